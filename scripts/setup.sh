@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Idempotent machine + venv set-up for soilvolume (Debian 12 bookworm, Python 3.11).
+# Installs Debian packages (QGIS 3.40 LTR from bookworm-backports, Chromium for report tests),
+# creates .venv with --system-site-packages on Debian's /usr/bin/python3 and installs the wheels.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+
+need_apt=0
+for pkg in python3-venv libusb-1.0-0 libgl1 libegl1 libgomp1 python3-qgis qgis-providers qgis chromium; do
+  dpkg -s "$pkg" >/dev/null 2>&1 || need_apt=1
+done
+if [ "$need_apt" = 1 ]; then
+  if [ ! -f /etc/apt/sources.list.d/backports.sources ]; then
+    printf 'Types: deb\nURIs: http://deb.debian.org/debian\nSuites: bookworm-backports\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' \
+      | $SUDO tee /etc/apt/sources.list.d/backports.sources >/dev/null
+  fi
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends --no-upgrade \
+    python3-venv libusb-1.0-0 libgl1 libegl1 libgomp1 chromium fonts-dejavu-core >/dev/null
+  $SUDO apt-get install -y -qq --no-install-recommends -t bookworm-backports \
+    python3-qgis qgis-providers qgis >/dev/null
+fi
+
+if [ ! -x .venv/bin/python ]; then
+  /usr/bin/python3 -m venv --system-site-packages .venv
+fi
+stamp=.venv/.deps-stamp
+want=$(cat pyproject.toml constraints.txt scripts/setup.sh | sha256sum | cut -d' ' -f1)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  .venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
+  echo "$want" > "$stamp"
+fi
+.venv/bin/python -c "import soilvolume, open3d, rasterio, pyproj, laspy, qgis.core" \
+  && echo "setup: OK ($(.venv/bin/python -c 'from qgis.core import Qgis; print("QGIS", Qgis.version())'))"

@@ -1,0 +1,169 @@
+"""Read and write point clouds: LAS/LAZ (laspy + lazrs), PLY/PCD (Open3D), XYZ/TXT/CSV (numpy).
+
+Readers return absolute float64 coordinates in the file's own CRS and units; CRS handling lives in
+:mod:`soilvolume.crs`. Writers go through a temporary name and rename when complete.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .types import SoilVolumeError
+
+LAS_SUFFIXES = {".las", ".laz"}
+O3D_SUFFIXES = {".ply", ".pcd"}
+TEXT_SUFFIXES = {".xyz", ".txt", ".csv", ".pts"}
+SUPPORTED = sorted(LAS_SUFFIXES | O3D_SUFFIXES | TEXT_SUFFIXES)
+
+
+@dataclass
+class RawPoints:
+    """Points as read from a file: absolute coordinates in the file's CRS and units."""
+
+    xyz: np.ndarray
+    classification: np.ndarray | None
+    crs_wkt: str | None
+    path: str
+
+
+def _check_readable(path: Path) -> None:
+    if not path.exists():
+        raise SoilVolumeError(f"{path}: file not found")
+    if not path.is_file():
+        raise SoilVolumeError(f"{path}: not a file")
+    if not os.access(path, os.R_OK):
+        raise SoilVolumeError(f"{path}: file is not readable (permissions)")
+    if path.suffix.lower() not in SUPPORTED:
+        raise SoilVolumeError(
+            f"{path}: unsupported point cloud format '{path.suffix}' (use one of {', '.join(SUPPORTED)})"
+        )
+
+
+def read_points(path: str | os.PathLike) -> RawPoints:
+    """Read a point cloud file; raise :class:`SoilVolumeError` naming the file on any problem."""
+    p = Path(path)
+    _check_readable(p)
+    suffix = p.suffix.lower()
+    if suffix in LAS_SUFFIXES:
+        raw = _read_las(p)
+    elif suffix in O3D_SUFFIXES:
+        raw = _read_o3d(p)
+    else:
+        raw = _read_text(p)
+    validate(raw)
+    return raw
+
+
+def validate(raw: RawPoints) -> None:
+    """Reject empty clouds and non-finite coordinates."""
+    if raw.xyz.shape[0] == 0:
+        raise SoilVolumeError(f"{raw.path}: the point cloud is empty (0 points)")
+    bad = ~np.isfinite(raw.xyz).all(axis=1)
+    if bad.any():
+        raise SoilVolumeError(
+            f"{raw.path}: {int(bad.sum())} point(s) have NaN or infinite coordinates"
+        )
+
+
+def las_crs_wkt(header, path: Path) -> str | None:
+    """The CRS of a LAS header (WKT VLR or GeoTIFF keys) as WKT, or None."""
+    try:
+        crs = header.parse_crs()
+    except Exception as exc:  # laspy raises several types on broken VLRs
+        raise SoilVolumeError(f"{path}: cannot parse the CRS stored in the header ({exc})") from exc
+    return None if crs is None else crs.to_wkt()
+
+
+def _read_las(path: Path) -> RawPoints:
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            header = reader.header
+            wkt = las_crs_wkt(header, path)
+            n = header.point_count
+            xyz = np.empty((n, 3), dtype=np.float64)
+            dims = set(header.point_format.dimension_names)
+            cls = np.empty(n, dtype=np.uint8) if "classification" in dims else None
+            start = 0
+            for chunk in reader.chunk_iterator(2_000_000):
+                m = len(chunk)
+                xyz[start : start + m, 0] = chunk.x
+                xyz[start : start + m, 1] = chunk.y
+                xyz[start : start + m, 2] = chunk.z
+                if cls is not None:
+                    cls[start : start + m] = np.asarray(chunk.classification)
+                start += m
+    except SoilVolumeError:
+        raise
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+    if start != n:
+        raise SoilVolumeError(f"{path}: corrupt LAS file (header says {n} points, read {start})")
+    return RawPoints(xyz, cls, wkt, str(path))
+
+
+def _read_o3d(path: Path) -> RawPoints:
+    import open3d as o3d
+
+    pcd = o3d.io.read_point_cloud(str(path))
+    xyz = np.asarray(pcd.points, dtype=np.float64)
+    if xyz.size == 0 and path.stat().st_size > 0:
+        raise SoilVolumeError(f"{path}: not a readable {path.suffix} point cloud (Open3D read 0 points)")
+    return RawPoints(xyz.copy(), None, None, str(path))
+
+
+def _read_text(path: Path) -> RawPoints:
+    delim = "," if path.suffix.lower() == ".csv" else None
+    try:
+        data = np.loadtxt(path, delimiter=delim, usecols=(0, 1, 2), ndmin=2, comments=("#", "//"))
+    except ValueError:
+        try:  # a header line
+            data = np.loadtxt(path, delimiter=delim, usecols=(0, 1, 2), ndmin=2, skiprows=1)
+        except Exception as exc:
+            raise SoilVolumeError(f"{path}: cannot parse x y z columns ({exc})") from exc
+    return RawPoints(np.asarray(data, dtype=np.float64), None, None, str(path))
+
+
+@contextmanager
+def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary sibling path; rename it onto ``final`` only if the block succeeds."""
+    final = Path(final)
+    tmp = final.with_name(f".{final.stem}.partial{final.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, final)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_las(
+    path: str | os.PathLike,
+    xyz_abs: np.ndarray,
+    crs_wkt: str | None,
+    classification: np.ndarray | None = None,
+    scale: float = 0.001,
+) -> None:
+    """Write absolute coordinates as LAS 1.4 (LAZ when the suffix is .laz), atomically."""
+    import laspy
+    import pyproj
+
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    lo = np.floor(xyz_abs.min(axis=0)) if len(xyz_abs) else np.zeros(3)
+    header.offsets = lo
+    header.scales = np.array([scale, scale, scale])
+    if crs_wkt:
+        header.add_crs(pyproj.CRS.from_wkt(crs_wkt))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz_abs[:, 0], xyz_abs[:, 1], xyz_abs[:, 2]
+    if classification is not None:
+        las.classification = classification
+    with atomic_path(path) as tmp:
+        las.write(str(tmp), do_compress=Path(path).suffix.lower() == ".laz")

@@ -1,0 +1,77 @@
+"""Plain data types shared by the engine's steps."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class SoilVolumeError(Exception):
+    """An input or processing problem a user can act on; the message names the file and problem."""
+
+
+@dataclass
+class Cloud:
+    """A point cloud in local coordinates: absolute = ``xyz + origin`` (metres, horizontal and
+    vertical, in ``crs``). ``xyz`` is float64; float32 copies for Open3D are made from it."""
+
+    xyz: np.ndarray
+    origin: np.ndarray
+    crs_wkt: str | None = None
+    path: str = ""
+    classification: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.xyz.shape[0])
+
+    def subset(self, mask: np.ndarray) -> Cloud:
+        cls = None if self.classification is None else self.classification[mask]
+        return Cloud(self.xyz[mask], self.origin, self.crs_wkt, self.path, cls)
+
+    def absolute(self) -> np.ndarray:
+        return self.xyz + self.origin
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """A north-up raster grid: ``xmin``/``ymax`` are absolute coordinates of the top-left corner,
+    aligned to multiples of ``cell``; ``origin`` is the local origin the engine's arrays use."""
+
+    xmin: float
+    ymax: float
+    cell: float
+    rows: int
+    cols: int
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    crs_wkt: str | None = None
+
+    @property
+    def cell_area(self) -> float:
+        return self.cell * self.cell
+
+    def centers_local(self) -> tuple[np.ndarray, np.ndarray]:
+        """Cell-centre coordinates (local frame) as two (rows, cols) arrays."""
+        xs = self.xmin + (np.arange(self.cols) + 0.5) * self.cell - self.origin[0]
+        ys = self.ymax - (np.arange(self.rows) + 0.5) * self.cell - self.origin[1]
+        return np.meshgrid(xs, ys)
+
+    def index(self, xy_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(row, col, inside) for local x/y points."""
+        col = np.floor((xy_local[:, 0] + self.origin[0] - self.xmin) / self.cell).astype(np.int64)
+        row = np.floor((self.ymax - xy_local[:, 1] - self.origin[1]) / self.cell).astype(np.int64)
+        inside = (row >= 0) & (row < self.rows) & (col >= 0) & (col < self.cols)
+        return row, col, inside
+
+
+@dataclass
+class StageQuality:
+    """Quality of one registration stage, as Open3D reports it."""
+
+    method: str
+    fitness: float
+    rmse: float
+    transform: np.ndarray = field(default_factory=lambda: np.eye(4))
+    accepted: bool = True
+    seconds: float = 0.0
+    note: str = ""
