@@ -45,6 +45,15 @@ class GridSpec:
     cols: int
     origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     crs_wkt: str | None = None
+    xy_unit: float = 1.0  # metres per horizontal CRS unit (rasters are written in CRS units)
+
+    @property
+    def transform(self):
+        """The rasterio/GDAL affine transform in the CRS's own units."""
+        from affine import Affine
+
+        u = self.xy_unit
+        return Affine(self.cell / u, 0.0, self.xmin / u, 0.0, -self.cell / u, self.ymax / u)
 
     @property
     def cell_area(self) -> float:

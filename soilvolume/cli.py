@@ -1,0 +1,163 @@
+"""Command line: ``soilvolume estimate BEFORE AFTER --out DIR [options]`` and friends.
+
+Options and their help come from :class:`soilvolume.options.Options`, so ``--help`` explains
+every knob with its default.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import fields
+from pathlib import Path
+
+from .options import Options
+from .types import SoilVolumeError
+
+SKIP = {"keep_registered_cloud"}
+EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
+(H_after - H_before - correction), plane_offset.tif (the correction d_i), after_registered.laz,
+report.json and report.html. Volumes are in cubic metres: fill = material added, cut = removed,
+net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted)."""
+
+
+def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> None:
+    """One ``--flag`` per Options field (``--no-registered-cloud`` for the boolean)."""
+    for f in fields(Options):
+        if f.name in SKIP or (only is not None and f.name not in only):
+            continue
+        flag = "--" + f.name.replace("_", "-")
+        kind = {"float": float, "int": int, "float | None": float}.get(str(f.type), str)
+        choices = f.metadata["choices"]
+        p.add_argument(flag, dest=f.name, type=kind, choices=choices, default=None,
+                       help=f"{f.metadata['help']} (default: {f.default})")
+
+
+def options_from(ns: argparse.Namespace) -> Options:
+    given = {f.name: getattr(ns, f.name) for f in fields(Options) if getattr(ns, f.name, None) is not None}
+    if getattr(ns, "no_registered_cloud", False):
+        given["keep_registered_cloud"] = False
+    return Options(**given)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="soilvolume",
+        description="Soil volume change between two georeferenced point clouds (Shao et al. method, "
+        "with robust registration and stable-ground correction).",
+    )
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    est = sub.add_parser("estimate", help="the whole pipeline: register, grid, difference, volumes",
+                         description="Estimate the soil volume change from BEFORE to AFTER.", epilog=EPILOG)
+    est.add_argument("before", type=Path, help="wide 'before' survey (LAS/LAZ/PLY/PCD/XYZ)")
+    est.add_argument("after", type=Path, help="smaller 'after' survey (LAS/LAZ/PLY/PCD/XYZ)")
+    est.add_argument("--out", type=Path, required=True, help="output folder (created; must be empty unless --overwrite)")
+    est.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty output folder")
+    est.add_argument("--before-pipeline", type=Path, help="PDAL pipeline JSON preparing the before cloud (replaces reading it)")
+    est.add_argument("--after-pipeline", type=Path, help="PDAL pipeline JSON preparing the after cloud")
+    est.add_argument("--no-registered-cloud", action="store_true", help="do not write after_registered.laz")
+    est.add_argument("--quiet", action="store_true", help="no progress output")
+    add_options(est)
+
+    dem = sub.add_parser("dem", help="one cloud to an average-height GeoTIFF")
+    dem.add_argument("cloud", type=Path, help="point cloud file")
+    dem.add_argument("--out", type=Path, required=True, help="output GeoTIFF")
+    dem.add_argument("--crs", help="CRS when the file has none")
+    dem.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
+                     help="grid extent in the cloud's CRS (snapped outwards to the cell)")
+    add_options(dem, {"cell", "statistic", "ground"})
+
+    reg = sub.add_parser("register", help="register AFTER onto BEFORE and write it")
+    reg.add_argument("before", type=Path)
+    reg.add_argument("after", type=Path)
+    reg.add_argument("--out", type=Path, required=True, help="registered after cloud (.las/.laz)")
+    add_options(reg, {"before_crs", "after_crs", "radius", "coarse", "coarse_voxel", "fine",
+                      "pfh_patch", "seed", "ground", "max_gps_shift", "max_gps_rotation"})
+
+    vol = sub.add_parser("volume", help="cut/fill/net between two DEM GeoTIFFs (optional zones)")
+    vol.add_argument("before_dem", type=Path)
+    vol.add_argument("after_dem", type=Path)
+    vol.add_argument("--out", type=Path, required=True, help="difference GeoTIFF to write")
+    vol.add_argument("--zones", type=Path, help="polygon file (GeoPackage/Shapefile/GeoJSON)")
+    vol.add_argument("--zone-field", help="attribute naming each zone")
+
+    demo = sub.add_parser("demo", help="make a seeded synthetic pair with known volumes and run it")
+    demo.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the pair and results")
+    demo.add_argument("--size", choices=("small", "paper"), default="small", help="scene size")
+    demo.add_argument("--seed", type=int, default=0, help="scene seed")
+    return ap
+
+
+def _progress(quiet: bool):
+    if quiet:
+        return None
+
+    def show(pct: float, msg: str) -> None:
+        print(f"[{pct:5.1f}%] {msg}", file=sys.stderr, flush=True)
+
+    return show
+
+
+def cmd_estimate(ns: argparse.Namespace) -> int:
+    from .api import Hooks, estimate
+    from .report import summary_lines
+
+    res = estimate(ns.before, ns.after, ns.out, options_from(ns), overwrite=ns.overwrite,
+                   hooks=Hooks(progress=_progress(ns.quiet)),
+                   before_pipeline=ns.before_pipeline, after_pipeline=ns.after_pipeline)
+    for line in summary_lines(res.report):
+        print(line)
+    print(f"outputs in {ns.out}")
+    return 0
+
+
+def cmd_dem(ns: argparse.Namespace) -> int:
+    from .api import cloud_to_dem
+
+    info = cloud_to_dem(ns.cloud, ns.out, options_from(ns), crs=ns.crs,
+                        bounds=tuple(ns.bounds) if ns.bounds else None)
+    print(json.dumps(info, indent=2))
+    return 0
+
+
+def cmd_register(ns: argparse.Namespace) -> int:
+    from .api import register
+
+    print(json.dumps(register(ns.before, ns.after, ns.out, options_from(ns)), indent=2))
+    return 0
+
+
+def cmd_volume(ns: argparse.Namespace) -> int:
+    from .api import volume_from_rasters
+
+    res = volume_from_rasters(ns.before_dem, ns.after_dem, ns.out, zones=ns.zones, zone_field=ns.zone_field)
+    print(json.dumps(res, indent=2))
+    return 0
+
+
+def cmd_demo(ns: argparse.Namespace) -> int:
+    from .demo import run_demo
+
+    return run_demo(ns.out, ns.size, ns.seed)
+
+
+COMMANDS = {"estimate": cmd_estimate, "dem": cmd_dem, "register": cmd_register,
+            "volume": cmd_volume, "demo": cmd_demo}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ns = build_parser().parse_args(argv)
+    try:
+        return COMMANDS[ns.command](ns)
+    except SoilVolumeError as exc:
+        print(f"soilvolume: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("soilvolume: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

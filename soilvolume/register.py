@@ -1,0 +1,217 @@
+"""Coarse (FPFH + RANSAC) and fine (robust point-to-plane ICP, GICP, or the paper's PFH + SAC-IA)
+registration of the after cloud onto the before cloud, in local coordinates.
+
+Every stage returns a :class:`~soilvolume.types.StageQuality` carrying its 4x4 transform (after
+-> before, local frame), fitness and inlier RMSE, as Open3D's registration pipelines do.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .crop import footprint, inside
+from .options import Options
+from .types import SoilVolumeError, StageQuality
+
+# (voxel m, max correspondence distance m, Tukey k m): coarse-to-fine, shrinking distances.
+ICP_LEVELS = ((1.0, 6.0, 3.0), (1.0, 3.0, 1.0), (0.5, 1.5, 0.5), (0.25, 0.8, 0.25), (0.25, 0.4, 0.15))
+REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12), (0.15, 0.25, 0.08))
+EVAL_DISTANCE = 0.4
+
+
+@dataclass
+class Registration:
+    """The accepted transform (after -> before, local frame) and each stage's quality."""
+
+    transform: np.ndarray
+    coarse: StageQuality
+    fine: StageQuality
+
+
+def _o3d():
+    import open3d as o3d
+
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    return o3d
+
+
+def to_pcd(xyz: np.ndarray, voxel: float | None = None):
+    """Open3D cloud from local float64 coordinates, optionally voxel-thinned."""
+    o3d = _o3d()
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz, dtype=np.float64)))
+    return pcd.voxel_down_sample(voxel) if voxel else pcd
+
+
+def with_normals(pcd, radius: float):
+    o3d = _o3d()
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
+    pcd.orient_normals_to_align_with_direction(np.array([0.0, 0.0, 1.0]))
+    return pcd
+
+
+def rotation_deg(t: np.ndarray) -> float:
+    """Rotation angle (degrees) of a 4x4 rigid transform."""
+    c = (np.trace(t[:3, :3]) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def shift_at(t: np.ndarray, point: np.ndarray) -> float:
+    """How far the transform moves ``point`` (metres)."""
+    return float(np.linalg.norm(t[:3, :3] @ point + t[:3, 3] - point))
+
+
+def transform_points(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return xyz @ t[:3, :3].T + t[:3, 3]
+
+
+def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> tuple[float, float]:
+    """(fitness, inlier RMSE) of ``t`` at ``distance``."""
+    o3d = _o3d()
+    ev = o3d.pipelines.registration.evaluate_registration(source, target, distance, t)
+    return float(ev.fitness), float(ev.inlier_rmse)
+
+
+def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, seed: int) -> np.ndarray:
+    """FPFH features + RANSAC on a coarse voxel (seeded); returns the 4x4 transform."""
+    o3d = _o3d()
+    reg = o3d.pipelines.registration
+    o3d.utility.random.seed(seed)
+    src = with_normals(to_pcd(source_xyz, voxel), 2.5 * voxel)
+    tgt = with_normals(to_pcd(target_xyz, voxel), 2.5 * voxel)
+    param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+    fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
+    dist = 1.5 * voxel
+    res = reg.registration_ransac_based_on_feature_matching(
+        src, tgt, fs, ft, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(100_000, 0.999),
+    )
+    return np.asarray(res.transformation)
+
+
+def crop_target(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, margin: float) -> np.ndarray:
+    """Target points within ``margin`` of the source footprint under the transform ``t``."""
+    poly = footprint(transform_points(source_xyz, t)[:, :2], margin, segments=16)
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    box = ((target_xyz[:, :2] >= lo) & (target_xyz[:, :2] <= hi)).all(axis=1)
+    idx = np.flatnonzero(box)
+    return target_xyz[idx[inside(target_xyz[idx, :2], poly)]]
+
+
+def icp_levels(
+    source_xyz: np.ndarray, target_xyz: np.ndarray, init: np.ndarray, levels=ICP_LEVELS,
+    method: str = "icp", check: Callable[[], None] | None = None,
+) -> np.ndarray:
+    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, or GICP)."""
+    o3d = _o3d()
+    reg = o3d.pipelines.registration
+    t = init.copy()
+    cache: dict[float, tuple] = {}
+    for voxel, dist, k in levels:
+        if check:
+            check()
+        if voxel not in cache:
+            tgt_xyz = crop_target(target_xyz, source_xyz, t, 2.0 + ICP_LEVELS[0][1])
+            tgt = with_normals(to_pcd(tgt_xyz, voxel), max(3 * voxel, 0.5))
+            cache[voxel] = (to_pcd(source_xyz, voxel), tgt)
+        src, tgt = cache[voxel]
+        crit = reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=40)
+        if method == "gicp":
+            est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
+            res = reg.registration_generalized_icp(src, tgt, dist, t, est, crit)
+        else:
+            est = reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=k))
+            res = reg.registration_icp(src, tgt, dist, t, est, crit)
+        t = np.asarray(res.transformation).copy()
+    return t
+
+
+def stable_source(
+    source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, cell: float = 1.0,
+) -> np.ndarray:
+    """The source with its fitted low-order deformation removed and its change areas dropped:
+    what the last ICP levels should see (smooth terrain constrains x/y only weakly)."""
+    from .correction_quick import detrend_for_registration
+
+    return detrend_for_registration(transform_points(source_xyz, t), target_xyz, cell)
+
+
+def register(
+    after_xyz: np.ndarray, before_xyz: np.ndarray, before_wide_xyz: np.ndarray, options: Options,
+    check: Callable[[], None] | None = None,
+) -> Registration:
+    """Register after onto before (both local). ``before_xyz`` is the before cloud cropped to the
+    after footprint + radius; ``before_wide_xyz`` is what coarse registration sees (same crop)."""
+    eye = np.eye(4)
+    coarse = _coarse_stage(after_xyz, before_wide_xyz, options)
+    starts = [(eye, "gps")]
+    if coarse.accepted and not np.allclose(coarse.transform, eye):
+        starts.append((coarse.transform, "coarse"))
+    best: StageQuality | None = None
+    for init, label in starts:
+        if check:
+            check()
+        fine = _fine_stage(after_xyz, before_xyz, init, options, check)
+        fine.note = f"started from the {label} pose"
+        if best is None or _better(fine, best):
+            best = fine
+    assert best is not None
+    if options.coarse == "auto" and coarse.accepted and "gps" in best.note:
+        coarse.accepted = False
+        coarse.note += "; rejected: fine registration fits better from the GPS pose"
+    if best.fitness < 0.2:
+        raise SoilVolumeError(
+            f"registration failed: only {best.fitness:.0%} of the after cloud lies within "
+            f"{EVAL_DISTANCE} m of the before cloud (RMSE {best.rmse:.3f} m); check that both "
+            "clouds cover the same site and their CRSs"
+        )
+    return Registration(best.transform, coarse, best)
+
+
+def _better(a: StageQuality, b: StageQuality) -> bool:
+    if abs(a.fitness - b.fitness) > 0.005:
+        return a.fitness > b.fitness
+    return a.rmse < b.rmse
+
+
+def _coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
+    t0 = time.perf_counter()
+    if options.coarse == "none":
+        return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
+    t = coarse_fpfh(after_xyz, before_xyz, options.coarse_voxel, options.seed)
+    src, tgt = to_pcd(after_xyz, options.coarse_voxel), to_pcd(before_xyz, options.coarse_voxel)
+    fit, rmse = evaluate(src, tgt, t, 1.5 * options.coarse_voxel)
+    centre = after_xyz.mean(axis=0)
+    rot, shift = rotation_deg(t), shift_at(t, centre)
+    within = rot <= options.max_gps_rotation and shift <= options.max_gps_shift
+    accepted = options.coarse == "fpfh" or within
+    note = f"FPFH+RANSAC moved the after centre {shift:.2f} m and rotated {rot:.2f} deg"
+    if not within:
+        note += (f"; outside the GPS error prior ({options.max_gps_shift} m, "
+                 f"{options.max_gps_rotation} deg)" + ("" if accepted else ": rejected"))
+    return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)
+
+
+def _fine_stage(after_xyz, before_xyz, init, options: Options, check) -> StageQuality:
+    t0 = time.perf_counter()
+    if options.fine == "none":
+        t = init
+    elif options.fine == "pfh":
+        from .pfh import pfh_sac_ia
+
+        t = pfh_sac_ia(after_xyz, before_xyz, init, options.pfh_patch, options.seed)
+    else:
+        t = icp_levels(after_xyz, before_xyz, init, ICP_LEVELS, options.fine, check)
+        src_stable = stable_source(after_xyz, before_xyz, t)
+        if len(src_stable) > 100:
+            # src_stable is already in the before frame: refine a correction on top of t.
+            dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, options.fine, check)
+            t = dt @ t
+    src = to_pcd(after_xyz, 0.25)
+    tgt = to_pcd(crop_target(before_xyz, after_xyz, t, 2.0), 0.1)
+    fit, rmse = evaluate(src, tgt, t)
+    return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0)

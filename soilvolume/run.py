@@ -1,0 +1,269 @@
+"""Orchestration of the method, step by step, with timings, progress and all-or-nothing outputs."""
+
+from __future__ import annotations
+
+import os
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from . import grid as gridmod
+from . import holes, planes
+from .api import Hooks, Result
+from .crop import footprint, polygon_area
+from .io import read_points, write_las
+from .options import Options
+from .outputs import OutputDir
+from .prepare import Prepared, prepare
+from .register import register, transform_points
+from .report import absolute_transform, stage_dict, write_json
+from .types import GridSpec, SoilVolumeError
+from .volume import budget, difference
+
+
+class Timer:
+    """Per-stage wall times (seconds), in the order they ran."""
+
+    def __init__(self) -> None:
+        self.s: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, name: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.s[name] = self.s.get(name, 0.0) + time.perf_counter() - t0
+
+
+def _threads(options: Options) -> None:
+    if options.threads > 0:
+        os.environ.setdefault("OMP_NUM_THREADS", str(options.threads))
+
+
+def shared_grid(prep: Prepared, after_xyz: np.ndarray, options: Options) -> GridSpec:
+    """The grid over the registered after footprint, cell size from the before density."""
+    poly = footprint(after_xyz[:, :2])
+    cell = options.cell
+    if cell is None or cell <= 0:
+        from .crop import inside
+
+        n_inside = int(inside(prep.before.xyz[:, :2], poly).sum())
+        cell = gridmod.choose_cell(n_inside, polygon_area(poly))
+    lo = np.maximum(after_xyz.min(axis=0), prep.before.xyz.min(axis=0))
+    hi = np.minimum(after_xyz.max(axis=0), prep.before.xyz.max(axis=0))
+    if (hi[:2] <= lo[:2]).any():
+        raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
+    return gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
+
+
+def run_estimate(
+    before: Path, after: Path, out_dir: Path, options: Options, *, overwrite: bool, hooks: Hooks,
+    before_pipeline=None, after_pipeline=None,
+) -> Result:
+    """See :func:`soilvolume.api.estimate`."""
+    _threads(options)
+    timer = Timer()
+    out = OutputDir(out_dir, [before, after], overwrite)
+    try:
+        result = _estimate(before, after, out, options, timer, hooks, before_pipeline, after_pipeline)
+    except BaseException:
+        out.abort()
+        raise
+    moved = out.commit()
+    result.outputs = {Path(n).stem: p for n, p in moved.items()}
+    result.outputs["report_json"] = moved["report.json"]
+    hooks.step(100, "done")
+    return result
+
+
+def _read(before, after, options, hooks, before_pipeline, after_pipeline):
+    if before_pipeline or after_pipeline:
+        from .pipeline import prepare_cloud_from_file
+
+        b = prepare_cloud_from_file(before_pipeline, before) if before_pipeline else read_points(before)
+        a = prepare_cloud_from_file(after_pipeline, after) if after_pipeline else read_points(after)
+        return b, a
+    return read_points(before), read_points(after)
+
+
+def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hooks: Hooks,
+              before_pipeline, after_pipeline) -> Result:
+    hooks.step(2, f"reading {before.name} and {after.name}")
+    with timer("read"):
+        raw_b, raw_a = _read(before, after, options, hooks, before_pipeline, after_pipeline)
+    hooks.info(f"read {len(raw_b.xyz):,} before and {len(raw_a.xyz):,} after points")
+    hooks.step(10, f"cropping the before cloud to the after footprint + {options.radius:g} m")
+    with timer("crop"):
+        prep = prepare(raw_b, raw_a, options)
+    del raw_b, raw_a
+    hooks.info(f"before cloud cropped to {len(prep.before):,} points")
+    hooks.step(15, "registering (coarse, then fine)")
+    with timer("register"):
+        reg = register(prep.after.xyz, prep.before.xyz, prep.before.xyz, options,
+                       check=lambda: hooks.step(15, "registering"))
+    timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
+    timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
+    hooks.info(f"coarse: {reg.coarse.note}")
+    hooks.info(f"fine ({reg.fine.method}): fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m, {reg.fine.note}")
+    after_xyz = transform_points(prep.after.xyz, reg.transform)
+    hooks.step(60, "fitting the RANSAC planes")
+    with timer("grids"):
+        grid = shared_grid(prep, after_xyz, options)
+        h_b, n_b = gridmod.average_height(prep.before.xyz, grid, options.statistic)
+        h_a, n_a = gridmod.average_height(after_xyz, grid, options.statistic)
+    with timer("planes"):
+        x, y = grid.centers_local()
+        in_grid = np.isfinite(h_b)
+        sel_b = _points_on(prep.before.xyz, grid, in_grid)
+        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+        p_a = planes.ransac_plane(after_xyz, options.plane_threshold, seed=options.seed + 1)
+        d_i = planes.plane_offset(p_b, p_a, grid)
+    hooks.step(75, "computing the difference and volumes")
+    with timer("volume"):
+        vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
+    hooks.step(85, "writing outputs")
+    with timer("write"):
+        gridmod.write_geotiff(out.path("dem_before.tif"), h_b, grid, "average height, before (m)")
+        gridmod.write_geotiff(out.path("dem_after.tif"), h_a, grid, "average height, after (m)")
+        gridmod.write_geotiff(out.path("difference.tif"), vols["diff"], grid,
+                              f"H_after - H_before - correction ({options.correction}) (m)")
+        gridmod.write_geotiff(out.path("plane_offset.tif"), vols["offset"], grid,
+                              f"vertical correction d_i subtracted ({options.correction}) (m)")
+        if options.keep_registered_cloud:
+            write_las(out.path("after_registered.laz"), after_xyz + prep.origin, prep.frame.wkt)
+    report = _report(prep, reg, grid, vols, p_b, p_a, options, timer)
+    write_json(out.path("report.json"), report)
+    _html(out, report, vols, grid)
+    return Result(report)
+
+
+def _points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
+    row, col, ok = grid.index(xyz[:, :2])
+    keep = np.zeros(len(xyz), bool)
+    keep[ok] = cells[row[ok], col[ok]]
+    return xyz[keep]
+
+
+def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
+    """Raw difference -> sparse/hole refill -> correction -> budgets."""
+    raw = difference(h_a, h_b)
+    max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
+    filled, filled_mask = holes.refill_sparse(raw, n_b, n_a, options.min_count_ratio, max_cells)
+    offset, params, stable = _correction(filled, d_i, grid, options)
+    diff = filled - offset
+    area = grid.cell_area
+    return {
+        "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
+        "stable": stable, "params": params,
+        "compensated": budget(diff, area), "uncompensated": budget(filled, area),
+        "paper_plane": budget(filled - d_i, area),
+        "holes": holes.summary(diff, filled_mask, area),
+        "empty_cells": int((~np.isfinite(raw)).sum()),
+        "empty_before": int((n_b == 0).sum()), "empty_after": int((n_a == 0).sum()),
+    }
+
+
+def _correction(diff, d_i, grid: GridSpec, options: Options):
+    """The vertical correction surface to subtract, its parameters and the stable-cell mask."""
+    method = options.correction
+    finite = np.isfinite(diff)
+    if method == "none":
+        return np.where(finite, 0.0, np.nan), {"method": "none"}, finite
+    if method == "paper-plane":
+        return np.where(finite, d_i, np.nan), {"method": "paper-plane"}, finite
+    from .correction import apply as apply_correction
+
+    res = apply_correction(diff, method, grid)
+    return np.where(finite, res.surface, np.nan), {"method": method, **res.params}, res.stable_mask
+
+
+def _report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: Options, timer: Timer) -> dict:
+    from dataclasses import asdict
+
+    t_abs = absolute_transform(reg.transform, prep.origin)
+    return {
+        "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
+        "volume_m3": vols["compensated"],
+        "volume_uncompensated_m3": vols["uncompensated"],
+        "volume_paper_plane_m3": vols["paper_plane"],
+        "correction": {"method": options.correction, "params": vols["params"]},
+        "registration": {
+            "transform": t_abs, "transform_local": reg.transform, "local_origin": prep.origin,
+            "coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine),
+        },
+        "planes": {"before": p_b.as_dict(prep.origin), "after": p_a.as_dict(prep.origin)},
+        "grid": {
+            "cell_m": grid.cell, "rows": grid.rows, "cols": grid.cols, "crs": prep.frame.crs.name,
+            "crs_wkt": prep.frame.wkt, "transform": list(grid.transform)[:6],
+            "compared_area_m2": vols["compensated"]["area_m2"], "compared_cells": vols["compensated"]["cells"],
+            "empty_cells": vols["empty_cells"], "empty_before": vols["empty_before"],
+            "empty_after": vols["empty_after"], "statistic": options.statistic,
+        },
+        "holes": vols["holes"],
+        "inputs": prep.inputs,
+        "options": asdict(options),
+        "timings_s": dict(timer.s),
+    }
+
+
+def _html(out: OutputDir, report: dict, vols: dict, grid: GridSpec) -> None:
+    try:
+        from .report_html import write_html
+    except ImportError:
+        return
+    arrays = {"difference": vols["diff"], "residual": np.where(vols["stable"], vols["diff"], np.nan),
+              "filled_mask": vols["filled_mask"]}
+    write_html(report, arrays, grid, out.path("report.html"))
+
+
+def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bounds, hooks: Hooks) -> dict:
+    """See :func:`soilvolume.api.cloud_to_dem`."""
+    from .crs import to_frame, work_frame
+    from .prepare import resolve_crs, select_ground
+
+    hooks.step(5, f"reading {cloud.name}")
+    raw = read_points(cloud)
+    src = resolve_crs(raw, crs, "a CRS")
+    frame = work_frame(src, None if not src.is_geographic else (0, 0))
+    keep, note = select_ground(raw, options.ground)
+    xyz = to_frame(raw.xyz[keep], src, frame, raw.path)
+    origin = np.floor(xyz.min(axis=0))
+    xyz -= origin
+    if bounds is not None:
+        u = frame.xy_unit
+        lo = np.array([bounds[0] * u, bounds[1] * u, 0]) - origin
+        hi = np.array([bounds[2] * u, bounds[3] * u, 0]) - origin
+    else:
+        lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+    cell = options.cell or gridmod.choose_cell(len(xyz), polygon_area(footprint(xyz[:, :2])))
+    grid = gridmod.make_grid(lo, hi, cell, origin, frame.wkt, frame.xy_unit)
+    hooks.step(40, f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
+    h, n = gridmod.average_height(xyz, grid, options.statistic)
+    if out_tif.resolve() == cloud.resolve():
+        raise SoilVolumeError(f"{out_tif}: refusing to overwrite the input")
+    gridmod.write_geotiff(out_tif, h, grid, f"average height ({options.statistic}) (m)")
+    hooks.step(100, "done")
+    return {"cell_m": cell, "rows": grid.rows, "cols": grid.cols, "crs": frame.crs.name,
+            "transform": list(grid.transform)[:6], "points": int(len(xyz)),
+            "valid_cells": int(np.isfinite(h).sum()), "selection": note}
+
+
+def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
+    """See :func:`soilvolume.api.register`."""
+    hooks.step(5, "reading")
+    prep = prepare(read_points(before), read_points(after), options)
+    hooks.step(20, "registering")
+    reg = register(prep.after.xyz, prep.before.xyz, prep.before.xyz, options,
+                   check=lambda: hooks.step(20, "registering"))
+    hooks.step(90, "writing the registered cloud")
+    if out_cloud.resolve() in (before.resolve(), after.resolve()):
+        raise SoilVolumeError(f"{out_cloud}: refusing to overwrite an input file")
+    write_las(out_cloud, transform_points(prep.after.xyz, reg.transform) + prep.origin, prep.frame.wkt)
+    hooks.step(100, "done")
+    from .report import _clean
+
+    return _clean({"transform": absolute_transform(reg.transform, prep.origin),
+                   "coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine)})
