@@ -1,0 +1,102 @@
+"""Level of detection, variogram-based volume uncertainty and its coverage on seeded pairs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from soilvolume.correction import apply
+from soilvolume.types import GridSpec
+from soilvolume.uncertainty import (
+    correlated_fraction,
+    fit_spherical,
+    level_of_detection,
+    semivariogram,
+    thresholded_volumes,
+    volume_uncertainty,
+)
+
+CELL = 0.5
+N = 160
+GRID = GridSpec(xmin=0.0, ymax=N * CELL, cell=CELL, rows=N, cols=N)
+
+
+def noisy_pair(seed: int, pile: bool = True, corr_m: float = 3.0):
+    """(diff, true net m3): pile and pit, 4 cm dome + 5 cm bias, 1.5 cm correlated noise of
+    ~``corr_m`` scale and 2 cm white noise."""
+    rng = np.random.default_rng(seed)
+    y, x = (np.mgrid[0:N, 0:N] + 0.5) * CELL
+    r1, r2 = np.hypot(x - 30, y - 45), np.hypot(x - 58, y - 22)
+    truth = np.where(r1 < 10, 3.0 * (1 + np.cos(np.pi * r1 / 10)) / 2, 0.0)
+    truth -= np.where(r2 < 5, 2.0 * (1 + np.cos(np.pi * r2 / 5)) / 2, 0.0)
+    truth *= pile
+    u, v = (x - 40) / 40, (y - 40) / 40
+    corr = ndimage.gaussian_filter(rng.normal(size=truth.shape), corr_m / CELL)
+    noise = 0.015 * corr / corr.std() + rng.normal(0, 0.02, truth.shape)
+    diff = truth + 0.04 * (1 - u * u - v * v) + 0.05 + noise
+    return diff, truth.sum() * CELL**2
+
+
+def estimate(diff):
+    res = apply(diff, "surface", GRID)
+    net = float(np.nansum(np.where(res.change_mask, res.corrected, 0.0)) * CELL**2)
+    unc = volume_uncertainty(res.corrected, res.stable_mask, res.change_mask, GRID)
+    return res, net, unc
+
+
+def test_spherical_fit_recovers_range_of_smoothed_noise():
+    rng = np.random.default_rng(0)
+    white = rng.normal(0, 0.02, (300, 300))
+    corr = ndimage.uniform_filter(rng.normal(size=(300, 300)), 11)
+    field = white + 0.02 * corr / corr.std()
+    lags, gamma, pairs = semivariogram(field, np.ones(field.shape, bool), 1.0)
+    model = fit_spherical(lags, gamma, pairs)
+    assert model["nugget"] == pytest.approx(0.02**2, rel=0.3)
+    assert model["psill"] == pytest.approx(0.02**2, rel=0.3)
+    assert 6 < model["range"] < 20  # an 11-cell box filter decorrelates at 11 cells
+    assert correlated_fraction(1e6, 10.0) == pytest.approx(np.pi * 100 / 5e6)
+    assert correlated_fraction(1e-6, 10.0) == pytest.approx(1.0, abs=1e-3)
+
+
+def test_lod_and_thresholds():
+    assert level_of_detection(0.02) == pytest.approx(0.0392, rel=1e-3)
+    per_cell = np.full((2, 2), 0.02)
+    assert np.allclose(level_of_detection(0.02, 0.95, per_cell), 1.96 * 0.02 * np.sqrt(2), 1e-3)
+    d = np.array([[0.01, -0.01], [0.5, -0.2]])
+    t = thresholded_volumes(d, 0.05, 2.0)
+    assert t == pytest.approx({"net": 0.6, "cut": 0.4, "fill": 1.0, "area_m2": 4.0})
+
+
+def test_no_change_pair_is_zero_within_uncertainty():
+    diff, _ = noisy_pair(7, pile=False)
+    res, net, unc = estimate(diff)
+    assert abs(net) <= unc["net"]
+    raw_fill = float(np.nansum(np.clip(res.corrected, 0, None)) * CELL**2)
+    thr = thresholded_volumes(res.corrected, unc["lod_m"], CELL**2)
+    assert thr["fill"] < 0.3 * raw_fill and thr["cut"] < 0.3 * raw_fill  # isolated noise cells
+    thr = thresholded_volumes(res.corrected, unc["lod_m"], CELL**2, min_cells=8)
+    assert thr["fill"] < 0.1 * raw_fill and thr["cut"] < 0.1 * raw_fill
+    assert max(thr["fill"], thr["cut"], abs(thr["net"])) <= unc["net"]
+    assert unc["sigma_m"] == pytest.approx(np.hypot(0.02, 0.015), rel=0.25)
+
+
+def test_thresholded_cut_and_fill_of_a_pile_and_pit():
+    diff, _ = noisy_pair(1)
+    res, _, unc = estimate(diff)
+    thr = thresholded_volumes(res.corrected, unc["lod_m"], CELL**2, min_cells=8)
+    fill_true = 3.0 * np.pi * 100 * (0.5 - 2 / np.pi**2)
+    cut_true = 2.0 * np.pi * 25 * (0.5 - 2 / np.pi**2)
+    assert thr["fill"] == pytest.approx(fill_true, rel=0.03)
+    assert thr["cut"] == pytest.approx(cut_true, rel=0.03)
+
+
+def test_interval_covers_true_net_in_at_least_18_of_20_pairs():
+    hits, errors = 0, []
+    for seed in range(20):
+        diff, true_net = noisy_pair(seed, corr_m=(1.0, 3.0, 6.0)[seed % 3])
+        _, net, unc = estimate(diff)
+        hits += abs(net - true_net) <= unc["net"]
+        errors.append(abs(net - true_net) / true_net)
+    assert hits >= 18
+    assert np.median(errors) < 0.02
