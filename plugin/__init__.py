@@ -1,0 +1,1 @@
+"""The QGIS plugin class (menu, toolbar, Processing provider registration)."""

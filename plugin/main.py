@@ -1,0 +1,56 @@
+"""The plugin object QGIS creates through ``classFactory``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from qgis.core import QgsApplication
+from qgis.PyQt.QtGui import QIcon
+from qgis.PyQt.QtWidgets import QAction
+
+from ..processing.base import ICON
+from ..processing.provider import SoilVolumeProvider
+
+MENU = "&Soil volume change"
+MAIN_ALGORITHM = "soilvolume:estimatevolumechange"
+
+
+class SoilVolumePlugin:
+    """Registers the Processing provider; adds a menu entry and a toolbar button that open the
+    main algorithm's dialog."""
+
+    def __init__(self, iface: Any) -> None:
+        self.iface = iface
+        self.provider: SoilVolumeProvider | None = None
+        self.action: QAction | None = None
+
+    def initProcessing(self) -> None:  # noqa: N802 - QGIS API
+        if self.provider is None:
+            self.provider = SoilVolumeProvider()
+            QgsApplication.processingRegistry().addProvider(self.provider)
+
+    def initGui(self) -> None:  # noqa: N802 - QGIS API
+        self.initProcessing()
+        self.action = QAction(
+            QIcon(str(ICON)), "Estimate soil volume change…", self.iface.mainWindow())
+        self.action.setObjectName("soilvolumeEstimate")
+        self.action.setToolTip("Estimate soil volume change between two point cloud surveys")
+        self.action.triggered.connect(self.open_dialog)
+        self.iface.addPluginToMenu(MENU, self.action)
+        self.iface.addToolBarIcon(self.action)
+
+    def open_dialog(self) -> None:
+        """Open the Processing dialog of the main algorithm."""
+        from qgis import processing  # QGIS's Processing framework, never this plugin's folder
+
+        processing.execAlgorithmDialog(MAIN_ALGORITHM, {})
+
+    def unload(self) -> None:
+        if self.action is not None:
+            self.iface.removePluginMenu(MENU, self.action)
+            self.iface.removeToolBarIcon(self.action)
+            self.action.deleteLater()
+            self.action = None
+        if self.provider is not None:
+            QgsApplication.processingRegistry().removeProvider(self.provider)
+            self.provider = None

@@ -1,0 +1,139 @@
+"""Point cloud to average-height DEM."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from qgis.core import (
+    QgsProcessingContext,
+    QgsProcessingException,
+    QgsProcessingFeedback,
+    QgsProcessingOutputNumber,
+    QgsProcessingParameterExtent,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterRasterDestination,
+)
+
+from . import engine, params, styles
+from .base import SoilVolumeAlgorithm
+
+HELP = """\
+<p>Grids one point cloud into a GeoTIFF of the average height per cell (the DEMs the volume
+method compares).</p>
+<h3>Inputs</h3>
+<p>A point cloud file (LAS, LAZ, PLY, PCD, XYZ/TXT/CSV) or point cloud layer; a CRS override
+when the file has none; the <b>cell size</b> (0 = chosen from the point density, at least 8
+points per cell); an optional <b>extent</b> (e.g. another DEM's extent, to get the same grid;
+snapped outwards to the cell size); the per-cell <b>statistic</b> (robust mean rejects points
+beyond 3 MAD of the cell median) and which points count as <b>ground</b>.</p>
+<h3>Output</h3>
+<p>A single-band Float32 GeoTIFF in the cloud's projected CRS (a geographic CRS is replaced by
+its UTM zone); empty cells are nodata. It loads with a terrain colour ramp.</p>"""
+
+
+class PointCloudToDem(SoilVolumeAlgorithm):
+    """One cloud to an average-height GeoTIFF."""
+
+    _group = "Point cloud tools"
+    _group_id = "pointcloud"
+
+    def name(self) -> str:
+        return "pointcloudtodem"
+
+    def displayName(self) -> str:  # noqa: N802 - Qt API
+        return self.tr("Point cloud to average-height DEM")
+
+    def shortHelpString(self) -> str:  # noqa: N802
+        return self.tr(HELP)
+
+    def tags(self) -> list[str]:
+        return self.tr("dem,dsm,grid,rasterize,average,height,point cloud,lidar").split(",")
+
+    def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
+        for p in params.cloud_params("INPUT", "Input"):
+            self.addParameter(p)
+        self.addParameter(params.crs_param("CRS", "Input"))
+        self.addParameter(QgsProcessingParameterNumber(
+            "CELL", self.tr("Cell size (m, 0 = automatic from point density)"),
+            type=QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0,
+        ))
+        self.addParameter(QgsProcessingParameterExtent(
+            "EXTENT", self.tr("Grid extent (default: the cloud's)"), optional=True))
+        self.addParameter(params.enum_param(
+            "STATISTIC", self.tr("Cell height statistic"), params.STATISTIC_LABELS))
+        self.addParameter(params.enum_param(
+            "GROUND", self.tr("Ground points"), params.GROUND_LABELS))
+        self.addParameter(QgsProcessingParameterRasterDestination(
+            "OUTPUT", self.tr("Average-height DEM")))
+        for key, description in (
+            ("CELL_SIZE", "Cell size (m)"), ("ROWS", "Rows"), ("COLUMNS", "Columns"),
+            ("POINTS", "Points gridded"), ("VALID_CELLS", "Cells with a height"),
+        ):
+            self.addOutput(QgsProcessingOutputNumber(key, self.tr(description)))
+
+    def checkParameterValues(  # noqa: N802
+        self, parameters: dict[str, Any], context: QgsProcessingContext
+    ) -> tuple[bool, str]:
+        ok, message = params.check_clouds(parameters, {"INPUT": "input"})
+        return (ok, message) if not ok else super().checkParameterValues(parameters, context)
+
+    def bounds(
+        self, parameters: dict[str, Any], context: QgsProcessingContext, crs: str | None
+    ) -> tuple[float, float, float, float] | None:
+        """The extent parameter in the cloud's CRS (when known), as xmin, ymin, xmax, ymax."""
+        if not parameters.get("EXTENT"):
+            return None
+        target = params.qgs_crs(crs)
+        if not target.isValid():
+            target = self.parameterAsExtentCrs(parameters, "EXTENT", context)
+        rect = self.parameterAsExtent(parameters, "EXTENT", context, target)
+        if rect.isEmpty():
+            raise QgsProcessingException("The grid extent is empty.")
+        return rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum()
+
+    def processAlgorithm(  # noqa: N802
+        self, parameters: dict[str, Any], context: QgsProcessingContext,
+        feedback: QgsProcessingFeedback,
+    ) -> dict[str, Any]:
+        engine.require(engine.POINT_CLOUD_DEPS)
+        cloud = params.cloud_path(self, parameters, "INPUT", context, "Input")
+        crs = params.crs_text(self, parameters, "CRS", context) or self.header_crs(cloud)
+        options = engine.engine("options").Options().with_(
+            cell=params.optional_cell(self.parameterAsDouble(parameters, "CELL", context)),
+            statistic=params.STATISTICS[self.parameterAsEnum(parameters, "STATISTIC", context)],
+            ground=params.GROUNDS[self.parameterAsEnum(parameters, "GROUND", context)],
+        )
+        out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
+        tif = out if Path(out).suffix.lower() in params.RASTER_COPY_SUFFIXES else out + ".tif"
+        with engine.engine_errors(feedback, "Set the 'Input CRS override' parameter."):
+            grid = engine.engine("api").cloud_to_dem(
+                cloud, tif, options, crs=params.crs_text(self, parameters, "CRS", context),
+                bounds=self.bounds(parameters, context, crs), hooks=engine.hooks(feedback),
+            )
+        if tif != out:
+            params.deliver_raster(Path(tif), out)
+            Path(tif).unlink(missing_ok=True)
+        styles.style_on_load(context, out, styles.TERRAIN)
+        feedback.pushInfo(
+            f"{grid['rows']} x {grid['cols']} cells of {grid['cell_m']} m, {grid['points']:,} "
+            f"points, {grid['valid_cells']:,} cells with a height ({grid['crs']})")
+        return {
+            "OUTPUT": out, "CELL_SIZE": float(grid["cell_m"]), "ROWS": int(grid["rows"]),
+            "COLUMNS": int(grid["cols"]), "POINTS": int(grid["points"]),
+            "VALID_CELLS": int(grid["valid_cells"]),
+        }
+
+    @staticmethod
+    def header_crs(cloud: str) -> str | None:
+        """The CRS stored in a LAS/LAZ header (to reproject the extent), or None."""
+        if Path(cloud).suffix.lower() not in (".las", ".laz"):
+            return None
+        try:
+            import laspy
+
+            with laspy.open(cloud) as reader:
+                crs = reader.header.parse_crs()
+            return crs.to_wkt() if crs is not None else None
+        except Exception:  # noqa: BLE001 - the engine reports unreadable files itself
+            return None

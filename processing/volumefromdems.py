@@ -1,0 +1,151 @@
+"""Volume from the difference of two DEMs, in total and per polygon."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from qgis.core import (
+    QgsCoordinateReferenceSystem,
+    QgsFeature,
+    QgsFeatureSink,
+    QgsField,
+    QgsFields,
+    QgsProcessing,
+    QgsProcessingContext,
+    QgsProcessingException,
+    QgsProcessingFeedback,
+    QgsProcessingOutputNumber,
+    QgsProcessingParameterFeatureSink,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterField,
+    QgsProcessingParameterRasterDestination,
+    QgsProcessingParameterRasterLayer,
+    QgsRasterLayer,
+    QgsWkbTypes,
+)
+from qgis.PyQt.QtCore import QVariant
+
+from . import engine, params, styles
+from .base import SoilVolumeAlgorithm
+
+HELP = """\
+<p>Cut, fill and net volume between two DEMs you already have (e.g. from <i>Point cloud to
+average-height DEM</i> or any survey), in total and per polygon.</p>
+<h3>Method</h3>
+<p>Difference = after − before on the before DEM's grid (the after DEM is resampled onto it
+when the grids differ). Fill sums the positive differences times the cell area, cut the
+negative ones (as a positive number), net = fill − cut. Cells where either DEM is nodata are
+not compared.</p>
+<h3>Inputs</h3>
+<p>Before and after DEMs (heights in metres, projected CRS); optionally a polygon layer of
+zones (e.g. stockpiles, pits, lots) and a field naming them.</p>
+<h3>Outputs</h3>
+<p>The difference raster (diverging ramp centred on 0: red = cut, blue = fill), a table with
+one row per zone (zone, name, cut, fill, net in m³ and compared area in m²) and the totals
+NET_VOLUME, CUT_VOLUME, FILL_VOLUME and COMPARED_AREA over the whole compared area.</p>"""
+
+TABLE_FIELDS = (
+    ("zone", QVariant.Int), ("name", QVariant.String), ("cut", QVariant.Double),
+    ("fill", QVariant.Double), ("net", QVariant.Double), ("area", QVariant.Double),
+)
+
+
+def table_fields() -> QgsFields:
+    fields = QgsFields()
+    for name, kind in TABLE_FIELDS:
+        fields.append(QgsField(name, kind))
+    return fields
+
+
+def raster_file(layer: QgsRasterLayer | None, label: str) -> str:
+    """The file behind a raster layer (the engine reads files with rasterio)."""
+    if layer is None or not layer.isValid():
+        raise QgsProcessingException(f"The {label} DEM is not a valid raster layer.")
+    source = layer.source()
+    if layer.providerType() != "gdal" or not Path(source.split("|")[0]).is_file():
+        raise QgsProcessingException(
+            f"The {label} DEM ({layer.name()}) is not a raster file; save it as a GeoTIFF first.")
+    return source.split("|")[0]
+
+
+class VolumeFromDems(SoilVolumeAlgorithm):
+    """Cut/fill/net between two rasters, in total and per polygon."""
+
+    _group = "Volume change"
+    _group_id = "volume"
+
+    def name(self) -> str:
+        return "volumefromdems"
+
+    def displayName(self) -> str:  # noqa: N802 - Qt API
+        return self.tr("Volume from DEM difference")
+
+    def shortHelpString(self) -> str:  # noqa: N802
+        return self.tr(HELP)
+
+    def tags(self) -> list[str]:
+        return self.tr("volume,cut,fill,dem of difference,dod,stockpile,zonal,raster").split(",")
+
+    def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
+        self.addParameter(QgsProcessingParameterRasterLayer("BEFORE", self.tr("Before DEM")))
+        self.addParameter(QgsProcessingParameterRasterLayer("AFTER", self.tr("After DEM")))
+        self.addParameter(QgsProcessingParameterFeatureSource(
+            "ZONES", self.tr("Zones (polygons)"), [QgsProcessing.TypeVectorPolygon], optional=True))
+        self.addParameter(QgsProcessingParameterField(
+            "ZONE_FIELD", self.tr("Zone name field"), parentLayerParameterName="ZONES",
+            optional=True))
+        self.addParameter(QgsProcessingParameterRasterDestination(
+            "OUTPUT", self.tr("Difference (after − before)")))
+        self.addParameter(QgsProcessingParameterFeatureSink(
+            "TABLE", self.tr("Volumes per zone"), QgsProcessing.TypeVector, optional=True,
+            createByDefault=True))
+        for key, description in (
+            ("NET_VOLUME", "Net volume change (m³, fill − cut)"), ("CUT_VOLUME", "Cut volume (m³)"),
+            ("FILL_VOLUME", "Fill volume (m³)"), ("COMPARED_AREA", "Compared area (m²)"),
+        ):
+            self.addOutput(QgsProcessingOutputNumber(key, self.tr(description)))
+
+    def processAlgorithm(  # noqa: N802
+        self, parameters: dict[str, Any], context: QgsProcessingContext,
+        feedback: QgsProcessingFeedback,
+    ) -> dict[str, Any]:
+        engine.require(engine.RASTER_DEPS)
+        before = raster_file(self.parameterAsRasterLayer(parameters, "BEFORE", context), "before")
+        after = raster_file(self.parameterAsRasterLayer(parameters, "AFTER", context), "after")
+        zones = None
+        if parameters.get("ZONES"):
+            zones = self.parameterAsCompatibleSourceLayerPath(
+                parameters, "ZONES", context, ["gpkg", "shp", "geojson"], "gpkg", feedback)
+        zone_field = self.parameterAsString(parameters, "ZONE_FIELD", context) or None
+        out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
+        tif = out if Path(out).suffix.lower() in params.RASTER_COPY_SUFFIXES else out + ".tif"
+        with engine.engine_errors(feedback):
+            volumes = engine.engine("api").volume_from_rasters(
+                before, after, tif, zones=zones or None, zone_field=zone_field,
+                hooks=engine.hooks(feedback))
+        if tif != out:
+            params.deliver_raster(Path(tif), out)
+            Path(tif).unlink(missing_ok=True)
+        styles.style_on_load(context, out, styles.DIVERGING)
+        total = volumes["total"]
+        results: dict[str, Any] = {
+            "OUTPUT": out, "NET_VOLUME": float(total["net"]), "CUT_VOLUME": float(total["cut"]),
+            "FILL_VOLUME": float(total["fill"]), "COMPARED_AREA": float(total["area_m2"]),
+        }
+        feedback.pushInfo(
+            f"Volumes (m³): net {total['net']:.2f}, cut {total['cut']:.2f}, "
+            f"fill {total['fill']:.2f} over {total['area_m2']:.1f} m²")
+        sink, table_id = self.parameterAsSink(
+            parameters, "TABLE", context, table_fields(), QgsWkbTypes.NoGeometry,
+            QgsCoordinateReferenceSystem())
+        if sink is not None:
+            for zone in volumes.get("zones", []):
+                feature = QgsFeature(table_fields())
+                feature.setAttributes([
+                    int(zone["id"]), str(zone.get("name") or zone["id"]), float(zone["cut"]),
+                    float(zone["fill"]), float(zone["net"]), float(zone["area_m2"]),
+                ])
+                sink.addFeature(feature, QgsFeatureSink.FastInsert)
+            results["TABLE"] = table_id
+        return results

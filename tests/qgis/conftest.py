@@ -1,0 +1,114 @@
+"""Fixtures of the QGIS tests: the plugin imported as a package, Processing, a seeded scene.
+
+pytest-qgis owns the QgsApplication (pitfalls 7 and 8 of the set-up notes). The plugin is imported
+the way QGIS imports it: as a package named after its folder, here a symlink
+``<tmp>/soilvolume_qgis -> <repo>``; the repository root itself must never be on ``sys.path``,
+where its ``processing/`` folder would shadow QGIS's Processing framework.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+import tempfile
+from pathlib import Path
+
+import pytest
+from qgis.core import QgsApplication
+
+REPO = Path(__file__).resolve().parents[2]
+PLUGIN_NAME = "soilvolume_qgis"
+PROVIDER_ID = "soilvolume"
+_KEEP_ALIVE: list = []  # Python wrappers of providers the registry owns
+
+
+def _is_repo(entry: str) -> bool:
+    try:
+        return Path(entry or ".").resolve() == REPO
+    except OSError:
+        return False
+
+
+def _sanitize_sys_path() -> None:
+    """Drop the repo root from sys.path (``python -m pytest`` run from it puts it there) and any
+    ``processing`` module imported from it; put QGIS's Python plugins folder first."""
+    sys.path[:] = [entry for entry in sys.path if not _is_repo(entry)]
+    shadow = sys.modules.get("processing")
+    shadow_file = Path(getattr(shadow, "__file__", "") or "/").resolve()
+    if shadow is not None and REPO in shadow_file.parents:
+        for name in [n for n in sys.modules if n == "processing" or n.startswith("processing.")]:
+            del sys.modules[name]
+    qgis_plugins = str(Path(QgsApplication.pkgDataPath()) / "python" / "plugins")
+    if qgis_plugins in sys.path:
+        sys.path.remove(qgis_plugins)
+    sys.path.insert(0, qgis_plugins)
+
+
+def _link_plugin() -> Path:
+    """A folder holding only ``soilvolume_qgis -> <repo>``, added to sys.path."""
+    folder = Path(tempfile.mkdtemp(prefix="soilvolume-qgis-plugins-"))
+    (folder / PLUGIN_NAME).symlink_to(REPO, target_is_directory=True)
+    sys.path.append(str(folder))
+    return folder
+
+
+_sanitize_sys_path()
+PLUGINS_DIR = _link_plugin()
+
+
+@pytest.fixture(scope="session")
+def plugin_package():
+    """The plugin imported as QGIS imports it."""
+    return importlib.import_module(PLUGIN_NAME)
+
+
+@pytest.fixture(scope="session")
+def plugins_dir() -> Path:
+    return PLUGINS_DIR
+
+
+@pytest.fixture
+def provider(qgis_processing, plugin_package):
+    """The plugin's provider registered in the Processing registry (re-registered when a test
+    unloaded the plugin)."""
+    from soilvolume_qgis.processing.provider import SoilVolumeProvider
+
+    registry = QgsApplication.processingRegistry()
+    existing = registry.providerById(PROVIDER_ID)
+    if existing is None:
+        existing = SoilVolumeProvider()
+        _KEEP_ALIVE.append(existing)
+        assert registry.addProvider(existing)
+    return existing
+
+
+@pytest.fixture(scope="session")
+def scene_dir(tmp_path_factory) -> Path:
+    """A small seeded before/after pair (LAS with CRS) and its truth.json."""
+    from soilvolume import synthetic
+
+    folder = tmp_path_factory.mktemp("scene")
+    scene = synthetic.make_pair(0, synthetic.SceneConfig.small())
+    synthetic.write_pair(scene, folder)
+    return folder
+
+
+@pytest.fixture(scope="session")
+def truth(scene_dir: Path) -> dict:
+    import json
+
+    return json.loads((scene_dir / "truth.json").read_text())
+
+
+@pytest.fixture
+def run_alg(provider):
+    """``processing.run`` of one of the plugin's algorithms."""
+    from qgis import processing
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback
+
+    def run(name: str, parameters: dict, context: QgsProcessingContext | None = None,
+            feedback: QgsProcessingFeedback | None = None) -> dict:
+        return processing.run(f"{PROVIDER_ID}:{name}", parameters, context=context,
+                              feedback=feedback or QgsProcessingFeedback())
+
+    return run
