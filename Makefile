@@ -1,0 +1,39 @@
+# soilvolume: the two commands a fresh machine needs are `make setup` and `make test`.
+VENV    := .venv
+PY      := $(VENV)/bin/python
+PYTEST  := QT_QPA_PLATFORM=offscreen $(VENV)/bin/pytest
+
+.PHONY: setup test test-engine test-qgis lint demo bench bench-full package deploy clean
+
+setup:  ## install Debian packages (QGIS LTR, Chromium), the venv and the wheels (idempotent)
+	bash scripts/setup.sh
+
+test:   ## the whole test suite: engine, PDAL pipelines, QGIS algorithms headless
+	$(PYTEST) -q -p no:cacheprovider tests
+
+test-engine:
+	$(PYTEST) -q -p no:cacheprovider tests --ignore=tests/qgis
+
+test-qgis:
+	$(PYTEST) -q -p no:cacheprovider tests/qgis
+
+lint:
+	$(VENV)/bin/ruff check .
+
+demo:   ## seeded synthetic pair with known volumes, whole pipeline, estimated vs true
+	$(VENV)/bin/soilvolume demo --out demo_out
+
+bench:  ## benchmark: paper-sized pair + 1M/4M ladder (cached scenes outside git)
+	$(PY) bench/run_bench.py
+
+bench-full:  ## adds the 16M and 64M pairs
+	$(PY) bench/run_bench.py --full
+
+package:  ## installable plugin zip in dist/
+	bash scripts/package.sh
+
+deploy:  ## link the working tree into the local QGIS profile
+	bash scripts/deploy.sh
+
+clean:
+	rm -rf dist build demo_out .pytest_cache .ruff_cache
