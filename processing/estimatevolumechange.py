@@ -70,6 +70,17 @@ and the numbers NET_VOLUME, CUT_VOLUME, FILL_VOLUME (m³) and UNCOMPENSATED_NET_
 the correction), plus the 4×4 registration transform (JSON).</p>"""
 
 
+def report_file(outputs: dict[str, Any], suffix: str) -> Path | None:
+    """The engine's report with this suffix (``report_html``/``report_json`` or any such file)."""
+    preferred = outputs.get("report" + suffix.replace(".", "_"))
+    if preferred is not None and Path(preferred).suffix == suffix:
+        return Path(preferred)
+    for path in outputs.values():
+        if Path(path).suffix == suffix and Path(path).stem.startswith("report"):
+            return Path(path)
+    return None
+
+
 class EstimateVolumeChange(SoilVolumeAlgorithm):
     """Whole pipeline: two clouds in, DEMs, difference and volumes out."""
 
@@ -213,10 +224,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         if registered and "after_registered" in outputs:
             results["REGISTERED"] = params.deliver_cloud(
                 Path(outputs["after_registered"]), registered)
-        for key, out_key in (("REPORT", "report_html"), ("REPORT_JSON", "report_json")):
+        for key, suffix in (("REPORT", ".html"), ("REPORT_JSON", ".json")):
             dest = self.parameterAsFileOutput(parameters, key, context)
-            if dest and out_key in outputs:
-                results[key] = self.copy_report(Path(outputs[out_key]), dest)
+            src = report_file(outputs, suffix)
+            if dest and src is None:
+                feedback.pushWarning(f"The engine wrote no {suffix} report.")
+            elif dest:
+                results[key] = self.copy_report(src, dest)
         report = result.report
         for key, (section, field, _d) in NUMBERS.items():
             value = report.get(section, {}).get(field)

@@ -67,9 +67,8 @@ def plugins_dir() -> Path:
     return PLUGINS_DIR
 
 
-@pytest.fixture
-def provider(qgis_processing, plugin_package):
-    """The plugin's provider registered in the Processing registry (re-registered when a test
+def ensure_provider():
+    """The plugin's provider, registered in the Processing registry (again, when a test
     unloaded the plugin)."""
     from soilvolume_qgis.processing.provider import SoilVolumeProvider
 
@@ -80,6 +79,21 @@ def provider(qgis_processing, plugin_package):
         _KEEP_ALIVE.append(existing)
         assert registry.addProvider(existing)
     return existing
+
+
+@pytest.fixture
+def provider(qgis_processing, plugin_package):
+    return ensure_provider()
+
+
+def run_algorithm(name: str, parameters: dict, context=None, feedback=None) -> dict:
+    """``processing.run`` of one of the plugin's algorithms."""
+    from qgis import processing
+    from qgis.core import QgsProcessingFeedback
+
+    ensure_provider()
+    return processing.run(f"{PROVIDER_ID}:{name}", parameters, context=context,
+                          feedback=feedback or QgsProcessingFeedback())
 
 
 @pytest.fixture(scope="session")
@@ -101,14 +115,20 @@ def truth(scene_dir: Path) -> dict:
 
 
 @pytest.fixture
-def run_alg(provider):
-    """``processing.run`` of one of the plugin's algorithms."""
-    from qgis import processing
-    from qgis.core import QgsProcessingContext, QgsProcessingFeedback
+def run_alg(qgis_processing, plugin_package):
+    return run_algorithm
 
-    def run(name: str, parameters: dict, context: QgsProcessingContext | None = None,
-            feedback: QgsProcessingFeedback | None = None) -> dict:
-        return processing.run(f"{PROVIDER_ID}:{name}", parameters, context=context,
-                              feedback=feedback or QgsProcessingFeedback())
 
-    return run
+@pytest.fixture(scope="session")
+def estimate_run(qgis_processing, plugin_package, scene_dir, tmp_path_factory) -> dict:
+    """One full estimate through processing.run with every output written to files."""
+    out = tmp_path_factory.mktemp("estimate")
+    params = {
+        "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"),
+        "CELL": 1.0, "RADIUS": 30.0, "FINE": 0, "CORRECTION": 0,
+        "DIFFERENCE": str(out / "difference.tif"), "DEM_BEFORE": str(out / "dem_before.tif"),
+        "DEM_AFTER": str(out / "dem_after.tif"), "PLANE_OFFSET": str(out / "plane_offset.tif"),
+        "REGISTERED": str(out / "after_registered.laz"), "REPORT": str(out / "report.html"),
+        "REPORT_JSON": str(out / "report.json"),
+    }
+    return run_algorithm("estimatevolumechange", params)
