@@ -98,6 +98,17 @@ def _disk(radius_cells: float) -> np.ndarray:
     return xx * xx + yy * yy <= radius_cells * radius_cells + 1e-9
 
 
+def _drop_specks(change: np.ndarray, min_cells: int) -> np.ndarray:
+    """Change cells in 8-connected patches of at least ``min_cells`` cells (isolated noise
+    extremes are not change areas)."""
+    if min_cells <= 1 or not change.any():
+        return change
+    labels, n = ndimage.label(change, structure=np.ones((3, 3), bool))
+    ok = np.bincount(labels.ravel(), minlength=n + 1) >= min_cells
+    ok[0] = False
+    return ok[labels]
+
+
 def stable_cells(
     diff: np.ndarray,
     cell: float,
@@ -108,10 +119,12 @@ def stable_cells(
     iterations: int = 5,
     k: float = 3.0,
     min_fraction: float = 0.05,
+    min_change_cells: int = 3,
 ) -> np.ndarray:
     """Cells of ``diff`` taken as stable ground. With ``user_mask`` (True = stable) that mask
     (restricted to valid cells) is returned. Otherwise iterate: degree-2 fit, change =
-    |residual| > ``lod`` (or ``k`` x NMAD), dilate change by ``dilate_m``, refit on the rest."""
+    |residual| > ``lod`` (or ``k`` x NMAD) in patches of >= ``min_change_cells`` cells, dilate
+    change by ``dilate_m``, refit on the rest."""
     valid = np.isfinite(diff)
     if user_mask is not None:
         return valid & user_mask.astype(bool)
@@ -124,7 +137,7 @@ def stable_cells(
         surface, _, _ = _poly_fit(x, y, diff, stable, 2, robust=it == 0)
         resid = diff - surface
         thr = lod if lod is not None else k * nmad(resid[stable])
-        change = valid & (np.abs(resid) > thr)
+        change = _drop_specks(valid & (np.abs(resid) > thr), min_change_cells)
         if disk is not None and change.any():
             change = ndimage.binary_dilation(change, disk)
         new = valid & ~change

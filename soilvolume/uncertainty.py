@@ -130,7 +130,8 @@ def volume_uncertainty(
     per_cell_sigma: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
-    (all valid cells when None), cut/fill split by the sign of the corrected difference.
+    (all valid cells when None), cut/fill split by the sign of the corrected difference, and
+    ``net_compared_area`` for a sum over every valid cell (e.g. thresholded or raw volumes).
     ``n_coef`` = coefficients of the correction surface (6 surface, 3 plane, 1 constant, 0 none).
     Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2, range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
@@ -146,6 +147,7 @@ def volume_uncertainty(
         "net": region,
         "cut": region & (diff_corrected < 0),
         "fill": region & (diff_corrected > 0),
+        "net_compared_area": valid,
     }
     out: dict[str, Any] = {
         k: z * region_sigma(int(m.sum()), grid.cell, model, b, pcv) for k, m in parts.items()

@@ -72,12 +72,13 @@ def test_no_change_pair_is_zero_within_uncertainty():
     diff, _ = noisy_pair(7, pile=False)
     res, net, unc = estimate(diff)
     assert abs(net) <= unc["net"]
+    assert abs(np.nansum(res.corrected) * CELL**2) <= unc["net_compared_area"]
     raw_fill = float(np.nansum(np.clip(res.corrected, 0, None)) * CELL**2)
     thr = thresholded_volumes(res.corrected, unc["lod_m"], CELL**2)
     assert thr["fill"] < 0.3 * raw_fill and thr["cut"] < 0.3 * raw_fill  # isolated noise cells
     thr = thresholded_volumes(res.corrected, unc["lod_m"], CELL**2, min_cells=8)
     assert thr["fill"] < 0.1 * raw_fill and thr["cut"] < 0.1 * raw_fill
-    assert max(thr["fill"], thr["cut"], abs(thr["net"])) <= unc["net"]
+    assert max(thr["fill"], thr["cut"], abs(thr["net"])) <= unc["net_compared_area"]
     assert unc["sigma_m"] == pytest.approx(np.hypot(0.02, 0.015), rel=0.25)
 
 
