@@ -1,0 +1,83 @@
+"""Per-zone budgets from polygon files (GeoJSON in lon/lat, GeoPackage in the grid CRS)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pyproj
+import pytest
+
+from soilvolume.types import GridSpec, SoilVolumeError
+from soilvolume.zones import budget, polygons_mask, zone_budgets
+
+UTM = pyproj.CRS.from_epsg(32654)
+GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=200, cols=200,
+                origin=(500000.0, 3900000.0, 0.0), crs_wkt=UTM.to_wkt())
+
+
+def diff() -> np.ndarray:
+    rng = np.random.default_rng(3)
+    d = rng.normal(0, 0.3, (GRID.rows, GRID.cols))
+    d[:5] = np.nan
+    return d
+
+
+def box(x0, y0, x1, y1):
+    return [[[x0, y0], [x1, y0], [x1, y1], [x0, y1], [x0, y0]]]
+
+
+def write_geojson_lonlat(path, boxes, names):
+    tr = pyproj.Transformer.from_crs(UTM, "EPSG:4326", always_xy=True)
+    feats = [{"type": "Feature", "properties": {"name": n},
+              "geometry": {"type": "Polygon",
+                           "coordinates": [[list(tr.transform(x, y)) for x, y in ring]
+                                           for ring in b]}}
+             for b, n in zip(boxes, names, strict=True)]
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
+
+
+def test_zone_sums_equal_totals_after_reprojection(tmp_path):
+    path = tmp_path / "zones.geojson"
+    write_geojson_lonlat(path, [box(499990, 3899990, 500050, 3900110),
+                                box(500050, 3899990, 500110, 3900110)], ["west", "east"])
+    d = diff()
+    zones = zone_budgets(d, GRID, path)
+    total = budget(d, np.ones(d.shape, bool), GRID.cell_area)
+    assert [z["name"] for z in zones] == ["west", "east"]
+    for key in ("net", "cut", "fill", "area_m2"):
+        assert sum(z[key] for z in zones) == pytest.approx(total[key], rel=1e-9, abs=1e-9)
+    assert zones[0]["zone_area_m2"] == pytest.approx(5000.0)
+    west = budget(d[:, :100], np.ones((200, 100), bool), GRID.cell_area)
+    assert zones[0]["net"] == pytest.approx(west["net"])
+
+
+def test_geopackage_in_grid_crs_with_name_field_and_mask(tmp_path):
+    from osgeo import ogr, osr
+
+    path = tmp_path / "stable.gpkg"
+    ds = ogr.GetDriverByName("GPKG").CreateDataSource(str(path))
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(32654)
+    layer = ds.CreateLayer("zones", srs, ogr.wkbPolygon)
+    layer.CreateField(ogr.FieldDefn("zone_id", ogr.OFTString))
+    f = ogr.Feature(layer.GetLayerDefn())
+    f.SetField("zone_id", "pad A")
+    f.SetGeometry(ogr.CreateGeometryFromJson(json.dumps(
+        {"type": "Polygon", "coordinates": box(500010, 3900010, 500020, 3900030)})))
+    layer.CreateFeature(f)
+    ds = None
+    zones = zone_budgets(diff(), GRID, path, name_field="zone_id")
+    assert zones[0]["name"] == "pad A" and zones[0]["zone_area_m2"] == pytest.approx(200.0)
+    assert polygons_mask(path, GRID).sum() == 800
+    with pytest.raises(SoilVolumeError, match="no field 'nope'"):
+        zone_budgets(diff(), GRID, path, name_field="nope")
+
+
+def test_unreadable_file_names_it(tmp_path):
+    bad = tmp_path / "broken.gpkg"
+    bad.write_text("not a geopackage")
+    with pytest.raises(SoilVolumeError, match="broken.gpkg"):
+        zone_budgets(diff(), GRID, bad)
+    with pytest.raises(SoilVolumeError, match="missing.shp"):
+        zone_budgets(diff(), GRID, tmp_path / "missing.shp")
