@@ -18,6 +18,7 @@ from .types import GridSpec
 
 METHODS = ("surface", "plane", "constant", "none")
 _DEGREE = {"surface": 2, "plane": 1, "constant": 0}
+_MAX_FIT = 150_000  # cells used per least-squares fit
 
 
 @dataclass
@@ -79,7 +80,10 @@ def _lstsq(xs, ys, z, w, degree: int) -> np.ndarray:
 def _poly_fit(x, y, diff, mask, degree: int, robust: bool = False):
     """(surface over the whole grid, coefficients, (cx, cy, scale)); Tukey-IRLS if ``robust``."""
     xs, ys, frame = _scaled(x, y, mask)
-    px, py, z = xs[mask], ys[mask], diff[mask]
+    idx = np.flatnonzero(mask)
+    if idx.size > _MAX_FIT:  # a regular subsample keeps large grids fast
+        idx = idx[:: -(-idx.size // _MAX_FIT)]
+    px, py, z = xs.ravel()[idx], ys.ravel()[idx], diff.ravel()[idx]
     w = np.ones_like(z)
     coef = _lstsq(px, py, z, w, degree)
     for _ in range(8 if robust else 0):
