@@ -85,6 +85,9 @@ def compute(grid: Grid, x, y, v, *, stats=STATS, binmode=False, radius=None, pow
         parts: list[tuple] = []
         for di in range(-reach, reach + 1):
             for dj in range(-reach, reach + 1):
+                # nearest a point of the cell can be to that centre: skip unreachable offsets
+                if math.hypot(max(0, abs(di) - 0.5), max(0, abs(dj) - 0.5)) * grid.res >= radius:
+                    continue
                 i, j = ci + di, cj + dj
                 d = np.hypot(grid.x0 + (i + 0.5) * grid.res - x, grid.y0 + (j + 0.5) * grid.res - y)
                 m = d < radius

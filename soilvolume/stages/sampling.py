@@ -23,11 +23,11 @@ def voxel_center_nn(view: PointView, opts: dict, ctx: StageContext) -> PointView
     idx = np.floor((xyz - lo) / cell).astype(np.int64)
     centre = lo + (idx + 0.5) * cell
     dist = ((centre - xyz) ** 2).sum(axis=1)
-    c, r, d = idx[:, 0], idx[:, 1], idx[:, 2]
-    order = np.lexsort((np.arange(len(view)), dist, d, c, r))
-    key = idx[order][:, [1, 0, 2]]
+    span = idx.max(axis=0) + 1
+    key = (idx[:, 1] * span[0] + idx[:, 0]) * span[2] + idx[:, 2]  # (y, x, z) voxel order
+    order = np.lexsort((dist, key))  # stable: the first point wins ties
     first = np.ones(len(order), dtype=bool)
-    first[1:] = (key[1:] != key[:-1]).any(axis=1)
+    first[1:] = key[order][1:] != key[order][:-1]
     return view.take(order[first])
 
 
@@ -42,15 +42,26 @@ def sample(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     if n == 0:
         return view
     xyz = view.xyz
-    tree = cKDTree(xyz)
-    r_strict = np.nextafter(radius, 0)
-    taken = np.zeros(n, dtype=bool)
+    r_strict = float(np.nextafter(radius, 0))
     keep = np.zeros(n, dtype=bool)
     for s in range(0, n, _CHUNK):
         e = min(n, s + _CHUNK)
-        near = tree.query_ball_point(xyz[s:e], r_strict, workers=-1)
-        for i in range(s, e):
-            if not taken[i]:
-                keep[i] = True
-                taken[near[i - s]] = True
+        cand = np.arange(s, e)
+        if keep[:s].any():  # drop points near anything kept in earlier chunks
+            kept_tree = cKDTree(xyz[:s][keep[:s]])
+            d, _ = kept_tree.query(xyz[s:e], k=1, distance_upper_bound=r_strict, workers=-1)
+            cand = cand[~(d < radius)]
+        if cand.size == 0:
+            continue
+        # the rest, in input order: a point is kept unless an earlier kept one is too close
+        pairs = cKDTree(xyz[cand]).query_pairs(r_strict, output_type="ndarray")
+        pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))] if len(pairs) else pairs
+        ptr = np.searchsorted(pairs[:, 0], np.arange(cand.size + 1)).tolist()
+        later = pairs[:, 1].tolist()
+        taken = bytearray(cand.size)
+        for a in range(cand.size):
+            if not taken[a]:
+                keep[cand[a]] = True
+                for b in later[ptr[a]:ptr[a + 1]]:
+                    taken[b] = 1
     return view.take(keep)
