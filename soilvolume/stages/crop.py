@@ -25,8 +25,11 @@ def _one(opts: dict, name: str, ctx: StageContext):
 
 def _transformer(view: PointView, opts: dict, ctx: StageContext):
     a_srs = ctx.string(opts, "a_srs")
-    if not a_srs or view.srs_wkt is None:
+    if not a_srs:
         return None
+    if view.srs_wkt is None:
+        raise ctx.error("unable to transform the crop geometry from 'a_srs': the points have no "
+                        "SRS")
     src, dst = pyproj.CRS.from_user_input(a_srs), pyproj.CRS.from_wkt(view.srs_wkt)
     if src.equals(dst):
         return None
