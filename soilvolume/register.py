@@ -21,6 +21,8 @@ from .types import SoilVolumeError, StageQuality
 ICP_LEVELS = ((1.0, 6.0, 3.0), (1.0, 3.0, 1.0), (0.5, 1.5, 0.5), (0.25, 0.8, 0.25), (0.25, 0.4, 0.15))
 REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12), (0.15, 0.25, 0.08))
 EVAL_DISTANCE = 0.4
+MAX_ICP_POINTS = 150_000  # per level: coarser voxels on very large sites
+MAX_COARSE_POINTS = 15_000
 
 
 @dataclass
@@ -69,10 +71,48 @@ def transform_points(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> tuple[float, float]:
-    """(fitness, inlier RMSE) of ``t`` at ``distance``."""
+    """(fitness, inlier RMSE) of ``t`` at ``distance`` (Open3D, point to point)."""
     o3d = _o3d()
     ev = o3d.pipelines.registration.evaluate_registration(source, target, distance, t)
     return float(ev.fitness), float(ev.inlier_rmse)
+
+
+def _cap_voxel(xyz: np.ndarray, max_points: int) -> float:
+    """The voxel size that leaves about ``max_points`` of a cloud (0 when it has fewer)."""
+    if len(xyz) <= max_points:
+        return 0.0
+    from .crop import polygon_area
+
+    return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max_points))
+
+
+def spacing(xyz: np.ndarray) -> float:
+    """Mean horizontal point spacing (m) of a cloud: sqrt(footprint area / points)."""
+    from .crop import polygon_area
+
+    return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max(len(xyz), 1)))
+
+
+def evaluate_surface(
+    source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, distance: float = EVAL_DISTANCE,
+) -> tuple[float, float]:
+    """(fitness, RMSE) on terrain: the fraction of source points whose point-to-plane distance to
+    the target surface is within ``distance`` (nearest target point within 3 point spacings),
+    and the RMS of those distances. Meaningful on sparse clouds, unlike point-to-point."""
+    src = to_pcd(transform_points(source_xyz, t), 0.25)
+    reach = max(1.0, 3 * spacing(target_xyz))
+    tgt = with_normals(to_pcd(crop_target(target_xyz, source_xyz, t, reach), 0.1), max(reach, 0.5))
+    from scipy.spatial import cKDTree
+
+    sp, tp, tn = np.asarray(src.points), np.asarray(tgt.points), np.asarray(tgt.normals)
+    if len(tp) == 0:
+        return 0.0, float("nan")
+    d, j = cKDTree(tp).query(sp, distance_upper_bound=reach)
+    near = np.isfinite(d)
+    r = np.abs(np.einsum("ij,ij->i", sp[near] - tp[j[near]], tn[j[near]]))
+    ok = r <= distance
+    fit = float(ok.sum() / max(len(sp), 1))
+    return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
 
 
 def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, seed: int) -> np.ndarray:
@@ -80,6 +120,7 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
     o3d = _o3d()
     reg = o3d.pipelines.registration
     o3d.utility.random.seed(seed)
+    voxel = max(voxel, _cap_voxel(source_xyz, MAX_COARSE_POINTS), _cap_voxel(target_xyz, MAX_COARSE_POINTS))
     src = with_normals(to_pcd(source_xyz, voxel), 2.5 * voxel)
     tgt = with_normals(to_pcd(target_xyz, voxel), 2.5 * voxel)
     param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
@@ -88,7 +129,7 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
     res = reg.registration_ransac_based_on_feature_matching(
         src, tgt, fs, ft, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
         [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
-        reg.RANSACConvergenceCriteria(100_000, 0.999),
+        reg.RANSACConvergenceCriteria(50_000, 0.999),
     )
     return np.asarray(res.transformation)
 
@@ -111,7 +152,10 @@ def icp_levels(
     reg = o3d.pipelines.registration
     t = init.copy()
     cache: dict[float, tuple] = {}
+    cap = _cap_voxel(source_xyz, MAX_ICP_POINTS)
+    gap = 1.5 * spacing(target_xyz)  # sparse clouds: correspondences are at least this far
     for voxel, dist, k in levels:
+        voxel, dist = max(voxel, cap), max(dist, gap)
         if check:
             check()
         if voxel not in cache:
@@ -166,7 +210,7 @@ def register(
     if best.fitness < 0.2:
         raise SoilVolumeError(
             f"registration failed: only {best.fitness:.0%} of the after cloud lies within "
-            f"{EVAL_DISTANCE} m of the before cloud (RMSE {best.rmse:.3f} m); check that both "
+            f"{EVAL_DISTANCE} m of the before surface (RMSE {best.rmse:.3f} m); check that both "
             "clouds cover the same site and their CRSs"
         )
     return Registration(best.transform, coarse, best)
@@ -211,7 +255,5 @@ def _fine_stage(after_xyz, before_xyz, init, options: Options, check) -> StageQu
             # src_stable is already in the before frame: refine a correction on top of t.
             dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, options.fine, check)
             t = dt @ t
-    src = to_pcd(after_xyz, 0.25)
-    tgt = to_pcd(crop_target(before_xyz, after_xyz, t, 2.0), 0.1)
-    fit, rmse = evaluate(src, tgt, t)
+    fit, rmse = evaluate_surface(after_xyz, before_xyz, t)
     return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0)
