@@ -15,6 +15,7 @@ import numpy as np
 from . import stages as embedded
 from .io import RawPoints, atomic_path
 from .stages.geometry import format_bounds
+from .stages.readers import SRS_OPTS
 from .stages.view import PointView
 from .types import SoilVolumeError
 
@@ -39,7 +40,8 @@ STRING_OR_LIST = {"limits", "polygon", "point", "output_type", "value", "assignm
                   "returns"}
 
 __all__ = ["PointView", "build_prepare_pipeline", "build_dem_stage", "dumps", "load_pipeline",
-           "prepare_cloud", "run_pipeline", "run_pipeline_file", "save_pipeline", "view_to_raw"]
+           "prepare_cloud", "prepare_cloud_from_file", "run_pipeline", "run_pipeline_file",
+           "save_pipeline", "view_to_raw", "with_input"]
 
 
 # ---------------------------------------------------------------------------- building
@@ -368,5 +370,27 @@ def prepare_cloud(path: str | os.PathLike, *, engine: str = "auto", **options: A
 def run_pipeline_file(pipeline: str | os.PathLike, *, engine: str = "auto") -> RawPoints:
     """A user's preparation pipeline file, run; the points keep the reader's filename as path."""
     stages = load_pipeline(pipeline)
+    view = run_pipeline(stages, engine=engine, source=str(pipeline))
+    return view_to_raw(view, stages[0]["filename"], str(pipeline))
+
+
+def with_input(stages: list[dict[str, Any]], path: str | os.PathLike) -> list[dict[str, Any]]:
+    """The stages reading ``path`` instead of the reader's filename (like ``pdal pipeline
+    --readers.las.filename=...``); the reader changes type when the file's format needs it, keeping
+    its SRS options."""
+    reader = dict(stages[0])
+    fresh = reader_stage(path)
+    if fresh["type"] != reader["type"]:
+        reader = {**fresh, **{k: v for k, v in reader.items() if k in SRS_OPTS}}
+    reader["filename"] = str(path)
+    return [reader, *stages[1:]]
+
+
+def prepare_cloud_from_file(pipeline: str | os.PathLike, path: str | os.PathLike | None = None,
+                            *, engine: str = "auto") -> RawPoints:
+    """A user's preparation pipeline run on ``path`` (default: the pipeline's own reader file)."""
+    stages = load_pipeline(pipeline)
+    if path is not None:
+        stages = with_input(stages, path)
     view = run_pipeline(stages, engine=engine, source=str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))

@@ -148,6 +148,12 @@ def test_run_pipeline_file_and_engine_choice(tmp_path, monkeypatch):
     f.write_text(json.dumps([REAL, {"type": "filters.range", "limits": "Z[0:430]"}]))
     raw = P.run_pipeline_file(f, engine="embedded")
     assert raw.path == REAL and raw.xyz[:, 2].max() <= 430
+    other = _las(tmp_path / "o.las", np.array([[0.0, 0, 1], [1, 1, 500]]))
+    raw2 = P.prepare_cloud_from_file(f, other, engine="embedded")  # the CLI's BEFORE wins
+    assert raw2.path == str(other) and raw2.xyz[:, 2].tolist() == [1.0]
+    xyz = tmp_path / "o.xyz"
+    xyz.write_text("0 0 1\n1 1 2\n")
+    assert P.prepare_cloud_from_file(f, xyz, engine="embedded").xyz.shape == (2, 3)
     monkeypatch.setattr(P, "_pdal_module", lambda: None)
     with pytest.raises(SoilVolumeError, match="pdal Python bindings do not import"):
         P.run_pipeline(P.load_pipeline(f), engine="pdal")
