@@ -102,10 +102,11 @@ def write_geotiff(
     import rasterio
 
     path = Path(path)
-    data = np.where(np.isfinite(array), array, NODATA).astype(dtype)
+    nodata = NODATA if np.dtype(dtype).kind == "f" else 255
+    data = np.where(np.isfinite(array), array, nodata).astype(dtype)
     profile = dict(
         driver="GTiff", width=grid.cols, height=grid.rows, count=1, dtype=dtype,
-        crs=grid.crs_wkt, transform=grid.transform, nodata=NODATA, compress="deflate",
+        crs=grid.crs_wkt, transform=grid.transform, nodata=nodata, compress="deflate",
         tiled=grid.cols >= 256 and grid.rows >= 256,
     )
     with atomic_path(path) as tmp:

@@ -126,12 +126,15 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
         vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
     hooks.step(85, "writing outputs")
     with timer("write"):
-        gridmod.write_geotiff(out.path("dem_before.tif"), h_b, grid, "average height, before (m)")
-        gridmod.write_geotiff(out.path("dem_after.tif"), h_a, grid, "average height, after (m)")
+        z0 = float(prep.origin[2])  # local -> absolute heights
+        gridmod.write_geotiff(out.path("dem_before.tif"), h_b + z0, grid, "average height, before (m)")
+        gridmod.write_geotiff(out.path("dem_after.tif"), h_a + z0, grid, "average height, after (m)")
         gridmod.write_geotiff(out.path("difference.tif"), vols["diff"], grid,
                               f"H_after - H_before - correction ({options.correction}) (m)")
         gridmod.write_geotiff(out.path("plane_offset.tif"), vols["offset"], grid,
                               f"vertical correction d_i subtracted ({options.correction}) (m)")
+        gridmod.write_geotiff(out.path("filled_mask.tif"), vols["filled_mask"].astype("uint8"), grid,
+                              "1 = difference interpolated (sparse cell or filled hole)", "", "uint8")
         if options.keep_registered_cloud:
             write_las(out.path("after_registered.laz"), after_xyz + prep.origin, prep.frame.wkt)
     report = _report(prep, reg, grid, vols, p_b, p_a, options, timer)
@@ -244,7 +247,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     h, n = gridmod.average_height(xyz, grid, options.statistic)
     if out_tif.resolve() == cloud.resolve():
         raise SoilVolumeError(f"{out_tif}: refusing to overwrite the input")
-    gridmod.write_geotiff(out_tif, h, grid, f"average height ({options.statistic}) (m)")
+    gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
     hooks.step(100, "done")
     return {"cell_m": cell, "rows": grid.rows, "cols": grid.cols, "crs": frame.crs.name,
             "transform": list(grid.transform)[:6], "points": int(len(xyz)),

@@ -1,0 +1,69 @@
+"""GeoTIFFs read back with rasterio: CRS, transform, nodata and cell values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rasterio
+
+from soilvolume.api import cloud_to_dem
+from soilvolume.grid import NODATA, average_height, make_grid
+from soilvolume.io import read_points
+from soilvolume.options import Options
+
+
+def test_outputs_read_back(misaligned_result):
+    res, _, out = misaligned_result
+    g = res.report["grid"]
+    for name in ("dem_before", "dem_after", "difference", "plane_offset"):
+        with rasterio.open(out / f"{name}.tif") as ds:
+            assert ds.crs.to_epsg() == 32654
+            assert ds.nodata == NODATA
+            assert (ds.height, ds.width) == (g["rows"], g["cols"])
+            t = ds.transform
+            assert t.a == pytest.approx(g["cell_m"]) and t.e == pytest.approx(-g["cell_m"])
+            for edge in (t.c, t.f):  # cell edges on multiples of the cell size
+                assert edge / g["cell_m"] == pytest.approx(round(edge / g["cell_m"]), abs=1e-6)
+            band = ds.read(1, masked=True)
+            assert band.count() > 0
+    with rasterio.open(out / "dem_before.tif") as b, rasterio.open(out / "dem_after.tif") as a, \
+            rasterio.open(out / "difference.tif") as d, rasterio.open(out / "plane_offset.tif") as o, \
+            rasterio.open(out / "filled_mask.tif") as f:
+        hb, ha, dd, off = (x.read(1, masked=True).astype(float) for x in (b, a, d, o))
+        filled = f.read(1) == 1
+    assert 0 < filled.sum() < filled.size / 4  # some sparse cells were interpolated, marked
+    both = ~hb.mask & ~ha.mask & ~dd.mask & ~off.mask & ~filled
+    assert np.abs((ha - hb - off)[both] - dd[both]).max() < 2e-3 + 0  # float32 storage
+    assert (d.nodata == NODATA)
+    # the sum of the difference raster is the reported net volume
+    assert float(dd.sum()) * g["cell_m"] ** 2 == pytest.approx(res.report["volume_m3"]["net"], rel=1e-3)
+    assert 40 < float(hb.mean()) < 120  # metres above the datum, synthetic site
+
+
+def test_dem_cells_equal_numpy_means(misaligned_pair, tmp_path):
+    before, _, _ = misaligned_pair
+    out = tmp_path / "dem.tif"
+    info = cloud_to_dem(before, out, Options(cell=2.0, statistic="mean", ground="none"))
+    xyz = read_points(before).xyz
+    with rasterio.open(out) as ds:
+        band = ds.read(1, masked=True)
+        t = ds.transform
+        assert ds.crs.to_epsg() == 32654 and info["cell_m"] == 2.0
+        col = np.floor((xyz[:, 0] - t.c) / t.a).astype(int)
+        row = np.floor((xyz[:, 1] - t.f) / t.e).astype(int)
+        for r, c in [(5, 7), (20, 33), (40, 60)]:
+            sel = (row == r) & (col == c)
+            assert sel.any()
+            assert band[r, c] == pytest.approx(xyz[sel, 2].mean(), abs=1e-3)
+
+
+def test_robust_mean_ignores_an_outlier():
+    rng = np.random.default_rng(0)
+    xyz = np.c_[rng.uniform(0, 1, 50), rng.uniform(0, 1, 50), rng.normal(10, 0.02, 50)]
+    xyz[0, 2] = 25.0  # a floater
+    grid = make_grid(np.zeros(3), np.ones(3), 1.0, np.zeros(3), None)
+    mean, _ = average_height(xyz, grid, "mean")
+    robust, n = average_height(xyz, grid, "robust-mean")
+    assert n[0, 0] == 50
+    assert abs(mean[0, 0] - 10) > 0.25
+    assert robust[0, 0] == pytest.approx(xyz[1:, 2].mean(), abs=0.01)
