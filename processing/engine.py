@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
+import re
 import sys
 import sysconfig
 import traceback
@@ -74,21 +76,40 @@ def engine(name: str = "api") -> ModuleType:
     return importlib.import_module(f"soilvolume.{name}")
 
 
+def _import(module: str) -> ModuleType:
+    """Import a dependency; pyproj with RTLD_DEEPBIND on Linux (see below)."""
+    if module == "pyproj" and "pyproj" not in sys.modules and hasattr(os, "RTLD_DEEPBIND"):
+        # pyproj wheels bundle their own libproj. Inside QGIS, which already loaded the system
+        # libproj, the bundled copy's symbols would bind to the system one; both sets of static
+        # objects then get destroyed at exit and qgis_process/QGIS segfaults after a successful
+        # run. Deep binding keeps the bundled libproj self-contained.
+        flags = sys.getdlopenflags()
+        sys.setdlopenflags(flags | os.RTLD_DEEPBIND)
+        try:
+            return importlib.import_module("pyproj")
+        finally:
+            sys.setdlopenflags(flags)
+    return importlib.import_module(module)
+
+
 def missing_dependencies(deps: Sequence[tuple[str, str]]) -> list[tuple[str, str, str]]:
     """(module, pip requirement, error) for every dependency that does not import."""
     missing = []
     for module, requirement in deps:
         try:
-            importlib.import_module(module)
+            _import(module)
         except Exception as exc:  # noqa: BLE001 - any import failure (ImportError, OSError...)
             missing.append((module, requirement, f"{type(exc).__name__}: {exc}"))
     return missing
 
 
 def python_executable() -> str:
-    """The Python interpreter QGIS runs (sys.executable is often the QGIS binary itself)."""
+    """The Python interpreter behind QGIS's Python. In embedded Python ``sys.executable`` is
+    often the QGIS binary or whatever ``python3`` is first on PATH, so it is trusted only when it
+    lives under ``sys.prefix``; else the interpreter in ``sys.exec_prefix`` is named."""
     exe = Path(sys.executable or "")
-    if exe.name.lower().startswith("python"):
+    prefixes = {Path(sys.prefix), Path(sys.exec_prefix)}
+    if exe.name.lower().startswith("python") and any(p in exe.parents for p in prefixes):
         return str(exe)
     prefix = Path(sys.exec_prefix)
     v = sys.version_info
@@ -165,6 +186,28 @@ def hooks(feedback: QgsProcessingFeedback | None):  # -> soilvolume.api.Hooks
     )
 
 
+# the engine's messages name command-line options; say which Processing parameter instead
+CLI_TO_PARAMETER = {
+    "--before-crs": "the 'Before CRS override' parameter",
+    "--after-crs": "the 'After CRS override' parameter",
+    "--radius": "the 'Crop radius' parameter",
+    "--cell": "the 'Cell size' parameter",
+    "--fine": "the 'Fine registration' parameter",
+    "--coarse": "the 'Coarse registration' parameter",
+    "--correction": "the 'Plane-offset correction' parameter",
+    "--ground": "the 'Ground points' parameter",
+    "--statistic": "the 'Cell height statistic' parameter",
+    "--crs": "the 'CRS override' parameter",
+}
+
+
+def qgis_wording(message: str) -> str:
+    """An engine message with command-line options replaced by parameter names."""
+    for flag in sorted(CLI_TO_PARAMETER, key=len, reverse=True):
+        message = re.sub(rf"(?<![\w-]){re.escape(flag)}(?![\w-])", CLI_TO_PARAMETER[flag], message)
+    return message.replace("pass the '", "set the '")
+
+
 @contextmanager
 def engine_errors(feedback: QgsProcessingFeedback | None, hint: str = "") -> Iterator[None]:
     """Engine errors become QgsProcessingException with the engine's message."""
@@ -174,8 +217,8 @@ def engine_errors(feedback: QgsProcessingFeedback | None, hint: str = "") -> Ite
     except api.Cancelled as exc:
         raise QgsProcessingException("Cancelled by the user; no outputs were written.") from exc
     except engine("types").SoilVolumeError as exc:
-        message = str(exc)
-        if hint and "crs" in message.lower():
+        message = qgis_wording(str(exc))
+        if hint and "crs" in message.lower() and "parameter" not in message:
             message = f"{message}\n{hint}"
         raise QgsProcessingException(message) from exc
     except QgsProcessingException:

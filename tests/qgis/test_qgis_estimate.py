@@ -71,7 +71,6 @@ def test_reports_and_registered_cloud(estimate_run):
         assert "<html" in Path(estimate_run["REPORT"]).read_text().lower()
 
 
-@pytest.mark.xfail(reason="engine writes DEM heights relative to its local origin z", strict=False)
 def test_dems_hold_absolute_heights(estimate_run):
     for key in ("DEM_BEFORE", "DEM_AFTER"):
         with rasterio.open(estimate_run[key]) as ds:

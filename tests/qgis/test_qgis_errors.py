@@ -1,0 +1,110 @@
+"""Bad parameters and missing dependencies give a QgsProcessingException with a clear message."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from qgis.core import QgsProcessingException
+
+
+@pytest.fixture(scope="module")
+def xyz_pair(scene_dir, tmp_path_factory) -> tuple[Path, Path]:
+    """The scene's clouds as XYZ text files, which carry no CRS (every 4th point)."""
+    import laspy
+
+    folder = tmp_path_factory.mktemp("xyz")
+    paths = []
+    for name in ("before", "after"):
+        las = laspy.read(scene_dir / f"{name}.las")
+        path = folder / f"{name}.xyz"
+        np.savetxt(path, np.c_[las.x, las.y, las.z][::4], fmt="%.3f")
+        paths.append(path)
+    return paths[0], paths[1]
+
+
+def test_wrong_file_type(run_alg, scene_dir, tmp_path):
+    shapefile = tmp_path / "parcels.shp"
+    shapefile.write_bytes(b"\0" * 100)
+    with pytest.raises(QgsProcessingException, match=r"unsupported file type '\.shp'"):
+        run_alg("estimatevolumechange", {
+            "BEFORE": str(shapefile), "AFTER": str(scene_dir / "after.las"),
+            "DIFFERENCE": str(tmp_path / "d.tif")})
+
+
+def test_missing_file(run_alg, scene_dir, tmp_path):
+    with pytest.raises(QgsProcessingException, match="file not found"):
+        run_alg("registerpointclouds", {
+            "BEFORE": str(tmp_path / "nowhere.las"), "AFTER": str(scene_dir / "after.las"),
+            "OUTPUT": str(tmp_path / "r.laz")})
+
+
+def test_no_input_cloud(run_alg, tmp_path):
+    with pytest.raises(QgsProcessingException, match="No input point cloud"):
+        run_alg("pointcloudtodem", {"OUTPUT": str(tmp_path / "dem.tif")})
+
+
+def test_missing_crs_names_the_parameter(run_alg, xyz_pair, tmp_path):
+    before, after = xyz_pair
+    with pytest.raises(QgsProcessingException) as info:
+        run_alg("estimatevolumechange", {
+            "BEFORE": str(before), "AFTER": str(after), "DIFFERENCE": str(tmp_path / "d.tif")})
+    message = str(info.value)
+    assert "CRS" in message and "CRS override" in message
+    assert not (tmp_path / "d.tif").exists()
+
+
+def test_crs_override_makes_xyz_usable(run_alg, xyz_pair, tmp_path):
+    res = run_alg("pointcloudtodem", {
+        "INPUT": str(xyz_pair[0]), "CRS": "EPSG:32654", "CELL": 4.0,
+        "OUTPUT": str(tmp_path / "dem.tif")})
+    assert res["VALID_CELLS"] > 100
+
+
+def test_no_overlap(run_alg, scene_dir, tmp_path):
+    import laspy
+
+    far = tmp_path / "far.las"
+    las = laspy.read(scene_dir / "after.las")
+    las.x = np.asarray(las.x) + 10_000.0  # 10 km east of the before survey
+    las.write(far)
+    with pytest.raises(QgsProcessingException) as info:
+        run_alg("estimatevolumechange", {
+            "BEFORE": str(scene_dir / "before.las"), "AFTER": str(far),
+            "DIFFERENCE": str(tmp_path / "d.tif")})
+    assert "overlap" in str(info.value).lower()
+    assert not (tmp_path / "d.tif").exists()
+
+
+def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "open3d", None)  # "import open3d" now fails
+    with pytest.raises(QgsProcessingException) as info:
+        run_alg("estimatevolumechange", {
+            "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"),
+            "DIFFERENCE": str(tmp_path / "d.tif")})
+    message = str(info.value)
+    assert "cannot import open3d" in message
+    assert f"{sys.executable} -m pip install" in message and "open3d" in message
+    assert "restart QGIS" in message
+
+
+def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch):
+    from soilvolume_qgis.processing import engine
+
+    def broken(name: str = "api"):
+        raise ImportError("simulated: soilvolume/run.py is missing")
+
+    monkeypatch.setattr(engine, "engine", broken)
+    with pytest.raises(QgsProcessingException, match="engine package 'soilvolume' does not import"):
+        run_alg("pointcloudtodem", {
+            "INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")})
+
+
+def test_install_command_outside_a_venv(monkeypatch):
+    from soilvolume_qgis.processing import engine
+
+    monkeypatch.setattr(sys, "prefix", sys.base_prefix)
+    command = engine.install_command(["open3d-cpu", "laspy[lazrs]"])
+    assert "-m pip install --user" in command and '"laspy[lazrs]"' in command

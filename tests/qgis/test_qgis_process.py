@@ -1,0 +1,93 @@
+"""Headless runs through the ``qgis_process`` command line, in a throw-away QGIS profile."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sysconfig
+from pathlib import Path
+
+import pytest
+
+QGIS_PROCESS = shutil.which("qgis_process")
+pytestmark = pytest.mark.skipif(QGIS_PROCESS is None, reason="qgis_process is not installed")
+
+BLOCKER = '''
+import importlib.abc, sys
+
+class _Block(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] == "open3d":
+            raise ImportError("No module named 'open3d' (blocked by the test)")
+        return None
+
+sys.meta_path.insert(0, _Block())
+'''
+
+
+@pytest.fixture(scope="module")
+def qgis_env(plugins_dir, tmp_path_factory) -> dict[str, str]:
+    """Environment of a headless qgis_process with only this plugin enabled, in a temp profile;
+    its Python sees this interpreter's packages (the engine's dependencies)."""
+    config = tmp_path_factory.mktemp("qgis-profile")
+    env = dict(os.environ)
+    env.update(
+        QT_QPA_PLATFORM="offscreen", QGIS_PLUGINPATH=str(plugins_dir),
+        QGIS_CUSTOM_CONFIG_PATH=str(config), PYTHONPATH=sysconfig.get_paths()["purelib"],
+    )
+    env.pop("QGIS_OPTIONS_PATH", None)  # pytest-qgis points it at its own settings
+    run = subprocess.run([QGIS_PROCESS, "plugins", "enable", "soilvolume_qgis"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    return env
+
+
+def qgis_process(env: dict[str, str], *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([QGIS_PROCESS, *args], env=env, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_qgis_process_lists_the_algorithms(qgis_env):
+    run = qgis_process(qgis_env, "list")
+    assert run.returncode == 0, run.stderr
+    for name in ("estimatevolumechange", "pointcloudtodem", "registerpointclouds",
+                 "volumefromdems"):
+        assert f"soilvolume:{name}" in run.stdout
+
+
+def test_qgis_process_runs_the_pipeline(qgis_env, scene_dir, truth, tmp_path):
+    run = qgis_process(
+        qgis_env, "run", "soilvolume:estimatevolumechange", "--json", "--",
+        f"BEFORE={scene_dir / 'before.las'}", f"AFTER={scene_dir / 'after.las'}", "CELL=1",
+        f"DIFFERENCE={tmp_path / 'difference.tif'}", f"DEM_BEFORE={tmp_path / 'dem_before.tif'}",
+        f"REPORT_JSON={tmp_path / 'report.json'}",
+    )
+    assert run.returncode == 0, run.stderr + run.stdout
+    results = json.loads(run.stdout)["results"]
+    assert results["NET_VOLUME"] == pytest.approx(truth["net"], rel=0.03)
+    for key in ("CUT_VOLUME", "FILL_VOLUME", "UNCOMPENSATED_NET_VOLUME"):
+        assert isinstance(results[key], float)
+    assert Path(results["DIFFERENCE"]).is_file() and Path(results["DEM_BEFORE"]).is_file()
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["volume_m3"]["net"] == pytest.approx(results["NET_VOLUME"])
+
+
+def test_qgis_process_without_open3d_explains_the_fix(qgis_env, scene_dir, tmp_path):
+    blocker = tmp_path / "blocker"
+    blocker.mkdir()
+    (blocker / "sitecustomize.py").write_text(BLOCKER)
+    env = dict(qgis_env, PYTHONPATH=f"{blocker}{os.pathsep}{qgis_env['PYTHONPATH']}")
+    listed = qgis_process(env, "list")
+    assert "soilvolume:estimatevolumechange" in listed.stdout  # the plugin still loads
+    run = qgis_process(
+        env, "run", "soilvolume:estimatevolumechange", "--",
+        f"BEFORE={scene_dir / 'before.las'}", f"AFTER={scene_dir / 'after.las'}",
+        f"DIFFERENCE={tmp_path / 'difference.tif'}",
+    )
+    assert run.returncode != 0
+    output = run.stdout + run.stderr
+    assert "cannot import open3d" in output
+    assert "-m pip install" in output and "open3d" in output.split("-m pip install")[1]
+    assert "Traceback" not in output
