@@ -124,6 +124,7 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
     hooks.step(75, "computing the difference and volumes")
     with timer("volume"):
         vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
+        vols["dem_after"] = h_a + prep.origin[2]
     hooks.step(85, "writing outputs")
     with timer("write"):
         z0 = float(prep.origin[2])  # local -> absolute heights
@@ -150,37 +151,57 @@ def _points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray
     return xyz[keep]
 
 
+N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
+
+
 def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
-    """Raw difference -> sparse/hole refill -> correction -> budgets."""
+    """Raw difference -> sparse/hole refill -> correction -> budgets, uncertainty, zones."""
+    from .uncertainty import thresholded_volumes, volume_uncertainty
+
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
     filled, filled_mask = holes.refill_sparse(raw, n_b, n_a, options.min_count_ratio, max_cells)
-    offset, params, stable = _correction(filled, d_i, grid, options)
+    offset, params, stable, change = _correction(filled, d_i, grid, options)
     diff = filled - offset
     area = grid.cell_area
-    return {
+    unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
+                             n_coef=N_COEF[options.correction])
+    vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
-        "stable": stable, "params": params,
+        "stable": stable, "params": params, "uncertainty": unc,
         "compensated": budget(diff, area), "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
+        "change_areas": budget(diff, area, change),
+        "thresholded": thresholded_volumes(diff, unc["lod_m"], area),
         "holes": holes.summary(diff, filled_mask, area),
         "empty_cells": int((~np.isfinite(raw)).sum()),
         "empty_before": int((n_b == 0).sum()), "empty_after": int((n_a == 0).sum()),
     }
+    if options.zones:
+        from .zones import zone_budgets
+
+        vols["zones"] = zone_budgets(diff, grid, options.zones)
+    return vols
 
 
 def _correction(diff, d_i, grid: GridSpec, options: Options):
-    """The vertical correction surface to subtract, its parameters and the stable-cell mask."""
-    method = options.correction
-    finite = np.isfinite(diff)
-    if method == "none":
-        return np.where(finite, 0.0, np.nan), {"method": "none"}, finite
-    if method == "paper-plane":
-        return np.where(finite, d_i, np.nan), {"method": "paper-plane"}, finite
+    """(correction surface to subtract, its parameters, stable-cell mask, change mask).
+
+    Stable ground is found the same way for every method, so residual statistics and the
+    uncertainty are comparable; ``paper-plane`` subtracts the paper's ``d_i`` first."""
     from .correction import apply as apply_correction
 
-    res = apply_correction(diff, method, grid)
-    return np.where(finite, res.surface, np.nan), {"method": method, **res.params}, res.stable_mask
+    method = options.correction
+    base = d_i if method == "paper-plane" else 0.0
+    user_mask = None
+    if options.stable_mask:
+        from .zones import polygons_mask
+
+        user_mask = polygons_mask(options.stable_mask, grid)
+    res = apply_correction(diff - base, "none" if method == "paper-plane" else method, grid,
+                           user_mask=user_mask)
+    offset = np.where(np.isfinite(diff), base + res.surface, np.nan)
+    return offset, {**res.params, "method": method}, res.stable_mask, res.change_mask
 
 
 def _report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: Options, timer: Timer) -> dict:
@@ -192,6 +213,15 @@ def _report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: 
         "volume_m3": vols["compensated"],
         "volume_uncompensated_m3": vols["uncompensated"],
         "volume_paper_plane_m3": vols["paper_plane"],
+        "volume_change_areas_m3": vols["change_areas"],
+        "volume_thresholded_m3": vols["thresholded"],
+        "uncertainty_m3": {"net": vols["uncertainty"]["net_compared_area"],
+                           "cut": vols["uncertainty"]["cut"], "fill": vols["uncertainty"]["fill"],
+                           "net_change_areas": vols["uncertainty"]["net"],
+                           "lod_m": vols["uncertainty"]["lod_m"],
+                           "confidence": vols["uncertainty"]["confidence"]},
+        "uncertainty": vols["uncertainty"],
+        "zones": vols.get("zones", []),
         "correction": {"method": options.correction, "params": vols["params"]},
         "registration": {
             "transform": t_abs, "transform_local": reg.transform, "local_origin": prep.origin,
@@ -218,7 +248,7 @@ def _html(out: OutputDir, report: dict, vols: dict, grid: GridSpec) -> None:
     except ImportError:
         return
     arrays = {"difference": vols["diff"], "residual": np.where(vols["stable"], vols["diff"], np.nan),
-              "filled_mask": vols["filled_mask"]}
+              "filled_mask": vols["filled_mask"], "dem_after": vols["dem_after"]}
     write_html(report, arrays, grid, out.path("report.html"))
 
 
