@@ -83,6 +83,16 @@ def build_parser() -> argparse.ArgumentParser:
     vol.add_argument("--zones", type=Path, help="polygon file (GeoPackage/Shapefile/GeoJSON)")
     vol.add_argument("--zone-field", help="attribute naming each zone")
 
+    pipe = sub.add_parser("pipeline", help="write the PDAL pipelines that prepare both clouds",
+                          description="Write before.json and after.json: read, reproject to the "
+                          "before CRS, crop the before cloud to the after footprint + radius, "
+                          "ground, outliers; run them with `pdal pipeline` or pass them to "
+                          "`soilvolume estimate --before-pipeline/--after-pipeline`.")
+    pipe.add_argument("before", type=Path)
+    pipe.add_argument("after", type=Path)
+    pipe.add_argument("--emit", type=Path, required=True, help="folder for the two pipeline JSON files")
+    add_options(pipe, {"before_crs", "after_crs", "radius", "ground"})
+
     demo = sub.add_parser("demo", help="make a seeded synthetic pair with known volumes and run it")
     demo.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the pair and results")
     demo.add_argument("--size", choices=("small", "paper"), default="small", help="scene size")
@@ -137,6 +147,14 @@ def cmd_volume(ns: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_pipeline(ns: argparse.Namespace) -> int:
+    from .emit import emit_pipelines
+
+    for path in emit_pipelines(ns.before, ns.after, ns.emit, options_from(ns)):
+        print(path)
+    return 0
+
+
 def cmd_demo(ns: argparse.Namespace) -> int:
     from .demo import run_demo
 
@@ -144,7 +162,7 @@ def cmd_demo(ns: argparse.Namespace) -> int:
 
 
 COMMANDS = {"estimate": cmd_estimate, "dem": cmd_dem, "register": cmd_register,
-            "volume": cmd_volume, "demo": cmd_demo}
+            "volume": cmd_volume, "demo": cmd_demo, "pipeline": cmd_pipeline}
 
 
 def main(argv: list[str] | None = None) -> int:

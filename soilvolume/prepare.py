@@ -36,8 +36,9 @@ def resolve_crs(raw: RawPoints, override: str | None, flag: str) -> pyproj.CRS:
     return crs
 
 
-def select_ground(raw: RawPoints, mode: str) -> tuple[np.ndarray, str]:
-    """Mask of the points to use, and a note: class 2 when asked for or (auto) present."""
+def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None) -> tuple[np.ndarray, str]:
+    """Mask of the points to use, and a note: class 2 when asked for or (auto) present, or the
+    SMRF ground filter (run in metres: ``crs`` gives the file's units)."""
     n = len(raw.xyz)
     has_class = raw.classification is not None and bool((raw.classification == GROUND).any())
     if mode == "none" or (mode == "auto" and not has_class):
@@ -47,9 +48,12 @@ def select_ground(raw: RawPoints, mode: str) -> tuple[np.ndarray, str]:
             raise SoilVolumeError(f"{raw.path}: --ground class needs ground-classified (class 2) points; the file has none")
         return raw.classification == GROUND, "class 2 (ground)"
     if mode == "filter":
-        from .stages.smrf import smrf_ground
+        from .crs import xy_unit, z_unit
+        from .stages.smrf import smrf_classify
 
-        return smrf_ground(raw.xyz), "SMRF ground filter"
+        h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
+        x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
+        return smrf_classify(x, y, z), "SMRF ground filter"
     raise SoilVolumeError(f"unknown ground mode '{mode}'")
 
 
@@ -59,8 +63,8 @@ def prepare(before: RawPoints, after: RawPoints, options: Options) -> Prepared:
     crs_a = resolve_crs(after, options.after_crs, "--after-crs")
     hint = lonlat_of(before.xyz, crs_b) if crs_b.is_geographic else None
     frame = work_frame(crs_b, hint)
-    keep_b, note_b = select_ground(before, options.ground)
-    keep_a, note_a = select_ground(after, options.ground)
+    keep_b, note_b = select_ground(before, options.ground, crs_b)
+    keep_a, note_a = select_ground(after, options.ground, crs_a)
     xyz_b = to_frame(before.xyz[keep_b], crs_b, frame, before.path)
     xyz_a = to_frame(after.xyz[keep_a], crs_a, frame, after.path)
     lo, hi = xyz_a.min(axis=0), xyz_a.max(axis=0)

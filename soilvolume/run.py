@@ -261,7 +261,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     raw = read_points(cloud)
     src = resolve_crs(raw, crs, "a CRS")
     frame = work_frame(src, None if not src.is_geographic else (0, 0))
-    keep, note = select_ground(raw, options.ground)
+    keep, note = select_ground(raw, options.ground, src)
     xyz = to_frame(raw.xyz[keep], src, frame, raw.path)
     origin = np.floor(xyz.min(axis=0))
     xyz -= origin
