@@ -144,10 +144,10 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             "DEM_AFTER", self.tr("DEM after (registered)"), optional=True, createByDefault=True))
         self.addParameter(QgsProcessingParameterRasterDestination(
             "PLANE_OFFSET", self.tr("Plane-offset correction raster"), optional=True,
-            createByDefault=False))
+            createByDefault=True))
         self.addParameter(QgsProcessingParameterFileDestination(
             "REGISTERED", self.tr("Registered after cloud"), fileFilter=params.LAS_FILTER,
-            optional=True, createByDefault=False))
+            optional=True, createByDefault=True))
         self.addParameter(QgsProcessingParameterFileDestination(
             "REPORT", self.tr("HTML report"), fileFilter="HTML files (*.html)", optional=True,
             createByDefault=True))

@@ -42,7 +42,8 @@ not compared.</p>
 zones (e.g. stockpiles, pits, lots) and a field naming them.</p>
 <h3>Outputs</h3>
 <p>The difference raster (diverging ramp centred on 0: red = cut, blue = fill), a table with
-one row per zone (zone, name, cut, fill, net in m³ and compared area in m²) and the totals
+one row per zone (zone, name, cut, fill, net in m³ and compared area in m²; a single "total"
+row when no zones are given) and the totals
 NET_VOLUME, CUT_VOLUME, FILL_VOLUME and COMPARED_AREA over the whole compared area.</p>"""
 
 TABLE_FIELDS = (
@@ -140,7 +141,8 @@ class VolumeFromDems(SoilVolumeAlgorithm):
             parameters, "TABLE", context, table_fields(), QgsWkbTypes.NoGeometry,
             QgsCoordinateReferenceSystem())
         if sink is not None:
-            for zone in volumes.get("zones", []):
+            rows = (volumes.get("zones") or []) if zones else [{"id": 0, "name": "total", **total}]
+            for zone in rows:
                 feature = QgsFeature(table_fields())
                 feature.setAttributes([
                     int(zone["id"]), str(zone.get("name") or zone["id"]), float(zone["cut"]),

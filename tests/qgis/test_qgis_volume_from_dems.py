@@ -72,6 +72,13 @@ def test_without_zones(run_alg, dems, tmp_path):
         "BEFORE": dems[0], "AFTER": dems[1], "OUTPUT": str(tmp_path / "d.tif"),
         "TABLE": str(tmp_path / "v.gpkg")})
     assert res["NET_VOLUME"] > 0 and res["COMPARED_AREA"] > 3000
+    table = QgsVectorLayer(res["TABLE"], "volumes", "ogr")
+    try:
+        rows = list(table.getFeatures())
+        assert [r["name"] for r in rows] == ["total"]
+        assert rows[0]["net"] == pytest.approx(res["NET_VOLUME"])
+    finally:
+        del table
 
 
 def test_loaded_difference_is_styled_around_zero(provider, dems):
