@@ -60,7 +60,7 @@ def estimate(
     before: str | Path,
     after: str | Path,
     out_dir: str | Path,
-    options: Options = Options(),
+    options: Options | None = None,
     *,
     overwrite: bool = False,
     hooks: Hooks | None = None,
@@ -71,7 +71,7 @@ def estimate(
     from .run import run_estimate
 
     return run_estimate(
-        Path(before), Path(after), Path(out_dir), options, overwrite=overwrite,
+        Path(before), Path(after), Path(out_dir), options or Options(), overwrite=overwrite,
         hooks=hooks or Hooks(), before_pipeline=before_pipeline, after_pipeline=after_pipeline,
     )
 
@@ -79,7 +79,7 @@ def estimate(
 def cloud_to_dem(
     cloud: str | Path,
     out_tif: str | Path,
-    options: Options = Options(),
+    options: Options | None = None,
     *,
     crs: str | None = None,
     bounds: tuple[float, float, float, float] | None = None,
@@ -90,7 +90,7 @@ def cloud_to_dem(
     description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
     from .run import run_cloud_to_dem
 
-    return run_cloud_to_dem(Path(cloud), Path(out_tif), options, crs=crs, bounds=bounds,
+    return run_cloud_to_dem(Path(cloud), Path(out_tif), options or Options(), crs=crs, bounds=bounds,
                             hooks=hooks or Hooks())
 
 
@@ -98,7 +98,7 @@ def register(
     before: str | Path,
     after: str | Path,
     out_cloud: str | Path,
-    options: Options = Options(),
+    options: Options | None = None,
     *,
     hooks: Hooks | None = None,
 ) -> dict[str, Any]:
@@ -107,7 +107,8 @@ def register(
     "fine": {...}}."""
     from .run import run_register
 
-    return run_register(Path(before), Path(after), Path(out_cloud), options, hooks=hooks or Hooks())
+    return run_register(Path(before), Path(after), Path(out_cloud), options or Options(),
+                        hooks=hooks or Hooks())
 
 
 def volume_from_rasters(

@@ -53,9 +53,11 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Estimate the soil volume change from BEFORE to AFTER.", epilog=EPILOG)
     est.add_argument("before", type=Path, help="wide 'before' survey (LAS/LAZ/PLY/PCD/XYZ)")
     est.add_argument("after", type=Path, help="smaller 'after' survey (LAS/LAZ/PLY/PCD/XYZ)")
-    est.add_argument("--out", type=Path, required=True, help="output folder (created; must be empty unless --overwrite)")
+    est.add_argument("--out", type=Path, required=True,
+                     help="output folder (created; must be empty unless --overwrite)")
     est.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty output folder")
-    est.add_argument("--before-pipeline", type=Path, help="PDAL pipeline JSON preparing the before cloud (replaces reading it)")
+    est.add_argument("--before-pipeline", type=Path,
+                     help="PDAL pipeline JSON preparing the before cloud (replaces reading it)")
     est.add_argument("--after-pipeline", type=Path, help="PDAL pipeline JSON preparing the after cloud")
     est.add_argument("--no-registered-cloud", action="store_true", help="do not write after_registered.laz")
     est.add_argument("--quiet", action="store_true", help="no progress output")

@@ -45,7 +45,8 @@ def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None) -> t
         return np.ones(n, bool), "all points"
     if mode in ("auto", "class"):
         if not has_class:
-            raise SoilVolumeError(f"{raw.path}: --ground class needs ground-classified (class 2) points; the file has none")
+            raise SoilVolumeError(
+                f"{raw.path}: --ground class needs ground-classified (class 2) points; the file has none")
         return raw.classification == GROUND, "class 2 (ground)"
     if mode == "filter":
         from .crs import xy_unit, z_unit

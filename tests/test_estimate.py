@@ -54,7 +54,7 @@ def test_report_has_every_field(misaligned_result):
     res, _, out = misaligned_result
     assert OUTPUTS <= {p.name for p in out.iterdir()}
     r = json.loads((out / "report.json").read_text())
-    assert r == json.loads(json.dumps(res.report, default=str)) or r["volume_m3"] == pytest.approx(res.report["volume_m3"])
+    assert r["volume_m3"] == pytest.approx(res.report["volume_m3"])
     for key in ("net", "cut", "fill"):
         assert isinstance(r["volume_m3"][key], float)
         assert isinstance(r["volume_uncompensated_m3"][key], float)
