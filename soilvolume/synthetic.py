@@ -479,7 +479,7 @@ class _World:
         xyz = np.column_stack([x, y, z])
         del x, y, z, g
         if epoch == 1:
-            # element-wise (not BLAS) so results are bit-identical whatever the chunking
+            # element-wise (not BLAS): results do not depend on the chunking (up to 1 ulp)
             d = xyz - self.c
             R = self.R
             xyz = np.column_stack([R[i, 0] * d[:, 0] + R[i, 1] * d[:, 1] + R[i, 2] * d[:, 2]
