@@ -15,6 +15,8 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QVariant
 
+pytest.importorskip("soilvolume.rasters", reason="engine: soilvolume/rasters.py not there yet")
+
 
 def zones_layer(dem: str) -> QgsVectorLayer:
     """Two polygons, west and east halves, that together cover the whole DEM."""
