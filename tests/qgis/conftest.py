@@ -8,7 +8,9 @@ where its ``processing/`` folder would shadow QGIS's Processing framework.
 
 from __future__ import annotations
 
+import atexit
 import importlib
+import shutil
 import sys
 import tempfile
 from pathlib import Path
@@ -47,6 +49,7 @@ def _sanitize_sys_path() -> None:
 def _link_plugin() -> Path:
     """A folder holding only ``soilvolume_qgis -> <repo>``, added to sys.path."""
     folder = Path(tempfile.mkdtemp(prefix="soilvolume-qgis-plugins-"))
+    atexit.register(shutil.rmtree, folder, True)
     (folder / PLUGIN_NAME).symlink_to(REPO, target_is_directory=True)
     sys.path.append(str(folder))
     return folder
