@@ -73,8 +73,8 @@ def run_estimate(
         out.abort()
         raise
     moved = out.commit()
-    result.outputs = {Path(n).stem: p for n, p in moved.items()}
-    result.outputs["report_json"] = moved["report.json"]
+    result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p
+                      for n, p in moved.items()}
     hooks.step(100, "done")
     return result
 

@@ -53,6 +53,8 @@ def test_transform_recovered_within_5cm_and_005deg(misaligned_result):
 def test_report_has_every_field(misaligned_result):
     res, _, out = misaligned_result
     assert OUTPUTS <= {p.name for p in out.iterdir()}
+    assert {"report_json", "report_html", "difference", "dem_before"} <= set(res.outputs)
+    assert res.outputs["report_html"].name == "report.html"
     r = json.loads((out / "report.json").read_text())
     assert r["volume_m3"] == pytest.approx(res.report["volume_m3"])
     for key in ("net", "cut", "fill"):
