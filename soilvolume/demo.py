@@ -19,10 +19,14 @@ def run_demo(out: Path, size: str = "small", seed: int = 0) -> int:
     print(f"synthetic pair ({size}, seed {seed}) in {data}")
     res = estimate(before, after, out / "result", Options(seed=seed), overwrite=True,
                    hooks=Hooks(progress=lambda p, m: print(f"[{p:5.1f}%] {m}", flush=True)))
-    v, u = res.report["volume_m3"], res.report["volume_uncompensated_m3"]
-    print(f"{'':14}{'estimated':>12}{'uncompensated':>15}{'true':>12}{'error':>9}")
-    for k in ("net", "cut", "fill"):
-        err = (v[k] - truth[k]) / abs(truth[k]) * 100 if truth[k] else float("nan")
-        print(f"{k + ' (m3)':14}{v[k]:12.2f}{u[k]:15.2f}{truth[k]:12.2f}{err:8.2f}%")
+    r = res.report
+    rows = [("all compared cells", r["volume_m3"]), ("change areas", r["volume_change_areas_m3"]),
+            ("uncompensated", r["volume_uncompensated_m3"]), ("paper plane d_i", r["volume_paper_plane_m3"])]
+    print(f"{'volumes (m3)':22}{'net':>10}{'cut':>10}{'fill':>10}   net error")
+    print(f"{'true':22}{truth['net']:10.2f}{truth['cut']:10.2f}{truth['fill']:10.2f}")
+    for name, v in rows:
+        err = (v["net"] - truth["net"]) / abs(truth["net"]) * 100
+        print(f"{name:22}{v['net']:10.2f}{v['cut']:10.2f}{v['fill']:10.2f}   {err:+.2f} %")
+    print(f"95 % uncertainty of the net: +-{r['uncertainty_m3']['net']:.2f} m3")
     print(f"results in {out / 'result'} (report.html, difference.tif, ...)")
     return 0
