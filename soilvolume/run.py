@@ -79,21 +79,20 @@ def run_estimate(
     return result
 
 
-def _read(before, after, options, hooks, before_pipeline, after_pipeline):
-    if before_pipeline or after_pipeline:
+def _read(path: Path, pipeline):
+    """A cloud read directly, or through the user's preparation pipeline."""
+    if pipeline:
         from .pipeline import prepare_cloud_from_file
 
-        b = prepare_cloud_from_file(before_pipeline, before) if before_pipeline else read_points(before)
-        a = prepare_cloud_from_file(after_pipeline, after) if after_pipeline else read_points(after)
-        return b, a
-    return read_points(before), read_points(after)
+        return prepare_cloud_from_file(pipeline, path)
+    return read_points(path)
 
 
 def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hooks: Hooks,
               before_pipeline, after_pipeline) -> Result:
     hooks.step(2, f"reading {before.name} and {after.name}")
     with timer("read"):
-        raw_b, raw_a = _read(before, after, options, hooks, before_pipeline, after_pipeline)
+        raw_b, raw_a = _read(before, before_pipeline), _read(after, after_pipeline)
     hooks.info(f"read {len(raw_b.xyz):,} before and {len(raw_a.xyz):,} after points")
     hooks.step(10, f"cropping the before cloud to the after footprint + {options.radius:g} m")
     with timer("crop"):

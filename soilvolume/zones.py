@@ -146,10 +146,10 @@ def polygons_mask(path: str | Path, grid: GridSpec) -> np.ndarray:
 def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, float]:
     """net/cut/fill (m^3; cut and fill positive, net = fill - cut) and compared area (m^2) of
     the finite cells of ``diff`` in ``mask``."""
-    d = diff[mask & np.isfinite(diff)]
-    fill = float(d[d > 0].sum() * cell_area)
-    cut = float(-d[d < 0].sum() * cell_area)
-    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(d.size * cell_area)}
+    from .volume import budget as cell_budget
+
+    b = cell_budget(diff, cell_area, mask)
+    return {k: b[k] for k in ("net", "cut", "fill", "area_m2")}
 
 
 def zone_budgets(
