@@ -49,7 +49,10 @@ def to_pcd(xyz: np.ndarray, voxel: float | None = None):
 
 
 def with_normals(pcd, radius: float):
+    """Upward-oriented normals (an empty cloud is returned as it is)."""
     o3d = _o3d()
+    if not pcd.has_points():
+        return pcd
     pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
     pcd.orient_normals_to_align_with_direction(np.array([0.0, 0.0, 1.0]))
     return pcd
@@ -160,6 +163,11 @@ def icp_levels(
             check()
         if voxel not in cache:
             tgt_xyz = crop_target(target_xyz, source_xyz, t, 2.0 + ICP_LEVELS[0][1])
+            if len(tgt_xyz) < 3:
+                raise SoilVolumeError(
+                    "registration failed: the fine registration drifted off the before cloud "
+                    "(no before points left under the after cloud); check that both clouds "
+                    "cover the same site and their CRSs")
             tgt = with_normals(to_pcd(tgt_xyz, voxel), max(3 * voxel, 0.5))
             cache[voxel] = (to_pcd(source_xyz, voxel), tgt)
         src, tgt = cache[voxel]
