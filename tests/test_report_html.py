@@ -1,4 +1,5 @@
-"""report.html: self-contained, renders in headless Chromium with the map and histogram."""
+"""report.html: self-contained, renders in headless Chromium with the maps (PNG) and histogram (SVG), and
+never imports matplotlib."""
 
 from __future__ import annotations
 
@@ -7,11 +8,13 @@ import re
 import shutil
 import struct
 import subprocess
+import sys
+import zlib
 
 import numpy as np
 import pytest
 
-from soilvolume.report_html import write_html
+from soilvolume.report_html import PUOR, RDBU, block_mean, colour_ramp, difference_map, hillshade, png_bytes, write_html
 from soilvolume.types import GridSpec
 
 GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=160, cols=200,
@@ -25,7 +28,7 @@ def report() -> dict:
         "volume_uncompensated_m3": {"net": 1101.0, "cut": 3.1, "fill": 1104.1},
         "volume_thresholded_m3": {"net": 1041.0, "cut": 10.0, "fill": 1051.0},
         "uncertainty_m3": {"net": 6.3, "cut": 1.2, "fill": 6.1},
-        "uncertainty": {"lod_m": 0.05, "sigma_m": 0.025, "range_m": 11.0},
+        "uncertainty": {"lod_m": 0.05, "sigma_m": 0.025, "range_m": 11.0, "confidence": 0.95},
         "registration": {"transform": np.eye(4).tolist(),
                          "coarse": {"method": "fpfh", "fitness": 0.8, "rmse": 0.3,
                                     "accepted": False},
@@ -61,16 +64,83 @@ def png_size(uri: str) -> tuple[int, int]:
 def test_html_is_self_contained_and_tolerant(tmp_path):
     path = write_html(report(), arrays(), GRID, tmp_path / "report.html")
     text = path.read_text()
-    assert "http://" not in text and "https://" not in text
+    assert "http://" not in text and "https://" not in text and "<script" not in text
     imgs = dict(re.findall(r'<img id="([\w-]+)" alt="[^"]*" src="(data:image/png;base64,[^"]+)"',
                            text))
-    assert set(imgs) == {"difference-map", "histogram", "residual-map"}
+    assert set(imgs) == {"difference-map", "residual-map"}
     for uri in imgs.values():
         w, h = png_size(uri)
         assert w > 300 and h > 200
+    hist = re.search(r'<svg class=plot id="histogram".*?</svg>', text)[0]
+    assert hist.count("<rect class=bar") >= 30 and "±LoD95 = 0.050 m" in hist
+    assert 'id="difference-map-colour-bar"' in text and 'id="residual-map-colour-bar"' in text
     assert "1,040.20 ± 6.30" in text and "before &lt;1&gt;.las" in text
     minimal = write_html({}, {}, GRID, tmp_path / "empty.html").read_text()
-    assert "Volumes" in minimal and "<img" not in minimal
+    assert "Volumes" in minimal and "<img" not in minimal and "<svg" not in minimal
+    nan = {"difference": np.full((3, 4), np.nan), "residual": None, "dem_after": np.zeros((2, 2))}
+    assert "<img" not in write_html({"uncertainty": {"lod_m": "n/a"}}, nan, GRID, tmp_path / "nan.html").read_text()
+
+
+def test_does_not_import_matplotlib():
+    code = ("import sys, numpy as np; import soilvolume.report_html as r; from soilvolume.types import GridSpec; "
+            "g = GridSpec(xmin=0.0, ymax=50.0, cell=0.5, rows=100, cols=100); "
+            "d = np.random.default_rng(0).normal(size=(100, 100)); "
+            "html = r.render_html({'uncertainty': {'lod_m': 0.1}}, {'difference': d, 'residual': d, "
+            "'dem_after': d, 'filled_mask': d > 2}, g); "
+            "assert '<img' in html and '<svg' in html; assert 'matplotlib' not in sys.modules, 'matplotlib'")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0, res.stderr
+
+
+def test_colour_ramp_ends_centre_and_nan():
+    rgba = colour_ramp(np.array([0.0, 2.0, -2.0, 5.0, -5.0, np.nan, 1.0]), 2.0)
+    assert rgba.dtype == np.uint8 and rgba.shape == (7, 4)
+    assert tuple(rgba[0]) == (*RDBU[len(RDBU) // 2].astype(int), 255) == (247, 247, 247, 255)
+    assert tuple(rgba[1, :3]) == tuple(rgba[3, :3]) == tuple(RDBU[-1].astype(int))  # +limit, beyond: blue end
+    assert tuple(rgba[2, :3]) == tuple(rgba[4, :3]) == tuple(RDBU[0].astype(int))  # -limit, beyond: red end
+    assert rgba[5, 3] == 0 and (rgba[[0, 1, 2, 3, 4, 6], 3] == 255).all()
+    assert rgba[6, 2] > rgba[6, 0]  # +limit/2 is bluish
+    assert tuple(colour_ramp(np.array([0.0]), 1.0, PUOR)[0, :3]) == tuple(PUOR[5].astype(int))
+
+
+def test_png_encoder_round_trip():
+    rgba = np.random.default_rng(1).integers(0, 256, (7, 5, 4), dtype=np.uint8)
+    data = png_bytes(rgba)
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">II", data[16:24]) == (5, 7)
+    idat = data[8 + 25 + 8: -12]  # after the signature, IHDR chunk and the IDAT header
+    raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(7, 1 + 5 * 4)
+    assert (raw[:, 0] == 0).all() and (raw[:, 1:].reshape(7, 5, 4) == rgba).all()
+    image = pytest.importorskip("PIL.Image")
+    import io
+
+    assert (np.asarray(image.open(io.BytesIO(data)).convert("RGBA")) == rgba).all()
+
+
+def test_block_mean_ignores_nan_and_keeps_partial_blocks():
+    a = np.arange(35, dtype=float).reshape(5, 7)
+    a[0, 0] = np.nan
+    a[4:, 4:] = np.nan
+    m = block_mean(a, 3)
+    assert m.shape == (2, 3)
+    assert m[0, 0] == np.nanmean(a[:3, :3]) and m[1, 2] == np.nanmean(a[3:, 6:])
+    assert np.isfinite(m).all() and block_mean(a, 1) is a
+
+
+def test_hillshade_lights_slopes_facing_the_north_west_sun():
+    flat = hillshade(np.zeros((5, 5)), 1.0)
+    y, x = np.mgrid[0:5, 0:5].astype(float)  # row index runs south
+    facing_sun = hillshade(x + y, 1.0)  # rising to the south-east: faces north-west
+    away = hillshade(-(x + y), 1.0)
+    assert np.allclose(flat, np.sqrt(0.5)) and (facing_sun > flat).all() and (away < flat).all()
+
+
+def test_big_rasters_are_downsampled_for_display():
+    grid = GridSpec(xmin=0.0, ymax=1000.0, cell=0.5, rows=2000, cols=1200)
+    d = np.random.default_rng(2).normal(size=(2000, 1200))
+    fig = difference_map(d, grid, relief=d, filled_mask=d > 2)
+    w, h = png_size(re.search(r'src="(data:image/png;base64,[^"]+)"', fig)[1])
+    assert (w, h) == (400, 667)  # 3 x 3 block means: the long side at most 900 px
+    assert "shown as 3 x 3 cell means" in fig
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed")
@@ -78,18 +148,30 @@ def test_renders_in_headless_chromium(tmp_path):
     path = write_html(report(), arrays(), GRID, tmp_path / "report.html")
     probe = tmp_path / "probe.html"  # the report plus a script that records rendered sizes
     probe.write_text(path.read_text().replace("</body>", (
-        "<script>window.addEventListener('load',()=>{document.body.setAttribute('data-imgs',"
-        "Array.from(document.images).map(i=>i.id+':'+i.naturalWidth+'x'+i.height).join(';'))})"
-        "</script></body>")))
+        "<script>window.addEventListener('load',()=>{"
+        "const r=e=>{const b=e.getBoundingClientRect();return Math.round(b.width)+'x'+Math.round(b.height)};"
+        "const out=Array.from(document.images).map(i=>'img:'+i.id+':'+i.naturalWidth+':'+r(i)+':'"
+        "+r(i.nextElementSibling));"
+        "document.querySelectorAll('svg.plot').forEach(s=>out.push('svg:'+s.id+':'"
+        "+s.querySelectorAll('rect.bar').length+':'+r(s)));"
+        "document.body.setAttribute('data-probe',out.join(';'))})</script></body>")))
     flags = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu",
              "--disable-background-networking", "--disable-component-update", "--disable-sync",
              "--no-first-run", f"--user-data-dir={tmp_path / 'profile'}",
              "--virtual-time-budget=3000"]
     dom = subprocess.run(flags + ["--dump-dom", probe.as_uri()], capture_output=True,
                          text=True, timeout=60).stdout
-    sizes = dict(re.findall(r"([\w-]+):(\d+)x\d+", re.search(r'data-imgs="([^"]*)"', dom)[1]))
-    for ident in ("difference-map", "histogram", "residual-map"):
-        assert int(sizes[ident]) > 300  # decoded, non-broken image
+    probed = [e.split(":") for e in re.search(r'data-probe="([^"]*)"', dom)[1].split(";")]
+    imgs = {e[1]: (int(e[2]), e[3], e[4]) for e in probed if e[0] == "img"}
+    svgs = {e[1]: (int(e[2]), *map(int, e[3].split("x"))) for e in probed if e[0] == "svg"}
+    for ident in ("difference-map", "residual-map"):
+        natural, shown, overlay = imgs[ident]
+        width, height = map(int, shown.split("x"))
+        assert natural > 300 and width > 500 and height > 300  # decoded, non-broken, visible
+        assert overlay == shown  # scale bar and north arrow drawn over the whole map
+        assert svgs[f"{ident}-colour-bar"][1] > 300
+    bars, width, height = svgs["histogram"]
+    assert bars >= 30 and width > 500 and height > 200
     shot = tmp_path / "shot.png"
     subprocess.run(flags + [f"--screenshot={shot}", "--window-size=1200,2000", path.as_uri()],
                    capture_output=True, timeout=60)
