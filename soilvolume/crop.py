@@ -7,7 +7,6 @@ radius; the same polygon is what a PDAL ``filters.crop`` receives, so both paths
 from __future__ import annotations
 
 import numpy as np
-from matplotlib.path import Path as MplPath
 from scipy.spatial import ConvexHull, QhullError
 
 from .types import SoilVolumeError
@@ -32,8 +31,39 @@ def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.nda
 
 
 def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Boolean mask of points inside a polygon (vertices (K, 2))."""
-    return MplPath(polygon).contains_points(xy)
+    """Boolean mask of points inside a convex polygon (vertices (K, 2), either orientation),
+    as the footprints here are: on the inner side of every edge."""
+    if _signed_area(polygon) < 0:
+        polygon = polygon[::-1]
+    ok = np.ones(len(xy), bool)
+    x, y = xy[:, 0], xy[:, 1]
+    for (x0, y0), (x1, y1) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        ok &= (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0) >= 0
+    return ok
+
+
+class PolygonMask:
+    """Fast point-in-polygon for streaming: the polygon rasterized on a lattice of at most about
+    ``max_cells`` cells of at least ``resolution`` m (a cell is in when its centre is)."""
+
+    def __init__(self, polygon: np.ndarray, resolution: float = 0.5, max_cells: int = 4_000_000) -> None:
+        self.lo = polygon.min(axis=0)
+        span = polygon.max(axis=0) - self.lo
+        self.res = max(resolution, float(np.sqrt(span[0] * span[1] / max_cells)))
+        cols, rows = (np.ceil(span / self.res).astype(int) + 1).tolist()
+        xs = self.lo[0] + (np.arange(cols) + 0.5) * self.res
+        ys = self.lo[1] + (np.arange(rows) + 0.5) * self.res
+        gx, gy = np.meshgrid(xs, ys)
+        self.mask = inside(np.c_[gx.ravel(), gy.ravel()], polygon).reshape(rows, cols)
+
+    def __call__(self, xyz: np.ndarray) -> np.ndarray:
+        col = ((xyz[:, 0] - self.lo[0]) / self.res).astype(np.int64)
+        row = ((xyz[:, 1] - self.lo[1]) / self.res).astype(np.int64)
+        rows, cols = self.mask.shape
+        ok = (col >= 0) & (row >= 0) & (col < cols) & (row < rows)
+        out = np.zeros(len(xyz), bool)
+        out[ok] = self.mask[row[ok], col[ok]]
+        return out
 
 
 def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:
@@ -43,17 +73,10 @@ def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:
     return "POLYGON ((" + ", ".join(f"{x:.3f} {y:.3f}" for x, y in ring) + "))"
 
 
-def polygon_area(polygon: np.ndarray) -> float:
+def _signed_area(polygon: np.ndarray) -> float:
     x, y = polygon[:, 0], polygon[:, 1]
-    return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+    return float(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
 
 
-def crop_mask(before_xy: np.ndarray, after_xy: np.ndarray, radius: float) -> np.ndarray:
-    """Mask of before points within ``radius`` of the after cloud's footprint (bbox prefilter)."""
-    poly = footprint(after_xy, radius)
-    lo, hi = poly.min(axis=0), poly.max(axis=0)
-    box = ((before_xy >= lo) & (before_xy <= hi)).all(axis=1)
-    mask = np.zeros(len(before_xy), dtype=bool)
-    idx = np.flatnonzero(box)
-    mask[idx] = inside(before_xy[idx], poly)
-    return mask
+def polygon_area(polygon: np.ndarray) -> float:
+    return abs(_signed_area(polygon))

@@ -1,5 +1,6 @@
-"""Step 1: read both clouds, bring them into one working frame (before CRS, metres, local origin),
-select ground points and crop the before cloud to the after footprint plus the radius."""
+"""Step 1: stream both clouds into one working frame (before CRS, metres, local origin), select
+ground points, crop the before cloud to the after footprint plus the radius, and thin both for
+registration on the way."""
 
 from __future__ import annotations
 
@@ -8,10 +9,11 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
-from .crop import crop_mask
+from .crop import PolygonMask, footprint
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame
-from .io import RawPoints, read_points
+from .io import RawPoints
 from .options import Options
+from .stream import ColumnThinner, Source, from_raw, load
 from .types import Cloud, SoilVolumeError
 
 GROUND = 2
@@ -19,16 +21,21 @@ GROUND = 2
 
 @dataclass
 class Prepared:
-    """Both clouds in the local working frame (absolute = xyz + origin, in ``frame.crs``)."""
+    """Both clouds in the local working frame (absolute = xyz + origin, in ``frame.crs``):
+    full-resolution float32 points and float64 column-thinned subsets for registration."""
 
     before: Cloud  # cropped to the after footprint + radius
     after: Cloud
     frame: WorkFrame
     origin: np.ndarray
     inputs: dict
+    before_thin: np.ndarray
+    after_thin: np.ndarray
+    voxel: float
+    read_s: float = 0.0  # of the streaming time, seconds spent reading and decoding chunks
 
 
-def resolve_crs(raw: RawPoints, override: str | None, flag: str) -> pyproj.CRS:
+def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyproj.CRS:
     """The CRS given on the command line, else the file's header CRS."""
     crs = parse_crs(override, raw.path) or parse_crs(raw.crs_wkt, raw.path)
     if crs is None:
@@ -58,44 +65,76 @@ def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None) -> t
     raise SoilVolumeError(f"unknown ground mode '{mode}'")
 
 
-def prepare(before: RawPoints, after: RawPoints, options: Options) -> Prepared:
-    """Working frame, local origin, ground selection and the radius crop."""
+THIN_POINTS = 200_000  # registration subset: about this many after points
+
+
+def _filtered(src: Source, crs: pyproj.CRS, mode: str) -> tuple[Source, str, str | None]:
+    """(source to stream, ground mode for streaming, note): SMRF needs the whole cloud."""
+    if mode != "filter":
+        return src, mode, None
+    raw = src.materialize()
+    keep, note = select_ground(raw, "filter", crs)
+    if not keep.any():
+        raise SoilVolumeError(f"{src.path}: the SMRF ground filter found no ground points")
+    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path))
+    out.count = src.count  # report the points read, not the ground points
+    return out, "none", note
+
+
+def thin_voxel(area_m2: float) -> float:
+    """Column size (m) of the registration subset: about THIN_POINTS over ``area_m2``, >= 0.15 m."""
+    return max(0.15, float(np.sqrt(max(area_m2, 1.0) / THIN_POINTS)))
+
+
+def prepare(before: Source, after: Source, options: Options, check=None) -> Prepared:
+    """Stream both clouds into the working frame with a local origin: all after points, the
+    before points within the radius of the after footprint, and thinned subsets of both."""
     crs_b = resolve_crs(before, options.before_crs, "--before-crs")
     crs_a = resolve_crs(after, options.after_crs, "--after-crs")
-    hint = lonlat_of(before.xyz, crs_b) if crs_b.is_geographic else None
+    hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None
     frame = work_frame(crs_b, hint)
-    keep_b, note_b = select_ground(before, options.ground, crs_b)
-    keep_a, note_a = select_ground(after, options.ground, crs_a)
-    xyz_b = to_frame(before.xyz[keep_b], crs_b, frame, before.path)
-    xyz_a = to_frame(after.xyz[keep_a], crs_a, frame, after.path)
-    lo, hi = xyz_a.min(axis=0), xyz_a.max(axis=0)
+    corners = to_frame(_box_corners(after.lo, after.hi), crs_a, frame, after.path)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
-    xyz_b -= origin
-    xyz_a -= origin
-    mask = crop_mask(xyz_b[:, :2], xyz_a[:, :2], options.radius)
-    if mask.sum() < 10:
+    pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
+    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
+    after, mode_a, note_a = _filtered(after, crs_a, options.ground)
+    a = load(after, _local(crs_a, frame, origin, after.path), mode_a, None,
+             ColumnThinner(lo - origin - pad, hi - origin + pad, voxel), check)
+    if len(a.thin) < 3:
+        raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
+    poly = footprint(a.thin[:, :2], options.radius)
+    before, mode_b, note_b = _filtered(before, crs_b, options.ground)
+    b = load(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
+             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check)
+    if len(b.xyz) < 10:
         raise SoilVolumeError(
             f"{before.path} and {after.path} do not overlap: the before cloud has "
-            f"{int(mask.sum())} points within {options.radius:g} m of the after cloud's footprint "
+            f"{len(b.xyz)} points within {options.radius:g} m of the after cloud's footprint "
             "(check the CRSs and --radius)"
         )
     inputs = {
-        "before": _describe(before, crs_b, int(keep_b.sum()), note_b, int(mask.sum())),
-        "after": _describe(after, crs_a, int(keep_a.sum()), note_a, int(keep_a.sum())),
+        "before": _describe(before, crs_b, b.used, note_b or b.note, len(b.xyz)),
+        "after": _describe(after, crs_a, a.used, note_a or a.note, len(a.xyz)),
     }
+    read_s = a.extra["read_s"] + b.extra["read_s"]
     wkt = frame.wkt
     return Prepared(
-        Cloud(xyz_b[mask], origin, wkt, before.path),
-        Cloud(xyz_a, origin, wkt, after.path),
-        frame, origin, inputs,
+        Cloud(b.xyz, origin, wkt, before.path), Cloud(a.xyz, origin, wkt, after.path),
+        frame, origin, inputs, b.thin, a.thin, voxel, read_s,
     )
 
 
-def _describe(raw: RawPoints, crs: pyproj.CRS, used: int, note: str, kept: int) -> dict:
-    return {"path": raw.path, "points": int(len(raw.xyz)), "points_used": used,
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.array([[x, y, lo[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])] + [list(hi)], float)
+
+
+def _local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
+    return lambda xyz: to_frame(xyz, crs, frame, path) - origin
+
+
+def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int) -> dict:
+    return {"path": src.path, "points": int(src.count), "points_used": used,
             "points_after_crop": kept, "selection": note, "crs": crs.name,
             "crs_wkt": crs.to_wkt()}
 
-
-def read_pair(before, after) -> tuple[RawPoints, RawPoints]:
-    return read_points(before), read_points(after)

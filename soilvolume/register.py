@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .crop import footprint, inside
+from . import surface
+from .crop import footprint
 from .options import Options
 from .types import SoilVolumeError, StageQuality
 
@@ -23,6 +24,9 @@ REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12), (0.15, 0.25, 0.08))
 EVAL_DISTANCE = 0.4
 MAX_ICP_POINTS = 150_000  # per level: coarser voxels on very large sites
 MAX_COARSE_POINTS = 15_000
+MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
+ICP_TOL, ICP_ITER = 1e-6, 30
+COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
 
 
 @dataclass
@@ -98,23 +102,20 @@ def spacing(xyz: np.ndarray) -> float:
 
 def evaluate_surface(
     source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, distance: float = EVAL_DISTANCE,
+    gap: float | None = None,
 ) -> tuple[float, float]:
-    """(fitness, RMSE) on terrain: the fraction of source points whose point-to-plane distance to
-    the target surface is within ``distance`` (nearest target point within 3 point spacings),
-    and the RMS of those distances. Meaningful on sparse clouds, unlike point-to-point."""
-    src = to_pcd(transform_points(source_xyz, t), 0.25)
-    reach = max(1.0, 3 * spacing(target_xyz))
-    tgt = with_normals(to_pcd(crop_target(target_xyz, source_xyz, t, reach), 0.1), max(reach, 0.5))
-    from scipy.spatial import cKDTree
-
-    sp, tp, tn = np.asarray(src.points), np.asarray(tgt.points), np.asarray(tgt.normals)
-    if len(tp) == 0:
+    """(fitness, RMSE) on terrain: the fraction of source points within ``distance`` of the
+    tangent plane of the target surface (columns of max(0.25 m, 2 point spacings)), and the RMS
+    of those distances. Meaningful on sparse clouds, unlike point-to-point."""
+    src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
+    gap = spacing(target_xyz) if gap is None else gap
+    lo, hi = src[:, :2].min(axis=0) - 1.0, src[:, :2].max(axis=0) + 1.0
+    cols = surface.columns(target_xyz, max(0.25, 2 * gap), lo, hi)
+    if len(cols.xyz) == 0:
         return 0.0, float("nan")
-    d, j = cKDTree(tp).query(sp, distance_upper_bound=reach)
-    near = np.isfinite(d)
-    r = np.abs(np.einsum("ij,ij->i", sp[near] - tp[j[near]], tn[j[near]]))
+    r = np.abs(surface.plane_residuals(src, cols, surface.normals(cols)))
     ok = r <= distance
-    fit = float(ok.sum() / max(len(sp), 1))
+    fit = float(ok.sum() / max(len(src), 1))
     return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
 
 
@@ -124,54 +125,49 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
     reg = o3d.pipelines.registration
     o3d.utility.random.seed(seed)
     voxel = max(voxel, _cap_voxel(source_xyz, MAX_COARSE_POINTS), _cap_voxel(target_xyz, MAX_COARSE_POINTS))
-    src = with_normals(to_pcd(source_xyz, voxel), 2.5 * voxel)
-    tgt = with_normals(to_pcd(target_xyz, voxel), 2.5 * voxel)
+    src, tgt = _column_pcd(source_xyz, voxel), _column_pcd(target_xyz, voxel)
     param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
     fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
     dist = 1.5 * voxel
     res = reg.registration_ransac_based_on_feature_matching(
         src, tgt, fs, ft, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
         [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
-        reg.RANSACConvergenceCriteria(50_000, 0.999),
+        reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
     )
     return np.asarray(res.transformation)
 
 
-def crop_target(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, margin: float) -> np.ndarray:
-    """Target points within ``margin`` of the source footprint under the transform ``t``."""
-    poly = footprint(transform_points(source_xyz, t)[:, :2], margin, segments=16)
-    lo, hi = poly.min(axis=0), poly.max(axis=0)
-    box = ((target_xyz[:, :2] >= lo) & (target_xyz[:, :2] <= hi)).all(axis=1)
-    idx = np.flatnonzero(box)
-    return target_xyz[idx[inside(target_xyz[idx, :2], poly)]]
+def _column_pcd(xyz: np.ndarray, voxel: float):
+    """Open3D cloud of the column means of ``xyz`` with surface normals."""
+    cols = surface.columns(xyz, voxel)
+    pcd = to_pcd(cols.xyz)
+    pcd.normals = _o3d().utility.Vector3dVector(surface.normals(cols))
+    return pcd
 
 
 def icp_levels(
     source_xyz: np.ndarray, target_xyz: np.ndarray, init: np.ndarray, levels=ICP_LEVELS,
-    method: str = "icp", check: Callable[[], None] | None = None,
-) -> np.ndarray:
-    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, or GICP)."""
+    method: str = "icp", check: Callable[[], None] | None = None, scores: bool = False,
+    gap: float | None = None,
+):
+    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, or GICP) of column-mean
+    surfaces (target normals from the column heights); with ``scores`` returns (transform,
+    fitness, inlier RMSE) of the last level. ``gap``: the target's point spacing."""
     o3d = _o3d()
     reg = o3d.pipelines.registration
     t = init.copy()
     cache: dict[float, tuple] = {}
     cap = _cap_voxel(source_xyz, MAX_ICP_POINTS)
-    gap = 1.5 * spacing(target_xyz)  # sparse clouds: correspondences are at least this far
+    gap = 1.5 * (spacing(target_xyz) if gap is None else gap)  # sparse clouds: correspondences are at least this far
     for voxel, dist, k in levels:
         voxel, dist = max(voxel, cap), max(dist, gap)
         if check:
             check()
         if voxel not in cache:
-            tgt_xyz = crop_target(target_xyz, source_xyz, t, 2.0 + ICP_LEVELS[0][1])
-            if len(tgt_xyz) < 3:
-                raise SoilVolumeError(
-                    "registration failed: the fine registration drifted off the before cloud "
-                    "(no before points left under the after cloud); check that both clouds "
-                    "cover the same site and their CRSs")
-            tgt = with_normals(to_pcd(tgt_xyz, voxel), max(3 * voxel, 0.5))
-            cache[voxel] = (to_pcd(source_xyz, voxel), tgt)
+            cache[voxel] = (_sampled(to_pcd(surface.columns(source_xyz, voxel).xyz), MAX_SOURCE_POINTS),
+                            _surface_pcd(target_xyz, source_xyz, t, voxel, 2.0 + dist))
         src, tgt = cache[voxel]
-        crit = reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=40)
+        crit = reg.ICPConvergenceCriteria(relative_fitness=ICP_TOL, relative_rmse=ICP_TOL, max_iteration=ICP_ITER)
         if method == "gicp":
             est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
             res = reg.registration_generalized_icp(src, tgt, dist, t, est, crit)
@@ -179,7 +175,31 @@ def icp_levels(
             est = reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=k))
             res = reg.registration_icp(src, tgt, dist, t, est, crit)
         t = np.asarray(res.transformation).copy()
-    return t
+    return (t, float(res.fitness), float(res.inlier_rmse)) if scores else t
+
+
+def _surface_pcd(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
+    """The target's column surface with normals, over the source's box under ``t`` + margin."""
+    moved = transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t)
+    lo, hi = moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin
+    cols = surface.columns(target_xyz, voxel, lo, hi)
+    if len(cols.xyz) < 3:
+        raise SoilVolumeError(
+            "registration failed: the fine registration drifted off the before cloud "
+            "(no before points left under the after cloud); check that both clouds "
+            "cover the same site and their CRSs")
+    pcd = to_pcd(cols.xyz)
+    pcd.normals = _o3d().utility.Vector3dVector(surface.normals(cols))
+    return pcd
+
+
+def _sampled(pcd, cap: int):
+    """At most ``cap`` points of a cloud, a fixed-stride sample (deterministic): the source side
+    of ICP needs well-spread points, not all of them; the target keeps its density."""
+    n = len(pcd.points)
+    if n <= cap:
+        return pcd
+    return pcd.select_by_index(np.arange(0, n, int(np.ceil(n / cap))).tolist())
 
 
 def stable_source(
@@ -193,25 +213,18 @@ def stable_source(
 
 
 def register(
-    after_xyz: np.ndarray, before_xyz: np.ndarray, before_wide_xyz: np.ndarray, options: Options,
-    check: Callable[[], None] | None = None,
+    after_xyz: np.ndarray, before_xyz: np.ndarray, options: Options, check: Callable[[], None] | None = None,
+    dense: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Registration:
-    """Register after onto before (both local). ``before_xyz`` is the before cloud cropped to the
-    after footprint + radius; ``before_wide_xyz`` is what coarse registration sees (same crop)."""
+    """Register after onto before (both local, typically the thinned subsets; ``before_xyz`` is
+    the before cloud cropped to the after footprint + radius). ``dense``: the full-resolution
+    (after, before) clouds, for the paper's PFH patch matching."""
     eye = np.eye(4)
-    coarse = _coarse_stage(after_xyz, before_wide_xyz, options)
+    coarse = _coarse_stage(after_xyz, before_xyz, options)
     starts = [(eye, "gps")]
     if coarse.accepted and not np.allclose(coarse.transform, eye):
         starts.append((coarse.transform, "coarse"))
-    best: StageQuality | None = None
-    for init, label in starts:
-        if check:
-            check()
-        fine = _fine_stage(after_xyz, before_xyz, init, options, check)
-        fine.note = f"started from the {label} pose"
-        if best is None or _better(fine, best):
-            best = fine
-    assert best is not None
+    best = _fine_stage(after_xyz, before_xyz, starts, options, check, dense)
     if options.coarse == "auto" and coarse.accepted and "gps" in best.note:
         coarse.accepted = False
         coarse.note += "; rejected: fine registration fits better from the GPS pose"
@@ -248,20 +261,45 @@ def _coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)
 
 
-def _fine_stage(after_xyz, before_xyz, init, options: Options, check) -> StageQuality:
+def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=None) -> StageQuality:
+    """The fine stage from the best of the starting poses: ICP/GICP run their first (1 m) levels
+    from each start and finish from the one that fits best; PFH and none are scored whole."""
     t0 = time.perf_counter()
-    if options.fine == "none":
-        t = init
-    elif options.fine == "pfh":
-        from .pfh import pfh_sac_ia
+    gap = spacing(before_xyz)
+    if options.fine in ("icp", "gicp"):
+        t, label = _icp_from_best(after_xyz, before_xyz, starts, options.fine, check, gap)
+        fit, rmse = evaluate_surface(after_xyz, before_xyz, t, gap=gap)
+        return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0,
+                            f"started from the {label} pose")
+    best: StageQuality | None = None
+    for init, label in starts:
+        if options.fine == "pfh":
+            from .pfh import pfh_sac_ia
 
-        t = pfh_sac_ia(after_xyz, before_xyz, init, options.pfh_patch, options.seed)
-    else:
-        t = icp_levels(after_xyz, before_xyz, init, ICP_LEVELS, options.fine, check)
-        src_stable = stable_source(after_xyz, before_xyz, t)
-        if len(src_stable) > 100:
-            # src_stable is already in the before frame: refine a correction on top of t.
-            dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, options.fine, check)
-            t = dt @ t
-    fit, rmse = evaluate_surface(after_xyz, before_xyz, t)
-    return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0)
+            src, tgt = dense if dense is not None else (after_xyz, before_xyz)
+            t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed)
+        else:
+            t = init
+        fit, rmse = evaluate_surface(after_xyz, before_xyz, t, gap=gap)
+        q = StageQuality(options.fine, fit, rmse, t, True, 0.0, f"started from the {label} pose")
+        if best is None or _better(q, best):
+            best = q
+    assert best is not None
+    best.seconds = time.perf_counter() - t0
+    return best
+
+
+def _icp_from_best(after_xyz, before_xyz, starts, method: str, check, gap: float) -> tuple[np.ndarray, str]:
+    head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
+    scored = []
+    for init, label in starts:
+        t, fit, rmse = icp_levels(after_xyz, before_xyz, init, head, method, check, scores=True, gap=gap)
+        scored.append((-fit, rmse, label, t))
+    _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
+    t = icp_levels(after_xyz, before_xyz, t, tail, method, check, gap=gap)
+    src_stable = stable_source(after_xyz, before_xyz, t)
+    if len(src_stable) > 100:
+        # src_stable is already in the before frame: refine a correction on top of t.
+        dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap)
+        t = dt @ t
+    return t, label

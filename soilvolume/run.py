@@ -43,17 +43,14 @@ def _threads(options: Options) -> None:
         os.environ.setdefault("OMP_NUM_THREADS", str(options.threads))
 
 
-def shared_grid(prep: Prepared, after_xyz: np.ndarray, options: Options) -> GridSpec:
+def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> GridSpec:
     """The grid over the registered after footprint, cell size from the before density."""
-    poly = footprint(after_xyz[:, :2])
+    poly = footprint(after_thin[:, :2])
     cell = options.cell
     if cell is None or cell <= 0:
-        from .crop import inside
-
-        n_inside = int(inside(prep.before.xyz[:, :2], poly).sum())
-        cell = gridmod.choose_cell(n_inside, polygon_area(poly))
-    lo = np.maximum(after_xyz.min(axis=0), prep.before.xyz.min(axis=0))
-    hi = np.minimum(after_xyz.max(axis=0), prep.before.xyz.max(axis=0))
+        cell = gridmod.cell_for(prep.before.xyz, poly)
+    lo = np.maximum(after_thin.min(axis=0), prep.before_thin.min(axis=0))
+    hi = np.minimum(after_thin.max(axis=0), prep.before_thin.max(axis=0))
     if (hi[:2] <= lo[:2]).any():
         raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
     return gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
@@ -79,46 +76,36 @@ def run_estimate(
     return result
 
 
-def _read(path: Path, pipeline):
-    """A cloud read directly, or through the user's preparation pipeline."""
-    if pipeline:
-        from .pipeline import prepare_cloud_from_file
-
-        return prepare_cloud_from_file(pipeline, path)
-    return read_points(path)
-
-
 def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hooks: Hooks,
               before_pipeline, after_pipeline) -> Result:
-    hooks.step(2, f"reading {before.name} and {after.name}")
-    with timer("read"):
-        raw_b, raw_a = _read(before, before_pipeline), _read(after, after_pipeline)
-    hooks.info(f"read {len(raw_b.xyz):,} before and {len(raw_a.xyz):,} after points")
-    hooks.step(10, f"cropping the before cloud to the after footprint + {options.radius:g} m")
+    hooks.step(2, f"reading {before.name} and {after.name} (cropping and thinning on the way)")
     with timer("crop"):
-        prep = prepare(raw_b, raw_a, options)
-    del raw_b, raw_a
-    hooks.info(f"before cloud cropped to {len(prep.before):,} points")
+        prep = _prepare(before, after, options, hooks, before_pipeline, after_pipeline)
+    timer.s["read"] = prep.read_s  # the rest of streaming: frame, crop, thinning
+    timer.s["crop"] -= prep.read_s
+    hooks.info(f"kept {len(prep.before):,} before points within {options.radius:g} m of the after "
+               f"footprint and {len(prep.after):,} after points; registration subsets "
+               f"{len(prep.before_thin):,} + {len(prep.after_thin):,} ({prep.voxel:.2f} m columns)")
     hooks.step(15, "registering (coarse, then fine)")
     with timer("register"):
-        reg = register(prep.after.xyz, prep.before.xyz, prep.before.xyz, options,
-                       check=lambda: hooks.step(15, "registering"))
+        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"),
+                       dense=(prep.after.xyz, prep.before.xyz))
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     hooks.info(f"coarse: {reg.coarse.note}")
     hooks.info(f"fine ({reg.fine.method}): fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m, {reg.fine.note}")
-    after_xyz = transform_points(prep.after.xyz, reg.transform)
-    hooks.step(60, "fitting the RANSAC planes")
+    hooks.step(55, "gridding the average heights")
     with timer("grids"):
-        grid = shared_grid(prep, after_xyz, options)
+        after_xyz = transform_points32(prep.after.xyz, reg.transform)
+        after_thin = transform_points(prep.after_thin, reg.transform)
+        grid = shared_grid(prep, after_thin, options)
         h_b, n_b = gridmod.average_height(prep.before.xyz, grid, options.statistic)
         h_a, n_a = gridmod.average_height(after_xyz, grid, options.statistic)
+    hooks.step(70, "fitting the RANSAC planes")
     with timer("planes"):
-        x, y = grid.centers_local()
-        in_grid = np.isfinite(h_b)
-        sel_b = _points_on(prep.before.xyz, grid, in_grid)
+        sel_b = _points_on(prep.before_thin, grid, np.isfinite(h_b))
         p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-        p_a = planes.ransac_plane(after_xyz, options.plane_threshold, seed=options.seed + 1)
+        p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
         d_i = planes.plane_offset(p_b, p_a, grid)
     hooks.step(75, "computing the difference and volumes")
     with timer("volume"):
@@ -126,21 +113,42 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
         vols["dem_after"] = h_a + prep.origin[2]
     hooks.step(85, "writing outputs")
     with timer("write"):
-        z0 = float(prep.origin[2])  # local -> absolute heights
-        gridmod.write_geotiff(out.path("dem_before.tif"), h_b + z0, grid, "average height, before (m)")
-        gridmod.write_geotiff(out.path("dem_after.tif"), h_a + z0, grid, "average height, after (m)")
-        gridmod.write_geotiff(out.path("difference.tif"), vols["diff"], grid,
-                              f"H_after - H_before - correction ({options.correction}) (m)")
-        gridmod.write_geotiff(out.path("plane_offset.tif"), vols["offset"], grid,
-                              f"vertical correction d_i subtracted ({options.correction}) (m)")
-        gridmod.write_geotiff(out.path("filled_mask.tif"), vols["filled_mask"].astype("uint8"), grid,
-                              "1 = difference interpolated (sparse cell or filled hole)", "", "uint8")
+        _write_rasters(out, h_b, h_a, vols, grid, prep, options)
         if options.keep_registered_cloud:
-            write_las(out.path("after_registered.laz"), after_xyz + prep.origin, prep.frame.wkt)
-    report = _report(prep, reg, grid, vols, p_b, p_a, options, timer)
-    write_json(out.path("report.json"), report)
-    _html(out, report, vols, grid)
+            write_las(out.path("after_registered.laz"), after_xyz.astype(np.float64) + prep.origin, prep.frame.wkt)
+    with timer("report"):
+        report = _report(prep, reg, grid, vols, p_b, p_a, options, timer)
+        write_json(out.path("report.json"), report)
+        _html(out, report, vols, grid)
     return Result(report)
+
+
+def _prepare(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline) -> Prepared:
+    from .stream import open_source
+
+    src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
+    return prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"))
+
+
+def transform_points32(xyz: np.ndarray, t: np.ndarray, chunk: int = 4_000_000) -> np.ndarray:
+    """A rigid transform of float32 local points, in chunks (no float64 copy of the cloud)."""
+    out = np.empty_like(xyz, dtype=np.float32)
+    r, s = t[:3, :3].T.astype(np.float32), t[:3, 3].astype(np.float32)
+    for i in range(0, len(xyz), chunk):
+        out[i : i + chunk] = xyz[i : i + chunk] @ r + s
+    return out
+
+
+def _write_rasters(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, prep: Prepared, options: Options) -> None:
+    z0 = float(prep.origin[2])  # local -> absolute heights
+    gridmod.write_geotiff(out.path("dem_before.tif"), h_b + z0, grid, "average height, before (m)")
+    gridmod.write_geotiff(out.path("dem_after.tif"), h_a + z0, grid, "average height, after (m)")
+    gridmod.write_geotiff(out.path("difference.tif"), vols["diff"], grid,
+                          f"H_after - H_before - correction ({options.correction}) (m)")
+    gridmod.write_geotiff(out.path("plane_offset.tif"), vols["offset"], grid,
+                          f"vertical correction d_i subtracted ({options.correction}) (m)")
+    gridmod.write_geotiff(out.path("filled_mask.tif"), vols["filled_mask"].astype("uint8"), grid,
+                          "1 = difference interpolated (sparse cell or filled hole)", "", "uint8")
 
 
 def _points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
@@ -286,14 +294,15 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
     """See :func:`soilvolume.api.register`."""
     hooks.step(5, "reading")
-    prep = prepare(read_points(before), read_points(after), options)
-    hooks.step(20, "registering")
-    reg = register(prep.after.xyz, prep.before.xyz, prep.before.xyz, options,
-                   check=lambda: hooks.step(20, "registering"))
-    hooks.step(90, "writing the registered cloud")
     if out_cloud.resolve() in (before.resolve(), after.resolve()):
         raise SoilVolumeError(f"{out_cloud}: refusing to overwrite an input file")
-    write_las(out_cloud, transform_points(prep.after.xyz, reg.transform) + prep.origin, prep.frame.wkt)
+    prep = _prepare(before, after, options, hooks, None, None)
+    hooks.step(20, "registering")
+    reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
+                   dense=(prep.after.xyz, prep.before.xyz))
+    hooks.step(90, "writing the registered cloud")
+    xyz = transform_points32(prep.after.xyz, reg.transform).astype(np.float64) + prep.origin
+    write_las(out_cloud, xyz, prep.frame.wkt)
     hooks.step(100, "done")
     from .report import _clean
 

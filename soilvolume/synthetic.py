@@ -80,6 +80,7 @@ class SceneConfig:
     holes: int = 0  # occlusion holes (no points) per epoch, some on change edges
     vegetation: bool = False  # bushes in both epochs, grown in the after epoch (class 3/4/5)
     objects: bool = False  # vehicles (class 6) and boulders (class 1), same place in both epochs
+    relief: float = 1.0  # scale of the long waves and hills (0 = a tilted plane with local detail)
     change: str = "piles"  # "piles" (3 piles ~1020 m3 + one pit ~69 m3) or "none"
     crs: str = "EPSG:32654"
     origin: tuple[float, float, float] = (500_000.0, 3_900_000.0, 0.0)  # added to local coords
@@ -233,8 +234,10 @@ class _World:
                 waves.append((rng.uniform(amp_lo, amp_hi), k * np.cos(th), k * np.sin(th),
                               rng.uniform(0, 2 * np.pi)))
         self.waves = np.array(waves)
+        self.waves[:3, 0] *= cfg.relief
         self.hills = np.column_stack([rng.uniform(-2.5, 3.0, 4), rng.uniform(0, bw, 4),
                                       rng.uniform(0, bh, 4), rng.uniform(10.0, 30.0, 4)])
+        self.hills[:, 0] *= cfg.relief
         aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
         th0 = rng.uniform(0, np.pi)
         lines = []  # (kind, x0, y0, x1, y1, height, width) ; kind 0 ditch (gaussian), 1 berm

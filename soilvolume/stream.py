@@ -1,0 +1,212 @@
+"""Streaming input: read a cloud chunk by chunk (laspy), bring each chunk into the working frame,
+keep only the points later steps need (float32, local coordinates) and build the voxel-thinned
+registration subset on the way, so memory stays bounded by the kept points, not the file.
+
+Non-LAS files and clouds produced by a preparation pipeline arrive whole and are one chunk.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
+from .types import SoilVolumeError
+
+CHUNK = 1_000_000
+GROUND = 2
+
+
+@dataclass
+class Source:
+    """A cloud to stream: its CRS, point count and bounds (file CRS and units), and its chunks."""
+
+    path: str
+    crs_wkt: str | None
+    count: int
+    lo: np.ndarray
+    hi: np.ndarray
+    has_class: bool
+    raw: RawPoints | None = None  # whole cloud already in memory (non-LAS, pipeline output)
+
+    def chunks(self, size: int = CHUNK) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+        """(xyz float64 absolute in the file CRS, classification or None) per chunk."""
+        if self.raw is not None:
+            yield self.raw.xyz, self.raw.classification
+            return
+        yield from _las_chunks(Path(self.path), self.count, size)
+
+    def materialize(self) -> RawPoints:
+        """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
+        if self.raw is not None:
+            return self.raw
+        parts = list(self.chunks())
+        cls = None if parts[0][1] is None else np.concatenate([c for _, c in parts])
+        return RawPoints(np.concatenate([x for x, _ in parts]), cls, self.crs_wkt, self.path)
+
+
+def open_source(path, pipeline=None) -> Source:
+    """A streamable LAS/LAZ source from its header, else the whole cloud read now."""
+    p = Path(path)
+    if pipeline:
+        from .pipeline import prepare_cloud_from_file
+
+        return from_raw(prepare_cloud_from_file(pipeline, p))
+    _check_readable(p)
+    if p.suffix.lower() not in LAS_SUFFIXES:
+        return from_raw(read_points(p))
+    import laspy
+
+    try:
+        with laspy.open(p) as reader:
+            h = reader.header
+            wkt = las_crs_wkt(h, p)
+            dims = set(h.point_format.dimension_names)
+            src = Source(str(p), wkt, int(h.point_count), np.asarray(h.mins, float),
+                         np.asarray(h.maxs, float), "classification" in dims)
+    except SoilVolumeError:
+        raise
+    except Exception as exc:
+        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({exc})") from exc
+    if src.count == 0:
+        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points)")
+    return src
+
+
+def from_raw(raw: RawPoints) -> Source:
+    validate(raw)
+    return Source(raw.path, raw.crs_wkt, len(raw.xyz), raw.xyz.min(axis=0), raw.xyz.max(axis=0),
+                  raw.classification is not None, raw)
+
+
+def _las_chunks(path: Path, count: int, size: int):
+    import laspy
+
+    read = 0
+    try:
+        with laspy.open(path) as reader:
+            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+            for chunk in reader.chunk_iterator(size):
+                xyz = np.empty((len(chunk), 3))
+                xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
+                read += len(chunk)
+                yield xyz, (np.asarray(chunk.classification) if has_cls else None)
+    except SoilVolumeError:
+        raise
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+    if read != count:
+        raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
+
+
+class ColumnThinner:
+    """Voxel thinning of a terrain cloud while streaming: the centroid of the points in each
+    ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float) -> None:
+        self.lo, self.voxel = np.asarray(lo[:2], float), float(voxel)
+        self.shape = (int(np.ceil((hi[1] - lo[1]) / voxel)) + 1, int(np.ceil((hi[0] - lo[0]) / voxel)) + 1)
+        n = self.shape[0] * self.shape[1]
+        self.sums = np.zeros((4, n))
+
+    def add(self, xyz: np.ndarray) -> None:
+        ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64)
+        iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64)
+        ok = (ix >= 0) & (iy >= 0) & (ix < self.shape[1]) & (iy < self.shape[0])
+        ids = iy[ok] * self.shape[1] + ix[ok]
+        n = self.sums.shape[1]
+        self.sums[3] += np.bincount(ids, minlength=n)
+        for k in range(3):
+            self.sums[k] += np.bincount(ids, weights=xyz[ok, k], minlength=n)
+
+    def result(self) -> np.ndarray:
+        """The centroids (float64, (M, 3))."""
+        has = self.sums[3] > 0
+        return (self.sums[:3, has] / self.sums[3, has]).T.copy()
+
+
+class _Parts:
+    """Kept points appended into one float32 buffer sized by the header count (pages never
+    written are never resident), so no concatenation copy is needed."""
+
+    def __init__(self, capacity: int) -> None:
+        self.buf = np.empty((max(capacity, 0), 3), np.float32)
+        self.n = 0
+
+    def append(self, xyz: np.ndarray) -> None:
+        m = len(xyz)
+        if self.n + m > len(self.buf):  # more points than the header said: grow
+            grown = np.empty((max(2 * len(self.buf), self.n + m), 3), np.float32)
+            grown[: self.n] = self.buf[: self.n]
+            self.buf = grown
+        self.buf[self.n : self.n + m] = xyz
+        self.n += m
+
+    def result(self) -> np.ndarray:
+        return self.buf[: self.n]
+
+
+@dataclass
+class Loaded:
+    """One epoch after streaming: kept points (float32 local), the thinned subset (float64
+    local), and what was read and kept."""
+
+    xyz: np.ndarray
+    thin: np.ndarray
+    points: int = 0
+    used: int = 0
+    note: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
+    """Whether to keep only class 2: ``class`` always (error without it), ``auto`` when the file
+    has ground-classified points (decided on its first chunk)."""
+    has = first_cls is not None and bool((first_cls == GROUND).any())
+    if mode == "class" and not has:
+        raise SoilVolumeError(
+            f"{src.path}: --ground class needs ground-classified (class 2) points; the file has none")
+    return mode == "class" or (mode == "auto" and has)
+
+
+def load(
+    src: Source, to_local: Callable[[np.ndarray], np.ndarray], mode: str,
+    keep: Callable[[np.ndarray], np.ndarray] | None, thinner: ColumnThinner,
+    check: Callable[[], None] | None = None,
+) -> Loaded:
+    """Stream ``src``: select ground (``mode`` in auto/class/none; ``filter`` needs the whole
+    cloud and is done by the caller), convert with ``to_local`` (file CRS -> local frame), keep
+    the points for which ``keep`` is true (all when None) and feed them to ``thinner``."""
+    parts = _Parts(src.count)
+    points = used = 0
+    use_class: bool | None = None
+    reading = 0.0
+    chunks = src.chunks()
+    while True:
+        t0 = time.perf_counter()
+        try:
+            xyz, cls = next(chunks)
+        except StopIteration:
+            break
+        finally:
+            reading += time.perf_counter() - t0
+        if check:
+            check()
+        if use_class is None:
+            use_class = ground_mode(src, cls, mode)
+        points += len(xyz)
+        if use_class and cls is not None:
+            xyz = xyz[cls == GROUND]
+        used += len(xyz)
+        local = to_local(xyz)
+        if keep is not None:
+            local = local[keep(local)]
+        thinner.add(local)
+        parts.append(local)
+    kept = parts.result()
+    note = "class 2 (ground)" if use_class else "all points"
+    return Loaded(kept, thinner.result(), points, used, note, {"read_s": reading})
