@@ -206,10 +206,23 @@ def stable_source(
     source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, cell: float = 1.0,
 ) -> np.ndarray:
     """The source with its fitted low-order deformation removed and its change areas dropped:
-    what the last ICP levels should see (smooth terrain constrains x/y only weakly)."""
-    from .correction_quick import detrend_for_registration
+    what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
+    ground and the degree-2 surface come from :mod:`soilvolume.correction` on 1 m median grids."""
+    from .correction import apply
+    from .grid import average_height, make_grid
 
-    return detrend_for_registration(transform_points(source_xyz, t), target_xyz, cell)
+    src = transform_points(source_xyz, t)
+    grid = make_grid(src.min(axis=0), src.max(axis=0), cell, np.zeros(3), None)
+    diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
+    if np.isfinite(diff).sum() < 20:
+        return src[:0]
+    res = apply(diff, "surface", grid)
+    row, col, ok = grid.index(src)
+    keep = np.zeros(len(src), bool)
+    keep[ok] = res.stable_mask[row[ok], col[ok]]
+    out = src[keep]
+    out[:, 2] -= res.surface[row[keep], col[keep]]
+    return out
 
 
 def register(
