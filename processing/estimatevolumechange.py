@@ -125,7 +125,8 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                 "STATISTIC", self.tr("Cell height statistic"), params.STATISTIC_LABELS),
             params.enum_param("GROUND", self.tr("Ground points"), params.GROUND_LABELS),
             params.number_param(
-                "FILL_HOLES", self.tr("Fill holes up to this area (m², 0 = off)"), 0.0),
+                "FILL_HOLES", self.tr("Fill enclosed holes up to this area (m², 0 = off)"),
+                engine.engine("options").Options().fill_holes),
             QgsProcessingParameterNumber(
                 "SEED", self.tr("Random seed"), defaultValue=0, minValue=0),
             QgsProcessingParameterFile(

@@ -364,12 +364,13 @@ def refill_sparse(
     return filled, targets & np.isfinite(filled)
 
 
-def weak_cells(counts: np.ndarray, ratio: float = 0.5) -> np.ndarray:
-    """Cells of one epoch with 0 < count < ``ratio`` x median count over its cells with data."""
+def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0) -> np.ndarray:
+    """Cells of one epoch with 0 < count < max(``min_points``, ``ratio`` x median count over its
+    cells with data); none when ``ratio`` <= 0."""
     has = counts > 0
     if ratio <= 0 or not has.any():
         return np.zeros(counts.shape, bool)
-    return has & (counts < ratio * np.median(counts[has]))
+    return has & (counts < max(min_points, ratio * np.median(counts[has])))
 
 
 def refill_epoch(
@@ -378,13 +379,14 @@ def refill_epoch(
     ratio: float = 0.5,
     max_hole_cells: int | None = None,
     method: str = "biharmonic",
+    min_points: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One epoch's DEM: drop and refill its weak cells (see ``weak_cells``) and, with
     ``max_hole_cells``, fill enclosed empty holes up to that size (empty areas touching the grid
     border, e.g. outside a partial cloud, stay NaN). Returns (filled DEM, mask of refilled cells
     that got a finite value); weak cells that cannot be refilled become NaN."""
     valid = np.isfinite(h)
-    targets = (weak_cells(counts, ratio) & valid) | enclosed_holes(valid, max_hole_cells)
+    targets = (weak_cells(counts, ratio, min_points) & valid) | enclosed_holes(valid, max_hole_cells)
     filled = _filler(method)(h, targets)
     return filled, targets & np.isfinite(filled)
 

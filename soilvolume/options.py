@@ -39,8 +39,9 @@ class Options:
     # step 5: grids and volumes
     cell: float | None = _opt(None, "grid cell size (m); default from the before cloud's density (>= 8 points per cell, >= 0.5 m)")
     statistic: str = _opt("robust-mean", "per-cell height: robust-mean (mean after rejecting points beyond 3 MAD of the cell median), mean (the paper), median", ("robust-mean", "mean", "median"))
-    min_count_ratio: float = _opt(0.5, "cells with fewer points than this fraction of the median count are unreliable and re-filled from neighbours")
-    fill_holes: float = _opt(0.0, "fill holes up to this area (m2) in the difference raster by interpolation (0 = off); sparse cells are always re-filled")
+    min_count_ratio: float = _opt(0.1, "a cell of one epoch with fewer points than this fraction of its median count (and always one with fewer than 3) is unreliable: its height is re-filled from neighbours (0 = off)")
+    fill_holes: float = _opt(100.0, "fill enclosed holes (empty cells of one epoch, e.g. occlusions) up to this area (m2) by interpolating that epoch's heights; larger holes stay empty and are reported (0 = off)")
+    fill_method: str = _opt("biharmonic", "interpolation of refilled cells: biharmonic (smooth, keeps slopes across the hole), harmonic (Laplace, never overshoots its border values)", ("biharmonic", "harmonic"))
     ground: str = _opt("auto", "ground points: auto (class 2 when the file has it, else all), class (class 2 only), filter (SMRF ground filter), none", ("auto", "class", "filter", "none"))
     lod_confidence: float = _opt(0.95, "confidence of the level of detection and of the volume uncertainty")
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon")

@@ -161,13 +161,22 @@ def _points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray
 N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
 
 
+MIN_POINTS = 3  # a robust cell height needs at least this many points
+
+
 def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
-    """Raw difference -> sparse/hole refill -> correction -> budgets, uncertainty, zones."""
+    """Raw difference; each epoch's weak cells and enclosed holes refilled from its own
+    neighbours -> difference -> correction -> budgets, uncertainty, zones."""
     from .uncertainty import thresholded_volumes, volume_uncertainty
 
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
-    filled, filled_mask = holes.refill_sparse(raw, n_b, n_a, options.min_count_ratio, max_cells)
+    fill = dict(ratio=options.min_count_ratio, max_hole_cells=max_cells, method=options.fill_method,
+                min_points=MIN_POINTS)
+    f_b, m_b = holes.refill_epoch(h_b, n_b, **fill)
+    f_a, m_a = holes.refill_epoch(h_a, n_a, **fill)
+    filled = difference(f_a, f_b)
+    filled_mask = (m_a | m_b) & np.isfinite(filled)
     offset, params, stable, change = _correction(filled, d_i, grid, options)
     diff = filled - offset
     area = grid.cell_area

@@ -37,8 +37,9 @@ def columns(xyz: np.ndarray, cell: float, lo: np.ndarray | None = None, hi: np.n
     n = shape[0] * shape[1]
     count = np.bincount(ids, minlength=n)
     has = np.flatnonzero(count)
-    means = np.stack([np.bincount(ids, weights=xyz[ok, k], minlength=n)[has] for k in range(3)], axis=1)
-    means /= count[has, None]
+    means = np.empty((len(has), 3))
+    for k in range(3):
+        means[:, k] = np.bincount(ids, weights=xyz[ok, k], minlength=n)[has] / count[has]
     return Columns(means, has // shape[1], has % shape[1], shape, lo, float(cell))
 
 
