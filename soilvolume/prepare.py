@@ -43,9 +43,11 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
     return crs
 
 
-def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None) -> tuple[np.ndarray, str]:
+def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0,
+                  slope: float = 0.6) -> tuple[np.ndarray, str]:
     """Mask of the points to use, and a note: class 2 when asked for or (auto) present, or the
-    SMRF ground filter (run in metres: ``crs`` gives the file's units)."""
+    SMRF ground filter (run in metres: ``crs`` gives the file's units) with an earthworks
+    ``window`` and ``slope`` (PDAL's 18 m / 0.15 take the piles themselves for objects)."""
     n = len(raw.xyz)
     has_class = raw.classification is not None and bool((raw.classification == GROUND).any())
     if mode == "none" or (mode == "auto" and not has_class):
@@ -61,19 +63,20 @@ def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None) -> t
 
         h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
         x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
-        return smrf_classify(x, y, z), "SMRF ground filter"
+        keep = smrf_classify(x, y, z, window=window, slope=slope)
+        return keep, f"SMRF ground filter (window {window:g} m, slope {slope:g})"
     raise SoilVolumeError(f"unknown ground mode '{mode}'")
 
 
 THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
-def _filtered(src: Source, crs: pyproj.CRS, mode: str) -> tuple[Source, str, str | None]:
+def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
     """(source to stream, ground mode for streaming, note): SMRF needs the whole cloud."""
-    if mode != "filter":
-        return src, mode, None
+    if options.ground != "filter":
+        return src, options.ground, None
     raw = src.materialize()
-    keep, note = select_ground(raw, "filter", crs)
+    keep, note = select_ground(raw, "filter", crs, options.ground_window, options.ground_slope)
     if not keep.any():
         raise SoilVolumeError(f"{src.path}: the SMRF ground filter found no ground points")
     out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path))
@@ -98,13 +101,13 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
-    after, mode_a, note_a = _filtered(after, crs_a, options.ground)
+    after, mode_a, note_a = _filtered(after, crs_a, options)
     a = load(after, _local(crs_a, frame, origin, after.path), mode_a, None,
              ColumnThinner(lo - origin - pad, hi - origin + pad, voxel), check)
     if len(a.thin) < 3:
         raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
     poly = footprint(a.thin[:, :2], options.radius)
-    before, mode_b, note_b = _filtered(before, crs_b, options.ground)
+    before, mode_b, note_b = _filtered(before, crs_b, options)
     b = load(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
              ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check)
     if len(b.xyz) < 10:

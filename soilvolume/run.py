@@ -181,7 +181,7 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
     diff = filled - offset
     area = grid.cell_area
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
-                             n_coef=N_COEF[options.correction])
+                             n_coef=N_COEF[options.correction], filled_mask=filled_mask)
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
         "stable": stable, "params": params, "uncertainty": unc,
@@ -277,7 +277,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     raw = read_points(cloud)
     src = resolve_crs(raw, crs, "a CRS")
     frame = work_frame(src, None if not src.is_geographic else (0, 0))
-    keep, note = select_ground(raw, options.ground, src)
+    keep, note = select_ground(raw, options.ground, src, options.ground_window, options.ground_slope)
     xyz = to_frame(raw.xyz[keep], src, frame, raw.path)
     origin = np.floor(xyz.min(axis=0))
     xyz -= origin

@@ -20,6 +20,8 @@ from scipy import ndimage, optimize, stats
 from .correction import nmad
 from .types import GridSpec
 
+INTERP_FRACTION = 0.15
+
 
 def z_value(confidence: float = 0.95) -> float:
     """Two-sided normal quantile (1.96 for 95 %)."""
@@ -128,11 +130,16 @@ def volume_uncertainty(
     *,
     n_coef: int = 6,
     per_cell_sigma: np.ndarray | None = None,
+    filled_mask: np.ndarray | None = None,
+    interp_fraction: float = INTERP_FRACTION,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
     (all valid cells when None), cut/fill split by the sign of the corrected difference, and
     ``net_compared_area`` for a sum over every valid cell (e.g. thresholded or raw volumes).
     ``n_coef`` = coefficients of the correction surface (6 surface, 3 plane, 1 constant, 0 none).
+    ``filled_mask``: interpolated cells; their volume gets a further, fully correlated one-sigma
+    error of ``interp_fraction`` x its absolute value (hole fills over change edges were off by
+    10-22 % of their volume on synthetic pairs).
     Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2, range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
     stable = stable_mask & valid
@@ -149,13 +156,21 @@ def volume_uncertainty(
         "fill": region & (diff_corrected > 0),
         "net_compared_area": valid,
     }
+    filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
+    absd = np.abs(np.where(valid, diff_corrected, 0.0))
+
+    def interp(m: np.ndarray) -> float:
+        return interp_fraction * float(absd[m & filled].sum()) * grid.cell_area
+
     out: dict[str, Any] = {
-        k: z * region_sigma(int(m.sum()), grid.cell, model, b, pcv) for k, m in parts.items()
+        k: z * math.hypot(region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m))
+        for k, m in parts.items()
     }
     out.update(
         confidence=confidence, sigma_m=sigma, lod_m=z * sigma if np.isfinite(sigma) else None,
         nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"],
-        bias_sigma_m=b, stable_cells=int(stable.sum()), change_area_m2=float(region.sum())
+        bias_sigma_m=b, interpolated_m3=interp(region) / max(interp_fraction, 1e-12),
+        stable_cells=int(stable.sum()), change_area_m2=float(region.sum())
         * grid.cell_area,
         variogram={"lag_m": lags.tolist(), "gamma_m2": gamma.tolist(),
                    "pairs": npairs.tolist()},
