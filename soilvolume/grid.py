@@ -44,9 +44,16 @@ def make_grid(
 
 
 def cell_ids(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Flat cell id of every point inside the grid, and the mask of those points."""
-    row, col, ok = grid.index(xyz[:, :2])
-    return row[ok] * grid.cols + col[ok], ok
+    """Flat cell id of every point inside the grid, and the mask of those points (computed in
+    the points' own precision: float32 local coordinates stay float32)."""
+    inv = 1.0 / grid.cell
+    col = (xyz[:, 0] - (grid.xmin - grid.origin[0])) * inv
+    row = ((grid.ymax - grid.origin[1]) - xyz[:, 1]) * inv
+    ok = (col >= 0) & (col < grid.cols) & (row >= 0) & (row < grid.rows)
+    ids = row[ok].astype(np.int64)  # non-negative: truncation is floor
+    ids *= grid.cols
+    ids += col[ok].astype(np.int64)
+    return ids, ok
 
 
 def average_height(

@@ -144,6 +144,32 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
             tmp.unlink()
 
 
+def write_las_chunked(
+    path: str | os.PathLike, xyz_local: np.ndarray, origin: np.ndarray, crs_wkt: str | None,
+    transform: np.ndarray | None = None, scale: float = 0.001, chunk: int = 2_000_000,
+) -> None:
+    """Write local points (optionally through a 4x4 rigid ``transform``) as absolute LAS 1.4/LAZ,
+    chunk by chunk (memory bounded by the chunk, not the cloud), atomically."""
+    import laspy
+    import pyproj
+
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    origin = np.asarray(origin, float)
+    header.offsets = np.floor(origin)
+    header.scales = np.array([scale, scale, scale])
+    if crs_wkt:
+        header.add_crs(pyproj.CRS.from_wkt(crs_wkt))
+    with atomic_path(path) as tmp:
+        with laspy.open(tmp, mode="w", header=header, do_compress=Path(path).suffix.lower() == ".laz") as w:
+            for i in range(0, len(xyz_local), chunk):
+                part = np.asarray(xyz_local[i : i + chunk], dtype=np.float64)
+                if transform is not None:
+                    part = part @ transform[:3, :3].T + transform[:3, 3]
+                rec = laspy.ScaleAwarePointRecord.zeros(len(part), header=header)
+                rec.x, rec.y, rec.z = part[:, 0] + origin[0], part[:, 1] + origin[1], part[:, 2] + origin[2]
+                w.write_points(rec)
+
+
 def write_las(
     path: str | os.PathLike,
     xyz_abs: np.ndarray,

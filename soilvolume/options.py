@@ -24,7 +24,7 @@ class Options:
     # step 1: alignment initialisation
     radius: float = _opt(30.0, "crop radius (m) around the after cloud's footprint applied to the before cloud (paper: 30 m)")
     # step 2: coarse registration
-    coarse: str = _opt("auto", "coarse registration: auto (FPFH+RANSAC, kept only if it beats the GPS pose within the prior), fpfh (always), none", ("auto", "fpfh", "none"))
+    coarse: str = _opt("auto", "coarse registration: auto (FPFH+RANSAC only when the fine stage from the GPS pose fits poorly, kept only within the GPS error prior and if it then fits better), fpfh (always, the paper's path), none", ("auto", "fpfh", "none"))
     coarse_voxel: float = _opt(1.0, "voxel size (m) for FPFH features and RANSAC")
     max_gps_shift: float = _opt(8.0, "GPS error prior: largest horizontal/vertical shift (m) a coarse result may apply")
     max_gps_rotation: float = _opt(6.0, "GPS error prior: largest rotation (degrees) a coarse result may apply")

@@ -22,6 +22,7 @@ from .types import SoilVolumeError, StageQuality
 ICP_LEVELS = ((1.0, 6.0, 3.0), (1.0, 3.0, 1.0), (0.5, 1.5, 0.5), (0.25, 0.8, 0.25), (0.25, 0.4, 0.15))
 REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12), (0.15, 0.25, 0.08))
 EVAL_DISTANCE = 0.4
+AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse
 MAX_ICP_POINTS = 150_000  # per level: coarser voxels on very large sites
 MAX_COARSE_POINTS = 15_000
 MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
@@ -233,6 +234,13 @@ def register(
     the before cloud cropped to the after footprint + radius). ``dense``: the full-resolution
     (after, before) clouds, for the paper's PFH patch matching."""
     eye = np.eye(4)
+    if options.coarse == "auto" and options.fine != "none":
+        first = _fine_stage(after_xyz, before_xyz, [(eye, "gps")], options, check, dense)
+        if first.fitness >= AUTO_FITNESS:  # the GPS pose converged: FPFH cannot do better here
+            note = (f"skipped: the fine registration from the GPS pose fits ({first.fitness:.0%} of the "
+                    f"after cloud within {EVAL_DISTANCE} m); --coarse fpfh forces it")
+            return Registration(first.transform, StageQuality("fpfh-ransac", float("nan"), float("nan"),
+                                                              eye, False, 0.0, note), first)
     coarse = _coarse_stage(after_xyz, before_xyz, options)
     starts = [(eye, "gps")]
     if coarse.accepted and not np.allclose(coarse.transform, eye):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from . import grid as gridmod
 from . import holes, planes
 from .api import Hooks, Result
 from .crop import footprint, polygon_area
-from .io import read_points, write_las
+from .io import read_points, write_las_chunked
 from .options import Options
 from .outputs import OutputDir
 from .prepare import Prepared, prepare
@@ -95,27 +96,31 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
     hooks.info(f"coarse: {reg.coarse.note}")
     hooks.info(f"fine ({reg.fine.method}): fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m, {reg.fine.note}")
     hooks.step(55, "gridding the average heights")
-    with timer("grids"):
-        after_xyz = transform_points32(prep.after.xyz, reg.transform)
-        after_thin = transform_points(prep.after_thin, reg.transform)
-        grid = shared_grid(prep, after_thin, options)
-        h_b, n_b = gridmod.average_height(prep.before.xyz, grid, options.statistic)
-        h_a, n_a = gridmod.average_height(after_xyz, grid, options.statistic)
-    hooks.step(70, "fitting the RANSAC planes")
-    with timer("planes"):
-        sel_b = _points_on(prep.before_thin, grid, np.isfinite(h_b))
-        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-        p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
-        d_i = planes.plane_offset(p_b, p_a, grid)
-    hooks.step(75, "computing the difference and volumes")
-    with timer("volume"):
-        vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
-        vols["dem_after"] = h_a + prep.origin[2]
-    hooks.step(85, "writing outputs")
-    with timer("write"):
-        _write_rasters(out, h_b, h_a, vols, grid, prep, options)
-        if options.keep_registered_cloud:
-            write_las(out.path("after_registered.laz"), after_xyz.astype(np.float64) + prep.origin, prep.frame.wkt)
+    with ThreadPoolExecutor(2) as pool:  # numpy sorts and LAZ compression release the GIL
+        cloud_job = _write_registered(pool, out, prep, reg, options)
+        with timer("grids"):
+            after_xyz = transform_points32(prep.after.xyz, reg.transform)
+            after_thin = transform_points(prep.after_thin, reg.transform)
+            grid = shared_grid(prep, after_thin, options)
+            before_job = pool.submit(gridmod.average_height, prep.before.xyz, grid, options.statistic)
+            h_a, n_a = gridmod.average_height(after_xyz, grid, options.statistic)
+            del after_xyz
+            h_b, n_b = before_job.result()
+        hooks.step(70, "fitting the RANSAC planes")
+        with timer("planes"):
+            sel_b = _points_on(prep.before_thin, grid, np.isfinite(h_b))
+            p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+            p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+            d_i = planes.plane_offset(p_b, p_a, grid)
+        hooks.step(75, "computing the difference and volumes")
+        with timer("volume"):
+            vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
+            vols["dem_after"] = h_a + prep.origin[2]
+        hooks.step(85, "writing outputs")
+        with timer("write"):
+            _write_rasters(out, h_b, h_a, vols, grid, prep, options)
+            if cloud_job is not None:
+                cloud_job.result()
     with timer("report"):
         report = _report(prep, reg, grid, vols, p_b, p_a, options, timer)
         write_json(out.path("report.json"), report)
@@ -128,6 +133,14 @@ def _prepare(before, after, options: Options, hooks: Hooks, before_pipeline, aft
 
     src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
     return prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"))
+
+
+def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, reg, options: Options):
+    """Start writing after_registered.laz in the background (None when not asked for)."""
+    if not options.keep_registered_cloud:
+        return None
+    return pool.submit(write_las_chunked, out.path("after_registered.laz"), prep.after.xyz, prep.origin,
+                       prep.frame.wkt, reg.transform)
 
 
 def transform_points32(xyz: np.ndarray, t: np.ndarray, chunk: int = 4_000_000) -> np.ndarray:
@@ -310,8 +323,7 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
     reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
                    dense=(prep.after.xyz, prep.before.xyz))
     hooks.step(90, "writing the registered cloud")
-    xyz = transform_points32(prep.after.xyz, reg.transform).astype(np.float64) + prep.origin
-    write_las(out_cloud, xyz, prep.frame.wkt)
+    write_las_chunked(out_cloud, prep.after.xyz, prep.origin, prep.frame.wkt, reg.transform)
     hooks.step(100, "done")
     from .report import _clean
 

@@ -127,3 +127,22 @@ def test_results_are_deterministic(misaligned_pair, misaligned_result, tmp_path)
     first = misaligned_result[0].report
     assert again["volume_m3"]["net"] == pytest.approx(first["volume_m3"]["net"], abs=1e-6)
     assert np.allclose(again["registration"]["transform"], first["registration"]["transform"], atol=1e-9)
+
+
+def test_coarse_auto_skips_fpfh_when_the_gps_pose_converges(misaligned_result):
+    coarse = misaligned_result[0].report["registration"]["coarse"]
+    assert coarse["accepted"] is False and coarse["note"].startswith("skipped")
+
+
+def test_coarse_auto_runs_fpfh_when_the_gps_pose_fits_poorly(misaligned_pair, tmp_path, monkeypatch):
+    """The fallback path of --coarse auto: FPFH runs, is guarded by the GPS prior, the fine stage
+    starts from the better pose, and the result is as accurate as from the GPS pose."""
+    import soilvolume.register as reg
+
+    monkeypatch.setattr(reg, "AUTO_FITNESS", 1.01)  # never good enough: always try FPFH
+    before, after, truth = misaligned_pair
+    r = estimate(before, after, tmp_path / "out", Options()).report
+    coarse = r["registration"]["coarse"]
+    assert coarse["method"] == "fpfh-ransac" and "FPFH+RANSAC moved" in coarse["note"]
+    rot, disp = transform_error(r, truth)
+    assert rot < 0.05 and disp < 0.05, (rot, disp)
