@@ -17,13 +17,14 @@ from .types import SoilVolumeError
 
 SKIP = {"keep_registered_cloud"}
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
-(H_after - H_before - correction), plane_offset.tif (the correction d_i), after_registered.laz,
-report.json and report.html. Volumes are in cubic metres: fill = material added, cut = removed,
+(H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
+report.json, report.html, and with --registered-cloud after_registered.laz.
+Volumes are in cubic metres: fill = material added, cut = removed,
 net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted)."""
 
 
 def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> None:
-    """One ``--flag`` per Options field (``--no-registered-cloud`` for the boolean)."""
+    """One ``--flag`` per Options field (``--registered-cloud`` for the boolean)."""
     for f in fields(Options):
         if f.name in SKIP or (only is not None and f.name not in only):
             continue
@@ -36,8 +37,8 @@ def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> Non
 
 def options_from(ns: argparse.Namespace) -> Options:
     given = {f.name: getattr(ns, f.name) for f in fields(Options) if getattr(ns, f.name, None) is not None}
-    if getattr(ns, "no_registered_cloud", False):
-        given["keep_registered_cloud"] = False
+    if getattr(ns, "registered_cloud", False):
+        given["keep_registered_cloud"] = True
     return Options(**given)
 
 
@@ -59,7 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--before-pipeline", type=Path,
                      help="PDAL pipeline JSON preparing the before cloud (replaces reading it)")
     est.add_argument("--after-pipeline", type=Path, help="PDAL pipeline JSON preparing the after cloud")
-    est.add_argument("--no-registered-cloud", action="store_true", help="do not write after_registered.laz")
+    est.add_argument("--registered-cloud", action="store_true",
+                     help="also write after_registered.laz, the after cloud moved by the registration (off by "
+                     "default: it costs as much as the rest of a large run; report.json has the 4x4 transform)")
     est.add_argument("--quiet", action="store_true", help="no progress output")
     add_options(est)
 

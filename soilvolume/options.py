@@ -49,7 +49,7 @@ class Options:
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon")
     # run control
     threads: int = _opt(0, "worker threads for Open3D/numpy (0 = all cores)")
-    keep_registered_cloud: bool = _opt(True, "write after_registered.laz")
+    keep_registered_cloud: bool = _opt(False, "write after_registered.laz (the after cloud moved by the registration; the transform is always in report.json)")
 
     def with_(self, **changes: Any) -> Options:
         """A copy with some fields changed."""

@@ -103,6 +103,45 @@ def _las_chunks(path: Path, count: int, size: int):
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
 
 
+def prefetch(chunks: Iterator, depth: int = 2) -> Iterator:
+    """Iterate ``chunks`` read ahead by a background thread (decoding overlaps the caller's
+    processing: both are mostly numpy work that releases the GIL). Errors are re-raised here."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    end = object()
+
+    def run() -> None:
+        try:
+            for item in chunks:
+                if stop.is_set():
+                    return
+                q.put(item)
+            q.put(end)
+        except BaseException as exc:  # handed to the consumer
+            q.put(exc)
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = q.get()
+            if item is end:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        while worker.is_alive():  # unblock a producer waiting on a full queue
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                worker.join(0.05)
+
+
 class ColumnThinner:
     """Voxel thinning of a terrain cloud while streaming: the centroid of the points in each
     ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk."""
@@ -185,7 +224,7 @@ def load(
     points = used = 0
     use_class: bool | None = None
     reading = 0.0
-    chunks = src.chunks()
+    chunks = prefetch(src.chunks())
     while True:
         t0 = time.perf_counter()
         try:

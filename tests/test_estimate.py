@@ -12,8 +12,8 @@ from scipy.spatial.transform import Rotation
 from soilvolume.api import estimate
 from soilvolume.options import Options
 
-OUTPUTS = {"dem_before.tif", "dem_after.tif", "difference.tif", "plane_offset.tif",
-           "after_registered.laz", "report.json", "report.html"}
+OUTPUTS = {"dem_before.tif", "dem_after.tif", "difference.tif", "plane_offset.tif", "filled_mask.tif",
+           "report.json", "report.html"}
 
 
 def transform_error(report: dict, truth: dict) -> tuple[float, float]:
@@ -104,12 +104,23 @@ def test_fine_pfh_converges(tmp_path):
 
 def test_cli_estimate_writes_outputs_and_prints_volumes(misaligned_pair, tmp_path):
     before, after, truth = misaligned_pair
-    p = run_cli("estimate", before, after, "--out", tmp_path / "o", "--quiet", "--coarse", "none")
+    p = run_cli("estimate", before, after, "--out", tmp_path / "o", "--quiet", "--coarse", "none",
+                "--registered-cloud")
     assert p.returncode == 0, p.stderr
     assert "net" in p.stdout and "m3" in p.stdout
     r = json.loads((tmp_path / "o" / "report.json").read_text())
     assert rel_err(r["volume_m3"]["net"], truth["net"]) < 0.02
     assert r["registration"]["coarse"]["method"] == "none"
+    # the registered cloud is the after cloud moved by the reported transform (mm precision)
+    import laspy
+
+    orig, moved = laspy.read(after), laspy.read(tmp_path / "o" / "after_registered.laz")
+    assert len(moved.points) == len(orig.points)
+    t = np.array(r["registration"]["transform"])
+    o = np.array(r["registration"]["local_origin"])
+    src = np.c_[orig.x, orig.y, orig.z][:1000] - o
+    want = src @ t[:3, :3].T + (t[:3, 3] + o @ t[:3, :3].T - o)
+    assert np.abs(np.c_[moved.x, moved.y, moved.z][:1000] - o - want).max() < 0.003
 
 
 def test_cli_help_explains_every_option():
