@@ -419,6 +419,40 @@ def refill_epoch(
     return filled, targets & np.isfinite(filled)
 
 
+def typical_radius(mask: np.ndarray) -> float:
+    """Radius (cells) of a disc the size of a typical component of ``mask``, weighted by area
+    (what the filled volume mostly sits in); 1 when there is none."""
+    labels, n = ndimage.label(mask, structure=_FOUR)
+    if n == 0:
+        return 1.0
+    size = np.bincount(labels.ravel())[1:].astype(float)
+    return max(1.0, float(np.sqrt((size * size).sum() / size.sum() / np.pi)))
+
+
+def fill_error(h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0,
+               n_holes: int = 40, seed: int = 0) -> float:
+    """One-sigma error (m) of the MEAN height of a refilled hole, measured on known ground: discs
+    of ``radius`` cells are cut out of ``usable`` cells of ``h`` (apart, fully surrounded by
+    usable cells), refilled with ``method`` and compared with what was there (NaN if no room)."""
+    r = int(np.ceil(radius))
+    yy, xx = np.mgrid[-r - 2: r + 3, -r - 2: r + 3]
+    room = ndimage.binary_erosion(usable & np.isfinite(h), xx * xx + yy * yy <= (radius + 2) ** 2)
+    step = 2 * r + 5
+    cand = np.argwhere(room[::step, ::step]) * step
+    if len(cand) < 5:
+        return float("nan")
+    rng = np.random.default_rng(seed)
+    centres = cand[rng.choice(len(cand), min(n_holes, len(cand)), replace=False)]
+    labels = np.zeros(h.shape, np.int32)
+    disc = np.argwhere(xx * xx + yy * yy <= radius * radius) - (r + 2)
+    for k, (cy, cx) in enumerate(centres, start=1):
+        labels[cy + disc[:, 0], cx + disc[:, 1]] = k
+    targets = labels > 0
+    err = _filler(method)(np.where(targets, np.nan, h), targets) - h
+    mean_err = ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
+    return float(np.sqrt(np.mean(np.square(mean_err))))
+
+
 def summary(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:
     """Counts, areas and the net volume contributed by refilled cells (for the report)."""
     d = np.where(filled_mask, diff, 0.0)

@@ -193,8 +193,9 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
     offset, params, stable, change = _correction(filled, d_i, grid, options)
     diff = filled - offset
     area = grid.cell_area
+    fill_sigma = _fill_sigma(h_b, h_a, m_b, m_a, n_b, n_a, stable, options)
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
-                             n_coef=N_COEF[options.correction], filled_mask=filled_mask)
+                             n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma)
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
         "stable": stable, "params": params, "uncertainty": unc,
@@ -211,6 +212,18 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
 
         vols["zones"] = zone_budgets(diff, grid, options.zones)
     return vols
+
+
+def _fill_sigma(h_b, h_a, m_b, m_a, n_b, n_a, stable, options: Options) -> np.ndarray:
+    """Per-cell one-sigma error (m) of refilled cells, from refilling known stable ground of the
+    same epoch with holes of the typical size (0 where nothing was refilled)."""
+    out = np.zeros(h_b.shape)
+    for h, m, n in ((h_b, m_b, n_b), (h_a, m_a, n_a)):
+        if m.any():
+            s = holes.fill_error(h, stable & (n > 0), options.fill_method, holes.typical_radius(m),
+                                 seed=options.seed)
+            out = np.hypot(out, np.where(m, s if np.isfinite(s) else 0.0, 0.0))
+    return out
 
 
 def _correction(diff, d_i, grid: GridSpec, options: Options):
