@@ -10,7 +10,7 @@ import numpy as np
 import pyproj
 
 from .crop import PolygonMask, footprint
-from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame
+from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
 from .io import RawPoints
 from .options import Options
 from .stream import ColumnThinner, Source, from_raw, load
@@ -24,7 +24,7 @@ class Prepared:
     """Both clouds in the local working frame (absolute = xyz + origin, in ``frame.crs``):
     full-resolution float32 points and float64 column-thinned subsets for registration."""
 
-    before: Cloud  # cropped to the after footprint + radius
+    before: Cloud  # within the after box + the GPS error prior (the thinned subset: + radius)
     after: Cloud
     frame: WorkFrame
     origin: np.ndarray
@@ -108,16 +108,19 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
         raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
     poly = footprint(a.thin[:, :2], options.radius)
     before, mode_b, note_b = _filtered(before, crs_b, options)
+    # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
+    reach = options.max_gps_shift + 2.0
+    box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach)
     b = load(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
-             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check)
-    if len(b.xyz) < 10:
+             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box)
+    if b.extra["cropped"] < 10 or len(b.xyz) == 0:
         raise SoilVolumeError(
             f"{before.path} and {after.path} do not overlap: the before cloud has "
-            f"{len(b.xyz)} points within {options.radius:g} m of the after cloud's footprint "
+            f"{b.extra['cropped']} points within {options.radius:g} m of the after cloud's footprint "
             "(check the CRSs and --radius)"
         )
     inputs = {
-        "before": _describe(before, crs_b, b.used, note_b or b.note, len(b.xyz)),
+        "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"]),
         "after": _describe(after, crs_a, a.used, note_a or a.note, len(a.xyz)),
     }
     read_s = a.extra["read_s"] + b.extra["read_s"]
@@ -133,6 +136,10 @@ def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 
 
 def _local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
+    """File CRS -> local frame; a plain subtraction when the file is already in the frame's
+    CRS in metres (the common case)."""
+    if crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0:
+        return lambda xyz: xyz - origin
     return lambda xyz: to_frame(xyz, crs, frame, path) - origin
 
 

@@ -215,15 +215,17 @@ def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
 def load(
     src: Source, to_local: Callable[[np.ndarray], np.ndarray], mode: str,
     keep: Callable[[np.ndarray], np.ndarray] | None, thinner: ColumnThinner,
-    check: Callable[[], None] | None = None,
+    check: Callable[[], None] | None = None, box: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Loaded:
     """Stream ``src``: select ground (``mode`` in auto/class/none; ``filter`` needs the whole
     cloud and is done by the caller), convert with ``to_local`` (file CRS -> local frame), keep
-    the points for which ``keep`` is true (all when None) and feed them to ``thinner``."""
+    the points for which ``keep`` is true (all when None) and feed them to ``thinner``; only
+    those within the x/y ``box`` (lo, hi; everything when None) are kept at full resolution."""
     parts = _Parts(src.count)
     points = used = 0
     use_class: bool | None = None
     reading = 0.0
+    cropped = 0
     chunks = prefetch(src.chunks())
     while True:
         t0 = time.perf_counter()
@@ -238,14 +240,18 @@ def load(
         if use_class is None:
             use_class = ground_mode(src, cls, mode)
         points += len(xyz)
-        if use_class and cls is not None:
-            xyz = xyz[cls == GROUND]
-        used += len(xyz)
         local = to_local(xyz)
+        mask = cls == GROUND if use_class and cls is not None else None
+        used += len(xyz) if mask is None else int(mask.sum())
         if keep is not None:
-            local = local[keep(local)]
+            mask = keep(local) if mask is None else mask & keep(local)
+        if mask is not None:  # one compress for ground and crop
+            local = local[mask]
         thinner.add(local)
+        cropped += len(local)
+        if box is not None:
+            local = local[((local[:, :2] >= box[0]) & (local[:, :2] <= box[1])).all(axis=1)]
         parts.append(local)
     kept = parts.result()
     note = "class 2 (ground)" if use_class else "all points"
-    return Loaded(kept, thinner.result(), points, used, note, {"read_s": reading})
+    return Loaded(kept, thinner.result(), points, used, note, {"read_s": reading, "cropped": cropped})
