@@ -9,8 +9,7 @@ sparse linear system over the target cells and the 2-cell ring around them:
 * biharmonic (least squared second differences; in the interior the same system as the least
   squared Laplacian of MATLAB inpaint_nans / skimage inpaint_biharmonic): exact for planes and
   quadratics, carries slopes into the hole; on a hole over a cone's foot it leaves 0.43x the
-  harmonic overestimate. It also carries noise further, so scattered single weak cells of a noisy
-  difference raster are better refilled harmonically (the default of ``refill_sparse``).
+  harmonic overestimate. It also carries noise further than the harmonic fill.
 
 ``refill_epoch`` refills one epoch's DEM (its own weak cells and enclosed holes) before the
 difference is taken, so the other epoch's measured heights are kept.
@@ -32,19 +31,6 @@ _TIKHONOV = 1e-10  # biharmonic normal matrix + eps I: factorisable even where t
 _REFINE_MAX = 30  # iterative-refinement steps removing eps where the system is well posed
 _BAND_EDGES = np.unique(np.ceil(8 * 1.25 ** np.arange(16)).astype(int))  # banded Cholesky up to ~230
 _BIG_GROUP = 200_000  # coupled biharmonic unknowns beyond which a sub-system is filled harmonically
-
-
-def sparse_cells(
-    counts_before: np.ndarray, counts_after: np.ndarray, ratio: float = 0.5
-) -> np.ndarray:
-    """Cells with data in both epochs where either count is below ``ratio`` x that epoch's
-    median count (median over its cells with data)."""
-    both = (counts_before > 0) & (counts_after > 0)
-    if ratio <= 0 or not both.any():
-        return np.zeros(both.shape, bool)
-    med_b = np.median(counts_before[counts_before > 0])
-    med_a = np.median(counts_after[counts_after > 0])
-    return both & ((counts_before < ratio * med_b) | (counts_after < ratio * med_a))
 
 
 def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
@@ -175,33 +161,6 @@ def biharmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
         sub = np.zeros(todo.shape, bool)
         sub.ravel()[flat[bad]] = True
         out[sub] = harmonic_fill(np.where(targets & ~sub, np.nan, values), sub)[sub]
-    return out
-
-
-def kink_fill(values: np.ndarray, targets: np.ndarray, iterations: int = 8, eps: float = 1e-3) -> np.ndarray:
-    """Like :func:`biharmonic_fill` but minimising the sum of ABSOLUTE second differences
-    (second-order total variation, by iteratively reweighted least squares from the biharmonic
-    solution): it prefers piecewise-planar fills, so two slopes meeting inside a hole (a pile's
-    foot, a pit's rim) meet in a crease instead of a smooth overshooting bump."""
-    known = np.isfinite(values) & ~targets
-    out = biharmonic_fill(values, targets)
-    todo = _reachable(targets, known) & np.isfinite(out)
-    flat = np.flatnonzero(todo)
-    if not flat.size:
-        return out
-    mat, rhs, k_rows, k_vals = _second_difference_rows(values, known | todo, todo, flat)
-    x = out.ravel()[flat]
-    for _ in range(iterations):
-        w = 1.0 / np.sqrt(np.maximum(np.abs(mat @ x - rhs), eps))
-        wm = sparse.diags(w) @ mat
-        x_new, bad = _least_squares(wm.tocsr(), w * rhs, k_rows, k_vals)
-        if bad.any():
-            break
-        step = np.abs(x_new - x).max()
-        x = x_new
-        if step < 1e-4:
-            break
-    out.ravel()[flat] = x
     return out
 
 
@@ -349,7 +308,6 @@ def _group_range(groups: np.ndarray, vals: np.ndarray, n: int) -> tuple[np.ndarr
 _FILLERS: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
     "harmonic": harmonic_fill,
     "biharmonic": biharmonic_fill,
-    "kink": kink_fill,
 }
 
 
@@ -361,35 +319,6 @@ def _filler(method: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
 
 
 # --------------------------------------------------------------------------- refill entry points
-
-
-def fill_holes(
-    diff: np.ndarray, max_cells: int | None, method: str = "harmonic"
-) -> tuple[np.ndarray, np.ndarray]:
-    """Fill empty (NaN) holes of at most ``max_cells`` cells enclosed by valid cells.
-    Returns (filled diff, mask of filled cells)."""
-    holes = enclosed_holes(np.isfinite(diff), max_cells)
-    filled = _filler(method)(diff, holes)
-    return filled, holes & np.isfinite(filled)
-
-
-def refill_sparse(
-    diff: np.ndarray,
-    counts_before: np.ndarray,
-    counts_after: np.ndarray,
-    ratio: float = 0.5,
-    max_hole_cells: int | None = None,
-    method: str = "harmonic",
-) -> tuple[np.ndarray, np.ndarray]:
-    """Drop cells whose point count in either epoch is below ``ratio`` x its median count and
-    refill the difference there from reliable neighbours; with ``max_hole_cells`` also fill
-    enclosed empty holes up to that size. Returns (filled diff, mask of refilled cells); cells
-    that cannot be refilled (no reliable neighbour) become NaN."""
-    weak = sparse_cells(counts_before, counts_after, ratio) & np.isfinite(diff)
-    holes = enclosed_holes(np.isfinite(diff), max_hole_cells)
-    targets = weak | holes
-    filled = _filler(method)(diff, targets)
-    return filled, targets & np.isfinite(filled)
 
 
 def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0) -> np.ndarray:

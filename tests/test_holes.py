@@ -11,10 +11,8 @@ from soilvolume import holes
 from soilvolume.holes import (
     biharmonic_fill,
     enclosed_holes,
-    fill_holes,
     harmonic_fill,
     refill_epoch,
-    refill_sparse,
     summary,
 )
 
@@ -37,49 +35,49 @@ def test_harmonic_fill_is_exact_on_a_plane():
     assert np.allclose(out, plane, atol=1e-9)
 
 
-def test_refill_sparse_recovers_pile_volume():
+def test_refill_epoch_recovers_pile_volume():
+    """Cells of one epoch holding a single stray point (an outlier becomes the whole cell height)
+    are refilled from that epoch's neighbours; the other epoch's heights are kept."""
     rng = np.random.default_rng(1)
     truth = pile()
     true_net = truth.sum() * CELL**2
-    diff = truth + rng.normal(0, 0.01, truth.shape)
-    cb = rng.poisson(12, truth.shape)
-    ca = rng.poisson(20, truth.shape)
+    h_after = 50.0 + truth + rng.normal(0, 0.01, truth.shape)
+    counts = rng.poisson(20, truth.shape) + 3
     sparse = rng.random(truth.shape) < 0.04
-    ca[sparse] = 1  # one stray point: an outlier becomes the whole cell height
-    diff[sparse] += rng.choice([2.5, -1.5], sparse.sum())
-    raw = np.nansum(diff) * CELL**2
-    filled, mask = refill_sparse(diff, cb, ca, ratio=0.5)
-    net = np.nansum(filled) * CELL**2
+    counts[sparse] = 1
+    h_after[sparse] += rng.choice([2.5, -1.5], sparse.sum())
+    raw = np.nansum(h_after - 50.0) * CELL**2
+    filled, mask = refill_epoch(h_after, counts, 0.1, min_points=3)
+    net = np.nansum(filled - 50.0) * CELL**2
     assert abs(raw - true_net) / true_net > 0.1
     assert abs(net - true_net) / true_net < 0.01
-    assert mask[sparse].all()  # plus a few genuinely thin cells of the Poisson counts
-    assert summary(filled, mask, CELL**2)["filled_cells"] == mask.sum()
+    assert np.array_equal(mask, sparse)
+    assert summary(filled - 50.0, mask, CELL**2)["filled_cells"] == mask.sum()
 
 
-def test_refill_only_inside_common_footprint_and_bounded_holes():
+def test_refill_only_inside_footprint_and_bounded_holes():
     truth = pile(100, radius=8.0)
-    diff = truth.copy()
-    diff[:, :10] = np.nan  # outside the after footprint
-    diff[40:44, 40:44] = np.nan  # a 16-cell occlusion hole on the pile
-    diff[70:80, 70:80] = np.nan  # a 100-cell hole
-    counts = np.where(np.isfinite(diff), 10, 0)
-    filled, mask = refill_sparse(diff, counts, counts, max_hole_cells=20)
+    h = truth.copy()
+    h[:, :10] = np.nan  # outside this epoch's footprint
+    h[40:44, 40:44] = np.nan  # a 16-cell occlusion hole on the pile
+    h[70:80, 70:80] = np.nan  # a 100-cell hole
+    counts = np.where(np.isfinite(h), 10, 0)
+    filled, mask = refill_epoch(h, counts, 0.1, max_hole_cells=20)
     assert mask.sum() == 16
     assert np.isnan(filled[:, :10]).all() and np.isnan(filled[70:80, 70:80]).all()
-    assert np.abs(filled[40:44, 40:44] - truth[40:44, 40:44]).max() < 0.1
-    f2, m2 = fill_holes(diff, 200)
+    assert np.abs(filled[40:44, 40:44] - truth[40:44, 40:44]).max() < 0.01
+    f2, m2 = refill_epoch(h, counts, 0.1, max_hole_cells=200)
     assert m2.sum() == 116 and np.isnan(f2[:, :10]).all()
-    assert not enclosed_holes(np.isfinite(diff), None).any()
+    assert not enclosed_holes(np.isfinite(h), None).any()
 
 
 def test_refill_is_fast_on_a_large_grid():
     rng = np.random.default_rng(2)
-    diff = rng.normal(0, 0.02, (1000, 1000))
-    cb = rng.poisson(10, diff.shape)
-    ca = rng.poisson(10, diff.shape)
-    ca[rng.random(diff.shape) < 0.05] = 1
+    h = rng.normal(0, 0.02, (1000, 1000))
+    counts = rng.poisson(10, h.shape) + 3
+    counts[rng.random(h.shape) < 0.05] = 1
     t0 = time.perf_counter()
-    filled, mask = refill_sparse(diff, cb, ca)
+    filled, mask = refill_epoch(h, counts, 0.1, min_points=3)
     assert time.perf_counter() - t0 < 5.0
     assert np.isfinite(filled).all() and mask.mean() > 0.04
 
@@ -189,15 +187,14 @@ def test_refill_epoch_refills_sparse_cells_and_bounded_enclosed_holes():
         refill_epoch(h, counts, method="kriging")
 
 
-def test_difference_refills_take_a_method():
+def test_refill_epoch_takes_a_method():
     truth = pile(100, radius=8.0)
-    diff = truth.copy()
-    diff[40:44, 40:44] = np.nan
+    h = truth.copy()
+    h[40:44, 40:44] = np.nan
+    counts = np.where(np.isfinite(h), 10, 0)
     for method, tol in (("harmonic", 0.1), ("biharmonic", 0.005)):
-        filled, mask = fill_holes(diff, 20, method=method)
+        filled, mask = refill_epoch(h, counts, 0.1, 20, method=method)
         assert mask.sum() == 16 and np.abs(filled - truth)[40:44, 40:44].max() < tol
-        f2, m2 = refill_sparse(diff, np.ones(diff.shape), np.ones(diff.shape), 0.5, 20, method=method)
-        assert np.array_equal(f2, filled, equal_nan=True) and np.array_equal(m2, mask)
 
 
 def test_biharmonic_smoke_on_a_large_grid_with_blobs():
