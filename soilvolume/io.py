@@ -7,7 +7,7 @@ Readers return absolute float64 coordinates in the file's own CRS and units; CRS
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -145,11 +145,11 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
 
 
 def write_las_chunked(
-    path: str | os.PathLike, xyz_local: np.ndarray, origin: np.ndarray, crs_wkt: str | None,
-    transform: np.ndarray | None = None, scale: float = 0.001, chunk: int = 2_000_000,
+    path: str | os.PathLike, chunks: Iterable[tuple[np.ndarray, np.ndarray | None]], origin: np.ndarray,
+    crs_wkt: str | None, transform: np.ndarray | None = None, scale: float = 0.001,
 ) -> None:
-    """Write local points (optionally through a 4x4 rigid ``transform``) as absolute LAS 1.4/LAZ,
-    chunk by chunk (memory bounded by the chunk, not the cloud), atomically."""
+    """Write (local xyz, classification or None) chunks, optionally through a 4x4 rigid
+    ``transform``, as absolute LAS 1.4/LAZ (memory bounded by a chunk), atomically."""
     import laspy
     import pyproj
 
@@ -161,12 +161,14 @@ def write_las_chunked(
         header.add_crs(pyproj.CRS.from_wkt(crs_wkt))
     with atomic_path(path) as tmp:
         with laspy.open(tmp, mode="w", header=header, do_compress=Path(path).suffix.lower() == ".laz") as w:
-            for i in range(0, len(xyz_local), chunk):
-                part = np.asarray(xyz_local[i : i + chunk], dtype=np.float64)
+            for xyz, cls in chunks:
+                part = np.asarray(xyz, dtype=np.float64)
                 if transform is not None:
                     part = part @ transform[:3, :3].T + transform[:3, 3]
                 rec = laspy.ScaleAwarePointRecord.zeros(len(part), header=header)
                 rec.x, rec.y, rec.z = part[:, 0] + origin[0], part[:, 1] + origin[1], part[:, 2] + origin[2]
+                if cls is not None:
+                    rec.classification = cls
                 w.write_points(rec)
 
 

@@ -4,6 +4,7 @@ registration on the way."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +33,7 @@ class Prepared:
     before_thin: np.ndarray
     after_thin: np.ndarray
     voxel: float
+    after_chunks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray | None]]]  # all after points, local
     read_s: float = 0.0  # of the streaming time, seconds spent reading and decoding chunks
 
 
@@ -101,8 +103,9 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
+    original_after, to_a = after, _local(crs_a, frame, origin, after.path)
     after, mode_a, note_a = _filtered(after, crs_a, options)
-    a = load(after, _local(crs_a, frame, origin, after.path), mode_a, None,
+    a = load(after, to_a, mode_a, None,
              ColumnThinner(lo - origin - pad, hi - origin + pad, voxel), check)
     if len(a.thin) < 3:
         raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
@@ -127,8 +130,16 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     wkt = frame.wkt
     return Prepared(
         Cloud(b.xyz, origin, wkt, before.path), Cloud(a.xyz, origin, wkt, after.path),
-        frame, origin, inputs, b.thin, a.thin, voxel, read_s,
+        frame, origin, inputs, b.thin, a.thin, voxel, _all_points(original_after, to_a), read_s,
     )
+
+
+def _all_points(src: Source, to_local):
+    """Every point of ``src`` (all classes), chunk by chunk in the local frame, with its class."""
+    def chunks():
+        for xyz, cls in src.chunks():
+            yield to_local(xyz), cls
+    return chunks
 
 
 def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

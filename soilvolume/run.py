@@ -136,10 +136,11 @@ def _prepare(before, after, options: Options, hooks: Hooks, before_pipeline, aft
 
 
 def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, reg, options: Options):
-    """Start writing after_registered.laz in the background (None when not asked for)."""
+    """Start writing after_registered.laz (every after point, all classes, moved by the
+    registration) in the background (None when not asked for)."""
     if not options.keep_registered_cloud:
         return None
-    return pool.submit(write_las_chunked, out.path("after_registered.laz"), prep.after.xyz, prep.origin,
+    return pool.submit(write_las_chunked, out.path("after_registered.laz"), prep.after_chunks(), prep.origin,
                        prep.frame.wkt, reg.transform)
 
 
@@ -336,7 +337,7 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
     reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
                    dense=(prep.after.xyz, prep.before.xyz))
     hooks.step(90, "writing the registered cloud")
-    write_las_chunked(out_cloud, prep.after.xyz, prep.origin, prep.frame.wkt, reg.transform)
+    write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
     hooks.step(100, "done")
     from .report import _clean
 

@@ -157,3 +157,23 @@ def test_coarse_auto_runs_fpfh_when_the_gps_pose_fits_poorly(misaligned_pair, tm
     assert coarse["method"] == "fpfh-ransac" and "FPFH+RANSAC moved" in coarse["note"]
     rot, disp = transform_error(r, truth)
     assert rot < 0.05 and disp < 0.05, (rot, disp)
+
+
+def test_registered_cloud_keeps_every_point_and_class(tmp_path):
+    """Registration uses the ground (class 2) points, but the registered cloud is the whole after
+    cloud, every class kept, moved by the transform."""
+    import laspy
+
+    from soilvolume.api import register
+
+    before, after, truth = write_scene(tmp_path / "data", 4, vegetation=True, objects=True)
+    res = register(before, after, tmp_path / "reg.laz", Options())
+    orig, moved = laspy.read(after), laspy.read(tmp_path / "reg.laz")
+    assert len(moved.points) == len(orig.points)
+    assert np.array_equal(np.asarray(moved.classification), np.asarray(orig.classification))
+    assert (np.asarray(orig.classification) != 2).any()
+    t = np.array(res["transform"])
+    src = np.c_[orig.x, orig.y, orig.z][:500]
+    o = src.mean(axis=0)
+    want = (src - o) @ t[:3, :3].T + (t[:3, 3] + o @ t[:3, :3].T - o)
+    assert np.abs(np.c_[moved.x, moved.y, moved.z][:500] - o - want).max() < 0.003
