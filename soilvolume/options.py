@@ -42,7 +42,7 @@ class Options:
     min_count_ratio: float = _opt(0.1, "a cell of one epoch with fewer points than this fraction of its median count (and always one with fewer than 3) is unreliable: its height is re-filled from neighbours (0 = off)")
     fill_holes: float = _opt(100.0, "fill enclosed holes (empty cells of one epoch, e.g. occlusions) up to this area (m2) by interpolating that epoch's heights; larger holes stay empty and are reported (0 = off)")
     fill_method: str = _opt("biharmonic", "interpolation of refilled cells: biharmonic (smooth, keeps slopes across the hole), harmonic (Laplace, never overshoots its border values)", ("biharmonic", "harmonic"))
-    ground: str = _opt("auto", "ground points: auto (class 2 when the file has it, else all), class (class 2 only), filter (SMRF ground filter), none", ("auto", "class", "filter", "none"))
+    ground: str = _opt("auto", "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), none", ("auto", "class", "filter", "none"))
     ground_window: float = _opt(6.0, "--ground filter: largest object (m) the SMRF filter removes (vehicles, bushes); keep it below the width of the piles you measure (PDAL's default 18 m removes piles)")
     ground_slope: float = _opt(0.6, "--ground filter: steepest ground slope (rise/run) SMRF keeps as terrain (pile flanks; PDAL's default 0.15)")
     lod_confidence: float = _opt(0.95, "confidence of the level of detection and of the volume uncertainty")
