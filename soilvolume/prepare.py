@@ -134,6 +134,36 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     )
 
 
+@dataclass
+class Single:
+    """One cloud streamed into its working frame: float32 local points and a thinned subset."""
+
+    xyz: np.ndarray
+    thin: np.ndarray
+    frame: WorkFrame
+    origin: np.ndarray
+    note: str
+
+
+def prepare_single(src: Source, override: str | None, options: Options, check=None) -> Single:
+    """Stream one cloud (ground selection as ``options.ground``) into its own working frame, with
+    the local origin at the floor of its bounds."""
+    crs = resolve_crs(src, override, "--crs")
+    hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
+    frame = work_frame(crs, hint)
+    corners = to_frame(_box_corners(src.lo, src.hi), crs, frame, src.path)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    origin = np.floor(lo)
+    pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
+    to_local = _local(crs, frame, origin, src.path)
+    src, mode, note = _filtered(src, crs, options)
+    one = load(src, to_local, mode, None,
+               ColumnThinner(lo - origin - pad, hi - origin + pad, thin_voxel(float(np.prod(hi[:2] - lo[:2])))), check)
+    if len(one.xyz) == 0:
+        raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note or one.note})")
+    return Single(one.xyz, one.thin, frame, origin, note or one.note)
+
+
 def _all_points(src: Source, to_local):
     """Every point of ``src`` (all classes), chunk by chunk in the local frame, with its class."""
     def chunks():

@@ -14,7 +14,7 @@ from . import grid as gridmod
 from . import holes, planes
 from .api import Hooks, Result
 from .crop import footprint, polygon_area
-from .io import read_points, write_las_chunked
+from .io import write_las_chunked
 from .options import Options
 from .outputs import OutputDir
 from .prepare import Prepared, prepare
@@ -297,34 +297,29 @@ def _html(out: OutputDir, report: dict, vols: dict, grid: GridSpec) -> None:
 
 def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bounds, hooks: Hooks) -> dict:
     """See :func:`soilvolume.api.cloud_to_dem`."""
-    from .crs import to_frame, work_frame
-    from .prepare import resolve_crs, select_ground
+    from .prepare import prepare_single
+    from .stream import open_source
 
+    if out_tif.resolve() == cloud.resolve():
+        raise SoilVolumeError(f"{out_tif}: refusing to overwrite the input")
     hooks.step(5, f"reading {cloud.name}")
-    raw = read_points(cloud)
-    src = resolve_crs(raw, crs, "a CRS")
-    frame = work_frame(src, None if not src.is_geographic else (0, 0))
-    keep, note = select_ground(raw, options.ground, src, options.ground_window, options.ground_slope)
-    xyz = to_frame(raw.xyz[keep], src, frame, raw.path)
-    origin = np.floor(xyz.min(axis=0))
-    xyz -= origin
+    one = prepare_single(open_source(cloud), crs, options, check=lambda: hooks.step(5, "reading"))
+    xyz, origin, frame = one.xyz, one.origin, one.frame
     if bounds is not None:
         u = frame.xy_unit
         lo = np.array([bounds[0] * u, bounds[1] * u, 0]) - origin
         hi = np.array([bounds[2] * u, bounds[3] * u, 0]) - origin
     else:
-        lo, hi = xyz.min(axis=0), xyz.max(axis=0)
-    cell = options.cell or gridmod.choose_cell(len(xyz), polygon_area(footprint(xyz[:, :2])))
+        lo, hi = xyz.min(axis=0).astype(float), xyz.max(axis=0).astype(float)
+    cell = options.cell or gridmod.choose_cell(len(xyz), polygon_area(footprint(one.thin[:, :2])))
     grid = gridmod.make_grid(lo, hi, cell, origin, frame.wkt, frame.xy_unit)
     hooks.step(40, f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
     h, n = gridmod.average_height(xyz, grid, options.statistic)
-    if out_tif.resolve() == cloud.resolve():
-        raise SoilVolumeError(f"{out_tif}: refusing to overwrite the input")
     gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
     hooks.step(100, "done")
     return {"cell_m": cell, "rows": grid.rows, "cols": grid.cols, "crs": frame.crs.name,
             "transform": list(grid.transform)[:6], "points": int(len(xyz)),
-            "valid_cells": int(np.isfinite(h).sum()), "selection": note}
+            "valid_cells": int(np.isfinite(h).sum()), "selection": one.note}
 
 
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:

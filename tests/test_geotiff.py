@@ -67,3 +67,24 @@ def test_robust_mean_ignores_an_outlier():
     assert n[0, 0] == 50
     assert abs(mean[0, 0] - 10) > 0.25
     assert robust[0, 0] == pytest.approx(xyz[1:, 2].mean(), abs=0.01)
+
+
+def test_dem_of_a_geographic_cloud_is_in_its_utm_zone(tmp_path):
+    """Lon/lat input: the DEM is written in the UTM zone of the cloud's position, in metres."""
+    import pyproj
+
+    from soilvolume.io import write_las
+
+    rng = np.random.default_rng(3)
+    n = 20_000
+    lon = 139.70 + rng.uniform(0, 0.0005, n)  # ~45 m x 55 m in Tokyo: UTM zone 54N
+    lat = 35.68 + rng.uniform(0, 0.0005, n)
+    z = 40.0 + rng.normal(0, 0.01, n)
+    write_las(tmp_path / "geo.laz", np.c_[lon, lat, z], pyproj.CRS("EPSG:4326").to_wkt(), scale=1e-7)
+    info = cloud_to_dem(tmp_path / "geo.laz", tmp_path / "geo.tif", Options(cell=1.0))
+    assert "UTM zone 54N" in info["crs"]
+    with rasterio.open(tmp_path / "geo.tif") as ds:
+        assert ds.crs.to_epsg() == 32654 and ds.res == (1.0, 1.0)
+        assert 40 < ds.width < 50 and 50 < ds.height < 60
+        h = ds.read(1, masked=True)
+        assert abs(float(h.mean()) - 40.0) < 0.01
