@@ -33,12 +33,13 @@ class Source:
     has_class: bool
     raw: RawPoints | None = None  # whole cloud already in memory (non-LAS, pipeline output)
 
-    def chunks(self, size: int = CHUNK) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
-        """(xyz float64 absolute in the file CRS, classification or None) per chunk."""
+    def chunks(self, size: int | None = None) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+        """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
+        points (default ``CHUNK``)."""
         if self.raw is not None:
             yield self.raw.xyz, self.raw.classification
             return
-        yield from _las_chunks(Path(self.path), self.count, size)
+        yield from _las_chunks(Path(self.path), self.count, size or CHUNK)
 
     def materialize(self) -> RawPoints:
         """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""

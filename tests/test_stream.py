@@ -1,0 +1,88 @@
+"""Streaming input: chunked reading equals reading whole, column thinning, the crop mask, and
+errors raised in the read-ahead thread reaching the caller."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyproj
+import pytest
+
+from soilvolume import stream
+from soilvolume.crop import PolygonMask, footprint, inside
+from soilvolume.io import RawPoints, write_las
+from soilvolume.stream import ColumnThinner, from_raw, load, open_source, prefetch
+from soilvolume.types import SoilVolumeError
+
+
+@pytest.fixture
+def cloud(tmp_path):
+    rng = np.random.default_rng(0)
+    n = 25_000
+    xyz = np.c_[500_000 + rng.uniform(0, 60, n), 3_900_000 + rng.uniform(0, 40, n), 50 + rng.normal(0, 0.2, n)]
+    cls = np.where(rng.random(n) < 0.8, 2, 5).astype(np.uint8)
+    path = tmp_path / "c.las"
+    write_las(path, xyz, pyproj.CRS("EPSG:32654").to_wkt(), classification=cls)
+    return path, xyz, cls
+
+
+def _load(src, origin, keep=None, box=None, mode="auto"):
+    lo, hi = np.array([-1.0, -1.0]), np.array([70.0, 50.0])
+    return load(src, lambda x: x - origin, mode, keep, ColumnThinner(lo, hi, 0.5), box=box)
+
+
+def test_chunked_load_equals_whole_load(cloud, monkeypatch):
+    path, xyz, cls = cloud
+    origin = np.array([500_000.0, 3_900_000.0, 50.0])
+    monkeypatch.setattr(stream, "CHUNK", 1_000)  # 25 chunks
+    las = open_source(path)
+    assert len(list(las.chunks())) == 25
+    whole = from_raw(RawPoints(np.c_[xyz].round(3), cls, las.crs_wkt, str(path)))
+    keep = PolygonMask(np.array([[5.0, 5.0], [55.0, 5.0], [30.0, 35.0]]))
+    box = (np.array([0.0, 0.0]), np.array([40.0, 30.0]))
+    a, b = _load(las, origin, keep, box), _load(whole, origin, keep, box)
+    assert a.note == b.note == "class 2 (ground)"
+    assert a.used == b.used == int((cls == 2).sum())
+    assert a.extra["cropped"] == b.extra["cropped"] > 0
+    assert a.xyz.dtype == np.float32 and np.allclose(a.xyz, b.xyz, atol=1e-4)
+    assert np.allclose(a.thin, b.thin, atol=1e-9)
+    assert (a.xyz[:, :2] <= box[1] + 1e-4).all()
+
+
+def test_column_thinner_gives_column_means():
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(0, 10, (5_000, 3))
+    t = ColumnThinner(np.zeros(2), np.full(2, 10.0), 2.5)
+    t.add(pts[:2_000])
+    t.add(pts[2_000:])
+    got = t.result()
+    ids = (pts[:, 1] // 2.5).astype(int) * t.shape[1] + (pts[:, 0] // 2.5).astype(int)
+    want = np.array([pts[ids == k].mean(axis=0) for k in np.unique(ids)])
+    assert np.allclose(got, want)
+
+
+def test_polygon_mask_matches_exact_test_away_from_edges():
+    rng = np.random.default_rng(2)
+    poly = footprint(rng.uniform(0, 50, (200, 2)), radius=5.0)
+    pts = rng.uniform(-10, 60, (50_000, 2))
+    fast, exact = PolygonMask(poly, resolution=0.5)(pts), inside(pts, poly)
+    assert (fast != exact).mean() < 0.02  # only cells on the boundary can differ
+
+
+def test_read_ahead_errors_reach_the_caller():
+    def chunks():
+        yield 1
+        raise SoilVolumeError("broken chunk")
+
+    it = prefetch(chunks())
+    assert next(it) == 1
+    with pytest.raises(SoilVolumeError, match="broken chunk"):
+        next(it)
+
+
+def test_truncated_las_is_reported(cloud, tmp_path):
+    path, _, _ = cloud
+    cut = tmp_path / "cut.las"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    src = open_source(cut)
+    with pytest.raises(SoilVolumeError, match="cut.las"):
+        _load(src, np.zeros(3))
