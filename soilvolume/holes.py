@@ -11,8 +11,9 @@ sparse linear system over the target cells and the 2-cell ring around them:
   quadratics, carries slopes into the hole; on a hole over a cone's foot it leaves 0.43x the
   harmonic overestimate. It also carries noise further than the harmonic fill.
 
-``refill_epoch`` refills one epoch's DEM (its own weak cells and enclosed holes) before the
-difference is taken, so the other epoch's measured heights are kept.
+``refill_epoch`` refills one epoch's DEM (its own weak cells, optionally enclosed holes) before
+the difference is taken, so the other epoch's measured heights are kept; the engine fills the
+enclosed holes of the difference itself with ``fill`` (smooth on unchanged ground).
 """
 
 from __future__ import annotations
@@ -319,6 +320,11 @@ def _filler(method: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
 
 
 # --------------------------------------------------------------------------- refill entry points
+
+
+def fill(values: np.ndarray, targets: np.ndarray, method: str = "biharmonic") -> np.ndarray:
+    """``values`` with the ``targets`` cells interpolated by ``method`` (no-op without targets)."""
+    return _filler(method)(values, targets) if targets.any() else values
 
 
 def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0) -> np.ndarray:

@@ -40,7 +40,7 @@ class Options:
     cell: float | None = _opt(None, "grid cell size (m); default from the before cloud's density (>= 8 points per cell, >= 0.5 m)")
     statistic: str = _opt("robust-mean", "per-cell height: robust-mean (mean after rejecting points beyond 3 MAD of the cell median), mean (the paper), median", ("robust-mean", "mean", "median"))
     min_count_ratio: float = _opt(0.1, "a cell of one epoch with fewer points than this fraction of its median count (and always one with fewer than 3) is unreliable: its height is re-filled from neighbours (0 = off)")
-    fill_holes: float = _opt(100.0, "fill enclosed holes (empty cells of one epoch, e.g. occlusions) up to this area (m2) by interpolating that epoch's heights; larger holes stay empty and are reported (0 = off)")
+    fill_holes: float = _opt(100.0, "fill enclosed holes (cells empty in either epoch, e.g. occlusions) up to this area (m2) by interpolating the height difference around them; larger holes stay empty and are reported (0 = off)")
     fill_method: str = _opt("biharmonic", "interpolation of refilled cells: biharmonic (smooth, keeps slopes across the hole), harmonic (Laplace, never overshoots its border values)", ("biharmonic", "harmonic"))
     ground: str = _opt("auto", "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), none", ("auto", "class", "filter", "none"))
     ground_window: float = _opt(6.0, "--ground filter: largest object (m) the SMRF filter removes (vehicles, bushes); keep it below the width of the piles you measure (PDAL's default 18 m removes piles)")

@@ -179,22 +179,24 @@ MIN_POINTS = 3  # a robust cell height needs at least this many points
 
 
 def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
-    """Raw difference; each epoch's weak cells and enclosed holes refilled from its own
-    neighbours -> difference -> correction -> budgets, uncertainty, zones."""
+    """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
+    of the difference (empty in either epoch) filled from the surrounding difference, which is
+    smooth on unchanged ground whatever the terrain -> correction -> budgets, uncertainty, zones."""
     from .uncertainty import thresholded_volumes, volume_uncertainty
 
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
-    fill = dict(ratio=options.min_count_ratio, max_hole_cells=max_cells, method=options.fill_method,
-                min_points=MIN_POINTS)
-    f_b, m_b = holes.refill_epoch(h_b, n_b, **fill)
-    f_a, m_a = holes.refill_epoch(h_a, n_a, **fill)
+    weak = dict(ratio=options.min_count_ratio, method=options.fill_method, min_points=MIN_POINTS)
+    f_b, m_b = holes.refill_epoch(h_b, n_b, **weak)
+    f_a, m_a = holes.refill_epoch(h_a, n_a, **weak)
     filled = difference(f_a, f_b)
-    filled_mask = (m_a | m_b) & np.isfinite(filled)
+    hole = holes.enclosed_holes(np.isfinite(filled), max_cells)
+    filled = holes.fill(filled, hole, options.fill_method)
+    filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
     offset, params, stable, change = _correction(filled, d_i, grid, options)
     diff = filled - offset
     area = grid.cell_area
-    fill_sigma = _fill_sigma(h_b, h_a, m_b, m_a, n_b, n_a, stable, options)
+    fill_sigma = _fill_sigma(diff, filled_mask, stable, options)
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
                              n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma)
     vols = {
@@ -215,16 +217,13 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
     return vols
 
 
-def _fill_sigma(h_b, h_a, m_b, m_a, n_b, n_a, stable, options: Options) -> np.ndarray:
-    """Per-cell one-sigma error (m) of refilled cells, from refilling known stable ground of the
-    same epoch with holes of the typical size (0 where nothing was refilled)."""
-    out = np.zeros(h_b.shape)
-    for h, m, n in ((h_b, m_b, n_b), (h_a, m_a, n_a)):
-        if m.any():
-            s = holes.fill_error(h, stable & (n > 0), options.fill_method, holes.typical_radius(m),
-                                 seed=options.seed)
-            out = np.hypot(out, np.where(m, s if np.isfinite(s) else 0.0, 0.0))
-    return out
+def _fill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
+    """Per-cell one-sigma error (m) of refilled cells, measured by refilling known stable cells
+    of the difference with holes of the typical size (0 where nothing was refilled)."""
+    if not filled_mask.any():
+        return np.zeros(diff.shape)
+    s = holes.fill_error(diff, stable, options.fill_method, holes.typical_radius(filled_mask), seed=options.seed)
+    return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
 
 
 def _correction(diff, d_i, grid: GridSpec, options: Options):
