@@ -12,10 +12,11 @@
 from __future__ import annotations
 
 import math
+from statistics import NormalDist
 from typing import Any
 
 import numpy as np
-from scipy import ndimage, optimize, stats
+from scipy import ndimage, optimize
 
 from .correction import nmad
 from .types import GridSpec
@@ -25,7 +26,7 @@ INTERP_FRACTION = 0.15
 
 def z_value(confidence: float = 0.95) -> float:
     """Two-sided normal quantile (1.96 for 95 %)."""
-    return float(stats.norm.ppf(0.5 + confidence / 2))
+    return NormalDist().inv_cdf(0.5 + confidence / 2)
 
 
 def level_of_detection(
