@@ -31,15 +31,11 @@ def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.nda
 
 
 def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Boolean mask of points inside a convex polygon (vertices (K, 2), either orientation),
-    as the footprints here are: on the inner side of every edge."""
-    if _signed_area(polygon) < 0:
-        polygon = polygon[::-1]
-    ok = np.ones(len(xy), bool)
-    x, y = xy[:, 0], xy[:, 1]
-    for (x0, y0), (x1, y1) in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
-        ok &= (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0) >= 0
-    return ok
+    """Boolean mask of points inside a polygon (vertices (K, 2)), boundary included: the same
+    test the embedded filters.crop applies to this polygon."""
+    from .stages.geometry import covers
+
+    return covers([polygon], xy[:, 0], xy[:, 1])
 
 
 class PolygonMask:
@@ -73,10 +69,6 @@ def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:
     return "POLYGON ((" + ", ".join(f"{x:.3f} {y:.3f}" for x, y in ring) + "))"
 
 
-def _signed_area(polygon: np.ndarray) -> float:
-    x, y = polygon[:, 0], polygon[:, 1]
-    return float(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-
-
 def polygon_area(polygon: np.ndarray) -> float:
-    return abs(_signed_area(polygon))
+    x, y = polygon[:, 0], polygon[:, 1]
+    return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
