@@ -88,25 +88,44 @@ def _read_las(path: Path) -> RawPoints:
             header = reader.header
             wkt = las_crs_wkt(header, path)
             n = header.point_count
-            xyz = np.empty((n, 3), dtype=np.float64)
-            dims = set(header.point_format.dimension_names)
-            cls = np.empty(n, dtype=np.uint8) if "classification" in dims else None
-            start = 0
-            for chunk in reader.chunk_iterator(2_000_000):
-                m = len(chunk)
-                xyz[start : start + m, 0] = chunk.x
-                xyz[start : start + m, 1] = chunk.y
-                xyz[start : start + m, 2] = chunk.z
-                if cls is not None:
-                    cls[start : start + m] = np.asarray(chunk.classification)
-                start += m
+            has_cls = "classification" in set(header.point_format.dimension_names)
     except SoilVolumeError:
         raise
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
-    if start != n:
-        raise SoilVolumeError(f"{path}: corrupt LAS file (header says {n} points, read {start})")
+    xyz = np.empty((n, 3))
+    cls = np.empty(n, dtype=np.uint8) if has_cls else None
+    start = 0
+    for part, part_cls in las_chunks(path, n, 2_000_000):  # raises unless exactly n points come
+        if start + len(part) > n:
+            raise SoilVolumeError(f"{path}: corrupt LAS file (more points than the header's {n})")
+        xyz[start : start + len(part)] = part
+        if cls is not None:
+            cls[start : start + len(part)] = part_cls
+        start += len(part)
     return RawPoints(xyz, cls, wkt, str(path))
+
+
+def las_chunks(path: Path, count: int, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    """(absolute xyz float64, classification or None) of a LAS/LAZ file, ``size`` points at a
+    time; a point count other than the header's ``count`` is reported as a corrupt file."""
+    import laspy
+
+    read = 0
+    try:
+        with laspy.open(path) as reader:
+            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+            for chunk in reader.chunk_iterator(size):
+                xyz = np.empty((len(chunk), 3))
+                xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
+                read += len(chunk)
+                yield xyz, (np.asarray(chunk.classification) if has_cls else None)
+    except SoilVolumeError:
+        raise
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+    if read != count:
+        raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
 
 
 def _read_o3d(path: Path) -> RawPoints:

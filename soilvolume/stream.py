@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
+from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
 from .types import SoilVolumeError
 
 CHUNK = 1_000_000
@@ -39,7 +39,7 @@ class Source:
         if self.raw is not None:
             yield self.raw.xyz, self.raw.classification
             return
-        yield from _las_chunks(Path(self.path), self.count, size or CHUNK)
+        yield from las_chunks(Path(self.path), self.count, size or CHUNK)
 
     def materialize(self) -> RawPoints:
         """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
@@ -82,26 +82,6 @@ def from_raw(raw: RawPoints) -> Source:
     validate(raw)
     return Source(raw.path, raw.crs_wkt, len(raw.xyz), raw.xyz.min(axis=0), raw.xyz.max(axis=0),
                   raw.classification is not None, raw)
-
-
-def _las_chunks(path: Path, count: int, size: int):
-    import laspy
-
-    read = 0
-    try:
-        with laspy.open(path) as reader:
-            has_cls = "classification" in set(reader.header.point_format.dimension_names)
-            for chunk in reader.chunk_iterator(size):
-                xyz = np.empty((len(chunk), 3))
-                xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
-                read += len(chunk)
-                yield xyz, (np.asarray(chunk.classification) if has_cls else None)
-    except SoilVolumeError:
-        raise
-    except Exception as exc:
-        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
-    if read != count:
-        raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
 
 
 def prefetch(chunks: Iterator, depth: int = 2) -> Iterator:
