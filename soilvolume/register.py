@@ -89,9 +89,7 @@ def _cap_voxel(xyz: np.ndarray, max_points: int) -> float:
     """The voxel size that leaves about ``max_points`` of a cloud (0 when it has fewer)."""
     if len(xyz) <= max_points:
         return 0.0
-    from .crop import polygon_area
-
-    return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max_points))
+    return spacing(xyz) * float(np.sqrt(len(xyz) / max_points))
 
 
 def spacing(xyz: np.ndarray) -> float:
@@ -138,9 +136,9 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
     return np.asarray(res.transformation)
 
 
-def _column_pcd(xyz: np.ndarray, voxel: float):
-    """Open3D cloud of the column means of ``xyz`` with surface normals."""
-    cols = surface.columns(xyz, voxel)
+def _column_pcd(xyz: np.ndarray, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
+    """Open3D cloud of the column means of ``xyz`` (within lo..hi) with surface normals."""
+    cols = surface.columns(xyz, voxel, lo, hi)
     pcd = to_pcd(cols.xyz)
     pcd.normals = _o3d().utility.Vector3dVector(surface.normals(cols))
     return pcd
@@ -182,15 +180,12 @@ def icp_levels(
 def _surface_pcd(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
     """The target's column surface with normals, over the source's box under ``t`` + margin."""
     moved = transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t)
-    lo, hi = moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin
-    cols = surface.columns(target_xyz, voxel, lo, hi)
-    if len(cols.xyz) < 3:
+    pcd = _column_pcd(target_xyz, voxel, moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin)
+    if len(pcd.points) < 3:
         raise SoilVolumeError(
             "registration failed: the fine registration drifted off the before cloud "
             "(no before points left under the after cloud); check that both clouds "
             "cover the same site and their CRSs")
-    pcd = to_pcd(cols.xyz)
-    pcd.normals = _o3d().utility.Vector3dVector(surface.normals(cols))
     return pcd
 
 
