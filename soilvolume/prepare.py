@@ -14,7 +14,7 @@ from .crop import PolygonMask, footprint
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
 from .io import RawPoints
 from .options import Options
-from .stream import ColumnThinner, Source, from_raw, load
+from .stream import ColumnThinner, Loaded, Source, from_raw, load
 from .types import Cloud, SoilVolumeError
 
 GROUND = 2
@@ -98,15 +98,11 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     crs_a = resolve_crs(after, options.after_crs, "--after-crs")
     hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None
     frame = work_frame(crs_b, hint)
-    corners = to_frame(_box_corners(after.lo, after.hi), crs_a, frame, after.path)
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    lo, hi = _frame_box(after, crs_a, frame)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
-    pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
-    after, mode_a, note_a = _filtered(after, crs_a, options)
-    a = load(after, to_a, mode_a, None,
-             ColumnThinner(lo - origin - pad, hi - origin + pad, voxel), check)
+    after, a, note_a = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check)
     if len(a.thin) < 3:
         raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
     poly = footprint(a.thin[:, :2], options.radius)
@@ -151,17 +147,29 @@ def prepare_single(src: Source, override: str | None, options: Options, check=No
     crs = resolve_crs(src, override, "--crs")
     hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
     frame = work_frame(crs, hint)
-    corners = to_frame(_box_corners(src.lo, src.hi), crs, frame, src.path)
-    lo, hi = corners.min(axis=0), corners.max(axis=0)
+    lo, hi = _frame_box(src, crs, frame)
     origin = np.floor(lo)
-    pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
+    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     to_local = _local(crs, frame, origin, src.path)
-    src, mode, note = _filtered(src, crs, options)
-    one = load(src, to_local, mode, None,
-               ColumnThinner(lo - origin - pad, hi - origin + pad, thin_voxel(float(np.prod(hi[:2] - lo[:2])))), check)
+    src, one, note = _load_whole(src, crs, to_local, lo - origin, hi - origin, voxel, options, check)
     if len(one.xyz) == 0:
         raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note or one.note})")
     return Single(one.xyz, one.thin, frame, origin, note or one.note)
+
+
+def _frame_box(src: Source, crs: pyproj.CRS, frame: WorkFrame) -> tuple[np.ndarray, np.ndarray]:
+    """The source's header bounds, in the working frame (absolute, metres)."""
+    corners = to_frame(_box_corners(src.lo, src.hi), crs, frame, src.path)
+    return corners.min(axis=0), corners.max(axis=0)
+
+
+def _load_whole(src: Source, crs: pyproj.CRS, to_local, lo: np.ndarray, hi: np.ndarray, voxel: float,
+                options: Options, check) -> tuple[Source, Loaded, str | None]:
+    """Every (ground) point of ``src`` kept, thinned over its local box lo..hi (padded: the box
+    comes from header bounds). Returns (the source streamed, what was loaded, filter note)."""
+    src, mode, note = _filtered(src, crs, options)
+    pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
+    return src, load(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check), note
 
 
 def _all_points(src: Source, to_local):
