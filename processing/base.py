@@ -12,10 +12,27 @@ ICON = Path(__file__).resolve().parent.parent / "resources" / "icon.svg"
 
 
 class SoilVolumeAlgorithm(QgsProcessingAlgorithm):
-    """Shared metadata; subclasses define name, parameters and processAlgorithm."""
+    """Shared metadata from class attributes; subclasses set them and define the parameters and
+    processAlgorithm."""
 
+    _name = ""
+    _display_name = ""
+    _help = ""
+    _tags = ""  # comma-separated
     _group = ""
     _group_id = ""
+
+    def name(self) -> str:
+        return self._name
+
+    def displayName(self) -> str:  # noqa: N802 - Qt API
+        return self.tr(self._display_name)
+
+    def shortHelpString(self) -> str:  # noqa: N802
+        return self.tr(self._help)
+
+    def tags(self) -> list[str]:
+        return self.tr(self._tags).split(",")
 
     def tr(self, text: str) -> str:
         return QCoreApplication.translate(type(self).__name__, text)

@@ -84,24 +84,15 @@ def report_file(outputs: dict[str, Any], suffix: str) -> Path | None:
 class EstimateVolumeChange(SoilVolumeAlgorithm):
     """Whole pipeline: two clouds in, DEMs, difference and volumes out."""
 
+    _name = "estimatevolumechange"
+    _display_name = "Estimate soil volume change"
+    _help = HELP
+    _tags = "volume,cut,fill,earthworks,DEM of difference,DoD,point cloud,lidar,uav,registration,icp"
     _group = "Volume change"
     _group_id = "volume"
 
-    def name(self) -> str:
-        return "estimatevolumechange"
-
-    def displayName(self) -> str:  # noqa: N802 - Qt API
-        return self.tr("Estimate soil volume change")
-
-    def shortHelpString(self) -> str:  # noqa: N802
-        return self.tr(HELP)
-
     def shortDescription(self) -> str:  # noqa: N802
         return self.tr("Cut, fill and net volume between two point cloud surveys of one site.")
-
-    def tags(self) -> list[str]:
-        return self.tr("volume,cut,fill,earthworks,DEM of difference,DoD,point cloud,lidar,"
-                       "uav,registration,icp").split(",")
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
         for p in params.cloud_params("BEFORE", "Before") + params.cloud_params("AFTER", "After"):

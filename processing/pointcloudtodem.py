@@ -35,20 +35,12 @@ its UTM zone); empty cells are nodata. It loads with a terrain colour ramp.</p>"
 class PointCloudToDem(SoilVolumeAlgorithm):
     """One cloud to an average-height GeoTIFF."""
 
+    _name = "pointcloudtodem"
+    _display_name = "Point cloud to average-height DEM"
+    _help = HELP
+    _tags = "dem,dsm,grid,rasterize,average,height,point cloud,lidar"
     _group = "Point cloud tools"
     _group_id = "pointcloud"
-
-    def name(self) -> str:
-        return "pointcloudtodem"
-
-    def displayName(self) -> str:  # noqa: N802 - Qt API
-        return self.tr("Point cloud to average-height DEM")
-
-    def shortHelpString(self) -> str:  # noqa: N802
-        return self.tr(HELP)
-
-    def tags(self) -> list[str]:
-        return self.tr("dem,dsm,grid,rasterize,average,height,point cloud,lidar").split(",")
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
         for p in params.cloud_params("INPUT", "Input"):

@@ -38,21 +38,12 @@ and the fine stage's fitness and inlier RMSE.</p>"""
 class RegisterPointClouds(SoilVolumeAlgorithm):
     """Coarse + fine registration of two clouds."""
 
+    _name = "registerpointclouds"
+    _display_name = "Register point clouds (after onto before)"
+    _help = HELP
+    _tags = "registration,icp,gicp,fpfh,ransac,align,co-registration,point cloud"
     _group = "Point cloud tools"
     _group_id = "pointcloud"
-
-    def name(self) -> str:
-        return "registerpointclouds"
-
-    def displayName(self) -> str:  # noqa: N802 - Qt API
-        return self.tr("Register point clouds (after onto before)")
-
-    def shortHelpString(self) -> str:  # noqa: N802
-        return self.tr(HELP)
-
-    def tags(self) -> list[str]:
-        return self.tr(
-            "registration,icp,gicp,fpfh,ransac,align,co-registration,point cloud").split(",")
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
         for p in params.cloud_params("BEFORE", "Before") + params.cloud_params("AFTER", "After"):

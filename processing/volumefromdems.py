@@ -73,20 +73,12 @@ def raster_file(layer: QgsRasterLayer | None, label: str) -> str:
 class VolumeFromDems(SoilVolumeAlgorithm):
     """Cut/fill/net between two rasters, in total and per polygon."""
 
+    _name = "volumefromdems"
+    _display_name = "Volume from DEM difference"
+    _help = HELP
+    _tags = "volume,cut,fill,dem of difference,dod,stockpile,zonal,raster"
     _group = "Volume change"
     _group_id = "volume"
-
-    def name(self) -> str:
-        return "volumefromdems"
-
-    def displayName(self) -> str:  # noqa: N802 - Qt API
-        return self.tr("Volume from DEM difference")
-
-    def shortHelpString(self) -> str:  # noqa: N802
-        return self.tr(HELP)
-
-    def tags(self) -> list[str]:
-        return self.tr("volume,cut,fill,dem of difference,dod,stockpile,zonal,raster").split(",")
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
         self.addParameter(QgsProcessingParameterRasterLayer("BEFORE", self.tr("Before DEM")))
