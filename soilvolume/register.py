@@ -28,6 +28,7 @@ MAX_COARSE_POINTS = 15_000
 MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
 ICP_TOL, ICP_ITER = 1e-6, 30
 COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
+STABLE_PASSES = 2  # refinements on the stable ground found at the current pose
 
 
 @dataclass
@@ -198,26 +199,44 @@ def _sampled(pcd, cap: int):
     return pcd.select_by_index(np.arange(0, n, int(np.ceil(n / cap))).tolist())
 
 
+def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The points of a cloud in the margin band of its own footprint (see
+    :func:`soilvolume.stable.margin`): surveys are flown beyond the works, so this band is the
+    part of the after survey most likely to be stable ground."""
+    from .stable import margin
+
+    cell = max(1.0, 2.0 * gap)
+    cols = surface.columns(xyz, cell)
+    valid = np.zeros(cols.shape, bool)
+    valid[cols.row, cols.col] = True
+    band = margin(valid, cell)
+    ix = np.clip(((xyz[:, 0] - cols.lo[0]) // cell).astype(np.int64), 0, cols.shape[1] - 1)
+    iy = np.clip(((xyz[:, 1] - cols.lo[1]) // cell).astype(np.int64), 0, cols.shape[0] - 1)
+    return xyz[band[iy, ix]]
+
+
 def stable_source(
     source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, cell: float = 1.0,
 ) -> np.ndarray:
     """The source with its fitted low-order deformation removed and its change areas dropped:
     what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
-    ground and the degree-2 surface come from :mod:`soilvolume.correction` on 1 m median grids."""
-    from .correction import apply
+    ground (searched from the margin of the after footprint) and the degree-2 surface come from
+    :mod:`soilvolume.stable` on median grids."""
     from .grid import average_height, make_grid
+    from .stable import find_stable
 
     src = transform_points(source_xyz, t)
+    cell = max(cell, 1.5 * spacing(target_xyz))
     grid = make_grid(src.min(axis=0), src.max(axis=0), cell, np.zeros(3), None)
     diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
     if np.isfinite(diff).sum() < 20:
         return src[:0]
-    res = apply(diff, "surface", grid)
+    stable, trend = find_stable(diff, cell)
     row, col, ok = grid.index(src)
     keep = np.zeros(len(src), bool)
-    keep[ok] = res.stable_mask[row[ok], col[ok]]
+    keep[ok] = stable[row[ok], col[ok]]
     out = src[keep]
-    out[:, 2] -= res.surface[row[keep], col[keep]]
+    out[:, 2] -= trend[row[keep], col[keep]]
     return out
 
 
@@ -306,15 +325,21 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
 
 
 def _icp_from_best(after_xyz, before_xyz, starts, method: str, check, gap: float) -> tuple[np.ndarray, str]:
+    """ICP from the best start on the margin of the after survey, then refined twice on the
+    stable ground found at the pose reached (works inside the survey never pull the pose)."""
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
+    ring = margin_points(after_xyz, gap)
+    src = ring if len(ring) >= max(500, 0.05 * len(after_xyz)) else after_xyz
     scored = []
     for init, label in starts:
-        t, fit, rmse = icp_levels(after_xyz, before_xyz, init, head, method, check, scores=True, gap=gap)
+        t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, scores=True, gap=gap)
         scored.append((-fit, rmse, label, t))
     _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
-    t = icp_levels(after_xyz, before_xyz, t, tail, method, check, gap=gap)
-    src_stable = stable_source(after_xyz, before_xyz, t)
-    if len(src_stable) > 100:
+    t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap)
+    for _ in range(STABLE_PASSES):
+        src_stable = stable_source(after_xyz, before_xyz, t)
+        if len(src_stable) <= 100:
+            break
         # src_stable is already in the before frame: refine a correction on top of t.
         dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap)
         t = dt @ t
