@@ -2,8 +2,8 @@
 
 Stable cells come from :mod:`soilvolume.stable` (a search that starts at the margin of the
 compared area, so works covering most of it never become the reference). The correction surface
-(constant, plane or degree-2 polynomial, lowered to the degree the stable ground supports by
-spatial cross-validation) is least squares on the stable cells and subtracted.
+(constant, plane or degree-2 polynomial, lowered to a plane when the stable ground lies on one
+side of the change areas only) is least squares on the stable cells and subtracted.
 """
 
 from __future__ import annotations
@@ -78,31 +78,17 @@ def fit_surface(
     return surface, params
 
 
-def supported_degree(diff: np.ndarray, stable: np.ndarray, grid: GridSpec, max_degree: int, blocks: int = 4) -> int:
-    """The lowest polynomial degree (0..``max_degree``) whose spatial block cross-validation
-    error on the stable cells is within 5 % of the best: a surface the stable ground cannot
-    support (one-sided or patchy stable ground) would be extrapolated into the change areas."""
-    mask = stable & np.isfinite(diff)
-    if max_degree <= 0 or mask.sum() < 40:
-        return max(0, min(max_degree, 0))
-    x, y = grid.centers_local()
-    bx = np.digitize(x, np.quantile(x[mask], np.linspace(0, 1, blocks + 1)[1:-1]))
-    by = np.digitize(y, np.quantile(y[mask], np.linspace(0, 1, blocks + 1)[1:-1]))
-    block = by * blocks + bx
-    errors = []
-    for degree in range(max_degree + 1):
-        sq, n = 0.0, 0
-        for b in np.unique(block[mask]):
-            test = mask & (block == b)
-            train = mask & ~test
-            if train.sum() < 12:
-                continue
-            pred = fit_poly(x, y, diff, train, degree)[0]
-            r = diff[test] - pred[test]
-            sq, n = sq + float(np.sum(np.minimum(r * r, 9 * np.median(r * r) + 1e-12))), n + r.size
-        errors.append(sq / max(n, 1))
-    best = min(errors)
-    return next(d for d, e in enumerate(errors) if e <= 1.05 * best)
+def supported_degree(stable: np.ndarray, change: np.ndarray, max_degree: int) -> int:
+    """The highest polynomial degree (up to ``max_degree``) the stable ground supports across the
+    change areas: a curved surface needs stable ground all around them, a plane on one side only
+    (see :func:`soilvolume.stable.largest_gap_deg`); a handful of stable cells gets a constant."""
+    from .stable import largest_gap_deg
+
+    if stable.sum() < 30:
+        return 0
+    if largest_gap_deg(stable, change) > 180.0:
+        return min(max_degree, 1)
+    return max_degree
 
 
 def apply(
@@ -121,7 +107,7 @@ def apply(
     stable = stable_cells(diff, grid.cell, dilate_m=dilate_m, user_mask=user_mask, iterations=iterations)
     used = method
     if select_degree and method in ("surface", "plane"):
-        degree = supported_degree(diff, stable, grid, _DEGREE[method])
+        degree = supported_degree(stable, np.isfinite(diff) & ~stable, _DEGREE[method])
         used = {0: "constant", 1: "plane", 2: "surface"}[degree]
     surface, params = fit_surface(diff, stable, grid, used)
     params["method"], params["fitted"] = method, used

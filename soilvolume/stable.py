@@ -102,3 +102,15 @@ def _surface(x, y, diff, mask, degree: int, robust: bool = False) -> np.ndarray:
     if mask.sum() < 12:
         return np.zeros(diff.shape)
     return fit_poly(x, y, diff, mask, degree, robust=robust)[0]
+
+
+def largest_gap_deg(stable: np.ndarray, change: np.ndarray) -> float:
+    """Largest angular gap (degrees) of the stable cells seen from the centre of the change
+    areas: above 180 the stable ground lies on one side of the works only."""
+    if not change.any() or not stable.any():
+        return 0.0
+    cr, cc = np.argwhere(change).mean(axis=0)
+    r, c = np.nonzero(stable)
+    ang = np.sort(np.degrees(np.arctan2(r - cr, c - cc)))
+    gaps = np.diff(np.r_[ang, ang[0] + 360.0])
+    return float(gaps.max())
