@@ -102,8 +102,10 @@ def _write_las(path: Path, xyz: np.ndarray) -> None:
     las.write(str(path))
 
 
-def write_pair(case: str, seed: int, directory: Path) -> tuple[Path, Path, Path]:
-    """Write before.las, after.las and truth.json of a real-terrain case into ``directory``."""
+def write_pair(case: str, seed: int, directory: Path, shift_m=SHIFT_M,
+               rotation_deg=ROTATION_DEG) -> tuple[Path, Path, Path]:
+    """Write before.las, after.las and truth.json of a real-terrain case into ``directory``
+    (misalignment of the after half: ``shift_m``, ``rotation_deg`` = roll, pitch, yaw)."""
     import laspy
 
     las = laspy.read(str(real_dir() / SOURCE))
@@ -122,8 +124,8 @@ def write_pair(case: str, seed: int, directory: Path) -> tuple[Path, Path, Path]
     cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
     near = np.hypot(before[:, 0] - cx, before[:, 1] - cy) < 15.0
     c = np.array([cx, cy, float(np.median(before[near, 2]))])
-    R = _rotation(*ROTATION_DEG)
-    t = np.asarray(SHIFT_M, dtype=np.float64)
+    R = _rotation(*rotation_deg)
+    t = np.asarray(shift_m, dtype=np.float64)
     surveyed = (after - c) @ R.T + c + t
     T = np.eye(4)  # surveyed -> true
     T[:3, :3] = R.T
@@ -135,7 +137,7 @@ def write_pair(case: str, seed: int, directory: Path) -> tuple[Path, Path, Path]
         "net": float(fill - cut), "cut": float(cut), "fill": float(fill),
         "transform": T.tolist(),
         "misalignment": {"center": c.tolist(), "rotation_matrix": R.tolist(),
-                         "shift_m": list(SHIFT_M), "rotation_deg": list(ROTATION_DEG),
+                         "shift_m": list(shift_m), "rotation_deg": list(rotation_deg),
                          "convention": "p_surveyed = R (p_true - center) + center + shift; "
                                        "transform is its inverse (surveyed -> true)"},
         "after_footprint": list(BOX),

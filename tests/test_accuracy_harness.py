@@ -177,6 +177,10 @@ def test_score_on_a_fabricated_report():
     # coverage over rows, skipping rows without an interval or a truth
     rows = [row, row2, {"covered": {"net": None, "cut": None, "fill": None}}, {"error": "x"}]
     assert accuracy.coverage(rows) == {"net": (2, 2), "cut": (1, 2), "fill": (2, 2)}
+    # a run with a truth that failed counts as a miss
+    rows.append({"error": "registration failed", "has_truth": True})
+    assert accuracy.coverage(rows) == {"net": (2, 3), "cut": (1, 3), "fill": (2, 3)}
+    assert accuracy.passed(rows[-1]) is False
     assert accuracy.passed({"checks": {}}) is None
 
 
