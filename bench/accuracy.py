@@ -517,7 +517,44 @@ def summary(rows: list[dict]) -> str:
                                            for k, v in by_target.items()) + ".")
     if errors:
         out.append(f"- Errors (no report): {', '.join(errors)}.")
+    out += verdict_summary(rows) + same_as_default(rows)
     return "\n".join(out)
+
+
+def _bad(row: dict) -> bool:
+    """A run a user should not have trusted: an error, a failed target, or a net interval that
+    misses the truth."""
+    return bool(row.get("error")) or passed(row) is False or (
+        row.get("covered", {}).get("net") is False)
+
+
+def verdict_summary(rows: list[dict]) -> list[str]:
+    """How ``quality.verdict`` lines up with the outcome (only when the engine reports one)."""
+    groups: dict[str, list[dict]] = {}
+    for r in rows:
+        if r.get("has_truth") and r.get("verdict"):
+            groups.setdefault(r["verdict"], []).append(r)
+    if not groups:
+        return ["- `quality.verdict`: not reported by this engine."]
+    parts = [f"{v}: {len(g)} cases, {sum(_bad(r) for r in g)} of them bad"
+             for v, g in sorted(groups.items())]
+    return ["- Verdict against outcome (bad = error, failed target or net interval missing the "
+            "truth): " + "; ".join(parts) + "."]
+
+
+def same_as_default(rows: list[dict]) -> list[str]:
+    """Flag ``*-precise`` rows identical to their default-option twin (option without effect)."""
+    by_name = {r["name"]: r for r in rows}
+    same = []
+    for r in rows:
+        base = by_name.get(r["name"].removesuffix("-precise"))
+        if r["name"].endswith("-precise") and base and "est" in r and "est" in base:
+            if r["est"] == base["est"]:
+                same.append(r["name"])
+    if not same:
+        return []
+    return [f"- `georeferencing=\"precise\"` gave exactly the default's numbers on "
+            f"{', '.join(same)}: the option has no effect at this engine commit."]
 
 
 HOW_TO_READ = """\
@@ -598,7 +635,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="markdown file (default: bench/ACCURACY.md for the "
                                               "whole matrix, bench/results/accuracy-<subset>.md)")
     ap.add_argument("--cache", type=Path, help="scene/run cache (default ~/.cache/...)")
+    ap.add_argument("--render", type=Path, metavar="JSON",
+                    help="only rewrite the markdown from a saved accuracy-latest.json (its own "
+                         "run date and commit are kept); needs --out")
     args = ap.parse_args(argv)
+    if args.render:
+        if not args.out:
+            raise SystemExit("--render needs --out")
+        saved = json.loads(args.render.read_text())
+        args.out.write_text(markdown(saved["rows"], saved["meta"]))
+        print(f"[accuracy] wrote {args.out}")
+        return 0
     cases = select(MATRIX, args.quick, args.cases)
     if args.list:
         for c in cases:

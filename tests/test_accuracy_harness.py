@@ -194,3 +194,17 @@ def test_zero_truth_errors_are_relative_to_the_moved_volume():
     assert row["checks"] == {"net 3%": False, "cut 5%": True, "fill 5%": False}
     assert math.isnan(accuracy.rel_error_pct(1.0, 0.0, 0.0))
     assert accuracy.covered(1.0, 0.0, None) is None
+
+
+def test_verdict_and_option_notes():
+    good = {"name": "a", "has_truth": True, "verdict": "reliable", "checks": {"net 1%": True},
+            "covered": {"net": True}, "est": {"net": 1.0}}
+    bad = {"name": "b", "has_truth": True, "verdict": "reliable", "checks": {"net 1%": False},
+           "covered": {"net": True}, "est": {"net": 2.0}}
+    worse = {"name": "c", "has_truth": True, "verdict": "not reliable", "error": "x"}
+    (line,) = accuracy.verdict_summary([good, bad, worse])
+    assert "reliable: 2 cases, 1 of them bad" in line and "not reliable: 1 cases, 1" in line
+    assert "not reported" in accuracy.verdict_summary([{"name": "d"}])[0]
+    twin = {**good, "name": "a-precise"}
+    assert "a-precise" in accuracy.same_as_default([good, twin])[0]
+    assert accuracy.same_as_default([good, {**twin, "est": {"net": 3.0}}]) == []
