@@ -92,13 +92,16 @@ class Case:
     dense: bool = False
     quick: bool = False
     options: dict = field(default_factory=dict)  # Options overrides (default: none)
+    # non-default options, to locate a failure: own table, not in coverage or target counts
+    diagnostic: bool = False
 
     def scene_config(self) -> SceneConfig:
         return replace(SceneConfig(), **self.config)
 
 
 def _syn(name, what, seed, target=None, dense=False, quick=False, options=None, **cfg) -> Case:
-    return Case(name, "synthetic", what, seed, cfg, target, dense, quick, options or {})
+    return Case(name, "synthetic", what, seed, cfg, target, dense, quick, options or {},
+                diagnostic=bool(options))
 
 
 MATRIX: list[Case] = [
@@ -149,6 +152,17 @@ MATRIX: list[Case] = [
          options={"georeferencing": "precise"}, change="excavation", change_fraction=0.5, **LIDAR),
     _syn("lidar-pile-flat", "LiDAR: one pile 10 %, flat, clutter", 19, change="pile", **LIDAR,
          **FLAT),
+    # diagnostics: a "half" pair without GPS error, registration off (and correction off), to
+    # tell registration, bias correction and gridding apart when the default fails
+    _syn("half-exc50-noreg", "excavation 50 % + pile 6 %, no GPS error, no nuisances; "
+         "coarse=none fine=none", 9, "half", options={"coarse": "none", "fine": "none"},
+         change="excavation", change_fraction=0.5, **QUARTER, **NO_GPS_ERROR),
+    _syn("half-exc50-noreg-nocorr", "same pair; coarse=none fine=none correction=none", 9,
+         "half", options={"coarse": "none", "fine": "none", "correction": "none"},
+         change="excavation", change_fraction=0.5, **QUARTER, **NO_GPS_ERROR),
+    _syn("piles-clean-exact-noreg-nocorr", "the piles-clean-exact pair; coarse=none fine=none "
+         "correction=none", 12, options={"coarse": "none", "fine": "none", "correction": "none"},
+         change="piles", **QUARTER, **NO_GPS_ERROR),
     # real terrain (2015 Tommy Thompson ground, two disjoint halves) with a known change
     Case("rt-pilepit", "real-terrain", "real ground 0.1 pt/m2, " + real_terrain.CASES["pilepit"]
          + ", GPS 2 m/2 deg", 1, {"case": "pilepit"}),
@@ -159,6 +173,12 @@ MATRIX: list[Case] = [
          1, {"case": "pilepit", **NO_GPS_ERROR}),
     Case("rt-excavation-lidar", "real-terrain", "same as rt-excavation without misalignment "
          "(LiDAR)", 1, {"case": "excavation", **NO_GPS_ERROR}, "half"),
+    Case("rt-pilepit-lidar-noreg", "real-terrain", "the rt-pilepit-lidar pair; coarse=none "
+         "fine=none", 1, {"case": "pilepit", **NO_GPS_ERROR},
+         options={"coarse": "none", "fine": "none"}, diagnostic=True),
+    Case("rt-excavation-lidar-noreg", "real-terrain", "the rt-excavation-lidar pair; "
+         "coarse=none fine=none", 1, {"case": "excavation", **NO_GPS_ERROR}, "half",
+         options={"coarse": "none", "fine": "none"}, diagnostic=True),
     # the two real pairs (their own criteria)
     Case("real-autzen", "autzen", "Autzen BMX 2010/2023 LiDAR, mound raised", quick=True),
     Case("real-tommy", "tommy", "Tommy Thompson 2015/2023 LiDAR, ~0.41 m datum offset",
@@ -231,6 +251,7 @@ def coverage(rows: list[dict]) -> dict:
     that ended in an error (no report, so no interval) counts as not covered."""
     out = {}
     for q in QUANTITIES:
+        rows = [r for r in rows if not r.get("diagnostic")]
         vals = [r["covered"][q] for r in rows if r.get("covered", {}).get(q) is not None]
         vals += [False for r in rows if r.get("has_truth") and r.get("error")]
         out[q] = (sum(bool(v) for v in vals), len(vals))
@@ -374,7 +395,7 @@ def run_real(case: Case, root: Path) -> dict:
 
 def run_case(case: Case, root: Path) -> dict:
     base = {"name": case.name, "kind": case.kind, "what": case.what, "target": case.target,
-            "dense": case.dense, "options": case.options,
+            "dense": case.dense, "options": case.options, "diagnostic": case.diagnostic,
             "has_truth": case.kind in ("synthetic", "real-terrain")}
     try:
         if case.kind in ("autzen", "tommy"):
@@ -442,13 +463,13 @@ def _err(r: dict, q: str, digits: int = 1) -> str:
     return _pct(v, digits) if math.isfinite(v) else f"{r['err_m3'][q]:+.1f} m³"
 
 
-def synthetic_table(rows: list[dict]) -> str:
+def synthetic_table(rows: list[dict], diagnostic: bool = False) -> str:
     head = ["case", "change %", "true net / cut / fill m³", "net err %", "cut err %",
             "fill err %", "in 95 % n/c/f", "half-width % n/c/f", "reg. err deg / m",
             "verdict", "s", "target", "result"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
-        if r["kind"] not in ("synthetic", "real-terrain"):
+        if r["kind"] not in ("synthetic", "real-terrain") or bool(r.get("diagnostic")) != diagnostic:
             continue
         if r.get("error") or r.get("skipped"):
             lines.append(f"| {r['name']} | " + " | ".join(["–"] * (len(head) - 3))
@@ -466,6 +487,27 @@ def synthetic_table(rows: list[dict]) -> str:
             "".join(_cov(r["covered"][q]) for q in QUANTITIES),
             hw, regs, r.get("verdict") or "–", f"{r['wall_s']:.0f}", r.get("target") or "–",
             _result(r)]) + " |")
+    return "\n".join(lines)
+
+
+def other_volumes_table(rows: list[dict]) -> str:
+    """Signed error (%) of the report's other volume definitions, for comparison with the
+    headline: ``volume_change_areas_m3`` and ``volume_thresholded_m3``."""
+    keys = [("volume_change_areas_m3", "change areas"), ("volume_thresholded_m3", "above LoD")]
+    lines = ["| case | headline net / cut / fill % | "
+             + " | ".join(f"{label} net / cut / fill %" for _, label in keys) + " |",
+             "|---|---|" + "---|" * len(keys)]
+    for r in rows:
+        if "truth" not in r or r.get("diagnostic"):
+            continue
+        t = r["truth"]
+        scale = t["cut"] + t["fill"]
+        cells = [" / ".join(_pct(r["err_pct"][q]) for q in QUANTITIES)]
+        for k, _ in keys:
+            v = (r.get("other_volumes") or {}).get(k)
+            cells.append("–" if not v else " / ".join(
+                _pct(rel_error_pct(v[q], t[q], scale)) for q in QUANTITIES))
+        lines.append(f"| {r['name']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -502,7 +544,7 @@ def summary(rows: list[dict]) -> str:
         ok = n > 0 and c / n >= COVERAGE_TARGET
         parts.append(f"{q} {c}/{n}" + (f" ({100 * c / n:.0f} %, {'PASS' if ok else '**FAIL**'})"
                                        if n else ""))
-    judged = [r for r in rows if passed(r) is not None]
+    judged = [r for r in rows if passed(r) is not None and not r.get("diagnostic")]
     npass = sum(bool(passed(r)) for r in judged)
     errors = [r["name"] for r in rows if r.get("error")]
     out = [f"- 95 % interval coverage over the matrix (target ≥ {COVERAGE_TARGET:.0%} each): "
@@ -592,6 +634,17 @@ def markdown(rows: list[dict], meta: dict) -> str:
         "## Summary", "", summary(rows), "",
         "## Synthetic and real-terrain pairs (exact truth)", "", synthetic_table(rows), "",
         "## Real pairs", "", real_table(rows), "",
+        "## The report's other volume definitions (same runs)", "",
+        "Errors of `volume_change_areas_m3` (cut and fill summed over detected change areas "
+        "only) and `volume_thresholded_m3` (cells beyond the level of detection), beside the "
+        "headline `volume_m3` scored above.", "",
+        other_volumes_table(rows), "",
+        "## Diagnostics (non-default options; not in the summary)", "",
+        "Same columns. They locate a failure of the default run: registration "
+        "(`coarse=none fine=none` on a pair without GPS error), bias correction "
+        "(`correction=none` too) or gridding; and whether `georeferencing=\"precise\"` helps "
+        "LiDAR pairs.", "",
+        synthetic_table(rows, diagnostic=True), "",
         "## Cases", "",
         *[f"- `{r['name']}`: {r['what']}" + (f" — error: `{r['error']}`" if r.get("error") else "")
           for r in rows], "",
