@@ -224,12 +224,15 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
         lod_cell = np.full(diff.shape, unc0["lod_m"] or 0.0)
     fill_area, cut_area = change_areas(diff, lod_cell)
     change = fill_area | cut_area
+    noise = _signed_budget(diff, fill_area & stable, cut_area & stable, area)  # detections of noise
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
-                             n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma)
+                             n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma,
+                             extra_sigma={k: abs(noise[k]) for k in ("net", "cut", "fill")})
     headline = _signed_budget(diff, fill_area, cut_area, area)
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
-        "stable": stable, "params": params, "uncertainty": unc, "change_mask": change,
+        "stable": stable, "params": params, "uncertainty": {**unc, "detected_noise_m3": noise},
+        "change_mask": change,
         "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
         "change_areas": headline,
