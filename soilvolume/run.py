@@ -222,7 +222,7 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
         lod_cell = np.maximum(lod_cell, z * fill_sigma)
     else:
         lod_cell = np.full(diff.shape, unc0["lod_m"] or 0.0)
-    fill_area, cut_area = change_areas(diff, lod_cell)
+    fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
     noise = _signed_budget(diff, fill_area & stable, cut_area & stable, area)  # detections of noise
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
@@ -320,7 +320,8 @@ def _report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: 
         "grid": {
             "cell_m": grid.cell, "rows": grid.rows, "cols": grid.cols, "crs": prep.frame.crs.name,
             "crs_wkt": prep.frame.wkt, "transform": list(grid.transform)[:6],
-            "compared_area_m2": vols["compensated"]["area_m2"], "compared_cells": vols["compensated"]["cells"],
+            "compared_area_m2": vols["all_cells"]["area_m2"], "compared_cells": vols["all_cells"]["cells"],
+            "change_area_m2": vols["compensated"]["area_m2"],
             "empty_cells": vols["empty_cells"], "empty_before": vols["empty_before"],
             "empty_after": vols["empty_after"], "statistic": options.statistic,
         },
