@@ -122,7 +122,9 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             d_i = planes.plane_offset(p_b, p_a, grid)
         hooks.step(75, "computing the difference and volumes")
         with timer("volume"):
-            vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b))
+            alt = reg.fine.alternative
+            moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
+            vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
             vols["dem_after"] = h_a + prep.origin[2]
         hooks.step(85, "writing outputs")
         with timer("write"):
@@ -192,11 +194,13 @@ N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
 MIN_POINTS = 3  # a robust cell height needs at least this many points
 
 
-def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None) -> dict:
+def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None) -> dict:
     """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
     of the difference (empty in either epoch) filled from the surrounding difference, which is
     smooth on unchanged ground whatever the terrain -> correction -> change areas, budgets,
-    uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs."""
+    uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs;
+    ``moved``: the rigid move from the accepted pose to a nearly as good one (registration
+    uncertainty)."""
     from .change import cell_lod, cell_sigma, change_areas
     from .uncertainty import thresholded_volumes, volume_uncertainty, z_value
 
@@ -225,13 +229,17 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
     noise = _signed_budget(diff, fill_area & stable, cut_area & stable, area)  # detections of noise
+    shift = _pose_effect(f_a, grid, moved)
+    reg_v = _signed_budget(shift, fill_area, cut_area, area)
+    extra = {k: float(np.hypot(noise[k], reg_v[k])) for k in ("net", "cut", "fill")}
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
                              n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma,
-                             extra_sigma={k: abs(noise[k]) for k in ("net", "cut", "fill")})
+                             extra_sigma=extra)
     headline = _signed_budget(diff, fill_area, cut_area, area)
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
-        "stable": stable, "params": params, "uncertainty": {**unc, "detected_noise_m3": noise},
+        "stable": stable, "params": params,
+        "uncertainty": {**unc, "detected_noise_m3": noise, "registration_m3": reg_v},
         "change_mask": change,
         "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
@@ -246,6 +254,18 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
 
         vols["zones"] = zone_budgets(np.where(change, diff, 0.0), grid, options.zones)
     return vols
+
+
+def _pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:
+    """Change of the difference (m per cell) if the after surface moved horizontally by ``moved``
+    (4x4, local): -grad(H) . u; its vertical part and tilt are absorbed by the bias correction."""
+    if moved is None:
+        return np.zeros(h_after.shape)
+    x, y = grid.centers_local()
+    p = np.stack([x, y, np.nan_to_num(h_after)], axis=-1)
+    u = p @ moved[:3, :3].T + moved[:3, 3] - p
+    gy, gx = np.gradient(h_after, grid.cell)  # rows run south: d/dy = -d/drow
+    return -(gx * u[..., 0] - gy * u[..., 1])
 
 
 def _signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray, cell_area: float) -> dict:

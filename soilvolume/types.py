@@ -84,3 +84,4 @@ class StageQuality:
     accepted: bool = True
     seconds: float = 0.0
     note: str = ""
+    alternative: np.ndarray | None = None  # a nearly as good pose (its spread from ``transform`` is uncertainty)
