@@ -202,7 +202,7 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
     ``moved``: the rigid move from the accepted pose to a nearly as good one (registration
     uncertainty)."""
     from .change import cell_lod, cell_sigma, change_areas
-    from .uncertainty import thresholded_volumes, volume_uncertainty, z_value
+    from .uncertainty import detection_level, thresholded_volumes, volume_uncertainty, z_value
 
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
@@ -217,15 +217,15 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
     diff = filled - offset
     area = grid.cell_area
     fill_sigma = _fill_sigma(diff, filled_mask, stable, options)
-    unc0 = volume_uncertainty(diff, stable, None, grid, options.lod_confidence, n_coef=0)
+    lod = detection_level(diff, stable, options.lod_confidence)
     z = z_value(options.lod_confidence)
     if spread is not None:
         se_a = np.where(m_a, np.nan, cell_sigma(spread[0], n_a))
         se_b = np.where(m_b, np.nan, cell_sigma(spread[1], n_b))
-        lod_cell = cell_lod(unc0["lod_m"] or 0.0, se_a, se_b, z)
+        lod_cell = cell_lod(lod, se_a, se_b, z)
         lod_cell = np.maximum(lod_cell, z * fill_sigma)
     else:
-        lod_cell = np.full(diff.shape, unc0["lod_m"] or 0.0)
+        lod_cell = np.full(diff.shape, lod)
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
     noise = _signed_budget(diff, fill_area & stable, cut_area & stable, area)  # detections of noise
@@ -239,12 +239,12 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
         "stable": stable, "params": params,
-        "uncertainty": {**unc, "detected_noise_m3": noise, "registration_m3": reg_v},
+        "uncertainty": {**unc, "lod_m": lod, "detected_noise_m3": noise, "registration_m3": reg_v},
         "change_mask": change,
         "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
         "change_areas": headline,
-        "thresholded": thresholded_volumes(diff, unc["lod_m"], area),
+        "thresholded": thresholded_volumes(diff, lod, area),
         "holes": holes.summary(diff, filled_mask, area),
         "empty_cells": int((~np.isfinite(raw)).sum()),
         "empty_before": int((n_b == 0).sum()), "empty_after": int((n_a == 0).sum()),

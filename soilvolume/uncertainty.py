@@ -194,6 +194,19 @@ def volume_uncertainty(
     return out
 
 
+def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
+    """Level of detection (m) of one cell: from the stable-ground residuals (see :func:`_lod`),
+    but at most twice the LoD of the neighbour-difference noise, so real change left in what
+    was taken as stable ground (e.g. a thin layer on well georeferenced surveys) cannot inflate it."""
+    from .stable import noise_sigma
+
+    r = diff[stable & np.isfinite(diff)]
+    lod = _lod(r, nmad(r), confidence) if r.size else None
+    noise = noise_sigma(diff)
+    cap = 2.0 * z_value(confidence) * noise if np.isfinite(noise) else float("inf")
+    return float(min(lod if lod is not None else cap, cap)) if np.isfinite(min(lod or cap, cap)) else 0.0
+
+
 def _lod(stable_residuals: np.ndarray, sigma: float, confidence: float) -> float | None:
     """LoD at ``confidence``: z x NMAD, or the empirical quantile of |stable residuals| when the
     residuals have heavier tails than a normal distribution (they usually do)."""
