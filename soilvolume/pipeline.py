@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from . import stages as embedded
+from .confine import confine_writers
 from .io import RawPoints, atomic_path
 from .stages.geometry import format_bounds
 from .stages.readers import SRS_OPTS
@@ -369,7 +370,7 @@ def prepare_cloud(path: str | os.PathLike, *, engine: str = "auto", **options: A
 
 def run_pipeline_file(pipeline: str | os.PathLike, *, engine: str = "auto") -> RawPoints:
     """A user's preparation pipeline file, run; the points keep the reader's filename as path."""
-    stages = load_pipeline(pipeline)
+    stages = confine_writers(load_pipeline(pipeline), str(pipeline))
     view = run_pipeline(stages, engine=engine, source=str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))
 
@@ -392,5 +393,6 @@ def prepare_cloud_from_file(pipeline: str | os.PathLike, path: str | os.PathLike
     stages = load_pipeline(pipeline)
     if path is not None:
         stages = with_input(stages, path)
+    stages = confine_writers(stages, str(pipeline))
     view = run_pipeline(stages, engine=engine, source=str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))
