@@ -152,9 +152,13 @@ def _read_text(path: Path) -> RawPoints:
 
 @contextmanager
 def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary sibling path; rename it onto ``final`` only if the block succeeds."""
+    """Yield a hidden temporary sibling path (named for this process, so a killed run's is
+    recognised by :func:`soilvolume.outputs.sweep`); rename it onto ``final`` only if the block
+    succeeds."""
+    from .outputs import STAGING, sibling
+
     final = Path(final)
-    tmp = final.with_name(f".{final.stem}.partial{final.suffix}")
+    tmp = sibling(final, STAGING, suffix=final.suffix)
     try:
         yield tmp
         os.replace(tmp, final)
