@@ -12,8 +12,11 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
+from .interrupt import Interrupted, handle_signals
 from .options import Options
+from .outputs import os_problem
 from .types import SoilVolumeError
+from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
@@ -36,10 +39,11 @@ def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> Non
 
 
 def options_from(ns: argparse.Namespace) -> Options:
+    """The Options of the parsed flags, each checked against its allowed range."""
     given = {f.name: getattr(ns, f.name) for f in fields(Options) if getattr(ns, f.name, None) is not None}
     if getattr(ns, "registered_cloud", False):
         given["keep_registered_cloud"] = True
-    return Options(**given)
+    return check_options(Options(**given))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -131,8 +135,8 @@ def cmd_estimate(ns: argparse.Namespace) -> int:
 def cmd_dem(ns: argparse.Namespace) -> int:
     from .api import cloud_to_dem
 
-    info = cloud_to_dem(ns.cloud, ns.out, options_from(ns), crs=ns.crs,
-                        bounds=tuple(ns.bounds) if ns.bounds else None)
+    options, bounds = options_from(ns), check_bounds(ns.bounds)
+    info = cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds)
     print(json.dumps(info, indent=2))
     return 0
 
@@ -170,16 +174,37 @@ COMMANDS = {"estimate": cmd_estimate, "dem": cmd_dem, "register": cmd_register,
             "volume": cmd_volume, "demo": cmd_demo, "pipeline": cmd_pipeline}
 
 
+def _fail(message: str, code: int = 1) -> int:
+    print(f"soilvolume: error: {one_line(message)}", file=sys.stderr)
+    return code
+
+
+def one_line(message: str, limit: int = 400) -> str:
+    """A message on one line of at most ``limit`` characters."""
+    text = " ".join(str(message).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def main(argv: list[str] | None = None) -> int:
-    ns = build_parser().parse_args(argv)
-    try:
-        return COMMANDS[ns.command](ns)
-    except SoilVolumeError as exc:
-        print(f"soilvolume: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("soilvolume: interrupted", file=sys.stderr)
-        return 130
+    """Run one command; every failure is one line on stderr and a non-zero exit: 1 for errors,
+    130/143 for SIGINT/SIGTERM (outputs are never half-written)."""
+    with handle_signals():
+        ns = build_parser().parse_args(argv)
+        try:
+            code = COMMANDS[ns.command](ns)
+        except Interrupted as exc:
+            return _fail(str(exc), exc.exit_code)
+        except SoilVolumeError as exc:
+            return _fail(str(exc))
+        except OSError as exc:
+            return _fail(str(os_problem(exc)))
+        except MemoryError:
+            return _fail("out of memory: use a larger --cell or crop the clouds first")
+        except RecursionError:
+            return _fail("input nested too deeply")
+        except KeyboardInterrupt:  # a signal arrived before the handlers were installed
+            return _fail("interrupted", 130)
+        return code
 
 
 if __name__ == "__main__":
