@@ -90,6 +90,9 @@ def has_ground_class(path: str | os.PathLike) -> bool:
         return False
     import laspy
 
+    from .lasheader import check_las_header
+
+    check_las_header(Path(path))
     with laspy.open(path) as reader:
         if "classification" not in reader.header.point_format.dimension_names:
             return False
