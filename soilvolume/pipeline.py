@@ -291,6 +291,8 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
             text = Path(path_or_text).read_text(encoding="utf-8")
         except OSError as exc:
             raise SoilVolumeError(f"pipeline {name}: cannot read ({exc.strerror or exc})") from exc
+        except UnicodeDecodeError as exc:
+            raise SoilVolumeError(f"pipeline {name}: not UTF-8 text (byte {exc.start})") from exc
     else:
         name = "<text>"
     try:
@@ -298,6 +300,8 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
     except json.JSONDecodeError as exc:
         raise SoilVolumeError(f"pipeline {name}: invalid JSON (line {exc.lineno}, column "
                               f"{exc.colno}: {exc.msg})") from exc
+    except RecursionError as exc:
+        raise SoilVolumeError(f"pipeline {name}: invalid JSON (nested too deeply)") from exc
     return _normalise(raw, name)
 
 

@@ -32,14 +32,18 @@ def flag(field: str) -> str:
     return "--" + field.replace("_", "-")
 
 
+def _num(v: float) -> str:
+    return str(int(v)) if float(v).is_integer() and abs(v) < 1e15 else f"{v:g}"
+
+
 def _range_text(meta: dict[str, Any], integer: bool) -> str:
     kind = "an integer" if integer else "a finite number"
     lo, hi = meta.get("lo"), meta.get("hi")
     parts = []
     if lo is not None:
-        parts.append(f"{'>' if meta.get('lo_open') else '>='} {lo:g}")
+        parts.append(f"{'>' if meta.get('lo_open') else '>='} {_num(lo)}")
     if hi is not None:
-        parts.append(f"<= {hi:g}")
+        parts.append(f"<= {_num(hi)}")
     return f"must be {kind} {' and '.join(parts)}".rstrip()
 
 
