@@ -36,6 +36,7 @@ class Interrupted(SoilVolumeError):
 def _record(signum: int, _frame) -> None:
     if _pending:  # second signal: the run is stuck in a long native call; leave now
         run_cleanups()
+        os.write(2, f"soilvolume: error: interrupted by {NAMES.get(signum, signum)} (forced)\n".encode())
         os._exit(128 + signum)
     _pending.append(signum)
 
