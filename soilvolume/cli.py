@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from dataclasses import fields
 from pathlib import Path
 
 from .interrupt import Interrupted, handle_signals
+from .nativelog import hold_native_stderr
 from .options import Options
 from .outputs import os_problem
 from .types import SoilVolumeError
@@ -188,23 +190,31 @@ def one_line(message: str, limit: int = 400) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; every failure is one line on stderr and a non-zero exit: 1 for errors,
     130/143 for SIGINT/SIGTERM (outputs are never half-written)."""
+    logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
     with handle_signals():
         ns = build_parser().parse_args(argv)
-        try:
-            code = COMMANDS[ns.command](ns)
-        except Interrupted as exc:
-            return _fail(str(exc), exc.exit_code)
-        except SoilVolumeError as exc:
-            return _fail(str(exc))
-        except OSError as exc:
-            return _fail(str(os_problem(exc)))
-        except MemoryError:
-            return _fail("out of memory: use a larger --cell or crop the clouds first")
-        except RecursionError:
-            return _fail("input nested too deeply")
-        except KeyboardInterrupt:  # a signal arrived before the handlers were installed
-            return _fail("interrupted", 130)
+        with hold_native_stderr() as native:
+            code = _run(ns)
+        if code == 0 and native.text:
+            sys.stderr.write(native.text)
         return code
+
+
+def _run(ns: argparse.Namespace) -> int:
+    try:
+        return COMMANDS[ns.command](ns)
+    except Interrupted as exc:
+        return _fail(str(exc), exc.exit_code)
+    except SoilVolumeError as exc:
+        return _fail(str(exc))
+    except OSError as exc:
+        return _fail(str(os_problem(exc)))
+    except MemoryError:
+        return _fail("out of memory: use a larger --cell or crop the clouds first")
+    except RecursionError:
+        return _fail("input nested too deeply")
+    except KeyboardInterrupt:  # a signal arrived before the handlers were installed
+        return _fail("interrupted", 130)
 
 
 if __name__ == "__main__":

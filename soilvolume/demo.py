@@ -15,7 +15,7 @@ from .validate import check_number
 def run_demo(out: Path, size: str = "small", seed: int = 0) -> int:
     cfg = SceneConfig.paper() if size == "paper" else SceneConfig.small()
     check_number("seed", seed, {"lo": 0, "hi": 2**31 - 1}, integer=True)
-    with output_dir(out, [], True, ("data", "result")) as staged, os_errors():
+    with output_dir(out, [], True, ("data", "result")) as staged, os_errors(staged.final):
         data = staged.path("data")
         data.mkdir()
         before, after, truth_path = write_pair(make_pair(seed, cfg), data, "laz")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -36,7 +37,8 @@ class Interrupted(SoilVolumeError):
 def _record(signum: int, _frame) -> None:
     if _pending:  # second signal: the run is stuck in a long native call; leave now
         run_cleanups()
-        os.write(2, f"soilvolume: error: interrupted by {NAMES.get(signum, signum)} (forced)\n".encode())
+        sys.stderr.write(f"soilvolume: error: interrupted by {NAMES.get(signum, signum)} (forced)\n")
+        sys.stderr.flush()
         os._exit(128 + signum)
     _pending.append(signum)
 

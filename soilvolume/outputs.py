@@ -21,7 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from . import interrupt
-from .types import SoilVolumeError
+from .types import SoilVolumeError, short_error
 
 STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
 #: what a folder of a previous run may hold for --overwrite to replace it
@@ -40,16 +40,36 @@ def os_problem(exc: OSError, path: str | os.PathLike | None = None) -> SoilVolum
 
 
 @contextmanager
-def os_errors() -> Iterator[None]:
-    """OSErrors (and GDAL's file errors) raised in the block become one-line SoilVolumeErrors."""
+def os_errors(path: Path | None = None) -> Iterator[None]:
+    """OSErrors and GDAL's write errors raised in the block become one-line SoilVolumeErrors
+    naming ``path`` (the output being written) or the file the error names."""
     try:
         yield
-    except OSError as exc:
-        raise os_problem(exc) from exc
-    except Exception as exc:
-        if type(exc).__name__ in ("CPLE_FileIOError", "CPLE_OpenFailedError", "CPLE_NoWriteAccessError"):
-            raise SoilVolumeError(str(exc).splitlines()[0]) from exc
+    except SoilVolumeError:
         raise
+    except OSError as exc:
+        raise _write_problem(exc, path) from exc
+    except Exception as exc:
+        if type(exc).__module__.startswith("rasterio"):
+            raise _write_problem(exc, path) from exc
+        raise
+
+
+def _write_problem(exc: BaseException, path: Path | None) -> SoilVolumeError:
+    """The clearest account of a failed write: the OS error, a full disk, or GDAL's first cause."""
+    if isinstance(exc, OSError) and exc.errno:
+        named = exc.filename and STAGING not in str(exc.filename)
+        return os_problem(exc, exc.filename if named else path)
+    folder = path if path is not None and path.is_dir() else (path.parent if path is not None else Path.cwd())
+    try:
+        full = shutil.disk_usage(folder).free < 1 << 20
+    except OSError:
+        full = False
+    cause = exc
+    while cause.__cause__ is not None or cause.__context__ is not None:
+        cause = cause.__cause__ or cause.__context__
+    text = "no space left on the device" if full else short_error(cause)
+    return SoilVolumeError(f"{path}: cannot write ({text})" if path is not None else f"cannot write ({text})")
 
 
 def _tag(name: str) -> str:

@@ -84,7 +84,7 @@ def run_volume_from_rasters(before: Path, after: Path, out: Path, *, zones=None,
 
         result["zones"] = zone_budgets(diff, grid, zones, zone_field)
     hooks.step(90, f"writing {out.name}")
-    with os_errors():
+    with os_errors(out):
         write_geotiff(out, diff, grid, "after - before (m)")
     hooks.step(100, "done")
     return result

@@ -69,7 +69,8 @@ def run_estimate(
     _threads(options)
     timer = Timer()
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
-    with output_dir(out_dir, inputs, overwrite) as out, os_errors(), writers_into(out.stage, inputs, RUN_OUTPUTS):
+    with output_dir(out_dir, inputs, overwrite) as out, os_errors(out.final), \
+            writers_into(out.stage, inputs, RUN_OUTPUTS):
         result = _estimate(before, after, out, options, timer, hooks, before_pipeline, after_pipeline)
     result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p
                       for n, p in out.moved.items()}
@@ -317,7 +318,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     if not np.isfinite(h).any():
         raise SoilVolumeError(f"{cloud}: no points inside the grid (check --bounds)")
     hooks.step(90, f"writing {out_tif.name}")
-    with os_errors():
+    with os_errors(out_tif):
         gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
     hooks.step(100, "done")
     return {"cell_m": cell, "rows": grid.rows, "cols": grid.cols, "crs": frame.crs.name,
@@ -336,7 +337,7 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
     reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
                    dense=(prep.after.xyz, prep.before.xyz))
     hooks.step(90, "writing the registered cloud")
-    with os_errors():
+    with os_errors(out_cloud):
         write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
     hooks.step(100, "done")
     from .report import _clean
