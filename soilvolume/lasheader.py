@@ -52,7 +52,7 @@ def check_las_header(path: Path) -> int:
     if fmt not in MIN_RECORD or rec_len < MIN_RECORD[fmt]:
         raise _fail(path, f"point format {fmt} with {rec_len}-byte records")
     count = _point_count(head, minor)
-    _check_numbers(path, struct.unpack_from("<15d", head, 131))
+    _check_numbers(path, struct.unpack_from("<12d", head, 131))
     compressed = compressed or path.suffix.lower() == ".laz"
     _check_count(path, head, minor, count, rec_len, offset, size, compressed)
     return count

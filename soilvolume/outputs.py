@@ -15,6 +15,7 @@ import fcntl
 import hashlib
 import os
 import re
+import secrets
 import shutil
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -79,9 +80,11 @@ def _tag(name: str) -> str:
     return hashlib.sha1(name.encode()).hexdigest()[:16]
 
 
-def sibling(final: Path, kind: str, pid: int | None = None, suffix: str = "") -> Path:
-    """The hidden sibling of ``final`` of this ``kind`` for process ``pid`` (default: this one)."""
-    return final.with_name(f".{_tag(final.name)}.{kind}-{pid or os.getpid()}{suffix}")
+def sibling(final: Path, kind: str, pid: int | None = None, suffix: str = "", token: str | None = None) -> Path:
+    """The hidden sibling of ``final`` of this ``kind`` for process ``pid`` (default: this one),
+    told apart from others of the same process by ``token`` (default: a fresh random one)."""
+    token = secrets.token_hex(4) if token is None else token
+    return final.with_name(f".{_tag(final.name)}.{kind}-{pid or os.getpid()}-{token}{suffix}")
 
 
 def _alive(pid: int) -> bool:
@@ -106,7 +109,7 @@ def _remove(path: Path) -> None:
 def sweep(final: Path) -> None:
     """Remove the hidden siblings of ``final`` left by dead runs; a trashed old set whose new set
     never arrived is put back."""
-    pattern = re.compile(rf"^\.{re.escape(_tag(final.name))}\.({STAGING}|{TRASH})-(\d+)(\..*)?$")
+    pattern = re.compile(rf"^\.{re.escape(_tag(final.name))}\.({STAGING}|{TRASH})-(\d+)(-\w*)?(\..*)?$")
     try:
         entries = list(final.parent.iterdir())
     except OSError:
@@ -168,7 +171,8 @@ class OutputDir:
         self.created = _make_parents(self.final.parent)
         with locked(self.final.parent):
             sweep(self.final)
-            self.stage = sibling(self.final, STAGING)
+            self.token = secrets.token_hex(4)
+            self.stage = sibling(self.final, STAGING, token=self.token)
             try:
                 self.stage.mkdir()
             except OSError as exc:
@@ -224,13 +228,13 @@ class OutputDir:
                 raise os_problem(exc, self.final) from exc
         if not self.overwrite:
             raise SoilVolumeError(f"{self.final}: another run filled the output folder meanwhile")
-        trash = sibling(self.final, TRASH)
+        trash = sibling(self.final, TRASH, token=self.token)
         os.rename(self.final, trash)
         os.rename(self.stage, self.final)
         shutil.rmtree(trash, ignore_errors=True)
 
     def _restore(self) -> None:
-        trash = sibling(self.final, TRASH)
+        trash = sibling(self.final, TRASH, token=self.token)
         if trash.exists() and not self.final.exists():
             os.rename(trash, self.final)
 

@@ -58,7 +58,7 @@ def check_number(field: str, value: Any, meta: dict[str, Any], integer: bool = F
     bad = bad or (lo is not None and (value <= lo if meta.get("lo_open") else value < lo))
     bad = bad or (hi is not None and value > hi)
     if bad:
-        raise OptionError(field, f"{_range_text(meta, integer)} (got {value:g})")
+        raise OptionError(field, f"{_range_text(meta, integer)} (got {_num(value) if math.isfinite(value) else value})")
 
 
 def check_options(options: Options) -> Options:

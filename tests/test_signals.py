@@ -86,10 +86,10 @@ def test_a_kill_between_the_two_renames_of_a_swap_restores_the_old_set(tmp_path)
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()
     out = tmp_path / "result"
-    trash = sibling(out, TRASH, int(dead))
+    trash = sibling(out, TRASH, int(dead), token="ab12")
     trash.mkdir()
     (trash / "report.json").write_text("{}")
-    staged = sibling(out, "soilvolume-staging", int(dead))
+    staged = sibling(out, "soilvolume-staging", int(dead), token="ab12")
     staged.mkdir()
     sweep(out)
     assert sorted(os.listdir(tmp_path)) == ["result"]
