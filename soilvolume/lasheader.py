@@ -52,6 +52,10 @@ def check_las_header(path: Path) -> int:
     if fmt not in MIN_RECORD or rec_len < MIN_RECORD[fmt]:
         raise _fail(path, f"point format {fmt} with {rec_len}-byte records")
     count = _point_count(head, minor)
+    by_return = sum(struct.unpack_from("<15Q", head, 255)) if minor >= 4 else 0
+    by_return = by_return or sum(struct.unpack_from("<5I", head, 111))
+    if by_return > count:
+        raise _fail(path, f"{by_return} points counted by return, the header says {count}")
     _check_numbers(path, struct.unpack_from("<12d", head, 131))
     compressed = compressed or path.suffix.lower() == ".laz"
     _check_count(path, head, minor, count, rec_len, offset, size, compressed)
