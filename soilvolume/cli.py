@@ -25,7 +25,9 @@ EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs),
 (H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
 report.json, report.html, and with --registered-cloud after_registered.laz.
 Volumes are in cubic metres: fill = material added, cut = removed,
-net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted)."""
+net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted).
+The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
+2 (bad command line), 130/143 (interrupted by SIGINT/SIGTERM; nothing written)."""
 
 
 def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> None:
@@ -62,9 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("after", type=Path, help="smaller 'after' survey (LAS/LAZ/PLY/PCD/XYZ)")
     est.add_argument("--out", type=Path, required=True,
                      help="output folder (created; must be empty unless --overwrite)")
-    est.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty output folder")
+    est.add_argument("--overwrite", action="store_true",
+                     help="replace the output folder of an earlier run as a whole, in one swap (refused when it "
+                     "holds files a run does not write)")
     est.add_argument("--before-pipeline", type=Path,
-                     help="PDAL pipeline JSON preparing the before cloud (replaces reading it)")
+                     help="PDAL pipeline JSON preparing the before cloud (replaces reading it); its writers "
+                     "write into --out under their file names, never onto an input")
     est.add_argument("--after-pipeline", type=Path, help="PDAL pipeline JSON preparing the after cloud")
     est.add_argument("--registered-cloud", action="store_true",
                      help="also write after_registered.laz, the after cloud moved by the registration (off by "
