@@ -124,6 +124,20 @@ def sweep(final: Path) -> None:
             _remove(entry)
 
 
+def _sweep_inside(folder: Path) -> None:
+    """Remove staging folders that dead runs left inside ``folder`` (mount points, folders whose
+    parent is not writable)."""
+    pattern = re.compile(rf"^\.{STAGING}-(\d+)-\w+$")
+    try:
+        entries = list(folder.iterdir()) if folder.is_dir() else []
+    except OSError:
+        return
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m and not _alive(int(m.group(1))):
+            _remove(entry)
+
+
 @contextmanager
 def locked(folder: Path) -> Iterator[None]:
     """An exclusive advisory lock on ``folder`` (swaps and sweeps of concurrent runs take turns)."""
@@ -167,17 +181,31 @@ class OutputDir:
             self.final = self.final.resolve()
         self.inputs = {Path(p).resolve() for p in inputs if p}
         self.overwrite, self.allowed = overwrite, set(allowed) if allowed is not None else None
+        _sweep_inside(self.final)
         self._check()
         self.created = _make_parents(self.final.parent)
+        self.token = secrets.token_hex(4)
         with locked(self.final.parent):
             sweep(self.final)
-            self.token = secrets.token_hex(4)
-            self.stage = sibling(self.final, STAGING, token=self.token)
+            self.inside = os.path.ismount(self.final)  # a mount point cannot be swapped
+            self.stage = self._inner() if self.inside else sibling(self.final, STAGING, token=self.token)
             try:
                 self.stage.mkdir()
             except OSError as exc:
-                self._drop_parents()
-                raise os_problem(exc, self.final.parent) from exc
+                if not self._empty_writable():
+                    self._drop_parents()
+                    raise os_problem(exc, self.final.parent) from exc
+                self.inside, self.stage = True, self._inner()  # parent not writable: stage inside
+                self.stage.mkdir()
+
+    def _inner(self) -> Path:
+        return self.final / f".{STAGING}-{os.getpid()}-{self.token}"
+
+    def _empty_writable(self) -> bool:
+        """An existing, empty, writable folder: its outputs can be staged inside it (no old set
+        to mix with)."""
+        f = self.final
+        return f.is_dir() and not any(f.iterdir()) and os.access(f, os.W_OK | os.X_OK)
 
     def _check(self) -> None:
         final = self.final
@@ -215,8 +243,16 @@ class OutputDir:
         """Swap the staging folder into place; returns name -> final path of every output."""
         interrupt.check()
         names = sorted(p.name for p in self.stage.iterdir())
-        with locked(self.final.parent), interrupt.cleanup_on_exit(self._restore):
-            self._swap()
+        if self.inside:  # a mount point or an unswappable folder: file by file, then the stale ones
+            for n in names:
+                os.replace(self.stage / n, self.final / n)
+            self.stage.rmdir()
+            for old in self.final.iterdir():
+                if old.name not in names and not old.name.startswith(f".{STAGING}-"):
+                    _remove(old)
+        else:
+            with locked(self.final.parent), interrupt.cleanup_on_exit(self._restore):
+                self._swap()
         return {n: self.final / n for n in names}
 
     def _swap(self) -> None:

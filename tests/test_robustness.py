@@ -322,6 +322,22 @@ def test_stale_staging_of_a_dead_run_is_swept(tmp_path):
     assert _hidden(tmp_path) == []
 
 
+def test_a_mount_point_is_filled_in_place_and_dead_runs_staging_inside_is_swept(tmp_path, monkeypatch):
+    import soilvolume.outputs as outputs
+
+    final = tmp_path / "mnt"
+    final.mkdir()
+    (final / ".soilvolume-staging-999999999-ab12").mkdir()  # a killed run's
+    (final / "report.json").write_text("old")
+    (final / "stale.tif").write_text("old")
+    monkeypatch.setattr(outputs.os.path, "ismount", lambda p: Path(p) == final)
+    out = OutputDir(final, [], True)
+    assert out.stage.parent == final
+    _stage(out, {"report.json": "new"})
+    out.commit()
+    assert [p.name for p in final.iterdir()] == ["report.json"] and _hidden(tmp_path) == []
+
+
 def test_estimate_overwrite_end_to_end(capsys, pair, tmp_path):
     out = tmp_path / "o"
     out.mkdir()
