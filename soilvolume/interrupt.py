@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
@@ -56,7 +57,11 @@ def pending() -> int | None:
 
 @contextmanager
 def handle_signals() -> Iterator[None]:
-    """Record SIGINT/SIGTERM for :func:`check` while the block runs (main thread only)."""
+    """Record SIGINT/SIGTERM for :func:`check` while the block runs (in the main thread; elsewhere
+    Python cannot install handlers and the block runs unchanged)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
     old = {s: signal.signal(s, _record) for s in NAMES}
     try:
         yield

@@ -180,6 +180,7 @@ class OutputDir:
         if self.final.is_symlink() or self.final.exists():
             self.final = self.final.resolve()
         self.inputs = {Path(p).resolve() for p in inputs if p}
+        self.moved: dict[str, Path] = {}  # name -> final path, once committed
         self.overwrite, self.allowed = overwrite, set(allowed) if allowed is not None else None
         _sweep_inside(self.final)
         self._check()
