@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from . import interrupt
 from .options import Options
 from .types import SoilVolumeError
+from .validate import check_bounds, check_options
 
 Progress = Callable[[float, str], None]
 Log = Callable[[str], None]
@@ -34,6 +36,8 @@ class Hooks:
     cancel: Cancel | None = None
 
     def step(self, percent: float, message: str) -> None:
+        """Report progress; raise :class:`Cancelled` (or ``Interrupted`` after SIGINT/SIGTERM)."""
+        interrupt.check()
         if self.cancel is not None and self.cancel():
             raise Cancelled("cancelled by the user")
         if self.progress is not None:
@@ -71,7 +75,7 @@ def estimate(
     from .run import run_estimate
 
     return run_estimate(
-        Path(before), Path(after), Path(out_dir), options or Options(), overwrite=overwrite,
+        Path(before), Path(after), Path(out_dir), check_options(options or Options()), overwrite=overwrite,
         hooks=hooks or Hooks(), before_pipeline=before_pipeline, after_pipeline=after_pipeline,
     )
 
@@ -90,7 +94,8 @@ def cloud_to_dem(
     description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
     from .run import run_cloud_to_dem
 
-    return run_cloud_to_dem(Path(cloud), Path(out_tif), options or Options(), crs=crs, bounds=bounds,
+    return run_cloud_to_dem(Path(cloud), Path(out_tif), check_options(options or Options()), crs=crs,
+                            bounds=check_bounds(bounds),
                             hooks=hooks or Hooks())
 
 
@@ -107,7 +112,7 @@ def register(
     "fine": {...}}."""
     from .run import run_register
 
-    return run_register(Path(before), Path(after), Path(out_cloud), options or Options(),
+    return run_register(Path(before), Path(after), Path(out_cloud), check_options(options or Options()),
                         hooks=hooks or Hooks())
 
 

@@ -13,14 +13,16 @@ import numpy as np
 from . import grid as gridmod
 from . import holes, planes
 from .api import Hooks, Result
+from .confine import writers_into
 from .crop import footprint, polygon_area
 from .io import write_las_chunked
 from .options import Options
-from .outputs import OutputDir
+from .outputs import RUN_OUTPUTS, OutputDir, check_output_file, os_errors, output_dir
 from .prepare import Prepared, prepare
 from .register import register, rotation_deg, shift_at, tilt_deg, transform_points
 from .report import absolute_transform, stage_dict, write_json
 from .types import GridSpec, SoilVolumeError
+from .validate import check_grid_cells
 from .volume import budget, difference
 
 
@@ -54,7 +56,9 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> Gri
     hi = np.minimum(after_thin.max(axis=0), prep.before_thin.max(axis=0))
     if (hi[:2] <= lo[:2]).any():
         raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
-    return gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
+    grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
+    check_grid_cells(grid.rows, grid.cols, cell)
+    return grid
 
 
 def run_estimate(
@@ -64,15 +68,12 @@ def run_estimate(
     """See :func:`soilvolume.api.estimate`."""
     _threads(options)
     timer = Timer()
-    out = OutputDir(out_dir, [before, after], overwrite)
-    try:
+    inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
+    with output_dir(out_dir, inputs, overwrite) as out, os_errors(out.final), \
+            writers_into(out.stage, inputs, RUN_OUTPUTS):
         result = _estimate(before, after, out, options, timer, hooks, before_pipeline, after_pipeline)
-    except BaseException:
-        out.abort()
-        raise
-    moved = out.commit()
     result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p
-                      for n, p in moved.items()}
+                      for n, p in out.moved.items()}
     hooks.step(100, "done")
     return result
 
@@ -367,8 +368,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     from .prepare import prepare_single
     from .stream import open_source
 
-    if out_tif.resolve() == cloud.resolve():
-        raise SoilVolumeError(f"{out_tif}: refusing to overwrite the input")
+    out_tif = check_output_file(out_tif, [cloud])
     hooks.step(5, f"reading {cloud.name}")
     one = prepare_single(open_source(cloud), crs, options, check=lambda: hooks.step(5, "reading"))
     xyz, origin, frame = one.xyz, one.origin, one.frame
@@ -380,9 +380,14 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
         lo, hi = xyz.min(axis=0).astype(float), xyz.max(axis=0).astype(float)
     cell = options.cell or gridmod.choose_cell(len(xyz), polygon_area(footprint(one.thin[:, :2])))
     grid = gridmod.make_grid(lo, hi, cell, origin, frame.wkt, frame.xy_unit)
+    check_grid_cells(grid.rows, grid.cols, cell)
     hooks.step(40, f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
     h, n = gridmod.average_height(xyz, grid, options.statistic)
-    gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
+    if not np.isfinite(h).any():
+        raise SoilVolumeError(f"{cloud}: no points inside the grid (check --bounds)")
+    hooks.step(90, f"writing {out_tif.name}")
+    with os_errors(out_tif):
+        gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
     hooks.step(100, "done")
     return {"cell_m": cell, "rows": grid.rows, "cols": grid.cols, "crs": frame.crs.name,
             "transform": list(grid.transform)[:6], "points": int(len(xyz)),
@@ -391,15 +396,17 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
 
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
     """See :func:`soilvolume.api.register`."""
+    out_cloud = check_output_file(out_cloud, [before, after])
+    if out_cloud.suffix.lower() not in (".las", ".laz"):
+        raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
     hooks.step(5, "reading")
-    if out_cloud.resolve() in (before.resolve(), after.resolve()):
-        raise SoilVolumeError(f"{out_cloud}: refusing to overwrite an input file")
     prep = _prepare(before, after, options, hooks, None, None)
     hooks.step(20, "registering")
     reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
                    dense=(prep.after.xyz, prep.before.xyz))
     hooks.step(90, "writing the registered cloud")
-    write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
+    with os_errors(out_cloud):
+        write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
     hooks.step(100, "done")
     from .report import _clean
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
-from .types import SoilVolumeError
+from .types import SoilVolumeError, short_error
 
 CHUNK = 1_000_000
 GROUND = 2
@@ -72,7 +72,7 @@ def open_source(path, pipeline=None) -> Source:
     except SoilVolumeError:
         raise
     except Exception as exc:
-        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({exc})") from exc
+        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
     if src.count == 0:
         raise SoilVolumeError(f"{p}: the point cloud is empty (0 points)")
     return src
