@@ -601,7 +601,8 @@ def same_as_default(rows: list[dict]) -> list[str]:
 
 HOW_TO_READ = """\
 How to read: each row is one seeded pair run through `soilvolume.api.estimate` with **default
-options** (rows named `*-precise` add `georeferencing="precise"`). *err %* is the signed error of
+options** (rows with non-default options, e.g. `georeferencing="precise"` or registration off,
+are in the *Diagnostics* table and do not count in the summary). *err %* is the signed error of
 the headline `volume_m3` against the exact truth, relative to the true value (for a true value of
 0, e.g. the fill of a pit-only pair or every quantity of `none-control`, relative to the true
 moved volume cut + fill, or shown as –). *in 95 %* says whether net/cut/fill's reported 95 %
