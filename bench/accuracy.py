@@ -692,6 +692,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--render", type=Path, metavar="JSON",
                     help="only rewrite the markdown from a saved accuracy-latest.json (its own "
                          "run date and commit are kept); needs --out")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="add this to every scene seed (are the passes seed luck?); such runs "
+                         "never rewrite bench/ACCURACY.md")
+    ap.add_argument("--strict", action="store_true",
+                    help="exit status 1 when a target, the coverage or a run fails")
     args = ap.parse_args(argv)
     if args.render:
         if not args.out:
@@ -701,6 +706,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[accuracy] wrote {args.out}")
         return 0
     cases = select(MATRIX, args.quick, args.cases)
+    if args.seed_offset:
+        cases = [replace(c, seed=c.seed + args.seed_offset) for c in cases]
     if args.list:
         for c in cases:
             print(f"{c.name:22s} {c.kind:12s} target={c.target or '-':5s} "
@@ -733,9 +740,10 @@ def main(argv: list[str] | None = None) -> int:
                   flush=True)
     meta = machine_meta(argv, time.perf_counter() - t0, load, len(cases))
     text = markdown(rows, meta)
-    full = not args.quick and not args.cases
+    full = not args.quick and not args.cases and not args.seed_offset
     out = args.out or (HERE / "ACCURACY.md" if full else
-                       HERE / "results" / f"accuracy-{'quick' if args.quick else 'subset'}.md")
+                       HERE / "results" / f"accuracy-{'quick' if args.quick else 'subset'}"
+                       f"{f'-seed+{args.seed_offset}' if args.seed_offset else ''}.md")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     (HERE / "results").mkdir(exist_ok=True)
@@ -743,6 +751,12 @@ def main(argv: list[str] | None = None) -> int:
         json.dumps({"meta": meta, "rows": rows}, indent=1, default=str) + "\n")
     print("\n" + text)
     print(f"[accuracy] wrote {out}")
+    if args.strict:
+        judged = [r for r in rows if not r.get("diagnostic")]
+        cov = coverage(judged)
+        bad = any(passed(r) is False for r in judged) or any(
+            n and c / n < COVERAGE_TARGET for c, n in cov.values())
+        return 1 if bad else 0
     return 0
 
 
