@@ -250,8 +250,8 @@ def coverage(rows: list[dict]) -> dict:
     """{quantity: (covered, counted)} over rows with a truth and an interval; a run with a truth
     that ended in an error (no report, so no interval) counts as not covered."""
     out = {}
+    rows = [r for r in rows if not r.get("diagnostic")]
     for q in QUANTITIES:
-        rows = [r for r in rows if not r.get("diagnostic")]
         vals = [r["covered"][q] for r in rows if r.get("covered", {}).get(q) is not None]
         vals += [False for r in rows if r.get("has_truth") and r.get("error")]
         out[q] = (sum(bool(v) for v in vals), len(vals))
