@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage, optimize
 
-from .correction import nmad
+from .robust import nmad
 from .types import GridSpec
 
 INTERP_FRACTION = 0.15
@@ -134,6 +134,7 @@ def volume_uncertainty(
     filled_mask: np.ndarray | None = None,
     interp_fraction: float = INTERP_FRACTION,
     fill_sigma: np.ndarray | None = None,
+    extra_sigma: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
     (all valid cells when None), cut/fill split by the sign of the corrected difference, and
@@ -143,6 +144,8 @@ def volume_uncertainty(
     error of ``interp_fraction`` x its absolute value (hole fills over change edges were off by
     10-22 % of their volume on synthetic pairs), and ``fill_sigma`` (m, per cell: the error of
     refilling known ground) summed fully correlated within each connected refilled patch.
+    ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
+    change detection picks up from noise on stable ground.
     Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2, range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
     stable = stable_mask & valid
@@ -172,8 +175,10 @@ def volume_uncertainty(
         per_patch = ndimage.sum(np.where(m, fs, 0.0), labels, np.arange(1, n_patches + 1)) * grid.cell_area
         return float(np.sqrt(np.sum(np.square(per_patch)))) if n_patches else 0.0
 
+    extra = extra_sigma or {}
     out: dict[str, Any] = {
-        k: z * float(np.linalg.norm([region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m), refill(m)]))
+        k: z * float(np.linalg.norm([region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m), refill(m),
+                                     extra.get(k, 0.0)]))
         for k, m in parts.items()
     }
     out.update(
