@@ -530,7 +530,7 @@ def real_table(rows: list[dict]) -> str:
             crit = (f"lift of 2023 {r['lift_m']:+.3f} m (target {TOMMY_LIFT[0]:g}..{TOMMY_LIFT[1]:g});"
                     f" median difference {r['diff_median_m']:+.3f} m (target ±{TOMMY_MEDIAN:g})")
         lines.append("| " + " | ".join([
-            r["name"], f"{e['net']:+.0f} / {e['cut']:.0f} / {e['fill']:.0f}",
+            r["name"], f"{e['net']:+.0f} / {abs(e['cut']):.0f} / {abs(e['fill']):.0f}",
             "–" if hw is None else f"{hw:.0f}", crit, r.get("verdict") or "–",
             f"{r['wall_s']:.0f}", _result(r)]) + " |")
     return "\n".join(lines)
@@ -574,7 +574,7 @@ def verdict_summary(rows: list[dict]) -> list[str]:
     """How ``quality.verdict`` lines up with the outcome (only when the engine reports one)."""
     groups: dict[str, list[dict]] = {}
     for r in rows:
-        if r.get("has_truth") and r.get("verdict"):
+        if r.get("has_truth") and r.get("verdict") and not r.get("diagnostic"):
             groups.setdefault(r["verdict"], []).append(r)
     if not groups:
         return ["- `quality.verdict`: not reported by this engine."]
