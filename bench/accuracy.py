@@ -1,7 +1,7 @@
 """Accuracy harness (issue 10, "Right when the change dominates"): default-option estimates over a
 seeded matrix of pairs with exactly known change, scored against the issue's targets.
 
-    .venv/bin/python bench/accuracy.py                 # whole matrix (5-7 min on 2 busy cores)
+    .venv/bin/python bench/accuracy.py                 # whole matrix (4-7 min on 2 busy cores)
     .venv/bin/python bench/accuracy.py --quick         # ~1 min subset
     .venv/bin/python bench/accuracy.py --cases 'exc*'  # cases whose name matches (fnmatch)
     .venv/bin/python bench/accuracy.py --list          # the matrix, nothing run
