@@ -173,7 +173,7 @@ def icp_levels(
     cap = _cap_voxel(source_xyz, MAX_ICP_POINTS)
     gap = 1.5 * (spacing(target_xyz) if gap is None else gap)  # sparse clouds: correspondences are at least this far
     for voxel, dist, k in levels:
-        voxel, dist = max(voxel, cap), max(dist, gap)
+        voxel, dist = max(voxel, cap, gap / 1.5), max(dist, gap)  # no columns finer than the spacing
         if check:
             check()
         if voxel not in cache:
