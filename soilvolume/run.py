@@ -23,6 +23,8 @@ from .report import absolute_transform, stage_dict, write_json
 from .types import GridSpec, SoilVolumeError
 from .volume import budget, difference
 
+REGISTERING = "registering the after cloud onto the before cloud (coarse, then fine)"
+
 
 class Timer:
     """Per-stage wall times (seconds), in the order they ran."""
@@ -87,9 +89,9 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
     hooks.info(f"kept {len(prep.before):,} before points within {options.radius:g} m of the after "
                f"footprint and {len(prep.after):,} after points; registration subsets "
                f"{len(prep.before_thin):,} + {len(prep.after_thin):,} ({prep.voxel:.2f} m columns)")
-    hooks.step(15, "registering (coarse, then fine)")
+    hooks.step(15, REGISTERING)
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"),
+        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, REGISTERING),
                        dense=(prep.after.xyz, prep.before.xyz))
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
@@ -106,7 +108,7 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             h_a, n_a = gridmod.average_height(after_xyz, grid, options.statistic)
             del after_xyz
             h_b, n_b = before_job.result()
-        hooks.step(70, "fitting the RANSAC planes")
+        hooks.step(70, "estimating the vertical bias correction")
         with timer("planes"):
             sel_b = _points_on(prep.before_thin, grid, np.isfinite(h_b))
             p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
@@ -132,7 +134,7 @@ def _prepare(before, after, options: Options, hooks: Hooks, before_pipeline, aft
     from .stream import open_source
 
     src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
-    return prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"))
+    return prepare(src_b, src_a, options, check=hooks.ticker(2, 15, "reading"))
 
 
 def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, reg, options: Options):
@@ -302,7 +304,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     if out_tif.resolve() == cloud.resolve():
         raise SoilVolumeError(f"{out_tif}: refusing to overwrite the input")
     hooks.step(5, f"reading {cloud.name}")
-    one = prepare_single(open_source(cloud), crs, options, check=lambda: hooks.step(5, "reading"))
+    one = prepare_single(open_source(cloud), crs, options, check=hooks.ticker(5, 40, "reading"))
     xyz, origin, frame = one.xyz, one.origin, one.frame
     if bounds is not None:
         u = frame.xy_unit
@@ -328,7 +330,7 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
         raise SoilVolumeError(f"{out_cloud}: refusing to overwrite an input file")
     prep = _prepare(before, after, options, hooks, None, None)
     hooks.step(20, "registering")
-    reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
+    reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(20, 90, "registering"),
                    dense=(prep.after.xyz, prep.before.xyz))
     hooks.step(90, "writing the registered cloud")
     write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
