@@ -28,9 +28,11 @@ POINT_CLOUD_DEPS: tuple[tuple[str, str], ...] = (
     ("open3d", _OPEN3D_PIP),
 )
 RASTER_DEPS: tuple[tuple[str, str], ...] = POINT_CLOUD_DEPS[:4]
-# open3d's own requirements are its viewer's (dash, plotly, pandas, scikit-learn, ...: ~500 MB);
-# the engine uses only its numpy core, so it is installed without them.
+# open3d's own requirements are mostly its notebook viewer's (ipywidgets, nbformat, ipython, ...);
+# the engine uses only its numpy core, so it is installed without them, plus dash, which its
+# ``import open3d`` needs (open3d.visualization imports it).
 NO_DEPS = {"open3d", "open3d-cpu"}
+NO_DEPS_NEEDS = ("dash",)
 
 
 def site_dir() -> Path:
@@ -112,7 +114,7 @@ def pip_commands(requirements: Sequence[str], target: Path) -> list[list[str]]:
     base = [python_executable(), "-m", "pip", "install", "--disable-pip-version-check",
             "--no-input", "--only-binary=:all:", "--upgrade", "--target", str(target)]
     alone = [r for r in reqs if r in NO_DEPS]
-    rest = [r for r in reqs if r not in NO_DEPS]
+    rest = [r for r in reqs if r not in NO_DEPS] + (list(NO_DEPS_NEEDS) if alone else [])
     numpy = _installed_numpy()
     if numpy is not None:
         rest = [r for r in rest if r != "numpy"]

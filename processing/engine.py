@@ -28,7 +28,7 @@ POINT_CLOUD_DEPS = deps_module.POINT_CLOUD_DEPS
 RASTER_DEPS = deps_module.RASTER_DEPS
 
 
-def _ensure_engine_package() -> None:
+def ensure_engine_package() -> None:
     """Make the engine importable as top-level ``soilvolume``.
 
     Uses an already imported or installed ``soilvolume`` if there is one, else the copy shipped
@@ -57,7 +57,7 @@ def _ensure_engine_package() -> None:
 
 def engine(name: str = "api") -> ModuleType:
     """The engine module ``soilvolume.<name>``."""
-    _ensure_engine_package()
+    ensure_engine_package()
     return importlib.import_module(f"soilvolume.{name}")
 
 

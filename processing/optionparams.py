@@ -7,6 +7,7 @@ the table's range. Options added to the table later appear here without any chan
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import MISSING, Field, fields
 from typing import Any
 
@@ -36,9 +37,15 @@ UNIT_TEXT = {"m": "m", "m2": "m²", "deg": "°"}
 POLYGON_FORMATS = ["gpkg", "shp", "geojson"]
 
 
+def options_class() -> type:
+    """The engine's Options class (pure Python: importable without the engine's dependencies)."""
+    engine.ensure_engine_package()
+    return importlib.import_module("soilvolume.options").Options
+
+
 def option_fields(only: set[str] | None = None) -> list[Field]:
     """The option table's fields (those in ``only`` when given), in table order."""
-    table = fields(engine.engine("options").Options)
+    table = fields(options_class())
     return [f for f in table if f.name not in SKIPPED and (only is None or f.name in only)]
 
 
@@ -132,7 +139,7 @@ def read_options(
         value = _value(alg, field, parameters, context, feedback)
         if value is not None or field.default is None:
             given[field.name] = value
-    return engine.engine("options").Options(**given)
+    return options_class()(**given)
 
 
 def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> Any:
