@@ -107,19 +107,32 @@ def _installed_numpy() -> str | None:
     return numpy.__version__
 
 
+def constraints_file(target: Path) -> Path | None:
+    """A pip constraints file next to ``target`` pinning numpy to the version QGIS already
+    uses (its compiled modules need that ABI): numpy is installed only if a package needs it, and
+    then in that version. None when QGIS has no numpy."""
+    numpy = _installed_numpy()
+    if numpy is None:
+        return None
+    path = target.parent / "constraints.txt"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(f"numpy=={numpy}\n", encoding="utf-8")
+    return path
+
+
 def pip_commands(requirements: Sequence[str], target: Path) -> list[list[str]]:
-    """The pip runs that install ``requirements`` into ``target``: one for open3d without its
-    viewer's dependencies, one for the rest (numpy pinned to QGIS's own when it has one)."""
+    """The pip runs that install ``requirements`` into ``target``: the rest, numpy constrained to
+    QGIS's own, then open3d without its dependencies (writes the constraints file)."""
     reqs = list(dict.fromkeys(requirements))
+    alone = [r for r in reqs if r in NO_DEPS]
+    rest = [r for r in reqs if r not in NO_DEPS and r != "numpy"] + (list(NO_DEPS_NEEDS) if alone else [])
+    if "numpy" in reqs and _installed_numpy() is None:
+        rest.append("numpy")
     base = [python_executable(), "-m", "pip", "install", "--disable-pip-version-check",
             "--no-input", "--only-binary=:all:", "--upgrade", "--target", str(target)]
-    alone = [r for r in reqs if r in NO_DEPS]
-    rest = [r for r in reqs if r not in NO_DEPS] + (list(NO_DEPS_NEEDS) if alone else [])
-    numpy = _installed_numpy()
-    if numpy is not None:
-        rest = [r for r in rest if r != "numpy"]
-        if rest:
-            rest.append(f"numpy=={numpy}")  # already importable: keep QGIS's ABI
+    constraints = constraints_file(target)
+    if constraints is not None:
+        base += ["--constraint", str(constraints)]
     commands = [base + rest] if rest else []
     if alone:
         commands.append(base + ["--no-deps"] + alone)

@@ -61,11 +61,18 @@ def engine(name: str = "api") -> ModuleType:
     return importlib.import_module(f"soilvolume.{name}")
 
 
-def require(deps: Sequence[tuple[str, str]]) -> None:
-    """Raise QgsProcessingException naming what is missing and how to install it."""
+def require(deps: Sequence[tuple[str, str]], feedback: QgsProcessingFeedback | None = None) -> None:
+    """Raise QgsProcessingException naming what is missing; how to install it goes to the log
+    once (the error itself is repeated by Processing's log, console and dialog)."""
     missing = deps_module.missing(deps)
     if missing:
-        raise QgsProcessingException(deps_module.message(missing))
+        names = ", ".join(m for m, _, _ in missing)
+        if feedback is None:
+            raise QgsProcessingException(deps_module.message(missing))
+        feedback.pushWarning(deps_module.message(missing))
+        raise QgsProcessingException(
+            f"Soil volume change cannot run: missing Python packages ({names}); "
+            "how to install them is in the warning above.")
     try:
         engine("api")
     except Exception as exc:  # noqa: BLE001

@@ -116,7 +116,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         self, parameters: dict[str, Any], context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS)
+        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before")
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         pipelines = {

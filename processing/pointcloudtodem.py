@@ -78,7 +78,7 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         self, parameters: dict[str, Any], context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS)
+        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         cloud = params.cloud_path(self, parameters, "INPUT", context, "Input")
         crs = params.crs_text(self, parameters, "CRS", context) or self.header_crs(cloud)
         options = optionparams.read_options(self, parameters, context, feedback, OPTIONS)

@@ -70,7 +70,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         self, parameters: dict[str, Any], context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS)
+        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before")
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         options = optionparams.read_options(self, parameters, context, feedback, OPTIONS)
