@@ -123,6 +123,12 @@ def run_alg(qgis_processing, plugin_package):
 
 
 @pytest.fixture(scope="session")
+def run_alg_session(qgis_processing, plugin_package):
+    """:func:`run_algorithm` for module- or session-scoped fixtures."""
+    return run_algorithm
+
+
+@pytest.fixture(scope="session")
 def estimate_run(qgis_processing, plugin_package, scene_dir, tmp_path_factory) -> dict:
     """One full estimate through processing.run with every output written to files."""
     out = tmp_path_factory.mktemp("estimate")
