@@ -35,13 +35,13 @@ class Hooks:
     cancel: Cancel | None = None
     _last: str | None = field(default=None, repr=False)
 
-    def step(self, percent: float, message: str) -> None:
+    def step(self, percent: float, message: str, log: bool = True) -> None:
         """Check for cancellation, move the progress bar and log ``message`` (once)."""
         if self.cancel is not None and self.cancel():
             raise Cancelled("cancelled by the user")
         if self.progress is not None:
             self.progress(percent, message)
-        if message != self._last:
+        if log and message != self._last:
             self._last = message
             self.info(message)
 
@@ -50,15 +50,15 @@ class Hooks:
             self.log(message)
 
     def ticker(self, start: float, end: float, message: str, expected: int = 8) -> Callable[[], None]:
-        """A ``check()`` callback for a long stage of unknown length: each call checks for
-        cancellation and moves the bar from ``start`` towards ``end`` (about 90 % of the way after
-        ``expected`` calls, never reaching it); ``message`` is logged once."""
+        """A ``check()`` callback for a long stage of unknown length (logged by the step that
+        started it): each call checks for cancellation and moves the bar from ``start`` towards
+        ``end`` (about 90 % of the way after ``expected`` calls, never reaching it)."""
         calls = [0]
         rate = 0.1 ** (1.0 / max(expected, 1))
 
         def check() -> None:
             calls[0] += 1
-            self.step(start + (end - start) * (1.0 - rate ** calls[0]), message)
+            self.step(start + (end - start) * (1.0 - rate ** calls[0]), message, log=False)
 
         return check
 
