@@ -75,7 +75,7 @@ def missing(deps: Sequence[tuple[str, str]] = POINT_CLOUD_DEPS, *, quick: bool =
     for module, requirement in deps:
         try:
             if quick:
-                if module not in sys.modules and importlib.util.find_spec(module) is None:
+                if importlib.util.find_spec(module) is None:  # also None when blocked in sys.modules
                     raise ImportError(f"No module named '{module}'")
             else:
                 _import(module)

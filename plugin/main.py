@@ -29,9 +29,10 @@ class SoilVolumePlugin:
         self.dependencies = DependencyBar(iface)
 
     def initProcessing(self) -> None:  # noqa: N802 - QGIS API
-        if self.provider is None:
+        registry = QgsApplication.processingRegistry()
+        if self.provider is None and registry.providerById("soilvolume") is None:
             self.provider = SoilVolumeProvider()
-            QgsApplication.processingRegistry().addProvider(self.provider)
+            registry.addProvider(self.provider)
 
     def initGui(self) -> None:  # noqa: N802 - QGIS API
         self.initProcessing()
