@@ -61,7 +61,7 @@ def description(field: Field) -> str:
     if unit and unit != "m":
         label = f"{label} ({UNIT_TEXT.get(unit, unit)})"
     if field.default is None and _is_number(field):
-        label = f"{label} [optional, automatic when not set]"
+        label = f"{label} (automatic when not set)"
     return label
 
 
@@ -119,12 +119,23 @@ def _number(field: Field, name: str, label: str, default: Any, optional: bool):
     else:
         kind = QgsProcessingParameterNumber.Integer if _kind(field) == "int" else QgsProcessingParameterNumber.Double
         param = QgsProcessingParameterNumber(name, label, type=kind, defaultValue=default, optional=optional)
+    param.setMetadata({"widget_wrapper": {"decimals": decimals(default, meta.get("lo"))}})
     lo, hi = meta.get("lo"), meta.get("hi")
     if lo is not None:
         param.setMinimum(0.0 if optional else lo)  # optional numbers: 0 also means automatic
     if hi is not None:
         param.setMaximum(hi)
     return param
+
+
+def decimals(*values: float | None) -> int:
+    """Decimals the widget shows: enough for the default and the lower bound (1 to 4), so a
+    radius reads 30.0, not 30.000000."""
+    need = 1
+    for value in values:
+        if isinstance(value, float):
+            need = max(need, next((d for d in range(1, 5) if abs(round(value, d) - value) < 1e-9), 4))
+    return need
 
 
 def read_options(
