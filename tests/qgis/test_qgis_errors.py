@@ -79,14 +79,22 @@ def test_no_overlap(run_alg, scene_dir, tmp_path):
 
 
 def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
+    from qgis.core import QgsProcessingFeedback
     from soilvolume_qgis.plugin import deps
 
+    class Warnings(QgsProcessingFeedback):
+        texts: list[str] = []
+
+        def pushWarning(self, text: str) -> None:  # noqa: N802 - Qt API
+            self.texts.append(text)
+
     monkeypatch.setitem(sys.modules, "open3d", None)  # "import open3d" now fails
-    with pytest.raises(QgsProcessingException) as info:
+    feedback = Warnings()
+    with pytest.raises(QgsProcessingException, match=r"missing Python packages \(open3d\)"):
         run_alg("estimatevolumechange", {
             "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"),
-            "DIFFERENCE": str(tmp_path / "d.tif")})
-    message = str(info.value)
+            "DIFFERENCE": str(tmp_path / "d.tif")}, feedback=feedback)
+    message = "\n".join(feedback.texts)
     assert "cannot import open3d" in message and "press Install" in message
     assert f"--target {deps.site_dir()}" in message and "--no-deps open3d" in message
     assert "--user" not in message and "--break-system-packages" not in message

@@ -118,3 +118,13 @@ def test_option_errors_name_the_parameter(plugin_package):
     assert text == ("Incorrect parameter value for 'Crop radius around the after footprint' "
                     "(RADIUS): must be between 0 and 10000 m (got -1)")
     assert engine.option_error_text(ValueError("plain")) is None
+
+
+def test_a_point_cloud_layer_is_read_from_its_file(estimate, scene_dir):
+    """A loaded layer (here a COPC-provider layer object) gives the engine its source file."""
+    from qgis.core import QgsPointCloudLayer, QgsProcessingContext
+    from soilvolume_qgis.processing import params
+
+    layer = QgsPointCloudLayer(str(scene_dir / "before.las"), "before", "copc")
+    path = params.cloud_path(estimate, {"BEFORE": layer}, "BEFORE", QgsProcessingContext(), "Before")
+    assert path == str(scene_dir / "before.las")
