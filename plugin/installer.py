@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import importlib
 import subprocess
-import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -122,7 +121,3 @@ class DependencyBar:
             bar.pushMessage(TITLE, f"Installing the dependencies failed (see the log): {error[-300:]}",
                             Qgis.MessageLevel.Critical)
 
-
-def python_for_pip() -> str:
-    """The interpreter pip runs with (exposed for the tests and the README)."""
-    return deps.python_executable() or sys.executable

@@ -123,13 +123,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             key: (self.parameterAsFile(parameters, key, context) or None)
             for key in ("BEFORE_PIPELINE", "AFTER_PIPELINE")
         }
-        options = optionparams.read_options(self, parameters, context, feedback)
         registered = self.parameterAsFileOutput(parameters, "REGISTERED", context)
-        options = options.with_(keep_registered_cloud=bool(registered))
         feedback.pushInfo(f"Before point cloud: {before}\nAfter point cloud: {after}")
         work = Path(tempfile.mkdtemp(prefix="soilvolume_", dir=QgsProcessingUtils.tempFolder()))
         try:
-            with engine.engine_errors(feedback, CRS_HINT):
+            with engine.engine_errors(feedback, CRS_HINT):  # option errors name the parameter
+                options = optionparams.read_options(self, parameters, context, feedback).with_(
+                    keep_registered_cloud=bool(registered))
                 result = engine.engine("api").estimate(
                     before, after, work, options, overwrite=True, hooks=engine.hooks(feedback),
                     before_pipeline=pipelines["BEFORE_PIPELINE"],

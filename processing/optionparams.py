@@ -15,6 +15,7 @@ from qgis.core import (
     Qgis,
     QgsProcessingAlgorithm,
     QgsProcessingContext,
+    QgsProcessingException,
     QgsProcessingFeedback,
     QgsProcessingParameterBoolean,
     QgsProcessingParameterCrs,
@@ -68,7 +69,7 @@ def description(field: Field) -> str:
 def parameter(field: Field) -> QgsProcessingParameterDefinition:
     """The Processing parameter of one option field."""
     param = _make(field)
-    param.setHelp(field.metadata.get("help") or "")
+    param.setHelp(engine.qgis_wording(field.metadata.get("help") or ""))  # no command-line flags
     if field.name not in BASIC:
         param.setFlags(param.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
     return param
@@ -150,7 +151,13 @@ def read_options(
         value = _value(alg, field, parameters, context, feedback)
         if value is not None or field.default is None:
             given[field.name] = value
-    return options_class()(**given)
+    try:
+        return options_class()(**given)
+    except Exception as exc:  # an engine option error names the field: word it as the parameter
+        text = engine.option_error_text(exc)
+        if text is None:
+            raise
+        raise QgsProcessingException(text) from exc
 
 
 def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> Any:

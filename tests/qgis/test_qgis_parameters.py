@@ -29,11 +29,14 @@ def option_fields():
 
 
 def test_every_option_is_a_parameter(estimate):
+    from soilvolume_qgis.processing.engine import qgis_wording
+
     for field in option_fields():
         param = estimate.parameterDefinition(field.name.upper())
         assert param is not None, field.name
         assert param.description().startswith(field.metadata["label"]), field.name
-        assert param.help() == field.metadata["help"], field.name
+        assert param.help() == qgis_wording(field.metadata["help"]), field.name
+        assert "--" not in param.help(), field.name
 
 
 def test_choices_are_string_enums(estimate):
@@ -69,7 +72,7 @@ def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
     alg = estimate.create({})  # a fresh instance, initAlgorithm run again
     param = alg.parameterDefinition("MAX_SLOPE")
     assert param is not None and param.description().startswith("Steepest slope")
-    assert param.help() == "steepest slope kept (m per m)"
+    assert param.help() == "Steepest slope kept (m per m)"
 
 
 def test_one_required_input_per_epoch(estimate):
