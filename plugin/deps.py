@@ -11,7 +11,6 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import os
-import site
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -43,10 +42,11 @@ def site_dir() -> Path:
 
 
 def activate(folder: Path | None = None) -> Path:
-    """Append the private folder to ``sys.path`` (with its .pth files) if it exists."""
+    """Append the private folder to ``sys.path`` if it exists. Its .pth files are not run: one
+    from setuptools (pulled in by a dependency) would patch distutils for all of QGIS."""
     folder = folder or site_dir()
     if folder.is_dir() and str(folder) not in sys.path:
-        site.addsitedir(str(folder))
+        sys.path.append(str(folder))
         importlib.invalidate_caches()
     return folder
 
