@@ -32,8 +32,8 @@ from . import engine
 CRS_FIELDS = {"before_crs", "after_crs"}
 POLYGON_FIELDS = {"stable_mask", "zones"}
 SKIPPED = {"keep_registered_cloud"}  # an output destination, not a parameter
-BASIC = {"before_crs", "after_crs", "georeferencing", "cell", "radius", "fine", "correction",
-         "stable_mask", "zones"}
+BASIC = ("before_crs", "after_crs", "cell", "radius", "georeferencing", "fine", "correction", "zones",
+         "stable_mask")  # shown first, in this order; the rest is advanced, in table order
 UNIT_TEXT = {"m": "m", "m2": "m²", "deg": "°"}
 POLYGON_FORMATS = ["gpkg", "shp", "geojson"]
 
@@ -76,7 +76,9 @@ def parameter(field: Field) -> QgsProcessingParameterDefinition:
 
 
 def parameters(only: set[str] | None = None) -> list[QgsProcessingParameterDefinition]:
-    return [parameter(f) for f in option_fields(only)]
+    table = option_fields(only)
+    first = sorted((f for f in table if f.name in BASIC), key=lambda f: BASIC.index(f.name))
+    return [parameter(f) for f in first + [f for f in table if f.name not in BASIC]]
 
 
 def _is_number(field: Field) -> bool:
