@@ -48,6 +48,14 @@ def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
     return crs
 
 
+def raster_wkt(wkt: str | None) -> str | None:
+    """WKT of the horizontal part of ``wkt`` (2D): rasters hold heights in metres, so a vertical
+    CRS in other units (e.g. NAVD88 height in US survey feet) would mislabel them."""
+    if not wkt:
+        return None
+    return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt()
+
+
 def has_vertical(crs: pyproj.CRS) -> bool:
     return crs.is_compound or crs.is_vertical or len(crs.axis_info) == 3
 

@@ -25,6 +25,8 @@ from .types import GridSpec, SoilVolumeError
 from .validate import check_grid_cells
 from .volume import budget, difference
 
+REGISTERING = "registering the after cloud onto the before cloud (coarse, then fine)"
+
 
 class Timer:
     """Per-stage wall times (seconds), in the order they ran."""
@@ -94,9 +96,9 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
     hooks.info(f"georeferencing: {mode} ({why})")
     if mode == "precise":
         options = options.with_(correction="none")
-    hooks.step(15, "registering (coarse, then fine)")
+    hooks.step(15, REGISTERING)
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"),
+        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, REGISTERING),
                        dense=(prep.after.xyz, prep.before.xyz), precise=mode == "precise")
     reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
@@ -115,7 +117,7 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             h_a, n_a, s_a = gridmod.average_height(after_xyz, grid, options.statistic, spread=True)
             del after_xyz
             h_b, n_b, s_b = before_job.result()
-        hooks.step(70, "fitting the RANSAC planes")
+        hooks.step(70, "estimating the vertical bias correction")
         with timer("planes"):
             sel_b = _points_on(prep.before_thin, grid, np.isfinite(h_b))
             p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
@@ -149,7 +151,7 @@ def _prepare(before, after, options: Options, hooks: Hooks, before_pipeline, aft
     from .stream import open_source
 
     src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
-    return prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"))
+    return prepare(src_b, src_a, options, check=hooks.ticker(2, 15, "reading"))
 
 
 def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, reg, options: Options):
@@ -370,7 +372,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
 
     out_tif = check_output_file(out_tif, [cloud])
     hooks.step(5, f"reading {cloud.name}")
-    one = prepare_single(open_source(cloud), crs, options, check=lambda: hooks.step(5, "reading"))
+    one = prepare_single(open_source(cloud), crs, options, check=hooks.ticker(5, 40, "reading"))
     xyz, origin, frame = one.xyz, one.origin, one.frame
     if bounds is not None:
         u = frame.xy_unit
@@ -402,7 +404,7 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
     hooks.step(5, "reading")
     prep = _prepare(before, after, options, hooks, None, None)
     hooks.step(20, "registering")
-    reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
+    reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(20, 90, "registering"),
                    dense=(prep.after.xyz, prep.before.xyz))
     hooks.step(90, "writing the registered cloud")
     with os_errors(out_cloud):
