@@ -21,20 +21,22 @@ from . import engine, params
 
 # output -> (report section, key, description)
 NUMBERS: dict[str, tuple[str, str, str]] = {
-    "NET_VOLUME": ("volume_m3", "net", "Net volume change (m³, fill − cut)"),
+    "NET_VOLUME": ("volume_m3", "net", "Net volume change over the change areas (m³, fill − cut)"),
     "NET_UNCERTAINTY": ("uncertainty_m3", "net", "Net volume change: ± half-width (m³, 95 % by default)"),
-    "CUT_VOLUME": ("volume_m3", "cut", "Cut volume (m³)"),
+    "CUT_VOLUME": ("volume_m3", "cut", "Cut volume over the areas of significant loss (m³)"),
     "CUT_UNCERTAINTY": ("uncertainty_m3", "cut", "Cut volume: ± half-width (m³)"),
-    "FILL_VOLUME": ("volume_m3", "fill", "Fill volume (m³)"),
+    "FILL_VOLUME": ("volume_m3", "fill", "Fill volume over the areas of significant gain (m³)"),
     "FILL_UNCERTAINTY": ("uncertainty_m3", "fill", "Fill volume: ± half-width (m³)"),
     "UNCOMPENSATED_NET_VOLUME": (
         "volume_uncompensated_m3", "net", "Net volume change without the vertical correction (m³)"),
-    "CHANGE_NET_VOLUME": ("volume_change_areas_m3", "net", "Net volume over the detected change areas (m³)"),
-    "CHANGE_NET_UNCERTAINTY": (
-        "uncertainty_m3", "net_change_areas", "Net volume over the change areas: ± half-width (m³)"),
-    "CHANGE_CUT_VOLUME": ("volume_change_areas_m3", "cut", "Cut volume over the change areas (m³)"),
-    "CHANGE_FILL_VOLUME": ("volume_change_areas_m3", "fill", "Fill volume over the change areas (m³)"),
-    "CHANGE_AREA": ("volume_change_areas_m3", "area_m2", "Detected change area (m²)"),
+    "ALL_CELLS_NET_VOLUME": (
+        "volume_all_cells_m3", "net", "Net volume summed over every compared cell, as the paper does (m³)"),
+    "ALL_CELLS_NET_UNCERTAINTY": (
+        "uncertainty_m3", "net_all_cells", "Net volume over every compared cell: ± half-width (m³)"),
+    "ALL_CELLS_CUT_VOLUME": ("volume_all_cells_m3", "cut", "Cut summed over every compared cell (m³, incl. noise)"),
+    "ALL_CELLS_FILL_VOLUME": (
+        "volume_all_cells_m3", "fill", "Fill summed over every compared cell (m³, incl. noise)"),
+    "CHANGE_AREA": ("volume_m3", "area_m2", "Detected change area (m²)"),
     "LEVEL_OF_DETECTION": ("uncertainty_m3", "lod_m", "Level of detection (m)"),
     "COMPARED_AREA": ("grid", "compared_area_m2", "Compared area (m²)"),
     "CELL_SIZE": ("grid", "cell_m", "Cell size (m)"),

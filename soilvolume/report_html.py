@@ -75,14 +75,16 @@ def _no_data(title: str) -> str:
 
 
 VOLUME_ROWS = (  # report key, row label, uncertainty_m3 key prefix of its ± (or None)
-    ("volume_m3", "all compared cells, corrected", ""),
-    ("volume_change_areas_m3", "detected change areas only", "change_areas"),
+    ("volume_m3", "areas of significant change (headline)", ""),
+    ("volume_all_cells_m3", "every compared cell, as the paper sums (incl. noise)", "all_cells"),
     ("volume_thresholded_m3", "cells beyond the level of detection", None),
     ("volume_uncompensated_m3", "without the vertical correction", None),
     ("volume_paper_plane_m3", "with the paper's plane offset d_i", None),
 )
 LABELS = {  # report keys -> words (units in brackets)
     "net": "net (m³)", "cut": "cut (m³)", "fill": "fill (m³)", "net_compared_area": "net, all compared cells (m³)",
+    "net_all_cells": "net, every compared cell (m³)", "net_change_areas": "net, change areas (m³)",
+    "interpolation_sigma_m3": "interpolation error, 1σ (m³)",
     "confidence": "confidence level", "sigma_m": "noise on stable ground, NMAD (m)",
     "lod_m": "level of detection (m)", "nugget_m2": "uncorrelated error variance (m²)",
     "psill_m2": "spatially correlated error variance (m²)", "range_m": "correlation range (m)",

@@ -77,10 +77,12 @@ def test_numbers_and_strings(zoned_run, truth):
     assert results["NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net"])
     assert results["NET_UNCERTAINTY"] > 0
     assert results["CUT_UNCERTAINTY"] > 0 and results["FILL_UNCERTAINTY"] > 0
-    for key, field in (("CHANGE_NET_VOLUME", "net"), ("CHANGE_CUT_VOLUME", "cut"), ("CHANGE_FILL_VOLUME", "fill"),
-                       ("CHANGE_AREA", "area_m2")):
-        assert results[key] == pytest.approx(report["volume_change_areas_m3"][field]), key
-    assert results["CHANGE_NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net_change_areas"])
+    for key, field in (("ALL_CELLS_NET_VOLUME", "net"), ("ALL_CELLS_CUT_VOLUME", "cut"),
+                       ("ALL_CELLS_FILL_VOLUME", "fill")):
+        assert results[key] == pytest.approx(report["volume_all_cells_m3"][field]), key
+    assert results["CHANGE_AREA"] == pytest.approx(report["volume_m3"]["area_m2"])
+    assert results["ALL_CELLS_NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net_all_cells"])
+    assert results["VERDICT"] in ("reliable", "use with caution", "not reliable")
     assert results["LEVEL_OF_DETECTION"] == pytest.approx(report["uncertainty_m3"]["lod_m"])
     assert results["NET_VOLUME"] == pytest.approx(truth["net"], rel=0.1)
     assert "is a significant gain (fill)" in results["SIGNIFICANCE"]
