@@ -41,7 +41,8 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-sys.path.insert(0, str(REPO))
+# never the repository root: it is the QGIS plugin folder, whose processing/ would shadow QGIS's
+# Processing in the same interpreter (the engine comes from the installed package)
 sys.path.insert(0, str(HERE))
 
 import real_terrain  # noqa: E402

@@ -42,7 +42,7 @@ def test_registration_as_rotation_and_shift(page):
 
 def test_volumes_significance_and_no_internal_keys(page, estimate_run):
     text = visible_text(page)
-    assert "detected change areas only" in text
+    assert "areas of significant change (headline)" in text and "every compared cell" in text
     assert estimate_run["SIGNIFICANCE"] in text.replace("&#x27;", "'")
     for key in INTERNAL:
         assert key not in text, key
