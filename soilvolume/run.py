@@ -281,10 +281,18 @@ def _signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray
 
 def _fill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     """Per-cell one-sigma error (m) of refilled cells, measured by refilling known stable cells
-    of the difference with holes of the typical size (0 where nothing was refilled)."""
+    of the difference with holes of the typical size, or smaller ones where the stable ground
+    has no room for them (0 where nothing was refilled)."""
     if not filled_mask.any():
         return np.zeros(diff.shape)
-    s = holes.fill_error(diff, stable, options.fill_method, holes.typical_radius(filled_mask), seed=options.seed)
+    radius, s = holes.typical_radius(filled_mask), float("nan")
+    while not np.isfinite(s) and radius >= 1.0:  # smaller test holes where stable ground is patchy
+        s = holes.fill_error(diff, stable, options.fill_method, radius, seed=options.seed)
+        radius /= 2.0
+    if not np.isfinite(s):  # no room to measure it: one stable-ground noise level per cell
+        from .robust import nmad
+
+        s = nmad(diff[stable])
     return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
 
 

@@ -21,7 +21,7 @@ from scipy import ndimage, optimize
 from .robust import nmad
 from .types import GridSpec
 
-INTERP_FRACTION = 0.15
+INTERP_FRACTION = 0.35  # one sigma, fully correlated: refills over change edges overshoot convex toes and rims
 
 
 def z_value(confidence: float = 0.95) -> float:
