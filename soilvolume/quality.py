@@ -17,7 +17,7 @@ PRIOR_MARGIN = 0.8  # a pose using more than this share of the prior is suspicio
 
 
 def assess(report: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndarray, cell_area: float,
-           prior: dict) -> dict:
+           prior: dict, diff: np.ndarray | None = None) -> dict:
     """``{"verdict", "trusted", "messages"}`` for a finished run (see module)."""
     out: list[tuple[str, str]] = []
     v, u = report["volume_m3"], report["uncertainty_m3"]
@@ -42,8 +42,9 @@ def assess(report: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndar
         if fit is not None and np.isfinite(fit) and fit < 0.5:
             out.append(("caution", f"only {fit:.0%} of the after survey fits the before surface after registration"))
     if used == "precise":
-        shift = report["correction"]["params"].get("residuals", {}).get("mean", 0.0)
-        if np.isfinite(shift) and abs(shift) > 0.05:
+        ground = diff[stable & np.isfinite(diff)] if diff is not None else np.empty(0)
+        shift = float(np.median(ground)) if ground.size else 0.0
+        if abs(shift) > 0.05:
             out.append(("caution", f"the ground outside the change areas differs by {shift:+.2f} m between the "
                         "surveys and was not corrected (coordinates used as georeferenced): check the datums, or "
                         "use --georeferencing gps if it is a survey offset"))

@@ -9,6 +9,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
 from . import grid as gridmod
 from . import holes, planes
@@ -139,7 +140,8 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
         from .quality import assess
 
         prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-        report["quality"] = assess(report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior)
+        report["quality"] = assess(report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior,
+                                   vols["diff"])
         for line in report["quality"]["messages"]:
             hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_json(out.path("report.json"), report)
@@ -231,10 +233,11 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
         lod_cell = np.full(diff.shape, lod)
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
-    noise = _signed_budget(diff, fill_area & stable, cut_area & stable, area)  # detections of noise
+    # stable ground for the error model: never a cell of (or next to) a detected change area
+    stable = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
     shift = _pose_effect(f_a, grid, moved)
     reg_v = _signed_budget(shift, fill_area, cut_area, area)
-    extra = {k: float(np.hypot(noise[k], reg_v[k])) for k in ("net", "cut", "fill")}
+    extra = {k: abs(reg_v[k]) for k in ("net", "cut", "fill")}
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
                              n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma,
                              extra_sigma=extra)
@@ -242,7 +245,7 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
         "stable": stable, "params": params,
-        "uncertainty": {**unc, "lod_m": lod, "detected_noise_m3": noise, "registration_m3": reg_v},
+        "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v},
         "change_mask": change,
         "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
