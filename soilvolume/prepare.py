@@ -73,6 +73,14 @@ def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, wind
 THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
+def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, poly: np.ndarray) -> Source:
+    """``src`` read only where it meets the bounding box of the local polygon ``poly`` (VPC tiles
+    and COPC nodes outside it are skipped), when the file is in the frame's CRS and metres."""
+    if src.raw is not None or not (crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
+        return src
+    return src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])
+
+
 def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
     """(source to stream, ground mode for streaming, note): SMRF needs the whole cloud."""
     if options.ground != "filter":
@@ -106,7 +114,7 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     if len(a.thin) < 3:
         raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
     poly = footprint(a.thin[:, :2], options.radius)
-    before, mode_b, note_b = _filtered(before, crs_b, options)
+    before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
     reach = options.max_gps_shift + 2.0
     box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach)

@@ -2,20 +2,25 @@
 keep only the points later steps need (float32, local coordinates) and build the voxel-thinned
 registration subset on the way, so memory stays bounded by the kept points, not the file.
 
-Non-LAS files and clouds produced by a preparation pipeline arrive whole and are one chunk.
+A source is a LAS/LAZ file, a COPC file or a virtual point cloud (``.vpc``) of such tiles; with a
+``region`` only the VPC tiles and COPC octree nodes meeting it are read (plain LAS/LAZ files are
+read whole and the caller filters). Non-LAS files and clouds produced by a preparation pipeline
+arrive whole and are one chunk.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from .copc import copc_chunks, is_copc
 from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
 from .types import SoilVolumeError
+from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
 GROUND = 2
@@ -32,14 +37,30 @@ class Source:
     hi: np.ndarray
     has_class: bool
     raw: RawPoints | None = None  # whole cloud already in memory (non-LAS, pipeline output)
+    vpc: Vpc | None = None  # a virtual point cloud: its tiles
+    region: tuple[np.ndarray, np.ndarray] | None = None  # x/y box (file CRS) that reads may stop at
 
     def chunks(self, size: int | None = None) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
         """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
-        points (default ``CHUNK``)."""
+        points (default ``CHUNK``); with a ``region``, chunks may hold points outside it."""
         if self.raw is not None:
             yield self.raw.xyz, self.raw.classification
             return
-        yield from las_chunks(Path(self.path), self.count, size or CHUNK)
+        lo, hi = self.region if self.region is not None else (None, None)
+        paths = [t.path for t in self.vpc.tiles_meeting(lo, hi)] if self.vpc is not None else [self.path]
+        for path in paths:
+            yield from file_chunks(path, self.region, size or CHUNK)
+
+    def within(self, lo, hi) -> Source:
+        """This source, read only where it can meet the x/y box lo..hi (file CRS)."""
+        return replace(self, region=(np.asarray(lo[:2], float), np.asarray(hi[:2], float)))
+
+    def tiles(self) -> list[str]:
+        """The files that a read of this source opens."""
+        if self.vpc is None:
+            return [self.path]
+        lo, hi = self.region if self.region is not None else (None, None)
+        return [t.path for t in self.vpc.tiles_meeting(lo, hi)]
 
     def materialize(self) -> RawPoints:
         """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
@@ -50,16 +71,35 @@ class Source:
         return RawPoints(np.concatenate([x for x, _ in parts]), cls, self.crs_wkt, self.path)
 
 
+def file_chunks(path: str, region, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only the octree
+    nodes meeting it, anything else is streamed whole."""
+    if region is not None and is_copc(path):
+        yield from copc_chunks(path, region[0], region[1], size=size)
+        return
+    yield from las_chunks(Path(path), _header(Path(path)).count, size)
+
+
 def open_source(path, pipeline=None) -> Source:
-    """A streamable LAS/LAZ source from its header, else the whole cloud read now."""
+    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now."""
     p = Path(path)
     if pipeline:
         from .pipeline import prepare_cloud_from_file
 
         return from_raw(prepare_cloud_from_file(pipeline, p))
+    if p.suffix.lower() == ".vpc":
+        return _open_vpc(p)
     _check_readable(p)
     if p.suffix.lower() not in LAS_SUFFIXES:
         return from_raw(read_points(p))
+    src = _header(p)
+    if src.count == 0:
+        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points)")
+    return src
+
+
+def _header(p: Path) -> Source:
+    """A LAS/LAZ/COPC file's source from its header."""
     import laspy
 
     try:
@@ -67,15 +107,24 @@ def open_source(path, pipeline=None) -> Source:
             h = reader.header
             wkt = las_crs_wkt(h, p)
             dims = set(h.point_format.dimension_names)
-            src = Source(str(p), wkt, int(h.point_count), np.asarray(h.mins, float),
-                         np.asarray(h.maxs, float), "classification" in dims)
+            return Source(str(p), wkt, int(h.point_count), np.asarray(h.mins, float),
+                          np.asarray(h.maxs, float), "classification" in dims)
     except SoilVolumeError:
         raise
     except Exception as exc:
         raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({exc})") from exc
-    if src.count == 0:
-        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points)")
-    return src
+
+
+def _open_vpc(p: Path) -> Source:
+    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from its items."""
+    vpc = read_vpc(p)
+    first = _header(Path(vpc.tiles[0].path))
+    if vpc.count == 0:
+        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
+    lo, hi = vpc.lo, vpc.hi
+    lo[2] = first.lo[2] if not np.isfinite(lo[2]) else lo[2]
+    hi[2] = first.hi[2] if not np.isfinite(hi[2]) else hi[2]
+    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
 
 
 def from_raw(raw: RawPoints) -> Source:

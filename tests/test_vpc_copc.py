@@ -1,0 +1,141 @@
+"""Tiled inputs: virtual point clouds (.vpc) and COPC files, read whole or within a box."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+from copc_writer import write_copc
+
+from soilvolume.io import write_las
+from soilvolume.stream import open_source
+from soilvolume.types import SoilVolumeError
+from soilvolume.vpc import read_vpc, write_vpc
+
+UTM = "EPSG:32654"
+
+
+def _cloud(n: int = 40_000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    xyz = np.c_[rng.uniform(500_000, 500_100, n), rng.uniform(4_000_000, 4_000_080, n), rng.uniform(10, 20, n)]
+    return np.round(xyz, 3), rng.integers(1, 3, n).astype(np.uint8)
+
+
+def _tiles(folder: Path, xyz: np.ndarray, cls: np.ndarray, crss=(UTM,) * 4) -> list[Path]:
+    """Four quadrant tiles of the cloud, each in its CRS (coordinates unchanged)."""
+    import pyproj
+
+    cx, cy = 500_050, 4_000_040
+    paths = []
+    for k, (east, north) in enumerate([(0, 0), (1, 0), (0, 1), (1, 1)]):
+        m = ((xyz[:, 0] >= cx) == bool(east)) & ((xyz[:, 1] >= cy) == bool(north))
+        p = folder / f"tile_{k}.laz"
+        write_las(p, xyz[m], pyproj.CRS(crss[k]).to_wkt(), cls[m])
+        paths.append(p)
+    return paths
+
+
+def _read_all(src) -> np.ndarray:
+    parts = [x for x, _ in src.chunks()]
+    return np.concatenate(parts) if parts else np.empty((0, 3))
+
+
+def _sorted(xyz: np.ndarray) -> np.ndarray:
+    return xyz[np.lexsort(xyz.T[::-1])]
+
+
+@pytest.mark.parametrize("relative", [True, False])
+def test_vpc_hrefs_read_every_tile(tmp_path, relative):
+    xyz, cls = _cloud()
+    (tmp_path / "tiles").mkdir()
+    tiles = _tiles(tmp_path / "tiles", xyz, cls)
+    vpc = write_vpc(tmp_path / "survey.vpc", tiles, relative=relative)
+    hrefs = [f["assets"]["data"]["href"] for f in json.loads(vpc.read_text())["features"]]
+    assert all(h.startswith("tiles/") for h in hrefs) if relative else all(Path(h).is_absolute() for h in hrefs)
+    src = open_source(vpc)
+    assert src.count == len(xyz) and src.vpc is not None and "UTM zone 54N" in src.crs_wkt
+    np.testing.assert_allclose(_sorted(_read_all(src)), _sorted(xyz), atol=1e-6)
+
+
+def test_vpc_moved_with_relative_hrefs(tmp_path):
+    """A folder with a VPC and relative hrefs can be moved as a whole."""
+    xyz, cls = _cloud()
+    (tmp_path / "a" / "tiles").mkdir(parents=True)
+    tiles = _tiles(tmp_path / "a" / "tiles", xyz, cls)
+    write_vpc(tmp_path / "a" / "survey.vpc", tiles)
+    shutil.move(tmp_path / "a", tmp_path / "b")
+    assert len(_read_all(open_source(tmp_path / "b" / "survey.vpc"))) == len(xyz)
+
+
+def test_vpc_reads_only_tiles_meeting_the_box(tmp_path):
+    xyz, cls = _cloud()
+    tiles = _tiles(tmp_path, xyz, cls)
+    src = open_source(write_vpc(tmp_path / "s.vpc", tiles)).within((500_010, 4_000_010), (500_030, 4_000_030))
+    assert [Path(t).name for t in src.tiles()] == ["tile_0.laz"]
+    got = _read_all(src)
+    assert len(got) == int(((xyz[:, 0] < 500_050) & (xyz[:, 1] < 4_000_040)).sum())
+
+
+def test_vpc_mixed_crs_refused(tmp_path):
+    xyz, cls = _cloud()
+    tiles = _tiles(tmp_path, xyz, cls, crss=(UTM, UTM, "EPSG:32655", UTM))
+    with pytest.raises(SoilVolumeError, match=r"different CRSs.*tile_0.laz.*tile_2.laz"):
+        read_vpc(write_vpc(tmp_path / "s.vpc", tiles))
+
+
+def test_vpc_missing_tile_named(tmp_path):
+    xyz, cls = _cloud()
+    tiles = _tiles(tmp_path, xyz, cls)
+    vpc = write_vpc(tmp_path / "s.vpc", tiles)
+    tiles[3].unlink()
+    with pytest.raises(SoilVolumeError, match=r"s\.vpc: tile tile_3\.laz not found"):
+        open_source(vpc)
+
+
+def test_vpc_not_a_feature_collection(tmp_path):
+    bad = tmp_path / "bad.vpc"
+    bad.write_text('{"type": "Feature"}')
+    with pytest.raises(SoilVolumeError, match="not a virtual point cloud"):
+        open_source(bad)
+
+
+def test_vpc_wgs84_bbox_when_no_proj_bbox(tmp_path):
+    xyz, cls = _cloud()
+    tiles = _tiles(tmp_path, xyz, cls)
+    vpc = write_vpc(tmp_path / "s.vpc", tiles)
+    doc = json.loads(vpc.read_text())
+    for f in doc["features"]:
+        del f["properties"]["proj:bbox"]
+    vpc.write_text(json.dumps(doc))
+    src = open_source(vpc).within((500_010, 4_000_010), (500_030, 4_000_030))
+    assert [Path(t).name for t in src.tiles()] == ["tile_0.laz"]
+
+
+def test_copc_box_read_equals_full_read_filtered(tmp_path):
+    import pyproj
+
+    xyz, cls = _cloud(60_000)
+    path = write_copc(tmp_path / "c.copc.laz", xyz, cls, pyproj.CRS(UTM).to_wkt())
+    full = laspy.read(path)
+    assert full.header.point_count == len(xyz)
+    src = open_source(path)
+    assert src.count == len(xyz) and src.crs_wkt
+    np.testing.assert_allclose(_sorted(_read_all(src)), _sorted(xyz), atol=1e-6)
+    lo, hi = np.array([500_020.0, 4_000_015.0]), np.array([500_045.0, 4_000_050.0])
+    inside = ((xyz[:, :2] >= lo) & (xyz[:, :2] <= hi)).all(axis=1)
+    got = _read_all(src.within(lo, hi))
+    np.testing.assert_allclose(_sorted(got), _sorted(xyz[inside]), atol=1e-6)
+
+
+def test_copc_tiles_in_a_vpc(tmp_path):
+    xyz, cls = _cloud()
+    tiles = _tiles(tmp_path, xyz, cls)
+    copcs = [write_copc(tmp_path / f"{t.stem}.copc.laz", laspy.read(t).xyz, seed=k) for k, t in enumerate(tiles)]
+    src = open_source(write_vpc(tmp_path / "s.vpc", copcs)).within((500_010, 4_000_010), (500_030, 4_000_030))
+    got = _read_all(src)
+    inside = ((xyz[:, :2] >= (500_010, 4_000_010)) & (xyz[:, :2] <= (500_030, 4_000_030))).all(axis=1)
+    np.testing.assert_allclose(_sorted(got), _sorted(xyz[inside]), atol=1e-6)
