@@ -67,9 +67,15 @@ def average_height(
     if statistic not in ("mean", "median", "robust-mean"):
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     ids, ok = cell_ids(xyz, grid)
-    z = np.asarray(xyz[ok, 2], dtype=np.float64)
-    n = grid.rows * grid.cols
-    shape = (grid.rows, grid.cols)
+    return cell_heights(ids, np.asarray(xyz[ok, 2], dtype=np.float64), (grid.rows, grid.cols), statistic, k_mad)
+
+
+def cell_heights(
+    ids: np.ndarray, z: np.ndarray, shape: tuple[int, int], statistic: str = "robust-mean", k_mad: float = 3.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
+    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid)."""
+    n = shape[0] * shape[1]
     if statistic == "mean" or len(z) == 0:
         counts = np.bincount(ids, minlength=n)
         return _mean(ids, z, counts, n).reshape(shape), counts.reshape(shape)

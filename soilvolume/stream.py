@@ -197,6 +197,10 @@ class ColumnThinner:
         has = self.sums[3] > 0
         return (self.sums[:3, has] / self.sums[3, has]).T.copy()
 
+    def counts(self) -> np.ndarray:
+        """The number of points behind each centroid of :meth:`result` (same order)."""
+        return self.sums[3, self.sums[3] > 0].astype(np.int64)
+
 
 class _Parts:
     """Kept points appended into one float32 buffer sized by the header count (pages never
@@ -251,7 +255,7 @@ def load(
     cloud and is done by the caller), convert with ``to_local`` (file CRS -> local frame), keep
     the points for which ``keep`` is true (all when None) and feed them to ``thinner``; only
     those within the x/y ``box`` (lo, hi; everything when None) are kept at full resolution."""
-    parts = _Parts(src.count)
+    parts = _Parts(src.count if box is None or (box[1] >= box[0]).all() else 0)
     points = used = 0
     use_class: bool | None = None
     reading = 0.0
@@ -284,4 +288,5 @@ def load(
         parts.append(local)
     kept = parts.result()
     note = "class 2 (ground)" if use_class else "all points"
-    return Loaded(kept, thinner.result(), points, used, note, {"read_s": reading, "cropped": cropped})
+    extra = {"read_s": reading, "cropped": cropped, "counts": thinner.counts()}
+    return Loaded(kept, thinner.result(), points, used, note, extra)

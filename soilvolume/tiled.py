@@ -1,0 +1,259 @@
+"""The distributed engine: the same method as the in-process run, with the point work done tile
+by tile as Dask tasks, so no process holds a survey's points.
+
+1. Registration as in-process, on column-thinned subsets streamed once (no full-resolution copy).
+2. The shared grid is cut into tiles; each task streams only what meets its tile (VPC tiles,
+   COPC nodes; plain LAS/LAZ files are streamed and filtered), assigns points to the *global*
+   grid's cells and computes its cells' heights with :func:`grid.cell_heights`, so a cell gets the
+   same points, hence the same height, as in-process (cells need no halo: a point belongs to one).
+3. The per-tile height and count rasters are gathered (4 small numbers per cell, against ~8 points
+   per cell) and the raster steps (refill, holes, correction fitted once on the whole grid,
+   uncertainty, budgets) run exactly as in-process; outputs are written block by block as COGs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import planes
+from .api import Hooks, Result
+from .cog import write_cog
+from .crop import PolygonMask, footprint, inside, polygon_area
+from .crs import WorkFrame
+from .grid import cell_heights, cell_ids, choose_cell
+from .options import Options
+from .outputs import OutputDir
+from .prepare import GROUND, Prepared, _local, prepare
+from .register import register, transform_points
+from .report import write_json
+from .schedule import Schedule, client, worker_gb
+from .stream import open_source
+from .types import GridSpec, SoilVolumeError
+
+TILE_BYTES_PER_POINT = 120.0  # a task's peak per point of its tile (both epochs, ids, sort keys, chunk)
+MIN_TILE, MAX_TILE = 64, 4096  # tile side (cells)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Everything a tile task needs (picklable: sent to the workers)."""
+
+    before: str
+    after: str
+    crs_b: str  # WKT of each file's CRS (header or override)
+    crs_a: str
+    frame: WorkFrame
+    origin: np.ndarray
+    grid: GridSpec
+    transform: np.ndarray  # after -> before, local frame
+    ground: tuple[bool, bool]  # (before, after): class 2 only
+    crop: np.ndarray  # the before crop polygon (local), as in-process
+    statistic: str
+
+
+Window = tuple[int, int, int, int]  # r0, r1, c0, c1
+
+
+def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...]]:
+    """(window, (h_after, n_after, h_before, n_before)) of one tile: both epochs' points on its
+    cells, their heights and counts."""
+    h_b, n_b = _epoch(plan, plan.before, plan.crs_b, win, None, plan.ground[0], PolygonMask(plan.crop))
+    h_a, n_a = _epoch(plan, plan.after, plan.crs_a, win, plan.transform, plan.ground[1], None)
+    return win, (h_a, n_a.astype(np.int32), h_b, n_b.astype(np.int32))
+
+
+def _epoch(plan: Plan, path: str, crs_wkt: str, win: Window, transform, ground: bool, keep):
+    import pyproj
+
+    from .run import transform_points32
+
+    crs = pyproj.CRS.from_wkt(crs_wkt)
+    to_local = _local(crs, plan.frame, plan.origin, path)
+    src = open_source(path)
+    box = _read_box(plan, crs, win, transform)
+    if box is not None:
+        src = src.within(*box)
+    ids, zs = [], []
+    for xyz, cls in src.chunks():
+        if ground and cls is not None:
+            xyz = xyz[cls == GROUND]
+        local = to_local(xyz)
+        if keep is not None:
+            local = local[keep(local)]
+        local = local.astype(np.float32)
+        if transform is not None:
+            local = transform_points32(local, transform)
+        i, z = _window_cells(local, plan.grid, win)
+        ids.append(i)
+        zs.append(z)
+    shape = (win[1] - win[0], win[3] - win[2])
+    return cell_heights(np.concatenate(ids), np.concatenate(zs), shape, plan.statistic)
+
+
+def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window) -> tuple[np.ndarray, np.ndarray]:
+    """Flat cell ids within the window, and heights, of the points on the window's cells of
+    ``grid`` (cells assigned on the whole grid, exactly as in-process)."""
+    ids, ok = cell_ids(xyz32, grid)
+    row, col = np.divmod(ids, grid.cols)
+    m = (row >= win[0]) & (row < win[1]) & (col >= win[2]) & (col < win[3])
+    local_ids = (row[m] - win[0]) * (win[3] - win[2]) + (col[m] - win[2])
+    return local_ids, np.asarray(xyz32[ok, 2][m], dtype=np.float64)
+
+
+def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:
+    """The x/y box (file CRS) a tile's points can come from, for files in the frame's CRS and
+    metres (else None: read everything); ``transform`` maps the file's local points to the grid."""
+    from .crs import z_unit
+
+    if not (crs.equals(plan.frame.crs) and plan.frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
+        return None
+    g, o = plan.grid, plan.origin
+    x0, x1 = g.xmin + win[2] * g.cell - o[0], g.xmin + win[3] * g.cell - o[0]
+    y0, y1 = g.ymax - win[1] * g.cell - o[1], g.ymax - win[0] * g.cell - o[1]
+    corners = np.array([[x, y, 0.0] for x in (x0, x1) for y in (y0, y1)])
+    margin = g.cell
+    if transform is not None:  # back into the file's frame: the inverse rigid transform
+        r, t = transform[:3, :3], transform[:3, 3]
+        corners = (corners - t) @ r
+        margin += 0.02 * (x1 - x0 + y1 - y0) + 1.0  # tilt of the unknown z
+    lo, hi = corners[:, :2].min(axis=0) - margin + o[:2], corners[:, :2].max(axis=0) + margin + o[:2]
+    return lo, hi
+
+
+def tiles(grid: GridSpec, side: int) -> list[Window]:
+    """The grid cut into tiles of ``side`` x ``side`` cells (row-major)."""
+    return [(r, min(r + side, grid.rows), c, min(c + side, grid.cols))
+            for r in range(0, grid.rows, side) for c in range(0, grid.cols, side)]
+
+
+def tile_side(options: Options, points_per_cell: float, task_gb: float) -> int:
+    """Tile side (cells): ``options.tile_cells``, else what a task's memory share holds."""
+    if options.tile_cells > 0:
+        return int(options.tile_cells)
+    points = min(4e6, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT)
+    return int(np.clip(math.sqrt(points / max(points_per_cell, 1e-3)), MIN_TILE, MAX_TILE))
+
+
+def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0.5) -> float:
+    """:func:`grid.cell_for` from the thinned subset: the before points behind the column
+    centroids inside the registered after footprint, over the footprint's area."""
+    poly = footprint(after_thin[:, :2])
+    ins = inside(prep.before_thin[:, :2], poly)
+    return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly), minimum=minimum)
+
+
+def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks) -> tuple[np.ndarray, ...]:
+    """Run every tile on the client ``c`` and assemble (h_a, n_a, h_b, n_b) on the grid."""
+    from dask.distributed import as_completed
+
+    g = plan.grid
+    h_a, h_b = np.full((g.rows, g.cols), np.nan), np.full((g.rows, g.cols), np.nan)
+    n_a, n_b = np.zeros((g.rows, g.cols), np.int64), np.zeros((g.rows, g.cols), np.int64)
+    futures = c.map(grid_tile, [plan] * len(windows), windows, pure=False)
+    for k, fut in enumerate(as_completed(futures), 1):
+        (r0, r1, c0, c1), (ha, na, hb, nb) = fut.result()
+        h_a[r0:r1, c0:c1], n_a[r0:r1, c0:c1], h_b[r0:r1, c0:c1], n_b[r0:r1, c0:c1] = ha, na, hb, nb
+        fut.release()
+        hooks.step(55 + 15 * k / len(windows), f"gridded tile {k}/{len(windows)}")
+    return h_a, n_a, h_b, n_b
+
+
+def schedule_for(before, after, options: Options, pipeline: bool) -> Schedule:
+    """The schedule of a run: ``--scheduler``, or for ``auto`` in-process when the pair's points
+    (from the LAS/COPC/VPC headers) fit the memory budget; pipelines and other formats run
+    in-process."""
+    from .schedule import choose, parse
+
+    if options.scheduler == "auto":
+        points = [_header_points(p) for p in (before, after)]
+        if pipeline or None in points:
+            return Schedule("none")
+        return choose("auto", options.memory_limit, sum(points))
+    chosen = parse(options.scheduler)
+    if pipeline and chosen.kind != "none":
+        raise SoilVolumeError(f"--scheduler {options.scheduler}: preparation pipelines run in-process only "
+                              "(use --scheduler none)")
+    return chosen
+
+
+def _header_points(path) -> int | None:
+    """A LAS/LAZ/COPC file's or a VPC's point count from its header(s); None for other formats."""
+    from pathlib import Path
+
+    from .io import LAS_SUFFIXES
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in LAS_SUFFIXES | {".vpc"}:
+        return None
+    return open_source(path).count
+
+
+def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
+                   schedule: Schedule) -> Result:
+    """:func:`run._estimate` with the point work as Dask tasks on ``schedule``."""
+    from . import run
+
+    if options.ground == "filter":
+        raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
+    hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
+    with timer("crop"):
+        src_b, src_a = open_source(before), open_source(after)
+        prep = prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"), full=False)
+    timer.s["read"] = prep.read_s
+    timer.s["crop"] -= prep.read_s
+    hooks.step(15, "registering (coarse, then fine)")
+    with timer("register"):
+        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"))
+    timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
+    timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
+    after_thin = transform_points(prep.after_thin, reg.transform)
+    cell = options.cell if options.cell else cell_from_columns(prep, after_thin)
+    grid = run.shared_grid(prep, after_thin, options.with_(cell=cell))
+    plan = Plan(str(before), str(after), prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"],
+                prep.frame, prep.origin, grid, reg.transform, prep.ground,
+                footprint(prep.after_thin[:, :2], options.radius), options.statistic)
+    per_cell = (prep.inputs["before"]["points_used"] + prep.inputs["after"]["points_used"]) / max(
+        1.0, polygon_area(footprint(prep.before_thin[:, :2])) / cell**2)
+    side = tile_side(options, per_cell, worker_gb(schedule, options.memory_limit))
+    windows = tiles(grid, side)
+    hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
+    with timer("grids"), client(schedule, options.memory_limit) as c:
+        h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, hooks)
+    with timer("planes"):
+        sel_b = run._points_on(prep.before_thin, grid, np.isfinite(h_b))
+        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+        p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+        d_i = planes.plane_offset(p_b, p_a, grid)
+    hooks.step(75, "computing the difference and volumes")
+    with timer("volume"):
+        vols = run._volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
+        vols["dem_after"] = h_a + prep.origin[2]
+    hooks.step(85, "writing outputs (COG)")
+    with timer("write"):
+        write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
+    with timer("report"):
+        report = run._report(prep, reg, grid, vols, p_b, p_a, options, timer)
+        report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side}
+        write_json(out.path("report.json"), report)
+        run._html(out, report, vols, grid)
+    return Result(report)
+
+
+def write_outputs(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, origin, options: Options) -> None:
+    """The five rasters of a run, as COGs written block by block."""
+    z0 = float(origin[2])
+    layers = [
+        ("dem_before.tif", lambda r, c: h_b[r, c] + z0, "average height, before (m)", "float32"),
+        ("dem_after.tif", lambda r, c: h_a[r, c] + z0, "average height, after (m)", "float32"),
+        ("difference.tif", lambda r, c: vols["diff"][r, c],
+         f"H_after - H_before - correction ({options.correction}) (m)", "float32"),
+        ("plane_offset.tif", lambda r, c: vols["offset"][r, c],
+         f"vertical correction d_i subtracted ({options.correction}) (m)", "float32"),
+        ("filled_mask.tif", lambda r, c: vols["filled_mask"][r, c].astype("uint8"),
+         "1 = difference interpolated (sparse cell or filled hole)", "uint8"),
+    ]
+    for name, piece, desc, dtype in layers:
+        write_cog(out.path(name), grid, piece, desc, "" if dtype == "uint8" else "metre", dtype)
