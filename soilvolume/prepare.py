@@ -38,6 +38,7 @@ class Prepared:
     read_s: float = 0.0  # of the streaming time, seconds spent reading and decoding chunks
     before_counts: np.ndarray | None = None  # points behind each before_thin centroid
     ground: tuple[bool, bool] = (False, False)  # (before, after) streamed as class 2 only
+    index: tuple = (None, None)  # (before, after): chunk boxes of single files (Source.index)
 
 
 def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyproj.CRS:
@@ -127,7 +128,7 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
     reach = options.max_gps_shift + 2.0
     box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach) if full else NOTHING
     b = load(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
-             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box)
+             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box, not full)
     if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
         raise SoilVolumeError(
             f"{before.path} and {after.path} do not overlap: the before cloud has "
@@ -143,7 +144,7 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
     return Prepared(
         Cloud(b.xyz, origin, wkt, before.path), Cloud(a.xyz, origin, wkt, after.path),
         frame, origin, inputs, b.thin, a.thin, voxel, _all_points(original_after, to_a), read_s,
-        b.extra["counts"], (b.note == CLASS_NOTE, a.note == CLASS_NOTE),
+        b.extra["counts"], (b.note == CLASS_NOTE, a.note == CLASS_NOTE), (b.extra["index"], a.extra["index"]),
     )
 
 
@@ -187,7 +188,8 @@ def _load_whole(src: Source, crs: pyproj.CRS, to_local, lo: np.ndarray, hi: np.n
     loaded, filter note)."""
     src, mode, note = _filtered(src, crs, options)
     pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
-    return src, load(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box), note
+    return src, load(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box,
+                     box is NOTHING), note
 
 
 def _all_points(src: Source, to_local):

@@ -70,20 +70,42 @@ def choose(spec: str, memory_limit: float, points: int) -> Schedule:
 
 @contextmanager
 def client(schedule: Schedule, memory_limit: float) -> Iterator:
-    """A ``dask.distributed.Client`` for ``schedule`` (threads: in this process; local: a
-    LocalCluster sharing the memory budget among its worker processes), closed on exit."""
+    """A future of a ``dask.distributed.Client`` for ``schedule``, started in the background
+    (threads: in this process; local: a LocalCluster sharing the memory budget among its worker
+    processes), closed on exit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1) as pool, _client(schedule, memory_limit, pool) as fut:
+        yield fut
+
+
+@contextmanager
+def _client(schedule: Schedule, memory_limit: float, pool) -> Iterator:
+    fut = pool.submit(_start, schedule, memory_limit)
+    try:
+        yield fut
+    finally:
+        try:
+            cluster, c = fut.result()
+        except Exception:
+            cluster = c = None
+        if c is not None:
+            c.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _start(schedule: Schedule, memory_limit: float):
+    """(LocalCluster or None, Client) for ``schedule``."""
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - a dependency
         raise SoilVolumeError(f"--scheduler {schedule}: needs dask[distributed] ({exc})") from exc
     if schedule.kind == "tcp":
         try:
-            c = Client(schedule.address, timeout="20s")
+            return None, Client(schedule.address, timeout="20s")
         except OSError as exc:
             raise SoilVolumeError(f"--scheduler {schedule.address}: cannot reach the Dask scheduler ({exc})") from exc
-        with c:
-            yield c
-        return
     processes = schedule.kind == "local"
     per_worker = budget_gb(memory_limit) / schedule.workers
     cluster = LocalCluster(
@@ -91,8 +113,7 @@ def client(schedule: Schedule, memory_limit: float) -> Iterator:
         processes=processes, memory_limit=f"{per_worker:.3f}GiB" if processes else None,
         dashboard_address=None, silence_logs=40,
     )
-    with cluster, Client(cluster) as c:
-        yield c
+    return cluster, Client(cluster)
 
 
 def worker_gb(schedule: Schedule, memory_limit: float) -> float:

@@ -39,6 +39,7 @@ class Source:
     raw: RawPoints | None = None  # whole cloud already in memory (non-LAS, pipeline output)
     vpc: Vpc | None = None  # a virtual point cloud: its tiles
     region: tuple[np.ndarray, np.ndarray] | None = None  # x/y box (file CRS) that reads may stop at
+    index: tuple | None = None  # of a single file: (start, count, x/y lo, x/y hi) of each chunk read
 
     def chunks(self, size: int | None = None) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
         """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
@@ -46,9 +47,10 @@ class Source:
         if self.raw is not None:
             yield self.raw.xyz, self.raw.classification
             return
-        lo, hi = self.region if self.region is not None else (None, None)
-        paths = [t.path for t in self.vpc.tiles_meeting(lo, hi)] if self.vpc is not None else [self.path]
-        for path in paths:
+        if self.index is not None and self.region is not None and not is_copc(self.path):
+            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK)
+            return
+        for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK)
 
     def within(self, lo, hi) -> Source:
@@ -69,6 +71,29 @@ class Source:
         parts = list(self.chunks())
         cls = None if parts[0][1] is None else np.concatenate([c for _, c in parts])
         return RawPoints(np.concatenate([x for x, _ in parts]), cls, self.crs_wkt, self.path)
+
+
+def _meeting(index, lo, hi) -> list[tuple[int, int]]:
+    """(start, count) of the indexed chunks whose x/y box meets lo..hi."""
+    return [(s, n) for s, n, a, b in index if (a <= hi).all() and (lo <= b).all()]
+
+
+def las_ranges(path: str, ranges: list[tuple[int, int]], size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+            for start, count in ranges:
+                reader.seek(start)
+                for i in range(0, count, size):
+                    pts = reader.read_points(min(size, count - i))
+                    xyz = np.empty((len(pts), 3))
+                    xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
+                    yield xyz, (np.asarray(pts.classification) if has_cls else None)
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
 
 
 def file_chunks(path: str, region, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
@@ -250,16 +275,19 @@ def load(
     src: Source, to_local: Callable[[np.ndarray], np.ndarray], mode: str,
     keep: Callable[[np.ndarray], np.ndarray] | None, thinner: ColumnThinner,
     check: Callable[[], None] | None = None, box: tuple[np.ndarray, np.ndarray] | None = None,
+    indexed: bool = False,
 ) -> Loaded:
     """Stream ``src``: select ground (``mode`` in auto/class/none; ``filter`` needs the whole
     cloud and is done by the caller), convert with ``to_local`` (file CRS -> local frame), keep
     the points for which ``keep`` is true (all when None) and feed them to ``thinner``; only
-    those within the x/y ``box`` (lo, hi; everything when None) are kept at full resolution."""
+    those within the x/y ``box`` (lo, hi; everything when None) are kept at full resolution.
+    ``indexed``: also record each chunk's x/y box (``extra["index"]``, for later bounded reads)."""
     parts = _Parts(src.count if box is None or (box[1] >= box[0]).all() else 0)
     points = used = 0
     use_class: bool | None = None
     reading = 0.0
     cropped = 0
+    index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
     chunks = prefetch(src.chunks())
     while True:
         t0 = time.perf_counter()
@@ -273,6 +301,8 @@ def load(
             check()
         if use_class is None:
             use_class = ground_mode(src, cls, mode)
+        if index is not None:
+            index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
         points += len(xyz)
         local = to_local(xyz)
         mask = cls == GROUND if use_class and cls is not None else None
@@ -288,5 +318,6 @@ def load(
         parts.append(local)
     kept = parts.result()
     note = "class 2 (ground)" if use_class else "all points"
-    extra = {"read_s": reading, "cropped": cropped, "counts": thinner.counts()}
+    extra = {"read_s": reading, "cropped": cropped, "counts": thinner.counts(),
+             "index": None if index is None else tuple(index)}
     return Loaded(kept, thinner.result(), points, used, note, extra)

@@ -52,6 +52,7 @@ class Plan:
     ground: tuple[bool, bool]  # (before, after): class 2 only
     crop: np.ndarray  # the before crop polygon (local), as in-process
     statistic: str
+    index: tuple = (None, None)  # (before, after): chunk boxes of single files, for bounded reads
 
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
@@ -60,19 +61,23 @@ Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...]]:
     """(window, (h_after, n_after, h_before, n_before)) of one tile: both epochs' points on its
     cells, their heights and counts."""
-    h_b, n_b = _epoch(plan, plan.before, plan.crs_b, win, None, plan.ground[0], PolygonMask(plan.crop))
-    h_a, n_a = _epoch(plan, plan.after, plan.crs_a, win, plan.transform, plan.ground[1], None)
+    h_b, n_b = _epoch(plan, 0, win, None, PolygonMask(plan.crop))
+    h_a, n_a = _epoch(plan, 1, win, plan.transform, None)
     return win, (h_a, n_a.astype(np.int32), h_b, n_b.astype(np.int32))
 
 
-def _epoch(plan: Plan, path: str, crs_wkt: str, win: Window, transform, ground: bool, keep):
+def _epoch(plan: Plan, epoch: int, win: Window, transform, keep):
+    """Heights and counts of one epoch (0 before, 1 after) on the window's cells."""
+    from dataclasses import replace
+
     import pyproj
 
     from .run import transform_points32
 
-    crs = pyproj.CRS.from_wkt(crs_wkt)
+    path, ground = (plan.before, plan.after)[epoch], plan.ground[epoch]
+    crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])
     to_local = _local(crs, plan.frame, plan.origin, path)
-    src = open_source(path)
+    src = replace(open_source(path), index=plan.index[epoch])
     box = _read_box(plan, crs, win, transform)
     if box is not None:
         src = src.within(*box)
@@ -90,7 +95,8 @@ def _epoch(plan: Plan, path: str, crs_wkt: str, win: Window, transform, ground: 
         ids.append(i)
         zs.append(z)
     shape = (win[1] - win[0], win[3] - win[2])
-    return cell_heights(np.concatenate(ids), np.concatenate(zs), shape, plan.statistic)
+    z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
+    return cell_heights(np.concatenate(ids), z, shape, plan.statistic)
 
 
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window) -> tuple[np.ndarray, np.ndarray]:
@@ -100,7 +106,7 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window) -> tuple[np.nd
     row, col = np.divmod(ids, grid.cols)
     m = (row >= win[0]) & (row < win[1]) & (col >= win[2]) & (col < win[3])
     local_ids = (row[m] - win[0]) * (win[3] - win[2]) + (col[m] - win[2])
-    return local_ids, np.asarray(xyz32[ok, 2][m], dtype=np.float64)
+    return local_ids.astype(np.int32), xyz32[ok, 2][m]
 
 
 def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:
@@ -129,12 +135,22 @@ def tiles(grid: GridSpec, side: int) -> list[Window]:
             for r in range(0, grid.rows, side) for c in range(0, grid.cols, side)]
 
 
-def tile_side(options: Options, points_per_cell: float, task_gb: float) -> int:
-    """Tile side (cells): ``options.tile_cells``, else what a task's memory share holds."""
+def tile_side(options: Options, grid: GridSpec, points_per_cell: float, task_gb: float, workers: int) -> int:
+    """Tile side (cells): ``options.tile_cells``, else what a task's memory share holds, and
+    small enough for two tiles per worker."""
     if options.tile_cells > 0:
         return int(options.tile_cells)
     points = min(4e6, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT)
-    return int(np.clip(math.sqrt(points / max(points_per_cell, 1e-3)), MIN_TILE, MAX_TILE))
+    side = math.sqrt(points / max(points_per_cell, 1e-3))
+    side = min(side, math.sqrt(grid.rows * grid.cols / (2 * max(1, workers))))
+    return int(np.clip(side, MIN_TILE, MAX_TILE))
+
+
+def points_per_cell(prep: Prepared, cell: float) -> float:
+    """Expected points (both epochs) per grid cell: each epoch's points over its footprint."""
+    area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
+    used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
+    return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
 
 
 def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0.5) -> float:
@@ -194,11 +210,18 @@ def _header_points(path) -> int | None:
 def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
                    schedule: Schedule) -> Result:
     """:func:`run._estimate` with the point work as Dask tasks on ``schedule``."""
-    from . import run
-
     if options.ground == "filter":
         raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
     hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
+    with client(schedule, options.memory_limit) as starting:  # workers start while registration runs
+        return _tiled(before, after, out, options, timer, hooks, schedule, starting)
+
+
+def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule,
+           starting) -> Result:
+    """The tiled run, with ``starting`` the future of the (cluster, client) being started."""
+    from . import run
+
     with timer("crop"):
         src_b, src_a = open_source(before), open_source(after)
         prep = prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"), full=False)
@@ -214,13 +237,14 @@ def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks
     grid = run.shared_grid(prep, after_thin, options.with_(cell=cell))
     plan = Plan(str(before), str(after), prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"],
                 prep.frame, prep.origin, grid, reg.transform, prep.ground,
-                footprint(prep.after_thin[:, :2], options.radius), options.statistic)
-    per_cell = (prep.inputs["before"]["points_used"] + prep.inputs["after"]["points_used"]) / max(
-        1.0, polygon_area(footprint(prep.before_thin[:, :2])) / cell**2)
-    side = tile_side(options, per_cell, worker_gb(schedule, options.memory_limit))
+                footprint(prep.after_thin[:, :2], options.radius), options.statistic, prep.index)
+    side = tile_side(options, grid, points_per_cell(prep, cell), worker_gb(schedule, options.memory_limit),
+                     schedule.workers)
     windows = tiles(grid, side)
+    with timer("cluster_wait"):
+        _, c = starting.result()
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
-    with timer("grids"), client(schedule, options.memory_limit) as c:
+    with timer("grids"):
         h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, hooks)
     with timer("planes"):
         sel_b = run._points_on(prep.before_thin, grid, np.isfinite(h_b))

@@ -139,3 +139,26 @@ def test_copc_tiles_in_a_vpc(tmp_path):
     got = _read_all(src)
     inside = ((xyz[:, :2] >= (500_010, 4_000_010)) & (xyz[:, :2] <= (500_030, 4_000_030))).all(axis=1)
     np.testing.assert_allclose(_sorted(got), _sorted(xyz[inside]), atol=1e-6)
+
+
+def test_indexed_las_reads_only_chunks_meeting_the_box(tmp_path):
+    """A single LAS file streamed once records each chunk's box; later bounded reads seek to the
+    chunks meeting the box (what the tile tasks do with plain files)."""
+    from dataclasses import replace
+
+    from soilvolume.stream import file_chunks
+
+    xyz, cls = _cloud(30_000)
+    order = np.argsort(xyz[:, 1])
+    path = write_las(tmp_path / "strips.laz", xyz[order], None, cls[order]) or tmp_path / "strips.laz"
+    index, start = [], 0
+    for part, _ in file_chunks(str(path), None, 5_000):
+        index.append((start, len(part), part[:, :2].min(axis=0), part[:, :2].max(axis=0)))
+        start += len(part)
+    lo, hi = np.array([500_000.0, 4_000_020.0]), np.array([500_100.0, 4_000_030.0])
+    src = replace(open_source(path), index=tuple(index)).within(lo, hi)
+    got = np.concatenate([x for x, _ in src.chunks(5_000)])
+    assert len(got) <= 10_000  # two or three of six chunks
+    inside = ((xyz[:, :2] >= lo) & (xyz[:, :2] <= hi)).all(axis=1)
+    sel = ((got[:, :2] >= lo) & (got[:, :2] <= hi)).all(axis=1)
+    np.testing.assert_allclose(_sorted(got[sel]), _sorted(xyz[inside]), atol=1e-6)
