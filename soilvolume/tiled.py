@@ -129,10 +129,36 @@ def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.n
     return lo, hi
 
 
-def tiles(grid: GridSpec, side: int) -> list[Window]:
-    """The grid cut into tiles of ``side`` x ``side`` cells (row-major)."""
-    return [(r, min(r + side, grid.rows), c, min(c + side, grid.cols))
-            for r in range(0, grid.rows, side) for c in range(0, grid.cols, side)]
+def tiles(grid: GridSpec, side: int, align: float | None = None) -> list[Window]:
+    """The grid cut into tiles of ``side`` x ``side`` cells (row-major); with ``align`` (metres),
+    tile edges fall on absolute multiples of it (the input's own tiling: each data tile is then
+    read by one task), slivers merged into their neighbours."""
+    r_off = c_off = 0
+    if align:
+        c_off = round(((-grid.xmin) % align) / grid.cell) % side
+        r_off = round((grid.ymax % align) / grid.cell) % side
+    rows, cols = _edges(grid.rows, r_off, side), _edges(grid.cols, c_off, side)
+    return [(r0, r1, c0, c1) for r0, r1 in zip(rows, rows[1:], strict=False)
+            for c0, c1 in zip(cols, cols[1:], strict=False)]
+
+
+def _edges(n: int, offset: int, side: int) -> list[int]:
+    """0, offset, offset + side, ..., n, without edges closer than side / 4 to the next."""
+    inner = [e for e in range(offset, n, side) if e > 0]
+    edges = [0]
+    for e in inner:
+        if e - edges[-1] >= side // 4 and n - e >= side // 4:
+            edges.append(e)
+    return edges + [n]
+
+
+def data_tile_m(src, cell: float, side: int) -> float | None:
+    """The side (m) of a VPC's square tiles when a grid tile can hold one (else None)."""
+    if src.vpc is None or len(src.vpc.tiles) < 2:
+        return None
+    widths = [t.hi[0] - t.lo[0] for t in src.vpc.tiles]
+    size = float(np.median(widths))
+    return size if 0 < size / cell <= side else None
 
 
 def tile_side(options: Options, grid: GridSpec, points_per_cell: float, task_gb: float, workers: int) -> int:
@@ -240,7 +266,10 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
                 footprint(prep.after_thin[:, :2], options.radius), options.statistic, prep.index)
     side = tile_side(options, grid, points_per_cell(prep, cell), worker_gb(schedule, options.memory_limit),
                      schedule.workers)
-    windows = tiles(grid, side)
+    align = None if options.tile_cells else data_tile_m(src_b, cell, 2 * side)
+    if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
+        side = max(1, round(align / cell))
+    windows = tiles(grid, side, align)
     with timer("cluster_wait"):
         _, c = starting.result()
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")

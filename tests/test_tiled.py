@@ -92,3 +92,9 @@ def test_tiles_cover_the_grid_once():
     for r0, r1, c0, c1 in tiles(g, 16):
         cover[r0:r1, c0:c1] += 1
     assert (cover == 1).all()
+
+
+def test_tiles_aligned_to_the_input_tiling():
+    g = GridSpec(500_012.5, 4_000_101.0, 0.5, 126, 134)  # 50 m data tiles = 100 cells
+    edges = sorted({c0 for _, _, c0, _ in tiles(g, 100, 50.0)})
+    assert [round(g.xmin + c * g.cell, 3) % 50 for c in edges[1:]] == [0.0]

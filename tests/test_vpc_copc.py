@@ -150,7 +150,8 @@ def test_indexed_las_reads_only_chunks_meeting_the_box(tmp_path):
 
     xyz, cls = _cloud(30_000)
     order = np.argsort(xyz[:, 1])
-    path = write_las(tmp_path / "strips.laz", xyz[order], None, cls[order]) or tmp_path / "strips.laz"
+    path = tmp_path / "strips.laz"
+    write_las(path, xyz[order], None, cls[order])
     index, start = [], 0
     for part, _ in file_chunks(str(path), None, 5_000):
         index.append((start, len(part), part[:, :2].min(axis=0), part[:, :2].max(axis=0)))
