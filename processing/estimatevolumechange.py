@@ -60,7 +60,7 @@ chosen from the point density).</li>
 cells.</li>
 </ol>
 <h3>Inputs</h3>
-<p>Before/after clouds as files (LAS, LAZ, PLY, PCD, XYZ/TXT/CSV) or point cloud layers. Give
+<p>Before/after clouds as files (LAS, LAZ, COPC, VPC of tiles, PLY, PCD, XYZ/TXT/CSV) or point cloud layers. Give
 a CRS override when a file has no CRS (PLY, XYZ) or a wrong one. Optional PDAL pipelines
 (JSON) pre-process each cloud when PDAL is available.</p>
 <h3>Outputs</h3>

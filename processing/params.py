@@ -20,7 +20,7 @@ from qgis.core import (
     QgsProcessingParameterPointCloudLayer,
 )
 
-CLOUD_EXTENSIONS = ("las", "laz", "ply", "pcd", "xyz", "txt", "csv")
+CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
 CLOUD_FILTER = (
     "Point clouds (" + " ".join(f"*.{e}" for e in CLOUD_EXTENSIONS) + ");;All files (*.*)"
 )
@@ -68,7 +68,7 @@ def cloud_params(key: str, label: str) -> list[QgsProcessingParameterDefinition]
     """A point cloud file parameter and its optional point cloud layer alternative."""
     return [
         QgsProcessingParameterFile(
-            key, f"{label} point cloud file (LAS, LAZ, PLY, PCD, XYZ/TXT/CSV)",
+            key, f"{label} point cloud file (LAS, LAZ, COPC, VPC, PLY, PCD, XYZ/TXT/CSV)",
             behavior=QgsProcessingParameterFile.File, fileFilter=CLOUD_FILTER, optional=True,
         ),
         QgsProcessingParameterPointCloudLayer(

@@ -14,7 +14,9 @@ by tile as Dask tasks, so no process holds a survey's points.
 from __future__ import annotations
 
 import math
+import shutil
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -187,20 +189,74 @@ def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0
     return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly), minimum=minimum)
 
 
-def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks) -> tuple[np.ndarray, ...]:
-    """Run every tile on the client ``c`` and assemble (h_a, n_a, h_b, n_b) on the grid."""
+def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None) -> tuple[np.ndarray, ...]:
+    """Run every tile on the client ``c`` and assemble (h_a, n_a, h_b, n_b) on the grid. Tiles
+    found in ``cache`` (from an interrupted run of the same plan) are not run again; finished
+    tiles are saved there."""
     from dask.distributed import as_completed
 
     g = plan.grid
-    h_a, h_b = np.full((g.rows, g.cols), np.nan), np.full((g.rows, g.cols), np.nan)
-    n_a, n_b = np.zeros((g.rows, g.cols), np.int64), np.zeros((g.rows, g.cols), np.int64)
-    futures = c.map(grid_tile, [plan] * len(windows), windows, pure=False)
+    out = (np.full((g.rows, g.cols), np.nan), np.zeros((g.rows, g.cols), np.int64),
+           np.full((g.rows, g.cols), np.nan), np.zeros((g.rows, g.cols), np.int64))
+    todo = []
+    for win in windows:
+        saved = _load_tile(cache, win)
+        if saved is None:
+            todo.append(win)
+        else:
+            _place(out, win, saved)
+    if len(todo) < len(windows):
+        hooks.info(f"resuming: {len(windows) - len(todo)} of {len(windows)} tiles done in an earlier run")
+    futures = c.map(grid_tile, [plan] * len(todo), todo, pure=False)
     for k, fut in enumerate(as_completed(futures), 1):
-        (r0, r1, c0, c1), (ha, na, hb, nb) = fut.result()
-        h_a[r0:r1, c0:c1], n_a[r0:r1, c0:c1], h_b[r0:r1, c0:c1], n_b[r0:r1, c0:c1] = ha, na, hb, nb
+        win, arrays = fut.result()
         fut.release()
-        hooks.step(55 + 15 * k / len(windows), f"gridded tile {k}/{len(windows)}")
-    return h_a, n_a, h_b, n_b
+        _place(out, win, arrays)
+        _save_tile(cache, win, arrays)
+        hooks.step(55 + 15 * k / max(1, len(todo)), f"gridded tile {k}/{len(todo)}")
+    return out
+
+
+def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:
+    r0, r1, c0, c1 = win
+    for full, part in zip(out, arrays, strict=True):
+        full[r0:r1, c0:c1] = part
+
+
+def _tile_file(cache: Path, win: Window) -> Path:
+    return cache / "tile_{}_{}_{}_{}.npz".format(*win)
+
+
+def _load_tile(cache: Path | None, win: Window):
+    if cache is None or not _tile_file(cache, win).exists():
+        return None
+    try:
+        with np.load(_tile_file(cache, win)) as z:
+            return z["h_a"], z["n_a"], z["h_b"], z["n_b"]
+    except (OSError, ValueError, KeyError):  # a tile cut short by the interruption: run it again
+        return None
+
+
+def _save_tile(cache: Path | None, win: Window, arrays) -> None:
+    if cache is None:
+        return
+    tmp = cache / f".{_tile_file(cache, win).name}"
+    with open(tmp, "wb") as f:
+        np.savez(f, **dict(zip(("h_a", "n_a", "h_b", "n_b"), arrays, strict=True)))
+    tmp.replace(_tile_file(cache, win))
+
+
+def tile_cache(out: OutputDir, plan: Plan) -> Path:
+    """The folder keeping finished tiles of ``plan`` until the run succeeds (keyed by the plan,
+    so a changed input, option or registration starts afresh)."""
+    import hashlib
+    import pickle
+
+    key = hashlib.sha1(pickle.dumps((plan.before, plan.after, plan.crs_b, plan.crs_a, plan.origin.tolist(),
+                                     plan.grid, plan.transform.round(12).tolist(), plan.ground, plan.statistic)))
+    folder = out.final / ".soilvolume-tiles" / key.hexdigest()[:16]
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
 
 
 def schedule_for(before, after, options: Options, pipeline: bool) -> Schedule:
@@ -273,8 +329,9 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     with timer("cluster_wait"):
         _, c = starting.result()
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
+    cache = tile_cache(out, plan)
     with timer("grids"):
-        h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, hooks)
+        h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, hooks, cache)
     with timer("planes"):
         sel_b = run._points_on(prep.before_thin, grid, np.isfinite(h_b))
         p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
@@ -292,6 +349,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side}
         write_json(out.path("report.json"), report)
         run._html(out, report, vols, grid)
+    shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
 
 

@@ -98,3 +98,30 @@ def test_tiles_aligned_to_the_input_tiling():
     g = GridSpec(500_012.5, 4_000_101.0, 0.5, 126, 134)  # 50 m data tiles = 100 cells
     edges = sorted({c0 for _, _, c0, _ in tiles(g, 100, 50.0)})
     assert [round(g.xmin + c * g.cell, 3) % 50 for c in edges[1:]] == [0.0]
+
+
+def test_resume_runs_only_the_missing_tiles(tmp_path):
+    """Tiles saved by an interrupted run are reused; a missing one runs (here: fails naming the
+    input, which does not exist)."""
+    import pyproj
+    from dask.distributed import Client
+
+    from soilvolume.api import Hooks
+    from soilvolume.crs import WorkFrame
+    from soilvolume.tiled import Plan, _save_tile, run_tiles
+
+    g = GridSpec(0.0, 40.0, 1.0, 40, 40)
+    crs = pyproj.CRS("EPSG:32654")
+    plan = Plan(str(tmp_path / "gone_b.las"), str(tmp_path / "gone_a.las"), crs.to_wkt(), crs.to_wkt(),
+                WorkFrame(crs, 1.0), np.zeros(3), g, np.eye(4), (False, False), np.zeros((3, 2)), "mean")
+    windows = tiles(g, 20)
+    for k, (r0, r1, c0, c1) in enumerate(windows):
+        shape = (r1 - r0, c1 - c0)
+        _save_tile(tmp_path, (r0, r1, c0, c1), (np.full(shape, k, float), np.ones(shape, np.int32),
+                                               np.zeros(shape), np.ones(shape, np.int32)))
+    with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
+        h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, Hooks(), tmp_path)
+        assert h_a[0, 0] == 0 and h_a[39, 39] == 3 and (n_a == 1).all()
+        (tmp_path / "tile_20_40_20_40.npz").unlink()
+        with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
+            run_tiles(c, plan, windows, Hooks(), tmp_path)
