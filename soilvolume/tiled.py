@@ -60,15 +60,19 @@ class Plan:
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 
 
-def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...]]:
-    """(window, (h_after, n_after, h_before, n_before)) of one tile: both epochs' points on its
-    cells, their heights and counts."""
-    h_b, n_b = _epoch(plan, 0, win, None, PolygonMask(plan.crop))
-    h_a, n_a = _epoch(plan, 1, win, plan.transform, None)
-    return win, (h_a, n_a.astype(np.int32), h_b, n_b.astype(np.int32))
+def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], dict]:
+    """(window, (h_after, n_after, h_before, n_before), stats) of one tile: both epochs' points
+    on its cells, their heights and counts; stats: points read, seconds."""
+    import time
+
+    t0, stats = time.perf_counter(), {"read": 0}
+    h_b, n_b = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
+    h_a, n_a = _epoch(plan, 1, win, plan.transform, None, stats)
+    stats["seconds"] = time.perf_counter() - t0
+    return win, (h_a, n_a.astype(np.int32), h_b, n_b.astype(np.int32)), stats
 
 
-def _epoch(plan: Plan, epoch: int, win: Window, transform, keep):
+def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
     """Heights and counts of one epoch (0 before, 1 after) on the window's cells."""
     from dataclasses import replace
 
@@ -85,8 +89,14 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep):
         src = src.within(*box)
     ids, zs = [], []
     for xyz, cls in src.chunks():
-        if ground and cls is not None:
-            xyz = xyz[cls == GROUND]
+        stats["read"] += len(xyz)
+        sel = cls == GROUND if ground and cls is not None else None
+        if box is not None:  # the box has a margin: cells are assigned exactly below
+            near = (xyz[:, 0] >= box[0][0]) & (xyz[:, 0] <= box[1][0]) & (xyz[:, 1] >= box[0][1]) & (
+                xyz[:, 1] <= box[1][1])
+            sel = near if sel is None else sel & near
+        if sel is not None:
+            xyz = xyz[sel]
         local = to_local(xyz)
         if keep is not None:
             local = local[keep(local)]
@@ -189,10 +199,13 @@ def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0
     return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly), minimum=minimum)
 
 
-def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None) -> tuple[np.ndarray, ...]:
+def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None,
+              stats: dict | None = None) -> tuple[np.ndarray, ...]:
     """Run every tile on the client ``c`` and assemble (h_a, n_a, h_b, n_b) on the grid. Tiles
     found in ``cache`` (from an interrupted run of the same plan) are not run again; finished
-    tiles are saved there."""
+    tiles are saved there. ``stats`` sums the tasks' points read and seconds."""
+    stats = stats if stats is not None else {}
+    stats.update(read=0, seconds=0.0)
     from dask.distributed import as_completed
 
     g = plan.grid
@@ -209,8 +222,10 @@ def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | 
         hooks.info(f"resuming: {len(windows) - len(todo)} of {len(windows)} tiles done in an earlier run")
     futures = c.map(grid_tile, [plan] * len(todo), todo, pure=False)
     for k, fut in enumerate(as_completed(futures), 1):
-        win, arrays = fut.result()
+        win, arrays, task = fut.result()
         fut.release()
+        for key in stats:
+            stats[key] += task[key]
         _place(out, win, arrays)
         _save_tile(cache, win, arrays)
         hooks.step(55 + 15 * k / max(1, len(todo)), f"gridded tile {k}/{len(todo)}")
@@ -331,7 +346,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
     cache = tile_cache(out, plan)
     with timer("grids"):
-        h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, hooks, cache)
+        h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
     with timer("planes"):
         sel_b = run._points_on(prep.before_thin, grid, np.isfinite(h_b))
         p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
@@ -346,7 +361,9 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
     with timer("report"):
         report = run._report(prep, reg, grid, vols, p_b, p_a, options, timer)
-        report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side}
+        report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side,
+                            "task_points_read": stats["read"], "task_seconds": round(stats["seconds"], 3),
+                            "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9))}
         write_json(out.path("report.json"), report)
         run._html(out, report, vols, grid)
     shutil.rmtree(cache.parent, ignore_errors=True)
