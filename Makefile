@@ -3,7 +3,7 @@ VENV    := .venv
 PY      := $(VENV)/bin/python
 PYTEST  := QT_QPA_PLATFORM=offscreen $(VENV)/bin/pytest
 
-.PHONY: setup test test-engine test-qgis lint demo bench bench-full package deploy clean
+.PHONY: setup test test-engine test-qgis lint demo bench bench-full accuracy accuracy-quick package deploy clean
 
 setup:  ## install Debian packages (QGIS LTR, Chromium), the venv and the wheels (idempotent)
 	bash scripts/setup.sh
@@ -28,6 +28,12 @@ bench:  ## benchmark: paper-sized pair + 1M/4M ladder (cached scenes outside git
 
 bench-full:  ## adds the 16M and 64M pairs
 	$(PY) bench/run_bench.py --full
+
+accuracy:  ## accuracy harness (issue 10): seeded matrix + real pairs vs targets, rewrites bench/ACCURACY.md
+	$(PY) bench/accuracy.py
+
+accuracy-quick:  ## ~1 minute subset of the accuracy harness (bench/results/accuracy-quick.md)
+	$(PY) bench/accuracy.py --quick
 
 package:  ## installable plugin zip in dist/
 	bash scripts/package.sh

@@ -57,9 +57,11 @@ def cell_ids(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def average_height(
-    xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", k_mad: float = 3.0,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Per-cell height (NaN where empty) and point count, both (rows, cols).
+    xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", k_mad: float = 3.0, spread: bool = False,
+) -> tuple[np.ndarray, ...]:
+    """Per-cell height (NaN where empty) and point count, both (rows, cols); with ``spread``
+    also the per-cell robust spread of the heights (m: IQR / 1.349, the standard deviation for
+    ``mean``), which objects, vegetation and steep edges inside a cell inflate.
 
     ``robust-mean``: the mean of the points within ``k_mad`` robust standard deviations (from the
     cell's interquartile range, floor 1 cm) of the cell median. Cells are ordered by one integer
@@ -78,13 +80,21 @@ def cell_heights(
     n = shape[0] * shape[1]
     if statistic == "mean" or len(z) == 0:
         counts = np.bincount(ids, minlength=n)
-        return _mean(ids, z, counts, n).reshape(shape), counts.reshape(shape)
+        mean = _mean(ids, z, counts, n)
+        out = (mean.reshape(shape), counts.reshape(shape))
+        if spread:
+            sq = _mean(ids, z * z, counts, n)
+            out += (np.sqrt(np.maximum(sq - mean * mean, 0.0)).reshape(shape),)
+        return out
     keys = _SortedCells(ids, z, n)
     med = keys.quantile(0.5)
+    iqr_sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
+    extra = (iqr_sigma.reshape(shape),) if spread else ()
     if statistic == "median":
-        return med.reshape(shape), keys.counts.reshape(shape)
-    sigma = np.maximum((keys.quantile(0.75) - keys.quantile(0.25)) / 1.349, 0.01)
-    return keys.mean_between(med - k_mad * sigma, med + k_mad * sigma).reshape(shape), keys.counts.reshape(shape)
+        return (med.reshape(shape), keys.counts.reshape(shape), *extra)
+    sigma = np.maximum(iqr_sigma, 0.01)
+    h = keys.mean_between(med - k_mad * sigma, med + k_mad * sigma)
+    return (h.reshape(shape), keys.counts.reshape(shape), *extra)
 
 
 class _SortedCells:

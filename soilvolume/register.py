@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -28,6 +28,7 @@ MAX_COARSE_POINTS = 15_000
 MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
 ICP_TOL, ICP_ITER = 1e-6, 30
 COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
+STABLE_PASSES = 2  # refinements on the stable ground found at the current pose
 
 
 @dataclass
@@ -37,6 +38,7 @@ class Registration:
     transform: np.ndarray
     coarse: StageQuality
     fine: StageQuality
+    georeferencing: dict = field(default_factory=dict)
 
 
 def _o3d():
@@ -67,6 +69,18 @@ def rotation_deg(t: np.ndarray) -> float:
     """Rotation angle (degrees) of a 4x4 rigid transform."""
     c = (np.trace(t[:3, :3]) - 1.0) / 2.0
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def tilt_deg(t: np.ndarray) -> float:
+    """Tilt (degrees) of a 4x4 rigid transform: the angle it turns the vertical by."""
+    return float(np.degrees(np.arccos(np.clip(t[2, 2], -1.0, 1.0))))
+
+
+def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
+    """Whether a pose stays within the georeferencing prior (shift at the after centre, rotation
+    and tilt)."""
+    return (shift_at(t, centre) <= options.max_gps_shift and rotation_deg(t) <= options.max_gps_rotation
+            and tilt_deg(t) <= options.max_gps_tilt)
 
 
 def shift_at(t: np.ndarray, point: np.ndarray) -> float:
@@ -198,37 +212,60 @@ def _sampled(pcd, cap: int):
     return pcd.select_by_index(np.arange(0, n, int(np.ceil(n / cap))).tolist())
 
 
+def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The points of a cloud in the margin band of its own footprint (see
+    :func:`soilvolume.stable.margin`): surveys are flown beyond the works, so this band is the
+    part of the after survey most likely to be stable ground."""
+    from .stable import margin
+
+    cell = max(1.0, 2.0 * gap)
+    cols = surface.columns(xyz, cell)
+    valid = np.zeros(cols.shape, bool)
+    valid[cols.row, cols.col] = True
+    band = margin(valid, cell)
+    ix = np.clip(((xyz[:, 0] - cols.lo[0]) // cell).astype(np.int64), 0, cols.shape[1] - 1)
+    iy = np.clip(((xyz[:, 1] - cols.lo[1]) // cell).astype(np.int64), 0, cols.shape[0] - 1)
+    return xyz[band[iy, ix]]
+
+
 def stable_source(
     source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, cell: float = 1.0,
 ) -> np.ndarray:
     """The source with its fitted low-order deformation removed and its change areas dropped:
     what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
-    ground and the degree-2 surface come from :mod:`soilvolume.correction` on 1 m median grids."""
-    from .correction import apply
+    ground (searched from the margin of the after footprint) and the degree-2 surface come from
+    :mod:`soilvolume.stable` on median grids."""
     from .grid import average_height, make_grid
+    from .stable import find_stable
 
     src = transform_points(source_xyz, t)
+    cell = max(cell, 1.5 * spacing(target_xyz))
     grid = make_grid(src.min(axis=0), src.max(axis=0), cell, np.zeros(3), None)
     diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
     if np.isfinite(diff).sum() < 20:
         return src[:0]
-    res = apply(diff, "surface", grid)
+    stable, trend = find_stable(diff, cell)
     row, col, ok = grid.index(src)
     keep = np.zeros(len(src), bool)
-    keep[ok] = res.stable_mask[row[ok], col[ok]]
+    keep[ok] = stable[row[ok], col[ok]]
     out = src[keep]
-    out[:, 2] -= res.surface[row[keep], col[keep]]
+    out[:, 2] -= trend[row[keep], col[keep]]
     return out
 
 
 def register(
     after_xyz: np.ndarray, before_xyz: np.ndarray, options: Options, check: Callable[[], None] | None = None,
-    dense: tuple[np.ndarray, np.ndarray] | None = None,
+    dense: tuple[np.ndarray, np.ndarray] | None = None, precise: bool = False,
 ) -> Registration:
     """Register after onto before (both local, typically the thinned subsets; ``before_xyz`` is
     the before cloud cropped to the after footprint + radius). ``dense``: the full-resolution
     (after, before) clouds, for the paper's PFH patch matching."""
     eye = np.eye(4)
+    if precise:
+        fit, rmse = evaluate_surface(_judged(after_xyz, spacing(before_xyz)), before_xyz, eye)
+        skipped = "skipped: coordinates used as georeferenced (--georeferencing)"
+        return Registration(eye, StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
+                            StageQuality("none", fit, rmse, eye, True, 0.0, skipped))
     if options.coarse == "auto" and options.fine != "none":
         first = _fine_stage(after_xyz, before_xyz, [(eye, "gps")], options, check, dense)
         if first.fitness >= AUTO_FITNESS:  # the GPS pose converged: FPFH cannot do better here
@@ -282,9 +319,10 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     from each start and finish from the one that fits best; PFH and none are scored whole."""
     t0 = time.perf_counter()
     gap = spacing(before_xyz)
+    judge = _judged(after_xyz, gap)
     if options.fine in ("icp", "gicp"):
-        t, label = _icp_from_best(after_xyz, before_xyz, starts, options.fine, check, gap)
-        fit, rmse = evaluate_surface(after_xyz, before_xyz, t, gap=gap)
+        t, label = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
+        fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0,
                             f"started from the {label} pose")
     best: StageQuality | None = None
@@ -296,7 +334,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
             t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed)
         else:
             t = init
-        fit, rmse = evaluate_surface(after_xyz, before_xyz, t, gap=gap)
+        fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         q = StageQuality(options.fine, fit, rmse, t, True, 0.0, f"started from the {label} pose")
         if best is None or _better(q, best):
             best = q
@@ -305,17 +343,47 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     return best
 
 
-def _icp_from_best(after_xyz, before_xyz, starts, method: str, check, gap: float) -> tuple[np.ndarray, str]:
+def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: float) -> tuple[np.ndarray, str]:
+    """ICP from the best start on the margin of the after survey, then refined twice on the
+    stable ground found at the pose reached (works inside the survey never pull the pose); the
+    pose that fits the margin best within the georeferencing prior wins."""
+    method = options.fine
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
+    src = _judged(after_xyz, gap)
     scored = []
     for init, label in starts:
-        t, fit, rmse = icp_levels(after_xyz, before_xyz, init, head, method, check, scores=True, gap=gap)
+        t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, scores=True, gap=gap)
         scored.append((-fit, rmse, label, t))
     _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
-    t = icp_levels(after_xyz, before_xyz, t, tail, method, check, gap=gap)
-    src_stable = stable_source(after_xyz, before_xyz, t)
-    if len(src_stable) > 100:
+    t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap)
+    poses = [(init, lab) for init, lab in starts] + [(t, label)]
+    for _ in range(STABLE_PASSES):
+        src_stable = stable_source(after_xyz, before_xyz, t)
+        if len(src_stable) <= 100:
+            break
         # src_stable is already in the before frame: refine a correction on top of t.
         dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap)
         t = dt @ t
-    return t, label
+        poses.append((t, label))
+    centre = after_xyz.mean(axis=0)
+    allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
+    return _best_on(src, before_xyz, allowed, gap)
+
+
+def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The after points a pose is judged on: the margin of the after survey (works inside it do
+    not fit any correct pose), or all points when the margin is too thin to judge."""
+    ring = margin_points(after_xyz, gap)
+    return ring if len(ring) >= max(500, 0.05 * len(after_xyz)) else after_xyz
+
+
+def _best_on(src, before_xyz, poses, gap: float) -> tuple[np.ndarray, str]:
+    """The pose under which the margin points fit the before surface best (the last, most
+    refined one on ties): a pass that drifted never replaces a better pose."""
+    best, best_key = poses[-1], None
+    for k, (t, label) in enumerate(poses):
+        fit, rmse = evaluate_surface(src, before_xyz, t, gap=gap)
+        key = (round(fit, 2), -np.nan_to_num(rmse, nan=1e9), k)
+        if best_key is None or key > best_key:
+            best, best_key = (t, label), key
+    return best

@@ -56,10 +56,19 @@ def summary_lines(report: dict) -> list[str]:
         f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells "
         f"({g['rows']} x {g['cols']})",
         f"registration: {fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m",
-        f"volume ({report['correction']['method']}): "
+        f"volume (change areas, {report['correction']['method']} correction): "
         f"net {v['net']:+.2f} m3  cut {v['cut']:.2f} m3  fill {v['fill']:.2f} m3",
         f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
         f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
         f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
         f"total time {sum(report['timings_s'].values()):.2f} s",
+        *quality_lines(report),
     ]
+
+
+def quality_lines(report: dict) -> list[str]:
+    """The quality verdict and its reasons, one line each."""
+    q = report.get("quality")
+    if not q:
+        return []
+    return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]]

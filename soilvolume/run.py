@@ -18,7 +18,7 @@ from .io import write_las_chunked
 from .options import Options
 from .outputs import OutputDir
 from .prepare import Prepared, prepare
-from .register import register, transform_points
+from .register import register, rotation_deg, shift_at, tilt_deg, transform_points
 from .report import absolute_transform, stage_dict, write_json
 from .types import GridSpec, SoilVolumeError
 from .volume import budget, difference
@@ -94,10 +94,17 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
     hooks.info(f"kept {len(prep.before):,} before points within {options.radius:g} m of the after "
                f"footprint and {len(prep.after):,} after points; registration subsets "
                f"{len(prep.before_thin):,} + {len(prep.after_thin):,} ({prep.voxel:.2f} m columns)")
+    from .georef import resolve
+
+    mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
+    hooks.info(f"georeferencing: {mode} ({why})")
+    if mode == "precise":
+        options = options.with_(correction="none")
     hooks.step(15, "registering (coarse, then fine)")
     with timer("register"):
         reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"),
-                       dense=(prep.after.xyz, prep.before.xyz))
+                       dense=(prep.after.xyz, prep.before.xyz), precise=mode == "precise")
+    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     hooks.info(f"coarse: {reg.coarse.note}")
@@ -109,10 +116,11 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             after_xyz = transform_points32(prep.after.xyz, reg.transform)
             after_thin = transform_points(prep.after_thin, reg.transform)
             grid = shared_grid(prep, after_thin, options)
-            before_job = pool.submit(gridmod.average_height, prep.before.xyz, grid, options.statistic)
-            h_a, n_a = gridmod.average_height(after_xyz, grid, options.statistic)
+            before_job = pool.submit(gridmod.average_height, prep.before.xyz, grid, options.statistic,
+                                     spread=True)
+            h_a, n_a, s_a = gridmod.average_height(after_xyz, grid, options.statistic, spread=True)
             del after_xyz
-            h_b, n_b = before_job.result()
+            h_b, n_b, s_b = before_job.result()
         hooks.step(70, "fitting the RANSAC planes")
         with timer("planes"):
             sel_b = _points_on(prep.before_thin, grid, np.isfinite(h_b))
@@ -121,7 +129,7 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             d_i = planes.plane_offset(p_b, p_a, grid)
         hooks.step(75, "computing the difference and volumes")
         with timer("volume"):
-            vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
+            vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b))
             vols["dem_after"] = h_a + prep.origin[2]
         hooks.step(85, "writing outputs")
         with timer("write"):
@@ -130,6 +138,12 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
                 cloud_job.result()
     with timer("report"):
         report = _report(prep, reg, grid, vols, p_b, p_a, options, timer)
+        from .quality import assess
+
+        prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
+        report["quality"] = assess(report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior)
+        for line in report["quality"]["messages"]:
+            hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_json(out.path("report.json"), report)
         _html(out, report, vols, grid)
     return Result(report)
@@ -185,11 +199,13 @@ N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
 MIN_POINTS = 3  # a robust cell height needs at least this many points
 
 
-def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
+def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None) -> dict:
     """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
     of the difference (empty in either epoch) filled from the surrounding difference, which is
-    smooth on unchanged ground whatever the terrain -> correction -> budgets, uncertainty, zones."""
-    from .uncertainty import thresholded_volumes, volume_uncertainty
+    smooth on unchanged ground whatever the terrain -> correction -> change areas, budgets,
+    uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs."""
+    from .change import cell_lod, cell_sigma, change_areas
+    from .uncertainty import thresholded_volumes, volume_uncertainty, z_value
 
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
@@ -200,18 +216,30 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
     hole = holes.enclosed_holes(np.isfinite(filled), max_cells)
     filled = holes.fill(filled, hole, options.fill_method)
     filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
-    offset, params, stable, change = _correction(filled, d_i, grid, options)
+    offset, params, stable, _ = _correction(filled, d_i, grid, options)
     diff = filled - offset
     area = grid.cell_area
     fill_sigma = _fill_sigma(diff, filled_mask, stable, options)
+    unc0 = volume_uncertainty(diff, stable, None, grid, options.lod_confidence, n_coef=0)
+    z = z_value(options.lod_confidence)
+    if spread is not None:
+        se_a = np.where(m_a, np.nan, cell_sigma(spread[0], n_a))
+        se_b = np.where(m_b, np.nan, cell_sigma(spread[1], n_b))
+        lod_cell = cell_lod(unc0["lod_m"] or 0.0, se_a, se_b, z)
+        lod_cell = np.maximum(lod_cell, z * fill_sigma)
+    else:
+        lod_cell = np.full(diff.shape, unc0["lod_m"] or 0.0)
+    fill_area, cut_area = change_areas(diff, lod_cell)
+    change = fill_area | cut_area
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
                              n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma)
+    headline = _signed_budget(diff, fill_area, cut_area, area)
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
-        "stable": stable, "params": params, "uncertainty": unc,
-        "compensated": budget(diff, area), "uncompensated": budget(filled, area),
+        "stable": stable, "params": params, "uncertainty": unc, "change_mask": change,
+        "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
-        "change_areas": budget(diff, area, change),
+        "change_areas": headline,
         "thresholded": thresholded_volumes(diff, unc["lod_m"], area),
         "holes": holes.summary(diff, filled_mask, area),
         "empty_cells": int((~np.isfinite(raw)).sum()),
@@ -220,8 +248,16 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options) -> dict:
     if options.zones:
         from .zones import zone_budgets
 
-        vols["zones"] = zone_budgets(diff, grid, options.zones)
+        vols["zones"] = zone_budgets(np.where(change, diff, 0.0), grid, options.zones)
     return vols
+
+
+def _signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray, cell_area: float) -> dict:
+    """Fill over the fill areas, cut over the cut areas (m3), net = fill - cut."""
+    fill = float(np.nansum(np.where(fill_area, diff, 0.0)) * cell_area)
+    cut = float(-np.nansum(np.where(cut_area, diff, 0.0)) * cell_area)
+    cells = int((fill_area | cut_area).sum())
+    return {"net": fill - cut, "cut": cut, "fill": fill, "cells": cells, "area_m2": cells * cell_area}
 
 
 def _fill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
@@ -260,13 +296,18 @@ def _report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: 
     return {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
         "volume_m3": vols["compensated"],
+        "volume_method": ("fill and cut summed over the areas of significant change: cells whose corrected "
+                          "difference exceeds their level of detection, in patches of at least 3 cells, grown into "
+                          "connected cells of the same sign above half of it; survey noise elsewhere is not counted"),
+        "volume_all_cells_m3": vols["all_cells"],
         "volume_uncompensated_m3": vols["uncompensated"],
         "volume_paper_plane_m3": vols["paper_plane"],
         "volume_change_areas_m3": vols["change_areas"],
         "volume_thresholded_m3": vols["thresholded"],
-        "uncertainty_m3": {"net": vols["uncertainty"]["net_compared_area"],
+        "uncertainty_m3": {"net": vols["uncertainty"]["net"],
                            "cut": vols["uncertainty"]["cut"], "fill": vols["uncertainty"]["fill"],
                            "net_change_areas": vols["uncertainty"]["net"],
+                           "net_all_cells": vols["uncertainty"]["net_compared_area"],
                            "lod_m": vols["uncertainty"]["lod_m"],
                            "confidence": vols["uncertainty"]["confidence"]},
         "uncertainty": vols["uncertainty"],
@@ -275,6 +316,9 @@ def _report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: 
         "registration": {
             "transform": t_abs, "transform_local": reg.transform, "local_origin": prep.origin,
             "coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine),
+            "georeferencing": reg.georeferencing,
+            "rotation_deg": rotation_deg(reg.transform), "tilt_deg": tilt_deg(reg.transform),
+            "shift_m": shift_at(reg.transform, prep.after_thin.mean(axis=0)),
         },
         "planes": {"before": p_b.as_dict(prep.origin), "after": p_a.as_dict(prep.origin)},
         "grid": {

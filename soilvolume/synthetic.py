@@ -24,6 +24,13 @@ Frames and truth convention
   EXCLUDE vegetation growth, objects, doming, vertical bias, noise and outliers: a perfect method
   recovers exactly these numbers. The piles and the pit do not overlap, so cut is the pit and
   fill the piles.
+* Other change kinds (``SceneConfig.change``), for pairs where the change dominates: ``"pit"``
+  (one flat-bottomed conical pit over 5 % of the after footprint), ``"pile"`` (one flat-topped
+  conical pile over 10 %), ``"excavation"`` (a flat-bottomed rectangular excavation with sloped
+  sides whose outline covers exactly ``change_fraction`` of the after footprint, plus a tall
+  conical pile beside it near one edge; 2-75 %) and ``"none"``. Their volumes are the same exact
+  analytic integrals and their features never overlap (cut = the pits/excavation, fill = the
+  piles). Clutter and holes are placed around their true outlines.
 
 LAS classes
 -----------
@@ -53,6 +60,10 @@ __all__ = [
     "scene_truth",
     "iter_epoch",
     "change_dz",
+    "features_dz",
+    "finish_features",
+    "feature_area",
+    "CHANGE_KINDS",
 ]
 
 CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never depend on the caller)
@@ -81,9 +92,14 @@ class SceneConfig:
     vegetation: bool = False  # bushes in both epochs, grown in the after epoch (class 3/4/5)
     objects: bool = False  # vehicles (class 6) and boulders (class 1), same place in both epochs
     relief: float = 1.0  # scale of the long waves and hills (0 = a tilted plane with local detail)
-    change: str = "piles"  # "piles" (3 piles ~1020 m3 + one pit ~69 m3) or "none"
+    # "piles" (3 piles ~1020 m3 + one pit ~69 m3, ~15 % of the after footprint), "none", "pit" (one
+    # flat-bottomed pit, 5 %), "pile" (one flat-topped pile, 10 %) or "excavation" (a flat-bottomed
+    # excavation over `change_fraction` of the after footprint plus a tall pile near one edge)
+    change: str = "piles"
     crs: str = "EPSG:32654"
     origin: tuple[float, float, float] = (500_000.0, 3_900_000.0, 0.0)  # added to local coords
+    # change="excavation": fraction of the after footprint the excavation's outline covers
+    change_fraction: float = 0.4
 
     @classmethod
     def paper(cls, **overrides) -> SceneConfig:
@@ -147,16 +163,21 @@ def _after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
     return cx - aw / 2.0, cy - ah / 2.0, cx + aw / 2.0, cy + ah / 2.0
 
 
+CHANGE_KINDS = ("piles", "none", "pit", "pile", "excavation")
+
+
 def _change_features(cfg: SceneConfig) -> list[dict]:
     """The analytic change features (positions relative to the after footprint centre, scaled
     down if the after footprint is smaller than the default)."""
     if cfg.change == "none":
         return []
-    if cfg.change != "piles":
-        raise ValueError(f"unknown change {cfg.change!r} (piles, none)")
+    if cfg.change not in CHANGE_KINDS:
+        raise ValueError(f"unknown change {cfg.change!r} ({', '.join(CHANGE_KINDS)})")
     x0, y0, x1, y1 = _after_box(cfg)
     cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
     s = min(1.0, (x1 - x0) / 67.0, (y1 - y0) / 62.7)
+    if cfg.change != "piles":
+        return finish_features(_single_features(cfg, x0, y0, x1, y1, s))
     feats = [
         # flat-topped cone: sign, bottom radius, top radius, height
         dict(kind="cone", sign=1.0, x=cx - 15 * s, y=cy + 12 * s, r_bottom=8.5 * s,
@@ -169,6 +190,14 @@ def _change_features(cfg: SceneConfig) -> list[dict]:
         dict(kind="cone", sign=-1.0, x=cx - 14 * s, y=cy - 14 * s, r_bottom=5.0 * s,
              r_top=2.5 * s, height=1.5 * s, name="pit (truncated cone)"),
     ]
+    return finish_features(feats)
+
+
+def finish_features(feats: list[dict]) -> list[dict]:
+    """Add the exact ``volume`` (m3, >= 0) and the bounding ``radius`` (m) to analytic change
+    features: ``cone`` (x, y, r_bottom, r_top, height; a flat-topped cone or flat-bottomed conical
+    pit) and ``rect`` (x, y, a, b bottom half-sizes, height, run = horizontal run of the equal side
+    slopes, angle_deg; a flat-topped pile or flat-bottomed excavation). ``sign`` +1 fill, -1 cut."""
     for f in feats:
         if f["kind"] == "cone":
             h, r1, r2 = f["height"], f["r_top"], f["r_bottom"]
@@ -182,13 +211,84 @@ def _change_features(cfg: SceneConfig) -> list[dict]:
     return feats
 
 
-def change_dz(x: np.ndarray, y: np.ndarray, cfg: SceneConfig) -> np.ndarray:
-    """The analytic ground change dz (m, + = fill) at LOCAL x/y (true frame)."""
+def feature_area(f: dict) -> float:
+    """Exact area (m2) of a change feature's outline (where its dz is not zero)."""
+    if f["kind"] == "cone":
+        return math.pi * f["r_bottom"] ** 2
+    return 4.0 * f["a"] * f["b"]
+
+
+def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: float,
+                     s: float) -> list[dict]:
+    """Features of the "pit", "pile" and "excavation" kinds. They carry ``exact_outline``: the
+    placement of clutter and holes uses their true outline, not the bounding circle."""
+    aw, ah = x1 - x0, y1 - y0
+    cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+    area = aw * ah
+    if cfg.change == "pit":  # 5 % of the after footprint, 2 m deep
+        rb = math.sqrt(0.05 * area / math.pi)
+        return [dict(kind="cone", sign=-1.0, x=cx + 4.0 * s, y=cy - 3.0 * s, r_bottom=rb,
+                     r_top=0.55 * rb, height=2.0 * s, exact_outline=True,
+                     name="pit (flat-bottomed truncated cone)")]
+    if cfg.change == "pile":  # 10 % of the after footprint, 5 m high
+        rb = math.sqrt(0.10 * area / math.pi)
+        return [dict(kind="cone", sign=1.0, x=cx - 3.0 * s, y=cy + 2.0 * s, r_bottom=rb,
+                     r_top=0.35 * rb, height=5.0 * s, exact_outline=True,
+                     name="pile (flat-topped truncated cone)")]
+    # excavation: 2b tall (most of the footprint's height), 2a wide so that 4ab = f * area; a
+    # tall conical pile beside it, the pair centred in x with equal margins
+    frac = float(cfg.change_fraction)
+    if not 0.02 <= frac <= 0.75:
+        raise ValueError(f"change_fraction {frac} outside 0.02..0.75")
+    margin_y = 0.045 * ah
+    b = min(ah - 2.0 * margin_y, 1.2 * ah * math.sqrt(frac)) / 2.0
+    a = frac * area / (4.0 * b)
+    gap = 1.5 * s
+    rp = min(9.0 * s, (aw - 4.0 * s - 2.0 * a - gap) / 2.0)  # 2 m margins at both x ends
+    if rp < 3.0 * s:
+        raise ValueError(f"change_fraction {frac} leaves no room for the pile")
+    width = 2.0 * a + gap + 2.0 * rp
+    ex = cx - width / 2.0 + a
+    px = ex + a + gap + rp
+    py = cy + min(0.25 * ah, ah / 2.0 - rp - 2.0 * s)
+    depth, run = 2.5 * s, 3.0 * s
+    return [
+        dict(kind="rect", sign=-1.0, x=ex, y=cy, a=a, b=b, height=depth, run=run,
+             angle_deg=0.0, exact_outline=True,
+             name=f"excavation (flat-bottomed, {frac:.0%} of the after footprint)"),
+        # ~42 degree sides, flat top of 0.3 x its base radius
+        dict(kind="cone", sign=1.0, x=px, y=py, r_bottom=rp, r_top=0.3 * rp,
+             height=0.9 * 0.7 * rp, exact_outline=True, name="tall pile (truncated cone)"),
+    ]
+
+
+def _outline_distance(f: dict, x: float, y: float) -> float:
+    """Distance (m) from (x, y) to the outline of a change feature (0 inside)."""
+    u, v = x - f["x"], y - f["y"]
+    if f["kind"] == "cone":
+        return max(0.0, math.hypot(u, v) - f["r_bottom"])
+    t = math.radians(f["angle_deg"])
+    uu = abs(u * math.cos(t) + v * math.sin(t)) - f["a"]
+    vv = abs(-u * math.sin(t) + v * math.cos(t)) - f["b"]
+    return math.hypot(max(uu, 0.0), max(vv, 0.0))
+
+
+def _clear_of(f: dict, x: float, y: float, r: float) -> bool:
+    """(x, y) with radius r is clear of change feature f (bounding circle for the original
+    "piles" features, whose placement must not change; true outline for the others)."""
+    if f.get("exact_outline"):
+        return _outline_distance(f, x, y) > r
+    return math.hypot(x - f["x"], y - f["y"]) > f["radius"] + r
+
+
+def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:
+    """The ground change dz (m, + = fill) of analytic features (see :func:`finish_features`)
+    at x/y in the features' frame."""
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     dz = np.zeros(np.broadcast(x, y).shape)
     x, y = np.broadcast_to(x, dz.shape), np.broadcast_to(y, dz.shape)
-    for f in _change_features(cfg):
+    for f in feats:
         R = f["radius"]
         m = (np.abs(x - f["x"]) < R) & (np.abs(y - f["y"]) < R)
         if not m.any():
@@ -206,6 +306,11 @@ def change_dz(x: np.ndarray, y: np.ndarray, cfg: SceneConfig) -> np.ndarray:
             h = np.clip(d * (f["height"] / f["run"]), 0.0, f["height"])
         dz[m] += f["sign"] * h
     return dz
+
+
+def change_dz(x: np.ndarray, y: np.ndarray, cfg: SceneConfig) -> np.ndarray:
+    """The analytic ground change dz (m, + = fill) at LOCAL x/y (true frame)."""
+    return features_dz(x, y, _change_features(cfg))
 
 
 class _World:
@@ -270,7 +375,10 @@ class _World:
             if not (r < x < bw - r and r < y < bh - r):
                 return False
             for c in self.changes:
-                if math.hypot(x - c["x"], y - c["y"]) < c["radius"] + r + 2.0:
+                if c.get("exact_outline"):
+                    if not _clear_of(c, x, y, r + 2.0):
+                        return False
+                elif math.hypot(x - c["x"], y - c["y"]) < c["radius"] + r + 2.0:
                     return False
             return all(math.hypot(x - px, y - py) > r + pr + 0.5 for px, py, pr in placed)
 
@@ -357,13 +465,22 @@ class _World:
             if k % 3 == 0 and self.changes:  # on a change edge
                 c = self.changes[int(rng.integers(len(self.changes)))]
                 ang = rng.uniform(0, 2 * np.pi)
-                rr = c["r_bottom"] if c["kind"] == "cone" else min(c["a"], c["b"])
-                x, y = c["x"] + rr * np.cos(ang), c["y"] + rr * np.sin(ang)
+                if c.get("exact_outline") and c["kind"] == "rect":  # on the rectangle's edge
+                    ca, sa = np.cos(ang), np.sin(ang)
+                    k = 1.0 / max(abs(ca) / c["a"], abs(sa) / c["b"])
+                    t = math.radians(c["angle_deg"])
+                    u, v = k * ca, k * sa
+                    x = c["x"] + u * math.cos(t) - v * math.sin(t)
+                    y = c["y"] + u * math.sin(t) + v * math.cos(t)
+                else:
+                    rr = c["r_bottom"] if c["kind"] == "cone" else min(c["a"], c["b"])
+                    x, y = c["x"] + rr * np.cos(ang), c["y"] + rr * np.sin(ang)
             else:
                 for _try in range(50):
                     x = rng.uniform(self.ax0 + 2, self.ax1 - 2)
                     y = rng.uniform(self.ay0 + 2, self.ay1 - 2)
-                    if all(math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
+                    if all(_clear_of(c, x, y, r + 1.0) if c.get("exact_outline")
+                           else math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
                            for c in self.changes):
                         break
             # irregular blob: union of three discs
@@ -527,6 +644,13 @@ class _World:
 # public API
 
 
+def _config_dict(cfg: SceneConfig) -> dict:
+    d = asdict(cfg)
+    if cfg.change != "excavation":  # only meaningful there; keeps older truth files identical
+        d.pop("change_fraction")
+    return d
+
+
 def _truth(world: _World) -> dict:
     cfg = world.cfg
     fill = sum(f["volume"] for f in world.changes if f["sign"] > 0)
@@ -561,7 +685,7 @@ def _truth(world: _World) -> dict:
         "features": features,
         "crs": cfg.crs,
         "seed": world.seed,
-        "config": asdict(cfg),
+        "config": _config_dict(cfg),
         "cell_note": (
             "net/cut/fill (m3) are exact integrals of the analytic ground change dz (piles and "
             "pit; fill = added material, cut >= 0 removed), excluding vegetation, objects, "

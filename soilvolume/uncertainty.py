@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage, optimize
 
-from .correction import nmad
+from .robust import nmad
 from .types import GridSpec
 
 INTERP_FRACTION = 0.15

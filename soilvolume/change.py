@@ -1,0 +1,58 @@
+"""Change areas: where the corrected difference shows real change, cut and fill apart.
+
+A cell is significant when its difference exceeds its own level of detection: the stable-ground
+LoD, raised where the cell's heights are uncertain (few points, or a wide spread of heights from
+objects, vegetation or a steep edge inside the cell). Cells on the border of the compared area
+are only partly covered by one survey and never start a change area. Significant cells of one sign form change
+areas when they make a patch of a few cells; each area then takes in a buffer of neighbouring
+cells whatever their sign, which recovers the toes of piles and the rims of pits below the LoD.
+The buffer is sign-blind on purpose: growing into cells of the same sign only would select noise
+by its sign and bias cut and fill outward. Survey noise elsewhere is not counted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+MIN_CELLS = 3  # a change area has at least this many significant cells
+BUFFER_CELLS = 1  # cells of buffer around each change area
+_EIGHT = np.ones((3, 3), bool)
+
+
+def cell_sigma(spread: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Standard error (m) of each cell's height: spread / sqrt(points) (NaN where empty)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(counts > 0, spread / np.sqrt(np.maximum(counts, 1)), np.nan)
+
+
+def cell_lod(lod: float, se_a: np.ndarray, se_b: np.ndarray, z: float) -> np.ndarray:
+    """Per-cell level of detection: the stable-ground LoD, or ``z`` standard errors of the
+    cell's difference where that is larger (unknown standard errors count as zero)."""
+    se = np.sqrt(np.nan_to_num(se_a) ** 2 + np.nan_to_num(se_b) ** 2)
+    return np.maximum(lod, z * se)
+
+
+def _cores(significant: np.ndarray, min_cells: int) -> np.ndarray:
+    labels, n = ndimage.label(significant, structure=_EIGHT)
+    if n == 0:
+        return significant
+    keep = np.bincount(labels.ravel(), minlength=n + 1) >= min_cells
+    keep[0] = False
+    return keep[labels]
+
+
+def change_areas(
+    diff: np.ndarray, lod: np.ndarray | float, *, min_cells: int = MIN_CELLS, buffer_cells: int = BUFFER_CELLS
+) -> tuple[np.ndarray, np.ndarray]:
+    """(fill mask, cut mask): areas of significant positive / negative change with their buffers
+    (see module); a buffer cell both kinds of area reach belongs to neither."""
+    valid = np.isfinite(diff)
+    d = np.where(valid, diff, 0.0)
+    lod = np.broadcast_to(lod, d.shape)
+    inner = ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered: no cores
+    fill_core, cut_core = _cores(inner & (d > lod), min_cells), _cores(inner & (d < -lod), min_cells)
+    grow = (lambda m: ndimage.binary_dilation(m, _EIGHT, iterations=buffer_cells)) if buffer_cells else (lambda m: m)
+    fill, cut = grow(fill_core) & valid, grow(cut_core) & valid
+    both = fill & cut
+    return (fill & ~both) | fill_core, (cut & ~both) | cut_core

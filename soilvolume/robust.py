@@ -1,0 +1,71 @@
+"""Robust statistics and low-order polynomial surfaces on grids (the building blocks of the
+stable-ground search and the bias correction)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+_MAX_FIT = 150_000  # cells used per least-squares fit
+
+
+def nmad(values: np.ndarray) -> float:
+    """Normalized median absolute deviation (1.4826 x MAD) of the finite values."""
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        return float("nan")
+    return float(1.4826 * np.median(np.abs(v - np.median(v))))
+
+
+def residual_stats(residual: np.ndarray, mask: np.ndarray) -> dict[str, float]:
+    """mean, std, nmad, rmse and n_cells of ``residual`` on ``mask``."""
+    r = residual[mask & np.isfinite(residual)]
+    if r.size == 0:
+        return {"mean": float("nan"), "std": float("nan"), "nmad": float("nan"),
+                "rmse": float("nan"), "n_cells": 0}
+    return {"mean": float(r.mean()), "std": float(r.std()), "nmad": nmad(r),
+            "rmse": float(np.sqrt(np.mean(r * r))), "n_cells": int(r.size)}
+
+
+def _terms(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
+    cols = [np.ones_like(x)]
+    if degree >= 1:
+        cols += [x, y]
+    if degree >= 2:
+        cols += [x * x, x * y, y * y]
+    return np.stack(cols, axis=-1)
+
+
+_TERM_NAMES = ("1", "x", "y", "x2", "xy", "y2")
+
+
+def _scaled(x: np.ndarray, y: np.ndarray, mask: np.ndarray):
+    """Centre and scale coordinates on the masked cells (conditioning)."""
+    cx, cy = float(x[mask].mean()), float(y[mask].mean())
+    s = float(max(np.ptp(x[mask]), np.ptp(y[mask]), 1e-9) / 2)
+    return (x - cx) / s, (y - cy) / s, (cx, cy, s)
+
+
+def _lstsq(xs, ys, z, w, degree: int) -> np.ndarray:
+    a = _terms(xs, ys, degree)
+    sw = np.sqrt(w)
+    coef, *_ = np.linalg.lstsq(a * sw[:, None], z * sw, rcond=None)
+    return coef
+
+
+def fit_poly(x, y, diff, mask, degree: int, robust: bool = False):
+    """(surface over the whole grid, coefficients, (cx, cy, scale)); Tukey-IRLS if ``robust``."""
+    xs, ys, frame = _scaled(x, y, mask)
+    idx = np.flatnonzero(mask)
+    if idx.size > _MAX_FIT:  # a regular subsample keeps large grids fast
+        idx = idx[:: -(-idx.size // _MAX_FIT)]
+    px, py, z = xs.ravel()[idx], ys.ravel()[idx], diff.ravel()[idx]
+    w = np.ones_like(z)
+    coef = _lstsq(px, py, z, w, degree)
+    for _ in range(8 if robust else 0):
+        r = z - _terms(px, py, degree) @ coef
+        c = 4.685 * max(nmad(r), 1e-6)
+        w = np.clip(1 - (r / c) ** 2, 0, None) ** 2
+        if np.count_nonzero(w) <= degree * 3 + 1:
+            break
+        coef = _lstsq(px, py, z, w, degree)
+    return _terms(xs, ys, degree) @ coef, coef, frame

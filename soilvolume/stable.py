@@ -1,0 +1,116 @@
+"""Stable ground: the cells of a DEM of difference where nothing changed, found so that real
+change never becomes the reference, even when the works cover most of the after survey.
+
+Surveys are flown beyond the works, so the search starts from the margin of the after
+footprint: a low-order surface is fitted robustly there (Tukey IRLS, change in part of the
+margin is rejected), every cell within k noise levels of it is stable, the change areas are
+dilated, and the surface is refitted on the stable cells until the set stops changing. The
+noise level comes from differences between neighbouring cells, which a smooth offset, tilt or
+doming does not inflate and which change areas inflate only along their edges.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from .robust import fit_poly, nmad
+
+MARGIN_FRACTION = 0.15  # margin band width as a fraction of the footprint's inradius
+
+
+def noise_sigma(diff: np.ndarray) -> float:
+    """One-cell noise (m) of a difference grid: NMAD of differences between 4-neighbours / sqrt 2."""
+    d = np.concatenate([(diff[:, 1:] - diff[:, :-1]).ravel(), (diff[1:] - diff[:-1]).ravel()])
+    d = d[np.isfinite(d)]
+    return nmad(d) / np.sqrt(2.0) if d.size >= 10 else float("nan")
+
+
+def margin(valid: np.ndarray, cell: float, fraction: float = MARGIN_FRACTION) -> np.ndarray:
+    """Valid cells within a band along the outer edge of the valid area (gaps inside it closed
+    first): at least three cells, ``fraction`` of the largest inside distance."""
+    if not valid.any():
+        return valid
+    region = ndimage.binary_fill_holes(ndimage.binary_closing(np.pad(valid, 3), iterations=2))
+    inside = ndimage.distance_transform_edt(region)[3:-3, 3:-3]
+    band = max(3.0, fraction * float(inside.max()))
+    return valid & (inside <= band)
+
+
+def _disk(radius_cells: float) -> np.ndarray:
+    r = int(np.ceil(radius_cells))
+    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+    return xx * xx + yy * yy <= radius_cells * radius_cells + 1e-9
+
+
+def _patches(mask: np.ndarray, min_cells: int) -> np.ndarray:
+    """Cells of ``mask`` in 8-connected patches of at least ``min_cells`` cells."""
+    if min_cells <= 1 or not mask.any():
+        return mask
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), bool))
+    ok = np.bincount(labels.ravel(), minlength=n + 1) >= min_cells
+    ok[0] = False
+    return ok[labels]
+
+
+def find_stable(
+    diff: np.ndarray,
+    cell: float,
+    *,
+    degree: int = 2,
+    seed: np.ndarray | None = None,
+    user_mask: np.ndarray | None = None,
+    k: float = 3.0,
+    dilate_m: float = 2.0,
+    min_change_cells: int = 3,
+    iterations: int = 8,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(stable mask, fitted surface of ``degree``) of a difference grid. ``seed``: cells to start
+    from (default: the margin of the valid area); ``user_mask`` (True = stable) is taken as given."""
+    valid = np.isfinite(diff)
+    y, x = np.mgrid[0 : diff.shape[0], 0 : diff.shape[1]] * float(cell)
+    if user_mask is not None:
+        stable = valid & user_mask.astype(bool)
+        return stable, _surface(x, y, diff, stable, degree)
+    if valid.sum() < 12:
+        return valid, np.zeros(diff.shape)
+    stable = margin(valid, cell) if seed is None else valid & seed
+    if stable.sum() < 12:
+        stable = valid
+    noise = noise_sigma(diff)
+    disk = _disk(dilate_m / cell) if dilate_m > 0 else None
+    surface = _surface(x, y, diff, stable, min(degree, 1), robust=True)
+    for it in range(iterations):
+        resid = diff - surface
+        spread = nmad(resid[stable])
+        thr = k * (max(spread, noise) if np.isfinite(noise) else spread)
+        change = _patches(valid & (np.abs(resid) > thr), min_change_cells)
+        if disk is not None and change.any():
+            change = ndimage.binary_dilation(change, disk)
+        new = valid & ~change
+        if new.sum() < 12:
+            break
+        converged = np.array_equal(new, stable)
+        stable = new
+        surface = _surface(x, y, diff, stable, degree, robust=True)
+        if converged and it > 0:
+            break
+    return stable, surface
+
+
+def _surface(x, y, diff, mask, degree: int, robust: bool = False) -> np.ndarray:
+    if mask.sum() < 12:
+        return np.zeros(diff.shape)
+    return fit_poly(x, y, diff, mask, degree, robust=robust)[0]
+
+
+def largest_gap_deg(stable: np.ndarray, change: np.ndarray) -> float:
+    """Largest angular gap (degrees) of the stable cells seen from the centre of the change
+    areas: above 180 the stable ground lies on one side of the works only."""
+    if not change.any() or not stable.any():
+        return 0.0
+    cr, cc = np.argwhere(change).mean(axis=0)
+    r, c = np.nonzero(stable)
+    ang = np.sort(np.degrees(np.arctan2(r - cr, c - cc)))
+    gaps = np.diff(np.r_[ang, ang[0] + 360.0])
+    return float(gaps.max())
