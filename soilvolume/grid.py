@@ -69,12 +69,14 @@ def average_height(
     if statistic not in ("mean", "median", "robust-mean"):
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     ids, ok = cell_ids(xyz, grid)
-    return cell_heights(ids, np.asarray(xyz[ok, 2], dtype=np.float64), (grid.rows, grid.cols), statistic, k_mad)
+    z = np.asarray(xyz[ok, 2], dtype=np.float64)
+    return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
 
 
 def cell_heights(
     ids: np.ndarray, z: np.ndarray, shape: tuple[int, int], statistic: str = "robust-mean", k_mad: float = 3.0,
-) -> tuple[np.ndarray, np.ndarray]:
+    spread: bool = False,
+) -> tuple[np.ndarray, ...]:
     """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
     ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid)."""
     n = shape[0] * shape[1]

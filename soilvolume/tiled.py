@@ -37,6 +37,7 @@ from .types import GridSpec, SoilVolumeError
 
 TILE_BYTES_PER_POINT = 120.0  # a task's peak per point of its tile (both epochs, ids, sort keys, chunk)
 MIN_TILE, MAX_TILE = 64, 4096  # tile side (cells)
+TILE_ARRAYS = ("h_a", "n_a", "s_a", "h_b", "n_b", "s_b")  # what a tile task returns
 
 
 @dataclass(frozen=True)
@@ -61,15 +62,16 @@ Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 
 
 def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], dict]:
-    """(window, (h_after, n_after, h_before, n_before), stats) of one tile: both epochs' points
-    on its cells, their heights and counts; stats: points read, seconds."""
+    """(window, (h_after, n_after, spread_after, h_before, n_before, spread_before), stats) of one
+    tile: both epochs' points on its cells, their heights, counts and spreads; stats: points
+    read, seconds."""
     import time
 
     t0, stats = time.perf_counter(), {"read": 0}
-    h_b, n_b = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
-    h_a, n_a = _epoch(plan, 1, win, plan.transform, None, stats)
+    h_b, n_b, s_b = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
+    h_a, n_a, s_a = _epoch(plan, 1, win, plan.transform, None, stats)
     stats["seconds"] = time.perf_counter() - t0
-    return win, (h_a, n_a.astype(np.int32), h_b, n_b.astype(np.int32)), stats
+    return win, (h_a, n_a.astype(np.int32), s_a, h_b, n_b.astype(np.int32), s_b), stats
 
 
 def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
@@ -108,7 +110,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
         zs.append(z)
     shape = (win[1] - win[0], win[3] - win[2])
     z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
-    return cell_heights(np.concatenate(ids), z, shape, plan.statistic)
+    return cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True)
 
 
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window) -> tuple[np.ndarray, np.ndarray]:
@@ -201,7 +203,7 @@ def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0
 
 def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None,
               stats: dict | None = None) -> tuple[np.ndarray, ...]:
-    """Run every tile on the client ``c`` and assemble (h_a, n_a, h_b, n_b) on the grid. Tiles
+    """Run every tile on the client ``c`` and assemble (h_a, n_a, s_a, h_b, n_b, s_b) on the grid. Tiles
     found in ``cache`` (from an interrupted run of the same plan) are not run again; finished
     tiles are saved there. ``stats`` sums the tasks' points read and seconds."""
     stats = stats if stats is not None else {}
@@ -209,8 +211,8 @@ def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | 
     from dask.distributed import as_completed
 
     g = plan.grid
-    out = (np.full((g.rows, g.cols), np.nan), np.zeros((g.rows, g.cols), np.int64),
-           np.full((g.rows, g.cols), np.nan), np.zeros((g.rows, g.cols), np.int64))
+    out = tuple(np.full((g.rows, g.cols), np.nan) if k % 3 != 1 else np.zeros((g.rows, g.cols), np.int64)
+                for k in range(6))
     todo = []
     for win in windows:
         saved = _load_tile(cache, win)
@@ -247,7 +249,7 @@ def _load_tile(cache: Path | None, win: Window):
         return None
     try:
         with np.load(_tile_file(cache, win)) as z:
-            return z["h_a"], z["n_a"], z["h_b"], z["n_b"]
+            return tuple(z[k] for k in TILE_ARRAYS)
     except (OSError, ValueError, KeyError):  # a tile cut short by the interruption: run it again
         return None
 
@@ -257,7 +259,7 @@ def _save_tile(cache: Path | None, win: Window, arrays) -> None:
         return
     tmp = cache / f".{_tile_file(cache, win).name}"
     with open(tmp, "wb") as f:
-        np.savez(f, **dict(zip(("h_a", "n_a", "h_b", "n_b"), arrays, strict=True)))
+        np.savez(f, **dict(zip(TILE_ARRAYS, arrays, strict=True)))
     tmp.replace(_tile_file(cache, win))
 
 
@@ -324,9 +326,17 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         prep = prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"), full=False)
     timer.s["read"] = prep.read_s
     timer.s["crop"] -= prep.read_s
+    from .georef import resolve
+
+    mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
+    hooks.info(f"georeferencing: {mode} ({why})")
+    if mode == "precise":
+        options = options.with_(correction="none")
     hooks.step(15, "registering (coarse, then fine)")
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"))
+        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"),
+                       precise=mode == "precise")
+    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     after_thin = transform_points(prep.after_thin, reg.transform)
@@ -346,7 +356,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
     cache = tile_cache(out, plan)
     with timer("grids"):
-        h_a, n_a, h_b, n_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
+        h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
     with timer("planes"):
         sel_b = run._points_on(prep.before_thin, grid, np.isfinite(h_b))
         p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
@@ -354,7 +364,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         d_i = planes.plane_offset(p_b, p_a, grid)
     hooks.step(75, "computing the difference and volumes")
     with timer("volume"):
-        vols = run._volumes(h_a, h_b, n_a, n_b, d_i, grid, options)
+        vols = run._volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b))
         vols["dem_after"] = h_a + prep.origin[2]
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):
@@ -364,10 +374,21 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side,
                             "task_points_read": stats["read"], "task_seconds": round(stats["seconds"], 3),
                             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9))}
+        _quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
         run._html(out, report, vols, grid)
     shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
+
+
+def _quality(report: dict, vols: dict, grid: GridSpec, options: Options, hooks: Hooks) -> None:
+    """The quality verdict of the in-process run, on the same numbers."""
+    from .quality import assess
+
+    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
+    report["quality"] = assess(report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior)
+    for line in report["quality"]["messages"]:
+        hooks.info(f"quality ({report['quality']['verdict']}): {line}")
 
 
 def write_outputs(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, origin, options: Options) -> None:
