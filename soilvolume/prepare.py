@@ -106,10 +106,12 @@ def thin_voxel(area_m2: float) -> float:
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 
 
-def prepare(before: Source, after: Source, options: Options, check=None, full: bool = True) -> Prepared:
+def prepare(before: Source, after: Source, options: Options, check=None, full: bool = True,
+            loader: Callable[..., Loaded] = load) -> Prepared:
     """Stream both clouds into the working frame with a local origin: all after points, the
     before points within the radius of the after footprint, and thinned subsets of both
-    (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile)."""
+    (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
+    ``loader`` streams one source (:func:`stream.load`, or the same as Dask tasks)."""
     crs_b = resolve_crs(before, options.before_crs, "--before-crs")
     crs_a = resolve_crs(after, options.after_crs, "--after-crs")
     hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None
@@ -119,7 +121,7 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
     after, a, note_a = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check,
-                                   None if full else NOTHING)
+                                   None if full else NOTHING, loader)
     if len(a.thin) < 3:
         raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
     poly = footprint(a.thin[:, :2], options.radius)
@@ -127,7 +129,7 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
     reach = options.max_gps_shift + 2.0
     box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach) if full else NOTHING
-    b = load(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
+    b = loader(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
              ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box, not full)
     if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
         raise SoilVolumeError(
@@ -182,14 +184,14 @@ def _frame_box(src: Source, crs: pyproj.CRS, frame: WorkFrame) -> tuple[np.ndarr
 
 
 def _load_whole(src: Source, crs: pyproj.CRS, to_local, lo: np.ndarray, hi: np.ndarray, voxel: float,
-                options: Options, check, box=None) -> tuple[Source, Loaded, str | None]:
+                options: Options, check, box=None, loader=load) -> tuple[Source, Loaded, str | None]:
     """Every (ground) point of ``src`` kept (within ``box`` when given), thinned over its local box
     lo..hi (padded: the box comes from header bounds). Returns (the source streamed, what was
     loaded, filter note)."""
     src, mode, note = _filtered(src, crs, options)
     pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
-    return src, load(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box,
-                     box is NOTHING), note
+    return src, loader(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box,
+                       box is NOTHING), note
 
 
 def _all_points(src: Source, to_local):

@@ -202,7 +202,7 @@ class ColumnThinner:
     ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk."""
 
     def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float) -> None:
-        self.lo, self.voxel = np.asarray(lo[:2], float), float(voxel)
+        self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
         self.shape = (int(np.ceil((hi[1] - lo[1]) / voxel)) + 1, int(np.ceil((hi[0] - lo[0]) / voxel)) + 1)
         n = self.shape[0] * self.shape[1]
         self.sums = np.zeros((4, n))

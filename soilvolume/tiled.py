@@ -31,6 +31,7 @@ from .outputs import OutputDir
 from .prepare import GROUND, Prepared, _local, prepare
 from .register import register, transform_points
 from .report import write_json
+from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
 from .stream import open_source
 from .types import GridSpec, SoilVolumeError
@@ -312,7 +313,7 @@ def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks
     if options.ground == "filter":
         raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
     hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
-    with client(schedule, options.memory_limit) as starting:  # workers start while registration runs
+    with client(schedule, options.memory_limit) as starting:  # workers start while the inputs are opened
         return _tiled(before, after, out, options, timer, hooks, schedule, starting)
 
 
@@ -321,11 +322,12 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     """The tiled run, with ``starting`` the future of the (cluster, client) being started."""
     from . import run
 
-    with timer("crop"):
+    with timer("cluster_wait"):
+        _, c = starting.result()
+    with timer("crop"):  # the registration subsets: a first pass as Dask tasks
         src_b, src_a = open_source(before), open_source(after)
-        prep = prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"), full=False)
-    timer.s["read"] = prep.read_s
-    timer.s["crop"] -= prep.read_s
+        prep = prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"), full=False,
+                       loader=dask_loader(c, lambda m: hooks.step(8, m)))
     from .georef import resolve
 
     mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
@@ -351,8 +353,6 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
         side = max(1, round(align / cell))
     windows = tiles(grid, side, align)
-    with timer("cluster_wait"):
-        _, c = starting.result()
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
     cache = tile_cache(out, plan)
     with timer("grids"):
