@@ -127,3 +127,15 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
         (tmp_path / "tile_20_40_20_40.npz").unlink()
         with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
             run_tiles(c, plan, windows, Hooks(), tmp_path)
+
+
+def test_existing_cluster_by_address(pair, in_process, tmp_path):
+    """--scheduler tcp://HOST:PORT: an already running cluster (here in this process)."""
+    from dask.distributed import LocalCluster
+
+    before, after, _ = pair
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
+                      dashboard_address=None) as cluster:
+        got = estimate(before, after, tmp_path / "r", Options(scheduler=cluster.scheduler_address, tile_cells=24))
+    assert got.report["engine"]["scheduler"].startswith("tcp://")
+    _same(got, in_process)
