@@ -13,7 +13,7 @@ from conftest import write_scene
 from soilvolume.api import estimate
 from soilvolume.options import Options
 from soilvolume.schedule import Schedule, choose, parse
-from soilvolume.tiled import tiles
+from soilvolume.tiletask import tiles
 from soilvolume.types import GridSpec, SoilVolumeError
 from soilvolume.vpc import write_vpc
 
@@ -110,7 +110,7 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
 
     from soilvolume.api import Hooks
     from soilvolume.crs import WorkFrame
-    from soilvolume.tiled import Plan, _save_tile, run_tiles
+    from soilvolume.tiletask import Plan, _save_tile, run_tiles
 
     g = GridSpec(0.0, 40.0, 1.0, 40, 40)
     crs = pyproj.CRS("EPSG:32654")
