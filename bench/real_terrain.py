@@ -43,7 +43,13 @@ CASES = {
 
 
 def real_dir() -> Path:
-    return Path(os.environ.get("SOILVOLUME_REAL_DATA", DEFAULT_REAL))
+    """``$SOILVOLUME_REAL_DATA``, else ``../shared/data/real`` beside the repository (as the
+    tests look for it), else ``/work/shared/data/real``."""
+    env = os.environ.get("SOILVOLUME_REAL_DATA")
+    if env:
+        return Path(env)
+    beside = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    return beside if beside.exists() else DEFAULT_REAL
 
 
 def available() -> bool:

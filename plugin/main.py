@@ -10,6 +10,8 @@ from qgis.PyQt.QtWidgets import QAction
 
 from ..processing.base import ICON
 from ..processing.provider import SoilVolumeProvider
+from . import deps
+from .installer import DependencyBar
 
 MENU = "&Soil volume change"
 MAIN_ALGORITHM = "soilvolume:estimatevolumechange"
@@ -17,17 +19,20 @@ MAIN_ALGORITHM = "soilvolume:estimatevolumechange"
 
 class SoilVolumePlugin:
     """Registers the Processing provider; adds a menu entry and a toolbar button that open the
-    main algorithm's dialog."""
+    main algorithm's dialog; checks the engine's dependencies once and offers to install them."""
 
     def __init__(self, iface: Any) -> None:
         self.iface = iface
         self.provider: SoilVolumeProvider | None = None
         self.action: QAction | None = None
+        self.install_action: QAction | None = None
+        self.dependencies = DependencyBar(iface)
 
     def initProcessing(self) -> None:  # noqa: N802 - QGIS API
-        if self.provider is None:
+        registry = QgsApplication.processingRegistry()
+        if self.provider is None and registry.providerById("soilvolume") is None:
             self.provider = SoilVolumeProvider()
-            QgsApplication.processingRegistry().addProvider(self.provider)
+            registry.addProvider(self.provider)
 
     def initGui(self) -> None:  # noqa: N802 - QGIS API
         self.initProcessing()
@@ -38,6 +43,21 @@ class SoilVolumePlugin:
         self.action.triggered.connect(self.open_dialog)
         self.iface.addPluginToMenu(MENU, self.action)
         self.iface.addToolBarIcon(self.action)
+        self.install_action = QAction("Install dependencies…", self.iface.mainWindow())
+        self.install_action.triggered.connect(self.install_dependencies)
+        self.iface.addPluginToMenu(MENU, self.install_action)
+        self.dependencies.check()
+
+    def install_dependencies(self) -> None:
+        """Install whatever the engine still misses (menu entry; the bar's button does the same)."""
+        from qgis.core import Qgis
+
+        missing = deps.missing()
+        if not missing:
+            self.iface.messageBar().pushMessage(
+                "Soil volume change", "All dependencies are installed.", Qgis.MessageLevel.Info, 5)
+            return
+        self.dependencies.install([req for _, req, _ in missing])
 
     def open_dialog(self) -> None:
         """Open the Processing dialog of the main algorithm."""
@@ -46,6 +66,10 @@ class SoilVolumePlugin:
         processing.execAlgorithmDialog(MAIN_ALGORITHM, {})
 
     def unload(self) -> None:
+        if self.install_action is not None:
+            self.iface.removePluginMenu(MENU, self.install_action)
+            self.install_action.deleteLater()
+            self.install_action = None
         if self.action is not None:
             self.iface.removePluginMenu(MENU, self.action)
             self.iface.removeToolBarIcon(self.action)

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-from qgis.core import QgsProcessingAlgorithm
+from qgis.core import QgsProcessingAlgorithm, QgsProcessingContext
 from qgis.PyQt.QtCore import QCoreApplication
 from qgis.PyQt.QtGui import QIcon
+
+from . import params
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icon.svg"
 
@@ -21,6 +24,7 @@ class SoilVolumeAlgorithm(QgsProcessingAlgorithm):
     _tags = ""  # comma-separated
     _group = ""
     _group_id = ""
+    _clouds: dict[str, str] = {}  # point cloud inputs: parameter -> label ("Before", ...)
 
     def name(self) -> str:
         return self._name
@@ -29,7 +33,24 @@ class SoilVolumeAlgorithm(QgsProcessingAlgorithm):
         return self.tr(self._display_name)
 
     def shortHelpString(self) -> str:  # noqa: N802
-        return self.tr(self._help)
+        """The help as flowing HTML: the source's line breaks are not paragraph breaks."""
+        return " ".join(self.tr(self._help).split())
+
+    def checkParameterValues(  # noqa: N802
+        self, parameters: dict[str, Any], context: QgsProcessingContext
+    ) -> tuple[bool, str]:
+        """QGIS's checks, except that a point cloud input may also be a file QGIS itself
+        cannot open as a layer (no PDAL); a missing or unsupported file is named clearly."""
+        for key, label in self._clouds.items():
+            ok, message = params.check_cloud_value(self, parameters, key, context, label)
+            if not ok:
+                return ok, message
+        for param in self.parameterDefinitions():
+            if param.name() in self._clouds or param.isDestination():
+                continue
+            if not param.checkValueIsAcceptable(parameters.get(param.name()), context):
+                return False, f"Incorrect parameter value for {param.description()}"
+        return True, ""
 
     def tags(self) -> list[str]:
         return self.tr(self._tags).split(",")

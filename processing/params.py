@@ -9,15 +9,14 @@ from typing import Any
 
 from qgis.core import (
     QgsCoordinateReferenceSystem,
+    QgsMapLayer,
     QgsProcessingAlgorithm,
     QgsProcessingContext,
     QgsProcessingException,
     QgsProcessingParameterCrs,
     QgsProcessingParameterDefinition,
-    QgsProcessingParameterEnum,
-    QgsProcessingParameterFile,
-    QgsProcessingParameterNumber,
     QgsProcessingParameterPointCloudLayer,
+    QgsProperty,
 )
 
 CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
@@ -27,55 +26,19 @@ CLOUD_FILTER = (
 LAS_FILTER = "LAZ files (*.laz);;LAS files (*.las)"
 RASTER_COPY_SUFFIXES = (".tif", ".tiff")
 
-FINE_METHODS = ("icp", "gicp", "pfh", "none")
-FINE_LABELS = (
-    "Robust ICP, point-to-plane (recommended)",
-    "Generalized ICP",
-    "PFH + SAC-IA on a patch (the paper's method)",
-    "None (coarse registration only)",
-)
-COARSE_METHODS = ("auto", "fpfh", "none")
-COARSE_LABELS = (
-    "Auto: FPFH + RANSAC, kept only if better than the GPS pose",
-    "Always FPFH + RANSAC",
-    "None (trust the GPS georeferencing)",
-)
-CORRECTIONS = ("surface", "plane", "paper-plane", "none")
-CORRECTION_LABELS = (
-    "Surface: degree-2 polynomial on stable ground (recommended)",
-    "Plane on stable ground",
-    "Paper: two RANSAC planes, offset d_i",
-    "None (no plane-offset compensation)",
-)
-STATISTICS = ("robust-mean", "mean", "median")
-STATISTIC_LABELS = ("Robust mean (3 MAD rejection)", "Mean (the paper)", "Median")
-GROUNDS = ("auto", "class", "filter", "none")
-GROUND_LABELS = (
-    "Auto: class 2 when the file has it, else all points",
-    "Class 2 (ground) only",
-    "SMRF ground filter",
-    "All points",
-)
-
-
 def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterDefinition:
     """Mark a parameter as advanced."""
     param.setFlags(param.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
     return param
 
 
-def cloud_params(key: str, label: str) -> list[QgsProcessingParameterDefinition]:
-    """A point cloud file parameter and its optional point cloud layer alternative."""
-    return [
-        QgsProcessingParameterFile(
-            key, f"{label} point cloud file (LAS, LAZ, COPC, VPC, PLY, PCD, XYZ/TXT/CSV)",
-            behavior=QgsProcessingParameterFile.File, fileFilter=CLOUD_FILTER, optional=True,
-        ),
-        QgsProcessingParameterPointCloudLayer(
-            f"{key}_LAYER", f"…or a {label.lower()} point cloud layer (used when no file is given)",
-            optional=True,
-        ),
-    ]
+def cloud_param(key: str, label: str) -> QgsProcessingParameterPointCloudLayer:
+    """One required input per epoch: a point cloud layer, or a file path (LAS, LAZ, COPC, VPC,
+    PLY, PCD, XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer)."""
+    param = QgsProcessingParameterPointCloudLayer(key, f"{label} point cloud")
+    param.setHelp(f"The {label.lower()} survey: a point cloud layer of the project or a file "
+                  f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)}).")
+    return param
 
 
 def crs_param(key: str, label: str) -> QgsProcessingParameterCrs:
@@ -84,32 +47,31 @@ def crs_param(key: str, label: str) -> QgsProcessingParameterCrs:
     )
 
 
-def enum_param(key: str, label: str, labels: tuple[str, ...], default: int = 0):
-    return QgsProcessingParameterEnum(key, label, options=list(labels), defaultValue=default)
-
-
-def number_param(key: str, label: str, default: float, minimum: float = 0.0):
-    return QgsProcessingParameterNumber(
-        key, label, type=QgsProcessingParameterNumber.Double, defaultValue=default,
-        minValue=minimum,
-    )
-
-
 def cloud_path(
     alg: QgsProcessingAlgorithm, parameters: dict[str, Any], key: str,
-    context: QgsProcessingContext,
-    label: str,
+    context: QgsProcessingContext, label: str,
 ) -> str:
-    """The point cloud file behind ``key`` (a file) or ``key_LAYER`` (a point cloud layer)."""
-    path = alg.parameterAsFile(parameters, key, context) if parameters.get(key) else ""
-    if not path and parameters.get(f"{key}_LAYER"):
-        layer = alg.parameterAsPointCloudLayer(parameters, f"{key}_LAYER", context)
-        if layer is not None:
-            path = layer.source()
+    """The point cloud file behind ``key``: a file path as given, or a layer's source file."""
+    path = _cloud_source(alg, parameters, key, context)
     if not path:
-        raise QgsProcessingException(f"No {label} point cloud: give a file or a point cloud layer.")
+        raise QgsProcessingException(
+            f"No {label.lower()} point cloud: choose a point cloud layer or a file.")
     check_cloud_file(path, label)
     return path
+
+
+def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcessingContext) -> str:
+    value = parameters.get(key)
+    if isinstance(value, QgsProperty):
+        value = value.valueAsString(context.expressionContext())
+    if isinstance(value, QgsMapLayer):
+        return value.source()
+    if not value:
+        return ""
+    if isinstance(value, str) and (Path(value).is_file() or Path(value).suffix):
+        return value
+    layer = alg.parameterAsPointCloudLayer(parameters, key, context)
+    return layer.source() if layer is not None else str(value)
 
 
 def check_cloud_file(path: str, label: str) -> None:
@@ -124,17 +86,15 @@ def check_cloud_file(path: str, label: str) -> None:
         )
 
 
-def check_clouds(parameters: dict[str, Any], keys: dict[str, str]) -> tuple[bool, str]:
-    """checkParameterValues helper: each cloud given once, as a readable supported file."""
-    for key, label in keys.items():
-        value = parameters.get(key)
-        if not value and not parameters.get(f"{key}_LAYER"):
-            return False, f"No {label} point cloud: give a file or a point cloud layer."
-        if isinstance(value, str) and value:
-            try:
-                check_cloud_file(value, label)
-            except QgsProcessingException as exc:
-                return False, str(exc)
+def check_cloud_value(
+    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], key: str,
+    context: QgsProcessingContext, label: str,
+) -> tuple[bool, str]:
+    """checkParameterValues for one cloud input: a layer, or a readable supported file."""
+    try:
+        cloud_path(alg, parameters, key, context, label)
+    except QgsProcessingException as exc:
+        return False, str(exc)
     return True, ""
 
 
@@ -170,11 +130,6 @@ def qgs_crs(text: str | None) -> QgsCoordinateReferenceSystem:
         return QgsCoordinateReferenceSystem()
     crs = QgsCoordinateReferenceSystem(text)
     return crs if crs.isValid() else QgsCoordinateReferenceSystem.fromWkt(text)
-
-
-def optional_cell(value: float) -> float | None:
-    """Cell size parameter: 0 means automatic."""
-    return float(value) if value and value > 0 else None
 
 
 def deliver_raster(src: Path, dest: str | None) -> str | None:

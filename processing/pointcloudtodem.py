@@ -11,11 +11,10 @@ from qgis.core import (
     QgsProcessingFeedback,
     QgsProcessingOutputNumber,
     QgsProcessingParameterExtent,
-    QgsProcessingParameterNumber,
     QgsProcessingParameterRasterDestination,
 )
 
-from . import engine, params, styles
+from . import engine, optionparams, params, styles
 from .base import SoilVolumeAlgorithm
 
 HELP = """\
@@ -32,6 +31,9 @@ beyond 3 MAD of the cell median) and which points count as <b>ground</b>.</p>
 its UTM zone); empty cells are nodata. It loads with a terrain colour ramp.</p>"""
 
 
+OPTIONS = {"cell", "statistic", "ground", "ground_window", "ground_slope"}
+
+
 class PointCloudToDem(SoilVolumeAlgorithm):
     """One cloud to an average-height GeoTIFF."""
 
@@ -41,21 +43,15 @@ class PointCloudToDem(SoilVolumeAlgorithm):
     _tags = "dem,dsm,grid,rasterize,average,height,point cloud,lidar"
     _group = "Point cloud tools"
     _group_id = "pointcloud"
+    _clouds = {"INPUT": "Input"}
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
-        for p in params.cloud_params("INPUT", "Input"):
-            self.addParameter(p)
+        self.addParameter(params.cloud_param("INPUT", "Input"))
         self.addParameter(params.crs_param("CRS", "Input"))
-        self.addParameter(QgsProcessingParameterNumber(
-            "CELL", self.tr("Cell size (m, 0 = automatic from point density)"),
-            type=QgsProcessingParameterNumber.Double, defaultValue=0.0, minValue=0.0,
-        ))
+        for param in optionparams.parameters(OPTIONS):
+            self.addParameter(param)
         self.addParameter(QgsProcessingParameterExtent(
             "EXTENT", self.tr("Grid extent (default: the cloud's)"), optional=True))
-        self.addParameter(params.enum_param(
-            "STATISTIC", self.tr("Cell height statistic"), params.STATISTIC_LABELS))
-        self.addParameter(params.enum_param(
-            "GROUND", self.tr("Ground points"), params.GROUND_LABELS))
         self.addParameter(QgsProcessingParameterRasterDestination(
             "OUTPUT", self.tr("Average-height DEM")))
         for key, description in (
@@ -63,12 +59,6 @@ class PointCloudToDem(SoilVolumeAlgorithm):
             ("POINTS", "Points gridded"), ("VALID_CELLS", "Cells with a height"),
         ):
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(description)))
-
-    def checkParameterValues(  # noqa: N802
-        self, parameters: dict[str, Any], context: QgsProcessingContext
-    ) -> tuple[bool, str]:
-        ok, message = params.check_clouds(parameters, {"INPUT": "input"})
-        return (ok, message) if not ok else super().checkParameterValues(parameters, context)
 
     def bounds(
         self, parameters: dict[str, Any], context: QgsProcessingContext, crs: str | None
@@ -88,14 +78,10 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         self, parameters: dict[str, Any], context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS)
+        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         cloud = params.cloud_path(self, parameters, "INPUT", context, "Input")
         crs = params.crs_text(self, parameters, "CRS", context) or self.header_crs(cloud)
-        options = engine.engine("options").Options().with_(
-            cell=params.optional_cell(self.parameterAsDouble(parameters, "CELL", context)),
-            statistic=params.STATISTICS[self.parameterAsEnum(parameters, "STATISTIC", context)],
-            ground=params.GROUNDS[self.parameterAsEnum(parameters, "GROUND", context)],
-        )
+        options = optionparams.read_options(self, parameters, context, feedback, OPTIONS)
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         tif = out if Path(out).suffix.lower() in params.RASTER_COPY_SUFFIXES else out + ".tif"
         with engine.engine_errors(feedback, "Set the 'Input CRS override' parameter."):

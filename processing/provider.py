@@ -5,6 +5,7 @@ from __future__ import annotations
 from qgis.core import QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
+from ..plugin import deps
 from .base import ICON
 from .estimatevolumechange import EstimateVolumeChange
 from .pointcloudtodem import PointCloudToDem
@@ -19,6 +20,7 @@ class SoilVolumeProvider(QgsProcessingProvider):
     """Registers the four algorithms; the engine is imported only when one runs."""
 
     def loadAlgorithms(self) -> None:  # noqa: N802 - Qt API
+        deps.activate()  # also when only the provider is used (qgis_process, tests)
         for algorithm in ALGORITHMS:
             self.addAlgorithm(algorithm())
 

@@ -11,10 +11,9 @@ from qgis.core import (
     QgsProcessingOutputNumber,
     QgsProcessingOutputString,
     QgsProcessingParameterFileDestination,
-    QgsProcessingParameterNumber,
 )
 
-from . import engine, params
+from . import engine, optionparams, params
 from .base import SoilVolumeAlgorithm
 
 HELP = """\
@@ -35,6 +34,11 @@ overrides for files without one, the crop radius (m) and the registration method
 and the fine stage's fitness and inlier RMSE.</p>"""
 
 
+OPTIONS = {"before_crs", "after_crs", "radius", "coarse", "coarse_voxel", "georeferencing",
+           "max_gps_shift", "max_gps_rotation", "max_gps_tilt", "fine", "pfh_patch", "seed", "ground",
+           "threads"}
+
+
 class RegisterPointClouds(SoilVolumeAlgorithm):
     """Coarse + fine registration of two clouds."""
 
@@ -44,20 +48,13 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
     _tags = "registration,icp,gicp,fpfh,ransac,align,co-registration,point cloud"
     _group = "Point cloud tools"
     _group_id = "pointcloud"
+    _clouds = {"BEFORE": "Before", "AFTER": "After"}
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
-        for p in params.cloud_params("BEFORE", "Before") + params.cloud_params("AFTER", "After"):
-            self.addParameter(p)
-        self.addParameter(params.crs_param("BEFORE_CRS", "Before"))
-        self.addParameter(params.crs_param("AFTER_CRS", "After"))
-        self.addParameter(params.number_param(
-            "RADIUS", self.tr("Crop radius around the after cloud (m)"), 30.0))
-        self.addParameter(params.enum_param(
-            "FINE", self.tr("Fine registration"), params.FINE_LABELS))
-        self.addParameter(params.advanced(params.enum_param(
-            "COARSE", self.tr("Coarse registration"), params.COARSE_LABELS)))
-        self.addParameter(params.advanced(QgsProcessingParameterNumber(
-            "SEED", self.tr("Random seed"), defaultValue=0, minValue=0)))
+        self.addParameter(params.cloud_param("BEFORE", "Before"))
+        self.addParameter(params.cloud_param("AFTER", "After"))
+        for param in optionparams.parameters(OPTIONS):
+            self.addParameter(param)
         self.addParameter(QgsProcessingParameterFileDestination(
             "OUTPUT", self.tr("Registered after cloud"), fileFilter=params.LAS_FILTER))
         self.addParameter(QgsProcessingParameterFileDestination(
@@ -69,27 +66,14 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         self.addOutput(QgsProcessingOutputNumber(
             "RMSE", self.tr("Fine registration inlier RMSE (m)")))
 
-    def checkParameterValues(  # noqa: N802
-        self, parameters: dict[str, Any], context: QgsProcessingContext
-    ) -> tuple[bool, str]:
-        ok, message = params.check_clouds(parameters, {"BEFORE": "before", "AFTER": "after"})
-        return (ok, message) if not ok else super().checkParameterValues(parameters, context)
-
     def processAlgorithm(  # noqa: N802
         self, parameters: dict[str, Any], context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS)
+        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before")
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
-        options = engine.engine("options").Options().with_(
-            before_crs=params.crs_text(self, parameters, "BEFORE_CRS", context),
-            after_crs=params.crs_text(self, parameters, "AFTER_CRS", context),
-            radius=self.parameterAsDouble(parameters, "RADIUS", context),
-            fine=params.FINE_METHODS[self.parameterAsEnum(parameters, "FINE", context)],
-            coarse=params.COARSE_METHODS[self.parameterAsEnum(parameters, "COARSE", context)],
-            seed=self.parameterAsInt(parameters, "SEED", context),
-        )
+        options = optionparams.read_options(self, parameters, context, feedback, OPTIONS)
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         if Path(out).suffix.lower() not in (".las", ".laz"):
             out += ".laz"

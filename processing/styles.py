@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from qgis.core import (
+    QgsColorRampLegendNodeSettings,
     QgsMapLayer,
     QgsProcessingContext,
     QgsProcessingFeedback,
@@ -35,26 +36,39 @@ def value_range(layer: QgsRasterLayer) -> tuple[float, float] | None:
 
 
 def apply_style(layer: QgsMapLayer, kind: str) -> bool:
-    """Load the QML for ``kind`` and stretch its ramp to the data (symmetric for differences)."""
+    """Load the QML for ``kind``, stretch its ramp to the data (symmetric for differences) and
+    install it as a new renderer, so the Layers panel rebuilds the legend with the new range."""
     if not isinstance(layer, QgsRasterLayer) or not layer.isValid():
         return False
     _message, ok = layer.loadNamedStyle(str(style_path(kind)))
     renderer = layer.renderer()
     rng = value_range(layer)
     if ok and isinstance(renderer, QgsSingleBandPseudoColorRenderer) and rng is not None:
-        lo, hi = rng
-        if kind == DIVERGING:
-            m = max(abs(lo), abs(hi)) or 0.1
-            lo, hi = -m, m
-        elif hi <= lo:
-            hi = lo + 1.0
-        shader_fn = renderer.shader().rasterShaderFunction()
-        ramp = shader_fn.sourceColorRamp()
-        renderer.setClassificationMin(lo)
-        renderer.setClassificationMax(hi)
-        renderer.createShader(ramp.clone() if ramp is not None else None)
+        layer.setRenderer(stretched(renderer, *symmetric(rng, kind)))
     layer.triggerRepaint()
     return ok
+
+
+def symmetric(rng: tuple[float, float], kind: str) -> tuple[float, float]:
+    """The styled range: centred on 0 for differences, never empty."""
+    lo, hi = rng
+    if kind == DIVERGING:
+        m = max(abs(lo), abs(hi)) or 0.1
+        return -m, m
+    return (lo, hi) if hi > lo else (lo, lo + 1.0)
+
+
+def stretched(renderer: QgsSingleBandPseudoColorRenderer, lo: float, hi: float):
+    """A copy of ``renderer`` with its colour ramp (and legend) spread over lo..hi."""
+    new = renderer.clone()
+    ramp = renderer.shader().rasterShaderFunction().sourceColorRamp()
+    legend = renderer.shader().rasterShaderFunction().legendSettings()
+    new.setClassificationMin(lo)
+    new.setClassificationMax(hi)
+    new.createShader(ramp.clone() if ramp is not None else None)
+    if legend is not None:
+        new.shader().rasterShaderFunction().setLegendSettings(QgsColorRampLegendNodeSettings(legend))
+    return new
 
 
 class StylePostProcessor(QgsProcessingLayerPostProcessorInterface):
@@ -79,12 +93,14 @@ class StylePostProcessor(QgsProcessingLayerPostProcessorInterface):
 
 
 def style_on_load(
-    context: QgsProcessingContext, path: str | None, kind: str, name: str = ""
+    context: QgsProcessingContext, path: str | None, kind: str, name: str = "", order: int = 0
 ) -> None:
-    """Style the output at ``path`` (and name it) if Processing will load it."""
+    """Style the output at ``path`` (name it, and stack it by ``order``: higher on top) if
+    Processing will load it."""
     if not path or not context.willLoadLayerOnCompletion(path):
         return
     details = context.layerToLoadOnCompletionDetails(path)
     details.setPostProcessor(StylePostProcessor.create(kind))
     if name:
         details.name = name
+    details.layerSortKey = order

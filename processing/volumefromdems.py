@@ -103,7 +103,7 @@ class VolumeFromDems(SoilVolumeAlgorithm):
         self, parameters: dict[str, Any], context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.RASTER_DEPS)
+        engine.require(engine.RASTER_DEPS, feedback)
         before = raster_file(self.parameterAsRasterLayer(parameters, "BEFORE", context), "before")
         after = raster_file(self.parameterAsRasterLayer(parameters, "AFTER", context), "after")
         zones = None

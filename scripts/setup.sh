@@ -8,7 +8,7 @@ SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 export DEBIAN_FRONTEND=noninteractive
 
 need_apt=0
-for pkg in python3-venv libusb-1.0-0 libgl1 libegl1 libgomp1 python3-qgis qgis-providers qgis chromium; do
+for pkg in python3-venv libusb-1.0-0 libgl1 libegl1 libgomp1 python3-qgis qgis-providers qgis chromium xvfb; do
   dpkg -s "$pkg" >/dev/null 2>&1 || need_apt=1
 done
 if [ "$need_apt" = 1 ]; then
@@ -18,7 +18,7 @@ if [ "$need_apt" = 1 ]; then
   fi
   $SUDO apt-get update -qq
   $SUDO apt-get install -y -qq --no-install-recommends --no-upgrade \
-    python3-venv libusb-1.0-0 libgl1 libegl1 libgomp1 chromium fonts-dejavu-core >/dev/null
+    python3-venv libusb-1.0-0 libgl1 libegl1 libgomp1 chromium fonts-dejavu-core xvfb >/dev/null
   $SUDO apt-get install -y -qq --no-install-recommends -t bookworm-backports \
     python3-qgis qgis-providers qgis >/dev/null
 fi

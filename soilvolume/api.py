@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from . import interrupt
 from .options import Options
 from .types import SoilVolumeError
+from .validate import check_bounds, check_options
 
 Progress = Callable[[float, str], None]
 Log = Callable[[str], None]
@@ -27,23 +29,42 @@ class Cancelled(SoilVolumeError):
 
 @dataclass
 class Hooks:
-    """Progress, log and cancellation callbacks (all optional)."""
+    """Progress, log and cancellation callbacks (all optional). A message is logged once even
+    when a stage reports it many times (e.g. once per ICP level)."""
 
     progress: Progress | None = None
     log: Log | None = None
     cancel: Cancel | None = None
+    _last: str | None = field(default=None, repr=False)
 
-    def step(self, percent: float, message: str) -> None:
+    def step(self, percent: float, message: str, log: bool = True) -> None:
+        """Check for cancellation (:class:`Cancelled`, or ``Interrupted`` after SIGINT/SIGTERM),
+        move the progress bar and log ``message`` (once)."""
+        interrupt.check()
         if self.cancel is not None and self.cancel():
             raise Cancelled("cancelled by the user")
         if self.progress is not None:
             self.progress(percent, message)
-        if self.log is not None:
-            self.log(message)
+        if log and message != self._last:
+            self._last = message
+            self.info(message)
 
     def info(self, message: str) -> None:
         if self.log is not None:
             self.log(message)
+
+    def ticker(self, start: float, end: float, message: str, expected: int = 8) -> Callable[[], None]:
+        """A ``check()`` callback for a long stage of unknown length (logged by the step that
+        started it): each call checks for cancellation and moves the bar from ``start`` towards
+        ``end`` (about 90 % of the way after ``expected`` calls, never reaching it)."""
+        calls = [0]
+        rate = 0.1 ** (1.0 / max(expected, 1))
+
+        def check() -> None:
+            calls[0] += 1
+            self.step(start + (end - start) * (1.0 - rate ** calls[0]), message, log=False)
+
+        return check
 
 
 @dataclass
@@ -71,7 +92,7 @@ def estimate(
     from .run import run_estimate
 
     return run_estimate(
-        Path(before), Path(after), Path(out_dir), options or Options(), overwrite=overwrite,
+        Path(before), Path(after), Path(out_dir), check_options(options or Options()), overwrite=overwrite,
         hooks=hooks or Hooks(), before_pipeline=before_pipeline, after_pipeline=after_pipeline,
     )
 
@@ -90,7 +111,8 @@ def cloud_to_dem(
     description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
     from .run import run_cloud_to_dem
 
-    return run_cloud_to_dem(Path(cloud), Path(out_tif), options or Options(), crs=crs, bounds=bounds,
+    return run_cloud_to_dem(Path(cloud), Path(out_tif), check_options(options or Options()), crs=crs,
+                            bounds=check_bounds(bounds),
                             hooks=hooks or Hooks())
 
 
@@ -107,7 +129,7 @@ def register(
     "fine": {...}}."""
     from .run import run_register
 
-    return run_register(Path(before), Path(after), Path(out_cloud), options or Options(),
+    return run_register(Path(before), Path(after), Path(out_cloud), check_options(options or Options()),
                         hooks=hooks or Hooks())
 
 

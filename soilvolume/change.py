@@ -43,16 +43,41 @@ def _cores(significant: np.ndarray, min_cells: int) -> np.ndarray:
 
 
 def change_areas(
-    diff: np.ndarray, lod: np.ndarray | float, *, min_cells: int = MIN_CELLS, buffer_cells: int = BUFFER_CELLS
+    diff: np.ndarray,
+    lod: np.ndarray | float,
+    *,
+    refilled: np.ndarray | None = None,
+    min_cells: int = MIN_CELLS,
+    buffer_cells: int = BUFFER_CELLS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(fill mask, cut mask): areas of significant positive / negative change with their buffers
-    (see module); a buffer cell both kinds of area reach belongs to neither."""
+    (see module); a buffer cell both kinds of area reach belongs to neither. ``refilled`` cells
+    (interpolated, not measured) never start an area; a refilled patch touching an area of the
+    sign of its own volume joins it (a hole on a pile is part of the pile)."""
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
-    inner = ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered: no cores
-    fill_core, cut_core = _cores(inner & (d > lod), min_cells), _cores(inner & (d < -lod), min_cells)
+    measured = ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered
+    if refilled is not None:
+        measured &= ~refilled
+    fill_core, cut_core = _cores(measured & (d > lod), min_cells), _cores(measured & (d < -lod), min_cells)
     grow = (lambda m: ndimage.binary_dilation(m, _EIGHT, iterations=buffer_cells)) if buffer_cells else (lambda m: m)
     fill, cut = grow(fill_core) & valid, grow(cut_core) & valid
     both = fill & cut
-    return (fill & ~both) | fill_core, (cut & ~both) | cut_core
+    fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
+    if refilled is not None and refilled.any():
+        fill, cut = _join_refilled(d, refilled & valid & ~fill & ~cut, fill, cut)
+    return fill, cut
+
+
+def _join_refilled(d, patches, fill, cut):
+    labels, n = ndimage.label(patches, structure=_EIGHT)
+    if n == 0:
+        return fill, cut
+    idx = np.arange(1, n + 1)
+    vol = ndimage.sum(d, labels, idx)
+    near_fill = ndimage.maximum(ndimage.binary_dilation(fill, _EIGHT), labels, idx) > 0
+    near_cut = ndimage.maximum(ndimage.binary_dilation(cut, _EIGHT), labels, idx) > 0
+    to_fill = np.r_[False, near_fill & (vol > 0)]
+    to_cut = np.r_[False, near_cut & (vol < 0)]
+    return fill | to_fill[labels], cut | to_cut[labels]

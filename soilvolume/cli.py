@@ -8,19 +8,26 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from dataclasses import fields
 from pathlib import Path
 
+from .interrupt import Interrupted, handle_signals
+from .nativelog import hold_native_stderr
 from .options import Options
+from .outputs import os_problem
 from .types import SoilVolumeError
+from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
 (H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
 report.json, report.html, and with --registered-cloud after_registered.laz.
 Volumes are in cubic metres: fill = material added, cut = removed,
-net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted)."""
+net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted).
+The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
+2 (bad command line), 130/143 (interrupted by SIGINT/SIGTERM; nothing written)."""
 
 
 def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> None:
@@ -36,10 +43,11 @@ def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> Non
 
 
 def options_from(ns: argparse.Namespace) -> Options:
+    """The Options of the parsed flags, each checked against its allowed range."""
     given = {f.name: getattr(ns, f.name) for f in fields(Options) if getattr(ns, f.name, None) is not None}
     if getattr(ns, "registered_cloud", False):
         given["keep_registered_cloud"] = True
-    return Options(**given)
+    return check_options(Options(**given))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,9 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("after", type=Path, help="smaller 'after' survey (LAS/LAZ/PLY/PCD/XYZ)")
     est.add_argument("--out", type=Path, required=True,
                      help="output folder (created; must be empty unless --overwrite)")
-    est.add_argument("--overwrite", action="store_true", help="allow writing into a non-empty output folder")
+    est.add_argument("--overwrite", action="store_true",
+                     help="replace the output folder of an earlier run as a whole, in one swap (refused when it "
+                     "holds files a run does not write)")
     est.add_argument("--before-pipeline", type=Path,
-                     help="PDAL pipeline JSON preparing the before cloud (replaces reading it)")
+                     help="PDAL pipeline JSON preparing the before cloud (replaces reading it); its writers "
+                     "write into --out under their file names, never onto an input")
     est.add_argument("--after-pipeline", type=Path, help="PDAL pipeline JSON preparing the after cloud")
     est.add_argument("--registered-cloud", action="store_true",
                      help="also write after_registered.laz, the after cloud moved by the registration (off by "
@@ -131,8 +142,8 @@ def cmd_estimate(ns: argparse.Namespace) -> int:
 def cmd_dem(ns: argparse.Namespace) -> int:
     from .api import cloud_to_dem
 
-    info = cloud_to_dem(ns.cloud, ns.out, options_from(ns), crs=ns.crs,
-                        bounds=tuple(ns.bounds) if ns.bounds else None)
+    options, bounds = options_from(ns), check_bounds(ns.bounds)
+    info = cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds)
     print(json.dumps(info, indent=2))
     return 0
 
@@ -170,16 +181,45 @@ COMMANDS = {"estimate": cmd_estimate, "dem": cmd_dem, "register": cmd_register,
             "volume": cmd_volume, "demo": cmd_demo, "pipeline": cmd_pipeline}
 
 
+def _fail(message: str, code: int = 1) -> int:
+    print(f"soilvolume: error: {one_line(message)}", file=sys.stderr)
+    return code
+
+
+def one_line(message: str, limit: int = 400) -> str:
+    """A message on one line of at most ``limit`` characters."""
+    text = " ".join(str(message).split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def main(argv: list[str] | None = None) -> int:
-    ns = build_parser().parse_args(argv)
+    """Run one command; every failure is one line on stderr and a non-zero exit: 1 for errors,
+    130/143 for SIGINT/SIGTERM (outputs are never half-written)."""
+    logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
+    with handle_signals():
+        ns = build_parser().parse_args(argv)
+        with hold_native_stderr() as native:
+            code = _run(ns)
+        if code == 0 and native.text:
+            sys.stderr.write(native.text)
+        return code
+
+
+def _run(ns: argparse.Namespace) -> int:
     try:
         return COMMANDS[ns.command](ns)
+    except Interrupted as exc:
+        return _fail(str(exc), exc.exit_code)
     except SoilVolumeError as exc:
-        print(f"soilvolume: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("soilvolume: interrupted", file=sys.stderr)
-        return 130
+        return _fail(str(exc))
+    except OSError as exc:
+        return _fail(str(os_problem(exc)))
+    except MemoryError:
+        return _fail("out of memory: use a larger --cell or crop the clouds first")
+    except RecursionError:
+        return _fail("input nested too deeply")
+    except KeyboardInterrupt:  # a signal arrived before the handlers were installed
+        return _fail("interrupted", 130)
 
 
 if __name__ == "__main__":

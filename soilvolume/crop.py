@@ -9,7 +9,20 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from .types import SoilVolumeError
+from .types import SoilVolumeError, short_error
+
+MIN_COLUMNS = 30  # fewest thinned columns a cloud needs to be registered, gridded and compared
+
+
+def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
+    """Refuse a cloud whose (thinned) x/y are too few or all on a line: nothing can be registered
+    or gridded on it."""
+    if len(xy) < MIN_COLUMNS:
+        raise SoilVolumeError(f"{path}: too few points to work with ({len(xy)} distinct positions {what}, "
+                              f"at least {MIN_COLUMNS} needed)")
+    spread = np.linalg.svd(xy - xy.mean(axis=0), compute_uv=False) / np.sqrt(len(xy))
+    if spread[1] < max(0.01, 1e-4 * spread[0]):
+        raise SoilVolumeError(f"{path}: the points lie on a line (a degenerate cloud: no area to compare)")
 
 
 def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.ndarray:
@@ -19,7 +32,7 @@ def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.nda
     try:
         hull = ConvexHull(xy[::step])
     except (QhullError, ValueError) as exc:
-        raise SoilVolumeError(f"the after cloud's footprint is degenerate (collinear points?): {exc}") from exc
+        raise SoilVolumeError(f"a cloud's footprint is degenerate (points on a line?): {short_error(exc, 80)}") from exc
     verts = xy[::step][hull.vertices]
     if radius > 0:
         ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)

@@ -14,7 +14,7 @@ import pyproj
 from pyproj.aoi import AreaOfInterest
 from pyproj.database import query_utm_crs_info
 
-from .types import SoilVolumeError
+from .types import SoilVolumeError, short_error
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,9 @@ def parse_crs(text: str | None, what: str) -> pyproj.CRS | None:
     try:
         return pyproj.CRS.from_user_input(text)
     except pyproj.exceptions.CRSError as exc:
-        raise SoilVolumeError(f"{what}: cannot understand CRS '{str(text)[:80]}' ({exc})") from exc
+        shown = " ".join(str(text).split())
+        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        raise SoilVolumeError(f"{what}: cannot understand CRS '{shown}' ({short_error(exc)})") from exc
 
 
 def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
@@ -44,6 +46,14 @@ def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
     if crs.is_compound:
         return crs.sub_crs_list[0]
     return crs
+
+
+def raster_wkt(wkt: str | None) -> str | None:
+    """WKT of the horizontal part of ``wkt`` (2D): rasters hold heights in metres, so a vertical
+    CRS in other units (e.g. NAVD88 height in US survey feet) would mislabel them."""
+    if not wkt:
+        return None
+    return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt()
 
 
 def has_vertical(crs: pyproj.CRS) -> bool:

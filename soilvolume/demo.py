@@ -7,18 +7,22 @@ from pathlib import Path
 
 from .api import Hooks, estimate
 from .options import Options
+from .outputs import os_errors, output_dir
 from .synthetic import SceneConfig, make_pair, write_pair
+from .validate import check_number
 
 
 def run_demo(out: Path, size: str = "small", seed: int = 0) -> int:
     cfg = SceneConfig.paper() if size == "paper" else SceneConfig.small()
-    data = out / "data"
-    data.mkdir(parents=True, exist_ok=True)
-    before, after, truth_path = write_pair(make_pair(seed, cfg), data, "laz")
-    truth = json.loads(truth_path.read_text())
-    print(f"synthetic pair ({size}, seed {seed}) in {data}")
-    res = estimate(before, after, out / "result", Options(seed=seed), overwrite=True,
-                   hooks=Hooks(progress=lambda p, m: print(f"[{p:5.1f}%] {m}", flush=True)))
+    check_number("seed", seed, {"lo": 0, "hi": 2**31 - 1}, integer=True)
+    with output_dir(out, [], True, ("data", "result")) as staged, os_errors(staged.final):
+        data = staged.path("data")
+        data.mkdir()
+        before, after, truth_path = write_pair(make_pair(seed, cfg), data, "laz")
+        truth = json.loads(truth_path.read_text())
+        print(f"synthetic pair ({size}, seed {seed}) in {out / 'data'}")
+        res = estimate(before, after, staged.path("result"), Options(seed=seed), overwrite=True,
+                       hooks=Hooks(progress=lambda p, m: print(f"[{p:5.1f}%] {m}", flush=True)))
     r = res.report
     rows = [("all compared cells", r["volume_m3"]), ("change areas", r["volume_change_areas_m3"]),
             ("uncompensated", r["volume_uncompensated_m3"]), ("paper plane d_i", r["volume_paper_plane_m3"])]

@@ -14,8 +14,12 @@ from .crop import footprint, polygon_wkt
 from .crs import lonlat_of, to_frame, work_frame
 from .io import read_points
 from .options import Options
+from .outputs import os_errors, output_dir
 from .pipeline import build_prepare_pipeline, save_pipeline
 from .prepare import resolve_crs
+
+#: what an emit folder may hold to be replaced: the files of an earlier emit and of its runs
+EMITTED = ("before.json", "after.json", "before_prepared.laz", "after_prepared.laz")
 
 
 def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -> tuple[Path, Path]:
@@ -26,14 +30,13 @@ def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -
     frame = work_frame(crs_b, lonlat_of(raw_b.xyz, crs_b) if crs_b.is_geographic else None)
     after_xy = to_frame(raw_a.xyz, crs_a, frame, raw_a.path)[:, :2] / frame.xy_unit
     poly = footprint(after_xy, options.radius / frame.xy_unit)
-    out_dir.mkdir(parents=True, exist_ok=True)
     srs = frame.crs.to_wkt()
     common = {"ground": options.ground, "out_srs": srs}
-    stages_b = build_prepare_pipeline(before, in_srs=options.before_crs, crop={"polygon": polygon_wkt(poly)},
-                                      output=out_dir / "before_prepared.laz", **common)
-    stages_a = build_prepare_pipeline(after, in_srs=options.after_crs,
-                                      output=out_dir / "after_prepared.laz", **common)
-    paths = out_dir / "before.json", out_dir / "after.json"
-    save_pipeline(stages_b, paths[0])
-    save_pipeline(stages_a, paths[1])
-    return paths
+    with output_dir(out_dir, [before, after], True, EMITTED) as out, os_errors(out.final):
+        stages_b = build_prepare_pipeline(before, in_srs=options.before_crs, crop={"polygon": polygon_wkt(poly)},
+                                          output=out.final / "before_prepared.laz", **common)
+        stages_a = build_prepare_pipeline(after, in_srs=options.after_crs,
+                                          output=out.final / "after_prepared.laz", **common)
+        save_pipeline(stages_b, out.path("before.json"))
+        save_pipeline(stages_a, out.path("after.json"))
+    return out.final / "before.json", out.final / "after.json"

@@ -172,15 +172,18 @@ def write_geotiff(
     path: str | Path, array: np.ndarray, grid: GridSpec, description: str = "",
     units: str = "metre", dtype: str = "float32",
 ) -> Path:
-    """Write a single-band GeoTIFF (NaN -> nodata), atomically; returns the path."""
+    """Write a single-band GeoTIFF (NaN -> nodata), atomically; returns the path. Tagged with
+    the grid's horizontal CRS only: the values are metres whatever the input's vertical unit."""
     import rasterio
+
+    from .crs import raster_wkt
 
     path = Path(path)
     nodata = NODATA if np.dtype(dtype).kind == "f" else 255
     data = np.where(np.isfinite(array), array, nodata).astype(dtype)
     profile = dict(
         driver="GTiff", width=grid.cols, height=grid.rows, count=1, dtype=dtype,
-        crs=grid.crs_wkt, transform=grid.transform, nodata=nodata, compress="deflate",
+        crs=raster_wkt(grid.crs_wkt), transform=grid.transform, nodata=nodata, compress="deflate",
         tiled=grid.cols >= 256 and grid.rows >= 256,
     )
     with atomic_path(path) as tmp:

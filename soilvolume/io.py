@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .types import SoilVolumeError
+from .lasheader import BoundsCheck, check_las_header
+from .types import SoilVolumeError, short_error
 
 LAS_SUFFIXES = {".las", ".laz"}
 O3D_SUFFIXES = {".ply", ".pcd"}
@@ -43,6 +44,8 @@ def _check_readable(path: Path) -> None:
         raise SoilVolumeError(
             f"{path}: unsupported point cloud format '{path.suffix}' (use one of {', '.join(SUPPORTED)})"
         )
+    if path.suffix.lower() in LAS_SUFFIXES:
+        check_las_header(path)
 
 
 def read_points(path: str | os.PathLike) -> RawPoints:
@@ -71,13 +74,36 @@ def validate(raw: RawPoints) -> None:
         )
 
 
+CRS_RECORDS = {2111, 2112, 34735, 34736, 34737}  # WKT (math transform, CRS) and GeoTIFF keys
+WKT_STARTS = (b"PROJCS", b"PROJCRS", b"GEOGCS", b"GEOGCRS", b"COMPD_CS", b"COMPOUNDCRS", b"GEODCRS")
+
+
 def las_crs_wkt(header, path: Path) -> str | None:
-    """The CRS of a LAS header (WKT VLR or GeoTIFF keys) as WKT, or None."""
+    """The CRS of a LAS header (WKT VLR or GeoTIFF keys) as WKT, or None when it has no CRS
+    record; a CRS record that cannot be read is an error, not 'no CRS'."""
     try:
         crs = header.parse_crs()
     except Exception as exc:  # laspy raises several types on broken VLRs
-        raise SoilVolumeError(f"{path}: cannot parse the CRS stored in the header ({exc})") from exc
-    return None if crs is None else crs.to_wkt()
+        raise SoilVolumeError(f"{path}: the CRS stored in the header cannot be read ({short_error(exc)})") from exc
+    if crs is None:
+        broken = next((v for v in header.vlrs if _looks_like_crs(v)), None)
+        if broken is not None:
+            user = "".join(c if c.isprintable() else "?" for c in str(broken.user_id))
+            raise SoilVolumeError(f"{path}: the header's CRS record (VLR '{user}' {broken.record_id}) "
+                                  "cannot be read (corrupt header?)")
+        return None
+    return crs.to_wkt()
+
+
+def _looks_like_crs(vlr) -> bool:
+    """A VLR that was meant to hold the CRS: its ids, or WKT-looking content."""
+    from difflib import SequenceMatcher
+
+    user = str(getattr(vlr, "user_id", "")).strip("\x00 ")
+    if SequenceMatcher(None, user.lower(), "lasf_projection").ratio() > 0.8 or vlr.record_id in CRS_RECORDS:
+        return True
+    data = getattr(vlr, "record_data", b"") or b""
+    return bytes(data[:16]).lstrip().upper().startswith(WKT_STARTS)
 
 
 def _read_las(path: Path) -> RawPoints:
@@ -92,7 +118,7 @@ def _read_las(path: Path) -> RawPoints:
     except SoilVolumeError:
         raise
     except Exception as exc:
-        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
     xyz = np.empty((n, 3))
     cls = np.empty(n, dtype=np.uint8) if has_cls else None
     start = 0
@@ -114,18 +140,23 @@ def las_chunks(path: Path, count: int, size: int) -> Iterator[tuple[np.ndarray, 
     read = 0
     try:
         with laspy.open(path) as reader:
-            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+            h = reader.header
+            has_cls = "classification" in set(h.point_format.dimension_names)
+            bounds = BoundsCheck(path, h)
             for chunk in reader.chunk_iterator(size):
                 xyz = np.empty((len(chunk), 3))
-                xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
+                with np.errstate(over="ignore", invalid="ignore"):  # checked against the bounds below
+                    xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
+                bounds.update(xyz)
                 read += len(chunk)
                 yield xyz, (np.asarray(chunk.classification) if has_cls else None)
     except SoilVolumeError:
         raise
     except Exception as exc:
-        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
     if read != count:
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
+    bounds.finish()
 
 
 def _read_o3d(path: Path) -> RawPoints:
@@ -152,9 +183,13 @@ def _read_text(path: Path) -> RawPoints:
 
 @contextmanager
 def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary sibling path; rename it onto ``final`` only if the block succeeds."""
+    """Yield a hidden temporary sibling path (named for this process, so a killed run's is
+    recognised by :func:`soilvolume.outputs.sweep`); rename it onto ``final`` only if the block
+    succeeds."""
+    from .outputs import STAGING, sibling
+
     final = Path(final)
-    tmp = final.with_name(f".{final.stem}.partial{final.suffix}")
+    tmp = sibling(final, STAGING, suffix=final.suffix)
     try:
         yield tmp
         os.replace(tmp, final)

@@ -1,48 +1,327 @@
-"""An output folder filled all-or-nothing: files are written into a hidden staging folder inside
-it and moved into place only when the whole run succeeded."""
+"""All-or-nothing outputs: a run builds its files in a hidden staging folder next to ``--out``
+(same file system) and swaps it into place only when everything succeeded, so a reader of
+``--out`` sees the complete old set or the complete new set, never a mix.
+
+Hidden siblings are named ``.<name>.soilvolume-staging-<pid>`` (the new set) and
+``.<name>.soilvolume-trash-<pid>`` (the old set during a swap); those of runs that are no longer
+alive (killed) are recognised and removed by the next run, which restores a trashed old set if a
+kill struck between the two renames of a swap.
+"""
 
 from __future__ import annotations
 
+import errno
+import fcntl
+import hashlib
 import os
+import re
+import secrets
 import shutil
-import tempfile
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-from .types import SoilVolumeError
+from . import interrupt
+from .types import SoilVolumeError, short_error
+
+STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
+#: what a folder of a previous run may hold for --overwrite to replace it
+RUN_SUFFIXES = (".tif", ".tiff", ".json", ".html", ".las", ".laz", ".xml")
+NAME_MAX = 255
+#: the files ``estimate`` writes itself (pipeline writers may not take these names)
+RUN_OUTPUTS = ("dem_before.tif", "dem_after.tif", "difference.tif", "plane_offset.tif", "filled_mask.tif",
+               "report.json", "report.html", "after_registered.laz")
+
+
+def os_problem(exc: OSError, path: str | os.PathLike | None = None) -> SoilVolumeError:
+    """An OSError as one line naming the path and the problem."""
+    where = path if path is not None else exc.filename
+    text = exc.strerror or str(exc).splitlines()[0]
+    return SoilVolumeError(f"{where}: {text}" if where else text)
+
+
+@contextmanager
+def os_errors(path: Path | None = None) -> Iterator[None]:
+    """OSErrors and GDAL's write errors raised in the block become one-line SoilVolumeErrors
+    naming ``path`` (the output being written) or the file the error names."""
+    try:
+        yield
+    except SoilVolumeError:
+        raise
+    except OSError as exc:
+        raise _write_problem(exc, path) from exc
+    except Exception as exc:
+        if type(exc).__module__.startswith("rasterio"):
+            raise _write_problem(exc, path) from exc
+        raise
+
+
+def _write_problem(exc: BaseException, path: Path | None) -> SoilVolumeError:
+    """The clearest account of a failed write: the OS error, a full disk, or GDAL's first cause."""
+    if isinstance(exc, OSError) and exc.errno:
+        named = exc.filename and STAGING not in str(exc.filename)
+        return os_problem(exc, exc.filename if named else path)
+    folder = path if path is not None and path.is_dir() else (path.parent if path is not None else Path.cwd())
+    try:
+        full = shutil.disk_usage(folder).free < 1 << 20
+    except OSError:
+        full = False
+    cause = exc
+    while cause.__cause__ is not None or cause.__context__ is not None:
+        cause = cause.__cause__ or cause.__context__
+    text = "no space left on the device" if full else short_error(cause)
+    return SoilVolumeError(f"{path}: cannot write ({text})" if path is not None else f"cannot write ({text})")
+
+
+def _tag(name: str) -> str:
+    """``name``, or a short digest of it when hidden siblings would exceed NAME_MAX bytes."""
+    if len(name.encode()) <= NAME_MAX - 40:
+        return name
+    return hashlib.sha1(name.encode()).hexdigest()[:16]
+
+
+def sibling(final: Path, kind: str, pid: int | None = None, suffix: str = "", token: str | None = None) -> Path:
+    """The hidden sibling of ``final`` of this ``kind`` for process ``pid`` (default: this one),
+    told apart from others of the same process by ``token`` (default: a fresh random one)."""
+    token = secrets.token_hex(4) if token is None else token
+    return final.with_name(f".{_tag(final.name)}.{kind}-{pid or os.getpid()}-{token}{suffix}")
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def sweep(final: Path) -> None:
+    """Remove the hidden siblings of ``final`` left by dead runs; a trashed old set whose new set
+    never arrived is put back."""
+    pattern = re.compile(rf"^\.{re.escape(_tag(final.name))}\.({STAGING}|{TRASH})-(\d+)(-\w*)?(\..*)?$")
+    try:
+        entries = list(final.parent.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if not m or _alive(int(m.group(2))):
+            continue
+        if m.group(1) == TRASH and not final.exists():
+            os.rename(entry, final)
+        else:
+            _remove(entry)
+
+
+def _sweep_inside(folder: Path) -> None:
+    """Remove staging folders that dead runs left inside ``folder`` (mount points, folders whose
+    parent is not writable)."""
+    pattern = re.compile(rf"^\.{STAGING}-(\d+)-\w+$")
+    try:
+        entries = list(folder.iterdir()) if folder.is_dir() else []
+    except OSError:
+        return
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m and not _alive(int(m.group(1))):
+            _remove(entry)
+
+
+@contextmanager
+def locked(folder: Path) -> Iterator[None]:
+    """An exclusive advisory lock on ``folder`` (swaps and sweeps of concurrent runs take turns)."""
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and its missing parents; returns those created (deepest last)."""
+    missing = [p for p in [folder, *folder.parents] if not p.exists()][::-1]
+    for p in missing:
+        try:
+            p.mkdir()
+        except FileExistsError:
+            if not p.is_dir():
+                raise SoilVolumeError(f"{p}: exists and is not a folder") from None
+        except OSError as exc:
+            raise os_problem(exc, p) from exc
+    if not folder.is_dir():
+        raise SoilVolumeError(f"{folder}: not a folder")
+    return missing
 
 
 class OutputDir:
-    """Staging for one run's outputs; ``commit()`` moves them into ``final``."""
+    """Staging for one run's output folder; ``commit()`` swaps it into place, ``abort()`` removes
+    it. ``inputs`` may never be written, replaced or lie inside the folder; ``allowed`` says which
+    entries of an existing folder ``--overwrite`` may replace (default: files a run writes)."""
 
-    def __init__(self, final: Path, inputs: list[Path], overwrite: bool) -> None:
-        self.final = final.resolve()
-        resolved = {p.resolve() for p in inputs}
-        if self.final in resolved:
-            raise SoilVolumeError(f"{final}: the output folder is one of the input files")
-        if self.final.exists() and not self.final.is_dir():
+    def __init__(self, final: Path, inputs: Iterable[Path | str | None], overwrite: bool,
+                 allowed: Iterable[str] | None = None) -> None:
+        self.final = Path(os.path.abspath(final))
+        if self.final.is_symlink() or self.final.exists():
+            self.final = self.final.resolve()
+        self.inputs = {Path(p).resolve() for p in inputs if p}
+        self.moved: dict[str, Path] = {}  # name -> final path, once committed
+        self.overwrite, self.allowed = overwrite, set(allowed) if allowed is not None else None
+        _sweep_inside(self.final)
+        self._check()
+        self.created = _make_parents(self.final.parent)
+        self.token = secrets.token_hex(4)
+        with locked(self.final.parent):
+            sweep(self.final)
+            self.inside = os.path.ismount(self.final)  # a mount point cannot be swapped
+            self.stage = self._inner() if self.inside else sibling(self.final, STAGING, token=self.token)
+            try:
+                self.stage.mkdir()
+            except OSError as exc:
+                if not self._empty_writable():
+                    self._drop_parents()
+                    raise os_problem(exc, self.final.parent) from exc
+                self.inside, self.stage = True, self._inner()  # parent not writable: stage inside
+                self.stage.mkdir()
+
+    def _inner(self) -> Path:
+        return self.final / f".{STAGING}-{os.getpid()}-{self.token}"
+
+    def _empty_writable(self) -> bool:
+        """An existing, empty, writable folder: its outputs can be staged inside it (no old set
+        to mix with)."""
+        f = self.final
+        return f.is_dir() and not any(f.iterdir()) and os.access(f, os.W_OK | os.X_OK)
+
+    def _check(self) -> None:
+        final = self.final
+        for p in self.inputs:
+            if _inside(p, final):
+                raise SoilVolumeError(f"{final}: the output folder is or contains the input {p}")
+        if final.exists() and not final.is_dir():
             raise SoilVolumeError(f"{final}: exists and is not a folder")
-        if self.final.exists() and any(self.final.iterdir()) and not overwrite:
+        try:
+            entries = sorted(final.iterdir()) if final.is_dir() else []
+        except OSError as exc:
+            raise os_problem(exc, final) from exc
+        if final.is_dir() and not os.access(final, os.W_OK | os.X_OK):
+            raise SoilVolumeError(f"{final}: the output folder is not writable")
+        if entries and not self.overwrite:
             raise SoilVolumeError(f"{final}: output folder exists and is not empty (use --overwrite)")
-        self.inputs = resolved
-        self.created = not self.final.exists()
-        self.final.mkdir(parents=True, exist_ok=True)
-        self.stage = Path(tempfile.mkdtemp(prefix=".soilvolume-partial-", dir=self.final))
+        foreign = [e for e in entries if not self._ours(e)]
+        if foreign:
+            raise SoilVolumeError(f"{final}: --overwrite replaces the whole folder, and it holds "
+                                  f"'{foreign[0].name}' that soilvolume does not write; choose another folder")
+
+    def _ours(self, entry: Path) -> bool:
+        if self.allowed is not None:
+            return entry.name in self.allowed
+        old_staging = entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
+        return old_staging or (entry.is_file() and entry.name.lower().endswith(RUN_SUFFIXES))
 
     def path(self, name: str) -> Path:
-        if (self.final / name).resolve() in self.inputs:
-            raise SoilVolumeError(f"{self.final / name}: refusing to overwrite an input file")
+        """Where to write the output ``name`` (inside the staging folder)."""
+        if Path(name).name != name or name in ("", ".", ".."):
+            raise SoilVolumeError(f"{name}: an output name must be a plain file name")
         return self.stage / name
 
     def commit(self) -> dict[str, Path]:
-        """Move every staged file into the final folder; returns name -> final path."""
-        moved = {}
-        for f in sorted(self.stage.iterdir()):
-            os.replace(f, self.final / f.name)
-            moved[f.name] = self.final / f.name
-        self.stage.rmdir()
-        return moved
+        """Swap the staging folder into place; returns name -> final path of every output."""
+        interrupt.check()
+        names = sorted(p.name for p in self.stage.iterdir())
+        if self.inside:  # a mount point or an unswappable folder: file by file, then the stale ones
+            for n in names:
+                os.replace(self.stage / n, self.final / n)
+            self.stage.rmdir()
+            for old in self.final.iterdir():
+                if old.name not in names and not old.name.startswith(f".{STAGING}-"):
+                    _remove(old)
+        else:
+            with locked(self.final.parent), interrupt.cleanup_on_exit(self._restore):
+                self._swap()
+        return {n: self.final / n for n in names}
+
+    def _swap(self) -> None:
+        try:
+            os.rename(self.stage, self.final)  # atomic when final is missing or an empty folder
+            return
+        except OSError as exc:
+            if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                raise os_problem(exc, self.final) from exc
+        if not self.overwrite:
+            raise SoilVolumeError(f"{self.final}: another run filled the output folder meanwhile")
+        trash = sibling(self.final, TRASH, token=self.token)
+        os.rename(self.final, trash)
+        os.rename(self.stage, self.final)
+        shutil.rmtree(trash, ignore_errors=True)
+
+    def _restore(self) -> None:
+        trash = sibling(self.final, TRASH, token=self.token)
+        if trash.exists() and not self.final.exists():
+            os.rename(trash, self.final)
 
     def abort(self) -> None:
+        """Remove everything this run created."""
         shutil.rmtree(self.stage, ignore_errors=True)
-        if self.created and not any(self.final.iterdir()):
-            self.final.rmdir()
+        self._drop_parents()
+
+    def _drop_parents(self) -> None:
+        for p in reversed(self.created):
+            try:
+                p.rmdir()
+            except OSError:
+                break
+
+
+@contextmanager
+def output_dir(final: Path, inputs: Iterable[Path | str | None], overwrite: bool,
+               allowed: Iterable[str] | None = None) -> Iterator[OutputDir]:
+    """An :class:`OutputDir` committed when the block succeeds, removed when it fails."""
+    out = OutputDir(final, inputs, overwrite, allowed)
+    with interrupt.cleanup_on_exit(out.abort):
+        try:
+            yield out
+        except BaseException:
+            out.abort()
+            raise
+        try:
+            out.moved = out.commit()
+        except BaseException:
+            out.abort()
+            raise
+
+
+def check_output_file(path: Path, inputs: Iterable[Path | str | None]) -> Path:
+    """A single output file's absolute path, after checking it is not an input, its folder
+    exists and is writable; removes stale staging files of killed runs next to it."""
+    final = Path(os.path.abspath(path))
+    if final.exists():
+        final = final.resolve()
+    if final in {Path(p).resolve() for p in inputs if p}:
+        raise SoilVolumeError(f"{path}: refusing to overwrite an input file")
+    if final.is_dir():
+        raise SoilVolumeError(f"{path}: is a folder, not a file name")
+    if not final.parent.is_dir():
+        raise SoilVolumeError(f"{final.parent}: the output folder does not exist")
+    if not os.access(final.parent, os.W_OK | os.X_OK):
+        raise SoilVolumeError(f"{final.parent}: the output folder is not writable")
+    if len(final.name.encode()) > NAME_MAX:
+        raise SoilVolumeError(f"{path}: file name longer than {NAME_MAX} bytes")
+    with locked(final.parent):
+        sweep(final)
+    return final

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from . import stages as embedded
+from .confine import confine_writers
 from .io import RawPoints, atomic_path
 from .stages.geometry import format_bounds
 from .stages.readers import SRS_OPTS
@@ -89,6 +90,9 @@ def has_ground_class(path: str | os.PathLike) -> bool:
         return False
     import laspy
 
+    from .lasheader import check_las_header
+
+    check_las_header(Path(path))
     with laspy.open(path) as reader:
         if "classification" not in reader.header.point_format.dimension_names:
             return False
@@ -287,6 +291,8 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
             text = Path(path_or_text).read_text(encoding="utf-8")
         except OSError as exc:
             raise SoilVolumeError(f"pipeline {name}: cannot read ({exc.strerror or exc})") from exc
+        except UnicodeDecodeError as exc:
+            raise SoilVolumeError(f"pipeline {name}: not UTF-8 text (byte {exc.start})") from exc
     else:
         name = "<text>"
     try:
@@ -294,6 +300,8 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
     except json.JSONDecodeError as exc:
         raise SoilVolumeError(f"pipeline {name}: invalid JSON (line {exc.lineno}, column "
                               f"{exc.colno}: {exc.msg})") from exc
+    except RecursionError as exc:
+        raise SoilVolumeError(f"pipeline {name}: invalid JSON (nested too deeply)") from exc
     return _normalise(raw, name)
 
 
@@ -369,7 +377,7 @@ def prepare_cloud(path: str | os.PathLike, *, engine: str = "auto", **options: A
 
 def run_pipeline_file(pipeline: str | os.PathLike, *, engine: str = "auto") -> RawPoints:
     """A user's preparation pipeline file, run; the points keep the reader's filename as path."""
-    stages = load_pipeline(pipeline)
+    stages = confine_writers(load_pipeline(pipeline), str(pipeline))
     view = run_pipeline(stages, engine=engine, source=str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))
 
@@ -392,5 +400,6 @@ def prepare_cloud_from_file(pipeline: str | os.PathLike, path: str | os.PathLike
     stages = load_pipeline(pipeline)
     if path is not None:
         stages = with_input(stages, path)
+    stages = confine_writers(stages, str(pipeline))
     view = run_pipeline(stages, engine=engine, source=str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))

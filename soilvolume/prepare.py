@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
-from .crop import PolygonMask, footprint
+from .crop import PolygonMask, check_spread, footprint
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
 from .io import RawPoints
 from .options import Options
@@ -42,11 +42,17 @@ class Prepared:
 
 
 def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyproj.CRS:
-    """The CRS given on the command line, else the file's header CRS."""
-    crs = parse_crs(override, raw.path) or parse_crs(raw.crs_wkt, raw.path)
-    if crs is None:
+    """The file's header CRS, else the one given by ``flag`` (for files without one); a flag
+    that contradicts the header is refused rather than silently applied or ignored."""
+    given, header = parse_crs(override, flag), parse_crs(raw.crs_wkt, raw.path)
+    if header is None and given is None:
         raise SoilVolumeError(f"{raw.path}: the file has no CRS in its header; pass {flag} (e.g. EPSG:32654)")
-    return crs
+    if header is not None and given is not None and not header.equals(given, ignore_axis_order=True):
+        raise SoilVolumeError(
+            f"{raw.path}: {flag} {override} differs from the CRS in the header ({header.name}); {flag} "
+            "applies only to files without one (to replace a wrong header CRS, prepare the cloud with a "
+            "pipeline whose reader sets override_srs)")
+    return header or given
 
 
 def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0,
@@ -122,8 +128,7 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
     after, a, note_a = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check,
                                    None if full else NOTHING, loader)
-    if len(a.thin) < 3:
-        raise SoilVolumeError(f"{after.path}: too few points to work with ({len(a.xyz)} after ground selection)")
+    check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
     before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
@@ -137,6 +142,7 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
             f"{b.extra['cropped']} points within {options.radius:g} m of the after cloud's footprint "
             "(check the CRSs and --radius)"
         )
+    check_spread(b.thin[:, :2], before.path, "near the after cloud")
     inputs = {
         "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"]),
         "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"]),
@@ -174,6 +180,7 @@ def prepare_single(src: Source, override: str | None, options: Options, check=No
     src, one, note = _load_whole(src, crs, to_local, lo - origin, hi - origin, voxel, options, check)
     if len(one.xyz) == 0:
         raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note or one.note})")
+    check_spread(one.thin[:, :2], src.path, "after the ground selection")
     return Single(one.xyz, one.thin, frame, origin, note or one.note)
 
 

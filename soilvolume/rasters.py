@@ -10,6 +10,7 @@ import numpy as np
 from .api import Hooks
 from .crs import parse_crs, xy_unit
 from .grid import write_geotiff
+from .outputs import check_output_file, os_errors
 from .types import GridSpec, SoilVolumeError
 from .volume import budget
 
@@ -62,6 +63,7 @@ def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
 def run_volume_from_rasters(before: Path, after: Path, out: Path, *, zones=None, zone_field=None,
                             hooks: Hooks) -> dict[str, Any]:
     """See :func:`soilvolume.api.volume_from_rasters`."""
+    out = check_output_file(out, [before, after, zones])
     hooks.step(5, f"reading {before.name} and {after.name}")
     zb, pb = read_dem(before)
     za, pa = read_dem(after)
@@ -74,16 +76,16 @@ def run_volume_from_rasters(before: Path, after: Path, out: Path, *, zones=None,
     diff = za - zb
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
-    if out.resolve() in (before.resolve(), after.resolve()):
-        raise SoilVolumeError(f"{out}: refusing to overwrite an input raster")
     hooks.step(60, "computing cut and fill")
-    write_geotiff(out, diff, grid, "after - before (m)")
     result: dict[str, Any] = {"total": _public(budget(diff, grid.cell_area)), "zones": [],
                               "cell_m": grid.cell, "crs": parse_crs(grid.crs_wkt, "raster").name}
-    if zones:
+    if zones:  # before writing: a bad zones file leaves nothing behind
         from .zones import zone_budgets
 
         result["zones"] = zone_budgets(diff, grid, zones, zone_field)
+    hooks.step(90, f"writing {out.name}")
+    with os_errors(out):
+        write_geotiff(out, diff, grid, "after - before (m)")
     hooks.step(100, "done")
     return result
 

@@ -173,7 +173,7 @@ def icp_levels(
     cap = _cap_voxel(source_xyz, MAX_ICP_POINTS)
     gap = 1.5 * (spacing(target_xyz) if gap is None else gap)  # sparse clouds: correspondences are at least this far
     for voxel, dist, k in levels:
-        voxel, dist = max(voxel, cap), max(dist, gap)
+        voxel, dist = max(voxel, cap, gap / 1.5), max(dist, gap)  # no columns finer than the spacing
         if check:
             check()
         if voxel not in cache:
@@ -321,10 +321,10 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     gap = spacing(before_xyz)
     judge = _judged(after_xyz, gap)
     if options.fine in ("icp", "gicp"):
-        t, label = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
+        (t, label), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
         fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0,
-                            f"started from the {label} pose")
+                            f"started from the {label} pose", alternative=alt)
     best: StageQuality | None = None
     for init, label in starts:
         if options.fine == "pfh":
@@ -343,10 +343,12 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     return best
 
 
-def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: float) -> tuple[np.ndarray, str]:
+def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: float):
     """ICP from the best start on the margin of the after survey, then refined twice on the
     stable ground found at the pose reached (works inside the survey never pull the pose); the
-    pose that fits the margin best within the georeferencing prior wins."""
+    pose that fits the margin best within the georeferencing prior wins. Returns ((transform,
+    label), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
+    uncertainty, None when there is none)."""
     method = options.fine
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
     src = _judged(after_xyz, gap)
@@ -367,7 +369,9 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
         poses.append((t, label))
     centre = after_xyz.mean(axis=0)
     allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
-    return _best_on(src, before_xyz, allowed, gap)
+    best = _best_on(src, before_xyz, allowed, gap)
+    others = [p[0] for p in allowed[len(starts):] if p[0] is not best[0]]
+    return best, (others[-1] if others else None)
 
 
 def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:

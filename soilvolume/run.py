@@ -13,15 +13,19 @@ import numpy as np
 from . import grid as gridmod
 from . import holes, planes
 from .api import Hooks, Result
+from .confine import writers_into
 from .crop import footprint, polygon_area
 from .io import write_las_chunked
 from .options import Options
-from .outputs import OutputDir
+from .outputs import RUN_OUTPUTS, OutputDir, check_output_file, os_errors, output_dir
 from .prepare import Prepared, prepare
 from .register import register, rotation_deg, shift_at, tilt_deg, transform_points
 from .report import absolute_transform, stage_dict, write_json
 from .types import GridSpec, SoilVolumeError
+from .validate import check_grid_cells
 from .volume import budget, difference
+
+REGISTERING = "registering the after cloud onto the before cloud (coarse, then fine)"
 
 
 class Timer:
@@ -54,7 +58,9 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> Gri
     hi = np.minimum(after_thin.max(axis=0), prep.before_thin.max(axis=0))
     if (hi[:2] <= lo[:2]).any():
         raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
-    return gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
+    grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
+    check_grid_cells(grid.rows, grid.cols, cell)
+    return grid
 
 
 def run_estimate(
@@ -64,15 +70,12 @@ def run_estimate(
     """See :func:`soilvolume.api.estimate`."""
     _threads(options)
     timer = Timer()
-    out = OutputDir(out_dir, [before, after], overwrite)
-    try:
+    inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
+    with output_dir(out_dir, inputs, overwrite) as out, os_errors(out.final), \
+            writers_into(out.stage, inputs, RUN_OUTPUTS):
         result = _estimate(before, after, out, options, timer, hooks, before_pipeline, after_pipeline)
-    except BaseException:
-        out.abort()
-        raise
-    moved = out.commit()
     result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p
-                      for n, p in moved.items()}
+                      for n, p in out.moved.items()}
     hooks.step(100, "done")
     return result
 
@@ -100,9 +103,9 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
     hooks.info(f"georeferencing: {mode} ({why})")
     if mode == "precise":
         options = options.with_(correction="none")
-    hooks.step(15, "registering (coarse, then fine)")
+    hooks.step(15, REGISTERING)
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"),
+        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, REGISTERING),
                        dense=(prep.after.xyz, prep.before.xyz), precise=mode == "precise")
     reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
@@ -121,7 +124,7 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             h_a, n_a, s_a = gridmod.average_height(after_xyz, grid, options.statistic, spread=True)
             del after_xyz
             h_b, n_b, s_b = before_job.result()
-        hooks.step(70, "fitting the RANSAC planes")
+        hooks.step(70, "estimating the vertical bias correction")
         with timer("planes"):
             sel_b = _points_on(prep.before_thin, grid, np.isfinite(h_b))
             p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
@@ -129,7 +132,9 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             d_i = planes.plane_offset(p_b, p_a, grid)
         hooks.step(75, "computing the difference and volumes")
         with timer("volume"):
-            vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b))
+            alt = reg.fine.alternative
+            moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
+            vols = _volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
             vols["dem_after"] = h_a + prep.origin[2]
         hooks.step(85, "writing outputs")
         with timer("write"):
@@ -153,7 +158,7 @@ def _prepare(before, after, options: Options, hooks: Hooks, before_pipeline, aft
     from .stream import open_source
 
     src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
-    return prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"))
+    return prepare(src_b, src_a, options, check=hooks.ticker(2, 15, "reading"))
 
 
 def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, reg, options: Options):
@@ -199,13 +204,15 @@ N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
 MIN_POINTS = 3  # a robust cell height needs at least this many points
 
 
-def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None) -> dict:
+def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None) -> dict:
     """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
     of the difference (empty in either epoch) filled from the surrounding difference, which is
     smooth on unchanged ground whatever the terrain -> correction -> change areas, budgets,
-    uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs."""
+    uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs;
+    ``moved``: the rigid move from the accepted pose to a nearly as good one (registration
+    uncertainty)."""
     from .change import cell_lod, cell_sigma, change_areas
-    from .uncertainty import thresholded_volumes, volume_uncertainty, z_value
+    from .uncertainty import detection_level, thresholded_volumes, volume_uncertainty, z_value
 
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
@@ -220,27 +227,34 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
     diff = filled - offset
     area = grid.cell_area
     fill_sigma = _fill_sigma(diff, filled_mask, stable, options)
-    unc0 = volume_uncertainty(diff, stable, None, grid, options.lod_confidence, n_coef=0)
+    lod = detection_level(diff, stable, options.lod_confidence)
     z = z_value(options.lod_confidence)
     if spread is not None:
         se_a = np.where(m_a, np.nan, cell_sigma(spread[0], n_a))
         se_b = np.where(m_b, np.nan, cell_sigma(spread[1], n_b))
-        lod_cell = cell_lod(unc0["lod_m"] or 0.0, se_a, se_b, z)
+        lod_cell = cell_lod(lod, se_a, se_b, z)
         lod_cell = np.maximum(lod_cell, z * fill_sigma)
     else:
-        lod_cell = np.full(diff.shape, unc0["lod_m"] or 0.0)
-    fill_area, cut_area = change_areas(diff, lod_cell)
+        lod_cell = np.full(diff.shape, lod)
+    fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
+    noise = _signed_budget(diff, fill_area & stable, cut_area & stable, area)  # detections of noise
+    shift = _pose_effect(f_a, grid, moved)
+    reg_v = _signed_budget(shift, fill_area, cut_area, area)
+    extra = {k: float(np.hypot(noise[k], reg_v[k])) for k in ("net", "cut", "fill")}
     unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
-                             n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma)
+                             n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma,
+                             extra_sigma=extra)
     headline = _signed_budget(diff, fill_area, cut_area, area)
     vols = {
         "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
-        "stable": stable, "params": params, "uncertainty": unc, "change_mask": change,
+        "stable": stable, "params": params,
+        "uncertainty": {**unc, "lod_m": lod, "detected_noise_m3": noise, "registration_m3": reg_v},
+        "change_mask": change,
         "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
         "change_areas": headline,
-        "thresholded": thresholded_volumes(diff, unc["lod_m"], area),
+        "thresholded": thresholded_volumes(diff, lod, area),
         "holes": holes.summary(diff, filled_mask, area),
         "empty_cells": int((~np.isfinite(raw)).sum()),
         "empty_before": int((n_b == 0).sum()), "empty_after": int((n_a == 0).sum()),
@@ -250,6 +264,18 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
 
         vols["zones"] = zone_budgets(np.where(change, diff, 0.0), grid, options.zones)
     return vols
+
+
+def _pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:
+    """Change of the difference (m per cell) if the after surface moved horizontally by ``moved``
+    (4x4, local): -grad(H) . u; its vertical part and tilt are absorbed by the bias correction."""
+    if moved is None:
+        return np.zeros(h_after.shape)
+    x, y = grid.centers_local()
+    p = np.stack([x, y, np.nan_to_num(h_after)], axis=-1)
+    u = p @ moved[:3, :3].T + moved[:3, 3] - p
+    gy, gx = np.gradient(h_after, grid.cell)  # rows run south: d/dy = -d/drow
+    return -(gx * u[..., 0] - gy * u[..., 1])
 
 
 def _signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray, cell_area: float) -> dict:
@@ -324,7 +350,8 @@ def _report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: 
         "grid": {
             "cell_m": grid.cell, "rows": grid.rows, "cols": grid.cols, "crs": prep.frame.crs.name,
             "crs_wkt": prep.frame.wkt, "transform": list(grid.transform)[:6],
-            "compared_area_m2": vols["compensated"]["area_m2"], "compared_cells": vols["compensated"]["cells"],
+            "compared_area_m2": vols["all_cells"]["area_m2"], "compared_cells": vols["all_cells"]["cells"],
+            "change_area_m2": vols["compensated"]["area_m2"],
             "empty_cells": vols["empty_cells"], "empty_before": vols["empty_before"],
             "empty_after": vols["empty_after"], "statistic": options.statistic,
         },
@@ -350,10 +377,9 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     from .prepare import prepare_single
     from .stream import open_source
 
-    if out_tif.resolve() == cloud.resolve():
-        raise SoilVolumeError(f"{out_tif}: refusing to overwrite the input")
+    out_tif = check_output_file(out_tif, [cloud])
     hooks.step(5, f"reading {cloud.name}")
-    one = prepare_single(open_source(cloud), crs, options, check=lambda: hooks.step(5, "reading"))
+    one = prepare_single(open_source(cloud), crs, options, check=hooks.ticker(5, 40, "reading"))
     xyz, origin, frame = one.xyz, one.origin, one.frame
     if bounds is not None:
         u = frame.xy_unit
@@ -363,9 +389,14 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
         lo, hi = xyz.min(axis=0).astype(float), xyz.max(axis=0).astype(float)
     cell = options.cell or gridmod.choose_cell(len(xyz), polygon_area(footprint(one.thin[:, :2])))
     grid = gridmod.make_grid(lo, hi, cell, origin, frame.wkt, frame.xy_unit)
+    check_grid_cells(grid.rows, grid.cols, cell)
     hooks.step(40, f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
     h, n = gridmod.average_height(xyz, grid, options.statistic)
-    gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
+    if not np.isfinite(h).any():
+        raise SoilVolumeError(f"{cloud}: no points inside the grid (check --bounds)")
+    hooks.step(90, f"writing {out_tif.name}")
+    with os_errors(out_tif):
+        gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
     hooks.step(100, "done")
     return {"cell_m": cell, "rows": grid.rows, "cols": grid.cols, "crs": frame.crs.name,
             "transform": list(grid.transform)[:6], "points": int(len(xyz)),
@@ -374,15 +405,17 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
 
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
     """See :func:`soilvolume.api.register`."""
+    out_cloud = check_output_file(out_cloud, [before, after])
+    if out_cloud.suffix.lower() not in (".las", ".laz"):
+        raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
     hooks.step(5, "reading")
-    if out_cloud.resolve() in (before.resolve(), after.resolve()):
-        raise SoilVolumeError(f"{out_cloud}: refusing to overwrite an input file")
     prep = _prepare(before, after, options, hooks, None, None)
     hooks.step(20, "registering")
-    reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(20, "registering"),
+    reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(20, 90, "registering"),
                    dense=(prep.after.xyz, prep.before.xyz))
     hooks.step(90, "writing the registered cloud")
-    write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
+    with os_errors(out_cloud):
+        write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
     hooks.step(100, "done")
     from .report import _clean
 

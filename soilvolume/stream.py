@@ -19,7 +19,7 @@ import numpy as np
 
 from .copc import copc_chunks, is_copc
 from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
-from .types import SoilVolumeError
+from .types import SoilVolumeError, short_error
 from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
@@ -93,7 +93,7 @@ def las_ranges(path: str, ranges: list[tuple[int, int]], size: int) -> Iterator[
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
                     yield xyz, (np.asarray(pts.classification) if has_cls else None)
     except Exception as exc:
-        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
 
 
 def file_chunks(path: str, region, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
@@ -137,7 +137,7 @@ def _header(p: Path) -> Source:
     except SoilVolumeError:
         raise
     except Exception as exc:
-        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({exc})") from exc
+        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
 
 
 def _open_vpc(p: Path) -> Source:

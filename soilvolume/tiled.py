@@ -129,9 +129,9 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     hooks.info(f"georeferencing: {mode} ({why})")
     if mode == "precise":
         options = options.with_(correction="none")
-    hooks.step(15, "registering (coarse, then fine)")
+    hooks.step(15, run.REGISTERING)
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=lambda: hooks.step(15, "registering"),
+        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, run.REGISTERING),
                        precise=mode == "precise")
     reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
@@ -159,7 +159,9 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         d_i = planes.plane_offset(p_b, p_a, grid)
     hooks.step(75, "computing the difference and volumes")
     with timer("volume"):
-        vols = run._volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b))
+        alt = reg.fine.alternative
+        moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
+        vols = run._volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
         vols["dem_after"] = h_a + prep.origin[2]
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):

@@ -212,13 +212,14 @@ def _save_tile(cache: Path | None, win: Window, arrays) -> None:
 
 
 def tile_cache(out: OutputDir, plan: Plan) -> Path:
-    """The folder keeping finished tiles of ``plan`` until the run succeeds (keyed by the plan,
-    so a changed input, option or registration starts afresh)."""
+    """The folder keeping finished tiles of ``plan`` until the run succeeds: a hidden sibling of
+    the output folder (outputs are staged and swapped in whole), keyed by the plan, so a changed
+    input, option or registration starts afresh."""
     import hashlib
     import pickle
 
     key = hashlib.sha1(pickle.dumps((plan.before, plan.after, plan.crs_b, plan.crs_a, plan.origin.tolist(),
                                      plan.grid, plan.transform.round(12).tolist(), plan.ground, plan.statistic)))
-    folder = out.final / ".soilvolume-tiles" / key.hexdigest()[:16]
+    folder = out.final.parent / f".{out.final.name}.soilvolume-tiles" / key.hexdigest()[:16]
     folder.mkdir(parents=True, exist_ok=True)
     return folder

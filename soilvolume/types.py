@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -9,6 +10,13 @@ import numpy as np
 
 class SoilVolumeError(Exception):
     """An input or processing problem a user can act on; the message names the file and problem."""
+
+
+def short_error(exc: BaseException, limit: int = 160) -> str:
+    """A library exception's message for a one-line error: one line, any WKT it quotes replaced
+    by '<WKT>', at most ``limit`` characters (the exception's type when it has no message)."""
+    text = re.sub(r"[A-Z_]{4,}\[.*\]", "<WKT>", " ".join(str(exc).split())) or type(exc).__name__
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @dataclass
@@ -84,3 +92,4 @@ class StageQuality:
     accepted: bool = True
     seconds: float = 0.0
     note: str = ""
+    alternative: np.ndarray | None = None  # a nearly as good pose (its spread from ``transform`` is uncertainty)

@@ -134,6 +134,7 @@ def volume_uncertainty(
     filled_mask: np.ndarray | None = None,
     interp_fraction: float = INTERP_FRACTION,
     fill_sigma: np.ndarray | None = None,
+    extra_sigma: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
     (all valid cells when None), cut/fill split by the sign of the corrected difference, and
@@ -143,6 +144,8 @@ def volume_uncertainty(
     error of ``interp_fraction`` x its absolute value (hole fills over change edges were off by
     10-22 % of their volume on synthetic pairs), and ``fill_sigma`` (m, per cell: the error of
     refilling known ground) summed fully correlated within each connected refilled patch.
+    ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
+    change detection picks up from noise on stable ground.
     Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2, range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
     stable = stable_mask & valid
@@ -172,8 +175,10 @@ def volume_uncertainty(
         per_patch = ndimage.sum(np.where(m, fs, 0.0), labels, np.arange(1, n_patches + 1)) * grid.cell_area
         return float(np.sqrt(np.sum(np.square(per_patch)))) if n_patches else 0.0
 
+    extra = extra_sigma or {}
     out: dict[str, Any] = {
-        k: z * float(np.linalg.norm([region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m), refill(m)]))
+        k: z * float(np.linalg.norm([region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m), refill(m),
+                                     extra.get(k, 0.0)]))
         for k, m in parts.items()
     }
     out.update(
@@ -187,6 +192,19 @@ def volume_uncertainty(
                    "pairs": npairs.tolist()},
     )
     return out
+
+
+def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
+    """Level of detection (m) of one cell: from the stable-ground residuals (see :func:`_lod`),
+    but at most twice the LoD of the neighbour-difference noise, so real change left in what
+    was taken as stable ground (e.g. a thin layer on well georeferenced surveys) cannot inflate it."""
+    from .stable import noise_sigma
+
+    r = diff[stable & np.isfinite(diff)]
+    lod = _lod(r, nmad(r), confidence) if r.size else None
+    noise = noise_sigma(diff)
+    cap = 2.0 * z_value(confidence) * noise if np.isfinite(noise) else float("inf")
+    return float(min(lod if lod is not None else cap, cap)) if np.isfinite(min(lod or cap, cap)) else 0.0
 
 
 def _lod(stable_residuals: np.ndarray, sigma: float, confidence: float) -> float | None:

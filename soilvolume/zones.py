@@ -166,3 +166,19 @@ def zone_budgets(
         row["zone_area_m2"] = float(mask.sum() * grid.cell_area)
         out.append(row)
     return out
+
+
+def net_half_width(area_m2: float, cell: float, uncertainty: dict[str, Any]) -> float | None:
+    """± half-width (m^3, at the run's confidence) of a zone's net volume over ``area_m2`` of
+    compared cells, from the run's stable-ground error model (``report["uncertainty"]``);
+    None when the report has no model. Refill errors are not included."""
+    from .uncertainty import region_sigma, z_value
+
+    try:
+        model = {"nugget": uncertainty["nugget_m2"], "psill": uncertainty["psill_m2"],
+                 "range": uncertainty["range_m"]}
+        bias, confidence = uncertainty.get("bias_sigma_m", 0.0), uncertainty.get("confidence", 0.95)
+    except (KeyError, TypeError):
+        return None
+    n_cells = int(round(area_m2 / (cell * cell)))
+    return z_value(confidence) * region_sigma(n_cells, cell, model, bias)

@@ -82,11 +82,11 @@ def test_surface_correction_under_1_percent(correction_errors):
 
 
 def test_no_correction_is_clearly_worse(correction_errors):
-    """The 4 cm dome of the after epoch is a real bias: uncorrected, the net is 11-13 % too high
-    (measured +11.30, +11.93, +12.49 % on seeds 1-3; +11.2..+13.0 % over 16 pairs at 0.8-1.6 M
-    points)."""
+    """The 4 cm dome of the after epoch is a real bias: uncorrected, the net over the change areas
+    is 4-6 % too high (measured +3.9 % on seed 1, against +0.2 % corrected; summed over every
+    compared cell, as the paper does, the dome added 11-13 %)."""
     for seed, errs in correction_errors.items():
-        assert errs["none"] > 0.05, f"seed {seed}: {errs}"
+        assert errs["none"] > 0.02, f"seed {seed}: {errs}"
         assert abs(errs["none"]) > 3 * abs(errs["surface"]), f"seed {seed}: {errs}"
 
 
@@ -223,11 +223,11 @@ def test_no_change_thresholded_volumes_are_small(no_change_report):
     normal distribution: with 1.96 NMAD alone 31-53 % of the raw cut/fill survived on 10.6-14.7 %
     of the area). Measured now, seeds 0..3: 23-45 % of the raw cut/fill on 7.3-10.8 % of the area;
     the rest are cells excluded from the stable ground as noise extremes."""
-    raw, thr = no_change_report["volume_m3"], no_change_report["volume_thresholded_m3"]
+    raw, thr = no_change_report["volume_all_cells_m3"], no_change_report["volume_thresholded_m3"]
     assert thr["cut"] < 0.65 * raw["cut"], (thr, raw)
     assert thr["fill"] < 0.65 * raw["fill"], (thr, raw)
     assert thr["area_m2"] < 0.20 * raw["area_m2"], (thr, raw)
-    assert abs(thr["net"]) <= no_change_report["uncertainty_m3"]["net"], thr
+    assert abs(thr["net"]) <= no_change_report["uncertainty_m3"]["net_all_cells"], thr
 
 
 def test_no_change_hole_fill_error_is_covered(tmp_path):

@@ -205,6 +205,8 @@ def test_verdict_and_option_notes():
     (line,) = accuracy.verdict_summary([good, bad, worse])
     assert "reliable: 2 cases, 1 of them bad" in line and "not reliable: 1 cases, 1" in line
     assert "not reported" in accuracy.verdict_summary([{"name": "d"}])[0]
+    diag = {**bad, "diagnostic": True}
+    assert accuracy.verdict_summary([good, diag]) == accuracy.verdict_summary([good])
     twin = {**good, "name": "a-precise"}
     assert "a-precise" in accuracy.same_as_default([good, twin])[0]
     assert accuracy.same_as_default([good, {**twin, "est": {"net": 3.0}}]) == []

@@ -111,7 +111,8 @@ def test_bad_crs_text(tmp_path, good):
 def test_crs_that_cannot_be_transformed(tmp_path, good):
     """Mars coordinates cannot be transformed to an Earth UTM zone."""
     mars = "+proj=utm +zone=10 +a=3396190 +b=3376200 +units=m +no_defs +type=crs"
-    _fails(tmp_path, good[0], good[1], "--after-crs", mars, expect="transformation")
+    nocrs = _las(tmp_path / "nocrs.las", _grid_cloud(30, seed=1), crs=None)  # the flag applies to files without one
+    _fails(tmp_path, good[0], nocrs, "--after-crs", mars, expect="transformation")
 
 
 def test_no_overlap(tmp_path, good):

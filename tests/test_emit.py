@@ -26,7 +26,8 @@ def test_emitted_pipelines_run_and_match_the_direct_estimate(misaligned_pair, mi
     direct = misaligned_result[0].report["volume_m3"]["net"]
     assert abs(net - direct) / abs(direct) < 0.01
     assert abs(net - truth["net"]) / truth["net"] < 0.02
-    assert (tmp_path / "pipes" / "before_prepared.laz").exists()  # the pipeline's own writer ran
+    # the pipeline's own writer ran, into the run's output folder (writers never write outside it)
+    assert (out / "before_prepared.laz").exists() and not (tmp_path / "pipes" / "before_prepared.laz").exists()
 
 
 def test_pipeline_help():

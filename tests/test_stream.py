@@ -83,6 +83,5 @@ def test_truncated_las_is_reported(cloud, tmp_path):
     path, _, _ = cloud
     cut = tmp_path / "cut.las"
     cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
-    src = open_source(cut)
-    with pytest.raises(SoilVolumeError, match="cut.las"):
-        _load(src, np.zeros(3))
+    with pytest.raises(SoilVolumeError, match="cut.las"):  # found in the header, before reading
+        _load(open_source(cut), np.zeros(3))

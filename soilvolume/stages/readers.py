@@ -9,6 +9,8 @@ import numpy as np
 import pyproj
 
 from .. import io
+from ..lasheader import BoundsCheck, check_las_header
+from ..types import short_error
 from .view import PointView, StageContext
 
 SRS_OPTS = {"override_srs", "spatialreference", "default_srs"}
@@ -54,6 +56,10 @@ def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView
     import laspy
 
     path = _path(opts, ctx)
+    try:
+        check_las_header(path)
+    except io.SoilVolumeError as exc:
+        raise ctx.error(str(exc)) from exc
     names = {"X": "x", "Y": "y", "Z": "z", "Classification": "classification",
              "ReturnNumber": "return_number", "NumberOfReturns": "number_of_returns",
              "Intensity": "intensity"}
@@ -67,15 +73,21 @@ def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView
             arrays = {k: np.empty(n, dtype=np.float64 if k in "XYZ" else
                                   (np.uint16 if k == "Intensity" else np.uint8)) for k in cols}
             start = 0
+            bounds = BoundsCheck(path, header)
             for chunk in reader.chunk_iterator(2_000_000):
                 m = len(chunk)
+                if start + m > n:
+                    raise io.SoilVolumeError(f"{path}: corrupt LAS file (more points than the header's {n})")
                 for k, v in cols.items():
                     arrays[k][start:start + m] = np.asarray(getattr(chunk, v))
+                bounds.update(np.c_[arrays["X"][start:start + m], arrays["Y"][start:start + m],
+                                    arrays["Z"][start:start + m]])
                 start += m
+            bounds.finish()
     except Exception as exc:  # laspy raises many types on broken files
         if isinstance(exc, io.SoilVolumeError):
             raise ctx.error(str(exc)) from exc
-        raise ctx.error(f"{path}: not a readable LAS/LAZ file ({exc})") from exc
+        raise ctx.error(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
     if start != n:
         raise ctx.error(f"{path}: corrupt LAS file (header says {n} points, read {start})")
     return _srs(PointView(arrays, wkt), opts, ctx)

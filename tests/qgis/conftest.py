@@ -123,12 +123,18 @@ def run_alg(qgis_processing, plugin_package):
 
 
 @pytest.fixture(scope="session")
+def run_alg_session(qgis_processing, plugin_package):
+    """:func:`run_algorithm` for module- or session-scoped fixtures."""
+    return run_algorithm
+
+
+@pytest.fixture(scope="session")
 def estimate_run(qgis_processing, plugin_package, scene_dir, tmp_path_factory) -> dict:
     """One full estimate through processing.run with every output written to files."""
     out = tmp_path_factory.mktemp("estimate")
     params = {
         "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"),
-        "CELL": 1.0, "RADIUS": 30.0, "FINE": 0, "CORRECTION": 0,
+        "CELL": 1.0, "RADIUS": 30.0, "FINE": "icp", "CORRECTION": "surface",
         "DIFFERENCE": str(out / "difference.tif"), "DEM_BEFORE": str(out / "dem_before.tif"),
         "DEM_AFTER": str(out / "dem_after.tif"), "PLANE_OFFSET": str(out / "plane_offset.tif"),
         "REGISTERED": str(out / "after_registered.laz"), "REPORT": str(out / "report.html"),

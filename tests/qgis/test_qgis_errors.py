@@ -79,15 +79,25 @@ def test_no_overlap(run_alg, scene_dir, tmp_path):
 
 
 def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
+    from qgis.core import QgsProcessingFeedback
+    from soilvolume_qgis.plugin import deps
+
+    class Warnings(QgsProcessingFeedback):
+        texts: list[str] = []
+
+        def pushWarning(self, text: str) -> None:  # noqa: N802 - Qt API
+            self.texts.append(text)
+
     monkeypatch.setitem(sys.modules, "open3d", None)  # "import open3d" now fails
-    with pytest.raises(QgsProcessingException) as info:
+    feedback = Warnings()
+    with pytest.raises(QgsProcessingException, match=r"missing Python packages \(open3d\)"):
         run_alg("estimatevolumechange", {
             "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"),
-            "DIFFERENCE": str(tmp_path / "d.tif")})
-    message = str(info.value)
-    assert "cannot import open3d" in message
-    assert f"{sys.executable} -m pip install" in message and "open3d" in message
-    assert "restart QGIS" in message
+            "DIFFERENCE": str(tmp_path / "d.tif")}, feedback=feedback)
+    message = "\n".join(feedback.texts)
+    assert "cannot import open3d" in message and "press Install" in message
+    assert f"--target {deps.site_dir()}" in message and "--no-deps open3d" in message
+    assert "--user" not in message and "--break-system-packages" not in message
 
 
 def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch):
@@ -100,11 +110,3 @@ def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch
     with pytest.raises(QgsProcessingException, match="engine package 'soilvolume' does not import"):
         run_alg("pointcloudtodem", {
             "INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")})
-
-
-def test_install_command_outside_a_venv(monkeypatch):
-    from soilvolume_qgis.processing import engine
-
-    monkeypatch.setattr(sys, "prefix", sys.base_prefix)
-    command = engine.install_command(["open3d-cpu", "laspy[lazrs]"])
-    assert "-m pip install --user" in command and '"laspy[lazrs]"' in command

@@ -105,5 +105,5 @@ def test_zip_installs_and_loads(plugin_zip, tmp_path):
     assert out["engine_file"].startswith(str(plugins))  # the engine shipped in the zip
     assert out["algorithms"] == [f"soilvolume:{n}" for n in (
         "estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems")]
-    assert out["menu_calls"] == 1
+    assert out["menu_calls"] == 2  # the estimate and "Install dependencies…"
     assert out["unloaded"] and not out["provider_after_unload"]

@@ -54,9 +54,8 @@ def test_numeric_outputs_of_the_estimate(provider):
     rasters = {"DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET"}
     assert rasters | {"REGISTERED", "REPORT"} <= outputs
     fine = alg.parameterDefinition("FINE")
-    assert len(fine.options()) == 4
-    correction = alg.parameterDefinition("CORRECTION")
-    assert "None" in correction.options()[-1]
+    assert fine.options() == ["icp", "gicp", "pfh", "none"] and fine.usesStaticStrings()
+    assert alg.parameterDefinition("CORRECTION").defaultValue() == "surface"
 
 
 def test_plugin_menu_and_unload(plugin_package, qgis_iface):

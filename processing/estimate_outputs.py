@@ -1,0 +1,125 @@
+"""The estimate's numbers and strings as Processing outputs, and the per-zone volume table."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from qgis.core import (
+    QgsFeature,
+    QgsFeatureSink,
+    QgsField,
+    QgsFields,
+    QgsProcessingAlgorithm,
+    QgsProcessingContext,
+    QgsProcessingException,
+    QgsProcessingOutputNumber,
+    QgsProcessingOutputString,
+)
+from qgis.PyQt.QtCore import QVariant
+
+from . import engine, params
+
+# output -> (report section, key, description)
+NUMBERS: dict[str, tuple[str, str, str]] = {
+    "NET_VOLUME": ("volume_m3", "net", "Net volume change over the change areas (m³, fill − cut)"),
+    "NET_UNCERTAINTY": ("uncertainty_m3", "net", "Net volume change: ± half-width (m³, 95 % by default)"),
+    "CUT_VOLUME": ("volume_m3", "cut", "Cut volume over the areas of significant loss (m³)"),
+    "CUT_UNCERTAINTY": ("uncertainty_m3", "cut", "Cut volume: ± half-width (m³)"),
+    "FILL_VOLUME": ("volume_m3", "fill", "Fill volume over the areas of significant gain (m³)"),
+    "FILL_UNCERTAINTY": ("uncertainty_m3", "fill", "Fill volume: ± half-width (m³)"),
+    "UNCOMPENSATED_NET_VOLUME": (
+        "volume_uncompensated_m3", "net", "Net volume change without the vertical correction (m³)"),
+    "ALL_CELLS_NET_VOLUME": (
+        "volume_all_cells_m3", "net", "Net volume summed over every compared cell, as the paper does (m³)"),
+    "ALL_CELLS_NET_UNCERTAINTY": (
+        "uncertainty_m3", "net_all_cells", "Net volume over every compared cell: ± half-width (m³)"),
+    "ALL_CELLS_CUT_VOLUME": ("volume_all_cells_m3", "cut", "Cut summed over every compared cell (m³, incl. noise)"),
+    "ALL_CELLS_FILL_VOLUME": (
+        "volume_all_cells_m3", "fill", "Fill summed over every compared cell (m³, incl. noise)"),
+    "CHANGE_AREA": ("volume_m3", "area_m2", "Detected change area (m²)"),
+    "LEVEL_OF_DETECTION": ("uncertainty_m3", "lod_m", "Level of detection (m)"),
+    "COMPARED_AREA": ("grid", "compared_area_m2", "Compared area (m²)"),
+    "CELL_SIZE": ("grid", "cell_m", "Cell size (m)"),
+}
+REGISTRATION = {  # output -> (summary.rotation_shift key, description)
+    "ROTATION": ("rotation_deg", "Registration rotation (°)"),
+    "SHIFT": ("shift_m", "Registration shift (m)"),
+}
+STRINGS = {
+    "VERDICT": "Quality verdict (reliable, use with caution, not reliable)",
+    "QUALITY_MESSAGES": "Quality messages (one per line)",
+    "SIGNIFICANCE": "Significance of the net change, in words",
+    "TRANSFORM": "Registration transform (4×4, JSON, after → before)",
+}
+ZONE_FIELDS = (("zone_name", QVariant.String), ("cut_m3", QVariant.Double), ("fill_m3", QVariant.Double),
+               ("net_m3", QVariant.Double), ("net_pm_m3", QVariant.Double), ("area_m2", QVariant.Double))
+
+
+def add_outputs(alg: QgsProcessingAlgorithm) -> None:
+    for key, (_s, _k, text) in NUMBERS.items():
+        alg.addOutput(QgsProcessingOutputNumber(key, alg.tr(text)))
+    for key, (_k, text) in REGISTRATION.items():
+        alg.addOutput(QgsProcessingOutputNumber(key, alg.tr(text)))
+    for key, text in STRINGS.items():
+        alg.addOutput(QgsProcessingOutputString(key, alg.tr(text)))
+
+
+def values(report: dict[str, Any]) -> dict[str, Any]:
+    """Every number and string output, read defensively from report.json."""
+    summary = engine.engine("summary")
+    out: dict[str, Any] = {}
+    for key, (section, field, _d) in NUMBERS.items():
+        value = (report.get(section) or {}).get(field)
+        out[key] = float(value) if isinstance(value, (int, float)) else None
+    reg = report.get("registration") or {}
+    local = reg.get("transform_local")
+    moved = summary.rotation_shift(local) if local is not None else {}
+    for key, (field, _d) in REGISTRATION.items():
+        out[key] = moved.get(field)
+    quality = summary.quality(report)
+    out["VERDICT"] = quality["verdict"]
+    out["QUALITY_MESSAGES"] = "\n".join(quality["messages"])
+    out["SIGNIFICANCE"] = summary.significance(report)
+    out["TRANSFORM"] = params.to_json(reg.get("transform"))
+    return out
+
+
+def zone_fields(source_fields: QgsFields) -> QgsFields:
+    """The zones' own attributes and the volume fields (renamed when a zone field has the name)."""
+    fields = QgsFields(source_fields)
+    for name, kind in ZONE_FIELDS:
+        fields.append(QgsField(name if fields.indexOf(name) < 0 else f"sv_{name}", kind))
+    return fields
+
+
+def write_zones(
+    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], context: QgsProcessingContext,
+    report: dict[str, Any],
+) -> str | None:
+    """The ZONE_VOLUMES table: each zone polygon with cut, fill, net and the net's ±."""
+    zones = report.get("zones") or []
+    source = alg.parameterAsSource(parameters, "ZONES", context) if parameters.get("ZONES") else None
+    if source is None or not zones:
+        return None
+    fields = zone_fields(source.fields())
+    sink, dest = alg.parameterAsSink(parameters, "ZONE_VOLUMES", context, fields, source.wkbType(),
+                                     source.sourceCrs())
+    if sink is None:
+        return None
+    features = [f for f in source.getFeatures() if f.hasGeometry()]
+    if len(features) != len(zones):
+        raise QgsProcessingException(
+            f"The engine measured {len(zones)} zones but the ZONES layer has {len(features)} polygons.")
+    for feature, zone in zip(features, zones, strict=True):
+        sink.addFeature(_zone_feature(feature, zone, fields, report), QgsFeatureSink.FastInsert)
+    return dest
+
+
+def _zone_feature(feature: QgsFeature, zone: dict[str, Any], fields: QgsFields, report: dict) -> QgsFeature:
+    cell = (report.get("grid") or {}).get("cell_m") or 1.0
+    pm = engine.engine("zones").net_half_width(zone.get("area_m2", 0.0), cell, report.get("uncertainty") or {})
+    out = QgsFeature(fields)
+    out.setGeometry(feature.geometry())
+    extra = [zone.get("name"), zone.get("cut"), zone.get("fill"), zone.get("net"), pm, zone.get("area_m2")]
+    out.setAttributes(list(feature.attributes()) + extra)
+    return out

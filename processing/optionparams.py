@@ -1,0 +1,194 @@
+"""Processing parameters built from the engine's option table (``soilvolume.options.Options``).
+
+One parameter per option field: name = field name upper-cased, description = its label, help = its
+help text, choices -> a string-valued enum, lengths in metres -> a distance widget, numbers with
+the table's range. Options added to the table later appear here without any change.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import MISSING, Field, fields
+from typing import Any
+
+from qgis.core import (
+    Qgis,
+    QgsProcessingAlgorithm,
+    QgsProcessingContext,
+    QgsProcessingException,
+    QgsProcessingFeedback,
+    QgsProcessingParameterBoolean,
+    QgsProcessingParameterCrs,
+    QgsProcessingParameterDefinition,
+    QgsProcessingParameterDistance,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterString,
+)
+
+from . import engine
+
+CRS_FIELDS = {"before_crs", "after_crs"}
+POLYGON_FIELDS = {"stable_mask", "zones"}
+SKIPPED = {"keep_registered_cloud"}  # an output destination, not a parameter
+BASIC = ("before_crs", "after_crs", "cell", "radius", "georeferencing", "fine", "correction", "zones",
+         "stable_mask")  # shown first, in this order; the rest is advanced, in table order
+UNIT_TEXT = {"m": "m", "m2": "m²", "deg": "°"}
+POLYGON_FORMATS = ["gpkg", "shp", "geojson"]
+
+
+def options_class() -> type:
+    """The engine's Options class (pure Python: importable without the engine's dependencies)."""
+    engine.ensure_engine_package()
+    return importlib.import_module("soilvolume.options").Options
+
+
+def option_fields(only: set[str] | None = None) -> list[Field]:
+    """The option table's fields (those in ``only`` when given), in table order."""
+    table = fields(options_class())
+    return [f for f in table if f.name not in SKIPPED and (only is None or f.name in only)]
+
+
+def key(field: Field) -> str:
+    return field.name.upper()
+
+
+def description(field: Field) -> str:
+    """The field's label with its unit for plain numbers (distance widgets show their own)."""
+    meta = field.metadata
+    label = meta.get("label") or field.name.replace("_", " ").capitalize()
+    unit = meta.get("unit")
+    if unit and unit != "m":
+        label = f"{label} ({UNIT_TEXT.get(unit, unit)})"
+    if field.default is None and _is_number(field):
+        label = f"{label} (automatic when not set)"
+    return label
+
+
+def parameter(field: Field) -> QgsProcessingParameterDefinition:
+    """The Processing parameter of one option field."""
+    param = _make(field)
+    param.setHelp(engine.qgis_wording(field.metadata.get("help") or ""))  # no command-line flags
+    if field.name not in BASIC:
+        param.setFlags(param.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
+    return param
+
+
+def parameters(only: set[str] | None = None) -> list[QgsProcessingParameterDefinition]:
+    table = option_fields(only)
+    first = sorted((f for f in table if f.name in BASIC), key=lambda f: BASIC.index(f.name))
+    return [parameter(f) for f in first + [f for f in table if f.name not in BASIC]]
+
+
+def _is_number(field: Field) -> bool:
+    return _kind(field) in ("float", "int")
+
+
+def _kind(field: Field) -> str:
+    """float, int, bool or str, from the field's annotation (``float | None`` -> float)."""
+    text = str(field.type)
+    for kind in ("bool", "float", "int"):
+        if text.startswith(kind):
+            return kind
+    return "str"
+
+
+def _make(field: Field) -> QgsProcessingParameterDefinition:
+    meta, name, label = field.metadata, key(field), description(field)
+    default = None if field.default is MISSING else field.default
+    optional = default is None
+    if field.name in CRS_FIELDS:
+        return QgsProcessingParameterCrs(name, label, optional=True)
+    if field.name in POLYGON_FIELDS:
+        return QgsProcessingParameterFeatureSource(
+            name, label, [Qgis.ProcessingSourceType.VectorPolygon], optional=True)
+    if meta.get("choices"):
+        return QgsProcessingParameterEnum(name, label, options=list(meta["choices"]),
+                                          defaultValue=default, usesStaticStrings=True)
+    kind = _kind(field)
+    if kind == "bool":
+        return QgsProcessingParameterBoolean(name, label, defaultValue=bool(default))
+    if kind in ("float", "int"):
+        return _number(field, name, label, default, optional)
+    return QgsProcessingParameterString(name, label, defaultValue=default, optional=optional)
+
+
+def _number(field: Field, name: str, label: str, default: Any, optional: bool):
+    meta = field.metadata
+    if meta.get("unit") == "m" and _kind(field) == "float":
+        param = QgsProcessingParameterDistance(name, label, defaultValue=default, optional=optional)
+        param.setDefaultUnit(Qgis.DistanceUnit.Meters)
+    else:
+        kind = QgsProcessingParameterNumber.Integer if _kind(field) == "int" else QgsProcessingParameterNumber.Double
+        param = QgsProcessingParameterNumber(name, label, type=kind, defaultValue=default, optional=optional)
+    param.setMetadata({"widget_wrapper": {"decimals": decimals(default, meta.get("lo"))}})
+    lo, hi = meta.get("lo"), meta.get("hi")
+    if lo is not None:
+        param.setMinimum(0.0 if optional else lo)  # optional numbers: 0 also means automatic
+    if hi is not None:
+        param.setMaximum(hi)
+    return param
+
+
+def decimals(*values: float | None) -> int:
+    """Decimals the widget shows: enough for the default and the lower bound (1 to 4), so a
+    radius reads 30.0, not 30.000000."""
+    need = 1
+    for value in values:
+        if isinstance(value, float):
+            need = max(need, next((d for d in range(1, 5) if abs(round(value, d) - value) < 1e-9), 4))
+    return need
+
+
+def read_options(
+    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], context: QgsProcessingContext,
+    feedback: QgsProcessingFeedback | None = None, only: set[str] | None = None,
+):
+    """The engine's Options from the parameters of the fields in ``only`` (all when None)."""
+    given = {}
+    for field in option_fields(only):
+        if alg.parameterDefinition(key(field)) is None:
+            continue
+        value = _value(alg, field, parameters, context, feedback)
+        if value is not None or field.default is None:
+            given[field.name] = value
+    try:
+        return options_class()(**given)
+    except Exception as exc:  # an engine option error names the field: word it as the parameter
+        text = engine.option_error_text(exc)
+        if text is None:
+            raise
+        raise QgsProcessingException(text) from exc
+
+
+def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> Any:
+    name = key(field)
+    if field.name in CRS_FIELDS:
+        from .params import crs_text
+
+        return crs_text(alg, parameters, name, context)
+    if field.name in POLYGON_FIELDS:
+        if not parameters.get(name):
+            return None
+        return alg.parameterAsCompatibleSourceLayerPath(
+            parameters, name, context, POLYGON_FORMATS, "gpkg", feedback) or None
+    if field.metadata.get("choices"):
+        return alg.parameterAsEnumString(parameters, name, context) or None
+    return _scalar(alg, field, parameters, name, context)
+
+
+def _scalar(alg, field: Field, parameters: dict[str, Any], name: str, context) -> Any:
+    kind = _kind(field)
+    if kind == "bool":
+        return alg.parameterAsBool(parameters, name, context)
+    if kind not in ("float", "int"):
+        return alg.parameterAsString(parameters, name, context) or None
+    raw = parameters.get(name, alg.parameterDefinition(name).defaultValue())
+    if raw is None or raw == "":
+        return None
+    value = alg.parameterAsInt(parameters, name, context) if kind == "int" else alg.parameterAsDouble(
+        parameters, name, context)
+    if field.default is None and value <= 0:
+        return None  # optional numbers (e.g. the cell size): 0 = automatic
+    return value

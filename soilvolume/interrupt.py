@@ -1,0 +1,89 @@
+"""SIGINT/SIGTERM as a flag the engine checks between steps, never an exception raised inside
+native code (Open3D, laspy, numpy).
+
+:func:`handle_signals` installs handlers that only record the signal; :func:`check` (called by
+:meth:`soilvolume.api.Hooks.step` and every iteration callback) raises :class:`Interrupted`.
+A second signal of a run that does not stop runs the registered cleanups and exits at once.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+
+from .types import SoilVolumeError
+
+_pending: list[int] = []
+_cleanups: list[Callable[[], None]] = []
+NAMES = {signal.SIGINT: "SIGINT", signal.SIGTERM: "SIGTERM"}
+
+
+class Interrupted(SoilVolumeError):
+    """The run received SIGINT or SIGTERM; nothing was written."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        super().__init__(f"interrupted by {NAMES.get(signum, signum)}; nothing was written")
+
+    @property
+    def exit_code(self) -> int:
+        """The shell's convention: 128 + the signal number (130 SIGINT, 143 SIGTERM)."""
+        return 128 + self.signum
+
+
+def _record(signum: int, _frame) -> None:
+    if _pending:  # second signal: the run is stuck in a long native call; leave now
+        run_cleanups()
+        sys.stderr.write(f"soilvolume: error: interrupted by {NAMES.get(signum, signum)} (forced)\n")
+        sys.stderr.flush()
+        os._exit(128 + signum)
+    _pending.append(signum)
+
+
+def check() -> None:
+    """Raise :class:`Interrupted` when a signal arrived since the handlers were installed."""
+    if _pending:
+        raise Interrupted(_pending[0])
+
+
+def pending() -> int | None:
+    """The signal received, or None."""
+    return _pending[0] if _pending else None
+
+
+@contextmanager
+def handle_signals() -> Iterator[None]:
+    """Record SIGINT/SIGTERM for :func:`check` while the block runs (in the main thread; elsewhere
+    Python cannot install handlers and the block runs unchanged)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {s: signal.signal(s, _record) for s in NAMES}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+        _pending.clear()
+
+
+@contextmanager
+def cleanup_on_exit(fn: Callable[[], None]) -> Iterator[None]:
+    """Run ``fn`` if the process is forced out by a second signal while the block runs."""
+    _cleanups.append(fn)
+    try:
+        yield
+    finally:
+        _cleanups.remove(fn)
+
+
+def run_cleanups() -> None:
+    for fn in reversed(_cleanups):
+        try:
+            fn()
+        except Exception:  # noqa: BLE001 - best effort on the way out
+            pass

@@ -1,0 +1,58 @@
+"""What C libraries (libtiff, GDAL, PROJ, Open3D) print straight to the process's stderr, held back
+while a command runs: replayed when it succeeds, dropped when it fails with its own one-line
+error (a full disk otherwise adds dozens of libtiff lines). ``SOILVOLUME_DEBUG=1`` keeps them.
+
+Python's own ``sys.stderr`` (progress, errors) keeps writing to the terminal.
+"""
+
+from __future__ import annotations
+
+import faulthandler
+import io
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+
+class Held:
+    """The native stderr text of a block, available once it ended."""
+
+    text = ""
+
+
+def _real_stderr() -> bool:
+    try:
+        return sys.stderr.fileno() == 2 and not os.environ.get("SOILVOLUME_DEBUG")
+    except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
+        return False
+
+
+@contextmanager
+def hold_native_stderr() -> Iterator[Held]:
+    """Point file descriptor 2 at a temporary file and ``sys.stderr`` at the terminal."""
+    held = Held()
+    if not _real_stderr():
+        yield held
+        return
+    sys.stderr.flush()
+    was_enabled = faulthandler.is_enabled()
+    terminal = os.dup(2)
+    python_stderr = sys.stderr
+    sys.stderr = os.fdopen(os.dup(terminal), "w", buffering=1, encoding=python_stderr.encoding,
+                           errors="backslashreplace")
+    faulthandler.enable(sys.stderr)  # a crash still reports on the terminal
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield held
+        finally:
+            sys.stderr.flush()
+            os.dup2(terminal, 2)
+            os.close(terminal)
+            sys.stderr.close()
+            sys.stderr = python_stderr
+            faulthandler.enable(sys.stderr) if was_enabled else faulthandler.disable()
+            sink.seek(0)
+            held.text = sink.read().decode(errors="replace")

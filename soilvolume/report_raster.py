@@ -1,0 +1,56 @@
+"""Raster helpers of the report figures: block averaging of large grids and PNG encoding with
+zlib (no imaging library)."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+
+import numpy as np
+
+
+def _fold(a: np.ndarray, k: int, axis: int) -> np.ndarray:
+    """Sums of k consecutive entries along ``axis`` (0 or 1; the last group may be shorter)."""
+    shape = list(a.shape)
+    shape[axis] = -(-shape[axis] // k)
+    out = np.zeros(shape, np.float64 if a.dtype.kind == "f" else np.int32)
+    for i in range(k):
+        x = a[i::k] if axis == 0 else a[:, i::k]
+        if axis == 0:
+            out[: x.shape[0]] += x
+        else:
+            out[:, : x.shape[1]] += x
+    return out
+
+
+def block_mean(a: np.ndarray, k: int) -> np.ndarray:
+    """NaN-aware mean over k x k blocks (partial blocks at the edges); NaN where a block has no data."""
+    if k <= 1:
+        return a
+    ok = np.isfinite(a)
+    total = _fold(_fold(np.where(ok, a, 0.0), k, 0), k, 1)
+    count = _fold(_fold(ok, k, 0), k, 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, total / count, np.nan)
+
+
+def _block_any(m: np.ndarray, k: int) -> np.ndarray:
+    m = np.asarray(m, bool)
+    return m if k <= 1 else _fold(_fold(m, k, 0), k, 1) > 0
+
+
+def _repeat(a: np.ndarray, f: int) -> np.ndarray:
+    return a if f <= 1 else np.repeat(np.repeat(a, f, axis=0), f, axis=1)
+
+
+def png_bytes(rgba: np.ndarray) -> bytes:
+    """An (h, w, 4) uint8 array as an 8-bit RGBA PNG (filter 0, fast zlib)."""
+    h, w = rgba.shape[:2]
+    raw = np.zeros((h, 1 + 4 * w), np.uint8)
+    raw[:, 1:] = np.ascontiguousarray(rgba, np.uint8).reshape(h, 4 * w)
+
+    def chunk(tag: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
+
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw.tobytes(), 1)) + chunk(b"IEND", b""))

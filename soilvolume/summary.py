@@ -1,0 +1,48 @@
+"""Plain-language figures of a run, shared by the HTML report and the QGIS outputs: the
+registration as a rotation (degrees) and a shift (metres), and whether the net change is
+significant."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+
+def rotation_shift(transform_local: Any) -> dict[str, float]:
+    """Rotation angle (degrees, about any axis), its tilt part (degrees off vertical) and yaw,
+    and the shift (metres: horizontal, vertical, total) of a 4x4 transform in local
+    coordinates (the engine's origin is inside the data, so the shift is where the data is)."""
+    t = np.asarray(transform_local, dtype=float)
+    r, s = t[:3, :3], t[:3, 3]
+    cos_angle = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
+    tilt = math.degrees(math.acos(float(np.clip(r[2, 2], -1.0, 1.0))))
+    yaw = math.degrees(math.atan2(r[1, 0], r[0, 0]))
+    return {"rotation_deg": math.degrees(math.acos(cos_angle)), "tilt_deg": tilt, "yaw_deg": yaw,
+            "shift_m": float(np.linalg.norm(s)), "shift_horizontal_m": float(np.hypot(s[0], s[1])),
+            "shift_vertical_m": float(s[2]), "dx_m": float(s[0]), "dy_m": float(s[1])}
+
+
+def significance(report: dict[str, Any]) -> str:
+    """One sentence: is the net change distinguishable from zero at the run's confidence?"""
+    net = report.get("volume_m3", {}).get("net")
+    unc = report.get("uncertainty_m3", {})
+    half, conf = unc.get("net"), unc.get("confidence", 0.95)
+    if net is None or half is None:
+        return "No uncertainty could be estimated, so the significance of the change is unknown."
+    level = f"{conf * 100:g} %"
+    if abs(net) > half:
+        kind = "gain (fill)" if net > 0 else "loss (cut)"
+        return (f"The net change of {net:+,.1f} m³ ± {half:,.1f} m³ is a significant {kind} "
+                f"at {level} confidence: the interval does not include zero.")
+    return (f"The net change of {net:+,.1f} m³ ± {half:,.1f} m³ is not significant at {level} "
+            f"confidence: the interval includes zero, so no net gain or loss is shown.")
+
+
+def quality(report: dict[str, Any]) -> dict[str, Any]:
+    """The run's quality verdict (reliable / use with caution / not reliable) and its plain
+    sentences; an empty verdict when the engine gave none."""
+    q = report.get("quality") or {}
+    return {"verdict": str(q.get("verdict") or ""), "trusted": q.get("trusted"),
+            "messages": [str(m) for m in q.get("messages") or []]}

@@ -1,0 +1,98 @@
+"""One check of every option against the ranges declared in :class:`~soilvolume.options.Options`.
+
+The CLI, the engine's entry points and the QGIS algorithms all call :func:`check_options`, so a
+value is refused the same way everywhere: an :class:`OptionError` naming the option, the allowed
+range and the value given.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import fields
+from typing import Any
+
+from .options import Options
+from .types import SoilVolumeError
+
+#: fewest grid cells over the compared area that give a meaningful volume
+MIN_CELLS = 25
+
+
+class OptionError(SoilVolumeError):
+    """An option value outside its allowed range; ``field`` is the :class:`Options` field name."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        self.field, self.reason = field, reason
+        super().__init__(f"{flag(field)}: {reason}")
+
+
+def flag(field: str) -> str:
+    """The command-line flag of an option field (``cell`` -> ``--cell``)."""
+    return "--" + field.replace("_", "-")
+
+
+def _num(v: float) -> str:
+    return str(int(v)) if float(v).is_integer() and abs(v) < 1e15 else f"{v:g}"
+
+
+def _range_text(meta: dict[str, Any], integer: bool) -> str:
+    kind = "an integer" if integer else "a finite number"
+    lo, hi = meta.get("lo"), meta.get("hi")
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if meta.get('lo_open') else '>='} {_num(lo)}")
+    if hi is not None:
+        parts.append(f"<= {_num(hi)}")
+    return f"must be {kind} {' and '.join(parts)}".rstrip()
+
+
+def check_number(field: str, value: Any, meta: dict[str, Any], integer: bool = False) -> None:
+    """Refuse a value that is not a number, not finite, or outside ``meta``'s lo..hi."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise OptionError(field, f"{_range_text(meta, integer)} (got {value!r})")
+    if integer and not isinstance(value, int):
+        raise OptionError(field, f"{_range_text(meta, integer)} (got {value!r})")
+    lo, hi = meta.get("lo"), meta.get("hi")
+    bad = not math.isfinite(value)
+    bad = bad or (lo is not None and (value <= lo if meta.get("lo_open") else value < lo))
+    bad = bad or (hi is not None and value > hi)
+    if bad:
+        raise OptionError(field, f"{_range_text(meta, integer)} (got {_num(value) if math.isfinite(value) else value})")
+
+
+def check_options(options: Options) -> Options:
+    """Every field of ``options`` against its declared choices and range; returns ``options``."""
+    for f in fields(options):
+        value, meta = getattr(options, f.name), f.metadata
+        if value is None:
+            continue
+        if meta.get("choices") and value not in meta["choices"]:
+            raise OptionError(f.name, f"must be one of {', '.join(meta['choices'])} (got {value!r})")
+        if meta.get("lo") is not None or meta.get("hi") is not None:
+            check_number(f.name, value, meta, integer=f.type in ("int", int))
+        elif f.type in ("str | None", "str") and not isinstance(value, str):
+            raise OptionError(f.name, f"must be text (got {value!r})")
+    return options
+
+
+def check_bounds(bounds: Sequence[float] | None, name: str = "--bounds") -> tuple[float, ...] | None:
+    """``xmin, ymin, xmax, ymax``: four finite numbers with xmin < xmax and ymin < ymax."""
+    if bounds is None:
+        return None
+    b = tuple(bounds)
+    if len(b) != 4 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in b):
+        raise SoilVolumeError(f"{name}: must be four finite numbers XMIN YMIN XMAX YMAX (got {b})")
+    if not (b[0] < b[2] and b[1] < b[3]):
+        raise SoilVolumeError(f"{name}: XMIN must be < XMAX and YMIN < YMAX (got {' '.join(f'{v:g}' for v in b)})")
+    return b
+
+
+def check_grid_cells(rows: int, cols: int, cell: float, valid: int | None = None) -> None:
+    """Refuse a grid with fewer than :data:`MIN_CELLS` cells (or valid cells) over the compared
+    area: a cell as large as the site turns a volume into noise."""
+    n = rows * cols if valid is None else valid
+    if n < MIN_CELLS:
+        raise OptionError("cell", f"a {cell:g} m grid has only {n} cell(s) over the compared area "
+                          f"(at least {MIN_CELLS} needed); use a smaller --cell or leave it unset "
+                          "to derive it from the point density")

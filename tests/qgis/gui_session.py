@@ -1,0 +1,144 @@
+"""A desktop QGIS session under a virtual X server, driven by ``test_qgis_gui.py``.
+
+Opens the estimate's Processing dialog, runs the algorithm the way the dialog does (outputs loaded
+into the project through Processing's own post-processing), shows the Layers panel and the map,
+checks stacking order and legend ranges through the API and saves screenshots.
+
+Usage: gui_session.py PLUGINS_DIR BEFORE AFTER OUT_DIR ARTEFACTS_DIR (prints a JSON summary).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+from qgis.core import (
+    QgsApplication,
+    QgsColorRampLegendNode,
+    QgsLayerTreeModel,
+    QgsLegendSettings,
+    QgsProject,
+    QgsRasterLayer,
+    QgsRenderContext,
+)
+
+
+def start(plugins_dir: str):
+    app = QgsApplication([], True)
+    app.initQgis()
+    sys.path.insert(0, str(Path(QgsApplication.pkgDataPath()) / "python" / "plugins"))
+    sys.path.append(plugins_dir)
+    from processing.core.Processing import Processing
+
+    Processing.initialize()
+    from soilvolume_qgis.processing.provider import SoilVolumeProvider
+
+    provider = SoilVolumeProvider()
+    QgsApplication.processingRegistry().addProvider(provider)
+    return app, provider
+
+
+def settle(seconds: float = 0.5) -> None:
+    end = time.time() + seconds
+    while time.time() < end:
+        QgsApplication.processEvents()
+        time.sleep(0.02)
+
+
+def dialog_checks(before: str, after: str, artefacts: Path) -> dict:
+    """Open the algorithm dialog with the two clouds set; read its widgets; screenshot."""
+    from processing.gui.AlgorithmDialog import AlgorithmDialog
+
+    alg = QgsApplication.processingRegistry().createAlgorithmById("soilvolume:estimatevolumechange")
+    dialog = AlgorithmDialog(alg)
+    panel = dialog.mainWidget()
+    panel.setParameters({"BEFORE": before, "AFTER": after})
+    dialog.resize(1000, 850)
+    dialog.show()
+    settle()
+    dialog.grab().save(str(artefacts / "estimate_dialog.png"))
+    wrappers = panel.wrappers
+    from qgis.PyQt.QtWidgets import QDoubleSpinBox, QLabel
+
+    radius = wrappers["RADIUS"].wrappedWidget()
+    out = {"radius_text": radius.findChild(QDoubleSpinBox).text(),
+           "radius_labels": [label.text() for label in radius.findChildren(QLabel)],
+           "fine_value": wrappers["FINE"].widgetValue(),
+           "before_value": wrappers["BEFORE"].widgetValue(),
+           "registered_created": bool(wrappers["REGISTERED"].widgetValue())}
+    dialog.close()
+    return out
+
+
+def run_and_load(before: str, after: str, out_dir: Path) -> dict:
+    from processing.tools.general import runAndLoadResults
+
+    rasters = ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")
+    params = {"BEFORE": before, "AFTER": after, "CELL": 1.0,
+              **{key: str(out_dir / f"{key.lower()}.tif") for key in rasters}}
+    return runAndLoadResults("soilvolume:estimatevolumechange", params)
+
+
+def legend_checks(model: QgsLayerTreeModel) -> list[dict]:
+    rows = []
+    for node in model.rootGroup().findLayers():
+        layer = node.layer()
+        if not isinstance(layer, QgsRasterLayer):
+            continue
+        ramp = [n for n in model.layerLegendNodes(node) if isinstance(n, QgsColorRampLegendNode)]
+        data = ramp[0].exportToJson(QgsLegendSettings(), QgsRenderContext()) if ramp else None
+        renderer = layer.renderer()
+        rows.append({"name": layer.name(), "legend": [data["min"].toDouble(), data["max"].toDouble()] if data else None,
+                     "style": [renderer.classificationMin(), renderer.classificationMax()],
+                     "nodata": layer.dataProvider().sourceNoDataValue(1)})
+    return rows
+
+
+def layers_window(artefacts: Path) -> QgsLayerTreeModel:
+    """The Layers panel and the map side by side, screenshot saved."""
+    from qgis.gui import QgsLayerTreeMapCanvasBridge, QgsLayerTreeView, QgsMapCanvas
+    from qgis.PyQt.QtWidgets import QHBoxLayout, QWidget
+
+    project = QgsProject.instance()
+    window, row = QWidget(), QHBoxLayout()
+    model = QgsLayerTreeModel(project.layerTreeRoot())
+    view, canvas = QgsLayerTreeView(), QgsMapCanvas()
+    view.setModel(model)
+    bridge = QgsLayerTreeMapCanvasBridge(project.layerTreeRoot(), canvas)
+    row.addWidget(view, 1)
+    row.addWidget(canvas, 2)
+    window.setLayout(row)
+    window.resize(1200, 700)
+    window.show()
+    view.expandAll()
+    canvas.setDestinationCrs(project.layerTreeRoot().findLayers()[0].layer().crs())
+    canvas.zoomToFullExtent()
+    canvas.refresh()
+    settle(1.0)
+    canvas.waitWhileRendering()
+    settle(0.5)
+    window.grab().save(str(artefacts / "layers_and_map.png"))
+    window._keep = (view, canvas, bridge)  # noqa: SLF001 - keep wrappers alive until exit
+    return model
+
+
+def main(plugins_dir: str, before: str, after: str, out_dir: str, artefacts: str) -> int:
+    app, _provider = start(plugins_dir)
+    folder = Path(artefacts)
+    folder.mkdir(parents=True, exist_ok=True)
+    summary = {"dialog": dialog_checks(before, after, folder)}
+    results = run_and_load(before, after, Path(out_dir))
+    summary["net"] = results["NET_VOLUME"]
+    model = layers_window(folder)
+    summary["order"] = [n.layer().name() for n in model.rootGroup().findLayers()]
+    summary["legends"] = legend_checks(model)
+    print(json.dumps(summary))
+    QgsProject.instance().removeAllMapLayers()
+    app.exitQgis()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(*sys.argv[1:6]))

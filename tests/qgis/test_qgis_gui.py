@@ -1,0 +1,59 @@
+"""The desktop GUI under a virtual X server (Xvfb): the algorithm dialog, the styled outputs
+loaded by Processing, their stacking order and legends; screenshots kept in tests/artefacts/."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+XVFB_RUN = shutil.which("xvfb-run")
+pytestmark = pytest.mark.skipif(XVFB_RUN is None, reason="xvfb-run is not installed (apt-get install xvfb)")
+HERE = Path(__file__).resolve().parent
+ARTEFACTS = HERE.parent / "artefacts"
+
+
+@pytest.fixture(scope="module")
+def session(plugins_dir, scene_dir, tmp_path_factory) -> dict:
+    out = tmp_path_factory.mktemp("gui")
+    env = {k: v for k, v in os.environ.items() if k not in ("QT_QPA_PLATFORM", "PYTHONPATH", "QGIS_OPTIONS_PATH")}
+    env["QGIS_CUSTOM_CONFIG_PATH"] = str(out / "profile")
+    command = [XVFB_RUN, "-a", "-s", "-screen 0 1400x1000x24", sys.executable, str(HERE / "gui_session.py"),
+               str(plugins_dir), str(scene_dir / "before.las"), str(scene_dir / "after.las"), str(out), str(ARTEFACTS)]
+    run = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300, cwd=str(out))
+    assert run.returncode == 0, run.stderr[-3000:] + run.stdout[-2000:]
+    line = [text for text in run.stdout.splitlines() if text.startswith("{")][-1]
+    return json.loads(line)
+
+
+def test_dialog_widgets(session):
+    dialog = session["dialog"]
+    assert any("meters" in text.lower() for text in dialog["radius_labels"]), dialog  # a distance
+    assert dialog["radius_text"] == "30.0", dialog  # not 30.000000
+    assert dialog["fine_value"] == "icp"
+    assert dialog["before_value"].endswith("before.las")
+    assert not dialog["registered_created"]  # the registered cloud is off by default
+    assert (ARTEFACTS / "estimate_dialog.png").stat().st_size > 10_000
+
+
+def test_outputs_loaded_styled_and_stacked(session, truth):
+    assert session["net"] == pytest.approx(truth["net"], rel=0.03)
+    order = session["order"]
+    assert order[0].startswith("Difference") and len(order) == 4
+    assert order.index("Vertical correction") < order.index("DEM before")
+    assert (ARTEFACTS / "layers_and_map.png").stat().st_size > 20_000
+
+
+def test_legends_show_the_styled_range(session):
+    for row in session["legends"]:
+        assert row["legend"] == pytest.approx(row["style"]), row["name"]
+        assert row["nodata"] == -9999, row["name"]
+        if row["name"].startswith("DEM"):
+            assert 55 < row["legend"][0] < row["legend"][1] < 75  # the scene's heights, not 0-100
+        else:
+            assert row["legend"][0] == pytest.approx(-row["legend"][1])

@@ -1,0 +1,165 @@
+"""The estimate's numbers, strings and per-zone table as Processing outputs; the rasters' CRS,
+nodata, stacking order and legends once Processing loads them."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from qgis.core import (
+    QgsColorRampLegendNode,
+    QgsFeature,
+    QgsField,
+    QgsGeometry,
+    QgsLayerTreeModel,
+    QgsLegendSettings,
+    QgsPointXY,
+    QgsProcessingContext,
+    QgsProcessingFeedback,
+    QgsProcessingOutputLayerDefinition,
+    QgsProject,
+    QgsRasterLayer,
+    QgsRenderContext,
+    QgsVectorFileWriter,
+    QgsVectorLayer,
+)
+from qgis.PyQt.QtCore import QVariant
+
+REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
+ZONES = {"pile A": (500067.0, 3900087.0, 11.0), "pit": (500068.0, 3900061.0, 7.0)}
+STABLE = ((500050, 3900042, 500060, 3900050), (500105, 3900042, 500117, 3900050),  # ground away from
+          (500050, 3900097, 500056, 3900105), (500105, 3900097, 500117, 3900104),  # the piles and pit
+          (500050, 3900070, 500058, 3900080), (500105, 3900072, 500118, 3900080))
+
+
+def write_polygons(path: Path, boxes: dict[str, tuple[float, float, float, float]]) -> Path:
+    """A GeoPackage of named rectangles (EPSG:32654)."""
+    layer = QgsVectorLayer("Polygon?crs=EPSG:32654", "zones", "memory")
+    layer.dataProvider().addAttributes([QgsField("name", QVariant.String)])
+    layer.updateFields()
+    for name, (x0, y0, x1, y1) in boxes.items():
+        feature = QgsFeature(layer.fields())
+        ring = [QgsPointXY(x0, y0), QgsPointXY(x1, y0), QgsPointXY(x1, y1), QgsPointXY(x0, y1)]
+        feature.setGeometry(QgsGeometry.fromPolygonXY([ring]))
+        feature.setAttributes([name])
+        layer.dataProvider().addFeature(feature)
+    options = QgsVectorFileWriter.SaveVectorOptions()
+    options.driverName = "GPKG"
+    error = QgsVectorFileWriter.writeAsVectorFormatV3(layer, str(path), QgsProject.instance().transformContext(),
+                                                      options)
+    assert error[0] == QgsVectorFileWriter.NoError, error
+    return path
+
+
+@pytest.fixture(scope="module")
+def zoned_run(run_alg_session, scene_dir, tmp_path_factory):
+    """One estimate with zones and a stable-ground mask, its outputs loaded into the project."""
+    out = tmp_path_factory.mktemp("zoned")
+    zones = write_polygons(out / "zones.gpkg", {n: (x - h, y - h, x + h, y + h) for n, (x, y, h) in ZONES.items()})
+    stable = write_polygons(out / "stable.gpkg", {f"s{i}": box for i, box in enumerate(STABLE)})
+    context = QgsProcessingContext()
+    context.setProject(QgsProject.instance())
+    loaded = {key: QgsProcessingOutputLayerDefinition(str(out / f"{key.lower()}.tif"), QgsProject.instance())
+              for key in ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")}
+    params = {"BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"), "CELL": 1.0,
+              "ZONES": str(zones), "STABLE_MASK": str(stable), "ZONE_VOLUMES": str(out / "zone_volumes.gpkg"),
+              "REPORT_JSON": str(out / "report.json"), **loaded}
+    results = run_alg_session("estimatevolumechange", params, context=context)
+    return results, context
+
+
+def test_numbers_and_strings(zoned_run, truth):
+    results, _ = zoned_run
+    report = json.loads(Path(results["REPORT_JSON"]).read_text())
+    assert results["NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net"])
+    assert results["NET_UNCERTAINTY"] > 0
+    assert results["CUT_UNCERTAINTY"] > 0 and results["FILL_UNCERTAINTY"] > 0
+    for key, field in (("ALL_CELLS_NET_VOLUME", "net"), ("ALL_CELLS_CUT_VOLUME", "cut"),
+                       ("ALL_CELLS_FILL_VOLUME", "fill")):
+        assert results[key] == pytest.approx(report["volume_all_cells_m3"][field]), key
+    assert results["CHANGE_AREA"] == pytest.approx(report["volume_m3"]["area_m2"])
+    assert results["ALL_CELLS_NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net_all_cells"])
+    assert results["VERDICT"] in ("reliable", "use with caution", "not reliable")
+    assert results["LEVEL_OF_DETECTION"] == pytest.approx(report["uncertainty_m3"]["lod_m"])
+    assert results["NET_VOLUME"] == pytest.approx(truth["net"], rel=0.1)
+    assert "is a significant gain (fill)" in results["SIGNIFICANCE"]
+    assert isinstance(results["VERDICT"], str) and isinstance(results["QUALITY_MESSAGES"], str)
+    assert report["options"]["stable_mask"] and report["options"]["zones"]
+
+
+def test_registration_as_rotation_and_shift(zoned_run, truth):
+    results, _ = zoned_run
+    mis = truth["misalignment"]  # the GPS error the registration undoes
+    assert results["ROTATION"] == pytest.approx(math.hypot(*mis["rotation_deg"]), abs=0.1)
+    assert results["SHIFT"] == pytest.approx(math.hypot(*mis["shift_m"]), abs=1.0)
+
+
+def test_per_zone_table(zoned_run, truth):
+    results, _ = zoned_run
+    layer = QgsVectorLayer(results["ZONE_VOLUMES"], "zones", "ogr")
+    rows = {f["name"]: f for f in layer.getFeatures()}
+    assert set(rows) == set(ZONES)
+    for row in rows.values():
+        assert row["net_m3"] == pytest.approx(row["fill_m3"] - row["cut_m3"])
+        assert row["net_pm_m3"] > 0 and row.hasGeometry()
+    pile_a = next(f for f in truth["features"] if f["name"].startswith("pile A"))
+    assert rows["pile A"]["net_m3"] == pytest.approx(pile_a["volume"], rel=0.15)
+    assert rows["pit"]["net_m3"] < 0
+
+
+def test_difference_on_top_and_legends_match_the_style(zoned_run):
+    """The post-processors Processing runs after loading: sort keys put the difference on top;
+    the Layers-panel legend (layer tree model) shows the styled range, not the QML's."""
+    _, context = zoned_run
+    details = {d.name: d for d in context.layersToLoadOnCompletion().values()}
+    keys = {name: d.layerSortKey for name, d in details.items()}
+    assert max(keys, key=keys.get).startswith("Difference")
+    project = QgsProject.instance()
+    model = QgsLayerTreeModel(project.layerTreeRoot())
+    try:
+        for path, d in context.layersToLoadOnCompletion().items():
+            layer = QgsRasterLayer(path, d.name)
+            project.addMapLayer(layer)
+            d.postProcessor().postProcessLayer(layer, context, QgsProcessingFeedback())
+            lo, hi = legend_range(model, layer)
+            renderer = layer.renderer()
+            assert (lo, hi) == pytest.approx((renderer.classificationMin(), renderer.classificationMax()))
+            assert layer.dataProvider().sourceNoDataValue(1) == -9999
+    finally:
+        project.removeAllMapLayers()
+
+
+def legend_range(model: QgsLayerTreeModel, layer) -> tuple[float, float]:
+    """(min, max) the colour-ramp legend node of ``layer`` shows."""
+    node = model.rootGroup().findLayer(layer.id())
+    for legend in model.layerLegendNodes(node):
+        if isinstance(legend, QgsColorRampLegendNode):
+            data = legend.exportToJson(QgsLegendSettings(), QgsRenderContext())
+            return data["min"].toDouble(), data["max"].toDouble()
+    raise AssertionError(f"{layer.name()}: no colour ramp legend")
+
+
+@pytest.mark.skipif(not (REAL / "autzen_bmx_2010.las").is_file(), reason="real data not present")
+def test_autzen_rasters_have_no_vertical_crs_in_feet(run_alg, tmp_path):
+    """Autzen's z is in US survey feet (NAVD88 ftUS); the rasters hold metres, so they carry
+    the horizontal CRS only."""
+    res = run_alg("estimatevolumechange", {
+        "BEFORE": str(REAL / "autzen_bmx_2010.las"), "AFTER": str(REAL / "autzen_bmx_2023.las"),
+        "DIFFERENCE": str(tmp_path / "d.tif"), "DEM_BEFORE": str(tmp_path / "b.tif")})
+    for key in ("DIFFERENCE", "DEM_BEFORE"):
+        layer = QgsRasterLayer(res[key], key)
+        try:
+            crs = layer.crs()
+            assert crs.isValid() and "ftUS" not in crs.toWkt() and "NAVD88" not in crs.toWkt()
+            assert "Oregon" in crs.description()
+        finally:
+            del layer
+    import rasterio
+
+    with rasterio.open(res["DEM_BEFORE"]) as ds:
+        dem = ds.read(1, masked=True)
+    assert 125 < float(np.ma.median(dem)) < 135  # metres (the file's feet would be ~427)
+    assert "REGISTERED" not in res or res["REGISTERED"] is None

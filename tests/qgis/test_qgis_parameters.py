@@ -1,0 +1,133 @@
+"""The estimate's parameters come from the engine's option table; inputs, help and wording."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import pytest
+from qgis.core import (
+    Qgis,
+    QgsApplication,
+    QgsProcessingParameterDistance,
+    QgsProcessingParameterEnum,
+    QgsProcessingParameterNumber,
+    QgsProcessingParameterPointCloudLayer,
+)
+
+from soilvolume.options import Options, _opt
+
+ESTIMATE = "soilvolume:estimatevolumechange"
+
+
+@pytest.fixture
+def estimate(provider):
+    return QgsApplication.processingRegistry().algorithmById(ESTIMATE)
+
+
+def option_fields():
+    return [f for f in fields(Options) if f.name != "keep_registered_cloud"]
+
+
+def test_every_option_is_a_parameter(estimate):
+    from soilvolume_qgis.processing.engine import qgis_wording
+
+    for field in option_fields():
+        param = estimate.parameterDefinition(field.name.upper())
+        assert param is not None, field.name
+        assert param.description().startswith(field.metadata["label"]), field.name
+        assert param.help() == qgis_wording(field.metadata["help"]), field.name
+        assert "--" not in param.help(), field.name
+
+
+def test_choices_are_string_enums(estimate):
+    for field in option_fields():
+        if not field.metadata["choices"]:
+            continue
+        param = estimate.parameterDefinition(field.name.upper())
+        assert isinstance(param, QgsProcessingParameterEnum), field.name
+        assert param.usesStaticStrings() and param.options() == list(field.metadata["choices"])
+        assert param.defaultValue() == field.default
+
+
+def test_lengths_are_distances_and_ranges_are_kept(estimate):
+    for field in option_fields():
+        param = estimate.parameterDefinition(field.name.upper())
+        if field.metadata["unit"] == "m":
+            assert isinstance(param, QgsProcessingParameterDistance), field.name
+            assert param.defaultUnit() == Qgis.DistanceUnit.Meters
+        if isinstance(param, QgsProcessingParameterNumber) and field.default is not None:
+            assert param.minimum() == pytest.approx(field.metadata["lo"]), field.name
+            assert param.maximum() == pytest.approx(field.metadata["hi"]), field.name
+            assert param.defaultValue() == pytest.approx(field.default), field.name
+
+
+def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
+    from soilvolume_qgis.processing import optionparams
+
+    @dataclass(frozen=True)
+    class Wider(Options):
+        max_slope: float = _opt(2.0, "steepest slope kept (m per m)", label="Steepest slope", lo=0.0, hi=10.0)
+
+    monkeypatch.setattr(optionparams, "options_class", lambda: Wider)
+    alg = estimate.create({})  # a fresh instance, initAlgorithm run again
+    param = alg.parameterDefinition("MAX_SLOPE")
+    assert param is not None and param.description().startswith("Steepest slope")
+    assert param.help() == "Steepest slope kept (m per m)"
+
+
+def test_one_required_input_per_epoch(estimate):
+    for key in ("BEFORE", "AFTER"):
+        param = estimate.parameterDefinition(key)
+        assert isinstance(param, QgsProcessingParameterPointCloudLayer)
+        assert not param.flags() & param.FlagOptional
+    names = {p.name() for p in estimate.parameterDefinitions()}
+    assert not {"BEFORE_LAYER", "AFTER_LAYER"} & names
+
+
+def test_a_missing_epoch_is_named(run_alg, scene_dir, tmp_path):
+    from qgis.core import QgsProcessingException
+
+    with pytest.raises(QgsProcessingException, match="No after point cloud"):
+        run_alg("estimatevolumechange", {"BEFORE": str(scene_dir / "before.las"),
+                                         "DIFFERENCE": str(tmp_path / "d.tif")})
+
+
+def test_registered_cloud_is_off_by_default(estimate):
+    assert not estimate.parameterDefinition("REGISTERED").createByDefault()
+
+
+def test_help_is_flowing_html(provider):
+    for alg in provider.algorithms():
+        text = alg.shortHelpString()
+        assert "\n" not in text and "<p>" in text, alg.name()
+
+
+def test_engine_messages_in_parameter_words(plugin_package):
+    from soilvolume_qgis.processing import engine
+
+    text = engine.qgis_wording("coarse: skipped (87% within 0.4 m); --coarse fpfh forces it")
+    assert "--" not in text and "'Coarse registration' (COARSE) = fpfh forces it" in text
+    assert text.startswith("Coarse")
+    assert "(CELL)" in engine.qgis_wording("grid too large: use a larger --cell")
+
+
+def test_option_errors_name_the_parameter(plugin_package):
+    from soilvolume_qgis.processing import engine
+
+    class OptionError(Exception):
+        field, reason = "radius", "must be between 0 and 10000 m (got -1)"
+
+    text = engine.option_error_text(OptionError())
+    assert text == ("Incorrect parameter value for 'Crop radius around the after footprint' "
+                    "(RADIUS): must be between 0 and 10000 m (got -1)")
+    assert engine.option_error_text(ValueError("plain")) is None
+
+
+def test_a_point_cloud_layer_is_read_from_its_file(estimate, scene_dir):
+    """A loaded layer (here a COPC-provider layer object) gives the engine its source file."""
+    from qgis.core import QgsPointCloudLayer, QgsProcessingContext
+    from soilvolume_qgis.processing import params
+
+    layer = QgsPointCloudLayer(str(scene_dir / "before.las"), "before", "copc")
+    path = params.cloud_path(estimate, {"BEFORE": layer}, "BEFORE", QgsProcessingContext(), "Before")
+    assert path == str(scene_dir / "before.las")
