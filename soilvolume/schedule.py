@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 
 from .types import SoilVolumeError
 
@@ -48,9 +50,22 @@ def budget_gb(memory_limit: float) -> float:
     """The memory budget in GB: ``memory_limit``, else half of this machine's memory."""
     if memory_limit > 0:
         return float(memory_limit)
-    import psutil
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):  # not POSIX
+        try:
+            import psutil
 
-    return psutil.virtual_memory().total / 2**30 / 2
+            total = psutil.virtual_memory().total
+        except ImportError:
+            total = 8 * 2**30
+    return total / 2**30 / 2
+
+
+def can_spawn() -> bool:
+    """Whether worker processes can be started: this process runs a Python interpreter (inside
+    QGIS, ``sys.executable`` is QGIS itself and spawned workers would start QGIS)."""
+    return Path(sys.executable).name.lower().startswith("python")
 
 
 def in_process_gb(points: int) -> float:
@@ -65,7 +80,7 @@ def choose(spec: str, memory_limit: float, points: int) -> Schedule:
         return chosen
     if in_process_gb(points) <= budget_gb(memory_limit):
         return Schedule("none")
-    return Schedule("local", os.cpu_count() or 1)
+    return Schedule("local" if can_spawn() else "threads", os.cpu_count() or 1)
 
 
 @contextmanager
@@ -107,6 +122,9 @@ def _start(schedule: Schedule, memory_limit: float):
         except OSError as exc:
             raise SoilVolumeError(f"--scheduler {schedule.address}: cannot reach the Dask scheduler ({exc})") from exc
     processes = schedule.kind == "local"
+    if processes and not can_spawn():
+        raise SoilVolumeError(f"--scheduler {schedule}: cannot start worker processes from {sys.executable}; "
+                              "use threads[:N] or an existing cluster (tcp://HOST:PORT)")
     per_worker = budget_gb(memory_limit) / schedule.workers
     cluster = LocalCluster(
         n_workers=schedule.workers if processes else 1, threads_per_worker=1 if processes else schedule.workers,

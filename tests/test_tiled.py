@@ -139,3 +139,11 @@ def test_existing_cluster_by_address(pair, in_process, tmp_path):
         got = estimate(before, after, tmp_path / "r", Options(scheduler=cluster.scheduler_address, tile_cells=24))
     assert got.report["engine"]["scheduler"].startswith("tcp://")
     _same(got, in_process)
+
+
+def test_auto_inside_qgis_uses_threads(monkeypatch):
+    """Inside QGIS ``sys.executable`` is QGIS: worker processes cannot be spawned from it."""
+    import sys
+
+    monkeypatch.setattr(sys, "executable", "/usr/bin/qgis")
+    assert choose("auto", 1.0, 64_000_000).kind == "threads"
