@@ -170,7 +170,8 @@ def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | 
             _place(out, win, saved)
     if len(todo) < len(windows):
         hooks.info(f"resuming: {len(windows) - len(todo)} of {len(windows)} tiles done in an earlier run")
-    futures = c.map(grid_tile, [plan] * len(todo), todo, pure=False)
+    shared = c.scatter(plan, broadcast=True) if todo else None  # sent once, not with every task
+    futures = c.map(grid_tile, [shared] * len(todo), todo, pure=False)
     for k, fut in enumerate(as_completed(futures), 1):
         win, arrays, task = fut.result()
         fut.release()
