@@ -163,3 +163,28 @@ def test_indexed_las_reads_only_chunks_meeting_the_box(tmp_path):
     inside = ((xyz[:, :2] >= lo) & (xyz[:, :2] <= hi)).all(axis=1)
     sel = ((got[:, :2] >= lo) & (got[:, :2] <= hi)).all(axis=1)
     np.testing.assert_allclose(_sorted(got[sel]), _sorted(xyz[inside]), atol=1e-6)
+
+
+def test_vpc_unreadable_tile_named(tmp_path):
+    xyz, cls = _cloud()
+    tiles = _tiles(tmp_path, xyz, cls)
+    vpc = write_vpc(tmp_path / "s.vpc", tiles)
+    tiles[1].write_bytes(b"LASF" + b"\0" * 50)  # truncated: the header says nothing sensible
+    with pytest.raises(SoilVolumeError, match=r"tile_1\.laz: not a readable LAS/LAZ"):
+        _read_all(open_source(vpc))
+
+
+def test_copc_before_gives_the_las_result(tmp_path):
+    """A COPC before cloud (read only where it meets the crop) gives the LAS result."""
+    from conftest import write_scene
+
+    from soilvolume.api import estimate
+    from soilvolume.options import Options
+
+    before, after, _ = write_scene(tmp_path / "pair", 5)
+    las = laspy.read(before)
+    copc = write_copc(tmp_path / "before.copc.laz", np.c_[las.x, las.y, las.z], np.asarray(las.classification),
+                      las.header.parse_crs().to_wkt())
+    ref = estimate(before, after, tmp_path / "a", Options(scheduler="none"))
+    got = estimate(copc, after, tmp_path / "b", Options(scheduler="none"))
+    assert got.report["volume_m3"]["net"] == pytest.approx(ref.report["volume_m3"]["net"], rel=1e-3)
