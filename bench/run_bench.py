@@ -35,6 +35,10 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(HERE))
+
+from memory import TreeSampler  # noqa: E402
+from tiles import split  # noqa: E402
 
 from soilvolume import synthetic  # noqa: E402
 from soilvolume.synthetic import SceneConfig  # noqa: E402
@@ -114,13 +118,18 @@ def timed(argv: list[str], timeout: float, log: Path) -> dict:
     else:
         full = [sys.executable, "-c", _WRAP, tpath, *argv]
     t = time.perf_counter()
-    try:
-        with open(log, "w") as lf:
-            proc = subprocess.run(full, stdout=lf, stderr=subprocess.STDOUT, timeout=timeout)
-        rc = proc.returncode
-    except subprocess.TimeoutExpired:
-        rc = "timeout"
+    with open(log, "w") as lf:
+        proc = subprocess.Popen(full, stdout=lf, stderr=subprocess.STDOUT)
+        with TreeSampler(proc.pid) as tree:
+            try:
+                rc = proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+                rc = "timeout"
     wall = time.perf_counter() - t
+    per_process = sorted(((round(mb), name) for pid, (mb, name) in tree.peaks.items()
+                          if name not in ("time", "python3") or pid != proc.pid), reverse=True)
     peak_mb = None
     text = Path(tpath).read_text() if Path(tpath).exists() else ""
     os.unlink(tpath)
@@ -134,30 +143,61 @@ def timed(argv: list[str], timeout: float, log: Path) -> dict:
         info = json.loads(text)
         peak_mb, rc = info["maxrss_kb"] / 1024.0, info["rc"]
     tail = log.read_text(errors="replace").strip().splitlines()[-15:] if log.exists() else []
-    return {"rc": rc, "wall_s": wall, "peak_rss_mb": peak_mb, "log_tail": tail}
+    largest = max((mb for mb, name in per_process if name != "time"), default=None)
+    return {"rc": rc, "wall_s": wall, "peak_rss_mb": peak_mb, "largest_process_mb": largest,
+            "processes_sum_mb": round(tree.total), "processes": per_process[:8], "log_tail": tail}
 
 
 def las_count(path: Path) -> int:
-    import laspy
+    from soilvolume.stream import open_source
 
-    with laspy.open(str(path)) as r:
-        return int(r.header.point_count)
+    return int(open_source(path).count)
 
 
-def run_scene(name: str, args, root: Path, runs: Path) -> dict:
+def files(path: Path) -> list[Path]:
+    """The files behind an input (a VPC's tiles)."""
+    if path.suffix != ".vpc":
+        return [path]
+    from soilvolume.vpc import read_vpc
+
+    return [Path(t.path) for t in read_vpc(path).tiles]
+
+
+def ensure_tiles(path: Path, tile_m: float) -> Path:
+    """``path`` split once into LAZ tiles of ``tile_m`` metres + a VPC (cached beside it)."""
+    folder = path.parent / f"tiles-{tile_m:g}m"
+    vpc = folder / f"{path.stem}.vpc"
+    if not vpc.exists():
+        print(f"[bench] tiling {path} into {tile_m:g} m LAZ tiles ...", flush=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".tiles-", dir=path.parent))
+        split(path, tmp, tile_m)
+        folder.mkdir(exist_ok=True)
+        for f in tmp.iterdir():
+            os.replace(f, folder / f.name)
+        tmp.rmdir()
+    return vpc
+
+
+def run_scene(name: str, args, root: Path, runs: Path, scheduler: str = "") -> dict:
     before, after, truth_path, gen_s = ensure_scene(name, args.seed, args.fmt, root)
+    originals = (before, after)
+    if args.layout == "vpc":
+        before, after = ensure_tiles(before, args.tile_m), ensure_tiles(after, args.tile_m)
     truth = json.loads(truth_path.read_text())
     nb, na = las_count(before), las_count(after)
-    warm([before, after])
-    out = runs / name
+    inputs = files(before) + files(after)
+    warm(inputs)
+    label = name + (f" [{scheduler}]" if scheduler else "") + (" vpc" if args.layout == "vpc" else "")
+    out = runs / re.sub(r"[^\w.-]+", "_", label)
     venv = Path(args.venv)
     fmt_args = {"before": shlex.quote(str(before)), "after": shlex.quote(str(after)),
                 "out": shlex.quote(str(out)), "venv": shlex.quote(str(venv)),
                 "python": shlex.quote(str(venv / "bin" / "python")),
                 "repo": shlex.quote(str(REPO))}
-    argv = shlex.split(args.cmd.format(**fmt_args))
-    res: dict = {"scene": name, "points_before": nb, "points_after": na, "points": nb + na,
-                 "files_mb": round((before.stat().st_size + after.stat().st_size) / 2**20, 1),
+    argv = shlex.split(args.cmd.format(**fmt_args)) + (["--scheduler", scheduler] if scheduler else [])
+    res: dict = {"scene": name, "label": label, "scheduler": scheduler or "default", "layout": args.layout,
+                 "tiles": len(inputs), "points_before": nb, "points_after": na, "points": nb + na,
+                 "files_mb": round(sum(f.stat().st_size for f in inputs) / 2**20, 1),
                  "generate_s": round(gen_s, 2), "truth_net_m3": truth["net"],
                  "truth_cut_m3": truth["cut"], "truth_fill_m3": truth["fill"], "runs": []}
     best = None
@@ -165,7 +205,7 @@ def run_scene(name: str, args, root: Path, runs: Path) -> dict:
         if out.exists():
             shutil.rmtree(out)
         print(f"[bench] {name}: run {i + 1}/{args.repeat}: {' '.join(argv)}", flush=True)
-        r = timed(argv, args.timeout, runs / f"{name}.log")
+        r = timed(argv, args.timeout, runs / f"{out.name}.log")
         rep_path = out / "report.json"
         report = json.loads(rep_path.read_text()) if rep_path.exists() and r["rc"] == 0 else None
         r["report"] = report
@@ -182,6 +222,8 @@ def run_scene(name: str, args, root: Path, runs: Path) -> dict:
         report = best["report"]
         res["wall_s"] = best["wall_s"]
         res["peak_rss_mb"] = best["peak_rss_mb"]
+        for k in ("largest_process_mb", "processes_sum_mb", "processes"):
+            res[k] = best.get(k)
         res["timings_s"] = report.get("timings_s", {})
         vol = report.get("volume_m3", {}) or {}
         res["net_m3"] = vol.get("net")
@@ -191,20 +233,20 @@ def run_scene(name: str, args, root: Path, runs: Path) -> dict:
             res["net_error_pct"] = 100.0 * (res["net_m3"] - truth["net"]) / abs(truth["net"])
         grid = report.get("grid", {}) or {}
         res["grid"] = {k: grid.get(k) for k in ("cell_m", "rows", "cols") if k in grid}
-        shutil.copy(out / "report.json", runs / f"{name}.report.json")
+        shutil.copy(out / "report.json", runs / f"{out.name}.report.json")
         if not args.keep_outputs:
             shutil.rmtree(out, ignore_errors=True)
 
     # the floor: read both files + write three GeoTIFFs of the same grid, own process
-    fl_out = runs / f"{name}-floor"
-    fl_argv = [str(venv / "bin" / "python"), str(HERE / "floor.py"), str(before), str(after),
+    fl_out = runs / f"{out.name}-floor"
+    fl_argv = [str(venv / "bin" / "python"), str(HERE / "floor.py"), str(originals[0]), str(originals[1]),
                str(fl_out)]
     cell = (res.get("grid") or {}).get("cell_m")
     if cell:
         fl_argv += ["--cell", str(cell)]
     fl_best = None
     for _ in range(args.repeat):
-        r = timed(fl_argv, args.timeout, runs / f"{name}-floor.log")
+        r = timed(fl_argv, args.timeout, runs / f"{out.name}-floor.log")
         if r["rc"] != 0:
             res["floor_error"] = f"exit {r['rc']}: " + " | ".join(r["log_tail"][-3:])
             break
@@ -259,15 +301,19 @@ def table(results: list[dict]) -> str:
             if k not in STAGES and k not in extra:
                 extra.append(k)
     stages = STAGES + extra
-    head = (["scene", "points"] + stages
-            + ["wall s", "peak MB", "floor s", "x floor", "net err %", "load"])
+    head = (["scene", "points", "scheduler"] + stages
+            + ["wall s", "peak MB", "largest process MB", "all processes MB", "floor s", "x floor", "net err %",
+               "load"])
     rows = []
     for r in results:
         t = r.get("timings_s", {})
         name = r["scene"] + (f" (= {r['same_as']})" if r.get("same_as") else "")
-        rows.append([name, f"{r['points'] / 1e6:.2f}M"]
+        if r.get("layout") == "vpc":
+            name += f" (VPC, {r['tiles']} tiles)"
+        rows.append([name, f"{r['points'] / 1e6:.2f}M", r.get("scheduler", "default")]
                     + [_f(t.get(s), ".2f") for s in stages]
                     + [_f(r.get("wall_s"), ".2f"), _f(r.get("peak_rss_mb"), ".0f"),
+                       _f(r.get("largest_process_mb"), ".0f"), _f(r.get("processes_sum_mb"), ".0f"),
                        _f(r.get("floor_wall_s"), ".2f"), _f(r.get("ratio_to_floor"), ".1f"),
                        _f(r.get("net_error_pct"), "+.2f") if "error" not in r
                        else r["error"], _f(r.get("loadavg_1m_before"), ".1f")])
@@ -277,49 +323,45 @@ def table(results: list[dict]) -> str:
 
 
 def plot(results: list[dict], path: Path) -> None:
+    """Time and per-process peak memory against points, one line per scheduler/layout."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
 
-    ok = sorted((r for r in results if r.get("wall_s") and not r.get("same_as")),
-                key=lambda r: r["points"])
+    ok = [r for r in results if r.get("wall_s") and not r.get("same_as")]
     if not ok:
         return
-    n = np.array([r["points"] for r in ok], dtype=float)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 5))
-    wall = np.array([r["wall_s"] for r in ok])
-    a1.loglog(n, wall, "o-", label="estimate (wall)")
-    fl = [(r["points"], r["floor_wall_s"]) for r in ok if r.get("floor_wall_s")]
+    series: dict[str, list[dict]] = {}
+    for r in sorted(ok, key=lambda r: r["points"]):
+        series.setdefault(f"{r.get('scheduler', 'default')}" + (" VPC" if r.get("layout") == "vpc" else ""),
+                          []).append(r)
+    for label, rs in series.items():
+        n = np.array([r["points"] for r in rs], dtype=float)
+        a1.loglog(n, [r["wall_s"] for r in rs], "o-", label=f"estimate {label}")
+        mem = [r.get("largest_process_mb") or r.get("peak_rss_mb") for r in rs]
+        a2.loglog(n, mem, "o-", label=f"largest process {label}")
+        if any(r.get("processes_sum_mb") for r in rs) and label.startswith(("local", "tcp")):
+            a2.loglog(n, [r.get("processes_sum_mb") for r in rs], "x:", label=f"all processes {label}")
+    floors: dict[int, float] = {}
+    for r in ok:
+        if r.get("floor_wall_s"):
+            floors[r["points"]] = min(floors.get(r["points"], float("inf")), r["floor_wall_s"])
+    fl = sorted(floors.items())
     if fl:
-        a1.loglog(*zip(*fl, strict=True), "s--", label="floor: read + 3 GeoTIFFs")
-    ref_n = np.geomspace(n.min(), max(n.max(), n.min() * 10), 20)
-    a1.loglog(ref_n, wall[0] * ref_n / n[0], ":", color="gray", label="linear scaling")
-    a1.set_xlabel("points (before + after)")
-    a1.set_ylabel("seconds")
+        a1.loglog(*zip(*fl, strict=True), "s--", color="gray", label="floor: read + 3 GeoTIFFs")
     a1.set_title("wall time")
-    mem = [(r["points"], r["peak_rss_mb"]) for r in ok if r.get("peak_rss_mb")]
-    if mem:
-        mn, mm = (np.array(v, dtype=float) for v in zip(*mem, strict=True))
-        a2.loglog(mn, mm, "o-", label="estimate (peak RSS)")
-        a2.loglog(ref_n, mm[0] * ref_n / mn[0], ":", color="gray", label="linear scaling")
-    fm = [(r["points"], r["floor_peak_rss_mb"]) for r in ok if r.get("floor_peak_rss_mb")]
-    if fm:
-        a2.loglog(*zip(*fm, strict=True), "s--", label="floor")
-    a2.axhline(4096, color="red", lw=0.8, label="4 GB target")
-    a2.set_xlabel("points (before + after)")
+    a1.set_ylabel("seconds")
+    a2.axhline(1024, color="red", lw=0.8, label="1 GB (64 M pair, local:2)")
+    a2.axhline(600, color="orange", lw=0.8, label="600 MB (paper pair as VPC, local:2)")
+    a2.set_title("peak memory per process")
     a2.set_ylabel("MB")
-    a2.set_title("peak memory")
     for ax in (a1, a2):
-        for r in ok:
-            if r["scene"] == "paper":
-                y = r["wall_s"] if ax is a1 else r.get("peak_rss_mb")
-                if y:
-                    ax.annotate("paper", (r["points"], y), textcoords="offset points",
-                                xytext=(5, -12))
+        ax.set_xlabel("points (before + after)")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -359,6 +401,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--update-readme", action="store_true",
                     help="rewrite the latest-results table in bench/README.md")
     ap.add_argument("--generate-only", action="store_true", help="only build the scene cache")
+    ap.add_argument("--scheduler", default="",
+                    help="comma-separated --scheduler values to run each scene with (e.g. none,local:2); "
+                         "default: the engine's default (auto)")
+    ap.add_argument("--layout", choices=["file", "vpc"], default="file",
+                    help="inputs as one file per epoch, or as LAZ tiles grouped by a VPC")
+    ap.add_argument("--tile-m", type=float, default=50.0, help="--layout vpc: tile side (m)")
     args = ap.parse_args(argv)
 
     sizes = [s.strip() for s in (FULL_SIZES if args.full else (args.sizes or DEFAULT_SIZES))
@@ -368,7 +416,9 @@ def main(argv: list[str] | None = None) -> int:
     root = Path(args.cache) if args.cache else cache_root()
     if args.generate_only:
         for s in sizes:
-            ensure_scene(s, args.seed, args.fmt, root)
+            b, a, _, _ = ensure_scene(s, args.seed, args.fmt, root)
+            if args.layout == "vpc":
+                ensure_tiles(b, args.tile_m), ensure_tiles(a, args.tile_m)
         return 0
     results_dir = Path(args.results)
     results_dir.mkdir(parents=True, exist_ok=True)
@@ -378,8 +428,9 @@ def main(argv: list[str] | None = None) -> int:
     results: list[dict] = []
     started = time.strftime("%Y-%m-%d %H:%M:%S %z")
     done: dict[str, dict] = {}  # config key -> result, so e.g. 4M (= the paper config) runs once
-    for s in sizes:
-        key = json.dumps(asdict(scene_config(s)), sort_keys=True)
+    schedulers = [x.strip() for x in args.scheduler.split(",")] if args.scheduler else [""]
+    for s, sched in ((s, x) for s in sizes for x in schedulers):
+        key = json.dumps(asdict(scene_config(s)), sort_keys=True) + sched
         if key in done:
             same = dict(done[key], scene=s, same_as=done[key]["scene"])
             print(f"[bench] {s}: same scene as {same['same_as']}, not run again", flush=True)
@@ -389,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
         if load is not None and load > 0.5 * (os.cpu_count() or 1):
             print(f"[bench] warning: load average {load:.2f} on {os.cpu_count()} cores: other "
                   "processes compete, timings will be pessimistic", flush=True)
-        r = run_scene(s, args, root, runs)
+        r = run_scene(s, args, root, runs, sched)
         r["loadavg_1m_before"] = load
         done[key] = r
         results.append(r)

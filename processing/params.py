@@ -19,7 +19,7 @@ from qgis.core import (
     QgsProperty,
 )
 
-CLOUD_EXTENSIONS = ("las", "laz", "ply", "pcd", "xyz", "txt", "csv")
+CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
 CLOUD_FILTER = (
     "Point clouds (" + " ".join(f"*.{e}" for e in CLOUD_EXTENSIONS) + ");;All files (*.*)"
 )
@@ -33,8 +33,8 @@ def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterD
 
 
 def cloud_param(key: str, label: str) -> QgsProcessingParameterPointCloudLayer:
-    """One required input per epoch: a point cloud layer, or a file path (LAS, LAZ, PLY, PCD,
-    XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer)."""
+    """One required input per epoch: a point cloud layer, or a file path (LAS, LAZ, COPC, VPC,
+    PLY, PCD, XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer)."""
     param = QgsProcessingParameterPointCloudLayer(key, f"{label} point cloud")
     param.setHelp(f"The {label.lower()} survey: a point cloud layer of the project or a file "
                   f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)}).")

@@ -70,8 +70,16 @@ def average_height(
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     ids, ok = cell_ids(xyz, grid)
     z = np.asarray(xyz[ok, 2], dtype=np.float64)
-    n = grid.rows * grid.cols
-    shape = (grid.rows, grid.cols)
+    return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
+
+
+def cell_heights(
+    ids: np.ndarray, z: np.ndarray, shape: tuple[int, int], statistic: str = "robust-mean", k_mad: float = 3.0,
+    spread: bool = False,
+) -> tuple[np.ndarray, ...]:
+    """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
+    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid)."""
+    n = shape[0] * shape[1]
     if statistic == "mean" or len(z) == 0:
         counts = np.bincount(ids, minlength=n)
         mean = _mean(ids, z, counts, n)

@@ -65,6 +65,9 @@ class Options:
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
     # run control
     threads: int = _opt(0, "worker threads for Open3D/numpy (0 = all cores)", label="Threads", lo=0, hi=1024)
+    scheduler: str = _opt("auto", "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST:PORT (an existing Dask cluster; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)", label="Scheduler")
+    memory_limit: float = _opt(0.0, "memory budget (GB) of the run: auto chooses in-process below it, and a LocalCluster shares it among its workers (0 = half of this machine's memory)", label="Memory budget", unit="GB", lo=0.0, hi=1e6)
+    tile_cells: int = _opt(0, "side (cells) of the tiles the distributed engine grids one task at a time (0 = from the point density, about 4 million points per tile)", label="Tile size", unit="cells", lo=0, hi=100000)
     keep_registered_cloud: bool = _opt(False, "write after_registered.laz (the after cloud moved by the registration; the transform is always in report.json)", label="Write the registered after cloud")
 
     def with_(self, **changes: Any) -> Options:

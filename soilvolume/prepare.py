@@ -18,6 +18,7 @@ from .stream import ColumnThinner, Loaded, Source, from_raw, load
 from .types import Cloud, SoilVolumeError
 
 GROUND = 2
+CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
 
 
 @dataclass
@@ -35,6 +36,9 @@ class Prepared:
     voxel: float
     after_chunks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray | None]]]  # all after points, local
     read_s: float = 0.0  # of the streaming time, seconds spent reading and decoding chunks
+    before_counts: np.ndarray | None = None  # points behind each before_thin centroid
+    ground: tuple[bool, bool] = (False, False)  # (before, after) streamed as class 2 only
+    index: tuple = (None, None)  # (before, after): chunk boxes of single files (Source.index)
 
 
 def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyproj.CRS:
@@ -79,6 +83,14 @@ def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, wind
 THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
+def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, poly: np.ndarray) -> Source:
+    """``src`` read only where it meets the bounding box of the local polygon ``poly`` (VPC tiles
+    and COPC nodes outside it are skipped), when the file is in the frame's CRS and metres."""
+    if src.raw is not None or not (crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
+        return src
+    return src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])
+
+
 def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
     """(source to stream, ground mode for streaming, note): SMRF needs the whole cloud."""
     if options.ground != "filter":
@@ -97,9 +109,15 @@ def thin_voxel(area_m2: float) -> float:
     return max(0.15, float(np.sqrt(max(area_m2, 1.0) / THIN_POINTS)))
 
 
-def prepare(before: Source, after: Source, options: Options, check=None) -> Prepared:
+NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
+
+
+def prepare(before: Source, after: Source, options: Options, check=None, full: bool = True,
+            loader: Callable[..., Loaded] = load) -> Prepared:
     """Stream both clouds into the working frame with a local origin: all after points, the
-    before points within the radius of the after footprint, and thinned subsets of both."""
+    before points within the radius of the after footprint, and thinned subsets of both
+    (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
+    ``loader`` streams one source (:func:`stream.load`, or the same as Dask tasks)."""
     crs_b = resolve_crs(before, options.before_crs, "--before-crs")
     crs_a = resolve_crs(after, options.after_crs, "--after-crs")
     hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None
@@ -108,16 +126,17 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
-    after, a, note_a = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check)
+    after, a, note_a = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check,
+                                   None if full else NOTHING, loader)
     check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
-    before, mode_b, note_b = _filtered(before, crs_b, options)
+    before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
     reach = options.max_gps_shift + 2.0
-    box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach)
-    b = load(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
-             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box)
-    if b.extra["cropped"] < 10 or len(b.xyz) == 0:
+    box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach) if full else NOTHING
+    b = loader(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
+             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box, not full)
+    if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
         raise SoilVolumeError(
             f"{before.path} and {after.path} do not overlap: the before cloud has "
             f"{b.extra['cropped']} points within {options.radius:g} m of the after cloud's footprint "
@@ -126,13 +145,14 @@ def prepare(before: Source, after: Source, options: Options, check=None) -> Prep
     check_spread(b.thin[:, :2], before.path, "near the after cloud")
     inputs = {
         "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"]),
-        "after": _describe(after, crs_a, a.used, note_a or a.note, len(a.xyz)),
+        "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"]),
     }
     read_s = a.extra["read_s"] + b.extra["read_s"]
     wkt = frame.wkt
     return Prepared(
         Cloud(b.xyz, origin, wkt, before.path), Cloud(a.xyz, origin, wkt, after.path),
         frame, origin, inputs, b.thin, a.thin, voxel, _all_points(original_after, to_a), read_s,
+        b.extra["counts"], (b.note == CLASS_NOTE, a.note == CLASS_NOTE), (b.extra["index"], a.extra["index"]),
     )
 
 
@@ -171,12 +191,14 @@ def _frame_box(src: Source, crs: pyproj.CRS, frame: WorkFrame) -> tuple[np.ndarr
 
 
 def _load_whole(src: Source, crs: pyproj.CRS, to_local, lo: np.ndarray, hi: np.ndarray, voxel: float,
-                options: Options, check) -> tuple[Source, Loaded, str | None]:
-    """Every (ground) point of ``src`` kept, thinned over its local box lo..hi (padded: the box
-    comes from header bounds). Returns (the source streamed, what was loaded, filter note)."""
+                options: Options, check, box=None, loader=load) -> tuple[Source, Loaded, str | None]:
+    """Every (ground) point of ``src`` kept (within ``box`` when given), thinned over its local box
+    lo..hi (padded: the box comes from header bounds). Returns (the source streamed, what was
+    loaded, filter note)."""
     src, mode, note = _filtered(src, crs, options)
     pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
-    return src, load(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check), note
+    return src, loader(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box,
+                       box is NOTHING), note
 
 
 def _all_points(src: Source, to_local):

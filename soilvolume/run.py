@@ -83,6 +83,13 @@ def run_estimate(
 
 def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hooks: Hooks,
               before_pipeline, after_pipeline) -> Result:
+    from .tiled import schedule_for
+
+    schedule = schedule_for(before, after, options, before_pipeline or after_pipeline)
+    if schedule.kind != "none":
+        from .tiled import estimate_tiled
+
+        return estimate_tiled(before, after, out, options, timer, hooks, schedule)
     hooks.step(2, f"reading {before.name} and {after.name} (cropping and thinning on the way)")
     with timer("crop"):
         prep = _prepare(before, after, options, hooks, before_pipeline, after_pipeline)
