@@ -28,7 +28,7 @@ MAX_COARSE_POINTS = 15_000
 MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
 ICP_TOL, ICP_ITER = 1e-6, 30
 COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
-STABLE_PASSES = 2  # refinements on the stable ground found at the current pose
+STABLE_PASSES = 1  # refinements on the stable ground found at the current pose
 
 
 @dataclass
