@@ -13,7 +13,7 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from .interrupt import Interrupted, handle_signals
+from .interrupt import Interrupted, handle_signals, ignore_signals
 from .nativelog import hold_native_stderr
 from .options import Options
 from .outputs import os_problem
@@ -202,6 +202,8 @@ def main(argv: list[str] | None = None) -> int:
             code = _run(ns)
         if code == 0 and native.text:
             sys.stderr.write(native.text)
+        if argv is None:  # the program is about to exit: a late signal must not kill it mid-way
+            ignore_signals()
         return code
 
 

@@ -71,6 +71,13 @@ def handle_signals() -> Iterator[None]:
         _pending.clear()
 
 
+def ignore_signals() -> None:
+    """Ignore SIGINT/SIGTERM from now on (a finished program on its way out; main thread only)."""
+    if threading.current_thread() is threading.main_thread():
+        for s in NAMES:
+            signal.signal(s, signal.SIG_IGN)
+
+
 @contextmanager
 def cleanup_on_exit(fn: Callable[[], None]) -> Iterator[None]:
     """Run ``fn`` if the process is forced out by a second signal while the block runs."""

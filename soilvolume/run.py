@@ -240,8 +240,11 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
         lod_cell = np.full(diff.shape, lod)
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
-    # stable ground for the error model: never a cell of (or next to) a detected change area
-    stable = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
+    # stable ground for the error model: never a cell of (or next to) a detected change area,
+    # unless the user drew it
+    quiet = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
+    if not options.stable_mask and quiet.sum() >= 12:
+        stable = quiet
     shift = _pose_effect(f_a, grid, moved)
     reg_v = _signed_budget(shift, fill_area, cut_area, area)
     extra = {k: abs(reg_v[k]) for k in ("net", "cut", "fill")}
@@ -265,7 +268,8 @@ def _volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=N
     if options.zones:
         from .zones import zone_budgets
 
-        vols["zones"] = zone_budgets(np.where(change, diff, 0.0), grid, options.zones)
+        compared = np.where(np.isfinite(diff), 0.0, np.nan)
+        vols["zones"] = zone_budgets(np.where(change, diff, compared), grid, options.zones)
     return vols
 
 
