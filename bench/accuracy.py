@@ -11,7 +11,7 @@ LiDAR cases add a second row with ``georeferencing="precise"``) and reads ``repo
 ``volume_m3`` (net/cut/fill), ``uncertainty_m3`` (95 % half-widths), ``registration.transform``
 (absolute 4x4, after -> before) and ``quality.verdict`` when the engine writes one.
 
-Scenes: synthetic pairs from :mod:`soilvolume.synthetic` (exact analytic truth), real-terrain
+Scenes: synthetic pairs from :mod:`soilvolume.scenes.synthetic` (exact analytic truth), real-terrain
 pairs from :mod:`real_terrain` (2015 Tommy Thompson ground split in two halves, analytic change
 added to one), and the two real pairs in ``/work/shared/data/real`` (``$SOILVOLUME_REAL_DATA``),
 scored on their own criteria. Scenes and run outputs are cached outside git in
@@ -47,8 +47,8 @@ sys.path.insert(0, str(HERE))
 
 import real_terrain  # noqa: E402
 
-from soilvolume import synthetic  # noqa: E402
-from soilvolume.synthetic import SceneConfig  # noqa: E402
+from soilvolume.scenes import synthetic  # noqa: E402
+from soilvolume.scenes.synthetic import SceneConfig  # noqa: E402
 
 QUANTITIES = ("net", "cut", "fill")
 # the targets: |relative error| (%) per quantity

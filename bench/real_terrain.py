@@ -4,11 +4,11 @@ The ground points (class 2) of the 2015 Tommy Thompson Park LiDAR survey
 (``/work/shared/data/real/tommy_thompson_park_2015.laz``, or ``$SOILVOLUME_REAL_DATA``) are split
 into two disjoint random halves (seeded). The first half is the "before" cloud (whole extent).
 The second half, cropped to a box inside the park, gets an analytic change added to its heights
-(the same feature shapes as :mod:`soilvolume.synthetic`: flat-topped cones, flat-bottomed pits,
+(the same feature shapes as :mod:`soilvolume.scenes.synthetic`: flat-topped cones, flat-bottomed pits,
 a flat-bottomed rectangular excavation with sloped sides) and a GPS-like misalignment about the
 box centre, ``p_surveyed = R (p - c) + c + shift``. Both halves sample the same real surface at
 different places, so the only true change is the added dz: ``truth`` net/cut/fill are its exact
-integrals (analytic, see ``soilvolume.synthetic.finish_features``) and ``truth["transform"]`` is
+integrals (analytic, see ``soilvolume.scenes.synthetic.finish_features``) and ``truth["transform"]`` is
 the inverse of the misalignment, as in ``truth.json`` of the synthetic pairs.
 
 The cloud is sparse (~0.19 ground points per m2 in the whole file, half of it per epoch), so the
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from soilvolume.synthetic import feature_area, features_dz, finish_features
+from soilvolume.scenes.synthetic import feature_area, features_dz, finish_features
 
 DEFAULT_REAL = Path("/work/shared/data/real")
 SOURCE = "tommy_thompson_park_2015.laz"

@@ -40,8 +40,8 @@ sys.path.insert(0, str(HERE))
 from memory import TreeSampler  # noqa: E402
 from tiles import split  # noqa: E402
 
-from soilvolume import synthetic  # noqa: E402
-from soilvolume.synthetic import SceneConfig  # noqa: E402
+from soilvolume.scenes import synthetic  # noqa: E402
+from soilvolume.scenes.synthetic import SceneConfig  # noqa: E402
 
 STAGES = ["read", "crop", "coarse", "fine", "planes", "grids", "volume", "write"]
 LADDER = {"1M": 1_000_000, "4M": 4_000_000, "16M": 16_000_000, "64M": 64_000_000}
@@ -149,7 +149,7 @@ def timed(argv: list[str], timeout: float, log: Path) -> dict:
 
 
 def las_count(path: Path) -> int:
-    from soilvolume.stream import open_source
+    from soilvolume.inputs.stream import open_source
 
     return int(open_source(path).count)
 
@@ -158,7 +158,7 @@ def files(path: Path) -> list[Path]:
     """The files behind an input (a VPC's tiles)."""
     if path.suffix != ".vpc":
         return [path]
-    from soilvolume.vpc import read_vpc
+    from soilvolume.inputs.vpc import read_vpc
 
     return [Path(t.path) for t in read_vpc(path).tiles]
 

@@ -10,7 +10,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from soilvolume.vpc import write_vpc  # noqa: E402
+from soilvolume.inputs.vpc import write_vpc  # noqa: E402
 
 
 def split(src: Path, folder: Path, tile_m: float, chunk: int = 2_000_000) -> Path:

@@ -137,7 +137,7 @@ def engine_errors(feedback: QgsProcessingFeedback | None, hint: str = "") -> Ite
         yield
     except api.Cancelled as exc:
         raise QgsProcessingException("Cancelled by the user; no outputs were written.") from exc
-    except engine("types").SoilVolumeError as exc:
+    except engine("core.types").SoilVolumeError as exc:
         message = option_error_text(exc) or qgis_wording(str(exc))
         if hint and "crs" in message.lower() and "parameter" not in message:
             message = f"{message}\n{hint}"

@@ -66,7 +66,7 @@ def add_outputs(alg: QgsProcessingAlgorithm) -> None:
 
 def values(report: dict[str, Any]) -> dict[str, Any]:
     """Every number and string output, read defensively from report.json."""
-    summary = engine.engine("summary")
+    summary = engine.engine("reporting.summary")
     out: dict[str, Any] = {}
     for key, (section, field, _d) in NUMBERS.items():
         value = (report.get(section) or {}).get(field)
@@ -117,7 +117,7 @@ def write_zones(
 
 def _zone_feature(feature: QgsFeature, zone: dict[str, Any], fields: QgsFields, report: dict) -> QgsFeature:
     cell = (report.get("grid") or {}).get("cell_m") or 1.0
-    pm = engine.engine("zones").net_half_width(zone.get("area_m2", 0.0), cell, report.get("uncertainty") or {})
+    pm = engine.engine("volumes.zones").net_half_width(zone.get("area_m2", 0.0), cell, report.get("uncertainty") or {})
     out = QgsFeature(fields)
     out.setGeometry(feature.geometry())
     extra = [zone.get("name"), zone.get("cut"), zone.get("fill"), zone.get("net"), pm, zone.get("area_m2")]

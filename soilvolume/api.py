@@ -2,7 +2,7 @@
 
 Every function takes file paths and an :class:`~soilvolume.options.Options`, reports through the
 optional ``progress(percent, message)``, ``log(message)`` and ``cancel() -> bool`` callbacks, and
-raises :class:`~soilvolume.types.SoilVolumeError` (or :class:`Cancelled`) with a message naming
+raises :class:`~soilvolume.core.types.SoilVolumeError` (or :class:`Cancelled`) with a message naming
 the file and the problem. Outputs are written atomically.
 """
 
@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import interrupt
+from .core import interrupt
+from .core.types import SoilVolumeError
 from .options import Options
-from .types import SoilVolumeError
 from .validate import check_bounds, check_options
 
 Progress = Callable[[float, str], None]
@@ -89,7 +89,7 @@ def estimate(
     after_pipeline: str | Path | None = None,
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
-    from .run import run_estimate
+    from .workflow.estimate import run_estimate
 
     return run_estimate(
         Path(before), Path(after), Path(out_dir), check_options(options or Options()), overwrite=overwrite,
@@ -109,7 +109,7 @@ def cloud_to_dem(
     """One cloud to an average-height GeoTIFF (``options.cell``/``options.statistic``; ``bounds``
     = xmin, ymin, xmax, ymax in the cloud's CRS, snapped outwards to the cell). Returns the grid
     description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
-    from .run import run_cloud_to_dem
+    from .workflow.estimate import run_cloud_to_dem
 
     return run_cloud_to_dem(Path(cloud), Path(out_tif), check_options(options or Options()), crs=crs,
                             bounds=check_bounds(bounds),
@@ -127,7 +127,7 @@ def register(
     """Register the after cloud onto the before cloud and write it (LAS/LAZ, before CRS).
     Returns {"transform": 4x4 row-major list (after in before CRS -> before), "coarse": {...},
     "fine": {...}}."""
-    from .run import run_register
+    from .workflow.estimate import run_register
 
     return run_register(Path(before), Path(after), Path(out_cloud), check_options(options or Options()),
                         hooks=hooks or Hooks())
@@ -145,7 +145,7 @@ def volume_from_rasters(
     """Cut/fill/net between two DEMs a user already has (the after raster is resampled onto the
     before grid when they differ). Returns {"total": {"net","cut","fill","area_m2"}, "zones":
     [{"id", "name", "net", "cut", "fill", "area_m2"}, ...]} and writes the difference GeoTIFF."""
-    from .rasters import run_volume_from_rasters
+    from .workflow.rasters import run_volume_from_rasters
 
     return run_volume_from_rasters(Path(before_tif), Path(after_tif), Path(out_difference),
                                    zones=zones, zone_field=zone_field, hooks=hooks or Hooks())

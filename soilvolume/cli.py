@@ -13,11 +13,11 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from .interrupt import Interrupted, handle_signals, ignore_signals
-from .nativelog import hold_native_stderr
+from .core.interrupt import Interrupted, handle_signals, ignore_signals
+from .core.nativelog import hold_native_stderr
+from .core.outputs import os_problem
+from .core.types import SoilVolumeError
 from .options import Options
-from .outputs import os_problem
-from .types import SoilVolumeError
 from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
@@ -128,7 +128,7 @@ def _progress(quiet: bool):
 
 def cmd_estimate(ns: argparse.Namespace) -> int:
     from .api import Hooks, estimate
-    from .report import summary_lines
+    from .reporting.report import summary_lines
 
     res = estimate(ns.before, ns.after, ns.out, options_from(ns), overwrite=ns.overwrite,
                    hooks=Hooks(progress=_progress(ns.quiet)),
@@ -164,7 +164,7 @@ def cmd_volume(ns: argparse.Namespace) -> int:
 
 
 def cmd_pipeline(ns: argparse.Namespace) -> int:
-    from .emit import emit_pipelines
+    from .pipelines.emit import emit_pipelines
 
     for path in emit_pipelines(ns.before, ns.after, ns.emit, options_from(ns)):
         print(path)
@@ -172,7 +172,7 @@ def cmd_pipeline(ns: argparse.Namespace) -> int:
 
 
 def cmd_demo(ns: argparse.Namespace) -> int:
-    from .demo import run_demo
+    from .scenes.demo import run_demo
 
     return run_demo(ns.out, ns.size, ns.seed)
 

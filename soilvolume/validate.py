@@ -12,8 +12,8 @@ from collections.abc import Sequence
 from dataclasses import fields
 from typing import Any
 
+from .core.types import SoilVolumeError
 from .options import Options
-from .types import SoilVolumeError
 
 #: fewest grid cells over the compared area that give a meaningful volume
 MIN_CELLS = 25

@@ -12,7 +12,7 @@ import pytest
 
 from soilvolume.api import estimate
 from soilvolume.options import Options
-from soilvolume.synthetic import SceneConfig, make_pair, write_pair
+from soilvolume.scenes.synthetic import SceneConfig, make_pair, write_pair
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
 if not REAL.exists():

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from soilvolume.synthetic import (
+from soilvolume.scenes.synthetic import (
     SceneConfig,
     change_dz,
     feature_area,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from soilvolume.io import write_las
+from soilvolume.inputs.io import write_las
 
 
 def _las(path, xyz, crs="EPSG:32654"):

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from conftest import write_scene
 
-from soilvolume import quality, stable
 from soilvolume.api import estimate
-from soilvolume.change import change_areas
+from soilvolume.compensation import stable
 from soilvolume.options import Options
+from soilvolume.volumes import quality
+from soilvolume.volumes.change import change_areas
 
 
 def _run(folder, seed=0, options=None, **scene):

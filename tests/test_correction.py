@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from soilvolume.correction import apply, fit_surface, stable_cells
-from soilvolume.types import GridSpec
+from soilvolume.compensation.correction import apply, fit_surface, stable_cells
+from soilvolume.core.types import GridSpec
 
 CELL = 0.5
 N = 200

@@ -6,7 +6,7 @@ import json
 
 from conftest import run_cli
 
-from soilvolume.pipeline import load_pipeline
+from soilvolume.pipelines.pipeline import load_pipeline
 
 
 def test_emitted_pipelines_run_and_match_the_direct_estimate(misaligned_pair, misaligned_result, tmp_path):

@@ -148,7 +148,7 @@ def test_coarse_auto_skips_fpfh_when_the_gps_pose_converges(misaligned_result):
 def test_coarse_auto_runs_fpfh_when_the_gps_pose_fits_poorly(misaligned_pair, tmp_path, monkeypatch):
     """The fallback path of --coarse auto: FPFH runs, is guarded by the GPS prior, the fine stage
     starts from the better pose, and the result is as accurate as from the GPS pose."""
-    import soilvolume.register as reg
+    import soilvolume.registration.register as reg
 
     monkeypatch.setattr(reg, "AUTO_FITNESS", 1.01)  # never good enough: always try FPFH
     before, after, truth = misaligned_pair

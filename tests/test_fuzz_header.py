@@ -16,9 +16,9 @@ import numpy as np
 import pyproj
 import pytest
 
-from soilvolume.prepare import resolve_crs
-from soilvolume.stream import open_source
-from soilvolume.types import SoilVolumeError
+from soilvolume.core.types import SoilVolumeError
+from soilvolume.inputs.prepare import resolve_crs
+from soilvolume.inputs.stream import open_source
 
 CASES = {"1.4.las": 120, "1.2.las": 80, "1.4.laz": 80}  # 280 flips in all
 TOLERANCE = 0.01  # of the extent

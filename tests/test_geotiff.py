@@ -7,8 +7,8 @@ import pytest
 import rasterio
 
 from soilvolume.api import cloud_to_dem
-from soilvolume.grid import NODATA, average_height, make_grid
-from soilvolume.io import read_points
+from soilvolume.dem.grid import NODATA, average_height, make_grid
+from soilvolume.inputs.io import read_points
 from soilvolume.options import Options
 
 
@@ -73,7 +73,7 @@ def test_dem_of_a_geographic_cloud_is_in_its_utm_zone(tmp_path):
     """Lon/lat input: the DEM is written in the UTM zone of the cloud's position, in metres."""
     import pyproj
 
-    from soilvolume.io import write_las
+    from soilvolume.inputs.io import write_las
 
     rng = np.random.default_rng(3)
     n = 20_000

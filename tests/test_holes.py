@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from soilvolume import holes
-from soilvolume.holes import (
+from soilvolume.dem import holes
+from soilvolume.dem.holes import (
     biharmonic_fill,
     enclosed_holes,
     harmonic_fill,

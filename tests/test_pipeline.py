@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from soilvolume import pipeline as P
-from soilvolume.stages import REGISTRY
-from soilvolume.types import SoilVolumeError
+from soilvolume.core.types import SoilVolumeError
+from soilvolume.pipelines import pipeline as P
+from soilvolume.pipelines.stages import REGISTRY
 
 REAL = "/work/shared/data/real/autzen_bmx_2010.las"
 FT = 0.304800609601219
@@ -18,7 +18,7 @@ RESOURCES = Path(__file__).resolve().parents[1] / "resources" / "pipelines"
 
 
 def _las(path: Path, xyz: np.ndarray, cls=None, crs="EPSG:32633") -> Path:
-    from soilvolume.io import write_las
+    from soilvolume.inputs.io import write_las
 
     write_las(path, xyz, __import__("pyproj").CRS(crs).to_wkt(), cls)
     return path
@@ -88,7 +88,7 @@ def test_prepare_cloud_real_file_vertical_feet_to_metres():
     assert out.path == REAL and out.classification is not None
     import pyproj
 
-    from soilvolume import crs
+    from soilvolume.inputs import crs
 
     assert crs.z_unit(pyproj.CRS.from_wkt(out.crs_wkt)) == 1.0
     assert crs.z_unit(pyproj.CRS.from_wkt(base.crs_wkt)) == pytest.approx(FT)

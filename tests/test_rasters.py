@@ -11,7 +11,7 @@ from conftest import run_cli
 from rasterio.transform import from_origin
 
 from soilvolume.api import volume_from_rasters
-from soilvolume.types import SoilVolumeError
+from soilvolume.core.types import SoilVolumeError
 
 
 def _dem(path, z, transform=None, crs="EPSG:32654"):

@@ -14,8 +14,17 @@ import zlib
 import numpy as np
 import pytest
 
-from soilvolume.report_html import PUOR, RDBU, block_mean, colour_ramp, difference_map, hillshade, png_bytes, write_html
-from soilvolume.types import GridSpec
+from soilvolume.core.types import GridSpec
+from soilvolume.reporting.html import (
+    PUOR,
+    RDBU,
+    block_mean,
+    colour_ramp,
+    difference_map,
+    hillshade,
+    png_bytes,
+    write_html,
+)
 
 GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=160, cols=200,
                 origin=(500000.0, 3900000.0, 0.0))
@@ -82,7 +91,8 @@ def test_html_is_self_contained_and_tolerant(tmp_path):
 
 
 def test_does_not_import_matplotlib():
-    code = ("import sys, numpy as np; import soilvolume.report_html as r; from soilvolume.types import GridSpec; "
+    code = ("import sys, numpy as np; import soilvolume.reporting.html as r; "
+            "from soilvolume.core.types import GridSpec; "
             "g = GridSpec(xmin=0.0, ymax=50.0, cell=0.5, rows=100, cols=100); "
             "d = np.random.default_rng(0).normal(size=(100, 100)); "
             "html = r.render_html({'uncertainty': {'lod_m': 0.1}}, {'difference': d, 'residual': d, "

@@ -18,10 +18,10 @@ import pytest
 
 from soilvolume import api
 from soilvolume.cli import main
-from soilvolume.io import write_las
+from soilvolume.core.outputs import OutputDir, sweep
+from soilvolume.core.types import SoilVolumeError
+from soilvolume.inputs.io import write_las
 from soilvolume.options import Options
-from soilvolume.outputs import OutputDir, sweep
-from soilvolume.types import SoilVolumeError
 from soilvolume.validate import OptionError, check_options
 
 WKT = pyproj.CRS("EPSG:32654").to_wkt()
@@ -323,7 +323,7 @@ def test_stale_staging_of_a_dead_run_is_swept(tmp_path):
 
 
 def test_a_mount_point_is_filled_in_place_and_dead_runs_staging_inside_is_swept(tmp_path, monkeypatch):
-    import soilvolume.outputs as outputs
+    import soilvolume.core.outputs as outputs
 
     final = tmp_path / "mnt"
     final.mkdir()
@@ -350,8 +350,8 @@ def test_estimate_overwrite_end_to_end(capsys, pair, tmp_path):
 
 
 def test_volume_with_bad_zones_writes_nothing(capsys, tmp_path):
-    from soilvolume.grid import write_geotiff
-    from soilvolume.types import GridSpec
+    from soilvolume.core.types import GridSpec
+    from soilvolume.dem.grid import write_geotiff
 
     grid = GridSpec(500000.0, 3900050.0, 1.0, 50, 50, crs_wkt=WKT)
     write_geotiff(tmp_path / "b.tif", np.zeros((50, 50)), grid)

@@ -81,7 +81,7 @@ def test_killed_run_leftovers_are_removed_by_the_next_run(pair, tmp_path):
 
 
 def test_a_kill_between_the_two_renames_of_a_swap_restores_the_old_set(tmp_path):
-    from soilvolume.outputs import TRASH, sibling, sweep
+    from soilvolume.core.outputs import TRASH, sibling, sweep
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from soilvolume.stages import (
+from soilvolume.core.types import SoilVolumeError
+from soilvolume.pipelines.stages import (
     StageContext,
     execute,
     gdalgrid,
@@ -16,10 +17,9 @@ from soilvolume.stages import (
     sampling,
     smrf,
 )
-from soilvolume.stages import crop as crop_stage
-from soilvolume.stages import range as range_stage
-from soilvolume.stages.view import PointView
-from soilvolume.types import SoilVolumeError
+from soilvolume.pipelines.stages import crop as crop_stage
+from soilvolume.pipelines.stages import range as range_stage
+from soilvolume.pipelines.stages.view import PointView
 
 REAL = "/work/shared/data/real/autzen_bmx_2010.las"
 FT = 0.304800609601219  # metres per US survey foot
@@ -278,7 +278,7 @@ def test_gdal_binmode_mean_count_min_max_equal_numpy(tmp_path):
     v = view(x, y, z)
     execute_opts = {"type": "writers.gdal", "filename": str(tmp_path / "dem.tif"),
                     "resolution": 1.0, "binmode": True, "output_type": "mean,count"}
-    from soilvolume.stages import writers
+    from soilvolume.pipelines.stages import writers
 
     writers.write_gdal(v, execute_opts, ctx("writers.gdal"))
     with rasterio.open(tmp_path / "dem.tif") as ds:

@@ -7,11 +7,11 @@ import numpy as np
 import pyproj
 import pytest
 
-from soilvolume import stream
-from soilvolume.crop import PolygonMask, footprint, inside
-from soilvolume.io import RawPoints, write_las
-from soilvolume.stream import ColumnThinner, from_raw, load, open_source, prefetch
-from soilvolume.types import SoilVolumeError
+from soilvolume.core.types import SoilVolumeError
+from soilvolume.inputs import stream
+from soilvolume.inputs.footprint import PolygonMask, footprint, inside
+from soilvolume.inputs.io import RawPoints, write_las
+from soilvolume.inputs.stream import ColumnThinner, from_raw, load, open_source, prefetch
 
 
 @pytest.fixture

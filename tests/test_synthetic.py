@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from soilvolume.synthetic import (
+from soilvolume.scenes.synthetic import (
     Scene,
     SceneConfig,
     change_dz,
@@ -139,7 +139,7 @@ def test_after_heights_match_truth_on_ground():
 def test_streaming_chunks_equal_in_memory(scene, monkeypatch):
     before = np.concatenate([xyz for xyz, _ in iter_epoch(3, scene.config, "before")])
     np.testing.assert_allclose(before, scene.before, rtol=0, atol=1e-9)
-    import soilvolume.synthetic as syn
+    import soilvolume.scenes.synthetic as syn
 
     monkeypatch.setattr(syn, "CHUNK_POINTS", 7_000)  # many chunks
     s = make_pair(3, scene.config)

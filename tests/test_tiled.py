@@ -11,11 +11,11 @@ import rasterio
 from conftest import write_scene
 
 from soilvolume.api import estimate
+from soilvolume.core.types import GridSpec, SoilVolumeError
+from soilvolume.distributed.schedule import Schedule, choose, parse
+from soilvolume.distributed.tiletask import tiles
+from soilvolume.inputs.vpc import write_vpc
 from soilvolume.options import Options
-from soilvolume.schedule import Schedule, choose, parse
-from soilvolume.tiletask import tiles
-from soilvolume.types import GridSpec, SoilVolumeError
-from soilvolume.vpc import write_vpc
 
 RASTERS = ("dem_before", "dem_after", "difference", "plane_offset", "filled_mask")
 
@@ -59,7 +59,7 @@ def test_local_cluster_two_processes_matches_in_process(pair, in_process, tmp_pa
 def test_vpc_tiles_on_threads_match_single_file(pair, in_process, tmp_path):
     import laspy
 
-    from soilvolume.io import write_las
+    from soilvolume.inputs.io import write_las
 
     before, after, _ = pair
     las = laspy.read(before)
@@ -109,8 +109,8 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
     from dask.distributed import Client
 
     from soilvolume.api import Hooks
-    from soilvolume.crs import WorkFrame
-    from soilvolume.tiletask import Plan, _save_tile, run_tiles
+    from soilvolume.distributed.tiletask import Plan, _save_tile, run_tiles
+    from soilvolume.inputs.crs import WorkFrame
 
     g = GridSpec(0.0, 40.0, 1.0, 40, 40)
     crs = pyproj.CRS("EPSG:32654")

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from soilvolume.correction import apply
-from soilvolume.types import GridSpec
-from soilvolume.uncertainty import (
+from soilvolume.compensation.correction import apply
+from soilvolume.core.types import GridSpec
+from soilvolume.volumes.uncertainty import (
     correlated_fraction,
     fit_spherical,
     level_of_detection,

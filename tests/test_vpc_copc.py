@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from copc_writer import write_copc
 
-from soilvolume.io import write_las
-from soilvolume.stream import open_source
-from soilvolume.types import SoilVolumeError
-from soilvolume.vpc import read_vpc, write_vpc
+from soilvolume.core.types import SoilVolumeError
+from soilvolume.inputs.io import write_las
+from soilvolume.inputs.stream import open_source
+from soilvolume.inputs.vpc import read_vpc, write_vpc
 
 UTM = "EPSG:32654"
 
@@ -146,7 +146,7 @@ def test_indexed_las_reads_only_chunks_meeting_the_box(tmp_path):
     chunks meeting the box (what the tile tasks do with plain files)."""
     from dataclasses import replace
 
-    from soilvolume.stream import file_chunks
+    from soilvolume.inputs.stream import file_chunks
 
     xyz, cls = _cloud(30_000)
     order = np.argsort(xyz[:, 1])

@@ -8,8 +8,8 @@ import numpy as np
 import pyproj
 import pytest
 
-from soilvolume.types import GridSpec, SoilVolumeError
-from soilvolume.zones import budget, polygons_mask, zone_budgets
+from soilvolume.core.types import GridSpec, SoilVolumeError
+from soilvolume.volumes.zones import budget, polygons_mask, zone_budgets
 
 UTM = pyproj.CRS.from_epsg(32654)
 GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=200, cols=200,

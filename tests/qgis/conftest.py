@@ -102,7 +102,7 @@ def run_algorithm(name: str, parameters: dict, context=None, feedback=None) -> d
 @pytest.fixture(scope="session")
 def scene_dir(tmp_path_factory) -> Path:
     """A small seeded before/after pair (LAS with CRS) and its truth.json."""
-    from soilvolume import synthetic
+    from soilvolume.scenes import synthetic
 
     folder = tmp_path_factory.mktemp("scene")
     scene = synthetic.make_pair(0, synthetic.SceneConfig.small())

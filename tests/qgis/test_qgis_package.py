@@ -69,7 +69,7 @@ def test_zip_contents(plugin_zip):
     for required in ("metadata.txt", "__init__.py", "LICENSE", "plugin/main.py",
                      "processing/provider.py", "resources/icon.png", "resources/icon.svg",
                      "resources/styles/difference.qml", "resources/styles/dem.qml",
-                     "soilvolume/api.py", "soilvolume/run.py"):
+                     "soilvolume/api.py", "soilvolume/workflow/estimate.py"):
         assert f"soilvolume_qgis/{required}" in names, required
     for banned in ("tests/", ".venv/", "__pycache__", ".pyc", ".git/", "egg-info", "bench/"):
         assert not any(banned in n for n in names), banned

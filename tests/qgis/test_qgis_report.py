@@ -49,8 +49,8 @@ def test_volumes_significance_and_no_internal_keys(page, estimate_run):
 
 
 def test_quality_verdict_and_messages(estimate_run):
-    from soilvolume.report_html import render_html
-    from soilvolume.types import GridSpec
+    from soilvolume.core.types import GridSpec
+    from soilvolume.reporting.html import render_html
 
     report = json.loads(Path(estimate_run["REPORT_JSON"]).read_text())
     report["quality"] = {"verdict": "use with caution", "trusted": True,

@@ -1,0 +1,3 @@
+"""Step 3: bias compensation: the paper's plane offsets d_i and the stable-ground correction of the
+difference.
+"""

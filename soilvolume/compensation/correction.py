@@ -1,0 +1,118 @@
+"""Stable-ground bias correction of a DEM of difference (generalises the paper's plane offset).
+
+Stable cells come from :mod:`soilvolume.compensation.stable` (a search that starts at the margin of the
+compared area, so works covering most of it never become the reference). The correction surface
+(constant, plane or degree-2 polynomial, lowered to a plane when the stable ground lies on one
+side of the change areas only) is least squares on the stable cells and subtracted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..core.types import GridSpec
+from .robust import _TERM_NAMES, fit_poly, residual_stats
+
+METHODS = ("surface", "plane", "constant", "none")
+_DEGREE = {"surface": 2, "plane": 1, "constant": 0}
+
+
+@dataclass
+class CorrectionResult:
+    """``corrected = diff - surface``; ``change_mask`` = valid cells outside the stable ground
+    (the dilated change areas); ``params`` as :func:`fit_surface` returns them."""
+
+    corrected: np.ndarray
+    surface: np.ndarray
+    stable_mask: np.ndarray
+    change_mask: np.ndarray
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+def stable_cells(
+    diff: np.ndarray,
+    cell: float,
+    *,
+    dilate_m: float = 2.0,
+    user_mask: np.ndarray | None = None,
+    iterations: int = 8,
+    k: float = 3.0,
+    degree: int = 2,
+) -> np.ndarray:
+    """Cells of ``diff`` taken as stable ground (see :func:`soilvolume.compensation.stable.find_stable`: a
+    search from the margin of the compared area, so change covering most of it is not taken as
+    the reference). ``user_mask`` (True = stable) is returned as given (on valid cells)."""
+    from .stable import find_stable
+
+    return find_stable(diff, cell, degree=degree, user_mask=user_mask, k=k, dilate_m=dilate_m,
+                       iterations=iterations)[0]
+
+
+def fit_surface(
+    diff: np.ndarray, stable_mask: np.ndarray, grid: GridSpec, method: str = "surface"
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """Least-squares correction surface on the stable cells: ``surface`` (degree-2 polynomial),
+    ``plane``, ``constant`` or ``none`` (zeros). Returns (surface (rows, cols), params) with
+    params = method, terms, coefficients (in scaled local coordinates), centre_local, scale_m,
+    and ``residuals`` (mean, std, nmad, rmse, n_cells of diff - surface on stable cells)."""
+    if method not in METHODS:
+        raise ValueError(f"unknown correction method {method!r} (expected one of {METHODS})")
+    mask = stable_mask & np.isfinite(diff)
+    degree = _DEGREE.get(method)
+    params: dict[str, Any] = {"method": method}
+    if degree is None or mask.sum() < 6:
+        surface = np.zeros(diff.shape)
+        if degree is not None:
+            params["note"] = "too few stable cells: no correction applied"
+    else:
+        x, y = grid.centers_local()
+        surface, coef, (cx, cy, s) = fit_poly(x, y, diff, mask, degree)
+        n = len(coef)
+        params.update(terms=list(_TERM_NAMES[:n]), coefficients=[float(c) for c in coef],
+                      centre_local=[cx, cy], scale_m=s)
+    params["residuals"] = residual_stats(diff - surface, mask)
+    params["residuals_before"] = residual_stats(diff, mask)
+    return surface, params
+
+
+def supported_degree(stable: np.ndarray, change: np.ndarray, max_degree: int) -> int:
+    """The highest polynomial degree (up to ``max_degree``) the stable ground supports across the
+    change areas: a curved surface needs stable ground all around them, a plane on one side only
+    (see :func:`soilvolume.compensation.stable.largest_gap_deg`); a handful of stable cells gets a constant."""
+    from .stable import largest_gap_deg
+
+    if stable.sum() < 30:
+        return 0
+    if largest_gap_deg(stable, change) > 180.0:
+        return min(max_degree, 1)
+    return max_degree
+
+
+def apply(
+    diff: np.ndarray,
+    method: str,
+    grid: GridSpec,
+    *,
+    user_mask: np.ndarray | None = None,
+    dilate_m: float = 2.0,
+    iterations: int = 8,
+    select_degree: bool = True,
+) -> CorrectionResult:
+    """Find stable ground, fit the ``method`` surface on it and subtract it. Stable ground is
+    found the same way whatever the method (so ``none`` still yields residual statistics); with
+    ``select_degree`` the surface's degree is lowered to what the stable ground supports."""
+    stable = stable_cells(diff, grid.cell, dilate_m=dilate_m, user_mask=user_mask, iterations=iterations)
+    used = method
+    if select_degree and method in ("surface", "plane"):
+        degree = supported_degree(stable, np.isfinite(diff) & ~stable, _DEGREE[method])
+        used = {0: "constant", 1: "plane", 2: "surface"}[degree]
+    surface, params = fit_surface(diff, stable, grid, used)
+    params["method"], params["fitted"] = method, used
+    surface = np.where(np.isfinite(diff), surface, np.nan)
+    valid = np.isfinite(diff)
+    params["stable_cells"] = int(stable.sum())
+    params["stable_fraction"] = float(stable.sum() / max(valid.sum(), 1))
+    return CorrectionResult(diff - surface, surface, stable, valid & ~stable, params)

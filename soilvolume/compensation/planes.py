@@ -1,0 +1,68 @@
+"""Plane-offset compensation as in the paper: a RANSAC plane in each registered cloud and
+``d_i`` = the vertical distance between the two planes at each grid cell centre."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.types import GridSpec, SoilVolumeError
+
+
+@dataclass(frozen=True)
+class Plane:
+    """z = a*x + b*y + c in local coordinates; ``inliers`` is the inlier fraction."""
+
+    a: float
+    b: float
+    c: float
+    inliers: float
+
+    def z(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return self.a * x + self.b * y + self.c
+
+    def as_dict(self, origin: np.ndarray) -> dict:
+        """Coefficients in absolute coordinates: z = a*X + b*Y + c."""
+        c_abs = self.c + origin[2] - self.a * origin[0] - self.b * origin[1]
+        return {"a": self.a, "b": self.b, "c": float(c_abs), "inlier_fraction": self.inliers}
+
+
+def ransac_plane(
+    xyz: np.ndarray, threshold: float = 0.15, iterations: int = 500, seed: int = 0,
+    sample: int = 20_000,
+) -> Plane:
+    """Seeded RANSAC plane (3-point hypotheses scored on a subsample), refined by least squares
+    on its inliers."""
+    if len(xyz) < 3:
+        raise SoilVolumeError("a RANSAC plane needs at least 3 points")
+    rng = np.random.default_rng(seed)
+    pts = xyz[rng.choice(len(xyz), min(sample, len(xyz)), replace=False)]
+    tri = pts[rng.integers(0, len(pts), size=(iterations, 3))]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(normal, axis=1)
+    ok = norm > 1e-9
+    normal, tri = normal[ok] / norm[ok, None], tri[ok]
+    d = -np.einsum("ij,ij->i", normal, tri[:, 0])
+    best, best_count = None, -1
+    for k in range(0, len(normal), 64):  # blocks keep memory bounded
+        dist = np.abs(pts @ normal[k : k + 64].T + d[k : k + 64])
+        counts = (dist < threshold).sum(axis=0)
+        j = int(np.argmax(counts))
+        if counts[j] > best_count:
+            best_count, best = int(counts[j]), (normal[k + j], d[k + j])
+    assert best is not None
+    inl = np.abs(pts @ best[0] + best[1]) < threshold
+    return _fit(pts[inl], float(inl.mean()))
+
+
+def _fit(pts: np.ndarray, inlier_fraction: float) -> Plane:
+    a = np.c_[pts[:, 0], pts[:, 1], np.ones(len(pts))]
+    coef, *_ = np.linalg.lstsq(a, pts[:, 2], rcond=None)
+    return Plane(float(coef[0]), float(coef[1]), float(coef[2]), inlier_fraction)
+
+
+def plane_offset(before: Plane, after: Plane, grid: GridSpec) -> np.ndarray:
+    """``d_i``: after-plane minus before-plane height at every cell centre (rows, cols)."""
+    x, y = grid.centers_local()
+    return after.z(x, y) - before.z(x, y)

@@ -1,0 +1,90 @@
+"""The first pass of the distributed engine as Dask tasks: each task streams one unit of a source
+(a range of a LAS/LAZ file's points, or one VPC tile) and returns its column-thinning sums,
+counts and chunk boxes; the driver adds them up. A drop-in for :func:`stream.load` when no
+full-resolution points are kept, so :func:`prepare.prepare` runs unchanged on a cluster."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..inputs.copc import is_copc
+from ..inputs.stream import CHUNK, GROUND, ColumnThinner, Loaded, Source, file_chunks, ground_mode, las_ranges, load
+
+UNIT = 8_000_000  # points per task of a single file
+
+Unit = tuple[str, int | None, int | None]  # path, first point, point count (None: the whole file)
+
+
+def units(src: Source) -> list[Unit]:
+    """The pieces of ``src`` one task each streams."""
+    if src.vpc is not None:
+        return [(p, None, None) for p in src.tiles()]
+    if is_copc(src.path):
+        return [(src.path, None, None)]
+    return [(src.path, s, min(UNIT, src.count - s)) for s in range(0, src.count, UNIT)]
+
+
+def scan_unit(unit: Unit, region, to_local, use_class: bool, keep, lo, hi, voxel: float, indexed: bool) -> dict:
+    """Thinning sums, counts and chunk boxes of one unit."""
+    import time
+
+    path, start, count = unit
+    chunks = file_chunks(path, region, CHUNK) if start is None else las_ranges(path, [(start, count)], CHUNK)
+    thinner = ColumnThinner(lo, hi, voxel)
+    out = {"points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
+    t0 = time.perf_counter()
+    for xyz, cls in chunks:
+        out["read_s"] += time.perf_counter() - t0
+        if indexed:
+            out["index"].append(((start or 0) + out["points"], len(xyz), xyz[:, :2].min(axis=0),
+                                 xyz[:, :2].max(axis=0)))
+        out["points"] += len(xyz)
+        local = to_local(xyz)
+        mask = cls == GROUND if use_class and cls is not None else None
+        out["used"] += len(xyz) if mask is None else int(mask.sum())
+        if keep is not None:
+            mask = keep(local) if mask is None else mask & keep(local)
+        if mask is not None:
+            local = local[mask]
+        thinner.add(local)
+        out["cropped"] += len(local)
+        t0 = time.perf_counter()
+    out["sums"] = thinner.sums
+    return out
+
+
+def dask_loader(client, progress: Callable[[str], None] | None = None) -> Callable[..., Loaded]:
+    """A :func:`stream.load` running its units on ``client`` (sources kept whole in memory, and
+    reads that keep full-resolution points, fall back to streaming here)."""
+    from dask.distributed import as_completed
+
+    def loader(src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check=None, box=None,
+               indexed: bool = False) -> Loaded:
+        keeps_points = box is None or (box[1] >= box[0]).all()
+        if src.raw is not None or keeps_points:
+            return load(src, to_local, mode, keep, thinner, check, box, indexed)
+        stream = src.chunks()
+        first = next(stream, (None, None))[1]
+        stream.close()
+        use_class = ground_mode(src, first, mode)
+        todo = units(src)
+        args = (src.region, to_local, use_class, keep, thinner.lo, thinner.hi, thinner.voxel, indexed)
+        futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], pure=False)
+        parts = []
+        for k, fut in enumerate(as_completed(futures), 1):
+            part = fut.result()
+            fut.release()
+            thinner.sums += part.pop("sums")
+            parts.append(part)
+            if progress:
+                progress(f"scanned {k}/{len(todo)} pieces of {src.path}")
+        single = indexed and src.vpc is None and not is_copc(src.path)
+        index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
+        total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
+        note = "class 2 (ground)" if use_class else "all points"
+        extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": thinner.counts(), "index": index}
+        return Loaded(np.empty((0, 3), np.float32), thinner.result(), total["points"], total["used"], note, extra)
+
+    return loader

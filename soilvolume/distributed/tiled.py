@@ -1,0 +1,205 @@
+"""The distributed engine: the same method as the in-process run, with the point work done as
+Dask tasks, so no process holds a survey's points.
+
+1. A first pass of tasks (:mod:`scan`) returns column-thinning sums, counts and chunk boxes;
+   registration runs in the driver on the thinned subsets, as in-process.
+2. The shared grid is cut into tiles; each task streams only what meets its tile (VPC tiles, COPC
+   nodes, the chunks of a plain file whose boxes the first pass recorded), assigns points to the
+   *global* grid's cells and computes its cells' heights with :func:`grid.cell_heights`, so a cell
+   gets the same points as in-process (no halo is needed: a point belongs to one cell).
+3. The per-tile rasters are gathered (a few numbers per cell, against ~8 points per cell) and the
+   raster steps (refill, holes, correction fitted once on the whole grid, uncertainty, budgets)
+   run as in-process; outputs are written block by block as COGs. Finished tiles are kept until
+   the run succeeds, so an interrupted run resumes.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from ..api import Hooks, Result
+from ..compensation import planes
+from ..core.outputs import OutputDir
+from ..core.types import GridSpec, SoilVolumeError
+from ..dem.grid import choose_cell
+from ..inputs.footprint import footprint, inside, polygon_area
+from ..inputs.prepare import Prepared, prepare
+from ..inputs.stream import open_source
+from ..options import Options
+from ..registration.register import register, transform_points
+from ..reporting.report import write_json
+from .cog import write_cog
+from .scan import dask_loader
+from .schedule import Schedule, client, worker_gb
+from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, run_tiles, tile_cache, tiles
+
+
+def data_tile_m(src, cell: float, side: int) -> float | None:
+    """The side (m) of a VPC's square tiles when a grid tile can hold one (else None)."""
+    if src.vpc is None or len(src.vpc.tiles) < 2:
+        return None
+    widths = [t.hi[0] - t.lo[0] for t in src.vpc.tiles]
+    size = float(np.median(widths))
+    return size if 0 < size / cell <= side else None
+
+
+def tile_side(options: Options, grid: GridSpec, points_per_cell: float, task_gb: float, workers: int) -> int:
+    """Tile side (cells): ``options.tile_cells``, else what a task's memory share holds, and
+    small enough for two tiles per worker."""
+    if options.tile_cells > 0:
+        return int(options.tile_cells)
+    points = min(4e6, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT)
+    side = math.sqrt(points / max(points_per_cell, 1e-3))
+    side = min(side, math.sqrt(grid.rows * grid.cols / (2 * max(1, workers))))
+    return int(np.clip(side, MIN_TILE, MAX_TILE))
+
+
+def points_per_cell(prep: Prepared, cell: float) -> float:
+    """Expected points (both epochs) per grid cell: each epoch's points over its footprint."""
+    area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
+    used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
+    return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
+
+
+def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0.5) -> float:
+    """:func:`grid.cell_for` from the thinned subset: the before points behind the column
+    centroids inside the registered after footprint, over the footprint's area."""
+    poly = footprint(after_thin[:, :2])
+    ins = inside(prep.before_thin[:, :2], poly)
+    return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly), minimum=minimum)
+
+
+def schedule_for(before, after, options: Options, pipeline: bool) -> Schedule:
+    """The schedule of a run: ``--scheduler``, or for ``auto`` in-process when the pair's points
+    (from the LAS/COPC/VPC headers) fit the memory budget; pipelines and other formats run
+    in-process."""
+    from .schedule import choose, parse
+
+    if options.scheduler == "auto":
+        points = [_header_points(p) for p in (before, after)]
+        if pipeline or None in points:
+            return Schedule("none")
+        return choose("auto", options.memory_limit, sum(points))
+    chosen = parse(options.scheduler)
+    if pipeline and chosen.kind != "none":
+        raise SoilVolumeError(f"--scheduler {options.scheduler}: preparation pipelines run in-process only "
+                              "(use --scheduler none)")
+    return chosen
+
+
+def _header_points(path) -> int | None:
+    """A LAS/LAZ/COPC file's or a VPC's point count from its header(s); None for other formats."""
+
+    from ..inputs.io import LAS_SUFFIXES
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in LAS_SUFFIXES | {".vpc"}:
+        return None
+    return open_source(path).count
+
+
+def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
+                   schedule: Schedule) -> Result:
+    """:func:`run._estimate` with the point work as Dask tasks on ``schedule``."""
+    if options.ground == "filter":
+        raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
+    hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
+    with client(schedule, options.memory_limit) as starting:  # workers start while the inputs are opened
+        return _tiled(before, after, out, options, timer, hooks, schedule, starting)
+
+
+def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule,
+           starting) -> Result:
+    """The tiled run, with ``starting`` the future of the (cluster, client) being started."""
+    from ..workflow import estimate as run
+
+    with timer("cluster_wait"):
+        _, c = starting.result()
+    with timer("crop"):  # the registration subsets: a first pass as Dask tasks
+        src_b, src_a = open_source(before), open_source(after)
+        prep = prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"), full=False,
+                       loader=dask_loader(c, lambda m: hooks.step(8, m)))
+    from ..registration.georef import resolve
+
+    mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
+    hooks.info(f"georeferencing: {mode} ({why})")
+    if mode == "precise":
+        options = options.with_(correction="none")
+    hooks.step(15, run.REGISTERING)
+    with timer("register"):
+        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, run.REGISTERING),
+                       precise=mode == "precise")
+    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
+    timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
+    timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
+    after_thin = transform_points(prep.after_thin, reg.transform)
+    cell = options.cell if options.cell else cell_from_columns(prep, after_thin)
+    grid = run.shared_grid(prep, after_thin, options.with_(cell=cell))
+    plan = Plan(str(before), str(after), prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"],
+                prep.frame, prep.origin, grid, reg.transform, prep.ground,
+                footprint(prep.after_thin[:, :2], options.radius), options.statistic, prep.index)
+    side = tile_side(options, grid, points_per_cell(prep, cell), worker_gb(schedule, options.memory_limit),
+                     schedule.workers)
+    align = None if options.tile_cells else data_tile_m(src_b, cell, 2 * side)
+    if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
+        side = max(1, round(align / cell))
+    windows = tiles(grid, side, align)
+    hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
+    cache = tile_cache(out, plan)
+    with timer("grids"):
+        h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
+    with timer("planes"):
+        sel_b = run._points_on(prep.before_thin, grid, np.isfinite(h_b))
+        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+        p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+        d_i = planes.plane_offset(p_b, p_a, grid)
+    hooks.step(75, "computing the difference and volumes")
+    with timer("volume"):
+        alt = reg.fine.alternative
+        moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
+        vols = run._volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
+        vols["dem_after"] = h_a + prep.origin[2]
+    hooks.step(85, "writing outputs (COG)")
+    with timer("write"):
+        write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
+    with timer("report"):
+        report = run._report(prep, reg, grid, vols, p_b, p_a, options, timer)
+        report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side,
+                            "task_points_read": stats["read"], "task_seconds": round(stats["seconds"], 3),
+                            "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9))}
+        _quality(report, vols, grid, options, hooks)
+        write_json(out.path("report.json"), report)
+        run._html(out, report, vols, grid)
+    shutil.rmtree(cache.parent, ignore_errors=True)
+    return Result(report)
+
+
+def _quality(report: dict, vols: dict, grid: GridSpec, options: Options, hooks: Hooks) -> None:
+    """The quality verdict of the in-process run, on the same numbers."""
+    from ..volumes.quality import assess
+
+    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
+    report["quality"] = assess(report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior)
+    for line in report["quality"]["messages"]:
+        hooks.info(f"quality ({report['quality']['verdict']}): {line}")
+
+
+def write_outputs(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, origin, options: Options) -> None:
+    """The five rasters of a run, as COGs written block by block."""
+    z0 = float(origin[2])
+    layers = [
+        ("dem_before.tif", lambda r, c: h_b[r, c] + z0, "average height, before (m)", "float32"),
+        ("dem_after.tif", lambda r, c: h_a[r, c] + z0, "average height, after (m)", "float32"),
+        ("difference.tif", lambda r, c: vols["diff"][r, c],
+         f"H_after - H_before - correction ({options.correction}) (m)", "float32"),
+        ("plane_offset.tif", lambda r, c: vols["offset"][r, c],
+         f"vertical correction d_i subtracted ({options.correction}) (m)", "float32"),
+        ("filled_mask.tif", lambda r, c: vols["filled_mask"][r, c].astype("uint8"),
+         "1 = difference interpolated (sparse cell or filled hole)", "uint8"),
+    ]
+    for name, piece, desc, dtype in layers:
+        write_cog(out.path(name), grid, piece, desc, "" if dtype == "uint8" else "metre", dtype)

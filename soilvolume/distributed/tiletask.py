@@ -1,0 +1,226 @@
+"""One tile of the shared grid as a Dask task: both epochs' points on the tile's cells (read only
+where they can meet it), their heights, counts and spreads with :func:`grid.cell_heights` on the
+*global* grid's cell assignment; the tiling of the grid; running the tiles with resume."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..api import Hooks
+from ..core.outputs import OutputDir
+from ..core.types import GridSpec
+from ..dem.grid import cell_heights, cell_ids
+from ..inputs.crs import WorkFrame
+from ..inputs.footprint import PolygonMask
+from ..inputs.prepare import GROUND, _local
+from ..inputs.stream import open_source
+
+TILE_BYTES_PER_POINT = 120.0  # a task's peak per point of its tile (both epochs, ids, sort keys, chunk)
+MIN_TILE, MAX_TILE = 64, 4096  # tile side (cells)
+TILE_ARRAYS = ("h_a", "n_a", "s_a", "h_b", "n_b", "s_b")  # what a tile task returns
+
+
+@dataclass(frozen=True)
+class Plan:
+    """Everything a tile task needs (picklable: sent to the workers)."""
+
+    before: str
+    after: str
+    crs_b: str  # WKT of each file's CRS (header or override)
+    crs_a: str
+    frame: WorkFrame
+    origin: np.ndarray
+    grid: GridSpec
+    transform: np.ndarray  # after -> before, local frame
+    ground: tuple[bool, bool]  # (before, after): class 2 only
+    crop: np.ndarray  # the before crop polygon (local), as in-process
+    statistic: str
+    index: tuple = (None, None)  # (before, after): chunk boxes of single files, for bounded reads
+
+
+Window = tuple[int, int, int, int]  # r0, r1, c0, c1
+
+
+def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], dict]:
+    """(window, (h_after, n_after, spread_after, h_before, n_before, spread_before), stats) of one
+    tile: both epochs' points on its cells, their heights, counts and spreads; stats: points
+    read, seconds."""
+    import time
+
+    t0, stats = time.perf_counter(), {"read": 0}
+    h_b, n_b, s_b = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
+    h_a, n_a, s_a = _epoch(plan, 1, win, plan.transform, None, stats)
+    stats["seconds"] = time.perf_counter() - t0
+    return win, (h_a, n_a.astype(np.int32), s_a, h_b, n_b.astype(np.int32), s_b), stats
+
+
+def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
+    """Heights and counts of one epoch (0 before, 1 after) on the window's cells."""
+    from dataclasses import replace
+
+    import pyproj
+
+    from ..workflow.estimate import transform_points32
+
+    path, ground = (plan.before, plan.after)[epoch], plan.ground[epoch]
+    crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])
+    to_local = _local(crs, plan.frame, plan.origin, path)
+    src = replace(open_source(path), index=plan.index[epoch])
+    box = _read_box(plan, crs, win, transform)
+    if box is not None:
+        src = src.within(*box)
+    ids, zs = [], []
+    for xyz, cls in src.chunks():
+        stats["read"] += len(xyz)
+        sel = cls == GROUND if ground and cls is not None else None
+        if box is not None:  # the box has a margin: cells are assigned exactly below
+            near = (xyz[:, 0] >= box[0][0]) & (xyz[:, 0] <= box[1][0]) & (xyz[:, 1] >= box[0][1]) & (
+                xyz[:, 1] <= box[1][1])
+            sel = near if sel is None else sel & near
+        if sel is not None:
+            xyz = xyz[sel]
+        local = to_local(xyz)
+        if keep is not None:
+            local = local[keep(local)]
+        local = local.astype(np.float32)
+        if transform is not None:
+            local = transform_points32(local, transform)
+        i, z = _window_cells(local, plan.grid, win)
+        ids.append(i)
+        zs.append(z)
+    shape = (win[1] - win[0], win[3] - win[2])
+    z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
+    return cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True)
+
+
+def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window) -> tuple[np.ndarray, np.ndarray]:
+    """Flat cell ids within the window, and heights, of the points on the window's cells of
+    ``grid`` (cells assigned on the whole grid, exactly as in-process)."""
+    ids, ok = cell_ids(xyz32, grid)
+    row, col = np.divmod(ids, grid.cols)
+    m = (row >= win[0]) & (row < win[1]) & (col >= win[2]) & (col < win[3])
+    local_ids = (row[m] - win[0]) * (win[3] - win[2]) + (col[m] - win[2])
+    return local_ids.astype(np.int32), xyz32[ok, 2][m]
+
+
+def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:
+    """The x/y box (file CRS) a tile's points can come from, for files in the frame's CRS and
+    metres (else None: read everything); ``transform`` maps the file's local points to the grid."""
+    from ..inputs.crs import z_unit
+
+    if not (crs.equals(plan.frame.crs) and plan.frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
+        return None
+    g, o = plan.grid, plan.origin
+    x0, x1 = g.xmin + win[2] * g.cell - o[0], g.xmin + win[3] * g.cell - o[0]
+    y0, y1 = g.ymax - win[1] * g.cell - o[1], g.ymax - win[0] * g.cell - o[1]
+    corners = np.array([[x, y, 0.0] for x in (x0, x1) for y in (y0, y1)])
+    margin = g.cell
+    if transform is not None:  # back into the file's frame: the inverse rigid transform
+        r, t = transform[:3, :3], transform[:3, 3]
+        corners = (corners - t) @ r
+        margin += 0.02 * (x1 - x0 + y1 - y0) + 1.0  # tilt of the unknown z
+    lo, hi = corners[:, :2].min(axis=0) - margin + o[:2], corners[:, :2].max(axis=0) + margin + o[:2]
+    return lo, hi
+
+
+def tiles(grid: GridSpec, side: int, align: float | None = None) -> list[Window]:
+    """The grid cut into tiles of ``side`` x ``side`` cells (row-major); with ``align`` (metres),
+    tile edges fall on absolute multiples of it (the input's own tiling: each data tile is then
+    read by one task), slivers merged into their neighbours."""
+    r_off = c_off = 0
+    if align:
+        c_off = round(((-grid.xmin) % align) / grid.cell) % side
+        r_off = round((grid.ymax % align) / grid.cell) % side
+    rows, cols = _edges(grid.rows, r_off, side), _edges(grid.cols, c_off, side)
+    return [(r0, r1, c0, c1) for r0, r1 in zip(rows, rows[1:], strict=False)
+            for c0, c1 in zip(cols, cols[1:], strict=False)]
+
+
+def _edges(n: int, offset: int, side: int) -> list[int]:
+    """0, offset, offset + side, ..., n, without edges closer than side / 4 to the next."""
+    inner = [e for e in range(offset, n, side) if e > 0]
+    edges = [0]
+    for e in inner:
+        if e - edges[-1] >= side // 4 and n - e >= side // 4:
+            edges.append(e)
+    return edges + [n]
+
+
+def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None,
+              stats: dict | None = None) -> tuple[np.ndarray, ...]:
+    """Run every tile on the client ``c`` and assemble (h_a, n_a, s_a, h_b, n_b, s_b) on the grid. Tiles
+    found in ``cache`` (from an interrupted run of the same plan) are not run again; finished
+    tiles are saved there. ``stats`` sums the tasks' points read and seconds."""
+    stats = stats if stats is not None else {}
+    stats.update(read=0, seconds=0.0)
+    from dask.distributed import as_completed
+
+    g = plan.grid
+    out = tuple(np.full((g.rows, g.cols), np.nan) if k % 3 != 1 else np.zeros((g.rows, g.cols), np.int64)
+                for k in range(6))
+    todo = []
+    for win in windows:
+        saved = _load_tile(cache, win)
+        if saved is None:
+            todo.append(win)
+        else:
+            _place(out, win, saved)
+    if len(todo) < len(windows):
+        hooks.info(f"resuming: {len(windows) - len(todo)} of {len(windows)} tiles done in an earlier run")
+    shared = c.scatter(plan, broadcast=True) if todo else None  # sent once, not with every task
+    futures = c.map(grid_tile, [shared] * len(todo), todo, pure=False)
+    for k, fut in enumerate(as_completed(futures), 1):
+        win, arrays, task = fut.result()
+        fut.release()
+        for key in stats:
+            stats[key] += task[key]
+        _place(out, win, arrays)
+        _save_tile(cache, win, arrays)
+        hooks.step(55 + 15 * k / max(1, len(todo)), f"gridded tile {k}/{len(todo)}")
+    return out
+
+
+def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:
+    r0, r1, c0, c1 = win
+    for full, part in zip(out, arrays, strict=True):
+        full[r0:r1, c0:c1] = part
+
+
+def _tile_file(cache: Path, win: Window) -> Path:
+    return cache / "tile_{}_{}_{}_{}.npz".format(*win)
+
+
+def _load_tile(cache: Path | None, win: Window):
+    if cache is None or not _tile_file(cache, win).exists():
+        return None
+    try:
+        with np.load(_tile_file(cache, win)) as z:
+            return tuple(z[k] for k in TILE_ARRAYS)
+    except (OSError, ValueError, KeyError):  # a tile cut short by the interruption: run it again
+        return None
+
+
+def _save_tile(cache: Path | None, win: Window, arrays) -> None:
+    if cache is None:
+        return
+    tmp = cache / f".{_tile_file(cache, win).name}"
+    with open(tmp, "wb") as f:
+        np.savez(f, **dict(zip(TILE_ARRAYS, arrays, strict=True)))
+    tmp.replace(_tile_file(cache, win))
+
+
+def tile_cache(out: OutputDir, plan: Plan) -> Path:
+    """The folder keeping finished tiles of ``plan`` until the run succeeds: a hidden sibling of
+    the output folder (outputs are staged and swapped in whole), keyed by the plan, so a changed
+    input, option or registration starts afresh."""
+    import hashlib
+    import pickle
+
+    key = hashlib.sha1(pickle.dumps((plan.before, plan.after, plan.crs_b, plan.crs_a, plan.origin.tolist(),
+                                     plan.grid, plan.transform.round(12).tolist(), plan.ground, plan.statistic)))
+    folder = out.final.parent / f".{out.final.name}.soilvolume-tiles" / key.hexdigest()[:16]
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder

@@ -1,0 +1,54 @@
+"""Cloud-Optimized Point Clouds (``.copc.laz``): bounded reads through laspy's COPC reader.
+
+A COPC file is also a valid LAZ 1.4 file, so a whole-file read streams it like any LAZ; a read
+within an x/y box fetches and decompresses only the octree nodes meeting the box, and a
+``resolution`` stops at the octree level with that point spacing (a thinned read).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..core.types import SoilVolumeError
+
+
+def is_copc(path: str | Path) -> bool:
+    """Whether ``path`` is a COPC file (by its name, then by its first VLR)."""
+    p = Path(path)
+    if p.name.lower().endswith(".copc.laz"):
+        return True
+    if p.suffix.lower() != ".laz":
+        return False
+    try:
+        with open(p, "rb") as f:
+            head = f.read(375 + 54 + 160)
+    except OSError:
+        return False
+    return len(head) > 377 + 20 and head[377 : 377 + 4] == b"copc"  # user id of the first VLR (LAS 1.4)
+
+
+def copc_chunks(
+    path: str | Path, lo=None, hi=None, resolution: float | None = None, size: int = 1_000_000,
+) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    """(absolute xyz float64, classification or None) of the points of a COPC file within the
+    x/y box lo..hi (inclusive), at most ``size`` at a time, read from the octree nodes meeting
+    the box (down to the level of ``resolution`` when given)."""
+    import laspy
+
+    try:
+        with laspy.CopcReader.open(str(path)) as reader:
+            bounds = None
+            if lo is not None:
+                bounds = laspy.copc.Bounds(mins=np.asarray(lo[:2], float), maxs=np.asarray(hi[:2], float))
+            pts = reader.query(bounds=bounds, resolution=resolution)
+            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable COPC file ({exc})") from exc
+    for i in range(0, len(pts), size):
+        part = pts[i : i + size]
+        xyz = np.empty((len(part), 3))
+        xyz[:, 0], xyz[:, 1], xyz[:, 2] = part.x, part.y, part.z
+        yield xyz, (np.asarray(part.classification) if has_cls else None)

@@ -1,0 +1,137 @@
+"""One working frame for both clouds: the before cloud's projected CRS, x/y/z in metres.
+
+Honours each file's horizontal and vertical units (e.g. NAD83 / Oregon LCC + NAVD88 height in US
+survey feet); a geographic before CRS is replaced by its UTM zone. ``WorkFrame.xy_unit`` is the
+number of metres per horizontal CRS unit, used when writing rasters back in the CRS's own units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pyproj
+from pyproj.aoi import AreaOfInterest
+from pyproj.database import query_utm_crs_info
+
+from ..core.types import SoilVolumeError, short_error
+
+
+@dataclass(frozen=True)
+class WorkFrame:
+    """The CRS outputs are written in, and the unit factors to and from it."""
+
+    crs: pyproj.CRS
+    xy_unit: float  # metres per horizontal unit of ``crs``
+
+    @property
+    def wkt(self) -> str:
+        return self.crs.to_wkt()
+
+
+def parse_crs(text: str | None, what: str) -> pyproj.CRS | None:
+    """A CRS from user text (EPSG code, 'EPSG:2991+6360', WKT, PROJ string) or header WKT."""
+    if text is None or str(text).strip() == "":
+        return None
+    try:
+        return pyproj.CRS.from_user_input(text)
+    except pyproj.exceptions.CRSError as exc:
+        shown = " ".join(str(text).split())
+        shown = shown if len(shown) <= 60 else shown[:57] + "..."
+        raise SoilVolumeError(f"{what}: cannot understand CRS '{shown}' ({short_error(exc)})") from exc
+
+
+def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
+    """The horizontal part of a (possibly compound) CRS."""
+    if crs.is_compound:
+        return crs.sub_crs_list[0]
+    return crs
+
+
+def raster_wkt(wkt: str | None) -> str | None:
+    """WKT of the horizontal part of ``wkt`` (2D): rasters hold heights in metres, so a vertical
+    CRS in other units (e.g. NAVD88 height in US survey feet) would mislabel them."""
+    if not wkt:
+        return None
+    return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt()
+
+
+def has_vertical(crs: pyproj.CRS) -> bool:
+    return crs.is_compound or crs.is_vertical or len(crs.axis_info) == 3
+
+
+def xy_unit(crs: pyproj.CRS) -> float:
+    """Metres per horizontal unit (1 for geographic: not used for lengths)."""
+    h = horizontal(crs)
+    if h.is_geographic:
+        return 1.0
+    return float(h.axis_info[0].unit_conversion_factor)
+
+
+def z_unit(crs: pyproj.CRS) -> float:
+    """Metres per vertical unit: the vertical CRS's axis; without one, LAS convention: the
+    horizontal linear unit (metres for geographic CRSs)."""
+    if crs.is_compound:
+        return float(crs.sub_crs_list[1].axis_info[0].unit_conversion_factor)
+    if len(crs.axis_info) == 3:
+        return float(crs.axis_info[2].unit_conversion_factor)
+    return xy_unit(crs)
+
+
+def work_frame(before: pyproj.CRS, lonlat_hint: tuple[float, float] | None = None) -> WorkFrame:
+    """The working frame: the before CRS when projected, else the UTM zone at ``lonlat_hint``."""
+    h = horizontal(before)
+    if h.is_projected:
+        return WorkFrame(before, xy_unit(before))
+    if lonlat_hint is None:
+        raise SoilVolumeError("a geographic before CRS needs a position to choose a UTM zone")
+    lon, lat = lonlat_hint
+    infos = query_utm_crs_info(
+        datum_name=h.datum.name if h.datum else "WGS 84",
+        area_of_interest=AreaOfInterest(lon, lat, lon, lat),
+    ) or query_utm_crs_info(datum_name="WGS 84", area_of_interest=AreaOfInterest(lon, lat, lon, lat))
+    if not infos:
+        raise SoilVolumeError(f"no UTM zone found for lon/lat {lon:.4f}, {lat:.4f}")
+    return WorkFrame(pyproj.CRS.from_epsg(int(infos[0].code)), 1.0)
+
+
+def to_frame(xyz: np.ndarray, src: pyproj.CRS, frame: WorkFrame, path: str) -> np.ndarray:
+    """Absolute coordinates in ``src`` to the frame: x/y in metres-scaled frame units, z in metres.
+
+    Uses a 3D transformation when both CRSs carry a vertical component (datum shifts and vertical
+    unit changes are then pyproj's), else converts z with the source's vertical unit.
+    """
+    dst = frame.crs
+    out = np.empty_like(xyz, dtype=np.float64)
+    if src.equals(dst):
+        out[:, :2] = xyz[:, :2]
+        out[:, 2] = xyz[:, 2] * z_unit(src)
+    else:
+        both_3d = has_vertical(src) and has_vertical(dst)
+        s, d = (src, dst) if both_3d else (horizontal(src), horizontal(dst))
+        try:
+            tr = pyproj.Transformer.from_crs(s, d, always_xy=True)
+        except pyproj.exceptions.ProjError as exc:
+            raise SoilVolumeError(f"{path}: no transformation from its CRS to {d.name} ({exc})") from exc
+        if both_3d:
+            x, y, z = tr.transform(xyz[:, 0], xyz[:, 1], xyz[:, 2], errcheck=False)
+            out[:, 2] = np.asarray(z) * z_unit(dst)
+        else:
+            x, y = tr.transform(xyz[:, 0], xyz[:, 1], errcheck=False)
+            out[:, 2] = xyz[:, 2] * z_unit(src)
+        out[:, 0], out[:, 1] = x, y
+        if not np.isfinite(out).all():
+            raise SoilVolumeError(
+                f"{path}: CRS transformation to {dst.name} failed (points outside its area of use?)"
+            )
+    out[:, :2] *= frame.xy_unit
+    return out
+
+
+def lonlat_of(xyz: np.ndarray, crs: pyproj.CRS) -> tuple[float, float]:
+    """Longitude/latitude of the centre of a cloud's bounding box."""
+    cx = float((xyz[:, 0].min() + xyz[:, 0].max()) / 2)
+    cy = float((xyz[:, 1].min() + xyz[:, 1].max()) / 2)
+    tr = pyproj.Transformer.from_crs(horizontal(crs), "EPSG:4326", always_xy=True)
+    lon, lat = tr.transform(cx, cy)
+    return float(lon), float(lat)

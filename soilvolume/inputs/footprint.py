@@ -1,0 +1,87 @@
+"""Alignment initialisation: crop the before cloud to the after cloud's footprint plus a radius.
+
+The footprint is the convex hull of the after cloud's x/y (its GPS position), buffered by the
+radius; the same polygon is what a PDAL ``filters.crop`` receives, so both paths agree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from ..core.types import SoilVolumeError, short_error
+
+MIN_COLUMNS = 30  # fewest thinned columns a cloud needs to be registered, gridded and compared
+
+
+def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
+    """Refuse a cloud whose (thinned) x/y are too few or all on a line: nothing can be registered
+    or gridded on it."""
+    if len(xy) < MIN_COLUMNS:
+        raise SoilVolumeError(f"{path}: too few points to work with ({len(xy)} distinct positions {what}, "
+                              f"at least {MIN_COLUMNS} needed)")
+    spread = np.linalg.svd(xy - xy.mean(axis=0), compute_uv=False) / np.sqrt(len(xy))
+    if spread[1] < max(0.01, 1e-4 * spread[0]):
+        raise SoilVolumeError(f"{path}: the points lie on a line (a degenerate cloud: no area to compare)")
+
+
+def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.ndarray:
+    """Convex hull of ``xy`` buffered by ``radius`` (exact Minkowski sum with a 'segments'-gon
+    circumscribing the circle), as a closed-free (K, 2) vertex array, counter-clockwise."""
+    step = max(1, len(xy) // 200_000)
+    try:
+        hull = ConvexHull(xy[::step])
+    except (QhullError, ValueError) as exc:
+        raise SoilVolumeError(f"a cloud's footprint is degenerate (points on a line?): {short_error(exc, 80)}") from exc
+    verts = xy[::step][hull.vertices]
+    if radius > 0:
+        ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+        r = radius / np.cos(np.pi / segments)
+        circle = np.c_[np.cos(ang), np.sin(ang)] * r
+        pts = (verts[:, None, :] + circle[None, :, :]).reshape(-1, 2)
+        verts = pts[ConvexHull(pts).vertices]
+    return verts
+
+
+def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Boolean mask of points inside a polygon (vertices (K, 2)), boundary included: the same
+    test the embedded filters.crop applies to this polygon."""
+    from ..pipelines.stages.geometry import covers
+
+    return covers([polygon], xy[:, 0], xy[:, 1])
+
+
+class PolygonMask:
+    """Fast point-in-polygon for streaming: the polygon rasterized on a lattice of at most about
+    ``max_cells`` cells of at least ``resolution`` m (a cell is in when its centre is)."""
+
+    def __init__(self, polygon: np.ndarray, resolution: float = 0.5, max_cells: int = 4_000_000) -> None:
+        self.lo = polygon.min(axis=0)
+        span = polygon.max(axis=0) - self.lo
+        self.res = max(resolution, float(np.sqrt(span[0] * span[1] / max_cells)))
+        cols, rows = (np.ceil(span / self.res).astype(int) + 1).tolist()
+        xs = self.lo[0] + (np.arange(cols) + 0.5) * self.res
+        ys = self.lo[1] + (np.arange(rows) + 0.5) * self.res
+        gx, gy = np.meshgrid(xs, ys)
+        self.mask = inside(np.c_[gx.ravel(), gy.ravel()], polygon).reshape(rows, cols)
+
+    def __call__(self, xyz: np.ndarray) -> np.ndarray:
+        col = ((xyz[:, 0] - self.lo[0]) / self.res).astype(np.int64)
+        row = ((xyz[:, 1] - self.lo[1]) / self.res).astype(np.int64)
+        rows, cols = self.mask.shape
+        ok = (col >= 0) & (row >= 0) & (col < cols) & (row < rows)
+        out = np.zeros(len(xyz), bool)
+        out[ok] = self.mask[row[ok], col[ok]]
+        return out
+
+
+def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:
+    """WKT of a polygon, shifted by ``origin`` (local -> absolute coordinates)."""
+    p = polygon + (0 if origin is None else np.asarray(origin)[:2])
+    ring = np.vstack([p, p[:1]])
+    return "POLYGON ((" + ", ".join(f"{x:.3f} {y:.3f}" for x, y in ring) + "))"
+
+
+def polygon_area(polygon: np.ndarray) -> float:
+    x, y = polygon[:, 0], polygon[:, 1]
+    return float(0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))

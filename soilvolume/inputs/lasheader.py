@@ -1,0 +1,156 @@
+"""Sanity of a LAS/LAZ header before any reader trusts it.
+
+Checked against the file size with plain ``struct`` reads, in a bounded number of steps: the
+signature and version, header size and point data offset, each VLR lying between the header and
+the points, the point format and record length, the point count (exactly, for uncompressed LAS),
+and finite, non-zero scales, finite offsets and bounds. Readers then also compare the points
+they decode with the header's bounds (:class:`BoundsCheck`).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from ..core.types import SoilVolumeError
+
+VLR_HEADER, EVLR_HEADER = 54, 60
+#: smallest point record of each point data format (LAS 1.4, Table 7 and following)
+MIN_RECORD = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
+MIN_HEADER = {0: 227, 1: 227, 2: 227, 3: 235, 4: 375}
+#: a compressed point record is never smaller than this many bytes, on average
+MIN_LAZ_BYTES_PER_POINT = 0.01
+#: how far inside a header bound the outermost point may lie, as a fraction of the extent
+LOOSE = 0.005
+
+
+def _fail(path: Path, problem: str) -> SoilVolumeError:
+    return SoilVolumeError(f"{path}: corrupt LAS header ({problem})")
+
+
+def check_las_header(path: Path) -> int:
+    """Raise naming the file when its header is inconsistent; returns the point count."""
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(375)
+        if len(head) < 227 or head[:4] != b"LASF":
+            raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file (no LASF signature, or too short)")
+        major, minor = head[24], head[25]
+        if major != 1 or minor not in MIN_HEADER:
+            raise _fail(path, f"version {major}.{minor}")
+        header_size, offset, n_vlrs = struct.unpack_from("<HII", head, 94)
+        if not MIN_HEADER[minor] <= header_size <= offset <= size:
+            raise _fail(path, f"header size {header_size} / point data offset {offset} for a {size}-byte file")
+        _check_vlrs(fh, path, header_size, offset, n_vlrs)
+        if minor >= 4:
+            _check_evlrs(fh, path, *struct.unpack_from("<QI", head, 235), offset, size)
+    fmt_byte, rec_len = struct.unpack_from("<BH", head, 104)
+    fmt, compressed = fmt_byte & 0x3F, bool(fmt_byte & 0xC0)
+    if fmt not in MIN_RECORD or rec_len < MIN_RECORD[fmt]:
+        raise _fail(path, f"point format {fmt} with {rec_len}-byte records")
+    count = _point_count(head, minor)
+    by_return = sum(struct.unpack_from("<15Q", head, 255)) if minor >= 4 else 0
+    by_return = by_return or sum(struct.unpack_from("<5I", head, 111))
+    if by_return > count:
+        raise _fail(path, f"{by_return} points counted by return, the header says {count}")
+    _check_numbers(path, struct.unpack_from("<12d", head, 131))
+    compressed = compressed or path.suffix.lower() == ".laz"
+    _check_count(path, head, minor, count, rec_len, offset, size, compressed)
+    return count
+
+
+def _check_vlrs(fh, path: Path, header_size: int, offset: int, n_vlrs: int) -> None:
+    """Walk the VLRs: each must end at or before the point data (at most one step per VLR that
+    fits, so an absurd count stops at the first that does not)."""
+    pos = header_size
+    for i in range(n_vlrs):
+        if pos + VLR_HEADER > offset:
+            raise _fail(path, f"{n_vlrs} VLRs declared, VLR {i + 1} would start in the point data")
+        fh.seek(pos + 20)
+        (length,) = struct.unpack("<H", fh.read(2))
+        pos += VLR_HEADER + length
+        if pos > offset:
+            raise _fail(path, f"VLR {i + 1} runs into the point data")
+
+
+def _check_evlrs(fh, path: Path, start: int, n_evlrs: int, offset: int, size: int) -> None:
+    """Walk the extended VLRs after the point data: each must end within the file."""
+    if not n_evlrs:
+        return
+    if not offset <= start <= size:
+        raise _fail(path, f"{n_evlrs} EVLRs declared at byte {start} of a {size}-byte file")
+    pos = start
+    for i in range(n_evlrs):
+        if pos + EVLR_HEADER > size:
+            raise _fail(path, f"{n_evlrs} EVLRs declared, EVLR {i + 1} would start past the end of the file")
+        fh.seek(pos + 20)
+        (length,) = struct.unpack("<Q", fh.read(8))
+        pos += EVLR_HEADER + length
+        if pos > size:
+            raise _fail(path, f"EVLR {i + 1} runs past the end of the file")
+
+
+def _point_count(head: bytes, minor: int) -> int:
+    legacy = struct.unpack_from("<I", head, 107)[0]
+    if minor >= 4:
+        return struct.unpack_from("<Q", head, 247)[0] or legacy
+    return legacy
+
+
+def _check_numbers(path: Path, values: tuple[float, ...]) -> None:
+    scales, offsets, bounds = values[:3], values[3:6], values[6:]
+    if not all(math.isfinite(s) and s != 0 for s in scales):
+        raise _fail(path, f"scale factors {scales} must be finite and non-zero")
+    if not all(math.isfinite(v) for v in offsets + bounds):
+        raise _fail(path, "offsets and bounds must be finite numbers")
+
+
+def _check_count(path: Path, head: bytes, minor: int, count: int, rec_len: int, offset: int, size: int,
+                 compressed: bool) -> None:
+    end = size
+    if minor >= 4:
+        evlr_start, n_evlr = struct.unpack_from("<QI", head, 235)
+        if n_evlr and offset <= evlr_start <= size:
+            end = evlr_start
+    data = end - offset
+    if compressed:
+        if count * MIN_LAZ_BYTES_PER_POINT > data + 1:
+            raise _fail(path, f"{count} points cannot fit in {data} bytes of compressed data")
+        return
+    if count * rec_len > data:
+        raise _fail(path, f"{count} points of {rec_len} bytes need {count * rec_len} bytes, "
+                    f"the file holds {data} (truncated file or wrong count)")
+    if data - count * rec_len >= rec_len:
+        raise _fail(path, f"the file holds {data // rec_len} points, the header says {count}")
+
+
+class BoundsCheck:
+    """Decoded points against the header's bounds, chunk by chunk: none may lie outside by more
+    than a scale step, and together they must reach each bound within :data:`LOOSE` of the extent
+    (a corrupt scale or offset otherwise gives plausible-looking, wrongly scaled coordinates)."""
+
+    def __init__(self, path: Path | str, header) -> None:
+        self.path = path
+        self.lo, self.hi = np.asarray(header.mins, float), np.asarray(header.maxs, float)
+        self.tol = np.abs(np.asarray(header.scales, float)) + 1e-12 * np.maximum(abs(self.lo), abs(self.hi))
+        self.seen_lo, self.seen_hi = np.full(3, np.inf), np.full(3, -np.inf)
+
+    def update(self, xyz: np.ndarray) -> None:
+        if not len(xyz):
+            return
+        lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+        if (lo < self.lo - self.tol).any() or (hi > self.hi + self.tol).any():
+            raise SoilVolumeError(f"{self.path}: points lie outside the bounds in the LAS header "
+                                  "(corrupt scale, offset or bounds)")
+        self.seen_lo, self.seen_hi = np.minimum(self.seen_lo, lo), np.maximum(self.seen_hi, hi)
+
+    def finish(self) -> None:
+        if not np.isfinite(self.seen_lo).all():
+            return
+        slack = 2 * self.tol + LOOSE * (self.hi - self.lo)
+        if (self.seen_lo - self.lo > slack).any() or (self.hi - self.seen_hi > slack).any():
+            raise SoilVolumeError(f"{self.path}: the points do not reach the bounds in the LAS header "
+                                  "(corrupt scale, offset or bounds)")

@@ -1,0 +1,228 @@
+"""Step 1: stream both clouds into one working frame (before CRS, metres, local origin), select
+ground points, crop the before cloud to the after footprint plus the radius, and thin both for
+registration on the way."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import pyproj
+
+from ..core.types import Cloud, SoilVolumeError
+from ..options import Options
+from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
+from .footprint import PolygonMask, check_spread, footprint
+from .io import RawPoints
+from .stream import ColumnThinner, Loaded, Source, from_raw, load
+
+GROUND = 2
+CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
+
+
+@dataclass
+class Prepared:
+    """Both clouds in the local working frame (absolute = xyz + origin, in ``frame.crs``):
+    full-resolution float32 points and float64 column-thinned subsets for registration."""
+
+    before: Cloud  # within the after box + the GPS error prior (the thinned subset: + radius)
+    after: Cloud
+    frame: WorkFrame
+    origin: np.ndarray
+    inputs: dict
+    before_thin: np.ndarray
+    after_thin: np.ndarray
+    voxel: float
+    after_chunks: Callable[[], Iterator[tuple[np.ndarray, np.ndarray | None]]]  # all after points, local
+    read_s: float = 0.0  # of the streaming time, seconds spent reading and decoding chunks
+    before_counts: np.ndarray | None = None  # points behind each before_thin centroid
+    ground: tuple[bool, bool] = (False, False)  # (before, after) streamed as class 2 only
+    index: tuple = (None, None)  # (before, after): chunk boxes of single files (Source.index)
+
+
+def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyproj.CRS:
+    """The file's header CRS, else the one given by ``flag`` (for files without one); a flag
+    that contradicts the header is refused rather than silently applied or ignored."""
+    given, header = parse_crs(override, flag), parse_crs(raw.crs_wkt, raw.path)
+    if header is None and given is None:
+        raise SoilVolumeError(f"{raw.path}: the file has no CRS in its header; pass {flag} (e.g. EPSG:32654)")
+    if header is not None and given is not None and not header.equals(given, ignore_axis_order=True):
+        raise SoilVolumeError(
+            f"{raw.path}: {flag} {override} differs from the CRS in the header ({header.name}); {flag} "
+            "applies only to files without one (to replace a wrong header CRS, prepare the cloud with a "
+            "pipeline whose reader sets override_srs)")
+    return header or given
+
+
+def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0,
+                  slope: float = 0.6) -> tuple[np.ndarray, str]:
+    """Mask of the points to use, and a note: class 2 when asked for or (auto) present, or the
+    SMRF ground filter (run in metres: ``crs`` gives the file's units) with an earthworks
+    ``window`` and ``slope`` (PDAL's 18 m / 0.15 take the piles themselves for objects)."""
+    n = len(raw.xyz)
+    has_class = raw.classification is not None and bool((raw.classification == GROUND).any())
+    if mode == "none" or (mode == "auto" and not has_class):
+        return np.ones(n, bool), "all points"
+    if mode in ("auto", "class"):
+        if not has_class:
+            raise SoilVolumeError(
+                f"{raw.path}: --ground class needs ground-classified (class 2) points; the file has none")
+        return raw.classification == GROUND, "class 2 (ground)"
+    if mode == "filter":
+        from ..pipelines.stages.smrf import smrf_classify
+        from .crs import xy_unit, z_unit
+
+        h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
+        x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
+        keep = smrf_classify(x, y, z, window=window, slope=slope)
+        return keep, f"SMRF ground filter (window {window:g} m, slope {slope:g})"
+    raise SoilVolumeError(f"unknown ground mode '{mode}'")
+
+
+THIN_POINTS = 200_000  # registration subset: about this many after points
+
+
+def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, poly: np.ndarray) -> Source:
+    """``src`` read only where it meets the bounding box of the local polygon ``poly`` (VPC tiles
+    and COPC nodes outside it are skipped), when the file is in the frame's CRS and metres."""
+    if src.raw is not None or not (crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
+        return src
+    return src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])
+
+
+def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
+    """(source to stream, ground mode for streaming, note): SMRF needs the whole cloud."""
+    if options.ground != "filter":
+        return src, options.ground, None
+    raw = src.materialize()
+    keep, note = select_ground(raw, "filter", crs, options.ground_window, options.ground_slope)
+    if not keep.any():
+        raise SoilVolumeError(f"{src.path}: the SMRF ground filter found no ground points")
+    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path))
+    out.count = src.count  # report the points read, not the ground points
+    return out, "none", note
+
+
+def thin_voxel(area_m2: float) -> float:
+    """Column size (m) of the registration subset: about THIN_POINTS over ``area_m2``, >= 0.15 m."""
+    return max(0.15, float(np.sqrt(max(area_m2, 1.0) / THIN_POINTS)))
+
+
+NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
+
+
+def prepare(before: Source, after: Source, options: Options, check=None, full: bool = True,
+            loader: Callable[..., Loaded] = load) -> Prepared:
+    """Stream both clouds into the working frame with a local origin: all after points, the
+    before points within the radius of the after footprint, and thinned subsets of both
+    (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
+    ``loader`` streams one source (:func:`stream.load`, or the same as Dask tasks)."""
+    crs_b = resolve_crs(before, options.before_crs, "--before-crs")
+    crs_a = resolve_crs(after, options.after_crs, "--after-crs")
+    hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None
+    frame = work_frame(crs_b, hint)
+    lo, hi = _frame_box(after, crs_a, frame)
+    origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
+    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
+    original_after, to_a = after, _local(crs_a, frame, origin, after.path)
+    after, a, note_a = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check,
+                                   None if full else NOTHING, loader)
+    check_spread(a.thin[:, :2], after.path, "after the ground selection")
+    poly = footprint(a.thin[:, :2], options.radius)
+    before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
+    # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
+    reach = options.max_gps_shift + 2.0
+    box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach) if full else NOTHING
+    b = loader(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
+             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box, not full)
+    if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
+        raise SoilVolumeError(
+            f"{before.path} and {after.path} do not overlap: the before cloud has "
+            f"{b.extra['cropped']} points within {options.radius:g} m of the after cloud's footprint "
+            "(check the CRSs and --radius)"
+        )
+    check_spread(b.thin[:, :2], before.path, "near the after cloud")
+    inputs = {
+        "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"]),
+        "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"]),
+    }
+    read_s = a.extra["read_s"] + b.extra["read_s"]
+    wkt = frame.wkt
+    return Prepared(
+        Cloud(b.xyz, origin, wkt, before.path), Cloud(a.xyz, origin, wkt, after.path),
+        frame, origin, inputs, b.thin, a.thin, voxel, _all_points(original_after, to_a), read_s,
+        b.extra["counts"], (b.note == CLASS_NOTE, a.note == CLASS_NOTE), (b.extra["index"], a.extra["index"]),
+    )
+
+
+@dataclass
+class Single:
+    """One cloud streamed into its working frame: float32 local points and a thinned subset."""
+
+    xyz: np.ndarray
+    thin: np.ndarray
+    frame: WorkFrame
+    origin: np.ndarray
+    note: str
+
+
+def prepare_single(src: Source, override: str | None, options: Options, check=None) -> Single:
+    """Stream one cloud (ground selection as ``options.ground``) into its own working frame, with
+    the local origin at the floor of its bounds."""
+    crs = resolve_crs(src, override, "--crs")
+    hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
+    frame = work_frame(crs, hint)
+    lo, hi = _frame_box(src, crs, frame)
+    origin = np.floor(lo)
+    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
+    to_local = _local(crs, frame, origin, src.path)
+    src, one, note = _load_whole(src, crs, to_local, lo - origin, hi - origin, voxel, options, check)
+    if len(one.xyz) == 0:
+        raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note or one.note})")
+    check_spread(one.thin[:, :2], src.path, "after the ground selection")
+    return Single(one.xyz, one.thin, frame, origin, note or one.note)
+
+
+def _frame_box(src: Source, crs: pyproj.CRS, frame: WorkFrame) -> tuple[np.ndarray, np.ndarray]:
+    """The source's header bounds, in the working frame (absolute, metres)."""
+    corners = to_frame(_box_corners(src.lo, src.hi), crs, frame, src.path)
+    return corners.min(axis=0), corners.max(axis=0)
+
+
+def _load_whole(src: Source, crs: pyproj.CRS, to_local, lo: np.ndarray, hi: np.ndarray, voxel: float,
+                options: Options, check, box=None, loader=load) -> tuple[Source, Loaded, str | None]:
+    """Every (ground) point of ``src`` kept (within ``box`` when given), thinned over its local box
+    lo..hi (padded: the box comes from header bounds). Returns (the source streamed, what was
+    loaded, filter note)."""
+    src, mode, note = _filtered(src, crs, options)
+    pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
+    return src, loader(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box,
+                       box is NOTHING), note
+
+
+def _all_points(src: Source, to_local):
+    """Every point of ``src`` (all classes), chunk by chunk in the local frame, with its class."""
+    def chunks():
+        for xyz, cls in src.chunks():
+            yield to_local(xyz), cls
+    return chunks
+
+
+def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.array([[x, y, lo[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])] + [list(hi)], float)
+
+
+def _local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
+    """File CRS -> local frame; a plain subtraction when the file is already in the frame's
+    CRS in metres (the common case)."""
+    if crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0:
+        return lambda xyz: xyz - origin
+    return lambda xyz: to_frame(xyz, crs, frame, path) - origin
+
+
+def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int) -> dict:
+    return {"path": src.path, "points": int(src.count), "points_used": used,
+            "points_after_crop": kept, "selection": note, "crs": crs.name,
+            "crs_wkt": crs.to_wkt()}
+

@@ -1,0 +1,323 @@
+"""Streaming input: read a cloud chunk by chunk (laspy), bring each chunk into the working frame,
+keep only the points later steps need (float32, local coordinates) and build the voxel-thinned
+registration subset on the way, so memory stays bounded by the kept points, not the file.
+
+A source is a LAS/LAZ file, a COPC file or a virtual point cloud (``.vpc``) of such tiles; with a
+``region`` only the VPC tiles and COPC octree nodes meeting it are read (plain LAS/LAZ files are
+read whole and the caller filters). Non-LAS files and clouds produced by a preparation pipeline
+arrive whole and are one chunk.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from ..core.types import SoilVolumeError, short_error
+from .copc import copc_chunks, is_copc
+from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
+from .vpc import Vpc, read_vpc
+
+CHUNK = 1_000_000
+GROUND = 2
+
+
+@dataclass
+class Source:
+    """A cloud to stream: its CRS, point count and bounds (file CRS and units), and its chunks."""
+
+    path: str
+    crs_wkt: str | None
+    count: int
+    lo: np.ndarray
+    hi: np.ndarray
+    has_class: bool
+    raw: RawPoints | None = None  # whole cloud already in memory (non-LAS, pipeline output)
+    vpc: Vpc | None = None  # a virtual point cloud: its tiles
+    region: tuple[np.ndarray, np.ndarray] | None = None  # x/y box (file CRS) that reads may stop at
+    index: tuple | None = None  # of a single file: (start, count, x/y lo, x/y hi) of each chunk read
+
+    def chunks(self, size: int | None = None) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+        """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
+        points (default ``CHUNK``); with a ``region``, chunks may hold points outside it."""
+        if self.raw is not None:
+            yield self.raw.xyz, self.raw.classification
+            return
+        if self.index is not None and self.region is not None and not is_copc(self.path):
+            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK)
+            return
+        for path in self.tiles():
+            yield from file_chunks(path, self.region, size or CHUNK)
+
+    def within(self, lo, hi) -> Source:
+        """This source, read only where it can meet the x/y box lo..hi (file CRS)."""
+        return replace(self, region=(np.asarray(lo[:2], float), np.asarray(hi[:2], float)))
+
+    def tiles(self) -> list[str]:
+        """The files that a read of this source opens."""
+        if self.vpc is None:
+            return [self.path]
+        lo, hi = self.region if self.region is not None else (None, None)
+        return [t.path for t in self.vpc.tiles_meeting(lo, hi)]
+
+    def materialize(self) -> RawPoints:
+        """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
+        if self.raw is not None:
+            return self.raw
+        parts = list(self.chunks())
+        cls = None if parts[0][1] is None else np.concatenate([c for _, c in parts])
+        return RawPoints(np.concatenate([x for x, _ in parts]), cls, self.crs_wkt, self.path)
+
+
+def _meeting(index, lo, hi) -> list[tuple[int, int]]:
+    """(start, count) of the indexed chunks whose x/y box meets lo..hi."""
+    return [(s, n) for s, n, a, b in index if (a <= hi).all() and (lo <= b).all()]
+
+
+def las_ranges(path: str, ranges: list[tuple[int, int]], size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+            for start, count in ranges:
+                reader.seek(start)
+                for i in range(0, count, size):
+                    pts = reader.read_points(min(size, count - i))
+                    xyz = np.empty((len(pts), 3))
+                    xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
+                    yield xyz, (np.asarray(pts.classification) if has_cls else None)
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
+
+
+def file_chunks(path: str, region, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only the octree
+    nodes meeting it, anything else is streamed whole."""
+    if region is not None and is_copc(path):
+        yield from copc_chunks(path, region[0], region[1], size=size)
+        return
+    yield from las_chunks(Path(path), _header(Path(path)).count, size)
+
+
+def open_source(path, pipeline=None) -> Source:
+    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now."""
+    p = Path(path)
+    if pipeline:
+        from ..pipelines.pipeline import prepare_cloud_from_file
+
+        return from_raw(prepare_cloud_from_file(pipeline, p))
+    if p.suffix.lower() == ".vpc":
+        return _open_vpc(p)
+    _check_readable(p)
+    if p.suffix.lower() not in LAS_SUFFIXES:
+        return from_raw(read_points(p))
+    src = _header(p)
+    if src.count == 0:
+        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points)")
+    return src
+
+
+def _header(p: Path) -> Source:
+    """A LAS/LAZ/COPC file's source from its header."""
+    import laspy
+
+    try:
+        with laspy.open(p) as reader:
+            h = reader.header
+            wkt = las_crs_wkt(h, p)
+            dims = set(h.point_format.dimension_names)
+            return Source(str(p), wkt, int(h.point_count), np.asarray(h.mins, float),
+                          np.asarray(h.maxs, float), "classification" in dims)
+    except SoilVolumeError:
+        raise
+    except Exception as exc:
+        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
+
+
+def _open_vpc(p: Path) -> Source:
+    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from its items."""
+    vpc = read_vpc(p)
+    first = _header(Path(vpc.tiles[0].path))
+    if vpc.count == 0:
+        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
+    lo, hi = vpc.lo, vpc.hi
+    lo[2] = first.lo[2] if not np.isfinite(lo[2]) else lo[2]
+    hi[2] = first.hi[2] if not np.isfinite(hi[2]) else hi[2]
+    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
+
+
+def from_raw(raw: RawPoints) -> Source:
+    validate(raw)
+    return Source(raw.path, raw.crs_wkt, len(raw.xyz), raw.xyz.min(axis=0), raw.xyz.max(axis=0),
+                  raw.classification is not None, raw)
+
+
+def prefetch(chunks: Iterator, depth: int = 2) -> Iterator:
+    """Iterate ``chunks`` read ahead by a background thread (decoding overlaps the caller's
+    processing: both are mostly numpy work that releases the GIL). Errors are re-raised here."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    end = object()
+
+    def run() -> None:
+        try:
+            for item in chunks:
+                if stop.is_set():
+                    return
+                q.put(item)
+            q.put(end)
+        except BaseException as exc:  # handed to the consumer
+            q.put(exc)
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = q.get()
+            if item is end:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        while worker.is_alive():  # unblock a producer waiting on a full queue
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                worker.join(0.05)
+
+
+class ColumnThinner:
+    """Voxel thinning of a terrain cloud while streaming: the centroid of the points in each
+    ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float) -> None:
+        self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
+        self.shape = (int(np.ceil((hi[1] - lo[1]) / voxel)) + 1, int(np.ceil((hi[0] - lo[0]) / voxel)) + 1)
+        n = self.shape[0] * self.shape[1]
+        self.sums = np.zeros((4, n))
+
+    def add(self, xyz: np.ndarray) -> None:
+        ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64)
+        iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64)
+        ok = (ix >= 0) & (iy >= 0) & (ix < self.shape[1]) & (iy < self.shape[0])
+        ids = iy[ok] * self.shape[1] + ix[ok]
+        n = self.sums.shape[1]
+        self.sums[3] += np.bincount(ids, minlength=n)
+        for k in range(3):
+            self.sums[k] += np.bincount(ids, weights=xyz[ok, k], minlength=n)
+
+    def result(self) -> np.ndarray:
+        """The centroids (float64, (M, 3))."""
+        has = self.sums[3] > 0
+        return (self.sums[:3, has] / self.sums[3, has]).T.copy()
+
+    def counts(self) -> np.ndarray:
+        """The number of points behind each centroid of :meth:`result` (same order)."""
+        return self.sums[3, self.sums[3] > 0].astype(np.int64)
+
+
+class _Parts:
+    """Kept points appended into one float32 buffer sized by the header count (pages never
+    written are never resident), so no concatenation copy is needed."""
+
+    def __init__(self, capacity: int) -> None:
+        self.buf = np.empty((max(capacity, 0), 3), np.float32)
+        self.n = 0
+
+    def append(self, xyz: np.ndarray) -> None:
+        m = len(xyz)
+        if self.n + m > len(self.buf):  # more points than the header said: grow
+            grown = np.empty((max(2 * len(self.buf), self.n + m), 3), np.float32)
+            grown[: self.n] = self.buf[: self.n]
+            self.buf = grown
+        self.buf[self.n : self.n + m] = xyz
+        self.n += m
+
+    def result(self) -> np.ndarray:
+        return self.buf[: self.n]
+
+
+@dataclass
+class Loaded:
+    """One epoch after streaming: kept points (float32 local), the thinned subset (float64
+    local), and what was read and kept."""
+
+    xyz: np.ndarray
+    thin: np.ndarray
+    points: int = 0
+    used: int = 0
+    note: str = ""
+    extra: dict = field(default_factory=dict)
+
+
+def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
+    """Whether to keep only class 2: ``class`` always (error without it), ``auto`` when the file
+    has ground-classified points (decided on its first chunk)."""
+    has = first_cls is not None and bool((first_cls == GROUND).any())
+    if mode == "class" and not has:
+        raise SoilVolumeError(
+            f"{src.path}: --ground class needs ground-classified (class 2) points; the file has none")
+    return mode == "class" or (mode == "auto" and has)
+
+
+def load(
+    src: Source, to_local: Callable[[np.ndarray], np.ndarray], mode: str,
+    keep: Callable[[np.ndarray], np.ndarray] | None, thinner: ColumnThinner,
+    check: Callable[[], None] | None = None, box: tuple[np.ndarray, np.ndarray] | None = None,
+    indexed: bool = False,
+) -> Loaded:
+    """Stream ``src``: select ground (``mode`` in auto/class/none; ``filter`` needs the whole
+    cloud and is done by the caller), convert with ``to_local`` (file CRS -> local frame), keep
+    the points for which ``keep`` is true (all when None) and feed them to ``thinner``; only
+    those within the x/y ``box`` (lo, hi; everything when None) are kept at full resolution.
+    ``indexed``: also record each chunk's x/y box (``extra["index"]``, for later bounded reads)."""
+    parts = _Parts(src.count if box is None or (box[1] >= box[0]).all() else 0)
+    points = used = 0
+    use_class: bool | None = None
+    reading = 0.0
+    cropped = 0
+    index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
+    chunks = prefetch(src.chunks())
+    while True:
+        t0 = time.perf_counter()
+        try:
+            xyz, cls = next(chunks)
+        except StopIteration:
+            break
+        finally:
+            reading += time.perf_counter() - t0
+        if check:
+            check()
+        if use_class is None:
+            use_class = ground_mode(src, cls, mode)
+        if index is not None:
+            index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
+        points += len(xyz)
+        local = to_local(xyz)
+        mask = cls == GROUND if use_class and cls is not None else None
+        used += len(xyz) if mask is None else int(mask.sum())
+        if keep is not None:
+            mask = keep(local) if mask is None else mask & keep(local)
+        if mask is not None:  # one compress for ground and crop
+            local = local[mask]
+        thinner.add(local)
+        cropped += len(local)
+        if box is not None:
+            local = local[((local[:, :2] >= box[0]) & (local[:, :2] <= box[1])).all(axis=1)]
+        parts.append(local)
+    kept = parts.result()
+    note = "class 2 (ground)" if use_class else "all points"
+    extra = {"read_s": reading, "cropped": cropped, "counts": thinner.counts(),
+             "index": None if index is None else tuple(index)}
+    return Loaded(kept, thinner.result(), points, used, note, extra)

@@ -1,0 +1,42 @@
+"""``soilvolume pipeline``: the preparation of both clouds as PDAL pipeline JSON files.
+
+The before pipeline crops to the after cloud's GPS footprint plus the radius (the same polygon
+the engine uses), both pipelines select ground and remove statistical outliers, and write the
+prepared clouds; ``soilvolume estimate --before-pipeline/--after-pipeline`` runs them (with PDAL
+when it imports, else the embedded executor), as does ``pdal pipeline`` on a server.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..core.outputs import os_errors, output_dir
+from ..inputs.crs import lonlat_of, to_frame, work_frame
+from ..inputs.footprint import footprint, polygon_wkt
+from ..inputs.io import read_points
+from ..inputs.prepare import resolve_crs
+from ..options import Options
+from .pipeline import build_prepare_pipeline, save_pipeline
+
+#: what an emit folder may hold to be replaced: the files of an earlier emit and of its runs
+EMITTED = ("before.json", "after.json", "before_prepared.laz", "after_prepared.laz")
+
+
+def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -> tuple[Path, Path]:
+    """Write ``before.json`` and ``after.json`` into ``out_dir``; returns their paths."""
+    raw_b, raw_a = read_points(before), read_points(after)
+    crs_b = resolve_crs(raw_b, options.before_crs, "--before-crs")
+    crs_a = resolve_crs(raw_a, options.after_crs, "--after-crs")
+    frame = work_frame(crs_b, lonlat_of(raw_b.xyz, crs_b) if crs_b.is_geographic else None)
+    after_xy = to_frame(raw_a.xyz, crs_a, frame, raw_a.path)[:, :2] / frame.xy_unit
+    poly = footprint(after_xy, options.radius / frame.xy_unit)
+    srs = frame.crs.to_wkt()
+    common = {"ground": options.ground, "out_srs": srs}
+    with output_dir(out_dir, [before, after], True, EMITTED) as out, os_errors(out.final):
+        stages_b = build_prepare_pipeline(before, in_srs=options.before_crs, crop={"polygon": polygon_wkt(poly)},
+                                          output=out.final / "before_prepared.laz", **common)
+        stages_a = build_prepare_pipeline(after, in_srs=options.after_crs,
+                                          output=out.final / "after_prepared.laz", **common)
+        save_pipeline(stages_b, out.path("before.json"))
+        save_pipeline(stages_a, out.path("after.json"))
+    return out.final / "before.json", out.final / "after.json"

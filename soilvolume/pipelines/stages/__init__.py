@@ -1,0 +1,72 @@
+"""The embedded executor: PDAL stages re-implemented with numpy/scipy, for machines without PDAL.
+
+Only the stages and options in :data:`REGISTRY` run; anything else raises a
+:class:`~soilvolume.core.types.SoilVolumeError` naming the stage or option, so a pipeline never runs
+with an option silently ignored.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from ...core.types import SoilVolumeError
+from . import crop, outlier, readers, reprojection, sampling, smrf, writers
+from . import range as range_stage
+from .view import PointView, StageContext
+
+StageFn = Callable[[PointView | None, dict, StageContext], PointView]
+
+#: options every stage accepts (PDAL's general stage options we can honour)
+GENERIC = {"type", "tag", "user_data"}
+
+REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
+    "readers.las": (readers.read_las, frozenset(readers.LAS_OPTS)),
+    "readers.ply": (readers.read_o3d, frozenset(readers.PLY_OPTS)),
+    "readers.pcd": (readers.read_o3d, frozenset(readers.PLY_OPTS)),
+    "readers.text": (readers.read_text, frozenset(readers.TEXT_OPTS)),
+    "filters.reprojection": (reprojection.reproject, frozenset(reprojection.OPTS)),
+    "filters.crop": (crop.crop, frozenset(crop.OPTS)),
+    "filters.outlier": (outlier.outlier, frozenset(outlier.OPTS)),
+    "filters.range": (range_stage.filter_range, frozenset(range_stage.RANGE_OPTS)),
+    "filters.assign": (range_stage.assign, frozenset(range_stage.ASSIGN_OPTS)),
+    "filters.voxelcenternearestneighbor": (sampling.voxel_center_nn,
+                                           frozenset(sampling.VOXEL_OPTS)),
+    "filters.sample": (sampling.sample, frozenset(sampling.SAMPLE_OPTS)),
+    "filters.smrf": (smrf.smrf, frozenset(smrf.OPTS)),
+    "writers.las": (writers.write_las, frozenset(writers.LAS_OPTS)),
+    "writers.gdal": (writers.write_gdal, frozenset(writers.GDAL_OPTS)),
+}
+
+
+def check_stage(stage: dict, source: str) -> tuple[StageFn, str]:
+    """The function of a stage, or the error naming the unsupported stage/option."""
+    kind = stage.get("type")
+    if kind not in REGISTRY:
+        raise SoilVolumeError(
+            f"pipeline {source}: stage '{kind}' is not supported by the embedded executor "
+            f"(supported: {', '.join(sorted(REGISTRY))})")
+    fn, allowed = REGISTRY[kind]
+    for name in stage:
+        if name not in allowed and name not in GENERIC:
+            raise SoilVolumeError(
+                f"pipeline {source}: option '{name}' of {kind} is not supported by the embedded "
+                f"executor (supported: {', '.join(sorted(allowed))})")
+    return fn, kind
+
+
+def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
+    """Run a linear pipeline (one reader first, then filters and writers in order)."""
+    checked = [check_stage(s, source) for s in stages]
+    readers_at = [i for i, (_, kind) in enumerate(checked) if kind.startswith("readers.")]
+    if readers_at != [0]:
+        raise SoilVolumeError(
+            f"pipeline {source}: the embedded executor runs exactly one reader, as the first "
+            "stage (no merging of several inputs)")
+    view: PointView | None = None
+    for stage, (fn, kind) in zip(stages, checked, strict=True):
+        view = fn(view, stage, StageContext(source, kind))
+    assert view is not None
+    return view
+
+
+__all__ = ["REGISTRY", "PointView", "StageContext", "check_stage", "execute"]

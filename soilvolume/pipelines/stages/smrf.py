@@ -1,0 +1,170 @@
+"""filters.smrf: the Simple Morphological Filter (Pingel et al. 2013) as PDAL implements it.
+
+1. ZImin: the lowest Z per ``cell`` (grid from the points' minimum corner), empty cells filled
+   with the mean of the 8 nearest filled cells.
+2. Low outliers: the progressive filter on -ZImin (slope 5, one pixel).
+3. Optional net cutting (``cut``), then the object mask: openings of ZInet with diamond elements
+   of radius 1..ceil(window/cell) pixels; a cell is an object where successive surfaces differ by
+   more than slope * cell * radius.
+4. ZIpro: ZImin without object/low/net cells, refilled the same way.
+5. A point is ground (Classification 2) when |ZIpro - z| <= threshold + scalar * slope(ZIpro),
+   else 1. Points outside ``returns`` or in ``ignore`` ranges keep their classification.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ...core.types import SoilVolumeError
+from .range import parse_ranges, select
+from .view import PointView, StageContext
+
+OPTS = {"cell", "slope", "window", "threshold", "scalar", "cut", "ignore", "returns"}
+
+
+def _cross(a: np.ndarray, iterations: int, op) -> np.ndarray:
+    """Grey erosion/dilation with the 5-point cross, iterated (a diamond of that radius);
+    neighbours outside the raster are ignored, as in PDAL's erodeDiamond/dilateDiamond."""
+    for _ in range(iterations):
+        out = a.copy()
+        op(out[1:, :], a[:-1, :], out=out[1:, :])
+        op(out[:-1, :], a[1:, :], out=out[:-1, :])
+        op(out[:, 1:], a[:, :-1], out=out[:, 1:])
+        op(out[:, :-1], a[:, 1:], out=out[:, :-1])
+        a = out
+    return a
+
+
+def erode(a: np.ndarray, it: int) -> np.ndarray:
+    return _cross(a, it, np.minimum)
+
+
+def dilate(a: np.ndarray, it: int) -> np.ndarray:
+    return _cross(a, it, np.maximum)
+
+
+def knnfill(z: np.ndarray, cell: float) -> np.ndarray:
+    """Fill NaN cells with the mean of the (up to) 8 nearest non-NaN cell centres."""
+    empty = np.isnan(z)
+    if not empty.any() or empty.all():
+        return z
+    rows, cols = np.indices(z.shape)
+    full = ~empty
+    tree = cKDTree(np.column_stack([cols[full], rows[full]]) * cell)
+    k = min(8, int(full.sum()))
+    _, idx = tree.query(np.column_stack([cols[empty], rows[empty]]) * cell, k=k, workers=-1)
+    out = z.copy()
+    out[empty] = z[full][idx.reshape(idx.shape[0], -1)].mean(axis=1)
+    return out
+
+
+def progressive(zi: np.ndarray, cell: float, slope: float, max_window: float) -> np.ndarray:
+    """Object mask of the progressive morphological filter."""
+    max_radius = int(math.ceil(max_window / cell))
+    prev, erosion = zi, zi
+    obj = np.zeros(zi.shape, dtype=bool)
+    for radius in range(1, max_radius + 1):
+        erosion = erode(erosion, 1)
+        opening = dilate(erosion, radius)
+        obj |= np.abs(prev - opening) > slope * cell * radius
+        prev = opening
+    return obj
+
+
+def _gradient(a: np.ndarray, axis: int) -> np.ndarray:
+    if a.shape[axis] < 2:
+        return np.zeros_like(a)
+    return np.gradient(a, axis=axis)  # central inside, one-sided at the edges (MATLAB's)
+
+
+def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, scalar=1.25,
+                  cut=0.0) -> np.ndarray:
+    """Ground flags (True = ground) for the given points."""
+    minx, miny = float(x.min()), float(y.min())
+    cols = int((float(x.max()) - minx) / cell + 1)
+    rows = int((float(y.max()) - miny) / cell + 1)
+    c = np.floor((x - minx) / cell).astype(np.int64)
+    r = np.floor((y - miny) / cell).astype(np.int64)
+    flat = r * cols + c
+    zimin = np.full(rows * cols, np.inf)
+    np.minimum.at(zimin, flat, z)
+    zimin[np.isinf(zimin)] = np.nan
+    zimin = knnfill(zimin.reshape(rows, cols), cell)
+    low = progressive(-zimin, cell, 5.0, cell)
+    net = np.zeros(zimin.shape, dtype=bool)
+    zinet = zimin
+    if cut > 0:
+        v = int(math.ceil(cut / cell))
+        net[:, ::v] = True
+        net[::v, :] = True
+        opened = dilate(erode(zimin, 2 * v), 2 * v)
+        zinet = np.where(net, opened, zimin)
+    obj = progressive(zinet, cell, slope, window)
+    zipro = knnfill(np.where(obj | low | net, np.nan, zimin), cell)
+    scaled = zipro / cell
+    gsurf = np.hypot(_gradient(scaled, 1), _gradient(scaled, 0))
+    gsurf = knnfill(gsurf, cell)
+    thresh = threshold + scalar * gsurf
+    zp, tp = zipro.ravel()[flat], thresh.ravel()[flat]
+    return np.abs(zp - z) <= tp  # NaN comparisons are False: not ground, as PDAL skips them
+
+
+def _returns_mask(view: PointView, returns: list[str], ctx: StageContext) -> np.ndarray:
+    n = len(view)
+    rn_key, nr_key = view.dim("ReturnNumber"), view.dim("NumberOfReturns")
+    if not returns or rn_key is None or nr_key is None:
+        return np.ones(n, dtype=bool)
+    rn = view.arrays[rn_key].astype(np.int64)
+    nr = view.arrays[nr_key].astype(np.int64)
+    zero = (rn == 0) | (nr == 0)
+    if zero.all():
+        return np.ones(n, dtype=bool)
+    if zero.any():
+        raise ctx.error("some NumberOfReturns or ReturnNumber values are 0, but not all")
+    want = np.zeros(n, dtype=bool)
+    for kind in returns:
+        if kind == "first":
+            want |= (rn == 1) & (nr > 1)
+        elif kind == "intermediate":
+            want |= (rn > 1) & (rn < nr)
+        elif kind == "last":
+            want |= (rn == nr) & (nr > 1)
+        elif kind == "only":
+            want |= nr == 1
+        else:
+            raise ctx.error(f"unrecognised 'returns' value '{kind}'")
+    return want
+
+
+def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
+    cell = ctx.positive(opts, "cell", 1.0)
+    params = {
+        "cell": cell,
+        "slope": ctx.number(opts, "slope", 0.15),
+        "window": ctx.positive(opts, "window", 18.0 * cell),
+        "threshold": ctx.number(opts, "threshold", 0.5),
+        "scalar": ctx.number(opts, "scalar", 1.25),
+        "cut": ctx.number(opts, "cut", 0.0),
+    }
+    returns = opts.get("returns", "last, only")
+    returns = [s.strip() for t in (returns if isinstance(returns, list) else [returns])
+               for s in str(t).split(",") if s.strip()]
+    cls = view.ensure("Classification")
+    if len(view) == 0:
+        return view
+    use = _returns_mask(view, returns, ctx)
+    for text in ctx.strings(opts, "ignore"):
+        try:
+            use &= ~select(view, parse_ranges(text), ctx)
+        except SoilVolumeError as exc:
+            raise ctx.error(str(exc)) from exc
+    if not use.any():
+        raise ctx.error("no returns to process")
+    idx = np.flatnonzero(use)
+    ground = smrf_classify(view.arrays["X"][idx], view.arrays["Y"][idx], view.arrays["Z"][idx],
+                           **params)
+    cls[idx] = np.where(ground, 2, 1).astype(cls.dtype)
+    return view

@@ -1,0 +1,393 @@
+"""Coarse (FPFH + RANSAC) and fine (robust point-to-plane ICP, GICP, or the paper's PFH + SAC-IA)
+registration of the after cloud onto the before cloud, in local coordinates.
+
+Every stage returns a :class:`~soilvolume.core.types.StageQuality` carrying its 4x4 transform (after
+-> before, local frame), fitness and inlier RMSE, as Open3D's registration pipelines do.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.types import SoilVolumeError, StageQuality
+from ..inputs.footprint import footprint
+from ..options import Options
+from . import columns as surface
+
+# (voxel m, max correspondence distance m, Tukey k m): coarse-to-fine, shrinking distances.
+ICP_LEVELS = ((1.0, 6.0, 3.0), (1.0, 3.0, 1.0), (0.5, 1.5, 0.5), (0.25, 0.8, 0.25), (0.25, 0.4, 0.15))
+REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12), (0.15, 0.25, 0.08))
+EVAL_DISTANCE = 0.4
+AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse
+MAX_ICP_POINTS = 150_000  # per level: coarser voxels on very large sites
+MAX_COARSE_POINTS = 15_000
+MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
+ICP_TOL, ICP_ITER = 1e-6, 30
+COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
+STABLE_PASSES = 1  # refinements on the stable ground found at the current pose
+
+
+@dataclass
+class Registration:
+    """The accepted transform (after -> before, local frame) and each stage's quality."""
+
+    transform: np.ndarray
+    coarse: StageQuality
+    fine: StageQuality
+    georeferencing: dict = field(default_factory=dict)
+
+
+def _o3d():
+    import open3d as o3d
+
+    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    return o3d
+
+
+def to_pcd(xyz: np.ndarray, voxel: float | None = None):
+    """Open3D cloud from local float64 coordinates, optionally voxel-thinned."""
+    o3d = _o3d()
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz, dtype=np.float64)))
+    return pcd.voxel_down_sample(voxel) if voxel else pcd
+
+
+def with_normals(pcd, radius: float):
+    """Upward-oriented normals (an empty cloud is returned as it is)."""
+    o3d = _o3d()
+    if not pcd.has_points():
+        return pcd
+    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
+    pcd.orient_normals_to_align_with_direction(np.array([0.0, 0.0, 1.0]))
+    return pcd
+
+
+def rotation_deg(t: np.ndarray) -> float:
+    """Rotation angle (degrees) of a 4x4 rigid transform."""
+    c = (np.trace(t[:3, :3]) - 1.0) / 2.0
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def tilt_deg(t: np.ndarray) -> float:
+    """Tilt (degrees) of a 4x4 rigid transform: the angle it turns the vertical by."""
+    return float(np.degrees(np.arccos(np.clip(t[2, 2], -1.0, 1.0))))
+
+
+def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
+    """Whether a pose stays within the georeferencing prior (shift at the after centre, rotation
+    and tilt)."""
+    return (shift_at(t, centre) <= options.max_gps_shift and rotation_deg(t) <= options.max_gps_rotation
+            and tilt_deg(t) <= options.max_gps_tilt)
+
+
+def shift_at(t: np.ndarray, point: np.ndarray) -> float:
+    """How far the transform moves ``point`` (metres)."""
+    return float(np.linalg.norm(t[:3, :3] @ point + t[:3, 3] - point))
+
+
+def transform_points(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return xyz @ t[:3, :3].T + t[:3, 3]
+
+
+def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> tuple[float, float]:
+    """(fitness, inlier RMSE) of ``t`` at ``distance`` (Open3D, point to point)."""
+    o3d = _o3d()
+    ev = o3d.pipelines.registration.evaluate_registration(source, target, distance, t)
+    return float(ev.fitness), float(ev.inlier_rmse)
+
+
+def _cap_voxel(xyz: np.ndarray, max_points: int) -> float:
+    """The voxel size that leaves about ``max_points`` of a cloud (0 when it has fewer)."""
+    if len(xyz) <= max_points:
+        return 0.0
+    return spacing(xyz) * float(np.sqrt(len(xyz) / max_points))
+
+
+def spacing(xyz: np.ndarray) -> float:
+    """Mean horizontal point spacing (m) of a cloud: sqrt(footprint area / points)."""
+    from ..inputs.footprint import polygon_area
+
+    return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max(len(xyz), 1)))
+
+
+def evaluate_surface(
+    source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, distance: float = EVAL_DISTANCE,
+    gap: float | None = None,
+) -> tuple[float, float]:
+    """(fitness, RMSE) on terrain: the fraction of source points within ``distance`` of the
+    tangent plane of the target surface (columns of max(0.25 m, 2 point spacings)), and the RMS
+    of those distances. Meaningful on sparse clouds, unlike point-to-point."""
+    src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
+    gap = spacing(target_xyz) if gap is None else gap
+    lo, hi = src[:, :2].min(axis=0) - 1.0, src[:, :2].max(axis=0) + 1.0
+    cols = surface.columns(target_xyz, max(0.25, 2 * gap), lo, hi)
+    if len(cols.xyz) == 0:
+        return 0.0, float("nan")
+    r = np.abs(surface.plane_residuals(src, cols, surface.normals(cols)))
+    ok = r <= distance
+    fit = float(ok.sum() / max(len(src), 1))
+    return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
+
+
+def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, seed: int) -> np.ndarray:
+    """FPFH features + RANSAC on a coarse voxel (seeded); returns the 4x4 transform."""
+    o3d = _o3d()
+    reg = o3d.pipelines.registration
+    o3d.utility.random.seed(seed)
+    voxel = max(voxel, _cap_voxel(source_xyz, MAX_COARSE_POINTS), _cap_voxel(target_xyz, MAX_COARSE_POINTS))
+    src, tgt = _column_pcd(source_xyz, voxel), _column_pcd(target_xyz, voxel)
+    param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+    fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
+    dist = 1.5 * voxel
+    res = reg.registration_ransac_based_on_feature_matching(
+        src, tgt, fs, ft, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
+    )
+    return np.asarray(res.transformation)
+
+
+def _column_pcd(xyz: np.ndarray, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
+    """Open3D cloud of the column means of ``xyz`` (within lo..hi) with surface normals."""
+    cols = surface.columns(xyz, voxel, lo, hi)
+    pcd = to_pcd(cols.xyz)
+    pcd.normals = _o3d().utility.Vector3dVector(surface.normals(cols))
+    return pcd
+
+
+def icp_levels(
+    source_xyz: np.ndarray, target_xyz: np.ndarray, init: np.ndarray, levels=ICP_LEVELS,
+    method: str = "icp", check: Callable[[], None] | None = None, scores: bool = False,
+    gap: float | None = None,
+):
+    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, or GICP) of column-mean
+    surfaces (target normals from the column heights); with ``scores`` returns (transform,
+    fitness, inlier RMSE) of the last level. ``gap``: the target's point spacing."""
+    o3d = _o3d()
+    reg = o3d.pipelines.registration
+    t = init.copy()
+    cache: dict[float, tuple] = {}
+    cap = _cap_voxel(source_xyz, MAX_ICP_POINTS)
+    gap = 1.5 * (spacing(target_xyz) if gap is None else gap)  # sparse clouds: correspondences are at least this far
+    for voxel, dist, k in levels:
+        voxel, dist = max(voxel, cap, gap / 1.5), max(dist, gap)  # no columns finer than the spacing
+        if check:
+            check()
+        if voxel not in cache:
+            cache[voxel] = (_sampled(to_pcd(surface.columns(source_xyz, voxel).xyz), MAX_SOURCE_POINTS),
+                            _surface_pcd(target_xyz, source_xyz, t, voxel, 2.0 + dist))
+        src, tgt = cache[voxel]
+        crit = reg.ICPConvergenceCriteria(relative_fitness=ICP_TOL, relative_rmse=ICP_TOL, max_iteration=ICP_ITER)
+        if method == "gicp":
+            est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
+            res = reg.registration_generalized_icp(src, tgt, dist, t, est, crit)
+        else:
+            est = reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=k))
+            res = reg.registration_icp(src, tgt, dist, t, est, crit)
+        t = np.asarray(res.transformation).copy()
+    return (t, float(res.fitness), float(res.inlier_rmse)) if scores else t
+
+
+def _surface_pcd(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
+    """The target's column surface with normals, over the source's box under ``t`` + margin."""
+    moved = transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t)
+    pcd = _column_pcd(target_xyz, voxel, moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin)
+    if len(pcd.points) < 3:
+        raise SoilVolumeError(
+            "registration failed: the fine registration drifted off the before cloud "
+            "(no before points left under the after cloud); check that both clouds "
+            "cover the same site and their CRSs")
+    return pcd
+
+
+def _sampled(pcd, cap: int):
+    """At most ``cap`` points of a cloud, a fixed-stride sample (deterministic): the source side
+    of ICP needs well-spread points, not all of them; the target keeps its density."""
+    n = len(pcd.points)
+    if n <= cap:
+        return pcd
+    return pcd.select_by_index(np.arange(0, n, int(np.ceil(n / cap))).tolist())
+
+
+def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The points of a cloud in the margin band of its own footprint (see
+    :func:`soilvolume.compensation.stable.margin`): surveys are flown beyond the works, so this band is the
+    part of the after survey most likely to be stable ground."""
+    from ..compensation.stable import margin
+
+    cell = max(1.0, 2.0 * gap)
+    cols = surface.columns(xyz, cell)
+    valid = np.zeros(cols.shape, bool)
+    valid[cols.row, cols.col] = True
+    band = margin(valid, cell)
+    ix = np.clip(((xyz[:, 0] - cols.lo[0]) // cell).astype(np.int64), 0, cols.shape[1] - 1)
+    iy = np.clip(((xyz[:, 1] - cols.lo[1]) // cell).astype(np.int64), 0, cols.shape[0] - 1)
+    return xyz[band[iy, ix]]
+
+
+def stable_source(
+    source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, cell: float = 1.0,
+) -> np.ndarray:
+    """The source with its fitted low-order deformation removed and its change areas dropped:
+    what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
+    ground (searched from the margin of the after footprint) and the degree-2 surface come from
+    :mod:`soilvolume.compensation.stable` on median grids."""
+    from ..compensation.stable import find_stable
+    from ..dem.grid import average_height, make_grid
+
+    src = transform_points(source_xyz, t)
+    cell = max(cell, 1.5 * spacing(target_xyz))
+    grid = make_grid(src.min(axis=0), src.max(axis=0), cell, np.zeros(3), None)
+    diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
+    if np.isfinite(diff).sum() < 20:
+        return src[:0]
+    stable, trend = find_stable(diff, cell)
+    row, col, ok = grid.index(src)
+    keep = np.zeros(len(src), bool)
+    keep[ok] = stable[row[ok], col[ok]]
+    out = src[keep]
+    out[:, 2] -= trend[row[keep], col[keep]]
+    return out
+
+
+def register(
+    after_xyz: np.ndarray, before_xyz: np.ndarray, options: Options, check: Callable[[], None] | None = None,
+    dense: tuple[np.ndarray, np.ndarray] | None = None, precise: bool = False,
+) -> Registration:
+    """Register after onto before (both local, typically the thinned subsets; ``before_xyz`` is
+    the before cloud cropped to the after footprint + radius). ``dense``: the full-resolution
+    (after, before) clouds, for the paper's PFH patch matching."""
+    eye = np.eye(4)
+    if precise:
+        fit, rmse = evaluate_surface(_judged(after_xyz, spacing(before_xyz)), before_xyz, eye)
+        skipped = "skipped: coordinates used as georeferenced (--georeferencing)"
+        return Registration(eye, StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
+                            StageQuality("none", fit, rmse, eye, True, 0.0, skipped))
+    if options.coarse == "auto" and options.fine != "none":
+        first = _fine_stage(after_xyz, before_xyz, [(eye, "gps")], options, check, dense)
+        if first.fitness >= AUTO_FITNESS:  # the GPS pose converged: FPFH cannot do better here
+            note = (f"skipped: the fine registration from the GPS pose fits ({first.fitness:.0%} of the "
+                    f"after cloud within {EVAL_DISTANCE} m); --coarse fpfh forces it")
+            return Registration(first.transform, StageQuality("fpfh-ransac", float("nan"), float("nan"),
+                                                              eye, False, 0.0, note), first)
+    coarse = _coarse_stage(after_xyz, before_xyz, options)
+    starts = [(eye, "gps")]
+    if coarse.accepted and not np.allclose(coarse.transform, eye):
+        starts.append((coarse.transform, "coarse"))
+    best = _fine_stage(after_xyz, before_xyz, starts, options, check, dense)
+    if options.coarse == "auto" and coarse.accepted and "gps" in best.note:
+        coarse.accepted = False
+        coarse.note += "; rejected: fine registration fits better from the GPS pose"
+    if best.fitness < 0.2:
+        raise SoilVolumeError(
+            f"registration failed: only {best.fitness:.0%} of the after cloud lies within "
+            f"{EVAL_DISTANCE} m of the before surface (RMSE {best.rmse:.3f} m); check that both "
+            "clouds cover the same site and their CRSs"
+        )
+    return Registration(best.transform, coarse, best)
+
+
+def _better(a: StageQuality, b: StageQuality) -> bool:
+    if abs(a.fitness - b.fitness) > 0.005:
+        return a.fitness > b.fitness
+    return a.rmse < b.rmse
+
+
+def _coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
+    t0 = time.perf_counter()
+    if options.coarse == "none":
+        return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
+    t = coarse_fpfh(after_xyz, before_xyz, options.coarse_voxel, options.seed)
+    src, tgt = to_pcd(after_xyz, options.coarse_voxel), to_pcd(before_xyz, options.coarse_voxel)
+    fit, rmse = evaluate(src, tgt, t, 1.5 * options.coarse_voxel)
+    centre = after_xyz.mean(axis=0)
+    rot, shift = rotation_deg(t), shift_at(t, centre)
+    within = rot <= options.max_gps_rotation and shift <= options.max_gps_shift
+    accepted = options.coarse == "fpfh" or within
+    note = f"FPFH+RANSAC moved the after centre {shift:.2f} m and rotated {rot:.2f} deg"
+    if not within:
+        note += (f"; outside the GPS error prior ({options.max_gps_shift} m, "
+                 f"{options.max_gps_rotation} deg)" + ("" if accepted else ": rejected"))
+    return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)
+
+
+def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=None) -> StageQuality:
+    """The fine stage from the best of the starting poses: ICP/GICP run their first (1 m) levels
+    from each start and finish from the one that fits best; PFH and none are scored whole."""
+    t0 = time.perf_counter()
+    gap = spacing(before_xyz)
+    judge = _judged(after_xyz, gap)
+    if options.fine in ("icp", "gicp"):
+        (t, label), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
+        fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
+        return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0,
+                            f"started from the {label} pose", alternative=alt)
+    best: StageQuality | None = None
+    for init, label in starts:
+        if options.fine == "pfh":
+            from .pfh import pfh_sac_ia
+
+            src, tgt = dense if dense is not None else (after_xyz, before_xyz)
+            t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed)
+        else:
+            t = init
+        fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
+        q = StageQuality(options.fine, fit, rmse, t, True, 0.0, f"started from the {label} pose")
+        if best is None or _better(q, best):
+            best = q
+    assert best is not None
+    best.seconds = time.perf_counter() - t0
+    return best
+
+
+def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: float):
+    """ICP from the best start on the margin of the after survey, then refined twice on the
+    stable ground found at the pose reached (works inside the survey never pull the pose); the
+    pose that fits the margin best within the georeferencing prior wins. Returns ((transform,
+    label), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
+    uncertainty, None when there is none)."""
+    method = options.fine
+    head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
+    src = _judged(after_xyz, gap)
+    scored = []
+    for init, label in starts:
+        t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, scores=True, gap=gap)
+        scored.append((-fit, rmse, label, t))
+    _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
+    t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap)
+    poses = [(init, lab) for init, lab in starts] + [(t, label)]
+    for _ in range(STABLE_PASSES):
+        src_stable = stable_source(after_xyz, before_xyz, t)
+        if len(src_stable) <= 100:
+            break
+        # src_stable is already in the before frame: refine a correction on top of t.
+        dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap)
+        t = dt @ t
+        poses.append((t, label))
+    centre = after_xyz.mean(axis=0)
+    allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
+    best = _best_on(src, before_xyz, allowed, gap)
+    others = [p[0] for p in allowed[len(starts):] if p[0] is not best[0]]
+    return best, (others[-1] if others else None)
+
+
+def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The after points a pose is judged on: the margin of the after survey (works inside it do
+    not fit any correct pose), or all points when the margin is too thin to judge."""
+    ring = margin_points(after_xyz, gap)
+    return ring if len(ring) >= max(500, 0.05 * len(after_xyz)) else after_xyz
+
+
+def _best_on(src, before_xyz, poses, gap: float) -> tuple[np.ndarray, str]:
+    """The pose under which the margin points fit the before surface best (the last, most
+    refined one on ties): a pass that drifted never replaces a better pose."""
+    best, best_key = poses[-1], None
+    for k, (t, label) in enumerate(poses):
+        fit, rmse = evaluate_surface(src, before_xyz, t, gap=gap)
+        key = (round(fit, 2), -np.nan_to_num(rmse, nan=1e9), k)
+        if best_key is None or key > best_key:
+            best, best_key = (t, label), key
+    return best

@@ -1,0 +1,3 @@
+"""Seeded synthetic before/after scenes with known volumes and the soilvolume demo command (not
+part of the method).
+"""

@@ -1,0 +1,241 @@
+"""Level of detection and volume uncertainty from the stable-ground residuals.
+
+* LoD (GCD-style): ``z * sigma`` per cell, sigma = NMAD of the stable residuals, optionally
+  combined in quadrature with a per-cell standard error.
+* Volume uncertainty with spatially correlated error (Rolstad et al. 2009; Anderson 2019): an
+  empirical semivariogram of the stable residuals (exact, from grid shifts) fitted by a spherical
+  model ``nugget + psill * sph(h, range)``; a volume over ``n`` cells of area ``A`` then has
+  variance ``n * nugget * cell^4`` (uncorrelated) ``+ A^2 * psill * f(A, range)`` (correlated),
+  plus the error of the correction surface's level estimated on the stable ground.
+"""
+
+from __future__ import annotations
+
+import math
+from statistics import NormalDist
+from typing import Any
+
+import numpy as np
+from scipy import ndimage, optimize
+
+from ..compensation.robust import nmad
+from ..core.types import GridSpec
+
+INTERP_FRACTION = 0.35  # one sigma, fully correlated: refills over change edges overshoot convex toes and rims
+
+
+def z_value(confidence: float = 0.95) -> float:
+    """Two-sided normal quantile (1.96 for 95 %)."""
+    return NormalDist().inv_cdf(0.5 + confidence / 2)
+
+
+def level_of_detection(
+    sigma: float, confidence: float = 0.95, per_cell_sigma: np.ndarray | None = None
+) -> float | np.ndarray:
+    """LoD = z * sqrt(sigma^2 + per_cell_sigma^2) (a float without ``per_cell_sigma``)."""
+    if per_cell_sigma is None:
+        return z_value(confidence) * float(sigma)
+    return z_value(confidence) * np.sqrt(sigma * sigma + np.square(per_cell_sigma))
+
+
+def semivariogram(
+    residual: np.ndarray, mask: np.ndarray, cell: float, n_lags: int = 24,
+    max_lag_cells: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Isotropic empirical semivariogram from row/column shifts of the masked residuals:
+    (lags_m, gamma_m2, n_pairs) for roughly log-spaced lags up to half the masked extent."""
+    z = np.where(mask & np.isfinite(residual), residual, np.nan)
+    rr, cc = np.nonzero(np.isfinite(z))
+    if rr.size < 2:
+        return np.empty(0), np.empty(0), np.empty(0, int)
+    extent = max(np.ptp(rr), np.ptp(cc)) + 1
+    top = max(1, min(max_lag_cells or extent // 2, extent - 1))
+    lags = np.unique(np.round(np.geomspace(1, top, n_lags)).astype(int))
+    out_l, out_g, out_n = [], [], []
+    for h in lags:
+        d = np.concatenate([(z[:, h:] - z[:, :-h]).ravel(), (z[h:] - z[:-h]).ravel()])
+        d = d[np.isfinite(d)]
+        if d.size >= 10:
+            out_l.append(h * cell)
+            out_g.append(0.5 * float(np.mean(d * d)))
+            out_n.append(d.size)
+    return np.array(out_l), np.array(out_g), np.array(out_n)
+
+
+def spherical(h: np.ndarray, nugget: float, psill: float, rng: float) -> np.ndarray:
+    """Spherical semivariogram model with a nugget (gamma(0+) = nugget)."""
+    s = np.minimum(np.asarray(h, float) / rng, 1.0)
+    return nugget + psill * (1.5 * s - 0.5 * s**3)
+
+
+def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> dict[str, float]:
+    """Weighted least-squares spherical fit: {nugget, psill, range} (m^2, m^2, m)."""
+    if lags.size < 3:
+        g = float(gamma.mean()) if gamma.size else 0.0
+        return {"nugget": g, "psill": 0.0, "range": float(lags.max()) if lags.size else 0.0}
+    g_max = float(gamma.max())
+    reach = lags[np.argmax(gamma >= 0.9 * g_max)]
+    p0 = [float(gamma[0]) * 0.5, max(g_max - float(gamma[0]) * 0.5, 1e-12), float(reach)]
+    bounds = ([0.0, 0.0, float(lags[0]) * 0.5], [g_max * 2, g_max * 2, float(lags[-1]) * 2])
+    try:
+        p, _ = optimize.curve_fit(spherical, lags, gamma, p0=p0, bounds=bounds,
+                                  sigma=1 / np.sqrt(n_pairs), maxfev=5000)
+    except (RuntimeError, ValueError):
+        p = p0
+    return {"nugget": float(p[0]), "psill": float(p[1]), "range": float(p[2])}
+
+
+def correlated_fraction(area: float, rng: float) -> float:
+    """Rolstad et al. (2009): variance of the mean of a spherically correlated field over a
+    disc-equivalent area, as a fraction of the point variance."""
+    if area <= 0:
+        return 0.0
+    if rng <= 0:
+        return 0.0
+    radius = math.sqrt(area / math.pi)
+    if radius >= rng:
+        return math.pi * rng * rng / (5 * area)
+    q = radius / rng
+    return 1 - q + q**3 / 5
+
+
+def region_sigma(n_cells: int, cell: float, model: dict[str, float], bias_sigma: float = 0.0,
+                 per_cell_var: float = 0.0) -> float:
+    """One-sigma volume uncertainty (m^3) over ``n_cells`` cells."""
+    if n_cells <= 0:
+        return 0.0
+    area = n_cells * cell * cell
+    var_unc = n_cells * (model["nugget"] + per_cell_var) * cell**4
+    var_cor = area * area * model["psill"] * correlated_fraction(area, model["range"])
+    var_sys = (area * bias_sigma) ** 2
+    return math.sqrt(var_unc + var_cor + var_sys)
+
+
+def bias_sigma(n_stable: int, cell: float, model: dict[str, float], n_coef: int) -> float:
+    """One-sigma error of the correction surface's level at a change cell: the mean error over
+    the stable ground, inflated by the number of fitted coefficients."""
+    if n_stable <= 0:
+        return 0.0
+    area = n_stable * cell * cell
+    var_mean = model["nugget"] / n_stable + model["psill"] * correlated_fraction(
+        area, model["range"])
+    return math.sqrt(max(n_coef, 1) * var_mean)
+
+
+def volume_uncertainty(
+    diff_corrected: np.ndarray,
+    stable_mask: np.ndarray,
+    change_mask: np.ndarray | None,
+    grid: GridSpec,
+    confidence: float = 0.95,
+    *,
+    n_coef: int = 6,
+    per_cell_sigma: np.ndarray | None = None,
+    filled_mask: np.ndarray | None = None,
+    interp_fraction: float = INTERP_FRACTION,
+    fill_sigma: np.ndarray | None = None,
+    extra_sigma: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
+    (all valid cells when None), cut/fill split by the sign of the corrected difference, and
+    ``net_compared_area`` for a sum over every valid cell (e.g. thresholded or raw volumes).
+    ``n_coef`` = coefficients of the correction surface (6 surface, 3 plane, 1 constant, 0 none).
+    ``filled_mask``: interpolated cells; their volume gets a further, fully correlated one-sigma
+    error of ``interp_fraction`` x its absolute value (hole fills over change edges were off by
+    10-22 % of their volume on synthetic pairs), and ``fill_sigma`` (m, per cell: the error of
+    refilling known ground) summed fully correlated within each connected refilled patch.
+    ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
+    change detection picks up from noise on stable ground.
+    Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2, range_m, the variogram, areas."""
+    valid = np.isfinite(diff_corrected)
+    stable = stable_mask & valid
+    region = valid if change_mask is None else change_mask & valid
+    sigma = nmad(diff_corrected[stable]) if stable.any() else float("nan")
+    lags, gamma, npairs = semivariogram(diff_corrected, stable, grid.cell)
+    model = fit_spherical(lags, gamma, npairs)
+    z = z_value(confidence)
+    pcv = 0.0 if per_cell_sigma is None else float(np.nanmean(np.square(per_cell_sigma[region])))
+    b = bias_sigma(int(stable.sum()), grid.cell, model, n_coef) if n_coef else 0.0
+    parts = {
+        "net": region,
+        "cut": region & (diff_corrected < 0),
+        "fill": region & (diff_corrected > 0),
+        "net_compared_area": valid,
+    }
+    filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
+    absd = np.abs(np.where(valid, diff_corrected, 0.0))
+
+    labels, n_patches = ndimage.label(filled)
+    fs = np.zeros(valid.shape) if fill_sigma is None else np.where(filled, fill_sigma, 0.0)
+
+    def interp(m: np.ndarray) -> float:
+        return interp_fraction * float(absd[m & filled].sum()) * grid.cell_area
+
+    def refill(m: np.ndarray) -> float:
+        per_patch = ndimage.sum(np.where(m, fs, 0.0), labels, np.arange(1, n_patches + 1)) * grid.cell_area
+        return float(np.sqrt(np.sum(np.square(per_patch)))) if n_patches else 0.0
+
+    extra = extra_sigma or {}
+    out: dict[str, Any] = {
+        k: z * float(np.linalg.norm([region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m), refill(m),
+                                     extra.get(k, 0.0)]))
+        for k, m in parts.items()
+    }
+    out.update(
+        confidence=confidence, sigma_m=sigma, lod_m=_lod(diff_corrected[stable], sigma, confidence),
+        nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"],
+        bias_sigma_m=b, interpolated_m3=interp(region) / max(interp_fraction, 1e-12),
+        refill_sigma_m3=refill(region),
+        stable_cells=int(stable.sum()), change_area_m2=float(region.sum())
+        * grid.cell_area,
+        variogram={"lag_m": lags.tolist(), "gamma_m2": gamma.tolist(),
+                   "pairs": npairs.tolist()},
+    )
+    return out
+
+
+def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
+    """Level of detection (m) of one cell: from the stable-ground residuals (see :func:`_lod`),
+    but at most twice the LoD of the neighbour-difference noise, so real change left in what
+    was taken as stable ground (e.g. a thin layer on well georeferenced surveys) cannot inflate it."""
+    from ..compensation.stable import noise_sigma
+
+    r = diff[stable & np.isfinite(diff)]
+    lod = _lod(r, nmad(r), confidence) if r.size else None
+    noise = noise_sigma(diff)
+    cap = 2.0 * z_value(confidence) * noise if np.isfinite(noise) else float("inf")
+    return float(min(lod if lod is not None else cap, cap)) if np.isfinite(min(lod or cap, cap)) else 0.0
+
+
+def _lod(stable_residuals: np.ndarray, sigma: float, confidence: float) -> float | None:
+    """LoD at ``confidence``: z x NMAD, or the empirical quantile of |stable residuals| when the
+    residuals have heavier tails than a normal distribution (they usually do)."""
+    if not np.isfinite(sigma):
+        return None
+    r = np.abs(stable_residuals[np.isfinite(stable_residuals)])
+    empirical = float(np.quantile(r, confidence)) if r.size >= 20 else 0.0
+    return max(z_value(confidence) * sigma, empirical)
+
+
+def thresholded_volumes(
+    diff: np.ndarray, lod: float | np.ndarray, cell_area: float, min_cells: int = 1
+) -> dict[str, float]:
+    """net/cut/fill (m^3, cut and fill positive, net = fill - cut) over cells with |d| >= lod
+    (``lod`` a float or a per-cell array); with ``min_cells`` > 1, connected same-sign patches
+    smaller than that are dropped too (a spatial-coherence filter against isolated noise)."""
+    keep = np.isfinite(diff) & (np.abs(diff) >= lod)
+    if min_cells > 1:
+        keep = _coherent(keep & (diff > 0), min_cells) | _coherent(keep & (diff < 0), min_cells)
+    d = np.where(keep, diff, 0.0)
+    fill = float(d[d > 0].sum() * cell_area)
+    cut = float(-d[d < 0].sum() * cell_area)
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(keep.sum() * cell_area)}
+
+
+def _coherent(mask: np.ndarray, min_cells: int) -> np.ndarray:
+    """Cells of ``mask`` in 8-connected patches of at least ``min_cells`` cells."""
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), bool))
+    sizes = np.bincount(labels.ravel(), minlength=n + 1)
+    ok = sizes >= min_cells
+    ok[0] = False
+    return ok[labels]
