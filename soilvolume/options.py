@@ -74,10 +74,3 @@ class Options:
         """A copy with some fields changed."""
         return replace(self, **changes)
 
-    def validated(self) -> Options:
-        """``self`` after checking every field against its allowed range (raises
-        :class:`soilvolume.validate.OptionError` naming the first bad one)."""
-        from .validate import check_options
-
-        return check_options(self)
-

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..api import Hooks, Result
 from ..compensation import planes
+from ..core.hooks import Hooks, Result
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import choose_cell
@@ -30,8 +30,11 @@ from ..inputs.footprint import footprint, inside, polygon_area
 from ..inputs.prepare import Prepared, prepare
 from ..inputs.stream import open_source
 from ..options import Options
-from ..registration.register import register, transform_points
-from ..reporting.report import write_json
+from ..registration.register import register
+from ..registration.rigid import transform_points
+from ..reporting.report import build_report, write_json
+from ..volumes.compute import compute_volumes
+from ..workflow.steps import REGISTERING, points_on, shared_grid, write_report_html
 from .cog import write_cog
 from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
@@ -104,7 +107,7 @@ def _header_points(path) -> int | None:
 
 def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
                    schedule: Schedule) -> Result:
-    """:func:`run._estimate` with the point work as Dask tasks on ``schedule``."""
+    """the in-process run (:mod:`soilvolume.workflow.estimate`) with the point work as Dask tasks on ``schedule``."""
     if options.ground == "filter":
         raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
     hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
@@ -115,8 +118,6 @@ def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks
 def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule,
            starting) -> Result:
     """The tiled run, with ``starting`` the future of the (cluster, client) being started."""
-    from ..workflow import estimate as run
-
     with timer("cluster_wait"):
         _, c = starting.result()
     with timer("crop"):  # the registration subsets: a first pass as Dask tasks
@@ -129,16 +130,16 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     hooks.info(f"georeferencing: {mode} ({why})")
     if mode == "precise":
         options = options.with_(correction="none")
-    hooks.step(15, run.REGISTERING)
+    hooks.step(15, REGISTERING)
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, run.REGISTERING),
+        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, REGISTERING),
                        precise=mode == "precise")
     reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     after_thin = transform_points(prep.after_thin, reg.transform)
     cell = options.cell if options.cell else cell_from_columns(prep, after_thin)
-    grid = run.shared_grid(prep, after_thin, options.with_(cell=cell))
+    grid = shared_grid(prep, after_thin, options.with_(cell=cell))
     plan = Plan(str(before), str(after), prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"],
                 prep.frame, prep.origin, grid, reg.transform, prep.ground,
                 footprint(prep.after_thin[:, :2], options.radius), options.statistic, prep.index)
@@ -153,7 +154,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     with timer("grids"):
         h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
     with timer("planes"):
-        sel_b = run._points_on(prep.before_thin, grid, np.isfinite(h_b))
+        sel_b = points_on(prep.before_thin, grid, np.isfinite(h_b))
         p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
         p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
         d_i = planes.plane_offset(p_b, p_a, grid)
@@ -161,19 +162,19 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     with timer("volume"):
         alt = reg.fine.alternative
         moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
-        vols = run._volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
+        vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
         vols["dem_after"] = h_a + prep.origin[2]
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):
         write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
     with timer("report"):
-        report = run._report(prep, reg, grid, vols, p_b, p_a, options, timer)
+        report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
         report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side,
                             "task_points_read": stats["read"], "task_seconds": round(stats["seconds"], 3),
                             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9))}
         _quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
-        run._html(out, report, vols, grid)
+        write_report_html(out, report, vols, grid)
     shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
 

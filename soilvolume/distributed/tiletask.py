@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..api import Hooks
+from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec
 from ..dem.grid import cell_heights, cell_ids
@@ -63,7 +63,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
 
     import pyproj
 
-    from ..workflow.estimate import transform_points32
+    from ..registration.rigid import transform_points32
 
     path, ground = (plan.before, plan.after)[epoch], plan.ground[epoch]
     crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])

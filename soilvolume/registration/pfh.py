@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .register import to_pcd, transform_points, with_normals
+from .o3d import to_pcd, with_normals
+from .rigid import transform_points
 
 BINS = 5
 

@@ -17,6 +17,8 @@ from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
 from ..options import Options
 from . import columns as surface
+from .o3d import _o3d, to_pcd
+from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
 
 # (voxel m, max correspondence distance m, Tukey k m): coarse-to-fine, shrinking distances.
 ICP_LEVELS = ((1.0, 6.0, 3.0), (1.0, 3.0, 1.0), (0.5, 1.5, 0.5), (0.25, 0.8, 0.25), (0.25, 0.4, 0.15))
@@ -41,55 +43,11 @@ class Registration:
     georeferencing: dict = field(default_factory=dict)
 
 
-def _o3d():
-    import open3d as o3d
-
-    o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    return o3d
-
-
-def to_pcd(xyz: np.ndarray, voxel: float | None = None):
-    """Open3D cloud from local float64 coordinates, optionally voxel-thinned."""
-    o3d = _o3d()
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz, dtype=np.float64)))
-    return pcd.voxel_down_sample(voxel) if voxel else pcd
-
-
-def with_normals(pcd, radius: float):
-    """Upward-oriented normals (an empty cloud is returned as it is)."""
-    o3d = _o3d()
-    if not pcd.has_points():
-        return pcd
-    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=radius, max_nn=30))
-    pcd.orient_normals_to_align_with_direction(np.array([0.0, 0.0, 1.0]))
-    return pcd
-
-
-def rotation_deg(t: np.ndarray) -> float:
-    """Rotation angle (degrees) of a 4x4 rigid transform."""
-    c = (np.trace(t[:3, :3]) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-
-
-def tilt_deg(t: np.ndarray) -> float:
-    """Tilt (degrees) of a 4x4 rigid transform: the angle it turns the vertical by."""
-    return float(np.degrees(np.arccos(np.clip(t[2, 2], -1.0, 1.0))))
-
-
 def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
     """Whether a pose stays within the georeferencing prior (shift at the after centre, rotation
     and tilt)."""
     return (shift_at(t, centre) <= options.max_gps_shift and rotation_deg(t) <= options.max_gps_rotation
             and tilt_deg(t) <= options.max_gps_tilt)
-
-
-def shift_at(t: np.ndarray, point: np.ndarray) -> float:
-    """How far the transform moves ``point`` (metres)."""
-    return float(np.linalg.norm(t[:3, :3] @ point + t[:3, 3] - point))
-
-
-def transform_points(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
-    return xyz @ t[:3, :3].T + t[:3, 3]
 
 
 def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> tuple[float, float]:

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..api import Hooks
+from ..core.hooks import Hooks
 from ..core.outputs import check_output_file, os_errors
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import write_geotiff

@@ -1,0 +1,134 @@
+"""The volume step of the method, on the two epochs' grids: the difference, each epoch's weak
+cells refilled, holes filled, the bias correction (:mod:`soilvolume.compensation`), change areas,
+budgets, uncertainty and zones."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from ..core.types import GridSpec
+from ..dem import holes
+from ..options import Options
+from .difference import budget, difference, signed_budget
+
+N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
+
+
+MIN_POINTS = 3  # a robust cell height needs at least this many points
+
+
+def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None) -> dict:
+    """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
+    of the difference (empty in either epoch) filled from the surrounding difference, which is
+    smooth on unchanged ground whatever the terrain -> correction -> change areas, budgets,
+    uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs;
+    ``moved``: the rigid move from the accepted pose to a nearly as good one (registration
+    uncertainty)."""
+    from .change import cell_lod, cell_sigma, change_areas
+    from .uncertainty import detection_level, thresholded_volumes, volume_uncertainty, z_value
+
+    raw = difference(h_a, h_b)
+    max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
+    weak = dict(ratio=options.min_count_ratio, method=options.fill_method, min_points=MIN_POINTS)
+    f_b, m_b = holes.refill_epoch(h_b, n_b, **weak)
+    f_a, m_a = holes.refill_epoch(h_a, n_a, **weak)
+    filled = difference(f_a, f_b)
+    hole = holes.enclosed_holes(np.isfinite(filled), max_cells)
+    filled = holes.fill(filled, hole, options.fill_method)
+    filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
+    offset, params, stable, _ = correction(filled, d_i, grid, options)
+    diff = filled - offset
+    area = grid.cell_area
+    fill_sigma = refill_sigma(diff, filled_mask, stable, options)
+    lod = detection_level(diff, stable, options.lod_confidence)
+    z = z_value(options.lod_confidence)
+    if spread is not None:
+        se_a = np.where(m_a, np.nan, cell_sigma(spread[0], n_a))
+        se_b = np.where(m_b, np.nan, cell_sigma(spread[1], n_b))
+        lod_cell = cell_lod(lod, se_a, se_b, z)
+        lod_cell = np.maximum(lod_cell, z * fill_sigma)
+    else:
+        lod_cell = np.full(diff.shape, lod)
+    fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
+    change = fill_area | cut_area
+    # stable ground for the error model: never a cell of (or next to) a detected change area,
+    # unless the user drew it
+    quiet = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
+    if not options.stable_mask and quiet.sum() >= 12:
+        stable = quiet
+    shift = pose_effect(f_a, grid, moved)
+    reg_v = signed_budget(shift, fill_area, cut_area, area)
+    extra = {k: abs(reg_v[k]) for k in ("net", "cut", "fill")}
+    unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
+                             n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma,
+                             extra_sigma=extra)
+    headline = signed_budget(diff, fill_area, cut_area, area)
+    vols = {
+        "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
+        "stable": stable, "params": params,
+        "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v},
+        "change_mask": change,
+        "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
+        "paper_plane": budget(filled - d_i, area),
+        "change_areas": headline,
+        "thresholded": thresholded_volumes(diff, lod, area),
+        "holes": holes.summary(diff, filled_mask, area),
+        "empty_cells": int((~np.isfinite(raw)).sum()),
+        "empty_before": int((n_b == 0).sum()), "empty_after": int((n_a == 0).sum()),
+    }
+    if options.zones:
+        from .zones import zone_budgets
+
+        compared = np.where(np.isfinite(diff), 0.0, np.nan)
+        vols["zones"] = zone_budgets(np.where(change, diff, compared), grid, options.zones)
+    return vols
+
+
+def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:
+    """Change of the difference (m per cell) if the after surface moved horizontally by ``moved``
+    (4x4, local): -grad(H) . u; its vertical part and tilt are absorbed by the bias correction."""
+    if moved is None:
+        return np.zeros(h_after.shape)
+    x, y = grid.centers_local()
+    p = np.stack([x, y, np.nan_to_num(h_after)], axis=-1)
+    u = p @ moved[:3, :3].T + moved[:3, 3] - p
+    gy, gx = np.gradient(h_after, grid.cell)  # rows run south: d/dy = -d/drow
+    return -(gx * u[..., 0] - gy * u[..., 1])
+
+
+def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
+    """Per-cell one-sigma error (m) of refilled cells, measured by refilling known stable cells
+    of the difference with holes of the typical size, or smaller ones where the stable ground
+    has no room for them (0 where nothing was refilled)."""
+    if not filled_mask.any():
+        return np.zeros(diff.shape)
+    radius, s = holes.typical_radius(filled_mask), float("nan")
+    while not np.isfinite(s) and radius >= 1.0:  # smaller test holes where stable ground is patchy
+        s = holes.fill_error(diff, stable, options.fill_method, radius, seed=options.seed)
+        radius /= 2.0
+    if not np.isfinite(s):  # no room to measure it: one stable-ground noise level per cell
+        from ..compensation.robust import nmad
+
+        s = nmad(diff[stable])
+    return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
+
+
+def correction(diff, d_i, grid: GridSpec, options: Options):
+    """(correction surface to subtract, its parameters, stable-cell mask, change mask).
+
+    Stable ground is found the same way for every method, so residual statistics and the
+    uncertainty are comparable; ``paper-plane`` subtracts the paper's ``d_i`` first."""
+    from ..compensation.correction import apply as apply_correction
+
+    method = options.correction
+    base = d_i if method == "paper-plane" else 0.0
+    user_mask = None
+    if options.stable_mask:
+        from .zones import polygons_mask
+
+        user_mask = polygons_mask(options.stable_mask, grid)
+    res = apply_correction(diff - base, "none" if method == "paper-plane" else method, grid,
+                           user_mask=user_mask)
+    offset = np.where(np.isfinite(diff), base + res.surface, np.nan)
+    return offset, {**res.params, "method": method}, res.stable_mask, res.change_mask

@@ -1,0 +1,76 @@
+"""Steps shared by the in-process run (:mod:`.estimate`) and the tiled one
+(:mod:`soilvolume.distributed.tiled`): stage timings, reading the pair, the shared grid, the
+points on valid cells, report.html."""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+
+import numpy as np
+
+from ..core.hooks import Hooks
+from ..core.outputs import OutputDir
+from ..core.types import GridSpec, SoilVolumeError
+from ..dem import grid as gridmod
+from ..inputs.footprint import footprint
+from ..inputs.prepare import Prepared, prepare
+from ..options import Options
+from ..validate import check_grid_cells
+
+REGISTERING = "registering the after cloud onto the before cloud (coarse, then fine)"
+
+
+
+class Timer:
+    """Per-stage wall times (seconds), in the order they ran."""
+
+    def __init__(self) -> None:
+        self.s: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, name: str):
+        t0 = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.s[name] = self.s.get(name, 0.0) + time.perf_counter() - t0
+
+
+def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> GridSpec:
+    """The grid over the registered after footprint, cell size from the before density."""
+    poly = footprint(after_thin[:, :2])
+    cell = options.cell
+    if cell is None or cell <= 0:
+        cell = gridmod.cell_for(prep.before.xyz, poly)
+    lo = np.maximum(after_thin.min(axis=0), prep.before_thin.min(axis=0))
+    hi = np.minimum(after_thin.max(axis=0), prep.before_thin.max(axis=0))
+    if (hi[:2] <= lo[:2]).any():
+        raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
+    grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
+    check_grid_cells(grid.rows, grid.cols, cell)
+    return grid
+
+
+def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline) -> Prepared:
+    from ..inputs.stream import open_source
+
+    src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
+    return prepare(src_b, src_a, options, check=hooks.ticker(2, 15, "reading"))
+
+
+def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
+    row, col, ok = grid.index(xyz[:, :2])
+    keep = np.zeros(len(xyz), bool)
+    keep[ok] = cells[row[ok], col[ok]]
+    return xyz[keep]
+
+
+def write_report_html(out: OutputDir, report: dict, vols: dict, grid: GridSpec) -> None:
+    try:
+        from ..reporting.html import write_html
+    except ImportError:
+        return
+    arrays = {"difference": vols["diff"], "residual": np.where(vols["stable"], vols["diff"], np.nan),
+              "filled_mask": vols["filled_mask"], "dem_after": vols["dem_after"]}
+    write_html(report, arrays, grid, out.path("report.html"))
