@@ -282,17 +282,22 @@ def _key(*parts: bytes) -> str:
     return h.hexdigest()[:10]
 
 
+def _scene_code() -> bytes:
+    """The scene generator's source (soilvolume/scenes/), part of the scene cache keys."""
+    return b"".join(p.read_bytes() for p in sorted(Path(synthetic.__file__).parent.glob("*.py")))
+
+
 def ensure_scene(case: Case, root: Path) -> tuple[Path, Path, Path]:
     """Generate (once) a synthetic or real-terrain pair; before, after, truth paths."""
     if case.kind == "synthetic":
         cfg = case.scene_config()
         key = _key(json.dumps(asdict(cfg), sort_keys=True).encode(),
-                   Path(synthetic.__file__).read_bytes(), str(case.seed).encode())
+                   _scene_code(), str(case.seed).encode())
         d = root / "scenes" / f"syn-{cfg.change}-s{case.seed}-{key}"
     else:
         key = _key(json.dumps(case.config, sort_keys=True).encode(),
                    Path(real_terrain.__file__).read_bytes(),
-                   Path(synthetic.__file__).read_bytes(), str(case.seed).encode())
+                   _scene_code(), str(case.seed).encode())
         d = root / "scenes" / f"rt-{case.config['case']}-s{case.seed}-{key}"
     files = (d / "before.las", d / "after.las", d / "truth.json")
     if all(f.exists() for f in files):
@@ -664,7 +669,7 @@ def machine_meta(argv: list[str], total_s: float, load: float, n: int) -> dict:
     try:  # the last commit that changed the engine (soilvolume/ except the scene generator)
         engine_commit = subprocess.run(
             ["git", "log", "-1", "--format=%h %cd", "--date=format:%Y-%m-%d %H:%M", "--",
-             "soilvolume", ":!soilvolume/synthetic.py"], cwd=REPO, capture_output=True,
+             "soilvolume", ":!soilvolume/scenes"], cwd=REPO, capture_output=True,
             text=True, timeout=20).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         engine_commit = ""

@@ -81,7 +81,7 @@ def ensure_scene(name: str, seed: int, fmt: str, root: Path) -> tuple[Path, Path
     """Generate (once) the scene's files; returns before, after, truth paths and the seconds
     spent generating (0 when cached). The cache key covers the config and the generator code."""
     cfg = scene_config(name)
-    src = Path(synthetic.__file__).read_bytes()
+    src = b"".join(p.read_bytes() for p in sorted(Path(synthetic.__file__).parent.glob("*.py")))  # scenes/
     key = hashlib.sha1(json.dumps(asdict(cfg), sort_keys=True).encode() + src
                        + fmt.encode()).hexdigest()[:10]
     d = root / f"pair-{cfg.before_points + cfg.after_points}-s{seed}-{key}"

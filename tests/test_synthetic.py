@@ -139,7 +139,7 @@ def test_after_heights_match_truth_on_ground():
 def test_streaming_chunks_equal_in_memory(scene, monkeypatch):
     before = np.concatenate([xyz for xyz, _ in iter_epoch(3, scene.config, "before")])
     np.testing.assert_allclose(before, scene.before, rtol=0, atol=1e-9)
-    import soilvolume.scenes.synthetic as syn
+    import soilvolume.scenes.world as syn
 
     monkeypatch.setattr(syn, "CHUNK_POINTS", 7_000)  # many chunks
     s = make_pair(3, scene.config)

@@ -1,0 +1,129 @@
+"""Users' pipeline files (or JSON text) loaded and checked: PDAL's shorthand forms normalised to
+stages, every option's type checked, errors naming the file and the problem."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+from ..core.types import SoilVolumeError
+
+#: PDAL's reader/writer inference from a filename's extension
+READERS = {".las": "readers.las", ".laz": "readers.las", ".ply": "readers.ply",
+           ".pcd": "readers.pcd", ".txt": "readers.text", ".csv": "readers.text"}
+WRITERS = {".las": "writers.las", ".laz": "writers.las", ".tif": "writers.gdal",
+           ".tiff": "writers.gdal", ".vrt": "writers.gdal", ".txt": "writers.text",
+           ".csv": "writers.text", ".ply": "writers.ply", ".pcd": "writers.pcd"}
+#: extra text formats the builder reads with an explicit readers.text
+TEXT_SUFFIXES = {".xyz", ".pts", ".txt", ".csv"}
+
+NUMERIC = {"mean_k", "multiplier", "min_k", "radius", "class", "cell", "slope", "window",
+           "threshold", "scalar", "cut", "distance", "resolution", "power", "window_size",
+           "nodata", "origin_x", "origin_y", "width", "height", "scale_x", "scale_y", "scale_z",
+           "skip", "count", "minor_version", "dataformat_id"}
+BOOLEAN = {"outside", "binmode", "error_on_failure"}
+STRING = {"type", "filename", "in_srs", "out_srs", "a_srs", "method", "header", "separator",
+          "gdaldriver", "data_type", "dimension", "override_srs", "default_srs",
+          "spatialreference", "compression"}
+STRING_OR_LIST = {"limits", "polygon", "point", "output_type", "value", "assignment", "ignore",
+                  "returns"}
+
+
+def _check_value(name: str, value: Any, where: str) -> None:
+    def bad(expect: str) -> SoilVolumeError:
+        return SoilVolumeError(f"{where}: option '{name}' must be {expect}, got {value!r}")
+
+    if value is None:
+        raise bad("set (not null)")
+    if name in NUMERIC:
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise bad("a number")
+        try:
+            float(value)
+        except ValueError:
+            raise bad("a number") from None
+    elif name in BOOLEAN:
+        if not (isinstance(value, bool) or str(value).lower() in ("true", "false")):
+            raise bad("true or false")
+    elif name in STRING and not isinstance(value, str):
+        raise bad("a string")
+    elif name in STRING_OR_LIST:
+        items = value if isinstance(value, list) else [value]
+        if not items or not all(isinstance(v, (str, dict)) for v in items):
+            raise bad("a string or a list of strings")
+
+
+def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
+    if isinstance(raw, dict):
+        if "pipeline" not in raw:
+            raise SoilVolumeError(f"pipeline {name}: an object needs a 'pipeline' list")
+        raw = raw["pipeline"]
+    if not isinstance(raw, list):
+        raise SoilVolumeError(
+            f"pipeline {name}: expected a list of stages or {{\"pipeline\": [...]}}, "
+            f"got {type(raw).__name__}")
+    if not raw:
+        raise SoilVolumeError(f"pipeline {name}: the pipeline has no stages (missing reader)")
+    out: list[dict[str, Any]] = []
+    last = len(raw) - 1
+    for i, entry in enumerate(raw):
+        where = f"pipeline {name}: stage {i + 1}"
+        if isinstance(entry, str):
+            entry = {"filename": entry}
+        elif not isinstance(entry, dict):
+            raise SoilVolumeError(f"{where} must be an object or a filename string, got "
+                                  f"{type(entry).__name__}")
+        stage = dict(entry)
+        kind = stage.get("type")
+        if kind is None:
+            fname = stage.get("filename")
+            if not isinstance(fname, str):
+                raise SoilVolumeError(f"{where} has no 'type' (and no filename to infer it from)")
+            table = READERS if i == 0 else WRITERS if i == last else None
+            if table is None:
+                raise SoilVolumeError(f"{where}: a bare filename must be the first (reader) or "
+                                      "the last (writer) stage")
+            kind = table.get(Path(fname).suffix.lower())
+            if kind is None:
+                raise SoilVolumeError(f"{where}: cannot infer a stage for '{fname}'")
+            stage = {"type": kind, **stage}
+        if not isinstance(kind, str):
+            raise SoilVolumeError(f"{where}: 'type' must be a string, got {kind!r}")
+        for key, value in stage.items():
+            _check_value(key, value, f"{where} ({kind})")
+        out.append(stage)
+    first = out[0]
+    if not first["type"].startswith("readers."):
+        raise SoilVolumeError(f"pipeline {name}: missing reader: the first stage is "
+                              f"'{first['type']}', not a reader (e.g. readers.las) or a filename")
+    if not isinstance(first.get("filename"), str) or not first["filename"]:
+        raise SoilVolumeError(f"pipeline {name}: the reader {first['type']} has no filename")
+    return out
+
+
+def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
+    """Stages of a pipeline file (or JSON text), validated; errors name the file and problem.
+
+    Accepts ``{"pipeline": [...]}`` or a bare list; strings are filenames (the first a reader,
+    the last a writer, types inferred from the extension as PDAL does)."""
+    text = str(path_or_text)
+    if isinstance(path_or_text, os.PathLike) or not text.lstrip().startswith(("[", "{")):
+        name = text
+        try:
+            text = Path(path_or_text).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise SoilVolumeError(f"pipeline {name}: cannot read ({exc.strerror or exc})") from exc
+        except UnicodeDecodeError as exc:
+            raise SoilVolumeError(f"pipeline {name}: not UTF-8 text (byte {exc.start})") from exc
+    else:
+        name = "<text>"
+    try:
+        raw = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise SoilVolumeError(f"pipeline {name}: invalid JSON (line {exc.lineno}, column "
+                              f"{exc.colno}: {exc.msg})") from exc
+    except RecursionError as exc:
+        raise SoilVolumeError(f"pipeline {name}: invalid JSON (nested too deeply)") from exc
+    return _normalise(raw, name)

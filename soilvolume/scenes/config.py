@@ -1,0 +1,66 @@
+"""The parameters of a synthetic pair (:class:`SceneConfig`) and the LAS classes it writes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+CLASS_GROUND = 2
+CLASS_VEHICLE = 6
+CLASS_BOULDER = 1
+CLASS_OUTLIER = 1
+
+
+@dataclass(frozen=True)
+class SceneConfig:
+    """Parameters of a synthetic pair (lengths in metres, angles in degrees)."""
+
+    before_size: tuple[float, float] = (158.0, 154.0)
+    after_size: tuple[float, float] = (67.0, 62.7)
+    before_points: int = 250_000  # "paper" scale is 2_500_000
+    after_points: int = 150_000  # "paper" scale is 1_500_000
+    shift_m: tuple[float, float, float] = (2.0, -1.5, 0.3)  # GPS misalignment of the after cloud
+    rotation_deg: tuple[float, float, float] = (0.3, -0.2, 2.0)  # roll, pitch, yaw (after centre)
+    noise_m: float = 0.03  # gaussian vertical SfM noise (each epoch)
+    doming_m: float = 0.0  # amplitude of a smooth dome/bowl added to the after epoch
+    vertical_bias_m: float = 0.0  # planar bias (offset + small tilt) added to the after epoch
+    outlier_fraction: float = 0.0  # isolated outliers incl. floaters (class 1)
+    holes: int = 0  # occlusion holes (no points) per epoch, some on change edges
+    vegetation: bool = False  # bushes in both epochs, grown in the after epoch (class 3/4/5)
+    objects: bool = False  # vehicles (class 6) and boulders (class 1), same place in both epochs
+    relief: float = 1.0  # scale of the long waves and hills (0 = a tilted plane with local detail)
+    # "piles" (3 piles ~1020 m3 + one pit ~69 m3, ~15 % of the after footprint), "none", "pit" (one
+    # flat-bottomed pit, 5 %), "pile" (one flat-topped pile, 10 %) or "excavation" (a flat-bottomed
+    # excavation over `change_fraction` of the after footprint plus a tall pile near one edge)
+    change: str = "piles"
+    crs: str = "EPSG:32654"
+    origin: tuple[float, float, float] = (500_000.0, 3_900_000.0, 0.0)  # added to local coords
+    # change="excavation": fraction of the after footprint the excavation's outline covers
+    change_fraction: float = 0.4
+
+    @classmethod
+    def paper(cls, **overrides) -> SceneConfig:
+        """The paper-sized, realistic scene: 2.5 M + 1.5 M points with every nuisance on."""
+        base = cls(
+            before_points=2_500_000,
+            after_points=1_500_000,
+            shift_m=(2.5, -1.8, 0.4),
+            rotation_deg=(0.3, -0.2, 2.5),
+            noise_m=0.03,
+            doming_m=0.03,
+            outlier_fraction=0.005,
+            holes=8,
+            vegetation=True,
+            objects=True,
+        )
+        return replace(base, **overrides)
+
+    @classmethod
+    def small(cls, **overrides) -> SceneConfig:
+        """Same geometry as the default, ~60 k + 40 k points, for fast tests."""
+        return replace(cls(before_points=60_000, after_points=40_000), **overrides)
+
+    def with_total_points(self, total: int) -> SceneConfig:
+        """A copy with ``total`` points split between the epochs in the current ratio."""
+        frac = self.before_points / float(self.before_points + self.after_points)
+        nb = int(round(total * frac))
+        return replace(self, before_points=nb, after_points=int(total) - nb)

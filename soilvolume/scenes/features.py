@@ -1,0 +1,174 @@
+"""The analytic ground change of a synthetic pair: piles, pits and excavations placed on the after
+footprint, their exact volumes and ``dz(x, y)``."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import SceneConfig
+
+# ----------------------------------------------------------------------------------------------
+# geometry shared by both epochs
+
+
+def _after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
+    """(xmin, ymin, xmax, ymax) of the after footprint, local frame (true frame)."""
+    bw, bh = cfg.before_size
+    aw, ah = cfg.after_size
+    cx = bw / 2.0 + min(3.0, 0.04 * bw)
+    cy = bh / 2.0 - min(2.0, 0.03 * bh)
+    cx = min(max(cx, aw / 2.0), bw - aw / 2.0)
+    cy = min(max(cy, ah / 2.0), bh - ah / 2.0)
+    return cx - aw / 2.0, cy - ah / 2.0, cx + aw / 2.0, cy + ah / 2.0
+
+
+CHANGE_KINDS = ("piles", "none", "pit", "pile", "excavation")
+
+
+def _change_features(cfg: SceneConfig) -> list[dict]:
+    """The analytic change features (positions relative to the after footprint centre, scaled
+    down if the after footprint is smaller than the default)."""
+    if cfg.change == "none":
+        return []
+    if cfg.change not in CHANGE_KINDS:
+        raise ValueError(f"unknown change {cfg.change!r} ({', '.join(CHANGE_KINDS)})")
+    x0, y0, x1, y1 = _after_box(cfg)
+    cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+    s = min(1.0, (x1 - x0) / 67.0, (y1 - y0) / 62.7)
+    if cfg.change != "piles":
+        return finish_features(_single_features(cfg, x0, y0, x1, y1, s))
+    feats = [
+        # flat-topped cone: sign, bottom radius, top radius, height
+        dict(kind="cone", sign=1.0, x=cx - 15 * s, y=cy + 12 * s, r_bottom=8.5 * s,
+             r_top=4.5 * s, height=3.5 * s, name="pile A (truncated cone)"),
+        dict(kind="cone", sign=1.0, x=cx + 14 * s, y=cy + 14 * s, r_bottom=6.5 * s,
+             r_top=3.0 * s, height=3.0 * s, name="pile B (truncated cone)"),
+        # rectangular pile, equal side slopes: bottom half-sizes a x b, rotated by angle
+        dict(kind="rect", sign=1.0, x=cx + 12 * s, y=cy - 13 * s, a=8.0 * s, b=5.5 * s,
+             height=3.0 * s, run=3.0 * s, angle_deg=25.0, name="pile C (truncated rectangular)"),
+        dict(kind="cone", sign=-1.0, x=cx - 14 * s, y=cy - 14 * s, r_bottom=5.0 * s,
+             r_top=2.5 * s, height=1.5 * s, name="pit (truncated cone)"),
+    ]
+    return finish_features(feats)
+
+
+def finish_features(feats: list[dict]) -> list[dict]:
+    """Add the exact ``volume`` (m3, >= 0) and the bounding ``radius`` (m) to analytic change
+    features: ``cone`` (x, y, r_bottom, r_top, height; a flat-topped cone or flat-bottomed conical
+    pit) and ``rect`` (x, y, a, b bottom half-sizes, height, run = horizontal run of the equal side
+    slopes, angle_deg; a flat-topped pile or flat-bottomed excavation). ``sign`` +1 fill, -1 cut."""
+    for f in feats:
+        if f["kind"] == "cone":
+            h, r1, r2 = f["height"], f["r_top"], f["r_bottom"]
+            f["volume"] = math.pi * h / 3.0 * (r1 * r1 + r1 * r2 + r2 * r2)
+            f["radius"] = r2
+        else:
+            a, b, h, run = f["a"], f["b"], f["height"], f["run"]
+            k = run / h  # horizontal run per metre of height
+            f["volume"] = 4.0 * (a * b * h - (a + b) * k * h * h / 2.0 + k * k * h**3 / 3.0)
+            f["radius"] = math.hypot(a, b)
+    return feats
+
+
+def feature_area(f: dict) -> float:
+    """Exact area (m2) of a change feature's outline (where its dz is not zero)."""
+    if f["kind"] == "cone":
+        return math.pi * f["r_bottom"] ** 2
+    return 4.0 * f["a"] * f["b"]
+
+
+def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: float,
+                     s: float) -> list[dict]:
+    """Features of the "pit", "pile" and "excavation" kinds. They carry ``exact_outline``: the
+    placement of clutter and holes uses their true outline, not the bounding circle."""
+    aw, ah = x1 - x0, y1 - y0
+    cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
+    area = aw * ah
+    if cfg.change == "pit":  # 5 % of the after footprint, 2 m deep
+        rb = math.sqrt(0.05 * area / math.pi)
+        return [dict(kind="cone", sign=-1.0, x=cx + 4.0 * s, y=cy - 3.0 * s, r_bottom=rb,
+                     r_top=0.55 * rb, height=2.0 * s, exact_outline=True,
+                     name="pit (flat-bottomed truncated cone)")]
+    if cfg.change == "pile":  # 10 % of the after footprint, 5 m high
+        rb = math.sqrt(0.10 * area / math.pi)
+        return [dict(kind="cone", sign=1.0, x=cx - 3.0 * s, y=cy + 2.0 * s, r_bottom=rb,
+                     r_top=0.35 * rb, height=5.0 * s, exact_outline=True,
+                     name="pile (flat-topped truncated cone)")]
+    # excavation: 2b tall (most of the footprint's height), 2a wide so that 4ab = f * area; a
+    # tall conical pile beside it, the pair centred in x with equal margins
+    frac = float(cfg.change_fraction)
+    if not 0.02 <= frac <= 0.75:
+        raise ValueError(f"change_fraction {frac} outside 0.02..0.75")
+    margin_y = 0.045 * ah
+    b = min(ah - 2.0 * margin_y, 1.2 * ah * math.sqrt(frac)) / 2.0
+    a = frac * area / (4.0 * b)
+    gap = 1.5 * s
+    rp = min(9.0 * s, (aw - 4.0 * s - 2.0 * a - gap) / 2.0)  # 2 m margins at both x ends
+    if rp < 3.0 * s:
+        raise ValueError(f"change_fraction {frac} leaves no room for the pile")
+    width = 2.0 * a + gap + 2.0 * rp
+    ex = cx - width / 2.0 + a
+    px = ex + a + gap + rp
+    py = cy + min(0.25 * ah, ah / 2.0 - rp - 2.0 * s)
+    depth, run = 2.5 * s, 3.0 * s
+    return [
+        dict(kind="rect", sign=-1.0, x=ex, y=cy, a=a, b=b, height=depth, run=run,
+             angle_deg=0.0, exact_outline=True,
+             name=f"excavation (flat-bottomed, {frac:.0%} of the after footprint)"),
+        # ~42 degree sides, flat top of 0.3 x its base radius
+        dict(kind="cone", sign=1.0, x=px, y=py, r_bottom=rp, r_top=0.3 * rp,
+             height=0.9 * 0.7 * rp, exact_outline=True, name="tall pile (truncated cone)"),
+    ]
+
+
+def _outline_distance(f: dict, x: float, y: float) -> float:
+    """Distance (m) from (x, y) to the outline of a change feature (0 inside)."""
+    u, v = x - f["x"], y - f["y"]
+    if f["kind"] == "cone":
+        return max(0.0, math.hypot(u, v) - f["r_bottom"])
+    t = math.radians(f["angle_deg"])
+    uu = abs(u * math.cos(t) + v * math.sin(t)) - f["a"]
+    vv = abs(-u * math.sin(t) + v * math.cos(t)) - f["b"]
+    return math.hypot(max(uu, 0.0), max(vv, 0.0))
+
+
+def _clear_of(f: dict, x: float, y: float, r: float) -> bool:
+    """(x, y) with radius r is clear of change feature f (bounding circle for the original
+    "piles" features, whose placement must not change; true outline for the others)."""
+    if f.get("exact_outline"):
+        return _outline_distance(f, x, y) > r
+    return math.hypot(x - f["x"], y - f["y"]) > f["radius"] + r
+
+
+def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:
+    """The ground change dz (m, + = fill) of analytic features (see :func:`finish_features`)
+    at x/y in the features' frame."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    dz = np.zeros(np.broadcast(x, y).shape)
+    x, y = np.broadcast_to(x, dz.shape), np.broadcast_to(y, dz.shape)
+    for f in feats:
+        R = f["radius"]
+        m = (np.abs(x - f["x"]) < R) & (np.abs(y - f["y"]) < R)
+        if not m.any():
+            continue
+        u, v = x[m] - f["x"], y[m] - f["y"]
+        if f["kind"] == "cone":
+            r = np.hypot(u, v)
+            slope = f["height"] / (f["r_bottom"] - f["r_top"])
+            h = np.clip((f["r_bottom"] - r) * slope, 0.0, f["height"])
+        else:
+            t = math.radians(f["angle_deg"])
+            uu = np.abs(u * math.cos(t) + v * math.sin(t))
+            vv = np.abs(-u * math.sin(t) + v * math.cos(t))
+            d = np.minimum(f["a"] - uu, f["b"] - vv)
+            h = np.clip(d * (f["height"] / f["run"]), 0.0, f["height"])
+        dz[m] += f["sign"] * h
+    return dz
+
+
+def change_dz(x: np.ndarray, y: np.ndarray, cfg: SceneConfig) -> np.ndarray:
+    """The analytic ground change dz (m, + = fill) at LOCAL x/y (true frame)."""
+    return features_dz(x, y, _change_features(cfg))
