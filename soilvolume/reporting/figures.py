@@ -24,7 +24,6 @@ PUOR = np.array([[127, 59, 8], [179, 88, 6], [224, 130, 20], [253, 184, 99], [25
 _MAX_PX = 900  # longest side of an embedded map (larger rasters are block-averaged)
 _DISPLAY = 760  # longest side of a map on the page (CSS px)
 _AZIMUTH, _ALTITUDE = 315.0, 45.0
-_HIST_BINS = 71
 
 
 def _positive(v: Any) -> float | None:
@@ -289,74 +288,3 @@ def residual_map(residual: np.ndarray, grid: GridSpec, relief: np.ndarray | None
                f"Hatched: no data. {_extent_text(grid, r.shape, k)}")
     bar = _colour_bar(PUOR, lim, "residual on stable ground (m)", ident)
     return _map_figure(ident, "Stable-ground residuals", _repeat(rgba, f), r.shape[1] * grid.cell, bar, caption)
-
-
-def _hist_limit(v: np.ndarray, lod: float | None) -> float:
-    """Symmetric histogram range: the 0.5-99.5 percentiles (of a subsample), wide enough for ±1.5 LoD."""
-    lo, hi = np.percentile(v[:: max(1, v.size // 250_000)], [0.5, 99.5])
-    return max(abs(float(lo)), abs(float(hi)), 1.5 * (lod or 0.0), 1e-3)
-
-
-def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str, ident: str) -> str:
-    """Log-count bars over [-lim, lim], ±LoD band, zero line, axes with ticks."""
-    w, h, left, right, top, bottom = 760, 300, 64, 16, 12, 50
-    pw, ph = w - left - right, h - top - bottom
-    y_hi = math.log10(max(int(counts.max()), 1)) + 0.15
-    y_lo = math.log10(0.5)
-
-    def sx(x: float) -> float:
-        return left + (min(max(x, -lim), lim) + lim) / (2 * lim) * pw
-
-    def sy(c: float) -> float:
-        return top + ph * (1 - (math.log10(c) - y_lo) / (y_hi - y_lo))
-
-    n = len(counts)
-    edges = np.linspace(-lim, lim, n + 1)
-    fills = colour_ramp((edges[:-1] + edges[1:]) / 2, lim, RDBU)
-    parts = [f'<line x1="{left}" x2="{left + pw}" y1="{sy(10 ** p):.1f}" y2="{sy(10 ** p):.1f}" stroke="#e4e4e4"/>'
-             f'<text x="{left - 6}" y="{sy(10 ** p) + 4:.1f}" text-anchor="end">{_count_label(10 ** p)}</text>'
-             for p in range(0, math.floor(y_hi) + 1)]
-    parts += [f'<rect class=bar x="{sx(edges[i]):.2f}" y="{sy(c):.1f}" width="{pw / n:.2f}" '
-              f'height="{top + ph - sy(c):.1f}" fill="rgb({r},{g},{b})" stroke="#555" stroke-width=".5"/>'
-              for i, c in enumerate(counts.tolist()) if c > 0 for r, g, b in [fills[i, :3].tolist()]]
-    if lod:
-        parts += [f'<rect x="{sx(-lod):.1f}" y="{top}" width="{sx(lod) - sx(-lod):.1f}" height="{ph}" '
-                  'fill="#f39c12" fill-opacity=".3"/>'] + [
-            f'<line x1="{sx(x):.1f}" x2="{sx(x):.1f}" y1="{top}" y2="{top + ph}" stroke="#d35400" '
-            'stroke-dasharray="4 3"/>' for x in (-lod, lod)]
-    ticks, step = _ticks(-lim, lim, 8)
-    parts += [f'<line x1="{sx(t):.1f}" x2="{sx(t):.1f}" y1="{top + ph}" y2="{top + ph + 5}" stroke="#000"/>'
-              f'<text x="{sx(t):.1f}" y="{top + ph + 18}" text-anchor="middle">{_tick_label(t, step)}</text>'
-              for t in ticks]
-    parts.append(f'<line x1="{sx(0):.1f}" x2="{sx(0):.1f}" y1="{top}" y2="{top + ph}" stroke="#000" '
-                 'stroke-width="1.2"/>'
-                 f'<path d="M{left},{top}V{top + ph}H{left + pw}" fill="none" stroke="#000"/>'
-                 f'<text x="{left + pw / 2}" y="{h - 8}" text-anchor="middle">after − before (m)</text>'
-                 f'<text transform="translate(16,{top + ph / 2}) rotate(-90)" text-anchor="middle">'
-                 "cells (log scale)</text>")
-    if lod:
-        parts.append(f'<rect x="{left + pw - 22}" y="{top + 8}" width="14" height="12" fill="#f39c12" '
-                     f'fill-opacity=".5"/><text x="{left + pw - 28}" y="{top + 18}" text-anchor="end" '
-                     f"{_halo(12)}>{html.escape(lod_label)}</text>")
-    return (f'<svg class=plot id="{ident}" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-size="12" '
-            f'role="img"><title>Histogram of after − before differences</title>{"".join(parts)}</svg>')
-
-
-def histogram(diff: np.ndarray, lod: float | None = None, confidence: float | None = None,
-              ident: str = "histogram") -> str | None:
-    """HTML figure: inline-SVG histogram of the finite differences with the ±LoD band shaded; None
-    without data."""
-    d = _float_2d(diff)
-    if d is None:
-        return None
-    v = d[np.isfinite(d)]
-    lod = _positive(lod)
-    lim = _hist_limit(v, lod)
-    counts, _ = np.histogram(v, bins=_HIST_BINS, range=(-lim, lim))
-    conf = _positive(confidence)
-    label = f"±LoD{f'{conf * 100:g}' if conf and conf < 1 else ''} = {lod:.3f} m" if lod else ""
-    hidden = v.size - int(counts.sum())
-    caption = (f"{v.size:,} cells in {_HIST_BINS} bins of {2 * lim / _HIST_BINS:.3g} m over ±{lim:.3g} m "
-               f"(0.5–99.5th percentiles){f'; {hidden:,} cells beyond not shown' if hidden else ''}. "
-               + ("Shaded: level of detection." if lod else "No level of detection in the report."))
-    return f"<figure>{_hist_svg(counts, lim, lod, label, ident)}<figcaption>{caption}</figcaption></figure>"

@@ -21,10 +21,10 @@ from .figures import (
     colour_ramp,
     difference_map,
     hillshade,
-    histogram,
     png_bytes,
     residual_map,
 )
+from .histogram import histogram
 
 __all__ = ["PUOR", "RDBU", "block_mean", "colour_ramp", "difference_map", "hillshade", "png_bytes",
            "render_html", "write_html"]
