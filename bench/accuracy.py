@@ -70,15 +70,29 @@ FT_US = 0.3048006096
 DENSE = {"before_points": 2_500_000, "after_points": 1_500_000}  # the paper's density
 QUARTER = {"before_points": 625_000, "after_points": 375_000}
 SPARSE = {"before_points": 125_000, "after_points": 75_000}  # ~5 / 18 points per m2
-NUISANCES = {"noise_m": 0.03, "doming_m": 0.03, "outlier_fraction": 0.005, "holes": 8,
-             "vegetation": True, "objects": True}
+NUISANCES = {
+    "noise_m": 0.03,
+    "doming_m": 0.03,
+    "outlier_fraction": 0.005,
+    "holes": 8,
+    "vegetation": True,
+    "objects": True,
+}
 GPS2 = {"shift_m": (2.0, -1.5, 0.3), "rotation_deg": (0.3, -0.2, 2.0)}
 GPS3 = {"shift_m": (3.0, 2.0, 0.5), "rotation_deg": (0.5, -0.4, 3.0)}
 NO_GPS_ERROR = {"shift_m": (0.0, 0.0, 0.0), "rotation_deg": (0.0, 0.0, 0.0)}
 # airborne LiDAR: precise georeferencing, 5 cm noise, ~10 / 36 points per m2, no doming
-LIDAR = {**NO_GPS_ERROR, "noise_m": 0.05, "before_points": 250_000, "after_points": 150_000,
-         "doming_m": 0.0, "outlier_fraction": 0.002, "holes": 6, "vegetation": True,
-         "objects": True}
+LIDAR = {
+    **NO_GPS_ERROR,
+    "noise_m": 0.05,
+    "before_points": 250_000,
+    "after_points": 150_000,
+    "doming_m": 0.0,
+    "outlier_fraction": 0.002,
+    "holes": 6,
+    "vegetation": True,
+    "objects": True,
+}
 FLAT = {"relief": 0.0}
 
 
@@ -101,89 +115,289 @@ class Case:
 
 
 def _syn(name, what, seed, target=None, dense=False, quick=False, options=None, **cfg) -> Case:
-    return Case(name, "synthetic", what, seed, cfg, target, dense, quick, options or {},
-                diagnostic=bool(options))
+    return Case(name, "synthetic", what, seed, cfg, target, dense, quick, options or {}, diagnostic=bool(options))
 
 
 MATRIX: list[Case] = [
     # paper density, every nuisance: the "paper" targets (net 1 %, cut/fill 3 %)
-    _syn("paper-piles-s1", "piles 15 %, rolling, all nuisances, GPS 2.5 m/2.5 deg", 1, "paper",
-         True, True, **DENSE, **NUISANCES, shift_m=(2.5, -1.8, 0.4), rotation_deg=(0.3, -0.2, 2.5)),
-    _syn("paper-piles-s2", "piles 15 %, rolling, all nuisances, GPS 2 m/2 deg", 2, "paper", True,
-         **DENSE, **NUISANCES, **GPS2),
-    _syn("paper-piles-flat", "piles 15 %, flat, all nuisances, GPS 3 m/3 deg", 3, "paper", True,
-         **DENSE, **NUISANCES, **GPS3, **FLAT),
-    _syn("paper-pit", "one pit 5 %, rolling, all nuisances, GPS 2 m/2 deg", 4, "paper", True,
-         change="pit", **DENSE, **NUISANCES, **GPS2),
-    _syn("paper-pile-flat", "one pile 10 %, flat, all nuisances, GPS 2 m/2 deg", 5, "paper", True,
-         change="pile", **DENSE, **NUISANCES, **GPS2, **FLAT),
+    _syn(
+        "paper-piles-s1",
+        "piles 15 %, rolling, all nuisances, GPS 2.5 m/2.5 deg",
+        1,
+        "paper",
+        True,
+        True,
+        **DENSE,
+        **NUISANCES,
+        shift_m=(2.5, -1.8, 0.4),
+        rotation_deg=(0.3, -0.2, 2.5),
+    ),
+    _syn(
+        "paper-piles-s2",
+        "piles 15 %, rolling, all nuisances, GPS 2 m/2 deg",
+        2,
+        "paper",
+        True,
+        **DENSE,
+        **NUISANCES,
+        **GPS2,
+    ),
+    _syn(
+        "paper-piles-flat",
+        "piles 15 %, flat, all nuisances, GPS 3 m/3 deg",
+        3,
+        "paper",
+        True,
+        **DENSE,
+        **NUISANCES,
+        **GPS3,
+        **FLAT,
+    ),
+    _syn(
+        "paper-pit",
+        "one pit 5 %, rolling, all nuisances, GPS 2 m/2 deg",
+        4,
+        "paper",
+        True,
+        change="pit",
+        **DENSE,
+        **NUISANCES,
+        **GPS2,
+    ),
+    _syn(
+        "paper-pile-flat",
+        "one pile 10 %, flat, all nuisances, GPS 2 m/2 deg",
+        5,
+        "paper",
+        True,
+        change="pile",
+        **DENSE,
+        **NUISANCES,
+        **GPS2,
+        **FLAT,
+    ),
     # works over about half of the after footprint: the "half" targets (net 3 %, cut/fill 5 %)
-    _syn("half-exc40", "excavation 40 % + pile 6 %, rolling, all nuisances, GPS 2 m/2 deg", 6,
-         "half", False, True, change="excavation", change_fraction=0.4, **QUARTER, **NUISANCES,
-         **GPS2),
-    _syn("half-exc50-flat", "excavation 50 % + pile 6 %, flat, all nuisances, GPS 3 m/3 deg", 7,
-         "half", change="excavation", change_fraction=0.5, **QUARTER, **NUISANCES, **GPS3, **FLAT),
-    _syn("half-exc45-dense", "excavation 45 % + pile 6 %, rolling, all nuisances, GPS 3 m/3 deg",
-         8, "half", True, change="excavation", change_fraction=0.45, **DENSE, **NUISANCES, **GPS3),
-    _syn("half-exc50-clean", "excavation 50 % + pile 6 %, rolling, no nuisances, GPS 2 m/2 deg",
-         9, "half", change="excavation", change_fraction=0.5, **QUARTER, **GPS2),
+    _syn(
+        "half-exc40",
+        "excavation 40 % + pile 6 %, rolling, all nuisances, GPS 2 m/2 deg",
+        6,
+        "half",
+        False,
+        True,
+        change="excavation",
+        change_fraction=0.4,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+    ),
+    _syn(
+        "half-exc50-flat",
+        "excavation 50 % + pile 6 %, flat, all nuisances, GPS 3 m/3 deg",
+        7,
+        "half",
+        change="excavation",
+        change_fraction=0.5,
+        **QUARTER,
+        **NUISANCES,
+        **GPS3,
+        **FLAT,
+    ),
+    _syn(
+        "half-exc45-dense",
+        "excavation 45 % + pile 6 %, rolling, all nuisances, GPS 3 m/3 deg",
+        8,
+        "half",
+        True,
+        change="excavation",
+        change_fraction=0.45,
+        **DENSE,
+        **NUISANCES,
+        **GPS3,
+    ),
+    _syn(
+        "half-exc50-clean",
+        "excavation 50 % + pile 6 %, rolling, no nuisances, GPS 2 m/2 deg",
+        9,
+        "half",
+        change="excavation",
+        change_fraction=0.5,
+        **QUARTER,
+        **GPS2,
+    ),
     # change over most of the footprint (no error target; counts for coverage)
-    _syn("exc70", "excavation 70 % + pile 2 %, rolling, all nuisances, GPS 2 m/2 deg", 10,
-         change="excavation", change_fraction=0.7, **QUARTER, **NUISANCES, **GPS2),
-    _syn("exc70-flat-clean", "excavation 70 % + pile 2 %, flat, no nuisances, GPS 2 m/2 deg", 11,
-         change="excavation", change_fraction=0.7, **QUARTER, **GPS2, **FLAT),
+    _syn(
+        "exc70",
+        "excavation 70 % + pile 2 %, rolling, all nuisances, GPS 2 m/2 deg",
+        10,
+        change="excavation",
+        change_fraction=0.7,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+    ),
+    _syn(
+        "exc70-flat-clean",
+        "excavation 70 % + pile 2 %, flat, no nuisances, GPS 2 m/2 deg",
+        11,
+        change="excavation",
+        change_fraction=0.7,
+        **QUARTER,
+        **GPS2,
+        **FLAT,
+    ),
     # the other axes at quarter / sparse density
-    _syn("piles-clean-exact", "piles 15 %, rolling, no nuisances, no GPS error", 12,
-         change="piles", **QUARTER, **NO_GPS_ERROR),
-    _syn("piles-gps3", "piles 15 %, rolling, doming + holes, GPS 3 m/3 deg", 13, **QUARTER,
-         doming_m=0.04, holes=8, **GPS3),
-    _syn("piles-sparse", "piles 15 %, rolling, all nuisances, GPS 2 m/2 deg, sparse", 14,
-         **SPARSE, **NUISANCES, **GPS2),
-    _syn("pit-sparse-flat", "one pit 5 %, flat, all nuisances, GPS 2 m/2 deg, sparse", 15,
-         change="pit", **SPARSE, **NUISANCES, **GPS2, **FLAT),
-    _syn("none-control", "no change, rolling, all nuisances, GPS 2 m/2 deg", 16, change="none",
-         **QUARTER, **NUISANCES, **GPS2),
+    _syn(
+        "piles-clean-exact",
+        "piles 15 %, rolling, no nuisances, no GPS error",
+        12,
+        change="piles",
+        **QUARTER,
+        **NO_GPS_ERROR,
+    ),
+    _syn(
+        "piles-gps3",
+        "piles 15 %, rolling, doming + holes, GPS 3 m/3 deg",
+        13,
+        **QUARTER,
+        doming_m=0.04,
+        holes=8,
+        **GPS3,
+    ),
+    _syn(
+        "piles-sparse", "piles 15 %, rolling, all nuisances, GPS 2 m/2 deg, sparse", 14, **SPARSE, **NUISANCES, **GPS2
+    ),
+    _syn(
+        "pit-sparse-flat",
+        "one pit 5 %, flat, all nuisances, GPS 2 m/2 deg, sparse",
+        15,
+        change="pit",
+        **SPARSE,
+        **NUISANCES,
+        **GPS2,
+        **FLAT,
+    ),
+    _syn(
+        "none-control",
+        "no change, rolling, all nuisances, GPS 2 m/2 deg",
+        16,
+        change="none",
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+    ),
     # LiDAR flavour: no misalignment, 5 cm noise, sparser; defaults and georeferencing=precise
     _syn("lidar-piles", "LiDAR: piles 15 %, rolling, clutter", 17, quick=False, **LIDAR),
-    _syn("lidar-piles-precise", "same pair, georeferencing=precise", 17,
-         options={"georeferencing": "precise"}, **LIDAR),
-    _syn("lidar-exc50", "LiDAR: excavation 50 % + pile 6 %, rolling, clutter", 18, "half", False,
-         True, change="excavation", change_fraction=0.5, **LIDAR),
-    _syn("lidar-exc50-precise", "same pair, georeferencing=precise", 18, "half",
-         options={"georeferencing": "precise"}, change="excavation", change_fraction=0.5, **LIDAR),
-    _syn("lidar-pile-flat", "LiDAR: one pile 10 %, flat, clutter", 19, change="pile", **LIDAR,
-         **FLAT),
+    _syn(
+        "lidar-piles-precise", "same pair, georeferencing=precise", 17, options={"georeferencing": "precise"}, **LIDAR
+    ),
+    _syn(
+        "lidar-exc50",
+        "LiDAR: excavation 50 % + pile 6 %, rolling, clutter",
+        18,
+        "half",
+        False,
+        True,
+        change="excavation",
+        change_fraction=0.5,
+        **LIDAR,
+    ),
+    _syn(
+        "lidar-exc50-precise",
+        "same pair, georeferencing=precise",
+        18,
+        "half",
+        options={"georeferencing": "precise"},
+        change="excavation",
+        change_fraction=0.5,
+        **LIDAR,
+    ),
+    _syn("lidar-pile-flat", "LiDAR: one pile 10 %, flat, clutter", 19, change="pile", **LIDAR, **FLAT),
     # diagnostics: a "half" pair without GPS error, registration off (and correction off), to
     # tell registration, bias correction and gridding apart when the default fails
-    _syn("half-exc50-noreg", "excavation 50 % + pile 6 %, no GPS error, no nuisances; "
-         "coarse=none fine=none", 9, "half", options={"coarse": "none", "fine": "none"},
-         change="excavation", change_fraction=0.5, **QUARTER, **NO_GPS_ERROR),
-    _syn("half-exc50-noreg-nocorr", "same pair; coarse=none fine=none correction=none", 9,
-         "half", options={"coarse": "none", "fine": "none", "correction": "none"},
-         change="excavation", change_fraction=0.5, **QUARTER, **NO_GPS_ERROR),
-    _syn("piles-clean-exact-noreg-nocorr", "the piles-clean-exact pair; coarse=none fine=none "
-         "correction=none", 12, options={"coarse": "none", "fine": "none", "correction": "none"},
-         change="piles", **QUARTER, **NO_GPS_ERROR),
+    _syn(
+        "half-exc50-noreg",
+        "excavation 50 % + pile 6 %, no GPS error, no nuisances; coarse=none fine=none",
+        9,
+        "half",
+        options={"coarse": "none", "fine": "none"},
+        change="excavation",
+        change_fraction=0.5,
+        **QUARTER,
+        **NO_GPS_ERROR,
+    ),
+    _syn(
+        "half-exc50-noreg-nocorr",
+        "same pair; coarse=none fine=none correction=none",
+        9,
+        "half",
+        options={"coarse": "none", "fine": "none", "correction": "none"},
+        change="excavation",
+        change_fraction=0.5,
+        **QUARTER,
+        **NO_GPS_ERROR,
+    ),
+    _syn(
+        "piles-clean-exact-noreg-nocorr",
+        "the piles-clean-exact pair; coarse=none fine=none correction=none",
+        12,
+        options={"coarse": "none", "fine": "none", "correction": "none"},
+        change="piles",
+        **QUARTER,
+        **NO_GPS_ERROR,
+    ),
     # real terrain (2015 Tommy Thompson ground, two disjoint halves) with a known change
-    Case("rt-pilepit", "real-terrain", "real ground 0.1 pt/m2, " + real_terrain.CASES["pilepit"]
-         + ", GPS 2 m/2 deg", 1, {"case": "pilepit"}),
-    Case("rt-excavation", "real-terrain", "real ground 0.1 pt/m2, "
-         + real_terrain.CASES["excavation"] + ", GPS 2 m/2 deg", 1, {"case": "excavation"},
-         "half"),
-    Case("rt-pilepit-lidar", "real-terrain", "same as rt-pilepit without misalignment (LiDAR)",
-         1, {"case": "pilepit", **NO_GPS_ERROR}),
-    Case("rt-excavation-lidar", "real-terrain", "same as rt-excavation without misalignment "
-         "(LiDAR)", 1, {"case": "excavation", **NO_GPS_ERROR}, "half"),
-    Case("rt-pilepit-lidar-noreg", "real-terrain", "the rt-pilepit-lidar pair; coarse=none "
-         "fine=none", 1, {"case": "pilepit", **NO_GPS_ERROR},
-         options={"coarse": "none", "fine": "none"}, diagnostic=True),
-    Case("rt-excavation-lidar-noreg", "real-terrain", "the rt-excavation-lidar pair; "
-         "coarse=none fine=none", 1, {"case": "excavation", **NO_GPS_ERROR}, "half",
-         options={"coarse": "none", "fine": "none"}, diagnostic=True),
+    Case(
+        "rt-pilepit",
+        "real-terrain",
+        "real ground 0.1 pt/m2, " + real_terrain.CASES["pilepit"] + ", GPS 2 m/2 deg",
+        1,
+        {"case": "pilepit"},
+    ),
+    Case(
+        "rt-excavation",
+        "real-terrain",
+        "real ground 0.1 pt/m2, " + real_terrain.CASES["excavation"] + ", GPS 2 m/2 deg",
+        1,
+        {"case": "excavation"},
+        "half",
+    ),
+    Case(
+        "rt-pilepit-lidar",
+        "real-terrain",
+        "same as rt-pilepit without misalignment (LiDAR)",
+        1,
+        {"case": "pilepit", **NO_GPS_ERROR},
+    ),
+    Case(
+        "rt-excavation-lidar",
+        "real-terrain",
+        "same as rt-excavation without misalignment (LiDAR)",
+        1,
+        {"case": "excavation", **NO_GPS_ERROR},
+        "half",
+    ),
+    Case(
+        "rt-pilepit-lidar-noreg",
+        "real-terrain",
+        "the rt-pilepit-lidar pair; coarse=none fine=none",
+        1,
+        {"case": "pilepit", **NO_GPS_ERROR},
+        options={"coarse": "none", "fine": "none"},
+        diagnostic=True,
+    ),
+    Case(
+        "rt-excavation-lidar-noreg",
+        "real-terrain",
+        "the rt-excavation-lidar pair; coarse=none fine=none",
+        1,
+        {"case": "excavation", **NO_GPS_ERROR},
+        "half",
+        options={"coarse": "none", "fine": "none"},
+        diagnostic=True,
+    ),
     # the two real pairs (their own criteria)
     Case("real-autzen", "autzen", "Autzen BMX 2010/2023 LiDAR, mound raised", quick=True),
-    Case("real-tommy", "tommy", "Tommy Thompson 2015/2023 LiDAR, ~0.41 m datum offset",
-         quick=True),
+    Case("real-tommy", "tommy", "Tommy Thompson 2015/2023 LiDAR, ~0.41 m datum offset", quick=True),
 ]
 
 # ----------------------------------------------------------------------------------------------
@@ -222,9 +436,16 @@ def score(report: dict, truth: dict, target: str | None, dense: bool) -> dict:
     pass/fail for the case's targets."""
     vol, unc = report["volume_m3"], report.get("uncertainty_m3", {}) or {}
     scale = truth["cut"] + truth["fill"]
-    row: dict = {"truth": {q: truth[q] for q in QUANTITIES},
-                 "est": {q: vol[q] for q in QUANTITIES}, "err_pct": {}, "err_m3": {},
-                 "half_width": {}, "hw_pct": {}, "covered": {}, "checks": {}}
+    row: dict = {
+        "truth": {q: truth[q] for q in QUANTITIES},
+        "est": {q: vol[q] for q in QUANTITIES},
+        "err_pct": {},
+        "err_m3": {},
+        "half_width": {},
+        "hw_pct": {},
+        "covered": {},
+        "checks": {},
+    }
     for q in QUANTITIES:
         hw = unc.get(q)
         row["err_m3"][q] = vol[q] - truth[q]
@@ -235,15 +456,15 @@ def score(report: dict, truth: dict, target: str | None, dense: bool) -> dict:
     reg = report.get("registration", {}) or {}
     if reg.get("transform") is not None and truth.get("transform") is not None:
         mis = truth["misalignment"]
-        row["registration"] = registration_error(reg["transform"], truth["transform"],
-                                                 mis["center"], mis["shift_m"])
+        row["registration"] = registration_error(reg["transform"], truth["transform"], mis["center"], mis["shift_m"])
     if target:
         for q, lim in TARGETS[target].items():
             row["checks"][f"{q} {lim:g}%"] = abs(row["err_pct"][q]) <= lim
     if dense and abs(truth["net"]) > 1e-9:
         hw = row["half_width"]["net"]
-        row["checks"][f"net hw {DENSE_WIDTH_PCT:g}%"] = (
-            hw is not None and hw <= DENSE_WIDTH_PCT / 100.0 * abs(truth["net"]))
+        row["checks"][f"net hw {DENSE_WIDTH_PCT:g}%"] = hw is not None and hw <= DENSE_WIDTH_PCT / 100.0 * abs(
+            truth["net"]
+        )
     return row
 
 
@@ -291,13 +512,15 @@ def ensure_scene(case: Case, root: Path) -> tuple[Path, Path, Path]:
     """Generate (once) a synthetic or real-terrain pair; before, after, truth paths."""
     if case.kind == "synthetic":
         cfg = case.scene_config()
-        key = _key(json.dumps(asdict(cfg), sort_keys=True).encode(),
-                   _scene_code(), str(case.seed).encode())
+        key = _key(json.dumps(asdict(cfg), sort_keys=True).encode(), _scene_code(), str(case.seed).encode())
         d = root / "scenes" / f"syn-{cfg.change}-s{case.seed}-{key}"
     else:
-        key = _key(json.dumps(case.config, sort_keys=True).encode(),
-                   Path(real_terrain.__file__).read_bytes(),
-                   _scene_code(), str(case.seed).encode())
+        key = _key(
+            json.dumps(case.config, sort_keys=True).encode(),
+            Path(real_terrain.__file__).read_bytes(),
+            _scene_code(),
+            str(case.seed).encode(),
+        )
         d = root / "scenes" / f"rt-{case.config['case']}-s{case.seed}-{key}"
     files = (d / "before.las", d / "after.las", d / "truth.json")
     if all(f.exists() for f in files):
@@ -308,8 +531,9 @@ def ensure_scene(case: Case, root: Path) -> tuple[Path, Path, Path]:
     if case.kind == "synthetic":
         synthetic.write_pair_streaming(case.seed, cfg, tmp, fmt="las")
     else:
-        real_terrain.write_pair(case.config["case"], case.seed, tmp,
-                                **{k: v for k, v in case.config.items() if k != "case"})
+        real_terrain.write_pair(
+            case.config["case"], case.seed, tmp, **{k: v for k, v in case.config.items() if k != "case"}
+        )
     if d.exists():
         shutil.rmtree(d)
     tmp.rename(d)
@@ -376,15 +600,18 @@ def run_real(case: Case, root: Path) -> dict:
         return {"skipped": f"real data not found in {real}"}
     report, wall = run_estimate(before, after, out, case.options)
     vol = report["volume_m3"]
-    row = {"est": {q: vol[q] for q in QUANTITIES}, "wall_s": wall,
-           "half_width": {q: (report.get("uncertainty_m3") or {}).get(q) for q in QUANTITIES},
-           "verdict": (report.get("quality") or {}).get("verdict"), "checks": {}}
+    row = {
+        "est": {q: vol[q] for q in QUANTITIES},
+        "wall_s": wall,
+        "half_width": {q: (report.get("uncertainty_m3") or {}).get(q) for q in QUANTITIES},
+        "verdict": (report.get("quality") or {}).get("verdict"),
+        "checks": {},
+    }
     if case.kind == "autzen":
         row.update(autzen_m3c2(out, real))
         lo, hi = AUTZEN_NET
         row["checks"][f"net {lo:g}..{hi:g}"] = lo <= vol["net"] <= hi
-        row["checks"][f"M3C2 med<={AUTZEN_M3C2_MEDIAN:g}"] = (
-            row["m3c2_median_abs_m"] <= AUTZEN_M3C2_MEDIAN)
+        row["checks"][f"M3C2 med<={AUTZEN_M3C2_MEDIAN:g}"] = row["m3c2_median_abs_m"] <= AUTZEN_M3C2_MEDIAN
     else:
         import rasterio
 
@@ -400,9 +627,16 @@ def run_real(case: Case, root: Path) -> dict:
 
 
 def run_case(case: Case, root: Path) -> dict:
-    base = {"name": case.name, "kind": case.kind, "what": case.what, "target": case.target,
-            "dense": case.dense, "options": case.options, "diagnostic": case.diagnostic,
-            "has_truth": case.kind in ("synthetic", "real-terrain")}
+    base = {
+        "name": case.name,
+        "kind": case.kind,
+        "what": case.what,
+        "target": case.target,
+        "dense": case.dense,
+        "options": case.options,
+        "diagnostic": case.diagnostic,
+        "has_truth": case.kind in ("synthetic", "real-terrain"),
+    }
     try:
         if case.kind in ("autzen", "tommy"):
             return {**base, **run_real(case, root)}
@@ -419,14 +653,14 @@ def run_case(case: Case, root: Path) -> dict:
         row["verdict"] = (report.get("quality") or {}).get("verdict")
         row["wall_s"] = wall
         # for the JSON only: the report's other volume definitions and stage times
-        row["other_volumes"] = {k: report.get(k) for k in (
-            "volume_change_areas_m3", "volume_thresholded_m3", "volume_uncompensated_m3")}
+        row["other_volumes"] = {
+            k: report.get(k) for k in ("volume_change_areas_m3", "volume_thresholded_m3", "volume_uncompensated_m3")
+        }
         row["timings_s"] = report.get("timings_s")
         row["quality"] = report.get("quality")
         return {**base, **row}
     except Exception as exc:  # one failing case must not stop the matrix
-        return {**base, "error": f"{type(exc).__name__}: {exc}",
-                "traceback": traceback.format_exc(limit=3)}
+        return {**base, "error": f"{type(exc).__name__}: {exc}", "traceback": traceback.format_exc(limit=3)}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -470,29 +704,58 @@ def _err(r: dict, q: str, digits: int = 1) -> str:
 
 
 def synthetic_table(rows: list[dict], diagnostic: bool = False) -> str:
-    head = ["case", "change %", "true net / cut / fill m³", "net err %", "cut err %",
-            "fill err %", "in 95 % n/c/f", "half-width % n/c/f", "reg. err deg / m",
-            "verdict", "s", "target", "result"]
+    head = [
+        "case",
+        "change %",
+        "true net / cut / fill m³",
+        "net err %",
+        "cut err %",
+        "fill err %",
+        "in 95 % n/c/f",
+        "half-width % n/c/f",
+        "reg. err deg / m",
+        "verdict",
+        "s",
+        "target",
+        "result",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         if r["kind"] not in ("synthetic", "real-terrain") or bool(r.get("diagnostic")) != diagnostic:
             continue
         if r.get("error") or r.get("skipped"):
-            lines.append(f"| {r['name']} | " + " | ".join(["–"] * (len(head) - 3))
-                         + f" | {r.get('target') or '–'} | {_result(r)} |")
+            lines.append(
+                f"| {r['name']} | "
+                + " | ".join(["–"] * (len(head) - 3))
+                + f" | {r.get('target') or '–'} | {_result(r)} |"
+            )
             continue
         t = r["truth"]
         reg = r.get("registration")
         regs = f"{reg['rot_deg']:.3f} / {reg['shift_m']:.3f}" if reg else "–"
         hw = "/".join(_num(r["hw_pct"][q], ".1f") for q in QUANTITIES)
 
-        lines.append("| " + " | ".join([
-            r["name"], f"{r['change_pct']:.0f}",
-            f"{t['net']:+.0f} / {t['cut']:.0f} / {t['fill']:.0f}",
-            _err(r, "net", 2), _err(r, "cut"), _err(r, "fill"),
-            "".join(_cov(r["covered"][q]) for q in QUANTITIES),
-            hw, regs, r.get("verdict") or "–", f"{r['wall_s']:.0f}", r.get("target") or "–",
-            _result(r)]) + " |")
+        lines.append(
+            "| "
+            + " | ".join(
+                [
+                    r["name"],
+                    f"{r['change_pct']:.0f}",
+                    f"{t['net']:+.0f} / {t['cut']:.0f} / {t['fill']:.0f}",
+                    _err(r, "net", 2),
+                    _err(r, "cut"),
+                    _err(r, "fill"),
+                    "".join(_cov(r["covered"][q]) for q in QUANTITIES),
+                    hw,
+                    regs,
+                    r.get("verdict") or "–",
+                    f"{r['wall_s']:.0f}",
+                    r.get("target") or "–",
+                    _result(r),
+                ]
+            )
+            + " |"
+        )
     return "\n".join(lines)
 
 
@@ -500,9 +763,12 @@ def other_volumes_table(rows: list[dict]) -> str:
     """Signed error (%) of the report's other volume definitions, for comparison with the
     headline: ``volume_change_areas_m3`` and ``volume_thresholded_m3``."""
     keys = [("volume_change_areas_m3", "change areas"), ("volume_thresholded_m3", "above LoD")]
-    lines = ["| case | headline net / cut / fill % | "
-             + " | ".join(f"{label} net / cut / fill %" for _, label in keys) + " |",
-             "|---|---|" + "---|" * len(keys)]
+    lines = [
+        "| case | headline net / cut / fill % | "
+        + " | ".join(f"{label} net / cut / fill %" for _, label in keys)
+        + " |",
+        "|---|---|" + "---|" * len(keys),
+    ]
     for r in rows:
         if "truth" not in r or r.get("diagnostic"):
             continue
@@ -511,15 +777,16 @@ def other_volumes_table(rows: list[dict]) -> str:
         cells = [" / ".join(_pct(r["err_pct"][q]) for q in QUANTITIES)]
         for k, _ in keys:
             v = (r.get("other_volumes") or {}).get(k)
-            cells.append("–" if not v else " / ".join(
-                _pct(rel_error_pct(v[q], t[q], scale)) for q in QUANTITIES))
+            cells.append("–" if not v else " / ".join(_pct(rel_error_pct(v[q], t[q], scale)) for q in QUANTITIES))
         lines.append(f"| {r['name']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
 def real_table(rows: list[dict]) -> str:
-    lines = ["| case | net / cut / fill m³ | net 95 % ± | criterion values | verdict | s | result |",
-             "|---|---|---|---|---|---|---|"]
+    lines = [
+        "| case | net / cut / fill m³ | net 95 % ± | criterion values | verdict | s | result |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         if r["kind"] not in ("autzen", "tommy"):
             continue
@@ -529,16 +796,31 @@ def real_table(rows: list[dict]) -> str:
         e = r["est"]
         hw = r["half_width"]["net"]
         if r["kind"] == "autzen":
-            crit = (f"net {e['net']:+.0f} m³ (target {AUTZEN_NET[0]:g}..{AUTZEN_NET[1]:g}); "
-                    f"median \\|diff − M3C2 dz\\| {r['m3c2_median_abs_m']:.3f} m over "
-                    f"{r['m3c2_points']} core points (target ≤ {AUTZEN_M3C2_MEDIAN:g})")
+            crit = (
+                f"net {e['net']:+.0f} m³ (target {AUTZEN_NET[0]:g}..{AUTZEN_NET[1]:g}); "
+                f"median \\|diff − M3C2 dz\\| {r['m3c2_median_abs_m']:.3f} m over "
+                f"{r['m3c2_points']} core points (target ≤ {AUTZEN_M3C2_MEDIAN:g})"
+            )
         else:
-            crit = (f"lift of 2023 {r['lift_m']:+.3f} m (target {TOMMY_LIFT[0]:g}..{TOMMY_LIFT[1]:g});"
-                    f" median difference {r['diff_median_m']:+.3f} m (target ±{TOMMY_MEDIAN:g})")
-        lines.append("| " + " | ".join([
-            r["name"], f"{e['net']:+.0f} / {abs(e['cut']):.0f} / {abs(e['fill']):.0f}",
-            "–" if hw is None else f"{hw:.0f}", crit, r.get("verdict") or "–",
-            f"{r['wall_s']:.0f}", _result(r)]) + " |")
+            crit = (
+                f"lift of 2023 {r['lift_m']:+.3f} m (target {TOMMY_LIFT[0]:g}..{TOMMY_LIFT[1]:g});"
+                f" median difference {r['diff_median_m']:+.3f} m (target ±{TOMMY_MEDIAN:g})"
+            )
+        lines.append(
+            "| "
+            + " | ".join(
+                [
+                    r["name"],
+                    f"{e['net']:+.0f} / {abs(e['cut']):.0f} / {abs(e['fill']):.0f}",
+                    "–" if hw is None else f"{hw:.0f}",
+                    crit,
+                    r.get("verdict") or "–",
+                    f"{r['wall_s']:.0f}",
+                    _result(r),
+                ]
+            )
+            + " |"
+        )
     return "\n".join(lines)
 
 
@@ -548,21 +830,19 @@ def summary(rows: list[dict]) -> str:
     for q in QUANTITIES:
         c, n = cov[q]
         ok = n > 0 and c / n >= COVERAGE_TARGET
-        parts.append(f"{q} {c}/{n}" + (f" ({100 * c / n:.0f} %, {'PASS' if ok else '**FAIL**'})"
-                                       if n else ""))
+        parts.append(f"{q} {c}/{n}" + (f" ({100 * c / n:.0f} %, {'PASS' if ok else '**FAIL**'})" if n else ""))
     judged = [r for r in rows if passed(r) is not None and not r.get("diagnostic")]
     npass = sum(bool(passed(r)) for r in judged)
     errors = [r["name"] for r in rows if r.get("error")]
-    out = [f"- 95 % interval coverage over the matrix (target ≥ {COVERAGE_TARGET:.0%} each): "
-           + "; ".join(parts) + ".",
-           f"- Cases meeting their targets: **{npass} of {len(judged)}** "
-           f"(cases without a target count only for coverage)."]
+    out = [
+        f"- 95 % interval coverage over the matrix (target ≥ {COVERAGE_TARGET:.0%} each): " + "; ".join(parts) + ".",
+        f"- Cases meeting their targets: **{npass} of {len(judged)}** "
+        f"(cases without a target count only for coverage).",
+    ]
     by_target: dict[str, list[str]] = {}
     for r in judged:
-        by_target.setdefault(r.get("target") or r["kind"], []).append(
-            "y" if passed(r) else "n")
-    out.append("- By target: " + "; ".join(f"{k} {v.count('y')}/{len(v)}"
-                                           for k, v in by_target.items()) + ".")
+        by_target.setdefault(r.get("target") or r["kind"], []).append("y" if passed(r) else "n")
+    out.append("- By target: " + "; ".join(f"{k} {v.count('y')}/{len(v)}" for k, v in by_target.items()) + ".")
     if errors:
         out.append(f"- Errors (no report): {', '.join(errors)}.")
     out += verdict_summary(rows) + same_as_default(rows)
@@ -572,8 +852,7 @@ def summary(rows: list[dict]) -> str:
 def _bad(row: dict) -> bool:
     """A run a user should not have trusted: an error, a failed target, or a net interval that
     misses the truth."""
-    return bool(row.get("error")) or passed(row) is False or (
-        row.get("covered", {}).get("net") is False)
+    return bool(row.get("error")) or passed(row) is False or (row.get("covered", {}).get("net") is False)
 
 
 def verdict_summary(rows: list[dict]) -> list[str]:
@@ -584,10 +863,11 @@ def verdict_summary(rows: list[dict]) -> list[str]:
             groups.setdefault(r["verdict"], []).append(r)
     if not groups:
         return ["- `quality.verdict`: not reported by this engine."]
-    parts = [f"{v}: {len(g)} cases, {sum(_bad(r) for r in g)} of them bad"
-             for v, g in sorted(groups.items())]
-    return ["- Verdict against outcome (bad = error, failed target or net interval missing the "
-            "truth): " + "; ".join(parts) + "."]
+    parts = [f"{v}: {len(g)} cases, {sum(_bad(r) for r in g)} of them bad" for v, g in sorted(groups.items())]
+    return [
+        "- Verdict against outcome (bad = error, failed target or net interval missing the "
+        "truth): " + "; ".join(parts) + "."
+    ]
 
 
 def same_as_default(rows: list[dict]) -> list[str]:
@@ -601,8 +881,10 @@ def same_as_default(rows: list[dict]) -> list[str]:
                 same.append(r["name"])
     if not same:
         return []
-    return [f"- `georeferencing=\"precise\"` gave exactly the default's numbers on "
-            f"{', '.join(same)}: the option has no effect at this engine commit."]
+    return [
+        f'- `georeferencing="precise"` gave exactly the default\'s numbers on '
+        f"{', '.join(same)}: the option has no effect at this engine commit."
+    ]
 
 
 HOW_TO_READ = """\
@@ -629,33 +911,55 @@ shared 2-core machine (generation excluded, cached)."""
 def markdown(rows: list[dict], meta: dict) -> str:
     m = meta
     dirty = " (dirty)" if m["git_dirty"] else ""
-    return "\n".join([
-        "# Accuracy harness: latest table", "",
-        "<!-- generated by bench/accuracy.py (make accuracy); do not edit by hand -->", "",
-        HOW_TO_READ, "",
-        f"Run {m['date']} · commit {m['git_commit']}{dirty} · engine last changed in "
-        f"{m['engine_commit'] or '?'} (`{m['engine']}`) · "
-        f"{m['cpu']}, {m['cores']} cores, {m['mem_gb']} GB, shared with other jobs (load "
-        f"{m['load_before']:.1f} at start) · Python {m['python']} · {m['cases']} cases in "
-        f"{m['total_s']:.0f} s · `{m['argv']}`", "",
-        "## Summary", "", summary(rows), "",
-        "## Synthetic and real-terrain pairs (exact truth)", "", synthetic_table(rows), "",
-        "## Real pairs", "", real_table(rows), "",
-        "## The report's other volume definitions (same runs)", "",
-        "Errors of `volume_change_areas_m3` (cut and fill summed over detected change areas "
-        "only) and `volume_thresholded_m3` (cells beyond the level of detection), beside the "
-        "headline `volume_m3` scored above.", "",
-        other_volumes_table(rows), "",
-        "## Diagnostics (non-default options; not in the summary)", "",
-        "Same columns. They locate a failure of the default run: registration "
-        "(`coarse=none fine=none` on a pair without GPS error), bias correction "
-        "(`correction=none` too) or gridding; and whether `georeferencing=\"precise\"` helps "
-        "LiDAR pairs.", "",
-        synthetic_table(rows, diagnostic=True), "",
-        "## Cases", "",
-        *[f"- `{r['name']}`: {r['what']}" + (f" — error: `{r['error']}`" if r.get("error") else "")
-          for r in rows], "",
-    ])
+    return "\n".join(
+        [
+            "# Accuracy harness: latest table",
+            "",
+            "<!-- generated by bench/accuracy.py (make accuracy); do not edit by hand -->",
+            "",
+            HOW_TO_READ,
+            "",
+            f"Run {m['date']} · commit {m['git_commit']}{dirty} · engine last changed in "
+            f"{m['engine_commit'] or '?'} (`{m['engine']}`) · "
+            f"{m['cpu']}, {m['cores']} cores, {m['mem_gb']} GB, shared with other jobs (load "
+            f"{m['load_before']:.1f} at start) · Python {m['python']} · {m['cases']} cases in "
+            f"{m['total_s']:.0f} s · `{m['argv']}`",
+            "",
+            "## Summary",
+            "",
+            summary(rows),
+            "",
+            "## Synthetic and real-terrain pairs (exact truth)",
+            "",
+            synthetic_table(rows),
+            "",
+            "## Real pairs",
+            "",
+            real_table(rows),
+            "",
+            "## The report's other volume definitions (same runs)",
+            "",
+            "Errors of `volume_change_areas_m3` (cut and fill summed over detected change areas "
+            "only) and `volume_thresholded_m3` (cells beyond the level of detection), beside the "
+            "headline `volume_m3` scored above.",
+            "",
+            other_volumes_table(rows),
+            "",
+            "## Diagnostics (non-default options; not in the summary)",
+            "",
+            "Same columns. They locate a failure of the default run: registration "
+            "(`coarse=none fine=none` on a pair without GPS error), bias correction "
+            '(`correction=none` too) or gridding; and whether `georeferencing="precise"` helps '
+            "LiDAR pairs.",
+            "",
+            synthetic_table(rows, diagnostic=True),
+            "",
+            "## Cases",
+            "",
+            *[f"- `{r['name']}`: {r['what']}" + (f" — error: `{r['error']}`" if r.get("error") else "") for r in rows],
+            "",
+        ]
+    )
 
 
 def machine_meta(argv: list[str], total_s: float, load: float, n: int) -> dict:
@@ -668,14 +972,33 @@ def machine_meta(argv: list[str], total_s: float, load: float, n: int) -> dict:
 
     try:  # the last commit that changed the engine (soilvolume/ except the scene generator)
         engine_commit = subprocess.run(
-            ["git", "log", "-1", "--format=%h %cd", "--date=format:%Y-%m-%d %H:%M", "--",
-             "soilvolume", ":!soilvolume/scenes"], cwd=REPO, capture_output=True,
-            text=True, timeout=20).stdout.strip()
+            [
+                "git",
+                "log",
+                "-1",
+                "--format=%h %cd",
+                "--date=format:%Y-%m-%d %H:%M",
+                "--",
+                "soilvolume",
+                ":!soilvolume/scenes",
+            ],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            timeout=20,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         engine_commit = ""
-    return {**m, "engine_commit": engine_commit, "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-            "engine": str(Path(soilvolume.__file__).resolve().parent), "load_before": load,
-            "total_s": total_s, "cases": n, "argv": " ".join(["bench/accuracy.py", *argv])}
+    return {
+        **m,
+        "engine_commit": engine_commit,
+        "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "engine": str(Path(soilvolume.__file__).resolve().parent),
+        "load_before": load,
+        "total_s": total_s,
+        "cases": n,
+        "argv": " ".join(["bench/accuracy.py", *argv]),
+    }
 
 
 def select(cases: list[Case], quick: bool, pattern: str | None) -> list[Case]:
@@ -692,17 +1015,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="~1 minute subset")
     ap.add_argument("--cases", help="comma-separated name patterns (fnmatch or substring)")
     ap.add_argument("--list", action="store_true", help="print the matrix and exit")
-    ap.add_argument("--out", type=Path, help="markdown file (default: bench/ACCURACY.md for the "
-                                              "whole matrix, bench/results/accuracy-<subset>.md)")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        help="markdown file (default: bench/ACCURACY.md for the whole matrix, bench/results/accuracy-<subset>.md)",
+    )
     ap.add_argument("--cache", type=Path, help="scene/run cache (default ~/.cache/...)")
-    ap.add_argument("--render", type=Path, metavar="JSON",
-                    help="only rewrite the markdown from a saved accuracy-latest.json (its own "
-                         "run date and commit are kept); needs --out")
-    ap.add_argument("--seed-offset", type=int, default=0,
-                    help="add this to every scene seed (are the passes seed luck?); such runs "
-                         "never rewrite bench/ACCURACY.md")
-    ap.add_argument("--strict", action="store_true",
-                    help="exit status 1 when a target, the coverage or a run fails")
+    ap.add_argument(
+        "--render",
+        type=Path,
+        metavar="JSON",
+        help="only rewrite the markdown from a saved accuracy-latest.json (its own "
+        "run date and commit are kept); needs --out",
+    )
+    ap.add_argument(
+        "--seed-offset",
+        type=int,
+        default=0,
+        help="add this to every scene seed (are the passes seed luck?); such runs never rewrite bench/ACCURACY.md",
+    )
+    ap.add_argument("--strict", action="store_true", help="exit status 1 when a target, the coverage or a run fails")
     args = ap.parse_args(argv)
     if args.render:
         if not args.out:
@@ -716,16 +1048,17 @@ def main(argv: list[str] | None = None) -> int:
         cases = [replace(c, seed=c.seed + args.seed_offset) for c in cases]
     if args.list:
         for c in cases:
-            print(f"{c.name:22s} {c.kind:12s} target={c.target or '-':5s} "
-                  f"{'dense ' if c.dense else ''}{'quick ' if c.quick else ''}{c.what}")
+            print(
+                f"{c.name:22s} {c.kind:12s} target={c.target or '-':5s} "
+                f"{'dense ' if c.dense else ''}{'quick ' if c.quick else ''}{c.what}"
+            )
         return 0
     if not cases:
         raise SystemExit("no case matches")
     root = args.cache or cache_root()
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     if load > 0.5 * (os.cpu_count() or 1):
-        print(f"[accuracy] note: load average {load:.1f} on {os.cpu_count()} cores: "
-              "times will be inflated", flush=True)
+        print(f"[accuracy] note: load average {load:.1f} on {os.cpu_count()} cores: times will be inflated", flush=True)
     t0 = time.perf_counter()
     rows = []
     for i, case in enumerate(cases, 1):
@@ -738,30 +1071,35 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  skipped: {row['skipped']}", flush=True)
         elif "err_pct" in row:
             e = row["err_pct"]
-            print(f"  net {_pct(e['net'], 2)} % cut {_pct(e['cut'])} % fill {_pct(e['fill'])} % "
-                  f"in95 {''.join(_cov(row['covered'][q]) for q in QUANTITIES)} "
-                  f"{row['wall_s']:.1f} s -> {_result(row)}", flush=True)
+            print(
+                f"  net {_pct(e['net'], 2)} % cut {_pct(e['cut'])} % fill {_pct(e['fill'])} % "
+                f"in95 {''.join(_cov(row['covered'][q]) for q in QUANTITIES)} "
+                f"{row['wall_s']:.1f} s -> {_result(row)}",
+                flush=True,
+            )
         else:
-            print(f"  net {row['est']['net']:+.1f} m3 {row['wall_s']:.1f} s -> {_result(row)}",
-                  flush=True)
+            print(f"  net {row['est']['net']:+.1f} m3 {row['wall_s']:.1f} s -> {_result(row)}", flush=True)
     meta = machine_meta(argv, time.perf_counter() - t0, load, len(cases))
     text = markdown(rows, meta)
     full = not args.quick and not args.cases and not args.seed_offset
-    out = args.out or (HERE / "ACCURACY.md" if full else
-                       HERE / "results" / f"accuracy-{'quick' if args.quick else 'subset'}"
-                       f"{f'-seed+{args.seed_offset}' if args.seed_offset else ''}.md")
+    out = args.out or (
+        HERE / "ACCURACY.md"
+        if full
+        else HERE / "results" / f"accuracy-{'quick' if args.quick else 'subset'}"
+        f"{f'-seed+{args.seed_offset}' if args.seed_offset else ''}.md"
+    )
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     (HERE / "results").mkdir(exist_ok=True)
     (HERE / "results" / "accuracy-latest.json").write_text(
-        json.dumps({"meta": meta, "rows": rows}, indent=1, default=str) + "\n")
+        json.dumps({"meta": meta, "rows": rows}, indent=1, default=str) + "\n"
+    )
     print("\n" + text)
     print(f"[accuracy] wrote {out}")
     if args.strict:
         judged = [r for r in rows if not r.get("diagnostic")]
         cov = coverage(judged)
-        bad = any(passed(r) is False for r in judged) or any(
-            n and c / n < COVERAGE_TARGET for c, n in cov.values())
+        bad = any(passed(r) is False for r in judged) or any(n and c / n < COVERAGE_TARGET for c, n in cov.values())
         return 1 if bad else 0
     return 0
 

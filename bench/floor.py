@@ -67,16 +67,36 @@ def main() -> None:
     cols, rows = int(round((x1 - x0) / cell)), int(round((y1 - y0) / cell))
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    profile = dict(driver="GTiff", width=cols, height=rows, count=1, dtype="float32",
-                   crs=crs.to_wkt() if crs is not None else None, nodata=np.nan,
-                   transform=from_origin(x0, y1, cell, cell), compress="deflate", tiled=True)
+    profile = dict(
+        driver="GTiff",
+        width=cols,
+        height=rows,
+        count=1,
+        dtype="float32",
+        crs=crs.to_wkt() if crs is not None else None,
+        nodata=np.nan,
+        transform=from_origin(x0, y1, cell, cell),
+        compress="deflate",
+        tiled=True,
+    )
     data = np.full((rows, cols), np.nan, dtype=np.float32)
     for name in ("dem_before", "dem_after", "difference"):
         with rasterio.open(out / f"{name}.tif", "w", **profile) as dst:
             dst.write(data, 1)
     t_write = time.perf_counter() - t
-    print(json.dumps({"points": nb + na, "cell_m": cell, "rows": rows, "cols": cols,
-                      "import_s": t_import, "read_s": t_read, "write_s": t_write}))
+    print(
+        json.dumps(
+            {
+                "points": nb + na,
+                "cell_m": cell,
+                "rows": rows,
+                "cols": cols,
+                "import_s": t_import,
+                "read_s": t_read,
+                "write_s": t_write,
+            }
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -62,10 +62,28 @@ def features(case: str) -> list[dict]:
     w, h = x1 - x0, y1 - y0
     if case == "pilepit":
         feats = [
-            dict(kind="cone", sign=1.0, x=x0 + 60.0, y=y0 + 150.0, r_bottom=30.0, r_top=10.0,
-                 height=6.0, exact_outline=True, name="pile (truncated cone)"),
-            dict(kind="cone", sign=-1.0, x=x0 + 150.0, y=y0 + 70.0, r_bottom=28.0, r_top=12.0,
-                 height=3.0, exact_outline=True, name="pit (flat-bottomed truncated cone)"),
+            dict(
+                kind="cone",
+                sign=1.0,
+                x=x0 + 60.0,
+                y=y0 + 150.0,
+                r_bottom=30.0,
+                r_top=10.0,
+                height=6.0,
+                exact_outline=True,
+                name="pile (truncated cone)",
+            ),
+            dict(
+                kind="cone",
+                sign=-1.0,
+                x=x0 + 150.0,
+                y=y0 + 70.0,
+                r_bottom=28.0,
+                r_top=12.0,
+                height=3.0,
+                exact_outline=True,
+                name="pit (flat-bottomed truncated cone)",
+            ),
         ]
     elif case == "excavation":
         b = 0.4 * h
@@ -74,11 +92,30 @@ def features(case: str) -> list[dict]:
         width = 2.0 * a + gap + 2.0 * rp
         ex = (x0 + x1) / 2.0 - width / 2.0 + a
         feats = [
-            dict(kind="rect", sign=-1.0, x=ex, y=(y0 + y1) / 2.0, a=a, b=b, height=4.0, run=8.0,
-                 angle_deg=0.0, exact_outline=True, name="excavation (flat-bottomed, 45 %)"),
-            dict(kind="cone", sign=1.0, x=ex + a + gap + rp, y=(y0 + y1) / 2.0 + 0.2 * h,
-                 r_bottom=rp, r_top=8.0, height=10.0, exact_outline=True,
-                 name="tall pile (truncated cone)"),
+            dict(
+                kind="rect",
+                sign=-1.0,
+                x=ex,
+                y=(y0 + y1) / 2.0,
+                a=a,
+                b=b,
+                height=4.0,
+                run=8.0,
+                angle_deg=0.0,
+                exact_outline=True,
+                name="excavation (flat-bottomed, 45 %)",
+            ),
+            dict(
+                kind="cone",
+                sign=1.0,
+                x=ex + a + gap + rp,
+                y=(y0 + y1) / 2.0 + 0.2 * h,
+                r_bottom=rp,
+                r_top=8.0,
+                height=10.0,
+                exact_outline=True,
+                name="tall pile (truncated cone)",
+            ),
         ]
     else:
         raise ValueError(f"unknown real-terrain case {case!r} ({', '.join(CASES)})")
@@ -108,8 +145,9 @@ def _write_las(path: Path, xyz: np.ndarray) -> None:
     las.write(str(path))
 
 
-def write_pair(case: str, seed: int, directory: Path, shift_m=SHIFT_M,
-               rotation_deg=ROTATION_DEG) -> tuple[Path, Path, Path]:
+def write_pair(
+    case: str, seed: int, directory: Path, shift_m=SHIFT_M, rotation_deg=ROTATION_DEG
+) -> tuple[Path, Path, Path]:
     """Write before.las, after.las and truth.json of a real-terrain case into ``directory``
     (misalignment of the after half: ``shift_m``, ``rotation_deg`` = roll, pitch, yaw)."""
     import laspy
@@ -121,8 +159,7 @@ def write_pair(case: str, seed: int, directory: Path, shift_m=SHIFT_M,
     half = rng.random(len(xyz)) < 0.5
     before, after = xyz[half], xyz[~half]
     x0, y0, x1, y1 = BOX
-    inside = ((after[:, 0] >= x0) & (after[:, 0] <= x1) & (after[:, 1] >= y0)
-              & (after[:, 1] <= y1))
+    inside = (after[:, 0] >= x0) & (after[:, 0] <= x1) & (after[:, 1] >= y0) & (after[:, 1] <= y1)
     after = after[inside].copy()
     feats = features(case)
     after[:, 2] += features_dz(after[:, 0], after[:, 1], feats)
@@ -140,16 +177,25 @@ def write_pair(case: str, seed: int, directory: Path, shift_m=SHIFT_M,
     cut = sum(f["volume"] for f in feats if f["sign"] < 0)
     area = (x1 - x0) * (y1 - y0)
     truth = {
-        "net": float(fill - cut), "cut": float(cut), "fill": float(fill),
+        "net": float(fill - cut),
+        "cut": float(cut),
+        "fill": float(fill),
         "transform": T.tolist(),
-        "misalignment": {"center": c.tolist(), "rotation_matrix": R.tolist(),
-                         "shift_m": list(shift_m), "rotation_deg": list(rotation_deg),
-                         "convention": "p_surveyed = R (p_true - center) + center + shift; "
-                                       "transform is its inverse (surveyed -> true)"},
+        "misalignment": {
+            "center": c.tolist(),
+            "rotation_matrix": R.tolist(),
+            "shift_m": list(shift_m),
+            "rotation_deg": list(rotation_deg),
+            "convention": "p_surveyed = R (p_true - center) + center + shift; "
+            "transform is its inverse (surveyed -> true)",
+        },
         "after_footprint": list(BOX),
         "features": feats,
         "change_fraction": sum(feature_area(f) for f in feats) / area,
-        "crs": CRS, "seed": int(seed), "case": case, "source": SOURCE,
+        "crs": CRS,
+        "seed": int(seed),
+        "case": case,
+        "source": SOURCE,
         "points": {"before": int(len(before)), "after": int(len(surveyed))},
         "cell_note": "net/cut/fill are exact integrals of the added analytic dz",
     }
@@ -178,6 +224,9 @@ if __name__ == "__main__":
     print(f"after density ~{after_density():.3f} pts/m2; cases: {', '.join(CASES)}")
     for name in CASES:
         fs = features(name)
-        print(name, [(f["name"], round(f["volume"], 1)) for f in fs],
-              f"{sum(feature_area(f) for f in fs) / ((BOX[2] - BOX[0]) * (BOX[3] - BOX[1])):.1%}",
-              math.isfinite(sum(f["volume"] for f in fs)))
+        print(
+            name,
+            [(f["name"], round(f["volume"], 1)) for f in fs],
+            f"{sum(feature_area(f) for f in fs) / ((BOX[2] - BOX[0]) * (BOX[3] - BOX[1])):.1%}",
+            math.isfinite(sum(f["volume"] for f in fs)),
+        )

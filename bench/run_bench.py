@@ -82,8 +82,7 @@ def ensure_scene(name: str, seed: int, fmt: str, root: Path) -> tuple[Path, Path
     spent generating (0 when cached). The cache key covers the config and the generator code."""
     cfg = scene_config(name)
     src = b"".join(p.read_bytes() for p in sorted(Path(synthetic.__file__).parent.glob("*.py")))  # scenes/
-    key = hashlib.sha1(json.dumps(asdict(cfg), sort_keys=True).encode() + src
-                       + fmt.encode()).hexdigest()[:10]
+    key = hashlib.sha1(json.dumps(asdict(cfg), sort_keys=True).encode() + src + fmt.encode()).hexdigest()[:10]
     d = root / f"pair-{cfg.before_points + cfg.after_points}-s{seed}-{key}"
     files = (d / f"before.{fmt}", d / f"after.{fmt}", d / "truth.json")
     if all(f.exists() for f in files):
@@ -91,8 +90,7 @@ def ensure_scene(name: str, seed: int, fmt: str, root: Path) -> tuple[Path, Path
     root.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{name}-", dir=root))
     t = time.perf_counter()
-    print(f"[bench] generating {name} ({cfg.before_points:,} + {cfg.after_points:,} points) "
-          f"in {d} ...", flush=True)
+    print(f"[bench] generating {name} ({cfg.before_points:,} + {cfg.after_points:,} points) in {d} ...", flush=True)
     synthetic.write_pair_streaming(seed, cfg, tmp, fmt=fmt)
     if d.exists():
         shutil.rmtree(d)
@@ -128,8 +126,14 @@ def timed(argv: list[str], timeout: float, log: Path) -> dict:
                 proc.wait()
                 rc = "timeout"
     wall = time.perf_counter() - t
-    per_process = sorted(((round(mb), name) for pid, (mb, name) in tree.peaks.items()
-                          if name not in ("time", "python3") or pid != proc.pid), reverse=True)
+    per_process = sorted(
+        (
+            (round(mb), name)
+            for pid, (mb, name) in tree.peaks.items()
+            if name not in ("time", "python3") or pid != proc.pid
+        ),
+        reverse=True,
+    )
     peak_mb = None
     text = Path(tpath).read_text() if Path(tpath).exists() else ""
     os.unlink(tpath)
@@ -144,8 +148,15 @@ def timed(argv: list[str], timeout: float, log: Path) -> dict:
         peak_mb, rc = info["maxrss_kb"] / 1024.0, info["rc"]
     tail = log.read_text(errors="replace").strip().splitlines()[-15:] if log.exists() else []
     largest = max((mb for mb, name in per_process if name != "time"), default=None)
-    return {"rc": rc, "wall_s": wall, "peak_rss_mb": peak_mb, "largest_process_mb": largest,
-            "processes_sum_mb": round(tree.total), "processes": per_process[:8], "log_tail": tail}
+    return {
+        "rc": rc,
+        "wall_s": wall,
+        "peak_rss_mb": peak_mb,
+        "largest_process_mb": largest,
+        "processes_sum_mb": round(tree.total),
+        "processes": per_process[:8],
+        "log_tail": tail,
+    }
 
 
 def las_count(path: Path) -> int:
@@ -190,16 +201,31 @@ def run_scene(name: str, args, root: Path, runs: Path, scheduler: str = "") -> d
     label = name + (f" [{scheduler}]" if scheduler else "") + (" vpc" if args.layout == "vpc" else "")
     out = runs / re.sub(r"[^\w.-]+", "_", label)
     venv = Path(args.venv)
-    fmt_args = {"before": shlex.quote(str(before)), "after": shlex.quote(str(after)),
-                "out": shlex.quote(str(out)), "venv": shlex.quote(str(venv)),
-                "python": shlex.quote(str(venv / "bin" / "python")),
-                "repo": shlex.quote(str(REPO))}
+    fmt_args = {
+        "before": shlex.quote(str(before)),
+        "after": shlex.quote(str(after)),
+        "out": shlex.quote(str(out)),
+        "venv": shlex.quote(str(venv)),
+        "python": shlex.quote(str(venv / "bin" / "python")),
+        "repo": shlex.quote(str(REPO)),
+    }
     argv = shlex.split(args.cmd.format(**fmt_args)) + (["--scheduler", scheduler] if scheduler else [])
-    res: dict = {"scene": name, "label": label, "scheduler": scheduler or "default", "layout": args.layout,
-                 "tiles": len(inputs), "points_before": nb, "points_after": na, "points": nb + na,
-                 "files_mb": round(sum(f.stat().st_size for f in inputs) / 2**20, 1),
-                 "generate_s": round(gen_s, 2), "truth_net_m3": truth["net"],
-                 "truth_cut_m3": truth["cut"], "truth_fill_m3": truth["fill"], "runs": []}
+    res: dict = {
+        "scene": name,
+        "label": label,
+        "scheduler": scheduler or "default",
+        "layout": args.layout,
+        "tiles": len(inputs),
+        "points_before": nb,
+        "points_after": na,
+        "points": nb + na,
+        "files_mb": round(sum(f.stat().st_size for f in inputs) / 2**20, 1),
+        "generate_s": round(gen_s, 2),
+        "truth_net_m3": truth["net"],
+        "truth_cut_m3": truth["cut"],
+        "truth_fill_m3": truth["fill"],
+        "runs": [],
+    }
     best = None
     for i in range(args.repeat):
         if out.exists():
@@ -213,8 +239,7 @@ def run_scene(name: str, args, root: Path, runs: Path, scheduler: str = "") -> d
         if r["rc"] != 0 or report is None:
             res["error"] = f"exit {r['rc']}" + ("" if report else ", no report.json")
             res["log_tail"] = r["log_tail"]
-            print(f"[bench] {name}: FAILED ({res['error']})\n    "
-                  + "\n    ".join(r["log_tail"]), flush=True)
+            print(f"[bench] {name}: FAILED ({res['error']})\n    " + "\n    ".join(r["log_tail"]), flush=True)
             break
         if best is None or r["wall_s"] < best["wall_s"]:
             best = r
@@ -239,8 +264,7 @@ def run_scene(name: str, args, root: Path, runs: Path, scheduler: str = "") -> d
 
     # the floor: read both files + write three GeoTIFFs of the same grid, own process
     fl_out = runs / f"{out.name}-floor"
-    fl_argv = [str(venv / "bin" / "python"), str(HERE / "floor.py"), str(originals[0]), str(originals[1]),
-               str(fl_out)]
+    fl_argv = [str(venv / "bin" / "python"), str(HERE / "floor.py"), str(originals[0]), str(originals[1]), str(fl_out)]
     cell = (res.get("grid") or {}).get("cell_m")
     if cell:
         fl_argv += ["--cell", str(cell)]
@@ -279,15 +303,19 @@ def machine() -> dict:
 
     def git(*a: str) -> str:
         try:
-            return subprocess.run(["git", *a], cwd=REPO, capture_output=True, text=True,
-                                  timeout=20).stdout.strip()
+            return subprocess.run(["git", *a], cwd=REPO, capture_output=True, text=True, timeout=20).stdout.strip()
         except (OSError, subprocess.SubprocessError):
             return ""
 
-    return {"cpu": cpu, "cores": os.cpu_count(), "mem_gb": mem_gb,
-            "os": platform.platform(), "python": platform.python_version(),
-            "git_commit": git("rev-parse", "--short", "HEAD"),
-            "git_dirty": bool(git("status", "--porcelain", "--untracked-files=no"))}
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "mem_gb": mem_gb,
+        "os": platform.platform(),
+        "python": platform.python_version(),
+        "git_commit": git("rev-parse", "--short", "HEAD"),
+        "git_dirty": bool(git("status", "--porcelain", "--untracked-files=no")),
+    }
 
 
 def _f(v, fmt: str) -> str:
@@ -301,22 +329,31 @@ def table(results: list[dict]) -> str:
             if k not in STAGES and k not in extra:
                 extra.append(k)
     stages = STAGES + extra
-    head = (["scene", "points", "scheduler"] + stages
-            + ["wall s", "peak MB", "largest process MB", "all processes MB", "floor s", "x floor", "net err %",
-               "load"])
+    head = (
+        ["scene", "points", "scheduler"]
+        + stages
+        + ["wall s", "peak MB", "largest process MB", "all processes MB", "floor s", "x floor", "net err %", "load"]
+    )
     rows = []
     for r in results:
         t = r.get("timings_s", {})
         name = r["scene"] + (f" (= {r['same_as']})" if r.get("same_as") else "")
         if r.get("layout") == "vpc":
             name += f" (VPC, {r['tiles']} tiles)"
-        rows.append([name, f"{r['points'] / 1e6:.2f}M", r.get("scheduler", "default")]
-                    + [_f(t.get(s), ".2f") for s in stages]
-                    + [_f(r.get("wall_s"), ".2f"), _f(r.get("peak_rss_mb"), ".0f"),
-                       _f(r.get("largest_process_mb"), ".0f"), _f(r.get("processes_sum_mb"), ".0f"),
-                       _f(r.get("floor_wall_s"), ".2f"), _f(r.get("ratio_to_floor"), ".1f"),
-                       _f(r.get("net_error_pct"), "+.2f") if "error" not in r
-                       else r["error"], _f(r.get("loadavg_1m_before"), ".1f")])
+        rows.append(
+            [name, f"{r['points'] / 1e6:.2f}M", r.get("scheduler", "default")]
+            + [_f(t.get(s), ".2f") for s in stages]
+            + [
+                _f(r.get("wall_s"), ".2f"),
+                _f(r.get("peak_rss_mb"), ".0f"),
+                _f(r.get("largest_process_mb"), ".0f"),
+                _f(r.get("processes_sum_mb"), ".0f"),
+                _f(r.get("floor_wall_s"), ".2f"),
+                _f(r.get("ratio_to_floor"), ".1f"),
+                _f(r.get("net_error_pct"), "+.2f") if "error" not in r else r["error"],
+                _f(r.get("loadavg_1m_before"), ".1f"),
+            ]
+        )
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     return "\n".join(lines)
@@ -336,8 +373,9 @@ def plot(results: list[dict], path: Path) -> None:
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(12, 5))
     series: dict[str, list[dict]] = {}
     for r in sorted(ok, key=lambda r: r["points"]):
-        series.setdefault(f"{r.get('scheduler', 'default')}" + (" VPC" if r.get("layout") == "vpc" else ""),
-                          []).append(r)
+        series.setdefault(f"{r.get('scheduler', 'default')}" + (" VPC" if r.get("layout") == "vpc" else ""), []).append(
+            r
+        )
     for label, rs in series.items():
         n = np.array([r["points"] for r in rs], dtype=float)
         a1.loglog(n, [r["wall_s"] for r in rs], "o-", label=f"estimate {label}")
@@ -379,38 +417,49 @@ def update_readme(text: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sizes", default=None,
-                    help=f"comma-separated scenes (paper, 1M, 4M, 16M, 64M, or e.g. 250k); "
-                         f"default {DEFAULT_SIZES}")
+    ap = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--sizes",
+        default=None,
+        help=f"comma-separated scenes (paper, 1M, 4M, 16M, 64M, or e.g. 250k); default {DEFAULT_SIZES}",
+    )
     ap.add_argument("--full", action="store_true", help=f"run {FULL_SIZES}")
-    ap.add_argument("--cmd", default=DEFAULT_CMD,
-                    help="command template; fields {before} {after} {out} {venv} {python} {repo}"
-                         f" (default: {DEFAULT_CMD!r})")
+    ap.add_argument(
+        "--cmd",
+        default=DEFAULT_CMD,
+        help="command template; fields {before} {after} {out} {venv} {python} {repo}"
+        f" (default: {DEFAULT_CMD!r})",
+    )
     ap.add_argument("--venv", default=str(REPO / ".venv"), help="virtualenv of {venv}/{python}")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--fmt", choices=["las", "laz"], default="las", help="input file format")
     ap.add_argument("--repeat", type=int, default=1, help="runs per scene; the fastest is kept")
     ap.add_argument("--timeout", type=float, default=3600.0, help="seconds per process")
-    ap.add_argument("--cache", default=None,
-                    help="scene cache (default $SOILVOLUME_BENCH_CACHE or "
-                         "~/.cache/soilvolume-bench)")
+    ap.add_argument(
+        "--cache", default=None, help="scene cache (default $SOILVOLUME_BENCH_CACHE or ~/.cache/soilvolume-bench)"
+    )
     ap.add_argument("--results", default=str(HERE / "results"), help="output directory")
     ap.add_argument("--keep-outputs", action="store_true", help="keep each run's output dir")
-    ap.add_argument("--update-readme", action="store_true",
-                    help="rewrite the latest-results table in bench/README.md")
+    ap.add_argument("--update-readme", action="store_true", help="rewrite the latest-results table in bench/README.md")
     ap.add_argument("--generate-only", action="store_true", help="only build the scene cache")
-    ap.add_argument("--scheduler", default="",
-                    help="comma-separated --scheduler values to run each scene with (e.g. none,local:2); "
-                         "default: the engine's default (auto)")
-    ap.add_argument("--layout", choices=["file", "vpc"], default="file",
-                    help="inputs as one file per epoch, or as LAZ tiles grouped by a VPC")
+    ap.add_argument(
+        "--scheduler",
+        default="",
+        help="comma-separated --scheduler values to run each scene with (e.g. none,local:2); "
+        "default: the engine's default (auto)",
+    )
+    ap.add_argument(
+        "--layout",
+        choices=["file", "vpc"],
+        default="file",
+        help="inputs as one file per epoch, or as LAZ tiles grouped by a VPC",
+    )
     ap.add_argument("--tile-m", type=float, default=50.0, help="--layout vpc: tile side (m)")
     args = ap.parse_args(argv)
 
-    sizes = [s.strip() for s in (FULL_SIZES if args.full else (args.sizes or DEFAULT_SIZES))
-             .split(",") if s.strip()]
+    sizes = [s.strip() for s in (FULL_SIZES if args.full else (args.sizes or DEFAULT_SIZES)).split(",") if s.strip()]
     for s in sizes:
         scene_config(s)  # validate early
     root = Path(args.cache) if args.cache else cache_root()
@@ -438,23 +487,36 @@ def main(argv: list[str] | None = None) -> int:
             continue
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else None
         if load is not None and load > 0.5 * (os.cpu_count() or 1):
-            print(f"[bench] warning: load average {load:.2f} on {os.cpu_count()} cores: other "
-                  "processes compete, timings will be pessimistic", flush=True)
+            print(
+                f"[bench] warning: load average {load:.2f} on {os.cpu_count()} cores: other "
+                "processes compete, timings will be pessimistic",
+                flush=True,
+            )
         r = run_scene(s, args, root, runs, sched)
         r["loadavg_1m_before"] = load
         done[key] = r
         results.append(r)
-    doc = {"date": started, "machine": machine(), "command": args.cmd, "seed": args.seed,
-           "fmt": args.fmt, "repeat": args.repeat, "cache": str(root), "scenes": results}
+    doc = {
+        "date": started,
+        "machine": machine(),
+        "command": args.cmd,
+        "seed": args.seed,
+        "fmt": args.fmt,
+        "repeat": args.repeat,
+        "cache": str(root),
+        "scenes": results,
+    }
     (results_dir / "latest.json").write_text(json.dumps(doc, indent=2))
     plot(results, results_dir / "latest.png")
     tab = table(results)
     m = doc["machine"]
     dirty = " (dirty)" if m["git_dirty"] else ""
-    header = (f"{started} · {m['cpu']} · {m['cores']} cores · {m['mem_gb']} GB · "
-              f"Python {m['python']} · commit {m['git_commit']}{dirty}"
-              f"\n\ncommand: `{args.cmd}`; best of {args.repeat}; x floor = wall / floor wall; "
-              "load = 1-min load average before the scene\n")
+    header = (
+        f"{started} · {m['cpu']} · {m['cores']} cores · {m['mem_gb']} GB · "
+        f"Python {m['python']} · commit {m['git_commit']}{dirty}"
+        f"\n\ncommand: `{args.cmd}`; best of {args.repeat}; x floor = wall / floor wall; "
+        "load = 1-min load average before the scene\n"
+    )
     print()
     print(header)
     print(tab)

@@ -37,8 +37,7 @@ def main() -> None:
     for p in (a.before, a.after):
         las = laspy.read(p)
         m = np.asarray(las.classification) == 2
-        clouds.append((np.asarray(las.x)[m], np.asarray(las.y)[m], np.asarray(las.z)[m],
-                       las.header.parse_crs()))
+        clouds.append((np.asarray(las.x)[m], np.asarray(las.y)[m], np.asarray(las.z)[m], las.header.parse_crs()))
     timings["read"] = time.perf_counter() - t + (t - T0)
 
     t = time.perf_counter()
@@ -70,14 +69,27 @@ def main() -> None:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     crs = clouds[0][3]
-    profile = dict(driver="GTiff", width=cols, height=rows, count=1, dtype="float32",
-                   crs=crs.to_wkt() if crs is not None else None, nodata=np.nan,
-                   transform=from_origin(x0, y1, cell, cell), compress="deflate", tiled=True)
+    profile = dict(
+        driver="GTiff",
+        width=cols,
+        height=rows,
+        count=1,
+        dtype="float32",
+        crs=crs.to_wkt() if crs is not None else None,
+        nodata=np.nan,
+        transform=from_origin(x0, y1, cell, cell),
+        compress="deflate",
+        tiled=True,
+    )
     for name, arr in (("dem_before", dems[0]), ("dem_after", dems[1]), ("difference", diff)):
         with rasterio.open(out / f"{name}.tif", "w", **profile) as dst:
             dst.write(arr.astype(np.float32), 1)
-    report = {"volume_m3": vol, "grid": {"cell_m": cell, "rows": rows, "cols": cols},
-              "timings_s": timings, "standin": True}
+    report = {
+        "volume_m3": vol,
+        "grid": {"cell_m": cell, "rows": rows, "cols": cols},
+        "timings_s": timings,
+        "standin": True,
+    }
     timings["write"] = time.perf_counter() - t
     (out / "report.json").write_text(json.dumps(report, indent=2))
 

@@ -67,8 +67,11 @@ def _import(module: str):
     return importlib.import_module(module)
 
 
-def missing(deps: Sequence[tuple[str, str]] = POINT_CLOUD_DEPS, *, quick: bool = False,
-            ) -> list[tuple[str, str, str]]:
+def missing(
+    deps: Sequence[tuple[str, str]] = POINT_CLOUD_DEPS,
+    *,
+    quick: bool = False,
+) -> list[tuple[str, str, str]]:
     """(module, pip requirement, error) of every dependency that does not import. ``quick``
     only looks the modules up (no import: cheap enough for plugin load)."""
     out = []
@@ -128,8 +131,18 @@ def pip_commands(requirements: Sequence[str], target: Path) -> list[list[str]]:
     rest = [r for r in reqs if r not in NO_DEPS and r != "numpy"] + (list(NO_DEPS_NEEDS) if alone else [])
     if "numpy" in reqs and _installed_numpy() is None:
         rest.append("numpy")
-    base = [python_executable(), "-m", "pip", "install", "--disable-pip-version-check",
-            "--no-input", "--only-binary=:all:", "--upgrade", "--target", str(target)]
+    base = [
+        python_executable(),
+        "-m",
+        "pip",
+        "install",
+        "--disable-pip-version-check",
+        "--no-input",
+        "--only-binary=:all:",
+        "--upgrade",
+        "--target",
+        str(target),
+    ]
     constraints = constraints_file(target)
     if constraints is not None:
         base += ["--constraint", str(constraints)]
@@ -147,11 +160,15 @@ def shell_text(command: Sequence[str]) -> str:
 def message(missing_deps: Sequence[tuple[str, str, str]]) -> str:
     """What is missing and how to install it (the plugin's Install button, or by hand)."""
     names = ", ".join(m for m, _, _ in missing_deps)
-    lines = [f"Soil volume change cannot run: the Python used by QGIS ({python_executable()}, "
-             f"Python {sys.version.split()[0]}) cannot import {names}."]
+    lines = [
+        f"Soil volume change cannot run: the Python used by QGIS ({python_executable()}, "
+        f"Python {sys.version.split()[0]}) cannot import {names}."
+    ]
     lines += [f"  - {module}: {error}" for module, _, error in missing_deps]
-    lines.append("In QGIS, press Install in the message bar that appears when the plugin loads "
-                 "(Plugins > Soil volume change > Install dependencies), or run:")
+    lines.append(
+        "In QGIS, press Install in the message bar that appears when the plugin loads "
+        "(Plugins > Soil volume change > Install dependencies), or run:"
+    )
     reqs = [req for _, req, _ in missing_deps]
     lines += ["  " + shell_text(c) for c in pip_commands(reqs, site_dir())]
     if sys.platform == "win32":

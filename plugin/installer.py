@@ -24,8 +24,9 @@ class InstallTask(QgsTask):
     """pip installs ``requirements`` into ``target``; progress moves with each package pip
     reports, every pip line goes to the "Soil volume change" log."""
 
-    def __init__(self, requirements: Sequence[str], target: Path,
-                 done: Callable[[bool, str], None] | None = None) -> None:
+    def __init__(
+        self, requirements: Sequence[str], target: Path, done: Callable[[bool, str], None] | None = None
+    ) -> None:
         super().__init__("Installing the Soil volume change dependencies", QgsTask.CanCancel)
         self.commands = deps.pip_commands(requirements, target)
         self.target, self.done, self.error = target, done, ""
@@ -48,7 +49,7 @@ class InstallTask(QgsTask):
             log(line.rstrip())
             if line.startswith(("Collecting", "Installing", "Successfully")):
                 seen += 1
-                self.setProgress(index * share + share * (1 - 0.8 ** seen))
+                self.setProgress(index * share + share * (1 - 0.8**seen))
             if self.isCanceled():
                 proc.terminate()
                 self.error = "cancelled"
@@ -106,8 +107,8 @@ class DependencyBar:
         self.task = InstallTask(requirements, deps.site_dir(), self.report)
         QgsApplication.taskManager().addTask(self.task)
         self.iface.messageBar().pushMessage(
-            TITLE, "Installing dependencies in the background (progress in the task bar).",
-            Qgis.MessageLevel.Info, 5)
+            TITLE, "Installing dependencies in the background (progress in the task bar).", Qgis.MessageLevel.Info, 5
+        )
         return self.task
 
     def report(self, ok: bool, error: str) -> None:
@@ -118,6 +119,6 @@ class DependencyBar:
         elif ok:
             bar.pushMessage(TITLE, "Dependencies installed; restart QGIS to load them.", Qgis.MessageLevel.Warning)
         else:
-            bar.pushMessage(TITLE, f"Installing the dependencies failed (see the log): {error[-300:]}",
-                            Qgis.MessageLevel.Critical)
-
+            bar.pushMessage(
+                TITLE, f"Installing the dependencies failed (see the log): {error[-300:]}", Qgis.MessageLevel.Critical
+            )

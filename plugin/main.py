@@ -36,8 +36,7 @@ class SoilVolumePlugin:
 
     def initGui(self) -> None:  # noqa: N802 - QGIS API
         self.initProcessing()
-        self.action = QAction(
-            QIcon(str(ICON)), "Estimate soil volume change…", self.iface.mainWindow())
+        self.action = QAction(QIcon(str(ICON)), "Estimate soil volume change…", self.iface.mainWindow())
         self.action.setObjectName("soilvolumeEstimate")
         self.action.setToolTip("Estimate soil volume change between two point cloud surveys")
         self.action.triggered.connect(self.open_dialog)
@@ -55,7 +54,8 @@ class SoilVolumePlugin:
         missing = deps.missing()
         if not missing:
             self.iface.messageBar().pushMessage(
-                "Soil volume change", "All dependencies are installed.", Qgis.MessageLevel.Info, 5)
+                "Soil volume change", "All dependencies are installed.", Qgis.MessageLevel.Info, 5
+            )
             return
         self.dependencies.install([req for _, req, _ in missing])
 

@@ -72,7 +72,8 @@ def require(deps: Sequence[tuple[str, str]], feedback: QgsProcessingFeedback | N
         feedback.pushWarning(deps_module.message(missing))
         raise QgsProcessingException(
             f"Soil volume change cannot run: missing Python packages ({names}); "
-            "how to install them is in the warning above.")
+            "how to install them is in the warning above."
+        )
     try:
         engine("api")
     except Exception as exc:  # noqa: BLE001
@@ -109,7 +110,7 @@ def qgis_wording(message: str) -> str:
     for i, word in enumerate(words):
         stripped = word.rstrip(".,;:)")
         if stripped in names:
-            words[i] = names[stripped] + word[len(stripped):]
+            words[i] = names[stripped] + word[len(stripped) :]
             if i + 1 < len(words) and not words[i + 1].startswith(("-", "(")) and stripped != "--crs":
                 words[i] += " ="
     text = " ".join(words).replace("pass the '", "set the '")
@@ -145,9 +146,7 @@ def engine_errors(feedback: QgsProcessingFeedback | None, hint: str = "") -> Ite
     except QgsProcessingException:
         raise
     except MemoryError as exc:
-        raise QgsProcessingException(
-            "Out of memory: use a larger cell size or crop the clouds first."
-        ) from exc
+        raise QgsProcessingException("Out of memory: use a larger cell size or crop the clouds first.") from exc
     except Exception as exc:  # noqa: BLE001 - never let an engine bug take QGIS down
         if feedback is not None:
             feedback.reportError(traceback.format_exc())

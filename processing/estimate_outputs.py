@@ -28,14 +28,22 @@ NUMBERS: dict[str, tuple[str, str, str]] = {
     "FILL_VOLUME": ("volume_m3", "fill", "Fill volume over the areas of significant gain (m³)"),
     "FILL_UNCERTAINTY": ("uncertainty_m3", "fill", "Fill volume: ± half-width (m³)"),
     "UNCOMPENSATED_NET_VOLUME": (
-        "volume_uncompensated_m3", "net", "Net volume change without the vertical correction (m³)"),
+        "volume_uncompensated_m3",
+        "net",
+        "Net volume change without the vertical correction (m³)",
+    ),
     "ALL_CELLS_NET_VOLUME": (
-        "volume_all_cells_m3", "net", "Net volume summed over every compared cell, as the paper does (m³)"),
+        "volume_all_cells_m3",
+        "net",
+        "Net volume summed over every compared cell, as the paper does (m³)",
+    ),
     "ALL_CELLS_NET_UNCERTAINTY": (
-        "uncertainty_m3", "net_all_cells", "Net volume over every compared cell: ± half-width (m³)"),
+        "uncertainty_m3",
+        "net_all_cells",
+        "Net volume over every compared cell: ± half-width (m³)",
+    ),
     "ALL_CELLS_CUT_VOLUME": ("volume_all_cells_m3", "cut", "Cut summed over every compared cell (m³, incl. noise)"),
-    "ALL_CELLS_FILL_VOLUME": (
-        "volume_all_cells_m3", "fill", "Fill summed over every compared cell (m³, incl. noise)"),
+    "ALL_CELLS_FILL_VOLUME": ("volume_all_cells_m3", "fill", "Fill summed over every compared cell (m³, incl. noise)"),
     "CHANGE_AREA": ("volume_m3", "area_m2", "Detected change area (m²)"),
     "LEVEL_OF_DETECTION": ("uncertainty_m3", "lod_m", "Level of detection (m)"),
     "COMPARED_AREA": ("grid", "compared_area_m2", "Compared area (m²)"),
@@ -51,8 +59,14 @@ STRINGS = {
     "SIGNIFICANCE": "Significance of the net change, in words",
     "TRANSFORM": "Registration transform (4×4, JSON, after → before)",
 }
-ZONE_FIELDS = (("zone_name", QVariant.String), ("cut_m3", QVariant.Double), ("fill_m3", QVariant.Double),
-               ("net_m3", QVariant.Double), ("net_pm_m3", QVariant.Double), ("area_m2", QVariant.Double))
+ZONE_FIELDS = (
+    ("zone_name", QVariant.String),
+    ("cut_m3", QVariant.Double),
+    ("fill_m3", QVariant.Double),
+    ("net_m3", QVariant.Double),
+    ("net_pm_m3", QVariant.Double),
+    ("area_m2", QVariant.Double),
+)
 
 
 def add_outputs(alg: QgsProcessingAlgorithm) -> None:
@@ -93,7 +107,9 @@ def zone_fields(source_fields: QgsFields) -> QgsFields:
 
 
 def write_zones(
-    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], context: QgsProcessingContext,
+    alg: QgsProcessingAlgorithm,
+    parameters: dict[str, Any],
+    context: QgsProcessingContext,
     report: dict[str, Any],
 ) -> str | None:
     """The ZONE_VOLUMES table: each zone polygon with cut, fill, net and the net's ±."""
@@ -102,14 +118,14 @@ def write_zones(
     if source is None or not zones:
         return None
     fields = zone_fields(source.fields())
-    sink, dest = alg.parameterAsSink(parameters, "ZONE_VOLUMES", context, fields, source.wkbType(),
-                                     source.sourceCrs())
+    sink, dest = alg.parameterAsSink(parameters, "ZONE_VOLUMES", context, fields, source.wkbType(), source.sourceCrs())
     if sink is None:
         return None
     features = [f for f in source.getFeatures() if f.hasGeometry()]
     if len(features) != len(zones):
         raise QgsProcessingException(
-            f"The engine measured {len(zones)} zones but the ZONES layer has {len(features)} polygons.")
+            f"The engine measured {len(zones)} zones but the ZONES layer has {len(features)} polygons."
+        )
     for feature, zone in zip(features, zones, strict=True):
         sink.addFeature(_zone_feature(feature, zone, fields, report), QgsFeatureSink.FastInsert)
     return dest

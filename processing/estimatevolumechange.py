@@ -87,33 +87,63 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         for param in optionparams.parameters():
             self.addParameter(param)
         for key, label in (("BEFORE_PIPELINE", "before"), ("AFTER_PIPELINE", "after")):
-            self.addParameter(params.advanced(QgsProcessingParameterFile(
-                key, self.tr(f"PDAL pipeline for the {label} cloud (JSON)"), extension="json",
-                optional=True)))
+            self.addParameter(
+                params.advanced(
+                    QgsProcessingParameterFile(
+                        key, self.tr(f"PDAL pipeline for the {label} cloud (JSON)"), extension="json", optional=True
+                    )
+                )
+            )
         self.add_destinations()
         estimate_outputs.add_outputs(self)
 
     def add_destinations(self) -> None:
-        self.addParameter(QgsProcessingParameterRasterDestination(
-            "DIFFERENCE", self.tr("Difference (after − before, corrected)")))
+        self.addParameter(
+            QgsProcessingParameterRasterDestination("DIFFERENCE", self.tr("Difference (after − before, corrected)"))
+        )
         for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET"):
-            self.addParameter(QgsProcessingParameterRasterDestination(
-                key, self.tr(RASTERS[key][2]), optional=True, createByDefault=True))
-        self.addParameter(QgsProcessingParameterFileDestination(
-            "REPORT", self.tr("HTML report"), fileFilter="HTML files (*.html)", optional=True,
-            createByDefault=True))
-        self.addParameter(QgsProcessingParameterFileDestination(
-            "REPORT_JSON", self.tr("JSON report"), fileFilter="JSON files (*.json)", optional=True,
-            createByDefault=False))
-        self.addParameter(QgsProcessingParameterFeatureSink(
-            "ZONE_VOLUMES", self.tr("Volumes per zone"), QgsProcessing.TypeVectorPolygon,
-            optional=True, createByDefault=True))
-        self.addParameter(QgsProcessingParameterFileDestination(
-            "REGISTERED", self.tr("Registered after cloud"), fileFilter=params.LAS_FILTER,
-            optional=True, createByDefault=False))
+            self.addParameter(
+                QgsProcessingParameterRasterDestination(
+                    key, self.tr(RASTERS[key][2]), optional=True, createByDefault=True
+                )
+            )
+        self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "REPORT", self.tr("HTML report"), fileFilter="HTML files (*.html)", optional=True, createByDefault=True
+            )
+        )
+        self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "REPORT_JSON",
+                self.tr("JSON report"),
+                fileFilter="JSON files (*.json)",
+                optional=True,
+                createByDefault=False,
+            )
+        )
+        self.addParameter(
+            QgsProcessingParameterFeatureSink(
+                "ZONE_VOLUMES",
+                self.tr("Volumes per zone"),
+                QgsProcessing.TypeVectorPolygon,
+                optional=True,
+                createByDefault=True,
+            )
+        )
+        self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "REGISTERED",
+                self.tr("Registered after cloud"),
+                fileFilter=params.LAS_FILTER,
+                optional=True,
+                createByDefault=False,
+            )
+        )
 
     def processAlgorithm(  # noqa: N802
-        self, parameters: dict[str, Any], context: QgsProcessingContext,
+        self,
+        parameters: dict[str, Any],
+        context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
         engine.require(engine.POINT_CLOUD_DEPS, feedback)
@@ -129,9 +159,15 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         try:
             with engine.engine_errors(feedback, CRS_HINT):  # option errors name the parameter
                 options = optionparams.read_options(self, parameters, context, feedback).with_(
-                    keep_registered_cloud=bool(registered))
+                    keep_registered_cloud=bool(registered)
+                )
                 result = engine.engine("api").estimate(
-                    before, after, work, options, overwrite=True, hooks=engine.hooks(feedback),
+                    before,
+                    after,
+                    work,
+                    options,
+                    overwrite=True,
+                    hooks=engine.hooks(feedback),
                     before_pipeline=pipelines["BEFORE_PIPELINE"],
                     after_pipeline=pipelines["AFTER_PIPELINE"],
                 )
@@ -172,6 +208,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
     @staticmethod
     def log_summary(results: dict[str, Any], feedback) -> None:
         """The volumes in the log, and the quality messages as warnings."""
+
         def pm(key: str) -> str:
             value = results.get(key)
             return f" ± {value:,.1f}" if value is not None else ""
@@ -179,7 +216,8 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         feedback.pushInfo(
             f"Volumes (m³): net {results['NET_VOLUME']:+,.1f}{pm('NET_UNCERTAINTY')}, "
             f"cut {results['CUT_VOLUME']:,.1f}{pm('CUT_UNCERTAINTY')}, "
-            f"fill {results['FILL_VOLUME']:,.1f}{pm('FILL_UNCERTAINTY')}")
+            f"fill {results['FILL_VOLUME']:,.1f}{pm('FILL_UNCERTAINTY')}"
+        )
         feedback.pushInfo(results["SIGNIFICANCE"])
         if results["VERDICT"]:
             feedback.pushInfo(f"Quality: {results['VERDICT']}")
@@ -193,7 +231,6 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         if src.suffix == ".html":
             text = src.read_text(encoding="utf-8", errors="replace")
             for sibling in src.parent.iterdir():
-                if (sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file()
-                        and f'"{sibling.name}"' in text):
+                if sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file() and f'"{sibling.name}"' in text:
                     shutil.copyfile(sibling, Path(dest).parent / sibling.name)
         return dest

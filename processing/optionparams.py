@@ -32,8 +32,17 @@ from . import engine
 CRS_FIELDS = {"before_crs", "after_crs"}
 POLYGON_FIELDS = {"stable_mask", "zones"}
 SKIPPED = {"keep_registered_cloud"}  # an output destination, not a parameter
-BASIC = ("before_crs", "after_crs", "cell", "radius", "georeferencing", "fine", "correction", "zones",
-         "stable_mask")  # shown first, in this order; the rest is advanced, in table order
+BASIC = (
+    "before_crs",
+    "after_crs",
+    "cell",
+    "radius",
+    "georeferencing",
+    "fine",
+    "correction",
+    "zones",
+    "stable_mask",
+)  # shown first, in this order; the rest is advanced, in table order
 UNIT_TEXT = {"m": "m", "m2": "m²", "deg": "°"}
 POLYGON_FORMATS = ["gpkg", "shp", "geojson"]
 
@@ -102,10 +111,12 @@ def _make(field: Field) -> QgsProcessingParameterDefinition:
         return QgsProcessingParameterCrs(name, label, optional=True)
     if field.name in POLYGON_FIELDS:
         return QgsProcessingParameterFeatureSource(
-            name, label, [Qgis.ProcessingSourceType.VectorPolygon], optional=True)
+            name, label, [Qgis.ProcessingSourceType.VectorPolygon], optional=True
+        )
     if meta.get("choices"):
-        return QgsProcessingParameterEnum(name, label, options=list(meta["choices"]),
-                                          defaultValue=default, usesStaticStrings=True)
+        return QgsProcessingParameterEnum(
+            name, label, options=list(meta["choices"]), defaultValue=default, usesStaticStrings=True
+        )
     kind = _kind(field)
     if kind == "bool":
         return QgsProcessingParameterBoolean(name, label, defaultValue=bool(default))
@@ -142,8 +153,11 @@ def decimals(*values: float | None) -> int:
 
 
 def read_options(
-    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], context: QgsProcessingContext,
-    feedback: QgsProcessingFeedback | None = None, only: set[str] | None = None,
+    alg: QgsProcessingAlgorithm,
+    parameters: dict[str, Any],
+    context: QgsProcessingContext,
+    feedback: QgsProcessingFeedback | None = None,
+    only: set[str] | None = None,
 ):
     """The engine's Options from the parameters of the fields in ``only`` (all when None)."""
     given = {}
@@ -171,8 +185,10 @@ def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> 
     if field.name in POLYGON_FIELDS:
         if not parameters.get(name):
             return None
-        return alg.parameterAsCompatibleSourceLayerPath(
-            parameters, name, context, POLYGON_FORMATS, "gpkg", feedback) or None
+        return (
+            alg.parameterAsCompatibleSourceLayerPath(parameters, name, context, POLYGON_FORMATS, "gpkg", feedback)
+            or None
+        )
     if field.metadata.get("choices"):
         return alg.parameterAsEnumString(parameters, name, context) or None
     return _scalar(alg, field, parameters, name, context)
@@ -187,8 +203,11 @@ def _scalar(alg, field: Field, parameters: dict[str, Any], name: str, context) -
     raw = parameters.get(name, alg.parameterDefinition(name).defaultValue())
     if raw is None or raw == "":
         return None
-    value = alg.parameterAsInt(parameters, name, context) if kind == "int" else alg.parameterAsDouble(
-        parameters, name, context)
+    value = (
+        alg.parameterAsInt(parameters, name, context)
+        if kind == "int"
+        else alg.parameterAsDouble(parameters, name, context)
+    )
     if field.default is None and value <= 0:
         return None  # optional numbers (e.g. the cell size): 0 = automatic
     return value

@@ -20,11 +20,10 @@ from qgis.core import (
 )
 
 CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
-CLOUD_FILTER = (
-    "Point clouds (" + " ".join(f"*.{e}" for e in CLOUD_EXTENSIONS) + ");;All files (*.*)"
-)
+CLOUD_FILTER = "Point clouds (" + " ".join(f"*.{e}" for e in CLOUD_EXTENSIONS) + ");;All files (*.*)"
 LAS_FILTER = "LAZ files (*.laz);;LAS files (*.las)"
 RASTER_COPY_SUFFIXES = (".tif", ".tiff")
+
 
 def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterDefinition:
     """Mark a parameter as advanced."""
@@ -36,8 +35,10 @@ def cloud_param(key: str, label: str) -> QgsProcessingParameterPointCloudLayer:
     """One required input per epoch: a point cloud layer, or a file path (LAS, LAZ, COPC, VPC,
     PLY, PCD, XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer)."""
     param = QgsProcessingParameterPointCloudLayer(key, f"{label} point cloud")
-    param.setHelp(f"The {label.lower()} survey: a point cloud layer of the project or a file "
-                  f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)}).")
+    param.setHelp(
+        f"The {label.lower()} survey: a point cloud layer of the project or a file "
+        f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)})."
+    )
     return param
 
 
@@ -48,14 +49,16 @@ def crs_param(key: str, label: str) -> QgsProcessingParameterCrs:
 
 
 def cloud_path(
-    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], key: str,
-    context: QgsProcessingContext, label: str,
+    alg: QgsProcessingAlgorithm,
+    parameters: dict[str, Any],
+    key: str,
+    context: QgsProcessingContext,
+    label: str,
 ) -> str:
     """The point cloud file behind ``key``: a file path as given, or a layer's source file."""
     path = _cloud_source(alg, parameters, key, context)
     if not path:
-        raise QgsProcessingException(
-            f"No {label.lower()} point cloud: choose a point cloud layer or a file.")
+        raise QgsProcessingException(f"No {label.lower()} point cloud: choose a point cloud layer or a file.")
     check_cloud_file(path, label)
     return path
 
@@ -87,8 +90,11 @@ def check_cloud_file(path: str, label: str) -> None:
 
 
 def check_cloud_value(
-    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], key: str,
-    context: QgsProcessingContext, label: str,
+    alg: QgsProcessingAlgorithm,
+    parameters: dict[str, Any],
+    key: str,
+    context: QgsProcessingContext,
+    label: str,
 ) -> tuple[bool, str]:
     """checkParameterValues for one cloud input: a layer, or a readable supported file."""
     try:
@@ -99,7 +105,9 @@ def check_cloud_value(
 
 
 def crs_text(
-    alg: QgsProcessingAlgorithm, parameters: dict[str, Any], key: str,
+    alg: QgsProcessingAlgorithm,
+    parameters: dict[str, Any],
+    key: str,
     context: QgsProcessingContext,
 ) -> str | None:
     """An optional CRS parameter as text the engine (pyproj) understands."""
@@ -116,6 +124,7 @@ def crs_text(
 
 def to_json(value: Any, indent: int | None = None) -> str:
     """JSON of engine values (numpy arrays and scalars included)."""
+
     def plain(obj: Any) -> Any:
         if hasattr(obj, "tolist"):
             return obj.tolist()

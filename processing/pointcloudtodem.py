@@ -50,13 +50,16 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         self.addParameter(params.crs_param("CRS", "Input"))
         for param in optionparams.parameters(OPTIONS):
             self.addParameter(param)
-        self.addParameter(QgsProcessingParameterExtent(
-            "EXTENT", self.tr("Grid extent (default: the cloud's)"), optional=True))
-        self.addParameter(QgsProcessingParameterRasterDestination(
-            "OUTPUT", self.tr("Average-height DEM")))
+        self.addParameter(
+            QgsProcessingParameterExtent("EXTENT", self.tr("Grid extent (default: the cloud's)"), optional=True)
+        )
+        self.addParameter(QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Average-height DEM")))
         for key, description in (
-            ("CELL_SIZE", "Cell size (m)"), ("ROWS", "Rows"), ("COLUMNS", "Columns"),
-            ("POINTS", "Points gridded"), ("VALID_CELLS", "Cells with a height"),
+            ("CELL_SIZE", "Cell size (m)"),
+            ("ROWS", "Rows"),
+            ("COLUMNS", "Columns"),
+            ("POINTS", "Points gridded"),
+            ("VALID_CELLS", "Cells with a height"),
         ):
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(description)))
 
@@ -75,7 +78,9 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         return rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum()
 
     def processAlgorithm(  # noqa: N802
-        self, parameters: dict[str, Any], context: QgsProcessingContext,
+        self,
+        parameters: dict[str, Any],
+        context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
         engine.require(engine.POINT_CLOUD_DEPS, feedback)
@@ -86,8 +91,12 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         tif = out if Path(out).suffix.lower() in params.RASTER_COPY_SUFFIXES else out + ".tif"
         with engine.engine_errors(feedback, "Set the 'Input CRS override' parameter."):
             grid = engine.engine("api").cloud_to_dem(
-                cloud, tif, options, crs=params.crs_text(self, parameters, "CRS", context),
-                bounds=self.bounds(parameters, context, crs), hooks=engine.hooks(feedback),
+                cloud,
+                tif,
+                options,
+                crs=params.crs_text(self, parameters, "CRS", context),
+                bounds=self.bounds(parameters, context, crs),
+                hooks=engine.hooks(feedback),
             )
         if tif != out:
             params.deliver_raster(Path(tif), out)
@@ -95,10 +104,14 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         styles.style_on_load(context, out, styles.TERRAIN)
         feedback.pushInfo(
             f"{grid['rows']} x {grid['cols']} cells of {grid['cell_m']} m, {grid['points']:,} "
-            f"points, {grid['valid_cells']:,} cells with a height ({grid['crs']})")
+            f"points, {grid['valid_cells']:,} cells with a height ({grid['crs']})"
+        )
         return {
-            "OUTPUT": out, "CELL_SIZE": float(grid["cell_m"]), "ROWS": int(grid["rows"]),
-            "COLUMNS": int(grid["cols"]), "POINTS": int(grid["points"]),
+            "OUTPUT": out,
+            "CELL_SIZE": float(grid["cell_m"]),
+            "ROWS": int(grid["rows"]),
+            "COLUMNS": int(grid["cols"]),
+            "POINTS": int(grid["points"]),
             "VALID_CELLS": int(grid["valid_cells"]),
         }
 

@@ -34,9 +34,22 @@ overrides for files without one, the crop radius (m) and the registration method
 and the fine stage's fitness and inlier RMSE.</p>"""
 
 
-OPTIONS = {"before_crs", "after_crs", "radius", "coarse", "coarse_voxel", "georeferencing",
-           "max_gps_shift", "max_gps_rotation", "max_gps_tilt", "fine", "pfh_patch", "seed", "ground",
-           "threads"}
+OPTIONS = {
+    "before_crs",
+    "after_crs",
+    "radius",
+    "coarse",
+    "coarse_voxel",
+    "georeferencing",
+    "max_gps_shift",
+    "max_gps_rotation",
+    "max_gps_tilt",
+    "fine",
+    "pfh_patch",
+    "seed",
+    "ground",
+    "threads",
+}
 
 
 class RegisterPointClouds(SoilVolumeAlgorithm):
@@ -55,19 +68,30 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         self.addParameter(params.cloud_param("AFTER", "After"))
         for param in optionparams.parameters(OPTIONS):
             self.addParameter(param)
-        self.addParameter(QgsProcessingParameterFileDestination(
-            "OUTPUT", self.tr("Registered after cloud"), fileFilter=params.LAS_FILTER))
-        self.addParameter(QgsProcessingParameterFileDestination(
-            "TRANSFORM_FILE", self.tr("Transform (JSON)"), fileFilter="JSON files (*.json)",
-            optional=True, createByDefault=False))
-        self.addOutput(QgsProcessingOutputString(
-            "TRANSFORM", self.tr("Transform (4×4, row-major JSON, after → before)")))
+        self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "OUTPUT", self.tr("Registered after cloud"), fileFilter=params.LAS_FILTER
+            )
+        )
+        self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "TRANSFORM_FILE",
+                self.tr("Transform (JSON)"),
+                fileFilter="JSON files (*.json)",
+                optional=True,
+                createByDefault=False,
+            )
+        )
+        self.addOutput(
+            QgsProcessingOutputString("TRANSFORM", self.tr("Transform (4×4, row-major JSON, after → before)"))
+        )
         self.addOutput(QgsProcessingOutputNumber("FITNESS", self.tr("Fine registration fitness")))
-        self.addOutput(QgsProcessingOutputNumber(
-            "RMSE", self.tr("Fine registration inlier RMSE (m)")))
+        self.addOutput(QgsProcessingOutputNumber("RMSE", self.tr("Fine registration inlier RMSE (m)")))
 
     def processAlgorithm(  # noqa: N802
-        self, parameters: dict[str, Any], context: QgsProcessingContext,
+        self,
+        parameters: dict[str, Any],
+        context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
         engine.require(engine.POINT_CLOUD_DEPS, feedback)
@@ -79,8 +103,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
             out += ".laz"
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         with engine.engine_errors(feedback, "Set the 'CRS override' parameters."):
-            reg = engine.engine("api").register(
-                before, after, out, options, hooks=engine.hooks(feedback))
+            reg = engine.engine("api").register(before, after, out, options, hooks=engine.hooks(feedback))
         transform = params.to_json(reg["transform"])
         feedback.pushInfo(f"Transform (after → before): {transform}")
         results: dict[str, Any] = {"OUTPUT": out, "TRANSFORM": transform}

@@ -92,9 +92,7 @@ class StylePostProcessor(QgsProcessingLayerPostProcessorInterface):
         return processor
 
 
-def style_on_load(
-    context: QgsProcessingContext, path: str | None, kind: str, name: str = "", order: int = 0
-) -> None:
+def style_on_load(context: QgsProcessingContext, path: str | None, kind: str, name: str = "", order: int = 0) -> None:
     """Style the output at ``path`` (name it, and stack it by ``order``: higher on top) if
     Processing will load it."""
     if not path or not context.willLoadLayerOnCompletion(path):

@@ -47,8 +47,12 @@ row when no zones are given) and the totals
 NET_VOLUME, CUT_VOLUME, FILL_VOLUME and COMPARED_AREA over the whole compared area.</p>"""
 
 TABLE_FIELDS = (
-    ("zone", QVariant.Int), ("name", QVariant.String), ("cut", QVariant.Double),
-    ("fill", QVariant.Double), ("net", QVariant.Double), ("area", QVariant.Double),
+    ("zone", QVariant.Int),
+    ("name", QVariant.String),
+    ("cut", QVariant.Double),
+    ("fill", QVariant.Double),
+    ("net", QVariant.Double),
+    ("area", QVariant.Double),
 )
 
 
@@ -66,7 +70,8 @@ def raster_file(layer: QgsRasterLayer | None, label: str) -> str:
     source = layer.source()
     if layer.providerType() != "gdal" or not Path(source.split("|")[0]).is_file():
         raise QgsProcessingException(
-            f"The {label} DEM ({layer.name()}) is not a raster file; save it as a GeoTIFF first.")
+            f"The {label} DEM ({layer.name()}) is not a raster file; save it as a GeoTIFF first."
+        )
     return source.split("|")[0]
 
 
@@ -83,24 +88,34 @@ class VolumeFromDems(SoilVolumeAlgorithm):
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
         self.addParameter(QgsProcessingParameterRasterLayer("BEFORE", self.tr("Before DEM")))
         self.addParameter(QgsProcessingParameterRasterLayer("AFTER", self.tr("After DEM")))
-        self.addParameter(QgsProcessingParameterFeatureSource(
-            "ZONES", self.tr("Zones (polygons)"), [QgsProcessing.TypeVectorPolygon], optional=True))
-        self.addParameter(QgsProcessingParameterField(
-            "ZONE_FIELD", self.tr("Zone name field"), parentLayerParameterName="ZONES",
-            optional=True))
-        self.addParameter(QgsProcessingParameterRasterDestination(
-            "OUTPUT", self.tr("Difference (after − before)")))
-        self.addParameter(QgsProcessingParameterFeatureSink(
-            "TABLE", self.tr("Volumes per zone"), QgsProcessing.TypeVector, optional=True,
-            createByDefault=True))
+        self.addParameter(
+            QgsProcessingParameterFeatureSource(
+                "ZONES", self.tr("Zones (polygons)"), [QgsProcessing.TypeVectorPolygon], optional=True
+            )
+        )
+        self.addParameter(
+            QgsProcessingParameterField(
+                "ZONE_FIELD", self.tr("Zone name field"), parentLayerParameterName="ZONES", optional=True
+            )
+        )
+        self.addParameter(QgsProcessingParameterRasterDestination("OUTPUT", self.tr("Difference (after − before)")))
+        self.addParameter(
+            QgsProcessingParameterFeatureSink(
+                "TABLE", self.tr("Volumes per zone"), QgsProcessing.TypeVector, optional=True, createByDefault=True
+            )
+        )
         for key, description in (
-            ("NET_VOLUME", "Net volume change (m³, fill − cut)"), ("CUT_VOLUME", "Cut volume (m³)"),
-            ("FILL_VOLUME", "Fill volume (m³)"), ("COMPARED_AREA", "Compared area (m²)"),
+            ("NET_VOLUME", "Net volume change (m³, fill − cut)"),
+            ("CUT_VOLUME", "Cut volume (m³)"),
+            ("FILL_VOLUME", "Fill volume (m³)"),
+            ("COMPARED_AREA", "Compared area (m²)"),
         ):
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(description)))
 
     def processAlgorithm(  # noqa: N802
-        self, parameters: dict[str, Any], context: QgsProcessingContext,
+        self,
+        parameters: dict[str, Any],
+        context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
         engine.require(engine.RASTER_DEPS, feedback)
@@ -109,37 +124,48 @@ class VolumeFromDems(SoilVolumeAlgorithm):
         zones = None
         if parameters.get("ZONES"):
             zones = self.parameterAsCompatibleSourceLayerPath(
-                parameters, "ZONES", context, ["gpkg", "shp", "geojson"], "gpkg", feedback)
+                parameters, "ZONES", context, ["gpkg", "shp", "geojson"], "gpkg", feedback
+            )
         zone_field = self.parameterAsString(parameters, "ZONE_FIELD", context) or None
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
         tif = out if Path(out).suffix.lower() in params.RASTER_COPY_SUFFIXES else out + ".tif"
         with engine.engine_errors(feedback):
             volumes = engine.engine("api").volume_from_rasters(
-                before, after, tif, zones=zones or None, zone_field=zone_field,
-                hooks=engine.hooks(feedback))
+                before, after, tif, zones=zones or None, zone_field=zone_field, hooks=engine.hooks(feedback)
+            )
         if tif != out:
             params.deliver_raster(Path(tif), out)
             Path(tif).unlink(missing_ok=True)
         styles.style_on_load(context, out, styles.DIVERGING)
         total = volumes["total"]
         results: dict[str, Any] = {
-            "OUTPUT": out, "NET_VOLUME": float(total["net"]), "CUT_VOLUME": float(total["cut"]),
-            "FILL_VOLUME": float(total["fill"]), "COMPARED_AREA": float(total["area_m2"]),
+            "OUTPUT": out,
+            "NET_VOLUME": float(total["net"]),
+            "CUT_VOLUME": float(total["cut"]),
+            "FILL_VOLUME": float(total["fill"]),
+            "COMPARED_AREA": float(total["area_m2"]),
         }
         feedback.pushInfo(
             f"Volumes (m³): net {total['net']:.2f}, cut {total['cut']:.2f}, "
-            f"fill {total['fill']:.2f} over {total['area_m2']:.1f} m²")
+            f"fill {total['fill']:.2f} over {total['area_m2']:.1f} m²"
+        )
         sink, table_id = self.parameterAsSink(
-            parameters, "TABLE", context, table_fields(), QgsWkbTypes.NoGeometry,
-            QgsCoordinateReferenceSystem())
+            parameters, "TABLE", context, table_fields(), QgsWkbTypes.NoGeometry, QgsCoordinateReferenceSystem()
+        )
         if sink is not None:
             rows = (volumes.get("zones") or []) if zones else [{"id": 0, "name": "total", **total}]
             for zone in rows:
                 feature = QgsFeature(table_fields())
-                feature.setAttributes([
-                    int(zone["id"]), str(zone.get("name") or zone["id"]), float(zone["cut"]),
-                    float(zone["fill"]), float(zone["net"]), float(zone["area_m2"]),
-                ])
+                feature.setAttributes(
+                    [
+                        int(zone["id"]),
+                        str(zone.get("name") or zone["id"]),
+                        float(zone["cut"]),
+                        float(zone["fill"]),
+                        float(zone["net"]),
+                        float(zone["area_m2"]),
+                    ]
+                )
                 sink.addFeature(feature, QgsFeatureSink.FastInsert)
             results["TABLE"] = table_id
         return results

@@ -33,8 +33,14 @@ def estimate(
     from .workflow.estimate import run_estimate
 
     return run_estimate(
-        Path(before), Path(after), Path(out_dir), check_options(options or Options()), overwrite=overwrite,
-        hooks=hooks or Hooks(), before_pipeline=before_pipeline, after_pipeline=after_pipeline,
+        Path(before),
+        Path(after),
+        Path(out_dir),
+        check_options(options or Options()),
+        overwrite=overwrite,
+        hooks=hooks or Hooks(),
+        before_pipeline=before_pipeline,
+        after_pipeline=after_pipeline,
     )
 
 
@@ -52,9 +58,14 @@ def cloud_to_dem(
     description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
     from .workflow.commands import run_cloud_to_dem
 
-    return run_cloud_to_dem(Path(cloud), Path(out_tif), check_options(options or Options()), crs=crs,
-                            bounds=check_bounds(bounds),
-                            hooks=hooks or Hooks())
+    return run_cloud_to_dem(
+        Path(cloud),
+        Path(out_tif),
+        check_options(options or Options()),
+        crs=crs,
+        bounds=check_bounds(bounds),
+        hooks=hooks or Hooks(),
+    )
 
 
 def register(
@@ -70,8 +81,9 @@ def register(
     "fine": {...}}."""
     from .workflow.commands import run_register
 
-    return run_register(Path(before), Path(after), Path(out_cloud), check_options(options or Options()),
-                        hooks=hooks or Hooks())
+    return run_register(
+        Path(before), Path(after), Path(out_cloud), check_options(options or Options()), hooks=hooks or Hooks()
+    )
 
 
 def volume_from_rasters(
@@ -88,5 +100,11 @@ def volume_from_rasters(
     [{"id", "name", "net", "cut", "fill", "area_m2"}, ...]} and writes the difference GeoTIFF."""
     from .workflow.rasters import run_volume_from_rasters
 
-    return run_volume_from_rasters(Path(before_tif), Path(after_tif), Path(out_difference),
-                                   zones=zones, zone_field=zone_field, hooks=hooks or Hooks())
+    return run_volume_from_rasters(
+        Path(before_tif),
+        Path(after_tif),
+        Path(out_difference),
+        zones=zones,
+        zone_field=zone_field,
+        hooks=hooks or Hooks(),
+    )

@@ -38,8 +38,14 @@ def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> Non
         flag = "--" + f.name.replace("_", "-")
         kind = {"float": float, "int": int, "float | None": float}.get(str(f.type), str)
         choices = f.metadata["choices"]
-        p.add_argument(flag, dest=f.name, type=kind, choices=choices, default=None,
-                       help=f"{f.metadata['help']} (default: {f.default})")
+        p.add_argument(
+            flag,
+            dest=f.name,
+            type=kind,
+            choices=choices,
+            default=None,
+            help=f"{f.metadata['help']} (default: {f.default})",
+        )
 
 
 def options_from(ns: argparse.Namespace) -> Options:
@@ -58,22 +64,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = ap.add_subparsers(dest="command", required=True)
 
-    est = sub.add_parser("estimate", help="the whole pipeline: register, grid, difference, volumes",
-                         description="Estimate the soil volume change from BEFORE to AFTER.", epilog=EPILOG)
+    est = sub.add_parser(
+        "estimate",
+        help="the whole pipeline: register, grid, difference, volumes",
+        description="Estimate the soil volume change from BEFORE to AFTER.",
+        epilog=EPILOG,
+    )
     est.add_argument("before", type=Path, help="wide 'before' survey (LAS/LAZ/PLY/PCD/XYZ)")
     est.add_argument("after", type=Path, help="smaller 'after' survey (LAS/LAZ/PLY/PCD/XYZ)")
-    est.add_argument("--out", type=Path, required=True,
-                     help="output folder (created; must be empty unless --overwrite)")
-    est.add_argument("--overwrite", action="store_true",
-                     help="replace the output folder of an earlier run as a whole, in one swap (refused when it "
-                     "holds files a run does not write)")
-    est.add_argument("--before-pipeline", type=Path,
-                     help="PDAL pipeline JSON preparing the before cloud (replaces reading it); its writers "
-                     "write into --out under their file names, never onto an input")
+    est.add_argument(
+        "--out", type=Path, required=True, help="output folder (created; must be empty unless --overwrite)"
+    )
+    est.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the output folder of an earlier run as a whole, in one swap (refused when it "
+        "holds files a run does not write)",
+    )
+    est.add_argument(
+        "--before-pipeline",
+        type=Path,
+        help="PDAL pipeline JSON preparing the before cloud (replaces reading it); its writers "
+        "write into --out under their file names, never onto an input",
+    )
     est.add_argument("--after-pipeline", type=Path, help="PDAL pipeline JSON preparing the after cloud")
-    est.add_argument("--registered-cloud", action="store_true",
-                     help="also write after_registered.laz, the after cloud moved by the registration (off by "
-                     "default: it costs as much as the rest of a large run; report.json has the 4x4 transform)")
+    est.add_argument(
+        "--registered-cloud",
+        action="store_true",
+        help="also write after_registered.laz, the after cloud moved by the registration (off by "
+        "default: it costs as much as the rest of a large run; report.json has the 4x4 transform)",
+    )
     est.add_argument("--quiet", action="store_true", help="no progress output")
     add_options(est)
 
@@ -81,16 +101,35 @@ def build_parser() -> argparse.ArgumentParser:
     dem.add_argument("cloud", type=Path, help="point cloud file")
     dem.add_argument("--out", type=Path, required=True, help="output GeoTIFF")
     dem.add_argument("--crs", help="CRS when the file has none")
-    dem.add_argument("--bounds", type=float, nargs=4, metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
-                     help="grid extent in the cloud's CRS (snapped outwards to the cell)")
+    dem.add_argument(
+        "--bounds",
+        type=float,
+        nargs=4,
+        metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
+        help="grid extent in the cloud's CRS (snapped outwards to the cell)",
+    )
     add_options(dem, {"cell", "statistic", "ground"})
 
     reg = sub.add_parser("register", help="register AFTER onto BEFORE and write it")
     reg.add_argument("before", type=Path)
     reg.add_argument("after", type=Path)
     reg.add_argument("--out", type=Path, required=True, help="registered after cloud (.las/.laz)")
-    add_options(reg, {"before_crs", "after_crs", "radius", "coarse", "coarse_voxel", "fine",
-                      "pfh_patch", "seed", "ground", "max_gps_shift", "max_gps_rotation"})
+    add_options(
+        reg,
+        {
+            "before_crs",
+            "after_crs",
+            "radius",
+            "coarse",
+            "coarse_voxel",
+            "fine",
+            "pfh_patch",
+            "seed",
+            "ground",
+            "max_gps_shift",
+            "max_gps_rotation",
+        },
+    )
 
     vol = sub.add_parser("volume", help="cut/fill/net between two DEM GeoTIFFs (optional zones)")
     vol.add_argument("before_dem", type=Path)
@@ -99,11 +138,14 @@ def build_parser() -> argparse.ArgumentParser:
     vol.add_argument("--zones", type=Path, help="polygon file (GeoPackage/Shapefile/GeoJSON)")
     vol.add_argument("--zone-field", help="attribute naming each zone")
 
-    pipe = sub.add_parser("pipeline", help="write the PDAL pipelines that prepare both clouds",
-                          description="Write before.json and after.json: read, reproject to the "
-                          "before CRS, crop the before cloud to the after footprint + radius, "
-                          "ground, outliers; run them with `pdal pipeline` or pass them to "
-                          "`soilvolume estimate --before-pipeline/--after-pipeline`.")
+    pipe = sub.add_parser(
+        "pipeline",
+        help="write the PDAL pipelines that prepare both clouds",
+        description="Write before.json and after.json: read, reproject to the "
+        "before CRS, crop the before cloud to the after footprint + radius, "
+        "ground, outliers; run them with `pdal pipeline` or pass them to "
+        "`soilvolume estimate --before-pipeline/--after-pipeline`.",
+    )
     pipe.add_argument("before", type=Path)
     pipe.add_argument("after", type=Path)
     pipe.add_argument("--emit", type=Path, required=True, help="folder for the two pipeline JSON files")
@@ -130,9 +172,16 @@ def cmd_estimate(ns: argparse.Namespace) -> int:
     from .api import Hooks, estimate
     from .reporting.report import summary_lines
 
-    res = estimate(ns.before, ns.after, ns.out, options_from(ns), overwrite=ns.overwrite,
-                   hooks=Hooks(progress=_progress(ns.quiet)),
-                   before_pipeline=ns.before_pipeline, after_pipeline=ns.after_pipeline)
+    res = estimate(
+        ns.before,
+        ns.after,
+        ns.out,
+        options_from(ns),
+        overwrite=ns.overwrite,
+        hooks=Hooks(progress=_progress(ns.quiet)),
+        before_pipeline=ns.before_pipeline,
+        after_pipeline=ns.after_pipeline,
+    )
     for line in summary_lines(res.report):
         print(line)
     print(f"outputs in {ns.out}")
@@ -177,8 +226,14 @@ def cmd_demo(ns: argparse.Namespace) -> int:
     return run_demo(ns.out, ns.size, ns.seed)
 
 
-COMMANDS = {"estimate": cmd_estimate, "dem": cmd_dem, "register": cmd_register,
-            "volume": cmd_volume, "demo": cmd_demo, "pipeline": cmd_pipeline}
+COMMANDS = {
+    "estimate": cmd_estimate,
+    "dem": cmd_dem,
+    "register": cmd_register,
+    "volume": cmd_volume,
+    "demo": cmd_demo,
+    "pipeline": cmd_pipeline,
+}
 
 
 def _fail(message: str, code: int = 1) -> int:

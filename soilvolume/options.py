@@ -33,44 +33,197 @@ class Options:
     """Options of one estimate run (all lengths in metres of the before CRS)."""
 
     # inputs
-    before_crs: str | None = _opt(None, "CRS of the before cloud when its header has none (e.g. EPSG:32654 or EPSG:2991+6360)", label="Before CRS override")
+    before_crs: str | None = _opt(
+        None,
+        "CRS of the before cloud when its header has none (e.g. EPSG:32654 or EPSG:2991+6360)",
+        label="Before CRS override",
+    )
     after_crs: str | None = _opt(None, "CRS of the after cloud when its header has none", label="After CRS override")
     # step 1: alignment initialisation
-    radius: float = _opt(30.0, "crop radius (m) around the after cloud's footprint applied to the before cloud (paper: 30 m)", label="Crop radius around the after footprint", unit="m", lo=0.0, hi=10000.0)
+    radius: float = _opt(
+        30.0,
+        "crop radius (m) around the after cloud's footprint applied to the before cloud (paper: 30 m)",
+        label="Crop radius around the after footprint",
+        unit="m",
+        lo=0.0,
+        hi=10000.0,
+    )
     # step 2: coarse registration
-    coarse: str = _opt("auto", "coarse registration: auto (FPFH+RANSAC only when the fine stage from the GPS pose fits poorly, kept only within the GPS error prior and if it then fits better), fpfh (always, the paper's path), none", ("auto", "fpfh", "none"), label="Coarse registration")
-    coarse_voxel: float = _opt(1.0, "voxel size (m) for FPFH features and RANSAC", label="Coarse registration voxel", unit="m", lo=0.05, hi=100.0)
-    georeferencing: str = _opt("auto", "how far the surveys' georeferencing is trusted: auto (precise when both files declare the same vertical datum and already agree at the margin of the after survey, else gps), gps (GPS-tagged UAV surveys: registered within the prior below), precise (LiDAR, RTK/PPK or ground control: coordinates used as they are, no registration and no bias correction)", ("auto", "gps", "precise"), label="Georeferencing of the surveys")
-    max_gps_shift: float = _opt(8.0, "georeferencing prior: largest shift (m) registration may apply", label="Georeferencing prior: largest shift", unit="m", lo=0.0, hi=1000.0)
-    max_gps_rotation: float = _opt(6.0, "georeferencing prior: largest rotation (degrees, mostly yaw) registration may apply", label="Georeferencing prior: largest rotation", unit="deg", lo=0.0, hi=180.0)
-    max_gps_tilt: float = _opt(1.0, "georeferencing prior: largest tilt (degrees, about a horizontal axis) registration may apply; a tilt the stable ground cannot pin down stays at 0", label="Georeferencing prior: largest tilt", unit="deg", lo=0.0, hi=90.0)
+    coarse: str = _opt(
+        "auto",
+        "coarse registration: auto (FPFH+RANSAC only when the fine stage from the GPS pose fits poorly, kept only within the GPS error prior and if it then fits better), fpfh (always, the paper's path), none",
+        ("auto", "fpfh", "none"),
+        label="Coarse registration",
+    )
+    coarse_voxel: float = _opt(
+        1.0,
+        "voxel size (m) for FPFH features and RANSAC",
+        label="Coarse registration voxel",
+        unit="m",
+        lo=0.05,
+        hi=100.0,
+    )
+    georeferencing: str = _opt(
+        "auto",
+        "how far the surveys' georeferencing is trusted: auto (precise when both files declare the same vertical datum and already agree at the margin of the after survey, else gps), gps (GPS-tagged UAV surveys: registered within the prior below), precise (LiDAR, RTK/PPK or ground control: coordinates used as they are, no registration and no bias correction)",
+        ("auto", "gps", "precise"),
+        label="Georeferencing of the surveys",
+    )
+    max_gps_shift: float = _opt(
+        8.0,
+        "georeferencing prior: largest shift (m) registration may apply",
+        label="Georeferencing prior: largest shift",
+        unit="m",
+        lo=0.0,
+        hi=1000.0,
+    )
+    max_gps_rotation: float = _opt(
+        6.0,
+        "georeferencing prior: largest rotation (degrees, mostly yaw) registration may apply",
+        label="Georeferencing prior: largest rotation",
+        unit="deg",
+        lo=0.0,
+        hi=180.0,
+    )
+    max_gps_tilt: float = _opt(
+        1.0,
+        "georeferencing prior: largest tilt (degrees, about a horizontal axis) registration may apply; a tilt the stable ground cannot pin down stays at 0",
+        label="Georeferencing prior: largest tilt",
+        unit="deg",
+        lo=0.0,
+        hi=90.0,
+    )
     # step 3: fine registration
-    fine: str = _opt("icp", "fine registration: icp (robust point-to-plane, coarse-to-fine, change areas down-weighted), gicp, pfh (the paper's PFH + SAC-IA on a patch), none", ("icp", "gicp", "pfh", "none"), label="Fine registration")
-    pfh_patch: float = _opt(6.0, "side (m) of the square patch used by --fine pfh (paper: 6 m)", label="PFH patch size", unit="m", lo=0.5, hi=1000.0)
-    seed: int = _opt(0, "random seed for every RANSAC/sampling step (results are deterministic)", label="Random seed", lo=0, hi=2**31 - 1)
+    fine: str = _opt(
+        "icp",
+        "fine registration: icp (robust point-to-plane, coarse-to-fine, change areas down-weighted), gicp, pfh (the paper's PFH + SAC-IA on a patch), none",
+        ("icp", "gicp", "pfh", "none"),
+        label="Fine registration",
+    )
+    pfh_patch: float = _opt(
+        6.0,
+        "side (m) of the square patch used by --fine pfh (paper: 6 m)",
+        label="PFH patch size",
+        unit="m",
+        lo=0.5,
+        hi=1000.0,
+    )
+    seed: int = _opt(
+        0,
+        "random seed for every RANSAC/sampling step (results are deterministic)",
+        label="Random seed",
+        lo=0,
+        hi=2**31 - 1,
+    )
     # step 4: plane-offset / bias compensation
-    correction: str = _opt("surface", "vertical bias correction: surface (degree-2 polynomial on stable ground), plane (plane on stable ground), paper-plane (the paper's two RANSAC planes, d_i), none", ("surface", "plane", "paper-plane", "none"), label="Vertical bias correction")
-    plane_threshold: float = _opt(0.15, "RANSAC plane inlier distance (m)", label="RANSAC plane inlier distance", unit="m", lo=0.001, hi=100.0)
-    stable_mask: str | None = _opt(None, "optional polygon file (GeoPackage/Shapefile/GeoJSON) of ground known to be stable", label="Stable ground polygons")
+    correction: str = _opt(
+        "surface",
+        "vertical bias correction: surface (degree-2 polynomial on stable ground), plane (plane on stable ground), paper-plane (the paper's two RANSAC planes, d_i), none",
+        ("surface", "plane", "paper-plane", "none"),
+        label="Vertical bias correction",
+    )
+    plane_threshold: float = _opt(
+        0.15, "RANSAC plane inlier distance (m)", label="RANSAC plane inlier distance", unit="m", lo=0.001, hi=100.0
+    )
+    stable_mask: str | None = _opt(
+        None,
+        "optional polygon file (GeoPackage/Shapefile/GeoJSON) of ground known to be stable",
+        label="Stable ground polygons",
+    )
     # step 5: grids and volumes
-    cell: float | None = _opt(None, "grid cell size (m); default from the before cloud's density (>= 8 points per cell, >= 0.5 m)", label="Grid cell size", unit="m", lo=0.01, hi=1000.0)
-    statistic: str = _opt("robust-mean", "per-cell height: robust-mean (mean after rejecting points beyond 3 MAD of the cell median), mean (the paper), median", ("robust-mean", "mean", "median"), label="Per-cell height statistic")
-    min_count_ratio: float = _opt(0.1, "a cell of one epoch with fewer points than this fraction of its median count (and always one with fewer than 3) is unreliable: its height is re-filled from neighbours (0 = off)", label="Weak cell threshold (fraction of the median count)", lo=0.0, hi=1.0)
-    fill_holes: float = _opt(100.0, "fill enclosed holes (cells empty in either epoch, e.g. occlusions) up to this area (m2) by interpolating the height difference around them; larger holes stay empty and are reported (0 = off)", label="Largest hole to fill", unit="m2", lo=0.0, hi=1e7)
-    fill_method: str = _opt("biharmonic", "interpolation of refilled cells: biharmonic (smooth, keeps slopes across the hole), harmonic (Laplace, never overshoots its border values)", ("biharmonic", "harmonic"), label="Hole interpolation")
-    ground: str = _opt("auto", "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), none", ("auto", "class", "filter", "none"), label="Ground points")
-    ground_window: float = _opt(6.0, "--ground filter: largest object (m) the SMRF filter removes (vehicles, bushes); keep it below the width of the piles you measure (PDAL's default 18 m removes piles)", label="Ground filter window", unit="m", lo=0.5, hi=500.0)
-    ground_slope: float = _opt(0.6, "--ground filter: steepest ground slope (rise/run) SMRF keeps as terrain (pile flanks; PDAL's default 0.15)", label="Ground filter slope (rise/run)", lo=0.01, hi=10.0)
-    lod_confidence: float = _opt(0.95, "confidence of the level of detection and of the volume uncertainty", label="Confidence level", lo=0.5, hi=0.999)
+    cell: float | None = _opt(
+        None,
+        "grid cell size (m); default from the before cloud's density (>= 8 points per cell, >= 0.5 m)",
+        label="Grid cell size",
+        unit="m",
+        lo=0.01,
+        hi=1000.0,
+    )
+    statistic: str = _opt(
+        "robust-mean",
+        "per-cell height: robust-mean (mean after rejecting points beyond 3 MAD of the cell median), mean (the paper), median",
+        ("robust-mean", "mean", "median"),
+        label="Per-cell height statistic",
+    )
+    min_count_ratio: float = _opt(
+        0.1,
+        "a cell of one epoch with fewer points than this fraction of its median count (and always one with fewer than 3) is unreliable: its height is re-filled from neighbours (0 = off)",
+        label="Weak cell threshold (fraction of the median count)",
+        lo=0.0,
+        hi=1.0,
+    )
+    fill_holes: float = _opt(
+        100.0,
+        "fill enclosed holes (cells empty in either epoch, e.g. occlusions) up to this area (m2) by interpolating the height difference around them; larger holes stay empty and are reported (0 = off)",
+        label="Largest hole to fill",
+        unit="m2",
+        lo=0.0,
+        hi=1e7,
+    )
+    fill_method: str = _opt(
+        "biharmonic",
+        "interpolation of refilled cells: biharmonic (smooth, keeps slopes across the hole), harmonic (Laplace, never overshoots its border values)",
+        ("biharmonic", "harmonic"),
+        label="Hole interpolation",
+    )
+    ground: str = _opt(
+        "auto",
+        "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), none",
+        ("auto", "class", "filter", "none"),
+        label="Ground points",
+    )
+    ground_window: float = _opt(
+        6.0,
+        "--ground filter: largest object (m) the SMRF filter removes (vehicles, bushes); keep it below the width of the piles you measure (PDAL's default 18 m removes piles)",
+        label="Ground filter window",
+        unit="m",
+        lo=0.5,
+        hi=500.0,
+    )
+    ground_slope: float = _opt(
+        0.6,
+        "--ground filter: steepest ground slope (rise/run) SMRF keeps as terrain (pile flanks; PDAL's default 0.15)",
+        label="Ground filter slope (rise/run)",
+        lo=0.01,
+        hi=10.0,
+    )
+    lod_confidence: float = _opt(
+        0.95,
+        "confidence of the level of detection and of the volume uncertainty",
+        label="Confidence level",
+        lo=0.5,
+        hi=0.999,
+    )
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
     # run control
     threads: int = _opt(0, "worker threads for Open3D/numpy (0 = all cores)", label="Threads", lo=0, hi=1024)
-    scheduler: str = _opt("auto", "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST:PORT (an existing Dask cluster; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)", label="Scheduler")
-    memory_limit: float = _opt(0.0, "memory budget (GB) of the run: auto chooses in-process below it, and a LocalCluster shares it among its workers (0 = half of this machine's memory)", label="Memory budget", unit="GB", lo=0.0, hi=1e6)
-    tile_cells: int = _opt(0, "side (cells) of the tiles the distributed engine grids one task at a time (0 = from the point density, about 4 million points per tile)", label="Tile size", unit="cells", lo=0, hi=100000)
-    keep_registered_cloud: bool = _opt(False, "write after_registered.laz (the after cloud moved by the registration; the transform is always in report.json)", label="Write the registered after cloud")
+    scheduler: str = _opt(
+        "auto",
+        "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST:PORT (an existing Dask cluster; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
+        label="Scheduler",
+    )
+    memory_limit: float = _opt(
+        0.0,
+        "memory budget (GB) of the run: auto chooses in-process below it, and a LocalCluster shares it among its workers (0 = half of this machine's memory)",
+        label="Memory budget",
+        unit="GB",
+        lo=0.0,
+        hi=1e6,
+    )
+    tile_cells: int = _opt(
+        0,
+        "side (cells) of the tiles the distributed engine grids one task at a time (0 = from the point density, about 4 million points per tile)",
+        label="Tile size",
+        unit="cells",
+        lo=0,
+        hi=100000,
+    )
+    keep_registered_cloud: bool = _opt(
+        False,
+        "write after_registered.laz (the after cloud moved by the registration; the transform is always in report.json)",
+        label="Write the registered after cloud",
+    )
 
     def with_(self, **changes: Any) -> Options:
         """A copy with some fields changed."""
         return replace(self, **changes)
-

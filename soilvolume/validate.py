@@ -93,6 +93,9 @@ def check_grid_cells(rows: int, cols: int, cell: float, valid: int | None = None
     area: a cell as large as the site turns a volume into noise."""
     n = rows * cols if valid is None else valid
     if n < MIN_CELLS:
-        raise OptionError("cell", f"a {cell:g} m grid has only {n} cell(s) over the compared area "
-                          f"(at least {MIN_CELLS} needed); use a smaller --cell or leave it unset "
-                          "to derive it from the point density")
+        raise OptionError(
+            "cell",
+            f"a {cell:g} m grid has only {n} cell(s) over the compared area "
+            f"(at least {MIN_CELLS} needed); use a smaller --cell or leave it unset "
+            "to derive it from the point density",
+        )

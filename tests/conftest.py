@@ -27,8 +27,9 @@ def write_scene(folder: Path, seed: int = 0, **changes) -> tuple[Path, Path, dic
 
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     """The console entry point as a user runs it (``python -m soilvolume``)."""
-    return subprocess.run([sys.executable, "-m", "soilvolume", *map(str, args)], cwd=cwd,
-                          capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "soilvolume", *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=600
+    )
 
 
 @pytest.fixture(scope="session")

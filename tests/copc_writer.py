@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 
-def write_copc(path: Path, xyz: np.ndarray, cls: np.ndarray | None = None, crs_wkt: str = "",
-               scale: float = 0.001, seed: int = 0) -> Path:
+def write_copc(
+    path: Path, xyz: np.ndarray, cls: np.ndarray | None = None, crs_wkt: str = "", scale: float = 0.001, seed: int = 0
+) -> Path:
     import copclib as c
     import laspy
 

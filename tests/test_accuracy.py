@@ -37,6 +37,7 @@ def run(before: Path, after: Path, out: Path, **options) -> dict:
 
 # --- 1. full pipeline, paper geometry ---------------------------------------------------------
 
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_full_pipeline_under_1_percent_on_paper_geometry(tmp_path, seed):
     """Default options (GPS misalignment on, FPFH/ICP registration, surface correction, hole fill)
@@ -105,6 +106,7 @@ def test_paper_plane_correction_is_clearly_worse(correction_errors):
 
 # --- 3. --ground filter on unclassified clouds ------------------------------------------------
 
+
 @pytest.fixture(scope="module", params=[1, 2], ids=lambda s: f"seed{s}")
 def ground_runs(request, tmp_path_factory) -> dict:
     """Bushes (grown in the after epoch), vehicles and boulders, and every point unclassified, so
@@ -112,16 +114,23 @@ def ground_runs(request, tmp_path_factory) -> dict:
     Returns {seed, before, after, truth, folder, none, filter} (reports for the last two)."""
     seed = request.param
     folder = tmp_path_factory.mktemp(f"vegetation{seed}")
-    before, after, truth = write_scene(folder / "data", seed, before_points=250_000,
-                                       after_points=150_000, vegetation=True, objects=True)
+    before, after, truth = write_scene(
+        folder / "data", seed, before_points=250_000, after_points=150_000, vegetation=True, objects=True
+    )
     for path in (before, after):
         las = laspy.read(path)
         las.classification = np.ones(len(las.points), np.uint8)
         las.write(path)
     assert not (laspy.read(after).classification == 2).any()
-    return {"seed": seed, "before": before, "after": after, "truth": truth, "folder": folder,
-            "none": run(before, after, folder / "none", ground="none"),
-            "filter": run(before, after, folder / "filter", ground="filter")}
+    return {
+        "seed": seed,
+        "before": before,
+        "after": after,
+        "truth": truth,
+        "folder": folder,
+        "none": run(before, after, folder / "none", ground="none"),
+        "filter": run(before, after, folder / "filter", ground="filter"),
+    }
 
 
 def test_ground_filter_removes_vegetation_and_objects(ground_runs):
@@ -143,8 +152,7 @@ def test_ground_filter_removes_vegetation_and_objects(ground_runs):
 def test_ground_filter_through_the_cli(ground_runs):
     """The same run as a user types it, once (about 3 s): same selection, same volume."""
     out = ground_runs["folder"] / "cli"
-    proc = run_cli("estimate", ground_runs["before"], ground_runs["after"], "--out", out,
-                   "--ground", "filter")
+    proc = run_cli("estimate", ground_runs["before"], ground_runs["after"], "--out", out, "--ground", "filter")
     assert proc.returncode == 0, proc.stderr[-2000:]
     report = json.loads((out / "report.json").read_text())
     api = ground_runs["filter"]
@@ -165,11 +173,18 @@ def coverage_runs(tmp_path_factory) -> list[dict[str, float]]:
     rows = []
     for seed in COVERAGE_SEEDS:
         folder = tmp_path_factory.mktemp(f"coverage{seed}")
-        before, after, truth = write_scene(folder / "data", seed, before_points=62_500,
-                                           after_points=37_500, **NUISANCES)
+        before, after, truth = write_scene(
+            folder / "data", seed, before_points=62_500, after_points=37_500, **NUISANCES
+        )
         report = run(before, after, folder / "out")
-        rows.append({"seed": seed, "error": report["volume_m3"]["net"] - truth["net"],
-                     "half_width": report["uncertainty_m3"]["net"], "truth": truth["net"]})
+        rows.append(
+            {
+                "seed": seed,
+                "error": report["volume_m3"]["net"] - truth["net"],
+                "half_width": report["uncertainty_m3"]["net"],
+                "truth": truth["net"],
+            }
+        )
     return rows
 
 

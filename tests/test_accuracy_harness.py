@@ -25,8 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 import accuracy  # noqa: E402
 import real_terrain  # noqa: E402
 
-KINDS = [("pit", 0.4), ("pile", 0.4), ("excavation", 0.4), ("excavation", 0.5),
-         ("excavation", 0.7)]
+KINDS = [("pit", 0.4), ("pile", 0.4), ("excavation", 0.4), ("excavation", 0.5), ("excavation", 0.7)]
 
 
 def _grid(box, cell):
@@ -63,12 +62,12 @@ def test_new_change_kinds_truth(change, fraction):
     fill = cut = 0.0
     support = np.zeros((len(ys), len(xs)), np.int32)
     for i in range(0, len(ys), 400):
-        yy = ys[i:i + 400, None]
+        yy = ys[i : i + 400, None]
         dz = change_dz(xs[None, :], yy, cfg)
         fill += dz[dz > 0].sum() * cell * cell
         cut -= dz[dz < 0].sum() * cell * cell
         for f in feats:
-            support[i:i + 400] += features_dz(xs[None, :], yy, [f]) != 0
+            support[i : i + 400] += features_dz(xs[None, :], yy, [f]) != 0
     assert support.max() <= 1, "features overlap"
     if t["fill"] > 0:
         assert fill == pytest.approx(t["fill"], rel=5e-3)
@@ -89,8 +88,7 @@ def test_new_change_kinds_truth(change, fraction):
         exc = [f for f in feats if f["sign"] < 0]
         assert len(exc) == 1 and t["config"]["change_fraction"] == fraction
         assert feature_area(exc[0]) / area == pytest.approx(fraction, rel=1e-9)
-        measured = (support.sum() * cell * cell - sum(feature_area(f) for f in feats
-                                                      if f["sign"] > 0)) / area
+        measured = (support.sum() * cell * cell - sum(feature_area(f) for f in feats if f["sign"] > 0)) / area
         assert measured == pytest.approx(fraction, rel=0.05)
     else:
         assert "change_fraction" not in t["config"]
@@ -101,8 +99,15 @@ def test_new_change_kinds_truth(change, fraction):
 def test_clutter_and_holes_keep_off_the_excavation():
     """Vegetation, vehicles and boulders are placed around the true outline of the new features
     (some inside the after footprint, none on the change)."""
-    cfg = SceneConfig.small(change="excavation", change_fraction=0.5, vegetation=True,
-                            objects=True, holes=6, before_points=40_000, after_points=25_000)
+    cfg = SceneConfig.small(
+        change="excavation",
+        change_fraction=0.5,
+        vegetation=True,
+        objects=True,
+        holes=6,
+        before_points=40_000,
+        after_points=25_000,
+    )
     scene = make_pair(2, cfg)
     cls = scene.before_class
     xy = scene.before[:, :2]
@@ -111,8 +116,7 @@ def test_clutter_and_holes_keep_off_the_excavation():
     dz = scene.change_dz(xy[clutter, 0], xy[clutter, 1])
     assert np.all(dz == 0)
     fp = scene.truth["after_footprint"]
-    inside = ((xy[clutter, 0] > fp[0]) & (xy[clutter, 0] < fp[2]) & (xy[clutter, 1] > fp[1])
-              & (xy[clutter, 1] < fp[3]))
+    inside = (xy[clutter, 0] > fp[0]) & (xy[clutter, 0] < fp[2]) & (xy[clutter, 1] > fp[1]) & (xy[clutter, 1] < fp[3])
     assert inside.sum() > 10
 
 
@@ -127,12 +131,12 @@ def test_real_terrain_features_exact():
             m_y = (ys > f["y"] - r) & (ys < f["y"] + r)
             dz = features_dz(xs[m_x][None, :], ys[m_y][:, None], [f])
             assert abs(dz.sum()) * 0.01 == pytest.approx(f["volume"], rel=5e-3)
-        area = (real_terrain.BOX[2] - real_terrain.BOX[0]) * (real_terrain.BOX[3]
-                                                               - real_terrain.BOX[1])
+        area = (real_terrain.BOX[2] - real_terrain.BOX[0]) * (real_terrain.BOX[3] - real_terrain.BOX[1])
         assert 0.05 < sum(feature_area(f) for f in feats) / area < 0.6
 
 
 # --- scoring ----------------------------------------------------------------------------------
+
 
 def _truth(net_cut_fill=(900.0, 100.0, 1000.0), yaw_deg=2.0):
     c = np.array([500_050.0, 3_900_050.0, 60.0])
@@ -143,8 +147,13 @@ def _truth(net_cut_fill=(900.0, 100.0, 1000.0), yaw_deg=2.0):
     T[:3, :3] = R.T
     T[:3, 3] = c - R.T @ (c + shift)
     net, cut, fill = net_cut_fill
-    return {"net": net, "cut": cut, "fill": fill, "transform": T.tolist(),
-            "misalignment": {"center": c.tolist(), "shift_m": shift.tolist()}}, T
+    return {
+        "net": net,
+        "cut": cut,
+        "fill": fill,
+        "transform": T.tolist(),
+        "misalignment": {"center": c.tolist(), "shift_m": shift.tolist()},
+    }, T
 
 
 def test_score_on_a_fabricated_report():
@@ -156,9 +165,11 @@ def test_score_on_a_fabricated_report():
     E[:3, :3] = [[math.cos(b), -math.sin(b), 0], [math.sin(b), math.cos(b), 0], [0, 0, 1]]
     c = np.array(truth["misalignment"]["center"])
     E[:3, 3] = c - E[:3, :3] @ c
-    report = {"volume_m3": {"net": 909.0, "cut": 120.0, "fill": 1020.0},
-              "uncertainty_m3": {"net": 10.0, "cut": 5.0, "fill": 25.0},
-              "registration": {"transform": (E @ T).tolist()}}
+    report = {
+        "volume_m3": {"net": 909.0, "cut": 120.0, "fill": 1020.0},
+        "uncertainty_m3": {"net": 10.0, "cut": 5.0, "fill": 25.0},
+        "registration": {"transform": (E @ T).tolist()},
+    }
     row = accuracy.score(report, truth, "paper", dense=True)
     assert row["err_pct"]["net"] == pytest.approx(1.0)
     assert row["err_pct"]["cut"] == pytest.approx(20.0)
@@ -166,12 +177,18 @@ def test_score_on_a_fabricated_report():
     assert row["hw_pct"]["net"] == pytest.approx(100 * 10 / 900)
     assert row["registration"]["rot_deg"] == pytest.approx(0.1, abs=1e-9)
     assert row["registration"]["shift_m"] == pytest.approx(0.0, abs=1e-6)  # rotation about it
-    assert row["checks"] == {"net 1%": True, "cut 3%": False, "fill 3%": True,
-                             "net hw 5%": True}
+    assert row["checks"] == {"net 1%": True, "cut 3%": False, "fill 3%": True, "net hw 5%": True}
     assert accuracy.passed(row) is False
-    row2 = accuracy.score({**report, "uncertainty_m3": {"net": 50.0, "cut": 30.0, "fill": 30.0},
-                           "volume_m3": {"net": 905.0, "cut": 101.0, "fill": 1006.0}},
-                          truth, "paper", dense=True)
+    row2 = accuracy.score(
+        {
+            **report,
+            "uncertainty_m3": {"net": 50.0, "cut": 30.0, "fill": 30.0},
+            "volume_m3": {"net": 905.0, "cut": 101.0, "fill": 1006.0},
+        },
+        truth,
+        "paper",
+        dense=True,
+    )
     assert row2["covered"] == {"net": True, "cut": True, "fill": True}
     assert row2["checks"]["net hw 5%"] is False  # 50 m3 > 5 % of 900 m3
     # coverage over rows, skipping rows without an interval or a truth
@@ -186,8 +203,10 @@ def test_score_on_a_fabricated_report():
 
 def test_zero_truth_errors_are_relative_to_the_moved_volume():
     truth, _ = _truth((-200.0, 200.0, 0.0))
-    report = {"volume_m3": {"net": -190.0, "cut": 204.0, "fill": 14.0},
-              "uncertainty_m3": {"net": 12.0, "cut": 10.0, "fill": 10.0}}
+    report = {
+        "volume_m3": {"net": -190.0, "cut": 204.0, "fill": 14.0},
+        "uncertainty_m3": {"net": 12.0, "cut": 10.0, "fill": 10.0},
+    }
     row = accuracy.score(report, truth, "half", dense=False)
     assert row["err_pct"]["fill"] == pytest.approx(7.0)  # 14 m3 of 200 m3 moved
     assert row["covered"]["fill"] is False and row["covered"]["net"] is True
@@ -197,10 +216,22 @@ def test_zero_truth_errors_are_relative_to_the_moved_volume():
 
 
 def test_verdict_and_option_notes():
-    good = {"name": "a", "has_truth": True, "verdict": "reliable", "checks": {"net 1%": True},
-            "covered": {"net": True}, "est": {"net": 1.0}}
-    bad = {"name": "b", "has_truth": True, "verdict": "reliable", "checks": {"net 1%": False},
-           "covered": {"net": True}, "est": {"net": 2.0}}
+    good = {
+        "name": "a",
+        "has_truth": True,
+        "verdict": "reliable",
+        "checks": {"net 1%": True},
+        "covered": {"net": True},
+        "est": {"net": 1.0},
+    }
+    bad = {
+        "name": "b",
+        "has_truth": True,
+        "verdict": "reliable",
+        "checks": {"net 1%": False},
+        "covered": {"net": True},
+        "est": {"net": 2.0},
+    }
     worse = {"name": "c", "has_truth": True, "verdict": "not reliable", "error": "x"}
     (line,) = accuracy.verdict_summary([good, bad, worse])
     assert "reliable: 2 cases, 1 of them bad" in line and "not reliable: 1 cases, 1" in line

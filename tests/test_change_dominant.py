@@ -58,8 +58,9 @@ def test_intervals_hold_the_truth_when_change_dominates(excavation_half):
 def test_lidar_pair_without_misalignment_keeps_its_pose(tmp_path):
     """Excavation over 70 % of the footprint, perfectly georeferenced (LiDAR): the registration
     must stay near the identity instead of laying the works onto the old ground."""
-    report, truth = _run(tmp_path, 1, change="excavation", change_fraction=0.7,
-                         shift_m=(0, 0, 0), rotation_deg=(0, 0, 0), noise_m=0.05)
+    report, truth = _run(
+        tmp_path, 1, change="excavation", change_fraction=0.7, shift_m=(0, 0, 0), rotation_deg=(0, 0, 0), noise_m=0.05
+    )
     assert _rotation_error(report, truth) < 0.1
     assert abs(_rel(report, truth, "net")) < 0.03
     assert abs(_rel(report, truth, "cut")) < 0.05
@@ -68,8 +69,9 @@ def test_lidar_pair_without_misalignment_keeps_its_pose(tmp_path):
 def test_clutter_in_both_surveys_makes_no_cut(tmp_path):
     """One pile only (no true cut), vehicles, boulders, vegetation, holes and outliers in both
     surveys. Before this work the headline cut was tens of m3; measured: a few m3."""
-    report, truth = _run(tmp_path, 2, change="pile", objects=True, vegetation=True, holes=6,
-                         outlier_fraction=0.005, doming_m=0.03)
+    report, truth = _run(
+        tmp_path, 2, change="pile", objects=True, vegetation=True, holes=6, outlier_fraction=0.005, doming_m=0.03
+    )
     assert truth["cut"] == 0
     assert report["volume_m3"]["cut"] < 0.01 * truth["fill"]
     assert abs(_rel(report, truth, "fill")) < 0.03
@@ -106,10 +108,18 @@ def test_change_areas_count_no_noise_and_no_sign_selected_rim():
 
 
 def _report(net, half_width, used="gps", fitness=0.9):
-    return {"volume_m3": {"net": net}, "uncertainty_m3": {"net": half_width},
-            "registration": {"georeferencing": {"used": used}, "rotation_deg": 1.0, "tilt_deg": 0.1,
-                             "shift_m": 1.0, "fine": {"fitness": fitness}},
-            "correction": {"params": {"residuals": {"mean": 0.0}}}}
+    return {
+        "volume_m3": {"net": net},
+        "uncertainty_m3": {"net": half_width},
+        "registration": {
+            "georeferencing": {"used": used},
+            "rotation_deg": 1.0,
+            "tilt_deg": 0.1,
+            "shift_m": 1.0,
+            "fine": {"fitness": fitness},
+        },
+        "correction": {"params": {"residuals": {"mean": 0.0}}},
+    }
 
 
 PRIOR = {"shift": 8.0, "rotation": 6.0, "tilt": 1.0}

@@ -13,8 +13,7 @@ N = 200
 
 
 def grid() -> GridSpec:
-    return GridSpec(xmin=500000.0, ymax=4000000.0, cell=CELL, rows=N, cols=N,
-                    origin=(500000.0, 3999900.0, 0.0))
+    return GridSpec(xmin=500000.0, ymax=4000000.0, cell=CELL, rows=N, cols=N, origin=(500000.0, 3999900.0, 0.0))
 
 
 def domed_pair(seed: int = 0):

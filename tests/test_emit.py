@@ -19,8 +19,9 @@ def test_emitted_pipelines_run_and_match_the_direct_estimate(misaligned_pair, mi
     assert types[0] == "readers.las" and "filters.crop" in types and "filters.outlier" in types
     assert json.loads(b_json.read_text())["pipeline"][0]["filename"] == str(before)
     out = tmp_path / "est"
-    p = run_cli("estimate", before, after, "--before-pipeline", b_json, "--after-pipeline", a_json,
-                "--out", out, "--quiet")
+    p = run_cli(
+        "estimate", before, after, "--before-pipeline", b_json, "--after-pipeline", a_json, "--out", out, "--quiet"
+    )
     assert p.returncode == 0, p.stderr
     net = json.loads((out / "report.json").read_text())["volume_m3"]["net"]
     direct = misaligned_result[0].report["volume_m3"]["net"]

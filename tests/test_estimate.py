@@ -12,8 +12,15 @@ from scipy.spatial.transform import Rotation
 from soilvolume.api import estimate
 from soilvolume.options import Options
 
-OUTPUTS = {"dem_before.tif", "dem_after.tif", "difference.tif", "plane_offset.tif", "filled_mask.tif",
-           "report.json", "report.html"}
+OUTPUTS = {
+    "dem_before.tif",
+    "dem_after.tif",
+    "difference.tif",
+    "plane_offset.tif",
+    "filled_mask.tif",
+    "report.json",
+    "report.html",
+}
 
 
 def transform_error(report: dict, truth: dict) -> tuple[float, float]:
@@ -74,8 +81,9 @@ def test_compensation_removes_a_planar_vertical_bias(tmp_path):
     """Registration off: a planar bias (offset + tilt) left in the after epoch of a near-planar
     site (the paper's assumption; on rolling terrain its RANSAC planes pick arbitrary bands) is
     what the paper's plane compensation removes; both plane corrections must beat no correction."""
-    before, after, truth = write_scene(tmp_path / "data", 3, shift_m=(0, 0, 0),
-                                       rotation_deg=(0, 0, 0), vertical_bias_m=0.25, relief=0.0)
+    before, after, truth = write_scene(
+        tmp_path / "data", 3, shift_m=(0, 0, 0), rotation_deg=(0, 0, 0), vertical_bias_m=0.25, relief=0.0
+    )
     errs = {}
     for corr in ("none", "paper-plane", "plane", "surface"):
         opts = Options(coarse="none", fine="none", correction=corr)
@@ -104,8 +112,7 @@ def test_fine_pfh_converges(tmp_path):
 
 def test_cli_estimate_writes_outputs_and_prints_volumes(misaligned_pair, tmp_path):
     before, after, truth = misaligned_pair
-    p = run_cli("estimate", before, after, "--out", tmp_path / "o", "--quiet", "--coarse", "none",
-                "--registered-cloud")
+    p = run_cli("estimate", before, after, "--out", tmp_path / "o", "--quiet", "--coarse", "none", "--registered-cloud")
     assert p.returncode == 0, p.stderr
     assert "net" in p.stdout and "m3" in p.stdout
     r = json.loads((tmp_path / "o" / "report.json").read_text())
@@ -126,8 +133,19 @@ def test_cli_estimate_writes_outputs_and_prints_volumes(misaligned_pair, tmp_pat
 def test_cli_help_explains_every_option():
     p = run_cli("estimate", "--help")
     assert p.returncode == 0
-    for flag in ("--radius", "--coarse", "--fine", "--correction", "--cell", "--statistic",
-                 "--before-crs", "--after-crs", "--overwrite", "--seed", "--pfh-patch"):
+    for flag in (
+        "--radius",
+        "--coarse",
+        "--fine",
+        "--correction",
+        "--cell",
+        "--statistic",
+        "--before-crs",
+        "--after-crs",
+        "--overwrite",
+        "--seed",
+        "--pfh-patch",
+    ):
         assert flag in p.stdout
     assert "default" in p.stdout
 

@@ -26,15 +26,19 @@ def test_outputs_read_back(misaligned_result):
                 assert edge / g["cell_m"] == pytest.approx(round(edge / g["cell_m"]), abs=1e-6)
             band = ds.read(1, masked=True)
             assert band.count() > 0
-    with rasterio.open(out / "dem_before.tif") as b, rasterio.open(out / "dem_after.tif") as a, \
-            rasterio.open(out / "difference.tif") as d, rasterio.open(out / "plane_offset.tif") as o, \
-            rasterio.open(out / "filled_mask.tif") as f:
+    with (
+        rasterio.open(out / "dem_before.tif") as b,
+        rasterio.open(out / "dem_after.tif") as a,
+        rasterio.open(out / "difference.tif") as d,
+        rasterio.open(out / "plane_offset.tif") as o,
+        rasterio.open(out / "filled_mask.tif") as f,
+    ):
         hb, ha, dd, off = (x.read(1, masked=True).astype(float) for x in (b, a, d, o))
         filled = f.read(1) == 1
     assert filled.sum() < filled.size / 4  # interpolated cells (sparse or holes) are marked, few
     both = ~hb.mask & ~ha.mask & ~dd.mask & ~off.mask & ~filled
     assert np.abs((ha - hb - off)[both] - dd[both]).max() < 2e-3 + 0  # float32 storage
-    assert (d.nodata == NODATA)
+    assert d.nodata == NODATA
     # the sum of the difference raster is the net over every compared cell (the paper's sum)
     assert float(dd.sum()) * g["cell_m"] ** 2 == pytest.approx(res.report["volume_all_cells_m3"]["net"], rel=1e-3)
     assert 40 < float(hb.mean()) < 120  # metres above the datum, synthetic site

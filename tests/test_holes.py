@@ -93,8 +93,8 @@ def blobs(shape: tuple[int, int], frac: float, seed: int, r_max: float = 15.9) -
         a, b = rng.integers(20, shape[0] - 20), rng.integers(20, shape[1] - 20)
         r = rng.uniform(1.5, r_max)
         k = int(r) + 1
-        yy, xx = np.mgrid[-k: k + 1, -k: k + 1]
-        t[a - k: a + k + 1, b - k: b + k + 1] |= yy**2 + xx**2 < r * r
+        yy, xx = np.mgrid[-k : k + 1, -k : k + 1]
+        t[a - k : a + k + 1, b - k : b + k + 1] |= yy**2 + xx**2 < r * r
     return t
 
 

@@ -27,13 +27,29 @@ def _las(path: Path, xyz: np.ndarray, cls=None, crs="EPSG:32633") -> Path:
 # ----------------------------------------------------------------------------- building
 def test_build_prepare_pipeline_stages_and_json_round_trip(tmp_path):
     stages = P.build_prepare_pipeline(
-        REAL, in_srs="EPSG:2991+6360", out_srs="EPSG:2991+5703",
-        crop={"bounds": (194470, 259220, 194510, 259270)}, outlier=(8, 2.5), ground="filter",
-        z_range=(100, None), voxel=0.25, output=tmp_path / "out.laz")
+        REAL,
+        in_srs="EPSG:2991+6360",
+        out_srs="EPSG:2991+5703",
+        crop={"bounds": (194470, 259220, 194510, 259270)},
+        outlier=(8, 2.5),
+        ground="filter",
+        z_range=(100, None),
+        voxel=0.25,
+        output=tmp_path / "out.laz",
+    )
     assert [s["type"] for s in stages] == [
-        "readers.las", "filters.reprojection", "filters.crop", "filters.assign",
-        "filters.outlier", "filters.range", "filters.smrf", "filters.range", "filters.range",
-        "filters.voxelcenternearestneighbor", "writers.las"]
+        "readers.las",
+        "filters.reprojection",
+        "filters.crop",
+        "filters.assign",
+        "filters.outlier",
+        "filters.range",
+        "filters.smrf",
+        "filters.range",
+        "filters.range",
+        "filters.voxelcenternearestneighbor",
+        "writers.las",
+    ]
     assert stages[0]["default_srs"] == "EPSG:2991+6360"
     assert stages[2]["bounds"] == "([194470.0, 194510.0], [259220.0, 259270.0])"
     assert stages[5]["limits"] == "Classification![7:7]"
@@ -57,13 +73,10 @@ def test_build_crop_forms_and_ground_modes(tmp_path):
     assert cls[1] == {"type": "filters.range", "limits": "Classification[2:2]"}
     # autzen_bmx_2010 is all class 2: auto means class; a cloud without class 2 means none
     assert P.build_prepare_pipeline(REAL, ground="auto", outlier=None) == cls
-    n = _las(tmp_path / "n.las", np.random.default_rng(0).uniform(0, 10, (50, 3)),
-             np.ones(50, dtype=np.uint8))
+    n = _las(tmp_path / "n.las", np.random.default_rng(0).uniform(0, 10, (50, 3)), np.ones(50, dtype=np.uint8))
     assert len(P.build_prepare_pipeline(n, ground="auto", outlier=None)) == 1
-    g = _las(tmp_path / "g.las", np.random.default_rng(0).uniform(0, 10, (50, 3)),
-             np.full(50, 2, dtype=np.uint8))
-    assert P.build_prepare_pipeline(g, ground="auto", outlier=None)[1]["limits"] == \
-        "Classification[2:2]"
+    g = _las(tmp_path / "g.las", np.random.default_rng(0).uniform(0, 10, (50, 3)), np.full(50, 2, dtype=np.uint8))
+    assert P.build_prepare_pipeline(g, ground="auto", outlier=None)[1]["limits"] == "Classification[2:2]"
     with pytest.raises(SoilVolumeError, match="ground 'trees'"):
         P.build_prepare_pipeline(REAL, ground="trees")
     with pytest.raises(SoilVolumeError, match=r"\.las or \.laz"):
@@ -96,12 +109,10 @@ def test_prepare_cloud_real_file_vertical_feet_to_metres():
 
 def test_prepare_cloud_crop_outliers_voxel(tmp_path):
     rng = np.random.default_rng(2)
-    xyz = np.column_stack([rng.uniform(0, 50, 20000), rng.uniform(0, 50, 20000),
-                           rng.normal(0, 0.02, 20000)])
+    xyz = np.column_stack([rng.uniform(0, 50, 20000), rng.uniform(0, 50, 20000), rng.normal(0, 0.02, 20000)])
     xyz[:20, 2] = 40.0  # spikes
     f = _las(tmp_path / "a.las", xyz + [500000, 0, 0])
-    raw = P.prepare_cloud(f, crop={"bounds": (500010, 10, 500040, 40)}, outlier=(8, 2.5),
-                          voxel=1.0, engine="embedded")
+    raw = P.prepare_cloud(f, crop={"bounds": (500010, 10, 500040, 40)}, outlier=(8, 2.5), voxel=1.0, engine="embedded")
     assert raw.xyz[:, 0].min() >= 500010 and raw.xyz[:, 1].max() <= 40
     assert raw.xyz[:, 2].max() < 1.0  # spikes gone
     assert len(raw.xyz) <= 31 * 31
@@ -111,8 +122,7 @@ def test_dem_stage_mean_cells_equal_numpy(tmp_path):
     import rasterio
 
     rng = np.random.default_rng(4)
-    xyz = np.column_stack([rng.uniform(0, 20, 5000), rng.uniform(0, 10, 5000),
-                           rng.normal(5, 1, 5000)])
+    xyz = np.column_stack([rng.uniform(0, 20, 5000), rng.uniform(0, 10, 5000), rng.normal(5, 1, 5000)])
     f = _las(tmp_path / "d.las", xyz)
     tif = tmp_path / "dem.tif"
     stages = [P.reader_stage(f), P.build_dem_stage(tif, 2.0, origin=(0, 0), size=(10, 5))]
@@ -165,38 +175,45 @@ def test_run_pipeline_file_and_engine_choice(tmp_path, monkeypatch):
 # ----------------------------------------------------------------------------- errors
 def test_unknown_stage_and_option_give_clear_errors():
     with pytest.raises(SoilVolumeError) as e:
-        P.run_pipeline([{"type": "readers.las", "filename": REAL}, {"type": "filters.foo"}],
-                       engine="embedded", source="mine.json")
+        P.run_pipeline(
+            [{"type": "readers.las", "filename": REAL}, {"type": "filters.foo"}], engine="embedded", source="mine.json"
+        )
     msg = str(e.value)
-    assert msg.startswith("pipeline mine.json: stage 'filters.foo' is not supported by the "
-                          "embedded executor (supported: ")
+    assert msg.startswith(
+        "pipeline mine.json: stage 'filters.foo' is not supported by the embedded executor (supported: "
+    )
     assert "filters.smrf" in msg
     with pytest.raises(SoilVolumeError) as e:
-        P.run_pipeline([{"type": "readers.las", "filename": REAL},
-                        {"type": "filters.crop", "bounds": "([0,1],[0,1])", "bar": 1}],
-                       engine="embedded", source="mine.json")
+        P.run_pipeline(
+            [{"type": "readers.las", "filename": REAL}, {"type": "filters.crop", "bounds": "([0,1],[0,1])", "bar": 1}],
+            engine="embedded",
+            source="mine.json",
+        )
     assert "option 'bar' of filters.crop is not supported" in str(e.value)
     with pytest.raises(SoilVolumeError, match="exactly one reader"):
-        P.run_pipeline([{"type": "readers.las", "filename": REAL},
-                        {"type": "readers.las", "filename": REAL}], engine="embedded")
+        P.run_pipeline(
+            [{"type": "readers.las", "filename": REAL}, {"type": "readers.las", "filename": REAL}], engine="embedded"
+        )
 
 
-@pytest.mark.parametrize(("content", "problem"), [
-    ('{"pipeline": [ "a.las", ', "invalid JSON (line 1"),
-    ('"a.las"', "expected a list of stages"),
-    ('{"stages": []}', "needs a 'pipeline' list"),
-    ("[]", "no stages (missing reader)"),
-    ('[{"type": "filters.crop", "bounds": "([0,1],[0,1])"}]', "missing reader"),
-    ('[42]', "stage 1 must be an object or a filename string"),
-    ('["a.las", {"type": "filters.outlier", "mean_k": "eight"}]',
-     "option 'mean_k' must be a number"),
-    ('["a.las", {"type": "filters.crop", "outside": "maybe"}]', "'outside' must be true or false"),
-    ('["a.las", {"type": 7}]', "'type' must be a string"),
-    ('["a.las", {"limits": "Z[0:1]"}]', "stage 2 has no 'type'"),
-    ('[{"type": "readers.las"}]', "has no filename"),
-    ('["a.xyz"]', "cannot infer a stage for 'a.xyz'"),
-    ('["a.las", {"type": "filters.range", "limits": [1, 2]}]', "a string or a list of strings"),
-])
+@pytest.mark.parametrize(
+    ("content", "problem"),
+    [
+        ('{"pipeline": [ "a.las", ', "invalid JSON (line 1"),
+        ('"a.las"', "expected a list of stages"),
+        ('{"stages": []}', "needs a 'pipeline' list"),
+        ("[]", "no stages (missing reader)"),
+        ('[{"type": "filters.crop", "bounds": "([0,1],[0,1])"}]', "missing reader"),
+        ("[42]", "stage 1 must be an object or a filename string"),
+        ('["a.las", {"type": "filters.outlier", "mean_k": "eight"}]', "option 'mean_k' must be a number"),
+        ('["a.las", {"type": "filters.crop", "outside": "maybe"}]', "'outside' must be true or false"),
+        ('["a.las", {"type": 7}]', "'type' must be a string"),
+        ('["a.las", {"limits": "Z[0:1]"}]', "stage 2 has no 'type'"),
+        ('[{"type": "readers.las"}]', "has no filename"),
+        ('["a.xyz"]', "cannot infer a stage for 'a.xyz'"),
+        ('["a.las", {"type": "filters.range", "limits": [1, 2]}]', "a string or a list of strings"),
+    ],
+)
 def test_bad_pipeline_files_name_file_and_problem(tmp_path, content, problem):
     f = tmp_path / "bad.json"
     f.write_text(content)
@@ -207,8 +224,7 @@ def test_bad_pipeline_files_name_file_and_problem(tmp_path, content, problem):
 
 
 def test_load_accepts_pdal_forms(tmp_path):
-    stages = P.load_pipeline('["in.laz", {"type": "filters.range", "limits": "Z[0:1]"}, '
-                             '"out.tif"]')
+    stages = P.load_pipeline('["in.laz", {"type": "filters.range", "limits": "Z[0:1]"}, "out.tif"]')
     assert stages[0] == {"type": "readers.las", "filename": "in.laz"}
     assert stages[-1] == {"type": "writers.gdal", "filename": "out.tif"}
     assert P.load_pipeline('{"pipeline": [{"filename": "a.ply"}]}')[0]["type"] == "readers.ply"
@@ -219,11 +235,13 @@ def test_load_accepts_pdal_forms(tmp_path):
 # ----------------------------------------------------------------------------- real PDAL
 def test_same_pipeline_through_real_pdal_matches_embedded(tmp_path):
     pytest.importorskip(
-        "pdal", reason="the pdal Python bindings do not import here (PDAL's C++ library is not "
-        "installable on this machine); the PDAL-vs-embedded comparison runs where PDAL exists")
+        "pdal",
+        reason="the pdal Python bindings do not import here (PDAL's C++ library is not "
+        "installable on this machine); the PDAL-vs-embedded comparison runs where PDAL exists",
+    )
     stages = P.build_prepare_pipeline(
-        REAL, out_srs="EPSG:2991+5703", crop={"bounds": (194475, 259225, 194505, 259260)},
-        outlier=(8, 2.5), voxel=0.5)
+        REAL, out_srs="EPSG:2991+5703", crop={"bounds": (194475, 259225, 194505, 259260)}, outlier=(8, 2.5), voxel=0.5
+    )
     a = P.run_pipeline(stages, engine="pdal")
     b = P.run_pipeline(stages, engine="embedded")
     assert len(a) == len(b)

@@ -16,8 +16,18 @@ from soilvolume.core.types import SoilVolumeError
 
 def _dem(path, z, transform=None, crs="EPSG:32654"):
     transform = transform or from_origin(500000, 3900100, 1.0, 1.0)
-    with rasterio.open(path, "w", driver="GTiff", width=z.shape[1], height=z.shape[0], count=1,
-                       dtype="float32", crs=crs, transform=transform, nodata=-9999) as ds:
+    with rasterio.open(
+        path,
+        "w",
+        driver="GTiff",
+        width=z.shape[1],
+        height=z.shape[0],
+        count=1,
+        dtype="float32",
+        crs=crs,
+        transform=transform,
+        nodata=-9999,
+    ) as ds:
         ds.write(np.where(np.isfinite(z), z, -9999).astype("float32"), 1)
     return path
 
@@ -45,12 +55,23 @@ def test_totals_and_difference(dems, tmp_path):
 def test_zones_sum_to_the_total(dems, tmp_path):
     zones = tmp_path / "zones.geojson"
     x0, y0 = 500000, 3900100
+
     def box(x1, y1, x2, y2):
         return [[[x0 + x1, y0 - y1], [x0 + x2, y0 - y1], [x0 + x2, y0 - y2], [x0 + x1, y0 - y2], [x0 + x1, y0 - y1]]]
-    feats = [{"type": "Feature", "properties": {"name": n}, "geometry": {"type": "Polygon", "coordinates": c}}
-             for n, c in (("west", box(0, 0, 30, 50)), ("east", box(30, 0, 60, 50)))]
-    zones.write_text(json.dumps({"type": "FeatureCollection", "features": feats,
-                                 "crs": {"type": "name", "properties": {"name": "EPSG:32654"}}}))
+
+    feats = [
+        {"type": "Feature", "properties": {"name": n}, "geometry": {"type": "Polygon", "coordinates": c}}
+        for n, c in (("west", box(0, 0, 30, 50)), ("east", box(30, 0, 60, 50)))
+    ]
+    zones.write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "features": feats,
+                "crs": {"type": "name", "properties": {"name": "EPSG:32654"}},
+            }
+        )
+    )
     res = volume_from_rasters(*dems, tmp_path / "d.tif", zones=zones, zone_field="name")
     by = {z["name"]: z for z in res["zones"]}
     assert by["west"]["fill"] == pytest.approx(200) and by["east"]["cut"] == pytest.approx(50)

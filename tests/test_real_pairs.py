@@ -17,8 +17,20 @@ def autzen(real_dir, tmp_path_factory):
     no stable ground to register on, so registration and correction would absorb the real
     change; a surveyor trusts the LiDAR georeferencing here (--fine none, --correction none)."""
     out = tmp_path_factory.mktemp("autzen") / "out"
-    p = run_cli("estimate", real_dir / "autzen_bmx_2010.las", real_dir / "autzen_bmx_2023.las",
-                "--out", out, "--quiet", "--coarse", "none", "--fine", "none", "--correction", "none")
+    p = run_cli(
+        "estimate",
+        real_dir / "autzen_bmx_2010.las",
+        real_dir / "autzen_bmx_2023.las",
+        "--out",
+        out,
+        "--quiet",
+        "--coarse",
+        "none",
+        "--fine",
+        "none",
+        "--correction",
+        "none",
+    )
     assert p.returncode == 0, p.stderr
     return json.loads((out / "report.json").read_text()), out
 
@@ -50,8 +62,14 @@ def report_cell(out) -> float:
 @pytest.fixture(scope="module")
 def tommy(real_dir, tmp_path_factory):
     out = tmp_path_factory.mktemp("ttp") / "out"
-    p = run_cli("estimate", real_dir / "tommy_thompson_park_2015.laz",
-                real_dir / "tommy_thompson_park_2023.laz", "--out", out, "--quiet")
+    p = run_cli(
+        "estimate",
+        real_dir / "tommy_thompson_park_2015.laz",
+        real_dir / "tommy_thompson_park_2023.laz",
+        "--out",
+        out,
+        "--quiet",
+    )
     assert p.returncode == 0, p.stderr
     return json.loads((out / "report.json").read_text()), out
 

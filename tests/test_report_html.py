@@ -26,8 +26,7 @@ from soilvolume.reporting.html import (
     write_html,
 )
 
-GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=160, cols=200,
-                origin=(500000.0, 3900000.0, 0.0))
+GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=160, cols=200, origin=(500000.0, 3900000.0, 0.0))
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
@@ -38,30 +37,41 @@ def report() -> dict:
         "volume_thresholded_m3": {"net": 1041.0, "cut": 10.0, "fill": 1051.0},
         "uncertainty_m3": {"net": 6.3, "cut": 1.2, "fill": 6.1},
         "uncertainty": {"lod_m": 0.05, "sigma_m": 0.025, "range_m": 11.0, "confidence": 0.95},
-        "registration": {"transform": np.eye(4).tolist(),
-                         "coarse": {"method": "fpfh", "fitness": 0.8, "rmse": 0.3,
-                                    "accepted": False},
-                         "fine": {"method": "icp", "fitness": 0.97, "rmse": 0.031}},
-        "grid": {"cell_m": 0.5, "rows": 160, "cols": 200, "crs": "WGS 84 / UTM zone 54N",
-                 "compared_area_m2": 8000.0},
-        "inputs": {"before": {"path": "before <1>.las", "points": 2500000, "crs": "EPSG:32654"},
-                   "after": {"path": "after.laz", "points": 1500000}},
+        "registration": {
+            "transform": np.eye(4).tolist(),
+            "coarse": {"method": "fpfh", "fitness": 0.8, "rmse": 0.3, "accepted": False},
+            "fine": {"method": "icp", "fitness": 0.97, "rmse": 0.031},
+        },
+        "grid": {"cell_m": 0.5, "rows": 160, "cols": 200, "crs": "WGS 84 / UTM zone 54N", "compared_area_m2": 8000.0},
+        "inputs": {
+            "before": {"path": "before <1>.las", "points": 2500000, "crs": "EPSG:32654"},
+            "after": {"path": "after.laz", "points": 1500000},
+        },
         "timings_s": {"read": 0.4, "register": 2.1},
-        "correction": {"method": "surface",
-                       "params": {"terms": ["1", "x"], "coefficients": [0.05, 0.001],
-                                  "residuals": {"mean": 0.0, "std": 0.02, "nmad": 0.019}}},
+        "correction": {
+            "method": "surface",
+            "params": {
+                "terms": ["1", "x"],
+                "coefficients": [0.05, 0.001],
+                "residuals": {"mean": 0.0, "std": 0.02, "nmad": 0.019},
+            },
+        },
     }
 
 
 def arrays() -> dict:
-    y, x = np.mgrid[0:GRID.rows, 0:GRID.cols] * GRID.cell
+    y, x = np.mgrid[0 : GRID.rows, 0 : GRID.cols] * GRID.cell
     d = 3 * np.exp(-((x - 50) ** 2 + (y - 40) ** 2) / 100) - np.exp(-((x - 20) ** 2) / 20)
     d[:10, :30] = np.nan
     rng = np.random.default_rng(0)
     filled = np.zeros(d.shape, bool)
     filled[50:55, 60:70] = True
-    return {"difference": d, "dem_after": 100 + d + 0.01 * x, "filled_mask": filled,
-            "residual": np.where(np.abs(d) < 0.05, rng.normal(0, 0.02, d.shape), np.nan)}
+    return {
+        "difference": d,
+        "dem_after": 100 + d + 0.01 * x,
+        "filled_mask": filled,
+        "residual": np.where(np.abs(d) < 0.05, rng.normal(0, 0.02, d.shape), np.nan),
+    }
 
 
 def png_size(uri: str) -> tuple[int, int]:
@@ -74,8 +84,7 @@ def test_html_is_self_contained_and_tolerant(tmp_path):
     path = write_html(report(), arrays(), GRID, tmp_path / "report.html")
     text = path.read_text()
     assert "http://" not in text and "https://" not in text and "<script" not in text
-    imgs = dict(re.findall(r'<img id="([\w-]+)" alt="[^"]*" src="(data:image/png;base64,[^"]+)"',
-                           text))
+    imgs = dict(re.findall(r'<img id="([\w-]+)" alt="[^"]*" src="(data:image/png;base64,[^"]+)"', text))
     assert set(imgs) == {"difference-map", "residual-map"}
     for uri in imgs.values():
         w, h = png_size(uri)
@@ -91,13 +100,15 @@ def test_html_is_self_contained_and_tolerant(tmp_path):
 
 
 def test_does_not_import_matplotlib():
-    code = ("import sys, numpy as np; import soilvolume.reporting.html as r; "
-            "from soilvolume.core.types import GridSpec; "
-            "g = GridSpec(xmin=0.0, ymax=50.0, cell=0.5, rows=100, cols=100); "
-            "d = np.random.default_rng(0).normal(size=(100, 100)); "
-            "html = r.render_html({'uncertainty': {'lod_m': 0.1}}, {'difference': d, 'residual': d, "
-            "'dem_after': d, 'filled_mask': d > 2}, g); "
-            "assert '<img' in html and '<svg' in html; assert 'matplotlib' not in sys.modules, 'matplotlib'")
+    code = (
+        "import sys, numpy as np; import soilvolume.reporting.html as r; "
+        "from soilvolume.core.types import GridSpec; "
+        "g = GridSpec(xmin=0.0, ymax=50.0, cell=0.5, rows=100, cols=100); "
+        "d = np.random.default_rng(0).normal(size=(100, 100)); "
+        "html = r.render_html({'uncertainty': {'lod_m': 0.1}}, {'difference': d, 'residual': d, "
+        "'dem_after': d, 'filled_mask': d > 2}, g); "
+        "assert '<img' in html and '<svg' in html; assert 'matplotlib' not in sys.modules, 'matplotlib'"
+    )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stderr
 
@@ -117,7 +128,7 @@ def test_png_encoder_round_trip():
     rgba = np.random.default_rng(1).integers(0, 256, (7, 5, 4), dtype=np.uint8)
     data = png_bytes(rgba)
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">II", data[16:24]) == (5, 7)
-    idat = data[8 + 25 + 8: -12]  # after the signature, IHDR chunk and the IDAT header
+    idat = data[8 + 25 + 8 : -12]  # after the signature, IHDR chunk and the IDAT header
     raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(7, 1 + 5 * 4)
     assert (raw[:, 0] == 0).all() and (raw[:, 1:].reshape(7, 5, 4) == rgba).all()
     image = pytest.importorskip("PIL.Image")
@@ -157,20 +168,33 @@ def test_big_rasters_are_downsampled_for_display():
 def test_renders_in_headless_chromium(tmp_path):
     path = write_html(report(), arrays(), GRID, tmp_path / "report.html")
     probe = tmp_path / "probe.html"  # the report plus a script that records rendered sizes
-    probe.write_text(path.read_text().replace("</body>", (
-        "<script>window.addEventListener('load',()=>{"
-        "const r=e=>{const b=e.getBoundingClientRect();return Math.round(b.width)+'x'+Math.round(b.height)};"
-        "const out=Array.from(document.images).map(i=>'img:'+i.id+':'+i.naturalWidth+':'+r(i)+':'"
-        "+r(i.nextElementSibling));"
-        "document.querySelectorAll('svg.plot').forEach(s=>out.push('svg:'+s.id+':'"
-        "+s.querySelectorAll('rect.bar').length+':'+r(s)));"
-        "document.body.setAttribute('data-probe',out.join(';'))})</script></body>")))
-    flags = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu",
-             "--disable-background-networking", "--disable-component-update", "--disable-sync",
-             "--no-first-run", f"--user-data-dir={tmp_path / 'profile'}",
-             "--virtual-time-budget=3000"]
-    dom = subprocess.run(flags + ["--dump-dom", probe.as_uri()], capture_output=True,
-                         text=True, timeout=60).stdout
+    probe.write_text(
+        path.read_text().replace(
+            "</body>",
+            (
+                "<script>window.addEventListener('load',()=>{"
+                "const r=e=>{const b=e.getBoundingClientRect();return Math.round(b.width)+'x'+Math.round(b.height)};"
+                "const out=Array.from(document.images).map(i=>'img:'+i.id+':'+i.naturalWidth+':'+r(i)+':'"
+                "+r(i.nextElementSibling));"
+                "document.querySelectorAll('svg.plot').forEach(s=>out.push('svg:'+s.id+':'"
+                "+s.querySelectorAll('rect.bar').length+':'+r(s)));"
+                "document.body.setAttribute('data-probe',out.join(';'))})</script></body>"
+            ),
+        )
+    )
+    flags = [
+        CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        f"--user-data-dir={tmp_path / 'profile'}",
+        "--virtual-time-budget=3000",
+    ]
+    dom = subprocess.run(flags + ["--dump-dom", probe.as_uri()], capture_output=True, text=True, timeout=60).stdout
     probed = [e.split(":") for e in re.search(r'data-probe="([^"]*)"', dom)[1].split(";")]
     imgs = {e[1]: (int(e[2]), e[3], e[4]) for e in probed if e[0] == "img"}
     svgs = {e[1]: (int(e[2]), *map(int, e[3].split("x"))) for e in probed if e[0] == "svg"}
@@ -183,7 +207,8 @@ def test_renders_in_headless_chromium(tmp_path):
     bars, width, height = svgs["histogram"]
     assert bars >= 30 and width > 500 and height > 200
     shot = tmp_path / "shot.png"
-    subprocess.run(flags + [f"--screenshot={shot}", "--window-size=1200,2000", path.as_uri()],
-                   capture_output=True, timeout=60)
+    subprocess.run(
+        flags + [f"--screenshot={shot}", "--window-size=1200,2000", path.as_uri()], capture_output=True, timeout=60
+    )
     assert shot.exists()
     assert struct.unpack(">II", shot.read_bytes()[16:24]) == (1200, 2000)

@@ -64,11 +64,24 @@ def _hidden(folder: Path) -> list[str]:
 
 
 # ------------------------------------------------------------------------------------ options
-@pytest.mark.parametrize(("flag", "value"), [
-    ("--cell", "nan"), ("--cell", "inf"), ("--cell", "-1"), ("--cell", "1e9"), ("--radius", "nan"),
-    ("--radius", "-5"), ("--lod-confidence", "1.5"), ("--seed", "-1"), ("--pfh-patch", "0"),
-    ("--ground-window", "nan"), ("--ground-slope", "inf"), ("--threads", "-2"), ("--max-gps-shift", "-inf"),
-])
+@pytest.mark.parametrize(
+    ("flag", "value"),
+    [
+        ("--cell", "nan"),
+        ("--cell", "inf"),
+        ("--cell", "-1"),
+        ("--cell", "1e9"),
+        ("--radius", "nan"),
+        ("--radius", "-5"),
+        ("--lod-confidence", "1.5"),
+        ("--seed", "-1"),
+        ("--pfh-patch", "0"),
+        ("--ground-window", "nan"),
+        ("--ground-slope", "inf"),
+        ("--threads", "-2"),
+        ("--max-gps-shift", "-inf"),
+    ],
+)
 def test_absurd_option_is_refused_naming_it_and_its_range(capsys, tmp_path, flag, value):
     out = tmp_path / "out"
     code, err = cli(capsys, "estimate", "b.las", "a.las", "--out", out, f"{flag}={value}")
@@ -76,10 +89,15 @@ def test_absurd_option_is_refused_naming_it_and_its_range(capsys, tmp_path, flag
     assert not out.exists()
 
 
-@pytest.mark.parametrize("args", [
-    ["--cell", "nan"], ["--bounds", "nan", "0", "10", "10"], ["--bounds", "10", "10", "0", "0"],
-    ["--bounds", "0", "0", "inf", "10"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--cell", "nan"],
+        ["--bounds", "nan", "0", "10", "10"],
+        ["--bounds", "10", "10", "0", "0"],
+        ["--bounds", "0", "0", "inf", "10"],
+    ],
+)
 def test_dem_options_are_checked(capsys, tmp_path, args):
     code, err = cli(capsys, "dem", "cloud.las", "--out", tmp_path / "d.tif", *args)
     _one_line_error(code, err, args[0])
@@ -130,8 +148,9 @@ def test_a_pipeline_writer_onto_an_input_is_refused(capsys, pair, tmp_path, targ
         (tmp_path / "link.las").symlink_to(a)
         name = str(tmp_path / "link.las")
     sums = _md5(b, a)
-    pipe = _pipeline(tmp_path / "p.json", {"type": "readers.las", "filename": str(b)},
-                     {"type": "writers.las", "filename": name})
+    pipe = _pipeline(
+        tmp_path / "p.json", {"type": "readers.las", "filename": str(b)}, {"type": "writers.las", "filename": name}
+    )
     code, err = cli(capsys, "estimate", b, a, "--out", tmp_path / "o", "--before-pipeline", pipe, "--quiet")
     _one_line_error(code, err, "inputs are read-only")
     assert _md5(b, a) == sums and not (tmp_path / "o").exists() and _hidden(tmp_path) == []
@@ -142,16 +161,20 @@ def test_pipeline_writers_go_into_the_output_and_nowhere_else(capsys, pair, tmp_
     work = tmp_path / "work"
     work.mkdir()
     outside = tmp_path / "outside.tif"
-    pipe = _pipeline(work / "p.json", {"type": "readers.las", "filename": str(b)},
-                     {"type": "writers.las", "filename": "../escape.las"},
-                     {"type": "writers.gdal", "filename": str(outside), "resolution": 2, "output_type": "mean"})
+    pipe = _pipeline(
+        work / "p.json",
+        {"type": "readers.las", "filename": str(b)},
+        {"type": "writers.las", "filename": "../escape.las"},
+        {"type": "writers.gdal", "filename": str(outside), "resolution": 2, "output_type": "mean"},
+    )
     code, err = cli(capsys, "estimate", b, a, "--out", work / "o", "--before-pipeline", pipe, "--quiet")
     assert code == 0, err
     assert {"escape.las", "outside.tif", "report.json"} <= {p.name for p in (work / "o").iterdir()}
     assert not outside.exists() and not (tmp_path / "escape.las").exists()
     # the same writers in a failing run leave nothing anywhere
-    code, err = cli(capsys, "estimate", b, a, "--out", work / "o2", "--before-pipeline", pipe, "--cell", "50",
-                    "--quiet")
+    code, err = cli(
+        capsys, "estimate", b, a, "--out", work / "o2", "--before-pipeline", pipe, "--cell", "50", "--quiet"
+    )
     assert code == 1 and not (work / "o2").exists() and not outside.exists() and _hidden(work) == []
 
 
@@ -177,17 +200,20 @@ def _patched(tmp_path, name, at, fmt, value, version="1.4") -> Path:
     return out
 
 
-@pytest.mark.parametrize(("name", "at", "fmt", "value", "expect"), [
-    ("vlrs.las", 100, "<I", 2**32 - 1, "VLR"),
-    ("count.las", 247, "<Q", 2**63 - 1, "points"),
-    ("fewer.las", 247, "<Q", 100, "the header says 100"),
-    ("nanoffset.las", 155, "<d", math.nan, "finite"),
-    ("nanbound.las", 179, "<d", math.nan, "finite"),
-    ("infscale.las", 131, "<d", math.inf, "scale"),
-    ("zeroscale.las", 139, "<d", 0.0, "scale"),
-    ("evlrs.las", 243, "<I", 2**32 - 1, "EVLR"),
-    ("offset.las", 96, "<I", 2**31, "point data offset"),
-])
+@pytest.mark.parametrize(
+    ("name", "at", "fmt", "value", "expect"),
+    [
+        ("vlrs.las", 100, "<I", 2**32 - 1, "VLR"),
+        ("count.las", 247, "<Q", 2**63 - 1, "points"),
+        ("fewer.las", 247, "<Q", 100, "the header says 100"),
+        ("nanoffset.las", 155, "<d", math.nan, "finite"),
+        ("nanbound.las", 179, "<d", math.nan, "finite"),
+        ("infscale.las", 131, "<d", math.inf, "scale"),
+        ("zeroscale.las", 139, "<d", 0.0, "scale"),
+        ("evlrs.las", 243, "<I", 2**32 - 1, "EVLR"),
+        ("offset.las", 96, "<I", 2**31, "point data offset"),
+    ],
+)
 def test_a_broken_header_is_one_line_naming_the_file(capsys, tmp_path, name, at, fmt, value, expect):
     bad = _patched(tmp_path, name, at, fmt, value)
     code, err = cli(capsys, "dem", bad, "--out", tmp_path / "d.tif")
@@ -249,8 +275,9 @@ def test_pipeline_json_that_is_not_utf8_or_nested_too_deep(capsys, pair, tmp_pat
     (tmp_path / "bin.json").write_bytes(b'{"pipeline": ["\xff\xfe.las"]}')
     (tmp_path / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
     for name, expect in (("bin.json", "not UTF-8"), ("deep.json", "nested too deeply")):
-        code, err = cli(capsys, "estimate", *pair, "--out", tmp_path / "o", "--before-pipeline",
-                        tmp_path / name, "--quiet")
+        code, err = cli(
+            capsys, "estimate", *pair, "--out", tmp_path / "o", "--before-pipeline", tmp_path / name, "--quiet"
+        )
         _one_line_error(code, err, name, expect)
 
 
@@ -357,7 +384,15 @@ def test_volume_with_bad_zones_writes_nothing(capsys, tmp_path):
     write_geotiff(tmp_path / "b.tif", np.zeros((50, 50)), grid)
     write_geotiff(tmp_path / "a.tif", np.ones((50, 50)), grid)
     (tmp_path / "bad.gpkg").write_text("not a geopackage")
-    code, err = cli(capsys, "volume", tmp_path / "b.tif", tmp_path / "a.tif", "--out", tmp_path / "d.tif",
-                    "--zones", tmp_path / "bad.gpkg")
+    code, err = cli(
+        capsys,
+        "volume",
+        tmp_path / "b.tif",
+        tmp_path / "a.tif",
+        "--out",
+        tmp_path / "d.tif",
+        "--zones",
+        tmp_path / "bad.gpkg",
+    )
     _one_line_error(code, err, "bad.gpkg")
     assert not (tmp_path / "d.tif").exists() and _hidden(tmp_path) == []

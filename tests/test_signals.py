@@ -23,8 +23,12 @@ def pair(tmp_path_factory):
 
 
 def _start(pair, out: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "soilvolume", "estimate", *map(str, pair), "--out", str(out)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-m", "soilvolume", "estimate", *map(str, pair), "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def _wait_for(proc: subprocess.Popen, text: str) -> list[str]:
@@ -41,14 +45,17 @@ def _leftovers(out: Path) -> list[str]:
     return [p.name for p in out.parent.iterdir() if "soilvolume-" in p.name]
 
 
-@pytest.mark.parametrize(("sig", "stage", "delay"), [
-    (signal.SIGINT, "reading", 0.0),
-    (signal.SIGINT, "registering", 0.3),  # during the late Open3D import / registration
-    (signal.SIGINT, "registering", 1.5),
-    (signal.SIGTERM, "registering", 0.8),
-    (signal.SIGTERM, "gridding", 0.0),
-    (signal.SIGINT, "writing outputs", 0.0),
-])
+@pytest.mark.parametrize(
+    ("sig", "stage", "delay"),
+    [
+        (signal.SIGINT, "reading", 0.0),
+        (signal.SIGINT, "registering", 0.3),  # during the late Open3D import / registration
+        (signal.SIGINT, "registering", 1.5),
+        (signal.SIGTERM, "registering", 0.8),
+        (signal.SIGTERM, "gridding", 0.0),
+        (signal.SIGINT, "writing outputs", 0.0),
+    ],
+)
 def test_signal_cleans_up_and_exits(pair, tmp_path, sig, stage, delay):
     out = tmp_path / "result"
     proc = _start(pair, out)
@@ -83,8 +90,9 @@ def test_killed_run_leftovers_are_removed_by_the_next_run(pair, tmp_path):
 def test_a_kill_between_the_two_renames_of_a_swap_restores_the_old_set(tmp_path):
     from soilvolume.core.outputs import TRASH, sibling, sweep
 
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
-                          text=True).stdout.strip()
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True
+    ).stdout.strip()
     out = tmp_path / "result"
     trash = sibling(out, TRASH, int(dead), token="ab12")
     trash.mkdir()

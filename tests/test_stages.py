@@ -27,8 +27,11 @@ FT = 0.304800609601219  # metres per US survey foot
 
 def view(x, y, z=None, **dims) -> PointView:
     x = np.asarray(x, dtype=np.float64)
-    arrays = {"X": x, "Y": np.asarray(y, dtype=np.float64),
-              "Z": np.zeros_like(x) if z is None else np.asarray(z, dtype=np.float64)}
+    arrays = {
+        "X": x,
+        "Y": np.asarray(y, dtype=np.float64),
+        "Z": np.zeros_like(x) if z is None else np.asarray(z, dtype=np.float64),
+    }
     arrays.update({k: np.asarray(v) for k, v in dims.items()})
     return PointView(arrays, None)
 
@@ -54,18 +57,18 @@ def test_crop_bounds_3d_and_geojson_forms():
     v = view([1, 1, 1], [1, 1, 1], [0, 5, 10])
     assert run(crop_stage.crop, v, bounds="([0,2],[0,2],[4,6])").arrays["Z"].tolist() == [5]
     assert len(run(crop_stage.crop, v, bounds=[0, 0, 2, 2])) == 3
-    assert len(run(crop_stage.crop, v, bounds={"minx": 0, "miny": 0, "maxx": 0.5,
-                                               "maxy": 2})) == 0
+    assert len(run(crop_stage.crop, v, bounds={"minx": 0, "miny": 0, "maxx": 0.5, "maxy": 2})) == 0
 
 
 def test_crop_polygon_covers_boundary_and_excludes_holes():
-    wkt = ("POLYGON((0 0, 10 0, 10 10, 0 10, 0 0), (4 4, 6 4, 6 6, 4 6, 4 4))")
+    wkt = "POLYGON((0 0, 10 0, 10 10, 0 10, 0 0), (4 4, 6 4, 6 6, 4 6, 4 4))"
     x = [0, 10, 5, 5, 2, 4, 5, 11, -0.001, 7]
     y = [0, 5, 0, 5, 2, 5, 4, 5, 5, 10]
     # vertex, right edge, bottom edge, hole centre, inside, hole edge, hole edge, out, out, top
     kept = run(crop_stage.crop, view(x, y), polygon=wkt)
     assert sorted(zip(kept.arrays["X"].tolist(), kept.arrays["Y"].tolist(), strict=True)) == sorted(
-        [(0, 0), (10, 5), (5, 0), (2, 2), (4, 5), (5, 4), (7, 10)])
+        [(0, 0), (10, 5), (5, 0), (2, 2), (4, 5), (5, 4), (7, 10)]
+    )
     out = run(crop_stage.crop, view(x, y), polygon=wkt, outside=True)
     assert sorted(out.arrays["X"].tolist()) == [-0.001, 5, 11]
 
@@ -120,7 +123,7 @@ def test_crop_needs_one_region():
 def _brute_outliers(xyz, k, mult):
     d = np.sqrt(((xyz[:, None, :] - xyz[None, :, :]) ** 2).sum(-1))
     d.sort(axis=1)
-    mean_d = d[:, 1:k + 1].mean(axis=1)
+    mean_d = d[:, 1 : k + 1].mean(axis=1)
     return mean_d >= mean_d.mean() + mult * mean_d.std(ddof=1)
 
 
@@ -161,15 +164,17 @@ def test_outlier_radius_method_and_all_outliers_leaves_view_unchanged():
 def test_range_syntax():
     r = range_stage.parse_ranges("Z[0:100],Classification![7:7], Red(20:40], Blue[:255)")
     assert [(x.name, x.lo, x.hi, x.lo_closed, x.hi_closed, x.negate) for x in r] == [
-        ("Z", 0, 100, True, True, False), ("Classification", 7, 7, True, True, True),
-        ("Red", 20, 40, False, True, False), ("Blue", None, 255, True, False, False)]
+        ("Z", 0, 100, True, True, False),
+        ("Classification", 7, 7, True, True, True),
+        ("Red", 20, 40, False, True, False),
+        ("Blue", None, 255, True, False, False),
+    ]
     with pytest.raises(SoilVolumeError):
         range_stage.parse_ranges("Z[0;1]")
 
 
 def test_range_or_within_dimension_and_across_dimensions():
-    v = view([0, 1, 2, 3, 4], [0] * 5, [0, 10, 20, 30, 40],
-             Classification=np.array([1, 2, 6, 2, 7], dtype=np.uint8))
+    v = view([0, 1, 2, 3, 4], [0] * 5, [0, 10, 20, 30, 40], Classification=np.array([1, 2, 6, 2, 7], dtype=np.uint8))
     out = run(range_stage.filter_range, v, limits="Classification[1:2],Classification[6:6],Z(0:30]")
     assert out.arrays["X"].tolist() == [1, 2, 3]
     out = run(range_stage.filter_range, v, limits="z[10:]")  # names are case-insensitive
@@ -239,8 +244,9 @@ def test_reprojection_vertical_us_survey_feet_to_metres():
 
 def test_reprojection_real_autzen_file_header_srs():
     raw = execute([{"type": "readers.las", "filename": REAL}])
-    out = execute([{"type": "readers.las", "filename": REAL},
-                   {"type": "filters.reprojection", "out_srs": "EPSG:2991+5703"}])
+    out = execute(
+        [{"type": "readers.las", "filename": REAL}, {"type": "filters.reprojection", "out_srs": "EPSG:2991+5703"}]
+    )
     assert "ftUS" in raw.srs_wkt or "US survey foot" in raw.srs_wkt
     assert len(out) == len(raw) == 829
     np.testing.assert_allclose(out.arrays["Z"], raw.arrays["Z"] * FT, rtol=1e-12)
@@ -262,8 +268,7 @@ def test_gdal_binmode_mean_count_min_max_equal_numpy(tmp_path):
     z = rng.normal(50, 2, 3000)
     x[:5], y[:5] = 109.5, 204.5  # the same spot several times
     grid = gdalgrid.grid_from_bounds(x.min(), y.min(), x.max(), y.max(), 1.0)
-    assert (grid.width, grid.height) == (int((x.max() - x.min()) // 1) + 1,
-                                         int((y.max() - y.min()) // 1) + 1)
+    assert (grid.width, grid.height) == (int((x.max() - x.min()) // 1) + 1, int((y.max() - y.min()) // 1) + 1)
     out = gdalgrid.compute(grid, x, y, z, stats=("mean", "count", "min", "max"), binmode=True)
     i = np.floor(x - grid.x0).astype(int)
     j = np.floor(y - grid.y0).astype(int)
@@ -276,8 +281,13 @@ def test_gdal_binmode_mean_count_min_max_equal_numpy(tmp_path):
     assert out["count"].sum() == 3000
     # through the writer: GeoTIFF geometry, band order, nodata
     v = view(x, y, z)
-    execute_opts = {"type": "writers.gdal", "filename": str(tmp_path / "dem.tif"),
-                    "resolution": 1.0, "binmode": True, "output_type": "mean,count"}
+    execute_opts = {
+        "type": "writers.gdal",
+        "filename": str(tmp_path / "dem.tif"),
+        "resolution": 1.0,
+        "binmode": True,
+        "output_type": "mean,count",
+    }
     from soilvolume.pipelines.stages import writers
 
     writers.write_gdal(v, execute_opts, ctx("writers.gdal"))
@@ -286,14 +296,19 @@ def test_gdal_binmode_mean_count_min_max_equal_numpy(tmp_path):
         assert ds.transform.c == pytest.approx(x.min())
         assert ds.transform.f == pytest.approx(y.min() + grid.height)
         assert ds.nodata == -9999
-        np.testing.assert_allclose(ds.read(1), np.where(np.isnan(out["mean"]), -9999,
-                                                        out["mean"]))
+        np.testing.assert_allclose(ds.read(1), np.where(np.isnan(out["mean"]), -9999, out["mean"]))
 
 
 def test_gdal_origin_width_height_and_empty_cells():
     grid = gdalgrid.Grid(0.0, 0.0, 3, 2, 1.0)
-    out = gdalgrid.compute(grid, np.array([0.5, 2.5, 5.0]), np.array([1.5, 0.5, 0.5]),
-                           np.array([10.0, 20.0, 99.0]), stats=("mean", "count"), binmode=True)
+    out = gdalgrid.compute(
+        grid,
+        np.array([0.5, 2.5, 5.0]),
+        np.array([1.5, 0.5, 0.5]),
+        np.array([10.0, 20.0, 99.0]),
+        stats=("mean", "count"),
+        binmode=True,
+    )
     np.testing.assert_array_equal(out["count"], [[1, 0, 0], [0, 0, 1]])  # (5, .5) is off-grid
     assert out["mean"][0, 0] == 10 and out["mean"][1, 2] == 20 and np.isnan(out["mean"][0, 1])
 
@@ -302,22 +317,26 @@ def test_gdal_radius_mode_uses_cells_within_radius():
     grid = gdalgrid.Grid(0.0, 0.0, 5, 5, 1.0)
     # a point at the centre of cell (2, 2): default radius sqrt(2) (strict) reaches the 4
     # edge neighbours (distance 1) but not the diagonals (distance sqrt(2))
-    out = gdalgrid.compute(grid, np.array([2.5]), np.array([2.5]), np.array([7.0]),
-                           stats=("count", "mean", "idw"))
+    out = gdalgrid.compute(grid, np.array([2.5]), np.array([2.5]), np.array([7.0]), stats=("count", "mean", "idw"))
     expect = np.zeros((5, 5))
     expect[2, 2] = expect[1, 2] = expect[3, 2] = expect[2, 1] = expect[2, 3] = 1
     np.testing.assert_array_equal(out["count"], expect)
     assert out["idw"][2, 2] == 7.0
-    wide = gdalgrid.compute(grid, np.array([2.5]), np.array([2.5]), np.array([7.0]),
-                            stats=("count",), radius=1.5)
+    wide = gdalgrid.compute(grid, np.array([2.5]), np.array([2.5]), np.array([7.0]), stats=("count",), radius=1.5)
     assert wide["count"].sum() == 9
 
 
 def test_gdal_window_fill_inverse_distance():
     grid = gdalgrid.Grid(0.0, 0.0, 3, 1, 1.0)
-    out = gdalgrid.compute(grid, np.array([0.5, 2.5]), np.array([0.5, 0.5]),
-                           np.array([10.0, 40.0]), stats=("mean", "count"), binmode=True,
-                           window_size=1)
+    out = gdalgrid.compute(
+        grid,
+        np.array([0.5, 2.5]),
+        np.array([0.5, 0.5]),
+        np.array([10.0, 40.0]),
+        stats=("mean", "count"),
+        binmode=True,
+        window_size=1,
+    )
     assert out["mean"][0, 1] == pytest.approx(25.0) and out["count"][0, 1] == 0
 
 
@@ -348,9 +367,12 @@ def test_writers_las_round_trip(tmp_path):
     import laspy
 
     out = tmp_path / "o.laz"
-    v = execute([{"type": "readers.las", "filename": REAL},
-                 {"type": "writers.las", "filename": str(out), "scale_x": 0.001,
-                  "scale_y": 0.001, "scale_z": 0.001}])
+    v = execute(
+        [
+            {"type": "readers.las", "filename": REAL},
+            {"type": "writers.las", "filename": str(out), "scale_x": 0.001, "scale_y": 0.001, "scale_z": 0.001},
+        ]
+    )
     las = laspy.read(out)
     np.testing.assert_allclose(las.x, v.arrays["X"], atol=6e-4)
     np.testing.assert_array_equal(np.asarray(las.classification), v.arrays["Classification"])
@@ -366,7 +388,7 @@ def _scene(seed=0):
     ground = 0.05 * x + 0.3 * np.sin(y / 9.0) + rng.normal(0, 0.02, n)
     z = ground.copy()
     obj = np.zeros(n, dtype=bool)
-    for (x0, x1, y0, y1, h) in [(20, 32, 20, 30, 3.0), (60, 75, 45, 60, 6.0)]:
+    for x0, x1, y0, y1, h in [(20, 32, 20, 30, 3.0), (60, 75, 45, 60, 6.0)]:
         box = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
         z[box] += h
         obj |= box

@@ -22,9 +22,12 @@ from soilvolume.scenes.synthetic import (
 
 @pytest.fixture(scope="module")
 def scene() -> Scene:
-    return make_pair(3, SceneConfig.small(doming_m=0.03, vertical_bias_m=0.05,
-                                          outlier_fraction=0.005, holes=6, vegetation=True,
-                                          objects=True))
+    return make_pair(
+        3,
+        SceneConfig.small(
+            doming_m=0.03, vertical_bias_m=0.05, outlier_fraction=0.005, holes=6, vegetation=True, objects=True
+        ),
+    )
 
 
 def _apply(T, xyz):
@@ -54,8 +57,7 @@ def test_truth_matches_fine_raster_integral(scene):
     # dz vanishes outside the features, and on the whole before footprint the raster sum agrees
     xs = (np.arange(int(cfg.before_size[0] / 0.05)) + 0.5) * 0.05
     ys = (np.arange(int(cfg.before_size[1] / 0.05)) + 0.5) * 0.05
-    total = sum(change_dz(xs[None, :], ys[i:i + 500, None], cfg).sum()
-                for i in range(0, len(ys), 500))
+    total = sum(change_dz(xs[None, :], ys[i : i + 500, None], cfg).sum() for i in range(0, len(ys), 500))
     assert total * 0.05**2 == pytest.approx(t["net"], rel=5e-4)
 
 
@@ -79,15 +81,13 @@ def test_deterministic(scene):
     np.testing.assert_array_equal(again.after_class, scene.after_class)
     assert again.truth == scene.truth
     other = make_pair(4, scene.config)
-    assert other.before.shape != scene.before.shape or not np.array_equal(other.before,
-                                                                            scene.before)
+    assert other.before.shape != scene.before.shape or not np.array_equal(other.before, scene.before)
 
 
 def test_truth_transform_recovers_true_frame(scene):
     """Surveyed after cloud mapped by truth["transform"] == the same sampling without any
     misalignment (the misalignment draws no random numbers)."""
-    aligned = make_pair(3, replace(scene.config, shift_m=(0.0, 0.0, 0.0),
-                                   rotation_deg=(0.0, 0.0, 0.0)))
+    aligned = make_pair(3, replace(scene.config, shift_m=(0.0, 0.0, 0.0), rotation_deg=(0.0, 0.0, 0.0)))
     np.testing.assert_allclose(aligned.before, scene.before, rtol=0, atol=1e-9)
     recovered = _apply(scene.truth["transform"], scene.after)
     assert np.abs(recovered - aligned.after).max() < 1e-6
@@ -157,8 +157,7 @@ def test_write_pair_roundtrip(scene, tmp_path, fmt):
     pyproj = pytest.importorskip("pyproj")
     pb, pa, pt = write_pair(scene, tmp_path, fmt=fmt)
     assert pb.name == f"before.{fmt}" and pa.name == f"after.{fmt}"
-    for path, xyz, cls in ((pb, scene.before, scene.before_class),
-                           (pa, scene.after, scene.after_class)):
+    for path, xyz, cls in ((pb, scene.before, scene.before_class), (pa, scene.after, scene.after_class)):
         las = laspy.read(path)
         assert las.header.version.major == 1 and las.header.version.minor == 4
         crs = las.header.parse_crs()

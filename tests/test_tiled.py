@@ -114,13 +114,34 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
 
     g = GridSpec(0.0, 40.0, 1.0, 40, 40)
     crs = pyproj.CRS("EPSG:32654")
-    plan = Plan(str(tmp_path / "gone_b.las"), str(tmp_path / "gone_a.las"), crs.to_wkt(), crs.to_wkt(),
-                WorkFrame(crs, 1.0), np.zeros(3), g, np.eye(4), (False, False), np.zeros((3, 2)), "mean")
+    plan = Plan(
+        str(tmp_path / "gone_b.las"),
+        str(tmp_path / "gone_a.las"),
+        crs.to_wkt(),
+        crs.to_wkt(),
+        WorkFrame(crs, 1.0),
+        np.zeros(3),
+        g,
+        np.eye(4),
+        (False, False),
+        np.zeros((3, 2)),
+        "mean",
+    )
     windows = tiles(g, 20)
     for k, (r0, r1, c0, c1) in enumerate(windows):
         shape = (r1 - r0, c1 - c0)
-        _save_tile(tmp_path, (r0, r1, c0, c1), (np.full(shape, k, float), np.ones(shape, np.int32), np.zeros(shape),
-                                               np.zeros(shape), np.ones(shape, np.int32), np.zeros(shape)))
+        _save_tile(
+            tmp_path,
+            (r0, r1, c0, c1),
+            (
+                np.full(shape, k, float),
+                np.ones(shape, np.int32),
+                np.zeros(shape),
+                np.zeros(shape),
+                np.ones(shape, np.int32),
+                np.zeros(shape),
+            ),
+        )
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
         h_a, n_a, *_ = run_tiles(c, plan, windows, Hooks(), tmp_path)
         assert h_a[0, 0] == 0 and h_a[39, 39] == 3 and (n_a == 1).all()
@@ -134,8 +155,9 @@ def test_existing_cluster_by_address(pair, in_process, tmp_path):
     from dask.distributed import LocalCluster
 
     before, after, _ = pair
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
-                      dashboard_address=None) as cluster:
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, protocol="tcp", dashboard_address=None
+    ) as cluster:
         got = estimate(before, after, tmp_path / "r", Options(scheduler=cluster.scheduler_address, tile_cells=24))
     assert got.report["engine"]["scheduler"].startswith("tcp://")
     _same(got, in_process)

@@ -183,8 +183,12 @@ def test_copc_before_gives_the_las_result(tmp_path):
 
     before, after, _ = write_scene(tmp_path / "pair", 5)
     las = laspy.read(before)
-    copc = write_copc(tmp_path / "before.copc.laz", np.c_[las.x, las.y, las.z], np.asarray(las.classification),
-                      las.header.parse_crs().to_wkt())
+    copc = write_copc(
+        tmp_path / "before.copc.laz",
+        np.c_[las.x, las.y, las.z],
+        np.asarray(las.classification),
+        las.header.parse_crs().to_wkt(),
+    )
     ref = estimate(before, after, tmp_path / "a", Options(scheduler="none"))
     got = estimate(copc, after, tmp_path / "b", Options(scheduler="none"))
     assert got.report["volume_m3"]["net"] == pytest.approx(ref.report["volume_m3"]["net"], rel=1e-3)

@@ -12,8 +12,9 @@ from soilvolume.core.types import GridSpec, SoilVolumeError
 from soilvolume.volumes.zones import budget, polygons_mask, zone_budgets
 
 UTM = pyproj.CRS.from_epsg(32654)
-GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=200, cols=200,
-                origin=(500000.0, 3900000.0, 0.0), crs_wkt=UTM.to_wkt())
+GRID = GridSpec(
+    xmin=500000.0, ymax=3900100.0, cell=0.5, rows=200, cols=200, origin=(500000.0, 3900000.0, 0.0), crs_wkt=UTM.to_wkt()
+)
 
 
 def diff() -> np.ndarray:
@@ -29,18 +30,22 @@ def box(x0, y0, x1, y1):
 
 def write_geojson_lonlat(path, boxes, names):
     tr = pyproj.Transformer.from_crs(UTM, "EPSG:4326", always_xy=True)
-    feats = [{"type": "Feature", "properties": {"name": n},
-              "geometry": {"type": "Polygon",
-                           "coordinates": [[list(tr.transform(x, y)) for x, y in ring]
-                                           for ring in b]}}
-             for b, n in zip(boxes, names, strict=True)]
+    feats = [
+        {
+            "type": "Feature",
+            "properties": {"name": n},
+            "geometry": {"type": "Polygon", "coordinates": [[list(tr.transform(x, y)) for x, y in ring] for ring in b]},
+        }
+        for b, n in zip(boxes, names, strict=True)
+    ]
     path.write_text(json.dumps({"type": "FeatureCollection", "features": feats}))
 
 
 def test_zone_sums_equal_totals_after_reprojection(tmp_path):
     path = tmp_path / "zones.geojson"
-    write_geojson_lonlat(path, [box(499990, 3899990, 500050, 3900110),
-                                box(500050, 3899990, 500110, 3900110)], ["west", "east"])
+    write_geojson_lonlat(
+        path, [box(499990, 3899990, 500050, 3900110), box(500050, 3899990, 500110, 3900110)], ["west", "east"]
+    )
     d = diff()
     zones = zone_budgets(d, GRID, path)
     total = budget(d, np.ones(d.shape, bool), GRID.cell_area)
@@ -63,8 +68,11 @@ def test_geopackage_in_grid_crs_with_name_field_and_mask(tmp_path):
     layer.CreateField(ogr.FieldDefn("zone_id", ogr.OFTString))
     f = ogr.Feature(layer.GetLayerDefn())
     f.SetField("zone_id", "pad A")
-    f.SetGeometry(ogr.CreateGeometryFromJson(json.dumps(
-        {"type": "Polygon", "coordinates": box(500010, 3900010, 500020, 3900030)})))
+    f.SetGeometry(
+        ogr.CreateGeometryFromJson(
+            json.dumps({"type": "Polygon", "coordinates": box(500010, 3900010, 500020, 3900030)})
+        )
+    )
     layer.CreateFeature(f)
     ds = None
     zones = zone_budgets(diff(), GRID, path, name_field="zone_id")

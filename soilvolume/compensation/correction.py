@@ -47,8 +47,7 @@ def stable_cells(
     the reference). ``user_mask`` (True = stable) is returned as given (on valid cells)."""
     from .stable import find_stable
 
-    return find_stable(diff, cell, degree=degree, user_mask=user_mask, k=k, dilate_m=dilate_m,
-                       iterations=iterations)[0]
+    return find_stable(diff, cell, degree=degree, user_mask=user_mask, k=k, dilate_m=dilate_m, iterations=iterations)[0]
 
 
 def fit_surface(
@@ -71,8 +70,9 @@ def fit_surface(
         x, y = grid.centers_local()
         surface, coef, (cx, cy, s) = fit_poly(x, y, diff, mask, degree)
         n = len(coef)
-        params.update(terms=list(_TERM_NAMES[:n]), coefficients=[float(c) for c in coef],
-                      centre_local=[cx, cy], scale_m=s)
+        params.update(
+            terms=list(_TERM_NAMES[:n]), coefficients=[float(c) for c in coef], centre_local=[cx, cy], scale_m=s
+        )
     params["residuals"] = residual_stats(diff - surface, mask)
     params["residuals_before"] = residual_stats(diff, mask)
     return surface, params

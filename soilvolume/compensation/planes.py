@@ -29,7 +29,10 @@ class Plane:
 
 
 def ransac_plane(
-    xyz: np.ndarray, threshold: float = 0.15, iterations: int = 500, seed: int = 0,
+    xyz: np.ndarray,
+    threshold: float = 0.15,
+    iterations: int = 500,
+    seed: int = 0,
     sample: int = 20_000,
 ) -> Plane:
     """Seeded RANSAC plane (3-point hypotheses scored on a subsample), refined by least squares

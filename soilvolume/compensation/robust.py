@@ -20,10 +20,14 @@ def residual_stats(residual: np.ndarray, mask: np.ndarray) -> dict[str, float]:
     """mean, std, nmad, rmse and n_cells of ``residual`` on ``mask``."""
     r = residual[mask & np.isfinite(residual)]
     if r.size == 0:
-        return {"mean": float("nan"), "std": float("nan"), "nmad": float("nan"),
-                "rmse": float("nan"), "n_cells": 0}
-    return {"mean": float(r.mean()), "std": float(r.std()), "nmad": nmad(r),
-            "rmse": float(np.sqrt(np.mean(r * r))), "n_cells": int(r.size)}
+        return {"mean": float("nan"), "std": float("nan"), "nmad": float("nan"), "rmse": float("nan"), "n_cells": 0}
+    return {
+        "mean": float(r.mean()),
+        "std": float(r.std()),
+        "nmad": nmad(r),
+        "rmse": float(np.sqrt(np.mean(r * r))),
+        "n_cells": int(r.size),
+    }
 
 
 def _terms(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:

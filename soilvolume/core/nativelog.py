@@ -40,8 +40,9 @@ def hold_native_stderr() -> Iterator[Held]:
     was_enabled = faulthandler.is_enabled()
     terminal = os.dup(2)
     python_stderr = sys.stderr
-    sys.stderr = os.fdopen(os.dup(terminal), "w", buffering=1, encoding=python_stderr.encoding,
-                           errors="backslashreplace")
+    sys.stderr = os.fdopen(
+        os.dup(terminal), "w", buffering=1, encoding=python_stderr.encoding, errors="backslashreplace"
+    )
     faulthandler.enable(sys.stderr)  # a crash still reports on the terminal
     with tempfile.TemporaryFile() as sink:
         os.dup2(sink.fileno(), 2)

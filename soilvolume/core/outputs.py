@@ -29,8 +29,16 @@ STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
 RUN_SUFFIXES = (".tif", ".tiff", ".json", ".html", ".las", ".laz", ".xml")
 NAME_MAX = 255
 #: the files ``estimate`` writes itself (pipeline writers may not take these names)
-RUN_OUTPUTS = ("dem_before.tif", "dem_after.tif", "difference.tif", "plane_offset.tif", "filled_mask.tif",
-               "report.json", "report.html", "after_registered.laz")
+RUN_OUTPUTS = (
+    "dem_before.tif",
+    "dem_after.tif",
+    "difference.tif",
+    "plane_offset.tif",
+    "filled_mask.tif",
+    "report.json",
+    "report.html",
+    "after_registered.laz",
+)
 
 
 def os_problem(exc: OSError, path: str | os.PathLike | None = None) -> SoilVolumeError:
@@ -174,8 +182,9 @@ class OutputDir:
     it. ``inputs`` may never be written, replaced or lie inside the folder; ``allowed`` says which
     entries of an existing folder ``--overwrite`` may replace (default: files a run writes)."""
 
-    def __init__(self, final: Path, inputs: Iterable[Path | str | None], overwrite: bool,
-                 allowed: Iterable[str] | None = None) -> None:
+    def __init__(
+        self, final: Path, inputs: Iterable[Path | str | None], overwrite: bool, allowed: Iterable[str] | None = None
+    ) -> None:
         self.final = Path(os.path.abspath(final))
         if self.final.is_symlink() or self.final.exists():
             self.final = self.final.resolve()
@@ -225,8 +234,10 @@ class OutputDir:
             raise SoilVolumeError(f"{final}: output folder exists and is not empty (use --overwrite)")
         foreign = [e for e in entries if not self._ours(e)]
         if foreign:
-            raise SoilVolumeError(f"{final}: --overwrite replaces the whole folder, and it holds "
-                                  f"'{foreign[0].name}' that soilvolume does not write; choose another folder")
+            raise SoilVolumeError(
+                f"{final}: --overwrite replaces the whole folder, and it holds "
+                f"'{foreign[0].name}' that soilvolume does not write; choose another folder"
+            )
 
     def _ours(self, entry: Path) -> bool:
         if self.allowed is not None:
@@ -289,8 +300,9 @@ class OutputDir:
 
 
 @contextmanager
-def output_dir(final: Path, inputs: Iterable[Path | str | None], overwrite: bool,
-               allowed: Iterable[str] | None = None) -> Iterator[OutputDir]:
+def output_dir(
+    final: Path, inputs: Iterable[Path | str | None], overwrite: bool, allowed: Iterable[str] | None = None
+) -> Iterator[OutputDir]:
     """An :class:`OutputDir` committed when the block succeeds, removed when it fails."""
     out = OutputDir(final, inputs, overwrite, allowed)
     with interrupt.cleanup_on_exit(out.abort):

@@ -28,7 +28,11 @@ def choose_cell(points: int, area_m2: float, per_cell: float = 8.0, minimum: flo
 
 
 def make_grid(
-    lo: np.ndarray, hi: np.ndarray, cell: float, origin: np.ndarray, crs_wkt: str | None,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cell: float,
+    origin: np.ndarray,
+    crs_wkt: str | None,
     xy_unit: float = 1.0,
 ) -> GridSpec:
     """A grid covering local bounds ``lo``..``hi`` with edges on absolute multiples of ``cell``."""
@@ -57,7 +61,11 @@ def cell_ids(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
 
 
 def average_height(
-    xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", k_mad: float = 3.0, spread: bool = False,
+    xyz: np.ndarray,
+    grid: GridSpec,
+    statistic: str = "robust-mean",
+    k_mad: float = 3.0,
+    spread: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """Per-cell height (NaN where empty) and point count, both (rows, cols); with ``spread``
     also the per-cell robust spread of the heights (m: IQR / 1.349, the standard deviation for
@@ -74,7 +82,11 @@ def average_height(
 
 
 def cell_heights(
-    ids: np.ndarray, z: np.ndarray, shape: tuple[int, int], statistic: str = "robust-mean", k_mad: float = 3.0,
+    ids: np.ndarray,
+    z: np.ndarray,
+    shape: tuple[int, int],
+    statistic: str = "robust-mean",
+    k_mad: float = 3.0,
     spread: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
@@ -107,7 +119,7 @@ class _SortedCells:
         self.z0 = float(z.min())
         id_bits = max(1, int(n_cells).bit_length())
         self.bits = 62 - id_bits
-        self.q = max(1e-4, (float(z.max()) - self.z0) / (2 ** self.bits - 2))
+        self.q = max(1e-4, (float(z.max()) - self.z0) / (2**self.bits - 2))
         key = ids.astype(np.int64) << self.bits
         key |= np.rint((z - self.z0) / self.q).astype(np.int64)
         key.sort()
@@ -169,8 +181,12 @@ def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> floa
 
 
 def write_geotiff(
-    path: str | Path, array: np.ndarray, grid: GridSpec, description: str = "",
-    units: str = "metre", dtype: str = "float32",
+    path: str | Path,
+    array: np.ndarray,
+    grid: GridSpec,
+    description: str = "",
+    units: str = "metre",
+    dtype: str = "float32",
 ) -> Path:
     """Write a single-band GeoTIFF (NaN -> nodata), atomically; returns the path. Tagged with
     the grid's horizontal CRS only: the values are metres whatever the input's vertical unit."""
@@ -182,8 +198,15 @@ def write_geotiff(
     nodata = NODATA if np.dtype(dtype).kind == "f" else 255
     data = np.where(np.isfinite(array), array, nodata).astype(dtype)
     profile = dict(
-        driver="GTiff", width=grid.cols, height=grid.rows, count=1, dtype=dtype,
-        crs=raster_wkt(grid.crs_wkt), transform=grid.transform, nodata=nodata, compress="deflate",
+        driver="GTiff",
+        width=grid.cols,
+        height=grid.rows,
+        count=1,
+        dtype=dtype,
+        crs=raster_wkt(grid.crs_wkt),
+        transform=grid.transform,
+        nodata=nodata,
+        compress="deflate",
         tiled=grid.cols >= 256 and grid.rows >= 256,
     )
     with atomic_path(path) as tmp:

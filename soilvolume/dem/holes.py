@@ -233,7 +233,7 @@ def _group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
     for k in range(_BAND_EDGES.size + 1):
         lo, hi = bounds[k], bounds[k + 1]
         if hi > lo:
-            e = by_row[cut[k]: cut[k + 1]]
+            e = by_row[cut[k] : cut[k + 1]]
             try:
                 blocks.append((lo, hi, _factor(k, pr[e] - lo, pc[e] - lo, low.data[e], hi - lo)))
             except (np.linalg.LinAlgError, RuntimeError):
@@ -241,7 +241,7 @@ def _group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
 
     def solve(b: np.ndarray) -> np.ndarray:
         y = b[order]
-        y[bounds[-1]:] = 0.0
+        y[bounds[-1] :] = 0.0
         for lo, hi, f in blocks:
             y[lo:hi] = f(y[lo:hi])
         x = np.empty_like(y)
@@ -364,13 +364,14 @@ def typical_radius(mask: np.ndarray) -> float:
     return max(1.0, float(np.sqrt((size * size).sum() / size.sum() / np.pi)))
 
 
-def fill_error(h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0,
-               n_holes: int = 40, seed: int = 0) -> float:
+def fill_error(
+    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, n_holes: int = 40, seed: int = 0
+) -> float:
     """One-sigma error (m) of the MEAN height of a refilled hole, measured on known ground: discs
     of ``radius`` cells are cut out of ``usable`` cells of ``h`` (apart, fully surrounded by
     usable cells), refilled with ``method`` and compared with what was there (NaN if no room)."""
     r = int(np.ceil(radius))
-    yy, xx = np.mgrid[-r - 2: r + 3, -r - 2: r + 3]
+    yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
     room = ndimage.binary_erosion(usable & np.isfinite(h), xx * xx + yy * yy <= (radius + 2) ** 2)
     step = 2 * r + 5
     cand = np.argwhere(room[::step, ::step]) * step

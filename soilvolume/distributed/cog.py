@@ -16,8 +16,12 @@ BLOCK = 256
 
 
 def write_cog(
-    path: str | Path, grid: GridSpec, piece: Callable[[slice, slice], np.ndarray], description: str = "",
-    units: str = "metre", dtype: str = "float32",
+    path: str | Path,
+    grid: GridSpec,
+    piece: Callable[[slice, slice], np.ndarray],
+    description: str = "",
+    units: str = "metre",
+    dtype: str = "float32",
 ) -> Path:
     """Write ``piece(rows, cols)`` (the raster's values on that window; NaN = nodata) block row by
     block row as a single-band COG, atomically; returns the path."""
@@ -27,9 +31,21 @@ def write_cog(
 
     path = Path(path)
     nodata = NODATA if np.dtype(dtype).kind == "f" else 255
-    profile = dict(driver="GTiff", width=grid.cols, height=grid.rows, count=1, dtype=dtype, crs=grid.crs_wkt,
-                   transform=grid.transform, nodata=nodata, compress="deflate", tiled=True,
-                   blockxsize=BLOCK, blockysize=BLOCK, BIGTIFF="IF_SAFER")
+    profile = dict(
+        driver="GTiff",
+        width=grid.cols,
+        height=grid.rows,
+        count=1,
+        dtype=dtype,
+        crs=grid.crs_wkt,
+        transform=grid.transform,
+        nodata=nodata,
+        compress="deflate",
+        tiled=True,
+        blockxsize=BLOCK,
+        blockysize=BLOCK,
+        BIGTIFF="IF_SAFER",
+    )
     plain = path.with_name(f".{path.stem}.blocks.tif")
     try:
         with rasterio.open(plain, "w", **profile) as dst:
@@ -44,8 +60,14 @@ def write_cog(
             dst.set_band_unit(1, units)
             dst.update_tags(AREA_OR_POINT="Area")
         with atomic_path(path) as tmp:
-            rasterio.shutil.copy(plain, tmp, driver="COG", compress="DEFLATE", blocksize=BLOCK,
-                                 overview_resampling="nearest" if dtype == "uint8" else "average")
+            rasterio.shutil.copy(
+                plain,
+                tmp,
+                driver="COG",
+                compress="DEFLATE",
+                blocksize=BLOCK,
+                overview_resampling="nearest" if dtype == "uint8" else "average",
+            )
     finally:
         plain.unlink(missing_ok=True)
     return path

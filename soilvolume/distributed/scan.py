@@ -38,8 +38,9 @@ def scan_unit(unit: Unit, region, to_local, use_class: bool, keep, lo, hi, voxel
     for xyz, cls in chunks:
         out["read_s"] += time.perf_counter() - t0
         if indexed:
-            out["index"].append(((start or 0) + out["points"], len(xyz), xyz[:, :2].min(axis=0),
-                                 xyz[:, :2].max(axis=0)))
+            out["index"].append(
+                ((start or 0) + out["points"], len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0))
+            )
         out["points"] += len(xyz)
         local = to_local(xyz)
         mask = cls == GROUND if use_class and cls is not None else None
@@ -60,8 +61,9 @@ def dask_loader(client, progress: Callable[[str], None] | None = None) -> Callab
     reads that keep full-resolution points, fall back to streaming here)."""
     from dask.distributed import as_completed
 
-    def loader(src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check=None, box=None,
-               indexed: bool = False) -> Loaded:
+    def loader(
+        src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check=None, box=None, indexed: bool = False
+    ) -> Loaded:
         keeps_points = box is None or (box[1] >= box[0]).all()
         if src.raw is not None or keeps_points:
             return load(src, to_local, mode, keep, thinner, check, box, indexed)

@@ -41,8 +41,7 @@ def parse(spec: str) -> Schedule | None:
         return Schedule("tcp", address=spec)
     m = re.fullmatch(r"(threads|local)(?::(\d+))?", spec)
     if not m or (m.group(2) is not None and int(m.group(2)) < 1):
-        raise SoilVolumeError(
-            f"--scheduler {spec}: expected none, threads[:N], local[:N], tcp://HOST:PORT or auto")
+        raise SoilVolumeError(f"--scheduler {spec}: expected none, threads[:N], local[:N], tcp://HOST:PORT or auto")
     return Schedule(m.group(1), int(m.group(2) or (os.cpu_count() or 1)))
 
 
@@ -123,13 +122,18 @@ def _start(schedule: Schedule, memory_limit: float):
             raise SoilVolumeError(f"--scheduler {schedule.address}: cannot reach the Dask scheduler ({exc})") from exc
     processes = schedule.kind == "local"
     if processes and not can_spawn():
-        raise SoilVolumeError(f"--scheduler {schedule}: cannot start worker processes from {sys.executable}; "
-                              "use threads[:N] or an existing cluster (tcp://HOST:PORT)")
+        raise SoilVolumeError(
+            f"--scheduler {schedule}: cannot start worker processes from {sys.executable}; "
+            "use threads[:N] or an existing cluster (tcp://HOST:PORT)"
+        )
     per_worker = budget_gb(memory_limit) / schedule.workers
     cluster = LocalCluster(
-        n_workers=schedule.workers if processes else 1, threads_per_worker=1 if processes else schedule.workers,
-        processes=processes, memory_limit=f"{per_worker:.3f}GiB" if processes else None,
-        dashboard_address=None, silence_logs=40,
+        n_workers=schedule.workers if processes else 1,
+        threads_per_worker=1 if processes else schedule.workers,
+        processes=processes,
+        memory_limit=f"{per_worker:.3f}GiB" if processes else None,
+        dashboard_address=None,
+        silence_logs=40,
     )
     return cluster, Client(cluster)
 

@@ -89,8 +89,9 @@ def schedule_for(before, after, options: Options, pipeline: bool) -> Schedule:
         return choose("auto", options.memory_limit, sum(points))
     chosen = parse(options.scheduler)
     if pipeline and chosen.kind != "none":
-        raise SoilVolumeError(f"--scheduler {options.scheduler}: preparation pipelines run in-process only "
-                              "(use --scheduler none)")
+        raise SoilVolumeError(
+            f"--scheduler {options.scheduler}: preparation pipelines run in-process only (use --scheduler none)"
+        )
     return chosen
 
 
@@ -105,8 +106,7 @@ def _header_points(path) -> int | None:
     return open_source(path).count
 
 
-def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
-                   schedule: Schedule) -> Result:
+def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule) -> Result:
     """the in-process run (:mod:`soilvolume.workflow.estimate`) with the point work as Dask tasks on ``schedule``."""
     if options.ground == "filter":
         raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
@@ -115,15 +115,22 @@ def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks
         return _tiled(before, after, out, options, timer, hooks, schedule, starting)
 
 
-def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule,
-           starting) -> Result:
+def _tiled(
+    before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule, starting
+) -> Result:
     """The tiled run, with ``starting`` the future of the (cluster, client) being started."""
     with timer("cluster_wait"):
         _, c = starting.result()
     with timer("crop"):  # the registration subsets: a first pass as Dask tasks
         src_b, src_a = open_source(before), open_source(after)
-        prep = prepare(src_b, src_a, options, check=lambda: hooks.step(5, "reading"), full=False,
-                       loader=dask_loader(c, lambda m: hooks.step(8, m)))
+        prep = prepare(
+            src_b,
+            src_a,
+            options,
+            check=lambda: hooks.step(5, "reading"),
+            full=False,
+            loader=dask_loader(c, lambda m: hooks.step(8, m)),
+        )
     from ..registration.georef import resolve
 
     mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
@@ -132,19 +139,36 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         options = options.with_(correction="none")
     hooks.step(15, REGISTERING)
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, REGISTERING),
-                       precise=mode == "precise")
+        reg = register(
+            prep.after_thin,
+            prep.before_thin,
+            options,
+            check=hooks.ticker(15, 55, REGISTERING),
+            precise=mode == "precise",
+        )
     reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     after_thin = transform_points(prep.after_thin, reg.transform)
     cell = options.cell if options.cell else cell_from_columns(prep, after_thin)
     grid = shared_grid(prep, after_thin, options.with_(cell=cell))
-    plan = Plan(str(before), str(after), prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"],
-                prep.frame, prep.origin, grid, reg.transform, prep.ground,
-                footprint(prep.after_thin[:, :2], options.radius), options.statistic, prep.index)
-    side = tile_side(options, grid, points_per_cell(prep, cell), worker_gb(schedule, options.memory_limit),
-                     schedule.workers)
+    plan = Plan(
+        str(before),
+        str(after),
+        prep.inputs["before"]["crs_wkt"],
+        prep.inputs["after"]["crs_wkt"],
+        prep.frame,
+        prep.origin,
+        grid,
+        reg.transform,
+        prep.ground,
+        footprint(prep.after_thin[:, :2], options.radius),
+        options.statistic,
+        prep.index,
+    )
+    side = tile_side(
+        options, grid, points_per_cell(prep, cell), worker_gb(schedule, options.memory_limit), schedule.workers
+    )
     align = None if options.tile_cells else data_tile_m(src_b, cell, 2 * side)
     if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
         side = max(1, round(align / cell))
@@ -169,9 +193,14 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
     with timer("report"):
         report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
-        report["engine"] = {"scheduler": str(schedule), "tiles": len(windows), "tile_cells": side,
-                            "task_points_read": stats["read"], "task_seconds": round(stats["seconds"], 3),
-                            "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9))}
+        report["engine"] = {
+            "scheduler": str(schedule),
+            "tiles": len(windows),
+            "tile_cells": side,
+            "task_points_read": stats["read"],
+            "task_seconds": round(stats["seconds"], 3),
+            "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
+        }
         _quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
         write_report_html(out, report, vols, grid)
@@ -195,12 +224,24 @@ def write_outputs(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, origin, 
     layers = [
         ("dem_before.tif", lambda r, c: h_b[r, c] + z0, "average height, before (m)", "float32"),
         ("dem_after.tif", lambda r, c: h_a[r, c] + z0, "average height, after (m)", "float32"),
-        ("difference.tif", lambda r, c: vols["diff"][r, c],
-         f"H_after - H_before - correction ({options.correction}) (m)", "float32"),
-        ("plane_offset.tif", lambda r, c: vols["offset"][r, c],
-         f"vertical correction d_i subtracted ({options.correction}) (m)", "float32"),
-        ("filled_mask.tif", lambda r, c: vols["filled_mask"][r, c].astype("uint8"),
-         "1 = difference interpolated (sparse cell or filled hole)", "uint8"),
+        (
+            "difference.tif",
+            lambda r, c: vols["diff"][r, c],
+            f"H_after - H_before - correction ({options.correction}) (m)",
+            "float32",
+        ),
+        (
+            "plane_offset.tif",
+            lambda r, c: vols["offset"][r, c],
+            f"vertical correction d_i subtracted ({options.correction}) (m)",
+            "float32",
+        ),
+        (
+            "filled_mask.tif",
+            lambda r, c: vols["filled_mask"][r, c].astype("uint8"),
+            "1 = difference interpolated (sparse cell or filled hole)",
+            "uint8",
+        ),
     ]
     for name, piece, desc, dtype in layers:
         write_cog(out.path(name), grid, piece, desc, "" if dtype == "uint8" else "metre", dtype)

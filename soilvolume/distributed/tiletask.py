@@ -77,8 +77,12 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
         stats["read"] += len(xyz)
         sel = cls == GROUND if ground and cls is not None else None
         if box is not None:  # the box has a margin: cells are assigned exactly below
-            near = (xyz[:, 0] >= box[0][0]) & (xyz[:, 0] <= box[1][0]) & (xyz[:, 1] >= box[0][1]) & (
-                xyz[:, 1] <= box[1][1])
+            near = (
+                (xyz[:, 0] >= box[0][0])
+                & (xyz[:, 0] <= box[1][0])
+                & (xyz[:, 1] >= box[0][1])
+                & (xyz[:, 1] <= box[1][1])
+            )
             sel = near if sel is None else sel & near
         if sel is not None:
             xyz = xyz[sel]
@@ -135,8 +139,9 @@ def tiles(grid: GridSpec, side: int, align: float | None = None) -> list[Window]
         c_off = round(((-grid.xmin) % align) / grid.cell) % side
         r_off = round((grid.ymax % align) / grid.cell) % side
     rows, cols = _edges(grid.rows, r_off, side), _edges(grid.cols, c_off, side)
-    return [(r0, r1, c0, c1) for r0, r1 in zip(rows, rows[1:], strict=False)
-            for c0, c1 in zip(cols, cols[1:], strict=False)]
+    return [
+        (r0, r1, c0, c1) for r0, r1 in zip(rows, rows[1:], strict=False) for c0, c1 in zip(cols, cols[1:], strict=False)
+    ]
 
 
 def _edges(n: int, offset: int, side: int) -> list[int]:
@@ -149,8 +154,9 @@ def _edges(n: int, offset: int, side: int) -> list[int]:
     return edges + [n]
 
 
-def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None,
-              stats: dict | None = None) -> tuple[np.ndarray, ...]:
+def run_tiles(
+    c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None, stats: dict | None = None
+) -> tuple[np.ndarray, ...]:
     """Run every tile on the client ``c`` and assemble (h_a, n_a, s_a, h_b, n_b, s_b) on the grid. Tiles
     found in ``cache`` (from an interrupted run of the same plan) are not run again; finished
     tiles are saved there. ``stats`` sums the tasks' points read and seconds."""
@@ -159,8 +165,9 @@ def run_tiles(c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | 
     from dask.distributed import as_completed
 
     g = plan.grid
-    out = tuple(np.full((g.rows, g.cols), np.nan) if k % 3 != 1 else np.zeros((g.rows, g.cols), np.int64)
-                for k in range(6))
+    out = tuple(
+        np.full((g.rows, g.cols), np.nan) if k % 3 != 1 else np.zeros((g.rows, g.cols), np.int64) for k in range(6)
+    )
     todo = []
     for win in windows:
         saved = _load_tile(cache, win)
@@ -219,8 +226,21 @@ def tile_cache(out: OutputDir, plan: Plan) -> Path:
     import hashlib
     import pickle
 
-    key = hashlib.sha1(pickle.dumps((plan.before, plan.after, plan.crs_b, plan.crs_a, plan.origin.tolist(),
-                                     plan.grid, plan.transform.round(12).tolist(), plan.ground, plan.statistic)))
+    key = hashlib.sha1(
+        pickle.dumps(
+            (
+                plan.before,
+                plan.after,
+                plan.crs_b,
+                plan.crs_a,
+                plan.origin.tolist(),
+                plan.grid,
+                plan.transform.round(12).tolist(),
+                plan.ground,
+                plan.statistic,
+            )
+        )
+    )
     folder = out.final.parent / f".{out.final.name}.soilvolume-tiles" / key.hexdigest()[:16]
     folder.mkdir(parents=True, exist_ok=True)
     return folder

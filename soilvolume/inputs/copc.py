@@ -31,7 +31,11 @@ def is_copc(path: str | Path) -> bool:
 
 
 def copc_chunks(
-    path: str | Path, lo=None, hi=None, resolution: float | None = None, size: int = 1_000_000,
+    path: str | Path,
+    lo=None,
+    hi=None,
+    resolution: float | None = None,
+    size: int = 1_000_000,
 ) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
     """(absolute xyz float64, classification or None) of the points of a COPC file within the
     x/y box lo..hi (inclusive), at most ``size`` at a time, read from the octree nodes meeting

@@ -121,9 +121,7 @@ def to_frame(xyz: np.ndarray, src: pyproj.CRS, frame: WorkFrame, path: str) -> n
             out[:, 2] = xyz[:, 2] * z_unit(src)
         out[:, 0], out[:, 1] = x, y
         if not np.isfinite(out).all():
-            raise SoilVolumeError(
-                f"{path}: CRS transformation to {dst.name} failed (points outside its area of use?)"
-            )
+            raise SoilVolumeError(f"{path}: CRS transformation to {dst.name} failed (points outside its area of use?)")
     out[:, :2] *= frame.xy_unit
     return out
 

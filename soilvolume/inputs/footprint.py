@@ -18,8 +18,9 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
     """Refuse a cloud whose (thinned) x/y are too few or all on a line: nothing can be registered
     or gridded on it."""
     if len(xy) < MIN_COLUMNS:
-        raise SoilVolumeError(f"{path}: too few points to work with ({len(xy)} distinct positions {what}, "
-                              f"at least {MIN_COLUMNS} needed)")
+        raise SoilVolumeError(
+            f"{path}: too few points to work with ({len(xy)} distinct positions {what}, at least {MIN_COLUMNS} needed)"
+        )
     spread = np.linalg.svd(xy - xy.mean(axis=0), compute_uv=False) / np.sqrt(len(xy))
     if spread[1] < max(0.01, 1e-4 * spread[0]):
         raise SoilVolumeError(f"{path}: the points lie on a line (a degenerate cloud: no area to compare)")

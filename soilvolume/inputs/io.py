@@ -69,9 +69,7 @@ def validate(raw: RawPoints) -> None:
         raise SoilVolumeError(f"{raw.path}: the point cloud is empty (0 points)")
     bad = ~np.isfinite(raw.xyz).all(axis=1)
     if bad.any():
-        raise SoilVolumeError(
-            f"{raw.path}: {int(bad.sum())} point(s) have NaN or infinite coordinates"
-        )
+        raise SoilVolumeError(f"{raw.path}: {int(bad.sum())} point(s) have NaN or infinite coordinates")
 
 
 CRS_RECORDS = {2111, 2112, 34735, 34736, 34737}  # WKT (math transform, CRS) and GeoTIFF keys
@@ -89,8 +87,9 @@ def las_crs_wkt(header, path: Path) -> str | None:
         broken = next((v for v in header.vlrs if _looks_like_crs(v)), None)
         if broken is not None:
             user = "".join(c if c.isprintable() else "?" for c in str(broken.user_id))
-            raise SoilVolumeError(f"{path}: the header's CRS record (VLR '{user}' {broken.record_id}) "
-                                  "cannot be read (corrupt header?)")
+            raise SoilVolumeError(
+                f"{path}: the header's CRS record (VLR '{user}' {broken.record_id}) cannot be read (corrupt header?)"
+            )
         return None
     return crs.to_wkt()
 
@@ -199,8 +198,12 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
 
 
 def write_las_chunked(
-    path: str | os.PathLike, chunks: Iterable[tuple[np.ndarray, np.ndarray | None]], origin: np.ndarray,
-    crs_wkt: str | None, transform: np.ndarray | None = None, scale: float = 0.001,
+    path: str | os.PathLike,
+    chunks: Iterable[tuple[np.ndarray, np.ndarray | None]],
+    origin: np.ndarray,
+    crs_wkt: str | None,
+    transform: np.ndarray | None = None,
+    scale: float = 0.001,
 ) -> None:
     """Write (local xyz, classification or None) chunks, optionally through a 4x4 rigid
     ``transform``, as absolute LAS 1.4/LAZ (memory bounded by a chunk), atomically."""

@@ -108,8 +108,9 @@ def _check_numbers(path: Path, values: tuple[float, ...]) -> None:
         raise _fail(path, "offsets and bounds must be finite numbers")
 
 
-def _check_count(path: Path, head: bytes, minor: int, count: int, rec_len: int, offset: int, size: int,
-                 compressed: bool) -> None:
+def _check_count(
+    path: Path, head: bytes, minor: int, count: int, rec_len: int, offset: int, size: int, compressed: bool
+) -> None:
     end = size
     if minor >= 4:
         evlr_start, n_evlr = struct.unpack_from("<QI", head, 235)
@@ -121,8 +122,11 @@ def _check_count(path: Path, head: bytes, minor: int, count: int, rec_len: int, 
             raise _fail(path, f"{count} points cannot fit in {data} bytes of compressed data")
         return
     if count * rec_len > data:
-        raise _fail(path, f"{count} points of {rec_len} bytes need {count * rec_len} bytes, "
-                    f"the file holds {data} (truncated file or wrong count)")
+        raise _fail(
+            path,
+            f"{count} points of {rec_len} bytes need {count * rec_len} bytes, "
+            f"the file holds {data} (truncated file or wrong count)",
+        )
     if data - count * rec_len >= rec_len:
         raise _fail(path, f"the file holds {data // rec_len} points, the header says {count}")
 
@@ -143,8 +147,9 @@ class BoundsCheck:
             return
         lo, hi = xyz.min(axis=0), xyz.max(axis=0)
         if (lo < self.lo - self.tol).any() or (hi > self.hi + self.tol).any():
-            raise SoilVolumeError(f"{self.path}: points lie outside the bounds in the LAS header "
-                                  "(corrupt scale, offset or bounds)")
+            raise SoilVolumeError(
+                f"{self.path}: points lie outside the bounds in the LAS header (corrupt scale, offset or bounds)"
+            )
         self.seen_lo, self.seen_hi = np.minimum(self.seen_lo, lo), np.maximum(self.seen_hi, hi)
 
     def finish(self) -> None:
@@ -152,5 +157,6 @@ class BoundsCheck:
             return
         slack = 2 * self.tol + LOOSE * (self.hi - self.lo)
         if (self.seen_lo - self.lo > slack).any() or (self.hi - self.seen_hi > slack).any():
-            raise SoilVolumeError(f"{self.path}: the points do not reach the bounds in the LAS header "
-                                  "(corrupt scale, offset or bounds)")
+            raise SoilVolumeError(
+                f"{self.path}: the points do not reach the bounds in the LAS header (corrupt scale, offset or bounds)"
+            )

@@ -51,12 +51,14 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
         raise SoilVolumeError(
             f"{raw.path}: {flag} {override} differs from the CRS in the header ({header.name}); {flag} "
             "applies only to files without one (to replace a wrong header CRS, prepare the cloud with a "
-            "pipeline whose reader sets override_srs)")
+            "pipeline whose reader sets override_srs)"
+        )
     return header or given
 
 
-def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0,
-                  slope: float = 0.6) -> tuple[np.ndarray, str]:
+def select_ground(
+    raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0, slope: float = 0.6
+) -> tuple[np.ndarray, str]:
     """Mask of the points to use, and a note: class 2 when asked for or (auto) present, or the
     SMRF ground filter (run in metres: ``crs`` gives the file's units) with an earthworks
     ``window`` and ``slope`` (PDAL's 18 m / 0.15 take the piles themselves for objects)."""
@@ -67,7 +69,8 @@ def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, wind
     if mode in ("auto", "class"):
         if not has_class:
             raise SoilVolumeError(
-                f"{raw.path}: --ground class needs ground-classified (class 2) points; the file has none")
+                f"{raw.path}: --ground class needs ground-classified (class 2) points; the file has none"
+            )
         return raw.classification == GROUND, "class 2 (ground)"
     if mode == "filter":
         from ..pipelines.stages.smrf import smrf_classify
@@ -112,8 +115,9 @@ def thin_voxel(area_m2: float) -> float:
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 
 
-def prepare(before: Source, after: Source, options: Options, check=None, full: bool = True,
-            loader: Callable[..., Loaded] = load) -> Prepared:
+def prepare(
+    before: Source, after: Source, options: Options, check=None, full: bool = True, loader: Callable[..., Loaded] = load
+) -> Prepared:
     """Stream both clouds into the working frame with a local origin: all after points, the
     before points within the radius of the after footprint, and thinned subsets of both
     (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
@@ -126,16 +130,25 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
-    after, a, note_a = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check,
-                                   None if full else NOTHING, loader)
+    after, a, note_a = _load_whole(
+        after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check, None if full else NOTHING, loader
+    )
     check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
     before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
     reach = options.max_gps_shift + 2.0
     box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach) if full else NOTHING
-    b = loader(before, _local(crs_b, frame, origin, before.path), mode_b, PolygonMask(poly),
-             ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel), check, box, not full)
+    b = loader(
+        before,
+        _local(crs_b, frame, origin, before.path),
+        mode_b,
+        PolygonMask(poly),
+        ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel),
+        check,
+        box,
+        not full,
+    )
     if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
         raise SoilVolumeError(
             f"{before.path} and {after.path} do not overlap: the before cloud has "
@@ -150,9 +163,19 @@ def prepare(before: Source, after: Source, options: Options, check=None, full: b
     read_s = a.extra["read_s"] + b.extra["read_s"]
     wkt = frame.wkt
     return Prepared(
-        Cloud(b.xyz, origin, wkt, before.path), Cloud(a.xyz, origin, wkt, after.path),
-        frame, origin, inputs, b.thin, a.thin, voxel, _all_points(original_after, to_a), read_s,
-        b.extra["counts"], (b.note == CLASS_NOTE, a.note == CLASS_NOTE), (b.extra["index"], a.extra["index"]),
+        Cloud(b.xyz, origin, wkt, before.path),
+        Cloud(a.xyz, origin, wkt, after.path),
+        frame,
+        origin,
+        inputs,
+        b.thin,
+        a.thin,
+        voxel,
+        _all_points(original_after, to_a),
+        read_s,
+        b.extra["counts"],
+        (b.note == CLASS_NOTE, a.note == CLASS_NOTE),
+        (b.extra["index"], a.extra["index"]),
     )
 
 
@@ -190,22 +213,37 @@ def _frame_box(src: Source, crs: pyproj.CRS, frame: WorkFrame) -> tuple[np.ndarr
     return corners.min(axis=0), corners.max(axis=0)
 
 
-def _load_whole(src: Source, crs: pyproj.CRS, to_local, lo: np.ndarray, hi: np.ndarray, voxel: float,
-                options: Options, check, box=None, loader=load) -> tuple[Source, Loaded, str | None]:
+def _load_whole(
+    src: Source,
+    crs: pyproj.CRS,
+    to_local,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    voxel: float,
+    options: Options,
+    check,
+    box=None,
+    loader=load,
+) -> tuple[Source, Loaded, str | None]:
     """Every (ground) point of ``src`` kept (within ``box`` when given), thinned over its local box
     lo..hi (padded: the box comes from header bounds). Returns (the source streamed, what was
     loaded, filter note)."""
     src, mode, note = _filtered(src, crs, options)
     pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
-    return src, loader(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box,
-                       box is NOTHING), note
+    return (
+        src,
+        loader(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box, box is NOTHING),
+        note,
+    )
 
 
 def _all_points(src: Source, to_local):
     """Every point of ``src`` (all classes), chunk by chunk in the local frame, with its class."""
+
     def chunks():
         for xyz, cls in src.chunks():
             yield to_local(xyz), cls
+
     return chunks
 
 
@@ -222,7 +260,12 @@ def _local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
 
 
 def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int) -> dict:
-    return {"path": src.path, "points": int(src.count), "points_used": used,
-            "points_after_crop": kept, "selection": note, "crs": crs.name,
-            "crs_wkt": crs.to_wkt()}
-
+    return {
+        "path": src.path,
+        "points": int(src.count),
+        "points_used": used,
+        "points_after_crop": kept,
+        "selection": note,
+        "crs": crs.name,
+        "crs_wkt": crs.to_wkt(),
+    }

@@ -132,8 +132,14 @@ def _header(p: Path) -> Source:
             h = reader.header
             wkt = las_crs_wkt(h, p)
             dims = set(h.point_format.dimension_names)
-            return Source(str(p), wkt, int(h.point_count), np.asarray(h.mins, float),
-                          np.asarray(h.maxs, float), "classification" in dims)
+            return Source(
+                str(p),
+                wkt,
+                int(h.point_count),
+                np.asarray(h.mins, float),
+                np.asarray(h.maxs, float),
+                "classification" in dims,
+            )
     except SoilVolumeError:
         raise
     except Exception as exc:
@@ -154,8 +160,15 @@ def _open_vpc(p: Path) -> Source:
 
 def from_raw(raw: RawPoints) -> Source:
     validate(raw)
-    return Source(raw.path, raw.crs_wkt, len(raw.xyz), raw.xyz.min(axis=0), raw.xyz.max(axis=0),
-                  raw.classification is not None, raw)
+    return Source(
+        raw.path,
+        raw.crs_wkt,
+        len(raw.xyz),
+        raw.xyz.min(axis=0),
+        raw.xyz.max(axis=0),
+        raw.classification is not None,
+        raw,
+    )
 
 
 def prefetch(chunks: Iterator, depth: int = 2) -> Iterator:
@@ -266,15 +279,18 @@ def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
     has ground-classified points (decided on its first chunk)."""
     has = first_cls is not None and bool((first_cls == GROUND).any())
     if mode == "class" and not has:
-        raise SoilVolumeError(
-            f"{src.path}: --ground class needs ground-classified (class 2) points; the file has none")
+        raise SoilVolumeError(f"{src.path}: --ground class needs ground-classified (class 2) points; the file has none")
     return mode == "class" or (mode == "auto" and has)
 
 
 def load(
-    src: Source, to_local: Callable[[np.ndarray], np.ndarray], mode: str,
-    keep: Callable[[np.ndarray], np.ndarray] | None, thinner: ColumnThinner,
-    check: Callable[[], None] | None = None, box: tuple[np.ndarray, np.ndarray] | None = None,
+    src: Source,
+    to_local: Callable[[np.ndarray], np.ndarray],
+    mode: str,
+    keep: Callable[[np.ndarray], np.ndarray] | None,
+    thinner: ColumnThinner,
+    check: Callable[[], None] | None = None,
+    box: tuple[np.ndarray, np.ndarray] | None = None,
     indexed: bool = False,
 ) -> Loaded:
     """Stream ``src``: select ground (``mode`` in auto/class/none; ``filter`` needs the whole
@@ -318,6 +334,10 @@ def load(
         parts.append(local)
     kept = parts.result()
     note = "class 2 (ground)" if use_class else "all points"
-    extra = {"read_s": reading, "cropped": cropped, "counts": thinner.counts(),
-             "index": None if index is None else tuple(index)}
+    extra = {
+        "read_s": reading,
+        "cropped": cropped,
+        "counts": thinner.counts(),
+        "index": None if index is None else tuple(index),
+    }
     return Loaded(kept, thinner.result(), points, used, note, extra)

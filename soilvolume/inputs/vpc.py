@@ -130,7 +130,8 @@ def _common_crs(vpc: Path, crss: list) -> str | None:
         if not crs.equals(first):
             raise SoilVolumeError(
                 f"{vpc}: tiles in different CRSs ({Path(first_tile).name}: {first.name}; "
-                f"{Path(tile).name}: {crs.name}); reproject them to one CRS first")
+                f"{Path(tile).name}: {crs.name}); reproject them to one CRS first"
+            )
     return first.to_wkt()
 
 
@@ -189,18 +190,28 @@ def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative:
             h = r.header
             crs = h.parse_crs()
         href = os.path.relpath(t.resolve(), out.resolve().parent) if relative else str(t.resolve())
-        props = {"datetime": "1970-01-01T00:00:00Z", "pc:count": int(h.point_count), "pc:type": "lidar",
-                 "pc:encoding": "?", "proj:bbox": [*map(float, h.mins), *map(float, h.maxs)]}
+        props = {
+            "datetime": "1970-01-01T00:00:00Z",
+            "pc:count": int(h.point_count),
+            "pc:type": "lidar",
+            "pc:encoding": "?",
+            "proj:bbox": [*map(float, h.mins), *map(float, h.maxs)],
+        }
         feature = {"type": "Feature", "stac_version": "1.0.0", "id": t.stem}
         if crs is not None:
             props["proj:wkt2"] = crs.to_wkt()
             feature["bbox"] = _to_wgs84(h.mins, h.maxs, crs)
-        features.append({
-            **feature,
-            "stac_extensions": ["https://stac-extensions.github.io/pointcloud/v1.0.0/schema.json",
-                                "https://stac-extensions.github.io/projection/v1.1.0/schema.json"],
-            "geometry": None, "properties": props,
-            "assets": {"data": {"href": href.replace(os.sep, "/"), "roles": ["data"]}},
-        })
+        features.append(
+            {
+                **feature,
+                "stac_extensions": [
+                    "https://stac-extensions.github.io/pointcloud/v1.0.0/schema.json",
+                    "https://stac-extensions.github.io/projection/v1.1.0/schema.json",
+                ],
+                "geometry": None,
+                "properties": props,
+                "assets": {"data": {"href": href.replace(os.sep, "/"), "roles": ["data"]}},
+            }
+        )
     out.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=1))
     return out

@@ -31,8 +31,9 @@ _run: ContextVar[_Run | None] = ContextVar("soilvolume_pipeline_writers", defaul
 
 
 @contextmanager
-def writers_into(folder: Path, inputs: Iterable[str | os.PathLike | None],
-                 reserved: Iterable[str] = ()) -> Iterator[None]:
+def writers_into(
+    folder: Path, inputs: Iterable[str | os.PathLike | None], reserved: Iterable[str] = ()
+) -> Iterator[None]:
     """Redirect pipeline writers into ``folder`` while the block runs; ``reserved`` names (the
     run's own outputs) and ``inputs`` may not be written."""
     token = _run.set(_Run(Path(folder), {Path(p).resolve() for p in inputs if p}, set(reserved)))
@@ -49,8 +50,11 @@ def _refuse(source: str, i: int, kind: str, why: str) -> SoilVolumeError:
 def confine_writers(stages: list[dict[str, Any]], source: str) -> list[dict[str, Any]]:
     """``stages`` with every writer confined (see the module doc); raises naming the stage."""
     run = _run.get()
-    readers = {Path(s["filename"]).resolve() for s in stages
-               if str(s.get("type", "")).startswith("readers.") and isinstance(s.get("filename"), str)}
+    readers = {
+        Path(s["filename"]).resolve()
+        for s in stages
+        if str(s.get("type", "")).startswith("readers.") and isinstance(s.get("filename"), str)
+    }
     inputs = readers | (run.inputs if run else set())
     out = []
     for i, stage in enumerate(stages):

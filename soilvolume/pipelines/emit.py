@@ -33,10 +33,16 @@ def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -
     srs = frame.crs.to_wkt()
     common = {"ground": options.ground, "out_srs": srs}
     with output_dir(out_dir, [before, after], True, EMITTED) as out, os_errors(out.final):
-        stages_b = build_prepare_pipeline(before, in_srs=options.before_crs, crop={"polygon": polygon_wkt(poly)},
-                                          output=out.final / "before_prepared.laz", **common)
-        stages_a = build_prepare_pipeline(after, in_srs=options.after_crs,
-                                          output=out.final / "after_prepared.laz", **common)
+        stages_b = build_prepare_pipeline(
+            before,
+            in_srs=options.before_crs,
+            crop={"polygon": polygon_wkt(poly)},
+            output=out.final / "before_prepared.laz",
+            **common,
+        )
+        stages_a = build_prepare_pipeline(
+            after, in_srs=options.after_crs, output=out.final / "after_prepared.laz", **common
+        )
         save_pipeline(stages_b, out.path("before.json"))
         save_pipeline(stages_a, out.path("after.json"))
     return out.final / "before.json", out.final / "after.json"

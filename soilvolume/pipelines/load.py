@@ -11,24 +11,76 @@ from typing import Any
 from ..core.types import SoilVolumeError
 
 #: PDAL's reader/writer inference from a filename's extension
-READERS = {".las": "readers.las", ".laz": "readers.las", ".ply": "readers.ply",
-           ".pcd": "readers.pcd", ".txt": "readers.text", ".csv": "readers.text"}
-WRITERS = {".las": "writers.las", ".laz": "writers.las", ".tif": "writers.gdal",
-           ".tiff": "writers.gdal", ".vrt": "writers.gdal", ".txt": "writers.text",
-           ".csv": "writers.text", ".ply": "writers.ply", ".pcd": "writers.pcd"}
+READERS = {
+    ".las": "readers.las",
+    ".laz": "readers.las",
+    ".ply": "readers.ply",
+    ".pcd": "readers.pcd",
+    ".txt": "readers.text",
+    ".csv": "readers.text",
+}
+WRITERS = {
+    ".las": "writers.las",
+    ".laz": "writers.las",
+    ".tif": "writers.gdal",
+    ".tiff": "writers.gdal",
+    ".vrt": "writers.gdal",
+    ".txt": "writers.text",
+    ".csv": "writers.text",
+    ".ply": "writers.ply",
+    ".pcd": "writers.pcd",
+}
 #: extra text formats the builder reads with an explicit readers.text
 TEXT_SUFFIXES = {".xyz", ".pts", ".txt", ".csv"}
 
-NUMERIC = {"mean_k", "multiplier", "min_k", "radius", "class", "cell", "slope", "window",
-           "threshold", "scalar", "cut", "distance", "resolution", "power", "window_size",
-           "nodata", "origin_x", "origin_y", "width", "height", "scale_x", "scale_y", "scale_z",
-           "skip", "count", "minor_version", "dataformat_id"}
+NUMERIC = {
+    "mean_k",
+    "multiplier",
+    "min_k",
+    "radius",
+    "class",
+    "cell",
+    "slope",
+    "window",
+    "threshold",
+    "scalar",
+    "cut",
+    "distance",
+    "resolution",
+    "power",
+    "window_size",
+    "nodata",
+    "origin_x",
+    "origin_y",
+    "width",
+    "height",
+    "scale_x",
+    "scale_y",
+    "scale_z",
+    "skip",
+    "count",
+    "minor_version",
+    "dataformat_id",
+}
 BOOLEAN = {"outside", "binmode", "error_on_failure"}
-STRING = {"type", "filename", "in_srs", "out_srs", "a_srs", "method", "header", "separator",
-          "gdaldriver", "data_type", "dimension", "override_srs", "default_srs",
-          "spatialreference", "compression"}
-STRING_OR_LIST = {"limits", "polygon", "point", "output_type", "value", "assignment", "ignore",
-                  "returns"}
+STRING = {
+    "type",
+    "filename",
+    "in_srs",
+    "out_srs",
+    "a_srs",
+    "method",
+    "header",
+    "separator",
+    "gdaldriver",
+    "data_type",
+    "dimension",
+    "override_srs",
+    "default_srs",
+    "spatialreference",
+    "compression",
+}
+STRING_OR_LIST = {"limits", "polygon", "point", "output_type", "value", "assignment", "ignore", "returns"}
 
 
 def _check_value(name: str, value: Any, where: str) -> None:
@@ -62,8 +114,8 @@ def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
         raw = raw["pipeline"]
     if not isinstance(raw, list):
         raise SoilVolumeError(
-            f"pipeline {name}: expected a list of stages or {{\"pipeline\": [...]}}, "
-            f"got {type(raw).__name__}")
+            f'pipeline {name}: expected a list of stages or {{"pipeline": [...]}}, got {type(raw).__name__}'
+        )
     if not raw:
         raise SoilVolumeError(f"pipeline {name}: the pipeline has no stages (missing reader)")
     out: list[dict[str, Any]] = []
@@ -73,8 +125,7 @@ def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
         if isinstance(entry, str):
             entry = {"filename": entry}
         elif not isinstance(entry, dict):
-            raise SoilVolumeError(f"{where} must be an object or a filename string, got "
-                                  f"{type(entry).__name__}")
+            raise SoilVolumeError(f"{where} must be an object or a filename string, got {type(entry).__name__}")
         stage = dict(entry)
         kind = stage.get("type")
         if kind is None:
@@ -83,8 +134,7 @@ def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
                 raise SoilVolumeError(f"{where} has no 'type' (and no filename to infer it from)")
             table = READERS if i == 0 else WRITERS if i == last else None
             if table is None:
-                raise SoilVolumeError(f"{where}: a bare filename must be the first (reader) or "
-                                      "the last (writer) stage")
+                raise SoilVolumeError(f"{where}: a bare filename must be the first (reader) or the last (writer) stage")
             kind = table.get(Path(fname).suffix.lower())
             if kind is None:
                 raise SoilVolumeError(f"{where}: cannot infer a stage for '{fname}'")
@@ -96,8 +146,10 @@ def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
         out.append(stage)
     first = out[0]
     if not first["type"].startswith("readers."):
-        raise SoilVolumeError(f"pipeline {name}: missing reader: the first stage is "
-                              f"'{first['type']}', not a reader (e.g. readers.las) or a filename")
+        raise SoilVolumeError(
+            f"pipeline {name}: missing reader: the first stage is "
+            f"'{first['type']}', not a reader (e.g. readers.las) or a filename"
+        )
     if not isinstance(first.get("filename"), str) or not first["filename"]:
         raise SoilVolumeError(f"pipeline {name}: the reader {first['type']} has no filename")
     return out
@@ -122,8 +174,9 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
     try:
         raw = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise SoilVolumeError(f"pipeline {name}: invalid JSON (line {exc.lineno}, column "
-                              f"{exc.colno}: {exc.msg})") from exc
+        raise SoilVolumeError(
+            f"pipeline {name}: invalid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"
+        ) from exc
     except RecursionError as exc:
         raise SoilVolumeError(f"pipeline {name}: invalid JSON (nested too deeply)") from exc
     return _normalise(raw, name)

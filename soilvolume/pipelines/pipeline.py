@@ -21,9 +21,20 @@ from .stages.geometry import format_bounds
 from .stages.readers import SRS_OPTS
 from .stages.view import PointView
 
-__all__ = ["PointView", "build_prepare_pipeline", "build_dem_stage", "dumps", "load_pipeline",
-           "prepare_cloud", "prepare_cloud_from_file", "run_pipeline", "run_pipeline_file",
-           "save_pipeline", "view_to_raw", "with_input"]
+__all__ = [
+    "PointView",
+    "build_prepare_pipeline",
+    "build_dem_stage",
+    "dumps",
+    "load_pipeline",
+    "prepare_cloud",
+    "prepare_cloud_from_file",
+    "run_pipeline",
+    "run_pipeline_file",
+    "save_pipeline",
+    "view_to_raw",
+    "with_input",
+]
 
 
 # ---------------------------------------------------------------------------- building
@@ -137,8 +148,7 @@ def build_prepare_pipeline(
         out.append({"type": "filters.assign", "value": "Classification = 0"})
     if outlier is not None:
         k, mult = outlier
-        out.append({"type": "filters.outlier", "method": "statistical", "mean_k": int(k),
-                    "multiplier": float(mult)})
+        out.append({"type": "filters.outlier", "method": "statistical", "mean_k": int(k), "multiplier": float(mult)})
         out.append({"type": "filters.range", "limits": "Classification![7:7]"})
     if ground == "filter":
         out.append({"type": "filters.smrf", **(smrf or {})})
@@ -151,8 +161,9 @@ def build_prepare_pipeline(
     if output is not None:
         if Path(output).suffix.lower() not in (".las", ".laz"):
             raise SoilVolumeError(f"{output}: the prepared cloud is written as .las or .laz")
-        out.append({"type": "writers.las", "filename": str(output), "scale_x": 0.001,
-                    "scale_y": 0.001, "scale_z": 0.001})
+        out.append(
+            {"type": "writers.las", "filename": str(output), "scale_x": 0.001, "scale_y": 0.001, "scale_z": 0.001}
+        )
     return out
 
 
@@ -167,13 +178,18 @@ def build_dem_stage(
 ) -> dict[str, Any]:
     """writers.gdal for an average-height DEM: plain binning (``binmode``), origin = lower-left
     corner, ``size`` = (width, height) cells."""
-    stage: dict[str, Any] = {"type": "writers.gdal", "filename": str(filename),
-                             "resolution": float(resolution), "binmode": True,
-                             "output_type": output_type, "data_type": "float64",
-                             "nodata": nodata, "gdaldriver": "GTiff"}
+    stage: dict[str, Any] = {
+        "type": "writers.gdal",
+        "filename": str(filename),
+        "resolution": float(resolution),
+        "binmode": True,
+        "output_type": output_type,
+        "data_type": "float64",
+        "nodata": nodata,
+        "gdaldriver": "GTiff",
+    }
     if origin is not None and size is not None:
-        stage.update(origin_x=float(origin[0]), origin_y=float(origin[1]),
-                     width=int(size[0]), height=int(size[1]))
+        stage.update(origin_x=float(origin[0]), origin_y=float(origin[1]), width=int(size[0]), height=int(size[1]))
     return stage
 
 
@@ -226,16 +242,17 @@ def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
     return PointView(out, srs or None)
 
 
-def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto",
-                 source: str = "<pipeline>") -> PointView:
+def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto", source: str = "<pipeline>") -> PointView:
     """Run stages with real PDAL (``engine='pdal'``), the embedded executor ('embedded'), or
     PDAL when ``import pdal`` works else embedded ('auto')."""
     if engine not in ("auto", "pdal", "embedded"):
         raise SoilVolumeError(f"engine '{engine}': use auto, pdal or embedded")
     pdal = None if engine == "embedded" else _pdal_module()
     if engine == "pdal" and pdal is None:
-        raise SoilVolumeError("engine 'pdal' requested but the pdal Python bindings do not import "
-                              "(install PDAL from conda-forge or OSGeo4W)")
+        raise SoilVolumeError(
+            "engine 'pdal' requested but the pdal Python bindings do not import "
+            "(install PDAL from conda-forge or OSGeo4W)"
+        )
     if pdal is not None:
         return _run_pdal(pdal, stages, source)
     return embedded.execute(stages, source)
@@ -276,8 +293,9 @@ def with_input(stages: list[dict[str, Any]], path: str | os.PathLike) -> list[di
     return [reader, *stages[1:]]
 
 
-def prepare_cloud_from_file(pipeline: str | os.PathLike, path: str | os.PathLike | None = None,
-                            *, engine: str = "auto") -> RawPoints:
+def prepare_cloud_from_file(
+    pipeline: str | os.PathLike, path: str | os.PathLike | None = None, *, engine: str = "auto"
+) -> RawPoints:
     """A user's preparation pipeline run on ``path`` (default: the pipeline's own reader file)."""
     stages = load_pipeline(pipeline)
     if path is not None:

@@ -36,8 +36,12 @@ def resolve(mode: str, inputs: dict, after_xyz: np.ndarray, before_xyz: np.ndarr
     gap = spacing(before_xyz)
     fit, _ = evaluate_surface(margin_points(after_xyz, gap), before_xyz, np.eye(4), gap=gap)
     if fit < AGREE_FITNESS:
-        return "gps", (f"both files declare {vb}, but only {fit:.0%} of the after survey's margin agrees with "
-                       "the before surface as georeferenced: registered within the GPS prior")
-    return "precise", (f"both files declare {vb} and {fit:.0%} of the after survey's margin agrees with the "
-                       "before surface as georeferenced: coordinates used as they are (no registration, no "
-                       "bias correction); use --georeferencing gps to register anyway")
+        return "gps", (
+            f"both files declare {vb}, but only {fit:.0%} of the after survey's margin agrees with "
+            "the before surface as georeferenced: registered within the GPS prior"
+        )
+    return "precise", (
+        f"both files declare {vb} and {fit:.0%} of the after survey's margin agrees with the "
+        "before surface as georeferenced: coordinates used as they are (no registration, no "
+        "bias correction); use --georeferencing gps to register anyway"
+    )

@@ -91,8 +91,20 @@ def _triples(src: np.ndarray, n: int, min_dist: float, rng) -> np.ndarray:
     return pick[(d >= min_dist).all(axis=1)][:n]
 
 
-def sac_ia(src, fs, tgt, ft, seed: int, *, kt: np.ndarray, iterations: int = 3000, k_sim: int = 4,
-           inlier: float = 0.15, max_rotation: float = 6.0, max_shift: float = 4.0) -> np.ndarray:
+def sac_ia(
+    src,
+    fs,
+    tgt,
+    ft,
+    seed: int,
+    *,
+    kt: np.ndarray,
+    iterations: int = 3000,
+    k_sim: int = 4,
+    inlier: float = 0.15,
+    max_rotation: float = 6.0,
+    max_shift: float = 4.0,
+) -> np.ndarray:
     """SAC-IA: source keypoints ``src`` with descriptors ``fs``; target points ``tgt`` whose
     keypoints ``kt`` have descriptors ``ft``. Returns the best 4x4 transform (refitted on inliers).
     Hypotheses beyond the prior (``max_rotation`` degrees, ``max_shift`` m) are discarded."""
@@ -128,8 +140,15 @@ def _score(tree: cKDTree, src: np.ndarray, t: np.ndarray, inlier: float) -> floa
     return float(np.where(d < inlier, 0.5 * d * d, inlier * (d - 0.5 * inlier)).sum())
 
 
-def pfh_sac_ia(source_xyz: np.ndarray, target_xyz: np.ndarray, init: np.ndarray, patch: float = 6.0,
-               seed: int = 0, voxel: float = 0.15, margin: float = 3.0) -> np.ndarray:
+def pfh_sac_ia(
+    source_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    init: np.ndarray,
+    patch: float = 6.0,
+    seed: int = 0,
+    voxel: float = 0.15,
+    margin: float = 3.0,
+) -> np.ndarray:
     """The paper's precise registration on a ``patch`` x ``patch`` m square; returns the 4x4
     transform (source -> target, composed with ``init``)."""
     src_all = transform_points(source_xyz, init)

@@ -46,8 +46,11 @@ class Registration:
 def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
     """Whether a pose stays within the georeferencing prior (shift at the after centre, rotation
     and tilt)."""
-    return (shift_at(t, centre) <= options.max_gps_shift and rotation_deg(t) <= options.max_gps_rotation
-            and tilt_deg(t) <= options.max_gps_tilt)
+    return (
+        shift_at(t, centre) <= options.max_gps_shift
+        and rotation_deg(t) <= options.max_gps_rotation
+        and tilt_deg(t) <= options.max_gps_tilt
+    )
 
 
 def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> tuple[float, float]:
@@ -72,7 +75,10 @@ def spacing(xyz: np.ndarray) -> float:
 
 
 def evaluate_surface(
-    source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, distance: float = EVAL_DISTANCE,
+    source_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    t: np.ndarray,
+    distance: float = EVAL_DISTANCE,
     gap: float | None = None,
 ) -> tuple[float, float]:
     """(fitness, RMSE) on terrain: the fraction of source points within ``distance`` of the
@@ -101,7 +107,14 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
     fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
     dist = 1.5 * voxel
     res = reg.registration_ransac_based_on_feature_matching(
-        src, tgt, fs, ft, True, dist, reg.TransformationEstimationPointToPoint(False), 3,
+        src,
+        tgt,
+        fs,
+        ft,
+        True,
+        dist,
+        reg.TransformationEstimationPointToPoint(False),
+        3,
         [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
         reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
     )
@@ -117,8 +130,13 @@ def _column_pcd(xyz: np.ndarray, voxel: float, lo: np.ndarray | None = None, hi:
 
 
 def icp_levels(
-    source_xyz: np.ndarray, target_xyz: np.ndarray, init: np.ndarray, levels=ICP_LEVELS,
-    method: str = "icp", check: Callable[[], None] | None = None, scores: bool = False,
+    source_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    init: np.ndarray,
+    levels=ICP_LEVELS,
+    method: str = "icp",
+    check: Callable[[], None] | None = None,
+    scores: bool = False,
     gap: float | None = None,
 ):
     """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, or GICP) of column-mean
@@ -135,8 +153,10 @@ def icp_levels(
         if check:
             check()
         if voxel not in cache:
-            cache[voxel] = (_sampled(to_pcd(surface.columns(source_xyz, voxel).xyz), MAX_SOURCE_POINTS),
-                            _surface_pcd(target_xyz, source_xyz, t, voxel, 2.0 + dist))
+            cache[voxel] = (
+                _sampled(to_pcd(surface.columns(source_xyz, voxel).xyz), MAX_SOURCE_POINTS),
+                _surface_pcd(target_xyz, source_xyz, t, voxel, 2.0 + dist),
+            )
         src, tgt = cache[voxel]
         crit = reg.ICPConvergenceCriteria(relative_fitness=ICP_TOL, relative_rmse=ICP_TOL, max_iteration=ICP_ITER)
         if method == "gicp":
@@ -157,7 +177,8 @@ def _surface_pcd(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, 
         raise SoilVolumeError(
             "registration failed: the fine registration drifted off the before cloud "
             "(no before points left under the after cloud); check that both clouds "
-            "cover the same site and their CRSs")
+            "cover the same site and their CRSs"
+        )
     return pcd
 
 
@@ -187,7 +208,10 @@ def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
 
 
 def stable_source(
-    source_xyz: np.ndarray, target_xyz: np.ndarray, t: np.ndarray, cell: float = 1.0,
+    source_xyz: np.ndarray,
+    target_xyz: np.ndarray,
+    t: np.ndarray,
+    cell: float = 1.0,
 ) -> np.ndarray:
     """The source with its fitted low-order deformation removed and its change areas dropped:
     what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
@@ -212,8 +236,12 @@ def stable_source(
 
 
 def register(
-    after_xyz: np.ndarray, before_xyz: np.ndarray, options: Options, check: Callable[[], None] | None = None,
-    dense: tuple[np.ndarray, np.ndarray] | None = None, precise: bool = False,
+    after_xyz: np.ndarray,
+    before_xyz: np.ndarray,
+    options: Options,
+    check: Callable[[], None] | None = None,
+    dense: tuple[np.ndarray, np.ndarray] | None = None,
+    precise: bool = False,
 ) -> Registration:
     """Register after onto before (both local, typically the thinned subsets; ``before_xyz`` is
     the before cloud cropped to the after footprint + radius). ``dense``: the full-resolution
@@ -222,15 +250,21 @@ def register(
     if precise:
         fit, rmse = evaluate_surface(_judged(after_xyz, spacing(before_xyz)), before_xyz, eye)
         skipped = "skipped: coordinates used as georeferenced (--georeferencing)"
-        return Registration(eye, StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
-                            StageQuality("none", fit, rmse, eye, True, 0.0, skipped))
+        return Registration(
+            eye,
+            StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
+            StageQuality("none", fit, rmse, eye, True, 0.0, skipped),
+        )
     if options.coarse == "auto" and options.fine != "none":
         first = _fine_stage(after_xyz, before_xyz, [(eye, "gps")], options, check, dense)
         if first.fitness >= AUTO_FITNESS:  # the GPS pose converged: FPFH cannot do better here
-            note = (f"skipped: the fine registration from the GPS pose fits ({first.fitness:.0%} of the "
-                    f"after cloud within {EVAL_DISTANCE} m); --coarse fpfh forces it")
-            return Registration(first.transform, StageQuality("fpfh-ransac", float("nan"), float("nan"),
-                                                              eye, False, 0.0, note), first)
+            note = (
+                f"skipped: the fine registration from the GPS pose fits ({first.fitness:.0%} of the "
+                f"after cloud within {EVAL_DISTANCE} m); --coarse fpfh forces it"
+            )
+            return Registration(
+                first.transform, StageQuality("fpfh-ransac", float("nan"), float("nan"), eye, False, 0.0, note), first
+            )
     coarse = _coarse_stage(after_xyz, before_xyz, options)
     starts = [(eye, "gps")]
     if coarse.accepted and not np.allclose(coarse.transform, eye):
@@ -267,8 +301,9 @@ def _coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     accepted = options.coarse == "fpfh" or within
     note = f"FPFH+RANSAC moved the after centre {shift:.2f} m and rotated {rot:.2f} deg"
     if not within:
-        note += (f"; outside the GPS error prior ({options.max_gps_shift} m, "
-                 f"{options.max_gps_rotation} deg)" + ("" if accepted else ": rejected"))
+        note += f"; outside the GPS error prior ({options.max_gps_shift} m, {options.max_gps_rotation} deg)" + (
+            "" if accepted else ": rejected"
+        )
     return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)
 
 
@@ -281,8 +316,16 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     if options.fine in ("icp", "gicp"):
         (t, label), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
         fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
-        return StageQuality(options.fine, fit, rmse, t, True, time.perf_counter() - t0,
-                            f"started from the {label} pose", alternative=alt)
+        return StageQuality(
+            options.fine,
+            fit,
+            rmse,
+            t,
+            True,
+            time.perf_counter() - t0,
+            f"started from the {label} pose",
+            alternative=alt,
+        )
     best: StageQuality | None = None
     for init, label in starts:
         if options.fine == "pfh":
@@ -328,7 +371,7 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     centre = after_xyz.mean(axis=0)
     allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
     best = _best_on(src, before_xyz, allowed, gap)
-    others = [p[0] for p in allowed[len(starts):] if p[0] is not best[0]]
+    others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
     return best, (others[-1] if others else None)
 
 

@@ -15,12 +15,38 @@ from ..core.types import GridSpec
 from .raster import _block_any, _repeat, block_mean, png_bytes
 
 # ColorBrewer 11-class ramps, low -> high (as matplotlib's RdBu / PuOr): red = cut, blue = fill.
-RDBU = np.array([[103, 0, 31], [178, 24, 43], [214, 96, 77], [244, 165, 130], [253, 219, 199],
-                 [247, 247, 247], [209, 229, 240], [146, 197, 222], [67, 147, 195], [33, 102, 172],
-                 [5, 48, 97]], float)
-PUOR = np.array([[127, 59, 8], [179, 88, 6], [224, 130, 20], [253, 184, 99], [254, 224, 182],
-                 [247, 247, 247], [216, 218, 235], [178, 171, 210], [128, 115, 172], [84, 39, 136],
-                 [45, 0, 75]], float)
+RDBU = np.array(
+    [
+        [103, 0, 31],
+        [178, 24, 43],
+        [214, 96, 77],
+        [244, 165, 130],
+        [253, 219, 199],
+        [247, 247, 247],
+        [209, 229, 240],
+        [146, 197, 222],
+        [67, 147, 195],
+        [33, 102, 172],
+        [5, 48, 97],
+    ],
+    float,
+)
+PUOR = np.array(
+    [
+        [127, 59, 8],
+        [179, 88, 6],
+        [224, 130, 20],
+        [253, 184, 99],
+        [254, 224, 182],
+        [247, 247, 247],
+        [216, 218, 235],
+        [178, 171, 210],
+        [128, 115, 172],
+        [84, 39, 136],
+        [45, 0, 75],
+    ],
+    float,
+)
 _MAX_PX = 900  # longest side of an embedded map (larger rasters are block-averaged)
 _DISPLAY = 760  # longest side of a map on the page (CSS px)
 _AZIMUTH, _ALTITUDE = 315.0, 45.0
@@ -180,38 +206,49 @@ def _scale_bar(width: float, height: float, span_m: float) -> str:
     length = _nice_length(span_m)
     px, x, y = length / span_m * width, 14.0, height - 16.0
     box = max(px, 44.0) + 12
-    return (f'<rect x="{x - 6}" y="{y - 22:.1f}" width="{box:.1f}" height="34" rx="3" fill="#fff" '
-            f'fill-opacity=".75"/><rect x="{x}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#000"/>'
-            f'<rect x="{x + px / 2:.1f}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#fff" '
-            f'stroke="#000"/><text x="{x + px / 2:.1f}" y="{y - 5:.1f}" text-anchor="middle" '
-            f'font-size="13">{_metres(length)}</text>')
+    return (
+        f'<rect x="{x - 6}" y="{y - 22:.1f}" width="{box:.1f}" height="34" rx="3" fill="#fff" '
+        f'fill-opacity=".75"/><rect x="{x}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#000"/>'
+        f'<rect x="{x + px / 2:.1f}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#fff" '
+        f'stroke="#000"/><text x="{x + px / 2:.1f}" y="{y - 5:.1f}" text-anchor="middle" '
+        f'font-size="13">{_metres(length)}</text>'
+    )
 
 
 def _north_arrow(width: float) -> str:
-    return (f'<g transform="translate({width - 24:.1f},10)"><polygon points="0,0 9,26 0,19 -9,26" '
-            f'fill="#000" stroke="#fff" stroke-width="1.5"/>'
-            f'<text x="0" y="42" text-anchor="middle" font-weight="bold" {_halo(14)}>N</text></g>')
+    return (
+        f'<g transform="translate({width - 24:.1f},10)"><polygon points="0,0 9,26 0,19 -9,26" '
+        f'fill="#000" stroke="#fff" stroke-width="1.5"/>'
+        f'<text x="0" y="42" text-anchor="middle" font-weight="bold" {_halo(14)}>N</text></g>'
+    )
 
 
-def _colour_bar(table: np.ndarray, limit: float, label: str, ident: str,
-                ends: tuple[str, str] = ("", "")) -> str:
+def _colour_bar(table: np.ndarray, limit: float, label: str, ident: str, ends: tuple[str, str] = ("", "")) -> str:
     """A horizontal SVG colour bar from -limit to +limit with ticks in metres."""
     w, x0, x1, y, h = 480, 30, 450, 4, 14
-    stops = "".join(f'<stop offset="{i / (len(table) - 1):.3f}" stop-color="rgb({r:.0f},{g:.0f},{b:.0f})"/>'
-                    for i, (r, g, b) in enumerate(table))
+    stops = "".join(
+        f'<stop offset="{i / (len(table) - 1):.3f}" stop-color="rgb({r:.0f},{g:.0f},{b:.0f})"/>'
+        for i, (r, g, b) in enumerate(table)
+    )
     ticks, step = _ticks(-limit, limit, 4)
     marks = "".join(
         f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{y + h}" y2="{y + h + 4}" stroke="#000"/>'
         f'<text x="{x:.1f}" y="{y + h + 16}" text-anchor="middle">{_tick_label(t, step)}</text>'
-        for t in ticks for x in [x0 + (t + limit) / (2 * limit) * (x1 - x0)])
-    end_text = (f'<text x="{x0}" y="54">{html.escape(ends[0])}</text>'
-                f'<text x="{x1}" y="54" text-anchor="end">{html.escape(ends[1])}</text>')
-    return (f'<svg class=plot id="{ident}-colour-bar" viewBox="0 0 {w} 60" width="{w}" height="60" '
-            f'font-size="12" role="img" aria-label="{html.escape(label)}">'
-            f'<defs><linearGradient id="{ident}-ramp">{stops}</linearGradient></defs>'
-            f'<rect x="{x0}" y="{y}" width="{x1 - x0}" height="{h}" fill="url(#{ident}-ramp)" stroke="#666"/>'
-            f'{marks}{end_text}<text x="{(x0 + x1) / 2}" y="54" text-anchor="middle">{html.escape(label)}</text>'
-            "</svg>")
+        for t in ticks
+        for x in [x0 + (t + limit) / (2 * limit) * (x1 - x0)]
+    )
+    end_text = (
+        f'<text x="{x0}" y="54">{html.escape(ends[0])}</text>'
+        f'<text x="{x1}" y="54" text-anchor="end">{html.escape(ends[1])}</text>'
+    )
+    return (
+        f'<svg class=plot id="{ident}-colour-bar" viewBox="0 0 {w} 60" width="{w}" height="60" '
+        f'font-size="12" role="img" aria-label="{html.escape(label)}">'
+        f'<defs><linearGradient id="{ident}-ramp">{stops}</linearGradient></defs>'
+        f'<rect x="{x0}" y="{y}" width="{x1 - x0}" height="{h}" fill="url(#{ident}-ramp)" stroke="#666"/>'
+        f'{marks}{end_text}<text x="{(x0 + x1) / 2}" y="54" text-anchor="middle">{html.escape(label)}</text>'
+        "</svg>"
+    )
 
 
 def _extent_text(grid: GridSpec, shape: tuple[int, int], k: int) -> str:
@@ -220,8 +257,10 @@ def _extent_text(grid: GridSpec, shape: tuple[int, int], k: int) -> str:
     x1, y0 = x0 + shape[1] * grid.cell / u, y1 - shape[0] * grid.cell / u
     unit = "m" if u == 1 else "CRS units"
     shown = f", shown as {k} x {k} cell means" if k > 1 else ""
-    return (f"Extent x {x0:,.1f} – {x1:,.1f}, y {y0:,.1f} – {y1:,.1f} ({unit}); "
-            f"{shape[0]:,} x {shape[1]:,} cells of {grid.cell:g} m{shown}.")
+    return (
+        f"Extent x {x0:,.1f} – {x1:,.1f}, y {y0:,.1f} – {y1:,.1f} ({unit}); "
+        f"{shape[0]:,} x {shape[1]:,} cells of {grid.cell:g} m{shown}."
+    )
 
 
 def _map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_bar: str, caption: str) -> str:
@@ -229,19 +268,28 @@ def _map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_
     h, w = rgba.shape[:2]
     s = _DISPLAY / max(h, w)
     wd, hd = round(w * s), round(h * s)
-    overlay = (f'<svg viewBox="0 0 {wd} {hd}" font-family="sans-serif" aria-hidden="true">'
-               f"{_scale_bar(wd, hd, span_m)}{_north_arrow(wd)}</svg>")
-    return (f'<figure><div class=map style="width:{wd}px"><img id="{ident}" alt="{html.escape(title)}" '
-            f'src="{_png_uri(rgba)}" width="{w}" height="{h}">{overlay}</div>{colour_bar}'
-            f"<figcaption>{caption}</figcaption></figure>")
+    overlay = (
+        f'<svg viewBox="0 0 {wd} {hd}" font-family="sans-serif" aria-hidden="true">'
+        f"{_scale_bar(wd, hd, span_m)}{_north_arrow(wd)}</svg>"
+    )
+    return (
+        f'<figure><div class=map style="width:{wd}px"><img id="{ident}" alt="{html.escape(title)}" '
+        f'src="{_png_uri(rgba)}" width="{w}" height="{h}">{overlay}</div>{colour_bar}'
+        f"<figcaption>{caption}</figcaption></figure>"
+    )
 
 
 # ---------------------------------------------------------------- figures
 
 
-def difference_map(diff: np.ndarray, grid: GridSpec, relief: np.ndarray | None = None,
-                   filled_mask: np.ndarray | None = None, title: str = "DEM of difference",
-                   ident: str = "difference-map") -> str | None:
+def difference_map(
+    diff: np.ndarray,
+    grid: GridSpec,
+    relief: np.ndarray | None = None,
+    filled_mask: np.ndarray | None = None,
+    title: str = "DEM of difference",
+    ident: str = "difference-map",
+) -> str | None:
     """HTML figure: ``diff`` on a diverging ramp centred on 0 (red cut, blue fill), hillshaded by
     ``relief`` (else by ``diff``), refilled cells outlined in black; None without data."""
     d = _float_2d(diff)
@@ -257,17 +305,20 @@ def difference_map(diff: np.ndarray, grid: GridSpec, relief: np.ndarray | None =
     mask = _like(filled_mask, d)
     if mask is not None and mask.any():
         rgba[_outline(_repeat(_block_any(mask, k), f))] = (0, 0, 0, 255)
-    caption = (f"{html.escape(title)}: after − before, red = cut (lowered), blue = fill (raised), ramp "
-               f"±{lim:.3g} m (99th percentile of |difference|; larger values in the end colours), "
-               f"hillshaded{' by the after DEM' if rel is not None else ''}. "
-               f"{'Black outline: refilled cells. ' if mask is not None and mask.any() else ''}"
-               f"Hatched: no data. {_extent_text(grid, d.shape, k)}")
+    caption = (
+        f"{html.escape(title)}: after − before, red = cut (lowered), blue = fill (raised), ramp "
+        f"±{lim:.3g} m (99th percentile of |difference|; larger values in the end colours), "
+        f"hillshaded{' by the after DEM' if rel is not None else ''}. "
+        f"{'Black outline: refilled cells. ' if mask is not None and mask.any() else ''}"
+        f"Hatched: no data. {_extent_text(grid, d.shape, k)}"
+    )
     bar = _colour_bar(RDBU, lim, "after − before (m)", ident, ("cut", "fill"))
     return _map_figure(ident, title, rgba, d.shape[1] * grid.cell, bar, caption)
 
 
-def residual_map(residual: np.ndarray, grid: GridSpec, relief: np.ndarray | None = None,
-                 ident: str = "residual-map") -> str | None:
+def residual_map(
+    residual: np.ndarray, grid: GridSpec, relief: np.ndarray | None = None, ident: str = "residual-map"
+) -> str | None:
     """HTML figure: stable-ground residuals (after correction) on a symmetric ramp, over a faint grey
     hillshade of ``relief`` for context; None without data."""
     r = _float_2d(residual)
@@ -283,8 +334,10 @@ def residual_map(residual: np.ndarray, grid: GridSpec, relief: np.ndarray | None
         grey = np.clip(205 + 45 * (hillshade(rel, grid.cell * k) / math.sin(math.radians(_ALTITUDE)) - 1), 0, 255)
         context = (rgba[..., 3] == 0) & np.isfinite(rel)
         rgba[context] = np.stack([grey[context]] * 3 + [np.full(grey[context].shape, 255.0)], axis=-1)
-    caption = (f"Residuals on stable ground after the bias correction, ramp ±{lim:.3g} m (99th percentile "
-               f"of |residual|). {'Grey relief: not stable ground. ' if rel is not None else ''}"
-               f"Hatched: no data. {_extent_text(grid, r.shape, k)}")
+    caption = (
+        f"Residuals on stable ground after the bias correction, ramp ±{lim:.3g} m (99th percentile "
+        f"of |residual|). {'Grey relief: not stable ground. ' if rel is not None else ''}"
+        f"Hatched: no data. {_extent_text(grid, r.shape, k)}"
+    )
     bar = _colour_bar(PUOR, lim, "residual on stable ground (m)", ident)
     return _map_figure(ident, "Stable-ground residuals", _repeat(rgba, f), r.shape[1] * grid.cell, bar, caption)

@@ -26,8 +26,17 @@ from .figures import (
 )
 from .histogram import histogram
 
-__all__ = ["PUOR", "RDBU", "block_mean", "colour_ramp", "difference_map", "hillshade", "png_bytes",
-           "render_html", "write_html"]
+__all__ = [
+    "PUOR",
+    "RDBU",
+    "block_mean",
+    "colour_ramp",
+    "difference_map",
+    "hillshade",
+    "png_bytes",
+    "render_html",
+    "write_html",
+]
 
 _CSS = """body{font-family:sans-serif;margin:1.5em;max-width:1100px;color:#222}
 table{border-collapse:collapse;margin:.5em 0 1.2em}td,th{border:1px solid #bbb;padding:3px 8px;
@@ -40,6 +49,7 @@ background:repeating-linear-gradient(45deg,#fff 0 4px,#ddd 4px 6px)}
 svg.plot{display:block;max-width:100%;height:auto;font-family:sans-serif}
 p.big{font-size:120%}.verdict{padding:.3em .6em;display:inline-block;background:#eee}
 .verdict.reliable{background:#dfd}.verdict.use-with-caution{background:#ffd}.verdict.not-reliable{background:#fdd}"""
+
 
 def _get(d: Any, *keys: str, default: Any = None) -> Any:
     for k in keys:
@@ -62,11 +72,15 @@ def _fmt(v: Any, digits: int = 2) -> str:
 
 
 def _table(header: list[str], rows: list[list[Any]], first_left: bool = True) -> str:
-    th = "".join(f"<th{' class=l' if i == 0 and first_left else ''}>{html.escape(h)}</th>"
-                 for i, h in enumerate(header))
+    th = "".join(
+        f"<th{' class=l' if i == 0 and first_left else ''}>{html.escape(h)}</th>" for i, h in enumerate(header)
+    )
     body = "".join(
-        "<tr>" + "".join(f"<td{' class=l' if i == 0 and first_left else ''}>{c}</td>"
-                         for i, c in enumerate(r)) + "</tr>" for r in rows)
+        "<tr>"
+        + "".join(f"<td{' class=l' if i == 0 and first_left else ''}>{c}</td>" for i, c in enumerate(r))
+        + "</tr>"
+        for r in rows
+    )
     return f"<table><tr>{th}</tr>{body}</table>"
 
 
@@ -82,20 +96,41 @@ VOLUME_ROWS = (  # report key, row label, uncertainty_m3 key prefix of its ± (o
     ("volume_paper_plane_m3", "with the paper's plane offset d_i", None),
 )
 LABELS = {  # report keys -> words (units in brackets)
-    "net": "net (m³)", "cut": "cut (m³)", "fill": "fill (m³)", "net_compared_area": "net, all compared cells (m³)",
-    "net_all_cells": "net, every compared cell (m³)", "net_change_areas": "net, change areas (m³)",
+    "net": "net (m³)",
+    "cut": "cut (m³)",
+    "fill": "fill (m³)",
+    "net_compared_area": "net, all compared cells (m³)",
+    "net_all_cells": "net, every compared cell (m³)",
+    "net_change_areas": "net, change areas (m³)",
     "interpolation_sigma_m3": "interpolation error, 1σ (m³)",
-    "confidence": "confidence level", "sigma_m": "noise on stable ground, NMAD (m)",
-    "lod_m": "level of detection (m)", "nugget_m2": "uncorrelated error variance (m²)",
-    "psill_m2": "spatially correlated error variance (m²)", "range_m": "correlation range (m)",
-    "bias_sigma_m": "error of the correction's level, 1σ (m)", "interpolated_m3": "interpolated volume (m³)",
-    "refill_sigma_m3": "refill error, 1σ (m³)", "stable_cells": "stable-ground cells",
-    "change_area_m2": "detected change area (m²)", "filled_cells": "refilled cells",
-    "filled_area_m2": "refilled area (m²)", "filled_net_m3": "net volume in refilled cells (m³)",
-    "mean": "mean (m)", "std": "standard deviation (m)", "nmad": "NMAD (m)", "rmse": "RMSE (m)",
-    "n_cells": "cells", "crop": "reading and cropping", "read": "reading", "coarse": "coarse registration",
-    "fine": "fine registration", "register_other": "registration, other", "grids": "gridding",
-    "planes": "reference planes", "volume": "volumes and uncertainty", "write": "writing rasters",
+    "confidence": "confidence level",
+    "sigma_m": "noise on stable ground, NMAD (m)",
+    "lod_m": "level of detection (m)",
+    "nugget_m2": "uncorrelated error variance (m²)",
+    "psill_m2": "spatially correlated error variance (m²)",
+    "range_m": "correlation range (m)",
+    "bias_sigma_m": "error of the correction's level, 1σ (m)",
+    "interpolated_m3": "interpolated volume (m³)",
+    "refill_sigma_m3": "refill error, 1σ (m³)",
+    "stable_cells": "stable-ground cells",
+    "change_area_m2": "detected change area (m²)",
+    "filled_cells": "refilled cells",
+    "filled_area_m2": "refilled area (m²)",
+    "filled_net_m3": "net volume in refilled cells (m³)",
+    "mean": "mean (m)",
+    "std": "standard deviation (m)",
+    "nmad": "NMAD (m)",
+    "rmse": "RMSE (m)",
+    "n_cells": "cells",
+    "crop": "reading and cropping",
+    "read": "reading",
+    "coarse": "coarse registration",
+    "fine": "fine registration",
+    "register_other": "registration, other",
+    "grids": "gridding",
+    "planes": "reference planes",
+    "volume": "volumes and uncertainty",
+    "write": "writing rasters",
     "report": "report",
 }
 UNIT_WORDS = {"m": "m", "m2": "m²", "m3": "m³", "deg": "°", "s": "s"}
@@ -123,8 +158,13 @@ def _volume_rows(report: dict) -> list[list[str]]:
         v = _get(report, key)
         if not isinstance(v, dict):
             continue
-        half = {} if prefix is None else ({k: unc.get(k) for k in ("net", "cut", "fill")} if prefix == ""
-                                          else {"net": unc.get(f"net_{prefix}")})
+        half = (
+            {}
+            if prefix is None
+            else (
+                {k: unc.get(k) for k in ("net", "cut", "fill")} if prefix == "" else {"net": unc.get(f"net_{prefix}")}
+            )
+        )
         cells = [html.escape(text)] + [_pm(v.get(k), half.get(k)) for k in ("net", "cut", "fill")]
         rows.append(cells + [_fmt(v.get("area_m2"), 1)])
     return rows
@@ -136,10 +176,12 @@ def _summary(report: dict) -> str:
 
     v, u = _get(report, "volume_m3", default={}) or {}, _get(report, "uncertainty_m3", default={}) or {}
     conf = u.get("confidence", 0.95)
-    out = (f"<p class=big>Net change <b>{_pm(v.get('net'), u.get('net'))} m³</b> "
-           f"(cut {_pm(v.get('cut'), u.get('cut'))} m³, fill {_pm(v.get('fill'), u.get('fill'))} m³; "
-           f"± at {_fmt(conf * 100, 0)} % confidence) over {_fmt(v.get('area_m2'), 0)} m².</p>"
-           f"<p>{html.escape(significance(report))}</p>")
+    out = (
+        f"<p class=big>Net change <b>{_pm(v.get('net'), u.get('net'))} m³</b> "
+        f"(cut {_pm(v.get('cut'), u.get('cut'))} m³, fill {_pm(v.get('fill'), u.get('fill'))} m³; "
+        f"± at {_fmt(conf * 100, 0)} % confidence) over {_fmt(v.get('area_m2'), 0)} m².</p>"
+        f"<p>{html.escape(significance(report))}</p>"
+    )
     q = quality(report)
     if q["verdict"]:
         verdict = html.escape(q["verdict"])
@@ -158,27 +200,49 @@ def _registration(report: dict) -> str:
     for stage in ("coarse", "fine"):
         s = reg.get(stage)
         if isinstance(s, dict):
-            rows.append([stage, _fmt(s.get("method")), _fmt(s.get("fitness"), 3), _fmt(s.get("rmse"), 3),
-                         _fmt(s.get("accepted")), _fmt(s.get("note"))])
+            rows.append(
+                [
+                    stage,
+                    _fmt(s.get("method")),
+                    _fmt(s.get("fitness"), 3),
+                    _fmt(s.get("rmse"), 3),
+                    _fmt(s.get("accepted")),
+                    _fmt(s.get("note")),
+                ]
+            )
     out = _table(["stage", "method", "fitness", "RMSE (m)", "kept", "note"], rows)
     local = reg.get("transform_local")
     if local is None:
         return out
     m = rotation_shift(local)
-    out += _table(["rotation (°)", "of which tilt (°)", "heading change (°)", "shift (m)", "east (m)",
-                   "north (m)", "up (m)"],
-                  [[_fmt(m["rotation_deg"], 3), _fmt(m["tilt_deg"], 3), _fmt(m["yaw_deg"], 3),
-                    _fmt(m["shift_m"], 3), _fmt(m["dx_m"], 3), _fmt(m["dy_m"], 3),
-                    _fmt(m["shift_vertical_m"], 3)]], first_left=False)
-    return out + ("<p class=note>How the after survey was moved onto the before survey (shift at the "
-                  "centre of the data). The 4×4 matrix is in report.json.</p>")
+    out += _table(
+        ["rotation (°)", "of which tilt (°)", "heading change (°)", "shift (m)", "east (m)", "north (m)", "up (m)"],
+        [
+            [
+                _fmt(m["rotation_deg"], 3),
+                _fmt(m["tilt_deg"], 3),
+                _fmt(m["yaw_deg"], 3),
+                _fmt(m["shift_m"], 3),
+                _fmt(m["dx_m"], 3),
+                _fmt(m["dy_m"], 3),
+                _fmt(m["shift_vertical_m"], 3),
+            ]
+        ],
+        first_left=False,
+    )
+    return out + (
+        "<p class=note>How the after survey was moved onto the before survey (shift at the "
+        "centre of the data). The 4×4 matrix is in report.json.</p>"
+    )
 
 
 def _kv(d: dict | None, digits: int = 4) -> str:
     if not isinstance(d, dict) or not d:
         return "<p class=note>not available</p>"
-    rows = [[html.escape(label(str(k))), _fmt(v, digits) if not isinstance(v, (list, dict))
-             else html.escape(str(v))[:300]] for k, v in d.items()]
+    rows = [
+        [html.escape(label(str(k))), _fmt(v, digits) if not isinstance(v, (list, dict)) else html.escape(str(v))[:300]]
+        for k, v in d.items()
+    ]
     return _table(["", "value"], rows)
 
 
@@ -187,13 +251,31 @@ def _inputs(report: dict) -> str:
     for which in ("before", "after"):
         i = _get(report, "inputs", which)
         if isinstance(i, dict):
-            rows.append([which, _fmt(i.get("path")), _fmt(i.get("points")), _fmt(i.get("points_used")),
-                         _fmt(i.get("selection")), _fmt(i.get("crs"))])
+            rows.append(
+                [
+                    which,
+                    _fmt(i.get("path")),
+                    _fmt(i.get("points")),
+                    _fmt(i.get("points_used")),
+                    _fmt(i.get("selection")),
+                    _fmt(i.get("crs")),
+                ]
+            )
     g = _get(report, "grid", default={}) or {}
     out = _table(["survey", "file", "points", "points used", "selection", "CRS"], rows)
-    out += _table(["cell (m)", "rows", "columns", "CRS of the rasters", "compared area (m²)"],
-                  [[_fmt(g.get("cell_m")), _fmt(g.get("rows")), _fmt(g.get("cols")),
-                    _fmt(g.get("crs")), _fmt(g.get("compared_area_m2"), 1)]], first_left=False)
+    out += _table(
+        ["cell (m)", "rows", "columns", "CRS of the rasters", "compared area (m²)"],
+        [
+            [
+                _fmt(g.get("cell_m")),
+                _fmt(g.get("rows")),
+                _fmt(g.get("cols")),
+                _fmt(g.get("crs")),
+                _fmt(g.get("compared_area_m2"), 1),
+            ]
+        ],
+        first_left=False,
+    )
     return out
 
 
@@ -225,15 +307,16 @@ def _correction(report: dict) -> str:
     out = f"<p>Method: <b>{_fmt(c.get('method') or params.get('method'))}</b></p>"
     if params.get("coefficients") is not None:
         terms = params.get("terms") or [f"c{i}" for i in range(len(params["coefficients"]))]
-        out += _table(["term", "coefficient"], [[html.escape(str(t)), f"{v:.6g}"] for t, v in
-                                                zip(terms, params["coefficients"], strict=False)])
+        out += _table(
+            ["term", "coefficient"],
+            [[html.escape(str(t)), f"{v:.6g}"] for t, v in zip(terms, params["coefficients"], strict=False)],
+        )
     return out + "<p>Residuals on stable ground after the correction:</p>" + _kv(resid)
 
 
 def _sections(report: dict, arrays: dict, grid: GridSpec) -> list[str]:
     diff = arrays.get("difference")
-    lod = (_get(report, "uncertainty", "lod_m") or _get(report, "uncertainty_m3", "lod_m")
-           or _get(report, "lod_m"))
+    lod = _get(report, "uncertainty", "lod_m") or _get(report, "uncertainty_m3", "lod_m") or _get(report, "lod_m")
     conf = _get(report, "uncertainty", "confidence") or _get(report, "uncertainty_m3", "confidence")
     relief = arrays.get("dem_after")
     figures = [
@@ -241,10 +324,13 @@ def _sections(report: dict, arrays: dict, grid: GridSpec) -> list[str]:
         ("Histogram", histogram(diff, lod, conf)),
         ("Stable-ground residuals", residual_map(arrays.get("residual"), grid, relief)),
     ]
-    out = ["<h2>Result</h2>" + _summary(report),
-           "<h2>Volumes (m³)</h2>" + _table(["", "net", "cut", "fill", "area (m²)"], _volume_rows(report))
-           + "<p class=note>± = half-width of the interval at the confidence level, including spatially "
-           "correlated error; cut and fill are positive, net = fill − cut.</p>"]
+    out = [
+        "<h2>Result</h2>" + _summary(report),
+        "<h2>Volumes (m³)</h2>"
+        + _table(["", "net", "cut", "fill", "area (m²)"], _volume_rows(report))
+        + "<p class=note>± = half-width of the interval at the confidence level, including spatially "
+        "correlated error; cut and fill are positive, net = fill − cut.</p>",
+    ]
     out += [f"<h2>{t}</h2>{fig or _no_data(t)}" for t, fig in figures]
     out.append("<h2>Uncertainty</h2>" + _kv(_uncertainty_summary(report)))
     out.append("<h2>Vertical bias correction</h2>" + _correction(report))
@@ -271,9 +357,11 @@ def render_html(report: dict, arrays: dict, grid: GridSpec, run_date: str | None
     title = "Soil volume change report"
     date = run_date or datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
     sw = _get(report, "software", "version")
-    head = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title>"
-            f"<style>{_CSS}</style></head><body><h1>{title}</h1>"
-            f"<p class=note>Run on {html.escape(date)} with soilvolume {_fmt(sw or 'unknown')}.</p>")
+    head = (
+        f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title>"
+        f"<style>{_CSS}</style></head><body><h1>{title}</h1>"
+        f"<p class=note>Run on {html.escape(date)} with soilvolume {_fmt(sw or 'unknown')}.</p>"
+    )
     return head + "\n".join(_sections(report, arrays, grid)) + "</body></html>"
 
 

@@ -36,8 +36,15 @@ def _clean(v: Any) -> Any:
 
 
 def stage_dict(q: StageQuality) -> dict:
-    return {"method": q.method, "fitness": q.fitness, "rmse": q.rmse, "accepted": q.accepted,
-            "seconds": q.seconds, "note": q.note, "transform_local": q.transform}
+    return {
+        "method": q.method,
+        "fitness": q.fitness,
+        "rmse": q.rmse,
+        "accepted": q.accepted,
+        "seconds": q.seconds,
+        "note": q.note,
+        "transform_local": q.transform,
+    }
 
 
 def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -58,8 +65,7 @@ def summary_lines(report: dict) -> list[str]:
     g = report["grid"]
     fine = report["registration"]["fine"]
     return [
-        f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells "
-        f"({g['rows']} x {g['cols']})",
+        f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
         f"registration: {fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m",
         f"volume (change areas, {report['correction']['method']} correction): "
         f"net {v['net']:+.2f} m3  cut {v['cut']:.2f} m3  fill {v['fill']:.2f} m3",
@@ -87,38 +93,54 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, opti
     return {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
         "volume_m3": vols["compensated"],
-        "volume_method": ("fill and cut summed over the areas of significant change: cells whose corrected "
-                          "difference exceeds their level of detection, in patches of at least 3 cells, grown into "
-                          "connected cells of the same sign above half of it; survey noise elsewhere is not counted"),
+        "volume_method": (
+            "fill and cut summed over the areas of significant change: cells whose corrected "
+            "difference exceeds their level of detection, in patches of at least 3 cells, grown into "
+            "connected cells of the same sign above half of it; survey noise elsewhere is not counted"
+        ),
         "volume_all_cells_m3": vols["all_cells"],
         "volume_uncompensated_m3": vols["uncompensated"],
         "volume_paper_plane_m3": vols["paper_plane"],
         "volume_change_areas_m3": vols["change_areas"],
         "volume_thresholded_m3": vols["thresholded"],
-        "uncertainty_m3": {"net": vols["uncertainty"]["net"],
-                           "cut": vols["uncertainty"]["cut"], "fill": vols["uncertainty"]["fill"],
-                           "net_change_areas": vols["uncertainty"]["net"],
-                           "net_all_cells": vols["uncertainty"]["net_compared_area"],
-                           "lod_m": vols["uncertainty"]["lod_m"],
-                           "confidence": vols["uncertainty"]["confidence"]},
+        "uncertainty_m3": {
+            "net": vols["uncertainty"]["net"],
+            "cut": vols["uncertainty"]["cut"],
+            "fill": vols["uncertainty"]["fill"],
+            "net_change_areas": vols["uncertainty"]["net"],
+            "net_all_cells": vols["uncertainty"]["net_compared_area"],
+            "lod_m": vols["uncertainty"]["lod_m"],
+            "confidence": vols["uncertainty"]["confidence"],
+        },
         "uncertainty": vols["uncertainty"],
         "zones": vols.get("zones", []),
         "correction": {"method": options.correction, "params": vols["params"]},
         "registration": {
-            "transform": t_abs, "transform_local": reg.transform, "local_origin": prep.origin,
-            "coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine),
+            "transform": t_abs,
+            "transform_local": reg.transform,
+            "local_origin": prep.origin,
+            "coarse": stage_dict(reg.coarse),
+            "fine": stage_dict(reg.fine),
             "georeferencing": reg.georeferencing,
-            "rotation_deg": rotation_deg(reg.transform), "tilt_deg": tilt_deg(reg.transform),
+            "rotation_deg": rotation_deg(reg.transform),
+            "tilt_deg": tilt_deg(reg.transform),
             "shift_m": shift_at(reg.transform, prep.after_thin.mean(axis=0)),
         },
         "planes": {"before": p_b.as_dict(prep.origin), "after": p_a.as_dict(prep.origin)},
         "grid": {
-            "cell_m": grid.cell, "rows": grid.rows, "cols": grid.cols, "crs": prep.frame.crs.name,
-            "crs_wkt": prep.frame.wkt, "transform": list(grid.transform)[:6],
-            "compared_area_m2": vols["all_cells"]["area_m2"], "compared_cells": vols["all_cells"]["cells"],
+            "cell_m": grid.cell,
+            "rows": grid.rows,
+            "cols": grid.cols,
+            "crs": prep.frame.crs.name,
+            "crs_wkt": prep.frame.wkt,
+            "transform": list(grid.transform)[:6],
+            "compared_area_m2": vols["all_cells"]["area_m2"],
+            "compared_cells": vols["all_cells"]["cells"],
             "change_area_m2": vols["compensated"]["area_m2"],
-            "empty_cells": vols["empty_cells"], "empty_before": vols["empty_before"],
-            "empty_after": vols["empty_after"], "statistic": options.statistic,
+            "empty_cells": vols["empty_cells"],
+            "empty_before": vols["empty_before"],
+            "empty_after": vols["empty_after"],
+            "statistic": options.statistic,
         },
         "holes": vols["holes"],
         "inputs": prep.inputs,

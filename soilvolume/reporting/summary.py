@@ -19,9 +19,16 @@ def rotation_shift(transform_local: Any) -> dict[str, float]:
     cos_angle = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
     tilt = math.degrees(math.acos(float(np.clip(r[2, 2], -1.0, 1.0))))
     yaw = math.degrees(math.atan2(r[1, 0], r[0, 0]))
-    return {"rotation_deg": math.degrees(math.acos(cos_angle)), "tilt_deg": tilt, "yaw_deg": yaw,
-            "shift_m": float(np.linalg.norm(s)), "shift_horizontal_m": float(np.hypot(s[0], s[1])),
-            "shift_vertical_m": float(s[2]), "dx_m": float(s[0]), "dy_m": float(s[1])}
+    return {
+        "rotation_deg": math.degrees(math.acos(cos_angle)),
+        "tilt_deg": tilt,
+        "yaw_deg": yaw,
+        "shift_m": float(np.linalg.norm(s)),
+        "shift_horizontal_m": float(np.hypot(s[0], s[1])),
+        "shift_vertical_m": float(s[2]),
+        "dx_m": float(s[0]),
+        "dy_m": float(s[1]),
+    }
 
 
 def significance(report: dict[str, Any]) -> str:
@@ -34,15 +41,22 @@ def significance(report: dict[str, Any]) -> str:
     level = f"{conf * 100:g} %"
     if abs(net) > half:
         kind = "gain (fill)" if net > 0 else "loss (cut)"
-        return (f"The net change of {net:+,.1f} m³ ± {half:,.1f} m³ is a significant {kind} "
-                f"at {level} confidence: the interval does not include zero.")
-    return (f"The net change of {net:+,.1f} m³ ± {half:,.1f} m³ is not significant at {level} "
-            f"confidence: the interval includes zero, so no net gain or loss is shown.")
+        return (
+            f"The net change of {net:+,.1f} m³ ± {half:,.1f} m³ is a significant {kind} "
+            f"at {level} confidence: the interval does not include zero."
+        )
+    return (
+        f"The net change of {net:+,.1f} m³ ± {half:,.1f} m³ is not significant at {level} "
+        f"confidence: the interval includes zero, so no net gain or loss is shown."
+    )
 
 
 def quality(report: dict[str, Any]) -> dict[str, Any]:
     """The run's quality verdict (reliable / use with caution / not reliable) and its plain
     sentences; an empty verdict when the engine gave none."""
     q = report.get("quality") or {}
-    return {"verdict": str(q.get("verdict") or ""), "trusted": q.get("trusted"),
-            "messages": [str(m) for m in q.get("messages") or []]}
+    return {
+        "verdict": str(q.get("verdict") or ""),
+        "trusted": q.get("trusted"),
+        "messages": [str(m) for m in q.get("messages") or []],
+    }

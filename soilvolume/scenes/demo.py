@@ -21,11 +21,21 @@ def run_demo(out: Path, size: str = "small", seed: int = 0) -> int:
         before, after, truth_path = write_pair(make_pair(seed, cfg), data, "laz")
         truth = json.loads(truth_path.read_text())
         print(f"synthetic pair ({size}, seed {seed}) in {out / 'data'}")
-        res = estimate(before, after, staged.path("result"), Options(seed=seed), overwrite=True,
-                       hooks=Hooks(progress=lambda p, m: print(f"[{p:5.1f}%] {m}", flush=True)))
+        res = estimate(
+            before,
+            after,
+            staged.path("result"),
+            Options(seed=seed),
+            overwrite=True,
+            hooks=Hooks(progress=lambda p, m: print(f"[{p:5.1f}%] {m}", flush=True)),
+        )
     r = res.report
-    rows = [("all compared cells", r["volume_m3"]), ("change areas", r["volume_change_areas_m3"]),
-            ("uncompensated", r["volume_uncompensated_m3"]), ("paper plane d_i", r["volume_paper_plane_m3"])]
+    rows = [
+        ("all compared cells", r["volume_m3"]),
+        ("change areas", r["volume_change_areas_m3"]),
+        ("uncompensated", r["volume_uncompensated_m3"]),
+        ("paper plane d_i", r["volume_paper_plane_m3"]),
+    ]
     print(f"{'volumes (m3)':22}{'net':>10}{'cut':>10}{'fill':>10}   net error")
     print(f"{'true':22}{truth['net']:10.2f}{truth['cut']:10.2f}{truth['fill']:10.2f}")
     for name, v in rows:

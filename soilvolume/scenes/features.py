@@ -41,15 +41,49 @@ def _change_features(cfg: SceneConfig) -> list[dict]:
         return finish_features(_single_features(cfg, x0, y0, x1, y1, s))
     feats = [
         # flat-topped cone: sign, bottom radius, top radius, height
-        dict(kind="cone", sign=1.0, x=cx - 15 * s, y=cy + 12 * s, r_bottom=8.5 * s,
-             r_top=4.5 * s, height=3.5 * s, name="pile A (truncated cone)"),
-        dict(kind="cone", sign=1.0, x=cx + 14 * s, y=cy + 14 * s, r_bottom=6.5 * s,
-             r_top=3.0 * s, height=3.0 * s, name="pile B (truncated cone)"),
+        dict(
+            kind="cone",
+            sign=1.0,
+            x=cx - 15 * s,
+            y=cy + 12 * s,
+            r_bottom=8.5 * s,
+            r_top=4.5 * s,
+            height=3.5 * s,
+            name="pile A (truncated cone)",
+        ),
+        dict(
+            kind="cone",
+            sign=1.0,
+            x=cx + 14 * s,
+            y=cy + 14 * s,
+            r_bottom=6.5 * s,
+            r_top=3.0 * s,
+            height=3.0 * s,
+            name="pile B (truncated cone)",
+        ),
         # rectangular pile, equal side slopes: bottom half-sizes a x b, rotated by angle
-        dict(kind="rect", sign=1.0, x=cx + 12 * s, y=cy - 13 * s, a=8.0 * s, b=5.5 * s,
-             height=3.0 * s, run=3.0 * s, angle_deg=25.0, name="pile C (truncated rectangular)"),
-        dict(kind="cone", sign=-1.0, x=cx - 14 * s, y=cy - 14 * s, r_bottom=5.0 * s,
-             r_top=2.5 * s, height=1.5 * s, name="pit (truncated cone)"),
+        dict(
+            kind="rect",
+            sign=1.0,
+            x=cx + 12 * s,
+            y=cy - 13 * s,
+            a=8.0 * s,
+            b=5.5 * s,
+            height=3.0 * s,
+            run=3.0 * s,
+            angle_deg=25.0,
+            name="pile C (truncated rectangular)",
+        ),
+        dict(
+            kind="cone",
+            sign=-1.0,
+            x=cx - 14 * s,
+            y=cy - 14 * s,
+            r_bottom=5.0 * s,
+            r_top=2.5 * s,
+            height=1.5 * s,
+            name="pit (truncated cone)",
+        ),
     ]
     return finish_features(feats)
 
@@ -79,8 +113,7 @@ def feature_area(f: dict) -> float:
     return 4.0 * f["a"] * f["b"]
 
 
-def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: float,
-                     s: float) -> list[dict]:
+def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: float, s: float) -> list[dict]:
     """Features of the "pit", "pile" and "excavation" kinds. They carry ``exact_outline``: the
     placement of clutter and holes uses their true outline, not the bounding circle."""
     aw, ah = x1 - x0, y1 - y0
@@ -88,14 +121,34 @@ def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: floa
     area = aw * ah
     if cfg.change == "pit":  # 5 % of the after footprint, 2 m deep
         rb = math.sqrt(0.05 * area / math.pi)
-        return [dict(kind="cone", sign=-1.0, x=cx + 4.0 * s, y=cy - 3.0 * s, r_bottom=rb,
-                     r_top=0.55 * rb, height=2.0 * s, exact_outline=True,
-                     name="pit (flat-bottomed truncated cone)")]
+        return [
+            dict(
+                kind="cone",
+                sign=-1.0,
+                x=cx + 4.0 * s,
+                y=cy - 3.0 * s,
+                r_bottom=rb,
+                r_top=0.55 * rb,
+                height=2.0 * s,
+                exact_outline=True,
+                name="pit (flat-bottomed truncated cone)",
+            )
+        ]
     if cfg.change == "pile":  # 10 % of the after footprint, 5 m high
         rb = math.sqrt(0.10 * area / math.pi)
-        return [dict(kind="cone", sign=1.0, x=cx - 3.0 * s, y=cy + 2.0 * s, r_bottom=rb,
-                     r_top=0.35 * rb, height=5.0 * s, exact_outline=True,
-                     name="pile (flat-topped truncated cone)")]
+        return [
+            dict(
+                kind="cone",
+                sign=1.0,
+                x=cx - 3.0 * s,
+                y=cy + 2.0 * s,
+                r_bottom=rb,
+                r_top=0.35 * rb,
+                height=5.0 * s,
+                exact_outline=True,
+                name="pile (flat-topped truncated cone)",
+            )
+        ]
     # excavation: 2b tall (most of the footprint's height), 2a wide so that 4ab = f * area; a
     # tall conical pile beside it, the pair centred in x with equal margins
     frac = float(cfg.change_fraction)
@@ -114,12 +167,31 @@ def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: floa
     py = cy + min(0.25 * ah, ah / 2.0 - rp - 2.0 * s)
     depth, run = 2.5 * s, 3.0 * s
     return [
-        dict(kind="rect", sign=-1.0, x=ex, y=cy, a=a, b=b, height=depth, run=run,
-             angle_deg=0.0, exact_outline=True,
-             name=f"excavation (flat-bottomed, {frac:.0%} of the after footprint)"),
+        dict(
+            kind="rect",
+            sign=-1.0,
+            x=ex,
+            y=cy,
+            a=a,
+            b=b,
+            height=depth,
+            run=run,
+            angle_deg=0.0,
+            exact_outline=True,
+            name=f"excavation (flat-bottomed, {frac:.0%} of the after footprint)",
+        ),
         # ~42 degree sides, flat top of 0.3 x its base radius
-        dict(kind="cone", sign=1.0, x=px, y=py, r_bottom=rp, r_top=0.3 * rp,
-             height=0.9 * 0.7 * rp, exact_outline=True, name="tall pile (truncated cone)"),
+        dict(
+            kind="cone",
+            sign=1.0,
+            x=px,
+            y=py,
+            r_bottom=rp,
+            r_top=0.3 * rp,
+            height=0.9 * 0.7 * rp,
+            exact_outline=True,
+            name="tall pile (truncated cone)",
+        ),
     ]
 
 

@@ -107,8 +107,7 @@ def _truth(world: _World) -> dict:
     T[:3, 3] = (world.c + o) - world.R.T @ (o + world.c + world.t)
     features = []
     for f in world.changes:
-        d = {k: (float(v) if isinstance(v, float | int) and not isinstance(v, bool) else v)
-             for k, v in f.items()}
+        d = {k: (float(v) if isinstance(v, float | int) and not isinstance(v, bool) else v) for k, v in f.items()}
         d["x"] += float(o[0])
         d["y"] += float(o[1])
         features.append(d)
@@ -123,10 +122,9 @@ def _truth(world: _World) -> dict:
             "shift_m": list(cfg.shift_m),
             "rotation_deg": list(cfg.rotation_deg),
             "convention": "p_surveyed = R (p_true - center) + center + shift; "
-                          "transform is its inverse (surveyed -> true), absolute coordinates",
+            "transform is its inverse (surveyed -> true), absolute coordinates",
         },
-        "after_footprint": [world.ax0 + o[0], world.ay0 + o[1], world.ax1 + o[0],
-                            world.ay1 + o[1]],
+        "after_footprint": [world.ax0 + o[0], world.ay0 + o[1], world.ax1 + o[0], world.ay1 + o[1]],
         "features": features,
         "crs": cfg.crs,
         "seed": world.seed,
@@ -146,8 +144,7 @@ def scene_truth(seed: int = 0, config: SceneConfig | None = None) -> dict:
     return _truth(_World(seed, config or SceneConfig()))
 
 
-def iter_epoch(seed: int, config: SceneConfig, epoch: str
-               ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+def iter_epoch(seed: int, config: SceneConfig, epoch: str) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Yield (xyz absolute float64 (n,3), class uint8) chunks of one epoch ("before"/"after"),
     each at most ~1 M points; concatenated they equal ``make_pair``'s arrays."""
     world = _World(seed, config)
@@ -173,8 +170,9 @@ def _las_header(config: SceneConfig, scale: float):
 
     header = laspy.LasHeader(point_format=6, version="1.4")
     o = config.origin
-    header.offsets = np.array([math.floor(o[0] / 1000.0) * 1000.0,
-                               math.floor(o[1] / 1000.0) * 1000.0, math.floor(o[2])])
+    header.offsets = np.array(
+        [math.floor(o[0] / 1000.0) * 1000.0, math.floor(o[1] / 1000.0) * 1000.0, math.floor(o[2])]
+    )
     header.scales = np.array([scale, scale, scale])
     header.add_crs(pyproj.CRS.from_user_input(config.crs))
     header.generating_software = "soilvolume.synthetic"
@@ -193,15 +191,13 @@ def _write_truth(path: Path, truth: dict) -> None:
     path.write_text(json.dumps(truth, indent=2) + "\n")
 
 
-def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001
-               ) -> tuple[Path, Path, Path]:
+def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) -> tuple[Path, Path, Path]:
     """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, point format 6, CRS as WKT VLR,
     classification) and ``truth.json`` into ``directory``; return the three paths."""
     import laspy
 
     pb, pa, pt = _paths(directory, fmt)
-    for path, xyz, cls in ((pb, scene.before, scene.before_class),
-                           (pa, scene.after, scene.after_class)):
+    for path, xyz, cls in ((pb, scene.before, scene.before_class), (pa, scene.after, scene.after_class)):
         las = laspy.LasData(_las_header(scene.config, scale))
         las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
         las.classification = cls
@@ -210,8 +206,9 @@ def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001
     return pb, pa, pt
 
 
-def write_pair_streaming(seed: int, config: SceneConfig, directory, fmt: str = "las",
-                         scale: float = 0.001) -> tuple[Path, Path, Path]:
+def write_pair_streaming(
+    seed: int, config: SceneConfig, directory, fmt: str = "las", scale: float = 0.001
+) -> tuple[Path, Path, Path]:
     """Like ``write_pair(make_pair(seed, config), ...)`` but chunk by chunk, in bounded memory
     (~0.3 GB whatever the size): for pairs of tens of millions of points."""
     import laspy
@@ -230,4 +227,3 @@ def write_pair_streaming(seed: int, config: SceneConfig, directory, fmt: str = "
                 del xyz, cls, rec
     _write_truth(pt, _truth(world))
     return pb, pa, pt
-

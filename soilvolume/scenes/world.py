@@ -31,23 +31,21 @@ class _World:
         self.tilt = rng.uniform(-0.02, 0.02, 2)
         self.centre = (bw / 2.0, bh / 2.0)
         waves = []
-        for amp_lo, amp_hi, wl_lo, wl_hi, n in ((0.5, 1.5, 60.0, 200.0, 3),
-                                                (0.02, 0.08, 2.0, 12.0, 14)):
+        for amp_lo, amp_hi, wl_lo, wl_hi, n in ((0.5, 1.5, 60.0, 200.0, 3), (0.02, 0.08, 2.0, 12.0, 14)):
             for _ in range(n):
                 th = rng.uniform(0, 2 * np.pi)
                 k = 2 * np.pi / rng.uniform(wl_lo, wl_hi)
-                waves.append((rng.uniform(amp_lo, amp_hi), k * np.cos(th), k * np.sin(th),
-                              rng.uniform(0, 2 * np.pi)))
+                waves.append((rng.uniform(amp_lo, amp_hi), k * np.cos(th), k * np.sin(th), rng.uniform(0, 2 * np.pi)))
         self.waves = np.array(waves)
         self.waves[:3, 0] *= cfg.relief
-        self.hills = np.column_stack([rng.uniform(-2.5, 3.0, 4), rng.uniform(0, bw, 4),
-                                      rng.uniform(0, bh, 4), rng.uniform(10.0, 30.0, 4)])
+        self.hills = np.column_stack(
+            [rng.uniform(-2.5, 3.0, 4), rng.uniform(0, bw, 4), rng.uniform(0, bh, 4), rng.uniform(10.0, 30.0, 4)]
+        )
         self.hills[:, 0] *= cfg.relief
         aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
         th0 = rng.uniform(0, np.pi)
         lines = []  # (kind, x0, y0, x1, y1, height, width) ; kind 0 ditch (gaussian), 1 berm
-        for i, (kind, ang) in enumerate(((0, th0), (0, th0 + rng.uniform(1.0, 2.1)),
-                                         (1, th0 + rng.uniform(0.5, 1.0)))):
+        for i, (kind, ang) in enumerate(((0, th0), (0, th0 + rng.uniform(1.0, 2.1)), (1, th0 + rng.uniform(0.5, 1.0)))):
             px = acx + rng.uniform(-0.3, 0.3) * aw
             py = acy + rng.uniform(-0.3, 0.3) * ah
             half = rng.uniform(25.0, 50.0)
@@ -58,10 +56,14 @@ class _World:
             del i
         self.lines = np.array(lines)
         nm = 30
-        self.mounds = np.column_stack([rng.uniform(0.15, 0.5, nm) * rng.choice([-1, 1], nm),
-                                       rng.uniform(self.ax0 - 10, self.ax1 + 10, nm),
-                                       rng.uniform(self.ay0 - 10, self.ay1 + 10, nm),
-                                       rng.uniform(1.0, 3.0, nm)])
+        self.mounds = np.column_stack(
+            [
+                rng.uniform(0.15, 0.5, nm) * rng.choice([-1, 1], nm),
+                rng.uniform(self.ax0 - 10, self.ax1 + 10, nm),
+                rng.uniform(self.ay0 - 10, self.ay1 + 10, nm),
+                rng.uniform(1.0, 3.0, nm),
+            ]
+        )
 
         # --- non-ground features (non-overlapping, away from the change) ---
         self.feat_res = 0.25
@@ -131,10 +133,8 @@ class _World:
 
         # --- misalignment (local frame): p_s = R (p - c) + c + t ---
         roll, pitch, yaw = np.radians(cfg.rotation_deg)
-        rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)],
-                       [0, np.sin(roll), np.cos(roll)]])
-        ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0],
-                       [-np.sin(pitch), 0, np.cos(pitch)]])
+        rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
+        ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
         rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
         self.R = rz @ ry @ rx
         self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
@@ -158,8 +158,7 @@ class _World:
         if n <= 0:
             return None
         bw, bh = self.cfg.before_size
-        grid = np.zeros((int(math.ceil(bh / self.hole_res)) + 1,
-                         int(math.ceil(bw / self.hole_res)) + 1), dtype=bool)
+        grid = np.zeros((int(math.ceil(bh / self.hole_res)) + 1, int(math.ceil(bw / self.hole_res)) + 1), dtype=bool)
         for k in range(n):
             r = rng.uniform(1.5, 3.0)
             if k % 3 == 0 and self.changes:  # on a change edge
@@ -179,14 +178,23 @@ class _World:
                 for _try in range(50):
                     x = rng.uniform(self.ax0 + 2, self.ax1 - 2)
                     y = rng.uniform(self.ay0 + 2, self.ay1 - 2)
-                    if all(_clear_of(c, x, y, r + 1.0) if c.get("exact_outline")
-                           else math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
-                           for c in self.changes):
+                    if all(
+                        _clear_of(c, x, y, r + 1.0)
+                        if c.get("exact_outline")
+                        else math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
+                        for c in self.changes
+                    ):
                         break
             # irregular blob: union of three discs
             for _ in range(3):
-                self._stamp(grid, self.hole_res, x + rng.uniform(-0.6, 0.6) * r,
-                            y + rng.uniform(-0.6, 0.6) * r, r * rng.uniform(0.5, 0.9), True)
+                self._stamp(
+                    grid,
+                    self.hole_res,
+                    x + rng.uniform(-0.6, 0.6) * r,
+                    y + rng.uniform(-0.6, 0.6) * r,
+                    r * rng.uniform(0.5, 0.9),
+                    True,
+                )
         return grid
 
     @staticmethod
@@ -206,8 +214,12 @@ class _World:
             z += amp * np.exp(-((x - hx) ** 2 + (y - hy) ** 2) / (2 * sig * sig))
         for kind, x0, y0, x1, y1, height, width in self.lines:
             reach = 3.5 * width if kind == 0 else 2.0 * width + 0.5
-            m = ((x > min(x0, x1) - reach) & (x < max(x0, x1) + reach)
-                 & (y > min(y0, y1) - reach) & (y < max(y0, y1) + reach))
+            m = (
+                (x > min(x0, x1) - reach)
+                & (x < max(x0, x1) + reach)
+                & (y > min(y0, y1) - reach)
+                & (y < max(y0, y1) + reach)
+            )
             if not m.any():
                 continue
             px, py = x[m], y[m]
@@ -291,9 +303,9 @@ class _World:
             o = np.nonzero(rng.random(z.shape) < cfg.outlier_fraction)[0]
             kind = rng.random(o.size)
             near = rng.choice([-1.0, 1.0], o.size) * rng.uniform(0.25, 1.5, o.size)
-            off = np.where(kind < 0.5, near,
-                           np.where(kind < 0.85, rng.uniform(1.0, 8.0, o.size),
-                                    -rng.uniform(0.5, 4.0, o.size)))
+            off = np.where(
+                kind < 0.5, near, np.where(kind < 0.85, rng.uniform(1.0, 8.0, o.size), -rng.uniform(0.5, 4.0, o.size))
+            )
             z[o] += off
             cls[o] = CLASS_OUTLIER
         xyz = np.column_stack([x, y, z])
@@ -302,8 +314,9 @@ class _World:
             # element-wise (not BLAS): results do not depend on the chunking (up to 1 ulp)
             d = xyz - self.c
             R = self.R
-            xyz = np.column_stack([R[i, 0] * d[:, 0] + R[i, 1] * d[:, 1] + R[i, 2] * d[:, 2]
-                                   for i in range(3)]) + (self.c + self.t)
+            xyz = np.column_stack([R[i, 0] * d[:, 0] + R[i, 1] * d[:, 1] + R[i, 2] * d[:, 2] for i in range(3)]) + (
+                self.c + self.t
+            )
             del d
         xyz += np.asarray(cfg.origin, dtype=np.float64)
         return xyz, cls
@@ -332,10 +345,8 @@ class _World:
         # boulders: half-ellipsoid
         bou = (typ == 2) & (rho2 < 1.0)
         hbo = gi + h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0))
-        znew = np.where(bush, gi + hb, np.where(veh, np.maximum(hv, gi + 0.2),
-                                                np.where(bou, hbo, gi)))
-        cnew = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE,
-                                                np.where(bou, CLASS_BOULDER, CLASS_GROUND)))
+        znew = np.where(bush, gi + hb, np.where(veh, np.maximum(hv, gi + 0.2), np.where(bou, hbo, gi)))
+        cnew = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE, np.where(bou, CLASS_BOULDER, CLASS_GROUND)))
         z[idx] = znew
         cls[idx] = cnew.astype(np.uint8)
 

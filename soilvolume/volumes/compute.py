@@ -60,22 +60,38 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
     shift = pose_effect(f_a, grid, moved)
     reg_v = signed_budget(shift, fill_area, cut_area, area)
     extra = {k: abs(reg_v[k]) for k in ("net", "cut", "fill")}
-    unc = volume_uncertainty(diff, stable, change, grid, options.lod_confidence,
-                             n_coef=N_COEF[options.correction], filled_mask=filled_mask, fill_sigma=fill_sigma,
-                             extra_sigma=extra)
+    unc = volume_uncertainty(
+        diff,
+        stable,
+        change,
+        grid,
+        options.lod_confidence,
+        n_coef=N_COEF[options.correction],
+        filled_mask=filled_mask,
+        fill_sigma=fill_sigma,
+        extra_sigma=extra,
+    )
     headline = signed_budget(diff, fill_area, cut_area, area)
     vols = {
-        "raw": raw, "filled": filled, "filled_mask": filled_mask, "offset": offset, "diff": diff,
-        "stable": stable, "params": params,
+        "raw": raw,
+        "filled": filled,
+        "filled_mask": filled_mask,
+        "offset": offset,
+        "diff": diff,
+        "stable": stable,
+        "params": params,
         "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v},
         "change_mask": change,
-        "compensated": headline, "all_cells": budget(diff, area), "uncompensated": budget(filled, area),
+        "compensated": headline,
+        "all_cells": budget(diff, area),
+        "uncompensated": budget(filled, area),
         "paper_plane": budget(filled - d_i, area),
         "change_areas": headline,
         "thresholded": thresholded_volumes(diff, lod, area),
         "holes": holes.summary(diff, filled_mask, area),
         "empty_cells": int((~np.isfinite(raw)).sum()),
-        "empty_before": int((n_b == 0).sum()), "empty_after": int((n_a == 0).sum()),
+        "empty_before": int((n_b == 0).sum()),
+        "empty_after": int((n_a == 0).sum()),
     }
     if options.zones:
         from .zones import zone_budgets
@@ -128,7 +144,6 @@ def correction(diff, d_i, grid: GridSpec, options: Options):
         from .zones import polygons_mask
 
         user_mask = polygons_mask(options.stable_mask, grid)
-    res = apply_correction(diff - base, "none" if method == "paper-plane" else method, grid,
-                           user_mask=user_mask)
+    res = apply_correction(diff - base, "none" if method == "paper-plane" else method, grid, user_mask=user_mask)
     offset = np.where(np.isfinite(diff), base + res.surface, np.nan)
     return offset, {**res.params, "method": method}, res.stable_mask, res.change_mask

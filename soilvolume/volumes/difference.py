@@ -18,8 +18,7 @@ def budget(diff: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -
     d = diff[ok]
     fill = float(d[d > 0].sum() * cell_area)
     cut = float(-d[d < 0].sum() * cell_area)
-    return {"net": fill - cut, "cut": cut, "fill": fill, "cells": int(ok.sum()),
-            "area_m2": float(ok.sum() * cell_area)}
+    return {"net": fill - cut, "cut": cut, "fill": fill, "cells": int(ok.sum()), "area_m2": float(ok.sum() * cell_area)}
 
 
 def signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray, cell_area: float) -> dict:

@@ -16,8 +16,15 @@ MIN_STABLE_CELLS = 30
 PRIOR_MARGIN = 0.8  # a pose using more than this share of the prior is suspicious
 
 
-def assess(report: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndarray, cell_area: float,
-           prior: dict, diff: np.ndarray | None = None) -> dict:
+def assess(
+    report: dict,
+    stable: np.ndarray,
+    change: np.ndarray,
+    offset: np.ndarray,
+    cell_area: float,
+    prior: dict,
+    diff: np.ndarray | None = None,
+) -> dict:
     """``{"verdict", "trusted", "messages"}`` for a finished run (see module)."""
     out: list[tuple[str, str]] = []
     v, u = report["volume_m3"], report["uncertainty_m3"]
@@ -26,18 +33,36 @@ def assess(report: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndar
     n_stable, n_valid = int(stable.sum()), max(int(valid.sum()), 1)
     if used == "gps":
         if n_stable < MIN_STABLE_CELLS or n_stable / n_valid < MIN_STABLE_FRACTION:
-            out.append(("unreliable", f"too little stable ground ({n_stable / n_valid:.0%} of the compared area) to "
-                        "register the surveys and remove their bias: the works may have been absorbed"))
+            out.append(
+                (
+                    "unreliable",
+                    f"too little stable ground ({n_stable / n_valid:.0%} of the compared area) to "
+                    "register the surveys and remove their bias: the works may have been absorbed",
+                )
+            )
         elif largest_gap_deg(stable, change) > 180:
-            out.append(("caution", "the stable ground lies on one side of the works only: tilt and bias across "
-                        "the works are extrapolated"))
+            out.append(
+                (
+                    "caution",
+                    "the stable ground lies on one side of the works only: tilt and bias across "
+                    "the works are extrapolated",
+                )
+            )
         reg = report["registration"]
-        for key, limit, unit in (("rotation_deg", prior["rotation"], "deg"), ("tilt_deg", prior["tilt"], "deg"),
-                                 ("shift_m", prior["shift"], "m")):
+        for key, limit, unit in (
+            ("rotation_deg", prior["rotation"], "deg"),
+            ("tilt_deg", prior["tilt"], "deg"),
+            ("shift_m", prior["shift"], "m"),
+        ):
             val = reg.get(key, 0.0)
             if limit > 0 and val > PRIOR_MARGIN * limit:
-                out.append(("caution", f"the registration used {val:.2f} {unit} of a {limit:g} {unit} "
-                            f"georeferencing prior ({key.split('_')[0]})"))
+                out.append(
+                    (
+                        "caution",
+                        f"the registration used {val:.2f} {unit} of a {limit:g} {unit} "
+                        f"georeferencing prior ({key.split('_')[0]})",
+                    )
+                )
         fit = reg.get("fine", {}).get("fitness")
         if fit is not None and np.isfinite(fit) and fit < 0.5:
             out.append(("caution", f"only {fit:.0%} of the after survey fits the before surface after registration"))
@@ -45,23 +70,40 @@ def assess(report: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndar
         ground = diff[stable & np.isfinite(diff)] if diff is not None else np.empty(0)
         shift = float(np.median(ground)) if ground.size else 0.0
         if abs(shift) > 0.05:
-            out.append(("caution", f"the ground outside the change areas differs by {shift:+.2f} m between the "
-                        "surveys and was not corrected (coordinates used as georeferenced): check the datums, or "
-                        "use --georeferencing gps if it is a survey offset"))
+            out.append(
+                (
+                    "caution",
+                    f"the ground outside the change areas differs by {shift:+.2f} m between the "
+                    "surveys and was not corrected (coordinates used as georeferenced): check the datums, or "
+                    "use --georeferencing gps if it is a survey offset",
+                )
+            )
     corr = float(np.nansum(np.where(change, offset, 0.0)) * cell_area)
     net = abs(v["net"])
     if abs(corr) > 0.5 * max(net, 1e-9) and abs(corr) > u["net"] / 2:
         sev = "unreliable" if abs(corr) > 2 * max(net, 1e-9) else "caution"
-        out.append((sev, f"the bias correction ({corr:+.1f} m3 over the change areas) is comparable to the net "
-                    f"change ({v['net']:+.1f} m3)"))
+        out.append(
+            (
+                sev,
+                f"the bias correction ({corr:+.1f} m3 over the change areas) is comparable to the net "
+                f"change ({v['net']:+.1f} m3)",
+            )
+        )
     if net <= u["net"]:
-        out.append(("caution", f"the net change ({v['net']:+.1f} m3) is within its 95 % interval (±{u['net']:.1f} "
-                    "m3) of zero: it is not significant"))
+        out.append(
+            (
+                "caution",
+                f"the net change ({v['net']:+.1f} m3) is within its 95 % interval (±{u['net']:.1f} "
+                "m3) of zero: it is not significant",
+            )
+        )
     return _verdict(out)
 
 
 def _verdict(found: list[tuple[str, str]]) -> dict:
     worst = 2 if any(s == "unreliable" for s, _ in found) else 1 if found else 0
-    messages = [m for _, m in found] or ["stable ground surrounds the works, the registration stays within "
-                                         "the georeferencing prior and the net change is significant"]
+    messages = [m for _, m in found] or [
+        "stable ground surrounds the works, the registration stays within "
+        "the georeferencing prior and the net change is significant"
+    ]
     return {"verdict": VERDICTS[worst], "trusted": worst == 0, "messages": messages}

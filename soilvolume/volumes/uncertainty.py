@@ -39,7 +39,10 @@ def level_of_detection(
 
 
 def semivariogram(
-    residual: np.ndarray, mask: np.ndarray, cell: float, n_lags: int = 24,
+    residual: np.ndarray,
+    mask: np.ndarray,
+    cell: float,
+    n_lags: int = 24,
     max_lag_cells: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Isotropic empirical semivariogram from row/column shifts of the masked residuals:
@@ -78,8 +81,7 @@ def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> d
     p0 = [float(gamma[0]) * 0.5, max(g_max - float(gamma[0]) * 0.5, 1e-12), float(reach)]
     bounds = ([0.0, 0.0, float(lags[0]) * 0.5], [g_max * 2, g_max * 2, float(lags[-1]) * 2])
     try:
-        p, _ = optimize.curve_fit(spherical, lags, gamma, p0=p0, bounds=bounds,
-                                  sigma=1 / np.sqrt(n_pairs), maxfev=5000)
+        p, _ = optimize.curve_fit(spherical, lags, gamma, p0=p0, bounds=bounds, sigma=1 / np.sqrt(n_pairs), maxfev=5000)
     except (RuntimeError, ValueError):
         p = p0
     return {"nugget": float(p[0]), "psill": float(p[1]), "range": float(p[2])}
@@ -99,8 +101,9 @@ def correlated_fraction(area: float, rng: float) -> float:
     return 1 - q + q**3 / 5
 
 
-def region_sigma(n_cells: int, cell: float, model: dict[str, float], bias_sigma: float = 0.0,
-                 per_cell_var: float = 0.0) -> float:
+def region_sigma(
+    n_cells: int, cell: float, model: dict[str, float], bias_sigma: float = 0.0, per_cell_var: float = 0.0
+) -> float:
     """One-sigma volume uncertainty (m^3) over ``n_cells`` cells."""
     if n_cells <= 0:
         return 0.0
@@ -117,8 +120,7 @@ def bias_sigma(n_stable: int, cell: float, model: dict[str, float], n_coef: int)
     if n_stable <= 0:
         return 0.0
     area = n_stable * cell * cell
-    var_mean = model["nugget"] / n_stable + model["psill"] * correlated_fraction(
-        area, model["range"])
+    var_mean = model["nugget"] / n_stable + model["psill"] * correlated_fraction(area, model["range"])
     return math.sqrt(max(n_coef, 1) * var_mean)
 
 
@@ -177,19 +179,27 @@ def volume_uncertainty(
 
     extra = extra_sigma or {}
     out: dict[str, Any] = {
-        k: z * float(np.linalg.norm([region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m), refill(m),
-                                     extra.get(k, 0.0)]))
+        k: z
+        * float(
+            np.linalg.norm(
+                [region_sigma(int(m.sum()), grid.cell, model, b, pcv), interp(m), refill(m), extra.get(k, 0.0)]
+            )
+        )
         for k, m in parts.items()
     }
     out.update(
-        confidence=confidence, sigma_m=sigma, lod_m=_lod(diff_corrected[stable], sigma, confidence),
-        nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"],
-        bias_sigma_m=b, interpolated_m3=interp(region) / max(interp_fraction, 1e-12),
+        confidence=confidence,
+        sigma_m=sigma,
+        lod_m=_lod(diff_corrected[stable], sigma, confidence),
+        nugget_m2=model["nugget"],
+        psill_m2=model["psill"],
+        range_m=model["range"],
+        bias_sigma_m=b,
+        interpolated_m3=interp(region) / max(interp_fraction, 1e-12),
         refill_sigma_m3=refill(region),
-        stable_cells=int(stable.sum()), change_area_m2=float(region.sum())
-        * grid.cell_area,
-        variogram={"lag_m": lags.tolist(), "gamma_m2": gamma.tolist(),
-                   "pairs": npairs.tolist()},
+        stable_cells=int(stable.sum()),
+        change_area_m2=float(region.sum()) * grid.cell_area,
+        variogram={"lag_m": lags.tolist(), "gamma_m2": gamma.tolist(), "pairs": npairs.tolist()},
     )
     return out
 

@@ -29,9 +29,7 @@ class Polygon:
     geometry: dict[str, Any]
 
 
-def read_polygons(
-    path: str | Path, name_field: str | None = None
-) -> tuple[list[Polygon], str | None]:
+def read_polygons(path: str | Path, name_field: str | None = None) -> tuple[list[Polygon], str | None]:
     """(polygons, CRS WKT or None) of the first layer of ``path``; non-polygon features are
     skipped. Raises SoilVolumeError naming the file when it cannot be read."""
     path = Path(path)
@@ -47,8 +45,7 @@ def read_polygons(
     for i, (fid, props, geom) in enumerate(feats):
         if geom is None or geom.get("type") not in ("Polygon", "MultiPolygon"):
             continue
-        polys.append(Polygon(int(fid if fid is not None else i), _name(props, name_field, i, path),
-                             geom))
+        polys.append(Polygon(int(fid if fid is not None else i), _name(props, name_field, i, path), geom))
     if not polys:
         raise SoilVolumeError(f"{path}: no polygon features")
     return polys, wkt
@@ -67,8 +64,10 @@ def _read_fiona(path: Path):
 
     with fiona.open(path) as src:
         wkt = src.crs_wkt or None
-        feats = [(f.id, dict(f.properties or {}),
-                  json.loads(json.dumps(dict(f.geometry))) if f.geometry else None) for f in src]
+        feats = [
+            (f.id, dict(f.properties or {}), json.loads(json.dumps(dict(f.geometry))) if f.geometry else None)
+            for f in src
+        ]
     return feats, wkt
 
 
@@ -117,8 +116,14 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid: GridSpec) -> li
     if src.equals(dst, ignore_axis_order=True):
         return polys
     tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)
-    return [Polygon(p.id, p.name, {"type": p.geometry["type"], "coordinates": _transform_coords(
-        p.geometry["coordinates"], tr.transform)}) for p in polys]
+    return [
+        Polygon(
+            p.id,
+            p.name,
+            {"type": p.geometry["type"], "coordinates": _transform_coords(p.geometry["coordinates"], tr.transform)},
+        )
+        for p in polys
+    ]
 
 
 def _grid_transform(grid: GridSpec) -> Affine:
@@ -132,8 +137,12 @@ def _grid_transform(grid: GridSpec) -> Affine:
 def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
     """One boolean (rows, cols) mask per polygon (cells whose centre is inside)."""
     tf = _grid_transform(grid)
-    return [features.rasterize([(p.geometry, 1)], out_shape=(grid.rows, grid.cols), transform=tf,
-                               fill=0, dtype="uint8").astype(bool) for p in polys]
+    return [
+        features.rasterize(
+            [(p.geometry, 1)], out_shape=(grid.rows, grid.cols), transform=tf, fill=0, dtype="uint8"
+        ).astype(bool)
+        for p in polys
+    ]
 
 
 def polygons_mask(path: str | Path, grid: GridSpec) -> np.ndarray:
@@ -175,8 +184,7 @@ def net_half_width(area_m2: float, cell: float, uncertainty: dict[str, Any]) -> 
     from .uncertainty import region_sigma, z_value
 
     try:
-        model = {"nugget": uncertainty["nugget_m2"], "psill": uncertainty["psill_m2"],
-                 "range": uncertainty["range_m"]}
+        model = {"nugget": uncertainty["nugget_m2"], "psill": uncertainty["psill_m2"], "range": uncertainty["range_m"]}
         bias, confidence = uncertainty.get("bias_sigma_m", 0.0), uncertainty.get("confidence", 0.95)
     except (KeyError, TypeError):
         return None

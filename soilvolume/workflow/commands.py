@@ -46,9 +46,16 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     with os_errors(out_tif):
         gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
     hooks.step(100, "done")
-    return {"cell_m": cell, "rows": grid.rows, "cols": grid.cols, "crs": frame.crs.name,
-            "transform": list(grid.transform)[:6], "points": int(len(xyz)),
-            "valid_cells": int(np.isfinite(h).sum()), "selection": one.note}
+    return {
+        "cell_m": cell,
+        "rows": grid.rows,
+        "cols": grid.cols,
+        "crs": frame.crs.name,
+        "transform": list(grid.transform)[:6],
+        "points": int(len(xyz)),
+        "valid_cells": int(np.isfinite(h).sum()),
+        "selection": one.note,
+    }
 
 
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
@@ -59,12 +66,22 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
     hooks.step(5, "reading")
     prep = prepare_pair(before, after, options, hooks, None, None)
     hooks.step(20, "registering")
-    reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(20, 90, "registering"),
-                   dense=(prep.after.xyz, prep.before.xyz))
+    reg = register(
+        prep.after_thin,
+        prep.before_thin,
+        options,
+        check=hooks.ticker(20, 90, "registering"),
+        dense=(prep.after.xyz, prep.before.xyz),
+    )
     hooks.step(90, "writing the registered cloud")
     with os_errors(out_cloud):
         write_las_chunked(out_cloud, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
     hooks.step(100, "done")
 
-    return _clean({"transform": absolute_transform(reg.transform, prep.origin),
-                   "coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine)})
+    return _clean(
+        {
+            "transform": absolute_transform(reg.transform, prep.origin),
+            "coarse": stage_dict(reg.coarse),
+            "fine": stage_dict(reg.fine),
+        }
+    )

@@ -30,24 +30,34 @@ def _threads(options: Options) -> None:
 
 
 def run_estimate(
-    before: Path, after: Path, out_dir: Path, options: Options, *, overwrite: bool, hooks: Hooks,
-    before_pipeline=None, after_pipeline=None,
+    before: Path,
+    after: Path,
+    out_dir: Path,
+    options: Options,
+    *,
+    overwrite: bool,
+    hooks: Hooks,
+    before_pipeline=None,
+    after_pipeline=None,
 ) -> Result:
     """See :func:`soilvolume.api.estimate`."""
     _threads(options)
     timer = Timer()
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
-    with output_dir(out_dir, inputs, overwrite) as out, os_errors(out.final), \
-            writers_into(out.stage, inputs, RUN_OUTPUTS):
+    with (
+        output_dir(out_dir, inputs, overwrite) as out,
+        os_errors(out.final),
+        writers_into(out.stage, inputs, RUN_OUTPUTS),
+    ):
         result = _estimate(before, after, out, options, timer, hooks, before_pipeline, after_pipeline)
-    result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p
-                      for n, p in out.moved.items()}
+    result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in out.moved.items()}
     hooks.step(100, "done")
     return result
 
 
-def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hooks: Hooks,
-              before_pipeline, after_pipeline) -> Result:
+def _estimate(
+    before, after, out: OutputDir, options: Options, timer: Timer, hooks: Hooks, before_pipeline, after_pipeline
+) -> Result:
     from ..distributed.tiled import schedule_for
 
     schedule = schedule_for(before, after, options, before_pipeline or after_pipeline)
@@ -60,9 +70,11 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
         prep = prepare_pair(before, after, options, hooks, before_pipeline, after_pipeline)
     timer.s["read"] = prep.read_s  # the rest of streaming: frame, crop, thinning
     timer.s["crop"] -= prep.read_s
-    hooks.info(f"kept {len(prep.before):,} before points within {options.radius:g} m of the after "
-               f"footprint and {len(prep.after):,} after points; registration subsets "
-               f"{len(prep.before_thin):,} + {len(prep.after_thin):,} ({prep.voxel:.2f} m columns)")
+    hooks.info(
+        f"kept {len(prep.before):,} before points within {options.radius:g} m of the after "
+        f"footprint and {len(prep.after):,} after points; registration subsets "
+        f"{len(prep.before_thin):,} + {len(prep.after_thin):,} ({prep.voxel:.2f} m columns)"
+    )
     from ..registration.georef import resolve
 
     mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
@@ -71,8 +83,14 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
         options = options.with_(correction="none")
     hooks.step(15, REGISTERING)
     with timer("register"):
-        reg = register(prep.after_thin, prep.before_thin, options, check=hooks.ticker(15, 55, REGISTERING),
-                       dense=(prep.after.xyz, prep.before.xyz), precise=mode == "precise")
+        reg = register(
+            prep.after_thin,
+            prep.before_thin,
+            options,
+            check=hooks.ticker(15, 55, REGISTERING),
+            dense=(prep.after.xyz, prep.before.xyz),
+            precise=mode == "precise",
+        )
     reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
@@ -85,8 +103,7 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
             after_xyz = transform_points32(prep.after.xyz, reg.transform)
             after_thin = transform_points(prep.after_thin, reg.transform)
             grid = shared_grid(prep, after_thin, options)
-            before_job = pool.submit(gridmod.average_height, prep.before.xyz, grid, options.statistic,
-                                     spread=True)
+            before_job = pool.submit(gridmod.average_height, prep.before.xyz, grid, options.statistic, spread=True)
             h_a, n_a, s_a = gridmod.average_height(after_xyz, grid, options.statistic, spread=True)
             del after_xyz
             h_b, n_b, s_b = before_job.result()
@@ -112,8 +129,9 @@ def _estimate(before, after, out: OutputDir, options: Options, timer: Timer, hoo
         from ..volumes.quality import assess
 
         prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-        report["quality"] = assess(report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior,
-                                   vols["diff"])
+        report["quality"] = assess(
+            report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior, vols["diff"]
+        )
         for line in report["quality"]["messages"]:
             hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_json(out.path("report.json"), report)
@@ -126,19 +144,34 @@ def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, 
     registration) in the background (None when not asked for)."""
     if not options.keep_registered_cloud:
         return None
-    return pool.submit(write_las_chunked, out.path("after_registered.laz"), prep.after_chunks(), prep.origin,
-                       prep.frame.wkt, reg.transform)
+    return pool.submit(
+        write_las_chunked,
+        out.path("after_registered.laz"),
+        prep.after_chunks(),
+        prep.origin,
+        prep.frame.wkt,
+        reg.transform,
+    )
 
 
 def _write_rasters(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, prep: Prepared, options: Options) -> None:
     z0 = float(prep.origin[2])  # local -> absolute heights
     gridmod.write_geotiff(out.path("dem_before.tif"), h_b + z0, grid, "average height, before (m)")
     gridmod.write_geotiff(out.path("dem_after.tif"), h_a + z0, grid, "average height, after (m)")
-    gridmod.write_geotiff(out.path("difference.tif"), vols["diff"], grid,
-                          f"H_after - H_before - correction ({options.correction}) (m)")
-    gridmod.write_geotiff(out.path("plane_offset.tif"), vols["offset"], grid,
-                          f"vertical correction d_i subtracted ({options.correction}) (m)")
-    gridmod.write_geotiff(out.path("filled_mask.tif"), vols["filled_mask"].astype("uint8"), grid,
-                          "1 = difference interpolated (sparse cell or filled hole)", "", "uint8")
-
-
+    gridmod.write_geotiff(
+        out.path("difference.tif"), vols["diff"], grid, f"H_after - H_before - correction ({options.correction}) (m)"
+    )
+    gridmod.write_geotiff(
+        out.path("plane_offset.tif"),
+        vols["offset"],
+        grid,
+        f"vertical correction d_i subtracted ({options.correction}) (m)",
+    )
+    gridmod.write_geotiff(
+        out.path("filled_mask.tif"),
+        vols["filled_mask"].astype("uint8"),
+        grid,
+        "1 = difference interpolated (sparse cell or filled hole)",
+        "",
+        "uint8",
+    )

@@ -45,8 +45,7 @@ def grid_of(profile: dict) -> GridSpec:
         raise SoilVolumeError("rasters must be north-up with square cells")
     crs = parse_crs(profile["crs"].to_wkt(), "raster")
     u = xy_unit(crs)
-    return GridSpec(t.c * u, t.f * u, t.a * u, profile["height"], profile["width"], (0.0, 0.0, 0.0),
-                    crs.to_wkt(), u)
+    return GridSpec(t.c * u, t.f * u, t.a * u, profile["height"], profile["width"], (0.0, 0.0, 0.0), crs.to_wkt(), u)
 
 
 def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
@@ -54,21 +53,33 @@ def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
     from rasterio.warp import Resampling, reproject
 
     out = np.full((dst["height"], dst["width"]), np.nan)
-    reproject(z, out, src_transform=src["transform"], src_crs=src["crs"], src_nodata=np.nan,
-              dst_transform=dst["transform"], dst_crs=dst["crs"], dst_nodata=np.nan,
-              resampling=Resampling.bilinear)
+    reproject(
+        z,
+        out,
+        src_transform=src["transform"],
+        src_crs=src["crs"],
+        src_nodata=np.nan,
+        dst_transform=dst["transform"],
+        dst_crs=dst["crs"],
+        dst_nodata=np.nan,
+        resampling=Resampling.bilinear,
+    )
     return out
 
 
-def run_volume_from_rasters(before: Path, after: Path, out: Path, *, zones=None, zone_field=None,
-                            hooks: Hooks) -> dict[str, Any]:
+def run_volume_from_rasters(
+    before: Path, after: Path, out: Path, *, zones=None, zone_field=None, hooks: Hooks
+) -> dict[str, Any]:
     """See :func:`soilvolume.api.volume_from_rasters`."""
     out = check_output_file(out, [before, after, zones])
     hooks.step(5, f"reading {before.name} and {after.name}")
     zb, pb = read_dem(before)
     za, pa = read_dem(after)
-    same = pa["transform"] == pb["transform"] and (pa["height"], pa["width"]) == (pb["height"], pb["width"]) \
+    same = (
+        pa["transform"] == pb["transform"]
+        and (pa["height"], pa["width"]) == (pb["height"], pb["width"])
         and pa["crs"] == pb["crs"]
+    )
     if not same:
         hooks.info(f"resampling {after.name} onto the grid of {before.name}")
         za = resample_onto(za, pa, pb)
@@ -77,8 +88,12 @@ def run_volume_from_rasters(before: Path, after: Path, out: Path, *, zones=None,
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
     hooks.step(60, "computing cut and fill")
-    result: dict[str, Any] = {"total": _public(budget(diff, grid.cell_area)), "zones": [],
-                              "cell_m": grid.cell, "crs": parse_crs(grid.crs_wkt, "raster").name}
+    result: dict[str, Any] = {
+        "total": _public(budget(diff, grid.cell_area)),
+        "zones": [],
+        "cell_m": grid.cell,
+        "crs": parse_crs(grid.crs_wkt, "raster").name,
+    }
     if zones:  # before writing: a bad zones file leaves nothing behind
         from ..volumes.zones import zone_budgets
 

@@ -21,7 +21,6 @@ from ..validate import check_grid_cells
 REGISTERING = "registering the after cloud onto the before cloud (coarse, then fine)"
 
 
-
 class Timer:
     """Per-stage wall times (seconds), in the order they ran."""
 
@@ -71,6 +70,10 @@ def write_report_html(out: OutputDir, report: dict, vols: dict, grid: GridSpec) 
         from ..reporting.html import write_html
     except ImportError:
         return
-    arrays = {"difference": vols["diff"], "residual": np.where(vols["stable"], vols["diff"], np.nan),
-              "filled_mask": vols["filled_mask"], "dem_after": vols["dem_after"]}
+    arrays = {
+        "difference": vols["diff"],
+        "residual": np.where(vols["stable"], vols["diff"], np.nan),
+        "filled_mask": vols["filled_mask"],
+        "dem_after": vols["dem_after"],
+    }
     write_html(report, arrays, grid, out.path("report.html"))

@@ -95,8 +95,9 @@ def run_algorithm(name: str, parameters: dict, context=None, feedback=None) -> d
     from qgis.core import QgsProcessingFeedback
 
     ensure_provider()
-    return processing.run(f"{PROVIDER_ID}:{name}", parameters, context=context,
-                          feedback=feedback or QgsProcessingFeedback())
+    return processing.run(
+        f"{PROVIDER_ID}:{name}", parameters, context=context, feedback=feedback or QgsProcessingFeedback()
+    )
 
 
 @pytest.fixture(scope="session")
@@ -133,15 +134,21 @@ def estimate_run(qgis_processing, plugin_package, scene_dir, tmp_path_factory) -
     """One full estimate through processing.run with every output written to files."""
     out = tmp_path_factory.mktemp("estimate")
     params = {
-        "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"),
-        "CELL": 1.0, "RADIUS": 30.0, "FINE": "icp", "CORRECTION": "surface",
-        "DIFFERENCE": str(out / "difference.tif"), "DEM_BEFORE": str(out / "dem_before.tif"),
-        "DEM_AFTER": str(out / "dem_after.tif"), "PLANE_OFFSET": str(out / "plane_offset.tif"),
-        "REGISTERED": str(out / "after_registered.laz"), "REPORT": str(out / "report.html"),
+        "BEFORE": str(scene_dir / "before.las"),
+        "AFTER": str(scene_dir / "after.las"),
+        "CELL": 1.0,
+        "RADIUS": 30.0,
+        "FINE": "icp",
+        "CORRECTION": "surface",
+        "DIFFERENCE": str(out / "difference.tif"),
+        "DEM_BEFORE": str(out / "dem_before.tif"),
+        "DEM_AFTER": str(out / "dem_after.tif"),
+        "PLANE_OFFSET": str(out / "plane_offset.tif"),
+        "REGISTERED": str(out / "after_registered.laz"),
+        "REPORT": str(out / "report.html"),
         "REPORT_JSON": str(out / "report.json"),
     }
     return run_algorithm("estimatevolumechange", params)
-
 
 
 _RESTORED: list[bool] = []

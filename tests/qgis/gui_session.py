@@ -63,11 +63,13 @@ def dialog_checks(before: str, after: str, artefacts: Path) -> dict:
     from qgis.PyQt.QtWidgets import QDoubleSpinBox, QLabel
 
     radius = wrappers["RADIUS"].wrappedWidget()
-    out = {"radius_text": radius.findChild(QDoubleSpinBox).text(),
-           "radius_labels": [label.text() for label in radius.findChildren(QLabel)],
-           "fine_value": wrappers["FINE"].widgetValue(),
-           "before_value": wrappers["BEFORE"].widgetValue(),
-           "registered_created": bool(wrappers["REGISTERED"].widgetValue())}
+    out = {
+        "radius_text": radius.findChild(QDoubleSpinBox).text(),
+        "radius_labels": [label.text() for label in radius.findChildren(QLabel)],
+        "fine_value": wrappers["FINE"].widgetValue(),
+        "before_value": wrappers["BEFORE"].widgetValue(),
+        "registered_created": bool(wrappers["REGISTERED"].widgetValue()),
+    }
     dialog.close()
     return out
 
@@ -76,8 +78,12 @@ def run_and_load(before: str, after: str, out_dir: Path) -> dict:
     from processing.tools.general import runAndLoadResults
 
     rasters = ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")
-    params = {"BEFORE": before, "AFTER": after, "CELL": 1.0,
-              **{key: str(out_dir / f"{key.lower()}.tif") for key in rasters}}
+    params = {
+        "BEFORE": before,
+        "AFTER": after,
+        "CELL": 1.0,
+        **{key: str(out_dir / f"{key.lower()}.tif") for key in rasters},
+    }
     return runAndLoadResults("soilvolume:estimatevolumechange", params)
 
 
@@ -90,9 +96,14 @@ def legend_checks(model: QgsLayerTreeModel) -> list[dict]:
         ramp = [n for n in model.layerLegendNodes(node) if isinstance(n, QgsColorRampLegendNode)]
         data = ramp[0].exportToJson(QgsLegendSettings(), QgsRenderContext()) if ramp else None
         renderer = layer.renderer()
-        rows.append({"name": layer.name(), "legend": [data["min"].toDouble(), data["max"].toDouble()] if data else None,
-                     "style": [renderer.classificationMin(), renderer.classificationMax()],
-                     "nodata": layer.dataProvider().sourceNoDataValue(1)})
+        rows.append(
+            {
+                "name": layer.name(),
+                "legend": [data["min"].toDouble(), data["max"].toDouble()] if data else None,
+                "style": [renderer.classificationMin(), renderer.classificationMax()],
+                "nodata": layer.dataProvider().sourceNoDataValue(1),
+            }
+        )
     return rows
 
 

@@ -29,16 +29,22 @@ def test_wrong_file_type(run_alg, scene_dir, tmp_path):
     shapefile = tmp_path / "parcels.shp"
     shapefile.write_bytes(b"\0" * 100)
     with pytest.raises(QgsProcessingException, match=r"unsupported file type '\.shp'"):
-        run_alg("estimatevolumechange", {
-            "BEFORE": str(shapefile), "AFTER": str(scene_dir / "after.las"),
-            "DIFFERENCE": str(tmp_path / "d.tif")})
+        run_alg(
+            "estimatevolumechange",
+            {"BEFORE": str(shapefile), "AFTER": str(scene_dir / "after.las"), "DIFFERENCE": str(tmp_path / "d.tif")},
+        )
 
 
 def test_missing_file(run_alg, scene_dir, tmp_path):
     with pytest.raises(QgsProcessingException, match="file not found"):
-        run_alg("registerpointclouds", {
-            "BEFORE": str(tmp_path / "nowhere.las"), "AFTER": str(scene_dir / "after.las"),
-            "OUTPUT": str(tmp_path / "r.laz")})
+        run_alg(
+            "registerpointclouds",
+            {
+                "BEFORE": str(tmp_path / "nowhere.las"),
+                "AFTER": str(scene_dir / "after.las"),
+                "OUTPUT": str(tmp_path / "r.laz"),
+            },
+        )
 
 
 def test_no_input_cloud(run_alg, tmp_path):
@@ -49,17 +55,19 @@ def test_no_input_cloud(run_alg, tmp_path):
 def test_missing_crs_names_the_parameter(run_alg, xyz_pair, tmp_path):
     before, after = xyz_pair
     with pytest.raises(QgsProcessingException) as info:
-        run_alg("estimatevolumechange", {
-            "BEFORE": str(before), "AFTER": str(after), "DIFFERENCE": str(tmp_path / "d.tif")})
+        run_alg(
+            "estimatevolumechange", {"BEFORE": str(before), "AFTER": str(after), "DIFFERENCE": str(tmp_path / "d.tif")}
+        )
     message = str(info.value)
     assert "CRS" in message and "CRS override" in message
     assert not (tmp_path / "d.tif").exists()
 
 
 def test_crs_override_makes_xyz_usable(run_alg, xyz_pair, tmp_path):
-    res = run_alg("pointcloudtodem", {
-        "INPUT": str(xyz_pair[0]), "CRS": "EPSG:32654", "CELL": 4.0,
-        "OUTPUT": str(tmp_path / "dem.tif")})
+    res = run_alg(
+        "pointcloudtodem",
+        {"INPUT": str(xyz_pair[0]), "CRS": "EPSG:32654", "CELL": 4.0, "OUTPUT": str(tmp_path / "dem.tif")},
+    )
     assert res["VALID_CELLS"] > 100
 
 
@@ -71,9 +79,10 @@ def test_no_overlap(run_alg, scene_dir, tmp_path):
     las.x = np.asarray(las.x) + 10_000.0  # 10 km east of the before survey
     las.write(far)
     with pytest.raises(QgsProcessingException) as info:
-        run_alg("estimatevolumechange", {
-            "BEFORE": str(scene_dir / "before.las"), "AFTER": str(far),
-            "DIFFERENCE": str(tmp_path / "d.tif")})
+        run_alg(
+            "estimatevolumechange",
+            {"BEFORE": str(scene_dir / "before.las"), "AFTER": str(far), "DIFFERENCE": str(tmp_path / "d.tif")},
+        )
     assert "overlap" in str(info.value).lower()
     assert not (tmp_path / "d.tif").exists()
 
@@ -91,9 +100,15 @@ def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "open3d", None)  # "import open3d" now fails
     feedback = Warnings()
     with pytest.raises(QgsProcessingException, match=r"missing Python packages \(open3d\)"):
-        run_alg("estimatevolumechange", {
-            "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"),
-            "DIFFERENCE": str(tmp_path / "d.tif")}, feedback=feedback)
+        run_alg(
+            "estimatevolumechange",
+            {
+                "BEFORE": str(scene_dir / "before.las"),
+                "AFTER": str(scene_dir / "after.las"),
+                "DIFFERENCE": str(tmp_path / "d.tif"),
+            },
+            feedback=feedback,
+        )
     message = "\n".join(feedback.texts)
     assert "cannot import open3d" in message and "press Install" in message
     assert f"--target {deps.site_dir()}" in message and "--no-deps open3d" in message
@@ -108,5 +123,4 @@ def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch
 
     monkeypatch.setattr(engine, "engine", broken)
     with pytest.raises(QgsProcessingException, match="engine package 'soilvolume' does not import"):
-        run_alg("pointcloudtodem", {
-            "INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")})
+        run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")})

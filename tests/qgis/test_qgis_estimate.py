@@ -20,8 +20,7 @@ def test_volumes_match_the_truth(estimate_run, truth):
     # cut and fill also carry the survey noise (3 cm in each epoch), net does not
     assert estimate_run["FILL_VOLUME"] == pytest.approx(truth["fill"], rel=0.1)
     assert estimate_run["CUT_VOLUME"] == pytest.approx(truth["cut"], abs=0.1 * truth["fill"])
-    assert estimate_run["FILL_VOLUME"] - estimate_run["CUT_VOLUME"] == pytest.approx(
-        estimate_run["NET_VOLUME"])
+    assert estimate_run["FILL_VOLUME"] - estimate_run["CUT_VOLUME"] == pytest.approx(estimate_run["NET_VOLUME"])
     assert estimate_run["CELL_SIZE"] == pytest.approx(1.0)
 
 
@@ -62,8 +61,7 @@ def test_reports_and_registered_cloud(estimate_run):
 
     report = json.loads(Path(estimate_run["REPORT_JSON"]).read_text())
     assert report["volume_m3"]["net"] == pytest.approx(estimate_run["NET_VOLUME"])
-    assert report["volume_uncompensated_m3"]["net"] == pytest.approx(
-        estimate_run["UNCOMPENSATED_NET_VOLUME"])
+    assert report["volume_uncompensated_m3"]["net"] == pytest.approx(estimate_run["UNCOMPENSATED_NET_VOLUME"])
     with laspy.open(estimate_run["REGISTERED"]) as reader:
         assert reader.header.point_count > 10_000
         assert reader.header.parse_crs().to_epsg() == 32654

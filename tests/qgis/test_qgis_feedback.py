@@ -25,8 +25,11 @@ class RecordingFeedback(QgsProcessingFeedback):
 
 def test_progress_and_engine_log(run_alg, scene_dir, tmp_path):
     feedback = RecordingFeedback()
-    run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "before.las"), "CELL": 2.0,
-                                "OUTPUT": str(tmp_path / "dem.tif")}, feedback=feedback)
+    run_alg(
+        "pointcloudtodem",
+        {"INPUT": str(scene_dir / "before.las"), "CELL": 2.0, "OUTPUT": str(tmp_path / "dem.tif")},
+        feedback=feedback,
+    )
     assert feedback.progress and feedback.progress[-1] == pytest.approx(100)
     assert feedback.progress == sorted(feedback.progress)
     assert any("gridding" in line.lower() for line in feedback.infos)  # an engine log line
@@ -36,8 +39,11 @@ def test_cancel_writes_nothing(run_alg, scene_dir, tmp_path):
     feedback = QgsProcessingFeedback()
     feedback.cancel()
     with pytest.raises(QgsProcessingException, match="Cancelled"):
-        run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "before.las"),
-                                    "OUTPUT": str(tmp_path / "dem.tif")}, feedback=feedback)
+        run_alg(
+            "pointcloudtodem",
+            {"INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")},
+            feedback=feedback,
+        )
     assert not (tmp_path / "dem.tif").exists()
 
 

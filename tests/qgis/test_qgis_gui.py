@@ -23,8 +23,19 @@ def session(plugins_dir, scene_dir, tmp_path_factory) -> dict:
     out = tmp_path_factory.mktemp("gui")
     env = {k: v for k, v in os.environ.items() if k not in ("QT_QPA_PLATFORM", "PYTHONPATH", "QGIS_OPTIONS_PATH")}
     env["QGIS_CUSTOM_CONFIG_PATH"] = str(out / "profile")
-    command = [XVFB_RUN, "-a", "-s", "-screen 0 1400x1000x24", sys.executable, str(HERE / "gui_session.py"),
-               str(plugins_dir), str(scene_dir / "before.las"), str(scene_dir / "after.las"), str(out), str(ARTEFACTS)]
+    command = [
+        XVFB_RUN,
+        "-a",
+        "-s",
+        "-screen 0 1400x1000x24",
+        sys.executable,
+        str(HERE / "gui_session.py"),
+        str(plugins_dir),
+        str(scene_dir / "before.las"),
+        str(scene_dir / "after.las"),
+        str(out),
+        str(ARTEFACTS),
+    ]
     run = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300, cwd=str(out))
     assert run.returncode == 0, run.stderr[-3000:] + run.stdout[-2000:]
     line = [text for text in run.stdout.splitlines() if text.startswith("{")][-1]

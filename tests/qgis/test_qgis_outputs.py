@@ -30,9 +30,14 @@ from qgis.PyQt.QtCore import QVariant
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
 ZONES = {"pile A": (500067.0, 3900087.0, 11.0), "pit": (500068.0, 3900061.0, 7.0)}
-STABLE = ((500050, 3900042, 500060, 3900050), (500105, 3900042, 500117, 3900050),  # ground away from
-          (500050, 3900097, 500056, 3900105), (500105, 3900097, 500117, 3900104),  # the piles and pit
-          (500050, 3900070, 500058, 3900080), (500105, 3900072, 500118, 3900080))
+STABLE = (
+    (500050, 3900042, 500060, 3900050),
+    (500105, 3900042, 500117, 3900050),  # ground away from
+    (500050, 3900097, 500056, 3900105),
+    (500105, 3900097, 500117, 3900104),  # the piles and pit
+    (500050, 3900070, 500058, 3900080),
+    (500105, 3900072, 500118, 3900080),
+)
 
 
 def write_polygons(path: Path, boxes: dict[str, tuple[float, float, float, float]]) -> Path:
@@ -48,8 +53,9 @@ def write_polygons(path: Path, boxes: dict[str, tuple[float, float, float, float
         layer.dataProvider().addFeature(feature)
     options = QgsVectorFileWriter.SaveVectorOptions()
     options.driverName = "GPKG"
-    error = QgsVectorFileWriter.writeAsVectorFormatV3(layer, str(path), QgsProject.instance().transformContext(),
-                                                      options)
+    error = QgsVectorFileWriter.writeAsVectorFormatV3(
+        layer, str(path), QgsProject.instance().transformContext(), options
+    )
     assert error[0] == QgsVectorFileWriter.NoError, error
     return path
 
@@ -62,11 +68,20 @@ def zoned_run(run_alg_session, scene_dir, tmp_path_factory):
     stable = write_polygons(out / "stable.gpkg", {f"s{i}": box for i, box in enumerate(STABLE)})
     context = QgsProcessingContext()
     context.setProject(QgsProject.instance())
-    loaded = {key: QgsProcessingOutputLayerDefinition(str(out / f"{key.lower()}.tif"), QgsProject.instance())
-              for key in ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")}
-    params = {"BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"), "CELL": 1.0,
-              "ZONES": str(zones), "STABLE_MASK": str(stable), "ZONE_VOLUMES": str(out / "zone_volumes.gpkg"),
-              "REPORT_JSON": str(out / "report.json"), **loaded}
+    loaded = {
+        key: QgsProcessingOutputLayerDefinition(str(out / f"{key.lower()}.tif"), QgsProject.instance())
+        for key in ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")
+    }
+    params = {
+        "BEFORE": str(scene_dir / "before.las"),
+        "AFTER": str(scene_dir / "after.las"),
+        "CELL": 1.0,
+        "ZONES": str(zones),
+        "STABLE_MASK": str(stable),
+        "ZONE_VOLUMES": str(out / "zone_volumes.gpkg"),
+        "REPORT_JSON": str(out / "report.json"),
+        **loaded,
+    }
     results = run_alg_session("estimatevolumechange", params, context=context)
     return results, context
 
@@ -77,8 +92,11 @@ def test_numbers_and_strings(zoned_run, truth):
     assert results["NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net"])
     assert results["NET_UNCERTAINTY"] > 0
     assert results["CUT_UNCERTAINTY"] > 0 and results["FILL_UNCERTAINTY"] > 0
-    for key, field in (("ALL_CELLS_NET_VOLUME", "net"), ("ALL_CELLS_CUT_VOLUME", "cut"),
-                       ("ALL_CELLS_FILL_VOLUME", "fill")):
+    for key, field in (
+        ("ALL_CELLS_NET_VOLUME", "net"),
+        ("ALL_CELLS_CUT_VOLUME", "cut"),
+        ("ALL_CELLS_FILL_VOLUME", "fill"),
+    ):
         assert results[key] == pytest.approx(report["volume_all_cells_m3"][field]), key
     assert results["CHANGE_AREA"] == pytest.approx(report["volume_m3"]["area_m2"])
     assert results["ALL_CELLS_NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net_all_cells"])
@@ -146,9 +164,15 @@ def legend_range(model: QgsLayerTreeModel, layer) -> tuple[float, float]:
 def test_autzen_rasters_have_no_vertical_crs_in_feet(run_alg, tmp_path):
     """Autzen's z is in US survey feet (NAVD88 ftUS); the rasters hold metres, so they carry
     the horizontal CRS only."""
-    res = run_alg("estimatevolumechange", {
-        "BEFORE": str(REAL / "autzen_bmx_2010.las"), "AFTER": str(REAL / "autzen_bmx_2023.las"),
-        "DIFFERENCE": str(tmp_path / "d.tif"), "DEM_BEFORE": str(tmp_path / "b.tif")})
+    res = run_alg(
+        "estimatevolumechange",
+        {
+            "BEFORE": str(REAL / "autzen_bmx_2010.las"),
+            "AFTER": str(REAL / "autzen_bmx_2023.las"),
+            "DIFFERENCE": str(tmp_path / "d.tif"),
+            "DEM_BEFORE": str(tmp_path / "b.tif"),
+        },
+    )
     for key in ("DIFFERENCE", "DEM_BEFORE"):
         layer = QgsRasterLayer(res[key], key)
         try:

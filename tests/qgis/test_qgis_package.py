@@ -13,10 +13,19 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-REQUIRED_METADATA = ("name", "qgisMinimumVersion", "description", "about", "version", "author",
-                     "email", "repository", "tracker")
+REQUIRED_METADATA = (
+    "name",
+    "qgisMinimumVersion",
+    "description",
+    "about",
+    "version",
+    "author",
+    "email",
+    "repository",
+    "tracker",
+)
 
-LOADER = r'''
+LOADER = r"""
 import json, sys
 from unittest import mock
 from qgis.core import QgsApplication
@@ -47,15 +56,20 @@ out["unloaded"] = utils.unloadPlugin("soilvolume_qgis")
 out["provider_after_unload"] = registry.providerById("soilvolume") is not None
 print("RESULT" + json.dumps(out))
 app.exitQgis()
-'''
+"""
 
 
 @pytest.fixture(scope="module")
 def plugin_zip(tmp_path_factory) -> Path:
     dist = tmp_path_factory.mktemp("dist")
-    run = subprocess.run(["bash", str(REPO / "scripts" / "package.sh")], cwd=REPO,
-                         env=dict(os.environ, DIST_DIR=str(dist)), capture_output=True,
-                         text=True, timeout=120)
+    run = subprocess.run(
+        ["bash", str(REPO / "scripts" / "package.sh")],
+        cwd=REPO,
+        env=dict(os.environ, DIST_DIR=str(dist)),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert run.returncode == 0, run.stderr
     return Path(run.stdout.strip().splitlines()[-1])
 
@@ -66,10 +80,19 @@ def test_zip_contents(plugin_zip):
     assert plugin_zip.name == f"soilvolume_qgis-{version['general']['version']}.zip"
     names = zipfile.ZipFile(plugin_zip).namelist()
     assert all(n.startswith("soilvolume_qgis/") for n in names)
-    for required in ("metadata.txt", "__init__.py", "LICENSE", "plugin/main.py",
-                     "processing/provider.py", "resources/icon.png", "resources/icon.svg",
-                     "resources/styles/difference.qml", "resources/styles/dem.qml",
-                     "soilvolume/api.py", "soilvolume/workflow/estimate.py"):
+    for required in (
+        "metadata.txt",
+        "__init__.py",
+        "LICENSE",
+        "plugin/main.py",
+        "processing/provider.py",
+        "resources/icon.png",
+        "resources/icon.svg",
+        "resources/styles/difference.qml",
+        "resources/styles/dem.qml",
+        "soilvolume/api.py",
+        "soilvolume/workflow/estimate.py",
+    ):
         assert f"soilvolume_qgis/{required}" in names, required
     for banned in ("tests/", ".venv/", "__pycache__", ".pyc", ".git/", "egg-info", "bench/"):
         assert not any(banned in n for n in names), banned
@@ -94,16 +117,18 @@ def test_zip_installs_and_loads(plugin_zip, tmp_path):
     zipfile.ZipFile(plugin_zip).extractall(plugins)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update(QT_QPA_PLATFORM="offscreen", QGIS_CUSTOM_CONFIG_PATH=str(tmp_path / "profile"))
-    run = subprocess.run([sys.executable, "-c", LOADER, str(plugins)], cwd=tmp_path, env=env,
-                         capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-c", LOADER, str(plugins)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, run.stderr
     line = next(ln for ln in run.stdout.splitlines() if ln.startswith("RESULT"))
-    out = json.loads(line[len("RESULT"):])
+    out = json.loads(line[len("RESULT") :])
     assert out["available"] == ["soilvolume_qgis"]
     assert out["loaded"] and out["started"]
     assert out["plugin_file"].startswith(str(plugins))
     assert out["engine_file"].startswith(str(plugins))  # the engine shipped in the zip
-    assert out["algorithms"] == [f"soilvolume:{n}" for n in (
-        "estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems")]
+    assert out["algorithms"] == [
+        f"soilvolume:{n}" for n in ("estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems")
+    ]
     assert out["menu_calls"] == 2  # the estimate and "Install dependencies…"
     assert out["unloaded"] and not out["provider_after_unload"]

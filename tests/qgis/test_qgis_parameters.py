@@ -88,8 +88,9 @@ def test_a_missing_epoch_is_named(run_alg, scene_dir, tmp_path):
     from qgis.core import QgsProcessingException
 
     with pytest.raises(QgsProcessingException, match="No after point cloud"):
-        run_alg("estimatevolumechange", {"BEFORE": str(scene_dir / "before.las"),
-                                         "DIFFERENCE": str(tmp_path / "d.tif")})
+        run_alg(
+            "estimatevolumechange", {"BEFORE": str(scene_dir / "before.las"), "DIFFERENCE": str(tmp_path / "d.tif")}
+        )
 
 
 def test_registered_cloud_is_off_by_default(estimate):
@@ -118,8 +119,10 @@ def test_option_errors_name_the_parameter(plugin_package):
         field, reason = "radius", "must be between 0 and 10000 m (got -1)"
 
     text = engine.option_error_text(OptionError())
-    assert text == ("Incorrect parameter value for 'Crop radius around the after footprint' "
-                    "(RADIUS): must be between 0 and 10000 m (got -1)")
+    assert text == (
+        "Incorrect parameter value for 'Crop radius around the after footprint' "
+        "(RADIUS): must be between 0 and 10000 m (got -1)"
+    )
     assert engine.option_error_text(ValueError("plain")) is None
 
 

@@ -14,7 +14,7 @@ import pytest
 QGIS_PROCESS = shutil.which("qgis_process")
 pytestmark = pytest.mark.skipif(QGIS_PROCESS is None, reason="qgis_process is not installed")
 
-BLOCKER = '''
+BLOCKER = """
 import importlib.abc, sys
 
 class _Block(importlib.abc.MetaPathFinder):
@@ -24,7 +24,7 @@ class _Block(importlib.abc.MetaPathFinder):
         return None
 
 sys.meta_path.insert(0, _Block())
-'''
+"""
 
 
 @pytest.fixture(scope="module")
@@ -34,34 +34,42 @@ def qgis_env(plugins_dir, tmp_path_factory) -> dict[str, str]:
     config = tmp_path_factory.mktemp("qgis-profile")
     env = dict(os.environ)
     env.update(
-        QT_QPA_PLATFORM="offscreen", QGIS_PLUGINPATH=str(plugins_dir),
-        QGIS_CUSTOM_CONFIG_PATH=str(config), PYTHONPATH=sysconfig.get_paths()["purelib"],
+        QT_QPA_PLATFORM="offscreen",
+        QGIS_PLUGINPATH=str(plugins_dir),
+        QGIS_CUSTOM_CONFIG_PATH=str(config),
+        PYTHONPATH=sysconfig.get_paths()["purelib"],
     )
     env.pop("QGIS_OPTIONS_PATH", None)  # pytest-qgis points it at its own settings
-    run = subprocess.run([QGIS_PROCESS, "plugins", "enable", "soilvolume_qgis"], env=env,
-                         capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        [QGIS_PROCESS, "plugins", "enable", "soilvolume_qgis"], env=env, capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, run.stderr
     return env
 
 
 def qgis_process(env: dict[str, str], *args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([QGIS_PROCESS, *args], env=env, capture_output=True, text=True,
-                          timeout=300)
+    return subprocess.run([QGIS_PROCESS, *args], env=env, capture_output=True, text=True, timeout=300)
 
 
 def test_qgis_process_lists_the_algorithms(qgis_env):
     run = qgis_process(qgis_env, "list")
     assert run.returncode == 0, run.stderr
-    for name in ("estimatevolumechange", "pointcloudtodem", "registerpointclouds",
-                 "volumefromdems"):
+    for name in ("estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems"):
         assert f"soilvolume:{name}" in run.stdout
 
 
 def test_qgis_process_runs_the_pipeline(qgis_env, scene_dir, truth, tmp_path):
     run = qgis_process(
-        qgis_env, "run", "soilvolume:estimatevolumechange", "--json", "--",
-        f"BEFORE={scene_dir / 'before.las'}", f"AFTER={scene_dir / 'after.las'}", "CELL=1",
-        f"DIFFERENCE={tmp_path / 'difference.tif'}", f"DEM_BEFORE={tmp_path / 'dem_before.tif'}",
+        qgis_env,
+        "run",
+        "soilvolume:estimatevolumechange",
+        "--json",
+        "--",
+        f"BEFORE={scene_dir / 'before.las'}",
+        f"AFTER={scene_dir / 'after.las'}",
+        "CELL=1",
+        f"DIFFERENCE={tmp_path / 'difference.tif'}",
+        f"DEM_BEFORE={tmp_path / 'dem_before.tif'}",
         f"REPORT_JSON={tmp_path / 'report.json'}",
     )
     assert run.returncode == 0, run.stderr + run.stdout
@@ -82,8 +90,12 @@ def test_qgis_process_without_open3d_explains_the_fix(qgis_env, scene_dir, tmp_p
     listed = qgis_process(env, "list")
     assert "soilvolume:estimatevolumechange" in listed.stdout  # the plugin still loads
     run = qgis_process(
-        env, "run", "soilvolume:estimatevolumechange", "--",
-        f"BEFORE={scene_dir / 'before.las'}", f"AFTER={scene_dir / 'after.las'}",
+        env,
+        "run",
+        "soilvolume:estimatevolumechange",
+        "--",
+        f"BEFORE={scene_dir / 'before.las'}",
+        f"AFTER={scene_dir / 'after.las'}",
         f"DIFFERENCE={tmp_path / 'difference.tif'}",
     )
     assert run.returncode != 0

@@ -23,9 +23,16 @@ class RecordingFeedback(QgsProcessingFeedback):
 def recorded(run_alg_session, scene_dir, tmp_path_factory) -> RecordingFeedback:
     out = tmp_path_factory.mktemp("progress")
     feedback = RecordingFeedback()
-    run_alg_session("estimatevolumechange", {
-        "BEFORE": str(scene_dir / "before.las"), "AFTER": str(scene_dir / "after.las"), "CELL": 1.0,
-        "DIFFERENCE": str(out / "d.tif")}, feedback=feedback)
+    run_alg_session(
+        "estimatevolumechange",
+        {
+            "BEFORE": str(scene_dir / "before.las"),
+            "AFTER": str(scene_dir / "after.las"),
+            "CELL": 1.0,
+            "DIFFERENCE": str(out / "d.tif"),
+        },
+        feedback=feedback,
+    )
     return feedback
 
 

@@ -53,8 +53,11 @@ def test_quality_verdict_and_messages(estimate_run):
     from soilvolume.reporting.html import render_html
 
     report = json.loads(Path(estimate_run["REPORT_JSON"]).read_text())
-    report["quality"] = {"verdict": "use with caution", "trusted": True,
-                         "messages": ["Only 40 % of the after cloud fits the before surface."]}
+    report["quality"] = {
+        "verdict": "use with caution",
+        "trusted": True,
+        "messages": ["Only 40 % of the after cloud fits the before surface."],
+    }
     page = render_html(report, {}, GridSpec(xmin=0.0, ymax=10.0, cell=1.0, rows=10, cols=10), "2026-01-02 03:04 UTC")
     assert "Quality: <b>use with caution</b>" in page and "Only 40 % of the after cloud" in page
     assert "Run on 2026-01-02 03:04 UTC" in page

@@ -29,9 +29,11 @@ def zones_layer(dem: str) -> QgsVectorLayer:
     layer.updateFields()
     for name, (x0, x1) in (("west", (left - 5, middle)), ("east", (middle, right + 5))):
         feature = QgsFeature(layer.fields())
-        feature.setGeometry(QgsGeometry.fromWkt(
-            f"POLYGON(({x0} {bottom - 5},{x1} {bottom - 5},{x1} {top + 5},{x0} {top + 5},"
-            f"{x0} {bottom - 5}))"))
+        feature.setGeometry(
+            QgsGeometry.fromWkt(
+                f"POLYGON(({x0} {bottom - 5},{x1} {bottom - 5},{x1} {top + 5},{x0} {top + 5},{x0} {bottom - 5}))"
+            )
+        )
         feature.setAttributes([name])
         provider.addFeature(feature)
     return layer
@@ -44,21 +46,32 @@ def dems(estimate_run) -> tuple[str, str]:
 
 def test_totals_and_zone_table(run_alg, dems, estimate_run, tmp_path):
     zones = zones_layer(dems[0])
-    res = run_alg("volumefromdems", {
-        "BEFORE": dems[0], "AFTER": dems[1], "ZONES": zones, "ZONE_FIELD": "name",
-        "OUTPUT": str(tmp_path / "diff.tif"), "TABLE": str(tmp_path / "volumes.gpkg")})
+    res = run_alg(
+        "volumefromdems",
+        {
+            "BEFORE": dems[0],
+            "AFTER": dems[1],
+            "ZONES": zones,
+            "ZONE_FIELD": "name",
+            "OUTPUT": str(tmp_path / "diff.tif"),
+            "TABLE": str(tmp_path / "volumes.gpkg"),
+        },
+    )
     # the uncorrected difference of the estimate's own DEMs gives its uncompensated volume
     assert res["NET_VOLUME"] == pytest.approx(estimate_run["UNCOMPENSATED_NET_VOLUME"], rel=0.02)
     assert res["FILL_VOLUME"] - res["CUT_VOLUME"] == pytest.approx(res["NET_VOLUME"])
     table = QgsVectorLayer(res["TABLE"], "volumes", "ogr")
     try:
         assert table.isValid()
-        assert [f.name() for f in table.fields()][-6:] == ["zone", "name", "cut", "fill", "net",
-                                                            "area"]
+        assert [f.name() for f in table.fields()][-6:] == ["zone", "name", "cut", "fill", "net", "area"]
         rows = list(table.getFeatures())
         assert sorted(r["name"] for r in rows) == ["east", "west"]
-        for key, total in (("cut", "CUT_VOLUME"), ("fill", "FILL_VOLUME"), ("net", "NET_VOLUME"),
-                           ("area", "COMPARED_AREA")):
+        for key, total in (
+            ("cut", "CUT_VOLUME"),
+            ("fill", "FILL_VOLUME"),
+            ("net", "NET_VOLUME"),
+            ("area", "COMPARED_AREA"),
+        ):
             assert sum(r[key] for r in rows) == pytest.approx(res[total], rel=1e-6), key
     finally:
         del table
@@ -70,9 +83,10 @@ def test_totals_and_zone_table(run_alg, dems, estimate_run, tmp_path):
 
 
 def test_without_zones(run_alg, dems, tmp_path):
-    res = run_alg("volumefromdems", {
-        "BEFORE": dems[0], "AFTER": dems[1], "OUTPUT": str(tmp_path / "d.tif"),
-        "TABLE": str(tmp_path / "v.gpkg")})
+    res = run_alg(
+        "volumefromdems",
+        {"BEFORE": dems[0], "AFTER": dems[1], "OUTPUT": str(tmp_path / "d.tif"), "TABLE": str(tmp_path / "v.gpkg")},
+    )
     assert res["NET_VOLUME"] > 0 and res["COMPARED_AREA"] > 3000
     table = QgsVectorLayer(res["TABLE"], "volumes", "ogr")
     try:
@@ -87,11 +101,13 @@ def test_loaded_difference_is_styled_around_zero(provider, dems):
     from qgis import processing
 
     project = QgsProject.instance()
-    res = processing.runAndLoadResults("soilvolume:volumefromdems", {
-        "BEFORE": dems[0], "AFTER": dems[1], "OUTPUT": "TEMPORARY_OUTPUT"})
+    res = processing.runAndLoadResults(
+        "soilvolume:volumefromdems", {"BEFORE": dems[0], "AFTER": dems[1], "OUTPUT": "TEMPORARY_OUTPUT"}
+    )
     try:
         layer = project.mapLayer(res["OUTPUT"]) or next(
-            lyr for lyr in project.mapLayers().values() if lyr.source() == res["OUTPUT"])
+            lyr for lyr in project.mapLayers().values() if lyr.source() == res["OUTPUT"]
+        )
         renderer = layer.renderer()
         assert isinstance(renderer, QgsSingleBandPseudoColorRenderer)
         assert renderer.classificationMin() == pytest.approx(-renderer.classificationMax())

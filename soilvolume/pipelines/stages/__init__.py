@@ -29,8 +29,7 @@ REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
     "filters.outlier": (outlier.outlier, frozenset(outlier.OPTS)),
     "filters.range": (range_stage.filter_range, frozenset(range_stage.RANGE_OPTS)),
     "filters.assign": (range_stage.assign, frozenset(range_stage.ASSIGN_OPTS)),
-    "filters.voxelcenternearestneighbor": (sampling.voxel_center_nn,
-                                           frozenset(sampling.VOXEL_OPTS)),
+    "filters.voxelcenternearestneighbor": (sampling.voxel_center_nn, frozenset(sampling.VOXEL_OPTS)),
     "filters.sample": (sampling.sample, frozenset(sampling.SAMPLE_OPTS)),
     "filters.smrf": (smrf.smrf, frozenset(smrf.OPTS)),
     "writers.las": (writers.write_las, frozenset(writers.LAS_OPTS)),
@@ -44,13 +43,15 @@ def check_stage(stage: dict, source: str) -> tuple[StageFn, str]:
     if kind not in REGISTRY:
         raise SoilVolumeError(
             f"pipeline {source}: stage '{kind}' is not supported by the embedded executor "
-            f"(supported: {', '.join(sorted(REGISTRY))})")
+            f"(supported: {', '.join(sorted(REGISTRY))})"
+        )
     fn, allowed = REGISTRY[kind]
     for name in stage:
         if name not in allowed and name not in GENERIC:
             raise SoilVolumeError(
                 f"pipeline {source}: option '{name}' of {kind} is not supported by the embedded "
-                f"executor (supported: {', '.join(sorted(allowed))})")
+                f"executor (supported: {', '.join(sorted(allowed))})"
+            )
     return fn, kind
 
 
@@ -61,7 +62,8 @@ def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
     if readers_at != [0]:
         raise SoilVolumeError(
             f"pipeline {source}: the embedded executor runs exactly one reader, as the first "
-            "stage (no merging of several inputs)")
+            "stage (no merging of several inputs)"
+        )
     view: PointView | None = None
     for stage, (fn, kind) in zip(stages, checked, strict=True):
         view = fn(view, stage, StageContext(source, kind))

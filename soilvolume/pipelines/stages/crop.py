@@ -17,8 +17,10 @@ def _one(opts: dict, name: str, ctx: StageContext):
     value = opts.get(name)
     if isinstance(value, list) and value and not isinstance(value[0], (int, float)):
         if len(value) > 1:
-            raise ctx.error(f"several '{name}' regions (PDAL makes one output view per region) "
-                            "are not supported by the embedded executor: give one region")
+            raise ctx.error(
+                f"several '{name}' regions (PDAL makes one output view per region) "
+                "are not supported by the embedded executor: give one region"
+            )
         value = value[0]
     return value
 
@@ -28,8 +30,7 @@ def _transformer(view: PointView, opts: dict, ctx: StageContext):
     if not a_srs:
         return None
     if view.srs_wkt is None:
-        raise ctx.error("unable to transform the crop geometry from 'a_srs': the points have no "
-                        "SRS")
+        raise ctx.error("unable to transform the crop geometry from 'a_srs': the points have no SRS")
     src, dst = pyproj.CRS.from_user_input(a_srs), pyproj.CRS.from_wkt(view.srs_wkt)
     if src.equals(dst):
         return None
@@ -61,8 +62,7 @@ def crop(view: PointView, opts: dict, ctx: StageContext) -> PointView:
             keep = geometry.covers(rings, x, y)
         else:
             if tr is not None:
-                raise ctx.error("'a_srs' with 'point' is not supported (PDAL does not reproject "
-                                "crop points either)")
+                raise ctx.error("'a_srs' with 'point' is not supported (PDAL does not reproject crop points either)")
             centre = geometry.parse_point(_one(opts, "point", ctx))
             dist = ctx.positive(opts, "distance")
             if dist is None:

@@ -28,8 +28,7 @@ class Grid:
 
 def grid_from_bounds(minx: float, miny: float, maxx: float, maxy: float, res: float) -> Grid:
     """PDAL's createGrid: width = floor((maxx - minx) / res) + 1, same for height."""
-    return Grid(minx, miny, int(math.floor((maxx - minx) / res)) + 1,
-                int(math.floor((maxy - miny) / res)) + 1, res)
+    return Grid(minx, miny, int(math.floor((maxx - minx) / res)) + 1, int(math.floor((maxy - miny) / res)) + 1, res)
 
 
 def _accumulate(grid: Grid, i, j, v, d, stats: set[str], power: float) -> dict[str, np.ndarray]:
@@ -70,8 +69,9 @@ def _accumulate(grid: Grid, i, j, v, d, stats: set[str], power: float) -> dict[s
     return out
 
 
-def compute(grid: Grid, x, y, v, *, stats=STATS, binmode=False, radius=None, power=1.0,
-            window_size=0) -> dict[str, np.ndarray]:
+def compute(
+    grid: Grid, x, y, v, *, stats=STATS, binmode=False, radius=None, power=1.0, window_size=0
+) -> dict[str, np.ndarray]:
     """Rasters (height x width, row 0 = top, i.e. GDAL order) of the requested statistics."""
     stats = set(stats)
     radius = grid.res * math.sqrt(2.0) if radius is None else radius

@@ -20,7 +20,7 @@ def mean_knn_distance(xyz: np.ndarray, k: int) -> np.ndarray:
     out = np.empty(xyz.shape[0], dtype=np.float64)
     kk = min(k + 1, xyz.shape[0])
     for s in range(0, xyz.shape[0], _CHUNK):
-        sel = order[s:s + _CHUNK]
+        sel = order[s : s + _CHUNK]
         d, _ = tree.query(xyz[sel], k=kk, workers=-1)
         d = d.reshape(d.shape[0], -1)
         out[sel] = d[:, 1:].mean(axis=1) if kk > 1 else 0.0
@@ -50,8 +50,7 @@ def outlier(view: PointView, opts: dict, ctx: StageContext) -> PointView:
         radius = ctx.positive(opts, "radius", 1.0)
         min_k = ctx.integer(opts, "min_k", 2)
         tree = cKDTree(xyz)
-        counts = tree.query_ball_point(xyz, np.nextafter(radius, 0), workers=-1,
-                                       return_length=True)
+        counts = tree.query_ball_point(xyz, np.nextafter(radius, 0), workers=-1, return_length=True)
         bad = counts <= min_k
     else:
         raise ctx.error(f"option 'method' must be 'statistical' or 'radius', got {method!r}")

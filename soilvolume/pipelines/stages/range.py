@@ -14,9 +14,7 @@ RANGE_OPTS = {"limits"}
 ASSIGN_OPTS = {"value", "assignment"}
 
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
-_RANGE = re.compile(
-    rf"\s*([A-Za-z_][A-Za-z0-9_]*)\s*(!?)\s*([\[(])\s*({_NUM})?\s*:\s*({_NUM})?\s*([\])])\s*"
-)
+_RANGE = re.compile(rf"\s*([A-Za-z_][A-Za-z0-9_]*)\s*(!?)\s*([\[(])\s*({_NUM})?\s*:\s*({_NUM})?\s*([\])])\s*")
 
 
 @dataclass(frozen=True)
@@ -46,11 +44,18 @@ def parse_ranges(text: str) -> list[DimRange]:
     while pos < len(text):
         m = _RANGE.match(text, pos)
         if not m:
-            raise SoilVolumeError(
-                f"invalid range '{text[pos:pos + 40]}' (e.g. 'Classification[2:2]')")
+            raise SoilVolumeError(f"invalid range '{text[pos : pos + 40]}' (e.g. 'Classification[2:2]')")
         name, neg, lb, lo, hi, rb = m.groups()
-        out.append(DimRange(name, None if lo is None else float(lo), None if hi is None else
-                            float(hi), lb == "[", rb == "]", neg == "!"))
+        out.append(
+            DimRange(
+                name,
+                None if lo is None else float(lo),
+                None if hi is None else float(hi),
+                lb == "[",
+                rb == "]",
+                neg == "!",
+            )
+        )
         pos = m.end()
         if pos < len(text):
             if text[pos] != ",":
@@ -66,8 +71,7 @@ def select(view: PointView, ranges: list[DimRange], ctx: StageContext) -> np.nda
     for r in ranges:
         key = view.dim(r.name)
         if key is None:
-            raise ctx.error(f"invalid dimension name '{r.name}' (the points have: "
-                            f"{', '.join(view.arrays)})")
+            raise ctx.error(f"invalid dimension name '{r.name}' (the points have: {', '.join(view.arrays)})")
         hit = r.passes(view.arrays[key])
         by_dim[key] = by_dim[key] | hit if key in by_dim else hit
     for hit in by_dim.values():
@@ -96,8 +100,7 @@ def assign(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     for text in ctx.strings(opts, "value"):
         m = _VALUE.fullmatch(text)
         if not m:
-            raise ctx.error(f"value '{text}' is not supported by the embedded executor "
-                            "(only 'Dimension = number')")
+            raise ctx.error(f"value '{text}' is not supported by the embedded executor (only 'Dimension = number')")
         arr = view.ensure(m.group(1))
         arr[:] = float(m.group(2))
     for text in ctx.strings(opts, "assignment"):

@@ -19,8 +19,10 @@ LAS_OPTS = COMMON
 PLY_OPTS = COMMON
 TEXT_OPTS = COMMON | {"header", "separator", "skip"}
 
-_KNOWN = {n.lower(): n for n in ("X", "Y", "Z", "Classification", "Intensity",
-                                  "ReturnNumber", "NumberOfReturns", "Red", "Green", "Blue")}
+_KNOWN = {
+    n.lower(): n
+    for n in ("X", "Y", "Z", "Classification", "Intensity", "ReturnNumber", "NumberOfReturns", "Red", "Green", "Blue")
+}
 
 
 def _path(opts: dict, ctx: StageContext) -> Path:
@@ -60,9 +62,15 @@ def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView
         check_las_header(path)
     except io.SoilVolumeError as exc:
         raise ctx.error(str(exc)) from exc
-    names = {"X": "x", "Y": "y", "Z": "z", "Classification": "classification",
-             "ReturnNumber": "return_number", "NumberOfReturns": "number_of_returns",
-             "Intensity": "intensity"}
+    names = {
+        "X": "x",
+        "Y": "y",
+        "Z": "z",
+        "Classification": "classification",
+        "ReturnNumber": "return_number",
+        "NumberOfReturns": "number_of_returns",
+        "Intensity": "intensity",
+    }
     try:
         with laspy.open(path) as reader:
             header = reader.header
@@ -70,8 +78,10 @@ def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView
             n = header.point_count
             present = set(header.point_format.dimension_names)
             cols = {k: v for k, v in names.items() if v in present or k in "XYZ"}
-            arrays = {k: np.empty(n, dtype=np.float64 if k in "XYZ" else
-                                  (np.uint16 if k == "Intensity" else np.uint8)) for k in cols}
+            arrays = {
+                k: np.empty(n, dtype=np.float64 if k in "XYZ" else (np.uint16 if k == "Intensity" else np.uint8))
+                for k in cols
+            }
             start = 0
             bounds = BoundsCheck(path, header)
             for chunk in reader.chunk_iterator(2_000_000):
@@ -79,9 +89,12 @@ def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView
                 if start + m > n:
                     raise io.SoilVolumeError(f"{path}: corrupt LAS file (more points than the header's {n})")
                 for k, v in cols.items():
-                    arrays[k][start:start + m] = np.asarray(getattr(chunk, v))
-                bounds.update(np.c_[arrays["X"][start:start + m], arrays["Y"][start:start + m],
-                                    arrays["Z"][start:start + m]])
+                    arrays[k][start : start + m] = np.asarray(getattr(chunk, v))
+                bounds.update(
+                    np.c_[
+                        arrays["X"][start : start + m], arrays["Y"][start : start + m], arrays["Z"][start : start + m]
+                    ]
+                )
                 start += m
             bounds.finish()
     except Exception as exc:  # laspy raises many types on broken files
@@ -140,8 +153,7 @@ def read_text(view: PointView | None, opts: dict, ctx: StageContext) -> PointVie
         raise ctx.error(f"{path}: the header '{header_line.strip()[:80]}' does not name X, Y and Z")
     delim = None if sep.isspace() else sep
     try:
-        data = np.loadtxt(path, delimiter=delim, skiprows=skiprows, ndmin=2, dtype=np.float64,
-                          comments=None)
+        data = np.loadtxt(path, delimiter=delim, skiprows=skiprows, ndmin=2, dtype=np.float64, comments=None)
     except ValueError as exc:
         raise ctx.error(f"{path}: cannot parse the point records ({exc})") from exc
     if data.size and data.shape[1] != len(dims):

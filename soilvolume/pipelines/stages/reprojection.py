@@ -37,8 +37,7 @@ def reproject(view: PointView, opts: dict, ctx: StageContext) -> PointView:
             tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)
         except pyproj.exceptions.ProjError as exc:
             raise ctx.error(f"no transformation from {src.name} to {dst.name} ({exc})") from exc
-        x, y, z = tr.transform(view.arrays["X"], view.arrays["Y"], view.arrays["Z"],
-                               errcheck=False)
+        x, y, z = tr.transform(view.arrays["X"], view.arrays["Y"], view.arrays["Z"], errcheck=False)
         x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
         ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
         view.arrays["X"], view.arrays["Y"], view.arrays["Z"] = x, y, z

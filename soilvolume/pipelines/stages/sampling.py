@@ -36,8 +36,7 @@ def sample(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     ``cell`` instead gives radius = cell * sqrt(3) / 2. Exactly one of the two is required."""
     if ("cell" in opts) == ("radius" in opts):
         raise ctx.error("set exactly one of 'cell' or 'radius'")
-    radius = (ctx.positive(opts, "radius") if "radius" in opts
-              else ctx.positive(opts, "cell") * np.sqrt(3.0) / 2.0)
+    radius = ctx.positive(opts, "radius") if "radius" in opts else ctx.positive(opts, "cell") * np.sqrt(3.0) / 2.0
     n = len(view)
     if n == 0:
         return view
@@ -62,6 +61,6 @@ def sample(view: PointView, opts: dict, ctx: StageContext) -> PointView:
         for a in range(cand.size):
             if not taken[a]:
                 keep[cand[a]] = True
-                for b in later[ptr[a]:ptr[a + 1]]:
+                for b in later[ptr[a] : ptr[a + 1]]:
                     taken[b] = 1
     return view.take(keep)

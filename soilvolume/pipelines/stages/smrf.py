@@ -80,8 +80,7 @@ def _gradient(a: np.ndarray, axis: int) -> np.ndarray:
     return np.gradient(a, axis=axis)  # central inside, one-sided at the edges (MATLAB's)
 
 
-def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, scalar=1.25,
-                  cut=0.0) -> np.ndarray:
+def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, scalar=1.25, cut=0.0) -> np.ndarray:
     """Ground flags (True = ground) for the given points."""
     minx, miny = float(x.min()), float(y.min())
     cols = int((float(x.max()) - minx) / cell + 1)
@@ -150,8 +149,9 @@ def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
         "cut": ctx.number(opts, "cut", 0.0),
     }
     returns = opts.get("returns", "last, only")
-    returns = [s.strip() for t in (returns if isinstance(returns, list) else [returns])
-               for s in str(t).split(",") if s.strip()]
+    returns = [
+        s.strip() for t in (returns if isinstance(returns, list) else [returns]) for s in str(t).split(",") if s.strip()
+    ]
     cls = view.ensure("Classification")
     if len(view) == 0:
         return view
@@ -164,7 +164,6 @@ def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     if not use.any():
         raise ctx.error("no returns to process")
     idx = np.flatnonzero(use)
-    ground = smrf_classify(view.arrays["X"][idx], view.arrays["Y"][idx], view.arrays["Z"][idx],
-                           **params)
+    ground = smrf_classify(view.arrays["X"][idx], view.arrays["Y"][idx], view.arrays["Z"][idx], **params)
     cls[idx] = np.where(ground, 2, 1).astype(cls.dtype)
     return view

@@ -12,16 +12,60 @@ from ...inputs import io
 from . import gdalgrid, geometry
 from .view import PointView, StageContext
 
-LAS_OPTS = {"filename", "compression", "a_srs", "scale_x", "scale_y", "scale_z", "offset_x",
-            "offset_y", "offset_z", "minor_version", "dataformat_id", "forward"}
-GDAL_OPTS = {"filename", "resolution", "radius", "power", "gdaldriver", "output_type",
-             "data_type", "window_size", "nodata", "dimension", "bounds", "origin_x",
-             "origin_y", "width", "height", "override_srs", "default_srs", "binmode"}
-_DTYPES = {"double": "float64", "float64": "float64", "float": "float32", "float32": "float32",
-           "int32": "int32", "int16": "int16", "uint8": "uint8", "uint16": "uint16",
-           "uint32": "uint32"}
-_NODATA = {"float64": -9999.0, "float32": -9999.0, "int32": -9999, "int16": -9999,
-           "uint8": 255, "uint16": 9999, "uint32": 9999}
+LAS_OPTS = {
+    "filename",
+    "compression",
+    "a_srs",
+    "scale_x",
+    "scale_y",
+    "scale_z",
+    "offset_x",
+    "offset_y",
+    "offset_z",
+    "minor_version",
+    "dataformat_id",
+    "forward",
+}
+GDAL_OPTS = {
+    "filename",
+    "resolution",
+    "radius",
+    "power",
+    "gdaldriver",
+    "output_type",
+    "data_type",
+    "window_size",
+    "nodata",
+    "dimension",
+    "bounds",
+    "origin_x",
+    "origin_y",
+    "width",
+    "height",
+    "override_srs",
+    "default_srs",
+    "binmode",
+}
+_DTYPES = {
+    "double": "float64",
+    "float64": "float64",
+    "float": "float32",
+    "float32": "float32",
+    "int32": "int32",
+    "int16": "int16",
+    "uint8": "uint8",
+    "uint16": "uint16",
+    "uint32": "uint32",
+}
+_NODATA = {
+    "float64": -9999.0,
+    "float32": -9999.0,
+    "int32": -9999,
+    "int16": -9999,
+    "uint8": 255,
+    "uint16": 9999,
+    "uint32": 9999,
+}
 
 
 def _filename(opts: dict, ctx: StageContext) -> Path:
@@ -38,14 +82,12 @@ def write_las(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     path = _filename(opts, ctx)
     scales = {ctx.number(opts, f"scale_{a}", 0.01) for a in "xyz"}
     if len(scales) != 1:
-        raise ctx.error("different scale_x/scale_y/scale_z are not supported by the embedded "
-                        "executor")
+        raise ctx.error("different scale_x/scale_y/scale_z are not supported by the embedded executor")
     for a in "xyz":
         off = opts.get(f"offset_{a}", "auto")
         if off != "auto":
             raise ctx.error(f"option 'offset_{a}' other than 'auto' is not supported")
-    if str(opts.get("compression", "")).lower() in ("laszip", "lazperf", "true") and \
-            path.suffix.lower() != ".laz":
+    if str(opts.get("compression", "")).lower() in ("laszip", "lazperf", "true") and path.suffix.lower() != ".laz":
         raise ctx.error("compression needs a .laz filename in the embedded executor")
     wkt = view.srs_wkt
     if ctx.string(opts, "a_srs"):
@@ -100,10 +142,16 @@ def gdal_rasters(view: PointView, opts: dict, ctx: StageContext):
         raise ctx.error(f"specified dimension '{opts.get('dimension')}' does not exist")
     grid = _grid(view, opts, res, ctx)
     rasters = gdalgrid.compute(
-        grid, view.arrays["X"], view.arrays["Y"], view.arrays[key].astype(np.float64),
-        stats=stats, binmode=ctx.boolean(opts, "binmode", False),
-        radius=ctx.positive(opts, "radius"), power=ctx.number(opts, "power", 1.0),
-        window_size=ctx.integer(opts, "window_size", 0))
+        grid,
+        view.arrays["X"],
+        view.arrays["Y"],
+        view.arrays[key].astype(np.float64),
+        stats=stats,
+        binmode=ctx.boolean(opts, "binmode", False),
+        radius=ctx.positive(opts, "radius"),
+        power=ctx.number(opts, "power", 1.0),
+        window_size=ctx.integer(opts, "window_size", 0),
+    )
     return grid, rasters
 
 
@@ -121,9 +169,16 @@ def write_gdal(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     srs = ctx.string(opts, "override_srs") or view.srs_wkt or ctx.string(opts, "default_srs")
     crs = pyproj.CRS.from_user_input(srs).to_wkt() if srs else None
     transform = from_origin(grid.x0, grid.y0 + grid.res * grid.height, grid.res, grid.res)
-    profile = {"driver": ctx.string(opts, "gdaldriver", "GTiff"), "width": grid.width,
-               "height": grid.height, "count": len(rasters), "dtype": dtype, "nodata": nodata,
-               "transform": transform, "crs": crs}
+    profile = {
+        "driver": ctx.string(opts, "gdaldriver", "GTiff"),
+        "width": grid.width,
+        "height": grid.height,
+        "count": len(rasters),
+        "dtype": dtype,
+        "nodata": nodata,
+        "transform": transform,
+        "crs": crs,
+    }
     try:
         with io.atomic_path(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
             for band, (name, arr) in enumerate(rasters.items(), start=1):
