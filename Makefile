@@ -8,7 +8,7 @@ PYTEST  := QT_QPA_PLATFORM=offscreen $(VENV)/bin/pytest
 setup:  ## install Debian packages (QGIS LTR, Chromium), the venv and the wheels (idempotent)
 	bash scripts/setup.sh
 
-test:   ## the whole test suite: engine, PDAL pipelines, QGIS algorithms headless
+test: lint  ## lint and format check, then the whole test suite: engine, PDAL pipelines, QGIS algorithms headless
 	$(PYTEST) -q -p no:cacheprovider tests
 
 test-engine:
@@ -17,8 +17,9 @@ test-engine:
 test-qgis:
 	$(PYTEST) -q -p no:cacheprovider tests/qgis
 
-lint:
+lint:   ## ruff lint and ruff format --check (CI runs it through make test)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 
 demo:   ## seeded synthetic pair with known volumes, whole pipeline, estimated vs true
 	$(VENV)/bin/soilvolume demo --out demo_out
