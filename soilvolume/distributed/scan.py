@@ -10,7 +10,8 @@ from collections.abc import Callable
 import numpy as np
 
 from ..inputs.copc import is_copc
-from ..inputs.stream import CHUNK, GROUND, ColumnThinner, Loaded, Source, file_chunks, ground_mode, las_ranges, load
+from ..inputs.io import GROUND
+from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, file_chunks, ground_mode, las_ranges, load
 
 UNIT = 8_000_000  # points per task of a single file
 

@@ -15,7 +15,8 @@ from ..core.types import GridSpec
 from ..dem.grid import cell_heights, cell_ids
 from ..inputs.crs import WorkFrame
 from ..inputs.footprint import PolygonMask
-from ..inputs.prepare import GROUND, _local
+from ..inputs.io import GROUND
+from ..inputs.prepare import _local
 from ..inputs.stream import open_source
 
 TILE_BYTES_PER_POINT = 120.0  # a task's peak per point of its tile (both epochs, ids, sort keys, chunk)

@@ -18,6 +18,7 @@ from ..core.types import SoilVolumeError, short_error
 from .lasheader import BoundsCheck, check_las_header
 
 LAS_SUFFIXES = {".las", ".laz"}
+GROUND = 2  # the LAS classification of ground points
 O3D_SUFFIXES = {".ply", ".pcd"}
 TEXT_SUFFIXES = {".xyz", ".txt", ".csv", ".pts"}
 SUPPORTED = sorted(LAS_SUFFIXES | O3D_SUFFIXES | TEXT_SUFFIXES)

@@ -14,10 +14,9 @@ from ..core.types import Cloud, SoilVolumeError
 from ..options import Options
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
 from .footprint import PolygonMask, check_spread, footprint
-from .io import RawPoints
+from .io import GROUND, RawPoints
 from .stream import ColumnThinner, Loaded, Source, from_raw, load
 
-GROUND = 2
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
 
 

@@ -19,11 +19,10 @@ import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
 from .copc import copc_chunks, is_copc
-from .io import LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
+from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
 from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
-GROUND = 2
 
 
 @dataclass

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import SoilVolumeError
-from ..inputs.io import RawPoints, atomic_path
+from ..inputs.io import GROUND, RawPoints, atomic_path
 from . import stages as embedded
 from .confine import confine_writers
 from .load import READERS, TEXT_SUFFIXES, load_pipeline
@@ -89,7 +89,7 @@ def has_ground_class(path: str | os.PathLike) -> bool:
         if "classification" not in reader.header.point_format.dimension_names:
             return False
         for chunk in reader.chunk_iterator(2_000_000):
-            if np.any(np.asarray(chunk.classification) == 2):
+            if np.any(np.asarray(chunk.classification) == GROUND):
                 return True
     return False
 
