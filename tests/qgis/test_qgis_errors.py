@@ -119,7 +119,7 @@ def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch
     from soilvolume_qgis.processing import engine
 
     def broken(name: str = "api"):
-        raise ImportError("simulated: soilvolume/run.py is missing")
+        raise ImportError("simulated: soilvolume/workflow/estimate.py is missing")
 
     monkeypatch.setattr(engine, "engine", broken)
     with pytest.raises(QgsProcessingException, match="engine package 'soilvolume' does not import"):

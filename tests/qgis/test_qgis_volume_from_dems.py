@@ -15,7 +15,7 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QVariant
 
-pytest.importorskip("soilvolume.workflow.rasters", reason="engine: soilvolume/rasters.py not there yet")
+pytest.importorskip("soilvolume.workflow.rasters", reason="engine: soilvolume/workflow/rasters.py not there yet")
 
 
 def zones_layer(dem: str) -> QgsVectorLayer:
