@@ -81,3 +81,17 @@ def _join_refilled(d, patches, fill, cut):
     to_fill = np.r_[False, near_fill & (vol > 0)]
     to_cut = np.r_[False, near_cut & (vol < 0)]
     return fill | to_fill[labels], cut | to_cut[labels]
+
+
+def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:
+    """Volume (m3, absolute) of the change areas in ``area`` whose mean |difference| is under
+    twice their LoD: detections that noise alone could have made, counted as uncertain whole."""
+    labels, n = ndimage.label(area, structure=_EIGHT)
+    if n == 0:
+        return 0.0
+    idx = np.arange(1, n + 1)
+    d = np.where(np.isfinite(diff), diff, 0.0)
+    mean_abs = ndimage.mean(np.abs(d), labels, idx)
+    mean_lod = ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
+    vol = np.abs(ndimage.sum(d, labels, idx)) * cell_area
+    return float(vol[mean_abs < 2.0 * mean_lod].sum())
