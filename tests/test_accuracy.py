@@ -189,22 +189,22 @@ def coverage_runs(tmp_path_factory) -> list[dict[str, float]]:
 
 
 def test_interval_covers_the_truth_in_18_of_20(coverage_runs):
-    """Measured: 20/20 covered; |error| / half-width at most 0.67 (median 0.24: conservative; a
-    calibrated 95 % interval would give a median near 0.34)."""
+    """Measured: 20/20 covered; |error| / half-width at most 0.74 (median 0.18: conservative; a
+    calibrated 95 % interval would give a median near 0.34). Refills over the piles' toes are
+    what the interval has to allow for on these sparse pairs (2-cell holes)."""
     covered = [r["seed"] for r in coverage_runs if abs(r["error"]) <= r["half_width"]]
     assert len(covered) >= 18, coverage_runs
 
 
 def test_interval_is_not_uselessly_wide(coverage_runs):
-    """Measured half-widths: median 4.4 % of the true net (3.0-9.7 % on 18 pairs; 24.0 % and
-    35.9 % on seeds 17 and 16, where the variogram fit puts a long-range sill at its 68.4 m
-    upper bound on a flat empirical variogram)."""
+    """Measured half-widths: median 3.7 % of the true net (1.9-11.0 %; the widest where the
+    variogram fit puts a long-range sill at its upper bound on a flat empirical variogram)."""
     widths = [r["half_width"] / r["truth"] for r in coverage_runs]
     assert float(np.median(widths)) < 0.08, widths
 
 
 def test_median_error_of_small_pairs(coverage_runs):
-    """Measured: median |error| 1.16 %, largest 2.89 % (seed 3), standard deviation 1.4 %."""
+    """Measured: median |error| 0.81 %, largest 2.33 % (seed 8)."""
     errs = [abs(r["error"]) / r["truth"] for r in coverage_runs]
     assert float(np.median(errs)) < 0.02, errs
     assert max(errs) < 0.05, errs

@@ -17,6 +17,7 @@ from scipy import ndimage
 
 MIN_CELLS = 3  # a change area has at least this many significant cells
 BUFFER_CELLS = 1  # cells of buffer around each change area
+MARGINAL_CELLS = 50  # smaller areas barely above their LoD may be noise (a few correlation areas)
 _EIGHT = np.ones((3, 3), bool)
 
 
@@ -81,3 +82,19 @@ def _join_refilled(d, patches, fill, cut):
     to_fill = np.r_[False, near_fill & (vol > 0)]
     to_cut = np.r_[False, near_cut & (vol < 0)]
     return fill | to_fill[labels], cut | to_cut[labels]
+
+
+def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:
+    """Volume (m3, absolute) of the small change areas in ``area`` (under ``MARGINAL_CELLS``
+    cells) whose mean |difference| is under twice their LoD: detections that noise alone could
+    have made, counted as uncertain whole. Large coherent areas are never noise."""
+    labels, n = ndimage.label(area, structure=_EIGHT)
+    if n == 0:
+        return 0.0
+    idx = np.arange(1, n + 1)
+    d = np.where(np.isfinite(diff), diff, 0.0)
+    mean_abs = ndimage.mean(np.abs(d), labels, idx)
+    mean_lod = ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
+    vol = np.abs(ndimage.sum(d, labels, idx)) * cell_area
+    size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+    return float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())

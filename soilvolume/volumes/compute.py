@@ -25,8 +25,8 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
     uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs;
     ``moved``: the rigid move from the accepted pose to a nearly as good one (registration
     uncertainty)."""
-    from .change import cell_lod, cell_sigma, change_areas
-    from .uncertainty import detection_level, thresholded_volumes, volume_uncertainty, z_value
+    from .change import cell_lod, cell_sigma, change_areas, marginal_volume
+    from .uncertainty import detection_level, interp_fraction, thresholded_volumes, volume_uncertainty, z_value
 
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
@@ -59,7 +59,12 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
         stable = quiet
     shift = pose_effect(f_a, grid, moved)
     reg_v = signed_budget(shift, fill_area, cut_area, area)
-    extra = {k: abs(reg_v[k]) for k in ("net", "cut", "fill")}
+    marginal = {
+        "fill": marginal_volume(diff, fill_area, lod_cell, area),
+        "cut": marginal_volume(diff, cut_area, lod_cell, area),
+    }
+    marginal["net"] = float(np.hypot(marginal["fill"], marginal["cut"]))
+    extra = {k: float(np.hypot(reg_v[k], marginal[k])) for k in ("net", "cut", "fill")}
     unc = volume_uncertainty(
         diff,
         stable,
@@ -69,6 +74,7 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
         n_coef=N_COEF[options.correction],
         filled_mask=filled_mask,
         fill_sigma=fill_sigma,
+        interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
         extra_sigma=extra,
     )
     headline = signed_budget(diff, fill_area, cut_area, area)
@@ -80,7 +86,7 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
         "diff": diff,
         "stable": stable,
         "params": params,
-        "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v},
+        "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v, "marginal_detections_m3": marginal},
         "change_mask": change,
         "compensated": headline,
         "all_cells": budget(diff, area),
