@@ -33,7 +33,7 @@ from ..options import Options
 from ..registration.register import register
 from ..registration.rigid import transform_points
 from ..reporting.report import build_report, write_json
-from ..volumes.compute import compute_volumes
+from ..volumes.compute import Volumes, compute_volumes
 from ..workflow.steps import REGISTERING, points_on, shared_grid, write_report_html
 from .cog import write_cog
 from .scan import dask_loader
@@ -187,7 +187,6 @@ def _tiled(
         alt = reg.fine.alternative
         moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
         vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
-        vols["dem_after"] = h_a + prep.origin[2]
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):
         write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
@@ -203,22 +202,22 @@ def _tiled(
         }
         _quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
-        write_report_html(out, report, vols, grid)
+        write_report_html(out, report, vols, grid, h_a + prep.origin[2])
     shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
 
 
-def _quality(report: dict, vols: dict, grid: GridSpec, options: Options, hooks: Hooks) -> None:
+def _quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:
     """The quality verdict of the in-process run, on the same numbers."""
     from ..volumes.quality import assess
 
     prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-    report["quality"] = assess(report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior)
+    report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior)
     for line in report["quality"]["messages"]:
         hooks.info(f"quality ({report['quality']['verdict']}): {line}")
 
 
-def write_outputs(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, origin, options: Options) -> None:
+def write_outputs(out: OutputDir, h_b, h_a, vols: Volumes, grid: GridSpec, origin, options: Options) -> None:
     """The five rasters of a run, as COGs written block by block."""
     z0 = float(origin[2])
     layers = [
@@ -226,19 +225,19 @@ def write_outputs(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, origin, 
         ("dem_after.tif", lambda r, c: h_a[r, c] + z0, "average height, after (m)", "float32"),
         (
             "difference.tif",
-            lambda r, c: vols["diff"][r, c],
+            lambda r, c: vols.diff[r, c],
             f"H_after - H_before - correction ({options.correction}) (m)",
             "float32",
         ),
         (
             "plane_offset.tif",
-            lambda r, c: vols["offset"][r, c],
+            lambda r, c: vols.offset[r, c],
             f"vertical correction d_i subtracted ({options.correction}) (m)",
             "float32",
         ),
         (
             "filled_mask.tif",
-            lambda r, c: vols["filled_mask"][r, c].astype("uint8"),
+            lambda r, c: vols.filled_mask[r, c].astype("uint8"),
             "1 = difference interpolated (sparse cell or filled hole)",
             "uint8",
         ),

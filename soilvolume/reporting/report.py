@@ -16,6 +16,7 @@ from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 
 if TYPE_CHECKING:
     from ..inputs.prepare import Prepared
+    from ..volumes.compute import Volumes
 
 
 def _clean(v: Any) -> Any:
@@ -85,36 +86,36 @@ def quality_lines(report: dict) -> list[str]:
     return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]]
 
 
-def build_report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, options: Options, timer) -> dict:
+def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, options: Options, timer) -> dict:
     """report.json of an estimate run (``timer.s``: seconds per stage)."""
     from dataclasses import asdict
 
     t_abs = absolute_transform(reg.transform, prep.origin)
     return {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
-        "volume_m3": vols["compensated"],
+        "volume_m3": vols.compensated,
         "volume_method": (
             "fill and cut summed over the areas of significant change: cells whose corrected "
             "difference exceeds their level of detection, in patches of at least 3 cells, grown into "
             "connected cells of the same sign above half of it; survey noise elsewhere is not counted"
         ),
-        "volume_all_cells_m3": vols["all_cells"],
-        "volume_uncompensated_m3": vols["uncompensated"],
-        "volume_paper_plane_m3": vols["paper_plane"],
-        "volume_change_areas_m3": vols["change_areas"],
-        "volume_thresholded_m3": vols["thresholded"],
+        "volume_all_cells_m3": vols.all_cells,
+        "volume_uncompensated_m3": vols.uncompensated,
+        "volume_paper_plane_m3": vols.paper_plane,
+        "volume_change_areas_m3": vols.change_areas,
+        "volume_thresholded_m3": vols.thresholded,
         "uncertainty_m3": {
-            "net": vols["uncertainty"]["net"],
-            "cut": vols["uncertainty"]["cut"],
-            "fill": vols["uncertainty"]["fill"],
-            "net_change_areas": vols["uncertainty"]["net"],
-            "net_all_cells": vols["uncertainty"]["net_compared_area"],
-            "lod_m": vols["uncertainty"]["lod_m"],
-            "confidence": vols["uncertainty"]["confidence"],
+            "net": vols.uncertainty["net"],
+            "cut": vols.uncertainty["cut"],
+            "fill": vols.uncertainty["fill"],
+            "net_change_areas": vols.uncertainty["net"],
+            "net_all_cells": vols.uncertainty["net_compared_area"],
+            "lod_m": vols.uncertainty["lod_m"],
+            "confidence": vols.uncertainty["confidence"],
         },
-        "uncertainty": vols["uncertainty"],
-        "zones": vols.get("zones", []),
-        "correction": {"method": options.correction, "params": vols["params"]},
+        "uncertainty": vols.uncertainty,
+        "zones": vols.zones,
+        "correction": {"method": options.correction, "params": vols.params},
         "registration": {
             "transform": t_abs,
             "transform_local": reg.transform,
@@ -134,15 +135,15 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: dict, p_b, p_a, opti
             "crs": prep.frame.crs.name,
             "crs_wkt": prep.frame.wkt,
             "transform": list(grid.transform)[:6],
-            "compared_area_m2": vols["all_cells"]["area_m2"],
-            "compared_cells": vols["all_cells"]["cells"],
-            "change_area_m2": vols["compensated"]["area_m2"],
-            "empty_cells": vols["empty_cells"],
-            "empty_before": vols["empty_before"],
-            "empty_after": vols["empty_after"],
+            "compared_area_m2": vols.all_cells["area_m2"],
+            "compared_cells": vols.all_cells["cells"],
+            "change_area_m2": vols.compensated["area_m2"],
+            "empty_cells": vols.empty_cells,
+            "empty_before": vols.empty_before,
+            "empty_after": vols.empty_after,
             "statistic": options.statistic,
         },
-        "holes": vols["holes"],
+        "holes": vols.holes,
         "inputs": prep.inputs,
         "options": asdict(options),
         "timings_s": dict(timer.s),

@@ -4,6 +4,8 @@ budgets, uncertainty and zones."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 from scipy import ndimage
 
@@ -18,7 +20,34 @@ N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
 MIN_POINTS = 3  # a robust cell height needs at least this many points
 
 
-def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None) -> dict:
+@dataclass(frozen=True)
+class Volumes:
+    """The volume step's result: grids on the shared grid (m) and budgets (m3, as report.json
+    holds them: net, cut, fill, cells, area_m2)."""
+
+    raw: np.ndarray  # H_after - H_before, NaN where either epoch is empty
+    filled: np.ndarray  # the same with weak cells and enclosed holes refilled
+    filled_mask: np.ndarray  # the refilled cells
+    offset: np.ndarray  # the correction subtracted (d_i and/or the stable-ground surface)
+    diff: np.ndarray  # the corrected difference: filled - offset
+    stable: np.ndarray  # the stable cells of the error model
+    params: dict  # the correction's parameters
+    uncertainty: dict  # volume uncertainty, LoD, registration and marginal-detection terms
+    change_mask: np.ndarray  # the areas of significant change
+    compensated: dict  # the headline budget: fill and cut over the change areas
+    all_cells: dict  # every compared cell
+    uncompensated: dict  # the refilled difference without correction
+    paper_plane: dict  # the paper's H_after - H_before - d_i over every compared cell
+    change_areas: dict  # = compensated
+    thresholded: dict  # cells above the LoD only
+    holes: dict  # refilled area and volume
+    empty_cells: int
+    empty_before: int
+    empty_after: int
+    zones: list = field(default_factory=list)  # per-polygon budgets (--zones)
+
+
+def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None) -> Volumes:
     """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
     of the difference (empty in either epoch) filled from the surrounding difference, which is
     smooth on unchanged ground whatever the terrain -> correction -> change areas, budgets,
@@ -104,7 +133,7 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
 
         compared = np.where(np.isfinite(diff), 0.0, np.nan)
         vols["zones"] = zone_budgets(np.where(change, diff, compared), grid, options.zones)
-    return vols
+    return Volumes(**vols)
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:

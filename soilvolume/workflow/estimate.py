@@ -20,7 +20,7 @@ from ..pipelines.confine import writers_into
 from ..registration.register import register
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.report import build_report, write_json
-from ..volumes.compute import compute_volumes
+from ..volumes.compute import Volumes, compute_volumes
 from .steps import REGISTERING, Timer, points_on, prepare_pair, shared_grid, write_report_html
 
 
@@ -118,7 +118,6 @@ def _estimate(
             alt = reg.fine.alternative
             moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
             vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
-            vols["dem_after"] = h_a + prep.origin[2]
         hooks.step(85, "writing outputs")
         with timer("write"):
             _write_rasters(out, h_b, h_a, vols, grid, prep, options)
@@ -129,13 +128,11 @@ def _estimate(
         from ..volumes.quality import assess
 
         prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-        report["quality"] = assess(
-            report, vols["stable"], vols["change_mask"], vols["offset"], grid.cell_area, prior, vols["diff"]
-        )
+        report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior, vols.diff)
         for line in report["quality"]["messages"]:
             hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_json(out.path("report.json"), report)
-        write_report_html(out, report, vols, grid)
+        write_report_html(out, report, vols, grid, h_a + prep.origin[2])
     return Result(report)
 
 
@@ -154,22 +151,22 @@ def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, 
     )
 
 
-def _write_rasters(out: OutputDir, h_b, h_a, vols: dict, grid: GridSpec, prep: Prepared, options: Options) -> None:
+def _write_rasters(out: OutputDir, h_b, h_a, vols: Volumes, grid: GridSpec, prep: Prepared, options: Options) -> None:
     z0 = float(prep.origin[2])  # local -> absolute heights
     gridmod.write_geotiff(out.path("dem_before.tif"), h_b + z0, grid, "average height, before (m)")
     gridmod.write_geotiff(out.path("dem_after.tif"), h_a + z0, grid, "average height, after (m)")
     gridmod.write_geotiff(
-        out.path("difference.tif"), vols["diff"], grid, f"H_after - H_before - correction ({options.correction}) (m)"
+        out.path("difference.tif"), vols.diff, grid, f"H_after - H_before - correction ({options.correction}) (m)"
     )
     gridmod.write_geotiff(
         out.path("plane_offset.tif"),
-        vols["offset"],
+        vols.offset,
         grid,
         f"vertical correction d_i subtracted ({options.correction}) (m)",
     )
     gridmod.write_geotiff(
         out.path("filled_mask.tif"),
-        vols["filled_mask"].astype("uint8"),
+        vols.filled_mask.astype("uint8"),
         grid,
         "1 = difference interpolated (sparse cell or filled hole)",
         "",

@@ -17,6 +17,7 @@ from ..inputs.footprint import footprint
 from ..inputs.prepare import Prepared, prepare
 from ..options import Options
 from ..validate import check_grid_cells
+from ..volumes.compute import Volumes
 
 REGISTERING = "registering the after cloud onto the before cloud (coarse, then fine)"
 
@@ -65,15 +66,15 @@ def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
     return xyz[keep]
 
 
-def write_report_html(out: OutputDir, report: dict, vols: dict, grid: GridSpec) -> None:
+def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpec, dem_after: np.ndarray) -> None:
     try:
         from ..reporting.html import write_html
     except ImportError:
         return
     arrays = {
-        "difference": vols["diff"],
-        "residual": np.where(vols["stable"], vols["diff"], np.nan),
-        "filled_mask": vols["filled_mask"],
-        "dem_after": vols["dem_after"],
+        "difference": vols.diff,
+        "residual": np.where(vols.stable, vols.diff, np.nan),
+        "filled_mask": vols.filled_mask,
+        "dem_after": dem_after,
     }
     write_html(report, arrays, grid, out.path("report.html"))
