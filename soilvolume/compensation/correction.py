@@ -16,8 +16,24 @@ import numpy as np
 from ..core.types import GridSpec
 from .robust import _TERM_NAMES, fit_poly, residual_stats
 
-METHODS = ("surface", "plane", "constant", "none")
-_DEGREE = {"surface": 2, "plane": 1, "constant": 0}
+
+@dataclass(frozen=True)
+class Mode:
+    """What a ``--correction`` value means, decoded here once."""
+
+    degree: int | None  # degree of the polynomial fitted on stable ground (None: no surface)
+    coefficients: int  # parameters fitted (degrees of freedom the uncertainty loses)
+    paper_plane: bool = False  # subtract the paper's plane offset d_i first
+
+
+MODES = {
+    "surface": Mode(2, 6),
+    "plane": Mode(1, 3),
+    "constant": Mode(0, 1),
+    "none": Mode(None, 0),
+    "paper-plane": Mode(None, 0, paper_plane=True),
+}
+METHODS = tuple(name for name, mode in MODES.items() if not mode.paper_plane)  # surfaces fitted here
 
 
 @dataclass
@@ -60,7 +76,7 @@ def fit_surface(
     if method not in METHODS:
         raise ValueError(f"unknown correction method {method!r} (expected one of {METHODS})")
     mask = stable_mask & np.isfinite(diff)
-    degree = _DEGREE.get(method)
+    degree = MODES[method].degree
     params: dict[str, Any] = {"method": method}
     if degree is None or mask.sum() < 6:
         surface = np.zeros(diff.shape)
@@ -107,8 +123,8 @@ def apply(
     stable = stable_cells(diff, grid.cell, dilate_m=dilate_m, user_mask=user_mask, iterations=iterations)
     used = method
     if select_degree and method in ("surface", "plane"):
-        degree = supported_degree(stable, np.isfinite(diff) & ~stable, _DEGREE[method])
-        used = {0: "constant", 1: "plane", 2: "surface"}[degree]
+        degree = supported_degree(stable, np.isfinite(diff) & ~stable, MODES[method].degree)
+        used = next(name for name in METHODS if MODES[name].degree == degree)
     surface, params = fit_surface(diff, stable, grid, used)
     params["method"], params["fitted"] = method, used
     surface = np.where(np.isfinite(diff), surface, np.nan)

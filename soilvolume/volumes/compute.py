@@ -9,13 +9,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
+from ..compensation.correction import MODES
+from ..compensation.correction import apply as apply_correction
 from ..core.types import GridSpec
 from ..dem import holes
 from ..options import Options
 from .difference import budget, difference, signed_budget
-
-N_COEF = {"surface": 6, "plane": 3, "constant": 1, "none": 0, "paper-plane": 0}
-
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
 
@@ -100,7 +99,7 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
         change,
         grid,
         options.lod_confidence,
-        n_coef=N_COEF[options.correction],
+        n_coef=MODES[options.correction].coefficients,
         filled_mask=filled_mask,
         fill_sigma=fill_sigma,
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
@@ -170,15 +169,14 @@ def correction(diff, d_i, grid: GridSpec, options: Options):
 
     Stable ground is found the same way for every method, so residual statistics and the
     uncertainty are comparable; ``paper-plane`` subtracts the paper's ``d_i`` first."""
-    from ..compensation.correction import apply as apply_correction
-
     method = options.correction
-    base = d_i if method == "paper-plane" else 0.0
+    paper = MODES[method].paper_plane
+    base = d_i if paper else 0.0
     user_mask = None
     if options.stable_mask:
         from .zones import polygons_mask
 
         user_mask = polygons_mask(options.stable_mask, grid)
-    res = apply_correction(diff - base, "none" if method == "paper-plane" else method, grid, user_mask=user_mask)
+    res = apply_correction(diff - base, "none" if paper else method, grid, user_mask=user_mask)
     offset = np.where(np.isfinite(diff), base + res.surface, np.nan)
     return offset, {**res.params, "method": method}, res.stable_mask, res.change_mask
