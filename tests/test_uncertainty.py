@@ -11,10 +11,10 @@ from soilvolume.core.types import GridSpec
 from soilvolume.volumes.uncertainty import (
     correlated_fraction,
     fit_spherical,
-    level_of_detection,
     semivariogram,
     thresholded_volumes,
     volume_uncertainty,
+    z_value,
 )
 
 CELL = 0.5
@@ -60,9 +60,7 @@ def test_spherical_fit_recovers_range_of_smoothed_noise():
 
 
 def test_lod_and_thresholds():
-    assert level_of_detection(0.02) == pytest.approx(0.0392, rel=1e-3)
-    per_cell = np.full((2, 2), 0.02)
-    assert np.allclose(level_of_detection(0.02, 0.95, per_cell), 1.96 * 0.02 * np.sqrt(2), 1e-3)
+    assert z_value(0.95) == pytest.approx(1.96, rel=1e-3)  # the LoD is z x sigma
     d = np.array([[0.01, -0.01], [0.5, -0.2]])
     t = thresholded_volumes(d, 0.05, 2.0)
     assert t == pytest.approx({"net": 0.6, "cut": 0.4, "fill": 1.0, "area_m2": 4.0})

@@ -50,11 +50,6 @@ def check() -> None:
         raise Interrupted(_pending[0])
 
 
-def pending() -> int | None:
-    """The signal received, or None."""
-    return _pending[0] if _pending else None
-
-
 @contextmanager
 def handle_signals() -> Iterator[None]:
     """Record SIGINT/SIGTERM for :func:`check` while the block runs (in the main thread; elsewhere

@@ -37,15 +37,6 @@ def z_value(confidence: float = 0.95) -> float:
     return NormalDist().inv_cdf(0.5 + confidence / 2)
 
 
-def level_of_detection(
-    sigma: float, confidence: float = 0.95, per_cell_sigma: np.ndarray | None = None
-) -> float | np.ndarray:
-    """LoD = z * sqrt(sigma^2 + per_cell_sigma^2) (a float without ``per_cell_sigma``)."""
-    if per_cell_sigma is None:
-        return z_value(confidence) * float(sigma)
-    return z_value(confidence) * np.sqrt(sigma * sigma + np.square(per_cell_sigma))
-
-
 def semivariogram(
     residual: np.ndarray,
     mask: np.ndarray,
