@@ -16,7 +16,7 @@ import numpy as np
 from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
 from ..options import Options
-from . import columns as surface
+from . import columns
 from .o3d import _o3d, to_pcd
 from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
 
@@ -87,10 +87,10 @@ def evaluate_surface(
     src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
     gap = spacing(target_xyz) if gap is None else gap
     lo, hi = src[:, :2].min(axis=0) - 1.0, src[:, :2].max(axis=0) + 1.0
-    cols = surface.columns(target_xyz, max(0.25, 2 * gap), lo, hi)
+    cols = columns.columns(target_xyz, max(0.25, 2 * gap), lo, hi)
     if len(cols.xyz) == 0:
         return 0.0, float("nan")
-    r = np.abs(surface.plane_residuals(src, cols, surface.normals(cols)))
+    r = np.abs(columns.plane_residuals(src, cols, columns.normals(cols)))
     ok = r <= distance
     fit = float(ok.sum() / max(len(src), 1))
     return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
@@ -123,9 +123,9 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
 
 def _column_pcd(xyz: np.ndarray, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
     """Open3D cloud of the column means of ``xyz`` (within lo..hi) with surface normals."""
-    cols = surface.columns(xyz, voxel, lo, hi)
+    cols = columns.columns(xyz, voxel, lo, hi)
     pcd = to_pcd(cols.xyz)
-    pcd.normals = _o3d().utility.Vector3dVector(surface.normals(cols))
+    pcd.normals = _o3d().utility.Vector3dVector(columns.normals(cols))
     return pcd
 
 
@@ -154,7 +154,7 @@ def icp_levels(
             check()
         if voxel not in cache:
             cache[voxel] = (
-                _sampled(to_pcd(surface.columns(source_xyz, voxel).xyz), MAX_SOURCE_POINTS),
+                _sampled(to_pcd(columns.columns(source_xyz, voxel).xyz), MAX_SOURCE_POINTS),
                 _surface_pcd(target_xyz, source_xyz, t, voxel, 2.0 + dist),
             )
         src, tgt = cache[voxel]
@@ -198,7 +198,7 @@ def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
     from ..compensation.stable import margin
 
     cell = max(1.0, 2.0 * gap)
-    cols = surface.columns(xyz, cell)
+    cols = columns.columns(xyz, cell)
     valid = np.zeros(cols.shape, bool)
     valid[cols.row, cols.col] = True
     band = margin(valid, cell)
