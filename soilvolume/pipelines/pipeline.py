@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import SoilVolumeError
-from ..inputs.io import GROUND, RawPoints, atomic_path
+from ..inputs.io import GROUND, LAS_SUFFIXES, RawPoints, atomic_path
 from . import stages as embedded
 from .confine import confine_writers
 from .load import READERS, TEXT_SUFFIXES, load_pipeline
@@ -78,7 +78,7 @@ def reader_stage(path: str | os.PathLike, default_srs: str | None = None) -> dic
 
 def has_ground_class(path: str | os.PathLike) -> bool:
     """Whether a LAS/LAZ file has points of class 2 (for ``ground='auto'``)."""
-    if Path(path).suffix.lower() not in (".las", ".laz"):
+    if Path(path).suffix.lower() not in LAS_SUFFIXES:
         return False
     import laspy
 
@@ -159,7 +159,7 @@ def build_prepare_pipeline(
     if voxel:
         out.append({"type": "filters.voxelcenternearestneighbor", "cell": float(voxel)})
     if output is not None:
-        if Path(output).suffix.lower() not in (".las", ".laz"):
+        if Path(output).suffix.lower() not in LAS_SUFFIXES:
             raise SoilVolumeError(f"{output}: the prepared cloud is written as .las or .laz")
         out.append(
             {"type": "writers.las", "filename": str(output), "scale_x": 0.001, "scale_y": 0.001, "scale_z": 0.001}

@@ -12,7 +12,7 @@ from ..core.outputs import check_output_file, os_errors
 from ..core.types import SoilVolumeError
 from ..dem import grid as gridmod
 from ..inputs.footprint import footprint, polygon_area
-from ..inputs.io import write_las_chunked
+from ..inputs.io import LAS_SUFFIXES, write_las_chunked
 from ..options import Options
 from ..registration.register import register
 from ..reporting.report import _clean, absolute_transform, stage_dict
@@ -61,7 +61,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
     """See :func:`soilvolume.api.register`."""
     out_cloud = check_output_file(out_cloud, [before, after])
-    if out_cloud.suffix.lower() not in (".las", ".laz"):
+    if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
     hooks.step(5, "reading")
     prep = prepare_pair(before, after, options, hooks, None, None)
