@@ -101,3 +101,23 @@ def test_tommy_thompson_vertical_offset_removed(tommy):
     assert abs(report["volume_m3"]["net"]) < 58_000 / 4
     assert report["registration"]["fine"]["fitness"] > 0.6
     assert report["inputs"]["before"]["selection"].startswith("class 2")
+
+
+def test_autzen_registered_anyway_is_flagged(real_dir, tmp_path):
+    """Forced to register (--georeferencing gps), the small crop of works pulls the pose to the
+    prior's limits and the net collapses (+63 m3): the report must not call that reliable."""
+    out = tmp_path / "out"
+    p = run_cli(
+        "estimate",
+        real_dir / "autzen_bmx_2010.las",
+        real_dir / "autzen_bmx_2023.las",
+        "--out",
+        out,
+        "--quiet",
+        "--georeferencing",
+        "gps",
+    )
+    assert p.returncode == 0, p.stderr
+    quality = json.loads((out / "report.json").read_text())["quality"]
+    assert quality["verdict"] != "reliable"
+    assert any("georeferencing prior" in m for m in quality["messages"])

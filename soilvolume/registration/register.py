@@ -372,7 +372,9 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
     best = _best_on(src, before_xyz, allowed, gap)
     others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
-    return best, (others[-1] if others else None)
+    rejected = len(poses) - len(allowed)
+    label = best[1] + (f"; {rejected} pose(s) beyond the georeferencing prior rejected" if rejected else "")
+    return (best[0], label), (others[-1] if others else None)
 
 
 def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:

@@ -63,6 +63,14 @@ def assess(
                         f"georeferencing prior ({key.split('_')[0]})",
                     )
                 )
+        if "beyond the georeferencing prior" in reg.get("fine", {}).get("note", ""):
+            out.append(
+                (
+                    "caution",
+                    "registration wanted a pose beyond the georeferencing prior (the works may "
+                    "pull it); the best pose within the prior was kept",
+                )
+            )
         fit = reg.get("fine", {}).get("fitness")
         if fit is not None and np.isfinite(fit) and fit < 0.5:
             out.append(("caution", f"only {fit:.0%} of the after survey fits the before surface after registration"))
