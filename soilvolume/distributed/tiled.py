@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..compensation import planes
 from ..core.hooks import Hooks, Result
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec, SoilVolumeError
@@ -33,8 +32,8 @@ from ..options import Options
 from ..registration.register import register
 from ..registration.rigid import transform_points
 from ..reporting.report import build_report, write_json
-from ..volumes.compute import Volumes, compute_volumes
-from ..workflow.steps import REGISTERING, points_on, shared_grid, write_report_html
+from ..volumes.compute import Volumes
+from ..workflow.steps import REGISTERING, add_quality, planes_and_volumes, shared_grid, write_report_html
 from .cog import write_cog
 from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
@@ -177,16 +176,10 @@ def _tiled(
     cache = tile_cache(out, plan)
     with timer("grids"):
         h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
-    with timer("planes"):
-        sel_b = points_on(prep.before_thin, grid, np.isfinite(h_b))
-        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-        p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
-        d_i = planes.plane_offset(p_b, p_a, grid)
-    hooks.step(75, "computing the difference and volumes")
-    with timer("volume"):
-        alt = reg.fine.alternative
-        moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
-        vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
+    hooks.step(70, "estimating the vertical bias correction")
+    vols, p_b, p_a = planes_and_volumes(
+        prep, reg, grid, (h_a, n_a, s_a, h_b, n_b, s_b), after_thin, options, timer, hooks
+    )
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):
         write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
@@ -200,21 +193,11 @@ def _tiled(
             "task_seconds": round(stats["seconds"], 3),
             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
         }
-        _quality(report, vols, grid, options, hooks)
+        add_quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
         write_report_html(out, report, vols, grid, h_a + prep.origin[2])
     shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
-
-
-def _quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:
-    """The quality verdict of the in-process run, on the same numbers."""
-    from ..volumes.quality import assess
-
-    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-    report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior)
-    for line in report["quality"]["messages"]:
-        hooks.info(f"quality ({report['quality']['verdict']}): {line}")
 
 
 def write_outputs(out: OutputDir, h_b, h_a, vols: Volumes, grid: GridSpec, origin, options: Options) -> None:

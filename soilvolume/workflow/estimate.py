@@ -6,9 +6,6 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import numpy as np
-
-from ..compensation import planes
 from ..core.hooks import Hooks, Result
 from ..core.outputs import RUN_OUTPUTS, OutputDir, os_errors, output_dir
 from ..core.types import GridSpec
@@ -20,8 +17,8 @@ from ..pipelines.confine import writers_into
 from ..registration.register import register
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.report import build_report, write_json
-from ..volumes.compute import Volumes, compute_volumes
-from .steps import REGISTERING, Timer, points_on, prepare_pair, shared_grid, write_report_html
+from ..volumes.compute import Volumes
+from .steps import REGISTERING, Timer, add_quality, planes_and_volumes, prepare_pair, shared_grid, write_report_html
 
 
 def _threads(options: Options) -> None:
@@ -108,16 +105,9 @@ def _estimate(
             del after_xyz
             h_b, n_b, s_b = before_job.result()
         hooks.step(70, "estimating the vertical bias correction")
-        with timer("planes"):
-            sel_b = points_on(prep.before_thin, grid, np.isfinite(h_b))
-            p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-            p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
-            d_i = planes.plane_offset(p_b, p_a, grid)
-        hooks.step(75, "computing the difference and volumes")
-        with timer("volume"):
-            alt = reg.fine.alternative
-            moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
-            vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
+        vols, p_b, p_a = planes_and_volumes(
+            prep, reg, grid, (h_a, n_a, s_a, h_b, n_b, s_b), after_thin, options, timer, hooks
+        )
         hooks.step(85, "writing outputs")
         with timer("write"):
             _write_rasters(out, h_b, h_a, vols, grid, prep, options)
@@ -125,12 +115,7 @@ def _estimate(
                 cloud_job.result()
     with timer("report"):
         report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
-        from ..volumes.quality import assess
-
-        prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-        report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior, vols.diff)
-        for line in report["quality"]["messages"]:
-            hooks.info(f"quality ({report['quality']['verdict']}): {line}")
+        add_quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
         write_report_html(out, report, vols, grid, h_a + prep.origin[2])
     return Result(report)

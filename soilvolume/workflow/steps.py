@@ -78,3 +78,35 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
         "dem_after": dem_after,
     }
     write_html(report, arrays, grid, out.path("report.html"))
+
+
+def planes_and_volumes(
+    prep: Prepared, reg, grid: GridSpec, epochs: tuple, after_thin: np.ndarray, options: Options, timer, hooks: Hooks
+):
+    """The paper's two RANSAC planes and d_i, then the volume step, from both epochs' grids
+    ``epochs`` = (h_a, n_a, s_a, h_b, n_b, s_b): (Volumes, plane before, plane after)."""
+    from ..compensation import planes
+    from ..volumes.compute import compute_volumes
+
+    h_a, n_a, s_a, h_b, n_b, s_b = epochs
+    with timer("planes"):
+        sel_b = points_on(prep.before_thin, grid, np.isfinite(h_b))
+        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+        p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+        d_i = planes.plane_offset(p_b, p_a, grid)
+    hooks.step(75, "computing the difference and volumes")
+    with timer("volume"):
+        alt = reg.fine.alternative
+        moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
+        vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
+    return vols, p_b, p_a
+
+
+def add_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:
+    """The quality verdict (see :mod:`soilvolume.volumes.quality`) into ``report``, logged."""
+    from ..volumes.quality import assess
+
+    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
+    report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior, vols.diff)
+    for line in report["quality"]["messages"]:
+        hooks.info(f"quality ({report['quality']['verdict']}): {line}")
