@@ -29,11 +29,10 @@ from ..inputs.footprint import footprint, inside, polygon_area
 from ..inputs.prepare import Prepared, prepare
 from ..inputs.stream import open_source
 from ..options import Options
-from ..registration.register import register
 from ..registration.rigid import transform_points
 from ..reporting.report import build_report, write_json
 from ..volumes.compute import Volumes
-from ..workflow.steps import REGISTERING, add_quality, planes_and_volumes, shared_grid, write_report_html
+from ..workflow.steps import add_quality, planes_and_volumes, register_pair, shared_grid, write_report_html
 from .cog import write_cog
 from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
@@ -130,24 +129,7 @@ def _tiled(
             full=False,
             loader=dask_loader(c, lambda m: hooks.step(8, m)),
         )
-    from ..registration.georef import resolve
-
-    mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
-    hooks.info(f"georeferencing: {mode} ({why})")
-    if mode == "precise":
-        options = options.with_(correction="none")
-    hooks.step(15, REGISTERING)
-    with timer("register"):
-        reg = register(
-            prep.after_thin,
-            prep.before_thin,
-            options,
-            check=hooks.ticker(15, 55, REGISTERING),
-            precise=mode == "precise",
-        )
-    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
-    timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
-    timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
+    reg, options = register_pair(prep, options, hooks, timer)
     after_thin = transform_points(prep.after_thin, reg.transform)
     cell = options.cell if options.cell else cell_from_columns(prep, after_thin)
     grid = shared_grid(prep, after_thin, options.with_(cell=cell))

@@ -14,11 +14,10 @@ from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared
 from ..options import Options
 from ..pipelines.confine import writers_into
-from ..registration.register import register
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.report import build_report, write_json
 from ..volumes.compute import Volumes
-from .steps import REGISTERING, Timer, add_quality, planes_and_volumes, prepare_pair, shared_grid, write_report_html
+from .steps import Timer, add_quality, planes_and_volumes, prepare_pair, register_pair, shared_grid, write_report_html
 
 
 def _threads(options: Options) -> None:
@@ -72,25 +71,7 @@ def _estimate(
         f"footprint and {len(prep.after):,} after points; registration subsets "
         f"{len(prep.before_thin):,} + {len(prep.after_thin):,} ({prep.voxel:.2f} m columns)"
     )
-    from ..registration.georef import resolve
-
-    mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
-    hooks.info(f"georeferencing: {mode} ({why})")
-    if mode == "precise":
-        options = options.with_(correction="none")
-    hooks.step(15, REGISTERING)
-    with timer("register"):
-        reg = register(
-            prep.after_thin,
-            prep.before_thin,
-            options,
-            check=hooks.ticker(15, 55, REGISTERING),
-            dense=(prep.after.xyz, prep.before.xyz),
-            precise=mode == "precise",
-        )
-    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
-    timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
-    timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
+    reg, options = register_pair(prep, options, hooks, timer, dense=(prep.after.xyz, prep.before.xyz))
     hooks.info(f"coarse: {reg.coarse.note}")
     hooks.info(f"fine ({reg.fine.method}): fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m, {reg.fine.note}")
     hooks.step(55, "gridding the average heights")

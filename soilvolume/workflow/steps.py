@@ -110,3 +110,29 @@ def add_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, h
     report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior, vols.diff)
     for line in report["quality"]["messages"]:
         hooks.info(f"quality ({report['quality']['verdict']}): {line}")
+
+
+def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense=None):
+    """Decide how far the georeferencing is trusted, then register: (Registration, the options
+    the rest of the run uses; precise surveys get no bias correction)."""
+    from ..registration.georef import resolve
+    from ..registration.register import register
+
+    mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
+    hooks.info(f"georeferencing: {mode} ({why})")
+    if mode == "precise":
+        options = options.with_(correction="none")
+    hooks.step(15, REGISTERING)
+    with timer("register"):
+        reg = register(
+            prep.after_thin,
+            prep.before_thin,
+            options,
+            check=hooks.ticker(15, 55, REGISTERING),
+            dense=dense,
+            precise=mode == "precise",
+        )
+    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
+    timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
+    timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
+    return reg, options
