@@ -73,3 +73,15 @@ def fit_poly(x, y, diff, mask, degree: int, robust: bool = False):
             break
         coef = _lstsq(px, py, z, w, degree)
     return _terms(xs, ys, degree) @ coef, coef, frame
+
+
+def patches(mask: np.ndarray, min_cells: int) -> np.ndarray:
+    """Cells of ``mask`` in 8-connected patches of at least ``min_cells`` cells."""
+    from scipy import ndimage
+
+    if min_cells <= 1 or not mask.any():
+        return mask
+    labels, n = ndimage.label(mask, structure=np.ones((3, 3), bool))
+    ok = np.bincount(labels.ravel(), minlength=n + 1) >= min_cells
+    ok[0] = False
+    return ok[labels]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from .robust import fit_poly, nmad
+from .robust import fit_poly, nmad, patches
 
 MARGIN_FRACTION = 0.15  # margin band width as a fraction of the footprint's inradius
 
@@ -41,16 +41,6 @@ def _disk(radius_cells: float) -> np.ndarray:
     r = int(np.ceil(radius_cells))
     yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
     return xx * xx + yy * yy <= radius_cells * radius_cells + 1e-9
-
-
-def _patches(mask: np.ndarray, min_cells: int) -> np.ndarray:
-    """Cells of ``mask`` in 8-connected patches of at least ``min_cells`` cells."""
-    if min_cells <= 1 or not mask.any():
-        return mask
-    labels, n = ndimage.label(mask, structure=np.ones((3, 3), bool))
-    ok = np.bincount(labels.ravel(), minlength=n + 1) >= min_cells
-    ok[0] = False
-    return ok[labels]
 
 
 def find_stable(
@@ -84,7 +74,7 @@ def find_stable(
         resid = diff - surface
         spread = nmad(resid[stable])
         thr = k * (max(spread, noise) if np.isfinite(noise) else spread)
-        change = _patches(valid & (np.abs(resid) > thr), min_change_cells)
+        change = patches(valid & (np.abs(resid) > thr), min_change_cells)
         if disk is not None and change.any():
             change = ndimage.binary_dilation(change, disk)
         new = valid & ~change

@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
+from ..compensation.robust import patches
+
 MIN_CELLS = 3  # a change area has at least this many significant cells
 BUFFER_CELLS = 1  # cells of buffer around each change area
 MARGINAL_CELLS = 50  # smaller areas barely above their LoD may be noise (a few correlation areas)
@@ -32,15 +34,6 @@ def cell_lod(lod: float, se_a: np.ndarray, se_b: np.ndarray, z: float) -> np.nda
     cell's difference where that is larger (unknown standard errors count as zero)."""
     se = np.sqrt(np.nan_to_num(se_a) ** 2 + np.nan_to_num(se_b) ** 2)
     return np.maximum(lod, z * se)
-
-
-def _cores(significant: np.ndarray, min_cells: int) -> np.ndarray:
-    labels, n = ndimage.label(significant, structure=_EIGHT)
-    if n == 0:
-        return significant
-    keep = np.bincount(labels.ravel(), minlength=n + 1) >= min_cells
-    keep[0] = False
-    return keep[labels]
 
 
 def change_areas(
@@ -61,7 +54,7 @@ def change_areas(
     measured = ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered
     if refilled is not None:
         measured &= ~refilled
-    fill_core, cut_core = _cores(measured & (d > lod), min_cells), _cores(measured & (d < -lod), min_cells)
+    fill_core, cut_core = patches(measured & (d > lod), min_cells), patches(measured & (d < -lod), min_cells)
     grow = (lambda m: ndimage.binary_dilation(m, _EIGHT, iterations=buffer_cells)) if buffer_cells else (lambda m: m)
     fill, cut = grow(fill_core) & valid, grow(cut_core) & valid
     both = fill & cut

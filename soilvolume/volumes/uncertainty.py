@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage, optimize
 
-from ..compensation.robust import nmad
+from ..compensation.robust import nmad, patches
 from ..core.types import GridSpec
 
 INTERP_FRACTION = 0.15
@@ -258,17 +258,8 @@ def thresholded_volumes(
     smaller than that are dropped too (a spatial-coherence filter against isolated noise)."""
     keep = np.isfinite(diff) & (np.abs(diff) >= lod)
     if min_cells > 1:
-        keep = _coherent(keep & (diff > 0), min_cells) | _coherent(keep & (diff < 0), min_cells)
+        keep = patches(keep & (diff > 0), min_cells) | patches(keep & (diff < 0), min_cells)
     d = np.where(keep, diff, 0.0)
     fill = float(d[d > 0].sum() * cell_area)
     cut = float(-d[d < 0].sum() * cell_area)
     return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(keep.sum() * cell_area)}
-
-
-def _coherent(mask: np.ndarray, min_cells: int) -> np.ndarray:
-    """Cells of ``mask`` in 8-connected patches of at least ``min_cells`` cells."""
-    labels, n = ndimage.label(mask, structure=np.ones((3, 3), bool))
-    sizes = np.bincount(labels.ravel(), minlength=n + 1)
-    ok = sizes >= min_cells
-    ok[0] = False
-    return ok[labels]
