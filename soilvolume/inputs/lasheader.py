@@ -63,17 +63,8 @@ def check_las_header(path: Path) -> int:
 
 
 def _check_vlrs(fh, path: Path, header_size: int, offset: int, n_vlrs: int) -> None:
-    """Walk the VLRs: each must end at or before the point data (at most one step per VLR that
-    fits, so an absurd count stops at the first that does not)."""
-    pos = header_size
-    for i in range(n_vlrs):
-        if pos + VLR_HEADER > offset:
-            raise _fail(path, f"{n_vlrs} VLRs declared, VLR {i + 1} would start in the point data")
-        fh.seek(pos + 20)
-        (length,) = struct.unpack("<H", fh.read(2))
-        pos += VLR_HEADER + length
-        if pos > offset:
-            raise _fail(path, f"VLR {i + 1} runs into the point data")
+    """Walk the VLRs: each must end at or before the point data."""
+    _walk_records(fh, path, header_size, n_vlrs, offset, ("VLR", VLR_HEADER, "<H"), ("in", "into"), "the point data")
 
 
 def _check_evlrs(fh, path: Path, start: int, n_evlrs: int, offset: int, size: int) -> None:
@@ -82,15 +73,22 @@ def _check_evlrs(fh, path: Path, start: int, n_evlrs: int, offset: int, size: in
         return
     if not offset <= start <= size:
         raise _fail(path, f"{n_evlrs} EVLRs declared at byte {start} of a {size}-byte file")
-    pos = start
-    for i in range(n_evlrs):
-        if pos + EVLR_HEADER > size:
-            raise _fail(path, f"{n_evlrs} EVLRs declared, EVLR {i + 1} would start past the end of the file")
+    _walk_records(fh, path, start, n_evlrs, size, ("EVLR", EVLR_HEADER, "<Q"), ("past", "past"), "the end of the file")
+
+
+def _walk_records(fh, path: Path, pos: int, count: int, end: int, record: tuple, words: tuple, limit: str) -> None:
+    """Step over ``count`` records from byte ``pos``; ``record`` = (kind, header size, struct
+    format of its length at byte 20). Each must end by byte ``end`` (at most one step per record
+    that fits, so an absurd count stops at the first that does not)."""
+    kind, header, length_format = record
+    for i in range(count):
+        if pos + header > end:
+            raise _fail(path, f"{count} {kind}s declared, {kind} {i + 1} would start {words[0]} {limit}")
         fh.seek(pos + 20)
-        (length,) = struct.unpack("<Q", fh.read(8))
-        pos += EVLR_HEADER + length
-        if pos > size:
-            raise _fail(path, f"EVLR {i + 1} runs past the end of the file")
+        (length,) = struct.unpack(length_format, fh.read(struct.calcsize(length_format)))
+        pos += header + length
+        if pos > end:
+            raise _fail(path, f"{kind} {i + 1} runs {words[1]} {limit}")
 
 
 def _point_count(head: bytes, minor: int) -> int:
