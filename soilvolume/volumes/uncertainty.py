@@ -224,8 +224,9 @@ def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.
     r = diff[stable & np.isfinite(diff)]
     lod = _lod(r, nmad(r), confidence) if r.size else None
     noise = noise_sigma(diff)
-    cap = 2.0 * z_value(confidence) * noise if np.isfinite(noise) else float("inf")
-    return float(min(lod if lod is not None else cap, cap)) if np.isfinite(min(lod or cap, cap)) else 0.0
+    cap = 2.0 * z_value(confidence) * noise if np.isfinite(noise) else None
+    known = [v for v in (lod, cap) if v is not None and np.isfinite(v)]
+    return float(min(known)) if known else 0.0
 
 
 def leftover_bias(residual: np.ndarray, stable: np.ndarray, cell: float, scale_m: float = 10.0) -> np.ndarray:
