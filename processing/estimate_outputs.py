@@ -92,7 +92,7 @@ def values(report: dict[str, Any]) -> dict[str, Any]:
         out[key] = moved.get(field)
     quality = summary.quality(report)
     out["VERDICT"] = quality["verdict"]
-    out["QUALITY_MESSAGES"] = "\n".join(quality["messages"])
+    out["QUALITY_MESSAGES"] = "\n".join(engine.qgis_wording(m) for m in quality["messages"])
     out["SIGNIFICANCE"] = summary.significance(report)
     out["TRANSFORM"] = params.to_json(reg.get("transform"))
     return out

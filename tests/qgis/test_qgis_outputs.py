@@ -187,3 +187,17 @@ def test_autzen_rasters_have_no_vertical_crs_in_feet(run_alg, tmp_path):
         dem = ds.read(1, masked=True)
     assert 125 < float(np.ma.median(dem)) < 135  # metres (the file's feet would be ~427)
     assert "REGISTERED" not in res or res["REGISTERED"] is None
+
+
+def test_quality_messages_name_parameters_not_flags(real_dir, run_alg_session, tmp_path):
+    """On Autzen the verdict explains an uncorrected offset and how to ask for registration: in
+    QGIS's words (the parameter's label and name), never a command-line flag."""
+    params = {
+        "BEFORE": str(real_dir / "autzen_bmx_2010.las"),
+        "AFTER": str(real_dir / "autzen_bmx_2023.las"),
+        "DIFFERENCE": str(tmp_path / "difference.tif"),
+    }
+    results = run_alg_session("estimatevolumechange", params)
+    assert results["VERDICT"] == "use with caution"
+    assert "--" not in results["QUALITY_MESSAGES"]
+    assert "(GEOREFERENCING)" in results["QUALITY_MESSAGES"]
