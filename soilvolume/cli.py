@@ -13,7 +13,7 @@ import sys
 from dataclasses import fields
 from pathlib import Path
 
-from .core.interrupt import Interrupted, handle_signals, ignore_signals
+from .core.interrupt import Interrupted, handle_signals
 from .core.nativelog import hold_native_stderr
 from .core.outputs import os_problem
 from .core.types import SoilVolumeError
@@ -251,14 +251,12 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; every failure is one line on stderr and a non-zero exit: 1 for errors,
     130/143 for SIGINT/SIGTERM (outputs are never half-written)."""
     logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
-    with handle_signals():
+    with handle_signals(then_ignore=argv is None):  # None: the program exits right after
         ns = build_parser().parse_args(argv)
         with hold_native_stderr() as native:
             code = _run(ns)
         if code == 0 and native.text:
             sys.stderr.write(native.text)
-        if argv is None:  # the program is about to exit: a late signal must not kill it mid-way
-            ignore_signals()
         return code
 
 

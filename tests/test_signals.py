@@ -102,3 +102,18 @@ def test_a_kill_between_the_two_renames_of_a_swap_restores_the_old_set(tmp_path)
     sweep(out)
     assert sorted(os.listdir(tmp_path)) == ["result"]
     assert (out / "report.json").read_text() == "{}"
+
+
+def test_signal_after_the_run_is_ignored_on_the_way_out():
+    """A signal between the last write and the exit status must not turn a success into -2."""
+    script = (
+        "import os, signal\n"
+        "from soilvolume.core.interrupt import handle_signals\n"
+        "with handle_signals(then_ignore=True):\n"
+        "    pass\n"
+        "os.kill(os.getpid(), signal.SIGINT)\n"
+        "os.kill(os.getpid(), signal.SIGTERM)\n"
+        "print('exited normally')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert (done.returncode, done.stdout.strip()) == (0, "exited normally"), done.stderr

@@ -51,9 +51,11 @@ def check() -> None:
 
 
 @contextmanager
-def handle_signals() -> Iterator[None]:
+def handle_signals(then_ignore: bool = False) -> Iterator[None]:
     """Record SIGINT/SIGTERM for :func:`check` while the block runs (in the main thread; elsewhere
-    Python cannot install handlers and the block runs unchanged)."""
+    Python cannot install handlers and the block runs unchanged). Afterwards the previous handlers
+    come back, or with ``then_ignore`` the signals stay ignored: a finished program on its way out
+    must not be killed between its last write and its exit status."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -62,15 +64,8 @@ def handle_signals() -> Iterator[None]:
         yield
     finally:
         for s, h in old.items():
-            signal.signal(s, h)
+            signal.signal(s, signal.SIG_IGN if then_ignore else h)
         _pending.clear()
-
-
-def ignore_signals() -> None:
-    """Ignore SIGINT/SIGTERM from now on (a finished program on its way out; main thread only)."""
-    if threading.current_thread() is threading.main_thread():
-        for s in NAMES:
-            signal.signal(s, signal.SIG_IGN)
 
 
 @contextmanager
