@@ -27,6 +27,10 @@ POINT_CLOUD_DEPS: tuple[tuple[str, str], ...] = (
     ("open3d", _OPEN3D_PIP),
 )
 RASTER_DEPS: tuple[tuple[str, str], ...] = POINT_CLOUD_DEPS[:4]
+# Not needed to run, offered with the rest: surveys past the memory budget run as Dask tasks
+# (without it, the Scheduler "auto" runs them in-process).
+OPTIONAL_DEPS: tuple[tuple[str, str], ...] = (("distributed", "dask[distributed]"),)
+ALL_DEPS = POINT_CLOUD_DEPS + OPTIONAL_DEPS
 # open3d's own requirements are mostly its notebook viewer's (ipywidgets, nbformat, ipython, ...);
 # the engine uses only its numpy core, so it is installed without them, plus dash, which its
 # ``import open3d`` needs (open3d.visualization imports it).
@@ -68,7 +72,7 @@ def _import(module: str):
 
 
 def missing(
-    deps: Sequence[tuple[str, str]] = POINT_CLOUD_DEPS,
+    deps: Sequence[tuple[str, str]] = ALL_DEPS,
     *,
     quick: bool = False,
 ) -> list[tuple[str, str, str]]:

@@ -80,10 +80,10 @@ class DependencyBar:
 
     def check(self) -> list[tuple[str, str, str]]:
         """Show the bar if something is missing (quick look-up, no import); returns the missing."""
-        missing = deps.missing(quick=True)
+        missing = deps.missing(deps.POINT_CLOUD_DEPS, quick=True)
         if missing and not DependencyBar.shown and self.iface is not None:
             DependencyBar.shown = True
-            self.show(missing)
+            self.show(deps.missing(quick=True))  # the optional ones come along
         return missing
 
     def show(self, missing: Sequence[tuple[str, str, str]]) -> None:

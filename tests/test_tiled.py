@@ -169,3 +169,13 @@ def test_auto_inside_qgis_uses_threads(monkeypatch):
 
     monkeypatch.setattr(sys, "executable", "/usr/bin/qgis")
     assert choose("auto", 1.0, 64_000_000).kind == "threads"
+
+
+def test_auto_without_dask_runs_in_process(monkeypatch):
+    """A large pair with ``auto`` and no dask.distributed installed: in-process, as before."""
+    from soilvolume.distributed import schedule
+
+    monkeypatch.setattr(schedule, "has_dask", lambda: False)
+    assert schedule.choose("auto", 1.0, 64_000_000).kind == "none"
+    monkeypatch.undo()
+    assert schedule.has_dask() is True  # installed by make setup

@@ -67,6 +67,16 @@ def can_spawn() -> bool:
     return Path(sys.executable).name.lower().startswith("python")
 
 
+def has_dask() -> bool:
+    """Whether dask.distributed can be imported (``auto`` runs in-process without it)."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec("distributed") is not None
+    except (ImportError, ValueError):
+        return False
+
+
 def in_process_gb(points: int) -> float:
     """Expected peak memory (GB) of an in-process run over ``points`` input points."""
     return BASE_GB + BYTES_PER_POINT * points / 2**30
@@ -77,7 +87,7 @@ def choose(spec: str, memory_limit: float, points: int) -> Schedule:
     chosen = parse(spec)
     if chosen is not None:
         return chosen
-    if in_process_gb(points) <= budget_gb(memory_limit):
+    if in_process_gb(points) <= budget_gb(memory_limit) or not has_dask():
         return Schedule("none")
     return Schedule("local" if can_spawn() else "threads", os.cpu_count() or 1)
 

@@ -77,6 +77,28 @@ def test_missing_dependency_shows_one_bar_with_install(plugin_package, qgis_ifac
             plugin.unload()
 
 
+def test_dask_is_optional_but_offered_with_the_rest(plugin_package, qgis_iface, fresh_bar, monkeypatch):
+    """Without dask.distributed the plugin runs (no bar); when the bar shows for a required
+    package, its Install button also installs dask[distributed]."""
+    from soilvolume_qgis.plugin.installer import DependencyBar
+
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    plugin = load_plugin(plugin_package, qgis_iface)
+    try:
+        assert our_items(fresh_bar) == []
+    finally:
+        plugin.unload()
+    monkeypatch.setitem(sys.modules, "open3d", None)
+    calls = []
+    monkeypatch.setattr(DependencyBar, "install", lambda self, reqs: calls.append(list(reqs)))
+    plugin = load_plugin(plugin_package, qgis_iface)
+    try:
+        our_items(fresh_bar)[0].findChild(QPushButton, "soilvolumeInstallDependencies").click()
+        assert "dask[distributed]" in calls[0] and any(r.startswith("open3d") for r in calls[0])
+    finally:
+        plugin.unload()
+
+
 def test_no_bar_when_everything_imports(plugin_package, qgis_iface, fresh_bar):
     plugin = load_plugin(plugin_package, qgis_iface)
     try:
