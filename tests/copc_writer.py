@@ -9,7 +9,13 @@ import numpy as np
 
 
 def write_copc(
-    path: Path, xyz: np.ndarray, cls: np.ndarray | None = None, crs_wkt: str = "", scale: float = 0.001, seed: int = 0
+    path: Path,
+    xyz: np.ndarray,
+    cls: np.ndarray | None = None,
+    crs_wkt: str = "",
+    scale: float = 0.001,
+    seed: int = 0,
+    spacing: float | None = None,
 ) -> Path:
     import copclib as c
     import laspy
@@ -22,7 +28,7 @@ def write_copc(
     half, centre = float((hi - lo).max() / 2) + 1.0, (lo + hi) / 2
     info = writer.copc_config.copc_info
     info.center_x, info.center_y, info.center_z = map(float, centre)
-    info.halfsize, info.spacing = half, 2 * half / 64
+    info.halfsize, info.spacing = half, spacing or 2 * half / 64  # the root level's point spacing
     header = laspy.LasHeader(point_format=6, version="1.4")
     header.scales, header.offsets = np.full(3, scale), off
 

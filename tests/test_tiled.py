@@ -179,3 +179,25 @@ def test_auto_without_dask_runs_in_process(monkeypatch):
     assert schedule.choose("auto", 1.0, 64_000_000).kind == "none"
     monkeypatch.undo()
     assert schedule.has_dask() is True  # installed by make setup
+
+
+def test_copc_inputs_thinned_for_registration_match_in_process(pair, in_process, tmp_path):
+    """COPC inputs whose registration pass reads only the root level (1/16 of the points, about
+    one per registration column of this sparse pair): the grid of the LAS run (cell size from the
+    scaled counts) and its volumes within 2 % and within the thinned run's own interval."""
+    import laspy
+    from copc_writer import write_copc
+
+    before, after, _ = pair
+    copcs = []
+    for k, path in enumerate((before, after)):
+        las = laspy.read(path)
+        xyz = np.c_[las.x, las.y, las.z]
+        crs = las.header.parse_crs().to_wkt()
+        copcs.append(write_copc(tmp_path / f"{k}.copc.laz", xyz, np.asarray(las.classification), crs, spacing=0.01))
+    got = estimate(*copcs, tmp_path / "r", Options(scheduler="threads:2", tile_cells=24))
+    ref = in_process.report
+    assert got.report["grid"]["cell_m"] == ref["grid"]["cell_m"]
+    for part in ("net", "cut", "fill"):
+        assert got.report["volume_m3"][part] == pytest.approx(ref["volume_m3"][part], rel=0.02, abs=0.5), part
+    assert abs(got.report["volume_m3"]["net"] - ref["volume_m3"]["net"]) <= got.report["uncertainty_m3"]["net"]

@@ -192,3 +192,33 @@ def test_copc_before_gives_the_las_result(tmp_path):
     ref = estimate(before, after, tmp_path / "a", Options(scheduler="none"))
     got = estimate(copc, after, tmp_path / "b", Options(scheduler="none"))
     assert got.report["volume_m3"]["net"] == pytest.approx(ref.report["volume_m3"]["net"], rel=1e-3)
+
+
+def test_copc_registration_pass_reads_a_thinning_level(tmp_path):
+    """The first pass of a tiled run reads a COPC file only down to the octree level its
+    registration columns need (here the root, 1/16 of the points) and scales the counts back:
+    same totals, column centroids and counts close to a full read's."""
+    import pyproj
+
+    from soilvolume.distributed.scan import scan_unit
+    from soilvolume.inputs.copc import copc_chunks, read_fraction
+
+    xyz, cls = _cloud(80_000)
+    path = write_copc(tmp_path / "c.copc.laz", xyz, cls, pyproj.CRS(UTM).to_wkt(), spacing=0.05)
+    las = tmp_path / "c.laz"
+    write_las(las, xyz, pyproj.CRS(UTM).to_wkt(), cls)
+    voxel = 4.0  # columns of 4 m (resolution 1 m): the root level's 0.05 m spacing is enough
+    assert read_fraction(path, resolution=1.0) == pytest.approx(1 / 16)
+    assert sum(len(p) for p, _ in copc_chunks(path, resolution=1.0)) == len(xyz) // 16
+    origin = np.array([500_000.0, 4_000_000.0, 0.0])
+    lo, hi = np.zeros(3), np.array([100.0, 80.0, 0.0])
+    args = (None, lambda p: p - origin, False, None, lo, hi, voxel, False)
+    thin = scan_unit((str(path), None, None), *args)
+    full = scan_unit((str(las), 0, len(xyz)), *args)
+    assert thin["points"] == full["points"] == len(xyz)
+    n_thin, n_full = thin["sums"][3], full["sums"][3]
+    assert n_thin.sum() == pytest.approx(n_full.sum())
+    has = n_full > 0
+    assert np.median(np.abs(n_thin[has] / n_full[has] - 1)) < 0.3  # ~12 of ~200 points per column
+    centroids = [s["sums"][:3, has] / s["sums"][3, has] for s in (thin, full)]
+    assert np.median(np.abs(centroids[0] - centroids[1])) < 1.0  # metres, in a 4 m column

@@ -30,6 +30,36 @@ def is_copc(path: str | Path) -> bool:
     return len(head) > 377 + 20 and head[377 : 377 + 4] == b"copc"  # user id of the first VLR (LAS 1.4)
 
 
+def _levels(reader, resolution: float | None) -> range | None:
+    """The octree levels a read at ``resolution`` (point spacing, file units) needs, as laspy
+    computes them; None for all."""
+    import math
+
+    if resolution is None:
+        return None
+    return range(0, max(1, math.ceil(math.log2(reader.copc_info.spacing / resolution)) + 1))
+
+
+def read_fraction(path: str | Path, lo=None, hi=None, resolution: float | None = None) -> float:
+    """The share of the points of the nodes meeting the box that a read at ``resolution`` returns,
+    from the octree hierarchy alone (1.0 for a full-resolution read): what scales the counts of a
+    thinned read back to the survey's density."""
+    import laspy
+    from laspy.copc import load_octree_for_query
+
+    if resolution is None:
+        return 1.0
+    with laspy.CopcReader.open(str(path)) as reader:
+        bounds = None
+        if lo is not None:
+            bounds = laspy.copc.Bounds(mins=np.asarray(lo[:2], float), maxs=np.asarray(hi[:2], float))
+            bounds = bounds.ensure_3d(reader.header.mins, reader.header.maxs)
+        args = (reader.source, reader.copc_info, reader.root_page, bounds)
+        every = sum(n.point_count for n in load_octree_for_query(*args))
+        read = sum(n.point_count for n in load_octree_for_query(*args, _levels(reader, resolution)))
+    return read / every if every else 1.0
+
+
 def copc_chunks(
     path: str | Path,
     lo=None,

@@ -95,11 +95,15 @@ def las_ranges(path: str, ranges: list[tuple[int, int]], size: int) -> Iterator[
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
 
 
-def file_chunks(path: str, region, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+def file_chunks(
+    path: str, region, size: int, resolution: float | None = None
+) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
     """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only the octree
-    nodes meeting it, anything else is streamed whole."""
-    if region is not None and is_copc(path):
-        yield from copc_chunks(path, region[0], region[1], size=size)
+    nodes meeting it, with a ``resolution`` only its levels down to that point spacing; anything
+    else is streamed whole."""
+    if (region is not None or resolution is not None) and is_copc(path):
+        lo, hi = region if region is not None else (None, None)
+        yield from copc_chunks(path, lo, hi, resolution=resolution, size=size)
         return
     yield from las_chunks(Path(path), _header(Path(path)).count, size)
 
