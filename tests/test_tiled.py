@@ -184,7 +184,7 @@ def test_auto_without_dask_runs_in_process(monkeypatch):
 def test_copc_inputs_thinned_for_registration_match_in_process(pair, in_process, tmp_path):
     """COPC inputs whose registration pass reads only the root level (1/16 of the points, about
     one per registration column of this sparse pair): the grid of the LAS run (cell size from the
-    scaled counts) and its volumes within 2 % and within the thinned run's own interval."""
+    scaled counts) and its volumes within 2 % or a quarter of the thinned run's interval."""
     import laspy
     from copc_writer import write_copc
 
@@ -199,5 +199,5 @@ def test_copc_inputs_thinned_for_registration_match_in_process(pair, in_process,
     ref = in_process.report
     assert got.report["grid"]["cell_m"] == ref["grid"]["cell_m"]
     for part in ("net", "cut", "fill"):
-        assert got.report["volume_m3"][part] == pytest.approx(ref["volume_m3"][part], rel=0.02, abs=0.5), part
-    assert abs(got.report["volume_m3"]["net"] - ref["volume_m3"]["net"]) <= got.report["uncertainty_m3"]["net"]
+        off = abs(got.report["volume_m3"][part] - ref["volume_m3"][part])
+        assert off <= 0.02 * abs(ref["volume_m3"][part]) or off <= got.report["uncertainty_m3"][part] / 4, part
