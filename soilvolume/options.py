@@ -218,6 +218,12 @@ class Options:
         lo=0,
         hi=100000,
     )
+    volume_step: str = _opt(
+        "auto",
+        "where a distributed run's volume step (holes, correction, change areas, uncertainty) runs: whole (the whole grid in the driver process; results equal the in-process run), tiles (tile by tile on the workers with halos, the correction and stable ground found on an overview of the grid; for grids too large for one process), auto (tiles when the grid exceeds half of --memory-limit)",
+        ("auto", "whole", "tiles"),
+        label="Volume step",
+    )
     keep_registered_cloud: bool = _opt(
         False,
         "write after_registered.laz (the after cloud moved by the registration; the transform is always in report.json)",

@@ -73,6 +73,13 @@ class GridSpec:
         ys = self.ymax - (np.arange(self.rows) + 0.5) * self.cell - self.origin[1]
         return np.meshgrid(xs, ys)
 
+    def window(self, r0: int, r1: int, c0: int, c1: int) -> GridSpec:
+        """The sub-grid of rows r0..r1 and columns c0..c1 (same cells, same origin)."""
+        from dataclasses import replace
+
+        x0, y0 = self.xmin + c0 * self.cell, self.ymax - r0 * self.cell
+        return replace(self, xmin=x0, ymax=y0, rows=r1 - r0, cols=c1 - c0)
+
     def index(self, xy_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(row, col, inside) for local x/y points."""
         col = np.floor((xy_local[:, 0] + self.origin[0] - self.xmin) / self.cell).astype(np.int64)

@@ -6,14 +6,12 @@ sparse linear system over the target cells and the 2-cell ring around them:
 
 * harmonic (Laplace equation, reliable cells as boundary values): exact for planes, obeys the
   maximum principle, but lies above any convex kink (a pile's foot), so it overestimates there;
-* biharmonic (least squared second differences; in the interior the same system as the least
-  squared Laplacian of MATLAB inpaint_nans / skimage inpaint_biharmonic): exact for planes and
-  quadratics, carries slopes into the hole; on a hole over a cone's foot it leaves 0.43x the
-  harmonic overestimate. It also carries noise further than the harmonic fill.
+* biharmonic (least squared second differences, as MATLAB inpaint_nans / skimage
+  inpaint_biharmonic): exact for planes and quadratics, carries slopes into the hole (0.43x the
+  harmonic overestimate on a cone's foot), and noise further than the harmonic fill.
 
-``refill_epoch`` refills one epoch's DEM (its own weak cells, optionally enclosed holes) before
-the difference is taken, so the other epoch's measured heights are kept; the engine fills the
-enclosed holes of the difference itself with ``fill`` (smooth on unchanged ground).
+``refill_epoch`` refills one epoch's own weak cells (and enclosed holes) before the difference
+is taken; the engine fills enclosed holes of the difference with ``fill``.
 """
 
 from __future__ import annotations
@@ -327,13 +325,14 @@ def fill(values: np.ndarray, targets: np.ndarray, method: str = "biharmonic") ->
     return _filler(method)(values, targets) if targets.any() else values
 
 
-def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0) -> np.ndarray:
+def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0, median: float | None = None) -> np.ndarray:
     """Cells of one epoch with 0 < count < max(``min_points``, ``ratio`` x median count over its
-    cells with data); none when ``ratio`` <= 0."""
+    cells with data, or ``median``: the whole grid's for a tile of it); none when ``ratio`` <= 0."""
     has = counts > 0
     if ratio <= 0 or not has.any():
         return np.zeros(counts.shape, bool)
-    return has & (counts < max(min_points, ratio * np.median(counts[has])))
+    median = np.median(counts[has]) if median is None else median
+    return has & (counts < max(min_points, ratio * median))
 
 
 def refill_epoch(
@@ -343,13 +342,15 @@ def refill_epoch(
     max_hole_cells: int | None = None,
     method: str = "biharmonic",
     min_points: int = 0,
+    median: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One epoch's DEM: drop and refill its weak cells (see ``weak_cells``) and, with
     ``max_hole_cells``, fill enclosed empty holes up to that size (empty areas touching the grid
     border, e.g. outside a partial cloud, stay NaN). Returns (filled DEM, mask of refilled cells
-    that got a finite value); weak cells that cannot be refilled become NaN."""
+    that got a finite value); weak cells that cannot be refilled become NaN. ``median``: see
+    ``weak_cells``."""
     valid = np.isfinite(h)
-    targets = (weak_cells(counts, ratio, min_points) & valid) | enclosed_holes(valid, max_hole_cells)
+    targets = (weak_cells(counts, ratio, min_points, median) & valid) | enclosed_holes(valid, max_hole_cells)
     filled = _filler(method)(h, targets)
     return filled, targets & np.isfinite(filled)
 
@@ -393,8 +394,4 @@ def summary(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict
     """Counts, areas and the net volume contributed by refilled cells (for the report)."""
     d = np.where(filled_mask, diff, 0.0)
     n = int(filled_mask.sum())
-    return {
-        "filled_cells": n,
-        "filled_area_m2": n * cell_area,
-        "filled_net_m3": float(np.nansum(d) * cell_area),
-    }
+    return {"filled_cells": n, "filled_area_m2": n * cell_area, "filled_net_m3": float(np.nansum(d) * cell_area)}

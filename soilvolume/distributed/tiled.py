@@ -31,9 +31,8 @@ from ..inputs.stream import open_source
 from ..options import Options
 from ..registration.rigid import transform_points
 from ..reporting.report import build_report, write_json
-from ..volumes.compute import Volumes
 from ..workflow.steps import add_quality, planes_and_volumes, register_pair, shared_grid, write_report_html
-from .cog import write_cog
+from .cog import write_outputs
 from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
 from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, run_tiles, tile_cache, tiles
@@ -156,56 +155,54 @@ def _tiled(
     windows = tiles(grid, side, align)
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
     cache = tile_cache(out, plan)
-    with timer("grids"):
-        h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
-    hooks.step(70, "estimating the vertical bias correction")
-    vols, p_b, p_a = planes_and_volumes(
-        prep, reg, grid, (h_a, n_a, s_a, h_b, n_b, s_b), after_thin, options, timer, hooks
-    )
-    hooks.step(85, "writing outputs (COG)")
-    with timer("write"):
-        write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
+    k = volume_factor(options, grid, schedule)
+    if k > 1:
+        from .volumestep import tiled_volume_step
+
+        report, stats, html = tiled_volume_step(
+            c, plan, windows, cache, k, (prep, reg, after_thin), out, options, timer, hooks
+        )
+    else:
+        with timer("grids"):
+            h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
+        hooks.step(70, "estimating the vertical bias correction")
+        vols, p_b, p_a = planes_and_volumes(
+            prep, reg, grid, (h_a, n_a, s_a, h_b, n_b, s_b), after_thin, options, timer, hooks
+        )
+        hooks.step(85, "writing outputs (COG)")
+        with timer("write"):
+            arrays = {"h_b": h_b, "h_a": h_a, "diff": vols.diff, "offset": vols.offset, "filled_mask": vols.filled_mask}
+            write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
+        with timer("report"):
+            report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
+            add_quality(report, vols, grid, options, hooks)
+    report["engine"] = {
+        "scheduler": str(schedule),
+        "tiles": len(windows),
+        "tile_cells": side,
+        "volume_step": "whole grid" if k == 1 else f"tiles, overview of {k} x {k} cells",
+        "task_points_read": stats["read"],
+        "task_seconds": round(stats["seconds"], 3),
+        "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
+    }
     with timer("report"):
-        report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
-        report["engine"] = {
-            "scheduler": str(schedule),
-            "tiles": len(windows),
-            "tile_cells": side,
-            "task_points_read": stats["read"],
-            "task_seconds": round(stats["seconds"], 3),
-            "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
-        }
-        add_quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
-        write_report_html(out, report, vols, grid, h_a + prep.origin[2])
+        if k == 1:
+            html = (vols, grid, h_a + prep.origin[2])
+        write_report_html(out, report, *html)
     shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
 
 
-def write_outputs(out: OutputDir, h_b, h_a, vols: Volumes, grid: GridSpec, origin, options: Options) -> None:
-    """The five rasters of a run, as COGs written block by block."""
-    z0 = float(origin[2])
-    layers = [
-        ("dem_before.tif", lambda r, c: h_b[r, c] + z0, "average height, before (m)", "float32"),
-        ("dem_after.tif", lambda r, c: h_a[r, c] + z0, "average height, after (m)", "float32"),
-        (
-            "difference.tif",
-            lambda r, c: vols.diff[r, c],
-            f"H_after - H_before - correction ({options.correction}) (m)",
-            "float32",
-        ),
-        (
-            "plane_offset.tif",
-            lambda r, c: vols.offset[r, c],
-            f"vertical correction d_i subtracted ({options.correction}) (m)",
-            "float32",
-        ),
-        (
-            "filled_mask.tif",
-            lambda r, c: vols.filled_mask[r, c].astype("uint8"),
-            "1 = difference interpolated (sparse cell or filled hole)",
-            "uint8",
-        ),
-    ]
-    for name, piece, desc, dtype in layers:
-        write_cog(out.path(name), grid, piece, desc, "" if dtype == "uint8" else "metre", dtype)
+def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:
+    """1 for the volume step on the whole grid in the driver, else the block side of the
+    overview the tiled volume step finds the correction on (``--volume-step``)."""
+    from .overview import factor
+    from .schedule import budget_gb
+
+    k = factor(grid, budget_gb(options.memory_limit))
+    if options.volume_step == "whole":
+        return 1
+    if options.volume_step == "tiles":
+        return max(k, 2)
+    return k

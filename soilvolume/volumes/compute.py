@@ -46,26 +46,50 @@ class Volumes:
     zones: list = field(default_factory=list)  # per-polygon budgets (--zones)
 
 
-def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None) -> Volumes:
+@dataclass(frozen=True)
+class Given:
+    """What a tile of a grid too large for one process takes from the whole grid instead of
+    finding it in its own window: the correction surface and stable ground (from an overview
+    of the grid), each epoch's median point count (weak cells), and the window's core (the
+    cells it counts; the rest is halo, context only)."""
+
+    offset: np.ndarray  # the correction surface on the window (m)
+    stable: np.ndarray  # stable ground on the window
+    params: dict  # the correction's parameters
+    median_counts: tuple[float, float]  # (after, before)
+    core: tuple[slice, slice]
+
+
+def compute_volumes(
+    h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None, given: Given | None = None
+) -> Volumes:
     """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
     of the difference (empty in either epoch) filled from the surrounding difference, which is
     smooth on unchanged ground whatever the terrain -> correction -> change areas, budgets,
     uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs;
     ``moved``: the rigid move from the accepted pose to a nearly as good one (registration
-    uncertainty)."""
+    uncertainty); ``given``: the window of a tiled run (see :class:`Given`)."""
     from .change import cell_lod, cell_sigma, change_areas, marginal_volume
     from .uncertainty import detection_level, interp_fraction, thresholded_volumes, volume_uncertainty, z_value
 
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
     weak = dict(ratio=options.min_count_ratio, method=options.fill_method, min_points=MIN_POINTS)
-    f_b, m_b = holes.refill_epoch(h_b, n_b, **weak)
-    f_a, m_a = holes.refill_epoch(h_a, n_a, **weak)
+    med_a, med_b = (None, None) if given is None else given.median_counts
+    f_b, m_b = holes.refill_epoch(h_b, n_b, **weak, median=med_b)
+    f_a, m_a = holes.refill_epoch(h_a, n_a, **weak, median=med_a)
     filled = difference(f_a, f_b)
     hole = holes.enclosed_holes(np.isfinite(filled), max_cells)
     filled = holes.fill(filled, hole, options.fill_method)
     filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
-    offset, params, stable, _ = correction(filled, d_i, grid, options)
+    if given is None:
+        offset, params, stable, _ = correction(filled, d_i, grid, options)
+        counted = np.ones(raw.shape, bool)
+    else:
+        offset = np.where(np.isfinite(filled), given.offset, np.nan)
+        params, stable = given.params, given.stable & np.isfinite(filled)
+        counted = np.zeros(raw.shape, bool)
+        counted[given.core] = True
     diff = filled - offset
     area = grid.cell_area
     fill_sigma = refill_sigma(diff, filled_mask, stable, options)
@@ -80,6 +104,8 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
         lod_cell = np.full(diff.shape, lod)
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
+    if given is not None:  # decided with the halo's context, counted on the core only
+        fill_area, cut_area = fill_area & counted, cut_area & counted
     # stable ground for the error model: never a cell of (or next to) a detected change area,
     # unless the user drew it
     quiet = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
@@ -92,20 +118,23 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
         "cut": marginal_volume(diff, cut_area, lod_cell, area),
     }
     marginal["net"] = float(np.hypot(marginal["fill"], marginal["cut"]))
-    extra = {k: float(np.hypot(reg_v[k], marginal[k])) for k in ("net", "cut", "fill")}
+    reg_in = 0.0 if given else 1.0  # a tile: the pose is common to all tiles, summed across them
+    extra = {k: float(np.hypot(reg_in * reg_v[k], marginal[k])) for k in ("net", "cut", "fill")}
     unc = volume_uncertainty(
         diff,
         stable,
         change,
         grid,
         options.lod_confidence,
-        n_coef=MODES[options.correction].coefficients,
+        n_coef=0 if given else MODES[options.correction].coefficients,  # a tile: the overview has the bias
         filled_mask=filled_mask,
         fill_sigma=fill_sigma,
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
         extra_sigma=extra,
+        counted=None if given is None else counted,
     )
     headline = signed_budget(diff, fill_area, cut_area, area)
+    c_diff, c_filled, c_raw = (np.where(counted, a, np.nan) for a in (diff, filled, raw))
     vols = {
         "raw": raw,
         "filled": filled,
@@ -117,21 +146,23 @@ def compute_volumes(h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, s
         "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v, "marginal_detections_m3": marginal},
         "change_mask": change,
         "compensated": headline,
-        "all_cells": budget(diff, area),
-        "uncompensated": budget(filled, area),
-        "paper_plane": budget(filled - d_i, area),
+        "all_cells": budget(c_diff, area),
+        "uncompensated": budget(c_filled, area),
+        "paper_plane": budget(c_filled - d_i, area),
         "change_areas": headline,
-        "thresholded": thresholded_volumes(diff, lod, area),
-        "holes": holes.summary(diff, filled_mask, area),
-        "empty_cells": int((~np.isfinite(raw)).sum()),
-        "empty_before": int((n_b == 0).sum()),
-        "empty_after": int((n_a == 0).sum()),
+        "thresholded": thresholded_volumes(c_diff, lod, area),
+        "holes": holes.summary(c_diff, filled_mask & counted, area),
+        "empty_cells": int((~np.isfinite(c_raw) & counted).sum()),
+        "empty_before": int(((n_b == 0) & counted).sum()),
+        "empty_after": int(((n_a == 0) & counted).sum()),
     }
     if options.zones:
         from .zones import zone_budgets
 
         compared = np.where(np.isfinite(diff), 0.0, np.nan)
-        vols["zones"] = zone_budgets(np.where(change, diff, compared), grid, options.zones)
+        rows, cols = (slice(None), slice(None)) if given is None else given.core
+        zgrid = grid if given is None else grid.window(rows.start, rows.stop, cols.start, cols.stop)
+        vols["zones"] = zone_budgets(np.where(change, diff, compared)[rows, cols], zgrid, options.zones)
     return Volumes(**vols)
 
 

@@ -136,6 +136,7 @@ def volume_uncertainty(
     interp_fraction: float = INTERP_FRACTION,
     fill_sigma: np.ndarray | None = None,
     extra_sigma: dict[str, float] | None = None,
+    counted: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
     (all valid cells when None), cut/fill split by the sign of the corrected difference, and
@@ -147,9 +148,13 @@ def volume_uncertainty(
     refilling known ground) summed fully correlated within each connected refilled patch.
     ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
     change detection picks up from noise on stable ground.
-    Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2, range_m, the variogram, areas."""
+    ``counted``: the cells the volumes sum over (a tile's core; default all), while the error
+    model uses every stable cell. Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2,
+    range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
     stable = stable_mask & valid
+    if counted is not None:
+        valid = valid & counted
     region = valid if change_mask is None else change_mask & valid
     sigma = nmad(diff_corrected[stable]) if stable.any() else float("nan")
     lags, gamma, npairs = semivariogram(diff_corrected, stable, grid.cell)
@@ -182,21 +187,17 @@ def volume_uncertainty(
     def unmodelled(m: np.ndarray) -> float:  # fully correlated over the part
         return abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
 
-    out: dict[str, Any] = {
-        k: z
-        * float(
-            np.linalg.norm(
-                [
-                    region_sigma(int(m.sum()), grid.cell, model, b, pcv),
-                    interp(m),
-                    refill(m),
-                    unmodelled(m),
-                    extra.get(k, 0.0),
-                ]
-            )
-        )
+    terms = {  # one-sigma (m^3): the area's error model, then refills, leftover bias, extras
+        k: [
+            region_sigma(int(m.sum()), grid.cell, model, b, pcv),
+            interp(m),
+            refill(m),
+            unmodelled(m),
+            extra.get(k, 0.0),
+        ]
         for k, m in parts.items()
     }
+    out: dict[str, Any] = {k: z * float(np.linalg.norm(t)) for k, t in terms.items()}
     out.update(
         confidence=confidence,
         sigma_m=sigma,
@@ -210,6 +211,8 @@ def volume_uncertainty(
         unmodelled_bias_m3=unmodelled(region),
         stable_cells=int(stable.sum()),
         change_area_m2=float(region.sum()) * grid.cell_area,
+        part_area_m2={k: float(m.sum()) * grid.cell_area for k, m in parts.items()},
+        terms_m3=terms,  # one-sigma: area model, refilled share, refill error, leftover bias, extras
         variogram={"lag_m": lags.tolist(), "gamma_m2": gamma.tolist(), "pairs": npairs.tolist()},
     )
     return out

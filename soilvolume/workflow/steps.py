@@ -84,7 +84,8 @@ def planes_and_volumes(
     prep: Prepared, reg, grid: GridSpec, epochs: tuple, after_thin: np.ndarray, options: Options, timer, hooks: Hooks
 ):
     """The paper's two RANSAC planes and d_i, then the volume step, from both epochs' grids
-    ``epochs`` = (h_a, n_a, s_a, h_b, n_b, s_b): (Volumes, plane before, plane after)."""
+    ``epochs`` = (h_a, n_a, s_a, h_b, n_b, s_b) (spreads may be None): (Volumes, plane before,
+    plane after)."""
     from ..compensation import planes
     from ..volumes.compute import compute_volumes
 
@@ -96,10 +97,15 @@ def planes_and_volumes(
         d_i = planes.plane_offset(p_b, p_a, grid)
     hooks.step(75, "computing the difference and volumes")
     with timer("volume"):
-        alt = reg.fine.alternative
-        moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
-        vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
+        spread = None if s_a is None else (s_a, s_b)
+        vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=spread, moved=alternative_move(reg))
     return vols, p_b, p_a
+
+
+def alternative_move(reg) -> np.ndarray | None:
+    """The rigid move (4x4, local) from the accepted pose to the nearly as good one (None)."""
+    alt = reg.fine.alternative
+    return None if alt is None else alt @ np.linalg.inv(reg.transform)
 
 
 def add_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:

@@ -1,0 +1,101 @@
+"""The driver's side of the tiled volume step (see :mod:`volumetiles`): grid the tiles into the
+store with an overview, run the volume step on the overview, then on every tile, and write
+the outputs from the store."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.hooks import Hooks
+from ..core.outputs import OutputDir
+from ..reporting.report import build_report
+from ..workflow.steps import add_quality, alternative_move, planes_and_volumes
+from . import overview
+from .cog import write_outputs
+from .tilestore import TileStore
+from .volumetiles import GRID_ARRAYS, VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
+
+
+def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDir, options, timer, hooks: Hooks):
+    """(report, task stats, report.html arguments) of a run whose volume step goes tile by tile;
+    ``run`` = (prepared pair, registration, registered after subset)."""
+    prep, reg, after_thin = run
+    grid = plan.grid
+    store = TileStore(str(cache / f"store-k{k}"), tuple(windows))
+    (cache / f"store-k{k}").mkdir(exist_ok=True)
+    with timer("grids"):
+        epochs, medians, stats = _grid_tiles(c, plan, store, k, hooks)
+    hooks.step(70, f"estimating the vertical bias correction on a {k} x {k} overview of the grid")
+    coarse = overview.coarse(grid, k)
+    over, p_b, p_a = planes_and_volumes(prep, reg, coarse, epochs, after_thin, options, timer, hooks)
+    job = VolumeJob(
+        store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), alternative_move(reg)
+    )
+    with timer("volume"):
+        shared = c.scatter(job, broadcast=True)
+        futures = c.map(volume_tile, [shared] * len(windows), windows, pure=False)
+        tiles = []
+        from dask.distributed import as_completed
+
+        for n, fut in enumerate(as_completed(futures), 1):
+            tiles.append(fut.result())
+            fut.release()
+            hooks.step(75 + 10 * n / len(windows), f"volumes of tile {n}/{len(windows)}")
+        order = {w: i for i, w in enumerate(windows)}
+        tiles.sort(key=lambda t: order[t["window"]])  # the same sums whatever the finishing order
+        vols = combine(tiles, over, grid.cell)
+    vols.uncertainty["volume_step"]["overview_cell_factor"] = k
+    hooks.step(85, "writing outputs (COG)")
+    with timer("write"):
+        write_outputs(out, _reader(store), grid, float(prep.origin[2]), options.correction)
+    with timer("report"):
+        report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
+        add_quality(report, vols, coarse, options, hooks)
+    return report, stats, (vols, coarse, epochs[0] + prep.origin[2])
+
+
+def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
+    """Grid every tile into ``store`` (tiles already there are summarized, not run again):
+    ((h_a, n_a, None, h_b, n_b, None) on the overview, (after, before) median counts, stats)."""
+    from dask.distributed import as_completed
+
+    coarse = overview.coarse(plan.grid, k)
+    sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
+    hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
+    stats = {"read": 0, "seconds": 0.0}
+
+    def add(summary) -> None:
+        _, blocks, hist = summary[:3]
+        for e in range(2):
+            overview.add_blocks(sums[e], blocks[e])
+            hists[e] += hist[e]
+
+    todo = [w for w in store.windows if not store.has(GRID_ARRAYS, w)]
+    for w in store.windows:
+        if w not in todo:
+            add(summarize_grid_tile(w, [store.load(n, w) for n in GRID_ARRAYS], k))
+    if len(todo) < len(store.windows):
+        hooks.info(f"resuming: {len(store.windows) - len(todo)} of {len(store.windows)} tiles done in an earlier run")
+    shared = c.scatter(plan, broadcast=True) if todo else None
+    futures = c.map(grid_tile_stored, [shared] * len(todo), todo, [store] * len(todo), [k] * len(todo), pure=False)
+    for n, fut in enumerate(as_completed(futures), 1):
+        summary = fut.result()
+        fut.release()
+        add(summary)
+        for key in stats:
+            stats[key] += summary[3][key]
+        hooks.step(55 + 15 * n / max(1, len(todo)), f"gridded tile {n}/{len(todo)}")
+    epochs = []
+    for total, valid, count in sums:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            epochs += [np.where(valid > 0, total / valid, np.nan), count.astype(np.int64), None]
+    medians = (overview.median_from_histogram(hists[0]), overview.median_from_histogram(hists[1]))
+    return tuple(epochs), medians, stats
+
+
+def _reader(store: TileStore):
+    def get(key: str, rows: slice, cols: slice) -> np.ndarray:
+        win = (rows.start, rows.stop, cols.start, cols.stop)
+        return store.read(key, win, fill=False, dtype=bool) if key == "filled_mask" else store.read(key, win)
+
+    return get

@@ -1,0 +1,180 @@
+"""The volume step of a grid too large for one process, tile by tile (``--volume-step tiles``):
+
+1. The gridding tasks keep their tiles on disk (:class:`TileStore`) and return the block sums of
+   an overview of the grid (:mod:`overview`) and their count histograms.
+2. The driver runs the whole volume step on the overview (cells k times larger): stable ground,
+   the correction surface and the paper's planes are found there, over the whole site, as
+   in-process; each epoch's median point count comes from the histograms.
+3. One task per tile runs the volume step on its window plus a halo, with that correction and
+   stable ground brought to its cells (:class:`soilvolume.volumes.compute.Given`); its own
+   stable residuals give its level of detection and error model. Budgets are summed over the
+   tiles' cores. Each part's half-width combines, as in-process: the error model (the tiles'
+   semivariograms pooled) over the part's whole area, correlated across tile edges as within
+   them; the systematic terms summed across tiles (the refilled share of change, leftover
+   bias); the independent ones in quadrature (refill errors, small detections); and what every
+   tile shares: the correction's bias (the overview's, over the whole area) and the volume
+   effect of the other registration pose.
+4. Outputs are COGs written block by block from the tiles on disk.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..core.types import GridSpec
+from ..options import Options
+from ..volumes.compute import Given, Volumes, compute_volumes
+from ..volumes.uncertainty import region_sigma, z_value
+from . import overview
+from .tilestore import TileStore, Window
+
+HALO = 16  # cells of context around a tile: change areas, refills and buffers near its edges
+GRID_ARRAYS = ("h_a", "n_a", "s_a", "h_b", "n_b", "s_b")
+VOLUME_ARRAYS = ("diff", "offset", "filled_mask")
+BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "thresholded", "holes")
+PARTS = ("net", "cut", "fill", "net_compared_area")
+
+
+def grid_tile_stored(plan, win: Window, store: TileStore, k: int) -> tuple:
+    """:func:`tiletask.grid_tile`, its arrays kept in ``store``: (window, block sums of both
+    epochs, count histograms, stats)."""
+    from .tiletask import grid_tile
+
+    win, arrays, stats = grid_tile(plan, win)
+    store.save(win, dict(zip(GRID_ARRAYS, arrays, strict=True)))
+    return summarize_grid_tile(win, arrays, k) + (stats,)
+
+
+def summarize_grid_tile(win: Window, arrays, k: int) -> tuple:
+    """(window, (after, before) block sums, (after, before) count histograms)."""
+    h_a, n_a, _, h_b, n_b, _ = arrays
+    blocks = (overview.block_sums(win, k, h_a, n_a), overview.block_sums(win, k, h_b, n_b))
+    return win, blocks, (overview.count_histogram(n_a), overview.count_histogram(n_b))
+
+
+@dataclass(frozen=True)
+class VolumeJob:
+    """What a volume tile task needs (picklable)."""
+
+    store: TileStore
+    grid: GridSpec
+    options: Options
+    k: int
+    offset: np.ndarray  # the overview's correction surface
+    stable: np.ndarray  # the overview's stable ground
+    params: dict
+    medians: tuple[float, float]  # (after, before) median point counts of the whole grid
+    planes: tuple  # (before, after) RANSAC planes of the paper
+    moved: np.ndarray | None
+
+
+def volume_tile(job: VolumeJob, win: Window) -> dict:
+    """The volume step on one tile (with its halo); its core's arrays kept in the store; returns
+    its budgets and uncertainty."""
+    from ..compensation.planes import plane_offset
+
+    g = job.grid
+    r0, r1, c0, c1 = win
+    ext = (max(0, r0 - HALO), min(g.rows, r1 + HALO), max(0, c0 - HALO), min(g.cols, c1 + HALO))
+    a = {n: job.store.read(n, ext, fill=0 if n.startswith("n_") else np.nan) for n in GRID_ARRAYS}
+    wgrid = g.window(*ext)
+    core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
+    given = Given(
+        offset=overview.to_cells(job.offset, job.k, ext),
+        stable=overview.to_cells(job.stable, job.k, ext, nearest=True).astype(bool),
+        params=job.params,
+        median_counts=job.medians,
+        core=core,
+    )
+    d_i = plane_offset(job.planes[0], job.planes[1], wgrid)
+    vols = compute_volumes(
+        a["h_a"], a["h_b"], a["n_a"], a["n_b"], d_i, wgrid, job.options, (a["s_a"], a["s_b"]), job.moved, given
+    )
+    job.store.save(win, {n: getattr(vols, n)[core] for n in VOLUME_ARRAYS})
+    out = {b: getattr(vols, b) for b in BUDGETS}
+    out.update(
+        window=win,
+        uncertainty=vols.uncertainty,
+        zones=vols.zones,
+        empty=(vols.empty_cells, vols.empty_before, vols.empty_after),
+    )
+    return out
+
+
+def _sum_dicts(dicts: list[dict]) -> dict:
+    keys = [k for k, v in dicts[0].items() if isinstance(v, int | float)]
+    return {k: type(dicts[0][k])(sum(d[k] for d in dicts)) for k in keys}
+
+
+def _rss(values) -> float:
+    return float(np.sqrt(np.sum(np.square(list(values)))))
+
+
+def _zones(tiles: list[dict]) -> list[dict]:
+    if not tiles[0]["zones"]:
+        return []
+    out = []
+    for rows in zip(*(t["zones"] for t in tiles), strict=True):
+        out.append({"id": rows[0]["id"], "name": rows[0]["name"], **_sum_dicts(list(rows))})
+    return out
+
+
+def _pooled_model(tiles: list[dict]) -> dict[str, float]:
+    """The tiles' semivariogram models averaged, weighted by their stable cells."""
+    keys = {"nugget": "nugget_m2", "psill": "psill_m2", "range": "range_m"}
+    w = np.array([t["uncertainty"]["stable_cells"] for t in tiles], float)
+    out = {}
+    for k, key in keys.items():
+        v = np.array([t["uncertainty"][key] for t in tiles], float)
+        ok = np.isfinite(v) & (w > 0)
+        out[k] = float(np.sum(v[ok] * w[ok]) / w[ok].sum()) if ok.any() else 0.0
+    return out
+
+
+def combine(tiles: list[dict], over: Volumes, cell: float) -> Volumes:
+    """The run's Volumes: budgets summed over the tiles, half-widths combined with the
+    overview's, the overview's rasters (for the report's map, histogram and quality checks)."""
+    budgets = {b: _sum_dicts([t[b] for t in tiles]) for b in BUDGETS}
+    u = dict(over.uncertainty)
+    z = z_value(over.uncertainty["confidence"])
+    reg = {p: sum(t["uncertainty"]["registration_m3"][p] for t in tiles) for p in ("net", "cut", "fill")}
+    reg["net_compared_area"] = reg["net"]
+    model = _pooled_model(tiles)
+    u.update(nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"])
+    for part in PARTS:
+        area = sum(t["uncertainty"]["part_area_m2"][part] for t in tiles)
+        region = region_sigma(round(area / cell**2), cell, model)  # correlated across tile edges too
+        terms = np.array([t["uncertainty"]["terms_m3"][part][1:] for t in tiles])
+        systematic = terms[:, [0, 2]].sum(axis=0)  # refilled share, leftover bias: fully correlated
+        independent = np.sqrt(np.square(terms[:, [1, 3]]).sum(axis=0))  # refill error, small detections
+        shared = np.hypot(area * over.uncertainty["bias_sigma_m"], reg[part])  # the same in every tile
+        u[part] = z * float(np.linalg.norm([region, *systematic, *independent, shared]))
+    u["registration_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}
+    u["marginal_detections_m3"] = {
+        p: _rss(t["uncertainty"]["marginal_detections_m3"][p] for t in tiles) for p in ("net", "cut", "fill")
+    }
+    cells = np.array([t["all_cells"]["cells"] for t in tiles], float)
+    w = cells / max(cells.sum(), 1.0)
+    for key in ("lod_m", "sigma_m"):
+        vals = np.array([t["uncertainty"][key] for t in tiles], float)
+        ok = np.isfinite(vals)
+        u[key] = float(np.sum(vals[ok] * w[ok]) / max(w[ok].sum(), 1e-12)) if ok.any() else over.uncertainty[key]
+    u["volume_step"] = {"tiles": len(tiles), "overview_cell_factor": None}
+    empty = np.sum([t["empty"] for t in tiles], axis=0)
+    return replace(
+        over,
+        uncertainty=u,
+        compensated=budgets["compensated"],
+        change_areas=budgets["compensated"],
+        all_cells=budgets["all_cells"],
+        uncompensated=budgets["uncompensated"],
+        paper_plane=budgets["paper_plane"],
+        thresholded=budgets["thresholded"],
+        holes=budgets["holes"],
+        empty_cells=int(empty[0]),
+        empty_before=int(empty[1]),
+        empty_after=int(empty[2]),
+        zones=_zones(tiles),
+    )
