@@ -81,7 +81,7 @@ class GridSpec:
         return row, col, inside
 
 
-@dataclass
+@dataclass(frozen=True)
 class StageQuality:
     """Quality of one registration stage, as Open3D reports it."""
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
+from dataclasses import replace
 
 import numpy as np
 
@@ -132,7 +133,7 @@ def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense=N
             dense=dense,
             precise=mode == "precise",
         )
-    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
+    reg = replace(reg, georeferencing={"requested": options.georeferencing, "used": mode, "reason": why})
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     return reg, options
