@@ -24,7 +24,7 @@ import numpy as np
 from ..core.hooks import Hooks, Result
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec, SoilVolumeError
-from ..dem.grid import choose_cell
+from ..dem.grid import EpochDEM, choose_cell
 from ..inputs.footprint import footprint, inside, polygon_area
 from ..inputs.prepare import Prepared, prepare
 from ..inputs.stream import open_source
@@ -36,7 +36,7 @@ from ..workflow.steps import add_quality, planes_and_volumes, register_pair, sha
 from .cog import write_cog
 from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
-from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, run_tiles, tile_cache, tiles
+from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, epoch_dems, run_tiles, tile_cache, tiles
 
 
 def data_tile_m(src, cell: float, side: int) -> float | None:
@@ -157,14 +157,12 @@ def _tiled(
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
     cache = tile_cache(out, plan)
     with timer("grids"):
-        h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
+        dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}))
     hooks.step(70, "estimating the vertical bias correction")
-    vols, p_b, p_a = planes_and_volumes(
-        prep, reg, grid, (h_a, n_a, s_a, h_b, n_b, s_b), after_thin, options, timer, hooks
-    )
+    vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):
-        write_outputs(out, h_b, h_a, vols, grid, prep.origin, options)
+        write_outputs(out, dem_b, dem_a, vols, grid, prep.origin, options)
     with timer("report"):
         report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
         report["engine"] = {
@@ -177,17 +175,19 @@ def _tiled(
         }
         add_quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
-        write_report_html(out, report, vols, grid, h_a + prep.origin[2])
+        write_report_html(out, report, vols, grid, dem_a.heights + prep.origin[2])
     shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
 
 
-def write_outputs(out: OutputDir, h_b, h_a, vols: Volumes, grid: GridSpec, origin, options: Options) -> None:
+def write_outputs(
+    out: OutputDir, before: EpochDEM, after: EpochDEM, vols: Volumes, grid: GridSpec, origin, options: Options
+) -> None:
     """The five rasters of a run, as COGs written block by block."""
     z0 = float(origin[2])
     layers = [
-        ("dem_before.tif", lambda r, c: h_b[r, c] + z0, "average height, before (m)", "float32"),
-        ("dem_after.tif", lambda r, c: h_a[r, c] + z0, "average height, after (m)", "float32"),
+        ("dem_before.tif", lambda r, c: before.heights[r, c] + z0, "average height, before (m)", "float32"),
+        ("dem_after.tif", lambda r, c: after.heights[r, c] + z0, "average height, after (m)", "float32"),
         (
             "difference.tif",
             lambda r, c: vols.diff[r, c],

@@ -82,16 +82,23 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
 
 
 def planes_and_volumes(
-    prep: Prepared, reg, grid: GridSpec, epochs: tuple, after_thin: np.ndarray, options: Options, timer, hooks: Hooks
+    prep: Prepared,
+    reg,
+    grid: GridSpec,
+    dem_after: gridmod.EpochDEM,
+    dem_before: gridmod.EpochDEM,
+    after_thin: np.ndarray,
+    options: Options,
+    timer,
+    hooks: Hooks,
 ):
-    """The paper's two RANSAC planes and d_i, then the volume step, from both epochs' grids
-    ``epochs`` = (h_a, n_a, s_a, h_b, n_b, s_b): (Volumes, plane before, plane after)."""
+    """The paper's two RANSAC planes and d_i, then the volume step, from both epochs' DEMs:
+    (Volumes, plane before, plane after)."""
     from ..compensation import planes
     from ..volumes.compute import compute_volumes
 
-    h_a, n_a, s_a, h_b, n_b, s_b = epochs
     with timer("planes"):
-        sel_b = points_on(prep.before_thin, grid, np.isfinite(h_b))
+        sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
         p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
         p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
         d_i = planes.plane_offset(p_b, p_a, grid)
@@ -99,7 +106,7 @@ def planes_and_volumes(
     with timer("volume"):
         alt = reg.fine.alternative
         moved = None if alt is None else alt @ np.linalg.inv(reg.transform)
-        vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=(s_a, s_b), moved=moved)
+        vols = compute_volumes(dem_after, dem_before, d_i, grid, options, moved=moved)
     return vols, p_b, p_a
 
 
