@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..core.cells import cell_index
 from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
 from ..options import Options
@@ -203,8 +204,8 @@ def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
     valid = np.zeros(cols.shape, bool)
     valid[cols.row, cols.col] = True
     band = margin(valid, cell)
-    ix = np.clip(((xyz[:, 0] - cols.lo[0]) // cell).astype(np.int64), 0, cols.shape[1] - 1)
-    iy = np.clip(((xyz[:, 1] - cols.lo[1]) // cell).astype(np.int64), 0, cols.shape[0] - 1)
+    ix = np.clip(cell_index(xyz[:, 0], cols.lo[0], cell), 0, cols.shape[1] - 1)
+    iy = np.clip(cell_index(xyz[:, 1], cols.lo[1], cell), 0, cols.shape[0] - 1)
     return xyz[band[iy, ix]]
 
 
