@@ -19,6 +19,8 @@ from qgis.core import (
     QgsProperty,
 )
 
+from . import engine
+
 CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
 CLOUD_FILTER = "Point clouds (" + " ".join(f"*.{e}" for e in CLOUD_EXTENSIONS) + ");;All files (*.*)"
 LAS_FILTER = "LAZ files (*.laz);;LAS files (*.las)"
@@ -156,6 +158,12 @@ def deliver_raster(src: Path, dest: str | None) -> str | None:
     return dest
 
 
+def is_las(path: str | Path) -> bool:
+    """Whether ``path`` names a LAS/LAZ file (COPC included), by the engine's own suffixes (its
+    readers import laspy: for algorithms past their dependency check)."""
+    return Path(path).suffix.lower() in engine.engine("inputs.io").LAS_SUFFIXES
+
+
 def deliver_cloud(src: Path, dest: str | None) -> str | None:
     """Copy an engine LAZ cloud to a destination (.laz as is, .las decompressed)."""
     if not dest:
@@ -164,7 +172,7 @@ def deliver_cloud(src: Path, dest: str | None) -> str | None:
     if Path(dest).suffix.lower() == src.suffix.lower():
         shutil.copyfile(src, dest)
         return dest
-    if Path(dest).suffix.lower() not in (".las", ".laz"):
+    if not is_las(dest):
         raise QgsProcessingException(f"{dest}: the registered cloud is written as .las or .laz.")
     import laspy
 

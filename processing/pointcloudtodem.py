@@ -118,7 +118,7 @@ class PointCloudToDem(SoilVolumeAlgorithm):
     @staticmethod
     def header_crs(cloud: str) -> str | None:
         """The CRS stored in a LAS/LAZ header (to reproject the extent), or None."""
-        if Path(cloud).suffix.lower() not in (".las", ".laz"):
+        if not params.is_las(cloud):
             return None
         try:
             import laspy

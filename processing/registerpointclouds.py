@@ -99,7 +99,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         options = optionparams.read_options(self, parameters, context, feedback, OPTIONS)
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
-        if Path(out).suffix.lower() not in (".las", ".laz"):
+        if not params.is_las(out):
             out += ".laz"
         Path(out).parent.mkdir(parents=True, exist_ok=True)
         with engine.engine_errors(feedback, "Set the 'CRS override' parameters."):

@@ -19,7 +19,7 @@ def short_error(exc: BaseException, limit: int = 160) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-@dataclass
+@dataclass(frozen=True)
 class Cloud:
     """A point cloud in local coordinates: absolute = ``xyz + origin`` (metres, horizontal and
     vertical, in ``crs``). ``xyz`` is float64; float32 copies for Open3D are made from it."""
@@ -88,7 +88,7 @@ class GridSpec:
         return row, col, inside
 
 
-@dataclass
+@dataclass(frozen=True)
 class StageQuality:
     """Quality of one registration stage, as Open3D reports it."""
 

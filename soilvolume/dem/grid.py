@@ -8,6 +8,7 @@ cell median, which keeps stray outliers and floaters from becoming a whole cell'
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,16 @@ from ..core.types import GridSpec, SoilVolumeError
 from ..inputs.io import atomic_path
 
 NODATA = -9999.0
+
+
+@dataclass(frozen=True)
+class EpochDEM:
+    """One epoch's average-height grid on the shared grid, each (rows, cols): heights (m, local
+    frame, NaN where empty), point counts and robust height spreads (m) per cell."""
+
+    heights: np.ndarray
+    counts: np.ndarray
+    spread: np.ndarray
 
 
 def choose_cell(points: int, area_m2: float, per_cell: float = 8.0, minimum: float = 0.5) -> float:
@@ -79,6 +90,11 @@ def average_height(
     ids, ok = cell_ids(xyz, grid)
     z = np.asarray(xyz[ok, 2], dtype=np.float64)
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
+
+
+def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -> EpochDEM:
+    """:func:`average_height` of one epoch with its spreads, as an :class:`EpochDEM`."""
+    return EpochDEM(*average_height(xyz, grid, statistic, spread=True))
 
 
 def cell_heights(

@@ -35,7 +35,7 @@ from ..workflow.steps import add_quality, planes_and_volumes, register_pair, sha
 from .cog import write_outputs
 from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
-from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, run_tiles, tile_cache, tiles
+from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, epoch_dems, run_tiles, tile_cache, tiles
 
 
 def data_tile_m(src, cell: float, side: int) -> float | None:
@@ -164,14 +164,13 @@ def _tiled(
         )
     else:
         with timer("grids"):
-            h_a, n_a, s_a, h_b, n_b, s_b = run_tiles(c, plan, windows, hooks, cache, stats := {})
+            dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}))
         hooks.step(70, "estimating the vertical bias correction")
-        vols, p_b, p_a = planes_and_volumes(
-            prep, reg, grid, (h_a, n_a, s_a, h_b, n_b, s_b), after_thin, options, timer, hooks
-        )
+        vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
         hooks.step(85, "writing outputs (COG)")
         with timer("write"):
-            arrays = {"h_b": h_b, "h_a": h_a, "diff": vols.diff, "offset": vols.offset, "filled_mask": vols.filled_mask}
+            arrays = {"h_b": dem_b.heights, "h_a": dem_a.heights}
+            arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask)
             write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
         with timer("report"):
             report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
@@ -188,7 +187,7 @@ def _tiled(
     with timer("report"):
         write_json(out.path("report.json"), report)
         if k == 1:
-            html = (vols, grid, h_a + prep.origin[2])
+            html = (vols, grid, dem_a.heights + prep.origin[2])
         write_report_html(out, report, *html)
     shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)

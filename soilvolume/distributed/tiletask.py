@@ -12,7 +12,7 @@ import numpy as np
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec
-from ..dem.grid import cell_heights, cell_ids
+from ..dem.grid import EpochDEM, cell_heights, cell_ids
 from ..inputs.crs import WorkFrame
 from ..inputs.footprint import PolygonMask
 from ..inputs.io import GROUND
@@ -158,9 +158,10 @@ def _edges(n: int, offset: int, side: int) -> list[int]:
 def run_tiles(
     c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None, stats: dict | None = None
 ) -> tuple[np.ndarray, ...]:
-    """Run every tile on the client ``c`` and assemble (h_a, n_a, s_a, h_b, n_b, s_b) on the grid. Tiles
-    found in ``cache`` (from an interrupted run of the same plan) are not run again; finished
-    tiles are saved there. ``stats`` sums the tasks' points read and seconds."""
+    """Run every tile on the client ``c`` and assemble the arrays of :data:`TILE_ARRAYS` on the
+    grid (:func:`epoch_dems` makes them the two epochs' DEMs). Tiles found in ``cache`` (from an
+    interrupted run of the same plan) are not run again; finished tiles are saved there.
+    ``stats`` sums the tasks' points read and seconds."""
     stats = stats if stats is not None else {}
     stats.update(read=0, seconds=0.0)
     from dask.distributed import as_completed
@@ -189,6 +190,12 @@ def run_tiles(
         _save_tile(cache, win, arrays)
         hooks.step(55 + 15 * k / max(1, len(todo)), f"gridded tile {k}/{len(todo)}")
     return out
+
+
+def epoch_dems(arrays: tuple[np.ndarray, ...]) -> tuple[EpochDEM, EpochDEM]:
+    """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order."""
+    h_a, n_a, s_a, h_b, n_b, s_b = arrays
+    return EpochDEM(h_a, n_a, s_a), EpochDEM(h_b, n_b, s_b)
 
 
 def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
+from ..dem.grid import EpochDEM
 from ..reporting.report import build_report
 from ..workflow.steps import add_quality, alternative_move, planes_and_volumes
 from . import overview
@@ -27,7 +28,7 @@ def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDi
         epochs, medians, stats = _grid_tiles(c, plan, store, k, hooks)
     hooks.step(70, f"estimating the vertical bias correction on a {k} x {k} overview of the grid")
     coarse = overview.coarse(grid, k)
-    over, p_b, p_a = planes_and_volumes(prep, reg, coarse, epochs, after_thin, options, timer, hooks)
+    over, p_b, p_a = planes_and_volumes(prep, reg, coarse, *epochs, after_thin, options, timer, hooks)
     job = VolumeJob(
         store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), alternative_move(reg)
     )
@@ -51,12 +52,12 @@ def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDi
     with timer("report"):
         report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
         add_quality(report, vols, coarse, options, hooks)
-    return report, stats, (vols, coarse, epochs[0] + prep.origin[2])
+    return report, stats, (vols, coarse, epochs[0].heights + prep.origin[2])
 
 
 def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
     """Grid every tile into ``store`` (tiles already there are summarized, not run again):
-    ((h_a, n_a, None, h_b, n_b, None) on the overview, (after, before) median counts, stats)."""
+    ((after, before) DEMs of the overview, (after, before) median counts, stats)."""
     from dask.distributed import as_completed
 
     coarse = overview.coarse(plan.grid, k)
@@ -86,9 +87,10 @@ def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
             stats[key] += summary[3][key]
         hooks.step(55 + 15 * n / max(1, len(todo)), f"gridded tile {n}/{len(todo)}")
     epochs = []
-    for total, valid, count in sums:
+    for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):
-            epochs += [np.where(valid > 0, total / valid, np.nan), count.astype(np.int64), None]
+            heights = np.where(valid > 0, total / valid, np.nan)
+        epochs.append(EpochDEM(heights, count.astype(np.int64), np.zeros(heights.shape)))
     medians = (overview.median_from_histogram(hists[0]), overview.median_from_histogram(hists[1]))
     return tuple(epochs), medians, stats
 

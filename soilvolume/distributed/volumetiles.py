@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core.types import GridSpec
+from ..dem.grid import EpochDEM
 from ..options import Options
 from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import region_sigma, z_value
@@ -89,9 +90,8 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
         core=core,
     )
     d_i = plane_offset(job.planes[0], job.planes[1], wgrid)
-    vols = compute_volumes(
-        a["h_a"], a["h_b"], a["n_a"], a["n_b"], d_i, wgrid, job.options, (a["s_a"], a["s_b"]), job.moved, given
-    )
+    after, before = (EpochDEM(a[f"h_{e}"], a[f"n_{e}"], a[f"s_{e}"]) for e in "ab")
+    vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
     job.store.save(win, {n: getattr(vols, n)[core] for n in VOLUME_ARRAYS})
     out = {b: getattr(vols, b) for b in BUDGETS}
     out.update(

@@ -20,7 +20,7 @@ from .stream import ColumnThinner, Loaded, Source, from_raw, load
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
 
 
-@dataclass
+@dataclass(frozen=True)
 class Prepared:
     """Both clouds in the local working frame (absolute = xyz + origin, in ``frame.crs``):
     full-resolution float32 points and float64 column-thinned subsets for registration."""
@@ -178,7 +178,7 @@ def prepare(
     )
 
 
-@dataclass
+@dataclass(frozen=True)
 class Single:
     """One cloud streamed into its working frame: float32 local points and a thinned subset."""
 

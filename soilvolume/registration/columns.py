@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from ..core.cells import cell_index
+
 
 @dataclass
 class Columns:
@@ -30,8 +32,7 @@ def columns(xyz: np.ndarray, cell: float, lo: np.ndarray | None = None, hi: np.n
     lo = xyz[:, :2].min(axis=0) if lo is None else np.asarray(lo[:2], float)
     hi = xyz[:, :2].max(axis=0) if hi is None else np.asarray(hi[:2], float)
     shape = (int((hi[1] - lo[1]) // cell) + 1, int((hi[0] - lo[0]) // cell) + 1)
-    ix = np.floor((xyz[:, 0] - lo[0]) / cell).astype(np.int64)
-    iy = np.floor((xyz[:, 1] - lo[1]) / cell).astype(np.int64)
+    ix, iy = cell_index(xyz[:, 0], lo[0], cell), cell_index(xyz[:, 1], lo[1], cell)
     ok = (ix >= 0) & (iy >= 0) & (ix < shape[1]) & (iy < shape[0])
     ids = iy[ok] * shape[1] + ix[ok]
     n = shape[0] * shape[1]
@@ -85,8 +86,7 @@ def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray
 def plane_residuals(points: np.ndarray, c: Columns, n: np.ndarray) -> np.ndarray:
     """Point-to-plane distance of each point to the tangent plane of the column it falls in
     (NaN for points over empty columns or off the grid)."""
-    ix = np.floor((points[:, 0] - c.lo[0]) / c.cell).astype(np.int64)
-    iy = np.floor((points[:, 1] - c.lo[1]) / c.cell).astype(np.int64)
+    ix, iy = cell_index(points[:, 0], c.lo[0], c.cell), cell_index(points[:, 1], c.lo[1], c.cell)
     ok = (ix >= 0) & (iy >= 0) & (ix < c.shape[1]) & (iy < c.shape[0])
     lut = np.full(c.shape[0] * c.shape[1], -1, np.int64)
     lut[c.row * c.shape[1] + c.col] = np.arange(len(c.row))

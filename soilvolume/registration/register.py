@@ -9,10 +9,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..core.cells import cell_index
 from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
 from ..options import Options
@@ -33,9 +34,10 @@ COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
 STABLE_PASSES = 1  # refinements on the stable ground found at the current pose
 
 
-@dataclass
+@dataclass(frozen=True)
 class Registration:
-    """The accepted transform (after -> before, local frame) and each stage's quality."""
+    """The accepted transform (after -> before, local frame), each stage's quality and how far
+    the georeferencing was trusted (filled in by :func:`soilvolume.workflow.steps.register_pair`)."""
 
     transform: np.ndarray
     coarse: StageQuality
@@ -202,8 +204,8 @@ def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
     valid = np.zeros(cols.shape, bool)
     valid[cols.row, cols.col] = True
     band = margin(valid, cell)
-    ix = np.clip(((xyz[:, 0] - cols.lo[0]) // cell).astype(np.int64), 0, cols.shape[1] - 1)
-    iy = np.clip(((xyz[:, 1] - cols.lo[1]) // cell).astype(np.int64), 0, cols.shape[0] - 1)
+    ix = np.clip(cell_index(xyz[:, 0], cols.lo[0], cell), 0, cols.shape[1] - 1)
+    iy = np.clip(cell_index(xyz[:, 1], cols.lo[1], cell), 0, cols.shape[0] - 1)
     return xyz[band[iy, ix]]
 
 
@@ -271,8 +273,8 @@ def register(
         starts.append((coarse.transform, "coarse"))
     best = _fine_stage(after_xyz, before_xyz, starts, options, check, dense)
     if options.coarse == "auto" and coarse.accepted and "gps" in best.note:
-        coarse.accepted = False
-        coarse.note += "; rejected: fine registration fits better from the GPS pose"
+        note = coarse.note + "; rejected: fine registration fits better from the GPS pose"
+        coarse = replace(coarse, accepted=False, note=note)
     if best.fitness < 0.2:
         raise SoilVolumeError(
             f"registration failed: only {best.fitness:.0%} of the after cloud lies within "
@@ -340,8 +342,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
         if best is None or _better(q, best):
             best = q
     assert best is not None
-    best.seconds = time.perf_counter() - t0
-    return best
+    return replace(best, seconds=time.perf_counter() - t0)
 
 
 def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: float):

@@ -13,6 +13,7 @@ from ..compensation.correction import MODES
 from ..compensation.correction import apply as apply_correction
 from ..core.types import GridSpec
 from ..dem import holes
+from ..dem.grid import EpochDEM
 from ..options import Options
 from .difference import budget, difference, signed_budget
 
@@ -61,17 +62,18 @@ class Given:
 
 
 def compute_volumes(
-    h_a, h_b, n_a, n_b, d_i, grid: GridSpec, options: Options, spread=None, moved=None, given: Given | None = None
+    after: EpochDEM, before: EpochDEM, d_i, grid: GridSpec, options: Options, moved=None, given: Given | None = None
 ) -> Volumes:
     """Raw difference; each epoch's weak cells refilled from its own neighbours; enclosed holes
     of the difference (empty in either epoch) filled from the surrounding difference, which is
     smooth on unchanged ground whatever the terrain -> correction -> change areas, budgets,
-    uncertainty, zones. ``spread``: per-cell height spreads (after, before) for per-cell LoDs;
-    ``moved``: the rigid move from the accepted pose to a nearly as good one (registration
-    uncertainty); ``given``: the window of a tiled run (see :class:`Given`)."""
+    uncertainty, zones. The epochs' per-cell height spreads give per-cell LoDs; ``moved``: the
+    rigid move from the accepted pose to a nearly as good one (registration uncertainty);
+    ``given``: the window of a tiled run (see :class:`Given`)."""
     from .change import cell_lod, cell_sigma, change_areas, marginal_volume
     from .uncertainty import detection_level, interp_fraction, thresholded_volumes, volume_uncertainty, z_value
 
+    h_a, n_a, h_b, n_b = after.heights, after.counts, before.heights, before.counts
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
     weak = dict(ratio=options.min_count_ratio, method=options.fill_method, min_points=MIN_POINTS)
@@ -95,13 +97,9 @@ def compute_volumes(
     fill_sigma = refill_sigma(diff, filled_mask, stable, options)
     lod = detection_level(diff, stable, options.lod_confidence)
     z = z_value(options.lod_confidence)
-    if spread is not None:
-        se_a = np.where(m_a, np.nan, cell_sigma(spread[0], n_a))
-        se_b = np.where(m_b, np.nan, cell_sigma(spread[1], n_b))
-        lod_cell = cell_lod(lod, se_a, se_b, z)
-        lod_cell = np.maximum(lod_cell, z * fill_sigma)
-    else:
-        lod_cell = np.full(diff.shape, lod)
+    se_a = np.where(m_a, np.nan, cell_sigma(after.spread, n_a))
+    se_b = np.where(m_b, np.nan, cell_sigma(before.spread, n_b))
+    lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
     if given is not None:  # decided with the halo's context, counted on the core only

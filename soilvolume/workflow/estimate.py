@@ -81,24 +81,22 @@ def _estimate(
             after_xyz = transform_points32(prep.after.xyz, reg.transform)
             after_thin = transform_points(prep.after_thin, reg.transform)
             grid = shared_grid(prep, after_thin, options)
-            before_job = pool.submit(gridmod.average_height, prep.before.xyz, grid, options.statistic, spread=True)
-            h_a, n_a, s_a = gridmod.average_height(after_xyz, grid, options.statistic, spread=True)
+            before_job = pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, options.statistic)
+            dem_a = gridmod.epoch_dem(after_xyz, grid, options.statistic)
             del after_xyz
-            h_b, n_b, s_b = before_job.result()
+            dem_b = before_job.result()
         hooks.step(70, "estimating the vertical bias correction")
-        vols, p_b, p_a = planes_and_volumes(
-            prep, reg, grid, (h_a, n_a, s_a, h_b, n_b, s_b), after_thin, options, timer, hooks
-        )
+        vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
         hooks.step(85, "writing outputs")
         with timer("write"):
-            _write_rasters(out, h_b, h_a, vols, grid, prep, options)
+            _write_rasters(out, dem_b, dem_a, vols, grid, prep, options)
             if cloud_job is not None:
                 cloud_job.result()
     with timer("report"):
         report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
         add_quality(report, vols, grid, options, hooks)
         write_json(out.path("report.json"), report)
-        write_report_html(out, report, vols, grid, h_a + prep.origin[2])
+        write_report_html(out, report, vols, grid, dem_a.heights + prep.origin[2])
     return Result(report)
 
 
@@ -117,10 +115,18 @@ def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, 
     )
 
 
-def _write_rasters(out: OutputDir, h_b, h_a, vols: Volumes, grid: GridSpec, prep: Prepared, options: Options) -> None:
+def _write_rasters(
+    out: OutputDir,
+    before: gridmod.EpochDEM,
+    after: gridmod.EpochDEM,
+    vols: Volumes,
+    grid: GridSpec,
+    prep: Prepared,
+    options: Options,
+) -> None:
     z0 = float(prep.origin[2])  # local -> absolute heights
-    gridmod.write_geotiff(out.path("dem_before.tif"), h_b + z0, grid, "average height, before (m)")
-    gridmod.write_geotiff(out.path("dem_after.tif"), h_a + z0, grid, "average height, after (m)")
+    gridmod.write_geotiff(out.path("dem_before.tif"), before.heights + z0, grid, "average height, before (m)")
+    gridmod.write_geotiff(out.path("dem_after.tif"), after.heights + z0, grid, "average height, after (m)")
     gridmod.write_geotiff(
         out.path("difference.tif"), vols.diff, grid, f"H_after - H_before - correction ({options.correction}) (m)"
     )

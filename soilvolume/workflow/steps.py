@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
+from dataclasses import replace
 
 import numpy as np
 
@@ -81,24 +82,29 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
 
 
 def planes_and_volumes(
-    prep: Prepared, reg, grid: GridSpec, epochs: tuple, after_thin: np.ndarray, options: Options, timer, hooks: Hooks
+    prep: Prepared,
+    reg,
+    grid: GridSpec,
+    dem_after: gridmod.EpochDEM,
+    dem_before: gridmod.EpochDEM,
+    after_thin: np.ndarray,
+    options: Options,
+    timer,
+    hooks: Hooks,
 ):
-    """The paper's two RANSAC planes and d_i, then the volume step, from both epochs' grids
-    ``epochs`` = (h_a, n_a, s_a, h_b, n_b, s_b) (spreads may be None): (Volumes, plane before,
-    plane after)."""
+    """The paper's two RANSAC planes and d_i, then the volume step, from both epochs' DEMs:
+    (Volumes, plane before, plane after)."""
     from ..compensation import planes
     from ..volumes.compute import compute_volumes
 
-    h_a, n_a, s_a, h_b, n_b, s_b = epochs
     with timer("planes"):
-        sel_b = points_on(prep.before_thin, grid, np.isfinite(h_b))
+        sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
         p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
         p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
         d_i = planes.plane_offset(p_b, p_a, grid)
     hooks.step(75, "computing the difference and volumes")
     with timer("volume"):
-        spread = None if s_a is None else (s_a, s_b)
-        vols = compute_volumes(h_a, h_b, n_a, n_b, d_i, grid, options, spread=spread, moved=alternative_move(reg))
+        vols = compute_volumes(dem_after, dem_before, d_i, grid, options, moved=alternative_move(reg))
     return vols, p_b, p_a
 
 
@@ -138,7 +144,7 @@ def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense=N
             dense=dense,
             precise=mode == "precise",
         )
-    reg.georeferencing = {"requested": options.georeferencing, "used": mode, "reason": why}
+    reg = replace(reg, georeferencing={"requested": options.georeferencing, "used": mode, "reason": why})
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     return reg, options

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...core.cells import cell_index
+
 STATS = ("min", "max", "mean", "idw", "count", "stdev")
 
 
@@ -75,8 +77,7 @@ def compute(
     """Rasters (height x width, row 0 = top, i.e. GDAL order) of the requested statistics."""
     stats = set(stats)
     radius = grid.res * math.sqrt(2.0) if radius is None else radius
-    ci = np.floor((x - grid.x0) / grid.res).astype(np.int64)
-    cj = np.floor((y - grid.y0) / grid.res).astype(np.int64)
+    ci, cj = cell_index(x, grid.x0, grid.res), cell_index(y, grid.y0, grid.res)
     if binmode:
         dist = np.hypot(grid.x0 + (ci + 0.5) * grid.res - x, grid.y0 + (cj + 0.5) * grid.res - y)
         acc = _accumulate(grid, ci, cj, v, dist, stats, power)

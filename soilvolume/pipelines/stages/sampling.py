@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ...core.cells import cell_index
 from .view import PointView, StageContext
 
 VOXEL_OPTS = {"cell"}
@@ -20,7 +21,7 @@ def voxel_center_nn(view: PointView, opts: dict, ctx: StageContext) -> PointView
         return view
     xyz = view.xyz
     lo = xyz.min(axis=0)
-    idx = np.floor((xyz - lo) / cell).astype(np.int64)
+    idx = cell_index(xyz, lo, cell)
     centre = lo + (idx + 0.5) * cell
     dist = ((centre - xyz) ** 2).sum(axis=1)
     span = idx.max(axis=0) + 1

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ...core.cells import cell_index
 from ...core.types import SoilVolumeError
 from .range import parse_ranges, select
 from .view import PointView, StageContext
@@ -85,8 +86,7 @@ def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, 
     minx, miny = float(x.min()), float(y.min())
     cols = int((float(x.max()) - minx) / cell + 1)
     rows = int((float(y.max()) - miny) / cell + 1)
-    c = np.floor((x - minx) / cell).astype(np.int64)
-    r = np.floor((y - miny) / cell).astype(np.int64)
+    c, r = cell_index(x, minx, cell), cell_index(y, miny, cell)
     flat = r * cols + c
     zimin = np.full(rows * cols, np.inf)
     np.minimum.at(zimin, flat, z)

@@ -1,0 +1,14 @@
+"""Points to the cells of a regular grid: the one ``floor((v - lo) / cell)`` binning shared by the
+registration's column surfaces and the embedded PDAL stages."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def cell_index(v: np.ndarray, lo, cell: float) -> np.ndarray:
+    """The index (int64) of the ``cell``-wide bin each coordinate of ``v`` falls in, counted from
+    ``lo``: ``floor((v - lo) / cell)``. ``v`` is one axis (with a scalar ``lo``) or (N, k)
+    coordinates (with ``lo`` of k values). Coordinates off the grid get negative or too large
+    indices: callers drop or clip them."""
+    return np.floor((v - lo) / cell).astype(np.int64)
