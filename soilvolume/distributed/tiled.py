@@ -7,10 +7,11 @@ Dask tasks, so no process holds a survey's points.
    nodes, the chunks of a plain file whose boxes the first pass recorded), assigns points to the
    *global* grid's cells and computes its cells' heights with :func:`grid.cell_heights`, so a cell
    gets the same points as in-process (no halo is needed: a point belongs to one cell).
-3. The per-tile rasters are gathered (a few numbers per cell, against ~8 points per cell) and the
-   raster steps (refill, holes, correction fitted once on the whole grid, uncertainty, budgets)
-   run as in-process; outputs are written block by block as COGs. Finished tiles are kept until
-   the run succeeds, so an interrupted run resumes.
+3. ``--volume-step whole``: the per-tile rasters are gathered (a few numbers per cell, against
+   ~8 points per cell) and the volume step (refill, holes, correction fitted once on the whole
+   grid, uncertainty, budgets) runs as in-process. ``tiles`` (grids too large for one process):
+   see :mod:`volumestep`. Outputs are written block by block as COGs. Finished tiles are kept
+   until the run succeeds, so an interrupted run resumes.
 """
 
 from __future__ import annotations
