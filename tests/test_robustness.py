@@ -396,3 +396,22 @@ def test_volume_with_bad_zones_writes_nothing(capsys, tmp_path):
     )
     _one_line_error(code, err, "bad.gpkg")
     assert not (tmp_path / "d.tif").exists() and _hidden(tmp_path) == []
+
+
+def test_open3d_imported_without_its_plotly_drawing():
+    """The engine imports Open3D without Dash/Plotly (0.6 s it never uses); an explicit import of
+    Open3D's Plotly module afterwards still gets the real one."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from soilvolume.registration.o3d import to_pcd\n"
+        "import numpy as np\n"
+        "assert len(to_pcd(np.zeros((3, 3))).points) == 3\n"
+        "assert 'dash' not in sys.modules\n"
+        "import open3d.visualization.draw_plotly as d\n"
+        "assert 'dash' in sys.modules and d.draw_plotly.__module__ == d.__name__\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr

@@ -34,13 +34,14 @@ def columns(xyz: np.ndarray, cell: float, lo: np.ndarray | None = None, hi: np.n
     shape = (int((hi[1] - lo[1]) // cell) + 1, int((hi[0] - lo[0]) // cell) + 1)
     ix, iy = cell_index(xyz[:, 0], lo[0], cell), cell_index(xyz[:, 1], lo[1], cell)
     ok = (ix >= 0) & (iy >= 0) & (ix < shape[1]) & (iy < shape[0])
-    ids = iy[ok] * shape[1] + ix[ok]
+    pts = xyz if ok.all() else xyz[ok]
+    ids = iy * shape[1] + ix if pts is xyz else iy[ok] * shape[1] + ix[ok]
     n = shape[0] * shape[1]
     count = np.bincount(ids, minlength=n)
     has = np.flatnonzero(count)
     means = np.empty((len(has), 3))
     for k in range(3):
-        means[:, k] = np.bincount(ids, weights=xyz[ok, k], minlength=n)[has] / count[has]
+        means[:, k] = np.bincount(ids, weights=pts[:, k], minlength=n)[has] / count[has]
     return Columns(means, has // shape[1], has % shape[1], shape, lo, float(cell))
 
 

@@ -5,12 +5,42 @@ from __future__ import annotations
 
 import numpy as np
 
+PLOTLY = "open3d.visualization.draw_plotly"
+
 
 def _o3d():
+    import sys
+
+    if "open3d" not in sys.modules:
+        _import_without_plotly()
     import open3d as o3d
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     return o3d
+
+
+def _import_without_plotly() -> None:
+    """Import Open3D without its Plotly/Dash web drawing (~0.6 s of imports the engine never
+    uses): a placeholder stands in for ``open3d.visualization.draw_plotly`` while ``open3d``
+    imports and is dropped after, so an explicit import of that module still gets the real one.
+    Should a future Open3D need more from it, Open3D is imported as it comes."""
+    import sys
+    import types
+
+    def unavailable(*_args, **_kwargs):
+        raise ImportError(f"import {PLOTLY} for Open3D's Plotly drawing")
+
+    stub = types.ModuleType(PLOTLY)
+    stub.get_plotly_fig = stub.draw_plotly = stub.draw_plotly_server = unavailable
+    sys.modules[PLOTLY] = stub
+    try:
+        import open3d  # noqa: F401
+    except ImportError:
+        for name in [n for n in sys.modules if n == "open3d" or n.startswith("open3d.")]:
+            del sys.modules[name]
+    finally:
+        if sys.modules.get(PLOTLY) is stub:
+            del sys.modules[PLOTLY]
 
 
 def to_pcd(xyz: np.ndarray, voxel: float | None = None):
