@@ -70,8 +70,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Estimate the soil volume change from BEFORE to AFTER.",
         epilog=EPILOG,
     )
-    est.add_argument("before", type=Path, help="wide 'before' survey (LAS/LAZ/PLY/PCD/XYZ)")
-    est.add_argument("after", type=Path, help="smaller 'after' survey (LAS/LAZ/PLY/PCD/XYZ)")
+    est.add_argument(
+        "before",
+        type=Path,
+        help="wide 'before' survey: LAS/LAZ, COPC (.copc.laz), a virtual point cloud of tiles (.vpc), PLY/PCD/XYZ",
+    )
+    est.add_argument("after", type=Path, help="smaller 'after' survey (the same formats)")
     est.add_argument(
         "--out", type=Path, required=True, help="output folder (created; must be empty unless --overwrite)"
     )
