@@ -267,3 +267,29 @@ def test_tile_store_reads_any_window(tmp_path):
     assert all(store.has(["a"], w) for w in wins) and not store.has(["b"], wins[0])
     np.testing.assert_array_equal(store.read("a", (5, 31, 3, 30)), full[5:31, 3:30])
     assert not list(tmp_path.glob(".*"))  # no temporary files left
+
+
+def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_path):
+    """Grid tiles snap to a VPC's data tiles (each read once) only when a data tile's points fit a
+    task's memory; over a tight budget the tiles come from the budget instead."""
+    import laspy
+
+    from soilvolume.inputs.io import write_las
+
+    before, after, _ = pair
+    las = laspy.read(before)
+    xyz, cls = np.c_[las.x, las.y, las.z], np.asarray(las.classification)
+    mid = np.median(xyz[:, :2], axis=0)
+    parts = []
+    for k, (east, north) in enumerate([(0, 0), (1, 0), (0, 1), (1, 1)]):
+        m = ((xyz[:, 0] >= mid[0]) == bool(east)) & ((xyz[:, 1] >= mid[1]) == bool(north))
+        parts.append(tmp_path / f"before_{k}.laz")
+        write_las(parts[-1], xyz[m], las.header.parse_crs().to_wkt(), cls[m])
+    vpc = write_vpc(tmp_path / "before.vpc", parts)
+    roomy = estimate(vpc, after, tmp_path / "a", Options(scheduler="threads:2", volume_step="whole"))
+    tight = estimate(vpc, after, tmp_path / "b", Options(scheduler="threads:2", volume_step="whole", memory_limit=1e-5))
+    cell = roomy.report["grid"]["cell_m"]
+    width = np.median([np.ptp(laspy.read(p).x) for p in parts])
+    assert roomy.report["engine"]["tile_cells"] == round(width / cell)  # snapped to the data tiles
+    assert tight.report["engine"]["tile_cells"] != roomy.report["engine"]["tile_cells"]
+    assert tight.report["volume_m3"]["net"] == pytest.approx(roomy.report["volume_m3"]["net"], rel=1e-3)

@@ -48,6 +48,11 @@ def data_tile_m(src, cell: float, side: int) -> float | None:
     return size if 0 < size / cell <= side else None
 
 
+def fits(points: float, task_gb: float) -> bool:
+    """Whether a tile of ``points`` points fits half of one task's memory."""
+    return points * TILE_BYTES_PER_POINT <= 0.5 * task_gb * 2**30
+
+
 def tile_side(options: Options, grid: GridSpec, points_per_cell: float, task_gb: float, workers: int) -> int:
     """Tile side (cells): ``options.tile_cells``, else what a task's memory share holds, and
     small enough for two tiles per worker."""
@@ -147,10 +152,11 @@ def _tiled(
         options.statistic,
         prep.index,
     )
-    side = tile_side(
-        options, grid, points_per_cell(prep, cell), worker_gb(schedule, options.memory_limit), schedule.workers
-    )
+    task_gb = worker_gb(schedule, options.memory_limit)
+    side = tile_side(options, grid, points_per_cell(prep, cell), task_gb, schedule.workers)
     align = None if options.tile_cells else data_tile_m(src_b, cell, 2 * side)
+    if align and not fits(points_per_cell(prep, cell) * (align / cell) ** 2, task_gb):
+        align = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
     if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
         side = max(1, round(align / cell))
     windows = tiles(grid, side, align)
