@@ -31,11 +31,16 @@ from ..volumes.uncertainty import region_sigma, z_value
 from . import overview
 from .tilestore import TileStore, Window
 
-HALO = 16  # cells of context around a tile: change areas, refills and buffers near its edges
+HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
 GRID_ARRAYS = ("h_a", "n_a", "s_a", "h_b", "n_b", "s_b")
 VOLUME_ARRAYS = ("diff", "offset", "filled_mask")
 BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "thresholded", "holes")
 PARTS = ("net", "cut", "fill", "net_compared_area")
+
+
+def halo(cell: float) -> int:
+    """Cells of context around a tile: ``HALO_CELLS``, or ``HALO_M`` metres on fine grids."""
+    return max(HALO_CELLS, int(np.ceil(HALO_M / cell)))
 
 
 def grid_tile_stored(plan, win: Window, store: TileStore, k: int) -> tuple:
@@ -78,7 +83,8 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
 
     g = job.grid
     r0, r1, c0, c1 = win
-    ext = (max(0, r0 - HALO), min(g.rows, r1 + HALO), max(0, c0 - HALO), min(g.cols, c1 + HALO))
+    h = halo(g.cell)
+    ext = (max(0, r0 - h), min(g.rows, r1 + h), max(0, c0 - h), min(g.cols, c1 + h))
     a = {n: job.store.read(n, ext, fill=0 if n.startswith("n_") else np.nan) for n in GRID_ARRAYS}
     wgrid = g.window(*ext)
     core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
