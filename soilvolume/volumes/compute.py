@@ -18,6 +18,7 @@ from ..options import Options
 from .difference import budget, difference, signed_budget
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
+MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
 
 
 @dataclass(frozen=True)
@@ -178,11 +179,12 @@ def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -
 
 def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     """Per-cell one-sigma error (m) of refilled cells, measured by refilling known stable cells
-    of the difference with holes of the typical size, or smaller ones where the stable ground
-    has no room for them (0 where nothing was refilled)."""
+    of the difference with holes of the typical size (at most ``MAX_TEST_RADIUS`` cells: weak
+    cells spread over a grid finer than the points form one giant "hole"), or smaller ones where
+    the stable ground has no room for them (0 where nothing was refilled)."""
     if not filled_mask.any():
         return np.zeros(diff.shape)
-    radius, s = holes.typical_radius(filled_mask), float("nan")
+    radius, s = min(holes.typical_radius(filled_mask), MAX_TEST_RADIUS), float("nan")
     while not np.isfinite(s) and radius >= 1.0:  # smaller test holes where stable ground is patchy
         s = holes.fill_error(diff, stable, options.fill_method, radius, seed=options.seed)
         radius /= 2.0
