@@ -253,6 +253,9 @@ def test_overview_pieces():
     assert sums[2].sum() == n.sum()
     up = overview.to_cells(np.arange(12.0)[None, :].repeat(13, 0), k, (0, 50, 0, 45))
     assert up.shape == (50, 45) and np.all(np.diff(up[0]) >= 0)
+    from soilvolume.distributed.volumetiles import halo
+
+    assert (halo(1.0), halo(0.05)) == (16, 100)  # cells, and at least 5 m on fine grids
 
 
 def test_tile_store_reads_any_window(tmp_path):
