@@ -22,7 +22,7 @@ from ..inputs.stream import open_source
 # a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
 # 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
 TILE_BYTES_PER_POINT = 48.0
-MIN_TILE, MAX_TILE = 64, 4096  # tile side (cells)
+MIN_TILE, MAX_TILE = 16, 4096  # tile side (cells): small tiles keep very dense data within a task's memory
 TILE_ARRAYS = ("h_a", "n_a", "s_a", "h_b", "n_b", "s_b")  # what a tile task returns
 
 
