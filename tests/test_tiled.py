@@ -297,3 +297,18 @@ def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_pa
     assert roomy.report["engine"]["tile_cells"] == round(width / cell)  # snapped to the data tiles
     assert tight.report["engine"]["tile_cells"] != roomy.report["engine"]["tile_cells"]
     assert tight.report["volume_m3"]["net"] == pytest.approx(roomy.report["volume_m3"]["net"], rel=1e-3)
+
+
+def test_overview_factor_from_budget_and_size():
+    from soilvolume.distributed import overview
+    from soilvolume.distributed.tiled import volume_factor
+
+    small = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=1000, cols=1000)  # 1e6 cells: ~200 MB
+    huge = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=20_000, cols=20_000)  # 4e8 cells
+    sched = Schedule("local", 2)
+    assert volume_factor(Options(memory_limit=8.0), small, sched) == 1  # auto: the whole grid fits
+    assert volume_factor(Options(memory_limit=8.0, volume_step="tiles"), small, sched) == 2
+    assert volume_factor(Options(memory_limit=0.1, volume_step="whole"), small, sched) == 1
+    k = volume_factor(Options(memory_limit=8.0), huge, sched)
+    assert k > 1 and huge.rows * huge.cols / k**2 <= overview.MAX_CELLS
+    assert overview.factor(huge, 8.0) <= k

@@ -15,10 +15,17 @@ RASTER_BYTES_PER_CELL = 200.0  # the volume step's peak per grid cell (arrays, l
 COUNT_CAP = 1 << 16  # counts above this are one histogram bin (the median is far below)
 
 
+MAX_CELLS = 2_000_000  # the overview's cells at most: its volume step runs in the driver (~50 s)
+
+
 def factor(grid: GridSpec, budget_gb: float) -> int:
-    """The overview's block side (a power of 2): 1 when the whole grid's volume step fits half
-    of the memory budget."""
-    cells = budget_gb * 2**30 * 0.5 / RASTER_BYTES_PER_CELL
+    """The smallest power of 2 k whose k x k blocks bring the grid's volume step within half of
+    the memory budget (1: the whole grid fits)."""
+    return blocks_for(grid, budget_gb * 2**30 * 0.5 / RASTER_BYTES_PER_CELL)
+
+
+def blocks_for(grid: GridSpec, cells: float) -> int:
+    """The smallest power of 2 k with at most ``cells`` blocks of k x k grid cells."""
     k = 1
     while grid.rows * grid.cols / (k * k) > cells:
         k *= 2

@@ -203,12 +203,10 @@ def _tiled(
 def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:
     """1 for the volume step on the whole grid in the driver, else the block side of the
     overview the tiled volume step finds the correction on (``--volume-step``)."""
-    from .overview import factor
+    from .overview import MAX_CELLS, blocks_for, factor
     from .schedule import budget_gb
 
     k = factor(grid, budget_gb(options.memory_limit))
-    if options.volume_step == "whole":
+    if options.volume_step == "whole" or (options.volume_step == "auto" and k == 1):
         return 1
-    if options.volume_step == "tiles":
-        return max(k, 2)
-    return k
+    return max(k, 2, blocks_for(grid, MAX_CELLS))  # the overview's volume step stays short
