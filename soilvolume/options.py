@@ -212,7 +212,7 @@ class Options:
     )
     tile_cells: int = _opt(
         0,
-        "side (cells) of the tiles the distributed engine grids one task at a time (0 = from the point density, about 4 million points per tile)",
+        "side (cells) of the tiles the distributed engine grids one task at a time (0 = from the point density: what half of a worker's share of --memory-limit holds, at most 32 million points, at least two tiles per worker, snapped to a VPC's tiles when one fits)",
         label="Tile size",
         unit="cells",
         lo=0,

@@ -48,6 +48,9 @@ def data_tile_m(src, cell: float, side: int) -> float | None:
     return size if 0 < size / cell <= side else None
 
 
+TILE_POINTS = 32e6  # points per tile at most: ~1.3 GB per task; fewer reads of dense LAZ tiles
+
+
 def fits(points: float, task_gb: float) -> bool:
     """Whether a tile of ``points`` points fits half of one task's memory."""
     return points * TILE_BYTES_PER_POINT <= 0.5 * task_gb * 2**30
@@ -58,7 +61,7 @@ def tile_side(options: Options, grid: GridSpec, points_per_cell: float, task_gb:
     small enough for two tiles per worker."""
     if options.tile_cells > 0:
         return int(options.tile_cells)
-    points = min(4e6, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT)
+    points = min(TILE_POINTS, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT)
     side = math.sqrt(points / max(points_per_cell, 1e-3))
     side = min(side, math.sqrt(grid.rows * grid.cols / (2 * max(1, workers))))
     return int(np.clip(side, MIN_TILE, MAX_TILE))
