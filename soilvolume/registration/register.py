@@ -23,7 +23,7 @@ from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
 
 # (voxel m, max correspondence distance m, Tukey k m): coarse-to-fine, shrinking distances.
 ICP_LEVELS = ((1.0, 6.0, 3.0), (1.0, 3.0, 1.0), (0.5, 1.5, 0.5), (0.25, 0.8, 0.25), (0.25, 0.4, 0.15))
-REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12), (0.15, 0.25, 0.08))
+REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12))
 EVAL_DISTANCE = 0.4
 AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse
 MAX_ICP_POINTS = 150_000  # per level: coarser voxels on very large sites
