@@ -312,3 +312,47 @@ def test_overview_factor_from_budget_and_size():
     k = volume_factor(Options(memory_limit=8.0), huge, sched)
     assert k > 1 and huge.rows * huge.cols / k**2 <= overview.MAX_CELLS
     assert overview.factor(huge, 8.0) <= k
+
+
+def test_tiled_volume_step_resumes_from_its_store(tmp_path):
+    """With the volume step in tiles, finished grid tiles live in the store: a second run only
+    grids the missing ones (here: fails naming the input, which does not exist), and the
+    overview and median counts come from the stored tiles."""
+    import pyproj
+    from dask.distributed import Client
+
+    from soilvolume.api import Hooks
+    from soilvolume.distributed.tilestore import TileStore
+    from soilvolume.distributed.tiletask import Plan
+    from soilvolume.distributed.volumestep import _grid_tiles
+    from soilvolume.distributed.volumetiles import GRID_ARRAYS
+    from soilvolume.inputs.crs import WorkFrame
+
+    g = GridSpec(0.0, 40.0, 1.0, 40, 40)
+    crs = pyproj.CRS("EPSG:32654")
+    plan = Plan(
+        *(str(tmp_path / n) for n in ("gone_b.las", "gone_a.las")),
+        crs.to_wkt(),
+        crs.to_wkt(),
+        WorkFrame(crs, 1.0),
+        np.zeros(3),
+        g,
+        np.eye(4),
+        (False, False),
+        np.zeros((3, 2)),
+        "mean",
+    )
+    store = TileStore(str(tmp_path), tuple(tiles(g, 20)))
+    for k, w in enumerate(store.windows):
+        shape = (w[1] - w[0], w[3] - w[2])
+        counts = np.full(shape, 4 + k, np.int32)
+        arrays = (np.full(shape, float(k)), counts, np.zeros(shape), np.zeros(shape), counts, np.zeros(shape))
+        store.save(w, dict(zip(GRID_ARRAYS, arrays, strict=True)))
+    with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
+        (after, before), medians, stats = _grid_tiles(c, plan, store, 4, Hooks())
+        assert stats["read"] == 0 and medians == (5.5, 5.5)  # counts 4..7, 400 cells each
+        assert after.heights.shape == (10, 10) and after.heights[0, 0] == 0 and after.heights[9, 9] == 3
+        assert after.counts[0, 0] == 16 * 4  # a 4 x 4 block of cells with 4 points
+        (tmp_path / "h_a_20_40_20_40.npy").unlink()
+        with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
+            _grid_tiles(c, plan, store, 4, Hooks())
