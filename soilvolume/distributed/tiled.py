@@ -155,10 +155,10 @@ def _tiled(
         options.statistic,
         prep.index,
     )
-    task_gb = worker_gb(schedule, options.memory_limit)
-    side = tile_side(options, grid, points_per_cell(prep, cell), task_gb, schedule.workers)
+    task_gb, density = worker_gb(schedule, options.memory_limit), points_per_cell(prep, cell)
+    side = tile_side(options, grid, density, task_gb, schedule.workers)
     align = None if options.tile_cells else data_tile_m(src_b, cell, 2 * side)
-    if align and not fits(points_per_cell(prep, cell) * (align / cell) ** 2, task_gb):
+    if align and not fits(density * (align / cell) ** 2, task_gb):
         align = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
     if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
         side = max(1, round(align / cell))

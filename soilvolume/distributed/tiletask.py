@@ -166,8 +166,6 @@ def run_tiles(
     ``stats`` sums the tasks' points read and seconds."""
     stats = stats if stats is not None else {}
     stats.update(read=0, seconds=0.0)
-    from dask.distributed import as_completed
-
     g = plan.grid
     out = tuple(
         np.full((g.rows, g.cols), np.nan) if k % 3 != 1 else np.zeros((g.rows, g.cols), np.int64) for k in range(6)
@@ -179,19 +177,33 @@ def run_tiles(
             todo.append(win)
         else:
             _place(out, win, saved)
-    if len(todo) < len(windows):
-        hooks.info(f"resuming: {len(windows) - len(todo)} of {len(windows)} tiles done in an earlier run")
-    shared = c.scatter(plan, broadcast=True) if todo else None  # sent once, not with every task
-    futures = c.map(grid_tile, [shared] * len(todo), todo, pure=False)
-    for k, fut in enumerate(as_completed(futures), 1):
-        win, arrays, task = fut.result()
-        fut.release()
+    for win, arrays, task in map_tiles(c, grid_tile, plan, todo, hooks=hooks, total=len(windows)):
         for key in stats:
             stats[key] += task[key]
         _place(out, win, arrays)
         _save_tile(cache, win, arrays)
-        hooks.step(55 + 15 * k / max(1, len(todo)), f"gridded tile {k}/{len(todo)}")
     return out
+
+
+def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: int = 0, steps=(55, 70, "gridded")):
+    """``fn(shared, window, *args)`` for every window as Dask tasks on the client ``c`` (``shared``
+    sent to the workers once, not with every task), yielding the results as tasks finish, with
+    progress from ``steps[0]`` to ``steps[1]`` %. ``total``: the tiles of the run, when those not
+    in ``windows`` were done by an earlier run."""
+    from dask.distributed import as_completed
+
+    if len(windows) < total:
+        hooks.info(f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
+    if not windows:
+        return
+    n, (lo, hi, verb) = len(windows), steps
+    ref = c.scatter(shared, broadcast=True)
+    futures = c.map(fn, [ref] * n, windows, *[[a] * n for a in args], pure=False)
+    for k, fut in enumerate(as_completed(futures), 1):
+        result = fut.result()
+        fut.release()
+        hooks.step(lo + (hi - lo) * k / n, f"{verb} tile {k}/{n}")
+        yield result
 
 
 def epoch_dems(arrays: tuple[np.ndarray, ...]) -> tuple[EpochDEM, EpochDEM]:

@@ -14,7 +14,8 @@ from ..workflow.steps import add_quality, alternative_move, planes_and_volumes
 from . import overview
 from .cog import write_outputs
 from .tilestore import TileStore
-from .volumetiles import GRID_ARRAYS, VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
+from .tiletask import TILE_ARRAYS, map_tiles
+from .volumetiles import VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
 
 
 def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDir, options, timer, hooks: Hooks):
@@ -22,8 +23,9 @@ def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDi
     ``run`` = (prepared pair, registration, registered after subset)."""
     prep, reg, after_thin = run
     grid = plan.grid
-    store = TileStore(str(cache / f"store-k{k}"), tuple(windows))
-    (cache / f"store-k{k}").mkdir(exist_ok=True)
+    folder = cache / f"store-k{k}"
+    folder.mkdir(exist_ok=True)
+    store = TileStore(str(folder), tuple(windows))
     with timer("grids"):
         epochs, medians, stats = _grid_tiles(c, plan, store, k, hooks)
     hooks.step(70, f"estimating the vertical bias correction on a {k} x {k} overview of the grid")
@@ -33,19 +35,10 @@ def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDi
         store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), alternative_move(reg)
     )
     with timer("volume"):
-        shared = c.scatter(job, broadcast=True)
-        futures = c.map(volume_tile, [shared] * len(windows), windows, pure=False)
-        tiles = []
-        from dask.distributed import as_completed
-
-        for n, fut in enumerate(as_completed(futures), 1):
-            tiles.append(fut.result())
-            fut.release()
-            hooks.step(75 + 10 * n / len(windows), f"volumes of tile {n}/{len(windows)}")
+        tiles = list(map_tiles(c, volume_tile, job, windows, hooks=hooks, steps=(75, 85, "volumes of")))
         order = {w: i for i, w in enumerate(windows)}
         tiles.sort(key=lambda t: order[t["window"]])  # the same sums whatever the finishing order
-        vols = combine(tiles, over, grid.cell)
-    vols.uncertainty["volume_step"]["overview_cell_factor"] = k
+        vols = combine(tiles, over, grid.cell, k)
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):
         write_outputs(out, _reader(store), grid, float(prep.origin[2]), options.correction)
@@ -58,8 +51,6 @@ def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDi
 def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
     """Grid every tile into ``store`` (tiles already there are summarized, not run again):
     ((after, before) DEMs of the overview, (after, before) median counts, stats)."""
-    from dask.distributed import as_completed
-
     coarse = overview.coarse(plan.grid, k)
     sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
     hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
@@ -71,21 +62,14 @@ def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
             overview.add_blocks(sums[e], blocks[e])
             hists[e] += hist[e]
 
-    todo = [w for w in store.windows if not store.has(GRID_ARRAYS, w)]
+    todo = [w for w in store.windows if not store.has(TILE_ARRAYS, w)]
     for w in store.windows:
         if w not in todo:
-            add(summarize_grid_tile(w, [store.load(n, w) for n in GRID_ARRAYS], k))
-    if len(todo) < len(store.windows):
-        hooks.info(f"resuming: {len(store.windows) - len(todo)} of {len(store.windows)} tiles done in an earlier run")
-    shared = c.scatter(plan, broadcast=True) if todo else None
-    futures = c.map(grid_tile_stored, [shared] * len(todo), todo, [store] * len(todo), [k] * len(todo), pure=False)
-    for n, fut in enumerate(as_completed(futures), 1):
-        summary = fut.result()
-        fut.release()
+            add(summarize_grid_tile(w, [store.load(n, w) for n in TILE_ARRAYS], k))
+    for summary in map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows)):
         add(summary)
         for key in stats:
             stats[key] += summary[3][key]
-        hooks.step(55 + 15 * n / max(1, len(todo)), f"gridded tile {n}/{len(todo)}")
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -30,9 +30,9 @@ from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import region_sigma, z_value
 from . import overview
 from .tilestore import TileStore, Window
+from .tiletask import TILE_ARRAYS, grid_tile
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
-GRID_ARRAYS = ("h_a", "n_a", "s_a", "h_b", "n_b", "s_b")
 VOLUME_ARRAYS = ("diff", "offset", "filled_mask")
 BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "thresholded", "holes")
 PARTS = ("net", "cut", "fill", "net_compared_area")
@@ -46,10 +46,8 @@ def halo(cell: float) -> int:
 def grid_tile_stored(plan, win: Window, store: TileStore, k: int) -> tuple:
     """:func:`tiletask.grid_tile`, its arrays kept in ``store``: (window, block sums of both
     epochs, count histograms, stats)."""
-    from .tiletask import grid_tile
-
     win, arrays, stats = grid_tile(plan, win)
-    store.save(win, dict(zip(GRID_ARRAYS, arrays, strict=True)))
+    store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
     return summarize_grid_tile(win, arrays, k) + (stats,)
 
 
@@ -85,7 +83,7 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     r0, r1, c0, c1 = win
     h = halo(g.cell)
     ext = (max(0, r0 - h), min(g.rows, r1 + h), max(0, c0 - h), min(g.cols, c1 + h))
-    a = {n: job.store.read(n, ext, fill=0 if n.startswith("n_") else np.nan) for n in GRID_ARRAYS}
+    a = {n: job.store.read(n, ext, fill=0 if n.startswith("n_") else np.nan) for n in TILE_ARRAYS}
     wgrid = g.window(*ext)
     core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
     given = Given(
@@ -127,21 +125,23 @@ def _zones(tiles: list[dict]) -> list[dict]:
     return out
 
 
+def _weighted(tiles: list[dict], key: str, weights: np.ndarray, default: float) -> float:
+    """The tiles' ``uncertainty[key]`` averaged with ``weights`` (``default`` when none is finite)."""
+    v = np.array([t["uncertainty"][key] for t in tiles], float)
+    ok = np.isfinite(v) & (weights > 0)
+    return float(np.sum(v[ok] * weights[ok]) / weights[ok].sum()) if ok.any() else default
+
+
 def _pooled_model(tiles: list[dict]) -> dict[str, float]:
     """The tiles' semivariogram models averaged, weighted by their stable cells."""
-    keys = {"nugget": "nugget_m2", "psill": "psill_m2", "range": "range_m"}
     w = np.array([t["uncertainty"]["stable_cells"] for t in tiles], float)
-    out = {}
-    for k, key in keys.items():
-        v = np.array([t["uncertainty"][key] for t in tiles], float)
-        ok = np.isfinite(v) & (w > 0)
-        out[k] = float(np.sum(v[ok] * w[ok]) / w[ok].sum()) if ok.any() else 0.0
-    return out
+    return {k: _weighted(tiles, f"{k}_{u}", w, 0.0) for k, u in (("nugget", "m2"), ("psill", "m2"), ("range", "m"))}
 
 
-def combine(tiles: list[dict], over: Volumes, cell: float) -> Volumes:
+def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     """The run's Volumes: budgets summed over the tiles, half-widths combined with the
-    overview's, the overview's rasters (for the report's map, histogram and quality checks)."""
+    overview's (of ``k`` x ``k`` cells), the overview's rasters (for the report's map, histogram
+    and quality checks)."""
     budgets = {b: _sum_dicts([t[b] for t in tiles]) for b in BUDGETS}
     u = dict(over.uncertainty)
     z = z_value(over.uncertainty["confidence"])
@@ -162,12 +162,9 @@ def combine(tiles: list[dict], over: Volumes, cell: float) -> Volumes:
         p: _rss(t["uncertainty"]["marginal_detections_m3"][p] for t in tiles) for p in ("net", "cut", "fill")
     }
     cells = np.array([t["all_cells"]["cells"] for t in tiles], float)
-    w = cells / max(cells.sum(), 1.0)
     for key in ("lod_m", "sigma_m"):
-        vals = np.array([t["uncertainty"][key] for t in tiles], float)
-        ok = np.isfinite(vals)
-        u[key] = float(np.sum(vals[ok] * w[ok]) / max(w[ok].sum(), 1e-12)) if ok.any() else over.uncertainty[key]
-    u["volume_step"] = {"tiles": len(tiles), "overview_cell_factor": None}
+        u[key] = _weighted(tiles, key, cells, over.uncertainty[key])
+    u["volume_step"] = {"tiles": len(tiles), "overview_cell_factor": k}
     empty = np.sum([t["empty"] for t in tiles], axis=0)
     return replace(
         over,

@@ -87,12 +87,11 @@ def compute_volumes(
     filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
     if given is None:
         offset, params, stable, _ = correction(filled, d_i, grid, options)
-        counted = np.ones(raw.shape, bool)
+        core = (slice(None), slice(None))  # the cells the budgets count: all
     else:
         offset = np.where(np.isfinite(filled), given.offset, np.nan)
         params, stable = given.params, given.stable & np.isfinite(filled)
-        counted = np.zeros(raw.shape, bool)
-        counted[given.core] = True
+        core = given.core  # the halo is context only
     diff = filled - offset
     area = grid.cell_area
     fill_sigma = refill_sigma(diff, filled_mask, stable, options)
@@ -103,18 +102,16 @@ def compute_volumes(
     lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
-    if given is not None:  # decided with the halo's context, counted on the core only
-        fill_area, cut_area = fill_area & counted, cut_area & counted
     # stable ground for the error model: never a cell of (or next to) a detected change area,
     # unless the user drew it
     quiet = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
     if not options.stable_mask and quiet.sum() >= 12:
         stable = quiet
-    shift = pose_effect(f_a, grid, moved)
-    reg_v = signed_budget(shift, fill_area, cut_area, area)
+    d, fa, ca = diff[core], fill_area[core], cut_area[core]  # areas decided with the halo, counted on the core
+    reg_v = signed_budget(pose_effect(f_a, grid, moved)[core], fa, ca, area)
     marginal = {
-        "fill": marginal_volume(diff, fill_area, lod_cell, area),
-        "cut": marginal_volume(diff, cut_area, lod_cell, area),
+        "fill": marginal_volume(d, fa, lod_cell[core], area),
+        "cut": marginal_volume(d, ca, lod_cell[core], area),
     }
     marginal["net"] = float(np.hypot(marginal["fill"], marginal["cut"]))
     reg_in = 0.0 if given else 1.0  # a tile: the pose is common to all tiles, summed across them
@@ -130,10 +127,9 @@ def compute_volumes(
         fill_sigma=fill_sigma,
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
         extra_sigma=extra,
-        counted=None if given is None else counted,
+        counted=None if given is None else _mask(diff.shape, core),
     )
-    headline = signed_budget(diff, fill_area, cut_area, area)
-    c_diff, c_filled, c_raw = (np.where(counted, a, np.nan) for a in (diff, filled, raw))
+    headline = signed_budget(d, fa, ca, area)
     vols = {
         "raw": raw,
         "filled": filled,
@@ -145,24 +141,32 @@ def compute_volumes(
         "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v, "marginal_detections_m3": marginal},
         "change_mask": change,
         "compensated": headline,
-        "all_cells": budget(c_diff, area),
-        "uncompensated": budget(c_filled, area),
-        "paper_plane": budget(c_filled - d_i, area),
+        "all_cells": budget(d, area),
+        "uncompensated": budget(filled[core], area),
+        "paper_plane": budget(filled[core] - d_i[core], area),
         "change_areas": headline,
-        "thresholded": thresholded_volumes(c_diff, lod, area),
-        "holes": holes.summary(c_diff, filled_mask & counted, area),
-        "empty_cells": int((~np.isfinite(c_raw) & counted).sum()),
-        "empty_before": int(((n_b == 0) & counted).sum()),
-        "empty_after": int(((n_a == 0) & counted).sum()),
+        "thresholded": thresholded_volumes(d, lod, area),
+        "holes": holes.summary(d, filled_mask[core], area),
+        "empty_cells": int((~np.isfinite(raw[core])).sum()),
+        "empty_before": int((n_b[core] == 0).sum()),
+        "empty_after": int((n_a[core] == 0).sum()),
     }
     if options.zones:
         from .zones import zone_budgets
 
-        compared = np.where(np.isfinite(diff), 0.0, np.nan)
-        rows, cols = (slice(None), slice(None)) if given is None else given.core
+        rows, cols = core
         zgrid = grid if given is None else grid.window(rows.start, rows.stop, cols.start, cols.stop)
-        vols["zones"] = zone_budgets(np.where(change, diff, compared)[rows, cols], zgrid, options.zones)
+        vols["zones"] = zone_budgets(
+            np.where(change[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones
+        )
     return Volumes(**vols)
+
+
+def _mask(shape: tuple[int, int], core: tuple[slice, slice]) -> np.ndarray:
+    """True on the ``core`` window of a grid of ``shape``."""
+    out = np.zeros(shape, bool)
+    out[core] = True
+    return out
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:
