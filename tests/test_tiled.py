@@ -56,21 +56,26 @@ def test_local_cluster_two_processes_matches_in_process(pair, in_process, tmp_pa
         assert ds.tags(ns="IMAGE_STRUCTURE").get("LAYOUT") == "COG"
 
 
-def test_vpc_tiles_on_threads_match_single_file(pair, in_process, tmp_path):
+def _quadrant_vpc(before, folder) -> tuple:
+    """(the before cloud split into four quadrant LAZ tiles grouped by a VPC, the tiles)."""
     import laspy
 
     from soilvolume.inputs.io import write_las
 
-    before, after, _ = pair
     las = laspy.read(before)
     xyz, cls = np.c_[las.x, las.y, las.z], np.asarray(las.classification)
     mid = np.median(xyz[:, :2], axis=0)
     parts = []
     for k, (east, north) in enumerate([(0, 0), (1, 0), (0, 1), (1, 1)]):
         m = ((xyz[:, 0] >= mid[0]) == bool(east)) & ((xyz[:, 1] >= mid[1]) == bool(north))
-        parts.append(tmp_path / f"before_{k}.laz")
+        parts.append(folder / f"before_{k}.laz")
         write_las(parts[-1], xyz[m], las.header.parse_crs().to_wkt(), cls[m])
-    vpc = write_vpc(tmp_path / "before.vpc", parts)
+    return write_vpc(folder / "before.vpc", parts), parts
+
+
+def test_vpc_tiles_on_threads_match_single_file(pair, in_process, tmp_path):
+    before, after, _ = pair
+    vpc, _ = _quadrant_vpc(before, tmp_path)
     got = estimate(vpc, after, tmp_path / "r", Options(scheduler="threads:2", tile_cells=20))
     # the registration subset is summed in another order: the transform moves by float rounding
     _same(got, in_process, rel=1e-3)
@@ -102,21 +107,18 @@ def test_tiles_aligned_to_the_input_tiling():
     assert [round(g.xmin + c * g.cell, 3) % 50 for c in edges[1:]] == [0.0]
 
 
-def test_resume_runs_only_the_missing_tiles(tmp_path):
-    """Tiles saved by an interrupted run are reused; a missing one runs (here: fails naming the
-    input, which does not exist)."""
+def _plan_of_missing_inputs(folder):
+    """A tile plan over a 40 x 40 grid of 1 m cells whose input files do not exist."""
     import pyproj
-    from dask.distributed import Client
 
-    from soilvolume.api import Hooks
-    from soilvolume.distributed.tiletask import Plan, _save_tile, run_tiles
+    from soilvolume.distributed.tiletask import Plan
     from soilvolume.inputs.crs import WorkFrame
 
-    g = GridSpec(0.0, 40.0, 1.0, 40, 40)
     crs = pyproj.CRS("EPSG:32654")
-    plan = Plan(
-        str(tmp_path / "gone_b.las"),
-        str(tmp_path / "gone_a.las"),
+    g = GridSpec(0.0, 40.0, 1.0, 40, 40)
+    paths = (str(folder / "gone_b.las"), str(folder / "gone_a.las"))
+    return Plan(
+        *paths,
         crs.to_wkt(),
         crs.to_wkt(),
         WorkFrame(crs, 1.0),
@@ -127,6 +129,18 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
         np.zeros((3, 2)),
         "mean",
     )
+
+
+def test_resume_runs_only_the_missing_tiles(tmp_path):
+    """Tiles saved by an interrupted run are reused; a missing one runs (here: fails naming the
+    input, which does not exist)."""
+    from dask.distributed import Client
+
+    from soilvolume.api import Hooks
+    from soilvolume.distributed.tiletask import _save_tile, run_tiles
+
+    plan = _plan_of_missing_inputs(tmp_path)
+    g = plan.grid
     windows = tiles(g, 20)
     for k, (r0, r1, c0, c1) in enumerate(windows):
         shape = (r1 - r0, c1 - c0)
@@ -277,18 +291,8 @@ def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_pa
     task's memory; over a tight budget the tiles come from the budget instead."""
     import laspy
 
-    from soilvolume.inputs.io import write_las
-
     before, after, _ = pair
-    las = laspy.read(before)
-    xyz, cls = np.c_[las.x, las.y, las.z], np.asarray(las.classification)
-    mid = np.median(xyz[:, :2], axis=0)
-    parts = []
-    for k, (east, north) in enumerate([(0, 0), (1, 0), (0, 1), (1, 1)]):
-        m = ((xyz[:, 0] >= mid[0]) == bool(east)) & ((xyz[:, 1] >= mid[1]) == bool(north))
-        parts.append(tmp_path / f"before_{k}.laz")
-        write_las(parts[-1], xyz[m], las.header.parse_crs().to_wkt(), cls[m])
-    vpc = write_vpc(tmp_path / "before.vpc", parts)
+    vpc, parts = _quadrant_vpc(before, tmp_path)
     one = dict(scheduler="threads:1", volume_step="whole")  # one worker: tiles up to half the grid
     roomy = estimate(vpc, after, tmp_path / "a", Options(**one))
     tight = estimate(vpc, after, tmp_path / "b", Options(**one, memory_limit=1e-5))
@@ -318,36 +322,21 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
     """With the volume step in tiles, finished grid tiles live in the store: a second run only
     grids the missing ones (here: fails naming the input, which does not exist), and the
     overview and median counts come from the stored tiles."""
-    import pyproj
     from dask.distributed import Client
 
     from soilvolume.api import Hooks
     from soilvolume.distributed.tilestore import TileStore
-    from soilvolume.distributed.tiletask import Plan
+    from soilvolume.distributed.tiletask import TILE_ARRAYS
     from soilvolume.distributed.volumestep import _grid_tiles
-    from soilvolume.distributed.volumetiles import GRID_ARRAYS
-    from soilvolume.inputs.crs import WorkFrame
 
-    g = GridSpec(0.0, 40.0, 1.0, 40, 40)
-    crs = pyproj.CRS("EPSG:32654")
-    plan = Plan(
-        *(str(tmp_path / n) for n in ("gone_b.las", "gone_a.las")),
-        crs.to_wkt(),
-        crs.to_wkt(),
-        WorkFrame(crs, 1.0),
-        np.zeros(3),
-        g,
-        np.eye(4),
-        (False, False),
-        np.zeros((3, 2)),
-        "mean",
-    )
+    plan = _plan_of_missing_inputs(tmp_path)
+    g = plan.grid
     store = TileStore(str(tmp_path), tuple(tiles(g, 20)))
     for k, w in enumerate(store.windows):
         shape = (w[1] - w[0], w[3] - w[2])
         counts = np.full(shape, 4 + k, np.int32)
         arrays = (np.full(shape, float(k)), counts, np.zeros(shape), np.zeros(shape), counts, np.zeros(shape))
-        store.save(w, dict(zip(GRID_ARRAYS, arrays, strict=True)))
+        store.save(w, dict(zip(TILE_ARRAYS, arrays, strict=True)))
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
         (after, before), medians, stats = _grid_tiles(c, plan, store, 4, Hooks())
         assert stats["read"] == 0 and medians == (5.5, 5.5)  # counts 4..7, 400 cells each

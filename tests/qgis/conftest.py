@@ -130,16 +130,24 @@ def run_alg_session(qgis_processing, plugin_package):
 
 
 @pytest.fixture(scope="session")
-def estimate_run(qgis_processing, plugin_package, scene_dir, tmp_path_factory) -> dict:
-    """One full estimate through processing.run with every output written to files."""
-    out = tmp_path_factory.mktemp("estimate")
-    params = {
+def estimate_inputs(scene_dir) -> dict:
+    """The inputs and options of the reference estimate run on the seeded scene."""
+    return {
         "BEFORE": str(scene_dir / "before.las"),
         "AFTER": str(scene_dir / "after.las"),
         "CELL": 1.0,
         "RADIUS": 30.0,
         "FINE": "icp",
         "CORRECTION": "surface",
+    }
+
+
+@pytest.fixture(scope="session")
+def estimate_run(qgis_processing, plugin_package, estimate_inputs, tmp_path_factory) -> dict:
+    """One full estimate through processing.run with every output written to files."""
+    out = tmp_path_factory.mktemp("estimate")
+    params = {
+        **estimate_inputs,
         "DIFFERENCE": str(out / "difference.tif"),
         "DEM_BEFORE": str(out / "dem_before.tif"),
         "DEM_AFTER": str(out / "dem_after.tif"),

@@ -76,16 +76,11 @@ def test_dems_hold_absolute_heights(estimate_run):
         assert 55 < np.nanmedian(dem) < 70, key  # the scene's ground heights (57.6-68.6 m)
 
 
-def test_tiled_volume_step_from_qgis(run_alg, scene_dir, estimate_run, tmp_path):
+def test_tiled_volume_step_from_qgis(run_alg, estimate_inputs, estimate_run, tmp_path):
     """Scheduler and Volume step are parameters: Dask threads inside QGIS, the volume step tile
     by tile, the same volumes as the in-process run (1 %) and a readable difference raster."""
     params = {
-        "BEFORE": str(scene_dir / "before.las"),
-        "AFTER": str(scene_dir / "after.las"),
-        "CELL": 1.0,
-        "RADIUS": 30.0,
-        "FINE": "icp",
-        "CORRECTION": "surface",
+        **estimate_inputs,
         "SCHEDULER": "threads:2",
         "VOLUME_STEP": "tiles",
         "TILE_CELLS": 24,
