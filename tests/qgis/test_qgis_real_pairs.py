@@ -11,7 +11,17 @@ import warnings
 from pathlib import Path
 
 import pytest
-from qgis.core import QgsProcessingFeedback, QgsVectorLayer
+from qgis.core import (
+    QgsLayerTreeModel,
+    QgsProcessingContext,
+    QgsProcessingFeedback,
+    QgsProcessingOutputLayerDefinition,
+    QgsProject,
+    QgsRasterLayer,
+    QgsVectorLayer,
+)
+
+from .test_qgis_outputs import legend_range
 
 
 class RecordingFeedback(QgsProcessingFeedback):
@@ -130,3 +140,35 @@ def test_tommy_thompson_progress_moves_through_registration(tommy):
     assert len({round(p) for p in steps if 15 < p < 50}) >= 3, steps  # ICP levels move the bar
     assert results["VERDICT"] == "reliable" and not feedback.warnings  # the summary is no warning
     assert results["NET_VOLUME"] - results["NET_UNCERTAINTY"] > 0  # a significant gain
+
+
+def test_autzen_layers_as_loaded(run_alg, real_dir, tmp_path):
+    """Autzen's outputs as Processing loads them: the difference on top; every legend shows the
+    styled range, which follows the data (DEMs in metres, 128-134 m; the zero correction of a
+    precise run a narrow ±0.1 m, not the style file's ±1 m); nodata set; no vertical CRS."""
+    project = QgsProject.instance()
+    context = QgsProcessingContext()
+    context.setProject(project)
+    keys = ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")
+    loaded = {k: QgsProcessingOutputLayerDefinition(str(tmp_path / f"{k}.tif"), project) for k in keys}
+    params = {"BEFORE": str(real_dir / "autzen_bmx_2010.las"), "AFTER": str(real_dir / "autzen_bmx_2023.las")}
+    run_alg("estimatevolumechange", {**params, **loaded}, context=context)
+    details = context.layersToLoadOnCompletion()
+    assert max(details.values(), key=lambda d: d.layerSortKey).name.startswith("Difference")
+    model = QgsLayerTreeModel(project.layerTreeRoot())
+    ranges = {}
+    try:
+        for path, d in details.items():
+            layer = QgsRasterLayer(path, d.name)
+            project.addMapLayer(layer)
+            d.postProcessor().postProcessLayer(layer, context, QgsProcessingFeedback())
+            renderer = layer.renderer()
+            ranges[d.name] = (renderer.classificationMin(), renderer.classificationMax())
+            assert legend_range(model, layer) == pytest.approx(ranges[d.name]), d.name
+            assert layer.dataProvider().sourceNoDataValue(1) == -9999
+            assert not layer.verticalCrs().isValid() and "ftUS" not in layer.crs().toWkt()
+    finally:
+        project.removeAllMapLayers()
+    for name in ("DEM before", "DEM after (registered)"):
+        assert 128 < ranges[name][0] < ranges[name][1] < 134, ranges
+    assert ranges["Vertical correction"] == pytest.approx((-0.1, 0.1)), ranges
