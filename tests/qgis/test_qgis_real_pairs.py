@@ -122,6 +122,7 @@ def test_autzen_zones_and_stable_mask(autzen):
     for key in ("NET_VOLUME", "CUT_VOLUME", "FILL_VOLUME"):
         assert math.copysign(1.0, results[key]) == 1.0, key
     assert not [w for w in caught if "QgsField constructor is deprecated" in w], caught
+    assert "not significant" in results["QUALITY_MESSAGES"] and " m3" not in results["QUALITY_MESSAGES"]
 
 
 def test_autzen_precise_run_is_explained_in_parameter_words(autzen):
