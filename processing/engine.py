@@ -85,13 +85,17 @@ def require(deps: Sequence[tuple[str, str]], feedback: QgsProcessingFeedback | N
         ) from exc
 
 
-def hooks(feedback: QgsProcessingFeedback | None):  # -> soilvolume.api.Hooks
-    """Engine hooks: progress bar, Processing log (in QGIS's wording), cancel button."""
+def hooks(feedback: QgsProcessingFeedback | None, skip: tuple[str, ...] = ()):  # -> soilvolume.api.Hooks
+    """Engine hooks: progress bar, Processing log (in QGIS's wording; engine lines starting with
+    one of ``skip`` left out, e.g. those the algorithm logs itself), cancel button."""
     fb = feedback or QgsProcessingFeedback()
+
+    def log(message: str) -> None:
+        if not message.startswith(skip):
+            fb.pushInfo(qgis_wording(message))
+
     return engine("api").Hooks(
-        progress=lambda percent, _message: fb.setProgress(float(percent)),
-        log=lambda message: fb.pushInfo(qgis_wording(message)),
-        cancel=fb.isCanceled,
+        progress=lambda percent, _message: fb.setProgress(float(percent)), log=log, cancel=fb.isCanceled
     )
 
 

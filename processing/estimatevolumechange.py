@@ -167,7 +167,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                     work,
                     options,
                     overwrite=True,
-                    hooks=engine.hooks(feedback),
+                    hooks=engine.hooks(feedback, skip=("quality (",)),  # logged with the results
                     before_pipeline=pipelines["BEFORE_PIPELINE"],
                     after_pipeline=pipelines["AFTER_PIPELINE"],
                 )

@@ -101,6 +101,9 @@ def test_log_and_report_name_parameters_not_flags(pair, request):
     assert not [line for line in lines if "RANSAC" in line], lines
     volumes = [line for line in lines if line.startswith("Volumes (m³)")]
     assert len(volumes) == 1 and not re.search(r"-0\.0\b", volumes[0]), volumes
+    for message in filter(None, results["QUALITY_MESSAGES"].split("\n")):
+        logged = [line for line in lines if message.lower() in line.lower() and not line.startswith("Results:")]
+        assert len(logged) == 1, logged  # once (processing.run's "Results:" line aside)
     assert not [w for w in caught if "Covariance" in w], caught  # scipy's fit warning: noise
     text = visible_text(Path(results["REPORT"]).read_text(encoding="utf-8"))
     assert not re.search(r"(^|[\s(])--[a-z]", text), re.findall(r".{60}--[a-z].{30}", text)
@@ -130,6 +133,8 @@ def test_autzen_precise_run_is_explained_in_parameter_words(autzen):
     registration = [line for line in feedback.infos if line.startswith(("Coarse", "Fine"))]
     assert registration and all("'Georeferencing of the surveys' (GEOREFERENCING)" in r for r in registration)
     assert results["VERDICT"] == "use with caution"
+    assert "Comparing the surfaces (no vertical bias correction)" in feedback.infos  # a precise run
+    assert not [line for line in feedback.infos if line.startswith("Estimating the vertical bias")]
     assert set(results["QUALITY_MESSAGES"].split("\n")) <= set(feedback.warnings)  # cautions are warnings
 
 
