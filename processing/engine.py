@@ -8,8 +8,10 @@ message saying what is missing and how to install it.
 
 from __future__ import annotations
 
+import html
 import importlib
 import importlib.util
+import re
 import sys
 import traceback
 from collections.abc import Iterator, Sequence
@@ -83,13 +85,17 @@ def require(deps: Sequence[tuple[str, str]], feedback: QgsProcessingFeedback | N
         ) from exc
 
 
-def hooks(feedback: QgsProcessingFeedback | None):  # -> soilvolume.api.Hooks
-    """Engine hooks: progress bar, Processing log (in QGIS's wording), cancel button."""
+def hooks(feedback: QgsProcessingFeedback | None, skip: tuple[str, ...] = ()):  # -> soilvolume.api.Hooks
+    """Engine hooks: progress bar, Processing log (in QGIS's wording; engine lines starting with
+    one of ``skip`` left out, e.g. those the algorithm logs itself), cancel button."""
     fb = feedback or QgsProcessingFeedback()
+
+    def log(message: str) -> None:
+        if not message.startswith(skip):
+            fb.pushInfo(qgis_wording(message))
+
     return engine("api").Hooks(
-        progress=lambda percent, _message: fb.setProgress(float(percent)),
-        log=lambda message: fb.pushInfo(qgis_wording(message)),
-        cancel=fb.isCanceled,
+        progress=lambda percent, _message: fb.setProgress(float(percent)), log=log, cancel=fb.isCanceled
     )
 
 
@@ -104,17 +110,40 @@ def parameter_names() -> dict[str, str]:
 
 def qgis_wording(message: str) -> str:
     """An engine message as a sentence naming Processing parameters instead of command-line
-    flags: "--coarse fpfh forces it" -> "Coarse registration (COARSE) = fpfh forces it"."""
-    names = parameter_names()
-    words = message.split(" ")
-    for i, word in enumerate(words):
-        stripped = word.rstrip(".,;:)")
-        if stripped in names:
-            words[i] = names[stripped] + word[len(stripped) :]
-            if i + 1 < len(words) and not words[i + 1].startswith(("-", "(")) and stripped != "--crs":
-                words[i] += " ="
-    text = " ".join(words).replace("pass the '", "set the '")
+    flags: "--coarse fpfh forces it" -> "'Coarse registration' (COARSE) = fpfh forces it"."""
+    text = reword_flags(message)
     return text[:1].upper() + text[1:]
+
+
+def reword_flags(text: str) -> str:
+    """``text`` with every command-line flag of the engine replaced by its parameter's label and
+    name (followed by " =" when a value follows the flag); "(--flag)" and "--flag," included."""
+    names = parameter_names()
+    words = text.split(" ")
+    for i, word in enumerate(words):
+        flag = word.lstrip("(").rstrip(".,;:)")
+        if flag not in names:
+            continue
+        lead = word[: word.index(flag)]
+        tail = word[len(lead) + len(flag) :]
+        words[i] = lead + names[flag] + tail
+        if not tail and flag != "--crs" and i + 1 < len(words) and not words[i + 1].startswith(("-", "(")):
+            words[i] += " ="
+    return " ".join(words).replace("pass the '", "set the '")
+
+
+def reword_html(page: str) -> str:
+    """An engine HTML report with the flags in its text reworded (:func:`reword_flags`); markup,
+    styles and scripts untouched."""
+    parts = re.split(r"(<[^>]*>)", page)
+    raw = False
+    for i, part in enumerate(parts):
+        if part.startswith("<"):
+            tag = part[1:].split(" ", 1)[0].rstrip(">").lower()
+            raw = tag in ("style", "script") or (raw and tag not in ("/style", "/script"))
+        elif not raw and "--" in part:
+            parts[i] = html.escape(reword_flags(html.unescape(part)), quote=False)
+    return "".join(parts)
 
 
 def option_error_text(exc: Exception) -> str | None:

@@ -15,7 +15,7 @@ from qgis.core import (
     QgsProcessingOutputNumber,
     QgsProcessingOutputString,
 )
-from qgis.PyQt.QtCore import QVariant
+from qgis.PyQt.QtCore import QMetaType
 
 from . import engine, params
 
@@ -60,12 +60,12 @@ STRINGS = {
     "TRANSFORM": "Registration transform (4×4, JSON, after → before)",
 }
 ZONE_FIELDS = (
-    ("zone_name", QVariant.String),
-    ("cut_m3", QVariant.Double),
-    ("fill_m3", QVariant.Double),
-    ("net_m3", QVariant.Double),
-    ("net_pm_m3", QVariant.Double),
-    ("area_m2", QVariant.Double),
+    ("zone_name", QMetaType.Type.QString),
+    ("cut_m3", QMetaType.Type.Double),
+    ("fill_m3", QMetaType.Type.Double),
+    ("net_m3", QMetaType.Type.Double),
+    ("net_pm_m3", QMetaType.Type.Double),
+    ("area_m2", QMetaType.Type.Double),
 )
 
 
@@ -84,7 +84,7 @@ def values(report: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, (section, field, _d) in NUMBERS.items():
         value = (report.get(section) or {}).get(field)
-        out[key] = float(value) if isinstance(value, (int, float)) else None
+        out[key] = float(value) + 0.0 if isinstance(value, (int, float)) else None  # + 0.0: no -0.0
     reg = report.get("registration") or {}
     local = reg.get("transform_local")
     moved = summary.rotation_shift(local) if local is not None else {}

@@ -167,7 +167,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                     work,
                     options,
                     overwrite=True,
-                    hooks=engine.hooks(feedback),
+                    hooks=engine.hooks(feedback, skip=("quality (",)),  # logged with the results
                     before_pipeline=pipelines["BEFORE_PIPELINE"],
                     after_pipeline=pipelines["AFTER_PIPELINE"],
                 )
@@ -209,20 +209,21 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
     def log_summary(results: dict[str, Any], feedback) -> None:
         """The volumes in the log, and the quality messages as warnings."""
 
-        def pm(key: str) -> str:
+        def m3(key: str, sign: str = "") -> str:
             value = results.get(key)
-            return f" ± {value:,.1f}" if value is not None else ""
+            return "n/a" if value is None else f"{value + 0.0:{sign},.1f}"  # + 0.0: no "-0.0"
 
         feedback.pushInfo(
-            f"Volumes (m³): net {results['NET_VOLUME']:+,.1f}{pm('NET_UNCERTAINTY')}, "
-            f"cut {results['CUT_VOLUME']:,.1f}{pm('CUT_UNCERTAINTY')}, "
-            f"fill {results['FILL_VOLUME']:,.1f}{pm('FILL_UNCERTAINTY')}"
+            f"Volumes (m³): net {m3('NET_VOLUME', '+')} ± {m3('NET_UNCERTAINTY')}, "
+            f"cut {m3('CUT_VOLUME')} ± {m3('CUT_UNCERTAINTY')}, "
+            f"fill {m3('FILL_VOLUME')} ± {m3('FILL_UNCERTAINTY')}"
         )
         feedback.pushInfo(results["SIGNIFICANCE"])
         if results["VERDICT"]:
             feedback.pushInfo(f"Quality: {results['VERDICT']}")
+        push = feedback.pushInfo if results["VERDICT"] == "reliable" else feedback.pushWarning
         for line in filter(None, results["QUALITY_MESSAGES"].split("\n")):
-            feedback.pushWarning(line)
+            push(line)  # a reliable run's summary is no warning
 
     @staticmethod
     def copy_report(src: Path, dest: str) -> str:
@@ -230,6 +231,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         params.deliver_file(src, dest)
         if src.suffix == ".html":
             text = src.read_text(encoding="utf-8", errors="replace")
+            Path(dest).write_text(engine.reword_html(text), encoding="utf-8")  # parameters, not flags
             for sibling in src.parent.iterdir():
                 if sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file() and f'"{sibling.name}"' in text:
                     shutil.copyfile(sibling, Path(dest).parent / sibling.name)

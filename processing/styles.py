@@ -3,6 +3,7 @@ stretched to the layer's values (a difference symmetric around 0)."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from qgis.core import (
@@ -25,14 +26,31 @@ def style_path(kind: str) -> Path:
 
 
 def value_range(layer: QgsRasterLayer) -> tuple[float, float] | None:
-    """The 2-98 % cumulative cut of band 1, or None for an empty raster."""
+    """The 2-98 % cumulative cut of band 1 (its min and max when the cut is undefined, as for a
+    constant raster such as a zero correction), or None for an empty raster."""
     provider = layer.dataProvider()
     if provider is None:
         return None
     lo, hi = provider.cumulativeCut(1, 0.02, 0.98)
-    if lo is None or hi is None or lo != lo or hi != hi:  # NaN
+    if _finite(lo, hi):
+        return float(lo), float(hi)
+    return min_max(layer.source())
+
+
+def min_max(path: str) -> tuple[float, float] | None:
+    """Exact min and max of band 1 of a GDAL raster (None when it has no valid cell)."""
+    from osgeo import gdal
+
+    try:
+        dataset = gdal.Open(path)
+        lo, hi = dataset.GetRasterBand(1).ComputeRasterMinMax(False) if dataset else (None, None)
+    except RuntimeError:  # no valid cell (GDAL exceptions enabled)
         return None
-    return float(lo), float(hi)
+    return (float(lo), float(hi)) if _finite(lo, hi) else None
+
+
+def _finite(*values: float | None) -> bool:
+    return all(v is not None and math.isfinite(v) for v in values)
 
 
 def apply_style(layer: QgsMapLayer, kind: str) -> bool:

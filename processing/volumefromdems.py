@@ -24,7 +24,7 @@ from qgis.core import (
     QgsRasterLayer,
     QgsWkbTypes,
 )
-from qgis.PyQt.QtCore import QVariant
+from qgis.PyQt.QtCore import QMetaType
 
 from . import engine, params, styles
 from .base import SoilVolumeAlgorithm
@@ -47,12 +47,12 @@ row when no zones are given) and the totals
 NET_VOLUME, CUT_VOLUME, FILL_VOLUME and COMPARED_AREA over the whole compared area.</p>"""
 
 TABLE_FIELDS = (
-    ("zone", QVariant.Int),
-    ("name", QVariant.String),
-    ("cut", QVariant.Double),
-    ("fill", QVariant.Double),
-    ("net", QVariant.Double),
-    ("area", QVariant.Double),
+    ("zone", QMetaType.Type.Int),
+    ("name", QMetaType.Type.QString),
+    ("cut", QMetaType.Type.Double),
+    ("fill", QMetaType.Type.Double),
+    ("net", QMetaType.Type.Double),
+    ("area", QMetaType.Type.Double),
 )
 
 

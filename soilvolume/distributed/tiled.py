@@ -32,7 +32,14 @@ from ..inputs.stream import open_source
 from ..options import Options
 from ..registration.rigid import transform_points
 from ..reporting.report import build_report, write_json
-from ..workflow.steps import add_quality, planes_and_volumes, register_pair, shared_grid, write_report_html
+from ..workflow.steps import (
+    add_quality,
+    correction_step,
+    planes_and_volumes,
+    register_pair,
+    shared_grid,
+    write_report_html,
+)
 from .cog import write_outputs
 from .scan import dask_loader
 from .schedule import Schedule, client, worker_gb
@@ -175,7 +182,7 @@ def _tiled(
     else:
         with timer("grids"):
             dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}))
-        hooks.step(70, "estimating the vertical bias correction")
+        hooks.step(70, correction_step(options))
         vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
         hooks.step(85, "writing outputs (COG)")
         with timer("write"):

@@ -293,10 +293,13 @@ def _parameters(report: dict) -> str:
         if f.name not in given:
             continue
         meta, value = f.metadata, given[f.name]
-        unit = UNIT_WORDS.get(meta.get("unit") or "", "")
+        unit = UNIT_WORDS.get(meta.get("unit") or "", meta.get("unit") or "")
         default = "" if f.default is MISSING else ("default" if value == f.default else f"default {f.default}")
-        text = "automatic" if value is None and f.default is None else _fmt(value, 3)
-        rows.append([html.escape(meta.get("label") or f.name), f"{text} {unit}".strip(), default])
+        if value is None:  # optional files are "none"; other unset options are chosen by the engine
+            text = "none" if str(meta.get("help", "")).startswith("optional") else "automatic"
+        else:
+            text = f"{_fmt(value, 3)} {unit}".strip()
+        rows.append([html.escape(meta.get("label") or f.name), text, default])
     return _table(["parameter", "value", ""], rows)
 
 

@@ -93,16 +93,16 @@ def assess(
         out.append(
             (
                 sev,
-                f"the bias correction ({corr:+.1f} m3 over the change areas) is comparable to the net "
-                f"change ({v['net']:+.1f} m3)",
+                f"the bias correction ({corr:+.1f} m³ over the change areas) is comparable to the net "
+                f"change ({v['net']:+.1f} m³)",
             )
         )
     if net <= u["net"]:
         out.append(
             (
                 "caution",
-                f"the net change ({v['net']:+.1f} m3) is within its 95 % interval (±{u['net']:.1f} "
-                "m3) of zero: it is not significant",
+                f"the net change ({v['net']:+.1f} m³) is within its 95 % interval (±{u['net']:.1f} "
+                "m³) of zero: it is not significant",
             )
         )
     return _verdict(out)

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from statistics import NormalDist
 from typing import Any
 
@@ -80,7 +81,11 @@ def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> d
     p0 = [float(gamma[0]) * 0.5, max(g_max - float(gamma[0]) * 0.5, 1e-12), float(reach)]
     bounds = ([0.0, 0.0, float(lags[0]) * 0.5], [g_max * 2, g_max * 2, float(lags[-1]) * 2])
     try:
-        p, _ = optimize.curve_fit(spherical, lags, gamma, p0=p0, bounds=bounds, sigma=1 / np.sqrt(n_pairs), maxfev=5000)
+        with warnings.catch_warnings():  # the covariance is not used: its warning is noise in the log
+            warnings.simplefilter("ignore", optimize.OptimizeWarning)
+            p, _ = optimize.curve_fit(
+                spherical, lags, gamma, p0=p0, bounds=bounds, sigma=1 / np.sqrt(n_pairs), maxfev=5000
+            )
     except (RuntimeError, ValueError):
         p = p0
     return {"nugget": float(p[0]), "psill": float(p[1]), "range": float(p[2])}

@@ -17,7 +17,16 @@ from ..pipelines.confine import writers_into
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.report import build_report, write_json
 from ..volumes.compute import Volumes
-from .steps import Timer, add_quality, planes_and_volumes, prepare_pair, register_pair, shared_grid, write_report_html
+from .steps import (
+    Timer,
+    add_quality,
+    correction_step,
+    planes_and_volumes,
+    prepare_pair,
+    register_pair,
+    shared_grid,
+    write_report_html,
+)
 
 
 def _threads(options: Options) -> None:
@@ -85,7 +94,7 @@ def _estimate(
             dem_a = gridmod.epoch_dem(after_xyz, grid, options.statistic)
             del after_xyz
             dem_b = before_job.result()
-        hooks.step(70, "estimating the vertical bias correction")
+        hooks.step(70, correction_step(options))
         vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
         hooks.step(85, "writing outputs")
         with timer("write"):

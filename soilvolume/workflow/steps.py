@@ -108,6 +108,13 @@ def planes_and_volumes(
     return vols, p_b, p_a
 
 
+def correction_step(options: Options) -> str:
+    """The progress message of the correction step: what it does with these options."""
+    if options.correction == "none":
+        return "comparing the surfaces (no vertical bias correction)"
+    return "estimating the vertical bias correction"
+
+
 def alternative_move(reg) -> np.ndarray | None:
     """The rigid move (4x4, local) from the accepted pose to the nearly as good one (None)."""
     alt = reg.fine.alternative

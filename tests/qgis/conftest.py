@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import atexit
 import importlib
+import os
 import shutil
 import sys
 import tempfile
@@ -46,9 +47,34 @@ def _sanitize_sys_path() -> None:
     sys.path.insert(0, qgis_plugins)
 
 
+LINK_PREFIX = "soilvolume-qgis-plugins-"
+
+
+def _remove_stale_links() -> None:
+    """Remove link folders of earlier sessions whose process is gone (killed or crashed before
+    any clean-up could run); the folder name carries the process id."""
+    for folder in Path(tempfile.gettempdir()).glob(f"{LINK_PREFIX}*-*"):
+        pid = folder.name[len(LINK_PREFIX) :].split("-", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True  # exists, owned by someone else
+    return True
+
+
 def _link_plugin() -> Path:
-    """A folder holding only ``soilvolume_qgis -> <repo>``, added to sys.path."""
-    folder = Path(tempfile.mkdtemp(prefix="soilvolume-qgis-plugins-"))
+    """A folder holding only ``soilvolume_qgis -> <repo>``, added to sys.path. Removed by the
+    session fixture :func:`_remove_plugin_link` before QGIS exits (atexit as a fallback, and
+    the next session removes it if this process is killed)."""
+    _remove_stale_links()
+    folder = Path(tempfile.mkdtemp(prefix=f"{LINK_PREFIX}{os.getpid()}-"))
     atexit.register(shutil.rmtree, folder, True)
     (folder / PLUGIN_NAME).symlink_to(REPO, target_is_directory=True)
     sys.path.append(str(folder))
@@ -57,6 +83,14 @@ def _link_plugin() -> Path:
 
 _sanitize_sys_path()
 PLUGINS_DIR = _link_plugin()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _remove_plugin_link(qgis_app):
+    """Remove the plugin link folder at the end of the session, before pytest-qgis tears the
+    QgsApplication down: QGIS's exit can end the process before atexit handlers run."""
+    yield
+    shutil.rmtree(PLUGINS_DIR, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

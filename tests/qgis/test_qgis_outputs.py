@@ -26,7 +26,7 @@ from qgis.core import (
     QgsVectorFileWriter,
     QgsVectorLayer,
 )
-from qgis.PyQt.QtCore import QVariant
+from qgis.PyQt.QtCore import QMetaType
 
 REAL = Path(__file__).resolve().parents[3] / "shared" / "data" / "real"
 ZONES = {"pile A": (500067.0, 3900087.0, 11.0), "pit": (500068.0, 3900061.0, 7.0)}
@@ -43,7 +43,7 @@ STABLE = (
 def write_polygons(path: Path, boxes: dict[str, tuple[float, float, float, float]]) -> Path:
     """A GeoPackage of named rectangles (EPSG:32654)."""
     layer = QgsVectorLayer("Polygon?crs=EPSG:32654", "zones", "memory")
-    layer.dataProvider().addAttributes([QgsField("name", QVariant.String)])
+    layer.dataProvider().addAttributes([QgsField("name", QMetaType.Type.QString)])
     layer.updateFields()
     for name, (x0, y0, x1, y1) in boxes.items():
         feature = QgsFeature(layer.fields())

@@ -110,6 +110,14 @@ def test_engine_messages_in_parameter_words(plugin_package):
     assert "--" not in text and "'Coarse registration' (COARSE) = fpfh forces it" in text
     assert text.startswith("Coarse")
     assert "(CELL)" in engine.qgis_wording("grid too large: use a larger --cell")
+    assert engine.qgis_wording("used as georeferenced (--georeferencing)").endswith(
+        "('Georeferencing of the surveys' (GEOREFERENCING))"
+    )
+    assert "(CELL), then" in engine.qgis_wording("set --cell, then run")  # no "=" before a comma
+    page = "<style>a{--x:1}</style><td>skipped; --coarse fpfh forces it &amp; more</td>"
+    assert engine.reword_html(page) == (
+        "<style>a{--x:1}</style><td>skipped; 'Coarse registration' (COARSE) = fpfh forces it &amp; more</td>"
+    )
 
 
 def test_option_errors_name_the_parameter(plugin_package):

@@ -13,7 +13,7 @@ from qgis.core import (
     QgsSingleBandPseudoColorRenderer,
     QgsVectorLayer,
 )
-from qgis.PyQt.QtCore import QVariant
+from qgis.PyQt.QtCore import QMetaType
 
 pytest.importorskip("soilvolume.workflow.rasters", reason="engine: soilvolume/workflow/rasters.py not there yet")
 
@@ -25,7 +25,7 @@ def zones_layer(dem: str) -> QgsVectorLayer:
     middle = (left + right) / 2
     layer = QgsVectorLayer("Polygon?crs=EPSG:32654", "zones", "memory")
     provider = layer.dataProvider()
-    provider.addAttributes([QgsField("name", QVariant.String)])
+    provider.addAttributes([QgsField("name", QMetaType.Type.QString)])
     layer.updateFields()
     for name, (x0, x1) in (("west", (left - 5, middle)), ("east", (middle, right + 5))):
         feature = QgsFeature(layer.fields())
