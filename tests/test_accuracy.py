@@ -215,21 +215,35 @@ def test_median_error_of_small_pairs(coverage_runs):
 NO_CHANGE = {"change": "none", "before_points": 250_000, "after_points": 150_000, **NUISANCES}
 
 
-@pytest.fixture(scope="module", params=[0, 1], ids=lambda s: f"seed{s}")
-def no_change_report(request, tmp_path_factory) -> dict:
-    folder = tmp_path_factory.mktemp(f"nochange{request.param}")
-    before, after, truth = write_scene(folder / "data", request.param, **NO_CHANGE)
-    assert truth["net"] == 0
-    return run(before, after, folder / "out")
+NO_CHANGE_SEEDS = tuple(range(10))
 
 
-def test_no_change_net_within_its_uncertainty(no_change_report):
-    """Measured |net| / uncertainty, seeds 0..9: 0.04, 0.20, 0.97, 0.22, 1.01, 0.21, 0.09, 0.94,
-    0.40, 1.10: only 8/10 covered (seed 4: -8.53 vs +-8.45 m3, seed 9: -10.42 vs +-9.46 m3), and
-    the misses and near misses are hole fills (filled_net_m3 -6.4, -8.4, and +7.9 on seed 2).
-    Seeds 0 and 1 are the first two; the under-coverage is the xfail below."""
-    net, unc = no_change_report["volume_m3"]["net"], no_change_report["uncertainty_m3"]["net"]
-    assert abs(net) <= unc, (net, unc)
+@pytest.fixture(scope="module")
+def no_change_reports(tmp_path_factory) -> dict[int, dict]:
+    """report.json of the no-change pair, seeds 0..9."""
+    out = {}
+    for seed in NO_CHANGE_SEEDS:
+        folder = tmp_path_factory.mktemp(f"nochange{seed}")
+        before, after, truth = write_scene(folder / "data", seed, **NO_CHANGE)
+        assert truth["net"] == 0
+        out[seed] = run(before, after, folder / "out")
+    return out
+
+
+@pytest.fixture(params=[0, 1], ids=lambda s: f"seed{s}")
+def no_change_report(request, no_change_reports) -> dict:
+    return no_change_reports[request.param]
+
+
+def test_no_change_net_within_its_uncertainty(no_change_reports):
+    """A 95 % interval holds the zero net of unchanged ground on at least 8 of 10 seeds (an honest
+    one misses 3 or more of 10 with probability 1.2 %). Measured net +- half-width (m3), seeds
+    0..9: 0 +- 0 (no change area), -1.69 +- 1.65 (missed: a hole fill on unchanged ground
+    whose partly covered rim cells hold 1-4 points), +3.99 +- 4.08, +0.18 +- 0.38, 0 +- 0,
+    -0.54 +- 1.09, 0 +- 0, +0.15 +- 0.31, 0 +- 0, 0 +- 0: 9 of 10."""
+    got = {s: (r["volume_m3"]["net"], r["uncertainty_m3"]["net"]) for s, r in no_change_reports.items()}
+    covered = [s for s, (net, unc) in got.items() if abs(net) <= unc + 1e-9]
+    assert len(covered) >= 8, got
 
 
 def test_no_change_thresholded_volumes_are_small(no_change_report):

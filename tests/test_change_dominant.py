@@ -148,3 +148,6 @@ def test_quality_gate_words():
 
     biased = quality.assess(_report(50.0, 10.0), around, change, np.full(grid.shape, 0.5), 1.0, PRIOR)
     assert any("comparable to the net" in m for m in biased["messages"])
+    # a correction within the net's interval cannot have made it wrong (a pair without change)
+    small = quality.assess(_report(0.1, 0.3), around, change, np.full(grid.shape, 0.002), 1.0, PRIOR)
+    assert not any("comparable to the net" in m for m in small["messages"]), small

@@ -137,7 +137,7 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
     from dask.distributed import Client
 
     from soilvolume.api import Hooks
-    from soilvolume.distributed.tiletask import _save_tile, run_tiles
+    from soilvolume.distributed.tiletask import TILE_ARRAYS, _save_tile, run_tiles
 
     plan = _plan_of_missing_inputs(tmp_path)
     g = plan.grid
@@ -147,14 +147,7 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
         _save_tile(
             tmp_path,
             (r0, r1, c0, c1),
-            (
-                np.full(shape, k, float),
-                np.ones(shape, np.int32),
-                np.zeros(shape),
-                np.zeros(shape),
-                np.ones(shape, np.int32),
-                np.zeros(shape),
-            ),
+            tuple(_tile_array(n, shape, k, np.ones(shape, np.int32)) for n in TILE_ARRAYS),
         )
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
         h_a, n_a, *_ = run_tiles(c, plan, windows, Hooks(), tmp_path)
@@ -318,6 +311,13 @@ def test_overview_factor_from_budget_and_size():
     assert overview.factor(huge, 8.0) <= k
 
 
+def _tile_array(name: str, shape: tuple[int, int], k: int, counts: np.ndarray) -> np.ndarray:
+    """A stored tile's array: after heights ``k``, the given counts, zeros elsewhere."""
+    if name.startswith("n_"):
+        return counts
+    return np.full(shape, float(k)) if name == "h_a" else np.zeros(shape)
+
+
 def test_tiled_volume_step_resumes_from_its_store(tmp_path):
     """With the volume step in tiles, finished grid tiles live in the store: a second run only
     grids the missing ones (here: fails naming the input, which does not exist), and the
@@ -335,7 +335,7 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
     for k, w in enumerate(store.windows):
         shape = (w[1] - w[0], w[3] - w[2])
         counts = np.full(shape, 4 + k, np.int32)
-        arrays = (np.full(shape, float(k)), counts, np.zeros(shape), np.zeros(shape), counts, np.zeros(shape))
+        arrays = tuple(_tile_array(n, shape, k, counts) for n in TILE_ARRAYS)
         store.save(w, dict(zip(TILE_ARRAYS, arrays, strict=True)))
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
         (after, before), medians, stats = _grid_tiles(c, plan, store, 4, Hooks())

@@ -27,6 +27,66 @@ class EpochDEM:
     heights: np.ndarray
     counts: np.ndarray
     spread: np.ndarray
+    dx: np.ndarray | None = None  # mean offset (m) of the cell's points from its centre, east
+    dy: np.ndarray | None = None  # the same, north
+
+    def centred(self, cell: float, skip: np.ndarray | None = None) -> np.ndarray:
+        """Heights moved from where each cell's points lie to the cell's centre, along the slope
+        of the neighbouring cells: a cell covered on one side only (at a hole or the survey's
+        edge) otherwise holds the height of that side, on a slope too high or too low. ``skip``:
+        cells too weak to give their neighbours a slope (left as they are)."""
+        if self.dx is None or self.dy is None:
+            return self.heights
+        base = self.heights if skip is None else np.where(skip, np.nan, self.heights)
+        h = base
+        for _ in range(CENTRING_PASSES):
+            gx, gy = slopes(h, cell)
+            h = base - np.nan_to_num(gx) * self.dx - np.nan_to_num(gy) * self.dy
+        return h if skip is None else np.where(skip, self.heights, h)
+
+
+CENTRING_PASSES = 4  # fixed-point passes: a moved cell gives its neighbours better slopes
+EPOCH_ARRAYS = ("h", "n", "s", "x", "y")  # an EpochDEM's arrays, in field order
+
+
+def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """dh/dx (east) and dh/dy (north) per cell: central differences where both neighbours have
+    data, one-sided where one has, NaN where neither has."""
+    out = []
+    for axis in (1, 0):
+        fwd = np.full(h.shape, np.nan)
+        bwd = np.full(h.shape, np.nan)
+        ahead = [slice(None)] * 2
+        behind = [slice(None)] * 2
+        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
+        step = (h[tuple(ahead)] - h[tuple(behind)]) / cell
+        fwd[tuple(behind)] = step
+        bwd[tuple(ahead)] = step
+        both = np.isfinite(fwd) & np.isfinite(bwd)
+        out.append(np.where(both, 0.5 * (fwd + bwd), np.where(np.isfinite(fwd), fwd, bwd)))
+    return out[0], -out[1]  # rows run south
+
+
+class OffsetSums:
+    """Per-cell sums of the points' positions within their cells, gathered chunk by chunk; their
+    means say how far each cell's points sit from its centre."""
+
+    def __init__(self, n_cells: int) -> None:
+        self.sx, self.sy, self.n = np.zeros(n_cells), np.zeros(n_cells), np.zeros(n_cells)
+
+    def add(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
+        """Points in flat cells ``ids`` at fractional grid coordinates ``col``/``row``."""
+        m = self.n.size
+        self.sx += np.bincount(ids, weights=col % 1.0, minlength=m)
+        self.sy += np.bincount(ids, weights=row % 1.0, minlength=m)
+        self.n += np.bincount(ids, minlength=m)
+
+    def means(self, shape: tuple[int, int], cell: float) -> tuple[np.ndarray, np.ndarray]:
+        """(east, north) mean offsets (m) from the cell centres, 0 where empty."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            dx = np.where(self.n > 0, self.sx / self.n - 0.5, 0.0) * cell
+            dy = np.where(self.n > 0, 0.5 - self.sy / self.n, 0.0) * cell
+        return dx.reshape(shape).astype(np.float32), dy.reshape(shape).astype(np.float32)
 
 
 def choose_cell(points: int, area_m2: float, per_cell: float = 8.0, minimum: float = 0.5) -> float:
@@ -58,17 +118,38 @@ def make_grid(
     return GridSpec(xmin, ymax, cell, rows, cols, tuple(float(v) for v in origin), crs_wkt, xy_unit)
 
 
-def cell_ids(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Flat cell id of every point inside the grid, and the mask of those points (computed in
-    the points' own precision: float32 local coordinates stay float32)."""
+def cell_coords(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Column and row coordinates (in cells, fractional) of every point, and the mask of those
+    inside the grid (computed in the points' own precision: float32 stays float32)."""
     inv = 1.0 / grid.cell
     col = (xyz[:, 0] - (grid.xmin - grid.origin[0])) * inv
     row = ((grid.ymax - grid.origin[1]) - xyz[:, 1]) * inv
     ok = (col >= 0) & (col < grid.cols) & (row >= 0) & (row < grid.rows)
-    ids = row[ok].astype(np.int64)  # non-negative: truncation is floor
-    ids *= grid.cols
-    ids += col[ok].astype(np.int64)
-    return ids, ok
+    return col, row, ok
+
+
+def flat_ids(col: np.ndarray, row: np.ndarray, n_cols: int) -> np.ndarray:
+    """Flat cell ids of non-negative column and row coordinates (truncation is floor)."""
+    ids = row.astype(np.int64)
+    ids *= n_cols
+    ids += col.astype(np.int64)
+    return ids
+
+
+def cell_ids(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+    """Flat cell id of every point inside the grid, and the mask of those points."""
+    col, row, ok = cell_coords(xyz, grid)
+    return flat_ids(col[ok], row[ok], grid.cols), ok
+
+
+def centroid_offsets(xyz: np.ndarray, grid: GridSpec, chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`OffsetSums.means` of ``xyz`` on ``grid``, a chunk of points at a time."""
+    sums = OffsetSums(grid.rows * grid.cols)
+    for s in range(0, len(xyz), chunk):
+        col, row, ok = cell_coords(xyz[s : s + chunk], grid)
+        col, row = col[ok], row[ok]
+        sums.add(flat_ids(col, row, grid.cols), col, row)
+    return sums.means((grid.rows, grid.cols), grid.cell)
 
 
 def average_height(
@@ -93,8 +174,9 @@ def average_height(
 
 
 def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -> EpochDEM:
-    """:func:`average_height` of one epoch with its spreads, as an :class:`EpochDEM`."""
-    return EpochDEM(*average_height(xyz, grid, statistic, spread=True))
+    """:func:`average_height` of one epoch with its spreads and its points' offsets from the cell
+    centres, as an :class:`EpochDEM`."""
+    return EpochDEM(*average_height(xyz, grid, statistic, spread=True), *centroid_offsets(xyz, grid))
 
 
 def cell_heights(

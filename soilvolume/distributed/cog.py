@@ -75,15 +75,15 @@ def write_cog(
 
 def write_outputs(out, get: Callable[[str, slice, slice], np.ndarray], grid: GridSpec, z0: float, correction: str):
     """The five rasters of a run as COGs, block by block; ``get(name, rows, cols)`` gives the
-    window of the grid array ``name`` (h_b, h_a, diff, offset, filled_mask; heights local)."""
+    window of the grid array ``name`` (dem_b, dem_a, diff, offset, filled_mask; heights local)."""
     layers = [
-        ("dem_before.tif", "h_b", "average height, before (m)"),
-        ("dem_after.tif", "h_a", "average height, after (m)"),
+        ("dem_before.tif", "dem_b", "average height, before (m)"),
+        ("dem_after.tif", "dem_a", "average height, after (m)"),
         ("difference.tif", "diff", f"H_after - H_before - correction ({correction}) (m)"),
         ("plane_offset.tif", "offset", f"vertical correction d_i subtracted ({correction}) (m)"),
     ]
     for name, key, desc in layers:
-        add = z0 if key in ("h_b", "h_a") else 0.0
+        add = z0 if key.startswith("dem_") else 0.0
         write_cog(out.path(name), grid, lambda r, c, key=key, add=add: get(key, r, c) + add, desc)
     desc = "1 = difference interpolated (sparse cell or filled hole)"
     mask = lambda r, c: get("filled_mask", r, c).astype("uint8")  # noqa: E731

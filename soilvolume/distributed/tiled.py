@@ -186,7 +186,7 @@ def _tiled(
         vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
         hooks.step(85, "writing outputs (COG)")
         with timer("write"):
-            arrays = {"h_b": dem_b.heights, "h_a": dem_a.heights}
+            arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
             arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask)
             write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
         with timer("report"):

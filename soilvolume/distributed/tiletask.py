@@ -12,7 +12,7 @@ import numpy as np
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM, cell_heights, cell_ids
+from ..dem.grid import EPOCH_ARRAYS, EpochDEM, OffsetSums, cell_coords, cell_heights, flat_ids
 from ..inputs.crs import WorkFrame
 from ..inputs.footprint import PolygonMask
 from ..inputs.io import GROUND
@@ -23,7 +23,7 @@ from ..inputs.stream import open_source
 # 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
 TILE_BYTES_PER_POINT = 48.0
 MIN_TILE, MAX_TILE = 16, 4096  # tile side (cells): small tiles keep very dense data within a task's memory
-TILE_ARRAYS = ("h_a", "n_a", "s_a", "h_b", "n_b", "s_b")  # what a tile task returns
+TILE_ARRAYS = tuple(f"{k}_{e}" for e in "ab" for k in EPOCH_ARRAYS)  # what a tile task returns: h_a, n_a, ...
 
 
 @dataclass(frozen=True)
@@ -48,20 +48,21 @@ Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 
 
 def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], dict]:
-    """(window, (h_after, n_after, spread_after, h_before, n_before, spread_before), stats) of one
-    tile: both epochs' points on its cells, their heights, counts and spreads; stats: points
-    read, seconds."""
+    """(window, arrays of :data:`TILE_ARRAYS`, stats) of one tile: both epochs' points on its
+    cells, their heights, counts, spreads and offsets from the cell centres; stats: points read,
+    seconds."""
     import time
 
     t0, stats = time.perf_counter(), {"read": 0}
-    h_b, n_b, s_b = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
-    h_a, n_a, s_a = _epoch(plan, 1, win, plan.transform, None, stats)
+    before = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
+    after = _epoch(plan, 1, win, plan.transform, None, stats)
     stats["seconds"] = time.perf_counter() - t0
-    return win, (h_a, n_a.astype(np.int32), s_a, h_b, n_b.astype(np.int32), s_b), stats
+    return win, tuple(a.astype(np.int32) if k == 1 else a for e in (after, before) for k, a in enumerate(e)), stats
 
 
 def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
-    """Heights and counts of one epoch (0 before, 1 after) on the window's cells."""
+    """Heights, counts, spreads and centre offsets of one epoch (0 before, 1 after) on the
+    window's cells."""
     from dataclasses import replace
 
     import pyproj
@@ -75,7 +76,8 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
     box = _read_box(plan, crs, win, transform)
     if box is not None:
         src = src.within(*box)
-    ids, zs = [], []
+    shape = (win[1] - win[0], win[3] - win[2])
+    ids, zs, offsets = [], [], OffsetSums(shape[0] * shape[1])
     for xyz, cls in src.chunks():
         stats["read"] += len(xyz)
         sel = cls == GROUND if ground and cls is not None else None
@@ -95,21 +97,24 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
         local = local.astype(np.float32)
         if transform is not None:
             local = transform_points32(local, transform)
-        i, z = _window_cells(local, plan.grid, win)
+        i, z = _window_cells(local, plan.grid, win, offsets)
         ids.append(i)
         zs.append(z)
-    shape = (win[1] - win[0], win[3] - win[2])
     z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
-    return cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True)
+    heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True)
+    return heights + offsets.means(shape, plan.grid.cell)
 
 
-def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window) -> tuple[np.ndarray, np.ndarray]:
+def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums) -> tuple[np.ndarray, np.ndarray]:
     """Flat cell ids within the window, and heights, of the points on the window's cells of
-    ``grid`` (cells assigned on the whole grid, exactly as in-process)."""
-    ids, ok = cell_ids(xyz32, grid)
-    row, col = np.divmod(ids, grid.cols)
+    ``grid`` (cells assigned on the whole grid, exactly as in-process); their positions in
+    their cells are added to ``offsets``."""
+    fcol, frow, ok = cell_coords(xyz32, grid)
+    fcol, frow = fcol[ok], frow[ok]
+    row, col = np.divmod(flat_ids(fcol, frow, grid.cols), grid.cols)
     m = (row >= win[0]) & (row < win[1]) & (col >= win[2]) & (col < win[3])
     local_ids = (row[m] - win[0]) * (win[3] - win[2]) + (col[m] - win[2])
+    offsets.add(local_ids, fcol[m], frow[m])
     return local_ids.astype(np.int32), xyz32[ok, 2][m]
 
 
@@ -168,7 +173,8 @@ def run_tiles(
     stats.update(read=0, seconds=0.0)
     g = plan.grid
     out = tuple(
-        np.full((g.rows, g.cols), np.nan) if k % 3 != 1 else np.zeros((g.rows, g.cols), np.int64) for k in range(6)
+        np.zeros((g.rows, g.cols), np.int64) if k.startswith("n_") else np.full((g.rows, g.cols), np.nan)
+        for k in TILE_ARRAYS
     )
     todo = []
     for win in windows:
@@ -208,8 +214,8 @@ def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: 
 
 def epoch_dems(arrays: tuple[np.ndarray, ...]) -> tuple[EpochDEM, EpochDEM]:
     """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order."""
-    h_a, n_a, s_a, h_b, n_b, s_b = arrays
-    return EpochDEM(h_a, n_a, s_a), EpochDEM(h_b, n_b, s_b)
+    k = len(EPOCH_ARRAYS)
+    return EpochDEM(*arrays[:k]), EpochDEM(*arrays[k:])
 
 
 def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:

@@ -24,16 +24,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import region_sigma, z_value
 from . import overview
 from .tilestore import TileStore, Window
-from .tiletask import TILE_ARRAYS, grid_tile
+from .tiletask import TILE_ARRAYS, epoch_dems, grid_tile
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
-VOLUME_ARRAYS = ("diff", "offset", "filled_mask")
+VOLUME_ARRAYS = ("dem_a", "dem_b", "diff", "offset", "filled_mask")
 BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "thresholded", "holes")
 PARTS = ("net", "cut", "fill", "net_compared_area")
 
@@ -53,9 +52,9 @@ def grid_tile_stored(plan, win: Window, store: TileStore, k: int) -> tuple:
 
 def summarize_grid_tile(win: Window, arrays, k: int) -> tuple:
     """(window, (after, before) block sums, (after, before) count histograms)."""
-    h_a, n_a, _, h_b, n_b, _ = arrays
-    blocks = (overview.block_sums(win, k, h_a, n_a), overview.block_sums(win, k, h_b, n_b))
-    return win, blocks, (overview.count_histogram(n_a), overview.count_histogram(n_b))
+    a = dict(zip(TILE_ARRAYS, arrays, strict=True))
+    blocks = tuple(overview.block_sums(win, k, a[f"h_{e}"], a[f"n_{e}"]) for e in "ab")
+    return win, blocks, tuple(overview.count_histogram(a[f"n_{e}"]) for e in "ab")
 
 
 @dataclass(frozen=True)
@@ -83,7 +82,7 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     r0, r1, c0, c1 = win
     h = halo(g.cell)
     ext = (max(0, r0 - h), min(g.rows, r1 + h), max(0, c0 - h), min(g.cols, c1 + h))
-    a = {n: job.store.read(n, ext, fill=0 if n.startswith("n_") else np.nan) for n in TILE_ARRAYS}
+    a = [job.store.read(n, ext, fill=0 if n[0] in "nxy" else np.nan) for n in TILE_ARRAYS]
     wgrid = g.window(*ext)
     core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
     given = Given(
@@ -94,7 +93,7 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
         core=core,
     )
     d_i = plane_offset(job.planes[0], job.planes[1], wgrid)
-    after, before = (EpochDEM(a[f"h_{e}"], a[f"n_{e}"], a[f"s_{e}"]) for e in "ab")
+    after, before = epoch_dems(a)
     vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
     job.store.save(win, {n: getattr(vols, n)[core] for n in VOLUME_ARRAYS})
     out = {b: getattr(vols, b) for b in BUDGETS}

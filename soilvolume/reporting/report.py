@@ -97,7 +97,10 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
         "volume_method": (
             "fill and cut summed over the areas of significant change: cells whose corrected "
             "difference exceeds their level of detection, in patches of at least 3 cells, grown into "
-            "connected cells of the same sign above half of it; survey noise elsewhere is not counted"
+            "connected cells of the same sign above half of it; survey noise elsewhere is not counted. "
+            "A cell's height in each epoch is the robust mean of its points, moved to the cell's centre "
+            "along the local slope where its points cover it unevenly; cells with too few points and "
+            "enclosed holes are interpolated from the surrounding difference (filled_mask.tif)"
         ),
         "volume_all_cells_m3": vols.all_cells,
         "volume_uncompensated_m3": vols.uncompensated,

@@ -26,6 +26,8 @@ class Volumes:
     """The volume step's result: grids on the shared grid (m) and budgets (m3, as report.json
     holds them: net, cut, fill, cells, area_m2)."""
 
+    dem_a: np.ndarray  # H_after the difference is taken from: heights at the cell centres (local)
+    dem_b: np.ndarray  # H_before, the same
     raw: np.ndarray  # H_after - H_before, NaN where either epoch is empty
     filled: np.ndarray  # the same with weak cells and enclosed holes refilled
     filled_mask: np.ndarray  # the refilled cells
@@ -74,11 +76,14 @@ def compute_volumes(
     from .change import cell_lod, cell_sigma, change_areas, marginal_volume
     from .uncertainty import detection_level, interp_fraction, thresholded_volumes, volume_uncertainty, z_value
 
-    h_a, n_a, h_b, n_b = after.heights, after.counts, before.heights, before.counts
+    med_a, med_b = (None, None) if given is None else given.median_counts
+    weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS)
+    n_a, n_b = after.counts, before.counts
+    h_a = after.centred(grid.cell, holes.weak_cells(n_a, **weak, median=med_a))
+    h_b = before.centred(grid.cell, holes.weak_cells(n_b, **weak, median=med_b))
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
-    weak = dict(ratio=options.min_count_ratio, method=options.fill_method, min_points=MIN_POINTS)
-    med_a, med_b = (None, None) if given is None else given.median_counts
+    weak["method"] = options.fill_method
     f_b, m_b = holes.refill_epoch(h_b, n_b, **weak, median=med_b)
     f_a, m_a = holes.refill_epoch(h_a, n_a, **weak, median=med_a)
     filled = difference(f_a, f_b)
@@ -131,6 +136,8 @@ def compute_volumes(
     )
     headline = signed_budget(d, fa, ca, area)
     vols = {
+        "dem_a": h_a,
+        "dem_b": h_b,
         "raw": raw,
         "filled": filled,
         "filled_mask": filled_mask,
@@ -182,21 +189,27 @@ def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -
 
 
 def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
-    """Per-cell one-sigma error (m) of refilled cells, measured by refilling known stable cells
-    of the difference with holes of the typical size (at most ``MAX_TEST_RADIUS`` cells: weak
-    cells spread over a grid finer than the points form one giant "hole"), or smaller ones where
-    the stable ground has no room for them (0 where nothing was refilled)."""
+    """Per-cell one-sigma error (m) of refilled cells: the error of a hole's mean height grows with
+    its size, so each refilled patch gets the error measured by refilling known stable cells of the
+    difference with test holes of about its radius (radii 1, 2, 4, ... cells up to the largest
+    patch's, at most ``MAX_TEST_RADIUS``: weak cells spread over a grid finer than the points form
+    one giant "hole"; interpolated in log radius; the largest measured radius for patches too large
+    for the stable ground). 0 where nothing was refilled."""
     if not filled_mask.any():
         return np.zeros(diff.shape)
-    radius, s = min(holes.typical_radius(filled_mask), MAX_TEST_RADIUS), float("nan")
-    while not np.isfinite(s) and radius >= 1.0:  # smaller test holes where stable ground is patchy
-        s = holes.fill_error(diff, stable, options.fill_method, radius, seed=options.seed)
-        radius /= 2.0
-    if not np.isfinite(s):  # no room to measure it: one stable-ground noise level per cell
+    labels, n = ndimage.label(filled_mask, structure=ndimage.generate_binary_structure(2, 1))
+    radius = np.sqrt(np.bincount(labels.ravel())[1:] / np.pi)
+    ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
+    measured = [(r, holes.fill_error(diff, stable, options.fill_method, r, seed=options.seed)) for r in ladder]
+    measured = [(r, s) for r, s in measured if np.isfinite(s)]
+    if not measured:  # no room to measure it: one stable-ground noise level per cell
         from ..compensation.robust import nmad
 
         s = nmad(diff[stable])
-    return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
+        return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
+    r_m, s_m = np.log(np.array(measured)).T
+    per_patch = np.exp(np.interp(np.log(np.maximum(radius, 1.0)), r_m, s_m))
+    return np.where(filled_mask, np.r_[0.0, per_patch][labels], 0.0)
 
 
 def correction(diff, d_i, grid: GridSpec, options: Options):

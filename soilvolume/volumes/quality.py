@@ -88,7 +88,7 @@ def assess(
             )
     corr = float(np.nansum(np.where(change, offset, 0.0)) * cell_area)
     net = abs(v["net"])
-    if abs(corr) > 0.5 * max(net, 1e-9) and abs(corr) > u["net"] / 2:
+    if abs(corr) > 0.5 * max(net, 1e-9) and abs(corr) > u["net"]:  # a correction within the interval cannot
         sev = "unreliable" if abs(corr) > 2 * max(net, 1e-9) else "caution"
         out.append(
             (

@@ -98,7 +98,7 @@ def _estimate(
         vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
         hooks.step(85, "writing outputs")
         with timer("write"):
-            _write_rasters(out, dem_b, dem_a, vols, grid, prep, options)
+            _write_rasters(out, vols, grid, prep, options)
             if cloud_job is not None:
                 cloud_job.result()
     with timer("report"):
@@ -124,18 +124,10 @@ def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, 
     )
 
 
-def _write_rasters(
-    out: OutputDir,
-    before: gridmod.EpochDEM,
-    after: gridmod.EpochDEM,
-    vols: Volumes,
-    grid: GridSpec,
-    prep: Prepared,
-    options: Options,
-) -> None:
+def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec, prep: Prepared, options: Options) -> None:
     z0 = float(prep.origin[2])  # local -> absolute heights
-    gridmod.write_geotiff(out.path("dem_before.tif"), before.heights + z0, grid, "average height, before (m)")
-    gridmod.write_geotiff(out.path("dem_after.tif"), after.heights + z0, grid, "average height, after (m)")
+    gridmod.write_geotiff(out.path("dem_before.tif"), vols.dem_b + z0, grid, "average height, before (m)")
+    gridmod.write_geotiff(out.path("dem_after.tif"), vols.dem_a + z0, grid, "average height, after (m)")
     gridmod.write_geotiff(
         out.path("difference.tif"), vols.diff, grid, f"H_after - H_before - correction ({options.correction}) (m)"
     )
