@@ -11,11 +11,14 @@ from scipy import ndimage
 
 from ..compensation.correction import MODES
 from ..compensation.correction import apply as apply_correction
+from ..compensation.robust import patches
 from ..core.types import GridSpec
 from ..dem import holes
 from ..dem.grid import EpochDEM
 from ..options import Options
+from .change import MIN_CELLS
 from .difference import budget, difference, signed_budget
+from .outline import refill_across_outline
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
 MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
@@ -105,6 +108,9 @@ def compute_volumes(
     se_a = np.where(m_a, np.nan, cell_sigma(after.spread, n_a))
     se_b = np.where(m_b, np.nan, cell_sigma(before.spread, n_b))
     lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
+    significant = patches(~filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
+    diff = refill_across_outline(diff, filled_mask, significant, options.fill_method)
+    filled = diff + offset
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
     # stable ground for the error model: never a cell of (or next to) a detected change area,

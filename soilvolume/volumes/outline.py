@@ -1,0 +1,50 @@
+"""Holes across the outline of the works, filled from each side.
+
+A smooth interpolant rounds the kink where unchanged ground meets a pile's foot or a pit's rim,
+and always to the same side: a hole on a pit's rim comes out deeper, one on a pile's foot higher
+(accuracy harness, paper-density pairs: net -1.76 % on a 259 m3 pit, +0.45 % on 954 m3 of piles;
+-0.08 % and -0.00 % filled this way). A hole whose rim holds both significant change and
+unchanged ground is split between
+the two (each of its cells goes with the nearer), and each side is interpolated from its own rim
+only, with a free edge at the split: the slope of the works runs on to the outline instead of
+bending into the ground around it, and the ground stays level.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+
+from ..dem import holes
+
+_FOUR = ndimage.generate_binary_structure(2, 1)
+RING = 2  # cells: the rim of a hole that says what surrounds it
+MIN_SHARE = 0.2  # each side holds at least this share of the rim, or the hole is left as it is
+MIN_SIDE = 8  # and at least this many rim cells: enough to carry a slope (on coarse grids the kink is inside a cell)
+_PAD = 8  # cells of context around a hole
+
+
+def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarray, method: str) -> np.ndarray:
+    """``values`` (the corrected difference, holes filled) with each ``hole`` component whose rim
+    has both ``change`` (measured, significant) and unchanged cells refilled side by side (see
+    module); other holes keep their values."""
+    known = np.isfinite(values) & ~hole
+    change, stable = known & change, known & ~change
+    out = values.copy()
+    labels, _ = ndimage.label(hole, _FOUR)
+    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+        if box is None:
+            continue
+        box = tuple(slice(max(0, s.start - _PAD), s.stop + _PAD) for s in box)
+        cells = labels[box] == k
+        rim = ndimage.binary_dilation(cells, _FOUR, iterations=RING) & known[box]
+        n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
+        if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
+            continue
+        nearer_change = ndimage.distance_transform_edt(~change[box]) < ndimage.distance_transform_edt(~stable[box])
+        view = out[box]
+        for side, own in ((cells & nearer_change, change[box]), (cells & ~nearer_change, stable[box])):
+            filled = holes.fill(np.where(own | side, values[box], np.nan), side, method)
+            ok = side & np.isfinite(filled)
+            view[ok] = filled[ok]
+    return out
