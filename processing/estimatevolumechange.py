@@ -43,8 +43,9 @@ a remaining vertical bias is estimated on stable ground and removed (<b>vertical
 correction</b>); cut, fill and net volumes are summed with their 95 % uncertainty.</p>
 <h3>Inputs</h3>
 <p>One <b>before</b> and one <b>after</b> point cloud: a point cloud layer or a file (LAS,
-LAZ, COPC, VPC of tiles, PLY, PCD, XYZ/TXT/CSV). Give a CRS override when a file has no CRS (PLY, XYZ) or a wrong
-one. Optional <b>zones</b> (polygons) get their own volumes; optional <b>stable ground</b>
+LAZ, COPC, VPC of tiles, PLY, PCD, XYZ/TXT/CSV). Give a CRS override when a file has no CRS
+(PLY, XYZ); one that differs from the CRS in a file's header is refused. Optional <b>zones</b>
+(polygons) get their own volumes; optional <b>stable ground</b>
 polygons mark ground known not to have changed. Advanced parameters tune each step.</p>
 <h3>Outputs</h3>
 <p>The corrected difference raster (red = cut, blue = fill, on top), both DEMs and the vertical

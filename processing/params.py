@@ -45,9 +45,7 @@ def cloud_param(key: str, label: str) -> QgsProcessingParameterPointCloudLayer:
 
 
 def crs_param(key: str, label: str) -> QgsProcessingParameterCrs:
-    return QgsProcessingParameterCrs(
-        key, f"{label} CRS override (when the file has none or a wrong one)", optional=True
-    )
+    return QgsProcessingParameterCrs(key, f"{label} CRS override (for a file without one)", optional=True)
 
 
 def cloud_path(

@@ -212,7 +212,7 @@ def test_copc_registration_pass_reads_a_thinning_level(tmp_path):
     assert sum(len(p) for p, _ in copc_chunks(path, resolution=1.0)) == len(xyz) // 16
     origin = np.array([500_000.0, 4_000_000.0, 0.0])
     lo, hi = np.zeros(3), np.array([100.0, 80.0, 0.0])
-    args = (None, lambda p: p - origin, False, None, lo, hi, voxel, False)
+    args = (None, lambda p: p - origin, False, None, (lo, hi, voxel), False)
     thin = scan_unit((str(path), None, None), *args)
     full = scan_unit((str(las), 0, len(xyz)), *args)
     assert thin["points"] == full["points"] == len(xyz)

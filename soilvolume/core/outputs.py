@@ -28,6 +28,8 @@ STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
 #: what a folder of a previous run may hold for --overwrite to replace it
 RUN_SUFFIXES = (".tif", ".tiff", ".json", ".html", ".las", ".laz", ".xml")
 NAME_MAX = 255
+#: libraries whose write errors (a full disk, a lost mount) arrive as their own exception types
+WRITER_LIBRARIES = ("rasterio", "laspy", "lazrs")
 #: the files ``estimate`` writes itself (pipeline writers may not take these names)
 RUN_OUTPUTS = (
     "dem_before.tif",
@@ -50,7 +52,7 @@ def os_problem(exc: OSError, path: str | os.PathLike | None = None) -> SoilVolum
 
 @contextmanager
 def os_errors(path: Path | None = None) -> Iterator[None]:
-    """OSErrors and GDAL's write errors raised in the block become one-line SoilVolumeErrors
+    """OSErrors and GDAL's or laspy's write errors raised in the block become one-line SoilVolumeErrors
     naming ``path`` (the output being written) or the file the error names."""
     try:
         yield
@@ -59,7 +61,7 @@ def os_errors(path: Path | None = None) -> Iterator[None]:
     except OSError as exc:
         raise _write_problem(exc, path) from exc
     except Exception as exc:
-        if type(exc).__module__.startswith("rasterio"):
+        if type(exc).__module__.startswith(WRITER_LIBRARIES):
             raise _write_problem(exc, path) from exc
         raise
 
@@ -328,6 +330,8 @@ def check_output_file(path: Path, inputs: Iterable[Path | str | None]) -> Path:
         raise SoilVolumeError(f"{path}: refusing to overwrite an input file")
     if final.is_dir():
         raise SoilVolumeError(f"{path}: is a folder, not a file name")
+    if final.exists() and not final.is_file():
+        raise SoilVolumeError(f"{path}: exists and is not a regular file (a device or pipe is never replaced)")
     if not final.parent.is_dir():
         raise SoilVolumeError(f"{final.parent}: the output folder does not exist")
     if not os.access(final.parent, os.W_OK | os.X_OK):

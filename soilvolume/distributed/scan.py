@@ -31,17 +31,18 @@ def units(src: Source) -> list[Unit]:
     return [(src.path, s, min(UNIT, src.count - s)) for s in range(0, src.count, UNIT)]
 
 
-def scan_unit(unit: Unit, region, to_local, use_class: bool, keep, lo, hi, voxel: float, indexed: bool) -> dict:
+def scan_unit(unit: Unit, region, to_local, use_class: bool, keep, thinning: tuple, indexed: bool) -> dict:
     """Thinning sums, counts and chunk boxes of one unit."""
     import time
 
     path, start, count = unit
+    voxel = thinning[2]  # (lo, hi, voxel[, within]) of the driver's ColumnThinner
     resolution = voxel / COPC_POINTS_PER_COLUMN_SIDE if start is None and is_copc(path) else None
     if start is None:
         chunks = file_chunks(path, region, CHUNK, resolution)
     else:
         chunks = las_ranges(path, [(start, count)], CHUNK)
-    thinner = ColumnThinner(lo, hi, voxel)
+    thinner = ColumnThinner(*thinning)
     out = {"points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
     t0 = time.perf_counter()
     for xyz, cls in chunks:
@@ -85,7 +86,8 @@ def dask_loader(client, progress: Callable[[str], None] | None = None) -> Callab
         stream.close()
         use_class = ground_mode(src, first, mode)
         todo = units(src)
-        args = (src.region, to_local, use_class, keep, thinner.lo, thinner.hi, thinner.voxel, indexed)
+        thinning = (thinner.lo, thinner.hi, thinner.voxel, thinner.within)
+        args = (src.region, to_local, use_class, keep, thinning, indexed)
         futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], pure=False)
         parts = []
         for k, fut in enumerate(as_completed(futures), 1):

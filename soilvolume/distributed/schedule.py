@@ -15,6 +15,7 @@ from pathlib import Path
 from ..core.types import SoilVolumeError
 
 BASE_GB = 0.45  # in-process run of a small pair: imports, registration, rasters (measured 330-460 MB)
+MAX_WORKERS = 1024  # threads or worker processes of threads:N / local:N
 BYTES_PER_POINT = 30.0  # in-process growth per input point (measured ~26 B from 16 M to 64 M points)
 
 
@@ -40,8 +41,11 @@ def parse(spec: str) -> Schedule | None:
     if spec.startswith("tcp://") or spec.startswith("tls://"):
         return Schedule("tcp", address=spec)
     m = re.fullmatch(r"(threads|local)(?::(\d+))?", spec)
-    if not m or (m.group(2) is not None and int(m.group(2)) < 1):
-        raise SoilVolumeError(f"--scheduler {spec}: expected none, threads[:N], local[:N], tcp://HOST:PORT or auto")
+    if not m or (m.group(2) is not None and not 1 <= int(m.group(2)) <= MAX_WORKERS):
+        raise SoilVolumeError(
+            f"--scheduler {spec}: expected none, threads[:N], local[:N] (N from 1 to {MAX_WORKERS}), "
+            "tcp://HOST:PORT or auto"
+        )
     return Schedule(m.group(1), int(m.group(2) or (os.cpu_count() or 1)))
 
 

@@ -56,7 +56,7 @@ def check_las_header(path: Path) -> int:
     by_return = by_return or sum(struct.unpack_from("<5I", head, 111))
     if by_return > count:
         raise _fail(path, f"{by_return} points counted by return, the header says {count}")
-    _check_numbers(path, struct.unpack_from("<12d", head, 131))
+    _check_numbers(path, struct.unpack_from("<12d", head, 131), count)
     compressed = compressed or path.suffix.lower() == ".laz"
     _check_count(path, head, minor, count, rec_len, offset, size, compressed)
     return count
@@ -98,12 +98,20 @@ def _point_count(head: bytes, minor: int) -> int:
     return legacy
 
 
-def _check_numbers(path: Path, values: tuple[float, ...]) -> None:
+def _check_numbers(path: Path, values: tuple[float, ...], count: int) -> None:
+    """Finite non-zero scales, finite offsets and bounds; with points, each axis's bounds in
+    order and within what its 32-bit integers can store (offset +- scale * 2^31)."""
     scales, offsets, bounds = values[:3], values[3:6], values[6:]
     if not all(math.isfinite(s) and s != 0 for s in scales):
         raise _fail(path, f"scale factors {scales} must be finite and non-zero")
     if not all(math.isfinite(v) for v in offsets + bounds):
         raise _fail(path, "offsets and bounds must be finite numbers")
+    if not count:
+        return
+    for axis, scale, offset, hi, lo in zip("xyz", scales, offsets, bounds[::2], bounds[1::2], strict=True):
+        reach = abs(scale) * (2**31 + 1)
+        if lo > hi or lo < offset - reach or hi > offset + reach:
+            raise _fail(path, f"{axis} bounds {lo:g}..{hi:g} impossible with offset {offset:g} and scale {scale:g}")
 
 
 def _check_count(

@@ -13,7 +13,7 @@ import pyproj
 from ..core.types import Cloud, SoilVolumeError
 from ..options import Options
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
-from .footprint import PolygonMask, check_spread, footprint
+from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
 from .io import GROUND, RawPoints
 from .stream import ColumnThinner, Loaded, Source, from_raw, load
 
@@ -138,16 +138,19 @@ def prepare(
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
     reach = options.max_gps_shift + 2.0
     box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach) if full else NOTHING
+    within = _padded_box(before, crs_b, frame, origin)  # a crop radius far past the data costs nothing
     b = loader(
         before,
         _local(crs_b, frame, origin, before.path),
         mode_b,
         PolygonMask(poly),
-        ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel),
+        ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel, within, before.path),
         check,
         box,
         not full,
     )
+    if b.used < MIN_COLUMNS:  # a handful of points in all: not an overlap problem
+        raise SoilVolumeError(f"{before.path}: too few points to work with ({b.used}, at least {MIN_COLUMNS} needed)")
     if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
         raise SoilVolumeError(
             f"{before.path} and {after.path} do not overlap: the before cloud has "
@@ -228,12 +231,21 @@ def _load_whole(
     lo..hi (padded: the box comes from header bounds). Returns (the source streamed, what was
     loaded, filter note)."""
     src, mode, note = _filtered(src, crs, options)
-    pad = 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
-    return (
-        src,
-        loader(src, to_local, mode, None, ColumnThinner(lo - pad, hi + pad, voxel), check, box, box is NOTHING),
-        note,
-    )
+    pad = _pad(lo, hi)
+    thinner = ColumnThinner(lo - pad, hi + pad, voxel, name=src.path)
+    return src, loader(src, to_local, mode, None, thinner, check, box, box is NOTHING), note
+
+
+def _pad(lo: np.ndarray, hi: np.ndarray) -> float:
+    """Margin (m) around a box from header bounds: reprojected corners may not enclose every point."""
+    return 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
+
+
+def _padded_box(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray) -> tuple:
+    """The local x/y box every point of ``src`` lies in (its header bounds, padded)."""
+    lo, hi = _frame_box(src, crs, frame)
+    pad = _pad(lo, hi)
+    return lo[:2] - origin[:2] - pad, hi[:2] - origin[:2] + pad
 
 
 def _all_points(src: Source, to_local):

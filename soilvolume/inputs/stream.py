@@ -23,6 +23,8 @@ from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, la
 from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
+#: most columns a thinning grid may have (4 float64 sums each: 2 GB)
+MAX_COLUMNS = 1 << 26
 
 
 @dataclass
@@ -215,17 +217,31 @@ def prefetch(chunks: Iterator, depth: int = 2) -> Iterator:
 
 class ColumnThinner:
     """Voxel thinning of a terrain cloud while streaming: the centroid of the points in each
-    ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk."""
+    ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk. With ``within``
+    (a local x/y box where all points lie), the box is cut to the columns meeting it, on the
+    same lattice (the same centroids, in the same order). ``name`` (the file) prefixes errors."""
 
-    def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float) -> None:
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float, within=None, name: str = "") -> None:
         self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
-        self.shape = (int(np.ceil((hi[1] - lo[1]) / voxel)) + 1, int(np.ceil((hi[0] - lo[0]) / voxel)) + 1)
+        self.within = within
+        first = np.zeros(2, np.int64)
+        last = np.ceil((self.hi - self.lo) / voxel).astype(np.int64)
+        if within is not None:
+            first = np.maximum(first, np.floor((np.asarray(within[0][:2]) - self.lo) / voxel).astype(np.int64) - 1)
+            last = np.minimum(last, np.ceil((np.asarray(within[1][:2]) - self.lo) / voxel).astype(np.int64) + 1)
+        self.first = first
+        self.shape = (int(max(last[1] - first[1], -1)) + 1, int(max(last[0] - first[0], -1)) + 1)
         n = self.shape[0] * self.shape[1]
+        if n > MAX_COLUMNS:
+            raise SoilVolumeError(
+                f"{name + ': ' if name else ''}{self.shape[0]:,} x {self.shape[1]:,} columns of {voxel:.3g} m to "
+                "thin: the extent is far larger than the points (corrupt header bounds, or --radius too large)"
+            )
         self.sums = np.zeros((4, n))
 
     def add(self, xyz: np.ndarray) -> None:
-        ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64)
-        iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64)
+        ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64) - self.first[0]
+        iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64) - self.first[1]
         ok = (ix >= 0) & (iy >= 0) & (ix < self.shape[1]) & (iy < self.shape[0])
         ids = iy[ok] * self.shape[1] + ix[ok]
         n = self.sums.shape[1]

@@ -30,6 +30,8 @@ WRITERS = {
     ".ply": "writers.ply",
     ".pcd": "writers.pcd",
 }
+#: largest pipeline file read (a pipeline with a detailed crop polygon is a few MB)
+MAX_BYTES = 64 << 20
 #: extra text formats the builder reads with an explicit readers.text
 TEXT_SUFFIXES = {".xyz", ".pts", ".txt", ".csv"}
 
@@ -155,6 +157,20 @@ def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
     return out
 
 
+def _read_text(path: Path, name: str) -> str:
+    """A pipeline file's text: a regular file of at most :data:`MAX_BYTES`, UTF-8."""
+    try:
+        if path.exists() and not path.is_dir() and not path.is_file():
+            raise SoilVolumeError(f"pipeline {name}: not a regular file (a device or pipe)")
+        if path.is_file() and path.stat().st_size > MAX_BYTES:
+            raise SoilVolumeError(f"pipeline {name}: larger than {MAX_BYTES >> 20} MB, not a pipeline file")
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise SoilVolumeError(f"pipeline {name}: cannot read ({exc.strerror or exc})") from exc
+    except UnicodeDecodeError as exc:
+        raise SoilVolumeError(f"pipeline {name}: not UTF-8 text (byte {exc.start})") from exc
+
+
 def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
     """Stages of a pipeline file (or JSON text), validated; errors name the file and problem.
 
@@ -163,12 +179,7 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
     text = str(path_or_text)
     if isinstance(path_or_text, os.PathLike) or not text.lstrip().startswith(("[", "{")):
         name = text
-        try:
-            text = Path(path_or_text).read_text(encoding="utf-8")
-        except OSError as exc:
-            raise SoilVolumeError(f"pipeline {name}: cannot read ({exc.strerror or exc})") from exc
-        except UnicodeDecodeError as exc:
-            raise SoilVolumeError(f"pipeline {name}: not UTF-8 text (byte {exc.start})") from exc
+        text = _read_text(Path(path_or_text), name)
     else:
         name = "<text>"
     try:

@@ -35,6 +35,8 @@ def read_polygons(path: str | Path, name_field: str | None = None) -> tuple[list
     path = Path(path)
     if not path.exists():
         raise SoilVolumeError(f"{path}: zones file not found")
+    if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
+        raise SoilVolumeError(f"{path}: not a regular file (a device or pipe)")
     try:
         feats, wkt = _read_fiona(path) if _has_fiona() else _read_ogr(path)
     except SoilVolumeError:

@@ -23,6 +23,8 @@ def read_dem(path: Path) -> tuple[np.ndarray, Any]:
 
     if not path.exists():
         raise SoilVolumeError(f"{path}: file not found")
+    if not path.is_file():  # a FIFO would block GDAL for ever
+        raise SoilVolumeError(f"{path}: not a regular file")
     try:
         with rasterio.open(path) as ds:
             band = ds.read(1, masked=True).astype("float64")

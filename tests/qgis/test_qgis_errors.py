@@ -124,3 +124,27 @@ def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch
     monkeypatch.setattr(engine, "engine", broken)
     with pytest.raises(QgsProcessingException, match="engine package 'soilvolume' does not import"):
         run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")})
+
+
+@pytest.mark.parametrize(
+    ("alg", "extra", "expect"),
+    [
+        ("estimatevolumechange", {"LOD_CONFIDENCE": 1.5}, "Confidence level"),
+        ("estimatevolumechange", {"CELL": 50.0}, "(CELL)"),
+        ("estimatevolumechange", {"CELL": 1e9}, "Grid cell size"),
+        ("pointcloudtodem", {"CELL": 500.0}, "(CELL)"),
+        ("estimatevolumechange", {"SEED": -1}, "Random seed"),
+    ],
+)
+def test_absurd_options_are_refused_naming_the_parameter(run_alg, scene_dir, tmp_path, alg, extra, expect):
+    """Out of the table's range: refused by the parameter's own check; in range but too coarse for
+    the site: refused by the engine with advice. Nothing is written either way."""
+    if alg == "pointcloudtodem":
+        params = {"INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")}
+    else:
+        b, a = scene_dir / "before.las", scene_dir / "after.las"
+        params = {"BEFORE": str(b), "AFTER": str(a), "DIFFERENCE": str(tmp_path / "d.tif")}
+    with pytest.raises(QgsProcessingException) as info:
+        run_alg(alg, {**params, **extra})
+    assert expect in str(info.value), str(info.value)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -1,0 +1,169 @@
+"""More of a hostile user: devices and pipes as inputs or outputs, a full disk under the LAZ
+writer, impossible header bounds, absurd worker counts and crop radii, a signal during start-up."""
+
+from __future__ import annotations
+
+import os
+import signal
+import stat
+import struct
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from test_robustness import WKT, _cloud, _one_line_error, cli
+
+from soilvolume import api
+from soilvolume.core.types import SoilVolumeError
+from soilvolume.distributed.schedule import parse
+from soilvolume.inputs.io import write_las
+from soilvolume.inputs.stream import ColumnThinner
+
+
+@pytest.fixture
+def pair(tmp_path):
+    b, a = tmp_path / "before.las", tmp_path / "after.las"
+    write_las(b, _cloud(60), WKT)
+    write_las(a, _cloud(30, seed=1), WKT)
+    return b, a
+
+
+@pytest.fixture
+def alarm():
+    """Fail instead of hanging for ever (a FIFO opened for reading blocks)."""
+
+    def timeout(*_):
+        raise TimeoutError("hung")
+
+    old = signal.signal(signal.SIGALRM, timeout)
+    signal.alarm(60)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, old)
+
+
+def test_a_single_file_output_never_replaces_a_device_or_pipe(capsys, pair, tmp_path):
+    fifo = tmp_path / "out.tif"
+    os.mkfifo(fifo)
+    for args in (["dem", pair[0]], ["register", *pair], ["volume", *pair]):
+        code, err = cli(capsys, *args, "--out", fifo)
+        _one_line_error(code, err, "out.tif", "not a regular file")
+        assert stat.S_ISFIFO(fifo.lstat().st_mode)
+
+
+def test_pipes_and_devices_as_inputs_are_refused_without_hanging(capsys, pair, tmp_path, alarm):
+    fifo = tmp_path / "fifo.gpkg"
+    os.mkfifo(fifo)
+    out = tmp_path / "o"
+    cases = [
+        (["estimate", *pair, "--out", out, "--before-pipeline", fifo], "fifo.gpkg"),
+        (["estimate", *pair, "--out", out, "--before-pipeline", "/dev/zero"], "/dev/zero"),
+        (["estimate", *pair, "--out", out, "--zones", fifo], "fifo.gpkg"),
+        (["volume", fifo, pair[1], "--out", tmp_path / "v.tif"], "fifo.gpkg"),
+    ]
+    for args, name in cases:
+        code, err = cli(capsys, *args, *(["--quiet"] if args[0] == "estimate" else []))
+        _one_line_error(code, err, name, "not a regular file")
+    assert not out.exists() and not (tmp_path / "v.tif").exists()
+
+
+def test_a_pipeline_file_larger_than_any_pipeline_is_not_read(capsys, pair, tmp_path, monkeypatch):
+    from soilvolume.pipelines import load
+
+    big = tmp_path / "big.json"
+    big.write_text("[" + " " * 4096 + "]")
+    monkeypatch.setattr(load, "MAX_BYTES", 1024)
+    code, err = cli(capsys, "estimate", *pair, "--out", tmp_path / "o", "--before-pipeline", big, "--quiet")
+    _one_line_error(code, err, "big.json", "larger than")
+
+
+def test_a_full_disk_under_the_laz_writer_is_one_line_and_leaves_nothing(capsys, pair, tmp_path, monkeypatch):
+    import laspy
+    import lazrs
+
+    def full(self, *args, **kwargs):
+        raise lazrs.LazrsError("IoError: Failed to call write")
+
+    monkeypatch.setattr(laspy.LasWriter, "write_points", full)
+    code, err = cli(capsys, "register", *pair, "--out", tmp_path / "r.laz")
+    _one_line_error(code, err, "r.laz", "cannot write")
+    code, err = cli(capsys, "estimate", *pair, "--out", tmp_path / "o", "--registered-cloud", "--quiet")
+    _one_line_error(code, err, "cannot write")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["after.las", "before.las"]
+
+
+@pytest.mark.parametrize(
+    ("at", "value"),
+    [
+        (187, 1e300),  # min x far beyond what offset + scale * int32 can reach
+        (195, 3899000.0),  # max y below min y
+    ],
+)
+def test_impossible_header_bounds_are_refused_before_reading(capsys, tmp_path, at, value):
+    path = tmp_path / "bounds.las"
+    write_las(path, _cloud(20), WKT)
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<d", data, at, value)
+    path.write_bytes(bytes(data))
+    code, err = cli(capsys, "dem", path, "--out", tmp_path / "d.tif")
+    _one_line_error(code, err, "bounds.las", "corrupt LAS header", "bounds")
+
+
+def test_bounds_far_beyond_the_points_cost_no_memory(capsys, tmp_path):
+    path = tmp_path / "far.las"
+    write_las(path, _cloud(20), WKT)
+    data = bytearray(path.read_bytes())
+    offset_y = struct.unpack_from("<d", data, 163)[0]
+    struct.pack_into("<d", data, 195, offset_y + 2.0e6)  # storable, but 2000 km past the points
+    path.write_bytes(bytes(data))
+    code, err = cli(capsys, "dem", path, "--out", tmp_path / "d.tif")
+    _one_line_error(code, err, "far.las", "far larger than the points")
+
+
+def test_a_thinner_cut_to_the_data_gives_the_same_columns():
+    rng = np.random.default_rng(3)
+    xyz = np.c_[rng.uniform(100, 160, (5000, 2)), rng.normal(0, 1, 5000)]
+    whole = ColumnThinner(np.zeros(2), np.full(2, 2000.0), 0.7)
+    cut = ColumnThinner(np.zeros(2), np.full(2, 2000.0), 0.7, within=(np.full(2, 99.0), np.full(2, 161.0)))
+    for part in np.array_split(xyz, 3):
+        whole.add(part)
+        cut.add(part)
+    assert cut.sums.shape[1] < whole.sums.shape[1] / 100
+    assert np.array_equal(cut.result(), whole.result())
+    assert np.array_equal(cut.counts(), whole.counts())
+
+
+def test_a_crop_radius_far_larger_than_the_before_cloud_runs_small(pair, tmp_path):
+    res = api.estimate(*pair, tmp_path / "o", api.Options(radius=10000.0))
+    assert res.report["options"]["radius"] == 10000.0
+
+
+@pytest.mark.parametrize("spec", ["local:0", "local:99999", "threads:1025"])
+def test_absurd_worker_counts_are_refused(spec):
+    with pytest.raises(SoilVolumeError, match="N from 1 to 1024"):
+        parse(spec)
+
+
+def test_a_before_cloud_of_three_points_is_not_called_an_overlap_problem(capsys, pair, tmp_path):
+    three = tmp_path / "three.las"
+    write_las(three, np.array([[500010.0, 3900010, 50], [500020, 3900010, 51], [500010, 3900020, 52]]), WKT)
+    code, err = cli(capsys, "estimate", three, pair[1], "--out", tmp_path / "o", "--quiet")
+    _one_line_error(code, err, "three.las", "too few points")
+
+
+def test_a_signal_while_the_program_is_still_importing_is_one_line():
+    script = (
+        "import builtins, os, signal, runpy, sys\n"
+        "real = builtins.__import__\n"
+        "def slow(name, globals=None, locals=None, fromlist=(), level=0):\n"
+        "    if name == 'cli' and level == 1:\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "    return real(name, globals, locals, fromlist, level)\n"
+        "builtins.__import__ = slow\n"
+        "sys.argv = ['soilvolume', '--help']\n"
+        "runpy.run_module('soilvolume', run_name='__main__')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr.splitlines() == ["soilvolume: error: interrupted by SIGINT; nothing was written"]
