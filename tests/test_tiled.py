@@ -345,3 +345,20 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
         (tmp_path / "h_a_20_40_20_40.npy").unlink()
         with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
             _grid_tiles(c, plan, store, 4, Hooks())
+
+
+def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, monkeypatch):
+    """Nothing in the output folder, and the one line names the kept tiles (a resume)."""
+    import signal
+
+    from soilvolume.core.interrupt import Interrupted
+    from soilvolume.distributed import tiled
+
+    def interrupted(*_a, **_k):
+        raise Interrupted(signal.SIGINT)
+
+    monkeypatch.setattr(tiled, "run_tiles", interrupted)
+    before, after, _ = pair
+    with pytest.raises(Interrupted, match=r"kept in .*\.r\.soilvolume-tiles for the same command to resume") as err:
+        estimate(before, after, tmp_path / "r", Options(scheduler="threads:1", volume_step="whole"))
+    assert err.value.exit_code == 130 and not (tmp_path / "r").exists()

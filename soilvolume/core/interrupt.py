@@ -23,11 +23,15 @@ NAMES = {signal.SIGINT: "SIGINT", signal.SIGTERM: "SIGTERM"}
 
 
 class Interrupted(SoilVolumeError):
-    """The run received SIGINT or SIGTERM; nothing was written."""
+    """The run received SIGINT or SIGTERM; nothing was written (``kept``: where a tiled run keeps
+    its finished tiles for the same command to resume)."""
 
-    def __init__(self, signum: int) -> None:
+    def __init__(self, signum: int, kept: str | None = None) -> None:
         self.signum = signum
-        super().__init__(f"interrupted by {NAMES.get(signum, signum)}; nothing was written")
+        said = f"interrupted by {NAMES.get(signum, signum)}; nothing was written"
+        if kept:
+            said += f" to the output folder; finished tiles are kept in {kept} for the same command to resume"
+        super().__init__(said)
 
     @property
     def exit_code(self) -> int:

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.hooks import Hooks, Result
+from ..core.interrupt import Interrupted
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import choose_cell
@@ -172,26 +173,29 @@ def _tiled(
     windows = tiles(grid, side, align)
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
     cache = tile_cache(out, plan)
-    k = volume_factor(options, grid, schedule)
-    if k > 1:
-        from .volumestep import tiled_volume_step
+    try:  # an interruption keeps the finished tiles for a resume: say where
+        k = volume_factor(options, grid, schedule)
+        if k > 1:
+            from .volumestep import tiled_volume_step
 
-        report, stats, html = tiled_volume_step(
-            c, plan, windows, cache, k, (prep, reg, after_thin), out, options, timer, hooks
-        )
-    else:
-        with timer("grids"):
-            dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}))
-        hooks.step(70, correction_step(options))
-        vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
-        hooks.step(85, "writing outputs (COG)")
-        with timer("write"):
-            arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
-            arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask)
-            write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
-        with timer("report"):
-            report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
-            add_quality(report, vols, grid, options, hooks)
+            report, stats, html = tiled_volume_step(
+                c, plan, windows, cache, k, (prep, reg, after_thin), out, options, timer, hooks
+            )
+        else:
+            with timer("grids"):
+                dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}))
+            hooks.step(70, correction_step(options))
+            vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
+            hooks.step(85, "writing outputs (COG)")
+            with timer("write"):
+                arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
+                arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask)
+                write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
+            with timer("report"):
+                report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
+                add_quality(report, vols, grid, options, hooks)
+    except Interrupted as exc:
+        raise Interrupted(exc.signum, kept=str(cache.parent)) from None
     report["engine"] = {
         "scheduler": str(schedule),
         "tiles": len(windows),
