@@ -72,21 +72,21 @@ class OffsetSums:
     means say how far each cell's points sit from its centre."""
 
     def __init__(self, n_cells: int) -> None:
-        self.sx, self.sy, self.n = np.zeros(n_cells), np.zeros(n_cells), np.zeros(n_cells)
+        self.sx, self.sy = np.zeros(n_cells), np.zeros(n_cells)
 
     def add(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
         """Points in flat cells ``ids`` at fractional grid coordinates ``col``/``row``."""
-        m = self.n.size
-        self.sx += np.bincount(ids, weights=col % 1.0, minlength=m)
-        self.sy += np.bincount(ids, weights=row % 1.0, minlength=m)
-        self.n += np.bincount(ids, minlength=m)
+        self.sx += np.bincount(ids, weights=col - np.floor(col), minlength=self.sx.size)
+        self.sy += np.bincount(ids, weights=row - np.floor(row), minlength=self.sy.size)
 
-    def means(self, shape: tuple[int, int], cell: float) -> tuple[np.ndarray, np.ndarray]:
-        """(east, north) mean offsets (m) from the cell centres, 0 where empty."""
+    def means(self, counts: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+        """(east, north) mean offsets (m) from the cell centres, 0 where empty; ``counts``: the
+        points per cell, (rows, cols)."""
+        n = counts.ravel()
         with np.errstate(invalid="ignore", divide="ignore"):
-            dx = np.where(self.n > 0, self.sx / self.n - 0.5, 0.0) * cell
-            dy = np.where(self.n > 0, 0.5 - self.sy / self.n, 0.0) * cell
-        return dx.reshape(shape).astype(np.float32), dy.reshape(shape).astype(np.float32)
+            dx = np.where(n > 0, self.sx / n - 0.5, 0.0) * cell
+            dy = np.where(n > 0, 0.5 - self.sy / n, 0.0) * cell
+        return dx.reshape(counts.shape).astype(np.float32), dy.reshape(counts.shape).astype(np.float32)
 
 
 def choose_cell(points: int, area_m2: float, per_cell: float = 8.0, minimum: float = 0.5) -> float:
@@ -142,16 +142,6 @@ def cell_ids(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
     return flat_ids(col[ok], row[ok], grid.cols), ok
 
 
-def centroid_offsets(xyz: np.ndarray, grid: GridSpec, chunk: int = 1 << 22) -> tuple[np.ndarray, np.ndarray]:
-    """:meth:`OffsetSums.means` of ``xyz`` on ``grid``, a chunk of points at a time."""
-    sums = OffsetSums(grid.rows * grid.cols)
-    for s in range(0, len(xyz), chunk):
-        col, row, ok = cell_coords(xyz[s : s + chunk], grid)
-        col, row = col[ok], row[ok]
-        sums.add(flat_ids(col, row, grid.cols), col, row)
-    return sums.means((grid.rows, grid.cols), grid.cell)
-
-
 def average_height(
     xyz: np.ndarray,
     grid: GridSpec,
@@ -166,8 +156,6 @@ def average_height(
     ``robust-mean``: the mean of the points within ``k_mad`` robust standard deviations (from the
     cell's interquartile range, floor 1 cm) of the cell median. Cells are ordered by one integer
     sort of (cell, height) keys, so the cost is a single O(n log n) pass."""
-    if statistic not in ("mean", "median", "robust-mean"):
-        raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     ids, ok = cell_ids(xyz, grid)
     z = np.asarray(xyz[ok, 2], dtype=np.float64)
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
@@ -176,7 +164,15 @@ def average_height(
 def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -> EpochDEM:
     """:func:`average_height` of one epoch with its spreads and its points' offsets from the cell
     centres, as an :class:`EpochDEM`."""
-    return EpochDEM(*average_height(xyz, grid, statistic, spread=True), *centroid_offsets(xyz, grid))
+    col, row, ok = cell_coords(xyz, grid)
+    col, row = col[ok], row[ok]
+    ids = flat_ids(col, row, grid.cols)
+    sums = OffsetSums(grid.rows * grid.cols)
+    sums.add(ids, col, row)
+    del col, row
+    z = np.asarray(xyz[ok, 2], dtype=np.float64)
+    h, n, s = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True)
+    return EpochDEM(h, n, s, *sums.means(n, grid.cell))
 
 
 def cell_heights(
@@ -189,6 +185,8 @@ def cell_heights(
 ) -> tuple[np.ndarray, ...]:
     """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
     ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid)."""
+    if statistic not in ("mean", "median", "robust-mean"):
+        raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     n = shape[0] * shape[1]
     if statistic == "mean" or len(z) == 0:
         counts = np.bincount(ids, minlength=n)

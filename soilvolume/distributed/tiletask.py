@@ -102,7 +102,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
         zs.append(z)
     z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
     heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True)
-    return heights + offsets.means(shape, plan.grid.cell)
+    return heights + offsets.means(heights[1], plan.grid.cell)
 
 
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums) -> tuple[np.ndarray, np.ndarray]:

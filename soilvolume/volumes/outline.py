@@ -31,9 +31,12 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
-    labels, _ = ndimage.label(hole, _FOUR)
+    labels, n = ndimage.label(hole, _FOUR)
+    if n == 0:
+        return out
+    candidates = _both_sides(labels, n, change, stable)
     for k, box in enumerate(ndimage.find_objects(labels), start=1):
-        if box is None:
+        if box is None or not candidates[k]:
             continue
         box = tuple(slice(max(0, s.start - _PAD), s.stop + _PAD) for s in box)
         cells = labels[box] == k
@@ -48,3 +51,16 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
             ok = side & np.isfinite(filled)
             view[ok] = filled[ok]
     return out
+
+
+def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarray) -> np.ndarray:
+    """Per hole label (index 0 unused), whether its rim may hold enough of both sides: rim cells
+    counted on the labels grown by ``RING`` cells (where two holes' rims meet, one takes them;
+    the exact rim is counted again for the holes that pass)."""
+    grown = labels
+    for _ in range(RING):
+        grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=_FOUR))
+    idx = np.arange(n + 1)
+    n_change = ndimage.sum(change, grown, idx)
+    n_stable = ndimage.sum(stable, grown, idx)
+    return np.minimum(n_change, n_stable) >= MIN_SIDE
