@@ -25,6 +25,11 @@ def write_scene(folder: Path, seed: int = 0, **changes) -> tuple[Path, Path, dic
     return b, a, json.loads(Path(t).read_text())
 
 
+def run_python(code: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    """``code`` run by this Python in a fresh process (text output captured)."""
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=timeout)
+
+
 def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     """The console entry point as a user runs it (``python -m soilvolume``)."""
     return subprocess.run(

@@ -7,12 +7,11 @@ import os
 import signal
 import stat
 import struct
-import subprocess
-import sys
 
 import numpy as np
 import pytest
-from test_robustness import WKT, _cloud, _one_line_error, cli
+from conftest import run_python
+from test_robustness import WKT, _cloud, _one_line_error, cli, small_pair
 
 from soilvolume import api
 from soilvolume.core.types import SoilVolumeError
@@ -23,10 +22,7 @@ from soilvolume.inputs.stream import ColumnThinner
 
 @pytest.fixture
 def pair(tmp_path):
-    b, a = tmp_path / "before.las", tmp_path / "after.las"
-    write_las(b, _cloud(60), WKT)
-    write_las(a, _cloud(30, seed=1), WKT)
-    return b, a
+    return small_pair(tmp_path)
 
 
 @pytest.fixture
@@ -164,6 +160,6 @@ def test_a_signal_while_the_program_is_still_importing_is_one_line():
         "sys.argv = ['soilvolume', '--help']\n"
         "runpy.run_module('soilvolume', run_name='__main__')\n"
     )
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    done = run_python(script)
     assert done.returncode == 130, done.stderr
     assert done.stderr.splitlines() == ["soilvolume: error: interrupted by SIGINT; nothing was written"]

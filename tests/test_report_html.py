@@ -8,11 +8,11 @@ import re
 import shutil
 import struct
 import subprocess
-import sys
 import zlib
 
 import numpy as np
 import pytest
+from conftest import run_python
 
 from soilvolume.core.types import GridSpec
 from soilvolume.reporting.html import (
@@ -109,7 +109,7 @@ def test_does_not_import_matplotlib():
         "'dem_after': d, 'filled_mask': d > 2}, g); "
         "assert '<img' in html and '<svg' in html; assert 'matplotlib' not in sys.modules, 'matplotlib'"
     )
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    res = run_python(code)
     assert res.returncode == 0, res.stderr
 
 

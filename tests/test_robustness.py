@@ -15,6 +15,7 @@ import laspy
 import numpy as np
 import pyproj
 import pytest
+from conftest import run_python
 
 from soilvolume import api
 from soilvolume.cli import main
@@ -34,12 +35,17 @@ def _cloud(n=40, x0=500000.0, y0=3900000.0, seed=0):
     return np.c_[xy[:, 0] + x0, xy[:, 1] + y0, z]
 
 
-@pytest.fixture
-def pair(tmp_path):
-    b, a = tmp_path / "before.las", tmp_path / "after.las"
+def small_pair(folder: Path) -> tuple[Path, Path]:
+    """Two small overlapping LAS clouds in ``folder``: (before, after)."""
+    b, a = folder / "before.las", folder / "after.las"
     write_las(b, _cloud(60), WKT)
     write_las(a, _cloud(30, seed=1), WKT)
     return b, a
+
+
+@pytest.fixture
+def pair(tmp_path):
+    return small_pair(tmp_path)
 
 
 def _md5(*paths):
@@ -401,9 +407,6 @@ def test_volume_with_bad_zones_writes_nothing(capsys, tmp_path):
 def test_open3d_imported_without_its_plotly_drawing():
     """The engine imports Open3D without Dash/Plotly (0.6 s it never uses); an explicit import of
     Open3D's Plotly module afterwards still gets the real one."""
-    import subprocess
-    import sys
-
     code = (
         "import sys\n"
         "from soilvolume.registration.o3d import to_pcd\n"
@@ -413,5 +416,5 @@ def test_open3d_imported_without_its_plotly_drawing():
         "import open3d.visualization.draw_plotly as d\n"
         "assert 'dash' in sys.modules and d.draw_plotly.__module__ == d.__name__\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    done = run_python(code, timeout=120)
     assert done.returncode == 0, done.stderr

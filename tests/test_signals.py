@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from conftest import run_cli, write_scene
+from conftest import run_cli, run_python, write_scene
 
 PROGRESS = "["
 
@@ -115,5 +115,5 @@ def test_signal_after_the_run_is_ignored_on_the_way_out():
         "os.kill(os.getpid(), signal.SIGTERM)\n"
         "print('exited normally')\n"
     )
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    done = run_python(script)
     assert (done.returncode, done.stdout.strip()) == (0, "exited normally"), done.stderr

@@ -10,17 +10,7 @@ from qgis.core import (
     QgsSingleBandPseudoColorRenderer,
 )
 
-
-class RecordingFeedback(QgsProcessingFeedback):
-    def __init__(self) -> None:
-        super().__init__()
-        self.progress: list[float] = []
-        self.infos: list[str] = []
-        self.progressChanged.connect(self.progress.append)
-
-    def pushInfo(self, info: str) -> None:  # noqa: N802 - Qt API
-        self.infos.append(info)
-        super().pushInfo(info)
+from .recording import RecordingFeedback
 
 
 def test_progress_and_engine_log(run_alg, scene_dir, tmp_path):

@@ -4,19 +4,8 @@ the plugin's words (no command-line flags, no RANSAC planes when the surface cor
 from __future__ import annotations
 
 import pytest
-from qgis.core import QgsProcessingFeedback
 
-
-class RecordingFeedback(QgsProcessingFeedback):
-    def __init__(self) -> None:
-        super().__init__()
-        self.progress: list[float] = []
-        self.infos: list[str] = []
-        self.progressChanged.connect(self.progress.append)
-
-    def pushInfo(self, info: str) -> None:  # noqa: N802 - Qt API
-        self.infos.append(info)
-        super().pushInfo(info)
+from .recording import RecordingFeedback
 
 
 @pytest.fixture(scope="module")

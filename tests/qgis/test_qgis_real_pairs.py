@@ -21,24 +21,8 @@ from qgis.core import (
     QgsVectorLayer,
 )
 
+from .recording import RecordingFeedback
 from .test_qgis_outputs import legend_range
-
-
-class RecordingFeedback(QgsProcessingFeedback):
-    def __init__(self) -> None:
-        super().__init__()
-        self.progress: list[float] = []
-        self.infos: list[str] = []
-        self.warnings: list[str] = []
-        self.progressChanged.connect(self.progress.append)
-
-    def pushInfo(self, info: str) -> None:  # noqa: N802 - Qt API
-        self.infos.append(info)
-        super().pushInfo(info)
-
-    def pushWarning(self, warning: str) -> None:  # noqa: N802 - Qt API
-        self.warnings.append(warning)
-        super().pushWarning(warning)
 
 
 def run_pair(run_alg, real_dir: Path, out: Path, before: str, after: str, **extra):
