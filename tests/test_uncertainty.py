@@ -99,3 +99,12 @@ def test_interval_covers_true_net_in_at_least_18_of_20_pairs():
         errors.append(abs(net - true_net) / true_net)
     assert hits >= 18
     assert np.median(errors) < 0.02
+
+
+def test_budgets_without_cut_say_zero_not_minus_zero():
+    """A pile-only pair: the summary line reads "cut 0.00 m3", not "-0.00"."""
+    from soilvolume.volumes.difference import budget, signed_budget
+
+    d = np.array([[1.0, 2.0], [0.5, np.nan]])
+    assert f"{budget(d, 1.0)['cut']:.2f}" == "0.00"
+    assert f"{signed_budget(d, d > 0, d < 0, 1.0)['cut']:.2f}" == "0.00"

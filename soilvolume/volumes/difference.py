@@ -17,13 +17,13 @@ def budget(diff: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -
     ok = np.isfinite(diff) if mask is None else np.isfinite(diff) & mask
     d = diff[ok]
     fill = float(d[d > 0].sum() * cell_area)
-    cut = float(-d[d < 0].sum() * cell_area)
+    cut = float(-d[d < 0].sum() * cell_area) + 0.0  # + 0.0: no -0.0 cut
     return {"net": fill - cut, "cut": cut, "fill": fill, "cells": int(ok.sum()), "area_m2": float(ok.sum() * cell_area)}
 
 
 def signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray, cell_area: float) -> dict:
     """Fill over the fill areas, cut over the cut areas (m3), net = fill - cut."""
     fill = float(np.nansum(np.where(fill_area, diff, 0.0)) * cell_area)
-    cut = float(-np.nansum(np.where(cut_area, diff, 0.0)) * cell_area)
+    cut = float(-np.nansum(np.where(cut_area, diff, 0.0)) * cell_area) + 0.0
     cells = int((fill_area | cut_area).sum())
     return {"net": fill - cut, "cut": cut, "fill": fill, "cells": cells, "area_m2": cells * cell_area}
