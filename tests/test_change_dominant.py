@@ -133,10 +133,15 @@ def test_quality_gate_words():
     good = quality.assess(_report(500.0, 20.0), around, change, grid, 1.0, PRIOR)
     assert good["verdict"] == "reliable" and good["trusted"]
 
-    little = around & (np.arange(40)[:, None] < 2)  # two rows of stable ground
+    little = around & (np.arange(40)[:, None] < 1)  # one row of stable ground: 2.5 %
     bad = quality.assess(_report(500.0, 20.0), little, ~little, grid, 1.0, PRIOR)
     assert bad["verdict"] == "not reliable"
     assert any("too little stable ground" in m for m in bad["messages"])
+    thin = np.zeros_like(change)  # a ring of stable ground around the works, 9.75 % of the area
+    thin[[0, -1], :] = thin[:, [0, -1]] = True
+    low = quality.assess(_report(500.0, 20.0), thin, ~thin, grid, 1.0, PRIOR)
+    assert low["verdict"] == "use with caution"
+    assert any(m.startswith("little stable ground (10% of") for m in low["messages"]), low
 
     one_side = around & (np.arange(40)[None, :] < 12)
     lop = quality.assess(_report(500.0, 20.0), one_side, change, grid, 1.0, PRIOR)

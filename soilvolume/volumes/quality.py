@@ -11,7 +11,8 @@ import numpy as np
 from ..compensation.stable import largest_gap_deg
 
 VERDICTS = ("reliable", "use with caution", "not reliable")
-MIN_STABLE_FRACTION = 0.1
+MIN_STABLE_FRACTION = 0.05  # less stable ground than this share of the compared area: not reliable
+LOW_STABLE_FRACTION = 0.1  # less than this: use with caution (a site whose works cover most of it)
 MIN_STABLE_CELLS = 30
 PRIOR_MARGIN = 0.8  # a pose using more than this share of the prior is suspicious
 
@@ -38,6 +39,14 @@ def assess(
                     "unreliable",
                     f"too little stable ground ({n_stable / n_valid:.0%} of the compared area) to "
                     "register the surveys and remove their bias: the works may have been absorbed",
+                )
+            )
+        elif n_stable / n_valid < LOW_STABLE_FRACTION:
+            out.append(
+                (
+                    "caution",
+                    f"little stable ground ({n_stable / n_valid:.0%} of the compared area): the "
+                    "registration and bias correction rest on it alone; check that they did not absorb the works",
                 )
             )
         elif largest_gap_deg(stable, change) > 180:
