@@ -1,3 +1,6 @@
+"""``python -m soilvolume`` and the ``soilvolume`` console command: a signal that arrives while
+the program is still importing ends it with one line, like one during a run."""
+
 import os
 import signal
 import sys
@@ -10,9 +13,15 @@ def _early(signum: int, _frame) -> None:
     os._exit(128 + signum)
 
 
-for _sig in (signal.SIGINT, signal.SIGTERM):  # main() installs the run's own handlers
-    signal.signal(_sig, _early)
+def run() -> int:
+    """Install the early handlers, import the command line (it takes a moment), run it;
+    ``main`` installs the run's own handlers."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _early)
+    from .cli import main
 
-from .cli import main  # noqa: E402 - after the handlers: imports take a moment
+    return main()
 
-sys.exit(main())
+
+if __name__ == "__main__":
+    sys.exit(run())

@@ -148,7 +148,18 @@ def test_a_before_cloud_of_three_points_is_not_called_an_overlap_problem(capsys,
     _one_line_error(code, err, "three.las", "too few points")
 
 
-def test_a_signal_while_the_program_is_still_importing_is_one_line():
+@pytest.mark.parametrize(
+    "start",
+    [
+        "runpy.run_module('soilvolume', run_name='__main__')",  # python -m soilvolume
+        "from soilvolume.__main__ import run; sys.exit(run())",  # the console command
+    ],
+    ids=["module", "console"],
+)
+def test_a_signal_while_the_program_is_still_importing_is_one_line(start):
+    from importlib.metadata import entry_points
+
+    assert entry_points(group="console_scripts")["soilvolume"].value == "soilvolume.__main__:run"
     script = (
         "import builtins, os, signal, runpy, sys\n"
         "real = builtins.__import__\n"
@@ -158,7 +169,7 @@ def test_a_signal_while_the_program_is_still_importing_is_one_line():
         "    return real(name, globals, locals, fromlist, level)\n"
         "builtins.__import__ = slow\n"
         "sys.argv = ['soilvolume', '--help']\n"
-        "runpy.run_module('soilvolume', run_name='__main__')\n"
+        f"{start}\n"
     )
     done = run_python(script)
     assert done.returncode == 130, done.stderr
