@@ -80,13 +80,11 @@ def compute_volumes(
     from .uncertainty import detection_level, interp_fraction, thresholded_volumes, volume_uncertainty, z_value
 
     med_a, med_b = (None, None) if given is None else given.median_counts
-    weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS)
     n_a, n_b = after.counts, before.counts
-    h_a = after.centred(grid.cell, holes.weak_cells(n_a, **weak, median=med_a))
-    h_b = before.centred(grid.cell, holes.weak_cells(n_b, **weak, median=med_b))
+    h_a, h_b = centred_heights(after, grid.cell, options, med_a), centred_heights(before, grid.cell, options, med_b)
     raw = difference(h_a, h_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
-    weak["method"] = options.fill_method
+    weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS, method=options.fill_method)
     f_b, m_b = holes.refill_epoch(h_b, n_b, **weak, median=med_b)
     f_a, m_a = holes.refill_epoch(h_a, n_a, **weak, median=med_a)
     filled = difference(f_a, f_b)
@@ -173,6 +171,12 @@ def compute_volumes(
             np.where(change[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones
         )
     return Volumes(**vols)
+
+
+def centred_heights(dem: EpochDEM, cell: float, options: Options, median: float | None = None) -> np.ndarray:
+    """The epoch's heights at its cell centres (:meth:`EpochDEM.centred`); its weak cells (see
+    :func:`holes.weak_cells`, ``median``: the whole grid's median count for a tile) give no slope."""
+    return dem.centred(cell, holes.weak_cells(dem.counts, options.min_count_ratio, MIN_POINTS, median))
 
 
 def _mask(shape: tuple[int, int], core: tuple[slice, slice]) -> np.ndarray:

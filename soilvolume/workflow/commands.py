@@ -17,6 +17,7 @@ from ..options import Options
 from ..registration.register import register
 from ..reporting.report import _clean, absolute_transform, stage_dict
 from ..validate import check_grid_cells
+from ..volumes.compute import centred_heights
 from .steps import prepare_pair
 
 
@@ -39,12 +40,12 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     grid = gridmod.make_grid(lo, hi, cell, origin, frame.wkt, frame.xy_unit)
     check_grid_cells(grid.rows, grid.cols, cell)
     hooks.step(40, f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
-    h, n = gridmod.average_height(xyz, grid, options.statistic)
+    h = centred_heights(gridmod.epoch_dem(xyz, grid, options.statistic), cell, options)
     if not np.isfinite(h).any():
         raise SoilVolumeError(f"{cloud}: no points inside the grid (check --bounds)")
     hooks.step(90, f"writing {out_tif.name}")
     with os_errors(out_tif):
-        gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}) (m)")
+        gridmod.write_geotiff(out_tif, h + origin[2], grid, f"average height ({options.statistic}, cell centres) (m)")
     hooks.step(100, "done")
     return {
         "cell_m": cell,
