@@ -276,6 +276,21 @@ def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> floa
     return choose_cell(int(counts[ins].sum()), float(ins.sum()) * res * res, minimum=minimum)
 
 
+MASK_LAYER = "filled_mask"  # the one uint8 layer of a run, without units
+
+
+def output_layers(correction: str) -> list[tuple[str, str, str]]:
+    """The rasters of an estimate run: (file name, the volume step's array, description); the
+    ``dem_`` arrays are local heights (add the origin's z)."""
+    return [
+        ("dem_before.tif", "dem_b", "average height, before (m)"),
+        ("dem_after.tif", "dem_a", "average height, after (m)"),
+        ("difference.tif", "diff", f"H_after - H_before - correction ({correction}) (m)"),
+        ("plane_offset.tif", "offset", f"vertical correction d_i subtracted ({correction}) (m)"),
+        ("filled_mask.tif", MASK_LAYER, "1 = difference interpolated (sparse cell or filled hole)"),
+    ]
+
+
 def write_geotiff(
     path: str | Path,
     array: np.ndarray,

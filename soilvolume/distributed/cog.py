@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import GridSpec
-from ..dem.grid import NODATA
+from ..dem.grid import MASK_LAYER, NODATA, output_layers
 from ..inputs.io import atomic_path
 
 BLOCK = 256
@@ -74,17 +74,11 @@ def write_cog(
 
 
 def write_outputs(out, get: Callable[[str, slice, slice], np.ndarray], grid: GridSpec, z0: float, correction: str):
-    """The five rasters of a run as COGs, block by block; ``get(name, rows, cols)`` gives the
-    window of the grid array ``name`` (dem_b, dem_a, diff, offset, filled_mask; heights local)."""
-    layers = [
-        ("dem_before.tif", "dem_b", "average height, before (m)"),
-        ("dem_after.tif", "dem_a", "average height, after (m)"),
-        ("difference.tif", "diff", f"H_after - H_before - correction ({correction}) (m)"),
-        ("plane_offset.tif", "offset", f"vertical correction d_i subtracted ({correction}) (m)"),
-    ]
-    for name, key, desc in layers:
-        add = z0 if key.startswith("dem_") else 0.0
-        write_cog(out.path(name), grid, lambda r, c, key=key, add=add: get(key, r, c) + add, desc)
-    desc = "1 = difference interpolated (sparse cell or filled hole)"
-    mask = lambda r, c: get("filled_mask", r, c).astype("uint8")  # noqa: E731
-    write_cog(out.path("filled_mask.tif"), grid, mask, desc, "", "uint8")
+    """The rasters of a run (:func:`grid.output_layers`) as COGs, block by block;
+    ``get(name, rows, cols)`` gives the window of the grid array ``name`` (heights local)."""
+    for name, key, desc in output_layers(correction):
+        if key == MASK_LAYER:
+            write_cog(out.path(name), grid, lambda r, c, key=key: get(key, r, c).astype("uint8"), desc, "", "uint8")
+        else:
+            add = z0 if key.startswith("dem_") else 0.0
+            write_cog(out.path(name), grid, lambda r, c, key=key, add=add: get(key, r, c) + add, desc)

@@ -26,6 +26,12 @@ MIN_TILE, MAX_TILE = 16, 4096  # tile side (cells): small tiles keep very dense 
 TILE_ARRAYS = tuple(f"{k}_{e}" for e in "ab" for k in EPOCH_ARRAYS)  # what a tile task returns: h_a, n_a, ...
 
 
+def empty_value(name: str) -> float:
+    """A tile array's value where no point fell: 0 for counts and centre offsets, NaN for heights
+    and spreads."""
+    return 0 if name[0] in "nxy" else np.nan
+
+
 @dataclass(frozen=True)
 class Plan:
     """Everything a tile task needs (picklable: sent to the workers)."""
@@ -57,7 +63,10 @@ def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], 
     before = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
     after = _epoch(plan, 1, win, plan.transform, None, stats)
     stats["seconds"] = time.perf_counter() - t0
-    return win, tuple(a.astype(np.int32) if k == 1 else a for e in (after, before) for k, a in enumerate(e)), stats
+    arrays = tuple(
+        a.astype(np.int32) if k == "n" else a for e in (after, before) for k, a in zip(EPOCH_ARRAYS, e, strict=True)
+    )
+    return win, arrays, stats
 
 
 def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
@@ -172,10 +181,7 @@ def run_tiles(
     stats = stats if stats is not None else {}
     stats.update(read=0, seconds=0.0)
     g = plan.grid
-    out = tuple(
-        np.zeros((g.rows, g.cols), np.int64) if k.startswith("n_") else np.full((g.rows, g.cols), np.nan)
-        for k in TILE_ARRAYS
-    )
+    out = tuple(np.full((g.rows, g.cols), empty_value(k), np.int64 if k[0] == "n" else float) for k in TILE_ARRAYS)
     todo = []
     for win in windows:
         saved = _load_tile(cache, win)

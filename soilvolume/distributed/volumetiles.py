@@ -29,7 +29,7 @@ from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import region_sigma, z_value
 from . import overview
 from .tilestore import TileStore, Window
-from .tiletask import TILE_ARRAYS, epoch_dems, grid_tile
+from .tiletask import TILE_ARRAYS, empty_value, epoch_dems, grid_tile
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
 VOLUME_ARRAYS = ("dem_a", "dem_b", "diff", "offset", "filled_mask")
@@ -82,7 +82,7 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     r0, r1, c0, c1 = win
     h = halo(g.cell)
     ext = (max(0, r0 - h), min(g.rows, r1 + h), max(0, c0 - h), min(g.cols, c1 + h))
-    a = [job.store.read(n, ext, fill=0 if n[0] in "nxy" else np.nan) for n in TILE_ARRAYS]
+    a = [job.store.read(n, ext, fill=empty_value(n)) for n in TILE_ARRAYS]
     wgrid = g.window(*ext)
     core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
     given = Given(

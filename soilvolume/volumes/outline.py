@@ -4,10 +4,10 @@ A smooth interpolant rounds the kink where unchanged ground meets a pile's foot 
 and always to the same side: a hole on a pit's rim comes out deeper, one on a pile's foot higher
 (accuracy harness, paper-density pairs: net -1.76 % on a 259 m3 pit, +0.45 % on 954 m3 of piles;
 -0.08 % and -0.00 % filled this way). A hole whose rim holds both significant change and
-unchanged ground is split between
-the two (each of its cells goes with the nearer), and each side is interpolated from its own rim
-only, with a free edge at the split: the slope of the works runs on to the outline instead of
-bending into the ground around it, and the ground stays level.
+unchanged ground is split between the two (each of its cells goes with the nearer), and each
+side is interpolated from its own rim only, with a free edge at the split: the slope of the
+works runs on to the outline instead of bending into the ground around it, and the ground stays
+level.
 """
 
 from __future__ import annotations

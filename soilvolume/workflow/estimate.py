@@ -126,22 +126,9 @@ def _write_registered(pool: ThreadPoolExecutor, out: OutputDir, prep: Prepared, 
 
 def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec, prep: Prepared, options: Options) -> None:
     z0 = float(prep.origin[2])  # local -> absolute heights
-    gridmod.write_geotiff(out.path("dem_before.tif"), vols.dem_b + z0, grid, "average height, before (m)")
-    gridmod.write_geotiff(out.path("dem_after.tif"), vols.dem_a + z0, grid, "average height, after (m)")
-    gridmod.write_geotiff(
-        out.path("difference.tif"), vols.diff, grid, f"H_after - H_before - correction ({options.correction}) (m)"
-    )
-    gridmod.write_geotiff(
-        out.path("plane_offset.tif"),
-        vols.offset,
-        grid,
-        f"vertical correction d_i subtracted ({options.correction}) (m)",
-    )
-    gridmod.write_geotiff(
-        out.path("filled_mask.tif"),
-        vols.filled_mask.astype("uint8"),
-        grid,
-        "1 = difference interpolated (sparse cell or filled hole)",
-        "",
-        "uint8",
-    )
+    for name, key, desc in gridmod.output_layers(options.correction):
+        array = getattr(vols, key)
+        if key == gridmod.MASK_LAYER:
+            gridmod.write_geotiff(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
+        else:
+            gridmod.write_geotiff(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)
