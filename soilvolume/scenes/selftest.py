@@ -27,16 +27,18 @@ MODULES = {
     "distributed": "LocalCluster",
     "fiona": "open",
 }
-POINTS = (6_000, 4_000)  # before, after
-NET_TOLERANCE = 0.25  # relative: a smoke test at 0.5 points/m², not an accuracy test
+POINTS = (12_000, 8_000)  # before, after: 0.5 and 1.9 points/m²
+NET_TOLERANCE = 0.1  # relative: a smoke test on 3 m cells (measured 0.8 %), not an accuracy test
 
 
 def check_imports() -> dict[str, str]:
     """{module: version} of every dependency; SoilVolumeError naming the first that fails."""
+    from ..registration.o3d import _o3d  # Open3D as the engine imports it (without its web drawing)
+
     versions = {}
     for name, attribute in MODULES.items():
         try:
-            module = importlib.import_module(name)
+            module = _o3d() if name == "open3d" else importlib.import_module(name)
         except Exception as exc:  # noqa: BLE001 - ImportError, OSError of a missing library, ...
             raise SoilVolumeError(f"cannot import {name} ({type(exc).__name__}: {exc})") from exc
         if not hasattr(module, attribute):
@@ -65,7 +67,7 @@ def run_selftest(out: Path, hooks: Hooks) -> dict:
         before, after, truth_path = write_pair(make_pair(0, cfg), data, "laz")
         truth = json.loads(truth_path.read_text())
         hooks.step(30, "estimating its volume change")
-        res = estimate(before, after, staged.path("result"), Options(cell=2.0), overwrite=True, hooks=Hooks())
+        res = estimate(before, after, staged.path("result"), Options(cell=3.0), overwrite=True, hooks=Hooks())
     net = res.report["volume_m3"]["net"]
     if not abs(net - truth["net"]) <= NET_TOLERANCE * abs(truth["net"]):
         raise SoilVolumeError(f"self-test: net {net:+.1f} m³ where the seeded pair holds {truth['net']:+.1f} m³")
