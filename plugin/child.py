@@ -86,7 +86,9 @@ def lines(proc: subprocess.Popen, cancelled: Callable[[], bool]) -> Iterator[tup
             pass
         q.put((name, None))
 
-    readers = [threading.Thread(target=pump, args=(n, p), daemon=True) for n, p in (("out", proc.stdout), ("err", proc.stderr))]
+    readers = [
+        threading.Thread(target=pump, args=(n, p), daemon=True) for n, p in (("out", proc.stdout), ("err", proc.stderr))
+    ]
     for reader in readers:
         reader.start()
     open_pipes = 2

@@ -117,7 +117,7 @@ def load(folder: Path) -> Environment | None:
 
 
 def status(folder: Path) -> str:
-    """"" when ready, else why not (one sentence)."""
+    """ "" when ready, else why not (one sentence)."""
     if load(folder) is not None:
         return ""
     if (folder / STAMP).is_file():
@@ -220,7 +220,9 @@ class Installer:
         env = Environment(**{**asdict(env), "versions": versions, "seconds": round(time.perf_counter() - t0, 1)})
         (self.folder / STAMP).write_text(json.dumps(asdict(env), indent=1), encoding="utf-8")
         self.progress(100)
-        self.log(f"The engine's environment is ready ({self.folder}, {size_mb(self.folder):,.0f} MB, {env.seconds:.0f} s).")
+        self.log(
+            f"The engine's environment is ready ({self.folder}, {size_mb(self.folder):,.0f} MB, {env.seconds:.0f} s)."
+        )
         return env
 
     def _quick_check(self, env: Environment) -> bool:
@@ -291,7 +293,9 @@ class Installer:
         self.log("Testing the engine in its environment (imports, then a tiny seeded estimate)")
         self.progress(85)
         with tempfile.TemporaryDirectory(prefix="soilvolume-selftest-") as tmp:
-            out = self._step(env.command(["selftest", "--out", str(Path(tmp) / "run"), "--progress", "jsonl"]), "engine")
+            out = self._step(
+                env.command(["selftest", "--out", str(Path(tmp) / "run"), "--progress", "jsonl"]), "engine"
+            )
         for line in reversed(out):
             try:
                 event = json.loads(line)

@@ -16,7 +16,13 @@ from pathlib import Path
 from packaging.requirements import Requirement
 
 LOCK = Path(__file__).resolve().parents[1] / "plugin" / "engine-lock.txt"
-LINUX = ["manylinux_2_35_x86_64", "manylinux_2_31_x86_64", "manylinux_2_28_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64"]
+LINUX = [
+    "manylinux_2_35_x86_64",
+    "manylinux_2_31_x86_64",
+    "manylinux_2_28_x86_64",
+    "manylinux_2_17_x86_64",
+    "manylinux2014_x86_64",
+]
 TARGETS = {  # name -> (platform tags, python version, marker environment)
     "Linux x86_64 cp311": (LINUX, "3.11", ("linux", "x86_64", "Linux")),
     "Linux x86_64 cp312": (LINUX, "3.12", ("linux", "x86_64", "Linux")),

@@ -39,6 +39,7 @@ RUN_OUTPUTS = (
     "filled_mask.tif",
     "report.json",
     "report.html",
+    "change_areas.geojson",
     "after_registered.laz",
 )
 

@@ -68,6 +68,10 @@ def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
 
 
 def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpec, dem_after: np.ndarray) -> None:
+    """report.html, and the areas of significant change as polygons (its map outlines them)."""
+    from ..reporting.changeareas import FILE, write_change_areas
+
+    write_change_areas(out.path(FILE), vols.diff, vols.change_mask, grid)
     try:
         from ..reporting.html import write_html
     except ImportError:
@@ -77,6 +81,7 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
         "residual": np.where(vols.stable, vols.diff, np.nan),
         "filled_mask": vols.filled_mask,
         "dem_after": dem_after,
+        "change": vols.change_mask,
     }
     write_html(report, arrays, grid, out.path("report.html"))
 
