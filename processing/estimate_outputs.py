@@ -146,7 +146,7 @@ def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingCo
     if gdal.VectorTranslate(dest, str(src)) is None:
         raise QgsProcessingException(f"Cannot write {dest} (unsupported vector format?).")
     label = f"Areas of significant change ({pair[1]})" if pair[1] else "Areas of significant change"
-    styles.style_on_load(context, dest, styles.CHANGE_AREAS, label, 50, params.group_label(pair))
+    styles.style_on_load(context, dest, styles.CHANGE_AREAS, label, 35, params.group_label(pair))  # under the difference
     return dest
 
 

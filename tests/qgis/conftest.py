@@ -20,6 +20,8 @@ import pytest
 from qgis.core import QgsApplication
 
 REPO = Path(__file__).resolve().parents[2]
+# the engine's environment that `make setup` builds with the plugin's own installer
+ENGINE_ENV = Path(os.environ.setdefault("SOILVOLUME_ENGINE_ENV", str(REPO / ".engine-env")))
 PLUGIN_NAME = "soilvolume_qgis"
 PROVIDER_ID = "soilvolume"
 _KEEP_ALIVE: list = []  # Python wrappers of providers the registry owns

@@ -87,19 +87,9 @@ def test_no_overlap(run_alg, scene_dir, tmp_path):
     assert not (tmp_path / "d.tif").exists()
 
 
-def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
-    from qgis.core import QgsProcessingFeedback
-    from soilvolume_qgis.plugin import deps
-
-    class Warnings(QgsProcessingFeedback):
-        texts: list[str] = []
-
-        def pushWarning(self, text: str) -> None:  # noqa: N802 - Qt API
-            self.texts.append(text)
-
-    monkeypatch.setitem(sys.modules, "open3d", None)  # "import open3d" now fails
-    feedback = Warnings()
-    with pytest.raises(QgsProcessingException, match=r"missing Python packages \(open3d\)"):
+def test_missing_environment_names_the_installer(run_alg, scene_dir, tmp_path, monkeypatch):
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(tmp_path / "no-environment"))
+    with pytest.raises(QgsProcessingException) as info:
         run_alg(
             "estimatevolumechange",
             {
@@ -107,23 +97,27 @@ def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
                 "AFTER": str(scene_dir / "after.las"),
                 "DIFFERENCE": str(tmp_path / "d.tif"),
             },
-            feedback=feedback,
         )
-    message = "\n".join(feedback.texts)
-    assert "cannot import open3d" in message and "press Install" in message
-    assert f"--target {deps.site_dir()}" in message and "--no-deps open3d" in message
-    assert "--user" not in message and "--break-system-packages" not in message
+    message = str(info.value)
+    assert "not installed yet" in message and "qgis_process run soilvolume:installdependencies" in message
+    assert "Install dependencies" in message and not (tmp_path / "d.tif").exists()
 
 
-def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch):
-    from soilvolume_qgis.processing import engine
+def test_a_crashed_engine_gives_one_message_with_its_last_lines(run_alg, scene_dir, tmp_path, monkeypatch):
+    """A child that dies (here by SIGSEGV after a line on stderr): one message naming the
+    signal and the child's last lines; nothing written."""
+    from soilvolume_qgis.plugin import environment
 
-    def broken(name: str = "api"):
-        raise ImportError("simulated: soilvolume/workflow/estimate.py is missing")
-
-    monkeypatch.setattr(engine, "engine", broken)
-    with pytest.raises(QgsProcessingException, match="engine package 'soilvolume' does not import"):
+    crash = (
+        "import os,signal,sys; print('engine: about to crash', file=sys.stderr, flush=True); "
+        "os.kill(os.getpid(), signal.SIGSEGV)"
+    )
+    monkeypatch.setattr(environment.Environment, "command", lambda self, args: [sys.executable, "-c", crash])
+    with pytest.raises(QgsProcessingException) as info:
         run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")})
+    message = str(info.value)
+    assert "stopped unexpectedly (signal SIGSEGV)" in message and "engine: about to crash" in message
+    assert not (tmp_path / "dem.tif").exists()
 
 
 @pytest.mark.parametrize(
