@@ -74,7 +74,7 @@ class Environment:
         """The command line of this environment's Python with ``args`` (isolated, its packages)."""
         if self.mode == "venv":
             return [self.interpreter, "-I", "-u", *args]
-        code = f"import site,sys;site.addsitedir({self.site!r});sys.argv[:2]=['-c'];exec(sys.argv.pop(1))"
+        code = f"import site,sys;site.addsitedir({self.site!r});c=sys.argv.pop(1);exec(c)"
         if args[:1] == ["-c"]:
             return [self.interpreter, "-I", "-S", "-u", "-c", code, args[1], *args[2:]]
         raise ValueError("only -c CODE is supported in a --target environment")
