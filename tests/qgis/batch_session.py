@@ -43,6 +43,7 @@ def main(plugins_dir: str, out_dir: str, *pairs: str) -> int:
         rows.append({"PARAMETERS": {"BEFORE": before, "AFTER": after}, "OUTPUTS": outputs})
     panel = dialog.mainWidget()
     panel.load_batch_file_3_40_version({"rows": rows})
+    panel.checkLoadLayersOnCompletion.setChecked(True)  # as an analyst does: the results loaded
     dialog.show()
     t0 = time.time()
     dialog.runAlgorithm()
