@@ -145,6 +145,12 @@ def build_parser() -> argparse.ArgumentParser:
     vol.add_argument("--zone-field", help="attribute naming each zone")
     add_progress(vol)
 
+    add_tools(sub)
+    return ap
+
+
+def add_tools(sub) -> None:
+    """The sub-commands around the method: pipeline, demo, selftest."""
     pipe = sub.add_parser(
         "pipeline",
         help="write the PDAL pipelines that prepare both clouds",
@@ -171,17 +177,18 @@ def build_parser() -> argparse.ArgumentParser:
     )
     check.add_argument("--out", type=Path, required=True, help="folder for the pair and its results")
     add_progress(check)
-    return ap
 
 
 def _hooks(ns: argparse.Namespace):
-    """Progress for people (stderr), or the protocol's progress, log and cancel."""
+    """The protocol's progress, log and cancel; else progress for people on stderr where the
+    command has ``--quiet`` (the estimate) and it is not given; else none (dem, register and
+    volume print their JSON and nothing else)."""
     from .api import Hooks
 
     proto: Protocol | None = getattr(ns, "protocol", None)
     if proto is not None:
         return Hooks(progress=proto.progress, log=proto.log, cancel=proto.is_cancelled)
-    if getattr(ns, "quiet", False):
+    if getattr(ns, "quiet", True):
         return Hooks()
 
     def show(pct: float, msg: str) -> None:

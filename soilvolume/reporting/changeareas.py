@@ -1,7 +1,9 @@
 """The areas of significant change as polygons: each connected patch of significant cut or
 fill (the cells the headline cut and fill are summed over) becomes one polygon with its kind,
 area and volume, written as GeoJSON next to the rasters (``change_areas.geojson``) and outlined
-on report.html's map. The polygons' volumes add up to the headline cut and fill."""
+on report.html's map. The polygons' volumes add up to the headline cut and fill; where the
+volume step goes tile by tile, they are drawn on the overview grid the report's map shows (its
+cells are k x k of the run's), and their volumes are that grid's."""
 
 from __future__ import annotations
 
@@ -16,27 +18,27 @@ from ..core.types import GridSpec
 FILE = "change_areas.geojson"
 
 
-def patches(diff: np.ndarray, change: np.ndarray) -> tuple[np.ndarray, list[tuple[str, int]]]:
-    """(labels, [(kind, label), ...]): connected patches (4-neighbours) of cut (diff < 0) and of
-    fill (diff > 0) cells inside ``change``; label 0 = no patch."""
+def patches(change: np.ndarray, cut: np.ndarray) -> tuple[np.ndarray, list[tuple[str, int]]]:
+    """(labels, [(kind, label), ...]): connected patches (4-neighbours) of the cut areas
+    (``cut``) and of the fill areas (the rest of ``change``), as the headline sums them (a
+    buffer cell of a pile counts with the pile whatever its sign); label 0 = no patch."""
     from scipy import ndimage
 
-    d = np.nan_to_num(np.asarray(diff, dtype=float))
-    labels = np.zeros(d.shape, np.int32)
+    labels = np.zeros(change.shape, np.int32)
     kinds: list[tuple[str, int]] = []
-    for kind, cells in (("cut", change & (d < 0)), ("fill", change & (d > 0))):
+    for kind, cells in (("cut", change & cut), ("fill", change & ~cut)):
         lab, n = ndimage.label(cells)
         labels[cells] = lab[cells] + len(kinds)
         kinds += [(kind, len(kinds) + i + 1) for i in range(n)]
     return labels, kinds
 
 
-def features(diff: np.ndarray, change: np.ndarray, grid: GridSpec) -> list[dict]:
+def features(diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSpec) -> list[dict]:
     """GeoJSON features (CRS units of the grid) of every patch: kind, area_m2, volume_m3 (cut
     as a positive number, as the headline), mean and extreme change (m)."""
     from rasterio import features as rfeatures
 
-    labels, kinds = patches(diff, change)
+    labels, kinds = patches(change, cut)
     if not kinds:
         return []
     d = np.nan_to_num(np.asarray(diff, dtype=float))
@@ -62,13 +64,14 @@ def features(diff: np.ndarray, change: np.ndarray, grid: GridSpec) -> list[dict]
     return out
 
 
-def write_change_areas(path: str | Path, diff: np.ndarray, change: np.ndarray, grid: GridSpec) -> dict:
-    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically); returns
-    {"file", "cut_polygons", "fill_polygons", "cut_m3", "fill_m3"}."""
+def write_change_areas(path: str | Path, diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSpec) -> dict:
+    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically); ``cut``:
+    the cut areas of ``change``; returns {"file", "cut_polygons", "fill_polygons", "cut_m3",
+    "fill_m3"}."""
     from ..inputs.crs import raster_wkt
 
     path = Path(path)
-    feats = features(diff, change, grid)
+    feats = features(diff, change, cut, grid)
     crs = {"type": "name", "properties": {"name": _crs_name(raster_wkt(grid.crs_wkt))}}
     doc = {"type": "FeatureCollection", "name": "change_areas", "crs": crs, "features": feats}
     tmp = path.with_name(f".{path.stem}.partial{path.suffix}")

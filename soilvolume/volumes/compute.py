@@ -51,6 +51,7 @@ class Volumes:
     empty_before: int
     empty_after: int
     zones: list = field(default_factory=list)  # per-polygon budgets (--zones)
+    cut_mask: np.ndarray | None = None  # the cut areas of change_mask (the rest of it is fill)
 
 
 @dataclass(frozen=True)
@@ -151,6 +152,7 @@ def compute_volumes(
         "params": params,
         "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v, "marginal_detections_m3": marginal},
         "change_mask": change,
+        "cut_mask": cut_area,
         "compensated": headline,
         "all_cells": budget(d, area),
         "uncompensated": budget(filled[core], area),

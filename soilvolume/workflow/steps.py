@@ -71,7 +71,7 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
     """report.html, and the areas of significant change as polygons (its map outlines them)."""
     from ..reporting.changeareas import FILE, write_change_areas
 
-    write_change_areas(out.path(FILE), vols.diff, vols.change_mask, grid)
+    write_change_areas(out.path(FILE), vols.diff, vols.change_mask, vols.cut_mask, grid)
     try:
         from ..reporting.html import write_html
     except ImportError:
