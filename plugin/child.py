@@ -19,18 +19,24 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 POLL_S = 0.1
-GRACE_S = 0.4  # after "cancel" on stdin, then after SIGTERM, before the next, harder stop
+GRACE_S = 0.3  # after "cancel" on stdin, then after SIGTERM, before the next, harder stop
+EXIT_S = 30.0  # how long a child that closed its output may take to exit
 
 
 class Cancelled(Exception):
     """The user cancelled; the child was stopped."""
 
 
-def start(command: Sequence[str], env: dict[str, str], cwd: str | None = None) -> subprocess.Popen:
-    """The child, in its own process group (a stop reaches its workers too), pipes in text."""
-    extra: dict = {"start_new_session": True}
+def detached() -> dict:
+    """Popen arguments that put a child in a process group of its own (a stop reaches its
+    workers too), out of QGIS's console and signals."""
     if sys.platform == "win32":
-        extra = {"creationflags": 0x08000000 | 0x00000200}  # CREATE_NO_WINDOW | CREATE_NEW_PROCESS_GROUP
+        return {"creationflags": 0x08000000 | 0x00000200}  # CREATE_NO_WINDOW | CREATE_NEW_PROCESS_GROUP
+    return {"start_new_session": True}
+
+
+def start(command: Sequence[str], env: dict[str, str], cwd: str | None = None) -> subprocess.Popen:
+    """The child, detached (:func:`detached`), its pipes in text."""
     return subprocess.Popen(
         list(command),
         stdin=subprocess.PIPE,
@@ -42,7 +48,7 @@ def start(command: Sequence[str], env: dict[str, str], cwd: str | None = None) -
         bufsize=1,
         env=env,
         cwd=cwd,
-        **extra,
+        **detached(),
     )
 
 
@@ -61,6 +67,16 @@ def stop(proc: subprocess.Popen) -> None:
         except subprocess.TimeoutExpired:
             _signal(proc, hard)
     proc.wait(timeout=10)
+
+
+def exit_code(proc: subprocess.Popen, timeout: float = EXIT_S) -> int:
+    """The child's exit status once it closed its output; stopped (:func:`stop`) when it does
+    not exit within ``timeout`` (its status is then the signal's)."""
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        stop(proc)
+        return proc.returncode
 
 
 def _signal(proc: subprocess.Popen, hard: bool) -> None:
@@ -158,7 +174,7 @@ def run_engine(command: Sequence[str], env: dict[str, str], events: Events, cwd:
                 error = event
             else:
                 _dispatch(event, events)
-        code = proc.wait(timeout=30)
+        code = exit_code(proc)
     finally:
         if proc.poll() is None:
             stop(proc)

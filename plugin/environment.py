@@ -22,11 +22,17 @@ import subprocess
 import sys
 import tempfile
 import time
+import urllib.parse
 import urllib.request
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
+
+try:
+    from . import child
+except ImportError:  # run as a script (scripts/setup.sh: python3 plugin/environment.py install DIR)
+    import child  # type: ignore[no-redef]
 
 PLUGIN_DIR = Path(__file__).resolve().parents[1]  # holds the engine package soilvolume/
 LOCK = Path(__file__).resolve().parent / "engine-lock.txt"
@@ -202,18 +208,7 @@ class Installer:
             self.log(f"The engine's environment is ready ({self.folder}); nothing to do.")
             self.progress(100)
             return existing
-        self.python = self.python or base_python()
-        caps = self.caps or probe(self.python)
-        if not SUPPORTED[0] <= tuple(caps.version) <= SUPPORTED[-1]:
-            raise InstallError(
-                f"{self.python} is Python {'.'.join(map(str, caps.version))}; the engine's environment needs "
-                f"Python 3.11 or 3.12. Install one and set the environment variable {PYTHON_VAR} to it."
-            )
-        (self.folder / STAMP).unlink(missing_ok=True)  # not ready until the self-test passed
-        self.progress(2)
-        mode, interpreter, site = self._create(caps)
-        pip = self._pip(mode, interpreter, caps)
-        self.progress(10)
+        mode, interpreter, site, pip = self.prepare()
         self._install(pip, site)
         env = Environment(str(self.folder), mode, interpreter, site, lock_key(), {})
         versions = self._selftest(env)
@@ -224,6 +219,23 @@ class Installer:
             f"The engine's environment is ready ({self.folder}, {size_mb(self.folder):,.0f} MB, {env.seconds:.0f} s)."
         )
         return env
+
+    def prepare(self) -> tuple[str, str, str, list[str]]:
+        """The environment's folder made and its own pip found or bootstrapped (the stamp
+        removed: not ready until the self-test passed): (mode, interpreter, site, pip command)."""
+        self.python = self.python or base_python()
+        caps = self.caps or probe(self.python)
+        if not SUPPORTED[0] <= tuple(caps.version) <= SUPPORTED[-1]:
+            raise InstallError(
+                f"{self.python} is Python {'.'.join(map(str, caps.version))}; the engine's environment needs "
+                f"Python 3.11 or 3.12. Install one and set the environment variable {PYTHON_VAR} to it."
+            )
+        (self.folder / STAMP).unlink(missing_ok=True)
+        self.progress(2)
+        mode, interpreter, site = self._create(caps)
+        pip = self._pip(mode, interpreter, caps)
+        self.progress(10)
+        return mode, interpreter, site, pip
 
     def _quick_check(self, env: Environment) -> bool:
         run = _run(env.command(["--help"]), timeout=120)
@@ -266,7 +278,8 @@ class Installer:
         wheel = next(u for u in release["urls"] if u["filename"].endswith("py3-none-any.whl"))
         target = self.folder / ".bootstrap" / wheel["filename"]
         target.parent.mkdir(parents=True, exist_ok=True)
-        with urllib.request.urlopen(wheel["url"], timeout=120) as answer:  # noqa: S310
+        url = urllib.parse.urljoin(PIP_JSON, wheel["url"])  # mirrors answer with relative links
+        with urllib.request.urlopen(url, timeout=120) as answer:  # noqa: S310
             data = answer.read()
         if hashlib.sha256(data).hexdigest() != wheel["digests"]["sha256"]:
             raise InstallError(f"pip's wheel from PyPI does not match its SHA-256 ({wheel['filename']})")
@@ -308,25 +321,20 @@ class Installer:
 
     def _step(self, command: list[str], tool: str, each: Callable[[str], None] | None = None) -> list[str]:
         """Run one tool, every line to the log; InstallError with its last lines if it fails."""
-        try:
-            from .child import Cancelled, lines, start
-        except ImportError:  # run as a script (scripts/setup.sh)
-            from child import Cancelled, lines, start
-
         self.log("Running: " + " ".join(f'"{a}"' if " " in a else a for a in command if "\n" not in a))
-        proc = start(command, child_environ())
+        proc = child.start(command, child_environ())
         proc.stdin.close()
         kept: deque[str] = deque(maxlen=400)
         try:
-            for _stream, line in lines(proc, self.cancelled):
+            for _stream, line in child.lines(proc, self.cancelled):
                 kept.append(line)
                 if not line.startswith("{"):
                     self.log(line)
                 if each is not None:
                     each(line)
-        except Cancelled:
+        except child.Cancelled:
             raise InstallError("cancelled; run the installer again to finish the environment") from None
-        code = proc.wait(timeout=60)
+        code = child.exit_code(proc)
         if code != 0:
             raise InstallError(f"{tool} failed (exit {code}); its last lines:\n" + "\n".join(_readable(kept)[-12:]))
         return list(kept)
@@ -352,13 +360,6 @@ def size_mb(folder: Path) -> float:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file() and not p.is_symlink()) / 1e6
 
 
-def _detached() -> dict:
-    """Popen arguments that keep a child out of QGIS's console and signals."""
-    if sys.platform == "win32":
-        return {"creationflags": 0x08000000 | 0x00000200}  # CREATE_NO_WINDOW | CREATE_NEW_PROCESS_GROUP
-    return {"start_new_session": True}
-
-
 def _run(command: list[str], timeout: float) -> subprocess.CompletedProcess:
     try:
         return subprocess.run(
@@ -370,7 +371,7 @@ def _run(command: list[str], timeout: float) -> subprocess.CompletedProcess:
             timeout=timeout,
             env=child_environ(),
             stdin=subprocess.DEVNULL,
-            **_detached(),
+            **child.detached(),
         )
     except (OSError, subprocess.TimeoutExpired) as exc:
         return subprocess.CompletedProcess(command, 1, "", str(exc))

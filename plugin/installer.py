@@ -32,11 +32,17 @@ class LogFeedback(QgsProcessingFeedback):
     def __init__(self) -> None:
         super().__init__()
         self.lines: list[str] = []
+        self.errors: list[str] = []
 
     def pushInfo(self, info: str) -> None:  # noqa: N802 - Qt API
         self.lines.append(info)
         log(info)
         super().pushInfo(info)
+
+    def reportError(self, error: str, fatalError: bool = False) -> None:  # noqa: N802, N803 - Qt API
+        self.errors.append(error)
+        log(error, Qgis.MessageLevel.Critical)
+        super().reportError(error, fatalError)
 
 
 class DependencyBar:
@@ -58,6 +64,18 @@ class DependencyBar:
             DependencyBar.shown = True
             self.show(why)
         return why
+
+    def close(self) -> None:
+        """At plugin unload: remove the bar if it is still up (its button would call into the
+        unloaded plugin), so the reloaded plugin shows its own; a bar the user closed stays
+        closed for the session."""
+        if self.item is None or self.iface is None:
+            return
+        bar = self.iface.messageBar()
+        if self.item in bar.items():
+            bar.popWidget(self.item)
+            DependencyBar.shown = False
+        self.item = None
 
     def show(self, why: str) -> None:
         from qgis.PyQt.QtWidgets import QPushButton
@@ -92,7 +110,7 @@ class DependencyBar:
         return self.task
 
     def report(self, ok: bool, feedback: LogFeedback, done=None) -> None:
-        error = "" if ok else (feedback.lines[-1] if feedback.lines else "see the log")
+        error = "" if ok else (feedback.errors or feedback.lines or ["see the log"])[-1]
         ready = ok and not environment.status(environment.env_folder())
         if done is not None:
             done(ready, error)
@@ -104,6 +122,11 @@ class DependencyBar:
         else:
             bar.pushMessage(
                 TITLE,
-                f"Installing failed (the log has pip's and the engine's lines): {error[-300:]}",
+                f"Installing failed (the log has pip's and the engine's lines): {last_lines(error)}",
                 Qgis.MessageLevel.Critical,
             )
+
+
+def last_lines(text: str, lines: int = 4, limit: int = 500) -> str:
+    """The end of an error for the message bar: its last few whole lines."""
+    return "\n".join(text.strip().splitlines()[-lines:])[-limit:]

@@ -59,6 +59,7 @@ class SoilVolumePlugin:
         processing.execAlgorithmDialog(MAIN_ALGORITHM, {})
 
     def unload(self) -> None:
+        self.dependencies.close()
         if self.install_action is not None:
             self.iface.removePluginMenu(MENU, self.install_action)
             self.install_action.deleteLater()

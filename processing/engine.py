@@ -14,6 +14,7 @@ import importlib
 import importlib.util
 import re
 import sys
+from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
 from types import ModuleType
@@ -25,6 +26,7 @@ from ..plugin import child, environment
 
 PLUGIN_DIR = Path(__file__).resolve().parent.parent
 TRACKER = "https://github.com/soilvolume/soilvolume/issues"
+CANCELLED = "Cancelled by the user; no outputs were written."
 INSTALL_HINT = (
     "Install it with Plugins > Soil volume change > Install dependencies…, the message bar's Install "
     "button, or headless: qgis_process run soilvolume:installdependencies"
@@ -58,13 +60,20 @@ def engine(name: str = "options") -> ModuleType:
     return importlib.import_module(f"soilvolume.{name}")
 
 
-def ready_environment() -> environment.Environment:
-    """The installed environment, or QgsProcessingException saying how to install it."""
+def ready_environment(feedback: QgsProcessingFeedback | None = None) -> environment.Environment:
+    """The installed environment, or QgsProcessingException. Why not and how to install it go
+    to the log once, as a warning (Processing repeats the error itself in its log, console and
+    dialog); without ``feedback`` the error says it all."""
     folder = environment.env_folder()
     env = environment.load(folder)
     if env is None:
+        advice = f"Soil volume change cannot run yet: {environment.status(folder)} ({folder}). {INSTALL_HINT}."
+        if feedback is None:
+            raise QgsProcessingException(advice)
+        feedback.pushWarning(advice)
         raise QgsProcessingException(
-            f"Soil volume change cannot run yet: {environment.status(folder)} ({folder}). {INSTALL_HINT}."
+            "Soil volume change cannot run yet: the engine's Python environment is missing or out of "
+            "date; how to install it is in the warning above."
         )
     return env
 
@@ -78,7 +87,7 @@ def run(
     """Run ``soilvolume ARGS --progress jsonl`` in the environment; the result line's fields.
     Engine log lines starting with one of ``skip`` are left out (the algorithm logs them)."""
     fb = feedback or QgsProcessingFeedback()
-    env = ready_environment()
+    env = ready_environment(feedback)
 
     def log(message: str) -> None:
         if not message.startswith(skip):
@@ -94,7 +103,7 @@ def run(
     try:
         return child.run_engine(env.command([*args, "--progress", "jsonl"]), environment.child_environ(), events)
     except child.Cancelled as exc:
-        raise QgsProcessingException("Cancelled by the user; no outputs were written.") from exc
+        raise QgsProcessingException(CANCELLED) from exc
     except child.EngineError as exc:
         raise QgsProcessingException(error_text(exc, hint)) from exc
 
@@ -111,14 +120,18 @@ def error_text(exc: child.EngineError, hint: str = "") -> str:
 
 def python(args: Sequence[str], feedback: QgsProcessingFeedback | None = None) -> None:
     """Run the environment's Python on ``-c CODE ARGS`` (e.g. a LAZ to LAS conversion)."""
-    env = ready_environment()
+    env = ready_environment(feedback)
     proc = child.start(env.python(list(args)), environment.child_environ())
     proc.stdin.close()
-    tail = []
-    for _stream, line in child.lines(proc, (feedback or QgsProcessingFeedback()).isCanceled):
-        tail.append(line)
-    if proc.wait(timeout=60) != 0:
-        raise QgsProcessingException(child.crash_text(proc.returncode, tail[-12:]))
+    tail: deque[str] = deque(maxlen=12)
+    try:
+        for _stream, line in child.lines(proc, (feedback or QgsProcessingFeedback()).isCanceled):
+            tail.append(line)
+    except child.Cancelled as exc:
+        raise QgsProcessingException(CANCELLED) from exc
+    code = child.exit_code(proc)
+    if code != 0:
+        raise QgsProcessingException(child.crash_text(code, tail))
 
 
 def option_args(options, command: str) -> list[str]:

@@ -146,7 +146,8 @@ def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingCo
     if gdal.VectorTranslate(dest, str(src)) is None:
         raise QgsProcessingException(f"Cannot write {dest} (unsupported vector format?).")
     label = f"Areas of significant change ({pair[1]})" if pair[1] else "Areas of significant change"
-    styles.style_on_load(context, dest, styles.CHANGE_AREAS, label, 35, params.group_label(pair))  # under the difference
+    # sort key 35: under the difference (40), over the correction and the DEMs
+    styles.style_on_load(context, dest, styles.CHANGE_AREAS, label, 35, params.group_label(pair))
     return dest
 
 

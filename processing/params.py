@@ -197,7 +197,9 @@ def deliver_cloud(src: Path, dest: str | None, feedback=None) -> str | None:
         return dest
     if not is_las(dest):
         raise QgsProcessingException(f"{dest}: the registered cloud is written as .las or .laz.")
-    engine.python(["-c", LAZ_TO_LAS, str(src), str(dest)], feedback)
+    converted = src.with_name(src.stem + "_converted.las")  # in the run's folder: no half-written dest
+    engine.python(["-c", LAZ_TO_LAS, str(src), str(converted)], feedback)
+    shutil.copyfile(converted, dest)
     return dest
 
 
