@@ -1,6 +1,7 @@
 """QGIS's real Batch dialog (processing's BatchAlgorithmDialog) on two pairs in a desktop session
 under Xvfb, run the way the dialog's Run button runs it (pooled processing threads), outputs
-loaded into the project; prints a JSON summary (each row's net, QGIS alive afterwards).
+loaded into the project; prints a JSON summary (each row's net, the Layers panel's groups, and
+QGIS's own Processing run in the same process afterwards).
 
 Usage (a stock QGIS Python, nothing of the dev venv): batch_session.py PLUGINS_DIR OUT_DIR PAIR...
 where each PAIR is BEFORE,AFTER.
@@ -9,27 +10,36 @@ where each PAIR is BEFORE,AFTER.
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
 from qgis.core import QgsApplication, QgsProject
+from session import start  # tests/qgis/session.py, beside this script
+
+
+def groups() -> dict[str, list[str]]:
+    """The Layers panel: each group's layers, top first (and the root's own layers under "")."""
+    root = QgsProject.instance().layerTreeRoot()
+    tree = {"": [node.name() for node in root.children() if node.nodeType() == node.NodeLayer]}
+    for group in root.findGroups():
+        tree[group.name()] = [layer.name() for layer in group.findLayers()]
+    return tree
+
+
+def still_working(out: Path) -> dict:
+    """After the batch, in the same process: QGIS's own Processing still runs (statistics of the
+    first row's difference raster)."""
+    from qgis import processing
+
+    stats = processing.run("native:rasterlayerstatistics", {"INPUT": str(out / "row0_difference.tif"), "BAND": 1})
+    return {"mean": stats["MEAN"], "min": stats["MIN"], "max": stats["MAX"]}
 
 
 def main(plugins_dir: str, out_dir: str, *pairs: str) -> int:
-    app = QgsApplication([], True)
-    app.initQgis()
-    sys.path.insert(0, str(Path(QgsApplication.pkgDataPath()) / "python" / "plugins"))
-    sys.path.append(plugins_dir)
-    from processing.core.Processing import Processing
+    app, _provider, _modules = start(plugins_dir, gui=True)
     from processing.gui.BatchAlgorithmDialog import BatchAlgorithmDialog
 
-    Processing.initialize()
-    from soilvolume_qgis.processing.provider import SoilVolumeProvider
-
-    provider = SoilVolumeProvider()
-    QgsApplication.processingRegistry().addProvider(provider)
     alg = QgsApplication.processingRegistry().createAlgorithmById("soilvolume:estimatevolumechange")
     dialog = BatchAlgorithmDialog(alg)
     out = Path(out_dir)
@@ -38,7 +48,7 @@ def main(plugins_dir: str, out_dir: str, *pairs: str) -> int:
         before, after = pair.split(",")
         outputs = {
             key: str(out / f"row{i}_{key.lower()}{ext}")
-            for key, ext in (("DIFFERENCE", ".tif"), ("REPORT_JSON", ".json"))
+            for key, ext in (("DIFFERENCE", ".tif"), ("CHANGE_AREAS", ".gpkg"), ("REPORT_JSON", ".json"))
         }
         rows.append({"PARAMETERS": {"BEFORE": before, "AFTER": after}, "OUTPUTS": outputs})
     panel = dialog.mainWidget()
@@ -62,9 +72,9 @@ def main(plugins_dir: str, out_dir: str, *pairs: str) -> int:
     for i in range(len(rows)):
         path = out / f"row{i}_report_json.json"
         nets.append(json.loads(path.read_text())["volume_m3"]["net"] if path.is_file() else None)
-    layers = sorted(layer.name() for layer in QgsProject.instance().mapLayers().values())
-    summary = {"nets": nets, "seconds": time.time() - t0, "layers": layers, "alive": True, "pid": os.getpid()}
+    seconds = time.time() - t0
     dialog.close()
+    summary = {"nets": nets, "seconds": seconds, "groups": groups(), "after": still_working(out)}
     print("RESULT" + json.dumps(summary), flush=True)
     QgsProject.instance().removeAllMapLayers()
     app.exitQgis()

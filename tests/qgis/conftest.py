@@ -106,6 +106,24 @@ def plugins_dir() -> Path:
     return PLUGINS_DIR
 
 
+@pytest.fixture(scope="session")
+def plugin_zip(tmp_path_factory) -> Path:
+    """The installable zip, as ``make package`` builds it."""
+    import subprocess
+
+    dist = tmp_path_factory.mktemp("dist")
+    run = subprocess.run(
+        ["bash", str(REPO / "scripts" / "package.sh")],
+        cwd=REPO,
+        env=dict(os.environ, DIST_DIR=str(dist)),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    return Path(run.stdout.strip().splitlines()[-1])
+
+
 def ensure_provider():
     """The plugin's provider, registered in the Processing registry (again, when a test
     unloaded the plugin)."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 
 import pytest
-from qgis.core import QgsApplication
+from qgis.core import Qgis, QgsApplication
 from qgis.PyQt.QtWidgets import QPushButton
 
 
@@ -19,8 +19,10 @@ def fresh_bar(plugin_package, monkeypatch, qgis_iface):
     monkeypatch.setattr(DependencyBar, "shown", False)
     bar = qgis_iface.messageBar()
     bar.clearWidgets()
+    bar.clear_messages()
     yield bar
     bar.clearWidgets()
+    bar.clear_messages()
 
 
 def our_items(bar) -> list:
@@ -52,6 +54,42 @@ def test_missing_environment_shows_one_bar_with_install(plugin_package, qgis_ifa
         plugin.unload()
 
 
+def test_a_closed_bar_stays_closed_after_a_reload(plugin_package, qgis_iface, fresh_bar, monkeypatch, tmp_path):
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(tmp_path / "nothing-here"))
+    plugin = load_plugin(plugin_package, qgis_iface)
+    (item,) = our_items(fresh_bar)
+    fresh_bar.popWidget(item)  # the user closes it
+    plugin.unload()
+    plugin = load_plugin(plugin_package, qgis_iface)
+    try:
+        assert our_items(fresh_bar) == []  # once per session
+    finally:
+        plugin.unload()
+
+
+def test_a_failed_install_says_so_with_the_engines_last_lines(provider, qgis_iface, fresh_bar, monkeypatch, tmp_path):
+    """A real environment whose packages did not install (the pip step skipped): the self-test
+    fails, no stamp is written, the bar says it failed with the engine's own last line."""
+    from soilvolume_qgis.plugin import environment
+    from soilvolume_qgis.plugin.installer import DependencyBar
+
+    folder = tmp_path / "engine"
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(folder))
+    monkeypatch.setattr(environment.Installer, "_install", lambda self, pip, site: None)
+    outcome = []
+    DependencyBar(qgis_iface).install(lambda ok, error: outcome.append((ok, error)))
+    deadline = time.time() + 180
+    while not outcome and time.time() < deadline:
+        QgsApplication.processEvents()
+        time.sleep(0.05)
+    ((ok, error),) = outcome
+    assert not ok and "No module named 'numpy'" in error, outcome
+    assert environment.load(folder) is None and not (folder / environment.STAMP).exists()
+    (critical,) = fresh_bar.get_messages(Qgis.MessageLevel.Critical)
+    assert "Installing failed" in critical and "numpy" in critical
+    assert fresh_bar.get_messages(Qgis.MessageLevel.Success) == []
+
+
 def test_no_bar_when_the_environment_is_ready(plugin_package, qgis_iface, fresh_bar):
     plugin = load_plugin(plugin_package, qgis_iface)
     try:
@@ -73,4 +111,8 @@ def test_install_button_runs_the_installer_algorithm_as_a_task(provider, qgis_if
         time.sleep(0.05)
     assert outcome == [(True, "")], outcome
     assert task.status() == task.Complete
-    assert any("Installed and tested" in item.text() for item in our_items(fresh_bar))
+    # pytest-qgis's message bar records pushMessage as "title:text" per level
+    assert any(m.startswith("Soil volume change:Installing") for m in fresh_bar.get_messages(Qgis.MessageLevel.Info))
+    success = fresh_bar.get_messages(Qgis.MessageLevel.Success)
+    assert success == ["Soil volume change:Installed and tested: the algorithms are ready."], success
+    assert fresh_bar.get_messages(Qgis.MessageLevel.Critical) == []

@@ -88,7 +88,12 @@ def test_no_overlap(run_alg, scene_dir, tmp_path):
 
 
 def test_missing_environment_names_the_installer(run_alg, scene_dir, tmp_path, monkeypatch):
+    """The error says the environment is missing and points to the warning, which says why and
+    the three ways to install it (once: Processing repeats the error itself)."""
+    from .recording import RecordingFeedback
+
     monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(tmp_path / "no-environment"))
+    feedback = RecordingFeedback()
     with pytest.raises(QgsProcessingException) as info:
         run_alg(
             "estimatevolumechange",
@@ -97,10 +102,13 @@ def test_missing_environment_names_the_installer(run_alg, scene_dir, tmp_path, m
                 "AFTER": str(scene_dir / "after.las"),
                 "DIFFERENCE": str(tmp_path / "d.tif"),
             },
+            feedback=feedback,
         )
-    message = str(info.value)
-    assert "not installed yet" in message and "qgis_process run soilvolume:installdependencies" in message
-    assert "Install dependencies" in message and not (tmp_path / "d.tif").exists()
+    assert "environment is missing" in str(info.value) and "warning above" in str(info.value)
+    (advice,) = feedback.warnings
+    assert "not installed yet" in advice and str(tmp_path / "no-environment") in advice
+    assert "qgis_process run soilvolume:installdependencies" in advice and "Install dependencies" in advice
+    assert not (tmp_path / "d.tif").exists()
 
 
 def test_a_crashed_engine_gives_one_message_with_its_last_lines(run_alg, scene_dir, tmp_path, monkeypatch):

@@ -10,8 +10,6 @@ import sys
 import zipfile
 from pathlib import Path
 
-import pytest
-
 REPO = Path(__file__).resolve().parents[2]
 REQUIRED_METADATA = (
     "name",
@@ -57,21 +55,6 @@ out["provider_after_unload"] = registry.providerById("soilvolume") is not None
 print("RESULT" + json.dumps(out))
 app.exitQgis()
 """
-
-
-@pytest.fixture(scope="module")
-def plugin_zip(tmp_path_factory) -> Path:
-    dist = tmp_path_factory.mktemp("dist")
-    run = subprocess.run(
-        ["bash", str(REPO / "scripts" / "package.sh")],
-        cwd=REPO,
-        env=dict(os.environ, DIST_DIR=str(dist)),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert run.returncode == 0, run.stderr
-    return Path(run.stdout.strip().splitlines()[-1])
 
 
 def test_zip_contents(plugin_zip):

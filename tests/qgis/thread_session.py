@@ -8,6 +8,7 @@ Usage: thread_session.py PLUGINS_DIR OUT_DIR REAL_DIR
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -18,6 +19,7 @@ from qgis.core import (
     QgsProcessingContext,
     QgsProcessingFeedback,
 )
+from session import start  # tests/qgis/session.py, beside this script
 
 HEAVY = ("numpy", "scipy", "pyproj", "rasterio", "open3d", "laspy", "lazrs", "dask", "distributed", "fiona")
 WHEEL_LIBS = (
@@ -40,20 +42,23 @@ def loaded_heavy() -> dict[str, str]:
     }
 
 
+def children() -> list[str]:
+    """Processes this one started that are still alive (an engine left behind would be one)."""
+    alive = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            name, rest = stat.read_text().rsplit(")", 1)
+        except OSError:
+            continue
+        state, ppid = rest.split()[:2]
+        if int(ppid) == os.getpid() and state != "Z":
+            alive.append(name.split("(", 1)[1])
+    return alive
+
+
 def main(plugins_dir: str, out_dir: str, real: str) -> int:
-    app = QgsApplication([], False)
-    app.initQgis()
-    sys.path.insert(0, str(Path(QgsApplication.pkgDataPath()) / "python" / "plugins"))
-    sys.path.append(plugins_dir)
-    from processing.core.Processing import Processing
-
-    Processing.initialize()
-    before_plugin = loaded_heavy()
-    from soilvolume_qgis.processing.provider import SoilVolumeProvider
-
-    provider = SoilVolumeProvider()
+    app, _provider, before_plugin = start(plugins_dir, gui=False)
     registry = QgsApplication.processingRegistry()
-    registry.addProvider(provider)
     out, r = Path(out_dir), Path(real)
     pairs = {
         "autzen": (r / "autzen_bmx_2010.las", r / "autzen_bmx_2023.las"),
@@ -108,6 +113,7 @@ def main(plugins_dir: str, out_dir: str, real: str) -> int:
     libs = sorted({line.split()[-1] for line in maps.splitlines() if any(w in line for w in WHEEL_LIBS)})
     new = {n: f for n, f in loaded_heavy().items() if n not in before_plugin}
     summary = {"runs": runs, "seconds": seconds, "others": others, "new_modules": new, "wheel_libraries": libs}
+    summary["children"] = children()
     print("RESULT" + json.dumps(summary), flush=True)
     app.exitQgis()
     return 0
