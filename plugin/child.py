@@ -80,13 +80,23 @@ def exit_code(proc: subprocess.Popen, timeout: float = EXIT_S) -> int:
 
 
 def _signal(proc: subprocess.Popen, hard: bool) -> None:
+    """SIGTERM (then SIGKILL) to the child's process group; on Windows the child's process tree
+    ends at once (``taskkill /T /F``: Dask workers included), else the child alone."""
     try:
-        if sys.platform == "win32":
-            proc.kill()
-        else:
+        if sys.platform != "win32":
             os.killpg(proc.pid, signal.SIGKILL if hard else signal.SIGTERM)
+        elif not _kill_tree(proc):
+            proc.kill()
     except (ProcessLookupError, PermissionError, OSError):
         pass
+
+
+def _kill_tree(proc: subprocess.Popen) -> bool:
+    try:
+        command = ["taskkill", "/T", "/F", "/PID", str(proc.pid)]
+        return subprocess.run(command, capture_output=True, timeout=10, **detached()).returncode == 0
+    except (OSError, ValueError, subprocess.TimeoutExpired):
+        return False
 
 
 def lines(proc: subprocess.Popen, cancelled: Callable[[], bool]) -> Iterator[tuple[str, str]]:
@@ -111,6 +121,7 @@ def lines(proc: subprocess.Popen, cancelled: Callable[[], bool]) -> Iterator[tup
     while open_pipes:
         if cancelled():
             stop(proc)
+            _close(proc, readers)
             raise Cancelled()
         try:
             name, line = q.get(timeout=POLL_S)
@@ -120,8 +131,18 @@ def lines(proc: subprocess.Popen, cancelled: Callable[[], bool]) -> Iterator[tup
             open_pipes -= 1
         else:
             yield name, line
+    _close(proc, readers)
+
+
+def _close(proc: subprocess.Popen, readers: list[threading.Thread]) -> None:
+    """Close the child's output pipes once their readers are done (the child has exited or
+    closed them)."""
     for reader in readers:
         reader.join(timeout=5)
+    if not any(reader.is_alive() for reader in readers):
+        for pipe in (proc.stdout, proc.stderr):
+            if pipe is not None:
+                pipe.close()
 
 
 @dataclass

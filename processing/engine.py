@@ -20,7 +20,7 @@ from pathlib import Path
 from types import ModuleType
 from typing import Any
 
-from qgis.core import QgsProcessingException, QgsProcessingFeedback
+from qgis.core import QgsProcessingException, QgsProcessingFeedback, QgsProcessingUtils
 
 from ..plugin import child, environment
 
@@ -101,11 +101,18 @@ def run(
         cancelled=fb.isCanceled,
     )
     try:
-        return child.run_engine(env.command([*args, "--progress", "jsonl"]), environment.child_environ(), events)
+        return child.run_engine(env.command([*args, "--progress", "jsonl"]), engine_environ(), events)
     except child.Cancelled as exc:
         raise QgsProcessingException(CANCELLED) from exc
     except child.EngineError as exc:
         raise QgsProcessingException(error_text(exc, hint)) from exc
+
+
+def engine_environ() -> dict[str, str]:
+    """The engine's environment variables: QGIS's, scrubbed (``environment.child_environ``), and
+    Dask's scratch space in Processing's temporary folder (QGIS removes it at exit) rather than
+    the system's."""
+    return environment.child_environ({"DASK_TEMPORARY_DIRECTORY": QgsProcessingUtils.tempFolder()})
 
 
 def error_text(exc: child.EngineError, hint: str = "") -> str:
