@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 from typing import Any
 
@@ -232,11 +231,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
     @staticmethod
     def copy_report(src: Path, dest: str) -> str:
         """Copy a report and any sibling files it links to (e.g. figures) next to it."""
-        params.deliver_file(src, dest)
-        if src.suffix == ".html":
-            text = src.read_text(encoding="utf-8", errors="replace")
-            Path(dest).write_text(engine.reword_html(text), encoding="utf-8")  # parameters, not flags
-            for sibling in src.parent.iterdir():
-                if sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file() and f'"{sibling.name}"' in text:
-                    shutil.copyfile(sibling, Path(dest).parent / sibling.name)
+        if src.suffix != ".html":
+            return params.deliver_file(src, dest)
+        Path(dest).parent.mkdir(parents=True, exist_ok=True)
+        text = src.read_text(encoding="utf-8", errors="replace")
+        page = engine.reword_html(text)  # parameters, not flags
+        params.write_atomically(dest, lambda partial: partial.write_text(page, encoding="utf-8"))
+        for sibling in src.parent.iterdir():
+            if sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file() and f'"{sibling.name}"' in text:
+                params.copy(sibling, str(Path(dest).parent / sibling.name))
         return dest

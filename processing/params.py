@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -155,22 +156,13 @@ def to_json(value: Any, indent: int | None = None) -> str:
     return json.dumps(value, indent=indent, default=plain)
 
 
-def qgs_crs(text: str | None) -> QgsCoordinateReferenceSystem:
-    """A QGIS CRS from an authority id or WKT (invalid when empty or not understood)."""
-    if not text:
-        return QgsCoordinateReferenceSystem()
-    crs = QgsCoordinateReferenceSystem(text)
-    return crs if crs.isValid() else QgsCoordinateReferenceSystem.fromWkt(text)
-
-
 def deliver_raster(src: Path, dest: str | None) -> str | None:
     """Move an engine GeoTIFF to a destination (converting when it is not a GeoTIFF)."""
     if not dest:
         return None
     Path(dest).parent.mkdir(parents=True, exist_ok=True)
     if Path(dest).suffix.lower() in RASTER_COPY_SUFFIXES:
-        shutil.copyfile(src, dest)
-        return dest
+        return copy(src, dest)
     from osgeo import gdal
 
     if gdal.Translate(dest, str(src)) is None:
@@ -193,14 +185,12 @@ def deliver_cloud(src: Path, dest: str | None, feedback=None) -> str | None:
         return None
     Path(dest).parent.mkdir(parents=True, exist_ok=True)
     if Path(dest).suffix.lower() == src.suffix.lower():
-        shutil.copyfile(src, dest)
-        return dest
+        return copy(src, dest)
     if not is_las(dest):
         raise QgsProcessingException(f"{dest}: the registered cloud is written as .las or .laz.")
     converted = src.with_name(src.stem + "_converted.las")  # in the run's folder: no half-written dest
     engine.python(["-c", LAZ_TO_LAS, str(src), str(converted)], feedback)
-    shutil.copyfile(converted, dest)
-    return dest
+    return copy(converted, dest)
 
 
 @contextmanager
@@ -237,5 +227,26 @@ def deliver_file(src: Path, dest: str | None) -> str | None:
     if not dest:
         return None
     Path(dest).parent.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(src, dest)
+    return copy(src, dest)
+
+
+def copy(src: Path, dest: str) -> str:
+    """``src`` copied to ``dest`` whole or not at all (through a hidden partial file beside it,
+    renamed into place: a full disk or a crash leaves no half-written destination)."""
+    write_atomically(dest, lambda partial: shutil.copyfile(src, partial))
     return dest
+
+
+def write_atomically(dest: str | Path, write) -> None:
+    """``write(partial_path)``, then the partial file renamed to ``dest``; removed on failure
+    (an OS error as one line naming the destination)."""
+    dest = Path(dest)
+    partial = dest.with_name(f".{dest.name}.partial")
+    try:
+        write(partial)
+        os.replace(partial, dest)
+    except BaseException as exc:
+        partial.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise QgsProcessingException(f"Cannot write {dest}: {exc.strerror or exc}") from exc
+        raise

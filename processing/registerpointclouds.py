@@ -97,6 +97,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         dest = self.parameterAsFileOutput(parameters, "TRANSFORM_FILE", context)
         if dest:
             Path(dest).parent.mkdir(parents=True, exist_ok=True)
-            Path(dest).write_text(params.to_json(reg, indent=2) + "\n", encoding="utf-8")
+            text = params.to_json(reg, indent=2) + "\n"
+            params.write_atomically(dest, lambda partial: partial.write_text(text, encoding="utf-8"))
             results["TRANSFORM_FILE"] = dest
         return results

@@ -150,3 +150,27 @@ def test_absurd_options_are_refused_naming_the_parameter(run_alg, scene_dir, tmp
         run_alg(alg, {**params, **extra})
     assert expect in str(info.value), str(info.value)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_while_delivering_leaves_no_half_written_output(plugin_package, tmp_path, monkeypatch):
+    """Outputs are copied through a partial file renamed into place: a copy that fails half-way
+    leaves neither the destination nor the partial file (and an earlier destination intact)."""
+    import errno
+    import shutil
+
+    from soilvolume_qgis.processing import params
+
+    src = tmp_path / "difference.tif"
+    src.write_bytes(b"x" * 10_000)
+    dest = tmp_path / "out" / "d.tif"
+    dest.parent.mkdir()
+    dest.write_bytes(b"the previous run")
+
+    def half(a, b):
+        Path(b).write_bytes(Path(a).read_bytes()[:5_000])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(shutil, "copyfile", half)
+    with pytest.raises(QgsProcessingException, match=r"Cannot write .*d\.tif: No space left on device"):
+        params.deliver_raster(src, str(dest))
+    assert dest.read_bytes() == b"the previous run" and sorted(p.name for p in dest.parent.iterdir()) == ["d.tif"]
