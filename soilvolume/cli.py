@@ -26,6 +26,7 @@ SKIP = {"keep_registered_cloud"}
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
 (H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
 report.json, report.html, and with --registered-cloud after_registered.laz.
+change_areas.geojson: the areas of significant change as cut and fill polygons with their volumes.
 Volumes are in cubic metres: fill = material added, cut = removed,
 net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted).
 The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
