@@ -29,6 +29,25 @@ class EpochDEM:
     spread: np.ndarray
     dx: np.ndarray | None = None  # mean offset (m) of the cell's points from its centre, east
     dy: np.ndarray | None = None  # the same, north
+    veg: np.ndarray | None = None  # points per cell that are not soil: vegetation,
+    obj: np.ndarray | None = None  # objects (buildings, wires),
+    other: np.ndarray | None = None  # other (noise, water, unclassified)
+    nonsoil_z: np.ndarray | None = None  # the sum of their heights (m, local)
+
+    def nonsoil(self) -> np.ndarray:
+        """Points per cell that are not soil (all kinds; 0 without a rule)."""
+        parts = [a for a in (self.veg, self.obj, self.other) if a is not None]
+        return sum(parts) if parts else np.zeros(self.counts.shape, np.int64)
+
+    def all_points_height(self) -> np.ndarray:
+        """Each cell's mean height with its non-soil points in (what a grid of every point would
+        hold; NaN where the cell has no point at all)."""
+        if self.nonsoil_z is None:
+            return self.heights
+        m = self.nonsoil()
+        soil = np.where(self.counts > 0, np.nan_to_num(self.heights) * self.counts, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.counts + m > 0, (soil + self.nonsoil_z) / (self.counts + m), np.nan)
 
     def centred(self, cell: float, skip: np.ndarray | None = None) -> np.ndarray:
         """Heights moved from where each cell's points lie to the cell's centre, along the slope
@@ -46,7 +65,9 @@ class EpochDEM:
 
 
 CENTRING_PASSES = 4  # fixed-point passes: a moved cell gives its neighbours better slopes
-EPOCH_ARRAYS = ("h", "n", "s", "x", "y")  # an EpochDEM's arrays, in field order
+EPOCH_ARRAYS = ("h", "n", "s", "x", "y", "v", "o", "q", "z")  # an EpochDEM's arrays, in field order
+ZERO_WHERE_EMPTY = set("nxyvoqz")  # arrays that are 0 (not NaN) where a cell has no point
+MOSTLY = 0.5  # a cell whose points are at least this share not soil has no soil height (colour rule)
 
 
 def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
@@ -161,9 +182,10 @@ def average_height(
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
 
 
-def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -> EpochDEM:
-    """:func:`average_height` of one epoch with its spreads and its points' offsets from the cell
-    centres, as an :class:`EpochDEM`."""
+def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", nonsoil=None) -> EpochDEM:
+    """:func:`average_height` of one epoch's soil points with their spreads and offsets from
+    the cell centres, and the per-cell counts of its ``nonsoil`` points (``soil.points.NonSoil``,
+    in the grid's frame), as an :class:`EpochDEM` (see :func:`finish_epoch`)."""
     col, row, ok = cell_coords(xyz, grid)
     col, row = col[ok], row[ok]
     ids = flat_ids(col, row, grid.cols)
@@ -172,7 +194,37 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -
     del col, row
     z = np.asarray(xyz[ok, 2], dtype=np.float64)
     h, n, s = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True)
-    return EpochDEM(h, n, s, *sums.means(n, grid.cell))
+    others = None
+    if nonsoil is not None:
+        o_ids, o_ok = cell_ids(nonsoil.xyz, grid)
+        others = nonsoil_sums(o_ids, nonsoil.labels[o_ok], nonsoil.xyz[o_ok, 2], (grid.rows, grid.cols))
+    return finish_epoch((h, n, s), sums.means(n, grid.cell), others, nonsoil.rule if nonsoil is not None else None)
+
+
+def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:
+    """(vegetation, objects, other counts, sum of heights) per cell of non-soil points in flat
+    cells ``ids`` of a ``shape`` grid (labels of :mod:`soilvolume.soil.points`)."""
+    from ..soil.points import OBJECT, OTHER, VEGETATION
+
+    n = shape[0] * shape[1]
+    counts = tuple(np.bincount(ids[labels == k], minlength=n).reshape(shape) for k in (VEGETATION, OBJECT, OTHER))
+    return (*counts, np.bincount(ids, weights=np.asarray(z, np.float64), minlength=n).reshape(shape))
+
+
+def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> EpochDEM:
+    """An :class:`EpochDEM` from its soil heights (h, n, s), centre offsets (dx, dy) and non-soil
+    sums (:func:`nonsoil_sums`, None without a rule); with a colour rule (``rule.empties_cells``)
+    a cell mostly of non-soil points has no soil height: its remaining "soil" points are canopy
+    seen at a slant or mixed pixels, not the ground."""
+    h, n, s = heights
+    if others is None:
+        return EpochDEM(h, n, s, *offsets)
+    if rule is not None and rule.empties_cells:
+        m = others[0] + others[1] + others[2]
+        gone = (m > 0) & (m >= MOSTLY * (m + n))
+        h, s = np.where(gone, np.nan, h), np.where(gone, np.nan, s)
+        n = np.where(gone, 0, n)
+    return EpochDEM(h, n, s, *offsets, *others)
 
 
 def cell_heights(

@@ -162,6 +162,7 @@ def _tiled(
         footprint(prep.after_thin[:, :2], options.radius),
         options.statistic,
         prep.index,
+        prep.rules,
     )
     task_gb, density = worker_gb(schedule, options.memory_limit), points_per_cell(prep, cell)
     side = tile_side(options, grid, density, task_gb, schedule.workers)
