@@ -117,6 +117,10 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
             "confidence": vols.uncertainty["confidence"],
         },
         "uncertainty": vols.uncertainty,
+        "excluded": {
+            **vols.excluded,
+            "rule": {e: prep.inputs[e].get("soil_rule", "") for e in ("before", "after")},
+        },
         "zones": vols.zones,
         "correction": {"method": options.correction, "params": vols.params},
         "registration": {

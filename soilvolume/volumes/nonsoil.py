@@ -1,0 +1,159 @@
+"""What the volume step leaves out of the soil, and says so: objects that moved between the
+surveys (found by shape, :mod:`soilvolume.soil.objects`) are taken out of the change areas;
+cells whose points were mostly not soil (vegetation, objects, other by the epochs' point rules)
+are listed with the apparent volume they would have added; objects in one survey only stay
+counted and are listed. The class raster (``excluded.tif``) draws all of it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.types import GridSpec
+from ..dem.grid import EpochDEM
+from ..soil.objects import Blob, find_objects
+
+# excluded.tif: one byte per cell
+CLASS_CODES = {
+    0: "soil",
+    1: "vegetation (not gridded)",
+    2: "objects by classification (not gridded)",
+    3: "other points: noise, water, unclassified (not gridded)",
+    4: "moved object (left out of the volumes)",
+    5: "object in one survey only (counted)",
+}
+SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
+MISSED_SHARE = 0.1  # one-sigma share of an excluded volume the classification may have got wrong
+MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
+
+
+@dataclass(frozen=True)
+class Exclusion:
+    """The change areas without moved objects, the class raster, the report's ``excluded``
+    section and the one-sigma volume terms (m3 per part) of what the classification may have
+    missed or wrongly removed."""
+
+    fill: np.ndarray
+    cut: np.ndarray
+    classes: np.ndarray
+    report: dict
+    sigma: dict
+
+
+def exclude_nonsoil(
+    diff: np.ndarray,
+    fill: np.ndarray,
+    cut: np.ndarray,
+    epochs: tuple[EpochDEM, EpochDEM],
+    offset: np.ndarray,
+    grid: GridSpec,
+    mode: str = "auto",
+) -> Exclusion:
+    """See module; ``epochs`` (after, before), ``mode`` the ``--exclude`` option (``none``: moved
+    objects stay counted, still listed)."""
+    found = find_objects(diff, fill, cut, grid.cell)
+    leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
+    valid = np.isfinite(diff)
+    classes = np.where(valid, 0, 255).astype(np.uint8)
+    report: dict = {"mode": mode, "classes": {}}
+    sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
+    apparent = _apparent(diff, epochs, offset)
+    shares = _shares(epochs)
+    taken = np.zeros(diff.shape, bool)
+    for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
+        cells = (shares[name] >= SHARE) & ~taken & ~found.moved & ~found.single
+        taken |= cells
+        classes[cells] = code
+        part = _budget(apparent, cells, grid.cell_area)
+        report["classes"][name] = part
+        for k in sigma:
+            sigma[k] = float(np.hypot(sigma[k], MISSED_SHARE * abs(part[k])))
+    classes[found.moved] = 4
+    classes[found.single] = 5
+    moved = _budget(np.where(found.moved, diff, 0.0), found.moved, grid.cell_area)
+    report["moved_objects"] = {
+        **moved,
+        "count": len(found.moved_blobs()) // 2,
+        "excluded": mode != "none",
+        "items": [_item(b, grid) for b in found.moved_blobs()],
+    }
+    single = found.single_blobs()
+    report["single_objects"] = {
+        "count": len(single),
+        "net_m3": float(sum(b.sign * b.volume_m3 for b in single)),
+        "counted": True,
+        "items": [_item(b, grid) for b in single],
+    }
+    if mode != "none":
+        for k in sigma:
+            sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * abs(moved[k])))
+    report["sigma_m3"] = sigma
+    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma)
+
+
+def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
+    """Per class, the largest share of a cell's points (either epoch) that are of that class."""
+    out = {}
+    for name, field in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
+        best = np.zeros(epochs[0].counts.shape)
+        for e in epochs:
+            part = getattr(e, field)
+            if part is None:
+                continue
+            total = e.counts + e.nonsoil()
+            with np.errstate(invalid="ignore", divide="ignore"):
+                best = np.maximum(best, np.where(total > 0, part / np.maximum(total, 1), 0.0))
+        out[name] = best
+    return out
+
+
+def _apparent(diff: np.ndarray, epochs: tuple[EpochDEM, EpochDEM], offset: np.ndarray) -> np.ndarray:
+    """Per cell, the difference every point would have given minus the soil's (m; 0 where
+    either is unknown): what the excluded points would have added."""
+    after, before = (e.all_points_height() for e in epochs)
+    d = after - before - np.nan_to_num(offset)
+    return np.nan_to_num(d - diff)
+
+
+def _budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
+    v = np.where(cells, np.nan_to_num(d), 0.0)
+    fill, cut = float(v[v > 0].sum()) * cell_area, float(-v[v < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(cells.sum()) * cell_area}
+
+
+def _item(b: Blob, grid: GridSpec) -> dict:
+    """An object for the report: absolute centroid, footprint, height, volume."""
+    x = grid.xmin + (b.x + 0.5) * grid.cell
+    y = grid.ymax - (b.y + 0.5) * grid.cell
+    return {
+        "kind": "fill" if b.sign > 0 else "cut",
+        "x": x,
+        "y": y,
+        "area_m2": b.area_m2,
+        "height_m": b.height_m,
+        "volume_m3": b.volume_m3,
+        "moved": bool(b.partner),
+    }
+
+
+def sentence(report: dict) -> list[str]:
+    """Plain sentences on what was excluded and listed (for the verdict and the CLI)."""
+    out = []
+    m = report.get("moved_objects") or {}
+    if m.get("count"):
+        verb = "excluded" if m.get("excluded") else "counted (--exclude none)"
+        out.append(
+            f"{m['fill']:.0f} m³ of apparent fill and {m['cut']:.0f} m³ of apparent cut in {m['count']} "
+            f"moved object{'s' if m['count'] > 1 else ''} {verb}"
+        )
+    for name, part in (report.get("classes") or {}).items():
+        if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
+            out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
+    s = report.get("single_objects") or {}
+    if s.get("count"):
+        out.append(
+            f"{s['count']} object{'s' if s['count'] > 1 else ''} in one survey only ({s['net_m3']:+.0f} m³) "
+            "counted: check that they are soil (a machine, a container or a test pillar is not)"
+        )
+    return out
