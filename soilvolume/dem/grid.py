@@ -328,7 +328,9 @@ def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> floa
     return choose_cell(int(counts[ins].sum()), float(ins.sum()) * res * res, minimum=minimum)
 
 
-MASK_LAYER = "filled_mask"  # the one uint8 layer of a run, without units
+MASK_LAYER = "filled_mask"  # uint8 layers of a run, without units: the refilled cells,
+CLASS_LAYER = "classes"  # and what is not soil (volumes/nonsoil.CLASS_CODES; resources/styles/excluded.qml)
+UINT8_LAYERS = (MASK_LAYER, CLASS_LAYER)
 
 
 def output_layers(correction: str) -> list[tuple[str, str, str]]:
@@ -340,7 +342,14 @@ def output_layers(correction: str) -> list[tuple[str, str, str]]:
         ("difference.tif", "diff", f"H_after - H_before - correction ({correction}) (m)"),
         ("plane_offset.tif", "offset", f"vertical correction d_i subtracted ({correction}) (m)"),
         ("filled_mask.tif", MASK_LAYER, "1 = difference interpolated (sparse cell or filled hole)"),
+        ("excluded.tif", CLASS_LAYER, CLASS_LEGEND),
     ]
+
+
+CLASS_LEGEND = (
+    "what is not soil: 0 soil, 1 vegetation, 2 objects by classification, 3 other (noise, water, unclassified), "
+    "4 moved object (left out), 5 object in one survey (counted), 6 rough change (counted)"
+)
 
 
 def write_geotiff(

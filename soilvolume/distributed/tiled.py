@@ -190,7 +190,7 @@ def _tiled(
             hooks.step(85, "writing outputs (COG)")
             with timer("write"):
                 arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
-                arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask)
+                arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask, classes=vols.classes)
                 write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
             with timer("report"):
                 report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)

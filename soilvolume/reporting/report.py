@@ -74,8 +74,16 @@ def summary_lines(report: dict) -> list[str]:
         f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
         f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
         f"total time {sum(report['timings_s'].values()):.2f} s",
+        *(f"not soil: {line}" for line in nonsoil_lines(report)),
         *quality_lines(report),
     ]
+
+
+def nonsoil_lines(report: dict) -> list[str]:
+    """What was excluded as not soil, or counted and listed, in plain sentences."""
+    from ..volumes.nonsoil import sentence
+
+    return sentence(report.get("excluded") or {})
 
 
 def quality_lines(report: dict) -> list[str]:
@@ -120,6 +128,7 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
         "excluded": {
             **vols.excluded,
             "rule": {e: prep.inputs[e].get("soil_rule", "") for e in ("before", "after")},
+            "by_classification": all(r is not None and r.use_class for r in prep.rules),
         },
         "zones": vols.zones,
         "correction": {"method": options.correction, "params": vols.params},

@@ -34,22 +34,29 @@ def vehicle_shape(rng: np.random.Generator) -> tuple[float, float, float]:
     return rng.uniform(2.1, 2.6), rng.uniform(0.85, 1.0), rng.uniform(1.4, 1.9)
 
 
-def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> None:
+def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
     """Place this config's moved, arriving and leaving vehicles, vegetation patches and crop field
     with ``place(inside_after, params)`` (params as the world's feature rows without x/y; it
-    returns False when no free spot was found)."""
+    returns False when no free spot was found). Returns the role of each feature placed, in
+    order ("moved", "arrived", "left", "vegetation")."""
     if cfg.signals not in SIGNALS:
         raise ValueError(f"unknown signals {cfg.signals!r} ({', '.join(SIGNALS)})")
+    roles: list[str] = []
     for _ in range(cfg.movers):  # the same vehicle at two places: before only, then after only
         a, b, h = vehicle_shape(rng)
         r = math.hypot(a, b)
         if place(True, (VEHICLE, rng.uniform(0, np.pi), a, b, h, 0.0, 0.0, 0.0, r)):
-            place(True, (VEHICLE, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a, b, h, r))
+            roles.append("moved")
+            if place(True, (VEHICLE, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a, b, h, r)):
+                roles.append("moved")
+            else:  # no room for its new place: it left
+                roles[-1] = "left"
     for n, after in ((cfg.arrivals, True), (cfg.departures, False)):
         for _ in range(n):
             a, b, h = vehicle_shape(rng)
             shape = (0.0, 0.0, 0.0, a, b, h) if after else (a, b, h, 0.0, 0.0, 0.0)
-            place(True, (VEHICLE, rng.uniform(0, np.pi), *shape, math.hypot(a, b)))
+            if place(True, (VEHICLE, rng.uniform(0, np.pi), *shape, math.hypot(a, b))):
+                roles.append("arrived" if after else "left")
     grown = cfg.patch_change == "grown"
     if cfg.patch_change not in ("grown", "mown"):
         raise ValueError(f"unknown patch_change {cfg.patch_change!r} (grown, mown)")
@@ -57,10 +64,13 @@ def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> None:
         a, b = rng.uniform(2.0, 4.5), rng.uniform(1.5, 3.5)
         tall = rng.uniform(0.2, 0.6) if grown else rng.uniform(0.3, 0.6)
         h0, h1 = (0.05, tall) if grown else (tall, 0.05)
-        place(True, (PATCH, rng.uniform(0, np.pi), a, b, h0, a, b, h1, max(a, b)))
+        if place(True, (PATCH, rng.uniform(0, np.pi), a, b, h0, a, b, h1, max(a, b))):
+            roles.append("vegetation")
     if cfg.crops:
         a, b = rng.uniform(8.0, 10.0), rng.uniform(5.0, 7.0)
-        place(True, (CROP, rng.uniform(-0.3, 0.3), a, b, 0.2, a, b, 0.8, math.hypot(a, b)))
+        if place(True, (CROP, rng.uniform(-0.3, 0.3), a, b, 0.2, a, b, 0.8, math.hypot(a, b))):
+            roles.append("vegetation")
+    return roles
 
 
 def categories(cls: np.ndarray, stray: np.ndarray) -> np.ndarray:

@@ -106,11 +106,11 @@ NEWER_FIELDS += ("slope_deg", "site_tone")
 
 
 def _objects(world: _World) -> list[dict]:
-    """The vehicles present in one epoch only (moved, arrived or left), with their volume above
-    the ground (m3; the roof and the lower bonnet over the footprint, approximately)."""
+    """The vehicles present in one epoch only (role: moved, arrived or left), with their volume
+    above the ground (m3; the roof and the lower bonnet over the footprint, approximately)."""
     o = world.cfg.origin
     out = []
-    for f in world.feats[world.n_plain :]:
+    for f, role in zip(world.feats[world.n_plain :], world.roles, strict=True):
         if f[0] != VEHICLE:
             continue
         before = f[6] > 0
@@ -118,6 +118,7 @@ def _objects(world: _World) -> list[dict]:
         out.append(
             {
                 "epoch": "before" if before else "after",
+                "role": role,
                 "x": float(f[1] + o[0]),
                 "y": float(f[2] + o[1]),
                 "area_m2": float(4 * a * b),

@@ -128,7 +128,7 @@ class _World:
             place(10, False, boulder)
         extra = np.random.default_rng(np.random.SeedSequence([self.seed, 7]))  # new kinds: own stream
         self.n_plain = len(feats)  # features after these are the config's extra kinds
-        extra_features(cfg, extra, lambda inside, params: place(1, inside, lambda: params, extra))
+        self.roles = extra_features(cfg, extra, lambda inside, params: place(1, inside, lambda: params, extra))
         self.feats = np.array(feats, dtype=np.float64).reshape(-1, 11)
         if len(self.feats):
             self.feat_zc = self.terrain(self.feats[:, 1], self.feats[:, 2])

@@ -22,10 +22,12 @@ CLASS_CODES = {
     3: "other points: noise, water, unclassified (not gridded)",
     4: "moved object (left out of the volumes)",
     5: "object in one survey only (counted)",
+    6: "rough change: vegetation? (counted, in the interval)",
 }
 SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
-MISSED_SHARE = 0.1  # one-sigma share of an excluded volume the classification may have got wrong
+MISSED_SHARE = 0.08  # one-sigma share of an excluded volume the classification may have got wrong
 MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
+ROUGH_SHARE = 0.6  # one-sigma share of the change on rough cells (vegetation the signals did not see)
 
 
 @dataclass(frozen=True)
@@ -49,9 +51,13 @@ def exclude_nonsoil(
     offset: np.ndarray,
     grid: GridSpec,
     mode: str = "auto",
+    heights: tuple[np.ndarray, np.ndarray] | None = None,
+    stable: np.ndarray | None = None,
 ) -> Exclusion:
     """See module; ``epochs`` (after, before), ``mode`` the ``--exclude`` option (``none``: moved
-    objects stay counted, still listed)."""
+    objects stay counted, still listed); ``heights`` (after, before: the heights the difference
+    is taken from) and ``stable`` ground give the rough cells (:mod:`soilvolume.soil.rough`):
+    fill where the after survey is rough, cut where the before survey is."""
     found = find_objects(diff, fill, cut, grid.cell)
     leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
     valid = np.isfinite(diff)
@@ -71,6 +77,11 @@ def exclude_nonsoil(
             sigma[k] = float(np.hypot(sigma[k], MISSED_SHARE * abs(part[k])))
     classes[found.moved] = 4
     classes[found.single] = 5
+    rough = _rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
+    classes[rough] = 6
+    report["rough"] = _budget(diff, rough, grid.cell_area)
+    for k in sigma:
+        sigma[k] = float(np.hypot(sigma[k], ROUGH_SHARE * abs(report["rough"][k])))
     moved = _budget(np.where(found.moved, diff, 0.0), found.moved, grid.cell_area)
     report["moved_objects"] = {
         **moved,
@@ -90,6 +101,18 @@ def exclude_nonsoil(
             sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * abs(moved[k])))
     report["sigma_m3"] = sigma
     return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma)
+
+
+def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
+    """Change cells on rough ground: fill where the after survey is rough, cut where the before is."""
+    if heights is None or stable is None:
+        return np.zeros(fill.shape, bool)
+    from ..soil.rough import rough_cells, roughness
+
+    out = []
+    for e, h in zip(epochs, heights, strict=True):
+        out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
+    return (fill & out[0]) | (cut & out[1])
 
 
 def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
@@ -150,6 +173,12 @@ def sentence(report: dict) -> list[str]:
     for name, part in (report.get("classes") or {}).items():
         if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
             out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
+    r = report.get("rough") or {}
+    if r.get("area_m2"):
+        out.append(
+            f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
+            "counted: no classification, colour or returns said what it is"
+        )
     s = report.get("single_objects") or {}
     if s.get("count"):
         out.append(

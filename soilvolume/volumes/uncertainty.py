@@ -189,8 +189,14 @@ def volume_uncertainty(
     extra = extra_sigma or {}
     leftover = leftover_bias(diff_corrected, stable, grid.cell)
 
+    # the correction surface's residual systematic error where it cannot be seen: the spread of
+    # its leftover over the stable ground, carried fully correlated over the part's area
+    seen = leftover[stable & np.isfinite(leftover)]
+    residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
+
     def unmodelled(m: np.ndarray) -> float:  # fully correlated over the part
-        return abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
+        signed = abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
+        return float(np.hypot(signed, residual * float(m.sum()) * grid.cell_area))
 
     terms = {  # one-sigma (m^3): the area's error model, then refills, leftover bias, extras
         k: [
@@ -214,6 +220,7 @@ def volume_uncertainty(
         interpolated_m3=interp(region) / max(interp_fraction, 1e-12),
         refill_sigma_m3=refill(region),
         unmodelled_bias_m3=unmodelled(region),
+        correction_residual_m3=residual * float(region.sum()) * grid.cell_area,
         stable_cells=int(stable.sum()),
         change_area_m2=float(region.sum()) * grid.cell_area,
         part_area_m2={k: float(m.sum()) * grid.cell_area for k, m in parts.items()},

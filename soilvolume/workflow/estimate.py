@@ -129,7 +129,7 @@ def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec, prep: Prepared
     z0 = float(prep.origin[2])  # local -> absolute heights
     for name, key, desc in gridmod.output_layers(options.correction):
         array = getattr(vols, key)
-        if key == gridmod.MASK_LAYER:
+        if key in gridmod.UINT8_LAYERS:
             gridmod.write_geotiff(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
         else:
             gridmod.write_geotiff(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)

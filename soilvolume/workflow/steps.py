@@ -82,6 +82,7 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
         "difference": vols.diff,
         "residual": np.where(vols.stable, vols.diff, np.nan),
         "filled_mask": vols.filled_mask,
+        "classes": vols.classes,
         "dem_after": dem_after,
     }
     write_html(report, arrays, grid, out.path("report.html"))
