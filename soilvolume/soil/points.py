@@ -12,8 +12,10 @@ bridges), :data:`OTHER` (noise, water, unclassified).
   chromatic coordinates (r + g + b = 1); a point is vegetation when ExG exceeds the epoch's
   threshold and green is its strongest channel (yellow machines are not vegetation). The
   threshold is Otsu's split of the first chunk's ExG when it shows a green mode, clamped to
-  0.08..0.20, else 0.12; points too dark to have a colour (shadows) are left as soil. Bare soil,
-  brown or grey, has ExG near 0 and red or blue as strong as green, so the rule does not fire.
+  0.06..0.20, else 0.10 (what the split gives on vegetated sites, so an epoch whose first chunk
+  happens to hold little vegetation is labelled alike); points too dark to have a colour
+  (shadows) are left as soil. Bare soil, brown or grey, has ExG near 0 and red or blue as strong
+  as green: the rule fires on a few noisy points only, never on most of a cell's.
 * Returns (no real classification): a point that is not the last of several returns is
   vegetation (the canopy); the last return below it is ground.
 """
@@ -31,7 +33,7 @@ _BY_CLASS = np.full(256, OTHER, np.uint8)
 _BY_CLASS[GROUND] = SOIL
 _BY_CLASS[[3, 4, 5]] = VEGETATION
 _BY_CLASS[[6, 10, 13, 14, 15, 16, 17]] = OBJECT
-GREEN_DEFAULT, GREEN_RANGE = 0.12, (0.08, 0.20)
+GREEN_DEFAULT, GREEN_RANGE = 0.10, (0.06, 0.20)
 DARK = 0.12  # r + g + b below this share of full scale: too dark for a colour
 MIN_GREEN_SHARE = 0.002  # a green mode: at least this share of the first chunk's points
 MIN_MULTI_RETURNS = 0.005  # returns are used when at least this share has several

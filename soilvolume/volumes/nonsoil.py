@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
@@ -26,6 +27,7 @@ CLASS_CODES = {
 }
 SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
 MISSED_SHARE = 0.08  # one-sigma share of an excluded volume the classification may have got wrong
+NEAR_CELLS = 2  # ... where it was left out within this many cells of a counted change area
 MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
 ROUGH_SHARE = 0.6  # one-sigma share of the change on rough cells (vegetation the signals did not see)
 
@@ -67,12 +69,14 @@ def exclude_nonsoil(
     apparent = _apparent(diff, epochs, offset)
     shares = _shares(epochs)
     taken = np.zeros(diff.shape, bool)
+    # only what was left out in or beside the counted change areas can bias the headline
+    near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
     for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
         cells = (shares[name] >= SHARE) & ~taken & ~found.moved & ~found.single
         taken |= cells
         classes[cells] = code
-        part = _budget(apparent, cells, grid.cell_area)
-        report["classes"][name] = part
+        report["classes"][name] = _budget(apparent, cells, grid.cell_area)
+        part = _budget(apparent, cells & near, grid.cell_area)
         for k in sigma:
             sigma[k] = float(np.hypot(sigma[k], MISSED_SHARE * abs(part[k])))
     classes[found.moved] = 4
