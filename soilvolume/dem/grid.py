@@ -33,6 +33,7 @@ class EpochDEM:
     obj: np.ndarray | None = None  # objects (buildings, wires),
     other: np.ndarray | None = None  # other (noise, water, unclassified)
     nonsoil_z: np.ndarray | None = None  # the sum of their heights (m, local)
+    skew: np.ndarray | None = None  # the cell's height minus its points' median (m): what the statistic moved
 
     def nonsoil(self) -> np.ndarray:
         """Points per cell that are not soil (all kinds; 0 without a rule)."""
@@ -65,8 +66,8 @@ class EpochDEM:
 
 
 CENTRING_PASSES = 4  # fixed-point passes: a moved cell gives its neighbours better slopes
-EPOCH_ARRAYS = ("h", "n", "s", "x", "y", "v", "o", "q", "z")  # an EpochDEM's arrays, in field order
-ZERO_WHERE_EMPTY = set("nxyvoqz")  # arrays that are 0 (not NaN) where a cell has no point
+EPOCH_ARRAYS = ("h", "n", "s", "x", "y", "v", "o", "q", "z", "m")  # an EpochDEM's arrays, in field order
+ZERO_WHERE_EMPTY = set("nxyvoqzm")  # arrays that are 0 (not NaN) where a cell has no point
 MOSTLY = 0.5  # a cell whose points are at least this share not soil has no soil height (colour rule)
 
 
@@ -193,12 +194,13 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
     sums.add(ids, col, row)
     del col, row
     z = np.asarray(xyz[ok, 2], dtype=np.float64)
-    h, n, s = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True)
+    heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True, skew=True)
     others = None
     if nonsoil is not None:
         o_ids, o_ok = cell_ids(nonsoil.xyz, grid)
         others = nonsoil_sums(o_ids, nonsoil.labels[o_ok], nonsoil.xyz[o_ok, 2], (grid.rows, grid.cols))
-    return finish_epoch((h, n, s), sums.means(n, grid.cell), others, nonsoil.rule if nonsoil is not None else None)
+    rule = nonsoil.rule if nonsoil is not None else None
+    return finish_epoch(heights, sums.means(heights[1], grid.cell), others, rule)
 
 
 def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:
@@ -212,19 +214,19 @@ def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tupl
 
 
 def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> EpochDEM:
-    """An :class:`EpochDEM` from its soil heights (h, n, s), centre offsets (dx, dy) and non-soil
-    sums (:func:`nonsoil_sums`, None without a rule); with a colour rule (``rule.empties_cells``)
-    a cell mostly of non-soil points has no soil height: its remaining "soil" points are canopy
-    seen at a slant or mixed pixels, not the ground."""
-    h, n, s = heights
+    """An :class:`EpochDEM` from its soil heights (h, n, s, skew), centre offsets (dx, dy) and
+    non-soil sums (:func:`nonsoil_sums`, None without a rule); with a colour rule
+    (``rule.empties_cells``) a cell mostly of non-soil points has no soil height: its remaining
+    "soil" points are canopy seen at a slant or mixed pixels, not the ground."""
+    h, n, s, skew = heights
     if others is None:
-        return EpochDEM(h, n, s, *offsets)
+        return EpochDEM(h, n, s, *offsets, skew=skew)
     if rule is not None and rule.empties_cells:
         m = others[0] + others[1] + others[2]
         gone = (m > 0) & (m >= MOSTLY * (m + n))
-        h, s = np.where(gone, np.nan, h), np.where(gone, np.nan, s)
+        h, s, skew = (np.where(gone, np.nan, a) for a in (h, s, skew))
         n = np.where(gone, 0, n)
-    return EpochDEM(h, n, s, *offsets, *others)
+    return EpochDEM(h, n, s, *offsets, *others, skew)
 
 
 def cell_heights(
@@ -234,9 +236,12 @@ def cell_heights(
     statistic: str = "robust-mean",
     k_mad: float = 3.0,
     spread: bool = False,
+    skew: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
-    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid)."""
+    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid); with
+    ``skew`` (and ``spread``) also each cell's height minus its median (0 for ``median``, NaN
+    where empty; for ``mean`` the plain mean's)."""
     if statistic not in ("mean", "median", "robust-mean"):
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     n = shape[0] * shape[1]
@@ -247,16 +252,19 @@ def cell_heights(
         if spread:
             sq = _mean(ids, z * z, counts, n)
             out += (np.sqrt(np.maximum(sq - mean * mean, 0.0)).reshape(shape),)
+        if skew:
+            med = _SortedCells(ids, z, n).quantile(0.5) if len(z) else mean
+            out += ((mean - med).reshape(shape),)
         return out
     keys = _SortedCells(ids, z, n)
     med = keys.quantile(0.5)
     iqr_sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
     extra = (iqr_sigma.reshape(shape),) if spread else ()
     if statistic == "median":
-        return (med.reshape(shape), keys.counts.reshape(shape), *extra)
+        return (med.reshape(shape), keys.counts.reshape(shape), *extra, *((np.zeros(shape),) if skew else ()))
     sigma = np.maximum(iqr_sigma, 0.01)
     h = keys.mean_between(med - k_mad * sigma, med + k_mad * sigma)
-    return (h.reshape(shape), keys.counts.reshape(shape), *extra)
+    return (h.reshape(shape), keys.counts.reshape(shape), *extra, *(((h - med).reshape(shape),) if skew else ()))
 
 
 class _SortedCells:

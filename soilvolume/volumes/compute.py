@@ -80,7 +80,14 @@ def compute_volumes(
     rigid move from the accepted pose to a nearly as good one (registration uncertainty);
     ``given``: the window of a tiled run (see :class:`Given`)."""
     from .change import cell_lod, cell_sigma, change_areas, marginal_volume
-    from .uncertainty import detection_level, interp_fraction, thresholded_volumes, volume_uncertainty, z_value
+    from .uncertainty import (
+        detection_level,
+        interp_fraction,
+        statistic_bias,
+        thresholded_volumes,
+        volume_uncertainty,
+        z_value,
+    )
 
     med_a, med_b = (None, None) if given is None else given.median_counts
     n_a, n_b = after.counts, before.counts
@@ -129,7 +136,9 @@ def compute_volumes(
     }
     marginal["net"] = float(np.hypot(marginal["fill"], marginal["cut"]))
     reg_in = 0.0 if given else 1.0  # a tile: the pose is common to all tiles, summed across them
-    extra = {k: float(np.linalg.norm([reg_in * reg_v[k], marginal[k], ex.sigma[k]])) for k in ("net", "cut", "fill")}
+    skews = tuple(None if e.skew is None else e.skew[core] for e in (after, before))
+    stat = statistic_bias(skews, filled_mask[core], {"net": fa | ca, "cut": ca, "fill": fa}, area)
+    extra = {k: float(np.linalg.norm([reg_in * reg_v[k], marginal[k], ex.sigma[k], stat[k]])) for k in stat}
     counted = fill_area | cut_area  # the change areas without moved objects
     unc = volume_uncertainty(
         diff,
@@ -161,6 +170,7 @@ def compute_volumes(
             "registration_m3": reg_v,
             "marginal_detections_m3": marginal,
             "classification_m3": ex.sigma,
+            "statistic_m3": stat,
         },
         "change_mask": counted,
         "excluded": ex.report,

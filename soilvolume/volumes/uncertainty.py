@@ -230,6 +230,20 @@ def volume_uncertainty(
     return out
 
 
+def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
+    """One-sigma volume (m3) per part of the cell statistic's own bias where outliers, walls or
+    canopy leftovers fall in cells: how far the statistic moved each epoch's cells from their
+    medians, differenced, summed over the part (fully correlated: a wall or a rim biases all its
+    cells alike). ``skews``: (after, before) per-cell height minus median (None: 0); refilled
+    cells carry no statistic of their own."""
+    d = np.zeros(refilled.shape)
+    for sign, sk in zip((1.0, -1.0), skews, strict=True):
+        if sk is not None:
+            d += sign * np.nan_to_num(sk)
+    d[refilled] = 0.0
+    return {k: abs(float(d[m].sum())) * cell_area for k, m in parts.items()}
+
+
 def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
     """Level of detection (m) of one cell: from the stable-ground residuals (see :func:`_lod`),
     but at most twice the LoD of the neighbour-difference noise, so real change left in what
