@@ -1132,7 +1132,17 @@ of the net; over the whole matrix 95 % coverage ≥ 90 % for each of net, cut an
 pairs have their own criteria (second table). Cases without a target (–) count for coverage
 only. A run that ends in an engine error counts as a failure and as not covered. *change %* is
 the share of the after footprint whose ground changed. *s* is the wall time of the estimate on a
-shared 2-core machine (generation excluded, cached)."""
+shared 2-core machine (generation excluded, cached).
+
+Issue 19 (only soil counts) adds rows with machines that moved, arrived or left, grass grown or
+mown, crops, on photogrammetric scenes with RGB and no classification (`-rgb`), LiDAR-like ones
+with a classification and return numbers, and scenes without any signal (`-nosignal`). Their
+truth is the soil alone; rows marked *counted* in their description also count the objects in
+one survey only (machines that arrived or left, the seed paper's pillars), as the engine does by
+design (it lists them). Targets: **nochange** = |net| ≤ 15 m³, cut and fill ≤ 25 m³ each and the
+net's interval holds 0; **works** (yard, 30° landslide, trench, 70 % excavation, sparse high flight
+with 5 m / 5° GPS error) = net ≤ 1 % (of cut + fill for the landslide and the trench, whose net is
+small), cut and fill ≤ 5 %."""
 
 
 def markdown(rows: list[dict], meta: dict) -> str:

@@ -1,6 +1,6 @@
 """Rough cells: a canopy (grass, crops, bushes) stands in a cell as a spread of heights that the
 slope of the ground does not explain; soil, even on a pile's flank, is smooth at the scale of a
-cell. Used where no signal (classification, colour, returns) says what is vegetation: such cells
+cell. Used only where no signal (classification, colour, returns) labelled any point: such cells
 are flagged, counted, and their volume is carried in the interval and the verdict."""
 
 from __future__ import annotations

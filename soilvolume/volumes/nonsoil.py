@@ -108,8 +108,10 @@ def exclude_nonsoil(
 
 
 def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
-    """Change cells on rough ground: fill where the after survey is rough, cut where the before is."""
-    if heights is None or stable is None:
+    """Change cells on rough ground: fill where the after survey is rough, cut where the before is;
+    only where no signal labelled any point (a classification, colour or returns say what is
+    vegetation better than roughness, which curved ground on coarse cells also shows)."""
+    if heights is None or stable is None or any(e.nonsoil().any() for e in epochs):
         return np.zeros(fill.shape, bool)
     from ..soil.rough import rough_cells, roughness
 
