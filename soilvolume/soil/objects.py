@@ -12,7 +12,8 @@ the width of that band (its area over the blob's perimeter) implies a slope of a
 :data:`WALL_SLOPE`, or is below what the cell size resolves (a small steep pile on coarse cells
 looks the same: only a matching pair is left out), its footprint is under
 :data:`MAX_AREA_M2`, not elongated (a trench is not an object) and the ring around it is mostly
-unchanged ground.
+unchanged ground. On cells coarser than :data:`MAX_SINGLE_CELL` a lone steep pile cannot be told
+from an object: only matching pairs are objects there.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ MIN_AREA_M2 = 2.0
 MAX_AREA_M2 = 150.0
 MAX_ELONGATION = 5.0
 MIN_QUIET_RING = 0.6  # share of the ring around a blob that must be unchanged ground
+MAX_SINGLE_CELL = 0.8  # m: on coarser cells a vehicle's walls are not seen; only moved pairs are told
 # a moved object: the two blobs' ratios within these
 AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 1.8, 1.35, 1.8
 _EIGHT = np.ones((3, 3), bool)
@@ -82,6 +84,10 @@ def find_objects(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: floa
                 blobs.append(blob)
     if pair:
         blobs = _pairs(blobs)
+    if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs only
+        blobs = [b for b in blobs if b.partner]
+    kept = [b.label for b in blobs]
+    labels = np.where(np.isin(labels, kept), labels, 0)
     moved_ids = [b.label for b in blobs if b.partner]
     moved = np.isin(labels, moved_ids) & (labels > 0)
     moved = ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls

@@ -180,7 +180,7 @@ def sentence(report: dict) -> list[str]:
         if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
             out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
     r = report.get("rough") or {}
-    if r.get("area_m2"):
+    if r.get("area_m2") and abs(r.get("net", 0.0)) >= 0.5:
         out.append(
             f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
             "counted: no classification, colour or returns said what it is"
