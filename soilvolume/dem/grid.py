@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -34,6 +35,7 @@ class EpochDEM:
     other: np.ndarray | None = None  # other (noise, water, unclassified)
     nonsoil_z: np.ndarray | None = None  # the sum of their heights (m, local)
     skew: np.ndarray | None = None  # the cell's height minus its points' median (m): what the statistic moved
+    rule: Any = None  # soil.points.PointRule that labelled the points (None: none active)
 
     def nonsoil(self) -> np.ndarray:
         """Points per cell that are not soil (all kinds; 0 without a rule)."""
@@ -220,13 +222,13 @@ def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> 
     "soil" points are canopy seen at a slant or mixed pixels, not the ground."""
     h, n, s, skew = heights
     if others is None:
-        return EpochDEM(h, n, s, *offsets, skew=skew)
+        return EpochDEM(h, n, s, *offsets, skew=skew, rule=rule)
     if rule is not None and rule.empties_cells:
         m = others[0] + others[1] + others[2]
         gone = (m > 0) & (m >= MOSTLY * (m + n))
         h, s, skew = (np.where(gone, np.nan, a) for a in (h, s, skew))
         n = np.where(gone, 0, n)
-    return EpochDEM(h, n, s, *offsets, *others, skew)
+    return EpochDEM(h, n, s, *offsets, *others, skew, rule)
 
 
 def cell_heights(

@@ -184,7 +184,7 @@ def _tiled(
             )
         else:
             with timer("grids"):
-                dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}))
+                dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}), plan.rules)
             hooks.step(70, correction_step(options))
             vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
             hooks.step(85, "writing outputs (COG)")

@@ -138,7 +138,8 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
         others = nonsoil_sums(_joined(o_ids, np.int32), _joined(o_lab, np.uint8), _joined(o_z, np.float32), shape)
     dem = finish_epoch(heights, offsets.means(heights[1], plan.grid.cell), others, rule)
     zero = np.zeros(shape)
-    return tuple(zero if a is None else a for a in (getattr(dem, f.name) for f in fields(EpochDEM)))
+    names = [f.name for f in fields(EpochDEM)][: len(EPOCH_ARRAYS)]
+    return tuple(zero if a is None else a for a in (getattr(dem, n) for n in names))
 
 
 def _joined(parts: list, dtype) -> np.ndarray:
@@ -251,10 +252,13 @@ def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: 
         yield result
 
 
-def epoch_dems(arrays: tuple[np.ndarray, ...]) -> tuple[EpochDEM, EpochDEM]:
-    """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order."""
+def epoch_dems(arrays: tuple[np.ndarray, ...], rules: tuple = (None, None)) -> tuple[EpochDEM, EpochDEM]:
+    """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order; ``rules``:
+    the (before, after) point rules that labelled them (:attr:`Plan.rules`)."""
+    from dataclasses import replace
+
     k = len(EPOCH_ARRAYS)
-    return EpochDEM(*arrays[:k]), EpochDEM(*arrays[k:])
+    return replace(EpochDEM(*arrays[:k]), rule=rules[1]), replace(EpochDEM(*arrays[k:]), rule=rules[0])
 
 
 def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:

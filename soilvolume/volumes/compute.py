@@ -152,6 +152,7 @@ def compute_volumes(
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
         extra_sigma=extra,
         counted=None if given is None else _mask(diff.shape, core),
+        surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
     )
     headline = signed_budget(d, fa, ca, area)
     vols = {

@@ -27,6 +27,7 @@ CLASS_CODES = {
 }
 SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
 MISSED_SHARE = 0.08  # one-sigma share of an excluded volume the classification may have got wrong
+CLASS_MISSED_SHARE = 0.02  # the same for classes the files' own classification gave
 NEAR_CELLS = 2  # ... where it was left out within this many cells of a counted change area
 MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
 ROUGH_SHARE = 0.6  # one-sigma share of the change on rough cells (vegetation the signals did not see)
@@ -69,6 +70,7 @@ def exclude_nonsoil(
     apparent = _apparent(diff, epochs, offset)
     shares = _shares(epochs)
     taken = np.zeros(diff.shape, bool)
+    share = _missed_share(epochs)
     # only what was left out in or beside the counted change areas can bias the headline
     near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
     for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
@@ -78,7 +80,7 @@ def exclude_nonsoil(
         report["classes"][name] = _budget(apparent, cells, grid.cell_area)
         part = _budget(apparent, cells & near, grid.cell_area)
         for k in sigma:
-            sigma[k] = float(np.hypot(sigma[k], MISSED_SHARE * abs(part[k])))
+            sigma[k] = float(np.hypot(sigma[k], share * abs(part[k])))
     classes[found.moved] = 4
     classes[found.single] = 5
     rough = _rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
@@ -111,7 +113,7 @@ def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarr
     """Change cells on rough ground: fill where the after survey is rough, cut where the before is;
     only where no signal labelled any point (a classification, colour or returns say what is
     vegetation better than roughness, which curved ground on coarse cells also shows)."""
-    if heights is None or stable is None or any(e.nonsoil().any() for e in epochs):
+    if heights is None or stable is None or any(_labelled(e) for e in epochs):
         return np.zeros(fill.shape, bool)
     from ..soil.rough import rough_cells, roughness
 
@@ -119,6 +121,18 @@ def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarr
     for e, h in zip(epochs, heights, strict=True):
         out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
     return (fill & out[0]) | (cut & out[1])
+
+
+def _labelled(e: EpochDEM) -> bool:
+    """Whether a point rule labelled the epoch (or, without its rule, any point is not soil)."""
+    return (e.rule is not None and e.rule.active) or bool(e.nonsoil().any())
+
+
+def _missed_share(epochs: tuple[EpochDEM, EpochDEM]) -> float:
+    """The share of an excluded volume the classification may have got wrong: the files' own LAS
+    classification (ground returns below a canopy are measured) less than colour or returns."""
+    by_class = all(e.rule is not None and e.rule.use_class for e in epochs)
+    return CLASS_MISSED_SHARE if by_class else MISSED_SHARE
 
 
 def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:

@@ -142,6 +142,7 @@ def volume_uncertainty(
     fill_sigma: np.ndarray | None = None,
     extra_sigma: dict[str, float] | None = None,
     counted: np.ndarray | None = None,
+    surface: bool = True,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
     (all valid cells when None), cut/fill split by the sign of the corrected difference, and
@@ -154,7 +155,9 @@ def volume_uncertainty(
     ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
     change detection picks up from noise on stable ground.
     ``counted``: the cells the volumes sum over (a tile's core; default all), while the error
-    model uses every stable cell. Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2,
+    model uses every stable cell. ``surface``: a correction surface was fitted (its leftover's
+    spread on stable ground is carried over the part's area, fully correlated).
+    Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2,
     range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
     stable = stable_mask & valid
@@ -191,7 +194,7 @@ def volume_uncertainty(
 
     # the correction surface's residual systematic error where it cannot be seen: the spread of
     # its leftover over the stable ground, carried fully correlated over the part's area
-    seen = leftover[stable & np.isfinite(leftover)]
+    seen = leftover[stable & np.isfinite(leftover)] if surface else np.empty(0)  # no surface, no residual
     residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
 
     def unmodelled(m: np.ndarray) -> float:  # fully correlated over the part
