@@ -106,9 +106,10 @@ def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, s
     keep, note = select_ground(raw, "filter", crs, options.ground_window, options.ground_slope)
     if not keep.any():
         raise SoilVolumeError(f"{src.path}: the SMRF ground filter found no ground points")
-    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path))
+    sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
+    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
     out.count = src.count  # report the points read, not the ground points
-    return out, "none", note
+    return out, "filter", note
 
 
 def thin_voxel(area_m2: float) -> float:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
-from ..soil.points import SOIL, NonSoil, PointRule, decide
+from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
 from .copc import copc_chunks, is_copc
 from .io import (
     GROUND,
@@ -82,9 +82,9 @@ class Source:
         """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
         if self.raw is not None:
             return self.raw
-        parts = list(self.chunks())
-        cls = None if parts[0][1] is None else np.concatenate([c for _, c in parts])
-        return RawPoints(np.concatenate([x for x, _ in parts]), cls, self.crs_wkt, self.path)
+        xyz, cls, sig = zip(*self.chunks(signals=True), strict=True)
+        cls = None if cls[0] is None else np.concatenate(cls)
+        return RawPoints(np.concatenate(xyz), cls, self.crs_wkt, self.path, Signals.join(sig))
 
 
 def _meeting(index, lo, hi) -> list[tuple[int, int]]:

@@ -49,6 +49,14 @@ class Signals:
     def select(self, mask: np.ndarray) -> Signals:
         return Signals(*(None if a is None else a[mask] for a in (self.rgb, self.returns)))
 
+    @staticmethod
+    def join(parts) -> Signals | None:
+        """The chunks' signals end to end (None when the first has none)."""
+        if not parts or parts[0] is None:
+            return None
+        rgb, ret = ([getattr(p, k) for p in parts] for k in ("rgb", "returns"))
+        return Signals(*(None if a[0] is None else np.concatenate(a) for a in (rgb, ret)))
+
 
 @dataclass(frozen=True)
 class PointRule:
@@ -130,9 +138,10 @@ def otsu(values: np.ndarray, lo: float = -0.3, hi: float = 0.7, bins: int = 200)
 
 def decide(cls: np.ndarray | None, sig: Signals | None, mode: str, exclude: str = "auto") -> PointRule:
     """The epoch's rule from its first chunk: ``mode`` is ``--ground`` (class / auto use a real
-    classification), ``exclude`` ``--exclude`` (``none``: no colour or returns)."""
+    classification; filter: SMRF's ground, then colour and returns), ``exclude`` ``--exclude``
+    (``none``: no colour or returns)."""
     use_class = mode == "class" or (mode == "auto" and cls is not None and bool((cls == GROUND).any()))
-    if exclude == "none" or mode not in ("auto", "class") or sig is None:
+    if exclude == "none" or mode not in ("auto", "class", "filter") or sig is None:
         return PointRule(use_class)
     green, scale = None, 65535.0
     if sig.rgb is not None and len(sig.rgb) and not use_class:
