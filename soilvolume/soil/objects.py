@@ -32,7 +32,7 @@ MAX_ELONGATION = 5.0
 MIN_QUIET_RING = 0.6  # share of the ring around a blob that must be unchanged ground
 MAX_SINGLE_CELL = 0.8  # m: on coarser cells a vehicle's walls are not seen; only moved pairs are told
 # a moved object: the two blobs' ratios within these
-AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 1.8, 1.35, 1.8
+AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 2.0, 1.4, 2.5
 _EIGHT = np.ones((3, 3), bool)
 
 
@@ -68,17 +68,21 @@ class Objects:
         return [b for b in self.blobs if not b.partner]
 
 
-def find_objects(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, pair: bool = True) -> Objects:
+def find_objects(
+    diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, pair: bool = True, refilled=None
+) -> Objects:
     """Object blobs of the corrected difference within the ``fill`` and ``cut`` change areas
-    (see module); ``pair``: match moved objects (else every object is listed as single)."""
+    (see module); ``pair``: match moved objects (else every object is listed as single);
+    ``refilled``: interpolated cells, which join a blob's area but not its measurements (a refilled
+    canopy beside a machine is interpolated from the machine's roof)."""
     labels = np.zeros(diff.shape, np.int32)
     blobs: list[Blob] = []
     changed = fill | cut
     d0 = np.nan_to_num(diff)
     for sign, area in ((1, fill), (-1, cut)):
-        comp, n = ndimage.label(area, structure=_EIGHT)
+        comp, _ = ndimage.label(area, structure=_EIGHT)
         for k, sl in enumerate(ndimage.find_objects(comp), 1):
-            blob = _measure(sign * d0, comp, k, sl, changed, cell, sign, len(blobs) + 1)
+            blob = _measure(sign * d0, comp, k, sl, (changed, refilled), cell, sign, len(blobs) + 1)
             if blob is not None:
                 labels[sl][comp[sl] == k] = blob.label
                 blobs.append(blob)
@@ -95,13 +99,15 @@ def find_objects(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: floa
     return Objects(tuple(blobs), labels, moved, single)
 
 
-def _measure(d, comp, k, sl, changed, cell, sign, label) -> Blob | None:
+def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     """The blob of component ``k`` (``d``: its sign's difference, positive), or None when it is
-    not an object."""
+    not an object; ``masks``: (changed cells, refilled cells or None)."""
     pad = 3
     r0, c0 = max(sl[0].start - pad, 0), max(sl[1].start - pad, 0)
     win = (slice(r0, sl[0].stop + pad), slice(c0, sl[1].stop + pad))
-    mine = comp[win] == k
+    changed, refilled = masks
+    whole = comp[win] == k
+    mine = whole if refilled is None else whole & ~refilled[win]
     dd = np.where(mine, d[win], 0.0)
     height = float(np.percentile(dd[mine], 90)) if mine.any() else 0.0
     if height < MIN_HEIGHT_M:
@@ -120,11 +126,11 @@ def _measure(d, comp, k, sl, changed, cell, sign, label) -> Blob | None:
     elong = _elongation(rr, cc)
     if elong > MAX_ELONGATION:
         return None
-    grown = ndimage.binary_dilation(mine, _EIGHT, iterations=2)
-    ring = grown & ~ndimage.binary_dilation(mine, _EIGHT)
+    grown = ndimage.binary_dilation(whole, _EIGHT, iterations=2)
+    ring = grown & ~ndimage.binary_dilation(whole, _EIGHT)
     if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
         return None
-    vol = float(dd[mine].sum()) * a
+    vol = float(np.where(whole, d[win], 0.0).sum()) * a
     return Blob(sign, area, height, vol, float(cc.mean() + c0), float(rr.mean() + r0), elong, label)
 
 

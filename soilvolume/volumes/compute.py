@@ -121,7 +121,9 @@ def compute_volumes(
     filled = diff + offset
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
-    ex = exclude_nonsoil(diff, fill_area, cut_area, (after, before), offset, grid, options.exclude, (h_a, h_b), stable)
+    ex = exclude_nonsoil(
+        diff, fill_area, cut_area, (after, before), offset, grid, options.exclude, (h_a, h_b), stable, filled_mask
+    )
     fill_area, cut_area = ex.fill, ex.cut
     # stable ground for the error model: never a cell of (or next to) a detected change area,
     # unless the user drew it

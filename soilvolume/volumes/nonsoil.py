@@ -56,12 +56,14 @@ def exclude_nonsoil(
     mode: str = "auto",
     heights: tuple[np.ndarray, np.ndarray] | None = None,
     stable: np.ndarray | None = None,
+    refilled: np.ndarray | None = None,
 ) -> Exclusion:
     """See module; ``epochs`` (after, before), ``mode`` the ``--exclude`` option (``none``: moved
     objects stay counted, still listed); ``heights`` (after, before: the heights the difference
     is taken from) and ``stable`` ground give the rough cells (:mod:`soilvolume.soil.rough`):
-    fill where the after survey is rough, cut where the before survey is."""
-    found = find_objects(diff, fill, cut, grid.cell)
+    fill where the after survey is rough, cut where the before survey is; ``refilled``: the
+    interpolated cells (objects are measured without them)."""
+    found = find_objects(diff, fill, cut, grid.cell, refilled=refilled)
     leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
     valid = np.isfinite(diff)
     classes = np.where(valid, 0, 255).astype(np.uint8)
