@@ -30,6 +30,7 @@ MISSED_SHARE = 0.08  # one-sigma share of an excluded volume the classification 
 CLASS_MISSED_SHARE = 0.02  # the same for classes the files' own classification gave
 NEAR_CELLS = 2  # ... where it was left out within this many cells of a counted change area
 MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
+SINGLE_SHARE, MACHINE_M3 = 0.5, 40.0  # a machine-sized object in one survey: may be a machine (or half a move)
 ROUGH_SHARE = 0.6  # one-sigma share of the change on rough cells (vegetation the signals did not see)
 
 
@@ -107,6 +108,10 @@ def exclude_nonsoil(
     if mode != "none":
         for k in sigma:
             sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * abs(moved[k])))
+    for b in single:  # counted by design; a machine's size makes it as likely a machine
+        if b.volume_m3 <= MACHINE_M3:
+            for k in ("net", "fill" if b.sign > 0 else "cut"):
+                sigma[k] = float(np.hypot(sigma[k], SINGLE_SHARE * b.volume_m3))
     report["sigma_m3"] = sigma
     return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma)
 
