@@ -108,7 +108,9 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
             "connected cells of the same sign above half of it; survey noise elsewhere is not counted. "
             "A cell's height in each epoch is the robust mean of its points, moved to the cell's centre "
             "along the local slope where its points cover it unevenly; cells with too few points and "
-            "enclosed holes are interpolated from the surrounding difference (filled_mask.tif)"
+            "enclosed holes are interpolated from the surrounding difference (filled_mask.tif). Only soil "
+            "counts: points the epochs' rules say are not soil are not gridded, objects that moved between the "
+            "surveys are left out, objects in one survey only are counted and listed (excluded, excluded.tif)"
         ),
         "volume_all_cells_m3": vols.all_cells,
         "volume_uncompensated_m3": vols.uncompensated,
