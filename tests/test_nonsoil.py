@@ -100,7 +100,10 @@ def test_one_survey_object_counted_and_listed(tmp_path):
     assert single["count"] == 1 and single["counted"]
     assert single["items"][0]["volume_m3"] == pytest.approx(obj["volume"], rel=0.25)
     assert rep["volume_m3"]["net"] == pytest.approx(obj["volume"], rel=0.25)
-    assert any("one survey only" in m for m in rep["quality"]["messages"])
+    from soilvolume.reporting.report import nonsoil_lines
+
+    assert any("one survey only" in m for m in nonsoil_lines(rep))  # listed under the volumes
+    assert rep["uncertainty"]["classification_m3"]["net"] >= 0.4 * obj["volume"]  # a machine's size: uncertain
 
 
 def test_pile_never_excluded(tmp_path):
