@@ -4,6 +4,8 @@ the outputs from the store."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..core.hooks import Hooks
@@ -34,6 +36,7 @@ def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDi
     job = VolumeJob(
         store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), alternative_move(reg)
     )
+    job = replace(job, rules=prep.rules)
     with timer("volume"):
         tiles = list(map_tiles(c, volume_tile, job, windows, hooks=hooks, steps=(75, 85, "volumes of")))
         order = {w: i for i, w in enumerate(windows)}
