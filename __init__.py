@@ -23,9 +23,6 @@ def plugin_version() -> str:
 
 def classFactory(iface: Any):  # noqa: N802 - QGIS plugin entry point
     """Called by QGIS to create the plugin object."""
-    from .plugin import deps
-
-    deps.activate()  # the plugin-private folder of installed dependencies, after QGIS's own
     from .plugin.main import SoilVolumePlugin
 
     return SoilVolumePlugin(iface)

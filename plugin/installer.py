@@ -1,124 +1,132 @@
-"""Installing the engine's missing dependencies from QGIS: a background task running pip into the
-plugin's private folder, with progress and a log, and the message bar that offers it (once)."""
+"""The message bar that offers to install the engine's environment (once per session) and the
+install itself from the desktop: the ``soilvolume:installdependencies`` algorithm run as a
+background task, so the button, the Plugins menu and ``qgis_process`` share one installer."""
 
 from __future__ import annotations
 
-import importlib
-import subprocess
-from collections.abc import Callable, Sequence
-from pathlib import Path
+from collections.abc import Callable
 
-from qgis.core import Qgis, QgsApplication, QgsMessageLog, QgsTask
+from qgis.core import (
+    Qgis,
+    QgsApplication,
+    QgsMessageLog,
+    QgsProcessingAlgRunnerTask,
+    QgsProcessingContext,
+    QgsProcessingFeedback,
+)
 
-from . import deps
+from . import environment
 
 LOG_TAG = "Soil volume change"
 TITLE = "Soil volume change"
+ALGORITHM = "soilvolume:installdependencies"
 
 
 def log(message: str, level=Qgis.MessageLevel.Info) -> None:
     QgsMessageLog.logMessage(message, LOG_TAG, level)
 
 
-class InstallTask(QgsTask):
-    """pip installs ``requirements`` into ``target``; progress moves with each package pip
-    reports, every pip line goes to the "Soil volume change" log."""
+class LogFeedback(QgsProcessingFeedback):
+    """The installer's lines into the "Soil volume change" tab of the Log Messages panel."""
 
-    def __init__(
-        self, requirements: Sequence[str], target: Path, done: Callable[[bool, str], None] | None = None
-    ) -> None:
-        super().__init__("Installing the Soil volume change dependencies", QgsTask.CanCancel)
-        self.commands = deps.pip_commands(requirements, target)
-        self.target, self.done, self.error = target, done, ""
+    def __init__(self) -> None:
+        super().__init__()
         self.lines: list[str] = []
+        self.errors: list[str] = []
 
-    def run(self) -> bool:
-        self.target.mkdir(parents=True, exist_ok=True)
-        for i, command in enumerate(self.commands):
-            log("Running: " + deps.shell_text(command))
-            if not self._run_one(command, i):
-                return False
-        return True
+    def pushInfo(self, info: str) -> None:  # noqa: N802 - Qt API
+        self.lines.append(info)
+        log(info)
+        super().pushInfo(info)
 
-    def _run_one(self, command: list[str], index: int) -> bool:
-        share = 100.0 / len(self.commands)
-        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        seen = 0
-        for line in proc.stdout:  # type: ignore[union-attr]
-            self.lines.append(line.rstrip())
-            log(line.rstrip())
-            if line.startswith(("Collecting", "Installing", "Successfully")):
-                seen += 1
-                self.setProgress(index * share + share * (1 - 0.8**seen))
-            if self.isCanceled():
-                proc.terminate()
-                self.error = "cancelled"
-                return False
-        if proc.wait() != 0:
-            self.error = "\n".join(self.lines[-5:])
-            return False
-        return True
-
-    def finished(self, result: bool) -> None:  # noqa: D401 - Qt API
-        if result:
-            deps.activate(self.target)
-            importlib.invalidate_caches()
-        if self.done is not None:
-            self.done(result, self.error)
+    def reportError(self, error: str, fatalError: bool = False) -> None:  # noqa: N802, N803 - Qt API
+        self.errors.append(error)
+        log(error, Qgis.MessageLevel.Critical)
+        super().reportError(error, fatalError)
 
 
 class DependencyBar:
-    """The message bar entry shown at plugin load when dependencies are missing, once per
-    session; its Install button runs :class:`InstallTask`."""
+    """The message bar entry shown at plugin load when the environment is missing or stale, once
+    per session; its Install button runs :meth:`install`."""
 
     shown = False  # once per QGIS session, however often the plugin is reloaded
 
     def __init__(self, iface) -> None:
         self.iface = iface
-        self.task: InstallTask | None = None
+        self.task: QgsProcessingAlgRunnerTask | None = None
+        self.item = None
+        self._keep: tuple = ()
+
+    def check(self) -> str:
+        """Show the bar if the environment is not ready (a look at its stamp); returns why not."""
+        why = environment.status(environment.env_folder())
+        if why and not DependencyBar.shown and self.iface is not None:
+            DependencyBar.shown = True
+            self.show(why)
+        return why
+
+    def close(self) -> None:
+        """At plugin unload: remove the bar if it is still up (its button would call into the
+        unloaded plugin), so the reloaded plugin shows its own; a bar the user closed stays
+        closed for the session."""
+        if self.item is None or self.iface is None:
+            return
+        bar = self.iface.messageBar()
+        if self.item in bar.items():
+            bar.popWidget(self.item)
+            DependencyBar.shown = False
         self.item = None
 
-    def check(self) -> list[tuple[str, str, str]]:
-        """Show the bar if something is missing (quick look-up, no import); returns the missing."""
-        missing = deps.missing(deps.POINT_CLOUD_DEPS, quick=True)
-        if missing and not DependencyBar.shown and self.iface is not None:
-            DependencyBar.shown = True
-            self.show(deps.missing(quick=True))  # the optional ones come along
-        return missing
-
-    def show(self, missing: Sequence[tuple[str, str, str]]) -> None:
+    def show(self, why: str) -> None:
         from qgis.PyQt.QtWidgets import QPushButton
 
         bar = self.iface.messageBar()
-        names = ", ".join(sorted({m for m, _, _ in missing}))
-        self.item = bar.createMessage(TITLE, f"needs Python packages QGIS does not have ({names}).")
+        self.item = bar.createMessage(TITLE, f"cannot run yet: {why} (about 800 MB from PyPI).")
         button = QPushButton("Install")
         button.setObjectName("soilvolumeInstallDependencies")
-        button.clicked.connect(lambda: self.install([r for _, r, _ in missing]))
+        button.clicked.connect(self.install)
         self.item.layout().addWidget(button)
         bar.pushWidget(self.item, Qgis.MessageLevel.Warning)
-        log(deps.message(missing), Qgis.MessageLevel.Warning)
 
-    def install(self, requirements: Sequence[str]) -> InstallTask:
-        """Start the install task (progress in QGIS's task manager, pip's output in the log)."""
+    def install(self, done: Callable[[bool, str], None] | None = None) -> QgsProcessingAlgRunnerTask:
+        """Run the installer in the background (progress in the task bar, its lines in the log);
+        the bar says the plugin is ready only when the engine's self-test passed."""
         if self.item is not None:
             self.iface.messageBar().popWidget(self.item)
             self.item = None
-        self.task = InstallTask(requirements, deps.site_dir(), self.report)
+        alg = QgsApplication.processingRegistry().createAlgorithmById(ALGORITHM)
+        context, feedback = QgsProcessingContext(), LogFeedback()
+        self.task = QgsProcessingAlgRunnerTask(alg, {}, context, feedback)
+        self._keep = (context, feedback, alg)
+        self.task.executed.connect(lambda ok, results: self.report(ok, feedback, done))
         QgsApplication.taskManager().addTask(self.task)
-        self.iface.messageBar().pushMessage(
-            TITLE, "Installing dependencies in the background (progress in the task bar).", Qgis.MessageLevel.Info, 5
-        )
+        if self.iface is not None:
+            self.iface.messageBar().pushMessage(
+                TITLE,
+                "Installing the engine's environment in the background (progress in the task bar).",
+                Qgis.MessageLevel.Info,
+                5,
+            )
         return self.task
 
-    def report(self, ok: bool, error: str) -> None:
+    def report(self, ok: bool, feedback: LogFeedback, done=None) -> None:
+        error = "" if ok else (feedback.errors or feedback.lines or ["see the log"])[-1]
+        ready = ok and not environment.status(environment.env_folder())
+        if done is not None:
+            done(ready, error)
+        if self.iface is None:
+            return
         bar = self.iface.messageBar()
-        still = deps.missing() if ok else []
-        if ok and not still:
-            bar.pushMessage(TITLE, "Dependencies installed: the algorithms are ready.", Qgis.MessageLevel.Success, 10)
-        elif ok:
-            bar.pushMessage(TITLE, "Dependencies installed; restart QGIS to load them.", Qgis.MessageLevel.Warning)
+        if ready:
+            bar.pushMessage(TITLE, "Installed and tested: the algorithms are ready.", Qgis.MessageLevel.Success, 10)
         else:
             bar.pushMessage(
-                TITLE, f"Installing the dependencies failed (see the log): {error[-300:]}", Qgis.MessageLevel.Critical
+                TITLE,
+                f"Installing failed (the log has pip's and the engine's lines): {last_lines(error)}",
+                Qgis.MessageLevel.Critical,
             )
+
+
+def last_lines(text: str, lines: int = 4, limit: int = 500) -> str:
+    """The end of an error for the message bar: its last few whole lines."""
+    return "\n".join(text.strip().splitlines()[-lines:])[-limit:]

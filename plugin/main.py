@@ -10,7 +10,6 @@ from qgis.PyQt.QtWidgets import QAction
 
 from ..processing.base import ICON
 from ..processing.provider import SoilVolumeProvider
-from . import deps
 from .installer import DependencyBar
 
 MENU = "&Soil volume change"
@@ -19,7 +18,7 @@ MAIN_ALGORITHM = "soilvolume:estimatevolumechange"
 
 class SoilVolumePlugin:
     """Registers the Processing provider; adds a menu entry and a toolbar button that open the
-    main algorithm's dialog; checks the engine's dependencies once and offers to install them."""
+    main algorithm's dialog; checks the engine's environment once and offers to install it."""
 
     def __init__(self, iface: Any) -> None:
         self.iface = iface
@@ -48,16 +47,10 @@ class SoilVolumePlugin:
         self.dependencies.check()
 
     def install_dependencies(self) -> None:
-        """Install whatever the engine still misses (menu entry; the bar's button does the same)."""
-        from qgis.core import Qgis
-
-        missing = deps.missing()
-        if not missing:
-            self.iface.messageBar().pushMessage(
-                "Soil volume change", "All dependencies are installed.", Qgis.MessageLevel.Info, 5
-            )
-            return
-        self.dependencies.install([req for _, req, _ in missing])
+        """Install or update the engine's environment (menu entry; the bar's button does the
+        same, and so does ``qgis_process run soilvolume:installdependencies``): quick when it is
+        up to date."""
+        self.dependencies.install()
 
     def open_dialog(self) -> None:
         """Open the Processing dialog of the main algorithm."""
@@ -66,6 +59,7 @@ class SoilVolumePlugin:
         processing.execAlgorithmDialog(MAIN_ALGORITHM, {})
 
     def unload(self) -> None:
+        self.dependencies.close()
         if self.install_action is not None:
             self.iface.removePluginMenu(MENU, self.install_action)
             self.install_action.deleteLater()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 from qgis.core import (
@@ -17,7 +18,7 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QMetaType
 
-from . import engine, params
+from . import engine, params, styles
 
 # output -> (report section, key, description)
 NUMBERS: dict[str, tuple[str, str, str]] = {
@@ -78,23 +79,20 @@ def add_outputs(alg: QgsProcessingAlgorithm) -> None:
         alg.addOutput(QgsProcessingOutputString(key, alg.tr(text)))
 
 
-def values(report: dict[str, Any]) -> dict[str, Any]:
-    """Every number and string output, read defensively from report.json."""
-    summary = engine.engine("reporting.summary")
+def values(report: dict[str, Any], summary: dict[str, Any]) -> dict[str, Any]:
+    """Every number and string output, read defensively from report.json and the engine's
+    summary of it (rotation and shift, verdict, significance)."""
     out: dict[str, Any] = {}
     for key, (section, field, _d) in NUMBERS.items():
         value = (report.get(section) or {}).get(field)
         out[key] = float(value) + 0.0 if isinstance(value, (int, float)) else None  # + 0.0: no -0.0
-    reg = report.get("registration") or {}
-    local = reg.get("transform_local")
-    moved = summary.rotation_shift(local) if local is not None else {}
     for key, (field, _d) in REGISTRATION.items():
-        out[key] = moved.get(field)
-    quality = summary.quality(report)
-    out["VERDICT"] = quality["verdict"]
-    out["QUALITY_MESSAGES"] = "\n".join(engine.qgis_wording(m) for m in quality["messages"])
-    out["SIGNIFICANCE"] = summary.significance(report)
-    out["TRANSFORM"] = params.to_json(reg.get("transform"))
+        out[key] = summary.get(field)
+    quality = summary.get("quality") or {}
+    out["VERDICT"] = str(quality.get("verdict") or "")
+    out["QUALITY_MESSAGES"] = "\n".join(engine.qgis_wording(m) for m in quality.get("messages") or [])
+    out["SIGNIFICANCE"] = str(summary.get("significance") or "")
+    out["TRANSFORM"] = params.to_json((report.get("registration") or {}).get("transform"))
     return out
 
 
@@ -111,6 +109,7 @@ def write_zones(
     parameters: dict[str, Any],
     context: QgsProcessingContext,
     report: dict[str, Any],
+    summary: dict[str, Any],
 ) -> str | None:
     """The ZONE_VOLUMES table: each zone polygon with cut, fill, net and the net's ±."""
     zones = report.get("zones") or []
@@ -126,14 +125,33 @@ def write_zones(
         raise QgsProcessingException(
             f"The engine measured {len(zones)} zones but the ZONES layer has {len(features)} polygons."
         )
-    for feature, zone in zip(features, zones, strict=True):
-        sink.addFeature(_zone_feature(feature, zone, fields, report), QgsFeatureSink.FastInsert)
+    half_widths = list(summary.get("zone_net_pm_m3") or []) + [None] * len(zones)
+    for feature, zone, pm in zip(features, zones, half_widths[: len(zones)], strict=True):
+        sink.addFeature(_zone_feature(feature, zone, fields, pm), QgsFeatureSink.FastInsert)
     return dest
 
 
-def _zone_feature(feature: QgsFeature, zone: dict[str, Any], fields: QgsFields, report: dict) -> QgsFeature:
-    cell = (report.get("grid") or {}).get("cell_m") or 1.0
-    pm = engine.engine("volumes.zones").net_half_width(zone.get("area_m2", 0.0), cell, report.get("uncertainty") or {})
+def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingContext, src, pair) -> str | None:
+    """The CHANGE_AREAS output: the engine's cut and fill polygons (GeoJSON) in the format the
+    destination asks for (GDAL of QGIS), styled and named after the pair when loaded."""
+    dest = alg.parameterAsOutputLayer(parameters, "CHANGE_AREAS", context)
+    if not dest:
+        return None
+    if src is None or not Path(src).is_file():
+        raise QgsProcessingException("The engine wrote no change-area polygons.")
+    from osgeo import gdal
+
+    Path(dest).parent.mkdir(parents=True, exist_ok=True)
+    Path(dest).unlink(missing_ok=True)
+    if gdal.VectorTranslate(dest, str(src)) is None:
+        raise QgsProcessingException(f"Cannot write {dest} (unsupported vector format?).")
+    label = f"Areas of significant change ({pair[1]})" if pair[1] else "Areas of significant change"
+    # sort key 35: under the difference (40), over the correction and the DEMs
+    styles.style_on_load(context, dest, styles.CHANGE_AREAS, label, 35, params.group_label(pair))
+    return dest
+
+
+def _zone_feature(feature: QgsFeature, zone: dict[str, Any], fields: QgsFields, pm) -> QgsFeature:
     out = QgsFeature(fields)
     out.setGeometry(feature.geometry())
     extra = [zone.get("name"), zone.get("cut"), zone.get("fill"), zone.get("net"), pm, zone.get("area_m2")]

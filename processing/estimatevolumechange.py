@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -16,18 +14,19 @@ from qgis.core import (
     QgsProcessingParameterFile,
     QgsProcessingParameterFileDestination,
     QgsProcessingParameterRasterDestination,
-    QgsProcessingUtils,
+    QgsProcessingParameterVectorDestination,
 )
 
 from . import engine, estimate_outputs, optionparams, params, styles
 from .base import SoilVolumeAlgorithm
 
 RASTERS = {  # parameter -> (engine output key, style, layer name, sort key: higher = on top)
-    "DIFFERENCE": ("difference", styles.DIVERGING, "Difference (after − before, corrected)", 40),
+    "DIFFERENCE": ("difference", styles.DIVERGING, "Difference", 40),
     "PLANE_OFFSET": ("plane_offset", styles.DIVERGING, "Vertical correction", 30),
     "DEM_AFTER": ("dem_after", styles.TERRAIN, "DEM after (registered)", 20),
     "DEM_BEFORE": ("dem_before", styles.TERRAIN, "DEM before", 10),
 }
+DESCRIPTIONS = {"DIFFERENCE": "Difference (after − before, corrected)"}  # parameter labels
 REPORT_ASSETS = (".png", ".svg", ".jpg", ".css", ".js")
 CRS_HINT = "Set the 'Before CRS override' / 'After CRS override' parameters to the clouds' CRS."
 
@@ -49,7 +48,9 @@ LAZ, COPC, VPC of tiles, PLY, PCD, XYZ/TXT/CSV). Give a CRS override when a file
 polygons mark ground known not to have changed. Advanced parameters tune each step.</p>
 <h3>Outputs</h3>
 <p>The corrected difference raster (red = cut, blue = fill, on top), both DEMs and the vertical
-correction raster, styled; an HTML report; optionally the JSON report, the per-zone volume table
+correction raster, styled, in a group named after the pair; the areas of significant change as
+cut and fill polygons, each with its area and volume (the headline cut and fill are their sums);
+an HTML report; optionally the JSON report, the per-zone volume table
 and the registered after cloud (off by default: it is the most expensive output). Numbers: net,
 cut and fill volumes (m³) with their ± half-widths, the same over the detected change areas,
 the level of detection (m), compared area, cell size, registration rotation (°) and shift (m);
@@ -99,9 +100,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         estimate_outputs.add_outputs(self)
 
     def add_destinations(self) -> None:
-        self.addParameter(
-            QgsProcessingParameterRasterDestination("DIFFERENCE", self.tr("Difference (after − before, corrected)"))
-        )
+        self.addParameter(QgsProcessingParameterRasterDestination("DIFFERENCE", self.tr(DESCRIPTIONS["DIFFERENCE"])))
         for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET"):
             self.addParameter(
                 QgsProcessingParameterRasterDestination(
@@ -132,6 +131,15 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             )
         )
         self.addParameter(
+            QgsProcessingParameterVectorDestination(
+                "CHANGE_AREAS",
+                self.tr("Areas of significant change (cut and fill polygons)"),
+                QgsProcessing.TypeVectorPolygon,
+                optional=True,
+                createByDefault=True,
+            )
+        )
+        self.addParameter(
             QgsProcessingParameterFileDestination(
                 "REGISTERED",
                 self.tr("Registered after cloud"),
@@ -147,56 +155,50 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before")
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
-        pipelines = {
-            key: (self.parameterAsFile(parameters, key, context) or None)
-            for key in ("BEFORE_PIPELINE", "AFTER_PIPELINE")
-        }
         registered = self.parameterAsFileOutput(parameters, "REGISTERED", context)
+        options = optionparams.read_options(self, parameters, context, feedback)
+        args = ["estimate", before, after] + engine.option_args(options, "estimate")
+        for key, flag in (("BEFORE_PIPELINE", "--before-pipeline"), ("AFTER_PIPELINE", "--after-pipeline")):
+            if self.parameterAsFile(parameters, key, context):
+                args += [flag, self.parameterAsFile(parameters, key, context)]
+        if registered:
+            args.append("--registered-cloud")
         feedback.pushInfo(f"Before point cloud: {before}\nAfter point cloud: {after}")
-        work = Path(tempfile.mkdtemp(prefix="soilvolume_", dir=QgsProcessingUtils.tempFolder()))
-        try:
-            with engine.engine_errors(feedback, CRS_HINT):  # option errors name the parameter
-                options = optionparams.read_options(self, parameters, context, feedback).with_(
-                    keep_registered_cloud=bool(registered)
-                )
-                result = engine.engine("api").estimate(
-                    before,
-                    after,
-                    work,
-                    options,
-                    overwrite=True,
-                    hooks=engine.hooks(feedback, skip=("quality (",)),  # logged with the results
-                    before_pipeline=pipelines["BEFORE_PIPELINE"],
-                    after_pipeline=pipelines["AFTER_PIPELINE"],
-                )
-            return self.deliver(result, parameters, context, feedback, registered)
-        finally:
-            shutil.rmtree(work, ignore_errors=True)
+        with params.work_folder() as work:
+            result = engine.run(
+                [*args, "--out", str(work / "result")], feedback, skip=("quality (",), hint=CRS_HINT
+            )  # the quality lines are logged with the results
+            pair = params.pair_label(before, after)
+            return self.deliver(result, parameters, context, feedback, registered, pair)
 
-    def deliver(self, result, parameters, context, feedback, registered) -> dict[str, Any]:
+    def deliver(self, result, parameters, context, feedback, registered, pair=("", "")) -> dict[str, Any]:
         """Copy the engine outputs to the destinations and collect the numeric outputs."""
-        results = self.deliver_files(result.outputs, parameters, context, feedback, registered)
-        report = result.report
-        results.update(estimate_outputs.values(report))
-        results["ZONE_VOLUMES"] = estimate_outputs.write_zones(self, parameters, context, report)
+        outputs = {k: Path(v) for k, v in (result.get("outputs") or {}).items()}
+        results = self.deliver_files(outputs, parameters, context, feedback, registered, pair)
+        report, summary = result.get("report") or {}, result.get("summary") or {}
+        results.update(estimate_outputs.values(report, summary))
+        results["ZONE_VOLUMES"] = estimate_outputs.write_zones(self, parameters, context, report, summary)
+        results["CHANGE_AREAS"] = estimate_outputs.write_change_areas(
+            self, parameters, context, outputs.get("change_areas"), pair
+        )
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
         self.log_summary(results, feedback)
         return results
 
-    def deliver_files(self, outputs, parameters, context, feedback, registered) -> dict[str, Any]:
+    def deliver_files(self, outputs, parameters, context, feedback, registered, pair=("", "")) -> dict[str, Any]:
         results: dict[str, Any] = {}
         for key, (out_key, style, name, order) in RASTERS.items():
             dest = self.parameterAsOutputLayer(parameters, key, context)
             if dest and out_key not in outputs:
                 raise QgsProcessingException(f"The engine wrote no {out_key} raster.")
             results[key] = params.deliver_raster(Path(outputs[out_key]), dest) if dest else None
-            styles.style_on_load(context, results[key], style, name, order)
+            label = f"{name} ({pair[1] if key != 'DEM_BEFORE' else pair[0]})" if pair[1] else name
+            styles.style_on_load(context, results[key], style, label, order, params.group_label(pair))
         if registered and "after_registered" in outputs:
-            results["REGISTERED"] = params.deliver_cloud(Path(outputs["after_registered"]), registered)
+            results["REGISTERED"] = params.deliver_cloud(Path(outputs["after_registered"]), registered, feedback)
         for key, suffix in (("REPORT", ".html"), ("REPORT_JSON", ".json")):
             dest = self.parameterAsFileOutput(parameters, key, context)
             src = report_file(outputs, suffix)
@@ -229,11 +231,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
     @staticmethod
     def copy_report(src: Path, dest: str) -> str:
         """Copy a report and any sibling files it links to (e.g. figures) next to it."""
-        params.deliver_file(src, dest)
-        if src.suffix == ".html":
-            text = src.read_text(encoding="utf-8", errors="replace")
-            Path(dest).write_text(engine.reword_html(text), encoding="utf-8")  # parameters, not flags
-            for sibling in src.parent.iterdir():
-                if sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file() and f'"{sibling.name}"' in text:
-                    shutil.copyfile(sibling, Path(dest).parent / sibling.name)
+        if src.suffix != ".html":
+            return params.deliver_file(src, dest)
+        Path(dest).parent.mkdir(parents=True, exist_ok=True)
+        text = src.read_text(encoding="utf-8", errors="replace")
+        page = engine.reword_html(text)  # parameters, not flags
+        params.write_atomically(dest, lambda partial: partial.write_text(page, encoding="utf-8"))
+        for sibling in src.parent.iterdir():
+            if sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file() and f'"{sibling.name}"' in text:
+                params.copy(sibling, str(Path(dest).parent / sibling.name))
         return dest

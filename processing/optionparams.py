@@ -1,4 +1,5 @@
-"""Processing parameters built from the engine's option table (``soilvolume.options.Options``).
+"""Processing parameters built from the engine's option table (``soilvolume.options.Options``),
+for the fields each engine command takes (declared next to each option).
 
 One parameter per option field: name = field name upper-cased, description = its label, help = its
 help text, choices -> a string-valued enum, lengths in metres -> a distance widget, numbers with
@@ -15,7 +16,6 @@ from qgis.core import (
     Qgis,
     QgsProcessingAlgorithm,
     QgsProcessingContext,
-    QgsProcessingException,
     QgsProcessingFeedback,
     QgsProcessingParameterBoolean,
     QgsProcessingParameterCrs,
@@ -53,10 +53,11 @@ def options_class() -> type:
     return importlib.import_module("soilvolume.options").Options
 
 
-def option_fields(only: set[str] | None = None) -> list[Field]:
-    """The option table's fields (those in ``only`` when given), in table order."""
+def option_fields(command: str = "estimate") -> list[Field]:
+    """The option table's fields that the engine's ``command`` takes (the table declares it next
+    to each option), in table order."""
     table = fields(options_class())
-    return [f for f in table if f.name not in SKIPPED and (only is None or f.name in only)]
+    return [f for f in table if f.name not in SKIPPED and command in f.metadata.get("commands", ("estimate",))]
 
 
 def key(field: Field) -> str:
@@ -84,8 +85,8 @@ def parameter(field: Field) -> QgsProcessingParameterDefinition:
     return param
 
 
-def parameters(only: set[str] | None = None) -> list[QgsProcessingParameterDefinition]:
-    table = option_fields(only)
+def parameters(command: str = "estimate") -> list[QgsProcessingParameterDefinition]:
+    table = option_fields(command)
     first = sorted((f for f in table if f.name in BASIC), key=lambda f: BASIC.index(f.name))
     return [parameter(f) for f in first + [f for f in table if f.name not in BASIC]]
 
@@ -157,23 +158,17 @@ def read_options(
     parameters: dict[str, Any],
     context: QgsProcessingContext,
     feedback: QgsProcessingFeedback | None = None,
-    only: set[str] | None = None,
+    command: str = "estimate",
 ):
-    """The engine's Options from the parameters of the fields in ``only`` (all when None)."""
+    """The engine's Options from the parameters of the fields ``command`` takes."""
     given = {}
-    for field in option_fields(only):
+    for field in option_fields(command):
         if alg.parameterDefinition(key(field)) is None:
             continue
         value = _value(alg, field, parameters, context, feedback)
         if value is not None or field.default is None:
             given[field.name] = value
-    try:
-        return options_class()(**given)
-    except Exception as exc:  # an engine option error names the field: word it as the parameter
-        text = engine.option_error_text(exc)
-        if text is None:
-            raise
-        raise QgsProcessingException(text) from exc
+    return options_class()(**given)  # ranges are checked by the engine, which names the field
 
 
 def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> Any:

@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -16,15 +20,34 @@ from qgis.core import (
     QgsProcessingParameterCrs,
     QgsProcessingParameterDefinition,
     QgsProcessingParameterPointCloudLayer,
+    QgsProcessingUtils,
     QgsProperty,
 )
 
 from . import engine
 
 CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
-CLOUD_FILTER = "Point clouds (" + " ".join(f"*.{e}" for e in CLOUD_EXTENSIONS) + ");;All files (*.*)"
+CLOUD_FILTER = (
+    "Point clouds (" + " ".join(f"*.{e} *.{e.upper()}" for e in CLOUD_EXTENSIONS) + ");;"
+    "LAS/LAZ (*.las *.laz *.LAS *.LAZ);;PLY (*.ply *.PLY);;XYZ text (*.xyz *.txt *.csv);;All files (*.*)"
+)
 LAS_FILTER = "LAZ files (*.laz);;LAS files (*.las)"
+LAS_SUFFIXES = (".las", ".laz")
 RASTER_COPY_SUFFIXES = (".tif", ".tiff")
+
+
+class CloudParameter(QgsProcessingParameterPointCloudLayer):
+    """A point cloud input whose file picker lists every format the engine reads (LAS, LAZ,
+    PLY, XYZ, ...), also where QGIS has no PDAL provider and would list only COPC, EPT and VPC."""
+
+    def createFileFilter(self) -> str:  # noqa: N802 - Qt API
+        return CLOUD_FILTER
+
+    def clone(self) -> CloudParameter:
+        copy = CloudParameter(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
+        copy.setHelp(self.help())
+        copy.setFlags(self.flags())
+        return copy
 
 
 def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterDefinition:
@@ -36,7 +59,7 @@ def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterD
 def cloud_param(key: str, label: str) -> QgsProcessingParameterPointCloudLayer:
     """One required input per epoch: a point cloud layer, or a file path (LAS, LAZ, COPC, VPC,
     PLY, PCD, XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer)."""
-    param = QgsProcessingParameterPointCloudLayer(key, f"{label} point cloud")
+    param = CloudParameter(key, f"{label} point cloud")
     param.setHelp(
         f"The {label.lower()} survey: a point cloud layer of the project or a file "
         f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)})."
@@ -133,22 +156,13 @@ def to_json(value: Any, indent: int | None = None) -> str:
     return json.dumps(value, indent=indent, default=plain)
 
 
-def qgs_crs(text: str | None) -> QgsCoordinateReferenceSystem:
-    """A QGIS CRS from an authority id or WKT (invalid when empty or not understood)."""
-    if not text:
-        return QgsCoordinateReferenceSystem()
-    crs = QgsCoordinateReferenceSystem(text)
-    return crs if crs.isValid() else QgsCoordinateReferenceSystem.fromWkt(text)
-
-
 def deliver_raster(src: Path, dest: str | None) -> str | None:
     """Move an engine GeoTIFF to a destination (converting when it is not a GeoTIFF)."""
     if not dest:
         return None
     Path(dest).parent.mkdir(parents=True, exist_ok=True)
     if Path(dest).suffix.lower() in RASTER_COPY_SUFFIXES:
-        shutil.copyfile(src, dest)
-        return dest
+        return copy(src, dest)
     from osgeo import gdal
 
     if gdal.Translate(dest, str(src)) is None:
@@ -157,30 +171,82 @@ def deliver_raster(src: Path, dest: str | None) -> str | None:
 
 
 def is_las(path: str | Path) -> bool:
-    """Whether ``path`` names a LAS/LAZ file (COPC included), by the engine's own suffixes (its
-    readers import laspy: for algorithms past their dependency check)."""
-    return Path(path).suffix.lower() in engine.engine("inputs.io").LAS_SUFFIXES
+    """Whether ``path`` names a LAS/LAZ file (COPC included)."""
+    return Path(path).suffix.lower() in LAS_SUFFIXES
 
 
-def deliver_cloud(src: Path, dest: str | None) -> str | None:
-    """Copy an engine LAZ cloud to a destination (.laz as is, .las decompressed)."""
+LAZ_TO_LAS = "import laspy,sys;laspy.read(sys.argv[1]).write(sys.argv[2])"
+
+
+def deliver_cloud(src: Path, dest: str | None, feedback=None) -> str | None:
+    """Copy an engine LAZ cloud to a destination (.laz as is, .las decompressed by the engine's
+    Python: laspy never loads into QGIS)."""
     if not dest:
         return None
     Path(dest).parent.mkdir(parents=True, exist_ok=True)
     if Path(dest).suffix.lower() == src.suffix.lower():
-        shutil.copyfile(src, dest)
-        return dest
+        return copy(src, dest)
     if not is_las(dest):
         raise QgsProcessingException(f"{dest}: the registered cloud is written as .las or .laz.")
-    import laspy
+    converted = src.with_name(src.stem + "_converted.las")  # in the run's folder: no half-written dest
+    engine.python(["-c", LAZ_TO_LAS, str(src), str(converted)], feedback)
+    return copy(converted, dest)
 
-    laspy.read(str(src)).write(dest)
-    return dest
+
+@contextmanager
+def work_folder() -> Iterator[Path]:
+    """A private folder in Processing's temporary folder for one engine run, removed afterwards
+    whatever happened (the engine writes there; outputs are copied to their destinations only
+    after it succeeded, so nothing is written on cancel or failure)."""
+    folder = Path(tempfile.mkdtemp(prefix="soilvolume_", dir=QgsProcessingUtils.tempFolder()))
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def pair_label(before: str, after: str) -> tuple[str, str]:
+    """The names a run's layers carry: the before and after files' names without suffixes."""
+
+    def stem(path: str) -> str:
+        name = Path(path).name
+        for suffix in (".copc.laz", *(f".{e}" for e in CLOUD_EXTENSIONS)):
+            if name.lower().endswith(suffix):
+                return name[: -len(suffix)]
+        return Path(path).stem
+
+    return stem(before), stem(after)
+
+
+def group_label(pair: tuple[str, str]) -> str:
+    """The Layers-panel group of one run's outputs."""
+    return f"Soil volume: {pair[0]} → {pair[1]}" if pair[1] else ""
 
 
 def deliver_file(src: Path, dest: str | None) -> str | None:
     if not dest:
         return None
     Path(dest).parent.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(src, dest)
+    return copy(src, dest)
+
+
+def copy(src: Path, dest: str) -> str:
+    """``src`` copied to ``dest`` whole or not at all (through a hidden partial file beside it,
+    renamed into place: a full disk or a crash leaves no half-written destination)."""
+    write_atomically(dest, lambda partial: shutil.copyfile(src, partial))
     return dest
+
+
+def write_atomically(dest: str | Path, write) -> None:
+    """``write(partial_path)``, then the partial file renamed to ``dest``; removed on failure
+    (an OS error as one line naming the destination)."""
+    dest = Path(dest)
+    partial = dest.with_name(f".{dest.name}.partial")
+    try:
+        write(partial)
+        os.replace(partial, dest)
+    except BaseException as exc:
+        partial.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise QgsProcessingException(f"Cannot write {dest}: {exc.strerror or exc}") from exc
+        raise

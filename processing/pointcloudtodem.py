@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 from qgis.core import (
@@ -31,9 +30,6 @@ beyond 3 MAD of the cell median) and which points count as <b>ground</b>.</p>
 its UTM zone); empty cells are nodata. It loads with a terrain colour ramp.</p>"""
 
 
-OPTIONS = {"cell", "statistic", "ground", "ground_window", "ground_slope"}
-
-
 class PointCloudToDem(SoilVolumeAlgorithm):
     """One cloud to an average-height GeoTIFF."""
 
@@ -48,7 +44,7 @@ class PointCloudToDem(SoilVolumeAlgorithm):
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
         self.addParameter(params.cloud_param("INPUT", "Input"))
         self.addParameter(params.crs_param("CRS", "Input"))
-        for param in optionparams.parameters(OPTIONS):
+        for param in optionparams.parameters("dem"):
             self.addParameter(param)
         self.addParameter(
             QgsProcessingParameterExtent("EXTENT", self.tr("Grid extent (default: the cloud's)"), optional=True)
@@ -63,19 +59,18 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         ):
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(description)))
 
-    def bounds(
-        self, parameters: dict[str, Any], context: QgsProcessingContext, crs: str | None
-    ) -> tuple[float, float, float, float] | None:
-        """The extent parameter in the cloud's CRS (when known), as xmin, ymin, xmax, ymax."""
+    def bounds(self, parameters: dict[str, Any], context: QgsProcessingContext) -> list[str]:
+        """The extent parameter as ``--bounds XMIN YMIN XMAX YMAX --bounds-crs CRS`` (the engine
+        brings it into the cloud's CRS), or no arguments."""
         if not parameters.get("EXTENT"):
-            return None
-        target = params.qgs_crs(crs)
-        if not target.isValid():
-            target = self.parameterAsExtentCrs(parameters, "EXTENT", context)
-        rect = self.parameterAsExtent(parameters, "EXTENT", context, target)
+            return []
+        crs = self.parameterAsExtentCrs(parameters, "EXTENT", context)
+        rect = self.parameterAsExtent(parameters, "EXTENT", context, crs)
         if rect.isEmpty():
             raise QgsProcessingException("The grid extent is empty.")
-        return rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum()
+        box = [repr(v) for v in (rect.xMinimum(), rect.yMinimum(), rect.xMaximum(), rect.yMaximum())]
+        text = crs.authid() if crs.authid().upper().startswith("EPSG:") else crs.toWkt()
+        return ["--bounds", *box] + (["--bounds-crs", text] if crs.isValid() else [])
 
     def processAlgorithm(  # noqa: N802
         self,
@@ -83,24 +78,17 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         cloud = params.cloud_path(self, parameters, "INPUT", context, "Input")
-        crs = params.crs_text(self, parameters, "CRS", context) or self.header_crs(cloud)
-        options = optionparams.read_options(self, parameters, context, feedback, OPTIONS)
+        crs = params.crs_text(self, parameters, "CRS", context)
+        options = optionparams.read_options(self, parameters, context, feedback, "dem")
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
-        tif = out if Path(out).suffix.lower() in params.RASTER_COPY_SUFFIXES else out + ".tif"
-        with engine.engine_errors(feedback, "Set the 'Input CRS override' parameter."):
-            grid = engine.engine("api").cloud_to_dem(
-                cloud,
-                tif,
-                options,
-                crs=params.crs_text(self, parameters, "CRS", context),
-                bounds=self.bounds(parameters, context, crs),
-                hooks=engine.hooks(feedback),
+        args = ["dem", cloud, *engine.option_args(options, "dem"), *self.bounds(parameters, context)]
+        args += ["--crs", crs] if crs else []
+        with params.work_folder() as work:
+            grid = engine.run(
+                [*args, "--out", str(work / "dem.tif")], feedback, hint="Set the 'Input CRS override' parameter."
             )
-        if tif != out:
-            params.deliver_raster(Path(tif), out)
-            Path(tif).unlink(missing_ok=True)
+            params.deliver_raster(work / "dem.tif", out)
         styles.style_on_load(context, out, styles.TERRAIN)
         feedback.pushInfo(
             f"{grid['rows']} x {grid['cols']} cells of {grid['cell_m']} m, {grid['points']:,} "
@@ -114,17 +102,3 @@ class PointCloudToDem(SoilVolumeAlgorithm):
             "POINTS": int(grid["points"]),
             "VALID_CELLS": int(grid["valid_cells"]),
         }
-
-    @staticmethod
-    def header_crs(cloud: str) -> str | None:
-        """The CRS stored in a LAS/LAZ header (to reproject the extent), or None."""
-        if not params.is_las(cloud):
-            return None
-        try:
-            import laspy
-
-            with laspy.open(cloud) as reader:
-                crs = reader.header.parse_crs()
-            return crs.to_wkt() if crs is not None else None
-        except Exception:  # noqa: BLE001 - the engine reports unreadable files itself
-            return None

@@ -5,22 +5,21 @@ from __future__ import annotations
 from qgis.core import QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
-from ..plugin import deps
 from .base import ICON
 from .estimatevolumechange import EstimateVolumeChange
+from .installdependencies import InstallDependencies
 from .pointcloudtodem import PointCloudToDem
 from .registerpointclouds import RegisterPointClouds
 from .volumefromdems import VolumeFromDems
 
 PROVIDER_ID = "soilvolume"
-ALGORITHMS = (EstimateVolumeChange, PointCloudToDem, RegisterPointClouds, VolumeFromDems)
+ALGORITHMS = (EstimateVolumeChange, PointCloudToDem, RegisterPointClouds, VolumeFromDems, InstallDependencies)
 
 
 class SoilVolumeProvider(QgsProcessingProvider):
-    """Registers the four algorithms; the engine is imported only when one runs."""
+    """Registers the algorithms; each runs the engine in its own environment."""
 
     def loadAlgorithms(self) -> None:  # noqa: N802 - Qt API
-        deps.activate()  # also when only the provider is used (qgis_process, tests)
         for algorithm in ALGORITHMS:
             self.addAlgorithm(algorithm())
 

@@ -27,29 +27,12 @@ robust point-to-plane ICP (default; areas that changed are down-weighted), gener
 the paper's PFH + SAC-IA on a patch.</p>
 <h3>Inputs</h3>
 <p>Before/after clouds as files (LAS, LAZ, PLY, PCD, XYZ/TXT/CSV) or point cloud layers, CRS
-overrides for files without one, the crop radius (m) and the registration methods.</p>
+overrides for files without one, the crop radius (m), the georeferencing of the surveys and its
+prior, and the registration methods.</p>
 <h3>Outputs</h3>
 <p>The registered after cloud (LAS/LAZ, in the before cloud's CRS), the 4×4 transform
 (row-major, absolute coordinates, after → before) as a JSON string and optionally a JSON file,
 and the fine stage's fitness and inlier RMSE.</p>"""
-
-
-OPTIONS = {
-    "before_crs",
-    "after_crs",
-    "radius",
-    "coarse",
-    "coarse_voxel",
-    "georeferencing",
-    "max_gps_shift",
-    "max_gps_rotation",
-    "max_gps_tilt",
-    "fine",
-    "pfh_patch",
-    "seed",
-    "ground",
-    "threads",
-}
 
 
 class RegisterPointClouds(SoilVolumeAlgorithm):
@@ -66,7 +49,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
         self.addParameter(params.cloud_param("BEFORE", "Before"))
         self.addParameter(params.cloud_param("AFTER", "After"))
-        for param in optionparams.parameters(OPTIONS):
+        for param in optionparams.parameters("register"):
             self.addParameter(param)
         self.addParameter(
             QgsProcessingParameterFileDestination(
@@ -94,16 +77,17 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.POINT_CLOUD_DEPS, feedback)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before")
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
-        options = optionparams.read_options(self, parameters, context, feedback, OPTIONS)
+        options = optionparams.read_options(self, parameters, context, feedback, "register")
         out = self.parameterAsFileOutput(parameters, "OUTPUT", context)
         if not params.is_las(out):
             out += ".laz"
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
-        with engine.engine_errors(feedback, "Set the 'CRS override' parameters."):
-            reg = engine.engine("api").register(before, after, out, options, hooks=engine.hooks(feedback))
+        args = ["register", before, after, *engine.option_args(options, "register")]
+        with params.work_folder() as work:
+            moved = work / f"registered{Path(out).suffix.lower()}"
+            reg = engine.run([*args, "--out", str(moved)], feedback, hint="Set the 'CRS override' parameters.")
+            params.deliver_file(moved, out)
         transform = params.to_json(reg["transform"])
         feedback.pushInfo(f"Transform (after → before): {transform}")
         results: dict[str, Any] = {"OUTPUT": out, "TRANSFORM": transform}
@@ -113,6 +97,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         dest = self.parameterAsFileOutput(parameters, "TRANSFORM_FILE", context)
         if dest:
             Path(dest).parent.mkdir(parents=True, exist_ok=True)
-            Path(dest).write_text(params.to_json(reg, indent=2) + "\n", encoding="utf-8")
+            text = params.to_json(reg, indent=2) + "\n"
+            params.write_atomically(dest, lambda partial: partial.write_text(text, encoding="utf-8"))
             results["TRANSFORM_FILE"] = dest
         return results

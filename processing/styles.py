@@ -7,18 +7,23 @@ import math
 from pathlib import Path
 
 from qgis.core import (
+    QgsCategorizedSymbolRenderer,
     QgsColorRampLegendNodeSettings,
+    QgsFillSymbol,
     QgsMapLayer,
     QgsProcessingContext,
     QgsProcessingFeedback,
     QgsProcessingLayerPostProcessorInterface,
     QgsRasterLayer,
+    QgsRendererCategory,
     QgsSingleBandPseudoColorRenderer,
+    QgsVectorLayer,
 )
 
 STYLES_DIR = Path(__file__).resolve().parent.parent / "resources" / "styles"
 DIVERGING = "difference"
 TERRAIN = "dem"
+CHANGE_AREAS = "change_areas"  # polygons: cut red, fill blue, by their "kind"
 
 
 def style_path(kind: str) -> Path:
@@ -53,9 +58,26 @@ def _finite(*values: float | None) -> bool:
     return all(v is not None and math.isfinite(v) for v in values)
 
 
+def style_change_areas(layer: QgsMapLayer) -> bool:
+    """Cut polygons outlined red, fill polygons blue, half transparent, by their ``kind``."""
+    if not isinstance(layer, QgsVectorLayer) or not layer.isValid():
+        return False
+    categories = []
+    for value, colour in (("cut", "215,48,39"), ("fill", "33,102,172")):
+        symbol = QgsFillSymbol.createSimple(
+            {"color": f"{colour},70", "outline_color": f"{colour},255", "outline_width": "0.5"}
+        )
+        categories.append(QgsRendererCategory(value, symbol, value))
+    layer.setRenderer(QgsCategorizedSymbolRenderer("kind", categories))
+    layer.triggerRepaint()
+    return True
+
+
 def apply_style(layer: QgsMapLayer, kind: str) -> bool:
     """Load the QML for ``kind``, stretch its ramp to the data (symmetric for differences) and
     install it as a new renderer, so the Layers panel rebuilds the legend with the new range."""
+    if kind == CHANGE_AREAS:
+        return style_change_areas(layer)
     if not isinstance(layer, QgsRasterLayer) or not layer.isValid():
         return False
     _message, ok = layer.loadNamedStyle(str(style_path(kind)))
@@ -110,13 +132,19 @@ class StylePostProcessor(QgsProcessingLayerPostProcessorInterface):
         return processor
 
 
-def style_on_load(context: QgsProcessingContext, path: str | None, kind: str, name: str = "", order: int = 0) -> None:
-    """Style the output at ``path`` (name it, and stack it by ``order``: higher on top) if
-    Processing will load it."""
+def style_on_load(
+    context: QgsProcessingContext, path: str | None, kind: str, name: str = "", order: int = 0, group: str = ""
+) -> None:
+    """Style the output at ``path`` (name it, put it in ``group``, and stack it by ``order``:
+    higher on top) if Processing will load it. In a group of its own, each run's stack is the
+    same whatever layer is selected (Processing inserts at the top of a group, in key order)."""
     if not path or not context.willLoadLayerOnCompletion(path):
         return
     details = context.layerToLoadOnCompletionDetails(path)
-    details.setPostProcessor(StylePostProcessor.create(kind))
+    if kind:
+        details.setPostProcessor(StylePostProcessor.create(kind))
     if name:
         details.name = name
+    if group:
+        details.groupName = group
     details.layerSortKey = order

@@ -32,6 +32,11 @@ from .base import SoilVolumeAlgorithm
 HELP = """\
 <p>Cut, fill and net volume between two DEMs you already have (e.g. from <i>Point cloud to
 average-height DEM</i> or any survey), in total and per polygon.</p>
+<p><b>No registration, no vertical bias correction and no uncertainty are applied</b>: the two
+DEMs are subtracted as they are, so any offset between their georeferencing or vertical datums
+is counted as volume (the log gives the median difference over the whole grid, where such an
+offset shows). For two point clouds use <i>Estimate soil volume change</i>, which registers,
+corrects on stable ground and gives the 95 % interval.</p>
 <h3>Method</h3>
 <p>Difference = after − before on the before DEM's grid (the after DEM is resampled onto it
 when the grids differ). Fill sums the positive differences times the cell area, cut the
@@ -44,7 +49,8 @@ zones (e.g. stockpiles, pits, lots) and a field naming them.</p>
 <p>The difference raster (diverging ramp centred on 0: red = cut, blue = fill), a table with
 one row per zone (zone, name, cut, fill, net in m³ and compared area in m²; a single "total"
 row when no zones are given) and the totals
-NET_VOLUME, CUT_VOLUME, FILL_VOLUME and COMPARED_AREA over the whole compared area.</p>"""
+NET_VOLUME, CUT_VOLUME, FILL_VOLUME and COMPARED_AREA over the whole compared area, and
+MEDIAN_DIFFERENCE (m), the median of after − before over every compared cell.</p>"""
 
 TABLE_FIELDS = (
     ("zone", QMetaType.Type.Int),
@@ -109,6 +115,7 @@ class VolumeFromDems(SoilVolumeAlgorithm):
             ("CUT_VOLUME", "Cut volume (m³)"),
             ("FILL_VOLUME", "Fill volume (m³)"),
             ("COMPARED_AREA", "Compared area (m²)"),
+            ("MEDIAN_DIFFERENCE", "Median difference over the whole grid (m): a datum offset shows here"),
         ):
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(description)))
 
@@ -118,24 +125,23 @@ class VolumeFromDems(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        engine.require(engine.RASTER_DEPS, feedback)
         before = raster_file(self.parameterAsRasterLayer(parameters, "BEFORE", context), "before")
         after = raster_file(self.parameterAsRasterLayer(parameters, "AFTER", context), "after")
-        zones = None
+        args = ["volume", before, after]
         if parameters.get("ZONES"):
-            zones = self.parameterAsCompatibleSourceLayerPath(
-                parameters, "ZONES", context, ["gpkg", "shp", "geojson"], "gpkg", feedback
-            )
-        zone_field = self.parameterAsString(parameters, "ZONE_FIELD", context) or None
+            args += [
+                "--zones",
+                self.parameterAsCompatibleSourceLayerPath(
+                    parameters, "ZONES", context, ["gpkg", "shp", "geojson"], "gpkg", feedback
+                ),
+            ]
+            field = self.parameterAsString(parameters, "ZONE_FIELD", context)
+            args += ["--zone-field", field] if field else []
+        zones = "--zones" in args
         out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
-        tif = out if Path(out).suffix.lower() in params.RASTER_COPY_SUFFIXES else out + ".tif"
-        with engine.engine_errors(feedback):
-            volumes = engine.engine("api").volume_from_rasters(
-                before, after, tif, zones=zones or None, zone_field=zone_field, hooks=engine.hooks(feedback)
-            )
-        if tif != out:
-            params.deliver_raster(Path(tif), out)
-            Path(tif).unlink(missing_ok=True)
+        with params.work_folder() as work:
+            volumes = engine.run([*args, "--out", str(work / "difference.tif")], feedback)
+            params.deliver_raster(work / "difference.tif", out)
         styles.style_on_load(context, out, styles.DIVERGING)
         total = volumes["total"]
         results: dict[str, Any] = {
@@ -144,6 +150,7 @@ class VolumeFromDems(SoilVolumeAlgorithm):
             "CUT_VOLUME": float(total["cut"]),
             "FILL_VOLUME": float(total["fill"]),
             "COMPARED_AREA": float(total["area_m2"]),
+            "MEDIAN_DIFFERENCE": volumes.get("median_difference_m"),
         }
         feedback.pushInfo(
             f"Volumes (m³): net {total['net']:.2f}, cut {total['cut']:.2f}, "

@@ -27,10 +27,15 @@ if [ ! -x .venv/bin/python ]; then
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi
 stamp=.venv/.deps-stamp
-want=$(cat pyproject.toml constraints.txt scripts/setup.sh | sha256sum | cut -d' ' -f1)
+want=$(cat pyproject.toml constraints.txt plugin/engine-lock.txt scripts/setup.sh | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  .venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -e '.[dev]'
+  # the engine's pins (plugin/engine-lock.txt) as constraints: the tests test what users get
+  grep -v '^open3d==' plugin/engine-lock.txt | sed 's/^numpy==.*/numpy<2/' > .venv/engine-constraints.txt
+  .venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -c .venv/engine-constraints.txt -e '.[dev]'
   echo "$want" > "$stamp"
 fi
+# the engine's own environment, built by the plugin's installer (as QGIS users get it); the QGIS
+# tests point the plugin to it (SOILVOLUME_ENGINE_ENV); quick when it is up to date
+/usr/bin/python3 plugin/environment.py install .engine-env | grep -v '^WARNING: Location' | tail -3
 .venv/bin/python -c "import soilvolume, open3d, rasterio, pyproj, laspy, qgis.core" \
   && echo "setup: OK ($(.venv/bin/python -c 'from qgis.core import Qgis; print("QGIS", Qgis.version())'))"

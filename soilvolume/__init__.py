@@ -1,3 +1,3 @@
 """soilvolume: soil volume change from two georeferenced point clouds (engine, no QGIS needed)."""
 
-__version__ = "0.5.0"
+__version__ = "0.6.0"

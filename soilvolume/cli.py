@@ -10,6 +10,7 @@ import argparse
 import json
 import logging
 import sys
+import traceback
 from dataclasses import fields
 from pathlib import Path
 
@@ -17,7 +18,8 @@ from .core.interrupt import Interrupted, handle_signals
 from .core.nativelog import hold_native_stderr
 from .core.outputs import os_problem
 from .core.types import SoilVolumeError
-from .options import Options
+from .options import Options, command_fields
+from .protocol import Protocol, open_protocol
 from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
@@ -25,16 +27,18 @@ EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs),
 (H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
 excluded.tif (what is not soil: vegetation, objects, moved objects; see --exclude),
 report.json, report.html, and with --registered-cloud after_registered.laz.
+change_areas.geojson: the areas of significant change as cut and fill polygons with their volumes.
 Volumes are in cubic metres: fill = material added, cut = removed,
 net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted).
 The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
 2 (bad command line), 130/143 (interrupted by SIGINT/SIGTERM; nothing written)."""
 
 
-def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> None:
-    """One ``--flag`` per Options field (``--registered-cloud`` for the boolean)."""
-    for f in fields(Options):
-        if f.name in SKIP or (only is not None and f.name not in only):
+def add_options(p: argparse.ArgumentParser, command: str) -> None:
+    """One ``--flag`` per option ``command`` takes (``options.command_fields``; the estimate's
+    ``--registered-cloud`` is its own flag)."""
+    for f in command_fields(command):
+        if f.name in SKIP:
             continue
         flag = "--" + f.name.replace("_", "-")
         kind = {"float": float, "int": int, "float | None": float}.get(str(f.type), str)
@@ -47,6 +51,16 @@ def add_options(p: argparse.ArgumentParser, only: set[str] | None = None) -> Non
             default=None,
             help=f"{f.metadata['help']} (default: {f.default})",
         )
+
+
+def add_progress(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--progress",
+        choices=("text", "jsonl"),
+        default="text",
+        help="text: progress lines on stderr for people; jsonl: one JSON object per line on stdout "
+        "(progress, log, warning, error, result) for programs, and a line 'cancel' on stdin cancels",
+    )
 
 
 def options_from(ns: argparse.Namespace) -> Options:
@@ -100,7 +114,8 @@ def build_parser() -> argparse.ArgumentParser:
         "default: it costs as much as the rest of a large run; report.json has the 4x4 transform)",
     )
     est.add_argument("--quiet", action="store_true", help="no progress output")
-    add_options(est)
+    add_progress(est)
+    add_options(est, "estimate")
 
     dem = sub.add_parser("dem", help="one cloud to an average-height GeoTIFF")
     dem.add_argument("cloud", type=Path, help="point cloud file")
@@ -111,30 +126,18 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         nargs=4,
         metavar=("XMIN", "YMIN", "XMAX", "YMAX"),
-        help="grid extent in the cloud's CRS (snapped outwards to the cell)",
+        help="grid extent in the cloud's CRS, or in --bounds-crs (snapped outwards to the cell)",
     )
-    add_options(dem, {"cell", "statistic", "ground"})
+    dem.add_argument("--bounds-crs", help="CRS of --bounds when it is not the cloud's (e.g. EPSG:4326)")
+    add_progress(dem)
+    add_options(dem, "dem")
 
     reg = sub.add_parser("register", help="register AFTER onto BEFORE and write it")
     reg.add_argument("before", type=Path)
     reg.add_argument("after", type=Path)
     reg.add_argument("--out", type=Path, required=True, help="registered after cloud (.las/.laz)")
-    add_options(
-        reg,
-        {
-            "before_crs",
-            "after_crs",
-            "radius",
-            "coarse",
-            "coarse_voxel",
-            "fine",
-            "pfh_patch",
-            "seed",
-            "ground",
-            "max_gps_shift",
-            "max_gps_rotation",
-        },
-    )
+    add_progress(reg)
+    add_options(reg, "register")
 
     vol = sub.add_parser("volume", help="cut/fill/net between two DEM GeoTIFFs (optional zones)")
     vol.add_argument("before_dem", type=Path)
@@ -142,7 +145,14 @@ def build_parser() -> argparse.ArgumentParser:
     vol.add_argument("--out", type=Path, required=True, help="difference GeoTIFF to write")
     vol.add_argument("--zones", type=Path, help="polygon file (GeoPackage/Shapefile/GeoJSON)")
     vol.add_argument("--zone-field", help="attribute naming each zone")
+    add_progress(vol)
 
+    add_tools(sub)
+    return ap
+
+
+def add_tools(sub) -> None:
+    """The sub-commands around the method: pipeline, demo, selftest."""
     pipe = sub.add_parser(
         "pipeline",
         help="write the PDAL pipelines that prepare both clouds",
@@ -154,27 +164,52 @@ def build_parser() -> argparse.ArgumentParser:
     pipe.add_argument("before", type=Path)
     pipe.add_argument("after", type=Path)
     pipe.add_argument("--emit", type=Path, required=True, help="folder for the two pipeline JSON files")
-    add_options(pipe, {"before_crs", "after_crs", "radius", "ground"})
+    add_options(pipe, "pipeline")
 
     demo = sub.add_parser("demo", help="make a seeded synthetic pair with known volumes and run it")
     demo.add_argument("--out", type=Path, default=Path("demo_out"), help="folder for the pair and results")
     demo.add_argument("--size", choices=("small", "paper"), default="small", help="scene size")
     demo.add_argument("--seed", type=int, default=0, help="scene seed")
-    return ap
+
+    check = sub.add_parser(
+        "selftest",
+        help="check this installation: every dependency imports, a tiny seeded pair is estimated",
+        description="Import every dependency, write a seeded pair of a few thousand points (LAZ) "
+        "and estimate it; exit 0 when the volumes are where they must be.",
+    )
+    check.add_argument("--out", type=Path, required=True, help="folder for the pair and its results")
+    add_progress(check)
 
 
-def _progress(quiet: bool):
-    if quiet:
-        return None
+def _hooks(ns: argparse.Namespace):
+    """The protocol's progress, log and cancel; else progress for people on stderr where the
+    command has ``--quiet`` (the estimate) and it is not given; else none (dem, register and
+    volume print their JSON and nothing else)."""
+    from .api import Hooks
+
+    proto: Protocol | None = getattr(ns, "protocol", None)
+    if proto is not None:
+        return Hooks(progress=proto.progress, log=proto.log, cancel=proto.is_cancelled)
+    if getattr(ns, "quiet", True):
+        return Hooks()
 
     def show(pct: float, msg: str) -> None:
         print(f"[{pct:5.1f}%] {msg}", file=sys.stderr, flush=True)
 
-    return show
+    return Hooks(progress=show)
+
+
+def _result(ns: argparse.Namespace, **data) -> bool:
+    """Send a command's result as the protocol's last line; False without the protocol."""
+    proto: Protocol | None = getattr(ns, "protocol", None)
+    if proto is None:
+        return False
+    proto.emit("result", command=ns.command, **data)
+    return True
 
 
 def cmd_estimate(ns: argparse.Namespace) -> int:
-    from .api import Hooks, estimate
+    from .api import estimate
     from .reporting.report import summary_lines
 
     res = estimate(
@@ -183,37 +218,89 @@ def cmd_estimate(ns: argparse.Namespace) -> int:
         ns.out,
         options_from(ns),
         overwrite=ns.overwrite,
-        hooks=Hooks(progress=_progress(ns.quiet)),
+        hooks=_hooks(ns),
         before_pipeline=ns.before_pipeline,
         after_pipeline=ns.after_pipeline,
     )
+    if _result(ns, report=res.report, outputs=res.outputs, summary=front_end_summary(res.report)):
+        return 0
     for line in summary_lines(res.report):
         print(line)
     print(f"outputs in {ns.out}")
     return 0
 
 
+def front_end_summary(report: dict) -> dict:
+    """The figures a front end shows beside report.json: rotation and shift, the verdict, the
+    significance in words, each zone's net ± (from the run's error model)."""
+    from .reporting import summary
+    from .volumes.zones import net_half_width
+
+    local = (report.get("registration") or {}).get("transform_local")
+    cell = (report.get("grid") or {}).get("cell_m") or 1.0
+    unc = report.get("uncertainty") or {}
+    zones = [net_half_width(z.get("area_m2", 0.0), cell, unc) for z in report.get("zones") or []]
+    return {
+        **(summary.rotation_shift(local) if local is not None else {}),
+        "quality": summary.quality(report),
+        "significance": summary.significance(report),
+        "zone_net_pm_m3": zones,
+    }
+
+
 def cmd_dem(ns: argparse.Namespace) -> int:
     from .api import cloud_to_dem
 
     options, bounds = options_from(ns), check_bounds(ns.bounds)
-    info = cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds)
-    print(json.dumps(info, indent=2))
+    if bounds is not None and ns.bounds_crs:
+        bounds = bounds_in_cloud_crs(ns.cloud, ns.crs, bounds, ns.bounds_crs)
+    info = cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds, hooks=_hooks(ns))
+    if not _result(ns, **info):
+        print(json.dumps(info, indent=2))
     return 0
+
+
+def bounds_in_cloud_crs(cloud: Path, crs: str | None, bounds: tuple, bounds_crs: str) -> tuple:
+    """``bounds`` (in ``bounds_crs``) as the box around them in the cloud's CRS (``crs`` when
+    given, else its header's); unchanged when the cloud has no CRS."""
+    import pyproj
+
+    from .inputs.crs import parse_crs
+    from .inputs.stream import open_source
+
+    wkt = crs or open_source(cloud).crs_wkt
+    if not wkt:
+        return bounds
+    to = pyproj.Transformer.from_crs(parse_crs(bounds_crs, "--bounds-crs"), parse_crs(wkt, str(cloud)), always_xy=True)
+    return check_bounds(to.transform_bounds(*bounds))
 
 
 def cmd_register(ns: argparse.Namespace) -> int:
     from .api import register
 
-    print(json.dumps(register(ns.before, ns.after, ns.out, options_from(ns)), indent=2))
+    res = register(ns.before, ns.after, ns.out, options_from(ns), hooks=_hooks(ns))
+    if not _result(ns, **res):
+        print(json.dumps(res, indent=2))
     return 0
 
 
 def cmd_volume(ns: argparse.Namespace) -> int:
     from .api import volume_from_rasters
 
-    res = volume_from_rasters(ns.before_dem, ns.after_dem, ns.out, zones=ns.zones, zone_field=ns.zone_field)
-    print(json.dumps(res, indent=2))
+    res = volume_from_rasters(
+        ns.before_dem, ns.after_dem, ns.out, zones=ns.zones, zone_field=ns.zone_field, hooks=_hooks(ns)
+    )
+    if not _result(ns, **res):
+        print(json.dumps(res, indent=2))
+    return 0
+
+
+def cmd_selftest(ns: argparse.Namespace) -> int:
+    from .scenes.selftest import run_selftest
+
+    res = run_selftest(ns.out, _hooks(ns))
+    if not _result(ns, **res):
+        print(json.dumps(res, indent=2))
     return 0
 
 
@@ -238,12 +325,20 @@ COMMANDS = {
     "volume": cmd_volume,
     "demo": cmd_demo,
     "pipeline": cmd_pipeline,
+    "selftest": cmd_selftest,
 }
 
 
-def _fail(message: str, code: int = 1) -> int:
-    print(f"soilvolume: error: {one_line(message)}", file=sys.stderr)
+def _fail(message: str, code: int = 1, exc: BaseException | None = None) -> int:
+    text = one_line(message)
+    if _PROTOCOL:
+        fields = {"field": getattr(exc, "field", None), "reason": getattr(exc, "reason", None)}
+        _PROTOCOL[0].emit("error", message=text, exit=code, **{k: v for k, v in fields.items() if v})
+    print(f"soilvolume: error: {text}", file=sys.stderr)
     return code
+
+
+_PROTOCOL: list[Protocol] = []  # the run's protocol, while one runs
 
 
 def one_line(message: str, limit: int = 400) -> str:
@@ -258,6 +353,8 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
     with handle_signals(then_ignore=argv is None):  # None: the program exits right after
         ns = build_parser().parse_args(argv)
+        ns.protocol = open_protocol() if getattr(ns, "progress", "text") == "jsonl" else None
+        _PROTOCOL[:] = [ns.protocol] if ns.protocol else []
         with hold_native_stderr() as native:
             code = _run(ns)
         if code == 0 and native.text:
@@ -271,7 +368,7 @@ def _run(ns: argparse.Namespace) -> int:
     except Interrupted as exc:
         return _fail(str(exc), exc.exit_code)
     except SoilVolumeError as exc:
-        return _fail(str(exc))
+        return _fail(str(exc), exc=exc)
     except OSError as exc:
         return _fail(str(os_problem(exc)))
     except MemoryError:
@@ -280,6 +377,11 @@ def _run(ns: argparse.Namespace) -> int:
         return _fail("input nested too deeply")
     except KeyboardInterrupt:  # a signal arrived before the handlers were installed
         return _fail("interrupted", 130)
+    except Exception as exc:  # a bug: for a program reading the protocol, an error line too
+        if not _PROTOCOL:
+            raise
+        traceback.print_exc()
+        return _fail(f"internal error ({type(exc).__name__}: {exc}); please report it with the lines above", 1)
 
 
 if __name__ == "__main__":

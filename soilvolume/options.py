@@ -6,8 +6,18 @@ parameters onto the same fields, so all front ends share one set of defaults.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import Field, dataclass, field, fields, replace
 from typing import Any
+
+#: which commands take an option (``commands=`` of each field below): the command line builds
+#: each subcommand's flags from it and the QGIS algorithms their parameters
+ESTIMATE = ("estimate",)
+REGISTER = ("estimate", "register")
+PREPARE = ("estimate", "register", "pipeline")  # reading both clouds
+GRID = ("estimate", "dem")
+GROUND = ("estimate", "register", "dem", "pipeline")
+GROUND_FILTER = ("estimate", "register", "dem")
+COMMANDS = ("estimate", "register", "dem", "pipeline")
 
 
 def _opt(
@@ -20,12 +30,13 @@ def _opt(
     lo: float | None = None,
     hi: float | None = None,
     lo_open: bool = False,
+    commands: tuple[str, ...] = ESTIMATE,
 ) -> Any:
     """An option: default, one-line help, choices; ``label`` (short title for GUIs), ``unit``
-    ("m", "m2", "deg", ...), and the allowed range ``lo``..``hi`` (``lo`` excluded when
-    ``lo_open``) that every front end validates against."""
+    ("m", "m2", "deg", ...), the allowed range ``lo``..``hi`` (``lo`` excluded when
+    ``lo_open``) that every front end validates against, and the ``commands`` that take it."""
     meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
-    return field(default=default, metadata=meta)
+    return field(default=default, metadata={**meta, "commands": commands})
 
 
 @dataclass(frozen=True)
@@ -37,8 +48,11 @@ class Options:
         None,
         "CRS of the before cloud when its header has none (e.g. EPSG:32654 or EPSG:2991+6360)",
         label="Before CRS override",
+        commands=PREPARE,
     )
-    after_crs: str | None = _opt(None, "CRS of the after cloud when its header has none", label="After CRS override")
+    after_crs: str | None = _opt(
+        None, "CRS of the after cloud when its header has none", label="After CRS override", commands=PREPARE
+    )
     # step 1: alignment initialisation
     radius: float = _opt(
         30.0,
@@ -47,6 +61,7 @@ class Options:
         unit="m",
         lo=0.0,
         hi=10000.0,
+        commands=PREPARE,
     )
     # step 2: coarse registration
     coarse: str = _opt(
@@ -54,6 +69,7 @@ class Options:
         "coarse registration: auto (FPFH+RANSAC only when the fine stage from the GPS pose fits poorly, kept only within the GPS error prior and if it then fits better), fpfh (always, the paper's path), none",
         ("auto", "fpfh", "none"),
         label="Coarse registration",
+        commands=REGISTER,
     )
     coarse_voxel: float = _opt(
         1.0,
@@ -62,12 +78,14 @@ class Options:
         unit="m",
         lo=0.05,
         hi=100.0,
+        commands=REGISTER,
     )
     georeferencing: str = _opt(
         "auto",
         "how far the surveys' georeferencing is trusted: auto (precise when both files declare the same vertical datum and already agree at the margin of the after survey, else gps), gps (GPS-tagged UAV surveys: registered within the prior below), precise (LiDAR, RTK/PPK or ground control: coordinates used as they are, no registration and no bias correction)",
         ("auto", "gps", "precise"),
         label="Georeferencing of the surveys",
+        commands=REGISTER,
     )
     max_gps_shift: float = _opt(
         8.0,
@@ -76,6 +94,7 @@ class Options:
         unit="m",
         lo=0.0,
         hi=1000.0,
+        commands=REGISTER,
     )
     max_gps_rotation: float = _opt(
         6.0,
@@ -84,6 +103,7 @@ class Options:
         unit="deg",
         lo=0.0,
         hi=180.0,
+        commands=REGISTER,
     )
     max_gps_tilt: float = _opt(
         1.0,
@@ -92,6 +112,7 @@ class Options:
         unit="deg",
         lo=0.0,
         hi=90.0,
+        commands=REGISTER,
     )
     # step 3: fine registration
     fine: str = _opt(
@@ -99,6 +120,7 @@ class Options:
         "fine registration: icp (robust point-to-plane, coarse-to-fine, change areas down-weighted), gicp, pfh (the paper's PFH + SAC-IA on a patch), none",
         ("icp", "gicp", "pfh", "none"),
         label="Fine registration",
+        commands=REGISTER,
     )
     pfh_patch: float = _opt(
         6.0,
@@ -107,6 +129,7 @@ class Options:
         unit="m",
         lo=0.5,
         hi=1000.0,
+        commands=REGISTER,
     )
     seed: int = _opt(
         0,
@@ -114,6 +137,7 @@ class Options:
         label="Random seed",
         lo=0,
         hi=2**31 - 1,
+        commands=REGISTER,
     )
     # step 4: plane-offset / bias compensation
     correction: str = _opt(
@@ -138,12 +162,14 @@ class Options:
         unit="m",
         lo=0.01,
         hi=1000.0,
+        commands=GRID,
     )
     statistic: str = _opt(
         "robust-mean",
         "per-cell height: robust-mean (mean after rejecting points beyond 3 MAD of the cell median), mean (the paper), median",
         ("robust-mean", "mean", "median"),
         label="Per-cell height statistic",
+        commands=GRID,
     )
     min_count_ratio: float = _opt(
         0.1,
@@ -171,6 +197,7 @@ class Options:
         "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), none",
         ("auto", "class", "filter", "none"),
         label="Ground points",
+        commands=GROUND,
     )
     ground_window: float = _opt(
         6.0,
@@ -179,6 +206,7 @@ class Options:
         unit="m",
         lo=0.5,
         hi=500.0,
+        commands=GROUND_FILTER,
     )
     ground_slope: float = _opt(
         0.6,
@@ -186,6 +214,7 @@ class Options:
         label="Ground filter slope (rise/run)",
         lo=0.01,
         hi=10.0,
+        commands=GROUND_FILTER,
     )
     exclude: str = _opt(
         "auto",
@@ -202,7 +231,9 @@ class Options:
     )
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
     # run control
-    threads: int = _opt(0, "worker threads for Open3D/numpy (0 = all cores)", label="Threads", lo=0, hi=1024)
+    threads: int = _opt(
+        0, "worker threads for Open3D/numpy (0 = all cores)", label="Threads", lo=0, hi=1024, commands=REGISTER
+    )
     scheduler: str = _opt(
         "auto",
         "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST:PORT (an existing Dask cluster; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
@@ -239,3 +270,10 @@ class Options:
     def with_(self, **changes: Any) -> Options:
         """A copy with some fields changed."""
         return replace(self, **changes)
+
+
+def command_fields(command: str) -> list[Field]:
+    """The option fields ``command`` takes, in table order."""
+    if command not in COMMANDS:
+        raise ValueError(f"unknown command {command!r}")
+    return [f for f in fields(Options) if command in f.metadata["commands"]]

@@ -40,6 +40,7 @@ RUN_OUTPUTS = (
     "excluded.tif",
     "report.json",
     "report.html",
+    "change_areas.geojson",
     "after_registered.laz",
 )
 

@@ -282,6 +282,13 @@ def _map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_
 # ---------------------------------------------------------------- figures
 
 
+CHANGE_OUTLINE = (0, 150, 0, 255)
+CHANGE_CAPTION = (
+    "Green outline: the areas of significant change the headline cut and fill are summed over "
+    "(polygons in change_areas.geojson). "
+)
+
+
 def difference_map(
     diff: np.ndarray,
     grid: GridSpec,
@@ -289,9 +296,11 @@ def difference_map(
     filled_mask: np.ndarray | None = None,
     title: str = "DEM of difference",
     ident: str = "difference-map",
+    change: np.ndarray | None = None,
 ) -> str | None:
     """HTML figure: ``diff`` on a diverging ramp centred on 0 (red cut, blue fill), hillshaded by
-    ``relief`` (else by ``diff``), refilled cells outlined in black; None without data."""
+    ``relief`` (else by ``diff``), refilled cells outlined in black, the areas of significant
+    change (``change``: the headline's cells) outlined in green; None without data."""
     d = _float_2d(diff)
     if d is None:
         return None
@@ -305,11 +314,15 @@ def difference_map(
     mask = _like(filled_mask, d)
     if mask is not None and mask.any():
         rgba[_outline(_repeat(_block_any(mask, k), f))] = (0, 0, 0, 255)
+    areas = _like(change, d)
+    if areas is not None and areas.any():
+        rgba[_outline(_repeat(_block_any(areas, k), f))] = CHANGE_OUTLINE
     caption = (
         f"{html.escape(title)}: after − before, red = cut (lowered), blue = fill (raised), ramp "
         f"±{lim:.3g} m (99th percentile of |difference|; larger values in the end colours), "
         f"hillshaded{' by the after DEM' if rel is not None else ''}. "
         f"{'Black outline: refilled cells. ' if mask is not None and mask.any() else ''}"
+        f"{CHANGE_CAPTION if areas is not None and areas.any() else ''}"
         f"Hatched: no data. {_extent_text(grid, d.shape, k)}"
     )
     bar = _colour_bar(RDBU, lim, "after − before (m)", ident, ("cut", "fill"))

@@ -323,7 +323,7 @@ def _sections(report: dict, arrays: dict, grid: GridSpec) -> list[str]:
     conf = _get(report, "uncertainty", "confidence") or _get(report, "uncertainty_m3", "confidence")
     relief = arrays.get("dem_after")
     figures = [
-        ("Difference map", difference_map(diff, grid, relief, arrays.get("filled_mask"))),
+        ("Difference map", difference_map(diff, grid, relief, arrays.get("filled_mask"), change=arrays.get("change"))),
         ("Histogram", histogram(diff, lod, conf)),
         ("Stable-ground residuals", residual_map(arrays.get("residual"), grid, relief)),
     ]

@@ -54,6 +54,7 @@ class Volumes:
     zones: list = field(default_factory=list)  # per-polygon budgets (--zones)
     excluded: dict = field(default_factory=dict)  # what is not soil: classes, objects (volumes/nonsoil)
     classes: np.ndarray | None = None  # excluded.tif: the class of each cell (volumes/nonsoil.CLASS_CODES)
+    cut_mask: np.ndarray | None = None  # the cut areas of change_mask (the rest of it is fill)
 
 
 @dataclass(frozen=True)
@@ -176,6 +177,7 @@ def compute_volumes(
             "statistic_m3": stat,
         },
         "change_mask": counted,
+        "cut_mask": cut_area,  # after the exclusions, as the headline sums it
         "excluded": ex.report,
         "classes": ex.classes,
         "compensated": headline,

@@ -14,6 +14,10 @@ from ..dem.grid import write_geotiff
 from ..inputs.crs import parse_crs, xy_unit
 from ..volumes.difference import budget
 
+NO_CORRECTION = (
+    "volume from the DEM difference as it is: no registration, no vertical bias correction and no "
+    "uncertainty (for two point clouds, the estimate command does all three)"
+)
 FEET = {"ft", "foot", "feet", "us survey foot", "us-ft", "ftus", "us_survey_foot"}
 
 
@@ -90,11 +94,19 @@ def run_volume_from_rasters(
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
     hooks.step(60, "computing cut and fill")
+    hooks.info(NO_CORRECTION)
+    median = float(np.nanmedian(diff))
+    hooks.info(
+        f"median difference over the whole grid: {median:+.3f} m ({np.isfinite(diff).sum():,} cells); "
+        "a datum or georeferencing offset between the DEMs shows here and is counted as volume"
+    )
     result: dict[str, Any] = {
         "total": _public(budget(diff, grid.cell_area)),
         "zones": [],
         "cell_m": grid.cell,
         "crs": parse_crs(grid.crs_wkt, "raster").name,
+        "median_difference_m": median,
+        "method": NO_CORRECTION,
     }
     if zones:  # before writing: a bad zones file leaves nothing behind
         from ..volumes.zones import zone_budgets

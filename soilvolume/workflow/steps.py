@@ -74,6 +74,10 @@ def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
 
 
 def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpec, dem_after: np.ndarray) -> None:
+    """report.html, and the areas of significant change as polygons (its map outlines them)."""
+    from ..reporting.changeareas import FILE, write_change_areas
+
+    write_change_areas(out.path(FILE), vols.diff, vols.change_mask, vols.cut_mask, grid)
     try:
         from ..reporting.html import write_html
     except ImportError:
@@ -84,6 +88,7 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
         "filled_mask": vols.filled_mask,
         "classes": vols.classes,
         "dem_after": dem_after,
+        "change": vols.change_mask,
     }
     write_html(report, arrays, grid, out.path("report.html"))
 

@@ -20,6 +20,8 @@ import pytest
 from qgis.core import QgsApplication
 
 REPO = Path(__file__).resolve().parents[2]
+# the engine's environment that `make setup` builds with the plugin's own installer
+ENGINE_ENV = Path(os.environ.setdefault("SOILVOLUME_ENGINE_ENV", str(REPO / ".engine-env")))
 PLUGIN_NAME = "soilvolume_qgis"
 PROVIDER_ID = "soilvolume"
 _KEEP_ALIVE: list = []  # Python wrappers of providers the registry owns
@@ -102,6 +104,24 @@ def plugin_package():
 @pytest.fixture(scope="session")
 def plugins_dir() -> Path:
     return PLUGINS_DIR
+
+
+@pytest.fixture(scope="session")
+def plugin_zip(tmp_path_factory) -> Path:
+    """The installable zip, as ``make package`` builds it."""
+    import subprocess
+
+    dist = tmp_path_factory.mktemp("dist")
+    run = subprocess.run(
+        ["bash", str(REPO / "scripts" / "package.sh")],
+        cwd=REPO,
+        env=dict(os.environ, DIST_DIR=str(dist)),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    return Path(run.stdout.strip().splitlines()[-1])
 
 
 def ensure_provider():

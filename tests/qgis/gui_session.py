@@ -23,21 +23,7 @@ from qgis.core import (
     QgsRasterLayer,
     QgsRenderContext,
 )
-
-
-def start(plugins_dir: str):
-    app = QgsApplication([], True)
-    app.initQgis()
-    sys.path.insert(0, str(Path(QgsApplication.pkgDataPath()) / "python" / "plugins"))
-    sys.path.append(plugins_dir)
-    from processing.core.Processing import Processing
-
-    Processing.initialize()
-    from soilvolume_qgis.processing.provider import SoilVolumeProvider
-
-    provider = SoilVolumeProvider()
-    QgsApplication.processingRegistry().addProvider(provider)
-    return app, provider
+from session import start  # tests/qgis/session.py, beside this script
 
 
 def settle(seconds: float = 0.5) -> None:
@@ -83,6 +69,7 @@ def run_and_load(before: str, after: str, out_dir: Path) -> dict:
         "AFTER": after,
         "CELL": 1.0,
         **{key: str(out_dir / f"{key.lower()}.tif") for key in rasters},
+        "CHANGE_AREAS": "TEMPORARY_OUTPUT",  # what the dialog fills in (created by default)
     }
     return runAndLoadResults("soilvolume:estimatevolumechange", params)
 
@@ -105,6 +92,27 @@ def legend_checks(model: QgsLayerTreeModel) -> list[dict]:
             }
         )
     return rows
+
+
+def change_area_checks(results: dict) -> dict:
+    """The loaded polygons: their volumes per kind, the headline's, the renderer's categories."""
+    from qgis.core import QgsVectorLayer
+
+    layers = [x for x in QgsProject.instance().mapLayers().values() if isinstance(x, QgsVectorLayer)]
+    if len(layers) != 1:
+        return {"layers": [x.name() for x in layers]}
+    layer = layers[0]
+    sums: dict[str, float] = {}
+    for feature in layer.getFeatures():
+        sums[feature["kind"]] = sums.get(feature["kind"], 0.0) + feature["volume_m3"]
+    renderer = layer.renderer()
+    return {
+        "layers": [layer.name()],
+        "sums": sums,
+        "headline": {"cut": results["CUT_VOLUME"], "fill": results["FILL_VOLUME"]},
+        "categories": sorted(c.value() for c in getattr(renderer, "categories", list)()),
+        "crs": layer.crs().authid(),
+    }
 
 
 def layers_window(artefacts: Path) -> QgsLayerTreeModel:
@@ -136,7 +144,7 @@ def layers_window(artefacts: Path) -> QgsLayerTreeModel:
 
 
 def main(plugins_dir: str, before: str, after: str, out_dir: str, artefacts: str) -> int:
-    app, _provider = start(plugins_dir)
+    app, _provider, _modules = start(plugins_dir, gui=True)
     folder = Path(artefacts)
     folder.mkdir(parents=True, exist_ok=True)
     summary = {"dialog": dialog_checks(before, after, folder)}
@@ -145,6 +153,7 @@ def main(plugins_dir: str, before: str, after: str, out_dir: str, artefacts: str
     model = layers_window(folder)
     summary["order"] = [n.layer().name() for n in model.rootGroup().findLayers()]
     summary["legends"] = legend_checks(model)
+    summary["change_areas"] = change_area_checks(results)
     print(json.dumps(summary))
     QgsProject.instance().removeAllMapLayers()
     app.exitQgis()

@@ -1,39 +1,15 @@
-"""First-run dependencies: checked once at plugin load, a message bar with an Install button, and
-a real pip run (a tiny local wheel) into a private folder through QGIS's task manager."""
+"""The engine's environment from the desktop: a message bar with an Install button at plugin
+load when it is missing (once), none when it is ready, and the button running the same
+installer as ``soilvolume:installdependencies`` (a background task that reports success only
+after the engine's self-test passed)."""
 
 from __future__ import annotations
 
-import base64
-import hashlib
-import sys
 import time
-import zipfile
-from pathlib import Path
 
 import pytest
-from qgis.core import QgsApplication
+from qgis.core import Qgis, QgsApplication
 from qgis.PyQt.QtWidgets import QPushButton
-
-WHEEL_FILES = {
-    "tinysv/__init__.py": "VALUE = 42\n",
-    "tinysv-0.1.dist-info/METADATA": "Metadata-Version: 2.1\nName: tinysv\nVersion: 0.1\n",
-    "tinysv-0.1.dist-info/WHEEL": "Wheel-Version: 1.0\nGenerator: test\nRoot-Is-Purelib: true\nTag: py3-none-any\n",
-}
-
-
-def make_wheel(folder: Path) -> Path:
-    """A minimal valid pure-Python wheel (module ``tinysv``)."""
-    path = folder / "tinysv-0.1-py3-none-any.whl"
-    record = []
-    with zipfile.ZipFile(path, "w") as wheel:
-        for name, text in WHEEL_FILES.items():
-            data = text.encode()
-            digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
-            record.append(f"{name},sha256={digest},{len(data)}")
-            wheel.writestr(name, data)
-        record.append("tinysv-0.1.dist-info/RECORD,,")
-        wheel.writestr("tinysv-0.1.dist-info/RECORD", "\n".join(record) + "\n")
-    return path
 
 
 @pytest.fixture
@@ -43,8 +19,10 @@ def fresh_bar(plugin_package, monkeypatch, qgis_iface):
     monkeypatch.setattr(DependencyBar, "shown", False)
     bar = qgis_iface.messageBar()
     bar.clearWidgets()
+    bar.clear_messages()
     yield bar
     bar.clearWidgets()
+    bar.clear_messages()
 
 
 def our_items(bar) -> list:
@@ -57,89 +35,84 @@ def load_plugin(plugin_package, qgis_iface):
     return plugin
 
 
-def test_missing_dependency_shows_one_bar_with_install(plugin_package, qgis_iface, fresh_bar, monkeypatch):
+def test_missing_environment_shows_one_bar_with_install(plugin_package, qgis_iface, fresh_bar, monkeypatch, tmp_path):
     from soilvolume_qgis.plugin.installer import DependencyBar
 
-    monkeypatch.setitem(sys.modules, "open3d", None)  # found nowhere
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(tmp_path / "nothing-here"))
     calls = []
-    monkeypatch.setattr(DependencyBar, "install", lambda self, reqs: calls.append(list(reqs)))
+    monkeypatch.setattr(DependencyBar, "install", lambda self, *a: calls.append(True))
     load_plugin(plugin_package, qgis_iface).unload()  # a plugin reload: the bar is not repeated
-    plugins = [load_plugin(plugin_package, qgis_iface)]
+    plugin = load_plugin(plugin_package, qgis_iface)
     try:
         items = our_items(fresh_bar)
-        assert len(items) == 1 and "open3d" in items[0].text()
+        assert len(items) == 1 and "not installed yet" in items[0].text()
         button = items[0].findChild(QPushButton, "soilvolumeInstallDependencies")
         assert button is not None and button.text() == "Install"
         button.click()
-        assert calls and any(r.startswith("open3d") for r in calls[0])
+        assert calls
     finally:
-        for plugin in plugins:
-            plugin.unload()
+        plugin.unload()
 
 
-def test_dask_is_optional_but_offered_with_the_rest(plugin_package, qgis_iface, fresh_bar, monkeypatch):
-    """Without dask.distributed the plugin runs (no bar); when the bar shows for a required
-    package, its Install button also installs dask[distributed]."""
+def test_a_closed_bar_stays_closed_after_a_reload(plugin_package, qgis_iface, fresh_bar, monkeypatch, tmp_path):
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(tmp_path / "nothing-here"))
+    plugin = load_plugin(plugin_package, qgis_iface)
+    (item,) = our_items(fresh_bar)
+    fresh_bar.popWidget(item)  # the user closes it
+    plugin.unload()
+    plugin = load_plugin(plugin_package, qgis_iface)
+    try:
+        assert our_items(fresh_bar) == []  # once per session
+    finally:
+        plugin.unload()
+
+
+def test_a_failed_install_says_so_with_the_engines_last_lines(provider, qgis_iface, fresh_bar, monkeypatch, tmp_path):
+    """A real environment whose packages did not install (the pip step skipped): the self-test
+    fails, no stamp is written, the bar says it failed with the engine's own last line."""
+    from soilvolume_qgis.plugin import environment
     from soilvolume_qgis.plugin.installer import DependencyBar
 
-    monkeypatch.setitem(sys.modules, "distributed", None)
-    plugin = load_plugin(plugin_package, qgis_iface)
-    try:
-        assert our_items(fresh_bar) == []
-    finally:
-        plugin.unload()
-    monkeypatch.setitem(sys.modules, "open3d", None)
-    calls = []
-    monkeypatch.setattr(DependencyBar, "install", lambda self, reqs: calls.append(list(reqs)))
-    plugin = load_plugin(plugin_package, qgis_iface)
-    try:
-        our_items(fresh_bar)[0].findChild(QPushButton, "soilvolumeInstallDependencies").click()
-        assert "dask[distributed]" in calls[0] and any(r.startswith("open3d") for r in calls[0])
-    finally:
-        plugin.unload()
-
-
-def test_no_bar_when_everything_imports(plugin_package, qgis_iface, fresh_bar):
-    plugin = load_plugin(plugin_package, qgis_iface)
-    try:
-        assert our_items(fresh_bar) == []
-    finally:
-        plugin.unload()
-
-
-def test_install_runs_pip_into_the_private_folder(plugin_package, qgis_iface, fresh_bar, tmp_path, monkeypatch):
-    from soilvolume_qgis.plugin import deps, installer
-
-    target = tmp_path / "profile" / "soilvolume" / "site-packages"
-    monkeypatch.setattr(deps, "site_dir", lambda: target)
-    monkeypatch.setattr(sys, "path", list(sys.path))
-    wheel = make_wheel(tmp_path)
-    bar = installer.DependencyBar(qgis_iface)
-    task = bar.install([str(wheel)])
-    deadline = time.time() + 120
-    while task.status() not in (task.Complete, task.Terminated) and time.time() < deadline:
+    folder = tmp_path / "engine"
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(folder))
+    monkeypatch.setattr(environment.Installer, "_install", lambda self, pip, site: None)
+    outcome = []
+    DependencyBar(qgis_iface).install(lambda ok, error: outcome.append((ok, error)))
+    deadline = time.time() + 180
+    while not outcome and time.time() < deadline:
         QgsApplication.processEvents()
         time.sleep(0.05)
-    assert task.status() == task.Complete, "\n".join(task.lines)
-    assert (target / "tinysv" / "__init__.py").is_file()
-    assert str(target) in sys.path and sys.path.index(str(target)) > sys.path.index(str(Path(deps.__file__).parents[2]))
-    import tinysv
-
-    assert tinysv.VALUE == 42
-    assert any("Successfully installed tinysv" in line for line in task.lines)
-    assert task.progress() > 0
-    command = task.commands[0]
-    assert "--target" in command and "--user" not in command and "--break-system-packages" not in command
-    sys.modules.pop("tinysv", None)
+    ((ok, error),) = outcome
+    assert not ok and "No module named 'numpy'" in error, outcome
+    assert environment.load(folder) is None and not (folder / environment.STAMP).exists()
+    (critical,) = fresh_bar.get_messages(Qgis.MessageLevel.Critical)
+    assert "Installing failed" in critical and "numpy" in critical
+    assert fresh_bar.get_messages(Qgis.MessageLevel.Success) == []
 
 
-def test_pip_commands_keep_qgis_numpy(plugin_package, tmp_path):
-    import numpy
-    from soilvolume_qgis.plugin import deps
+def test_no_bar_when_the_environment_is_ready(plugin_package, qgis_iface, fresh_bar):
+    plugin = load_plugin(plugin_package, qgis_iface)
+    try:
+        assert our_items(fresh_bar) == []
+    finally:
+        plugin.unload()
 
-    commands = deps.pip_commands(["scipy", "open3d-cpu", "laspy[lazrs]"], tmp_path / "site-packages")
-    first, second = commands
-    assert "--no-deps" in second and second[-1] == "open3d-cpu"
-    assert "dash" in first and "scipy" in first and "open3d-cpu" not in first
-    constraints = Path(first[first.index("--constraint") + 1]).read_text()
-    assert constraints.strip() == f"numpy=={numpy.__version__}"
+
+def test_install_button_runs_the_installer_algorithm_as_a_task(provider, qgis_iface, fresh_bar):
+    """On a ready environment the task finishes at once (the stamp matches, the engine answers)
+    and the bar says ready; the same task is what the button starts."""
+    from soilvolume_qgis.plugin.installer import DependencyBar
+
+    outcome = []
+    task = DependencyBar(qgis_iface).install(lambda ok, error: outcome.append((ok, error)))
+    deadline = time.time() + 120
+    while not outcome and time.time() < deadline:
+        QgsApplication.processEvents()
+        time.sleep(0.05)
+    assert outcome == [(True, "")], outcome
+    assert task.status() == task.Complete
+    # pytest-qgis's message bar records pushMessage as "title:text" per level
+    assert any(m.startswith("Soil volume change:Installing") for m in fresh_bar.get_messages(Qgis.MessageLevel.Info))
+    success = fresh_bar.get_messages(Qgis.MessageLevel.Success)
+    assert success == ["Soil volume change:Installed and tested: the algorithms are ready."], success
+    assert fresh_bar.get_messages(Qgis.MessageLevel.Critical) == []

@@ -87,19 +87,14 @@ def test_no_overlap(run_alg, scene_dir, tmp_path):
     assert not (tmp_path / "d.tif").exists()
 
 
-def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
-    from qgis.core import QgsProcessingFeedback
-    from soilvolume_qgis.plugin import deps
+def test_missing_environment_names_the_installer(run_alg, scene_dir, tmp_path, monkeypatch):
+    """The error says the environment is missing and points to the warning, which says why and
+    the three ways to install it (once: Processing repeats the error itself)."""
+    from .recording import RecordingFeedback
 
-    class Warnings(QgsProcessingFeedback):
-        texts: list[str] = []
-
-        def pushWarning(self, text: str) -> None:  # noqa: N802 - Qt API
-            self.texts.append(text)
-
-    monkeypatch.setitem(sys.modules, "open3d", None)  # "import open3d" now fails
-    feedback = Warnings()
-    with pytest.raises(QgsProcessingException, match=r"missing Python packages \(open3d\)"):
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(tmp_path / "no-environment"))
+    feedback = RecordingFeedback()
+    with pytest.raises(QgsProcessingException) as info:
         run_alg(
             "estimatevolumechange",
             {
@@ -109,21 +104,28 @@ def test_missing_dependency_message(run_alg, scene_dir, tmp_path, monkeypatch):
             },
             feedback=feedback,
         )
-    message = "\n".join(feedback.texts)
-    assert "cannot import open3d" in message and "press Install" in message
-    assert f"--target {deps.site_dir()}" in message and "--no-deps open3d" in message
-    assert "--user" not in message and "--break-system-packages" not in message
+    assert "environment is missing" in str(info.value) and "warning above" in str(info.value)
+    (advice,) = feedback.warnings
+    assert "not installed yet" in advice and str(tmp_path / "no-environment") in advice
+    assert "qgis_process run soilvolume:installdependencies" in advice and "Install dependencies" in advice
+    assert not (tmp_path / "d.tif").exists()
 
 
-def test_engine_import_failure_message(run_alg, scene_dir, tmp_path, monkeypatch):
-    from soilvolume_qgis.processing import engine
+def test_a_crashed_engine_gives_one_message_with_its_last_lines(run_alg, scene_dir, tmp_path, monkeypatch):
+    """A child that dies (here by SIGSEGV after a line on stderr): one message naming the
+    signal and the child's last lines; nothing written."""
+    from soilvolume_qgis.plugin import environment
 
-    def broken(name: str = "api"):
-        raise ImportError("simulated: soilvolume/workflow/estimate.py is missing")
-
-    monkeypatch.setattr(engine, "engine", broken)
-    with pytest.raises(QgsProcessingException, match="engine package 'soilvolume' does not import"):
+    crash = (
+        "import os,signal,sys; print('engine: about to crash', file=sys.stderr, flush=True); "
+        "os.kill(os.getpid(), signal.SIGSEGV)"
+    )
+    monkeypatch.setattr(environment.Environment, "command", lambda self, args: [sys.executable, "-c", crash])
+    with pytest.raises(QgsProcessingException) as info:
         run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "before.las"), "OUTPUT": str(tmp_path / "dem.tif")})
+    message = str(info.value)
+    assert "stopped unexpectedly (signal SIGSEGV)" in message and "engine: about to crash" in message
+    assert not (tmp_path / "dem.tif").exists()
 
 
 @pytest.mark.parametrize(
@@ -148,3 +150,27 @@ def test_absurd_options_are_refused_naming_the_parameter(run_alg, scene_dir, tmp
         run_alg(alg, {**params, **extra})
     assert expect in str(info.value), str(info.value)
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_full_disk_while_delivering_leaves_no_half_written_output(plugin_package, tmp_path, monkeypatch):
+    """Outputs are copied through a partial file renamed into place: a copy that fails half-way
+    leaves neither the destination nor the partial file (and an earlier destination intact)."""
+    import errno
+    import shutil
+
+    from soilvolume_qgis.processing import params
+
+    src = tmp_path / "difference.tif"
+    src.write_bytes(b"x" * 10_000)
+    dest = tmp_path / "out" / "d.tif"
+    dest.parent.mkdir()
+    dest.write_bytes(b"the previous run")
+
+    def half(a, b):
+        Path(b).write_bytes(Path(a).read_bytes()[:5_000])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(shutil, "copyfile", half)
+    with pytest.raises(QgsProcessingException, match=r"Cannot write .*d\.tif: No space left on device"):
+        params.deliver_raster(src, str(dest))
+    assert dest.read_bytes() == b"the previous run" and sorted(p.name for p in dest.parent.iterdir()) == ["d.tif"]

@@ -69,6 +69,26 @@ def test_reports_and_registered_cloud(estimate_run):
         assert "<html" in Path(estimate_run["REPORT"]).read_text().lower()
 
 
+def test_registered_cloud_as_las_is_converted_by_the_engines_python(estimate_run, tmp_path):
+    """A .las destination: the LAZ decompressed by the engine's environment (laspy never loads
+    into QGIS) in the run's folder, then copied: the same points, uncompressed."""
+    import shutil
+
+    import laspy
+    from soilvolume_qgis.processing import params
+
+    work = tmp_path / "work"
+    work.mkdir()
+    src = work / "after_registered.laz"
+    shutil.copyfile(estimate_run["REGISTERED"], src)
+    dest = tmp_path / "out" / "registered.las"
+    assert params.deliver_cloud(src, str(dest)) == str(dest)
+    with laspy.open(src) as laz, laspy.open(dest) as las:
+        assert las.header.point_count == laz.header.point_count > 10_000
+        assert not las.header.are_points_compressed and laz.header.are_points_compressed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "work"]  # nothing beside the two
+
+
 def test_dems_hold_absolute_heights(estimate_run):
     for key in ("DEM_BEFORE", "DEM_AFTER"):
         with rasterio.open(estimate_run[key]) as ds:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import time
+from pathlib import Path
+
 import pytest
 from qgis.core import (
     QgsProcessingException,
@@ -35,6 +38,67 @@ def test_cancel_writes_nothing(run_alg, scene_dir, tmp_path):
             feedback=feedback,
         )
     assert not (tmp_path / "dem.tif").exists()
+
+
+class CancelAt(RecordingFeedback):
+    """Presses Cancel once the progress reaches ``percent``; remembers when."""
+
+    def __init__(self, percent: float) -> None:
+        super().__init__()
+        self.at: float | None = None
+        self.progressChanged.connect(lambda p: self._maybe(p, percent))
+
+    def _maybe(self, progress: float, percent: float) -> None:
+        if progress >= percent and self.at is None:
+            self.at = time.perf_counter()
+            self.cancel()
+
+
+def group_alive(pgid: int) -> list[int]:
+    """Processes of the process group ``pgid`` still alive (the engine and any worker of it)."""
+    alive = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            alive.append(int(stat.parent.name))
+    return alive
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
+def test_cancel_mid_run_stops_within_a_second_and_leaves_nothing(run_alg, scene_dir, tmp_path, monkeypatch):
+    """Cancel during the registration: the exception within a second, the engine and its process
+    group gone, no destination written, the run's private folder in Processing's temp removed."""
+    from qgis.core import QgsProcessingUtils
+    from soilvolume_qgis.plugin import child
+
+    started = []
+    real_start = child.start
+    monkeypatch.setattr(child, "start", lambda *a, **k: started.append(real_start(*a, **k)) or started[-1])
+    temp = Path(QgsProcessingUtils.tempFolder())
+    before = set(temp.glob("soilvolume_*"))
+    feedback = CancelAt(25.0)
+    outputs = {key: str(tmp_path / f"{key.lower()}.tif") for key in ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER")}
+    with pytest.raises(QgsProcessingException, match="Cancelled"):
+        run_alg(
+            "estimatevolumechange",
+            {
+                "BEFORE": str(scene_dir / "before.las"),
+                "AFTER": str(scene_dir / "after.las"),
+                "CHANGE_AREAS": str(tmp_path / "areas.gpkg"),
+                "REPORT": str(tmp_path / "report.html"),
+                **outputs,
+            },
+            feedback=feedback,
+        )
+    seconds = time.perf_counter() - feedback.at
+    (proc,) = started
+    assert seconds < 1.0, seconds
+    assert proc.poll() is not None and group_alive(proc.pid) == []
+    assert list(tmp_path.iterdir()) == []
+    assert set(temp.glob("soilvolume_*")) == before
 
 
 @pytest.mark.parametrize(("key", "kind"), [("DIFFERENCE", "difference"), ("DEM_BEFORE", "dem")])

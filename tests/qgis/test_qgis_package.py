@@ -10,8 +10,6 @@ import sys
 import zipfile
 from pathlib import Path
 
-import pytest
-
 REPO = Path(__file__).resolve().parents[2]
 REQUIRED_METADATA = (
     "name",
@@ -51,27 +49,12 @@ out["plugin_file"] = module.__file__
 out["algorithms"] = sorted(a.id() for a in provider.algorithms()) if provider else []
 out["menu_calls"] = iface.addPluginToMenu.call_count
 from soilvolume_qgis.processing import engine
-out["engine_file"] = engine.engine("api").__file__
+out["engine_file"] = engine.engine("options").__file__
 out["unloaded"] = utils.unloadPlugin("soilvolume_qgis")
 out["provider_after_unload"] = registry.providerById("soilvolume") is not None
 print("RESULT" + json.dumps(out))
 app.exitQgis()
 """
-
-
-@pytest.fixture(scope="module")
-def plugin_zip(tmp_path_factory) -> Path:
-    dist = tmp_path_factory.mktemp("dist")
-    run = subprocess.run(
-        ["bash", str(REPO / "scripts" / "package.sh")],
-        cwd=REPO,
-        env=dict(os.environ, DIST_DIR=str(dist)),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
-    assert run.returncode == 0, run.stderr
-    return Path(run.stdout.strip().splitlines()[-1])
 
 
 def test_zip_contents(plugin_zip):
@@ -92,6 +75,8 @@ def test_zip_contents(plugin_zip):
         "resources/styles/dem.qml",
         "soilvolume/api.py",
         "soilvolume/workflow/estimate.py",
+        "plugin/engine-lock.txt",
+        "plugin/environment.py",
     ):
         assert f"soilvolume_qgis/{required}" in names, required
     for banned in ("tests/", ".venv/", "__pycache__", ".pyc", ".git/", "egg-info", "bench/"):
@@ -128,7 +113,14 @@ def test_zip_installs_and_loads(plugin_zip, tmp_path):
     assert out["plugin_file"].startswith(str(plugins))
     assert out["engine_file"].startswith(str(plugins))  # the engine shipped in the zip
     assert out["algorithms"] == [
-        f"soilvolume:{n}" for n in ("estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems")
+        f"soilvolume:{n}"
+        for n in (
+            "estimatevolumechange",
+            "installdependencies",
+            "pointcloudtodem",
+            "registerpointclouds",
+            "volumefromdems",
+        )
     ]
     assert out["menu_calls"] == 2  # the estimate and "Install dependencies…"
     assert out["unloaded"] and not out["provider_after_unload"]

@@ -8,7 +8,7 @@ from pathlib import Path
 from qgis.core import QgsApplication
 
 REPO = Path(__file__).resolve().parents[2]
-ALGORITHMS = {"estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems"}
+ALGORITHMS = {"estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems", "installdependencies"}
 
 
 def test_processing_is_qgis_framework(qgis_processing, plugin_package):

@@ -159,6 +159,7 @@ def test_autzen_layers_as_loaded(run_alg, real_dir, tmp_path):
             assert not layer.verticalCrs().isValid() and "ftUS" not in layer.crs().toWkt()
     finally:
         project.removeAllMapLayers()
-    for name in ("DEM before", "DEM after (registered)"):
+    for name in ("DEM before (autzen_bmx_2010)", "DEM after (registered) (autzen_bmx_2023)"):
         assert 128 < ranges[name][0] < ranges[name][1] < 134, ranges
-    assert ranges["Vertical correction"] == pytest.approx((-0.1, 0.1)), ranges
+    assert ranges["Vertical correction (autzen_bmx_2023)"] == pytest.approx((-0.1, 0.1)), ranges
+    assert {d.groupName for d in details.values()} == {"Soil volume: autzen_bmx_2010 → autzen_bmx_2023"}

@@ -1,0 +1,115 @@
+"""``--progress jsonl``: the command line's machine-readable progress, one JSON object per line.
+
+Front ends that run the engine as a subprocess (the QGIS plugin) read these lines and never parse
+human text. Each object has a ``type``:
+
+- ``progress``: ``percent`` (0-100) and ``message``;
+- ``log``: ``message`` (a step or a note, once each);
+- ``warning``: ``message`` (a Python warning raised during the run);
+- ``error``: ``message`` (one line), ``exit`` (the exit status), and for an option out of its
+  range ``field`` (the option's name in :class:`soilvolume.options.Options`) and ``reason``;
+- ``result``: ``command`` and what the command returns (estimate: ``report``, ``outputs``,
+  ``summary``), the last line of a successful run.
+
+The protocol goes to the process's original standard output; anything else that would have gone
+there (C libraries' prints) is sent to standard error. A line ``cancel`` on standard input cancels
+the run as a user's Cancel does (nothing is written; exit 1 with an ``error`` line).
+Stdlib only.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import threading
+import warnings
+from pathlib import Path
+from typing import IO, Any
+
+
+def _plain(value: Any) -> Any:
+    """JSON for numpy values and paths (``tolist`` covers numpy arrays and scalars)."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    return str(value)
+
+
+def _finite(value: Any) -> Any:
+    """NaN and infinities as null: the lines stay strict JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {str(k): _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+class Protocol:
+    """Writes the protocol's lines (thread-safe); listens for ``cancel`` on standard input."""
+
+    def __init__(self, stream: IO[str]) -> None:
+        self.stream = stream
+        self.cancelled = threading.Event()
+        self._lock = threading.Lock()
+
+    def emit(self, kind: str, **fields: Any) -> None:
+        line = json.dumps(_finite({"type": kind, **fields}), default=_plain, allow_nan=False)
+        with self._lock:
+            self.stream.write(line + "\n")
+            self.stream.flush()
+
+    def progress(self, percent: float, message: str) -> None:
+        self.emit("progress", percent=round(float(percent), 2), message=message)
+
+    def log(self, message: str) -> None:
+        self.emit("log", message=message)
+
+    def is_cancelled(self) -> bool:
+        return self.cancelled.is_set()
+
+    def listen(self, stdin: IO[str] | None = None) -> None:
+        """Watch standard input for a ``cancel`` line (end of input is ignored)."""
+        source = stdin if stdin is not None else sys.stdin
+        if source is None or source.isatty():
+            return
+
+        def watch() -> None:
+            try:
+                for line in source:
+                    if line.strip() == "cancel":
+                        self.cancelled.set()
+                        return
+            except (OSError, ValueError):
+                return
+
+        threading.Thread(target=watch, name="soilvolume-cancel", daemon=True).start()
+
+    def capture_warnings(self) -> None:
+        """Python warnings become ``warning`` lines (once per message)."""
+        seen: set[str] = set()
+
+        def show(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ARG001
+            text = f"{category.__name__}: {message}"
+            if text not in seen:
+                seen.add(text)
+                self.emit("warning", message=text)
+
+        warnings.showwarning = show
+
+
+def open_protocol() -> Protocol:
+    """The protocol on the original standard output; fd 1 and ``sys.stdout`` then point at
+    standard error, so nothing else can interleave with the lines."""
+    sys.stdout.flush()
+    stream = os.fdopen(os.dup(1), "w", buffering=1, encoding="utf-8", errors="backslashreplace")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
+    proto = Protocol(stream)
+    proto.capture_warnings()
+    proto.listen()
+    return proto

@@ -1,0 +1,51 @@
+"""change_areas.geojson: the areas of significant change as polygons that hold the headline's cut
+and fill (buffer cells count with their area whatever their sign), in the run's CRS, readable by
+GDAL; and the patches split by the cut mask, not by each cell's sign."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from soilvolume.core.types import GridSpec
+from soilvolume.reporting.changeareas import features, patches
+
+
+def test_polygons_hold_the_headline_volumes(misaligned_result):
+    res, _truth, out = misaligned_result
+    doc = json.loads((out / "change_areas.geojson").read_text())
+    head = res.report["volume_m3"]
+    props = [f["properties"] for f in doc["features"]]
+    assert {p["kind"] for p in props} == {"cut", "fill"}
+    for kind in ("cut", "fill"):
+        mine = [p["volume_m3"] for p in props if p["kind"] == kind]
+        assert sum(mine) == pytest.approx(head[kind], abs=1e-3 * len(mine) + 1e-6), kind
+    assert sum(p["area_m2"] for p in props) == pytest.approx(head["area_m2"], abs=1e-3 * len(props))
+    assert doc["crs"]["properties"]["name"] == "urn:ogc:def:crs:EPSG::32654"
+
+
+def test_gdal_reads_them_with_their_crs(misaligned_result):
+    import fiona
+
+    _res, _truth, out = misaligned_result
+    with fiona.open(out / "change_areas.geojson") as layer:
+        assert layer.schema["geometry"] == "Polygon" and len(layer) > 0
+        assert layer.crs.to_epsg() == 32654
+        assert {f["properties"]["kind"] for f in layer} == {"cut", "fill"}
+
+
+def test_a_pile_keeps_its_negative_buffer_cells():
+    """A fill area whose buffer holds a slightly negative cell: one fill polygon with the
+    area's sum, no cut polygon made of the buffer cell."""
+    diff = np.zeros((6, 6))
+    diff[1:5, 1:5] = 1.0
+    diff[1, 1] = -0.05  # a buffer cell below zero
+    change = diff != 0
+    labels, kinds = patches(change, np.zeros_like(change))
+    assert kinds == [("fill", 1)] and (labels > 0).sum() == 16
+    grid = GridSpec(500000.0, 3900006.0, 1.0, 6, 6)
+    (feature,) = features(diff, change, np.zeros_like(change), grid)
+    assert feature["properties"]["volume_m3"] == pytest.approx(15 - 0.05)
+    assert feature["properties"]["area_m2"] == 16
