@@ -20,11 +20,14 @@ def _opt(
     lo: float | None = None,
     hi: float | None = None,
     lo_open: bool = False,
+    run_control: bool = False,
 ) -> Any:
     """An option: default, one-line help, choices; ``label`` (short title for GUIs), ``unit``
     ("m", "m2", "deg", ...), and the allowed range ``lo``..``hi`` (``lo`` excluded when
-    ``lo_open``) that every front end validates against."""
+    ``lo_open``) that every front end validates against; ``run_control``: where and how the run
+    goes, never its numbers (every other option keys the work a resumed run may reuse)."""
     meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
+    meta["run_control"] = run_control
     return field(default=default, metadata=meta)
 
 
@@ -196,11 +199,14 @@ class Options:
     )
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
     # run control
-    threads: int = _opt(0, "worker threads for Open3D/numpy (0 = all cores)", label="Threads", lo=0, hi=1024)
+    threads: int = _opt(
+        0, "worker threads for Open3D/numpy (0 = all cores)", label="Threads", lo=0, hi=1024, run_control=True
+    )
     scheduler: str = _opt(
         "auto",
         "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST:PORT (an existing Dask cluster; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
         label="Scheduler",
+        run_control=True,
     )
     memory_limit: float = _opt(
         0.0,
@@ -209,6 +215,7 @@ class Options:
         unit="GB",
         lo=0.0,
         hi=1e6,
+        run_control=True,
     )
     tile_cells: int = _opt(
         0,
@@ -228,6 +235,7 @@ class Options:
         False,
         "write after_registered.laz (the after cloud moved by the registration; the transform is always in report.json)",
         label="Write the registered after cloud",
+        run_control=True,
     )
 
     def with_(self, **changes: Any) -> Options:
