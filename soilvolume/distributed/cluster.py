@@ -17,8 +17,8 @@ from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
 
 CONNECT_S = 20.0  # a scheduler's address must answer within this
-START_S = {"tcp": 30.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
-NO_WORKERS_S = 30.0  # a cluster without any worker for this long cannot run the tasks
+START_S = {"tcp": 45.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
+NO_WORKERS_S = 20.0  # a cluster without any worker for this long cannot run the tasks
 POLL_S = 0.25  # how often a wait checks for signals and the cluster's health
 CLOSE_S = 15.0  # shutting the client and the cluster down
 WORKER_INIT = "soilvolume.distributed.workerinit"
@@ -111,13 +111,26 @@ def connect(address: str):
 def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None):
     """(LocalCluster, Client): ``workers`` processes of one thread (or one process of
     ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``."""
-    from dask.distributed import Client, LocalCluster
+    import dask
+    from dask.distributed import Client
 
     extra = {"preload": [WORKER_INIT]} if processes else {}
     if scratch is not None:
         scratch.mkdir(parents=True, exist_ok=True)
         extra["local_directory"] = str(scratch)
-    cluster = LocalCluster(
+    with dask.config.set({"temporary-directory": str(scratch) if scratch is not None else None}):
+        cluster = _local_cluster(workers, processes, per_worker_gb, extra)
+    try:
+        return cluster, Client(cluster)
+    except BaseException:
+        shut(cluster, None)
+        raise
+
+
+def _local_cluster(workers: int, processes: bool, per_worker_gb: float | None, extra: dict):
+    from dask.distributed import LocalCluster
+
+    return LocalCluster(
         n_workers=workers if processes else 1,
         threads_per_worker=1 if processes else workers,
         processes=processes,
@@ -127,11 +140,6 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
         silence_logs=logging.CRITICAL,
         **extra,
     )
-    try:
-        return cluster, Client(cluster)
-    except BaseException:
-        shut(cluster, None)
-        raise
 
 
 def checker(hooks) -> Callable[[], None]:

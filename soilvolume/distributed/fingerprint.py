@@ -64,9 +64,16 @@ def number_options(options: Options) -> dict[str, Any]:
             continue
         value = getattr(options, f.name)
         if f.name in FILE_OPTIONS and value:
-            value = {"path": str(value), **file_identity(value)}
+            value = {"path": str(value), "files": _vector_identity(Path(value))}
         out[f.name] = value
     return out
+
+
+def _vector_identity(path: Path) -> dict[str, Any]:
+    """A vector file's identity: the file and its sidecars (a Shapefile's .dbf, .prj, ...), or
+    every file of a folder."""
+    files = sorted(path.iterdir()) if path.is_dir() else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
+    return {p.name: file_identity(p) for p in files if p.is_file()}
 
 
 @lru_cache(maxsize=1)

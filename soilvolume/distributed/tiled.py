@@ -178,7 +178,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     k = volume_factor(options, grid, schedule)
     said = store.bind(run_parts(before, after, options, plan_parts(plan, windows, k)))
     if said:
-        hooks.info(said)
+        hooks.step(55, said)
     tiles_kept = store.tiles(windows)
     if k > 1:
         from .volumestep import tiled_volume_step
@@ -205,6 +205,8 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         "tile_cells": side,
         "points_per_cell": round(density, 3),
         "volume_step": "whole grid" if k == 1 else f"tiles, overview of {k} x {k} cells",
+        "tiles_resumed": stats["resumed"],
+        "kept_tiles_discarded": said,
         "task_points_read": stats["read"],
         "task_seconds": round(stats["seconds"], 3),
         "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),

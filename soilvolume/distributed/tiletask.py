@@ -190,7 +190,7 @@ def run_tiles(
     interrupted run of the same computation) are not run again; finished tiles are saved there.
     ``stats`` sums the tasks' points read and seconds."""
     stats = stats if stats is not None else {}
-    stats.update(read=0, seconds=0.0)
+    stats.update(read=0, seconds=0.0, resumed=0)
     g = plan.grid
     out = tuple(np.full((g.rows, g.cols), empty_value(k), np.int64 if k[0] == "n" else float) for k in TILE_ARRAYS)
     todo = []
@@ -200,11 +200,12 @@ def run_tiles(
         else:
             todo.append(win)
     for win, arrays, task in map_tiles(c, grid_tile, plan, todo, hooks=hooks, total=len(windows)):
-        for key in stats:
+        for key in ("read", "seconds"):
             stats[key] += task[key]
         _place(out, win, arrays)
         if store is not None:
             store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
+    stats["resumed"] = len(windows) - len(todo)
     return out
 
 
@@ -216,7 +217,7 @@ def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: 
     from .cluster import checker, completed
 
     if len(windows) < total:
-        hooks.info(f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
+        hooks.step(steps[0], f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
     if not windows:
         return
     n, (lo, hi, verb) = len(windows), steps

@@ -68,8 +68,9 @@ def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
             add(summarize_grid_tile(w, [store.load(n, w) for n in TILE_ARRAYS], k))
     for summary in map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows)):
         add(summary)
-        for key in stats:
+        for key in ("read", "seconds"):
             stats[key] += summary[3][key]
+    stats["resumed"] = len(store.windows) - len(todo)
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -150,10 +150,11 @@ def _box(fail, where: str, value: Any, wgs84: bool) -> tuple[float, ...] | None:
 
 
 def _crs(fail, where: str, props: dict) -> tuple[str, Any] | None:
-    """The first CRS field given: ``proj:wkt2``, ``proj:projjson`` or ``proj:epsg``, type-checked
-    and parsed (a CRS that cannot be read is named, never ignored)."""
+    """The first CRS field given (``proj:wkt2``, ``proj:projjson``, ``proj:epsg``), parsed;
+    every one given is type-checked (a CRS that cannot be read is named, never ignored)."""
     import pyproj
 
+    given = []
     for key, kinds, word in (
         ("proj:wkt2", str, "a WKT string"),
         ("proj:projjson", dict, "a PROJJSON object"),
@@ -164,9 +165,11 @@ def _crs(fail, where: str, props: dict) -> tuple[str, Any] | None:
             continue
         if not isinstance(value, kinds) or isinstance(value, bool) or (key == "proj:epsg" and value <= 0):
             raise fail(f"{where}.properties.{key}", f"must be {word} (got {_kind(value)})")
-        try:
-            crs = pyproj.CRS.from_user_input(f"EPSG:{value}" if key == "proj:epsg" else value)
-        except (pyproj.exceptions.CRSError, TypeError, ValueError):
-            raise fail(f"{where}.properties.{key}", "is not a CRS pyproj can read") from None
-        return key, crs
-    return None
+        given.append((key, value))
+    if not given:
+        return None
+    key, value = given[0]
+    try:
+        return key, pyproj.CRS.from_user_input(f"EPSG:{value}" if key == "proj:epsg" else value)
+    except (pyproj.exceptions.CRSError, TypeError, ValueError):
+        raise fail(f"{where}.properties.{key}", "is not a CRS pyproj can read") from None

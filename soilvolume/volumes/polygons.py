@@ -65,10 +65,14 @@ def _read(path: Path):
 
 
 def _read_pyogrio(path: Path):
+    import warnings
+
     import shapely
     from pyogrio import raw
 
-    meta, fids, wkb, values = raw.read(str(path), return_fids=True)
+    with warnings.catch_warnings():  # GDAL's complaints about a broken file: the error says it
+        warnings.simplefilter("ignore")
+        meta, fids, wkb, values = raw.read(str(path), return_fids=True)
     names = list(meta["fields"])
     geoms = shapely.from_wkb(wkb) if wkb is not None else [None] * len(fids)
     feats = [
