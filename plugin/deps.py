@@ -25,8 +25,9 @@ POINT_CLOUD_DEPS: tuple[tuple[str, str], ...] = (
     ("laspy", "laspy[lazrs]"),
     ("lazrs", "laspy[lazrs]"),
     ("open3d", _OPEN3D_PIP),
+    ("shapely", "shapely"),  # zones and stable-ground polygons (read with QGIS's own GDAL here)
 )
-RASTER_DEPS: tuple[tuple[str, str], ...] = POINT_CLOUD_DEPS[:4]
+RASTER_DEPS: tuple[tuple[str, str], ...] = (*POINT_CLOUD_DEPS[:4], ("shapely", "shapely"))
 # Not needed to run, offered with the rest: surveys past the memory budget run as Dask tasks
 # (without it, the Scheduler "auto" runs them in-process).
 OPTIONAL_DEPS: tuple[tuple[str, str], ...] = (("distributed", "dask[distributed]"),)

@@ -204,13 +204,13 @@ class Options:
     )
     scheduler: str = _opt(
         "auto",
-        "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST:PORT (an existing Dask cluster; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
+        "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST[:PORT] (an existing Dask cluster, port 8786 by default; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
         label="Scheduler",
         run_control=True,
     )
     memory_limit: float = _opt(
         0.0,
-        "memory budget (GB) of the run: auto chooses in-process below it, and a LocalCluster shares it among its workers (0 = half of this machine's memory)",
+        "memory budget (GB) of the run: auto chooses in-process below it, and a LocalCluster shares it among its workers, at least 0.25 GB each (0 = half of this machine's memory)",
         label="Memory budget",
         unit="GB",
         lo=0.0,

@@ -89,7 +89,9 @@ CASES = [
     Case("tcp-garbage-server", est("--scheduler", "tcp://127.0.0.1:{garbage}"), ERR, r"does not speak Dask's protocol"),
     Case("memory-below-a-worker", est("--memory-limit", "0.001", "--scheduler", "local:2"), ERR, r"below the 0.25 GB"),
     Case("memory-1e-9-auto", est("--memory-limit", "1e-9"), ERR, r"--memory-limit 1e-09: .* below"),
-    Case("memory-1e-9-threads", est("--memory-limit", "1e-9", "--scheduler", "threads:1"), ERR, r"smallest tile"),
+    Case("memory-1e-9-threads", est("--memory-limit", "1e-9", "--scheduler", "threads:1"), ERR, r"cannot hold a tile"),
+    Case("workers-1000", est("--scheduler", "local:1000"), ERR, r"below the 0.25 GB a worker needs; use fewer"),
+    Case("tile-too-large", est(*TILED[:2], "--tile-cells", "5000", "--memory-limit", "0.001"), ERR, r"smaller --tile"),
     # scheduler addresses
     Case("tcp-no-host", est("--scheduler", "tcp://"), ERR, r"--scheduler: no host"),
     Case("tls", est("--scheduler", "tls://10.0.0.1:8786"), ERR, r"TLS clusters need certificates"),
@@ -330,6 +332,7 @@ def _gone(pgid: int, within: float = 15.0) -> bool:
 
 LOCAL_TILES = ("--scheduler", "local:2", "--volume-step", "tiles", "--tile-cells", "16")
 MOMENTS = [  # (id, the progress line the signal follows, signal)
+    ("cluster-starting", r"thinning for registration", signal.SIGINT),
     ("first-pass", r"scanned 1/", signal.SIGINT),
     ("registering", r"registering the after cloud", signal.SIGINT),
     ("gridding", r"gridded tile 1/", signal.SIGINT),

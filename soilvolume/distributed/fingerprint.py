@@ -110,7 +110,7 @@ def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
     if old.get("code") != new.get("code"):
         return "the engine's code changed"
     for role in ("before", "after"):
-        a, b = old.get("inputs", {}).get(role, {}), new["inputs"][role]
+        a, b = old.get("inputs", {}).get(role, {}), new.get("inputs", {}).get(role, {})
         for name in b:
             if name not in a:
                 return f"the {role} input is another set of files ({Path(name).name} is new)"
@@ -118,13 +118,13 @@ def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
                 return f"{Path(name).name} changed (size, modification time or content)"
         if set(a) != set(b):
             return f"the {role} input is another set of files"
-    o, n = old.get("options", {}), new["options"]
+    o, n = old.get("options", {}), new.get("options", {})
     for key in n:
         if o.get(key) != n[key] and isinstance(n[key], dict) and isinstance(o.get(key), dict):
             return f"the --{key.replace('_', '-')} file {Path(n[key]['path']).name} changed"
         if o.get(key) != n[key]:
             return f"--{key.replace('_', '-')} differs ({_short(o.get(key))} then, {_short(n[key])} now)"
-    if old.get("plan") != new["plan"]:
+    if old.get("plan") != new.get("plan"):
         return "the registration, grid or tiling differs"
     return "" if old == new else "they were computed differently"
 

@@ -139,24 +139,44 @@ WORKER_MIN_GB = 0.25  # a worker process: the interpreter, numpy, laspy and a sm
 def check_budget(schedule: Schedule, memory_limit: float) -> None:
     """Refuse a memory budget below what each worker process needs to start and hold a tile
     (below it Dask pauses or restarts workers for ever)."""
-    if schedule.kind != "local" or memory_limit <= 0:
+    if schedule.kind != "local":
         return
     per_worker = budget_gb(memory_limit) / schedule.workers
-    if per_worker < WORKER_MIN_GB:
+    if per_worker >= WORKER_MIN_GB:
+        return
+    share = f"{per_worker:.3g} GB for each of the {schedule.workers} worker processes of {schedule}"
+    if memory_limit <= 0:
         raise SoilVolumeError(
-            f"--memory-limit {memory_limit:g}: {per_worker:.3g} GB for each of the {schedule.workers} worker "
-            f"processes of {schedule}, below the {WORKER_MIN_GB:g} GB a worker needs (give at least "
-            f"{WORKER_MIN_GB * schedule.workers:g}, or 0 for half of this machine's memory)"
+            f"--scheduler {schedule}: {share} (half of this machine's memory), below the {WORKER_MIN_GB:g} GB a "
+            "worker needs; use fewer workers"
         )
+    raise SoilVolumeError(
+        f"--memory-limit {memory_limit:g}: {share}, below the {WORKER_MIN_GB:g} GB a worker needs (give at least "
+        f"{WORKER_MIN_GB * schedule.workers:g}, or 0 for half of this machine's memory)"
+    )
 
 
-def check_tile_memory(points_per_tile: float, task_gb: float, memory_limit: float, bytes_per_point: float) -> None:
-    """Refuse a budget whose share per task cannot hold the smallest tile's points."""
-    need = points_per_tile * bytes_per_point * 2 / 2**30  # a task may use half of its share
-    if need > task_gb:
+MAX_TILES = 50_000  # tasks per step a cluster schedules well (each tile is a task of each step)
+
+
+def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) -> None:
+    """Refuse tilings a cluster cannot run: more than :data:`MAX_TILES` tiles, or a largest tile
+    whose points do not fit half of a task's memory share (``--memory-limit``)."""
+    from .tiletask import TILE_BYTES_PER_POINT
+
+    given = f"--tile-cells {options.tile_cells}" if options.tile_cells else "--memory-limit"
+    if len(windows) > MAX_TILES:
         raise SoilVolumeError(
-            f"--memory-limit {memory_limit:g}: {task_gb:.3g} GB per task cannot hold the smallest tile of this "
-            f"pair ({points_per_tile:,.0f} points need {need:.3g} GB); give a larger budget"
+            f"{given}: {len(windows):,} tiles, more than the {MAX_TILES:,} tasks a cluster schedules well; "
+            "use larger tiles (--tile-cells) or 0 for tiles from the point density"
+        )
+    cells = max((w[1] - w[0]) * (w[3] - w[2]) for w in windows)
+    need = cells * points_per_cell * TILE_BYTES_PER_POINT * 2 / 2**30  # a task may use half of its share
+    if need > task_gb:
+        fix = "a smaller --tile-cells or a larger budget" if options.tile_cells else "a larger budget"
+        raise SoilVolumeError(
+            f"{given}: {task_gb:.3g} GB per task (--memory-limit {options.memory_limit:g}) cannot hold a tile of "
+            f"{cells:,} cells of this pair ({cells * points_per_cell:,.0f} points need {need:.3g} GB); give {fix}"
         )
 
 

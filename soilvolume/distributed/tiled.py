@@ -44,7 +44,7 @@ from .cluster import checker
 from .cog import write_outputs
 from .fingerprint import run_parts
 from .scan import dask_loader
-from .schedule import Schedule, check_tile_memory, client, worker_gb
+from .schedule import Schedule, check_tiles, client, worker_gb
 from .tilestore import run_store
 from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, epoch_dems, plan_parts, run_tiles, tiles
 
@@ -166,7 +166,6 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         prep.index,
     )
     task_gb, density = worker_gb(schedule, options.memory_limit), points_per_cell(prep, cell)
-    check_tile_memory(density * MIN_TILE**2, task_gb, options.memory_limit, TILE_BYTES_PER_POINT)
     side = tile_side(options, grid, density, task_gb, schedule.workers)
     align = None if options.tile_cells else data_tile_m(src_b, cell, 2 * side)
     if align and not fits(density * (align / cell) ** 2, task_gb):
@@ -174,6 +173,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
     if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
         side = max(1, round(align / cell))
     windows = tiles(grid, side, align)
+    check_tiles(windows, density, task_gb, options)
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
     k = volume_factor(options, grid, schedule)
     said = store.bind(run_parts(before, after, options, plan_parts(plan, windows, k)))

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import secrets
 import shutil
 from collections.abc import Iterator
@@ -27,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.interrupt import Interrupted
-from ..core.outputs import _alive, _tag
+from ..core.interrupt import Interrupted, cleanup_on_exit
+from ..core.outputs import _tag, dead_siblings
 from . import fingerprint
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
@@ -150,7 +149,8 @@ def run_store(final: Path) -> Iterator[RunStore]:
     (the :class:`Interrupted` then says where)."""
     store = RunStore(final)
     try:
-        yield store
+        with cleanup_on_exit(lambda: store.close(keep=True)):  # a second signal: out at once
+            yield store
     except Interrupted as exc:
         kept = store.close(keep=True)
         raise Interrupted(exc.signum, kept=str(store.kept) if kept else None) from None
@@ -162,12 +162,5 @@ def run_store(final: Path) -> Iterator[RunStore]:
 
 def _sweep(final: Path) -> None:
     """Remove the run stores of runs into ``final`` that are no longer alive (killed)."""
-    pattern = re.compile(rf"^\.{re.escape(_tag(final.name))}\.{KEPT}-(\d+)-\w+$")
-    try:
-        entries = list(final.parent.iterdir())
-    except OSError:
-        return
-    for entry in entries:
-        m = pattern.match(entry.name)
-        if m and not _alive(int(m.group(1))):
-            shutil.rmtree(entry, ignore_errors=True)
+    for entry, _ in dead_siblings(final, (KEPT,)):
+        shutil.rmtree(entry, ignore_errors=True)

@@ -38,6 +38,10 @@ def read_polygons(
     if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
         raise SoilVolumeError(f"{path}: not a regular file (a device or pipe)")
     try:
+        import shapely  # noqa: F401 - validity and repair
+    except ImportError:
+        raise SoilVolumeError(f"{path}: reading polygons needs shapely (pip install shapely)") from None
+    try:
         feats, wkt = _read(path)
     except SoilVolumeError:
         raise

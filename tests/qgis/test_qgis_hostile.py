@@ -2,22 +2,8 @@
 
 from __future__ import annotations
 
-import signal
-
 import pytest
 from qgis.core import QgsProcessingException
-
-
-@pytest.fixture
-def alarm():
-    def timeout(*_):
-        raise TimeoutError("hung for 60 s")
-
-    old = signal.signal(signal.SIGALRM, timeout)
-    signal.alarm(60)
-    yield
-    signal.alarm(0)
-    signal.signal(signal.SIGALRM, old)
 
 
 @pytest.mark.parametrize("text", ["[1, 2]", '{"type": "FeatureCollection", "features": "x"}'])
