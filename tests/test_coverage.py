@@ -67,7 +67,7 @@ def test_a_small_gap_at_quiet_ground_is_a_caution():
     d[50:55, 5:10] = np.nan
     cov = coverage.summary(coverage.counts(n_a, n_b, refilled, d), 1.0, 0.0, 0.08)
     severity, text = coverage.check({"coverage": cov, "uncertainty_m3": {"net": 20.0}})
-    assert severity == "caution" and "25 m²" in text and "within their interval" in text
+    assert severity == "caution" and "25 m²" in text and "within their interval" in text, text
 
 
 def test_the_after_survey_beyond_the_grid():

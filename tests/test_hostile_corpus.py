@@ -448,7 +448,6 @@ def corpus(tmp_path_factory):
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_case(corpus, case: Case):
     code, out, err, seconds, folder = corpus["futures"][case.id].result()
-    print(f"TIME {case.id} {seconds:.1f}")
     lines = err.strip().splitlines()
     assert seconds <= LIMIT_S, f"took {seconds:.0f} s"
     assert code == case.code, (code, lines[-5:])

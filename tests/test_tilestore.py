@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 from dataclasses import fields
 
@@ -173,3 +174,27 @@ def test_a_failed_run_keeps_nothing_and_a_killed_runs_store_is_swept(tmp_path):
     dead.mkdir()
     RunStore(final).close(keep=False)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_kept_tiles_of_an_older_version_a_file_or_a_link_are_never_trusted(tmp_path):
+    final = tmp_path / "out"
+    old = tmp_path / ".out.soilvolume-tiles" / "0123456789abcdef"
+    old.mkdir(parents=True)
+    (old / "tile_0_1_0_1.npz").write_bytes(b"old")
+    store = RunStore(final)
+    assert store.bind({"code": "c"}) == (
+        "discarding the tiles kept by an interrupted run: they carry no record of their inputs; starting afresh"
+    )
+    store.close(keep=False)
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "precious.txt").write_text("keep me")
+    for planted in ("link", "file"):
+        kept = tmp_path / ".out.soilvolume-tiles"
+        kept.symlink_to(victim) if planted == "link" else kept.write_text("x")
+        store = RunStore(final)
+        assert not store.claimed and store.bind({"code": "c"}) is None
+        store.tiles([(0, 1, 0, 1)]).save((0, 1, 0, 1), {"h": np.ones((1, 1))})
+        assert store.close(keep=True) and kept.is_dir() and not kept.is_symlink()
+        shutil.rmtree(kept)
+    assert [p.name for p in victim.iterdir()] == ["precious.txt"]

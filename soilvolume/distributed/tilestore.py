@@ -99,6 +99,10 @@ class RunStore:
             self.claimed = True
         except OSError:
             self.claimed = False
+        if self.claimed and (self.folder.is_symlink() or not self.folder.is_dir()):  # not ours: never follow it
+            self.folder.unlink()
+            self.claimed = False
+        if not self.claimed:
             self.folder.mkdir()
         self.scratch = self.folder / "dask"  # the workers' spill and scratch space
         self.key = ""
@@ -133,6 +137,8 @@ class RunStore:
         the same command finds them; returns whether they were kept."""
         shutil.rmtree(self.scratch, ignore_errors=True)
         if keep and self.key and any(self.folder.glob(f"{self.key}_*.npy")):
+            if self.kept.is_symlink() or self.kept.is_file():
+                self.kept.unlink()
             shutil.rmtree(self.kept, ignore_errors=True)  # an older interruption's: ours is newer
             try:
                 os.rename(self.folder, self.kept)

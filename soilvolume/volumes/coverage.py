@@ -113,14 +113,14 @@ def check(report: dict) -> tuple[str, str] | None:
     if share > MAX_SHARE or bound > interval:
         return (
             "unreliable",
-            f"{said}: change there (~{bound:,.0f} m³ if it is like its surroundings) is not in the volumes, "
-            f"nor in their ±{interval:,.1f} m³ interval",
+            f"{said}: change there is not in the volumes (up to ~{bound:,.0f} m³ at the change seen around it, "
+            f"against their ±{interval:,.1f} m³ interval)",
         )
     if share > CAUTION_SHARE:
         return (
             "caution",
-            f"{said}: the volumes are for the compared {cov['compared_m2']:,.0f} m² only (change there like "
-            f"its surroundings, ~{bound:,.0f} m³, would lie within their interval)",
+            f"{said}: the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around "
+            f"it would make up to ~{bound:,.0f} m³ there, within their interval)",
         )
     return None
 
