@@ -1,8 +1,9 @@
 """Polygons from a vector file (GeoPackage, Shapefile, GeoJSON, ...) for zones and stable-ground
 masks: read with pyogrio (its own GDAL; works where GDAL's Python bindings are missing), else
-fiona, else GDAL's ``osgeo.ogr``; invalid geometries repaired with shapely's ``make_valid``
-(those left without area refused); brought into the grid's CRS with pyproj (a file without a CRS
-is taken to be in the grid's; coordinates its declared CRS cannot hold are refused).
+fiona, else GDAL's ``osgeo.ogr`` (first where it is loaded already, as inside QGIS); invalid
+geometries repaired with shapely's ``make_valid`` (those left without area refused); brought
+into the grid's CRS with pyproj (a file without a CRS is taken to be in the grid's; coordinates
+its declared CRS cannot hold are refused).
 """
 
 from __future__ import annotations
@@ -59,8 +60,14 @@ def read_polygons(
 
 
 def _read(path: Path):
-    """[(fid, properties, shapely geometry or None)], CRS WKT, by the first reader installed."""
-    for reader in (_read_pyogrio, _read_fiona, _read_ogr):
+    """[(fid, properties, shapely geometry or None)], CRS WKT, by the first reader installed;
+    GDAL's own bindings first where they are loaded already (inside QGIS: no second GDAL)."""
+    import sys
+
+    readers = [_read_pyogrio, _read_fiona, _read_ogr]
+    if "osgeo.ogr" in sys.modules or "qgis.core" in sys.modules:
+        readers.insert(0, readers.pop())
+    for reader in readers:
         try:
             return reader(path)
         except ImportError:
