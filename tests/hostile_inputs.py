@@ -158,6 +158,7 @@ def write_inputs(folder: Path) -> Path:
     shutil.rmtree(folder / "pair")
     _without(before := folder / "before.las", folder / "before_gap.las", (500040, 3900075, 500125, 3900120))
     _without(before, folder / "before_half.las", (500080, 3899000, 501000, 3901000))
+    _without(before, folder / "before_no_works.las", (500052, 3900052, 500112, 3900104))  # every pile and the pit
     good = quadrants(before, folder, "before")
     quadrants(folder / "after.las", folder, "after")
     bad_vpcs(folder, good)

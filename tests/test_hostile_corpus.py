@@ -72,6 +72,11 @@ def verdict(want: str, *words: str) -> Callable[[dict], None]:
     return check
 
 
+def never_not_significant(report: dict) -> None:
+    """Unseen change is not "no change"."""
+    assert not any("not significant" in m for m in report["quality"]["messages"]), report["quality"]
+
+
 def zones_flag(key: str, value) -> Callable[[dict], None]:
     def check(report: dict) -> None:
         assert any(z.get(key) == value for z in report["zones"]), report["zones"]
@@ -151,6 +156,13 @@ CASES = [
         0,
         r"coverage: both surveys cover \d+\.\d% .*the before survey misses",
         verdict("not reliable", "the before survey does not cover"),
+    ),
+    Case(
+        "before-misses-all-works",  # was net 0.0 +- 0.0 "not significant"
+        est("{in}/before_no_works.las", "{in}/after.las"),
+        0,
+        r"coverage: both surveys cover \d+\.\d% of the after footprint \(the before survey misses",
+        lambda r: verdict("not reliable", "does not cover")(r) or never_not_significant(r),
     ),
     Case(
         "before-gap-under-works-tiled",
