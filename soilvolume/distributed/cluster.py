@@ -17,7 +17,7 @@ from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
 
 CONNECT_S = 20.0  # a scheduler's address must answer within this
-START_S = {"tcp": 45.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
+START_S = {"tcp": 35.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
 NO_WORKERS_S = 20.0  # a cluster without any worker for this long cannot run the tasks
 POLL_S = 0.25  # how often a wait checks for signals and the cluster's health
 CLOSE_S = 15.0  # shutting the client and the cluster down
