@@ -24,6 +24,7 @@ from .validate import check_bounds, check_options
 SKIP = {"keep_registered_cloud"}
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
 (H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
+excluded.tif (what is not soil: vegetation, objects, moved objects; see --exclude),
 report.json, report.html, and with --registered-cloud after_registered.laz.
 Volumes are in cubic metres: fill = material added, cut = removed,
 net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted).

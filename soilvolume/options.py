@@ -190,6 +190,12 @@ class Options:
         lo=0.01,
         hi=10.0,
     )
+    exclude: str = _opt(
+        "auto",
+        "what is not soil: auto (points the signals say are not soil are not gridded: the LAS classification as --ground selects it, colour (vegetation by its excess-green index) and return numbers on files without one; objects that moved between the surveys are left out of the headline; objects in one survey only are counted and listed), none (colour and returns not used, moved objects counted: the volumes --exclude auto lists are restored; the class-2 selection stays with --ground)",
+        ("auto", "none"),
+        label="Exclude what is not soil",
+    )
     lod_confidence: float = _opt(
         0.95,
         "confidence of the level of detection and of the volume uncertainty",

@@ -241,3 +241,39 @@ def test_verdict_and_option_notes():
     twin = {**good, "name": "a-precise"}
     assert "a-precise" in accuracy.same_as_default([good, twin])[0]
     assert accuracy.same_as_default([good, {**twin, "est": {"net": 3.0}}]) == []
+
+
+@pytest.mark.parametrize("kind", ["yard", "landslide", "trench", "pillars"])
+def test_site_kinds_have_exact_volumes(kind):
+    """The issue-19 site kinds: the analytic volumes equal a fine numeric integral of dz."""
+    cfg = SceneConfig(change=kind, slope_deg=30.0 if kind == "landslide" else 0.0)
+    truth = scene_truth(5, cfg)
+    feats = _local_features(truth, cfg)
+    xs, ys = _grid((0.0, 0.0, *cfg.before_size), 0.05)
+    x, y = np.meshgrid(xs, ys)
+    dz = features_dz(x, y, feats)
+    fill, cut = dz[dz > 0].sum() * 0.0025, -dz[dz < 0].sum() * 0.0025
+    assert fill == pytest.approx(truth["fill"], rel=5e-3, abs=0.5)
+    assert cut == pytest.approx(truth["cut"], rel=5e-3, abs=0.5)
+    if kind == "pillars":
+        assert truth["fill"] == pytest.approx(1030.0, rel=0.01)
+
+
+def test_counted_truth_and_no_change_scoring():
+    """Objects in one survey only count as the engine counts them (an arrival and a departure of
+    one size are a move); a no-change pair is scored in m3 and on its interval holding 0."""
+    objects = [
+        {"epoch": "before", "role": "moved", "area_m2": 9.0, "volume": 13.0},
+        {"epoch": "after", "role": "moved", "area_m2": 9.0, "volume": 13.0},
+        {"epoch": "after", "role": "arrived", "area_m2": 8.0, "volume": 12.0},
+        {"epoch": "after", "role": "arrived", "area_m2": 20.0, "volume": 30.0},
+        {"epoch": "before", "role": "left", "area_m2": 8.5, "volume": 12.5},
+    ]
+    t = accuracy.counted_truth({"net": 0.0, "cut": 0.0, "fill": 0.0, "one_epoch_objects": objects})
+    assert (t["fill"], t["cut"], t["net"]) == (30.0, 0.0, 30.0)
+    truth = {"net": 0.0, "cut": 0.0, "fill": 0.0}
+    report = {"volume_m3": {"net": 9.0, "cut": 6.0, "fill": 15.0}, "uncertainty_m3": {"net": 10.0}}
+    row = accuracy.score(report, truth, "nochange", False)
+    assert all(row["checks"].values())
+    report["uncertainty_m3"]["net"] = 8.0
+    assert accuracy.score(report, truth, "nochange", False)["checks"]["0 in 95 %"] is False

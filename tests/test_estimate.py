@@ -18,6 +18,7 @@ OUTPUTS = {
     "difference.tif",
     "plane_offset.tif",
     "filled_mask.tif",
+    "excluded.tif",
     "report.json",
     "report.html",
 }

@@ -45,6 +45,7 @@ OTHER = {
     "ground": "none",
     "ground_window": 7.0,
     "ground_slope": 0.7,
+    "exclude": "none",
     "lod_confidence": 0.9,
     "threads": 2,
     "scheduler": "local:2",

@@ -202,6 +202,7 @@ def test_copc_registration_pass_reads_a_thinning_level(tmp_path):
 
     from soilvolume.distributed.scan import scan_unit
     from soilvolume.inputs.copc import copc_chunks, read_fraction
+    from soilvolume.soil.points import PointRule
 
     xyz, cls = _cloud(80_000)
     path = write_copc(tmp_path / "c.copc.laz", xyz, cls, pyproj.CRS(UTM).to_wkt(), spacing=0.05)
@@ -212,7 +213,7 @@ def test_copc_registration_pass_reads_a_thinning_level(tmp_path):
     assert sum(len(p) for p, _ in copc_chunks(path, resolution=1.0)) == len(xyz) // 16
     origin = np.array([500_000.0, 4_000_000.0, 0.0])
     lo, hi = np.zeros(3), np.array([100.0, 80.0, 0.0])
-    args = (None, lambda p: p - origin, False, None, (lo, hi, voxel), False)
+    args = (None, lambda p: p - origin, PointRule(), None, (lo, hi, voxel), False)
     thin = scan_unit((str(path), None, None), *args)
     full = scan_unit((str(las), 0, len(xyz)), *args)
     assert thin["points"] == full["points"] == len(xyz)

@@ -37,6 +37,7 @@ RUN_OUTPUTS = (
     "difference.tif",
     "plane_offset.tif",
     "filled_mask.tif",
+    "excluded.tif",
     "report.json",
     "report.html",
     "after_registered.laz",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -29,6 +30,7 @@ class Cloud:
     crs_wkt: str | None = None
     path: str = ""
     classification: np.ndarray | None = None
+    nonsoil: Any = None  # soil.points.NonSoil: the points read beside these that are not soil
 
     def __len__(self) -> int:
         return int(self.xyz.shape[0])

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -29,6 +30,27 @@ class EpochDEM:
     spread: np.ndarray
     dx: np.ndarray | None = None  # mean offset (m) of the cell's points from its centre, east
     dy: np.ndarray | None = None  # the same, north
+    veg: np.ndarray | None = None  # points per cell that are not soil: vegetation,
+    obj: np.ndarray | None = None  # objects (buildings, wires),
+    other: np.ndarray | None = None  # other (noise, water, unclassified)
+    nonsoil_z: np.ndarray | None = None  # the sum of their heights (m, local)
+    skew: np.ndarray | None = None  # the cell's height minus its points' median (m): what the statistic moved
+    rule: Any = None  # soil.points.PointRule that labelled the points (None: none active)
+
+    def nonsoil(self) -> np.ndarray:
+        """Points per cell that are not soil (all kinds; 0 without a rule)."""
+        parts = [a for a in (self.veg, self.obj, self.other) if a is not None]
+        return sum(parts) if parts else np.zeros(self.counts.shape, np.int64)
+
+    def all_points_height(self) -> np.ndarray:
+        """Each cell's mean height with its non-soil points in (what a grid of every point would
+        hold; NaN where the cell has no point at all)."""
+        if self.nonsoil_z is None:
+            return self.heights
+        m = self.nonsoil()
+        soil = np.where(self.counts > 0, np.nan_to_num(self.heights) * self.counts, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.counts + m > 0, (soil + self.nonsoil_z) / (self.counts + m), np.nan)
 
     def centred(self, cell: float, skip: np.ndarray | None = None) -> np.ndarray:
         """Heights moved from where each cell's points lie to the cell's centre, along the slope
@@ -46,7 +68,9 @@ class EpochDEM:
 
 
 CENTRING_PASSES = 4  # fixed-point passes: a moved cell gives its neighbours better slopes
-EPOCH_ARRAYS = ("h", "n", "s", "x", "y")  # an EpochDEM's arrays, in field order
+EPOCH_ARRAYS = ("h", "n", "s", "x", "y", "v", "o", "q", "z", "m")  # an EpochDEM's arrays, in field order
+ZERO_WHERE_EMPTY = set("nxyvoqzm")  # arrays that are 0 (not NaN) where a cell has no point
+MOSTLY = 0.5  # a cell whose points are at least this share not soil has no soil height (colour rule)
 
 
 def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
@@ -161,9 +185,10 @@ def average_height(
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
 
 
-def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -> EpochDEM:
-    """:func:`average_height` of one epoch with its spreads and its points' offsets from the cell
-    centres, as an :class:`EpochDEM`."""
+def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", nonsoil=None) -> EpochDEM:
+    """:func:`average_height` of one epoch's soil points with their spreads and offsets from
+    the cell centres, and the per-cell counts of its ``nonsoil`` points (``soil.points.NonSoil``,
+    in the grid's frame), as an :class:`EpochDEM` (see :func:`finish_epoch`)."""
     col, row, ok = cell_coords(xyz, grid)
     col, row = col[ok], row[ok]
     ids = flat_ids(col, row, grid.cols)
@@ -171,8 +196,39 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -
     sums.add(ids, col, row)
     del col, row
     z = np.asarray(xyz[ok, 2], dtype=np.float64)
-    h, n, s = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True)
-    return EpochDEM(h, n, s, *sums.means(n, grid.cell))
+    heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True, skew=True)
+    others = None
+    if nonsoil is not None:
+        o_ids, o_ok = cell_ids(nonsoil.xyz, grid)
+        others = nonsoil_sums(o_ids, nonsoil.labels[o_ok], nonsoil.xyz[o_ok, 2], (grid.rows, grid.cols))
+    rule = nonsoil.rule if nonsoil is not None else None
+    return finish_epoch(heights, sums.means(heights[1], grid.cell), others, rule)
+
+
+def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:
+    """(vegetation, objects, other counts, sum of heights) per cell of non-soil points in flat
+    cells ``ids`` of a ``shape`` grid (labels of :mod:`soilvolume.soil.points`)."""
+    from ..soil.points import OBJECT, OTHER, VEGETATION
+
+    n = shape[0] * shape[1]
+    counts = tuple(np.bincount(ids[labels == k], minlength=n).reshape(shape) for k in (VEGETATION, OBJECT, OTHER))
+    return (*counts, np.bincount(ids, weights=np.asarray(z, np.float64), minlength=n).reshape(shape))
+
+
+def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> EpochDEM:
+    """An :class:`EpochDEM` from its soil heights (h, n, s, skew), centre offsets (dx, dy) and
+    non-soil sums (:func:`nonsoil_sums`, None without a rule); with a colour rule
+    (``rule.empties_cells``) a cell mostly of non-soil points has no soil height: its remaining
+    "soil" points are canopy seen at a slant or mixed pixels, not the ground."""
+    h, n, s, skew = heights
+    if others is None:
+        return EpochDEM(h, n, s, *offsets, skew=skew, rule=rule)
+    if rule is not None and rule.empties_cells:
+        m = others[0] + others[1] + others[2]
+        gone = (m > 0) & (m >= MOSTLY * (m + n))
+        h, s, skew = (np.where(gone, np.nan, a) for a in (h, s, skew))
+        n = np.where(gone, 0, n)
+    return EpochDEM(h, n, s, *offsets, *others, skew, rule)
 
 
 def cell_heights(
@@ -182,9 +238,12 @@ def cell_heights(
     statistic: str = "robust-mean",
     k_mad: float = 3.0,
     spread: bool = False,
+    skew: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
-    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid)."""
+    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid); with
+    ``skew`` (and ``spread``) also each cell's height minus its median (0 for ``median``, NaN
+    where empty; for ``mean`` the plain mean's)."""
     if statistic not in ("mean", "median", "robust-mean"):
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     n = shape[0] * shape[1]
@@ -195,16 +254,19 @@ def cell_heights(
         if spread:
             sq = _mean(ids, z * z, counts, n)
             out += (np.sqrt(np.maximum(sq - mean * mean, 0.0)).reshape(shape),)
+        if skew:
+            med = _SortedCells(ids, z, n).quantile(0.5) if len(z) else mean
+            out += ((mean - med).reshape(shape),)
         return out
     keys = _SortedCells(ids, z, n)
     med = keys.quantile(0.5)
     iqr_sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
     extra = (iqr_sigma.reshape(shape),) if spread else ()
     if statistic == "median":
-        return (med.reshape(shape), keys.counts.reshape(shape), *extra)
+        return (med.reshape(shape), keys.counts.reshape(shape), *extra, *((np.zeros(shape),) if skew else ()))
     sigma = np.maximum(iqr_sigma, 0.01)
     h = keys.mean_between(med - k_mad * sigma, med + k_mad * sigma)
-    return (h.reshape(shape), keys.counts.reshape(shape), *extra)
+    return (h.reshape(shape), keys.counts.reshape(shape), *extra, *(((h - med).reshape(shape),) if skew else ()))
 
 
 class _SortedCells:
@@ -276,7 +338,9 @@ def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> floa
     return choose_cell(int(counts[ins].sum()), float(ins.sum()) * res * res, minimum=minimum)
 
 
-MASK_LAYER = "filled_mask"  # the one uint8 layer of a run, without units
+MASK_LAYER = "filled_mask"  # uint8 layers of a run, without units: the refilled cells,
+CLASS_LAYER = "classes"  # and what is not soil (volumes/nonsoil.CLASS_CODES; resources/styles/excluded.qml)
+UINT8_LAYERS = (MASK_LAYER, CLASS_LAYER)
 
 
 def output_layers(correction: str) -> list[tuple[str, str, str]]:
@@ -288,7 +352,14 @@ def output_layers(correction: str) -> list[tuple[str, str, str]]:
         ("difference.tif", "diff", f"H_after - H_before - correction ({correction}) (m)"),
         ("plane_offset.tif", "offset", f"vertical correction d_i subtracted ({correction}) (m)"),
         ("filled_mask.tif", MASK_LAYER, "1 = difference interpolated (sparse cell or filled hole)"),
+        ("excluded.tif", CLASS_LAYER, CLASS_LEGEND),
     ]
+
+
+CLASS_LEGEND = (
+    "what is not soil: 0 soil, 1 vegetation, 2 objects by classification, 3 other (noise, water, unclassified), "
+    "4 moved object (left out), 5 object in one survey (counted), 6 rough change (counted)"
+)
 
 
 def write_geotiff(

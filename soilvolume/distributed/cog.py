@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import GridSpec
-from ..dem.grid import MASK_LAYER, NODATA, output_layers
+from ..dem.grid import NODATA, UINT8_LAYERS, output_layers
 from ..inputs.io import atomic_path
 
 BLOCK = 256
@@ -77,7 +77,7 @@ def write_outputs(out, get: Callable[[str, slice, slice], np.ndarray], grid: Gri
     """The rasters of a run (:func:`grid.output_layers`) as COGs, block by block;
     ``get(name, rows, cols)`` gives the window of the grid array ``name`` (heights local)."""
     for name, key, desc in output_layers(correction):
-        if key == MASK_LAYER:
+        if key in UINT8_LAYERS:
             write_cog(out.path(name), grid, lambda r, c, key=key: get(key, r, c).astype("uint8"), desc, "", "uint8")
         else:
             add = z0 if key.startswith("dem_") else 0.0

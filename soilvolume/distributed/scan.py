@@ -11,8 +11,8 @@ import numpy as np
 
 from ..core import interrupt
 from ..inputs.copc import is_copc, read_fraction
-from ..inputs.io import GROUND
-from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, file_chunks, ground_mode, las_ranges, load
+from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
+from ..soil.points import SOIL, NonSoil, PointRule
 
 UNIT = 8_000_000  # points per task of a single file
 # COPC files are read for registration only down to the octree level whose spacing puts about
@@ -32,21 +32,21 @@ def units(src: Source) -> list[Unit]:
     return [(src.path, s, min(UNIT, src.count - s)) for s in range(0, src.count, UNIT)]
 
 
-def scan_unit(unit: Unit, region, to_local, use_class: bool, keep, thinning: tuple, indexed: bool) -> dict:
-    """Thinning sums, counts and chunk boxes of one unit."""
+def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool) -> dict:
+    """Thinning sums, counts and chunk boxes of one unit (its soil points, by the epoch's ``rule``)."""
     import time
 
     path, start, count = unit
     voxel = thinning[2]  # (lo, hi, voxel[, within]) of the driver's ColumnThinner
     resolution = voxel / COPC_POINTS_PER_COLUMN_SIDE if start is None and is_copc(path) else None
     if start is None:
-        chunks = file_chunks(path, region, CHUNK, resolution)
+        chunks = file_chunks(path, region, CHUNK, resolution, signals=True)
     else:
-        chunks = las_ranges(path, [(start, count)], CHUNK)
+        chunks = las_ranges(path, [(start, count)], CHUNK, signals=True)
     thinner = ColumnThinner(*thinning)
     out = {"points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
     t0 = time.perf_counter()
-    for xyz, cls in chunks:
+    for xyz, cls, sig in chunks:
         out["read_s"] += time.perf_counter() - t0
         if indexed:
             out["index"].append(
@@ -54,7 +54,8 @@ def scan_unit(unit: Unit, region, to_local, use_class: bool, keep, thinning: tup
             )
         out["points"] += len(xyz)
         local = to_local(xyz)
-        mask = cls == GROUND if use_class and cls is not None else None
+        labels = rule.labels(cls, sig)
+        mask = None if labels is None else labels == SOIL
         out["used"] += len(xyz) if mask is None else int(mask.sum())
         if keep is not None:
             mask = keep(local) if mask is None else mask & keep(local)
@@ -80,18 +81,26 @@ def dask_loader(
     from .cluster import completed
 
     def loader(
-        src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check=None, box=None, indexed: bool = False
+        src: Source,
+        to_local,
+        mode: str,
+        keep,
+        thinner: ColumnThinner,
+        check=None,
+        box=None,
+        indexed: bool = False,
+        exclude: str = "auto",
     ) -> Loaded:
         keeps_points = box is None or (box[1] >= box[0]).all()
         if src.raw is not None or keeps_points:
-            return load(src, to_local, mode, keep, thinner, check, box, indexed)
-        stream = src.chunks()
-        first = next(stream, (None, None))[1]
+            return load(src, to_local, mode, keep, thinner, check, box, indexed, exclude)
+        stream = src.chunks(signals=True)
+        _, first, sig = next(stream, (None, None, None))
         stream.close()
-        use_class = ground_mode(src, first, mode)
+        rule = epoch_rule(src, first, sig, mode, exclude)
         todo = units(src)
         thinning = (thinner.lo, thinner.hi, thinner.voxel, thinner.within)
-        args = (src.region, to_local, use_class, keep, thinning, indexed)
+        args = (src.region, to_local, rule, keep, thinning, indexed)
         futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], pure=False)
         parts = []
         for k, part in enumerate(completed(client, futures, f"reading {src.path}", wait_check), 1):
@@ -102,8 +111,10 @@ def dask_loader(
         single = indexed and src.vpc is None and not is_copc(src.path)
         index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
         total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
-        note = "class 2 (ground)" if use_class else "all points"
+        note = "class 2 (ground)" if rule.use_class else "all points"
         extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": thinner.counts(), "index": index}
-        return Loaded(np.empty((0, 3), np.float32), thinner.result(), total["points"], total["used"], note, extra)
+        nothing = NonSoil(np.empty((0, 3), np.float32), np.empty(0, np.uint8), rule) if rule.active else None
+        empty = np.empty((0, 3), np.float32)
+        return Loaded(empty, thinner.result(), total["points"], total["used"], note, extra, nothing)
 
     return loader

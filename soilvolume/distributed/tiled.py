@@ -164,6 +164,7 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         footprint(prep.after_thin[:, :2], options.radius),
         options.statistic,
         prep.index,
+        prep.rules,
     )
     task_gb, density = worker_gb(schedule, options.memory_limit), points_per_cell(prep, cell)
     side = tile_side(options, grid, density, task_gb, schedule.workers)
@@ -188,13 +189,13 @@ def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks,
         )
     else:
         with timer("grids"):
-            dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, tiles_kept, stats := {}))
+            dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, tiles_kept, stats := {}), plan.rules)
         hooks.step(70, correction_step(options))
         vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
         hooks.step(85, "writing outputs (COG)")
         with timer("write"):
             arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
-            arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask)
+            arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask, classes=vols.classes)
             write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
         with timer("report"):
             report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)

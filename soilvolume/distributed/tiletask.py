@@ -4,13 +4,23 @@ where they can meet it), their heights, counts and spreads with :func:`grid.cell
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.types import GridSpec
-from ..dem.grid import EPOCH_ARRAYS, EpochDEM, OffsetSums, cell_coords, cell_heights, flat_ids
+from ..dem.grid import (
+    EPOCH_ARRAYS,
+    ZERO_WHERE_EMPTY,
+    EpochDEM,
+    OffsetSums,
+    cell_coords,
+    cell_heights,
+    finish_epoch,
+    flat_ids,
+    nonsoil_sums,
+)
 from ..inputs.crs import WorkFrame
 from ..inputs.footprint import PolygonMask
 from ..inputs.io import GROUND
@@ -29,7 +39,7 @@ TILE_ARRAYS = tuple(f"{k}_{e}" for e in "ab" for k in EPOCH_ARRAYS)  # what a ti
 def empty_value(name: str) -> float:
     """A tile array's value where no point fell: 0 for counts and centre offsets, NaN for heights
     and spreads."""
-    return 0 if name[0] in "nxy" else np.nan
+    return 0 if name[0] in ZERO_WHERE_EMPTY else np.nan
 
 
 @dataclass(frozen=True)
@@ -48,6 +58,7 @@ class Plan:
     crop: np.ndarray  # the before crop polygon (local), as in-process
     statistic: str
     index: tuple = (None, None)  # (before, after): chunk boxes of single files, for bounded reads
+    rules: tuple = (None, None)  # (before, after): soil.points.PointRule of each epoch (None: class 2 by ground)
 
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
@@ -98,9 +109,12 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
         src = src.within(*box)
     shape = (win[1] - win[0], win[3] - win[2])
     ids, zs, offsets = [], [], OffsetSums(shape[0] * shape[1])
-    for xyz, cls in src.chunks():
+    rule = plan.rules[epoch]
+    o_ids, o_lab, o_z = [], [], []
+    for xyz, cls, sig in src.chunks(signals=True):
         stats["read"] += len(xyz)
-        sel = cls == GROUND if ground and cls is not None else None
+        labels = rule.labels(cls, sig) if rule is not None else None
+        sel = cls == GROUND if rule is None and ground and cls is not None else None
         if box is not None:  # the box has a margin: cells are assigned exactly below
             near = (
                 (xyz[:, 0] >= box[0][0])
@@ -110,32 +124,52 @@ def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
             )
             sel = near if sel is None else sel & near
         if sel is not None:
-            xyz = xyz[sel]
+            xyz, labels = xyz[sel], None if labels is None else labels[sel]
         local = to_local(xyz)
         if keep is not None:
-            local = local[keep(local)]
+            inside = keep(local)
+            local, labels = local[inside], None if labels is None else labels[inside]
         local = local.astype(np.float32)
         if transform is not None:
             local = transform_points32(local, transform)
+        if labels is not None:
+            soil = labels == 0
+            i, z = _window_cells(local[~soil], plan.grid, win, OffsetSums(shape[0] * shape[1]), keep_ids=True)
+            o_ids.append(i[0])
+            o_lab.append(labels[~soil][i[1]])
+            o_z.append(z)
+            local = local[soil]
         i, z = _window_cells(local, plan.grid, win, offsets)
         ids.append(i)
         zs.append(z)
     z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
-    heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True)
-    return heights + offsets.means(heights[1], plan.grid.cell)
+    heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True, skew=True)
+    others = None
+    if rule is not None:
+        others = nonsoil_sums(_joined(o_ids, np.int32), _joined(o_lab, np.uint8), _joined(o_z, np.float32), shape)
+    dem = finish_epoch(heights, offsets.means(heights[1], plan.grid.cell), others, rule)
+    zero = np.zeros(shape)
+    names = [f.name for f in fields(EpochDEM)][: len(EPOCH_ARRAYS)]
+    return tuple(zero if a is None else a for a in (getattr(dem, n) for n in names))
 
 
-def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums) -> tuple[np.ndarray, np.ndarray]:
+def _joined(parts: list, dtype) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.empty(0, dtype)
+
+
+def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums, keep_ids: bool = False):
     """Flat cell ids within the window, and heights, of the points on the window's cells of
     ``grid`` (cells assigned on the whole grid, exactly as in-process); their positions in
-    their cells are added to ``offsets``."""
+    their cells are added to ``offsets``. ``keep_ids``: the ids come with the indices of the
+    points they belong to."""
     fcol, frow, ok = cell_coords(xyz32, grid)
     fcol, frow = fcol[ok], frow[ok]
     row, col = np.divmod(flat_ids(fcol, frow, grid.cols), grid.cols)
     m = (row >= win[0]) & (row < win[1]) & (col >= win[2]) & (col < win[3])
     local_ids = (row[m] - win[0]) * (win[3] - win[2]) + (col[m] - win[2])
     offsets.add(local_ids, fcol[m], frow[m])
-    return local_ids.astype(np.int32), xyz32[ok, 2][m]
+    ids = local_ids.astype(np.int32)
+    return ((ids, np.flatnonzero(ok)[m]) if keep_ids else ids), xyz32[ok, 2][m]
 
 
 def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:
@@ -228,10 +262,13 @@ def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: 
         yield result
 
 
-def epoch_dems(arrays: tuple[np.ndarray, ...]) -> tuple[EpochDEM, EpochDEM]:
-    """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order."""
+def epoch_dems(arrays: tuple[np.ndarray, ...], rules: tuple = (None, None)) -> tuple[EpochDEM, EpochDEM]:
+    """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order; ``rules``:
+    the (before, after) point rules that labelled them (:attr:`Plan.rules`)."""
+    from dataclasses import replace
+
     k = len(EPOCH_ARRAYS)
-    return EpochDEM(*arrays[:k]), EpochDEM(*arrays[k:])
+    return replace(EpochDEM(*arrays[:k]), rule=rules[1]), replace(EpochDEM(*arrays[k:]), rule=rules[0])
 
 
 def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:

@@ -4,11 +4,13 @@ the outputs from the store."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
-from ..dem.grid import EpochDEM
+from ..dem.grid import MASK_LAYER, UINT8_LAYERS, EpochDEM
 from ..reporting.report import build_report
 from ..volumes.zones import check_inside
 from ..workflow.steps import add_quality, alternative_move, planes_and_volumes
@@ -32,6 +34,7 @@ def tiled_volume_step(c, plan, store: TileStore, k: int, run: tuple, out: Output
     job = VolumeJob(
         store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), alternative_move(reg)
     )
+    job = replace(job, rules=prep.rules)
     with timer("volume"):
         tiles = list(map_tiles(c, volume_tile, job, windows, hooks=hooks, steps=(75, 85, "volumes of")))
         order = {w: i for i, w in enumerate(windows)}
@@ -83,6 +86,8 @@ def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
 def _reader(store: TileStore):
     def get(key: str, rows: slice, cols: slice) -> np.ndarray:
         win = (rows.start, rows.stop, cols.start, cols.stop)
-        return store.read(key, win, fill=False, dtype=bool) if key == "filled_mask" else store.read(key, win)
+        if key in UINT8_LAYERS:  # the refilled mask, the classes: no NaN to fill with
+            return store.read(key, win, fill=0, dtype=bool if key == MASK_LAYER else np.uint8)
+        return store.read(key, win)
 
     return get

@@ -33,7 +33,7 @@ from .tilestore import TileStore, Window
 from .tiletask import TILE_ARRAYS, empty_value, epoch_dems, grid_tile
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
-VOLUME_ARRAYS = ("dem_a", "dem_b", "diff", "offset", "filled_mask")
+VOLUME_ARRAYS = ("dem_a", "dem_b", "diff", "offset", "filled_mask", "classes")
 BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "thresholded", "holes")
 PARTS = ("net", "cut", "fill", "net_compared_area")
 
@@ -72,6 +72,7 @@ class VolumeJob:
     medians: tuple[float, float]  # (after, before) median point counts of the whole grid
     planes: tuple  # (before, after) RANSAC planes of the paper
     moved: np.ndarray | None
+    rules: tuple = (None, None)  # (before, after) point rules (Plan.rules)
 
 
 def volume_tile(job: VolumeJob, win: Window) -> dict:
@@ -94,7 +95,7 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
         core=core,
     )
     d_i = plane_offset(job.planes[0], job.planes[1], wgrid)
-    after, before = epoch_dems(a)
+    after, before = epoch_dems(a, job.rules)
     vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
     job.store.save(win, {n: getattr(vols, n)[core] for n in VOLUME_ARRAYS})
     out = {b: getattr(vols, b) for b in BUDGETS}

@@ -66,11 +66,15 @@ def copc_chunks(
     hi=None,
     resolution: float | None = None,
     size: int = 1_000_000,
-) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    signals: bool = False,
+) -> Iterator[tuple]:
     """(absolute xyz float64, classification or None) of the points of a COPC file within the
     x/y box lo..hi (inclusive), at most ``size`` at a time, read from the octree nodes meeting
-    the box (down to the level of ``resolution`` when given)."""
+    the box (down to the level of ``resolution`` when given); with ``signals`` also their colour
+    and returns (:func:`io.point_signals`)."""
     import laspy
+
+    from .io import point_signals
 
     try:
         with laspy.CopcReader.open(str(path)) as reader:
@@ -78,11 +82,13 @@ def copc_chunks(
             if lo is not None:
                 bounds = laspy.copc.Bounds(mins=np.asarray(lo[:2], float), maxs=np.asarray(hi[:2], float))
             pts = reader.query(bounds=bounds, resolution=resolution)
-            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+            dims = set(reader.header.point_format.dimension_names)
+            has_cls = "classification" in dims
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable COPC file ({exc})") from exc
     for i in range(0, len(pts), size):
         part = pts[i : i + size]
         xyz = np.empty((len(part), 3))
         xyz[:, 0], xyz[:, 1], xyz[:, 2] = part.x, part.y, part.z
-        yield xyz, (np.asarray(part.classification) if has_cls else None)
+        cls = np.asarray(part.classification) if has_cls else None
+        yield (xyz, cls, point_signals(part, dims)) if signals else (xyz, cls)

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
+from ..soil.points import Signals
 from .lasheader import BoundsCheck, check_las_header
 
 LAS_SUFFIXES = {".las", ".laz"}
@@ -32,6 +33,7 @@ class RawPoints:
     classification: np.ndarray | None
     crs_wkt: str | None
     path: str
+    signals: Signals | None = None  # colour and returns, when the file has them
 
 
 def _check_readable(path: Path) -> None:
@@ -132,16 +134,18 @@ def _read_las(path: Path) -> RawPoints:
     return RawPoints(xyz, cls, wkt, str(path))
 
 
-def las_chunks(path: Path, count: int, size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+def las_chunks(path: Path, count: int, size: int, signals: bool = False) -> Iterator[tuple]:
     """(absolute xyz float64, classification or None) of a LAS/LAZ file, ``size`` points at a
-    time; a point count other than the header's ``count`` is reported as a corrupt file."""
+    time; a point count other than the header's ``count`` is reported as a corrupt file. With
+    ``signals``, a third item: the points' colour and returns (:func:`point_signals`)."""
     import laspy
 
     read = 0
     try:
         with laspy.open(path) as reader:
             h = reader.header
-            has_cls = "classification" in set(h.point_format.dimension_names)
+            dims = set(h.point_format.dimension_names)
+            has_cls = "classification" in dims
             bounds = BoundsCheck(path, h)
             for chunk in reader.chunk_iterator(size):
                 xyz = np.empty((len(chunk), 3))
@@ -149,7 +153,8 @@ def las_chunks(path: Path, count: int, size: int) -> Iterator[tuple[np.ndarray, 
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
                 bounds.update(xyz)
                 read += len(chunk)
-                yield xyz, (np.asarray(chunk.classification) if has_cls else None)
+                cls = np.asarray(chunk.classification) if has_cls else None
+                yield (xyz, cls, point_signals(chunk, dims)) if signals else (xyz, cls)
     except SoilVolumeError:
         raise
     except Exception as exc:
@@ -159,6 +164,17 @@ def las_chunks(path: Path, count: int, size: int) -> Iterator[tuple[np.ndarray, 
     bounds.finish()
 
 
+def point_signals(record, dims: set[str]) -> Signals | None:
+    """The colour (red, green, blue) and return numbers of a laspy point record, when its point
+    format has them (None when it has neither)."""
+    rgb = ret = None
+    if {"red", "green", "blue"} <= dims:
+        rgb = np.column_stack([np.asarray(record.red), np.asarray(record.green), np.asarray(record.blue)])
+    if {"return_number", "number_of_returns"} <= dims:
+        ret = np.column_stack([np.asarray(record.return_number), np.asarray(record.number_of_returns)]).astype(np.uint8)
+    return None if rgb is None and ret is None else Signals(rgb, ret)
+
+
 def _read_o3d(path: Path) -> RawPoints:
     import open3d as o3d
 
@@ -166,7 +182,10 @@ def _read_o3d(path: Path) -> RawPoints:
     xyz = np.asarray(pcd.points, dtype=np.float64)
     if xyz.size == 0 and path.stat().st_size > 0:
         raise SoilVolumeError(f"{path}: not a readable {path.suffix} point cloud (Open3D read 0 points)")
-    return RawPoints(xyz.copy(), None, None, str(path))
+    sig = None
+    if pcd.has_colors():  # 0..1 floats: to the 16-bit scale of LAS colour
+        sig = Signals(np.rint(np.asarray(pcd.colors) * 65535).astype(np.uint16))
+    return RawPoints(xyz.copy(), None, None, str(path), sig)
 
 
 def _read_text(path: Path) -> RawPoints:

@@ -39,6 +39,11 @@ class Prepared:
     ground: tuple[bool, bool] = (False, False)  # (before, after) streamed as class 2 only
     index: tuple = (None, None)  # (before, after): chunk boxes of single files (Source.index)
 
+    @property
+    def rules(self) -> tuple:
+        """(before, after): each epoch's ``soil.points.PointRule`` (None when none is active)."""
+        return tuple(None if c.nonsoil is None else c.nonsoil.rule for c in (self.before, self.after))
+
 
 def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyproj.CRS:
     """The file's header CRS, else the one given by ``flag`` (for files without one); a flag
@@ -101,9 +106,10 @@ def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, s
     keep, note = select_ground(raw, "filter", crs, options.ground_window, options.ground_slope)
     if not keep.any():
         raise SoilVolumeError(f"{src.path}: the SMRF ground filter found no ground points")
-    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path))
+    sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
+    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
     out.count = src.count  # report the points read, not the ground points
-    return out, "none", note
+    return out, "filter", note
 
 
 def thin_voxel(area_m2: float) -> float:
@@ -148,6 +154,7 @@ def prepare(
         check,
         box,
         not full,
+        exclude=options.exclude,
     )
     if b.used < MIN_COLUMNS:  # a handful of points in all: not an overlap problem
         raise SoilVolumeError(f"{before.path}: too few points to work with ({b.used}, at least {MIN_COLUMNS} needed)")
@@ -159,14 +166,14 @@ def prepare(
         )
     check_spread(b.thin[:, :2], before.path, "near the after cloud")
     inputs = {
-        "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"]),
-        "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"]),
+        "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"], b.nonsoil),
+        "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"], a.nonsoil),
     }
     read_s = a.extra["read_s"] + b.extra["read_s"]
     wkt = frame.wkt
     return Prepared(
-        Cloud(b.xyz, origin, wkt, before.path),
-        Cloud(a.xyz, origin, wkt, after.path),
+        Cloud(b.xyz, origin, wkt, before.path, nonsoil=b.nonsoil),
+        Cloud(a.xyz, origin, wkt, after.path, nonsoil=a.nonsoil),
         frame,
         origin,
         inputs,
@@ -233,7 +240,7 @@ def _load_whole(
     src, mode, note = _filtered(src, crs, options)
     pad = _pad(lo, hi)
     thinner = ColumnThinner(lo - pad, hi + pad, voxel, name=src.path)
-    return src, loader(src, to_local, mode, None, thinner, check, box, box is NOTHING), note
+    return src, loader(src, to_local, mode, None, thinner, check, box, box is NOTHING, exclude=options.exclude), note
 
 
 def _pad(lo: np.ndarray, hi: np.ndarray) -> float:
@@ -270,8 +277,11 @@ def _local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
     return lambda xyz: to_frame(xyz, crs, frame, path) - origin
 
 
-def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int) -> dict:
+def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int, nonsoil=None) -> dict:
+    from ..soil.points import PointRule
+
     return {
+        "soil_rule": (nonsoil.rule if nonsoil is not None else PointRule()).describe(),
         "path": src.path,
         "points": int(src.count),
         "points_used": used,

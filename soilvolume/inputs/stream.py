@@ -18,8 +18,19 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
+from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
 from .copc import copc_chunks, is_copc
-from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_chunks, las_crs_wkt, read_points, validate
+from .io import (
+    GROUND,
+    LAS_SUFFIXES,
+    RawPoints,
+    _check_readable,
+    las_chunks,
+    las_crs_wkt,
+    point_signals,
+    read_points,
+    validate,
+)
 from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
@@ -42,17 +53,19 @@ class Source:
     region: tuple[np.ndarray, np.ndarray] | None = None  # x/y box (file CRS) that reads may stop at
     index: tuple | None = None  # of a single file: (start, count, x/y lo, x/y hi) of each chunk read
 
-    def chunks(self, size: int | None = None) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    def chunks(self, size: int | None = None, signals: bool = False) -> Iterator[tuple]:
         """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
-        points (default ``CHUNK``); with a ``region``, chunks may hold points outside it."""
+        points (default ``CHUNK``); with a ``region``, chunks may hold points outside it. With
+        ``signals``, a third item: the chunk's colour and returns (``soil.points.Signals`` or None)."""
         if self.raw is not None:
-            yield self.raw.xyz, self.raw.classification
+            raw = self.raw
+            yield (raw.xyz, raw.classification, raw.signals) if signals else (raw.xyz, raw.classification)
             return
         if self.index is not None and self.region is not None and not is_copc(self.path):
-            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK)
+            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK, signals)
             return
         for path in self.tiles():
-            yield from file_chunks(path, self.region, size or CHUNK)
+            yield from file_chunks(path, self.region, size or CHUNK, signals=signals)
 
     def within(self, lo, hi) -> Source:
         """This source, read only where it can meet the x/y box lo..hi (file CRS)."""
@@ -69,9 +82,9 @@ class Source:
         """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
         if self.raw is not None:
             return self.raw
-        parts = list(self.chunks())
-        cls = None if parts[0][1] is None else np.concatenate([c for _, c in parts])
-        return RawPoints(np.concatenate([x for x, _ in parts]), cls, self.crs_wkt, self.path)
+        xyz, cls, sig = zip(*self.chunks(signals=True), strict=True)
+        cls = None if cls[0] is None else np.concatenate(cls)
+        return RawPoints(np.concatenate(xyz), cls, self.crs_wkt, self.path, Signals.join(sig))
 
 
 def _meeting(index, lo, hi) -> list[tuple[int, int]]:
@@ -79,35 +92,37 @@ def _meeting(index, lo, hi) -> list[tuple[int, int]]:
     return [(s, n) for s, n, a, b in index if (a <= hi).all() and (lo <= b).all()]
 
 
-def las_ranges(path: str, ranges: list[tuple[int, int]], size: int) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: bool = False) -> Iterator[tuple]:
     """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
     import laspy
 
     try:
         with laspy.open(path) as reader:
-            has_cls = "classification" in set(reader.header.point_format.dimension_names)
+            dims = set(reader.header.point_format.dimension_names)
+            has_cls = "classification" in dims
             for start, count in ranges:
                 reader.seek(start)
                 for i in range(0, count, size):
                     pts = reader.read_points(min(size, count - i))
                     xyz = np.empty((len(pts), 3))
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
-                    yield xyz, (np.asarray(pts.classification) if has_cls else None)
+                    cls = np.asarray(pts.classification) if has_cls else None
+                    yield (xyz, cls, point_signals(pts, dims)) if signals else (xyz, cls)
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
 
 
 def file_chunks(
-    path: str, region, size: int, resolution: float | None = None
-) -> Iterator[tuple[np.ndarray, np.ndarray | None]]:
+    path: str, region, size: int, resolution: float | None = None, signals: bool = False
+) -> Iterator[tuple]:
     """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only the octree
     nodes meeting it, with a ``resolution`` only its levels down to that point spacing; anything
     else is streamed whole."""
     if (region is not None or resolution is not None) and is_copc(path):
         lo, hi = region if region is not None else (None, None)
-        yield from copc_chunks(path, lo, hi, resolution=resolution, size=size)
+        yield from copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=signals)
         return
-    yield from las_chunks(Path(path), _header(Path(path)).count, size)
+    yield from las_chunks(Path(path), _header(Path(path)).count, size, signals)
 
 
 def open_source(path, pipeline=None) -> Source:
@@ -282,8 +297,9 @@ class _Parts:
 
 @dataclass
 class Loaded:
-    """One epoch after streaming: kept points (float32 local), the thinned subset (float64
-    local), and what was read and kept."""
+    """One epoch after streaming: kept soil points (float32 local), the thinned subset (float64
+    local), and what was read and kept; ``nonsoil``: the points the epoch's rule says are not
+    soil (``soil.points.NonSoil``: float32 local xyz, labels, the rule) within the same box."""
 
     xyz: np.ndarray
     thin: np.ndarray
@@ -291,6 +307,7 @@ class Loaded:
     used: int = 0
     note: str = ""
     extra: dict = field(default_factory=dict)
+    nonsoil: NonSoil | None = None
 
 
 def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
@@ -302,6 +319,13 @@ def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
     return mode == "class" or (mode == "auto" and has)
 
 
+def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str) -> PointRule:
+    """The epoch's point rule from its first chunk (:func:`soil.points.decide`), with the
+    class-2 selection of ``mode`` (an error when ``class`` finds none)."""
+    rule = decide(cls, sig, mode, exclude)
+    return replace(rule, use_class=ground_mode(src, cls, mode))
+
+
 def load(
     src: Source,
     to_local: Callable[[np.ndarray], np.ndarray],
@@ -311,52 +335,66 @@ def load(
     check: Callable[[], None] | None = None,
     box: tuple[np.ndarray, np.ndarray] | None = None,
     indexed: bool = False,
+    exclude: str = "auto",
 ) -> Loaded:
-    """Stream ``src``: select ground (``mode`` in auto/class/none; ``filter`` needs the whole
-    cloud and is done by the caller), convert with ``to_local`` (file CRS -> local frame), keep
-    the points for which ``keep`` is true (all when None) and feed them to ``thinner``; only
-    those within the x/y ``box`` (lo, hi; everything when None) are kept at full resolution.
-    ``indexed``: also record each chunk's x/y box (``extra["index"]``, for later bounded reads)."""
+    """Stream ``src``: label its points (the epoch's rule, decided on the first chunk from
+    ``mode`` in auto/class/none and ``exclude``; ``filter`` needs the whole cloud and is done by
+    the caller), convert with ``to_local`` (file CRS -> local frame), keep the soil points for
+    which ``keep`` is true (all when None) and feed them to ``thinner``; only those within the
+    x/y ``box`` (lo, hi; everything when None) are kept at full resolution, with the points that
+    are not soil beside them. ``indexed``: also record each chunk's x/y box (``extra["index"]``)."""
     parts = _Parts(src.count if box is None or (box[1] >= box[0]).all() else 0)
+    others, other_labels = _Parts(0), []
     points = used = 0
-    use_class: bool | None = None
+    rule: PointRule | None = None
     reading = 0.0
     cropped = 0
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
-    chunks = prefetch(src.chunks())
+    chunks = prefetch(src.chunks(signals=True))
     while True:
         t0 = time.perf_counter()
         try:
-            xyz, cls = next(chunks)
+            xyz, cls, sig = next(chunks)
         except StopIteration:
             break
         finally:
             reading += time.perf_counter() - t0
         if check:
             check()
-        if use_class is None:
-            use_class = ground_mode(src, cls, mode)
+        if rule is None:
+            rule = epoch_rule(src, cls, sig, mode, exclude)
         if index is not None:
             index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
         points += len(xyz)
         local = to_local(xyz)
-        mask = cls == GROUND if use_class and cls is not None else None
-        used += len(xyz) if mask is None else int(mask.sum())
-        if keep is not None:
-            mask = keep(local) if mask is None else mask & keep(local)
-        if mask is not None:  # one compress for ground and crop
+        labels = rule.labels(cls, sig)
+        soil = None if labels is None else labels == SOIL
+        used += len(xyz) if soil is None else int(soil.sum())
+        inside = None if keep is None else keep(local)
+        if soil is not None:  # the points that are not soil, within the crop and the box
+            other = ~soil if inside is None else ~soil & inside
+            o_xyz, o_lab = local[other], labels[other]
+            if box is not None:
+                near = ((o_xyz[:, :2] >= box[0]) & (o_xyz[:, :2] <= box[1])).all(axis=1)
+                o_xyz, o_lab = o_xyz[near], o_lab[near]
+            others.append(o_xyz)
+            other_labels.append(o_lab)
+        mask = soil if inside is None else (inside if soil is None else soil & inside)
+        if mask is not None:  # one compress for soil and crop
             local = local[mask]
         thinner.add(local)
         cropped += len(local)
         if box is not None:
             local = local[((local[:, :2] >= box[0]) & (local[:, :2] <= box[1])).all(axis=1)]
         parts.append(local)
-    kept = parts.result()
-    note = "class 2 (ground)" if use_class else "all points"
+    note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
+    rule = rule or PointRule()
     extra = {
         "read_s": reading,
         "cropped": cropped,
         "counts": thinner.counts(),
         "index": None if index is None else tuple(index),
     }
-    return Loaded(kept, thinner.result(), points, used, note, extra)
+    labels = np.concatenate(other_labels) if other_labels else np.empty(0, np.uint8)
+    nonsoil = NonSoil(others.result(), labels, rule) if rule.active else None
+    return Loaded(parts.result(), thinner.result(), points, used, note, extra, nonsoil)

@@ -335,6 +335,10 @@ def _sections(report: dict, arrays: dict, grid: GridSpec) -> list[str]:
         "correlated error; cut and fill are positive, net = fill − cut.</p>",
     ]
     out += [f"<h2>{t}</h2>{fig or _no_data(t)}" for t, fig in figures]
+    from .excluded import classes_map, excluded_section
+
+    nonsoil_map = classes_map(arrays.get("classes"), grid, relief) or ""
+    out.append("<h2>What is not soil</h2>" + nonsoil_map + excluded_section(report, _table))
     out.append("<h2>Uncertainty</h2>" + _kv(_uncertainty_summary(report)))
     out.append("<h2>Vertical bias correction</h2>" + _correction(report))
     out.append("<h2>Registration</h2>" + _registration(report))

@@ -75,6 +75,7 @@ def summary_lines(report: dict) -> list[str]:
         f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
         *_coverage_line(report),
         f"total time {sum(report['timings_s'].values()):.2f} s",
+        *(f"not soil: {line}" for line in nonsoil_lines(report)),
         *quality_lines(report),
     ]
 
@@ -84,6 +85,13 @@ def _coverage_line(report: dict) -> list[str]:
 
     said = line(report)
     return [said] if said else []
+
+
+def nonsoil_lines(report: dict) -> list[str]:
+    """What was excluded as not soil, or counted and listed, in plain sentences."""
+    from ..volumes.nonsoil import sentence
+
+    return sentence(report.get("excluded") or {})
 
 
 def quality_lines(report: dict) -> list[str]:
@@ -117,7 +125,9 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
             "connected cells of the same sign above half of it; survey noise elsewhere is not counted. "
             "A cell's height in each epoch is the robust mean of its points, moved to the cell's centre "
             "along the local slope where its points cover it unevenly; cells with too few points and "
-            "enclosed holes are interpolated from the surrounding difference (filled_mask.tif)"
+            "enclosed holes are interpolated from the surrounding difference (filled_mask.tif). Only soil "
+            "counts: points the epochs' rules say are not soil are not gridded, objects that moved between the "
+            "surveys are left out, objects in one survey only are counted and listed (excluded, excluded.tif)"
         ),
         "volume_all_cells_m3": vols.all_cells,
         "volume_uncompensated_m3": vols.uncompensated,
@@ -134,6 +144,11 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
             "confidence": vols.uncertainty["confidence"],
         },
         "uncertainty": vols.uncertainty,
+        "excluded": {
+            **vols.excluded,
+            "rule": {e: prep.inputs[e].get("soil_rule", "") for e in ("before", "after")},
+            "by_classification": all(r is not None and r.use_class for r in prep.rules),
+        },
         "zones": vols.zones,
         "correction": {"method": options.correction, "params": vols.params},
         "registration": {

@@ -36,6 +36,19 @@ class SceneConfig:
     origin: tuple[float, float, float] = (500_000.0, 3_900_000.0, 0.0)  # added to local coords
     # change="excavation": fraction of the after footprint the excavation's outline covers
     change_fraction: float = 0.4
+    # --- what is not soil, and the signals a survey carries (see scenes/nuisances.py) ---
+    # per-point signals written: "class" (LAS classification, as above), "rgb" (photogrammetric:
+    # never classified (class 0), RGB colour), "lidar" (classification and return numbers),
+    # "returns" (return numbers only, class 0), "none" (xyz only, class 0)
+    signals: str = "class"
+    movers: int = 0  # vehicles on the after footprint that moved between the surveys
+    arrivals: int = 0  # vehicles present in the after survey only
+    departures: int = 0  # vehicles present in the before survey only
+    patches: int = 0  # low vegetation patches (grass) on the after footprint
+    patch_change: str = "grown"  # "grown" (0.05 -> 0.2-0.6 m) or "mown" (0.3-0.6 -> 0.05 m)
+    crops: bool = False  # a crop field on the after footprint (0.2 -> 0.8 m)
+    slope_deg: float = 0.0  # a constant slope of the whole site (degrees, rising to the east)
+    site_tone: str = "brown"  # soil colour of "rgb" scenes: "brown" or "grey"
 
     @classmethod
     def paper(cls, **overrides) -> SceneConfig:

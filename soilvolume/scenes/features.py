@@ -24,7 +24,7 @@ def _after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
     return cx - aw / 2.0, cy - ah / 2.0, cx + aw / 2.0, cy + ah / 2.0
 
 
-CHANGE_KINDS = ("piles", "none", "pit", "pile", "excavation")
+CHANGE_KINDS = ("piles", "none", "pit", "pile", "excavation", "yard", "landslide", "trench", "pillars")
 
 
 def _change_features(cfg: SceneConfig) -> list[dict]:
@@ -37,6 +37,10 @@ def _change_features(cfg: SceneConfig) -> list[dict]:
     x0, y0, x1, y1 = _after_box(cfg)
     cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
     s = min(1.0, (x1 - x0) / 67.0, (y1 - y0) / 62.7)
+    if cfg.change in SITE_KINDS:
+        from .sites import site_features
+
+        return finish_features(site_features(cfg.change, cx, cy, s))
     if cfg.change != "piles":
         return finish_features(_single_features(cfg, x0, y0, x1, y1, s))
     feats = [
@@ -86,6 +90,9 @@ def _change_features(cfg: SceneConfig) -> list[dict]:
         ),
     ]
     return finish_features(feats)
+
+
+SITE_KINDS = ("yard", "landslide", "trench", "pillars")  # scenes/sites.py
 
 
 def finish_features(feats: list[dict]) -> list[dict]:

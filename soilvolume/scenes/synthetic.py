@@ -53,6 +53,7 @@ import numpy as np
 
 from .config import SceneConfig
 from .features import CHANGE_KINDS, change_dz, feature_area, features_dz, finish_features
+from .nuisances import VEHICLE
 from .world import _World
 
 __all__ = [
@@ -93,7 +94,38 @@ def _config_dict(cfg: SceneConfig) -> dict:
     d = asdict(cfg)
     if cfg.change != "excavation":  # only meaningful there; keeps older truth files identical
         d.pop("change_fraction")
+    plain = SceneConfig()
+    for k in NEWER_FIELDS:  # at their defaults: older truth files stay identical
+        if d[k] == getattr(plain, k):
+            d.pop(k)
     return d
+
+
+NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch_change", "crops")
+NEWER_FIELDS += ("slope_deg", "site_tone")
+
+
+def _objects(world: _World) -> list[dict]:
+    """The vehicles present in one epoch only (role: moved, arrived or left), with their volume
+    above the ground (m3; the roof and the lower bonnet over the footprint, approximately)."""
+    o = world.cfg.origin
+    out = []
+    for f, role in zip(world.feats[world.n_plain :], world.roles, strict=True):
+        if f[0] != VEHICLE:
+            continue
+        before = f[6] > 0
+        a, b, h = (f[4], f[5], f[6]) if before else (f[7], f[8], f[9])
+        out.append(
+            {
+                "epoch": "before" if before else "after",
+                "role": role,
+                "x": float(f[1] + o[0]),
+                "y": float(f[2] + o[1]),
+                "area_m2": float(4 * a * b),
+                "volume": float(2 * a * b * h * (1.55 + 0.45 * 0.62)),
+            }
+        )
+    return out
 
 
 def _truth(world: _World) -> dict:
@@ -126,6 +158,7 @@ def _truth(world: _World) -> dict:
         },
         "after_footprint": [world.ax0 + o[0], world.ay0 + o[1], world.ax1 + o[0], world.ay1 + o[1]],
         "features": features,
+        "one_epoch_objects": _objects(world),
         "crs": cfg.crs,
         "seed": world.seed,
         "config": _config_dict(cfg),
@@ -168,7 +201,7 @@ def _las_header(config: SceneConfig, scale: float):
     import laspy
     import pyproj
 
-    header = laspy.LasHeader(point_format=6, version="1.4")
+    header = laspy.LasHeader(point_format=7 if config.signals == "rgb" else 6, version="1.4")
     o = config.origin
     header.offsets = np.array(
         [math.floor(o[0] / 1000.0) * 1000.0, math.floor(o[1] / 1000.0) * 1000.0, math.floor(o[2])]
@@ -196,6 +229,8 @@ def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) 
     classification) and ``truth.json`` into ``directory``; return the three paths."""
     import laspy
 
+    if scene.config.signals != "class":  # colours and returns come from the generator's chunks
+        return write_pair_streaming(scene.seed, scene.config, directory, fmt, scale)
     pb, pa, pt = _paths(directory, fmt)
     for path, xyz, cls in ((pb, scene.before, scene.before_class), (pa, scene.after, scene.after_class)):
         las = laspy.LasData(_las_header(scene.config, scale))
@@ -219,10 +254,12 @@ def write_pair_streaming(
         header = _las_header(config, scale)
         with laspy.open(str(path), mode="w", header=header) as writer:
             for i in range(world.n_chunks(e)):
-                xyz, cls = world.chunk(e, i)
+                xyz, cls, fields = world.chunk(e, i, signals=True)
                 rec = laspy.ScaleAwarePointRecord.zeros(len(cls), header=header)
                 rec.x, rec.y, rec.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
                 rec.classification = cls
+                for name, values in fields.items():
+                    rec[name] = values
                 writer.write_points(rec)
                 del xyz, cls, rec
     _write_truth(pt, _truth(world))

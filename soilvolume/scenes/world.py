@@ -9,6 +9,7 @@ import numpy as np
 
 from .config import CLASS_BOULDER, CLASS_GROUND, CLASS_OUTLIER, CLASS_VEHICLE, SceneConfig
 from .features import _after_box, _change_features, _clear_of, change_dz
+from .nuisances import CROP, PATCH, categories, colours, extra_features, returns
 
 CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never depend on the caller)
 
@@ -84,8 +85,10 @@ class _World:
                     return False
             return all(math.hypot(x - px, y - py) > r + pr + 0.5 for px, py, pr in placed)
 
-        def place(n: int, inside_after: bool, make) -> None:
+        def place(n: int, inside_after: bool, make, rng=rng) -> bool:
+            ok = False
             for _ in range(n):
+                ok = False
                 for _try in range(50):
                     if inside_after:
                         x = rng.uniform(self.ax0 + 1, self.ax1 - 1)
@@ -96,7 +99,9 @@ class _World:
                     if free(x, y, params[-1]):
                         feats.append((params[0], x, y) + params[1:])
                         placed.append((x, y, params[-1]))
+                        ok = True
                         break
+            return ok
 
         def bush():
             r = rng.uniform(0.8, 3.0)
@@ -121,6 +126,9 @@ class _World:
             place(3, False, vehicle)
             place(12, True, boulder)
             place(10, False, boulder)
+        extra = np.random.default_rng(np.random.SeedSequence([self.seed, 7]))  # new kinds: own stream
+        self.n_plain = len(feats)  # features after these are the config's extra kinds
+        self.roles = extra_features(cfg, extra, lambda inside, params: place(1, inside, lambda: params, extra))
         self.feats = np.array(feats, dtype=np.float64).reshape(-1, 11)
         if len(self.feats):
             self.feat_zc = self.terrain(self.feats[:, 1], self.feats[:, 2])
@@ -208,6 +216,8 @@ class _World:
         x = np.asarray(x, dtype=np.float64)
         y = np.asarray(y, dtype=np.float64)
         z = self.z0 + self.tilt[0] * (x - self.centre[0]) + self.tilt[1] * (y - self.centre[1])
+        if self.cfg.slope_deg:
+            z += math.tan(math.radians(self.cfg.slope_deg)) * (x - self.centre[0])
         for amp, kx, ky, ph in self.waves:
             z += amp * np.cos(kx * x + ky * y + ph)
         for amp, hx, hy, sig in self.hills:
@@ -268,9 +278,11 @@ class _World:
         rows = max(1, CHUNK_POINTS // nx)
         return (ny + rows - 1) // rows
 
-    def chunk(self, epoch: int, index: int) -> tuple[np.ndarray, np.ndarray]:
+    def chunk(self, epoch: int, index: int, signals: bool = False) -> tuple:
         """(xyz absolute (n,3) float64, class uint8) of chunk ``index`` of ``epoch`` (0 before,
-        1 after as surveyed)."""
+        1 after as surveyed); with ``signals`` also a dict of the per-point fields the config's
+        ``signals`` writes (``red``/``green``/``blue``, ``return_number``/``number_of_returns``;
+        the classes are zeroed where the survey carries none)."""
         cfg = self.cfg
         x0, y0, w, h, nx, ny = self.grid_shape(epoch)
         rows = max(1, CHUNK_POINTS // nx)
@@ -288,17 +300,22 @@ class _World:
             keep = ~self._lookup(holes, self.hole_res, x, y)
             x, y = x[keep], y[keep]
         g = self.terrain(x, y)
+        fresh = np.zeros(x.shape, bool)
         if epoch == 1:
-            g += change_dz(x, y, cfg)
+            dz = change_dz(x, y, cfg)
+            g += dz
             g += self.deformation(x, y)
+            fresh = dz != 0
         z = g.copy()
         cls = np.full(x.shape, CLASS_GROUND, dtype=np.uint8)
+        lab = np.zeros(x.shape, np.int32)
         if len(self.feats):
             lab = self._lookup(self.label, self.feat_res, x, y)
             idx = np.nonzero(lab)[0]
             if idx.size:
                 self._apply_features(epoch, idx, lab[idx] - 1, x, y, g, z, cls, rng)
         z += rng.normal(0.0, cfg.noise_m, z.shape) if cfg.noise_m > 0 else 0.0
+        o = np.empty(0, np.int64)
         if cfg.outlier_fraction > 0:
             o = np.nonzero(rng.random(z.shape) < cfg.outlier_fraction)[0]
             kind = rng.random(o.size)
@@ -319,7 +336,25 @@ class _World:
             )
             del d
         xyz += np.asarray(cfg.origin, dtype=np.float64)
-        return xyz, cls
+        if not signals:
+            return xyz, cls
+        return (xyz, *self._signals(epoch, index, cls, o, lab, fresh))
+
+    def _signals(self, epoch: int, index: int, cls, stray, lab, fresh) -> tuple[np.ndarray, dict]:
+        """(LAS classes as the survey carries them, other per-point fields) of a chunk."""
+        cfg = self.cfg
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, 11 + epoch, index]))
+        mask = np.zeros(cls.shape, bool)
+        mask[stray] = True
+        cat = categories(cls, mask)
+        fields: dict = {}
+        if cfg.signals == "rgb":
+            rgb = colours(cat, lab - 1, fresh, cfg, rng)
+            fields.update(red=rgb[:, 0], green=rgb[:, 1], blue=rgb[:, 2])
+        if cfg.signals in ("lidar", "returns"):
+            fields["return_number"], fields["number_of_returns"] = returns(cat, lab > 0, rng)
+        keep = cfg.signals in ("class", "lidar")
+        return (cls if keep else np.zeros_like(cls)), fields
 
     def _apply_features(self, epoch, idx, k, x, y, g, z, cls, rng) -> None:
         f = self.feats[k]
@@ -330,7 +365,8 @@ class _World:
         a = f[:, 7] if epoch else f[:, 4]
         b = f[:, 8] if epoch else f[:, 5]
         h = f[:, 9] if epoch else f[:, 6]
-        rho2 = (u / a) ** 2 + (v / b) ** 2
+        with np.errstate(divide="ignore", invalid="ignore"):  # a vehicle absent from this epoch: 0 x 0
+            rho2 = np.nan_to_num((u / a) ** 2 + (v / b) ** 2, nan=np.inf)
         gi = g[idx]
         r1 = rng.random(idx.size)
         r2 = rng.random(idx.size)
@@ -345,6 +381,12 @@ class _World:
         # boulders: half-ellipsoid
         bou = (typ == 2) & (rho2 < 1.0)
         hbo = gi + h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0))
+        # grass patches (ellipses) and a crop field (rectangle): canopy seen with 0.85 / 0.75
+        box = (np.abs(u) < a) & (np.abs(v) < b)
+        low = ((typ == PATCH) & (rho2 < 1.0) & (r1 < 0.85)) | ((typ == CROP) & box & (r1 < 0.75))
+        bush |= low
+        hb = np.where(low, h * (0.7 + 0.6 * r2), hb)
+        veg_cls = np.where(hb < 0.5, 3, np.where(hb < 2.0, 4, 5)).astype(np.uint8)
         znew = np.where(bush, gi + hb, np.where(veh, np.maximum(hv, gi + 0.2), np.where(bou, hbo, gi)))
         cnew = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE, np.where(bou, CLASS_BOULDER, CLASS_GROUND)))
         z[idx] = znew

@@ -19,6 +19,7 @@ from ..options import Options
 from . import coverage
 from .change import MIN_CELLS
 from .difference import budget, difference, signed_budget
+from .nonsoil import exclude_nonsoil
 from .outline import refill_across_outline
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
@@ -52,6 +53,8 @@ class Volumes:
     empty_before: int
     empty_after: int
     zones: list = field(default_factory=list)  # per-polygon budgets (--zones)
+    excluded: dict = field(default_factory=dict)  # what is not soil: classes, objects (volumes/nonsoil)
+    classes: np.ndarray | None = None  # excluded.tif: the class of each cell (volumes/nonsoil.CLASS_CODES)
     coverage: dict = field(default_factory=dict)  # the after footprint's cells compared (volumes/coverage)
 
 
@@ -79,7 +82,14 @@ def compute_volumes(
     rigid move from the accepted pose to a nearly as good one (registration uncertainty);
     ``given``: the window of a tiled run (see :class:`Given`)."""
     from .change import cell_lod, cell_sigma, change_areas, marginal_volume
-    from .uncertainty import detection_level, interp_fraction, thresholded_volumes, volume_uncertainty, z_value
+    from .uncertainty import (
+        detection_level,
+        interp_fraction,
+        statistic_bias,
+        thresholded_volumes,
+        volume_uncertainty,
+        z_value,
+    )
 
     med_a, med_b = (None, None) if given is None else given.median_counts
     n_a, n_b = after.counts, before.counts
@@ -113,6 +123,10 @@ def compute_volumes(
     filled = diff + offset
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
+    ex = exclude_nonsoil(
+        diff, fill_area, cut_area, (after, before), offset, grid, options.exclude, (h_a, h_b), stable, filled_mask
+    )
+    fill_area, cut_area = ex.fill, ex.cut
     # stable ground for the error model: never a cell of (or next to) a detected change area,
     # unless the user drew it
     quiet = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
@@ -126,11 +140,14 @@ def compute_volumes(
     }
     marginal["net"] = float(np.hypot(marginal["fill"], marginal["cut"]))
     reg_in = 0.0 if given else 1.0  # a tile: the pose is common to all tiles, summed across them
-    extra = {k: float(np.hypot(reg_in * reg_v[k], marginal[k])) for k in ("net", "cut", "fill")}
+    skews = tuple(None if e.skew is None else e.skew[core] for e in (after, before))
+    stat = statistic_bias(skews, filled_mask[core], {"net": fa | ca, "cut": ca, "fill": fa}, area)
+    extra = {k: float(np.linalg.norm([reg_in * reg_v[k], marginal[k], ex.sigma[k], stat[k]])) for k in stat}
+    counted = fill_area | cut_area  # the change areas without moved objects
     unc = volume_uncertainty(
         diff,
         stable,
-        change,
+        counted,
         grid,
         options.lod_confidence,
         n_coef=0 if given else MODES[options.correction].coefficients,  # a tile: the overview has the bias
@@ -139,6 +156,7 @@ def compute_volumes(
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
         extra_sigma=extra,
         counted=None if given is None else _mask(diff.shape, core),
+        surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
     )
     headline = signed_budget(d, fa, ca, area)
     vols = {
@@ -151,8 +169,17 @@ def compute_volumes(
         "diff": diff,
         "stable": stable,
         "params": params,
-        "uncertainty": {**unc, "lod_m": lod, "registration_m3": reg_v, "marginal_detections_m3": marginal},
-        "change_mask": change,
+        "uncertainty": {
+            **unc,
+            "lod_m": lod,
+            "registration_m3": reg_v,
+            "marginal_detections_m3": marginal,
+            "classification_m3": ex.sigma,
+            "statistic_m3": stat,
+        },
+        "change_mask": counted,
+        "excluded": ex.report,
+        "classes": ex.classes,
         "compensated": headline,
         "all_cells": budget(d, area),
         "uncompensated": budget(filled[core], area),
@@ -171,7 +198,7 @@ def compute_volumes(
         rows, cols = core
         zgrid = grid if given is None else grid.window(rows.start, rows.stop, cols.start, cols.stop)
         vols["zones"] = zone_budgets(
-            np.where(change[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones, whole=given is None
+            np.where(counted[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones, whole=given is None
         )
     return Volumes(**vols)
 

@@ -108,6 +108,7 @@ def assess(
                 f"change ({v['net']:+.1f} m³)",
             )
         )
+    out += _nonsoil(report.get("excluded") or {}, u["net"])
     out.extend(("caution", m) for m in zone_messages(report.get("zones") or []))
     unseen = coverage_check(report)
     if unseen is not None:
@@ -121,6 +122,24 @@ def assess(
             )
         )
     return _verdict(out)
+
+
+def _nonsoil(excluded: dict, half: float) -> list[tuple[str, str]]:
+    """Cautions when what was excluded as not soil, or counted but flagged, is not small against
+    the net's interval: the headline then rests on that classification. Classes the files' own
+    LAS classification gave are the survey's statement (reported, not doubted here)."""
+    from .nonsoil import sentence
+
+    moved = excluded.get("moved_objects") or {}
+    parts = [moved.get("fill", 0.0) + moved.get("cut", 0.0) if moved.get("excluded") else 0.0]
+    if not excluded.get("by_classification"):
+        parts += [abs(c.get("net", 0.0)) for c in (excluded.get("classes") or {}).values()]
+    parts += [abs((excluded.get("rough") or {}).get("net", 0.0))]
+    parts += [abs((excluded.get("single_objects") or {}).get("net_m3", 0.0))]
+    if sum(parts) <= half:
+        return []
+    words = "; ".join(sentence(excluded))
+    return [("caution", f"{words}: together more than the net's interval (±{half:.1f} m³)")]
 
 
 def _verdict(found: list[tuple[str, str]]) -> dict:

@@ -142,6 +142,7 @@ def volume_uncertainty(
     fill_sigma: np.ndarray | None = None,
     extra_sigma: dict[str, float] | None = None,
     counted: np.ndarray | None = None,
+    surface: bool = True,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
     (all valid cells when None), cut/fill split by the sign of the corrected difference, and
@@ -154,7 +155,9 @@ def volume_uncertainty(
     ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
     change detection picks up from noise on stable ground.
     ``counted``: the cells the volumes sum over (a tile's core; default all), while the error
-    model uses every stable cell. Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2,
+    model uses every stable cell. ``surface``: a correction surface was fitted (its leftover's
+    spread on stable ground is carried over the part's area, fully correlated).
+    Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2,
     range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
     stable = stable_mask & valid
@@ -189,8 +192,14 @@ def volume_uncertainty(
     extra = extra_sigma or {}
     leftover = leftover_bias(diff_corrected, stable, grid.cell)
 
+    # the correction surface's residual systematic error where it cannot be seen: the spread of
+    # its leftover over the stable ground, carried fully correlated over the part's area
+    seen = leftover[stable & np.isfinite(leftover)] if surface else np.empty(0)  # no surface, no residual
+    residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
+
     def unmodelled(m: np.ndarray) -> float:  # fully correlated over the part
-        return abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
+        signed = abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
+        return float(np.hypot(signed, residual * float(m.sum()) * grid.cell_area))
 
     terms = {  # one-sigma (m^3): the area's error model, then refills, leftover bias, extras
         k: [
@@ -214,6 +223,7 @@ def volume_uncertainty(
         interpolated_m3=interp(region) / max(interp_fraction, 1e-12),
         refill_sigma_m3=refill(region),
         unmodelled_bias_m3=unmodelled(region),
+        correction_residual_m3=residual * float(region.sum()) * grid.cell_area,
         stable_cells=int(stable.sum()),
         change_area_m2=float(region.sum()) * grid.cell_area,
         part_area_m2={k: float(m.sum()) * grid.cell_area for k, m in parts.items()},
@@ -221,6 +231,20 @@ def volume_uncertainty(
         variogram={"lag_m": lags.tolist(), "gamma_m2": gamma.tolist(), "pairs": npairs.tolist()},
     )
     return out
+
+
+def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
+    """One-sigma volume (m3) per part of the cell statistic's own bias where outliers, walls or
+    canopy leftovers fall in cells: how far the statistic moved each epoch's cells from their
+    medians, differenced, summed over the part (fully correlated: a wall or a rim biases all its
+    cells alike). ``skews``: (after, before) per-cell height minus median (None: 0); refilled
+    cells carry no statistic of their own."""
+    d = np.zeros(refilled.shape)
+    for sign, sk in zip((1.0, -1.0), skews, strict=True):
+        if sk is not None:
+            d += sign * np.nan_to_num(sk)
+    d[refilled] = 0.0
+    return {k: abs(float(d[m].sum())) * cell_area for k, m in parts.items()}
 
 
 def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:

@@ -21,6 +21,7 @@ from .steps import (
     Timer,
     add_quality,
     correction_step,
+    moved_nonsoil,
     planes_and_volumes,
     prepare_pair,
     register_pair,
@@ -90,8 +91,8 @@ def _estimate(
             after_xyz = transform_points32(prep.after.xyz, reg.transform)
             after_thin = transform_points(prep.after_thin, reg.transform)
             grid = shared_grid(prep, after_thin, options)
-            before_job = pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, options.statistic)
-            dem_a = gridmod.epoch_dem(after_xyz, grid, options.statistic)
+            before_job = pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, options.statistic, prep.before.nonsoil)
+            dem_a = gridmod.epoch_dem(after_xyz, grid, options.statistic, moved_nonsoil(prep, reg))
             del after_xyz
             dem_b = before_job.result()
         hooks.step(70, correction_step(options))
@@ -128,7 +129,7 @@ def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec, prep: Prepared
     z0 = float(prep.origin[2])  # local -> absolute heights
     for name, key, desc in gridmod.output_layers(options.correction):
         array = getattr(vols, key)
-        if key == gridmod.MASK_LAYER:
+        if key in gridmod.UINT8_LAYERS:
             gridmod.write_geotiff(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
         else:
             gridmod.write_geotiff(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)

@@ -60,6 +60,12 @@ def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline,
     return prepare(src_b, src_a, options, check=hooks.ticker(2, 15, "reading"))
 
 
+def moved_nonsoil(prep: Prepared, reg):
+    """The after epoch's points that are not soil, moved by the registration (None without)."""
+    ns = prep.after.nonsoil
+    return None if ns is None else ns.moved(reg.transform)
+
+
 def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
     row, col, ok = grid.index(xyz[:, :2])
     keep = np.zeros(len(xyz), bool)
@@ -76,6 +82,7 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
         "difference": vols.diff,
         "residual": np.where(vols.stable, vols.diff, np.nan),
         "filled_mask": vols.filled_mask,
+        "classes": vols.classes,
         "dem_after": dem_after,
     }
     write_html(report, arrays, grid, out.path("report.html"))

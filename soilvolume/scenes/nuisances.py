@@ -1,0 +1,121 @@
+"""What is not soil on a synthetic site, and the per-point signals a survey carries.
+
+* Features beyond the original bushes, vehicles and boulders (drawn from their own random stream,
+  so pairs without them are unchanged): vehicles that moved between the surveys (one feature per
+  epoch, at different places and headings), vehicles that arrived or left, low vegetation patches
+  that grew or were mown, and a crop field.
+* Per-point colour for photogrammetric scenes (``signals="rgb"``): soil brown or grey with
+  brightness noise and shadows (fresh soil on the works a little darker), vegetation green but
+  not saturated (some points dry or mixed with the soil below), vehicles painted (yellow machines
+  are not green), boulders grey.
+* Return numbers for LiDAR scenes: canopy points are early returns of several, the ground seen
+  below them is the last return; hard surfaces give single returns.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import SceneConfig
+
+SIGNALS = ("class", "rgb", "lidar", "returns", "none")
+# feature types of the world's feature table
+BUSH, VEHICLE, BOULDER, PATCH, CROP = 0, 1, 2, 3, 4
+# per-point categories the colours and returns are drawn for
+SOIL, GREEN, CAR, STONE, STRAY = 0, 1, 2, 3, 4
+PAINT = np.array([[205, 165, 45], [215, 214, 208], [72, 74, 78], [205, 105, 40], [55, 72, 140]], float)
+SOIL_RGB = {"brown": (128, 102, 78), "grey": (118, 116, 110)}
+
+
+def vehicle_shape(rng: np.random.Generator) -> tuple[float, float, float]:
+    """Half length, half width and height (m) of a vehicle (as the world's own vehicles)."""
+    return rng.uniform(2.1, 2.6), rng.uniform(0.85, 1.0), rng.uniform(1.4, 1.9)
+
+
+def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
+    """Place this config's moved, arriving and leaving vehicles, vegetation patches and crop field
+    with ``place(inside_after, params)`` (params as the world's feature rows without x/y; it
+    returns False when no free spot was found). Returns the role of each feature placed, in
+    order ("moved", "arrived", "left", "vegetation")."""
+    if cfg.signals not in SIGNALS:
+        raise ValueError(f"unknown signals {cfg.signals!r} ({', '.join(SIGNALS)})")
+    roles: list[str] = []
+    for _ in range(cfg.movers):  # the same vehicle at two places: before only, then after only
+        a, b, h = vehicle_shape(rng)
+        r = math.hypot(a, b)
+        if place(True, (VEHICLE, rng.uniform(0, np.pi), a, b, h, 0.0, 0.0, 0.0, r)):
+            roles.append("moved")
+            if place(True, (VEHICLE, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a, b, h, r)):
+                roles.append("moved")
+            else:  # no room for its new place: it left
+                roles[-1] = "left"
+    for n, after in ((cfg.arrivals, True), (cfg.departures, False)):
+        for _ in range(n):
+            a, b, h = vehicle_shape(rng)
+            shape = (0.0, 0.0, 0.0, a, b, h) if after else (a, b, h, 0.0, 0.0, 0.0)
+            if place(True, (VEHICLE, rng.uniform(0, np.pi), *shape, math.hypot(a, b))):
+                roles.append("arrived" if after else "left")
+    grown = cfg.patch_change == "grown"
+    if cfg.patch_change not in ("grown", "mown"):
+        raise ValueError(f"unknown patch_change {cfg.patch_change!r} (grown, mown)")
+    for _ in range(cfg.patches):
+        a, b = rng.uniform(2.0, 4.5), rng.uniform(1.5, 3.5)
+        tall = rng.uniform(0.2, 0.6) if grown else rng.uniform(0.3, 0.6)
+        h0, h1 = (0.05, tall) if grown else (tall, 0.05)
+        if place(True, (PATCH, rng.uniform(0, np.pi), a, b, h0, a, b, h1, max(a, b))):
+            roles.append("vegetation")
+    if cfg.crops:
+        a, b = rng.uniform(8.0, 10.0), rng.uniform(5.0, 7.0)
+        if place(True, (CROP, rng.uniform(-0.3, 0.3), a, b, 0.2, a, b, 0.8, math.hypot(a, b))):
+            roles.append("vegetation")
+    return roles
+
+
+def categories(cls: np.ndarray, stray: np.ndarray) -> np.ndarray:
+    """Per-point category (:data:`SOIL` ...) from the world's classes (before the LAS classes
+    are withheld) and the mask of stray points (outliers)."""
+    cat = np.full(cls.shape, SOIL, np.uint8)
+    cat[(cls >= 3) & (cls <= 5)] = GREEN
+    cat[cls == 6] = CAR
+    cat[cls == 1] = STONE
+    cat[stray] = STRAY
+    return cat
+
+
+def colours(cat: np.ndarray, feature: np.ndarray, fresh: np.ndarray, cfg: SceneConfig, rng) -> np.ndarray:
+    """RGB (uint16, LAS 16-bit scale) per point: see module. ``feature``: the feature index of
+    each point (-1 none; vehicles take a paint by it), ``fresh``: points on the works."""
+    n = cat.size
+    soil = np.array(SOIL_RGB.get(cfg.site_tone, SOIL_RGB["brown"]), float)
+    rgb = np.broadcast_to(soil, (n, 3)).copy()
+    rgb[fresh] *= np.array([0.88, 0.86, 0.85])
+    green = cat == GREEN
+    dry = rng.uniform(0.0, 0.5, n)[:, None]  # blended towards dry grass
+    leaf = (1 - dry) * np.array([88.0, 112.0, 62.0]) + dry * np.array([140.0, 130.0, 90.0])
+    mixed = rng.random(n) < 0.1  # canopy pixels blended with the soil below
+    leaf = np.where(mixed[:, None], 0.3 * leaf + 0.7 * soil, leaf)
+    rgb[green] = leaf[green]
+    car = cat == CAR
+    rgb[car] = PAINT[np.maximum(feature[car], 0) % len(PAINT)]
+    rgb[cat == STONE] = (130.0, 128.0, 122.0)
+    bright = 1.0 + rng.normal(0.0, 0.08, n)
+    shade = rng.random(n) < 0.12
+    bright[shade] *= rng.uniform(0.35, 0.7, int(shade.sum()))
+    rgb = rgb * bright[:, None] + rng.normal(0.0, 5.0, (n, 3))
+    return (np.clip(rgb, 0, 255) * 256).astype(np.uint16)
+
+
+def returns(cat: np.ndarray, under: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
+    """(return number, number of returns) per point: canopy points mostly the first of 2-3 (a
+    fifth single, dense foliage), ground ``under`` vegetation the last of 2, others single."""
+    n = cat.size
+    num = np.ones(n, np.uint8)
+    ret = np.ones(n, np.uint8)
+    canopy = (cat == GREEN) & (rng.random(n) >= 0.2)
+    num[canopy] = rng.integers(2, 4, int(canopy.sum()))
+    ground = under & (cat == SOIL)
+    num[ground] = 2
+    ret[ground] = 2
+    return ret, num

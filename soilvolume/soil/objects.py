@@ -1,0 +1,160 @@
+"""Objects in the difference: compact blobs with near-vertical walls standing on unchanged
+ground (vehicles, containers, the test pillars of the seed paper), found by their shape alone.
+
+A blob of apparent fill and a blob of apparent cut of matching size, height and shape are one
+object that moved between the surveys: not earthworks, left out of the headline. An object in
+one survey only (a machine that arrived or left, a container, a pillar placed on purpose) is
+counted, but listed so the analyst sees it.
+
+Walls: soil stands at its angle of repose (under about 45 degrees), so the band between 20 % and
+80 % of a pile's height is wide; an object's is about one mixed cell. A blob is an object when
+the width of that band (its area over the blob's perimeter) implies a slope of at least
+:data:`WALL_SLOPE`, or is below what the cell size resolves (a small steep pile on coarse cells
+looks the same: only a matching pair is left out), its footprint is under
+:data:`MAX_AREA_M2`, not elongated (a trench is not an object) and the ring around it is mostly
+unchanged ground. On cells coarser than :data:`MAX_SINGLE_CELL` a lone steep pile cannot be told
+from an object: only matching pairs are objects there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+WALL_SLOPE = 1.6  # rise over run (58 degrees)
+UNRESOLVED = 1.2  # walls narrower than this many cells cannot be told from vertical
+MIN_HEIGHT_M = 0.4
+MIN_AREA_M2 = 2.0
+MAX_AREA_M2 = 150.0
+MAX_ELONGATION = 5.0
+MIN_QUIET_RING = 0.6  # share of the ring around a blob that must be unchanged ground
+MAX_SINGLE_CELL = 0.8  # m: on coarser cells a vehicle's walls are not seen; only moved pairs are told
+# a moved object: the two blobs' ratios within these
+AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 2.0, 1.4, 2.5
+_EIGHT = np.ones((3, 3), bool)
+
+
+@dataclass(frozen=True)
+class Blob:
+    """One object blob of the difference (volumes and areas positive; ``sign`` +1 fill)."""
+
+    sign: int
+    area_m2: float
+    height_m: float
+    volume_m3: float
+    x: float  # centroid, local frame (m)
+    y: float
+    elongation: float
+    label: int  # its label in :attr:`Objects.labels`
+    partner: int = 0  # the label of the blob it moved from or to (0: none)
+
+
+@dataclass(frozen=True)
+class Objects:
+    """The objects found: their blobs, a label grid of them, the cells of moved objects (left out
+    of the headline) and of objects in one survey only (counted, listed)."""
+
+    blobs: tuple[Blob, ...]
+    labels: np.ndarray
+    moved: np.ndarray
+    single: np.ndarray
+
+    def moved_blobs(self) -> list[Blob]:
+        return [b for b in self.blobs if b.partner]
+
+    def single_blobs(self) -> list[Blob]:
+        return [b for b in self.blobs if not b.partner]
+
+
+def find_objects(
+    diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, pair: bool = True, refilled=None
+) -> Objects:
+    """Object blobs of the corrected difference within the ``fill`` and ``cut`` change areas
+    (see module); ``pair``: match moved objects (else every object is listed as single);
+    ``refilled``: interpolated cells, which join a blob's area but not its measurements (a refilled
+    canopy beside a machine is interpolated from the machine's roof)."""
+    labels = np.zeros(diff.shape, np.int32)
+    blobs: list[Blob] = []
+    changed = fill | cut
+    d0 = np.nan_to_num(diff)
+    for sign, area in ((1, fill), (-1, cut)):
+        comp, _ = ndimage.label(area, structure=_EIGHT)
+        for k, sl in enumerate(ndimage.find_objects(comp), 1):
+            blob = _measure(sign * d0, comp, k, sl, (changed, refilled), cell, sign, len(blobs) + 1)
+            if blob is not None:
+                labels[sl][comp[sl] == k] = blob.label
+                blobs.append(blob)
+    if pair:
+        blobs = _pairs(blobs)
+    if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs only
+        blobs = [b for b in blobs if b.partner]
+    kept = [b.label for b in blobs]
+    labels = np.where(np.isin(labels, kept), labels, 0)
+    moved_ids = [b.label for b in blobs if b.partner]
+    moved = np.isin(labels, moved_ids) & (labels > 0)
+    moved = ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls
+    single = (labels > 0) & ~moved
+    return Objects(tuple(blobs), labels, moved, single)
+
+
+def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
+    """The blob of component ``k`` (``d``: its sign's difference, positive), or None when it is
+    not an object; ``masks``: (changed cells, refilled cells or None)."""
+    pad = 3
+    r0, c0 = max(sl[0].start - pad, 0), max(sl[1].start - pad, 0)
+    win = (slice(r0, sl[0].stop + pad), slice(c0, sl[1].stop + pad))
+    changed, refilled = masks
+    whole = comp[win] == k
+    mine = whole if refilled is None else whole & ~refilled[win]
+    dd = np.where(mine, d[win], 0.0)
+    height = float(np.percentile(dd[mine], 90)) if mine.any() else 0.0
+    if height < MIN_HEIGHT_M:
+        return None
+    a = cell * cell
+    half = mine & (dd >= 0.5 * height)
+    area = float(half.sum()) * a
+    if not MIN_AREA_M2 <= area <= MAX_AREA_M2:
+        return None
+    base, top = float((mine & (dd >= 0.2 * height)).sum()), float((mine & (dd >= 0.8 * height)).sum())
+    edge = half & ~ndimage.binary_erosion(half, _EIGHT)
+    width = (base - top) * a / max(float(edge.sum()) * cell, cell)
+    if width > max(0.6 * height / WALL_SLOPE, UNRESOLVED * cell):
+        return None
+    rr, cc = np.nonzero(half)
+    elong = _elongation(rr, cc)
+    if elong > MAX_ELONGATION:
+        return None
+    grown = ndimage.binary_dilation(whole, _EIGHT, iterations=2)
+    ring = grown & ~ndimage.binary_dilation(whole, _EIGHT)
+    if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
+        return None
+    vol = float(np.where(whole, d[win], 0.0).sum()) * a
+    return Blob(sign, area, height, vol, float(cc.mean() + c0), float(rr.mean() + r0), elong, label)
+
+
+def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:
+    """Ratio of the principal axes of a set of cells (1 for a disc or a square)."""
+    if rr.size < 3:
+        return 1.0
+    ev = np.linalg.eigvalsh(np.cov(np.vstack([rr, cc]).astype(float)) + 1e-3 * np.eye(2))
+    return float(np.sqrt(max(ev[1], 1e-9) / max(ev[0], 1e-9)))
+
+
+def _pairs(blobs: list[Blob]) -> list[Blob]:
+    """Fill and cut blobs matched into moved objects, the closest matches first."""
+    from dataclasses import replace
+
+    fills, cuts = [b for b in blobs if b.sign > 0], [b for b in blobs if b.sign < 0]
+    scored = []
+    for f in fills:
+        for c in cuts:
+            ra, rh, re = f.area_m2 / c.area_m2, f.height_m / c.height_m, f.elongation / c.elongation
+            if max(ra, 1 / ra) <= AREA_RATIO and max(rh, 1 / rh) <= HEIGHT_RATIO and max(re, 1 / re) <= SHAPE_RATIO:
+                scored.append((abs(np.log(ra)) + abs(np.log(rh)) + 0.5 * abs(np.log(re)), f.label, c.label))
+    partner: dict[int, int] = {}
+    for _, f, c in sorted(scored):
+        if f not in partner and c not in partner:
+            partner[f], partner[c] = c, f
+    return [replace(b, partner=partner.get(b.label, 0)) for b in blobs]

@@ -1,0 +1,187 @@
+"""What is soil, point by point, from the signals a survey carries: a real LAS classification,
+colour (photogrammetric clouds) and return numbers (LiDAR).
+
+The rule is decided once per epoch, from its first chunk (as the class-2 selection is), and is a
+small frozen :class:`PointRule` that labels every later chunk the same way in-process and in the
+tiled engine's tasks. Labels: :data:`SOIL`, :data:`VEGETATION`, :data:`OBJECT` (buildings, wires,
+bridges), :data:`OTHER` (noise, water, unclassified).
+
+* Classification (a file with class 2 points): class 2 is soil; 3-5 vegetation; 6, 10 and 13-17
+  objects; everything else other.
+* Colour (RGB without a real classification): the excess-green index ExG = 2g - r - b on
+  chromatic coordinates (r + g + b = 1); a point is vegetation when ExG exceeds the epoch's
+  threshold and green is its strongest channel (yellow machines are not vegetation). The
+  threshold is Otsu's split of the first chunk's ExG when it shows a green mode, clamped to
+  0.06..0.20, else 0.10 (what the split gives on vegetated sites, so an epoch whose first chunk
+  happens to hold little vegetation is labelled alike); points too dark to have a colour
+  (shadows) are left as soil. Bare soil, brown or grey, has ExG near 0 and red or blue as strong
+  as green: the rule fires on a few noisy points only, never on most of a cell's.
+* Returns (no real classification): a point that is not the last of several returns is
+  vegetation (the canopy); the last return below it is ground.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SOIL, VEGETATION, OBJECT, OTHER = 0, 1, 2, 3
+NAMES = ("soil", "vegetation", "objects", "other")
+GROUND = 2
+_BY_CLASS = np.full(256, OTHER, np.uint8)
+_BY_CLASS[GROUND] = SOIL
+_BY_CLASS[[3, 4, 5]] = VEGETATION
+_BY_CLASS[[6, 10, 13, 14, 15, 16, 17]] = OBJECT
+GREEN_DEFAULT, GREEN_RANGE = 0.10, (0.06, 0.20)
+DARK = 0.12  # r + g + b below this share of full scale: too dark for a colour
+MIN_GREEN_SHARE = 0.002  # a green mode: at least this share of the first chunk's points
+MIN_MULTI_RETURNS = 0.005  # returns are used when at least this share has several
+
+
+@dataclass(frozen=True)
+class Signals:
+    """Per-point fields of a chunk beyond xyz and the classification (None when absent)."""
+
+    rgb: np.ndarray | None = None  # (n, 3) uint16
+    returns: np.ndarray | None = None  # (n, 2) uint8: return number, number of returns
+
+    def select(self, mask: np.ndarray) -> Signals:
+        return Signals(*(None if a is None else a[mask] for a in (self.rgb, self.returns)))
+
+    @staticmethod
+    def join(parts) -> Signals | None:
+        """The chunks' signals end to end (None when the first has none)."""
+        if not parts or parts[0] is None:
+            return None
+        rgb, ret = ([getattr(p, k) for p in parts] for k in ("rgb", "returns"))
+        return Signals(*(None if a[0] is None else np.concatenate(a) for a in (rgb, ret)))
+
+
+@dataclass(frozen=True)
+class PointRule:
+    """How one epoch's points are labelled (see module); the default labels everything soil."""
+
+    use_class: bool = False
+    green: float | None = None  # ExG threshold; None: colour not used
+    full_scale: float = 65535.0  # of the colour channels (255 for 8-bit colour)
+    returns: bool = False
+
+    @property
+    def active(self) -> bool:
+        return self.use_class or self.green is not None or self.returns
+
+    @property
+    def empties_cells(self) -> bool:
+        """Whether a cell mostly of non-soil points has no soil height (photogrammetry sees no
+        ground under a canopy; LiDAR's ground returns below one are real)."""
+        return self.green is not None and not self.use_class
+
+    def labels(self, cls: np.ndarray | None, sig: Signals | None) -> np.ndarray | None:
+        """uint8 labels of a chunk's points, or None when all are soil."""
+        out = None
+        if self.use_class and cls is not None:
+            out = _BY_CLASS[np.asarray(cls, np.uint8)]
+        if self.green is not None and sig is not None and sig.rgb is not None:
+            veg = green_points(sig.rgb, self.green, self.full_scale)
+            out = np.where(veg, VEGETATION, SOIL).astype(np.uint8) if out is None else out
+        if self.returns and not self.use_class and sig is not None and sig.returns is not None:
+            early = sig.returns[:, 0] < sig.returns[:, 1]
+            out = np.zeros(len(early), np.uint8) if out is None else out
+            out[early] = VEGETATION
+        return out
+
+    def describe(self) -> str:
+        """The rule in words, for the report."""
+        if not self.active:
+            return "every point is soil (no classification, colour or returns used)"
+        parts = []
+        if self.use_class:
+            parts.append(
+                "LAS classification: class 2 is soil; 3-5 vegetation; 6, 10, 13-17 objects; others (noise 7/18, "
+                "water 9, unclassified 1) not soil"
+            )
+        if self.green is not None:
+            parts.append(f"colour: vegetation where ExG = 2g - r - b > {self.green:.3f} and green is the strongest")
+        if self.returns and not self.use_class:
+            parts.append("returns: points before the last of several returns are vegetation")
+        return "; ".join(parts)
+
+
+def exg(rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ExG on chromatic coordinates, r + g + b) of (n, 3) colours."""
+    c = rgb.astype(np.float32)
+    total = c.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        index = (2 * c[:, 1] - c[:, 0] - c[:, 2]) / np.maximum(total, 1.0)
+    return index, total
+
+
+def green_points(rgb: np.ndarray, threshold: float, full_scale: float) -> np.ndarray:
+    """Vegetation by colour (see module)."""
+    index, total = exg(rgb)
+    g = rgb[:, 1]
+    return (index > threshold) & (g > rgb[:, 0]) & (g > rgb[:, 2]) & (total >= DARK * 3 * full_scale)
+
+
+def otsu(values: np.ndarray, lo: float = -0.3, hi: float = 0.7, bins: int = 200) -> float:
+    """Otsu's threshold of ``values`` on a histogram over lo..hi."""
+    hist, edges = np.histogram(values, bins=bins, range=(lo, hi))
+    p = hist.astype(float) / max(hist.sum(), 1)
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    w0 = np.cumsum(p)
+    m = np.cumsum(p * mid)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        between = (m[-1] * w0 - m) ** 2 / (w0 * (1 - w0))
+    return float(mid[int(np.nanargmax(np.nan_to_num(between, nan=-1.0)))])
+
+
+def decide(cls: np.ndarray | None, sig: Signals | None, mode: str, exclude: str = "auto") -> PointRule:
+    """The epoch's rule from its first chunk: ``mode`` is ``--ground`` (class / auto use a real
+    classification; filter: SMRF's ground, then colour and returns), ``exclude`` ``--exclude``
+    (``none``: no colour or returns)."""
+    use_class = mode == "class" or (mode == "auto" and cls is not None and bool((cls == GROUND).any()))
+    if exclude == "none" or mode not in ("auto", "class", "filter") or sig is None:
+        return PointRule(use_class)
+    green, scale = None, 65535.0
+    if sig.rgb is not None and len(sig.rgb) and not use_class:
+        green, scale = colour_threshold(sig.rgb)
+    multi = False
+    if sig.returns is not None and len(sig.returns) and not use_class:
+        multi = float(np.mean(sig.returns[:, 1] > 1)) >= MIN_MULTI_RETURNS
+    return PointRule(use_class, green, scale, multi)
+
+
+def colour_threshold(rgb: np.ndarray) -> tuple[float | None, float]:
+    """(ExG threshold or None when the colour carries nothing, full scale of the channels)."""
+    top = float(rgb.max())
+    if top <= 0 or (rgb[:, 0] == rgb[:, 1]).all() and (rgb[:, 1] == rgb[:, 2]).all():
+        return None, 65535.0  # no colour, or grey levels only
+    scale = 255.0 if top <= 255 else 65535.0
+    index, total = exg(rgb)
+    bright = index[total >= DARK * 3 * scale]
+    if bright.size < 100:
+        return GREEN_DEFAULT, scale
+    split = otsu(bright)
+    upper = bright[bright > split]
+    lo, hi = GREEN_RANGE
+    if upper.size >= MIN_GREEN_SHARE * bright.size and lo <= split <= hi:
+        return split, scale
+    return GREEN_DEFAULT, scale
+
+
+@dataclass(frozen=True)
+class NonSoil:
+    """One epoch's points that are not soil (float32 local xyz, their labels) and the rule that
+    labelled them (also when it found none)."""
+
+    xyz: np.ndarray
+    labels: np.ndarray
+    rule: PointRule
+
+    def moved(self, transform: np.ndarray | None) -> NonSoil:
+        """The same points through a 4x4 rigid transform (float32 kept)."""
+        if transform is None or not len(self.xyz):
+            return self
+        r, t = transform[:3, :3].astype(np.float32), transform[:3, 3].astype(np.float32)
+        return NonSoil((self.xyz @ r.T + t).astype(np.float32), self.labels, self.rule)

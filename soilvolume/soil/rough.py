@@ -1,0 +1,45 @@
+"""Rough cells: a canopy (grass, crops, bushes) stands in a cell as a spread of heights that the
+slope of the ground does not explain; soil, even on a pile's flank, is smooth at the scale of a
+cell. Used only where no signal (classification, colour, returns) labelled any point: such cells
+are flagged, counted, and their volume is carried in the interval and the verdict."""
+
+from __future__ import annotations
+
+import numpy as np
+
+ROUGH_FACTOR = 3.0  # residual spread over this many times the stable ground's is rough
+ROUGH_MIN_M = 0.05
+IQR_SPREAD = 1.5  # interquartile spread (IQR / 1.349) of a sloping cell over its standard deviation, with margin
+MIN_POINTS = 6  # a spread of fewer points says little
+
+
+def roughness(spread: np.ndarray, heights: np.ndarray, counts: np.ndarray, cell: float) -> np.ndarray:
+    """Per-cell spread of heights (m) left after the part a plane of the cell's slope explains
+    (points spread uniformly over a cell on a slope g: a standard deviation of |g| c / sqrt(12),
+    and :data:`IQR_SPREAD` times that as an interquartile spread); NaN where too few points."""
+    g2 = _steepest(heights, 1) ** 2 + _steepest(heights, 0) ** 2
+    planar = IQR_SPREAD**2 * g2 / 12.0  # steps are per cell: g c
+    with np.errstate(invalid="ignore"):
+        r = np.sqrt(np.maximum(np.square(spread) - planar, 0.0))
+    return np.where(counts >= MIN_POINTS, r, np.nan)
+
+
+def _steepest(h: np.ndarray, axis: int) -> np.ndarray:
+    """Per cell, the larger of the two one-sided height steps (m per cell) along ``axis``: at a
+    break of slope (a pile's toe or crest) a central difference halves the flank's slope."""
+    step = np.abs(np.diff(h, axis=axis))
+    pad = [(0, 0), (0, 0)]
+    pad[axis] = (1, 0)
+    before = np.pad(step, pad, constant_values=np.nan)
+    pad[axis] = (0, 1)
+    after = np.pad(step, pad, constant_values=np.nan)
+    return np.nan_to_num(np.fmax(before, after))
+
+
+def rough_cells(r: np.ndarray, stable: np.ndarray) -> np.ndarray:
+    """Cells whose residual spread ``r`` is over :data:`ROUGH_FACTOR` times the stable ground's
+    median (at least :data:`ROUGH_MIN_M`)."""
+    ref = r[stable & np.isfinite(r)]
+    level = float(np.median(ref)) if ref.size else 0.0
+    with np.errstate(invalid="ignore"):
+        return np.nan_to_num(r) > max(ROUGH_FACTOR * level, ROUGH_MIN_M)

@@ -1,0 +1,215 @@
+"""What the volume step leaves out of the soil, and says so: objects that moved between the
+surveys (found by shape, :mod:`soilvolume.soil.objects`) are taken out of the change areas;
+cells whose points were mostly not soil (vegetation, objects, other by the epochs' point rules)
+are listed with the apparent volume they would have added; objects in one survey only stay
+counted and are listed. The class raster (``excluded.tif``) draws all of it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ..core.types import GridSpec
+from ..dem.grid import EpochDEM
+from ..soil.objects import Blob, find_objects
+
+# excluded.tif: one byte per cell
+CLASS_CODES = {
+    0: "soil",
+    1: "vegetation (not gridded)",
+    2: "objects by classification (not gridded)",
+    3: "other points: noise, water, unclassified (not gridded)",
+    4: "moved object (left out of the volumes)",
+    5: "object in one survey only (counted)",
+    6: "rough change: vegetation? (counted, in the interval)",
+}
+SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
+MISSED_SHARE = 0.08  # one-sigma share of an excluded volume the classification may have got wrong
+CLASS_MISSED_SHARE = 0.02  # the same for classes the files' own classification gave
+NEAR_CELLS = 2  # ... where it was left out within this many cells of a counted change area
+MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
+SINGLE_SHARE, MACHINE_M3 = 0.5, 40.0  # a machine-sized object in one survey: may be a machine (or half a move)
+ROUGH_SHARE = 0.6  # one-sigma share of the change on rough cells (vegetation the signals did not see)
+
+
+@dataclass(frozen=True)
+class Exclusion:
+    """The change areas without moved objects, the class raster, the report's ``excluded``
+    section and the one-sigma volume terms (m3 per part) of what the classification may have
+    missed or wrongly removed."""
+
+    fill: np.ndarray
+    cut: np.ndarray
+    classes: np.ndarray
+    report: dict
+    sigma: dict
+
+
+def exclude_nonsoil(
+    diff: np.ndarray,
+    fill: np.ndarray,
+    cut: np.ndarray,
+    epochs: tuple[EpochDEM, EpochDEM],
+    offset: np.ndarray,
+    grid: GridSpec,
+    mode: str = "auto",
+    heights: tuple[np.ndarray, np.ndarray] | None = None,
+    stable: np.ndarray | None = None,
+    refilled: np.ndarray | None = None,
+) -> Exclusion:
+    """See module; ``epochs`` (after, before), ``mode`` the ``--exclude`` option (``none``: moved
+    objects stay counted, still listed); ``heights`` (after, before: the heights the difference
+    is taken from) and ``stable`` ground give the rough cells (:mod:`soilvolume.soil.rough`):
+    fill where the after survey is rough, cut where the before survey is; ``refilled``: the
+    interpolated cells (objects are measured without them)."""
+    found = find_objects(diff, fill, cut, grid.cell, refilled=refilled)
+    leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
+    valid = np.isfinite(diff)
+    classes = np.where(valid, 0, 255).astype(np.uint8)
+    report: dict = {"mode": mode, "classes": {}}
+    sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
+    apparent = _apparent(diff, epochs, offset)
+    shares = _shares(epochs)
+    taken = np.zeros(diff.shape, bool)
+    share = _missed_share(epochs)
+    # only what was left out in or beside the counted change areas can bias the headline
+    near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
+    for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
+        cells = (shares[name] >= SHARE) & ~taken & ~found.moved & ~found.single
+        taken |= cells
+        classes[cells] = code
+        report["classes"][name] = _budget(apparent, cells, grid.cell_area)
+        part = _budget(apparent, cells & near, grid.cell_area)
+        for k in sigma:
+            sigma[k] = float(np.hypot(sigma[k], share * abs(part[k])))
+    classes[found.moved] = 4
+    classes[found.single] = 5
+    rough = _rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
+    classes[rough] = 6
+    report["rough"] = _budget(diff, rough, grid.cell_area)
+    for k in sigma:
+        sigma[k] = float(np.hypot(sigma[k], ROUGH_SHARE * abs(report["rough"][k])))
+    moved = _budget(np.where(found.moved, diff, 0.0), found.moved, grid.cell_area)
+    report["moved_objects"] = {
+        **moved,
+        "count": len(found.moved_blobs()) // 2,
+        "excluded": mode != "none",
+        "items": [_item(b, grid) for b in found.moved_blobs()],
+    }
+    single = found.single_blobs()
+    report["single_objects"] = {
+        "count": len(single),
+        "net_m3": float(sum(b.sign * b.volume_m3 for b in single)),
+        "counted": True,
+        "items": [_item(b, grid) for b in single],
+    }
+    if mode != "none":
+        for k in sigma:
+            sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * abs(moved[k])))
+    for b in single:  # counted by design; a machine's size makes it as likely a machine
+        if b.volume_m3 <= MACHINE_M3:
+            for k in ("net", "fill" if b.sign > 0 else "cut"):
+                sigma[k] = float(np.hypot(sigma[k], SINGLE_SHARE * b.volume_m3))
+    report["sigma_m3"] = sigma
+    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma)
+
+
+def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
+    """Change cells on rough ground: fill where the after survey is rough, cut where the before is;
+    only where no signal labelled any point (a classification, colour or returns say what is
+    vegetation better than roughness, which curved ground on coarse cells also shows)."""
+    if heights is None or stable is None or any(_labelled(e) for e in epochs):
+        return np.zeros(fill.shape, bool)
+    from ..soil.rough import rough_cells, roughness
+
+    out = []
+    for e, h in zip(epochs, heights, strict=True):
+        out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
+    return (fill & out[0]) | (cut & out[1])
+
+
+def _labelled(e: EpochDEM) -> bool:
+    """Whether a point rule labelled the epoch (or, without its rule, any point is not soil)."""
+    return (e.rule is not None and e.rule.active) or bool(e.nonsoil().any())
+
+
+def _missed_share(epochs: tuple[EpochDEM, EpochDEM]) -> float:
+    """The share of an excluded volume the classification may have got wrong: the files' own LAS
+    classification (ground returns below a canopy are measured) less than colour or returns."""
+    by_class = all(e.rule is not None and e.rule.use_class for e in epochs)
+    return CLASS_MISSED_SHARE if by_class else MISSED_SHARE
+
+
+def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
+    """Per class, the largest share of a cell's points (either epoch) that are of that class."""
+    out = {}
+    for name, field in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
+        best = np.zeros(epochs[0].counts.shape)
+        for e in epochs:
+            part = getattr(e, field)
+            if part is None:
+                continue
+            total = e.counts + e.nonsoil()
+            with np.errstate(invalid="ignore", divide="ignore"):
+                best = np.maximum(best, np.where(total > 0, part / np.maximum(total, 1), 0.0))
+        out[name] = best
+    return out
+
+
+def _apparent(diff: np.ndarray, epochs: tuple[EpochDEM, EpochDEM], offset: np.ndarray) -> np.ndarray:
+    """Per cell, the difference every point would have given minus the soil's (m; 0 where
+    either is unknown): what the excluded points would have added."""
+    after, before = (e.all_points_height() for e in epochs)
+    d = after - before - np.nan_to_num(offset)
+    return np.nan_to_num(d - diff)
+
+
+def _budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
+    v = np.where(cells, np.nan_to_num(d), 0.0)
+    fill, cut = float(v[v > 0].sum()) * cell_area, float(-v[v < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(cells.sum()) * cell_area}
+
+
+def _item(b: Blob, grid: GridSpec) -> dict:
+    """An object for the report: absolute centroid, footprint, height, volume."""
+    x = grid.xmin + (b.x + 0.5) * grid.cell
+    y = grid.ymax - (b.y + 0.5) * grid.cell
+    return {
+        "kind": "fill" if b.sign > 0 else "cut",
+        "x": x,
+        "y": y,
+        "area_m2": b.area_m2,
+        "height_m": b.height_m,
+        "volume_m3": b.volume_m3,
+        "moved": bool(b.partner),
+    }
+
+
+def sentence(report: dict) -> list[str]:
+    """Plain sentences on what was excluded and listed (for the verdict and the CLI)."""
+    out = []
+    m = report.get("moved_objects") or {}
+    if m.get("count"):
+        verb = "excluded" if m.get("excluded") else "counted (--exclude none)"
+        out.append(
+            f"{m['fill']:.0f} m³ of apparent fill and {m['cut']:.0f} m³ of apparent cut in {m['count']} "
+            f"moved object{'s' if m['count'] > 1 else ''} {verb}"
+        )
+    for name, part in (report.get("classes") or {}).items():
+        if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
+            out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
+    r = report.get("rough") or {}
+    if r.get("area_m2") and abs(r.get("net", 0.0)) >= 0.5:
+        out.append(
+            f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
+            "counted: no classification, colour or returns said what it is"
+        )
+    s = report.get("single_objects") or {}
+    if s.get("count"):
+        out.append(
+            f"{s['count']} object{'s' if s['count'] > 1 else ''} in one survey only ({s['net_m3']:+.0f} m³) "
+            "counted: check that they are soil (a machine, a container or a test pillar is not)"
+        )
+    return out
