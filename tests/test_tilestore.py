@@ -154,7 +154,12 @@ def test_kept_tiles_of_other_options_are_discarded_with_the_reason(tmp_path):
     store = RunStore(final)
     store.bind(parts)
     store.tiles([(0, 2, 0, 2)]).save((0, 2, 0, 2), {"h": np.ones((2, 2))})
+    (store.folder / f".{store.key}_h_2_4_0_2.npy.4242-abcd1234").write_bytes(b"cut short")  # a killed writer's
     assert store.close(keep=True)
+    assert sorted(p.name for p in (tmp_path / ".out.soilvolume-tiles").iterdir()) == [
+        f"{store.key}_h_0_2_0_2.npy",
+        "store.json",
+    ]
     again = RunStore(final)
     said = again.bind({**parts, "options": {"cell": 2.0}})
     assert (

@@ -136,6 +136,8 @@ class RunStore:
         """Remove the store, or with ``keep`` (an interruption) leave its finished tiles where
         the same command finds them; returns whether they were kept."""
         shutil.rmtree(self.scratch, ignore_errors=True)
+        for partial in self.folder.glob(".*.npy.*"):  # a tile write cut short (a worker killed mid-write)
+            partial.unlink(missing_ok=True)
         if keep and self.key and any(self.folder.glob(f"{self.key}_*.npy")):
             if self.kept.is_symlink() or self.kept.is_file():
                 self.kept.unlink()
