@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import re
 import sys
 import traceback
 from dataclasses import fields
@@ -71,8 +72,17 @@ def options_from(ns: argparse.Namespace) -> Options:
     return check_options(Options(**given))
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse whose errors are one line and exit 2: ``soilvolume: error: --cell: invalid float
+    value: 'abc'`` (its own usage block runs to 30 lines)."""
+
+    def error(self, message: str):
+        text = re.sub(r"^argument ([^:/ ]+)(/[^:]+)?: ", r"\1: ", message)
+        self.exit(2, f"soilvolume: error: {one_line(text)}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = Parser(
         prog="soilvolume",
         description="Soil volume change between two georeferenced point clouds (Shao et al. method, "
         "with robust registration and stable-ground correction).",

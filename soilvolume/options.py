@@ -31,12 +31,15 @@ def _opt(
     hi: float | None = None,
     lo_open: bool = False,
     commands: tuple[str, ...] = ESTIMATE,
+    run_control: bool = False,
 ) -> Any:
     """An option: default, one-line help, choices; ``label`` (short title for GUIs), ``unit``
     ("m", "m2", "deg", ...), the allowed range ``lo``..``hi`` (``lo`` excluded when
-    ``lo_open``) that every front end validates against, and the ``commands`` that take it."""
+    ``lo_open``) that every front end validates against, the ``commands`` that take it, and
+    ``run_control``: where and how the run goes, never its numbers (every other option keys the
+    work a resumed run may reuse)."""
     meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
-    return field(default=default, metadata={**meta, "commands": commands})
+    return field(default=default, metadata={**meta, "commands": commands, "run_control": run_control})
 
 
 @dataclass(frozen=True)
@@ -232,20 +235,28 @@ class Options:
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
     # run control
     threads: int = _opt(
-        0, "worker threads for Open3D/numpy (0 = all cores)", label="Threads", lo=0, hi=1024, commands=REGISTER
+        0,
+        "worker threads for Open3D/numpy (0 = all cores)",
+        label="Threads",
+        lo=0,
+        hi=1024,
+        commands=REGISTER,
+        run_control=True,
     )
     scheduler: str = _opt(
         "auto",
-        "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST:PORT (an existing Dask cluster; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
+        "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST[:PORT] (an existing Dask cluster, port 8786 by default; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
         label="Scheduler",
+        run_control=True,
     )
     memory_limit: float = _opt(
         0.0,
-        "memory budget (GB) of the run: auto chooses in-process below it, and a LocalCluster shares it among its workers (0 = half of this machine's memory)",
+        "memory budget (GB) of the run: auto chooses in-process below it, and a LocalCluster shares it among its workers, at least 0.25 GB each (0 = half of this machine's memory)",
         label="Memory budget",
         unit="GB",
         lo=0.0,
         hi=1e6,
+        run_control=True,
     )
     tile_cells: int = _opt(
         0,
@@ -265,6 +276,7 @@ class Options:
         False,
         "write after_registered.laz (the after cloud moved by the registration; the transform is always in report.json)",
         label="Write the registered after cloud",
+        run_control=True,
     )
 
     def with_(self, **changes: Any) -> Options:

@@ -73,7 +73,30 @@ def check_options(options: Options) -> Options:
             check_number(f.name, value, meta, integer=f.type in ("int", int))
         elif f.type in ("str | None", "str") and not isinstance(value, str):
             raise OptionError(f.name, f"must be text (got {value!r})")
+    _check_scheduler(options.scheduler)
+    _check_polygon_files(options)
     return options
+
+
+def _check_polygon_files(options: Options) -> None:
+    """The zones and stable-ground files read once now (missing, unreadable, without polygons,
+    invalid beyond repair: said before any point is read; their CRS is checked against the grid
+    later)."""
+    from .volumes.polygons import read_polygons
+
+    for name, what in (("zones", "zones file"), ("stable_mask", "--stable-mask file")):
+        path = getattr(options, name)
+        if path:
+            read_polygons(path, what=what)
+
+
+def _check_scheduler(spec: str) -> None:
+    """``--scheduler`` parsed as a run would parse it (its error names the option)."""
+    from .distributed.schedule import spec_problem
+
+    problem = spec_problem(spec)
+    if problem:
+        raise OptionError("scheduler", problem)
 
 
 def check_bounds(bounds: Sequence[float] | None, name: str = "--bounds") -> tuple[float, ...] | None:

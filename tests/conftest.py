@@ -37,6 +37,21 @@ def run_cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.fixture
+def alarm():
+    """Fail instead of hanging for ever (a FIFO opened for reading blocks): 60 s."""
+    import signal
+
+    def timeout(*_):
+        raise TimeoutError("hung for 60 s")
+
+    old = signal.signal(signal.SIGALRM, timeout)
+    signal.alarm(60)
+    yield
+    signal.alarm(0)
+    signal.signal(signal.SIGALRM, old)
+
+
 @pytest.fixture(scope="session")
 def misaligned_pair(tmp_path_factory):
     """Known cut/fill, 2 m / 2 degree GPS misalignment (synthetic default), no bias."""

@@ -4,7 +4,6 @@ writer, impossible header bounds, absurd worker counts and crop radii, a signal 
 from __future__ import annotations
 
 import os
-import signal
 import stat
 import struct
 
@@ -23,20 +22,6 @@ from soilvolume.inputs.stream import ColumnThinner
 @pytest.fixture
 def pair(tmp_path):
     return small_pair(tmp_path)
-
-
-@pytest.fixture
-def alarm():
-    """Fail instead of hanging for ever (a FIFO opened for reading blocks)."""
-
-    def timeout(*_):
-        raise TimeoutError("hung")
-
-    old = signal.signal(signal.SIGALRM, timeout)
-    signal.alarm(60)
-    yield
-    signal.alarm(0)
-    signal.signal(signal.SIGALRM, old)
 
 
 def test_a_single_file_output_never_replaces_a_device_or_pipe(capsys, pair, tmp_path):

@@ -137,24 +137,25 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
     from dask.distributed import Client
 
     from soilvolume.api import Hooks
-    from soilvolume.distributed.tiletask import TILE_ARRAYS, _save_tile, run_tiles
+    from soilvolume.distributed.tilestore import TileStore
+    from soilvolume.distributed.tiletask import TILE_ARRAYS, run_tiles
 
     plan = _plan_of_missing_inputs(tmp_path)
     g = plan.grid
     windows = tiles(g, 20)
+    store = TileStore(str(tmp_path), tuple(windows), "k1")
     for k, (r0, r1, c0, c1) in enumerate(windows):
         shape = (r1 - r0, c1 - c0)
-        _save_tile(
-            tmp_path,
-            (r0, r1, c0, c1),
-            tuple(_tile_array(n, shape, k, np.ones(shape, np.int32)) for n in TILE_ARRAYS),
-        )
+        arrays = [_tile_array(n, shape, k, np.ones(shape, np.int32)) for n in TILE_ARRAYS]
+        store.save((r0, r1, c0, c1), dict(zip(TILE_ARRAYS, arrays, strict=True)))
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
-        h_a, n_a, *_ = run_tiles(c, plan, windows, Hooks(), tmp_path)
+        h_a, n_a, *_ = run_tiles(c, plan, windows, Hooks(), store)
         assert h_a[0, 0] == 0 and h_a[39, 39] == 3 and (n_a == 1).all()
-        (tmp_path / "tile_20_40_20_40.npz").unlink()
+        with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):  # tiles of another key
+            run_tiles(c, plan, windows, Hooks(), TileStore(str(tmp_path), tuple(windows), "k2"))
+        (tmp_path / "k1_h_a_20_40_20_40.npy").unlink()
         with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
-            run_tiles(c, plan, windows, Hooks(), tmp_path)
+            run_tiles(c, plan, windows, Hooks(), store)
 
 
 def test_existing_cluster_by_address(pair, in_process, tmp_path):
@@ -211,13 +212,13 @@ def test_copc_inputs_thinned_for_registration_match_in_process(pair, in_process,
 
 
 def test_volume_step_tiles_on_a_local_cluster(pair, in_process, tmp_path):
-    """The volume step tile by tile on 2 worker processes (auto: the grid over a tiny memory
-    budget), the correction found on an overview of 2 x 2 cells: volumes within 1 % of the
+    """The volume step tile by tile on 2 worker processes, the correction found on an overview
+    of 2 x 2 cells: volumes within 1 % of the
     in-process run (cut within 2 m3), half-widths 0.5-2x the in-process ones (each 16-cell tile
     finds its level of detection and error model in its own 48-cell window; wider, never much
     narrower), and the difference raster within 2 cm on 99 % of its cells."""
     before, after, _ = pair
-    got = estimate(before, after, tmp_path / "r", Options(scheduler="local:2", tile_cells=16, memory_limit=0.0002))
+    got = estimate(before, after, tmp_path / "r", Options(scheduler="local:2", tile_cells=16, volume_step="tiles"))
     ref = in_process.report
     assert got.report["engine"]["volume_step"].startswith("tiles, overview of")
     for part in ("net", "cut", "fill"):
@@ -281,19 +282,27 @@ def test_tile_store_reads_any_window(tmp_path):
 
 def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_path):
     """Grid tiles snap to a VPC's data tiles (each read once) only when a data tile's points fit a
-    task's memory; over a tight budget the tiles come from the budget instead."""
+    task's memory; over a tight budget (between what the smallest tile and a data tile need) the
+    tiles come from the budget instead; below the smallest tile's need the budget is refused."""
     import laspy
+
+    from soilvolume.distributed.tiletask import MIN_TILE, TILE_BYTES_PER_POINT
 
     before, after, _ = pair
     vpc, parts = _quadrant_vpc(before, tmp_path)
     one = dict(scheduler="threads:1", volume_step="whole")  # one worker: tiles up to half the grid
     roomy = estimate(vpc, after, tmp_path / "a", Options(**one))
-    tight = estimate(vpc, after, tmp_path / "b", Options(**one, memory_limit=1e-5))
-    cell = roomy.report["grid"]["cell_m"]
+    cell, engine = roomy.report["grid"]["cell_m"], roomy.report["engine"]
     width = np.median([np.ptp(laspy.read(p).x) for p in parts])
-    assert roomy.report["engine"]["tile_cells"] == round(width / cell)  # snapped to the data tiles
-    assert tight.report["engine"]["tile_cells"] != roomy.report["engine"]["tile_cells"]
+    assert engine["tile_cells"] == round(width / cell)  # snapped to the data tiles
+    cells = (MIN_TILE**2 + engine["tile_cells"] ** 2) / 2  # fits the smallest tile, not a data tile
+    budget = 2 * cells * engine["points_per_cell"] * TILE_BYTES_PER_POINT / 2**30
+    tight = estimate(vpc, after, tmp_path / "b", Options(**one, memory_limit=budget))
+    assert MIN_TILE <= tight.report["engine"]["tile_cells"] < engine["tile_cells"]
     assert tight.report["volume_m3"]["net"] == pytest.approx(roomy.report["volume_m3"]["net"], rel=1e-3)
+    with pytest.raises(SoilVolumeError, match=r"--memory-limit: .* cannot hold a tile of \d+ cells"):
+        estimate(vpc, after, tmp_path / "c", Options(**one, memory_limit=budget / 10))
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
 
 
 def test_overview_factor_from_budget_and_size():
@@ -331,7 +340,7 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
 
     plan = _plan_of_missing_inputs(tmp_path)
     g = plan.grid
-    store = TileStore(str(tmp_path), tuple(tiles(g, 20)))
+    store = TileStore(str(tmp_path), tuple(tiles(g, 20)), "k1")
     for k, w in enumerate(store.windows):
         shape = (w[1] - w[0], w[3] - w[2])
         counts = np.full(shape, 4 + k, np.int32)
@@ -342,19 +351,24 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
         assert stats["read"] == 0 and medians == (5.5, 5.5)  # counts 4..7, 400 cells each
         assert after.heights.shape == (10, 10) and after.heights[0, 0] == 0 and after.heights[9, 9] == 3
         assert after.counts[0, 0] == 16 * 4  # a 4 x 4 block of cells with 4 points
-        (tmp_path / "h_a_20_40_20_40.npy").unlink()
+        (tmp_path / "k1_h_a_20_40_20_40.npy").unlink()
         with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
             _grid_tiles(c, plan, store, 4, Hooks())
 
 
 def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, monkeypatch):
-    """Nothing in the output folder, and the one line names the kept tiles (a resume)."""
+    """Nothing in the output folder, the one line names the kept tiles (a resume), and the store
+    holds them with the record of what they were computed from."""
+    import json
     import signal
 
     from soilvolume.core.interrupt import Interrupted
     from soilvolume.distributed import tiled
+    from soilvolume.distributed.tiletask import TILE_ARRAYS
 
-    def interrupted(*_a, **_k):
+    def interrupted(c, plan, windows, hooks, store, stats):
+        w = windows[0]
+        store.save(w, {n: np.zeros((w[1] - w[0], w[3] - w[2])) for n in TILE_ARRAYS})
         raise Interrupted(signal.SIGINT)
 
     monkeypatch.setattr(tiled, "run_tiles", interrupted)
@@ -362,3 +376,6 @@ def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, 
     with pytest.raises(Interrupted, match=r"kept in .*\.r\.soilvolume-tiles for the same command to resume") as err:
         estimate(before, after, tmp_path / "r", Options(scheduler="threads:1", volume_step="whole"))
     assert err.value.exit_code == 130 and not (tmp_path / "r").exists()
+    kept = tmp_path / ".r.soilvolume-tiles"
+    assert len(list(kept.glob("*_h_a_*.npy"))) == 1 and not (kept / "dask").exists()
+    assert set(json.loads((kept / "store.json").read_text())) == {"code", "inputs", "options", "plan"}

@@ -89,3 +89,79 @@ def test_unreadable_file_names_it(tmp_path):
         zone_budgets(diff(), GRID, bad)
     with pytest.raises(SoilVolumeError, match="missing.shp"):
         zone_budgets(diff(), GRID, tmp_path / "missing.shp")
+
+
+def _geojson(path, rings, crs="EPSG:32654", names=None):
+    feats = [
+        {"type": "Feature", "properties": {"name": n}, "geometry": {"type": "Polygon", "coordinates": r}}
+        for r, n in zip(rings, names or [f"z{k}" for k in range(len(rings))], strict=True)
+    ]
+    doc = {"type": "FeatureCollection", "features": feats}
+    if crs:
+        doc["crs"] = {"type": "name", "properties": {"name": crs}}
+    path.write_text(json.dumps(doc))
+    return path
+
+
+@pytest.mark.parametrize("reader", ["pyogrio", "fiona", "ogr"])
+def test_every_reader_gives_the_same_zones(tmp_path, reader):
+    """pyogrio (the engine's own environment), fiona, GDAL's osgeo.ogr (QGIS's own GDAL)."""
+    from soilvolume.volumes import polygons
+
+    if reader == "fiona":
+        pytest.importorskip("fiona")
+    path = _geojson(tmp_path / "z.geojson", [box(500010, 3900010, 500020, 3900030)], names=["pad"])
+    (fid, props, geom), *rest = getattr(polygons, f"_read_{reader}")(path)[0]
+    wkt = getattr(polygons, f"_read_{reader}")(path)[1]
+    assert not rest and props["name"] == "pad" and geom.area == pytest.approx(200.0) and "UTM zone 54N" in wkt
+
+
+def test_without_pyogrio_the_next_reader_serves(tmp_path, monkeypatch):
+    import builtins
+
+    from soilvolume.volumes import polygons
+
+    real = builtins.__import__
+
+    def block(name, *args, **kwargs):
+        if name.split(".")[0] in ("pyogrio", "fiona"):
+            raise ImportError(f"No module named '{name}' (blocked by the test)")
+        return real(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", block)
+    path = _geojson(tmp_path / "z.geojson", [box(500010, 3900010, 500020, 3900030)], names=["pad"])
+    polys, _ = polygons.read_polygons(path)
+    assert [p.name for p in polys] == ["pad"]
+
+
+def test_a_self_intersecting_zone_is_repaired_and_said(tmp_path):
+    bowtie = [[[500010, 3900010], [500030, 3900030], [500030, 3900010], [500010, 3900030], [500010, 3900010]]]
+    path = _geojson(tmp_path / "bowtie.geojson", [bowtie])
+    (row,) = zone_budgets(diff(), GRID, path)
+    assert row["repaired"] and row["polygon_area_m2"] == pytest.approx(200.0)  # two triangles
+    assert row["zone_area_m2"] == pytest.approx(200.0, rel=0.1)
+    from soilvolume.volumes.zones import zone_messages
+
+    assert any("repaired" in m and "'z0'" in m for m in zone_messages([row]))
+
+
+def test_zones_outside_the_grid_are_flagged_and_all_outside_refused(tmp_path):
+    from soilvolume.volumes.zones import zone_messages
+
+    inside, far = box(500010, 3900010, 500020, 3900030), box(510000, 3910000, 510010, 3910010)
+    rows = zone_budgets(diff(), GRID, _geojson(tmp_path / "some.geojson", [inside, far], names=["in", "far"]))
+    assert [r["outside_grid"] for r in rows] == [False, True] and rows[1]["net"] == 0.0
+    assert any("'far'" in m and "not measured" in m for m in zone_messages(rows))
+    with pytest.raises(SoilVolumeError, match=r"far\.geojson: no zone meets the survey's grid \(is its CRS right"):
+        zone_budgets(diff(), GRID, _geojson(tmp_path / "far.geojson", [far]))
+
+
+def test_a_zone_in_a_crs_that_cannot_hold_its_coordinates_is_refused(tmp_path):
+    path = _geojson(tmp_path / "lonlat.geojson", [box(500010, 3900010, 500020, 3900030)], crs="EPSG:4326")
+    with pytest.raises(SoilVolumeError, match=r"'z0' cannot be brought from WGS 84 into the survey's"):
+        zone_budgets(diff(), GRID, path)
+
+
+def test_a_missing_stable_mask_is_not_called_a_zones_file(tmp_path):
+    with pytest.raises(SoilVolumeError, match=r"nowhere\.gpkg: --stable-mask file not found"):
+        polygons_mask(tmp_path / "nowhere.gpkg", GRID)

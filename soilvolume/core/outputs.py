@@ -118,19 +118,24 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
-def sweep(final: Path) -> None:
-    """Remove the hidden siblings of ``final`` left by dead runs; a trashed old set whose new set
-    never arrived is put back."""
-    pattern = re.compile(rf"^\.{re.escape(_tag(final.name))}\.({STAGING}|{TRASH})-(\d+)(-\w*)?(\..*)?$")
+def dead_siblings(final: Path, kinds: Iterable[str]) -> Iterator[tuple[Path, str]]:
+    """(path, kind) of the hidden siblings of ``final`` of these ``kinds`` whose run is dead."""
+    pattern = re.compile(rf"^\.{re.escape(_tag(final.name))}\.({'|'.join(map(re.escape, kinds))})-(\d+)(-\w*)?(\..*)?$")
     try:
         entries = list(final.parent.iterdir())
     except OSError:
         return
     for entry in entries:
         m = pattern.match(entry.name)
-        if not m or _alive(int(m.group(2))):
-            continue
-        if m.group(1) == TRASH and not final.exists():
+        if m and not _alive(int(m.group(2))):
+            yield entry, m.group(1)
+
+
+def sweep(final: Path) -> None:
+    """Remove the hidden siblings of ``final`` left by dead runs; a trashed old set whose new set
+    never arrived is put back."""
+    for entry, kind in dead_siblings(final, (STAGING, TRASH)):
+        if kind == TRASH and not final.exists():
             os.rename(entry, final)
         else:
             _remove(entry)

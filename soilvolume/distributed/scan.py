@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..core import interrupt
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..soil.points import SOIL, NonSoil, PointRule
@@ -71,10 +72,13 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
     return out
 
 
-def dask_loader(client, progress: Callable[[str], None] | None = None) -> Callable[..., Loaded]:
+def dask_loader(
+    client, progress: Callable[[str], None] | None = None, wait_check: Callable[[], None] = interrupt.check
+) -> Callable[..., Loaded]:
     """A :func:`stream.load` running its units on ``client`` (sources kept whole in memory, and
-    reads that keep full-resolution points, fall back to streaming here)."""
-    from dask.distributed import as_completed
+    reads that keep full-resolution points, fall back to streaming here); ``wait_check`` runs
+    while the tasks are waited for (signals, cancellation)."""
+    from .cluster import completed
 
     def loader(
         src: Source,
@@ -99,9 +103,7 @@ def dask_loader(client, progress: Callable[[str], None] | None = None) -> Callab
         args = (src.region, to_local, rule, keep, thinning, indexed)
         futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], pure=False)
         parts = []
-        for k, fut in enumerate(as_completed(futures), 1):
-            part = fut.result()
-            fut.release()
+        for k, part in enumerate(completed(client, futures, f"reading {src.path}", wait_check), 1):
             thinner.sums += part.pop("sums")
             parts.append(part)
             if progress:

@@ -31,22 +31,59 @@ class Schedule:
         return {"none": "none", "tcp": str(self.address)}.get(self.kind, f"{self.kind}:{self.workers}")
 
 
+EXPECTED = f"expected none, threads[:N], local[:N] (N from 1 to {MAX_WORKERS}), tcp://HOST:PORT or auto"
+DEFAULT_PORT = 8786  # Dask's scheduler port
+
+
+def spec_problem(spec: str) -> str | None:
+    """What is wrong with a ``--scheduler`` value (None when it is right)."""
+    try:
+        parse(spec)
+    except SoilVolumeError as exc:
+        return str(exc).split(": ", 1)[1]
+    return None
+
+
 def parse(spec: str) -> Schedule | None:
-    """``none``, ``threads[:N]``, ``local[:N]``, ``tcp://HOST:PORT`` (None for ``auto``)."""
+    """``none``, ``threads[:N]``, ``local[:N]``, ``tcp://HOST[:PORT]`` (None for ``auto``)."""
     spec = (spec or "auto").strip()
     if spec == "auto":
         return None
     if spec == "none":
         return Schedule("none")
-    if spec.startswith("tcp://") or spec.startswith("tls://"):
-        return Schedule("tcp", address=spec)
+    if "://" in spec:
+        return Schedule("tcp", address=_address(spec))
     m = re.fullmatch(r"(threads|local)(?::(\d+))?", spec)
     if not m or (m.group(2) is not None and not 1 <= int(m.group(2)) <= MAX_WORKERS):
-        raise SoilVolumeError(
-            f"--scheduler {spec}: expected none, threads[:N], local[:N] (N from 1 to {MAX_WORKERS}), "
-            "tcp://HOST:PORT or auto"
-        )
+        raise SoilVolumeError(f"--scheduler {spec}: {EXPECTED}")
     return Schedule(m.group(1), int(m.group(2) or (os.cpu_count() or 1)))
+
+
+def _address(spec: str) -> str:
+    """A Dask scheduler's address ``tcp://HOST:PORT`` (port 8786 when not given), checked."""
+    from urllib.parse import urlsplit
+
+    def bad(problem: str) -> SoilVolumeError:
+        return SoilVolumeError(f"--scheduler {spec}: {problem}")
+
+    scheme = spec.split("://", 1)[0].lower()
+    if scheme == "tls":
+        raise bad("TLS clusters need certificates, which this command does not take; use tcp:// (e.g. over a tunnel)")
+    if scheme != "tcp":
+        raise bad(f"unsupported protocol '{scheme}://'; {EXPECTED}")
+    try:
+        url = urlsplit(spec)
+        port = url.port
+    except ValueError:
+        raise bad("the port must be a number from 1 to 65535") from None
+    if not url.hostname:
+        raise bad("no host: expected tcp://HOST:PORT")
+    if url.path not in ("", "/") or url.query or url.fragment or url.username or url.password:
+        raise bad("expected tcp://HOST:PORT, nothing more")
+    if port is not None and not 1 <= port <= 65535:
+        raise bad("the port must be a number from 1 to 65535")
+    host = f"[{url.hostname}]" if ":" in url.hostname else url.hostname
+    return f"tcp://{host}:{port or DEFAULT_PORT}"
 
 
 def budget_gb(memory_limit: float) -> float:
@@ -96,60 +133,85 @@ def choose(spec: str, memory_limit: float, points: int) -> Schedule:
     return Schedule("local" if can_spawn() else "threads", os.cpu_count() or 1)
 
 
+WORKER_MIN_GB = 0.25  # a worker process: the interpreter, numpy, laspy and a small tile
+
+
+def check_budget(schedule: Schedule, memory_limit: float) -> None:
+    """Refuse a memory budget below what each worker process needs to start and hold a tile
+    (below it Dask pauses or restarts workers for ever)."""
+    if schedule.kind != "local":
+        return
+    per_worker = budget_gb(memory_limit) / schedule.workers
+    if per_worker >= WORKER_MIN_GB:
+        return
+    share = f"{per_worker:.3g} GB for each of the {schedule.workers} worker processes of {schedule}"
+    if memory_limit <= 0:
+        raise SoilVolumeError(
+            f"--scheduler {schedule}: {share} (half of this machine's memory), below the {WORKER_MIN_GB:g} GB a "
+            "worker needs; use fewer workers"
+        )
+    raise SoilVolumeError(
+        f"--memory-limit {memory_limit:g}: {share}, below the {WORKER_MIN_GB:g} GB a worker needs (give at least "
+        f"{WORKER_MIN_GB * schedule.workers:g}, or 0 for half of this machine's memory)"
+    )
+
+
+MAX_TILES = 50_000  # tasks per step a cluster schedules well (each tile is a task of each step)
+
+
+def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) -> None:
+    """Refuse tilings a cluster cannot run: more than :data:`MAX_TILES` tiles, or a largest tile
+    whose points do not fit half of a task's memory share (``--memory-limit``)."""
+    from .tiletask import TILE_BYTES_PER_POINT
+
+    given = f"--tile-cells {options.tile_cells}" if options.tile_cells else "--memory-limit"
+    if len(windows) > MAX_TILES:
+        raise SoilVolumeError(
+            f"{given}: {len(windows):,} tiles, more than the {MAX_TILES:,} tasks a cluster schedules well; "
+            "use larger tiles (--tile-cells) or 0 for tiles from the point density"
+        )
+    cells = max((w[1] - w[0]) * (w[3] - w[2]) for w in windows)
+    need = cells * points_per_cell * TILE_BYTES_PER_POINT * 2 / 2**30  # a task may use half of its share
+    if need > task_gb:
+        fix = "a smaller --tile-cells or a larger budget" if options.tile_cells else "a larger budget"
+        raise SoilVolumeError(
+            f"{given}: {task_gb:.3g} GB per task (--memory-limit {options.memory_limit:g}) cannot hold a tile of "
+            f"{cells:,} cells of this pair ({cells * points_per_cell:,.0f} points need {need:.3g} GB); give {fix}"
+        )
+
+
 @contextmanager
-def client(schedule: Schedule, memory_limit: float) -> Iterator:
-    """A future of a ``dask.distributed.Client`` for ``schedule``, started in the background
-    (threads: in this process; local: a LocalCluster sharing the memory budget among its worker
-    processes), closed on exit."""
-    from concurrent.futures import ThreadPoolExecutor
+def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None) -> Iterator:
+    """A :class:`cluster.Starting` of a ``dask.distributed.Client`` for ``schedule``, started in the
+    background (threads: in this process; local: a LocalCluster sharing the memory budget among
+    its worker processes, their scratch space in ``scratch``; tcp: an existing cluster), shut
+    down on exit within a timeout."""
+    from .cluster import START_S, Starting
 
-    with ThreadPoolExecutor(1) as pool, _client(schedule, memory_limit, pool) as fut:
-        yield fut
-
-
-@contextmanager
-def _client(schedule: Schedule, memory_limit: float, pool) -> Iterator:
-    fut = pool.submit(_start, schedule, memory_limit)
+    check_budget(schedule, memory_limit)
+    starting = Starting(lambda: _start(schedule, memory_limit, scratch), str(schedule), START_S[schedule.kind])
     try:
-        yield fut
+        yield starting
     finally:
-        try:
-            cluster, c = fut.result()
-        except Exception:
-            cluster = c = None
-        if c is not None:
-            c.close()
-        if cluster is not None:
-            cluster.close()
+        starting.close()
 
 
-def _start(schedule: Schedule, memory_limit: float):
+def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
     """(LocalCluster or None, Client) for ``schedule``."""
-    try:
-        from dask.distributed import Client, LocalCluster
-    except ImportError as exc:  # pragma: no cover - a dependency
-        raise SoilVolumeError(f"--scheduler {schedule}: needs dask[distributed] ({exc})") from exc
+    if not has_dask():  # pragma: no cover - a dependency
+        raise SoilVolumeError(f"--scheduler {schedule}: needs dask[distributed] (pip install 'dask[distributed]')")
+    from . import cluster
+
     if schedule.kind == "tcp":
-        try:
-            return None, Client(schedule.address, timeout="20s")
-        except OSError as exc:
-            raise SoilVolumeError(f"--scheduler {schedule.address}: cannot reach the Dask scheduler ({exc})") from exc
+        return cluster.connect(str(schedule.address))
     processes = schedule.kind == "local"
     if processes and not can_spawn():
         raise SoilVolumeError(
             f"--scheduler {schedule}: cannot start worker processes from {sys.executable}; "
             "use threads[:N] or an existing cluster (tcp://HOST:PORT)"
         )
-    per_worker = budget_gb(memory_limit) / schedule.workers
-    cluster = LocalCluster(
-        n_workers=schedule.workers if processes else 1,
-        threads_per_worker=1 if processes else schedule.workers,
-        processes=processes,
-        memory_limit=f"{per_worker:.3f}GiB" if processes else None,
-        dashboard_address=None,
-        silence_logs=40,
-    )
-    return cluster, Client(cluster)
+    per_worker = budget_gb(memory_limit) / schedule.workers if processes else None
+    return cluster.local(schedule.workers, processes, per_worker, scratch)
 
 
 def worker_gb(schedule: Schedule, memory_limit: float) -> float:

@@ -11,19 +11,18 @@ Dask tasks, so no process holds a survey's points.
    ~8 points per cell) and the volume step (refill, holes, correction fitted once on the whole
    grid, uncertainty, budgets) runs as in-process. ``tiles`` (grids too large for one process):
    see :mod:`volumestep`. Outputs are written block by block as COGs. Finished tiles are kept
-   until the run succeeds, so an interrupted run resumes.
+   after an interruption, keyed by what they were computed from (:mod:`tilestore`), so the
+   same command resumes.
 """
 
 from __future__ import annotations
 
 import math
-import shutil
 from pathlib import Path
 
 import numpy as np
 
 from ..core.hooks import Hooks, Result
-from ..core.interrupt import Interrupted
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import choose_cell
@@ -41,10 +40,13 @@ from ..workflow.steps import (
     shared_grid,
     write_report_html,
 )
+from .cluster import checker
 from .cog import write_outputs
+from .fingerprint import run_parts
 from .scan import dask_loader
-from .schedule import Schedule, client, worker_gb
-from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, epoch_dems, run_tiles, tile_cache, tiles
+from .schedule import Schedule, check_tiles, client, worker_gb
+from .tilestore import run_store
+from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, epoch_dems, plan_parts, run_tiles, tiles
 
 
 def data_tile_m(src, cell: float, side: int) -> float | None:
@@ -125,16 +127,16 @@ def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks
     if options.ground == "filter":
         raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
     hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
-    with client(schedule, options.memory_limit) as starting:  # workers start while the inputs are opened
-        return _tiled(before, after, out, options, timer, hooks, schedule, starting)
+    with run_store(out.final) as store, client(schedule, options.memory_limit, store.scratch) as starting:
+        return _tiled(before, after, out, options, timer, hooks, schedule, (starting, store))
 
 
-def _tiled(
-    before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule, starting
-) -> Result:
-    """The tiled run, with ``starting`` the future of the (cluster, client) being started."""
+def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule, started) -> Result:
+    """The tiled run, with ``started`` = (the :class:`cluster.Starting` client, the run's
+    :class:`tilestore.RunStore`)."""
+    starting, store = started
     with timer("cluster_wait"):
-        _, c = starting.result()
+        c = starting.result(checker(hooks))
     with timer("crop"):  # the registration subsets: a first pass as Dask tasks
         src_b, src_a = open_source(before), open_source(after)
         prep = prepare(
@@ -143,7 +145,7 @@ def _tiled(
             options,
             check=lambda: hooks.step(5, "reading"),
             full=False,
-            loader=dask_loader(c, lambda m: hooks.step(8, m)),
+            loader=dask_loader(c, lambda m: hooks.step(8, m), checker(hooks)),
         )
     reg, options = register_pair(prep, options, hooks, timer)
     after_thin = transform_points(prep.after_thin, reg.transform)
@@ -172,36 +174,40 @@ def _tiled(
     if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
         side = max(1, round(align / cell))
     windows = tiles(grid, side, align)
+    check_tiles(windows, density, task_gb, options)
     hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
-    cache = tile_cache(out, plan)
-    try:  # an interruption keeps the finished tiles for a resume: say where
-        k = volume_factor(options, grid, schedule)
-        if k > 1:
-            from .volumestep import tiled_volume_step
+    k = volume_factor(options, grid, schedule)
+    said = store.bind(run_parts(before, after, options, plan_parts(plan, windows, k)))
+    if said:
+        hooks.step(55, said)
+    tiles_kept = store.tiles(windows)
+    if k > 1:
+        from .volumestep import tiled_volume_step
 
-            report, stats, html = tiled_volume_step(
-                c, plan, windows, cache, k, (prep, reg, after_thin), out, options, timer, hooks
-            )
-        else:
-            with timer("grids"):
-                dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, cache, stats := {}), plan.rules)
-            hooks.step(70, correction_step(options))
-            vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
-            hooks.step(85, "writing outputs (COG)")
-            with timer("write"):
-                arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
-                arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask, classes=vols.classes)
-                write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
-            with timer("report"):
-                report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
-                add_quality(report, vols, grid, options, hooks)
-    except Interrupted as exc:
-        raise Interrupted(exc.signum, kept=str(cache.parent)) from None
+        report, stats, html = tiled_volume_step(
+            c, plan, tiles_kept, k, (prep, reg, after_thin), out, options, timer, hooks
+        )
+    else:
+        with timer("grids"):
+            dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, tiles_kept, stats := {}), plan.rules)
+        hooks.step(70, correction_step(options))
+        vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
+        hooks.step(85, "writing outputs (COG)")
+        with timer("write"):
+            arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
+            arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask, classes=vols.classes)
+            write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
+        with timer("report"):
+            report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
+            add_quality(report, vols, grid, options, hooks)
     report["engine"] = {
         "scheduler": str(schedule),
         "tiles": len(windows),
         "tile_cells": side,
+        "points_per_cell": round(density, 3),
         "volume_step": "whole grid" if k == 1 else f"tiles, overview of {k} x {k} cells",
+        "tiles_resumed": stats["resumed"],
+        "kept_tiles_discarded": said,
         "task_points_read": stats["read"],
         "task_seconds": round(stats["seconds"], 3),
         "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
@@ -211,7 +217,6 @@ def _tiled(
         if k == 1:
             html = (vols, grid, dem_a.heights + prep.origin[2])
         write_report_html(out, report, *html)
-    shutil.rmtree(cache.parent, ignore_errors=True)
     return Result(report)
 
 

@@ -1,27 +1,50 @@
-"""Tiles of a grid kept on disk between the steps of a tiled run: one ``.npy`` file per array
-and tile, written atomically by the task that computed it, read back as any window of the
-grid (memory-mapped: a window costs what it holds, not what its tiles hold)."""
+"""Tiles of a grid kept on disk between the steps of a tiled run, and between an interrupted run
+and the same command run again.
+
+:class:`TileStore`: one ``.npy`` file per array and tile, named with the run's key (see
+:mod:`fingerprint`), written atomically under a name no other writer uses, read back as any
+window of the grid (memory-mapped: a window costs what it holds, not what its tiles hold).
+
+:class:`RunStore`: each run has a store of its own, a hidden sibling of the output folder
+(``.NAME.soilvolume-tiles-PID-TOKEN``); it holds the Dask workers' scratch space too. A run that
+succeeds or fails removes it; an interrupted one (SIGINT/SIGTERM) keeps its finished tiles as
+``.NAME.soilvolume-tiles``, which the next run into the same folder claims (one atomic rename:
+of two runs, one gets it) and uses only if what the tiles were computed from (``store.json``)
+is what this run computes from; else it discards them, saying why in one line.
+"""
 
 from __future__ import annotations
 
+import json
+import os
+import secrets
+import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..core.interrupt import Interrupted, cleanup_on_exit
+from ..core.outputs import _tag, dead_siblings
+from . import fingerprint
+
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
+KEPT, MANIFEST = "soilvolume-tiles", "store.json"
 
 
 @dataclass(frozen=True)
 class TileStore:
-    """A folder of per-tile arrays of a grid cut into ``windows`` (picklable: sent to tasks; the
-    folder must be visible to every worker)."""
+    """A folder of per-tile arrays of a grid cut into ``windows``, each file named with ``key``
+    (picklable: sent to tasks; the folder must be visible to every worker)."""
 
     folder: str
     windows: tuple[Window, ...]
+    key: str = "tiles"
 
     def _file(self, name: str, win: Window) -> Path:
-        return Path(self.folder) / "{}_{}_{}_{}_{}.npy".format(name, *win)
+        return Path(self.folder) / "{}_{}_{}_{}_{}_{}.npy".format(self.key, name, *win)
 
     def has(self, names, win: Window) -> bool:
         """Whether every array of ``names`` of tile ``win`` is on disk (a finished tile)."""
@@ -31,10 +54,13 @@ class TileStore:
         """Write the tile's arrays (each atomically: an interrupted task leaves no partial tile)."""
         for name, arr in arrays.items():
             final = self._file(name, win)
-            tmp = final.with_name(f".{final.name}")
-            with open(tmp, "wb") as f:
-                np.save(f, np.ascontiguousarray(arr))
-            tmp.replace(final)
+            tmp = final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}")
+            try:
+                with open(tmp, "wb") as f:
+                    np.save(f, np.ascontiguousarray(arr))
+                tmp.replace(final)
+            finally:
+                tmp.unlink(missing_ok=True)
 
     def load(self, name: str, win: Window) -> np.ndarray:
         return np.load(self._file(name, win), mmap_mode="r")
@@ -56,3 +82,93 @@ class TileStore:
         if out is None:
             out = np.full((r1 - r0, c1 - c0), fill, dtype or float)
         return out
+
+
+class RunStore:
+    """The tile store of one run (see module): :meth:`bind` once the plan is known, then
+    :meth:`close` with how the run ended."""
+
+    def __init__(self, final: Path) -> None:
+        self.final = Path(final)
+        name = _tag(self.final.name)
+        self.kept = self.final.with_name(f".{name}.{KEPT}")
+        self.folder = self.final.with_name(f".{name}.{KEPT}-{os.getpid()}-{secrets.token_hex(4)}")
+        _sweep(self.final)
+        try:  # claim the tiles an interrupted run kept (atomic: one run gets them)
+            os.rename(self.kept, self.folder)
+            self.claimed = True
+        except OSError:
+            self.claimed = False
+        if self.claimed and (self.folder.is_symlink() or not self.folder.is_dir()):  # not ours: never follow it
+            self.folder.unlink()
+            self.claimed = False
+        if not self.claimed:
+            self.folder.mkdir()
+        self.scratch = self.folder / "dask"  # the workers' spill and scratch space
+        self.key = ""
+
+    def bind(self, parts: dict) -> str | None:
+        """Key the store by what the run computes from; the tiles of another computation are
+        discarded: returns the reason in a line for the log (None when nothing was discarded)."""
+        self.key = fingerprint.digest(parts)
+        manifest = self.folder / MANIFEST
+        said = None
+        if self.claimed:
+            try:
+                old = json.loads(manifest.read_text())
+            except (OSError, ValueError):
+                old = {}
+            why = fingerprint.difference(old, parts) if old else "they carry no record of their inputs"
+            if why:
+                said = f"discarding the tiles kept by an interrupted run: {why}; starting afresh"
+                for entry in self.folder.iterdir():
+                    if entry != self.scratch:
+                        shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+        tmp = manifest.with_name(f".{MANIFEST}.tmp")
+        tmp.write_text(json.dumps(parts, sort_keys=True))
+        tmp.replace(manifest)
+        return said
+
+    def tiles(self, windows) -> TileStore:
+        return TileStore(str(self.folder), tuple(windows), self.key)
+
+    def close(self, keep: bool) -> bool:
+        """Remove the store, or with ``keep`` (an interruption) leave its finished tiles where
+        the same command finds them; returns whether they were kept."""
+        shutil.rmtree(self.scratch, ignore_errors=True)
+        for partial in self.folder.glob(".*.npy.*"):  # a tile write cut short (a worker killed mid-write)
+            partial.unlink(missing_ok=True)
+        if keep and self.key and any(self.folder.glob(f"{self.key}_*.npy")):
+            if self.kept.is_symlink() or self.kept.is_file():
+                self.kept.unlink()
+            shutil.rmtree(self.kept, ignore_errors=True)  # an older interruption's: ours is newer
+            try:
+                os.rename(self.folder, self.kept)
+                return True
+            except OSError:
+                pass
+        shutil.rmtree(self.folder, ignore_errors=True)
+        return False
+
+
+@contextmanager
+def run_store(final: Path) -> Iterator[RunStore]:
+    """The run's :class:`RunStore`, removed when the block ends, kept when it is interrupted
+    (the :class:`Interrupted` then says where)."""
+    store = RunStore(final)
+    try:
+        with cleanup_on_exit(lambda: store.close(keep=True)):  # a second signal: out at once
+            yield store
+    except Interrupted as exc:
+        kept = store.close(keep=True)
+        raise Interrupted(exc.signum, kept=str(store.kept) if kept else None) from None
+    except BaseException:
+        store.close(keep=False)
+        raise
+    store.close(keep=False)
+
+
+def _sweep(final: Path) -> None:
+    """Remove the run stores of runs into ``final`` that are no longer alive (killed)."""
+    for entry, _ in dead_siblings(final, (KEPT,)):
+        shutil.rmtree(entry, ignore_errors=True)

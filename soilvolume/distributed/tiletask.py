@@ -5,12 +5,10 @@ where they can meet it), their heights, counts and spreads with :func:`grid.cell
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from pathlib import Path
 
 import numpy as np
 
 from ..core.hooks import Hooks
-from ..core.outputs import OutputDir
 from ..core.types import GridSpec
 from ..dem.grid import (
     EPOCH_ARRAYS,
@@ -28,10 +26,12 @@ from ..inputs.footprint import PolygonMask
 from ..inputs.io import GROUND
 from ..inputs.prepare import _local
 from ..inputs.stream import open_source
+from .tilestore import TileStore
 
 # a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
 # 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
 TILE_BYTES_PER_POINT = 48.0
+SCATTER_S = 60  # sending a run's plan to every worker
 MIN_TILE, MAX_TILE = 16, 4096  # tile side (cells): small tiles keep very dense data within a task's memory
 TILE_ARRAYS = tuple(f"{k}_{e}" for e in "ab" for k in EPOCH_ARRAYS)  # what a tile task returns: h_a, n_a, ...
 
@@ -62,6 +62,17 @@ class Plan:
 
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
+
+
+def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
+    """What of a run's plan its tiles depend on, beyond its inputs and options: the frame, the
+    grid, the registration (to 12 decimals), the crop, the tiling and the overview factor."""
+    from dataclasses import fields
+
+    parts = {f.name: getattr(plan, f.name) for f in fields(plan) if f.name not in ("before", "after")}
+    parts.update(frame=plan.frame.wkt, grid=repr(plan.grid), transform=np.round(plan.transform, 12))
+    parts.update(windows=windows, overview=k)
+    return parts
 
 
 def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], dict]:
@@ -206,28 +217,29 @@ def _edges(n: int, offset: int, side: int) -> list[int]:
 
 
 def run_tiles(
-    c, plan: Plan, windows: list[Window], hooks: Hooks, cache: Path | None = None, stats: dict | None = None
+    c, plan: Plan, windows: list[Window], hooks: Hooks, store: TileStore | None = None, stats: dict | None = None
 ) -> tuple[np.ndarray, ...]:
     """Run every tile on the client ``c`` and assemble the arrays of :data:`TILE_ARRAYS` on the
-    grid (:func:`epoch_dems` makes them the two epochs' DEMs). Tiles found in ``cache`` (from an
-    interrupted run of the same plan) are not run again; finished tiles are saved there.
+    grid (:func:`epoch_dems` makes them the two epochs' DEMs). Tiles found in ``store`` (from an
+    interrupted run of the same computation) are not run again; finished tiles are saved there.
     ``stats`` sums the tasks' points read and seconds."""
     stats = stats if stats is not None else {}
-    stats.update(read=0, seconds=0.0)
+    stats.update(read=0, seconds=0.0, resumed=0)
     g = plan.grid
     out = tuple(np.full((g.rows, g.cols), empty_value(k), np.int64 if k[0] == "n" else float) for k in TILE_ARRAYS)
     todo = []
     for win in windows:
-        saved = _load_tile(cache, win)
-        if saved is None:
-            todo.append(win)
+        if store is not None and store.has(TILE_ARRAYS, win):
+            _place(out, win, [store.load(k, win) for k in TILE_ARRAYS])
         else:
-            _place(out, win, saved)
+            todo.append(win)
     for win, arrays, task in map_tiles(c, grid_tile, plan, todo, hooks=hooks, total=len(windows)):
-        for key in stats:
+        for key in ("read", "seconds"):
             stats[key] += task[key]
         _place(out, win, arrays)
-        _save_tile(cache, win, arrays)
+        if store is not None:
+            store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
+    stats["resumed"] = len(windows) - len(todo)
     return out
 
 
@@ -236,18 +248,16 @@ def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: 
     sent to the workers once, not with every task), yielding the results as tasks finish, with
     progress from ``steps[0]`` to ``steps[1]`` %. ``total``: the tiles of the run, when those not
     in ``windows`` were done by an earlier run."""
-    from dask.distributed import as_completed
+    from .cluster import checker, completed
 
     if len(windows) < total:
-        hooks.info(f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
+        hooks.step(steps[0], f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
     if not windows:
         return
     n, (lo, hi, verb) = len(windows), steps
-    ref = c.scatter(shared, broadcast=True)
+    ref = c.scatter(shared, broadcast=True, timeout=SCATTER_S)
     futures = c.map(fn, [ref] * n, windows, *[[a] * n for a in args], pure=False)
-    for k, fut in enumerate(as_completed(futures), 1):
-        result = fut.result()
-        fut.release()
+    for k, result in enumerate(completed(c, futures, f"{verb} tiles", checker(hooks)), 1):
         hooks.step(lo + (hi - lo) * k / n, f"{verb} tile {k}/{n}")
         yield result
 
@@ -265,54 +275,3 @@ def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:
     r0, r1, c0, c1 = win
     for full, part in zip(out, arrays, strict=True):
         full[r0:r1, c0:c1] = part
-
-
-def _tile_file(cache: Path, win: Window) -> Path:
-    return cache / "tile_{}_{}_{}_{}.npz".format(*win)
-
-
-def _load_tile(cache: Path | None, win: Window):
-    if cache is None or not _tile_file(cache, win).exists():
-        return None
-    try:
-        with np.load(_tile_file(cache, win)) as z:
-            return tuple(z[k] for k in TILE_ARRAYS)
-    except (OSError, ValueError, KeyError):  # a tile cut short by the interruption: run it again
-        return None
-
-
-def _save_tile(cache: Path | None, win: Window, arrays) -> None:
-    if cache is None:
-        return
-    tmp = cache / f".{_tile_file(cache, win).name}"
-    with open(tmp, "wb") as f:
-        np.savez(f, **dict(zip(TILE_ARRAYS, arrays, strict=True)))
-    tmp.replace(_tile_file(cache, win))
-
-
-def tile_cache(out: OutputDir, plan: Plan) -> Path:
-    """The folder keeping finished tiles of ``plan`` until the run succeeds: a hidden sibling of
-    the output folder (outputs are staged and swapped in whole), keyed by the plan, so a changed
-    input, option or registration starts afresh."""
-    import hashlib
-    import pickle
-
-    key = hashlib.sha1(
-        pickle.dumps(
-            (
-                plan.before,
-                plan.after,
-                plan.crs_b,
-                plan.crs_a,
-                plan.origin.tolist(),
-                plan.grid,
-                plan.transform.round(12).tolist(),
-                plan.ground,
-                plan.statistic,
-                plan.rules,
-            )
-        )
-    )
-    folder = out.final.parent / f".{out.final.name}.soilvolume-tiles" / key.hexdigest()[:16]
-    folder.mkdir(parents=True, exist_ok=True)
-    return folder

@@ -10,8 +10,9 @@ import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
-from ..dem.grid import EpochDEM
+from ..dem.grid import MASK_LAYER, UINT8_LAYERS, EpochDEM
 from ..reporting.report import build_report
+from ..volumes.zones import check_inside
 from ..workflow.steps import add_quality, alternative_move, planes_and_volumes
 from . import overview
 from .cog import write_outputs
@@ -20,14 +21,11 @@ from .tiletask import TILE_ARRAYS, map_tiles
 from .volumetiles import VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
 
 
-def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDir, options, timer, hooks: Hooks):
-    """(report, task stats, report.html arguments) of a run whose volume step goes tile by tile;
-    ``run`` = (prepared pair, registration, registered after subset)."""
+def tiled_volume_step(c, plan, store: TileStore, k: int, run: tuple, out: OutputDir, options, timer, hooks: Hooks):
+    """(report, task stats, report.html arguments) of a run whose volume step goes tile by tile,
+    its tiles kept in ``store``; ``run`` = (prepared pair, registration, registered after subset)."""
     prep, reg, after_thin = run
-    grid = plan.grid
-    folder = cache / f"store-k{k}"
-    folder.mkdir(exist_ok=True)
-    store = TileStore(str(folder), tuple(windows))
+    grid, windows = plan.grid, list(store.windows)
     with timer("grids"):
         epochs, medians, stats = _grid_tiles(c, plan, store, k, hooks)
     hooks.step(70, f"estimating the vertical bias correction on a {k} x {k} overview of the grid")
@@ -42,6 +40,8 @@ def tiled_volume_step(c, plan, windows, cache, k: int, run: tuple, out: OutputDi
         order = {w: i for i, w in enumerate(windows)}
         tiles.sort(key=lambda t: order[t["window"]])  # the same sums whatever the finishing order
         vols = combine(tiles, over, grid.cell, k)
+        if options.zones:
+            check_inside(vols.zones, options.zones)
     hooks.step(85, "writing outputs (COG)")
     with timer("write"):
         write_outputs(out, _reader(store), grid, float(prep.origin[2]), options.correction)
@@ -71,8 +71,9 @@ def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
             add(summarize_grid_tile(w, [store.load(n, w) for n in TILE_ARRAYS], k))
     for summary in map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows)):
         add(summary)
-        for key in stats:
+        for key in ("read", "seconds"):
             stats[key] += summary[3][key]
+    stats["resumed"] = len(store.windows) - len(todo)
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -85,6 +86,8 @@ def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
 def _reader(store: TileStore):
     def get(key: str, rows: slice, cols: slice) -> np.ndarray:
         win = (rows.start, rows.stop, cols.start, cols.stop)
-        return store.read(key, win, fill=False, dtype=bool) if key == "filled_mask" else store.read(key, win)
+        if key in UINT8_LAYERS:  # the refilled mask, the classes: no NaN to fill with
+            return store.read(key, win, fill=0, dtype=bool if key == MASK_LAYER else np.uint8)
+        return store.read(key, win)
 
     return get

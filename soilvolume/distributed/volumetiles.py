@@ -25,6 +25,7 @@ import numpy as np
 
 from ..core.types import GridSpec
 from ..options import Options
+from ..volumes import coverage
 from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import region_sigma, z_value
 from . import overview
@@ -103,8 +104,14 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
         uncertainty=vols.uncertainty,
         zones=vols.zones,
         empty=(vols.empty_cells, vols.empty_before, vols.empty_after),
+        coverage=coverage.counts(after.counts, before.counts, vols.filled_mask, vols.diff, core, _edges(ext, g)),
     )
     return out
+
+
+def _edges(ext: Window, grid: GridSpec) -> tuple[bool, bool, bool, bool]:
+    """Which sides of a window (top, bottom, left, right) are the grid's edge."""
+    return ext[0] == 0, ext[1] == grid.rows, ext[2] == 0, ext[3] == grid.cols
 
 
 def _sum_dicts(dicts: list[dict]) -> dict:
@@ -121,7 +128,8 @@ def _zones(tiles: list[dict]) -> list[dict]:
         return []
     out = []
     for rows in zip(*(t["zones"] for t in tiles), strict=True):
-        out.append({"id": rows[0]["id"], "name": rows[0]["name"], **_sum_dicts(list(rows))})
+        same = {k: rows[0][k] for k in ("polygon_area_m2", "repaired") if k in rows[0]}  # each tile's whole polygon
+        out.append({"id": rows[0]["id"], "name": rows[0]["name"], **_sum_dicts(list(rows)), **same})
     return out
 
 
@@ -180,4 +188,5 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
         empty_before=int(empty[1]),
         empty_after=int(empty[2]),
         zones=_zones(tiles),
+        coverage=coverage.combine([t["coverage"] for t in tiles]),
     )

@@ -1,8 +1,10 @@
 """Virtual point clouds (``.vpc``): a STAC ItemCollection of point cloud tiles, as written by
 PDAL wrench ``build_vpc`` and QGIS "Build virtual point cloud" (``vpc-spec.md`` in PDAL/wrench).
 
-Each tile's box comes from ``proj:bbox`` (native CRS), else from the WGS 84 ``bbox``, else from
-its LAS header; only the tiles meeting a query box are read. All tiles must share one CRS.
+The document's structure is checked against the STAC fields read (:mod:`vpcschema`); every tile's
+header is read once and its box and point count must match what the VPC says (``proj:bbox`` in
+the native CRS, else the WGS 84 ``bbox``); only the tiles meeting a query box are read. All tiles
+must share one CRS.
 """
 
 from __future__ import annotations
@@ -10,12 +12,13 @@ from __future__ import annotations
 import json
 import os
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from urllib.parse import unquote, urlparse
 
 import numpy as np
 
-from ..core.types import SoilVolumeError
+from ..core.types import SoilVolumeError, short_error
 
 
 @dataclass(frozen=True)
@@ -57,67 +60,105 @@ class Vpc:
         return [t for t in self.tiles if lo is None or t.meets(lo, hi)]
 
 
+MAX_BYTES = 256 * 2**20  # a .vpc lists tiles: far larger is not one
+#: how far a tile's box in the VPC may differ from its header's: native boxes (proj:bbox) are
+#: copied from the header, WGS 84 ones are rounded degrees of a reprojected box
+NATIVE_TOL, WGS84_TOL = 0.01, 1.0
+
+
 def read_vpc(path: str | os.PathLike) -> Vpc:
-    """Parse a ``.vpc``; one-line errors name the file or the tile at fault."""
+    """Parse a ``.vpc`` (its structure checked by :mod:`vpcschema`), each tile's header read and
+    compared with the box and count the VPC gives it; one-line errors name the file, the item and
+    the field or the tile at fault. Cached per file version (tile tasks open it often)."""
     p = Path(path)
     try:
-        doc = json.loads(p.read_text())
+        st = p.stat()
     except FileNotFoundError:
         raise SoilVolumeError(f"{p}: file not found") from None
-    except (OSError, ValueError) as exc:
-        raise SoilVolumeError(f"{p}: not a readable virtual point cloud ({exc})") from exc
-    items = doc.get("features") if isinstance(doc, dict) else None
-    if doc.get("type") != "FeatureCollection" or not isinstance(items, list) or not items:
-        raise SoilVolumeError(f"{p}: not a virtual point cloud (expected a STAC FeatureCollection of tiles)")
-    crss, tiles = [], []
-    for item in items:
+    except OSError as exc:
+        raise SoilVolumeError(f"{p}: cannot be read ({exc.strerror})") from None
+    version = (st.st_size, st.st_mtime_ns, st.st_ino)
+    vpc, tiles = _read_vpc(str(p), *version)
+    if [_version(t.path) for t in vpc.tiles] != tiles:  # a tile changed since: read it all again
+        _read_vpc.cache_clear()
+        vpc, _ = _read_vpc(str(p), *version)
+    return vpc
+
+
+def _version(path: str) -> tuple[int, int, int] | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_size, st.st_mtime_ns, st.st_ino
+
+
+@lru_cache(maxsize=16)
+def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, list]:
+    from .vpcschema import items
+
+    p = Path(path)
+    if p.is_dir() or not p.is_file():
+        raise SoilVolumeError(f"{p}: not a regular file")
+    if size > MAX_BYTES:
+        raise SoilVolumeError(f"{p}: {size / 2**20:.0f} MB is far larger than any virtual point cloud")
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError) as exc:
+        why = "nested too deeply" if isinstance(exc, RecursionError) else short_error(exc)
+        raise SoilVolumeError(f"{p}: not a readable virtual point cloud ({why})") from None
+    crss, tiles, seen = [], [], {}
+    for item in items(p, doc):
         tile_path = _href(p, item)
-        crs = _item_crs(item) or _header_crs(tile_path)
+        if tile_path in seen:
+            raise SoilVolumeError(f"{p}: {item.name} lists the tile {item.href} that {seen[tile_path]} lists already")
+        seen[tile_path] = item.name
+        head = _tile_header(p, item, tile_path)
+        crs = item.crs[1] if item.crs else head[3]
         crss.append((crs, tile_path))
-        tiles.append(_tile(tile_path, item, crs))
-    return Vpc(str(p), _common_crs(p, crss), tuple(tiles))
+        tiles.append(_tile(p, item, tile_path, head, crs))
+    return Vpc(str(p), _common_crs(p, crss), tuple(tiles)), [_version(t.path) for t in tiles]
 
 
-def _href(vpc: Path, item: dict) -> str:
-    """The data asset of an item as an absolute path (relative hrefs are relative to the VPC)."""
-    assets = item.get("assets") or {}
-    data = assets.get("data") or next((a for a in assets.values() if "data" in a.get("roles", [])), None)
-    if not data or not data.get("href"):
-        raise SoilVolumeError(f"{vpc}: item '{item.get('id', '?')}' has no data asset href")
-    href = data["href"]
+def _href(vpc: Path, item) -> str:
+    """The data asset of an item as an absolute path (relative hrefs are relative to the VPC),
+    checked to be a readable regular file."""
+    href = item.href
     if href.startswith("file://"):
         href = unquote(urlparse(href).path)
     elif "://" in href:
-        raise SoilVolumeError(f"{vpc}: remote tile {href} is not supported (only local files)")
+        raise SoilVolumeError(f"{vpc}: {item.name}: remote tile {href} is not supported (only local files)")
     full = (vpc.parent / href).resolve()
-    if not full.is_file():
+    if not full.exists():
         raise SoilVolumeError(f"{vpc}: tile {href} not found ({full})")
+    if full.is_dir():
+        raise SoilVolumeError(f"{vpc}: tile {href} is a folder, not a LAS/LAZ file")
+    if not full.is_file():
+        raise SoilVolumeError(f"{vpc}: tile {href} is not a regular file (a device or pipe)")
     if not os.access(full, os.R_OK):
         raise SoilVolumeError(f"{vpc}: tile {href} is not readable (permissions)")
+    if full.suffix.lower() not in (".las", ".laz"):
+        raise SoilVolumeError(f"{vpc}: tile {href} is not a LAS/LAZ file (its name does not end in .las or .laz)")
     return str(full)
 
 
-def _item_crs(item: dict):
-    import pyproj
-
-    props = item.get("properties") or {}
-    for key in ("proj:wkt2", "proj:projjson", "proj:epsg"):
-        value = props.get(key)
-        if value:
-            return pyproj.CRS.from_user_input(f"EPSG:{value}" if key == "proj:epsg" else value)
-    return None
-
-
-def _header_crs(tile_path: str):
+def _tile_header(vpc: Path, item, tile_path: str):
+    """(point count, mins, maxs, CRS or None) from the tile's header, checked before laspy reads
+    it (errors name the tile and never quote its bytes)."""
     import laspy
     import pyproj
 
+    from .lasheader import check_las_header
+
+    check_las_header(Path(tile_path))
     try:
         with laspy.open(tile_path) as r:
-            crs = r.header.parse_crs()
-    except Exception as exc:
-        raise SoilVolumeError(f"{tile_path}: not a readable LAS/LAZ tile ({exc})") from exc
-    return None if crs is None else pyproj.CRS.from_user_input(crs)
+            h = r.header
+            crs = h.parse_crs()
+            head = int(h.point_count), tuple(map(float, h.mins)), tuple(map(float, h.maxs))
+    except Exception as exc:  # laspy raises many types on broken files
+        raise SoilVolumeError(f"{tile_path}: not a readable LAS/LAZ tile ({type(exc).__name__})") from None
+    return (*head, None if crs is None else pyproj.CRS.from_user_input(crs))
 
 
 def _common_crs(vpc: Path, crss: list) -> str | None:
@@ -135,20 +176,39 @@ def _common_crs(vpc: Path, crss: list) -> str | None:
     return first.to_wkt()
 
 
-def _tile(tile_path: str, item: dict, crs) -> Tile:
-    props = item.get("properties") or {}
-    count = props.get("pc:count")
-    box = props.get("proj:bbox")
-    if box is None and item.get("bbox") is not None and crs is not None:
-        box = _from_wgs84(item["bbox"], crs)
-    if box is None or count is None:
-        return _tile_from_header(tile_path)
-    box = [float(v) for v in box]
-    lo, hi = (box[:2] + [-np.inf], box[2:] + [np.inf]) if len(box) == 4 else (box[:3], box[3:])
-    return Tile(tile_path, int(count), tuple(lo), tuple(hi))
+def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
+    """The tile with its header's box and count, after checking the VPC's own against them (a
+    wrong box would skip or misplace the tile's points)."""
+    count, lo, hi, _ = head
+    name = Path(tile_path).name
+    if item.count is not None and item.count != count:
+        raise SoilVolumeError(f"{vpc}: {item.name}: pc:count {item.count} but the header of {name} says {count} points")
+    if item.proj_bbox is not None:
+        _check_box(vpc, item, name, "proj:bbox", item.proj_bbox, lo, hi, NATIVE_TOL, exact=True)
+    elif item.bbox is not None and crs is not None:
+        _check_box(vpc, item, name, "bbox (WGS 84)", _from_wgs84(item.bbox, crs), lo, hi, WGS84_TOL, exact=False)
+    return Tile(tile_path, count, lo, hi)
 
 
-def _from_wgs84(bbox: list, crs) -> list[float]:
+def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, exact: bool) -> None:
+    """The VPC's x/y box of a tile (what decides whether it is read) against its header's: equal
+    within ``tol`` (plus a relative 1e-9), or with ``exact`` False, holding it. Heights come from
+    the header."""
+    box = list(box)
+    half = len(box) // 2
+    blo, bhi = np.asarray(box[:2]), np.asarray(box[half : half + 2])
+    hlo, hhi = np.asarray(lo[:2]), np.asarray(hi[:2])
+    t = tol + 1e-9 * np.maximum(np.abs(hlo), np.abs(hhi))
+    outside = (hlo < blo - t).any() or (hhi > bhi + t).any()
+    if outside or (exact and ((blo < hlo - t).any() or (bhi > hhi + t).any())):
+        shown = " ".join(f"{v:.2f}" for v in (*hlo, *hhi))
+        raise SoilVolumeError(
+            f"{vpc}: {item.name}: its {field} does not match the header of {name} (x/y box {shown}): "
+            "rebuild the virtual point cloud"
+        )
+
+
+def _from_wgs84(bbox, crs) -> list[float]:
     """A WGS 84 bbox (2D or 3D) as an x/y box in ``crs`` (densified edges)."""
     import pyproj
 
@@ -165,17 +225,6 @@ def _to_wgs84(mins, maxs, crs) -> list[float]:
     t = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
     w, s, e, n = t.transform_bounds(float(mins[0]), float(mins[1]), float(maxs[0]), float(maxs[1]), densify_pts=21)
     return [w, s, float(mins[2]), e, n, float(maxs[2])]
-
-
-def _tile_from_header(tile_path: str) -> Tile:
-    import laspy
-
-    try:
-        with laspy.open(tile_path) as r:
-            h = r.header
-            return Tile(tile_path, int(h.point_count), tuple(map(float, h.mins)), tuple(map(float, h.maxs)))
-    except Exception as exc:
-        raise SoilVolumeError(f"{tile_path}: not a readable LAS/LAZ tile ({exc})") from exc
 
 
 def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative: bool = True) -> Path:

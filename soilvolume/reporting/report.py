@@ -73,10 +73,18 @@ def summary_lines(report: dict) -> list[str]:
         f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
         f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
         f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
+        *_coverage_line(report),
         f"total time {sum(report['timings_s'].values()):.2f} s",
         *(f"not soil: {line}" for line in nonsoil_lines(report)),
         *quality_lines(report),
     ]
+
+
+def _coverage_line(report: dict) -> list[str]:
+    from ..volumes.coverage import line
+
+    said = line(report)
+    return [said] if said else []
 
 
 def nonsoil_lines(report: dict) -> list[str]:
@@ -92,6 +100,15 @@ def quality_lines(report: dict) -> list[str]:
     if not q:
         return []
     return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]]
+
+
+def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
+    """report.json's ``coverage`` (see :mod:`soilvolume.volumes.coverage`)."""
+    from ..registration.rigid import transform_points
+    from ..volumes import coverage
+
+    beyond = coverage.outside_m2(transform_points(prep.after_thin, reg.transform), grid)
+    return coverage.summary(vols.coverage, grid.cell_area, beyond, vols.uncertainty["lod_m"])
 
 
 def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, options: Options, timer) -> dict:
@@ -162,6 +179,7 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
             "statistic": options.statistic,
         },
         "holes": vols.holes,
+        "coverage": _coverage(prep, reg, grid, vols),
         "inputs": prep.inputs,
         "options": asdict(options),
         "timings_s": dict(timer.s),

@@ -25,7 +25,8 @@ MODULES = {
     "open3d": "geometry",
     "dask": "delayed",
     "distributed": "LocalCluster",
-    "fiona": "open",
+    "shapely": "make_valid",
+    "pyogrio": "read_info",
 }
 POINTS = (12_000, 8_000)  # before, after: 0.5 and 1.9 points/m²
 NET_TOLERANCE = 0.1  # relative: a smoke test on 3 m cells (measured 0.8 %), not an accuracy test

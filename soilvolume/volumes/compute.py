@@ -16,6 +16,7 @@ from ..core.types import GridSpec
 from ..dem import holes
 from ..dem.grid import EpochDEM
 from ..options import Options
+from . import coverage
 from .change import MIN_CELLS
 from .difference import budget, difference, signed_budget
 from .nonsoil import exclude_nonsoil
@@ -55,6 +56,7 @@ class Volumes:
     excluded: dict = field(default_factory=dict)  # what is not soil: classes, objects (volumes/nonsoil)
     classes: np.ndarray | None = None  # excluded.tif: the class of each cell (volumes/nonsoil.CLASS_CODES)
     cut_mask: np.ndarray | None = None  # the cut areas of change_mask (the rest of it is fill)
+    coverage: dict = field(default_factory=dict)  # the after footprint's cells compared (volumes/coverage)
 
 
 @dataclass(frozen=True)
@@ -190,6 +192,7 @@ def compute_volumes(
         "empty_cells": int((~np.isfinite(raw[core])).sum()),
         "empty_before": int((n_b[core] == 0).sum()),
         "empty_after": int((n_a[core] == 0).sum()),
+        "coverage": coverage.counts(n_a, n_b, filled_mask, diff, core, edges=(given is None,) * 4),
     }
     if options.zones:
         from .zones import zone_budgets
@@ -197,7 +200,7 @@ def compute_volumes(
         rows, cols = core
         zgrid = grid if given is None else grid.window(rows.start, rows.stop, cols.start, cols.stop)
         vols["zones"] = zone_budgets(
-            np.where(counted[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones
+            np.where(counted[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones, whole=given is None
         )
     return Volumes(**vols)
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..compensation.stable import largest_gap_deg
+from .coverage import check as coverage_check
+from .zones import zone_messages
 
 VERDICTS = ("reliable", "use with caution", "not reliable")
 MIN_STABLE_FRACTION = 0.05  # less stable ground than this share of the compared area: not reliable
@@ -107,7 +109,11 @@ def assess(
             )
         )
     out += _nonsoil(report.get("excluded") or {}, u["net"])
-    if net <= u["net"]:
+    out.extend(("caution", m) for m in zone_messages(report.get("zones") or []))
+    unseen = coverage_check(report)
+    if unseen is not None:
+        out.append(unseen)
+    if net <= u["net"] and (unseen is None or unseen[0] != "unreliable"):  # unseen change: not "no change"
         out.append(
             (
                 "caution",

@@ -1,131 +1,21 @@
 """Per-zone volume budgets and polygon masks from a vector file (GeoPackage/Shapefile/GeoJSON).
 
-Polygons are read with fiona when it is installed, else with GDAL's ``osgeo.ogr``; they are
-reprojected to the grid's CRS with pyproj and rasterized (cell centres inside) with rasterio.
+Polygons are read, repaired and brought into the grid's CRS by :mod:`polygons`, and rasterized
+(cell centres inside) with rasterio. A zone with no cell centre on the grid (outside the survey,
+or in the wrong CRS) is flagged, never a silent 0 m3; when no zone meets the grid the run fails.
 """
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyproj
 from rasterio import features
 from rasterio.transform import Affine
 
 from ..core.types import GridSpec, SoilVolumeError
-from ..inputs.crs import horizontal
-
-
-@dataclass
-class Polygon:
-    """One feature: GeoJSON-like geometry (in ``crs_wkt``), its id and display name."""
-
-    id: int
-    name: str
-    geometry: dict[str, Any]
-
-
-def read_polygons(path: str | Path, name_field: str | None = None) -> tuple[list[Polygon], str | None]:
-    """(polygons, CRS WKT or None) of the first layer of ``path``; non-polygon features are
-    skipped. Raises SoilVolumeError naming the file when it cannot be read."""
-    path = Path(path)
-    if not path.exists():
-        raise SoilVolumeError(f"{path}: zones file not found")
-    if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
-        raise SoilVolumeError(f"{path}: not a regular file (a device or pipe)")
-    try:
-        feats, wkt = _read_fiona(path) if _has_fiona() else _read_ogr(path)
-    except SoilVolumeError:
-        raise
-    except Exception as exc:  # driver errors come in many types
-        raise SoilVolumeError(f"{path}: cannot read polygons ({exc})") from exc
-    polys = []
-    for i, (fid, props, geom) in enumerate(feats):
-        if geom is None or geom.get("type") not in ("Polygon", "MultiPolygon"):
-            continue
-        polys.append(Polygon(int(fid if fid is not None else i), _name(props, name_field, i, path), geom))
-    if not polys:
-        raise SoilVolumeError(f"{path}: no polygon features")
-    return polys, wkt
-
-
-def _has_fiona() -> bool:
-    try:
-        import fiona  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _read_fiona(path: Path):
-    import fiona
-
-    with fiona.open(path) as src:
-        wkt = src.crs_wkt or None
-        feats = [
-            (f.id, dict(f.properties or {}), json.loads(json.dumps(dict(f.geometry))) if f.geometry else None)
-            for f in src
-        ]
-    return feats, wkt
-
-
-def _read_ogr(path: Path):
-    from osgeo import ogr
-
-    ogr.UseExceptions()
-    ds = ogr.Open(str(path))
-    if ds is None or ds.GetLayerCount() == 0:
-        raise SoilVolumeError(f"{path}: not a readable vector file")
-    layer = ds.GetLayer(0)
-    srs = layer.GetSpatialRef()
-    wkt = srs.ExportToWkt() if srs is not None else None
-    feats = []
-    for f in layer:
-        g = f.GetGeometryRef()
-        feats.append((f.GetFID(), f.items(), json.loads(g.ExportToJson()) if g else None))
-    return feats, wkt
-
-
-def _name(props: dict, field: str | None, i: int, path: Path) -> str:
-    if field:
-        if field not in props:
-            raise SoilVolumeError(f"{path}: no field '{field}' (fields: {', '.join(props)})")
-        return str(props[field])
-    for key in props:
-        if key.lower() in ("name", "zone", "label"):
-            return str(props[key])
-    return f"zone {i + 1}"
-
-
-def _transform_coords(coords: Any, fn) -> Any:
-    if isinstance(coords[0], (int, float)):
-        x, y = fn(coords[0], coords[1])
-        return [x, y]
-    return [_transform_coords(c, fn) for c in coords]
-
-
-def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid: GridSpec) -> list[Polygon]:
-    """Polygons reprojected to the grid's horizontal CRS (unchanged when either CRS is unknown
-    or they are equal)."""
-    if not src_wkt or not grid.crs_wkt:
-        return polys
-    src = horizontal(pyproj.CRS.from_user_input(src_wkt))
-    dst = horizontal(pyproj.CRS.from_user_input(grid.crs_wkt))
-    if src.equals(dst, ignore_axis_order=True):
-        return polys
-    tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)
-    return [
-        Polygon(
-            p.id,
-            p.name,
-            {"type": p.geometry["type"], "coordinates": _transform_coords(p.geometry["coordinates"], tr.transform)},
-        )
-        for p in polys
-    ]
+from .polygons import Polygon, read_polygons, to_grid_crs
 
 
 def _grid_transform(grid: GridSpec) -> Affine:
@@ -147,11 +37,27 @@ def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
     ]
 
 
-def polygons_mask(path: str | Path, grid: GridSpec) -> np.ndarray:
-    """Union of the polygons of ``path`` as a (rows, cols) mask (e.g. a stable-ground mask)."""
-    polys, wkt = read_polygons(path)
-    masks = polygon_masks(to_grid_crs(polys, wkt, grid), grid)
-    return np.logical_or.reduce(masks)
+def polygons_mask(path: str | Path, grid: GridSpec, what: str = "--stable-mask file") -> np.ndarray:
+    """Union of the polygons of ``path`` as a (rows, cols) mask (e.g. a stable-ground mask); one
+    that covers no cell of the grid is an error naming the file."""
+    polys, wkt = read_polygons(path, what=what)
+    polys = to_grid_crs(polys, wkt, grid, path)
+    if not any(_meets(p, grid) for p in polys):
+        raise SoilVolumeError(f"{path}: no polygon of this {what} meets the survey's grid{_crs_hint(wkt)}")
+    return np.logical_or.reduce(polygon_masks(polys, grid))
+
+
+def _meets(p: Polygon, grid: GridSpec) -> bool:
+    """Whether the polygon's bounds meet the grid's extent (both in the grid's CRS units)."""
+    u = grid.xy_unit
+    x0, y0, x1, y1 = p.geometry.bounds
+    gx0, gy1 = grid.xmin / u, grid.ymax / u
+    gx1, gy0 = gx0 + grid.cols * grid.cell / u, gy1 - grid.rows * grid.cell / u
+    return x0 <= gx1 and gx0 <= x1 and y0 <= gy1 and gy0 <= y1
+
+
+def _crs_hint(wkt: str | None) -> str:
+    return " (the file has no CRS: is it in the survey's?)" if not wkt else " (is its CRS right?)"
 
 
 def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, float]:
@@ -164,19 +70,55 @@ def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, fl
 
 
 def zone_budgets(
-    diff: np.ndarray, grid: GridSpec, zones_path: str | Path, name_field: str | None = None
+    diff: np.ndarray, grid: GridSpec, zones_path: str | Path, name_field: str | None = None, whole: bool = True
 ) -> list[dict[str, Any]]:
-    """[{id, name, net, cut, fill, area_m2, zone_area_m2}] per polygon of ``zones_path``
-    (overlapping zones each count their cells; ``zone_area_m2`` = cells inside the polygon)."""
+    """[{id, name, net, cut, fill, area_m2, zone_area_m2, polygon_area_m2, repaired}] per polygon
+    of ``zones_path`` (overlapping zones each count their cells; ``zone_area_m2`` = grid cells
+    inside the polygon); on the ``whole`` grid (not a tile's window), see :func:`check_inside`."""
     polys, wkt = read_polygons(zones_path, name_field)
-    polys = to_grid_crs(polys, wkt, grid)
+    polys = to_grid_crs(polys, wkt, grid, zones_path)
     out = []
     for p, mask in zip(polys, polygon_masks(polys, grid), strict=True):
         row = {"id": p.id, "name": p.name}
         row.update(budget(diff, mask, grid.cell_area))
         row["zone_area_m2"] = float(mask.sum() * grid.cell_area)
+        row["polygon_area_m2"] = float(p.geometry.area * grid.xy_unit**2)
+        row["repaired"] = p.repaired
         out.append(row)
+    return check_inside(out, zones_path, wkt) if whole else out
+
+
+def check_inside(rows: list[dict[str, Any]], path: str | Path, wkt: str | None = "") -> list[dict[str, Any]]:
+    """Flag the zones with no cell of the grid (``outside_grid``); an error when none has one."""
+    for row in rows:
+        row["outside_grid"] = row["zone_area_m2"] <= 0
+    if rows and all(r["outside_grid"] for r in rows):
+        raise SoilVolumeError(f"{path}: no zone meets the survey's grid{_crs_hint(wkt)}")
+    return rows
+
+
+def zone_messages(rows: list[dict[str, Any]]) -> list[str]:
+    """Sentences for the quality verdict about zones that lie outside the grid, in part or whole,
+    or whose geometry was repaired."""
+    out = []
+    outside = [r["name"] for r in rows if r.get("outside_grid")]
+    if outside:
+        out.append(
+            "zones without a grid cell centre inside (outside the survey, in another CRS than declared, or "
+            f"smaller than a cell): their volumes are not measured: {_names(outside)}"
+        )
+    part = [r["name"] for r in rows if not r.get("outside_grid") and r["zone_area_m2"] < 0.9 * r["polygon_area_m2"]]
+    if part:
+        out.append(f"zones only partly on the surveyed grid (their volumes cover that part): {_names(part)}")
+    fixed = [r["name"] for r in rows if r.get("repaired")]
+    if fixed:
+        out.append(f"zones whose invalid geometry (e.g. self-intersecting) was repaired: {_names(fixed)}")
     return out
+
+
+def _names(names: list[str], limit: int = 5) -> str:
+    shown = ", ".join(f"'{n}'" for n in names[:limit])
+    return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
 
 
 def net_half_width(area_m2: float, cell: float, uncertainty: dict[str, Any]) -> float | None:

@@ -128,7 +128,9 @@ def test_tommy_thompson_progress_moves_through_registration(tommy):
     start = next(i for i, line in enumerate(feedback.infos) if line.startswith("Registering"))
     assert start >= 0 and steps == sorted(steps)
     assert len({round(p) for p in steps if 15 < p < 50}) >= 3, steps  # ICP levels move the bar
-    assert results["VERDICT"] == "reliable" and not feedback.warnings  # the summary is no warning
+    # the 2023 survey reaches 120 m east of the 2015 one: 7 % of its footprint is not compared
+    assert results["VERDICT"] == "not reliable"
+    assert len(feedback.warnings) == 1 and "The before survey does not cover" in feedback.warnings[0]
     assert results["NET_VOLUME"] - results["NET_UNCERTAINTY"] > 0  # a significant gain
 
 

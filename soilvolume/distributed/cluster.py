@@ -1,0 +1,220 @@
+"""Every wait on a Dask cluster, with a timeout: starting it or connecting to it (no answer, no
+workers, a server that speaks something else), waiting for its tasks (with a heartbeat that
+checks for SIGINT/SIGTERM, a lost scheduler and workers that all went away) and shutting it down.
+Each failure is one line naming the scheduler."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
+from pathlib import Path
+
+from ..core import interrupt
+from ..core.types import SoilVolumeError, short_error
+
+CONNECT_S = 20.0  # a scheduler's address must answer within this
+START_S = {"tcp": 35.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
+NO_WORKERS_S = 20.0  # a cluster without any worker for this long cannot run the tasks
+POLL_S = 0.25  # how often a wait checks for signals and the cluster's health
+CLOSE_S = 15.0  # shutting the client and the cluster down
+WORKER_INIT = "soilvolume.distributed.workerinit"
+
+
+class Starting:
+    """A (cluster or None, client) being started on a daemon thread: waiting for it never blocks
+    longer than its timeout, and one nobody waits for any more is closed when it arrives."""
+
+    def __init__(self, start: Callable[[], tuple], what: str, timeout: float) -> None:
+        self.what, self.timeout = what, timeout
+        self.future: Future = Future()
+        self.lock, self.abandoned = threading.Lock(), False
+        threading.Thread(target=self._run, args=(start,), daemon=True, name="soilvolume-cluster").start()
+
+    def _run(self, start) -> None:
+        try:
+            made = start()
+        except BaseException as exc:  # noqa: BLE001 - handed to the waiting thread
+            self.future.set_exception(exc)
+            return
+        with self.lock:
+            late = self.abandoned
+            if not late:
+                self.future.set_result(made)
+        if late:
+            shut(*made)
+
+    def result(self, check: Callable[[], None] = interrupt.check):
+        """The client, once started (``check`` runs every :data:`POLL_S`)."""
+        deadline = time.monotonic() + self.timeout
+        while True:
+            check()
+            try:
+                return self.future.result(timeout=POLL_S)[1]
+            except FutureTimeout:
+                if time.monotonic() > deadline:
+                    raise SoilVolumeError(
+                        f"--scheduler {self.what}: no answer within {self.timeout:.0f} s (is it a Dask scheduler?)"
+                    ) from None
+            except SoilVolumeError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - a worker killed by the same Ctrl-C, a port taken, ...
+                check()
+                why = f"{type(exc).__name__}: {short_error(exc)}"
+                raise SoilVolumeError(f"--scheduler {self.what}: the Dask cluster did not start ({why})") from None
+
+    def close(self) -> None:
+        """Shut the cluster down (now, or when its start finishes)."""
+        with self.lock:
+            self.abandoned = True
+            done = self.future.done() and self.future.exception() is None
+        if done:
+            shut(*self.future.result())
+
+
+def shut(cluster, client) -> None:
+    """Close the client and the cluster, each within :data:`CLOSE_S` (never raises)."""
+    for thing in (client, cluster):
+        if thing is None:
+            continue
+        try:
+            thing.close(timeout=CLOSE_S)
+        except Exception:  # noqa: BLE001 - a cluster gone already, or too slow to say goodbye
+            pass
+
+
+def connect(address: str):
+    """(None, Client) of an existing cluster at ``address``, with at least one worker."""
+    from dask.distributed import Client
+
+    try:
+        c = Client(address, timeout=CONNECT_S)
+    except (OSError, TimeoutError) as exc:
+        raise SoilVolumeError(f"--scheduler {address}: cannot reach the Dask scheduler ({short_error(exc)})") from None
+    except Exception as exc:  # noqa: BLE001 - whatever a server that is not a Dask scheduler makes it raise
+        raise SoilVolumeError(
+            f"--scheduler {address}: the server there does not speak Dask's protocol ({type(exc).__name__})"
+        ) from None
+    try:
+        c.wait_for_workers(1, timeout=NO_WORKERS_S)
+    except Exception:  # noqa: BLE001 - a timeout, or the scheduler gone meanwhile
+        shut(None, c)
+        raise SoilVolumeError(
+            f"--scheduler {address}: the Dask cluster has no workers (none joined within {NO_WORKERS_S:.0f} s)"
+        ) from None
+    return None, c
+
+
+def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None):
+    """(LocalCluster, Client): ``workers`` processes of one thread (or one process of
+    ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``."""
+    import dask
+    from dask.distributed import Client
+
+    extra = {"preload": [WORKER_INIT]} if processes else {}
+    if scratch is not None:
+        scratch.mkdir(parents=True, exist_ok=True)
+        extra["local_directory"] = str(scratch)
+    with dask.config.set({"temporary-directory": str(scratch) if scratch is not None else None}):
+        cluster = _local_cluster(workers, processes, per_worker_gb, extra)
+    try:
+        return cluster, Client(cluster)
+    except BaseException:
+        shut(cluster, None)
+        raise
+
+
+def _local_cluster(workers: int, processes: bool, per_worker_gb: float | None, extra: dict):
+    from dask.distributed import LocalCluster
+
+    return LocalCluster(
+        n_workers=workers if processes else 1,
+        threads_per_worker=1 if processes else workers,
+        processes=processes,
+        memory_limit=f"{per_worker_gb:.3f}GiB" if per_worker_gb else None,
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},  # no port 8787 warning
+        silence_logs=logging.CRITICAL,
+        **extra,
+    )
+
+
+def checker(hooks) -> Callable[[], None]:
+    """A check for signals and for ``hooks``' cancel button that does not move the progress bar."""
+    from ..core.hooks import Cancelled
+
+    def check() -> None:
+        interrupt.check()
+        if hooks.cancel is not None and hooks.cancel():
+            raise Cancelled("cancelled by the user")
+
+    return check
+
+
+def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt.check) -> Iterator:
+    """The results of ``futures`` as they finish. Every :data:`POLL_S`: ``check()`` (signals,
+    cancellation), the client's connection, and workers (none for :data:`NO_WORKERS_S`: an
+    error). A task's failure is re-raised as it is (engine errors are one line already), a
+    cluster's as one line naming ``what`` the tasks were doing."""
+    from dask.distributed import wait
+
+    pending, lonely = set(futures), None
+    order = {f.key: k for k, f in enumerate(futures)}
+    while pending:
+        check()
+        try:
+            done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            done = set()
+        except Exception as exc:  # noqa: BLE001 - the connection broke
+            raise _cluster_error(exc, what) from None
+        for fut in sorted(done, key=lambda f: order[f.key]):
+            yield _result(fut, what)
+        if done:
+            lonely = None
+            continue
+        if c.status not in ("running", "connecting", "newly-created"):
+            raise SoilVolumeError(f"lost the connection to the Dask scheduler while {what}")
+        lonely = _check_workers(c, lonely, what)
+
+
+def _check_workers(c, since: float | None, what: str) -> float | None:
+    """When the cluster first had no worker (None: it has some); an error after NO_WORKERS_S."""
+    if c.scheduler_info().get("workers"):
+        return None
+    now = time.monotonic()
+    if since is not None and now - since > NO_WORKERS_S:
+        raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")
+    return since if since is not None else now
+
+
+def _result(fut, what: str):
+    try:
+        value = fut.result()
+    except SoilVolumeError:
+        raise
+    except MemoryError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - sorted below
+        if type(exc).__module__.split(".")[0] in ("distributed", "concurrent", "asyncio"):
+            raise _cluster_error(exc, what) from None
+        raise
+    fut.release()
+    return value
+
+
+def _cluster_error(exc: BaseException, what: str) -> SoilVolumeError:
+    """A cluster's failure as one line (a pending signal first: Ctrl-C also stops workers)."""
+    interrupt.check()
+    name = type(exc).__name__
+    if name == "KilledWorker":
+        return SoilVolumeError(
+            f"Dask workers died running the same task while {what} (out of memory? give each worker "
+            "more with --memory-limit, or smaller tiles with --tile-cells)"
+        )
+    if "Cancelled" in name or "CommClosed" in name or isinstance(exc, OSError):
+        return SoilVolumeError(f"the Dask cluster stopped the run's tasks while {what} ({name})")
+    return SoilVolumeError(f"the Dask cluster failed while {what} ({name}: {short_error(exc)})")

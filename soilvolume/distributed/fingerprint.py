@@ -1,0 +1,139 @@
+"""What a tiled run's kept tiles were computed from, so a resume never reuses work of other
+inputs, options or code: the content identity of every input file (size, modification time and
+a hash of its header, its end and samples of its body; small files hashed whole), every option
+that changes numbers (all those not declared run control in :class:`~soilvolume.options.Options`,
+so a new option cannot be forgotten), the engine's source and the run's plan (grid, registration,
+tiling)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import fields
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from ..options import Options
+
+WHOLE_BYTES = 16 * 2**20  # files up to this size are hashed whole
+HEAD_BYTES = 64 * 1024  # else: the header and VLRs, the end (LAZ chunk table, EVLRs) ...
+SAMPLES, SAMPLE_BYTES = 16, 4096  # ... and this many blocks spread over the body
+FILE_OPTIONS = ("zones", "stable_mask")  # options naming files whose content matters
+
+
+def file_identity(path: str | os.PathLike) -> dict[str, Any]:
+    """Size, modification time (ns) and a BLAKE2 digest of ``path``'s content (whole when small,
+    else its first and last :data:`HEAD_BYTES` and :data:`SAMPLES` blocks between)."""
+    p = Path(path)
+    st = p.stat()
+    digest = hashlib.blake2b(digest_size=16)
+    with open(p, "rb") as f:
+        if st.st_size <= WHOLE_BYTES:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                digest.update(block)
+        else:
+            digest.update(f.read(HEAD_BYTES))
+            step = (st.st_size - 2 * HEAD_BYTES) // (SAMPLES + 1)
+            for k in range(1, SAMPLES + 1):
+                f.seek(HEAD_BYTES + k * step)
+                digest.update(f.read(SAMPLE_BYTES))
+            f.seek(st.st_size - HEAD_BYTES)
+            digest.update(f.read(HEAD_BYTES))
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns, "hash": digest.hexdigest()}
+
+
+def input_identity(path: str | os.PathLike) -> dict[str, Any]:
+    """{file name: identity} of an input: the file, and for a VPC each of its tiles too."""
+    p = Path(path)
+    out = {str(p): file_identity(p)}
+    if p.suffix.lower() == ".vpc":
+        from ..inputs.vpc import read_vpc
+
+        out.update({t.path: file_identity(t.path) for t in read_vpc(p).tiles})
+    return out
+
+
+def number_options(options: Options) -> dict[str, Any]:
+    """Every option that changes the numbers (all but those declared ``run_control``), files
+    named by an option replaced by their identity."""
+    out: dict[str, Any] = {}
+    for f in fields(options):
+        if f.metadata.get("run_control"):
+            continue
+        value = getattr(options, f.name)
+        if f.name in FILE_OPTIONS and value:
+            value = {"path": str(value), "files": _vector_identity(Path(value))}
+        out[f.name] = value
+    return out
+
+
+def _vector_identity(path: Path) -> dict[str, Any]:
+    """A vector file's identity: the file and its sidecars (a Shapefile's .dbf, .prj, ...), or
+    every file of a folder."""
+    files = sorted(path.iterdir()) if path.is_dir() else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
+    return {p.name: file_identity(p) for p in files if p.is_file()}
+
+
+@lru_cache(maxsize=1)
+def code_identity() -> str:
+    """A digest of the engine's Python sources (a changed engine computes other numbers)."""
+    root = Path(__file__).resolve().parent.parent
+    digest = hashlib.blake2b(digest_size=16)
+    for source in sorted(root.rglob("*.py")):
+        digest.update(str(source.relative_to(root)).encode())
+        digest.update(source.read_bytes())
+    return digest.hexdigest()
+
+
+def run_parts(before, after, options: Options, plan: dict[str, Any]) -> dict[str, Any]:
+    """What the tiles of a run are computed from, as plain JSON values (see module)."""
+    return _plain(
+        {
+            "code": code_identity(),
+            "inputs": {"before": input_identity(before), "after": input_identity(after)},
+            "options": number_options(options),
+            "plan": plan,
+        }
+    )
+
+
+def digest(parts: dict[str, Any]) -> str:
+    """The key of ``parts``: 20 hex digits."""
+    text = json.dumps(parts, sort_keys=True, separators=(",", ":"))
+    return hashlib.blake2b(text.encode(), digest_size=10).hexdigest()
+
+
+def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
+    """Why the tiles of ``old`` parts cannot serve ``new`` ones, in a few words ("" when equal)."""
+    if old.get("code") != new.get("code"):
+        return "the engine's code changed"
+    for role in ("before", "after"):
+        a, b = old.get("inputs", {}).get(role, {}), new.get("inputs", {}).get(role, {})
+        for name in b:
+            if name not in a:
+                return f"the {role} input is another set of files ({Path(name).name} is new)"
+            if a[name] != b[name]:
+                return f"{Path(name).name} changed (size, modification time or content)"
+        if set(a) != set(b):
+            return f"the {role} input is another set of files"
+    o, n = old.get("options", {}), new.get("options", {})
+    for key in n:
+        if o.get(key) != n[key] and isinstance(n[key], dict) and isinstance(o.get(key), dict):
+            return f"the --{key.replace('_', '-')} file {Path(n[key]['path']).name} changed"
+        if o.get(key) != n[key]:
+            return f"--{key.replace('_', '-')} differs ({_short(o.get(key))} then, {_short(n[key])} now)"
+    if old.get("plan") != new.get("plan"):
+        return "the registration, grid or tiling differs"
+    return "" if old == new else "they were computed differently"
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value) if isinstance(value, dict) else str(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON-comparable plain values (tuples as lists, numpy values as Python)."""
+    return json.loads(json.dumps(value, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))

@@ -1,0 +1,21 @@
+"""Run by every Dask worker process this engine starts (a ``preload``): a terminal's Ctrl-C goes
+to the whole process group, and only the driver acts on it (it stops the run and shuts the
+cluster down); a worker killed by it would fail its tasks (``FutureCancelledError``)."""
+
+from __future__ import annotations
+
+import signal
+
+
+def ignore_interrupts() -> None:
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: the signal goes to the main thread's handler
+        pass
+
+
+def dask_setup(worker=None) -> None:  # noqa: ARG001 - the preload protocol
+    ignore_interrupts()
+
+
+ignore_interrupts()

@@ -1,0 +1,136 @@
+"""Coverage: the share of the after survey's footprint where both surveys have data, so a before
+survey that misses part of the works can never pass for "no change".
+
+The after footprint is every grid cell with after points (or refilled from them) plus the after
+survey's area beyond the grid (the grid stops where the before survey's extent does). What is
+compared there has a volume; what is not is unseen, and the quality gate (:func:`check`) says so:
+not reliable when more than :data:`MAX_SHARE` of the footprint is unseen, or when what change like
+that around the gaps (their |difference| 95th percentile) would amount to over them exceeds the
+net's interval; use with caution above :data:`CAUTION_SHARE`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+CAUTION_SHARE = 0.005  # unseen share of the after footprint that is named in the verdict
+MAX_SHARE = 0.05  # more than this unseen: not reliable, whatever its surroundings say
+RING = 3  # cells around a gap (or along the grid's edge) whose difference tells what it may hide
+COUNTS = ("after_cells", "compared_cells", "before_missing_cells", "gap_ring_cells", "edge_ring_cells")
+
+
+def counts(n_after, n_before, refilled, diff, core=(slice(None), slice(None)), edges=(True,) * 4) -> dict:
+    """Cells of the after footprint on (the ``core`` of) a window of the grid, those compared,
+    those without before data (and not refilled); the |difference| 95th percentiles of all
+    compared cells, of those within :data:`RING` cells of such gaps, and of those along the
+    sides of the window that are the grid's edge (``edges``: top, bottom, left, right)."""
+    from scipy import ndimage
+
+    footprint = (n_after > 0) | refilled
+    compared = footprint & np.isfinite(diff)
+    missing = footprint & (n_before == 0) & ~compared
+    near_gap = ndimage.binary_dilation(missing, iterations=RING) & compared if missing.any() else missing
+    edge = np.zeros(diff.shape, bool)
+    for side, cut in zip(
+        edges,
+        ((slice(0, RING), ...), (slice(-RING, None), ...), (..., slice(0, RING)), (..., slice(-RING, None))),
+        strict=True,
+    ):
+        if side:
+            edge[cut] = True
+    edge &= compared
+    d = np.abs(diff[core])
+    return {
+        "after_cells": int(footprint[core].sum()),
+        "compared_cells": int(compared[core].sum()),
+        "before_missing_cells": int(missing[core].sum()),
+        "gap_ring_cells": int(near_gap[core].sum()),
+        "edge_ring_cells": int(edge[core].sum()),
+        "abs_diff_p95_m": _p95(d[compared[core]]),
+        "gap_ring_p95_m": _p95(d[near_gap[core]]),
+        "edge_ring_p95_m": _p95(d[edge[core]]),
+    }
+
+
+def _p95(values: np.ndarray) -> float:
+    return float(np.percentile(values, 95)) if values.size else 0.0
+
+
+def combine(parts: list[dict]) -> dict:
+    """:func:`counts` of tiles added up (each percentile weighted by the cells behind it)."""
+    out = {k: int(sum(p[k] for p in parts)) for k in COUNTS}
+    for key, cells in (("abs_diff", "compared"), ("gap_ring", "gap_ring"), ("edge_ring", "edge_ring")):
+        w = np.array([p[f"{cells}_cells"] for p in parts], float)
+        v = np.array([p[f"{key}_p95_m"] for p in parts], float)
+        out[f"{key}_p95_m"] = float(np.sum(w * v) / w.sum()) if w.sum() > 0 else 0.0
+    return out
+
+
+def outside_m2(after_thin: np.ndarray, grid) -> float:
+    """Area (m2) of the after survey beyond the grid: the cells of the grid's lattice, extended
+    past its edges, that hold its registration columns (``after_thin``: registered, local)."""
+    row, col, ok = grid.index(after_thin[:, :2])
+    return float(len(np.unique(np.c_[row[~ok], col[~ok]], axis=0)) * grid.cell_area)
+
+
+def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float) -> dict:
+    """report.json's ``coverage``: the after footprint, what of it was compared, what the
+    before survey misses, and the volume that could hide there: the unseen area times the 95th
+    percentile |difference| around it (next to the gaps, along the grid's edge for the area
+    beyond it; at least the level of detection)."""
+    footprint = cells["after_cells"] * cell_area + beyond_m2
+    compared = cells["compared_cells"] * cell_area
+    inside = max(cells["after_cells"] - cells["compared_cells"], 0) * cell_area
+    floor = lod_m if np.isfinite(lod_m) else 0.0
+
+    def near(key: str) -> float:
+        return max(cells[f"{key}_p95_m"] if cells[f"{key}_cells"] else cells["abs_diff_p95_m"], floor)
+
+    return {
+        "after_footprint_m2": footprint,
+        "compared_m2": compared,
+        "compared_share": compared / footprint if footprint > 0 else 0.0,
+        "before_missing_m2": cells["before_missing_cells"] * cell_area + beyond_m2,
+        "after_beyond_before_extent_m2": beyond_m2,
+        "unseen_m2": inside + beyond_m2,
+        "unseen_volume_bound_m3": inside * near("gap_ring") + beyond_m2 * near("edge_ring"),
+        "abs_difference_p95_m": {"near_gaps": near("gap_ring"), "along_edge": near("edge_ring")},
+    }
+
+
+def check(report: dict) -> tuple[str, str] | None:
+    """(severity, sentence) when part of the after footprint was not compared: ``unreliable``
+    when what could hide there exceeds the net's interval, ``caution`` when it is more than
+    :data:`CAUTION_SHARE` of the footprint; None otherwise (or without a coverage record)."""
+    cov = report.get("coverage")
+    if not cov or cov["after_footprint_m2"] <= 0:
+        return None
+    unseen, share = cov["unseen_m2"], 1.0 - cov["compared_share"]
+    bound, interval = cov["unseen_volume_bound_m3"], report["uncertainty_m3"]["net"]
+    before = cov["before_missing_m2"] >= 0.5 * unseen
+    who = "the before survey does not cover" if before else "the surveys do not both cover"
+    said = f"{who} {unseen:,.0f} m² ({share:.0%}) of the after footprint"
+    if share > MAX_SHARE or bound > interval:
+        return (
+            "unreliable",
+            f"{said}: change there is not in the volumes (up to ~{bound:,.0f} m³ at the change seen around it, "
+            f"against their ±{interval:,.1f} m³ interval)",
+        )
+    if share > CAUTION_SHARE:
+        return (
+            "caution",
+            f"{said}: the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around "
+            f"it would make up to ~{bound:,.0f} m³ there, within their interval)",
+        )
+    return None
+
+
+def line(report: dict) -> str | None:
+    """The summary's coverage line."""
+    cov = report.get("coverage")
+    if not cov:
+        return None
+    text = f"coverage: both surveys cover {cov['compared_share']:.1%} of the after footprint"
+    if cov["before_missing_m2"] > 0:
+        text += f" (the before survey misses {cov['before_missing_m2']:,.0f} m2)"
+    return text

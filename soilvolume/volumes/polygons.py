@@ -1,0 +1,184 @@
+"""Polygons from a vector file (GeoPackage, Shapefile, GeoJSON, ...) for zones and stable-ground
+masks: read with pyogrio (its own GDAL; works where GDAL's Python bindings are missing), else
+fiona, else GDAL's ``osgeo.ogr`` (first where it is loaded already, as inside QGIS); invalid
+geometries repaired with shapely's ``make_valid`` (those left without area refused); brought
+into the grid's CRS with pyproj (a file without a CRS is taken to be in the grid's; coordinates
+its declared CRS cannot hold are refused).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.types import SoilVolumeError, short_error
+
+
+@dataclass
+class Polygon:
+    """One feature: a polygonal shapely geometry (in the file's CRS until reprojected), its id,
+    display name and whether its geometry had to be repaired."""
+
+    id: int
+    name: str
+    geometry: Any
+    repaired: bool = False
+
+
+def read_polygons(
+    path: str | Path, name_field: str | None = None, what: str = "zones file"
+) -> tuple[list[Polygon], str | None]:
+    """(polygons, CRS WKT or None) of the first layer of ``path``; non-polygon features are
+    skipped. Raises SoilVolumeError naming ``what`` and the file when it cannot be used."""
+    path = Path(path)
+    if not path.exists():
+        raise SoilVolumeError(f"{path}: {what} not found")
+    if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
+        raise SoilVolumeError(f"{path}: not a regular file (a device or pipe)")
+    try:
+        import shapely  # noqa: F401 - validity and repair
+    except ImportError:
+        raise SoilVolumeError(f"{path}: reading polygons needs shapely (pip install shapely)") from None
+    try:
+        feats, wkt = _read(path)
+    except SoilVolumeError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - driver errors come in many types
+        raise SoilVolumeError(f"{path}: cannot read polygons from this {what} ({short_error(exc)})") from None
+    polys = []
+    for i, (fid, props, geom) in enumerate(feats):
+        if geom is None or geom.is_empty or geom.geom_type not in ("Polygon", "MultiPolygon"):
+            continue
+        name = _name(props, name_field, i, path)
+        polys.append(_valid(Polygon(int(fid if fid is not None else i), name, geom), path))
+    if not polys:
+        raise SoilVolumeError(f"{path}: no polygon features in this {what}")
+    return polys, wkt
+
+
+def _read(path: Path):
+    """[(fid, properties, shapely geometry or None)], CRS WKT, by the first reader installed;
+    GDAL's own bindings first where they are loaded already (inside QGIS: no second GDAL)."""
+    import sys
+
+    readers = [_read_pyogrio, _read_fiona, _read_ogr]
+    if "osgeo.ogr" in sys.modules or "qgis.core" in sys.modules:
+        readers.insert(0, readers.pop())
+    for reader in readers:
+        try:
+            return reader(path)
+        except ImportError:
+            continue
+    raise SoilVolumeError(f"{path}: reading polygons needs pyogrio (pip install pyogrio), fiona or GDAL's Python")
+
+
+def _read_pyogrio(path: Path):
+    import warnings
+
+    import shapely
+    from pyogrio import raw
+
+    with warnings.catch_warnings():  # GDAL's complaints about a broken file: the error says it
+        warnings.simplefilter("ignore")
+        meta, fids, wkb, values = raw.read(str(path), return_fids=True)
+    names = list(meta["fields"])
+    geoms = shapely.from_wkb(wkb) if wkb is not None else [None] * len(fids)
+    feats = [
+        (int(fid), {n: v[k] for n, v in zip(names, values, strict=True)}, g)
+        for k, (fid, g) in enumerate(zip(fids, geoms, strict=True))
+    ]
+    return feats, _wkt(meta.get("crs"))
+
+
+def _read_fiona(path: Path):
+    import fiona
+    from shapely.geometry import shape
+
+    with fiona.open(path) as src:
+        wkt = src.crs_wkt or None
+        feats = [(f.id, dict(f.properties or {}), shape(f.geometry) if f.geometry else None) for f in src]
+    return feats, wkt
+
+
+def _read_ogr(path: Path):
+    import shapely
+    from osgeo import ogr
+
+    ogr.UseExceptions()
+    ds = ogr.Open(str(path))
+    if ds is None or ds.GetLayerCount() == 0:
+        raise SoilVolumeError(f"{path}: not a readable vector file")
+    layer = ds.GetLayer(0)
+    srs = layer.GetSpatialRef()
+    feats = []
+    for f in layer:
+        g = f.GetGeometryRef()
+        feats.append((f.GetFID(), f.items(), shapely.from_wkb(bytes(g.ExportToWkb())) if g else None))
+    return feats, srs.ExportToWkt() if srs is not None else None
+
+
+def _wkt(crs: str | None) -> str | None:
+    if not crs:
+        return None
+    import pyproj
+
+    return pyproj.CRS.from_user_input(crs).to_wkt()
+
+
+def _name(props: dict, field: str | None, i: int, path: Path) -> str:
+    if field:
+        if field not in props:
+            raise SoilVolumeError(f"{path}: no field '{field}' (fields: {', '.join(props)})")
+        return str(props[field])
+    for key in props:
+        if key.lower() in ("name", "zone", "label"):
+            return str(props[key])
+    return f"zone {i + 1}"
+
+
+def _valid(p: Polygon, path: Path) -> Polygon:
+    """``p`` with a valid polygonal geometry (repaired with ``make_valid``), or an error."""
+    import shapely
+
+    if shapely.is_valid(p.geometry):
+        return p
+    fixed = shapely.make_valid(p.geometry)
+    parts = [g for g in shapely.get_parts(fixed) if g.geom_type in ("Polygon", "MultiPolygon")]
+    area = shapely.union_all(parts) if parts else None
+    if area is None or area.is_empty or area.area <= 0:
+        raise SoilVolumeError(f"{path}: '{p.name}' is not a valid polygon and has no area once repaired")
+    return Polygon(p.id, p.name, area, repaired=True)
+
+
+def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Path = "") -> list[Polygon]:
+    """Polygons reprojected to the grid's horizontal CRS (unchanged when either CRS is unknown
+    or they are equal); coordinates that cannot be transformed are an error naming the file."""
+    import pyproj
+    import shapely
+
+    from ..inputs.crs import horizontal
+
+    if not src_wkt or not grid.crs_wkt:
+        return polys
+    src = horizontal(pyproj.CRS.from_user_input(src_wkt))
+    dst = horizontal(pyproj.CRS.from_user_input(grid.crs_wkt))
+    if src.equals(dst, ignore_axis_order=True):
+        return polys
+    tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)
+
+    def move(xy: np.ndarray) -> np.ndarray:
+        return np.column_stack(tr.transform(xy[:, 0], xy[:, 1]))
+
+    out = []
+    for p in polys:
+        geom = shapely.transform(p.geometry, move)
+        if not np.isfinite(shapely.get_coordinates(geom)).all():
+            raise SoilVolumeError(
+                f"{path}: '{p.name}' cannot be brought from {src.name} into the survey's {dst.name} "
+                "(are its coordinates really in the CRS the file declares?)"
+            )
+        out.append(Polygon(p.id, p.name, geom, p.repaired))
+    return out

@@ -1,0 +1,206 @@
+"""What kept tiles are keyed by (every input's content, every option that changes numbers), and
+the run stores: one per run, kept only after an interruption, claimed by one run only."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+from dataclasses import fields
+
+import numpy as np
+import pytest
+from test_robustness import WKT, _cloud
+
+from soilvolume.core.interrupt import Interrupted
+from soilvolume.distributed import fingerprint
+from soilvolume.distributed.tilestore import RunStore, run_store
+from soilvolume.inputs.io import write_las
+from soilvolume.inputs.vpc import write_vpc
+from soilvolume.options import Options
+
+#: a value of each option other than its default (the test fails when an option is added
+#: without one, so that a new option is checked to key the tiles, or declared run control)
+OTHER = {
+    "before_crs": "EPSG:32654",
+    "after_crs": "EPSG:32654",
+    "radius": 31.0,
+    "coarse": "fpfh",
+    "coarse_voxel": 2.0,
+    "georeferencing": "precise",
+    "max_gps_shift": 9.0,
+    "max_gps_rotation": 7.0,
+    "max_gps_tilt": 2.0,
+    "fine": "gicp",
+    "pfh_patch": 7.0,
+    "seed": 1,
+    "correction": "plane",
+    "plane_threshold": 0.2,
+    "cell": 2.0,
+    "statistic": "mean",
+    "min_count_ratio": 0.2,
+    "fill_holes": 50.0,
+    "fill_method": "harmonic",
+    "ground": "none",
+    "ground_window": 7.0,
+    "ground_slope": 0.7,
+    "exclude": "none",
+    "lod_confidence": 0.9,
+    "threads": 2,
+    "scheduler": "local:2",
+    "memory_limit": 4.0,
+    "tile_cells": 64,
+    "volume_step": "tiles",
+    "keep_registered_cloud": True,
+}
+FILES = ("zones", "stable_mask")
+
+
+def _polygons(path, x0: float = 500000.0) -> str:
+    box = [[[x0, 3900000], [x0 + 10, 3900000], [x0 + 10, 3900010], [x0, 3900010], [x0, 3900000]]]
+    feature = {"type": "Feature", "properties": {}, "geometry": {"type": "Polygon", "coordinates": box}}
+    path.write_text(json.dumps({"type": "FeatureCollection", "features": [feature]}))
+    return str(path)
+
+
+def test_every_option_but_run_control_keys_the_tiles(tmp_path):
+    plain = fingerprint.number_options(Options())
+    run_control = {f.name for f in fields(Options) if f.metadata["run_control"]}
+    assert run_control == {"threads", "scheduler", "memory_limit", "keep_registered_cloud"}
+    for f in fields(Options):
+        if f.name in FILES:
+            changed = Options(**{f.name: _polygons(tmp_path / f"{f.name}.geojson")})
+        else:
+            assert f.name in OTHER, f"{f.name}: give it a value in OTHER"
+            changed = Options(**{f.name: OTHER[f.name]})
+        differs = fingerprint.number_options(changed) != plain
+        assert differs != (f.name in run_control), f.name
+
+
+def test_a_changed_polygon_file_changes_the_key(tmp_path):
+    path = _polygons(tmp_path / "z.geojson")
+    a = fingerprint.number_options(Options(zones=path))
+    _polygons(tmp_path / "z.geojson", 500001.0)
+    b = fingerprint.number_options(Options(zones=path))
+    assert a != b
+    why = fingerprint.difference({"options": a}, {"options": b, "inputs": {}, "code": None})
+    assert why in ("the engine's code changed", "the --zones file z.geojson changed")
+
+
+def test_the_identity_of_a_file_follows_its_content(tmp_path):
+    path = tmp_path / "a.las"
+    write_las(path, _cloud(30), WKT)
+    st = path.stat()
+    first = fingerprint.file_identity(path)
+    data = bytearray(path.read_bytes())
+    data[-5] ^= 0xFF  # one byte of a point, the size and the modification time kept
+    path.write_bytes(bytes(data))
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert fingerprint.file_identity(path) != first
+    assert fingerprint.file_identity(path)["size"] == first["size"]
+
+
+def test_large_files_are_sampled_not_read_whole(tmp_path, monkeypatch):
+    monkeypatch.setattr(fingerprint, "WHOLE_BYTES", 1000)
+    path = tmp_path / "big.bin"
+    body = bytearray(np.random.default_rng(0).integers(0, 255, 300_000, dtype=np.uint8).tobytes())
+    path.write_bytes(bytes(body))
+    first = fingerprint.file_identity(path)
+    body[100] ^= 1  # in the head
+    path.write_bytes(bytes(body))
+    assert fingerprint.file_identity(path)["hash"] != first["hash"]
+
+
+def test_a_vpc_is_identified_by_its_tiles_too(tmp_path):
+    tiles = []
+    for k in range(2):
+        tiles.append(tmp_path / f"t{k}.laz")
+        write_las(tiles[-1], _cloud(20, x0=500000.0 + 20 * k), WKT)
+    vpc = write_vpc(tmp_path / "s.vpc", tiles)
+    first = fingerprint.input_identity(vpc)
+    assert set(first) == {str(vpc), *(str(t.resolve()) for t in tiles)}
+    xyz = _cloud(20, x0=500020.0)
+    xyz[:, 2] += 1.0
+    write_las(tiles[1], xyz, WKT)  # the same box, other heights
+    again = fingerprint.input_identity(vpc)
+    assert again != first
+    why = fingerprint.difference({"code": "c", "inputs": {"before": first}}, {"code": "c", "inputs": {"before": again}})
+    assert why == "t1.laz changed (size, modification time or content)"
+
+
+def test_an_interrupted_run_keeps_its_tiles_and_only_one_run_claims_them(tmp_path):
+    final = tmp_path / "out"
+    parts = {"code": "c", "inputs": {}, "options": {"cell": 1.0}, "plan": {}}
+    with pytest.raises(Interrupted, match=r"kept in .*\.out\.soilvolume-tiles"), run_store(final) as store:
+        store.bind(parts)
+        store.tiles([(0, 2, 0, 2)]).save((0, 2, 0, 2), {"h": np.ones((2, 2))})
+        raise Interrupted(signal.SIGINT)
+    kept = tmp_path / ".out.soilvolume-tiles"
+    assert kept.is_dir()
+    first, second = RunStore(final), RunStore(final)  # two runs: one claims the tiles
+    assert (first.claimed, second.claimed) == (True, False) and first.folder != second.folder
+    assert first.bind(parts) is None and first.tiles([(0, 2, 0, 2)]).has(["h"], (0, 2, 0, 2))
+    said = second.bind({**parts, "options": {"cell": 2.0}})
+    assert said is None  # nothing of its own to discard
+    first.close(keep=False)
+    second.close(keep=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_kept_tiles_of_other_options_are_discarded_with_the_reason(tmp_path):
+    final = tmp_path / "out"
+    parts = {"code": "c", "inputs": {}, "options": {"cell": 1.0}, "plan": {}}
+    store = RunStore(final)
+    store.bind(parts)
+    store.tiles([(0, 2, 0, 2)]).save((0, 2, 0, 2), {"h": np.ones((2, 2))})
+    (store.folder / f".{store.key}_h_2_4_0_2.npy.4242-abcd1234").write_bytes(b"cut short")  # a killed writer's
+    assert store.close(keep=True)
+    assert sorted(p.name for p in (tmp_path / ".out.soilvolume-tiles").iterdir()) == [
+        f"{store.key}_h_0_2_0_2.npy",
+        "store.json",
+    ]
+    again = RunStore(final)
+    said = again.bind({**parts, "options": {"cell": 2.0}})
+    assert (
+        said == "discarding the tiles kept by an interrupted run: --cell differs (1.0 then, 2.0 now); starting afresh"
+    )
+    assert not again.tiles([(0, 2, 0, 2)]).has(["h"], (0, 2, 0, 2))
+    again.close(keep=False)
+
+
+def test_a_failed_run_keeps_nothing_and_a_killed_runs_store_is_swept(tmp_path):
+    final = tmp_path / "out"
+    with pytest.raises(ValueError), run_store(final) as store:
+        store.bind({"code": "c", "inputs": {}, "options": {}, "plan": {}})
+        store.tiles([(0, 1, 0, 1)]).save((0, 1, 0, 1), {"h": np.ones((1, 1))})
+        raise ValueError("a failure")
+    assert list(tmp_path.iterdir()) == []
+    dead = tmp_path / ".out.soilvolume-tiles-999999999-abcd1234"
+    dead.mkdir()
+    RunStore(final).close(keep=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_kept_tiles_of_an_older_version_a_file_or_a_link_are_never_trusted(tmp_path):
+    final = tmp_path / "out"
+    old = tmp_path / ".out.soilvolume-tiles" / "0123456789abcdef"
+    old.mkdir(parents=True)
+    (old / "tile_0_1_0_1.npz").write_bytes(b"old")
+    store = RunStore(final)
+    assert store.bind({"code": "c"}) == (
+        "discarding the tiles kept by an interrupted run: they carry no record of their inputs; starting afresh"
+    )
+    store.close(keep=False)
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    (victim / "precious.txt").write_text("keep me")
+    for planted in ("link", "file"):
+        kept = tmp_path / ".out.soilvolume-tiles"
+        kept.symlink_to(victim) if planted == "link" else kept.write_text("x")
+        store = RunStore(final)
+        assert not store.claimed and store.bind({"code": "c"}) is None
+        store.tiles([(0, 1, 0, 1)]).save((0, 1, 0, 1), {"h": np.ones((1, 1))})
+        assert store.close(keep=True) and kept.is_dir() and not kept.is_symlink()
+        shutil.rmtree(kept)
+    assert [p.name for p in victim.iterdir()] == ["precious.txt"]
