@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
+from ..core.preload import reading_done
 from ..core.types import Cloud, SoilVolumeError
 from ..options import Options
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
@@ -171,6 +172,7 @@ def prepare(
     }
     read_s = a.extra["read_s"] + b.extra["read_s"]
     wkt = frame.wkt
+    reading_done()  # the memory peak is behind: held-back imports may go ahead
     return Prepared(
         Cloud(b.xyz, origin, wkt, before.path, nonsoil=b.nonsoil),
         Cloud(a.xyz, origin, wkt, after.path, nonsoil=a.nonsoil),

@@ -31,6 +31,7 @@ from .io import (
     read_points,
     validate,
 )
+from .lasimport import laspy_module
 from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
@@ -94,7 +95,7 @@ def _meeting(index, lo, hi) -> list[tuple[int, int]]:
 
 def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: bool = False) -> Iterator[tuple]:
     """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
-    import laspy
+    laspy = laspy_module()
 
     try:
         with laspy.open(path) as reader:
@@ -106,7 +107,7 @@ def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: boo
                     pts = reader.read_points(min(size, count - i))
                     xyz = np.empty((len(pts), 3))
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
-                    cls = np.asarray(pts.classification) if has_cls else None
+                    cls = np.array(pts.classification) if has_cls else None
                     yield (xyz, cls, point_signals(pts, dims)) if signals else (xyz, cls)
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
@@ -115,9 +116,8 @@ def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: boo
 def file_chunks(
     path: str, region, size: int, resolution: float | None = None, signals: bool = False
 ) -> Iterator[tuple]:
-    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only the octree
-    nodes meeting it, with a ``resolution`` only its levels down to that point spacing; anything
-    else is streamed whole."""
+    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only its octree nodes
+    meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file."""
     if (region is not None or resolution is not None) and is_copc(path):
         lo, hi = region if region is not None else (None, None)
         yield from copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=signals)
@@ -145,7 +145,7 @@ def open_source(path, pipeline=None) -> Source:
 
 def _header(p: Path) -> Source:
     """A LAS/LAZ/COPC file's source from its header."""
-    import laspy
+    laspy = laspy_module()
 
     try:
         with laspy.open(p) as reader:
