@@ -191,7 +191,7 @@ def from_raw(raw: RawPoints) -> Source:
     )
 
 
-def prefetch(chunks: Iterator, depth: int = 2) -> Iterator:
+def prefetch(chunks: Iterator, depth: int = 1) -> Iterator:
     """Iterate ``chunks`` read ahead by a background thread (decoding overlaps the caller's
     processing: both are mostly numpy work that releases the GIL). Errors are re-raised here."""
     import queue
@@ -366,8 +366,8 @@ def load(
         if index is not None:
             index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
         points += len(xyz)
-        local = to_local(xyz)
-        labels = rule.labels(cls, sig)
+        local, labels = to_local(xyz), rule.labels(cls, sig)
+        del xyz, cls, sig  # the chunk is not held while the next one is read
         soil = None if labels is None else labels == SOIL
         used += len(xyz) if soil is None else int(soil.sum())
         inside = None if keep is None else keep(local)
