@@ -347,8 +347,8 @@ def load(
     others, other_labels = _Parts(0), []
     points = used = 0
     rule: PointRule | None = None
-    reading = 0.0
-    cropped = 0
+    reading, cropped = 0.0, 0
+    shift = to_local if src.raw is not None else getattr(to_local, "inplace", to_local)  # chunks read fresh
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
     chunks = prefetch(src.chunks(signals=True))
     while True:
@@ -366,7 +366,7 @@ def load(
         if index is not None:
             index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
         points += len(xyz)
-        local, labels = to_local(xyz), rule.labels(cls, sig)
+        local, labels = shift(xyz), rule.labels(cls, sig)
         del xyz, cls, sig  # the chunk is not held while the next one is read
         soil = None if labels is None else labels == SOIL
         used += len(xyz) if soil is None else int(soil.sum())
