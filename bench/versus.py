@@ -67,8 +67,24 @@ def cc_argv(exe: str, before_ply: Path, after_ply: Path, cell: float) -> list[st
     return [exe, "-SILENT", "-AUTO_SAVE", "OFF", *opened, "-ICP", "-VOLUME", "-GRID_STEP", f"{cell:g}"]
 
 
+GNU_TIME = Path("/usr/bin/time")
+
+
 def run(argv: list[str], log: Path, env: dict | None = None, timeout: float = 1800) -> dict:
-    """Wall seconds, CPU seconds (user + sys) and peak RSS (MB) of one command (os.wait4)."""
+    """Wall seconds, CPU seconds (user + sys) and peak RSS (MB) of one command: GNU time's
+    figures when it is there (Linux keeps a forked child's peak across exec, so os.wait4 of a
+    child of this large process reports at least this process's RSS), else os.wait4's."""
+    if GNU_TIME.exists():
+        out = log.with_suffix(".time")
+        r = _wait4([str(GNU_TIME), "-f", "%U %S %M", "-o", str(out), *argv], log, env, timeout)
+        if r["rc"] == 0 and out.exists():
+            user, system, kb = out.read_text().split()[-3:]
+            r.update(cpu_s=float(user) + float(system), peak_rss_mb=int(kb) / 1024.0)
+        return r
+    return _wait4(argv, log, env, timeout)
+
+
+def _wait4(argv: list[str], log: Path, env: dict | None, timeout: float) -> dict:
     t = time.perf_counter()
     with open(log, "w") as lf:
         proc = subprocess.Popen(argv, stdout=lf, stderr=subprocess.STDOUT, env=env)
@@ -129,7 +145,8 @@ def compare(name: str, scheduler: str, rounds: int, venv: Path, runs_dir: Path, 
         if exe:
             cc = cc_argv(exe, plys[0], plys[1], cell or 0.5)
             res["cloudcompare"].append(run(cc, runs_dir / "versus-cc.log", env))
-        print(f"[versus] {name} round {i + 1}/{rounds}: " + ", ".join(_line(res, k, -1) for k in _kinds(res)), flush=True)
+        done = ", ".join(_line(res, k, -1) for k in _kinds(res))
+        print(f"[versus] {name} round {i + 1}/{rounds}: {done}", flush=True)
     shutil.rmtree(out, ignore_errors=True)
     res["truth_net_m3"] = json.loads(Path(truth).read_text())["net"]
     res["load"] = os.getloadavg()
