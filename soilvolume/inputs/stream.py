@@ -369,7 +369,7 @@ def load(
         local, labels = shift(xyz), rule.labels(cls, sig)
         del xyz, cls, sig  # the chunk is not held while the next one is read
         soil = None if labels is None else labels == SOIL
-        used += len(xyz) if soil is None else int(soil.sum())
+        used += len(local) if soil is None else int(soil.sum())
         inside = None if keep is None else keep(local)
         if soil is not None:  # the points that are not soil, within the crop and the box
             other = ~soil if inside is None else ~soil & inside
