@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.cells import in_box
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
 from .copc import copc_chunks, is_copc
@@ -192,8 +193,7 @@ def from_raw(raw: RawPoints) -> Source:
 
 
 def prefetch(chunks: Iterator, depth: int = 1) -> Iterator:
-    """Iterate ``chunks`` read ahead by a background thread (decoding overlaps the caller's
-    processing: both are mostly numpy work that releases the GIL). Errors are re-raised here."""
+    """``chunks`` read ahead by a thread (decoding overlaps the caller: numpy releases the GIL); errors re-raised."""
     import queue
     import threading
 
@@ -375,7 +375,7 @@ def load(
             other = ~soil if inside is None else ~soil & inside
             o_xyz, o_lab = local[other], labels[other]
             if box is not None:
-                near = ((o_xyz[:, :2] >= box[0]) & (o_xyz[:, :2] <= box[1])).all(axis=1)
+                near = in_box(o_xyz, *box)
                 o_xyz, o_lab = o_xyz[near], o_lab[near]
             others.append(o_xyz)
             other_labels.append(o_lab)
@@ -385,7 +385,7 @@ def load(
         thinner.add(local)
         cropped += len(local)
         if box is not None:
-            local = local[((local[:, :2] >= box[0]) & (local[:, :2] <= box[1])).all(axis=1)]
+            local = local[in_box(local, *box)]
         parts.append(local)
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()
