@@ -30,13 +30,17 @@ def estimate(
     after_pipeline: str | Path | None = None,
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
+    from .core.preload import preload
+
+    options = check_options(options or Options())
+    preload(options.georeferencing != "precise", options.threads)  # overlaps the reading
     from .workflow.estimate import run_estimate
 
     return run_estimate(
         Path(before),
         Path(after),
         Path(out_dir),
-        check_options(options or Options()),
+        options,
         overwrite=overwrite,
         hooks=hooks or Hooks(),
         before_pipeline=before_pipeline,

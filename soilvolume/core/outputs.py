@@ -252,7 +252,9 @@ class OutputDir:
         if self.allowed is not None:
             return entry.name in self.allowed
         old_staging = entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
-        return old_staging or (entry.is_file() and entry.name.lower().endswith(RUN_SUFFIXES))
+        return old_staging or (
+            entry.is_file() and (entry.name in RUN_OUTPUTS or entry.name.lower().endswith(RUN_SUFFIXES))
+        )
 
     def path(self, name: str) -> Path:
         """Where to write the output ``name`` (inside the staging folder)."""

@@ -17,7 +17,7 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
-from scipy import ndimage, optimize
+from scipy import ndimage
 
 from ..compensation.robust import nmad, patches
 from ..core.types import GridSpec
@@ -80,6 +80,8 @@ def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> d
     reach = lags[np.argmax(gamma >= 0.9 * g_max)]
     p0 = [float(gamma[0]) * 0.5, max(g_max - float(gamma[0]) * 0.5, 1e-12), float(reach)]
     bounds = ([0.0, 0.0, float(lags[0]) * 0.5], [g_max * 2, g_max * 2, float(lags[-1]) * 2])
+    from scipy import optimize  # ~0.1 s of imports, only when there is a variogram to fit
+
     try:
         with warnings.catch_warnings():  # the covariance is not used: its warning is noise in the log
             warnings.simplefilter("ignore", optimize.OptimizeWarning)
