@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.cells import cell_index
+from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
 from ..options import Options
@@ -42,7 +43,7 @@ class Registration:
     transform: np.ndarray
     coarse: StageQuality
     fine: StageQuality
-    georeferencing: dict = field(default_factory=dict)
+    georeferencing: Georeferencing | None = None
 
 
 def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:

@@ -152,21 +152,21 @@ def _write(run: Run, ex) -> None:
 
 
 def _report(run: Run, ex) -> None:
-    """Step 7: report.json (the quality verdict in it) and report.html."""
+    """Step 7: the run's typed record, report.json (the quality verdict in it) and report.html."""
+    from ..core.record import RunRecord
     from ..reporting.report import build_report, write_json
-    from .steps import add_quality, write_report_html
+    from .steps import quality_inputs, write_report_html
 
     run.hooks.step(run.at("report"), run.message("report"), log=False)
     with run.timer("report"):
+        judged = quality_inputs(run.vols, ex.correction_grid(run)[0], run.options)
         p_b, p_a, _ = run.planes
-        report = build_report(run.prep, run.reg, run.grid, run.vols, p_b, p_a, run.options, run.timer)
-        add_quality(report, run.vols, ex.correction_grid(run)[0], run.options, run.hooks)
-        engine = ex.engine(run)
-        if engine is not None:
-            report["engine"] = engine
+        record = RunRecord(run.prep, run.reg, run.grid, (p_b, p_a), run.vols, run.options, judged, ex.engine(run))
+        report = build_report(record, run.timer.totals())
+        for line in report["quality"]["messages"]:
+            run.hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_report_html(run.out, report, *ex.html(run))
-        report["timings_s"] = run.timer.totals()
-        write_json(run.out.path("report.json"), report)
+        write_json(run.out.path("report.json"), report, run.timer.totals())
     run.report = report
 
 
