@@ -22,7 +22,7 @@ PROGRESS: dict[str, tuple[float, float, str]] = {
     "prepare": (2, 15, "reading {epochs}"),
     "register": (15, 55, "registering the after cloud onto the before cloud (coarse, then fine)"),
     "grid": (55, 70, "gridding the average heights"),
-    "planes": (70, 75, "{correction}"),
+    "planes": (70, 75, "estimating the vertical bias correction"),  # or none: steps.correction_step
     "volume": (75, 85, "computing the difference and volumes"),
     "write": (85, 97, "writing outputs"),
     "report": (97, 100, "writing the report"),
@@ -69,17 +69,16 @@ class Run:
     dems: tuple = ()  # (after, before) dem.grid.EpochDEMs, or (the one epoch's centred heights,)
     planes: tuple = ()  # (plane before, plane after, d_i)
     vols: Any = None  # volumes.compute.Volumes
-    report: dict | None = None
-    result: dict | None = None  # what the command returns (register, dem)
+    report: dict | None = None  # report.json of an estimate
 
     def at(self, step: str, fraction: float = 0.0) -> float:
         """The percent ``fraction`` of the way through ``step``."""
         lo, hi = self.spans[step]
         return lo + (hi - lo) * fraction
 
-    def message(self, step: str, **words: str) -> str:
-        names = " and ".join(e.name for e in self.epochs)
-        return PROGRESS[step][2].format(epochs=names, **words)
+    def message(self, step: str) -> str:
+        """The progress table's message of ``step``, naming the run's epochs."""
+        return PROGRESS[step][2].format(epochs=" and ".join(e.name for e in self.epochs))
 
 
 def threads(command: str, options: Options) -> None:
