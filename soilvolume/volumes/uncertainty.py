@@ -130,6 +130,11 @@ def bias_sigma(n_stable: int, cell: float, model: dict[str, float], n_coef: int)
     return math.sqrt(max(n_coef, 1) * var_mean)
 
 
+#: the one-sigma terms (m^3) of ``terms_m3[part]``, in their order: the area's error model, the
+#: refilled share of change, the refill error, the leftover bias, extras (what a caller adds)
+TERMS = ("area_model", "refilled_share", "refill_error", "leftover_bias", "extras")
+
+
 def volume_uncertainty(
     diff_corrected: np.ndarray,
     stable_mask: np.ndarray,
@@ -203,7 +208,7 @@ def volume_uncertainty(
         signed = abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
         return float(np.hypot(signed, residual * float(m.sum()) * grid.cell_area))
 
-    terms = {  # one-sigma (m^3): the area's error model, then refills, leftover bias, extras
+    terms = {  # one-sigma (m^3), in the order of TERMS
         k: [
             region_sigma(int(m.sum()), grid.cell, model, b, pcv),
             interp(m),
