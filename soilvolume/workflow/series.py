@@ -141,7 +141,9 @@ def run_series(
     with output_dir(out_dir, [*paths, options.stable_mask], overwrite) as out, os_errors(out.final):
         report = _series(paths, when, out, options, timer, hooks)
     hooks.step(100, "done")
-    return Result(report, {Path(n).stem: p for n, p in out.moved.items()})
+    return Result(
+        report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in out.moved.items()}
+    )
 
 
 def _series(paths, dates, out, options: Options, timer: Timer, hooks: Hooks) -> dict:
