@@ -55,6 +55,32 @@ def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return s @ t_local @ s_inv
 
 
+def registration_summary(reg, origin: np.ndarray) -> dict:
+    """What ``soilvolume register`` returns: the absolute 4x4, each stage and the georeferencing decision."""
+    return _clean(
+        {
+            "transform": absolute_transform(reg.transform, origin),
+            "coarse": stage_dict(reg.coarse),
+            "fine": stage_dict(reg.fine),
+            "georeferencing": reg.georeferencing,
+        }
+    )
+
+
+def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
+    """What ``soilvolume dem`` returns: the grid written and the points behind it."""
+    return {
+        "cell_m": grid.cell,
+        "rows": grid.rows,
+        "cols": grid.cols,
+        "crs": one.frame.crs.name,
+        "transform": list(grid.transform)[:6],
+        "points": int(len(one.xyz)),
+        "valid_cells": int(np.isfinite(heights).sum()),
+        "selection": one.note,
+    }
+
+
 def write_json(path: Path, report: dict) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(_clean(report), indent=2))
