@@ -141,7 +141,8 @@ def write_ledger(path: Path, report: dict) -> None:
 
 
 def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
-    """Each epoch's corrected DEM (E0's heights + D_k, absolute) and every difference."""
+    """Each epoch's corrected DEM (E0's heights ``base`` at the cell centres + D_k, absolute)
+    and every difference."""
     z0 = float(grid.origin[2])
     for k, d in enumerate(series.to_e0):
         desc = f"epoch {k} heights in E0's frame, corrected once relative to E0 (m)"
@@ -153,14 +154,14 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
     gridmod.write_geotiff(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
 
 
-def write_outputs(out, paths, dates, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
-    """Every output of a series run into ``out`` (an :class:`~soilvolume.core.outputs.OutputDir`)."""
+def write_reports(out, paths, dates, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
+    """report.json, the ledger and report.html of a series run into ``out`` (an
+    :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
     from .serieshtml import write_series_html
 
-    base = vols[0].dem_b  # E0's heights at the cell centres (local)
-    write_rasters(out, series, base, grid)
     report = build_series_report(paths, dates, fits, vols, series, grid, options, timer)
-    write_json(out.path("report.json"), report)
     write_ledger(out.path(LEDGER), report)
-    write_series_html(out.path("report.html"), report, series, grid, base)
+    write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
+    report["timings_s"] = timer.totals()
+    write_json(out.path("report.json"), report)
     return report

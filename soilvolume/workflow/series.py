@@ -1,14 +1,16 @@
-"""``soilvolume series E0 E1 ... En``: a site surveyed n + 1 times, E0 the reference.
+"""``soilvolume series E0 E1 ... En``: a site surveyed n + 1 times, E0 the reference, as a run
+of the one pipeline (:mod:`.run`, ``COMMAND_STEPS["series"]``) on the :class:`Series` executor.
 
-A driver over the steps of :mod:`.steps` (the same ones an estimate run takes): each later epoch
-is prepared and registered against E0 (the pair E0 -> Ek, so the stable-ground refinement works
-on ground stable across the two), every epoch is moved into one frame (E0's, with the first
-pair's local origin) and gridded on one grid (the cells every registered epoch covers), each
-pair's volume step corrects Ek once relative to E0, and :mod:`soilvolume.volumes.series` turns
-the corrected differences into periods that add up to the cumulative."""
+Each later epoch is prepared and registered against E0 (the pair E0 -> Ek, so the stable-ground
+refinement works on ground stable across the two) with the steps of :mod:`.steps` an estimate
+takes, every epoch is moved into one frame (E0's, with the first pair's local origin) and
+gridded on one grid (the cells every registered epoch covers), each pair's volume step corrects
+Ek once relative to E0, and :mod:`soilvolume.volumes.series` turns the corrected differences
+into periods that add up to the cumulative."""
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -16,7 +18,7 @@ import numpy as np
 
 from ..core.hooks import Hooks, Result
 from ..core.outputs import os_errors, output_dir
-from ..core.types import GridSpec, SoilVolumeError
+from ..core.types import Epoch, GridSpec, SoilVolumeError
 from ..dem import grid as gridmod
 from ..inputs.footprint import footprint
 from ..inputs.lasheader import creation_date
@@ -24,7 +26,7 @@ from ..inputs.prepare import Prepared
 from ..options import Options
 from ..registration.rigid import transform_points, transform_points32
 from ..validate import check_grid_cells
-from .steps import Timer, alternative_move, moved_nonsoil, planes_and_volumes, prepare_pair, register_pair
+from .timing import Timer
 
 
 @dataclass(frozen=True)
@@ -67,13 +69,6 @@ def check_epochs(paths: list[Path]) -> None:
         raise SoilVolumeError("series: an epoch is given twice")
 
 
-def _scaled(hooks: Hooks, lo: float, hi: float) -> Hooks:
-    """``hooks`` with the progress of a sub-run mapped from 0-100 onto ``lo``-``hi``."""
-    show = hooks.progress
-    progress = None if show is None else (lambda pct, msg: show(lo + (hi - lo) * pct / 100.0, msg))
-    return Hooks(progress=progress, log=hooks.log, cancel=hooks.cancel)
-
-
 def _moved(t: np.ndarray, d: np.ndarray) -> np.ndarray:
     """A local transform of a frame with origin ``o + d`` re-expressed with origin ``o``."""
     s = np.eye(4)
@@ -105,15 +100,6 @@ def rebase(prep: Prepared, reg, origin: np.ndarray) -> tuple[Prepared, object]:
     return prep, replace(reg, transform=_moved(reg.transform, d), fine=fine)
 
 
-def register_epoch(e0: Path, ek: Path, options: Options, hooks: Hooks, timer: Timer) -> Fit:
-    """Prepare the pair E0 -> Ek and register Ek into E0's frame (the estimate's steps)."""
-    with timer("crop"):
-        prep = prepare_pair(e0, ek, options, hooks, None, None)
-    reg, opts = register_pair(prep, options, hooks, timer, dense=(prep.after.xyz, prep.before.xyz))
-    hooks.info(f"{ek.name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m")
-    return Fit(prep, reg, opts)
-
-
 def series_grid(fits: list[Fit], options: Options) -> GridSpec:
     """One grid over the cells E0 and every registered later epoch cover (their boxes' overlap),
     cell size from E0's density (as :func:`.steps.shared_grid`)."""
@@ -134,46 +120,111 @@ def series_grid(fits: list[Fit], options: Options) -> GridSpec:
 def run_series(
     paths: list[Path], out_dir: Path, options: Options, *, dates=None, overwrite: bool, hooks: Hooks
 ) -> Result:
-    """See :func:`soilvolume.api.series`."""
-    check_epochs(paths)
-    when = epoch_dates(paths, dates)
+    """See :func:`soilvolume.api.series`: the pipeline of :mod:`.run` over E0 and every later epoch."""
+    from .run import Run, drive
+
     timer = Timer()
+    check_epochs(paths)
+    epochs = tuple(Epoch(p, date=d) for p, d in zip(paths, epoch_dates(paths, dates), strict=True))
     with output_dir(out_dir, [*paths, options.stable_mask], overwrite) as out, os_errors(out.final):
-        report = _series(paths, when, out, options, timer, hooks)
+        run = drive(Run("series", epochs, options, hooks, timer, out=out), Series())
     hooks.step(100, "done")
-    return Result(
-        report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in out.moved.items()}
-    )
+    moved = out.moved.items()
+    return Result(run.report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
 
 
-def _series(paths, dates, out, options: Options, timer: Timer, hooks: Hooks) -> dict:
-    from ..reporting.series import write_outputs
-    from ..volumes.series import combine
+class Series:
+    """The executor of a series run (in-process): each step's work over E0 and every later epoch.
+    ``prepare``: the pairs E0 -> Ek; ``register_step``: each Ek into E0's frame, rebased on one
+    local origin; ``grid``: one grid, every epoch's DEM; ``planes_step``: each pair's planes;
+    ``volume``: each pair's volume step (Ek corrected once relative to E0), then the periods
+    (:func:`soilvolume.volumes.series.combine`); ``write``; ``report_step``."""
 
-    n = len(paths) - 1
-    fits = []
-    for k, path in enumerate(paths[1:], 1):
-        hooks.step(60.0 * (k - 1) / n, f"epoch {k} of {n}: registering {path.name} into {paths[0].name}'s frame")
-        fit = register_epoch(paths[0], path, options, _scaled(hooks, 60.0 * (k - 1) / n, 60.0 * k / n), timer)
-        origin = fits[0].prep.origin if fits else np.asarray(fit.prep.origin, dtype=np.float64)
-        fits.append(replace(fit, **dict(zip(("prep", "reg"), rebase(fit.prep, fit.reg, origin), strict=True))))
-    hooks.step(62, f"gridding {n + 1} epochs on one grid")
-    with timer("grids"):
-        grid = series_grid(fits, options)
-        e0 = fits[0].prep.before
-        dems = [gridmod.epoch_dem(e0.xyz, grid, options.statistic, e0.nonsoil)]
-        for f in fits:
+    reading_note = ""
+    raster_note = ""
+
+    def __init__(self) -> None:
+        self.preps: list[Prepared] = []
+        self.fits: list[Fit] = []
+        self.vols: list = []
+        self.planes: list = []
+
+    @contextmanager
+    def session(self, run):
+        yield self
+
+    def _each(self, run, step: str, k: int, n: int) -> tuple[float, float]:
+        lo, hi = run.spans[step]
+        return lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1) / n
+
+    def prepare(self, run) -> None:
+        from .steps import prepare_pair
+
+        e0, later = run.epochs[0], run.epochs[1:]
+        for k, ek in enumerate(later):
+            spans = {"prepare": self._each(run, "prepare", k, len(later))}
+            self.preps.append(prepare_pair(e0.path, ek.path, run.options, run.hooks, None, None, spans))
+
+    def register_step(self, run) -> None:
+        from .steps import register_pair
+
+        n, seconds = len(self.preps), {"coarse": 0.0, "fine": 0.0, "register_other": 0.0}
+        for k, prep in enumerate(self.preps):
+            name = run.epochs[k + 1].name
+            progress = (*self._each(run, "register", k, n), f"registering {name} into {run.epochs[0].name}'s frame")
+            reg, opts = register_pair(
+                prep, run.options, run.hooks, run.timer, (prep.after.xyz, prep.before.xyz), progress
+            )
+            run.hooks.info(
+                f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m"
+            )
+            seconds = {s: t + run.timer.s[s] for s, t in seconds.items()}
+            origin = self.fits[0].prep.origin if self.fits else np.asarray(prep.origin, dtype=np.float64)
+            self.fits.append(Fit(*rebase(prep, reg, origin), opts))
+        run.timer.s.update(seconds)
+        self.preps = []  # the fits hold them now
+
+    def grid(self, run) -> None:
+        from .steps import moved_nonsoil
+
+        grid = run.grid = series_grid(self.fits, run.options)
+        e0 = self.fits[0].prep.before
+        dems = [gridmod.epoch_dem(e0.xyz, grid, run.options.statistic, e0.nonsoil)]
+        for f in self.fits:
             xyz = transform_points32(f.prep.after.xyz, f.reg.transform)
-            dems.append(gridmod.epoch_dem(xyz, grid, options.statistic, moved_nonsoil(f.prep, f.reg)))
-    hooks.step(70, "correcting each epoch once into E0's frame (bias on stable ground)")
-    vols = []
-    for k, f in enumerate(fits, 1):
-        thin = transform_points(f.prep.after_thin, f.reg.transform)
-        v, _, _ = planes_and_volumes(f.prep, f.reg, grid, dems[k], dems[0], thin, f.options, timer, Hooks())
-        vols.append(v)
-    hooks.step(85, "periods, cumulative and their intervals")
-    with timer("series"):
-        series = combine(vols, dems, [alternative_move(f.reg) for f in fits], grid, options)
-    hooks.step(90, "writing outputs")
-    with timer("write"):
-        return write_outputs(out, paths, dates, fits, vols, series, grid, options, timer)
+            dems.append(gridmod.epoch_dem(xyz, grid, run.options.statistic, moved_nonsoil(f.prep, f.reg)))
+        run.dems = tuple(dems)
+
+    def planes_step(self, run) -> None:
+        from .steps import correction_step, planes_step
+
+        run.hooks.step(run.at("planes"), correction_step(run.options) + ", each epoch once relative to E0")
+        with run.timer("planes"):
+            for f in self.fits:
+                thin = transform_points(f.prep.after_thin, f.reg.transform)
+                self.planes.append(planes_step(f.prep, run.grid, run.dems[0], thin, f.options))
+
+    def volume(self, run):
+        from ..volumes.series import combine
+        from .steps import alternative_move, volume_step
+
+        for k, (f, planes) in enumerate(zip(self.fits, self.planes, strict=True), 1):
+            self.vols.append(volume_step((run.dems[k], run.dems[0]), planes[2], run.grid, f.options, f.reg))
+        run.hooks.step(run.at("volume", 0.8), "periods, cumulative and their intervals")
+        moves = [alternative_move(f.reg) for f in self.fits]
+        return combine(self.vols, list(run.dems), moves, run.grid, run.options)
+
+    def write(self, run) -> None:
+        from ..reporting.series import write_rasters
+
+        write_rasters(run.out, run.vols, self.vols[0].dem_b, run.grid)
+
+    def report_step(self, run) -> None:
+        from ..reporting.series import write_reports
+
+        run.hooks.step(run.at("report"), run.message("report"), log=False)
+        with run.timer("report"):
+            paths = [e.path for e in run.epochs]
+            dates = [e.date for e in run.epochs]
+            args = (paths, dates, self.fits, self.vols, run.vols, run.grid, run.options, run.timer)
+            run.report = write_reports(run.out, *args)

@@ -1,4 +1,4 @@
-""""Volume change over a series of surveys" through processing.run on the seeded 4-epoch site
+""" "Volume change over a series of surveys" through processing.run on the seeded 4-epoch site
 (soilvolume.scenes.series), the engine run as a subprocess in its own environment."""
 
 from __future__ import annotations
