@@ -12,7 +12,9 @@ once relative to E0), difference_<i>_<j>.tif (each period's change), cumulative_
 ledger.csv (one row per period and the cumulative: epochs, dates, net/cut/fill and their ±),
 report.json ("epochs" with each registration's 4x4 into E0's frame, "periods", "cumulative") and
 report.html (the ledger, cumulative cut and fill over time, the difference maps). The periods'
-nets add up to the cumulative net. The outputs appear together or not at all."""
+nets add up to the cumulative net. --before-crs applies to E0, --after-crs to every later epoch.
+The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
+2 (bad command line), 130/143 (interrupted; nothing written)."""
 
 
 def add_series(sub, add_options, add_progress) -> None:
