@@ -134,3 +134,21 @@ def test_bad_input_is_one_line_and_writes_nothing(site, tmp_path, capsys, case, 
     assert len(err) == 1 and words in err[0], err
     assert not any(tmp_path.iterdir())  # no output folder, no staging left behind
     assert {p: p.read_bytes() for p in paths[:2]} == before
+
+
+def test_series_through_the_protocol(site, tmp_path):
+    """--progress jsonl (a subprocess, as QGIS runs it): rising progress, then one result line
+    with the report and the outputs; nothing of the protocol on standard error."""
+    from conftest import run_cli
+
+    _, paths, _, _, _ = site
+    done = run_cli("series", paths[0], paths[2], "--out", tmp_path / "o", "--progress", "jsonl")
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    progress = [e["percent"] for e in lines if e["type"] == "progress"]
+    assert len(progress) >= 5 and progress == sorted(progress) and progress[-1] == 100
+    result = lines[-1]
+    assert result["type"] == "result" and result["command"] == "series"
+    assert len(result["report"]["periods"]) == 1 and result["report"]["epochs"][1]["date"] == "2026-03-16"
+    assert {"ledger", "report_json", "report_html", "dem_epoch0", "difference_0_1"} <= set(result["outputs"])
+    assert "{" not in done.stderr

@@ -179,6 +179,8 @@ class Series:
                 f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m"
             )
             seconds = {s: t + run.timer.s[s] for s, t in seconds.items()}
+            if self.fits:  # E0's DEM comes from the first pair: later pairs keep E0's subsets only
+                prep = replace(prep, before=replace(prep.before, xyz=prep.before.xyz[:0], nonsoil=None))
             origin = self.fits[0].prep.origin if self.fits else np.asarray(prep.origin, dtype=np.float64)
             self.fits.append(Fit(*rebase(prep, reg, origin), opts))
         run.timer.s.update(seconds)
