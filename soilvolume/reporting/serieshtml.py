@@ -29,7 +29,7 @@ def running_totals(report: dict) -> dict[str, list[float]]:
 def chart_svg(report: dict) -> str:
     """Cumulative cut, fill and net (m3) against the epochs (their dates where known)."""
     totals = running_totals(report)
-    w, h, left, right, top, bottom = 760, 300, 72, 110, 14, 52
+    w, h, left, right, top, bottom = 760, 300, 72, 120, 14, 52
     pw, ph = w - left - right, h - top - bottom
     n = len(totals["net"]) - 1
     lo = min(0.0, min(totals["net"]), -max(totals["cut"]))
@@ -56,7 +56,7 @@ def chart_svg(report: dict) -> str:
         colour = SERIES_COLOURS[key]
         parts.append(f'<polyline points="{pts}" fill="none" stroke="{colour}" stroke-width="2"/>')
         parts += [f'<circle cx="{p.split(",")[0]}" cy="{p.split(",")[1]}" r="3" fill="{colour}"/>' for p in pts.split()]
-        label = {"fill": "fill (added)", "cut": "cut (removed, below 0)", "net": "net since E0"}[key]
+        label = {"fill": "fill (added)", "cut": "cut (removed)", "net": "net since E0"}[key]
         y_end = sy(sign * totals[key][-1])
         parts.append(f'<text x="{left + pw + 6}" y="{y_end + 4:.1f}" fill="{colour}">{label}</text>')
     parts.append(f'<line x1="{left}" x2="{left + pw}" y1="{sy(0):.1f}" y2="{sy(0):.1f}" stroke="#888"/>')
@@ -65,16 +65,16 @@ def chart_svg(report: dict) -> str:
         f'<figure><svg class=plot viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-size="12">'
         + "".join(parts)
         + "</svg><figcaption>Cumulative cut and fill since the first survey (running sums of the "
-        "periods'), and the net change from the first survey to each epoch (its last point is the "
-        "cumulative net).</figcaption></figure>"
+        "periods', cut drawn below 0), and the net change from the first survey to each epoch (its "
+        "last point is the cumulative net).</figcaption></figure>"
     )
 
 
 def _ledger(report: dict) -> str:
     rows = []
-    for name, p in [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("0 → last", report["cumulative"])]:
+    for name, p in [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]:
         v, u = p["volume_m3"], p["uncertainty_m3"]
-        dates = " → ".join(html.escape(d or "?") for d in p["dates"])
+        dates = "<span style='white-space:nowrap'>" + " → ".join(html.escape(d or "?") for d in p["dates"]) + "</span>"
         rows.append(
             [f"{name}: E{p['from']} → E{p['to']}", dates]
             + [_pm(v[k], u[k]) for k in ("net", "cut", "fill")]
