@@ -112,3 +112,28 @@ def volume_from_rasters(
         zone_field=zone_field,
         hooks=hooks or Hooks(),
     )
+
+
+def series(
+    epochs: list[str | Path],
+    out_dir: str | Path,
+    options: Options | None = None,
+    *,
+    dates: list[str] | None = None,
+    overwrite: bool = False,
+    hooks: Hooks | None = None,
+) -> Result:
+    """Volume change over a series of surveys, E0 (``epochs[0]``) the reference: report.json
+    holds ``epochs`` (each registration into E0's frame), ``periods`` (one per consecutive pair)
+    and ``cumulative``; the periods' nets add up to the cumulative net. ``dates``: one per epoch
+    (YYYY-MM-DD; empty keeps the file's)."""
+    from .workflow.series import run_series
+
+    return run_series(
+        [Path(e) for e in epochs],
+        Path(out_dir),
+        check_options(options or Options()),
+        dates=dates,
+        overwrite=overwrite,
+        hooks=hooks or Hooks(),
+    )

@@ -32,6 +32,7 @@ COMMAND_STEPS: dict[str, tuple[str, ...]] = {
     "estimate": tuple(PROGRESS),
     "register": ("prepare", "register", "write"),
     "dem": ("prepare", "grid", "write"),
+    "series": tuple(PROGRESS),  # E0 and each later epoch: workflow/series.Series
 }
 
 
@@ -90,13 +91,20 @@ def threads(command: str, options: Options) -> None:
 
 
 def drive(run: Run, executor) -> Run:
-    """Run the command's steps in order on ``executor`` (see module); returns ``run`` filled in."""
+    """Run the command's steps in order on ``executor`` (see module); returns ``run`` filled in.
+    An executor over more than a pair (:class:`soilvolume.workflow.series.Series`) may do a whole
+    step itself (``<step>_step(run)``: register, planes, report over every pair); the order,
+    the spans and the messages stay the run's."""
     steps = COMMAND_STEPS[run.command]
     run.spans = spans(steps)
     threads(run.command, run.options)
     with executor.session(run):
         for name in steps:
-            STEPS[name](run, executor)
+            own = getattr(executor, f"{name}_step", None)  # a series' executor: the step over every pair
+            if own is not None:
+                own(run)
+            else:
+                STEPS[name](run, executor)
     return run
 
 
