@@ -124,8 +124,10 @@ def _header_points(path) -> int | None:
 
 def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule) -> Result:
     """the in-process run (:mod:`soilvolume.workflow.estimate`) with the point work as Dask tasks on ``schedule``."""
-    if options.ground == "filter":
-        raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
+    if options.ground in ("filter", "csf"):
+        raise SoilVolumeError(
+            f"--ground {options.ground} needs whole clouds: use --scheduler none (or classify the tiles first)"
+        )
     hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
     with run_store(out.final) as store, client(schedule, options.memory_limit, store.scratch) as starting:
         return _tiled(before, after, out, options, timer, hooks, schedule, (starting, store))
