@@ -223,3 +223,21 @@ def test_no_signal_pile_stays_usable(tmp_path):
     assert abs(v["net"] - truth) <= u["net"] <= 0.1 * truth
     assert rep["quality"]["verdict"] != "not reliable"
     assert rep["uncertainty"]["unclassified_m3"]["net"] <= 0.08 * truth
+
+
+def test_verdict_on_what_could_not_be_classified():
+    """Not reliable when, without any signal, the unclassified change is over the interval and a
+    tenth of the net; use with caution when only machine-sized objects in one survey are open; no
+    word when it is small against the interval."""
+    from soilvolume.volumes.quality import _unclassified
+
+    def excluded(fill, cut, signals):
+        unclear = {"fill": fill, "cut": cut, "net": fill - cut, "count": 3, "signals": signals}
+        return {"unclassified": unclear, "bound_m3": {"fill": fill, "cut": cut, "net": max(fill, cut)}}
+
+    ((sev, msg),) = _unclassified(excluded(150.0, 20.0, False), net=180.0, half=60.0)
+    assert sev == "unreliable" and "from +30 to +200 m³" in msg and "no classification, colour" in msg
+    ((sev, msg),) = _unclassified(excluded(15.0, 0.0, True), net=-2.0, half=8.0)
+    assert sev == "caution" and "machine-sized objects in one survey only" in msg
+    assert _unclassified(excluded(15.0, 0.0, False), net=900.0, half=40.0) == []  # within the interval
+    assert _unclassified(excluded(50.0, 0.0, False), net=900.0, half=40.0) == []  # under a tenth of the net
