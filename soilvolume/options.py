@@ -12,12 +12,15 @@ from typing import Any
 #: which commands take an option (``commands=`` of each field below): the command line builds
 #: each subcommand's flags from it and the QGIS algorithms their parameters
 ESTIMATE = ("estimate",)
-REGISTER = ("estimate", "register")
-PREPARE = ("estimate", "register", "pipeline")  # reading both clouds
-GRID = ("estimate", "dem")
-GROUND = ("estimate", "register", "dem", "pipeline")
-GROUND_FILTER = ("estimate", "register", "dem")
-COMMANDS = ("estimate", "register", "dem", "pipeline")
+VOLUME = ("estimate", "series")  # the volume step (a series runs it once per later epoch)
+REGISTER = ("estimate", "register", "series")
+PREPARE = ("estimate", "register", "pipeline", "series")  # reading both clouds
+GRID = ("estimate", "dem", "series")
+GROUND = ("estimate", "register", "dem", "pipeline", "series")
+GROUND_FILTER = ("estimate", "register", "dem", "series")
+POINTS = ("estimate", "register", "dem", "series")  # what is read of each cloud (the soil rule)
+CELLS = ("estimate", "dem", "series")  # the heights of each cell
+COMMANDS = ("estimate", "register", "dem", "pipeline", "series")
 
 
 def _opt(
@@ -148,14 +151,22 @@ class Options:
         "vertical bias correction: surface (degree-2 polynomial on stable ground), plane (plane on stable ground), paper-plane (the paper's two RANSAC planes, d_i), none",
         ("surface", "plane", "paper-plane", "none"),
         label="Vertical bias correction",
+        commands=VOLUME,
     )
     plane_threshold: float = _opt(
-        0.15, "RANSAC plane inlier distance (m)", label="RANSAC plane inlier distance", unit="m", lo=0.001, hi=100.0
+        0.15,
+        "RANSAC plane inlier distance (m)",
+        label="RANSAC plane inlier distance",
+        unit="m",
+        lo=0.001,
+        hi=100.0,
+        commands=VOLUME,
     )
     stable_mask: str | None = _opt(
         None,
         "optional polygon file (GeoPackage/Shapefile/GeoJSON) of ground known to be stable",
         label="Stable ground polygons",
+        commands=VOLUME,
     )
     # step 5: grids and volumes
     cell: float | None = _opt(
@@ -180,6 +191,7 @@ class Options:
         label="Weak cell threshold (fraction of the median count)",
         lo=0.0,
         hi=1.0,
+        commands=CELLS,
     )
     fill_holes: float = _opt(
         100.0,
@@ -188,12 +200,14 @@ class Options:
         unit="m2",
         lo=0.0,
         hi=1e7,
+        commands=VOLUME,
     )
     fill_method: str = _opt(
         "biharmonic",
         "interpolation of refilled cells: biharmonic (smooth, keeps slopes across the hole), harmonic (Laplace, never overshoots its border values)",
         ("biharmonic", "harmonic"),
         label="Hole interpolation",
+        commands=VOLUME,
     )
     ground: str = _opt(
         "auto",
@@ -224,6 +238,7 @@ class Options:
         "what is not soil: auto (points the signals say are not soil are not gridded: the LAS classification as --ground selects it, colour (vegetation by its excess-green index) and return numbers on files without one; objects that moved between the surveys are left out of the headline; objects in one survey only are counted and listed), none (colour and returns not used, moved objects counted: the volumes --exclude auto lists are restored; the class-2 selection stays with --ground)",
         ("auto", "none"),
         label="Exclude what is not soil",
+        commands=POINTS,
     )
     lod_confidence: float = _opt(
         0.95,
@@ -231,6 +246,7 @@ class Options:
         label="Confidence level",
         lo=0.5,
         hi=0.999,
+        commands=VOLUME,
     )
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
     # run control

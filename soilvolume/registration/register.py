@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.cells import cell_index
+from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
 from ..options import Options
@@ -42,7 +43,7 @@ class Registration:
     transform: np.ndarray
     coarse: StageQuality
     fine: StageQuality
-    georeferencing: dict = field(default_factory=dict)
+    georeferencing: Georeferencing | None = None
 
 
 def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
@@ -214,6 +215,7 @@ def stable_source(
     target_xyz: np.ndarray,
     t: np.ndarray,
     cell: float = 1.0,
+    gap: float | None = None,
 ) -> np.ndarray:
     """The source with its fitted low-order deformation removed and its change areas dropped:
     what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
@@ -223,7 +225,7 @@ def stable_source(
     from ..dem.grid import average_height, make_grid
 
     src = transform_points(source_xyz, t)
-    cell = max(cell, 1.5 * spacing(target_xyz))
+    cell = max(cell, 1.5 * (spacing(target_xyz) if gap is None else gap))  # gap: the target's spacing
     grid = make_grid(src.min(axis=0), src.max(axis=0), cell, np.zeros(3), None)
     diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
     if np.isfinite(diff).sum() < 20:
@@ -316,7 +318,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     gap = spacing(before_xyz)
     judge = _judged(after_xyz, gap)
     if options.fine in ("icp", "gicp"):
-        (t, label), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
+        (t, label, rejected), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
         fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         return StageQuality(
             options.fine,
@@ -327,6 +329,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
             time.perf_counter() - t0,
             f"started from the {label} pose",
             alternative=alt,
+            beyond_prior=rejected,
         )
     best: StageQuality | None = None
     for init, label in starts:
@@ -349,8 +352,8 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     """ICP from the best start on the margin of the after survey, then refined twice on the
     stable ground found at the pose reached (works inside the survey never pull the pose); the
     pose that fits the margin best within the georeferencing prior wins. Returns ((transform,
-    label), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
-    uncertainty, None when there is none)."""
+    label, poses rejected beyond the prior), the other refined pose (margin-only or
+    stable-ground ICP) as an alternative for the uncertainty, None when there is none)."""
     method = options.fine
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
     src = _judged(after_xyz, gap)
@@ -362,7 +365,7 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap)
     poses = [(init, lab) for init, lab in starts] + [(t, label)]
     for _ in range(STABLE_PASSES):
-        src_stable = stable_source(after_xyz, before_xyz, t)
+        src_stable = stable_source(after_xyz, before_xyz, t, gap=gap)
         if len(src_stable) <= 100:
             break
         # src_stable is already in the before frame: refine a correction on top of t.
@@ -375,7 +378,7 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
     rejected = len(poses) - len(allowed)
     label = best[1] + (f"; {rejected} pose(s) beyond the georeferencing prior rejected" if rejected else "")
-    return (best[0], label), (others[-1] if others else None)
+    return (best[0], label, rejected), (others[-1] if others else None)
 
 
 def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
