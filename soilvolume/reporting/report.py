@@ -65,11 +65,14 @@ def summary_lines(report: dict) -> list[str]:
     v, u = report["volume_m3"], report["volume_uncompensated_m3"]
     g = report["grid"]
     fine = report["registration"]["fine"]
+    surface = (report.get("reference") or {}).get("kind") == "surface"
+    reg = fine["method"] if surface else f"{fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m"
+    words = ("net", "below design", "above design") if surface else ("net", "cut", "fill")
     return [
         f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
-        f"registration: {fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m",
+        f"registration: {reg}",
         f"volume (change areas, {report['correction']['method']} correction): "
-        f"net {v['net']:+.2f} m3  cut {v['cut']:.2f} m3  fill {v['fill']:.2f} m3",
+        f"{words[0]} {v['net']:+.2f} m3  {words[1]} {v['cut']:.2f} m3  {words[2]} {v['fill']:.2f} m3",
         f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
         f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
         f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",

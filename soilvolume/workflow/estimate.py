@@ -65,7 +65,12 @@ def _estimate(
     before, after, out: OutputDir, options: Options, timer: Timer, hooks: Hooks, before_pipeline, after_pipeline
 ) -> Result:
     from ..distributed.tiled import schedule_for
+    from ..inputs.surface import is_surface
 
+    if is_surface(before) and before_pipeline is None:  # a design or an earlier DEM as the reference
+        from .design import estimate_surface
+
+        return estimate_surface(before, after, out, options, timer, hooks, after_pipeline)
     schedule = schedule_for(before, after, options, before_pipeline or after_pipeline)
     if schedule.kind != "none":
         from ..distributed.tiled import estimate_tiled
