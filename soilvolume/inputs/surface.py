@@ -138,8 +138,8 @@ def valid_box(surface: Surface, frame_crs: pyproj.CRS, xy_unit: float) -> tuple[
     rows, cols = np.nonzero(np.isfinite(surface.heights))
     r = np.array([rows.min(), rows.min(), rows.max() + 1, rows.max() + 1], float)
     c = np.array([cols.min(), cols.max() + 1, cols.min(), cols.max() + 1], float)
-    x, y = surface.transform * (c, r)
-    x, y = np.asarray(x, float), np.asarray(y, float)
+    t = surface.transform
+    x, y = t.a * c + t.b * r + t.c, t.d * c + t.e * r + t.f
     src, dst = horizontal(surface.crs), horizontal(frame_crs)
     if not src.equals(dst):
         x, y = pyproj.Transformer.from_crs(src, dst, always_xy=True).transform(x, y, errcheck=False)

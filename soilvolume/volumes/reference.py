@@ -61,17 +61,20 @@ def merge(quality: dict, found: tuple[str, str]) -> dict:
 
 
 def design_terms(
-    counted: dict[str, np.ndarray], sigma_cell: np.ndarray, given_m: float, cell_area: float, z: float
+    counted: dict[str, np.ndarray], sigma_cell: np.ndarray, given_m: float, datum_m: float, cell_area: float, z: float
 ) -> dict:
     """The surface's share of the volume's interval (m³, at the ``z`` of the confidence), per
     budget (``counted``: net, cut, fill cell masks): its resampling error per cell
-    (``sigma_cell``, independent between cells) and a given uncertainty of the surface
-    (``given_m``, one error common to the counted area: a design's level is one number)."""
-    out: dict[str, dict[str, float]] = {"resampling": {}, "given": {}}
+    (``sigma_cell``, independent between cells); a given uncertainty of the surface (``given_m``,
+    one error common to the counted area: a design's level is one number); and the datum between
+    survey and surface, known only as well as the unchanged ground measures it (``datum_m``, one
+    sigma of its mean there; nothing removes it), common to the counted area too."""
+    out: dict[str, dict[str, float]] = {"resampling": {}, "given": {}, "datum": {}}
     for key, mask in counted.items():
-        s = np.nan_to_num(sigma_cell[mask])
+        s, area = np.nan_to_num(sigma_cell[mask]), float(mask.sum()) * cell_area
         out["resampling"][key] = float(z * np.sqrt(np.sum(s * s)) * cell_area)
-        out["given"][key] = float(z * given_m * mask.sum() * cell_area)
+        out["given"][key] = float(z * given_m * area)
+        out["datum"][key] = float(z * datum_m * area)
     return out
 
 
@@ -79,6 +82,6 @@ def with_terms(uncertainty: dict, terms: dict) -> dict:
     """The uncertainty record with the surface's terms added in quadrature to net, cut, fill."""
     out = {**uncertainty, "reference_m3": terms}
     for key in ("net", "cut", "fill"):
-        parts = [uncertainty[key], terms["resampling"][key], terms["given"][key]]
+        parts = [uncertainty[key], *(terms[part][key] for part in ("resampling", "given", "datum"))]
         out[key] = float(np.linalg.norm(parts))
     return out

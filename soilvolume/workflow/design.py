@@ -136,13 +136,15 @@ def _check_overlap(dem_a: gridmod.EpochDEM, dem_s: gridmod.EpochDEM, design: Pat
 
 def _with_surface_terms(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridSpec) -> Volumes:
     """The volume step's result with the surface's resampling error and given uncertainty in its interval."""
-    from ..volumes.uncertainty import z_value
+    from ..volumes.uncertainty import bias_sigma, z_value
 
+    u = vols.uncertainty
     cut = vols.cut_mask if vols.cut_mask is not None else np.zeros(sigma.shape, bool)
     counted = {"net": vols.change_mask, "cut": cut & vols.change_mask, "fill": vols.change_mask & ~cut}
-    terms = reference.design_terms(
-        counted, sigma, options.design_uncertainty, grid.cell_area, z_value(options.lod_confidence)
-    )
+    model = {"nugget": u["nugget_m2"], "psill": u["psill_m2"], "range": u["range_m"]}
+    datum = bias_sigma(u["stable_cells"], grid.cell, model, 1) if options.correction == "none" else 0.0
+    z = z_value(options.lod_confidence)
+    terms = reference.design_terms(counted, sigma, options.design_uncertainty, datum, grid.cell_area, z)
     return replace(vols, uncertainty=reference.with_terms(vols.uncertainty, terms))
 
 
