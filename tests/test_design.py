@@ -61,11 +61,13 @@ def test_survey_against_design_within_2_percent(site, tmp_path):
         grid_z, t = ds.read(1, masked=True), ds.transform
         rows, cols = np.nonzero(~grid_z.mask)
         x, y = t.c + t.a * (cols + 0.5), t.f + t.e * (rows + 0.5)
-        expected = np.array([v[0] for v in src.sample(zip(x, y))])
+        expected = np.array([v[0] for v in src.sample(zip(x, y, strict=True))])
         assert ds.crs == src.crs
     assert np.abs(grid_z.data[rows, cols] - expected).max() < 1e-3
-    print(f"net {v['net']:+.2f} ± {u['net']:.2f} (truth {truth['net']:+.2f}), cut {v['cut']:.2f} ± {u['cut']:.2f} "
-          f"({truth['cut']:.2f}), fill {v['fill']:.2f} ± {u['fill']:.2f} ({truth['fill']:.2f}), {seconds:.2f} s")
+    print(
+        f"net {v['net']:+.2f} ± {u['net']:.2f} (truth {truth['net']:+.2f}), cut {v['cut']:.2f} ± {u['cut']:.2f} "
+        f"({truth['cut']:.2f}), fill {v['fill']:.2f} ± {u['fill']:.2f} ({truth['fill']:.2f}), {seconds:.2f} s"
+    )
 
 
 def test_offset_design_is_not_reliable(site, tmp_path):
@@ -88,9 +90,18 @@ def test_reprojected_design_and_feet(site, tmp_path):
     with rasterio.open(utm) as src:
         t, w, h = calculate_default_transform(src.crs, "EPSG:4326", src.width, src.height, *src.bounds)
         out = np.full((h, w), np.nan, "float32")
-        reproject(src.read(1), out, src_transform=src.transform, src_crs=src.crs, dst_transform=t,
-                  dst_crs="EPSG:4326", src_nodata=np.nan, dst_nodata=np.nan)
-        with rasterio.open(geo, "w", **{**src.profile, "crs": "EPSG:4326", "transform": t, "width": w, "height": h}) as d:
+        reproject(
+            src.read(1),
+            out,
+            src_transform=src.transform,
+            src_crs=src.crs,
+            dst_transform=t,
+            dst_crs="EPSG:4326",
+            src_nodata=np.nan,
+            dst_nodata=np.nan,
+        )
+        profile = {**src.profile, "crs": "EPSG:4326", "transform": t, "width": w, "height": h}
+        with rasterio.open(geo, "w", **profile) as d:
             d.write(out, 1)
     report, _ = _run(geo, after, tmp_path / "geo")
     assert abs(report["volume_m3"]["net"] - truth["net"]) <= 0.02 * truth["net"]
