@@ -18,7 +18,7 @@ from conftest import run_cli
 from soilvolume.api import estimate
 from soilvolume.options import Options
 from soilvolume.scenes.config import SceneConfig
-from soilvolume.scenes.surfaces import write_surface
+from soilvolume.scenes.surfaces import Pad, pad_truth, write_surface
 from soilvolume.scenes.synthetic import make_pair, write_pair
 
 SEED = 3
@@ -67,6 +67,23 @@ def test_survey_against_design_within_2_percent(site, tmp_path):
     print(
         f"net {v['net']:+.2f} ± {u['net']:.2f} (truth {truth['net']:+.2f}), cut {v['cut']:.2f} ± {u['cut']:.2f} "
         f"({truth['cut']:.2f}), fill {v['fill']:.2f} ± {u['fill']:.2f} ({truth['fill']:.2f}), {seconds:.2f} s"
+    )
+
+
+@pytest.mark.parametrize("pad", [Pad(), Pad(fx=0.65, fy=0.35, half_x=12.0, half_y=9.0, level=0.8)])
+def test_survey_against_a_grading_plan(site, tmp_path, pad):
+    """A plan that is not the existing ground: a graded pad with 1:2 side slopes, in cut and in fill."""
+    folder, after, _ = site
+    truth = pad_truth(SEED, CONFIG, pad, res=0.1)
+    report, _ = _run(write_surface(folder / "pad.tif", SEED, CONFIG, pad=pad), after, tmp_path / "out")
+    v, u = report["volume_m3"], report["uncertainty_m3"]
+    for key in ("net", "cut", "fill"):
+        assert abs(v[key] - truth[key]) <= 0.02 * abs(truth[key]), (key, v[key], truth[key])
+    assert abs(v["net"] - truth["net"]) <= u["net"], (v["net"], truth["net"], u["net"])
+    assert report["quality"]["verdict"] == "reliable", report["quality"]
+    print(
+        f"pad {pad.level:+.1f} m: net {v['net']:+.2f} ± {u['net']:.2f} ({truth['net']:+.2f}), cut {v['cut']:.2f} "
+        f"± {u['cut']:.2f} ({truth['cut']:.2f}), fill {v['fill']:.2f} ± {u['fill']:.2f} ({truth['fill']:.2f})"
     )
 
 
