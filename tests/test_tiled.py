@@ -336,7 +336,7 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
     from soilvolume.api import Hooks
     from soilvolume.distributed.tilestore import TileStore
     from soilvolume.distributed.tiletask import TILE_ARRAYS
-    from soilvolume.distributed.volumestep import _grid_tiles
+    from soilvolume.distributed.volumestep import grid_tiles
 
     plan = _plan_of_missing_inputs(tmp_path)
     g = plan.grid
@@ -347,13 +347,13 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
         arrays = tuple(_tile_array(n, shape, k, counts) for n in TILE_ARRAYS)
         store.save(w, dict(zip(TILE_ARRAYS, arrays, strict=True)))
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
-        (after, before), medians, stats = _grid_tiles(c, plan, store, 4, Hooks())
+        (after, before), medians, stats = grid_tiles(c, plan, store, 4, Hooks())
         assert stats["read"] == 0 and medians == (5.5, 5.5)  # counts 4..7, 400 cells each
         assert after.heights.shape == (10, 10) and after.heights[0, 0] == 0 and after.heights[9, 9] == 3
         assert after.counts[0, 0] == 16 * 4  # a 4 x 4 block of cells with 4 points
         (tmp_path / "k1_h_a_20_40_20_40.npy").unlink()
         with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
-            _grid_tiles(c, plan, store, 4, Hooks())
+            grid_tiles(c, plan, store, 4, Hooks())
 
 
 def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, monkeypatch):
@@ -363,7 +363,7 @@ def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, 
     import signal
 
     from soilvolume.core.interrupt import Interrupted
-    from soilvolume.distributed import tiled
+    from soilvolume.distributed import tiletask
     from soilvolume.distributed.tiletask import TILE_ARRAYS
 
     def interrupted(c, plan, windows, hooks, store, stats):
@@ -371,7 +371,7 @@ def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, 
         store.save(w, {n: np.zeros((w[1] - w[0], w[3] - w[2])) for n in TILE_ARRAYS})
         raise Interrupted(signal.SIGINT)
 
-    monkeypatch.setattr(tiled, "run_tiles", interrupted)
+    monkeypatch.setattr(tiletask, "run_tiles", interrupted)
     before, after, _ = pair
     with pytest.raises(Interrupted, match=r"kept in .*\.r\.soilvolume-tiles for the same command to resume") as err:
         estimate(before, after, tmp_path / "r", Options(scheduler="threads:1", volume_step="whole"))

@@ -102,3 +102,22 @@ class StageQuality:
     seconds: float = 0.0
     note: str = ""
     alternative: np.ndarray | None = None  # a nearly as good pose (its spread from ``transform`` is uncertainty)
+
+
+@dataclass(frozen=True)
+class Epoch:
+    """One input of a run, in time order: a survey (a point cloud file, optionally prepared by a
+    PDAL ``pipeline``) or a surface (a DEM raster in metres; ``kind="surface"``), with its date
+    (ISO ``YYYY-MM-DD``) when known. A run takes one epoch (``dem``), two (``estimate``,
+    ``register``: the first is the reference), or more (a series)."""
+
+    path: Any  # str or pathlib.Path
+    pipeline: Any = None  # str or pathlib.Path of a preparation pipeline
+    date: str | None = None
+    kind: str = "survey"  # "survey" | "surface"
+
+    @property
+    def name(self) -> str:
+        from pathlib import Path
+
+        return Path(self.path).name

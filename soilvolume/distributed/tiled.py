@@ -1,5 +1,5 @@
-"""The distributed engine: the same method as the in-process run, with the point work done as
-Dask tasks, so no process holds a survey's points.
+"""The distributed engine's pieces (its executor: :mod:`.executor`): the same method as the
+in-process run, with the point work done as Dask tasks, so no process holds a survey's points.
 
 1. A first pass of tasks (:mod:`scan`) returns column-thinning sums, counts and chunk boxes;
    registration runs in the driver on the thinned subsets, as in-process.
@@ -22,31 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.hooks import Hooks, Result
-from ..core.outputs import OutputDir
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import choose_cell
 from ..inputs.footprint import footprint, inside, polygon_area
-from ..inputs.prepare import Prepared, prepare
+from ..inputs.prepare import Prepared
 from ..inputs.stream import open_source
 from ..options import Options
-from ..registration.rigid import transform_points
-from ..reporting.report import build_report, write_json
-from ..workflow.steps import (
-    add_quality,
-    correction_step,
-    planes_and_volumes,
-    register_pair,
-    shared_grid,
-    write_report_html,
-)
-from .cluster import checker
-from .cog import write_outputs
-from .fingerprint import run_parts
-from .scan import dask_loader
-from .schedule import Schedule, check_tiles, client, worker_gb
-from .tilestore import run_store
-from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan, epoch_dems, plan_parts, run_tiles, tiles
+from .schedule import Schedule
+from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan
 
 
 def data_tile_m(src, cell: float, side: int) -> float | None:
@@ -122,102 +105,16 @@ def _header_points(path) -> int | None:
     return open_source(path).count
 
 
-def estimate_tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule) -> Result:
-    """the in-process run (:mod:`soilvolume.workflow.estimate`) with the point work as Dask tasks on ``schedule``."""
-    if options.ground == "filter":
-        raise SoilVolumeError("--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)")
-    hooks.step(2, f"reading {before.name} and {after.name} (thinning for registration)")
-    with run_store(out.final) as store, client(schedule, options.memory_limit, store.scratch) as starting:
-        return _tiled(before, after, out, options, timer, hooks, schedule, (starting, store))
-
-
-def _tiled(before, after, out: OutputDir, options: Options, timer, hooks: Hooks, schedule: Schedule, started) -> Result:
-    """The tiled run, with ``started`` = (the :class:`cluster.Starting` client, the run's
-    :class:`tilestore.RunStore`)."""
-    starting, store = started
-    with timer("cluster_wait"):
-        c = starting.result(checker(hooks))
-    with timer("crop"):  # the registration subsets: a first pass as Dask tasks
-        src_b, src_a = open_source(before), open_source(after)
-        prep = prepare(
-            src_b,
-            src_a,
-            options,
-            check=lambda: hooks.step(5, "reading"),
-            full=False,
-            loader=dask_loader(c, lambda m: hooks.step(8, m), checker(hooks)),
-        )
-    reg, options = register_pair(prep, options, hooks, timer)
-    after_thin = transform_points(prep.after_thin, reg.transform)
-    cell = options.cell if options.cell else cell_from_columns(prep, after_thin)
-    grid = shared_grid(prep, after_thin, options.with_(cell=cell))
-    plan = Plan(
-        str(before),
-        str(after),
-        prep.inputs["before"]["crs_wkt"],
-        prep.inputs["after"]["crs_wkt"],
-        prep.frame,
-        prep.origin,
-        grid,
-        reg.transform,
-        prep.ground,
-        footprint(prep.after_thin[:, :2], options.radius),
-        options.statistic,
-        prep.index,
-        prep.rules,
+def plan_for(run, cell: float) -> Plan:
+    """What every tile task of ``run`` (:class:`soilvolume.workflow.run.Run`) needs (picklable)."""
+    prep, options = run.prep, run.options
+    b, a = (str(e.path) for e in run.epochs)
+    crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
+    ring = footprint(prep.after_thin[:, :2], options.radius)
+    grid, t = run.grid, run.reg.transform
+    return Plan(
+        b, a, *crs, prep.frame, prep.origin, grid, t, prep.ground, ring, options.statistic, prep.index, prep.rules
     )
-    task_gb, density = worker_gb(schedule, options.memory_limit), points_per_cell(prep, cell)
-    side = tile_side(options, grid, density, task_gb, schedule.workers)
-    align = None if options.tile_cells else data_tile_m(src_b, cell, 2 * side)
-    if align and not fits(density * (align / cell) ** 2, task_gb):
-        align = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
-    if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
-        side = max(1, round(align / cell))
-    windows = tiles(grid, side, align)
-    check_tiles(windows, density, task_gb, options)
-    hooks.step(55, f"gridding {len(windows)} tiles of {side} x {side} cells on {schedule}")
-    k = volume_factor(options, grid, schedule)
-    said = store.bind(run_parts(before, after, options, plan_parts(plan, windows, k)))
-    if said:
-        hooks.step(55, said)
-    tiles_kept = store.tiles(windows)
-    if k > 1:
-        from .volumestep import tiled_volume_step
-
-        report, stats, html = tiled_volume_step(
-            c, plan, tiles_kept, k, (prep, reg, after_thin), out, options, timer, hooks
-        )
-    else:
-        with timer("grids"):
-            dem_a, dem_b = epoch_dems(run_tiles(c, plan, windows, hooks, tiles_kept, stats := {}), plan.rules)
-        hooks.step(70, correction_step(options))
-        vols, p_b, p_a = planes_and_volumes(prep, reg, grid, dem_a, dem_b, after_thin, options, timer, hooks)
-        hooks.step(85, "writing outputs (COG)")
-        with timer("write"):
-            arrays = {"dem_b": vols.dem_b, "dem_a": vols.dem_a}
-            arrays.update(diff=vols.diff, offset=vols.offset, filled_mask=vols.filled_mask, classes=vols.classes)
-            write_outputs(out, lambda key, r, c: arrays[key][r, c], grid, float(prep.origin[2]), options.correction)
-        with timer("report"):
-            report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
-            add_quality(report, vols, grid, options, hooks)
-    report["engine"] = {
-        "scheduler": str(schedule),
-        "tiles": len(windows),
-        "tile_cells": side,
-        "points_per_cell": round(density, 3),
-        "volume_step": "whole grid" if k == 1 else f"tiles, overview of {k} x {k} cells",
-        "tiles_resumed": stats["resumed"],
-        "kept_tiles_discarded": said,
-        "task_points_read": stats["read"],
-        "task_seconds": round(stats["seconds"], 3),
-        "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
-    }
-    with timer("report"):
-        write_json(out.path("report.json"), report)
-        if k == 1:
-            html = (vols, grid, dem_a.heights + prep.origin[2])
-        write_report_html(out, report, *html)
-    return Result(report)
 
 
 def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:

@@ -1,6 +1,7 @@
-"""The driver's side of the tiled volume step (see :mod:`volumetiles`): grid the tiles into the
-store with an overview, run the volume step on the overview, then on every tile, and write
-the outputs from the store."""
+"""The driver's side of the tiled volume step (see :mod:`volumetiles`; the order is
+:mod:`soilvolume.workflow.run`'s): grid the tiles into the store with an overview, then, given
+the volume step of the overview, the volume step on every tile; the outputs are read from the
+store."""
 
 from __future__ import annotations
 
@@ -9,49 +10,35 @@ from dataclasses import replace
 import numpy as np
 
 from ..core.hooks import Hooks
-from ..core.outputs import OutputDir
 from ..dem.grid import MASK_LAYER, UINT8_LAYERS, EpochDEM
-from ..reporting.report import build_report
 from ..volumes.zones import check_inside
-from ..workflow.steps import add_quality, alternative_move, planes_and_volumes
+from ..workflow.steps import alternative_move
 from . import overview
-from .cog import write_outputs
 from .tilestore import TileStore
 from .tiletask import TILE_ARRAYS, map_tiles
 from .volumetiles import VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
 
 
-def tiled_volume_step(c, plan, store: TileStore, k: int, run: tuple, out: OutputDir, options, timer, hooks: Hooks):
-    """(report, task stats, report.html arguments) of a run whose volume step goes tile by tile,
-    its tiles kept in ``store``; ``run`` = (prepared pair, registration, registered after subset)."""
-    prep, reg, after_thin = run
-    grid, windows = plan.grid, list(store.windows)
-    with timer("grids"):
-        epochs, medians, stats = _grid_tiles(c, plan, store, k, hooks)
-    hooks.step(70, f"estimating the vertical bias correction on a {k} x {k} overview of the grid")
-    coarse = overview.coarse(grid, k)
-    over, p_b, p_a = planes_and_volumes(prep, reg, coarse, *epochs, after_thin, options, timer, hooks)
-    job = VolumeJob(
-        store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), alternative_move(reg)
-    )
-    job = replace(job, rules=prep.rules)
-    with timer("volume"):
-        tiles = list(map_tiles(c, volume_tile, job, windows, hooks=hooks, steps=(75, 85, "volumes of")))
-        order = {w: i for i, w in enumerate(windows)}
-        tiles.sort(key=lambda t: order[t["window"]])  # the same sums whatever the finishing order
-        vols = combine(tiles, over, grid.cell, k)
-        if options.zones:
-            check_inside(vols.zones, options.zones)
-    hooks.step(85, "writing outputs (COG)")
-    with timer("write"):
-        write_outputs(out, _reader(store), grid, float(prep.origin[2]), options.correction)
-    with timer("report"):
-        report = build_report(prep, reg, grid, vols, p_b, p_a, options, timer)
-        add_quality(report, vols, coarse, options, hooks)
-    return report, stats, (vols, coarse, epochs[0].heights + prep.origin[2])
+def tile_volumes(c, store: TileStore, k: int, over, run, medians: tuple):
+    """The volume step tile by tile on the workers, given the correction ``over`` found on the
+    overview (the volume step of the overview grid), combined into the grid's ``Volumes``."""
+    grid, options, reg = run.grid, run.options, run.reg
+    p_b, p_a, _ = run.planes
+    moved = alternative_move(reg)
+    job = VolumeJob(store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), moved)
+    job = replace(job, rules=run.prep.rules)
+    windows = list(store.windows)
+    steps = (*run.spans["volume"], "volumes of")
+    tiles = list(map_tiles(c, volume_tile, job, windows, hooks=run.hooks, steps=steps))
+    order = {w: i for i, w in enumerate(windows)}
+    tiles.sort(key=lambda t: order[t["window"]])  # the same sums whatever the finishing order
+    vols = combine(tiles, over, grid.cell, k)
+    if options.zones:
+        check_inside(vols.zones, options.zones)
+    return vols
 
 
-def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
+def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
     """Grid every tile into ``store`` (tiles already there are summarized, not run again):
     ((after, before) DEMs of the overview, (after, before) median counts, stats)."""
     coarse = overview.coarse(plan.grid, k)
@@ -83,7 +70,7 @@ def _grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
     return tuple(epochs), medians, stats
 
 
-def _reader(store: TileStore):
+def reader(store: TileStore):
     def get(key: str, rows: slice, cols: slice) -> np.ndarray:
         win = (rows.start, rows.stop, cols.start, cols.stop)
         if key in UINT8_LAYERS:  # the refilled mask, the classes: no NaN to fill with

@@ -55,6 +55,32 @@ def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return s @ t_local @ s_inv
 
 
+def registration_summary(reg, origin: np.ndarray) -> dict:
+    """What ``soilvolume register`` returns: the absolute 4x4, each stage and the georeferencing decision."""
+    return _clean(
+        {
+            "transform": absolute_transform(reg.transform, origin),
+            "coarse": stage_dict(reg.coarse),
+            "fine": stage_dict(reg.fine),
+            "georeferencing": reg.georeferencing,
+        }
+    )
+
+
+def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
+    """What ``soilvolume dem`` returns: the grid written and the points behind it."""
+    return {
+        "cell_m": grid.cell,
+        "rows": grid.rows,
+        "cols": grid.cols,
+        "crs": one.frame.crs.name,
+        "transform": list(grid.transform)[:6],
+        "points": int(len(one.xyz)),
+        "valid_cells": int(np.isfinite(heights).sum()),
+        "selection": one.note,
+    }
+
+
 def write_json(path: Path, report: dict) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(_clean(report), indent=2))
@@ -118,8 +144,10 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
     """report.json of an estimate run (``timer.s``: seconds per stage)."""
     from dataclasses import asdict
 
+    from .surface import amend
+
     t_abs = absolute_transform(reg.transform, prep.origin)
-    return {
+    report = {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
         "volume_m3": vols.compensated,
         "volume_method": (
@@ -187,3 +215,4 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
         "options": asdict(options),
         "timings_s": dict(timer.s),
     }
+    return amend(report, prep, vols)  # a run against a surface: its reference

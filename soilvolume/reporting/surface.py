@@ -5,10 +5,29 @@ from __future__ import annotations
 
 import html
 
+NONE = "none: the reference is a surface"  # report.json's registration.kind of such a run
+WORDING = {"fill": "above design", "cut": "below design", "net": "above minus below design"}
+METHOD = (
+    "the survey against the reference surface (resampled onto the survey's grid): fill = the survey above the "
+    "design, cut = below it, over the survey's footprint clipped to the design's valid extent; "
+)
+
 
 def is_surface(report: dict) -> bool:
     """Whether the run's reference is a surface (report.json's ``reference.kind``)."""
     return (report.get("reference") or {}).get("kind") == "surface"
+
+
+def amend(report: dict, prep, vols) -> dict:
+    """report.json of a run against a surface (``prep.inputs["before"]`` describes it):
+    ``reference``, the registration's kind, the volumes' wording; others returned as they are."""
+    ref = (prep.inputs or {}).get("before") or {}
+    if ref.get("kind") != "surface":
+        return report
+    report["registration"]["kind"] = NONE
+    report["reference"] = {**ref, "wording": WORDING, "uncertainty_m3": vols.uncertainty.get("reference_m3")}
+    report["volume_method"] = METHOD + report["volume_method"]
+    return report
 
 
 def words(report: dict) -> tuple[str, str, str]:

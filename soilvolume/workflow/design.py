@@ -6,29 +6,28 @@ survey's agreement with the surface on unchanged ground joins the verdict (volum
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from ..core.hooks import Hooks, Result
+from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.types import GridSpec, SoilVolumeError, StageQuality
 from ..dem import grid as gridmod
 from ..inputs.prepare import Prepared
 from ..inputs.surface import Surface, on_grid, read_surface, valid_box
 from ..options import Options
+from ..reporting.surface import NONE
 from ..volumes import reference
 from ..volumes.compute import Volumes
-from .steps import Timer, write_report_html
 
-NONE = "none: the reference is a surface"
 NOT_REGISTERED = (
     f"registration: {NONE} (nothing is registered against a design: the survey must be well georeferenced; "
     "its agreement with the design on unchanged ground is checked)"
 )
 DESIGN_COUNT = 1000  # the points a surface cell stands for: never weak, never refilled as sparse
-WORDING = {"fill": "above design", "cut": "below design", "net": "above minus below design"}
 
 
 class _NoPlane:
@@ -38,42 +37,69 @@ class _NoPlane:
         return None
 
 
-def estimate_surface(design: Path, after: Path, out: OutputDir, options: Options, timer: Timer, hooks: Hooks, pipe):
-    """The run of :mod:`soilvolume.workflow.estimate` with a surface as the reference (``pipe``:
-    the after cloud's PDAL pipeline)."""
-    from ..inputs.prepare import prepare_survey
-    from ..inputs.stream import open_source
-    from ..volumes.compute import compute_volumes
+class SurfaceReference:
+    """The executor of an estimate whose reference is a surface (see module): the run's steps
+    are :data:`soilvolume.workflow.run.COMMAND_STEPS` ``["surface"]``, without register and
+    planes; the survey's point work is in-process."""
 
-    surface = read_surface(design, options.before_crs)  # before any point is read: bad rasters fail fast
-    options = _options(options, hooks)
-    hooks.step(2, f"reading {after.name} (the reference is the surface {design.name})")
-    with timer("crop"):
-        prep = prepare_survey(open_source(after, pipe), options, check=hooks.ticker(2, 15, "reading"))
-    timer.s["read"], timer.s["crop"] = prep.read_s, timer.s["crop"] - prep.read_s
-    prep = replace(prep, inputs={"before": surface.describe(), **prep.inputs})
-    hooks.info(NOT_REGISTERED)
-    hooks.step(55, f"gridding the survey and resampling {design.name} onto its grid")
-    with timer("grids"):
-        grid = survey_grid(prep, surface, options)
-        dem_a = gridmod.epoch_dem(prep.after.xyz, grid, options.statistic, prep.after.nonsoil)
-        dem_s, sigma = surface_epoch(surface, grid, options.design_uncertainty)
-        _check_overlap(dem_a, dem_s, design, after)
-    hooks.step(75, "computing the difference and volumes above and below the design")
-    with timer("volume"):
-        vols = compute_volumes(dem_a, dem_s, np.zeros((grid.rows, grid.cols)), grid, options)
-        vols = _with_surface_terms(vols, sigma, options, grid)
-    hooks.step(85, "writing outputs")
-    with timer("write"):
-        _write_rasters(out, vols, grid)
-    with timer("report"):
-        from ..reporting.report import write_json
+    reading_note = " (the reference is a surface)"
+    raster_note = ""
 
-        report = surface_report(prep, grid, vols, surface, options, timer)
-        add_surface_quality(report, vols, grid, options, hooks)
-        write_json(out.path("report.json"), report)
-        write_report_html(out, report, vols, grid, dem_a.heights + grid.origin[2])
-    return Result(report)
+    def __init__(self) -> None:
+        self.surface: Surface | None = None
+        self.sigma: np.ndarray | None = None
+
+    @contextmanager
+    def session(self, run):
+        yield self
+
+    def prepare(self, run) -> None:
+        """The surface read and checked (before any point), then the survey alone; nothing registered."""
+        from ..inputs.prepare import prepare_survey
+        from ..inputs.stream import open_source
+        from ..registration.register import Registration
+
+        design, after = run.epochs
+        self.surface = read_surface(Path(design.path), run.options.before_crs)
+        run.options = _options(run.options, run.hooks)
+        check = run.hooks.ticker(*run.spans["prepare"], "reading")
+        prep = prepare_survey(open_source(after.path, after.pipeline), run.options, check=check)
+        run.timer.s["read"] = prep.read_s
+        run.timer.s["crop"] = run.timer.s.get("crop", 0.0) - prep.read_s
+        run.prep = replace(prep, inputs={"before": self.surface.describe(), **prep.inputs})
+        stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)
+        georef = {"requested": run.options.georeferencing, "used": "none", "reason": "the reference is a surface"}
+        run.reg = Registration(np.eye(4), stage, stage, georef)
+        run.hooks.info(NOT_REGISTERED)
+
+    def grid(self, run) -> None:
+        """The survey's grid clipped to the surface, its DEM, and the surface resampled onto it."""
+        prep = run.prep
+        run.after_thin = prep.after_thin
+        grid = run.grid = survey_grid(prep, self.surface, run.options)
+        dem_a = gridmod.epoch_dem(prep.after.xyz, grid, run.options.statistic, prep.after.nonsoil)
+        dem_s, self.sigma = surface_epoch(self.surface, grid, run.options.design_uncertainty)
+        _check_overlap(dem_a, dem_s, self.surface.path, prep.after.path)
+        run.dems = (dem_a, dem_s)
+        run.planes = (_NoPlane(), _NoPlane(), np.zeros((grid.rows, grid.cols)))
+
+    def correction_grid(self, run) -> tuple:
+        return run.grid, run.dems
+
+    def volume(self, run) -> Volumes:
+        from ..volumes.compute import compute_volumes
+
+        vols = compute_volumes(run.dems[0], run.dems[1], run.planes[2], run.grid, run.options)
+        return _with_surface_terms(vols, self.sigma, run.options, run.grid)
+
+    def write(self, run) -> None:
+        _write_rasters(run.out, run.vols, run.grid)
+
+    def engine(self, run) -> dict | None:
+        return None
+
+    def html(self, run) -> tuple:
+        return run.vols, run.grid, run.dems[0].heights + run.grid.origin[2]
 
 
 def _options(options: Options, hooks: Hooks) -> Options:
@@ -163,27 +189,9 @@ def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec) -> None:
         gridmod.write_geotiff(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)
 
 
-def surface_report(prep: Prepared, grid: GridSpec, vols: Volumes, surface: Surface, options: Options, timer) -> dict:
-    """report.json of a run against a surface: an estimate's, with ``reference`` and no registration."""
-    from ..registration.register import Registration
-    from ..reporting.report import build_report
-
-    stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)
-    georef = {"requested": options.georeferencing, "used": "none", "reason": "the reference is a surface"}
-    reg = Registration(np.eye(4), stage, stage, georef)
-    report = build_report(prep, reg, grid, vols, _NoPlane(), _NoPlane(), options, timer)
-    report["registration"]["kind"] = NONE
-    report["reference"] = {**surface.describe(), "wording": WORDING, "uncertainty_m3": vols.uncertainty["reference_m3"]}
-    report["volume_method"] = (
-        "the survey against the reference surface (resampled onto the survey's grid): fill = the survey above "
-        "the design, cut = below it, over the survey's footprint clipped to the design's valid extent; "
-        + report["volume_method"]
-    )
-    return report
-
-
 def add_surface_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:
-    """The verdict (volumes/quality) with the survey's agreement with the surface first, logged."""
+    """The verdict (volumes/quality) with the survey's agreement with the surface first, logged
+    (:func:`soilvolume.workflow.steps.add_quality` of a run against a surface)."""
     from ..compensation.correction import stable_cells
     from ..volumes.quality import assess
 

@@ -1,11 +1,10 @@
-"""Steps shared by the in-process run (:mod:`.estimate`) and the tiled one
-(:mod:`soilvolume.distributed.tiled`): stage timings, reading the pair, the shared grid, the
-points on valid cells, report.html."""
+"""The pieces of the steps both executors share (:mod:`.executors`, the tiled
+:mod:`soilvolume.distributed.executor`): reading the pair, registration with its
+georeferencing decision, the shared grid, the planes, the volume step, the quality verdict,
+report.html. The order they run in is :mod:`.run`'s."""
 
 from __future__ import annotations
 
-import time
-from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -19,23 +18,6 @@ from ..inputs.prepare import Prepared, prepare
 from ..options import Options
 from ..validate import check_grid_cells
 from ..volumes.compute import Volumes
-
-REGISTERING = "registering the after cloud onto the before cloud (coarse, then fine)"
-
-
-class Timer:
-    """Per-stage wall times (seconds), in the order they ran."""
-
-    def __init__(self) -> None:
-        self.s: dict[str, float] = {}
-
-    @contextmanager
-    def __call__(self, name: str):
-        t0 = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.s[name] = self.s.get(name, 0.0) + time.perf_counter() - t0
 
 
 def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> GridSpec:
@@ -53,11 +35,12 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> Gri
     return grid
 
 
-def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline) -> Prepared:
+def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline, spans) -> Prepared:
+    """Both clouds read whole (:func:`inputs.prepare.prepare`), progress within ``spans["prepare"]``."""
     from ..inputs.stream import open_source
 
     src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
-    return prepare(src_b, src_a, options, check=hooks.ticker(2, 15, "reading"))
+    return prepare(src_b, src_a, options, check=hooks.ticker(*spans["prepare"], "reading"))
 
 
 def moved_nonsoil(prep: Prepared, reg):
@@ -93,31 +76,22 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
     write_html(report, arrays, grid, out.path("report.html"))
 
 
-def planes_and_volumes(
-    prep: Prepared,
-    reg,
-    grid: GridSpec,
-    dem_after: gridmod.EpochDEM,
-    dem_before: gridmod.EpochDEM,
-    after_thin: np.ndarray,
-    options: Options,
-    timer,
-    hooks: Hooks,
-):
-    """The paper's two RANSAC planes and d_i, then the volume step, from both epochs' DEMs:
-    (Volumes, plane before, plane after)."""
+def planes_step(prep: Prepared, grid: GridSpec, dem_before: gridmod.EpochDEM, after_thin: np.ndarray, options):
+    """The paper's two RANSAC planes (before on its valid cells, registered after) and d_i per
+    cell: (plane before, plane after, d_i)."""
     from ..compensation import planes
+
+    sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
+    p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+    p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+    return p_b, p_a, planes.plane_offset(p_b, p_a, grid)
+
+
+def volume_step(dems: tuple, d_i: np.ndarray, grid: GridSpec, options: Options, reg) -> Volumes:
+    """The volume step (:func:`volumes.compute.compute_volumes`) on the (after, before) DEMs."""
     from ..volumes.compute import compute_volumes
 
-    with timer("planes"):
-        sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
-        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-        p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
-        d_i = planes.plane_offset(p_b, p_a, grid)
-    hooks.step(75, "computing the difference and volumes")
-    with timer("volume"):
-        vols = compute_volumes(dem_after, dem_before, d_i, grid, options, moved=alternative_move(reg))
-    return vols, p_b, p_a
+    return compute_volumes(dems[0], dems[1], d_i, grid, options, moved=alternative_move(reg))
 
 
 def correction_step(options: Options) -> str:
@@ -134,8 +108,14 @@ def alternative_move(reg) -> np.ndarray | None:
 
 
 def add_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:
-    """The quality verdict (see :mod:`soilvolume.volumes.quality`) into ``report``, logged."""
+    """The quality verdict (see :mod:`soilvolume.volumes.quality`) into ``report``, logged; a run
+    against a surface also checks their agreement (:mod:`.design`)."""
     from ..volumes.quality import assess
+
+    if (report.get("reference") or {}).get("kind") == "surface":
+        from .design import add_surface_quality
+
+        return add_surface_quality(report, vols, grid, options, hooks)
 
     prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
     report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior, vols.diff)
@@ -143,23 +123,25 @@ def add_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, h
         hooks.info(f"quality ({report['quality']['verdict']}): {line}")
 
 
-def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense=None):
+def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense, progress: tuple):
     """Decide how far the georeferencing is trusted, then register: (Registration, the options
-    the rest of the run uses; precise surveys get no bias correction)."""
-    from ..registration.georef import resolve
-    from ..registration.register import register
-
-    mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
-    hooks.info(f"georeferencing: {mode} ({why})")
-    if mode == "precise":
-        options = options.with_(correction="none")
-    hooks.step(15, REGISTERING)
+    the rest of the run uses; precise surveys get no bias correction). ``register_other`` in
+    the timings: the decision and the imports, beside the coarse and fine stages."""
     with timer("register"):
+        from ..registration.georef import resolve
+        from ..registration.register import register
+
+        mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
+        hooks.info(f"georeferencing: {mode} ({why})")
+        if mode == "precise":
+            options = options.with_(correction="none")
+        lo, hi, message = progress  # the run's span and message of the step (workflow/run.PROGRESS)
+        hooks.step(lo, message)
         reg = register(
             prep.after_thin,
             prep.before_thin,
             options,
-            check=hooks.ticker(15, 55, REGISTERING),
+            check=hooks.ticker(lo, hi, message),
             dense=dense,
             precise=mode == "precise",
         )

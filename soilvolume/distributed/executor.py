@@ -1,0 +1,163 @@
+"""The tiled executor of :mod:`soilvolume.workflow.run`: the same steps, with the point work as
+Dask tasks (see :mod:`.tiled`), so no process holds a survey's points. Registration runs in the
+driver on the thinned subsets a first pass of tasks returns; the grid is cut into tiles; with
+``--volume-step tiles`` the volume step runs tile by tile too (:mod:`.volumestep`)."""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+
+from ..core.types import SoilVolumeError
+from .schedule import Schedule
+
+
+class Tiled:
+    """Point work as tile tasks on the cluster ``schedule`` names; tiles kept in the run's store."""
+
+    reading_note = " (thinning for registration)"
+    raster_note = " (COG)"
+
+    def __init__(self, schedule: Schedule) -> None:
+        self.schedule = schedule
+        self.c = self.store = self.plan = None
+        self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
+        self.coarse = self.over_epochs = self.medians = None
+
+    @contextmanager
+    def session(self, run):
+        from .cluster import checker
+        from .schedule import client
+        from .tilestore import run_store
+
+        if run.options.ground == "filter":
+            raise SoilVolumeError(
+                "--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)"
+            )
+        with run_store(run.out.final) as store, client(self.schedule, run.options.memory_limit, store.scratch) as s:
+            self.store = store
+            with run.timer("cluster_wait"):
+                self.c = s.result(checker(run.hooks))
+            yield self
+
+    def prepare(self, run) -> None:
+        from ..inputs.prepare import prepare
+        from ..inputs.stream import open_source
+        from .cluster import checker
+        from .scan import dask_loader
+
+        hooks = run.hooks
+        self.src_b, src_a = (open_source(e.path) for e in run.epochs)
+        loader = dask_loader(self.c, lambda m: hooks.step(run.at("prepare", 0.46), m), checker(hooks))
+        check = lambda: hooks.step(run.at("prepare", 0.23), "reading")  # noqa: E731
+        run.prep = prepare(self.src_b, src_a, run.options, check=check, full=False, loader=loader)
+
+    def dense(self, run) -> None:
+        return None  # no process holds the full-resolution points
+
+    def grid(self, run) -> None:
+        from ..registration.rigid import transform_points
+        from ..workflow.steps import shared_grid
+        from .fingerprint import run_parts
+        from .tiled import cell_from_columns, plan_for, volume_factor
+        from .tiletask import plan_parts
+
+        prep, reg, options = run.prep, run.reg, run.options
+        run.after_thin = transform_points(prep.after_thin, reg.transform)
+        cell = options.cell if options.cell else cell_from_columns(prep, run.after_thin)
+        run.grid = shared_grid(prep, run.after_thin, options.with_(cell=cell))
+        self.plan = plan_for(run, cell)
+        self.windows, self.side, self.density = self._tiles(run, cell)
+        run.hooks.step(
+            run.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
+        )
+        self.k = volume_factor(options, run.grid, self.schedule)
+        epochs = [e.path for e in run.epochs]
+        self.said = self.store.bind(run_parts(*epochs, options, plan_parts(self.plan, self.windows, self.k)))
+        if self.said:
+            run.hooks.step(run.at("grid"), self.said)
+        self.kept = self.store.tiles(self.windows)
+        if self.k > 1:
+            from . import overview
+            from .volumestep import grid_tiles
+
+            self.over_epochs, self.medians, self.stats = grid_tiles(self.c, self.plan, self.kept, self.k, run.hooks)
+            self.coarse = overview.coarse(run.grid, self.k)
+        else:
+            from .tiletask import epoch_dems, run_tiles
+
+            self.stats = {}
+            arrays = run_tiles(self.c, self.plan, self.windows, run.hooks, self.kept, self.stats)
+            run.dems = epoch_dems(arrays, self.plan.rules)
+
+    def _tiles(self, run, cell: float) -> tuple:
+        """(the tile windows, their side in cells, points per cell) for the run's grid."""
+        from .schedule import check_tiles, worker_gb
+        from .tiled import data_tile_m, fits, points_per_cell, tile_side
+        from .tiletask import tiles
+
+        options, grid = run.options, run.grid
+        task_gb, density = worker_gb(self.schedule, options.memory_limit), points_per_cell(run.prep, cell)
+        side = tile_side(options, grid, density, task_gb, self.schedule.workers)
+        align = None if options.tile_cells else data_tile_m(self.src_b, cell, 2 * side)
+        if align and not fits(density * (align / cell) ** 2, task_gb):
+            align = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
+        if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
+            side = max(1, round(align / cell))
+        windows = tiles(grid, side, align)
+        check_tiles(windows, density, task_gb, options)
+        return windows, side, density
+
+    def correction_grid(self, run) -> tuple:
+        """(the grid, the (after, before) DEMs) the planes and the correction are found on: the
+        overview's with the volume step in tiles."""
+        return (self.coarse, self.over_epochs) if self.k > 1 else (run.grid, run.dems)
+
+    def correction_note(self, run) -> str | None:
+        k = self.k
+        return f"estimating the vertical bias correction on a {k} x {k} overview of the grid" if k > 1 else None
+
+    def volume(self, run):
+        from ..workflow.steps import volume_step
+
+        if self.k == 1:
+            return volume_step(run.dems, run.planes[2], run.grid, run.options, run.reg)
+        from .volumestep import tile_volumes
+
+        over = volume_step(self.over_epochs, run.planes[2], self.coarse, run.options, run.reg)
+        return tile_volumes(self.c, self.kept, self.k, over, run, self.medians)
+
+    def write(self, run) -> None:
+        from .cog import write_outputs
+
+        if self.k > 1:
+            from .volumestep import reader
+
+            get = reader(self.kept)
+        else:
+            v = run.vols
+            arrays = {"dem_b": v.dem_b, "dem_a": v.dem_a, "diff": v.diff, "offset": v.offset}
+            arrays.update(filled_mask=v.filled_mask, classes=v.classes)
+            get = lambda key, r, c: arrays[key][r, c]  # noqa: E731
+        write_outputs(run.out, get, run.grid, float(run.prep.origin[2]), run.options.correction)
+
+    def engine(self, run) -> dict:
+        """report.json's ``engine``: where the tiles ran and what they cost."""
+        k, stats = self.k, self.stats
+        return {
+            "scheduler": str(self.schedule),
+            "tiles": len(self.windows),
+            "tile_cells": self.side,
+            "points_per_cell": round(self.density, 3),
+            "volume_step": "whole grid" if k == 1 else f"tiles, overview of {k} x {k} cells",
+            "tiles_resumed": stats["resumed"],
+            "kept_tiles_discarded": self.said,
+            "task_points_read": stats["read"],
+            "task_seconds": round(stats["seconds"], 3),
+            "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
+        }
+
+    def html(self, run) -> tuple:
+        z0 = run.prep.origin[2]
+        if self.k > 1:
+            return run.vols, self.coarse, self.over_epochs[0].heights + z0
+        return run.vols, run.grid, run.dems[0].heights + z0

@@ -1,0 +1,181 @@
+"""The one orchestrator: a run is the method's steps in order, driven once, each step's point work
+done by an executor chosen from the schedule (in-process arrays, :mod:`.executors`, or tile
+tasks, :mod:`soilvolume.distributed.executor`). Every command is a shortened run of the same
+pipeline (:data:`COMMAND_STEPS`); one progress table (:data:`PROGRESS`) serves them all."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.hooks import Hooks
+from ..core.types import Epoch, GridSpec
+from ..options import Options
+from .timing import Timer
+
+#: step -> (start %, end %, message) of an estimate; a shorter run spreads its steps over 0-100
+PROGRESS: dict[str, tuple[float, float, str]] = {
+    "prepare": (2, 15, "reading {epochs}"),
+    "register": (15, 55, "registering the after cloud onto the before cloud (coarse, then fine)"),
+    "grid": (55, 70, "gridding the average heights"),
+    "planes": (70, 75, "{correction}"),
+    "volume": (75, 85, "computing the difference and volumes"),
+    "write": (85, 97, "writing outputs"),
+    "report": (97, 100, "writing the report"),
+}
+#: the steps of each command, in the pipeline's order
+COMMAND_STEPS: dict[str, tuple[str, ...]] = {
+    "estimate": tuple(PROGRESS),
+    "register": ("prepare", "register", "write"),
+    "dem": ("prepare", "grid", "write"),
+    "surface": ("prepare", "grid", "volume", "write", "report"),  # estimate against a surface: nothing registered
+}
+
+
+def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
+    """Each step's percent range: the table's for a whole run, its share of 0-100 for a shorter one."""
+    if steps == tuple(PROGRESS):
+        return {s: PROGRESS[s][:2] for s in steps}
+    widths = [PROGRESS[s][1] - PROGRESS[s][0] for s in steps]
+    total, at, out = sum(widths), 0.0, {}
+    for s, w in zip(steps, widths, strict=True):
+        out[s] = (round(100 * at / total, 1), round(100 * (at + w) / total, 1))
+        at += w
+    return out
+
+
+@dataclass
+class Run:
+    """A run's inputs and what its steps produced so far (the executors fill it in)."""
+
+    command: str
+    epochs: tuple[Epoch, ...]
+    options: Options
+    hooks: Hooks
+    timer: Timer = field(default_factory=Timer)
+    out: Any = None  # core.outputs.OutputDir of an estimate
+    cloud_out: Path | None = None  # where the registered after cloud goes (register, --registered-cloud)
+    raster_out: Path | None = None  # the DEM of a dem run
+    crs: str | None = None  # dem: the cloud's CRS when its header has none
+    bounds: tuple | None = None  # dem: xmin, ymin, xmax, ymax in the cloud's CRS
+    spans: dict = field(default_factory=dict)
+    prep: Any = None  # inputs.prepare.Prepared (Single for one epoch)
+    reg: Any = None  # registration.register.Registration
+    grid: GridSpec | None = None
+    after_thin: np.ndarray | None = None  # the registered after subset
+    dems: tuple = ()  # (after, before) dem.grid.EpochDEMs, or (the one epoch's centred heights,)
+    planes: tuple = ()  # (plane before, plane after, d_i)
+    vols: Any = None  # volumes.compute.Volumes
+    report: dict | None = None
+    result: dict | None = None  # what the command returns (register, dem)
+
+    def at(self, step: str, fraction: float = 0.0) -> float:
+        """The percent ``fraction`` of the way through ``step``."""
+        lo, hi = self.spans[step]
+        return lo + (hi - lo) * fraction
+
+    def message(self, step: str, **words: str) -> str:
+        names = " and ".join(e.name for e in self.epochs)
+        return PROGRESS[step][2].format(epochs=names, **words)
+
+
+def threads(options: Options) -> None:
+    """``--threads``: the OpenMP threads of Open3D and numpy's libraries."""
+    if options.threads > 0:
+        os.environ.setdefault("OMP_NUM_THREADS", str(options.threads))
+
+
+def drive(run: Run, executor) -> Run:
+    """Run the command's steps in order on ``executor`` (see module); returns ``run`` filled in."""
+    surface = run.command == "estimate" and run.epochs[0].kind == "surface"
+    steps = COMMAND_STEPS["surface" if surface else run.command]
+    run.spans = spans(steps)
+    threads(run.options)
+    with executor.session(run):
+        for name in steps:
+            STEPS[name](run, executor)
+    return run
+
+
+def _prepare(run: Run, ex) -> None:
+    """Step 1: read the epochs into one working frame (:mod:`soilvolume.inputs.prepare`)."""
+    run.hooks.step(run.at("prepare"), run.message("prepare") + ex.reading_note)
+    with run.timer("crop"):
+        ex.prepare(run)
+
+
+def _register(run: Run, ex) -> None:
+    """Step 2: the georeferencing decision, then coarse + fine registration."""
+    from .steps import register_pair
+
+    dense = ex.dense(run)
+    progress = (*run.spans["register"], run.message("register"))
+    run.reg, run.options = register_pair(run.prep, run.options, run.hooks, run.timer, dense, progress)
+    fine = run.reg.fine
+    run.hooks.info(f"coarse: {run.reg.coarse.note}")
+    run.hooks.info(f"fine ({fine.method}): fitness {fine.fitness:.3f}, RMSE {fine.rmse:.3f} m, {fine.note}")
+
+
+def _grid(run: Run, ex) -> None:
+    """Step 3: the shared grid and each epoch's average heights on it."""
+    run.hooks.step(run.at("grid"), run.message("grid"))
+    with run.timer("grids"):
+        ex.grid(run)
+
+
+def _planes(run: Run, ex) -> None:
+    """Step 4: the paper's planes and d_i (on the grid the volume step finds the correction on)."""
+    from .steps import correction_step, planes_step
+
+    grid, dems = ex.correction_grid(run)
+    run.hooks.step(run.at("planes"), ex.correction_note(run) or correction_step(run.options))
+    with run.timer("planes"):
+        run.planes = planes_step(run.prep, grid, dems[1], run.after_thin, run.options)
+
+
+def _volume(run: Run, ex) -> None:
+    """Step 5: difference, refill, correction, change areas, budgets, uncertainty, zones."""
+    run.hooks.step(run.at("volume"), run.message("volume"))
+    with run.timer("volume"):
+        run.vols = ex.volume(run)
+
+
+def _write(run: Run, ex) -> None:
+    """Step 6: the rasters (and the registered cloud, when asked for)."""
+    run.hooks.step(run.at("write"), run.message("write") + ex.raster_note)
+    with run.timer("write"):
+        ex.write(run)
+
+
+def _report(run: Run, ex) -> None:
+    """Step 7: report.json (the quality verdict in it) and report.html."""
+    from ..reporting.report import build_report, write_json
+    from .steps import add_quality, write_report_html
+
+    run.hooks.step(run.at("report"), run.message("report"), log=False)
+    with run.timer("report"):
+        p_b, p_a, _ = run.planes
+        report = build_report(run.prep, run.reg, run.grid, run.vols, p_b, p_a, run.options, run.timer)
+        add_quality(report, run.vols, ex.correction_grid(run)[0], run.options, run.hooks)
+        engine = ex.engine(run)
+        if engine is not None:
+            report["engine"] = engine
+        write_report_html(run.out, report, *ex.html(run))
+        report["timings_s"] = run.timer.totals()
+        write_json(run.out.path("report.json"), report)
+    run.report = report
+
+
+STEPS = {
+    "prepare": _prepare,
+    "register": _register,
+    "grid": _grid,
+    "planes": _planes,
+    "volume": _volume,
+    "write": _write,
+    "report": _report,
+}

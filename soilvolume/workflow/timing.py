@@ -1,0 +1,52 @@
+"""Per-stage wall times of a run that add up to the process's wall time: the start-up of the
+process before the run (imports included), each stage, and what no stage timed."""
+
+from __future__ import annotations
+
+import os
+import time
+from contextlib import contextmanager
+
+
+def process_age() -> float | None:
+    """Seconds since this process started (Linux: /proc), or None where that is not known."""
+    try:
+        with open("/proc/self/stat", encoding="ascii") as f:
+            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
+        with open("/proc/uptime", encoding="ascii") as f:
+            uptime = float(f.read().split()[0])
+        return max(0.0, uptime - start_ticks / os.sysconf("SC_CLK_TCK"))
+    except (OSError, ValueError, IndexError, AttributeError):
+        return None
+
+
+class Timer:
+    """Per-stage wall times (seconds), in the order they ran; :meth:`totals` adds the process's
+    ``startup`` (process start to this timer's creation) and ``other`` (the run's time no stage
+    timed), so the values sum to the wall time since the process started."""
+
+    def __init__(self) -> None:
+        self.s: dict[str, float] = {}
+        self.t0 = time.perf_counter()
+        self.startup = process_age()
+        self._open: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, name: str):
+        t0 = self._open[name] = time.perf_counter()
+        try:
+            yield
+        finally:
+            del self._open[name]
+            self.s[name] = self.s.get(name, 0.0) + time.perf_counter() - t0
+
+    def totals(self) -> dict[str, float]:
+        """The stages so far, with ``startup`` first and ``other`` last."""
+        now = time.perf_counter()
+        out = {} if self.startup is None else {"startup": self.startup}
+        out.update(self.s)
+        for name, t0 in self._open.items():  # a stage still running (the report's)
+            out[name] = out.get(name, 0.0) + now - t0
+        timed = sum(out.values()) - out.get("startup", 0.0)
+        out["other"] = max(0.0, now - self.t0 - timed)
+        return out
