@@ -14,6 +14,8 @@ import numpy as np
 from ..compensation.robust import nmad
 
 MIN_CELLS = 30  # fewer unchanged cells than this cannot tell an offset
+RING = 1  # cells around the change areas whose sub-detection difference the volumes may miss
+TERMS = ("resampling", "given", "datum", "truncation", "outline")  # the surface's terms of the interval (m³)
 VERDICTS = ("reliable", "use with caution", "not reliable")  # as volumes/quality
 SEVERITY = {"caution": 1, "unreliable": 2}
 
@@ -78,10 +80,43 @@ def design_terms(
     return out
 
 
+def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
+    """The change just below the detection level along the change areas (the ring of cells
+    around the fill areas, and the cut areas, not counted; :data:`RING`), m³ at ``z``: what the
+    areas' outline leaves out where the difference fades out slowly, as where a plan meets gently
+    sloping ground (a graded pad crossing the terrain's contours). One sigma: that ring's
+    same-signed difference; the net's, both in quadrature."""
+    from scipy import ndimage
+
+    d, every = np.nan_to_num(diff), counted["net"]
+    out = {}
+    for key, sign in (("fill", 1.0), ("cut", -1.0)):
+        ring = ndimage.binary_dilation(counted[key], iterations=RING) & ~every & np.isfinite(diff)
+        out[key] = float(z * np.clip(sign * d[ring], 0.0, None).sum() * cell_area)
+    out["net"] = float(np.hypot(out["fill"], out["cut"]))
+    return out
+
+
+def outline(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
+    """The change areas' cells on the outline of the compared area (the survey's edge, or the
+    surface's), m³ at ``z``: such a cell counts whole though the survey or the surface covers
+    only part of it, so where the works run to the edge its volume is known to half a cell. One
+    sigma: half their same-signed volume; the net's, both in quadrature."""
+    from scipy import ndimage
+
+    valid = np.isfinite(diff)
+    edge = valid & ~ndimage.binary_erosion(valid, border_value=0)
+    d, out = np.nan_to_num(diff), {}
+    for key, sign in (("fill", 1.0), ("cut", -1.0)):
+        out[key] = float(z * 0.5 * np.clip(sign * d[edge & counted[key]], 0.0, None).sum() * cell_area)
+    out["net"] = float(np.hypot(out["fill"], out["cut"]))
+    return out
+
+
 def with_terms(uncertainty: dict, terms: dict) -> dict:
     """The uncertainty record with the surface's terms added in quadrature to net, cut, fill."""
     out = {**uncertainty, "reference_m3": terms}
     for key in ("net", "cut", "fill"):
-        parts = [uncertainty[key], *(terms[part][key] for part in ("resampling", "given", "datum"))]
+        parts = [uncertainty[key], *(terms[part][key] for part in TERMS)]
         out[key] = float(np.linalg.norm(parts))
     return out

@@ -171,6 +171,8 @@ def _with_surface_terms(vols: Volumes, sigma: np.ndarray, options: Options, grid
     datum = bias_sigma(u["stable_cells"], grid.cell, model, 1) if options.correction == "none" else 0.0
     z = z_value(options.lod_confidence)
     terms = reference.design_terms(counted, sigma, options.design_uncertainty, datum, grid.cell_area, z)
+    terms["truncation"] = reference.truncation(vols.diff, counted, grid.cell_area, z)
+    terms["outline"] = reference.outline(vols.diff, counted, grid.cell_area, z)
     return replace(vols, uncertainty=reference.with_terms(vols.uncertainty, terms))
 
 
