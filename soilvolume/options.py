@@ -17,6 +17,8 @@ PREPARE = ("estimate", "register", "pipeline")  # reading both clouds
 GRID = ("estimate", "dem")
 GROUND = ("estimate", "register", "dem", "pipeline")
 GROUND_FILTER = ("estimate", "register", "dem")
+POINTS = ("estimate", "register", "dem")  # what is read of each cloud (the soil rule)
+CELLS = ("estimate", "dem")  # the heights of each cell
 COMMANDS = ("estimate", "register", "dem", "pipeline")
 
 
@@ -180,6 +182,7 @@ class Options:
         label="Weak cell threshold (fraction of the median count)",
         lo=0.0,
         hi=1.0,
+        commands=CELLS,
     )
     fill_holes: float = _opt(
         100.0,
@@ -224,6 +227,7 @@ class Options:
         "what is not soil: auto (points the signals say are not soil are not gridded: the LAS classification as --ground selects it, colour (vegetation by its excess-green index) and return numbers on files without one; objects that moved between the surveys are left out of the headline; objects in one survey only are counted and listed), none (colour and returns not used, moved objects counted: the volumes --exclude auto lists are restored; the class-2 selection stays with --ground)",
         ("auto", "none"),
         label="Exclude what is not soil",
+        commands=POINTS,
     )
     lod_confidence: float = _opt(
         0.95,

@@ -156,3 +156,19 @@ def test_quality_gate_words():
     # a correction within the net's interval cannot have made it wrong (a pair without change)
     small = quality.assess(_report(0.1, 0.3), around, change, np.full(grid.shape, 0.002), 1.0, PRIOR)
     assert not any("comparable to the net" in m for m in small["messages"]), small
+
+
+def test_quality_reads_the_poses_rejected_beyond_the_prior_not_the_note():
+    """The caution comes from the registration's count of poses beyond the prior, whatever its note says."""
+    change = np.zeros((40, 40), bool)
+    change[15:25, 15:25] = True
+    offset = np.zeros(change.shape)
+
+    def words(fine: dict) -> list[str]:
+        report = _report(500.0, 20.0)
+        report["registration"]["fine"].update(fine)
+        return quality.assess(report, ~change, change, offset, 1.0, PRIOR)["messages"]
+
+    said = "registration wanted a pose beyond the georeferencing prior"
+    assert not any(said in m for m in words({"note": "2 pose(s) beyond the georeferencing prior rejected"}))
+    assert any(said in m for m in words({"note": "started from the gps pose", "poses_beyond_prior": 2}))

@@ -68,6 +68,28 @@ def test_autzen_heights_are_metres(autzen):
     assert 125 < float(z.min()) and float(z.max()) < 140
 
 
+RASTERS = ("dem_before", "dem_after", "difference", "plane_offset", "filled_mask", "excluded")
+
+
+def test_autzen_tiled_rasters_carry_the_in_process_crs(autzen, real_dir, tmp_path):
+    """The tiled engine's COGs and the in-process GeoTIFFs of the same pair carry one CRS: the
+    horizontal one (heights are metres; before, the COGs said NAVD88 height (ftUS)), and the same
+    values."""
+    report, ref = autzen
+    out = tmp_path / "tiled"
+    pair = real_dir / "autzen_bmx_2010.las", real_dir / "autzen_bmx_2023.las"
+    p = run_cli("estimate", *pair, "--out", out, "--quiet", "--scheduler", "threads:2")
+    assert p.returncode == 0, p.stderr
+    assert json.loads((out / "report.json").read_text())["engine"]["scheduler"] == "threads:2"
+    for name in RASTERS:
+        with rasterio.open(out / f"{name}.tif") as tiled, rasterio.open(ref / f"{name}.tif") as whole:
+            assert tiled.crs == whole.crs and tiled.crs.to_epsg() == 2991, (name, tiled.crs)
+            assert "ftUS" not in tiled.crs.to_wkt() and "foot" not in tiled.crs.to_wkt()
+            a, b = tiled.read(1, masked=True), whole.read(1, masked=True)
+            np.testing.assert_array_equal(a.mask, b.mask)
+            assert np.allclose(a.compressed(), b.compressed(), atol=1e-3), name
+
+
 def report_cell(out) -> float:
     return json.loads((out / "report.json").read_text())["grid"]["cell_m"]
 

@@ -102,6 +102,7 @@ class StageQuality:
     seconds: float = 0.0
     note: str = ""
     alternative: np.ndarray | None = None  # a nearly as good pose (its spread from ``transform`` is uncertainty)
+    beyond_prior: int = 0  # poses that fitted but lay beyond the georeferencing prior, rejected
 
 
 @dataclass(frozen=True)

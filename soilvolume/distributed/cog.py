@@ -24,10 +24,13 @@ def write_cog(
     dtype: str = "float32",
 ) -> Path:
     """Write ``piece(rows, cols)`` (the raster's values on that window; NaN = nodata) block row by
-    block row as a single-band COG, atomically; returns the path."""
+    block row as a single-band COG, atomically; returns the path. Tagged as every output raster
+    (:func:`inputs.crs.raster_wkt`, also dem/grid.write_geotiff's)."""
     import rasterio
     import rasterio.shutil
     from rasterio.windows import Window
+
+    from ..inputs.crs import raster_wkt
 
     path = Path(path)
     nodata = NODATA if np.dtype(dtype).kind == "f" else 255
@@ -37,7 +40,7 @@ def write_cog(
         height=grid.rows,
         count=1,
         dtype=dtype,
-        crs=grid.crs_wkt,
+        crs=raster_wkt(grid.crs_wkt),  # as dem/grid.write_geotiff: horizontal only, the values are metres
         transform=grid.transform,
         nodata=nodata,
         compress="deflate",

@@ -316,7 +316,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     gap = spacing(before_xyz)
     judge = _judged(after_xyz, gap)
     if options.fine in ("icp", "gicp"):
-        (t, label), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
+        (t, label, rejected), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
         fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         return StageQuality(
             options.fine,
@@ -327,6 +327,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
             time.perf_counter() - t0,
             f"started from the {label} pose",
             alternative=alt,
+            beyond_prior=rejected,
         )
     best: StageQuality | None = None
     for init, label in starts:
@@ -349,8 +350,8 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     """ICP from the best start on the margin of the after survey, then refined twice on the
     stable ground found at the pose reached (works inside the survey never pull the pose); the
     pose that fits the margin best within the georeferencing prior wins. Returns ((transform,
-    label), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
-    uncertainty, None when there is none)."""
+    label, poses rejected beyond the prior), the other refined pose (margin-only or
+    stable-ground ICP) as an alternative for the uncertainty, None when there is none)."""
     method = options.fine
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
     src = _judged(after_xyz, gap)
@@ -375,7 +376,7 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
     rejected = len(poses) - len(allowed)
     label = best[1] + (f"; {rejected} pose(s) beyond the georeferencing prior rejected" if rejected else "")
-    return (best[0], label), (others[-1] if others else None)
+    return (best[0], label, rejected), (others[-1] if others else None)
 
 
 def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:

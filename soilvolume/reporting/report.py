@@ -44,6 +44,7 @@ def stage_dict(q: StageQuality) -> dict:
         "accepted": q.accepted,
         "seconds": q.seconds,
         "note": q.note,
+        "poses_beyond_prior": q.beyond_prior,
         "transform_local": q.transform,
     }
 

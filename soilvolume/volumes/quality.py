@@ -74,7 +74,7 @@ def assess(
                         f"georeferencing prior ({key.split('_')[0]})",
                     )
                 )
-        if "beyond the georeferencing prior" in reg.get("fine", {}).get("note", ""):
+        if reg.get("fine", {}).get("poses_beyond_prior", 0) > 0:  # registration's count, not its wording
             out.append(
                 (
                     "caution",

@@ -83,9 +83,11 @@ class Run:
         return PROGRESS[step][2].format(epochs=names, **words)
 
 
-def threads(options: Options) -> None:
-    """``--threads``: the OpenMP threads of Open3D and numpy's libraries."""
-    if options.threads > 0:
+def threads(command: str, options: Options) -> None:
+    """``--threads`` of the commands that take it: the OpenMP threads of Open3D and numpy's libraries."""
+    from ..options import command_fields
+
+    if any(f.name == "threads" for f in command_fields(command)) and options.threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(options.threads))
 
 
@@ -94,7 +96,7 @@ def drive(run: Run, executor) -> Run:
     surface = run.command == "estimate" and run.epochs[0].kind == "surface"
     steps = COMMAND_STEPS["surface" if surface else run.command]
     run.spans = spans(steps)
-    threads(run.options)
+    threads(run.command, run.options)
     with executor.session(run):
         for name in steps:
             STEPS[name](run, executor)
