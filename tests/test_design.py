@@ -160,6 +160,9 @@ def test_bad_designs_are_refused(site, tmp_path):
     _refused(tmp_path, no_crs, after, "has no CRS; pass --before-crs")
     own = write_surface(folder / "own.tif", SEED, CONFIG, cell=2.0)
     _refused(tmp_path, own, after, "differs from the raster's CRS", "--before-crs", "EPSG:32655")
+    garbage = folder / "garbage.tif"
+    garbage.write_bytes(b"II*\x00" + bytes(range(256)) * 4)
+    _refused(tmp_path, garbage, after, "not a readable raster")
     far = write_surface(folder / "far.tif", SEED, CONFIG, cell=2.0, shift_xy=(5000.0, 0.0))
     _refused(tmp_path, far, after, "does not overlap")
     p = run_cli("estimate", no_crs, after, "--out", tmp_path / "given", "--quiet", "--before-crs", "EPSG:32654")
