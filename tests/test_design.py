@@ -168,3 +168,13 @@ def test_bad_designs_are_refused(site, tmp_path):
     p = run_cli("estimate", no_crs, after, "--out", tmp_path / "given", "--quiet", "--before-crs", "EPSG:32654")
     assert p.returncode == 0, p.stderr
     assert "below design" in p.stdout
+
+
+def test_a_rerun_with_overwrite_replaces_the_outputs(site, tmp_path):
+    """change_areas.geojson is a run's output too: --overwrite replaced no estimate folder on main."""
+    folder, after, _ = site
+    design = write_surface(folder / "design2.tif", SEED, CONFIG, cell=2.0)
+    for extra in ((), ("--overwrite",)):
+        p = run_cli("estimate", design, after, "--out", tmp_path / "out", "--quiet", *extra)
+        assert p.returncode == 0, p.stderr
+    assert (tmp_path / "out" / "change_areas.geojson").is_file()
