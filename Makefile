@@ -24,7 +24,8 @@ lint:   ## ruff lint and ruff format --check (CI runs it through make test)
 demo:   ## seeded synthetic pair with known volumes, whole pipeline, estimated vs true
 	$(VENV)/bin/soilvolume demo --out demo_out
 
-bench:  ## benchmark: paper-sized pair + 1M/4M ladder (cached scenes outside git)
+bench:  ## benchmark: the paper pair beside CloudCompare and the read floor (interleaved, medians), then the 1M/4M ladder
+	$(PY) bench/versus.py
 	$(PY) bench/run_bench.py
 
 bench-full:  ## adds the 16M and 64M pairs

@@ -11,9 +11,17 @@ from .installdependencies import InstallDependencies
 from .pointcloudtodem import PointCloudToDem
 from .registerpointclouds import RegisterPointClouds
 from .volumefromdems import VolumeFromDems
+from .volumeseries import VolumeSeries
 
 PROVIDER_ID = "soilvolume"
-ALGORITHMS = (EstimateVolumeChange, PointCloudToDem, RegisterPointClouds, VolumeFromDems, InstallDependencies)
+ALGORITHMS = (
+    EstimateVolumeChange,
+    VolumeSeries,
+    PointCloudToDem,
+    RegisterPointClouds,
+    VolumeFromDems,
+    InstallDependencies,
+)
 
 
 class SoilVolumeProvider(QgsProcessingProvider):

@@ -23,6 +23,12 @@ if [ "$need_apt" = 1 ]; then
     python3-qgis qgis-providers qgis >/dev/null
 fi
 
+# bench-only (make bench runs CloudCompare's CLI beside the engine); the bench skips it when absent
+if ! dpkg -s cloudcompare >/dev/null 2>&1; then
+  $SUDO apt-get install -y -qq --no-install-recommends cloudcompare >/dev/null 2>&1 \
+    || echo "setup: cloudcompare not installed (only make bench uses it; it skips CloudCompare without it)"
+fi
+
 if [ ! -x .venv/bin/python ]; then
   /usr/bin/python3 -m venv --system-site-packages .venv
 fi

@@ -30,13 +30,17 @@ def estimate(
     after_pipeline: str | Path | None = None,
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
+    from .core.preload import preload
+
+    options = check_options(options or Options())
+    preload(options.georeferencing != "precise", options.threads)  # overlaps the reading
     from .workflow.estimate import run_estimate
 
     return run_estimate(
         Path(before),
         Path(after),
         Path(out_dir),
-        check_options(options or Options()),
+        options,
         overwrite=overwrite,
         hooks=hooks or Hooks(),
         before_pipeline=before_pipeline,
@@ -106,5 +110,30 @@ def volume_from_rasters(
         Path(out_difference),
         zones=zones,
         zone_field=zone_field,
+        hooks=hooks or Hooks(),
+    )
+
+
+def series(
+    epochs: list[str | Path],
+    out_dir: str | Path,
+    options: Options | None = None,
+    *,
+    dates: list[str] | None = None,
+    overwrite: bool = False,
+    hooks: Hooks | None = None,
+) -> Result:
+    """Volume change over a series of surveys, E0 (``epochs[0]``) the reference: report.json
+    holds ``epochs`` (each registration into E0's frame), ``periods`` (one per consecutive pair)
+    and ``cumulative``; the periods' nets add up to the cumulative net. ``dates``: one per epoch
+    (YYYY-MM-DD; empty keeps the file's)."""
+    from .workflow.series import run_series
+
+    return run_series(
+        [Path(e) for e in epochs],
+        Path(out_dir),
+        check_options(options or Options()),
+        dates=dates,
+        overwrite=overwrite,
         hooks=hooks or Hooks(),
     )

@@ -21,6 +21,7 @@ from .core.outputs import os_problem
 from .core.types import SoilVolumeError
 from .options import Options, command_fields
 from .protocol import Protocol, open_protocol
+from .seriescli import add_series, cmd_series
 from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
@@ -159,6 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     vol.add_argument("--zone-field", help="attribute naming each zone")
     add_progress(vol)
 
+    add_series(sub, add_options, add_progress)
     add_tools(sub)
     return ap
 
@@ -168,10 +170,9 @@ def add_tools(sub) -> None:
     pipe = sub.add_parser(
         "pipeline",
         help="write the PDAL pipelines that prepare both clouds",
-        description="Write before.json and after.json: read, reproject to the "
-        "before CRS, crop the before cloud to the after footprint + radius, "
-        "ground, outliers; run them with `pdal pipeline` or pass them to "
-        "`soilvolume estimate --before-pipeline/--after-pipeline`.",
+        description="Write before.json and after.json: read, reproject to the before CRS, crop the before "
+        "cloud to the after footprint + radius, ground, outliers; run them with `pdal pipeline` or pass "
+        "them to `soilvolume estimate --before-pipeline/--after-pipeline`.",
     )
     pipe.add_argument("before", type=Path)
     pipe.add_argument("after", type=Path)
@@ -338,6 +339,7 @@ COMMANDS = {
     "demo": cmd_demo,
     "pipeline": cmd_pipeline,
     "selftest": cmd_selftest,
+    "series": lambda ns: cmd_series(ns, options_from(ns), _hooks(ns), _result),
 }
 
 

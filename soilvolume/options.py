@@ -12,14 +12,15 @@ from typing import Any
 #: which commands take an option (``commands=`` of each field below): the command line builds
 #: each subcommand's flags from it and the QGIS algorithms their parameters
 ESTIMATE = ("estimate",)
-REGISTER = ("estimate", "register")
-PREPARE = ("estimate", "register", "pipeline")  # reading both clouds
-GRID = ("estimate", "dem")
-GROUND = ("estimate", "register", "dem", "pipeline")
-GROUND_FILTER = ("estimate", "register", "dem")
-POINTS = ("estimate", "register", "dem")  # what is read of each cloud (the soil rule)
-CELLS = ("estimate", "dem")  # the heights of each cell
-COMMANDS = ("estimate", "register", "dem", "pipeline")
+VOLUME = ("estimate", "series")  # the volume step (a series runs it once per later epoch)
+REGISTER = ("estimate", "register", "series")
+PREPARE = ("estimate", "register", "pipeline", "series")  # reading both clouds
+GRID = ("estimate", "dem", "series")
+GROUND = ("estimate", "register", "dem", "pipeline", "series")
+GROUND_FILTER = ("estimate", "register", "dem", "series")
+POINTS = ("estimate", "register", "dem", "series")  # what is read of each cloud (the soil rule)
+CELLS = ("estimate", "dem", "series")  # the heights of each cell
+COMMANDS = ("estimate", "register", "dem", "pipeline", "series")
 
 
 def _opt(
@@ -150,14 +151,22 @@ class Options:
         "vertical bias correction: surface (degree-2 polynomial on stable ground), plane (plane on stable ground), paper-plane (the paper's two RANSAC planes, d_i), none",
         ("surface", "plane", "paper-plane", "none"),
         label="Vertical bias correction",
+        commands=VOLUME,
     )
     plane_threshold: float = _opt(
-        0.15, "RANSAC plane inlier distance (m)", label="RANSAC plane inlier distance", unit="m", lo=0.001, hi=100.0
+        0.15,
+        "RANSAC plane inlier distance (m)",
+        label="RANSAC plane inlier distance",
+        unit="m",
+        lo=0.001,
+        hi=100.0,
+        commands=VOLUME,
     )
     stable_mask: str | None = _opt(
         None,
         "optional polygon file (GeoPackage/Shapefile/GeoJSON) of ground known to be stable",
         label="Stable ground polygons",
+        commands=VOLUME,
     )
     # step 5: grids and volumes
     cell: float | None = _opt(
@@ -191,12 +200,14 @@ class Options:
         unit="m2",
         lo=0.0,
         hi=1e7,
+        commands=VOLUME,
     )
     fill_method: str = _opt(
         "biharmonic",
         "interpolation of refilled cells: biharmonic (smooth, keeps slopes across the hole), harmonic (Laplace, never overshoots its border values)",
         ("biharmonic", "harmonic"),
         label="Hole interpolation",
+        commands=VOLUME,
     )
     ground: str = _opt(
         "auto",
@@ -235,6 +246,7 @@ class Options:
         label="Confidence level",
         lo=0.5,
         hi=0.999,
+        commands=VOLUME,
     )
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
     design_uncertainty: float = _opt(

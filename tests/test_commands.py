@@ -87,3 +87,19 @@ def test_register_registers_by_default(pair, tmp_path):
     probe = np.array([500_079.0, 3_900_077.0, 60.0, 1.0])
     error = (np.array(result["transform"]) @ probe - np.array(truth["transform"]) @ probe)[:3]
     assert np.linalg.norm(error) < 0.1 and np.linalg.norm(np.array(truth["transform"])[:3, 3]) > 0.5
+
+
+def test_timings_add_up_to_the_wall_time(pair, tmp_path):
+    """report.json's timings_s: start-up, every stage and what no stage timed sum to the process's
+    wall time (the process leaves without the interpreter's teardown once the report is out)."""
+    import time
+
+    before, after, _ = pair
+    t0 = time.perf_counter()
+    done = run_cli("estimate", before, after, "--out", tmp_path / "r", "--quiet")
+    wall = time.perf_counter() - t0
+    assert done.returncode == 0, done.stderr
+    timings = json.loads((tmp_path / "r" / "report.json").read_text())["timings_s"]
+    assert list(timings)[0] == "startup" and list(timings)[-1] == "other" and timings["startup"] > 0.05
+    assert {"setup", "crop", "fine", "grids", "planes", "volume", "write", "report"} <= set(timings)
+    assert 0.9 * wall <= sum(timings.values()) <= wall, (sum(timings.values()), wall, timings)

@@ -311,7 +311,7 @@ def _stage(out: OutputDir, names: dict[str, str]) -> None:
 def test_overwrite_swaps_the_whole_set_and_keeps_no_stale_file(tmp_path):
     final = tmp_path / "result"
     old = OutputDir(final, [], False)
-    _stage(old, {"report.json": "old", "after_registered.laz": "old"})
+    _stage(old, {"report.json": "old", "after_registered.laz": "old", "change_areas.geojson": "old"})
     old.commit()
     new = OutputDir(final, [], True)
     assert (final / "report.json").read_text() == "old"  # a reader sees the old set while the new one builds
@@ -328,6 +328,10 @@ def test_overwrite_never_replaces_a_folder_of_other_files_or_inputs(tmp_path):
     with pytest.raises(SoilVolumeError, match="notes.docx"):
         OutputDir(final, [], True)
     (final / "notes.docx").unlink()
+    (final / "zones.geojson").write_text("mine")  # a run writes change_areas.geojson, no other GeoJSON
+    with pytest.raises(SoilVolumeError, match="zones.geojson"):
+        OutputDir(final, [], True)
+    (final / "zones.geojson").unlink()
     (final / "before.las").write_text("cloud")
     with pytest.raises(SoilVolumeError, match="contains the input"):
         OutputDir(final, [final / "before.las"], True)

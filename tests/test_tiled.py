@@ -379,3 +379,19 @@ def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, 
     kept = tmp_path / ".r.soilvolume-tiles"
     assert len(list(kept.glob("*_h_a_*.npy"))) == 1 and not (kept / "dask").exists()
     assert set(json.loads((kept / "store.json").read_text())) == {"code", "inputs", "options", "plan"}
+
+
+def test_tiled_run_writes_the_registered_cloud_as_in_process(pair, tmp_path):
+    """--registered-cloud in a tiled run: the after cloud moved by the same registration."""
+    import laspy
+
+    before, after, _ = pair
+    runs = {
+        s: estimate(before, after, tmp_path / s, Options(scheduler=s, keep_registered_cloud=True))
+        for s in ("threads:2", "none")
+    }
+    tiled, whole = (laspy.read(runs[s].outputs["after_registered"]) for s in ("threads:2", "none"))
+    assert len(tiled.points) == len(whole.points) == len(laspy.read(after).points)
+    t = np.array(runs["threads:2"].report["registration"]["transform"])
+    np.testing.assert_allclose(t, runs["none"].report["registration"]["transform"], atol=1e-6)
+    assert np.abs(tiled.xyz - whole.xyz).max() <= 2e-3

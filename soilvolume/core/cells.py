@@ -12,3 +12,10 @@ def cell_index(v: np.ndarray, lo, cell: float) -> np.ndarray:
     coordinates (with ``lo`` of k values). Coordinates off the grid get negative or too large
     indices: callers drop or clip them."""
     return np.floor((v - lo) / cell).astype(np.int64)
+
+
+def in_box(xyz: np.ndarray, lo, hi) -> np.ndarray:
+    """Mask of the points whose x/y lie in the box lo..hi (edges included): the same as
+    ``((xyz[:, :2] >= lo) & (xyz[:, :2] <= hi)).all(axis=1)``, without its (N, 2) temporaries."""
+    x, y = xyz[:, 0], xyz[:, 1]
+    return (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])

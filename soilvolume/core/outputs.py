@@ -26,7 +26,7 @@ from .types import SoilVolumeError, short_error
 
 STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
 #: what a folder of a previous run may hold for --overwrite to replace it
-RUN_SUFFIXES = (".tif", ".tiff", ".json", ".html", ".geojson", ".las", ".laz", ".xml")
+RUN_SUFFIXES = (".tif", ".tiff", ".json", ".html", ".geojson", ".las", ".laz", ".xml", ".csv")
 NAME_MAX = 255
 #: libraries whose write errors (a full disk, a lost mount) arrive as their own exception types
 WRITER_LIBRARIES = ("rasterio", "laspy", "lazrs")
@@ -252,7 +252,9 @@ class OutputDir:
         if self.allowed is not None:
             return entry.name in self.allowed
         old_staging = entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
-        return old_staging or (entry.is_file() and entry.name.lower().endswith(RUN_SUFFIXES))
+        return old_staging or (
+            entry.is_file() and (entry.name in RUN_OUTPUTS or entry.name.lower().endswith(RUN_SUFFIXES))
+        )
 
     def path(self, name: str) -> Path:
         """Where to write the output ``name`` (inside the staging folder)."""

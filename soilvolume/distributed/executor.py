@@ -139,6 +139,11 @@ class Tiled:
             arrays.update(filled_mask=v.filled_mask, classes=v.classes)
             get = lambda key, r, c: arrays[key][r, c]  # noqa: E731
         write_outputs(run.out, get, run.grid, float(run.prep.origin[2]), run.options.correction)
+        if run.cloud_out is not None:  # --registered-cloud: the after cloud streamed through the driver
+            from ..inputs.io import write_las_chunked
+
+            prep = run.prep
+            write_las_chunked(run.cloud_out, prep.after_chunks(), prep.origin, prep.frame.wkt, run.reg.transform)
 
     def engine(self, run) -> dict:
         """report.json's ``engine``: where the tiles ran and what they cost."""

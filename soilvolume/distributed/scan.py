@@ -53,7 +53,7 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
                 ((start or 0) + out["points"], len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0))
             )
         out["points"] += len(xyz)
-        local = to_local(xyz)
+        local = getattr(to_local, "inplace", to_local)(xyz)  # a chunk the reader allocated: shifted in place
         labels = rule.labels(cls, sig)
         mask = None if labels is None else labels == SOIL
         out["used"] += len(xyz) if mask is None else int(mask.sum())
@@ -68,7 +68,8 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
         scale = 1.0 / read_fraction(path, *(region if region is not None else (None, None)), resolution)
         thinner.sums *= scale  # centroids unchanged, counts scaled
         out.update({k: round(out[k] * scale) for k in ("points", "used", "cropped")})
-    out["sums"] = thinner.sums
+    has = np.flatnonzero(thinner.sums[3])  # the columns with points: a tile meets few of the grid's
+    out["sums"] = (has, thinner.sums[:, has])
     return out
 
 
@@ -104,7 +105,8 @@ def dask_loader(
         futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], pure=False)
         parts = []
         for k, part in enumerate(completed(client, futures, f"reading {src.path}", wait_check), 1):
-            thinner.sums += part.pop("sums")
+            cols, sums = part.pop("sums")
+            thinner.sums[:, cols] += sums
             parts.append(part)
             if progress:
                 progress(f"scanned {k}/{len(todo)} pieces of {src.path}")

@@ -27,7 +27,7 @@ from ..core.types import GridSpec
 from ..options import Options
 from ..volumes import coverage
 from ..volumes.compute import Given, Volumes, compute_volumes
-from ..volumes.uncertainty import region_sigma, z_value
+from ..volumes.uncertainty import TERMS, region_sigma, z_value
 from . import overview
 from .tilestore import TileStore, Window
 from .tiletask import TILE_ARRAYS, empty_value, epoch_dems, grid_tile
@@ -160,9 +160,11 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     for part in PARTS:
         area = sum(t["uncertainty"]["part_area_m2"][part] for t in tiles)
         region = region_sigma(round(area / cell**2), cell, model)  # correlated across tile edges too
-        terms = np.array([t["uncertainty"]["terms_m3"][part][1:] for t in tiles])
-        systematic = terms[:, [0, 2]].sum(axis=0)  # refilled share, leftover bias: fully correlated
-        independent = np.sqrt(np.square(terms[:, [1, 3]]).sum(axis=0))  # refill error, small detections
+        terms = [dict(zip(TERMS, t["uncertainty"]["terms_m3"][part], strict=True)) for t in tiles]
+        # the refilled share and leftover bias are fully correlated across tiles; refill errors
+        # and the extras (small detections) independent
+        systematic = [sum(t[n] for t in terms) for n in ("refilled_share", "leftover_bias")]
+        independent = [float(np.sqrt(sum(t[n] * t[n] for t in terms))) for n in ("refill_error", "extras")]
         shared = np.hypot(area * over.uncertainty["bias_sigma_m"], reg[part])  # the same in every tile
         u[part] = z * float(np.linalg.norm([region, *systematic, *independent, shared]))
     u["registration_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import SoilVolumeError
+from .lasimport import laspy_module
 
 
 def is_copc(path: str | Path) -> bool:
@@ -44,7 +45,7 @@ def read_fraction(path: str | Path, lo=None, hi=None, resolution: float | None =
     """The share of the points of the nodes meeting the box that a read at ``resolution`` returns,
     from the octree hierarchy alone (1.0 for a full-resolution read): what scales the counts of a
     thinned read back to the survey's density."""
-    import laspy
+    laspy = laspy_module()
     from laspy.copc import load_octree_for_query
 
     if resolution is None:
@@ -72,7 +73,7 @@ def copc_chunks(
     x/y box lo..hi (inclusive), at most ``size`` at a time, read from the octree nodes meeting
     the box (down to the level of ``resolution`` when given); with ``signals`` also their colour
     and returns (:func:`io.point_signals`)."""
-    import laspy
+    laspy = laspy_module()
 
     from .io import point_signals
 
@@ -90,5 +91,5 @@ def copc_chunks(
         part = pts[i : i + size]
         xyz = np.empty((len(part), 3))
         xyz[:, 0], xyz[:, 1], xyz[:, 2] = part.x, part.y, part.z
-        cls = np.asarray(part.classification) if has_cls else None
+        cls = np.array(part.classification) if has_cls else None
         yield (xyz, cls, point_signals(part, dims)) if signals else (xyz, cls)

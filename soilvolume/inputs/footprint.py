@@ -65,15 +65,15 @@ class PolygonMask:
         ys = self.lo[1] + (np.arange(rows) + 0.5) * self.res
         gx, gy = np.meshgrid(xs, ys)
         self.mask = inside(np.c_[gx.ravel(), gy.ravel()], polygon).reshape(rows, cols)
+        self.framed = np.pad(self.mask, 1)  # a border of False: indices clipped onto it are out
 
     def __call__(self, xyz: np.ndarray) -> np.ndarray:
+        rows, cols = self.mask.shape
         col = ((xyz[:, 0] - self.lo[0]) / self.res).astype(np.int64)
         row = ((xyz[:, 1] - self.lo[1]) / self.res).astype(np.int64)
-        rows, cols = self.mask.shape
-        ok = (col >= 0) & (row >= 0) & (col < cols) & (row < rows)
-        out = np.zeros(len(xyz), bool)
-        out[ok] = self.mask[row[ok], col[ok]]
-        return out
+        np.clip(col, -1, cols, out=col)
+        np.clip(row, -1, rows, out=row)
+        return self.framed[row + 1, col + 1]
 
 
 def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:

@@ -17,6 +17,7 @@ import numpy as np
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import Signals
 from .lasheader import BoundsCheck, check_las_header
+from .lasimport import laspy_module
 
 LAS_SUFFIXES = {".las", ".laz"}
 GROUND = 2  # the LAS classification of ground points
@@ -109,7 +110,7 @@ def _looks_like_crs(vlr) -> bool:
 
 
 def _read_las(path: Path) -> RawPoints:
-    import laspy
+    laspy = laspy_module()
 
     try:
         with laspy.open(path) as reader:
@@ -138,7 +139,7 @@ def las_chunks(path: Path, count: int, size: int, signals: bool = False) -> Iter
     """(absolute xyz float64, classification or None) of a LAS/LAZ file, ``size`` points at a
     time; a point count other than the header's ``count`` is reported as a corrupt file. With
     ``signals``, a third item: the points' colour and returns (:func:`point_signals`)."""
-    import laspy
+    laspy = laspy_module()
 
     read = 0
     try:
@@ -153,7 +154,7 @@ def las_chunks(path: Path, count: int, size: int, signals: bool = False) -> Iter
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
                 bounds.update(xyz)
                 read += len(chunk)
-                cls = np.asarray(chunk.classification) if has_cls else None
+                cls = np.array(chunk.classification) if has_cls else None  # a copy: a view pins the record
                 yield (xyz, cls, point_signals(chunk, dims)) if signals else (xyz, cls)
     except SoilVolumeError:
         raise
@@ -227,7 +228,7 @@ def write_las_chunked(
 ) -> None:
     """Write (local xyz, classification or None) chunks, optionally through a 4x4 rigid
     ``transform``, as absolute LAS 1.4/LAZ (memory bounded by a chunk), atomically."""
-    import laspy
+    laspy = laspy_module()
     import pyproj
 
     header = laspy.LasHeader(point_format=6, version="1.4")
@@ -257,7 +258,7 @@ def write_las(
     scale: float = 0.001,
 ) -> None:
     """Write absolute coordinates as LAS 1.4 (LAZ when the suffix is .laz), atomically."""
-    import laspy
+    laspy = laspy_module()
     import pyproj
 
     header = laspy.LasHeader(point_format=6, version="1.4")

@@ -166,3 +166,24 @@ class BoundsCheck:
             raise SoilVolumeError(
                 f"{self.path}: the points do not reach the bounds in the LAS header (corrupt scale, offset or bounds)"
             )
+
+
+def creation_date(path: Path) -> str | None:
+    """The survey date of a LAS/LAZ/COPC file as ``YYYY-MM-DD``: its header's file creation day
+    of year and year (bytes 90-93); None for other formats or when the header leaves them 0."""
+    import datetime as dt
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(94)
+    except OSError:
+        return None
+    if len(head) < 94 or head[:4] != b"LASF":
+        return None
+    day, year = struct.unpack_from("<HH", head, 90)
+    if not (1 <= day <= 366 and 1900 <= year <= 9999):
+        return None
+    try:
+        return (dt.date(year, 1, 1) + dt.timedelta(days=day - 1)).isoformat()
+    except ValueError:
+        return None

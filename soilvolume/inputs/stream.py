@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.cells import in_box
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
 from .copc import copc_chunks, is_copc
@@ -31,6 +32,7 @@ from .io import (
     read_points,
     validate,
 )
+from .lasimport import laspy_module
 from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
@@ -94,7 +96,7 @@ def _meeting(index, lo, hi) -> list[tuple[int, int]]:
 
 def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: bool = False) -> Iterator[tuple]:
     """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
-    import laspy
+    laspy = laspy_module()
 
     try:
         with laspy.open(path) as reader:
@@ -106,7 +108,7 @@ def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: boo
                     pts = reader.read_points(min(size, count - i))
                     xyz = np.empty((len(pts), 3))
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
-                    cls = np.asarray(pts.classification) if has_cls else None
+                    cls = np.array(pts.classification) if has_cls else None
                     yield (xyz, cls, point_signals(pts, dims)) if signals else (xyz, cls)
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
@@ -115,9 +117,8 @@ def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: boo
 def file_chunks(
     path: str, region, size: int, resolution: float | None = None, signals: bool = False
 ) -> Iterator[tuple]:
-    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only the octree
-    nodes meeting it, with a ``resolution`` only its levels down to that point spacing; anything
-    else is streamed whole."""
+    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only its octree nodes
+    meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file."""
     if (region is not None or resolution is not None) and is_copc(path):
         lo, hi = region if region is not None else (None, None)
         yield from copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=signals)
@@ -145,7 +146,7 @@ def open_source(path, pipeline=None) -> Source:
 
 def _header(p: Path) -> Source:
     """A LAS/LAZ/COPC file's source from its header."""
-    import laspy
+    laspy = laspy_module()
 
     try:
         with laspy.open(p) as reader:
@@ -191,9 +192,8 @@ def from_raw(raw: RawPoints) -> Source:
     )
 
 
-def prefetch(chunks: Iterator, depth: int = 2) -> Iterator:
-    """Iterate ``chunks`` read ahead by a background thread (decoding overlaps the caller's
-    processing: both are mostly numpy work that releases the GIL). Errors are re-raised here."""
+def prefetch(chunks: Iterator, depth: int = 1) -> Iterator:
+    """``chunks`` read ahead by a thread (decoding overlaps the caller: numpy releases the GIL); errors re-raised."""
     import queue
     import threading
 
@@ -347,8 +347,8 @@ def load(
     others, other_labels = _Parts(0), []
     points = used = 0
     rule: PointRule | None = None
-    reading = 0.0
-    cropped = 0
+    reading, cropped = 0.0, 0
+    shift = to_local if src.raw is not None else getattr(to_local, "inplace", to_local)  # chunks read fresh
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
     chunks = prefetch(src.chunks(signals=True))
     while True:
@@ -366,16 +366,16 @@ def load(
         if index is not None:
             index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
         points += len(xyz)
-        local = to_local(xyz)
-        labels = rule.labels(cls, sig)
+        local, labels = shift(xyz), rule.labels(cls, sig)
+        del xyz, cls, sig  # the chunk is not held while the next one is read
         soil = None if labels is None else labels == SOIL
-        used += len(xyz) if soil is None else int(soil.sum())
+        used += len(local) if soil is None else int(soil.sum())
         inside = None if keep is None else keep(local)
         if soil is not None:  # the points that are not soil, within the crop and the box
             other = ~soil if inside is None else ~soil & inside
             o_xyz, o_lab = local[other], labels[other]
             if box is not None:
-                near = ((o_xyz[:, :2] >= box[0]) & (o_xyz[:, :2] <= box[1])).all(axis=1)
+                near = in_box(o_xyz, *box)
                 o_xyz, o_lab = o_xyz[near], o_lab[near]
             others.append(o_xyz)
             other_labels.append(o_lab)
@@ -385,7 +385,7 @@ def load(
         thinner.add(local)
         cropped += len(local)
         if box is not None:
-            local = local[((local[:, :2] >= box[0]) & (local[:, :2] <= box[1])).all(axis=1)]
+            local = local[in_box(local, *box)]
         parts.append(local)
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()

@@ -19,6 +19,7 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
+from .lasimport import laspy_module
 
 
 @dataclass(frozen=True)
@@ -145,7 +146,7 @@ def _href(vpc: Path, item) -> str:
 def _tile_header(vpc: Path, item, tile_path: str):
     """(point count, mins, maxs, CRS or None) from the tile's header, checked before laspy reads
     it (errors name the tile and never quote its bytes)."""
-    import laspy
+    laspy = laspy_module()
     import pyproj
 
     from .lasheader import check_las_header
@@ -230,7 +231,7 @@ def _to_wgs84(mins, maxs, crs) -> list[float]:
 def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative: bool = True) -> Path:
     """Write a ``.vpc`` grouping LAS/LAZ/COPC ``tiles`` (boxes, counts and CRS from their headers;
     hrefs relative to the VPC unless ``relative`` is False)."""
-    import laspy
+    laspy = laspy_module()
 
     out = Path(path)
     features = []

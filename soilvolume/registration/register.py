@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..core.cells import cell_index
+from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
 from ..options import Options
@@ -42,7 +43,7 @@ class Registration:
     transform: np.ndarray
     coarse: StageQuality
     fine: StageQuality
-    georeferencing: dict = field(default_factory=dict)
+    georeferencing: Georeferencing | None = None
 
 
 def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
@@ -214,6 +215,7 @@ def stable_source(
     target_xyz: np.ndarray,
     t: np.ndarray,
     cell: float = 1.0,
+    gap: float | None = None,
 ) -> np.ndarray:
     """The source with its fitted low-order deformation removed and its change areas dropped:
     what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
@@ -223,7 +225,7 @@ def stable_source(
     from ..dem.grid import average_height, make_grid
 
     src = transform_points(source_xyz, t)
-    cell = max(cell, 1.5 * spacing(target_xyz))
+    cell = max(cell, 1.5 * (spacing(target_xyz) if gap is None else gap))  # gap: the target's spacing
     grid = make_grid(src.min(axis=0), src.max(axis=0), cell, np.zeros(3), None)
     diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
     if np.isfinite(diff).sum() < 20:
@@ -363,7 +365,7 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
     t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap)
     poses = [(init, lab) for init, lab in starts] + [(t, label)]
     for _ in range(STABLE_PASSES):
-        src_stable = stable_source(after_xyz, before_xyz, t)
+        src_stable = stable_source(after_xyz, before_xyz, t, gap=gap)
         if len(src_stable) <= 100:
             break
         # src_stable is already in the before frame: refine a correction on top of t.

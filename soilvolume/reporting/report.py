@@ -11,10 +11,10 @@ import numpy as np
 
 from ..core.types import GridSpec, StageQuality
 from ..inputs.io import atomic_path
-from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 
 if TYPE_CHECKING:
+    from ..core.record import RunRecord
     from ..inputs.prepare import Prepared
     from ..volumes.compute import Volumes
 
@@ -63,7 +63,7 @@ def registration_summary(reg, origin: np.ndarray) -> dict:
             "transform": absolute_transform(reg.transform, origin),
             "coarse": stage_dict(reg.coarse),
             "fine": stage_dict(reg.fine),
-            "georeferencing": reg.georeferencing,
+            "georeferencing": _georeferencing(reg),
         }
     )
 
@@ -82,7 +82,14 @@ def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
     }
 
 
-def write_json(path: Path, report: dict) -> None:
+def _georeferencing(reg) -> dict:
+    return {} if reg.georeferencing is None else reg.georeferencing.as_dict()
+
+
+def write_json(path: Path, report: dict, timings: dict[str, float] | None = None) -> None:
+    """report.json, atomically (``timings``: the run's final ``timings_s``, taken last)."""
+    if timings is not None:
+        report["timings_s"] = timings
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(_clean(report), indent=2))
 
@@ -141,12 +148,28 @@ def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
     return coverage.summary(vols.coverage, grid.cell_area, beyond, vols.uncertainty["lod_m"])
 
 
-def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, options: Options, timer) -> dict:
-    """report.json of an estimate run (``timer.s``: seconds per stage)."""
+def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
+    """report.json of an estimate run, its quality verdict in it (``timings``: seconds per stage so far)."""
+    from ..volumes.quality import assess
+    from .surface import is_surface, surface_quality
+
+    report = _report(record, timings)
+    q = record.quality
+    report["quality"] = assess(report, q.stable, q.change, q.offset, q.cell_area, q.prior, q.diff)
+    if is_surface(report):  # the survey's agreement with the reference surface leads the verdict
+        report["quality"] = surface_quality(report, record)
+    if record.engine is not None:
+        report["engine"] = record.engine
+    return report
+
+
+def _report(record: RunRecord, timings: dict[str, float]) -> dict:
     from dataclasses import asdict
 
     from .surface import amend
 
+    prep, reg, grid, vols, options = record.prep, record.reg, record.grid, record.vols, record.options
+    p_b, p_a = record.planes
     t_abs = absolute_transform(reg.transform, prep.origin)
     report = {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
@@ -189,7 +212,7 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
             "local_origin": prep.origin,
             "coarse": stage_dict(reg.coarse),
             "fine": stage_dict(reg.fine),
-            "georeferencing": reg.georeferencing,
+            "georeferencing": _georeferencing(reg),
             "rotation_deg": rotation_deg(reg.transform),
             "tilt_deg": tilt_deg(reg.transform),
             "shift_m": shift_at(reg.transform, prep.after_thin.mean(axis=0)),
@@ -214,6 +237,6 @@ def build_report(prep: Prepared, reg, grid: GridSpec, vols: Volumes, p_b, p_a, o
         "coverage": _coverage(prep, reg, grid, vols),
         "inputs": prep.inputs,
         "options": asdict(options),
-        "timings_s": dict(timer.s),
+        "timings_s": timings,
     }
     return amend(report, prep, vols)  # a run against a surface: its reference

@@ -30,6 +30,20 @@ def amend(report: dict, prep, vols) -> dict:
     return report
 
 
+def surface_quality(report: dict, record) -> dict:
+    """The verdict of a run against a surface (``record``: core/record.RunRecord): the survey's
+    agreement with the surface on the cells its change detection deems unchanged
+    (:mod:`soilvolume.volumes.reference`, recorded as ``reference.agreement``) first."""
+    from ..compensation.correction import stable_cells
+    from ..volumes import reference
+
+    diff = record.quality.diff
+    unchanged = stable_cells(diff, record.grid.cell)
+    agree = reference.agreement(diff, unchanged, record.vols.uncertainty["lod_m"], record.grid.cell_area)
+    report["reference"]["agreement"] = agree
+    return reference.merge(report["quality"], reference.check(agree))
+
+
 def words(report: dict) -> tuple[str, str, str]:
     """(the headline's lead, the cut's word, the fill's word)."""
     if is_surface(report):

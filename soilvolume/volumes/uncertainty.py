@@ -17,7 +17,7 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
-from scipy import ndimage, optimize
+from scipy import ndimage
 
 from ..compensation.robust import nmad, patches
 from ..core.types import GridSpec
@@ -80,6 +80,8 @@ def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> d
     reach = lags[np.argmax(gamma >= 0.9 * g_max)]
     p0 = [float(gamma[0]) * 0.5, max(g_max - float(gamma[0]) * 0.5, 1e-12), float(reach)]
     bounds = ([0.0, 0.0, float(lags[0]) * 0.5], [g_max * 2, g_max * 2, float(lags[-1]) * 2])
+    from scipy import optimize  # ~0.1 s of imports, only when there is a variogram to fit
+
     try:
         with warnings.catch_warnings():  # the covariance is not used: its warning is noise in the log
             warnings.simplefilter("ignore", optimize.OptimizeWarning)
@@ -126,6 +128,11 @@ def bias_sigma(n_stable: int, cell: float, model: dict[str, float], n_coef: int)
     area = n_stable * cell * cell
     var_mean = model["nugget"] / n_stable + model["psill"] * correlated_fraction(area, model["range"])
     return math.sqrt(max(n_coef, 1) * var_mean)
+
+
+#: the one-sigma terms (m^3) of ``terms_m3[part]``, in their order: the area's error model, the
+#: refilled share of change, the refill error, the leftover bias, extras (what a caller adds)
+TERMS = ("area_model", "refilled_share", "refill_error", "leftover_bias", "extras")
 
 
 def volume_uncertainty(
@@ -201,7 +208,7 @@ def volume_uncertainty(
         signed = abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
         return float(np.hypot(signed, residual * float(m.sum()) * grid.cell_area))
 
-    terms = {  # one-sigma (m^3): the area's error model, then refills, leftover bias, extras
+    terms = {  # one-sigma (m^3), in the order of TERMS
         k: [
             region_sigma(int(m.sum()), grid.cell, model, b, pcv),
             interp(m),

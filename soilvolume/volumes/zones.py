@@ -11,15 +11,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rasterio import features
-from rasterio.transform import Affine
 
 from ..core.types import GridSpec, SoilVolumeError
 from .polygons import Polygon, read_polygons, to_grid_crs
 
 
-def _grid_transform(grid: GridSpec) -> Affine:
+def _grid_transform(grid: GridSpec):
     """Affine of the grid in its CRS units (GridSpec.transform when it has one)."""
+    from rasterio.transform import Affine  # rasterio imported when zones are used
+
     t = getattr(grid, "transform", None)
     if t is not None:
         return t
@@ -28,6 +28,8 @@ def _grid_transform(grid: GridSpec) -> Affine:
 
 def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
     """One boolean (rows, cols) mask per polygon (cells whose centre is inside)."""
+    from rasterio import features
+
     tf = _grid_transform(grid)
     return [
         features.rasterize(

@@ -2,7 +2,8 @@
 earlier DEM, :mod:`soilvolume.inputs.surface`). The estimate's steps without the before cloud:
 nothing is registered against a surface, the surface is resampled onto the survey's grid as the
 before DEM, and the volume step runs as for a pair (bias correction off unless asked); the
-survey's agreement with the surface on unchanged ground joins the verdict (volumes/reference)."""
+survey's agreement with the surface on unchanged ground leads the verdict (volumes/reference,
+through reporting/surface)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
+from ..core.record import Georeferencing
 from ..core.types import GridSpec, SoilVolumeError, StageQuality
 from ..dem import grid as gridmod
 from ..inputs.prepare import Prepared
@@ -68,7 +70,7 @@ class SurfaceReference:
         run.timer.s["crop"] = run.timer.s.get("crop", 0.0) - prep.read_s
         run.prep = replace(prep, inputs={"before": self.surface.describe(), **prep.inputs})
         stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)
-        georef = {"requested": run.options.georeferencing, "used": "none", "reason": "the reference is a surface"}
+        georef = Georeferencing(run.options.georeferencing, "none", "the reference is a surface")
         run.reg = Registration(np.eye(4), stage, stage, georef)
         run.hooks.info(NOT_REGISTERED)
 
@@ -189,19 +191,3 @@ def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec) -> None:
         elif key == "diff":
             desc = "survey - design (m): above design > 0 (fill), below design < 0 (cut)"
         gridmod.write_geotiff(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)
-
-
-def add_surface_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:
-    """The verdict (volumes/quality) with the survey's agreement with the surface first, logged
-    (:func:`soilvolume.workflow.steps.add_quality` of a run against a surface)."""
-    from ..compensation.correction import stable_cells
-    from ..volumes.quality import assess
-
-    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-    q = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior, vols.diff)
-    unchanged = stable_cells(vols.diff, grid.cell)
-    agree = reference.agreement(vols.diff, unchanged, vols.uncertainty["lod_m"], grid.cell_area)
-    report["reference"]["agreement"] = agree
-    report["quality"] = reference.merge(q, reference.check(agree))
-    for line in report["quality"]["messages"]:
-        hooks.info(f"quality ({report['quality']['verdict']}): {line}")

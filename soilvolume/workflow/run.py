@@ -22,7 +22,7 @@ PROGRESS: dict[str, tuple[float, float, str]] = {
     "prepare": (2, 15, "reading {epochs}"),
     "register": (15, 55, "registering the after cloud onto the before cloud (coarse, then fine)"),
     "grid": (55, 70, "gridding the average heights"),
-    "planes": (70, 75, "{correction}"),
+    "planes": (70, 75, "estimating the vertical bias correction"),  # or none: steps.correction_step
     "volume": (75, 85, "computing the difference and volumes"),
     "write": (85, 97, "writing outputs"),
     "report": (97, 100, "writing the report"),
@@ -32,6 +32,7 @@ COMMAND_STEPS: dict[str, tuple[str, ...]] = {
     "estimate": tuple(PROGRESS),
     "register": ("prepare", "register", "write"),
     "dem": ("prepare", "grid", "write"),
+    "series": tuple(PROGRESS),  # E0 and each later epoch: workflow/series.Series
     "surface": ("prepare", "grid", "volume", "write", "report"),  # estimate against a surface: nothing registered
 }
 
@@ -70,17 +71,16 @@ class Run:
     dems: tuple = ()  # (after, before) dem.grid.EpochDEMs, or (the one epoch's centred heights,)
     planes: tuple = ()  # (plane before, plane after, d_i)
     vols: Any = None  # volumes.compute.Volumes
-    report: dict | None = None
-    result: dict | None = None  # what the command returns (register, dem)
+    report: dict | None = None  # report.json of an estimate
 
     def at(self, step: str, fraction: float = 0.0) -> float:
         """The percent ``fraction`` of the way through ``step``."""
         lo, hi = self.spans[step]
         return lo + (hi - lo) * fraction
 
-    def message(self, step: str, **words: str) -> str:
-        names = " and ".join(e.name for e in self.epochs)
-        return PROGRESS[step][2].format(epochs=names, **words)
+    def message(self, step: str) -> str:
+        """The progress table's message of ``step``, naming the run's epochs."""
+        return PROGRESS[step][2].format(epochs=" and ".join(e.name for e in self.epochs))
 
 
 def threads(command: str, options: Options) -> None:
@@ -92,14 +92,22 @@ def threads(command: str, options: Options) -> None:
 
 
 def drive(run: Run, executor) -> Run:
-    """Run the command's steps in order on ``executor`` (see module); returns ``run`` filled in."""
+    """Run the command's steps in order on ``executor`` (see module); returns ``run`` filled in.
+    An executor over more than a pair (:class:`soilvolume.workflow.series.Series`) may do a whole
+    step itself (``<step>_step(run)``: register, planes, report over every pair); the order,
+    the spans and the messages stay the run's. An estimate against a surface skips register and
+    planes (``COMMAND_STEPS["surface"]``, :class:`soilvolume.workflow.design.SurfaceReference`)."""
     surface = run.command == "estimate" and run.epochs[0].kind == "surface"
     steps = COMMAND_STEPS["surface" if surface else run.command]
     run.spans = spans(steps)
     threads(run.command, run.options)
     with executor.session(run):
         for name in steps:
-            STEPS[name](run, executor)
+            own = getattr(executor, f"{name}_step", None)  # a series' executor: the step over every pair
+            if own is not None:
+                own(run)
+            else:
+                STEPS[name](run, executor)
     return run
 
 
@@ -154,21 +162,21 @@ def _write(run: Run, ex) -> None:
 
 
 def _report(run: Run, ex) -> None:
-    """Step 7: report.json (the quality verdict in it) and report.html."""
+    """Step 7: the run's typed record, report.json (the quality verdict in it) and report.html."""
+    from ..core.record import RunRecord
     from ..reporting.report import build_report, write_json
-    from .steps import add_quality, write_report_html
+    from .steps import quality_inputs, write_report_html
 
     run.hooks.step(run.at("report"), run.message("report"), log=False)
     with run.timer("report"):
+        judged = quality_inputs(run.vols, ex.correction_grid(run)[0], run.options)
         p_b, p_a, _ = run.planes
-        report = build_report(run.prep, run.reg, run.grid, run.vols, p_b, p_a, run.options, run.timer)
-        add_quality(report, run.vols, ex.correction_grid(run)[0], run.options, run.hooks)
-        engine = ex.engine(run)
-        if engine is not None:
-            report["engine"] = engine
+        record = RunRecord(run.prep, run.reg, run.grid, (p_b, p_a), run.vols, run.options, judged, ex.engine(run))
+        report = build_report(record, run.timer.totals())
+        for line in report["quality"]["messages"]:
+            run.hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_report_html(run.out, report, *ex.html(run))
-        report["timings_s"] = run.timer.totals()
-        write_json(run.out.path("report.json"), report)
+        write_json(run.out.path("report.json"), report, run.timer.totals())
     run.report = report
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
+from ..core.record import Georeferencing, QualityInputs
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem import grid as gridmod
 from ..inputs.footprint import footprint
@@ -107,20 +108,10 @@ def alternative_move(reg) -> np.ndarray | None:
     return None if alt is None else alt @ np.linalg.inv(reg.transform)
 
 
-def add_quality(report: dict, vols: Volumes, grid: GridSpec, options: Options, hooks: Hooks) -> None:
-    """The quality verdict (see :mod:`soilvolume.volumes.quality`) into ``report``, logged; a run
-    against a surface also checks their agreement (:mod:`.design`)."""
-    from ..volumes.quality import assess
-
-    if (report.get("reference") or {}).get("kind") == "surface":
-        from .design import add_surface_quality
-
-        return add_surface_quality(report, vols, grid, options, hooks)
-
+def quality_inputs(vols: Volumes, grid: GridSpec, options: Options) -> QualityInputs:
+    """What the quality verdict judges of a run, on ``grid`` (the correction's)."""
     prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-    report["quality"] = assess(report, vols.stable, vols.change_mask, vols.offset, grid.cell_area, prior, vols.diff)
-    for line in report["quality"]["messages"]:
-        hooks.info(f"quality ({report['quality']['verdict']}): {line}")
+    return QualityInputs(vols.stable, vols.change_mask, vols.offset, vols.diff, grid.cell_area, prior)
 
 
 def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense, progress: tuple):
@@ -145,7 +136,7 @@ def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense, 
             dense=dense,
             precise=mode == "precise",
         )
-    reg = replace(reg, georeferencing={"requested": options.georeferencing, "used": mode, "reason": why})
+    reg = replace(reg, georeferencing=Georeferencing(options.georeferencing, mode, why))
     timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
     return reg, options

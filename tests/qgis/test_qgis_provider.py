@@ -8,7 +8,14 @@ from pathlib import Path
 from qgis.core import QgsApplication
 
 REPO = Path(__file__).resolve().parents[2]
-ALGORITHMS = {"estimatevolumechange", "pointcloudtodem", "registerpointclouds", "volumefromdems", "installdependencies"}
+ALGORITHMS = {
+    "estimatevolumechange",
+    "volumeseries",
+    "pointcloudtodem",
+    "registerpointclouds",
+    "volumefromdems",
+    "installdependencies",
+}
 
 
 def test_processing_is_qgis_framework(qgis_processing, plugin_package):

@@ -1,0 +1,46 @@
+"""Imports a run will need, done in a background thread while the clouds are read.
+
+Open3D (registration) and rasterio (GeoTIFF output) take ~0.3-0.8 s to import, most of it loading
+their native libraries, and a run needs them only after the inputs are read. Imported in a thread
+from the start, they overlap with the reading (numpy and laspy release the GIL); the step that
+needs one waits on Python's module lock until it is complete. rasterio waits until the reading is
+done (:func:`reading_done`): the peak memory of a run is at the end of the reading, and it would
+add its ~20 MB there. Nothing is imported that the run would not import anyway.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+
+_READ = threading.Event()  # set when the inputs are read (the memory peak is behind)
+
+
+def reading_done() -> None:
+    """The inputs are in memory: imports held back for the memory peak may go ahead."""
+    _READ.set()
+
+
+def _import(registration: bool) -> None:
+    import importlib
+
+    try:
+        if registration:
+            from ..registration.o3d import _o3d
+
+            _o3d()
+        _READ.wait(120.0)
+        importlib.import_module("rasterio")
+    except Exception:  # noqa: BLE001 - the step that needs a package reports it missing itself
+        pass
+
+
+def preload(registration: bool, threads: int = 0) -> threading.Thread:
+    """Start importing Open3D (when ``registration`` runs), then rasterio, in the background.
+    ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), so Open3D's OpenMP sees it."""
+    if threads > 0:
+        os.environ.setdefault("OMP_NUM_THREADS", str(threads))
+    _READ.clear()
+    worker = threading.Thread(target=_import, args=(registration,), name="soilvolume-preload", daemon=True)
+    worker.start()
+    return worker

@@ -1,0 +1,167 @@
+"""The outputs of a series run: report.json (``epochs``, ``periods``, ``cumulative``), the ledger
+CSV, each epoch's DEM and each period's (and the cumulative's) difference as GeoTIFFs, and
+report.html (:mod:`.serieshtml`)."""
+
+from __future__ import annotations
+
+import csv
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from ..core.types import GridSpec
+from ..dem import grid as gridmod
+from ..inputs.io import atomic_path
+from ..options import Options
+from ..registration.rigid import rotation_deg, shift_at, tilt_deg
+from .report import absolute_transform, stage_dict, write_json
+
+LEDGER = "ledger.csv"
+LEDGER_COLUMNS = (
+    "period",
+    "from",
+    "to",
+    "from_date",
+    "to_date",
+    "net_m3",
+    "net_pm_m3",
+    "cut_m3",
+    "cut_pm_m3",
+    "fill_m3",
+    "fill_pm_m3",
+)
+
+
+def dem_name(k: int) -> str:
+    return f"dem_epoch{k}.tif"
+
+
+def difference_name(i: int, j: int, cumulative: bool = False) -> str:
+    return f"{'cumulative' if cumulative else 'difference'}_{i}_{j}.tif"
+
+
+def _registration(fit, origin: np.ndarray) -> dict:
+    if fit is None:  # E0: the frame itself
+        return {"transform": np.eye(4), "reference": True}
+    reg = fit.reg
+    return {
+        "transform": absolute_transform(reg.transform, origin),
+        "transform_local": reg.transform,
+        "rotation_deg": rotation_deg(reg.transform),
+        "tilt_deg": tilt_deg(reg.transform),
+        "shift_m": shift_at(reg.transform, fit.prep.after_thin.mean(axis=0)),
+        "coarse": stage_dict(reg.coarse),
+        "fine": stage_dict(reg.fine),
+        "georeferencing": {} if reg.georeferencing is None else reg.georeferencing.as_dict(),
+    }
+
+
+def _change(c, dates: list, cell_area: float, cumulative: bool = False) -> dict:
+    u = c.uncertainty
+    return {
+        "from": c.start,
+        "to": c.end,
+        "dates": [dates[c.start], dates[c.end]],
+        "volume_m3": c.volume,
+        "uncertainty_m3": {"net": u["net"], "cut": u["cut"], "fill": u["fill"]},
+        "uncertainty": u,
+        "change_area_m2": float((c.fill_area | c.cut_area).sum()) * cell_area,
+        "difference": difference_name(c.start, c.end, cumulative),
+    }
+
+
+def build_series_report(paths, dates, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
+    """report.json of a series run (``fits``: the later epochs' registrations; ``vols``: the
+    volume steps of the pairs E0 -> Ek)."""
+    origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
+    epochs = []
+    for k, path in enumerate(paths):
+        fit = fits[k - 1] if k else None
+        cloud = fits[0].prep.before if fit is None else fit.prep.after
+        info = fits[0].prep.inputs["before"] if fit is None else fit.prep.inputs["after"]
+        epochs.append(
+            {
+                "index": k,
+                "path": str(path),
+                "date": dates[k],
+                "points": info.get("points", len(cloud)),
+                "input": info,
+                "registration": _registration(fit, origin),
+                "correction": None if k == 0 else {"method": fit.options.correction, "params": vols[k - 1].params},
+                "dem": dem_name(k),
+            }
+        )
+    area = grid.cell_area
+    return {
+        "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
+        "command": "series",
+        "method": (
+            "every later epoch registered into E0's frame and corrected once relative to E0 on stable "
+            "ground; all epochs on one grid and one set of cells; a period's net is summed over the "
+            "works (every period's areas of significant change), so the periods add up to the "
+            "cumulative net; cut and fill over each period's own areas of significant change; "
+            "below_detection = net - (fill - cut)"
+        ),
+        "epochs": epochs,
+        "periods": [_change(c, dates, area) for c in series.periods],
+        "cumulative": _change(series.cumulative, dates, area, cumulative=True),
+        "check": {
+            "periods_net_sum_m3": float(sum(c.volume["net"] for c in series.periods)),
+            "cumulative_net_m3": series.cumulative.volume["net"],
+        },
+        "grid": {
+            "cell_m": grid.cell,
+            "rows": grid.rows,
+            "cols": grid.cols,
+            "crs_wkt": grid.crs_wkt,
+            "transform": list(grid.transform)[:6],
+            "compared_area_m2": float(series.valid.sum()) * area,
+            "works_area_m2": float(series.works.sum()) * area,
+            "refilled_area_m2": float(series.refilled.sum()) * area,
+            "stable_cells": int(series.stable.sum()),
+            "local_origin": origin,
+        },
+        "options": asdict(options),
+        "timings_s": dict(timer.s),
+    }
+
+
+def write_ledger(path: Path, report: dict) -> None:
+    """One row per period and one for the cumulative: epochs, dates, net/cut/fill and their ±."""
+    rows = [(str(k + 1), p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(LEDGER_COLUMNS)
+        for name, p in rows:
+            v, u = p["volume_m3"], p["uncertainty_m3"]
+            dates = [d or "" for d in p["dates"]]
+            figures = [f"{x:.3f}" for k in ("net", "cut", "fill") for x in (v[k], u[k])]
+            w.writerow([name, p["from"], p["to"], *dates, *figures])
+
+
+def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
+    """Each epoch's corrected DEM (E0's heights ``base`` at the cell centres + D_k, absolute)
+    and every difference."""
+    z0 = float(grid.origin[2])
+    for k, d in enumerate(series.to_e0):
+        desc = f"epoch {k} heights in E0's frame, corrected once relative to E0 (m)"
+        gridmod.write_geotiff(out.path(dem_name(k)), base + d + z0, grid, desc)
+    for c in series.periods:
+        desc = f"epoch {c.end} - epoch {c.start} (m)"
+        gridmod.write_geotiff(out.path(difference_name(c.start, c.end)), c.diff, grid, desc)
+    c = series.cumulative
+    gridmod.write_geotiff(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
+
+
+def write_reports(out, paths, dates, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
+    """report.json, the ledger and report.html of a series run into ``out`` (an
+    :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
+    from .serieshtml import write_series_html
+
+    report = build_series_report(paths, dates, fits, vols, series, grid, options, timer)
+    write_ledger(out.path(LEDGER), report)
+    write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
+    report["timings_s"] = timer.totals()
+    write_json(out.path("report.json"), report)
+    return report

@@ -1,0 +1,142 @@
+"""A seeded site surveyed four times, with exact analytic volumes per period: a pit dug, then
+deepened, then partly backfilled; a pile placed, then partly hauled away; a windrow of spoil
+placed, then removed. Every epoch carries its own GPS error (a rigid misalignment), E0's too, so
+the truth of each epoch's registration into E0's frame is known (``truth["epochs"]``).
+
+The terrain is :class:`world._World`'s (no change features of its own); the features are
+:func:`features.finish_features` shapes with equal side slopes, nested from one epoch to the
+next, so each feature's change over a period has one sign and its volume is the difference of
+the two epochs' exact volumes."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .config import CLASS_GROUND, SceneConfig
+from .features import _after_box, features_dz, finish_features
+from .sites import _cone, _rect
+
+DATES = ("2026-03-02", "2026-03-09", "2026-03-16", "2026-03-23")
+#: per epoch: (shift m, roll/pitch/yaw deg) of its GPS error
+GPS_ERRORS = (
+    ((0.4, -0.3, 0.1), (0.05, -0.04, 0.3)),
+    ((2.0, -1.5, 0.3), (0.3, -0.2, 2.0)),
+    ((-1.6, 1.2, -0.2), (-0.2, 0.25, -1.5)),
+    ((1.1, 1.7, 0.25), (0.15, 0.3, 1.2)),
+)
+CONFIG = SceneConfig(before_size=(130.0, 125.0), after_size=(67.0, 63.0), change="none")
+PILE_SLOPE = 0.6  # the pile's side slope (height per metre of run)
+
+
+def epoch_features(cx: float, cy: float) -> list[dict[str, dict]]:
+    """Each epoch's features by slot (pit, pile, windrow), around the later surveys' centre."""
+
+    def pit(h: float) -> dict:
+        return _rect(-1.0, cx - 14.0, cy + 9.0, 7.0, 6.0, h, h, 0.0, f"pit {h:g} m deep")
+
+    def pile(h: float) -> dict:
+        return _cone(1.0, cx + 13.0, cy - 6.0, 8.0, 8.0 - h / PILE_SLOPE, h, f"pile {h:g} m high")
+
+    windrow = _rect(1.0, cx - 8.0, cy - 16.0, 10.0, 2.5, 1.8, 1.8, 0.0, "windrow")
+    epochs = [{}, {"pit": pit(2.0), "pile": pile(3.6)}]
+    epochs += [{"pit": pit(3.5), "pile": pile(1.5), "windrow": windrow}, {"pit": pit(1.0), "pile": pile(1.5)}]
+    for feats in epochs:
+        finish_features(list(feats.values()))
+    return epochs
+
+
+def _signed(feats: dict[str, dict]) -> dict[str, float]:
+    return {k: f["sign"] * f["volume"] for k, f in feats.items()}
+
+
+def change_truth(a: dict[str, dict], b: dict[str, dict]) -> dict[str, float]:
+    """net/cut/fill (m3) from features ``a`` to ``b``: each slot's change has one sign."""
+    va, vb = _signed(a), _signed(b)
+    moves = [vb.get(k, 0.0) - va.get(k, 0.0) for k in set(va) | set(vb)]
+    fill, cut = sum(m for m in moves if m > 0), -sum(m for m in moves if m < 0)
+    return {"net": fill - cut, "cut": cut, "fill": fill}
+
+
+def _rotation(deg) -> np.ndarray:
+    roll, pitch, yaw = np.radians(deg)
+    rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
+    ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
+    rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def misalignment(k: int, centre_abs: np.ndarray) -> np.ndarray:
+    """Epoch ``k``'s GPS error as a 4x4 on absolute coordinates: true -> surveyed,
+    ``p_s = R (p - c) + c + t``."""
+    shift, deg = GPS_ERRORS[k]
+    m = np.eye(4)
+    m[:3, :3] = _rotation(deg)
+    m[:3, 3] = centre_abs + np.asarray(shift) - m[:3, :3] @ centre_abs
+    return m
+
+
+def _points(world, box, n: int, feats: dict, rng) -> np.ndarray:
+    x = rng.uniform(box[0], box[2], n)
+    y = rng.uniform(box[1], box[3], n)
+    z = world.terrain(x, y) + features_dz(x, y, list(feats.values()))
+    return np.column_stack([x, y, z + rng.normal(0.0, CONFIG.noise_m, n)])
+
+
+def write_series(directory, seed: int = 0, density: tuple[float, float] = (6.0, 10.0)) -> tuple[list[Path], dict]:
+    """Write ``epoch0.las`` .. ``epoch3.las`` (class 2, the CRS, the survey date in the header)
+    and ``truth.json`` into ``directory``: (paths, truth). ``density``: points per m2 of E0 (the
+    wide reference) and of the later surveys (the works' footprint)."""
+    import laspy
+
+    from .synthetic import _las_header
+    from .world import _World
+
+    world = _World(seed, CONFIG)
+    ax0, ay0, ax1, ay1 = _after_box(CONFIG)
+    cx, cy = (ax0 + ax1) / 2.0, (ay0 + ay1) / 2.0
+    origin = np.asarray(CONFIG.origin, dtype=np.float64)
+    centre = np.array([cx, cy, float(world.terrain(np.array([cx]), np.array([cy]))[0])]) + origin
+    feats = epoch_features(cx, cy)
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    paths, epochs = [], []
+    m0 = misalignment(0, centre)
+    for k, fk in enumerate(feats):
+        rng = np.random.default_rng(np.random.SeedSequence([int(seed), 21, k]))
+        box = (0.0, 0.0, *CONFIG.before_size) if k == 0 else (ax0, ay0, ax1, ay1)
+        n = int(density[0 if k == 0 else 1] * (box[2] - box[0]) * (box[3] - box[1]))
+        xyz = _points(world, box, n, fk, rng) + origin
+        mk = misalignment(k, centre)
+        xyz = xyz @ mk[:3, :3].T + mk[:3, 3]
+        header = _las_header(CONFIG, 0.001)
+        header.creation_date = dt.date.fromisoformat(DATES[k])
+        las = laspy.LasData(header)
+        las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+        las.classification = np.full(n, CLASS_GROUND, np.uint8)
+        paths.append(d / f"epoch{k}.las")
+        las.write(str(paths[-1]))
+        to_e0 = m0 @ np.linalg.inv(mk)  # surveyed k -> true -> surveyed 0
+        seen = mk[:3, :3] @ centre + mk[:3, 3]  # the works' centre as epoch k surveyed it
+        epochs.append(
+            {
+                "path": str(paths[-1]),
+                "date": DATES[k],
+                "points": n,
+                "transform": to_e0.tolist(),
+                "centre": seen.tolist(),
+            }
+        )
+    truth = {
+        "seed": int(seed),
+        "epochs": epochs,
+        "periods": [{"from": i, "to": i + 1, **change_truth(feats[i], feats[i + 1])} for i in range(len(feats) - 1)],
+        "cumulative": {"from": 0, "to": len(feats) - 1, **change_truth(feats[0], feats[-1])},
+        "convention": "transform: epoch k's surveyed absolute coordinates -> E0's (4x4); centre: the works' "
+        "centre as epoch k surveyed it; volumes exact (m3)",
+    }
+    (d / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return paths, truth

@@ -1,0 +1,67 @@
+"""The ``soilvolume series`` command line (kept beside :mod:`.cli`, which wires it in)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from .options import Options
+
+SERIES_EPILOG = """Outputs in DIR: dem_epoch<k>.tif (each epoch's heights in E0's frame, corrected
+once relative to E0), difference_<i>_<j>.tif (each period's change), cumulative_0_<n>.tif,
+ledger.csv (one row per period and the cumulative: epochs, dates, net/cut/fill and their ±),
+report.json ("epochs" with each registration's 4x4 into E0's frame, "periods", "cumulative") and
+report.html (the ledger, cumulative cut and fill over time, the difference maps). The periods'
+nets add up to the cumulative net. --before-crs applies to E0, --after-crs to every later epoch.
+The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
+2 (bad command line), 130/143 (interrupted; nothing written)."""
+
+
+def add_series(sub, add_options, add_progress) -> None:
+    """The ``series`` sub-command: epochs, --out, --dates, --overwrite, and its options."""
+    p = sub.add_parser(
+        "series",
+        help="volume change over a series of surveys E0 E1 ... (E0 the reference)",
+        description="Register every later survey into E0's frame, grid all on one grid and report each "
+        "period's volume change (consecutive surveys) and the cumulative one, with intervals.",
+        epilog=SERIES_EPILOG,
+    )
+    p.add_argument("epochs", type=Path, nargs="+", help="the surveys in time order, E0 first (the formats of estimate)")
+    p.add_argument("--out", type=Path, required=True, help="output folder (created; must be empty unless --overwrite)")
+    p.add_argument("--overwrite", action="store_true", help="replace the output folder of an earlier run as a whole")
+    p.add_argument(
+        "--dates",
+        help="the surveys' dates, comma-separated YYYY-MM-DD, one per epoch (an empty entry keeps the "
+        "file's; default: each LAS header's creation day and year)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    add_progress(p)
+    add_options(p, "series")
+
+
+def cmd_series(ns: argparse.Namespace, options: Options, hooks, result) -> int:
+    """Run the series; print the ledger (or send the result through the protocol)."""
+    from .api import series
+
+    dates = None if ns.dates is None else ns.dates.split(",")
+    res = series(ns.epochs, ns.out, options, dates=dates, overwrite=ns.overwrite, hooks=hooks)
+    if result(ns, report=res.report, outputs=res.outputs):
+        return 0
+    for line in ledger_lines(res.report):
+        print(line)
+    print(f"outputs in {ns.out}")
+    return 0
+
+
+def ledger_lines(report: dict) -> list[str]:
+    """The ledger in words: one line per period and the cumulative."""
+    rows = [(f"period {k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
+    lines = []
+    for name, p in rows:
+        v, u = p["volume_m3"], p["uncertainty_m3"]
+        when = " -> ".join(d or "?" for d in p["dates"])
+        lines.append(
+            f"{name} E{p['from']} -> E{p['to']} ({when}): net {v['net']:+.2f} ± {u['net']:.2f} m3  "
+            f"cut {v['cut']:.2f} ± {u['cut']:.2f}  fill {v['fill']:.2f} ± {u['fill']:.2f}"
+        )
+    return lines

@@ -1,0 +1,109 @@
+"""Volumes of a series of surveys E0, E1, ... En on one grid, built so that the periods add up.
+
+Each later epoch k is corrected once into E0's frame: the volume step of the pair E0 -> Ek
+(:func:`.compute.compute_volumes`: weak cells and holes refilled, the bias correction on stable
+ground) gives ``D_k``, Ek's corrected surface minus E0's, with ``D_0 = 0``. All epochs then share
+one set of cells: the cells every pair compares (``valid``), one set of refilled cells (any
+pair's) and one stable ground (stable in every pair). A period i -> j is ``D_j - D_i``, the
+cumulative ``D_n``; its net is summed over one set of cells for every period, the works (the
+union of every period's and the cumulative's areas of significant change), so the nets
+telescope: ``sum_i (W_{i+1} - W_i) = W_n`` with ``W_k`` the sum of ``D_k`` over the works. Cut and
+fill are each period's own areas of significant change (as in an estimate run);
+``below_detection`` is the rest of the net, the change over the works outside them.
+The intervals: :mod:`.seriesunc`."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.types import GridSpec
+from ..dem.grid import EpochDEM
+from ..options import Options
+from .change import cell_lod, cell_sigma, change_areas
+from .compute import Volumes, pose_effect
+from .difference import signed_budget
+from .seriesunc import period_uncertainty
+from .uncertainty import detection_level, z_value
+
+
+@dataclass(frozen=True)
+class Change:
+    """One period (or the cumulative): epochs ``start`` -> ``end``, its difference (m), areas
+    of significant change, budgets and interval (m3)."""
+
+    start: int
+    end: int
+    diff: np.ndarray
+    fill_area: np.ndarray
+    cut_area: np.ndarray
+    volume: dict  # net (over the works), cut, fill (own areas), below_detection
+    uncertainty: dict
+
+
+@dataclass(frozen=True)
+class SeriesVolumes:
+    """The series' grids and changes: ``to_e0[k]`` = D_k (NaN outside ``valid``)."""
+
+    to_e0: list[np.ndarray]
+    valid: np.ndarray
+    refilled: np.ndarray
+    stable: np.ndarray
+    works: np.ndarray
+    periods: list[Change]
+    cumulative: Change
+    works_m3: list[float]  # W_k: D_k summed over the works
+
+
+def common_cells(vols: list[Volumes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(valid, refilled, stable): compared by every pair, refilled by any, stable in all."""
+    valid = np.logical_and.reduce([np.isfinite(v.diff) for v in vols])
+    refilled = np.logical_or.reduce([v.filled_mask for v in vols]) & valid
+    stable = np.logical_and.reduce([v.stable for v in vols]) & valid & ~refilled
+    return valid, refilled, stable
+
+
+def _areas(diff, se: tuple, refilled, stable, options: Options):
+    lod = detection_level(diff, stable, options.lod_confidence)
+    lod_cell = cell_lod(lod, se[0], se[1], z_value(options.lod_confidence))
+    return change_areas(diff, lod_cell, refilled=refilled), lod_cell
+
+
+def combine(
+    vols: list[Volumes],
+    dems: list[EpochDEM],
+    moves: list[np.ndarray | None],
+    grid: GridSpec,
+    options: Options,
+) -> SeriesVolumes:
+    """The series from the pairs E0 -> Ek (``vols[k-1]``), each epoch's DEM (``dems[k]``,
+    E0 first) and each later epoch's move to its alternative pose (``moves[k-1]``, or None)."""
+    valid, refilled, stable = common_cells(vols)
+    to_e0 = [np.where(valid, 0.0, np.nan)] + [np.where(valid, v.diff, np.nan) for v in vols]
+    se = [np.where(refilled, np.nan, cell_sigma(d.spread, d.counts)) for d in dems]
+    pose = [np.zeros((grid.rows, grid.cols))] + [
+        pose_effect(v.dem_a, grid, m) for v, m in zip(vols, moves, strict=True)
+    ]
+    n = len(to_e0) - 1
+    pairs = [(i, i + 1) for i in range(n)] + [(0, n)]
+    found = {}
+    for i, j in pairs:
+        diff = to_e0[j] - to_e0[i]
+        found[i, j] = (diff, *_areas(diff, (se[i], se[j]), refilled, stable, options))
+    works = np.logical_or.reduce([fill | cut for _, (fill, cut), _ in found.values()])
+    works_m3 = [math.fsum(d[works & valid].tolist()) * grid.cell_area for d in to_e0]
+    changes = []
+    for i, j in pairs:
+        diff, (fill, cut), lod_cell = found[i, j]
+        b = signed_budget(diff, fill, cut, grid.cell_area)
+        net = works_m3[j] - works_m3[i]
+        volume = {"net": net, "cut": b["cut"], "fill": b["fill"], "below_detection": net - (b["fill"] - b["cut"])}
+        fits = 1 if i == 0 else 2  # E0 is never corrected: see seriesunc
+        skews = (dems[j].skew, dems[i].skew)
+        unc = period_uncertainty(
+            diff, (fill, cut), works & valid, stable, refilled, lod_cell, pose[j] - pose[i], skews, grid, options, fits
+        )
+        changes.append(Change(i, j, diff, fill, cut, volume, unc))
+    return SeriesVolumes(to_e0, valid, refilled, stable, works & valid, changes[:-1], changes[-1], works_m3)

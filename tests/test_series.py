@@ -1,0 +1,154 @@
+"""``soilvolume series``: a seeded 4-epoch site (scenes/series: a pit dug, deepened and partly
+backfilled; a pile placed and partly hauled away; a windrow placed and removed; every epoch with
+its own GPS error) against its exact volumes and transforms."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+
+import numpy as np
+import pytest
+import rasterio
+
+from soilvolume.cli import main
+from soilvolume.scenes.series import write_series
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    d = tmp_path_factory.mktemp("series")
+    paths, truth = write_series(d / "scene", seed=0)
+    t0 = time.perf_counter()
+    assert main(["series", *map(str, paths), "--out", str(d / "out"), "--quiet"]) == 0
+    seconds = time.perf_counter() - t0
+    report = json.loads((d / "out" / "report.json").read_text())
+    return d, paths, truth, report, seconds
+
+
+def _moved(t: dict) -> float:
+    return t["cut"] + t["fill"]
+
+
+def _check_change(est: dict, truth: dict) -> None:
+    v, u = est["volume_m3"], est["uncertainty_m3"]
+    assert (est["from"], est["to"]) == (truth["from"], truth["to"])
+    assert abs(v["net"] - truth["net"]) <= 0.02 * _moved(truth), (v, truth)
+    for k in ("cut", "fill"):
+        assert v[k] == pytest.approx(truth[k], rel=0.03), (k, v, truth)
+    for k in ("net", "cut", "fill"):  # the 95 % interval holds the truth
+        assert abs(v[k] - truth[k]) <= u[k], (k, v, u, truth)
+
+
+def test_periods_and_cumulative_against_the_truth(site):
+    _, _, truth, report, seconds = site
+    assert len(report["periods"]) == 3
+    for est, t in zip(report["periods"], truth["periods"], strict=True):
+        _check_change(est, t)
+    _check_change(report["cumulative"], truth["cumulative"])
+    total = sum(p["volume_m3"]["net"] for p in report["periods"])
+    assert total == pytest.approx(report["cumulative"]["volume_m3"]["net"], abs=1e-9)  # they telescope
+    assert seconds < 60
+
+
+def _registration_error(t_est, t_true, centre) -> tuple[float, float]:
+    te, tt = np.asarray(t_est), np.asarray(t_true)
+    r = te[:3, :3] @ tt[:3, :3].T
+    rot = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0))))
+    p = np.asarray(centre)
+    return rot, float(np.linalg.norm((te[:3, :3] @ p + te[:3, 3]) - (tt[:3, :3] @ p + tt[:3, 3])))
+
+
+def test_every_epoch_registered_into_e0s_frame(site):
+    _, paths, truth, report, _ = site
+    epochs = report["epochs"]
+    assert [e["path"] for e in epochs] == [str(p) for p in paths]
+    assert np.array_equal(epochs[0]["registration"]["transform"], np.eye(4))
+    for e, t in zip(epochs[1:], truth["epochs"][1:], strict=True):
+        rot, shift = _registration_error(e["registration"]["transform"], t["transform"], t["centre"])
+        assert rot < 0.03 and shift < 0.03, (e["index"], rot, shift)
+    assert [e["date"] for e in epochs] == [t["date"] for t in truth["epochs"]]  # from the LAS headers
+    assert [e["points"] for e in epochs] == [t["points"] for t in truth["epochs"]]
+
+
+def test_outputs_read_back(site):
+    d, _, _, report, _ = site
+    out = d / "out"
+    cell_area = report["grid"]["cell_m"] ** 2
+    dems = []
+    for k in range(4):
+        with rasterio.open(out / f"dem_epoch{k}.tif") as src:
+            dems.append(src.read(1, masked=True).astype(float).filled(np.nan))
+    for p in report["periods"]:
+        with rasterio.open(out / p["difference"]) as src:
+            diff = src.read(1, masked=True).astype(float).filled(np.nan)
+        ok = np.isfinite(dems[p["to"]]) & np.isfinite(dems[p["from"]])
+        # a period's difference is the difference of the two corrected epoch DEMs
+        assert np.allclose(diff[ok], (dems[p["to"]] - dems[p["from"]])[ok], atol=2e-3)
+        fill = np.nansum(np.where(diff > 0.3, diff, 0.0)) * cell_area  # the unmistakable part of the fill
+        assert fill <= p["volume_m3"]["fill"] * 1.01
+    rows = list(csv.DictReader((out / "ledger.csv").open()))
+    assert [r["period"] for r in rows] == ["1", "2", "3", "cumulative"]
+    assert float(rows[-1]["net_m3"]) == pytest.approx(report["cumulative"]["volume_m3"]["net"], abs=1e-3)
+    assert rows[0]["from_date"] == "2026-03-02" and rows[-1]["to_date"] == "2026-03-23"
+    page = (out / "report.html").read_text()
+    assert "<polyline" in page and "Cut and fill over time" in page and page.count("<figure") >= 5
+
+
+def test_dates_given_override_the_headers(site, tmp_path):
+    d, paths, _, _, _ = site
+    out = tmp_path / "out"
+    args = ["series", str(paths[0]), str(paths[1]), "--out", str(out), "--quiet", "--dates", "2025-01-05,"]
+    assert main(args) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert [e["date"] for e in report["epochs"]] == ["2025-01-05", "2026-03-09"]
+    assert len(report["periods"]) == 1
+    assert report["cumulative"]["volume_m3"]["net"] == report["periods"][0]["volume_m3"]["net"]
+
+
+@pytest.mark.parametrize(
+    "case, words",
+    [
+        ("one", "at least two"),
+        ("missing", "no such file"),
+        ("dates", "--dates"),
+        ("baddate", "not a date"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(site, tmp_path, capsys, case, words):
+    _, paths, _, _, _ = site
+    before = {p: p.read_bytes() for p in paths[:2]}
+    epochs = {
+        "one": [paths[0]],
+        "missing": [paths[0], tmp_path / "nope.las"],
+        "dates": paths[:2],
+        "baddate": paths[:2],
+    }[case]
+    extra = {"dates": ["--dates", "2026-01-01"], "baddate": ["--dates", "2026-01-01,yesterday"]}.get(case, [])
+    out = tmp_path / "out"
+    capsys.readouterr()
+    assert main(["series", *map(str, epochs), "--out", str(out), "--quiet", *extra]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0], err
+    assert not any(tmp_path.iterdir())  # no output folder, no staging left behind
+    assert {p: p.read_bytes() for p in paths[:2]} == before
+
+
+def test_series_through_the_protocol(site, tmp_path):
+    """--progress jsonl (a subprocess, as QGIS runs it): rising progress, then one result line
+    with the report and the outputs; nothing of the protocol on standard error."""
+    from conftest import run_cli
+
+    _, paths, _, _, _ = site
+    done = run_cli("series", paths[0], paths[2], "--out", tmp_path / "o", "--progress", "jsonl")
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    progress = [e["percent"] for e in lines if e["type"] == "progress"]
+    assert len(progress) >= 5 and progress == sorted(progress) and progress[-1] == 100
+    result = lines[-1]
+    assert result["type"] == "result" and result["command"] == "series"
+    assert len(result["report"]["periods"]) == 1 and result["report"]["epochs"][1]["date"] == "2026-03-16"
+    assert {"ledger", "report_json", "report_html", "dem_epoch0", "difference_0_1"} <= set(result["outputs"])
+    assert "{" not in done.stderr

@@ -1,0 +1,72 @@
+"""Start-up and streaming costs (issue 22): what a run imports and when, and the in-place shift of
+the chunks the reader allocated (never of a cloud already in memory)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from conftest import run_python, write_scene
+
+from soilvolume.inputs.io import RawPoints
+from soilvolume.inputs.prepare import Shift
+from soilvolume.inputs.stream import ColumnThinner, from_raw, load, open_source
+
+
+def test_engine_modules_leave_open3d_rasterio_and_requests_to_the_run(tmp_path):
+    """Importing the CLI and the in-process run imports neither Open3D nor rasterio (the preload
+    thread does, while the clouds are read) and reading a LAS header does not import requests."""
+    b, _, _ = write_scene(tmp_path)
+    code = (
+        "import sys, json\n"
+        "import soilvolume.cli, soilvolume.workflow.estimate\n"
+        "from soilvolume.inputs.stream import open_source\n"
+        f"n = open_source({str(b)!r}).count\n"
+        "print(json.dumps([n] + [m in sys.modules for m in ('open3d', 'rasterio', 'requests', 'laspy')]))\n"
+    )
+    r = run_python(code)
+    assert r.returncode == 0, r.stderr
+    count, open3d, rasterio, requests, laspy = json.loads(r.stdout)
+    assert count > 1000 and laspy
+    assert not open3d and not rasterio and not requests
+
+
+def test_preload_imports_open3d_then_rasterio_after_the_reading():
+    code = (
+        "import sys, time\n"
+        "from soilvolume.core.preload import preload, reading_done\n"
+        "t = preload(True, threads=1)\n"
+        "time.sleep(0.2)\n"
+        "import open3d  # waits for the preload's import\n"
+        "early = 'rasterio' in sys.modules\n"
+        "reading_done(); t.join(60)\n"
+        "import os\n"
+        "print(early, 'rasterio' in sys.modules, os.environ['OMP_NUM_THREADS'], not t.is_alive())\n"
+    )
+    r = run_python(code, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "True", "1", "True"]
+
+
+def test_fresh_chunks_are_shifted_in_place_a_cloud_in_memory_never(tmp_path):
+    origin = np.array([100.0, 200.0, 10.0])
+    shift = Shift(origin)
+    xyz = np.random.default_rng(0).uniform(0, 50, (1000, 3)) + origin
+    expected = xyz - origin
+    assert np.array_equal(shift(xyz), expected)
+    moved = xyz.copy()
+    assert np.array_equal(shift.inplace(moved), expected) and np.array_equal(moved, expected)
+    # a cloud already in memory (non-LAS input, pipeline output) is one chunk: it stays as it was
+    raw = RawPoints(xyz.copy(), None, None, "mem.ply", None)
+    src = from_raw(raw)
+    thinner = ColumnThinner(np.zeros(2), np.full(2, 60.0), 1.0)
+    got = load(src, shift, "none", None, thinner)
+    assert np.array_equal(raw.xyz, xyz)
+    assert np.allclose(got.xyz, expected.astype(np.float32))
+    # a LAS file read chunk by chunk: the same local points as the copying shift
+    b, _, _ = write_scene(tmp_path)
+    las = open_source(b)
+    o = np.floor(las.lo)
+    a1 = load(las, Shift(o), "none", None, ColumnThinner(las.lo[:2] - o[:2] - 1, las.hi[:2] - o[:2] + 1, 1.0))
+    a2 = load(las, lambda p: p - o, "none", None, ColumnThinner(las.lo[:2] - o[:2] - 1, las.hi[:2] - o[:2] + 1, 1.0))
+    assert np.array_equal(a1.xyz, a2.xyz) and np.array_equal(a1.thin, a2.thin)
