@@ -171,7 +171,7 @@ def test_bad_designs_are_refused(site, tmp_path):
 
 
 def test_a_rerun_with_overwrite_replaces_the_outputs(site, tmp_path):
-    """change_areas.geojson is a run's output too: --overwrite replaced no estimate folder on main."""
+    """change_areas.geojson is a run's output too: a rerun with --overwrite replaces the folder."""
     folder, after, _ = site
     design = write_surface(folder / "design2.tif", SEED, CONFIG, cell=2.0)
     for extra in ((), ("--overwrite",)):
