@@ -181,7 +181,7 @@ def average_height(
     cell's interquartile range, floor 1 cm) of the cell median. Cells are ordered by one integer
     sort of (cell, height) keys, so the cost is a single O(n log n) pass."""
     ids, ok = cell_ids(xyz, grid)
-    z = np.asarray(xyz[ok, 2], dtype=np.float64)
+    z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
 
 
@@ -195,7 +195,7 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
     sums = OffsetSums(grid.rows * grid.cols)
     sums.add(ids, col, row)
     del col, row
-    z = np.asarray(xyz[ok, 2], dtype=np.float64)
+    z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
     heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True, skew=True)
     others = None
     if nonsoil is not None:
@@ -278,8 +278,12 @@ class _SortedCells:
         id_bits = max(1, int(n_cells).bit_length())
         self.bits = 62 - id_bits
         self.q = max(1e-4, (float(z.max()) - self.z0) / (2**self.bits - 2))
-        key = ids.astype(np.int64) << self.bits
-        key |= np.rint((z - self.z0) / self.q).astype(np.int64)
+        key = np.left_shift(ids.astype(np.int64, copy=False), self.bits)
+        t = np.subtract(z, self.z0)  # one float temporary, rounded in place
+        t /= self.q
+        np.rint(t, out=t)
+        key |= t.astype(np.int64)
+        del t
         key.sort()
         self.key = key
         self.counts = np.bincount(key >> self.bits, minlength=n_cells)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.cells import in_box
+from ..core.cells import bounds, in_box, rows
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
 from .copc import copc_chunks, is_copc
@@ -255,14 +255,22 @@ class ColumnThinner:
         self.sums = np.zeros((4, n))
 
     def add(self, xyz: np.ndarray) -> None:
+        """Add a chunk's points: sums over the span of column ids the chunk meets only (a chunk
+        covers a strip of a large site; the whole sums are not swept for each chunk)."""
         ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64) - self.first[0]
         iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64) - self.first[1]
         ok = (ix >= 0) & (iy >= 0) & (ix < self.shape[1]) & (iy < self.shape[0])
-        ids = iy[ok] * self.shape[1] + ix[ok]
-        n = self.sums.shape[1]
-        self.sums[3] += np.bincount(ids, minlength=n)
+        every = bool(ok.all())
+        ids = iy * self.shape[1] + ix if every else iy[ok] * self.shape[1] + ix[ok]
+        if not len(ids):
+            return
+        first = int(ids.min())
+        ids -= first
+        span = int(ids.max()) + 1
+        sums = self.sums[:, first : first + span]
+        sums[3] += np.bincount(ids, minlength=span)
         for k in range(3):
-            self.sums[k] += np.bincount(ids, weights=xyz[ok, k], minlength=n)
+            sums[k] += np.bincount(ids, weights=xyz[:, k] if every else np.compress(ok, xyz[:, k]), minlength=span)
 
     def result(self) -> np.ndarray:
         """The centroids (float64, (M, 3))."""
@@ -364,7 +372,7 @@ def load(
         if rule is None:
             rule = epoch_rule(src, cls, sig, mode, exclude)
         if index is not None:
-            index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
+            index.append((points, len(xyz), *bounds(xyz, 2)))
         points += len(xyz)
         local, labels = shift(xyz), rule.labels(cls, sig)
         del xyz, cls, sig  # the chunk is not held while the next one is read
@@ -373,19 +381,19 @@ def load(
         inside = None if keep is None else keep(local)
         if soil is not None:  # the points that are not soil, within the crop and the box
             other = ~soil if inside is None else ~soil & inside
-            o_xyz, o_lab = local[other], labels[other]
+            o_xyz, o_lab = rows(local, other), labels[other]
             if box is not None:
                 near = in_box(o_xyz, *box)
-                o_xyz, o_lab = o_xyz[near], o_lab[near]
+                o_xyz, o_lab = rows(o_xyz, near), o_lab[near]
             others.append(o_xyz)
             other_labels.append(o_lab)
         mask = soil if inside is None else (inside if soil is None else soil & inside)
         if mask is not None:  # one compress for soil and crop
-            local = local[mask]
+            local = rows(local, mask)
         thinner.add(local)
         cropped += len(local)
         if box is not None:
-            local = local[in_box(local, *box)]
+            local = rows(local, in_box(local, *box))
         parts.append(local)
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()
