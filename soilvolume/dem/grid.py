@@ -114,8 +114,7 @@ class OffsetSums:
 
 
 def choose_cell(points: int, area_m2: float, per_cell: float = 8.0, minimum: float = 0.5) -> float:
-    """Cell size (m) giving about ``per_cell`` points per cell, at least ``minimum``, rounded up
-    to 5 cm."""
+    """Cell size (m) for ~``per_cell`` points per cell, at least ``minimum``, rounded up to 5 cm."""
     if points <= 0 or area_m2 <= 0:
         raise SoilVolumeError("cannot choose a cell size: no points in the compared area")
     cell = math.sqrt(per_cell * area_m2 / points)
@@ -178,8 +177,7 @@ def average_height(
     ``mean``), which objects, vegetation and steep edges inside a cell inflate.
 
     ``robust-mean``: the mean of the points within ``k_mad`` robust standard deviations (from the
-    cell's interquartile range, floor 1 cm) of the cell median. Cells are ordered by one integer
-    sort of (cell, height) keys, so the cost is a single O(n log n) pass."""
+    cell's interquartile range, floor 1 cm) of the cell median; one sort of (cell, height) keys."""
     ids, ok = cell_ids(xyz, grid)
     z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
@@ -280,9 +278,7 @@ class _SortedCells:
         self.q = max(1e-4, (float(z.max()) - self.z0) / (2**self.bits - 2))
         key = np.left_shift(ids.astype(np.int64, copy=False), self.bits)
         t = np.subtract(z, self.z0)  # one float temporary, rounded in place
-        t /= self.q
-        np.rint(t, out=t)
-        key |= t.astype(np.int64)
+        key |= np.rint(np.divide(t, self.q, out=t), out=t).astype(np.int64)
         del t
         key.sort()
         self.key = key
