@@ -211,8 +211,8 @@ class Options:
     )
     ground: str = _opt(
         "auto",
-        "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), none",
-        ("auto", "class", "filter", "none"),
+        "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), csf (cloth simulation filter, tuned for earthworks: a 0.5 m cloth of medium stiffness that follows piles and pits and bridges vehicles and bushes; needs the cloth-simulation-filter package), none",
+        ("auto", "class", "filter", "csf", "none"),
         label="Ground points",
         commands=GROUND,
     )
@@ -249,6 +249,15 @@ class Options:
         commands=VOLUME,
     )
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
+    design_uncertainty: float = _opt(
+        0.0,
+        "when BEFORE is a surface (a design DEM GeoTIFF): its vertical uncertainty (m, one sigma, common to the "
+        "compared area), added to the volumes' interval; 0 takes the design as exact",
+        label="Design uncertainty (a surface as BEFORE)",
+        unit="m",
+        lo=0.0,
+        hi=100.0,
+    )
     # run control
     threads: int = _opt(
         0,

@@ -29,9 +29,9 @@ class Tiled:
         from .schedule import client
         from .tilestore import run_store
 
-        if run.options.ground == "filter":
+        if run.options.ground in ("filter", "csf"):
             raise SoilVolumeError(
-                "--ground filter needs whole clouds: use --scheduler none (or classify the tiles first)"
+                f"--ground {run.options.ground} needs whole clouds: use --scheduler none (or classify the tiles first)"
             )
         with run_store(run.out.final) as store, client(self.schedule, run.options.memory_limit, store.scratch) as s:
             self.store = store

@@ -86,6 +86,18 @@ def select_ground(
         x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
         keep = smrf_classify(x, y, z, window=window, slope=slope)
         return keep, f"SMRF ground filter (window {window:g} m, slope {slope:g})"
+    if mode == "csf":
+        from ..pipelines.stages.csf import DEFAULTS, csf_classify
+        from .crs import xy_unit, z_unit
+
+        h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
+        keep = csf_classify(raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v, **DEFAULTS)
+        return (
+            keep,
+            "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)".format(
+                **DEFAULTS
+            ),
+        )
     raise SoilVolumeError(f"unknown ground mode '{mode}'")
 
 
@@ -101,13 +113,13 @@ def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, p
 
 
 def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
-    """(source to stream, ground mode for streaming, note): SMRF needs the whole cloud."""
-    if options.ground != "filter":
+    """(source to stream, ground mode for streaming, note): SMRF and CSF need the whole cloud."""
+    if options.ground not in ("filter", "csf"):
         return src, options.ground, None
     raw = src.materialize()
-    keep, note = select_ground(raw, "filter", crs, options.ground_window, options.ground_slope)
+    keep, note = select_ground(raw, options.ground, crs, options.ground_window, options.ground_slope)
     if not keep.any():
-        raise SoilVolumeError(f"{src.path}: the SMRF ground filter found no ground points")
+        raise SoilVolumeError(f"{src.path}: the {note.split(' (')[0]} found no ground points")
     sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
     out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
     out.count = src.count  # report the points read, not the ground points
@@ -189,6 +201,37 @@ def prepare(
         b.extra["counts"],
         (b.note == CLASS_NOTE, a.note == CLASS_NOTE),
         (b.extra["index"], a.extra["index"]),
+    )
+
+
+def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
+    """Stream the after survey alone into its own working frame, as :func:`prepare` does, for a
+    run whose reference is a surface (:mod:`soilvolume.inputs.surface`): no before cloud."""
+    crs_a = resolve_crs(after, options.after_crs, "--after-crs")
+    hint = lonlat_of(np.array([after.lo, after.hi]), crs_a) if crs_a.is_geographic else None
+    frame = work_frame(crs_a, hint)
+    lo, hi = _frame_box(after, crs_a, frame)
+    origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
+    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
+    to_a = _local(crs_a, frame, origin, after.path)
+    streamed, a, note = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check)
+    if len(a.xyz) == 0:
+        raise SoilVolumeError(f"{after.path}: no points left after the ground selection ({note or a.note})")
+    check_spread(a.thin[:, :2], after.path, "after the ground selection")
+    none = np.empty((0, 3))
+    return Prepared(
+        Cloud(none.astype(np.float32), origin, frame.wkt, ""),
+        Cloud(a.xyz, origin, frame.wkt, after.path, nonsoil=a.nonsoil),
+        frame,
+        origin,
+        {"after": _describe(streamed, crs_a, a.used, note or a.note, a.extra["cropped"], a.nonsoil)},
+        none,
+        a.thin,
+        voxel,
+        _all_points(after, to_a),
+        a.extra["read_s"],
+        ground=(False, a.note == CLASS_NOTE),
+        index=(None, a.extra["index"]),
     )
 
 

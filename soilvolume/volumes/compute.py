@@ -158,6 +158,7 @@ def compute_volumes(
         extra_sigma=extra,
         counted=None if given is None else _mask(diff.shape, core),
         surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
+        bound_m3=ex.bound,
     )
     headline = signed_budget(d, fa, ca, area)
     vols = {
