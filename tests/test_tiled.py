@@ -366,7 +366,7 @@ def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, 
     from soilvolume.distributed import tiletask
     from soilvolume.distributed.tiletask import TILE_ARRAYS
 
-    def interrupted(c, plan, windows, hooks, store, stats):
+    def interrupted(c, plan, windows, hooks, store, stats, *_):
         w = windows[0]
         store.save(w, {n: np.zeros((w[1] - w[0], w[3] - w[2])) for n in TILE_ARRAYS})
         raise Interrupted(signal.SIGINT)

@@ -19,7 +19,7 @@ class Tiled:
 
     def __init__(self, schedule: Schedule) -> None:
         self.schedule = schedule
-        self.c = self.store = self.plan = None
+        self.c = self.store = self.plan = self.cache = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
         self.coarse = self.over_epochs = self.medians = None
 
@@ -43,11 +43,14 @@ class Tiled:
         from ..inputs.prepare import prepare
         from ..inputs.stream import open_source
         from .cluster import checker
+        from .pointcache import PointCache
         from .scan import dask_loader
+        from .schedule import budget_gb
 
         hooks = run.hooks
         self.src_b, src_a = (open_source(e.path) for e in run.epochs)
-        loader = dask_loader(self.c, lambda m: hooks.step(run.at("prepare", 0.46), m), checker(hooks))
+        self.cache = PointCache(self.c, budget_gb(run.options.memory_limit))
+        loader = dask_loader(self.c, lambda m: hooks.step(run.at("prepare", 0.46), m), checker(hooks), self.cache)
         check = lambda: hooks.step(run.at("prepare", 0.23), "reading")  # noqa: E731
         run.prep = prepare(self.src_b, src_a, run.options, check=check, full=False, loader=loader)
 
@@ -80,14 +83,17 @@ class Tiled:
             from . import overview
             from .volumestep import grid_tiles
 
-            self.over_epochs, self.medians, self.stats = grid_tiles(self.c, self.plan, self.kept, self.k, run.hooks)
+            self.over_epochs, self.medians, self.stats = grid_tiles(
+                self.c, self.plan, self.kept, self.k, run.hooks, self.cache
+            )
             self.coarse = overview.coarse(run.grid, self.k)
         else:
             from .tiletask import epoch_dems, run_tiles
 
             self.stats = {}
-            arrays = run_tiles(self.c, self.plan, self.windows, run.hooks, self.kept, self.stats)
+            arrays = run_tiles(self.c, self.plan, self.windows, run.hooks, self.kept, self.stats, self.cache)
             run.dems = epoch_dems(arrays, self.plan.rules)
+        self.cache.release()  # the workers' memory back for the volume step
 
     def _tiles(self, run, cell: float) -> tuple:
         """(the tile windows, their side in cells, points per cell) for the run's grid."""
@@ -157,6 +163,8 @@ class Tiled:
             "tiles_resumed": stats["resumed"],
             "kept_tiles_discarded": self.said,
             "task_points_read": stats["read"],
+            "task_points_from_memory": stats.get("cached", 0),
+            "points_kept_in_memory": self.cache.points if self.cache is not None else 0,
             "task_seconds": round(stats["seconds"], 3),
             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
         }

@@ -32,14 +32,18 @@ def units(src: Source) -> list[Unit]:
     return [(src.path, s, min(UNIT, src.count - s)) for s in range(0, src.count, UNIT)]
 
 
-def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool) -> dict:
-    """Thinning sums, counts and chunk boxes of one unit (its soil points, by the epoch's ``rule``)."""
+def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None) -> dict:
+    """Thinning sums, counts and chunk boxes of one unit (its soil points, by the epoch's ``rule``);
+    ``cached``: the unit's chunks already in this worker's memory (:mod:`.pointcache`), left intact."""
     import time
 
     path, start, count = unit
     voxel = thinning[2]  # (lo, hi, voxel[, within]) of the driver's ColumnThinner
     resolution = voxel / COPC_POINTS_PER_COLUMN_SIDE if start is None and is_copc(path) else None
-    if start is None:
+    shift = to_local if cached is not None else getattr(to_local, "inplace", to_local)
+    if cached is not None:
+        chunks = iter(cached)
+    elif start is None:
         chunks = file_chunks(path, region, CHUNK, resolution, signals=True)
     else:
         chunks = las_ranges(path, [(start, count)], CHUNK, signals=True)
@@ -53,7 +57,7 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
                 ((start or 0) + out["points"], len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0))
             )
         out["points"] += len(xyz)
-        local = getattr(to_local, "inplace", to_local)(xyz)  # a chunk the reader allocated: shifted in place
+        local = shift(xyz)  # a chunk the reader allocated: shifted in place (a cached one: copied)
         labels = rule.labels(cls, sig)
         mask = None if labels is None else labels == SOIL
         out["used"] += len(xyz) if mask is None else int(mask.sum())
@@ -74,11 +78,15 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
 
 
 def dask_loader(
-    client, progress: Callable[[str], None] | None = None, wait_check: Callable[[], None] = interrupt.check
+    client,
+    progress: Callable[[str], None] | None = None,
+    wait_check: Callable[[], None] = interrupt.check,
+    cache=None,
 ) -> Callable[..., Loaded]:
     """A :func:`stream.load` running its units on ``client`` (sources kept whole in memory, and
     reads that keep full-resolution points, fall back to streaming here); ``wait_check`` runs
-    while the tasks are waited for (signals, cancellation)."""
+    while the tasks are waited for (signals, cancellation); ``cache`` (a
+    :class:`.pointcache.PointCache`): the VPC tiles read are kept on the workers for the grid."""
     from .cluster import completed
 
     def loader(
@@ -102,7 +110,8 @@ def dask_loader(
         todo = units(src)
         thinning = (thinner.lo, thinner.hi, thinner.voxel, thinner.within)
         args = (src.region, to_local, rule, keep, thinning, indexed)
-        futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], pure=False)
+        kept = cache.take(src, [u[0] for u in todo]) if cache is not None else [None] * len(todo)
+        futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], kept, pure=False)
         parts = []
         for k, part in enumerate(completed(client, futures, f"reading {src.path}", wait_check), 1):
             cols, sums = part.pop("sums")

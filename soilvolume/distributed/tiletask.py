@@ -75,15 +75,15 @@ def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
     return parts
 
 
-def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], dict]:
+def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Window, tuple[np.ndarray, ...], dict]:
     """(window, arrays of :data:`TILE_ARRAYS`, stats) of one tile: both epochs' points on its
     cells, their heights, counts, spreads and offsets from the cell centres; stats: points read,
-    seconds."""
+    seconds. ``cached``: (before, after) {path: chunks} of VPC tiles in memory (:mod:`.pointcache`)."""
     import time
 
-    t0, stats = time.perf_counter(), {"read": 0}
-    before = _epoch(plan, 0, win, None, PolygonMask(plan.crop), stats)
-    after = _epoch(plan, 1, win, plan.transform, None, stats)
+    t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
+    before = _epoch(plan, 0, win, PolygonMask(plan.crop), stats, cached[0])
+    after = _epoch(plan, 1, win, None, stats, cached[1])
     stats["seconds"] = time.perf_counter() - t0
     arrays = tuple(
         a.astype(np.int32) if k == "n" else a for e in (after, before) for k, a in zip(EPOCH_ARRAYS, e, strict=True)
@@ -91,27 +91,34 @@ def grid_tile(plan: Plan, win: Window) -> tuple[Window, tuple[np.ndarray, ...], 
     return win, arrays, stats
 
 
-def _epoch(plan: Plan, epoch: int, win: Window, transform, keep, stats: dict):
-    """Heights, counts, spreads and centre offsets of one epoch (0 before, 1 after) on the
-    window's cells."""
+def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
+    """(CRS, source read only where it can meet the window, its x/y box or None) of one epoch
+    (0 before, 1 after)."""
     from dataclasses import replace
 
     import pyproj
 
+    crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])
+    src = replace(open_source((plan.before, plan.after)[epoch]), index=plan.index[epoch])
+    box = _read_box(plan, crs, win, plan.transform if epoch else None)
+    return crs, (src if box is None else src.within(*box)), box
+
+
+def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict | None = None):
+    """Heights, counts, spreads and centre offsets of one epoch (0 before, 1 after) on the
+    window's cells."""
     from ..registration.rigid import transform_points32
+    from .pointcache import chunks
 
     path, ground = (plan.before, plan.after)[epoch], plan.ground[epoch]
-    crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])
+    transform = plan.transform if epoch else None
+    crs, src, box = window_source(plan, epoch, win)
     to_local = _local(crs, plan.frame, plan.origin, path)
-    src = replace(open_source(path), index=plan.index[epoch])
-    box = _read_box(plan, crs, win, transform)
-    if box is not None:
-        src = src.within(*box)
     shape = (win[1] - win[0], win[3] - win[2])
     ids, zs, offsets = [], [], OffsetSums(shape[0] * shape[1])
     rule = plan.rules[epoch]
     o_ids, o_lab, o_z = [], [], []
-    for xyz, cls, sig in src.chunks(signals=True):
+    for xyz, cls, sig in chunks(src, cached, stats):
         stats["read"] += len(xyz)
         labels = rule.labels(cls, sig) if rule is not None else None
         sel = cls == GROUND if rule is None and ground and cls is not None else None
@@ -217,14 +224,21 @@ def _edges(n: int, offset: int, side: int) -> list[int]:
 
 
 def run_tiles(
-    c, plan: Plan, windows: list[Window], hooks: Hooks, store: TileStore | None = None, stats: dict | None = None
+    c,
+    plan: Plan,
+    windows: list[Window],
+    hooks: Hooks,
+    store: TileStore | None = None,
+    stats: dict | None = None,
+    cache=None,
 ) -> tuple[np.ndarray, ...]:
     """Run every tile on the client ``c`` and assemble the arrays of :data:`TILE_ARRAYS` on the
     grid (:func:`epoch_dems` makes them the two epochs' DEMs). Tiles found in ``store`` (from an
     interrupted run of the same computation) are not run again; finished tiles are saved there.
-    ``stats`` sums the tasks' points read and seconds."""
+    ``stats`` sums the tasks' points read (``cached``: of those, taken from the workers' memory)
+    and seconds; ``cache``: the first pass's tiles on the workers (:class:`.pointcache.PointCache`)."""
     stats = stats if stats is not None else {}
-    stats.update(read=0, seconds=0.0, resumed=0)
+    stats.update(read=0, cached=0, seconds=0.0, resumed=0)
     g = plan.grid
     out = tuple(np.full((g.rows, g.cols), empty_value(k), np.int64 if k[0] == "n" else float) for k in TILE_ARRAYS)
     todo = []
@@ -233,8 +247,9 @@ def run_tiles(
             _place(out, win, [store.load(k, win) for k in TILE_ARRAYS])
         else:
             todo.append(win)
-    for win, arrays, task in map_tiles(c, grid_tile, plan, todo, hooks=hooks, total=len(windows)):
-        for key in ("read", "seconds"):
+    per = window_caches(plan, todo, cache)
+    for win, arrays, task in map_tiles(c, grid_tile, plan, todo, hooks=hooks, total=len(windows), per=per):
+        for key in ("read", "cached", "seconds"):
             stats[key] += task[key]
         _place(out, win, arrays)
         if store is not None:
@@ -243,11 +258,22 @@ def run_tiles(
     return out
 
 
-def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: int = 0, steps=(55, 70, "gridded")):
-    """``fn(shared, window, *args)`` for every window as Dask tasks on the client ``c`` (``shared``
-    sent to the workers once, not with every task), yielding the results as tasks finish, with
-    progress from ``steps[0]`` to ``steps[1]`` %. ``total``: the tiles of the run, when those not
-    in ``windows`` were done by an earlier run."""
+def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
+    """Per window, the (before, after) {path: future} of the cached VPC tiles its reads open
+    (None without a cache)."""
+    if cache is None or not cache.futures:
+        return None
+    return [tuple(cache.meeting(window_source(plan, e, w)[1]) for e in (0, 1)) for w in windows]
+
+
+def map_tiles(
+    c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: int = 0, steps=(55, 70, "gridded"), per=None
+):
+    """``fn(shared, window, *args[, per[i]])`` for every window as Dask tasks on the client ``c``
+    (``shared`` sent to the workers once, not with every task), yielding the results as tasks
+    finish, with progress from ``steps[0]`` to ``steps[1]`` %. ``total``: the tiles of the run,
+    when those not in ``windows`` were done by an earlier run; ``per``: one more argument per
+    window (futures in it resolved on the worker)."""
     from .cluster import checker, completed
 
     if len(windows) < total:
@@ -256,7 +282,8 @@ def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: 
         return
     n, (lo, hi, verb) = len(windows), steps
     ref = c.scatter(shared, broadcast=True, timeout=SCATTER_S)
-    futures = c.map(fn, [ref] * n, windows, *[[a] * n for a in args], pure=False)
+    lists = [[a] * n for a in args] + ([per] if per is not None else [])
+    futures = c.map(fn, [ref] * n, windows, *lists, pure=False)
     for k, result in enumerate(completed(c, futures, f"{verb} tiles", checker(hooks)), 1):
         hooks.step(lo + (hi - lo) * k / n, f"{verb} tile {k}/{n}")
         yield result

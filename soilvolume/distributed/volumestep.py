@@ -15,7 +15,7 @@ from ..volumes.zones import check_inside
 from ..workflow.steps import alternative_move
 from . import overview
 from .tilestore import TileStore
-from .tiletask import TILE_ARRAYS, map_tiles
+from .tiletask import TILE_ARRAYS, map_tiles, window_caches
 from .volumetiles import VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
 
 
@@ -38,13 +38,13 @@ def tile_volumes(c, store: TileStore, k: int, over, run, medians: tuple):
     return vols
 
 
-def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
+def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
     """Grid every tile into ``store`` (tiles already there are summarized, not run again):
     ((after, before) DEMs of the overview, (after, before) median counts, stats)."""
     coarse = overview.coarse(plan.grid, k)
     sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
     hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
-    stats = {"read": 0, "seconds": 0.0}
+    stats = {"read": 0, "cached": 0, "seconds": 0.0}
 
     def add(summary) -> None:
         _, blocks, hist = summary[:3]
@@ -56,9 +56,10 @@ def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks):
     for w in store.windows:
         if w not in todo:
             add(summarize_grid_tile(w, [store.load(n, w) for n in TILE_ARRAYS], k))
-    for summary in map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows)):
+    per = window_caches(plan, todo, cache)
+    for summary in map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per):
         add(summary)
-        for key in ("read", "seconds"):
+        for key in ("read", "cached", "seconds"):
             stats[key] += summary[3][key]
     stats["resumed"] = len(store.windows) - len(todo)
     epochs = []

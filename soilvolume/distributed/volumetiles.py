@@ -43,10 +43,10 @@ def halo(cell: float) -> int:
     return max(HALO_CELLS, int(np.ceil(HALO_M / cell)))
 
 
-def grid_tile_stored(plan, win: Window, store: TileStore, k: int) -> tuple:
+def grid_tile_stored(plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
     """:func:`tiletask.grid_tile`, its arrays kept in ``store``: (window, block sums of both
     epochs, count histograms, stats)."""
-    win, arrays, stats = grid_tile(plan, win)
+    win, arrays, stats = grid_tile(plan, win, cached)
     store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
     return summarize_grid_tile(win, arrays, k) + (stats,)
 

@@ -1,0 +1,72 @@
+"""The first pass's points kept on the workers for the grid pass, when they fit the memory
+budget: a whole VPC tile (not COPC: its first pass reads a thinned level) is read once, by a
+task whose result stays on the worker that read it (a Dask future); the scan task and the
+grid tasks whose boxes meet the tile consume that future instead of decoding the file again.
+Tiles that do not fit the budget are read again by the grid tasks, as without the cache."""
+
+from __future__ import annotations
+
+from ..inputs.copc import is_copc
+from ..inputs.stream import CHUNK, Source, file_chunks
+
+CACHE_BYTES_PER_POINT = 40.0  # xyz float64, classification, RGB, returns (33 B) and the chunk lists
+CACHE_SHARE = 0.3  # of the budget: what the workers may hold beside their tasks (below Dask's spilling)
+
+
+def read_tile(path: str) -> tuple:
+    """The chunks (xyz, classification, signals) of one whole LAS/LAZ file, as the grid tasks'
+    reads yield them (:func:`stream.file_chunks`): the cached form of a VPC tile."""
+    return tuple(file_chunks(path, None, CHUNK, signals=True))
+
+
+class PointCache:
+    """Futures of the VPC tiles read into the workers' memory, within ``budget_gb``."""
+
+    def __init__(self, client, budget_gb: float) -> None:
+        self.client, self.left = client, budget_gb * CACHE_SHARE * 2**30
+        self.futures: dict[str, object] = {}
+        self.points = 0
+
+    def take(self, src: Source, paths: list[str]) -> list:
+        """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
+        read by streaming (not a VPC tile, COPC, or beyond the budget)."""
+        if src.vpc is None:
+            return [None] * len(paths)
+        counts = {t.path: t.count for t in src.vpc.tiles}
+        out = []
+        for p in paths:
+            need = counts.get(p, 0) * CACHE_BYTES_PER_POINT
+            if p not in counts or is_copc(p) or (p not in self.futures and need > self.left):
+                out.append(None)
+                continue
+            if p not in self.futures:
+                self.futures[p] = self.client.submit(read_tile, p, pure=False)
+                self.left -= need
+                self.points += counts[p]
+            out.append(self.futures[p])
+        return out
+
+    def meeting(self, src: Source) -> dict:
+        """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
+        if src.vpc is None:
+            return {}
+        return {p: self.futures[p] for p in src.tiles() if p in self.futures}
+
+    def release(self) -> None:
+        """Free the workers' memory (the futures dropped)."""
+        self.futures.clear()
+
+
+def chunks(src: Source, cached: dict | None, stats: dict):
+    """``src.chunks(signals=True)``, the tiles in ``cached`` ({path: chunks}) taken from memory
+    (their points counted in ``stats["cached"]``): the same chunks in the same order, so the grid
+    sums come out byte-identical."""
+    if not cached or src.vpc is None:
+        yield from src.chunks(signals=True)
+        return
+    for path in src.tiles():
+        if path in cached:
+            stats["cached"] = stats.get("cached", 0) + sum(len(c[0]) for c in cached[path])
+            yield from cached[path]
+        else:
+            yield from file_chunks(path, src.region, CHUNK, signals=True)

@@ -1,0 +1,83 @@
+"""The first pass's VPC tiles kept on the workers for the grid pass (distributed/pointcache):
+the same rasters and volumes, byte for byte, as a run that reads every tile again; tiles beyond
+the memory budget are read again."""
+
+from __future__ import annotations
+
+import json
+
+import laspy
+import numpy as np
+import pytest
+from conftest import write_scene
+
+from soilvolume.api import estimate
+from soilvolume.distributed import pointcache
+from soilvolume.distributed.schedule import budget_gb
+from soilvolume.inputs.io import write_las
+from soilvolume.inputs.vpc import write_vpc
+from soilvolume.options import Options
+
+RASTERS = ("dem_before", "dem_after", "difference", "plane_offset", "filled_mask", "excluded")
+
+
+def _vpc(las_path, folder, name: str):
+    """The cloud split into 3 x 3 LAZ tiles grouped by a VPC."""
+    las = laspy.read(las_path)
+    xyz, cls = np.c_[las.x, las.y, las.z], np.asarray(las.classification)
+    edges = [np.quantile(xyz[:, k], [1 / 3, 2 / 3]) for k in (0, 1)]
+    i, j = (np.searchsorted(edges[k], xyz[:, k]) for k in (0, 1))
+    parts = []
+    for a in range(3):
+        for b in range(3):
+            m = (i == a) & (j == b)
+            parts.append(folder / f"{name}_{a}{b}.laz")
+            write_las(parts[-1], xyz[m], las.header.parse_crs().to_wkt(), cls[m])
+    return write_vpc(folder / f"{name}.vpc", parts)
+
+
+@pytest.fixture(scope="module")
+def vpcs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cache_pair")
+    before, after, _ = write_scene(folder, 3)
+    return _vpc(before, folder, "before"), _vpc(after, folder, "after")
+
+
+def _run(vpcs, out, scheduler: str):
+    res = estimate(*vpcs, out, Options(scheduler=scheduler, tile_cells=24, volume_step="whole"))
+    return res, res.report["engine"]
+
+
+def _identical(got, ref) -> None:
+    for key in ("volume_m3", "volume_uncompensated_m3", "volume_change_areas_m3"):
+        assert json.dumps(got.report[key]) == json.dumps(ref.report[key]), key
+    # the interval differs in the last bits between two runs of the same engine (threaded sums)
+    assert got.report["uncertainty_m3"]["net"] == pytest.approx(ref.report["uncertainty_m3"]["net"], rel=1e-9)
+    for name in RASTERS:
+        assert got.outputs[name].read_bytes() == ref.outputs[name].read_bytes(), name
+
+
+def test_cached_tiles_give_the_rereading_run_byte_for_byte(vpcs, tmp_path, monkeypatch):
+    cached, eng = _run(vpcs, tmp_path / "cached", "threads:2")
+    assert eng["points_kept_in_memory"] > 0 and eng["task_points_from_memory"] == eng["task_points_read"] > 0
+    monkeypatch.setattr(pointcache, "CACHE_SHARE", 0.0)  # nothing fits: every grid task reads its tiles
+    reread, eng0 = _run(vpcs, tmp_path / "reread", "threads:2")
+    assert eng0["points_kept_in_memory"] == eng0["task_points_from_memory"] == 0
+    assert eng0["task_points_read"] == eng["task_points_read"]
+    _identical(cached, reread)
+    # a budget for part of the tiles: those read again, the others from memory, the same result
+    need = eng["points_kept_in_memory"] * pointcache.CACHE_BYTES_PER_POINT / 2**30
+    monkeypatch.setattr(pointcache, "CACHE_SHARE", 0.4 * need / budget_gb(0))
+    part, eng1 = _run(vpcs, tmp_path / "part", "threads:2")
+    assert 0 < eng1["points_kept_in_memory"] < eng["points_kept_in_memory"]
+    assert 0 < eng1["task_points_from_memory"] < eng1["task_points_read"]
+    _identical(part, reread)
+
+
+def test_cached_tiles_on_worker_processes(vpcs, tmp_path):
+    """On a LocalCluster the cached tiles stay on the worker that read them; grid tasks on the
+    other worker get them from it: the same result as on threads."""
+    threads, _ = _run(vpcs, tmp_path / "threads", "threads:2")
+    local, eng = _run(vpcs, tmp_path / "local", "local:2")
+    assert eng["task_points_from_memory"] == eng["task_points_read"] > 0
+    _identical(local, threads)
