@@ -18,7 +18,6 @@ LONG_FUNCTIONS = {
     "soilvolume/volumes/compute.py:compute_volumes",
     "soilvolume/volumes/uncertainty.py:volume_uncertainty",
     "soilvolume/volumes/quality.py:assess",
-    "soilvolume/scenes/world.py:__init__",
 }
 
 

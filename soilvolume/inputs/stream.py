@@ -250,7 +250,7 @@ class ColumnThinner:
         if n > MAX_COLUMNS:
             raise SoilVolumeError(
                 f"{name + ': ' if name else ''}{self.shape[0]:,} x {self.shape[1]:,} columns of {voxel:.3g} m to "
-                "thin: the extent is far larger than the points (corrupt header bounds, or --radius too large)"
+                "thin: the extent is far larger than the points (corrupt header bounds, or {opt:radius} too large)"
             )
         self.sums = np.zeros((4, n))
 
@@ -315,7 +315,7 @@ def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
     has ground-classified points (decided on its first chunk)."""
     has = first_cls is not None and bool((first_cls == GROUND).any())
     if mode == "class" and not has:
-        raise SoilVolumeError(f"{src.path}: --ground class needs ground-classified (class 2) points; the file has none")
+        raise SoilVolumeError(f"{src.path}: {{opt:ground=class}} needs ground (class 2) points; the file has none")
     return mode == "class" or (mode == "auto" and has)
 
 

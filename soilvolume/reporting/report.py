@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core.types import GridSpec, StageQuality
+from ..core.wording import cli_tree
 from ..inputs.io import atomic_path
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 
@@ -91,7 +92,7 @@ def write_json(path: Path, report: dict, timings: dict[str, float] | None = None
     if timings is not None:
         report["timings_s"] = timings
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(_clean(report), indent=2))
+        tmp.write_text(json.dumps(_clean(cli_tree(report)), indent=2))  # options worded as flags
 
 
 def summary_lines(report: dict) -> list[str]:

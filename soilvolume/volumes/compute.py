@@ -5,6 +5,7 @@ budgets, uncertainty and zones."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from scipy import ndimage
@@ -145,20 +146,20 @@ def compute_volumes(
     stat = statistic_bias(skews, filled_mask[core], {"net": fa | ca, "cut": ca, "fill": fa}, area)
     extra = {k: float(np.linalg.norm([reg_in * reg_v[k], marginal[k], ex.sigma[k], stat[k]])) for k in stat}
     counted = fill_area | cut_area  # the change areas without moved objects
-    unc = volume_uncertainty(
+    model = partial(  # the error model, over the cells a caller gives (the headline's, a zone's)
+        volume_uncertainty,
         diff,
         stable,
-        counted,
-        grid,
-        options.lod_confidence,
+        grid=grid,
+        confidence=options.lod_confidence,
         n_coef=0 if given else MODES[options.correction].coefficients,  # a tile: the overview has the bias
         filled_mask=filled_mask,
         fill_sigma=fill_sigma,
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
-        extra_sigma=extra,
         counted=None if given is None else _mask(diff.shape, core),
         surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
     )
+    unc = model(change_mask=counted, extra_sigma=extra)
     headline = signed_budget(d, fa, ca, area)
     vols = {
         "dem_a": h_a,
@@ -195,12 +196,17 @@ def compute_volumes(
         "coverage": coverage.counts(n_a, n_b, filled_mask, diff, core, edges=(given is None,) * 4),
     }
     if options.zones:
-        from .zones import zone_budgets
+        from .zones import zone_budgets, zone_interval
 
         rows, cols = core
         zgrid = grid if given is None else grid.window(rows.start, rows.stop, cols.start, cols.stop)
+        interval = None if given is not None else partial(zone_interval, model, counted, unc)  # tiles: not yet
         vols["zones"] = zone_budgets(
-            np.where(counted[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones, whole=given is None
+            np.where(counted[core], d, np.where(np.isfinite(d), 0.0, np.nan)),
+            zgrid,
+            options.zones,
+            whole=given is None,
+            interval=interval,
         )
     return Volumes(**vols)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compensation.stable import largest_gap_deg
+from ..core.wording import opt
 from .coverage import check as coverage_check
 from .zones import zone_messages
 
@@ -94,7 +95,7 @@ def assess(
                     "caution",
                     f"the ground outside the change areas differs by {shift:+.2f} m between the "
                     "surveys and was not corrected (coordinates used as georeferenced): check the datums, or "
-                    "use --georeferencing gps if it is a survey offset",
+                    f"use {opt('georeferencing', 'gps')} if it is a survey offset",
                 )
             )
     corr = float(np.nansum(np.where(change, offset, 0.0)) * cell_area)

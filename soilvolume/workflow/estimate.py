@@ -40,7 +40,7 @@ def run_estimate(
                 run.cloud_out = out.path("after_registered.laz")
             executor = executor_for(run)
         drive(run, executor)
-        result = Result(run.report)
+        result = Result(run.report, keyed=run.keyed)
     result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in out.moved.items()}
     hooks.step(100, "done")
     return result
