@@ -43,5 +43,5 @@ fi
 # the engine's own environment, built by the plugin's installer (as QGIS users get it); the QGIS
 # tests point the plugin to it (SOILVOLUME_ENGINE_ENV); quick when it is up to date
 /usr/bin/python3 plugin/environment.py install .engine-env | grep -v '^WARNING: Location' | tail -3
-.venv/bin/python -c "import soilvolume, open3d, rasterio, pyproj, laspy, qgis.core" \
+.venv/bin/python -c "import soilvolume, open3d, rasterio, pyproj, laspy, CSF, qgis.core" \
   && echo "setup: OK ($(.venv/bin/python -c 'from qgis.core import Qgis; print("QGIS", Qgis.version())'))"

@@ -211,8 +211,8 @@ class Options:
     )
     ground: str = _opt(
         "auto",
-        "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), none",
-        ("auto", "class", "filter", "none"),
+        "ground points: auto (class 2 when the file has ground-classified points, judged on its first million points; else all), class (class 2 only), filter (SMRF ground filter), csf (cloth simulation filter, tuned for earthworks: a 0.5 m cloth of medium stiffness that follows piles and pits and bridges vehicles and bushes; needs the cloth-simulation-filter package), none",
+        ("auto", "class", "filter", "csf", "none"),
         label="Ground points",
         commands=GROUND,
     )

@@ -30,9 +30,9 @@ class Tiled:
         from .schedule import client
         from .tilestore import run_store
 
-        if run.options.ground == "filter":
+        if run.options.ground in ("filter", "csf"):
             raise SoilVolumeError(
-                f"{opt('ground', 'filter')} needs whole clouds: use {opt('scheduler', 'none')} "
+                f"{opt('ground', run.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
                 "(or classify the tiles first)"
             )
         with run_store(run.out.final) as store, client(self.schedule, run.options.memory_limit, store.scratch) as s:

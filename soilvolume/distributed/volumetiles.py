@@ -27,7 +27,7 @@ from ..core.types import GridSpec
 from ..options import Options
 from ..volumes import coverage
 from ..volumes.compute import Given, Volumes, compute_volumes
-from ..volumes.uncertainty import TERMS, region_sigma, z_value
+from ..volumes.uncertainty import TERMS, region_sigma, widen, z_value
 from . import overview
 from .tilestore import TileStore, Window
 from .tiletask import TILE_ARRAYS, empty_value, epoch_dems, grid_tile
@@ -167,6 +167,9 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
         independent = [float(np.sqrt(sum(t[n] * t[n] for t in terms))) for n in ("refill_error", "extras")]
         shared = np.hypot(area * over.uncertainty["bias_sigma_m"], reg[part])  # the same in every tile
         u[part] = z * float(np.linalg.norm([region, *systematic, *independent, shared]))
+    unclear = {p: sum(t["uncertainty"].get("unclassified_m3", {}).get(p, 0.0) for t in tiles) for p in ("cut", "fill")}
+    unclear["net"] = max(unclear.values())  # as volumes/nonsoil: between net - fill and net + cut
+    u.update(widen({p: u[p] for p in PARTS}, unclear), unclassified_m3=unclear)
     u["registration_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}
     u["marginal_detections_m3"] = {
         p: _rss(t["uncertainty"]["marginal_detections_m3"][p] for t in tiles) for p in ("net", "cut", "fill")

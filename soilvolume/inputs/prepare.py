@@ -86,6 +86,18 @@ def select_ground(
         x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
         keep = smrf_classify(x, y, z, window=window, slope=slope)
         return keep, f"SMRF ground filter (window {window:g} m, slope {slope:g})"
+    if mode == "csf":
+        from ..pipelines.stages.csf import DEFAULTS, csf_classify
+        from .crs import xy_unit, z_unit
+
+        h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
+        keep = csf_classify(raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v, **DEFAULTS)
+        return (
+            keep,
+            "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)".format(
+                **DEFAULTS
+            ),
+        )
     raise SoilVolumeError(f"unknown ground mode '{mode}'")
 
 
@@ -101,13 +113,13 @@ def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, p
 
 
 def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
-    """(source to stream, ground mode for streaming, note): SMRF needs the whole cloud."""
-    if options.ground != "filter":
+    """(source to stream, ground mode for streaming, note): SMRF and CSF need the whole cloud."""
+    if options.ground not in ("filter", "csf"):
         return src, options.ground, None
     raw = src.materialize()
-    keep, note = select_ground(raw, "filter", crs, options.ground_window, options.ground_slope)
+    keep, note = select_ground(raw, options.ground, crs, options.ground_window, options.ground_slope)
     if not keep.any():
-        raise SoilVolumeError(f"{src.path}: the SMRF ground filter found no ground points")
+        raise SoilVolumeError(f"{src.path}: the {note.split(' (')[0]} found no ground points")
     sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
     out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
     out.count = src.count  # report the points read, not the ground points

@@ -130,13 +130,14 @@ def build_prepare_pipeline(
     (``{"polygon": wkt}``, ``{"bounds": (xmin, ymin, xmax, ymax)}`` or ``{"point": (x, y),
     "distance": r}``, in ``out_srs`` units) -> ground class (``ground='class'``) -> statistical
     outliers ``(mean_k, multiplier)`` removed -> SMRF ground filter (``ground='filter'``, options
-    ``smrf``) -> Z range -> voxel thinning -> optional LAS/LAZ ``output``. ``ground='auto'`` is
+    ``smrf``) or the cloth simulation filter (``ground='csf'``, tuned for earthworks) -> Z range ->
+    voxel thinning -> optional LAS/LAZ ``output``. ``ground='auto'`` is
     'class' when the file has class-2 points, else 'none'.
     """
     if ground == "auto":
         ground = "class" if has_ground_class(path) else "none"
-    if ground not in ("none", "class", "filter"):
-        raise SoilVolumeError(f"ground '{ground}': use auto, class, filter or none")
+    if ground not in ("none", "class", "filter", "csf"):
+        raise SoilVolumeError(f"ground '{ground}': use auto, class, filter, csf or none")
     out: list[dict[str, Any]] = [reader_stage(path, in_srs)]
     if out_srs:
         out.append({"type": "filters.reprojection", "out_srs": out_srs})
@@ -144,14 +145,19 @@ def build_prepare_pipeline(
         out.append(_crop_stage(crop))
     if ground == "class":
         out.append({"type": "filters.range", "limits": "Classification[2:2]"})
-    if ground == "filter":
+    if ground in ("filter", "csf"):
         out.append({"type": "filters.assign", "value": "Classification = 0"})
     if outlier is not None:
         k, mult = outlier
         out.append({"type": "filters.outlier", "method": "statistical", "mean_k": int(k), "multiplier": float(mult)})
         out.append({"type": "filters.range", "limits": "Classification![7:7]"})
-    if ground == "filter":
-        out.append({"type": "filters.smrf", **(smrf or {})})
+    if ground in ("filter", "csf"):
+        if ground == "filter":
+            out.append({"type": "filters.smrf", **(smrf or {})})
+        else:
+            from .stages.csf import DEFAULTS
+
+            out.append({"type": "filters.csf", **DEFAULTS})
         out.append({"type": "filters.range", "limits": "Classification[2:2]"})
     if z_range is not None:
         lo, hi = ("" if v is None else repr(float(v)) for v in z_range)

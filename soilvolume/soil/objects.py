@@ -28,11 +28,11 @@ UNRESOLVED = 1.2  # walls narrower than this many cells cannot be told from vert
 MIN_HEIGHT_M = 0.4
 MIN_AREA_M2 = 2.0
 MAX_AREA_M2 = 150.0
-MAX_ELONGATION = 5.0
+MAX_ELONGATION = 7.0  # two vehicles end to end are 5; a trench across a survey 20 and more
 MIN_QUIET_RING = 0.6  # share of the ring around a blob that must be unchanged ground
 MAX_SINGLE_CELL = 0.8  # m: on coarser cells a vehicle's walls are not seen; only moved pairs are told
 # a moved object: the two blobs' ratios within these
-AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 2.0, 1.4, 2.5
+AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 2.0, 1.5, 2.5
 _EIGHT = np.ones((3, 3), bool)
 
 

@@ -141,7 +141,7 @@ def decide(cls: np.ndarray | None, sig: Signals | None, mode: str, exclude: str 
     classification; filter: SMRF's ground, then colour and returns), ``exclude`` ``--exclude``
     (``none``: no colour or returns)."""
     use_class = mode == "class" or (mode == "auto" and cls is not None and bool((cls == GROUND).any()))
-    if exclude == "none" or mode not in ("auto", "class", "filter") or sig is None:
+    if exclude == "none" or mode not in ("auto", "class", "filter", "csf") or sig is None:
         return PointRule(use_class)
     green, scale = None, 65535.0
     if sig.rgb is not None and len(sig.rgb) and not use_class:

@@ -158,6 +158,7 @@ def compute_volumes(
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
         counted=None if given is None else _mask(diff.shape, core),
         surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
+        bound_m3=ex.bound,
     )
     unc = model(change_mask=counted, extra_sigma=extra)
     headline = signed_budget(d, fa, ca, area)

@@ -100,7 +100,8 @@ def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float) -> di
 
 def check(report: dict) -> tuple[str, str] | None:
     """(severity, sentence) when part of the after footprint was not compared: ``unreliable``
-    when what could hide there exceeds the net's interval, ``caution`` when it is more than
+    when what could hide there exceeds the net's interval (and what change at the level of
+    detection, twice over, would make over the unseen area), ``caution`` when it is more than
     :data:`CAUTION_SHARE` of the footprint; None otherwise (or without a coverage record)."""
     cov = report.get("coverage")
     if not cov or cov["after_footprint_m2"] <= 0:
@@ -110,7 +111,8 @@ def check(report: dict) -> tuple[str, str] | None:
     before = cov["before_missing_m2"] >= 0.5 * unseen
     who = "the before survey does not cover" if before else "the surveys do not both cover"
     said = f"{who} {unseen:,.0f} m² ({share:.0%}) of the after footprint"
-    if share > MAX_SHARE or bound > interval:
+    noise = 2.0 * unseen * float(report["uncertainty_m3"].get("lod_m") or 0.0)  # change at noise level: none
+    if share > MAX_SHARE or bound > max(interval, noise):
         return (
             "unreliable",
             f"{said}: change there is not in the volumes (up to ~{bound:,.0f} m³ at the change seen around it, "

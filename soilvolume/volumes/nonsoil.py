@@ -6,7 +6,7 @@ counted and are listed. The class raster (``excluded.tif``) draws all of it."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
@@ -31,8 +31,14 @@ MISSED_SHARE = 0.08  # one-sigma share of an excluded volume the classification 
 CLASS_MISSED_SHARE = 0.02  # the same for classes the files' own classification gave
 NEAR_CELLS = 2  # ... where it was left out within this many cells of a counted change area
 MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
-SINGLE_SHARE, MACHINE_M3 = 0.5, 40.0  # a machine-sized object in one survey: may be a machine (or half a move)
-ROUGH_SHARE = 0.6  # one-sigma share of the change on rough cells (vegetation the signals did not see)
+MACHINE_M3 = 40.0  # an object in one survey of at most this volume may be a machine (or half a move)
+# Without any signal (no classification, colour or returns) a compact change patch on unchanged
+# ground (a machine, a bush, a grass patch grown or mown, or a small heap) cannot be told from soil:
+# patches of at most this area and volume, and rough cells, are "unclassified". So is a
+# machine-sized object in one survey only, whatever the signals (a machine that left, or soil).
+# Their volume is a bound, not a random error: the interval is widened by it (the net by the
+# larger of the fill and cut parts) and the verdict names it.
+UNCLEAR_AREA_M2, UNCLEAR_M3 = 150.0, MACHINE_M3
 
 
 @dataclass(frozen=True)
@@ -46,6 +52,7 @@ class Exclusion:
     classes: np.ndarray
     report: dict
     sigma: dict
+    bound: dict = field(default_factory=lambda: dict.fromkeys(("net", "cut", "fill"), 0.0))  # unclassified (m3)
 
 
 def exclude_nonsoil(
@@ -65,14 +72,16 @@ def exclude_nonsoil(
     is taken from) and ``stable`` ground give the rough cells (:mod:`soilvolume.soil.rough`):
     fill where the after survey is rough, cut where the before survey is; ``refilled``: the
     interpolated cells (objects are measured without them)."""
-    found = find_objects(diff, fill, cut, grid.cell, refilled=refilled)
+    shares = _shares(epochs)
+    labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
+    unsure = labelled if refilled is None else refilled | labelled
+    found = find_objects(diff, fill, cut, grid.cell, refilled=unsure)
     leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
     valid = np.isfinite(diff)
     classes = np.where(valid, 0, 255).astype(np.uint8)
     report: dict = {"mode": mode, "classes": {}}
     sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
     apparent = _apparent(diff, epochs, offset)
-    shares = _shares(epochs)
     taken = np.zeros(diff.shape, bool)
     share = _missed_share(epochs)
     # only what was left out in or beside the counted change areas can bias the headline
@@ -90,8 +99,6 @@ def exclude_nonsoil(
     rough = _rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
     classes[rough] = 6
     report["rough"] = _budget(diff, rough, grid.cell_area)
-    for k in sigma:
-        sigma[k] = float(np.hypot(sigma[k], ROUGH_SHARE * abs(report["rough"][k])))
     moved = _budget(np.where(found.moved, diff, 0.0), found.moved, grid.cell_area)
     report["moved_objects"] = {
         **moved,
@@ -109,12 +116,37 @@ def exclude_nonsoil(
     if mode != "none":
         for k in sigma:
             sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * abs(moved[k])))
-    for b in single:  # counted by design; a machine's size makes it as likely a machine
-        if b.volume_m3 <= MACHINE_M3:
-            for k in ("net", "fill" if b.sign > 0 else "cut"):
-                sigma[k] = float(np.hypot(sigma[k], SINGLE_SHARE * b.volume_m3))
-    report["sigma_m3"] = sigma
-    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma)
+    counted = (fill | cut) & ~leave_out
+    signal = any(_labelled(e) for e in epochs)
+    unclear, n = _unclear(diff, counted, found, rough, signal, grid.cell_area)
+    report["unclassified"] = {**_budget(diff, unclear, grid.cell_area), "count": n, "signals": signal}
+    bound = {k: report["unclassified"][k] for k in ("cut", "fill")}
+    bound["net"] = max(bound.values())  # the truth lies between net - fill and net + cut
+    report["sigma_m3"], report["bound_m3"] = sigma, bound
+    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
+
+
+def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
+    """The counted change the engine cannot say is soil, and in how many patches: machine-sized
+    objects in one survey only; without any signal also rough cells and every compact change
+    patch (see :data:`UNCLEAR_AREA_M2`)."""
+    small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
+    out = np.isin(found.labels, small) & found.single & counted
+    if not signal:
+        d = np.nan_to_num(diff)
+        for part in (counted & (d > 0), counted & (d < 0)):
+            comp, k = ndimage.label(part, structure=np.ones((3, 3), bool))
+            if not k:
+                continue
+            idx = np.arange(1, k + 1)
+            area = ndimage.sum(part, comp, idx) * cell_area
+            vol = np.abs(ndimage.sum(d, comp, idx)) * cell_area
+            keep = idx[(area <= UNCLEAR_AREA_M2) & (vol <= UNCLEAR_M3)]
+            out |= np.isin(comp, keep) & part
+        out |= rough & counted
+    comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
+    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area if n else np.empty(0)
+    return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
 
 
 def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
@@ -146,10 +178,10 @@ def _missed_share(epochs: tuple[EpochDEM, EpochDEM]) -> float:
 def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
     """Per class, the largest share of a cell's points (either epoch) that are of that class."""
     out = {}
-    for name, field in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
+    for name, attr in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
         best = np.zeros(epochs[0].counts.shape)
         for e in epochs:
-            part = getattr(e, field)
+            part = getattr(e, attr)
             if part is None:
                 continue
             total = e.counts + e.nonsoil()
@@ -206,6 +238,12 @@ def sentence(report: dict) -> list[str]:
         out.append(
             f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
             "counted: no classification, colour or returns said what it is"
+        )
+    u = report.get("unclassified") or {}
+    if u.get("count") and u.get("fill", 0.0) + u.get("cut", 0.0) >= 0.5:
+        out.append(
+            f"{u['fill']:.0f} m³ of apparent fill and {u['cut']:.0f} m³ of apparent cut in {u['count']} compact "
+            "objects or rough areas could not be classified (counted; the interval holds both readings)"
         )
     s = report.get("single_objects") or {}
     if s.get("count"):

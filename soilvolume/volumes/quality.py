@@ -18,6 +18,7 @@ MIN_STABLE_FRACTION = 0.05  # less stable ground than this share of the compared
 LOW_STABLE_FRACTION = 0.1  # less than this: use with caution (a site whose works cover most of it)
 MIN_STABLE_CELLS = 30
 PRIOR_MARGIN = 0.8  # a pose using more than this share of the prior is suspicious
+UNCLASSIFIED_SHARE = 0.1  # change that may not be soil over this share of the net (and its interval): said
 
 
 def assess(
@@ -109,7 +110,11 @@ def assess(
                 f"change ({v['net']:+.1f} m³)",
             )
         )
-    out += _nonsoil(report.get("excluded") or {}, u["net"])
+    excluded = report.get("excluded") or {}
+    bound = float((excluded.get("bound_m3") or {}).get("net", 0.0))
+    random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified
+    out += _unclassified(excluded, v["net"], random_half)
+    out += _nonsoil(excluded, random_half)
     out.extend(("caution", m) for m in zone_messages(report.get("zones") or []))
     unseen = coverage_check(report)
     if unseen is not None:
@@ -141,6 +146,33 @@ def _nonsoil(excluded: dict, half: float) -> list[tuple[str, str]]:
         return []
     words = "; ".join(sentence(excluded))
     return [("caution", f"{words}: together more than the net's interval (±{half:.1f} m³)")]
+
+
+def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, str]]:
+    """When the change that could not be classified (:mod:`.nonsoil`: compact patches and rough
+    cells without any signal, machine-sized objects in one survey only) is over the net's
+    interval and :data:`UNCLASSIFIED_SHARE` of the net: not reliable without any signal (the
+    number then rests on a guess), use with caution when only objects in one survey are open (the
+    signals said what the rest is); the interval is widened by it either way."""
+    u = excluded.get("unclassified") or {}
+    bound = float((excluded.get("bound_m3") or {}).get("net", 0.0))
+    if bound <= max(half, UNCLASSIFIED_SHARE * abs(net)):
+        return []
+    why = (
+        "these are machine-sized objects in one survey only"
+        if u.get("signals", True)
+        else "the files carry no classification, colour or return numbers to say what they are"
+    )
+    lo, hi = net - u.get("fill", 0.0), net + u.get("cut", 0.0)
+    sev = "caution" if u.get("signals", True) else "unreliable"  # signals said the rest: only objects are open
+    return [
+        (
+            sev,
+            f"{u.get('fill', 0.0) + u.get('cut', 0.0):.0f} m³ of change in {u.get('count', 0)} compact objects or "
+            f"rough areas could not be classified as soil or not ({why}): the soil's net lies anywhere "
+            f"from {lo:+.0f} to {hi:+.0f} m³, and the interval is widened by it",
+        )
+    ]
 
 
 def _verdict(found: list[tuple[str, str]]) -> dict:

@@ -150,6 +150,7 @@ def volume_uncertainty(
     extra_sigma: dict[str, float] | None = None,
     counted: np.ndarray | None = None,
     surface: bool = True,
+    bound_m3: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
     (all valid cells when None), cut/fill split by the sign of the corrected difference, and
@@ -163,7 +164,9 @@ def volume_uncertainty(
     change detection picks up from noise on stable ground.
     ``counted``: the cells the volumes sum over (a tile's core; default all), while the error
     model uses every stable cell. ``surface``: a correction surface was fitted (its leftover's
-    spread on stable ground is carried over the part's area, fully correlated).
+    spread on stable ground is carried over the part's area, fully correlated). ``bound_m3``:
+    volume per part that may or may not be soil (no signal could say): added to the half-width
+    as it is, a bound rather than a random error (see :func:`widen`).
     Also returns lod_m, sigma_m (NMAD), nugget_m2, psill_m2,
     range_m, the variogram, areas."""
     valid = np.isfinite(diff_corrected)
@@ -218,7 +221,7 @@ def volume_uncertainty(
         ]
         for k, m in parts.items()
     }
-    out: dict[str, Any] = {k: z * float(np.linalg.norm(t)) for k, t in terms.items()}
+    out: dict[str, Any] = widen({k: z * float(np.linalg.norm(t)) for k, t in terms.items()}, bound_m3)
     out.update(
         confidence=confidence,
         sigma_m=sigma,
@@ -234,9 +237,21 @@ def volume_uncertainty(
         stable_cells=int(stable.sum()),
         change_area_m2=float(region.sum()) * grid.cell_area,
         part_area_m2={k: float(m.sum()) * grid.cell_area for k, m in parts.items()},
+        unclassified_m3={k: float((bound_m3 or {}).get(k, 0.0)) for k in ("net", "cut", "fill")},
         terms_m3=terms,  # one-sigma: area model, refilled share, refill error, leftover bias, extras
         variogram={"lag_m": lags.tolist(), "gamma_m2": gamma.tolist(), "pairs": npairs.tolist()},
     )
+    return out
+
+
+def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, float]:
+    """Half-widths (m3) widened by what the classification could not attribute (``bound``, m3
+    per part): the truth lies anywhere between counting all of it and none, so it adds as it is
+    (the net's half-width over every compared cell too)."""
+    b = bound or {}
+    out = {k: v + float(b.get(k, 0.0)) for k, v in half.items()}
+    if "net_compared_area" in out:
+        out["net_compared_area"] = half["net_compared_area"] + float(b.get("net", 0.0))
     return out
 
 

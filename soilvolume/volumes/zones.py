@@ -138,8 +138,10 @@ def zone_interval(model: Callable[..., dict], region: np.ndarray, headline: dict
     (``model``: :func:`~.uncertainty.volume_uncertainty` with the run's arguments) over the cells
     of ``region`` (the headline's change areas) inside ``zone``; the headline's further terms
     (registration, small detections, classification, cell statistic: ``headline["terms_m3"]``'s
-    extras) shared in proportion to the zone's area of each part."""
-    from .uncertainty import TERMS, z_value
+    extras) shared in proportion to the zone's area of each part, and widened by the whole
+    run's unclassified change (``unclassified_m3``: where it lies is not kept, so each zone
+    may hold all of it)."""
+    from .uncertainty import TERMS, widen, z_value
 
     own = model(change_mask=region & zone, extra_sigma=None)
     extra = TERMS.index("extras")
@@ -150,4 +152,4 @@ def zone_interval(model: Callable[..., dict], region: np.ndarray, headline: dict
         terms = list(own["terms_m3"][part])
         terms[extra] = share * headline["terms_m3"][part][extra]
         out[part] = z_value(headline["confidence"]) * float(np.linalg.norm(terms))
-    return out
+    return widen(out, headline.get("unclassified_m3"))

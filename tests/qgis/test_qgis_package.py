@@ -120,6 +120,7 @@ def test_zip_installs_and_loads(plugin_zip, tmp_path):
             "pointcloudtodem",
             "registerpointclouds",
             "volumefromdems",
+            "volumeseries",
         )
     ]
     assert out["menu_calls"] == 2  # the estimate and "Install dependencies…"

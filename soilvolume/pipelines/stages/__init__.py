@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ...core.types import SoilVolumeError
-from . import crop, outlier, readers, reprojection, sampling, smrf, writers
+from . import crop, csf, outlier, readers, reprojection, sampling, smrf, writers
 from . import range as range_stage
 from .view import PointView, StageContext
 
@@ -32,6 +32,7 @@ REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
     "filters.voxelcenternearestneighbor": (sampling.voxel_center_nn, frozenset(sampling.VOXEL_OPTS)),
     "filters.sample": (sampling.sample, frozenset(sampling.SAMPLE_OPTS)),
     "filters.smrf": (smrf.smrf, frozenset(smrf.OPTS)),
+    "filters.csf": (csf.csf, frozenset(csf.OPTS)),
     "writers.las": (writers.write_las, frozenset(writers.LAS_OPTS)),
     "writers.gdal": (writers.write_gdal, frozenset(writers.GDAL_OPTS)),
 }

@@ -1,0 +1,122 @@
+"""filters.csf: the Cloth Simulation Filter (Zhang et al. 2016), run by the ``CSF`` module of the
+PyPI package ``cloth-simulation-filter`` (the authors' own implementation, which PDAL's filters.csf
+also wraps).
+
+The cloud is turned upside down and a cloth of ``resolution`` cells dropped onto it; points within
+``threshold`` of where the cloth settles are ground (Classification 2), the rest 1. Tuned for
+earthworks by default: a fine cloth (0.5 m) of medium stiffness (``rigidness`` 2) with slope
+smoothing follows piles and pits, which are the signal, while it bridges vehicles, containers and
+bushes (a stiff cloth on flat ground, rigidness 3, would bridge small piles too).
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numpy as np
+
+from ...core.types import SoilVolumeError
+from .view import PointView, StageContext
+
+OPTS = {"resolution", "rigidness", "threshold", "smooth", "step", "iterations"}
+DEFAULTS = {"resolution": 0.5, "rigidness": 2, "threshold": 0.3, "smooth": True, "step": 0.65, "iterations": 500}
+PACKAGE = "cloth-simulation-filter"
+
+
+def available() -> bool:
+    """Whether the ``CSF`` module imports."""
+    try:
+        import CSF  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def csf_classify(
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    *,
+    resolution: float = 0.5,
+    rigidness: int = 2,
+    threshold: float = 0.3,
+    smooth: bool = True,
+    step: float = 0.65,
+    iterations: int = 500,
+) -> np.ndarray:
+    """Ground mask of the points (metres) by the cloth simulation (see module)."""
+    try:
+        import CSF
+    except ImportError as exc:
+        raise SoilVolumeError(
+            f"{{opt:ground=csf}} needs the '{PACKAGE}' package (pip install {PACKAGE}); it is not installed"
+        ) from exc
+    n = len(x)
+    if n == 0:
+        return np.zeros(0, bool)
+    sim = CSF.CSF()
+    p = sim.params
+    p.bSloopSmooth, p.cloth_resolution, p.rigidness = bool(smooth), float(resolution), int(rigidness)
+    p.class_threshold, p.time_step, p.interations = float(threshold), float(step), int(iterations)
+    origin = np.array([x.min(), y.min(), z.min()])  # small coordinates: the module works in doubles
+    sim.setPointCloud(np.column_stack([x, y, z]).astype(np.float64) - origin)
+    ground, other = CSF.VecInt(), CSF.VecInt()
+    with _quiet_native_stdout():  # the module prints its progress on the process's stdout
+        sim.do_filtering(ground, other, exportCloth=False)
+    keep = np.zeros(n, bool)
+    keep[np.asarray(ground, dtype=np.int64)] = True
+    return keep
+
+
+@contextmanager
+def _quiet_native_stdout() -> Iterator[None]:
+    """File descriptor 1 to the null device for the block; ``sys.stdout``, when it writes there,
+    moved to a copy of it (the command line's progress protocol writes on stdout)."""
+    try:
+        ours = sys.stdout.fileno() == 1
+    except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
+        ours = False
+    sys.stdout.flush()
+    real = os.dup(1)
+    python_stdout = sys.stdout
+    if ours:
+        sys.stdout = os.fdopen(os.dup(real), "w", buffering=1, encoding=python_stdout.encoding)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        os.dup2(real, 1)
+        os.close(real)
+        os.close(null)
+        if ours:
+            sys.stdout.close()
+            sys.stdout = python_stdout
+
+
+def csf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
+    """The stage: Classification 2 for ground, 1 for the rest."""
+    params = {
+        "resolution": ctx.positive(opts, "resolution", DEFAULTS["resolution"]),
+        "rigidness": int(ctx.number(opts, "rigidness", DEFAULTS["rigidness"])),
+        "threshold": ctx.positive(opts, "threshold", DEFAULTS["threshold"]),
+        "smooth": bool(opts.get("smooth", DEFAULTS["smooth"])),
+        "step": ctx.positive(opts, "step", DEFAULTS["step"]),
+        "iterations": int(ctx.positive(opts, "iterations", DEFAULTS["iterations"])),
+    }
+    if params["rigidness"] not in (1, 2, 3):
+        raise ctx.error("'rigidness' must be 1, 2 or 3")
+    cls = view.ensure("Classification")
+    if len(view) == 0:
+        return view
+    try:
+        ground = csf_classify(view.arrays["X"], view.arrays["Y"], view.arrays["Z"], **params)
+    except SoilVolumeError as exc:
+        raise ctx.error(str(exc)) from exc
+    cls[:] = np.where(ground, 2, 1).astype(cls.dtype)
+    return view
