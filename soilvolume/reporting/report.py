@@ -96,23 +96,25 @@ def write_json(path: Path, report: dict, timings: dict[str, float] | None = None
 
 
 def summary_lines(report: dict) -> list[str]:
-    """A few human lines for the terminal."""
+    """A few human lines for the terminal (options worded as flags)."""
     v, u = report["volume_m3"], report["volume_uncompensated_m3"]
     g = report["grid"]
     fine = report["registration"]["fine"]
-    return [
-        f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
-        f"registration: {fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m",
-        f"volume (change areas, {report['correction']['method']} correction): "
-        f"net {v['net']:+.2f} m3  cut {v['cut']:.2f} m3  fill {v['fill']:.2f} m3",
-        f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
-        f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
-        f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
-        *_coverage_line(report),
-        f"total time {sum(report['timings_s'].values()):.2f} s",
-        *(f"not soil: {line}" for line in nonsoil_lines(report)),
-        *quality_lines(report),
-    ]
+    return cli_tree(
+        [
+            f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
+            f"registration: {fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m",
+            f"volume (change areas, {report['correction']['method']} correction): "
+            f"net {v['net']:+.2f} m3  cut {v['cut']:.2f} m3  fill {v['fill']:.2f} m3",
+            f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
+            f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
+            f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
+            *_coverage_line(report),
+            f"total time {sum(report['timings_s'].values()):.2f} s",
+            *(f"not soil: {line}" for line in nonsoil_lines(report)),
+            *quality_lines(report),
+        ]
+    )
 
 
 def _coverage_line(report: dict) -> list[str]:
