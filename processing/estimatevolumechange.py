@@ -46,6 +46,11 @@ LAZ, COPC, VPC of tiles, PLY, PCD, XYZ/TXT/CSV). Give a CRS override when a file
 (PLY, XYZ); one that differs from the CRS in a file's header is refused. Optional <b>zones</b>
 (polygons) get their own volumes; optional <b>stable ground</b>
 polygons mark ground known not to have changed. Advanced parameters tune each step.</p>
+<p><b>A surface as the reference</b>: the before input may be a single-band DEM raster layer or
+GeoTIFF (a grading plan, or an earlier DEM; in its CRS, or the before CRS override when it has
+none). Nothing is registered against it (the survey must be well georeferenced) and no bias is
+corrected by default; the volumes are above (fill) and below (cut) the design over the survey's
+footprint, and the verdict checks that the survey agrees with the design on unchanged ground.</p>
 <h3>Outputs</h3>
 <p>The corrected difference raster (red = cut, blue = fill, on top), both DEMs and the vertical
 correction raster, styled, in a group named after the pair; the areas of significant change as
@@ -84,7 +89,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         return self.tr("Cut, fill and net volume between two point cloud surveys of one site.")
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
-        self.addParameter(params.cloud_param("BEFORE", "Before"))
+        self.addParameter(params.cloud_param("BEFORE", "Before", surface=True))
         self.addParameter(params.cloud_param("AFTER", "After"))
         for param in optionparams.parameters():
             self.addParameter(param)
@@ -155,7 +160,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
-        before = params.cloud_path(self, parameters, "BEFORE", context, "Before")
+        before = params.cloud_path(self, parameters, "BEFORE", context, "Before", surface=True)
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         registered = self.parameterAsFileOutput(parameters, "REGISTERED", context)
         options = optionparams.read_options(self, parameters, context, feedback)
@@ -165,7 +170,10 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                 args += [flag, self.parameterAsFile(parameters, key, context)]
         if registered:
             args.append("--registered-cloud")
-        feedback.pushInfo(f"Before point cloud: {before}\nAfter point cloud: {after}")
+        what = "point cloud"
+        if params.is_surface_file(before):
+            what = "surface (the reference: nothing is registered against it)"
+        feedback.pushInfo(f"Before {what}: {before}\nAfter point cloud: {after}")
         with params.work_folder() as work:
             result = engine.run(
                 [*args, "--out", str(work / "result")], feedback, skip=("quality (",), hint=CRS_HINT

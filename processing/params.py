@@ -22,11 +22,13 @@ from qgis.core import (
     QgsProcessingParameterPointCloudLayer,
     QgsProcessingUtils,
     QgsProperty,
+    QgsRasterLayer,
 )
 
 from . import engine
 
 CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
+SURFACE_EXTENSIONS = ("tif", "tiff")  # a surface as the reference (BEFORE of the estimate): a DEM GeoTIFF
 CLOUD_FILTER = (
     "Point clouds (" + " ".join(f"*.{e} *.{e.upper()}" for e in CLOUD_EXTENSIONS) + ");;"
     "LAS/LAZ (*.las *.laz *.LAS *.LAZ);;PLY (*.ply *.PLY);;XYZ text (*.xyz *.txt *.csv);;All files (*.*)"
@@ -44,10 +46,28 @@ class CloudParameter(QgsProcessingParameterPointCloudLayer):
         return CLOUD_FILTER
 
     def clone(self) -> CloudParameter:
-        copy = CloudParameter(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
+        copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
         copy.setHelp(self.help())
         copy.setFlags(self.flags())
         return copy
+
+
+class CloudOrSurfaceParameter(CloudParameter):
+    """The estimate's BEFORE: a point cloud, or a surface as the reference (a single-band DEM:
+    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered."""
+
+    def createFileFilter(self) -> str:  # noqa: N802 - Qt API
+        return "DEM GeoTIFF (a surface as the reference) (*.tif *.tiff *.TIF *.TIFF);;" + CLOUD_FILTER
+
+    def checkValueIsAcceptable(self, value, context=None) -> bool:  # noqa: N802 - Qt API
+        if isinstance(value, QgsRasterLayer) or is_surface_file(value):
+            return True
+        return super().checkValueIsAcceptable(value, context)
+
+
+def is_surface_file(value: Any) -> bool:
+    """Whether ``value`` names a DEM GeoTIFF (a surface as the estimate's reference)."""
+    return isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in SURFACE_EXTENSIONS
 
 
 def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterDefinition:
@@ -56,13 +76,20 @@ def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterD
     return param
 
 
-def cloud_param(key: str, label: str) -> QgsProcessingParameterPointCloudLayer:
+def cloud_param(key: str, label: str, surface: bool = False) -> QgsProcessingParameterPointCloudLayer:
     """One required input per epoch: a point cloud layer, or a file path (LAS, LAZ, COPC, VPC,
-    PLY, PCD, XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer)."""
-    param = CloudParameter(key, f"{label} point cloud")
+    PLY, PCD, XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer); with
+    ``surface`` also a raster layer or GeoTIFF (a DEM as the reference)."""
+    param = (CloudOrSurfaceParameter if surface else CloudParameter)(key, f"{label} point cloud")
     param.setHelp(
         f"The {label.lower()} survey: a point cloud layer of the project or a file "
-        f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)})."
+        f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)})"
+        + (
+            "; or a surface as the reference: a single-band DEM raster layer or GeoTIFF (a grading plan or an "
+            "earlier DEM), against which nothing is registered (volumes above/below the design)."
+            if surface
+            else "."
+        )
     )
     return param
 
@@ -77,16 +104,22 @@ def cloud_path(
     key: str,
     context: QgsProcessingContext,
     label: str,
+    surface: bool = False,
 ) -> str:
-    """The point cloud file behind ``key``: a file path as given, or a layer's source file."""
-    path = _cloud_source(alg, parameters, key, context)
+    """The point cloud file behind ``key``: a file path as given, or a layer's source file; with
+    ``surface`` also a DEM GeoTIFF (a raster layer's source file)."""
+    path = _cloud_source(alg, parameters, key, context, surface)
     if not path:
         raise QgsProcessingException(f"No {label.lower()} point cloud: choose a point cloud layer or a file.")
+    if surface and is_surface_file(path):
+        if not Path(path).is_file():
+            raise QgsProcessingException(f"{label} surface {path}: file not found.")
+        return path
     check_cloud_file(path, label)
     return path
 
 
-def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcessingContext) -> str:
+def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcessingContext, surface=False) -> str:
     value = parameters.get(key)
     if isinstance(value, QgsProperty):
         value = value.valueAsString(context.expressionContext())
@@ -97,6 +130,8 @@ def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcess
     if isinstance(value, str) and (Path(value).is_file() or Path(value).suffix):
         return value
     layer = alg.parameterAsPointCloudLayer(parameters, key, context)
+    if layer is None and surface:  # a raster layer of the project, by id or name
+        layer = alg.parameterAsRasterLayer(parameters, key, context)
     return layer.source() if layer is not None else str(value)
 
 
@@ -119,9 +154,11 @@ def check_cloud_value(
     context: QgsProcessingContext,
     label: str,
 ) -> tuple[bool, str]:
-    """checkParameterValues for one cloud input: a layer, or a readable supported file."""
+    """checkParameterValues for one cloud input: a layer, or a readable supported file (or a
+    surface, where the parameter takes one)."""
+    surface = isinstance(alg.parameterDefinition(key), CloudOrSurfaceParameter)
     try:
-        cloud_path(alg, parameters, key, context, label)
+        cloud_path(alg, parameters, key, context, label, surface)
     except QgsProcessingException as exc:
         return False, str(exc)
     return True, ""

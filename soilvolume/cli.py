@@ -99,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument(
         "before",
         type=Path,
-        help="wide 'before' survey: LAS/LAZ, COPC (.copc.laz), a virtual point cloud of tiles (.vpc), PLY/PCD/XYZ",
+        help="wide 'before' survey (LAS/LAZ, COPC, VPC of tiles, PLY/PCD/XYZ) or a design DEM GeoTIFF (.tif)",
     )
     est.add_argument("after", type=Path, help="smaller 'after' survey (the same formats)")
     est.add_argument(

@@ -249,6 +249,15 @@ class Options:
         commands=VOLUME,
     )
     zones: str | None = _opt(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
+    design_uncertainty: float = _opt(
+        0.0,
+        "when BEFORE is a surface (a design DEM GeoTIFF): its vertical uncertainty (m, one sigma, common to the "
+        "compared area), added to the volumes' interval; 0 takes the design as exact",
+        label="Design uncertainty (a surface as BEFORE)",
+        unit="m",
+        lo=0.0,
+        hi=100.0,
+    )
     # run control
     threads: int = _opt(
         0,

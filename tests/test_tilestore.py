@@ -26,6 +26,7 @@ OTHER = {
     "before_crs": "EPSG:32654",
     "after_crs": "EPSG:32654",
     "radius": 31.0,
+    "design_uncertainty": 0.05,
     "coarse": "fpfh",
     "coarse_voxel": 2.0,
     "georeferencing": "precise",

@@ -203,6 +203,37 @@ def prepare(
     )
 
 
+def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
+    """Stream the after survey alone into its own working frame, as :func:`prepare` does, for a
+    run whose reference is a surface (:mod:`soilvolume.inputs.surface`): no before cloud."""
+    crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
+    hint = lonlat_of(np.array([after.lo, after.hi]), crs_a) if crs_a.is_geographic else None
+    frame = work_frame(crs_a, hint)
+    lo, hi = _frame_box(after, crs_a, frame)
+    origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
+    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
+    to_a = _local(crs_a, frame, origin, after.path)
+    streamed, a, note = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check)
+    if len(a.xyz) == 0:
+        raise SoilVolumeError(f"{after.path}: no points left after the ground selection ({note or a.note})")
+    check_spread(a.thin[:, :2], after.path, "after the ground selection")
+    none = np.empty((0, 3))
+    return Prepared(
+        Cloud(none.astype(np.float32), origin, frame.wkt, ""),
+        Cloud(a.xyz, origin, frame.wkt, after.path, nonsoil=a.nonsoil),
+        frame,
+        origin,
+        {"after": _describe(streamed, crs_a, a.used, note or a.note, a.extra["cropped"], a.nonsoil)},
+        none,
+        a.thin,
+        voxel,
+        _all_points(after, to_a),
+        a.extra["read_s"],
+        ground=(False, a.note == CLASS_NOTE),
+        index=(None, a.extra["index"]),
+    )
+
+
 @dataclass(frozen=True)
 class Single:
     """One cloud streamed into its working frame: float32 local points and a thinned subset."""

@@ -174,12 +174,13 @@ def _volume_rows(report: dict) -> list[list[str]]:
 def _summary(report: dict) -> str:
     """The result in plain words: volumes with their ±, significance, quality verdict."""
     from .summary import quality, significance
+    from .surface import words
 
     v, u = _get(report, "volume_m3", default={}) or {}, _get(report, "uncertainty_m3", default={}) or {}
-    conf = u.get("confidence", 0.95)
+    conf, (lead, cut, fill) = u.get("confidence", 0.95), words(report)
     out = (
-        f"<p class=big>Net change <b>{_pm(v.get('net'), u.get('net'))} m³</b> "
-        f"(cut {_pm(v.get('cut'), u.get('cut'))} m³, fill {_pm(v.get('fill'), u.get('fill'))} m³; "
+        f"<p class=big>{lead} <b>{_pm(v.get('net'), u.get('net'))} m³</b> "
+        f"({cut} {_pm(v.get('cut'), u.get('cut'))} m³, {fill} {_pm(v.get('fill'), u.get('fill'))} m³; "
         f"± at {_fmt(conf * 100, 0)} % confidence) over {_fmt(v.get('area_m2'), 0)} m².</p>"
         f"<p>{html.escape(significance(report))}</p>"
     )
@@ -342,6 +343,9 @@ def _sections(report: dict, arrays: dict, grid: GridSpec) -> list[str]:
     out.append("<h2>What is not soil</h2>" + nonsoil_map + excluded_section(report, _table))
     out.append("<h2>Uncertainty</h2>" + _kv(_uncertainty_summary(report)))
     out.append("<h2>Vertical bias correction</h2>" + _correction(report))
+    from .surface import is_surface, section
+
+    out.append("<h2>Reference surface</h2>" + section(report, _table) if is_surface(report) else "")
     out.append("<h2>Registration</h2>" + _registration(report))
     out.append("<h2>Inputs and grid</h2>" + _inputs(report))
     out.append("<h2>Parameters</h2>" + _parameters(report))

@@ -100,12 +100,15 @@ def summary_lines(report: dict) -> list[str]:
     v, u = report["volume_m3"], report["volume_uncompensated_m3"]
     g = report["grid"]
     fine = report["registration"]["fine"]
-    return cli_tree(
+    surface = (report.get("reference") or {}).get("kind") == "surface"
+    reg = fine["method"] if surface else f"{fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m"
+    words = ("net", "below design", "above design") if surface else ("net", "cut", "fill")
+    return cli_tree(  # options worded as flags
         [
             f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
-            f"registration: {fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m",
+            f"registration: {reg}",
             f"volume (change areas, {report['correction']['method']} correction): "
-            f"net {v['net']:+.2f} m3  cut {v['cut']:.2f} m3  fill {v['fill']:.2f} m3",
+            f"{words[0]} {v['net']:+.2f} m3  {words[1]} {v['cut']:.2f} m3  {words[2]} {v['fill']:.2f} m3",
             f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
             f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
             f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
@@ -151,10 +154,13 @@ def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
 def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
     """report.json of an estimate run, its quality verdict in it (``timings``: seconds per stage so far)."""
     from ..volumes.quality import assess
+    from .surface import is_surface, surface_quality
 
     report = _report(record, timings)
     q = record.quality
     report["quality"] = assess(report, q.stable, q.change, q.offset, q.cell_area, q.prior, q.diff)
+    if is_surface(report):  # the survey's agreement with the reference surface leads the verdict
+        report["quality"] = surface_quality(report, record)
     if record.engine is not None:
         report["engine"] = record.engine
     return report
@@ -163,10 +169,12 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
 def _report(record: RunRecord, timings: dict[str, float]) -> dict:
     from dataclasses import asdict
 
+    from .surface import amend
+
     prep, reg, grid, vols, options = record.prep, record.reg, record.grid, record.vols, record.options
     p_b, p_a = record.planes
     t_abs = absolute_transform(reg.transform, prep.origin)
-    return {
+    report = {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
         "volume_m3": vols.compensated,
         "volume_method": (
@@ -234,3 +242,4 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
         "options": asdict(options),
         "timings_s": timings,
     }
+    return amend(report, prep, vols)  # a run against a surface: its reference

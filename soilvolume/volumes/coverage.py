@@ -109,7 +109,9 @@ def check(report: dict) -> tuple[str, str] | None:
     unseen, share = cov["unseen_m2"], 1.0 - cov["compared_share"]
     bound, interval = cov["unseen_volume_bound_m3"], report["uncertainty_m3"]["net"]
     before = cov["before_missing_m2"] >= 0.5 * unseen
+    surface = (report.get("reference") or {}).get("kind") == "surface"
     who = "the before survey does not cover" if before else "the surveys do not both cover"
+    who = "the design does not cover" if surface else who
     said = f"{who} {unseen:,.0f} m² ({share:.0%}) of the after footprint"
     noise = 2.0 * unseen * float(report["uncertainty_m3"].get("lod_m") or 0.0)  # change at noise level: none
     if share > MAX_SHARE or bound > max(interval, noise):
@@ -132,7 +134,9 @@ def line(report: dict) -> str | None:
     cov = report.get("coverage")
     if not cov:
         return None
-    text = f"coverage: both surveys cover {cov['compared_share']:.1%} of the after footprint"
+    surface = (report.get("reference") or {}).get("kind") == "surface"
+    who = ("the design covers", "the design misses") if surface else ("both surveys cover", "the before survey misses")
+    text = f"coverage: {who[0]} {cov['compared_share']:.1%} of the after footprint"
     if cov["before_missing_m2"] > 0:
-        text += f" (the before survey misses {cov['before_missing_m2']:,.0f} m2)"
+        text += f" ({who[1]} {cov['before_missing_m2']:,.0f} m2)"
     return text

@@ -8,6 +8,7 @@ from pathlib import Path
 from ..core.hooks import Hooks, Result
 from ..core.outputs import RUN_OUTPUTS, os_errors, output_dir
 from ..core.types import Epoch
+from ..inputs.surface import is_surface
 from ..options import Options
 from ..pipelines.confine import writers_into
 from .run import Run, drive
@@ -27,7 +28,8 @@ def run_estimate(
 ) -> Result:
     """See :func:`soilvolume.api.estimate`."""
     timer = Timer()  # first: the timings count from here (and the start-up before)
-    epochs = (Epoch(before, before_pipeline), Epoch(after, after_pipeline))
+    kind = "surface" if is_surface(before) and before_pipeline is None else "survey"  # a design, an earlier DEM
+    epochs = (Epoch(before, before_pipeline, kind=kind), Epoch(after, after_pipeline))
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
     with (
         output_dir(out_dir, inputs, overwrite) as out,
@@ -52,6 +54,12 @@ def executor_for(run: Run):
     from .executors import InProcess
 
     b, a = run.epochs
+    if b.kind == "surface":  # the survey alone, in-process (workflow/design)
+        from .design import SurfaceReference
+
+        if run.options.scheduler not in ("none", "auto"):
+            run.hooks.info("{opt:scheduler}: a run against a surface runs in this process")
+        return SurfaceReference()
     schedule = schedule_for(b.path, a.path, run.options, b.pipeline or a.pipeline)
     if schedule.kind == "none":
         return InProcess()

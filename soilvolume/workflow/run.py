@@ -33,6 +33,7 @@ COMMAND_STEPS: dict[str, tuple[str, ...]] = {
     "register": ("prepare", "register", "write"),
     "dem": ("prepare", "grid", "write"),
     "series": tuple(PROGRESS),  # E0 and each later epoch: workflow/series.Series
+    "surface": ("prepare", "grid", "volume", "write", "report"),  # estimate against a surface: nothing registered
 }
 
 
@@ -95,8 +96,10 @@ def drive(run: Run, executor) -> Run:
     """Run the command's steps in order on ``executor`` (see module); returns ``run`` filled in.
     An executor over more than a pair (:class:`soilvolume.workflow.series.Series`) may do a whole
     step itself (``<step>_step(run)``: register, planes, report over every pair); the order,
-    the spans and the messages stay the run's."""
-    steps = COMMAND_STEPS[run.command]
+    the spans and the messages stay the run's. An estimate against a surface skips register and
+    planes (``COMMAND_STEPS["surface"]``, :class:`soilvolume.workflow.design.SurfaceReference`)."""
+    surface = run.command == "estimate" and run.epochs[0].kind == "surface"
+    steps = COMMAND_STEPS["surface" if surface else run.command]
     run.spans = spans(steps)
     threads(run.command, run.options)
     with executor.session(run):

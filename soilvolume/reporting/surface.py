@@ -1,0 +1,78 @@
+"""report.html's wording of a run against a reference surface (a design or an earlier DEM):
+volumes above and below the design, and the reference in place of the registration."""
+
+from __future__ import annotations
+
+import html
+
+NONE = "none: the reference is a surface"  # report.json's registration.kind of such a run
+WORDING = {"fill": "above design", "cut": "below design", "net": "above minus below design"}
+METHOD = (
+    "the survey against the reference surface (resampled onto the survey's grid): fill = the survey above the "
+    "design, cut = below it, over the survey's footprint clipped to the design's valid extent; "
+)
+
+
+def is_surface(report: dict) -> bool:
+    """Whether the run's reference is a surface (report.json's ``reference.kind``)."""
+    return (report.get("reference") or {}).get("kind") == "surface"
+
+
+def amend(report: dict, prep, vols) -> dict:
+    """report.json of a run against a surface (``prep.inputs["before"]`` describes it):
+    ``reference``, the registration's kind, the volumes' wording; others returned as they are."""
+    ref = (prep.inputs or {}).get("before") or {}
+    if ref.get("kind") != "surface":
+        return report
+    report["registration"]["kind"] = NONE
+    report["reference"] = {**ref, "wording": WORDING, "uncertainty_m3": vols.uncertainty.get("reference_m3")}
+    report["volume_method"] = METHOD + report["volume_method"]
+    return report
+
+
+def surface_quality(report: dict, record) -> dict:
+    """The verdict of a run against a surface (``record``: core/record.RunRecord): the survey's
+    agreement with the surface on the cells its change detection deems unchanged
+    (:mod:`soilvolume.volumes.reference`, recorded as ``reference.agreement``) first."""
+    from ..compensation.correction import stable_cells
+    from ..volumes import reference
+
+    diff = record.quality.diff
+    unchanged = stable_cells(diff, record.grid.cell)
+    agree = reference.agreement(diff, unchanged, record.vols.uncertainty["lod_m"], record.grid.cell_area)
+    report["reference"]["agreement"] = agree
+    return reference.merge(report["quality"], reference.check(agree))
+
+
+def words(report: dict) -> tuple[str, str, str]:
+    """(the headline's lead, the cut's word, the fill's word)."""
+    if is_surface(report):
+        return "Survey against the design: net", "below design", "above design"
+    return "Net change", "cut", "fill"
+
+
+def section(report: dict, table) -> str:
+    """The reference surface and the survey's agreement with it on unchanged ground (``table``:
+    html's table builder, ``table(header, rows)``)."""
+    ref = report.get("reference") or {}
+    agree = ref.get("agreement") or {}
+
+    def fmt(value, digits=3):
+        return "n/a" if not isinstance(value, (int, float)) else f"{value:,.{digits}f}"
+
+    rows = [
+        ["surface", html.escape(str(ref.get("path", "")))],
+        ["CRS", html.escape(str(ref.get("crs", "")))],
+        ["resolution (m)", fmt(ref.get("resolution_m"))],
+        ["heights' unit from", html.escape(str(ref.get("vertical_unit", "")))],
+        ["unchanged ground compared (m²)", fmt(agree.get("area_m2"), 0)],
+        ["median survey − design there (m)", fmt(agree.get("median_m"))],
+        ["NMAD there (m)", fmt(agree.get("nmad_m"))],
+        ["level of detection (m)", fmt(agree.get("lod_m"))],
+    ]
+    return table(["", "value"], rows) + (
+        "<p class=note>Nothing is registered against a surface: the survey is used as georeferenced. Where the "
+        "design is the existing ground the survey must agree with it; a median offset there beyond the level of "
+        "detection is a datum or georeferencing offset, counted as earthworks. The design is taken as exact "
+        "unless a design uncertainty is given; its resampling error is in the interval.</p>"
+    )

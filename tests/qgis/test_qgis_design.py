@@ -1,0 +1,58 @@
+"""A surface as the reference in QGIS: the estimate algorithm takes a DEM raster layer (or a
+GeoTIFF) as BEFORE and the engine compares the survey with it (issue 21, item 3)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from qgis.core import QgsRasterLayer
+
+SEED = 3
+
+
+@pytest.fixture(scope="module")
+def design_site(tmp_path_factory):
+    from soilvolume.scenes.surfaces import write_surface
+    from soilvolume.scenes.synthetic import SceneConfig, make_pair, write_pair
+
+    folder = tmp_path_factory.mktemp("design")
+    cfg = SceneConfig.small(shift_m=(0.0, 0.0, 0.0), rotation_deg=(0.0, 0.0, 0.0))
+    _, after, truth = write_pair(make_pair(SEED, cfg), folder)
+    return write_surface(folder / "design.tif", SEED, cfg, cell=1.0), after, json.loads(truth.read_text())
+
+
+def test_a_raster_layer_as_before(run_alg, design_site, tmp_path):
+    design, after, truth = design_site
+    layer = QgsRasterLayer(str(design), "design")
+    assert layer.isValid()
+    out = {k: str(tmp_path / f"{k.lower()}.tif") for k in ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")}
+    result = run_alg(
+        "estimatevolumechange",
+        {"BEFORE": layer, "AFTER": str(after), **out, "REPORT_JSON": str(tmp_path / "report.json")},
+    )
+    for key in ("NET", "CUT", "FILL"):
+        assert result[f"{key}_VOLUME"] == pytest.approx(truth[key.lower()], rel=0.02), key
+    assert result["VERDICT"] == "reliable", result["QUALITY_MESSAGES"]
+    assert "agrees with the design" in result["QUALITY_MESSAGES"]
+    report = json.loads(Path(result["REPORT_JSON"]).read_text())
+    assert report["reference"]["kind"] == "surface" and report["reference"]["path"] == str(design)
+    assert report["registration"]["kind"] == "none: the reference is a surface"
+    dem = QgsRasterLayer(result["DEM_BEFORE"], "dem")
+    assert dem.isValid() and dem.crs().authid() == "EPSG:32654"
+
+
+def test_a_geotiff_path_as_before_and_a_bad_one(run_alg, design_site, tmp_path):
+    from qgis.core import QgsProcessingException
+
+    design, after, truth = design_site
+    result = run_alg(
+        "estimatevolumechange", {"BEFORE": str(design), "AFTER": str(after), "DIFFERENCE": str(tmp_path / "d.tif")}
+    )
+    assert result["NET_VOLUME"] == pytest.approx(truth["net"], rel=0.02)
+    with pytest.raises(QgsProcessingException, match="file not found"):
+        run_alg(
+            "estimatevolumechange",
+            {"BEFORE": str(tmp_path / "missing.tif"), "AFTER": str(after), "DIFFERENCE": str(tmp_path / "e.tif")},
+        )
