@@ -70,3 +70,42 @@ def test_fresh_chunks_are_shifted_in_place_a_cloud_in_memory_never(tmp_path):
     a1 = load(las, Shift(o), "none", None, ColumnThinner(las.lo[:2] - o[:2] - 1, las.hi[:2] - o[:2] + 1, 1.0))
     a2 = load(las, lambda p: p - o, "none", None, ColumnThinner(las.lo[:2] - o[:2] - 1, las.hi[:2] - o[:2] + 1, 1.0))
     assert np.array_equal(a1.xyz, a2.xyz) and np.array_equal(a1.thin, a2.thin)
+
+
+def test_fast_kernels_match_the_plain_numpy_ones():
+    """The per-column bounds and row compress equal numpy's axis-0 reductions and boolean
+    indexing; the thinning sums over a chunk's span of columns equal the sums over the whole grid
+    (chunks inside, partly outside and wholly outside the box)."""
+    from soilvolume.core.cells import bounds, rows
+
+    rng = np.random.default_rng(3)
+    for dtype in (np.float64, np.float32):
+        xyz = rng.uniform(-5, 65, (20_000, 3)).astype(dtype)
+        mask = rng.random(len(xyz)) < 0.7
+        lo, hi = bounds(xyz)
+        assert np.array_equal(lo, xyz.min(axis=0)) and np.array_equal(hi, xyz.max(axis=0))
+        assert np.array_equal(bounds(xyz, 2)[1], xyz[:, :2].max(axis=0)) and np.array_equal(rows(xyz, mask), xyz[mask])
+    xyz = rng.uniform(-5, 65, (20_000, 3))
+    new, whole = ColumnThinner(np.zeros(2), np.full(2, 60.0), 1.0), np.zeros((4, 61 * 61))
+    for part in (xyz[:5000], xyz[5000:], xyz[:0], xyz[xyz[:, 0] > 61]):
+        new.add(part)
+        ix, iy = part[:, 0].astype(np.int64), part[:, 1].astype(np.int64)  # as before: truncation
+        ok = (ix >= 0) & (iy >= 0) & (ix < 61) & (iy < 61)
+        ids = iy[ok] * 61 + ix[ok]
+        whole[3] += np.bincount(ids, minlength=whole.shape[1])
+        for k in range(3):
+            whole[k] += np.bincount(ids, weights=part[ok, k], minlength=whole.shape[1])
+    assert np.array_equal(new.sums, whole)
+
+
+def test_large_runs_keep_freed_memory(monkeypatch):
+    """Only a run over the large-run size changes the allocator's thresholds, once."""
+    import sys
+
+    from soilvolume.core import heap
+
+    monkeypatch.setattr(heap, "_done", False)
+    assert not heap.keep_freed_memory(1_000_000)
+    if sys.platform.startswith("linux"):
+        assert heap.keep_freed_memory(heap.LARGE_RUN_POINTS + 1)
+        assert not heap.keep_freed_memory(heap.LARGE_RUN_POINTS + 1)  # once per process

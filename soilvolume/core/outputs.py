@@ -26,7 +26,7 @@ from .types import SoilVolumeError, short_error
 
 STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
 #: what a folder of a previous run may hold for --overwrite to replace it
-RUN_SUFFIXES = (".tif", ".tiff", ".json", ".geojson", ".html", ".las", ".laz", ".xml", ".csv")
+RUN_SUFFIXES = (".tif", ".tiff", ".json", ".html", ".las", ".laz", ".xml", ".csv")
 NAME_MAX = 255
 #: libraries whose write errors (a full disk, a lost mount) arrive as their own exception types
 WRITER_LIBRARIES = ("rasterio", "laspy", "lazrs")

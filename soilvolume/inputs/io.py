@@ -149,9 +149,7 @@ def las_chunks(path: Path, count: int, size: int, signals: bool = False) -> Iter
             has_cls = "classification" in dims
             bounds = BoundsCheck(path, h)
             for chunk in reader.chunk_iterator(size):
-                xyz = np.empty((len(chunk), 3))
-                with np.errstate(over="ignore", invalid="ignore"):  # checked against the bounds below
-                    xyz[:, 0], xyz[:, 1], xyz[:, 2] = chunk.x, chunk.y, chunk.z
+                xyz = scaled_xyz(chunk)
                 bounds.update(xyz)
                 read += len(chunk)
                 cls = np.array(chunk.classification) if has_cls else None  # a copy: a view pins the record
@@ -163,6 +161,18 @@ def las_chunks(path: Path, count: int, size: int, signals: bool = False) -> Iter
     if read != count:
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
     bounds.finish()
+
+
+def scaled_xyz(chunk) -> np.ndarray:
+    """(N, 3) float64 coordinates of a laspy point record: ``X * scale + offset`` as laspy computes
+    them, written straight into the columns (no float64 array per axis, no copy)."""
+    xyz = np.empty((len(chunk), 3))
+    with np.errstate(over="ignore", invalid="ignore"):  # checked against the bounds by the caller
+        for k, name in enumerate("XYZ"):
+            out = xyz[:, k]
+            np.multiply(chunk.array[name], chunk.scales[k], out=out)
+            np.add(out, chunk.offsets[k], out=out)
+    return xyz
 
 
 def point_signals(record, dims: set[str]) -> Signals | None:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.cells import bounds
 from ..core.types import SoilVolumeError
 
 VLR_HEADER, EVLR_HEADER = 54, 60
@@ -151,7 +152,7 @@ class BoundsCheck:
     def update(self, xyz: np.ndarray) -> None:
         if not len(xyz):
             return
-        lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+        lo, hi = bounds(xyz)
         if (lo < self.lo - self.tol).any() or (hi > self.hi + self.tol).any():
             raise SoilVolumeError(
                 f"{self.path}: points lie outside the bounds in the LAS header (corrupt scale, offset or bounds)"

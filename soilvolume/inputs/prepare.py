@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
+from ..core.heap import keep_freed_memory
 from ..core.preload import reading_done
 from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
@@ -141,6 +142,7 @@ def prepare(
     before points within the radius of the after footprint, and thinned subsets of both
     (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
     ``loader`` streams one source (:func:`stream.load`, or the same as Dask tasks)."""
+    keep_freed_memory(before.count + after.count)  # large pairs: temporaries not faulted in anew
     crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None

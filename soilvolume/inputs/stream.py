@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.cells import in_box
+from ..core.cells import bounds, in_box, rows
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
 from .copc import copc_chunks, is_copc
@@ -33,11 +33,10 @@ from .io import (
     validate,
 )
 from .lasimport import laspy_module
+from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
 
 CHUNK = 1_000_000
-#: most columns a thinning grid may have (4 float64 sums each: 2 GB)
-MAX_COLUMNS = 1 << 26
 
 
 @dataclass
@@ -230,50 +229,6 @@ def prefetch(chunks: Iterator, depth: int = 1) -> Iterator:
                 worker.join(0.05)
 
 
-class ColumnThinner:
-    """Voxel thinning of a terrain cloud while streaming: the centroid of the points in each
-    ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk. With ``within``
-    (a local x/y box where all points lie), the box is cut to the columns meeting it, on the
-    same lattice (the same centroids, in the same order). ``name`` (the file) prefixes errors."""
-
-    def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float, within=None, name: str = "") -> None:
-        self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
-        self.within = within
-        first = np.zeros(2, np.int64)
-        last = np.ceil((self.hi - self.lo) / voxel).astype(np.int64)
-        if within is not None:
-            first = np.maximum(first, np.floor((np.asarray(within[0][:2]) - self.lo) / voxel).astype(np.int64) - 1)
-            last = np.minimum(last, np.ceil((np.asarray(within[1][:2]) - self.lo) / voxel).astype(np.int64) + 1)
-        self.first = first
-        self.shape = (int(max(last[1] - first[1], -1)) + 1, int(max(last[0] - first[0], -1)) + 1)
-        n = self.shape[0] * self.shape[1]
-        if n > MAX_COLUMNS:
-            raise SoilVolumeError(
-                f"{name + ': ' if name else ''}{self.shape[0]:,} x {self.shape[1]:,} columns of {voxel:.3g} m to "
-                "thin: the extent is far larger than the points (corrupt header bounds, or {opt:radius} too large)"
-            )
-        self.sums = np.zeros((4, n))
-
-    def add(self, xyz: np.ndarray) -> None:
-        ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64) - self.first[0]
-        iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64) - self.first[1]
-        ok = (ix >= 0) & (iy >= 0) & (ix < self.shape[1]) & (iy < self.shape[0])
-        ids = iy[ok] * self.shape[1] + ix[ok]
-        n = self.sums.shape[1]
-        self.sums[3] += np.bincount(ids, minlength=n)
-        for k in range(3):
-            self.sums[k] += np.bincount(ids, weights=xyz[ok, k], minlength=n)
-
-    def result(self) -> np.ndarray:
-        """The centroids (float64, (M, 3))."""
-        has = self.sums[3] > 0
-        return (self.sums[:3, has] / self.sums[3, has]).T.copy()
-
-    def counts(self) -> np.ndarray:
-        """The number of points behind each centroid of :meth:`result` (same order)."""
-        return self.sums[3, self.sums[3] > 0].astype(np.int64)
-
-
 class _Parts:
     """Kept points appended into one float32 buffer sized by the header count (pages never
     written are never resident), so no concatenation copy is needed."""
@@ -364,7 +319,7 @@ def load(
         if rule is None:
             rule = epoch_rule(src, cls, sig, mode, exclude)
         if index is not None:
-            index.append((points, len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)))
+            index.append((points, len(xyz), *bounds(xyz, 2)))
         points += len(xyz)
         local, labels = shift(xyz), rule.labels(cls, sig)
         del xyz, cls, sig  # the chunk is not held while the next one is read
@@ -373,19 +328,19 @@ def load(
         inside = None if keep is None else keep(local)
         if soil is not None:  # the points that are not soil, within the crop and the box
             other = ~soil if inside is None else ~soil & inside
-            o_xyz, o_lab = local[other], labels[other]
+            o_xyz, o_lab = rows(local, other), labels[other]
             if box is not None:
                 near = in_box(o_xyz, *box)
-                o_xyz, o_lab = o_xyz[near], o_lab[near]
+                o_xyz, o_lab = rows(o_xyz, near), o_lab[near]
             others.append(o_xyz)
             other_labels.append(o_lab)
         mask = soil if inside is None else (inside if soil is None else soil & inside)
         if mask is not None:  # one compress for soil and crop
-            local = local[mask]
+            local = rows(local, mask)
         thinner.add(local)
         cropped += len(local)
         if box is not None:
-            local = local[in_box(local, *box)]
+            local = rows(local, in_box(local, *box))
         parts.append(local)
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()

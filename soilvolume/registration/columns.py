@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..core.cells import cell_index
+from ..core.cells import bounds, cell_index
 
 
 @dataclass
@@ -29,19 +29,22 @@ class Columns:
 
 def columns(xyz: np.ndarray, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
     """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped)."""
-    lo = xyz[:, :2].min(axis=0) if lo is None else np.asarray(lo[:2], float)
-    hi = xyz[:, :2].max(axis=0) if hi is None else np.asarray(hi[:2], float)
+    if lo is None or hi is None:
+        box = bounds(xyz, 2)
+    lo = box[0] if lo is None else np.asarray(lo[:2], float)
+    hi = box[1] if hi is None else np.asarray(hi[:2], float)
     shape = (int((hi[1] - lo[1]) // cell) + 1, int((hi[0] - lo[0]) // cell) + 1)
     ix, iy = cell_index(xyz[:, 0], lo[0], cell), cell_index(xyz[:, 1], lo[1], cell)
     ok = (ix >= 0) & (iy >= 0) & (ix < shape[1]) & (iy < shape[0])
-    pts = xyz if ok.all() else xyz[ok]
-    ids = iy * shape[1] + ix if pts is xyz else iy[ok] * shape[1] + ix[ok]
+    every = bool(ok.all())
+    ids = iy * shape[1] + ix if every else iy[ok] * shape[1] + ix[ok]
     n = shape[0] * shape[1]
     count = np.bincount(ids, minlength=n)
     has = np.flatnonzero(count)
     means = np.empty((len(has), 3))
     for k in range(3):
-        means[:, k] = np.bincount(ids, weights=pts[:, k], minlength=n)[has] / count[has]
+        w = xyz[:, k] if every else np.compress(ok, xyz[:, k])
+        means[:, k] = np.bincount(ids, weights=w, minlength=n)[has] / count[has]
     return Columns(means, has // shape[1], has % shape[1], shape, lo, float(cell))
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.cells import cell_index
+from ..core.cells import bounds, cell_index, rows
 from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
 from ..inputs.footprint import footprint
@@ -89,8 +89,8 @@ def evaluate_surface(
     of those distances. Meaningful on sparse clouds, unlike point-to-point."""
     src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
     gap = spacing(target_xyz) if gap is None else gap
-    lo, hi = src[:, :2].min(axis=0) - 1.0, src[:, :2].max(axis=0) + 1.0
-    cols = columns.columns(target_xyz, max(0.25, 2 * gap), lo, hi)
+    lo, hi = bounds(src, 2)
+    cols = columns.columns(target_xyz, max(0.25, 2 * gap), lo - 1.0, hi + 1.0)
     if len(cols.xyz) == 0:
         return 0.0, float("nan")
     r = np.abs(columns.plane_residuals(src, cols, columns.normals(cols)))
@@ -207,7 +207,7 @@ def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
     band = margin(valid, cell)
     ix = np.clip(cell_index(xyz[:, 0], cols.lo[0], cell), 0, cols.shape[1] - 1)
     iy = np.clip(cell_index(xyz[:, 1], cols.lo[1], cell), 0, cols.shape[0] - 1)
-    return xyz[band[iy, ix]]
+    return rows(xyz, band[iy, ix])
 
 
 def stable_source(
@@ -226,7 +226,7 @@ def stable_source(
 
     src = transform_points(source_xyz, t)
     cell = max(cell, 1.5 * (spacing(target_xyz) if gap is None else gap))  # gap: the target's spacing
-    grid = make_grid(src.min(axis=0), src.max(axis=0), cell, np.zeros(3), None)
+    grid = make_grid(*bounds(src), cell, np.zeros(3), None)
     diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
     if np.isfinite(diff).sum() < 20:
         return src[:0]
@@ -234,7 +234,7 @@ def stable_source(
     row, col, ok = grid.index(src)
     keep = np.zeros(len(src), bool)
     keep[ok] = stable[row[ok], col[ok]]
-    out = src[keep]
+    out = rows(src, keep)
     out[:, 2] -= trend[row[keep], col[keep]]
     return out
 

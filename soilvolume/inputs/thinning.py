@@ -1,0 +1,63 @@
+"""Voxel thinning while streaming: the centroid of each column of a fixed grid, accumulated
+chunk by chunk (the thinned subsets registration and the footprint work on)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.types import SoilVolumeError
+
+#: most columns a thinning grid may have (4 float64 sums each: 2 GB)
+MAX_COLUMNS = 1 << 26
+
+
+class ColumnThinner:
+    """Voxel thinning of a terrain cloud while streaming: the centroid of the points in each
+    ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk. With ``within``
+    (a local x/y box where all points lie), the box is cut to the columns meeting it, on the
+    same lattice (the same centroids, in the same order). ``name`` (the file) prefixes errors."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float, within=None, name: str = "") -> None:
+        self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
+        self.within = within
+        first = np.zeros(2, np.int64)
+        last = np.ceil((self.hi - self.lo) / voxel).astype(np.int64)
+        if within is not None:
+            first = np.maximum(first, np.floor((np.asarray(within[0][:2]) - self.lo) / voxel).astype(np.int64) - 1)
+            last = np.minimum(last, np.ceil((np.asarray(within[1][:2]) - self.lo) / voxel).astype(np.int64) + 1)
+        self.first = first
+        self.shape = (int(max(last[1] - first[1], -1)) + 1, int(max(last[0] - first[0], -1)) + 1)
+        n = self.shape[0] * self.shape[1]
+        if n > MAX_COLUMNS:
+            raise SoilVolumeError(
+                f"{name + ': ' if name else ''}{self.shape[0]:,} x {self.shape[1]:,} columns of {voxel:.3g} m to "
+                "thin: the extent is far larger than the points (corrupt header bounds, or {opt:radius} too large)"
+            )
+        self.sums = np.zeros((4, n))
+
+    def add(self, xyz: np.ndarray) -> None:
+        """Add a chunk's points: sums over the span of column ids the chunk meets only (a chunk
+        covers a strip of a large site; the whole sums are not swept for each chunk)."""
+        ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64) - self.first[0]
+        iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64) - self.first[1]
+        ok = (ix >= 0) & (iy >= 0) & (ix < self.shape[1]) & (iy < self.shape[0])
+        every = bool(ok.all())
+        ids = iy * self.shape[1] + ix if every else iy[ok] * self.shape[1] + ix[ok]
+        if not len(ids):
+            return
+        first = int(ids.min())
+        ids -= first
+        span = int(ids.max()) + 1
+        sums = self.sums[:, first : first + span]
+        sums[3] += np.bincount(ids, minlength=span)
+        for k in range(3):
+            sums[k] += np.bincount(ids, weights=xyz[:, k] if every else np.compress(ok, xyz[:, k]), minlength=span)
+
+    def result(self) -> np.ndarray:
+        """The centroids (float64, (M, 3))."""
+        has = self.sums[3] > 0
+        return (self.sums[:3, has] / self.sums[3, has]).T.copy()
+
+    def counts(self) -> np.ndarray:
+        """The number of points behind each centroid of :meth:`result` (same order)."""
+        return self.sums[3, self.sums[3] > 0].astype(np.int64)
