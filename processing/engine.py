@@ -12,7 +12,6 @@ from __future__ import annotations
 import html
 import importlib
 import importlib.util
-import re
 import sys
 from collections import deque
 from collections.abc import Sequence
@@ -55,7 +54,7 @@ def ensure_engine_package() -> None:
 
 
 def engine(name: str = "options") -> ModuleType:
-    """A standard-library-only engine module (``options``): nothing else is imported here."""
+    """A standard-library-only engine module (``options``, ``wording``): nothing else is imported here."""
     ensure_engine_package()
     return importlib.import_module(f"soilvolume.{name}")
 
@@ -153,50 +152,34 @@ def option_args(options, command: str) -> list[str]:
 
 
 def parameter_names() -> dict[str, str]:
-    """``--flag`` -> "'Label' (NAME)" for every option of the engine's table."""
+    """Option key -> "'Label' (NAME)" for every option of the engine's table."""
     from .optionparams import description, key, option_fields
 
-    names = {"--" + f.name.replace("_", "-"): f"'{description(f)}' ({key(f)})" for f in option_fields()}
-    names["--crs"] = "'CRS override' (CRS)"
+    names = {f.name: f"'{description(f)}' ({key(f)})" for f in option_fields()}
+    names["crs"] = "'CRS override' (CRS)"
     return names
 
 
+def parameter_name(option: str, value: str | None = None, names: dict[str, str] | None = None) -> str:
+    """An option the engine names by key (``soilvolume.wording``) as its Processing parameter:
+    "'Coarse registration' (COARSE)", with its value "... (COARSE) = fpfh"."""
+    name = (names or parameter_names()).get(option) or engine("core.wording").flag(option)
+    return name if value is None else f"{name} = {value}"
+
+
 def qgis_wording(message: str) -> str:
-    """An engine message as a sentence naming Processing parameters instead of command-line
-    flags: "--coarse fpfh forces it" -> "'Coarse registration' (COARSE) = fpfh forces it"."""
-    text = reword_flags(message)
+    """An engine message (options by key) as a sentence naming Processing parameters:
+    "{opt:coarse=fpfh} forces it" -> "'Coarse registration' (COARSE) = fpfh forces it"."""
+    names = parameter_names()
+    text = engine("core.wording").render(message, lambda k, v: parameter_name(k, v, names))
     return text[:1].upper() + text[1:]
 
 
-def reword_flags(text: str) -> str:
-    """``text`` with every command-line flag of the engine replaced by its parameter's label and
-    name (followed by " =" when a value follows the flag); "(--flag)" and "--flag," included."""
-    names = parameter_names()
-    words = text.split(" ")
-    for i, word in enumerate(words):
-        flag = word.lstrip("(").rstrip(".,;:)")
-        if flag not in names:
-            continue
-        lead = word[: word.index(flag)]
-        tail = word[len(lead) + len(flag) :]
-        words[i] = lead + names[flag] + tail
-        if not tail and flag != "--crs" and i + 1 < len(words) and not words[i + 1].startswith(("-", "(")):
-            words[i] += " ="
-    return " ".join(words).replace("pass the '", "set the '")
-
-
 def reword_html(page: str) -> str:
-    """An engine HTML report with the flags in its text reworded (:func:`reword_flags`); markup,
-    styles and scripts untouched."""
-    parts = re.split(r"(<[^>]*>)", page)
-    raw = False
-    for i, part in enumerate(parts):
-        if part.startswith("<"):
-            tag = part[1:].split(" ", 1)[0].rstrip(">").lower()
-            raw = tag in ("style", "script") or (raw and tag not in ("/style", "/script"))
-        elif not raw and "--" in part:
-            parts[i] = html.escape(reword_flags(html.unescape(part)), quote=False)
-    return "".join(parts)
+    """An engine HTML report with its options (``<span data-option>`` elements) named by their
+    parameters; the rest of the page untouched."""
+    names = parameter_names()
+    return engine("core.wording").html_render(page, lambda k, v: html.escape(parameter_name(k, v, names), quote=False))
 
 
 def option_error_text(exc: Exception) -> str | None:

@@ -109,9 +109,8 @@ def write_zones(
     parameters: dict[str, Any],
     context: QgsProcessingContext,
     report: dict[str, Any],
-    summary: dict[str, Any],
 ) -> str | None:
-    """The ZONE_VOLUMES table: each zone polygon with cut, fill, net and the net's ±."""
+    """The ZONE_VOLUMES table: each zone polygon with cut, fill, net and the net's ± (report.json's)."""
     zones = report.get("zones") or []
     source = alg.parameterAsSource(parameters, "ZONES", context) if parameters.get("ZONES") else None
     if source is None or not zones:
@@ -125,8 +124,8 @@ def write_zones(
         raise QgsProcessingException(
             f"The engine measured {len(zones)} zones but the ZONES layer has {len(features)} polygons."
         )
-    half_widths = list(summary.get("zone_net_pm_m3") or []) + [None] * len(zones)
-    for feature, zone, pm in zip(features, zones, half_widths[: len(zones)], strict=True):
+    for feature, zone in zip(features, zones, strict=True):
+        pm = (zone.get("uncertainty_m3") or {}).get("net")  # the engine's interval (none from tiles yet)
         sink.addFeature(_zone_feature(feature, zone, fields, pm), QgsFeatureSink.FastInsert)
     return dest
 

@@ -187,7 +187,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         results = self.deliver_files(outputs, parameters, context, feedback, registered, pair)
         report, summary = result.get("report") or {}, result.get("summary") or {}
         results.update(estimate_outputs.values(report, summary))
-        results["ZONE_VOLUMES"] = estimate_outputs.write_zones(self, parameters, context, report, summary)
+        results["ZONE_VOLUMES"] = estimate_outputs.write_zones(self, parameters, context, report)
         results["CHANGE_AREAS"] = estimate_outputs.write_change_areas(
             self, parameters, context, outputs.get("change_areas"), pair
         )

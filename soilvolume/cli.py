@@ -1,7 +1,6 @@
 """Command line: ``soilvolume estimate BEFORE AFTER --out DIR [options]`` and friends.
 
-Options and their help come from :class:`soilvolume.options.Options`, so ``--help`` explains
-every knob with its default.
+Options and their help come from :class:`soilvolume.options.Options`: ``--help`` explains every knob.
 """
 
 from __future__ import annotations
@@ -15,6 +14,7 @@ import traceback
 from dataclasses import fields
 from pathlib import Path
 
+from .core import wording
 from .core.interrupt import Interrupted, handle_signals
 from .core.nativelog import hold_native_stderr
 from .core.outputs import os_problem
@@ -25,6 +25,7 @@ from .seriescli import add_series, cmd_series
 from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
+OUT_OF_MEMORY = f"out of memory: use a larger {wording.opt('cell')} or crop the clouds first"
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
 (H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
 excluded.tif (what is not soil: vegetation, objects, moved objects; see --exclude),
@@ -37,8 +38,7 @@ The outputs appear together or not at all; exit status 0 (done), 1 (error, one l
 
 
 def add_options(p: argparse.ArgumentParser, command: str) -> None:
-    """One ``--flag`` per option ``command`` takes (``options.command_fields``; the estimate's
-    ``--registered-cloud`` is its own flag)."""
+    """One ``--flag`` per option ``command`` takes (``command_fields``; ``--registered-cloud`` is its own)."""
     for f in command_fields(command):
         if f.name in SKIP:
             continue
@@ -51,7 +51,7 @@ def add_options(p: argparse.ArgumentParser, command: str) -> None:
             type=kind,
             choices=choices,
             default=None,
-            help=f"{f.metadata['help']} (default: {f.default})",
+            help=f"{wording.cli(f.metadata['help'])} (default: {f.default})",
         )
 
 
@@ -193,14 +193,13 @@ def add_tools(sub) -> None:
 
 
 def _hooks(ns: argparse.Namespace):
-    """The protocol's progress, log and cancel; else progress for people on stderr where the
-    command has ``--quiet`` (the estimate) and it is not given; else none (dem, register and
-    volume print their JSON and nothing else)."""
+    """The protocol's progress, log and cancel; else progress for people on stderr where the command has
+    ``--quiet`` (the estimate) and it is not given; else none (dem, register, volume print only JSON)."""
     from .api import Hooks
 
     proto: Protocol | None = getattr(ns, "protocol", None)
     if proto is not None:
-        return Hooks(progress=proto.progress, log=proto.log, cancel=proto.is_cancelled)
+        return Hooks(progress=proto.progress, log=proto.log, cancel=proto.is_cancelled, keyed=True)
     if getattr(ns, "quiet", True):
         return Hooks()
 
@@ -233,7 +232,7 @@ def cmd_estimate(ns: argparse.Namespace) -> int:
         before_pipeline=ns.before_pipeline,
         after_pipeline=ns.after_pipeline,
     )
-    if _result(ns, report=res.report, outputs=res.outputs, summary=front_end_summary(res.report)):
+    if _result(ns, report=res.report, outputs=res.outputs, summary=front_end_summary(res.keyed or res.report)):
         return 0
     for line in summary_lines(res.report):
         print(line)
@@ -243,19 +242,14 @@ def cmd_estimate(ns: argparse.Namespace) -> int:
 
 def front_end_summary(report: dict) -> dict:
     """The figures a front end shows beside report.json: rotation and shift, the verdict, the
-    significance in words, each zone's net ± (from the run's error model)."""
+    significance in words (each zone's ± is in report.json's zones)."""
     from .reporting import summary
-    from .volumes.zones import net_half_width
 
     local = (report.get("registration") or {}).get("transform_local")
-    cell = (report.get("grid") or {}).get("cell_m") or 1.0
-    unc = report.get("uncertainty") or {}
-    zones = [net_half_width(z.get("area_m2", 0.0), cell, unc) for z in report.get("zones") or []]
     return {
         **(summary.rotation_shift(local) if local is not None else {}),
         "quality": summary.quality(report),
         "significance": summary.significance(report),
-        "zone_net_pm_m3": zones,
     }
 
 
@@ -343,9 +337,10 @@ COMMANDS = {
 
 def _fail(message: str, code: int = 1, exc: BaseException | None = None) -> int:
     text = one_line(message)
-    if _PROTOCOL:
+    if _PROTOCOL:  # the message with its options by key (wording.opt), for the front end to word
         fields = {"field": getattr(exc, "field", None), "reason": getattr(exc, "reason", None)}
-        _PROTOCOL[0].emit("error", message=text, exit=code, **{k: v for k, v in fields.items() if v})
+        keyed = one_line(exc.keyed) if isinstance(exc, SoilVolumeError) else text
+        _PROTOCOL[0].emit("error", message=keyed, exit=code, **{k: v for k, v in fields.items() if v})
     print(f"soilvolume: error: {text}", file=sys.stderr)
     return code
 
@@ -378,13 +373,13 @@ def _run(ns: argparse.Namespace) -> int:
     try:
         return COMMANDS[ns.command](ns)
     except Interrupted as exc:
-        return _fail(str(exc), exc.exit_code)
+        return _fail(str(exc), exc.exit_code, exc)
     except SoilVolumeError as exc:
         return _fail(str(exc), exc=exc)
     except OSError as exc:
         return _fail(str(os_problem(exc)))
     except MemoryError:
-        return _fail("out of memory: use a larger --cell or crop the clouds first")
+        return _fail(wording.cli(OUT_OF_MEMORY), exc=SoilVolumeError(OUT_OF_MEMORY))
     except RecursionError:
         return _fail("input nested too deeply")
     except KeyboardInterrupt:  # a signal arrived before the handlers were installed

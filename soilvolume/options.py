@@ -130,7 +130,7 @@ class Options:
     )
     pfh_patch: float = _opt(
         6.0,
-        "side (m) of the square patch used by --fine pfh (paper: 6 m)",
+        "side (m) of the square patch used by {opt:fine=pfh} (paper: 6 m)",
         label="PFH patch size",
         unit="m",
         lo=0.5,
@@ -218,7 +218,7 @@ class Options:
     )
     ground_window: float = _opt(
         6.0,
-        "--ground filter: largest object (m) the SMRF filter removes (vehicles, bushes); keep it below the width of the piles you measure (PDAL's default 18 m removes piles)",
+        "{opt:ground=filter}: largest object (m) the SMRF filter removes (vehicles, bushes); keep it below the width of the piles you measure (PDAL's default 18 m removes piles)",
         label="Ground filter window",
         unit="m",
         lo=0.5,
@@ -227,7 +227,7 @@ class Options:
     )
     ground_slope: float = _opt(
         0.6,
-        "--ground filter: steepest ground slope (rise/run) SMRF keeps as terrain (pile flanks; PDAL's default 0.15)",
+        "{opt:ground=filter}: steepest ground slope (rise/run) SMRF keeps as terrain (pile flanks; PDAL's default 0.15)",
         label="Ground filter slope (rise/run)",
         lo=0.01,
         hi=10.0,
@@ -235,7 +235,7 @@ class Options:
     )
     exclude: str = _opt(
         "auto",
-        "what is not soil: auto (points the signals say are not soil are not gridded: the LAS classification as --ground selects it, colour (vegetation by its excess-green index) and return numbers on files without one; objects that moved between the surveys are left out of the headline; objects in one survey only are counted and listed), none (colour and returns not used, moved objects counted: the volumes --exclude auto lists are restored; the class-2 selection stays with --ground)",
+        "what is not soil: auto (points the signals say are not soil are not gridded: the LAS classification as {opt:ground} selects it, colour (vegetation by its excess-green index) and return numbers on files without one; objects that moved between the surveys are left out of the headline; objects in one survey only are counted and listed), none (colour and returns not used, moved objects counted: the volumes {opt:exclude=auto} lists are restored; the class-2 selection stays with {opt:ground})",
         ("auto", "none"),
         label="Exclude what is not soil",
         commands=POINTS,
@@ -270,7 +270,7 @@ class Options:
     )
     scheduler: str = _opt(
         "auto",
-        "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST[:PORT] (an existing Dask cluster, port 8786 by default; its workers must see the input paths), auto (in-process when the pair fits --memory-limit, else local)",
+        "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST[:PORT] (an existing Dask cluster, port 8786 by default; its workers must see the input paths), auto (in-process when the pair fits {opt:memory_limit}, else local)",
         label="Scheduler",
         run_control=True,
     )
@@ -285,7 +285,7 @@ class Options:
     )
     tile_cells: int = _opt(
         0,
-        "side (cells) of the tiles the distributed engine grids one task at a time (0 = from the point density: what half of a worker's share of --memory-limit holds, at most 32 million points, at least two tiles per worker, snapped to a VPC's tiles when one fits)",
+        "side (cells) of the tiles the distributed engine grids one task at a time (0 = from the point density: what half of a worker's share of {opt:memory_limit} holds, at most 32 million points, at least two tiles per worker, snapped to a VPC's tiles when one fits)",
         label="Tile size",
         unit="cells",
         lo=0,
@@ -293,7 +293,7 @@ class Options:
     )
     volume_step: str = _opt(
         "auto",
-        "where a distributed run's volume step (holes, correction, change areas, uncertainty) runs: whole (the whole grid in the driver process; results equal the in-process run), tiles (tile by tile on the workers with halos, the correction and stable ground found on an overview of the grid; for grids too large for one process), auto (tiles when the grid exceeds half of --memory-limit)",
+        "where a distributed run's volume step (holes, correction, change areas, uncertainty) runs: whole (the whole grid in the driver process; results equal the in-process run), tiles (tile by tile on the workers with halos, the correction and stable ground found on an overview of the grid; for grids too large for one process), auto (tiles when the grid exceeds half of {opt:memory_limit})",
         ("auto", "whole", "tiles"),
         label="Volume step",
     )

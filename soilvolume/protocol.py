@@ -11,6 +11,12 @@ human text. Each object has a ``type``:
 - ``result``: ``command`` and what the command returns (estimate: ``report``, ``outputs``,
   ``summary``), the last line of a successful run.
 
+Texts name options by key, as markers of :mod:`soilvolume.core.wording` (``{opt:scheduler}``, with its
+value ``{opt:scheduler=none}``), never as command-line flags: the front end words them its own way
+(the CLI's text output says ``--scheduler none``; the QGIS plugin names its parameter). The
+``result`` line's ``report`` is report.json (worded for the command line); its ``summary`` keeps
+the markers.
+
 The protocol goes to the process's original standard output; anything else that would have gone
 there (C libraries' prints) is sent to standard error. A line ``cancel`` on standard input cancels
 the run as a user's Cancel does (nothing is written; exit 1 with an ``error`` line).

@@ -13,6 +13,7 @@ from dataclasses import fields
 from typing import Any
 
 from .core.types import SoilVolumeError
+from .core.wording import opt
 from .options import Options
 
 #: fewest grid cells over the compared area that give a meaningful volume
@@ -24,12 +25,7 @@ class OptionError(SoilVolumeError):
 
     def __init__(self, field: str, reason: str) -> None:
         self.field, self.reason = field, reason
-        super().__init__(f"{flag(field)}: {reason}")
-
-
-def flag(field: str) -> str:
-    """The command-line flag of an option field (``cell`` -> ``--cell``)."""
-    return "--" + field.replace("_", "-")
+        super().__init__(f"{opt(field)}: {reason}")
 
 
 def _num(v: float) -> str:
@@ -84,7 +80,7 @@ def _check_polygon_files(options: Options) -> None:
     later)."""
     from .volumes.polygons import read_polygons
 
-    for name, what in (("zones", "zones file"), ("stable_mask", "--stable-mask file")):
+    for name, what in (("zones", "zones file"), ("stable_mask", f"{opt('stable_mask')} file")):
         path = getattr(options, name)
         if path:
             read_polygons(path, what=what)
@@ -119,6 +115,6 @@ def check_grid_cells(rows: int, cols: int, cell: float, valid: int | None = None
         raise OptionError(
             "cell",
             f"a {cell:g} m grid has only {n} cell(s) over the compared area "
-            f"(at least {MIN_CELLS} needed); use a smaller --cell or leave it unset "
+            f"(at least {MIN_CELLS} needed); use a smaller {opt('cell')} or leave it unset "
             "to derive it from the point density",
         )

@@ -157,7 +157,7 @@ def test_bad_designs_are_refused(site, tmp_path):
     bands = write_surface(folder / "bands.tif", SEED, CONFIG, cell=2.0, bands=3)
     _refused(tmp_path, bands, after, "single-band DEM; this raster has 3 bands")
     no_crs = write_surface(folder / "nocrs.tif", SEED, CONFIG, cell=2.0, crs=None)
-    _refused(tmp_path, no_crs, after, "has no CRS; pass --before-crs")
+    _refused(tmp_path, no_crs, after, "has no CRS; give --before-crs")
     own = write_surface(folder / "own.tif", SEED, CONFIG, cell=2.0)
     _refused(tmp_path, own, after, "differs from the raster's CRS", "--before-crs", "EPSG:32655")
     garbage = folder / "garbage.tif"

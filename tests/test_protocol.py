@@ -1,8 +1,8 @@
 """``--progress jsonl``, the command line's protocol for programs (the QGIS plugin): every line of
 standard output is one JSON object, progress moves, the result comes last; an option out of its
-range is an ``error`` line naming the option's field; ``cancel`` on standard input stops a run
-with nothing written; each command takes the options the option table declares for it; ``dem
---bounds-crs`` takes an extent in another CRS."""
+range is an ``error`` line naming the option's field, and texts name options by key; ``cancel``
+on standard input stops a run with nothing written; each command takes the options the option
+table declares for it; ``dem --bounds-crs`` takes an extent in another CRS."""
 
 from __future__ import annotations
 
@@ -45,6 +45,16 @@ def test_an_option_out_of_range_is_an_error_line_naming_its_field(pair, tmp_path
     error = events(done.stdout)[-1]
     assert error["type"] == "error" and error["field"] == "cell" and error["reason"], error
     assert error["exit"] == 1 and not (tmp_path / "dem.tif").exists()
+
+
+def test_errors_name_options_by_key_and_the_command_line_words_them_as_flags(pair, tmp_path):
+    args = ["estimate", *pair, "--out", tmp_path / "out", "--ground", "filter", "--scheduler", "threads:2"]
+    keyed = events(run_cli(*args, "--progress", "jsonl").stdout)[-1]
+    assert keyed["type"] == "error" and keyed["message"].startswith("{opt:ground=filter} needs whole clouds"), keyed
+    assert "use {opt:scheduler=none}" in keyed["message"] and "--" not in keyed["message"]
+    text = run_cli(*args)
+    assert text.returncode == 1 and "{" not in text.stderr
+    assert "error: --ground filter needs whole clouds: use --scheduler none" in text.stderr, text.stderr
 
 
 def test_cancel_on_stdin_stops_the_run_and_writes_nothing(pair, tmp_path):

@@ -165,3 +165,37 @@ def test_a_zone_in_a_crs_that_cannot_hold_its_coordinates_is_refused(tmp_path):
 def test_a_missing_stable_mask_is_not_called_a_zones_file(tmp_path):
     with pytest.raises(SoilVolumeError, match=r"nowhere\.gpkg: --stable-mask file not found"):
         polygons_mask(tmp_path / "nowhere.gpkg", GRID)
+
+
+def test_each_zone_has_the_headline_model_interval_holding_its_truth(tmp_path):
+    """A seeded pair cut in two zones (pile A and the pit west, piles B and C east) and a zone
+    over everything: each zone's 95 % interval (report.json) holds its exact volumes, the
+    zones' nets add up to the headline, and the zone over everything has the headline's ±."""
+    from conftest import write_scene
+
+    from soilvolume.api import estimate
+    from soilvolume.options import Options
+
+    b, a, truth = write_scene(tmp_path / "pair", seed=0)
+    ox, oy = 500000.0, 3900000.0
+    west, east, whole = box(ox, oy, 500081.5, 3900200), box(500081.5, oy, 500200, 3900200), box(ox, oy, 500200, 3900200)
+    zones = _geojson(tmp_path / "zones.geojson", [west, east, whole], names=["west", "east", "all"])
+    report = estimate(b, a, tmp_path / "out", Options(zones=str(zones))).report
+    on_disk = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert on_disk["zones"] == report["zones"]
+    rows = {z["name"]: z for z in report["zones"]}
+    feats = truth["features"]
+    exact = {
+        "west": [f["sign"] * f["volume"] for f in feats if f["x"] < 500081.5],
+        "east": [f["sign"] * f["volume"] for f in feats if f["x"] >= 500081.5],
+    }
+    assert len(exact["west"]) == 2 and len(exact["east"]) == 2  # pile A + pit, piles B + C
+    for name, vols in exact.items():
+        z, pm = rows[name], rows[name]["uncertainty_m3"]
+        want = {"net": sum(vols), "fill": sum(v for v in vols if v > 0), "cut": -sum(v for v in vols if v < 0)}
+        for part in ("net", "cut", "fill"):
+            assert 0.0 < pm[part] < 0.2 * max(abs(want["net"]), 1.0), (name, part, pm)
+            assert abs(z[part] - want[part]) <= pm[part], (name, part, z[part], want[part], pm[part])
+    assert rows["west"]["net"] + rows["east"]["net"] == pytest.approx(report["volume_m3"]["net"], rel=1e-9)
+    for part in ("net", "cut", "fill"):  # the same model: over every change cell, the headline's ±
+        assert rows["all"]["uncertainty_m3"][part] == pytest.approx(report["uncertainty_m3"][part], rel=1e-9)

@@ -10,6 +10,7 @@ from typing import Any
 
 from . import interrupt
 from .types import SoilVolumeError
+from .wording import cli
 
 Progress = Callable[[float, str], None]
 Log = Callable[[str], None]
@@ -23,11 +24,14 @@ class Cancelled(SoilVolumeError):
 @dataclass
 class Hooks:
     """Progress, log and cancellation callbacks (all optional). A message is logged once even
-    when a stage reports it many times (e.g. once per ICP level)."""
+    when a stage reports it many times (e.g. once per ICP level). Options in the messages are
+    worded for the command line, or with ``keyed`` left as markers (:mod:`soilvolume.core.wording`)
+    for a front end that words them its own way."""
 
     progress: Progress | None = None
     log: Log | None = None
     cancel: Cancel | None = None
+    keyed: bool = False
     _last: str | None = field(default=None, repr=False)
 
     def step(self, percent: float, message: str, log: bool = True) -> None:
@@ -37,14 +41,14 @@ class Hooks:
         if self.cancel is not None and self.cancel():
             raise Cancelled("cancelled by the user")
         if self.progress is not None:
-            self.progress(percent, message)
+            self.progress(percent, message if self.keyed else cli(message))
         if log and message != self._last:
             self._last = message
             self.info(message)
 
     def info(self, message: str) -> None:
         if self.log is not None:
-            self.log(message)
+            self.log(message if self.keyed else cli(message))
 
     def ticker(self, start: float, end: float, message: str, expected: int = 8) -> Callable[[], None]:
         """A ``check()`` callback for a long stage of unknown length (logged by the step that
@@ -68,3 +72,4 @@ class Result:
 
     report: dict[str, Any]
     outputs: dict[str, Path] = field(default_factory=dict)
+    keyed: dict[str, Any] | None = None  # the report with its options by key (wording.opt), for front ends

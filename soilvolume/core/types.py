@@ -8,9 +8,20 @@ from typing import Any
 
 import numpy as np
 
+from .wording import cli
+
 
 class SoilVolumeError(Exception):
-    """An input or processing problem a user can act on; the message names the file and problem."""
+    """An input or processing problem a user can act on; the message names the file and problem.
+    Options in it are markers (:func:`soilvolume.core.wording.opt`): ``str()`` words them for the
+    command line, :attr:`keyed` keeps them for a front end that words them its own way."""
+
+    @property
+    def keyed(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+    def __str__(self) -> str:
+        return cli(self.keyed)
 
 
 def short_error(exc: BaseException, limit: int = 160) -> str:

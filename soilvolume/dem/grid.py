@@ -137,7 +137,7 @@ def make_grid(
     cols = max(1, round((xmax - xmin) / cell))
     rows = max(1, round((ymax - ymin) / cell))
     if rows * cols > 400_000_000:
-        raise SoilVolumeError(f"grid of {rows} x {cols} cells is too large: use a larger --cell")
+        raise SoilVolumeError(f"grid of {rows} x {cols} cells is too large: use a larger {{opt:cell}}")
     return GridSpec(xmin, ymax, cell, rows, cols, tuple(float(v) for v in origin), crs_wkt, xy_unit)
 
 

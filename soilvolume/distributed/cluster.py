@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
+from ..core.wording import opt
 
 CONNECT_S = 20.0  # a scheduler's address must answer within this
 START_S = {"tcp": 35.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
@@ -57,14 +58,17 @@ class Starting:
             except FutureTimeout:
                 if time.monotonic() > deadline:
                     raise SoilVolumeError(
-                        f"--scheduler {self.what}: no answer within {self.timeout:.0f} s (is it a Dask scheduler?)"
+                        f"{opt('scheduler', self.what)}: no answer within {self.timeout:.0f} s "
+                        "(is it a Dask scheduler?)"
                     ) from None
             except SoilVolumeError:
                 raise
             except Exception as exc:  # noqa: BLE001 - a worker killed by the same Ctrl-C, a port taken, ...
                 check()
                 why = f"{type(exc).__name__}: {short_error(exc)}"
-                raise SoilVolumeError(f"--scheduler {self.what}: the Dask cluster did not start ({why})") from None
+                raise SoilVolumeError(
+                    f"{opt('scheduler', self.what)}: the Dask cluster did not start ({why})"
+                ) from None
 
     def close(self) -> None:
         """Shut the cluster down (now, or when its start finishes)."""
@@ -93,17 +97,19 @@ def connect(address: str):
     try:
         c = Client(address, timeout=CONNECT_S)
     except (OSError, TimeoutError) as exc:
-        raise SoilVolumeError(f"--scheduler {address}: cannot reach the Dask scheduler ({short_error(exc)})") from None
+        raise SoilVolumeError(
+            f"{opt('scheduler', address)}: cannot reach the Dask scheduler ({short_error(exc)})"
+        ) from None
     except Exception as exc:  # noqa: BLE001 - whatever a server that is not a Dask scheduler makes it raise
         raise SoilVolumeError(
-            f"--scheduler {address}: the server there does not speak Dask's protocol ({type(exc).__name__})"
+            f"{opt('scheduler', address)}: the server there does not speak Dask's protocol ({type(exc).__name__})"
         ) from None
     try:
         c.wait_for_workers(1, timeout=NO_WORKERS_S)
     except Exception:  # noqa: BLE001 - a timeout, or the scheduler gone meanwhile
         shut(None, c)
         raise SoilVolumeError(
-            f"--scheduler {address}: the Dask cluster has no workers (none joined within {NO_WORKERS_S:.0f} s)"
+            f"{opt('scheduler', address)}: the Dask cluster has no workers (none joined within {NO_WORKERS_S:.0f} s)"
         ) from None
     return None, c
 
@@ -213,7 +219,7 @@ def _cluster_error(exc: BaseException, what: str) -> SoilVolumeError:
     if name == "KilledWorker":
         return SoilVolumeError(
             f"Dask workers died running the same task while {what} (out of memory? give each worker "
-            "more with --memory-limit, or smaller tiles with --tile-cells)"
+            f"more with {opt('memory_limit')}, or smaller tiles with {opt('tile_cells')})"
         )
     if "Cancelled" in name or "CommClosed" in name or isinstance(exc, OSError):
         return SoilVolumeError(f"the Dask cluster stopped the run's tasks while {what} ({name})")

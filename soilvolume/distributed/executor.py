@@ -8,6 +8,7 @@ from __future__ import annotations
 from contextlib import contextmanager
 
 from ..core.types import SoilVolumeError
+from ..core.wording import opt
 from .schedule import Schedule
 
 
@@ -31,7 +32,8 @@ class Tiled:
 
         if run.options.ground in ("filter", "csf"):
             raise SoilVolumeError(
-                f"--ground {run.options.ground} needs whole clouds: use --scheduler none (or classify the tiles first)"
+                f"{opt('ground', run.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
+                "(or classify the tiles first)"
             )
         with run_store(run.out.final) as store, client(self.schedule, run.options.memory_limit, store.scratch) as s:
             self.store = store

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.types import SoilVolumeError
+from ..core.wording import opt
 
 BASE_GB = 0.45  # in-process run of a small pair: imports, registration, rasters (measured 330-460 MB)
 MAX_WORKERS = 1024  # threads or worker processes of threads:N / local:N
@@ -55,7 +56,7 @@ def parse(spec: str) -> Schedule | None:
         return Schedule("tcp", address=_address(spec))
     m = re.fullmatch(r"(threads|local)(?::(\d+))?", spec)
     if not m or (m.group(2) is not None and not 1 <= int(m.group(2)) <= MAX_WORKERS):
-        raise SoilVolumeError(f"--scheduler {spec}: {EXPECTED}")
+        raise SoilVolumeError(f"{opt('scheduler', spec)}: {EXPECTED}")
     return Schedule(m.group(1), int(m.group(2) or (os.cpu_count() or 1)))
 
 
@@ -64,7 +65,7 @@ def _address(spec: str) -> str:
     from urllib.parse import urlsplit
 
     def bad(problem: str) -> SoilVolumeError:
-        return SoilVolumeError(f"--scheduler {spec}: {problem}")
+        return SoilVolumeError(f"{opt('scheduler', spec)}: {problem}")
 
     scheme = spec.split("://", 1)[0].lower()
     if scheme == "tls":
@@ -147,11 +148,12 @@ def check_budget(schedule: Schedule, memory_limit: float) -> None:
     share = f"{per_worker:.3g} GB for each of the {schedule.workers} worker processes of {schedule}"
     if memory_limit <= 0:
         raise SoilVolumeError(
-            f"--scheduler {schedule}: {share} (half of this machine's memory), below the {WORKER_MIN_GB:g} GB a "
+            f"{opt('scheduler', schedule)}: {share} (half of this machine's memory), below the {WORKER_MIN_GB:g} GB a "
             "worker needs; use fewer workers"
         )
     raise SoilVolumeError(
-        f"--memory-limit {memory_limit:g}: {share}, below the {WORKER_MIN_GB:g} GB a worker needs (give at least "
+        f"{opt('memory_limit', f'{memory_limit:g}')}: {share}, below the {WORKER_MIN_GB:g} GB a worker needs "
+        "(give at least "
         f"{WORKER_MIN_GB * schedule.workers:g}, or 0 for half of this machine's memory)"
     )
 
@@ -164,18 +166,19 @@ def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) 
     whose points do not fit half of a task's memory share (``--memory-limit``)."""
     from .tiletask import TILE_BYTES_PER_POINT
 
-    given = f"--tile-cells {options.tile_cells}" if options.tile_cells else "--memory-limit"
+    given = opt("tile_cells", options.tile_cells) if options.tile_cells else opt("memory_limit")
     if len(windows) > MAX_TILES:
         raise SoilVolumeError(
             f"{given}: {len(windows):,} tiles, more than the {MAX_TILES:,} tasks a cluster schedules well; "
-            "use larger tiles (--tile-cells) or 0 for tiles from the point density"
+            f"use larger tiles ({opt('tile_cells')}) or 0 for tiles from the point density"
         )
     cells = max((w[1] - w[0]) * (w[3] - w[2]) for w in windows)
     need = cells * points_per_cell * TILE_BYTES_PER_POINT * 2 / 2**30  # a task may use half of its share
     if need > task_gb:
-        fix = "a smaller --tile-cells or a larger budget" if options.tile_cells else "a larger budget"
+        fix = f"a smaller {opt('tile_cells')} or a larger budget" if options.tile_cells else "a larger budget"
         raise SoilVolumeError(
-            f"{given}: {task_gb:.3g} GB per task (--memory-limit {options.memory_limit:g}) cannot hold a tile of "
+            f"{given}: {task_gb:.3g} GB per task ({opt('memory_limit', f'{options.memory_limit:g}')}) "
+            "cannot hold a tile of "
             f"{cells:,} cells of this pair ({cells * points_per_cell:,.0f} points need {need:.3g} GB); give {fix}"
         )
 
@@ -199,7 +202,9 @@ def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None)
 def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
     """(LocalCluster or None, Client) for ``schedule``."""
     if not has_dask():  # pragma: no cover - a dependency
-        raise SoilVolumeError(f"--scheduler {schedule}: needs dask[distributed] (pip install 'dask[distributed]')")
+        raise SoilVolumeError(
+            f"{opt('scheduler', schedule)}: needs dask[distributed] (pip install 'dask[distributed]')"
+        )
     from . import cluster
 
     if schedule.kind == "tcp":
@@ -207,7 +212,7 @@ def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
     processes = schedule.kind == "local"
     if processes and not can_spawn():
         raise SoilVolumeError(
-            f"--scheduler {schedule}: cannot start worker processes from {sys.executable}; "
+            f"{opt('scheduler', schedule)}: cannot start worker processes from {sys.executable}; "
             "use threads[:N] or an existing cluster (tcp://HOST:PORT)"
         )
     per_worker = budget_gb(memory_limit) / schedule.workers if processes else None

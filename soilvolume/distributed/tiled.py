@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
+from ..core.wording import opt
 from ..dem.grid import choose_cell
 from ..inputs.footprint import footprint, inside, polygon_area
 from ..inputs.prepare import Prepared
@@ -89,7 +90,8 @@ def schedule_for(before, after, options: Options, pipeline: bool) -> Schedule:
     chosen = parse(options.scheduler)
     if pipeline and chosen.kind != "none":
         raise SoilVolumeError(
-            f"--scheduler {options.scheduler}: preparation pipelines run in-process only (use --scheduler none)"
+            f"{opt('scheduler', options.scheduler)}: preparation pipelines run in-process only "
+            f"(use {opt('scheduler', 'none')})"
         )
     return chosen
 

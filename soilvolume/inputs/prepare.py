@@ -13,6 +13,7 @@ import pyproj
 from ..core.heap import keep_freed_memory
 from ..core.preload import reading_done
 from ..core.types import Cloud, SoilVolumeError
+from ..core.wording import opt
 from ..options import Options
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
@@ -75,7 +76,7 @@ def select_ground(
     if mode in ("auto", "class"):
         if not has_class:
             raise SoilVolumeError(
-                f"{raw.path}: --ground class needs ground-classified (class 2) points; the file has none"
+                f"{raw.path}: {opt('ground', 'class')} needs ground-classified (class 2) points; the file has none"
             )
         return raw.classification == GROUND, "class 2 (ground)"
     if mode == "filter":
@@ -142,8 +143,8 @@ def prepare(
     (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
     ``loader`` streams one source (:func:`stream.load`, or the same as Dask tasks)."""
     keep_freed_memory(before.count + after.count)  # large pairs: temporaries not faulted in anew
-    crs_b = resolve_crs(before, options.before_crs, "--before-crs")
-    crs_a = resolve_crs(after, options.after_crs, "--after-crs")
+    crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
+    crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None
     frame = work_frame(crs_b, hint)
     lo, hi = _frame_box(after, crs_a, frame)
@@ -177,7 +178,7 @@ def prepare(
         raise SoilVolumeError(
             f"{before.path} and {after.path} do not overlap: the before cloud has "
             f"{b.extra['cropped']} points within {options.radius:g} m of the after cloud's footprint "
-            "(check the CRSs and --radius)"
+            f"(check the CRSs and {opt('radius')})"
         )
     check_spread(b.thin[:, :2], before.path, "near the after cloud")
     inputs = {
@@ -207,7 +208,7 @@ def prepare(
 def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
     """Stream the after survey alone into its own working frame, as :func:`prepare` does, for a
     run whose reference is a surface (:mod:`soilvolume.inputs.surface`): no before cloud."""
-    crs_a = resolve_crs(after, options.after_crs, "--after-crs")
+    crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     hint = lonlat_of(np.array([after.lo, after.hi]), crs_a) if crs_a.is_geographic else None
     frame = work_frame(crs_a, hint)
     lo, hi = _frame_box(after, crs_a, frame)
@@ -249,7 +250,7 @@ class Single:
 def prepare_single(src: Source, override: str | None, options: Options, check=None) -> Single:
     """Stream one cloud (ground selection as ``options.ground``) into its own working frame, with
     the local origin at the floor of its bounds."""
-    crs = resolve_crs(src, override, "--crs")
+    crs = resolve_crs(src, override, opt("crs"))
     hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
     frame = work_frame(crs, hint)
     lo, hi = _frame_box(src, crs, frame)

@@ -270,7 +270,7 @@ def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
     has ground-classified points (decided on its first chunk)."""
     has = first_cls is not None and bool((first_cls == GROUND).any())
     if mode == "class" and not has:
-        raise SoilVolumeError(f"{src.path}: --ground class needs ground-classified (class 2) points; the file has none")
+        raise SoilVolumeError(f"{src.path}: {{opt:ground=class}} needs ground (class 2) points; the file has none")
     return mode == "class" or (mode == "auto" and has)
 
 

@@ -87,14 +87,14 @@ def read_surface(path: Path, crs_override: str | None) -> Surface:
 
 
 def _crs(path: Path, header, override: str | None) -> pyproj.CRS:
-    given = parse_crs(override, "--before-crs")
+    given = parse_crs(override, "{opt:before_crs}")
     own = None if header is None else pyproj.CRS.from_user_input(header.to_wkt())
     if own is None and given is None:
-        raise SoilVolumeError(f"{path}: the raster has no CRS; pass --before-crs (e.g. EPSG:32654)")
+        raise SoilVolumeError(f"{path}: the raster has no CRS; give {{opt:before_crs}} (e.g. EPSG:32654)")
     if own is not None and given is not None and not horizontal(own).equals(horizontal(given), ignore_axis_order=True):
         raise SoilVolumeError(
-            f"{path}: --before-crs {override} differs from the raster's CRS ({own.name}); --before-crs applies "
-            "only to a raster without one"
+            f"{path}: {{opt:before_crs={override}}} differs from the raster's CRS ({own.name}); "
+            "{opt:before_crs} applies only to a raster without one"
         )
     if given is not None and (own is None or has_vertical(given)):
         return given

@@ -31,7 +31,7 @@ class ColumnThinner:
         if n > MAX_COLUMNS:
             raise SoilVolumeError(
                 f"{name + ': ' if name else ''}{self.shape[0]:,} x {self.shape[1]:,} columns of {voxel:.3g} m to "
-                "thin: the extent is far larger than the points (corrupt header bounds, or --radius too large)"
+                "thin: the extent is far larger than the points (corrupt header bounds, or {opt:radius} too large)"
             )
         self.sums = np.zeros((4, n))
 

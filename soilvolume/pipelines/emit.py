@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.outputs import os_errors, output_dir
+from ..core.wording import opt
 from ..inputs.crs import lonlat_of, to_frame, work_frame
 from ..inputs.footprint import footprint, polygon_wkt
 from ..inputs.io import read_points
@@ -25,8 +26,8 @@ EMITTED = ("before.json", "after.json", "before_prepared.laz", "after_prepared.l
 def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -> tuple[Path, Path]:
     """Write ``before.json`` and ``after.json`` into ``out_dir``; returns their paths."""
     raw_b, raw_a = read_points(before), read_points(after)
-    crs_b = resolve_crs(raw_b, options.before_crs, "--before-crs")
-    crs_a = resolve_crs(raw_a, options.after_crs, "--after-crs")
+    crs_b = resolve_crs(raw_b, options.before_crs, opt("before_crs"))
+    crs_a = resolve_crs(raw_a, options.after_crs, opt("after_crs"))
     frame = work_frame(crs_b, lonlat_of(raw_b.xyz, crs_b) if crs_b.is_geographic else None)
     after_xy = to_frame(raw_a.xyz, crs_a, frame, raw_a.path)[:, :2] / frame.xy_unit
     poly = footprint(after_xy, options.radius / frame.xy_unit)

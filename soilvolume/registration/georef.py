@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pyproj
 
+from ..core.wording import opt
+
 AGREE_FITNESS = 0.6  # share of the margin within 0.4 m of the before surface at the given pose
 
 
@@ -26,7 +28,7 @@ def vertical_datum(wkt: str | None) -> str | None:
 def resolve(mode: str, inputs: dict, after_xyz: np.ndarray, before_xyz: np.ndarray) -> tuple[str, str]:
     """(``gps`` or ``precise``, the reason in plain words) for the run."""
     if mode != "auto":
-        return mode, f"--georeferencing {mode}"
+        return mode, opt("georeferencing", mode)
     vb = vertical_datum(inputs["before"].get("crs_wkt"))
     va = vertical_datum(inputs["after"].get("crs_wkt"))
     if vb is None or vb != va:
@@ -43,5 +45,5 @@ def resolve(mode: str, inputs: dict, after_xyz: np.ndarray, before_xyz: np.ndarr
     return "precise", (
         f"both files declare {vb} and {fit:.0%} of the after survey's margin agrees with the "
         "before surface as georeferenced: coordinates used as they are (no registration, no "
-        "bias correction); use --georeferencing gps to register anyway"
+        f"bias correction); use {opt('georeferencing', 'gps')} to register anyway"
     )

@@ -253,7 +253,7 @@ def register(
     eye = np.eye(4)
     if precise:
         fit, rmse = evaluate_surface(_judged(after_xyz, spacing(before_xyz)), before_xyz, eye)
-        skipped = "skipped: coordinates used as georeferenced (--georeferencing)"
+        skipped = "skipped: coordinates used as georeferenced ({opt:georeferencing})"
         return Registration(
             eye,
             StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
@@ -264,7 +264,7 @@ def register(
         if first.fitness >= AUTO_FITNESS:  # the GPS pose converged: FPFH cannot do better here
             note = (
                 f"skipped: the fine registration from the GPS pose fits ({first.fitness:.0%} of the "
-                f"after cloud within {EVAL_DISTANCE} m); --coarse fpfh forces it"
+                f"after cloud within {EVAL_DISTANCE} m); {{opt:coarse=fpfh}} forces it"
             )
             return Registration(
                 first.transform, StageQuality("fpfh-ransac", float("nan"), float("nan"), eye, False, 0.0, note), first

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core import wording
 from ..core.types import GridSpec
 from .figures import (
     PUOR,
@@ -379,7 +380,7 @@ def render_html(report: dict, arrays: dict, grid: GridSpec, run_date: str | None
 def write_html(report: dict, arrays: dict, grid: GridSpec, path: str | Path) -> Path:
     """Write report.html atomically; returns its path."""
     path = Path(path)
-    text = render_html(report, arrays, grid)
+    text = wording.html(render_html(report, arrays, grid))  # options as spans naming them
     tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)

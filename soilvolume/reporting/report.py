@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..core.types import GridSpec, StageQuality
+from ..core.wording import cli_tree
 from ..inputs.io import atomic_path
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 
@@ -91,30 +92,32 @@ def write_json(path: Path, report: dict, timings: dict[str, float] | None = None
     if timings is not None:
         report["timings_s"] = timings
     with atomic_path(path) as tmp:
-        tmp.write_text(json.dumps(_clean(report), indent=2))
+        tmp.write_text(json.dumps(_clean(cli_tree(report)), indent=2))  # options worded as flags
 
 
 def summary_lines(report: dict) -> list[str]:
-    """A few human lines for the terminal."""
+    """A few human lines for the terminal (options worded as flags)."""
     v, u = report["volume_m3"], report["volume_uncompensated_m3"]
     g = report["grid"]
     fine = report["registration"]["fine"]
     surface = (report.get("reference") or {}).get("kind") == "surface"
     reg = fine["method"] if surface else f"{fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m"
     words = ("net", "below design", "above design") if surface else ("net", "cut", "fill")
-    return [
-        f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
-        f"registration: {reg}",
-        f"volume (change areas, {report['correction']['method']} correction): "
-        f"{words[0]} {v['net']:+.2f} m3  {words[1]} {v['cut']:.2f} m3  {words[2]} {v['fill']:.2f} m3",
-        f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
-        f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
-        f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
-        *_coverage_line(report),
-        f"total time {sum(report['timings_s'].values()):.2f} s",
-        *(f"not soil: {line}" for line in nonsoil_lines(report)),
-        *quality_lines(report),
-    ]
+    return cli_tree(  # options worded as flags
+        [
+            f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
+            f"registration: {reg}",
+            f"volume (change areas, {report['correction']['method']} correction): "
+            f"{words[0]} {v['net']:+.2f} m3  {words[1]} {v['cut']:.2f} m3  {words[2]} {v['fill']:.2f} m3",
+            f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
+            f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
+            f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
+            *_coverage_line(report),
+            f"total time {sum(report['timings_s'].values()):.2f} s",
+            *(f"not soil: {line}" for line in nonsoil_lines(report)),
+            *quality_lines(report),
+        ]
+    )
 
 
 def _coverage_line(report: dict) -> list[str]:

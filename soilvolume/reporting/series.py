@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import GridSpec
+from ..core.wording import cli_tree
 from ..dem import grid as gridmod
 from ..inputs.io import atomic_path
 from ..options import Options
@@ -159,7 +160,7 @@ def write_reports(out, paths, dates, fits, vols, series, grid: GridSpec, options
     :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
     from .serieshtml import write_series_html
 
-    report = build_series_report(paths, dates, fits, vols, series, grid, options, timer)
+    report = cli_tree(build_series_report(paths, dates, fits, vols, series, grid, options, timer))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
     report["timings_s"] = timer.totals()

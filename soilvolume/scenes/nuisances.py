@@ -119,3 +119,22 @@ def returns(cat: np.ndarray, under: np.ndarray, rng) -> tuple[np.ndarray, np.nda
     num[ground] = 2
     ret[ground] = 2
     return ret, num
+
+
+def bush(rng: np.random.Generator) -> tuple:
+    """A bush's feature parameters (type 0, grown in the after epoch)."""
+    r, h = rng.uniform(0.8, 3.0), rng.uniform(0.3, 4.0)
+    r2, h2 = r * 1.1, h * 1.2 + 0.1  # grown in the after epoch
+    return (0, 0.0, r, r, h, r2, r2, h2, r2)
+
+
+def vehicle(rng: np.random.Generator) -> tuple:
+    """A vehicle's feature parameters (type 1: the same place in both epochs)."""
+    a, b, h = rng.uniform(2.1, 2.6), rng.uniform(0.85, 1.0), rng.uniform(1.4, 1.9)
+    return (1, rng.uniform(0, np.pi), a, b, h, a, b, h, math.hypot(a, b))
+
+
+def boulder(rng: np.random.Generator) -> tuple:
+    """A boulder's feature parameters (type 2)."""
+    a, b, h = rng.uniform(0.6, 1.5), rng.uniform(0.6, 1.5), rng.uniform(0.5, 1.3)
+    return (2, rng.uniform(0, np.pi), a, b, h, a, b, h, max(a, b))

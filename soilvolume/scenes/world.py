@@ -9,7 +9,7 @@ import numpy as np
 
 from .config import CLASS_BOULDER, CLASS_GROUND, CLASS_OUTLIER, CLASS_VEHICLE, SceneConfig
 from .features import _after_box, _change_features, _clear_of, change_dz
-from .nuisances import CROP, PATCH, categories, colours, extra_features, returns
+from .nuisances import CROP, PATCH, boulder, bush, categories, colours, extra_features, returns, vehicle
 
 CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never depend on the caller)
 
@@ -22,12 +22,19 @@ class _World:
         self.cfg = cfg
         self.seed = int(seed)
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0]))
-        bw, bh = cfg.before_size
         self.ax0, self.ay0, self.ax1, self.ay1 = _after_box(cfg)
-        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
         self.changes = _change_features(cfg)
+        self._init_terrain(rng)
+        self._init_features(rng)
+        self.hole_res = 0.1  # occlusion holes, per epoch
+        self.holes = [self._holes(rng, cfg.holes) for _ in range(2)]
+        self._init_misalignment()
 
-        # --- terrain: tilt + long waves + hills + roughness + ditches, berm, mounds ---
+    def _init_terrain(self, rng: np.random.Generator) -> None:
+        """Tilt, long waves, hills, roughness, ditches, berm and mounds (``rng``'s first draws)."""
+        cfg = self.cfg
+        bw, bh = cfg.before_size
+        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
         self.z0 = rng.uniform(58.0, 66.0)
         self.tilt = rng.uniform(-0.02, 0.02, 2)
         self.centre = (bw / 2.0, bh / 2.0)
@@ -46,7 +53,7 @@ class _World:
         aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
         th0 = rng.uniform(0, np.pi)
         lines = []  # (kind, x0, y0, x1, y1, height, width) ; kind 0 ditch (gaussian), 1 berm
-        for i, (kind, ang) in enumerate(((0, th0), (0, th0 + rng.uniform(1.0, 2.1)), (1, th0 + rng.uniform(0.5, 1.0)))):
+        for kind, ang in ((0, th0), (0, th0 + rng.uniform(1.0, 2.1)), (1, th0 + rng.uniform(0.5, 1.0))):
             px = acx + rng.uniform(-0.3, 0.3) * aw
             py = acy + rng.uniform(-0.3, 0.3) * ah
             half = rng.uniform(25.0, 50.0)
@@ -54,7 +61,6 @@ class _World:
             height = -rng.uniform(0.5, 1.0) if kind == 0 else rng.uniform(0.6, 1.2)
             width = rng.uniform(0.6, 1.2) if kind == 0 else rng.uniform(1.2, 2.0)
             lines.append((kind, px - dx, py - dy, px + dx, py + dy, height, width))
-            del i
         self.lines = np.array(lines)
         nm = 30
         self.mounds = np.column_stack(
@@ -66,7 +72,12 @@ class _World:
             ]
         )
 
-        # --- non-ground features (non-overlapping, away from the change) ---
+    def _init_features(self, rng: np.random.Generator) -> None:
+        """Non-ground features (bushes, vehicles, boulders, the config's extra kinds), placed
+        non-overlapping and away from the change, and their label grid."""
+        cfg = self.cfg
+        bw, bh = cfg.before_size
+        aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
         self.feat_res = 0.25
         self.fnx = int(math.ceil(bw / self.feat_res)) + 1
         self.fny = int(math.ceil(bh / self.feat_res)) + 1
@@ -103,29 +114,14 @@ class _World:
                         break
             return ok
 
-        def bush():
-            r = rng.uniform(0.8, 3.0)
-            h = rng.uniform(0.3, 4.0)
-            r2, h2 = r * 1.1, h * 1.2 + 0.1  # grown in the after epoch
-            return (0, 0.0, r, r, h, r2, r2, h2, r2)
-
-        def vehicle():
-            a, b, h = rng.uniform(2.1, 2.6), rng.uniform(0.85, 1.0), rng.uniform(1.4, 1.9)
-            return (1, rng.uniform(0, np.pi), a, b, h, a, b, h, math.hypot(a, b))
-
-        def boulder():
-            a, b = rng.uniform(0.6, 1.5), rng.uniform(0.6, 1.5)
-            h = rng.uniform(0.5, 1.3)
-            return (2, rng.uniform(0, np.pi), a, b, h, a, b, h, max(a, b))
-
         if cfg.vegetation:
-            place(int(bw * bh / 600), False, bush)
-            place(int(aw * ah / 250), True, bush)
+            place(int(bw * bh / 600), False, lambda: bush(rng))
+            place(int(aw * ah / 250), True, lambda: bush(rng))
         if cfg.objects:
-            place(5, True, vehicle)
-            place(3, False, vehicle)
-            place(12, True, boulder)
-            place(10, False, boulder)
+            place(5, True, lambda: vehicle(rng))
+            place(3, False, lambda: vehicle(rng))
+            place(12, True, lambda: boulder(rng))
+            place(10, False, lambda: boulder(rng))
         extra = np.random.default_rng(np.random.SeedSequence([self.seed, 7]))  # new kinds: own stream
         self.n_plain = len(feats)  # features after these are the config's extra kinds
         self.roles = extra_features(cfg, extra, lambda inside, params: place(1, inside, lambda: params, extra))
@@ -135,11 +131,10 @@ class _World:
         for k, f in enumerate(self.feats):
             self._stamp(self.label, self.feat_res, f[1], f[2], f[10] + self.feat_res, k + 1)
 
-        # --- occlusion holes, per epoch ---
-        self.hole_res = 0.1
-        self.holes = [self._holes(rng, cfg.holes) for _ in range(2)]
-
-        # --- misalignment (local frame): p_s = R (p - c) + c + t ---
+    def _init_misalignment(self) -> None:
+        """The GPS misalignment (local frame): ``p_s = R (p - c) + c + t``."""
+        cfg = self.cfg
+        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
         roll, pitch, yaw = np.radians(cfg.rotation_deg)
         rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
         ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])

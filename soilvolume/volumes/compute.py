@@ -5,6 +5,7 @@ budgets, uncertainty and zones."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from scipy import ndimage
@@ -82,16 +83,77 @@ def compute_volumes(
     uncertainty, zones. The epochs' per-cell height spreads give per-cell LoDs; ``moved``: the
     rigid move from the accepted pose to a nearly as good one (registration uncertainty);
     ``given``: the window of a tiled run (see :class:`Given`)."""
-    from .change import cell_lod, cell_sigma, change_areas, marginal_volume
-    from .uncertainty import (
-        detection_level,
-        interp_fraction,
-        statistic_bias,
-        thresholded_volumes,
-        volume_uncertainty,
-        z_value,
-    )
+    from .change import change_areas
+    from .uncertainty import detection_level
 
+    s = _refilled(after, before, grid, options, given)
+    filled_mask = s["filled_mask"]
+    if given is None:
+        offset, params, stable, _ = correction(s["filled"], d_i, grid, options)
+        core = (slice(None), slice(None))  # the cells the budgets count: all
+    else:
+        offset = np.where(np.isfinite(s["filled"]), given.offset, np.nan)
+        params, stable = given.params, given.stable & np.isfinite(s["filled"])
+        core = given.core  # the halo is context only
+    diff = s["filled"] - offset
+    fill_sigma = refill_sigma(diff, filled_mask, stable, options)
+    lod = detection_level(diff, stable, options.lod_confidence)
+    lod_cell = _cell_lods(after, before, s, lod, fill_sigma, options.lod_confidence)
+    significant = patches(~filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
+    diff = refill_across_outline(diff, filled_mask, significant, options.fill_method)
+    filled = diff + offset
+    fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
+    change = fill_area | cut_area
+    ex = exclude_nonsoil(
+        diff, fill_area, cut_area, (after, before), offset, grid, options.exclude, s["heights"], stable, filled_mask
+    )
+    fill_area, cut_area = ex.fill, ex.cut
+    # stable ground for the error model: never a cell of (or next to) a detected change area,
+    # unless the user drew it
+    quiet = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
+    if not options.stable_mask and quiet.sum() >= 12:
+        stable = quiet
+    d, fa, ca = diff[core], fill_area[core], cut_area[core]  # areas decided with the halo, counted on the core
+    terms = _extra_terms((after, before), s["f_a"], filled_mask, grid, moved, given, core, (d, fa, ca), lod_cell, ex)
+    counted = fill_area | cut_area  # the change areas without moved objects
+    model = _error_model(diff, stable, grid, options, given, core, filled_mask, fill_sigma, ex.bound)
+    unc = model(change_mask=counted, extra_sigma=terms.pop("extra"))
+    headline = signed_budget(d, fa, ca, grid.cell_area)
+    vols = {
+        "dem_a": s["heights"][0],
+        "dem_b": s["heights"][1],
+        "raw": s["raw"],
+        "filled": filled,
+        "filled_mask": filled_mask,
+        "offset": offset,
+        "diff": diff,
+        "stable": stable,
+        "params": params,
+        "uncertainty": {
+            **unc,
+            "lod_m": lod,
+            "registration_m3": terms["registration_m3"],
+            "marginal_detections_m3": terms["marginal_detections_m3"],
+            "classification_m3": ex.sigma,
+            "statistic_m3": terms["statistic_m3"],
+        },
+        "change_mask": counted,
+        "cut_mask": cut_area,  # after the exclusions, as the headline sums it
+        "excluded": ex.report,
+        "classes": ex.classes,
+        "compensated": headline,
+        "change_areas": headline,
+        **_budgets(s, filled, diff, d_i, core, lod, grid.cell_area, given is None, (after.counts, before.counts)),
+    }
+    if options.zones:
+        vols["zones"] = _zones(d, counted, grid, options, given, core, model, unc)
+    return Volumes(**vols)
+
+
+def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Options, given: Given | None) -> dict:
+    """The heights at the cell centres (``heights``: after, before), the raw difference, each
+    epoch's weak cells refilled (``f_a``, ``m_a``, ``m_b``), enclosed holes filled (``filled``)
+    and the refilled cells (``filled_mask``)."""
     med_a, med_b = (None, None) if given is None else given.median_counts
     n_a, n_b = after.counts, before.counts
     h_a, h_b = centred_heights(after, grid.cell, options, med_a), centred_heights(before, grid.cell, options, med_b)
@@ -104,36 +166,30 @@ def compute_volumes(
     hole = holes.enclosed_holes(np.isfinite(filled), max_cells)
     filled = holes.fill(filled, hole, options.fill_method)
     filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
-    if given is None:
-        offset, params, stable, _ = correction(filled, d_i, grid, options)
-        core = (slice(None), slice(None))  # the cells the budgets count: all
-    else:
-        offset = np.where(np.isfinite(filled), given.offset, np.nan)
-        params, stable = given.params, given.stable & np.isfinite(filled)
-        core = given.core  # the halo is context only
-    diff = filled - offset
+    return dict(heights=(h_a, h_b), raw=raw, f_a=f_a, m_a=m_a, m_b=m_b, filled=filled, filled_mask=filled_mask)
+
+
+def _cell_lods(after: EpochDEM, before: EpochDEM, s: dict, lod: float, fill_sigma, confidence: float) -> np.ndarray:
+    """Each cell's level of detection: the stable ground's, the epochs' own height errors, the
+    refill error of refilled cells."""
+    from .change import cell_lod, cell_sigma
+    from .uncertainty import z_value
+
+    z = z_value(confidence)
+    se_a = np.where(s["m_a"], np.nan, cell_sigma(after.spread, after.counts))
+    se_b = np.where(s["m_b"], np.nan, cell_sigma(before.spread, before.counts))
+    return np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
+
+
+def _extra_terms(epochs, f_a, filled_mask, grid: GridSpec, moved, given, core, counted, lod_cell, ex) -> dict:
+    """The one-sigma terms (m3 per part) beyond the error model: the registration's (the pose's
+    effect on the counted ``(d, fill, cut)``), the marginal detections, the cell statistic's
+    bias, and all of them with the classification's (``extra``)."""
+    from .change import marginal_volume
+    from .uncertainty import statistic_bias
+
+    d, fa, ca = counted
     area = grid.cell_area
-    fill_sigma = refill_sigma(diff, filled_mask, stable, options)
-    lod = detection_level(diff, stable, options.lod_confidence)
-    z = z_value(options.lod_confidence)
-    se_a = np.where(m_a, np.nan, cell_sigma(after.spread, n_a))
-    se_b = np.where(m_b, np.nan, cell_sigma(before.spread, n_b))
-    lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
-    significant = patches(~filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
-    diff = refill_across_outline(diff, filled_mask, significant, options.fill_method)
-    filled = diff + offset
-    fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
-    change = fill_area | cut_area
-    ex = exclude_nonsoil(
-        diff, fill_area, cut_area, (after, before), offset, grid, options.exclude, (h_a, h_b), stable, filled_mask
-    )
-    fill_area, cut_area = ex.fill, ex.cut
-    # stable ground for the error model: never a cell of (or next to) a detected change area,
-    # unless the user drew it
-    quiet = stable & ~ndimage.binary_dilation(change, iterations=max(1, round(2.0 / grid.cell)))
-    if not options.stable_mask and quiet.sum() >= 12:
-        stable = quiet
-    d, fa, ca = diff[core], fill_area[core], cut_area[core]  # areas decided with the halo, counted on the core
     reg_v = signed_budget(pose_effect(f_a, grid, moved)[core], fa, ca, area)
     marginal = {
         "fill": marginal_volume(d, fa, lod_cell[core], area),
@@ -141,69 +197,66 @@ def compute_volumes(
     }
     marginal["net"] = float(np.hypot(marginal["fill"], marginal["cut"]))
     reg_in = 0.0 if given else 1.0  # a tile: the pose is common to all tiles, summed across them
-    skews = tuple(None if e.skew is None else e.skew[core] for e in (after, before))
+    skews = tuple(None if e.skew is None else e.skew[core] for e in epochs)
     stat = statistic_bias(skews, filled_mask[core], {"net": fa | ca, "cut": ca, "fill": fa}, area)
     extra = {k: float(np.linalg.norm([reg_in * reg_v[k], marginal[k], ex.sigma[k], stat[k]])) for k in stat}
-    counted = fill_area | cut_area  # the change areas without moved objects
-    unc = volume_uncertainty(
+    return {"registration_m3": reg_v, "marginal_detections_m3": marginal, "statistic_m3": stat, "extra": extra}
+
+
+def _error_model(diff, stable, grid: GridSpec, options: Options, given, core, filled_mask, fill_sigma, bound):
+    """The error model (:func:`~.uncertainty.volume_uncertainty` with the run's arguments) over
+    the cells a caller gives: the headline's change areas, a zone's."""
+    from .uncertainty import interp_fraction, volume_uncertainty
+
+    return partial(
+        volume_uncertainty,
         diff,
         stable,
-        counted,
-        grid,
-        options.lod_confidence,
+        grid=grid,
+        confidence=options.lod_confidence,
         n_coef=0 if given else MODES[options.correction].coefficients,  # a tile: the overview has the bias
         filled_mask=filled_mask,
         fill_sigma=fill_sigma,
         interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
-        extra_sigma=extra,
         counted=None if given is None else _mask(diff.shape, core),
         surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
-        bound_m3=ex.bound,
+        bound_m3=bound,
     )
-    headline = signed_budget(d, fa, ca, area)
-    vols = {
-        "dem_a": h_a,
-        "dem_b": h_b,
-        "raw": raw,
-        "filled": filled,
-        "filled_mask": filled_mask,
-        "offset": offset,
-        "diff": diff,
-        "stable": stable,
-        "params": params,
-        "uncertainty": {
-            **unc,
-            "lod_m": lod,
-            "registration_m3": reg_v,
-            "marginal_detections_m3": marginal,
-            "classification_m3": ex.sigma,
-            "statistic_m3": stat,
-        },
-        "change_mask": counted,
-        "cut_mask": cut_area,  # after the exclusions, as the headline sums it
-        "excluded": ex.report,
-        "classes": ex.classes,
-        "compensated": headline,
+
+
+def _budgets(s: dict, filled, diff, d_i, core, lod: float, area: float, whole: bool, counts) -> dict:
+    """The budgets beside the headline (every compared cell, uncompensated, the paper's plane,
+    thresholded, refilled), the empty cells and the coverage, counted on the ``core``."""
+    from .uncertainty import thresholded_volumes
+
+    d, (n_a, n_b) = diff[core], counts
+    return {
         "all_cells": budget(d, area),
         "uncompensated": budget(filled[core], area),
         "paper_plane": budget(filled[core] - d_i[core], area),
-        "change_areas": headline,
         "thresholded": thresholded_volumes(d, lod, area),
-        "holes": holes.summary(d, filled_mask[core], area),
-        "empty_cells": int((~np.isfinite(raw[core])).sum()),
+        "holes": holes.summary(d, s["filled_mask"][core], area),
+        "empty_cells": int((~np.isfinite(s["raw"][core])).sum()),
         "empty_before": int((n_b[core] == 0).sum()),
         "empty_after": int((n_a[core] == 0).sum()),
-        "coverage": coverage.counts(n_a, n_b, filled_mask, diff, core, edges=(given is None,) * 4),
+        "coverage": coverage.counts(n_a, n_b, s["filled_mask"], diff, core, edges=(whole,) * 4),
     }
-    if options.zones:
-        from .zones import zone_budgets
 
-        rows, cols = core
-        zgrid = grid if given is None else grid.window(rows.start, rows.stop, cols.start, cols.stop)
-        vols["zones"] = zone_budgets(
-            np.where(counted[core], d, np.where(np.isfinite(d), 0.0, np.nan)), zgrid, options.zones, whole=given is None
-        )
-    return Volumes(**vols)
+
+def _zones(d, counted, grid: GridSpec, options: Options, given, core, model, unc) -> list:
+    """The zones' budgets over the counted change cells, with their intervals (whole grid only)."""
+    from .zones import zone_budgets, zone_interval
+
+    rows, cols = core
+    zgrid = grid if given is None else grid.window(rows.start, rows.stop, cols.start, cols.stop)
+    interval = None if given is not None else partial(zone_interval, model, counted, unc)  # tiles: not yet
+    return zone_budgets(
+        np.where(counted[core], d, np.where(np.isfinite(d), 0.0, np.nan)),
+        zgrid,
+        options.zones,
+        whole=given is None,
+        interval=interval,
+    )
 
 
 def centred_heights(dem: EpochDEM, cell: float, options: Options, median: float | None = None) -> np.ndarray:

@@ -12,6 +12,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..core.types import GridSpec
+from ..core.wording import opt
 from ..dem.grid import EpochDEM
 from ..soil.objects import Blob, find_objects
 
@@ -224,7 +225,7 @@ def sentence(report: dict) -> list[str]:
     out = []
     m = report.get("moved_objects") or {}
     if m.get("count"):
-        verb = "excluded" if m.get("excluded") else "counted (--exclude none)"
+        verb = "excluded" if m.get("excluded") else f"counted ({opt('exclude', 'none')})"
         out.append(
             f"{m['fill']:.0f} m³ of apparent fill and {m['cut']:.0f} m³ of apparent cut in {m['count']} "
             f"moved object{'s' if m['count'] > 1 else ''} {verb}"

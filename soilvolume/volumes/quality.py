@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compensation.stable import largest_gap_deg
+from ..core.wording import opt
 from .coverage import check as coverage_check
 from .zones import zone_messages
 
@@ -33,71 +34,10 @@ def assess(
     out: list[tuple[str, str]] = []
     v, u = report["volume_m3"], report["uncertainty_m3"]
     used = report["registration"].get("georeferencing", {}).get("used", "gps")
-    valid = np.isfinite(offset)
-    n_stable, n_valid = int(stable.sum()), max(int(valid.sum()), 1)
     if used == "gps":
-        if n_stable < MIN_STABLE_CELLS or n_stable / n_valid < MIN_STABLE_FRACTION:
-            out.append(
-                (
-                    "unreliable",
-                    f"too little stable ground ({n_stable / n_valid:.0%} of the compared area) to "
-                    "register the surveys and remove their bias: the works may have been absorbed",
-                )
-            )
-        elif n_stable / n_valid < LOW_STABLE_FRACTION:
-            out.append(
-                (
-                    "caution",
-                    f"little stable ground ({n_stable / n_valid:.0%} of the compared area): the "
-                    "registration and bias correction rest on it alone; check that they did not absorb the works",
-                )
-            )
-        elif largest_gap_deg(stable, change) > 180:
-            out.append(
-                (
-                    "caution",
-                    "the stable ground lies on one side of the works only: tilt and bias across "
-                    "the works are extrapolated",
-                )
-            )
-        reg = report["registration"]
-        for key, limit, unit in (
-            ("rotation_deg", prior["rotation"], "deg"),
-            ("tilt_deg", prior["tilt"], "deg"),
-            ("shift_m", prior["shift"], "m"),
-        ):
-            val = reg.get(key, 0.0)
-            if limit > 0 and val > PRIOR_MARGIN * limit:
-                out.append(
-                    (
-                        "caution",
-                        f"the registration used {val:.2f} {unit} of a {limit:g} {unit} "
-                        f"georeferencing prior ({key.split('_')[0]})",
-                    )
-                )
-        if reg.get("fine", {}).get("poses_beyond_prior", 0) > 0:  # registration's count, not its wording
-            out.append(
-                (
-                    "caution",
-                    "registration wanted a pose beyond the georeferencing prior (the works may "
-                    "pull it); the best pose within the prior was kept",
-                )
-            )
-        fit = reg.get("fine", {}).get("fitness")
-        if fit is not None and np.isfinite(fit) and fit < 0.5:
-            out.append(("caution", f"only {fit:.0%} of the after survey fits the before surface after registration"))
+        out += _gps_checks(report["registration"], stable, change, offset, prior)
     if used == "precise":
-        ground = diff[stable & np.isfinite(diff)] if diff is not None else np.empty(0)
-        shift = float(np.median(ground)) if ground.size else 0.0
-        if abs(shift) > 0.05:
-            out.append(
-                (
-                    "caution",
-                    f"the ground outside the change areas differs by {shift:+.2f} m between the "
-                    "surveys and was not corrected (coordinates used as georeferenced): check the datums, or "
-                    "use --georeferencing gps if it is a survey offset",
-                )
-            )
+        out += _precise_checks(stable, diff)
     corr = float(np.nansum(np.where(change, offset, 0.0)) * cell_area)
     net = abs(v["net"])
     if abs(corr) > 0.5 * max(net, 1e-9) and abs(corr) > u["net"]:  # a correction within the interval cannot
@@ -127,6 +67,80 @@ def assess(
             )
         )
     return _verdict(out)
+
+
+def _gps_checks(reg: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndarray, prior: dict) -> list:
+    """A registered run's checks: enough stable ground around the works, the pose within the
+    georeferencing prior, the fit of the after survey."""
+    out: list[tuple[str, str]] = []
+    valid = np.isfinite(offset)
+    n_stable, n_valid = int(stable.sum()), max(int(valid.sum()), 1)
+    if n_stable < MIN_STABLE_CELLS or n_stable / n_valid < MIN_STABLE_FRACTION:
+        out.append(
+            (
+                "unreliable",
+                f"too little stable ground ({n_stable / n_valid:.0%} of the compared area) to "
+                "register the surveys and remove their bias: the works may have been absorbed",
+            )
+        )
+    elif n_stable / n_valid < LOW_STABLE_FRACTION:
+        out.append(
+            (
+                "caution",
+                f"little stable ground ({n_stable / n_valid:.0%} of the compared area): the "
+                "registration and bias correction rest on it alone; check that they did not absorb the works",
+            )
+        )
+    elif largest_gap_deg(stable, change) > 180:
+        out.append(
+            (
+                "caution",
+                "the stable ground lies on one side of the works only: tilt and bias across the works are extrapolated",
+            )
+        )
+    for key, limit, unit in (
+        ("rotation_deg", prior["rotation"], "deg"),
+        ("tilt_deg", prior["tilt"], "deg"),
+        ("shift_m", prior["shift"], "m"),
+    ):
+        val = reg.get(key, 0.0)
+        if limit > 0 and val > PRIOR_MARGIN * limit:
+            out.append(
+                (
+                    "caution",
+                    f"the registration used {val:.2f} {unit} of a {limit:g} {unit} "
+                    f"georeferencing prior ({key.split('_')[0]})",
+                )
+            )
+    if reg.get("fine", {}).get("poses_beyond_prior", 0) > 0:  # registration's count, not its wording
+        out.append(
+            (
+                "caution",
+                "registration wanted a pose beyond the georeferencing prior (the works may "
+                "pull it); the best pose within the prior was kept",
+            )
+        )
+    fit = reg.get("fine", {}).get("fitness")
+    if fit is not None and np.isfinite(fit) and fit < 0.5:
+        out.append(("caution", f"only {fit:.0%} of the after survey fits the before surface after registration"))
+    return out
+
+
+def _precise_checks(stable: np.ndarray, diff: np.ndarray | None) -> list:
+    """A run used as georeferenced: the ground outside the works agrees between the surveys."""
+    out: list[tuple[str, str]] = []
+    ground = diff[stable & np.isfinite(diff)] if diff is not None else np.empty(0)
+    shift = float(np.median(ground)) if ground.size else 0.0
+    if abs(shift) > 0.05:
+        out.append(
+            (
+                "caution",
+                f"the ground outside the change areas differs by {shift:+.2f} m between the "
+                "surveys and was not corrected (coordinates used as georeferenced): check the datums, or "
+                f"use {opt('georeferencing', 'gps')} if it is a survey offset",
+            )
+        )
+    return out
 
 
 def _nonsoil(excluded: dict, half: float) -> list[tuple[str, str]]:

@@ -186,39 +186,10 @@ def volume_uncertainty(
         "fill": region & (diff_corrected > 0),
         "net_compared_area": valid,
     }
-    filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
-    absd = np.abs(np.where(valid, diff_corrected, 0.0))
-
-    labels, n_patches = ndimage.label(filled)
-    fs = np.zeros(valid.shape) if fill_sigma is None else np.where(filled, fill_sigma, 0.0)
-
-    def interp(m: np.ndarray) -> float:
-        return interp_fraction * float(absd[m & filled].sum()) * grid.cell_area
-
-    def refill(m: np.ndarray) -> float:
-        per_patch = ndimage.sum(np.where(m, fs, 0.0), labels, np.arange(1, n_patches + 1)) * grid.cell_area
-        return float(np.sqrt(np.sum(np.square(per_patch)))) if n_patches else 0.0
-
     extra = extra_sigma or {}
-    leftover = leftover_bias(diff_corrected, stable, grid.cell)
-
-    # the correction surface's residual systematic error where it cannot be seen: the spread of
-    # its leftover over the stable ground, carried fully correlated over the part's area
-    seen = leftover[stable & np.isfinite(leftover)] if surface else np.empty(0)  # no surface, no residual
-    residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
-
-    def unmodelled(m: np.ndarray) -> float:  # fully correlated over the part
-        signed = abs(float(np.nansum(np.where(m, leftover, 0.0)))) * grid.cell_area
-        return float(np.hypot(signed, residual * float(m.sum()) * grid.cell_area))
-
-    terms = {  # one-sigma (m^3), in the order of TERMS
-        k: [
-            region_sigma(int(m.sum()), grid.cell, model, b, pcv),
-            interp(m),
-            refill(m),
-            unmodelled(m),
-            extra.get(k, 0.0),
-        ]
+    pt = _PartTerms(diff_corrected, valid, stable, grid, filled_mask, fill_sigma, interp_fraction, surface)
+    terms = {
+        k: pt.terms(m, region_sigma(int(m.sum()), grid.cell, model, b, pcv), extra.get(k, 0.0))
         for k, m in parts.items()
     }
     out: dict[str, Any] = widen({k: z * float(np.linalg.norm(t)) for k, t in terms.items()}, bound_m3)
@@ -230,10 +201,10 @@ def volume_uncertainty(
         psill_m2=model["psill"],
         range_m=model["range"],
         bias_sigma_m=b,
-        interpolated_m3=interp(region) / max(interp_fraction, 1e-12),
-        refill_sigma_m3=refill(region),
-        unmodelled_bias_m3=unmodelled(region),
-        correction_residual_m3=residual * float(region.sum()) * grid.cell_area,
+        interpolated_m3=pt.interp(region) / max(interp_fraction, 1e-12),
+        refill_sigma_m3=pt.refill(region),
+        unmodelled_bias_m3=pt.unmodelled(region),
+        correction_residual_m3=pt.residual * float(region.sum()) * grid.cell_area,
         stable_cells=int(stable.sum()),
         change_area_m2=float(region.sum()) * grid.cell_area,
         part_area_m2={k: float(m.sum()) * grid.cell_area for k, m in parts.items()},
@@ -253,6 +224,40 @@ def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, f
     if "net_compared_area" in out:
         out["net_compared_area"] = half["net_compared_area"] + float(b.get("net", 0.0))
     return out
+
+
+class _PartTerms:
+    """The one-sigma terms (m^3) of a part beyond its area's error model: the refilled share of
+    its change (``interp``), the refill error (``refill``) and the correction's leftover bias
+    (``unmodelled``); see :func:`volume_uncertainty`."""
+
+    def __init__(self, diff, valid, stable, grid: GridSpec, filled_mask, fill_sigma, fraction: float, surface: bool):
+        self.cell_area, self.fraction = grid.cell_area, fraction
+        self.filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
+        self.absd = np.abs(np.where(valid, diff, 0.0))
+        self.labels, self.n_patches = ndimage.label(self.filled)
+        self.fs = np.zeros(valid.shape) if fill_sigma is None else np.where(self.filled, fill_sigma, 0.0)
+        self.leftover = leftover_bias(diff, stable, grid.cell)
+        # the correction surface's residual systematic error where it cannot be seen: the spread of
+        # its leftover over the stable ground, carried fully correlated over the part's area
+        seen = self.leftover[stable & np.isfinite(self.leftover)] if surface else np.empty(0)  # no surface, none
+        self.residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
+
+    def terms(self, m: np.ndarray, area_model: float, extras: float) -> list[float]:
+        """The one-sigma terms of the part ``m``, in the order of :data:`TERMS`."""
+        return [area_model, self.interp(m), self.refill(m), self.unmodelled(m), extras]
+
+    def interp(self, m: np.ndarray) -> float:
+        return self.fraction * float(self.absd[m & self.filled].sum()) * self.cell_area
+
+    def refill(self, m: np.ndarray) -> float:
+        labels, n = self.labels, self.n_patches
+        per_patch = ndimage.sum(np.where(m, self.fs, 0.0), labels, np.arange(1, n + 1)) * self.cell_area
+        return float(np.sqrt(np.sum(np.square(per_patch)))) if n else 0.0
+
+    def unmodelled(self, m: np.ndarray) -> float:  # fully correlated over the part
+        signed = abs(float(np.nansum(np.where(m, self.leftover, 0.0)))) * self.cell_area
+        return float(np.hypot(signed, self.residual * float(m.sum()) * self.cell_area))
 
 
 def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:

@@ -7,6 +7,7 @@ or in the wrong CRS) is flagged, never a silent 0 m3; when no zone meets the gri
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,7 @@ def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
     ]
 
 
-def polygons_mask(path: str | Path, grid: GridSpec, what: str = "--stable-mask file") -> np.ndarray:
+def polygons_mask(path: str | Path, grid: GridSpec, what: str = "{opt:stable_mask} file") -> np.ndarray:
     """Union of the polygons of ``path`` as a (rows, cols) mask (e.g. a stable-ground mask); one
     that covers no cell of the grid is an error naming the file."""
     polys, wkt = read_polygons(path, what=what)
@@ -72,11 +73,18 @@ def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, fl
 
 
 def zone_budgets(
-    diff: np.ndarray, grid: GridSpec, zones_path: str | Path, name_field: str | None = None, whole: bool = True
+    diff: np.ndarray,
+    grid: GridSpec,
+    zones_path: str | Path,
+    name_field: str | None = None,
+    whole: bool = True,
+    interval: Callable[[np.ndarray], dict[str, float]] | None = None,
 ) -> list[dict[str, Any]]:
     """[{id, name, net, cut, fill, area_m2, zone_area_m2, polygon_area_m2, repaired}] per polygon
     of ``zones_path`` (overlapping zones each count their cells; ``zone_area_m2`` = grid cells
-    inside the polygon); on the ``whole`` grid (not a tile's window), see :func:`check_inside`."""
+    inside the polygon); on the ``whole`` grid (not a tile's window), see :func:`check_inside`.
+    ``interval``: a zone's ± (net, cut, fill) from its mask (:func:`zone_interval`), kept as
+    ``uncertainty_m3``."""
     polys, wkt = read_polygons(zones_path, name_field)
     polys = to_grid_crs(polys, wkt, grid, zones_path)
     out = []
@@ -86,6 +94,8 @@ def zone_budgets(
         row["zone_area_m2"] = float(mask.sum() * grid.cell_area)
         row["polygon_area_m2"] = float(p.geometry.area * grid.xy_unit**2)
         row["repaired"] = p.repaired
+        if interval is not None:
+            row["uncertainty_m3"] = interval(mask)
         out.append(row)
     return check_inside(out, zones_path, wkt) if whole else out
 
@@ -123,16 +133,23 @@ def _names(names: list[str], limit: int = 5) -> str:
     return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
 
 
-def net_half_width(area_m2: float, cell: float, uncertainty: dict[str, Any]) -> float | None:
-    """± half-width (m^3, at the run's confidence) of a zone's net volume over ``area_m2`` of
-    compared cells, from the run's stable-ground error model (``report["uncertainty"]``);
-    None when the report has no model. Refill errors are not included."""
-    from .uncertainty import region_sigma, z_value
+def zone_interval(model: Callable[..., dict], region: np.ndarray, headline: dict, zone: np.ndarray) -> dict[str, float]:
+    """A zone's ± half-widths (m^3, net/cut/fill at the run's confidence): the run's error model
+    (``model``: :func:`~.uncertainty.volume_uncertainty` with the run's arguments) over the cells
+    of ``region`` (the headline's change areas) inside ``zone``; the headline's further terms
+    (registration, small detections, classification, cell statistic: ``headline["terms_m3"]``'s
+    extras) shared in proportion to the zone's area of each part, and widened by the whole
+    run's unclassified change (``unclassified_m3``: where it lies is not kept, so each zone
+    may hold all of it)."""
+    from .uncertainty import TERMS, widen, z_value
 
-    try:
-        model = {"nugget": uncertainty["nugget_m2"], "psill": uncertainty["psill_m2"], "range": uncertainty["range_m"]}
-        bias, confidence = uncertainty.get("bias_sigma_m", 0.0), uncertainty.get("confidence", 0.95)
-    except (KeyError, TypeError):
-        return None
-    n_cells = int(round(area_m2 / (cell * cell)))
-    return z_value(confidence) * region_sigma(n_cells, cell, model, bias)
+    own = model(change_mask=region & zone, extra_sigma=None)
+    extra = TERMS.index("extras")
+    out = {}
+    for part in ("net", "cut", "fill"):
+        whole = headline["part_area_m2"][part]
+        share = own["part_area_m2"][part] / whole if whole > 0 else 0.0
+        terms = list(own["terms_m3"][part])
+        terms[extra] = share * headline["terms_m3"][part][extra]
+        out[part] = z_value(headline["confidence"]) * float(np.linalg.norm(terms))
+    return widen(out, headline.get("unclassified_m3"))

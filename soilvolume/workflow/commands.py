@@ -8,6 +8,7 @@ from pathlib import Path
 from ..core.hooks import Hooks
 from ..core.outputs import check_output_file
 from ..core.types import Epoch, SoilVolumeError
+from ..core.wording import cli_tree
 from ..inputs.io import LAS_SUFFIXES
 from ..options import Options
 from ..reporting.report import dem_summary, registration_summary
@@ -20,7 +21,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     out_tif = check_output_file(out_tif, [cloud])
     run = drive(Run("dem", (Epoch(cloud),), options, hooks, raster_out=out_tif, crs=crs, bounds=bounds), InProcess())
     hooks.step(100, "done")
-    return dem_summary(run.prep, run.grid, run.dems[0])
+    return cli_tree(dem_summary(run.prep, run.grid, run.dems[0]))
 
 
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
@@ -30,4 +31,4 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
     run = drive(Run("register", (Epoch(before), Epoch(after)), options, hooks, cloud_out=out_cloud), InProcess())
     hooks.step(100, "done")
-    return registration_summary(run.reg, run.prep.origin)
+    return cli_tree(registration_summary(run.reg, run.prep.origin))  # options worded as flags

@@ -109,12 +109,12 @@ def _options(options: Options, hooks: Hooks) -> Options:
     none: a design is not the existing ground); the paper's planes need two clouds."""
     if options.correction == "paper-plane":
         raise SoilVolumeError(
-            "--correction paper-plane needs two point clouds; against a surface: none (the default), plane, surface"
+            "{opt:correction=paper-plane} needs two point clouds; against a surface: none (the default), plane, surface"
         )
     if options.keep_registered_cloud:
         hooks.info("--registered-cloud: nothing is registered against a surface, so no registered cloud is written")
     if options.correction == Options().correction:
-        hooks.info("bias correction: none (the design is not the existing ground; --correction plane fits one)")
+        hooks.info("bias correction: none (the design is not the existing ground; {opt:correction=plane} fits one)")
         return options.with_(correction="none", keep_registered_cloud=False)
     hooks.info(f"bias correction against the surface: {options.correction} on the unchanged ground, as asked")
     return options.with_(keep_registered_cloud=False)

@@ -42,7 +42,7 @@ def run_estimate(
                 run.cloud_out = out.path("after_registered.laz")
             executor = executor_for(run)
         drive(run, executor)
-        result = Result(run.report)
+        result = Result(run.report, keyed=run.keyed)
     result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in out.moved.items()}
     hooks.step(100, "done")
     return result
@@ -58,7 +58,7 @@ def executor_for(run: Run):
         from .design import SurfaceReference
 
         if run.options.scheduler not in ("none", "auto"):
-            run.hooks.info("--scheduler: a run against a surface runs in this process")
+            run.hooks.info("{opt:scheduler}: a run against a surface runs in this process")
         return SurfaceReference()
     schedule = schedule_for(b.path, a.path, run.options, b.pipeline or a.pipeline)
     if schedule.kind == "none":

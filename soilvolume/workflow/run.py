@@ -72,6 +72,7 @@ class Run:
     planes: tuple = ()  # (plane before, plane after, d_i)
     vols: Any = None  # volumes.compute.Volumes
     report: dict | None = None  # report.json of an estimate
+    keyed: dict | None = None  # the same with its options by key (wording.opt), for front ends
 
     def at(self, step: str, fraction: float = 0.0) -> float:
         """The percent ``fraction`` of the way through ``step``."""
@@ -164,6 +165,7 @@ def _write(run: Run, ex) -> None:
 def _report(run: Run, ex) -> None:
     """Step 7: the run's typed record, report.json (the quality verdict in it) and report.html."""
     from ..core.record import RunRecord
+    from ..core.wording import cli_tree
     from ..reporting.report import build_report, write_json
     from .steps import quality_inputs, write_report_html
 
@@ -176,8 +178,8 @@ def _report(run: Run, ex) -> None:
         for line in report["quality"]["messages"]:
             run.hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_report_html(run.out, report, *ex.html(run))
-        write_json(run.out.path("report.json"), report, run.timer.totals())
-    run.report = report
+        run.keyed, run.report = report, cli_tree(report)  # options by key; worded for the command line
+        write_json(run.out.path("report.json"), run.report, run.timer.totals())
 
 
 STEPS = {

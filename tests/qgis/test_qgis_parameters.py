@@ -104,17 +104,24 @@ def test_help_is_flowing_html(provider):
 
 
 def test_engine_messages_in_parameter_words(plugin_package):
+    """Options the engine names by key are worded as parameters, no flag parsing involved."""
     from soilvolume_qgis.processing import engine
 
-    text = engine.qgis_wording("coarse: skipped (87% within 0.4 m); --coarse fpfh forces it")
-    assert "--" not in text and "'Coarse registration' (COARSE) = fpfh forces it" in text
+    wording = engine.engine("core.wording")
+    text = engine.qgis_wording(f"coarse: skipped (87% within 0.4 m); {wording.opt('coarse', 'fpfh')} forces it")
+    assert "{" not in text and "'Coarse registration' (COARSE) = fpfh forces it" in text
     assert text.startswith("Coarse")
-    assert "(CELL)" in engine.qgis_wording("grid too large: use a larger --cell")
-    assert engine.qgis_wording("used as georeferenced (--georeferencing)").endswith(
+    assert "(CELL)" in engine.qgis_wording(f"grid too large: use a larger {wording.opt('cell')}")
+    assert engine.qgis_wording(f"used as georeferenced ({wording.opt('georeferencing')})").endswith(
         "('Georeferencing of the surveys' (GEOREFERENCING))"
     )
-    assert "(CELL), then" in engine.qgis_wording("set --cell, then run")  # no "=" before a comma
-    page = "<style>a{--x:1}</style><td>skipped; --coarse fpfh forces it &amp; more</td>"
+    assert engine.qgis_wording(f"set {wording.opt('cell')}, then run").endswith("(CELL), then run")
+    assert engine.qgis_wording("use --overwrite") == "Use --overwrite"  # text without markers is kept
+    assert wording.cli(f"use {wording.opt('memory_limit', 4)}") == "use --memory-limit 4"
+    page = wording.html(
+        f"<style>a{{--x:1}}</style><td>skipped; {wording.opt('coarse', 'fpfh')} forces it &amp; more</td>"
+    )
+    assert "--coarse fpfh" in page  # the engine's page reads as the command line's
     assert engine.reword_html(page) == (
         "<style>a{--x:1}</style><td>skipped; 'Coarse registration' (COARSE) = fpfh forces it &amp; more</td>"
     )

@@ -53,7 +53,7 @@ def csf_classify(
         import CSF
     except ImportError as exc:
         raise SoilVolumeError(
-            f"--ground csf needs the '{PACKAGE}' package (pip install {PACKAGE}); it is not installed"
+            f"{{opt:ground=csf}} needs the '{PACKAGE}' package (pip install {PACKAGE}); it is not installed"
         ) from exc
     n = len(x)
     if n == 0:

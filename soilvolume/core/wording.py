@@ -1,0 +1,81 @@
+"""Options named by key in the engine's messages; each front end words them its own way.
+
+An engine message refers to an option of :class:`soilvolume.options.Options` with a marker
+:func:`opt` writes: ``{opt:KEY}`` or, with the value it is set to, ``{opt:KEY=VALUE}``
+("use {opt:georeferencing=gps} to register anyway"). The command line words a marker as its
+flag (:func:`cli`: ``--georeferencing gps``), the QGIS plugin as its parameter
+(``'Georeferencing' (GEOREFERENCING) = gps``), both through :func:`render`. Messages keep their
+markers until they leave the engine: ``str()`` of a ``SoilVolumeError``, report.json and the
+command line's text are worded for the command line (:func:`cli`, :func:`cli_tree`), report.html
+carries them as ``<span data-option=KEY>`` elements (:func:`html`), and the ``--progress jsonl``
+protocol keeps the markers for its front end to word. Standard library only (QGIS imports it).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from typing import Any
+
+MARKER = re.compile(r"\{opt:([a-z][a-z0-9_]*)(?:=([^{}]*))?\}")
+SPAN = re.compile(r'<span class="option" data-option="([a-z][a-z0-9_]*)"(?: data-value="([^"]*)")?>[^<]*</span>')
+
+
+def opt(key: str, value: object = None) -> str:
+    """The marker of option ``key`` (``value``: what it is set to, shown beside its name)."""
+    return f"{{opt:{key}}}" if value is None else f"{{opt:{key}={value}}}"
+
+
+def flag(key: str) -> str:
+    """The command-line flag of option ``key`` (``before_crs`` -> ``--before-crs``)."""
+    return "--" + key.replace("_", "-")
+
+
+def render(text: str, name: Callable[[str, str | None], str]) -> str:
+    """``text`` with every marker replaced by ``name(key, value)`` (value None when not given)."""
+    return MARKER.sub(lambda m: name(m.group(1), m.group(2)), text)
+
+
+def cli_name(key: str, value: str | None) -> str:
+    """A marker in the command line's words: ``--key`` or ``--key value``."""
+    return flag(key) if value is None else f"{flag(key)} {value}"
+
+
+def cli(text: str) -> str:
+    """``text`` in the command line's words."""
+    return render(text, cli_name)
+
+
+def keys(text: str) -> list[str]:
+    """The options ``text`` names, in order."""
+    return [m.group(1) for m in MARKER.finditer(text)]
+
+
+def cli_tree(value: Any) -> Any:
+    """A JSON-like value (a report) with every string in the command line's words."""
+    if isinstance(value, str):
+        return cli(value) if "{opt:" in value else value
+    if isinstance(value, dict):
+        return {k: cli_tree(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [cli_tree(v) for v in value]
+    if isinstance(value, tuple):
+        return tuple(cli_tree(v) for v in value)
+    return value
+
+
+def _span(key: str, value: str | None) -> str:
+    data = "" if value is None else f' data-value="{value}"'
+    return f'<span class="option" data-option="{key}"{data}>{cli_name(key, value)}</span>'
+
+
+def html(page: str) -> str:
+    """An HTML page (its text already escaped) with every marker as a ``span`` naming the
+    option, its text the command line's words; :func:`html_render` words them otherwise."""
+    return render(page, _span)
+
+
+def html_render(page: str, name: Callable[[str, str | None], str]) -> str:
+    """A page of :func:`html` with each option's span replaced by ``name(key, value)`` (the
+    caller escapes what it returns)."""
+    return SPAN.sub(lambda m: name(m.group(1), m.group(2)), page)
