@@ -422,3 +422,25 @@ def test_open3d_imported_without_its_plotly_drawing():
     )
     done = run_python(code, timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+def test_without_flock_a_lock_folder_serialises_runs_and_is_removed(tmp_path, monkeypatch):
+    """Windows has no fcntl: the engine still imports, two runs into one folder still take turns
+    (the second refused), and the lock folder never stays behind."""
+    import soilvolume.core.outputs as outputs
+
+    assert run_python("import sys; sys.modules['fcntl'] = None; import soilvolume.core.outputs").returncode == 0
+    monkeypatch.setattr(outputs, "fcntl", None)
+    final = tmp_path / "result"
+    first, second = OutputDir(final, [], False), OutputDir(final, [], False)
+    _stage(first, {"report.json": "first"})
+    _stage(second, {"report.json": "second"})
+    first.commit()
+    with pytest.raises(SoilVolumeError, match="another run"):
+        second.commit()
+    second.abort()
+    assert (final / "report.json").read_text() == "first" and _hidden(tmp_path) == []
+    (tmp_path / outputs.LOCK_DIR).mkdir()  # a lock left by a killed run: a clear line, no hang
+    with pytest.raises(SoilVolumeError, match="soilvolume-lock: another soilvolume run"):
+        with outputs._lock_folder(tmp_path, wait_s=0.2):
+            pass

@@ -11,18 +11,23 @@ kill struck between the two renames of a swap.
 from __future__ import annotations
 
 import errno
-import fcntl
 import hashlib
 import os
 import re
 import secrets
 import shutil
+import time
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from . import interrupt
 from .types import SoilVolumeError, short_error
+
+try:
+    import fcntl
+except ImportError:  # Windows: no flock; a lock folder made atomically takes its place
+    fcntl = None
 
 STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
 #: what a folder of a previous run may hold for --overwrite to replace it
@@ -155,15 +160,44 @@ def _sweep_inside(folder: Path) -> None:
             _remove(entry)
 
 
+LOCK_DIR, LOCK_WAIT_S = ".soilvolume-lock", 120.0
+
+
 @contextmanager
 def locked(folder: Path) -> Iterator[None]:
-    """An exclusive advisory lock on ``folder`` (swaps and sweeps of concurrent runs take turns)."""
+    """An exclusive advisory lock on ``folder`` (swaps and sweeps of concurrent runs take turns):
+    ``flock`` on POSIX, else :func:`_lock_folder`."""
+    if fcntl is None:
+        with _lock_folder(folder):
+            yield
+        return
     fd = os.open(folder, os.O_RDONLY)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         yield
     finally:
         os.close(fd)
+
+
+@contextmanager
+def _lock_folder(folder: Path, wait_s: float = LOCK_WAIT_S) -> Iterator[None]:
+    """The lock where there is no ``flock`` (Windows): a folder ``.soilvolume-lock`` inside
+    ``folder``, made atomically and removed after; a run waits ``wait_s`` for another's at most."""
+    lock, deadline = folder / LOCK_DIR, time.monotonic() + wait_s
+    while True:
+        try:
+            os.mkdir(lock)
+            break
+        except FileExistsError:
+            if time.monotonic() > deadline:
+                raise SoilVolumeError(
+                    f"{lock}: another soilvolume run has held this lock for {wait_s:g} s; remove it if no run is going"
+                ) from None
+            time.sleep(0.05)
+    try:
+        yield
+    finally:
+        os.rmdir(lock)
 
 
 def _inside(path: Path, folder: Path) -> bool:
@@ -327,6 +361,15 @@ def output_dir(
         except BaseException:
             out.abort()
             raise
+
+
+def check_input_file(path: Path) -> None:
+    """Refuse, in one line, an input that is missing or not a regular file (a FIFO would block
+    GDAL for ever)."""
+    if not path.exists():
+        raise SoilVolumeError(f"{path}: file not found")
+    if not path.is_file():
+        raise SoilVolumeError(f"{path}: not a regular file")
 
 
 def check_output_file(path: Path, inputs: Iterable[Path | str | None]) -> Path:

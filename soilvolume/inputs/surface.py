@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pyproj
 
+from ..core.outputs import check_input_file
 from ..core.types import GridSpec, SoilVolumeError
 from .crs import has_vertical, horizontal, parse_crs, raster_wkt, z_unit
 
@@ -64,10 +65,7 @@ def read_surface(path: Path, crs_override: str | None) -> Surface:
     the band's declared unit)."""
     import rasterio
 
-    if not path.exists():
-        raise SoilVolumeError(f"{path}: file not found")
-    if not path.is_file():  # a FIFO would block GDAL for ever
-        raise SoilVolumeError(f"{path}: not a regular file")
+    check_input_file(path)
     try:
         with rasterio.open(path) as ds:
             if ds.count != 1:

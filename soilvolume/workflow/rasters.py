@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from ..core.hooks import Hooks
-from ..core.outputs import check_output_file, os_errors
+from ..core.outputs import check_input_file, check_output_file, os_errors
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import write_geotiff
 from ..inputs.crs import parse_crs, xy_unit
@@ -25,10 +25,7 @@ def read_dem(path: Path) -> tuple[np.ndarray, Any]:
     """(heights in metres with NaN for nodata, the open profile) of a single-band DEM."""
     import rasterio
 
-    if not path.exists():
-        raise SoilVolumeError(f"{path}: file not found")
-    if not path.is_file():  # a FIFO would block GDAL for ever
-        raise SoilVolumeError(f"{path}: not a regular file")
+    check_input_file(path)
     try:
         with rasterio.open(path) as ds:
             band = ds.read(1, masked=True).astype("float64")
