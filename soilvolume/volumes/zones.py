@@ -7,6 +7,7 @@ or in the wrong CRS) is flagged, never a silent 0 m3; when no zone meets the gri
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -30,14 +31,17 @@ def _grid_transform(grid: GridSpec):
 def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
     """One boolean (rows, cols) mask per polygon (cells whose centre is inside)."""
     from rasterio import features
+    from rasterio.errors import NotGeoreferencedWarning
 
     tf = _grid_transform(grid)
-    return [
-        features.rasterize(
-            [(p.geometry, 1)], out_shape=(grid.rows, grid.cols), transform=tf, fill=0, dtype="uint8"
-        ).astype(bool)
-        for p in polys
-    ]
+    with warnings.catch_warnings():  # the grid's transform is given: GDAL's scratch raster warns all the same
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        return [
+            features.rasterize(
+                [(p.geometry, 1)], out_shape=(grid.rows, grid.cols), transform=tf, fill=0, dtype="uint8"
+            ).astype(bool)
+            for p in polys
+        ]
 
 
 def polygons_mask(path: str | Path, grid: GridSpec, what: str = "{opt:stable_mask} file") -> np.ndarray:
