@@ -20,6 +20,7 @@ from . import environment
 LOG_TAG = "Soil volume change"
 TITLE = "Soil volume change"
 ALGORITHM = "soilvolume:installdependencies"
+_RUNS: list = []  # every install of the session, with what its task refers to (never freed under it)
 
 
 def log(message: str, level=Qgis.MessageLevel.Info) -> None:
@@ -56,6 +57,7 @@ class DependencyBar:
         self.task: QgsProcessingAlgRunnerTask | None = None
         self.item = None
         self._keep: tuple = ()
+        self._done: Callable[[bool, str], None] | None = None
 
     def check(self) -> str:
         """Show the bar if the environment is not ready (a look at its stamp); returns why not."""
@@ -98,7 +100,9 @@ class DependencyBar:
         context, feedback = QgsProcessingContext(), LogFeedback()
         self.task = QgsProcessingAlgRunnerTask(alg, {}, context, feedback)
         self._keep = (context, feedback, alg)
-        self.task.executed.connect(lambda ok, results: self.report(ok, feedback, done))
+        self._done = done
+        _RUNS.append(self)  # the task refers to the context and feedback until QGIS deletes it
+        self.task.executed.connect(self._executed)
         QgsApplication.taskManager().addTask(self.task)
         if self.iface is not None:
             self.iface.messageBar().pushMessage(
@@ -108,6 +112,9 @@ class DependencyBar:
                 5,
             )
         return self.task
+
+    def _executed(self, ok: bool, _results: dict) -> None:
+        self.report(ok, self._keep[1], self._done)
 
     def report(self, ok: bool, feedback: LogFeedback, done=None) -> None:
         error = "" if ok else (feedback.errors or feedback.lines or ["see the log"])[-1]
