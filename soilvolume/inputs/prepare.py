@@ -145,8 +145,7 @@ def prepare(
     keep_freed_memory(before.count + after.count)  # large pairs: temporaries not faulted in anew
     crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
-    hint = lonlat_of(np.array([before.lo, before.hi]), crs_b) if crs_b.is_geographic else None
-    frame = work_frame(crs_b, hint)
+    frame = _own_frame(before, crs_b)
     lo, hi = _frame_box(after, crs_a, frame)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
@@ -209,8 +208,7 @@ def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
     """Stream the after survey alone into its own working frame, as :func:`prepare` does, for a
     run whose reference is a surface (:mod:`soilvolume.inputs.surface`): no before cloud."""
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
-    hint = lonlat_of(np.array([after.lo, after.hi]), crs_a) if crs_a.is_geographic else None
-    frame = work_frame(crs_a, hint)
+    frame = _own_frame(after, crs_a)
     lo, hi = _frame_box(after, crs_a, frame)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
@@ -251,8 +249,7 @@ def prepare_single(src: Source, override: str | None, options: Options, check=No
     """Stream one cloud (ground selection as ``options.ground``) into its own working frame, with
     the local origin at the floor of its bounds."""
     crs = resolve_crs(src, override, opt("crs"))
-    hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
-    frame = work_frame(crs, hint)
+    frame = _own_frame(src, crs)
     lo, hi = _frame_box(src, crs, frame)
     origin = np.floor(lo)
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
@@ -262,6 +259,13 @@ def prepare_single(src: Source, override: str | None, options: Options, check=No
         raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note or one.note})")
     check_spread(one.thin[:, :2], src.path, "after the ground selection")
     return Single(one.xyz, one.thin, frame, origin, note or one.note)
+
+
+def _own_frame(src: Source, crs: pyproj.CRS) -> WorkFrame:
+    """The working frame of a run whose reference cloud is ``src`` (its UTM zone when ``crs`` is
+    geographic, from the header's bounds)."""
+    hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
+    return work_frame(crs, hint)
 
 
 def _frame_box(src: Source, crs: pyproj.CRS, frame: WorkFrame) -> tuple[np.ndarray, np.ndarray]:
