@@ -19,6 +19,22 @@ if not REAL.exists():
     REAL = Path("/work/shared/data/real")
 
 
+#: the cluttered site of the soil tests: 80 x 78 m (after survey 40 x 37 m), ~40 points per m2, vehicles
+#: resolved by 0.5 m cells; holes, outliers, doming, vegetation and objects
+SITE = dict(
+    before_size=(80.0, 78.0),
+    after_size=(40.0, 37.0),
+    before_points=250_000,
+    after_points=150_000,
+    noise_m=0.03,
+    doming_m=0.02,
+    outlier_fraction=0.003,
+    holes=3,
+    vegetation=True,
+    objects=True,
+)
+
+
 def write_scene(folder: Path, seed: int = 0, **changes) -> tuple[Path, Path, dict]:
     cfg = replace(SceneConfig.small(), **changes)
     b, a, t = write_pair(make_pair(seed, cfg), folder)

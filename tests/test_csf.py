@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SITE
 
 from soilvolume.api import estimate
 from soilvolume.options import Options
@@ -36,22 +37,7 @@ def test_estimate_with_csf_ground(tmp_path):
     """xyz only, one pile (214 m3), 2 vehicles moved, one arrived and one left, bushes grown.
     Measured: --ground csf net -0.6 %, verdict reliable; all points +9.2 % (not reliable, the
     interval widened by what shape alone cannot classify); SMRF -2.2 %."""
-    cfg = SceneConfig(
-        before_size=(80.0, 78.0),
-        after_size=(40.0, 37.0),
-        before_points=250_000,
-        after_points=150_000,
-        noise_m=0.03,
-        doming_m=0.02,
-        outlier_fraction=0.003,
-        holes=3,
-        vegetation=True,
-        objects=True,
-        change="pile",
-        signals="none",
-        movers=2,
-        arrivals=1,
-    )
+    cfg = SceneConfig(**SITE, change="pile", signals="none", movers=2, arrivals=1)
     b, a, t = write_pair_streaming(61, cfg, tmp_path / "data", "las")
     truth = json.loads(Path(t).read_text())
     rep = estimate(b, a, tmp_path / "csf", Options(ground="csf"), overwrite=True).report

@@ -12,25 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rasterio
+from conftest import SITE
 
 from soilvolume.api import estimate
 from soilvolume.options import Options
 from soilvolume.scenes.synthetic import SceneConfig, write_pair_streaming
 from soilvolume.soil import objects, points
 from soilvolume.soil.points import OBJECT, OTHER, SOIL, VEGETATION, PointRule, Signals
-
-SITE = dict(
-    before_size=(80.0, 78.0),
-    after_size=(40.0, 37.0),
-    before_points=250_000,
-    after_points=150_000,
-    noise_m=0.03,
-    doming_m=0.02,
-    outlier_fraction=0.003,
-    holes=3,
-    vegetation=True,
-    objects=True,
-)
 
 
 def _pair(tmp: Path, seed: int, **cfg) -> tuple[Path, Path, dict]:
