@@ -366,18 +366,20 @@ def typical_radius(mask: np.ndarray) -> float:
 
 
 def fill_error(
-    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, n_holes: int = 40, seed: int = 0
-) -> float:
+    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, n_holes: int = 40, seed: int = 0,
+    per_cell: bool = False,
+) -> float | tuple[float, float]:
     """One-sigma error (m) of the MEAN height of a refilled hole, measured on known ground: discs
     of ``radius`` cells are cut out of ``usable`` cells of ``h`` (apart, fully surrounded by
-    usable cells), refilled with ``method`` and compared with what was there (NaN if no room)."""
+    usable cells), refilled with ``method`` and compared with what was there (NaN if no room).
+    ``per_cell``: (the cells' RMS error, that) instead."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
     room = ndimage.binary_erosion(usable & np.isfinite(h), xx * xx + yy * yy <= (radius + 2) ** 2)
     step = 2 * r + 5
     cand = np.argwhere(room[::step, ::step]) * step
     if len(cand) < 5:
-        return float("nan")
+        return (float("nan"),) * 2 if per_cell else float("nan")
     rng = np.random.default_rng(seed)
     centres = cand[rng.choice(len(cand), min(n_holes, len(cand)), replace=False)]
     labels = np.zeros(h.shape, np.int32)
@@ -387,7 +389,8 @@ def fill_error(
     targets = labels > 0
     err = _filler(method)(np.where(targets, np.nan, h), targets) - h
     mean_err = ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
-    return float(np.sqrt(np.mean(np.square(mean_err))))
+    mean = float(np.sqrt(np.mean(np.square(mean_err))))
+    return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
 
 
 def summary(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:

@@ -21,6 +21,7 @@ from . import coverage
 from .change import MIN_CELLS
 from .difference import budget, difference, signed_budget
 from .nonsoil import exclude_nonsoil
+from .epochfill import fill_own_holes
 from .outline import refill_across_outline
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
@@ -96,11 +97,11 @@ def compute_volumes(
         params, stable = given.params, given.stable & np.isfinite(s["filled"])
         core = given.core  # the halo is context only
     diff = s["filled"] - offset
-    fill_sigma = refill_sigma(diff, filled_mask, stable, options)
+    fill_sigma = np.where(s["own"], s["own_sigma"], refill_sigma(diff, filled_mask, stable, options))
     lod = detection_level(diff, stable, options.lod_confidence)
     lod_cell = _cell_lods(after, before, s, lod, fill_sigma, options.lod_confidence)
     significant = patches(~filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
-    diff = refill_across_outline(diff, filled_mask, significant, options.fill_method)
+    diff = refill_across_outline(diff, filled_mask & ~s["own"], significant, options.fill_method)
     filled = diff + offset
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
@@ -116,7 +117,7 @@ def compute_volumes(
     d, fa, ca = diff[core], fill_area[core], cut_area[core]  # areas decided with the halo, counted on the core
     terms = _extra_terms((after, before), s["f_a"], filled_mask, grid, moved, given, core, (d, fa, ca), lod_cell, ex)
     counted = fill_area | cut_area  # the change areas without moved objects
-    model = _error_model(diff, stable, grid, options, given, core, filled_mask, fill_sigma, ex.bound)
+    model = _error_model(diff, stable, grid, options, given, core, (filled_mask, s["own"]), fill_sigma, ex.bound)
     unc = model(change_mask=counted, extra_sigma=terms.pop("extra"))
     headline = signed_budget(d, fa, ca, grid.cell_area)
     vols = {
@@ -162,11 +163,22 @@ def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Option
     weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS, method=options.fill_method)
     f_b, m_b = holes.refill_epoch(h_b, n_b, **weak, median=med_b)
     f_a, m_a = holes.refill_epoch(h_a, n_a, **weak, median=med_a)
+    hole = holes.enclosed_holes(np.isfinite(difference(f_a, f_b)), max_cells)
+    f_a, f_b, own, own_sigma = fill_own_holes(f_a, f_b, hole, _sparse(m_a, m_b, n_a, n_b, given), options.fill_method, options.seed)
     filled = difference(f_a, f_b)
-    hole = holes.enclosed_holes(np.isfinite(filled), max_cells)
-    filled = holes.fill(filled, hole, options.fill_method)
+    filled = holes.fill(filled, hole & ~own, options.fill_method)
     filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
-    return dict(heights=(h_a, h_b), raw=raw, f_a=f_a, m_a=m_a, m_b=m_b, filled=filled, filled_mask=filled_mask)
+    return dict(
+        heights=(h_a, h_b), raw=raw, f_a=f_a, m_a=m_a, m_b=m_b, filled=filled, filled_mask=filled_mask, own=own,
+        own_sigma=own_sigma,
+    )
+
+
+def _sparse(m_a, m_b, n_a, n_b, given: Given | None) -> tuple[np.ndarray, np.ndarray]:
+    """Each epoch's cells a hole's rim cannot trust: refilled, or under half the median count
+    (partly covered beside a hole)."""
+    med_a, med_b = (None, None) if given is None else given.median_counts
+    return m_a | holes.weak_cells(n_a, 0.5, MIN_POINTS, med_a), m_b | holes.weak_cells(n_b, 0.5, MIN_POINTS, med_b)
 
 
 def _cell_lods(after: EpochDEM, before: EpochDEM, s: dict, lod: float, fill_sigma, confidence: float) -> np.ndarray:
@@ -215,9 +227,10 @@ def _error_model(diff, stable, grid: GridSpec, options: Options, given, core, fi
         grid=grid,
         confidence=options.lod_confidence,
         n_coef=0 if given else MODES[options.correction].coefficients,  # a tile: the overview has the bias
-        filled_mask=filled_mask,
+        filled_mask=filled_mask[0],
+        own_fill=filled_mask[1],
         fill_sigma=fill_sigma,
-        interp_fraction=interp_fraction(holes.typical_radius(filled_mask)),
+        interp_fraction=interp_fraction(holes.typical_radius(filled_mask[0] & ~filled_mask[1])),
         counted=None if given is None else _mask(diff.shape, core),
         surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
         bound_m3=bound,

@@ -145,6 +145,7 @@ def volume_uncertainty(
     n_coef: int = 6,
     per_cell_sigma: np.ndarray | None = None,
     filled_mask: np.ndarray | None = None,
+    own_fill: np.ndarray | None = None,
     interp_fraction: float = INTERP_FRACTION,
     fill_sigma: np.ndarray | None = None,
     extra_sigma: dict[str, float] | None = None,
@@ -160,6 +161,8 @@ def volume_uncertainty(
     error of ``interp_fraction`` x its absolute value (hole fills over change edges were off by
     10-22 % of their volume on synthetic pairs), and ``fill_sigma`` (m, per cell: the error of
     refilling known ground) summed fully correlated within each connected refilled patch.
+    ``own_fill``: the refilled cells interpolated in their own survey, the difference measured
+    (volumes/epochfill): their error is ``fill_sigma`` alone, no share of their volume.
     ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
     change detection picks up from noise on stable ground.
     ``counted``: the cells the volumes sum over (a tile's core; default all), while the error
@@ -187,7 +190,7 @@ def volume_uncertainty(
         "net_compared_area": valid,
     }
     extra = extra_sigma or {}
-    pt = _PartTerms(diff_corrected, valid, stable, grid, filled_mask, fill_sigma, interp_fraction, surface)
+    pt = _PartTerms(diff_corrected, valid, stable, grid, (filled_mask, own_fill), fill_sigma, interp_fraction, surface)
     terms = {
         k: pt.terms(m, region_sigma(int(m.sum()), grid.cell, model, b, pcv), extra.get(k, 0.0))
         for k, m in parts.items()
@@ -233,7 +236,9 @@ class _PartTerms:
 
     def __init__(self, diff, valid, stable, grid: GridSpec, filled_mask, fill_sigma, fraction: float, surface: bool):
         self.cell_area, self.fraction = grid.cell_area, fraction
+        filled_mask, own = filled_mask
         self.filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
+        self.shared = self.filled if own is None else self.filled & ~own  # interpolated in the difference
         self.absd = np.abs(np.where(valid, diff, 0.0))
         self.labels, self.n_patches = ndimage.label(self.filled)
         self.fs = np.zeros(valid.shape) if fill_sigma is None else np.where(self.filled, fill_sigma, 0.0)
@@ -248,7 +253,7 @@ class _PartTerms:
         return [area_model, self.interp(m), self.refill(m), self.unmodelled(m), extras]
 
     def interp(self, m: np.ndarray) -> float:
-        return self.fraction * float(self.absd[m & self.filled].sum()) * self.cell_area
+        return self.fraction * float(self.absd[m & self.shared].sum()) * self.cell_area
 
     def refill(self, m: np.ndarray) -> float:
         labels, n = self.labels, self.n_patches
