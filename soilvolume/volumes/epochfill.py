@@ -25,7 +25,7 @@ from ..dem import holes
 
 _FOUR = ndimage.generate_binary_structure(2, 1)
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
-DETAIL_RATIO = 4.0  # the measured survey's detail beyond this many times the other's own: change
+DETAIL_RATIO = 2.0  # the measured survey's detail beyond this many times the other's own: change
 
 
 def fill_own_holes(

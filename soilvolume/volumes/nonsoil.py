@@ -39,6 +39,7 @@ MACHINE_M3 = 40.0  # an object in one survey of at most this volume may be a mac
 # Their volume is a bound, not a random error: the interval is widened by it (the net by the
 # larger of the fill and cut parts) and the verdict names it.
 UNCLEAR_AREA_M2, UNCLEAR_M3 = 150.0, MACHINE_M3
+GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shares of such cells and of soil
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,9 @@ def exclude_nonsoil(
     unsure = labelled if refilled is None else refilled | labelled
     found = find_objects(diff, fill, cut, grid.cell, refilled=unsure)
     leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
+    grass = _grass_patches(fill | cut, labelled_veg := shares["vegetation"] >= SHARE, refilled, grid.cell_area)
+    grass &= ~found.moved & ~found.single & (mode != "none")
+    leave_out = leave_out | grass
     valid = np.isfinite(diff)
     classes = np.where(valid, 0, 255).astype(np.uint8)
     report: dict = {"mode": mode, "classes": {}}
@@ -95,6 +99,10 @@ def exclude_nonsoil(
         for k in sigma:
             sigma[k] = float(np.hypot(sigma[k], share * abs(part[k])))
     classes[found.moved] = 4
+    classes[grass & ~labelled_veg] = 1
+    report["grass_patches"] = _budget(diff, grass, grid.cell_area)
+    for k in sigma:
+        sigma[k] = float(np.hypot(sigma[k], share * abs(report["grass_patches"][k])))
     classes[found.single] = 5
     rough = _rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
     classes[rough] = 6
@@ -124,6 +132,23 @@ def exclude_nonsoil(
     bound["net"] = max(bound.values())  # the truth lies between net - fill and net + cut
     report["sigma_m3"], report["bound_m3"] = sigma, bound
     return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
+
+
+def _grass_patches(change: np.ndarray, veg: np.ndarray, refilled: np.ndarray | None, cell_area: float) -> np.ndarray:
+    """Compact change patches (at most :data:`UNCLEAR_AREA_M2`) mostly of cells whose points were
+    vegetation (at least :data:`GRASS_VEG`) with little soil measured in them (under
+    :data:`GRASS_SOIL`; the rest interpolated under the canopy): grass whose dry blades the
+    colour test missed in a few cells, not soil (a heap of fine soil is measured soil)."""
+    comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
+    if n == 0:
+        return np.zeros(change.shape, bool)
+    idx = np.arange(1, n + 1)
+    size = np.bincount(comp.ravel(), minlength=n + 1)[1:]
+    soil = change & ~veg if refilled is None else change & ~veg & ~refilled
+    veg_share = ndimage.sum(veg, comp, idx) / size
+    soil_share = ndimage.sum(soil, comp, idx) / size
+    keep = (size * cell_area <= UNCLEAR_AREA_M2) & (veg_share >= GRASS_VEG) & (soil_share < GRASS_SOIL)
+    return np.r_[False, keep][comp]
 
 
 def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
