@@ -366,8 +366,7 @@ def typical_radius(mask: np.ndarray) -> float:
 
 
 def fill_error(
-    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, n_holes: int = 40, seed: int = 0,
-    per_cell: bool = False,
+    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, seed: int = 0, per_cell=False
 ) -> float | tuple[float, float]:
     """One-sigma error (m) of the MEAN height of a refilled hole, measured on known ground: discs
     of ``radius`` cells are cut out of ``usable`` cells of ``h`` (apart, fully surrounded by
@@ -381,7 +380,7 @@ def fill_error(
     if len(cand) < 5:
         return (float("nan"),) * 2 if per_cell else float("nan")
     rng = np.random.default_rng(seed)
-    centres = cand[rng.choice(len(cand), min(n_holes, len(cand)), replace=False)]
+    centres = cand[rng.choice(len(cand), min(40, len(cand)), replace=False)]  # 40 test holes
     labels = np.zeros(h.shape, np.int32)
     disc = np.argwhere(xx * xx + yy * yy <= radius * radius) - (r + 2)
     for k, (cy, cx) in enumerate(centres, start=1):

@@ -20,8 +20,8 @@ from ..options import Options
 from . import coverage
 from .change import MIN_CELLS
 from .difference import budget, difference, signed_budget
-from .nonsoil import exclude_nonsoil
 from .epochfill import fill_own_holes
+from .nonsoil import exclude_nonsoil
 from .outline import refill_across_outline
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
@@ -164,12 +164,21 @@ def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Option
     f_b, m_b = holes.refill_epoch(h_b, n_b, **weak, median=med_b)
     f_a, m_a = holes.refill_epoch(h_a, n_a, **weak, median=med_a)
     hole = holes.enclosed_holes(np.isfinite(difference(f_a, f_b)), max_cells)
-    f_a, f_b, own, own_sigma = fill_own_holes(f_a, f_b, hole, _sparse(m_a, m_b, n_a, n_b, given), options.fill_method, options.seed)
+    f_a, f_b, own, own_sigma = fill_own_holes(
+        f_a, f_b, hole, _sparse(m_a, m_b, n_a, n_b, given), options.fill_method, options.seed
+    )
     filled = difference(f_a, f_b)
     filled = holes.fill(filled, hole & ~own, options.fill_method)
     filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
     return dict(
-        heights=(h_a, h_b), raw=raw, f_a=f_a, m_a=m_a, m_b=m_b, filled=filled, filled_mask=filled_mask, own=own,
+        heights=(h_a, h_b),
+        raw=raw,
+        f_a=f_a,
+        m_a=m_a,
+        m_b=m_b,
+        filled=filled,
+        filled_mask=filled_mask,
+        own=own,
         own_sigma=own_sigma,
     )
 
