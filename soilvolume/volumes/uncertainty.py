@@ -145,7 +145,7 @@ def volume_uncertainty(
     n_coef: int = 6,
     per_cell_sigma: np.ndarray | None = None,
     filled_mask: np.ndarray | None = None,
-    own_fill: np.ndarray | None = None,
+    own_fill: np.ndarray | None = None,  # see filled_mask
     interp_fraction: float = INTERP_FRACTION,
     fill_sigma: np.ndarray | None = None,
     extra_sigma: dict[str, float] | None = None,
@@ -161,8 +161,7 @@ def volume_uncertainty(
     error of ``interp_fraction`` x its absolute value (hole fills over change edges were off by
     10-22 % of their volume on synthetic pairs), and ``fill_sigma`` (m, per cell: the error of
     refilling known ground) summed fully correlated within each connected refilled patch.
-    ``own_fill``: the refilled cells interpolated in their own survey, the difference measured
-    (volumes/epochfill): their error is ``fill_sigma`` alone, no share of their volume.
+    ``own_fill``: refilled cells filled in their own survey (volumes/epochfill): ``fill_sigma`` only.
     ``extra_sigma``: further one-sigma terms (m^3) per part (net, cut, fill), e.g. the volume the
     change detection picks up from noise on stable ground.
     ``counted``: the cells the volumes sum over (a tile's core; default all), while the error
