@@ -101,7 +101,7 @@ def compute_volumes(
     lod = detection_level(diff, stable, options.lod_confidence)
     lod_cell = _cell_lods(after, before, s, lod, fill_sigma, options.lod_confidence)
     significant = patches(~filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
-    diff = refill_across_outline(diff, filled_mask & ~s["own"], significant, options.fill_method, s["own"])
+    diff = refill_across_outline(diff, filled_mask & ~s["own"], significant, options.fill_method)
     filled = diff + offset
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area

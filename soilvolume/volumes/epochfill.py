@@ -49,9 +49,14 @@ def fill_own_holes(
         detail = np.sqrt(ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
         scale = _own_detail(out[miss], method, radius, seed)
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
-        cells = change[labels]
-        if not cells.any():
+        if change.any():  # a patch the survey cannot fill whole (beside cells empty in both) is left
+            change &= (
+                np.r_[False, ndimage.minimum(np.isfinite(holes.fill(out[miss], change[labels], method)), labels, idx)]
+                > 0
+            )
+        if not change.any():
             continue
+        cells = change[labels]
         grown = ndimage.grey_dilation(np.where(cells, labels, 0), footprint=np.ones((2 * RIM + 1,) * 2, bool))
         cells |= weak[miss] & (grown > 0)
         filled = holes.fill(out[miss], cells, method)

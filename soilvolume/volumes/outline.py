@@ -24,14 +24,11 @@ MIN_SIDE = 8  # and at least this many rim cells: enough to carry a slope (on co
 _PAD = 8  # cells of context around a hole
 
 
-def refill_across_outline(
-    values: np.ndarray, hole: np.ndarray, change: np.ndarray, method: str, aside: np.ndarray | None = None
-) -> np.ndarray:
+def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarray, method: str) -> np.ndarray:
     """``values`` (the corrected difference, holes filled) with each ``hole`` component whose rim
     has both ``change`` (measured, significant) and unchanged cells refilled side by side (see
-    module); other holes keep their values. ``aside``: filled cells that keep their values but
-    are no rim either (a survey's own ground interpolated: neither side of the outline)."""
-    known = np.isfinite(values) & ~hole & (True if aside is None else ~aside)
+    module); other holes keep their values."""
+    known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
     labels, n = ndimage.label(hole, _FOUR)
