@@ -9,7 +9,7 @@ import numpy as np
 
 from soilvolume.dem import holes
 from soilvolume.volumes.epochfill import fill_own_holes
-from soilvolume.volumes.nonsoil import _grass_patches
+from soilvolume.volumes.nonsoil import _grass_patches, sentence
 
 CELL = 0.5
 
@@ -73,3 +73,9 @@ def test_grass_patch_left_out_soil_heap_kept():
     big = np.zeros((n, n), bool)
     big[:, :] = True  # 900 m2: no compact patch
     assert not _grass_patches(big, big, None, CELL * CELL).any()
+
+
+def test_grass_patches_are_said():
+    """The report's sentence names the change left out as grass."""
+    words = sentence({"grass_patches": {"net": 5.3, "cut": 0.0, "fill": 5.3, "area_m2": 33.0}})
+    assert any("+5 m³" in w and "33 m²" in w and "grass" in w for w in words)

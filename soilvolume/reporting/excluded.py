@@ -72,7 +72,7 @@ def excluded_section(report: dict, table) -> str:
     rows = []
     for name, part in (ex.get("classes") or {}).items():
         rows.append([html.escape(name), *(f"{part.get(k, 0.0):,.1f}" for k in ("net", "cut", "fill", "area_m2"))])
-    for key, name in (("rough", "rough change (counted)"),):
+    for key, name in (("rough", "rough change (counted)"), ("grass_patches", "grass patches (left out)")):
         part = ex.get(key)
         if isinstance(part, dict):
             rows.append([html.escape(name), *(f"{part.get(k, 0.0):,.1f}" for k in ("net", "cut", "fill", "area_m2"))])

@@ -264,6 +264,12 @@ def sentence(report: dict) -> list[str]:
             f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
             "counted: no classification, colour or returns said what it is"
         )
+    g = report.get("grass_patches") or {}
+    if g.get("area_m2") and abs(g.get("net", 0.0)) >= 0.5:
+        out.append(
+            f"{g['net']:+.0f} m³ of change on {g['area_m2']:.0f} m² of compact patches mostly of vegetation, with "
+            "little soil measured in them, left out as grass"
+        )
     u = report.get("unclassified") or {}
     if u.get("count") and u.get("fill", 0.0) + u.get("cut", 0.0) >= 0.5:
         out.append(
