@@ -10,7 +10,8 @@ before-survey hole on a pillar's side dipped to -3...-5 m (accuracy harness, pap
 with the hole only misses its own ground: that ground is interpolated from its own neighbours
 (its own detail is all the error) and the difference taken from the measured survey.
 
-The choice is made per hole from what the data say: the measured survey's heights inside the
+Only holes empty in one survey throughout are taken (where a hole is empty in both somewhere,
+the difference fills it whole). The choice is made per hole from what the data say: the measured survey's heights inside the
 hole against their own interpolation from its rim (its detail there) are compared with how far
 the survey with the hole departs from its own interpolation on holes of that size on its known
 ground (its typical detail). Detail far beyond that is change, not shared terrain.
@@ -25,7 +26,7 @@ from ..dem import holes
 
 _FOUR = ndimage.generate_binary_structure(2, 1)
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
-DETAIL_RATIO = 2.0  # the measured survey's detail beyond this many times the other's own: change
+DETAIL_RATIO = 4.0  # the measured survey's detail beyond this many times the other's own: change
 
 
 def fill_own_holes(
@@ -38,8 +39,12 @@ def fill_own_holes(
     others are left to the difference's fill. The error is that survey's mean-height error on
     holes of the patch's size."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
+    # a hole empty in both surveys anywhere is the difference's to fill whole: a cell filled in its
+    # own survey on its rim would anchor that fill (one such cell moved a 72-cell hole by 13 m3)
+    parts, _ = ndimage.label(hole, _FOUR)
+    shared = np.isin(parts, np.unique(parts[hole & ~np.isfinite(h_a) & ~np.isfinite(h_b)]))
     for miss, seen in ((1, 0), (0, 1)):
-        one = hole & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
+        one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
         labels, n = ndimage.label(one, _FOUR)
         if n == 0:
             continue
@@ -49,7 +54,7 @@ def fill_own_holes(
         detail = np.sqrt(ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
         scale = _own_detail(out[miss], method, radius, seed)
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
-        if change.any():  # a patch the survey cannot fill whole (beside cells empty in both) is left
+        if change.any():  # a patch the survey cannot fill whole is left
             change &= (
                 np.r_[False, ndimage.minimum(np.isfinite(holes.fill(out[miss], change[labels], method)), labels, idx)]
                 > 0
