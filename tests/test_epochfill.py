@@ -61,6 +61,20 @@ def test_unchanged_ground_hole_stays_with_the_difference():
     assert not own.any()
 
 
+def test_object_wholly_inside_a_hole_stays_with_the_difference():
+    """A 1.8 m machine in the before survey standing wholly inside a hole of the after survey,
+    no change around it: no rim shows change, the hole is left to the difference (the machine
+    that left is no soil cut)."""
+    n = 80
+    ground = _ground(5)
+    hole = _disc(n, 40, 40, 6.0)
+    machine = _disc(n, 40, 40, 4.0)
+    before = ground + np.where(machine, 1.8, 0.0)
+    none = np.zeros((n, n), bool)
+    _, _, own, _ = fill_own_holes(np.where(hole, np.nan, ground), before, hole, (none, none), "biharmonic")
+    assert not own.any()
+
+
 def test_grass_patch_left_out_soil_heap_kept():
     """A compact change patch of vegetation cells with interpolated cells between them is grass;
     a heap of fine soil (measured soil cells) of the same size is kept, and so is a large patch."""

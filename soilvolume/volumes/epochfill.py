@@ -10,11 +10,15 @@ before-survey hole on a pillar's side dipped to -3...-5 m (accuracy harness, pap
 with the hole only misses its own ground: that ground is interpolated from its own neighbours
 (its own detail is all the error) and the difference taken from the measured survey.
 
-Only holes empty in one survey throughout are taken (where a hole is empty in both somewhere,
-the difference fills it whole). The choice is made per hole from what the data say: the measured survey's heights inside the
+The choice is made per hole from what the data say: the measured survey's heights inside the
 hole against their own interpolation from its rim (its detail there) are compared with how far
 the survey with the hole departs from its own interpolation on holes of that size on its known
-ground (its typical detail). Detail far beyond that is change, not shared terrain.
+ground (its typical detail). Detail far beyond that is change, not shared terrain, when the
+hole's rim shows change too (an object of the other survey standing wholly inside a hole, with
+no change around it, is left to the difference: a machine that left over a hole of the later
+survey is no soil cut). A hole with a quarter or more of its cells empty in both surveys is the
+difference's to fill whole (a cell filled in its own survey beside them anchored that fill:
+one moved a 72-cell hole by 13 m3).
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ from scipy import ndimage
 from ..dem import holes
 
 _FOUR = ndimage.generate_binary_structure(2, 1)
+SHARED = 0.25  # a hole with this share of its cells empty in both surveys is the difference's whole
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
 DETAIL_RATIO = 4.0  # the measured survey's detail beyond this many times the other's own: change
 
@@ -39,10 +44,9 @@ def fill_own_holes(
     others are left to the difference's fill. The error is that survey's mean-height error on
     holes of the patch's size."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
-    # a hole empty in both surveys anywhere is the difference's to fill whole: a cell filled in its
-    # own survey on its rim would anchor that fill (one such cell moved a 72-cell hole by 13 m3)
-    parts, _ = ndimage.label(hole, _FOUR)
-    shared = np.isin(parts, np.unique(parts[hole & ~np.isfinite(h_a) & ~np.isfinite(h_b)]))
+    parts, m = ndimage.label(hole, _FOUR)
+    share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
+    shared = np.r_[False, np.asarray(share) >= SHARED][parts]
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
         labels, n = ndimage.label(one, _FOUR)
@@ -54,6 +58,7 @@ def fill_own_holes(
         detail = np.sqrt(ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
         scale = _own_detail(out[miss], method, radius, seed)
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
+        change[1:] &= _rim_change(out[0] - out[1], labels, n) > detail / 2
         if change.any():  # a patch the survey cannot fill whole is left
             change &= (
                 np.r_[False, ndimage.minimum(np.isfinite(holes.fill(out[miss], change[labels], method)), labels, idx)]
@@ -70,6 +75,19 @@ def fill_own_holes(
         own |= ok
         sigma[ok] = np.r_[0.0, scale[:, 1]][np.maximum(labels, grown)][ok]
     return out[0], out[1], own, sigma
+
+
+def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
+    """Per patch, the change its rim shows (m): the larger of the rim's typical |difference| and
+    its spread (upper minus lower decile); 0 without a measured rim."""
+    grown = ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
+    ring = (labels == 0) & (grown > 0) & np.isfinite(d)
+    out = np.zeros(n)
+    lab, val = grown[ring], d[ring]
+    for k in np.unique(lab):
+        v = val[lab == k]
+        out[k - 1] = max(float(np.percentile(np.abs(v), 75)), float(np.percentile(v, 90) - np.percentile(v, 10)))
+    return out
 
 
 def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np.ndarray:
