@@ -19,6 +19,7 @@ from ..compensation.robust import patches
 
 MIN_CELLS = 3  # a change area has at least this many significant cells
 BUFFER_CELLS = 1  # cells of buffer around each change area
+JOIN_SHARE = 1.0 / 3.0  # a refilled patch joins an area that holds at least this share of its ring
 MARGINAL_CELLS = 50  # smaller areas barely above their LoD may be noise (a few correlation areas)
 _EIGHT = np.ones((3, 3), bool)
 
@@ -47,7 +48,9 @@ def change_areas(
     """(fill mask, cut mask): areas of significant positive / negative change with their buffers
     (see module); a buffer cell both kinds of area reach belongs to neither. ``refilled`` cells
     (interpolated, not measured) never start an area; a refilled patch touching an area of the
-    sign of its own volume joins it (a hole on a pile is part of the pile)."""
+    sign of its own volume joins it when its mean difference is beyond its cells' mean LoD (a
+    hole on a pile is part of the pile; vegetation refilled at a few millimetres of noise next to
+    a small cut is not)."""
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
@@ -60,18 +63,21 @@ def change_areas(
     both = fill & cut
     fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
     if refilled is not None and refilled.any():
-        fill, cut = _join_refilled(d, refilled & valid & ~fill & ~cut, fill, cut)
+        fill, cut = _join_refilled(d, lod, refilled & valid & ~fill & ~cut, fill, cut)
     return fill, cut
 
 
-def _join_refilled(d, patches, fill, cut):
+def _join_refilled(d, lod, patches, fill, cut):
     labels, n = ndimage.label(patches, structure=_EIGHT)
     if n == 0:
         return fill, cut
     idx = np.arange(1, n + 1)
-    vol = ndimage.sum(d, labels, idx)
-    near_fill = ndimage.maximum(ndimage.binary_dilation(fill, _EIGHT), labels, idx) > 0
-    near_cut = ndimage.maximum(ndimage.binary_dilation(cut, _EIGHT), labels, idx) > 0
+    mean = ndimage.mean(d, labels, idx)
+    vol = np.where(np.abs(mean) > ndimage.mean(lod, labels, idx), mean, 0.0)  # a patch within its own noise joins none
+    rim = ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
+    ring = np.maximum(ndimage.sum(np.ones(d.shape), rim, idx), 1.0)
+    near_fill = ndimage.sum(fill, rim, idx) >= JOIN_SHARE * ring
+    near_cut = ndimage.sum(cut, rim, idx) >= JOIN_SHARE * ring
     to_fill = np.r_[False, near_fill & (vol > 0)]
     to_cut = np.r_[False, near_cut & (vol < 0)]
     return fill | to_fill[labels], cut | to_cut[labels]
