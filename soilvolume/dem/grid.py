@@ -76,9 +76,9 @@ MOSTLY = 0.5  # a cell whose points are at least this share not soil has no soil
 def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """dh/dx (east) and dh/dy (north) per cell: central differences where both neighbours have
     data, NaN where neither has. Where one has, the one-sided step limited by the next step
-    beyond it (minmod: the smaller of the two if they agree in sign, else none): a cell at a hole
-    next to a bush, a vehicle or a rim otherwise takes the step onto it as its slope, and its
-    points, all on that side, are moved by it (0.46 m on a 0.5 m cell by a bush at a pit's rim,
+    beyond it (minmod: the smaller of the two where they agree in sign, else 0): a cell at a hole next to a bush, a
+    vehicle or a rim otherwise takes the step onto it as its slope, and its points, all on that
+    side, are moved by it (0.46 m on a 0.5 m cell beside a bush at a pit's rim,
     paper-veg20m-rgb); on a steady slope (a pit's wall, a pile's flank) the two steps agree."""
     out = []
     for axis in (1, 0):
@@ -95,15 +95,17 @@ def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
         fwd2[tuple(behind)] = fwd[tuple(ahead)]
         bwd2[tuple(ahead)] = bwd[tuple(behind)]
         both = np.isfinite(fwd) & np.isfinite(bwd)
-        one = np.where(np.isfinite(fwd), _minmod(fwd, fwd2), _minmod(bwd, bwd2))
+        one = np.where(np.isfinite(fwd), _limited(fwd, fwd2), _limited(bwd, bwd2))
         out.append(np.where(both, 0.5 * (fwd + bwd), one))
     return out[0], -out[1]  # rows run south
 
 
-def _minmod(step: np.ndarray, beyond: np.ndarray) -> np.ndarray:
-    """``step`` limited by ``beyond`` (kept where ``beyond`` is unknown: nothing to check it by)."""
-    limited = np.where(step * beyond > 0, np.sign(step) * np.minimum(np.abs(step), np.abs(beyond)), 0.0)
-    return np.where(np.isfinite(beyond), limited, step)
+def _limited(step: np.ndarray, beyond: np.ndarray) -> np.ndarray:
+    """``step`` limited by ``beyond`` (see :func:`slopes`; kept where ``beyond`` is unknown)."""
+    with np.errstate(invalid="ignore"):
+        agree = step * beyond > 0
+        limited = np.where(agree, np.sign(step) * np.minimum(np.abs(step), np.abs(beyond)), 0.0)
+    return np.where(np.isfinite(beyond) & np.isfinite(step), limited, step)
 
 
 class OffsetSums:
