@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
 from ..inputs.io import atomic_path
+from .slopes import slopes
 
 NODATA = -9999.0
 
@@ -71,41 +72,6 @@ CENTRING_PASSES = 4  # fixed-point passes: a moved cell gives its neighbours bet
 EPOCH_ARRAYS = ("h", "n", "s", "x", "y", "v", "o", "q", "z", "m")  # an EpochDEM's arrays, in field order
 ZERO_WHERE_EMPTY = set("nxyvoqzm")  # arrays that are 0 (not NaN) where a cell has no point
 MOSTLY = 0.5  # a cell whose points are at least this share not soil has no soil height (colour rule)
-
-
-def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """dh/dx (east) and dh/dy (north) per cell: central differences where both neighbours have
-    data, NaN where neither has. Where one has, the one-sided step limited by the next step
-    beyond it (minmod: the smaller of the two where they agree in sign, else 0): a cell at a hole next to a bush, a
-    vehicle or a rim otherwise takes the step onto it as its slope, and its points, all on that
-    side, are moved by it (0.46 m on a 0.5 m cell beside a bush at a pit's rim,
-    paper-veg20m-rgb); on a steady slope (a pit's wall, a pile's flank) the two steps agree."""
-    out = []
-    for axis in (1, 0):
-        fwd = np.full(h.shape, np.nan)
-        bwd = np.full(h.shape, np.nan)
-        ahead = [slice(None)] * 2
-        behind = [slice(None)] * 2
-        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
-        step = (h[tuple(ahead)] - h[tuple(behind)]) / cell
-        fwd[tuple(behind)] = step
-        bwd[tuple(ahead)] = step
-        fwd2 = np.full(h.shape, np.nan)  # the step beyond the forward one, and behind the backward one
-        bwd2 = np.full(h.shape, np.nan)
-        fwd2[tuple(behind)] = fwd[tuple(ahead)]
-        bwd2[tuple(ahead)] = bwd[tuple(behind)]
-        both = np.isfinite(fwd) & np.isfinite(bwd)
-        one = np.where(np.isfinite(fwd), _limited(fwd, fwd2), _limited(bwd, bwd2))
-        out.append(np.where(both, 0.5 * (fwd + bwd), one))
-    return out[0], -out[1]  # rows run south
-
-
-def _limited(step: np.ndarray, beyond: np.ndarray) -> np.ndarray:
-    """``step`` limited by ``beyond`` (see :func:`slopes`; kept where ``beyond`` is unknown)."""
-    with np.errstate(invalid="ignore"):
-        agree = step * beyond > 0
-        limited = np.where(agree, np.sign(step) * np.minimum(np.abs(step), np.abs(beyond)), 0.0)
-    return np.where(np.isfinite(beyond) & np.isfinite(step), limited, step)
 
 
 class OffsetSums:

@@ -100,7 +100,8 @@ def compute_volumes(
     lod = detection_level(diff, stable, options.lod_confidence)
     lod_cell = _cell_lods(after, before, s, lod, fill_sigma, options.lod_confidence)
     significant = patches(~filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
-    diff = refill_across_outline(diff, filled_mask, significant, options.fill_method)
+    sides = refill_across_outline(diff, filled_mask, significant, options.fill_method)
+    outline, diff = np.nan_to_num(sides - diff), sides  # where the outline runs in the holes: a term
     filled = diff + offset
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
@@ -115,6 +116,7 @@ def compute_volumes(
         stable = quiet
     d, fa, ca = diff[core], fill_area[core], cut_area[core]  # areas decided with the halo, counted on the core
     terms = _extra_terms((after, before), s["f_a"], filled_mask, grid, moved, given, core, (d, fa, ca), lod_cell, ex)
+    terms["extra"] = _with_outline(terms, outline[core], fa, ca, grid.cell_area)
     counted = fill_area | cut_area  # the change areas without moved objects
     model = _error_model(diff, stable, grid, options, given, core, filled_mask, fill_sigma, ex.bound)
     unc = model(change_mask=counted, extra_sigma=terms.pop("extra"))
@@ -136,6 +138,7 @@ def compute_volumes(
             "marginal_detections_m3": terms["marginal_detections_m3"],
             "classification_m3": ex.sigma,
             "statistic_m3": terms["statistic_m3"],
+            "outline_m3": terms["outline_m3"],
         },
         "change_mask": counted,
         "cut_mask": cut_area,  # after the exclusions, as the headline sums it
@@ -201,6 +204,15 @@ def _extra_terms(epochs, f_a, filled_mask, grid: GridSpec, moved, given, core, c
     stat = statistic_bias(skews, filled_mask[core], {"net": fa | ca, "cut": ca, "fill": fa}, area)
     extra = {k: float(np.linalg.norm([reg_in * reg_v[k], marginal[k], ex.sigma[k], stat[k]])) for k in stat}
     return {"registration_m3": reg_v, "marginal_detections_m3": marginal, "statistic_m3": stat, "extra": extra}
+
+
+def _with_outline(terms: dict, delta: np.ndarray, fa: np.ndarray, ca: np.ndarray, area: float) -> dict:
+    """The extra terms with where the outline runs inside the holes refilled across it
+    (:func:`~.outline.outline_sigma`, kept in ``terms`` as ``outline_m3``)."""
+    from .outline import outline_sigma
+
+    terms["outline_m3"] = outline_sigma(delta, {"net": fa | ca, "cut": ca, "fill": fa}, area)
+    return {k: float(np.hypot(v, terms["outline_m3"][k])) for k, v in terms["extra"].items()}
 
 
 def _error_model(diff, stable, grid: GridSpec, options: Options, given, core, filled_mask, fill_sigma, bound):

@@ -8,6 +8,11 @@ unchanged ground is split between the two (each of its cells goes with the neare
 side is interpolated from its own rim only, with a free edge at the split: the slope of the
 works runs on to the outline instead of bending into the ground around it, and the ground stays
 level.
+
+Where the outline runs inside the hole is not seen: the split by distance puts it half-way
+between the two rims, and the works' slope ends there, not at the kink. The two fills' difference
+over each hole is that uncertainty, a term of the interval by name (:func:`outline_sigma`; an
+occlusion hole across a pit's rim, paper-veg20m-rgb: 0.6 m3 of a 69 m3 pit).
 """
 
 from __future__ import annotations
@@ -64,3 +69,17 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     n_change = ndimage.sum(change, grown, idx)
     n_stable = ndimage.sum(stable, grown, idx)
     return np.minimum(n_change, n_stable) >= MIN_SIDE
+
+
+def outline_sigma(delta: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict[str, float]:
+    """One-sigma volume (m3) per part of where the outline runs inside the holes refilled side by
+    side: ``delta``, the side-by-side fill minus the plain one (0 elsewhere), summed per hole over
+    the part's cells, the holes independent."""
+    labels, n = ndimage.label(delta != 0, np.ones((3, 3), bool))
+    if n == 0:
+        return {k: 0.0 for k in parts}
+    idx = np.arange(1, n + 1)
+    return {
+        k: float(np.linalg.norm(ndimage.sum(np.where(m, delta, 0.0), labels, idx))) * cell_area
+        for k, m in parts.items()
+    }
