@@ -35,8 +35,7 @@ def test_centred_heights_are_the_plane_at_the_cell_centres():
     ring = np.isfinite(dem.heights) & (np.hypot(x - 10, y - 10) < 3.6) & cut  # cells cut by the disc
     e_mean, e_centred = (dem.heights - truth)[ring], (dem.centred(grid.cell) - truth)[ring]
     assert np.median(np.abs(e_mean)) > 0.04 and np.median(np.abs(e_centred)) < 0.01
-    # the volume of the ring (one-sided steps limited by the next: a little less than the plane's)
-    assert abs(e_centred.sum()) < 0.15 * abs(e_mean.sum())
+    assert abs(e_centred.sum()) < 0.1 * abs(e_mean.sum())  # the volume of the ring
 
 
 def test_offsets_are_zero_on_evenly_covered_cells_and_chunking_does_not_matter():

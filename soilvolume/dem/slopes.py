@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+KINK_M = 0.1  # a change of slope this high over one cell is an edge (a bush, a rim), not noise
+
 
 def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """dh/dx (east) and dh/dy (north) per cell: central differences where both neighbours have
@@ -28,14 +30,17 @@ def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
         fwd2[tuple(behind)] = fwd[tuple(ahead)]
         bwd2[tuple(ahead)] = bwd[tuple(behind)]
         both = np.isfinite(fwd) & np.isfinite(bwd)
-        one = np.where(np.isfinite(fwd), _limited(fwd, fwd2), _limited(bwd, bwd2))
+        one = np.where(np.isfinite(fwd), _limited(fwd, fwd2, cell), _limited(bwd, bwd2, cell))
         out.append(np.where(both, 0.5 * (fwd + bwd), one))
     return out[0], -out[1]  # rows run south
 
 
-def _limited(step: np.ndarray, beyond: np.ndarray) -> np.ndarray:
-    """``step`` limited by ``beyond`` (see :func:`slopes`; kept where ``beyond`` is unknown)."""
+def _limited(step: np.ndarray, beyond: np.ndarray, cell: float) -> np.ndarray:
+    """``step`` limited by ``beyond`` where the two differ by a kink of :data:`KINK_M` over a
+    cell or more (see :func:`slopes`; kept where ``beyond`` is unknown, and where they differ by
+    the heights' noise only: a sparse survey's edge cells keep the terrain's slope)."""
     with np.errstate(invalid="ignore"):
         agree = step * beyond > 0
         limited = np.where(agree, np.sign(step) * np.minimum(np.abs(step), np.abs(beyond)), 0.0)
-    return np.where(np.isfinite(beyond) & np.isfinite(step), limited, step)
+        kink = np.abs(step - beyond) * cell > KINK_M
+    return np.where(np.isfinite(beyond) & np.isfinite(step) & kink, limited, step)

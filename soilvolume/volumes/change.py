@@ -19,7 +19,6 @@ from ..compensation.robust import patches
 
 MIN_CELLS = 3  # a change area has at least this many significant cells
 BUFFER_CELLS = 1  # cells of buffer around each change area
-JOIN_SHARE = 1.0 / 3.0  # a refilled patch joins an area that holds at least this share of its ring
 MARGINAL_CELLS = 50  # smaller areas barely above their LoD may be noise (a few correlation areas)
 _EIGHT = np.ones((3, 3), bool)
 
@@ -48,9 +47,10 @@ def change_areas(
     """(fill mask, cut mask): areas of significant positive / negative change with their buffers
     (see module); a buffer cell both kinds of area reach belongs to neither. ``refilled`` cells
     (interpolated, not measured) never start an area; a refilled patch touching an area of the
-    sign of its own volume joins it when its mean difference is beyond its cells' mean LoD (a
-    hole on a pile is part of the pile; vegetation refilled at a few millimetres of noise next to
-    a small cut is not)."""
+    sign of its own volume joins it when the area's measured volume is at least the patch's: a
+    hole on a pile or in a pit is part of the works, but an interpolation never outweighs what
+    was measured around it (vegetation refilled a few millimetres below zero, a hole beside a
+    bush, next to a small noise cut: 1.4 m3 of a 69 m3 pit's cut in paper-veg20m-rgb)."""
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
@@ -63,24 +63,33 @@ def change_areas(
     both = fill & cut
     fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
     if refilled is not None and refilled.any():
-        fill, cut = _join_refilled(d, lod, refilled & valid & ~fill & ~cut, fill, cut)
+        fill, cut = _join_refilled(d, refilled & valid & ~fill & ~cut, fill, cut)
     return fill, cut
 
 
-def _join_refilled(d, lod, patches, fill, cut):
+def _join_refilled(d, patches, fill, cut):
     labels, n = ndimage.label(patches, structure=_EIGHT)
     if n == 0:
         return fill, cut
     idx = np.arange(1, n + 1)
-    mean = ndimage.mean(d, labels, idx)
-    vol = np.where(np.abs(mean) > ndimage.mean(lod, labels, idx), mean, 0.0)  # a patch within its own noise joins none
+    vol = ndimage.sum(d, labels, idx)
     rim = ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
-    ring = np.maximum(ndimage.sum(np.ones(d.shape), rim, idx), 1.0)
-    near_fill = ndimage.sum(fill, rim, idx) >= JOIN_SHARE * ring
-    near_cut = ndimage.sum(cut, rim, idx) >= JOIN_SHARE * ring
-    to_fill = np.r_[False, near_fill & (vol > 0)]
-    to_cut = np.r_[False, near_cut & (vol < 0)]
-    return fill | to_fill[labels], cut | to_cut[labels]
+    out = []
+    for area, sign in ((fill, 1.0), (cut, -1.0)):
+        works = ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
+        out.append(area | np.r_[False, (sign * vol > 0) & (works >= sign * vol)][labels])
+    return out[0], out[1]
+
+
+def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray:
+    """Per cell of ``area``, its connected area's volume (cell units) of the ``sign`` of its
+    kind, 0 where that is not of its sign (a cut area whose sum is above zero is noise and its
+    buffer) and outside it."""
+    comp, k = ndimage.label(area, structure=_EIGHT)
+    if k == 0:
+        return np.zeros(d.shape)
+    v = sign * ndimage.sum(d, comp, np.arange(1, k + 1))
+    return np.r_[0.0, np.maximum(v, 0.0)][comp]
 
 
 def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:
