@@ -10,10 +10,10 @@ KINK_M = 0.1  # a change of slope this high over one cell is an edge (a bush, a 
 
 def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """dh/dx (east) and dh/dy (north) per cell: central differences where both neighbours have
-    data, NaN where neither has. Where one has, the one-sided step limited by the next step
-    beyond it (minmod: the smaller of the two where they agree in sign, else 0): a cell at a hole next to a bush, a
-    vehicle or a rim otherwise takes the step onto it as its slope, and its points, all on that
-    side, are moved by it (0.46 m on a 0.5 m cell beside a bush at a pit's rim,
+    data, NaN where neither has. Where one has, the one-sided step, limited by the next step
+    beyond it where the two differ by a kink (:func:`_limited`, minmod): a cell at a hole next to
+    a bush, a vehicle or a rim otherwise takes the step onto it as its slope, and its points, all
+    on that side, are moved by it (0.46 m on a 0.5 m cell beside a bush at a pit's rim,
     paper-veg20m-rgb); on a steady slope (a pit's wall, a pile's flank) the two steps agree."""
     out = []
     for axis in (1, 0):

@@ -116,7 +116,7 @@ def compute_volumes(
         stable = quiet
     d, fa, ca = diff[core], fill_area[core], cut_area[core]  # areas decided with the halo, counted on the core
     terms = _extra_terms((after, before), s["f_a"], filled_mask, grid, moved, given, core, (d, fa, ca), lod_cell, ex)
-    terms["extra"] = _with_outline(terms, outline[core], fa, ca, grid.cell_area)
+    terms["extra"] = _with_outline(terms, outline[core], d, filled_mask, (fa, ca), grid.cell_area)
     counted = fill_area | cut_area  # the change areas without moved objects
     model = _error_model(diff, stable, grid, options, given, core, filled_mask, fill_sigma, ex.bound)
     unc = model(change_mask=counted, extra_sigma=terms.pop("extra"))
@@ -206,12 +206,15 @@ def _extra_terms(epochs, f_a, filled_mask, grid: GridSpec, moved, given, core, c
     return {"registration_m3": reg_v, "marginal_detections_m3": marginal, "statistic_m3": stat, "extra": extra}
 
 
-def _with_outline(terms: dict, delta: np.ndarray, fa: np.ndarray, ca: np.ndarray, area: float) -> dict:
+def _with_outline(terms: dict, delta: np.ndarray, d, filled_mask, areas, area: float) -> dict:
     """The extra terms with where the outline runs inside the holes refilled across it
     (:func:`~.outline.outline_sigma`, kept in ``terms`` as ``outline_m3``)."""
     from .outline import outline_sigma
+    from .uncertainty import interp_fraction
 
-    terms["outline_m3"] = outline_sigma(delta, {"net": fa | ca, "cut": ca, "fill": fa}, area)
+    fa, ca = areas
+    share = interp_fraction(holes.typical_radius(filled_mask))
+    terms["outline_m3"] = outline_sigma(delta, d, {"net": fa | ca, "cut": ca, "fill": fa}, share, area)
     return {k: float(np.hypot(v, terms["outline_m3"][k])) for k, v in terms["extra"].items()}
 
 

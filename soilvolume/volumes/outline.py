@@ -11,8 +11,8 @@ level.
 
 Where the outline runs inside the hole is not seen: the split by distance puts it half-way
 between the two rims, and the works' slope ends there, not at the kink. The two fills' difference
-over each hole is that uncertainty, a term of the interval by name (:func:`outline_sigma`; an
-occlusion hole across a pit's rim, paper-veg20m-rgb: 0.6 m3 of a 69 m3 pit).
+over each hole is that uncertainty; what of it the interval's refilled share does not already
+give those cells is a term of the interval by name (:func:`outline_sigma`).
 """
 
 from __future__ import annotations
@@ -71,15 +71,20 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     return np.minimum(n_change, n_stable) >= MIN_SIDE
 
 
-def outline_sigma(delta: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict[str, float]:
+def outline_sigma(
+    delta: np.ndarray, diff: np.ndarray, parts: dict[str, np.ndarray], share: float, cell_area: float
+) -> dict[str, float]:
     """One-sigma volume (m3) per part of where the outline runs inside the holes refilled side by
-    side: ``delta``, the side-by-side fill minus the plain one (0 elsewhere), summed per hole over
-    the part's cells, the holes independent."""
+    side beyond what the interval's refilled share (``share`` of the refilled |difference|)
+    already gives their cells: ``delta``, the side-by-side fill minus the plain one (0
+    elsewhere), summed per hole over the part's cells, the holes independent."""
     labels, n = ndimage.label(delta != 0, np.ones((3, 3), bool))
     if n == 0:
         return {k: 0.0 for k in parts}
     idx = np.arange(1, n + 1)
-    return {
-        k: float(np.linalg.norm(ndimage.sum(np.where(m, delta, 0.0), labels, idx))) * cell_area
-        for k, m in parts.items()
-    }
+    out = {}
+    for k, m in parts.items():
+        moved = np.abs(ndimage.sum(np.where(m, delta, 0.0), labels, idx))
+        given = share * ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
+        out[k] = float(np.linalg.norm(np.maximum(moved - given, 0.0))) * cell_area
+    return out
