@@ -47,10 +47,10 @@ def change_areas(
     """(fill mask, cut mask): areas of significant positive / negative change with their buffers
     (see module); a buffer cell both kinds of area reach belongs to neither. ``refilled`` cells
     (interpolated, not measured) never start an area; a refilled patch touching an area of the
-    sign of its own volume joins it when the area's measured volume is at least the patch's: a
-    hole on a pile or in a pit is part of the works, but an interpolation never outweighs what
-    was measured around it (vegetation refilled a few millimetres below zero, a hole beside a
-    bush, next to a small noise cut: 1.4 m3 of a 69 m3 pit's cut in paper-veg20m-rgb)."""
+    sign of its own volume joins it when the area's volume is at least the patch's: a hole on a
+    pile or in a pit is part of the works, but an interpolation never outweighs the area it
+    touches (vegetation refilled a few millimetres below zero, a hole beside a bush, next to a
+    small noise cut: 1.4 m3 of a 69 m3 pit's cut in paper-veg20m-rgb)."""
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
@@ -82,9 +82,9 @@ def _join_refilled(d, patches, fill, cut):
 
 
 def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray:
-    """Per cell of ``area``, its connected area's volume (cell units) of the ``sign`` of its
-    kind, 0 where that is not of its sign (a cut area whose sum is above zero is noise and its
-    buffer) and outside it."""
+    """Per cell of ``area``, its connected area's volume (m x cells) of the ``sign`` of its kind,
+    0 where that is not of its sign (a cut area whose sum is above zero is noise and its buffer)
+    and outside it."""
     comp, k = ndimage.label(area, structure=_EIGHT)
     if k == 0:
         return np.zeros(d.shape)
