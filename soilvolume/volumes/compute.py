@@ -149,7 +149,7 @@ def compute_volumes(
         **_budgets(s, filled, diff, d_i, core, lod, grid.cell_area, given is None, (after.counts, before.counts)),
     }
     if options.zones:
-        vols["zones"] = _zones(d, counted, grid, options, given, core, model, unc)
+        vols["zones"] = _zones(d, counted, (fa, ca), grid, options, given, core, model, unc)
     return Volumes(**vols)
 
 
@@ -258,8 +258,9 @@ def _budgets(s: dict, filled, diff, d_i, core, lod: float, area: float, whole: b
     }
 
 
-def _zones(d, counted, grid: GridSpec, options: Options, given, core, model, unc) -> list:
-    """The zones' budgets over the counted change cells, with their intervals (whole grid only)."""
+def _zones(d, counted, areas, grid: GridSpec, options: Options, given, core, model, unc) -> list:
+    """The zones' budgets over the counted change cells, fill and cut over the (fill, cut)
+    ``areas`` as the headline's, with their intervals (whole grid only)."""
     from .zones import zone_budgets, zone_interval
 
     rows, cols = core
@@ -271,6 +272,7 @@ def _zones(d, counted, grid: GridSpec, options: Options, given, core, model, unc
         options.zones,
         whole=given is None,
         interval=interval,
+        areas=areas,
     )
 
 
