@@ -85,3 +85,25 @@ def test_the_dem_command_writes_heights_at_the_cell_centres(tmp_path):
     x, y = t.c + cols * t.a - origin[0], t.f + rows * t.e - origin[1]
     err = np.abs(h - (0.6 * x - 0.3 * y))
     assert np.nanmedian(err) < 0.005 and np.nanpercentile(err, 99) < 0.03, np.nanmax(err)
+
+
+def test_a_cell_at_a_hole_is_not_moved_by_the_bush_beside_it():
+    """Flat ground with a hole west of a cell whose points sit on its east side, and a bush (a
+    dome of cells 0.4-0.7 m high) east of it: the step onto the bush is no slope of the ground
+    (the next step disagrees), so the cell keeps the ground's height; on a steady one-sided
+    slope the cell is still moved to its centre."""
+    h = np.zeros((3, 7))
+    h[:, 1] = np.nan  # the hole
+    h[:, 3:6] = [0.45, 0.55, 0.3]  # the bush
+    dx = np.zeros_like(h)
+    dx[:, 2] = 0.15  # the cell's points: its east side
+    base = np.zeros_like(h)
+    from soilvolume.dem.grid import EpochDEM
+
+    dem = EpochDEM(h, np.full(h.shape, 50), np.full(h.shape, 0.03), dx, np.zeros_like(h))
+    assert abs(dem.centred(0.5)[1, 2] - base[1, 2]) < 0.065  # was -0.27: moved down the bush's flank
+    wall = np.tile(0.6 * 0.5 * np.arange(7.0), (3, 1))  # a pit's wall at 0.6 m/m
+    wall[:, 1] = np.nan
+    wall[:, 2] += 0.6 * 0.15  # the points' mean lies 0.15 m east of the centre
+    dem = EpochDEM(wall, np.full(h.shape, 50), np.full(h.shape, 0.03), dx, np.zeros_like(h))
+    assert abs(dem.centred(0.5)[1, 2] - 0.6) < 0.005

@@ -50,3 +50,20 @@ def test_a_pile_keeps_its_negative_buffer_cells():
     (feature,) = features(diff, change, np.zeros_like(change), grid)
     assert feature["properties"]["volume_m3"] == pytest.approx(15 - 0.05)
     assert feature["properties"]["area_m2"] == 16
+
+
+def test_a_refilled_patch_joins_the_area_around_it_not_one_at_its_corner():
+    """A hole inside a pit joins its cut area; a large refilled patch (vegetation left out) at a
+    few millimetres below zero that touches a small cut area at one corner does not."""
+    from soilvolume.volumes.change import change_areas
+
+    diff = np.zeros((30, 30))
+    diff[3:9, 3:9] = -0.5  # a pit
+    refilled = np.zeros_like(diff, bool)
+    refilled[5:7, 5:7] = True  # a hole in it, filled at the pit's depth
+    diff[12:14, 12:15] = -0.05  # a small cut
+    refilled[14:26, 15:27] = True  # vegetation refilled, touching it at a corner
+    diff[14:26, 15:27] = -0.015
+    _, cut = change_areas(diff, 0.008, refilled=refilled)
+    assert cut[5:7, 5:7].all() and cut[12:14, 12:15].all()
+    assert not cut[16:26, 17:27].any()

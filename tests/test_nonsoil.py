@@ -229,3 +229,24 @@ def test_verdict_on_what_could_not_be_classified():
     assert sev == "caution" and "machine-sized objects in one survey only" in msg
     assert _unclassified(excluded(15.0, 0.0, False), net=900.0, half=40.0) == []  # within the interval
     assert _unclassified(excluded(50.0, 0.0, False), net=900.0, half=40.0) == []  # under a tenth of the net
+
+
+@pytest.mark.parametrize("seed", [126, 128])
+def test_the_cut_is_the_pit_not_its_neighbours(tmp_path, seed):
+    """The seed paper's piles and pit at 1.25 M points, grass grown, bushes, 2 vehicles moved,
+    occlusion holes; RGB. A hole across the pit's rim beside a bush, holes beside parked machines
+    and refilled bushes next to small noise cuts made the 69 m3 cut too large and its interval
+    miss (seed 126: +7.6 %, +-6.7 %). Measured: cut +3.4 % (+-7.4 %) and +0.1 % (+-5.2 %), net
+    -0.97 % and +0.77 %."""
+    cfg = dict(before_points=1_250_000, after_points=750_000, shift_m=(3.0, 2.0, 0.5), rotation_deg=(0.5, -0.4, 3.0))
+    cfg.update(doming_m=0.03, outlier_fraction=0.005, holes=8, vegetation=True, objects=True)
+    b, a, t = write_pair_streaming(
+        seed, SceneConfig(**cfg, signals="rgb", movers=2, patches=6, crops=True), tmp_path, "las"
+    )
+    truth = json.loads(Path(t).read_text())
+    rep = _run((b, a), tmp_path / "r")
+    for part, within in (("net", 0.015), ("cut", 0.045), ("fill", 0.015)):
+        err = rep["volume_m3"][part] - truth[part]
+        assert abs(err) <= within * truth[part], (part, err)
+        assert abs(err) <= rep["uncertainty_m3"][part], (part, err, rep["uncertainty_m3"][part])
+    assert rep["uncertainty"]["outline_m3"]["cut"] >= 0.0

@@ -59,3 +59,26 @@ def test_a_hole_touching_the_works_at_one_cell_is_left_alone():
     assert 0 < (rim & change).sum() < 0.2 * rim.sum()
     values = holes.fill(np.where(hole, np.nan, truth), hole)
     assert np.array_equal(refill_across_outline(values, hole, change, "biharmonic"), values)
+
+
+def test_the_interval_term_covers_what_is_left_of_the_holes_on_the_rim():
+    """The term of where the outline runs inside the holes (the two fills' difference, per hole,
+    beyond the interval's refilled share): without a share its 95 % holds the error left after
+    the side-by-side fill and is under the smooth fill's error; nothing for a part without
+    refilled cells."""
+    from soilvolume.volumes.outline import outline_sigma
+
+    truth = _pit()
+    hole = _rim_holes(truth.shape, [(15.0, 0.0), (-15.0, 5.0), (3.0, 15.0), (-8.0, -15.0)], 2.5)
+    values = holes.fill(np.where(hole, np.nan, truth), hole)
+    got = refill_across_outline(values, hole, ~hole & (np.abs(truth) > 0.01), "biharmonic")
+    cut = got < -0.005
+    parts = {"cut": cut, "fill": np.zeros_like(cut)}
+    sigma = outline_sigma(got - values, got, parts, 0.0, CELL**2)
+    err = abs(float((got - truth)[hole & cut].sum())) * CELL**2
+    smooth = abs(float((values - truth)[hole].sum())) * CELL**2
+    assert err < 1.96 * sigma["cut"] < smooth, (err, sigma, smooth)  # 1.42 < 2.28 < 6.72 m3
+    assert sigma["fill"] == 0.0
+    # what the interval's refilled share already gives the holes' cells is not counted twice
+    assert outline_sigma(got - values, got, parts, 0.5, CELL**2)["cut"] == 0.0
+    assert 0.0 < outline_sigma(got - values, got, parts, 0.01, CELL**2)["cut"] < sigma["cut"]

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
 from ..inputs.io import atomic_path
+from .slopes import slopes
 
 NODATA = -9999.0
 
@@ -71,24 +72,6 @@ CENTRING_PASSES = 4  # fixed-point passes: a moved cell gives its neighbours bet
 EPOCH_ARRAYS = ("h", "n", "s", "x", "y", "v", "o", "q", "z", "m")  # an EpochDEM's arrays, in field order
 ZERO_WHERE_EMPTY = set("nxyvoqzm")  # arrays that are 0 (not NaN) where a cell has no point
 MOSTLY = 0.5  # a cell whose points are at least this share not soil has no soil height (colour rule)
-
-
-def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """dh/dx (east) and dh/dy (north) per cell: central differences where both neighbours have
-    data, one-sided where one has, NaN where neither has."""
-    out = []
-    for axis in (1, 0):
-        fwd = np.full(h.shape, np.nan)
-        bwd = np.full(h.shape, np.nan)
-        ahead = [slice(None)] * 2
-        behind = [slice(None)] * 2
-        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
-        step = (h[tuple(ahead)] - h[tuple(behind)]) / cell
-        fwd[tuple(behind)] = step
-        bwd[tuple(ahead)] = step
-        both = np.isfinite(fwd) & np.isfinite(bwd)
-        out.append(np.where(both, 0.5 * (fwd + bwd), np.where(np.isfinite(fwd), fwd, bwd)))
-    return out[0], -out[1]  # rows run south
 
 
 class OffsetSums:

@@ -47,7 +47,10 @@ def change_areas(
     """(fill mask, cut mask): areas of significant positive / negative change with their buffers
     (see module); a buffer cell both kinds of area reach belongs to neither. ``refilled`` cells
     (interpolated, not measured) never start an area; a refilled patch touching an area of the
-    sign of its own volume joins it (a hole on a pile is part of the pile)."""
+    sign of its own volume joins it when the area's volume is at least the patch's: a hole on a
+    pile or in a pit is part of the works, but an interpolation never outweighs the area it
+    touches (vegetation refilled a few millimetres below zero, a hole beside a bush, next to a
+    small noise cut: 1.4 m3 of a 69 m3 pit's cut in paper-veg20m-rgb)."""
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
@@ -70,11 +73,23 @@ def _join_refilled(d, patches, fill, cut):
         return fill, cut
     idx = np.arange(1, n + 1)
     vol = ndimage.sum(d, labels, idx)
-    near_fill = ndimage.maximum(ndimage.binary_dilation(fill, _EIGHT), labels, idx) > 0
-    near_cut = ndimage.maximum(ndimage.binary_dilation(cut, _EIGHT), labels, idx) > 0
-    to_fill = np.r_[False, near_fill & (vol > 0)]
-    to_cut = np.r_[False, near_cut & (vol < 0)]
-    return fill | to_fill[labels], cut | to_cut[labels]
+    rim = ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
+    out = []
+    for area, sign in ((fill, 1.0), (cut, -1.0)):
+        works = ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
+        out.append(area | np.r_[False, (sign * vol > 0) & (works >= sign * vol)][labels])
+    return out[0], out[1]
+
+
+def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray:
+    """Per cell of ``area``, its connected area's volume (m x cells) of the ``sign`` of its kind,
+    0 where that is not of its sign (a cut area whose sum is above zero is noise and its buffer)
+    and outside it."""
+    comp, k = ndimage.label(area, structure=_EIGHT)
+    if k == 0:
+        return np.zeros(d.shape)
+    v = sign * ndimage.sum(d, comp, np.arange(1, k + 1))
+    return np.r_[0.0, np.maximum(v, 0.0)][comp]
 
 
 def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:

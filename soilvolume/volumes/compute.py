@@ -101,7 +101,8 @@ def compute_volumes(
     lod = detection_level(diff, stable, options.lod_confidence)
     lod_cell = _cell_lods(after, before, s, lod, fill_sigma, options.lod_confidence)
     significant = patches(~filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
-    diff = refill_across_outline(diff, filled_mask & ~s["own"], significant, options.fill_method)
+    sides = refill_across_outline(diff, filled_mask & ~s["own"], significant, options.fill_method)
+    outline, diff = np.nan_to_num(sides - diff), sides  # where the outline runs in the holes: a term
     filled = diff + offset
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
@@ -116,6 +117,7 @@ def compute_volumes(
         stable = quiet
     d, fa, ca = diff[core], fill_area[core], cut_area[core]  # areas decided with the halo, counted on the core
     terms = _extra_terms((after, before), s["f_a"], filled_mask, grid, moved, given, core, (d, fa, ca), lod_cell, ex)
+    terms["extra"] = _with_outline(terms, outline[core], d, filled_mask, (fa, ca), grid.cell_area)
     counted = fill_area | cut_area  # the change areas without moved objects
     model = _error_model(diff, stable, grid, options, given, core, (filled_mask, s["own"]), fill_sigma, ex.bound)
     unc = model(change_mask=counted, extra_sigma=terms.pop("extra"))
@@ -137,6 +139,7 @@ def compute_volumes(
             "marginal_detections_m3": terms["marginal_detections_m3"],
             "classification_m3": ex.sigma,
             "statistic_m3": terms["statistic_m3"],
+            "outline_m3": terms["outline_m3"],
         },
         "change_mask": counted,
         "cut_mask": cut_area,  # after the exclusions, as the headline sums it
@@ -147,7 +150,7 @@ def compute_volumes(
         **_budgets(s, filled, diff, d_i, core, lod, grid.cell_area, given is None, (after.counts, before.counts)),
     }
     if options.zones:
-        vols["zones"] = _zones(d, counted, grid, options, given, core, model, unc)
+        vols["zones"] = _zones(d, counted, (fa, ca), grid, options, given, core, model, unc)
     return Volumes(**vols)
 
 
@@ -224,6 +227,18 @@ def _extra_terms(epochs, f_a, filled_mask, grid: GridSpec, moved, given, core, c
     return {"registration_m3": reg_v, "marginal_detections_m3": marginal, "statistic_m3": stat, "extra": extra}
 
 
+def _with_outline(terms: dict, delta: np.ndarray, d, filled_mask, areas, area: float) -> dict:
+    """The extra terms with where the outline runs inside the holes refilled across it
+    (:func:`~.outline.outline_sigma`, kept in ``terms`` as ``outline_m3``)."""
+    from .outline import outline_sigma
+    from .uncertainty import interp_fraction
+
+    fa, ca = areas
+    share = interp_fraction(holes.typical_radius(filled_mask))
+    terms["outline_m3"] = outline_sigma(delta, d, {"net": fa | ca, "cut": ca, "fill": fa}, share, area)
+    return {k: float(np.hypot(v, terms["outline_m3"][k])) for k, v in terms["extra"].items()}
+
+
 def _error_model(diff, stable, grid: GridSpec, options: Options, given, core, filled_mask, fill_sigma, bound):
     """The error model (:func:`~.uncertainty.volume_uncertainty` with the run's arguments) over
     the cells a caller gives: the headline's change areas, a zone's."""
@@ -265,8 +280,9 @@ def _budgets(s: dict, filled, diff, d_i, core, lod: float, area: float, whole: b
     }
 
 
-def _zones(d, counted, grid: GridSpec, options: Options, given, core, model, unc) -> list:
-    """The zones' budgets over the counted change cells, with their intervals (whole grid only)."""
+def _zones(d, counted, areas, grid: GridSpec, options: Options, given, core, model, unc) -> list:
+    """The zones' budgets over the counted change cells, fill and cut over the (fill, cut)
+    ``areas`` as the headline's, with their intervals (whole grid only)."""
     from .zones import zone_budgets, zone_interval
 
     rows, cols = core
@@ -278,6 +294,7 @@ def _zones(d, counted, grid: GridSpec, options: Options, given, core, model, unc
         options.zones,
         whole=given is None,
         interval=interval,
+        areas=areas,
     )
 
 

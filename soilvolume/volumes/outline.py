@@ -8,6 +8,11 @@ unchanged ground is split between the two (each of its cells goes with the neare
 side is interpolated from its own rim only, with a free edge at the split: the slope of the
 works runs on to the outline instead of bending into the ground around it, and the ground stays
 level.
+
+Where the outline runs inside the hole is not seen: the split by distance puts it half-way
+between the two rims, and the works' slope ends there, not at the kink. The two fills' difference
+over each hole is that uncertainty; what of it the interval's refilled share does not already
+give those cells is a term of the interval by name (:func:`outline_sigma`).
 """
 
 from __future__ import annotations
@@ -64,3 +69,22 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     n_change = ndimage.sum(change, grown, idx)
     n_stable = ndimage.sum(stable, grown, idx)
     return np.minimum(n_change, n_stable) >= MIN_SIDE
+
+
+def outline_sigma(
+    delta: np.ndarray, diff: np.ndarray, parts: dict[str, np.ndarray], share: float, cell_area: float
+) -> dict[str, float]:
+    """One-sigma volume (m3) per part of where the outline runs inside the holes refilled side by
+    side beyond what the interval's refilled share (``share`` of the refilled |difference|)
+    already gives their cells: ``delta``, the side-by-side fill minus the plain one (0
+    elsewhere), summed per hole over the part's cells, the holes independent."""
+    labels, n = ndimage.label(delta != 0, np.ones((3, 3), bool))
+    if n == 0:
+        return {k: 0.0 for k in parts}
+    idx = np.arange(1, n + 1)
+    out = {}
+    for k, m in parts.items():
+        moved = np.abs(ndimage.sum(np.where(m, delta, 0.0), labels, idx))
+        given = share * ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
+        out[k] = float(np.linalg.norm(np.maximum(moved - given, 0.0))) * cell_area
+    return out

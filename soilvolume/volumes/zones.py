@@ -83,18 +83,25 @@ def zone_budgets(
     name_field: str | None = None,
     whole: bool = True,
     interval: Callable[[np.ndarray], dict[str, float]] | None = None,
+    areas: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[dict[str, Any]]:
     """[{id, name, net, cut, fill, area_m2, zone_area_m2, polygon_area_m2, repaired}] per polygon
     of ``zones_path`` (overlapping zones each count their cells; ``zone_area_m2`` = grid cells
     inside the polygon); on the ``whole`` grid (not a tile's window), see :func:`check_inside`.
     ``interval``: a zone's ± (net, cut, fill) from its mask (:func:`zone_interval`), kept as
-    ``uncertainty_m3``."""
+    ``uncertainty_m3``. ``areas``: the (fill, cut) areas a zone's fill and cut are summed over,
+    as the headline's (else by each cell's sign: noise in a pile's buffer would be cut)."""
     polys, wkt = read_polygons(zones_path, name_field)
     polys = to_grid_crs(polys, wkt, grid, zones_path)
     out = []
     for p, mask in zip(polys, polygon_masks(polys, grid), strict=True):
         row = {"id": p.id, "name": p.name}
         row.update(budget(diff, mask, grid.cell_area))
+        if areas is not None:
+            from .difference import signed_budget
+
+            split = signed_budget(diff, areas[0] & mask, areas[1] & mask, grid.cell_area)
+            row.update(cut=split["cut"], fill=split["fill"], net=split["fill"] - split["cut"])
         row["zone_area_m2"] = float(mask.sum() * grid.cell_area)
         row["polygon_area_m2"] = float(p.geometry.area * grid.xy_unit**2)
         row["repaired"] = p.repaired
