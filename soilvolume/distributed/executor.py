@@ -20,13 +20,15 @@ class Tiled:
 
     def __init__(self, schedule: Schedule) -> None:
         self.schedule = schedule
-        self.c = self.store = self.plan = self.cache = None
+        self.c = self.store = self.plan = self.cache = self.starting = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
         self.coarse = self.over_epochs = self.medians = None
 
     @contextmanager
     def session(self, run):
-        from .cluster import checker
+        """The run's tile store and cluster; the cluster starts in the background and is waited
+        for at its first use (``cluster_wait``), shut down in the background after its last."""
+        from .cluster import LazyClient, checker
         from .schedule import client
         from .tilestore import run_store
 
@@ -36,9 +38,13 @@ class Tiled:
                 "(or classify the tiles first)"
             )
         with run_store(run.out.final) as store, client(self.schedule, run.options.memory_limit, store.scratch) as s:
-            self.store = store
-            with run.timer("cluster_wait"):
-                self.c = s.result(checker(run.hooks))
+            self.store, self.starting = store, s
+
+            def wait():
+                with run.timer("cluster_wait"):
+                    return s.result(checker(run.hooks))
+
+            self.c = LazyClient(wait)
             yield self
 
     def prepare(self, run) -> None:
@@ -96,6 +102,8 @@ class Tiled:
             arrays = run_tiles(self.c, self.plan, self.windows, run.hooks, self.kept, self.stats, self.cache)
             run.dems = epoch_dems(arrays, self.plan.rules)
         self.cache.release()  # the workers' memory back for the volume step
+        if self.k == 1:
+            self.starting.close_soon()  # the volume step runs here: the workers are done
 
     def _tiles(self, run, cell: float) -> tuple:
         """(the tile windows, their side in cells, points per cell) for the run's grid."""
@@ -132,7 +140,9 @@ class Tiled:
         from .volumestep import tile_volumes
 
         over = volume_step(self.over_epochs, run.planes[2], self.coarse, run.options, run.reg)
-        return tile_volumes(self.c, self.kept, self.k, over, run, self.medians)
+        vols = tile_volumes(self.c, self.kept, self.k, over, run, self.medians)
+        self.starting.close_soon()  # the rest reads the tile store
+        return vols
 
     def write(self, run) -> None:
         from .cog import write_outputs

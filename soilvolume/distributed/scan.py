@@ -10,6 +10,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..core import interrupt
+from ..core.cells import bounds, rows
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..soil.points import SOIL, NonSoil, PointRule
@@ -52,10 +53,8 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
     t0 = time.perf_counter()
     for xyz, cls, sig in chunks:
         out["read_s"] += time.perf_counter() - t0
-        if indexed:
-            out["index"].append(
-                ((start or 0) + out["points"], len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0))
-            )
+        if indexed and start is not None:  # a range of a single file: its chunks' boxes bound the grid's reads
+            out["index"].append((start + out["points"], len(xyz), *bounds(xyz, 2)))
         out["points"] += len(xyz)
         local = shift(xyz)  # a chunk the reader allocated: shifted in place (a cached one: copied)
         labels = rule.labels(cls, sig)
@@ -64,7 +63,7 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
         if keep is not None:
             mask = keep(local) if mask is None else mask & keep(local)
         if mask is not None:
-            local = local[mask]
+            local = rows(local, mask)
         thinner.add(local)
         out["cropped"] += len(local)
         t0 = time.perf_counter()
