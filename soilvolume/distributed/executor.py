@@ -20,7 +20,7 @@ class Tiled:
 
     def __init__(self, schedule: Schedule) -> None:
         self.schedule = schedule
-        self.c = self.store = self.plan = self.cache = self.starting = None
+        self.c = self.store = self.plan = self.cache = self.starting = self.src_a = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
         self.coarse = self.over_epochs = self.medians = None
 
@@ -51,13 +51,15 @@ class Tiled:
         from ..inputs.prepare import prepare
         from ..inputs.stream import open_source
         from .cluster import checker
-        from .pointcache import PointCache
+        from .pointcache import PointCache, near_after
         from .scan import dask_loader
         from .schedule import budget_gb
 
         hooks = run.hooks
-        self.src_b, src_a = (open_source(e.path) for e in run.epochs)
+        self.src_b, self.src_a = (open_source(e.path) for e in run.epochs)
+        src_a = self.src_a
         self.cache = PointCache(self.c, budget_gb(run.options.memory_limit))
+        self.cache.expect(near_after(self.src_b, src_a, run.options.radius))
         loader = dask_loader(self.c, lambda m: hooks.step(run.at("prepare", 0.46), m), checker(hooks), self.cache)
         check = lambda: hooks.step(run.at("prepare", 0.23), "reading")  # noqa: E731
         run.prep = prepare(self.src_b, src_a, run.options, check=check, full=False, loader=loader)
@@ -76,7 +78,7 @@ class Tiled:
         run.after_thin = transform_points(prep.after_thin, reg.transform)
         cell = options.cell if options.cell else cell_from_columns(prep, run.after_thin)
         run.grid = shared_grid(prep, run.after_thin, options.with_(cell=cell))
-        self.plan = plan_for(run, cell)
+        self.plan = plan_for(run, cell, (self.src_b, self.src_a))
         self.windows, self.side, self.density = self._tiles(run, cell)
         run.hooks.step(
             run.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"

@@ -6,6 +6,8 @@ Tiles that do not fit the budget are read again by the grid tasks, as without th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from ..inputs.copc import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
 
@@ -26,8 +28,17 @@ class PointCache:
         self.client, self.left = client, budget_gb * CACHE_SHARE * 2**30
         self.futures: dict[str, object] = {}
         self.points = 0
+        self.expected: list[Source] = []
 
-    def take(self, src: Source, paths: list[str]) -> list:
+    def expect(self, src: Source) -> None:
+        """Read the tiles of ``src`` (a VPC, within its region) as soon as the first tiles are
+        taken, behind them: the later epoch's reads then overlap the driver's work between the
+        epochs and the first epoch's last tasks. Only when every tile expected fits the budget;
+        a tile read but not scanned is merely not needed (the grid reads what it meets)."""
+        if src.vpc is not None:
+            self.expected.append(src)
+
+    def take(self, src: Source, paths: list[str], priority: int = 0) -> list:
         """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
         read by streaming (not a VPC tile, COPC, or beyond the budget)."""
         if src.vpc is None:
@@ -40,11 +51,21 @@ class PointCache:
                 out.append(None)
                 continue
             if p not in self.futures:
-                self.futures[p] = self.client.submit(read_tile, p, pure=False)
+                self.futures[p] = self.client.submit(read_tile, p, pure=False, priority=priority)
                 self.left -= need
                 self.points += counts[p]
             out.append(self.futures[p])
+        self._prefetch()
         return out
+
+    def _prefetch(self) -> None:
+        expected, self.expected = self.expected, []
+        counts = {t.path: t.count for s in expected for t in s.vpc.tiles}
+        todo = [(s, s.tiles()) for s in expected]
+        need = sum(counts[p] for _, paths in todo for p in paths if p not in self.futures) * CACHE_BYTES_PER_POINT
+        if need <= self.left:
+            for s, paths in todo:
+                self.take(s, paths, priority=-1)  # after the scans of the tiles taken now
 
     def meeting(self, src: Source) -> dict:
         """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
@@ -70,3 +91,16 @@ def chunks(src: Source, cached: dict | None, stats: dict):
             yield from cached[path]
         else:
             yield from file_chunks(path, src.region, CHUNK, signals=True)
+
+
+def near_after(before: Source, after: Source, radius: float) -> Source:
+    """The before VPC where the after cloud's header box plus the crop radius can reach (the
+    tiles its first pass will read: the crop polygon lies in that box), when both are in the
+    same CRS; else the before as it is (without a VPC: nothing expected)."""
+    import pyproj
+
+    same = before.crs_wkt is not None and before.crs_wkt == after.crs_wkt
+    if before.vpc is None or not same or pyproj.CRS.from_wkt(before.crs_wkt).is_geographic:
+        return replace(before, vpc=None)
+    reach = 1.02 * radius + 1.0
+    return before.within(after.lo[:2] - reach, after.hi[:2] + reach)
