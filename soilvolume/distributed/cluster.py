@@ -102,8 +102,12 @@ class LazyClient:
     driver's own work before then (opening the sources, reading their first chunks) overlaps
     the start of the workers."""
 
-    def __init__(self, wait: Callable[[], object]) -> None:
-        self._wait, self._client = wait, None
+    def __init__(self, wait: Callable[[], object], started: Callable[[], bool] = lambda: True) -> None:
+        self._wait, self._started, self._client = wait, started, None
+
+    def ready(self) -> bool:
+        """Whether the cluster is up (or failed: the next use says why)."""
+        return self._client is not None or self._started()
 
     def resolve(self):
         """The client (waiting for it the first time)."""

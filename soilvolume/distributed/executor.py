@@ -44,7 +44,7 @@ class Tiled:
                 with run.timer("cluster_wait"):
                     return s.result(checker(run.hooks))
 
-            self.c = LazyClient(wait)
+            self.c = LazyClient(wait, s.future.done)
             yield self
 
     def prepare(self, run) -> None:

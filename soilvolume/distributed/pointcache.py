@@ -29,6 +29,7 @@ class PointCache:
         self.futures: dict[str, object] = {}
         self.points = 0
         self.expected: list[Source] = []
+        self.held: dict[str, tuple] = {}  # tiles read by the driver, until the workers are up
 
     def expect(self, src: Source) -> None:
         """Read the tiles of ``src`` (a VPC, within its region) as soon as the first tiles are
@@ -41,6 +42,7 @@ class PointCache:
     def take(self, src: Source, paths: list[str], priority: int = 0) -> list:
         """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
         read by streaming (not a VPC tile, COPC, or beyond the budget)."""
+        self._send_held()
         if src.vpc is None:
             return [None] * len(paths)
         counts = {t.path: t.count for t in src.vpc.tiles}
@@ -58,6 +60,24 @@ class PointCache:
         self._prefetch()
         return out
 
+    def fits(self, src: Source, path: str) -> bool:
+        """Whether the tile ``path`` of ``src`` (a VPC) fits what is left of the budget."""
+        count = next((t.count for t in src.vpc.tiles if t.path == path), None)
+        return count is not None and count * CACHE_BYTES_PER_POINT <= self.left
+
+    def hold(self, src: Source, path: str, chunks: tuple) -> None:
+        """Keep the chunks of a tile the driver read (see :meth:`fits`) for the workers: sent to
+        them at the next :meth:`take` (the same chunks a worker's read gives)."""
+        count = next(t.count for t in src.vpc.tiles if t.path == path)
+        self.left -= count * CACHE_BYTES_PER_POINT
+        self.points += count
+        self.held[path] = chunks
+
+    def _send_held(self) -> None:
+        for path, chunks in self.held.items():
+            self.futures[path] = self.client.scatter([chunks], hash=False)[0]
+        self.held.clear()
+
     def _prefetch(self) -> None:
         expected, self.expected = self.expected, []
         counts = {t.path: t.count for s in expected for t in s.vpc.tiles}
@@ -69,6 +89,7 @@ class PointCache:
 
     def meeting(self, src: Source) -> dict:
         """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
+        self._send_held()
         if src.vpc is None:
             return {}
         return {p: self.futures[p] for p in src.tiles() if p in self.futures}
