@@ -12,13 +12,16 @@ from pathlib import Path
 from typing import Any
 
 from qgis.core import (
+    Qgis,
     QgsCoordinateReferenceSystem,
     QgsMapLayer,
+    QgsPointCloudLayer,
     QgsProcessingAlgorithm,
     QgsProcessingContext,
     QgsProcessingException,
     QgsProcessingParameterCrs,
     QgsProcessingParameterDefinition,
+    QgsProcessingParameterMapLayer,
     QgsProcessingParameterPointCloudLayer,
     QgsProcessingUtils,
     QgsProperty,
@@ -52,15 +55,30 @@ class CloudParameter(QgsProcessingParameterPointCloudLayer):
         return copy
 
 
-class CloudOrSurfaceParameter(CloudParameter):
+class CloudOrSurfaceParameter(QgsProcessingParameterMapLayer):
     """The estimate's BEFORE: a point cloud, or a surface as the reference (a single-band DEM:
-    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered."""
+    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered.
+    A map-layer parameter of both types, so the dialog's dropdown lists the project's point
+    cloud and raster layers (and Model Builder accepts either as its input)."""
+
+    TYPES = (Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster)
+
+    def __init__(self, name: str, description: str, default: Any = None, optional: bool = False) -> None:
+        super().__init__(name, description, default, optional, list(self.TYPES))
 
     def createFileFilter(self) -> str:  # noqa: N802 - Qt API
         return "DEM GeoTIFF (a surface as the reference) (*.tif *.tiff *.TIF *.TIFF);;" + CLOUD_FILTER
 
+    def clone(self) -> CloudOrSurfaceParameter:
+        copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
+        copy.setHelp(self.help())
+        copy.setFlags(self.flags())
+        return copy
+
     def checkValueIsAcceptable(self, value, context=None) -> bool:  # noqa: N802 - Qt API
-        if isinstance(value, QgsRasterLayer) or is_surface_file(value):
+        if isinstance(value, (QgsRasterLayer, QgsPointCloudLayer)) or is_surface_file(value):
+            return True
+        if isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in CLOUD_EXTENSIONS:
             return True
         return super().checkValueIsAcceptable(value, context)
 
@@ -76,7 +94,7 @@ def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterD
     return param
 
 
-def cloud_param(key: str, label: str, surface: bool = False) -> QgsProcessingParameterPointCloudLayer:
+def cloud_param(key: str, label: str, surface: bool = False) -> QgsProcessingParameterDefinition:
     """One required input per epoch: a point cloud layer, or a file path (LAS, LAZ, COPC, VPC,
     PLY, PCD, XYZ/TXT/CSV; also when QGIS itself cannot open the file as a layer); with
     ``surface`` also a raster layer or GeoTIFF (a DEM as the reference)."""
@@ -127,10 +145,10 @@ def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcess
         return value.source()
     if not value:
         return ""
-    if isinstance(value, str) and (Path(value).is_file() or Path(value).suffix):
+    if isinstance(value, str) and Path(value).is_file():
         return value
-    layer = alg.parameterAsPointCloudLayer(parameters, key, context)
-    if layer is None and surface:  # a raster layer of the project, by id or name
+    layer = alg.parameterAsPointCloudLayer(parameters, key, context)  # a layer of the project, by id or name
+    if layer is None and surface:
         layer = alg.parameterAsRasterLayer(parameters, key, context)
     return layer.source() if layer is not None else str(value)
 

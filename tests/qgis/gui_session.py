@@ -33,6 +33,31 @@ def settle(seconds: float = 0.5) -> None:
         time.sleep(0.02)
 
 
+def dropdown_layers(wrapper) -> list[str]:
+    """The entries of a layer parameter's dropdown (layer names; the source in brackets)."""
+    from qgis.PyQt.QtWidgets import QComboBox
+
+    combo = wrapper.wrappedWidget().findChild(QComboBox)
+    return [combo.itemText(i) for i in range(combo.count())]
+
+
+def a_dem_layer(folder: Path) -> QgsRasterLayer:
+    """A small DEM GeoTIFF loaded into the project (a design surface to pick as *Before*)."""
+    from osgeo import gdal, osr
+
+    path = folder / "design_dem.tif"
+    raster = gdal.GetDriverByName("GTiff").Create(str(path), 4, 4, 1, gdal.GDT_Float32)
+    srs = osr.SpatialReference()
+    srs.ImportFromEPSG(32654)
+    raster.SetProjection(srs.ExportToWkt())
+    raster.SetGeoTransform((500000.0, 1.0, 0.0, 4000004.0, 0.0, -1.0))
+    raster.GetRasterBand(1).Fill(60.0)
+    raster = None
+    layer = QgsRasterLayer(str(path), "design DEM")
+    QgsProject.instance().addMapLayer(layer)
+    return layer
+
+
 def dialog_checks(before: str, after: str, artefacts: Path) -> dict:
     """Open the algorithm dialog with the two clouds set; read its widgets; screenshot."""
     from processing.gui.AlgorithmDialog import AlgorithmDialog
@@ -55,6 +80,8 @@ def dialog_checks(before: str, after: str, artefacts: Path) -> dict:
         "fine_value": wrappers["FINE"].widgetValue(),
         "before_value": wrappers["BEFORE"].widgetValue(),
         "registered_created": bool(wrappers["REGISTERED"].widgetValue()),
+        "before_dropdown": dropdown_layers(wrappers["BEFORE"]),
+        "after_dropdown": dropdown_layers(wrappers["AFTER"]),
     }
     dialog.close()
     return out
@@ -147,7 +174,9 @@ def main(plugins_dir: str, before: str, after: str, out_dir: str, artefacts: str
     app, _provider, _modules = start(plugins_dir, gui=True)
     folder = Path(artefacts)
     folder.mkdir(parents=True, exist_ok=True)
+    design = a_dem_layer(Path(out_dir))  # listed by the dialog's Before dropdown, then removed
     summary = {"dialog": dialog_checks(before, after, folder)}
+    QgsProject.instance().removeMapLayer(design.id())
     results = run_and_load(before, after, Path(out_dir))
     summary["net"] = results["NET_VOLUME"]
     model = layers_window(folder)

@@ -56,3 +56,48 @@ def test_a_geotiff_path_as_before_and_a_bad_one(run_alg, design_site, tmp_path):
             "estimatevolumechange",
             {"BEFORE": str(tmp_path / "missing.tif"), "AFTER": str(after), "DIFFERENCE": str(tmp_path / "e.tif")},
         )
+
+
+def _model(before_param) -> object:
+    """A Model Builder model: its two inputs feed the estimate, whose difference is the model's output."""
+    from qgis.core import (
+        QgsProcessingModelAlgorithm,
+        QgsProcessingModelChildAlgorithm,
+        QgsProcessingModelChildParameterSource,
+        QgsProcessingModelOutput,
+        QgsProcessingModelParameter,
+        QgsProcessingParameterFile,
+    )
+
+    model = QgsProcessingModelAlgorithm("Survey against design", "tests")
+    model.addModelParameter(before_param, QgsProcessingModelParameter(before_param.name()))
+    survey = QgsProcessingParameterFile("survey", "Survey")  # a file: this QGIS has no PDAL provider to load LAS
+    model.addModelParameter(survey, QgsProcessingModelParameter("survey"))
+    child = QgsProcessingModelChildAlgorithm("soilvolume:estimatevolumechange")
+    child.setChildId("estimate")
+    for key, source in (("BEFORE", before_param.name()), ("AFTER", "survey")):
+        child.addParameterSources(key, [QgsProcessingModelChildParameterSource.fromModelParameter(source)])
+    output = QgsProcessingModelOutput("difference", "Difference")
+    output.setChildId("estimate")
+    output.setChildOutputName("DIFFERENCE")
+    child.setModelOutputs({"difference": output})
+    model.addChildAlgorithm(child)
+    return model
+
+
+def test_a_model_feeds_a_raster_input_to_before(provider, design_site, tmp_path):
+    """Model Builder: a model whose raster input feeds *Before* runs, and its output raster holds the net."""
+    from qgis import processing
+    from qgis.core import QgsProcessingContext, QgsProcessingParameterRasterLayer
+
+    design, after, truth = design_site
+    model = _model(QgsProcessingParameterRasterLayer("design", "Design"))
+    values = {"design": str(design), "survey": str(after), "difference": str(tmp_path / "model_dod.tif")}
+    checked = model.checkParameterValues(values, QgsProcessingContext())
+    assert checked[0], checked
+    result = processing.run(model, values)
+    difference = QgsRasterLayer(next(v for k, v in result.items() if k.endswith("difference")), "difference")
+    assert difference.isValid() and difference.crs().authid() == "EPSG:32654"
+    stats = difference.dataProvider().bandStatistics(1)
+    cell = difference.rasterUnitsPerPixelX() * difference.rasterUnitsPerPixelY()
+    assert stats.sum * cell == pytest.approx(truth["net"], rel=0.03)  # the model's raster holds the net change

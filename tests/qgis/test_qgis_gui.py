@@ -49,6 +49,11 @@ def test_dialog_widgets(session):
     assert dialog["fine_value"] == "icp"
     assert dialog["before_value"].endswith("before.las")
     assert not dialog["registered_created"]  # the registered cloud is off by default
+    listed = {
+        side: [e for e in dialog[f"{side}_dropdown"] if e.startswith("design DEM")] for side in ("before", "after")
+    }
+    assert listed["before"], dialog  # a raster layer of the project as the reference (a design surface)
+    assert not listed["after"], dialog  # the after survey is a point cloud
     assert (ARTEFACTS / "estimate_dialog.png").stat().st_size > 10_000
 
 

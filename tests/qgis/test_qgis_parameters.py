@@ -76,10 +76,18 @@ def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
 
 
 def test_one_required_input_per_epoch(estimate):
-    for key in ("BEFORE", "AFTER"):
-        param = estimate.parameterDefinition(key)
-        assert isinstance(param, QgsProcessingParameterPointCloudLayer)
+    from qgis.core import Qgis, QgsProcessingParameterMapLayer
+
+    after, before = estimate.parameterDefinition("AFTER"), estimate.parameterDefinition("BEFORE")
+    assert isinstance(after, QgsProcessingParameterPointCloudLayer)
+    # BEFORE may be a surface too: its dropdown lists point cloud and raster layers
+    assert isinstance(before, QgsProcessingParameterMapLayer)
+    kinds = {Qgis.ProcessingSourceType(t) for t in before.dataTypes()}
+    assert kinds == {Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster}
+    assert "*.tif" in before.createFileFilter() and "*.ply" in before.createFileFilter()
+    for param in (after, before, before.clone()):
         assert not param.flags() & param.FlagOptional
+    assert isinstance(before.clone(), type(before)) and before.clone().dataTypes() == before.dataTypes()
     names = {p.name() for p in estimate.parameterDefinitions()}
     assert not {"BEFORE_LAYER", "AFTER_LAYER"} & names
 
