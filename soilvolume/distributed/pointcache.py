@@ -13,6 +13,7 @@ from ..inputs.stream import CHUNK, Source, file_chunks
 
 CACHE_BYTES_PER_POINT = 40.0  # xyz float64, classification, RGB, returns (33 B) and the chunk lists
 CACHE_SHARE = 0.3  # of the budget: what the workers may hold beside their tasks (below Dask's spilling)
+HELD_POINTS = 8_000_000  # points of the tiles the driver reads while the cluster starts (~320 MB)
 
 
 def read_tile(path: str) -> tuple:
@@ -61,9 +62,11 @@ class PointCache:
         return out
 
     def fits(self, src: Source, path: str) -> bool:
-        """Whether the tile ``path`` of ``src`` (a VPC) fits what is left of the budget."""
+        """Whether the tile ``path`` of ``src`` (a VPC) fits what is left of the budget, and
+        the driver may hold it (:data:`HELD_POINTS` at most, till the workers are up)."""
         count = next((t.count for t in src.vpc.tiles if t.path == path), None)
-        return count is not None and count * CACHE_BYTES_PER_POINT <= self.left
+        held = sum(len(c[0]) for chunks in self.held.values() for c in chunks)
+        return count is not None and count * CACHE_BYTES_PER_POINT <= self.left and held + count <= HELD_POINTS
 
     def hold(self, src: Source, path: str, chunks: tuple) -> None:
         """Keep the chunks of a tile the driver read (see :meth:`fits`) for the workers: sent to
