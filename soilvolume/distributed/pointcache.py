@@ -43,7 +43,7 @@ class PointCache:
     def take(self, src: Source, paths: list[str], priority: int = 0) -> list:
         """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
         read by streaming (not a VPC tile, COPC, or beyond the budget)."""
-        self._send_held()
+        self.send_held()
         if src.vpc is None:
             return [None] * len(paths)
         counts = {t.path: t.count for t in src.vpc.tiles}
@@ -76,7 +76,8 @@ class PointCache:
         self.points += count
         self.held[path] = chunks
 
-    def _send_held(self) -> None:
+    def send_held(self) -> None:
+        """The tiles the driver holds (:meth:`hold`) sent to the workers."""
         for path, chunks in self.held.items():
             self.futures[path] = self.client.scatter([chunks], hash=False)[0]
         self.held.clear()
@@ -92,7 +93,7 @@ class PointCache:
 
     def meeting(self, src: Source) -> dict:
         """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
-        self._send_held()
+        self.send_held()
         if src.vpc is None:
             return {}
         return {p: self.futures[p] for p in src.tiles() if p in self.futures}

@@ -266,6 +266,8 @@ def run_tiles(
 def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
     """Per window, the (before, after) {path: future} of the cached VPC tiles its reads open
     (None without a cache)."""
+    if cache is not None:
+        cache.send_held()  # tiles the driver read while the cluster started
     if cache is None or not cache.futures:
         return None
     return [tuple(cache.meeting(window_source(plan, e, w)[1]) for e in (0, 1)) for w in windows]
