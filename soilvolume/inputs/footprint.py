@@ -7,6 +7,7 @@ radius; the same polygon is what a PDAL ``filters.crop`` receives, so both paths
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from ..core.types import SoilVolumeError, short_error
 
@@ -28,8 +29,6 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
 def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.ndarray:
     """Convex hull of ``xy`` buffered by ``radius`` (exact Minkowski sum with a 'segments'-gon
     circumscribing the circle), as a closed-free (K, 2) vertex array, counter-clockwise."""
-    from scipy.spatial import ConvexHull, QhullError  # here: tile tasks import this module, not scipy
-
     step = max(1, len(xy) // 200_000)
     try:
         hull = ConvexHull(xy[::step])
