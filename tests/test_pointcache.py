@@ -81,3 +81,24 @@ def test_cached_tiles_on_worker_processes(vpcs, tmp_path):
     local, eng = _run(vpcs, tmp_path / "local", "local:2")
     assert eng["task_points_from_memory"] == eng["task_points_read"] > 0
     _identical(local, threads)
+
+
+def test_tiles_the_driver_read_while_the_cluster_started(vpcs, tmp_path, monkeypatch):
+    """Tiles scanned by the driver before the workers are up, then handed to them for the grid,
+    give the run on the workers alone byte for byte."""
+    from soilvolume.distributed import cluster
+
+    ref, _ = _run(vpcs, tmp_path / "ref", "threads:2")
+    calls = {"n": 0}
+
+    def starting(self) -> bool:  # the cluster "starts" during the first four tiles
+        calls["n"] += 1
+        return calls["n"] > 4
+
+    monkeypatch.setattr(cluster.LazyClient, "ready", starting)
+    held = []
+    hold = pointcache.PointCache.hold
+    monkeypatch.setattr(pointcache.PointCache, "hold", lambda self, *a: (held.append(a[1]), hold(self, *a)))
+    got, eng = _run(vpcs, tmp_path / "driver", "threads:2")
+    assert len(held) == 4 and eng["task_points_from_memory"] == eng["task_points_read"] > 0
+    _identical(got, ref)

@@ -109,3 +109,26 @@ def test_large_runs_keep_freed_memory(monkeypatch):
     if sys.platform.startswith("linux"):
         assert heap.keep_freed_memory(heap.LARGE_RUN_POINTS + 1)
         assert not heap.keep_freed_memory(heap.LARGE_RUN_POINTS + 1)  # once per process
+
+
+def test_a_stage_timed_within_another_is_left_out_of_it(monkeypatch):
+    """``cluster_wait`` timed inside ``crop`` (the cluster waited for at its first use): each
+    counts its own time and the stages still add up to the wall time."""
+    import time as clock
+
+    from soilvolume.workflow.timing import Timer
+
+    now = [100.0]
+    monkeypatch.setattr(clock, "perf_counter", lambda: now[0])
+    t = Timer()
+    with t("crop"):
+        now[0] += 1.0
+        with t("cluster_wait"):
+            now[0] += 2.0
+        now[0] += 0.5
+    with t("grids"):
+        now[0] += 0.25
+        assert t.totals()["grids"] == 0.25  # a stage still open counts what ran so far
+    s = t.totals()
+    assert (s["crop"], s["cluster_wait"], s["grids"]) == (1.5, 2.0, 0.25)
+    assert sum(v for k, v in s.items() if k != "startup") == 3.75

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
 from ..inputs.io import atomic_path
+from .cellstats import BLOCK, cell_heights
 from .slopes import slopes
 
 NODATA = -9999.0
@@ -85,6 +86,13 @@ class OffsetSums:
         """Points in flat cells ``ids`` at fractional grid coordinates ``col``/``row``."""
         self.sx += np.bincount(ids, weights=col - np.floor(col), minlength=self.sx.size)
         self.sy += np.bincount(ids, weights=row - np.floor(row), minlength=self.sy.size)
+
+    def add_at(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
+        """:meth:`add`, point by point into the sums (``np.add.at``): blocks added this way give
+        the same bits as one :meth:`add` of all of them into empty sums (a bincount adds in the
+        points' order too)."""
+        for sums, c in ((self.sx, col), (self.sy, row)):
+            np.add.at(sums, ids, (c - np.floor(c)).astype(np.float64))  # one dtype: numpy's fast path
 
     def means(self, counts: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
         """(east, north) mean offsets (m) from the cell centres, 0 where empty; ``counts``: the
@@ -166,24 +174,41 @@ def average_height(
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
 
 
-def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", nonsoil=None) -> EpochDEM:
+def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", nonsoil=None, move=None) -> EpochDEM:
     """:func:`average_height` of one epoch's soil points with their spreads and offsets from
     the cell centres, and the per-cell counts of its ``nonsoil`` points (``soil.points.NonSoil``,
-    in the grid's frame), as an :class:`EpochDEM` (see :func:`finish_epoch`)."""
-    col, row, ok = cell_coords(xyz, grid)
-    col, row = col[ok], row[ok]
-    ids = flat_ids(col, row, grid.cols)
-    sums = OffsetSums(grid.rows * grid.cols)
-    sums.add(ids, col, row)
-    del col, row
-    z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
-    heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True, skew=True)
+    in the grid's frame), as an :class:`EpochDEM` (see :func:`finish_epoch`). ``move``: applied
+    to each block of :data:`BLOCK` points first (the after cloud's registration, block by block:
+    no moved copy of the cloud). The points are assigned to cells block by block; only their
+    cell ids and heights are kept whole (the same arrays, in the same order, as in one piece)."""
+    n = grid.rows * grid.cols
+    sums = OffsetSums(n)
+    ids, z = _cells_of(xyz, grid, move, sums)
+    heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True, skew=True, own=True)
+    del ids, z
     others = None
     if nonsoil is not None:
         o_ids, o_ok = cell_ids(nonsoil.xyz, grid)
         others = nonsoil_sums(o_ids, nonsoil.labels[o_ok], nonsoil.xyz[o_ok, 2], (grid.rows, grid.cols))
     rule = nonsoil.rule if nonsoil is not None else None
     return finish_epoch(heights, sums.means(heights[1], grid.cell), others, rule)
+
+
+def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[np.ndarray, np.ndarray]:
+    """(flat cell ids, float64 heights) of the points of ``xyz`` inside ``grid``, in order,
+    assigned block by block (moved by ``move`` first); their centre offsets into ``sums``."""
+    ids, z = np.empty(len(xyz), np.int64), np.empty(len(xyz), np.float64)  # pages never written stay free
+    m = 0
+    for i in range(0, len(xyz), BLOCK):
+        part = xyz[i : i + BLOCK] if move is None else move(xyz[i : i + BLOCK])
+        col, row, ok = cell_coords(part, grid)
+        col, row = col[ok], row[ok]
+        k = len(col)
+        ids[m : m + k] = flat_ids(col, row, grid.cols)
+        sums.add_at(ids[m : m + k], col, row)
+        z[m : m + k] = np.compress(ok, part[:, 2])
+        m += k
+    return ids[:m], z[:m]
 
 
 def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:
@@ -210,100 +235,6 @@ def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> 
         h, s, skew = (np.where(gone, np.nan, a) for a in (h, s, skew))
         n = np.where(gone, 0, n)
     return EpochDEM(h, n, s, *offsets, *others, skew, rule)
-
-
-def cell_heights(
-    ids: np.ndarray,
-    z: np.ndarray,
-    shape: tuple[int, int],
-    statistic: str = "robust-mean",
-    k_mad: float = 3.0,
-    spread: bool = False,
-    skew: bool = False,
-) -> tuple[np.ndarray, ...]:
-    """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
-    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid); with
-    ``skew`` (and ``spread``) also each cell's height minus its median (0 for ``median``, NaN
-    where empty; for ``mean`` the plain mean's)."""
-    if statistic not in ("mean", "median", "robust-mean"):
-        raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
-    n = shape[0] * shape[1]
-    if statistic == "mean" or len(z) == 0:
-        counts = np.bincount(ids, minlength=n)
-        mean = _mean(ids, z, counts, n)
-        out = (mean.reshape(shape), counts.reshape(shape))
-        if spread:
-            sq = _mean(ids, z * z, counts, n)
-            out += (np.sqrt(np.maximum(sq - mean * mean, 0.0)).reshape(shape),)
-        if skew:
-            med = _SortedCells(ids, z, n).quantile(0.5) if len(z) else mean
-            out += ((mean - med).reshape(shape),)
-        return out
-    keys = _SortedCells(ids, z, n)
-    med = keys.quantile(0.5)
-    iqr_sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
-    extra = (iqr_sigma.reshape(shape),) if spread else ()
-    if statistic == "median":
-        return (med.reshape(shape), keys.counts.reshape(shape), *extra, *((np.zeros(shape),) if skew else ()))
-    sigma = np.maximum(iqr_sigma, 0.01)
-    h = keys.mean_between(med - k_mad * sigma, med + k_mad * sigma)
-    return (h.reshape(shape), keys.counts.reshape(shape), *extra, *(((h - med).reshape(shape),) if skew else ()))
-
-
-class _SortedCells:
-    """Heights sorted by (cell, height) through one sort of int64 keys ``cell << bits | height``
-    (height quantized to 0.1 mm, coarser only for a huge height range)."""
-
-    def __init__(self, ids: np.ndarray, z: np.ndarray, n_cells: int) -> None:
-        self.z0 = float(z.min())
-        id_bits = max(1, int(n_cells).bit_length())
-        self.bits = 62 - id_bits
-        self.q = max(1e-4, (float(z.max()) - self.z0) / (2**self.bits - 2))
-        key = np.left_shift(ids.astype(np.int64, copy=False), self.bits)
-        t = np.subtract(z, self.z0)  # one float temporary, rounded in place
-        key |= np.rint(np.divide(t, self.q, out=t), out=t).astype(np.int64)
-        del t
-        key.sort(kind="stable")  # the same keys in order; timsort runs on file order (~2.5x faster)
-        self.key = key
-        self.counts = np.bincount(key >> self.bits, minlength=n_cells)
-        self.starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
-        self.has = self.counts > 0
-
-    def height(self, idx: np.ndarray) -> np.ndarray:
-        return (self.key[idx] & ((1 << self.bits) - 1)) * self.q + self.z0
-
-    def quantile(self, p: float) -> np.ndarray:
-        """Per-cell quantile (linear interpolation between order statistics); NaN if empty."""
-        out = np.full(self.counts.shape, np.nan)
-        c, s = self.counts[self.has], self.starts[self.has]
-        pos = p * (c - 1)
-        lo = np.floor(pos).astype(np.int64)
-        hi = np.minimum(lo + 1, c - 1)
-        w = pos - lo
-        out[self.has] = (1 - w) * self.height(s + lo) + w * self.height(s + hi)
-        return out
-
-    def mean_between(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """Per-cell mean of the heights within [lo, hi]; NaN for empty cells."""
-        cells = np.flatnonzero(self.has)
-        base = cells.astype(np.int64) << self.bits
-        top = (1 << self.bits) - 1
-        qlo = np.clip(np.ceil((lo[cells] - self.z0) / self.q - 1e-9), 0, top).astype(np.int64)
-        qhi = np.clip(np.floor((hi[cells] - self.z0) / self.q + 1e-9), 0, top).astype(np.int64)
-        a = np.searchsorted(self.key, base | qlo, "left")
-        b = np.searchsorted(self.key, base | qhi, "right")
-        csum = np.concatenate([[0.0], np.cumsum(self.key & top, dtype=np.float64)])
-        out = np.full(self.counts.shape, np.nan)
-        k = b - a
-        out[cells] = (csum[b] - csum[a]) / np.maximum(k, 1) * self.q + self.z0
-        out[cells[k == 0]] = np.nan
-        return out
-
-
-def _mean(ids: np.ndarray, z: np.ndarray, counts: np.ndarray, n: int) -> np.ndarray:
-    sums = np.bincount(ids, weights=z, minlength=n)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
 
 
 def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> float:

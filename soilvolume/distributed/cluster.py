@@ -23,6 +23,9 @@ NO_WORKERS_S = 20.0  # a cluster without any worker for this long cannot run the
 POLL_S = 0.25  # how often a wait checks for signals and the cluster's health
 CLOSE_S = 15.0  # shutting the client and the cluster down
 WORKER_INIT = "soilvolume.distributed.workerinit"
+# Dask's statistical profiler samples every worker thread's stack every 10 ms: half of an idle
+# worker's CPU, and more on a busy one; nothing of this engine reads it
+QUIET = {"distributed.worker.profile.enabled": False}
 
 
 class Starting:
@@ -33,6 +36,7 @@ class Starting:
         self.what, self.timeout = what, timeout
         self.future: Future = Future()
         self.lock, self.abandoned = threading.Lock(), False
+        self.closing: threading.Thread | None = None
         threading.Thread(target=self._run, args=(start,), daemon=True, name="soilvolume-cluster").start()
 
     def _run(self, start) -> None:
@@ -71,12 +75,50 @@ class Starting:
                 ) from None
 
     def close(self) -> None:
-        """Shut the cluster down (now, or when its start finishes)."""
+        """Shut the cluster down (now, or when its start finishes); after :meth:`close_soon`,
+        wait (bounded) for that shutdown to end."""
+        if self.closing is not None:
+            self.closing.join(2 * CLOSE_S + 1)
+            return
+        self._shut()
+
+    def _shut(self) -> None:
         with self.lock:
             self.abandoned = True
             done = self.future.done() and self.future.exception() is None
         if done:
             shut(*self.future.result())
+
+    def close_soon(self) -> None:
+        """Start shutting the cluster down on a thread (it takes ~1 s: the driver's last steps
+        overlap it) once the run needs it no more; :meth:`close` waits for it."""
+        if self.closing is None:
+            self.closing = threading.Thread(target=self._shut, daemon=True, name="soilvolume-cluster-close")
+            self.closing.start()
+
+
+class LazyClient:
+    """The client of a cluster still starting: the first use waits for it (``wait``), so the
+    driver's own work before then (opening the sources, reading their first chunks) overlaps
+    the start of the workers."""
+
+    def __init__(self, wait: Callable[[], object], started: Callable[[], bool] = lambda: True) -> None:
+        self._wait, self._started, self._client = wait, started, None
+
+    def ready(self) -> bool:
+        """Whether the cluster is up (or failed: the next use says why)."""
+        return self._client is not None or self._started()
+
+    def resolve(self):
+        """The client (waiting for it the first time)."""
+        if self._client is None:
+            self._client = self._wait()
+        return self._client
+
+    def __getattr__(self, name: str):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self.resolve(), name)
 
 
 def shut(cluster, client) -> None:
@@ -124,7 +166,7 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
     if scratch is not None:
         scratch.mkdir(parents=True, exist_ok=True)
         extra["local_directory"] = str(scratch)
-    with dask.config.set({"temporary-directory": str(scratch) if scratch is not None else None}):
+    with dask.config.set({"temporary-directory": str(scratch) if scratch is not None else None, **QUIET}):
         cluster = _local_cluster(workers, processes, per_worker_gb, extra)
     try:
         return cluster, Client(cluster)

@@ -5,11 +5,22 @@ driver on the thinned subsets a first pass of tasks returns; the grid is cut int
 
 from __future__ import annotations
 
+import importlib
+import threading
 from contextlib import contextmanager
 
 from ..core.types import SoilVolumeError
 from ..core.wording import opt
 from .schedule import Schedule
+
+
+def _import_steps() -> None:
+    """The driver's next steps imported while it waits for the first pass's tasks (~0.2 s that
+    came between the reading and the registration)."""
+    try:
+        importlib.import_module("..workflow.steps", __package__)
+    except Exception:  # noqa: BLE001 - the step that needs it reports what is missing
+        pass
 
 
 class Tiled:
@@ -20,13 +31,15 @@ class Tiled:
 
     def __init__(self, schedule: Schedule) -> None:
         self.schedule = schedule
-        self.c = self.store = self.plan = self.cache = None
+        self.c = self.store = self.plan = self.cache = self.starting = self.src_a = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
         self.coarse = self.over_epochs = self.medians = None
 
     @contextmanager
     def session(self, run):
-        from .cluster import checker
+        """The run's tile store and cluster; the cluster starts in the background and is waited
+        for at its first use (``cluster_wait``), shut down in the background after its last."""
+        from .cluster import LazyClient, checker
         from .schedule import client
         from .tilestore import run_store
 
@@ -36,22 +49,30 @@ class Tiled:
                 "(or classify the tiles first)"
             )
         with run_store(run.out.final) as store, client(self.schedule, run.options.memory_limit, store.scratch) as s:
-            self.store = store
-            with run.timer("cluster_wait"):
-                self.c = s.result(checker(run.hooks))
+            self.store, self.starting = store, s
+
+            def wait():
+                with run.timer("cluster_wait"):
+                    return s.result(checker(run.hooks))
+
+            # the driver reads tiles itself while a local cluster starts (a remote one's workers read theirs)
+            self.c = LazyClient(wait, s.future.done if self.schedule.kind != "tcp" else lambda: True)
             yield self
 
     def prepare(self, run) -> None:
         from ..inputs.prepare import prepare
         from ..inputs.stream import open_source
         from .cluster import checker
-        from .pointcache import PointCache
+        from .pointcache import PointCache, near_after
         from .scan import dask_loader
         from .schedule import budget_gb
 
         hooks = run.hooks
-        self.src_b, src_a = (open_source(e.path) for e in run.epochs)
+        threading.Thread(target=_import_steps, daemon=True, name="soilvolume-steps").start()
+        self.src_b, self.src_a = (open_source(e.path) for e in run.epochs)
+        src_a = self.src_a
         self.cache = PointCache(self.c, budget_gb(run.options.memory_limit))
+        self.cache.expect(near_after(self.src_b, src_a, run.options.radius))
         loader = dask_loader(self.c, lambda m: hooks.step(run.at("prepare", 0.46), m), checker(hooks), self.cache)
         check = lambda: hooks.step(run.at("prepare", 0.23), "reading")  # noqa: E731
         run.prep = prepare(self.src_b, src_a, run.options, check=check, full=False, loader=loader)
@@ -70,7 +91,7 @@ class Tiled:
         run.after_thin = transform_points(prep.after_thin, reg.transform)
         cell = options.cell if options.cell else cell_from_columns(prep, run.after_thin)
         run.grid = shared_grid(prep, run.after_thin, options.with_(cell=cell))
-        self.plan = plan_for(run, cell)
+        self.plan = plan_for(run, cell, (self.src_b, self.src_a))
         self.windows, self.side, self.density = self._tiles(run, cell)
         run.hooks.step(
             run.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
@@ -96,6 +117,8 @@ class Tiled:
             arrays = run_tiles(self.c, self.plan, self.windows, run.hooks, self.kept, self.stats, self.cache)
             run.dems = epoch_dems(arrays, self.plan.rules)
         self.cache.release()  # the workers' memory back for the volume step
+        if self.k == 1:
+            self.starting.close_soon()  # the volume step runs here: the workers are done
 
     def _tiles(self, run, cell: float) -> tuple:
         """(the tile windows, their side in cells, points per cell) for the run's grid."""
@@ -132,7 +155,9 @@ class Tiled:
         from .volumestep import tile_volumes
 
         over = volume_step(self.over_epochs, run.planes[2], self.coarse, run.options, run.reg)
-        return tile_volumes(self.c, self.kept, self.k, over, run, self.medians)
+        vols = tile_volumes(self.c, self.kept, self.k, over, run, self.medians)
+        self.starting.close_soon()  # the rest reads the tile store
+        return vols
 
     def write(self, run) -> None:
         from .cog import write_outputs

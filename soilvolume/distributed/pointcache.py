@@ -6,11 +6,14 @@ Tiles that do not fit the budget are read again by the grid tasks, as without th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from ..inputs.copc import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
 
 CACHE_BYTES_PER_POINT = 40.0  # xyz float64, classification, RGB, returns (33 B) and the chunk lists
 CACHE_SHARE = 0.3  # of the budget: what the workers may hold beside their tasks (below Dask's spilling)
+HELD_POINTS = 8_000_000  # points of the tiles the driver reads while the cluster starts (~320 MB)
 
 
 def read_tile(path: str) -> tuple:
@@ -26,10 +29,21 @@ class PointCache:
         self.client, self.left = client, budget_gb * CACHE_SHARE * 2**30
         self.futures: dict[str, object] = {}
         self.points = 0
+        self.expected: list[Source] = []
+        self.held: dict[str, tuple] = {}  # tiles read by the driver, until the workers are up
 
-    def take(self, src: Source, paths: list[str]) -> list:
+    def expect(self, src: Source) -> None:
+        """Read the tiles of ``src`` (a VPC, within its region) as soon as the first tiles are
+        taken, behind them: the later epoch's reads then overlap the driver's work between the
+        epochs and the first epoch's last tasks. Only when every tile expected fits the budget;
+        a tile read but not scanned is merely not needed (the grid reads what it meets)."""
+        if src.vpc is not None:
+            self.expected.append(src)
+
+    def take(self, src: Source, paths: list[str], priority: int = 0) -> list:
         """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
         read by streaming (not a VPC tile, COPC, or beyond the budget)."""
+        self.send_held()
         if src.vpc is None:
             return [None] * len(paths)
         counts = {t.path: t.count for t in src.vpc.tiles}
@@ -40,14 +54,46 @@ class PointCache:
                 out.append(None)
                 continue
             if p not in self.futures:
-                self.futures[p] = self.client.submit(read_tile, p, pure=False)
+                self.futures[p] = self.client.submit(read_tile, p, pure=False, priority=priority)
                 self.left -= need
                 self.points += counts[p]
             out.append(self.futures[p])
+        self._prefetch()
         return out
+
+    def fits(self, src: Source, path: str) -> bool:
+        """Whether the tile ``path`` of ``src`` (a VPC) fits what is left of the budget, and
+        the driver may hold it (:data:`HELD_POINTS` at most, till the workers are up)."""
+        count = next((t.count for t in src.vpc.tiles if t.path == path), None)
+        held = sum(len(c[0]) for chunks in self.held.values() for c in chunks)
+        return count is not None and count * CACHE_BYTES_PER_POINT <= self.left and held + count <= HELD_POINTS
+
+    def hold(self, src: Source, path: str, chunks: tuple) -> None:
+        """Keep the chunks of a tile the driver read (see :meth:`fits`) for the workers: sent to
+        them at the next :meth:`take` (the same chunks a worker's read gives)."""
+        count = next(t.count for t in src.vpc.tiles if t.path == path)
+        self.left -= count * CACHE_BYTES_PER_POINT
+        self.points += count
+        self.held[path] = chunks
+
+    def send_held(self) -> None:
+        """The tiles the driver holds (:meth:`hold`) sent to the workers."""
+        for path, chunks in self.held.items():
+            self.futures[path] = self.client.scatter([chunks], hash=False)[0]
+        self.held.clear()
+
+    def _prefetch(self) -> None:
+        expected, self.expected = self.expected, []
+        counts = {t.path: t.count for s in expected for t in s.vpc.tiles}
+        todo = [(s, s.tiles()) for s in expected]
+        need = sum(counts[p] for _, paths in todo for p in paths if p not in self.futures) * CACHE_BYTES_PER_POINT
+        if need <= self.left:
+            for s, paths in todo:
+                self.take(s, paths, priority=-1)  # after the scans of the tiles taken now
 
     def meeting(self, src: Source) -> dict:
         """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
+        self.send_held()
         if src.vpc is None:
             return {}
         return {p: self.futures[p] for p in src.tiles() if p in self.futures}
@@ -70,3 +116,16 @@ def chunks(src: Source, cached: dict | None, stats: dict):
             yield from cached[path]
         else:
             yield from file_chunks(path, src.region, CHUNK, signals=True)
+
+
+def near_after(before: Source, after: Source, radius: float) -> Source:
+    """The before VPC where the after cloud's header box plus the crop radius can reach (the
+    tiles its first pass will read: the crop polygon lies in that box), when both are in the
+    same CRS; else the before as it is (without a VPC: nothing expected)."""
+    import pyproj
+
+    same = before.crs_wkt is not None and before.crs_wkt == after.crs_wkt
+    if before.vpc is None or not same or pyproj.CRS.from_wkt(before.crs_wkt).is_geographic:
+        return replace(before, vpc=None)
+    reach = 1.02 * radius + 1.0
+    return before.within(after.lo[:2] - reach, after.hi[:2] + reach)

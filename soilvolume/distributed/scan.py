@@ -6,10 +6,12 @@ full-resolution points are kept, so :func:`prepare.prepare` runs unchanged on a 
 from __future__ import annotations
 
 from collections.abc import Callable
+from itertools import chain
 
 import numpy as np
 
 from ..core import interrupt
+from ..core.cells import bounds, rows
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..soil.points import SOIL, NonSoil, PointRule
@@ -52,10 +54,8 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
     t0 = time.perf_counter()
     for xyz, cls, sig in chunks:
         out["read_s"] += time.perf_counter() - t0
-        if indexed:
-            out["index"].append(
-                ((start or 0) + out["points"], len(xyz), xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0))
-            )
+        if indexed and start is not None:  # a range of a single file: its chunks' boxes bound the grid's reads
+            out["index"].append((start + out["points"], len(xyz), *bounds(xyz, 2)))
         out["points"] += len(xyz)
         local = shift(xyz)  # a chunk the reader allocated: shifted in place (a cached one: copied)
         labels = rule.labels(cls, sig)
@@ -64,7 +64,7 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
         if keep is not None:
             mask = keep(local) if mask is None else mask & keep(local)
         if mask is not None:
-            local = local[mask]
+            local = rows(local, mask)
         thinner.add(local)
         out["cropped"] += len(local)
         t0 = time.perf_counter()
@@ -110,10 +110,12 @@ def dask_loader(
         todo = units(src)
         thinning = (thinner.lo, thinner.hi, thinner.voxel, thinner.within)
         args = (src.region, to_local, rule, keep, thinning, indexed)
-        kept = cache.take(src, [u[0] for u in todo]) if cache is not None else [None] * len(todo)
-        futures = client.map(scan_unit, todo, *[[a] * len(todo) for a in args], kept, pure=False)
+        here, left = _scan_here(src, todo, args, cache, getattr(client, "ready", lambda: True), wait_check)
+        send = cache is not None and (left or client.ready())  # the tiles read here go to the workers once up
+        kept = cache.take(src, [u[0] for u in left]) if send else [None] * len(left)
+        futures = client.map(scan_unit, left, *[[a] * len(left) for a in args], kept, pure=False) if left else []
         parts = []
-        for k, part in enumerate(completed(client, futures, f"reading {src.path}", wait_check), 1):
+        for k, part in enumerate(chain(here, completed(client, futures, f"reading {src.path}", wait_check)), 1):
             cols, sums = part.pop("sums")
             thinner.sums[:, cols] += sums
             parts.append(part)
@@ -129,3 +131,23 @@ def dask_loader(
         return Loaded(empty, thinner.result(), total["points"], total["used"], note, extra, nothing)
 
     return loader
+
+
+def _scan_here(src: Source, todo: list[Unit], args: tuple, cache, ready: Callable[[], bool], check) -> tuple:
+    """(parts, units left): the VPC tiles of ``todo`` scanned in this process, in order, while
+    the cluster is still starting (``ready()`` false) and the tiles fit ``cache``, which hands
+    them to the workers once they are up (:meth:`.pointcache.PointCache.hold`): the driver's
+    reading overlaps the workers' start instead of waiting for it."""
+    from .pointcache import read_tile
+
+    parts = []
+    while todo and cache is not None and src.vpc is not None and not ready():
+        path = todo[0][0]
+        if is_copc(path) or not cache.fits(src, path):
+            break
+        chunks = read_tile(path)
+        parts.append(scan_unit(todo[0], *args, cached=chunks))
+        cache.hold(src, path, chunks)
+        todo = todo[1:]
+        check()
+    return parts, todo

@@ -25,7 +25,7 @@ import numpy as np
 from ..core.types import GridSpec, SoilVolumeError
 from ..core.wording import opt
 from ..dem.grid import choose_cell
-from ..inputs.footprint import footprint, inside, polygon_area
+from ..inputs.footprint import PolygonMask, footprint, inside, polygon_area
 from ..inputs.prepare import Prepared
 from ..inputs.stream import open_source
 from ..options import Options
@@ -107,16 +107,17 @@ def _header_points(path) -> int | None:
     return open_source(path).count
 
 
-def plan_for(run, cell: float) -> Plan:
-    """What every tile task of ``run`` (:class:`soilvolume.workflow.run.Run`) needs (picklable)."""
+def plan_for(run, cell: float, sources: tuple = (None, None)) -> Plan:
+    """What every tile task of ``run`` (:class:`soilvolume.workflow.run.Run`) needs (picklable);
+    ``sources``: the (before, after) sources the driver opened (the tasks then open none)."""
     prep, options = run.prep, run.options
     b, a = (str(e.path) for e in run.epochs)
     crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
     ring = footprint(prep.after_thin[:, :2], options.radius)
     grid, t = run.grid, run.reg.transform
-    return Plan(
-        b, a, *crs, prep.frame, prep.origin, grid, t, prep.ground, ring, options.statistic, prep.index, prep.rules
-    )
+    streamed = tuple(None if s is None or s.raw is not None else s for s in sources)  # never whole clouds
+    parts = (prep.frame, prep.origin, grid, t, prep.ground, ring, options.statistic, prep.index, prep.rules)
+    return Plan(b, a, *crs, *parts, streamed, PolygonMask(ring))
 
 
 def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:

@@ -59,9 +59,13 @@ class Plan:
     statistic: str
     index: tuple = (None, None)  # (before, after): chunk boxes of single files, for bounded reads
     rules: tuple = (None, None)  # (before, after): soil.points.PointRule of each epoch (None: class 2 by ground)
+    # what the driver opened already, so no task reads them again (not part of the tiles' key):
+    sources: tuple = (None, None)  # (before, after) stream.Source from the headers (a VPC's tiles)
+    mask: PolygonMask | None = None  # the crop as a lattice
 
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
+OPENED = ("sources", "mask")  # the Plan's fields derived from the others and the inputs
 
 
 def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
@@ -69,7 +73,7 @@ def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
     grid, the registration (to 12 decimals), the crop, the tiling and the overview factor."""
     from dataclasses import fields
 
-    parts = {f.name: getattr(plan, f.name) for f in fields(plan) if f.name not in ("before", "after")}
+    parts = {f.name: getattr(plan, f.name) for f in fields(plan) if f.name not in ("before", "after", *OPENED)}
     parts.update(frame=plan.frame.wkt, grid=repr(plan.grid), transform=np.round(plan.transform, 12))
     parts.update(windows=windows, overview=k)
     return parts
@@ -82,7 +86,7 @@ def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Wi
     import time
 
     t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
-    before = _epoch(plan, 0, win, PolygonMask(plan.crop), stats, cached[0])
+    before = _epoch(plan, 0, win, plan.mask or PolygonMask(plan.crop), stats, cached[0])
     after = _epoch(plan, 1, win, None, stats, cached[1])
     stats["seconds"] = time.perf_counter() - t0
     arrays = tuple(
@@ -99,7 +103,8 @@ def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
     import pyproj
 
     crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])
-    src = replace(open_source((plan.before, plan.after)[epoch]), index=plan.index[epoch])
+    src = plan.sources[epoch] or open_source((plan.before, plan.after)[epoch])
+    src = replace(src, index=plan.index[epoch])
     box = _read_box(plan, crs, win, plan.transform if epoch else None)
     return crs, (src if box is None else src.within(*box)), box
 
@@ -261,6 +266,8 @@ def run_tiles(
 def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
     """Per window, the (before, after) {path: future} of the cached VPC tiles its reads open
     (None without a cache)."""
+    if cache is not None:
+        cache.send_held()  # tiles the driver read while the cluster started
     if cache is None or not cache.futures:
         return None
     return [tuple(cache.meeting(window_source(plan, e, w)[1]) for e in (0, 1)) for w in windows]

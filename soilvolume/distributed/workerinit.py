@@ -1,6 +1,7 @@
 """Run by every Dask worker process this engine starts (a ``preload``): a terminal's Ctrl-C goes
 to the whole process group, and only the driver acts on it (it stops the run and shuts the
-cluster down); a worker killed by it would fail its tasks (``FutureCancelledError``)."""
+cluster down); a worker killed by it would fail its tasks (``FutureCancelledError``). The tile
+tasks' modules are imported as the worker starts."""
 
 from __future__ import annotations
 
@@ -16,6 +17,17 @@ def ignore_interrupts() -> None:
 
 def dask_setup(worker=None) -> None:  # noqa: ARG001 - the preload protocol
     ignore_interrupts()
+    warm()
+
+
+def warm() -> None:
+    """Import what the tile tasks run (laspy, pyproj, the engine's readers and gridding) while
+    the worker starts: the driver reads the first tiles meanwhile, and the first tasks then
+    start at once instead of importing for ~0.4 s each."""
+    import importlib
+
+    for name in ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj"):
+        importlib.import_module(name)
 
 
 ignore_interrupts()

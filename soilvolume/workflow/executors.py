@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
+from functools import partial
 
 import numpy as np
 
@@ -59,12 +60,11 @@ class InProcess:
 
         prep, reg, opts = run.prep, run.reg, run.options
         self._start_cloud(run)
-        after_xyz = transform_points32(prep.after.xyz, reg.transform)
         run.after_thin = transform_points(prep.after_thin, reg.transform)
         grid = run.grid = shared_grid(prep, run.after_thin, opts)
         before_job = self.pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, opts.statistic, prep.before.nonsoil)
-        dem_a = gridmod.epoch_dem(after_xyz, grid, opts.statistic, moved_nonsoil(prep, reg))
-        del after_xyz
+        move = partial(transform_points32, t=reg.transform)  # block by block: no registered copy of the cloud
+        dem_a = gridmod.epoch_dem(prep.after.xyz, grid, opts.statistic, moved_nonsoil(prep, reg), move)
         run.dems = (dem_a, before_job.result())
 
     def correction_grid(self, run) -> tuple:

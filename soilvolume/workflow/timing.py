@@ -30,15 +30,22 @@ class Timer:
         self.t0 = time.perf_counter()
         self.startup = process_age()
         self._open: dict[str, float] = {}
+        self._inner: dict[str, float] = {}  # of each open stage: the time of the stages timed within it
 
     @contextmanager
     def __call__(self, name: str):
+        """Time the stage ``name``; a stage timed within another (e.g. ``cluster_wait`` within
+        ``crop``) is left out of the enclosing one, so the stages still add up."""
+        outer = next(reversed(self._open), None)
         t0 = self._open[name] = time.perf_counter()
         try:
             yield
         finally:
             del self._open[name]
-            self.s[name] = self.s.get(name, 0.0) + time.perf_counter() - t0
+            took = time.perf_counter() - t0
+            self.s[name] = self.s.get(name, 0.0) + took - self._inner.pop(name, 0.0)
+            if outer is not None and outer in self._open:
+                self._inner[outer] = self._inner.get(outer, 0.0) + took
 
     def totals(self) -> dict[str, float]:
         """The stages so far, with ``startup`` first and ``other`` last."""
@@ -46,7 +53,7 @@ class Timer:
         out = {} if self.startup is None else {"startup": self.startup}
         out.update(self.s)
         for name, t0 in self._open.items():  # a stage still running (the report's)
-            out[name] = out.get(name, 0.0) + now - t0
+            out[name] = out.get(name, 0.0) + now - t0 - self._inner.get(name, 0.0)
         timed = sum(out.values()) - out.get("startup", 0.0)
         out["other"] = max(0.0, now - self.t0 - timed)
         return out
