@@ -23,7 +23,7 @@ from scipy import linalg, ndimage, sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu, spsolve
 
-_FOUR = ndimage.generate_binary_structure(2, 1)
+FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use conjugate gradients
 _TIKHONOV = 1e-10  # biharmonic normal matrix + eps I: factorisable even where the system is singular
@@ -37,7 +37,7 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
     grid border (so they are enclosed by valid cells). ``None``/0 -> none."""
     if not max_cells or max_cells <= 0:
         return np.zeros(valid.shape, bool)
-    labels, n = ndimage.label(~valid, structure=_FOUR)
+    labels, n = ndimage.label(~valid, structure=FOUR)
     if n == 0:
         return np.zeros(valid.shape, bool)
     sizes = np.bincount(labels.ravel(), minlength=n + 1)
@@ -65,10 +65,10 @@ def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 def _reachable(targets: np.ndarray, known: np.ndarray) -> np.ndarray:
     """Target cells in 4-connected components that touch at least one known cell."""
-    labels, n = ndimage.label(targets, structure=_FOUR)
+    labels, n = ndimage.label(targets, structure=FOUR)
     if n == 0:
         return targets & False
-    touching = np.unique(labels[ndimage.binary_dilation(known, _FOUR) & targets])
+    touching = np.unique(labels[ndimage.binary_dilation(known, FOUR) & targets])
     ok = np.zeros(n + 1, bool)
     ok[touching] = True
     ok[0] = False
@@ -358,7 +358,7 @@ def refill_epoch(
 def typical_radius(mask: np.ndarray) -> float:
     """Radius (cells) of a disc the size of a typical component of ``mask``, weighted by area
     (what the filled volume mostly sits in); 1 when there is none."""
-    labels, n = ndimage.label(mask, structure=_FOUR)
+    labels, n = ndimage.label(mask, structure=FOUR)
     if n == 0:
         return 1.0
     size = np.bincount(labels.ravel())[1:].astype(float)

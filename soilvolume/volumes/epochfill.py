@@ -28,7 +28,6 @@ from scipy import ndimage
 
 from ..dem import holes
 
-_FOUR = ndimage.generate_binary_structure(2, 1)
 SHARED = 0.25  # a hole with this share of its cells empty in both surveys is the difference's whole
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
 DETAIL_RATIO = 4.0  # the measured survey's detail beyond this many times the other's own: change
@@ -44,12 +43,12 @@ def fill_own_holes(
     others are left to the difference's fill. The error is that survey's mean-height error on
     holes of the patch's size."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
-    parts, m = ndimage.label(hole, _FOUR)
+    parts, m = ndimage.label(hole, holes.FOUR)
     share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
-        labels, n = ndimage.label(one, _FOUR)
+        labels, n = ndimage.label(one, holes.FOUR)
         if n == 0:
             continue
         idx = np.arange(1, n + 1)

@@ -22,7 +22,6 @@ from scipy import ndimage
 
 from ..dem import holes
 
-_FOUR = ndimage.generate_binary_structure(2, 1)
 RING = 2  # cells: the rim of a hole that says what surrounds it
 MIN_SHARE = 0.2  # each side holds at least this share of the rim, or the hole is left as it is
 MIN_SIDE = 8  # and at least this many rim cells: enough to carry a slope (on coarse grids the kink is inside a cell)
@@ -36,7 +35,7 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
-    labels, n = ndimage.label(hole, _FOUR)
+    labels, n = ndimage.label(hole, holes.FOUR)
     if n == 0:
         return out
     candidates = _both_sides(labels, n, change, stable)
@@ -45,7 +44,7 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
             continue
         box = tuple(slice(max(0, s.start - _PAD), s.stop + _PAD) for s in box)
         cells = labels[box] == k
-        rim = ndimage.binary_dilation(cells, _FOUR, iterations=RING) & known[box]
+        rim = ndimage.binary_dilation(cells, holes.FOUR, iterations=RING) & known[box]
         n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
@@ -64,7 +63,7 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     the exact rim is counted again for the holes that pass)."""
     grown = labels
     for _ in range(RING):
-        grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=_FOUR))
+        grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=holes.FOUR))
     idx = np.arange(n + 1)
     n_change = ndimage.sum(change, grown, idx)
     n_stable = ndimage.sum(stable, grown, idx)
