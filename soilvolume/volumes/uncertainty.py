@@ -25,6 +25,11 @@ from ..core.types import GridSpec
 INTERP_FRACTION = 0.15
 
 
+# The fit's covariance is not used: its warning is noise in the log. A process filter, not
+# ``catch_warnings`` (not thread-safe, and tile tasks run on threads).
+warnings.filterwarnings("ignore", message="Covariance of the parameters could not be estimated")
+
+
 def interp_fraction(patch_radius_cells: float) -> float:
     """One-sigma error of refilled change volume, as a share of it (fully correlated): refills over
     change edges overshoot convex toes and rims, and the partly covered cells around a hole bias
@@ -83,11 +88,7 @@ def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> d
     from scipy import optimize  # ~0.1 s of imports, only when there is a variogram to fit
 
     try:
-        with warnings.catch_warnings():  # the covariance is not used: its warning is noise in the log
-            warnings.simplefilter("ignore", optimize.OptimizeWarning)
-            p, _ = optimize.curve_fit(
-                spherical, lags, gamma, p0=p0, bounds=bounds, sigma=1 / np.sqrt(n_pairs), maxfev=5000
-            )
+        p, _ = optimize.curve_fit(spherical, lags, gamma, p0=p0, bounds=bounds, sigma=1 / np.sqrt(n_pairs), maxfev=5000)
     except (RuntimeError, ValueError):
         p = p0
     return {"nugget": float(p[0]), "psill": float(p[1]), "range": float(p[2])}

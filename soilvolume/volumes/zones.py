@@ -17,6 +17,11 @@ import numpy as np
 from ..core.types import GridSpec, SoilVolumeError
 from .polygons import Polygon, read_polygons, to_grid_crs
 
+# The grid's transform is given, yet GDAL's scratch raster inside rasterize warns all the same. A
+# filter for the process, not ``catch_warnings``: that swaps the global filter list and is not
+# thread-safe (tile tasks run on threads; a neighbour's exit let the warning reach stderr).
+warnings.filterwarnings("ignore", message="Dataset has no geotransform", module="rasterio.features")
+
 
 def _grid_transform(grid: GridSpec):
     """Affine of the grid in its CRS units (GridSpec.transform when it has one)."""
@@ -31,17 +36,14 @@ def _grid_transform(grid: GridSpec):
 def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
     """One boolean (rows, cols) mask per polygon (cells whose centre is inside)."""
     from rasterio import features
-    from rasterio.errors import NotGeoreferencedWarning
 
     tf = _grid_transform(grid)
-    with warnings.catch_warnings():  # the grid's transform is given: GDAL's scratch raster warns all the same
-        warnings.simplefilter("ignore", NotGeoreferencedWarning)
-        return [
-            features.rasterize(
-                [(p.geometry, 1)], out_shape=(grid.rows, grid.cols), transform=tf, fill=0, dtype="uint8"
-            ).astype(bool)
-            for p in polys
-        ]
+    return [
+        features.rasterize(
+            [(p.geometry, 1)], out_shape=(grid.rows, grid.cols), transform=tf, fill=0, dtype="uint8"
+        ).astype(bool)
+        for p in polys
+    ]
 
 
 def polygons_mask(path: str | Path, grid: GridSpec, what: str = "{opt:stable_mask} file") -> np.ndarray:
