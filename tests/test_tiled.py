@@ -216,7 +216,10 @@ def test_volume_step_tiles_on_a_local_cluster(pair, in_process, tmp_path):
     of 2 x 2 cells: volumes within 1 % of the
     in-process run (cut within 2 m3), half-widths 0.5-2x the in-process ones (each 16-cell tile
     finds its level of detection and error model in its own 48-cell window; wider, never much
-    narrower), and the difference raster within 2 cm on 99 % of its cells."""
+    narrower), and the difference raster within 2 cm on 99 % of its cells: the overview's
+    correction is the only difference (max 1.4 cm on this pair, 3.2 cm at a corner of seed 1's);
+    what the tiles compute with their neighbours (the refilled difference the correction is
+    subtracted from: centring slopes, refills, hole fills) is the in-process one to 1 mm."""
     before, after, _ = pair
     got = estimate(before, after, tmp_path / "r", Options(scheduler="local:2", tile_cells=16, volume_step="tiles"))
     ref = in_process.report
@@ -229,10 +232,18 @@ def test_volume_step_tiles_on_a_local_cluster(pair, in_process, tmp_path):
     with rasterio.open(got.outputs["difference"]) as g, rasterio.open(in_process.outputs["difference"]) as r:
         assert g.profile["tiled"] and g.overviews(1) is not None
         a, b = g.read(1, masked=True), r.read(1, masked=True)
-        both = ~a.mask & ~b.mask
-        assert both.sum() >= 0.98 * (~b.mask).sum()
-        assert np.mean(np.abs(a[both] - b[both]) <= 0.02) >= 0.99
+        np.testing.assert_array_equal(a.mask, b.mask)
+        assert np.mean(np.abs(a - b).compressed() <= 0.02) >= 0.99
+    offsets = [_read(v.outputs["plane_offset"]) for v in (got, in_process)]
+    refilled = (a.astype(float) + offsets[0]) - (b.astype(float) + offsets[1])  # before the correction
+    assert np.mean(np.abs(refilled.compressed()) <= 1e-3) >= 0.99, np.abs(refilled).max()
+    np.testing.assert_array_equal(*(_read(v.outputs["filled_mask"]) for v in (got, in_process)))
     assert not list(tmp_path.glob(".*soilvolume-tiles*"))  # the tile store is gone after success
+
+
+def _read(path) -> np.ma.MaskedArray:
+    with rasterio.open(path) as ds:
+        return ds.read(1, masked=True).astype(float)
 
 
 def test_overview_pieces():
