@@ -82,3 +82,35 @@ def test_the_interval_term_covers_what_is_left_of_the_holes_on_the_rim():
     # what the interval's refilled share already gives the holes' cells is not counted twice
     assert outline_sigma(got - values, got, parts, 0.5, CELL**2)["cut"] == 0.0
     assert 0.0 < outline_sigma(got - values, got, parts, 0.01, CELL**2)["cut"] < sigma["cut"]
+
+
+def _trench(n: int = 120, depth: float = 2.0, half: float = 1.5, run: float = 0.5, angle: float = 6.0):
+    """The difference of a 3 m wide, 2 m deep trench with steep (0.5 m) walls across level ground,
+    44 m long and turned by ``angle`` degrees; with the cells' x, y (m)."""
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) * CELL - n * CELL / 2
+    t = np.radians(angle)
+    along, across = np.abs(x * np.cos(t) + y * np.sin(t)), np.abs(-x * np.sin(t) + y * np.cos(t))
+    return -np.clip(np.minimum(22.0 - along, half - across) * depth / run, 0.0, depth), x, y, t
+
+
+def test_holes_beside_a_trench_wall_keep_the_ground_level():
+    """Six seeded holes (1.5-2.5 m radius) centred on level ground 0.8-1.6 m off a trench's edge,
+    reaching its wall and floor: the works' rim touches each on one side only. The outline goes
+    on straight through them (its signed distance interpolated); each cell going with the nearer
+    rim gave the works a sector reaching the hole's middle, a 2 m deep wedge of unchanged ground
+    (-12.7 m3 over the holes, of -13.6 smoothly filled); -9.1 m3 now."""
+    truth, x, y, t = _trench()
+    rng = np.random.default_rng(3)
+    err = smooth = 0.0
+    for _ in range(6):
+        along, side = rng.uniform(-18.0, 18.0), rng.choice([-1.0, 1.0])
+        off, radius = 1.5 + rng.uniform(0.8, 1.6), rng.uniform(1.5, 2.5)
+        cx, cy = along * np.cos(t) - side * off * np.sin(t), along * np.sin(t) + side * off * np.cos(t)
+        hole = np.hypot(x - cx, y - cy) < radius
+        values = holes.fill(np.where(hole, np.nan, truth), hole)
+        got = refill_across_outline(values, hole, ~hole & (np.abs(truth) > 0.01), "biharmonic")
+        assert np.array_equal(got[~hole], values[~hole])
+        err += float((got - truth)[hole].sum()) * CELL**2
+        smooth += float((values - truth)[hole].sum()) * CELL**2
+    assert smooth < -10.0, smooth
+    assert abs(err) < 0.75 * abs(smooth) and abs(err) < 10.5, (err, smooth)

@@ -9,8 +9,13 @@ side is interpolated from its own rim only, with a free edge at the split: the s
 works runs on to the outline instead of bending into the ground around it, and the ground stays
 level.
 
-Where the outline runs inside the hole is not seen: the split by distance puts it half-way
-between the two rims, and the works' slope ends there, not at the kink. The two fills' difference
+Where the outline runs inside the hole is not seen: it is taken to go on as it runs outside, the
+signed distance to it interpolated across the hole (a straight outline goes on straight: its
+signed distance is a plane, which the interpolants keep). Each cell going with its nearer rim
+split a hole that the works' rim touches on one side only like a pie, the works' sector
+reaching the hole's middle: a hole on a trench's edge took a 2 m deep wedge of unchanged ground
+(accuracy harness, works-trench: -3.6 m3 on one hole), and one across the trench cut its floor
+off half-way (+4.0 m3). The works' slope ends there, not at the kink. The two fills' difference
 over each hole is that uncertainty; what of it the interval's refilled share does not already
 give those cells is a term of the interval by name (:func:`outline_sigma`).
 """
@@ -48,13 +53,25 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
         n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
-        nearer_change = ndimage.distance_transform_edt(~change[box]) < ndimage.distance_transform_edt(~stable[box])
+        nearer_change = _change_side(cells, change[box], stable[box], method)
         view = out[box]
         for side, own in ((cells & nearer_change, change[box]), (cells & ~nearer_change, stable[box])):
             filled = holes.fill(np.where(own | side, values[box], np.nan), side, method)
             ok = side & np.isfinite(filled)
             view[ok] = filled[ok]
     return out
+
+
+def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, method: str) -> np.ndarray:
+    """The hole ``cells`` on the works' side of the outline continued through the hole: the
+    signed distance to the outline (+ in the works, - in unchanged ground; cells) interpolated
+    across the hole, its zero the outline. A cell holding part of the change is a change cell,
+    so the outline runs through the last change cells: their centres are its zero. Where the
+    interpolation finds nothing, the nearer rim."""
+    to_change, to_stable = ndimage.distance_transform_edt(~change), ndimage.distance_transform_edt(~stable)
+    signed = np.where(change, to_stable - 1.0, np.where(stable, -to_change, np.nan))
+    signed = holes.fill(np.where(cells, np.nan, signed), cells, method)
+    return np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
 
 
 def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarray) -> np.ndarray:
