@@ -23,33 +23,40 @@ def test_engine_modules_leave_open3d_rasterio_and_requests_to_the_run(tmp_path):
         "from soilvolume.inputs.stream import open_source\n"
         f"n = open_source({str(b)!r}).count\n"
         "mods = ('open3d', 'rasterio', 'requests', 'laspy', 'scipy.optimize', 'soilvolume.reporting.html')\n"
-        "print(json.dumps([n] + [m in sys.modules for m in mods]))\n"
+        "out = [n] + [m in sys.modules for m in mods]\n"
+        "import soilvolume.distributed.tiled, soilvolume.workflow.executors, soilvolume.workflow.steps\n"
+        "import soilvolume.inputs.prepare  # what the reading needs\n"
+        "print(json.dumps(out + [m in sys.modules for m in ('scipy.ndimage', 'soilvolume.volumes.compute')]))\n"
     )
     r = run_python(code)
     assert r.returncode == 0, r.stderr
-    count, open3d, rasterio, requests, laspy, optimize, html = json.loads(r.stdout)
+    count, open3d, rasterio, requests, laspy, optimize, html, ndimage, volumes = json.loads(r.stdout)
     assert count > 1000 and laspy
     assert not open3d and not rasterio and not requests and not optimize and not html
+    assert not ndimage and not volumes  # the preload thread imports them while the clouds are read
 
 
 def test_preload_imports_open3d_then_rasterio_and_the_later_steps_after_the_reading():
-    """Open3D during the reading; rasterio and the later steps' modules (the variogram fit's
-    scipy.optimize, the report) only once the reading is done, while the registration runs."""
+    """Open3D and the registration's and volume step's modules (ndimage) during the reading;
+    rasterio and the later steps' modules (the variogram fit's scipy.optimize, the report) only
+    once the reading is done, while the registration runs."""
     code = (
         "import sys, time\n"
-        "from soilvolume.core.preload import LATER, preload, reading_done\n"
+        "from soilvolume.core.preload import DURING, LATER, preload, reading_done\n"
         "t = preload(True, threads=1)\n"
+        "t0 = time.time()\n"
+        "while not all(m in sys.modules for m in ('open3d', 'scipy.ndimage', *DURING)) and time.time() < t0 + 60:\n"
+        "    time.sleep(0.05)  # not imported here: the preload thread imports them\n"
         "time.sleep(0.2)\n"
-        "import open3d  # waits for the preload's import\n"
         "early = any(m in sys.modules for m in ('rasterio', *LATER))\n"
         "reading_done(); t.join(60)\n"
         "import os\n"
         "late = all(m in sys.modules for m in ('rasterio', 'scipy.optimize', 'soilvolume.reporting.html', *LATER))\n"
-        "print(early, late, os.environ['OMP_NUM_THREADS'], not t.is_alive())\n"
+        "print(time.time() < t0 + 60, early, late, os.environ['OMP_NUM_THREADS'], not t.is_alive())\n"
     )
     r = run_python(code, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["False", "True", "1", "True"]
+    assert r.stdout.split() == ["True", "False", "True", "1", "True"]
 
 
 def test_the_command_skips_scipys_docstring_rewriting_and_scipy_works_the_same():

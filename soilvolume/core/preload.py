@@ -5,10 +5,12 @@ their native libraries, and a run needs them only after the inputs are read. Imp
 from the start, they overlap with the reading (numpy and laspy release the GIL); the step that
 needs one waits on Python's module lock until it is complete. rasterio waits until the reading is
 done (:func:`reading_done`): the peak memory of a run is at the end of the reading, and it would
-add its ~20 MB there. After rasterio come the modules of the later steps (:data:`LATER`): the
-registration that follows the reading spends most of its time in Open3D's ICP, which releases the
-GIL, so they import beside it instead of before the steps that need them. Nothing is imported that
-the run would not import anyway.
+add its ~20 MB there. Between the two, while the clouds are still read, come the modules of the
+registration and the volume step (:data:`DURING`: SciPy's ndimage and sparse solvers), which the
+reading does not need; after rasterio those of the later steps (:data:`LATER`): the registration
+that follows the reading spends most of its time in Open3D's ICP, which releases the GIL, so they
+import beside it instead of before the steps that need them. Nothing is imported that the run
+would not import anyway.
 """
 
 from __future__ import annotations
@@ -17,6 +19,9 @@ import os
 import threading
 
 _READ = threading.Event()  # set when the inputs are read (the memory peak is behind)
+#: what the registration and the volume step import (ndimage, the refill's sparse solvers),
+#: imported during the reading, after Open3D
+DURING = ("soilvolume.registration.register", "soilvolume.volumes.compute")
 #: what the steps after the registration import, in the order they need it (after rasterio):
 #: the volume step's variogram fit (scipy.optimize, ~0.1 s), the planes, the report and its map
 LATER = (
@@ -43,6 +48,8 @@ def _import(registration: bool) -> None:
             from ..registration.o3d import _o3d
 
             _o3d()
+        for name in DURING:
+            importlib.import_module(name)
         _READ.wait(120.0)
         for name in ("rasterio", *LATER):
             importlib.import_module(name)
@@ -51,7 +58,8 @@ def _import(registration: bool) -> None:
 
 
 def preload(registration: bool, threads: int = 0) -> threading.Thread:
-    """Start importing Open3D (when ``registration`` runs), then rasterio and :data:`LATER`, in the background.
+    """Start importing Open3D (when ``registration`` runs), :data:`DURING`, then rasterio and
+    :data:`LATER`, in the background.
     ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), so Open3D's OpenMP sees it."""
     if threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(threads))
