@@ -7,10 +7,9 @@ needs one waits on Python's module lock until it is complete. rasterio waits unt
 done (:func:`reading_done`): the peak memory of a run is at the end of the reading, and it would
 add its ~20 MB there. Between the two, while the clouds are still read, come the modules of the
 registration and the volume step (:data:`DURING`: SciPy's ndimage and sparse solvers), which the
-reading does not need; after rasterio those of the later steps (:data:`LATER`): the registration
-that follows the reading spends most of its time in Open3D's ICP, which releases the GIL, so they
-import beside it instead of before the steps that need them. Nothing is imported that the run
-would not import anyway.
+reading does not need. Nothing is imported that the run would not import anyway. (Importing the
+later steps' modules, scipy.optimize and the report's, beside the registration's ICP was tried: no
+measurable gain on two cores, and ~30 MB more peak memory, the thread's allocations then.)
 """
 
 from __future__ import annotations
@@ -22,17 +21,6 @@ _READ = threading.Event()  # set when the inputs are read (the memory peak is be
 #: what the registration and the volume step import (ndimage, the refill's sparse solvers),
 #: imported during the reading, after Open3D
 DURING = ("soilvolume.registration.register", "soilvolume.volumes.compute")
-#: what the steps after the registration import, in the order they need it (after rasterio):
-#: the volume step's variogram fit (scipy.optimize, ~0.1 s), the planes, the report and its map
-LATER = (
-    "scipy.optimize",
-    "soilvolume.volumes.uncertainty",
-    "soilvolume.compensation.planes",
-    "rasterio.features",
-    "soilvolume.reporting.report",
-    "soilvolume.reporting.html",
-    "soilvolume.reporting.changeareas",
-)
 
 
 def reading_done() -> None:
@@ -51,15 +39,13 @@ def _import(registration: bool) -> None:
         for name in DURING:
             importlib.import_module(name)
         _READ.wait(120.0)
-        for name in ("rasterio", *LATER):
-            importlib.import_module(name)
+        importlib.import_module("rasterio")
     except Exception:  # noqa: BLE001 - the step that needs a package reports it missing itself
         pass
 
 
 def preload(registration: bool, threads: int = 0) -> threading.Thread:
-    """Start importing Open3D (when ``registration`` runs), :data:`DURING`, then rasterio and
-    :data:`LATER`, in the background.
+    """Start importing Open3D (when ``registration`` runs), :data:`DURING`, then rasterio, in the background.
     ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), so Open3D's OpenMP sees it."""
     if threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(threads))
