@@ -22,30 +22,70 @@ def test_engine_modules_leave_open3d_rasterio_and_requests_to_the_run(tmp_path):
         "import soilvolume.cli, soilvolume.workflow.estimate\n"
         "from soilvolume.inputs.stream import open_source\n"
         f"n = open_source({str(b)!r}).count\n"
-        "print(json.dumps([n] + [m in sys.modules for m in ('open3d', 'rasterio', 'requests', 'laspy')]))\n"
+        "mods = ('open3d', 'rasterio', 'requests', 'laspy', 'scipy.optimize', 'soilvolume.reporting.html')\n"
+        "out = [n] + [m in sys.modules for m in mods]\n"
+        "import soilvolume.distributed.tiled, soilvolume.workflow.executors, soilvolume.workflow.steps\n"
+        "import soilvolume.inputs.prepare  # what the reading needs\n"
+        "print(json.dumps(out + [m in sys.modules for m in ('scipy.ndimage', 'soilvolume.volumes.compute')]))\n"
     )
     r = run_python(code)
     assert r.returncode == 0, r.stderr
-    count, open3d, rasterio, requests, laspy = json.loads(r.stdout)
+    count, open3d, rasterio, requests, laspy, optimize, html, ndimage, volumes = json.loads(r.stdout)
     assert count > 1000 and laspy
-    assert not open3d and not rasterio and not requests
+    assert not open3d and not rasterio and not requests and not optimize and not html
+    assert not ndimage and not volumes  # the preload thread imports them while the clouds are read
 
 
-def test_preload_imports_open3d_then_rasterio_after_the_reading():
+def test_preload_imports_open3d_and_the_volume_step_then_rasterio_after_the_reading():
+    """Open3D and the registration's and volume step's modules (ndimage) during the reading;
+    rasterio only once the reading is done (the memory peak is behind)."""
     code = (
         "import sys, time\n"
-        "from soilvolume.core.preload import preload, reading_done\n"
+        "from soilvolume.core.preload import DURING, preload, reading_done\n"
         "t = preload(True, threads=1)\n"
+        "t0 = time.time()\n"
+        "while not all(m in sys.modules for m in ('open3d', 'scipy.ndimage', *DURING)) and time.time() < t0 + 60:\n"
+        "    time.sleep(0.05)  # not imported here: the preload thread imports them\n"
         "time.sleep(0.2)\n"
-        "import open3d  # waits for the preload's import\n"
         "early = 'rasterio' in sys.modules\n"
         "reading_done(); t.join(60)\n"
         "import os\n"
-        "print(early, 'rasterio' in sys.modules, os.environ['OMP_NUM_THREADS'], not t.is_alive())\n"
+        "late = 'rasterio' in sys.modules\n"
+        "print(time.time() < t0 + 60, early, late, os.environ['OMP_NUM_THREADS'], not t.is_alive())\n"
     )
     r = run_python(code, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["False", "True", "1", "True"]
+    assert r.stdout.split() == ["True", "False", "True", "1", "True"]
+
+
+def test_the_command_skips_scipys_docstring_rewriting_and_scipy_works_the_same():
+    """The command's process (``__main__.run``) installs :mod:`soilvolume.core.scipydocs` before
+    SciPy imports: SciPy's functions keep their docstrings without the appended notes and give
+    the same results; a process that imported SciPy first (a host such as QGIS) is left alone."""
+    probe = (
+        "import sys, json, numpy as np\n"
+        "from scipy import ndimage, optimize\n"
+        "a = np.random.default_rng(1).normal(size=(40, 30))\n"
+        "f = lambda h, a, b: a * h + b\n"
+        "p, _ = optimize.curve_fit(f, np.arange(9.0), 2 * np.arange(9.0) + 1, bounds=([0, 0], [5, 5]))\n"
+        "doc = ndimage.gaussian_filter.__doc__\n"
+        "print(json.dumps([type(sys.modules['scipy._lib._docscrape'].FunctionDoc).__name__,\n"
+        "  sys.modules['scipy._lib._docscrape'].FunctionDoc.__name__, 'Array API Standard Support' in doc,\n"
+        "  'Multidimensional Gaussian filter' in doc, ndimage.gaussian_filter(a, 1.5).tobytes().hex(), p.tolist()]))\n"
+    )
+    command = (  # the console entry with its command line replaced by the probe
+        "import soilvolume.cli\n"
+        f"soilvolume.cli.main = lambda: exec({probe!r}) or 0\n"
+        "from soilvolume.__main__ import run\n"
+        "run()\n"
+    )
+    host = "import scipy.ndimage\nfrom soilvolume.core.scipydocs import keep_docs\nassert not keep_docs()\n" + probe
+    r_cmd, r_host = run_python(command), run_python(host)
+    assert r_cmd.returncode == 0 and r_host.returncode == 0, r_cmd.stderr + r_host.stderr
+    cmd, plain = json.loads(r_cmd.stdout), json.loads(r_host.stdout)
+    assert cmd[1] == "KeptDoc" and plain[1] == "FunctionDoc"
+    assert not cmd[2] and plain[2] and cmd[3] and plain[3]  # the notes only in the host's docstrings
+    assert cmd[4] == plain[4] and np.allclose(cmd[5], [2.0, 1.0]) and cmd[5] == plain[5]
 
 
 def test_fresh_chunks_are_shifted_in_place_a_cloud_in_memory_never(tmp_path):

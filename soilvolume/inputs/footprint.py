@@ -33,41 +33,49 @@ _MEMO: dict = {}
 def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.ndarray:
     """Convex hull of ``xy`` buffered by ``radius`` (exact Minkowski sum with a 'segments'-gon
     circumscribing the circle), as a closed-free (K, 2) vertex array, counter-clockwise. A run
-    asks for the same thinned subsets' footprints in several steps: the last few are
-    remembered, by the points' bytes (a hash is ~4x cheaper than the hull)."""
+    asks for the same thinned subsets' footprints in several steps, buffered and not: the last
+    few hulls and buffers are remembered, by the points' bytes (a hash is ~4x cheaper than the
+    hull), and a buffer is made from the remembered hull."""
     if len(xy) > MEMO_POINTS:
-        return _footprint(xy, radius, segments)
+        return _buffered(_hull(xy), radius, segments)
     import hashlib
 
     data = np.ascontiguousarray(xy)
-    key = (
-        hashlib.blake2b(data.tobytes(), digest_size=16).digest(),
-        data.shape,
-        data.dtype.str,
-        float(radius),
-        segments,
-    )
+    key = (hashlib.blake2b(data.tobytes(), digest_size=16).digest(), data.shape, data.dtype.str)
+    hull = _remembered(key, lambda: _hull(xy))
+    if radius <= 0:
+        return hull.copy()
+    return _remembered((*key, float(radius), segments), lambda: _buffered(hull, radius, segments)).copy()
+
+
+def _remembered(key: tuple, make) -> np.ndarray:
+    """``make()``, remembered under ``key`` (the last few)."""
     if key not in _MEMO:
         if len(_MEMO) >= 8:
             _MEMO.pop(next(iter(_MEMO)))
-        _MEMO[key] = _footprint(xy, radius, segments)
-    return _MEMO[key].copy()
+        _MEMO[key] = make()
+    return _MEMO[key]
 
 
-def _footprint(xy: np.ndarray, radius: float, segments: int) -> np.ndarray:
+def _hull(xy: np.ndarray) -> np.ndarray:
+    """The convex hull's vertices of ``xy`` (of every k-th point past 200 000 points)."""
     step = max(1, len(xy) // 200_000)
     try:
         hull = ConvexHull(xy[::step])
     except (QhullError, ValueError) as exc:
         raise SoilVolumeError(f"a cloud's footprint is degenerate (points on a line?): {short_error(exc, 80)}") from exc
-    verts = xy[::step][hull.vertices]
-    if radius > 0:
-        ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
-        r = radius / np.cos(np.pi / segments)
-        circle = np.c_[np.cos(ang), np.sin(ang)] * r
-        pts = (verts[:, None, :] + circle[None, :, :]).reshape(-1, 2)
-        verts = pts[ConvexHull(pts).vertices]
-    return verts
+    return xy[::step][hull.vertices]
+
+
+def _buffered(verts: np.ndarray, radius: float, segments: int) -> np.ndarray:
+    """A hull ``verts`` buffered by ``radius`` (unchanged when ``radius`` <= 0)."""
+    if radius <= 0:
+        return verts
+    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    r = radius / np.cos(np.pi / segments)
+    circle = np.c_[np.cos(ang), np.sin(ang)] * r
+    pts = (verts[:, None, :] + circle[None, :, :]).reshape(-1, 2)
+    return pts[ConvexHull(pts).vertices]
 
 
 def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:

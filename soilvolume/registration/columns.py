@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ..core.cells import bounds, cell_index
+from ..core.cells import bounds, cell_index, in_box, rows
 
 
 @dataclass
@@ -28,12 +28,17 @@ class Columns:
 
 
 def columns(xyz: np.ndarray, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
-    """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped)."""
+    """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped).
+    Given a box, the points are first cut to it with a cell of margin (a superset of the points
+    the grid keeps, in their order: the same sums, on a fraction of a large target's points)."""
     if lo is None or hi is None:
         box = bounds(xyz, 2)
+    cut = lo is not None and hi is not None
     lo = box[0] if lo is None else np.asarray(lo[:2], float)
     hi = box[1] if hi is None else np.asarray(hi[:2], float)
     shape = (int((hi[1] - lo[1]) // cell) + 1, int((hi[0] - lo[0]) // cell) + 1)
+    if cut:
+        xyz = rows(xyz, in_box(xyz, lo - cell, lo + (np.array(shape[::-1]) + 1) * cell))
     ix, iy = cell_index(xyz[:, 0], lo[0], cell), cell_index(xyz[:, 1], lo[1], cell)
     ok = (ix >= 0) & (iy >= 0) & (ix < shape[1]) & (iy < shape[0])
     every = bool(ok.all())

@@ -6,6 +6,7 @@ report.html. The order they run in is :mod:`.run`'s."""
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,7 +19,9 @@ from ..inputs.footprint import footprint
 from ..inputs.prepare import Prepared, prepare
 from ..options import Options
 from ..validate import check_grid_cells
-from ..volumes.compute import Volumes
+
+if TYPE_CHECKING:  # the volume step's modules (SciPy's ndimage) are not needed to read the pair
+    from ..volumes.compute import Volumes
 
 
 def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> GridSpec:
