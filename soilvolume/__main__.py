@@ -14,13 +14,10 @@ def _early(signum: int, _frame) -> None:
 
 
 def run() -> int:
-    """Install the early handlers, skip SciPy's docstring rewriting (:mod:`.core.scipydocs`),
-    import the command line (it takes a moment), run it; ``main`` installs the run's own handlers."""
+    """Install the early handlers, import the command line (it takes a moment), run it;
+    ``main`` installs the run's own handlers."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _early)
-    from .core.scipydocs import keep_docs
-
-    keep_docs()  # this process is the command's own: SciPy's documentation notes are not needed
     from .cli import main
 
     return leave(main())

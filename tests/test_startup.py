@@ -58,36 +58,6 @@ def test_preload_imports_open3d_and_the_volume_step_then_rasterio_after_the_read
     assert r.stdout.split() == ["True", "False", "True", "1", "True"]
 
 
-def test_the_command_skips_scipys_docstring_rewriting_and_scipy_works_the_same():
-    """The command's process (``__main__.run``) installs :mod:`soilvolume.core.scipydocs` before
-    SciPy imports: SciPy's functions keep their docstrings without the appended notes and give
-    the same results; a process that imported SciPy first (a host such as QGIS) is left alone."""
-    probe = (
-        "import sys, json, numpy as np\n"
-        "from scipy import ndimage, optimize\n"
-        "a = np.random.default_rng(1).normal(size=(40, 30))\n"
-        "f = lambda h, a, b: a * h + b\n"
-        "p, _ = optimize.curve_fit(f, np.arange(9.0), 2 * np.arange(9.0) + 1, bounds=([0, 0], [5, 5]))\n"
-        "doc = ndimage.gaussian_filter.__doc__\n"
-        "print(json.dumps([type(sys.modules['scipy._lib._docscrape'].FunctionDoc).__name__,\n"
-        "  sys.modules['scipy._lib._docscrape'].FunctionDoc.__name__, 'Array API Standard Support' in doc,\n"
-        "  'Multidimensional Gaussian filter' in doc, ndimage.gaussian_filter(a, 1.5).tobytes().hex(), p.tolist()]))\n"
-    )
-    command = (  # the console entry with its command line replaced by the probe
-        "import soilvolume.cli\n"
-        f"soilvolume.cli.main = lambda: exec({probe!r}) or 0\n"
-        "from soilvolume.__main__ import run\n"
-        "run()\n"
-    )
-    host = "import scipy.ndimage\nfrom soilvolume.core.scipydocs import keep_docs\nassert not keep_docs()\n" + probe
-    r_cmd, r_host = run_python(command), run_python(host)
-    assert r_cmd.returncode == 0 and r_host.returncode == 0, r_cmd.stderr + r_host.stderr
-    cmd, plain = json.loads(r_cmd.stdout), json.loads(r_host.stdout)
-    assert cmd[1] == "KeptDoc" and plain[1] == "FunctionDoc"
-    assert not cmd[2] and plain[2] and cmd[3] and plain[3]  # the notes only in the host's docstrings
-    assert cmd[4] == plain[4] and np.allclose(cmd[5], [2.0, 1.0]) and cmd[5] == plain[5]
-
-
 def test_fresh_chunks_are_shifted_in_place_a_cloud_in_memory_never(tmp_path):
     origin = np.array([100.0, 200.0, 10.0])
     shift = Shift(origin)
