@@ -119,7 +119,7 @@ def compute_volumes(
     terms = _extra_terms((after, before), s["f_a"], filled_mask, grid, moved, given, core, (d, fa, ca), lod_cell, ex)
     terms["extra"] = _with_outline(terms, outline[core], d, filled_mask, (fa, ca), grid.cell_area)
     counted = fill_area | cut_area  # the change areas without moved objects
-    model = _error_model(diff, stable, grid, options, given, core, (filled_mask, s["own"]), fill_sigma, ex.bound)
+    model = _error_model(diff, stable, grid, options, given, core, filled_mask, s["own"], fill_sigma, ex.bound)
     unc = model(change_mask=counted, extra_sigma=terms.pop("extra"))
     headline = signed_budget(d, fa, ca, grid.cell_area)
     vols = {
@@ -239,7 +239,7 @@ def _with_outline(terms: dict, delta: np.ndarray, d, filled_mask, areas, area: f
     return {k: float(np.hypot(v, terms["outline_m3"][k])) for k, v in terms["extra"].items()}
 
 
-def _error_model(diff, stable, grid: GridSpec, options: Options, given, core, filled_mask, fill_sigma, bound):
+def _error_model(diff, stable, grid: GridSpec, options: Options, given, core, filled_mask, own, fill_sigma, bound):
     """The error model (:func:`~.uncertainty.volume_uncertainty` with the run's arguments) over
     the cells a caller gives: the headline's change areas, a zone's."""
     from .uncertainty import interp_fraction, volume_uncertainty
@@ -251,10 +251,10 @@ def _error_model(diff, stable, grid: GridSpec, options: Options, given, core, fi
         grid=grid,
         confidence=options.lod_confidence,
         n_coef=0 if given else MODES[options.correction].coefficients,  # a tile: the overview has the bias
-        filled_mask=filled_mask[0],
-        own_fill=filled_mask[1],
+        filled_mask=filled_mask,
+        own_fill=own,
         fill_sigma=fill_sigma,
-        interp_fraction=interp_fraction(holes.typical_radius(filled_mask[0] & ~filled_mask[1])),
+        interp_fraction=interp_fraction(holes.typical_radius(filled_mask & ~own)),
         counted=None if given is None else _mask(diff.shape, core),
         surface=given is None and MODES[options.correction].coefficients > 0,  # a tile: see n_coef
         bound_m3=bound,

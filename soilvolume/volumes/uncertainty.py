@@ -190,7 +190,7 @@ def volume_uncertainty(
         "net_compared_area": valid,
     }
     extra = extra_sigma or {}
-    pt = _PartTerms(diff_corrected, valid, stable, grid, (filled_mask, own_fill), fill_sigma, interp_fraction, surface)
+    pt = _PartTerms(diff_corrected, valid, stable, grid, filled_mask, own_fill, fill_sigma, interp_fraction, surface)
     terms = {
         k: pt.terms(m, region_sigma(int(m.sum()), grid.cell, model, b, pcv), extra.get(k, 0.0))
         for k, m in parts.items()
@@ -234,9 +234,10 @@ class _PartTerms:
     its change (``interp``), the refill error (``refill``) and the correction's leftover bias
     (``unmodelled``); see :func:`volume_uncertainty`."""
 
-    def __init__(self, diff, valid, stable, grid: GridSpec, filled_mask, fill_sigma, fraction: float, surface: bool):
+    def __init__(
+        self, diff, valid, stable, grid: GridSpec, filled_mask, own, fill_sigma, fraction: float, surface: bool
+    ):
         self.cell_area, self.fraction = grid.cell_area, fraction
-        filled_mask, own = filled_mask
         self.filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
         self.shared = self.filled if own is None else self.filled & ~own  # interpolated in the difference
         self.absd = np.abs(np.where(valid, diff, 0.0))
