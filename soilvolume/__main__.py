@@ -18,9 +18,20 @@ def run() -> int:
     ``main`` installs the run's own handlers."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _early)
+    one_blas_thread()
     from .cli import main
 
     return leave(main())
+
+
+def one_blas_thread() -> None:
+    """numpy's OpenBLAS on one thread in the command's process, unless the user's environment says
+    otherwise (``OPENBLAS_NUM_THREADS``); read once, when numpy loads, so set before any import.
+    The engine's matrix products are points times a 3x3 or small least squares, memory-bound;
+    with a thread per core, OpenBLAS's idle threads spin (sched_yield) after every product: 1.3 s
+    of system time in a 5 s run on two cores, taken from Open3D's threads and the preload
+    thread. Open3D's own threads are ``--threads`` (OpenMP)."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def leave(code: int) -> int:

@@ -4,8 +4,11 @@ the chunks the reader allocated (never of a cloud already in memory)."""
 from __future__ import annotations
 
 import json
+import os
+from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import run_python, write_scene
 
 from soilvolume.inputs.io import RawPoints
@@ -142,3 +145,34 @@ def test_a_stage_timed_within_another_is_left_out_of_it(monkeypatch):
     s = t.totals()
     assert (s["crop"], s["cluster_wait"], s["grids"]) == (1.5, 2.0, 0.25)
     assert sum(v for k, v in s.items() if k != "startup") == 3.75
+
+
+BLAS_PROBE = (
+    "import os, sys, types\n"
+    "cli = types.ModuleType('soilvolume.cli')\n"  # stands in for the command line: what does numpy see?
+    "def main():\n"
+    "    import numpy as np\n"
+    "    np.ones((300_000, 3)) @ np.eye(3)  # a product OpenBLAS threads\n"
+    "    print(len(os.listdir('/proc/self/task')), os.environ.get('OPENBLAS_NUM_THREADS'))\n"
+    "    return 0\n"
+    "cli.main = main\n"
+    "sys.modules['soilvolume.cli'] = cli\n"
+    "import soilvolume.__main__\n"
+    "soilvolume.__main__.run()\n"
+)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads in /proc")
+def test_the_command_runs_numpy_blas_on_one_thread_unless_the_user_says_otherwise(monkeypatch):
+    """The command's process loads numpy with OpenBLAS on one thread (idle BLAS threads spin after
+    every product, ~1.3 s of system time in a paper-sized run); a user's OPENBLAS_NUM_THREADS wins."""
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    r = run_python(BLAS_PROBE)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["1", "1"]  # the main thread alone
+    if (os.cpu_count() or 1) > 1:
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+        r = run_python(BLAS_PROBE)
+        assert r.returncode == 0, r.stderr
+        threads, setting = r.stdout.split()
+        assert int(threads) >= 2 and setting == "2"  # OpenBLAS's own thread beside the main one

@@ -85,7 +85,8 @@ class Run:
 
 
 def threads(command: str, options: Options) -> None:
-    """``--threads`` of the commands that take it: the OpenMP threads of Open3D and numpy's libraries."""
+    """``--threads`` of the commands that take it: Open3D's OpenMP threads (numpy's BLAS runs on one
+    thread in the command's process: :func:`soilvolume.__main__.one_blas_thread`)."""
     from ..options import command_fields
 
     if any(f.name == "threads" for f in command_fields(command)) and options.threads > 0:
