@@ -27,30 +27,95 @@ class Columns:
     cell: float
 
 
-def columns(xyz: np.ndarray, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
+class Cloud:
+    """A cloud (N, 3) with its cuts to boxes remembered: a grid over a box needs only the points in
+    it, and a superset of them in the cloud's order gives the same per-cell sums. A registration asks
+    for many nearby boxes on the same target: each is served from the tightest remembered cut that
+    holds it (cut anew, with :data:`SLACK` m of room, when none is tight). Cuts are kept as (3, M)
+    coordinate rows (each axis contiguous) and handed out as their (M, 3) transposed views."""
+
+    SLACK = 2.0  # m around a new cut, so that the nearby boxes asked next fit in it
+    TIGHT = 1.3  # a remembered cut serves a box when its area is at most this many times the box's
+
+    def __init__(self, xyz: np.ndarray) -> None:
+        self.xyz = xyz
+        self._cuts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._box: tuple[np.ndarray, np.ndarray] | None = None
+
+    @staticmethod
+    def of(xyz: np.ndarray | Cloud) -> Cloud:
+        return xyz if isinstance(xyz, Cloud) else Cloud(xyz)
+
+    @staticmethod
+    def points(xyz: np.ndarray | Cloud) -> np.ndarray:
+        return xyz.xyz if isinstance(xyz, Cloud) else xyz
+
+    def within(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The points in a superset of the box lo..hi (x/y, edges included), in the cloud's order."""
+        if self._box is None:
+            self._box = bounds(self.xyz, 2)
+        if (self._box[0] >= lo).all() and (self._box[1] <= hi).all():
+            return self.xyz
+        base, blo, bhi = self.xyz, np.full(2, -np.inf), np.full(2, np.inf)
+        for clo, chi, pts in self._cuts:  # the smallest remembered cut that holds the box
+            if (clo <= lo).all() and (chi >= hi).all() and np.prod(chi - clo) < np.prod(bhi - blo):
+                base, blo, bhi = pts.T, clo, chi
+        if np.prod(bhi - blo) <= self.TIGHT * np.prod(hi - lo):
+            return base
+        clo, chi = np.maximum(lo - self.SLACK, blo), np.minimum(hi + self.SLACK, bhi)
+        mask = in_box(base, clo, chi)
+        cut = np.empty((3, int(np.count_nonzero(mask))))
+        for k in range(3):
+            np.compress(mask, base[:, k], out=cut[k])
+        self._cuts.append((clo, chi, cut))
+        return cut.T
+
+
+def columns(
+    xyz: np.ndarray | Cloud, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None
+) -> Columns:
     """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped).
-    Given a box, the points are first cut to it with a cell of margin (a superset of the points
-    the grid keeps, in their order: the same sums, on a fraction of a large target's points)."""
-    if lo is None or hi is None:
-        box = bounds(xyz, 2)
+    Given a box, only the points in it with a cell of margin are binned (a superset of the points
+    the grid keeps, in their order: the same sums, on a fraction of a large target's points; a
+    :class:`Cloud` remembers its cuts for the next boxes)."""
+    pts = Cloud.points(xyz)
     cut = lo is not None and hi is not None
+    if not cut:
+        box = bounds(pts, 2)
     lo = box[0] if lo is None else np.asarray(lo[:2], float)
     hi = box[1] if hi is None else np.asarray(hi[:2], float)
     shape = (int((hi[1] - lo[1]) // cell) + 1, int((hi[0] - lo[0]) // cell) + 1)
     if cut:
-        xyz = rows(xyz, in_box(xyz, lo - cell, lo + (np.array(shape[::-1]) + 1) * cell))
-    ix, iy = cell_index(xyz[:, 0], lo[0], cell), cell_index(xyz[:, 1], lo[1], cell)
-    ok = (ix >= 0) & (iy >= 0) & (ix < shape[1]) & (iy < shape[0])
-    every = bool(ok.all())
-    ids = iy * shape[1] + ix if every else iy[ok] * shape[1] + ix[ok]
+        box = (lo - cell, lo + (np.array(shape[::-1]) + 1) * cell)
+        pts = xyz.within(*box) if isinstance(xyz, Cloud) else rows(xyz, in_box(xyz, *box))
+    return _binned(pts, lo, float(cell), shape)
+
+
+def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]) -> Columns:
+    """:func:`columns` of the points ``xyz`` on the grid from ``lo``: each point's cell is
+    ``floor((v - lo) / cell)`` per axis (:func:`~soilvolume.core.cells.cell_index`, kept in float:
+    the flat ids are exact integers), points off the grid go to one extra bin that is dropped
+    (each cell's sum runs over its points in order)."""
     n = shape[0] * shape[1]
-    count = np.bincount(ids, minlength=n)
+    fx, fy = _floor_index(xyz[:, 0], lo[0], cell), _floor_index(xyz[:, 1], lo[1], cell)
+    off = ~((fx >= 0) & (fy >= 0) & (fx < shape[1]) & (fy < shape[0]))
+    fy *= shape[1]
+    fy += fx
+    fy[off] = n
+    ids = fy.astype(np.int64)
+    count = np.bincount(ids, minlength=n + 1)[:n]
     has = np.flatnonzero(count)
     means = np.empty((len(has), 3))
     for k in range(3):
-        w = xyz[:, k] if every else np.compress(ok, xyz[:, k])
-        means[:, k] = np.bincount(ids, weights=w, minlength=n)[has] / count[has]
-    return Columns(means, has // shape[1], has % shape[1], shape, lo, float(cell))
+        means[:, k] = np.bincount(ids, weights=xyz[:, k], minlength=n + 1)[has] / count[has]
+    return Columns(means, has // shape[1], has % shape[1], shape, lo, cell)
+
+
+def _floor_index(v: np.ndarray, lo: float, cell: float) -> np.ndarray:
+    """``floor((v - lo) / cell)`` as float64 (the values of ``cell_index`` before the cast)."""
+    t = np.subtract(v, lo)
+    np.divide(t, cell, out=t)
+    return np.floor(t, out=t)
 
 
 def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:
