@@ -121,38 +121,45 @@ def _floor_index(v: np.ndarray, lo: float, cell: float) -> np.ndarray:
 def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:
     """Upward unit normals of the column surface from the gradient of its heights (Gaussian
     smoothed by ``smooth`` cells, normalized convolution over empty columns)."""
+    flat = c.row * c.shape[1] + c.col
     h = np.zeros(c.shape)
     w = np.zeros(c.shape)
-    h[c.row, c.col] = c.xyz[:, 2]
-    w[c.row, c.col] = 1.0
+    h.ravel()[flat] = c.xyz[:, 2]  # h * w is h itself: 0 where w is 0, h * 1.0 elsewhere
+    w.ravel()[flat] = 1.0
     if smooth > 0:
-        hs, ws = ndimage.gaussian_filter(h * w, smooth), ndimage.gaussian_filter(w, smooth)
+        hs, ws = ndimage.gaussian_filter(h, smooth), ndimage.gaussian_filter(w, smooth)
         with np.errstate(invalid="ignore", divide="ignore"):
             h = np.where(ws > 1e-3, hs / ws, 0.0)
         w = (ws > 1e-3).astype(float)
     gy, gx = _gradient(h, w > 0, c.cell)
-    n = np.stack([-gx[c.row, c.col], -gy[c.row, c.col], np.ones(len(c.row))], axis=1)
-    return n / np.linalg.norm(n, axis=1, keepdims=True)
+    gx, gy = gx.ravel()[flat], gy.ravel()[flat]
+    norm = np.sqrt((gx * gx + gy * gy) + 1.0)  # |(-gx, -gy, 1)| summed in that order
+    n = np.empty((len(flat), 3))
+    np.divide(-gx, norm, out=n[:, 0])
+    np.divide(-gy, norm, out=n[:, 1])
+    np.divide(1.0, norm, out=n[:, 2])
+    return n
 
 
 def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """(dz/dy, dz/dx) with central differences where both neighbours are valid, one-sided where
-    one is, 0 where none (y grows with the row index here)."""
+    one is, 0 where none (y grows with the row index here): each cell's forward plus backward
+    difference (0.0 where a neighbour is missing) over their count."""
     out = []
     for axis in (0, 1):
-        fwd = np.zeros_like(h)
-        bwd = np.zeros_like(h)
-        okf = np.zeros_like(valid)
-        okb = np.zeros_like(valid)
-        sl = [slice(None)] * 2
-        a, b = list(sl), list(sl)
+        a, b = [slice(None)] * 2, [slice(None)] * 2
         a[axis], b[axis] = slice(0, -1), slice(1, None)
-        fwd[tuple(a)] = h[tuple(b)] - h[tuple(a)]
-        okf[tuple(a)] = valid[tuple(b)] & valid[tuple(a)]
-        bwd[tuple(b)] = h[tuple(b)] - h[tuple(a)]
-        okb[tuple(b)] = okf[tuple(a)]
-        num = np.where(okf, fwd, 0.0) + np.where(okb, bwd, 0.0)
-        den = okf.astype(float) + okb.astype(float)
+        a, b = tuple(a), tuple(b)
+        ok = valid[b] & valid[a]
+        step = np.where(ok, h[b] - h[a], 0.0)
+        num, den = np.zeros_like(h), np.zeros_like(h)
+        num[a] = step
+        num[b] += step
+        first = [slice(None)] * 2
+        first[axis] = slice(0, 1)
+        num[tuple(first)] += 0.0  # the first cell's forward difference plus its missing backward one
+        den[a] = ok
+        den[b] += ok
         out.append(np.where(den > 0, num / np.maximum(den, 1) / cell, 0.0))
     return out[0], out[1]
 
