@@ -71,9 +71,10 @@ class Cloud:
         return cut.T
 
 
-def columns(
-    xyz: np.ndarray | Cloud, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None
-) -> Columns:
+Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cuts remembered
+
+
+def columns(xyz: Target, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
     """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped).
     Given a box, only the points in it with a cell of margin are binned (a superset of the points
     the grid keeps, in their order: the same sums, on a fraction of a large target's points; a

@@ -13,12 +13,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.cells import bounds, cell_index, rows
+from ..core.cells import bounds
 from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
-from ..inputs.footprint import footprint
 from ..options import Options
 from . import columns
+from .ground import margin_points, spacing, stable_source
 from .o3d import _o3d, to_pcd
 from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
 
@@ -33,7 +33,6 @@ MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its 
 ICP_TOL, ICP_ITER = 1e-6, 30
 COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
 STABLE_PASSES = 1  # refinements on the stable ground found at the current pose
-Target = np.ndarray | columns.Cloud  # a target cloud: an array, or one with its box cuts remembered
 
 
 @dataclass(frozen=True)
@@ -71,16 +70,9 @@ def _cap_voxel(xyz: np.ndarray, max_points: int) -> float:
     return spacing(xyz) * float(np.sqrt(len(xyz) / max_points))
 
 
-def spacing(xyz: np.ndarray) -> float:
-    """Mean horizontal point spacing (m) of a cloud: sqrt(footprint area / points)."""
-    from ..inputs.footprint import polygon_area
-
-    return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max(len(xyz), 1)))
-
-
 def evaluate_surface(
     source_xyz: np.ndarray,
-    target_xyz: Target,
+    target_xyz: columns.Target,
     t: np.ndarray,
     distance: float = EVAL_DISTANCE,
     gap: float | None = None,
@@ -126,7 +118,7 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
     return np.asarray(res.transformation)
 
 
-def _column_pcd(xyz: Target, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
+def _column_pcd(xyz: columns.Target, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
     """Open3D cloud of the column means of ``xyz`` (within lo..hi) with surface normals."""
     cols = columns.columns(xyz, voxel, lo, hi)
     pcd = to_pcd(cols.xyz)
@@ -136,7 +128,7 @@ def _column_pcd(xyz: Target, voxel: float, lo: np.ndarray | None = None, hi: np.
 
 def icp_levels(
     source_xyz: np.ndarray,
-    target_xyz: Target,
+    target_xyz: columns.Target,
     init: np.ndarray,
     levels=ICP_LEVELS,
     method: str = "icp",
@@ -175,7 +167,7 @@ def icp_levels(
     return (t, float(res.fitness), float(res.inlier_rmse)) if scores else t
 
 
-def _surface_pcd(target_xyz: Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
+def _surface_pcd(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
     """The target's column surface with normals, over the source's box under ``t`` + margin."""
     moved = transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t)
     pcd = _column_pcd(target_xyz, voxel, moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin)
@@ -195,54 +187,6 @@ def _sampled(xyz: np.ndarray, cap: int) -> np.ndarray:
     if n <= cap:
         return xyz
     return xyz[:: int(np.ceil(n / cap))]
-
-
-def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
-    """The points of a cloud in the margin band of its own footprint (see
-    :func:`soilvolume.compensation.stable.margin`): surveys are flown beyond the works, so this band is the
-    part of the after survey most likely to be stable ground."""
-    from ..compensation.stable import margin
-
-    cell = max(1.0, 2.0 * gap)
-    cols = columns.columns(xyz, cell)
-    valid = np.zeros(cols.shape, bool)
-    valid[cols.row, cols.col] = True
-    band = margin(valid, cell)
-    ix = np.clip(cell_index(xyz[:, 0], cols.lo[0], cell), 0, cols.shape[1] - 1)
-    iy = np.clip(cell_index(xyz[:, 1], cols.lo[1], cell), 0, cols.shape[0] - 1)
-    return rows(xyz, band[iy, ix])
-
-
-def stable_source(
-    source_xyz: np.ndarray,
-    target_xyz: Target,
-    t: np.ndarray,
-    cell: float = 1.0,
-    gap: float | None = None,
-) -> np.ndarray:
-    """The source with its fitted low-order deformation removed and its change areas dropped:
-    what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
-    ground (searched from the margin of the after footprint) and the degree-2 surface come from
-    :mod:`soilvolume.compensation.stable` on median grids."""
-    from ..compensation.stable import find_stable
-    from ..dem.grid import average_height, make_grid
-
-    src = transform_points(source_xyz, t)
-    target = columns.Cloud.of(target_xyz)
-    cell = max(cell, 1.5 * (spacing(target.xyz) if gap is None else gap))  # gap: the target's spacing
-    grid = make_grid(*bounds(src), cell, np.zeros(3), None)
-    top = np.array([grid.xmin + (grid.cols + 1) * grid.cell, grid.ymax + grid.cell])
-    near = target.within(np.array([grid.xmin - grid.cell, grid.ymax - (grid.rows + 1) * grid.cell]), top)
-    diff = average_height(src, grid, "median")[0] - average_height(near, grid, "median")[0]
-    if np.isfinite(diff).sum() < 20:
-        return src[:0]
-    stable, trend = find_stable(diff, cell)
-    row, col, ok = grid.index(src)
-    keep = np.zeros(len(src), bool)
-    keep[ok] = stable[row[ok], col[ok]]
-    out = rows(src, keep)
-    out[:, 2] -= trend[row[keep], col[keep]]
-    return out
 
 
 def register(
