@@ -2,6 +2,7 @@
 bit for bit, as the whole cloud, and a cut holds every point of its box in the cloud's order."""
 
 import numpy as np
+import pytest
 
 from soilvolume.registration.columns import Cloud, columns, normals
 
@@ -56,3 +57,19 @@ def test_a_cut_holds_every_point_of_its_box_in_order():
         assert set(xyz[inside, 2]) <= set(got[:, 2])
         assert np.all(np.diff(got[:, 2]) > 0)
     assert target.within(np.array([-50.0, -50.0]), np.array([50.0, 50.0])) is xyz
+
+
+def test_threads_reach_open3d():
+    """``--threads`` limits Open3D's own (oneTBB) threads, which OMP_NUM_THREADS does not reach."""
+    from soilvolume.registration.o3d import _o3d, limit_threads
+
+    utility = _o3d().utility
+    if not hasattr(utility, "get_max_threads"):
+        pytest.skip("this Open3D follows OMP_NUM_THREADS")
+    default = utility.get_max_threads()
+    try:
+        limit_threads(1)
+        assert utility.get_max_threads() == 1
+    finally:
+        limit_threads(0)
+    assert utility.get_max_threads() == default

@@ -19,7 +19,7 @@ from ..core.types import SoilVolumeError, StageQuality
 from ..options import Options
 from . import columns
 from .ground import margin_points, spacing, stable_source
-from .o3d import _o3d, to_pcd
+from .o3d import _o3d, limit_threads, to_pcd
 from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
 
 # (voxel m, max correspondence distance m, Tukey k m): coarse-to-fine, shrinking distances.
@@ -209,6 +209,7 @@ def register(
             StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
             StageQuality("none", fit, rmse, eye, True, 0.0, skipped),
         )
+    limit_threads(options.threads)
     target = columns.Cloud(before_xyz)  # the fine stage's many boxes on the before cloud share its cuts
     if options.coarse == "auto" and options.fine != "none":
         first = _fine_stage(after_xyz, target, [(eye, "gps")], options, check, dense)
