@@ -57,6 +57,7 @@ def test_a_cut_holds_every_point_of_its_box_in_order():
         assert set(xyz[inside, 2]) <= set(got[:, 2])
         assert np.all(np.diff(got[:, 2]) > 0)
     assert target.within(np.array([-50.0, -50.0]), np.array([50.0, 50.0])) is xyz
+    assert len(columns(Cloud(xyz[:0]), 0.5, np.zeros(2), np.ones(2)).xyz) == 0
 
 
 def test_threads_reach_open3d():

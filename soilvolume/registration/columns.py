@@ -52,6 +52,8 @@ class Cloud:
 
     def within(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """The points in a superset of the box lo..hi (x/y, edges included), in the cloud's order."""
+        if len(self.xyz) == 0:
+            return self.xyz
         if self._box is None:
             self._box = bounds(self.xyz, 2)
         if (self._box[0] >= lo).all() and (self._box[1] <= hi).all():
