@@ -27,67 +27,142 @@ class Columns:
     cell: float
 
 
-def columns(xyz: np.ndarray, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
+class Cloud:
+    """A cloud (N, 3) with its cuts to boxes remembered: a grid over a box needs only the points in
+    it, and a superset of them in the cloud's order gives the same per-cell sums. A registration asks
+    for many nearby boxes on the same target: each is served from the tightest remembered cut that
+    holds it (cut anew, with :data:`SLACK` m of room, when none is tight). Cuts are kept as (3, M)
+    coordinate rows (each axis contiguous) and handed out as their (M, 3) transposed views."""
+
+    SLACK = 2.0  # m around a new cut, so that the nearby boxes asked next fit in it
+    TIGHT = 1.3  # a remembered cut serves a box when its area is at most this many times the box's
+
+    def __init__(self, xyz: np.ndarray) -> None:
+        self.xyz = xyz
+        self._cuts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._box: tuple[np.ndarray, np.ndarray] | None = None
+
+    @staticmethod
+    def of(xyz: np.ndarray | Cloud) -> Cloud:
+        return xyz if isinstance(xyz, Cloud) else Cloud(xyz)
+
+    @staticmethod
+    def points(xyz: np.ndarray | Cloud) -> np.ndarray:
+        return xyz.xyz if isinstance(xyz, Cloud) else xyz
+
+    def within(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """The points in a superset of the box lo..hi (x/y, edges included), in the cloud's order."""
+        if len(self.xyz) == 0:
+            return self.xyz
+        if self._box is None:
+            self._box = bounds(self.xyz, 2)
+        if (self._box[0] >= lo).all() and (self._box[1] <= hi).all():
+            return self.xyz
+        base, blo, bhi = self.xyz, np.full(2, -np.inf), np.full(2, np.inf)
+        for clo, chi, pts in self._cuts:  # the smallest remembered cut that holds the box
+            if (clo <= lo).all() and (chi >= hi).all() and np.prod(chi - clo) < np.prod(bhi - blo):
+                base, blo, bhi = pts.T, clo, chi
+        if np.prod(bhi - blo) <= self.TIGHT * np.prod(hi - lo):
+            return base
+        clo, chi = np.maximum(lo - self.SLACK, blo), np.minimum(hi + self.SLACK, bhi)
+        mask = in_box(base, clo, chi)
+        cut = np.empty((3, int(np.count_nonzero(mask))))
+        for k in range(3):
+            np.compress(mask, base[:, k], out=cut[k])
+        self._cuts.append((clo, chi, cut))
+        return cut.T
+
+
+Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cuts remembered
+
+
+def columns(xyz: Target, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
     """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped).
-    Given a box, the points are first cut to it with a cell of margin (a superset of the points
-    the grid keeps, in their order: the same sums, on a fraction of a large target's points)."""
-    if lo is None or hi is None:
-        box = bounds(xyz, 2)
+    Given a box, only the points in it with a cell of margin are binned (a superset of the points
+    the grid keeps, in their order: the same sums, on a fraction of a large target's points; a
+    :class:`Cloud` remembers its cuts for the next boxes)."""
+    pts = Cloud.points(xyz)
     cut = lo is not None and hi is not None
+    if not cut:
+        box = bounds(pts, 2)
     lo = box[0] if lo is None else np.asarray(lo[:2], float)
     hi = box[1] if hi is None else np.asarray(hi[:2], float)
     shape = (int((hi[1] - lo[1]) // cell) + 1, int((hi[0] - lo[0]) // cell) + 1)
     if cut:
-        xyz = rows(xyz, in_box(xyz, lo - cell, lo + (np.array(shape[::-1]) + 1) * cell))
-    ix, iy = cell_index(xyz[:, 0], lo[0], cell), cell_index(xyz[:, 1], lo[1], cell)
-    ok = (ix >= 0) & (iy >= 0) & (ix < shape[1]) & (iy < shape[0])
-    every = bool(ok.all())
-    ids = iy * shape[1] + ix if every else iy[ok] * shape[1] + ix[ok]
+        box = (lo - cell, lo + (np.array(shape[::-1]) + 1) * cell)
+        pts = xyz.within(*box) if isinstance(xyz, Cloud) else rows(xyz, in_box(xyz, *box))
+    return _binned(pts, lo, float(cell), shape)
+
+
+def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]) -> Columns:
+    """:func:`columns` of the points ``xyz`` on the grid from ``lo``: each point's cell is
+    ``floor((v - lo) / cell)`` per axis (:func:`~soilvolume.core.cells.cell_index`, kept in float:
+    the flat ids are exact integers), points off the grid go to one extra bin that is dropped
+    (each cell's sum runs over its points in order)."""
     n = shape[0] * shape[1]
-    count = np.bincount(ids, minlength=n)
+    fx, fy = _floor_index(xyz[:, 0], lo[0], cell), _floor_index(xyz[:, 1], lo[1], cell)
+    off = ~((fx >= 0) & (fy >= 0) & (fx < shape[1]) & (fy < shape[0]))
+    fy *= shape[1]
+    fy += fx
+    fy[off] = n
+    ids = fy.astype(np.int64)
+    count = np.bincount(ids, minlength=n + 1)[:n]
     has = np.flatnonzero(count)
     means = np.empty((len(has), 3))
     for k in range(3):
-        w = xyz[:, k] if every else np.compress(ok, xyz[:, k])
-        means[:, k] = np.bincount(ids, weights=w, minlength=n)[has] / count[has]
-    return Columns(means, has // shape[1], has % shape[1], shape, lo, float(cell))
+        means[:, k] = np.bincount(ids, weights=xyz[:, k], minlength=n + 1)[has] / count[has]
+    return Columns(means, has // shape[1], has % shape[1], shape, lo, cell)
+
+
+def _floor_index(v: np.ndarray, lo: float, cell: float) -> np.ndarray:
+    """``floor((v - lo) / cell)`` as float64 (the values of ``cell_index`` before the cast)."""
+    t = np.subtract(v, lo)
+    np.divide(t, cell, out=t)
+    return np.floor(t, out=t)
 
 
 def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:
     """Upward unit normals of the column surface from the gradient of its heights (Gaussian
     smoothed by ``smooth`` cells, normalized convolution over empty columns)."""
+    flat = c.row * c.shape[1] + c.col
     h = np.zeros(c.shape)
     w = np.zeros(c.shape)
-    h[c.row, c.col] = c.xyz[:, 2]
-    w[c.row, c.col] = 1.0
+    h.ravel()[flat] = c.xyz[:, 2]  # h * w is h itself: 0 where w is 0, h * 1.0 elsewhere
+    w.ravel()[flat] = 1.0
     if smooth > 0:
-        hs, ws = ndimage.gaussian_filter(h * w, smooth), ndimage.gaussian_filter(w, smooth)
+        hs, ws = ndimage.gaussian_filter(h, smooth), ndimage.gaussian_filter(w, smooth)
         with np.errstate(invalid="ignore", divide="ignore"):
             h = np.where(ws > 1e-3, hs / ws, 0.0)
         w = (ws > 1e-3).astype(float)
     gy, gx = _gradient(h, w > 0, c.cell)
-    n = np.stack([-gx[c.row, c.col], -gy[c.row, c.col], np.ones(len(c.row))], axis=1)
-    return n / np.linalg.norm(n, axis=1, keepdims=True)
+    gx, gy = gx.ravel()[flat], gy.ravel()[flat]
+    norm = np.sqrt((gx * gx + gy * gy) + 1.0)  # |(-gx, -gy, 1)| summed in that order
+    n = np.empty((len(flat), 3))
+    np.divide(-gx, norm, out=n[:, 0])
+    np.divide(-gy, norm, out=n[:, 1])
+    np.divide(1.0, norm, out=n[:, 2])
+    return n
 
 
 def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """(dz/dy, dz/dx) with central differences where both neighbours are valid, one-sided where
-    one is, 0 where none (y grows with the row index here)."""
+    one is, 0 where none (y grows with the row index here): each cell's forward plus backward
+    difference (0.0 where a neighbour is missing) over their count."""
     out = []
     for axis in (0, 1):
-        fwd = np.zeros_like(h)
-        bwd = np.zeros_like(h)
-        okf = np.zeros_like(valid)
-        okb = np.zeros_like(valid)
-        sl = [slice(None)] * 2
-        a, b = list(sl), list(sl)
+        a, b = [slice(None)] * 2, [slice(None)] * 2
         a[axis], b[axis] = slice(0, -1), slice(1, None)
-        fwd[tuple(a)] = h[tuple(b)] - h[tuple(a)]
-        okf[tuple(a)] = valid[tuple(b)] & valid[tuple(a)]
-        bwd[tuple(b)] = h[tuple(b)] - h[tuple(a)]
-        okb[tuple(b)] = okf[tuple(a)]
-        num = np.where(okf, fwd, 0.0) + np.where(okb, bwd, 0.0)
-        den = okf.astype(float) + okb.astype(float)
+        a, b = tuple(a), tuple(b)
+        ok = valid[b] & valid[a]
+        step = np.where(ok, h[b] - h[a], 0.0)
+        num, den = np.zeros_like(h), np.zeros_like(h)
+        num[a] = step
+        num[b] += step
+        first = [slice(None)] * 2
+        first[axis] = slice(0, 1)
+        num[tuple(first)] += 0.0  # the first cell's forward difference plus its missing backward one
+        den[a] = ok
+        den[b] += ok
         out.append(np.where(den > 0, num / np.maximum(den, 1) / cell, 0.0))
     return out[0], out[1]
 

@@ -33,7 +33,8 @@ def resolve(mode: str, inputs: dict, after_xyz: np.ndarray, before_xyz: np.ndarr
     va = vertical_datum(inputs["after"].get("crs_wkt"))
     if vb is None or vb != va:
         return "gps", "the files do not both declare the same vertical datum: registered within the GPS prior"
-    from .register import evaluate_surface, margin_points, spacing
+    from .ground import margin_points, spacing
+    from .register import evaluate_surface
 
     gap = spacing(before_xyz)
     fit, _ = evaluate_surface(margin_points(after_xyz, gap), before_xyz, np.eye(4), gap=gap)

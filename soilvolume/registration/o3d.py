@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 PLOTLY = "open3d.visualization.draw_plotly"
+_LIMITED = False  # whether limit_threads set a limit (a later run without one lifts it)
 
 
 def _o3d():
@@ -17,6 +18,20 @@ def _o3d():
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
     return o3d
+
+
+def limit_threads(threads: int) -> None:
+    """Open3D's CPU threads, ``threads`` (0: all cores): Open3D 0.19+ runs on oneTBB, which ignores
+    OMP_NUM_THREADS (``--threads`` sets that for numpy's libraries); older releases have no
+    ``set_max_threads`` and follow OMP_NUM_THREADS. A process that never asks for a limit keeps
+    Open3D's own setting; one that did gets all cores back with 0."""
+    global _LIMITED
+    if threads <= 0 and not _LIMITED:
+        return
+    utility = _o3d().utility
+    if hasattr(utility, "set_max_threads"):
+        utility.set_max_threads(max(0, int(threads)))
+        _LIMITED = threads > 0
 
 
 def _import_without_plotly() -> None:

@@ -13,13 +13,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.cells import bounds, cell_index, rows
+from ..core.cells import bounds
 from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
-from ..inputs.footprint import footprint
 from ..options import Options
 from . import columns
-from .o3d import _o3d, to_pcd
+from .ground import margin_points, spacing, stable_source
+from .o3d import _o3d, limit_threads, to_pcd
 from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
 
 # (voxel m, max correspondence distance m, Tukey k m): coarse-to-fine, shrinking distances.
@@ -70,25 +70,19 @@ def _cap_voxel(xyz: np.ndarray, max_points: int) -> float:
     return spacing(xyz) * float(np.sqrt(len(xyz) / max_points))
 
 
-def spacing(xyz: np.ndarray) -> float:
-    """Mean horizontal point spacing (m) of a cloud: sqrt(footprint area / points)."""
-    from ..inputs.footprint import polygon_area
-
-    return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max(len(xyz), 1)))
-
-
 def evaluate_surface(
     source_xyz: np.ndarray,
-    target_xyz: np.ndarray,
+    target_xyz: columns.Target,
     t: np.ndarray,
     distance: float = EVAL_DISTANCE,
     gap: float | None = None,
 ) -> tuple[float, float]:
     """(fitness, RMSE) on terrain: the fraction of source points within ``distance`` of the
     tangent plane of the target surface (columns of max(0.25 m, 2 point spacings)), and the RMS
-    of those distances. Meaningful on sparse clouds, unlike point-to-point."""
+    of those distances. Meaningful on sparse clouds, unlike point-to-point. ``target_xyz``: an
+    array or a :class:`~soilvolume.registration.columns.Cloud` (its cuts remembered)."""
     src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
-    gap = spacing(target_xyz) if gap is None else gap
+    gap = spacing(columns.Cloud.points(target_xyz)) if gap is None else gap
     lo, hi = bounds(src, 2)
     cols = columns.columns(target_xyz, max(0.25, 2 * gap), lo - 1.0, hi + 1.0)
     if len(cols.xyz) == 0:
@@ -124,7 +118,7 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
     return np.asarray(res.transformation)
 
 
-def _column_pcd(xyz: np.ndarray, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
+def _column_pcd(xyz: columns.Target, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
     """Open3D cloud of the column means of ``xyz`` (within lo..hi) with surface normals."""
     cols = columns.columns(xyz, voxel, lo, hi)
     pcd = to_pcd(cols.xyz)
@@ -134,7 +128,7 @@ def _column_pcd(xyz: np.ndarray, voxel: float, lo: np.ndarray | None = None, hi:
 
 def icp_levels(
     source_xyz: np.ndarray,
-    target_xyz: np.ndarray,
+    target_xyz: columns.Target,
     init: np.ndarray,
     levels=ICP_LEVELS,
     method: str = "icp",
@@ -144,20 +138,21 @@ def icp_levels(
 ):
     """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, or GICP) of column-mean
     surfaces (target normals from the column heights); with ``scores`` returns (transform,
-    fitness, inlier RMSE) of the last level. ``gap``: the target's point spacing."""
+    fitness, inlier RMSE) of the last level. ``gap``: the target's point spacing; ``target_xyz``:
+    an array or a :class:`~soilvolume.registration.columns.Cloud`."""
     o3d = _o3d()
     reg = o3d.pipelines.registration
     t = init.copy()
     cache: dict[float, tuple] = {}
     cap = _cap_voxel(source_xyz, MAX_ICP_POINTS)
-    gap = 1.5 * (spacing(target_xyz) if gap is None else gap)  # sparse clouds: correspondences are at least this far
+    gap = 1.5 * (spacing(columns.Cloud.points(target_xyz)) if gap is None else gap)  # correspondences at least this far
     for voxel, dist, k in levels:
         voxel, dist = max(voxel, cap, gap / 1.5), max(dist, gap)  # no columns finer than the spacing
         if check:
             check()
         if voxel not in cache:
             cache[voxel] = (
-                _sampled(to_pcd(columns.columns(source_xyz, voxel).xyz), MAX_SOURCE_POINTS),
+                to_pcd(_sampled(columns.columns(source_xyz, voxel).xyz, MAX_SOURCE_POINTS)),
                 _surface_pcd(target_xyz, source_xyz, t, voxel, 2.0 + dist),
             )
         src, tgt = cache[voxel]
@@ -172,7 +167,7 @@ def icp_levels(
     return (t, float(res.fitness), float(res.inlier_rmse)) if scores else t
 
 
-def _surface_pcd(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
+def _surface_pcd(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
     """The target's column surface with normals, over the source's box under ``t`` + margin."""
     moved = transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t)
     pcd = _column_pcd(target_xyz, voxel, moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin)
@@ -185,58 +180,13 @@ def _surface_pcd(target_xyz: np.ndarray, source_xyz: np.ndarray, t: np.ndarray, 
     return pcd
 
 
-def _sampled(pcd, cap: int):
+def _sampled(xyz: np.ndarray, cap: int) -> np.ndarray:
     """At most ``cap`` points of a cloud, a fixed-stride sample (deterministic): the source side
     of ICP needs well-spread points, not all of them; the target keeps its density."""
-    n = len(pcd.points)
+    n = len(xyz)
     if n <= cap:
-        return pcd
-    return pcd.select_by_index(np.arange(0, n, int(np.ceil(n / cap))).tolist())
-
-
-def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
-    """The points of a cloud in the margin band of its own footprint (see
-    :func:`soilvolume.compensation.stable.margin`): surveys are flown beyond the works, so this band is the
-    part of the after survey most likely to be stable ground."""
-    from ..compensation.stable import margin
-
-    cell = max(1.0, 2.0 * gap)
-    cols = columns.columns(xyz, cell)
-    valid = np.zeros(cols.shape, bool)
-    valid[cols.row, cols.col] = True
-    band = margin(valid, cell)
-    ix = np.clip(cell_index(xyz[:, 0], cols.lo[0], cell), 0, cols.shape[1] - 1)
-    iy = np.clip(cell_index(xyz[:, 1], cols.lo[1], cell), 0, cols.shape[0] - 1)
-    return rows(xyz, band[iy, ix])
-
-
-def stable_source(
-    source_xyz: np.ndarray,
-    target_xyz: np.ndarray,
-    t: np.ndarray,
-    cell: float = 1.0,
-    gap: float | None = None,
-) -> np.ndarray:
-    """The source with its fitted low-order deformation removed and its change areas dropped:
-    what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
-    ground (searched from the margin of the after footprint) and the degree-2 surface come from
-    :mod:`soilvolume.compensation.stable` on median grids."""
-    from ..compensation.stable import find_stable
-    from ..dem.grid import average_height, make_grid
-
-    src = transform_points(source_xyz, t)
-    cell = max(cell, 1.5 * (spacing(target_xyz) if gap is None else gap))  # gap: the target's spacing
-    grid = make_grid(*bounds(src), cell, np.zeros(3), None)
-    diff = average_height(src, grid, "median")[0] - average_height(target_xyz, grid, "median")[0]
-    if np.isfinite(diff).sum() < 20:
-        return src[:0]
-    stable, trend = find_stable(diff, cell)
-    row, col, ok = grid.index(src)
-    keep = np.zeros(len(src), bool)
-    keep[ok] = stable[row[ok], col[ok]]
-    out = rows(src, keep)
-    out[:, 2] -= trend[row[keep], col[keep]]
-    return out
+        return xyz
+    return xyz[:: int(np.ceil(n / cap))]
 
 
 def register(
@@ -259,8 +209,10 @@ def register(
             StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
             StageQuality("none", fit, rmse, eye, True, 0.0, skipped),
         )
+    limit_threads(options.threads)
+    target = columns.Cloud(before_xyz)  # the fine stage's many boxes on the before cloud share its cuts
     if options.coarse == "auto" and options.fine != "none":
-        first = _fine_stage(after_xyz, before_xyz, [(eye, "gps")], options, check, dense)
+        first = _fine_stage(after_xyz, target, [(eye, "gps")], options, check, dense)
         if first.fitness >= AUTO_FITNESS:  # the GPS pose converged: FPFH cannot do better here
             note = (
                 f"skipped: the fine registration from the GPS pose fits ({first.fitness:.0%} of the "
@@ -273,7 +225,7 @@ def register(
     starts = [(eye, "gps")]
     if coarse.accepted and not np.allclose(coarse.transform, eye):
         starts.append((coarse.transform, "coarse"))
-    best = _fine_stage(after_xyz, before_xyz, starts, options, check, dense)
+    best = _fine_stage(after_xyz, target, starts, options, check, dense)
     if options.coarse == "auto" and coarse.accepted and "gps" in best.note:
         note = coarse.note + "; rejected: fine registration fits better from the GPS pose"
         coarse = replace(coarse, accepted=False, note=note)
@@ -313,13 +265,15 @@ def _coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
 
 def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=None) -> StageQuality:
     """The fine stage from the best of the starting poses: ICP/GICP run their first (1 m) levels
-    from each start and finish from the one that fits best; PFH and none are scored whole."""
+    from each start and finish from the one that fits best; PFH and none are scored whole.
+    ``before_xyz``: an array or a :class:`~soilvolume.registration.columns.Cloud`."""
     t0 = time.perf_counter()
-    gap = spacing(before_xyz)
+    gap = spacing(columns.Cloud.points(before_xyz))
     judge = _judged(after_xyz, gap)
     if options.fine in ("icp", "gicp"):
-        (t, label, rejected), alt = _icp_from_best(after_xyz, before_xyz, starts, options, check, gap)
-        fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
+        (t, label, rejected, (fit, rmse)), alt = _icp_from_best(
+            judge, after_xyz, before_xyz, starts, options, check, gap
+        )
         return StageQuality(
             options.fine,
             fit,
@@ -336,7 +290,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
         if options.fine == "pfh":
             from .pfh import pfh_sac_ia
 
-            src, tgt = dense if dense is not None else (after_xyz, before_xyz)
+            src, tgt = dense if dense is not None else (after_xyz, columns.Cloud.points(before_xyz))
             t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed)
         else:
             t = init
@@ -348,15 +302,15 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     return replace(best, seconds=time.perf_counter() - t0)
 
 
-def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: float):
-    """ICP from the best start on the margin of the after survey, then refined twice on the
-    stable ground found at the pose reached (works inside the survey never pull the pose); the
-    pose that fits the margin best within the georeferencing prior wins. Returns ((transform,
-    label, poses rejected beyond the prior), the other refined pose (margin-only or
-    stable-ground ICP) as an alternative for the uncertainty, None when there is none)."""
+def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, gap: float):
+    """ICP from the best start on the margin of the after survey (``src``: :func:`_judged`), then
+    refined twice on the stable ground found at the pose reached (works inside the survey never
+    pull the pose); the pose that fits the margin best within the georeferencing prior wins.
+    Returns ((transform, label, poses rejected beyond the prior, its (fitness, RMSE) on the
+    margin), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
+    uncertainty, None when there is none)."""
     method = options.fine
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
-    src = _judged(after_xyz, gap)
     scored = []
     for init, label in starts:
         t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, scores=True, gap=gap)
@@ -374,11 +328,11 @@ def _icp_from_best(after_xyz, before_xyz, starts, options: Options, check, gap: 
         poses.append((t, label))
     centre = after_xyz.mean(axis=0)
     allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
-    best = _best_on(src, before_xyz, allowed, gap)
+    best, scores = _best_on(src, before_xyz, allowed, gap)
     others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
     rejected = len(poses) - len(allowed)
     label = best[1] + (f"; {rejected} pose(s) beyond the georeferencing prior rejected" if rejected else "")
-    return (best[0], label, rejected), (others[-1] if others else None)
+    return (best[0], label, rejected, scores), (others[-1] if others else None)
 
 
 def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
@@ -388,13 +342,14 @@ def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
     return ring if len(ring) >= max(500, 0.05 * len(after_xyz)) else after_xyz
 
 
-def _best_on(src, before_xyz, poses, gap: float) -> tuple[np.ndarray, str]:
+def _best_on(src, before_xyz, poses, gap: float) -> tuple[tuple[np.ndarray, str], tuple[float, float]]:
     """The pose under which the margin points fit the before surface best (the last, most
-    refined one on ties): a pass that drifted never replaces a better pose."""
-    best, best_key = poses[-1], None
+    refined one on ties): a pass that drifted never replaces a better pose; and its (fitness,
+    RMSE) there (:func:`evaluate_surface`)."""
+    best, best_key, scores = poses[-1], None, (float("nan"), float("nan"))
     for k, (t, label) in enumerate(poses):
         fit, rmse = evaluate_surface(src, before_xyz, t, gap=gap)
         key = (round(fit, 2), -np.nan_to_num(rmse, nan=1e9), k)
         if best_key is None or key > best_key:
-            best, best_key = (t, label), key
-    return best
+            best, best_key, scores = (t, label), key, (fit, rmse)
+    return best, scores

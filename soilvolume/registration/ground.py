@@ -1,0 +1,66 @@
+"""The ground a registration is judged and refined on: the point spacing of a cloud, the margin
+band of the after survey (most likely stable) and the after points on stable ground at a pose."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.cells import bounds, cell_index, rows
+from ..inputs.footprint import footprint
+from . import columns
+from .rigid import transform_points
+
+
+def spacing(xyz: np.ndarray) -> float:
+    """Mean horizontal point spacing (m) of a cloud: sqrt(footprint area / points)."""
+    from ..inputs.footprint import polygon_area
+
+    return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max(len(xyz), 1)))
+
+
+def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The points of a cloud in the margin band of its own footprint (see
+    :func:`soilvolume.compensation.stable.margin`): surveys are flown beyond the works, so this band is the
+    part of the after survey most likely to be stable ground."""
+    from ..compensation.stable import margin
+
+    cell = max(1.0, 2.0 * gap)
+    cols = columns.columns(xyz, cell)
+    valid = np.zeros(cols.shape, bool)
+    valid[cols.row, cols.col] = True
+    band = margin(valid, cell)
+    ix = np.clip(cell_index(xyz[:, 0], cols.lo[0], cell), 0, cols.shape[1] - 1)
+    iy = np.clip(cell_index(xyz[:, 1], cols.lo[1], cell), 0, cols.shape[0] - 1)
+    return rows(xyz, band[iy, ix])
+
+
+def stable_source(
+    source_xyz: np.ndarray,
+    target_xyz: columns.Target,
+    t: np.ndarray,
+    cell: float = 1.0,
+    gap: float | None = None,
+) -> np.ndarray:
+    """The source with its fitted low-order deformation removed and its change areas dropped:
+    what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
+    ground (searched from the margin of the after footprint) and the degree-2 surface come from
+    :mod:`soilvolume.compensation.stable` on median grids."""
+    from ..compensation.stable import find_stable
+    from ..dem.grid import average_height, make_grid
+
+    src = transform_points(source_xyz, t)
+    target = columns.Cloud.of(target_xyz)
+    cell = max(cell, 1.5 * (spacing(target.xyz) if gap is None else gap))  # gap: the target's spacing
+    grid = make_grid(*bounds(src), cell, np.zeros(3), None)
+    top = np.array([grid.xmin + (grid.cols + 1) * grid.cell, grid.ymax + grid.cell])
+    near = target.within(np.array([grid.xmin - grid.cell, grid.ymax - (grid.rows + 1) * grid.cell]), top)
+    diff = average_height(src, grid, "median")[0] - average_height(near, grid, "median")[0]
+    if np.isfinite(diff).sum() < 20:
+        return src[:0]
+    stable, trend = find_stable(diff, cell)
+    row, col, ok = grid.index(src)
+    keep = np.zeros(len(src), bool)
+    keep[ok] = stable[row[ok], col[ok]]
+    out = rows(src, keep)
+    out[:, 2] -= trend[row[keep], col[keep]]
+    return out
