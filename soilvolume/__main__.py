@@ -30,7 +30,7 @@ def one_blas_thread() -> None:
     The engine's matrix products are points times a 3x3 or small least squares, memory-bound;
     with a thread per core, OpenBLAS's idle threads spin (sched_yield) after every product: 1.3 s
     of system time in a 5 s run on two cores, taken from Open3D's threads and the preload
-    thread. Open3D's own threads are ``--threads`` (OpenMP)."""
+    thread. Open3D's threads are ``--threads``."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 

@@ -46,7 +46,8 @@ def _import(registration: bool) -> None:
 
 def preload(registration: bool, threads: int = 0) -> threading.Thread:
     """Start importing Open3D (when ``registration`` runs), :data:`DURING`, then rasterio, in the background.
-    ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), so Open3D's OpenMP sees it."""
+    ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), for OpenMP libraries (Open3D 0.19+ is
+    limited by :func:`soilvolume.registration.o3d.limit_threads`)."""
     if threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(threads))
     _READ.clear()

@@ -22,7 +22,7 @@ def _o3d():
 
 def limit_threads(threads: int) -> None:
     """Open3D's CPU threads, ``threads`` (0: all cores): Open3D 0.19+ runs on oneTBB, which ignores
-    OMP_NUM_THREADS (``--threads`` sets that for numpy's libraries); older releases have no
+    OMP_NUM_THREADS (``--threads`` sets that too, for OpenMP libraries); older releases have no
     ``set_max_threads`` and follow OMP_NUM_THREADS. A process that never asks for a limit keeps
     Open3D's own setting; one that did gets all cores back with 0."""
     global _LIMITED

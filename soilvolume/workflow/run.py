@@ -85,8 +85,9 @@ class Run:
 
 
 def threads(command: str, options: Options) -> None:
-    """``--threads`` of the commands that take it: Open3D's OpenMP threads (numpy's BLAS runs on one
-    thread in the command's process: :func:`soilvolume.__main__.one_blas_thread`)."""
+    """``--threads`` of the commands that take it, for OpenMP libraries (OMP_NUM_THREADS; Open3D 0.19+
+    runs on oneTBB and gets it from :func:`soilvolume.registration.o3d.limit_threads`; numpy's BLAS
+    runs on one thread in the command's process: :func:`soilvolume.__main__.one_blas_thread`)."""
     from ..options import command_fields
 
     if any(f.name == "threads" for f in command_fields(command)) and options.threads > 0:
