@@ -77,6 +77,16 @@ class PointRule:
         ground under a canopy; LiDAR's ground returns below one are real)."""
         return self.green is not None and not self.use_class
 
+    @property
+    def signal_dims(self) -> set[str]:
+        """The LAS dimensions :meth:`labels` reads beyond the classification."""
+        dims = set()
+        if self.green is not None:
+            dims |= {"red", "green", "blue"}
+        if self.returns and not self.use_class:
+            dims |= {"return_number", "number_of_returns"}
+        return dims
+
     def labels(self, cls: np.ndarray | None, sig: Signals | None) -> np.ndarray | None:
         """uint8 labels of a chunk's points, or None when all are soil."""
         out = None
