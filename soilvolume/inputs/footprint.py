@@ -21,7 +21,11 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
         raise SoilVolumeError(
             f"{path}: too few points to work with ({len(xy)} distinct positions {what}, at least {MIN_COLUMNS} needed)"
         )
-    spread = np.linalg.svd(xy - xy.mean(axis=0), compute_uv=False) / np.sqrt(len(xy))
+    x, y = xy[:, 0] - xy[:, 0].mean(), xy[:, 1] - xy[:, 1].mean()
+    xy_ = float(x @ y)
+    moments = np.array([[float(x @ x), xy_], [xy_, float(y @ y)]]) / len(xy)
+    # the singular values of the centred points / sqrt(n), from their 2 x 2 second moments
+    spread = np.sqrt(np.maximum(np.linalg.eigvalsh(moments)[::-1], 0.0))
     if spread[1] < max(0.01, 1e-4 * spread[0]):
         raise SoilVolumeError(f"{path}: the points lie on a line (a degenerate cloud: no area to compare)")
 
@@ -103,11 +107,19 @@ class PolygonMask:
 
     def __call__(self, xyz: np.ndarray) -> np.ndarray:
         rows, cols = self.mask.shape
-        col = ((xyz[:, 0] - self.lo[0]) / self.res).astype(np.int64)
-        row = ((xyz[:, 1] - self.lo[1]) / self.res).astype(np.int64)
-        np.clip(col, -1, cols, out=col)
-        np.clip(row, -1, rows, out=row)
-        return self.framed[row + 1, col + 1]
+        col, row = self._cell(xyz[:, 0], 0, cols), self._cell(xyz[:, 1], 1, rows)
+        row += 1  # the flat index of (row + 1, col + 1) in the framed mask
+        row *= cols + 2
+        row += col
+        row += 1
+        return self.framed.ravel().take(row)
+
+    def _cell(self, v: np.ndarray, axis: int, n: int) -> np.ndarray:
+        """The lattice index along ``axis`` of coordinates ``v``, clipped to -1..n (the frame)."""
+        t = v - self.lo[axis]
+        t /= self.res
+        i = t.astype(np.int64)
+        return np.clip(i, -1, n, out=i)
 
 
 def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:
