@@ -7,7 +7,7 @@ Readers return absolute float64 coordinates in the file's own CRS and units; CRS
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -136,12 +136,12 @@ def _read_las(path: Path) -> RawPoints:
 
 
 def las_chunks(
-    path: Path, count: int, size: int, signals: bool | set[str] = False, origin: np.ndarray | None = None
+    path: Path, count: int, size: int, signals: bool | Callable = False, origin: np.ndarray | None = None
 ) -> Iterator[tuple]:
     """(absolute xyz float64, classification or None) of a LAS/LAZ file, ``size`` points at a
     time; a point count other than the header's ``count`` is reported as a corrupt file. With
-    ``signals``, a third item: the points' colour and returns (:func:`point_signals`; a set: of
-    those dimensions only, read again at each chunk, so a caller may narrow it while reading).
+    ``signals``, a third item: the points' colour and returns (:func:`point_signals`; a function:
+    of the dimensions it names for each chunk's classification, see :func:`signal_dims`).
     With ``origin``, the coordinates are ``xyz - origin`` (the subtraction done in the decoding)."""
     laspy = laspy_module()
 
@@ -158,7 +158,7 @@ def las_chunks(
                     bounds.extend(lo, hi)
                 read += len(chunk)
                 cls = np.array(chunk.classification) if has_cls else None  # a copy: a view pins the record
-                item = (xyz, cls) if signals is False else (xyz, cls, point_signals(chunk, signal_dims(dims, signals)))
+                item = (xyz, cls, point_signals(chunk, signal_dims(dims, signals, cls))) if signals else (xyz, cls)
                 del chunk, xyz, cls  # the record is not held while the consumer works (or the queue is full)
                 yield item
     except SoilVolumeError:
@@ -170,13 +170,10 @@ def las_chunks(
     bounds.finish()
 
 
-#: the dimensions :func:`point_signals` reads
-SIGNAL_DIMS = frozenset({"red", "green", "blue", "return_number", "number_of_returns"})
-
-
-def signal_dims(dims: set[str], signals: bool | set[str]) -> set[str]:
-    """The dimensions of ``dims`` a read with ``signals`` (True: all, a set: those) returns."""
-    return dims if signals is True else dims & set(signals or ())
+def signal_dims(dims: set[str], signals, cls: np.ndarray | None) -> set[str]:
+    """The dimensions of ``dims`` a read with ``signals`` returns for a chunk of classification
+    ``cls``: all (True), or those ``signals(cls)`` names."""
+    return dims if signals is True else dims & set(signals(cls))
 
 
 def scaled_xyz(chunk) -> np.ndarray:

@@ -19,12 +19,11 @@ import numpy as np
 
 from ..core.cells import bounds, in_box, rows
 from ..core.types import SoilVolumeError, short_error
-from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
+from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide, deciding_dims
 from .copc import copc_chunks, is_copc
 from .io import (
     GROUND,
     LAS_SUFFIXES,
-    SIGNAL_DIMS,
     RawPoints,
     _check_readable,
     las_chunks,
@@ -56,16 +55,16 @@ class Source:
     region: tuple[np.ndarray, np.ndarray] | None = None  # x/y box (file CRS) that reads may stop at
     index: tuple | None = None  # of a single file: (start, count, x/y lo, x/y hi) of each chunk read
 
-    def chunks(self, size: int | None = None, signals: bool | set[str] = False, origin=None) -> Iterator[tuple]:
+    def chunks(self, size: int | None = None, signals: bool | Callable = False, origin=None) -> Iterator[tuple]:
         """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
         points (default ``CHUNK``); with a ``region``, chunks may hold points outside it. With
         ``signals``, a third item: the chunk's colour and returns (``soil.points.Signals`` or None;
-        a set: of those dimensions only, see :func:`io.las_chunks`). With ``origin``, xyz are
+        a function: those it names, see :func:`io.las_chunks`). With ``origin``, xyz are
         ``xyz - origin`` (in the decoding of LAS/LAZ files)."""
         if self.raw is not None:
             raw = self.raw
             xyz = raw.xyz if origin is None else raw.xyz - origin
-            yield (xyz, raw.classification, raw.signals) if signals is not False else (xyz, raw.classification)
+            yield (xyz, raw.classification, raw.signals) if signals else (xyz, raw.classification)
             return
         if self.index is not None and self.region is not None and not is_copc(self.path):
             yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK, signals, origin)
@@ -99,7 +98,7 @@ def _meeting(index, lo, hi) -> list[tuple[int, int]]:
 
 
 def las_ranges(
-    path: str, ranges: list[tuple[int, int]], size: int, signals: bool | set[str] = False, origin=None
+    path: str, ranges: list[tuple[int, int]], size: int, signals: bool | Callable = False, origin=None
 ) -> Iterator[tuple]:
     """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
     laspy = laspy_module()
@@ -116,8 +115,8 @@ def las_ranges(
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
                     xyz = _shifted(xyz, origin)
                     cls = np.array(pts.classification) if has_cls else None
-                    sig = point_signals(pts, signal_dims(dims, signals)) if signals is not False else None
-                    yield (xyz, cls, sig) if signals is not False else (xyz, cls)
+                    sig = point_signals(pts, signal_dims(dims, signals, cls)) if signals else None
+                    yield (xyz, cls, sig) if signals else (xyz, cls)
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
 
@@ -128,14 +127,14 @@ def _shifted(xyz: np.ndarray, origin) -> np.ndarray:
 
 
 def file_chunks(
-    path: str, region, size: int, resolution: float | None = None, signals: bool | set[str] = False, origin=None
+    path: str, region, size: int, resolution: float | None = None, signals: bool | Callable = False, origin=None
 ) -> Iterator[tuple]:
     """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only its octree nodes
     meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file.
     ``origin``: see :meth:`Source.chunks`."""
     if (region is not None or resolution is not None) and is_copc(path):
         lo, hi = region if region is not None else (None, None)
-        for part in copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=signals is not False):
+        for part in copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=bool(signals)):
             yield (_shifted(part[0], origin), *part[1:])
         return
     yield from las_chunks(Path(path), _header(Path(path)).count, size, signals, origin)
@@ -297,22 +296,23 @@ def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str
     return replace(rule, use_class=ground_mode(src, cls, mode))
 
 
-def _labelled(src: Source, to_local, boxes: bool, rule_of) -> tuple[Iterator[tuple], Callable]:
+def _labelled(src: Source, to_local, boxes: bool, mode: str, exclude: str) -> tuple[Iterator[tuple], Callable]:
     """The chunks of ``src`` read ahead by a thread (:func:`prefetch`) as (xyz, labels or None,
     the epoch's rule, x/y box of the file coordinates when ``boxes``), and the conversion to the
     local frame still to apply to xyz. The thread decides the rule on the first chunk
-    (``rule_of(cls, signals)``), labels every chunk, reads only the signals the rule uses past the
-    first chunk, and subtracts the origin of a plain shift (``prepare.Shift``) in the decoding."""
+    (:func:`epoch_rule`), labels every chunk, reads only the signals the rule (or its decision)
+    uses, and subtracts the origin of a plain shift (``prepare.Shift``) in the decoding."""
     fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
-    want = set(SIGNAL_DIMS)  # narrowed to the rule's once it is decided
+    rule: PointRule | None = None
+
+    def wanted(cls) -> set[str]:
+        return deciding_dims(cls, mode, exclude) if rule is None else rule.signal_dims
 
     def run() -> Iterator[tuple]:
-        rule = None
-        for xyz, cls, sig in src.chunks(signals=want, origin=to_local.origin if fused else None):
-            if rule is None:
-                rule = rule_of(cls, sig)
-                want.intersection_update(rule.signal_dims)
+        nonlocal rule
+        for xyz, cls, sig in src.chunks(signals=wanted, origin=to_local.origin if fused else None):
+            rule = rule or epoch_rule(src, cls, sig, mode, exclude)
             item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes else None
             del xyz, cls, sig  # held by the item only
             yield item
@@ -343,7 +343,7 @@ def load(
     rule: PointRule | None = None
     reading, cropped = 0.0, 0
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
-    chunks, shift = _labelled(src, to_local, index is not None, lambda c, s: epoch_rule(src, c, s, mode, exclude))
+    chunks, shift = _labelled(src, to_local, index is not None, mode, exclude)
     while True:
         t0 = time.perf_counter()
         try:
