@@ -11,6 +11,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from ..core.types import SoilVolumeError, short_error
 
+BLOCK = 1 << 14  # points the crop mask looks up at a time
 MIN_COLUMNS = 30  # fewest thinned columns a cloud needs to be registered, gridded and compared
 
 
@@ -106,20 +107,31 @@ class PolygonMask:
         self.framed = np.pad(self.mask, 1)  # a border of False: indices clipped onto it are out
 
     def __call__(self, xyz: np.ndarray) -> np.ndarray:
-        rows, cols = self.mask.shape
-        col, row = self._cell(xyz[:, 0], 0, cols), self._cell(xyz[:, 1], 1, rows)
-        row += 1  # the flat index of (row + 1, col + 1) in the framed mask
-        row *= cols + 2
-        row += col
-        row += 1
-        return self.framed.ravel().take(row)
+        """Whether each point's x/y falls in a cell of the mask, block by block (the temporaries
+        of a block stay in the cache)."""
+        n = len(xyz)
+        out = np.empty(n, bool)
+        flat = self.framed.ravel()
+        scratch = np.empty(min(n, BLOCK)), np.empty(min(n, BLOCK), np.int64), np.empty(min(n, BLOCK), np.int64)
+        for start in range(0, n, BLOCK):
+            stop = min(n, start + BLOCK)
+            t, col, row = (a[: stop - start] for a in scratch)
+            self._cell(xyz[start:stop, 0], 0, t, col)
+            self._cell(xyz[start:stop, 1], 1, t, row)
+            row += 1  # the flat index of (row + 1, col + 1) in the framed mask
+            row *= self.framed.shape[1]
+            row += col
+            row += 1
+            flat.take(row, out=out[start:stop])
+        return out
 
-    def _cell(self, v: np.ndarray, axis: int, n: int) -> np.ndarray:
-        """The lattice index along ``axis`` of coordinates ``v``, clipped to -1..n (the frame)."""
-        t = v - self.lo[axis]
+    def _cell(self, v: np.ndarray, axis: int, t: np.ndarray, out: np.ndarray) -> None:
+        """The lattice index along ``axis`` of coordinates ``v`` into ``out``: ``int((v - lo) / res)``
+        clipped to -1..n (the frame), through the float scratch ``t``."""
+        np.subtract(v, self.lo[axis], out=t)
         t /= self.res
-        i = t.astype(np.int64)
-        return np.clip(i, -1, n, out=i)
+        np.copyto(out, t, casting="unsafe")  # as astype(np.int64)
+        np.clip(out, -1, self.mask.shape[1 - axis], out=out)
 
 
 def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:
