@@ -312,7 +312,8 @@ def _labelled(src: Source, to_local, boxes: bool, mode: str, exclude: str) -> tu
     def run() -> Iterator[tuple]:
         nonlocal rule
         for xyz, cls, sig in src.chunks(signals=wanted, origin=to_local.origin if fused else None):
-            rule = rule or epoch_rule(src, cls, sig, mode, exclude)
+            if rule is None:
+                rule = epoch_rule(src, cls, sig, mode, exclude)
             item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes else None
             del xyz, cls, sig  # held by the item only
             yield item
