@@ -85,3 +85,64 @@ def test_truncated_las_is_reported(cloud, tmp_path):
     cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
     with pytest.raises(SoilVolumeError, match="cut.las"):  # found in the header, before reading
         _load(open_source(cut), np.zeros(3))
+
+
+def _coloured(tmp_path, n=6_000):
+    """A LAS file with colour (some green points), several returns and no class 2."""
+    import laspy
+
+    rng = np.random.default_rng(3)
+    header = laspy.LasHeader(point_format=7, version="1.4")
+    header.offsets, header.scales = np.array([500_000.0, 3_900_000.0, 0.0]), np.full(3, 0.001)
+    header.add_crs(pyproj.CRS("EPSG:32654"))
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = 500_000 + rng.uniform(0, 60, n), 3_900_000 + rng.uniform(0, 40, n), rng.normal(50, 0.3, n)
+    green = rng.random(n) < 0.3
+    las.red = np.where(green, 20_000, 40_000).astype(np.uint16)
+    las.green = np.where(green, 50_000, 38_000).astype(np.uint16)
+    las.blue = np.where(green, 15_000, 36_000).astype(np.uint16)
+    las.number_of_returns = np.where(rng.random(n) < 0.2, 2, 1).astype(np.uint8)
+    las.return_number = np.where((las.number_of_returns == 2) & (rng.random(n) < 0.5), 1, las.number_of_returns)
+    path = tmp_path / "coloured.las"
+    las.write(str(path))
+    return path
+
+
+@pytest.mark.parametrize("classified", [True, False])
+def test_narrowed_signals_and_fused_shift_change_nothing(cloud, tmp_path, monkeypatch, classified):
+    """Reading only the signals the rule uses, with the origin subtracted in the decoding, loads
+    bit for bit what reading every signal and shifting afterwards loads."""
+    from soilvolume.inputs.prepare import Shift
+    from soilvolume.soil import points
+
+    path = cloud[0] if classified else _coloured(tmp_path)
+    origin = np.array([500_010.0, 3_900_010.0, 49.0])
+    monkeypatch.setattr(stream, "CHUNK", 1_000)
+    las = open_source(path)
+    keep = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
+
+    def both() -> list:
+        box = np.array([-11.0, -11.0]), np.array([60.0, 40.0])
+        return [load(las, f, "auto", keep, ColumnThinner(*box, 0.5)) for f in (Shift(origin), lambda x: x - origin)]
+
+    narrowed = both()
+    every = {*points.RGB_DIMS, *points.RETURN_DIMS}
+    monkeypatch.setattr(stream, "deciding_dims", lambda *a: every)
+    monkeypatch.setattr(points.PointRule, "signal_dims", property(lambda self: every))
+    full = both()
+    assert narrowed[0].nonsoil is not None and len(narrowed[0].nonsoil.labels) > 100
+    for a, b in ((narrowed[0], full[1]), (narrowed[1], full[1]), (full[0], full[1])):
+        assert a.nonsoil.rule == b.nonsoil.rule and (a.points, a.used, a.extra["cropped"]) == (
+            b.points,
+            b.used,
+            b.extra["cropped"],
+        )
+        for x, y in (
+            (a.xyz, b.xyz),
+            (a.thin, b.thin),
+            (a.nonsoil.xyz, b.nonsoil.xyz),
+            (a.nonsoil.labels, b.nonsoil.labels),
+        ):
+            assert x.dtype == y.dtype and np.array_equal(x, y)
+    rule = narrowed[0].nonsoil.rule
+    assert rule.use_class if classified else (rule.green is not None and rule.returns)

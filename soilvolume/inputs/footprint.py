@@ -11,6 +11,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from ..core.types import SoilVolumeError, short_error
 
+BLOCK = 1 << 14  # points the crop mask looks up at a time
 MIN_COLUMNS = 30  # fewest thinned columns a cloud needs to be registered, gridded and compared
 
 
@@ -21,7 +22,11 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
         raise SoilVolumeError(
             f"{path}: too few points to work with ({len(xy)} distinct positions {what}, at least {MIN_COLUMNS} needed)"
         )
-    spread = np.linalg.svd(xy - xy.mean(axis=0), compute_uv=False) / np.sqrt(len(xy))
+    x, y = xy[:, 0] - xy[:, 0].mean(), xy[:, 1] - xy[:, 1].mean()
+    xy_ = float(x @ y)
+    moments = np.array([[float(x @ x), xy_], [xy_, float(y @ y)]]) / len(xy)
+    # the singular values of the centred points / sqrt(n), from their 2 x 2 second moments
+    spread = np.sqrt(np.maximum(np.linalg.eigvalsh(moments)[::-1], 0.0))
     if spread[1] < max(0.01, 1e-4 * spread[0]):
         raise SoilVolumeError(f"{path}: the points lie on a line (a degenerate cloud: no area to compare)")
 
@@ -102,12 +107,31 @@ class PolygonMask:
         self.framed = np.pad(self.mask, 1)  # a border of False: indices clipped onto it are out
 
     def __call__(self, xyz: np.ndarray) -> np.ndarray:
-        rows, cols = self.mask.shape
-        col = ((xyz[:, 0] - self.lo[0]) / self.res).astype(np.int64)
-        row = ((xyz[:, 1] - self.lo[1]) / self.res).astype(np.int64)
-        np.clip(col, -1, cols, out=col)
-        np.clip(row, -1, rows, out=row)
-        return self.framed[row + 1, col + 1]
+        """Whether each point's x/y falls in a cell of the mask, block by block (the temporaries
+        of a block stay in the cache)."""
+        n = len(xyz)
+        out = np.empty(n, bool)
+        flat = self.framed.ravel()
+        scratch = np.empty(min(n, BLOCK)), np.empty(min(n, BLOCK), np.int64), np.empty(min(n, BLOCK), np.int64)
+        for start in range(0, n, BLOCK):
+            stop = min(n, start + BLOCK)
+            t, col, row = (a[: stop - start] for a in scratch)
+            self._cell(xyz[start:stop, 0], 0, t, col)
+            self._cell(xyz[start:stop, 1], 1, t, row)
+            row += 1  # the flat index of (row + 1, col + 1) in the framed mask
+            row *= self.framed.shape[1]
+            row += col
+            row += 1
+            flat.take(row, out=out[start:stop])
+        return out
+
+    def _cell(self, v: np.ndarray, axis: int, t: np.ndarray, out: np.ndarray) -> None:
+        """The lattice index along ``axis`` of coordinates ``v`` into ``out``: ``int((v - lo) / res)``
+        clipped to -1..n (the frame), through the float scratch ``t``."""
+        np.subtract(v, self.lo[axis], out=t)
+        t /= self.res
+        np.copyto(out, t, casting="unsafe")  # as astype(np.int64)
+        np.clip(out, -1, self.mask.shape[1 - axis], out=out)
 
 
 def polygon_wkt(polygon: np.ndarray, origin: np.ndarray | None = None) -> str:

@@ -150,9 +150,11 @@ class BoundsCheck:
         self.seen_lo, self.seen_hi = np.full(3, np.inf), np.full(3, -np.inf)
 
     def update(self, xyz: np.ndarray) -> None:
-        if not len(xyz):
-            return
-        lo, hi = bounds(xyz)
+        if len(xyz):
+            self.extend(*bounds(xyz))
+
+    def extend(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Take in a (non-empty) chunk's per-axis min ``lo`` and max ``hi``."""
         if (lo < self.lo - self.tol).any() or (hi > self.hi + self.tol).any():
             raise SoilVolumeError(
                 f"{self.path}: points lie outside the bounds in the LAS header (corrupt scale, offset or bounds)"

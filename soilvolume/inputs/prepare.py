@@ -331,7 +331,8 @@ def _local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
 
 class Shift:
     """File -> local frame when the file is in the frame's CRS in metres: ``xyz - origin``;
-    :meth:`inplace` on a chunk the reader allocated (no 24 MB array per 1 M points to fault in)."""
+    :meth:`inplace` on a chunk the reader allocated (no 24 MB array per 1 M points to fault in);
+    a reader given :attr:`origin` subtracts it as it decodes (``stream.Source.chunks``)."""
 
     def __init__(self, origin: np.ndarray) -> None:
         self.origin = origin

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..core.cells import bounds, in_box, rows
 from ..core.types import SoilVolumeError, short_error
-from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide
+from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide, deciding_dims
 from .copc import copc_chunks, is_copc
 from .io import (
     GROUND,
@@ -30,6 +30,7 @@ from .io import (
     las_crs_wkt,
     point_signals,
     read_points,
+    signal_dims,
     validate,
 )
 from .lasimport import laspy_module
@@ -54,19 +55,22 @@ class Source:
     region: tuple[np.ndarray, np.ndarray] | None = None  # x/y box (file CRS) that reads may stop at
     index: tuple | None = None  # of a single file: (start, count, x/y lo, x/y hi) of each chunk read
 
-    def chunks(self, size: int | None = None, signals: bool = False) -> Iterator[tuple]:
+    def chunks(self, size: int | None = None, signals: bool | Callable = False, origin=None) -> Iterator[tuple]:
         """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
         points (default ``CHUNK``); with a ``region``, chunks may hold points outside it. With
-        ``signals``, a third item: the chunk's colour and returns (``soil.points.Signals`` or None)."""
+        ``signals``, a third item: the chunk's colour and returns (``soil.points.Signals`` or None;
+        a function: those it names, see :func:`io.las_chunks`). With ``origin``, xyz are
+        ``xyz - origin`` (in the decoding of LAS/LAZ files)."""
         if self.raw is not None:
             raw = self.raw
-            yield (raw.xyz, raw.classification, raw.signals) if signals else (raw.xyz, raw.classification)
+            xyz = raw.xyz if origin is None else raw.xyz - origin
+            yield (xyz, raw.classification, raw.signals) if signals else (xyz, raw.classification)
             return
         if self.index is not None and self.region is not None and not is_copc(self.path):
-            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK, signals)
+            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK, signals, origin)
             return
         for path in self.tiles():
-            yield from file_chunks(path, self.region, size or CHUNK, signals=signals)
+            yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
 
     def within(self, lo, hi) -> Source:
         """This source, read only where it can meet the x/y box lo..hi (file CRS)."""
@@ -93,7 +97,9 @@ def _meeting(index, lo, hi) -> list[tuple[int, int]]:
     return [(s, n) for s, n, a, b in index if (a <= hi).all() and (lo <= b).all()]
 
 
-def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: bool = False) -> Iterator[tuple]:
+def las_ranges(
+    path: str, ranges: list[tuple[int, int]], size: int, signals: bool | Callable = False, origin=None
+) -> Iterator[tuple]:
     """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
     laspy = laspy_module()
 
@@ -107,22 +113,31 @@ def las_ranges(path: str, ranges: list[tuple[int, int]], size: int, signals: boo
                     pts = reader.read_points(min(size, count - i))
                     xyz = np.empty((len(pts), 3))
                     xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
+                    xyz = _shifted(xyz, origin)
                     cls = np.array(pts.classification) if has_cls else None
-                    yield (xyz, cls, point_signals(pts, dims)) if signals else (xyz, cls)
+                    sig = point_signals(pts, signal_dims(dims, signals, cls)) if signals else None
+                    yield (xyz, cls, sig) if signals else (xyz, cls)
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
 
 
+def _shifted(xyz: np.ndarray, origin) -> np.ndarray:
+    """``xyz - origin`` in place (``xyz`` as it is without an origin)."""
+    return xyz if origin is None else np.subtract(xyz, origin, out=xyz)
+
+
 def file_chunks(
-    path: str, region, size: int, resolution: float | None = None, signals: bool = False
+    path: str, region, size: int, resolution: float | None = None, signals: bool | Callable = False, origin=None
 ) -> Iterator[tuple]:
     """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only its octree nodes
-    meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file."""
+    meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file.
+    ``origin``: see :meth:`Source.chunks`."""
     if (region is not None or resolution is not None) and is_copc(path):
         lo, hi = region if region is not None else (None, None)
-        yield from copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=signals)
+        for part in copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=bool(signals)):
+            yield (_shifted(part[0], origin), *part[1:])
         return
-    yield from las_chunks(Path(path), _header(Path(path)).count, size, signals)
+    yield from las_chunks(Path(path), _header(Path(path)).count, size, signals, origin)
 
 
 def open_source(path, pipeline=None) -> Source:
@@ -281,6 +296,31 @@ def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str
     return replace(rule, use_class=ground_mode(src, cls, mode))
 
 
+def _labelled(src: Source, to_local, boxes: bool, mode: str, exclude: str) -> tuple[Iterator[tuple], Callable]:
+    """The chunks of ``src`` read ahead by a thread (:func:`prefetch`) as (xyz, labels or None,
+    the epoch's rule, x/y box of the file coordinates when ``boxes``), and the conversion to the
+    local frame still to apply to xyz. The thread decides the rule on the first chunk
+    (:func:`epoch_rule`), labels every chunk, reads only the signals the rule (or its decision)
+    uses, and subtracts the origin of a plain shift (``prepare.Shift``) in the decoding."""
+    fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
+    shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
+    rule: PointRule | None = None
+
+    def wanted(cls) -> set[str]:
+        return deciding_dims(cls, mode, exclude) if rule is None else rule.signal_dims
+
+    def run() -> Iterator[tuple]:
+        nonlocal rule
+        for xyz, cls, sig in src.chunks(signals=wanted, origin=to_local.origin if fused else None):
+            if rule is None:
+                rule = epoch_rule(src, cls, sig, mode, exclude)
+            item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes else None
+            del xyz, cls, sig  # held by the item only
+            yield item
+
+    return prefetch(run()), shift
+
+
 def load(
     src: Source,
     to_local: Callable[[np.ndarray], np.ndarray],
@@ -303,26 +343,22 @@ def load(
     points = used = 0
     rule: PointRule | None = None
     reading, cropped = 0.0, 0
-    shift = to_local if src.raw is not None else getattr(to_local, "inplace", to_local)  # chunks read fresh
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
-    chunks = prefetch(src.chunks(signals=True))
+    chunks, shift = _labelled(src, to_local, index is not None, mode, exclude)
     while True:
         t0 = time.perf_counter()
         try:
-            xyz, cls, sig = next(chunks)
+            local, labels, rule, xy_box = next(chunks)
         except StopIteration:
             break
         finally:
             reading += time.perf_counter() - t0
         if check:
             check()
-        if rule is None:
-            rule = epoch_rule(src, cls, sig, mode, exclude)
         if index is not None:
-            index.append((points, len(xyz), *bounds(xyz, 2)))
-        points += len(xyz)
-        local, labels = shift(xyz), rule.labels(cls, sig)
-        del xyz, cls, sig  # the chunk is not held while the next one is read
+            index.append((points, len(local), *xy_box))
+        points += len(local)
+        local = shift(local)
         soil = None if labels is None else labels == SOIL
         used += len(local) if soil is None else int(soil.sum())
         inside = None if keep is None else keep(local)

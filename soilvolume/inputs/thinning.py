@@ -55,9 +55,17 @@ class ColumnThinner:
 
     def result(self) -> np.ndarray:
         """The centroids (float64, (M, 3))."""
-        has = self.sums[3] > 0
-        return (self.sums[:3, has] / self.sums[3, has]).T.copy()
+        filled = self._filled()
+        count = self.sums[3].take(filled)
+        out = np.empty((len(filled), 3))
+        for k in range(3):  # column by column: no (3, M) temporaries and transposed copy
+            np.divide(self.sums[k].take(filled), count, out=out[:, k])
+        return out
 
     def counts(self) -> np.ndarray:
         """The number of points behind each centroid of :meth:`result` (same order)."""
-        return self.sums[3, self.sums[3] > 0].astype(np.int64)
+        return self.sums[3].take(self._filled()).astype(np.int64)
+
+    def _filled(self) -> np.ndarray:
+        """The ids of the columns that have points, in order."""
+        return np.flatnonzero(self.sums[3] > 0)

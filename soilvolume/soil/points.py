@@ -37,6 +37,7 @@ GREEN_DEFAULT, GREEN_RANGE = 0.10, (0.06, 0.20)
 DARK = 0.12  # r + g + b below this share of full scale: too dark for a colour
 MIN_GREEN_SHARE = 0.002  # a green mode: at least this share of the first chunk's points
 MIN_MULTI_RETURNS = 0.005  # returns are used when at least this share has several
+RGB_DIMS, RETURN_DIMS = ("red", "green", "blue"), ("return_number", "number_of_returns")  # LAS dimensions
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,16 @@ class PointRule:
         """Whether a cell mostly of non-soil points has no soil height (photogrammetry sees no
         ground under a canopy; LiDAR's ground returns below one are real)."""
         return self.green is not None and not self.use_class
+
+    @property
+    def signal_dims(self) -> set[str]:
+        """The LAS dimensions :meth:`labels` reads beyond the classification."""
+        dims = set()
+        if self.green is not None:
+            dims.update(RGB_DIMS)
+        if self.returns and not self.use_class:
+            dims.update(RETURN_DIMS)
+        return dims
 
     def labels(self, cls: np.ndarray | None, sig: Signals | None) -> np.ndarray | None:
         """uint8 labels of a chunk's points, or None when all are soil."""
@@ -136,11 +147,23 @@ def otsu(values: np.ndarray, lo: float = -0.3, hi: float = 0.7, bins: int = 200)
     return float(mid[int(np.nanargmax(np.nan_to_num(between, nan=-1.0)))])
 
 
+def _uses_class(cls: np.ndarray | None, mode: str) -> bool:
+    return mode == "class" or (mode == "auto" and cls is not None and bool((cls == GROUND).any()))
+
+
+def deciding_dims(cls: np.ndarray | None, mode: str, exclude: str = "auto") -> set[str]:
+    """The LAS dimensions :func:`decide` reads beyond ``cls``, the first chunk's classification
+    (none when the classification or the options decide alone)."""
+    if _uses_class(cls, mode) or exclude == "none" or mode not in ("auto", "class", "filter", "csf"):
+        return set()
+    return {*RGB_DIMS, *RETURN_DIMS}
+
+
 def decide(cls: np.ndarray | None, sig: Signals | None, mode: str, exclude: str = "auto") -> PointRule:
     """The epoch's rule from its first chunk: ``mode`` is ``--ground`` (class / auto use a real
     classification; filter: SMRF's ground, then colour and returns), ``exclude`` ``--exclude``
     (``none``: no colour or returns)."""
-    use_class = mode == "class" or (mode == "auto" and cls is not None and bool((cls == GROUND).any()))
+    use_class = _uses_class(cls, mode)
     if exclude == "none" or mode not in ("auto", "class", "filter", "csf") or sig is None:
         return PointRule(use_class)
     green, scale = None, 65535.0
