@@ -23,6 +23,8 @@ from scipy import linalg, ndimage, sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu, spsolve
 
+from .equivalents import disc_erosion, lower_triangle, rows_csr
+
 FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use conjugate gradients
@@ -175,11 +177,10 @@ def _second_difference_rows(values: np.ndarray, usable: np.ndarray, todo: np.nda
         wts = np.array([w for _, w in stencil])
         pad = n_c + 2  # anchors (stencil origins) may lie one cell outside the grid
         key = (r0[:, None] - off[:, 0] + 1) * pad + (c0[:, None] - off[:, 1] + 1)
-        ar, ac = np.divmod(np.unique(key), pad)
-        ar, ac = ar - 1, ac - 1
-        inside = (ar >= -off[:, 0].min()) & (ar < n_r - off[:, 0].max())  # every stencil cell in the grid
-        inside &= (ac >= -off[:, 1].min()) & (ac < n_c - off[:, 1].max())
-        pts = (ar[inside] * n_c + ac[inside])[:, None] + (off[:, 0] * n_c + off[:, 1])
+        ar, ac = np.divmod(np.unique(key), pad)  # the anchors' rows and columns, plus one
+        inside = (ar > -off[:, 0].min()) & (ar <= n_r - off[:, 0].max())  # every stencil cell in the grid
+        inside &= (ac > -off[:, 1].min()) & (ac <= n_c - off[:, 1].max())
+        pts = ((ar[inside] - 1) * n_c + ac[inside] - 1)[:, None] + (off[:, 0] * n_c + off[:, 1])
         pts = pts[ok_cell[pts].all(axis=1)]
         rows.append(np.repeat(np.arange(n_rows, n_rows + len(pts)), len(stencil)))
         cols.append(pts.ravel())
@@ -189,26 +190,14 @@ def _second_difference_rows(values: np.ndarray, usable: np.ndarray, todo: np.nda
     unk = tflat[cols]
     k_rows, k_vals = rows[~unk], vflat[cols[~unk]]
     rhs = -np.bincount(k_rows, weights=coef[~unk] * k_vals, minlength=n_rows)
-    mat = _rows_matrix(rows[unk], np.searchsorted(flat, cols[unk]), coef[unk], (n_rows, flat.size))
-    return mat, rhs, k_rows, k_vals
-
-
-def _rows_matrix(rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[int, int]) -> sparse.csr_matrix:
-    """The CSR matrix of entries given row by row, each row's columns increasing (what
-    ``csr_matrix((data, (rows, cols)))`` builds from them, without the conversion from
-    coordinates: the same arrays and index type)."""
-    idx = np.int32 if max(shape[0], shape[1], data.size) < np.iinfo(np.int32).max else np.int64
-    indptr = np.zeros(shape[0] + 1, idx)
-    np.cumsum(np.bincount(rows, minlength=shape[0]), out=indptr[1:])
-    return sparse.csr_matrix((data, cols.astype(idx), indptr), shape=shape)
+    return rows_csr(rows[unk], np.searchsorted(flat, cols[unk]), coef[unk], (n_rows, flat.size)), rhs, k_rows, k_vals
 
 
 def _least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares solution of ``mat x = rhs`` via the normal equations: one factorisation of
     ``normal + eps I`` and iterative refinement. Returns (x, unknowns to fill harmonically)."""
-    mat_t = mat.T
-    normal = (mat_t @ mat).tocsr()
-    g = mat_t @ rhs
+    normal = (mat.T @ mat).tocsr()
+    g = mat.T @ rhs
     n_groups, group = connected_components(normal, directed=False)
     solve, bad = _group_solver(normal + _TIKHONOV * sparse.identity(g.size, format="csr"), group, n_groups)
     x, last = solve(g), np.inf
@@ -230,7 +219,7 @@ def _group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
     """Factorise the block-diagonal SPD ``reg`` (blocks = ``group``): banded Cholesky of blocks
     kept in row-major order, batched by bandwidth; SuperLU for wider blocks; blocks over
     ``_BIG_GROUP`` unknowns are skipped (solution 0). Returns (solve, per-group skipped flags)."""
-    low = _lower(reg)
+    low = lower_triangle(reg)
     row = np.repeat(np.arange(low.shape[0]), np.diff(low.indptr))
     order, kind = _block_order(low, row, group, n_groups)
     pos = np.empty_like(order)
@@ -259,20 +248,6 @@ def _group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
         return x
 
     return solve, skipped
-
-
-def _lower(a: sparse.csr_matrix) -> sparse.csr_matrix:
-    """``sparse.tril(a, format="csr")`` of a CSR matrix in canonical form (sorted, no duplicate
-    entries), taken from its rows directly: the same arrays without the round trip through
-    coordinates."""
-    a = a.tocsr()
-    if not a.has_canonical_format:
-        return sparse.tril(a, format="csr")
-    row = np.repeat(np.arange(a.shape[0]), np.diff(a.indptr))
-    keep = a.indices <= row
-    indptr = np.zeros_like(a.indptr)
-    np.cumsum(np.bincount(row[keep], minlength=a.shape[0]), out=indptr[1:])
-    return sparse.csr_matrix((a.data[keep], a.indices[keep], indptr), shape=a.shape)
 
 
 def _block_order(low: sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_groups: int):
@@ -400,7 +375,7 @@ def fill_error(
     ``per_cell``: (the cells' RMS error, that) instead."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
-    room = ndimage.binary_erosion(usable & np.isfinite(h), xx * xx + yy * yy <= (radius + 2) ** 2)
+    room = disc_erosion(usable & np.isfinite(h), radius + 2)
     step = 2 * r + 5
     cand = np.argwhere(room[::step, ::step]) * step
     if len(cand) < 5:
