@@ -47,16 +47,32 @@ def ransac_plane(
     ok = norm > 1e-9
     normal, tri = normal[ok] / norm[ok, None], tri[ok]
     d = -np.einsum("ij,ij->i", normal, tri[:, 0])
-    best, best_count = None, -1
-    for k in range(0, len(normal), 64):  # blocks keep memory bounded
-        dist = np.abs(pts @ normal[k : k + 64].T + d[k : k + 64])
-        counts = (dist < threshold).sum(axis=0)
-        j = int(np.argmax(counts))
-        if counts[j] > best_count:
-            best_count, best = int(counts[j]), (normal[k + j], d[k + j])
-    assert best is not None
-    inl = np.abs(pts @ best[0] + best[1]) < threshold
+    assert len(normal)
+    j = int(np.argmax(_inlier_counts(pts, normal, d, threshold)))  # the first best hypothesis
+    inl = np.abs(pts @ normal[j] + d[j]) < threshold
     return _fit(pts[inl], float(inl.mean()))
+
+
+def _inlier_counts(pts: np.ndarray, normal: np.ndarray, d: np.ndarray, threshold: float) -> np.ndarray:
+    """Points of ``pts`` within ``threshold`` of each plane ``normal . p + d = 0``, hypotheses in
+    blocks of 8 (their distances stay in cache). The distances are the bits of the products of
+    ``pts`` by blocks of 64 normals (a matrix product sums each in the same order for any block
+    of 2 or more, transposed or not); a lone normal in the last block of 64 went through a
+    matrix-vector product (other rounding): it is scored as it was."""
+    pts_t = np.ascontiguousarray(pts.T)
+    n = len(normal)
+    lone = 1 if n % 64 == 1 else 0
+    edges = list(range(0, n - lone, 8)) + [n - lone]
+    if len(edges) > 2 and edges[-1] - edges[-2] == 1:  # no block of one: it would round otherwise
+        del edges[-2]
+    counts = np.empty(n, np.int64)
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        v = normal[a:b] @ pts_t
+        v += d[a:b, None]
+        counts[a:b] = np.count_nonzero(np.abs(v, out=v) < threshold, axis=1)
+    if lone:
+        counts[-1] = int((np.abs(pts @ normal[-1:].T + d[-1:]) < threshold).sum())
+    return counts
 
 
 def _fit(pts: np.ndarray, inlier_fraction: float) -> Plane:

@@ -49,8 +49,8 @@ def _scaled(x: np.ndarray, y: np.ndarray, mask: np.ndarray):
     return (x - cx) / s, (y - cy) / s, (cx, cy, s)
 
 
-def _lstsq(xs, ys, z, w, degree: int) -> np.ndarray:
-    a = _terms(xs, ys, degree)
+def _lstsq(a: np.ndarray, z: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted least squares of the design matrix ``a`` (:func:`_terms`) on ``z``."""
     sw = np.sqrt(w)
     coef, *_ = np.linalg.lstsq(a * sw[:, None], z * sw, rcond=None)
     return coef
@@ -63,15 +63,16 @@ def fit_poly(x, y, diff, mask, degree: int, robust: bool = False):
     if idx.size > _MAX_FIT:  # a regular subsample keeps large grids fast
         idx = idx[:: -(-idx.size // _MAX_FIT)]
     px, py, z = xs.ravel()[idx], ys.ravel()[idx], diff.ravel()[idx]
+    a = _terms(px, py, degree)  # the same design matrix for every reweighting
     w = np.ones_like(z)
-    coef = _lstsq(px, py, z, w, degree)
+    coef = _lstsq(a, z, w)
     for _ in range(8 if robust else 0):
-        r = z - _terms(px, py, degree) @ coef
+        r = z - a @ coef
         c = 4.685 * max(nmad(r), 1e-6)
         w = np.clip(1 - (r / c) ** 2, 0, None) ** 2
         if np.count_nonzero(w) <= degree * 3 + 1:
             break
-        coef = _lstsq(px, py, z, w, degree)
+        coef = _lstsq(a, z, w)
     return _terms(xs, ys, degree) @ coef, coef, frame
 
 

@@ -80,11 +80,10 @@ def find_stable(
         new = valid & ~change
         if new.sum() < 12:
             break
-        converged = np.array_equal(new, stable)
+        if it > 0 and np.array_equal(new, stable):  # converged: the surface is the one fitted on it
+            break
         stable = new
         surface = _surface(x, y, diff, stable, degree, robust=True)
-        if converged and it > 0:
-            break
     return stable, surface
 
 

@@ -143,10 +143,12 @@ def cell_coords(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray
 
 
 def flat_ids(col: np.ndarray, row: np.ndarray, n_cols: int) -> np.ndarray:
-    """Flat cell ids of non-negative column and row coordinates (truncation is floor)."""
-    ids = row.astype(np.int64)
+    """Flat cell ids (int64) of non-negative column and row coordinates inside a grid (truncation
+    is floor). The coordinates go through int32 (a grid has at most 4e8 cells), which the CPU
+    converts to in vectors; floats to int64 are converted one by one."""
+    ids = row.astype(np.int32).astype(np.int64)
     ids *= n_cols
-    ids += col.astype(np.int64)
+    ids += col.astype(np.int32)
     return ids
 
 

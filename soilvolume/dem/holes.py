@@ -23,6 +23,8 @@ from scipy import linalg, ndimage, sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu, spsolve
 
+from .equivalents import disc_erosion, lower_triangle, rows_csr
+
 FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use conjugate gradients
@@ -175,10 +177,10 @@ def _second_difference_rows(values: np.ndarray, usable: np.ndarray, todo: np.nda
         wts = np.array([w for _, w in stencil])
         pad = n_c + 2  # anchors (stencil origins) may lie one cell outside the grid
         key = (r0[:, None] - off[:, 0] + 1) * pad + (c0[:, None] - off[:, 1] + 1)
-        ar, ac = np.divmod(np.unique(key), pad)
-        pr, pc = ar[:, None] - 1 + off[:, 0], ac[:, None] - 1 + off[:, 1]
-        inside = ((pr >= 0) & (pr < n_r) & (pc >= 0) & (pc < n_c)).all(axis=1)
-        pts = pr[inside] * n_c + pc[inside]
+        ar, ac = np.divmod(np.unique(key), pad)  # the anchors' rows and columns, plus one
+        inside = (ar > -off[:, 0].min()) & (ar <= n_r - off[:, 0].max())  # every stencil cell in the grid
+        inside &= (ac > -off[:, 1].min()) & (ac <= n_c - off[:, 1].max())
+        pts = ((ar[inside] - 1) * n_c + ac[inside] - 1)[:, None] + (off[:, 0] * n_c + off[:, 1])
         pts = pts[ok_cell[pts].all(axis=1)]
         rows.append(np.repeat(np.arange(n_rows, n_rows + len(pts)), len(stencil)))
         cols.append(pts.ravel())
@@ -188,8 +190,7 @@ def _second_difference_rows(values: np.ndarray, usable: np.ndarray, todo: np.nda
     unk = tflat[cols]
     k_rows, k_vals = rows[~unk], vflat[cols[~unk]]
     rhs = -np.bincount(k_rows, weights=coef[~unk] * k_vals, minlength=n_rows)
-    mat = sparse.csr_matrix((coef[unk], (rows[unk], np.searchsorted(flat, cols[unk]))), shape=(n_rows, flat.size))
-    return mat, rhs, k_rows, k_vals
+    return rows_csr(rows[unk], np.searchsorted(flat, cols[unk]), coef[unk], (n_rows, flat.size)), rhs, k_rows, k_vals
 
 
 def _least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
@@ -218,7 +219,7 @@ def _group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
     """Factorise the block-diagonal SPD ``reg`` (blocks = ``group``): banded Cholesky of blocks
     kept in row-major order, batched by bandwidth; SuperLU for wider blocks; blocks over
     ``_BIG_GROUP`` unknowns are skipped (solution 0). Returns (solve, per-group skipped flags)."""
-    low = sparse.tril(reg, format="csr")
+    low = lower_triangle(reg)
     row = np.repeat(np.arange(low.shape[0]), np.diff(low.indptr))
     order, kind = _block_order(low, row, group, n_groups)
     pos = np.empty_like(order)
@@ -374,7 +375,7 @@ def fill_error(
     ``per_cell``: (the cells' RMS error, that) instead."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
-    room = ndimage.binary_erosion(usable & np.isfinite(h), xx * xx + yy * yy <= (radius + 2) ** 2)
+    room = disc_erosion(usable & np.isfinite(h), radius + 2)
     step = 2 * r + 5
     cand = np.argwhere(room[::step, ::step]) * step
     if len(cand) < 5:

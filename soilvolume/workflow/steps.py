@@ -30,13 +30,19 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> Gri
     cell = options.cell
     if cell is None or cell <= 0:
         cell = gridmod.cell_for(prep.before.xyz, poly)
-    lo = np.maximum(after_thin.min(axis=0), prep.before_thin.min(axis=0))
-    hi = np.minimum(after_thin.max(axis=0), prep.before_thin.max(axis=0))
+    lo = np.maximum(_column_ends(after_thin, np.min), _column_ends(prep.before_thin, np.min))
+    hi = np.minimum(_column_ends(after_thin, np.max), _column_ends(prep.before_thin, np.max))
     if (hi[:2] <= lo[:2]).any():
         raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
     grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
     check_grid_cells(grid.rows, grid.cols, cell)
     return grid
+
+
+def _column_ends(xyz: np.ndarray, end) -> np.ndarray:
+    """``end`` (np.min or np.max) of each column of an (n, 3) array: the values of
+    ``end(xyz, axis=0)``, column by column (a reduction across rows strides through memory)."""
+    return np.array([end(xyz[:, i]) for i in range(xyz.shape[1])])
 
 
 def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline, spans) -> Prepared:
@@ -51,6 +57,20 @@ def moved_nonsoil(prep: Prepared, reg):
     """The after epoch's points that are not soil, moved by the registration (None without)."""
     ns = prep.after.nonsoil
     return None if ns is None else ns.moved(reg.transform)
+
+
+MOVE_CHUNK = 1 << 15  # points per product of a moved block: its rows stay in cache
+
+
+def moved_block(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """A block of float32 local points moved by the rigid ``t`` (``registration.rigid.
+    transform_points32``) in chunks of :data:`MOVE_CHUNK` rows: a matrix product gives each row
+    the same bits whatever the chunk, but a lone last row would go through a matrix-vector
+    product (other rounding), so such a block is moved in one product, as a whole."""
+    from ..registration.rigid import transform_points32
+
+    n = len(xyz)
+    return transform_points32(xyz, t, chunk=max(n, 1) if n % MOVE_CHUNK == 1 else MOVE_CHUNK)
 
 
 def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
