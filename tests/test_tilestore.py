@@ -205,3 +205,53 @@ def test_kept_tiles_of_an_older_version_a_file_or_a_link_are_never_trusted(tmp_p
         assert store.close(keep=True) and kept.is_dir() and not kept.is_symlink()
         shutil.rmtree(kept)
     assert [p.name for p in victim.iterdir()] == ["precious.txt"]
+
+
+class _CyclicJunk:
+    """Garbage in a reference cycle with a finaliser: the collector runs Python code, where the
+    interpreter may switch threads (inside another thread's AST construction too)."""
+
+    def __init__(self) -> None:
+        self.me = self
+
+    def __del__(self) -> None:
+        sum(range(50))
+
+
+def test_tiles_load_from_many_threads_at_once(tmp_path):
+    """A threads:N run's tasks load tiles at the same time: numpy parses each .npy header with
+    ast.literal_eval, which CPython 3.11 cannot run in two threads at once (a spurious
+    "SystemError: AST constructor recursion depth mismatch", python/cpython#106905; 868 of
+    20 000 bare loads failed so on this machine's 3.11.2). The store's loads take turns."""
+    import gc
+    import sys
+    import threading
+
+    from soilvolume.distributed.tilestore import TileStore
+
+    store = TileStore(str(tmp_path), ((0, 16, 0, 16),))
+    store.save((0, 16, 0, 16), {"dem": np.arange(256.0).reshape(16, 16)})
+    errors: list[str] = []
+
+    def work() -> None:
+        for _ in range(1000):
+            [_CyclicJunk() for _ in range(5)]
+            try:
+                assert store.load("dem", (0, 16, 0, 16))[3, 4] == 52.0
+            except SystemError as exc:
+                errors.append(str(exc))
+
+    old = sys.getswitchinterval(), gc.get_threshold()
+    sys.setswitchinterval(1e-6)
+    gc.set_threshold(50, 5, 5)
+    try:
+        threads = [threading.Thread(target=work) for _ in range(4)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(60)
+    finally:
+        sys.setswitchinterval(old[0])
+        gc.set_threshold(*old[1])
+    assert not any(t.is_alive() for t in threads)
+    assert errors == []

@@ -19,6 +19,7 @@ import json
 import os
 import secrets
 import shutil
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -32,6 +33,11 @@ from . import fingerprint
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 KEPT, MANIFEST = "soilvolume-tiles", "store.json"
+# numpy parses a .npy header with ast.literal_eval; CPython 3.11 (Debian 12's 3.11.2 among them) keeps
+# the AST constructor's recursion depth per interpreter, so two threads building ASTs at once can
+# fail with "SystemError: AST constructor recursion depth mismatch" (python/cpython#106905): the
+# tasks of a threads:N run load tiles at the same time. Their header reads take turns.
+_HEADERS = threading.Lock()
 
 
 @dataclass(frozen=True)
@@ -63,7 +69,9 @@ class TileStore:
                 tmp.unlink(missing_ok=True)
 
     def load(self, name: str, win: Window) -> np.ndarray:
-        return np.load(self._file(name, win), mmap_mode="r")
+        """The tile's array ``name``, memory-mapped (see :data:`_HEADERS`)."""
+        with _HEADERS:
+            return np.load(self._file(name, win), mmap_mode="r")
 
     def read(self, name: str, win: Window, fill=np.nan, dtype=None) -> np.ndarray:
         """The array ``name`` on any window of the grid, from the tiles meeting it (``fill``
