@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.cells import bounds
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.record import Georeferencing, QualityInputs
@@ -30,19 +31,13 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> Gri
     cell = options.cell
     if cell is None or cell <= 0:
         cell = gridmod.cell_for(prep.before.xyz, poly)
-    lo = np.maximum(_column_ends(after_thin, np.min), _column_ends(prep.before_thin, np.min))
-    hi = np.minimum(_column_ends(after_thin, np.max), _column_ends(prep.before_thin, np.max))
+    (lo_a, hi_a), (lo_b, hi_b) = bounds(after_thin), bounds(prep.before_thin)
+    lo, hi = np.maximum(lo_a, lo_b), np.minimum(hi_a, hi_b)
     if (hi[:2] <= lo[:2]).any():
         raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
     grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
     check_grid_cells(grid.rows, grid.cols, cell)
     return grid
-
-
-def _column_ends(xyz: np.ndarray, end) -> np.ndarray:
-    """``end`` (np.min or np.max) of each column of an (n, 3) array: the values of
-    ``end(xyz, axis=0)``, column by column (a reduction across rows strides through memory)."""
-    return np.array([end(xyz[:, i]) for i in range(xyz.shape[1])])
 
 
 def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline, spans) -> Prepared:
