@@ -74,3 +74,20 @@ def test_threads_reach_open3d():
     finally:
         limit_threads(0)
     assert utility.get_max_threads() == default
+
+
+def test_points_moved_in_chunks_are_moved_as_in_one_product():
+    """transform_points32 moves a cloud chunk by chunk: every point gets the bits of one matrix
+    product over the whole cloud, a lone last row too (alone it would go through a matrix-vector
+    product, which rounds otherwise)."""
+    from soilvolume.registration.rigid import transform_points32
+
+    rng = np.random.default_rng(1)
+    t = np.eye(4)
+    a = 0.3
+    t[:2, :2] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    t[:3, 3] = [1.5, -2.25, 0.125]
+    for k in (2, 3, 5, 8, 16, 64):
+        for n in (k + 1, 2 * k, 3 * k + 1):
+            xyz = rng.uniform(-500, 500, (n, 3)).astype(np.float32)
+            assert np.array_equal(transform_points32(xyz, t, chunk=k), transform_points32(xyz, t, chunk=n)), (k, n)

@@ -25,10 +25,20 @@ def transform_points(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
     return xyz @ t[:3, :3].T + t[:3, 3]
 
 
+CACHE_ROWS = 1 << 15  # rows of a product whose points stay in the cache through it
+
+
 def transform_points32(xyz: np.ndarray, t: np.ndarray, chunk: int = 4_000_000) -> np.ndarray:
-    """A rigid transform of float32 local points, in chunks (no float64 copy of the cloud)."""
+    """A rigid transform of float32 local points, in chunks of ``chunk`` rows (no float64 copy of
+    the cloud). A matrix product gives each row the same bits whatever the chunk it is in, but a
+    chunk of one row would go through a matrix-vector product (another rounding): a lone last row
+    joins the chunk before it."""
     out = np.empty_like(xyz, dtype=np.float32)
     r, s = t[:3, :3].T.astype(np.float32), t[:3, 3].astype(np.float32)
-    for i in range(0, len(xyz), chunk):
-        out[i : i + chunk] = xyz[i : i + chunk] @ r + s
+    n = len(xyz)
+    starts = list(range(0, n, chunk))
+    if len(starts) > 1 and n - starts[-1] == 1:
+        starts.pop()
+    for i, j in zip(starts, [*starts[1:], n], strict=True):
+        out[i:j] = xyz[i:j] @ r + s
     return out

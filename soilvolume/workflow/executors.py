@@ -55,15 +55,15 @@ class InProcess:
     def grid(self, run) -> None:
         if len(run.epochs) == 1:
             return _grid_one(run)
-        from ..registration.rigid import transform_points
-        from .steps import moved_block, moved_nonsoil, shared_grid
+        from ..registration.rigid import CACHE_ROWS, transform_points, transform_points32
+        from .steps import moved_nonsoil, shared_grid
 
         prep, reg, opts = run.prep, run.reg, run.options
         self._start_cloud(run)
         run.after_thin = transform_points(prep.after_thin, reg.transform)
         grid = run.grid = shared_grid(prep, run.after_thin, opts)
         before_job = self.pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, opts.statistic, prep.before.nonsoil)
-        move = partial(moved_block, t=reg.transform)  # block by block: no registered copy of the cloud
+        move = partial(transform_points32, t=reg.transform, chunk=CACHE_ROWS)  # block by block: no registered copy
         dem_a = gridmod.epoch_dem(prep.after.xyz, grid, opts.statistic, moved_nonsoil(prep, reg), move)
         run.dems = (dem_a, before_job.result())
 

@@ -54,20 +54,6 @@ def moved_nonsoil(prep: Prepared, reg):
     return None if ns is None else ns.moved(reg.transform)
 
 
-MOVE_CHUNK = 1 << 15  # points per product of a moved block: its rows stay in cache
-
-
-def moved_block(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """A block of float32 local points moved by the rigid ``t`` (``registration.rigid.
-    transform_points32``) in chunks of :data:`MOVE_CHUNK` rows: a matrix product gives each row
-    the same bits whatever the chunk, but a lone last row would go through a matrix-vector
-    product (other rounding), so such a block is moved in one product, as a whole."""
-    from ..registration.rigid import transform_points32
-
-    n = len(xyz)
-    return transform_points32(xyz, t, chunk=max(n, 1) if n % MOVE_CHUNK == 1 else MOVE_CHUNK)
-
-
 def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
     row, col, ok = grid.index(xyz[:, :2])
     keep = np.zeros(len(xyz), bool)
