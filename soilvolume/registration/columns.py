@@ -160,7 +160,7 @@ def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray
         num[b] += step
         first = [slice(None)] * 2
         first[axis] = slice(0, 1)
-        num[tuple(first)] += 0.0  # the first cell's forward difference plus its missing backward one
+        num[tuple(first)] += 0.0  # plus its missing backward difference, as the sum did: -0.0 becomes 0.0
         den[a] = ok
         den[b] += ok
         out.append(np.where(den > 0, num / np.maximum(den, 1) / cell, 0.0))

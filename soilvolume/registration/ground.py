@@ -6,15 +6,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.cells import bounds, cell_index, rows
-from ..inputs.footprint import footprint
+from ..inputs.footprint import footprint, polygon_area
 from . import columns
 from .rigid import transform_points
 
 
 def spacing(xyz: np.ndarray) -> float:
     """Mean horizontal point spacing (m) of a cloud: sqrt(footprint area / points)."""
-    from ..inputs.footprint import polygon_area
-
     return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max(len(xyz), 1)))
 
 
