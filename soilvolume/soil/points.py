@@ -151,10 +151,15 @@ def _uses_class(cls: np.ndarray | None, mode: str) -> bool:
     return mode == "class" or (mode == "auto" and cls is not None and bool((cls == GROUND).any()))
 
 
+def _signals_may_decide(mode: str, exclude: str) -> bool:
+    """Whether ``--ground`` and ``--exclude`` leave colour and returns a say in the rule."""
+    return exclude != "none" and mode in ("auto", "class", "filter", "csf")
+
+
 def deciding_dims(cls: np.ndarray | None, mode: str, exclude: str = "auto") -> set[str]:
     """The LAS dimensions :func:`decide` reads beyond ``cls``, the first chunk's classification
     (none when the classification or the options decide alone)."""
-    if _uses_class(cls, mode) or exclude == "none" or mode not in ("auto", "class", "filter", "csf"):
+    if _uses_class(cls, mode) or not _signals_may_decide(mode, exclude):
         return set()
     return {*RGB_DIMS, *RETURN_DIMS}
 
@@ -164,7 +169,7 @@ def decide(cls: np.ndarray | None, sig: Signals | None, mode: str, exclude: str 
     classification; filter: SMRF's ground, then colour and returns), ``exclude`` ``--exclude``
     (``none``: no colour or returns)."""
     use_class = _uses_class(cls, mode)
-    if exclude == "none" or mode not in ("auto", "class", "filter", "csf") or sig is None:
+    if not _signals_may_decide(mode, exclude) or sig is None:
         return PointRule(use_class)
     green, scale = None, 65535.0
     if sig.rgb is not None and len(sig.rgb) and not use_class:
