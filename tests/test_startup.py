@@ -39,6 +39,20 @@ def test_engine_modules_leave_open3d_rasterio_and_requests_to_the_run(tmp_path):
     assert not ndimage and not volumes  # the preload thread imports them while the clouds are read
 
 
+def test_a_dask_worker_starts_without_scipy_spatial():
+    """What a worker imports as it starts (workerinit.warm: the scan and grid tasks' modules) leaves
+    out SciPy's spatial module (~0.2 s per worker): only the driver makes footprints (hulls)."""
+    code = (
+        "import sys\n"
+        "from soilvolume.distributed.workerinit import warm\n"
+        "warm()\n"
+        "print('scipy.spatial' in sys.modules, 'soilvolume.distributed.tiletask' in sys.modules)\n"
+    )
+    r = run_python(code)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "True"]
+
+
 def test_preload_imports_open3d_and_the_volume_step_then_rasterio_after_the_reading():
     """Open3D and the registration's and volume step's modules (ndimage) during the reading;
     rasterio only once the reading is done (the memory peak is behind)."""

@@ -107,6 +107,31 @@ def test_tiles_aligned_to_the_input_tiling():
     assert [round(g.xmin + c * g.cell, 3) % 50 for c in edges[1:]] == [0.0]
 
 
+def test_the_data_tiling_comes_from_the_tiles_corners_not_their_point_boxes():
+    """A 50 m tiling whose header boxes span 49.999 m (the points, not the tiles) and whose corner
+    tiles start inside their tile: pitch 50 m and the corner on the 50 m lattice; windows cut on it
+    cross no data tile (a 49.999 m pitch drifted a window edge 42 m off the tile edges here)."""
+    from types import SimpleNamespace
+
+    from soilvolume.distributed.tiled import data_tiling
+    from soilvolume.inputs.vpc import Tile
+
+    def tile(i, j, inset=0.0):
+        x, y = 500_000.0 + 50 * i, 3_900_000.0 + 50 * j
+        return Tile(f"t{i}_{j}.laz", 1000, (x + inset, y + inset, 0.0), (x + 49.999, y + 49.999, 1.0))
+
+    src = SimpleNamespace(
+        vpc=SimpleNamespace(tiles=[tile(i, j, 7.3 if i == j == 0 else 0.0) for i in range(3) for j in range(3)])
+    )
+    pitch, x0, y0 = data_tiling(src, 0.5, 200)
+    assert pitch == 50.0 and x0 % 50 == 0.0 and y0 % 50 == 0.0
+    g = GridSpec(500_048.0, 3_900_106.5, 0.5, 126, 135)
+    wins = tiles(g, 100, pitch, (x0, y0))
+    inner = sorted({round(g.xmin + c0 * g.cell, 3) for _, _, c0, _ in wins} - {g.xmin})
+    assert inner == [500_100.0]  # the 4-cell sliver at 500 050 merged into its neighbour
+    assert data_tiling(src, 0.5, 99) is None  # a data tile larger than a grid tile may be
+
+
 def _plan_of_missing_inputs(folder):
     """A tile plan over a 40 x 40 grid of 1 m cells whose input files do not exist."""
     import pyproj
@@ -304,8 +329,8 @@ def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_pa
     one = dict(scheduler="threads:1", volume_step="whole")  # one worker: tiles up to half the grid
     roomy = estimate(vpc, after, tmp_path / "a", Options(**one))
     cell, engine = roomy.report["grid"]["cell_m"], roomy.report["engine"]
-    width = np.median([np.ptp(laspy.read(p).x) for p in parts])
-    assert engine["tile_cells"] == round(width / cell)  # snapped to the data tiles
+    step = np.ptp([laspy.read(p).x.min() for p in parts])  # the quadrants' corners, west to east
+    assert abs(engine["tile_cells"] - step / cell) <= 1  # snapped to the data tiles (corners on cells)
     cells = (MIN_TILE**2 + engine["tile_cells"] ** 2) / 2  # fits the smallest tile, not a data tile
     budget = 2 * cells * engine["points_per_cell"] * TILE_BYTES_PER_POINT / 2**30
     tight = estimate(vpc, after, tmp_path / "b", Options(**one, memory_limit=budget))

@@ -229,3 +229,23 @@ def test_copc_registration_pass_reads_a_thinning_level(tmp_path):
     assert np.median(np.abs(n_thin[has] / n_full[has] - 1)) < 0.3  # ~12 of ~200 points per column
     centroids = [s["sums"][:3, has] / s["sums"][3, has] for s in (thin, full)]
     assert np.median(np.abs(centroids[0] - centroids[1])) < 1.0  # metres, in a 4 m column
+
+
+def test_the_first_pass_adds_the_units_sums_in_their_order_however_tasks_finish():
+    """Units' column sums arrive in any order (tasks finish when they finish); added in the units'
+    order they give the same bits every run (floating-point addition is not associative)."""
+    from itertools import permutations
+    from types import SimpleNamespace
+
+    from soilvolume.distributed.scan import _add_in_order
+
+    parts = [(np.array([0]), np.array([[v]] * 4)) for v in (1e16, 1.0, -1e16, 1.0)]
+    results = set()
+    for order in permutations(range(len(parts))):
+        thinner, waiting = SimpleNamespace(sums=np.zeros((4, 1))), {}
+        for k, pos in enumerate(order, 1):
+            waiting[pos] = parts[pos]
+            _add_in_order(thinner, waiting, k - len(waiting))
+        assert not waiting
+        results.add(thinner.sums[0, 0])
+    assert results == {1.0}  # ((1e16 + 1) - 1e16) + 1; in arrival order some orders give 0 or 2

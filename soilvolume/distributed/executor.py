@@ -123,18 +123,21 @@ class Tiled:
     def _tiles(self, run, cell: float) -> tuple:
         """(the tile windows, their side in cells, points per cell) for the run's grid."""
         from .schedule import check_tiles, worker_gb
-        from .tiled import data_tile_m, fits, points_per_cell, tile_side
+        from .tiled import data_tiling, fits, points_per_cell, tile_side
         from .tiletask import tiles
 
         options, grid = run.options, run.grid
         task_gb, density = worker_gb(self.schedule, options.memory_limit), points_per_cell(run.prep, cell)
         side = tile_side(options, grid, density, task_gb, self.schedule.workers)
-        align = None if options.tile_cells else data_tile_m(self.src_b, cell, 2 * side)
-        if align and not fits(density * (align / cell) ** 2, task_gb):
-            align = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
-        if align:  # snap to the input's tiles: rounded tile widths in metres to whole cells
-            side = max(1, round(align / cell))
-        windows = tiles(grid, side, align)
+        tiling = None if options.tile_cells else data_tiling(self.src_b, cell, 2 * side)
+        if tiling and not fits(density * (tiling[0] / cell) ** 2, task_gb):
+            tiling = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
+        windows = tiles(grid, side)
+        if tiling:  # snap to the input's tiles (one grid tile per data tile) when that keeps the workers busy
+            pitch = max(1, round(tiling[0] / cell))
+            aligned = tiles(grid, pitch, tiling[0], tiling[1:])
+            if len(aligned) >= min(len(windows), 2 * self.schedule.workers):
+                windows, side = aligned, pitch
         check_tiles(windows, density, task_gb, options)
         return windows, side, density
 

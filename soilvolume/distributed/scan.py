@@ -50,7 +50,7 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
     else:
         chunks = las_ranges(path, [(start, count)], CHUNK, signals=True)
     thinner = ColumnThinner(*thinning)
-    out = {"points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
+    out = {"unit": tuple(unit), "points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
     t0 = time.perf_counter()
     for xyz, cls, sig in chunks:
         out["read_s"] += time.perf_counter() - t0
@@ -114,10 +114,10 @@ def dask_loader(
         send = cache is not None and (left or client.ready())  # the tiles read here go to the workers once up
         kept = cache.take(src, [u[0] for u in left]) if send else [None] * len(left)
         futures = client.map(scan_unit, left, *[[a] * len(left) for a in args], kept, pure=False) if left else []
-        parts = []
+        parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
         for k, part in enumerate(chain(here, completed(client, futures, f"reading {src.path}", wait_check)), 1):
-            cols, sums = part.pop("sums")
-            thinner.sums[:, cols] += sums
+            waiting[position[part.pop("unit")]] = part.pop("sums")
+            _add_in_order(thinner, waiting, k - len(waiting))
             parts.append(part)
             if progress:
                 progress(f"scanned {k}/{len(todo)} pieces of {src.path}")
@@ -131,6 +131,16 @@ def dask_loader(
         return Loaded(empty, thinner.result(), total["points"], total["used"], note, extra, nothing)
 
     return loader
+
+
+def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
+    """Add the units' sums ({position: (columns, sums)}) to ``thinner`` in the units' order, however
+    the tasks finish: floating-point sums in one order give the same bits every run. ``added``:
+    how many were added before; those that cannot go yet wait for the ones before them."""
+    while added in waiting:
+        cols, sums = waiting.pop(added)
+        thinner.sums[:, cols] += sums
+        added += 1
 
 
 def _scan_here(src: Source, todo: list[Unit], args: tuple, cache, ready: Callable[[], bool], check) -> tuple:

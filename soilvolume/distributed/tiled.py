@@ -33,13 +33,36 @@ from .schedule import Schedule
 from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan
 
 
-def data_tile_m(src, cell: float, side: int) -> float | None:
-    """The side (m) of a VPC's square tiles when a grid tile can hold one (else None)."""
+def data_tiling(src, cell: float, side: int) -> tuple[float, float, float] | None:
+    """(pitch m, x, y of a tile corner) of a VPC's square tiling when a grid tile can hold one data
+    tile (else None): the spacing and phase of the tiles' lower-left corners, snapped to ``cell``.
+    Not the header boxes' widths: those span the points (49.999 m in a 50 m tiling), and windows
+    cut on a 49.999 m pitch would cross every data tile, each then read by several tasks."""
     if src.vpc is None or len(src.vpc.tiles) < 2:
         return None
-    widths = [t.hi[0] - t.lo[0] for t in src.vpc.tiles]
-    size = float(np.median(widths))
-    return size if 0 < size / cell <= side else None
+    lows = np.array([t.lo[:2] for t in src.vpc.tiles], float)
+    steps = np.rint(lows / cell).astype(np.int64)  # corners in cells (a tile's first points sit at its corner)
+    pitch = _mode(np.concatenate([np.diff(_shared(steps[:, k])) for k in (0, 1)]))
+    if pitch is None or not 0 < pitch <= side:
+        return None
+    x0, y0 = (_mode(steps[:, k] % pitch) for k in (0, 1))
+    return pitch * cell, x0 * cell, y0 * cell
+
+
+def _shared(corners: np.ndarray) -> np.ndarray:
+    """The distinct corner coordinates (along one axis) that at least a median number of tiles
+    share: a row or column of a tiling shares its edge, an edge tile whose points start inside it
+    has a coordinate of its own."""
+    v, n = np.unique(corners, return_counts=True)
+    return v[n >= np.median(n)]
+
+
+def _mode(values: np.ndarray) -> int | None:
+    """The most common of ``values`` (the smallest on ties), None when there are none."""
+    if len(values) == 0:
+        return None
+    v, n = np.unique(values, return_counts=True)
+    return int(v[np.argmax(n)])
 
 
 TILE_POINTS = 32e6  # points per tile at most: ~1.3 GB per task; fewer reads of dense LAZ tiles

@@ -204,14 +204,16 @@ def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.n
     return lo, hi
 
 
-def tiles(grid: GridSpec, side: int, align: float | None = None) -> list[Window]:
+def tiles(
+    grid: GridSpec, side: int, align: float | None = None, corner: tuple[float, float] = (0.0, 0.0)
+) -> list[Window]:
     """The grid cut into tiles of ``side`` x ``side`` cells (row-major); with ``align`` (metres),
-    tile edges fall on absolute multiples of it (the input's own tiling: each data tile is then
-    read by one task), slivers merged into their neighbours."""
+    tile edges fall on ``corner`` (absolute x, y) plus multiples of it (the input's own tiling:
+    each data tile is then read by one task), slivers merged into their neighbours."""
     r_off = c_off = 0
     if align:
-        c_off = round(((-grid.xmin) % align) / grid.cell) % side
-        r_off = round((grid.ymax % align) / grid.cell) % side
+        c_off = round(((corner[0] - grid.xmin) % align) / grid.cell) % side
+        r_off = round(((grid.ymax - corner[1]) % align) / grid.cell) % side
     rows, cols = _edges(grid.rows, r_off, side), _edges(grid.cols, c_off, side)
     return [
         (r0, r1, c0, c1) for r0, r1 in zip(rows, rows[1:], strict=False) for c0, c1 in zip(cols, cols[1:], strict=False)

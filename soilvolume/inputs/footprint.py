@@ -7,7 +7,6 @@ radius; the same polygon is what a PDAL ``filters.crop`` receives, so both paths
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import ConvexHull, QhullError
 
 from ..core.types import SoilVolumeError, short_error
 
@@ -64,6 +63,8 @@ def _remembered(key: tuple, make) -> np.ndarray:
 
 def _hull(xy: np.ndarray) -> np.ndarray:
     """The convex hull's vertices of ``xy`` (of every k-th point past 200 000 points)."""
+    from scipy.spatial import ConvexHull, QhullError  # here: a Dask worker masks with a footprint, never makes one
+
     step = max(1, len(xy) // 200_000)
     try:
         hull = ConvexHull(xy[::step])
@@ -76,6 +77,8 @@ def _buffered(verts: np.ndarray, radius: float, segments: int) -> np.ndarray:
     """A hull ``verts`` buffered by ``radius`` (unchanged when ``radius`` <= 0)."""
     if radius <= 0:
         return verts
+    from scipy.spatial import ConvexHull
+
     ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
     r = radius / np.cos(np.pi / segments)
     circle = np.c_[np.cos(ang), np.sin(ang)] * r
