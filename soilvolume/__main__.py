@@ -37,10 +37,14 @@ def one_blas_thread() -> None:
 def leave(code: int) -> int:
     """End the process with ``code`` once the command returned, without the interpreter's teardown
     (0.4-0.6 s of freeing numpy, pyproj, rasterio and Open3D, which report.json's ``timings_s``
-    cannot count): by then every output is written and closed, every pool and cluster shut."""
+    cannot count): by then every output is written and closed, every pool and cluster shut; what
+    the teardown would remove from TMPDIR is removed here."""
     import logging
 
+    from .core.interrupt import remove_process_temp_dir
+
     logging.shutdown()
+    remove_process_temp_dir()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()

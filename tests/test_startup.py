@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +52,31 @@ def test_a_dask_worker_starts_without_scipy_spatial():
     r = run_python(code)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["False", "True"]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forkserver workers on Linux only")
+def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
+    """A local cluster's workers come from one forkserver that imported Dask and the tasks'
+    modules once (a spawned worker imports them itself, ~0.6 s of CPU each, while the driver
+    reads); Dask's pre-spawn environment (one BLAS/OpenMP thread per worker) still reaches them."""
+    code = (
+        "import json, os, sys\n"
+        "from soilvolume.distributed import cluster\n"
+        "c, client = cluster.local(2, True, 1.0, None)\n"
+        "try:\n"
+        "    info = client.run(lambda: (os.getppid(), os.environ.get('OMP_NUM_THREADS'),\n"
+        "                               'soilvolume.distributed.tiletask' in sys.modules))\n"
+        "finally:\n"
+        "    cluster.shut(c, client)\n"
+        "print(json.dumps([os.getpid(), sorted(info.values())]))\n"
+    )
+    r = run_python(code, timeout=120)
+    assert r.returncode == 0, r.stderr
+    driver, workers = json.loads(r.stdout.splitlines()[-1])
+    assert len(workers) == 2
+    parents = {w[0] for w in workers}
+    assert len(parents) == 1 and driver not in parents  # one server forked both (spawned: the driver)
+    assert all(w[1] == "1" and w[2] for w in workers)
 
 
 def test_preload_imports_open3d_and_the_volume_step_then_rasterio_after_the_reading():

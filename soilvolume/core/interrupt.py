@@ -42,6 +42,7 @@ class Interrupted(SoilVolumeError):
 def _record(signum: int, _frame) -> None:
     if _pending:  # second signal: the run is stuck in a long native call; leave now
         run_cleanups()
+        remove_process_temp_dir()
         sys.stderr.write(f"soilvolume: error: interrupted by {NAMES.get(signum, signum)} (forced)\n")
         sys.stderr.flush()
         os._exit(128 + signum)
@@ -88,3 +89,15 @@ def run_cleanups() -> None:
             fn()
         except Exception:  # noqa: BLE001 - best effort on the way out
             pass
+
+
+def remove_process_temp_dir() -> None:
+    """The folder multiprocessing made in TMPDIR for this process (the socket of the Dask workers'
+    forkserver): the interpreter's exit removes it, an exit through ``os._exit`` (the command's
+    quick one, a forced one) does not."""
+    process = sys.modules.get("multiprocessing.process")
+    tempdir = process.current_process()._config.get("tempdir") if process else None
+    if tempdir:
+        import shutil
+
+        shutil.rmtree(tempdir, ignore_errors=True)

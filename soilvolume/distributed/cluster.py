@@ -6,6 +6,7 @@ Each failure is one line naming the scheduler."""
 from __future__ import annotations
 
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -166,13 +167,39 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
     if scratch is not None:
         scratch.mkdir(parents=True, exist_ok=True)
         extra["local_directory"] = str(scratch)
-    with dask.config.set({"temporary-directory": str(scratch) if scratch is not None else None, **QUIET}):
+    settings = {"temporary-directory": str(scratch) if scratch is not None else None, **QUIET}
+    if processes and (method := _start_method()):
+        settings["distributed.worker.multiprocessing-method"] = method
+    with dask.config.set(settings):
         cluster = _local_cluster(workers, processes, per_worker_gb, extra)
     try:
         return cluster, Client(cluster)
     except BaseException:
         shut(cluster, None)
         raise
+
+
+# what the tile tasks run (a worker imports them as it starts: workerinit.warm)
+TASK_MODULES = ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj")
+FORKSERVER_PRELOAD = ("distributed", WORKER_INIT, *TASK_MODULES)  # imported once for every forked worker
+
+
+def _start_method() -> str | None:
+    """``forkserver`` on Linux: one server process imports Dask and the tasks' modules once and
+    forks each worker from it (a spawned worker imports them itself, ~0.6 s of CPU each, which on
+    a small machine the driver's reading waits for). None elsewhere: Dask's default, spawn
+    (Windows has no fork; on macOS system libraries are not safe to use after one)."""
+    import multiprocessing
+
+    if not sys.platform.startswith("linux") or "forkserver" not in multiprocessing.get_all_start_methods():
+        return None
+    import dask
+    from distributed.utils import get_mp_context
+
+    with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
+        ctx = get_mp_context()  # Dask sets its preload list (and pandas) on first use: ours replaces it
+    ctx.set_forkserver_preload(list(FORKSERVER_PRELOAD))  # read when the server starts, at the first worker
+    return "forkserver"
 
 
 def _local_cluster(workers: int, processes: bool, per_worker_gb: float | None, extra: dict):
