@@ -8,7 +8,8 @@ the read floor (``bench/floor.py``: laspy chunked read of both files + three Geo
 start-up included) and CloudCompare's command line (ICP, then the 2.5D volume between the two
 clouds on the project's cell; CloudCompare reads PLY, so each pair is converted to binary PLY
 once, cached beside the LAS files and not charged). Interleaving spreads a shared machine's load
-over all three; the table gives medians of wall time and of CPU (user + sys) of each command,
+over all three; the table gives medians of wall time and of CPU (user + sys) of each command
+(with the processes it leaves to finish after it: a local cluster's forkserver and workers),
 its peak RSS, and the ratios project / CloudCompare and project / floor. CloudCompare is Debian's
 ``cloudcompare`` package (``scripts/setup.sh`` installs it); without it the CloudCompare columns
 are skipped with one line saying so. Results: ``bench/results/versus.json``.
@@ -73,15 +74,48 @@ GNU_TIME = Path("/usr/bin/time")
 def run(argv: list[str], log: Path, env: dict | None = None, timeout: float = 1800) -> dict:
     """Wall seconds, CPU seconds (user + sys) and peak RSS (MB) of one command: GNU time's
     figures when it is there (Linux keeps a forked child's peak across exec, so os.wait4 of a
-    child of this large process reports at least this process's RSS), else os.wait4's."""
+    child of this large process reports at least this process's RSS), else os.wait4's. The CPU
+    includes processes the command left to finish after it (:func:`_orphans_cpu`)."""
     if GNU_TIME.exists():
         out = log.with_suffix(".time")
         r = _wait4([str(GNU_TIME), "-f", "%U %S %M", "-o", str(out), *argv], log, env, timeout)
         if r["rc"] == 0 and out.exists():
             user, system, kb = out.read_text().split()[-3:]
-            r.update(cpu_s=float(user) + float(system), peak_rss_mb=int(kb) / 1024.0)
+            r.update(cpu_s=float(user) + float(system) + _orphans_cpu(), peak_rss_mb=int(kb) / 1024.0)
         return r
-    return _wait4(argv, log, env, timeout)
+    r = _wait4(argv, log, env, timeout)
+    r["cpu_s"] += _orphans_cpu()
+    return r
+
+
+def _become_subreaper() -> bool:
+    """Linux: descendants whose parent exits are handed to this process (not to init), so their
+    CPU can be counted: a local Dask cluster's forkserver and the workers it forked outlive the
+    command by a moment and are nobody's waited child otherwise (PR_SET_CHILD_SUBREAPER)."""
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+
+    return ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0) == 0
+
+
+SUBREAPER = False  # set by main(): :func:`_become_subreaper`
+
+
+def _orphans_cpu(timeout: float = 30.0) -> float:
+    """CPU seconds (user + sys) of the orphans handed to this process, each waited for (with
+    their own waited children) until none is left or ``timeout`` passes."""
+    total, deadline = 0.0, time.monotonic() + timeout
+    while SUBREAPER and time.monotonic() < deadline:
+        try:
+            pid, _status, ru = os.wait4(-1, os.WNOHANG)
+        except ChildProcessError:
+            break
+        if pid:
+            total += ru.ru_utime + ru.ru_stime
+        else:
+            time.sleep(0.01)
+    return total
 
 
 def _wait4(argv: list[str], log: Path, env: dict | None, timeout: float) -> dict:
@@ -190,6 +224,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--venv", default=str(REPO / ".venv"), help="environment with the soilvolume command")
     ap.add_argument("--results", default=str(HERE / "results"), help="output directory")
     args = ap.parse_args(argv)
+    global SUBREAPER
+    SUBREAPER = _become_subreaper()
     runs = Path(args.results) / "runs"
     runs.mkdir(parents=True, exist_ok=True)
     results = []
