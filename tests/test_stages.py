@@ -86,6 +86,20 @@ def test_polygon_cover_matches_brute_force_on_random_points():
     assert (got != want).sum() == 0
 
 
+def test_polygon_cover_of_a_wide_cloud_tests_only_the_polygons_box_and_agrees():
+    """A wide survey cropped to a small footprint: the points outside the rings' box are out
+    without being sorted; on the box's own lines (a vertex, an edge's ends, outside corners of
+    the box) the answer is the one the whole test gives."""
+    rng = np.random.default_rng(2)
+    ring = np.array([[2.0, 1.0], [6.0, 2.0], [7.0, 5.0], [3.0, 6.0], [1.0, 3.0]])
+    pts = np.vstack([rng.uniform(-40, 40, (50_000, 2)), ring, [[1, 1], [7, 6], [1, 6], [7, 1], [4, 6], [1, 3.5]]])
+    pts = np.vstack([pts, rng.choice([1.0, 7.0], (200, 1)) * [1, 0] + rng.uniform(1, 6, (200, 1)) * [0, 1]])
+    got = geometry.covers([ring], pts[:, 0], pts[:, 1])
+    assert np.array_equal(got, geometry._covers([ring], pts[:, 0], pts[:, 1]))
+    assert got[50_000:50_005].all() and not got[50_005:50_009].any()  # vertices in, box corners out
+    assert 0 < got.sum() < 0.01 * len(pts)
+
+
 def test_crop_multipolygon_and_geojson_polygon():
     mp = "MULTIPOLYGON(((0 0, 1 0, 1 1, 0 1, 0 0)), ((5 5, 6 5, 6 6, 5 6, 5 5)))"
     v = view([0.5, 5.5, 3], [0.5, 5.5, 3])

@@ -80,9 +80,23 @@ def parse_point(value) -> np.ndarray:
 def covers(rings: list[np.ndarray], x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Even-odd point-in-polygon over all rings, boundary included.
 
-    Points are sorted by y once; each edge then only touches the points in its y band, so the cost
-    is about (number of points) x (edges crossed by a horizontal line), not points x edges.
+    Only the points in the rings' bounding box are tested (a wide survey cropped to a small
+    footprint sorts a fraction of its points): the others are outside, as the test finds them.
     """
+    lo, hi = np.vstack(rings).min(axis=0), np.vstack(rings).max(axis=0)
+    box = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+    if box.all():
+        return _covers(rings, x, y)
+    out = np.zeros(x.shape[0], dtype=bool)
+    idx = np.flatnonzero(box)
+    out[idx] = _covers(rings, x[idx], y[idx])
+    return out
+
+
+def _covers(rings: list[np.ndarray], x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """:func:`covers` of every point: the points are sorted by y once; each edge then only
+    touches the points in its y band, so the cost is about (number of points) x (edges crossed
+    by a horizontal line), not points x edges."""
     n = x.shape[0]
     order = np.argsort(y, kind="stable")
     ys, xs = y[order], x[order]
