@@ -102,3 +102,57 @@ def test_tiles_the_driver_read_while_the_cluster_started(vpcs, tmp_path, monkeyp
     got, eng = _run(vpcs, tmp_path / "driver", "threads:2")
     assert len(held) == 4 and eng["task_points_from_memory"] == eng["task_points_read"] > 0
     _identical(got, ref)
+
+
+class _SlowClient:
+    """A client whose scatter takes ``delay`` s per tile (or fails with ``error``)."""
+
+    def __init__(self, delay: float, error: Exception | None = None) -> None:
+        self.delay, self.error, self.threads = delay, error, set()
+
+    def scatter(self, data, hash=True):  # noqa: A002 - Dask's keyword
+        import threading
+        import time
+
+        self.threads.add(threading.current_thread().name)
+        time.sleep(self.delay)
+        if self.error is not None:
+            raise self.error
+        return [("future", len(data[0]))]
+
+
+def _holding(client, paths):
+    from types import SimpleNamespace
+
+    cache = pointcache.PointCache(client, 1.0)
+    src = SimpleNamespace(vpc=SimpleNamespace(tiles=[SimpleNamespace(path=p, count=10) for p in paths]))
+    for p in paths:
+        cache.hold(src, p, (np.zeros((10, 3)),))
+    return cache, src
+
+
+def test_tiles_the_driver_holds_go_to_the_workers_while_it_goes_on():
+    """The driver's held tiles are sent by a thread (~0.2 s for the paper pair, which the driver
+    waited for before its next tasks and the registration); the grid's lookup waits for them."""
+    import threading
+    import time
+
+    client = _SlowClient(0.3)
+    cache, src = _holding(client, ["a.laz", "b.laz"])
+    t = time.perf_counter()
+    cache.send_held()
+    assert time.perf_counter() - t < 0.1 and not cache.held
+    src.tiles = lambda: ["a.laz", "b.laz", "c.laz"]
+    assert set(cache.meeting(src)) == {"a.laz", "b.laz"}  # waited: both futures there
+    assert time.perf_counter() - t >= 0.6 and client.threads == {"soilvolume-send-tiles"}
+    assert threading.current_thread().name not in client.threads
+
+
+def test_a_failure_to_send_the_held_tiles_is_one_line_in_the_driver():
+    from soilvolume.core.types import SoilVolumeError
+
+    cache, src = _holding(_SlowClient(0.0, OSError("connection reset by peer")), ["a.laz"])
+    cache.send_held()
+    with pytest.raises(SoilVolumeError, match=r"^sending the tiles read here to the Dask workers failed \("):
+        cache.sent()
+    cache.sent()  # said once

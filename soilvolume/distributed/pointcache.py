@@ -6,14 +6,17 @@ Tiles that do not fit the budget are read again by the grid tasks, as without th
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 
+from ..core.types import SoilVolumeError, short_error
 from ..inputs.copc import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
 
 CACHE_BYTES_PER_POINT = 40.0  # xyz float64, classification, RGB, returns (33 B) and the chunk lists
 CACHE_SHARE = 0.3  # of the budget: what the workers may hold beside their tasks (below Dask's spilling)
 HELD_POINTS = 8_000_000  # points of the tiles the driver reads while the cluster starts (~320 MB)
+SEND_S = 120.0  # the tiles the driver read must reach the workers within this
 
 
 def read_tile(path: str) -> tuple:
@@ -31,6 +34,9 @@ class PointCache:
         self.points = 0
         self.expected: list[Source] = []
         self.held: dict[str, tuple] = {}  # tiles read by the driver, until the workers are up
+        self.sending: set[str] = set()  # held tiles on their way to the workers
+        self.senders: list[threading.Thread] = []
+        self.failed: BaseException | None = None
 
     def expect(self, src: Source) -> None:
         """Read the tiles of ``src`` (a VPC, within its region) as soon as the first tiles are
@@ -44,6 +50,8 @@ class PointCache:
         """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
         read by streaming (not a VPC tile, COPC, or beyond the budget)."""
         self.send_held()
+        if self.sending.intersection(paths):
+            self.sent()  # a tile on its way: its future, not a second read
         if src.vpc is None:
             return [None] * len(paths)
         counts = {t.path: t.count for t in src.vpc.tiles}
@@ -77,10 +85,38 @@ class PointCache:
         self.held[path] = chunks
 
     def send_held(self) -> None:
-        """The tiles the driver holds (:meth:`hold`) sent to the workers."""
-        for path, chunks in self.held.items():
-            self.futures[path] = self.client.scatter([chunks], hash=False)[0]
-        self.held.clear()
+        """The tiles the driver holds (:meth:`hold`) sent to the workers, by a thread: the driver
+        goes on with its next tasks and the registration while they go out (~0.2 s for the paper
+        pair's 3.5 M points); :meth:`sent` waits for them."""
+        if not self.held:
+            return
+        held, self.held = self.held, {}
+        self.sending.update(held)
+        sender = threading.Thread(target=self._send, args=(held,), daemon=True, name="soilvolume-send-tiles")
+        self.senders.append(sender)
+        sender.start()
+
+    def _send(self, held: dict[str, tuple]) -> None:
+        try:
+            for path, chunks in held.items():
+                self.futures[path] = self.client.scatter([chunks], hash=False)[0]
+                self.sending.discard(path)
+        except BaseException as exc:  # noqa: BLE001 - raised in the driver by sent()
+            self.failed = exc
+
+    def sent(self) -> None:
+        """Wait (at most :data:`SEND_S`) until the tiles being sent have their futures; a failure
+        to send them is raised here, as one line."""
+        for sender in self.senders:
+            sender.join(SEND_S)
+            if sender.is_alive():
+                raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
+        self.senders.clear()
+        if self.failed is not None:
+            failed, self.failed = self.failed, None
+            if isinstance(failed, SoilVolumeError):
+                raise failed
+            raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
 
     def _prefetch(self) -> None:
         expected, self.expected = self.expected, []
@@ -94,12 +130,14 @@ class PointCache:
     def meeting(self, src: Source) -> dict:
         """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
         self.send_held()
+        self.sent()
         if src.vpc is None:
             return {}
         return {p: self.futures[p] for p in src.tiles() if p in self.futures}
 
     def release(self) -> None:
         """Free the workers' memory (the futures dropped)."""
+        self.sent()
         self.futures.clear()
 
 

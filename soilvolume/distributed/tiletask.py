@@ -270,6 +270,7 @@ def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
     (None without a cache)."""
     if cache is not None:
         cache.send_held()  # tiles the driver read while the cluster started
+        cache.sent()
     if cache is None or not cache.futures:
         return None
     return [tuple(cache.meeting(window_source(plan, e, w)[1]) for e in (0, 1)) for w in windows]
