@@ -50,7 +50,7 @@ class PointCache:
         """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
         read by streaming (not a VPC tile, COPC, or beyond the budget)."""
         self.send_held()
-        if self.sending.intersection(paths):
+        if priority >= 0 and self.sending.intersection(paths):
             self.sent()  # a tile on its way: its future, not a second read
         if src.vpc is None:
             return [None] * len(paths)
@@ -58,8 +58,8 @@ class PointCache:
         out = []
         for p in paths:
             need = counts.get(p, 0) * CACHE_BYTES_PER_POINT
-            if p not in counts or is_copc(p) or (p not in self.futures and need > self.left):
-                out.append(None)
+            if p not in counts or is_copc(p) or p in self.sending or (p not in self.futures and need > self.left):
+                out.append(None)  # (on its way: a prefetch does not wait for it)
                 continue
             if p not in self.futures:
                 self.futures[p] = self.client.submit(read_tile, p, pure=False, priority=priority)
@@ -88,18 +88,20 @@ class PointCache:
         """The tiles the driver holds (:meth:`hold`) sent to the workers, by a thread: the driver
         goes on with its next tasks and the registration while they go out (~0.2 s for the paper
         pair's 3.5 M points); :meth:`sent` waits for them."""
-        if not self.held:
-            return
         held, self.held = self.held, {}
         self.sending.update(held)
-        sender = threading.Thread(target=self._send, args=(held,), daemon=True, name="soilvolume-send-tiles")
+        if not held:
+            return
+        resolve = getattr(self.client, "resolve", None)  # a cluster still starting: waited for here, in the driver
+        client = resolve() if resolve else self.client
+        sender = threading.Thread(target=self._send, args=(client, held), daemon=True, name="soilvolume-send-tiles")
         self.senders.append(sender)
         sender.start()
 
-    def _send(self, held: dict[str, tuple]) -> None:
+    def _send(self, client, held: dict[str, tuple]) -> None:
         try:
             for path, chunks in held.items():
-                self.futures[path] = self.client.scatter([chunks], hash=False)[0]
+                self.futures[path] = client.scatter([chunks], hash=False)[0]
                 self.sending.discard(path)
         except BaseException as exc:  # noqa: BLE001 - raised in the driver by sent()
             self.failed = exc
@@ -107,11 +109,11 @@ class PointCache:
     def sent(self) -> None:
         """Wait (at most :data:`SEND_S`) until the tiles being sent have their futures; a failure
         to send them is raised here, as one line."""
-        for sender in self.senders:
+        while self.senders:
+            sender = self.senders.pop(0)
             sender.join(SEND_S)
             if sender.is_alive():
                 raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
-        self.senders.clear()
         if self.failed is not None:
             failed, self.failed = self.failed, None
             if isinstance(failed, SoilVolumeError):
@@ -122,7 +124,8 @@ class PointCache:
         expected, self.expected = self.expected, []
         counts = {t.path: t.count for s in expected for t in s.vpc.tiles}
         todo = [(s, s.tiles()) for s in expected]
-        need = sum(counts[p] for _, paths in todo for p in paths if p not in self.futures) * CACHE_BYTES_PER_POINT
+        kept = self.futures.keys() | self.sending
+        need = sum(counts[p] for _, paths in todo for p in paths if p not in kept) * CACHE_BYTES_PER_POINT
         if need <= self.left:
             for s, paths in todo:
                 self.take(s, paths, priority=-1)  # after the scans of the tiles taken now
