@@ -156,3 +156,21 @@ def test_a_failure_to_send_the_held_tiles_is_one_line_in_the_driver():
     with pytest.raises(SoilVolumeError, match=r"^sending the tiles read here to the Dask workers failed \("):
         cache.sent()
     cache.sent()  # said once
+
+
+def test_a_signal_while_the_held_tiles_are_sent_stops_the_wait():
+    """A send that hangs (a cluster gone quiet) does not hold a Ctrl-C for the 120 s timeout."""
+    import time
+
+    from soilvolume.core import interrupt
+
+    cache, _ = _holding(_SlowClient(5.0), ["a.laz"])
+    cache.send_held()
+    interrupt._pending.append(2)  # SIGINT recorded by the run's handler
+    try:
+        t = time.perf_counter()
+        with pytest.raises(interrupt.Interrupted):
+            cache.sent()
+        assert time.perf_counter() - t < 1.0
+    finally:
+        interrupt._pending.clear()

@@ -7,8 +7,10 @@ Tiles that do not fit the budget are read again by the grid tasks, as without th
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import replace
 
+from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
 from ..inputs.copc import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
@@ -107,11 +109,13 @@ class PointCache:
             self.failed = exc
 
     def sent(self) -> None:
-        """Wait (at most :data:`SEND_S`) until the tiles being sent have their futures; a failure
-        to send them is raised here, as one line."""
+        """Wait (at most :data:`SEND_S`, a signal checked every 0.25 s) until the tiles being sent
+        have their futures; a failure to send them is raised here, as one line."""
         while self.senders:
-            sender = self.senders.pop(0)
-            sender.join(SEND_S)
+            sender, deadline = self.senders.pop(0), time.monotonic() + SEND_S
+            while sender.is_alive() and time.monotonic() < deadline:
+                sender.join(0.25)
+                interrupt.check()
             if sender.is_alive():
                 raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
         if self.failed is not None:
