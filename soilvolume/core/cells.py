@@ -17,7 +17,11 @@ def cell_index(v: np.ndarray, lo, cell: float) -> np.ndarray:
 def in_box(xyz: np.ndarray, lo, hi) -> np.ndarray:
     """Mask of the points whose x/y lie in the box lo..hi (edges included): the same as
     ``((xyz[:, :2] >= lo) & (xyz[:, :2] <= hi)).all(axis=1)``, without its (N, 2) temporaries."""
-    x, y = xyz[:, 0], xyz[:, 1]
+    return xy_in_box(xyz[:, 0], xyz[:, 1], lo, hi)
+
+
+def xy_in_box(x: np.ndarray, y: np.ndarray, lo, hi) -> np.ndarray:
+    """:func:`in_box` of coordinates given as separate x and y arrays."""
     return (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
 
 

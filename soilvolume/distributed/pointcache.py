@@ -134,10 +134,14 @@ class PointCache:
             for s, paths in todo:
                 self.take(s, paths, priority=-1)  # after the scans of the tiles taken now
 
-    def meeting(self, src: Source) -> dict:
-        """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
+    def arrived(self) -> None:
+        """Every held tile sent and its future here (:meth:`send_held`, then :meth:`sent`)."""
         self.send_held()
         self.sent()
+
+    def meeting(self, src: Source) -> dict:
+        """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
+        self.arrived()
         if src.vpc is None:
             return {}
         return {p: self.futures[p] for p in src.tiles() if p in self.futures}

@@ -8,6 +8,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from ..core.cells import in_box
 from ..core.hooks import Hooks
 from ..core.types import GridSpec
 from ..dem.grid import (
@@ -128,12 +129,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
         labels = rule.labels(cls, sig) if rule is not None else None
         sel = cls == GROUND if rule is None and ground and cls is not None else None
         if box is not None:  # the box has a margin: cells are assigned exactly below
-            near = (
-                (xyz[:, 0] >= box[0][0])
-                & (xyz[:, 0] <= box[1][0])
-                & (xyz[:, 1] >= box[0][1])
-                & (xyz[:, 1] <= box[1][1])
-            )
+            near = in_box(xyz, *box)
             sel = near if sel is None else sel & near
         if sel is not None:
             xyz, labels = xyz[sel], None if labels is None else labels[sel]
@@ -269,8 +265,7 @@ def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
     """Per window, the (before, after) {path: future} of the cached VPC tiles its reads open
     (None without a cache)."""
     if cache is not None:
-        cache.send_held()  # tiles the driver read while the cluster started
-        cache.sent()
+        cache.arrived()  # tiles the driver read while the cluster started
     if cache is None or not cache.futures:
         return None
     return [tuple(cache.meeting(window_source(plan, e, w)[1]) for e in (0, 1)) for w in windows]

@@ -22,8 +22,8 @@ def dask_setup(worker=None) -> None:  # noqa: ARG001 - the preload protocol
 
 def warm() -> None:
     """Import what the tile tasks run (laspy, pyproj, the engine's readers and gridding) while
-        the worker starts: the driver reads the first tiles meanwhile, and the first tasks then
-        start at once instead of importing for ~0.4 s each (a worker forked from the forkserver has
+    the worker starts: the driver reads the first tiles meanwhile, and the first tasks then
+    start at once instead of importing for ~0.4 s each (a worker forked from the forkserver has
     them already: :data:`.cluster.FORKSERVER_PRELOAD`)."""
     import importlib
 

@@ -8,6 +8,7 @@ import re
 
 import numpy as np
 
+from ...core.cells import xy_in_box
 from ...core.types import SoilVolumeError
 
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
@@ -83,8 +84,8 @@ def covers(rings: list[np.ndarray], x: np.ndarray, y: np.ndarray) -> np.ndarray:
     Only the points in the rings' bounding box are tested (a wide survey cropped to a small
     footprint sorts a fraction of its points): the others are outside, as the test finds them.
     """
-    lo, hi = np.vstack(rings).min(axis=0), np.vstack(rings).max(axis=0)
-    box = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+    vertices = np.vstack(rings)
+    box = xy_in_box(x, y, vertices.min(axis=0), vertices.max(axis=0))
     if box.all():
         return _covers(rings, x, y)
     out = np.zeros(x.shape[0], dtype=bool)
