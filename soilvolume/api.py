@@ -31,9 +31,11 @@ def estimate(
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
     from .core.preload import preload
+    from .registration.o3d import needed
 
     options = check_options(options or Options())
-    preload(options.georeferencing != "precise", options.threads)  # overlaps the reading
+    registration = options.georeferencing != "precise" and needed(options.fine, options.coarse)
+    preload(registration, options.threads)  # overlaps the reading
     from .workflow.estimate import run_estimate
 
     return run_estimate(

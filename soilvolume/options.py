@@ -261,7 +261,7 @@ class Options:
     # run control
     threads: int = _opt(
         0,
-        "worker threads of the registration (Open3D; 0 = all cores)",
+        "worker threads of the registration (its nearest-neighbour searches and Open3D; 0 = all cores)",
         label="Threads",
         lo=0,
         hi=1024,

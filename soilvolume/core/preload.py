@@ -1,15 +1,16 @@
 """Imports a run will need, done in a background thread while the clouds are read.
 
-Open3D (registration) and rasterio (GeoTIFF output) take ~0.3-0.8 s to import, most of it loading
-their native libraries, and a run needs them only after the inputs are read. Imported in a thread
-from the start, they overlap with the reading (numpy and laspy release the GIL); the step that
-needs one waits on Python's module lock until it is complete. rasterio waits until the reading is
-done (:func:`reading_done`): the peak memory of a run is at the end of the reading, and it would
-add its ~20 MB there. Between the two, while the clouds are still read, come the modules of the
-registration and the volume step (:data:`DURING`: SciPy's ndimage and sparse solvers), which the
-reading does not need. Nothing is imported that the run would not import anyway. (Importing the
-later steps' modules, scipy.optimize and the report's, beside the registration's ICP was tried: no
-measurable gain on two cores, and ~30 MB more peak memory, the thread's allocations then.)
+Open3D (the registrations that use it: GICP, PFH, FPFH) and rasterio (GeoTIFF output) take
+~0.3-0.8 s to import, most of it loading their native libraries, and a run needs them only after
+the inputs are read. Imported in a thread from the start, they overlap with the reading (numpy and
+laspy release the GIL); the step that needs one waits on Python's module lock until it is
+complete. rasterio waits until the reading is done (:func:`reading_done`): the peak memory of a
+run is at the end of the reading, and it would add its ~20 MB there. Between the two, while the
+clouds are still read, come the modules of the registration and the volume step (:data:`DURING`:
+SciPy's ndimage and sparse solvers), which the reading does not need. Nothing is imported that the
+run would not import anyway. (Importing the later steps' modules, scipy.optimize and the report's,
+beside the registration's ICP was tried: no measurable gain on two cores, and ~30 MB more peak
+memory, the thread's allocations then.)
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ def _import(registration: bool) -> None:
 
 
 def preload(registration: bool, threads: int = 0) -> threading.Thread:
-    """Start importing Open3D (when ``registration`` runs), :data:`DURING`, then rasterio, in the background.
+    """Start importing Open3D (when ``registration`` uses it), :data:`DURING`, then rasterio, in the background.
     ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), for OpenMP libraries (Open3D 0.19+ is
     limited by :func:`soilvolume.registration.o3d.limit_threads`)."""
     if threads > 0:

@@ -7,6 +7,7 @@ import numpy as np
 
 PLOTLY = "open3d.visualization.draw_plotly"
 _LIMITED = False  # whether limit_threads set a limit (a later run without one lifts it)
+_WANTED: list[int] = []  # the threads asked for before Open3D was imported
 
 
 def _o3d():
@@ -17,18 +18,36 @@ def _o3d():
     import open3d as o3d
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
+    if _WANTED:
+        _apply(o3d.utility, _WANTED.pop())
     return o3d
+
+
+def needed(fine: str, coarse: str) -> bool:
+    """Whether a registration with these ``--fine`` and ``--coarse`` methods surely uses Open3D
+    (the default point-to-plane ICP does not; ``--coarse auto`` imports it only when it runs)."""
+    return fine in ("gicp", "pfh") or coarse == "fpfh"
 
 
 def limit_threads(threads: int) -> None:
     """Open3D's CPU threads, ``threads`` (0: all cores): Open3D 0.19+ runs on oneTBB, which ignores
     OMP_NUM_THREADS (``--threads`` sets that too, for OpenMP libraries); older releases have no
     ``set_max_threads`` and follow OMP_NUM_THREADS. A process that never asks for a limit keeps
-    Open3D's own setting; one that did gets all cores back with 0."""
+    Open3D's own setting; one that did gets all cores back with 0. Before Open3D is imported the
+    limit is only remembered: a run whose registration never needs Open3D does not import it."""
+    import sys
+
+    _WANTED.clear()
+    if "open3d" in sys.modules:
+        _apply(_o3d().utility, threads)
+    else:
+        _WANTED.append(threads)
+
+
+def _apply(utility, threads: int) -> None:
     global _LIMITED
     if threads <= 0 and not _LIMITED:
         return
-    utility = _o3d().utility
     if hasattr(utility, "set_max_threads"):
         utility.set_max_threads(max(0, int(threads)))
         _LIMITED = threads > 0

@@ -17,7 +17,7 @@ from ..core.cells import bounds
 from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
 from ..options import Options
-from . import columns
+from . import columns, icp
 from .ground import margin_points, spacing, stable_source
 from .o3d import _o3d, limit_threads, to_pcd
 from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
@@ -120,9 +120,22 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
 
 def _column_pcd(xyz: columns.Target, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None):
     """Open3D cloud of the column means of ``xyz`` (within lo..hi) with surface normals."""
+    return _as_pcd(*_column_surface(xyz, voxel, lo, hi))
+
+
+def _column_surface(
+    xyz: columns.Target, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The column means of ``xyz`` (within lo..hi) and their surface normals."""
     cols = columns.columns(xyz, voxel, lo, hi)
-    pcd = to_pcd(cols.xyz)
-    pcd.normals = _o3d().utility.Vector3dVector(columns.normals(cols))
+    return cols.xyz, columns.normals(cols)
+
+
+def _as_pcd(xyz: np.ndarray, normals: np.ndarray | None = None):
+    """An Open3D cloud of points (and normals)."""
+    pcd = to_pcd(xyz)
+    if normals is not None:
+        pcd.normals = _o3d().utility.Vector3dVector(normals)
     return pcd
 
 
@@ -135,14 +148,14 @@ def icp_levels(
     check: Callable[[], None] | None = None,
     scores: bool = False,
     gap: float | None = None,
+    workers: int = -1,
 ):
-    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, or GICP) of column-mean
-    surfaces (target normals from the column heights); with ``scores`` returns (transform,
-    fitness, inlier RMSE) of the last level. ``gap``: the target's point spacing; ``target_xyz``:
-    an array or a :class:`~soilvolume.registration.columns.Cloud`."""
-    o3d = _o3d()
-    reg = o3d.pipelines.registration
-    t = init.copy()
+    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, :mod:`.icp`, or Open3D's
+    GICP) of column-mean surfaces (target normals from the column heights); with ``scores``
+    returns (transform, fitness, inlier RMSE) of the last level. ``gap``: the target's point
+    spacing; ``target_xyz``: an array or a :class:`~soilvolume.registration.columns.Cloud`;
+    ``workers``: the nearest-neighbour searches' threads (-1: all cores)."""
+    t, fit, rmse = init.copy(), 0.0, 0.0
     cache: dict[float, tuple] = {}
     cap = _cap_voxel(source_xyz, MAX_ICP_POINTS)
     gap = 1.5 * (spacing(columns.Cloud.points(target_xyz)) if gap is None else gap)  # correspondences at least this far
@@ -151,33 +164,45 @@ def icp_levels(
         if check:
             check()
         if voxel not in cache:
-            cache[voxel] = (
-                to_pcd(_sampled(columns.columns(source_xyz, voxel).xyz, MAX_SOURCE_POINTS)),
-                _surface_pcd(target_xyz, source_xyz, t, voxel, 2.0 + dist),
-            )
-        src, tgt = cache[voxel]
-        crit = reg.ICPConvergenceCriteria(relative_fitness=ICP_TOL, relative_rmse=ICP_TOL, max_iteration=ICP_ITER)
+            src = _sampled(columns.columns(source_xyz, voxel).xyz, MAX_SOURCE_POINTS)
+            cache[voxel] = (src, *_surface(target_xyz, source_xyz, t, voxel, 2.0 + dist), {})
+        src, tgt, normals, trees = cache[voxel]
         if method == "gicp":
-            est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
-            res = reg.registration_generalized_icp(src, tgt, dist, t, est, crit)
+            t, fit, rmse = _gicp(src, tgt, normals, dist, t, k, trees)
         else:
-            est = reg.TransformationEstimationPointToPlane(reg.TukeyLoss(k=k))
-            res = reg.registration_icp(src, tgt, dist, t, est, crit)
-        t = np.asarray(res.transformation).copy()
-    return (t, float(res.fitness), float(res.inlier_rmse)) if scores else t
+            if "tree" not in trees:
+                trees["tree"] = icp.tree_of(tgt)
+            nearest = icp.Nearest(tgt, dist, workers, tree=trees["tree"])
+            res = icp.point_to_plane(src, tgt, normals, dist, t, k, ICP_TOL, ICP_ITER, workers, nearest)
+            t, fit, rmse = res.transform, res.fitness, res.inlier_rmse
+    return (t, fit, rmse) if scores else t
 
 
-def _surface_pcd(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
-    """The target's column surface with normals, over the source's box under ``t`` + margin."""
+def _gicp(src, tgt, normals, dist: float, t: np.ndarray, k: float, pcds: dict) -> tuple[np.ndarray, float, float]:
+    """One level of Open3D's generalized ICP (Tukey kernel) of arrays; their Open3D clouds are
+    kept in ``pcds`` for the next level on the same voxel."""
+    reg = _o3d().pipelines.registration
+    if "pcd" not in pcds:
+        pcds["pcd"] = (_as_pcd(src), _as_pcd(tgt, normals))
+    crit = reg.ICPConvergenceCriteria(relative_fitness=ICP_TOL, relative_rmse=ICP_TOL, max_iteration=ICP_ITER)
+    est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
+    res = reg.registration_generalized_icp(*pcds["pcd"], dist, t, est, crit)
+    return np.asarray(res.transformation).copy(), float(res.fitness), float(res.inlier_rmse)
+
+
+def _surface(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
+    """The target's column surface and normals over the source's box under ``t`` + margin."""
     moved = transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t)
-    pcd = _column_pcd(target_xyz, voxel, moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin)
-    if len(pcd.points) < 3:
+    xyz, normals = _column_surface(
+        target_xyz, voxel, moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin
+    )
+    if len(xyz) < 3:
         raise SoilVolumeError(
             "registration failed: the fine registration drifted off the before cloud "
             "(no before points left under the after cloud); check that both clouds "
             "cover the same site and their CRSs"
         )
-    return pcd
+    return xyz, normals
 
 
 def _sampled(xyz: np.ndarray, cap: int) -> np.ndarray:
@@ -309,21 +334,21 @@ def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, 
     Returns ((transform, label, poses rejected beyond the prior, its (fitness, RMSE) on the
     margin), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
     uncertainty, None when there is none)."""
-    method = options.fine
+    method, workers = options.fine, options.threads if options.threads > 0 else -1
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
     scored = []
     for init, label in starts:
-        t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, scores=True, gap=gap)
+        t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, True, gap, workers)
         scored.append((-fit, rmse, label, t))
     _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
-    t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap)
+    t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap, workers=workers)
     poses = [(init, lab) for init, lab in starts] + [(t, label)]
     for _ in range(STABLE_PASSES):
         src_stable = stable_source(after_xyz, before_xyz, t, gap=gap)
         if len(src_stable) <= 100:
             break
         # src_stable is already in the before frame: refine a correction on top of t.
-        dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap)
+        dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap, workers=workers)
         t = dt @ t
         poses.append((t, label))
     centre = after_xyz.mean(axis=0)
