@@ -17,6 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 SLACK = 1.5  # the searches look this many correspondence distances far: room to move in
+THREADED = 4096  # fewest points searched on several threads
 DET_MIN = 1e-6  # a normal matrix with a smaller determinant gives no step (as Open3D)
 
 
@@ -112,7 +113,8 @@ class Nearest:
         return d, np.where(has, d + moved < found.second, moved < self.bound - self.dist)
 
     def _search(self, points: np.ndarray) -> _Found:
-        d, j = self.tree.query(points.T, k=2, distance_upper_bound=self.bound, workers=self.workers)
+        workers = self.workers if points.shape[1] >= THREADED else 1  # threads cost more than a few searches
+        d, j = self.tree.query(points.T, k=2, distance_upper_bound=self.bound, workers=workers)
         return _Found(points.copy(), j[:, 0].astype(np.int64), np.minimum(d[:, 1], self.bound))
 
     def _distances(self, found: _Found, points: np.ndarray) -> np.ndarray:
