@@ -76,6 +76,24 @@ def test_threads_reach_open3d():
     assert utility.get_max_threads() == default
 
 
+def test_a_thread_limit_asked_before_open3d_is_imported_reaches_it():
+    """``--threads`` before anything imported Open3D (the default registration never does) is kept
+    and applied when a GICP, PFH or FPFH step imports it."""
+    from conftest import run_python
+
+    code = (
+        "import sys\n"
+        "from soilvolume.registration.o3d import _o3d, limit_threads\n"
+        "limit_threads(1)\n"
+        "before = 'open3d' in sys.modules\n"
+        "u = _o3d().utility\n"
+        "print(before, u.get_max_threads() if hasattr(u, 'get_max_threads') else 1)\n"
+    )
+    r = run_python(code, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "1"]
+
+
 def test_points_moved_in_chunks_are_moved_as_in_one_product():
     """transform_points32 moves a cloud chunk by chunk: every point gets the bits of one matrix
     product over the whole cloud, a lone last row too (alone it would go through a matrix-vector
