@@ -8,6 +8,7 @@ import numpy as np
 from ..core.types import SoilVolumeError
 
 BLOCK = 4_000_000  # points per block of the key and running-sum loops (32 MB temporaries)
+SPLIT_SORT = 2_000_000  # fewest keys sorted as two halves on two threads (when the caller's arrays are ours)
 
 
 def cell_heights(
@@ -53,7 +54,9 @@ class _SortedCells:
     """Heights sorted by (cell, height) through one sort of int64 keys ``cell << bits | height``
     (height quantized to 0.1 mm, coarser only for a huge height range). ``own``: ``ids`` (int64)
     and ``z`` (float64) are the caller's to overwrite: the keys are built in them (no 8 B per
-    point arrays faulted in anew); the temporaries stay within :data:`BLOCK` points."""
+    point arrays faulted in anew), and from :data:`SPLIT_SORT` keys on they are sorted as two
+    halves on two threads (into ``z``, spent by then); the temporaries stay within :data:`BLOCK`
+    points."""
 
     def __init__(self, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool = False) -> None:
         self.z0 = float(z.min())
@@ -67,11 +70,14 @@ class _SortedCells:
         for i in range(0, len(key), BLOCK):
             key[i : i + BLOCK] |= t[i : i + BLOCK].astype(np.int64)
         del t
-        key.sort(kind="stable")  # the same keys in order; timsort runs on file order (~2.5x faster)
-        self.key = key
         self.counts = np.zeros(n_cells, np.int64)
         for i in range(0, len(key), BLOCK):
             self.counts += np.bincount(key[i : i + BLOCK] >> self.bits, minlength=n_cells)
+        if own and len(key) >= SPLIT_SORT and _spare(z, key):
+            key = _sorted_halves(key, z.view(np.int64), self.counts, self.bits)
+        else:
+            key.sort(kind="stable")  # the same keys in order; timsort runs on file order (~2.5x faster)
+        self.key = key
         self.starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
         self.has = self.counts > 0
 
@@ -104,6 +110,35 @@ class _SortedCells:
         out[cells] = (csum[b] - csum[a]) / np.maximum(k, 1) * self.q + self.z0
         out[cells[k == 0]] = np.nan
         return out
+
+
+def _spare(z: np.ndarray, key: np.ndarray) -> bool:
+    """Whether ``z`` (the caller's heights, spent once the keys are built) can hold the keys."""
+    return z.dtype == np.float64 and z.flags.c_contiguous and len(z) == len(key) and not np.shares_memory(z, key)
+
+
+def _sorted_halves(key: np.ndarray, out: np.ndarray, counts: np.ndarray, bits: int) -> np.ndarray:
+    """``key`` sorted into ``out``: the keys of the cells before the middle point and those of the
+    cells after it moved apart (each in file order, where timsort finds its runs), then each half
+    sorted on its own thread. Sorted integers are one array whatever the route: the same bits as
+    ``key.sort()``."""
+    import threading
+
+    ends = np.cumsum(counts)
+    cell = min(int(np.searchsorted(ends, ends[-1] // 2)) + 1, len(counts))
+    split, limit = int(ends[cell - 1]), np.int64(cell) << bits
+    lo, hi = 0, split
+    for i in range(0, len(key), BLOCK):
+        block = key[i : i + BLOCK]
+        low = block < limit
+        a, b = np.compress(low, block), np.compress(~low, block)
+        out[lo : lo + len(a)], out[hi : hi + len(b)] = a, b
+        lo, hi = lo + len(a), hi + len(b)
+    other = threading.Thread(target=out[split:].sort, kwargs={"kind": "stable"}, name="soilvolume-sort")
+    other.start()
+    out[:split].sort(kind="stable")
+    other.join()
+    return out
 
 
 def _mean(ids: np.ndarray, z: np.ndarray, counts: np.ndarray, n: int) -> np.ndarray:
