@@ -34,8 +34,8 @@ def estimate(
     from .registration.o3d import needed
 
     options = check_options(options or Options())
-    registration = options.georeferencing != "precise" and needed(options.fine, options.coarse)
-    preload(registration, options.threads)  # overlaps the reading
+    uses_open3d = options.georeferencing != "precise" and needed(options.fine, options.coarse)
+    preload(uses_open3d, options.threads)  # overlaps the reading
     from .workflow.estimate import run_estimate
 
     return run_estimate(

@@ -29,11 +29,11 @@ def reading_done() -> None:
     _READ.set()
 
 
-def _import(registration: bool) -> None:
+def _import(open3d: bool) -> None:
     import importlib
 
     try:
-        if registration:
+        if open3d:
             from ..registration.o3d import _o3d
 
             _o3d()
@@ -45,13 +45,13 @@ def _import(registration: bool) -> None:
         pass
 
 
-def preload(registration: bool, threads: int = 0) -> threading.Thread:
-    """Start importing Open3D (when ``registration`` uses it), :data:`DURING`, then rasterio, in the background.
-    ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), for OpenMP libraries (Open3D 0.19+ is
-    limited by :func:`soilvolume.registration.o3d.limit_threads`)."""
+def preload(open3d: bool, threads: int = 0) -> threading.Thread:
+    """Start importing Open3D (when the registration uses it: ``open3d``), :data:`DURING`, then
+    rasterio, in the background. ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), for
+    OpenMP libraries (Open3D 0.19+ is limited by :func:`soilvolume.registration.o3d.limit_threads`)."""
     if threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(threads))
     _READ.clear()
-    worker = threading.Thread(target=_import, args=(registration,), name="soilvolume-preload", daemon=True)
+    worker = threading.Thread(target=_import, args=(open3d,), name="soilvolume-preload", daemon=True)
     worker.start()
     return worker

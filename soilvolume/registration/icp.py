@@ -47,6 +47,9 @@ class _Found:
     index: np.ndarray
     second: np.ndarray
 
+    def copy(self) -> _Found:
+        return _Found(self.at.copy(), self.index.copy(), self.second.copy())
+
     def take(self, idx: np.ndarray) -> _Found:
         return _Found(np.take(self.at, idx, axis=1), self.index[idx], self.second[idx])
 
@@ -94,7 +97,7 @@ class Nearest:
             idx = idx[~ok]
         if len(idx):
             if self.older is None:
-                self.older = self.last.take(np.arange(len(self.last.index)))
+                self.older = self.last.copy()
             else:
                 self.older.put(idx, self.last.take(idx))
             pts = np.take(points, idx, axis=1)

@@ -166,13 +166,13 @@ def icp_levels(
         if voxel not in cache:
             src = _sampled(columns.columns(source_xyz, voxel).xyz, MAX_SOURCE_POINTS)
             cache[voxel] = (src, *_surface(target_xyz, source_xyz, t, voxel, 2.0 + dist), {})
-        src, tgt, normals, trees = cache[voxel]
+        src, tgt, normals, kept = cache[voxel]  # kept: the voxel's k-d tree, or GICP's Open3D clouds
         if method == "gicp":
-            t, fit, rmse = _gicp(src, tgt, normals, dist, t, k, trees)
+            t, fit, rmse = _gicp(src, tgt, normals, dist, t, k, kept)
         else:
-            if "tree" not in trees:
-                trees["tree"] = icp.tree_of(tgt)
-            nearest = icp.Nearest(tgt, dist, workers, tree=trees["tree"])
+            if "tree" not in kept:
+                kept["tree"] = icp.tree_of(tgt)
+            nearest = icp.Nearest(tgt, dist, workers, tree=kept["tree"])
             res = icp.point_to_plane(src, tgt, normals, dist, t, k, ICP_TOL, ICP_ITER, workers, nearest)
             t, fit, rmse = res.transform, res.fitness, res.inlier_rmse
     return (t, fit, rmse) if scores else t
