@@ -38,11 +38,13 @@ class ColumnThinner:
     def add(self, xyz: np.ndarray) -> None:
         """Add a chunk's points: sums over the span of column ids the chunk meets only (a chunk
         covers a strip of a large site; the whole sums are not swept for each chunk)."""
-        ix = ((xyz[:, 0] - self.lo[0]) / self.voxel).astype(np.int64) - self.first[0]
-        iy = ((xyz[:, 1] - self.lo[1]) / self.voxel).astype(np.int64) - self.first[1]
-        ok = (ix >= 0) & (iy >= 0) & (ix < self.shape[1]) & (iy < self.shape[0])
+        ix, iy = self._index(xyz[:, 0], 0), self._index(xyz[:, 1], 1)
+        # as unsigned, a negative index is past the end: one comparison per axis tests both bounds
+        ok = np.less(ix.view(np.uint64), self.shape[1]) & np.less(iy.view(np.uint64), self.shape[0])
         every = bool(ok.all())
-        ids = iy * self.shape[1] + ix if every else iy[ok] * self.shape[1] + ix[ok]
+        iy *= self.shape[1]
+        iy += ix
+        ids = iy if every else np.compress(ok, iy)
         if not len(ids):
             return
         first = int(ids.min())
@@ -52,6 +54,14 @@ class ColumnThinner:
         sums[3] += np.bincount(ids, minlength=span)
         for k in range(3):
             sums[k] += np.bincount(ids, weights=xyz[:, k] if every else np.compress(ok, xyz[:, k]), minlength=span)
+
+    def _index(self, v: np.ndarray, axis: int) -> np.ndarray:
+        """``int((v - lo) / voxel) - first`` along ``axis`` (int64), with one temporary."""
+        t = np.subtract(v, self.lo[axis])
+        t /= self.voxel
+        out = t.astype(np.int64)
+        out -= self.first[axis]
+        return out
 
     def result(self) -> np.ndarray:
         """The centroids (float64, (M, 3))."""
