@@ -109,3 +109,23 @@ def test_points_moved_in_chunks_are_moved_as_in_one_product():
         for n in (k + 1, 2 * k, 3 * k + 1):
             xyz = rng.uniform(-500, 500, (n, 3)).astype(np.float32)
             assert np.array_equal(transform_points32(xyz, t, chunk=k), transform_points32(xyz, t, chunk=n)), (k, n)
+
+
+def test_points_moved_as_columns_have_the_bits_of_the_row_product():
+    """transform_points32 computes R @ xyz.T (the fast shape for BLAS): every coordinate has the
+    bits of ``xyz @ R.T + shift`` in float32, for chunk sizes around the kernels' widths."""
+    from soilvolume.registration.rigid import transform_points32
+
+    rng = np.random.default_rng(2)
+    a, b = np.deg2rad(2.5), 0.003
+    t = np.eye(4)
+    t[:3, :3] = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]) @ np.array(
+        [[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]]
+    )
+    t[:3, 3] = [1.2, -0.7, 0.3]
+    r, s = t[:3, :3].T.astype(np.float32), t[:3, 3].astype(np.float32)
+    for n in (*range(2, 40), 127, 129, 4097, 32769, 200_003):
+        xyz = (rng.random((n, 3)) * [300, 300, 20] - [150, 150, 10]).astype(np.float32)
+        moved = transform_points32(xyz, t, chunk=max(2, n // 3))
+        assert moved.shape == (n, 3) and moved.dtype == np.float32
+        assert np.ascontiguousarray(moved).tobytes() == (xyz @ r + s).tobytes(), n

@@ -169,3 +169,31 @@ def test_footprints_are_remembered_by_content_only():
         fp._hull = real
     assert np.array_equal(first, again) and calls == [len(xyz)]  # only the moved cloud's hull was made
     assert not np.array_equal(first, other)
+
+
+def test_the_footprint_test_runs_on_the_reading_thread(cloud, monkeypatch):
+    """With a plain shift the chunks arrive local, and the reading thread applies the footprint
+    test (the consumer is the busier thread); after any other conversion the consumer applies it.
+    Both load the same points."""
+    import threading
+
+    from soilvolume.inputs.prepare import Shift
+
+    origin = np.array([500_010.0, 3_900_010.0, 49.0])
+    monkeypatch.setattr(stream, "CHUNK", 1_000)
+    las = open_source(cloud[0])
+    mask = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
+    threads: list[str] = []
+
+    def keep(xyz):
+        threads.append(threading.current_thread().name)
+        return mask(xyz)
+
+    box = np.array([-11.0, -11.0]), np.array([60.0, 40.0])
+    fused = load(las, Shift(origin), "auto", keep, ColumnThinner(*box, 0.5))
+    on_reader, threads[:] = list(threads), []
+    shifted = load(las, lambda x: x - origin, "auto", keep, ColumnThinner(*box, 0.5))
+    assert len(on_reader) > 3 and "MainThread" not in on_reader
+    assert set(threads) == {"MainThread"}
+    assert 0 < fused.extra["cropped"] < fused.points
+    assert fused.xyz.tobytes() == shifted.xyz.tobytes() and fused.thin.tobytes() == shifted.thin.tobytes()

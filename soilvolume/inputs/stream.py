@@ -296,13 +296,18 @@ def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str
     return replace(rule, use_class=ground_mode(src, cls, mode))
 
 
-def _labelled(src: Source, to_local, boxes: bool, mode: str, exclude: str) -> tuple[Iterator[tuple], Callable]:
+def _labelled(
+    src: Source, to_local, boxes: bool, mode: str, exclude: str, keep: Callable | None = None
+) -> tuple[Iterator[tuple], Callable]:
     """The chunks of ``src`` read ahead by a thread (:func:`prefetch`) as (xyz, labels or None,
-    the epoch's rule, x/y box of the file coordinates when ``boxes``), and the conversion to the
-    local frame still to apply to xyz. The thread decides the rule on the first chunk
-    (:func:`epoch_rule`), labels every chunk, reads only the signals the rule (or its decision)
-    uses, and subtracts the origin of a plain shift (``prepare.Shift``) in the decoding."""
+    the epoch's rule, x/y box of the file coordinates when ``boxes``, ``keep`` of the points or
+    None), and the conversion to the local frame still to apply to xyz. The thread decides the
+    rule on the first chunk (:func:`epoch_rule`), labels every chunk, reads only the signals the
+    rule (or its decision) uses, and subtracts the origin of a plain shift (``prepare.Shift``) in
+    the decoding; then the points are local already, and the thread also applies ``keep`` (the
+    footprint test: the reading thread has time to spare, the consumer has none)."""
     fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
+    early = keep if fused else None
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
 
@@ -314,8 +319,9 @@ def _labelled(src: Source, to_local, boxes: bool, mode: str, exclude: str) -> tu
         for xyz, cls, sig in src.chunks(signals=wanted, origin=to_local.origin if fused else None):
             if rule is None:
                 rule = epoch_rule(src, cls, sig, mode, exclude)
-            item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes else None
-            del xyz, cls, sig  # held by the item only
+            inside = None if early is None else early(xyz)
+            item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes else None, inside
+            del xyz, cls, sig, inside  # held by the item only
             yield item
 
     return prefetch(run()), shift
@@ -344,11 +350,11 @@ def load(
     rule: PointRule | None = None
     reading, cropped = 0.0, 0
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
-    chunks, shift = _labelled(src, to_local, index is not None, mode, exclude)
+    chunks, shift = _labelled(src, to_local, index is not None, mode, exclude, keep)
     while True:
         t0 = time.perf_counter()
         try:
-            local, labels, rule, xy_box = next(chunks)
+            local, labels, rule, xy_box, inside = next(chunks)
         except StopIteration:
             break
         finally:
@@ -361,7 +367,8 @@ def load(
         local = shift(local)
         soil = None if labels is None else labels == SOIL
         used += len(local) if soil is None else int(soil.sum())
-        inside = None if keep is None else keep(local)
+        if inside is None and keep is not None:  # not tested by the reading thread
+            inside = keep(local)
         if soil is not None:  # the points that are not soil, within the crop and the box
             other = ~soil if inside is None else ~soil & inside
             o_xyz, o_lab = rows(local, other), labels[other]

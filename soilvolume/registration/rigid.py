@@ -30,15 +30,19 @@ CACHE_ROWS = 1 << 15  # rows of a product whose points stay in the cache through
 
 def transform_points32(xyz: np.ndarray, t: np.ndarray, chunk: int = 4_000_000) -> np.ndarray:
     """A rigid transform of float32 local points, in chunks of ``chunk`` rows (no float64 copy of
-    the cloud). A matrix product gives each row the same bits whatever the chunk it is in, but a
-    chunk of one row would go through a matrix-vector product (another rounding): a lone last row
-    joins the chunk before it."""
-    out = np.empty_like(xyz, dtype=np.float32)
-    r, s = t[:3, :3].T.astype(np.float32), t[:3, 3].astype(np.float32)
+    the cloud), as ``xyz @ R.T + shift`` in float32 gives it. Computed as ``R @ xyz.T`` into a
+    (3, N) array, returned as its (N, 3) transpose: BLAS takes a 3 x 3 times 3 x N product 3-6x
+    faster than an N x 3 times 3 x 3 one, with the same bits (each value is the same three-term
+    dot product), and each coordinate of the result is contiguous. A matrix product gives each
+    point the same bits whatever the chunk it is in, but a chunk of one point would go through a
+    matrix-vector product (another rounding): a lone last point joins the chunk before it."""
+    out = np.empty((3, len(xyz)), np.float32)
+    r, s = t[:3, :3].astype(np.float32), t[:3, 3].astype(np.float32)
     n = len(xyz)
     starts = list(range(0, n, chunk))
     if len(starts) > 1 and n - starts[-1] == 1:
         starts.pop()
     for i, j in zip(starts, [*starts[1:], n], strict=True):
-        out[i:j] = xyz[i:j] @ r + s
-    return out
+        np.matmul(r, xyz[i:j].T, out=out[:, i:j])
+    out += s[:, None]
+    return out.T
