@@ -13,6 +13,7 @@ from conftest import write_scene
 
 from soilvolume.api import estimate
 from soilvolume.distributed import pointcache
+from soilvolume.distributed.scan import _first_rule
 from soilvolume.distributed.schedule import budget_gb
 from soilvolume.inputs.io import write_las
 from soilvolume.inputs.vpc import write_vpc
@@ -91,9 +92,9 @@ def test_tiles_the_driver_read_while_the_cluster_started(vpcs, tmp_path, monkeyp
     ref, _ = _run(vpcs, tmp_path / "ref", "threads:2")
     calls = {"n": 0}
 
-    def starting(self) -> bool:  # the cluster "starts" during the first four tiles
+    def starting(self) -> bool:  # the cluster "starts" during the first four tiles (asked once before them)
         calls["n"] += 1
-        return calls["n"] > 4
+        return calls["n"] > 5
 
     monkeypatch.setattr(cluster.LazyClient, "ready", starting)
     held = []
@@ -118,7 +119,7 @@ class _SlowClient:
         time.sleep(self.delay)
         if self.error is not None:
             raise self.error
-        return [("future", len(data[0]))]
+        return [("future", data[0].points)]
 
 
 def _holding(client, paths):
@@ -127,7 +128,7 @@ def _holding(client, paths):
     cache = pointcache.PointCache(client, 1.0)
     src = SimpleNamespace(vpc=SimpleNamespace(tiles=[SimpleNamespace(path=p, count=10) for p in paths]))
     for p in paths:
-        cache.hold(src, p, (np.zeros((10, 3)),))
+        cache.hold(src, (p, None), pointcache.KeptTile(((np.zeros((10, 3), np.float32), None),), 10))
     return cache, src
 
 
@@ -143,7 +144,8 @@ def test_tiles_the_driver_holds_go_to_the_workers_while_it_goes_on():
     cache.send_held()
     assert time.perf_counter() - t < 0.1 and not cache.held
     src.tiles = lambda: ["a.laz", "b.laz", "c.laz"]
-    assert set(cache.meeting(src)) == {"a.laz", "b.laz"}  # waited: both futures there
+    assert set(cache.meeting(src, None)) == {"a.laz", "b.laz"}  # waited: both futures there
+    assert cache.meeting(src, "a crop") == {}  # kept uncropped: not for a cropped epoch
     assert time.perf_counter() - t >= 0.6 and client.threads == {"soilvolume-send-tiles"}
     assert threading.current_thread().name not in client.threads
 
@@ -174,3 +176,109 @@ def test_a_signal_while_the_held_tiles_are_sent_stops_the_wait():
         assert time.perf_counter() - t < 1.0
     finally:
         interrupt._pending.clear()
+
+
+def test_a_kept_tile_holds_the_points_its_crop_keeps_as_the_grid_would_make_them(tmp_path):
+    """What a scan keeps of a tile (scan_keeping) is what a grid task makes of the file itself:
+    the local float32 points inside the crop, in the file's order, with their labels; an
+    epoch without a crop keeps every point. The scan's own summary is the plain scan's."""
+    import pyproj
+
+    from soilvolume.distributed.scan import scan_keeping, scan_unit
+    from soilvolume.inputs.footprint import PolygonMask
+    from soilvolume.inputs.prepare import Shift
+    from soilvolume.soil.points import PointRule
+
+    rng = np.random.default_rng(4)
+    origin = np.array([500_000.0, 4_000_000.0, 10.0])
+    xyz = origin + np.c_[rng.uniform(0, 60, (30_000, 2)), rng.normal(0, 1, 30_000)]
+    cls = rng.choice([1, 2], 30_000).astype(np.uint8)
+    path = tmp_path / "t.laz"
+    write_las(path, xyz, pyproj.CRS("EPSG:32654").to_wkt(), cls)
+    xyz = laspy.read(path).xyz  # the stored (quantised) coordinates
+    ring = np.array([[5.0, 5.0], [50.0, 8.0], [40.0, 55.0], [8.0, 45.0]])
+    keep, rule = PolygonMask(ring), PointRule(use_class=True)
+    thinning = (np.zeros(3), np.array([60.0, 60.0, 0.0]), 2.0)
+    for crop in (keep, None):
+        args = ((str(path), None, None), None, Shift(origin), rule, crop, thinning, False)
+        part, kept = scan_keeping(*args, cached=pointcache.read_tile(str(path)))
+        plain = scan_unit(*args)
+        same = lambda d: {k: v for k, v in d.items() if k not in ("sums", "read_s")}  # noqa: E731
+        assert same(part) == same(plain)
+        assert all(np.array_equal(a, b) for a, b in zip(part["sums"], plain["sums"], strict=True))
+        local = xyz - origin
+        inside = keep(local) if crop is not None else np.ones(len(xyz), bool)
+        got = np.concatenate([c[0] for c in kept.chunks])
+        assert got.dtype == np.float32 and kept.points == len(xyz) and 0 < len(got) <= len(xyz)
+        assert np.array_equal(got, local[inside].astype(np.float32))
+        labels = np.concatenate([c[1] for c in kept.chunks])
+        assert np.array_equal(labels, rule.labels(cls, None)[inside])
+        assert (len(got) < len(xyz)) == (crop is not None)
+
+
+class _Recording:
+    """A client that records what is submitted (the read-ahead of tiles)."""
+
+    def __init__(self) -> None:
+        self.submitted = []
+
+    def submit(self, fn, *args, **kw):
+        self.submitted.append((fn.__name__, args[0], kw.get("priority")))
+        return ("future", args[0])
+
+
+def _source(path: str, tiles: list[str]):
+    from types import SimpleNamespace
+
+    vpc = SimpleNamespace(tiles=[SimpleNamespace(path=p, count=10) for p in tiles])
+    return SimpleNamespace(path=path, vpc=vpc, tiles=lambda: list(tiles))
+
+
+def test_tiles_are_read_ahead_behind_the_scans_and_only_for_an_epoch_not_begun():
+    """The later epoch's tiles are read ahead once the first epoch's scans are submitted (take
+    submits nothing; prefetch, after them, does), at a lower priority; tiles already scanned are
+    not; an epoch whose scan has begun (on the workers or in the driver) is not read ahead: that
+    would read only the tiles of its wider expected region it does not scan."""
+    client = _Recording()
+    cache = pointcache.PointCache(client, 1.0)
+    after, before = _source("a.vpc", ["a1", "a2"]), _source("b.vpc", ["b1", "b2", "b3"])
+    cache.expect(before)
+    assert cache.take(after, ["a1", "a2"]) == [(None, True), (None, True)] and client.submitted == []
+    cache.prefetch()
+    assert client.submitted == [("read_tile", p, -1) for p in ("b1", "b2", "b3")]
+    assert cache.take(before, ["b1", "b2"]) == [(("future", "b1"), True), (("future", "b2"), True)]
+    for begun in ("take", "hold"):
+        client = _Recording()
+        cache = pointcache.PointCache(client, 1.0)
+        cache.expect(before)
+        if begun == "take":
+            cache.take(before, ["b1"])
+        else:
+            cache.hold(before, ("b1", "crop"), pointcache.KeptTile((), 10))
+        cache.take(after, ["a1"])
+        cache.prefetch()
+        assert client.submitted == [], begun
+
+
+def test_the_epoch_rule_is_decided_where_its_first_tile_was_read_ahead(vpcs, tmp_path, monkeypatch):
+    """A worker that read the before's first tile ahead decides the epoch's rule on it (the
+    driver does not decode that tile a second time); the same result as the driver deciding."""
+    from soilvolume.distributed import cluster, scan
+
+    monkeypatch.setattr(cluster.LazyClient, "ready", lambda self: True)  # up before the first tile
+    monkeypatch.setattr(scan, "_first_rule", _counted_first_rule)  # (a task: pickled by reference)
+    DECIDED.clear()
+    got, eng = _run(vpcs, tmp_path / "tiled", "threads:2")
+    assert len(DECIDED) == 1 and eng["task_points_from_memory"] > 0
+    monkeypatch.setattr(pointcache, "CACHE_SHARE", 0.0)  # nothing read ahead: the driver decides
+    ref, _ = _run(vpcs, tmp_path / "ref", "threads:2")
+    assert len(DECIDED) == 1
+    _identical(got, ref)
+
+
+DECIDED: list = []  # the rules decided by tasks (threads: this module, imported by the workers)
+
+
+def _counted_first_rule(*args):
+    DECIDED.append(1)
+    return _first_rule(*args)

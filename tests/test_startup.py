@@ -58,14 +58,17 @@ def test_a_dask_worker_starts_without_scipy_spatial():
 def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     """A local cluster's workers come from one forkserver that imported Dask and the tasks'
     modules once (a spawned worker imports them itself, ~0.6 s of CPU each, while the driver
-    reads); Dask's pre-spawn environment (one BLAS/OpenMP thread per worker) still reaches them."""
+    reads); Dask's pre-spawn environment (one BLAS/OpenMP thread per worker) still reaches them and
+    their server, which starts before Dask is imported."""
     code = (
         "import json, os, sys\n"
+        "os.environ.pop('MALLOC_TRIM_THRESHOLD_', None)\n"
         "from soilvolume.distributed import cluster\n"
         "c, client = cluster.local(2, True, 1.0, None)\n"
         "try:\n"
         "    info = client.run(lambda: (os.getppid(), os.environ.get('OMP_NUM_THREADS'),\n"
-        "                               'soilvolume.distributed.tiletask' in sys.modules))\n"
+        "                               'soilvolume.distributed.tiletask' in sys.modules,\n"
+        "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0))))\n"
         "finally:\n"
         "    cluster.shut(c, client)\n"
         "print(json.dumps([os.getpid(), sorted(info.values())]))\n"
@@ -77,6 +80,11 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     parents = {w[0] for w in workers}
     assert len(parents) == 1 and driver not in parents  # one server forked both (spawned: the driver)
     assert all(w[1] == "1" and w[2] for w in workers)
+    # the server started before any nanny set Dask's pre-spawn environment: it had it from its start
+    # (OpenBLAS reads its threads as the server imports numpy), but for Dask's malloc trim threshold
+    # (cluster.LOCAL_WORKER_ENV: glibc's own, as in-process)
+    assert all("OMP_NUM_THREADS=1" in w[3] for w in workers)
+    assert not any(e.startswith("MALLOC_TRIM_THRESHOLD_=") for w in workers for e in w[3])
 
 
 def test_preload_imports_open3d_and_the_volume_step_then_rasterio_after_the_reading():

@@ -431,3 +431,30 @@ def test_tiled_run_writes_the_registered_cloud_as_in_process(pair, tmp_path):
     t = np.array(runs["threads:2"].report["registration"]["transform"])
     np.testing.assert_allclose(t, runs["none"].report["registration"]["transform"], atol=1e-6)
     assert np.abs(tiled.xyz - whole.xyz).max() <= 2e-3
+
+
+def test_a_tile_takes_its_cells_points_as_the_whole_grid_assigns_them():
+    """A tile task's cells (tiletask._window_cells: the window's bounds tested on the fractional
+    coordinates) are those the whole grid's flat ids give (truncated coordinates, then the row
+    and column inside the window): the same points, ids, heights and offsets, points on cell
+    edges, on the window's and the grid's borders and outside them included."""
+    from soilvolume.dem.grid import OffsetSums, cell_coords, flat_ids
+    from soilvolume.distributed.tiletask import _window_cells
+
+    rng = np.random.default_rng(7)
+    grid = GridSpec(xmin=500_000.0, ymax=4_000_030.0, cell=0.5, rows=60, cols=50, origin=(500_010.0, 4_000_000.0, 0.0))
+    xy = rng.uniform((-12, -2), (17, 32), (40_000, 2))
+    xy[:5000] = np.round(xy[:5000] * 2) / 2  # on the cells' edges
+    xyz = np.c_[xy, rng.normal(0, 1, len(xy))].astype(np.float32)
+    for win in [(0, 60, 0, 50), (10, 37, 5, 21), (59, 60, 49, 50), (0, 1, 0, 50)]:
+        col, row, ok = cell_coords(xyz, grid)  # the reference: whole-grid ids
+        r, c = np.divmod(flat_ids(col[ok], row[ok], grid.cols), grid.cols)
+        m = (r >= win[0]) & (r < win[1]) & (c >= win[2]) & (c < win[3])
+        want = (r[m] - win[0]) * (win[3] - win[2]) + (c[m] - win[2])
+        n = (win[1] - win[0]) * (win[3] - win[2])
+        ref, got = OffsetSums(n), OffsetSums(n)
+        ref.add(want, col[ok][m], row[ok][m])
+        (ids, which), z = _window_cells(xyz, grid, win, got, keep_ids=True)
+        assert np.array_equal(ids, want) and ids.dtype == np.int32 and len(ids) > 0
+        assert np.array_equal(which, np.flatnonzero(ok)[m]) and np.array_equal(z, xyz[ok, 2][m])
+        assert np.array_equal(got.sx, ref.sx) and np.array_equal(got.sy, ref.sy)

@@ -132,13 +132,15 @@ def make_grid(
     return GridSpec(xmin, ymax, cell, rows, cols, tuple(float(v) for v in origin), crs_wkt, xy_unit)
 
 
-def cell_coords(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def cell_coords(xyz: np.ndarray, grid: GridSpec, window: tuple | None = None) -> tuple[np.ndarray, ...]:
     """Column and row coordinates (in cells, fractional) of every point, and the mask of those
-    inside the grid (computed in the points' own precision: float32 stays float32)."""
+    inside the grid (computed in the points' own precision: float32 stays float32); with a
+    ``window`` (r0, r1, c0, c1 of the grid's cells), of those in the window's cells."""
     inv = 1.0 / grid.cell
     col = (xyz[:, 0] - (grid.xmin - grid.origin[0])) * inv
     row = ((grid.ymax - grid.origin[1]) - xyz[:, 1]) * inv
-    ok = (col >= 0) & (col < grid.cols) & (row >= 0) & (row < grid.rows)
+    r0, r1, c0, c1 = window if window is not None else (0, grid.rows, 0, grid.cols)
+    ok = (col >= c0) & (col < c1) & (row >= r0) & (row < r1)  # a cell's coordinates truncate to it
     return col, row, ok
 
 

@@ -6,6 +6,7 @@ Each failure is one line naming the scheduler."""
 from __future__ import annotations
 
 import logging
+import os
 import sys
 import threading
 import time
@@ -27,6 +28,11 @@ WORKER_INIT = "soilvolume.distributed.workerinit"
 # Dask's statistical profiler samples every worker thread's stack every 10 ms: half of an idle
 # worker's CPU, and more on a busy one; nothing of this engine reads it
 QUIET = {"distributed.worker.profile.enabled": False}
+# the engine's local workers live for one run and size their tasks to their memory: glibc's own
+# malloc thresholds, as in-process. Dask's pre-spawn MALLOC_TRIM_THRESHOLD_ (64 KB) also fixes the
+# mmap threshold at 128 KB, so every larger temporary goes back to the kernel when freed and is
+# faulted in again (0.14 s of the paper pair's 2.5 s as a VPC on local:2); None: not set
+LOCAL_WORKER_ENV = {"MALLOC_TRIM_THRESHOLD_": None}
 
 
 class Starting:
@@ -160,6 +166,7 @@ def connect(address: str):
 def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None):
     """(LocalCluster, Client): ``workers`` processes of one thread (or one process of
     ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``."""
+    method = _start_method() if processes else None  # first: the forkserver's imports overlap Dask's here
     import dask
     from dask.distributed import Client
 
@@ -168,7 +175,8 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
         scratch.mkdir(parents=True, exist_ok=True)
         extra["local_directory"] = str(scratch)
     settings = {"temporary-directory": str(scratch) if scratch is not None else None, **QUIET}
-    if processes and (method := _start_method()):
+    settings.update({f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in LOCAL_WORKER_ENV.items()})
+    if method:
         settings["distributed.worker.multiprocessing-method"] = method
     with dask.config.set(settings):
         cluster = _local_cluster(workers, processes, per_worker_gb, extra)
@@ -187,19 +195,45 @@ FORKSERVER_PRELOAD = ("distributed", WORKER_INIT, *TASK_MODULES)  # imported onc
 def _start_method() -> str | None:
     """``forkserver`` on Linux: one server process imports Dask and the tasks' modules once and
     forks each worker from it (a spawned worker imports them itself, ~0.6 s of CPU each, which on
-    a small machine the driver's reading waits for). None elsewhere: Dask's default, spawn
-    (Windows has no fork; on macOS system libraries are not safe to use after one)."""
+    a small machine the driver's reading waits for). The server starts at once, before this
+    process imports Dask and starts the scheduler and the nannies: its imports (~0.4 s) overlap
+    them instead of following them. None elsewhere: Dask's default, spawn (Windows has no fork;
+    on macOS system libraries are not safe to use after one)."""
     import multiprocessing
+    from multiprocessing import forkserver
 
     if not sys.platform.startswith("linux") or "forkserver" not in multiprocessing.get_all_start_methods():
         return None
+    multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
+    os.environ.update(pre_spawn_environ())  # what each nanny sets before its worker starts: the server's, for all
+    forkserver.ensure_running()
     import dask
     from distributed.utils import get_mp_context
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
-        ctx = get_mp_context()  # Dask sets its preload list (and pandas) on first use: ours replaces it
-    ctx.set_forkserver_preload(list(FORKSERVER_PRELOAD))  # read when the server starts, at the first worker
+        get_mp_context()  # Dask sets its preload list on first use: for a server running already, a no-op
     return "forkserver"
+
+
+def pre_spawn_environ() -> dict[str, str]:
+    """Dask's ``distributed.nanny.pre-spawn-environ`` as a nanny applies it (variables the user set
+    win), with :data:`LOCAL_WORKER_ENV`: one OpenMP/BLAS thread per worker. C libraries read them as a
+    process starts, so the forkserver needs them before its workers are forked, and it starts
+    before Distributed is imported (0.3 s): its defaults are loaded as importing it would."""
+    from importlib.util import find_spec
+
+    import dask
+
+    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"
+    if defaults.is_file():
+        import yaml
+
+        dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
+    else:  # a Distributed laid out otherwise: imported for its defaults
+        import distributed  # noqa: F401
+    env = dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}
+    env = {**env, **LOCAL_WORKER_ENV}
+    return {k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None}
 
 
 def _local_cluster(workers: int, processes: bool, per_worker_gb: float | None, extra: dict):

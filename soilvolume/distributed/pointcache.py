@@ -1,42 +1,61 @@
 """The first pass's points kept on the workers for the grid pass, when they fit the memory
-budget: a whole VPC tile (not COPC: its first pass reads a thinned level) is read once, by a
-task whose result stays on the worker that read it (a Dask future); the scan task and the
-grid tasks whose boxes meet the tile consume that future instead of decoding the file again.
-Tiles that do not fit the budget are read again by the grid tasks, as without the cache."""
+budget: the task that scans a whole VPC tile (not COPC: its first pass reads a thinned level)
+also makes what the grid needs of it, a :class:`KeptTile` (the local float32 points the crop
+keeps, with their labels), which stays on its worker as a Dask future; the grid tasks whose
+boxes meet the tile take it instead of decoding, labelling, shifting and cropping the file
+again. Tiles beyond the budget are read again by the grid tasks, as without the cache."""
 
 from __future__ import annotations
 
 import threading
 import time
-from dataclasses import replace
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, replace
 
 from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
 from ..inputs.copc import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
 
-CACHE_BYTES_PER_POINT = 40.0  # xyz float64, classification, RGB, returns (33 B) and the chunk lists
+# a tile read ahead (xyz float64, classification, RGB, returns: 33 B and the chunk lists) while its
+# kept form (float32 xyz and a label: 13 B) is made from it
+CACHE_BYTES_PER_POINT = 40.0
 CACHE_SHARE = 0.3  # of the budget: what the workers may hold beside their tasks (below Dask's spilling)
-HELD_POINTS = 8_000_000  # points of the tiles the driver reads while the cluster starts (~320 MB)
-SEND_S = 120.0  # the tiles the driver read must reach the workers within this
+HELD_POINTS = 8_000_000  # points of the tiles the driver scans while the cluster starts (~100 MB kept)
+SEND_S = 120.0  # the tiles the driver scanned must reach the workers within this
+
+Key = tuple  # (tile path, PolygonMask.key() of the crop its kept points passed, or None: not cropped)
+
+
+@dataclass(frozen=True)
+class KeptTile:
+    """A VPC tile as the grid pass needs it: per chunk of the file (:data:`stream.CHUNK`), the
+    local float32 x, y, z of the points the epoch's crop keeps, in the file's order, and their
+    labels (:mod:`soil.points`; None: every point is soil); ``points``: the tile's points."""
+
+    chunks: tuple
+    points: int
 
 
 def read_tile(path: str) -> tuple:
     """The chunks (xyz, classification, signals) of one whole LAS/LAZ file, as the grid tasks'
-    reads yield them (:func:`stream.file_chunks`): the cached form of a VPC tile."""
+    reads yield them (:func:`stream.file_chunks`)."""
     return tuple(file_chunks(path, None, CHUNK, signals=True))
 
 
 class PointCache:
-    """Futures of the VPC tiles read into the workers' memory, within ``budget_gb``."""
+    """Futures of the VPC tiles kept in the workers' memory (:class:`KeptTile`), within ``budget_gb``."""
 
     def __init__(self, client, budget_gb: float) -> None:
         self.client, self.left = client, budget_gb * CACHE_SHARE * 2**30
-        self.futures: dict[str, object] = {}
+        self.futures: dict[Key, object] = {}  # the kept tiles, for the grid
+        self.reads: dict[str, object] = {}  # tiles of an epoch to come read ahead, for its scan
+        self.charged: set[str] = set()  # the tiles counted against the budget
+        self.scanned: set[str] = set()  # tiles whose scan is done or on its way
         self.points = 0
         self.expected: list[Source] = []
-        self.held: dict[str, tuple] = {}  # tiles read by the driver, until the workers are up
-        self.sending: set[str] = set()  # held tiles on their way to the workers
+        self.held: dict[Key, KeptTile] = {}  # tiles the driver scanned, until the workers are up
+        self.sending: set[Key] = set()  # held tiles on their way to the workers
         self.senders: list[threading.Thread] = []
         self.failed: BaseException | None = None
 
@@ -48,48 +67,58 @@ class PointCache:
         if src.vpc is not None:
             self.expected.append(src)
 
-    def take(self, src: Source, paths: list[str], priority: int = 0) -> list:
-        """A future of each of ``paths`` (tiles of ``src``) kept in memory, or None for those
-        read by streaming (not a VPC tile, COPC, or beyond the budget)."""
+    def take(self, src: Source, paths: list[str]) -> list[tuple]:
+        """Per tile of ``paths`` (of ``src``) whose scan is submitted now: (the future of its
+        chunks read ahead, or None: the scan reads the file; whether the scan keeps the tile,
+        :meth:`admit`). :meth:`prefetch` follows the submission of the scans."""
         self.send_held()
-        if priority >= 0 and self.sending.intersection(paths):
-            self.sent()  # a tile on its way: its future, not a second read
-        if src.vpc is None:
-            return [None] * len(paths)
-        counts = {t.path: t.count for t in src.vpc.tiles}
-        out = []
-        for p in paths:
-            need = counts.get(p, 0) * CACHE_BYTES_PER_POINT
-            if p not in counts or is_copc(p) or p in self.sending or (p not in self.futures and need > self.left):
-                out.append(None)  # (on its way: a prefetch does not wait for it)
-                continue
-            if p not in self.futures:
-                self.futures[p] = self.client.submit(read_tile, p, pure=False, priority=priority)
-                self.left -= need
-                self.points += counts[p]
-            out.append(self.futures[p])
-        self._prefetch()
+        self._started(src)
+        out = [(self.reads.pop(p, None), self.admit(src, p)) for p in paths]
+        self.scanned.update(paths)
         return out
 
-    def fits(self, src: Source, path: str) -> bool:
-        """Whether the tile ``path`` of ``src`` (a VPC) fits what is left of the budget, and
-        the driver may hold it (:data:`HELD_POINTS` at most, till the workers are up)."""
-        count = next((t.count for t in src.vpc.tiles if t.path == path), None)
-        held = sum(len(c[0]) for chunks in self.held.values() for c in chunks)
-        return count is not None and count * CACHE_BYTES_PER_POINT <= self.left and held + count <= HELD_POINTS
+    def _started(self, src: Source) -> None:
+        """The scan of ``src`` has begun: reading its tiles ahead is too late (it would read only
+        those of the expected region it does not scan)."""
+        self.expected = [e for e in self.expected if e.path != src.path]
 
-    def hold(self, src: Source, path: str, chunks: tuple) -> None:
-        """Keep the chunks of a tile the driver read (see :meth:`fits`) for the workers: sent to
-        them at the next :meth:`take` (the same chunks a worker's read gives)."""
-        count = next(t.count for t in src.vpc.tiles if t.path == path)
+    def admit(self, src: Source, path: str) -> bool:
+        """Whether the tile ``path`` of ``src`` is kept: a VPC tile, not COPC, that fits what is
+        left of the budget (counted once)."""
+        if path in self.charged:
+            return True
+        count = _count(src, path)
+        if count is None or is_copc(path) or count * CACHE_BYTES_PER_POINT > self.left:
+            return False
         self.left -= count * CACHE_BYTES_PER_POINT
         self.points += count
-        self.held[path] = chunks
+        self.charged.add(path)
+        return True
+
+    def keep(self, key: Key, future) -> None:
+        """The future of a kept tile (a scan task's :class:`KeptTile`), for the grid."""
+        self.futures[key] = future
+
+    def fits(self, src: Source, path: str) -> bool:
+        """Whether the driver may scan and hold the tile ``path`` of ``src`` (a VPC): it fits the
+        budget and what the driver holds (:data:`HELD_POINTS` at most, till the workers are up)."""
+        count = _count(src, path)
+        held = sum(k.points for k in self.held.values())
+        room = path in self.charged or (count is not None and count * CACHE_BYTES_PER_POINT <= self.left)
+        return count is not None and room and held + count <= HELD_POINTS
+
+    def hold(self, src: Source, key: Key, kept: KeptTile) -> None:
+        """Keep a tile the driver scanned (see :meth:`fits`) for the workers: sent to them at the
+        next :meth:`take` (what a worker's scan keeps)."""
+        self._started(src)
+        self.admit(src, key[0])
+        self.scanned.add(key[0])
+        self.held[key] = kept
 
     def send_held(self) -> None:
         """The tiles the driver holds (:meth:`hold`) sent to the workers, by a thread: the driver
-        goes on with its next tasks and the registration while they go out (~0.2 s for the paper
-        pair's 3.5 M points); :meth:`sent` waits for them."""
+        goes on with its next tasks and the registration while they go out; :meth:`sent` waits
+        for them."""
         held, self.held = self.held, {}
         self.sending.update(held)
         if not held:
@@ -100,11 +129,11 @@ class PointCache:
         self.senders.append(sender)
         sender.start()
 
-    def _send(self, client, held: dict[str, tuple]) -> None:
+    def _send(self, client, held: dict[Key, KeptTile]) -> None:
         try:
-            for path, chunks in held.items():
-                self.futures[path] = client.scatter([chunks], hash=False)[0]
-                self.sending.discard(path)
+            for key, kept in held.items():
+                self.futures[key] = client.scatter([kept], hash=False)[0]
+                self.sending.discard(key)
         except BaseException as exc:  # noqa: BLE001 - raised in the driver by sent()
             self.failed = exc
 
@@ -124,47 +153,66 @@ class PointCache:
                 raise failed
             raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
 
-    def _prefetch(self) -> None:
+    def read_ahead(self, path: str):
+        """The future of the tile ``path`` read ahead (:meth:`prefetch`), None if it was not."""
+        return self.reads.get(path)
+
+    def prefetch(self) -> None:
+        """Start the reads :meth:`expect` asked for, once, behind the tasks submitted so far (a
+        read submitted first would take the workers before the scans that wait for them)."""
         expected, self.expected = self.expected, []
-        counts = {t.path: t.count for s in expected for t in s.vpc.tiles}
-        todo = [(s, s.tiles()) for s in expected]
-        kept = self.futures.keys() | self.sending
-        need = sum(counts[p] for _, paths in todo for p in paths if p not in kept) * CACHE_BYTES_PER_POINT
-        if need <= self.left:
-            for s, paths in todo:
-                self.take(s, paths, priority=-1)  # after the scans of the tiles taken now
+        todo = [(s, [p for p in s.tiles() if p not in self.scanned and p not in self.reads]) for s in expected]
+        fresh = {p: _count(s, p) or 0 for s, paths in todo for p in paths if p not in self.charged}
+        if sum(fresh.values()) * CACHE_BYTES_PER_POINT > self.left:
+            return
+        for s, paths in todo:
+            for p in paths:
+                if self.admit(s, p):  # after the scans of the tiles taken now
+                    self.reads[p] = self.client.submit(read_tile, p, pure=False, priority=-1)
 
     def arrived(self) -> None:
         """Every held tile sent and its future here (:meth:`send_held`, then :meth:`sent`)."""
         self.send_held()
         self.sent()
 
-    def meeting(self, src: Source) -> dict:
-        """{path: future} of the cached tiles a read of ``src`` (its region) opens."""
+    def meeting(self, src: Source, crop: str | None) -> dict:
+        """{path: future} of the tiles kept with the crop ``crop`` (:data:`Key`) that a read of
+        ``src`` (its region) opens."""
         self.arrived()
         if src.vpc is None:
             return {}
-        return {p: self.futures[p] for p in src.tiles() if p in self.futures}
+        return {p: self.futures[(p, crop)] for p in src.tiles() if (p, crop) in self.futures}
 
     def release(self) -> None:
         """Free the workers' memory (the futures dropped)."""
         self.sent()
         self.futures.clear()
+        self.reads.clear()
 
 
-def chunks(src: Source, cached: dict | None, stats: dict):
-    """``src.chunks(signals=True)``, the tiles in ``cached`` ({path: chunks}) taken from memory
-    (their points counted in ``stats["cached"]``): the same chunks in the same order, so the grid
-    sums come out byte-identical."""
+def _count(src: Source, path: str) -> int | None:
+    """The point count of the tile ``path`` of the VPC ``src`` (None: not one of its tiles)."""
+    if src.vpc is None:
+        return None
+    return next((t.count for t in src.vpc.tiles if t.path == path), None)
+
+
+def chunks(src: Source, cached: dict | None, stats: dict, made: Callable[[Iterator], Iterator]) -> Iterator:
+    """The chunks of ``src`` as the grid takes them, (local float32 xyz, labels or None): the
+    tiles in ``cached`` ({path: KeptTile}) from memory (their points counted in ``stats["cached"]``
+    and ``stats["read"]``), the others read and made so by ``made`` (file chunks -> that form):
+    the same chunks in the same order, so the grid sums come out byte-identical."""
     if not cached or src.vpc is None:
-        yield from src.chunks(signals=True)
+        yield from made(src.chunks(signals=True))
         return
     for path in src.tiles():
-        if path in cached:
-            stats["cached"] = stats.get("cached", 0) + sum(len(c[0]) for c in cached[path])
-            yield from cached[path]
-        else:
-            yield from file_chunks(path, src.region, CHUNK, signals=True)
+        kept = cached.get(path)
+        if kept is None:
+            yield from made(file_chunks(path, src.region, CHUNK, signals=True))
+            continue
+        stats["cached"] += kept.points
+        stats["read"] += kept.points
+        yield from kept.chunks
 
 
 def near_after(before: Source, after: Source, radius: float) -> Source:

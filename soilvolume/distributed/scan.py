@@ -6,6 +6,7 @@ full-resolution points are kept, so :func:`prepare.prepare` runs unchanged on a 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from itertools import chain
 
 import numpy as np
@@ -36,7 +37,22 @@ def units(src: Source) -> list[Unit]:
 
 def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None) -> dict:
     """Thinning sums, counts and chunk boxes of one unit (its soil points, by the epoch's ``rule``);
-    ``cached``: the unit's chunks already in this worker's memory (:mod:`.pointcache`), left intact."""
+    ``cached``: the unit's chunks read already (a future of :func:`.pointcache.read_tile`), left intact."""
+    return _scan(unit, region, to_local, rule, keep, thinning, indexed, cached, None)
+
+
+def scan_keeping(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None):
+    """(:func:`scan_unit`'s summary, the unit's :class:`.pointcache.KeptTile`): the points ``keep``
+    keeps, local float32, with their labels, for the grid pass."""
+    from .pointcache import KeptTile
+
+    kept: list = []
+    out = _scan(unit, region, to_local, rule, keep, thinning, indexed, cached, kept)
+    return out, KeptTile(tuple(kept), out["points"])
+
+
+def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached, kept) -> dict:
+    """:func:`scan_unit`; ``kept`` (a list or None): each chunk's kept points and labels appended."""
     import time
 
     path, start, count = unit
@@ -59,10 +75,13 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
         out["points"] += len(xyz)
         local = shift(xyz)  # a chunk the reader allocated: shifted in place (a cached one: copied)
         labels = rule.labels(cls, sig)
+        inside = None if keep is None else keep(local)
+        if kept is not None:
+            kept.append(_kept(local, labels, inside))
         mask = None if labels is None else labels == SOIL
         out["used"] += len(xyz) if mask is None else int(mask.sum())
-        if keep is not None:
-            mask = keep(local) if mask is None else mask & keep(local)
+        if inside is not None:
+            mask = inside if mask is None else mask & inside
         if mask is not None:
             local = rows(local, mask)
         thinner.add(local)
@@ -75,6 +94,14 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
     has = np.flatnonzero(thinner.sums[3])  # the columns with points: a tile meets few of the grid's
     out["sums"] = (has, thinner.sums[:, has])
     return out
+
+
+def _kept(local: np.ndarray, labels: np.ndarray | None, inside: np.ndarray | None) -> tuple:
+    """(local float32 xyz, labels) of the points ``inside`` keeps (all when None): a chunk of a
+    :class:`.pointcache.KeptTile`, the values the grid task would compute from the file."""
+    if inside is None:
+        return local.astype(np.float32), labels
+    return rows(local, inside).astype(np.float32), None if labels is None else labels[inside]
 
 
 def dask_loader(
@@ -103,17 +130,18 @@ def dask_loader(
         keeps_points = box is None or (box[1] >= box[0]).all()
         if src.raw is not None or keeps_points:
             return load(src, to_local, mode, keep, thinner, check, box, indexed, exclude)
-        stream = src.chunks(signals=True)
-        _, first, sig = next(stream, (None, None, None))
-        stream.close()
-        rule = epoch_rule(src, first, sig, mode, exclude)
-        todo = units(src)
+        todo, ready = units(src), getattr(client, "ready", lambda: True)
+        crop = None if keep is None else getattr(keep, "key", lambda: False)()  # False: not a lattice, not kept
+        kept = cache if crop is not False else None
+        rule, pre = _rule(client, src, todo, kept, ready, (mode, exclude), wait_check)
         thinning = (thinner.lo, thinner.hi, thinner.voxel, thinner.within)
         args = (src.region, to_local, rule, keep, thinning, indexed)
-        here, left = _scan_here(src, todo, args, cache, getattr(client, "ready", lambda: True), wait_check)
-        send = cache is not None and (left or client.ready())  # the tiles read here go to the workers once up
-        kept = cache.take(src, [u[0] for u in left]) if send else [None] * len(left)
-        futures = client.map(scan_unit, left, *[[a] * len(left) for a in args], kept, pure=False) if left else []
+        here, left = _scan_here(src, todo, args, (kept, crop, pre), ready, wait_check)
+        send = kept is not None and (left or client.ready())  # the tiles read here go to the workers once up
+        taken = kept.take(src, [u[0] for u in left]) if send else [(None, False)] * len(left)
+        futures = _submit(client, left, args, taken, kept, crop)
+        if send:
+            kept.prefetch()
         parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
         for k, part in enumerate(chain(here, completed(client, futures, f"reading {src.path}", wait_check)), 1):
             waiting[position[part.pop("unit")]] = part.pop("sums")
@@ -143,21 +171,86 @@ def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
         added += 1
 
 
-def _scan_here(src: Source, todo: list[Unit], args: tuple, cache, ready: Callable[[], bool], check) -> tuple:
+def _submit(client, left: list[Unit], args: tuple, taken: list[tuple], cache, crop) -> list:
+    """The scan tasks of ``left`` (``taken``: per unit, its chunks read ahead or None, and whether
+    it is kept): futures of their summaries; a kept unit's :class:`.pointcache.KeptTile` is split
+    from its summary on the worker that scanned it, and its future handed to ``cache``."""
+    import operator
+
+    if not left:
+        return []
+    keeping = [k for k, (_, kept) in enumerate(taken) if kept]
+    plain = [k for k, (_, kept) in enumerate(taken) if not kept]
+    futures = [None] * len(left)
+
+    def submit(fn, ks: list[int]) -> list:
+        if not ks:
+            return []
+        units, reads = [left[k] for k in ks], [taken[k][0] for k in ks]
+        return client.map(fn, units, *[[a] * len(ks) for a in args], reads, pure=False)
+
+    for k, f in zip(plain, submit(scan_unit, plain), strict=True):
+        futures[k] = f
+    both = submit(scan_keeping, keeping)
+    if both:
+        parts = client.map(operator.getitem, both, [0] * len(both), pure=False)
+        kept = client.map(operator.getitem, both, [1] * len(both), pure=False)
+        for k, part, tile in zip(keeping, parts, kept, strict=True):
+            futures[k] = part
+            cache.keep((left[k][0], crop), tile)
+    return futures
+
+
+def _rule(client, src: Source, todo: list[Unit], cache, ready: Callable[[], bool], how: tuple, check) -> tuple:
+    """(the epoch's rule, {path: chunks} of its first tile when it was read whole for it): decided
+    on the source's first chunk (:func:`stream.epoch_rule`; ``how``: mode, exclude). When the
+    driver is to scan the first tile (:func:`_scan_here`), it decodes it once; when a worker read
+    it ahead (:meth:`.pointcache.PointCache.prefetch`), the worker decides."""
+    path = todo[0][0] if todo and src.vpc is not None else None
+    if path is not None and cache is not None and not is_copc(path):
+        if not ready() and cache.fits(src, path):
+            from .pointcache import read_tile
+
+            chunks = read_tile(path)
+            if chunks:
+                return epoch_rule(src, chunks[0][1], chunks[0][2], *how), {path: chunks}
+        elif (read := cache.read_ahead(path)) is not None:
+            named = replace(src, vpc=None)  # what the rule's messages name, without the tile list
+            from .cluster import completed
+
+            decided = client.submit(_first_rule, read, named, how, pure=False)
+            rule = next(completed(client, [decided], f"reading {src.path}", check))
+            if rule is not None:
+                return rule, {}
+    stream = src.chunks(signals=True)
+    _, first, sig = next(stream, (None, None, None))
+    stream.close()
+    return epoch_rule(src, first, sig, *how), {}
+
+
+def _first_rule(chunks: tuple, src: Source, how: tuple) -> PointRule | None:
+    """:func:`stream.epoch_rule` on the first of a tile's ``chunks`` (None when it has none)."""
+    return epoch_rule(src, chunks[0][1], chunks[0][2], *how) if chunks else None
+
+
+def _scan_here(src: Source, todo: list[Unit], args: tuple, kept: tuple, ready: Callable[[], bool], check) -> tuple:
     """(parts, units left): the VPC tiles of ``todo`` scanned in this process, in order, while
-    the cluster is still starting (``ready()`` false) and the tiles fit ``cache``, which hands
-    them to the workers once they are up (:meth:`.pointcache.PointCache.hold`): the driver's
-    reading overlaps the workers' start instead of waiting for it."""
+    the cluster is still starting (``ready()`` false) and the tiles fit the cache of ``kept``
+    (cache, crop key, {path: chunks} read already), which hands what the grid needs of them to
+    the workers once they are up (:meth:`.pointcache.PointCache.hold`): the driver's reading
+    overlaps the workers' start instead of waiting for it."""
     from .pointcache import read_tile
 
+    cache, crop, pre = kept
     parts = []
     while todo and cache is not None and src.vpc is not None and not ready():
         path = todo[0][0]
         if is_copc(path) or not cache.fits(src, path):
             break
-        chunks = read_tile(path)
-        parts.append(scan_unit(todo[0], *args, cached=chunks))
-        cache.hold(src, path, chunks)
+        chunks = pre.pop(path) if path in pre else read_tile(path)
+        part, tile = scan_keeping(todo[0], *args, cached=chunks)
+        parts.append(part)
+        cache.hold(src, (path, crop), tile)
         todo = todo[1:]
         check()
     return parts, todo

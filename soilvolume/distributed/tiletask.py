@@ -19,7 +19,6 @@ from ..dem.grid import (
     cell_coords,
     cell_heights,
     finish_epoch,
-    flat_ids,
     nonsoil_sums,
 )
 from ..inputs.crs import WorkFrame
@@ -83,7 +82,7 @@ def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
 def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Window, tuple[np.ndarray, ...], dict]:
     """(window, arrays of :data:`TILE_ARRAYS`, stats) of one tile: both epochs' points on its
     cells, their heights, counts, spreads and offsets from the cell centres; stats: points read,
-    seconds. ``cached``: (before, after) {path: chunks} of VPC tiles in memory (:mod:`.pointcache`)."""
+    seconds. ``cached``: (before, after) {path: KeptTile} of VPC tiles in memory (:mod:`.pointcache`)."""
     import time
 
     t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
@@ -112,32 +111,18 @@ def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
 
 def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict | None = None):
     """Heights, counts, spreads and centre offsets of one epoch (0 before, 1 after) on the
-    window's cells."""
+    window's cells; ``cached``: {path: KeptTile} of the epoch's VPC tiles in memory."""
     from ..registration.rigid import transform_points32
     from .pointcache import chunks
 
-    path, ground = (plan.before, plan.after)[epoch], plan.ground[epoch]
     transform = plan.transform if epoch else None
-    crs, src, box = window_source(plan, epoch, win)
-    to_local = _local(crs, plan.frame, plan.origin, path)
     shape = (win[1] - win[0], win[3] - win[2])
     ids, zs, offsets = [], [], OffsetSums(shape[0] * shape[1])
-    rule = plan.rules[epoch]
+    rule, made = plan.rules[epoch], _FileChunks(plan, epoch, win, keep, stats)
+    if rule is None and plan.ground[epoch]:
+        cached = None  # kept tiles hold every class: class 2 is chosen from the files' classes
     o_ids, o_lab, o_z = [], [], []
-    for xyz, cls, sig in chunks(src, cached, stats):
-        stats["read"] += len(xyz)
-        labels = rule.labels(cls, sig) if rule is not None else None
-        sel = cls == GROUND if rule is None and ground and cls is not None else None
-        if box is not None:  # the box has a margin: cells are assigned exactly below
-            near = in_box(xyz, *box)
-            sel = near if sel is None else sel & near
-        if sel is not None:
-            xyz, labels = xyz[sel], None if labels is None else labels[sel]
-        local = to_local(xyz)
-        if keep is not None:
-            inside = keep(local)
-            local, labels = local[inside], None if labels is None else labels[inside]
-        local = local.astype(np.float32)
+    for local, labels in chunks(made.src, cached, stats, made):
         if transform is not None:
             local = transform_points32(local, transform)
         if labels is not None:
@@ -161,6 +146,35 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
     return tuple(zero if a is None else a for a in (getattr(dem, n) for n in names))
 
 
+class _FileChunks:
+    """File chunks (xyz, classification, signals) of one epoch made what the grid takes, (local
+    float32 xyz, labels or None), as the first pass keeps them (:class:`.pointcache.KeptTile`):
+    labelled, within the window's read box, in the local frame, cropped by ``keep``; ``src``: the
+    epoch's source read only where it can meet the window."""
+
+    def __init__(self, plan: Plan, epoch: int, win: Window, keep, stats: dict) -> None:
+        self.rule, self.ground, self.keep, self.stats = plan.rules[epoch], plan.ground[epoch], keep, stats
+        crs, self.src, self.box = window_source(plan, epoch, win)
+        self.to_local = _local(crs, plan.frame, plan.origin, (plan.before, plan.after)[epoch])
+
+    def __call__(self, file_chunks):
+        rule, box, keep = self.rule, self.box, self.keep
+        for xyz, cls, sig in file_chunks:
+            self.stats["read"] += len(xyz)
+            labels = rule.labels(cls, sig) if rule is not None else None
+            sel = cls == GROUND if rule is None and self.ground and cls is not None else None
+            if box is not None:  # the box has a margin: cells are assigned exactly below
+                near = in_box(xyz, *box)
+                sel = near if sel is None else sel & near
+            if sel is not None:
+                xyz, labels = xyz[sel], None if labels is None else labels[sel]
+            local = self.to_local(xyz)
+            if keep is not None:
+                inside = keep(local)
+                local, labels = local[inside], None if labels is None else labels[inside]
+            yield local.astype(np.float32), labels
+
+
 def _joined(parts: list, dtype) -> np.ndarray:
     return np.concatenate(parts) if parts else np.empty(0, dtype)
 
@@ -170,14 +184,15 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
     ``grid`` (cells assigned on the whole grid, exactly as in-process); their positions in
     their cells are added to ``offsets``. ``keep_ids``: the ids come with the indices of the
     points they belong to."""
-    fcol, frow, ok = cell_coords(xyz32, grid)
+    fcol, frow, ok = cell_coords(xyz32, grid, win)
     fcol, frow = fcol[ok], frow[ok]
-    row, col = np.divmod(flat_ids(fcol, frow, grid.cols), grid.cols)
-    m = (row >= win[0]) & (row < win[1]) & (col >= win[2]) & (col < win[3])
-    local_ids = (row[m] - win[0]) * (win[3] - win[2]) + (col[m] - win[2])
-    offsets.add(local_ids, fcol[m], frow[m])
-    ids = local_ids.astype(np.int32)
-    return ((ids, np.flatnonzero(ok)[m]) if keep_ids else ids), xyz32[ok, 2][m]
+    ids = frow.astype(np.int32)  # the cell's row and column: the coordinates truncated, as flat_ids
+    ids -= win[0]
+    ids *= win[3] - win[2]
+    ids += fcol.astype(np.int32)
+    ids -= win[2]
+    offsets.add(ids, fcol, frow)
+    return ((ids, np.flatnonzero(ok)) if keep_ids else ids), xyz32[ok, 2]
 
 
 def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:
@@ -268,7 +283,8 @@ def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
         cache.arrived()  # tiles the driver read while the cluster started
     if cache is None or not cache.futures:
         return None
-    return [tuple(cache.meeting(window_source(plan, e, w)[1]) for e in (0, 1)) for w in windows]
+    crops = ((plan.mask or PolygonMask(plan.crop)).key(), None)  # the before is kept cropped, the after whole
+    return [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in windows]
 
 
 def map_tiles(

@@ -129,6 +129,13 @@ class PolygonMask:
             flat.take(row, out=out[start:stop])
         return out
 
+    def key(self) -> str:
+        """A digest of the lattice (its corner, cell and cells): masks of the same polygon share it."""
+        import hashlib
+
+        head = np.r_[self.lo, self.res, self.mask.shape].astype(float).tobytes()
+        return hashlib.sha1(head + np.packbits(self.mask).tobytes(), usedforsecurity=False).hexdigest()
+
     def _cell(self, v: np.ndarray, axis: int, t: np.ndarray, out: np.ndarray) -> None:
         """The lattice index along ``axis`` of coordinates ``v`` into ``out``: ``int((v - lo) / res)``
         clipped to -1..n (the frame), through the float scratch ``t``."""
