@@ -129,3 +129,14 @@ def test_points_moved_as_columns_have_the_bits_of_the_row_product():
         moved = transform_points32(xyz, t, chunk=max(2, n // 3))
         assert moved.shape == (n, 3) and moved.dtype == np.float32
         assert np.ascontiguousarray(moved).tobytes() == (xyz @ r + s).tobytes(), n
+
+
+def test_no_points_and_one_point_are_moved_too():
+    """A chunk with no points (a tile task's chunk whose points all lie outside its read box) and
+    one with a single point come back with their shapes (an empty one used to fail)."""
+    from soilvolume.registration.rigid import transform_points32
+
+    t = np.eye(4)
+    t[:3, 3] = [1.0, 2.0, 3.0]
+    assert transform_points32(np.empty((0, 3), np.float32), t).shape == (0, 3)
+    assert np.array_equal(transform_points32(np.zeros((1, 3), np.float32), t), [[1.0, 2.0, 3.0]])

@@ -42,7 +42,7 @@ def transform_points32(xyz: np.ndarray, t: np.ndarray, chunk: int = 4_000_000) -
     starts = list(range(0, n, chunk))
     if len(starts) > 1 and n - starts[-1] == 1:
         starts.pop()
-    for i, j in zip(starts, [*starts[1:], n], strict=True):
+    for i, j in zip(starts, [*starts[1:], n][: len(starts)], strict=True):  # (no points: no chunk)
         np.matmul(r, xyz[i:j].T, out=out[:, i:j])
     out += s[:, None]
     return out.T
