@@ -107,3 +107,22 @@ def test_a_cell_at_a_hole_is_not_moved_by_the_bush_beside_it():
     wall[:, 2] += 0.6 * 0.15  # the points' mean lies 0.15 m east of the centre
     dem = EpochDEM(wall, np.full(h.shape, 50), np.full(h.shape, 0.03), dx, np.zeros_like(h))
     assert abs(dem.centred(0.5)[1, 2] - 0.6) < 0.005
+
+
+def test_offset_sums_block_by_block_have_the_bits_of_one_pass_point_by_point():
+    """OffsetSums.add_at (the in-process grid's blocks): a bincount for the cells a block brings
+    first, one-by-one adds for the cells earlier blocks gave points, the same bits as adding every
+    point in order into empty sums (np.add.at over all of them), for one block and several."""
+    rng = np.random.default_rng(3)
+    for n_cells, n, blocks in ((50, 1000, 1), (50, 1000, 7), (5000, 200_000, 5), (1_000_000, 300_000, 3)):
+        ids = rng.integers(0, n_cells, n)
+        col, row = ((rng.random(n) * 100).astype(np.float32) for _ in range(2))
+        col[:10] = np.floor(col[:10])  # on a cell's edge: an offset of zero
+        ref = OffsetSums(n_cells)
+        for sums, c in ((ref.sx, col), (ref.sy, row)):
+            np.add.at(sums, ids, (c - np.floor(c)).astype(np.float64))
+        got = OffsetSums(n_cells)
+        edges = np.linspace(0, n, blocks + 1).astype(int)
+        for a, b in zip(edges, edges[1:], strict=False):
+            got.add_at(ids[a:b], col[a:b], row[a:b])
+        assert got.sx.tobytes() == ref.sx.tobytes() and got.sy.tobytes() == ref.sy.tobytes(), (n_cells, blocks)
