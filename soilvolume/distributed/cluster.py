@@ -224,8 +224,9 @@ def pre_spawn_environ() -> dict[str, str]:
 
     import dask
 
-    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"
-    if defaults.is_file():
+    spec = find_spec("distributed")
+    defaults = Path(spec.origin).parent / "distributed.yaml" if spec is not None and spec.origin else None
+    if defaults is not None and defaults.is_file():
         import yaml
 
         dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))

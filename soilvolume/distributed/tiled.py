@@ -4,7 +4,8 @@ in-process run, with the point work done as Dask tasks, so no process holds a su
 1. A first pass of tasks (:mod:`scan`) returns column-thinning sums, counts and chunk boxes;
    registration runs in the driver on the thinned subsets, as in-process.
 2. The shared grid is cut into tiles; each task streams only what meets its tile (VPC tiles, COPC
-   nodes, the chunks of a plain file whose boxes the first pass recorded), assigns points to the
+   nodes, the chunks of a plain file whose boxes the first pass recorded; VPC tiles the first pass
+   kept on the workers, cropped and local, when they fit: :mod:`pointcache`), assigns points to the
    *global* grid's cells and computes its cells' heights with :func:`grid.cell_heights`, so a cell
    gets the same points as in-process (no halo is needed: a point belongs to one cell).
 3. ``--volume-step whole``: the per-tile rasters are gathered (a few numbers per cell, against

@@ -65,8 +65,9 @@ class TileStore:
                 with open(tmp, "wb") as f:
                     np.save(f, np.ascontiguousarray(arr))
                 tmp.replace(final)
-            finally:
+            except BaseException:
                 tmp.unlink(missing_ok=True)
+                raise
 
     def load(self, name: str, win: Window) -> np.ndarray:
         """The tile's array ``name``, memory-mapped (see :data:`_HEADERS`)."""
