@@ -5,6 +5,7 @@ and QGIS build their inputs), and ``register`` decides the georeferencing as ``e
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import fields
 
 import numpy as np
@@ -102,4 +103,5 @@ def test_timings_add_up_to_the_wall_time(pair, tmp_path):
     timings = json.loads((tmp_path / "r" / "report.json").read_text())["timings_s"]
     assert list(timings)[0] == "startup" and list(timings)[-1] == "other" and timings["startup"] > 0.05
     assert {"setup", "crop", "fine", "grids", "planes", "volume", "write", "report"} <= set(timings)
-    assert 0.9 * wall <= sum(timings.values()) <= wall, (sum(timings.values()), wall, timings)
+    tick = 1 / os.sysconf("SC_CLK_TCK")  # the start-up's resolution: the kernel's start time, in ticks
+    assert 0.9 * wall <= sum(timings.values()) <= wall + tick, (sum(timings.values()), wall, timings)
