@@ -104,3 +104,35 @@ def test_a_default_run_leaves_open3d_out_and_gicp_brings_it(tmp_path):
     assert out["icp"][0] is False and out["gicp"][0] is True
     for _, net in out.values():
         assert abs(net - truth["net"]) < 0.02 * abs(truth["net"])
+
+
+def test_an_icp_swinging_between_two_poses_ends_where_its_last_iteration_would(monkeypatch):
+    """An ICP whose steps swing it between two poses (it would until its last iteration) stops
+    once a pose repeats the one two iterations before, on the pose the last iteration would have
+    reached: the same transform, fitness and RMSE as running them all, for either parity."""
+    from soilvolume.registration import icp
+
+    rng = np.random.default_rng(5)
+    target = np.c_[rng.uniform(0, 20, (2000, 2)), np.zeros(2000)]
+    normals = np.tile([0.0, 0.0, 1.0], (2000, 1))
+    source = target[:500] + [0.0, 0.0, 0.05]
+    calls = []
+
+    def swinging(p, q, n, k):  # up 1 cm, down 1 cm, ...: two poses, exactly
+        calls.append(1)
+        out = np.eye(4)
+        out[2, 3] = 0.01 if len(calls) % 2 else -0.01
+        return out
+
+    monkeypatch.setattr(icp, "_step", swinging)
+    for max_iter in (29, 30):
+        calls.clear()
+        short = point_to_plane(source, target, normals, 1.0, np.eye(4), 0.5, max_iter=max_iter)
+        steps = len(calls)
+        monkeypatch.setattr(icp, "CYCLE", -1.0)  # no pose repeats: every iteration runs
+        calls.clear()
+        full = point_to_plane(source, target, normals, 1.0, np.eye(4), 0.5, max_iter=max_iter)
+        monkeypatch.setattr(icp, "CYCLE", 1e-12)
+        assert len(calls) == max_iter and steps < 5
+        assert np.array_equal(short.transform, full.transform), max_iter
+        assert (short.fitness, short.inlier_rmse, short.iterations) == (full.fitness, full.inlier_rmse, max_iter)

@@ -19,6 +19,7 @@ from scipy.spatial import cKDTree
 SLACK = 1.5  # the searches look this many correspondence distances far: room to move in
 THREADED = 4096  # fewest points searched on several threads
 DET_MIN = 1e-6  # a normal matrix with a smaller determinant gives no step (as Open3D)
+CYCLE = 1e-12  # poses two iterations apart closer than this: ICP swings between two poses
 
 
 @dataclass(frozen=True)
@@ -147,7 +148,9 @@ def point_to_plane(
     """ICP of ``source`` (N, 3) onto ``target`` (M, 3) with its unit ``normals``: correspondences
     within ``dist`` m, Tukey weights of constant ``k`` m on the point-to-plane residuals, from
     ``init``; stops when fitness and inlier RMSE change by less than ``tol`` or after ``max_iter``
-    steps. ``nearest``: a :class:`Nearest` of this target and distance to reuse."""
+    steps, or once a pose repeats the one two steps before (within :data:`CYCLE`: the ICP swings
+    between two poses till its last step) on the pose that last step would reach.
+    ``nearest``: a :class:`Nearest` of this target and distance to reuse."""
     t = np.array(init, dtype=float)
     pts = np.ascontiguousarray(source.T, dtype=float)
     if not np.array_equal(t, np.eye(4)):
@@ -155,7 +158,7 @@ def point_to_plane(
     nn = nearest or Nearest(target, dist, workers)
     nrm = np.ascontiguousarray(normals.T)
     sel, j, fit, rmse = _matches(nn, pts)
-    steps = 0
+    steps, poses = 0, []
     while steps < max_iter:
         steps += 1
         step = _step(np.take(pts, sel, axis=1), np.take(nn.target, j, axis=1), np.take(nrm, j, axis=1), k)
@@ -166,6 +169,11 @@ def point_to_plane(
         fit, rmse = new_fit, new_rmse
         if converged:
             break
+        poses = [*poses[-2:], (t, fit, rmse)]
+        if len(poses) == 3 and float(np.abs(poses[2][0] - poses[0][0]).max()) < CYCLE:
+            # swinging between two poses: the one the last iteration would end on
+            t, fit, rmse = poses[2] if (max_iter - steps) % 2 == 0 else poses[1]
+            return IcpResult(t, fit, rmse, max_iter)
     return IcpResult(t, fit, rmse, steps)
 
 
