@@ -12,7 +12,10 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from ..core import interrupt
+from ..core.cells import rows
 from ..core.types import SoilVolumeError, short_error
 from ..inputs.copc import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
@@ -35,6 +38,14 @@ class KeptTile:
 
     chunks: tuple
     points: int
+
+
+def kept_chunk(local: np.ndarray, labels: np.ndarray | None, inside: np.ndarray | None) -> tuple:
+    """(local float32 xyz, labels) of the points of a chunk ``inside`` keeps (all when None): a chunk
+    of a :class:`KeptTile` as the first pass makes it, and as a grid task makes it from the file."""
+    if inside is None:
+        return local.astype(np.float32), labels
+    return rows(local, inside).astype(np.float32), None if labels is None else labels[inside]
 
 
 def read_tile(path: str) -> tuple:
@@ -88,7 +99,7 @@ class PointCache:
         if path in self.charged:
             return True
         count = _count(src, path)
-        if count is None or is_copc(path) or count * CACHE_BYTES_PER_POINT > self.left:
+        if count is None or is_copc(path) or not self._room(path, count):
             return False
         self.left -= count * CACHE_BYTES_PER_POINT
         self.points += count
@@ -104,8 +115,11 @@ class PointCache:
         budget and what the driver holds (:data:`HELD_POINTS` at most, till the workers are up)."""
         count = _count(src, path)
         held = sum(k.points for k in self.held.values())
-        room = path in self.charged or (count is not None and count * CACHE_BYTES_PER_POINT <= self.left)
-        return count is not None and room and held + count <= HELD_POINTS
+        return count is not None and self._room(path, count) and held + count <= HELD_POINTS
+
+    def _room(self, path: str, count: int) -> bool:
+        """Whether a tile of ``count`` points is counted already or fits what is left of the budget."""
+        return path in self.charged or count * CACHE_BYTES_PER_POINT <= self.left
 
     def hold(self, src: Source, key: Key, kept: KeptTile) -> None:
         """Keep a tile the driver scanned (see :meth:`fits`) for the workers: sent to them at the

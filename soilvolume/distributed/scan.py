@@ -16,6 +16,7 @@ from ..core.cells import bounds, rows
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..soil.points import SOIL, NonSoil, PointRule
+from .pointcache import KeptTile, kept_chunk, read_tile
 
 UNIT = 8_000_000  # points per task of a single file
 # COPC files are read for registration only down to the octree level whose spacing puts about
@@ -44,8 +45,6 @@ def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tup
 def scan_keeping(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None):
     """(:func:`scan_unit`'s summary, the unit's :class:`.pointcache.KeptTile`): the points ``keep``
     keeps, local float32, with their labels, for the grid pass."""
-    from .pointcache import KeptTile
-
     kept: list = []
     out = _scan(unit, region, to_local, rule, keep, thinning, indexed, cached, kept)
     return out, KeptTile(tuple(kept), out["points"])
@@ -77,7 +76,7 @@ def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, 
         labels = rule.labels(cls, sig)
         inside = None if keep is None else keep(local)
         if kept is not None:
-            kept.append(_kept(local, labels, inside))
+            kept.append(kept_chunk(local, labels, inside))
         mask = None if labels is None else labels == SOIL
         out["used"] += len(xyz) if mask is None else int(mask.sum())
         if inside is not None:
@@ -94,14 +93,6 @@ def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, 
     has = np.flatnonzero(thinner.sums[3])  # the columns with points: a tile meets few of the grid's
     out["sums"] = (has, thinner.sums[:, has])
     return out
-
-
-def _kept(local: np.ndarray, labels: np.ndarray | None, inside: np.ndarray | None) -> tuple:
-    """(local float32 xyz, labels) of the points ``inside`` keeps (all when None): a chunk of a
-    :class:`.pointcache.KeptTile`, the values the grid task would compute from the file."""
-    if inside is None:
-        return local.astype(np.float32), labels
-    return rows(local, inside).astype(np.float32), None if labels is None else labels[inside]
 
 
 def dask_loader(
@@ -209,8 +200,6 @@ def _rule(client, src: Source, todo: list[Unit], cache, ready: Callable[[], bool
     path = todo[0][0] if todo and src.vpc is not None else None
     if path is not None and cache is not None and not is_copc(path):
         if not ready() and cache.fits(src, path):
-            from .pointcache import read_tile
-
             chunks = read_tile(path)
             if chunks:
                 return epoch_rule(src, chunks[0][1], chunks[0][2], *how), {path: chunks}
@@ -239,8 +228,6 @@ def _scan_here(src: Source, todo: list[Unit], args: tuple, kept: tuple, ready: C
     (cache, crop key, {path: chunks} read already), which hands what the grid needs of them to
     the workers once they are up (:meth:`.pointcache.PointCache.hold`): the driver's reading
     overlaps the workers' start instead of waiting for it."""
-    from .pointcache import read_tile
-
     cache, crop, pre = kept
     parts = []
     while todo and cache is not None and src.vpc is not None and not ready():

@@ -26,6 +26,7 @@ from ..inputs.footprint import PolygonMask
 from ..inputs.io import GROUND
 from ..inputs.prepare import _local
 from ..inputs.stream import open_source
+from .pointcache import chunks, kept_chunk
 from .tilestore import TileStore
 
 # a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
@@ -64,6 +65,11 @@ class Plan:
     mask: PolygonMask | None = None  # the crop as a lattice
 
 
+def crop_mask(plan: Plan) -> PolygonMask:
+    """The before crop as a lattice: the plan's, or made from its polygon."""
+    return plan.mask or PolygonMask(plan.crop)
+
+
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 OPENED = ("sources", "mask")  # the Plan's fields derived from the others and the inputs
 
@@ -86,7 +92,7 @@ def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Wi
     import time
 
     t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
-    before = _epoch(plan, 0, win, plan.mask or PolygonMask(plan.crop), stats, cached[0])
+    before = _epoch(plan, 0, win, crop_mask(plan), stats, cached[0])
     after = _epoch(plan, 1, win, None, stats, cached[1])
     stats["seconds"] = time.perf_counter() - t0
     arrays = tuple(
@@ -113,7 +119,6 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
     """Heights, counts, spreads and centre offsets of one epoch (0 before, 1 after) on the
     window's cells; ``cached``: {path: KeptTile} of the epoch's VPC tiles in memory."""
     from ..registration.rigid import transform_points32
-    from .pointcache import chunks
 
     transform = plan.transform if epoch else None
     shape = (win[1] - win[0], win[3] - win[2])
@@ -169,10 +174,7 @@ class _FileChunks:
             if sel is not None:
                 xyz, labels = xyz[sel], None if labels is None else labels[sel]
             local = self.to_local(xyz)
-            if keep is not None:
-                inside = keep(local)
-                local, labels = local[inside], None if labels is None else labels[inside]
-            yield local.astype(np.float32), labels
+            yield kept_chunk(local, labels, None if keep is None else keep(local))
 
 
 def _joined(parts: list, dtype) -> np.ndarray:
@@ -283,7 +285,7 @@ def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
         cache.arrived()  # tiles the driver read while the cluster started
     if cache is None or not cache.futures:
         return None
-    crops = ((plan.mask or PolygonMask(plan.crop)).key(), None)  # the before is kept cropped, the after whole
+    crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
     return [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in windows]
 
 
