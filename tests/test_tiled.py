@@ -458,3 +458,33 @@ def test_a_tile_takes_its_cells_points_as_the_whole_grid_assigns_them():
         assert np.array_equal(ids, want) and ids.dtype == np.int32 and len(ids) > 0
         assert np.array_equal(which, np.flatnonzero(ok)[m]) and np.array_equal(z, xyz[ok, 2][m])
         assert np.array_equal(got.sx, ref.sx) and np.array_equal(got.sy, ref.sy)
+
+
+def test_a_cluster_still_starting_when_the_run_ends_is_shut_down_before_its_scratch_goes():
+    """A run that ends (an error, a signal) while its cluster still starts waits for the start
+    and shuts the cluster down before it returns: its workers would otherwise come up after the
+    run, into the scratch space the run removed (a hidden store left beside the output)."""
+    import threading
+    import time
+
+    from soilvolume.distributed import cluster
+
+    closed = []
+
+    class Part:
+        def __init__(self, name: str) -> None:
+            self.name = name
+
+        def close(self, timeout=None) -> None:
+            closed.append((self.name, threading.current_thread().name))
+
+    def start() -> tuple:
+        time.sleep(0.4)
+        return Part("cluster"), Part("client")
+
+    starting = cluster.Starting(start, "local:2", 10.0)
+    t = time.perf_counter()
+    starting.close()
+    assert 0.3 < time.perf_counter() - t < 5.0
+    assert [c[0] for c in closed] == ["client", "cluster"]
+    assert {c[1] for c in closed} == {threading.current_thread().name}  # here, before close() returned

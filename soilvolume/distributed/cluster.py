@@ -82,11 +82,18 @@ class Starting:
                 ) from None
 
     def close(self) -> None:
-        """Shut the cluster down (now, or when its start finishes); after :meth:`close_soon`,
-        wait (bounded) for that shutdown to end."""
+        """Shut the cluster down; after :meth:`close_soon`, wait (bounded) for that shutdown to end.
+        A cluster still starting (a run ended by an error or a signal meanwhile) is waited for, at
+        most :data:`CLOSE_S`, and shut down here: its workers would otherwise come up after this
+        process, into the run's scratch space removed already. Past that, its starting thread
+        shuts it when it arrives."""
         if self.closing is not None:
             self.closing.join(2 * CLOSE_S + 1)
             return
+        try:
+            self.future.exception(timeout=CLOSE_S)
+        except FutureTimeout:
+            pass
         self._shut()
 
     def _shut(self) -> None:
