@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import math
-import warnings
 from statistics import NormalDist
 from typing import Any
 
@@ -23,11 +22,6 @@ from ..compensation.robust import nmad, patches
 from ..core.types import GridSpec
 
 INTERP_FRACTION = 0.15
-
-
-# The fit's covariance is not used: its warning is noise in the log. A process filter, not
-# ``catch_warnings`` (not thread-safe, and tile tasks run on threads).
-warnings.filterwarnings("ignore", message="Covariance of the parameters could not be estimated")
 
 
 def interp_fraction(patch_radius_cells: float) -> float:
@@ -76,22 +70,58 @@ def spherical(h: np.ndarray, nugget: float, psill: float, rng: float) -> np.ndar
     return nugget + psill * (1.5 * s - 0.5 * s**3)
 
 
+RANGE_GRID = 192  # ranges tried in each round of the fit's range search
+RANGE_ROUNDS = 4  # rounds, each on the bracket of the round before's best range (~1e-7 relative)
+
+
 def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> dict[str, float]:
-    """Weighted least-squares spherical fit: {nugget, psill, range} (m^2, m^2, m)."""
+    """Weighted least-squares spherical fit (weights: the pairs behind each lag): {nugget, psill,
+    range} (m^2, m^2, m), nugget and psill within [0, 2 max(gamma)], the range within
+    [lags[0] / 2, 2 lags[-1]]. For a given range the model is linear in nugget and psill, solved
+    exactly (:func:`_best_levels`); the range is searched on a log grid refined around its best
+    point, so the fit is the global least-squares one, not a local optimum from a start."""
     if lags.size < 3:
         g = float(gamma.mean()) if gamma.size else 0.0
         return {"nugget": g, "psill": 0.0, "range": float(lags.max()) if lags.size else 0.0}
-    g_max = float(gamma.max())
-    reach = lags[np.argmax(gamma >= 0.9 * g_max)]
-    p0 = [float(gamma[0]) * 0.5, max(g_max - float(gamma[0]) * 0.5, 1e-12), float(reach)]
-    bounds = ([0.0, 0.0, float(lags[0]) * 0.5], [g_max * 2, g_max * 2, float(lags[-1]) * 2])
-    from scipy import optimize  # ~0.1 s of imports, only when there is a variogram to fit
+    w, cap = np.asarray(n_pairs, float), 2.0 * float(gamma.max())
+    lo, hi = math.log(float(lags[0]) * 0.5), math.log(float(lags[-1]) * 2.0)
+    for _ in range(RANGE_ROUNDS):
+        logs = np.linspace(lo, hi, RANGE_GRID)
+        cost, levels = _best_levels(lags, gamma, w, np.exp(logs), cap)
+        i = int(np.argmin(cost))
+        lo, hi = logs[max(i - 1, 0)], logs[min(i + 1, RANGE_GRID - 1)]
+    return {"nugget": float(levels[0, i]), "psill": float(levels[1, i]), "range": float(np.exp(logs[i]))}
 
-    try:
-        p, _ = optimize.curve_fit(spherical, lags, gamma, p0=p0, bounds=bounds, sigma=1 / np.sqrt(n_pairs), maxfev=5000)
-    except (RuntimeError, ValueError):
-        p = p0
-    return {"nugget": float(p[0]), "psill": float(p[1]), "range": float(p[2])}
+
+def _best_levels(
+    lags: np.ndarray, gamma: np.ndarray, w: np.ndarray, ranges: np.ndarray, cap: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``ranges``: the weighted least-squares cost of the spherical model and its
+    (nugget, psill) within [0, ``cap``] (a convex problem in two unknowns: the unconstrained
+    solution when it is inside the box, else the best one on the box's edges), as (R,), (2, R)."""
+    s = np.minimum(lags[None, :] / ranges[:, None], 1.0)
+    b = 1.5 * s - 0.5 * s**3  # (R, L): the model's shape at each lag
+    sw, sg, sb, sbb, sgb = w.sum(), w @ gamma, b @ w, (b * b) @ w, b @ (w * gamma)
+    det = sw * sbb - sb * sb
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a, c = (sbb * sg - sb * sgb) / det, (sw * sgb - sb * sg) / det  # unconstrained
+        edges = [
+            (np.zeros_like(sb), sgb / sbb),  # no nugget
+            (np.full_like(sb, cap), (sgb - cap * sb) / sbb),  # nugget at its bound
+            (np.full_like(sb, sg / sw), np.zeros_like(sb)),  # no sill
+            ((sg - cap * sb) / sw, np.full_like(sb, cap)),  # sill at its bound
+        ]
+    inside = (det > 0) & (a >= 0) & (a <= cap) & (c >= 0) & (c <= cap)
+    candidates = [(np.where(inside, a, 0.0), np.where(inside, c, 0.0), inside)]
+    candidates += [(*(np.clip(np.nan_to_num(v), 0.0, cap) for v in edge), True) for edge in edges]
+    cost, levels = np.full(len(ranges), np.inf), np.zeros((2, len(ranges)))
+    for nugget, psill, ok in candidates:
+        r = gamma[None, :] - nugget[:, None] - psill[:, None] * b
+        here = np.where(ok, (r * r) @ w, np.inf)
+        better = here < cost
+        cost = np.where(better, here, cost)
+        levels = np.where(better, np.stack([nugget, psill]), levels)
+    return cost, levels
 
 
 def correlated_fraction(area: float, rng: float) -> float:
