@@ -1,7 +1,8 @@
 """Freed memory kept for reuse on large runs: glibc hands every block over its mmap threshold
 (at most 32 MB) back to the kernel when freed, so each of a large run's 100-300 MB temporaries
 is faulted in again page by page (on the 64 M-point pair ~8 s of system time, half of its CPU).
-Raising the mmap and trim thresholds keeps those pages in the heap; the peak stays the same."""
+Raising the mmap and trim thresholds keeps those pages in the heap; the peak stays the same on
+large pairs, and on the paper-sized pair (4 M points) it is 12 MB more for 3.6 % less wall time."""
 
 from __future__ import annotations
 
@@ -10,8 +11,8 @@ import ctypes.util
 import sys
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
-#: runs with more points than this keep freed memory (smaller runs: the default, the lower peak)
-LARGE_RUN_POINTS = 16_000_000
+#: runs with more points than this keep freed memory (smaller runs: the default; nothing to gain)
+LARGE_RUN_POINTS = 1_000_000
 _done = False
 
 
