@@ -83,12 +83,17 @@ def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpe
 
 def planes_step(prep: Prepared, grid: GridSpec, dem_before: gridmod.EpochDEM, after_thin: np.ndarray, options):
     """The paper's two RANSAC planes (before on its valid cells, registered after) and d_i per
-    cell: (plane before, plane after, d_i)."""
+    cell: (plane before, plane after, d_i). The after plane is found on a second thread meanwhile
+    (its matrix products and counts release the GIL)."""
+    from concurrent.futures import ThreadPoolExecutor
+
     from ..compensation import planes
 
-    sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
-    p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-    p_a = planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+    with ThreadPoolExecutor(1) as pool:
+        after = pool.submit(planes.ransac_plane, after_thin, options.plane_threshold, seed=options.seed + 1)
+        sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
+        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+        p_a = after.result()
     return p_b, p_a, planes.plane_offset(p_b, p_a, grid)
 
 
