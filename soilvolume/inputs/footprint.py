@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.polygons import covers
 from ..core.types import SoilVolumeError, short_error
 
 BLOCK = 1 << 14  # points the crop mask looks up at a time
@@ -90,8 +91,6 @@ def _buffered(verts: np.ndarray, radius: float, segments: int) -> np.ndarray:
 def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """Boolean mask of points inside a polygon (vertices (K, 2)), boundary included: the same
     test the embedded filters.crop applies to this polygon."""
-    from ..pipelines.stages.geometry import covers
-
     return covers([polygon], xy[:, 0], xy[:, 1])
 
 
