@@ -171,6 +171,36 @@ def test_footprints_are_remembered_by_content_only():
     assert not np.array_equal(first, other)
 
 
+@pytest.mark.parametrize("kind", ["rectangle", "gaussian", "grid", "rotated-grid", "disc", "line-ends"])
+def test_the_hull_is_qhulls_on_every_point(kind):
+    """The footprint's hull (Qhull on the points not well inside the extremes' octagon) is Qhull's
+    hull of all the points, vertex for vertex and in the same order: on column centroids (a grid,
+    its edges full of collinear points), rotated and far from the origin, and on random clouds."""
+    from scipy.spatial import ConvexHull
+
+    from soilvolume.inputs import footprint as fp
+
+    rng = np.random.default_rng(len(kind))
+    for n in (50, 3_000, 120_000, 450_000):
+        if kind == "rectangle":
+            xy = rng.random((n, 2)) * [100.0, 60.0]
+        elif kind == "gaussian":
+            xy = rng.normal(size=(n, 2)) * [30.0, 10.0]
+        elif kind in ("grid", "rotated-grid"):
+            m = int(np.sqrt(n))
+            xy = np.mgrid[0:m, 0:m].reshape(2, -1).T * 0.5 + 0.25
+            if kind == "rotated-grid":
+                a = rng.random() * np.pi
+                xy = xy @ np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]).T + [512_000.0, 4_100_000.0]
+        elif kind == "disc":
+            a, r = rng.random(n) * 2 * np.pi, np.sqrt(rng.random(n)) * 40
+            xy = np.c_[r * np.cos(a), r * np.sin(a)] + 1000.0
+        else:  # a strip whose extremes in several directions are the same two points
+            xy = np.c_[np.linspace(0, 100, n), rng.random(n) * 1e-3]
+        pts = xy[:: max(1, len(xy) // 200_000)]
+        assert np.array_equal(fp._hull(xy), pts[ConvexHull(pts).vertices])
+
+
 def test_the_footprint_test_runs_on_the_reading_thread(cloud, monkeypatch):
     """With a plain shift the chunks arrive local, and the reading thread applies the footprint
     test (the consumer is the busier thread); after any other conversion the consumer applies it.
