@@ -148,29 +148,6 @@ def test_narrowed_signals_and_fused_shift_change_nothing(cloud, tmp_path, monkey
     assert rule.use_class if classified else (rule.green is not None and rule.returns)
 
 
-def test_footprints_are_remembered_by_content_only():
-    """A footprint asked for again with the same points (another array, a strided view) is the
-    remembered one; one point moved by a millimetre gives its own hull."""
-    from soilvolume.inputs import footprint as fp
-
-    rng = np.random.default_rng(11)
-    xyz = rng.uniform(0, 50, (20_000, 3))
-    corner = int(np.argmax(xyz[:, 0] + xyz[:, 1]))  # a hull vertex
-    first = fp.footprint(xyz[:, :2])
-    calls = []
-    real = fp._hull
-    fp._hull = lambda xy: calls.append(len(xy)) or real(xy)
-    try:
-        again = fp.footprint(np.ascontiguousarray(xyz[:, :2]).copy())
-        moved = xyz.copy()
-        moved[corner, :2] += 0.001
-        other = fp.footprint(moved[:, :2])
-    finally:
-        fp._hull = real
-    assert np.array_equal(first, again) and calls == [len(xyz)]  # only the moved cloud's hull was made
-    assert not np.array_equal(first, other)
-
-
 @pytest.mark.parametrize("kind", ["rectangle", "gaussian", "grid", "rotated-grid", "disc", "line-ends"])
 def test_the_hull_is_qhulls_on_every_point(kind):
     """The footprint's hull (Qhull on the points not well inside the extremes' octagon) is Qhull's
