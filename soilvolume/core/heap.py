@@ -7,7 +7,6 @@ large pairs, and on the paper-sized pair (4 M points) it is 12 MB more for 3.6 %
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import sys
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
@@ -23,8 +22,7 @@ def keep_freed_memory(points: int, threshold: int = 1 << 30) -> bool:
     if _done or points <= LARGE_RUN_POINTS or not sys.platform.startswith("linux"):
         return False
     try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        mallopt = libc.mallopt
+        mallopt = ctypes.CDLL(None).mallopt  # the process's own symbols (find_library runs ldconfig: ~10 ms)
     except (OSError, AttributeError):  # not glibc
         return False
     mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
