@@ -222,3 +222,32 @@ def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
 def worker_gb(schedule: Schedule, memory_limit: float) -> float:
     """The memory (GB) one task may use: the budget shared by the workers (or threads)."""
     return budget_gb(memory_limit) / max(1, schedule.workers)
+
+
+def schedule_for(before, after, options, pipeline: bool) -> Schedule:
+    """The schedule of a run: ``--scheduler``, or for ``auto`` in-process when the pair's points
+    (from the LAS/COPC/VPC headers) fit the memory budget; pipelines and other formats run
+    in-process."""
+    if options.scheduler == "auto":
+        points = [_header_points(p) for p in (before, after)]
+        if pipeline or None in points:
+            return Schedule("none")
+        return choose("auto", options.memory_limit, sum(points))
+    chosen = parse(options.scheduler)
+    if pipeline and chosen.kind != "none":
+        raise SoilVolumeError(
+            f"{opt('scheduler', options.scheduler)}: preparation pipelines run in-process only "
+            f"(use {opt('scheduler', 'none')})"
+        )
+    return chosen
+
+
+def _header_points(path) -> int | None:
+    """A LAS/LAZ/COPC file's or a VPC's point count from its header(s); None for other formats."""
+    from ..inputs.io import LAS_SUFFIXES
+    from ..inputs.stream import open_source
+
+    suffix = Path(path).suffix.lower()
+    if suffix not in LAS_SUFFIXES | {".vpc"}:
+        return None
+    return open_source(path).count

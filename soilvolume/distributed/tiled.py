@@ -19,16 +19,13 @@ in-process run, with the point work done as Dask tasks, so no process holds a su
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 
-from ..core.types import GridSpec, SoilVolumeError
-from ..core.wording import opt
+from ..core.types import GridSpec
 from ..dem.grid import choose_cell
 from ..inputs.footprint import PolygonMask, footprint, inside, polygon_area
 from ..inputs.prepare import Prepared
-from ..inputs.stream import open_source
 from ..options import Options
 from .schedule import Schedule
 from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan
@@ -98,37 +95,6 @@ def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0
     poly = footprint(after_thin[:, :2])
     ins = inside(prep.before_thin[:, :2], poly)
     return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly), minimum=minimum)
-
-
-def schedule_for(before, after, options: Options, pipeline: bool) -> Schedule:
-    """The schedule of a run: ``--scheduler``, or for ``auto`` in-process when the pair's points
-    (from the LAS/COPC/VPC headers) fit the memory budget; pipelines and other formats run
-    in-process."""
-    from .schedule import choose, parse
-
-    if options.scheduler == "auto":
-        points = [_header_points(p) for p in (before, after)]
-        if pipeline or None in points:
-            return Schedule("none")
-        return choose("auto", options.memory_limit, sum(points))
-    chosen = parse(options.scheduler)
-    if pipeline and chosen.kind != "none":
-        raise SoilVolumeError(
-            f"{opt('scheduler', options.scheduler)}: preparation pipelines run in-process only "
-            f"(use {opt('scheduler', 'none')})"
-        )
-    return chosen
-
-
-def _header_points(path) -> int | None:
-    """A LAS/LAZ/COPC file's or a VPC's point count from its header(s); None for other formats."""
-
-    from ..inputs.io import LAS_SUFFIXES
-
-    suffix = Path(path).suffix.lower()
-    if suffix not in LAS_SUFFIXES | {".vpc"}:
-        return None
-    return open_source(path).count
 
 
 def plan_for(run, cell: float, sources: tuple = (None, None)) -> Plan:

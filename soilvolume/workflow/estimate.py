@@ -49,8 +49,8 @@ def run_estimate(
 
 
 def executor_for(run: Run):
-    """The executor the schedule (``--scheduler``, :func:`distributed.tiled.schedule_for`) picks."""
-    from ..distributed.tiled import schedule_for
+    """The executor the schedule (``--scheduler``, :func:`distributed.schedule.schedule_for`) picks."""
+    from ..distributed.schedule import schedule_for
     from .executors import InProcess
 
     b, a = run.epochs
