@@ -224,3 +224,37 @@ def test_the_command_runs_numpy_blas_on_one_thread_unless_the_user_says_otherwis
         assert r.returncode == 0, r.stderr
         threads, setting = r.stdout.split()
         assert int(threads) >= 2 and setting == "2"  # OpenBLAS's own thread beside the main one
+
+
+def test_the_command_loads_its_modules_without_the_garbage_collector_and_the_run_restarts_it(tmp_path):
+    """The command line pauses Python's cyclic collector while its modules load; a run restarts it
+    once its inputs are read, what was loaded frozen out of later passes; the result is the one a
+    run with the collector on all along gives. A program importing the engine keeps its collector."""
+    b, a, _ = write_scene(tmp_path)
+    probe = (
+        "import gc, json, sys, types\n"
+        "cli = types.ModuleType('soilvolume.cli')\n"
+        "def main():\n"
+        "    paused = not gc.isenabled()\n"
+        "    del sys.modules['soilvolume.cli']\n"  # the real command line from here
+        "    import soilvolume.cli as real\n"
+        f"    code = real.main(['estimate', {str(b)!r}, {str(a)!r}, '--out', {str(tmp_path / 'cli')!r}, '--quiet'])\n"
+        "    print(json.dumps([paused, gc.isenabled(), gc.get_freeze_count() > 1000, code]))\n"
+        "    return code\n"
+        "cli.main = main\n"
+        "sys.modules['soilvolume.cli'] = cli\n"
+        "import soilvolume.__main__\n"
+        "soilvolume.__main__.run()\n"
+    )
+    r = run_python(probe, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout.splitlines()[-1]) == [True, True, True, 0]
+    import gc
+
+    from soilvolume.api import estimate
+
+    enabled = gc.isenabled()
+    result = estimate(b, a, tmp_path / "api")
+    assert gc.isenabled() == enabled  # not paused by the engine: nothing to resume
+    ours = json.loads((tmp_path / "cli" / "report.json").read_text())["volume_m3"]
+    assert ours == result.report["volume_m3"]

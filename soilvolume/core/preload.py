@@ -25,8 +25,12 @@ DURING = ("soilvolume.registration.register", "soilvolume.volumes.compute")
 
 
 def reading_done() -> None:
-    """The inputs are in memory: imports held back for the memory peak may go ahead."""
+    """The inputs are in memory: imports held back for the memory peak may go ahead, and the
+    garbage collector paused for the imports restarts (:mod:`.collector`)."""
+    from .collector import resume
+
     _READ.set()
+    resume()
 
 
 def _import(open3d: bool) -> None:

@@ -39,9 +39,12 @@ class Tiled:
     def session(self, run):
         """The run's tile store and cluster; the cluster starts in the background and is waited
         for at its first use (``cluster_wait``), shut down in the background after its last."""
+        from ..core.collector import resume
         from .cluster import LazyClient, checker
         from .schedule import client
         from .tilestore import run_store
+
+        resume()  # the garbage collector, before the cluster's event loop starts (core.collector)
 
         if run.options.ground in ("filter", "csf"):
             raise SoilVolumeError(

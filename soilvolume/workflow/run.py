@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.collector import resume
 from ..core.hooks import Hooks
 from ..core.types import Epoch, GridSpec
 from ..options import Options
@@ -111,6 +112,7 @@ def drive(run: Run, executor) -> Run:
                 own(run)
             else:
                 STEPS[name](run, executor)
+            resume()  # the garbage collector, after the first step at the latest (core.collector)
     return run
 
 
