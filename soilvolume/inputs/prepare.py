@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyproj
 
+from ..core.cells import bounds
 from ..core.heap import keep_freed_memory
 from ..core.preload import reading_done
 from ..core.types import Cloud, SoilVolumeError
@@ -158,7 +159,7 @@ def prepare(
     before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
     reach = options.max_gps_shift + 2.0
-    box = (a.thin[:, :2].min(axis=0) - reach, a.thin[:, :2].max(axis=0) + reach) if full else NOTHING
+    box = tuple(v + d for v, d in zip(bounds(a.thin, 2), (-reach, reach), strict=True)) if full else NOTHING
     within = _padded_box(before, crs_b, frame, origin)  # a crop radius far past the data costs nothing
     b = loader(
         before,

@@ -31,7 +31,7 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> Gri
     cell = options.cell
     if cell is None or cell <= 0:
         cell = gridmod.cell_for(prep.before.xyz, poly)
-    (lo_a, hi_a), (lo_b, hi_b) = bounds(after_thin), bounds(prep.before_thin)
+    (lo_a, hi_a), (lo_b, hi_b) = bounds(after_thin, 2), bounds(prep.before_thin, 2)  # x/y: the grid's
     lo, hi = np.maximum(lo_a, lo_b), np.minimum(hi_a, hi_b)
     if (hi[:2] <= lo[:2]).any():
         raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
