@@ -59,16 +59,18 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     """A local cluster's workers come from one forkserver that imported Dask and the tasks'
     modules once (a spawned worker imports them itself, ~0.6 s of CPU each, while the driver
     reads); Dask's pre-spawn environment (one BLAS/OpenMP thread per worker) still reaches them and
-    their server, which starts before Dask is imported."""
+    their server, which starts before Dask is imported. The server imports with the garbage
+    collector paused; the workers have it on, the server's imports frozen out of it."""
     code = (
-        "import json, os, sys\n"
+        "import gc, json, os, sys\n"
         "os.environ.pop('MALLOC_TRIM_THRESHOLD_', None)\n"
         "from soilvolume.distributed import cluster\n"
         "c, client = cluster.local(2, True, 1.0, None)\n"
         "try:\n"
         "    info = client.run(lambda: (os.getppid(), os.environ.get('OMP_NUM_THREADS'),\n"
         "                               'soilvolume.distributed.tiletask' in sys.modules,\n"
-        "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0))))\n"
+        "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0)),\n"
+        "                               gc.isenabled(), gc.get_freeze_count()))\n"
         "finally:\n"
         "    cluster.shut(c, client)\n"
         "print(json.dumps([os.getpid(), sorted(info.values())]))\n"
@@ -80,6 +82,7 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     parents = {w[0] for w in workers}
     assert len(parents) == 1 and driver not in parents  # one server forked both (spawned: the driver)
     assert all(w[1] == "1" and w[2] for w in workers)
+    assert all(w[4] and w[5] > 10_000 for w in workers)  # collector on, the server's imports frozen
     # the server started before any nanny set Dask's pre-spawn environment: it had it from its start
     # (OpenBLAS reads its threads as the server imports numpy), but for Dask's malloc trim threshold
     # (cluster.LOCAL_WORKER_ENV: glibc's own, as in-process)

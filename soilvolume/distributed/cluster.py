@@ -196,7 +196,8 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
 
 # what the tile tasks run (a worker imports them as it starts: workerinit.warm)
 TASK_MODULES = ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj")
-FORKSERVER_PRELOAD = ("distributed", WORKER_INIT, *TASK_MODULES)  # imported once for every forked worker
+#: imported once for every forked worker, with the garbage collector paused (forkpause, forkready)
+FORKSERVER_PRELOAD = (f"{__package__}.forkpause", "distributed", WORKER_INIT, *TASK_MODULES, f"{__package__}.forkready")
 
 
 def _start_method() -> str | None:

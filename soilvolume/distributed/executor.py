@@ -44,8 +44,6 @@ class Tiled:
         from .schedule import client
         from .tilestore import run_store
 
-        resume()  # the garbage collector, before the cluster's event loop starts (core.collector)
-
         if run.options.ground in ("filter", "csf"):
             raise SoilVolumeError(
                 f"{opt('ground', run.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
@@ -53,6 +51,7 @@ class Tiled:
             )
         with run_store(run.out.final) as store, client(self.schedule, run.options.memory_limit, store.scratch) as s:
             self.store, self.starting = store, s
+            s.future.add_done_callback(lambda _: resume())  # the garbage collector, once the cluster is up
 
             def wait():
                 with run.timer("cluster_wait"):

@@ -1,0 +1,8 @@
+"""Imported last by the local cluster's forkserver (after :mod:`.forkpause` and the modules it
+preloads): the garbage collector restarts with the imported objects frozen, so no collection in
+the server or in a worker forked from it walks them again (nor touches their pages: copy-on-write
+keeps them shared with the server)."""
+
+from ..core.collector import resume
+
+resume()
