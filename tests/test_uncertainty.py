@@ -95,6 +95,10 @@ def test_spherical_fit_recovers_an_exact_model():
     model = fit_spherical(lags, gamma, np.linspace(5000, 800, 18))
     assert model["range"] == pytest.approx(12.0, rel=1e-6)
     assert model["nugget"] == pytest.approx(1e-4, rel=1e-5) and model["psill"] == pytest.approx(3e-4, rel=1e-5)
+    flat = fit_spherical(lags, np.full(18, 2e-4), np.linspace(5000, 800, 18))  # white noise: all nugget
+    assert flat["nugget"] == pytest.approx(2e-4) and flat["psill"] == 0.0
+    still = fit_spherical(lags, np.zeros(18), np.linspace(5000, 800, 18))  # no error at all
+    assert still["nugget"] == 0.0 and still["psill"] == 0.0 and np.isfinite(still["range"])
 
 
 def test_lod_and_thresholds():
