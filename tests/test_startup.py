@@ -229,11 +229,9 @@ def test_the_command_runs_numpy_blas_on_one_thread_unless_the_user_says_otherwis
         assert int(threads) >= 2 and setting == "2"  # OpenBLAS's own thread beside the main one
 
 
-def test_the_command_loads_its_modules_without_the_garbage_collector_and_the_run_restarts_it(tmp_path):
-    """The command line pauses Python's cyclic collector while its modules load; a run restarts it
-    once its inputs are read, what was loaded frozen out of later passes; the result is the one a
-    run with the collector on all along gives. A program importing the engine keeps its collector."""
-    b, a, _ = write_scene(tmp_path)
+def _collector_probe(args: list[str]) -> list:
+    """[collector paused while the command line loaded, on after the command, objects frozen, exit
+    code] of the command ``args`` run through ``python -m soilvolume``'s entry."""
     probe = (
         "import gc, json, sys, types\n"
         "cli = types.ModuleType('soilvolume.cli')\n"
@@ -241,7 +239,7 @@ def test_the_command_loads_its_modules_without_the_garbage_collector_and_the_run
         "    paused = not gc.isenabled()\n"
         "    del sys.modules['soilvolume.cli']\n"  # the real command line from here
         "    import soilvolume.cli as real\n"
-        f"    code = real.main(['estimate', {str(b)!r}, {str(a)!r}, '--out', {str(tmp_path / 'cli')!r}, '--quiet'])\n"
+        f"    code = real.main({args!r})\n"
         "    print(json.dumps([paused, gc.isenabled(), gc.get_freeze_count() > 1000, code]))\n"
         "    return code\n"
         "cli.main = main\n"
@@ -251,7 +249,17 @@ def test_the_command_loads_its_modules_without_the_garbage_collector_and_the_run
     )
     r = run_python(probe, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout.splitlines()[-1]) == [True, True, True, 0]
+    return json.loads(r.stdout.splitlines()[-1])
+
+
+def test_the_command_loads_its_modules_without_the_garbage_collector_and_the_run_restarts_it(tmp_path):
+    """The command line pauses Python's cyclic collector while its modules load; a run restarts it
+    once its inputs are read (a command without a pair, after its first step), what was loaded
+    frozen out of later passes; the result is the one a run with the collector on all along gives.
+    A program importing the engine keeps its collector."""
+    b, a, _ = write_scene(tmp_path)
+    assert _collector_probe(["estimate", str(b), str(a), "--out", str(tmp_path / "cli"), "--quiet"]) == [True] * 3 + [0]
+    assert _collector_probe(["dem", str(a), "--out", str(tmp_path / "dem.tif")]) == [True] * 3 + [0]
     import gc
 
     from soilvolume.api import estimate
