@@ -5,8 +5,10 @@ objects are long-lived and make no garbage cycles, yet the collector walks them 
 as they are created: ~30 ms of start-up on the paper-sized pair, one full pass over every module
 object among them. The command line pauses the collector before its imports (:func:`pause`) and
 the run resumes it once its inputs are read (:func:`resume`), with everything loaded so far frozen
-(``gc.freeze``: never walked again). A tiled run resumes it before its cluster starts (an event
-loop makes cycles). A program that imports the engine keeps its own collector as it is.
+(``gc.freeze``: never walked again), or after its first step at the latest; a tiled run's driver
+also once its cluster is up (an event loop makes cycles), and a local cluster's forkserver once it
+has imported what its workers run (``distributed.forkpause`` and ``forkready``). A program that
+imports the engine keeps its own collector as it is.
 """
 
 from __future__ import annotations

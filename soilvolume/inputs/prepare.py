@@ -159,7 +159,8 @@ def prepare(
     before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
     # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
     reach = options.max_gps_shift + 2.0
-    box = tuple(v + d for v, d in zip(bounds(a.thin, 2), (-reach, reach), strict=True)) if full else NOTHING
+    lo_a, hi_a = bounds(a.thin, 2)
+    box = (lo_a - reach, hi_a + reach) if full else NOTHING
     within = _padded_box(before, crs_b, frame, origin)  # a crop radius far past the data costs nothing
     b = loader(
         before,

@@ -33,7 +33,7 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> Gri
         cell = gridmod.cell_for(prep.before.xyz, poly)
     (lo_a, hi_a), (lo_b, hi_b) = bounds(after_thin, 2), bounds(prep.before_thin, 2)  # x/y: the grid's
     lo, hi = np.maximum(lo_a, lo_b), np.minimum(hi_a, hi_b)
-    if (hi[:2] <= lo[:2]).any():
+    if (hi <= lo).any():
         raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
     grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
     check_grid_cells(grid.rows, grid.cols, cell)
