@@ -198,18 +198,27 @@ def test_a_stage_timed_within_another_is_left_out_of_it(monkeypatch):
     assert sum(v for k, v in s.items() if k != "startup") == 3.75
 
 
-BLAS_PROBE = (
-    "import os, sys, types\n"
-    "cli = types.ModuleType('soilvolume.cli')\n"  # stands in for the command line: what does numpy see?
-    "def main():\n"
-    "    import numpy as np\n"
-    "    np.ones((300_000, 3)) @ np.eye(3)  # a product OpenBLAS threads\n"
-    "    print(len(os.listdir('/proc/self/task')), os.environ.get('OPENBLAS_NUM_THREADS'))\n"
-    "    return 0\n"
-    "cli.main = main\n"
-    "sys.modules['soilvolume.cli'] = cli\n"
-    "import soilvolume.__main__\n"
-    "soilvolume.__main__.run()\n"
+def entry_probe(imports: str, body: list[str]) -> str:
+    """A program running ``python -m soilvolume``'s entry (``soilvolume.__main__.run``) with the
+    command line replaced by a ``main`` of the lines ``body``, after ``import <imports>``."""
+    return (
+        f"import {imports}, sys, types\n"
+        "cli = types.ModuleType('soilvolume.cli')\n"  # stands in for the command line
+        "def main():\n" + "".join(f"    {line}\n" for line in body) + "cli.main = main\n"
+        "sys.modules['soilvolume.cli'] = cli\n"
+        "import soilvolume.__main__\n"
+        "soilvolume.__main__.run()\n"
+    )
+
+
+BLAS_PROBE = entry_probe(  # what does numpy see?
+    "os",
+    [
+        "import numpy as np",
+        "np.ones((300_000, 3)) @ np.eye(3)  # a product OpenBLAS threads",
+        "print(len(os.listdir('/proc/self/task')), os.environ.get('OPENBLAS_NUM_THREADS'))",
+        "return 0",
+    ],
 )
 
 
@@ -232,20 +241,16 @@ def test_the_command_runs_numpy_blas_on_one_thread_unless_the_user_says_otherwis
 def _collector_probe(args: list[str]) -> list:
     """[collector paused while the command line loaded, on after the command, objects frozen, exit
     code] of the command ``args`` run through ``python -m soilvolume``'s entry."""
-    probe = (
-        "import gc, json, sys, types\n"
-        "cli = types.ModuleType('soilvolume.cli')\n"
-        "def main():\n"
-        "    paused = not gc.isenabled()\n"
-        "    del sys.modules['soilvolume.cli']\n"  # the real command line from here
-        "    import soilvolume.cli as real\n"
-        f"    code = real.main({args!r})\n"
-        "    print(json.dumps([paused, gc.isenabled(), gc.get_freeze_count() > 1000, code]))\n"
-        "    return code\n"
-        "cli.main = main\n"
-        "sys.modules['soilvolume.cli'] = cli\n"
-        "import soilvolume.__main__\n"
-        "soilvolume.__main__.run()\n"
+    probe = entry_probe(
+        "gc, json",
+        [
+            "paused = not gc.isenabled()",
+            "del sys.modules['soilvolume.cli']  # the real command line from here",
+            "import soilvolume.cli as real",
+            f"code = real.main({args!r})",
+            "print(json.dumps([paused, gc.isenabled(), gc.get_freeze_count() > 1000, code]))",
+            "return code",
+        ],
     )
     r = run_python(probe, timeout=300)
     assert r.returncode == 0, r.stderr
