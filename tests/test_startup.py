@@ -90,26 +90,44 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     assert not any(e.startswith("MALLOC_TRIM_THRESHOLD_=") for w in workers for e in w[3])
 
 
-def test_preload_imports_open3d_and_the_volume_step_then_rasterio_after_the_reading():
-    """Open3D and the registration's and volume step's modules (ndimage) during the reading;
-    rasterio only once the reading is done (the memory peak is behind)."""
+def test_preload_imports_open3d_during_the_reading_and_the_later_steps_after_it():
+    """Open3D while the clouds are read; the registration's and volume step's modules (ndimage)
+    and rasterio only once the reading is done (an import beside the reading slows it; the
+    memory peak is behind)."""
     code = (
         "import sys, time\n"
-        "from soilvolume.core.preload import DURING, preload, reading_done\n"
+        "from soilvolume.core.preload import AFTER_READING, preload, reading_done\n"
         "t = preload(True, threads=1)\n"
         "t0 = time.time()\n"
-        "while not all(m in sys.modules for m in ('open3d', 'scipy.ndimage', *DURING)) and time.time() < t0 + 60:\n"
-        "    time.sleep(0.05)  # not imported here: the preload thread imports them\n"
-        "time.sleep(0.2)\n"
-        "early = 'rasterio' in sys.modules\n"
+        "while 'open3d' not in sys.modules and time.time() < t0 + 60:\n"
+        "    time.sleep(0.05)  # not imported here: the preload thread imports it\n"
+        "time.sleep(0.3)\n"
+        "early = [m in sys.modules for m in ('scipy.ndimage', *AFTER_READING)]\n"
         "reading_done(); t.join(60)\n"
         "import os\n"
-        "late = 'rasterio' in sys.modules\n"
-        "print(time.time() < t0 + 60, early, late, os.environ['OMP_NUM_THREADS'], not t.is_alive())\n"
+        "late = all(m in sys.modules for m in ('scipy.ndimage', *AFTER_READING))\n"
+        "print(time.time() < t0 + 60, any(early), late, os.environ['OMP_NUM_THREADS'], not t.is_alive())\n"
     )
     r = run_python(code, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["True", "False", "True", "1", "True"]
+
+
+def test_preload_goes_ahead_while_a_tiled_driver_waits_for_its_first_pass():
+    """A tiled run's driver, waiting on its workers' tasks (``idle``), lets the held-back imports
+    go ahead before its reading is done."""
+    code = (
+        "import sys\n"
+        "from soilvolume.core.preload import AFTER_READING, idle, preload\n"
+        "t = preload(False)\n"
+        "t.join(0.3)\n"
+        "early = any(m in sys.modules for m in AFTER_READING)\n"
+        "idle(); t.join(60)\n"
+        "print(early, all(m in sys.modules for m in AFTER_READING), t.is_alive())\n"
+    )
+    r = run_python(code, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "True", "False"]
 
 
 def test_fresh_chunks_are_shifted_in_place_a_cloud_in_memory_never(tmp_path):
@@ -274,3 +292,50 @@ def test_the_command_loads_its_modules_without_the_garbage_collector_and_the_run
     assert gc.isenabled() == enabled  # not paused by the engine: nothing to resume
     ours = json.loads((tmp_path / "cli" / "report.json").read_text())["volume_m3"]
     assert ours == result.report["volume_m3"]
+
+
+def test_the_command_imports_pyproj_without_its_network_modules_and_pyproj_still_works(tmp_path):
+    """A run through ``python -m soilvolume``'s entry never imports pyproj's grid downloads
+    (urllib.request, http.client, ssl) or importlib.metadata, ~25 ms of start-up; the functions
+    that need them still work, and a later ``import pyproj.sync`` is the real module."""
+    b, a, _ = write_scene(tmp_path)
+    args = ["estimate", str(b), str(a), "--out", str(tmp_path / "out")]
+    probe = entry_probe(
+        "json",
+        [
+            "del sys.modules['soilvolume.cli']",
+            "import soilvolume.cli as real",
+            f"code = real.main({args!r})",
+            "mods = ('urllib.request', 'http.client', 'ssl', 'importlib.metadata')",
+            "out = [code] + [m in sys.modules for m in mods]",
+            "import pyproj, pyproj.sync, pyproj.transformer",
+            "deferred = pyproj.transformer._download_resource_file",
+            "out += [callable(pyproj.sync.get_user_data_dir), type(deferred).__name__]",
+            "pyproj.show_versions()",
+            "print(json.dumps(out))",
+            "return 0",
+        ],
+    )
+    r = run_python(probe, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "pyproj:" in r.stdout  # show_versions printed the real report
+    assert json.loads(r.stdout.splitlines()[-1]) == [0, False, False, False, False, True, "function"]
+
+
+def test_a_pyproj_that_uses_a_stand_in_while_it_loads_is_imported_the_ordinary_way(tmp_path):
+    """Should a pyproj release use ``pyproj.sync`` at import time, it is loaded again without the
+    stand-ins (a fake pyproj here: its ``__init__`` adds to a constant of its sync module)."""
+    pkg = tmp_path / "pyproj"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("from pyproj.sync import LEVEL\nVALUE = LEVEL + 1\n")
+    (pkg / "sync.py").write_text("LEVEL = 41\n")
+    code = (
+        f"import sys; sys.path.insert(0, {str(tmp_path)!r})\n"
+        "from soilvolume.core.leanimport import import_pyproj\n"
+        "import_pyproj()\n"
+        "import pyproj, pyproj.sync\n"
+        "print(pyproj.VALUE, type(pyproj.sync).__name__)\n"
+    )
+    r = run_python(code)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["42", "module"]

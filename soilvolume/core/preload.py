@@ -1,16 +1,19 @@
-"""Imports a run will need, done in a background thread while the clouds are read.
+"""Imports a run will need, done in a background thread beside the steps that do not need them.
 
-Open3D (the registrations that use it: GICP, PFH, FPFH) and rasterio (GeoTIFF output) take
-~0.3-0.8 s to import, most of it loading their native libraries, and a run needs them only after
-the inputs are read. Imported in a thread from the start, they overlap with the reading (numpy and
-laspy release the GIL); the step that needs one waits on Python's module lock until it is
-complete. rasterio waits until the reading is done (:func:`reading_done`): the peak memory of a
-run is at the end of the reading, and it would add its ~20 MB there. Between the two, while the
-clouds are still read, come the modules of the registration and the volume step (:data:`DURING`:
-SciPy's ndimage and sparse solvers), which the reading does not need. Nothing is imported that the
-run would not import anyway. (Importing the later steps' modules, scipy.optimize and the report's,
-beside the registration's ICP was tried: no measurable gain on two cores, and ~30 MB more peak
-memory, the thread's allocations then.)
+Open3D (the registrations that use it: GICP, PFH, FPFH) takes ~0.4-0.6 s to import, most of it
+loading its native library, and a run needs it only after the inputs are read: imported in a
+thread from the start, it overlaps with the reading; the step that needs it waits on Python's
+module lock until it is complete. The other modules wait until the reading is done
+(:func:`reading_done`), or until the run waits on other processes (:func:`idle`: a tiled run's
+driver waiting for its first pass's tasks): the registration's and the volume step's (:data:`AFTER_READING`: SciPy's
+ndimage and sparse solvers), then rasterio (GeoTIFF output). The reading keeps both cores busy
+with its two threads; an import beside it, Python code holding the GIL, slowed it by more than it
+saved (paper pair, 2 cores: reading done ~50 ms later, the run ~40-90 ms longer, 25 interleaved
+runs), and the memory peak of a run is at the end of the reading, where rasterio would add its
+~20 MB. The registration runs on one core; the volume step's modules and rasterio load on the
+other meanwhile. Nothing is imported that the run would not import anyway. (Importing the later
+steps' modules, scipy.optimize and the report's, beside the registration's ICP was tried: no
+measurable gain on two cores, and ~30 MB more peak memory, the thread's allocations then.)
 """
 
 from __future__ import annotations
@@ -18,10 +21,10 @@ from __future__ import annotations
 import os
 import threading
 
-_READ = threading.Event()  # set when the inputs are read (the memory peak is behind)
-#: what the registration and the volume step import (ndimage, the refill's sparse solvers),
-#: imported during the reading, after Open3D
-DURING = ("soilvolume.registration.register", "soilvolume.volumes.compute")
+_GO = threading.Event()  # set when the inputs are read (the memory peak is behind) or the run waits
+#: what the registration and the volume step import (ndimage, the refill's sparse solvers), then
+#: GeoTIFF output, imported once the inputs are read (the registration waits for the first)
+AFTER_READING = ("soilvolume.registration.register", "soilvolume.volumes.compute", "rasterio")
 
 
 def reading_done() -> None:
@@ -29,8 +32,14 @@ def reading_done() -> None:
     garbage collector paused for the imports restarts (:mod:`.collector`)."""
     from .collector import resume
 
-    _READ.set()
+    _GO.set()
     resume()
+
+
+def idle() -> None:
+    """The run waits on other processes (a tiled run's driver on its first pass's tasks, its
+    points in the workers): the held-back imports may go ahead meanwhile."""
+    _GO.set()
 
 
 def _import(open3d: bool) -> None:
@@ -41,21 +50,21 @@ def _import(open3d: bool) -> None:
             from ..registration.o3d import _o3d
 
             _o3d()
-        for name in DURING:
+        _GO.wait(120.0)
+        for name in AFTER_READING:
             importlib.import_module(name)
-        _READ.wait(120.0)
-        importlib.import_module("rasterio")
     except Exception:  # noqa: BLE001 - the step that needs a package reports it missing itself
         pass
 
 
 def preload(open3d: bool, threads: int = 0) -> threading.Thread:
-    """Start importing Open3D (when the registration uses it: ``open3d``), :data:`DURING`, then
-    rasterio, in the background. ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), for
-    OpenMP libraries (Open3D 0.19+ is limited by :func:`soilvolume.registration.o3d.limit_threads`)."""
+    """Start importing Open3D (when the registration uses it: ``open3d``), then, once the inputs
+    are read or the run waits (:func:`idle`), :data:`AFTER_READING`, in the background.
+    ``threads`` > 0 sets OMP_NUM_THREADS first (as the run does), for OpenMP libraries (Open3D
+    0.19+ is limited by :func:`soilvolume.registration.o3d.limit_threads`)."""
     if threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(threads))
-    _READ.clear()
+    _GO.clear()
     worker = threading.Thread(target=_import, args=(open3d,), name="soilvolume-preload", daemon=True)
     worker.start()
     return worker
