@@ -9,54 +9,21 @@ standard library only): no numpy, pyproj, rasterio or Open3D ever loads into QGI
 
 from __future__ import annotations
 
-import html
-import importlib
-import importlib.util
-import sys
 from collections import deque
 from collections.abc import Sequence
-from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 from qgis.core import QgsProcessingException, QgsProcessingFeedback, QgsProcessingUtils
 
 from ..plugin import child, environment
+from .optiontable import engine, option_error_text, qgis_wording
 
-PLUGIN_DIR = Path(__file__).resolve().parent.parent
 TRACKER = "https://github.com/soilvolume/soilvolume/issues"
 CANCELLED = "Cancelled by the user; no outputs were written."
 INSTALL_HINT = (
     "Install it with Plugins > Soil volume change > Install dependencies…, the message bar's Install "
     "button, or headless: qgis_process run soilvolume:installdependencies"
 )
-
-
-def ensure_engine_package() -> None:
-    """Make the engine's package importable as top-level ``soilvolume`` (for its option table):
-    an already imported one, else the copy shipped inside the plugin folder, loaded by file
-    location (never by putting the plugin folder on ``sys.path``)."""
-    if "soilvolume" in sys.modules:
-        return
-    bundled = PLUGIN_DIR / "soilvolume" / "__init__.py"
-    spec = importlib.util.spec_from_file_location(
-        "soilvolume", bundled, submodule_search_locations=[str(bundled.parent)]
-    )
-    if spec is None or spec.loader is None:  # pragma: no cover - defensive
-        raise ImportError(f"cannot load the engine from {bundled}")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["soilvolume"] = module
-    try:
-        spec.loader.exec_module(module)
-    except BaseException:
-        del sys.modules["soilvolume"]
-        raise
-
-
-def engine(name: str = "options") -> ModuleType:
-    """A standard-library-only engine module (``options``, ``wording``): nothing else is imported here."""
-    ensure_engine_package()
-    return importlib.import_module(f"soilvolume.{name}")
 
 
 def ready_environment(feedback: QgsProcessingFeedback | None = None) -> environment.Environment:
@@ -149,47 +116,3 @@ def option_args(options, command: str) -> list[str]:
             continue
         out += ["--" + f.name.replace("_", "-"), repr(value) if isinstance(value, float) else str(value)]
     return out
-
-
-def parameter_names() -> dict[str, str]:
-    """Option key -> "'Label' (NAME)" for every option of the engine's table."""
-    from .optionparams import description, key, option_fields
-
-    names = {f.name: f"'{description(f)}' ({key(f)})" for f in option_fields()}
-    names["crs"] = "'CRS override' (CRS)"
-    return names
-
-
-def parameter_name(option: str, value: str | None = None, names: dict[str, str] | None = None) -> str:
-    """An option the engine names by key (``soilvolume.wording``) as its Processing parameter:
-    "'Coarse registration' (COARSE)", with its value "... (COARSE) = fpfh"."""
-    name = (names or parameter_names()).get(option) or engine("core.wording").flag(option)
-    return name if value is None else f"{name} = {value}"
-
-
-def qgis_wording(message: str) -> str:
-    """An engine message (options by key) as a sentence naming Processing parameters:
-    "{opt:coarse=fpfh} forces it" -> "'Coarse registration' (COARSE) = fpfh forces it"."""
-    names = parameter_names()
-    text = engine("core.wording").render(message, lambda k, v: parameter_name(k, v, names))
-    return text[:1].upper() + text[1:]
-
-
-def reword_html(page: str) -> str:
-    """An engine HTML report with its options (``<span data-option>`` elements) named by their
-    parameters; the rest of the page untouched."""
-    names = parameter_names()
-    return engine("core.wording").html_render(page, lambda k, v: html.escape(parameter_name(k, v, names), quote=False))
-
-
-def option_error_text(exc: Exception) -> str | None:
-    """An engine option error (it names the option's field) worded with the parameter."""
-    field, reason = getattr(exc, "field", None), getattr(exc, "reason", None)
-    if not field or not reason:
-        return None
-    from .optionparams import description, key, option_fields
-
-    match = [f for f in option_fields() if f.name == field]
-    if not match:
-        return None
-    return f"Incorrect parameter value for '{description(match[0])}' ({key(match[0])}): {reason}"

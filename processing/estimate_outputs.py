@@ -18,7 +18,8 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QMetaType
 
-from . import engine, params, styles
+from . import params, styles
+from .optiontable import qgis_wording
 
 # output -> (report section, key, description)
 NUMBERS: dict[str, tuple[str, str, str]] = {
@@ -90,7 +91,7 @@ def values(report: dict[str, Any], summary: dict[str, Any]) -> dict[str, Any]:
         out[key] = summary.get(field)
     quality = summary.get("quality") or {}
     out["VERDICT"] = str(quality.get("verdict") or "")
-    out["QUALITY_MESSAGES"] = "\n".join(engine.qgis_wording(m) for m in quality.get("messages") or [])
+    out["QUALITY_MESSAGES"] = "\n".join(qgis_wording(m) for m in quality.get("messages") or [])
     out["SIGNIFICANCE"] = str(summary.get("significance") or "")
     out["TRANSFORM"] = params.to_json((report.get("registration") or {}).get("transform"))
     return out

@@ -19,6 +19,7 @@ from qgis.core import (
 
 from . import engine, estimate_outputs, optionparams, params, styles
 from .base import SoilVolumeAlgorithm
+from .optiontable import reword_html
 
 RASTERS = {  # parameter -> (engine output key, style, layer name, sort key: higher = on top)
     "DIFFERENCE": ("difference", styles.DIVERGING, "Difference", 40),
@@ -243,7 +244,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             return params.deliver_file(src, dest)
         Path(dest).parent.mkdir(parents=True, exist_ok=True)
         text = src.read_text(encoding="utf-8", errors="replace")
-        page = engine.reword_html(text)  # parameters, not flags
+        page = reword_html(text)  # parameters, not flags
         params.write_atomically(dest, lambda partial: partial.write_text(page, encoding="utf-8"))
         for sibling in src.parent.iterdir():
             if sibling.suffix.lower() in REPORT_ASSETS and sibling.is_file() and f'"{sibling.name}"' in text:

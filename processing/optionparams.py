@@ -8,8 +8,7 @@ the table's range. Options added to the table later appear here without any chan
 
 from __future__ import annotations
 
-import importlib
-from dataclasses import MISSING, Field, fields
+from dataclasses import MISSING, Field
 from typing import Any
 
 from qgis.core import (
@@ -27,11 +26,11 @@ from qgis.core import (
     QgsProcessingParameterString,
 )
 
-from . import engine
+from .optiontable import description, key, option_fields, options_class, qgis_wording, value_kind
+from .params import crs_text
 
 CRS_FIELDS = {"before_crs", "after_crs"}
 POLYGON_FIELDS = {"stable_mask", "zones"}
-SKIPPED = {"keep_registered_cloud"}  # an output destination, not a parameter
 BASIC = (
     "before_crs",
     "after_crs",
@@ -43,43 +42,13 @@ BASIC = (
     "zones",
     "stable_mask",
 )  # shown first, in this order; the rest is advanced, in table order
-UNIT_TEXT = {"m": "m", "m2": "m²", "deg": "°"}
 POLYGON_FORMATS = ["gpkg", "shp", "geojson"]
-
-
-def options_class() -> type:
-    """The engine's Options class (pure Python: importable without the engine's dependencies)."""
-    engine.ensure_engine_package()
-    return importlib.import_module("soilvolume.options").Options
-
-
-def option_fields(command: str = "estimate") -> list[Field]:
-    """The option table's fields that the engine's ``command`` takes (the table declares it next
-    to each option), in table order."""
-    table = fields(options_class())
-    return [f for f in table if f.name not in SKIPPED and command in f.metadata.get("commands", ("estimate",))]
-
-
-def key(field: Field) -> str:
-    return field.name.upper()
-
-
-def description(field: Field) -> str:
-    """The field's label with its unit for plain numbers (distance widgets show their own)."""
-    meta = field.metadata
-    label = meta.get("label") or field.name.replace("_", " ").capitalize()
-    unit = meta.get("unit")
-    if unit and unit != "m":
-        label = f"{label} ({UNIT_TEXT.get(unit, unit)})"
-    if field.default is None and _is_number(field):
-        label = f"{label} (automatic when not set)"
-    return label
 
 
 def parameter(field: Field) -> QgsProcessingParameterDefinition:
     """The Processing parameter of one option field."""
     param = _make(field)
-    param.setHelp(engine.qgis_wording(field.metadata.get("help") or ""))  # no command-line flags
+    param.setHelp(qgis_wording(field.metadata.get("help") or ""))  # no command-line flags
     if field.name not in BASIC:
         param.setFlags(param.flags() | QgsProcessingParameterDefinition.FlagAdvanced)
     return param
@@ -89,19 +58,6 @@ def parameters(command: str = "estimate") -> list[QgsProcessingParameterDefiniti
     table = option_fields(command)
     first = sorted((f for f in table if f.name in BASIC), key=lambda f: BASIC.index(f.name))
     return [parameter(f) for f in first + [f for f in table if f.name not in BASIC]]
-
-
-def _is_number(field: Field) -> bool:
-    return _kind(field) in ("float", "int")
-
-
-def _kind(field: Field) -> str:
-    """float, int, bool or str, from the field's annotation (``float | None`` -> float)."""
-    text = str(field.type)
-    for kind in ("bool", "float", "int"):
-        if text.startswith(kind):
-            return kind
-    return "str"
 
 
 def _make(field: Field) -> QgsProcessingParameterDefinition:
@@ -118,7 +74,7 @@ def _make(field: Field) -> QgsProcessingParameterDefinition:
         return QgsProcessingParameterEnum(
             name, label, options=list(meta["choices"]), defaultValue=default, usesStaticStrings=True
         )
-    kind = _kind(field)
+    kind = value_kind(field)
     if kind == "bool":
         return QgsProcessingParameterBoolean(name, label, defaultValue=bool(default))
     if kind in ("float", "int"):
@@ -128,11 +84,13 @@ def _make(field: Field) -> QgsProcessingParameterDefinition:
 
 def _number(field: Field, name: str, label: str, default: Any, optional: bool):
     meta = field.metadata
-    if meta.get("unit") == "m" and _kind(field) == "float":
+    if meta.get("unit") == "m" and value_kind(field) == "float":
         param = QgsProcessingParameterDistance(name, label, defaultValue=default, optional=optional)
         param.setDefaultUnit(Qgis.DistanceUnit.Meters)
     else:
-        kind = QgsProcessingParameterNumber.Integer if _kind(field) == "int" else QgsProcessingParameterNumber.Double
+        kind = (
+            QgsProcessingParameterNumber.Integer if value_kind(field) == "int" else QgsProcessingParameterNumber.Double
+        )
         param = QgsProcessingParameterNumber(name, label, type=kind, defaultValue=default, optional=optional)
     param.setMetadata({"widget_wrapper": {"decimals": decimals(default, meta.get("lo"))}})
     lo, hi = meta.get("lo"), meta.get("hi")
@@ -174,8 +132,6 @@ def read_options(
 def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> Any:
     name = key(field)
     if field.name in CRS_FIELDS:
-        from .params import crs_text
-
         return crs_text(alg, parameters, name, context)
     if field.name in POLYGON_FIELDS:
         if not parameters.get(name):
@@ -190,7 +146,7 @@ def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> 
 
 
 def _scalar(alg, field: Field, parameters: dict[str, Any], name: str, context) -> Any:
-    kind = _kind(field)
+    kind = value_kind(field)
     if kind == "bool":
         return alg.parameterAsBool(parameters, name, context)
     if kind not in ("float", "int"):

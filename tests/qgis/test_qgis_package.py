@@ -48,8 +48,8 @@ provider = registry.providerById("soilvolume")
 out["plugin_file"] = module.__file__
 out["algorithms"] = sorted(a.id() for a in provider.algorithms()) if provider else []
 out["menu_calls"] = iface.addPluginToMenu.call_count
-from soilvolume_qgis.processing import engine
-out["engine_file"] = engine.engine("options").__file__
+from soilvolume_qgis.processing import optiontable
+out["engine_file"] = optiontable.engine("options").__file__
 out["unloaded"] = utils.unloadPlugin("soilvolume_qgis")
 out["provider_after_unload"] = registry.providerById("soilvolume") is not None
 print("RESULT" + json.dumps(out))

@@ -29,7 +29,7 @@ def option_fields():
 
 
 def test_every_option_is_a_parameter(estimate):
-    from soilvolume_qgis.processing.engine import qgis_wording
+    from soilvolume_qgis.processing.optiontable import qgis_wording
 
     for field in option_fields():
         param = estimate.parameterDefinition(field.name.upper())
@@ -62,13 +62,13 @@ def test_lengths_are_distances_and_ranges_are_kept(estimate):
 
 
 def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
-    from soilvolume_qgis.processing import optionparams
+    from soilvolume_qgis.processing import optiontable
 
     @dataclass(frozen=True)
     class Wider(Options):
         max_slope: float = _opt(2.0, "steepest slope kept (m per m)", label="Steepest slope", lo=0.0, hi=10.0)
 
-    monkeypatch.setattr(optionparams, "options_class", lambda: Wider)
+    monkeypatch.setattr(optiontable, "options_class", lambda: Wider)
     alg = estimate.create({})  # a fresh instance, initAlgorithm run again
     param = alg.parameterDefinition("MAX_SLOPE")
     assert param is not None and param.description().startswith("Steepest slope")
@@ -113,40 +113,40 @@ def test_help_is_flowing_html(provider):
 
 def test_engine_messages_in_parameter_words(plugin_package):
     """Options the engine names by key are worded as parameters, no flag parsing involved."""
-    from soilvolume_qgis.processing import engine
+    from soilvolume_qgis.processing import optiontable
 
-    wording = engine.engine("core.wording")
-    text = engine.qgis_wording(f"coarse: skipped (87% within 0.4 m); {wording.opt('coarse', 'fpfh')} forces it")
+    wording = optiontable.engine("core.wording")
+    text = optiontable.qgis_wording(f"coarse: skipped (87% within 0.4 m); {wording.opt('coarse', 'fpfh')} forces it")
     assert "{" not in text and "'Coarse registration' (COARSE) = fpfh forces it" in text
     assert text.startswith("Coarse")
-    assert "(CELL)" in engine.qgis_wording(f"grid too large: use a larger {wording.opt('cell')}")
-    assert engine.qgis_wording(f"used as georeferenced ({wording.opt('georeferencing')})").endswith(
+    assert "(CELL)" in optiontable.qgis_wording(f"grid too large: use a larger {wording.opt('cell')}")
+    assert optiontable.qgis_wording(f"used as georeferenced ({wording.opt('georeferencing')})").endswith(
         "('Georeferencing of the surveys' (GEOREFERENCING))"
     )
-    assert engine.qgis_wording(f"set {wording.opt('cell')}, then run").endswith("(CELL), then run")
-    assert engine.qgis_wording("use --overwrite") == "Use --overwrite"  # text without markers is kept
+    assert optiontable.qgis_wording(f"set {wording.opt('cell')}, then run").endswith("(CELL), then run")
+    assert optiontable.qgis_wording("use --overwrite") == "Use --overwrite"  # text without markers is kept
     assert wording.cli(f"use {wording.opt('memory_limit', 4)}") == "use --memory-limit 4"
     page = wording.html(
         f"<style>a{{--x:1}}</style><td>skipped; {wording.opt('coarse', 'fpfh')} forces it &amp; more</td>"
     )
     assert "--coarse fpfh" in page  # the engine's page reads as the command line's
-    assert engine.reword_html(page) == (
+    assert optiontable.reword_html(page) == (
         "<style>a{--x:1}</style><td>skipped; 'Coarse registration' (COARSE) = fpfh forces it &amp; more</td>"
     )
 
 
 def test_option_errors_name_the_parameter(plugin_package):
-    from soilvolume_qgis.processing import engine
+    from soilvolume_qgis.processing import optiontable
 
     class OptionError(Exception):
         field, reason = "radius", "must be between 0 and 10000 m (got -1)"
 
-    text = engine.option_error_text(OptionError())
+    text = optiontable.option_error_text(OptionError())
     assert text == (
         "Incorrect parameter value for 'Crop radius around the after footprint' "
         "(RADIUS): must be between 0 and 10000 m (got -1)"
     )
-    assert engine.option_error_text(ValueError("plain")) is None
+    assert optiontable.option_error_text(ValueError("plain")) is None
 
 
 def test_a_point_cloud_layer_is_read_from_its_file(estimate, scene_dir):
