@@ -14,18 +14,18 @@ def _early(signum: int, _frame) -> None:
 
 
 def run() -> int:
-    """Install the early handlers, pause the garbage collector, import pyproj lean
-    (:mod:`.core.leanimport`) and the command line (it takes a moment), run it; ``main``
-    installs the run's own handlers."""
+    """Install the early handlers, pause the garbage collector, have pyproj imported lean when
+    the command imports it (:mod:`.core.leanimport`), import the command line (it takes a
+    moment), run it; ``main`` installs the run's own handlers."""
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _early)
     from .core.collector import pause
 
     pause()  # while the modules load (core.collector)
     one_blas_thread()
-    from .core.leanimport import import_pyproj
+    from .core import leanimport
 
-    import_pyproj()  # before anything imports it the ordinary way
+    leanimport.install()  # pyproj, when the command imports it
     from .cli import main
 
     return leave(main())

@@ -322,6 +322,27 @@ def test_the_command_imports_pyproj_without_its_network_modules_and_pyproj_still
     assert json.loads(r.stdout.splitlines()[-1]) == [0, False, False, False, False, True, "function"]
 
 
+def test_the_command_line_alone_imports_no_pyproj_and_the_first_import_is_the_lean_one():
+    """``python -m soilvolume``'s entry loads pyproj only when a command imports it (``--help``
+    never does), and that first import is the lean one, after which the hook is gone."""
+    probe = entry_probe(
+        "json",
+        [
+            "del sys.modules['soilvolume.cli']",
+            "import soilvolume.cli",
+            "hooked = lambda: any(type(f).__name__ == '_Finder' for f in sys.meta_path)",
+            "out = ['pyproj' in sys.modules, hooked()]",
+            "import pyproj",
+            "out += [hooked(), 'urllib.request' in sys.modules, type(pyproj.__spec__.loader).__name__]",
+            "print(json.dumps(out))",
+            "return 0",
+        ],
+    )
+    r = run_python(probe)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout.splitlines()[-1]) == [False, True, False, False, "_Loader"]
+
+
 def test_a_pyproj_that_uses_a_stand_in_while_it_loads_is_imported_the_ordinary_way(tmp_path):
     """Should a pyproj release use ``pyproj.sync`` at import time, it is loaded again without the
     stand-ins (a fake pyproj here: its ``__init__`` adds to a constant of its sync module)."""
@@ -331,8 +352,8 @@ def test_a_pyproj_that_uses_a_stand_in_while_it_loads_is_imported_the_ordinary_w
     (pkg / "sync.py").write_text("LEVEL = 41\n")
     code = (
         f"import sys; sys.path.insert(0, {str(tmp_path)!r})\n"
-        "from soilvolume.core.leanimport import import_pyproj\n"
-        "import_pyproj()\n"
+        "from soilvolume.core import leanimport\n"
+        "leanimport.install()\n"
         "import pyproj, pyproj.sync\n"
         "print(pyproj.VALUE, type(pyproj.sync).__name__)\n"
     )

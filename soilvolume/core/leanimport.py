@@ -2,15 +2,19 @@
 
 pyproj's ``__init__`` imports ``pyproj.sync`` (grid downloads: urllib.request, http.client, ssl,
 email) and ``pyproj._show_versions`` (importlib.metadata), ~25 ms of every run's start-up, for
-``TransformerGroup.download_grids`` and ``pyproj.show_versions``. While pyproj loads, both are
-stand-ins; a name taken from one is a function that imports the real module when it is called
-and calls the real function, so pyproj behaves as before; the stand-ins leave ``sys.modules``
-once pyproj is loaded (a later ``import pyproj.sync`` imports the real module).
+``TransformerGroup.download_grids`` and ``pyproj.show_versions``. :func:`install` makes the next
+import of pyproj, whoever asks for it and whenever (a command that never needs pyproj never loads
+it), run with both replaced by stand-ins; a name taken from one is a function that imports the
+real module when it is called and calls the real function, so pyproj behaves as before. The
+stand-ins leave ``sys.modules`` once pyproj is loaded (a later ``import pyproj.sync`` imports the
+real module).
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.abc
+import importlib.util
 import sys
 import types
 
@@ -32,23 +36,53 @@ class _StandIn(types.ModuleType):
         return deferred
 
 
-def import_pyproj() -> None:
-    """Import pyproj with :data:`STAND_INS` in place (once; nothing when it is imported already).
-    Should a pyproj release use something of them while it loads, it is imported again the
-    ordinary way; a pyproj that cannot be imported is left to the import that needs it."""
-    if "pyproj" in sys.modules:
-        return
-    placed = {name: _StandIn(name) for name in STAND_INS if name not in sys.modules}
-    sys.modules.update(placed)
-    try:
-        import pyproj  # noqa: F401
-    except Exception:  # noqa: BLE001 - the module that failed is out of sys.modules: imported again below
-        pass
-    finally:
-        for name, module in placed.items():
-            if sys.modules.get(name) is module:
-                del sys.modules[name]
-    try:
-        import pyproj  # noqa: F401, F811
-    except ImportError:  # not installed (or numpy missing): the command's own import says which
-        pass
+class _Loader(importlib.abc.Loader):
+    """pyproj's own loader, running its ``__init__`` with :data:`STAND_INS` in place; should a
+    pyproj release use something of them while it loads, it runs again without them."""
+
+    def __init__(self, real: importlib.abc.Loader) -> None:
+        self.real = real
+
+    def __getattr__(self, attr: str):  # resources, file names: the real loader's
+        return getattr(self.real, attr)
+
+    def create_module(self, spec):
+        return self.real.create_module(spec)
+
+    def exec_module(self, module) -> None:
+        placed = {name: _StandIn(name) for name in STAND_INS if name not in sys.modules}
+        sys.modules.update(placed)
+        try:
+            self.real.exec_module(module)
+            return
+        except Exception:  # noqa: BLE001 - the submodule that failed is out of sys.modules: run again below
+            pass
+        finally:
+            for name, stand_in in placed.items():
+                if sys.modules.get(name) is stand_in:
+                    del sys.modules[name]
+        self.real.exec_module(module)  # the ordinary way (a pyproj that cannot load says why here)
+
+
+class _Finder(importlib.abc.MetaPathFinder):
+    """Finds pyproj, once, through the other finders, and hands it :class:`_Loader`."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name != "pyproj":
+            return None
+        uninstall()
+        spec = importlib.util.find_spec(name)
+        if spec is not None and spec.loader is not None:
+            spec.loader = _Loader(spec.loader)
+        return spec
+
+
+def install() -> None:
+    """Have the next import of pyproj load it lean (nothing when it is imported already)."""
+    if "pyproj" not in sys.modules and not any(isinstance(f, _Finder) for f in sys.meta_path):
+        sys.meta_path.insert(0, _Finder())
+
+
+def uninstall() -> None:
+    """Imports of pyproj the ordinary way again."""
+    sys.meta_path[:] = [f for f in sys.meta_path if not isinstance(f, _Finder)]
