@@ -1,19 +1,20 @@
 """Imports a run will need, done in a background thread beside the steps that do not need them.
 
 Open3D (the registrations that use it: GICP, PFH, FPFH) takes ~0.4-0.6 s to import, most of it
-loading its native library, and a run needs it only after the inputs are read: imported in a
-thread from the start, it overlaps with the reading; the step that needs it waits on Python's
-module lock until it is complete. The other modules wait until the reading is done
-(:func:`reading_done`), or until the run waits on other processes (:func:`idle`: a tiled run's
-driver waiting for its first pass's tasks): the registration's and the volume step's (:data:`AFTER_READING`: SciPy's
-ndimage and sparse solvers), then rasterio (GeoTIFF output). The reading keeps both cores busy
-with its two threads; an import beside it, Python code holding the GIL, slowed it by more than it
-saved (paper pair, 2 cores: reading done ~50 ms later, the run ~40-90 ms longer, 25 interleaved
-runs), and the memory peak of a run is at the end of the reading, where rasterio would add its
-~20 MB. The registration runs on one core; the volume step's modules and rasterio load on the
-other meanwhile. Nothing is imported that the run would not import anyway. (Importing the later
-steps' modules, scipy.optimize and the report's, beside the registration's ICP was tried: no
-measurable gain on two cores, and ~30 MB more peak memory, the thread's allocations then.)
+loading its native library, and a run needs it only after the inputs are read: imported in a thread
+from the start, it overlaps with the reading; the step that needs it waits on Python's module lock
+until it is complete. The other modules wait until the reading is done (:func:`reading_done`), or
+until the run waits on other processes (:func:`idle`: a tiled run's driver waiting for its first
+pass's tasks): the registration's and the volume step's (:data:`AFTER_READING`: SciPy's ndimage and
+sparse solvers), then rasterio (GeoTIFF output). The reading keeps both cores busy with its two
+threads; an import beside it, holding the GIL in long C calls (unmarshalling, loading extensions),
+slowed it by more than it saved (paper pair, 2 cores: reading done ~50 ms later, the run ~40-90 ms
+longer, 25 interleaved runs), and the memory peak of a run is at the end of the reading, where
+rasterio would add its ~20 MB. The registration runs on one core; the volume step's modules and
+rasterio load on the other meanwhile. Nothing is imported that the run would not import anyway.
+(Importing the later steps' modules, scipy.optimize and the report's, beside the registration's ICP
+was tried: no measurable gain on two cores, and ~30 MB more peak memory, the thread's allocations
+then.)
 """
 
 from __future__ import annotations
