@@ -35,8 +35,8 @@ else
 fi
 find "$stage" \( -name __pycache__ -o -name '*.egg-info' -o -name .pytest_cache \
   -o -name .ruff_cache \) -prune -exec rm -rf {} +
-find "$stage" \( -name '*.pyc' -o -name '*.pyo' -o -name '.DS_Store' -o -name '*.partial.*' \) \
-  -delete
+find "$stage" \( -name '*.pyc' -o -name '*.pyo' -o -name '.DS_Store' -o -name '*.partial.*' \
+  -o -name '_soilvolume_kernels-*' -o -name '._soilvolume_kernels-*' \) -delete  # no binaries: the installer builds them
 
 mkdir -p "$dist"
 zipfile="$(cd "$dist" && pwd)/$name-$version.zip"

@@ -40,6 +40,9 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   .venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -c .venv/engine-constraints.txt -e '.[dev]'
   echo "$want" > "$stamp"
 fi
+# the engine's native kernels (soilvolume/native/kernels.c) for the dev venv and the tests; the
+# plugin's installer below finds them present (the same source, the same folder)
+.venv/bin/python -m soilvolume.native.build
 # the engine's own environment, built by the plugin's installer (as QGIS users get it); the QGIS
 # tests point the plugin to it (SOILVOLUME_ENGINE_ENV); quick when it is up to date
 /usr/bin/python3 plugin/environment.py install .engine-env | grep -v '^WARNING: Location' | tail -3

@@ -72,10 +72,10 @@ def copc_chunks(
     """(absolute xyz float64, classification or None) of the points of a COPC file within the
     x/y box lo..hi (inclusive), at most ``size`` at a time, read from the octree nodes meeting
     the box (down to the level of ``resolution`` when given); with ``signals`` also their colour
-    and returns (:func:`io.point_signals`)."""
+    and returns (:func:`records.point_signals`)."""
     laspy = laspy_module()
 
-    from .io import point_signals
+    from .records import point_signals
 
     try:
         with laspy.CopcReader.open(str(path)) as reader:

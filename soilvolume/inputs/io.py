@@ -7,7 +7,7 @@ Readers return absolute float64 coordinates in the file's own CRS and units; CRS
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,8 +16,9 @@ import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import Signals
-from .lasheader import BoundsCheck, check_las_header
+from .lasheader import check_las_header
 from .lasimport import laspy_module
+from .records import decoded_xyz, las_chunks, point_signals, scaled_xyz, signal_dims  # noqa: F401  (their home was this module)
 
 LAS_SUFFIXES = {".las", ".laz"}
 GROUND = 2  # the LAS classification of ground points
@@ -133,93 +134,6 @@ def _read_las(path: Path) -> RawPoints:
             cls[start : start + len(part)] = part_cls
         start += len(part)
     return RawPoints(xyz, cls, wkt, str(path))
-
-
-def las_chunks(
-    path: Path, count: int, size: int, signals: bool | Callable = False, origin: np.ndarray | None = None
-) -> Iterator[tuple]:
-    """(absolute xyz float64, classification or None) of a LAS/LAZ file, ``size`` points at a
-    time; a point count other than the header's ``count`` is reported as a corrupt file. With
-    ``signals``, a third item: the points' colour and returns (:func:`point_signals`; a function:
-    of the dimensions it names for each chunk's classification, see :func:`signal_dims`).
-    With ``origin``, the coordinates are ``xyz - origin`` (the subtraction done in the decoding)."""
-    laspy = laspy_module()
-
-    read = 0
-    try:
-        with laspy.open(path) as reader:
-            h = reader.header
-            dims = set(h.point_format.dimension_names)
-            has_cls = "classification" in dims
-            bounds = BoundsCheck(path, h)
-            for chunk in reader.chunk_iterator(size):
-                xyz, lo, hi = decoded_xyz(chunk, origin)
-                if len(xyz):
-                    bounds.extend(lo, hi)
-                read += len(chunk)
-                cls = np.array(chunk.classification) if has_cls else None  # a copy: a view pins the record
-                item = (xyz, cls, point_signals(chunk, signal_dims(dims, signals, cls))) if signals else (xyz, cls)
-                del chunk, xyz, cls  # the record is not held while the consumer works (or the queue is full)
-                yield item
-    except SoilVolumeError:
-        raise
-    except Exception as exc:
-        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
-    if read != count:
-        raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
-    bounds.finish()
-
-
-def signal_dims(dims: set[str], signals, cls: np.ndarray | None) -> set[str]:
-    """The dimensions of ``dims`` a read with ``signals`` returns for a chunk of classification
-    ``cls``: all (True), or those ``signals(cls)`` names."""
-    return dims if signals is True else dims & set(signals(cls))
-
-
-def scaled_xyz(chunk) -> np.ndarray:
-    """(N, 3) float64 coordinates of a laspy point record: ``X * scale + offset`` as laspy computes them."""
-    return decoded_xyz(chunk)[0]
-
-
-BLOCK = 1 << 14  # points decoded at a time: a block's column stays in the cache through its passes
-
-
-def decoded_xyz(chunk, origin: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(xyz, lo, hi) of a laspy point record: the (N, 3) float64 coordinates ``X * scale + offset``
-    as laspy computes them (minus ``origin`` when given, as ``xyz - origin`` would), and the
-    per-axis min and max of ``X * scale + offset`` (the absolute coordinates), block by block
-    through a small scratch column (one pass over memory instead of one per operation)."""
-    n = len(chunk)
-    xyz = np.empty((n, 3))
-    if n == 0:
-        return xyz, np.full(3, np.inf), np.full(3, -np.inf)
-    ints = [chunk.array[name] for name in "XYZ"]
-    scratch = np.empty(min(n, BLOCK))
-    lows, highs = np.empty((3, -(-n // BLOCK))), np.empty((3, -(-n // BLOCK)))
-    with np.errstate(over="ignore", invalid="ignore"):  # checked against the bounds by the caller
-        for b, start in enumerate(range(0, n, BLOCK)):
-            stop = min(n, start + BLOCK)
-            t = scratch[: stop - start]
-            for k in range(3):
-                np.multiply(ints[k][start:stop], chunk.scales[k], out=t)
-                np.add(t, chunk.offsets[k], out=t)
-                lows[k, b], highs[k, b] = t.min(), t.max()
-                if origin is None:
-                    xyz[start:stop, k] = t
-                else:
-                    np.subtract(t, origin[k], out=xyz[start:stop, k])
-    return xyz, lows.min(axis=1), highs.max(axis=1)
-
-
-def point_signals(record, dims: set[str]) -> Signals | None:
-    """The colour (red, green, blue) and return numbers of a laspy point record, when its point
-    format has them (None when it has neither)."""
-    rgb = ret = None
-    if {"red", "green", "blue"} <= dims:
-        rgb = np.column_stack([np.asarray(record.red), np.asarray(record.green), np.asarray(record.blue)])
-    if {"return_number", "number_of_returns"} <= dims:
-        ret = np.column_stack([np.asarray(record.return_number), np.asarray(record.number_of_returns)]).astype(np.uint8)
-    return None if rgb is None and ret is None else Signals(rgb, ret)
 
 
 def _read_o3d(path: Path) -> RawPoints:

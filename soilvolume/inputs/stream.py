@@ -17,23 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.cells import bounds, in_box, rows
+from ..core.cells import bounds
+from ..core.readahead import prefetch
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide, deciding_dims
+from .chunkwork import Growing, NativeChunks, keep_chunk
 from .copc import copc_chunks, is_copc
-from .io import (
-    GROUND,
-    LAS_SUFFIXES,
-    RawPoints,
-    _check_readable,
-    las_chunks,
-    las_crs_wkt,
-    point_signals,
-    read_points,
-    signal_dims,
-    validate,
-)
+from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
 from .lasimport import laspy_module
+from .records import las_chunks, las_records, point_signals, signal_dims
 from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
 
@@ -71,6 +63,13 @@ class Source:
             return
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
+
+    def records(self, size: int | None = None, signals: bool | Callable = False) -> Iterator[tuple]:
+        """(:class:`~soilvolume.inputs.records.Records`, classification or None, signals) of each
+        chunk of the source's LAS/LAZ files read whole, undecoded (the native kernel's input;
+        :func:`native_reads` says when a source can)."""
+        for path in self.tiles():
+            yield from las_records(Path(path), _header(Path(path)).count, size or CHUNK, signals)
 
     def within(self, lo, hi) -> Source:
         """This source, read only where it can meet the x/y box lo..hi (file CRS)."""
@@ -206,65 +205,6 @@ def from_raw(raw: RawPoints) -> Source:
     )
 
 
-def prefetch(chunks: Iterator, depth: int = 1) -> Iterator:
-    """``chunks`` read ahead by a thread (decoding overlaps the caller: numpy releases the GIL); errors re-raised."""
-    import queue
-    import threading
-
-    q: queue.Queue = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-    end = object()
-
-    def run() -> None:
-        try:
-            for item in chunks:
-                if stop.is_set():
-                    return
-                q.put(item)
-            q.put(end)
-        except BaseException as exc:  # handed to the consumer
-            q.put(exc)
-
-    worker = threading.Thread(target=run, daemon=True)
-    worker.start()
-    try:
-        while True:
-            item = q.get()
-            if item is end:
-                return
-            if isinstance(item, BaseException):
-                raise item
-            yield item
-    finally:
-        stop.set()
-        while worker.is_alive():  # unblock a producer waiting on a full queue
-            try:
-                q.get_nowait()
-            except queue.Empty:
-                worker.join(0.05)
-
-
-class _Parts:
-    """Kept points appended into one float32 buffer sized by the header count (pages never
-    written are never resident), so no concatenation copy is needed."""
-
-    def __init__(self, capacity: int) -> None:
-        self.buf = np.empty((max(capacity, 0), 3), np.float32)
-        self.n = 0
-
-    def append(self, xyz: np.ndarray) -> None:
-        m = len(xyz)
-        if self.n + m > len(self.buf):  # more points than the header said: grow
-            grown = np.empty((max(2 * len(self.buf), self.n + m), 3), np.float32)
-            grown[: self.n] = self.buf[: self.n]
-            self.buf = grown
-        self.buf[self.n : self.n + m] = xyz
-        self.n += m
-
-    def result(self) -> np.ndarray:
-        return self.buf[: self.n]
-
-
 @dataclass
 class Loaded:
     """One epoch after streaming: kept soil points (float32 local), the thinned subset (float64
@@ -298,16 +238,19 @@ def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str
 
 def _labelled(
     src: Source, to_local, boxes: bool, mode: str, exclude: str, keep: Callable | None = None
-) -> tuple[Iterator[tuple], Callable]:
-    """The chunks of ``src`` read ahead by a thread (:func:`prefetch`) as (xyz, labels or None,
+) -> tuple[Iterator[tuple], Callable, bool]:
+    """The chunks of ``src`` read ahead by a thread (:func:`prefetch`) as (points, labels or None,
     the epoch's rule, x/y box of the file coordinates when ``boxes``, ``keep`` of the points or
-    None), and the conversion to the local frame still to apply to xyz. The thread decides the
-    rule on the first chunk (:func:`epoch_rule`), labels every chunk, reads only the signals the
-    rule (or its decision) uses, and subtracts the origin of a plain shift (``prepare.Shift``) in
-    the decoding; then the points are local already, and the thread also applies ``keep`` (the
+    None), the conversion to the local frame still to apply to the points, and whether they come
+    as undecoded :class:`~soilvolume.inputs.records.Records` (the native kernel decodes, crops and
+    thins them: :func:`native_reads`). The thread decides the rule on the first chunk
+    (:func:`epoch_rule`), labels every chunk and reads only the signals the rule (or its decision)
+    uses. Without the kernel, it subtracts the origin of a plain shift (``prepare.Shift``) in the
+    decoding; then the points are local already, and the thread also applies ``keep`` (the
     footprint test: the reading thread has time to spare, the consumer has none)."""
+    native = native_reads(src, to_local, keep)
     fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
-    early = keep if fused else None
+    early = keep if fused and not native else None
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
 
@@ -316,15 +259,39 @@ def _labelled(
 
     def run() -> Iterator[tuple]:
         nonlocal rule
-        for xyz, cls, sig in src.chunks(signals=wanted, origin=to_local.origin if fused else None):
+        if native:
+            chunks = src.records(signals=wanted)
+        else:
+            chunks = src.chunks(signals=wanted, origin=to_local.origin if fused else None)
+        for xyz, cls, sig in chunks:
             if rule is None:
                 rule = epoch_rule(src, cls, sig, mode, exclude)
             inside = None if early is None else early(xyz)
-            item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes else None, inside
+            item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes and not native else None, inside
             del xyz, cls, sig, inside  # held by the item only
             yield item
 
-    return prefetch(run()), shift
+    return prefetch(run()), shift, native
+
+
+def _joined(span: tuple, got) -> tuple[np.ndarray, np.ndarray]:
+    """An x/y box grown by a piece's bounds."""
+    return np.minimum(span[0], got.lo[:2]), np.maximum(span[1], got.hi[:2])
+
+
+def native_reads(src: Source, to_local, keep: Callable | None) -> bool:
+    """Whether ``src`` streams through the native chunk kernel: the library is there, the source is
+    LAS/LAZ files read whole (not COPC nodes, not indexed ranges), the frame is a plain shift and
+    the crop (if any) a rasterized polygon."""
+    from ..native import kernels
+
+    if kernels() is None or src.raw is not None or not hasattr(to_local, "inplace"):
+        return False
+    if keep is not None and not hasattr(keep, "framed"):
+        return False
+    if src.region is not None and (src.index is not None or any(is_copc(t) for t in src.tiles())):
+        return False
+    return True
 
 
 def load(
@@ -344,13 +311,17 @@ def load(
     which ``keep`` is true (all when None) and feed them to ``thinner``; only those within the
     x/y ``box`` (lo, hi; everything when None) are kept at full resolution, with the points that
     are not soil beside them. ``indexed``: also record each chunk's x/y box (``extra["index"]``)."""
-    parts = _Parts(src.count if box is None or (box[1] >= box[0]).all() else 0)
-    others, other_labels = _Parts(0), []
+    parts = Growing(src.count if box is None or (box[1] >= box[0]).all() else 0)
+    others, other_labels = Growing(0), Growing(0, None, np.uint8)
     points = used = 0
     rule: PointRule | None = None
-    reading, cropped = 0.0, 0
+    reading, cropped, start, span = 0.0, 0, 0, None
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
-    chunks, shift = _labelled(src, to_local, index is not None, mode, exclude, keep)
+    chunks, shift, native = _labelled(src, to_local, index is not None, mode, exclude, keep)
+    if native:
+        from ..native import kernels
+
+        kernel = NativeChunks(kernels(), thinner, keep, box, to_local.origin, CHUNK)
     while True:
         t0 = time.perf_counter()
         try:
@@ -361,30 +332,27 @@ def load(
             reading += time.perf_counter() - t0
         if check:
             check()
-        if index is not None:
-            index.append((points, len(local), *xy_box))
+        if native:
+            got = kernel.add(local, labels, parts, others, other_labels)
+            local.check.extend(got.lo, got.hi)
+            if local.last:
+                local.check.finish()
+            if index is not None:
+                piece = (got.lo[:2], got.hi[:2]) if span is None else _joined(span, got)
+                span, xy_box = (None, piece) if local.flush else (piece, None)
+            n_crop, n_soil = got.cropped, got.soil
+        else:
+            local = shift(local)
+            if inside is None and keep is not None:  # not tested by the reading thread
+                inside = keep(local)
+            soil = None if labels is None else labels == SOIL
+            n_crop, n_soil = keep_chunk(local, soil, inside, labels, thinner, box, parts, others, other_labels)
+        if index is not None and xy_box is not None:  # a chunk's box (native: once its last piece passed)
+            index.append((start, points + len(local) - start, *xy_box))
         points += len(local)
-        local = shift(local)
-        soil = None if labels is None else labels == SOIL
-        used += len(local) if soil is None else int(soil.sum())
-        if inside is None and keep is not None:  # not tested by the reading thread
-            inside = keep(local)
-        if soil is not None:  # the points that are not soil, within the crop and the box
-            other = ~soil if inside is None else ~soil & inside
-            o_xyz, o_lab = rows(local, other), labels[other]
-            if box is not None:
-                near = in_box(o_xyz, *box)
-                o_xyz, o_lab = rows(o_xyz, near), o_lab[near]
-            others.append(o_xyz)
-            other_labels.append(o_lab)
-        mask = soil if inside is None else (inside if soil is None else soil & inside)
-        if mask is not None:  # one compress for soil and crop
-            local = rows(local, mask)
-        thinner.add(local)
-        cropped += len(local)
-        if box is not None:
-            local = rows(local, in_box(local, *box))
-        parts.append(local)
+        start = start if xy_box is None else points
+        used += n_soil
+        cropped += n_crop
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()
     extra = {
@@ -393,6 +361,5 @@ def load(
         "counts": thinner.counts(),
         "index": None if index is None else tuple(index),
     }
-    labels = np.concatenate(other_labels) if other_labels else np.empty(0, np.uint8)
-    nonsoil = NonSoil(others.result(), labels, rule) if rule.active else None
+    nonsoil = NonSoil(others.result(), other_labels.result(), rule) if rule.active else None
     return Loaded(parts.result(), thinner.result(), points, used, note, extra, nonsoil)

@@ -34,6 +34,17 @@ class ColumnThinner:
                 "thin: the extent is far larger than the points (corrupt header bounds, or {opt:radius} too large)"
             )
         self.sums = np.zeros((4, n))
+        self._native: tuple | None = None
+
+    def native_state(self, chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What the native kernel keeps beside the sums (made once; ``chunk``: the most points
+        between two flushes): the chunk that last touched each column (int32 zeros), and room to
+        set aside the sums of ``chunk`` columns (ids, 4 values each)."""
+        if self._native is None:
+            n = self.sums.shape[1]
+            room = min(n, chunk)
+            self._native = (np.zeros(n, np.int32), np.empty(room, np.int64), np.empty((room, 4)))
+        return self._native
 
     def add(self, xyz: np.ndarray) -> None:
         """Add a chunk's points: sums over the span of column ids the chunk meets only (a chunk

@@ -99,6 +99,10 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
     ``floor((v - lo) / cell)`` per axis (:func:`~soilvolume.core.cells.cell_index`, kept in float:
     the flat ids are exact integers), points off the grid go to one extra bin that is dropped
     (each cell's sum runs over its points in order)."""
+    from ..native import kernels
+
+    if kernels() is not None and len(xyz):
+        return _native_binned(kernels(), xyz, lo, cell, shape)
     n = shape[0] * shape[1]
     fx, fy = _floor_index(xyz[:, 0], lo[0], cell), _floor_index(xyz[:, 1], lo[1], cell)
     off = ~((fx >= 0) & (fy >= 0) & (fx < shape[1]) & (fy < shape[0]))
@@ -111,6 +115,37 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
     means = np.empty((len(has), 3))
     for k in range(3):
         means[:, k] = np.bincount(ids, weights=xyz[:, k], minlength=n + 1)[has] / count[has]
+    return Columns(means, has // shape[1], has % shape[1], shape, lo, cell)
+
+
+def _native_binned(lib, xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]) -> Columns:
+    """:func:`_binned` on the native kernel (``sv_columns``): the same columns, bit for bit."""
+    from ..native import zeros
+
+    n = shape[0] * shape[1]
+    step = xyz.strides[0] // 8
+    if xyz.dtype != np.float64 or xyz.strides[1] % 8 or step * 8 != xyz.strides[0]:
+        xyz, step = np.ascontiguousarray(xyz, np.float64), 3
+    count, sums = zeros("columns_count", n, np.int64), zeros("columns_sums", 3 * n, np.float64)
+    has, means = np.empty(min(n, len(xyz)), np.int64), np.empty((min(n, len(xyz)), 3))
+    base, k = xyz.ctypes.data, xyz.strides[1]
+    m = lib.sv_columns(
+        base,
+        base + k,
+        base + 2 * k,
+        len(xyz),
+        step,
+        float(lo[0]),
+        float(lo[1]),
+        float(cell),
+        shape[0],
+        shape[1],
+        count.ctypes.data,
+        sums.ctypes.data,
+        has.ctypes.data,
+        means.ctypes.data,
+    )
+    has, means = has[:m], means[:m]
     return Columns(means, has // shape[1], has % shape[1], shape, lo, cell)
 
 

@@ -40,6 +40,8 @@ def test_no_venv_no_pip_installs_a_working_isolated_engine(plugin_package, tmp_p
     assert environment.load(folder) == env
     assert any("downloading pip's wheel from PyPI" in line for line in lines), lines[:20]
     assert any(line.startswith("Self-test passed") for line in lines)
+    assert not any(line.startswith("Native kernels: not built") for line in lines)  # a C compiler is here
+    assert list((environment.PLUGIN_DIR / "soilvolume" / "native").glob("_soilvolume_kernels-*"))
     version, where, path = probe(env, "pyproj")
     assert version == "3.7.2" and where.startswith(env.site)  # the lock's pyproj, from the folder
     assert [p for p in path if "dist-packages" in p or "site-packages" in p] == [env.site]

@@ -77,9 +77,11 @@ def test_zip_contents(plugin_zip):
         "soilvolume/workflow/estimate.py",
         "plugin/engine-lock.txt",
         "plugin/environment.py",
+        "soilvolume/native/kernels.c",
+        "soilvolume/native/build.py",
     ):
         assert f"soilvolume_qgis/{required}" in names, required
-    for banned in ("tests/", ".venv/", "__pycache__", ".pyc", ".git/", "egg-info", "bench/"):
+    for banned in ("tests/", ".venv/", "__pycache__", ".pyc", ".git/", "egg-info", "bench/", "_soilvolume_kernels-"):
         assert not any(banned in n for n in names), banned
 
 

@@ -1,0 +1,145 @@
+"""A streamed chunk's work on the native kernel (``sv_chunk``, :mod:`soilvolume.native`): decode the
+point records into the working frame, crop to the footprint, split soil from the rest, add the
+soil points to the thinning columns and keep those within the box as float32, in one pass.
+
+Its numpy twin is :func:`numpy_chunk` (the path :func:`soilvolume.inputs.stream.load` takes without
+the library): the same values, bit for bit."""
+
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.cells import in_box, rows
+from ..native.chunk import ChunkArgs, address
+from .records import Records, decoded_xyz
+from .thinning import ColumnThinner
+
+
+class Growing:
+    """Rows appended into one buffer sized up front (pages never written are never resident) and
+    grown by doubling past it; :meth:`room` hands a kernel the free tail to write into."""
+
+    def __init__(self, capacity: int, width: int | None = 3, dtype=np.float32) -> None:
+        self.shape = (width,) if width else ()
+        self.buf = np.empty((max(capacity, 0), *self.shape), dtype)
+        self.n = 0
+
+    def room(self, m: int) -> np.ndarray:
+        """The buffer's free tail, at least ``m`` rows (grown when needed)."""
+        if self.n + m > len(self.buf):
+            grown = np.empty((max(2 * len(self.buf), self.n + m), *self.shape), self.buf.dtype)
+            grown[: self.n] = self.buf[: self.n]
+            self.buf = grown
+        return self.buf[self.n :]
+
+    def append(self, rows_: np.ndarray) -> None:
+        self.room(len(rows_))[: len(rows_)] = rows_
+        self.n += len(rows_)
+
+    def result(self) -> np.ndarray:
+        return self.buf[: self.n]
+
+
+@dataclass
+class Counted:
+    """What one chunk gave: points cropped in (soil within the footprint), soil points, and the
+    per-axis bounds of the decoded absolute coordinates."""
+
+    cropped: int
+    soil: int
+    lo: np.ndarray
+    hi: np.ndarray
+
+
+class NativeChunks:
+    """One epoch's chunks on ``sv_chunk``: the crop ``polygon`` (a ``PolygonMask`` or None), the
+    ``thinner``, the x/y ``box`` of the points kept at full resolution (None: all) and the local
+    ``origin`` stay; each :meth:`add` passes one piece of a chunk (``chunk``: the most points of a
+    chunk, whose column sums are added up when its last piece has passed: :class:`Records`)."""
+
+    def __init__(self, lib: ctypes.CDLL, thinner: ColumnThinner, polygon, box, origin: np.ndarray, chunk: int) -> None:
+        self.lib, self.thinner = lib, thinner
+        a = self.args = ChunkArgs()
+        a.origin[:] = [float(v) for v in origin]
+        self.framed = None
+        if polygon is not None:
+            self.framed = np.ascontiguousarray(polygon.framed, np.uint8)
+            a.framed = address(self.framed)
+            a.plo[:], a.pres = [float(v) for v in polygon.lo], float(polygon.res)
+            a.prows, a.pcols = polygon.mask.shape
+        a.tlo[:], a.voxel = [float(v) for v in thinner.lo], thinner.voxel
+        a.first[:], a.shape[:] = [int(v) for v in thinner.first], [int(v) for v in thinner.shape]
+        self.state = thinner.native_state(chunk)
+        a.ncols, a.sums = thinner.sums.shape[1], address(thinner.sums)
+        a.mark, a.side_ids, a.side = (address(x) for x in self.state)
+        a.chunk, a.nside = 1, 0
+        a.use_box = int(box is not None)
+        if box is not None:
+            a.box[:] = [float(box[0][0]), float(box[0][1]), float(box[1][0]), float(box[1][1])]
+        self.holds = box is None or bool((np.asarray(box[1]) >= np.asarray(box[0])).all())  # a box points can be in
+
+    def add(self, rec: Records, labels: np.ndarray | None, parts: Growing, others: Growing, other_labels: Growing):
+        """One chunk: its kept soil points appended to ``parts``, the points that are not soil
+        (within the crop and the box) to ``others`` with their labels; returns :class:`Counted`."""
+        a, n = self.args, len(rec)
+        array = np.ascontiguousarray(rec.array)
+        fields = array.dtype.fields
+        a.rec, a.n, a.stride = address(array), n, array.dtype.itemsize
+        a.field[:] = [fields[k][1] for k in "XYZ"]
+        a.scale[:], a.offset[:] = [float(v) for v in rec.scales], [float(v) for v in rec.offsets]
+        lab = None if labels is None else np.ascontiguousarray(labels, np.uint8)
+        a.labels, a.flush = address(lab), int(rec.flush)
+        room = n if self.holds else 0
+        a.out = address(parts.room(room))
+        a.others = address(others.room(room if lab is not None else 0))
+        a.other_labels = address(other_labels.room(room if lab is not None else 0))
+        self.lib.sv_chunk(ctypes.byref(a))
+        parts.n += a.kept
+        others.n += a.other
+        other_labels.n += a.other
+        return Counted(a.cropped, a.soil, np.array(a.lo[:]), np.array(a.hi[:]))
+
+
+def numpy_chunk(
+    rec: Records,
+    labels: np.ndarray | None,
+    origin: np.ndarray,
+    polygon,
+    thinner: ColumnThinner,
+    box,
+    parts: Growing,
+    others: Growing,
+    other_labels: Growing,
+) -> Counted:
+    """:meth:`NativeChunks.add` in numpy (the twin the tests hold the kernel to; the streaming
+    without the library runs the same steps, split between its reading and consuming threads)."""
+    local, lo, hi = decoded_xyz(rec, origin)
+    soil = None if labels is None else labels == 0
+    inside = None if polygon is None else polygon(local)
+    return Counted(*keep_chunk(local, soil, inside, labels, thinner, box, parts, others, other_labels), lo, hi)
+
+
+def keep_chunk(local, soil, inside, labels, thinner, box, parts, others, other_labels) -> tuple[int, int]:
+    """The numpy consumer's part of a chunk of ``local`` points (``soil`` and ``inside``: masks or
+    None for all): (points cropped in, soil points)."""
+    n_soil = len(local) if soil is None else int(soil.sum())
+    if soil is not None:  # the points that are not soil, within the crop and the box
+        other = ~soil if inside is None else ~soil & inside
+        o_xyz, o_lab = rows(local, other), labels[other]
+        if box is not None:
+            near = in_box(o_xyz, *box)
+            o_xyz, o_lab = rows(o_xyz, near), o_lab[near]
+        others.append(o_xyz)
+        other_labels.append(o_lab)
+    mask = soil if inside is None else (inside if soil is None else soil & inside)
+    if mask is not None:  # one compress for soil and crop
+        local = rows(local, mask)
+    thinner.add(local)
+    cropped = len(local)
+    if box is not None:
+        local = rows(local, in_box(local, *box))
+    parts.append(local)
+    return cropped, n_soil

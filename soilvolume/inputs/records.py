@@ -1,0 +1,182 @@
+"""A LAS/LAZ file's points as raw point records, chunk by chunk, for the native kernels
+(:mod:`soilvolume.native`), which decode them in the same pass as the rest of a chunk's work.
+
+Uncompressed files are read into three buffers used in turn (no fresh memory per chunk: on a
+virtual machine a page fault costs microseconds, and laspy's reader zeroes and faults a new
+buffer for every chunk); LAZ chunks are the records lazrs decompresses. A consumer may hold one
+chunk while the next waits in a queue of one (:func:`soilvolume.inputs.stream.prefetch`) and the
+reader fills the third."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.types import SoilVolumeError, short_error
+from ..soil.points import Signals
+from .lasheader import BoundsCheck
+from .lasimport import laspy_module
+
+PIECE = 125_000  # points read at a time (a chunk of 1 M points in 8 pieces: 3.75 MB buffers of 30-byte records)
+RING = 3  # buffers of an uncompressed read in turn: the consumer's, the queued one, the one being read
+
+
+@dataclass
+class Records:
+    """One chunk of a file's point records, not decoded: its structured array (laspy's point
+    format), the header's scales and offsets, the file's bounds check (the consumer extends it
+    with the chunk's decoded bounds) and whether it is the file's last chunk (then the consumer
+    finishes the check)."""
+
+    array: np.ndarray
+    scales: np.ndarray
+    offsets: np.ndarray
+    check: BoundsCheck
+    last: bool
+    flush: bool = True  # the last piece of a chunk of ``size`` points (the numpy path's chunk)
+
+    def __len__(self) -> int:
+        return len(self.array)
+
+
+def las_records(
+    path: Path, count: int, size: int, signals: bool | Callable = False, piece: int = PIECE, ring: int = RING
+) -> Iterator[tuple]:
+    """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most
+    ``piece`` points, each chunk of ``size`` points (the numpy path's) ending on a piece marked
+    ``flush``; a point count other than the header's ``count`` is a corrupt file. An uncompressed
+    file is read into ``ring`` buffers in turn (one, when each piece is done with before the next)."""
+    laspy = laspy_module()
+    read = 0
+    try:
+        with laspy.open(path) as reader:
+            h = reader.header
+            dims = set(h.point_format.dimension_names)
+            has_cls = "classification" in dims
+            scales, offsets = np.asarray(h.scales, float), np.asarray(h.offsets, float)
+            check = BoundsCheck(path, h)
+            lengths = pieces(count, size, piece)
+            arrays = _laz(reader, lengths) if h.are_points_compressed else _raw(path, h, lengths, ring)
+            for array in arrays:
+                read += len(array)
+                rec = laspy.ScaleAwarePointRecord(array, h.point_format, scales, offsets)
+                cls = np.array(rec.classification) if has_cls else None
+                sig = point_signals(rec, signal_dims(dims, signals, cls)) if signals else None
+                item = Records(array, scales, offsets, check, read >= count, read % size == 0 or read >= count)
+                yield (item, cls, sig) if signals else (item, cls)
+                del rec, item, array
+    except SoilVolumeError:
+        raise
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
+    if read != count:
+        raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
+
+
+def las_chunks(
+    path: Path, count: int, size: int, signals: bool | Callable = False, origin: np.ndarray | None = None
+) -> Iterator[tuple]:
+    """(absolute xyz float64, classification or None) of a LAS/LAZ file, ``size`` points at a
+    time; a point count other than the header's ``count`` is reported as a corrupt file. With
+    ``signals``, a third item: the points' colour and returns (:func:`point_signals`; a function:
+    of the dimensions it names for each chunk's classification, see :func:`signal_dims`).
+    With ``origin``, the coordinates are ``xyz - origin`` (the subtraction done in the decoding).
+    The records are decoded here, so one read buffer serves every chunk."""
+    for rec, cls, *sig in las_records(path, count, size, signals, piece=size, ring=1):
+        xyz, lo, hi = decoded_xyz(rec, origin)
+        if len(xyz):
+            rec.check.extend(lo, hi)
+        if rec.last:
+            rec.check.finish()
+        item = (xyz, cls, sig[0]) if signals else (xyz, cls)
+        del rec, xyz, cls, sig  # the record is not held while the consumer works (or the queue is full)
+        yield item
+
+
+def signal_dims(dims: set[str], signals, cls: np.ndarray | None) -> set[str]:
+    """The dimensions of ``dims`` a read with ``signals`` returns for a chunk of classification
+    ``cls``: all (True), or those ``signals(cls)`` names."""
+    return dims if signals is True else dims & set(signals(cls))
+
+
+def scaled_xyz(chunk) -> np.ndarray:
+    """(N, 3) float64 coordinates of a laspy point record: ``X * scale + offset`` as laspy computes them."""
+    return decoded_xyz(chunk)[0]
+
+
+BLOCK = 1 << 14  # points decoded at a time: a block's column stays in the cache through its passes
+
+
+def decoded_xyz(chunk, origin: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(xyz, lo, hi) of a laspy point record: the (N, 3) float64 coordinates ``X * scale + offset``
+    as laspy computes them (minus ``origin`` when given, as ``xyz - origin`` would), and the
+    per-axis min and max of ``X * scale + offset`` (the absolute coordinates), block by block
+    through a small scratch column (one pass over memory instead of one per operation)."""
+    n = len(chunk)
+    xyz = np.empty((n, 3))
+    if n == 0:
+        return xyz, np.full(3, np.inf), np.full(3, -np.inf)
+    ints = [chunk.array[name] for name in "XYZ"]
+    scratch = np.empty(min(n, BLOCK))
+    lows, highs = np.empty((3, -(-n // BLOCK))), np.empty((3, -(-n // BLOCK)))
+    with np.errstate(over="ignore", invalid="ignore"):  # checked against the bounds by the caller
+        for b, start in enumerate(range(0, n, BLOCK)):
+            stop = min(n, start + BLOCK)
+            t = scratch[: stop - start]
+            for k in range(3):
+                np.multiply(ints[k][start:stop], chunk.scales[k], out=t)
+                np.add(t, chunk.offsets[k], out=t)
+                lows[k, b], highs[k, b] = t.min(), t.max()
+                if origin is None:
+                    xyz[start:stop, k] = t
+                else:
+                    np.subtract(t, origin[k], out=xyz[start:stop, k])
+    return xyz, lows.min(axis=1), highs.max(axis=1)
+
+
+def point_signals(record, dims: set[str]) -> Signals | None:
+    """The colour (red, green, blue) and return numbers of a laspy point record, when its point
+    format has them (None when it has neither)."""
+    rgb = ret = None
+    if {"red", "green", "blue"} <= dims:
+        rgb = np.column_stack([np.asarray(record.red), np.asarray(record.green), np.asarray(record.blue)])
+    if {"return_number", "number_of_returns"} <= dims:
+        ret = np.column_stack([np.asarray(record.return_number), np.asarray(record.number_of_returns)]).astype(np.uint8)
+    return None if rgb is None and ret is None else Signals(rgb, ret)
+
+
+def pieces(count: int, size: int, piece: int) -> list[int]:
+    """The lengths of the pieces of ``count`` points read in chunks of ``size``, each chunk in
+    pieces of at most ``piece`` (no piece straddles two chunks)."""
+    out = []
+    for start in range(0, count, size):
+        m = min(size, count - start)
+        out += [min(piece, m - k) for k in range(0, m, piece)]
+    return out
+
+
+def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
+    for m in lengths:
+        part = reader.read_points(m)
+        if len(part) == 0:  # fewer points than the header says: las_records reports it
+            return
+        yield part.array
+
+
+def _raw(path: Path, header, lengths: list[int], ring: int) -> Iterator[np.ndarray]:
+    """The records of an uncompressed file read into ``ring`` buffers in turn."""
+    dtype = header.point_format.dtype()
+    stride = dtype.itemsize
+    room = max(lengths, default=0) * stride
+    buffers = [np.empty(room, np.uint8) for _ in range(min(ring, len(lengths)))]  # pages faulted when read
+    with open(path, "rb") as fh:
+        fh.seek(header.offset_to_point_data)
+        for k, m in enumerate(lengths):
+            view = buffers[k % len(buffers)][: m * stride]
+            got = fh.readinto(view) or 0
+            yield np.frombuffer(view, dtype=dtype, count=got // stride)
+            if got != m * stride:
+                return

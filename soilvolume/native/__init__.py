@@ -1,0 +1,101 @@
+"""The engine's native kernels (``kernels.c``): one-pass loops over the points where numpy makes
+many passes over memory, loaded with ctypes when a build of this very source is present (its
+file name carries the source's digest: a library built from other code is never used), else the
+numpy path runs (the same bits, slower). ``SOILVOLUME_NATIVE=0`` turns them off.
+
+Built by ``python -m soilvolume.native.build`` (``make setup``; the plugin's installer when the
+machine has a C compiler; ``make package`` ships the Linux x86_64 build). A ctypes call releases
+the GIL: a kernel on the reading thread runs beside Python on the other."""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import platform
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SOURCE = HERE / "kernels.c"
+ABI = 1  # sv_abi() of kernels.c
+ENV = "SOILVOLUME_NATIVE"  # "0": the numpy path only
+DIR_ENV = "SOILVOLUME_NATIVE_DIR"  # another folder holding the built library (the plugin's environment)
+
+_lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
+
+
+def tag() -> str:
+    """This platform's part of the library's name (``linux-x86_64``, ``darwin-arm64``, ``win32-amd64``)."""
+    return f"{sys.platform}-{platform.machine().lower()}"
+
+
+def library_name() -> str:
+    """The file name of a build of this source for this platform."""
+    digest = hashlib.sha256(SOURCE.read_bytes()).hexdigest()[:16]
+    suffix = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
+    return f"_soilvolume_kernels-{digest}-{tag()}{suffix}"
+
+
+def folders() -> list[Path]:
+    """Where a built library is looked for: ``SOILVOLUME_NATIVE_DIR``, then beside the source."""
+    extra = os.environ.get(DIR_ENV)
+    return ([Path(extra)] if extra else []) + [HERE]
+
+
+def kernels() -> ctypes.CDLL | None:
+    """The loaded library with its prototypes, or None (no build of this source, or turned off)."""
+    global _lib
+    if _lib is False:
+        _lib = _load()
+    return _lib  # type: ignore[return-value]
+
+
+def _load() -> ctypes.CDLL | None:
+    if os.environ.get(ENV, "1") == "0" or not SOURCE.exists():
+        return None
+    name = library_name()
+    path = next((f / name for f in folders() if (f / name).is_file()), None)
+    if path is None:
+        return None
+    try:
+        lib = ctypes.CDLL(str(path))
+        lib.sv_abi.restype = ctypes.c_int64
+        if lib.sv_abi() != ABI:
+            return None
+    except (OSError, AttributeError):
+        return None
+    from .chunk import declare
+
+    declare(lib)
+    _declare(lib)
+    return lib
+
+
+def _declare(lib: ctypes.CDLL) -> None:
+    """The prototypes of the kernels other than the chunk's."""
+    i64, f64, ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
+    lib.sv_columns.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, ptr, ptr]
+    lib.sv_columns.restype = i64
+
+
+_scratch = threading.local()
+
+
+def zeros(name: str, size: int, dtype) -> np.ndarray:
+    """A thread's array of at least ``size`` zeros kept for the kernels that leave it zero (one
+    per ``name``: no fresh pages to fault in at every call)."""
+    have = getattr(_scratch, name, None)
+    if have is None or have.size < size:
+        have = np.zeros(max(size, 1), dtype)
+        setattr(_scratch, name, have)
+    return have
+
+
+def reset() -> None:
+    """Look for the library again at the next :func:`kernels` (tests switch ``SOILVOLUME_NATIVE``)."""
+    global _lib
+    _lib = False

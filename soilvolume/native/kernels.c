@@ -1,0 +1,196 @@
+/* soilvolume's native kernels: loops of the engine that numpy runs as many passes over memory,
+ * done in one pass each.
+ *
+ * Plain C99, no Python or numpy headers: loaded with ctypes, which releases the GIL for the call,
+ * so a kernel on one thread runs beside Python on another. Each kernel computes what its numpy
+ * twin computes (named in its comment), with the same double operations in the same order: the
+ * library is built with -ffp-contract=off (no fused multiply-adds), and a run gives the same bits
+ * with or without it (tests/test_native.py). Build: python -m soilvolume.native.build. */
+
+#include <stdint.h>
+#include <math.h>
+#include <string.h>
+
+/* The layout version of the structures below; the loader refuses a library of another. */
+#define SV_ABI 1
+
+int64_t sv_abi(void) { return SV_ABI; }
+
+/* One chunk of a LAS/LAZ file streamed into the working frame (numpy twin:
+ * soilvolume.inputs.chunkwork.numpy_chunk). */
+typedef struct {
+    /* the point records: X, Y, Z are int32 at field[k] bytes into each record of stride bytes */
+    const uint8_t *rec;
+    int64_t n, stride;
+    int64_t field[3];
+    double scale[3], offset[3], origin[3];
+    /* per point label (0: soil), or NULL: every point is soil */
+    const uint8_t *labels;
+    /* the crop: a polygon rasterized on a lattice (origin plo, cell pres, prows x pcols cells)
+     * framed by a border of zeros ((prows + 2) x (pcols + 2) bytes); NULL: no crop */
+    const uint8_t *framed;
+    double plo[2], pres;
+    int64_t prows, pcols;
+    /* the thinning lattice (soilvolume.inputs.thinning.ColumnThinner): column sums x, y, z and
+     * count (sums: 4 x ncols). numpy adds each chunk's sums (bincount's, from zero in point
+     * order) to them; here a column's points are added straight onto its sums, the sums a column
+     * held from earlier chunks set aside first (side_ids, side: 4 doubles each) and added back
+     * when the chunk ends (flush): a + b is b + a, the same bits, with no chunk-sized array of
+     * sums to fault in. mark (int32, ncols, zeros): the chunk (counted from 1, chunk) that last
+     * touched each column. */
+    double tlo[2], voxel;
+    int64_t first[2], shape[2], ncols;
+    double *sums;
+    int32_t *mark;
+    int64_t *side_ids;
+    double *side;
+    int64_t nside, chunk, flush;
+    /* the points kept at full resolution: those within box (lo x, lo y, hi x, hi y) when use_box */
+    int64_t use_box;
+    double box[4];
+    float *out;            /* soil points kept, (n, 3) room */
+    float *others;         /* points that are not soil, within the crop and the box, (n, 3) room */
+    uint8_t *other_labels; /* their labels, n room */
+    /* results */
+    int64_t cropped, kept, other, soil;
+    double lo[3], hi[3]; /* per axis min and max of X * scale + offset (absolute) */
+} sv_chunk_t;
+
+static inline int32_t load_i32(const uint8_t *p) {
+    int32_t v;
+    memcpy(&v, p, 4);
+    return v;
+}
+
+/* The polygon lattice's index of a coordinate: int((v - lo) / res) clipped to -1..top
+ * (PolygonMask._cell). */
+static inline int64_t lattice(double v, double lo, double res, int64_t top) {
+    double t = v - lo;
+    t = t / res;
+    if (!(t >= -1.0)) return -1; /* NaN too */
+    if (t > (double)top) return top;
+    return (int64_t)t;
+}
+
+/* A thinning column along one axis: int((v - lo) / voxel) - first (ColumnThinner._index), or -1
+ * where numpy's conversion would overflow (the caller's unsigned bound test fails both). */
+static inline int64_t column(double v, double lo, double voxel, int64_t first) {
+    double t = v - lo;
+    t = t / voxel;
+    if (!(t > -9.2e18 && t < 9.2e18)) return -1;
+    return (int64_t)t - first;
+}
+
+static inline int in_box(const double *p, const double *box) {
+    return p[0] >= box[0] && p[0] <= box[2] && p[1] >= box[1] && p[1] <= box[3];
+}
+
+/* Add a point to its column: straight onto the sums, once the column's earlier sums are set aside. */
+static inline void thin_add(sv_chunk_t *c, int64_t id, const double *p) {
+    int64_t n = c->ncols;
+    double *s = c->sums;
+    if (c->mark[id] != (int32_t)c->chunk) {
+        if (c->mark[id] != 0) {
+            double *keep = c->side + 4 * c->nside;
+            c->side_ids[c->nside++] = id;
+            keep[0] = s[id], keep[1] = s[n + id], keep[2] = s[2 * n + id], keep[3] = s[3 * n + id];
+            s[id] = s[n + id] = s[2 * n + id] = s[3 * n + id] = 0.0;
+        }
+        c->mark[id] = (int32_t)c->chunk;
+    }
+    s[id] += p[0], s[n + id] += p[1], s[2 * n + id] += p[2], s[3 * n + id] += 1.0;
+}
+
+/* The end of a chunk: the sums set aside added back (numpy: earlier sums + this chunk's). */
+static void thin_flush(sv_chunk_t *c) {
+    int64_t n = c->ncols;
+    for (int64_t k = 0; k < c->nside; k++) {
+        int64_t id = c->side_ids[k];
+        const double *keep = c->side + 4 * k;
+        c->sums[id] = keep[0] + c->sums[id];
+        c->sums[n + id] = keep[1] + c->sums[n + id];
+        c->sums[2 * n + id] = keep[2] + c->sums[2 * n + id];
+        c->sums[3 * n + id] = keep[3] + c->sums[3 * n + id];
+    }
+    c->nside = 0;
+    c->chunk++;
+}
+
+void sv_chunk(sv_chunk_t *c) {
+    int64_t cropped = 0, kept = 0, other = 0, soil = 0;
+    double mn[3], mx[3];
+    for (int64_t i = 0; i < c->n; i++) {
+        const uint8_t *r = c->rec + i * c->stride;
+        double p[3];
+        for (int k = 0; k < 3; k++) { /* decoded_xyz: X * scale + offset, minus origin */
+            double t = (double)load_i32(r + c->field[k]) * c->scale[k];
+            t = t + c->offset[k];
+            if (i == 0 || t < mn[k]) mn[k] = t;
+            if (i == 0 || t > mx[k]) mx[k] = t;
+            p[k] = t - c->origin[k];
+        }
+        int is_soil = c->labels == NULL || c->labels[i] == 0;
+        soil += is_soil;
+        if (c->framed) {
+            int64_t col = lattice(p[0], c->plo[0], c->pres, c->pcols);
+            int64_t row = lattice(p[1], c->plo[1], c->pres, c->prows);
+            if (!c->framed[(row + 1) * (c->pcols + 2) + col + 1]) continue;
+        }
+        int near = !c->use_box || in_box(p, c->box);
+        if (!is_soil) {
+            if (near) {
+                float *o = c->others + 3 * other;
+                o[0] = (float)p[0], o[1] = (float)p[1], o[2] = (float)p[2];
+                c->other_labels[other++] = c->labels[i];
+            }
+            continue;
+        }
+        cropped++;
+        int64_t ix = column(p[0], c->tlo[0], c->voxel, c->first[0]);
+        int64_t iy = column(p[1], c->tlo[1], c->voxel, c->first[1]);
+        if ((uint64_t)ix < (uint64_t)c->shape[1] && (uint64_t)iy < (uint64_t)c->shape[0])
+            thin_add(c, iy * c->shape[1] + ix, p);
+        if (near) {
+            float *o = c->out + 3 * kept++;
+            o[0] = (float)p[0], o[1] = (float)p[1], o[2] = (float)p[2];
+        }
+    }
+    if (c->flush) thin_flush(c);
+    c->cropped = cropped, c->kept = kept, c->other = other, c->soil = soil;
+    for (int k = 0; k < 3; k++) {
+        c->lo[k] = c->n ? mn[k] : 0.0;
+        c->hi[k] = c->n ? mx[k] : 0.0;
+    }
+}
+
+/* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): each point's
+ * column is floor((v - lo) / cell) per axis, points off the grid are dropped, each column's sums
+ * run over its points in order from zero (bincount's). x, y, z: the points' coordinates, step
+ * doubles apart. count (rows * cols) and sums (3 x rows * cols) are zeros and are left zeros.
+ * Writes the occupied columns' flat ids, in order, to has and their means (m x 3) to means;
+ * returns m. */
+int64_t sv_columns(const double *x, const double *y, const double *z, int64_t n, int64_t step, double lo0,
+                   double lo1, double cell, int64_t rows, int64_t cols, int64_t *count, double *sums,
+                   int64_t *has, double *means) {
+    int64_t cells = rows * cols, first = cells, last = -1;
+    for (int64_t i = 0; i < n; i++) {
+        double fx = x[i * step] - lo0, fy = y[i * step] - lo1;
+        fx = floor(fx / cell), fy = floor(fy / cell);
+        if (!(fx >= 0.0 && fy >= 0.0 && fx < (double)cols && fy < (double)rows)) continue;
+        int64_t id = (int64_t)(fy * (double)cols + fx);
+        count[id]++;
+        sums[id] += x[i * step], sums[cells + id] += y[i * step], sums[2 * cells + id] += z[i * step];
+        if (id < first) first = id;
+        if (id > last) last = id;
+    }
+    int64_t m = 0;
+    for (int64_t id = first; id <= last; id++) {
+        if (!count[id]) continue;
+        double c = (double)count[id];
+        has[m] = id;
+        means[3 * m] = sums[id] / c, means[3 * m + 1] = sums[cells + id] / c, means[3 * m + 2] = sums[2 * cells + id] / c;
+        m++;
+        count[id] = 0, sums[id] = sums[cells + id] = sums[2 * cells + id] = 0.0;
+    }
+    return m;
+}

@@ -1,0 +1,208 @@
+"""The native kernels (soilvolume/native/kernels.c) give the bits of their numpy twins: the chunk
+kernel of the streaming against :func:`soilvolume.inputs.chunkwork.numpy_chunk`, the column means
+of the registration against numpy's bincounts, and a whole estimate with and without the library;
+the library is built from this source (its name carries the source's digest) or not used."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import laspy
+import numpy as np
+import pytest
+
+from soilvolume import native
+from soilvolume.inputs.chunkwork import Growing, NativeChunks, numpy_chunk
+from soilvolume.inputs.footprint import PolygonMask
+from soilvolume.inputs.lasheader import BoundsCheck
+from soilvolume.inputs.records import Records, pieces
+from soilvolume.inputs.thinning import ColumnThinner
+
+
+@pytest.fixture(scope="module")
+def lib(tmp_path_factory):
+    """The kernels built now from this source into a folder of the test's (the checkout's own
+    build is not assumed)."""
+    out = tmp_path_factory.mktemp("native")
+    done = subprocess.run(
+        [sys.executable, "-m", "soilvolume.native.build", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    if done.returncode != 0:
+        pytest.skip(f"no C compiler here: {done.stderr.strip()}")
+    old = os.environ.get(native.DIR_ENV)
+    os.environ[native.DIR_ENV] = str(out)
+    native.reset()
+    yield native.kernels()
+    if old is None:
+        os.environ.pop(native.DIR_ENV)
+    else:
+        os.environ[native.DIR_ENV] = old
+    native.reset()
+
+
+def _records(rng, n: int, point_format: int) -> Records:
+    """``n`` random point records of a LAS point format, with the header values of a real file."""
+    fmt = laspy.PointFormat(point_format)
+    array = np.zeros(n, fmt.dtype())
+    for k, span in zip("XYZ", (60_000, 40_000, 3_000), strict=True):
+        array[k] = rng.integers(-span, span, n)
+    header = laspy.LasHeader(point_format=point_format, version="1.4")
+    header.scales, header.offsets = np.array([0.001, 0.001, 0.0025]), np.array([500_012.0, 3_900_007.0, 41.0])
+    header.mins, header.maxs = np.full(3, -1e12), np.full(3, 1e12)
+    return Records(array, header.scales, header.offsets, BoundsCheck("x.las", header), True)
+
+
+def _piece(rec: Records, a: int, b: int, flush: bool) -> Records:
+    return Records(rec.array[a:b], rec.scales, rec.offsets, rec.check, True, flush)
+
+
+def _chunks(rec: Records, rng) -> list[list[Records]]:
+    """The records as two chunks, the first in up to three pieces (the last ending the chunk)."""
+    n = len(rec)
+    if n < 4:
+        return [[rec]]
+    c = int(rng.integers(2, n - 1))
+    edges = [0, *sorted(set(rng.integers(1, c, 2).tolist())), c]
+    first = [_piece(rec, a, b, b == c) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    return [first, [_piece(rec, c, n, True)]]
+
+
+def _streamed(lib, chunks: list[list[Records]], labels, origin, polygon, box, lattice):
+    """Each chunk's pieces through the kernel (``lib``) or each whole chunk through numpy (None)."""
+    thinner = ColumnThinner(*lattice)
+    out = Growing(0), Growing(0), Growing(0, None, np.uint8)
+    counts = []
+    kernel = None if lib is None else NativeChunks(lib, thinner, polygon, box, origin, 10_000)
+    start = 0
+    for parts in chunks:
+        n = sum(len(p) for p in parts)
+        if kernel is None:
+            whole = Records(np.concatenate([p.array for p in parts]), parts[0].scales, parts[0].offsets, None, True)
+            lab = None if labels is None else labels[start : start + n]
+            got = [numpy_chunk(whole, lab, origin, polygon, thinner, box, *out)]
+        else:
+            got, at = [], start
+            for p in parts:
+                got.append(kernel.add(p, None if labels is None else labels[at : at + len(p)], *out))
+                at += len(p)
+        counts.append(
+            (
+                sum(g.cropped for g in got),
+                sum(g.soil for g in got),
+                np.min([g.lo for g in got], axis=0).tobytes(),
+                np.max([g.hi for g in got], axis=0).tobytes(),
+            )
+        )
+        start += n
+    return counts, thinner.sums.tobytes(), thinner.result().tobytes(), [o.result().tobytes() for o in out]
+
+
+@pytest.mark.parametrize("case", range(12))
+def test_the_chunk_kernel_gives_the_numpy_bits(lib, case):
+    """Decoding, crop, labels, thinning and the kept points of the kernel, fed in pieces, equal
+    numpy's on whole chunks bit for bit: with and without labels, crop polygon and box (also an
+    empty box), on lattices the points overflow, over several chunks sharing columns."""
+    rng = np.random.default_rng(case)
+    rec = _records(rng, int(rng.integers(1, 6_000)), (6, 1, 3, 7)[case % 4])
+    labels = None if case % 3 == 0 else rng.choice(np.array([0, 0, 0, 1, 2, 3], np.uint8), len(rec))
+    origin = np.array([500_010.0, 3_900_004.0, 40.0]) + rng.normal(0, 3, 3)
+    poly = rng.normal(0, 25, (12, 2)) if case % 2 else None
+    polygon = None if poly is None else PolygonMask(poly, resolution=rng.uniform(0.3, 2.0))
+    box = [None, (np.array([-20.0, -15.0]), np.array([25.0, 30.0])), (np.full(2, np.inf), np.full(2, -np.inf))][
+        case % 3
+    ]
+    lattice = (rng.normal(0, 10, 2) - 40, rng.normal(0, 10, 2) + 40, rng.uniform(0.2, 3.0))
+    chunks = _chunks(rec, rng)
+    a = _streamed(lib, chunks, labels, origin, polygon, box, lattice)
+    b = _streamed(None, chunks, labels, origin, polygon, box, lattice)
+    assert a == b
+    assert a[0][0][0] > 0 or polygon is not None or case % 3 == 2  # something was kept
+
+
+def test_pieces_never_straddle_chunks():
+    assert pieces(10, 4, 3) == [3, 1, 3, 1, 2]
+    assert pieces(8, 4, 4) == [4, 4]
+    assert pieces(0, 4, 3) == []
+    lengths = pieces(2_489_649, 1_000_000, 125_000)
+    assert sum(lengths) == 2_489_649 and max(lengths) == 125_000 and np.cumsum(lengths)[7] == 1_000_000
+
+
+@pytest.mark.parametrize("transposed", [False, True])
+def test_the_columns_kernel_gives_the_numpy_bits(lib, transposed, monkeypatch):
+    """The registration's column means (points off the grid, NaN, a transposed view)."""
+    from soilvolume.registration import columns
+
+    rng = np.random.default_rng(7)
+    for _ in range(60):
+        n = int(rng.integers(1, 4_000))
+        xyz = rng.normal(0, 10, (n, 3))
+        xyz[rng.integers(0, n, 3)] = np.nan
+        if transposed:
+            xyz = np.ascontiguousarray(xyz.T).T
+        lo, cell = rng.normal(0, 5, 2), rng.uniform(0.1, 3)
+        shape = (int(rng.integers(1, 60)), int(rng.integers(1, 60)))
+        a = columns._binned(xyz, lo, cell, shape)
+        monkeypatch.setenv(native.ENV, "0")
+        native.reset()
+        b = columns._binned(xyz, lo, cell, shape)
+        monkeypatch.delenv(native.ENV)
+        native.reset()
+        assert a.xyz.tobytes() == b.xyz.tobytes() and np.array_equal(a.row, b.row) and np.array_equal(a.col, b.col)
+
+
+def test_a_library_of_other_source_is_not_loaded(tmp_path, monkeypatch):
+    """Only a build of this very source is loaded: a file with another digest in its name, or a
+    library that is not one, leaves the numpy path on."""
+    name = native.library_name()
+    other = name.replace(name.split("-")[1], "0" * 16)
+    (tmp_path / other).write_bytes(b"not a library")
+    monkeypatch.setenv(native.DIR_ENV, str(tmp_path))
+    monkeypatch.setattr(native, "HERE", tmp_path)
+    native.reset()
+    assert native.kernels() is None
+    (tmp_path / name).write_bytes(b"not a library either")
+    native.reset()
+    assert native.kernels() is None
+    native.reset()
+
+
+def test_a_run_gives_the_same_outputs_with_and_without_the_kernels(lib, misaligned_pair, tmp_path):
+    """A whole estimate: every raster and the change areas byte for byte, and the volumes."""
+    before, after, _ = misaligned_pair
+    outs = {}
+    for flag in ("1", "0"):
+        out = tmp_path / f"native-{flag}"
+        env = {**os.environ, native.ENV: flag}
+        done = subprocess.run(
+            [sys.executable, "-m", "soilvolume", "estimate", str(before), str(after), "--out", str(out), "--quiet"],
+            capture_output=True,
+            text=True,
+            timeout=600,
+            env=env,
+        )
+        assert done.returncode == 0, done.stderr
+        outs[flag] = out
+    files = sorted(p.name for p in outs["1"].iterdir() if p.suffix in (".tif", ".geojson"))
+    assert len(files) >= 6
+    for name in files:
+        assert (outs["1"] / name).read_bytes() == (outs["0"] / name).read_bytes(), name
+
+
+def test_no_compiler_builds_nothing_and_says_so(tmp_path):
+    from soilvolume.native.build import build, main
+
+    path, note = build(tmp_path, cc="no-such-compiler")
+    assert path is None and "no C compiler" in note and not list(tmp_path.iterdir())
+    assert main(["--out", str(tmp_path), "--cc", "no-such-compiler", "--quiet"]) == 1
+
+
+def test_the_build_names_its_source_and_platform():
+    name = native.library_name()
+    assert name.startswith("_soilvolume_kernels-") and native.tag() in name
+    assert Path(native.SOURCE).name == "kernels.c"
