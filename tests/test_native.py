@@ -206,3 +206,87 @@ def test_the_build_names_its_source_and_platform():
     name = native.library_name()
     assert name.startswith("_soilvolume_kernels-") and native.tag() in name
     assert Path(native.SOURCE).name == "kernels.c"
+
+
+def _both(monkeypatch, fn):
+    """``fn()`` with the kernels, then without."""
+    a = fn()
+    monkeypatch.setenv(native.ENV, "0")
+    native.reset()
+    b = fn()
+    monkeypatch.delenv(native.ENV)
+    native.reset()
+    return a, b
+
+
+@pytest.mark.parametrize("layout", ["rows", "transposed"])
+def test_the_grid_kernels_give_the_numpy_bits(lib, monkeypatch, layout):
+    """An epoch's DEM (cells, heights, offsets, the sorted keys' statistics) from float32 points
+    with and without the kernels: points off the grid, several blocks, moved by a transform."""
+    from soilvolume.dem import cellstats
+    from soilvolume.dem import grid as gridmod
+    from soilvolume.registration.rigid import transform_points32
+
+    rng = np.random.default_rng(3)
+    xyz = np.c_[rng.uniform(-5, 65, 30_000), rng.uniform(-5, 45, 30_000), rng.normal(2, 0.3, 30_000)].astype(np.float32)
+    grid = gridmod.make_grid(np.array([0.0, 0.0]), np.array([60.0, 40.0]), 0.7, np.zeros(3), None)
+    monkeypatch.setattr(cellstats, "BLOCK", 7_000)
+    t = np.eye(4)
+    t[:3, 3] = [0.4, -0.2, 0.05]
+    move = None if layout == "rows" else (lambda p: transform_points32(p, t))
+    a, b = _both(monkeypatch, lambda: gridmod.epoch_dem(xyz, grid, "robust-mean", move=move))
+    assert np.isfinite(a.heights).sum() > 1_000
+    for name in ("heights", "counts", "spread", "skew", "dx", "dy"):
+        assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
+
+
+def test_the_sorted_keys_are_numpys(lib, monkeypatch):
+    from soilvolume.dem.cellstats import _SortedCells
+
+    rng = np.random.default_rng(4)
+    for n_cells, n in ((1, 5), (7, 400), (3_000, 90_000)):
+        ids = rng.integers(0, n_cells, n)
+        z = rng.normal(10, 3, n)
+        a, b = _both(monkeypatch, lambda: _SortedCells(ids.copy(), z.copy(), n_cells, own=True))  # noqa: B023
+        assert np.array_equal(a.key, b.key) and np.array_equal(a.counts, b.counts)
+        assert a.quantile(0.5).tobytes() == b.quantile(0.5).tobytes()
+
+
+@pytest.mark.parametrize("point_format", [1, 6])
+@pytest.mark.parametrize("classified", [True, False])
+def test_whole_chunks_read_by_the_kernel_load_what_numpy_loads(lib, tmp_path, monkeypatch, point_format, classified):
+    """A LAS file streamed with its later chunks left to the kernel to read (``sv_file_chunk``,
+    labels from the classification byte) loads what the numpy path loads, bit for bit."""
+    from soilvolume.inputs import stream
+    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.records import class_byte
+
+    rng = np.random.default_rng(point_format)
+    n = 9_000
+    las = laspy.LasData(laspy.LasHeader(point_format=point_format, version="1.4"))
+    las.header.scales, las.header.offsets = np.full(3, 0.001), np.array([500_000.0, 3_900_000.0, 0.0])
+    las.x, las.y, las.z = 500_000 + rng.uniform(0, 60, n), 3_900_000 + rng.uniform(0, 40, n), 50 + rng.normal(0, 0.2, n)
+    if classified:
+        las.classification = rng.choice(np.array([2, 2, 2, 5, 6, 7], np.uint8), n)
+        las.synthetic = rng.random(n) < 0.3  # a flag bit beside the class (formats 0-5: the same byte)
+    path = tmp_path / "c.las"
+    las.write(str(path))
+    at, mask = class_byte(las.points.array.dtype)
+    assert np.array_equal(las.points.array.view(np.uint8).reshape(n, -1)[:, at] & mask, np.asarray(las.classification))
+    monkeypatch.setattr(stream, "CHUNK", 2_000)  # the first chunk decides the rule, the other four are read by C
+    src = stream.open_source(path)
+    keep = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
+    box = np.array([-11.0, -11.0]), np.array([60.0, 40.0])
+
+    def run():
+        got = stream.load(src, Shift(np.array([500_010.0, 3_900_010.0, 49.0])), "auto", keep, ColumnThinner(*box, 0.5))
+        ns = (got.nonsoil.xyz.tobytes(), got.nonsoil.labels.tobytes()) if got.nonsoil else None
+        return got.xyz.tobytes(), got.thin.tobytes(), got.used, got.extra["cropped"], ns
+
+    calls = []
+    monkeypatch.setattr(
+        NativeChunks, "_from_file", lambda self, rec, f=NativeChunks._from_file: calls.append(1) or f(self, rec)
+    )
+    a, b = _both(monkeypatch, run)
+    assert a == b and len(calls) == 4  # the four later chunks, read by the kernel
+    assert (a[2] < n) == classified and (a[4] is not None) == classified

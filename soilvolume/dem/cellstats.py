@@ -63,7 +63,21 @@ class _SortedCells:
         id_bits = max(1, int(n_cells).bit_length())
         self.bits = 62 - id_bits
         self.q = max(1e-4, (float(z.max()) - self.z0) / (2**self.bits - 2))
+        from ..native import kernels
+
+        lib = kernels()
         ids = ids.astype(np.int64, copy=False)
+        if lib is not None and z.dtype == np.float64 and ids.flags.c_contiguous and z.flags.c_contiguous and len(z):
+            key = self._native(lib, ids, z, n_cells, own)
+        else:
+            key = self._numpy(ids, z, n_cells, own)
+        self.key = key
+        self.key = key
+        self.starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
+        self.has = self.counts > 0
+
+    def _numpy(self, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool) -> np.ndarray:
+        """The keys built, counted and sorted in numpy."""
         key = np.left_shift(ids, self.bits, out=ids if own else None)
         t = np.subtract(z, self.z0, out=z if own and z.dtype == np.float64 else None)  # rounded in place
         np.rint(np.divide(t, self.q, out=t), out=t)
@@ -74,12 +88,24 @@ class _SortedCells:
         for i in range(0, len(key), BLOCK):
             self.counts += np.bincount(key[i : i + BLOCK] >> self.bits, minlength=n_cells)
         if own and len(key) >= SPLIT_SORT and _spare(z, key):
-            key = _sorted_halves(key, z.view(np.int64), self.counts, self.bits)
-        else:
-            key.sort(kind="stable")  # the same keys in order; timsort runs on file order (~2.5x faster)
-        self.key = key
-        self.starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
-        self.has = self.counts > 0
+            return _sorted_halves(key, z.view(np.int64), self.counts, self.bits)
+        key.sort(kind="stable")  # the same keys in order; timsort runs on file order (~2.5x faster)
+        return key
+
+    def _native(self, lib, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool) -> np.ndarray:
+        """The same keys, counts and sorted keys on the native kernels (``sv_keys``: one pass;
+        ``sv_sort_keys``: by cell, then each cell's keys), into ``ids`` and ``z`` when ``own``."""
+        key = ids if own else np.empty_like(ids)
+        self.counts = np.zeros(n_cells, np.int64)
+        lib.sv_keys(
+            ids.ctypes.data, z.ctypes.data, len(z), self.z0, self.q, self.bits, key.ctypes.data, self.counts.ctypes.data
+        )
+        out = z.view(np.int64) if own and _spare(z, key) else np.empty_like(key)
+        pos = np.empty(n_cells, np.int64)
+        lib.sv_sort_keys(
+            key.ctypes.data, len(key), self.counts.ctypes.data, n_cells, self.bits, out.ctypes.data, pos.ctypes.data
+        )
+        return out
 
     def height(self, idx: np.ndarray) -> np.ndarray:
         return (self.key[idx] & ((1 << self.bits) - 1)) * self.q + self.z0

@@ -212,10 +212,15 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
 def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[np.ndarray, np.ndarray]:
     """(flat cell ids, float64 heights) of the points of ``xyz`` inside ``grid``, in order,
     assigned block by block (moved by ``move`` first); their centre offsets into ``sums``."""
+    from ..native import kernels
+
     ids, z = np.empty(len(xyz), np.int64), np.empty(len(xyz), np.float64)  # pages never written stay free
-    m = 0
+    m, lib = 0, kernels()
     for i in range(0, len(xyz), BLOCK):
         part = xyz[i : i + BLOCK] if move is None else move(xyz[i : i + BLOCK])
+        if lib is not None and part.dtype == np.float32 and len(part):
+            m += _native_cells(lib, part, grid, ids[m:], z[m:], sums)
+            continue
         col, row, ok = cell_coords(part, grid)
         col, row = col[ok], row[ok]
         k = len(col)
@@ -224,6 +229,30 @@ def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[
         z[m : m + k] = np.compress(ok, part[:, 2])
         m += k
     return ids[:m], z[:m]
+
+
+def _native_cells(lib, part: np.ndarray, grid: GridSpec, ids: np.ndarray, z: np.ndarray, sums: OffsetSums) -> int:
+    """One block of :func:`_cells_of` on the native kernel (``sv_cells``): the same ids, heights
+    and offset sums, bit for bit (float32 points)."""
+    if part.strides[0] % 4 or part.strides[1] % 4 or min(part.strides) <= 0:
+        part = np.ascontiguousarray(part)
+    step, axis, base = part.strides[0] // 4, part.strides[1], part.ctypes.data  # (N, 3) rows or a (3, N) transposed
+    return lib.sv_cells(
+        base,
+        base + axis,
+        base + 2 * axis,
+        len(part),
+        step,
+        float(grid.xmin - grid.origin[0]),
+        float(grid.ymax - grid.origin[1]),
+        1.0 / grid.cell,
+        grid.rows,
+        grid.cols,
+        ids.ctypes.data,
+        z.ctypes.data,
+        sums.sx.ctypes.data,
+        sums.sy.ctypes.data,
+    )
 
 
 def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:

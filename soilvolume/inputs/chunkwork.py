@@ -8,13 +8,18 @@ the library): the same values, bit for bit."""
 from __future__ import annotations
 
 import ctypes
+import os
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..core.cells import in_box, rows
+from ..core.types import SoilVolumeError
 from ..native.chunk import ChunkArgs, address
-from .records import Records, decoded_xyz
+from ..soil.points import SOIL
+from .records import PIECE, FileChunk, Records, decoded_xyz
 from .thinning import ColumnThinner
 
 
@@ -80,27 +85,62 @@ class NativeChunks:
         if box is not None:
             a.box[:] = [float(box[0][0]), float(box[0][1]), float(box[1][0]), float(box[1][1])]
         self.holds = box is None or bool((np.asarray(box[1]) >= np.asarray(box[0])).all())  # a box points can be in
+        self.files: dict[str, int] = {}
+        self.buf: np.ndarray | None = None
+        self.span: tuple | None = None  # x/y bounds of the pieces since the last flush
 
-    def add(self, rec: Records, labels: np.ndarray | None, parts: Growing, others: Growing, other_labels: Growing):
-        """One chunk: its kept soil points appended to ``parts``, the points that are not soil
-        (within the crop and the box) to ``others`` with their labels; returns :class:`Counted`."""
+    def add(self, rec, labels: np.ndarray | None, parts: Growing, others: Growing, other_labels: Growing):
+        """One piece (:class:`Records` with their ``labels``) or a whole chunk left in its file
+        (:class:`FileChunk`): its kept soil points appended to ``parts``, the points that are not
+        soil (within the crop and the box) to ``others`` with their labels; returns :class:`Counted`."""
         a, n = self.args, len(rec)
-        array = np.ascontiguousarray(rec.array)
-        fields = array.dtype.fields
-        a.rec, a.n, a.stride = address(array), n, array.dtype.itemsize
-        a.field[:] = [fields[k][1] for k in "XYZ"]
+        file = isinstance(rec, FileChunk)
+        array = None if file else np.ascontiguousarray(rec.array)
+        dtype = rec.dtype if file else array.dtype
+        a.rec, a.n, a.stride = address(array), n, dtype.itemsize
+        a.field[:] = [dtype.fields[k][1] for k in "XYZ"]
         a.scale[:], a.offset[:] = [float(v) for v in rec.scales], [float(v) for v in rec.offsets]
         lab = None if labels is None else np.ascontiguousarray(labels, np.uint8)
         a.labels, a.flush = address(lab), int(rec.flush)
-        room = n if self.holds else 0
+        room, others_room = (n, n if (rec.table if file else lab) is not None else 0) if self.holds else (0, 0)
         a.out = address(parts.room(room))
-        a.others = address(others.room(room if lab is not None else 0))
-        a.other_labels = address(other_labels.room(room if lab is not None else 0))
-        self.lib.sv_chunk(ctypes.byref(a))
+        a.others, a.other_labels = address(others.room(others_room)), address(other_labels.room(others_room))
+        if file:
+            self._from_file(rec)
+        else:
+            self.lib.sv_chunk(ctypes.byref(a))
         parts.n += a.kept
         others.n += a.other
         other_labels.n += a.other
         return Counted(a.cropped, a.soil, np.array(a.lo[:]), np.array(a.hi[:]))
+
+    def _from_file(self, rec: FileChunk) -> None:
+        """``sv_file_chunk``: the chunk read and worked on in the kernel (its file opened once)."""
+        if rec.path not in self.files:
+            self.files[rec.path] = os.open(rec.path, os.O_RDONLY)
+        if self.buf is None:
+            self.buf = np.empty(PIECE * rec.dtype.itemsize, np.uint8)
+        room = len(self.buf) // rec.dtype.itemsize
+        table = None if rec.table is None else np.ascontiguousarray(rec.table, np.uint8)
+        failed = self.lib.sv_file_chunk(
+            ctypes.byref(self.args),
+            self.files[rec.path],
+            rec.offset,
+            rec.count,
+            address(self.buf),
+            room,
+            address(table),
+            rec.cls_at,
+            rec.cls_mask,
+        )
+        if failed:
+            raise SoilVolumeError(f"{rec.path}: corrupt LAS file (its points end before the header's count)")
+
+    def close(self) -> None:
+        """Close the files :meth:`add` opened."""
+        for fd in self.files.values():
+            os.close(fd)
+        self.files.clear()
 
 
 def numpy_chunk(
@@ -143,3 +183,58 @@ def keep_chunk(local, soil, inside, labels, thinner, box, parts, others, other_l
         local = rows(local, in_box(local, *box))
     parts.append(local)
     return cropped, n_soil
+
+
+def consume(chunks: Iterator[tuple], work: Callable, index: list | None, check) -> tuple:
+    """Every chunk through ``work`` (the native kernel's or numpy's: (points cropped in, soil
+    points, the x/y box of a whole chunk or None)), each chunk's box into ``index``; returns
+    (points, soil points, points cropped in, seconds spent waiting for chunks, the epoch's rule)."""
+    points = used = cropped = start = 0
+    reading, rule = 0.0, None
+    while True:
+        t0 = time.perf_counter()
+        try:
+            item = next(chunks)
+        except StopIteration:
+            break
+        finally:
+            reading += time.perf_counter() - t0
+        if check:
+            check()
+        rule = item[2]
+        n_crop, n_soil, xy_box = work(item)
+        if index is not None and xy_box is not None:  # a chunk's box (native: once its last piece passed)
+            index.append((start, points + len(item[0]) - start, *xy_box))
+        points += len(item[0])
+        start = start if xy_box is None else points
+        used += n_soil
+        cropped += n_crop
+    return points, used, cropped, reading, rule
+
+
+def native_work(kernel: NativeChunks, item: tuple, out: tuple) -> tuple:
+    """One piece or chunk through the native kernel; the box of a whole chunk (bounds of the
+    pieces since the last flush) when it ends one."""
+    local, labels = item[:2]
+    got = kernel.add(local, labels, *out)
+    local.check.extend(got.lo, got.hi)
+    if local.last:
+        local.check.finish()
+    piece = (got.lo[:2], got.hi[:2]) if kernel.span is None else _joined(kernel.span, got)
+    kernel.span, box = (None, piece) if local.flush else (piece, None)
+    return got.cropped, got.soil, box
+
+
+def numpy_work(shift, keep, thinner: ColumnThinner, box, item: tuple, out: tuple) -> tuple:
+    """One chunk through numpy (the reading thread may have tested ``keep`` already)."""
+    local, labels, _, xy_box, inside = item
+    local = shift(local)
+    if inside is None and keep is not None:  # not tested by the reading thread
+        inside = keep(local)
+    soil = None if labels is None else labels == SOIL
+    return (*keep_chunk(local, soil, inside, labels, thinner, box, *out), xy_box)
+
+
+def _joined(span: tuple, got) -> tuple[np.ndarray, np.ndarray]:
+    """An x/y box grown by a piece's bounds."""
+    return np.minimum(span[0], got.lo[:2]), np.maximum(span[1], got.hi[:2])

@@ -42,13 +42,57 @@ class Records:
         return len(self.array)
 
 
+@dataclass
+class FileChunk:
+    """A whole chunk of an uncompressed LAS file left in the file for the native kernel to read
+    (``sv_file_chunk``: no Python between its pieces), its points labelled by ``table`` (the
+    labels of the LAS classes, by the classification byte at ``cls_at`` masked by ``cls_mask``;
+    None: every point soil)."""
+
+    path: str
+    offset: int  # of its first record in the file
+    count: int
+    dtype: np.dtype
+    cls_at: int
+    cls_mask: int
+    table: np.ndarray | None
+    scales: np.ndarray | None = None  # of the header; these four set by las_records
+    offsets: np.ndarray | None = None
+    check: BoundsCheck | None = None
+    last: bool = False
+    flush: bool = True
+
+    def __len__(self) -> int:
+        return self.count
+
+
+def class_byte(dtype: np.dtype) -> tuple[int, int] | None:
+    """(byte offset, mask) of the LAS classification in a point record (formats 0-5: the low 5
+    bits of ``raw_classification``; 6-10: a byte of its own), None without one."""
+    fields = dtype.fields or {}
+    if "classification" in fields and fields["classification"][0] == np.uint8:
+        return fields["classification"][1], 0xFF
+    if "raw_classification" in fields:
+        return fields["raw_classification"][1], 0x1F
+    return None
+
+
 def las_records(
-    path: Path, count: int, size: int, signals: bool | Callable = False, piece: int = PIECE, ring: int = RING
+    path: Path,
+    count: int,
+    size: int,
+    signals: bool | Callable = False,
+    piece: int = PIECE,
+    ring: int = RING,
+    direct: Callable[[bool], object] | None = None,
 ) -> Iterator[tuple]:
     """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most
     ``piece`` points, each chunk of ``size`` points (the numpy path's) ending on a piece marked
     ``flush``; a point count other than the header's ``count`` is a corrupt file. An uncompressed
-    file is read into ``ring`` buffers in turn (one, when each piece is done with before the next)."""
+    file is read into ``ring`` buffers in turn (one, when each piece is done with before the next).
+    ``direct(has_class)``, asked at each chunk of an uncompressed file: a class table (or None)
+    leaves the chunk in the file as a :class:`FileChunk` (classification and signals None); False
+    reads it."""
     laspy = laspy_module()
     read = 0
     try:
@@ -58,10 +102,18 @@ def las_records(
             has_cls = "classification" in dims
             scales, offsets = np.asarray(h.scales, float), np.asarray(h.offsets, float)
             check = BoundsCheck(path, h)
-            lengths = pieces(count, size, piece)
-            arrays = _laz(reader, lengths) if h.are_points_compressed else _raw(path, h, lengths, ring)
+            chunks = chunk_pieces(count, size, piece)
+            arrays = (
+                _laz(reader, [m for c in chunks for m in c])
+                if h.are_points_compressed
+                else _raw(path, h, chunks, ring, direct)
+            )
             for array in arrays:
                 read += len(array)
+                if isinstance(array, FileChunk):
+                    array.scales, array.offsets, array.check, array.last = scales, offsets, check, read >= count
+                    yield (array, None, None) if signals else (array, None)
+                    continue
                 rec = laspy.ScaleAwarePointRecord(array, h.point_format, scales, offsets)
                 cls = np.array(rec.classification) if has_cls else None
                 sig = point_signals(rec, signal_dims(dims, signals, cls)) if signals else None
@@ -151,11 +203,14 @@ def point_signals(record, dims: set[str]) -> Signals | None:
 def pieces(count: int, size: int, piece: int) -> list[int]:
     """The lengths of the pieces of ``count`` points read in chunks of ``size``, each chunk in
     pieces of at most ``piece`` (no piece straddles two chunks)."""
-    out = []
-    for start in range(0, count, size):
-        m = min(size, count - start)
-        out += [min(piece, m - k) for k in range(0, m, piece)]
-    return out
+    return [m for chunk in chunk_pieces(count, size, piece) for m in chunk]
+
+
+def chunk_pieces(count: int, size: int, piece: int) -> list[list[int]]:
+    """:func:`pieces`, chunk by chunk."""
+    return [
+        [min(piece, m - k) for k in range(0, m, piece)] for m in (min(size, count - s) for s in range(0, count, size))
+    ]
 
 
 def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
@@ -166,17 +221,30 @@ def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
         yield part.array
 
 
-def _raw(path: Path, header, lengths: list[int], ring: int) -> Iterator[np.ndarray]:
-    """The records of an uncompressed file read into ``ring`` buffers in turn."""
+def _raw(path: Path, header, chunks: list[list[int]], ring: int, direct=None) -> Iterator:
+    """The records of an uncompressed file, ``chunks`` of pieces read into ``ring`` buffers in
+    turn, or a whole chunk left in the file as a :class:`FileChunk` where ``direct`` says (see
+    :func:`las_records`)."""
     dtype = header.point_format.dtype()
-    stride = dtype.itemsize
-    room = max(lengths, default=0) * stride
-    buffers = [np.empty(room, np.uint8) for _ in range(min(ring, len(lengths)))]  # pages faulted when read
+    stride, cls, base = dtype.itemsize, class_byte(dtype), header.offset_to_point_data
+    room = max((m for chunk in chunks for m in chunk), default=0) * stride
+    buffers: list[np.ndarray] = []
+    at = read = 0
     with open(path, "rb") as fh:
-        fh.seek(header.offset_to_point_data)
-        for k, m in enumerate(lengths):
-            view = buffers[k % len(buffers)][: m * stride]
-            got = fh.readinto(view) or 0
-            yield np.frombuffer(view, dtype=dtype, count=got // stride)
-            if got != m * stride:
-                return
+        for chunk in chunks:
+            table = direct(cls is not None) if direct is not None else False
+            if table is not False:
+                yield FileChunk(str(path), base + at * stride, sum(chunk), dtype, *(cls or (0, 0)), table)
+                at += sum(chunk)
+                continue
+            fh.seek(base + at * stride)
+            for m in chunk:
+                if len(buffers) < ring:
+                    buffers.append(np.empty(room, np.uint8))  # pages faulted when read
+                view = buffers[read % len(buffers)][: m * stride]
+                read += 1
+                got = fh.readinto(view) or 0
+                yield np.frombuffer(view, dtype=dtype, count=got // stride)
+                if got != m * stride:
+                    return
+                at += m

@@ -10,9 +10,9 @@ arrive whole and are one chunk.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +20,8 @@ import numpy as np
 from ..core.cells import bounds
 from ..core.readahead import prefetch
 from ..core.types import SoilVolumeError, short_error
-from ..soil.points import SOIL, NonSoil, PointRule, Signals, decide, deciding_dims
-from .chunkwork import Growing, NativeChunks, keep_chunk
+from ..soil.points import NonSoil, PointRule, Signals, decide, deciding_dims
+from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
 from .copc import copc_chunks, is_copc
 from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
 from .lasimport import laspy_module
@@ -64,12 +64,13 @@ class Source:
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
 
-    def records(self, size: int | None = None, signals: bool | Callable = False) -> Iterator[tuple]:
+    def records(self, size: int | None = None, signals: bool | Callable = False, direct=None) -> Iterator[tuple]:
         """(:class:`~soilvolume.inputs.records.Records`, classification or None, signals) of each
-        chunk of the source's LAS/LAZ files read whole, undecoded (the native kernel's input;
-        :func:`native_reads` says when a source can)."""
+        chunk of the source's LAS/LAZ files read whole, undecoded, or a chunk left in its file
+        where ``direct`` says (:func:`~soilvolume.inputs.records.las_records`): the native kernel's
+        input (:func:`native_reads` says when a source can)."""
         for path in self.tiles():
-            yield from las_records(Path(path), _header(Path(path)).count, size or CHUNK, signals)
+            yield from las_records(Path(path), _header(Path(path)).count, size or CHUNK, signals, direct=direct)
 
     def within(self, lo, hi) -> Source:
         """This source, read only where it can meet the x/y box lo..hi (file CRS)."""
@@ -257,10 +258,15 @@ def _labelled(
     def wanted(cls) -> set[str]:
         return deciding_dims(cls, mode, exclude) if rule is None else rule.signal_dims
 
+    def direct(has_class: bool):  # a chunk left in the file once its labels need no signal
+        return False if rule is None or not whole_files else rule.class_table(has_class)
+
+    whole_files = native and file_kernel()
+
     def run() -> Iterator[tuple]:
         nonlocal rule
         if native:
-            chunks = src.records(signals=wanted)
+            chunks = src.records(signals=wanted, direct=direct)
         else:
             chunks = src.chunks(signals=wanted, origin=to_local.origin if fused else None)
         for xyz, cls, sig in chunks:
@@ -274,9 +280,12 @@ def _labelled(
     return prefetch(run()), shift, native
 
 
-def _joined(span: tuple, got) -> tuple[np.ndarray, np.ndarray]:
-    """An x/y box grown by a piece's bounds."""
-    return np.minimum(span[0], got.lo[:2]), np.maximum(span[1], got.hi[:2])
+def file_kernel() -> bool:
+    """Whether the native library reads whole chunks from files itself (POSIX builds)."""
+    from ..native import kernels
+
+    lib = kernels()
+    return lib is not None and hasattr(lib, "sv_file_chunk")
 
 
 def native_reads(src: Source, to_local, keep: Callable | None) -> bool:
@@ -311,48 +320,19 @@ def load(
     which ``keep`` is true (all when None) and feed them to ``thinner``; only those within the
     x/y ``box`` (lo, hi; everything when None) are kept at full resolution, with the points that
     are not soil beside them. ``indexed``: also record each chunk's x/y box (``extra["index"]``)."""
-    parts = Growing(src.count if box is None or (box[1] >= box[0]).all() else 0)
-    others, other_labels = Growing(0), Growing(0, None, np.uint8)
-    points = used = 0
-    rule: PointRule | None = None
-    reading, cropped, start, span = 0.0, 0, 0, None
+    out = Growing(src.count if box is None or (box[1] >= box[0]).all() else 0), Growing(0), Growing(0, None, np.uint8)
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
     chunks, shift, native = _labelled(src, to_local, index is not None, mode, exclude, keep)
     if native:
         from ..native import kernels
 
         kernel = NativeChunks(kernels(), thinner, keep, box, to_local.origin, CHUNK)
-    while True:
-        t0 = time.perf_counter()
-        try:
-            local, labels, rule, xy_box, inside = next(chunks)
-        except StopIteration:
-            break
-        finally:
-            reading += time.perf_counter() - t0
-        if check:
-            check()
+    work = partial(native_work, kernel, out=out) if native else partial(numpy_work, shift, keep, thinner, box, out=out)
+    try:
+        points, used, cropped, reading, rule = consume(chunks, work, index, check)
+    finally:
         if native:
-            got = kernel.add(local, labels, parts, others, other_labels)
-            local.check.extend(got.lo, got.hi)
-            if local.last:
-                local.check.finish()
-            if index is not None:
-                piece = (got.lo[:2], got.hi[:2]) if span is None else _joined(span, got)
-                span, xy_box = (None, piece) if local.flush else (piece, None)
-            n_crop, n_soil = got.cropped, got.soil
-        else:
-            local = shift(local)
-            if inside is None and keep is not None:  # not tested by the reading thread
-                inside = keep(local)
-            soil = None if labels is None else labels == SOIL
-            n_crop, n_soil = keep_chunk(local, soil, inside, labels, thinner, box, parts, others, other_labels)
-        if index is not None and xy_box is not None:  # a chunk's box (native: once its last piece passed)
-            index.append((start, points + len(local) - start, *xy_box))
-        points += len(local)
-        start = start if xy_box is None else points
-        used += n_soil
-        cropped += n_crop
+            kernel.close()
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()
     extra = {
@@ -361,5 +341,5 @@ def load(
         "counts": thinner.counts(),
         "index": None if index is None else tuple(index),
     }
-    nonsoil = NonSoil(others.result(), other_labels.result(), rule) if rule.active else None
-    return Loaded(parts.result(), thinner.result(), points, used, note, extra, nonsoil)
+    nonsoil = NonSoil(out[1].result(), out[2].result(), rule) if rule.active else None
+    return Loaded(out[0].result(), thinner.result(), points, used, note, extra, nonsoil)

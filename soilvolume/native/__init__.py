@@ -80,6 +80,13 @@ def _declare(lib: ctypes.CDLL) -> None:
     i64, f64, ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
     lib.sv_columns.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, ptr, ptr]
     lib.sv_columns.restype = i64
+    f32 = ctypes.c_float
+    lib.sv_cells.argtypes = [ptr, ptr, ptr, i64, i64, f32, f32, f32, i64, i64, ptr, ptr, ptr, ptr]
+    lib.sv_cells.restype = i64
+    lib.sv_sort_keys.argtypes = [ptr, i64, ptr, i64, i64, ptr, ptr]
+    lib.sv_sort_keys.restype = None
+    lib.sv_keys.argtypes = [ptr, ptr, i64, f64, f64, i64, ptr, ptr]
+    lib.sv_keys.restype = None
 
 
 _scratch = threading.local()

@@ -56,8 +56,12 @@ class ChunkArgs(ctypes.Structure):
 
 
 def declare(lib: ctypes.CDLL) -> None:
-    """The prototypes of the chunk kernel."""
+    """The prototypes of the chunk kernels (``sv_file_chunk``: POSIX builds only)."""
     lib.sv_chunk.argtypes, lib.sv_chunk.restype = [ctypes.POINTER(ChunkArgs)], None
+    if hasattr(lib, "sv_file_chunk"):
+        i64 = ctypes.c_int64
+        lib.sv_file_chunk.argtypes = [ctypes.POINTER(ChunkArgs), i64, i64, i64, _P, i64, _P, i64, i64]
+        lib.sv_file_chunk.restype = i64
 
 
 def address(a: np.ndarray | None) -> int | None:

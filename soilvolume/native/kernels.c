@@ -7,9 +7,15 @@
  * library is built with -ffp-contract=off (no fused multiply-adds), and a run gives the same bits
  * with or without it (tests/test_native.py). Build: python -m soilvolume.native.build. */
 
-#include <stdint.h>
+#define _POSIX_C_SOURCE 200809L /* pread */
 #include <math.h>
+#include <stdint.h>
 #include <string.h>
+#ifndef _WIN32
+#include <errno.h>
+#include <sys/types.h>
+#include <unistd.h>
+#endif
 
 /* The layout version of the structures below; the loader refuses a library of another. */
 #define SV_ABI 1
@@ -116,32 +122,35 @@ static void thin_flush(sv_chunk_t *c) {
     c->chunk++;
 }
 
-void sv_chunk(sv_chunk_t *c) {
-    int64_t cropped = 0, kept = 0, other = 0, soil = 0;
-    double mn[3], mx[3];
-    for (int64_t i = 0; i < c->n; i++) {
-        const uint8_t *r = c->rec + i * c->stride;
+/* The points of n records at rec through the chunk's work; a point's label is labels[i], else
+ * table[rec[cls_at] & cls_mask] (a LAS classification's), else soil. Counts and bounds add up in c. */
+static void chunk_points(sv_chunk_t *c, const uint8_t *rec, int64_t n, const uint8_t *labels, const uint8_t *table,
+                         int64_t cls_at, int64_t cls_mask) {
+    int64_t cropped = 0, kept = c->kept, other = c->other, soil = 0;
+    double *mn = c->lo, *mx = c->hi;
+    for (int64_t i = 0; i < n; i++) {
+        const uint8_t *r = rec + i * c->stride;
         double p[3];
         for (int k = 0; k < 3; k++) { /* decoded_xyz: X * scale + offset, minus origin */
             double t = (double)load_i32(r + c->field[k]) * c->scale[k];
             t = t + c->offset[k];
-            if (i == 0 || t < mn[k]) mn[k] = t;
-            if (i == 0 || t > mx[k]) mx[k] = t;
+            if (t < mn[k]) mn[k] = t;
+            if (t > mx[k]) mx[k] = t;
             p[k] = t - c->origin[k];
         }
-        int is_soil = c->labels == NULL || c->labels[i] == 0;
-        soil += is_soil;
+        uint8_t label = labels ? labels[i] : table ? table[r[cls_at] & cls_mask] : 0;
+        soil += label == 0;
         if (c->framed) {
             int64_t col = lattice(p[0], c->plo[0], c->pres, c->pcols);
             int64_t row = lattice(p[1], c->plo[1], c->pres, c->prows);
             if (!c->framed[(row + 1) * (c->pcols + 2) + col + 1]) continue;
         }
         int near = !c->use_box || in_box(p, c->box);
-        if (!is_soil) {
+        if (label != 0) {
             if (near) {
                 float *o = c->others + 3 * other;
                 o[0] = (float)p[0], o[1] = (float)p[1], o[2] = (float)p[2];
-                c->other_labels[other++] = c->labels[i];
+                c->other_labels[other++] = label;
             }
             continue;
         }
@@ -155,13 +164,46 @@ void sv_chunk(sv_chunk_t *c) {
             o[0] = (float)p[0], o[1] = (float)p[1], o[2] = (float)p[2];
         }
     }
-    if (c->flush) thin_flush(c);
-    c->cropped = cropped, c->kept = kept, c->other = other, c->soil = soil;
-    for (int k = 0; k < 3; k++) {
-        c->lo[k] = c->n ? mn[k] : 0.0;
-        c->hi[k] = c->n ? mx[k] : 0.0;
-    }
+    c->cropped += cropped, c->kept = kept, c->other = other, c->soil += soil;
 }
+
+static void chunk_start(sv_chunk_t *c) {
+    c->cropped = c->kept = c->other = c->soil = 0;
+    for (int k = 0; k < 3; k++) c->lo[k] = INFINITY, c->hi[k] = -INFINITY;
+}
+
+/* One piece of a chunk given as records (c->rec, c->n) and labels (c->labels, NULL: all soil);
+ * the chunk's column sums are added up when c->flush is set. */
+void sv_chunk(sv_chunk_t *c) {
+    chunk_start(c);
+    chunk_points(c, c->rec, c->n, c->labels, NULL, 0, 0);
+    if (c->flush) thin_flush(c);
+}
+
+#ifndef _WIN32
+
+/* One whole chunk read from a file: count records from byte offset of the open file fd, into buf
+ * (room for room records) piece by piece, labelled by table (the LAS classification at byte
+ * cls_at of a record, masked by cls_mask; NULL: all soil); the column sums added up at the end.
+ * Returns 0, or -1 when the file ends or a read fails first (errno says which). */
+int64_t sv_file_chunk(sv_chunk_t *c, int64_t fd, int64_t offset, int64_t count, uint8_t *buf, int64_t room,
+                      const uint8_t *table, int64_t cls_at, int64_t cls_mask) {
+    chunk_start(c);
+    for (int64_t done = 0; done < count;) {
+        int64_t m = count - done < room ? count - done : room, want = m * c->stride, got = 0;
+        while (got < want) {
+            ssize_t r = pread((int)fd, buf + got, (size_t)(want - got), (off_t)(offset + done * c->stride + got));
+            if (r < 0 && errno == EINTR) continue;
+            if (r <= 0) return -1;
+            got += r;
+        }
+        chunk_points(c, buf, m, NULL, table, cls_at, cls_mask);
+        done += m;
+    }
+    thin_flush(c);
+    return 0;
+}
+#endif
 
 /* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): each point's
  * column is floor((v - lo) / cell) per axis, points off the grid are dropped, each column's sums
@@ -193,4 +235,83 @@ int64_t sv_columns(const double *x, const double *y, const double *z, int64_t n,
         count[id] = 0, sums[id] = sums[cells + id] = sums[2 * cells + id] = 0.0;
     }
     return m;
+}
+
+/* Points to the cells of a grid (numpy twin: soilvolume.dem.grid._cells_of on a block): float32
+ * coordinates x, y, z (step floats apart) to fractional column (x - xmin) * inv and row
+ * (ymax - y) * inv in float32, as numpy computes them; the points inside the grid get their flat
+ * cell id and float64 height appended to ids and z, and their offsets within the cell
+ * (col - floor(col), row - floor(row)) added to sx and sy in order (OffsetSums.add_at). Returns
+ * the number appended. */
+int64_t sv_cells(const float *x, const float *y, const float *z, int64_t n, int64_t step, float xmin, float ymax,
+                 float inv, int64_t rows, int64_t cols, int64_t *ids, double *zout, double *sx, double *sy) {
+    int64_t m = 0;
+    for (int64_t i = 0; i < n; i++) {
+        float col = (x[i * step] - xmin) * inv, row = (ymax - y[i * step]) * inv;
+        if (!(col >= 0.0f && col < (float)cols && row >= 0.0f && row < (float)rows)) continue;
+        int64_t id = (int64_t)(int32_t)row * cols + (int64_t)(int32_t)col;
+        ids[m] = id;
+        zout[m++] = (double)z[i * step];
+        sx[id] += (double)(col - floorf(col));
+        sy[id] += (double)(row - floorf(row));
+    }
+    return m;
+}
+
+/* Sort v[0..n) ascending: quicksort (median of three) down to runs of 16, then insertion sort. */
+static void sort_i64(int64_t *v, int64_t n) {
+    while (n > 16) {
+        int64_t a = v[0], b = v[n / 2], c = v[n - 1];
+        int64_t pivot = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
+        int64_t i = 0, j = n - 1;
+        while (i <= j) {
+            while (v[i] < pivot) i++;
+            while (v[j] > pivot) j--;
+            if (i <= j) {
+                int64_t t = v[i];
+                v[i++] = v[j], v[j--] = t;
+            }
+        }
+        if (j + 1 < n - i) { /* the smaller side by recursion, the larger by the loop */
+            sort_i64(v, j + 1);
+            v += i, n -= i;
+        } else {
+            sort_i64(v + i, n - i);
+            n = j + 1;
+        }
+    }
+    for (int64_t i = 1; i < n; i++) {
+        int64_t x = v[i], j = i - 1;
+        while (j >= 0 && v[j] > x) v[j + 1] = v[j], j--;
+        v[j + 1] = x;
+    }
+}
+
+/* Sort int64 keys whose cell is key >> bits (counts: the keys of each of ncells cells) into out,
+ * through tmp (n): the keys moved to their cells (in order), then each cell's sorted. The result is
+ * the sorted array, the same as any sort gives. */
+void sv_sort_keys(const int64_t *key, int64_t n, const int64_t *counts, int64_t ncells, int64_t bits, int64_t *out,
+                  int64_t *next) {
+    int64_t at = 0;
+    for (int64_t c = 0; c < ncells; c++) next[c] = at, at += counts[c];
+    for (int64_t i = 0; i < n; i++) out[next[key[i] >> bits]++] = key[i];
+    at = 0;
+    for (int64_t c = 0; c < ncells; c++) {
+        sort_i64(out + at, counts[c]);
+        at += counts[c];
+    }
+}
+
+/* The (cell, height) keys of points (numpy twin: soilvolume.dem.cellstats._SortedCells): key =
+ * id << bits | rint((z - z0) / q), into key (which may be ids itself), and the points per cell
+ * added to counts. */
+void sv_keys(const int64_t *ids, const double *z, int64_t n, double z0, double q, int64_t bits, int64_t *key,
+             int64_t *counts) {
+    for (int64_t i = 0; i < n; i++) {
+        double t = z[i] - z0;
+        t = t / q;
+        int64_t id = ids[i];
+        key[i] = (id << bits) | (int64_t)rint(t);
+        counts[id]++;
+    }
 }

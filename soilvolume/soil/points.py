@@ -88,6 +88,16 @@ class PointRule:
             dims.update(RETURN_DIMS)
         return dims
 
+    def class_table(self, has_class: bool) -> np.ndarray | None | bool:
+        """The labels of the 256 LAS classes when a point's label depends on its classification
+        alone (None: every point is soil, as :meth:`labels` gives None); False when it needs colour
+        or returns. ``has_class``: the points carry a classification."""
+        if self.use_class and has_class:
+            return _BY_CLASS
+        if self.green is None and not (self.returns and not self.use_class):
+            return None
+        return False
+
     def labels(self, cls: np.ndarray | None, sig: Signals | None) -> np.ndarray | None:
         """uint8 labels of a chunk's points, or None when all are soil."""
         out = None
