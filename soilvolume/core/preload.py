@@ -3,16 +3,18 @@
 Open3D (the registrations that use it: GICP, PFH, FPFH) takes ~0.4-0.6 s to import, most of it
 loading its native library, and a run needs it only after the inputs are read: imported in a thread
 from the start, it overlaps with the reading; the step that needs it waits on Python's module lock
-until it is complete. The other modules wait until the reading is done (:func:`reading_done`), or
-until the run waits on other processes (:func:`idle`: a tiled run's driver waiting for its first
-pass's tasks): the registration's and the volume step's (:data:`AFTER_READING`: SciPy's ndimage and
-sparse solvers), then rasterio (GeoTIFF output). The reading keeps both cores busy with its two
-threads; an import beside it, holding the GIL in long C calls (unmarshalling, loading extensions),
+until it is complete. The other modules wait until the reading is done (:func:`reading_done`), until
+the run waits on other processes (:func:`idle`: a tiled run's driver waiting for its first pass's
+tasks), or until its thread works without the GIL (:func:`off_the_gil`: the native kernel reading
+whole chunks of a LAS file, no Python between its pieces): the registration's and the volume
+step's (:data:`AFTER_READING`: SciPy's spatial, ndimage and sparse solvers), then rasterio
+(GeoTIFF output). The numpy reading keeps both cores busy with its two threads and many GIL
+handoffs; an import beside it, holding the GIL in long C calls (unmarshalling, loading extensions),
 slowed it by more than it saved (paper pair, 2 cores: reading done ~50 ms later, the run ~40-90 ms
-longer, 25 interleaved runs), and the memory peak of a run is at the end of the reading, where
-rasterio would add its ~20 MB. The registration runs on one core; the volume step's modules and
-rasterio load on the other meanwhile. Nothing is imported that the run would not import anyway.
-(Importing the later steps' modules, scipy.optimize and the report's, beside the registration's ICP
+longer, 25 interleaved runs). Beside the native kernel the imports go ahead and the registration
+later runs without them (paper pair: the run 1.136 -> 1.076 s, 14 interleaved rounds; the reading
+~30 ms longer, the registration ~65 ms shorter). Nothing is imported that the run would not import
+anyway. (Importing the later steps' modules, scipy.optimize and the report's, beside the registration's ICP
 was tried: no measurable gain on two cores, and ~30 MB more peak memory, the thread's allocations
 then.)
 """
@@ -40,6 +42,12 @@ def reading_done() -> None:
 def idle() -> None:
     """The run waits on other processes (a tiled run's driver on its first pass's tasks, its
     points in the workers): the held-back imports may go ahead meanwhile."""
+    _GO.set()
+
+
+def off_the_gil() -> None:
+    """The run's thread works in native code that releases the GIL for a while (the streaming's
+    whole-chunk kernel, :mod:`soilvolume.native`): the held-back imports may go ahead beside it."""
     _GO.set()
 
 
