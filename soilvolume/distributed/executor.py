@@ -23,6 +23,20 @@ def _import_steps() -> None:
         pass
 
 
+IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read from disk, as the first pass reads them)
+
+
+def _identify(future, epochs) -> None:
+    """The inputs' identities (:func:`.fingerprint.input_identities`: BLAKE2 releases the GIL)
+    into ``future``."""
+    from .fingerprint import input_identities
+
+    try:
+        future.set_result(input_identities(*(e.path for e in epochs)))
+    except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
+        future.set_exception(exc)
+
+
 class Tiled:
     """Point work as tile tasks on the cluster ``schedule`` names; tiles kept in the run's store."""
 
@@ -33,7 +47,7 @@ class Tiled:
         self.schedule = schedule
         self.c = self.store = self.plan = self.cache = self.starting = self.src_a = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
-        self.coarse = self.over_epochs = self.medians = None
+        self.coarse = self.over_epochs = self.medians = self.identities = None
 
     @contextmanager
     def session(self, run):
@@ -62,6 +76,8 @@ class Tiled:
             yield self
 
     def prepare(self, run) -> None:
+        from concurrent.futures import Future
+
         from ..inputs.prepare import prepare
         from ..inputs.stream import open_source
         from .cluster import checker
@@ -71,6 +87,10 @@ class Tiled:
 
         hooks = run.hooks
         threading.Thread(target=_import_steps, daemon=True, name="soilvolume-steps").start()
+        self.identities = Future()  # the inputs as the run starts reading them, hashed beside the first pass
+        threading.Thread(
+            target=_identify, args=(self.identities, run.epochs), daemon=True, name="soilvolume-ids"
+        ).start()
         self.src_b, self.src_a = (open_source(e.path) for e in run.epochs)
         src_a = self.src_a
         self.cache = PointCache(self.c, budget_gb(run.options.memory_limit))
@@ -100,7 +120,8 @@ class Tiled:
         )
         self.k = volume_factor(options, run.grid, self.schedule)
         epochs = [e.path for e in run.epochs]
-        self.said = self.store.bind(run_parts(*epochs, options, plan_parts(self.plan, self.windows, self.k)))
+        inputs = self.identities.result(IDENTITY_S)
+        self.said = self.store.bind(run_parts(*epochs, options, plan_parts(self.plan, self.windows, self.k), inputs))
         if self.said:
             run.hooks.step(run.at("grid"), self.said)
         self.kept = self.store.tiles(self.windows)

@@ -55,6 +55,11 @@ def input_identity(path: str | os.PathLike) -> dict[str, Any]:
     return out
 
 
+def input_identities(before, after) -> dict[str, Any]:
+    """{"before": ..., "after": ...}: both inputs' :func:`input_identity`."""
+    return {"before": input_identity(before), "after": input_identity(after)}
+
+
 def number_options(options: Options) -> dict[str, Any]:
     """Every option that changes the numbers (all but those declared ``run_control``), files
     named by an option replaced by their identity."""
@@ -87,12 +92,13 @@ def code_identity() -> str:
     return digest.hexdigest()
 
 
-def run_parts(before, after, options: Options, plan: dict[str, Any]) -> dict[str, Any]:
-    """What the tiles of a run are computed from, as plain JSON values (see module)."""
+def run_parts(before, after, options: Options, plan: dict[str, Any], inputs: dict | None = None) -> dict[str, Any]:
+    """What the tiles of a run are computed from, as plain JSON values (see module); ``inputs``:
+    the inputs' identities taken already (:func:`input_identities`)."""
     return _plain(
         {
             "code": code_identity(),
-            "inputs": {"before": input_identity(before), "after": input_identity(after)},
+            "inputs": inputs if inputs is not None else input_identities(before, after),
             "options": number_options(options),
             "plan": plan,
         }
