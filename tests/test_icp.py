@@ -118,7 +118,7 @@ def test_an_icp_swinging_between_two_poses_ends_where_its_last_iteration_would(m
     source = target[:500] + [0.0, 0.0, 0.05]
     calls = []
 
-    def swinging(p, q, n, k):  # up 1 cm, down 1 cm, ...: two poses, exactly
+    def swinging(*_):  # up 1 cm, down 1 cm, ...: two poses, exactly
         calls.append(1)
         out = np.eye(4)
         out[2, 3] = 0.01 if len(calls) % 2 else -0.01

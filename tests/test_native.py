@@ -290,3 +290,27 @@ def test_whole_chunks_read_by_the_kernel_load_what_numpy_loads(lib, tmp_path, mo
     a, b = _both(monkeypatch, run)
     assert a == b and len(calls) == 4  # the four later chunks, read by the kernel
     assert (a[2] < n) == classified and (a[4] is not None) == classified
+
+
+def test_the_icp_kernels_give_the_numpy_bits(lib, monkeypatch):
+    """Point-to-plane ICP with its kept neighbours proven (and swapped with the search before) and
+    its step terms by the kernels: the same poses, fitness, RMSE and iterations as numpy."""
+    from soilvolume.registration import icp
+    from soilvolume.registration.rigid import transform_points
+
+    rng = np.random.default_rng(11)
+    gx, gy = np.meshgrid(np.arange(0, 60, 0.5), np.arange(0, 40, 0.5))
+    h = 0.4 * np.sin(gx / 7) + 0.3 * np.cos(gy / 5)
+    tgt = np.c_[gx.ravel(), gy.ravel(), h.ravel()]
+    normals = np.c_[-0.4 / 7 * np.cos(gx / 7).ravel(), 0.3 / 5 * np.sin(gy / 5).ravel(), np.ones(gx.size)]
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    pick = rng.choice(len(tgt), 3_000, replace=False)
+    src = tgt[pick] + rng.normal(0, 0.02, (3_000, 3))
+    for shift, dist, k in (((0.3, -0.2, 0.05), 1.5, 0.5), ((0.05, 0.02, 0.0), 0.4, 0.15), ((1.0, 0.5, 0.1), 3.0, 1.0)):
+        t = np.eye(4)
+        t[:3, 3] = shift
+        moved = transform_points(src, t)
+        a, b = _both(monkeypatch, lambda: icp.point_to_plane(moved, tgt, normals, dist, np.eye(4), k))  # noqa: B023
+        assert a.transform.tobytes() == b.transform.tobytes()
+        assert (a.fitness, a.inlier_rmse, a.iterations) == (b.fitness, b.inlier_rmse, b.iterations)
+        assert a.iterations > 2

@@ -315,3 +315,83 @@ void sv_keys(const int64_t *ids, const double *z, int64_t n, double z0, double q
         counts[id]++;
     }
 }
+
+/* The distance of point i (of n, columns of pts: 3 x n) to target column j (of t: 3 x tn). */
+static inline double dist_to(const double *pts, int64_t n, int64_t i, const double *t, int64_t tn, int64_t j) {
+    double a = pts[i] - t[j], b = pts[n + i] - t[tn + j], c = pts[2 * n + i] - t[2 * tn + j];
+    double s = a * a;
+    s += b * b;
+    s += c * c;
+    return sqrt(s);
+}
+
+/* Whether the nearest target kept for point i (at: where it was searched from, idx, second: the
+ * second-nearest distance) is still proven (registration.icp.Nearest._proven); *d: its distance. */
+static inline int proven(const double *pts, int64_t n, int64_t i, const double *at, const int64_t *idx,
+                         const double *second, const double *t, int64_t tn, int64_t m, double free, double *d) {
+    *d = dist_to(pts, n, i, t, tn, idx[i]);
+    double moved = dist_to(pts, n, i, at, n, i);
+    moved += 1e-9;
+    return idx[i] < m ? *d + moved < second[i] : moved < free;
+}
+
+/* The ICP's nearest neighbours kept while a bound proves them (numpy twin: the part of
+ * registration.icp.Nearest.__call__ before its k-d tree search): each point's distance to its
+ * kept nearest (last: at 3 x n, idx, second) into d; a point the last search no longer proves
+ * but the one before (old, when has_old) does swaps them; the others' last search is copied to
+ * old (when has_old) and their indices written to todo (to be searched again). free: the bound
+ * less the correspondence distance. Returns the number in todo. */
+int64_t sv_nearest_kept(const double *pts, int64_t n, double *last_at, int64_t *last_idx, double *last_second,
+                        double *old_at, int64_t *old_idx, double *old_second, int64_t has_old, const double *t,
+                        int64_t tn, int64_t m, double free, double *d, int64_t *todo) {
+    int64_t k = 0;
+    for (int64_t i = 0; i < n; i++) {
+        if (proven(pts, n, i, last_at, last_idx, last_second, t, tn, m, free, &d[i])) continue;
+        if (has_old) {
+            double db;
+            if (proven(pts, n, i, old_at, old_idx, old_second, t, tn, m, free, &db)) {
+                for (int c = 0; c < 3; c++) {
+                    double a = last_at[c * n + i];
+                    last_at[c * n + i] = old_at[c * n + i], old_at[c * n + i] = a;
+                }
+                int64_t j = last_idx[i];
+                last_idx[i] = old_idx[i], old_idx[i] = j;
+                double s = last_second[i];
+                last_second[i] = old_second[i], old_second[i] = s;
+                d[i] = db;
+                continue;
+            }
+            for (int c = 0; c < 3; c++) old_at[c * n + i] = last_at[c * n + i];
+            old_idx[i] = last_idx[i], old_second[i] = last_second[i];
+        }
+        todo[k++] = i;
+    }
+    return k;
+}
+
+/* The terms of one Gauss-Newton step of the Tukey-weighted point-to-plane ICP (numpy twin:
+ * registration.icp._step before its matrix products): for the K points pts[:, sel] (pts: 3 x n)
+ * and their targets t[:, j] (3 x tn) with normals nrm[:, j] (3 x nn), the residuals r, the
+ * Jacobian rows jac (6 x K: p x n, then n) and the weighted rows jw = jac * w. */
+void sv_icp_terms(const double *pts, int64_t n, const int64_t *sel, const int64_t *j, int64_t K, const double *t,
+                  int64_t tn, const double *nrm, int64_t nn, double k, double *jac, double *jw, double *r) {
+    for (int64_t i = 0; i < K; i++) {
+        int64_t s = sel[i], c = j[i];
+        double p0 = pts[s], p1 = pts[n + s], p2 = pts[2 * n + s];
+        double n0 = nrm[c], n1 = nrm[nn + c], n2 = nrm[2 * nn + c];
+        double res = (p0 - t[c]) * n0;
+        res += (p1 - t[tn + c]) * n1;
+        res += (p2 - t[2 * tn + c]) * n2;
+        double u = res / k;
+        u *= u;
+        u = 1.0 - u;
+        u *= u;
+        double w = fabs(res) <= k ? u : 0.0;
+        double row[6] = {p1 * n2 - p2 * n1, p2 * n0 - p0 * n2, p0 * n1 - p1 * n0, n0, n1, n2};
+        for (int q = 0; q < 6; q++) {
+            jac[q * K + i] = row[q];
+            jw[q * K + i] = row[q] * w;
+        }
+        r[i] = res;
+    }
+}

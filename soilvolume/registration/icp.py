@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..native import kernels
+
 SLACK = 1.5  # the searches look this many correspondence distances far: room to move in
 THREADED = 4096  # fewest points searched on several threads
 DET_MIN = 1e-6  # a normal matrix with a smaller determinant gives no step (as Open3D)
@@ -84,6 +86,11 @@ class Nearest:
         if self.last is None or len(self.last.index) != points.shape[1]:
             self.last, self.older = self._search(points), None
             return self._distances(self.last, points), self.last.index
+        from ..native import kernels
+
+        lib = kernels()
+        if lib is not None and points.flags.c_contiguous and points.dtype == np.float64:
+            return self._native(lib, points)
         d, ok = self._proven(self.last, points)
         idx = np.flatnonzero(~ok)
         if len(idx) and self.older is not None:
@@ -106,6 +113,35 @@ class Nearest:
             self.last.put(idx, found)
             d[idx] = self._distances(found, pts)
         return d, self.last.index
+
+    def _native(self, lib, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`__call__` with the kept neighbours proven, swapped and set aside by the native
+        kernel (``sv_nearest_kept``), the rest searched here: the same distances and state."""
+        n, last = points.shape[1], self.last
+        old = self.older if self.older is not None else last
+        d, todo = np.empty(n), np.empty(n, np.int64)
+        kept = (last.at, last.index, last.second, old.at, old.index, old.second)
+        k = lib.sv_nearest_kept(
+            points.ctypes.data,
+            n,
+            *(a.ctypes.data for a in kept),
+            int(self.older is not None),
+            self.target.ctypes.data,
+            self.target.shape[1],
+            self.m,
+            self.bound - self.dist,
+            d.ctypes.data,
+            todo.ctypes.data,
+        )
+        if k:
+            idx = todo[:k]
+            if self.older is None:
+                self.older = last.copy()
+            pts = np.take(points, idx, axis=1)
+            found = self._search(pts)
+            last.put(idx, found)
+            d[idx] = self._distances(found, pts)
+        return d, last.index
 
     def _proven(self, found: _Found, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The distance to each point's found nearest, and whether that is still its nearest
@@ -161,7 +197,7 @@ def point_to_plane(
     steps, poses = 0, []
     while steps < max_iter:
         steps += 1
-        step = _step(np.take(pts, sel, axis=1), np.take(nn.target, j, axis=1), np.take(nrm, j, axis=1), k)
+        step = _step(pts, sel, j, nn.target, nrm, k)
         t = step @ t
         pts = _moved(pts, step)
         sel, j, new_fit, new_rmse = _matches(nn, pts)
@@ -187,7 +223,16 @@ def _matches(nn: Nearest, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, floa
     return sel, j[sel], len(sel) / pts.shape[1], float(np.sqrt(np.dot(dd, dd) / len(sel)))
 
 
-def _step(p: np.ndarray, q: np.ndarray, n: np.ndarray, k: float) -> np.ndarray:
+def _step(pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: np.ndarray, nrm: np.ndarray, k: float):
+    """The step (4x4) of the points ``pts[:, sel]`` on the planes of their targets ``target[:, j]``
+    and normals ``nrm[:, j]``: its per-point terms by the native kernel when it is there."""
+    lib = kernels()
+    if lib is not None and pts.flags.c_contiguous and nrm.flags.c_contiguous and target.flags.c_contiguous:
+        return _native_step(lib, pts, sel, j, target, nrm, k)
+    return _numpy_step(np.take(pts, sel, axis=1), np.take(target, j, axis=1), np.take(nrm, j, axis=1), k)
+
+
+def _numpy_step(p: np.ndarray, q: np.ndarray, n: np.ndarray, k: float) -> np.ndarray:
     """The Gauss-Newton step (4x4) of the Tukey-weighted point-to-plane residuals of points
     ``p`` on planes (``q``, ``n``), all (3, K): identity when there are none or the system is
     singular."""
@@ -207,12 +252,42 @@ def _step(p: np.ndarray, q: np.ndarray, n: np.ndarray, k: float) -> np.ndarray:
     jac[1] = p[2] * n[0] - p[0] * n[2]
     jac[2] = p[0] * n[1] - p[1] * n[0]
     jac[3:] = n
-    jw = jac * w
+    return _solved(jac * w, jac, r)
+
+
+def _solved(jw: np.ndarray, jac: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The step (4x4) of the normal equations ``jw jac^T x = -jw r`` (identity when singular)."""
     a = jw @ jac.T
     det = np.linalg.det(a)
     if not np.isfinite(det) or abs(det) < DET_MIN:
         return np.eye(4)
     return _matrix(np.linalg.solve(a, -(jw @ r)))
+
+
+def _native_step(lib, pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: np.ndarray, nrm: np.ndarray, k: float):
+    """:func:`_numpy_step` with its per-point terms from the native kernel (``sv_icp_terms``) and
+    the same matrix products: the same step, bit for bit."""
+    m = len(sel)
+    if m == 0:
+        return np.eye(4)
+    jac, jw, r = np.empty((6, m)), np.empty((6, m)), np.empty(m)
+    sel, j = np.ascontiguousarray(sel, np.int64), np.ascontiguousarray(j, np.int64)
+    lib.sv_icp_terms(
+        pts.ctypes.data,
+        pts.shape[1],
+        sel.ctypes.data,
+        j.ctypes.data,
+        m,
+        target.ctypes.data,
+        target.shape[1],
+        nrm.ctypes.data,
+        nrm.shape[1],
+        float(k),
+        jac.ctypes.data,
+        jw.ctypes.data,
+        r.ctypes.data,
+    )
+    return _solved(jw, jac, r)
 
 
 def _matrix(x: np.ndarray) -> np.ndarray:
