@@ -273,7 +273,7 @@ def test_whole_chunks_read_by_the_kernel_load_what_numpy_loads(lib, tmp_path, mo
     las.write(str(path))
     at, mask = class_byte(las.points.array.dtype)
     assert np.array_equal(las.points.array.view(np.uint8).reshape(n, -1)[:, at] & mask, np.asarray(las.classification))
-    monkeypatch.setattr(stream, "CHUNK", 2_000)  # the first chunk decides the rule, the other four are read by C
+    monkeypatch.setattr(stream, "CHUNK", 2_000)  # five chunks, all read by the kernel
     src = stream.open_source(path)
     keep = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
     box = np.array([-11.0, -11.0]), np.array([60.0, 40.0])
@@ -288,7 +288,7 @@ def test_whole_chunks_read_by_the_kernel_load_what_numpy_loads(lib, tmp_path, mo
         NativeChunks, "_from_file", lambda self, rec, f=NativeChunks._from_file: calls.append(1) or f(self, rec)
     )
     a, b = _both(monkeypatch, run)
-    assert a == b and len(calls) == 4  # the four later chunks, read by the kernel
+    assert a == b and len(calls) == 5  # every chunk, the first too (its rule decided beforehand)
     assert (a[2] < n) == classified and (a[4] is not None) == classified
 
 
@@ -314,3 +314,40 @@ def test_the_icp_kernels_give_the_numpy_bits(lib, monkeypatch):
         assert a.transform.tobytes() == b.transform.tobytes()
         assert (a.fitness, a.inlier_rmse, a.iterations) == (b.fitness, b.inlier_rmse, b.iterations)
         assert a.iterations > 2
+
+
+@pytest.mark.parametrize("kind", ["class", "colour"])
+def test_the_rule_is_decided_on_the_first_chunk_not_its_first_piece(lib, tmp_path, monkeypatch, kind):
+    """The kernel gets a chunk in pieces; the epoch's rule is still decided on the whole first
+    chunk, as numpy decides it: ground points only after the first piece still make the rule
+    select class 2, and a colour threshold comes from the whole chunk's colours."""
+    from soilvolume.inputs import records, stream
+    from soilvolume.inputs.prepare import Shift
+
+    rng = np.random.default_rng(9)
+    n = 12_000
+    las = laspy.LasData(laspy.LasHeader(point_format=7, version="1.4"))
+    las.header.scales, las.header.offsets = np.full(3, 0.001), np.array([500_000.0, 3_900_000.0, 0.0])
+    las.x, las.y, las.z = 500_000 + rng.uniform(0, 60, n), 3_900_000 + rng.uniform(0, 40, n), 50 + rng.normal(0, 0.2, n)
+    if kind == "class":
+        las.classification = np.where(np.arange(n) < 1_500, 1, 2).astype(np.uint8)  # no ground in the first piece
+    else:
+        green = (np.arange(n) >= 1_500) & (rng.random(n) < 0.4)  # no vegetation in the first piece
+        las.red = np.where(green, 20_000, 40_000).astype(np.uint16)
+        las.green = np.where(green, 50_000, 38_000).astype(np.uint16)
+        las.blue = np.where(green, 15_000, 36_000).astype(np.uint16)
+    path = tmp_path / "late.las"
+    las.write(str(path))
+    monkeypatch.setattr(stream, "CHUNK", 6_000)
+    monkeypatch.setattr(records, "PIECE", 1_000)
+    src = stream.open_source(path)
+    box = np.array([-11.0, -11.0]), np.array([60.0, 40.0])
+
+    def run():
+        got = stream.load(src, Shift(np.array([500_010.0, 3_900_010.0, 49.0])), "auto", None, ColumnThinner(*box, 0.5))
+        rule = got.nonsoil.rule if got.nonsoil is not None else None
+        return rule, got.used, got.xyz.tobytes(), got.thin.tobytes()
+
+    a, b = _both(monkeypatch, run)
+    assert a == b
+    assert (a[0].use_class if kind == "class" else a[0].green is not None) and a[1] < n

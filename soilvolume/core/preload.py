@@ -27,7 +27,7 @@ import threading
 _GO = threading.Event()  # set when the inputs are read (the memory peak is behind) or the run waits
 #: what the registration and the volume step import (ndimage, the refill's sparse solvers), then
 #: GeoTIFF output, imported once the inputs are read (the registration waits for the first)
-AFTER_READING = ("soilvolume.registration.register", "soilvolume.volumes.compute", "rasterio")
+AFTER_READING = ("scipy.spatial", "soilvolume.registration.register", "soilvolume.volumes.compute", "rasterio")
 
 
 def reading_done() -> None:

@@ -82,14 +82,16 @@ def las_records(
     count: int,
     size: int,
     signals: bool | Callable = False,
-    piece: int = PIECE,
+    piece: int | None = None,
     ring: int = RING,
     direct: Callable[[bool], object] | None = None,
+    stop: int | None = None,
 ) -> Iterator[tuple]:
     """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most
-    ``piece`` points, each chunk of ``size`` points (the numpy path's) ending on a piece marked
+    ``piece`` points (:data:`PIECE`), each chunk of ``size`` points (the numpy path's) ending on a piece marked
     ``flush``; a point count other than the header's ``count`` is a corrupt file. An uncompressed
-    file is read into ``ring`` buffers in turn (one, when each piece is done with before the next).
+    file is read into ``ring`` buffers in turn (one, when each piece is done with before the next);
+    ``stop``: only the first ``stop`` points (a whole number of chunks or fewer) are read, unchecked.
     ``direct(has_class)``, asked at each chunk of an uncompressed file: a class table (or None)
     leaves the chunk in the file as a :class:`FileChunk` (classification and signals None); False
     reads it."""
@@ -102,7 +104,7 @@ def las_records(
             has_cls = "classification" in dims
             scales, offsets = np.asarray(h.scales, float), np.asarray(h.offsets, float)
             check = BoundsCheck(path, h)
-            chunks = chunk_pieces(count, size, piece)
+            chunks = chunk_pieces(count if stop is None else stop, size, PIECE if piece is None else piece)
             arrays = (
                 _laz(reader, [m for c in chunks for m in c])
                 if h.are_points_compressed
@@ -124,8 +126,17 @@ def las_records(
         raise
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
-    if read != count:
+    if read != (count if stop is None else stop):
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
+
+
+def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Callable) -> tuple:
+    """(classification or None, signals or None) of the first chunk of ``size`` points of a
+    LAS/LAZ file, read without decoding its coordinates: what an epoch's rule is decided on
+    (:func:`soilvolume.soil.points.decide`), the same points the numpy path decides it on."""
+    for _rec, cls, *sig in las_records(path, count, size, signals, piece=size, ring=1, stop=min(size, count)):
+        return cls, sig[0] if sig else None  # the chunk in one piece, as the numpy path reads it
+    return None, None
 
 
 def las_chunks(

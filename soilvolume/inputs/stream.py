@@ -25,7 +25,7 @@ from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
 from .copc import copc_chunks, is_copc
 from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
 from .lasimport import laspy_module
-from .records import las_chunks, las_records, point_signals, signal_dims
+from .records import first_chunk_signals, las_chunks, las_records, point_signals, signal_dims
 from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
 
@@ -63,6 +63,14 @@ class Source:
             return
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
+
+    def first_signals(self, signals: bool | Callable) -> tuple:
+        """(classification, signals) of the first chunk this source's reads yield (its first file
+        with points)."""
+        for path in map(Path, self.tiles()):
+            if count := _header(path).count:
+                return first_chunk_signals(path, count, CHUNK, signals)
+        return None, None
 
     def records(self, size: int | None = None, signals: bool | Callable = False, direct=None) -> Iterator[tuple]:
         """(:class:`~soilvolume.inputs.records.Records`, classification or None, signals) of each
@@ -244,16 +252,20 @@ def _labelled(
     the epoch's rule, x/y box of the file coordinates when ``boxes``, ``keep`` of the points or
     None), the conversion to the local frame still to apply to the points, and whether they come
     as undecoded :class:`~soilvolume.inputs.records.Records` (the native kernel decodes, crops and
-    thins them: :func:`native_reads`). The thread decides the rule on the first chunk
-    (:func:`epoch_rule`), labels every chunk and reads only the signals the rule (or its decision)
-    uses. Without the kernel, it subtracts the origin of a plain shift (``prepare.Shift``) in the
-    decoding; then the points are local already, and the thread also applies ``keep`` (the
-    footprint test: the reading thread has time to spare, the consumer has none)."""
+    thins them: :func:`native_reads`). The rule is decided on the first chunk (:func:`epoch_rule`;
+    for the kernel, whose pieces are smaller, that chunk is read beforehand as a whole); the thread
+    labels every chunk and reads only the signals the rule (or its decision) uses. Without the
+    kernel, it subtracts the origin of a plain shift (``prepare.Shift``) in the decoding; then the
+    points are local already, and the thread also applies ``keep`` (the footprint test: the
+    reading thread has time to spare, the consumer has none)."""
     native = native_reads(src, to_local, keep)
     fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
     early = keep if fused and not native else None
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
+    if native:  # decided on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
+        cls, sig = src.first_signals(lambda c: deciding_dims(c, mode, exclude))
+        rule = epoch_rule(src, cls, sig, mode, exclude)
 
     def wanted(cls) -> set[str]:
         return deciding_dims(cls, mode, exclude) if rule is None else rule.signal_dims
