@@ -157,6 +157,11 @@ def compare(name: str, scheduler: str, rounds: int, venv: Path, runs_dir: Path, 
         print("[versus] CloudCompare is not installed (apt-get install cloudcompare): its columns are skipped")
     plys = (ensure_ply(before), ensure_ply(after)) if exe else None
     warm([before, after, *(plys or ())])
+    scratch = runs_dir / f"versus-{name}-cc"  # CloudCompare writes its reports beside the clouds: here, not the cache
+    shutil.rmtree(scratch, ignore_errors=True)
+    if plys:
+        scratch.mkdir(parents=True)
+        plys = tuple(_linked(p, scratch) for p in plys)
     out = runs_dir / f"versus-{name}"
     env = dict(os.environ, QT_QPA_PLATFORM="offscreen")
     env.pop("PYTHONDONTWRITEBYTECODE", None)  # as installed: compiled modules
@@ -182,9 +187,20 @@ def compare(name: str, scheduler: str, rounds: int, venv: Path, runs_dir: Path, 
         done = ", ".join(_line(res, k, -1) for k in _kinds(res))
         print(f"[versus] {name} round {i + 1}/{rounds}: {done}", flush=True)
     shutil.rmtree(out, ignore_errors=True)
+    shutil.rmtree(scratch, ignore_errors=True)
     res["truth_net_m3"] = json.loads(Path(truth).read_text())["net"]
     res["load"] = os.getloadavg()
     return res
+
+
+def _linked(path: Path, folder: Path) -> Path:
+    """``path`` as a symbolic link in ``folder`` (a copy where links are not allowed)."""
+    link = folder / path.name
+    try:
+        link.symlink_to(path)
+    except OSError:
+        shutil.copyfile(path, link)
+    return link
 
 
 def _kinds(res: dict) -> list[str]:

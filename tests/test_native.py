@@ -316,8 +316,9 @@ def test_the_icp_kernels_give_the_numpy_bits(lib, monkeypatch):
         assert a.iterations > 2
 
 
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
 @pytest.mark.parametrize("kind", ["class", "colour"])
-def test_the_rule_is_decided_on_the_first_chunk_not_its_first_piece(lib, tmp_path, monkeypatch, kind):
+def test_the_rule_is_decided_on_the_first_chunk_not_its_first_piece(lib, tmp_path, monkeypatch, kind, suffix):
     """The kernel gets a chunk in pieces; the epoch's rule is still decided on the whole first
     chunk, as numpy decides it: ground points only after the first piece still make the rule
     select class 2, and a colour threshold comes from the whole chunk's colours."""
@@ -336,8 +337,8 @@ def test_the_rule_is_decided_on_the_first_chunk_not_its_first_piece(lib, tmp_pat
         las.red = np.where(green, 20_000, 40_000).astype(np.uint16)
         las.green = np.where(green, 50_000, 38_000).astype(np.uint16)
         las.blue = np.where(green, 15_000, 36_000).astype(np.uint16)
-    path = tmp_path / "late.las"
-    las.write(str(path))
+    path = tmp_path / f"late{suffix}"
+    las.write(str(path), do_compress=suffix == ".laz")
     monkeypatch.setattr(stream, "CHUNK", 6_000)
     monkeypatch.setattr(records, "PIECE", 1_000)
     src = stream.open_source(path)

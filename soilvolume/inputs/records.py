@@ -86,12 +86,14 @@ def las_records(
     ring: int = RING,
     direct: Callable[[bool], object] | None = None,
     stop: int | None = None,
+    whole_first: bool = False,
 ) -> Iterator[tuple]:
     """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most
     ``piece`` points (:data:`PIECE`), each chunk of ``size`` points (the numpy path's) ending on a piece marked
     ``flush``; a point count other than the header's ``count`` is a corrupt file. An uncompressed
     file is read into ``ring`` buffers in turn (one, when each piece is done with before the next);
-    ``stop``: only the first ``stop`` points (a whole number of chunks or fewer) are read, unchecked.
+    ``stop``: only the first ``stop`` points (a whole number of chunks or fewer) are read, unchecked;
+    ``whole_first``: the first chunk in one piece (an epoch's rule is decided on it).
     ``direct(has_class)``, asked at each chunk of an uncompressed file: a class table (or None)
     leaves the chunk in the file as a :class:`FileChunk` (classification and signals None); False
     reads it."""
@@ -105,6 +107,8 @@ def las_records(
             scales, offsets = np.asarray(h.scales, float), np.asarray(h.offsets, float)
             check = BoundsCheck(path, h)
             chunks = chunk_pieces(count if stop is None else stop, size, PIECE if piece is None else piece)
+            if whole_first and chunks:
+                chunks[0] = [sum(chunks[0])]
             arrays = (
                 _laz(reader, [m for c in chunks for m in c])
                 if h.are_points_compressed
@@ -128,6 +132,13 @@ def las_records(
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
     if read != (count if stop is None else stop):
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
+
+
+def compressed(path: Path) -> bool:
+    """Whether a LAS file's points are compressed (LAZ): the high bits of its point format byte."""
+    with open(path, "rb") as fh:
+        fh.seek(104)
+        return bool(fh.read(1)[0] & 0xC0)
 
 
 def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Callable) -> tuple:

@@ -25,7 +25,7 @@ from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
 from .copc import copc_chunks, is_copc
 from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
 from .lasimport import laspy_module
-from .records import first_chunk_signals, las_chunks, las_records, point_signals, signal_dims
+from .records import compressed, first_chunk_signals, las_chunks, las_records, point_signals, signal_dims
 from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
 
@@ -64,21 +64,26 @@ class Source:
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
 
-    def first_signals(self, signals: bool | Callable) -> tuple:
-        """(classification, signals) of the first chunk this source's reads yield (its first file
-        with points)."""
-        for path in map(Path, self.tiles()):
-            if count := _header(path).count:
-                return first_chunk_signals(path, count, CHUNK, signals)
-        return None, None
+    def first_file(self) -> Path | None:
+        """The first file with points this source's reads open."""
+        return next((p for p in map(Path, self.tiles()) if _header(p).count), None)
 
-    def records(self, size: int | None = None, signals: bool | Callable = False, direct=None) -> Iterator[tuple]:
+    def first_signals(self, signals: bool | Callable) -> tuple:
+        """(classification, signals) of the first chunk this source's reads yield."""
+        path = self.first_file()
+        return (None, None) if path is None else first_chunk_signals(path, _header(path).count, CHUNK, signals)
+
+    def records(
+        self, size: int | None = None, signals: bool | Callable = False, direct=None, whole_first: bool = False
+    ) -> Iterator[tuple]:
         """(:class:`~soilvolume.inputs.records.Records`, classification or None, signals) of each
         chunk of the source's LAS/LAZ files read whole, undecoded, or a chunk left in its file
         where ``direct`` says (:func:`~soilvolume.inputs.records.las_records`): the native kernel's
         input (:func:`native_reads` says when a source can)."""
         for path in self.tiles():
-            yield from las_records(Path(path), _header(Path(path)).count, size or CHUNK, signals, direct=direct)
+            count = _header(Path(path)).count
+            yield from las_records(Path(path), count, size or CHUNK, signals, direct=direct, whole_first=whole_first)
+            whole_first = whole_first and not count
 
     def within(self, lo, hi) -> Source:
         """This source, read only where it can meet the x/y box lo..hi (file CRS)."""
@@ -263,7 +268,9 @@ def _labelled(
     early = keep if fused and not native else None
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
-    if native:  # decided on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
+    first = src.first_file() if native else None
+    ahead = first is not None and not compressed(first)  # the rule decided before the reading
+    if ahead:  # on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
         cls, sig = src.first_signals(lambda c: deciding_dims(c, mode, exclude))
         rule = epoch_rule(src, cls, sig, mode, exclude)
 
@@ -277,8 +284,8 @@ def _labelled(
 
     def run() -> Iterator[tuple]:
         nonlocal rule
-        if native:
-            chunks = src.records(signals=wanted, direct=direct)
+        if native:  # a LAZ file's first chunk in one piece, the rule decided on it (once decompressed)
+            chunks = src.records(signals=wanted, direct=direct, whole_first=not ahead)
         else:
             chunks = src.chunks(signals=wanted, origin=to_local.origin if fused else None)
         for xyz, cls, sig in chunks:
