@@ -352,3 +352,12 @@ def test_the_rule_is_decided_on_the_first_chunk_not_its_first_piece(lib, tmp_pat
     a, b = _both(monkeypatch, run)
     assert a == b
     assert (a[0].use_class if kind == "class" else a[0].green is not None) and a[1] < n
+
+
+def test_the_centroids_kernel_gives_the_numpy_bits(lib, monkeypatch):
+    rng = np.random.default_rng(12)
+    t = ColumnThinner(np.array([-3.0, -2.0]), np.array([40.0, 30.0]), 0.7)
+    t.add(rng.uniform(-5, 45, (20_000, 3)))
+    t.add(rng.uniform(0, 10, (3_000, 3)))
+    a, b = _both(monkeypatch, lambda: (t.result().tobytes(), t.counts().tobytes()))
+    assert a == b and len(t.result()) > 1_000

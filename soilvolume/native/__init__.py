@@ -91,6 +91,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.sv_nearest_kept.restype = i64
     lib.sv_icp_terms.argtypes = [ptr, i64, ptr, ptr, i64, ptr, i64, ptr, i64, f64, ptr, ptr, ptr]
     lib.sv_icp_terms.restype = None
+    lib.sv_centroids.argtypes = [ptr, i64, ptr, ptr]
+    lib.sv_centroids.restype = i64
 
 
 _scratch = threading.local()
