@@ -18,7 +18,7 @@ from soilvolume import native
 from soilvolume.inputs.chunkwork import Growing, NativeChunks, numpy_chunk
 from soilvolume.inputs.footprint import PolygonMask
 from soilvolume.inputs.lasheader import BoundsCheck
-from soilvolume.inputs.records import Records, pieces
+from soilvolume.inputs.records import Records, chunk_pieces
 from soilvolume.inputs.thinning import ColumnThinner
 
 
@@ -126,6 +126,10 @@ def test_the_chunk_kernel_gives_the_numpy_bits(lib, case):
 
 
 def test_pieces_never_straddle_chunks():
+    def pieces(count, size, piece):
+        return [m for chunk in chunk_pieces(count, size, piece) for m in chunk]
+
+    assert chunk_pieces(10, 4, 3) == [[3, 1], [3, 1], [2]]
     assert pieces(10, 4, 3) == [3, 1, 3, 1, 2]
     assert pieces(8, 4, 4) == [4, 4]
     assert pieces(0, 4, 3) == []

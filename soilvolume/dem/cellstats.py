@@ -72,7 +72,6 @@ class _SortedCells:
         else:
             key = self._numpy(ids, z, n_cells, own)
         self.key = key
-        self.key = key
         self.starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
         self.has = self.counts > 0
 

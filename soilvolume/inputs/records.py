@@ -4,7 +4,7 @@
 Uncompressed files are read into three buffers used in turn (no fresh memory per chunk: on a
 virtual machine a page fault costs microseconds, and laspy's reader zeroes and faults a new
 buffer for every chunk); LAZ chunks are the records lazrs decompresses. A consumer may hold one
-chunk while the next waits in a queue of one (:func:`soilvolume.inputs.stream.prefetch`) and the
+chunk while the next waits in a queue of one (:func:`soilvolume.core.readahead.prefetch`) and the
 reader fills the third."""
 
 from __future__ import annotations
@@ -26,9 +26,9 @@ RING = 3  # buffers of an uncompressed read in turn: the consumer's, the queued 
 
 @dataclass
 class Records:
-    """One chunk of a file's point records, not decoded: its structured array (laspy's point
-    format), the header's scales and offsets, the file's bounds check (the consumer extends it
-    with the chunk's decoded bounds) and whether it is the file's last chunk (then the consumer
+    """One piece of a chunk of a file's point records, not decoded: its structured array (laspy's
+    point format), the header's scales and offsets, the file's bounds check (the consumer extends
+    it with the piece's decoded bounds) and whether it is the file's last piece (then the consumer
     finishes the check)."""
 
     array: np.ndarray
@@ -134,13 +134,6 @@ def las_records(
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
 
 
-def compressed(path: Path) -> bool:
-    """Whether a LAS file's points are compressed (LAZ): the high bits of its point format byte."""
-    with open(path, "rb") as fh:
-        fh.seek(104)
-        return bool(fh.read(1)[0] & 0xC0)
-
-
 def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Callable) -> tuple:
     """(classification or None, signals or None) of the first chunk of ``size`` points of a
     LAS/LAZ file, read without decoding its coordinates: what an epoch's rule is decided on
@@ -222,14 +215,9 @@ def point_signals(record, dims: set[str]) -> Signals | None:
     return None if rgb is None and ret is None else Signals(rgb, ret)
 
 
-def pieces(count: int, size: int, piece: int) -> list[int]:
-    """The lengths of the pieces of ``count`` points read in chunks of ``size``, each chunk in
-    pieces of at most ``piece`` (no piece straddles two chunks)."""
-    return [m for chunk in chunk_pieces(count, size, piece) for m in chunk]
-
-
 def chunk_pieces(count: int, size: int, piece: int) -> list[list[int]]:
-    """:func:`pieces`, chunk by chunk."""
+    """The lengths of the pieces of ``count`` points read in chunks of ``size``, chunk by chunk,
+    each chunk in pieces of at most ``piece`` (no piece straddles two chunks)."""
     return [
         [min(piece, m - k) for k in range(0, m, piece)] for m in (min(size, count - s) for s in range(0, count, size))
     ]

@@ -25,7 +25,7 @@ from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
 from .copc import copc_chunks, is_copc
 from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
 from .lasimport import laspy_module
-from .records import compressed, first_chunk_signals, las_chunks, las_records, point_signals, signal_dims
+from .records import first_chunk_signals, las_chunks, las_records, point_signals, signal_dims
 from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
 
@@ -46,6 +46,7 @@ class Source:
     vpc: Vpc | None = None  # a virtual point cloud: its tiles
     region: tuple[np.ndarray, np.ndarray] | None = None  # x/y box (file CRS) that reads may stop at
     index: tuple | None = None  # of a single file: (start, count, x/y lo, x/y hi) of each chunk read
+    compressed: bool = False  # a LAZ file's points
 
     def chunks(self, size: int | None = None, signals: bool | Callable = False, origin=None) -> Iterator[tuple]:
         """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
@@ -64,14 +65,14 @@ class Source:
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
 
-    def first_file(self) -> Path | None:
-        """The first file with points this source's reads open."""
-        return next((p for p in map(Path, self.tiles()) if _header(p).count), None)
+    def first_file(self) -> Source | None:
+        """The first file with points this source's reads open, as its header gives it."""
+        return next((h for h in map(_header, map(Path, self.tiles())) if h.count), None)
 
-    def first_signals(self, signals: bool | Callable) -> tuple:
-        """(classification, signals) of the first chunk this source's reads yield."""
-        path = self.first_file()
-        return (None, None) if path is None else first_chunk_signals(path, _header(path).count, CHUNK, signals)
+    @staticmethod
+    def first_signals(first: Source, signals: bool | Callable) -> tuple:
+        """(classification, signals) of the first chunk a read of the file ``first`` yields."""
+        return first_chunk_signals(Path(first.path), first.count, CHUNK, signals)
 
     def records(
         self, size: int | None = None, signals: bool | Callable = False, direct=None, whole_first: bool = False
@@ -187,6 +188,7 @@ def _header(p: Path) -> Source:
                 np.asarray(h.mins, float),
                 np.asarray(h.maxs, float),
                 "classification" in dims,
+                compressed=bool(h.are_points_compressed),
             )
     except SoilVolumeError:
         raise
@@ -269,9 +271,9 @@ def _labelled(
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
     first = src.first_file() if native else None
-    ahead = first is not None and not compressed(first)  # the rule decided before the reading
+    ahead = first is not None and not first.compressed  # the rule decided before the reading
     if ahead:  # on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
-        cls, sig = src.first_signals(lambda c: deciding_dims(c, mode, exclude))
+        cls, sig = src.first_signals(first, lambda c: deciding_dims(c, mode, exclude))
         rule = epoch_rule(src, cls, sig, mode, exclude)
 
     def wanted(cls) -> set[str]:

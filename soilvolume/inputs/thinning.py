@@ -76,7 +76,7 @@ class ColumnThinner:
 
     def result(self) -> np.ndarray:
         """The centroids (float64, (M, 3))."""
-        native = self._native_result()
+        native = self._native_result(centroids=True)
         if native is not None:
             return native[0]
         filled = self._filled()
@@ -88,21 +88,24 @@ class ColumnThinner:
 
     def counts(self) -> np.ndarray:
         """The number of points behind each centroid of :meth:`result` (same order)."""
-        native = self._native_result()
+        native = self._native_result(centroids=False)
         if native is not None:
             return native[1]
         return self.sums[3].take(self._filled()).astype(np.int64)
 
-    def _native_result(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """(centroids, counts) in one pass of the native kernel (``sv_centroids``); None without it."""
+    def _native_result(self, centroids: bool) -> tuple[np.ndarray | None, np.ndarray] | None:
+        """(centroids, or None when not ``centroids``; counts) in one pass of the native kernel
+        (``sv_centroids``); None without it."""
         from ..native import kernels
 
         lib = kernels()
         if lib is None or not self.sums.flags.c_contiguous:
             return None
         m = int(np.count_nonzero(self.sums[3] > 0))
-        out, counts = np.empty((m, 3)), np.empty(m, np.int64)
-        lib.sv_centroids(self.sums.ctypes.data, self.sums.shape[1], out.ctypes.data, counts.ctypes.data)
+        out, counts = np.empty((m, 3)) if centroids else None, np.empty(m, np.int64)
+        lib.sv_centroids(
+            self.sums.ctypes.data, self.sums.shape[1], None if out is None else out.ctypes.data, counts.ctypes.data
+        )
         return out, counts
 
     def _filled(self) -> np.ndarray:

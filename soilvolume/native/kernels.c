@@ -398,14 +398,14 @@ void sv_icp_terms(const double *pts, int64_t n, const int64_t *sel, const int64_
 
 /* The centroids of a thinning lattice's occupied columns (numpy twin: ColumnThinner.result and
  * counts): for each column with a count (sums: x, y, z, count rows of ncols), in order, its sums
- * over its count into out (m x 3) and the count into counts. Returns m. */
+ * over its count into out (m x 3; NULL: not wanted) and the count into counts. Returns m. */
 int64_t sv_centroids(const double *sums, int64_t ncols, double *out, int64_t *counts) {
     const double *sx = sums, *sy = sums + ncols, *sz = sums + 2 * ncols, *sc = sums + 3 * ncols;
     int64_t m = 0;
     for (int64_t j = 0; j < ncols; j++) {
         double c = sc[j];
         if (!(c > 0.0)) continue;
-        out[3 * m] = sx[j] / c, out[3 * m + 1] = sy[j] / c, out[3 * m + 2] = sz[j] / c;
+        if (out) out[3 * m] = sx[j] / c, out[3 * m + 1] = sy[j] / c, out[3 * m + 2] = sz[j] / c;
         counts[m++] = (int64_t)c;
     }
     return m;

@@ -86,8 +86,6 @@ class Nearest:
         if self.last is None or len(self.last.index) != points.shape[1]:
             self.last, self.older = self._search(points), None
             return self._distances(self.last, points), self.last.index
-        from ..native import kernels
-
         lib = kernels()
         if lib is not None and points.flags.c_contiguous and points.dtype == np.float64:
             return self._native(lib, points)
