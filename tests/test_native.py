@@ -365,3 +365,30 @@ def test_the_centroids_kernel_gives_the_numpy_bits(lib, monkeypatch):
     t.add(rng.uniform(0, 10, (3_000, 3)))
     a, b = _both(monkeypatch, lambda: (t.result().tobytes(), t.counts().tobytes()))
     assert a == b and len(t.result()) > 1_000
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="counts the process's page faults (Linux)")
+def test_the_thinning_writes_a_fresh_column_before_reading_it(lib):
+    """A column's first point is written onto its zero sums, not added to them: a read of a page
+    never written maps the shared zero page and the write after it faults again (and flushes
+    the TLB of every core running the process). Sums on fresh pages fault about once a page."""
+    import mmap
+    import resource
+
+    side = 1024  # columns a side: 4 x 8 MB of sums, 2048 pages each
+    thinner = ColumnThinner(np.zeros(2), np.full(2, side - 1.0), 1.0)
+    region = mmap.mmap(-1, thinner.sums.nbytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)  # never touched
+    thinner.sums = np.frombuffer(region, np.float64).reshape(thinner.sums.shape)
+    rec = _records(np.random.default_rng(3), 40_000, 1)
+    rec.array["X"] = np.random.default_rng(4).integers(0, side * 1000, len(rec))  # 0.001 m: every column's row
+    rec.array["Y"] = np.random.default_rng(5).integers(0, side * 1000, len(rec))
+    origin = rec.offsets.copy()
+    nothing = (np.full(2, np.inf), np.full(2, -np.inf))  # no points kept: only the sums are written
+    kernel = NativeChunks(lib, thinner, None, nothing, origin, len(rec))
+    out = Growing(0), Growing(0), Growing(0, None, np.uint8)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    kernel.add(rec, None, *out)
+    faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+    pages = thinner.sums.nbytes // mmap.PAGESIZE
+    assert int((thinner.sums[3] > 0).sum()) > 0.9 * 40_000 * np.exp(-40_000 / side**2)  # the points were added
+    assert faults < 1.5 * pages, f"{faults} faults for {pages} pages of sums"

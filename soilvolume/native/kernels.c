@@ -91,17 +91,23 @@ static inline int in_box(const double *p, const double *box) {
     return p[0] >= box[0] && p[0] <= box[2] && p[1] >= box[1] && p[1] <= box[3];
 }
 
-/* Add a point to its column: straight onto the sums, once the column's earlier sums are set aside. */
+/* Add a point to its column: straight onto the sums, once the column's earlier sums are set aside.
+ * A column no chunk touched yet (mark 0) still has zero sums: they are written, 0.0 + the point's,
+ * not read first. A read of a page never written maps the shared zero page, and the write after it
+ * faults again and flushes the TLB of every core running the process (the paper pair: ~50 ms). */
 static inline void thin_add(sv_chunk_t *c, int64_t id, const double *p) {
     int64_t n = c->ncols;
     double *s = c->sums;
     if (c->mark[id] != (int32_t)c->chunk) {
-        if (c->mark[id] != 0) {
-            double *keep = c->side + 4 * c->nside;
-            c->side_ids[c->nside++] = id;
-            keep[0] = s[id], keep[1] = s[n + id], keep[2] = s[2 * n + id], keep[3] = s[3 * n + id];
-            s[id] = s[n + id] = s[2 * n + id] = s[3 * n + id] = 0.0;
+        if (c->mark[id] == 0) { /* 0.0 + v: the bits of the zero sums plus v (-0.0 too) */
+            c->mark[id] = (int32_t)c->chunk;
+            s[id] = 0.0 + p[0], s[n + id] = 0.0 + p[1], s[2 * n + id] = 0.0 + p[2], s[3 * n + id] = 1.0;
+            return;
         }
+        double *keep = c->side + 4 * c->nside;
+        c->side_ids[c->nside++] = id;
+        keep[0] = s[id], keep[1] = s[n + id], keep[2] = s[2 * n + id], keep[3] = s[3 * n + id];
+        s[id] = s[n + id] = s[2 * n + id] = s[3 * n + id] = 0.0;
         c->mark[id] = (int32_t)c->chunk;
     }
     s[id] += p[0], s[n + id] += p[1], s[2 * n + id] += p[2], s[3 * n + id] += 1.0;
