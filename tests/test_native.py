@@ -392,3 +392,46 @@ def test_the_thinning_writes_a_fresh_column_before_reading_it(lib):
     pages = thinner.sums.nbytes // mmap.PAGESIZE
     assert int((thinner.sums[3] > 0).sum()) > 0.9 * 40_000 * np.exp(-40_000 / side**2)  # the points were added
     assert faults < 1.5 * pages, f"{faults} faults for {pages} pages of sums"
+
+
+@pytest.mark.parametrize("suffix", [".las", ".laz"])
+@pytest.mark.parametrize("rule", ["class", "colour", "none"])
+def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeypatch, suffix, rule):
+    """The first pass's scan of a VPC tile on the kernel (``distributed.nativescan``) gives numpy's
+    thinning sums and counts bit for bit, and kept chunks of numpy's sizes whose soil points and
+    other points (with their labels) are numpy's, each in order: what the grid takes apart."""
+    from soilvolume.distributed import nativescan, scan
+    from soilvolume.inputs.prepare import Shift
+    from soilvolume.soil.points import PointRule
+
+    rng = np.random.default_rng(7)
+    n = 9_000
+    las = laspy.LasData(laspy.LasHeader(point_format=7, version="1.4"))
+    las.header.scales, las.header.offsets = np.full(3, 0.001), np.array([500_000.0, 3_900_000.0, 0.0])
+    las.x, las.y, las.z = 500_000 + rng.uniform(0, 60, n), 3_900_000 + rng.uniform(0, 40, n), 50 + rng.normal(0, 0.2, n)
+    las.classification = rng.choice(np.array([2, 2, 2, 5, 6, 7], np.uint8), n)
+    las.red, las.green, las.blue = (rng.integers(0, 65535, n) for _ in range(3))
+    path = tmp_path / f"t{suffix}"
+    las.write(str(path))
+    point_rule = {"class": PointRule(use_class=True), "colour": PointRule(green=0.05), "none": PointRule()}[rule]
+    for module in (scan, nativescan):
+        monkeypatch.setattr(module, "CHUNK", 2_000)  # five chunks
+    keep = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
+    thinning = (np.array([-11.0, -11.0]), np.array([60.0, 40.0]), 0.5, None)
+    to_local = Shift(np.array([500_010.0, 3_900_010.0, 49.0]))
+
+    def run():
+        kept = []
+        got = scan._scan((str(path), None, None), None, to_local, point_rule, keep, thinning, False, None, kept)
+        counts = tuple(got[k] for k in ("points", "used", "cropped"))
+        sizes = [len(xyz) for xyz, _ in kept]
+        soil = np.concatenate([xyz if lab is None else xyz[lab == 0] for xyz, lab in kept])
+        other = [(xyz[lab != 0], lab[lab != 0]) for xyz, lab in kept if lab is not None]
+        other = b"".join(x.tobytes() + la.tobytes() for x, la in other)
+        return counts, got["sums"][0].tobytes(), got["sums"][1].tobytes(), sizes, soil.tobytes(), other
+
+    calls = []
+    monkeypatch.setattr(nativescan, "NativeChunks", lambda *a, f=nativescan.NativeChunks: calls.append(1) or f(*a))
+    a, b = _both(monkeypatch, run)
+    assert a == b and len(calls) == 1  # the kernel scanned it, then numpy
+    assert len(a[3]) == 5 and (a[0][1] < n) == (rule != "none")  # a rule left some points out

@@ -276,10 +276,14 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
     """The results of ``futures`` as they finish. Every :data:`POLL_S`: ``check()`` (signals,
     cancellation), the client's connection, and workers (none for :data:`NO_WORKERS_S`: an
     error). A task's failure is re-raised as it is (engine errors are one line already), a
-    cluster's as one line naming ``what`` the tasks were doing."""
+    cluster's as one line naming ``what`` the tasks were doing. No futures: nothing imported (the
+    driver's own scans end while the cluster's thread may still be importing Dask: its module lock
+    would hold them up)."""
+    pending, lonely = set(futures), None
+    if not pending:
+        return
     from dask.distributed import wait
 
-    pending, lonely = set(futures), None
     order = {f.key: k for k, f in enumerate(futures)}
     while pending:
         check()

@@ -16,6 +16,7 @@ from ..core.cells import bounds, rows
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..soil.points import SOIL, NonSoil, PointRule
+from .nativescan import native_scan
 from .pointcache import KeptTile, kept_chunk, read_tile
 
 UNIT = 8_000_000  # points per task of a single file
@@ -57,6 +58,10 @@ def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, 
     path, start, count = unit
     voxel = thinning[2]  # (lo, hi, voxel[, within]) of the driver's ColumnThinner
     resolution = voxel / COPC_POINTS_PER_COLUMN_SIDE if start is None and is_copc(path) else None
+    if cached is None and resolution is None and start is None:
+        done = native_scan(path, to_local, rule, keep, thinning, kept)
+        if done is not None:
+            return {"unit": tuple(unit), **done}
     shift = to_local if cached is not None else getattr(to_local, "inplace", to_local)
     if cached is not None:
         chunks = iter(cached)
@@ -237,8 +242,7 @@ def _scan_here(src: Source, todo: list[Unit], args: tuple, kept: tuple, ready: C
         path = todo[0][0]
         if is_copc(path) or not cache.fits(src, path):
             break
-        chunks = pre.pop(path) if path in pre else read_tile(path)
-        part, tile = scan_keeping(todo[0], *args, cached=chunks)
+        part, tile = scan_keeping(todo[0], *args, cached=pre.pop(path, None))  # None: the scan reads it
         parts.append(part)
         cache.hold(src, (path, crop), tile)
         todo = todo[1:]

@@ -1,0 +1,79 @@
+"""The first pass's scan of one whole LAS/LAZ file on the native chunk kernel
+(:class:`~soilvolume.inputs.chunkwork.NativeChunks`, as :func:`soilvolume.inputs.stream.load`
+streams a file): decode, crop, labels, thinning and the points kept for the grid in one pass,
+without the GIL (the driver scans tiles while the cluster starts; its imports share the cores).
+
+What it returns is what :func:`.scan._scan` computes in numpy: the same thinning sums and counts,
+and the same kept chunks (one per chunk of ``CHUNK`` points, the same number of points) with their
+soil points first and the others after them, each in file order: the grid takes soil and other
+points apart (:func:`.tiletask._epoch`), so its sums come out byte-identical."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..inputs.chunkwork import Growing, NativeChunks
+from ..inputs.copc import is_copc
+from ..inputs.records import FileChunk, las_records
+from ..inputs.stream import CHUNK, ColumnThinner, file_kernel, native_reads, open_source
+from ..soil.points import PointRule
+
+NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no points kept
+
+
+def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kept: list | None) -> dict | None:
+    """The scan of the file ``path`` (points, soil points used, points cropped in, read seconds,
+    the thinning ``sums``; each chunk's kept points and labels appended to ``kept`` when it is a
+    list), or None where the kernel does not apply: no library, a frame that is not a plain
+    shift, a crop that is not a lattice, a COPC file, an empty one."""
+    from ..native import kernels
+
+    if is_copc(path):
+        return None
+    src = open_source(path)
+    if src.raw is not None or not native_reads(src, to_local, keep):
+        return None
+    thinner = ColumnThinner(*thinning)
+    out = Growing(src.count if kept is not None else 0), Growing(0), Growing(0, None, np.uint8)
+    kernel = NativeChunks(kernels(), thinner, keep, None if kept is not None else NOTHING, to_local.origin, CHUNK)
+    direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None
+    records = las_records(Path(path), src.count, CHUNK, lambda _cls: rule.signal_dims, direct=direct)
+    res = {"points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
+    ends, labelled = [], False
+    try:
+        t0 = time.perf_counter()
+        for rec, cls, sig in records:
+            res["read_s"] += time.perf_counter() - t0
+            labels = None if isinstance(rec, FileChunk) else rule.labels(cls, sig)
+            labelled = labelled or labels is not None or (isinstance(rec, FileChunk) and rec.table is not None)
+            got = kernel.add(rec, labels, *out)
+            rec.check.extend(got.lo, got.hi)
+            if rec.last:
+                rec.check.finish()
+            res["points"] += len(rec)
+            res["used"] += got.soil
+            res["cropped"] += got.cropped
+            if rec.flush:  # the end of a chunk of CHUNK points: of a kept chunk
+                ends.append((out[0].n, out[1].n))
+            t0 = time.perf_counter()
+    finally:
+        kernel.close()
+    if kept is not None:
+        kept.extend(_kept_chunks(*(g.result() for g in out), ends, labelled))
+    has = np.flatnonzero(thinner.sums[3])  # the columns with points: a tile meets few of the grid's
+    res["sums"] = (has, thinner.sums[:, has])
+    return res
+
+
+def _kept_chunks(soil: np.ndarray, other: np.ndarray, labels: np.ndarray, ends: list, labelled: bool) -> list:
+    """(local float32 xyz, labels or None) of each chunk: its soil points, then its others."""
+    chunks, a0, b0 = [], 0, 0
+    for a1, b1 in ends:
+        xyz = np.concatenate([soil[a0:a1], other[b0:b1]])
+        lab = np.concatenate([np.zeros(a1 - a0, np.uint8), labels[b0:b1]]) if labelled else None
+        chunks.append((xyz, lab))
+        a0, b0 = a1, b1
+    return chunks
