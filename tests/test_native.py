@@ -435,3 +435,18 @@ def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeyp
     a, b = _both(monkeypatch, run)
     assert a == b and len(calls) == 1  # the kernel scanned it, then numpy
     assert len(a[3]) == 5 and (a[0][1] < n) == (rule != "none")  # a rule left some points out
+
+
+def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):
+    """A VPC tile without points: the kernel's scan steps aside and the numpy scan finds nothing."""
+    from soilvolume.distributed import nativescan, scan
+    from soilvolume.inputs.prepare import Shift
+    from soilvolume.soil.points import PointRule
+
+    path = tmp_path / "empty.las"
+    laspy.LasData(laspy.LasHeader(point_format=6, version="1.4")).write(str(path))
+    thinning, to_local = (np.zeros(2), np.full(2, 10.0), 0.5, None), Shift(np.zeros(3))
+    rule, kept = PointRule(use_class=True), []
+    assert nativescan.native_scan(str(path), to_local, rule, None, thinning, []) is None
+    got = scan._scan((str(path), None, None), None, to_local, rule, None, thinning, False, None, kept)
+    assert (got["points"], got["used"], got["cropped"], len(got["sums"][0]), kept) == (0, 0, 0, 0, [])

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.types import SoilVolumeError
 from ..inputs.chunkwork import Growing, NativeChunks
 from ..inputs.copc import is_copc
 from ..inputs.records import FileChunk, las_records
@@ -28,12 +29,15 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
     """The scan of the file ``path`` (points, soil points used, points cropped in, read seconds,
     the thinning ``sums``; each chunk's kept points and labels appended to ``kept`` when it is a
     list), or None where the kernel does not apply: no library, a frame that is not a plain
-    shift, a crop that is not a lattice, a COPC file, an empty one."""
+    shift, a crop that is not a lattice, a COPC file, an empty or unreadable one."""
     from ..native import kernels
 
     if is_copc(path):
         return None
-    src = open_source(path)
+    try:
+        src = open_source(path)
+    except SoilVolumeError:  # an empty or unreadable tile: the numpy scan says what it says of it
+        return None
     if src.raw is not None or not native_reads(src, to_local, keep):
         return None
     thinner = ColumnThinner(*thinning)
