@@ -394,9 +394,10 @@ def test_the_thinning_writes_a_fresh_column_before_reading_it(lib):
     assert faults < 1.5 * pages, f"{faults} faults for {pages} pages of sums"
 
 
+@pytest.mark.parametrize("keeping", [True, False])
 @pytest.mark.parametrize("suffix", [".las", ".laz"])
 @pytest.mark.parametrize("rule", ["class", "colour", "none"])
-def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeypatch, suffix, rule):
+def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeypatch, suffix, rule, keeping):
     """The first pass's scan of a VPC tile on the kernel (``distributed.nativescan``) gives numpy's
     thinning sums and counts bit for bit, and kept chunks of numpy's sizes whose soil points and
     other points (with their labels) are numpy's, each in order: what the grid takes apart."""
@@ -422,10 +423,12 @@ def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeyp
 
     def run():
         kept = []
-        got = scan._scan((str(path), None, None), None, to_local, point_rule, keep, thinning, False, None, kept)
+        got = scan._scan(
+            (str(path), None, None), None, to_local, point_rule, keep, thinning, False, None, kept if keeping else None
+        )
         counts = tuple(got[k] for k in ("points", "used", "cropped"))
         sizes = [len(xyz) for xyz, _ in kept]
-        soil = np.concatenate([xyz if lab is None else xyz[lab == 0] for xyz, lab in kept])
+        soil = np.concatenate([xyz if lab is None else xyz[lab == 0] for xyz, lab in kept] or [np.empty(0)])
         other = [(xyz[lab != 0], lab[lab != 0]) for xyz, lab in kept if lab is not None]
         other = b"".join(x.tobytes() + la.tobytes() for x, la in other)
         return counts, got["sums"][0].tobytes(), got["sums"][1].tobytes(), sizes, soil.tobytes(), other
@@ -434,7 +437,7 @@ def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeyp
     monkeypatch.setattr(nativescan, "NativeChunks", lambda *a, f=nativescan.NativeChunks: calls.append(1) or f(*a))
     a, b = _both(monkeypatch, run)
     assert a == b and len(calls) == 1  # the kernel scanned it, then numpy
-    assert len(a[3]) == 5 and (a[0][1] < n) == (rule != "none")  # a rule left some points out
+    assert len(a[3]) == (5 if keeping else 0) and (a[0][1] < n) == (rule != "none")  # a rule left some points out
 
 
 def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):
