@@ -10,16 +10,16 @@ points apart (:func:`.tiletask._epoch`), so its sums come out byte-identical."""
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 
 from ..core.types import SoilVolumeError
-from ..inputs.chunkwork import Growing, NativeChunks
+from ..inputs.chunkwork import Growing, NativeChunks, consume, native_work
 from ..inputs.copc import is_copc
 from ..inputs.records import FileChunk, las_records
-from ..inputs.stream import CHUNK, ColumnThinner, file_kernel, native_reads, open_source
+from ..inputs.stream import CHUNK, file_kernel, native_reads, open_source
+from ..inputs.thinning import ColumnThinner
 from ..soil.points import PointRule
 
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no points kept
@@ -45,26 +45,23 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
     kernel = NativeChunks(kernels(), thinner, keep, None if kept is not None else NOTHING, to_local.origin, CHUNK)
     direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None
     records = las_records(Path(path), src.count, CHUNK, lambda _cls: rule.signal_dims, direct=direct)
-    res = {"points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
+    items = ((rec, None if isinstance(rec, FileChunk) else rule.labels(cls, sig), rule) for rec, cls, sig in records)
     ends, labelled = [], False
+
+    def work(item: tuple) -> tuple:
+        nonlocal labelled
+        rec, labels, _ = item
+        labelled = labelled or labels is not None or (isinstance(rec, FileChunk) and rec.table is not None)
+        got = native_work(kernel, item, out)
+        if rec.flush:  # the end of a chunk of CHUNK points: of a kept chunk
+            ends.append((out[0].n, out[1].n))
+        return got
+
     try:
-        t0 = time.perf_counter()
-        for rec, cls, sig in records:
-            res["read_s"] += time.perf_counter() - t0
-            labels = None if isinstance(rec, FileChunk) else rule.labels(cls, sig)
-            labelled = labelled or labels is not None or (isinstance(rec, FileChunk) and rec.table is not None)
-            got = kernel.add(rec, labels, *out)
-            rec.check.extend(got.lo, got.hi)
-            if rec.last:
-                rec.check.finish()
-            res["points"] += len(rec)
-            res["used"] += got.soil
-            res["cropped"] += got.cropped
-            if rec.flush:  # the end of a chunk of CHUNK points: of a kept chunk
-                ends.append((out[0].n, out[1].n))
-            t0 = time.perf_counter()
+        points, used, cropped, read_s, _ = consume(items, work, None, None)
     finally:
         kernel.close()
+    res = {"points": points, "used": used, "cropped": cropped, "index": [], "read_s": read_s}
     if kept is not None:
         kept.extend(_kept_chunks(*(g.result() for g in out), ends, labelled))
     has = np.flatnonzero(thinner.sums[3])  # the columns with points: a tile meets few of the grid's
