@@ -453,3 +453,20 @@ def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):
     assert nativescan.native_scan(str(path), to_local, rule, None, thinning, []) is None
     got = scan._scan((str(path), None, None), None, to_local, rule, None, thinning, False, None, kept)
     assert (got["points"], got["used"], got["cropped"], len(got["sums"][0]), kept) == (0, 0, 0, 0, [])
+
+
+def test_a_thinner_is_fed_by_numpy_or_by_the_kernel_never_both(lib):
+    """The kernel writes a column's first point over its sums (taken to be zero): a thinner numpy
+    fed first, or numpy would feed after the kernel, is refused rather than summed wrong."""
+    rec = _records(np.random.default_rng(9), 100, 1)
+    origin = rec.offsets.copy()
+    numpy_fed = ColumnThinner(np.full(2, -100.0), np.full(2, 100.0), 1.0)
+    numpy_fed.add(np.zeros((3, 3)))
+    with pytest.raises(RuntimeError, match="fed by numpy"):
+        NativeChunks(lib, numpy_fed, None, None, origin, 100)
+    kernel_fed = ColumnThinner(np.full(2, -100.0), np.full(2, 100.0), 1.0)
+    NativeChunks(lib, kernel_fed, None, None, origin, 100).add(
+        rec, None, Growing(100), Growing(0), Growing(0, None, np.uint8)
+    )
+    with pytest.raises(RuntimeError, match="fed by the native kernel"):
+        kernel_fed.add(np.zeros((3, 3)))

@@ -35,12 +35,15 @@ class ColumnThinner:
             )
         self.sums = np.zeros((4, n))
         self._native: tuple | None = None
+        self._added = False  # by :meth:`add`: one thinner is fed by numpy or by the kernel, never both
 
     def native_state(self, chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What the native kernel keeps beside the sums (made once; ``chunk``: the most points
         between two flushes): the chunk that last touched each column (int32 zeros), and room to
         set aside the sums of ``chunk`` columns (ids, 4 values each)."""
         if self._native is None:
+            if self._added:  # the kernel writes a column's first point over its sums: they must be zero
+                raise RuntimeError("a thinner fed by numpy cannot go on with the native kernel")
             n = self.sums.shape[1]
             room = min(n, chunk)
             self._native = (np.zeros(n, np.int32), np.empty(room, np.int64), np.empty((room, 4)))
@@ -49,6 +52,9 @@ class ColumnThinner:
     def add(self, xyz: np.ndarray) -> None:
         """Add a chunk's points: sums over the span of column ids the chunk meets only (a chunk
         covers a strip of a large site; the whole sums are not swept for each chunk)."""
+        if self._native is not None:  # columns it left at zero would be written over by the kernel
+            raise RuntimeError("a thinner fed by the native kernel cannot go on with numpy")
+        self._added = True
         ix, iy = self._index(xyz[:, 0], 0), self._index(xyz[:, 1], 1)
         # as unsigned, a negative index is past the end: one comparison per axis tests both bounds
         ok = np.less(ix.view(np.uint64), self.shape[1]) & np.less(iy.view(np.uint64), self.shape[0])
