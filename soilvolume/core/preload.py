@@ -25,8 +25,9 @@ import os
 import threading
 
 _GO = threading.Event()  # set when the inputs are read (the memory peak is behind) or the run waits
-#: what the registration and the volume step import (ndimage, the refill's sparse solvers), then
-#: GeoTIFF output, imported once the inputs are read (the registration waits for the first)
+#: what the footprint and the ICP import (SciPy's spatial), the registration and the volume step
+#: (ndimage, the refill's sparse solvers), then GeoTIFF output, imported once the inputs are read
+#: or the kernel reads without the GIL (the footprint waits for the first)
 AFTER_READING = ("scipy.spatial", "soilvolume.registration.register", "soilvolume.volumes.compute", "rasterio")
 
 

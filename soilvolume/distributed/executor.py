@@ -119,9 +119,8 @@ class Tiled:
             run.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
         )
         self.k = volume_factor(options, run.grid, self.schedule)
-        epochs = [e.path for e in run.epochs]
         inputs = self.identities.result(IDENTITY_S)
-        self.said = self.store.bind(run_parts(*epochs, options, plan_parts(self.plan, self.windows, self.k), inputs))
+        self.said = self.store.bind(run_parts(inputs, options, plan_parts(self.plan, self.windows, self.k)))
         if self.said:
             run.hooks.step(run.at("grid"), self.said)
         self.kept = self.store.tiles(self.windows)

@@ -92,13 +92,13 @@ def code_identity() -> str:
     return digest.hexdigest()
 
 
-def run_parts(before, after, options: Options, plan: dict[str, Any], inputs: dict | None = None) -> dict[str, Any]:
+def run_parts(inputs: dict[str, Any], options: Options, plan: dict[str, Any]) -> dict[str, Any]:
     """What the tiles of a run are computed from, as plain JSON values (see module); ``inputs``:
-    the inputs' identities taken already (:func:`input_identities`)."""
+    the inputs' identities (:func:`input_identities`)."""
     return _plain(
         {
             "code": code_identity(),
-            "inputs": inputs if inputs is not None else input_identities(before, after),
+            "inputs": inputs,
             "options": number_options(options),
             "plan": plan,
         }

@@ -18,7 +18,7 @@ from ..core.types import SoilVolumeError, short_error
 from ..soil.points import Signals
 from .lasheader import check_las_header
 from .lasimport import laspy_module
-from .records import decoded_xyz, las_chunks, point_signals, scaled_xyz, signal_dims  # noqa: F401  (their home was this module)
+from .records import las_chunks
 
 LAS_SUFFIXES = {".las", ".laz"}
 GROUND = 2  # the LAS classification of ground points

@@ -169,11 +169,6 @@ def signal_dims(dims: set[str], signals, cls: np.ndarray | None) -> set[str]:
     return dims if signals is True else dims & set(signals(cls))
 
 
-def scaled_xyz(chunk) -> np.ndarray:
-    """(N, 3) float64 coordinates of a laspy point record: ``X * scale + offset`` as laspy computes them."""
-    return decoded_xyz(chunk)[0]
-
-
 BLOCK = 1 << 14  # points decoded at a time: a block's column stays in the cache through its passes
 
 

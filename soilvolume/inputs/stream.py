@@ -52,7 +52,7 @@ class Source:
         """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
         points (default ``CHUNK``); with a ``region``, chunks may hold points outside it. With
         ``signals``, a third item: the chunk's colour and returns (``soil.points.Signals`` or None;
-        a function: those it names, see :func:`io.las_chunks`). With ``origin``, xyz are
+        a function: those it names, see :func:`records.las_chunks`). With ``origin``, xyz are
         ``xyz - origin`` (in the decoding of LAS/LAZ files)."""
         if self.raw is not None:
             raw = self.raw

@@ -4,7 +4,7 @@ file name carries the source's digest: a library built from other code is never 
 numpy path runs (the same bits, slower). ``SOILVOLUME_NATIVE=0`` turns them off.
 
 Built by ``python -m soilvolume.native.build`` (``make setup``; the plugin's installer when the
-machine has a C compiler; ``make package`` ships the Linux x86_64 build). A ctypes call releases
+machine has a C compiler; ``make package`` ships the source only, no binary). A ctypes call releases
 the GIL: a kernel on the reading thread runs beside Python on the other."""
 
 from __future__ import annotations
