@@ -21,7 +21,8 @@ from ..native import kernels
 SLACK = 1.5  # the searches look this many correspondence distances far: room to move in
 THREADED = 4096  # fewest points searched on several threads
 DET_MIN = 1e-6  # a normal matrix with a smaller determinant gives no step (as Open3D)
-CYCLE = 1e-12  # poses two iterations apart closer than this: ICP swings between two poses
+CYCLE = 1e-12  # a pose closer than this to one a few iterations before: ICP goes round a cycle of poses
+PERIODS = range(2, 9)  # the cycles looked for: ICP on gentle terrain can go round 2, 4 or 8 poses
 
 
 @dataclass(frozen=True)
@@ -182,9 +183,9 @@ def point_to_plane(
     """ICP of ``source`` (N, 3) onto ``target`` (M, 3) with its unit ``normals``: correspondences
     within ``dist`` m, Tukey weights of constant ``k`` m on the point-to-plane residuals, from
     ``init``; stops when fitness and inlier RMSE change by less than ``tol`` or after ``max_iter``
-    steps, or once a pose repeats the one two steps before (within :data:`CYCLE`: the ICP swings
-    between two poses till its last step) on the pose that last step would reach.
-    ``nearest``: a :class:`Nearest` of this target and distance to reuse."""
+    steps, or once a pose repeats one a few steps before (within :data:`CYCLE`: the ICP goes
+    round a cycle of :data:`PERIODS` poses till its last step) on the pose that last step would
+    reach. ``nearest``: a :class:`Nearest` of this target and distance to reuse."""
     t = np.array(init, dtype=float)
     pts = np.ascontiguousarray(source.T, dtype=float)
     if not np.array_equal(t, np.eye(4)):
@@ -203,12 +204,21 @@ def point_to_plane(
         fit, rmse = new_fit, new_rmse
         if converged:
             break
-        poses = [*poses[-2:], (t, fit, rmse)]
-        if len(poses) == 3 and float(np.abs(poses[2][0] - poses[0][0]).max()) < CYCLE:
-            # swinging between two poses: the one the last iteration would end on
-            t, fit, rmse = poses[2] if (max_iter - steps) % 2 == 0 else poses[1]
-            return IcpResult(t, fit, rmse, max_iter)
+        poses = [*poses[-PERIODS[-1] :], (t, fit, rmse)]
+        last = _cycled(poses, max_iter - steps)
+        if last is not None:
+            return IcpResult(*last, max_iter)
     return IcpResult(t, fit, rmse, steps)
+
+
+def _cycled(poses: list[tuple], left: int) -> tuple | None:
+    """The (pose, fitness, RMSE) the ICP ends on ``left`` iterations on, when the latest of
+    ``poses`` (oldest first) repeats the one a period before: the poses repeat from there on;
+    None when no period of :data:`PERIODS` repeats."""
+    for p in PERIODS:
+        if len(poses) > p and float(np.abs(poses[-1][0] - poses[-1 - p][0]).max()) < CYCLE:
+            return poses[-1 - p + left % p] if left % p else poses[-1]
+    return None
 
 
 def _matches(nn: Nearest, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
