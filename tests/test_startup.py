@@ -130,6 +130,33 @@ def test_preload_goes_ahead_while_a_tiled_driver_waits_for_its_first_pass():
     assert r.stdout.split() == ["False", "True", "False"]
 
 
+def test_preload_imports_one_stage_per_native_window():
+    """Each window the kernel reads a file in without the GIL lets one stage of the held-back
+    imports go ahead: SciPy's spatial beside the after file (the footprint needs it next), the
+    later steps' modules beside the before file, none of them beside the Python between the two
+    files (the footprint, the crop's mask: an import there holds the GIL they wait for)."""
+    code = (
+        "import sys\n"
+        "from soilvolume.core.preload import STAGES, off_the_gil, preload\n"
+        "t = preload(False)\n"
+        "def now(stage):\n"
+        "    t.join(0.3)\n"
+        "    return ''.join('1' if m in sys.modules else '0' for m in stage)\n"
+        "seen = [now(STAGES[0])]\n"
+        "off_the_gil(); t.join(0.01)\n"
+        "import time; t0 = time.time()\n"
+        "while STAGES[0][-1] not in sys.modules and time.time() < t0 + 60:\n"
+        "    time.sleep(0.02)\n"
+        "seen += [now(STAGES[0]), now(STAGES[1])]\n"
+        "off_the_gil(); t.join(60)\n"
+        "seen += [now(STAGES[1]), str(t.is_alive())]\n"
+        "print(*seen)\n"
+    )
+    r = run_python(code, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["0", "1", "000", "111", "False"]
+
+
 def test_fresh_chunks_are_shifted_in_place_a_cloud_in_memory_never(tmp_path):
     origin = np.array([100.0, 200.0, 10.0])
     shift = Shift(origin)
