@@ -105,6 +105,38 @@ def test_tiles_the_driver_read_while_the_cluster_started(vpcs, tmp_path, monkeyp
     _identical(got, ref)
 
 
+def test_tiles_the_driver_read_go_out_before_the_registration(vpcs, tmp_path, monkeypatch):
+    """The driver read every tile (the cluster came up after its last scan, before the reading
+    ended): they go out to the workers at the end of the reading, beside the registration, not
+    when the grid needs them; the result is the run on the workers alone, byte for byte."""
+    from soilvolume.distributed import cluster
+    from soilvolume.inputs import prepare as prep_mod
+    from soilvolume.workflow import steps
+
+    ref, _ = _run(vpcs, tmp_path / "ref", "threads:2")
+    read, events = {"done": False}, []
+    reading = prep_mod.prepare
+
+    def prepare(*a, **k):
+        out = reading(*a, **k)
+        read["done"] = True  # up from here: after every scan, before the reading's end
+        return out
+
+    monkeypatch.setattr(prep_mod, "prepare", prepare)
+    monkeypatch.setattr(cluster.LazyClient, "ready", lambda self: read["done"])
+    send_held = pointcache.PointCache.send_held
+    monkeypatch.setattr(
+        pointcache.PointCache, "send_held", lambda self: (events.append(("send", len(self.held))), send_held(self))
+    )
+    register = steps.register_pair
+    monkeypatch.setattr(steps, "register_pair", lambda *a: (events.append(("register", 0)), register(*a))[1])
+    got, eng = _run(vpcs, tmp_path / "driver", "threads:2")
+    sent = [k for k, (what, n) in enumerate(events) if what == "send" and n]
+    assert sent and sent[0] < events.index(("register", 0)), events
+    assert eng["task_points_from_memory"] == eng["task_points_read"] > 0
+    _identical(got, ref)
+
+
 class _SlowClient:
     """A client whose scatter takes ``delay`` s per tile (or fails with ``error``)."""
 

@@ -98,6 +98,8 @@ class Tiled:
         loader = dask_loader(self.c, lambda m: hooks.step(run.at("prepare", 0.46), m), checker(hooks), self.cache)
         check = lambda: hooks.step(run.at("prepare", 0.23), "reading")  # noqa: E731
         run.prep = prepare(self.src_b, src_a, run.options, check=check, full=False, loader=loader)
+        if self.c.ready():  # the tiles the driver read go out beside the registration, not before the grid
+            self.cache.send_held()
 
     def dense(self, run) -> None:
         return None  # no process holds the full-resolution points
