@@ -130,31 +130,36 @@ def test_preload_goes_ahead_while_a_tiled_driver_waits_for_its_first_pass():
     assert r.stdout.split() == ["False", "True", "False"]
 
 
-def test_preload_imports_one_stage_per_native_window():
-    """Each window the kernel reads a file in without the GIL lets one stage of the held-back
-    imports go ahead: SciPy's spatial beside the after file (the footprint needs it next), the
-    later steps' modules beside the before file, none of them beside the Python between the two
-    files (the footprint, the crop's mask: an import there holds the GIL they wait for)."""
+def test_preload_imports_each_epochs_stage_beside_its_native_reading():
+    """The kernel reading an epoch's files without the GIL lets that epoch's stage of the held-back
+    imports go ahead, however many files (tiles) it has: SciPy's spatial beside the after cloud
+    (the footprint needs it next), the later steps' modules beside the before cloud, none of them
+    beside the Python between the two (the footprint, the crop's mask: an import there holds the
+    GIL they wait for)."""
     code = (
-        "import sys\n"
-        "from soilvolume.core.preload import STAGES, off_the_gil, preload\n"
+        "import sys, time\n"
+        "from soilvolume.core.preload import STAGES, off_the_gil, preload, reading_epoch\n"
         "t = preload(False)\n"
         "def now(stage):\n"
         "    t.join(0.3)\n"
         "    return ''.join('1' if m in sys.modules else '0' for m in stage)\n"
         "seen = [now(STAGES[0])]\n"
-        "off_the_gil(); t.join(0.01)\n"
-        "import time; t0 = time.time()\n"
+        "reading_epoch(0)\n"
+        "for tile in range(3):\n"
+        "    off_the_gil()  # the after cloud's tiles, one window each\n"
+        "t0 = time.time()\n"
         "while STAGES[0][-1] not in sys.modules and time.time() < t0 + 60:\n"
         "    time.sleep(0.02)\n"
         "seen += [now(STAGES[0]), now(STAGES[1])]\n"
+        "reading_epoch(1)\n"
+        "seen.append(now(STAGES[1]))  # between the epochs: not yet\n"
         "off_the_gil(); t.join(60)\n"
         "seen += [now(STAGES[1]), str(t.is_alive())]\n"
         "print(*seen)\n"
     )
     r = run_python(code, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["0", "1", "000", "111", "False"]
+    assert r.stdout.split() == ["0", "1", "000", "000", "111", "False"]
 
 
 def test_fresh_chunks_are_shifted_in_place_a_cloud_in_memory_never(tmp_path):

@@ -12,7 +12,7 @@ import pyproj
 
 from ..core.cells import bounds
 from ..core.heap import keep_freed_memory
-from ..core.preload import reading_done
+from ..core.preload import reading_done, reading_epoch
 from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
@@ -151,6 +151,7 @@ def prepare(
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
+    reading_epoch(0)
     after, a, note_a = _load_whole(
         after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check, None if full else NOTHING, loader
     )
@@ -162,6 +163,7 @@ def prepare(
     lo_a, hi_a = bounds(a.thin, 2)
     box = (lo_a - reach, hi_a + reach) if full else NOTHING
     within = _padded_box(before, crs_b, frame, origin)  # a crop radius far past the data costs nothing
+    reading_epoch(1)
     b = loader(
         before,
         _local(crs_b, frame, origin, before.path),
