@@ -488,3 +488,21 @@ def test_a_cluster_still_starting_when_the_run_ends_is_shut_down_before_its_scra
     assert 0.3 < time.perf_counter() - t < 5.0
     assert [c[0] for c in closed] == ["client", "cluster"]
     assert {c[1] for c in closed} == {threading.current_thread().name}  # here, before close() returned
+
+
+def test_a_grid_task_takes_soil_and_other_points_apart_as_a_mask_would():
+    """A chunk whose soil points come first (as the native scan keeps a tile) is cut by slices
+    (views, no copies), any other by a mask: the same points, labels and order either way."""
+    from soilvolume.distributed.tiletask import _soil_apart
+
+    rng = np.random.default_rng(3)
+    xyz = rng.normal(size=(1000, 3)).astype(np.float32)
+    mixed = rng.choice(np.array([0, 0, 0, 1, 3], np.uint8), 1000)
+    first = np.sort(mixed)  # soil (0) first, then the others in order
+    for labels in (mixed, first, np.zeros(1000, np.uint8), np.full(1000, 3, np.uint8)):
+        soil, other, other_labels = _soil_apart(xyz, labels)
+        keep = labels == 0
+        assert np.array_equal(soil, xyz[keep]) and np.array_equal(other, xyz[~keep])
+        assert np.array_equal(other_labels, labels[~keep])
+        sliced = np.shares_memory(soil, xyz) or np.shares_memory(other, xyz)
+        assert sliced == (labels is not mixed)  # slices unless mixed
