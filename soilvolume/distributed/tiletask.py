@@ -132,7 +132,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
             local = transform_points32(local, transform)
         if labels is not None:
             local, other, other_labels = _soil_apart(local, labels)
-            i, z = _window_cells(other, plan.grid, win, OffsetSums(shape[0] * shape[1]), keep_ids=True)
+            i, z = _window_cells(other, plan.grid, win, None, keep_ids=True)
             o_ids.append(i[0])
             o_lab.append(other_labels[i[1]])
             o_z.append(z)
@@ -191,11 +191,11 @@ def _joined(parts: list, dtype) -> np.ndarray:
     return np.concatenate(parts) if parts else np.empty(0, dtype)
 
 
-def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums, keep_ids: bool = False):
+def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums | None, keep_ids: bool = False):
     """Flat cell ids within the window, and heights, of the points on the window's cells of
     ``grid`` (cells assigned on the whole grid, exactly as in-process); their positions in
-    their cells are added to ``offsets``. ``keep_ids``: the ids come with the indices of the
-    points they belong to."""
+    their cells are added to ``offsets`` (None: not needed, as for the points that are not
+    soil). ``keep_ids``: the ids come with the indices of the points they belong to."""
     fcol, frow, ok = cell_coords(xyz32, grid, win)
     fcol, frow = fcol[ok], frow[ok]
     ids = frow.astype(np.int32)  # the cell's row and column: the coordinates truncated, as flat_ids
@@ -203,7 +203,8 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
     ids *= win[3] - win[2]
     ids += fcol.astype(np.int32)
     ids -= win[2]
-    offsets.add(ids, fcol, frow)
+    if offsets is not None:
+        offsets.add(ids, fcol, frow)
     return ((ids, np.flatnonzero(ok)) if keep_ids else ids), xyz32[ok, 2]
 
 
