@@ -470,3 +470,28 @@ def test_a_thinner_is_fed_by_numpy_or_by_the_kernel_never_both(lib):
     )
     with pytest.raises(RuntimeError, match="fed by the native kernel"):
         kernel_fed.add(np.zeros((3, 3)))
+
+
+def test_the_grid_index_finds_the_k_d_trees_neighbours(lib):
+    """The ICP's searches on the kernel's bucket grid: for every point, the nearest target (none
+    beyond the bound) and the distance to the second nearest that SciPy's k-d tree finds, on
+    column surfaces (one point a cell), on random clouds (many a cell, or none), for points off
+    the target's box and for a target of one point."""
+    from scipy.spatial import cKDTree
+
+    from soilvolume.registration.icp import GridIndex
+
+    rng = np.random.default_rng(7)
+    gx, gy = np.meshgrid(np.arange(120) * 0.5, np.arange(80) * 0.5)
+    surface = np.c_[gx.ravel(), gy.ravel(), 0.4 * np.sin(gx / 7).ravel()] + rng.normal(0, 0.02, (9600, 3))
+    targets = (surface, rng.uniform(-30, 30, (5000, 3)), np.array([[1.0, 2.0, 3.0]]))
+    for target in targets:
+        tree, grid = cKDTree(target, balanced_tree=False), GridIndex(lib, target)
+        near = target[rng.integers(0, len(target), 4000)] + rng.normal(0, 0.3, (4000, 3))
+        far = rng.uniform(-200, 200, (500, 3))  # mostly off the target's box
+        points = np.r_[near, far]
+        for bound in (0.05, 0.6, 4.5, 40.0):
+            d, j = tree.query(points, k=2, distance_upper_bound=bound)
+            idx, second = grid.nearest2(np.ascontiguousarray(points.T), bound)
+            assert np.array_equal(idx, j[:, 0]), bound
+            assert np.array_equal(second, np.minimum(d[:, 1], bound)), bound

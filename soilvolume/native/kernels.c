@@ -375,6 +375,97 @@ int64_t sv_nearest_kept(const double *pts, int64_t n, double *last_at, int64_t *
     return k;
 }
 
+/* The cell of (x, y) in a grid of nx x ny cells of side g from (x0, y0), clamped to its edge. */
+static int64_t grid_cell(double x, double y, double x0, double y0, double g, int64_t nx, int64_t ny) {
+    double fx = floor((x - x0) / g), fy = floor((y - y0) / g);
+    int64_t cx = fx < 0.0 ? 0 : (fx >= (double)nx ? nx - 1 : (int64_t)fx);
+    int64_t cy = fy < 0.0 ? 0 : (fy >= (double)ny ? ny - 1 : (int64_t)fy);
+    return cy * nx + cx;
+}
+
+/* A bucket grid of target points for nearest-neighbour searches (numpy twin: a scipy cKDTree,
+ * registration.icp.tree_of): the m points t (3 x tn rows, x and y used) counted into nx x ny
+ * cells of side g from (x0, y0) (clamped to the edge cells), start (nx * ny + 1) the first
+ * entry of each cell in order (m), the points of a cell in their own order. */
+void sv_grid_build(const double *t, int64_t tn, int64_t m, double x0, double y0, double g, int64_t nx, int64_t ny,
+                   int64_t *start, int64_t *order) {
+    int64_t cells = nx * ny;
+    for (int64_t c = 0; c <= cells; c++) start[c] = 0;
+    for (int64_t i = 0; i < m; i++) start[grid_cell(t[i], t[tn + i], x0, y0, g, nx, ny) + 1]++;
+    for (int64_t c = 0; c < cells; c++) start[c + 1] += start[c];
+    for (int64_t i = 0; i < m; i++) order[start[grid_cell(t[i], t[tn + i], x0, y0, g, nx, ny)]++] = i;
+    for (int64_t c = cells; c > 0; c--) start[c] = start[c - 1];
+    start[0] = 0;
+}
+
+/* The cell of the points of the row y = cy, columns lo..hi, and their squared distances to
+ * (px, py, pz), kept when below the two best so far (b1 < b2, index i1). */
+static void grid_row(const double *t, int64_t tn, const int64_t *start, const int64_t *order, int64_t nx,
+                     int64_t cy, int64_t lo, int64_t hi, double px, double py, double pz, double *b1, double *b2,
+                     int64_t *i1) {
+    for (int64_t c = cy * nx + lo; c <= cy * nx + hi; c++) {
+        for (int64_t e = start[c]; e < start[c + 1]; e++) {
+            int64_t j = order[e];
+            double dx = px - t[j], dy = py - t[tn + j], dz = pz - t[2 * tn + j];
+            double d = 0.0;  /* summed as scipy's cKDTree sums it (its unrolled loop leaves 0.0 first) */
+            d += dx * dx;
+            d += dy * dy;
+            d += dz * dz;
+            if (d < *b1) {
+                *b2 = *b1, *b1 = d, *i1 = j;
+            } else if (d < *b2) {
+                *b2 = d;
+            }
+        }
+    }
+}
+
+/* For each of the n points p (3 x n rows) its nearest target (index into the grid's points, m
+ * when none is nearer than bound) and the distance to the second nearest (bound when none is
+ * nearer), as cKDTree.query(k=2, distance_upper_bound=bound) finds them: rings of cells round
+ * the point's cell until a ring cannot hold a point nearer than the second found. */
+void sv_grid_nearest2(const double *p, int64_t n, const double *t, int64_t tn, int64_t m, double x0, double y0,
+                      double g, int64_t nx, int64_t ny, const int64_t *start, const int64_t *order, double bound,
+                      int64_t *idx, double *second) {
+    double bb = bound * bound;
+    int64_t rmax = (int64_t)(bound / g) + 2;
+    for (int64_t i = 0; i < n; i++) {
+        double px = p[i], py = p[n + i], pz = p[2 * n + i];
+        double fx = floor((px - x0) / g), fy = floor((py - y0) / g);
+        double b1 = bb, b2 = bb;
+        int64_t i1 = m;
+        if (fx > -(double)rmax && fy > -(double)rmax && fx < (double)(nx + rmax) && fy < (double)(ny + rmax)) {
+            int64_t qx = (int64_t)fx, qy = (int64_t)fy;
+            /* rings nearer than the grid's nearest cell are empty, none is beyond its farthest */
+            int64_t near = 0, far = 0, gap[4] = {-qx, qx - (nx - 1), -qy, qy - (ny - 1)};
+            int64_t reach[4] = {qx, nx - 1 - qx, qy, ny - 1 - qy};
+            for (int a = 0; a < 4; a++) {
+                if (gap[a] > near) near = gap[a];
+                if (reach[a] > far) far = reach[a];
+                if (-reach[a] > far) far = -reach[a];
+            }
+            for (int64_t r = near; r <= rmax && r <= far; r++) {
+                double lb = (double)(r - 1) * g;
+                if (r > 1 && lb * lb > b2) break;
+                int64_t ylo = qy - r < 0 ? 0 : qy - r, yhi = qy + r >= ny ? ny - 1 : qy + r;
+                int64_t xlo = qx - r < 0 ? 0 : qx - r, xhi = qx + r >= nx ? nx - 1 : qx + r;
+                for (int64_t cy = ylo; cy <= yhi; cy++) {
+                    if (cy == qy - r || cy == qy + r) {
+                        if (xlo <= xhi) grid_row(t, tn, start, order, nx, cy, xlo, xhi, px, py, pz, &b1, &b2, &i1);
+                    } else {
+                        if (qx - r >= 0 && qx - r < nx)
+                            grid_row(t, tn, start, order, nx, cy, qx - r, qx - r, px, py, pz, &b1, &b2, &i1);
+                        if (r > 0 && qx + r >= 0 && qx + r < nx)
+                            grid_row(t, tn, start, order, nx, cy, qx + r, qx + r, px, py, pz, &b1, &b2, &i1);
+                    }
+                }
+            }
+        }
+        idx[i] = i1;
+        second[i] = b2 < bb ? sqrt(b2) : bound;
+    }
+}
+
 /* The terms of one Gauss-Newton step of the Tukey-weighted point-to-plane ICP (numpy twin:
  * registration.icp._step before its matrix products): for the K points pts[:, sel] (pts: 3 x n)
  * and their targets t[:, j] (3 x tn) with normals nrm[:, j] (3 x nn), the residuals r, the

@@ -36,9 +36,51 @@ class IcpResult:
     iterations: int
 
 
-def tree_of(target: np.ndarray) -> cKDTree:
-    """The k-d tree of a target (N, 3) that :class:`Nearest` searches."""
+def tree_of(target: np.ndarray) -> cKDTree | GridIndex:
+    """What :class:`Nearest` searches a target (N, 3) with: a :class:`GridIndex` on the native
+    kernel when it is there, else SciPy's k-d tree (the same neighbours)."""
+    lib = kernels()
+    if lib is not None and len(target):
+        return GridIndex(lib, target)
     return cKDTree(target, balanced_tree=False)
+
+
+class GridIndex:
+    """A target's points counted into a grid of x/y cells (``sv_grid_build``): the nearest and
+    second-nearest target of each point within a bound, searched ring by ring of cells round
+    the point's (``sv_grid_nearest2``), as ``cKDTree.query(k=2, distance_upper_bound=...)``
+    finds them, distances summed in its order. A registration's targets are column surfaces,
+    about one point per cell: building it is one counting pass, a search a few cells."""
+
+    MAX_CELLS_PER_POINT = 4  # a sparse target's grid is coarsened to this many cells a point
+
+    def __init__(self, lib, target: np.ndarray) -> None:
+        self.lib, self.t = lib, np.ascontiguousarray(target.T, dtype=np.float64)  # (3, M)
+        self.m = self.t.shape[1]
+        lo, hi = self.t[:2].min(axis=1), self.t[:2].max(axis=1)
+        span = np.maximum(hi - lo, 1e-9)
+        g = max(float(np.sqrt(span[0] * span[1] / self.m)), 1e-6)
+        while (span[0] / g + 1) * (span[1] / g + 1) > self.MAX_CELLS_PER_POINT * self.m + 16:
+            g *= 1.5
+        self.g, self.x0, self.y0 = g, float(lo[0]), float(lo[1])
+        self.nx, self.ny = int(span[0] // g) + 1, int(span[1] // g) + 1
+        self.start = np.empty(self.nx * self.ny + 1, np.int64)
+        self.order = np.empty(self.m, np.int64)
+        lib.sv_grid_build(
+            self.t.ctypes.data, self.m, self.m, self.x0, self.y0, g, self.nx, self.ny,
+            self.start.ctypes.data, self.order.ctypes.data,
+        )  # fmt: skip
+
+    def nearest2(self, points: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
+        """(index of the nearest target, M for none nearer than ``bound``; distance to the second
+        nearest, ``bound`` for none) of each of the (3, N) C-contiguous float64 ``points``."""
+        n = points.shape[1]
+        idx, second = np.empty(n, np.int64), np.empty(n)
+        self.lib.sv_grid_nearest2(
+            points.ctypes.data, n, self.t.ctypes.data, self.m, self.m, self.x0, self.y0, self.g, self.nx, self.ny,
+            self.start.ctypes.data, self.order.ctypes.data, float(bound), idx.ctypes.data, second.ctypes.data,
+        )  # fmt: skip
+        return idx, second
 
 
 @dataclass
@@ -72,7 +114,9 @@ class Nearest:
     ``workers``: the k-d tree's threads (-1: all cores); ``tree``: :func:`tree_of` the target,
     when another distance searched it already."""
 
-    def __init__(self, target: np.ndarray, dist: float, workers: int = -1, tree: cKDTree | None = None) -> None:
+    def __init__(
+        self, target: np.ndarray, dist: float, workers: int = -1, tree: cKDTree | GridIndex | None = None
+    ) -> None:
         self.target = np.full((3, len(target) + 1), np.inf)  # (3, M) and a target at infinity
         self.target[:, :-1] = target.T
         self.m = len(target)
@@ -152,6 +196,9 @@ class Nearest:
         return d, np.where(has, d + moved < found.second, moved < self.bound - self.dist)
 
     def _search(self, points: np.ndarray) -> _Found:
+        if isinstance(self.tree, GridIndex) and points.flags.c_contiguous and points.dtype == np.float64:
+            idx, second = self.tree.nearest2(points, self.bound)
+            return _Found(points.copy(), idx, second)
         workers = self.workers if points.shape[1] >= THREADED else 1  # threads cost more than a few searches
         d, j = self.tree.query(points.T, k=2, distance_upper_bound=self.bound, workers=workers)
         return _Found(points.copy(), j[:, 0].astype(np.int64), np.minimum(d[:, 1], self.bound))
