@@ -495,3 +495,22 @@ def test_the_grid_index_finds_the_k_d_trees_neighbours(lib):
             idx, second = grid.nearest2(np.ascontiguousarray(points.T), bound)
             assert np.array_equal(idx, j[:, 0]), bound
             assert np.array_equal(second, np.minimum(d[:, 1], bound)), bound
+
+
+def test_the_cut_kernel_gives_the_masks_points(lib, monkeypatch):
+    """A registration target's cut to a box (``Cloud.within``) by the kernel: the points numpy's
+    mask and compress keep, in order, from a cloud (N, 3) and from an earlier cut's (3, M) rows,
+    edges included, none when the box misses the cloud."""
+    from soilvolume.registration import columns
+
+    rng = np.random.default_rng(4)
+    xyz = np.round(rng.uniform(0, 50, (20_000, 3)), 1)  # points on the box's edges too
+    for base in (xyz, np.ascontiguousarray(xyz.T).T):
+        for lo, hi in (((10.0, 5.0), (30.0, 20.0)), ((0.0, 0.0), (50.0, 50.0)), ((60.0, 60.0), (70.0, 70.0))):
+            lo, hi = np.array(lo), np.array(hi)
+            fast = columns._cut(base, lo, hi)
+            with monkeypatch.context() as m:
+                m.setattr("soilvolume.native.kernels", lambda: None)  # the numpy path
+                slow = columns._cut(base, lo, hi)
+            assert fast.shape == slow.shape and fast.tobytes() == slow.tobytes()
+    assert columns._cut(xyz, np.array([10.0, 5.0]), np.array([30.0, 20.0])).shape[1] > 0

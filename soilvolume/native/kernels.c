@@ -211,6 +211,22 @@ int64_t sv_file_chunk(sv_chunk_t *c, int64_t fd, int64_t offset, int64_t count, 
 }
 #endif
 
+/* The points whose x/y lie in the box x0..x1, y0..y1, edges included (numpy twin:
+ * core.cells.in_box and a compress of each axis): x, y, z step doubles apart; with out NULL
+ * counts them, else writes them in order to out (3 rows of m). Returns m. */
+int64_t sv_cut_box(const double *x, const double *y, const double *z, int64_t n, int64_t step, double x0,
+                   double y0, double x1, double y1, double *out, int64_t m) {
+    int64_t k = 0;
+    for (int64_t i = 0; i < n; i++) {
+        double px = x[i * step], py = y[i * step];
+        if (px >= x0 && px <= x1 && py >= y0 && py <= y1) {
+            if (out) out[k] = px, out[m + k] = py, out[2 * m + k] = z[i * step];
+            k++;
+        }
+    }
+    return k;
+}
+
 /* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): each point's
  * column is floor((v - lo) / cell) per axis, points off the grid are dropped, each column's sums
  * run over its points in order from zero (bincount's). x, y, z: the points' coordinates, step

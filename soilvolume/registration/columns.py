@@ -65,12 +65,30 @@ class Cloud:
         if np.prod(bhi - blo) <= self.TIGHT * np.prod(hi - lo):
             return base
         clo, chi = np.maximum(lo - self.SLACK, blo), np.minimum(hi + self.SLACK, bhi)
-        mask = in_box(base, clo, chi)
+        cut = _cut(base, clo, chi)
+        self._cuts.append((clo, chi, cut))
+        return cut.T
+
+
+def _cut(base: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The (3, M) coordinate rows of the points of ``base`` (N, 3) in the x/y box lo..hi, in order:
+    by the native kernel (``sv_cut_box``: counted, then copied) when it is there."""
+    from ..native import kernels
+
+    lib = kernels()
+    step = base.strides[0] // 8
+    if lib is None or base.dtype != np.float64 or base.strides[1] % 8 or step * 8 != base.strides[0]:
+        mask = in_box(base, lo, hi)
         cut = np.empty((3, int(np.count_nonzero(mask))))
         for k in range(3):
             np.compress(mask, base[:, k], out=cut[k])
-        self._cuts.append((clo, chi, cut))
-        return cut.T
+        return cut
+    at, k = base.ctypes.data, base.strides[1]
+    box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    m = lib.sv_cut_box(at, at + k, at + 2 * k, len(base), step, *box, None, 0)
+    cut = np.empty((3, m))
+    lib.sv_cut_box(at, at + k, at + 2 * k, len(base), step, *box, cut.ctypes.data, m)
+    return cut
 
 
 Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cuts remembered
