@@ -105,6 +105,7 @@ class Tiled:
         return None  # no process holds the full-resolution points
 
     def grid(self, run) -> None:
+        from ..inputs.footprint import footprint
         from ..registration.rigid import transform_points
         from ..workflow.steps import shared_grid
         from .fingerprint import run_parts
@@ -113,8 +114,9 @@ class Tiled:
 
         prep, reg, options = run.prep, run.reg, run.options
         run.after_thin = transform_points(prep.after_thin, reg.transform)
-        cell = options.cell if options.cell else cell_from_columns(prep, run.after_thin)
-        run.grid = shared_grid(prep, run.after_thin, options.with_(cell=cell))
+        poly = footprint(run.after_thin[:, :2])  # the registered after footprint
+        cell = options.cell if options.cell else cell_from_columns(prep, poly)
+        run.grid = shared_grid(prep, run.after_thin, options.with_(cell=cell), poly)
         self.plan = plan_for(run, cell, (self.src_b, self.src_a))
         self.windows, self.side, self.density = self._tiles(run, cell)
         run.hooks.step(

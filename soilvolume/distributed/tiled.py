@@ -89,10 +89,9 @@ def points_per_cell(prep: Prepared, cell: float) -> float:
     return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
 
 
-def cell_from_columns(prep: Prepared, after_thin: np.ndarray, minimum: float = 0.5) -> float:
+def cell_from_columns(prep: Prepared, poly: np.ndarray, minimum: float = 0.5) -> float:
     """:func:`grid.cell_for` from the thinned subset: the before points behind the column
-    centroids inside the registered after footprint, over the footprint's area."""
-    poly = footprint(after_thin[:, :2])
+    centroids inside the registered after footprint ``poly``, over the footprint's area."""
     ins = inside(prep.before_thin[:, :2], poly)
     return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly), minimum=minimum)
 
@@ -103,7 +102,7 @@ def plan_for(run, cell: float, sources: tuple = (None, None)) -> Plan:
     prep, options = run.prep, run.options
     b, a = (str(e.path) for e in run.epochs)
     crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
-    ring = footprint(prep.after_thin[:, :2], options.radius)
+    ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], options.radius)
     grid, t = run.grid, run.reg.transform
     streamed = tuple(None if s is None or s.raw is not None else s for s in sources)  # never whole clouds
     parts = (prep.frame, prep.origin, grid, t, prep.ground, ring, options.statistic, prep.index, prep.rules)

@@ -42,6 +42,7 @@ class Prepared:
     before_counts: np.ndarray | None = None  # points behind each before_thin centroid
     ground: tuple[bool, bool] = (False, False)  # (before, after) streamed as class 2 only
     index: tuple = (None, None)  # (before, after): chunk boxes of single files (Source.index)
+    crop: np.ndarray | None = None  # the crop polygon: the after footprint buffered by the radius
 
     @property
     def rules(self) -> tuple:
@@ -205,6 +206,7 @@ def prepare(
         b.extra["counts"],
         (b.note == CLASS_NOTE, a.note == CLASS_NOTE),
         (b.extra["index"], a.extra["index"]),
+        poly,
     )
 
 

@@ -25,9 +25,10 @@ if TYPE_CHECKING:  # the volume step's modules (SciPy's ndimage) are not needed 
     from ..volumes.compute import Volumes
 
 
-def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options) -> GridSpec:
-    """The grid over the registered after footprint, cell size from the before density."""
-    poly = footprint(after_thin[:, :2])
+def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options, poly: np.ndarray | None = None) -> GridSpec:
+    """The grid over the registered after footprint (``poly``, when the caller has it), cell size
+    from the before density."""
+    poly = footprint(after_thin[:, :2]) if poly is None else poly
     cell = options.cell
     if cell is None or cell <= 0:
         cell = gridmod.cell_for(prep.before.xyz, poly)
