@@ -43,6 +43,10 @@ fi
 # the engine's native kernels (soilvolume/native/kernels.c) for the dev venv and the tests; the
 # plugin's installer below finds them present (the same source, the same folder)
 .venv/bin/python -m soilvolume.native.build
+# the engine's modules byte-compiled now: each run is a new process, and where Python may not write
+# them itself (PYTHONDONTWRITEBYTECODE, as on this project's runners) it would compile ~150 modules
+# at every start (paper pair: 0.943 -> 0.885 s)
+.venv/bin/python -m compileall -q soilvolume
 # the engine's own environment, built by the plugin's installer (as QGIS users get it); the QGIS
 # tests point the plugin to it (SOILVOLUME_ENGINE_ENV); quick when it is up to date
 /usr/bin/python3 plugin/environment.py install .engine-env | grep -v '^WARNING: Location' | tail -3
