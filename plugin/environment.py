@@ -315,10 +315,6 @@ class Installer:
             self.log(f"Native kernels: not built ({said}); the engine runs without them, slower")
         elif "built:" in said:
             self.log("Native kernels: built (the engine's faster path)")
-        # the engine's modules byte-compiled for its interpreter: every run is a new process, and
-        # where Python does not write them itself it would compile them at every start (~60 ms);
-        # a folder it may not write to is left as it is
-        _run(env.python(["-m", "compileall", "-q", str(PLUGIN_DIR / "soilvolume")]), timeout=300)
 
     def _selftest(self, env: Environment) -> dict:
         self.log("Testing the engine in its environment (imports, then a tiny seeded estimate)")
