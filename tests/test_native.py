@@ -476,7 +476,7 @@ def test_the_grid_index_finds_the_k_d_trees_neighbours(lib):
     """The ICP's searches on the kernel's bucket grid: for every point, the nearest target (none
     beyond the bound) and the distance to the second nearest that SciPy's k-d tree finds, on
     column surfaces (one point a cell), on random clouds (many a cell, or none), for points off
-    the target's box and for a target of one point."""
+    the target's box and for a target of one point, within bounds up to none."""
     from scipy.spatial import cKDTree
 
     from soilvolume.registration.icp import GridIndex
@@ -490,7 +490,7 @@ def test_the_grid_index_finds_the_k_d_trees_neighbours(lib):
         near = target[rng.integers(0, len(target), 4000)] + rng.normal(0, 0.3, (4000, 3))
         far = rng.uniform(-200, 200, (500, 3))  # mostly off the target's box
         points = np.r_[near, far]
-        for bound in (0.05, 0.6, 4.5, 40.0):
+        for bound in (0.05, 0.6, 4.5, 40.0, np.inf):
             d, j = tree.query(points, k=2, distance_upper_bound=bound)
             idx, second = grid.nearest2(np.ascontiguousarray(points.T), bound)
             assert np.array_equal(idx, j[:, 0]), bound

@@ -443,8 +443,8 @@ static void grid_row(const double *t, int64_t tn, const int64_t *start, const in
 void sv_grid_nearest2(const double *p, int64_t n, const double *t, int64_t tn, int64_t m, double x0, double y0,
                       double g, int64_t nx, int64_t ny, const int64_t *start, const int64_t *order, double bound,
                       int64_t *idx, double *second) {
-    double bb = bound * bound;
-    int64_t rmax = (int64_t)(bound / g) + 2;
+    double bb = bound * bound, rings = bound / g;
+    int64_t rmax = rings < 1e9 ? (int64_t)rings + 2 : 1000000000; /* an unbounded search: the grid's extent bounds it */
     for (int64_t i = 0; i < n; i++) {
         double px = p[i], py = p[n + i], pz = p[2 * n + i];
         double fx = floor((px - x0) / g), fy = floor((py - y0) / g);
