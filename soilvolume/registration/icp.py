@@ -5,8 +5,9 @@ weighted point-to-plane residuals, the step applied to the moved source, stop wh
 fitness nor inlier RMSE changes by the tolerance. Poses agree with Open3D's to ~1e-14.
 
 Without Open3D's ~0.4-0.6 s import, and faster: an iteration moves the points by millimetres,
-so the nearest neighbours found by the k-d tree are kept while a bound proves them unchanged
-(:class:`Nearest`), and only the others are searched again.
+so the nearest neighbours found are kept while a bound proves them unchanged (:class:`Nearest`),
+and only the others are searched again: on the native kernel's bucket grid (:class:`GridIndex`),
+else SciPy's k-d tree, the same neighbours either way.
 """
 
 from __future__ import annotations
@@ -196,7 +197,8 @@ class Nearest:
         return d, np.where(has, d + moved < found.second, moved < self.bound - self.dist)
 
     def _search(self, points: np.ndarray) -> _Found:
-        if isinstance(self.tree, GridIndex) and points.flags.c_contiguous and points.dtype == np.float64:
+        if isinstance(self.tree, GridIndex):
+            points = np.ascontiguousarray(points, dtype=np.float64)
             idx, second = self.tree.nearest2(points, self.bound)
             return _Found(points.copy(), idx, second)
         workers = self.workers if points.shape[1] >= THREADED else 1  # threads cost more than a few searches
