@@ -55,3 +55,6 @@ def test_thinner_sums_match_the_formula_to_the_bit(dtype, within):
     assert len(th.result()) == int(filled.sum()) > 1000
     assert th.result().tobytes() == (ref[:3, filled] / ref[3, filled]).T.copy().tobytes()
     assert (th.counts() == ref[3, filled]).all()
+    centroids, counts = th.columns()  # both in one pass, as the streaming takes them
+    assert centroids.tobytes() == th.result().tobytes() and counts.tobytes() == th.counts().tobytes()
+    assert th.columns(centroids=False)[0] is None

@@ -152,10 +152,11 @@ def dask_loader(
         index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
         total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
         note = "class 2 (ground)" if rule.use_class else "all points"
-        extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": thinner.counts(), "index": index}
+        thin, counts = thinner.columns()
+        extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": counts, "index": index}
         nothing = NonSoil(np.empty((0, 3), np.float32), np.empty(0, np.uint8), rule) if rule.active else None
         empty = np.empty((0, 3), np.float32)
-        return Loaded(empty, thinner.result(), total["points"], total["used"], note, extra, nothing)
+        return Loaded(empty, thin, total["points"], total["used"], note, extra, nothing)
 
     return loader
 

@@ -356,11 +356,12 @@ def load(
             kernel.close()
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()
+    thin, counts = thinner.columns()
     extra = {
         "read_s": reading,
         "cropped": cropped,
-        "counts": thinner.counts(),
+        "counts": counts,
         "index": None if index is None else tuple(index),
     }
     nonsoil = NonSoil(out[1].result(), out[2].result(), rule) if rule.active else None
-    return Loaded(out[0].result(), thinner.result(), points, used, note, extra, nonsoil)
+    return Loaded(out[0].result(), thin, points, used, note, extra, nonsoil)

@@ -82,26 +82,29 @@ class ColumnThinner:
 
     def result(self) -> np.ndarray:
         """The centroids (float64, (M, 3))."""
-        native = self._native_result(centroids=True)
-        if native is not None:
-            return native[0]
-        filled = self._filled()
-        count = self.sums[3].take(filled)
-        out = np.empty((len(filled), 3))
-        for k in range(3):  # column by column: no (3, M) temporaries and transposed copy
-            np.divide(self.sums[k].take(filled), count, out=out[:, k])
-        return out
+        return self.columns()[0]
 
     def counts(self) -> np.ndarray:
         """The number of points behind each centroid of :meth:`result` (same order)."""
-        native = self._native_result(centroids=False)
+        return self.columns(centroids=False)[1]
+
+    def columns(self, centroids: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
+        """(the centroids, or None when not ``centroids``; the points behind each, same order) in
+        one pass: by the native kernel (``sv_centroids``) when it is there."""
+        native = self._native_result(centroids)
         if native is not None:
-            return native[1]
-        return self.sums[3].take(self._filled()).astype(np.int64)
+            return native
+        filled = self._filled()
+        count = self.sums[3].take(filled)
+        out = None
+        if centroids:
+            out = np.empty((len(filled), 3))
+            for k in range(3):  # column by column: no (3, M) temporaries and transposed copy
+                np.divide(self.sums[k].take(filled), count, out=out[:, k])
+        return out, count.astype(np.int64)
 
     def _native_result(self, centroids: bool) -> tuple[np.ndarray | None, np.ndarray] | None:
-        """(centroids, or None when not ``centroids``; counts) in one pass of the native kernel
-        (``sv_centroids``); None without it."""
+        """:meth:`columns` on the native kernel; None without it."""
         from ..native import kernels
 
         lib = kernels()
