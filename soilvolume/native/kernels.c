@@ -216,11 +216,12 @@ int64_t sv_file_chunk(sv_chunk_t *c, int64_t fd, int64_t offset, int64_t count, 
  * counts them, else writes them in order to out (3 rows of m). Returns m. */
 int64_t sv_cut_box(const double *x, const double *y, const double *z, int64_t n, int64_t step, double x0,
                    double y0, double x1, double y1, double *out, int64_t m) {
+    const double box[4] = {x0, y0, x1, y1};
     int64_t k = 0;
     for (int64_t i = 0; i < n; i++) {
-        double px = x[i * step], py = y[i * step];
-        if (px >= x0 && px <= x1 && py >= y0 && py <= y1) {
-            if (out) out[k] = px, out[m + k] = py, out[2 * m + k] = z[i * step];
+        const double p[2] = {x[i * step], y[i * step]};
+        if (in_box(p, box)) {
+            if (out) out[k] = p[0], out[m + k] = p[1], out[2 * m + k] = z[i * step];
             k++;
         }
     }
@@ -414,8 +415,8 @@ void sv_grid_build(const double *t, int64_t tn, int64_t m, double x0, double y0,
     start[0] = 0;
 }
 
-/* The cell of the points of the row y = cy, columns lo..hi, and their squared distances to
- * (px, py, pz), kept when below the two best so far (b1 < b2, index i1). */
+/* The points of the cells of row cy, columns lo..hi: their squared distances to (px, py, pz),
+ * each kept when below the two best so far (b1 <= b2, index i1 of the best). */
 static void grid_row(const double *t, int64_t tn, const int64_t *start, const int64_t *order, int64_t nx,
                      int64_t cy, int64_t lo, int64_t hi, double px, double py, double pz, double *b1, double *b2,
                      int64_t *i1) {
@@ -452,13 +453,13 @@ void sv_grid_nearest2(const double *p, int64_t n, const double *t, int64_t tn, i
         int64_t i1 = m;
         if (fx > -(double)rmax && fy > -(double)rmax && fx < (double)(nx + rmax) && fy < (double)(ny + rmax)) {
             int64_t qx = (int64_t)fx, qy = (int64_t)fy;
-            /* rings nearer than the grid's nearest cell are empty, none is beyond its farthest */
-            int64_t near = 0, far = 0, gap[4] = {-qx, qx - (nx - 1), -qy, qy - (ny - 1)};
-            int64_t reach[4] = {qx, nx - 1 - qx, qy, ny - 1 - qy};
+            /* rings nearer than the grid's nearest cell are empty, none is beyond its farthest:
+             * edge holds the point's cell less the grid's first and last column and row */
+            int64_t edge[4] = {qx, qx - (nx - 1), qy, qy - (ny - 1)}, near = 0, far = 0;
             for (int a = 0; a < 4; a++) {
-                if (gap[a] > near) near = gap[a];
-                if (reach[a] > far) far = reach[a];
-                if (-reach[a] > far) far = -reach[a];
+                int64_t out = a % 2 ? edge[a] : -edge[a], dist = edge[a] < 0 ? -edge[a] : edge[a];
+                if (out > near) near = out;
+                if (dist > far) far = dist;
             }
             for (int64_t r = near; r <= rmax && r <= far; r++) {
                 double lb = (double)(r - 1) * g;

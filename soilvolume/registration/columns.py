@@ -76,19 +76,29 @@ def _cut(base: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     from ..native import kernels
 
     lib = kernels()
-    step = base.strides[0] // 8
-    if lib is None or base.dtype != np.float64 or base.strides[1] % 8 or step * 8 != base.strides[0]:
+    if lib is None:
         mask = in_box(base, lo, hi)
         cut = np.empty((3, int(np.count_nonzero(mask))))
         for k in range(3):
             np.compress(mask, base[:, k], out=cut[k])
         return cut
-    at, k = base.ctypes.data, base.strides[1]
+    base, axes, step = _axes(base)
     box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
-    m = lib.sv_cut_box(at, at + k, at + 2 * k, len(base), step, *box, None, 0)
+    m = lib.sv_cut_box(*axes, len(base), step, *box, None, 0)
     cut = np.empty((3, m))
-    lib.sv_cut_box(at, at + k, at + 2 * k, len(base), step, *box, cut.ctypes.data, m)
+    lib.sv_cut_box(*axes, len(base), step, *box, cut.ctypes.data, m)
     return cut
+
+
+def _axes(xyz: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int], int]:
+    """(the points as the kernels read them, the addresses of their first x, y and z, the doubles
+    from one point's to the next's): an (N, 3) float64 array or its transposed (3, N) rows as they
+    are, any other copied into a C-ordered float64 one (keep the array while the addresses are used)."""
+    step = xyz.strides[0] // 8
+    if xyz.dtype != np.float64 or xyz.strides[1] % 8 or step * 8 != xyz.strides[0]:
+        xyz, step = np.ascontiguousarray(xyz, np.float64), 3
+    at, k = xyz.ctypes.data, xyz.strides[1]
+    return xyz, (at, at + k, at + 2 * k), step
 
 
 Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cuts remembered
@@ -141,16 +151,11 @@ def _native_binned(lib, xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tup
     from ..native import zeros
 
     n = shape[0] * shape[1]
-    step = xyz.strides[0] // 8
-    if xyz.dtype != np.float64 or xyz.strides[1] % 8 or step * 8 != xyz.strides[0]:
-        xyz, step = np.ascontiguousarray(xyz, np.float64), 3
+    xyz, axes, step = _axes(xyz)
     count, sums = zeros("columns_count", n, np.int64), zeros("columns_sums", 3 * n, np.float64)
     has, means = np.empty(min(n, len(xyz)), np.int64), np.empty((min(n, len(xyz)), 3))
-    base, k = xyz.ctypes.data, xyz.strides[1]
     m = lib.sv_columns(
-        base,
-        base + k,
-        base + 2 * k,
+        *axes,
         len(xyz),
         step,
         float(lo[0]),
