@@ -514,3 +514,79 @@ def test_the_cut_kernel_gives_the_masks_points(lib, monkeypatch):
                 slow = columns._cut(base, lo, hi)
             assert fast.shape == slow.shape and fast.tobytes() == slow.tobytes()
     assert columns._cut(xyz, np.array([10.0, 5.0]), np.array([30.0, 20.0])).shape[1] > 0
+
+
+def test_the_bounds_kernel_gives_numpys_min_and_max(lib, monkeypatch):
+    """Bounds of float64 clouds by the kernel (one pass): numpy's per-axis min and max for rows,
+    transposed rows, column slices and strided views, 1 to 3 axes, NaN where an axis has one."""
+    from soilvolume.core import cells
+
+    rng = np.random.default_rng(8)
+    xyz = rng.normal(0, 100, (120_000, 3))
+    nan = xyz.copy()
+    nan[5_000, 1] = np.nan
+    for a in (xyz, np.ascontiguousarray(xyz.T).T, xyz[:, :2], xyz[::3], xyz[:, 1:], nan):
+        for dims in (None, 1, 2, 3):
+            if dims is not None and dims > a.shape[1]:
+                continue
+            got = cells.bounds(a, dims)
+            with monkeypatch.context() as m:
+                m.setattr("soilvolume.native.kernels", lambda: None)  # the numpy path
+                want = cells.bounds(a, dims)
+            assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want, strict=True)), (a.strides, dims)
+    lo, hi = cells.bounds(nan)
+    assert np.isnan(lo[1]) and np.isnan(hi[1]) and np.isfinite(lo[[0, 2]]).all()
+
+
+def test_the_window_cells_kernel_gives_the_numpy_bits(lib, monkeypatch):
+    """A grid task's soil points on its window's cells (``tiletask._window_cells``) by the kernel:
+    numpy's cell ids and heights, and the same offset sums bit for bit, chunk after chunk."""
+    from soilvolume.dem import grid as gridmod
+    from soilvolume.distributed import tiletask
+
+    rng = np.random.default_rng(6)
+    grid = gridmod.make_grid(np.array([0.0, 0.0]), np.array([60.0, 40.0]), 0.7, np.zeros(3), None)
+    win = (10, 37, 21, 60)
+    chunks = [
+        np.c_[rng.uniform(-5, 65, n), rng.uniform(-5, 45, n), rng.normal(2, 0.3, n)].astype(np.float32)
+        for n in (9_000, 4_000)
+    ]
+    chunks.append(np.ascontiguousarray(chunks[0].T).T)  # transposed rows, as a moved chunk may be
+
+    def run():
+        sums, out = gridmod.OffsetSums((win[1] - win[0]) * (win[3] - win[2])), []
+        for c in chunks:
+            ids, z = tiletask._window_cells(c, grid, win, sums)
+            out += [ids.astype(np.int64).tobytes(), z.astype(np.float64).tobytes()]
+        return out, sums.sx.tobytes(), sums.sy.tobytes()
+
+    fast = run()
+    with monkeypatch.context() as m:
+        m.setattr("soilvolume.native.kernels", lambda: None)
+        slow = run()
+    assert fast == slow
+    assert len(fast[0][0]) > 8 * 1_000  # a thousand points and more on the window
+
+
+def test_the_first_chunk_is_read_mapped_as_it_is_read_into_buffers(tmp_path):
+    """An epoch's rule is decided on its first chunk, read as views of the file mapped read-only:
+    the same classes and signals as the buffered read, and a file shorter than its header says
+    gives what it has (the run's own reading reports it)."""
+    from soilvolume.inputs import records
+
+    rng = np.random.default_rng(2)
+    n = 5_000
+    las = laspy.LasData(laspy.LasHeader(point_format=7, version="1.4"))
+    las.x, las.y, las.z = rng.uniform(0, 60, n), rng.uniform(0, 40, n), rng.normal(0, 0.2, n)
+    las.classification = rng.integers(1, 7, n).astype(np.uint8)
+    las.red, las.green, las.blue = (rng.integers(0, 65_535, n).astype(np.uint16) for _ in range(3))
+    path = tmp_path / "a.las"
+    las.write(str(path))
+    mapped = records.first_chunk_signals(path, n, 3_000, True)
+    buffered = next(records.las_records(path, n, 3_000, True, piece=3_000, ring=1, stop=3_000))[1:]
+    assert np.array_equal(mapped[0], las.classification[:3_000]) and np.array_equal(mapped[0], buffered[0])
+    assert np.array_equal(mapped[1].rgb, buffered[1].rgb) and np.array_equal(mapped[1].returns, buffered[1].returns)
+    short = tmp_path / "short.las"
+    short.write_bytes(path.read_bytes()[: -(n - 1_000) * las.header.point_format.size])
+    cls, _ = records.first_chunk_signals(short, n, 3_000, True)
+    assert np.array_equal(cls, las.classification[:1_000])

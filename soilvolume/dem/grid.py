@@ -234,6 +234,14 @@ def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[
 def _native_cells(lib, part: np.ndarray, grid: GridSpec, ids: np.ndarray, z: np.ndarray, sums: OffsetSums) -> int:
     """One block of :func:`_cells_of` on the native kernel (``sv_cells``): the same ids, heights
     and offset sums, bit for bit (float32 points)."""
+    return native_cells(lib, part, grid, (0, grid.rows, 0, grid.cols), ids, z, sums.sx, sums.sy)
+
+
+def native_cells(lib, part: np.ndarray, grid: GridSpec, win: tuple, ids, z, sx: np.ndarray, sy: np.ndarray) -> int:
+    """``sv_cells``: the float32 points of ``part`` on the cells of the window ``win`` (r0, r1, c0,
+    c1) of ``grid``, assigned on the whole grid: their flat ids in the window and float64 heights
+    written to ``ids`` and ``z``, their offsets in their cells added to ``sx`` and ``sy`` point by
+    point; returns how many."""
     if part.strides[0] % 4 or part.strides[1] % 4 or min(part.strides) <= 0:
         part = np.ascontiguousarray(part)
     step, axis, base = part.strides[0] // 4, part.strides[1], part.ctypes.data  # (N, 3) rows or a (3, N) transposed
@@ -246,12 +254,11 @@ def _native_cells(lib, part: np.ndarray, grid: GridSpec, ids: np.ndarray, z: np.
         float(grid.xmin - grid.origin[0]),
         float(grid.ymax - grid.origin[1]),
         1.0 / grid.cell,
-        grid.rows,
-        grid.cols,
+        *(int(v) for v in win),
         ids.ctypes.data,
         z.ctypes.data,
-        sums.sx.ctypes.data,
-        sums.sy.ctypes.data,
+        sx.ctypes.data,
+        sy.ctypes.data,
     )
 
 

@@ -19,6 +19,7 @@ from ..dem.grid import (
     cell_coords,
     cell_heights,
     finish_epoch,
+    native_cells,
     nonsoil_sums,
 )
 from ..inputs.crs import WorkFrame
@@ -196,6 +197,12 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
     ``grid`` (cells assigned on the whole grid, exactly as in-process); their positions in
     their cells are added to ``offsets`` (None: not needed, as for the points that are not
     soil). ``keep_ids``: the ids come with the indices of the points they belong to."""
+    if offsets is not None and not keep_ids and xyz32.dtype == np.float32:
+        from ..native import kernels
+
+        lib = kernels()
+        if lib is not None:
+            return _native_window_cells(lib, xyz32, grid, win, offsets)
     fcol, frow, ok = cell_coords(xyz32, grid, win)
     fcol, frow = fcol[ok], frow[ok]
     ids = frow.astype(np.int32)  # the cell's row and column: the coordinates truncated, as flat_ids
@@ -206,6 +213,18 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
     if offsets is not None:
         offsets.add(ids, fcol, frow)
     return ((ids, np.flatnonzero(ok)) if keep_ids else ids), xyz32[ok, 2]
+
+
+def _native_window_cells(lib, xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums) -> tuple:
+    """:func:`_window_cells` of soil points on the kernel (``sv_cells``): the same ids, heights
+    and offset sums, bit for bit (the chunk's offsets summed from zero, then added, as
+    :meth:`OffsetSums.add` does)."""
+    ids, z = np.empty(len(xyz32), np.int64), np.empty(len(xyz32), np.float64)
+    sx, sy = np.zeros_like(offsets.sx), np.zeros_like(offsets.sy)
+    m = native_cells(lib, xyz32, grid, win, ids, z, sx, sy)
+    offsets.sx += sx
+    offsets.sy += sy
+    return ids[:m], z[:m]
 
 
 def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:

@@ -81,7 +81,7 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.sv_columns.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, ptr, ptr]
     lib.sv_columns.restype = i64
     f32 = ctypes.c_float
-    lib.sv_cells.argtypes = [ptr, ptr, ptr, i64, i64, f32, f32, f32, i64, i64, ptr, ptr, ptr, ptr]
+    lib.sv_cells.argtypes = [ptr, ptr, ptr, i64, i64, f32, f32, f32, i64, i64, i64, i64, ptr, ptr, ptr, ptr]
     lib.sv_cells.restype = i64
     lib.sv_sort_keys.argtypes = [ptr, i64, ptr, i64, i64, ptr, ptr]
     lib.sv_sort_keys.restype = None
@@ -91,6 +91,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.sv_nearest_kept.restype = i64
     lib.sv_cut_box.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, f64, ptr, i64]
     lib.sv_cut_box.restype = i64
+    lib.sv_bounds.argtypes = [ptr, i64, i64, i64, i64, ptr, ptr]
+    lib.sv_bounds.restype = None
     lib.sv_grid_build.argtypes = [ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr]
     lib.sv_grid_build.restype = None
     lib.sv_grid_nearest2.argtypes = [ptr, i64, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, f64, ptr, ptr]

@@ -228,6 +228,29 @@ int64_t sv_cut_box(const double *x, const double *y, const double *z, int64_t n,
     return k;
 }
 
+/* Per-axis min and max of the first dims (1 to 3) axes of n > 0 points in one pass (numpy twin:
+ * soilvolume.core.cells.bounds): point i's axis j at p[i * step + j * axis]; NaN where an axis
+ * holds a NaN, as numpy's. */
+static inline void extend(double x, double *a, double *b, int *nan, int j) {
+    *a = x < *a ? x : *a, *b = x > *b ? x : *b;
+    *nan |= (x != x) << j;
+}
+
+void sv_bounds(const double *p, int64_t n, int64_t step, int64_t axis, int64_t dims, double *lo, double *hi) {
+    double a0 = p[0], b0 = p[0], a1 = 0.0, b1 = 0.0, a2 = 0.0, b2 = 0.0;
+    int nan = 0;
+    if (dims > 1) a1 = b1 = p[axis];
+    if (dims > 2) a2 = b2 = p[2 * axis];
+    for (int64_t i = 0; i < n; i++) { /* unrolled per dims: one pass, the axes in registers */
+        const double *q = p + i * step;
+        extend(q[0], &a0, &b0, &nan, 0);
+        if (dims > 1) extend(q[axis], &a1, &b1, &nan, 1);
+        if (dims > 2) extend(q[2 * axis], &a2, &b2, &nan, 2);
+    }
+    const double a[3] = {a0, a1, a2}, b[3] = {b0, b1, b2};
+    for (int64_t j = 0; j < dims; j++) lo[j] = nan >> j & 1 ? NAN : a[j], hi[j] = nan >> j & 1 ? NAN : b[j];
+}
+
 /* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): each point's
  * column is floor((v - lo) / cell) per axis, points off the grid are dropped, each column's sums
  * run over its points in order from zero (bincount's). x, y, z: the points' coordinates, step
@@ -260,19 +283,21 @@ int64_t sv_columns(const double *x, const double *y, const double *z, int64_t n,
     return m;
 }
 
-/* Points to the cells of a grid (numpy twin: soilvolume.dem.grid._cells_of on a block): float32
- * coordinates x, y, z (step floats apart) to fractional column (x - xmin) * inv and row
- * (ymax - y) * inv in float32, as numpy computes them; the points inside the grid get their flat
- * cell id and float64 height appended to ids and z, and their offsets within the cell
- * (col - floor(col), row - floor(row)) added to sx and sy in order (OffsetSums.add_at). Returns
- * the number appended. */
+/* Points to the cells of a window of a grid (numpy twins: soilvolume.dem.grid._cells_of on a block,
+ * soilvolume.distributed.tiletask._window_cells): float32 coordinates x, y, z (step floats apart)
+ * to fractional column (x - xmin) * inv and row (ymax - y) * inv on the whole grid in float32, as
+ * numpy computes them; the points in the window's rows r0..r1 and columns c0..c1 get their flat
+ * cell id in the window and float64 height appended to ids and z, and their offsets within the
+ * cell (col - floor(col), row - floor(row)) added to sx and sy in order (OffsetSums.add_at).
+ * Returns the number appended. */
 int64_t sv_cells(const float *x, const float *y, const float *z, int64_t n, int64_t step, float xmin, float ymax,
-                 float inv, int64_t rows, int64_t cols, int64_t *ids, double *zout, double *sx, double *sy) {
-    int64_t m = 0;
+                 float inv, int64_t r0, int64_t r1, int64_t c0, int64_t c1, int64_t *ids, double *zout, double *sx,
+                 double *sy) {
+    int64_t m = 0, cols = c1 - c0;
     for (int64_t i = 0; i < n; i++) {
         float col = (x[i * step] - xmin) * inv, row = (ymax - y[i * step]) * inv;
-        if (!(col >= 0.0f && col < (float)cols && row >= 0.0f && row < (float)rows)) continue;
-        int64_t id = (int64_t)(int32_t)row * cols + (int64_t)(int32_t)col;
+        if (!(col >= (float)c0 && col < (float)c1 && row >= (float)r0 && row < (float)r1)) continue;
+        int64_t id = ((int64_t)(int32_t)row - r0) * cols + (int64_t)(int32_t)col - c0;
         ids[m] = id;
         zout[m++] = (double)z[i * step];
         sx[id] += (double)(col - floorf(col));

@@ -192,10 +192,8 @@ def _gicp(src, tgt, normals, dist: float, t: np.ndarray, k: float, pcds: dict) -
 
 def _surface(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
     """The target's column surface and normals over the source's box under ``t`` + margin."""
-    moved = transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t)
-    xyz, normals = _column_surface(
-        target_xyz, voxel, moved[:, :2].min(axis=0) - margin, moved[:, :2].max(axis=0) + margin
-    )
+    lo, hi = bounds(transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t), 2)
+    xyz, normals = _column_surface(target_xyz, voxel, lo - margin, hi + margin)
     if len(xyz) < 3:
         raise SoilVolumeError(
             "registration failed: the fine registration drifted off the before cloud "
