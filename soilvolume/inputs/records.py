@@ -87,13 +87,15 @@ def las_records(
     direct: Callable[[bool], object] | None = None,
     stop: int | None = None,
     whole_first: bool = False,
+    mapped: bool = False,
 ) -> Iterator[tuple]:
     """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most
     ``piece`` points (:data:`PIECE`), each chunk of ``size`` points (the numpy path's) ending on a piece marked
     ``flush``; a point count other than the header's ``count`` is a corrupt file. An uncompressed
     file is read into ``ring`` buffers in turn (one, when each piece is done with before the next);
     ``stop``: only the first ``stop`` points (a whole number of chunks or fewer) are read, unchecked;
-    ``whole_first``: the first chunk in one piece (an epoch's rule is decided on it).
+    ``whole_first``: the first chunk in one piece (an epoch's rule is decided on it);
+    ``mapped``: an uncompressed file's pieces are views of the file mapped read-only (no buffer).
     ``direct(has_class)``, asked at each chunk of an uncompressed file: a class table (or None)
     leaves the chunk in the file as a :class:`FileChunk` (classification and signals None); False
     reads it."""
@@ -112,6 +114,8 @@ def las_records(
             arrays = (
                 _laz(reader, [m for c in chunks for m in c])
                 if h.are_points_compressed
+                else _mapped(path, h, chunks)
+                if mapped
                 else _raw(path, h, chunks, ring, direct)
             )
             for array in arrays:
@@ -138,7 +142,7 @@ def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Calla
     """(classification or None, signals or None) of the first chunk of ``size`` points of a
     LAS/LAZ file, read without decoding its coordinates: what an epoch's rule is decided on
     (:func:`soilvolume.soil.points.decide`), the same points the numpy path decides it on."""
-    for _rec, cls, *sig in las_records(path, count, size, signals, piece=size, ring=1, stop=min(size, count)):
+    for _rec, cls, *sig in las_records(path, count, size, signals, piece=size, stop=min(size, count), mapped=True):
         return cls, sig[0] if sig else None  # the chunk in one piece, as the numpy path reads it
     return None, None
 
@@ -224,6 +228,25 @@ def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
         if len(part) == 0:  # fewer points than the header says: las_records reports it
             return
         yield part.array
+
+
+def _mapped(path: Path, header, chunks: list[list[int]]) -> Iterator[np.ndarray]:
+    """The pieces of an uncompressed file as views of it mapped read-only: the page cache's pages,
+    not a buffer faulted in and copied into (what deciding an epoch's rule on its first chunk
+    reads: one look at its classes and signals)."""
+    dtype = header.point_format.dtype()
+    base = header.offset_to_point_data
+    n = min(sum(map(sum, chunks)), max(0, (path.stat().st_size - base) // dtype.itemsize))
+    if n == 0:
+        return
+    points = np.memmap(path, dtype, mode="r", offset=base, shape=(n,))
+    at = 0
+    for m in (m for chunk in chunks for m in chunk):
+        part = points[at : at + m].view(np.ndarray)
+        at += len(part)
+        yield part
+        if len(part) < m:
+            return
 
 
 def _raw(path: Path, header, chunks: list[list[int]], ring: int, direct=None) -> Iterator:
