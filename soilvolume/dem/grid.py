@@ -219,7 +219,7 @@ def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[
     for i in range(0, len(xyz), BLOCK):
         part = xyz[i : i + BLOCK] if move is None else move(xyz[i : i + BLOCK])
         if lib is not None and part.dtype == np.float32 and len(part):
-            m += _native_cells(lib, part, grid, ids[m:], z[m:], sums)
+            m += native_cells(lib, part, grid, (0, grid.rows, 0, grid.cols), ids[m:], z[m:], sums.sx, sums.sy)
             continue
         col, row, ok = cell_coords(part, grid)
         col, row = col[ok], row[ok]
@@ -231,17 +231,13 @@ def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[
     return ids[:m], z[:m]
 
 
-def _native_cells(lib, part: np.ndarray, grid: GridSpec, ids: np.ndarray, z: np.ndarray, sums: OffsetSums) -> int:
-    """One block of :func:`_cells_of` on the native kernel (``sv_cells``): the same ids, heights
-    and offset sums, bit for bit (float32 points)."""
-    return native_cells(lib, part, grid, (0, grid.rows, 0, grid.cols), ids, z, sums.sx, sums.sy)
-
-
-def native_cells(lib, part: np.ndarray, grid: GridSpec, win: tuple, ids, z, sx: np.ndarray, sy: np.ndarray) -> int:
+def native_cells(
+    lib, part: np.ndarray, grid: GridSpec, win: tuple, ids: np.ndarray, z: np.ndarray, sx: np.ndarray, sy: np.ndarray
+) -> int:
     """``sv_cells``: the float32 points of ``part`` on the cells of the window ``win`` (r0, r1, c0,
     c1) of ``grid``, assigned on the whole grid: their flat ids in the window and float64 heights
     written to ``ids`` and ``z``, their offsets in their cells added to ``sx`` and ``sy`` point by
-    point; returns how many."""
+    point (as :meth:`OffsetSums.add_at`), the bits of numpy's :func:`cell_coords`; returns how many."""
     if part.strides[0] % 4 or part.strides[1] % 4 or min(part.strides) <= 0:
         part = np.ascontiguousarray(part)
     step, axis, base = part.strides[0] // 4, part.strides[1], part.ctypes.data  # (N, 3) rows or a (3, N) transposed
