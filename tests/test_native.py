@@ -421,23 +421,67 @@ def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeyp
     thinning = (np.array([-11.0, -11.0]), np.array([60.0, 40.0]), 0.5, None)
     to_local = Shift(np.array([500_010.0, 3_900_010.0, 49.0]))
 
+    run = _tile_scan(path, to_local, point_rule, keep, thinning, keeping)
+    calls = []
+    monkeypatch.setattr(nativescan, "NativeChunks", lambda *a, f=nativescan.NativeChunks: calls.append(1) or f(*a))
+    (kind, *a), (numpy_kind, *b) = _both(monkeypatch, run)
+    assert a == b and len(calls) == 1  # the kernel scanned it, then numpy
+    assert (kind, numpy_kind) == ("Block", "tuple")  # the kernel's on the tile's columns only
+    assert len(a[2]) == (5 if keeping else 0) and (a[0][1] < n) == (rule != "none")  # a rule left some points out
+
+
+def _tile_scan(path, to_local, rule, keep, thinning: tuple, keeping: bool):
+    """A function scanning the tile ``path`` as the first pass does: (the kind of its sums, its
+    counts, the bytes of the epoch's thinning sums once its sums are added, the kept chunks'
+    sizes, their soil points' bytes and their other points' and labels' bytes)."""
+    from soilvolume.distributed import scan
+
     def run():
         kept = []
         got = scan._scan(
-            (str(path), None, None), None, to_local, point_rule, keep, thinning, False, None, kept if keeping else None
+            (str(path), None, None), None, to_local, rule, keep, thinning, False, None, kept if keeping else None
         )
         counts = tuple(got[k] for k in ("points", "used", "cropped"))
+        epoch = ColumnThinner(*thinning)
+        scan._add_in_order(epoch, {0: got["sums"]}, 0)
         sizes = [len(xyz) for xyz, _ in kept]
         soil = np.concatenate([xyz if lab is None else xyz[lab == 0] for xyz, lab in kept] or [np.empty(0)])
         other = [(xyz[lab != 0], lab[lab != 0]) for xyz, lab in kept if lab is not None]
         other = b"".join(x.tobytes() + la.tobytes() for x, la in other)
-        return counts, got["sums"][0].tobytes(), got["sums"][1].tobytes(), sizes, soil.tobytes(), other
+        return type(got["sums"]).__name__, counts, epoch.sums.tobytes(), sizes, soil.tobytes(), other
 
+    return run
+
+
+def test_a_tile_with_points_off_its_header_box_is_thinned_on_all_columns(lib, tmp_path, monkeypatch):
+    """The kernel's scan thins a tile on the columns its header's box meets: a point that missed
+    them (a box too small) makes it scan the tile again on all of them, and it gives numpy's bits."""
+    from soilvolume.distributed import nativescan
+    from soilvolume.inputs.prepare import Shift
+    from soilvolume.soil.points import PointRule
+
+    rng = np.random.default_rng(8)
+    las = laspy.LasData(laspy.LasHeader(point_format=6, version="1.4"))
+    las.header.scales, las.header.offsets = np.full(3, 0.001), np.array([500_000.0, 3_900_000.0, 0.0])
+    las.x, las.y, las.z = (
+        500_000 + rng.uniform(0, 60, 5_000),
+        3_900_000 + rng.uniform(0, 40, 5_000),
+        rng.normal(0, 1, 5_000),
+    )
+    las.classification = np.full(5_000, 2, np.uint8)
+    path = tmp_path / "t.las"
+    las.write(str(path))
+    thinning = (np.array([-20.0, -20.0]), np.array([70.0, 50.0]), 0.5, None)
+    half = lambda thinning, box: (*thinning[:3], (box[0], (box[0] + box[1]) / 2))  # noqa: E731
+    monkeypatch.setattr(nativescan, "narrowed", half)
     calls = []
     monkeypatch.setattr(nativescan, "NativeChunks", lambda *a, f=nativescan.NativeChunks: calls.append(1) or f(*a))
-    a, b = _both(monkeypatch, run)
-    assert a == b and len(calls) == 1  # the kernel scanned it, then numpy
-    assert len(a[3]) == (5 if keeping else 0) and (a[0][1] < n) == (rule != "none")  # a rule left some points out
+    run = _tile_scan(
+        path, Shift(np.array([500_010.0, 3_900_010.0, 0.0])), PointRule(use_class=True), None, thinning, True
+    )
+    (kind, *a), (_, *b) = _both(monkeypatch, run)
+    assert a == b and len(calls) == 2  # the kernel scanned it twice, then numpy
+    assert kind == "tuple" and a[0][2] == 5_000  # every point cropped in and thinned
 
 
 def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):

@@ -58,3 +58,35 @@ def test_thinner_sums_match_the_formula_to_the_bit(dtype, within):
     centroids, counts = th.columns()  # both in one pass, as the streaming takes them
     assert centroids.tobytes() == th.result().tobytes() and counts.tobytes() == th.counts().tobytes()
     assert th.columns(centroids=False)[0] is None
+
+
+@pytest.mark.parametrize("within", [None, ((40.0, 55.0), (310.0, 390.0))])
+def test_tiles_thinned_on_their_own_columns_add_up_to_the_epochs_bits(within):
+    """Tiles thinned each on the columns its box meets (:func:`narrowed`), their blocks added in
+    order to the epoch's thinner, give the bits of the epoch's thinner fed every tile's points,
+    and of sparse adds of each tile's columns with points; a block off the columns is refused."""
+    from soilvolume.inputs.thinning import narrowed
+
+    thinning = (np.zeros(2), np.full(2, 400.0), 0.73, within)
+    whole, blocks, sparse = (ColumnThinner(*thinning) for _ in range(3))
+    rng = np.random.default_rng(5)
+    for x0, y0 in [(0, 0), (200, 0), (0, 200), (200, 200), (150, 150)]:  # the last overlaps the others
+        xyz = np.column_stack(
+            [rng.uniform(x0, x0 + 200, 40_000), rng.uniform(y0, y0 + 200, 40_000), rng.normal(size=40_000)]
+        )
+        whole.add(xyz)
+        tile = ColumnThinner(*narrowed(thinning, (np.array([x0, y0]) - 0.73, np.array([x0, y0]) + 200.73)))
+        tile.add(xyz)
+        assert tile.sums.shape[1] < whole.sums.shape[1] / 2  # its own columns, not the epoch's
+        blocks.add_block(tile.block())
+        has = np.flatnonzero(tile.sums[3])
+        part = ColumnThinner(*thinning)
+        part.add(xyz)
+        cols = np.flatnonzero(part.sums[3])
+        sparse.sums[:, cols] += part.sums[:, cols]
+        assert len(has) == len(cols)
+    assert blocks.sums.tobytes() == whole.sums.tobytes() == sparse.sums.tobytes()
+    off = ColumnThinner(np.zeros(2), np.full(2, 400.0), 0.73, ((-50.0, -50.0), (500.0, 500.0)))
+    if within is not None:  # a thinner of more columns than the epoch's: not a part of it
+        with pytest.raises(ValueError, match="outside"):
+            blocks.add_block(off.block())

@@ -27,7 +27,7 @@ IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read fr
 
 
 def _identify(future, epochs) -> None:
-    """The inputs' identities (:func:`.fingerprint.input_identities`: BLAKE2 releases the GIL)
+    """The inputs' identities (:func:`.fingerprint.input_identities`: zlib's CRC releases the GIL)
     into ``future``."""
     from .fingerprint import input_identities
 
@@ -93,7 +93,8 @@ class Tiled:
         ).start()
         self.src_b, self.src_a = (open_source(e.path) for e in run.epochs)
         src_a = self.src_a
-        self.cache = PointCache(self.c, budget_gb(run.options.memory_limit))
+        direct = self.schedule.kind in ("local", "threads")  # this machine's workers: sent straight to them
+        self.cache = PointCache(self.c, budget_gb(run.options.memory_limit), direct)
         self.cache.expect(near_after(self.src_b, src_a, run.options.radius))
         loader = dask_loader(self.c, lambda m: hooks.step(run.at("prepare", 0.46), m), checker(hooks), self.cache)
         check = lambda: hooks.step(run.at("prepare", 0.23), "reading")  # noqa: E731

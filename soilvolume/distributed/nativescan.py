@@ -19,7 +19,7 @@ from ..inputs.chunkwork import Growing, NativeChunks, consume, native_work
 from ..inputs.copc import is_copc
 from ..inputs.records import FileChunk, las_records
 from ..inputs.stream import CHUNK, file_kernel, native_reads, open_source
-from ..inputs.thinning import ColumnThinner
+from ..inputs.thinning import ColumnThinner, narrowed
 from ..soil.points import PointRule
 
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no points kept
@@ -27,11 +27,13 @@ NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no 
 
 def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kept: list | None) -> dict | None:
     """The scan of the file ``path`` (points, soil points used, points cropped in, read seconds,
-    the thinning ``sums``; each chunk's kept points and labels appended to ``kept`` when it is a
-    list), or None where the kernel does not apply: no library, a frame that is not a plain
-    shift, a crop that is not a lattice, a COPC file, an empty or unreadable one."""
-    from ..native import kernels
-
+    the thinning ``sums``, a :class:`.thinning.Block`; each chunk's kept points and labels
+    appended to ``kept`` when it is a list), or None where the kernel does not apply: no library,
+    a frame that is not a plain shift, a crop that is not a lattice, a COPC file, an empty or
+    unreadable one. The tile is thinned on the columns of ``thinning`` that meet its header's
+    box (points outside it fail the reader's bounds check), not on the whole epoch's, zeroed and
+    swept for each tile; if a point still missed them, the tile is scanned again on all of them
+    (and its sums are those of its columns with points)."""
     if is_copc(path):
         return None
     try:
@@ -40,9 +42,28 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
         return None
     if src.raw is not None or not native_reads(src, to_local, keep):
         return None
-    thinner = ColumnThinner(*thinning)
-    out = Growing(src.count if kept is not None else 0), Growing(0), Growing(0, None, np.uint8)
-    kernel = NativeChunks(kernels(), thinner, keep, None if kept is not None else NOTHING, to_local.origin, CHUNK)
+    pad = thinning[2]  # a column: the lattice adds one more on each side
+    box = (src.lo[:2] - to_local.origin[:2] - pad, src.hi[:2] - to_local.origin[:2] + pad)
+    tile = ColumnThinner(*narrowed(thinning, box))
+    res, thinner, chunks = _scan(src, path, to_local, rule, keep, tile, kept is not None)
+    if float(thinner.sums[3].sum()) == res["cropped"]:
+        res["sums"] = thinner.block()
+    else:  # a point off the header's box: on all the columns, the sums of those with points
+        res, thinner, chunks = _scan(src, path, to_local, rule, keep, ColumnThinner(*thinning), kept is not None)
+        has = np.flatnonzero(thinner.sums[3])
+        res["sums"] = (has, thinner.sums[:, has])
+    if kept is not None:
+        kept.extend(chunks)
+    return res
+
+
+def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinner, keeping: bool) -> tuple:
+    """(counts of the scan, ``thinner`` fed, each chunk's kept points and labels when
+    ``keeping``) of :func:`native_scan`."""
+    from ..native import kernels
+
+    out = Growing(src.count if keeping else 0), Growing(0), Growing(0, None, np.uint8)
+    kernel = NativeChunks(kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
     direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None
     records = las_records(Path(path), src.count, CHUNK, lambda _cls: rule.signal_dims, direct=direct)
     items = ((rec, None if isinstance(rec, FileChunk) else rule.labels(cls, sig), rule) for rec, cls, sig in records)
@@ -62,11 +83,8 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
     finally:
         kernel.close()
     res = {"points": points, "used": used, "cropped": cropped, "index": [], "read_s": read_s}
-    if kept is not None:
-        kept.extend(_kept_chunks(*(g.result() for g in out), ends, labelled))
-    has = np.flatnonzero(thinner.sums[3])  # the columns with points: a tile meets few of the grid's
-    res["sums"] = (has, thinner.sums[:, has])
-    return res
+    chunks = _kept_chunks(*(g.result() for g in out), ends, labelled) if keeping else []
+    return res, thinner, chunks
 
 
 def _kept_chunks(soil: np.ndarray, other: np.ndarray, labels: np.ndarray, ends: list, labelled: bool) -> list:

@@ -55,10 +55,12 @@ def read_tile(path: str) -> tuple:
 
 
 class PointCache:
-    """Futures of the VPC tiles kept in the workers' memory (:class:`KeptTile`), within ``budget_gb``."""
+    """Futures of the VPC tiles kept in the workers' memory (:class:`KeptTile`), within ``budget_gb``;
+    ``direct``: the tiles the driver scanned are sent straight to the workers (a cluster of this
+    machine), not through the scheduler."""
 
-    def __init__(self, client, budget_gb: float) -> None:
-        self.client, self.left = client, budget_gb * CACHE_SHARE * 2**30
+    def __init__(self, client, budget_gb: float, direct: bool = False) -> None:
+        self.client, self.left, self.direct = client, budget_gb * CACHE_SHARE * 2**30, direct
         self.futures: dict[Key, object] = {}  # the kept tiles, for the grid
         self.reads: dict[str, object] = {}  # tiles of an epoch to come read ahead, for its scan
         self.charged: set[str] = set()  # the tiles counted against the budget
@@ -144,9 +146,13 @@ class PointCache:
         sender.start()
 
     def _send(self, client, held: dict[Key, KeptTile]) -> None:
+        """All of ``held`` in one scatter (one call per tile took twice as long: 17 tiles of
+        3.8 M points, 0.10-0.15 s through the scheduler, 0.05 s straight and at once)."""
         try:
-            for key, kept in held.items():
-                self.futures[key] = client.scatter([kept], hash=False)[0]
+            keys = list(held)
+            futures = client.scatter([held[k] for k in keys], hash=False, direct=self.direct)
+            for key, future in zip(keys, futures, strict=True):
+                self.futures[key] = future
                 self.sending.discard(key)
         except BaseException as exc:  # noqa: BLE001 - raised in the driver by sent()
             self.failed = exc

@@ -15,6 +15,7 @@ from ..core import interrupt
 from ..core.cells import bounds, rows
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
+from ..inputs.thinning import Block
 from ..soil.points import SOIL, NonSoil, PointRule
 from .nativescan import native_scan
 from .pointcache import KeptTile, kept_chunk, read_tile
@@ -162,12 +163,17 @@ def dask_loader(
 
 
 def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
-    """Add the units' sums ({position: (columns, sums)}) to ``thinner`` in the units' order, however
-    the tasks finish: floating-point sums in one order give the same bits every run. ``added``:
-    how many were added before; those that cannot go yet wait for the ones before them."""
+    """Add the units' sums ({position: (columns, sums) or a :class:`Block`}) to ``thinner`` in the
+    units' order, however the tasks finish: floating-point sums in one order give the same bits
+    every run. ``added``: how many were added before; those that cannot go yet wait for the ones
+    before them."""
     while added in waiting:
-        cols, sums = waiting.pop(added)
-        thinner.sums[:, cols] += sums
+        part = waiting.pop(added)
+        if isinstance(part, Block):
+            thinner.add_block(part)
+        else:
+            cols, sums = part
+            thinner.sums[:, cols] += sums
         added += 1
 
 

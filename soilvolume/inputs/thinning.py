@@ -3,12 +3,46 @@ chunk by chunk (the thinned subsets registration and the footprint work on)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..core.types import SoilVolumeError
 
 #: most columns a thinning grid may have (4 float64 sums each: 2 GB)
 MAX_COLUMNS = 1 << 26
+
+
+def lattice(lo: np.ndarray, hi: np.ndarray, voxel: float, within=None) -> tuple[np.ndarray, tuple[int, int]]:
+    """(first column (x, y), shape (rows, columns)) of a :class:`ColumnThinner`'s columns."""
+    lo, hi = np.asarray(lo[:2], float), np.asarray(hi[:2], float)
+    first = np.zeros(2, np.int64)
+    last = np.ceil((hi - lo) / voxel).astype(np.int64)
+    if within is not None:
+        first = np.maximum(first, np.floor((np.asarray(within[0][:2]) - lo) / voxel).astype(np.int64) - 1)
+        last = np.minimum(last, np.ceil((np.asarray(within[1][:2]) - lo) / voxel).astype(np.int64) + 1)
+    return first, (int(max(last[1] - first[1], -1)) + 1, int(max(last[0] - first[0], -1)) + 1)
+
+
+def narrowed(thinning: tuple, box: tuple) -> tuple:
+    """``thinning`` (a thinner's lo, hi, voxel[, within]) with ``within`` narrowed to ``box`` (a
+    local x/y box where all the points to come lie): a thinner on the same lattice, over the
+    columns of the first that meet the box (one VPC tile's, not the whole epoch's)."""
+    lo, hi, voxel, within = (*thinning, None)[:4]
+    if within is not None:
+        box = (np.maximum(box[0][:2], within[0][:2]), np.minimum(box[1][:2], within[1][:2]))
+    return lo, hi, voxel, box
+
+
+@dataclass(frozen=True)
+class Block:
+    """The sums of a thinner cut from a wider one (:func:`narrowed`), to add to the wider one
+    (:meth:`ColumnThinner.add_block`): its first column (x, y) on the lattice, its shape (rows,
+    columns) and its sums (4, rows * columns)."""
+
+    first: tuple[int, int]
+    shape: tuple[int, int]
+    sums: np.ndarray
 
 
 class ColumnThinner:
@@ -20,13 +54,7 @@ class ColumnThinner:
     def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float, within=None, name: str = "") -> None:
         self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
         self.within = within
-        first = np.zeros(2, np.int64)
-        last = np.ceil((self.hi - self.lo) / voxel).astype(np.int64)
-        if within is not None:
-            first = np.maximum(first, np.floor((np.asarray(within[0][:2]) - self.lo) / voxel).astype(np.int64) - 1)
-            last = np.minimum(last, np.ceil((np.asarray(within[1][:2]) - self.lo) / voxel).astype(np.int64) + 1)
-        self.first = first
-        self.shape = (int(max(last[1] - first[1], -1)) + 1, int(max(last[0] - first[0], -1)) + 1)
+        self.first, self.shape = lattice(self.lo, self.hi, self.voxel, within)
         n = self.shape[0] * self.shape[1]
         if n > MAX_COLUMNS:
             raise SoilVolumeError(
@@ -36,6 +64,24 @@ class ColumnThinner:
         self.sums = np.zeros((4, n))
         self._native: tuple | None = None
         self._added = False  # by :meth:`add`: one thinner is fed by numpy or by the kernel, never both
+
+    def block(self) -> Block:
+        """This thinner's sums as a :class:`Block` of its lattice."""
+        return Block((int(self.first[0]), int(self.first[1])), self.shape, self.sums)
+
+    def add_block(self, block: Block) -> None:
+        """Add the sums of ``block`` (a thinner on this one's lattice, over columns of this one)
+        where it has points: as adding them column by column (a column's sums plus the block's),
+        without gathering and scattering the columns."""
+        h, w = block.shape
+        if h * w == 0:
+            return
+        dx, dy = block.first[0] - int(self.first[0]), block.first[1] - int(self.first[1])
+        if dx < 0 or dy < 0 or dy + h > self.shape[0] or dx + w > self.shape[1]:
+            raise ValueError("the block lies outside the thinner's columns")
+        view = self.sums.reshape(4, *self.shape)[:, dy : dy + h, dx : dx + w]
+        part = block.sums.reshape(4, h, w)
+        np.add(view, part, out=view, where=part[3] > 0)
 
     def native_state(self, chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """What the native kernel keeps beside the sums (made once; ``chunk``: the most points
