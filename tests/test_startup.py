@@ -70,24 +70,51 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
         "    info = client.run(lambda: (os.getppid(), os.environ.get('OMP_NUM_THREADS'),\n"
         "                               'soilvolume.distributed.tiletask' in sys.modules,\n"
         "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0)),\n"
-        "                               gc.isenabled(), gc.get_freeze_count()))\n"
+        "                               gc.isenabled(), gc.get_freeze_count(),\n"
+        "                               [m in sys.modules for m in ('laspy', 'requests', 'jinja2')],\n"
+        "                               [sys.modules.get(m, 0) is None for m in ('requests', 'jinja2')]))\n"
         "finally:\n"
         "    cluster.shut(c, client)\n"
-        "print(json.dumps([os.getpid(), sorted(info.values())]))\n"
+        "print(json.dumps([os.getpid(), sorted(info.values()), 'jinja2' in sys.modules]))\n"
     )
     r = run_python(code, timeout=120)
     assert r.returncode == 0, r.stderr
-    driver, workers = json.loads(r.stdout.splitlines()[-1])
+    driver, workers, jinja2 = json.loads(r.stdout.splitlines()[-1])
     assert len(workers) == 2
     parents = {w[0] for w in workers}
     assert len(parents) == 1 and driver not in parents  # one server forked both (spawned: the driver)
     assert all(w[1] == "1" and w[2] for w in workers)
     assert all(w[4] and w[5] > 10_000 for w in workers)  # collector on, the server's imports frozen
+    # laspy without requests, Dask without jinja2 (core.leanimport.EXTRAS), importable again after
+    assert all(w[6] == [True, False, False] and w[7] == [False, False] for w in workers) and not jinja2
     # the server started before any nanny set Dask's pre-spawn environment: it had it from its start
     # (OpenBLAS reads its threads as the server imports numpy), but for Dask's malloc trim threshold
     # (cluster.LOCAL_WORKER_ENV: glibc's own, as in-process)
     assert all("OMP_NUM_THREADS=1" in w[3] for w in workers)
     assert not any(e.startswith("MALLOC_TRIM_THRESHOLD_=") for w in workers for e in w[3])
+
+
+def test_imports_inside_without_see_the_extras_as_not_installed_and_after_it_as_installed():
+    """:func:`leanimport.without`: a module not imported yet cannot be imported inside (as if not
+    installed: a library's optional extra is then left out), and can be after it; one imported
+    already stays as it is."""
+    code = (
+        "import importlib, json, sys\n"
+        "from soilvolume.core.leanimport import without\n"
+        "import tabnanny\n"
+        "with without(('colorsys', 'tabnanny')):\n"
+        "    try:\n"
+        "        import colorsys\n"
+        "        inside = 'imported'\n"
+        "    except ModuleNotFoundError:\n"
+        "        inside = 'not installed'\n"
+        "    again = importlib.import_module('tabnanny') is sys.modules['tabnanny']\n"
+        "import colorsys\n"
+        "print(json.dumps([inside, again, colorsys.__name__]))\n"
+    )
+    r = run_python(code)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout.splitlines()[-1]) == ["not installed", True, "colorsys"]
 
 
 def test_preload_imports_open3d_during_the_reading_and_the_later_steps_after_it():

@@ -44,13 +44,13 @@ NATIVE_BOUNDS = 50_000  # fewest points whose bounds the native kernel takes (a 
 
 def _native_bounds(xyz: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray] | None:
     """:func:`bounds` on the kernel (``sv_bounds``: one pass over the points), None without it."""
-    from ..native import kernels
+    from ..native import kernels, steps
 
-    lib = kernels()
-    if lib is None or xyz.strides[0] % 8 or xyz.strides[1] % 8 or min(xyz.strides) <= 0:
+    lib, walk = kernels(), steps(xyz, np.float64)
+    if lib is None or walk is None:
         return None
     lo, hi = np.empty(k), np.empty(k)
-    step, axis = xyz.strides[0] // 8, xyz.strides[1] // 8
+    step, axis = walk
     lib.sv_bounds(xyz.ctypes.data, len(xyz), step, axis, k, lo.ctypes.data, hi.ctypes.data)
     return lo, hi
 

@@ -1,4 +1,4 @@
-"""pyproj imported without the modules it loads for functions the engine never calls.
+"""Libraries imported without the modules they load for functions the engine never calls.
 
 pyproj's ``__init__`` imports ``pyproj.sync`` (grid downloads: urllib.request, http.client, ssl,
 email) and ``pyproj._show_versions`` (importlib.metadata), ~25 ms of every run's start-up, for
@@ -8,6 +8,10 @@ it), run with both replaced by stand-ins; a name taken from one is a function th
 real module when it is called and calls the real function, so pyproj behaves as before. The
 stand-ins leave ``sys.modules`` once pyproj is loaded (a later ``import pyproj.sync`` imports the
 real module).
+
+:func:`without` hides optional extras, imported at a library's import when installed, from the
+imports made inside it: ``requests`` (laspy's COPC reader over HTTP, ~30 ms) and ``jinja2``
+(Dask's notebook HTML, ~15-25 ms). The library sees them as not installed, as it allows.
 """
 
 from __future__ import annotations
@@ -17,6 +21,8 @@ import importlib.abc
 import importlib.util
 import sys
 import types
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 STAND_INS = ("pyproj.sync", "pyproj._show_versions")
 
@@ -86,3 +92,34 @@ def install() -> None:
 def uninstall() -> None:
     """Imports of pyproj the ordinary way again."""
     sys.meta_path[:] = [f for f in sys.meta_path if not isinstance(f, _Finder)]
+
+
+#: optional extras libraries import when installed, for functions the engine never calls:
+#: requests (laspy: COPC over HTTP), jinja2 (Dask: notebook HTML of its objects)
+EXTRAS = ("requests", "jinja2")
+
+
+def hide(names: tuple[str, ...] = EXTRAS) -> list[str]:
+    """Imports see the modules ``names`` not imported yet as not installed (``import`` raises
+    ModuleNotFoundError), until :func:`unhide`; returns those hidden."""
+    hidden = [name for name in names if name not in sys.modules]
+    for name in hidden:
+        sys.modules[name] = None  # type: ignore[assignment]
+    return hidden
+
+
+def unhide(hidden: list[str]) -> None:
+    """The modules :func:`hide` hid importable again (those imported meanwhile stay)."""
+    for name in hidden:
+        if name in sys.modules and sys.modules[name] is None:
+            del sys.modules[name]
+
+
+@contextmanager
+def without(names: tuple[str, ...] = EXTRAS) -> Iterator[None]:
+    """The imports inside see ``names`` (those not imported yet) as not installed."""
+    hidden = hide(names)
+    try:
+        yield
+    finally:
+        unhide(hidden)

@@ -238,13 +238,17 @@ def native_cells(
     c1) of ``grid``, assigned on the whole grid: their flat ids in the window and float64 heights
     written to ``ids`` and ``z``, their offsets in their cells added to ``sx`` and ``sy`` point by
     point (as :meth:`OffsetSums.add_at`), the bits of numpy's :func:`cell_coords`; returns how many."""
-    if part.strides[0] % 4 or part.strides[1] % 4 or min(part.strides) <= 0:
-        part = np.ascontiguousarray(part)
-    step, axis, base = part.strides[0] // 4, part.strides[1], part.ctypes.data  # (N, 3) rows or a (3, N) transposed
+    from ..native import steps
+
+    walk = steps(part, np.float32)  # (N, 3) rows or a (3, N) transposed as they are, others copied
+    if walk is None:
+        part = np.ascontiguousarray(part, np.float32)
+        walk = steps(part, np.float32)
+    (step, axis), base = walk, part.ctypes.data
     return lib.sv_cells(
         base,
-        base + axis,
-        base + 2 * axis,
+        base + 4 * axis,
+        base + 8 * axis,
         len(part),
         step,
         float(grid.xmin - grid.origin[0]),

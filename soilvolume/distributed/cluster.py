@@ -16,9 +16,11 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from pathlib import Path
 
 from ..core import interrupt
+from ..core.leanimport import without
 from ..core.types import SoilVolumeError, short_error
 from ..core.wording import opt
 
+NOT_USED = ("jinja2",)  # Dask imports it, when installed, for notebook HTML: hidden (core.leanimport)
 CONNECT_S = 20.0  # a scheduler's address must answer within this
 START_S = {"tcp": 35.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
 NO_WORKERS_S = 20.0  # a cluster without any worker for this long cannot run the tasks
@@ -148,7 +150,8 @@ def shut(cluster, client) -> None:
 
 def connect(address: str):
     """(None, Client) of an existing cluster at ``address``, with at least one worker."""
-    from dask.distributed import Client
+    with without(NOT_USED):
+        from dask.distributed import Client
 
     try:
         c = Client(address, timeout=CONNECT_S)
@@ -174,8 +177,9 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
     """(LocalCluster, Client): ``workers`` processes of one thread (or one process of
     ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``."""
     method = _start_method() if processes else None  # first: the forkserver's imports overlap Dask's here
-    import dask
-    from dask.distributed import Client
+    with without(NOT_USED):
+        import dask
+        from dask.distributed import Client
 
     extra = {"preload": [WORKER_INIT]} if processes else {}
     if scratch is not None:
@@ -215,8 +219,9 @@ def _start_method() -> str | None:
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
     os.environ.update(pre_spawn_environ())  # what each nanny sets before its worker starts: the server's, for all
     forkserver.ensure_running()
-    import dask
-    from distributed.utils import get_mp_context
+    with without(NOT_USED):
+        import dask
+        from distributed.utils import get_mp_context
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         get_mp_context()  # Dask sets its preload list on first use: for a server running already, a no-op
@@ -230,7 +235,8 @@ def pre_spawn_environ() -> dict[str, str]:
     before Distributed is imported (0.3 s): its defaults are loaded as importing it would."""
     from importlib.util import find_spec
 
-    import dask
+    with without(NOT_USED):
+        import dask
 
     spec = find_spec("distributed")
     defaults = Path(spec.origin).parent / "distributed.yaml" if spec is not None and spec.origin else None

@@ -1,8 +1,12 @@
 """Imported first by the local cluster's forkserver (:data:`.cluster.FORKSERVER_PRELOAD`, which
 takes module names only): Python's garbage collector is paused while the server imports Dask and
-the tasks' modules (:mod:`soilvolume.core.collector`); :mod:`.forkready`, imported last, restarts
-it with what they made frozen."""
+the tasks' modules (:mod:`soilvolume.core.collector`), and the optional extras nothing of a worker
+uses are hidden from them (:data:`soilvolume.core.leanimport.EXTRAS`: laspy's requests, Dask's
+jinja2); :mod:`.forkready`, imported last, restarts it with what they made frozen and shows them
+again."""
 
+from ..core import leanimport
 from ..core.collector import pause
 
 pause()
+HIDDEN = leanimport.hide()

@@ -27,10 +27,12 @@ def warm() -> None:
     them already: :data:`.cluster.FORKSERVER_PRELOAD`)."""
     import importlib
 
+    from ..core.leanimport import without
     from .cluster import TASK_MODULES
 
-    for name in TASK_MODULES:
-        importlib.import_module(name)
+    with without():  # laspy's requests (core.leanimport.EXTRAS): a task never reads over HTTP
+        for name in TASK_MODULES:
+            importlib.import_module(name)
 
 
 ignore_interrupts()

@@ -9,13 +9,11 @@ import sys
 def laspy_module():
     """The ``laspy`` module; on first import ``requests`` is hidden from it (its HTTP COPC reader
     then says requests is missing), unless something imported ``requests`` already."""
-    if "laspy" not in sys.modules and "requests" not in sys.modules:
-        sys.modules["requests"] = None  # type: ignore[assignment]  # import requests -> ModuleNotFoundError
-        try:
+    if "laspy" not in sys.modules:
+        from ..core.leanimport import without
+
+        with without(("requests",)):
             import laspy
-        finally:
-            if sys.modules.get("requests", 0) is None:
-                del sys.modules["requests"]
     import laspy
 
     return laspy

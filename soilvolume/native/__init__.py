@@ -116,6 +116,16 @@ def zeros(name: str, size: int, dtype) -> np.ndarray:
     return have
 
 
+def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
+    """(values from one point to the next, from one axis to the next) of ``points``, an (N, k)
+    array of ``dtype`` or its transposed (k, N) rows, as a kernel walks them; None when the
+    kernels cannot walk it so (another dtype, strides not whole values, or not positive)."""
+    size = np.dtype(dtype).itemsize
+    if points.dtype != dtype or points.ndim != 2 or min(points.strides) <= 0 or any(s % size for s in points.strides):
+        return None
+    return points.strides[0] // size, points.strides[1] // size
+
+
 def reset() -> None:
     """Look for the library again at the next :func:`kernels` (tests switch ``SOILVOLUME_NATIVE``)."""
     global _lib

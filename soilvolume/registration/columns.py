@@ -94,11 +94,14 @@ def _axes(xyz: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int], int]:
     """(the points as the kernels read them, the addresses of their first x, y and z, the doubles
     from one point's to the next's): an (N, 3) float64 array or its transposed (3, N) rows as they
     are, any other copied into a C-ordered float64 one (keep the array while the addresses are used)."""
-    step = xyz.strides[0] // 8
-    if xyz.dtype != np.float64 or xyz.strides[1] % 8 or step * 8 != xyz.strides[0]:
-        xyz, step = np.ascontiguousarray(xyz, np.float64), 3
-    at, k = xyz.ctypes.data, xyz.strides[1]
-    return xyz, (at, at + k, at + 2 * k), step
+    from ..native import steps
+
+    walk = steps(xyz, np.float64)
+    if walk is None:
+        xyz = np.ascontiguousarray(xyz, np.float64)
+        walk = steps(xyz, np.float64)
+    (step, axis), at = walk, xyz.ctypes.data
+    return xyz, (at, at + 8 * axis, at + 16 * axis), step
 
 
 Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cuts remembered
