@@ -72,7 +72,8 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
         "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0)),\n"
         "                               gc.isenabled(), gc.get_freeze_count(),\n"
         "                               [m in sys.modules for m in ('laspy', 'requests', 'jinja2')],\n"
-        "                               [sys.modules.get(m, 0) is None for m in ('requests', 'jinja2')]))\n"
+        "                               [sys.modules.get(m, 0) is None for m in ('requests', 'jinja2')],\n"
+        "                               __import__('yaml').safe_load.__name__))\n"
         "finally:\n"
         "    cluster.shut(c, client)\n"
         "print(json.dumps([os.getpid(), sorted(info.values()), 'jinja2' in sys.modules]))\n"
@@ -87,6 +88,7 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     assert all(w[4] and w[5] > 10_000 for w in workers)  # collector on, the server's imports frozen
     # laspy without requests, Dask without jinja2 (core.leanimport.EXTRAS), importable again after
     assert all(w[6] == [True, False, False] and w[7] == [False, False] for w in workers) and not jinja2
+    assert all(w[8] == "safe_load" for w in workers)  # PyYAML's own again (LibYAML's while the server imported)
     # the server started before any nanny set Dask's pre-spawn environment: it had it from its start
     # (OpenBLAS reads its threads as the server imports numpy), but for Dask's malloc trim threshold
     # (cluster.LOCAL_WORKER_ENV: glibc's own, as in-process)
@@ -115,6 +117,24 @@ def test_imports_inside_without_see_the_extras_as_not_installed_and_after_it_as_
     r = run_python(code)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout.splitlines()[-1]) == ["not installed", True, "colorsys"]
+
+
+def test_yaml_inside_fast_yaml_is_libyamls_with_the_same_documents_and_pyyamls_after_it():
+    """:func:`leanimport.fast_yaml` (around Dask's and Distributed's imports, which parse their
+    defaults): ``yaml.safe_load`` gives what PyYAML's own loader gives, and is PyYAML's after."""
+    from pathlib import Path
+
+    import distributed
+    import yaml
+
+    from soilvolume.core.leanimport import fast_yaml
+
+    text = (Path(distributed.__file__).parent / "distributed.yaml").read_text(encoding="utf-8")
+    plain = yaml.safe_load
+    with fast_yaml():
+        inside, fast = yaml.safe_load(text), yaml.safe_load
+    assert inside == plain(text) and inside["distributed"]["nanny"]["pre-spawn-environ"]
+    assert yaml.safe_load is plain and (fast is not plain) == hasattr(yaml, "CSafeLoader")
 
 
 def test_preload_imports_open3d_during_the_reading_and_the_later_steps_after_it():

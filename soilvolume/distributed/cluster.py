@@ -16,11 +16,10 @@ from concurrent.futures import TimeoutError as FutureTimeout
 from pathlib import Path
 
 from ..core import interrupt
-from ..core.leanimport import without
+from ..core.leanimport import fast_yaml, lean_dask
 from ..core.types import SoilVolumeError, short_error
 from ..core.wording import opt
 
-NOT_USED = ("jinja2",)  # Dask imports it, when installed, for notebook HTML: hidden (core.leanimport)
 CONNECT_S = 20.0  # a scheduler's address must answer within this
 START_S = {"tcp": 35.0, "local": 180.0, "threads": 120.0}  # the whole start, workers included
 NO_WORKERS_S = 20.0  # a cluster without any worker for this long cannot run the tasks
@@ -150,7 +149,7 @@ def shut(cluster, client) -> None:
 
 def connect(address: str):
     """(None, Client) of an existing cluster at ``address``, with at least one worker."""
-    with without(NOT_USED):
+    with lean_dask():
         from dask.distributed import Client
 
     try:
@@ -177,7 +176,7 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
     """(LocalCluster, Client): ``workers`` processes of one thread (or one process of
     ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``."""
     method = _start_method() if processes else None  # first: the forkserver's imports overlap Dask's here
-    with without(NOT_USED):
+    with lean_dask():
         import dask
         from dask.distributed import Client
 
@@ -219,7 +218,7 @@ def _start_method() -> str | None:
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
     os.environ.update(pre_spawn_environ())  # what each nanny sets before its worker starts: the server's, for all
     forkserver.ensure_running()
-    with without(NOT_USED):
+    with lean_dask():
         import dask
         from distributed.utils import get_mp_context
 
@@ -235,7 +234,7 @@ def pre_spawn_environ() -> dict[str, str]:
     before Distributed is imported (0.3 s): its defaults are loaded as importing it would."""
     from importlib.util import find_spec
 
-    with without(NOT_USED):
+    with lean_dask():
         import dask
 
     spec = find_spec("distributed")
@@ -243,10 +242,11 @@ def pre_spawn_environ() -> dict[str, str]:
     if defaults is not None and defaults.is_file():
         import yaml
 
-        loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # LibYAML's: 2 ms, not 11, of the GIL
-        dask.config.update_defaults(yaml.load(defaults.read_text(encoding="utf-8"), Loader=loader))  # noqa: S506
+        with fast_yaml():
+            dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
     else:  # a Distributed laid out otherwise: imported for its defaults
-        import distributed  # noqa: F401
+        with lean_dask():
+            import distributed  # noqa: F401
     env = dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}
     env = {**env, **LOCAL_WORKER_ENV}
     return {k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None}
