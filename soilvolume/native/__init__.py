@@ -85,7 +85,7 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.sv_cells.restype = i64
     lib.sv_sort_keys.argtypes = [ptr, i64, ptr, i64, i64, ptr, ptr]
     lib.sv_sort_keys.restype = None
-    lib.sv_keys.argtypes = [ptr, ptr, i64, f64, f64, i64, ptr, ptr]
+    lib.sv_keys.argtypes = [ptr, ptr, i64, i64, f64, i64, ptr, ptr]
     lib.sv_keys.restype = None
     lib.sv_nearest_kept.argtypes = [ptr, i64, ptr, ptr, ptr, ptr, ptr, ptr, i64, ptr, i64, i64, f64, ptr, ptr]
     lib.sv_nearest_kept.restype = i64

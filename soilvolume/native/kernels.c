@@ -351,15 +351,14 @@ void sv_sort_keys(const int64_t *key, int64_t n, const int64_t *counts, int64_t 
 }
 
 /* The (cell, height) keys of points (numpy twin: soilvolume.dem.cellstats._SortedCells): key =
- * id << bits | rint((z - z0) / q), into key (which may be ids itself), and the points per cell
+ * id << bits | (rint(z / q) - base), into key (which may be ids itself), and the points per cell
  * added to counts. */
-void sv_keys(const int64_t *ids, const double *z, int64_t n, double z0, double q, int64_t bits, int64_t *key,
+void sv_keys(const int64_t *ids, const double *z, int64_t n, int64_t base, double q, int64_t bits, int64_t *key,
              int64_t *counts) {
     for (int64_t i = 0; i < n; i++) {
-        double t = z[i] - z0;
-        t = t / q;
+        double t = z[i] / q;
         int64_t id = ids[i];
-        key[i] = (id << bits) | (int64_t)rint(t);
+        key[i] = (id << bits) | ((int64_t)rint(t) - base);
         counts[id]++;
     }
 }
