@@ -238,17 +238,11 @@ def native_cells(
     c1) of ``grid``, assigned on the whole grid: their flat ids in the window and float64 heights
     written to ``ids`` and ``z``, their offsets in their cells added to ``sx`` and ``sy`` point by
     point (as :meth:`OffsetSums.add_at`), the bits of numpy's :func:`cell_coords`; returns how many."""
-    from ..native import steps
+    from ..native import axes
 
-    walk = steps(part, np.float32)  # (N, 3) rows or a (3, N) transposed as they are, others copied
-    if walk is None:
-        part = np.ascontiguousarray(part, np.float32)
-        walk = steps(part, np.float32)
-    (step, axis), base = walk, part.ctypes.data
+    part, addresses, step = axes(part, np.float32)  # (N, 3) rows or a (3, N) transposed as they are
     return lib.sv_cells(
-        base,
-        base + 4 * axis,
-        base + 8 * axis,
+        *addresses,
         len(part),
         step,
         float(grid.xmin - grid.origin[0]),

@@ -50,8 +50,7 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
         res["sums"] = thinner.block()
     else:  # a point off the header's box: on all the columns, the sums of those with points
         res, thinner, chunks = _scan(src, path, to_local, rule, keep, ColumnThinner(*thinning), kept is not None)
-        has = np.flatnonzero(thinner.sums[3])
-        res["sums"] = (has, thinner.sums[:, has])
+        res["sums"] = thinner.occupied()
     if kept is not None:
         kept.extend(chunks)
     return res

@@ -96,8 +96,7 @@ def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, 
         scale = 1.0 / read_fraction(path, *(region if region is not None else (None, None)), resolution)
         thinner.sums *= scale  # centroids unchanged, counts scaled
         out.update({k: round(out[k] * scale) for k in ("points", "used", "cropped")})
-    has = np.flatnonzero(thinner.sums[3])  # the columns with points: a tile meets few of the grid's
-    out["sums"] = (has, thinner.sums[:, has])
+    out["sums"] = thinner.occupied()
     return out
 
 

@@ -13,17 +13,6 @@ from ..core.types import SoilVolumeError
 MAX_COLUMNS = 1 << 26
 
 
-def lattice(lo: np.ndarray, hi: np.ndarray, voxel: float, within=None) -> tuple[np.ndarray, tuple[int, int]]:
-    """(first column (x, y), shape (rows, columns)) of a :class:`ColumnThinner`'s columns."""
-    lo, hi = np.asarray(lo[:2], float), np.asarray(hi[:2], float)
-    first = np.zeros(2, np.int64)
-    last = np.ceil((hi - lo) / voxel).astype(np.int64)
-    if within is not None:
-        first = np.maximum(first, np.floor((np.asarray(within[0][:2]) - lo) / voxel).astype(np.int64) - 1)
-        last = np.minimum(last, np.ceil((np.asarray(within[1][:2]) - lo) / voxel).astype(np.int64) + 1)
-    return first, (int(max(last[1] - first[1], -1)) + 1, int(max(last[0] - first[0], -1)) + 1)
-
-
 def narrowed(thinning: tuple, box: tuple) -> tuple:
     """``thinning`` (a thinner's lo, hi, voxel[, within]) with ``within`` narrowed to ``box`` (a
     local x/y box where all the points to come lie): a thinner on the same lattice, over the
@@ -54,7 +43,13 @@ class ColumnThinner:
     def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float, within=None, name: str = "") -> None:
         self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
         self.within = within
-        self.first, self.shape = lattice(self.lo, self.hi, self.voxel, within)
+        first = np.zeros(2, np.int64)
+        last = np.ceil((self.hi - self.lo) / voxel).astype(np.int64)
+        if within is not None:
+            first = np.maximum(first, np.floor((np.asarray(within[0][:2]) - self.lo) / voxel).astype(np.int64) - 1)
+            last = np.minimum(last, np.ceil((np.asarray(within[1][:2]) - self.lo) / voxel).astype(np.int64) + 1)
+        self.first = first
+        self.shape = (int(max(last[1] - first[1], -1)) + 1, int(max(last[0] - first[0], -1)) + 1)
         n = self.shape[0] * self.shape[1]
         if n > MAX_COLUMNS:
             raise SoilVolumeError(
@@ -64,6 +59,12 @@ class ColumnThinner:
         self.sums = np.zeros((4, n))
         self._native: tuple | None = None
         self._added = False  # by :meth:`add`: one thinner is fed by numpy or by the kernel, never both
+
+    def occupied(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the ids of the columns with points, their sums): what a scan of part of a cloud hands
+        back to add (a tile meets few of the epoch's columns)."""
+        has = np.flatnonzero(self.sums[3])
+        return has, self.sums[:, has]
 
     def block(self) -> Block:
         """This thinner's sums as a :class:`Block` of its lattice."""

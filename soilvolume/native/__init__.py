@@ -126,6 +126,19 @@ def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
     return points.strides[0] // size, points.strides[1] // size
 
 
+def axes(points: np.ndarray, dtype) -> tuple[np.ndarray, tuple[int, int, int], int]:
+    """(the points as the kernels read them, the addresses of their first x, y and z, the values
+    from one point's to the next's): an (N, 3) array of ``dtype`` or its transposed (3, N) rows as
+    they are (:func:`steps`), any other copied into a C-ordered one of ``dtype`` (keep the array
+    while the addresses are used)."""
+    walk = steps(points, dtype)
+    if walk is None:
+        points = np.ascontiguousarray(points, dtype)
+        walk = steps(points, dtype)
+    (step, axis), at, size = walk, points.ctypes.data, np.dtype(dtype).itemsize
+    return points, (at, at + size * axis, at + 2 * size * axis), step
+
+
 def reset() -> None:
     """Look for the library again at the next :func:`kernels` (tests switch ``SOILVOLUME_NATIVE``)."""
     global _lib

@@ -73,6 +73,7 @@ class Cloud:
 def _cut(base: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The (3, M) coordinate rows of the points of ``base`` (N, 3) in the x/y box lo..hi, in order:
     by the native kernel (``sv_cut_box``: counted, then copied) when it is there."""
+    from ..native import axes as native_axes
     from ..native import kernels
 
     lib = kernels()
@@ -82,26 +83,12 @@ def _cut(base: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         for k in range(3):
             np.compress(mask, base[:, k], out=cut[k])
         return cut
-    base, axes, step = _axes(base)
+    base, axes, step = native_axes(base, np.float64)
     box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     m = lib.sv_cut_box(*axes, len(base), step, *box, None, 0)
     cut = np.empty((3, m))
     lib.sv_cut_box(*axes, len(base), step, *box, cut.ctypes.data, m)
     return cut
-
-
-def _axes(xyz: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int], int]:
-    """(the points as the kernels read them, the addresses of their first x, y and z, the doubles
-    from one point's to the next's): an (N, 3) float64 array or its transposed (3, N) rows as they
-    are, any other copied into a C-ordered float64 one (keep the array while the addresses are used)."""
-    from ..native import steps
-
-    walk = steps(xyz, np.float64)
-    if walk is None:
-        xyz = np.ascontiguousarray(xyz, np.float64)
-        walk = steps(xyz, np.float64)
-    (step, axis), at = walk, xyz.ctypes.data
-    return xyz, (at, at + 8 * axis, at + 16 * axis), step
 
 
 Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cuts remembered
@@ -151,10 +138,11 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
 
 def _native_binned(lib, xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]) -> Columns:
     """:func:`_binned` on the native kernel (``sv_columns``): the same columns, bit for bit."""
+    from ..native import axes as native_axes
     from ..native import zeros
 
     n = shape[0] * shape[1]
-    xyz, axes, step = _axes(xyz)
+    xyz, axes, step = native_axes(xyz, np.float64)
     count, sums = zeros("columns_count", n, np.int64), zeros("columns_sums", 3 * n, np.float64)
     has, means = np.empty(min(n, len(xyz)), np.int64), np.empty((min(n, len(xyz)), 3))
     m = lib.sv_columns(
