@@ -220,3 +220,70 @@ def test_biharmonic_wide_and_oversize_systems(monkeypatch):
     hole[30:40, 30:40] = True
     monkeypatch.setattr(holes, "_BIG_GROUP", 50)  # oversize sub-systems are filled harmonically
     assert np.array_equal(biharmonic_fill(truth, hole), harmonic_fill(truth, hole))
+
+
+def _test_discs(h: np.ndarray, radius: float, seed: int = 0):
+    """fill_error's test discs on h: (centres, offsets, targets)."""
+    from soilvolume.dem.equivalents import disc_erosion_every
+
+    r = int(np.ceil(radius))
+    step = 2 * r + 5
+    cand = np.argwhere(disc_erosion_every(np.isfinite(h), radius + 2, step)) * step
+    centres = cand[np.random.default_rng(seed).choice(len(cand), min(40, len(cand)), replace=False)]
+    yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
+    disc = np.argwhere(xx * xx + yy * yy <= radius * radius) - (r + 2)
+    targets = np.zeros(h.shape, bool)
+    targets[centres[:, :1] + disc[:, 0], centres[:, 1:] + disc[:, 1]] = True
+    return centres, disc, targets
+
+
+@pytest.mark.parametrize("radius", [1.0, 2.5, 4.0, 8.0])
+def test_test_discs_solved_at_once_fill_as_the_whole_system(radius):
+    """The test discs of fill_error, apart and fully surrounded, share one factorised system
+    (``_discs_filled``): the same heights as the biharmonic fill of them all (equal up to the
+    last bits of the banded solver's blocking)."""
+    rng = np.random.default_rng(int(radius * 10))
+    y, x = np.mgrid[0:150, 0:170].astype(float)
+    h = np.sin(x / 9.0) * 3 + 0.01 * x * y + rng.normal(0, 0.05, x.shape)
+    h[:20, :30] = np.nan  # gaps: discs only where there is room
+    h[rng.random(h.shape) < 0.001] = np.nan
+    centres, disc, targets = _test_discs(h, radius)
+    values = np.where(targets, np.nan, h)
+    together = holes._discs_filled(values, targets, centres, disc)
+    whole = biharmonic_fill(values, targets)
+    assert together is not None and targets.sum() >= 5 * len(disc)
+    assert np.allclose(together[targets], whole[targets], rtol=0, atol=1e-9)
+    assert np.array_equal(together[~targets], values[~targets], equal_nan=True)  # the rest untouched
+    hole_next_to_gap = values.copy()
+    hole_next_to_gap[centres[0, 0] + int(np.ceil(radius)) + 1, centres[0, 1]] = np.nan
+    assert holes._discs_filled(hole_next_to_gap, targets, centres, disc) is None  # not the same system: declined
+
+
+def test_fill_error_measures_the_fill_it_stands_for():
+    """fill_error of a noisy surface: the error of the biharmonic fill it measures (the discs
+    solved at once) is the one of the fill of the discs as any holes."""
+    rng = np.random.default_rng(5)
+    y, x = np.mgrid[0:120, 0:140].astype(float)
+    h = 0.02 * x + rng.normal(0, 0.1, x.shape)
+    for radius in (1.0, 2.0, 4.0):
+        cell, mean = holes.fill_error(h, np.isfinite(h), "biharmonic", radius, per_cell=True)
+        centres, disc, targets = _test_discs(h, radius)
+        err = biharmonic_fill(np.where(targets, np.nan, h), targets) - h
+        assert cell == pytest.approx(np.sqrt(np.mean(err[targets] ** 2)), rel=1e-9)
+        assert 0.02 < mean < cell < 0.3  # a mean over a disc's cells errs less than one cell
+
+
+def test_disc_erosion_every_is_the_erosion_at_every_step():
+    from scipy import ndimage
+
+    from soilvolume.dem.equivalents import disc_erosion_every
+
+    rng = np.random.default_rng(6)
+    for _ in range(200):
+        shape = tuple(rng.integers(1, 70, 2))
+        mask = rng.random(shape) < rng.uniform(0.7, 1.0)
+        radius, step = float(rng.choice([0.5, 1, 2.5, 3, 6, 6.5, 10])), int(rng.integers(1, 15))
+        r = int(np.ceil(radius))
+        yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+        eroded = ndimage.binary_erosion(mask, xx * xx + yy * yy <= radius * radius)
+        assert np.array_equal(disc_erosion_every(mask, radius, step), eroded[::step, ::step])

@@ -244,13 +244,16 @@ def test_the_grid_kernels_give_the_numpy_bits(lib, monkeypatch, layout):
         assert getattr(a, name).tobytes() == getattr(b, name).tobytes(), name
 
 
-def test_the_sorted_keys_are_numpys(lib, monkeypatch):
+@pytest.mark.parametrize("spread", [0.002, 0.5, 3.0, 1_000.0])
+def test_the_sorted_keys_are_numpys(lib, monkeypatch, spread):
+    """Cells of a few keys (sorted by comparisons) and of many (by their bytes: one, two or three
+    passes for a cell's heights within 2.5 cm, 6.5 m, 1.6 km; by comparisons beyond), ties too."""
     from soilvolume.dem.cellstats import _SortedCells
 
     rng = np.random.default_rng(4)
-    for n_cells, n in ((1, 5), (7, 400), (3_000, 90_000)):
+    for n_cells, n in ((1, 5), (7, 400), (3_000, 90_000), (40, 200_000)):
         ids = rng.integers(0, n_cells, n)
-        z = rng.normal(10, 3, n)
+        z = np.round(rng.normal(10, spread, n), 4)
         a, b = _both(monkeypatch, lambda: _SortedCells(ids.copy(), z.copy(), n_cells, own=True))  # noqa: B023
         assert np.array_equal(a.key, b.key) and np.array_equal(a.counts, b.counts)
         assert a.quantile(0.5).tobytes() == b.quantile(0.5).tobytes()

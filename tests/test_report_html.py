@@ -130,7 +130,8 @@ def test_png_encoder_round_trip():
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">II", data[16:24]) == (5, 7)
     idat = data[8 + 25 + 8 : -12]  # after the signature, IHDR chunk and the IDAT header
     raw = np.frombuffer(zlib.decompress(idat), np.uint8).reshape(7, 1 + 5 * 4)
-    assert (raw[:, 0] == 0).all() and (raw[:, 1:].reshape(7, 5, 4) == rgba).all()
+    assert raw[0, 0] == 0 and (raw[1:, 0] == 2).all()  # the first row as it is, the others "Up"
+    assert (np.cumsum(raw[:, 1:], axis=0, dtype=np.uint8).reshape(7, 5, 4) == rgba).all()
     image = pytest.importorskip("PIL.Image")
     import io
 

@@ -1,12 +1,12 @@
 """Faster equivalents of SciPy calls the refill makes many times on small grids and systems,
 giving the same arrays: CSR matrices taken straight from their rows (what ``scipy.sparse``
-builds through coordinates, without the round trip) and the erosion by a disc (from the
-distance transform: an erosion by a wide disc costs its area per cell)."""
+builds through coordinates, without the round trip) and the erosion by a disc where only every
+step-th cell of it is read."""
 
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage, sparse
+from scipy import sparse
 
 
 def rows_csr(rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[int, int]) -> sparse.csr_matrix:
@@ -33,17 +33,15 @@ def lower_triangle(a: sparse.csr_matrix) -> sparse.csr_matrix:
     return sparse.csr_matrix((a.data[keep], a.indices[keep], indptr), shape=a.shape)
 
 
-SMALL_DISC = 6.0  # cells: up to this radius the erosion itself is quicker than the distance transform
-
-
-def disc_erosion(mask: np.ndarray, radius: float) -> np.ndarray:
-    """``ndimage.binary_erosion`` of ``mask`` by the disc of cells within ``radius`` (outside the
-    grid is not ``mask``): the cells whose nearest cell off the mask lies beyond ``radius``, from
-    the exact distance transform (squared distances are whole numbers of cells; an erosion by a
-    wide disc costs its area per cell; a small one is quicker as it is)."""
-    if radius <= SMALL_DISC:
-        r = int(np.ceil(radius))
-        yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
-        return ndimage.binary_erosion(mask, xx * xx + yy * yy <= radius * radius)
-    d = ndimage.distance_transform_edt(np.pad(mask, 1))[1:-1, 1:-1]
-    return np.rint(d * d) > radius * radius
+def disc_erosion_every(mask: np.ndarray, radius: float, step: int) -> np.ndarray:
+    """``ndimage.binary_erosion(mask, disc)[::step, ::step]`` for the disc of cells within
+    ``radius`` (outside the grid is not ``mask``), looked up at those cells only: each is True
+    when every cell within ``radius`` of it lies in the grid and in ``mask``."""
+    r = int(np.ceil(radius))
+    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+    near = xx * xx + yy * yy <= radius * radius
+    rows = np.arange(0, mask.shape[0], step)[:, None, None] + yy[near]
+    cols = np.arange(0, mask.shape[1], step)[None, :, None] + xx[near]
+    inside = (rows >= 0) & (rows < mask.shape[0]) & (cols >= 0) & (cols < mask.shape[1])
+    looked = mask[np.clip(rows, 0, mask.shape[0] - 1), np.clip(cols, 0, mask.shape[1] - 1)]
+    return (looked & inside).all(axis=-1)

@@ -17,13 +17,14 @@ is taken; the engine fills enclosed holes of the difference with ``fill``.
 from __future__ import annotations
 
 from collections.abc import Callable
+from functools import lru_cache
 
 import numpy as np
 from scipy import linalg, ndimage, sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu, spsolve
 
-from .equivalents import disc_erosion, lower_triangle, rows_csr
+from .equivalents import disc_erosion_every, lower_triangle, rows_csr
 
 FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
@@ -169,8 +170,16 @@ def _second_difference_rows(values: np.ndarray, usable: np.ndarray, todo: np.nda
     """Every ``_STENCILS`` row whose cells are all ``usable`` and include a todo cell (``flat`` =
     sorted flat indices of the todo cells). Returns (matrix over the todo cells, rhs = -known
     part, row of each known term, the known value in it)."""
+    mat, (k_rows, k_cells, k_coef), n_rows = _stencil_system(usable, todo, flat)
+    k_vals = values.ravel()[k_cells]
+    return mat, -np.bincount(k_rows, weights=k_coef * k_vals, minlength=n_rows), k_rows, k_vals
+
+
+def _stencil_system(usable: np.ndarray, todo: np.ndarray, flat: np.ndarray):
+    """The rows of :func:`_second_difference_rows` apart from the values: (matrix over the todo
+    cells, (row, flat cell, coefficient) of each known term, number of rows)."""
     (n_r, n_c), (r0, c0) = todo.shape, np.divmod(flat, todo.shape[1])
-    ok_cell, tflat, vflat = usable.ravel(), todo.ravel(), values.ravel()
+    ok_cell, tflat = usable.ravel(), todo.ravel()
     rows, cols, coef, n_rows = [], [], [], 0
     for stencil in _STENCILS:
         off = np.array([o for o, _ in stencil])
@@ -188,9 +197,8 @@ def _second_difference_rows(values: np.ndarray, usable: np.ndarray, todo: np.nda
         n_rows += len(pts)
     rows, cols, coef = np.concatenate(rows), np.concatenate(cols), np.concatenate(coef)
     unk = tflat[cols]
-    k_rows, k_vals = rows[~unk], vflat[cols[~unk]]
-    rhs = -np.bincount(k_rows, weights=coef[~unk] * k_vals, minlength=n_rows)
-    return rows_csr(rows[unk], np.searchsorted(flat, cols[unk]), coef[unk], (n_rows, flat.size)), rhs, k_rows, k_vals
+    mat = rows_csr(rows[unk], np.searchsorted(flat, cols[unk]), coef[unk], (n_rows, flat.size))
+    return mat, (rows[~unk], cols[~unk], coef[~unk]), n_rows
 
 
 def _least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
@@ -200,19 +208,26 @@ def _least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
     g = mat.T @ rhs
     n_groups, group = connected_components(normal, directed=False)
     solve, bad = _group_solver(normal + _TIKHONOV * sparse.identity(g.size, format="csr"), group, n_groups)
+    x = _refined(solve, normal, g)
+    probe = 1.0 + np.random.default_rng(0).random(g.size)
+    null = np.abs(solve(_TIKHONOV * probe)) > 0.01  # directions only eps pins down: ill posed
+    bad |= np.bincount(group, weights=null, minlength=n_groups) > 0
+    bad |= _wild(x, group, n_groups, mat, k_rows, k_vals)
+    return x, bad[group]
+
+
+def _refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
+    """The solution of ``normal x = g`` (one or more columns) by ``solve`` (of ``normal + eps
+    I``), refined until converged or stalled at round-off (over all columns at once)."""
     x, last = solve(g), np.inf
-    for _ in range(_REFINE_MAX):  # until converged or stalled at round-off
+    for _ in range(_REFINE_MAX):
         dx = solve(g - normal @ x)
         x += dx
         step = np.abs(dx).max()
         if not (step > 1e-9 * (1.0 + np.abs(x).max()) and step < 0.5 * last):
             break
         last = step
-    probe = 1.0 + np.random.default_rng(0).random(g.size)
-    null = np.abs(solve(_TIKHONOV * probe)) > 0.01  # directions only eps pins down: ill posed
-    bad |= np.bincount(group, weights=null, minlength=n_groups) > 0
-    bad |= _wild(x, group, n_groups, mat, k_rows, k_vals)
-    return x, bad[group]
+    return x
 
 
 def _group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
@@ -375,22 +390,86 @@ def fill_error(
     ``per_cell``: (the cells' RMS error, that) instead."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
-    room = disc_erosion(usable & np.isfinite(h), radius + 2)
     step = 2 * r + 5
-    cand = np.argwhere(room[::step, ::step]) * step
+    cand = np.argwhere(disc_erosion_every(usable & np.isfinite(h), radius + 2, step)) * step
     if len(cand) < 5:
         return (float("nan"),) * 2 if per_cell else float("nan")
     rng = np.random.default_rng(seed)
     centres = cand[rng.choice(len(cand), min(40, len(cand)), replace=False)]  # 40 test holes
     labels = np.zeros(h.shape, np.int32)
     disc = np.argwhere(xx * xx + yy * yy <= radius * radius) - (r + 2)
-    for k, (cy, cx) in enumerate(centres, start=1):
-        labels[cy + disc[:, 0], cx + disc[:, 1]] = k
+    labels[centres[:, :1] + disc[:, 0], centres[:, 1:] + disc[:, 1]] = np.arange(1, len(centres) + 1)[:, None]
     targets = labels > 0
-    err = _filler(method)(np.where(targets, np.nan, h), targets) - h
+    values = np.where(targets, np.nan, h)
+    filled = _discs_filled(values, targets, centres, disc) if method == "biharmonic" else None
+    err = (_filler(method)(values, targets) if filled is None else filled) - h
     mean_err = ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
     mean = float(np.sqrt(np.mean(np.square(mean_err))))
     return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
+
+
+def _discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, disc: np.ndarray) -> np.ndarray | None:
+    """The ``targets`` cells of :func:`biharmonic_fill` (``values``, ``targets``) where the targets
+    are test discs (``centres`` + ``disc`` offsets) far enough apart that no stencil meets two, each
+    with every stencil cell around it finite and in the grid (None otherwise): every disc's system
+    is then the same matrix with its own right-hand side, factorised once and solved for all the
+    discs at once, with the same arithmetic per disc as the whole system's solution."""
+    reach = int(np.abs(disc).max()) + 2  # the stencils touching a disc stay within 2 cells of it
+    if (centres.min(axis=0) < reach).any() or (centres.max(axis=0) + reach >= values.shape).any():
+        return None
+    size, flat, mat, normal, (k_rows, k_cells, k_coef), solve = _disc_system(disc.astype(np.int64).tobytes(), reach)
+    k_vals = _at(values, centres, k_cells, size)  # (discs, known terms)
+    if solve is None or not np.isfinite(k_vals).all():
+        return None
+    n_rows = mat.shape[0]
+    at_row = (k_rows + n_rows * np.arange(len(centres))[:, None]).ravel()
+    rhs = -np.bincount(at_row, weights=(k_coef * k_vals).ravel(), minlength=n_rows * len(centres))
+    x = _refined(solve, normal, mat.T @ rhs.reshape(len(centres), n_rows).T)  # (disc cells, discs)
+    cells = _at(np.arange(values.size).reshape(values.shape), centres, flat, size)
+    rank = np.empty(cells.size, np.int64)
+    rank[np.argsort(cells.ravel())] = np.arange(cells.size)  # the whole system's unknowns: in grid order
+    probe = (1.0 + np.random.default_rng(0).random(cells.size))[rank].reshape(cells.shape).T
+    bad = (np.abs(solve(_TIKHONOV * probe)) > 0.01).any(axis=0)  # directions only eps pins down
+    lo, hi = k_vals.min(axis=1), k_vals.max(axis=1)
+    allow = (hi - lo) * max(4.0, np.sqrt(flat.size)) + 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))
+    finite = np.where(np.isfinite(x), x, np.inf)
+    with np.errstate(invalid="ignore"):
+        bad |= ~np.isfinite(finite.max(axis=0)) | ~(finite.min(axis=0) >= lo - allow)
+        bad |= ~(finite.max(axis=0) <= hi + allow)
+    out = values.copy()
+    out.ravel()[cells.ravel()] = x.T.ravel()
+    if bad.any():  # as biharmonic_fill: the harmonic fill of those discs
+        sub = np.zeros(values.shape, bool)
+        sub.ravel()[cells[bad].ravel()] = True
+        out[sub] = harmonic_fill(np.where(targets & ~sub, np.nan, values), sub)[sub]
+    return out
+
+
+@lru_cache(maxsize=16)
+def _disc_system(disc: bytes, reach: int):
+    """The system of one test disc (its offsets' bytes; stencils within ``reach`` of its centre):
+    (patch size, the disc's flat cells in the patch, matrix, normal matrix, known terms as
+    :func:`_stencil_system`, solve of normal + eps I; None when it is not one factorisable group)."""
+    size = 2 * reach + 1
+    offsets = np.frombuffer(disc, np.int64).reshape(-1, 2)
+    todo = np.zeros((size, size), bool)
+    todo[offsets[:, 0] + reach, offsets[:, 1] + reach] = True
+    flat = np.flatnonzero(todo)
+    mat, known, _ = _stencil_system(np.ones_like(todo), todo, flat)
+    normal = (mat.T @ mat).tocsr()
+    n_groups, group = connected_components(normal, directed=False)
+    solve = None
+    if n_groups == 1:
+        solve, skipped = _group_solver(normal + _TIKHONOV * sparse.identity(flat.size, format="csr"), group, 1)
+        solve = None if skipped[0] else solve
+    return size, flat, mat, normal, known, solve
+
+
+def _at(grid: np.ndarray, centres: np.ndarray, cells: np.ndarray, size: int) -> np.ndarray:
+    """(discs, cells): ``grid`` at the flat ``cells`` of a ``size`` x ``size`` patch centred on each centre."""
+    r, c = np.divmod(cells, size)
+    half = size // 2
+    return grid[centres[:, :1] - half + r, centres[:, 1:] - half + c]
 
 
 def summary(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:

@@ -10,6 +10,7 @@
 #define _POSIX_C_SOURCE 200809L /* pread */
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 #ifndef _WIN32
 #include <errno.h>
@@ -335,19 +336,57 @@ static void sort_i64(int64_t *v, int64_t n) {
     }
 }
 
+/* Sort v[0..n) ascending, all of them within lo + 256^passes: least significant digit first, one
+ * byte of v - lo a pass, through tmp (n). */
+static void radix_i64(int64_t *v, int64_t n, int64_t lo, int passes, int64_t *tmp) {
+    int64_t *src = v, *dst = tmp;
+    for (int p = 0; p < passes; p++) {
+        int64_t at[256] = {0}, total = 0;
+        int shift = 8 * p;
+        for (int64_t i = 0; i < n; i++) at[((uint64_t)(src[i] - lo) >> shift) & 255]++;
+        for (int d = 0; d < 256; d++) {
+            int64_t c = at[d];
+            at[d] = total, total += c;
+        }
+        for (int64_t i = 0; i < n; i++) dst[at[((uint64_t)(src[i] - lo) >> shift) & 255]++] = src[i];
+        int64_t *t = src;
+        src = dst, dst = t;
+    }
+    if (src != v) memcpy(v, src, (size_t)n * sizeof *v);
+}
+
+/* Sort one cell's keys v[0..n): by their bytes (radix_i64, through tmp when there is one) when
+ * they span under 2^24 and are many enough for it, else sort_i64. */
+static void sort_cell(int64_t *v, int64_t n, int64_t *tmp) {
+    if (n <= 32 || tmp == NULL) {
+        sort_i64(v, n);
+        return;
+    }
+    int64_t lo = v[0], hi = v[0];
+    for (int64_t i = 1; i < n; i++) lo = v[i] < lo ? v[i] : lo, hi = v[i] > hi ? v[i] : hi;
+    uint64_t span = (uint64_t)(hi - lo);
+    int passes = span < 256 ? 1 : span < 65536 ? 2 : span < (1u << 24) ? 3 : 0;
+    if (passes == 0)
+        sort_i64(v, n);
+    else
+        radix_i64(v, n, lo, passes, tmp);
+}
+
 /* Sort int64 keys whose cell is key >> bits (counts: the keys of each of ncells cells) into out,
- * through tmp (n): the keys moved to their cells (in order), then each cell's sorted. The result is
- * the sorted array, the same as any sort gives. */
+ * with next (ncells) for scratch: the keys moved to their cells (in order), then each cell's
+ * sorted. The result is the sorted array, the same as any sort gives. */
 void sv_sort_keys(const int64_t *key, int64_t n, const int64_t *counts, int64_t ncells, int64_t bits, int64_t *out,
                   int64_t *next) {
-    int64_t at = 0;
-    for (int64_t c = 0; c < ncells; c++) next[c] = at, at += counts[c];
+    int64_t at = 0, most = 0;
+    for (int64_t c = 0; c < ncells; c++) next[c] = at, at += counts[c], most = counts[c] > most ? counts[c] : most;
     for (int64_t i = 0; i < n; i++) out[next[key[i] >> bits]++] = key[i];
+    int64_t *tmp = most > 32 ? malloc((size_t)most * sizeof *tmp) : NULL; /* NULL: sort_i64 throughout */
     at = 0;
     for (int64_t c = 0; c < ncells; c++) {
-        sort_i64(out + at, counts[c]);
+        sort_cell(out + at, counts[c], tmp);
         at += counts[c];
     }
+    free(tmp);
 }
 
 /* The (cell, height) keys of points (numpy twin: soilvolume.dem.cellstats._SortedCells): key =

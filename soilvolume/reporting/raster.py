@@ -44,10 +44,14 @@ def _repeat(a: np.ndarray, f: int) -> np.ndarray:
 
 
 def png_bytes(rgba: np.ndarray) -> bytes:
-    """An (h, w, 4) uint8 array as an 8-bit RGBA PNG (filter 0, fast zlib)."""
+    """An (h, w, 4) uint8 array as an 8-bit RGBA PNG: every row but the first filtered by the
+    row above it ("Up", zeros where a repeated row repeats it), fast zlib."""
     h, w = rgba.shape[:2]
-    raw = np.zeros((h, 1 + 4 * w), np.uint8)
-    raw[:, 1:] = np.ascontiguousarray(rgba, np.uint8).reshape(h, 4 * w)
+    rows = np.ascontiguousarray(rgba, np.uint8).reshape(h, 4 * w)
+    raw = np.empty((h, 1 + 4 * w), np.uint8)
+    raw[:, 0] = 2
+    raw[0] = np.r_[np.uint8(0), rows[0]]
+    np.subtract(rows[1:], rows[:-1], out=raw[1:, 1:])  # modulo 256, as PNG's filter
 
     def chunk(tag: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
