@@ -182,8 +182,15 @@ def _mean(ids: np.ndarray, z: np.ndarray, counts: np.ndarray, n: int) -> np.ndar
 
 def _running_sum(key: np.ndarray, top: int) -> np.ndarray:
     """``[0, cumsum(key & top)]`` in float64, block by block: each block starts from the running
-    total, so every value is the one a whole-array cumsum (a sequential sum) gives."""
+    total, so every value is the one a whole-array cumsum (a sequential sum) gives; in one pass
+    on the native kernel (``sv_running_sum``) when it is there."""
+    from ..native import kernels
+
     out = np.empty(len(key) + 1)
+    lib = kernels()
+    if lib is not None and key.dtype == np.int64 and key.flags.c_contiguous:
+        lib.sv_running_sum(key.ctypes.data, len(key), top, out.ctypes.data)
+        return out
     out[0] = 0.0
     for i in range(0, len(key), BLOCK):
         v = (key[i : i + BLOCK] & top).astype(np.float64)

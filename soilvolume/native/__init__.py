@@ -87,6 +87,8 @@ def _declare(lib: ctypes.CDLL) -> None:
     lib.sv_sort_keys.restype = None
     lib.sv_keys.argtypes = [ptr, ptr, i64, i64, f64, i64, ptr, ptr]
     lib.sv_keys.restype = None
+    lib.sv_running_sum.argtypes = [ptr, i64, i64, ptr]
+    lib.sv_running_sum.restype = None
     lib.sv_nearest_kept.argtypes = [ptr, i64, ptr, ptr, ptr, ptr, ptr, ptr, i64, ptr, i64, i64, f64, ptr, ptr]
     lib.sv_nearest_kept.restype = i64
     lib.sv_cut_box.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, f64, ptr, i64]

@@ -389,6 +389,17 @@ void sv_sort_keys(const int64_t *key, int64_t n, const int64_t *counts, int64_t 
     free(tmp);
 }
 
+/* [0, cumsum(key & top)] in double, one sequential sum (numpy twin: soilvolume.dem.cellstats.
+ * _running_sum): out (n + 1). */
+void sv_running_sum(const int64_t *key, int64_t n, int64_t top, double *out) {
+    double total = 0.0;
+    out[0] = total;
+    for (int64_t i = 0; i < n; i++) {
+        total += (double)(key[i] & top);
+        out[i + 1] = total;
+    }
+}
+
 /* The (cell, height) keys of points (numpy twin: soilvolume.dem.cellstats._SortedCells): key =
  * id << bits | (rint(z / q) - base), into key (which may be ids itself), and the points per cell
  * added to counts. */
