@@ -173,6 +173,13 @@ class Tiled:
         overview's with the volume step in tiles."""
         return (self.coarse, self.over_epochs) if self.k > 1 else (run.grid, run.dems)
 
+    def planes(self, run) -> tuple:
+        """The planes step's (plane before, plane after, d_i), on the correction's grid."""
+        from ..workflow.steps import planes_step
+
+        grid, dems = self.correction_grid(run)
+        return planes_step(run.prep, grid, dems[1], run.after_thin, run.options)
+
     def correction_note(self, run) -> str | None:
         k = self.k
         return f"estimating the vertical bias correction on a {k} x {k} overview of the grid" if k > 1 else None

@@ -4,7 +4,7 @@ executor implements how a step's work is done, never which steps run or in what 
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from functools import partial
 
@@ -23,6 +23,7 @@ class InProcess:
     def __init__(self) -> None:
         self.pool: ThreadPoolExecutor | None = None
         self.cloud_job = None
+        self.plane_job: Future | None = None
 
     @contextmanager
     def session(self, run):
@@ -62,10 +63,35 @@ class InProcess:
         self._start_cloud(run)
         run.after_thin = transform_points(prep.after_thin, reg.transform)
         grid = run.grid = shared_grid(prep, run.after_thin, opts)
-        before_job = self.pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, opts.statistic, prep.before.nonsoil)
+        before = self._before_then_planes(run)
         move = partial(transform_points32, t=reg.transform, chunk=CACHE_ROWS)  # block by block: no registered copy
         dem_a = gridmod.epoch_dem(prep.after.xyz, grid, opts.statistic, moved_nonsoil(prep, reg), move)
-        run.dems = (dem_a, before_job.result())
+        run.dems = (dem_a, before.result())
+
+    def _before_then_planes(self, run) -> Future:
+        """The before cloud's heights on the pool beside the after cloud's, then on the same thread
+        the planes step's two planes (their inputs are there by then; two threads at a time: the
+        after cloud's heights keep a core); returns the heights' future (the planes': ``plane_job``)."""
+        from .steps import after_plane, before_plane
+
+        prep, opts, heights = run.prep, run.options, Future()
+
+        def work() -> tuple:
+            try:
+                heights.set_result(gridmod.epoch_dem(prep.before.xyz, run.grid, opts.statistic, prep.before.nonsoil))
+            except BaseException as err:
+                heights.set_exception(err)
+                raise
+            return before_plane(prep, run.grid, heights.result(), opts), after_plane(run.after_thin, opts)
+
+        self.plane_job = self.pool.submit(work)
+        return heights
+
+    def planes(self, run) -> tuple:
+        """The planes step's (plane before, plane after, d_i), found on the pool since the grid step."""
+        from .steps import with_offset
+
+        return with_offset(*self.plane_job.result(), run.grid)
 
     def correction_grid(self, run) -> tuple:
         """(the grid, the (after, before) DEMs) the planes and the correction are found on."""

@@ -144,12 +144,11 @@ def _grid(run: Run, ex) -> None:
 
 def _planes(run: Run, ex) -> None:
     """Step 4: the paper's planes and d_i (on the grid the volume step finds the correction on)."""
-    from .steps import correction_step, planes_step
+    from .steps import correction_step
 
-    grid, dems = ex.correction_grid(run)
     run.hooks.step(run.at("planes"), ex.correction_note(run) or correction_step(run.options))
     with run.timer("planes"):
-        run.planes = planes_step(run.prep, grid, dems[1], run.after_thin, run.options)
+        run.planes = ex.planes(run)
 
 
 def _volume(run: Run, ex) -> None:

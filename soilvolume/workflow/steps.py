@@ -88,13 +88,30 @@ def planes_step(prep: Prepared, grid: GridSpec, dem_before: gridmod.EpochDEM, af
     (its matrix products and counts release the GIL)."""
     from concurrent.futures import ThreadPoolExecutor
 
+    with ThreadPoolExecutor(1) as pool:
+        after = pool.submit(after_plane, after_thin, options)
+        return with_offset(before_plane(prep, grid, dem_before, options), after.result(), grid)
+
+
+def before_plane(prep: Prepared, grid: GridSpec, dem_before: gridmod.EpochDEM, options):
+    """The before cloud's RANSAC plane, on its thinned points over the cells it has heights in."""
     from ..compensation import planes
 
-    with ThreadPoolExecutor(1) as pool:
-        after = pool.submit(planes.ransac_plane, after_thin, options.plane_threshold, seed=options.seed + 1)
-        sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
-        p_b = planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-        p_a = after.result()
+    sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
+    return planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
+
+
+def after_plane(after_thin: np.ndarray, options):
+    """The registered after cloud's RANSAC plane."""
+    from ..compensation import planes
+
+    return planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+
+
+def with_offset(p_b, p_a, grid: GridSpec) -> tuple:
+    """(plane before, plane after, d_i on ``grid``)."""
+    from ..compensation import planes
+
     return p_b, p_a, planes.plane_offset(p_b, p_a, grid)
 
 
