@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from soilvolume.dem import holes
+from soilvolume.dem import holes, testholes
 from soilvolume.dem.holes import (
     biharmonic_fill,
     enclosed_holes,
@@ -249,14 +249,14 @@ def test_test_discs_solved_at_once_fill_as_the_whole_system(radius):
     h[rng.random(h.shape) < 0.001] = np.nan
     centres, disc, targets = _test_discs(h, radius)
     values = np.where(targets, np.nan, h)
-    together = holes._discs_filled(values, targets, centres, disc)
+    together = testholes.discs_filled(values, targets, centres, disc)
     whole = biharmonic_fill(values, targets)
     assert together is not None and targets.sum() >= 5 * len(disc)
     assert np.allclose(together[targets], whole[targets], rtol=0, atol=1e-9)
     assert np.array_equal(together[~targets], values[~targets], equal_nan=True)  # the rest untouched
     hole_next_to_gap = values.copy()
     hole_next_to_gap[centres[0, 0] + int(np.ceil(radius)) + 1, centres[0, 1]] = np.nan
-    assert holes._discs_filled(hole_next_to_gap, targets, centres, disc) is None  # not the same system: declined
+    assert testholes.discs_filled(hole_next_to_gap, targets, centres, disc) is None  # not the same system: declined
 
 
 def test_fill_error_measures_the_fill_it_stands_for():
@@ -266,7 +266,7 @@ def test_fill_error_measures_the_fill_it_stands_for():
     y, x = np.mgrid[0:120, 0:140].astype(float)
     h = 0.02 * x + rng.normal(0, 0.1, x.shape)
     for radius in (1.0, 2.0, 4.0):
-        cell, mean = holes.fill_error(h, np.isfinite(h), "biharmonic", radius, per_cell=True)
+        cell, mean = testholes.fill_error(h, np.isfinite(h), "biharmonic", radius, per_cell=True)
         centres, disc, targets = _test_discs(h, radius)
         err = biharmonic_fill(np.where(targets, np.nan, h), targets) - h
         assert cell == pytest.approx(np.sqrt(np.mean(err[targets] ** 2)), rel=1e-9)

@@ -17,19 +17,18 @@ is taken; the engine fills enclosed holes of the difference with ``fill``.
 from __future__ import annotations
 
 from collections.abc import Callable
-from functools import lru_cache
 
 import numpy as np
 from scipy import linalg, ndimage, sparse
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu, spsolve
 
-from .equivalents import disc_erosion_every, lower_triangle, rows_csr
+from .equivalents import lower_triangle, rows_csr
 
 FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use conjugate gradients
-_TIKHONOV = 1e-10  # biharmonic normal matrix + eps I: factorisable even where the system is singular
+TIKHONOV = 1e-10  # biharmonic normal matrix + eps I: factorisable even where the system is singular
 _REFINE_MAX = 30  # iterative-refinement steps removing eps where the system is well posed
 _BAND_EDGES = np.unique(np.ceil(8 * 1.25 ** np.arange(16)).astype(int))  # banded Cholesky up to ~230
 _BIG_GROUP = 200_000  # coupled biharmonic unknowns beyond which a sub-system is filled harmonically
@@ -170,12 +169,12 @@ def _second_difference_rows(values: np.ndarray, usable: np.ndarray, todo: np.nda
     """Every ``_STENCILS`` row whose cells are all ``usable`` and include a todo cell (``flat`` =
     sorted flat indices of the todo cells). Returns (matrix over the todo cells, rhs = -known
     part, row of each known term, the known value in it)."""
-    mat, (k_rows, k_cells, k_coef), n_rows = _stencil_system(usable, todo, flat)
+    mat, (k_rows, k_cells, k_coef), n_rows = stencil_system(usable, todo, flat)
     k_vals = values.ravel()[k_cells]
     return mat, -np.bincount(k_rows, weights=k_coef * k_vals, minlength=n_rows), k_rows, k_vals
 
 
-def _stencil_system(usable: np.ndarray, todo: np.ndarray, flat: np.ndarray):
+def stencil_system(usable: np.ndarray, todo: np.ndarray, flat: np.ndarray):
     """The rows of :func:`_second_difference_rows` apart from the values: (matrix over the todo
     cells, (row, flat cell, coefficient) of each known term, number of rows)."""
     (n_r, n_c), (r0, c0) = todo.shape, np.divmod(flat, todo.shape[1])
@@ -207,16 +206,16 @@ def _least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
     normal = (mat.T @ mat).tocsr()
     g = mat.T @ rhs
     n_groups, group = connected_components(normal, directed=False)
-    solve, bad = _group_solver(normal + _TIKHONOV * sparse.identity(g.size, format="csr"), group, n_groups)
-    x = _refined(solve, normal, g)
+    solve, bad = group_solver(normal + TIKHONOV * sparse.identity(g.size, format="csr"), group, n_groups)
+    x = refined(solve, normal, g)
     probe = 1.0 + np.random.default_rng(0).random(g.size)
-    null = np.abs(solve(_TIKHONOV * probe)) > 0.01  # directions only eps pins down: ill posed
+    null = np.abs(solve(TIKHONOV * probe)) > 0.01  # directions only eps pins down: ill posed
     bad |= np.bincount(group, weights=null, minlength=n_groups) > 0
     bad |= _wild(x, group, n_groups, mat, k_rows, k_vals)
     return x, bad[group]
 
 
-def _refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
+def refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
     """The solution of ``normal x = g`` (one or more columns) by ``solve`` (of ``normal + eps
     I``), refined until converged or stalled at round-off (over all columns at once)."""
     x, last = solve(g), np.inf
@@ -230,7 +229,7 @@ def _refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matri
     return x
 
 
-def _group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
+def group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
     """Factorise the block-diagonal SPD ``reg`` (blocks = ``group``): banded Cholesky of blocks
     kept in row-major order, batched by bandwidth; SuperLU for wider blocks; blocks over
     ``_BIG_GROUP`` unknowns are skipped (solution 0). Returns (solve, per-group skipped flags)."""
@@ -326,7 +325,7 @@ _FILLERS: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
 }
 
 
-def _filler(method: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+def filler(method: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     try:
         return _FILLERS[method]
     except KeyError:
@@ -338,7 +337,7 @@ def _filler(method: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
 
 def fill(values: np.ndarray, targets: np.ndarray, method: str = "biharmonic") -> np.ndarray:
     """``values`` with the ``targets`` cells interpolated by ``method`` (no-op without targets)."""
-    return _filler(method)(values, targets) if targets.any() else values
+    return filler(method)(values, targets) if targets.any() else values
 
 
 def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0, median: float | None = None) -> np.ndarray:
@@ -367,7 +366,7 @@ def refill_epoch(
     ``weak_cells``."""
     valid = np.isfinite(h)
     targets = (weak_cells(counts, ratio, min_points, median) & valid) | enclosed_holes(valid, max_hole_cells)
-    filled = _filler(method)(h, targets)
+    filled = filler(method)(h, targets)
     return filled, targets & np.isfinite(filled)
 
 
@@ -379,97 +378,6 @@ def typical_radius(mask: np.ndarray) -> float:
         return 1.0
     size = np.bincount(labels.ravel())[1:].astype(float)
     return max(1.0, float(np.sqrt((size * size).sum() / size.sum() / np.pi)))
-
-
-def fill_error(
-    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, seed: int = 0, per_cell=False
-) -> float | tuple[float, float]:
-    """One-sigma error (m) of the MEAN height of a refilled hole, measured on known ground: discs
-    of ``radius`` cells are cut out of ``usable`` cells of ``h`` (apart, fully surrounded by
-    usable cells), refilled with ``method`` and compared with what was there (NaN if no room).
-    ``per_cell``: (the cells' RMS error, that) instead."""
-    r = int(np.ceil(radius))
-    yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
-    step = 2 * r + 5
-    cand = np.argwhere(disc_erosion_every(usable & np.isfinite(h), radius + 2, step)) * step
-    if len(cand) < 5:
-        return (float("nan"),) * 2 if per_cell else float("nan")
-    rng = np.random.default_rng(seed)
-    centres = cand[rng.choice(len(cand), min(40, len(cand)), replace=False)]  # 40 test holes
-    labels = np.zeros(h.shape, np.int32)
-    disc = np.argwhere(xx * xx + yy * yy <= radius * radius) - (r + 2)
-    labels[centres[:, :1] + disc[:, 0], centres[:, 1:] + disc[:, 1]] = np.arange(1, len(centres) + 1)[:, None]
-    targets = labels > 0
-    values = np.where(targets, np.nan, h)
-    filled = _discs_filled(values, targets, centres, disc) if method == "biharmonic" else None
-    err = (_filler(method)(values, targets) if filled is None else filled) - h
-    mean_err = ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
-    mean = float(np.sqrt(np.mean(np.square(mean_err))))
-    return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
-
-
-def _discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, disc: np.ndarray) -> np.ndarray | None:
-    """The ``targets`` cells of :func:`biharmonic_fill` (``values``, ``targets``) where the targets
-    are test discs (``centres`` + ``disc`` offsets) far enough apart that no stencil meets two, each
-    with every stencil cell around it finite and in the grid (None otherwise): every disc's system
-    is then the same matrix with its own right-hand side, factorised once and solved for all the
-    discs at once, with the same arithmetic per disc as the whole system's solution."""
-    reach = int(np.abs(disc).max()) + 2  # the stencils touching a disc stay within 2 cells of it
-    if (centres.min(axis=0) < reach).any() or (centres.max(axis=0) + reach >= values.shape).any():
-        return None
-    size, flat, mat, normal, (k_rows, k_cells, k_coef), solve = _disc_system(disc.astype(np.int64).tobytes(), reach)
-    k_vals = _at(values, centres, k_cells, size)  # (discs, known terms)
-    if solve is None or not np.isfinite(k_vals).all():
-        return None
-    n_rows = mat.shape[0]
-    at_row = (k_rows + n_rows * np.arange(len(centres))[:, None]).ravel()
-    rhs = -np.bincount(at_row, weights=(k_coef * k_vals).ravel(), minlength=n_rows * len(centres))
-    x = _refined(solve, normal, mat.T @ rhs.reshape(len(centres), n_rows).T)  # (disc cells, discs)
-    cells = _at(np.arange(values.size).reshape(values.shape), centres, flat, size)
-    rank = np.empty(cells.size, np.int64)
-    rank[np.argsort(cells.ravel())] = np.arange(cells.size)  # the whole system's unknowns: in grid order
-    probe = (1.0 + np.random.default_rng(0).random(cells.size))[rank].reshape(cells.shape).T
-    bad = (np.abs(solve(_TIKHONOV * probe)) > 0.01).any(axis=0)  # directions only eps pins down
-    lo, hi = k_vals.min(axis=1), k_vals.max(axis=1)
-    allow = (hi - lo) * max(4.0, np.sqrt(flat.size)) + 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))
-    finite = np.where(np.isfinite(x), x, np.inf)
-    with np.errstate(invalid="ignore"):
-        bad |= ~np.isfinite(finite.max(axis=0)) | ~(finite.min(axis=0) >= lo - allow)
-        bad |= ~(finite.max(axis=0) <= hi + allow)
-    out = values.copy()
-    out.ravel()[cells.ravel()] = x.T.ravel()
-    if bad.any():  # as biharmonic_fill: the harmonic fill of those discs
-        sub = np.zeros(values.shape, bool)
-        sub.ravel()[cells[bad].ravel()] = True
-        out[sub] = harmonic_fill(np.where(targets & ~sub, np.nan, values), sub)[sub]
-    return out
-
-
-@lru_cache(maxsize=16)
-def _disc_system(disc: bytes, reach: int):
-    """The system of one test disc (its offsets' bytes; stencils within ``reach`` of its centre):
-    (patch size, the disc's flat cells in the patch, matrix, normal matrix, known terms as
-    :func:`_stencil_system`, solve of normal + eps I; None when it is not one factorisable group)."""
-    size = 2 * reach + 1
-    offsets = np.frombuffer(disc, np.int64).reshape(-1, 2)
-    todo = np.zeros((size, size), bool)
-    todo[offsets[:, 0] + reach, offsets[:, 1] + reach] = True
-    flat = np.flatnonzero(todo)
-    mat, known, _ = _stencil_system(np.ones_like(todo), todo, flat)
-    normal = (mat.T @ mat).tocsr()
-    n_groups, group = connected_components(normal, directed=False)
-    solve = None
-    if n_groups == 1:
-        solve, skipped = _group_solver(normal + _TIKHONOV * sparse.identity(flat.size, format="csr"), group, 1)
-        solve = None if skipped[0] else solve
-    return size, flat, mat, normal, known, solve
-
-
-def _at(grid: np.ndarray, centres: np.ndarray, cells: np.ndarray, size: int) -> np.ndarray:
-    """(discs, cells): ``grid`` at the flat ``cells`` of a ``size`` x ``size`` patch centred on each centre."""
-    r, c = np.divmod(cells, size)
-    half = size // 2
-    return grid[centres[:, :1] - half + r, centres[:, 1:] - half + c]
 
 
 def summary(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:

@@ -14,7 +14,7 @@ from ..compensation.correction import MODES
 from ..compensation.correction import apply as apply_correction
 from ..compensation.robust import patches
 from ..core.types import GridSpec
-from ..dem import holes
+from ..dem import holes, testholes
 from ..dem.grid import EpochDEM
 from ..options import Options
 from . import coverage
@@ -335,7 +335,7 @@ def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     labels, n = ndimage.label(filled_mask, structure=ndimage.generate_binary_structure(2, 1))
     radius = np.sqrt(np.bincount(labels.ravel())[1:] / np.pi)
     ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
-    measured = [(r, holes.fill_error(diff, stable, options.fill_method, r, seed=options.seed)) for r in ladder]
+    measured = [(r, testholes.fill_error(diff, stable, options.fill_method, r, seed=options.seed)) for r in ladder]
     measured = [(r, s) for r, s in measured if np.isfinite(s)]
     if not measured:  # no room to measure it: one stable-ground noise level per cell
         from ..compensation.robust import nmad

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ..dem import holes
+from ..dem import holes, testholes
 
 SHARED = 0.25  # a hole with this share of its cells empty in both surveys is the difference's whole
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
@@ -97,7 +97,7 @@ def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np
     usable = np.isfinite(h)
     rows = []
     for r in ladder:
-        cell, mean = holes.fill_error(h, usable, method, r, seed=seed, per_cell=True)
+        cell, mean = testholes.fill_error(h, usable, method, r, seed=seed, per_cell=True)
         if np.isfinite(cell) and np.isfinite(mean):
             rows.append((r, cell, mean))
     if not rows:  # no room to measure: never taken for change
