@@ -1,7 +1,8 @@
-"""The distributed engine: tiles on a real Dask LocalCluster (2 worker processes) and on threads
-give the in-process result to rounding: the same cells, 99 % of cell values within 1 mm and all
-within 1 cm (heights are sorted as 0.1 mm steps from the tile's lowest point rather than the
-grid's, so a point right at a cell's robust-mean cut-off can flip), volumes within 1e-4 relative."""
+"""The distributed engine: tiles on a real Dask LocalCluster (2 worker processes), on a cluster
+by address and on threads give the in-process result: bit for bit where the registration is the
+same (tiles and the whole grid quantise heights on one lattice), to rounding where it is not (a
+VPC's registration subset summed in another order: 99 % of cell values within 1 mm, all within
+1 cm, volumes within 1e-3 relative)."""
 
 from __future__ import annotations
 

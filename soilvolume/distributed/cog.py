@@ -13,6 +13,7 @@ from ..dem.grid import NODATA, UINT8_LAYERS, output_layers
 from ..inputs.io import atomic_path
 
 BLOCK = 256
+IN_MEMORY_CELLS = 1 << 24  # up to this many cells a raster is staged in memory (64 MB of float32), not on disk
 
 
 def write_cog(
@@ -26,8 +27,6 @@ def write_cog(
     """Write ``piece(rows, cols)`` (the raster's values on that window; NaN = nodata) block row by
     block row as a single-band COG, atomically; returns the path. Tagged as every output raster
     (:func:`inputs.crs.raster_wkt`, also dem/grid.write_geotiff's)."""
-    import rasterio
-    import rasterio.shutil
     from rasterio.windows import Window
 
     from ..inputs.crs import raster_wkt
@@ -49,9 +48,10 @@ def write_cog(
         blockysize=BLOCK,
         BIGTIFF="IF_SAFER",
     )
+    small = grid.rows * grid.cols <= IN_MEMORY_CELLS
     plain = path.with_name(f".{path.stem}.blocks.tif")
     try:
-        with rasterio.open(plain, "w", **profile) as dst:
+        with _staged(plain, profile, small) as dst:
             for r0 in range(0, grid.rows, BLOCK):
                 rows = slice(r0, min(r0 + BLOCK, grid.rows))
                 for c0 in range(0, grid.cols, 8 * BLOCK):
@@ -62,18 +62,39 @@ def write_cog(
             dst.set_band_description(1, description)
             dst.set_band_unit(1, units)
             dst.update_tags(AREA_OR_POINT="Area")
-        with atomic_path(path) as tmp:
-            rasterio.shutil.copy(
-                plain,
-                tmp,
-                driver="COG",
-                compress="DEFLATE",
-                blocksize=BLOCK,
-                overview_resampling="nearest" if dtype == "uint8" else "average",
-            )
+            if small:
+                _as_cog(dst, path, dtype)
+        if not small:
+            _as_cog(plain, path, dtype)
     finally:
         plain.unlink(missing_ok=True)
     return path
+
+
+def _staged(plain: Path, profile: dict, small: bool):
+    """Where the raster's blocks are written before the COG is laid out from them: GDAL's MEM
+    driver for a small raster, else a tiled GeoTIFF on disk at ``plain`` (memory stays bounded)."""
+    import rasterio
+
+    if small:
+        keep = ("width", "height", "count", "dtype", "crs", "transform", "nodata")
+        return rasterio.open("", "w", driver="MEM", **{k: profile[k] for k in keep})
+    return rasterio.open(plain, "w", **profile)
+
+
+def _as_cog(src, path: Path, dtype: str) -> None:
+    """``src`` (a dataset or a file) laid out as a COG at ``path``, atomically."""
+    import rasterio.shutil
+
+    with atomic_path(path) as tmp:
+        rasterio.shutil.copy(
+            src,
+            tmp,
+            driver="COG",
+            compress="DEFLATE",
+            blocksize=BLOCK,
+            overview_resampling="nearest" if dtype == "uint8" else "average",
+        )
 
 
 def write_outputs(out, get: Callable[[str, slice, slice], np.ndarray], grid: GridSpec, z0: float, correction: str):
