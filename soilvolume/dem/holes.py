@@ -158,9 +158,15 @@ def biharmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
     mat, rhs, k_rows, k_vals = _second_difference_rows(values, known | todo, todo, flat)
     x, bad = _least_squares(mat, rhs, k_rows, k_vals)
     out.ravel()[flat] = x
-    if bad.any():
-        sub = np.zeros(todo.shape, bool)
-        sub.ravel()[flat[bad]] = True
+    return harmonic_instead(out, values, targets, flat[bad])
+
+
+def harmonic_instead(out: np.ndarray, values: np.ndarray, targets: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """``out`` with the flat ``cells`` (targets of a biharmonic fill its checks refused) given the
+    harmonic fill of them from ``values`` (the other targets left out)."""
+    if cells.size:
+        sub = np.zeros(targets.shape, bool)
+        sub.ravel()[cells] = True
         out[sub] = harmonic_fill(np.where(targets & ~sub, np.nan, values), sub)[sub]
     return out
 
@@ -301,7 +307,14 @@ def _wild(x, group, n_groups, mat, k_rows, k_vals) -> np.ndarray:
     kg = row_group[k_rows]
     lo, hi = _group_range(kg[kg >= 0], k_vals[kg >= 0], n_groups)
     xlo, xhi = _group_range(group, np.where(np.isfinite(x), x, np.inf), n_groups)
-    size = np.bincount(group, minlength=n_groups)
+    return beyond((lo, hi), (xlo, xhi), np.bincount(group, minlength=n_groups))
+
+
+def beyond(known: tuple, solved: tuple, size) -> np.ndarray:
+    """Whether each group's solution (``solved``: its min and max, +inf where not finite) is not
+    finite or leaves the range of its known stencil values (``known``: min, max) by more than a
+    generous margin for its ``size`` unknowns."""
+    (lo, hi), (xlo, xhi) = known, solved
     with np.errstate(invalid="ignore"):  # groups without known values: NaN margin -> wild
         allow = (hi - lo) * np.maximum(4.0, np.sqrt(size)) + 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))
         return ~np.isfinite(xhi) | ~(xlo >= lo - allow) | ~(xhi <= hi + allow)

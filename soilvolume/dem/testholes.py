@@ -12,7 +12,7 @@ from scipy import ndimage, sparse
 from scipy.sparse.csgraph import connected_components
 
 from .equivalents import disc_erosion_every
-from .holes import TIKHONOV, filler, group_solver, harmonic_fill, refined, stencil_system
+from .holes import TIKHONOV, beyond, filler, group_solver, harmonic_instead, refined, stencil_system
 
 
 def fill_error(
@@ -52,31 +52,23 @@ def discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, d
     if (centres.min(axis=0) < reach).any() or (centres.max(axis=0) + reach >= values.shape).any():
         return None
     size, flat, mat, normal, (k_rows, k_cells, k_coef), solve = _disc_system(disc.astype(np.int64).tobytes(), reach)
-    k_vals = _at(values, centres, k_cells, size)  # (discs, known terms)
+    k_vals = values[_around(centres, k_cells, size)]  # (discs, known terms)
     if solve is None or not np.isfinite(k_vals).all():
         return None
     n_rows = mat.shape[0]
     at_row = (k_rows + n_rows * np.arange(len(centres))[:, None]).ravel()
     rhs = -np.bincount(at_row, weights=(k_coef * k_vals).ravel(), minlength=n_rows * len(centres))
     x = refined(solve, normal, mat.T @ rhs.reshape(len(centres), n_rows).T)  # (disc cells, discs)
-    cells = _at(np.arange(values.size).reshape(values.shape), centres, flat, size)
+    cells = np.ravel_multi_index(_around(centres, flat, size), values.shape)  # (discs, disc cells)
     rank = np.empty(cells.size, np.int64)
     rank[np.argsort(cells.ravel())] = np.arange(cells.size)  # the whole system's unknowns: in grid order
     probe = (1.0 + np.random.default_rng(0).random(cells.size))[rank].reshape(cells.shape).T
     bad = (np.abs(solve(TIKHONOV * probe)) > 0.01).any(axis=0)  # directions only eps pins down
-    lo, hi = k_vals.min(axis=1), k_vals.max(axis=1)
-    allow = (hi - lo) * max(4.0, np.sqrt(flat.size)) + 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))
-    finite = np.where(np.isfinite(x), x, np.inf)
-    with np.errstate(invalid="ignore"):
-        bad |= ~np.isfinite(finite.max(axis=0)) | ~(finite.min(axis=0) >= lo - allow)
-        bad |= ~(finite.max(axis=0) <= hi + allow)
+    solved = np.where(np.isfinite(x), x, np.inf)
+    bad |= beyond((k_vals.min(axis=1), k_vals.max(axis=1)), (solved.min(axis=0), solved.max(axis=0)), flat.size)
     out = values.copy()
     out.ravel()[cells.ravel()] = x.T.ravel()
-    if bad.any():  # as biharmonic_fill: the harmonic fill of those discs
-        sub = np.zeros(values.shape, bool)
-        sub.ravel()[cells[bad].ravel()] = True
-        out[sub] = harmonic_fill(np.where(targets & ~sub, np.nan, values), sub)[sub]
-    return out
+    return harmonic_instead(out, values, targets, cells[bad].ravel())  # as biharmonic_fill
 
 
 @lru_cache(maxsize=16)
@@ -99,8 +91,9 @@ def _disc_system(disc: bytes, reach: int):
     return size, flat, mat, normal, known, solve
 
 
-def _at(grid: np.ndarray, centres: np.ndarray, cells: np.ndarray, size: int) -> np.ndarray:
-    """(discs, cells): ``grid`` at the flat ``cells`` of a ``size`` x ``size`` patch centred on each centre."""
+def _around(centres: np.ndarray, cells: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols), each (discs, cells): the grid cells of the flat ``cells`` of a ``size`` x
+    ``size`` patch centred on each centre."""
     r, c = np.divmod(cells, size)
     half = size // 2
-    return grid[centres[:, :1] - half + r, centres[:, 1:] - half + c]
+    return centres[:, :1] - half + r, centres[:, 1:] - half + c
