@@ -58,6 +58,8 @@ TARGETS = {
     "paper": {"net": 1.0, "cut": 3.0, "fill": 3.0},  # paper density, clutter, holes, vegetation
     "half": {"net": 3.0, "cut": 5.0, "fill": 5.0},  # works over about half the after footprint
     "works": {"net": 1.0, "cut": 5.0, "fill": 5.0},  # issue 19: yard, landslide, trench, 70 %, sparse high flight
+    # issue 45: water, equipment that arrived, a mown meadow: net of the moved volume, or "not reliable"
+    "hidden": {"net": 1.0, "cut": 3.0, "fill": 3.0},
 }
 # issue 19: a pair without soil change but with moved machines and grown vegetation (m3)
 NO_CHANGE_M3 = {"net": 15.0, "cut": 25.0, "fill": 25.0}
@@ -643,6 +645,108 @@ MATRIX += [
         **NUISANCES,
         **GPS5,
     ),
+    # issue 45: what hides or imitates earthworks (scenes/hazards.py); the truth is the soil alone
+    _nsyn(
+        "water-pit-rgb",
+        "one 2 m pit holding 0.8 m of water (no points on it), every nuisance; RGB",
+        140,
+        "hidden",
+        moved=True,
+        change="pit",
+        water_m=0.8,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        **RGB,
+    ),
+    _nsyn(
+        "water-exc40-lidar",
+        "excavation over 40 % + pile, 0.6 m of water in the excavation; LiDAR classification",
+        141,
+        "hidden",
+        moved=True,
+        change="excavation",
+        water_m=0.6,
+        **LIDAR,
+        **LIDAR_SIGNALS,
+    ),
+    _nsyn(
+        "equipment-nochange-rgb",
+        "no soil change; an excavator, a container, a cabin, a truck and a pipe stack arrived; RGB",
+        142,
+        "nochange",
+        change="none",
+        equipment=5,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        **RGB,
+    ),
+    _nsyn(
+        "equipment-nochange-nosignal",
+        "no soil change; 5 pieces of equipment arrived, a vehicle left; xyz only",
+        143,
+        "nochange",
+        change="none",
+        equipment=5,
+        departures=1,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        **NO_SIGNALS,
+    ),
+    _nsyn(
+        "equipment-piles-rgb",
+        "piles 15 %, 5 pieces of equipment arrived, a vehicle left, 2 moved; RGB",
+        144,
+        "hidden",
+        moved=True,
+        equipment=5,
+        departures=1,
+        movers=2,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        **RGB,
+    ),
+    _nsyn(
+        "meadow-pile-returns",
+        "one pile 10 % on a meadow over 40 % of the after survey, grass 0.3-0.7 m mown to stubble; returns",
+        145,
+        "hidden",
+        moved=True,
+        change="pile",
+        meadow=0.4,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        signals="returns",
+    ),
+    _nsyn(
+        "meadow-pile-rgb",
+        "one pile 10 % on a meadow over 40 % of the after survey, mown between the surveys; RGB",
+        146,
+        "hidden",
+        moved=True,
+        change="pile",
+        meadow=0.4,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        **RGB,
+    ),
+    _nsyn(
+        "meadow-nochange-nosignal",
+        "no soil change; a meadow over 40 % of the after survey mown between the surveys; xyz only",
+        147,
+        "nochange",
+        change="none",
+        meadow=0.4,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        **NO_SIGNALS,
+    ),
 ]
 
 # ----------------------------------------------------------------------------------------------
@@ -727,9 +831,14 @@ def score(report: dict, truth: dict, target: str | None, dense: bool, net_of_mov
         for q, lim in NO_CHANGE_M3.items():
             row["checks"][f"|{q}| {lim:g} m3"] = abs(row["err_m3"][q]) <= lim
         row["checks"]["0 in 95 %"] = bool(row["covered"]["net"])
+    elif target == "hidden" and (report.get("quality") or {}).get("verdict") == "not reliable":
+        row["checks"]["said not reliable"] = bool((report.get("quality") or {}).get("messages"))
     elif target:
         for q, lim in TARGETS[target].items():
             row["checks"][f"{q} {lim:g}%"] = abs(row["err_pct"][q]) <= lim
+    if target == "hidden":  # whatever the verdict, the intervals hold the truth
+        for q in QUANTITIES:
+            row["checks"][f"{q} in 95 %"] = bool(row["covered"][q])
     if dense and abs(truth["net"]) > 1e-9:
         hw = row["half_width"]["net"]
         row["checks"][f"net hw {DENSE_WIDTH_PCT:g}%"] = hw is not None and hw <= DENSE_WIDTH_PCT / 100.0 * abs(

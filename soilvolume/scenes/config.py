@@ -49,6 +49,10 @@ class SceneConfig:
     crops: bool = False  # a crop field on the after footprint (0.2 -> 0.8 m)
     slope_deg: float = 0.0  # a constant slope of the whole site (degrees, rising to the east)
     site_tone: str = "brown"  # soil colour of "rgb" scenes: "brown" or "grey"
+    # --- conditions that hide or imitate earthworks (see scenes/hazards.py) ---
+    water_m: float = 0.0  # standing water in the pits of the after survey (no points on it)
+    equipment: int = 0  # equipment and materials that arrived (excavator, container, cabin, ...)
+    meadow: float = 0.0  # share of the after footprint of a meadow mown between the surveys
 
     @classmethod
     def paper(cls, **overrides) -> SceneConfig:

@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from .config import SceneConfig
+from .hazards import equipment
 
 SIGNALS = ("class", "rgb", "lidar", "returns", "none")
 # feature types of the world's feature table
@@ -70,7 +71,7 @@ def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[st
         a, b = rng.uniform(8.0, 10.0), rng.uniform(5.0, 7.0)
         if place(True, (CROP, rng.uniform(-0.3, 0.3), a, b, 0.2, a, b, 0.8, math.hypot(a, b))):
             roles.append("vegetation")
-    return roles
+    return roles + equipment(cfg, rng, place)
 
 
 def categories(cls: np.ndarray, stray: np.ndarray) -> np.ndarray:

@@ -53,7 +53,7 @@ import numpy as np
 
 from .config import SceneConfig
 from .features import CHANGE_KINDS, change_dz, feature_area, features_dz, finish_features
-from .nuisances import VEHICLE
+from .nuisances import BOULDER, VEHICLE
 from .world import _World
 
 __all__ = [
@@ -102,27 +102,31 @@ def _config_dict(cfg: SceneConfig) -> dict:
 
 
 NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch_change", "crops")
-NEWER_FIELDS += ("slope_deg", "site_tone")
+NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow")
 
 
 def _objects(world: _World) -> list[dict]:
-    """The vehicles present in one epoch only (role: moved, arrived or left), with their volume
+    """The vehicles and equipment present in one epoch only (role: moved, arrived or left), with their volume
     above the ground (m3; the roof and the lower bonnet over the footprint, approximately)."""
     o = world.cfg.origin
     out = []
     for f, role in zip(world.feats[world.n_plain :], world.roles, strict=True):
-        if f[0] != VEHICLE:
+        if f[0] not in (VEHICLE, BOULDER) or role == "vegetation":
             continue
         before = f[6] > 0
         a, b, h = (f[4], f[5], f[6]) if before else (f[7], f[8], f[9])
+        if f[0] == BOULDER:  # a stack of pipes: a half-ellipsoid
+            area, volume = math.pi * a * b, 2.0 / 3.0 * math.pi * a * b * h
+        else:
+            area, volume = 4 * a * b, 2 * a * b * h * (1.55 + 0.45 * 0.62)
         out.append(
             {
                 "epoch": "before" if before else "after",
                 "role": role,
                 "x": float(f[1] + o[0]),
                 "y": float(f[2] + o[1]),
-                "area_m2": float(4 * a * b),
-                "volume": float(2 * a * b * h * (1.55 + 0.45 * 0.62)),
+                "area_m2": float(area),
+                "volume": float(volume),
             }
         )
     return out

@@ -9,6 +9,7 @@ import numpy as np
 
 from .config import CLASS_BOULDER, CLASS_GROUND, CLASS_OUTLIER, CLASS_VEHICLE, SceneConfig
 from .features import _after_box, _change_features, _clear_of, change_dz
+from .hazards import dry, meadow_row, water_levels
 from .nuisances import CROP, PATCH, boulder, bush, categories, colours, extra_features, returns, vehicle
 
 CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never depend on the caller)
@@ -29,6 +30,7 @@ class _World:
         self.hole_res = 0.1  # occlusion holes, per epoch
         self.holes = [self._holes(rng, cfg.holes) for _ in range(2)]
         self._init_misalignment()
+        self.water = water_levels(self) if cfg.water_m > 0 else []
 
     def _init_terrain(self, rng: np.random.Generator) -> None:
         """Tilt, long waves, hills, roughness, ditches, berm and mounds (``rng``'s first draws)."""
@@ -125,6 +127,9 @@ class _World:
         extra = np.random.default_rng(np.random.SeedSequence([self.seed, 7]))  # new kinds: own stream
         self.n_plain = len(feats)  # features after these are the config's extra kinds
         self.roles = extra_features(cfg, extra, lambda inside, params: place(1, inside, lambda: params, extra))
+        if cfg.meadow > 0:  # over the works: stamped last, under every other feature
+            feats.append(meadow_row(cfg, (self.ax0, self.ay0, self.ax1, self.ay1), extra))
+            self.roles.append("vegetation")
         self.feats = np.array(feats, dtype=np.float64).reshape(-1, 11)
         if len(self.feats):
             self.feat_zc = self.terrain(self.feats[:, 1], self.feats[:, 2])
@@ -155,7 +160,7 @@ class _World:
         ys = (np.arange(j0, j1) + 0.5) * res
         d = np.hypot(xs[None, :] - x, ys[:, None] - y)
         sub = grid[j0:j1, i0:i1]
-        sub[d < r] = value
+        sub[(d < r) & (sub == 0)] = value  # features never overlap, bar the meadow under them
 
     def _holes(self, rng: np.random.Generator, n: int) -> np.ndarray | None:
         if n <= 0:
@@ -301,6 +306,9 @@ class _World:
             g += dz
             g += self.deformation(x, y)
             fresh = dz != 0
+            if self.water:  # no point on the water of the pits
+                keep = dry(self, x, y, g, dz)
+                x, y, g, fresh = x[keep], y[keep], g[keep], fresh[keep]
         z = g.copy()
         cls = np.full(x.shape, CLASS_GROUND, dtype=np.uint8)
         lab = np.zeros(x.shape, np.int32)
@@ -309,6 +317,8 @@ class _World:
             idx = np.nonzero(lab)[0]
             if idx.size:
                 self._apply_features(epoch, idx, lab[idx] - 1, x, y, g, z, cls, rng)
+                bare = fresh & (cls >= 3) & (cls <= 5)  # no grass on fresh soil
+                z[bare], cls[bare] = g[bare], CLASS_GROUND
         z += rng.normal(0.0, cfg.noise_m, z.shape) if cfg.noise_m > 0 else 0.0
         o = np.empty(0, np.int64)
         if cfg.outlier_fraction > 0:
@@ -386,7 +396,3 @@ class _World:
         cnew = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE, np.where(bou, CLASS_BOULDER, CLASS_GROUND)))
         z[idx] = znew
         cls[idx] = cnew.astype(np.uint8)
-
-
-# ----------------------------------------------------------------------------------------------
-# public API

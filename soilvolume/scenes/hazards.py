@@ -1,0 +1,76 @@
+"""Site conditions that hide or imitate earthworks on a synthetic pair (issue 45).
+
+* Standing water (``water_m``): the after survey has no point on the water of its pits (laser
+  and photogrammetry both fail on water); the truth is still the pit's bottom.
+* Equipment and materials that arrived (``equipment``): an excavator, a container, a site cabin,
+  a truck and a stack of pipes, in turn, on unchanged ground of the after survey only.
+* A mown meadow (``meadow``, a share of the after footprint): grass 0.3-0.7 m high in the before
+  survey, stubble in the after one, with the works on it (fresh soil carries no grass). The
+  ground under the grass is seen through its gaps.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .config import SceneConfig
+
+BOULDER, PATCH = 2, 3  # the world's feature types (see nuisances)
+VEHICLE = 1
+# (name, feature type, half length, half width, height): boxes as vehicles, pipes as a mound
+EQUIPMENT = (
+    ("excavator", VEHICLE, 2.9, 1.5, 3.0),
+    ("container", VEHICLE, 3.05, 1.22, 2.6),
+    ("site cabin", VEHICLE, 2.2, 1.3, 2.8),
+    ("truck", VEHICLE, 3.8, 1.25, 3.2),
+    ("pipe stack", BOULDER, 3.0, 1.6, 1.4),
+)
+
+
+def equipment(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
+    """Place ``cfg.equipment`` pieces of :data:`EQUIPMENT` (in turn) in the after survey only,
+    with ``place(inside_after, params)``; their roles ("arrived")."""
+    roles = []
+    for k in range(cfg.equipment):
+        _, typ, a, b, h = EQUIPMENT[k % len(EQUIPMENT)]
+        j = rng.uniform(0.9, 1.1)
+        params = (typ, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a * j, b * j, h, math.hypot(a, b) * j)
+        if place(True, params):
+            roles.append("arrived")
+    return roles
+
+
+def meadow_row(cfg: SceneConfig, box: tuple[float, float, float, float], rng: np.random.Generator) -> tuple:
+    """The meadow's feature row (type, x, y, angle, a, b, h0, a, b, h1, r): an ellipse covering
+    ``cfg.meadow`` of the after footprint ``box`` around its centre, grass mown to stubble."""
+    x0, y0, x1, y1 = box
+    area = cfg.meadow * (x1 - x0) * (y1 - y0)
+    ratio = (x1 - x0) / (y1 - y0)
+    b = math.sqrt(area / (math.pi * ratio))
+    a = ratio * b
+    tall = rng.uniform(0.3, 0.7)
+    return (PATCH, (x0 + x1) / 2.0, (y0 + y1) / 2.0, 0.0, a, b, tall, a, b, 0.05, max(a, b))
+
+
+def water_levels(world) -> list[tuple[dict, float]]:
+    """(cut feature, its water level in the true local frame) for every pit of the world."""
+    from .features import change_dz
+
+    out = []
+    for f in world.changes:
+        if f["sign"] < 0:
+            x, y = np.array([f["x"]]), np.array([f["y"]])
+            bottom = world.terrain(x, y)[0] + change_dz(x, y, world.cfg)[0]
+            out.append((f, float(bottom) + world.cfg.water_m))
+    return out
+
+
+def dry(world, x: np.ndarray, y: np.ndarray, g: np.ndarray, dz: np.ndarray) -> np.ndarray:
+    """Mask of the after survey's points not under water (``g``: the after ground)."""
+    keep = np.ones(x.shape, bool)
+    for f, level in world.water:
+        near = (dz < 0) & (np.hypot(x - f["x"], y - f["y"]) < f["radius"] + 1.0)
+        keep &= ~(near & (g < level))
+    return keep
