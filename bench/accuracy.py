@@ -441,7 +441,6 @@ MATRIX += [
         "nochange-all-rgb-dense",
         "no soil change at paper density; vehicles moved (4), arrived (2) and left (1), grass grown, a crop field; RGB",
         122,
-        counted=True,
         change="none",
         **DENSE,
         **NUISANCES,
@@ -527,9 +526,8 @@ MATRIX += [
     ),
     _nsyn(
         "piles-arrivals-rgb",
-        "piles 15 %, 2 machines arrived and 1 left (counted, listed), grass grown; RGB",
+        "piles 15 %, 2 machines arrived and 1 left (left out, listed), grass grown; RGB",
         129,
-        counted=True,
         **QUARTER,
         **NUISANCES,
         **GPS2,
@@ -622,10 +620,8 @@ MATRIX += [
     ),
     _nsyn(
         "pile-sparse-mown-returns",
-        "one pile 10 %, sparse flight, grass mown on 3 patches, 2 vehicles moved, 1 arrived (counted); "
-        "return numbers only",
+        "one pile 10 %, sparse flight, grass mown on 3 patches, 2 vehicles moved, 1 arrived; return numbers only",
         137,
-        counted=True,
         change="pile",
         **SPARSE,
         **NUISANCES,

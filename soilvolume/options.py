@@ -235,10 +235,17 @@ class Options:
     )
     exclude: str = _opt(
         "auto",
-        "what is not soil: auto (points the signals say are not soil are not gridded: the LAS classification as {opt:ground} selects it, colour (vegetation by its excess-green index) and return numbers on files without one; objects that moved between the surveys are left out of the headline; objects in one survey only are counted and listed), none (colour and returns not used, moved objects counted: the volumes {opt:exclude=auto} lists are restored; the class-2 selection stays with {opt:ground})",
+        "what is not soil: auto (points the signals say are not soil are not gridded: the LAS classification as {opt:ground} selects it, colour (vegetation by its excess-green index) and return numbers on files without one; objects that moved between the surveys are left out of the headline; objects in one survey only as {opt:objects} says), none (colour and returns not used, moved objects and objects in one survey only counted: the volumes {opt:exclude=auto} lists are restored; the class-2 selection stays with {opt:ground})",
         ("auto", "none"),
         label="Exclude what is not soil",
         commands=POINTS,
+    )
+    objects: str = _opt(
+        "exclude",
+        "objects in one survey only (a machine, a container, a cabin or a stack of materials that arrived or left, found by their near-vertical walls): exclude (left out of the headline and listed with their volume; only earthworks count), count (counted as fill or cut and listed: the seed paper's test pillars)",
+        ("exclude", "count"),
+        label="Objects in one survey only",
+        commands=VOLUME,
     )
     lod_confidence: float = _opt(
         0.95,

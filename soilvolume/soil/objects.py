@@ -4,7 +4,7 @@ ground (vehicles, containers, the test pillars of the seed paper), found by thei
 A blob of apparent fill and a blob of apparent cut of matching size, height and shape are one
 object that moved between the surveys: not earthworks, left out of the headline. An object in
 one survey only (a machine that arrived or left, a container, a pillar placed on purpose) is
-counted, but listed so the analyst sees it.
+listed, and left out or counted as the ``objects`` option says.
 
 Walls: soil stands at its angle of repose (under about 45 degrees), so the band between 20 % and
 80 % of a pile's height is wide; an object's is about one mixed cell. A blob is an object when
@@ -49,6 +49,7 @@ class Blob:
     elongation: float
     label: int  # its label in :attr:`Objects.labels`
     partner: int = 0  # the label of the blob it moved from or to (0: none)
+    slope: float = 0.0  # median slope (rise/run) of its walls between 20 % and 80 % of its height
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,17 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
         return None
     vol = float(np.where(whole, d[win], 0.0).sum()) * a
-    return Blob(sign, area, height, vol, float(cc.mean() + c0), float(rr.mean() + r0), elong, label)
+    slope = _wall_slope(np.where(whole, d[win], 0.0), whole, height, cell)
+    return Blob(sign, area, height, vol, float(cc.mean() + c0), float(rr.mean() + r0), elong, label, slope=slope)
+
+
+def _wall_slope(dd: np.ndarray, whole: np.ndarray, height: float, cell: float) -> float:
+    """Median slope (rise/run) of a blob's cells between 20 % and 80 % of its height: about 1 or
+    less on a pile's flank at its angle of repose, 1.5 and more on a box's walls, whose mixed
+    cells rise by most of its height within a cell or two."""
+    gy, gx = np.gradient(dd, cell)
+    band = whole & (dd >= 0.2 * height) & (dd <= 0.8 * height)
+    return float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell
 
 
 def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:

@@ -107,7 +107,17 @@ def compute_volumes(
     fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
     change = fill_area | cut_area
     ex = exclude_nonsoil(
-        diff, fill_area, cut_area, (after, before), offset, grid, options.exclude, s["heights"], stable, filled_mask
+        diff,
+        fill_area,
+        cut_area,
+        (after, before),
+        offset,
+        grid,
+        options.exclude,
+        s["heights"],
+        stable,
+        filled_mask,
+        objects=options.objects,
     )
     fill_area, cut_area = ex.fill, ex.cut
     # stable ground for the error model: never a cell of (or next to) a detected change area,

@@ -1,8 +1,9 @@
 """What the volume step leaves out of the soil, and says so: objects that moved between the
 surveys (found by shape, :mod:`soilvolume.soil.objects`) are taken out of the change areas;
 cells whose points were mostly not soil (vegetation, objects, other by the epochs' point rules)
-are listed with the apparent volume they would have added; objects in one survey only stay
-counted and are listed. The class raster (``excluded.tif``) draws all of it."""
+are listed with the apparent volume they would have added; objects in one survey only
+(machines, containers, materials) are left out too and listed, or counted with
+``--objects count``. The class raster (``excluded.tif``) draws all of it."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ CLASS_CODES = {
     2: "objects by classification (not gridded)",
     3: "other points: noise, water, unclassified (not gridded)",
     4: "moved object (left out of the volumes)",
-    5: "object in one survey only (counted)",
+    5: "object in one survey only (listed; left out or counted as chosen)",
     6: "rough change: vegetation? (counted, in the interval)",
 }
 SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
@@ -39,6 +40,12 @@ MACHINE_M3 = 40.0  # an object in one survey of at most this volume may be a mac
 # Their volume is a bound, not a random error: the interval is widened by it (the net by the
 # larger of the fill and cut parts) and the verdict names it.
 UNCLEAR_AREA_M2, UNCLEAR_M3 = 150.0, MACHINE_M3
+# an object in one survey only above this volume is no machine, cabin or container (an excavator
+# holds ~50 m3 under its outline, a 40 ft container 75 m3): a steep pile, counted as soil
+OBJECT_MAX_M3 = 120.0
+# ... and whose walls' median slope is under this (rise/run, 50 degrees) is no box: a steep heap,
+# counted (piles at their angle of repose read 0.9-1.1, machines and containers 1.3-2.7)
+OBJECT_SLOPE = 1.2
 GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shares of such cells and of soil
 
 
@@ -67,17 +74,22 @@ def exclude_nonsoil(
     heights: tuple[np.ndarray, np.ndarray] | None = None,
     stable: np.ndarray | None = None,
     refilled: np.ndarray | None = None,
+    objects: str = "exclude",
 ) -> Exclusion:
     """See module; ``epochs`` (after, before), ``mode`` the ``--exclude`` option (``none``: moved
     objects stay counted, still listed); ``heights`` (after, before: the heights the difference
     is taken from) and ``stable`` ground give the rough cells (:mod:`soilvolume.soil.rough`):
     fill where the after survey is rough, cut where the before survey is; ``refilled``: the
-    interpolated cells (objects are measured without them)."""
+    interpolated cells (objects are measured without them); ``objects`` the ``--objects`` option
+    (``exclude``: objects in one survey only are left out too, unless ``mode`` is ``none``)."""
     shares = _shares(epochs)
     labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
     unsure = labelled if refilled is None else refilled | labelled
     found = find_objects(diff, fill, cut, grid.cell, refilled=unsure)
     leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
+    drop_single = objects == "exclude" and mode != "none"
+    lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
+    leave_out = leave_out | lone
     grass = _grass_patches(fill | cut, labelled_veg := shares["vegetation"] >= SHARE, refilled, grid.cell_area)
     grass &= ~found.moved & ~found.single & (mode != "none")
     leave_out = leave_out | grass
@@ -118,20 +130,33 @@ def exclude_nonsoil(
     report["single_objects"] = {
         "count": len(single),
         "net_m3": float(sum(b.sign * b.volume_m3 for b in single)),
-        "counted": True,
-        "items": [_item(b, grid) for b in single],
+        "counted": not drop_single,
+        "items": [{**_item(b, grid), "counted": not drop_single or b.volume_m3 > OBJECT_MAX_M3} for b in single],
     }
     if mode != "none":
+        lone_m3 = _budget(diff, lone, grid.cell_area)
         for k in sigma:
-            sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * abs(moved[k])))
+            sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * np.hypot(moved[k], lone_m3[k])))
     counted = (fill | cut) & ~leave_out
     signal = any(_labelled(e) for e in epochs)
     unclear, n = _unclear(diff, counted, found, rough, signal, grid.cell_area)
     report["unclassified"] = {**_budget(diff, unclear, grid.cell_area), "count": n, "signals": signal}
+    kept, left = _budget(diff, unclear & counted, grid.cell_area), _budget(diff, unclear & ~counted, grid.cell_area)
+    # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
+    below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
+    report["unclassified"]["net_range_m3"] = [-below, above]
     bound = {k: report["unclassified"][k] for k in ("cut", "fill")}
-    bound["net"] = max(bound.values())  # the truth lies between net - fill and net + cut
+    bound["net"] = max(below, above)
     report["sigma_m3"], report["bound_m3"] = sigma, bound
     return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
+
+
+def _lone(found) -> np.ndarray:
+    """The cells of the objects in one survey only of a machine's, a container's or a stack's
+    size (at most :data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`): left out of
+    the headline by default."""
+    ids = [b.label for b in found.single_blobs() if b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE]
+    return found.single & np.isin(found.labels, ids)
 
 
 def _grass_patches(change: np.ndarray, veg: np.ndarray, refilled: np.ndarray | None, cell_area: float) -> np.ndarray:
@@ -156,7 +181,7 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     objects in one survey only; without any signal also rough cells and every compact change
     patch (see :data:`UNCLEAR_AREA_M2`)."""
     small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
-    out = np.isin(found.labels, small) & found.single & counted
+    out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
     if not signal:
         d = np.nan_to_num(diff)
         for part in (counted & (d > 0), counted & (d < 0)):
@@ -278,8 +303,19 @@ def sentence(report: dict) -> list[str]:
         )
     s = report.get("single_objects") or {}
     if s.get("count"):
-        out.append(
-            f"{s['count']} object{'s' if s['count'] > 1 else ''} in one survey only ({s['net_m3']:+.0f} m³) "
-            "counted: check that they are soil (a machine, a container or a test pillar is not)"
-        )
+        items = s.get("items") or []
+        kept = [i for i in items if i.get("counted", s.get("counted", True))]
+        left = [i for i in items if i not in kept]
+        if left:
+            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in left)
+            out.append(
+                f"{len(left)} object{'s' if len(left) > 1 else ''} in one survey only ({m3:+.0f} m³) left out as "
+                f"machines, containers or materials ({opt('objects', 'exclude')})"
+            )
+        if kept:
+            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in kept)
+            out.append(
+                f"{len(kept)} object{'s' if len(kept) > 1 else ''} in one survey only ({m3:+.0f} m³) counted: "
+                "check that they are soil"
+            )
     return out

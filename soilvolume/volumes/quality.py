@@ -154,7 +154,8 @@ def _nonsoil(excluded: dict, half: float) -> list[tuple[str, str]]:
     if not excluded.get("by_classification"):
         parts += [abs(c.get("net", 0.0)) for c in (excluded.get("classes") or {}).values()]
     parts += [abs((excluded.get("rough") or {}).get("net", 0.0))]
-    parts += [abs((excluded.get("single_objects") or {}).get("net_m3", 0.0))]
+    single = excluded.get("single_objects") or {}
+    parts += [sum(abs(i.get("volume_m3", 0.0)) for i in single.get("items") or [])]
     if sum(parts) <= half:
         return []
     words = "; ".join(sentence(excluded))
@@ -176,7 +177,8 @@ def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, st
         if u.get("signals", True)
         else "the files carry no classification, colour or return numbers to say what they are"
     )
-    lo, hi = net - u.get("fill", 0.0), net + u.get("cut", 0.0)
+    below, above = u.get("net_range_m3") or (-u.get("fill", 0.0), u.get("cut", 0.0))
+    lo, hi = net + below, net + above
     sev = "caution" if u.get("signals", True) else "unreliable"  # signals said the rest: only objects are open
     return [
         (
