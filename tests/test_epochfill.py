@@ -82,11 +82,15 @@ def test_grass_patch_left_out_soil_heap_kept():
     grass, heap = _disc(n, 15, 15, 6.0), _disc(n, 42, 42, 6.0)
     veg = grass & (np.add.outer(np.arange(n), np.arange(n)) % 3 != 0)  # 2 of 3 grass cells labelled
     refilled = grass & ~veg
-    out = _grass_patches(grass | heap, veg, refilled, CELL * CELL)
+    bare = ~veg & ~refilled  # soil measured on the surface that rose
+    out = _grass_patches(grass | heap, veg, bare, CELL * CELL)
     assert out[grass].all() and not out[heap].any()
     big = np.zeros((n, n), bool)
     big[:, :] = True  # 900 m2: no compact patch
-    assert not _grass_patches(big, big, None, CELL * CELL).any()
+    assert not _grass_patches(big, big, ~big, CELL * CELL).any()
+    # a heap raised on a mown meadow: grass in the before survey, soil measured on the heap's top
+    meadow = _grass_patches(heap, heap, heap, CELL * CELL)
+    assert not meadow.any()
 
 
 def test_grass_patches_are_said():

@@ -47,6 +47,7 @@ OTHER = {
     "ground_window": 7.0,
     "ground_slope": 0.7,
     "exclude": "none",
+    "objects": "count",
     "lod_confidence": 0.9,
     "threads": 2,
     "scheduler": "local:2",

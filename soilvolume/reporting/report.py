@@ -185,7 +185,9 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
             "along the local slope where its points cover it unevenly; cells with too few points and "
             "enclosed holes are interpolated from the surrounding difference (filled_mask.tif). Only soil "
             "counts: points the epochs' rules say are not soil are not gridded, objects that moved between the "
-            "surveys are left out, objects in one survey only are counted and listed (excluded, excluded.tif)"
+            "surveys are left out, objects in one survey only of a machine's size are left out (or counted with "
+            "objects=count) and listed (excluded, excluded.tif); holes without any point inside the works (water, "
+            "shadow) widen the interval by what they may hide (blind)"
         ),
         "volume_all_cells_m3": vols.all_cells,
         "volume_uncompensated_m3": vols.uncompensated,
@@ -207,6 +209,7 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
             "rule": {e: prep.inputs[e].get("soil_rule", "") for e in ("before", "after")},
             "by_classification": all(r is not None and r.use_class for r in prep.rules),
         },
+        "blind": vols.blind,
         "zones": vols.zones,
         "correction": {"method": options.correction, "params": vols.params},
         "registration": {

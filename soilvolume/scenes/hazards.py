@@ -55,15 +55,18 @@ def meadow_row(cfg: SceneConfig, box: tuple[float, float, float, float], rng: np
 
 
 def water_levels(world) -> list[tuple[dict, float]]:
-    """(cut feature, its water level in the true local frame) for every pit of the world."""
+    """(cut feature, its water level in the true local frame) for every pit of the world: the
+    given depth of water above the lowest point of its bottom."""
     from .features import change_dz
 
     out = []
     for f in world.changes:
-        if f["sign"] < 0:
-            x, y = np.array([f["x"]]), np.array([f["y"]])
-            bottom = world.terrain(x, y)[0] + change_dz(x, y, world.cfg)[0]
-            out.append((f, float(bottom) + world.cfg.water_m))
+        if f["sign"] < 0:  # water pools at the lowest point of the pit's bottom
+            u = np.linspace(-f["radius"], f["radius"], 81)
+            x, y = (a.ravel() for a in np.meshgrid(f["x"] + u, f["y"] + u))
+            dz = change_dz(x, y, world.cfg)
+            bottom = float(np.min((world.terrain(x, y) + dz)[dz < 0]))
+            out.append((f, bottom + world.cfg.water_m))
     return out
 
 

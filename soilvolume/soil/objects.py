@@ -33,6 +33,7 @@ MIN_QUIET_RING = 0.6  # share of the ring around a blob that must be unchanged g
 MAX_SINGLE_CELL = 0.8  # m: on coarser cells a vehicle's walls are not seen; only moved pairs are told
 # a moved object: the two blobs' ratios within these
 AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 2.0, 1.5, 2.5
+RING_HOLE = 0.2  # a blob around unseen cells of this share of its own area is a ring, not an object
 _EIGHT = np.ones((3, 3), bool)
 
 
@@ -78,12 +79,12 @@ def find_objects(
     canopy beside a machine is interpolated from the machine's roof)."""
     labels = np.zeros(diff.shape, np.int32)
     blobs: list[Blob] = []
-    changed = fill | cut
+    changed, unknown = fill | cut, ~np.isfinite(diff)
     d0 = np.nan_to_num(diff)
     for sign, area in ((1, fill), (-1, cut)):
         comp, _ = ndimage.label(area, structure=_EIGHT)
         for k, sl in enumerate(ndimage.find_objects(comp), 1):
-            blob = _measure(sign * d0, comp, k, sl, (changed, refilled), cell, sign, len(blobs) + 1)
+            blob = _measure(sign * d0, comp, k, sl, (changed, refilled, unknown), cell, sign, len(blobs) + 1)
             if blob is not None:
                 labels[sl][comp[sl] == k] = blob.label
                 blobs.append(blob)
@@ -102,12 +103,15 @@ def find_objects(
 
 def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     """The blob of component ``k`` (``d``: its sign's difference, positive), or None when it is
-    not an object; ``masks``: (changed cells, refilled cells or None)."""
+    not an object; ``masks``: (changed cells, refilled cells or None, cells without a difference).
+    A ring around cells no survey saw (a pit's walls around its pond) is no object."""
     pad = 3
     r0, c0 = max(sl[0].start - pad, 0), max(sl[1].start - pad, 0)
     win = (slice(r0, sl[0].stop + pad), slice(c0, sl[1].stop + pad))
-    changed, refilled = masks
+    changed, refilled, unknown = masks
     whole = comp[win] == k
+    if (ndimage.binary_fill_holes(whole) & ~whole & unknown[win]).sum() > RING_HOLE * whole.sum():
+        return None
     mine = whole if refilled is None else whole & ~refilled[win]
     dd = np.where(mine, d[win], 0.0)
     height = float(np.percentile(dd[mine], 90)) if mine.any() else 0.0

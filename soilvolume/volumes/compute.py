@@ -18,10 +18,11 @@ from ..dem import holes, testholes
 from ..dem.grid import EpochDEM
 from ..options import Options
 from . import coverage
+from .blind import blind_change
 from .change import MIN_CELLS
 from .difference import budget, difference, signed_budget
 from .epochfill import fill_own_holes
-from .nonsoil import exclude_nonsoil
+from .nonsoil import Exclusion, exclude_nonsoil
 from .outline import refill_across_outline
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
@@ -56,6 +57,7 @@ class Volumes:
     empty_after: int
     zones: list = field(default_factory=list)  # per-polygon budgets (--zones)
     excluded: dict = field(default_factory=dict)  # what is not soil: classes, objects (volumes/nonsoil)
+    blind: dict = field(default_factory=dict)  # holes without any point in the works (volumes/blind)
     classes: np.ndarray | None = None  # excluded.tif: the class of each cell (volumes/nonsoil.CLASS_CODES)
     cut_mask: np.ndarray | None = None  # the cut areas of change_mask (the rest of it is fill)
     coverage: dict = field(default_factory=dict)  # the after footprint's cells compared (volumes/coverage)
@@ -104,21 +106,9 @@ def compute_volumes(
     sides = refill_across_outline(diff, filled_mask & ~s["own"], significant, options.fill_method)
     outline, diff = np.nan_to_num(sides - diff), sides  # where the outline runs in the holes: a term
     filled = diff + offset
-    fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask)
+    fill_area, cut_area = change_areas(diff, lod_cell, refilled=filled_mask & ~s["seen_once"])
     change = fill_area | cut_area
-    ex = exclude_nonsoil(
-        diff,
-        fill_area,
-        cut_area,
-        (after, before),
-        offset,
-        grid,
-        options.exclude,
-        s["heights"],
-        stable,
-        filled_mask,
-        objects=options.objects,
-    )
+    ex = _exclude(diff, (fill_area, cut_area), (after, before), offset, grid, options, s, stable)
     fill_area, cut_area = ex.fill, ex.cut
     # stable ground for the error model: never a cell of (or next to) a detected change area,
     # unless the user drew it
@@ -129,7 +119,9 @@ def compute_volumes(
     terms = _extra_terms((after, before), s["f_a"], filled_mask, grid, moved, given, core, (d, fa, ca), lod_cell, ex)
     terms["extra"] = _with_outline(terms, outline[core], d, filled_mask, (fa, ca), grid.cell_area)
     counted = fill_area | cut_area  # the change areas without moved objects
-    model = _error_model(diff, stable, grid, options, given, core, filled_mask, s["own"], fill_sigma, ex.bound)
+    hidden = blind_change(diff, (after, before), counted, grid.cell_area, s["seen_once"])
+    bound = {k: ex.bound[k] + hidden.bound[k] for k in ex.bound}  # unclassified, and unseen
+    model = _error_model(diff, stable, grid, options, given, core, filled_mask, s["own"], fill_sigma, bound)
     unc = model(change_mask=counted, extra_sigma=terms.pop("extra"))
     headline = signed_budget(d, fa, ca, grid.cell_area)
     vols = {
@@ -154,6 +146,7 @@ def compute_volumes(
         "change_mask": counted,
         "cut_mask": cut_area,  # after the exclusions, as the headline sums it
         "excluded": ex.report,
+        "blind": hidden.report,
         "classes": ex.classes,
         "compensated": headline,
         "change_areas": headline,
@@ -162,6 +155,12 @@ def compute_volumes(
     if options.zones:
         vols["zones"] = _zones(d, counted, (fa, ca), grid, options, given, core, model, unc)
     return Volumes(**vols)
+
+
+def _exclude(diff, areas, epochs, offset, grid: GridSpec, options: Options, s: dict, stable) -> Exclusion:
+    """What is not soil (:func:`.nonsoil.exclude_nonsoil`) with the run's options."""
+    mode, heights, refilled = options.exclude, s["heights"], s["filled_mask"] & ~s["seen_once"]
+    return exclude_nonsoil(diff, *areas, epochs, offset, grid, mode, heights, stable, refilled, objects=options.objects)
 
 
 def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Options, given: Given | None) -> dict:
@@ -176,13 +175,17 @@ def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Option
     weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS, method=options.fill_method)
     f_b, m_b = holes.refill_epoch(h_b, n_b, **weak, median=med_b)
     f_a, m_a = holes.refill_epoch(h_a, n_a, **weak, median=med_a)
-    hole = holes.enclosed_holes(np.isfinite(difference(f_a, f_b)), max_cells)
+    known = np.isfinite(difference(f_a, f_b))
+    hole = holes.enclosed_holes(known, max_cells)
+    # holes of one survey of any size are its own to fill where the other sees a pile across them
+    own_holes = holes.enclosed_holes(known, known.size) if max_cells else hole
+    one = own_holes & ~hole & (np.isfinite(f_a) != np.isfinite(f_b))  # measured in one survey, beyond a hole
     f_a, f_b, own, own_sigma = fill_own_holes(
-        f_a, f_b, hole, _sparse(m_a, m_b, n_a, n_b, given), options.fill_method, options.seed
+        f_a, f_b, own_holes, _sparse(m_a, m_b, n_a, n_b, given), options.fill_method, options.seed, grid.cell_area
     )
     filled = difference(f_a, f_b)
     filled = holes.fill(filled, hole & ~own, options.fill_method)
-    filled_mask = (m_a | m_b | hole) & np.isfinite(filled)
+    filled_mask = (m_a | m_b | hole | own) & np.isfinite(filled)
     return dict(
         heights=(h_a, h_b),
         raw=raw,
@@ -191,6 +194,7 @@ def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Option
         m_b=m_b,
         filled=filled,
         filled_mask=filled_mask,
+        seen_once=one & own,  # a pile on a meadow: measured in the after survey, may start a change area
         own=own,
         own_sigma=own_sigma,
     )

@@ -31,10 +31,12 @@ from ..dem import holes, testholes
 SHARED = 0.25  # a hole with this share of its cells empty in both surveys is the difference's whole
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
 DETAIL_RATIO = 4.0  # the measured survey's detail beyond this many times the other's own: change
+BULK_M3 = 120.0  # ... even with no change on its rim, when it holds more than a machine (a pile on a meadow)
+PILE_M3 = 40.0  # a shared hole one survey sees a pile in: its departure beyond the terrain's detail, in all
 
 
 def fill_own_holes(
-    h_a: np.ndarray, h_b: np.ndarray, hole: np.ndarray, weak: tuple, method: str, seed: int = 0
+    h_a: np.ndarray, h_b: np.ndarray, hole: np.ndarray, weak: tuple, method: str, seed: int = 0, cell_area: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(after, before, cells filled in their own survey, their one-sigma error in m): the
     ``hole`` cells empty in one survey only whose other survey sees change across them (see
@@ -46,6 +48,11 @@ def fill_own_holes(
     parts, m = ndimage.label(hole, holes.FOUR)
     share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
+    if cell_area > 0 and shared.any():
+        bulk, bulk_sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
+        own |= bulk
+        sigma[bulk] = bulk_sigma[bulk]
+        shared &= ~bulk
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
         labels, n = ndimage.label(one, holes.FOUR)
@@ -57,7 +64,9 @@ def fill_own_holes(
         detail = np.sqrt(ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
         scale = _own_detail(out[miss], method, radius, seed)
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
-        change[1:] &= _rim_change(out[0] - out[1], labels, n) > detail / 2
+        # no machine: the measured survey's departure from its own fill is beyond any machine's volume
+        bulk = np.abs(ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
+        change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | (bulk if cell_area > 0 else False)
         if change.any():  # a patch the survey cannot fill whole is left
             change &= (
                 np.r_[False, ndimage.minimum(np.isfinite(holes.fill(out[miss], change[labels], method)), labels, idx)]
@@ -105,3 +114,43 @@ def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np
     r_m, c_m, m_m = np.log(np.maximum(np.array(rows), 1e-9)).T
     at = np.log(np.maximum(radius, 1.0))
     return np.exp(np.stack([np.interp(at, r_m, c_m), np.interp(at, r_m, m_m)], axis=1))
+
+
+def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_area: float):
+    """(cells filled, one-sigma error in m) of the shared holes in which a survey measures more
+    than a machine's volume off its own interpolation (:data:`BULK_M3`: a pile raised on a meadow
+    whose grass hides the ground of both surveys around it): each survey's missing cells there
+    filled from its own known cells, harmonically (no overshoot beside the pile's foot), in place
+    in ``out``; the error is the two surveys' mean-height errors on holes of the part's size."""
+    done, sigma = np.zeros(parts.shape, bool), np.zeros(parts.shape)
+    for k in ids:
+        cells = parts == k
+        region = ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
+        radius = np.array([np.sqrt(region.sum() / np.pi)])
+        # the terrain's own detail at that size, on whichever survey has room to measure it
+        scale = min(float(_own_detail(e, "harmonic", radius, seed)[0, 0]) for e in out)
+        if not any(_stands_out(e, region, scale, cell_area) for e in out):
+            continue
+        err = 0.0
+        for e in out:
+            missing = cells & ~np.isfinite(e)
+            e[missing] = holes.fill(e, missing, "harmonic")[missing]
+            err = float(np.hypot(err, _own_detail(e, "harmonic", radius, seed)[0, 1]))
+        ok = cells & np.isfinite(out[0]) & np.isfinite(out[1])
+        done |= ok
+        sigma[ok] = err
+    return done, sigma
+
+
+def _stands_out(e: np.ndarray, region: np.ndarray, scale: float, cell_area: float) -> bool:
+    """Whether a survey's measured cells in ``region`` depart from its own interpolation across
+    it by more than :data:`DETAIL_RATIO` times the terrain's detail ``scale`` (RMS, m) and by
+    more than :data:`PILE_M3` in all: a pile, not the ground's own relief."""
+    seen = region & np.isfinite(e)
+    if not seen.any():
+        return False
+    dd = (e - holes.fill(np.where(region, np.nan, e), region, "harmonic"))[seen]
+    dd = dd[np.isfinite(dd)]
+    if dd.size == 0:
+        return False
+    return bool(np.sqrt(np.mean(dd * dd)) > DETAIL_RATIO * scale and np.abs(dd).sum() * cell_area > PILE_M3)

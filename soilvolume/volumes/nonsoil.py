@@ -46,6 +46,7 @@ OBJECT_MAX_M3 = 120.0
 # ... and whose walls' median slope is under this (rise/run, 50 degrees) is no box: a steep heap,
 # counted (piles at their angle of repose read 0.9-1.1, machines and containers 1.3-2.7)
 OBJECT_SLOPE = 1.2
+CANOPY_REACH = 2.0  # how far above the ground a canopy's points taken for soil may lift a cell (x its mean)
 GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shares of such cells and of soil
 
 
@@ -89,8 +90,11 @@ def exclude_nonsoil(
     leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
     drop_single = objects == "exclude" and mode != "none"
     lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
+    lone_ids = set(np.unique(found.labels[lone]).tolist())
     leave_out = leave_out | lone
-    grass = _grass_patches(fill | cut, labelled_veg := shares["vegetation"] >= SHARE, refilled, grid.cell_area)
+    labelled_veg = shares["vegetation"] >= SHARE
+    bare = _bare_top(diff, epochs, refilled)  # soil measured on the surface that rose
+    grass = _grass_patches(fill | cut, labelled_veg, bare, grid.cell_area)
     grass &= ~found.moved & ~found.single & (mode != "none")
     leave_out = leave_out | grass
     valid = np.isfinite(diff)
@@ -131,24 +135,33 @@ def exclude_nonsoil(
         "count": len(single),
         "net_m3": float(sum(b.sign * b.volume_m3 for b in single)),
         "counted": not drop_single,
-        "items": [{**_item(b, grid), "counted": not drop_single or b.volume_m3 > OBJECT_MAX_M3} for b in single],
+        "items": [{**_item(b, grid), "counted": b.label not in lone_ids} for b in single],
     }
     if mode != "none":
         lone_m3 = _budget(diff, lone, grid.cell_area)
         for k in sigma:
             sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * np.hypot(moved[k], lone_m3[k])))
-    counted = (fill | cut) & ~leave_out
+    bound = _bounds(diff, (fill | cut) & ~leave_out, found, rough, epochs, grid.cell_area, report)
+    report["sigma_m3"], report["bound_m3"] = sigma, bound
+    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
+
+
+def _bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) -> dict:
+    """The bound (m3 per part) of what could not be classified or was measured under a canopy
+    (``counted``: the change areas without what was left out); their sections added to
+    ``report``."""
     signal = any(_labelled(e) for e in epochs)
-    unclear, n = _unclear(diff, counted, found, rough, signal, grid.cell_area)
-    report["unclassified"] = {**_budget(diff, unclear, grid.cell_area), "count": n, "signals": signal}
-    kept, left = _budget(diff, unclear & counted, grid.cell_area), _budget(diff, unclear & ~counted, grid.cell_area)
+    unclear, n = _unclear(diff, counted, found, rough, signal, cell_area)
+    report["unclassified"] = {**_budget(diff, unclear, cell_area), "count": n, "signals": signal}
+    kept, left = _budget(diff, unclear & counted, cell_area), _budget(diff, unclear & ~counted, cell_area)
     # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
     below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
     report["unclassified"]["net_range_m3"] = [-below, above]
-    bound = {k: report["unclassified"][k] for k in ("cut", "fill")}
-    bound["net"] = max(below, above)
-    report["sigma_m3"], report["bound_m3"] = sigma, bound
-    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
+    canopy = _under_canopy(diff, epochs, counted, cell_area)
+    report["under_canopy"] = canopy
+    bound = {k: report["unclassified"][k] + canopy[k] for k in ("cut", "fill")}
+    bound["net"] = max(below, above) + canopy["cut"] + canopy["fill"]
+    return bound
 
 
 def _lone(found) -> np.ndarray:
@@ -159,17 +172,25 @@ def _lone(found) -> np.ndarray:
     return found.single & np.isin(found.labels, ids)
 
 
-def _grass_patches(change: np.ndarray, veg: np.ndarray, refilled: np.ndarray | None, cell_area: float) -> np.ndarray:
+def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray | None) -> np.ndarray:
+    """Cells whose higher surface (the after survey's on a fill, the before's on a cut) was
+    measured soil: a pile raised on a mown meadow is soil, whatever grew there before."""
+    after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)
+    top = np.where(np.nan_to_num(diff) >= 0, after, before)
+    return top if refilled is None else top & ~refilled
+
+
+def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:
     """Compact change patches (at most :data:`UNCLEAR_AREA_M2`) mostly of cells whose points were
-    vegetation (at least :data:`GRASS_VEG`) with little soil measured in them (under
-    :data:`GRASS_SOIL`; the rest interpolated under the canopy): grass whose dry blades the
-    colour test missed in a few cells, not soil (a heap of fine soil is measured soil)."""
+    vegetation (at least :data:`GRASS_VEG`) with little soil measured on the surface that rose
+    (``bare``, under :data:`GRASS_SOIL`; the rest interpolated under the canopy): grass whose dry
+    blades the colour test missed in a few cells, not soil (a heap of fine soil is measured soil)."""
     comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
     if n == 0:
         return np.zeros(change.shape, bool)
     idx = np.arange(1, n + 1)
     size = np.bincount(comp.ravel(), minlength=n + 1)[1:]
-    soil = change & ~veg if refilled is None else change & ~veg & ~refilled
+    soil = change & bare
     veg_share = ndimage.sum(veg, comp, idx) / size
     soil_share = ndimage.sum(soil, comp, idx) / size
     keep = (size * cell_area <= UNCLEAR_AREA_M2) & (veg_share >= GRASS_VEG) & (soil_share < GRASS_SOIL)
@@ -197,6 +218,28 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
     vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area if n else np.empty(0)
     return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
+
+
+def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
+    """What a canopy may have added to the change counted under it (m3 per part): where return
+    numbers alone keep the soil points under vegetation (no classification), a cell mostly of
+    canopy mixes its ground with canopy points the rule took for soil (a single return off dense
+    grass), so its height may sit up to the canopy's above the ground. Each counted cell under a
+    canopy in either survey adds the smaller of its |difference| and :data:`CANOPY_REACH` times
+    that canopy's mean height over the cell's soil height (itself raised by the canopy points)."""
+    reach = np.zeros(diff.shape)
+    for e in epochs:
+        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
+            continue  # a classification is the survey's statement; colour empties such cells
+        others = e.nonsoil()
+        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            top = np.where(covered, e.nonsoil_z / np.maximum(others, 1) - e.heights, 0.0)
+        reach = np.maximum(reach, np.nan_to_num(np.clip(CANOPY_REACH * top, 0.0, None)))
+    d = np.where(counted, np.nan_to_num(diff), 0.0)
+    part = np.minimum(np.abs(d), reach)
+    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
 
 
 def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:

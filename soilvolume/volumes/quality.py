@@ -19,6 +19,8 @@ LOW_STABLE_FRACTION = 0.1  # less than this: use with caution (a site whose work
 MIN_STABLE_CELLS = 30
 PRIOR_MARGIN = 0.8  # a pose using more than this share of the prior is suspicious
 UNCLASSIFIED_SHARE = 0.1  # change that may not be soil over this share of the net (and its interval): said
+CANOPY_SHARE = 0.05  # change under vegetation told by returns alone, over this share of the moved: not reliable
+BLIND_SHARE = 0.02  # what holes in the works may hide, over this share of the volume moved: not reliable
 
 
 def assess(
@@ -51,7 +53,11 @@ def assess(
         )
     excluded = report.get("excluded") or {}
     bound = float((excluded.get("bound_m3") or {}).get("net", 0.0))
-    random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified
+    hidden = report.get("blind") or {}
+    bound += float((hidden.get("bound_m3") or {}).get("net", 0.0))
+    random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified or seen
+    out += _blind(hidden, v)
+    out += _canopy(excluded, v)
     out += _unclassified(excluded, v["net"], random_half)
     out += _nonsoil(excluded, random_half)
     out.extend(("caution", m) for m in zone_messages(report.get("zones") or []))
@@ -186,6 +192,65 @@ def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, st
             f"{u.get('fill', 0.0) + u.get('cut', 0.0):.0f} m³ of change in {u.get('count', 0)} compact objects or "
             f"rough areas could not be classified as soil or not ({why}): the soil's net lies anywhere "
             f"from {lo:+.0f} to {hi:+.0f} m³, and the interval is widened by it",
+        )
+    ]
+
+
+def _canopy(excluded: dict, v: dict) -> list[tuple[str, str]]:
+    """Change measured under vegetation with return numbers alone (:mod:`.nonsoil`): not reliable
+    over :data:`CANOPY_SHARE` of the volume moved, a caution over a fifth of that."""
+    c = excluded.get("under_canopy") or {}
+    reach = c.get("cut", 0.0) + c.get("fill", 0.0)
+    moved = max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)
+    if reach <= 0.2 * CANOPY_SHARE * moved or reach < 1.0:
+        return []
+    return [
+        (
+            "unreliable" if reach > CANOPY_SHARE * moved else "caution",
+            f"{c.get('area_m2', 0.0):,.0f} m² of the change lies under vegetation that only return numbers "
+            f"told apart (no classification): a dense canopy's single returns may be taken for ground there, "
+            f"so up to {reach:,.0f} m³ of it may be vegetation; the interval is widened by it (a ground "
+            f"classification, or {opt('ground', 'csf')}, measures the ground itself)",
+        )
+    ]
+
+
+def _interpolated(part: dict, v: dict) -> list[tuple[str, str]]:
+    """Change counted where one survey's ground was interpolated under a large hole (grass over a
+    meadow in photogrammetry): not reliable over :data:`BLIND_SHARE` of the volume moved."""
+    m3 = part.get("cut", 0.0) + part.get("fill", 0.0)
+    if m3 <= BLIND_SHARE * max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9):
+        return []
+    return [
+        (
+            "unreliable",
+            f"{m3:,.0f} m³ of the change ({part.get('area_m2', 0.0):,.0f} m²) stands where one survey saw no "
+            "ground over a large area (vegetation or no returns): its ground there was interpolated from "
+            "around it, and the volume carries that interpolation's error (in the interval)",
+        )
+    ]
+
+
+def _blind(hidden: dict, v: dict) -> list[tuple[str, str]]:
+    """Holes without any point inside the works (:mod:`.blind`): not reliable when what they may
+    hide is over :data:`BLIND_SHARE` of the volume moved (the number cannot then be trusted to
+    that), a caution otherwise."""
+    out = _interpolated(hidden.get("interpolated") or {}, v)
+    items = hidden.get("items") or []
+    if not items:
+        return out
+    reach = float((hidden.get("bound_m3") or {}).get("net", 0.0))
+    moved = max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)
+    lo = sum(min(i["range_m3"]) for i in items)
+    hi = sum(max(i["range_m3"]) for i in items)
+    where = " and ".join(sorted({i["survey"] for i in items}))
+    return out + [
+        (
+            "unreliable" if reach > BLIND_SHARE * moved else "caution",
+            f"{hidden['area_m2']:,.0f} m² inside the works has no point at all in the {where} survey "
+            f"({len(items)} hole{'s' if len(items) > 1 else ''}: water, a shadow or no returns): the ground "
+            f"under it is unknown and the volume there lies anywhere from {lo:+,.0f} to {hi:+,.0f} m³ of "
+            "what is counted; the interval is widened by it",
         )
     ]
 
