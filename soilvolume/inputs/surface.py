@@ -1,6 +1,9 @@
 """A surface as the reference: a single-band DEM GeoTIFF (a grading plan, or an earlier DEM)
-read and checked, and resampled onto a run's grid (GDAL's warp through rasterio: bilinear at
-the cell centres, reprojected when the raster's CRS is not the grid's)."""
+opened and checked before any point is read (:func:`open_surface`), its heights read in metres
+over the survey's box only (:func:`read_over`, through :mod:`soilvolume.inputs.heights`: scale,
+offset, nodata and unit honoured; a raster far larger than the site costs only the site's
+window), and resampled onto a run's grid (GDAL's warp through rasterio: bilinear at the cell
+centres, reprojected when the raster's CRS is not the grid's)."""
 
 from __future__ import annotations
 
@@ -11,14 +14,11 @@ from typing import Any
 import numpy as np
 import pyproj
 
-from ..core.outputs import check_input_file
 from ..core.types import GridSpec, SoilVolumeError
-from .crs import has_vertical, horizontal, parse_crs, raster_wkt, z_unit
+from .crs import WorkFrame, has_vertical, horizontal, parse_crs, raster_wkt
+from .heights import HeightRaster, metres_per_unit, open_heights, read_heights, window_over
 
 SUFFIXES = (".tif", ".tiff")  # a first input with one of these is a surface, not a point cloud
-FEET = {"ft": 0.3048, "foot": 0.3048, "feet": 0.3048, "us survey foot": 0.3048006096, "us-ft": 0.3048006096}
-FEET |= {"ftus": 0.3048006096, "us_survey_foot": 0.3048006096}
-METRES = {"", "m", "metre", "meter", "metres", "meters"}
 
 
 def is_surface(path: str | Path | None) -> bool:
@@ -27,14 +27,32 @@ def is_surface(path: str | Path | None) -> bool:
 
 
 @dataclass(frozen=True)
+class SurfaceSource:
+    """A reference surface opened and checked: its CRS and heights' unit; no height read yet."""
+
+    raster: HeightRaster
+    crs: pyproj.CRS  # the raster's CRS (or --before-crs), possibly with a vertical part
+    factor: float  # metres per stored height unit (after the band's scale and offset)
+    vertical_unit: str  # where the heights' unit came from, in words
+
+    @property
+    def path(self) -> str:
+        return self.raster.path
+
+
+@dataclass(frozen=True)
 class Surface:
-    """A reference surface: heights in metres (NaN where it has none) on its own raster grid."""
+    """A reference surface: heights in metres (NaN where it has none) over the window of its
+    raster that covers the survey."""
 
     path: str
-    heights: np.ndarray  # (rows, cols) float64, metres
-    transform: Any  # affine.Affine of the raster, in its CRS's units
+    heights: np.ndarray  # (rows, cols) float64, metres, of the window read
+    transform: Any  # affine.Affine of the window, in the raster's CRS's units
     crs: pyproj.CRS  # the raster's CRS (or --before-crs), possibly with a vertical part
     vertical_unit: str  # where the heights' unit came from, in words
+    raster: HeightRaster  # what the whole raster declares
+    window: tuple[int, int, int, int]  # (col_off, row_off, cols, rows) read
+    masked: tuple[dict, ...] = ()  # values taken as nodata though not declared (heights.Heights.masked)
 
     @property
     def resolution_m(self) -> float:
@@ -44,49 +62,63 @@ class Surface:
         return float(np.hypot(self.transform.a, self.transform.d)) * xy_unit(self.crs)
 
     def describe(self) -> dict:
-        """report.json's description of the reference (``inputs.before`` and ``reference``)."""
-        rows, cols = self.heights.shape
+        """report.json's description of the reference (``inputs.before`` and ``reference``): the
+        whole raster's rows and cols, the window read over the survey, its valid cells."""
         return {
             "kind": "surface",
             "path": self.path,
             "crs": self.crs.name,
             "crs_wkt": self.crs.to_wkt(),
-            "rows": rows,
-            "cols": cols,
+            "rows": self.raster.height,
+            "cols": self.raster.width,
+            "window": dict(zip(("col_off", "row_off", "cols", "rows"), self.window, strict=True)),
             "resolution_m": self.resolution_m,
             "valid_cells": int(np.isfinite(self.heights).sum()),
             "vertical_unit": self.vertical_unit,
+            **self.raster.describe(),
+            "masked_as_nodata": list(self.masked),
         }
 
 
-def read_surface(path: Path, crs_override: str | None) -> Surface:
-    """Read and check a reference DEM: one band, a CRS (its own, or ``--before-crs`` for a raster
-    without one; a contradicting one is refused), heights in metres (the vertical CRS's unit, or
-    the band's declared unit)."""
-    import rasterio
-
-    check_input_file(path)
-    try:
-        with rasterio.open(path) as ds:
-            if ds.count != 1:
-                raise SoilVolumeError(
-                    f"{path}: the reference surface must be a single-band DEM; this raster has {ds.count} bands"
-                )
-            band = ds.read(1, masked=True).astype("float64").filled(np.nan)
-            unit, transform, header = (ds.units[0] or "").strip().lower(), ds.transform, ds.crs
-    except rasterio.errors.RasterioIOError as exc:
-        raise SoilVolumeError(f"{path}: not a readable raster ({' '.join(str(exc).split())[:200]})") from exc
-    crs = _crs(path, header, crs_override)
-    factor, where = _vertical(crs, unit, path)
-    heights = band * factor
-    if not np.isfinite(heights).any():
-        raise SoilVolumeError(f"{path}: the raster has no valid height (every cell is nodata)")
-    return Surface(str(path), heights, transform, crs, where)
+def open_surface(path: Path, crs_override: str | None) -> SurfaceSource:
+    """Open and check a reference DEM: one band, a CRS (its own, or ``--before-crs`` for a raster
+    without one; a contradicting one is refused), heights' unit (the vertical CRS's, or the
+    band's declared unit)."""
+    raster = open_heights(path)
+    crs = _crs(path, raster.crs, crs_override)
+    factor, where = metres_per_unit(crs, raster.unit, str(path))
+    return SurfaceSource(raster, crs, factor, where)
 
 
-def _crs(path: Path, header, override: str | None) -> pyproj.CRS:
+def read_over(source: SurfaceSource, lo: np.ndarray, hi: np.ndarray, frame: WorkFrame, margin_m: float) -> Surface:
+    """The surface's heights over the box ``lo``..``hi`` (absolute x/y in ``frame``, metres) and
+    ``margin_m`` around it, plus two of its pixels for the resampling's kernel."""
+    lo, hi = (
+        (np.asarray(lo[:2], float) - margin_m) / frame.xy_unit,
+        (np.asarray(hi[:2], float) + margin_m) / frame.xy_unit,
+    )
+    window = window_over(source.raster, source.crs, lo, hi, frame.crs, pad=2)
+    if window is None:
+        raise SoilVolumeError(
+            f"{source.path} does not overlap the survey: its extent misses the survey's (check the CRSs)"
+        )
+    got = read_heights(source.raster, source.factor, window)
+    if not np.isfinite(got.z).any():
+        raise SoilVolumeError(f"{source.path} does not overlap the survey: every cell of it over the survey is nodata")
+    return Surface(
+        source.path,
+        got.z,
+        got.transform,
+        source.crs,
+        source.vertical_unit,
+        source.raster,
+        got.window,
+        tuple(got.masked),
+    )
+
+
+def _crs(path: Path, own: pyproj.CRS | None, override: str | None) -> pyproj.CRS:
     given = parse_crs(override, "{opt:before_crs}")
-    own = None if header is None else pyproj.CRS.from_user_input(header.to_wkt())
     if own is None and given is None:
         raise SoilVolumeError(f"{path}: the raster has no CRS; give {{opt:before_crs}} (e.g. EPSG:32654)")
     if own is not None and given is not None and not horizontal(own).equals(horizontal(given), ignore_axis_order=True):
@@ -97,17 +129,6 @@ def _crs(path: Path, header, override: str | None) -> pyproj.CRS:
     if given is not None and (own is None or has_vertical(given)):
         return given
     return own
-
-
-def _vertical(crs: pyproj.CRS, unit: str, path: Path) -> tuple[float, str]:
-    """(metres per height unit, where that came from): a vertical CRS's axis, else the band's unit."""
-    if crs.is_compound or len(crs.axis_info) == 3:
-        return z_unit(crs), f"the vertical CRS ({z_unit(crs):g} m per unit)"
-    if unit in FEET:
-        return FEET[unit], f"the band's unit ({unit})"
-    if unit in METRES:
-        return 1.0, "metres" if not unit else f"the band's unit ({unit})"
-    raise SoilVolumeError(f"{path}: heights in '{unit}' are not understood (expected metres or feet)")
 
 
 def on_grid(surface: Surface, grid: GridSpec, method: str = "bilinear") -> np.ndarray:

@@ -18,8 +18,9 @@ from ..core.outputs import OutputDir
 from ..core.record import Georeferencing
 from ..core.types import GridSpec, SoilVolumeError, StageQuality
 from ..dem import grid as gridmod
+from ..inputs.heights import masked_notes
 from ..inputs.prepare import Prepared
-from ..inputs.surface import Surface, on_grid, read_surface, valid_box
+from ..inputs.surface import Surface, SurfaceSource, on_grid, open_surface, read_over, valid_box
 from ..options import Options
 from ..reporting.surface import NONE
 from ..volumes import reference
@@ -49,6 +50,7 @@ class SurfaceReference:
 
     def __init__(self) -> None:
         self.surface: Surface | None = None
+        self.cell = 0.0
         self.sigma: np.ndarray | None = None
 
     @contextmanager
@@ -56,18 +58,21 @@ class SurfaceReference:
         yield self
 
     def prepare(self, run) -> None:
-        """The surface read and checked (before any point), then the survey alone; nothing registered."""
+        """The surface opened and checked (before any point), then the survey alone, then the
+        surface's heights over the survey's box; nothing registered."""
         from ..inputs.prepare import prepare_survey
         from ..inputs.stream import open_source
         from ..registration.register import Registration
 
         design, after = run.epochs
-        self.surface = read_surface(Path(design.path), run.options.before_crs)
+        source = open_surface(Path(design.path), run.options.before_crs)
         run.options = _options(run.options, run.hooks)
         check = run.hooks.ticker(*run.spans["prepare"], "reading")
         prep = prepare_survey(open_source(after.path, after.pipeline), run.options, check=check)
         run.timer.s["read"] = prep.read_s
         run.timer.s["crop"] = run.timer.s.get("crop", 0.0) - prep.read_s
+        self.cell = survey_cell(prep, run.options)
+        self.surface = _read_surface(source, prep, self.cell, run.hooks)
         run.prep = replace(prep, inputs={"before": self.surface.describe(), **prep.inputs})
         stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)
         georef = Georeferencing(run.options.georeferencing, "none", "the reference is a surface")
@@ -78,7 +83,7 @@ class SurfaceReference:
         """The survey's grid clipped to the surface, its DEM, and the surface resampled onto it."""
         prep = run.prep
         run.after_thin = prep.after_thin
-        grid = run.grid = survey_grid(prep, self.surface, run.options)
+        grid = run.grid = survey_grid(prep, self.surface, self.cell)
         dem_a = gridmod.epoch_dem(prep.after.xyz, grid, run.options.statistic, prep.after.nonsoil)
         dem_s, self.sigma = surface_epoch(self.surface, grid, run.options.design_uncertainty)
         _check_overlap(dem_a, dem_s, self.surface.path, prep.after.path)
@@ -120,16 +125,30 @@ def _options(options: Options, hooks: Hooks) -> Options:
     return options.with_(keep_registered_cloud=False)
 
 
-def survey_grid(prep: Prepared, surface: Surface, options: Options) -> GridSpec:
-    """The grid over the survey's footprint clipped to the surface's valid extent; the cell size
-    from the survey's density unless ``--cell`` is given."""
+def survey_cell(prep: Prepared, options: Options) -> float:
+    """The grid's cell: ``--cell``, else from the survey's density."""
     from ..inputs.footprint import footprint
+
+    if options.cell is not None and options.cell > 0:
+        return options.cell
+    return gridmod.cell_for(prep.after.xyz, footprint(prep.after_thin[:, :2]))
+
+
+def _read_surface(source: SurfaceSource, prep: Prepared, cell: float, hooks: Hooks) -> Surface:
+    """The surface's heights over the survey's box and two cells around it (the grid's edges
+    and the resampling's kernel): a design far larger than the site costs only the site's window."""
+    thin, origin = prep.after_thin[:, :2], prep.origin[:2]
+    surface = read_over(source, thin.min(axis=0) + origin, thin.max(axis=0) + origin, prep.frame, 2 * cell)
+    for note in masked_notes(source.path, surface.masked):
+        hooks.info(note)
+    return surface
+
+
+def survey_grid(prep: Prepared, surface: Surface, cell: float) -> GridSpec:
+    """The grid of ``cell`` over the survey's footprint clipped to the surface's valid extent."""
     from ..validate import check_grid_cells
 
     thin, origin = prep.after_thin, prep.origin
-    cell = options.cell
-    if cell is None or cell <= 0:
-        cell = gridmod.cell_for(prep.after.xyz, footprint(thin[:, :2]))
     box_lo, box_hi = valid_box(surface, prep.frame.crs, prep.frame.xy_unit)
     lo = np.maximum(thin[:, :2].min(axis=0), box_lo - origin[:2])
     hi = np.minimum(thin[:, :2].max(axis=0), box_hi - origin[:2])
