@@ -1,44 +1,82 @@
-"""Volume between two DEM rasters a user already has (optionally per polygon zone)."""
+"""Volume between two DEM rasters a user already has (optionally per polygon zone): each read
+in metres through :mod:`soilvolume.inputs.heights` (scale, offset, nodata, unit), the after DEM
+over the before's extent only and resampled onto its grid when the grids differ."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyproj
 
 from ..core.hooks import Hooks
-from ..core.outputs import check_input_file, check_output_file, os_errors
+from ..core.outputs import check_output_file, os_errors
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import write_geotiff
-from ..inputs.crs import parse_crs, xy_unit
+from ..inputs.crs import horizontal, parse_crs, xy_unit
+from ..inputs.heights import (
+    HeightRaster,
+    Heights,
+    masked_notes,
+    metres_per_unit,
+    open_heights,
+    read_heights,
+    window_over,
+)
 from ..volumes.difference import budget
 
 NO_CORRECTION = (
     "volume from the DEM difference as it is: no registration, no vertical bias correction and no "
     "uncertainty (for two point clouds, the estimate command does all three)"
 )
-FEET = {"ft", "foot", "feet", "us survey foot", "us-ft", "ftus", "us_survey_foot"}
 
 
-def read_dem(path: Path) -> tuple[np.ndarray, Any]:
-    """(heights in metres with NaN for nodata, the open profile) of a single-band DEM."""
-    import rasterio
+@dataclass(frozen=True)
+class Dem:
+    """A DEM opened and checked (:mod:`soilvolume.inputs.heights`): its CRS and heights' unit."""
 
-    check_input_file(path)
-    try:
-        with rasterio.open(path) as ds:
-            band = ds.read(1, masked=True).astype("float64")
-            unit = (ds.units[0] or "").strip().lower()
-            profile = ds.profile
-    except rasterio.errors.RasterioIOError as exc:
-        raise SoilVolumeError(f"{path}: not a readable raster ({exc})") from exc
-    if profile.get("crs") is None:
+    raster: HeightRaster
+    crs: pyproj.CRS
+    factor: float  # metres per stored unit (after the band's scale and offset)
+    where: str  # where the unit came from, in words
+
+    def profile(self, heights: Heights) -> dict:
+        """The grid of ``heights`` (a window of the DEM) for GDAL's warp and :func:`grid_of`."""
+        rows, cols = heights.z.shape
+        return {"transform": heights.transform, "crs": self.crs, "height": rows, "width": cols}
+
+    def describe(self, heights: Heights) -> dict:
+        return {
+            "path": self.raster.path,
+            "vertical_unit": self.where,
+            **self.raster.describe(),
+            "masked_as_nodata": heights.masked,
+        }
+
+
+def open_dem(path: Path) -> Dem:
+    """A DEM opened, its CRS (required) and heights' unit checked; no pixel read."""
+    raster = open_heights(path)
+    if raster.crs is None:
         raise SoilVolumeError(f"{path}: the raster has no CRS")
-    z = band.filled(np.nan)
-    if unit in FEET:
-        z *= 0.3048006096 if "us" in unit else 0.3048
-    return z, profile
+    return Dem(raster, raster.crs, *metres_per_unit(raster.crs, raster.unit, str(path)))
+
+
+def after_on_before(after: Dem, before: Dem, grid: dict) -> tuple[np.ndarray, Heights]:
+    """The after DEM's heights on the before's grid ``grid``: read over the before's extent only
+    (two of its cells around), resampled bilinearly."""
+    t, w, h = grid["transform"], grid["width"], grid["height"]
+    pad = 2.0
+    xs, ys = zip(*(t @ (c, r) for c in (-pad, w + pad) for r in (-pad, h + pad)), strict=True)
+    window = window_over(
+        after.raster, after.crs, np.array([min(xs), min(ys)]), np.array([max(xs), max(ys)]), before.crs
+    )
+    if window is None:
+        raise SoilVolumeError(f"{before.raster.path} and {after.raster.path} do not overlap")
+    got = read_heights(after.raster, after.factor, window)
+    return resample_onto(got.z, after.profile(got), grid), got
 
 
 def grid_of(profile: dict) -> GridSpec:
@@ -52,7 +90,8 @@ def grid_of(profile: dict) -> GridSpec:
 
 
 def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
-    """``z`` (grid ``src``) resampled bilinearly onto the grid ``dst``."""
+    """``z`` (grid ``src``) resampled bilinearly onto the grid ``dst`` (horizontal CRSs)."""
+    from rasterio.crs import CRS
     from rasterio.warp import Resampling, reproject
 
     out = np.full((dst["height"], dst["width"]), np.nan)
@@ -60,10 +99,10 @@ def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
         z,
         out,
         src_transform=src["transform"],
-        src_crs=src["crs"],
+        src_crs=CRS.from_wkt(horizontal(src["crs"]).to_2d().to_wkt()),
         src_nodata=np.nan,
         dst_transform=dst["transform"],
-        dst_crs=dst["crs"],
+        dst_crs=CRS.from_wkt(horizontal(dst["crs"]).to_2d().to_wkt()),
         dst_nodata=np.nan,
         resampling=Resampling.bilinear,
     )
@@ -76,17 +115,19 @@ def run_volume_from_rasters(
     """See :func:`soilvolume.api.volume_from_rasters`."""
     out = check_output_file(out, [before, after, zones])
     hooks.step(5, f"reading {before.name} and {after.name}")
-    zb, pb = read_dem(before)
-    za, pa = read_dem(after)
-    same = (
-        pa["transform"] == pb["transform"]
-        and (pa["height"], pa["width"]) == (pb["height"], pb["width"])
-        and pa["crs"] == pb["crs"]
-    )
-    if not same:
+    db, da = open_dem(before), open_dem(after)
+    hb = read_heights(db.raster, db.factor)  # the whole before DEM: the difference's grid
+    pb = db.profile(hb)
+    rb, ra = db.raster, da.raster
+    if (ra.transform, ra.width, ra.height) == (rb.transform, rb.width, rb.height) and da.crs.equals(db.crs):
+        ha = read_heights(ra, da.factor)
+        za = ha.z
+    else:
         hooks.info(f"resampling {after.name} onto the grid of {before.name}")
-        za = resample_onto(za, pa, pb)
-    grid = grid_of(pb)
+        za, ha = after_on_before(da, db, pb)
+    for note in masked_notes(rb.path, hb.masked) + masked_notes(ra.path, ha.masked):
+        hooks.info(note)
+    grid, zb = grid_of(pb), hb.z
     diff = za - zb
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
@@ -104,6 +145,7 @@ def run_volume_from_rasters(
         "crs": parse_crs(grid.crs_wkt, "raster").name,
         "median_difference_m": median,
         "method": NO_CORRECTION,
+        "inputs": {"before": db.describe(hb), "after": da.describe(ha)},
     }
     if zones:  # before writing: a bad zones file leaves nothing behind
         from ..volumes.zones import zone_budgets
