@@ -184,3 +184,22 @@ def test_paper_config():
     assert SceneConfig.paper(holes=0).holes == 0
     big = cfg.with_total_points(1_000_000)
     assert big.before_points + big.after_points == 1_000_000
+
+
+def test_declared_vertical_datum_is_written(tmp_path):
+    """SceneConfig.vertical_datum: the files declare a compound CRS (UTM 54N + NAVD88 height),
+    whatever GPS error they carry; without it, the horizontal CRS alone (as before)."""
+    import laspy
+
+    from soilvolume.registration.georef import vertical_datum
+
+    cfg = SceneConfig.declared_datum(before_points=3000, after_points=2000)
+    assert cfg.vertical_datum == "EPSG:5703" and cfg.shift_m != (0.0, 0.0, 0.0)
+    before, after, truth = write_pair(make_pair(3, cfg), tmp_path / "datum")
+    for path in (before, after):
+        crs = laspy.read(path).header.parse_crs()
+        assert crs.is_compound and vertical_datum(crs.to_wkt()) == "NAVD88 height"
+        assert crs.sub_crs_list[0].to_epsg() == 32654
+    assert json.loads(truth.read_text())["config"]["vertical_datum"] == "EPSG:5703"
+    plain = write_pair(make_pair(3, SceneConfig.small(before_points=3000, after_points=2000)), tmp_path / "plain")
+    assert laspy.read(plain[1]).header.parse_crs().to_epsg() == 32654

@@ -10,6 +10,14 @@ CLASS_BOULDER = 1
 CLASS_OUTLIER = 1
 
 
+#: GPS errors of pairs whose files declare a vertical datum (:meth:`SceneConfig.declared_datum`):
+#: (shift m, roll/pitch/yaw deg), 2-5 m and 1-3 degrees
+DATUM_GPS_ERRORS = (
+    ((2.4, -1.6, 0.2), (0.2, -0.3, 1.3)),
+    ((-3.3, 3.1, -0.05), (-0.1, 0.1, -2.7)),
+)
+
+
 @dataclass(frozen=True)
 class SceneConfig:
     """Parameters of a synthetic pair (lengths in metres, angles in degrees)."""
@@ -33,6 +41,9 @@ class SceneConfig:
     # excavation over `change_fraction` of the after footprint plus a tall pile near one edge)
     change: str = "piles"
     crs: str = "EPSG:32654"
+    # a vertical CRS the files also declare (a compound CRS, e.g. "EPSG:5703" NAVD88 height): a
+    # declared datum says nothing of the GPS error above, which the surveys still carry
+    vertical_datum: str | None = None
     origin: tuple[float, float, float] = (500_000.0, 3_900_000.0, 0.0)  # added to local coords
     # change="excavation": fraction of the after footprint the excavation's outline covers
     change_fraction: float = 0.4
@@ -72,9 +83,27 @@ class SceneConfig:
         return replace(base, **overrides)
 
     @classmethod
+    def declared_datum(cls, error: int = 0, **overrides) -> SceneConfig:
+        """Files that declare a vertical datum (a compound CRS: UTM 54N + NAVD88 height) yet carry
+        the GPS error ``DATUM_GPS_ERRORS[error]``, on smooth terrain (relief 0.3), where the after
+        survey's margin lies within 0.4 m of the before surface as surveyed although it is metres off."""
+        shift, deg = DATUM_GPS_ERRORS[error]
+        return replace(cls(shift_m=shift, rotation_deg=deg, relief=0.3, vertical_datum="EPSG:5703"), **overrides)
+
+    @classmethod
     def small(cls, **overrides) -> SceneConfig:
         """Same geometry as the default, ~60 k + 40 k points, for fast tests."""
         return replace(cls(before_points=60_000, after_points=40_000), **overrides)
+
+    def declared_crs(self):
+        """The CRS the files declare (a pyproj CRS): ``crs``, compound with ``vertical_datum``."""
+        import pyproj
+
+        crs = pyproj.CRS.from_user_input(self.crs)
+        if self.vertical_datum is None:
+            return crs
+        vertical = pyproj.CRS.from_user_input(self.vertical_datum)
+        return pyproj.crs.CompoundCRS(f"{crs.name} + {vertical.name}", [crs, vertical])
 
     def with_total_points(self, total: int) -> SceneConfig:
         """A copy with ``total`` points split between the epochs in the current ratio."""

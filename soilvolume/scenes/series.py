@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,15 @@ GPS_ERRORS = (
     ((1.1, 1.7, 0.25), (0.15, 0.3, 1.2)),
 )
 CONFIG = SceneConfig(before_size=(130.0, 125.0), after_size=(67.0, 63.0), change="none")
+#: a site whose files declare a vertical datum (NAVD88 height) yet carry 2-5 m and 1-3 degrees of
+#: GPS error: smooth terrain, where the margin of a later survey agrees with E0's surface as
+#: surveyed although it lies metres off (:func:`write_series` with ``datum=True``, three epochs)
+DATUM_CONFIG = replace(CONFIG, relief=0.3, vertical_datum="EPSG:5703")
+DATUM_ERRORS = (
+    ((-1.2, 0.8, 0.05), (0.05, -0.05, -0.8)),
+    ((2.4, -1.9, 0.1), (0.2, -0.15, 1.6)),
+    ((-2.1, 2.6, -0.1), (-0.15, 0.2, -2.2)),
+)
 PILE_SLOPE = 0.6  # the pile's side slope (height per metre of run)
 
 
@@ -69,10 +79,10 @@ def _rotation(deg) -> np.ndarray:
     return rz @ ry @ rx
 
 
-def misalignment(k: int, centre_abs: np.ndarray) -> np.ndarray:
-    """Epoch ``k``'s GPS error as a 4x4 on absolute coordinates: true -> surveyed,
+def misalignment(k: int, centre_abs: np.ndarray, errors=GPS_ERRORS) -> np.ndarray:
+    """Epoch ``k``'s GPS error (``errors[k]``) as a 4x4 on absolute coordinates: true -> surveyed,
     ``p_s = R (p - c) + c + t``."""
-    shift, deg = GPS_ERRORS[k]
+    shift, deg = errors[k]
     m = np.eye(4)
     m[:3, :3] = _rotation(deg)
     m[:3, 3] = centre_abs + np.asarray(shift) - m[:3, :3] @ centre_abs
@@ -83,36 +93,40 @@ def _points(world, box, n: int, feats: dict, rng) -> np.ndarray:
     x = rng.uniform(box[0], box[2], n)
     y = rng.uniform(box[1], box[3], n)
     z = world.terrain(x, y) + features_dz(x, y, list(feats.values()))
-    return np.column_stack([x, y, z + rng.normal(0.0, CONFIG.noise_m, n)])
+    return np.column_stack([x, y, z + rng.normal(0.0, world.cfg.noise_m, n)])
 
 
-def write_series(directory, seed: int = 0, density: tuple[float, float] = (6.0, 10.0)) -> tuple[list[Path], dict]:
+def write_series(
+    directory, seed: int = 0, density: tuple[float, float] = (6.0, 10.0), datum: bool = False
+) -> tuple[list[Path], dict]:
     """Write ``epoch0.las`` .. ``epoch3.las`` (class 2, the CRS, the survey date in the header)
     and ``truth.json`` into ``directory``: (paths, truth). ``density``: points per m2 of E0 (the
-    wide reference) and of the later surveys (the works' footprint)."""
+    wide reference) and of the later surveys (the works' footprint). ``datum``: the three-epoch
+    site of :data:`DATUM_CONFIG` and :data:`DATUM_ERRORS` (E0 to E2) instead."""
     import laspy
 
     from .synthetic import _las_header
     from .world import _World
 
-    world = _World(seed, CONFIG)
-    ax0, ay0, ax1, ay1 = _after_box(CONFIG)
+    config, errors = (DATUM_CONFIG, DATUM_ERRORS) if datum else (CONFIG, GPS_ERRORS)
+    world = _World(seed, config)
+    ax0, ay0, ax1, ay1 = _after_box(config)
     cx, cy = (ax0 + ax1) / 2.0, (ay0 + ay1) / 2.0
-    origin = np.asarray(CONFIG.origin, dtype=np.float64)
+    origin = np.asarray(config.origin, dtype=np.float64)
     centre = np.array([cx, cy, float(world.terrain(np.array([cx]), np.array([cy]))[0])]) + origin
-    feats = epoch_features(cx, cy)
+    feats = epoch_features(cx, cy)[: len(errors)]
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     paths, epochs = [], []
-    m0 = misalignment(0, centre)
+    m0 = misalignment(0, centre, errors)
     for k, fk in enumerate(feats):
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), 21, k]))
-        box = (0.0, 0.0, *CONFIG.before_size) if k == 0 else (ax0, ay0, ax1, ay1)
+        box = (0.0, 0.0, *config.before_size) if k == 0 else (ax0, ay0, ax1, ay1)
         n = int(density[0 if k == 0 else 1] * (box[2] - box[0]) * (box[3] - box[1]))
         xyz = _points(world, box, n, fk, rng) + origin
-        mk = misalignment(k, centre)
+        mk = misalignment(k, centre, errors)
         xyz = xyz @ mk[:3, :3].T + mk[:3, 3]
-        header = _las_header(CONFIG, 0.001)
+        header = _las_header(config, 0.001)
         header.creation_date = dt.date.fromisoformat(DATES[k])
         las = laspy.LasData(header)
         las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]

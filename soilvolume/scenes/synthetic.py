@@ -102,7 +102,7 @@ def _config_dict(cfg: SceneConfig) -> dict:
 
 
 NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch_change", "crops")
-NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow")
+NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow", "vertical_datum")
 
 
 def _objects(world: _World) -> list[dict]:
@@ -203,7 +203,6 @@ def make_pair(seed: int = 0, config: SceneConfig | None = None) -> Scene:
 
 def _las_header(config: SceneConfig, scale: float):
     import laspy
-    import pyproj
 
     header = laspy.LasHeader(point_format=7 if config.signals == "rgb" else 6, version="1.4")
     o = config.origin
@@ -211,7 +210,7 @@ def _las_header(config: SceneConfig, scale: float):
         [math.floor(o[0] / 1000.0) * 1000.0, math.floor(o[1] / 1000.0) * 1000.0, math.floor(o[2])]
     )
     header.scales = np.array([scale, scale, scale])
-    header.add_crs(pyproj.CRS.from_user_input(config.crs))
+    header.add_crs(config.declared_crs())
     header.generating_software = "soilvolume.synthetic"
     return header
 
