@@ -88,7 +88,7 @@ class Options:
     )
     georeferencing: str = _opt(
         "auto",
-        "how far the surveys' georeferencing is trusted: auto (precise when both files declare the same vertical datum and already agree at the margin of the after survey, else gps), gps (GPS-tagged UAV surveys: registered within the prior below), precise (LiDAR, RTK/PPK or ground control: coordinates used as they are, no registration and no bias correction)",
+        "how far the surveys' georeferencing is trusted: auto (gps, unless both files declare the same vertical datum and the registration confirms their coordinates: its pose within its own resolution of them, then precise; a declared datum alone proves nothing), gps (GPS-tagged UAV surveys: registered within the prior below), precise (LiDAR, RTK/PPK or ground control: coordinates used as they are, no registration and no bias correction)",
         ("auto", "gps", "precise"),
         label="Georeferencing of the surveys",
         commands=REGISTER,

@@ -143,3 +143,17 @@ def test_autzen_registered_anyway_is_flagged(real_dir, tmp_path):
     quality = json.loads((out / "report.json").read_text())["quality"]
     assert quality["verdict"] != "reliable"
     assert any("georeferencing prior" in m for m in quality["messages"])
+
+
+def test_autzen_registration_cannot_confirm_its_coordinates(autzen):
+    """auto registers the pair before it trusts the declared NAVD88: the small crop of works pulls
+    the registration's poses apart (4.3 deg between them, one beyond the prior), so it can neither
+    confirm nor refute the coordinates; they are kept (the net as before: +424 m3) and the verdict
+    says the registration could not confirm them."""
+    report, _ = autzen
+    georeferencing = report["registration"]["georeferencing"]
+    assert georeferencing["used"] == "precise" and georeferencing["check"]["outcome"] == "inconclusive"
+    assert georeferencing["check"]["poses_beyond_prior"] >= 1
+    quality = report["quality"]
+    assert quality["verdict"] == "use with caution"
+    assert any("could not confirm the files' coordinates" in m for m in quality["messages"])

@@ -14,11 +14,14 @@ from .types import GridSpec
 
 @dataclass(frozen=True)
 class Georeferencing:
-    """How far the surveys' georeferencing was trusted (``registration/georef.resolve``)."""
+    """How far the surveys' georeferencing was trusted (``registration/georef``: declared, confirm)."""
 
     requested: str  # --georeferencing: auto, gps or precise
     used: str  # gps (registered within the prior) or precise (coordinates used as they are)
     reason: str
+    # auto with a declared vertical datum: what the registration said of the coordinates (outcome
+    # confirmed / refuted / inconclusive, the pose's move, the tolerances; registration/georef)
+    check: dict | None = None
 
     def as_dict(self) -> dict[str, str]:
         return asdict(self)

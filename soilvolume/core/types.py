@@ -114,6 +114,7 @@ class StageQuality:
     note: str = ""
     alternative: np.ndarray | None = None  # a nearly as good pose (its spread from ``transform`` is uncertainty)
     beyond_prior: int = 0  # poses that fitted but lay beyond the georeferencing prior, rejected
+    poses: tuple = ()  # every pose the fine stage refined to (4x4s, those beyond the prior too): its own spread
 
 
 @dataclass(frozen=True)

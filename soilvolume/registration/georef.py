@@ -1,6 +1,28 @@
 """How far the surveys' georeferencing is trusted: ``gps`` (register within the prior),
-``precise`` (use the coordinates as they are), or ``auto`` (precise when both files declare the
-same vertical datum and already agree at the margin of the after survey, else gps)."""
+``precise`` (use the coordinates as they are), or ``auto``: gps unless both files declare the
+same vertical datum; when they do, the registration decides (:func:`confirm`). A declared datum
+is no proof of precise coordinates: GPS-tagged surveys carry metres and degrees of error in any
+CRS, and on smooth terrain their margin still lies close to the before surface as surveyed.
+
+:func:`confirm` keeps the file coordinates only when the pose the registration found stays
+within its own resolution of them, at the after survey's centre:
+
+* horizontally, one side of the finest columns it matches surfaces on
+  (:func:`~soilvolume.registration.register.finest_column`: at least the before cloud's point
+  spacing): it cannot place the after survey more finely than that;
+* turned by no more than the angle that moves the survey's farthest point by that much;
+* vertically, :data:`GROUND_AGREES` (the level at which a precise run's report says the ground
+  outside the works disagrees, :mod:`soilvolume.volumes.quality`): precise runs correct no bias;
+* tilted by no more than the angle that lifts the survey's farthest point by that much.
+
+The registration's precision on the pair is the spread of its own poses (the margin fit and the
+stable-ground refinements, those beyond the prior too). When they agree within the same bounds
+and none wanted more than the prior allows, it is consistent: a pose within the bounds confirms
+the coordinates (precise), one beyond refutes them (gps, the registered pose). When its poses
+disagree (works covering the survey pull them apart), it can neither confirm nor refute them:
+they are kept when the after survey's margin agrees with the before surface as surveyed
+(:data:`AGREE_FITNESS`), the report saying the registration could not confirm them (a caution in
+the verdict), else registered."""
 
 from __future__ import annotations
 
@@ -8,8 +30,12 @@ import numpy as np
 import pyproj
 
 from ..core.wording import opt
+from .rigid import rotation_deg, tilt_deg
 
 AGREE_FITNESS = 0.6  # share of the margin within 0.4 m of the before surface at the given pose
+GROUND_AGREES = 0.05  # m: a vertical move the surveys' ground is said to agree within
+CONFIRMED, REFUTED, INCONCLUSIVE = "confirmed", "refuted", "inconclusive"
+KEYS = ("rotation_deg", "tilt_deg", "horizontal_m", "vertical_m")  # how a pose departs from another
 
 
 def vertical_datum(wkt: str | None) -> str | None:
@@ -25,26 +51,115 @@ def vertical_datum(wkt: str | None) -> str | None:
     return None
 
 
-def resolve(mode: str, inputs: dict, after_xyz: np.ndarray, before_xyz: np.ndarray) -> tuple[str, str]:
-    """(``gps`` or ``precise``, the reason in plain words) for the run."""
+def declared(mode: str, inputs: dict) -> tuple[str, str] | None:
+    """(``gps`` or ``precise``, the reason) when decided before registering: the explicit modes,
+    and auto when the files do not both declare one vertical datum; None when the registration
+    must decide (:func:`confirm`)."""
     if mode != "auto":
         return mode, opt("georeferencing", mode)
     vb = vertical_datum(inputs["before"].get("crs_wkt"))
     va = vertical_datum(inputs["after"].get("crs_wkt"))
     if vb is None or vb != va:
         return "gps", "the files do not both declare the same vertical datum: registered within the GPS prior"
-    from .ground import margin_points, spacing
-    from .register import evaluate_surface
+    return None
+
+
+def move_at(t: np.ndarray, centre: np.ndarray) -> dict[str, float]:
+    """How a 4x4 departs from the identity (:data:`KEYS`): its rotation and tilt (deg) and its
+    horizontal and vertical move of ``centre`` (m)."""
+    d = t[:3, :3] @ centre + t[:3, 3] - centre
+    return dict(zip(KEYS, (rotation_deg(t), tilt_deg(t), float(np.hypot(d[0], d[1])), float(abs(d[2]))), strict=True))
+
+
+def spread(reg, centre: np.ndarray) -> dict[str, float]:
+    """The largest departures (:data:`KEYS`) between the accepted pose and the other poses the
+    fine stage refined to: the registration's own precision on this pair."""
+    inv = np.linalg.inv(reg.transform)
+    moved = reg.transform[:3, :3] @ centre + reg.transform[:3, 3]
+    out = dict.fromkeys(KEYS, 0.0)
+    for p in reg.fine.poses:
+        d = move_at(p @ inv, moved)
+        out = {k: max(out[k], d[k]) for k in KEYS}
+    return out
+
+
+def tolerances(reg, after_xyz: np.ndarray, gap: float) -> dict:
+    """The bounds within which the registration cannot tell a pose from the file coordinates
+    (see module), by :data:`KEYS`, and its poses' ``spread``."""
+    from .register import finest_column
+
+    centre = after_xyz.mean(axis=0)
+    radius = float(np.hypot(*(after_xyz[:, :2] - centre[:2]).T).max(initial=1.0))
+    column = finest_column(after_xyz, gap)
+    turn, lift = (float(np.degrees(np.arctan(x / radius))) for x in (column, GROUND_AGREES))
+    bounds = dict(zip(KEYS, (turn, lift, column, GROUND_AGREES), strict=True))
+    return {**bounds, "spread": spread(reg, centre), "column_m": column, "radius_m": radius}
+
+
+def outcome(reg, after_xyz: np.ndarray, gap: float, fine: str) -> dict:
+    """What the registration says of the file coordinates: ``inconclusive`` when it is not
+    consistent, else ``confirmed`` (its pose within the tolerances of them) or ``refuted``; with
+    the figures (the pose's move, the tolerances, its poses' spread, those beyond the prior)."""
+    tol = tolerances(reg, after_xyz, gap)
+    move = move_at(reg.transform, after_xyz.mean(axis=0))
+    within = all(move[k] <= tol[k] for k in KEYS)
+    agree = all(tol["spread"][k] <= tol[k] for k in KEYS)
+    consistent = fine != "none" and reg.fine.beyond_prior == 0 and agree
+    said = (CONFIRMED if within else REFUTED) if consistent else INCONCLUSIVE
+    return {"outcome": said, "move": move, "tolerance": tol, "poses_beyond_prior": reg.fine.beyond_prior}
+
+
+def disagreement(check: dict) -> str:
+    """How far an inconsistent registration's poses lie apart, in words."""
+    d = check["tolerance"]["spread"]
+    return (
+        f"its poses differ by up to {d['rotation_deg']:.2f}°, {d['horizontal_m']:.2f} m across and "
+        f"{d['vertical_m']:.2f} m up or down; {check['poses_beyond_prior']} beyond the georeferencing prior"
+    )
+
+
+def _figures(check: dict) -> str:
+    m, t = check["move"], check["tolerance"]
+    return (
+        f"the registration moved the after survey's centre {m['horizontal_m']:.2f} m across and "
+        f"{m['vertical_m']:.2f} m up or down, turned it {m['rotation_deg']:.2f}° and tilted it "
+        f"{m['tilt_deg']:.2f}° (tolerances {t['horizontal_m']:.2f} m, {t['vertical_m']:.2f} m, "
+        f"{t['rotation_deg']:.2f}° and {t['tilt_deg']:.2f}°)"
+    )
+
+
+def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine: str) -> tuple[str, str, dict]:
+    """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason with the
+    figures, the check behind it) from the registration ``reg`` of the pair (see module)."""
+    from .ground import spacing
 
     gap = spacing(before_xyz)
+    check = outcome(reg, after_xyz, gap, fine)
+    said = _figures(check)
+    if check["outcome"] == CONFIRMED:
+        why = f"both files declare {datum} and {said}, its poses agreeing: coordinates confirmed, used as they are"
+        return "precise", why, check
+    if check["outcome"] == REFUTED:
+        why = f"both files declare {datum}, but {said}, its poses agreeing: the coordinates are off, registered"
+        return "gps", why, check
+    from .ground import margin_points
+    from .register import evaluate_surface
+
     fit, _ = evaluate_surface(margin_points(after_xyz, gap), before_xyz, np.eye(4), gap=gap)
+    check["margin_agreement"] = fit
+    unsure = f"both files declare {datum} and {said}, but the registration is not consistent ({disagreement(check)})"
     if fit < AGREE_FITNESS:
-        return "gps", (
-            f"both files declare {vb}, but only {fit:.0%} of the after survey's margin agrees with "
-            "the before surface as georeferenced: registered within the GPS prior"
+        return (
+            "gps",
+            f"{unsure} and only {fit:.0%} of the after survey's margin agrees as georeferenced: registered",
+            check,
         )
-    return "precise", (
-        f"both files declare {vb} and {fit:.0%} of the after survey's margin agrees with the "
-        "before surface as georeferenced: coordinates used as they are (no registration, no "
-        f"bias correction); use {opt('georeferencing', 'gps')} to register anyway"
+    return (
+        "precise",
+        (
+            f"{unsure}: it cannot confirm the coordinates; {fit:.0%} of the after survey's margin agrees "
+            f"with the before surface as georeferenced: used as they are (no bias correction); use "
+            f"{opt('georeferencing', 'gps')} to register anyway"
+        ),
+        check,
     )

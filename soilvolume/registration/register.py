@@ -63,6 +63,13 @@ def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> 
     return float(ev.fitness), float(ev.inlier_rmse)
 
 
+def finest_column(after_xyz: np.ndarray, gap: float) -> float:
+    """The side (m) of the finest columns the fine registration matches surfaces on (its last
+    level's voxel, no finer than the target's point spacing ``gap`` nor coarser than the cap on
+    large clouds): it cannot place the after survey more finely than this horizontally."""
+    return max(ICP_LEVELS[-1][0], gap, _cap_voxel(after_xyz, MAX_ICP_POINTS))
+
+
 def _cap_voxel(xyz: np.ndarray, max_points: int) -> float:
     """The voxel size that leaves about ``max_points`` of a cloud (0 when it has fewer)."""
     if len(xyz) <= max_points:
@@ -294,7 +301,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
     gap = spacing(columns.Cloud.points(before_xyz))
     judge = _judged(after_xyz, gap)
     if options.fine in ("icp", "gicp"):
-        (t, label, rejected, (fit, rmse)), alt = _icp_from_best(
+        (t, label, rejected, (fit, rmse)), alt, refined = _icp_from_best(
             judge, after_xyz, before_xyz, starts, options, check, gap
         )
         return StageQuality(
@@ -307,6 +314,7 @@ def _fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=No
             f"started from the {label} pose",
             alternative=alt,
             beyond_prior=rejected,
+            poses=refined,
         )
     best: StageQuality | None = None
     for init, label in starts:
@@ -331,7 +339,7 @@ def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, 
     pull the pose); the pose that fits the margin best within the georeferencing prior wins.
     Returns ((transform, label, poses rejected beyond the prior, its (fitness, RMSE) on the
     margin), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
-    uncertainty, None when there is none)."""
+    uncertainty, None when there is none, and every refined pose, those beyond the prior too)."""
     method, workers = options.fine, options.threads if options.threads > 0 else -1
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
     scored = []
@@ -355,7 +363,8 @@ def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, 
     others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
     rejected = len(poses) - len(allowed)
     label = best[1] + (f"; {rejected} pose(s) beyond the georeferencing prior rejected" if rejected else "")
-    return (best[0], label, rejected, scores), (others[-1] if others else None)
+    refined = tuple(p[0] for p in poses[len(starts) :])
+    return (best[0], label, rejected, scores), (others[-1] if others else None), refined
 
 
 def _judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:

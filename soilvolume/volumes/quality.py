@@ -33,24 +33,10 @@ def assess(
     diff: np.ndarray | None = None,
 ) -> dict:
     """``{"verdict", "trusted", "messages"}`` for a finished run (see module)."""
-    out: list[tuple[str, str]] = []
     v, u = report["volume_m3"], report["uncertainty_m3"]
-    used = report["registration"].get("georeferencing", {}).get("used", "gps")
-    if used == "gps":
-        out += _gps_checks(report["registration"], stable, change, offset, prior)
-    if used == "precise":
-        out += _precise_checks(stable, diff)
+    out = registration_checks(report["registration"], stable, change, offset, prior, diff)
     corr = float(np.nansum(np.where(change, offset, 0.0)) * cell_area)
-    net = abs(v["net"])
-    if abs(corr) > 0.5 * max(net, 1e-9) and abs(corr) > u["net"]:  # a correction within the interval cannot
-        sev = "unreliable" if abs(corr) > 2 * max(net, 1e-9) else "caution"
-        out.append(
-            (
-                sev,
-                f"the bias correction ({corr:+.1f} m³ over the change areas) is comparable to the net "
-                f"change ({v['net']:+.1f} m³)",
-            )
-        )
+    out += correction_check(corr, v["net"], u["net"])
     excluded = report.get("excluded") or {}
     bound = float((excluded.get("bound_m3") or {}).get("net", 0.0))
     hidden = report.get("blind") or {}
@@ -64,15 +50,45 @@ def assess(
     unseen = coverage_check(report)
     if unseen is not None:
         out.append(unseen)
-    if net <= u["net"] and (unseen is None or unseen[0] != "unreliable"):  # unseen change: not "no change"
-        out.append(
-            (
-                "caution",
-                f"the net change ({v['net']:+.1f} m³) is within its 95 % interval (±{u['net']:.1f} "
-                "m³) of zero: it is not significant",
-            )
+    if unseen is None or unseen[0] != "unreliable":  # unseen change: not "no change"
+        out += significance_check(v["net"], u["net"])
+    return verdict(out)
+
+
+def registration_checks(
+    reg: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndarray, prior: dict, diff: np.ndarray | None
+) -> list[tuple[str, str]]:
+    """The checks of how the after survey was placed (report.json's ``registration``): a
+    registered run's (:func:`_gps_checks`) or a run used as georeferenced
+    (:func:`_precise_checks`)."""
+    used = reg.get("georeferencing", {}).get("used", "gps")
+    if used == "gps":
+        return _gps_checks(reg, stable, change, offset, prior)
+    return _precise_checks(reg, stable, diff) if used == "precise" else []
+
+
+def correction_check(corr: float, net: float, half: float) -> list[tuple[str, str]]:
+    """When the bias correction over the change areas (``corr`` m3) is comparable to the net
+    (a correction within the net's interval ``half`` cannot matter)."""
+    size = max(abs(net), 1e-9)
+    if abs(corr) <= 0.5 * size or abs(corr) <= half:
+        return []
+    sev = "unreliable" if abs(corr) > 2 * size else "caution"
+    said = f"the bias correction ({corr:+.1f} m³ over the change areas) is comparable to the net change ({net:+.1f} m³)"
+    return [(sev, said)]
+
+
+def significance_check(net: float, half: float) -> list[tuple[str, str]]:
+    """A caution when the net lies within its 95 % interval of zero."""
+    if abs(net) > half:
+        return []
+    return [
+        (
+            "caution",
+            f"the net change ({net:+.1f} m³) is within its 95 % interval (±{half:.1f} m³) of zero: "
+            "it is not significant",
         )
-    return _verdict(out)
+    ]
 
 
 def _gps_checks(reg: dict, stable: np.ndarray, change: np.ndarray, offset: np.ndarray, prior: dict) -> list:
@@ -132,12 +148,22 @@ def _gps_checks(reg: dict, stable: np.ndarray, change: np.ndarray, offset: np.nd
     return out
 
 
-def _precise_checks(stable: np.ndarray, diff: np.ndarray | None) -> list:
-    """A run used as georeferenced: the ground outside the works agrees between the surveys."""
+def _precise_checks(reg: dict, stable: np.ndarray, diff: np.ndarray | None) -> list:
+    """A run used as georeferenced: the ground outside the works agrees between the surveys,
+    and, when auto chose it, the registration confirmed the coordinates."""
+    from ..registration.georef import GROUND_AGREES, INCONCLUSIVE, disagreement
+
     out: list[tuple[str, str]] = []
+    check = (reg.get("georeferencing") or {}).get("check") or {}
+    if check.get("outcome") == INCONCLUSIVE:
+        said = (
+            f"the registration could not confirm the files' coordinates ({disagreement(check)}): they were "
+            "used as georeferenced because both declare one vertical datum and the after survey's margin agrees"
+        )
+        out.append(("caution", said))
     ground = diff[stable & np.isfinite(diff)] if diff is not None else np.empty(0)
     shift = float(np.median(ground)) if ground.size else 0.0
-    if abs(shift) > 0.05:
+    if abs(shift) > GROUND_AGREES:
         out.append(
             (
                 "caution",
@@ -255,7 +281,8 @@ def _blind(hidden: dict, v: dict) -> list[tuple[str, str]]:
     ]
 
 
-def _verdict(found: list[tuple[str, str]]) -> dict:
+def verdict(found: list[tuple[str, str]]) -> dict:
+    """The worst severity of ``found`` (severity, sentence) pairs in :data:`VERDICTS`' words, and the sentences."""
     worst = 2 if any(s == "unreliable" for s, _ in found) else 1 if found else 0
     messages = [m for _, m in found] or [
         "stable ground surrounds the works, the registration stays within "

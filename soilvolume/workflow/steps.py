@@ -143,27 +143,37 @@ def quality_inputs(vols: Volumes, grid: GridSpec, options: Options) -> QualityIn
 
 def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense, progress: tuple):
     """Decide how far the georeferencing is trusted, then register: (Registration, the options
-    the rest of the run uses; precise surveys get no bias correction). ``register_other`` in
-    the timings: the decision and the imports, beside the coarse and fine stages."""
+    the rest of the run uses; precise surveys get no bias correction). Auto with a vertical datum
+    both files declare registers first and keeps the coordinates only when the registration
+    confirms them (:func:`soilvolume.registration.georef.confirm`). ``register_other`` in the
+    timings: the decision and the imports, beside the coarse and fine stages."""
     with timer("register"):
-        from ..registration.georef import resolve
+        from ..registration import georef
         from ..registration.register import register
 
-        mode, why = resolve(options.georeferencing, prep.inputs, prep.after_thin, prep.before_thin)
+        lo, hi, message = progress  # the run's span and message of the step (workflow/run.PROGRESS)
+        hooks.step(lo, message)
+        after, before = prep.after_thin, prep.before_thin
+        decided, check = georef.declared(options.georeferencing, prep.inputs), None
+        mode, why = decided or ("gps", "")
+        ticker = hooks.ticker(lo, hi, message)
+        reg = ran = register(after, before, options, check=ticker, dense=dense, precise=mode == "precise")
+        if decided is None:
+            datum = georef.vertical_datum(prep.inputs["after"].get("crs_wkt"))
+            mode, why, check = georef.confirm(reg, after, before, datum, options.fine)
+            if mode == "precise":
+                reg = kept_as_georeferenced(register(after, before, options, precise=True), check["outcome"])
         hooks.info(f"georeferencing: {mode} ({why})")
         if mode == "precise":
             options = options.with_(correction="none")
-        lo, hi, message = progress  # the run's span and message of the step (workflow/run.PROGRESS)
-        hooks.step(lo, message)
-        reg = register(
-            prep.after_thin,
-            prep.before_thin,
-            options,
-            check=hooks.ticker(lo, hi, message),
-            dense=dense,
-            precise=mode == "precise",
-        )
-    reg = replace(reg, georeferencing=Georeferencing(options.georeferencing, mode, why))
-    timer.s["coarse"], timer.s["fine"] = reg.coarse.seconds, reg.fine.seconds
-    timer.s["register_other"] = max(0.0, timer.s.pop("register") - reg.coarse.seconds - reg.fine.seconds)
+    reg = replace(reg, georeferencing=Georeferencing(options.georeferencing, mode, why, check))
+    timer.s["coarse"], timer.s["fine"] = ran.coarse.seconds, ran.fine.seconds
+    timer.s["register_other"] = max(0.0, timer.s.pop("register") - ran.coarse.seconds - ran.fine.seconds)
     return reg, options
+
+
+def kept_as_georeferenced(reg, outcome: str):
+    """The identity registration of coordinates auto kept, its stages saying why."""
+    said = "confirmed them" if outcome == "confirmed" else "could not confirm them"
+    note = f"not applied: coordinates used as georeferenced (the registration {said}; see georeferencing)"
+    return replace(reg, coarse=replace(reg.coarse, note=note), fine=replace(reg.fine, note=note))
