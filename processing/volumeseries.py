@@ -45,7 +45,8 @@ others. Advanced parameters tune each step as in "Estimate soil volume change".<
 (GeoTIFFs), the ledger (CSV: one row per period and the cumulative, with dates, net, cut, fill
 and their ±), report.json and an HTML report with the cumulative cut and fill over time. The
 ledger and the report can also be saved elsewhere. Numbers: the cumulative net, cut and fill
-(m³) with their ±; the periods as a JSON string.</p>"""
+(m³) with their ±; the periods as a JSON string, each with its quality verdict (reliable, use
+with caution, not reliable) and the reasons.</p>"""
 
 NUMBERS = {  # output -> (report key path, label)
     "CUMULATIVE_NET": (("volume_m3", "net"), "Cumulative net volume (m³)"),
@@ -153,7 +154,7 @@ class VolumeSeries(SoilVolumeAlgorithm):
         for key, (path, _) in NUMBERS.items():
             results[key] = (cumulative.get(path[0]) or {}).get(path[1])
         periods = [
-            {k: p.get(k) for k in ("from", "to", "dates", "volume_m3", "uncertainty_m3")}
+            {k: p.get(k) for k in ("from", "to", "dates", "volume_m3", "uncertainty_m3", "quality")}
             for p in report.get("periods") or []
         ]
         results["PERIODS"] = json.dumps(periods)
@@ -161,6 +162,7 @@ class VolumeSeries(SoilVolumeAlgorithm):
             v, u = p["volume_m3"], p["uncertainty_m3"]
             feedback.pushInfo(
                 f"E{p['from']} → E{p['to']}: net {v['net']:+,.1f} ± {u['net']:,.1f} m³, "
-                f"cut {v['cut']:,.1f} ± {u['cut']:,.1f}, fill {v['fill']:,.1f} ± {u['fill']:,.1f}"
+                f"cut {v['cut']:,.1f} ± {u['cut']:,.1f}, fill {v['fill']:,.1f} ± {u['fill']:,.1f}; "
+                f"quality: {(p.get('quality') or {}).get('verdict', '–')}"
             )
         return results

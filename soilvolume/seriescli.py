@@ -10,8 +10,9 @@ from .options import Options
 SERIES_EPILOG = """Outputs in DIR: dem_epoch<k>.tif (each epoch's heights in E0's frame, corrected
 once relative to E0), difference_<i>_<j>.tif (each period's change), cumulative_0_<n>.tif,
 ledger.csv (one row per period and the cumulative: epochs, dates, net/cut/fill and their ±),
-report.json ("epochs" with each registration's 4x4 into E0's frame, "periods", "cumulative") and
-report.html (the ledger, cumulative cut and fill over time, the difference maps). The periods'
+report.json ("epochs" with each registration's 4x4 into E0's frame, "periods", "cumulative", each
+with its quality verdict) and report.html (the ledger with the verdicts, cumulative cut and fill
+over time, the difference maps). The periods'
 nets add up to the cumulative net. --before-crs applies to E0, --after-crs to every later epoch.
 The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
 2 (bad command line), 130/143 (interrupted; nothing written)."""
@@ -54,7 +55,8 @@ def cmd_series(ns: argparse.Namespace, options: Options, hooks, result) -> int:
 
 
 def ledger_lines(report: dict) -> list[str]:
-    """The ledger in words: one line per period and the cumulative."""
+    """The ledger in words: one line per period and the cumulative, each with its quality
+    verdict and reasons."""
     rows = [(f"period {k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
     lines = []
     for name, p in rows:
@@ -64,4 +66,7 @@ def ledger_lines(report: dict) -> list[str]:
             f"{name} E{p['from']} -> E{p['to']} ({when}): net {v['net']:+.2f} ± {u['net']:.2f} m3  "
             f"cut {v['cut']:.2f} ± {u['cut']:.2f}  fill {v['fill']:.2f} ± {u['fill']:.2f}"
         )
+        q = p.get("quality") or {}
+        if q:
+            lines += [f"  quality: {q['verdict'].upper()}"] + [f"    - {m}" for m in q["messages"]]
     return lines

@@ -16,6 +16,7 @@ from ..dem import grid as gridmod
 from ..inputs.io import atomic_path
 from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
+from ..volumes.seriesquality import epoch_checks, period_quality
 from .report import absolute_transform, stage_dict, write_json
 
 LEDGER = "ledger.csv"
@@ -58,7 +59,7 @@ def _registration(fit, origin: np.ndarray) -> dict:
     }
 
 
-def _change(c, dates: list, cell_area: float, cumulative: bool = False) -> dict:
+def _change(c, dates: list, cell_area: float, quality: dict, cumulative: bool = False) -> dict:
     u = c.uncertainty
     return {
         "from": c.start,
@@ -69,12 +70,14 @@ def _change(c, dates: list, cell_area: float, cumulative: bool = False) -> dict:
         "uncertainty": u,
         "change_area_m2": float((c.fill_area | c.cut_area).sum()) * cell_area,
         "difference": difference_name(c.start, c.end, cumulative),
+        "quality": quality,
     }
 
 
 def build_series_report(paths, dates, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
     """report.json of a series run (``fits``: the later epochs' registrations; ``vols``: the
-    volume steps of the pairs E0 -> Ek)."""
+    volume steps of the pairs E0 -> Ek); each period and the cumulative with its quality verdict
+    (:mod:`soilvolume.volumes.seriesquality`)."""
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
     epochs = []
     for k, path in enumerate(paths):
@@ -94,6 +97,12 @@ def build_series_report(paths, dates, fits, vols, series, grid: GridSpec, option
             }
         )
     area = grid.cell_area
+    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
+    checks = epoch_checks([e["registration"] for e in epochs], vols, prior)
+
+    def change(c, cumulative: bool = False) -> dict:
+        return _change(c, dates, area, period_quality(c, checks, vols, area), cumulative)
+
     return {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
         "command": "series",
@@ -105,8 +114,8 @@ def build_series_report(paths, dates, fits, vols, series, grid: GridSpec, option
             "below_detection = net - (fill - cut)"
         ),
         "epochs": epochs,
-        "periods": [_change(c, dates, area) for c in series.periods],
-        "cumulative": _change(series.cumulative, dates, area, cumulative=True),
+        "periods": [change(c) for c in series.periods],
+        "cumulative": change(series.cumulative, cumulative=True),
         "check": {
             "periods_net_sum_m3": float(sum(c.volume["net"] for c in series.periods)),
             "cumulative_net_m3": series.cumulative.volume["net"],

@@ -70,18 +70,38 @@ def chart_svg(report: dict) -> str:
     )
 
 
+def _changes(report: dict) -> list[tuple[str, dict]]:
+    """(name, entry) of each period and of the cumulative."""
+    return [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
+
+
 def _ledger(report: dict) -> str:
     rows = []
-    for name, p in [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]:
+    for name, p in _changes(report):
         v, u = p["volume_m3"], p["uncertainty_m3"]
         dates = "<span style='white-space:nowrap'>" + " → ".join(html.escape(d or "?") for d in p["dates"]) + "</span>"
         rows.append(
             [f"{name}: E{p['from']} → E{p['to']}", dates]
             + [_pm(v[k], u[k]) for k in ("net", "cut", "fill")]
-            + [_fmt(v["below_detection"])]
+            + [_fmt(v["below_detection"]), _verdict(p)]
         )
-    head = ["period", "dates", "net (m³)", "cut (m³)", "fill (m³)", "of the net below detection (m³)"]
-    return "<h2>Ledger</h2>" + _table(head, rows)
+    head = ["period", "dates", "net (m³)", "cut (m³)", "fill (m³)", "of the net below detection (m³)", "quality"]
+    return "<h2>Ledger</h2>" + _table(head, rows) + _reasons(report)
+
+
+def _verdict(entry: dict) -> str:
+    said = html.escape(str((entry.get("quality") or {}).get("verdict") or "–"))
+    return f"<span class='verdict {said.replace(' ', '-')}'>{said}</span>"
+
+
+def _reasons(report: dict) -> str:
+    """Each period's quality verdict with its reasons, as a pair's report gives them."""
+    items = []
+    for name, p in _changes(report):
+        q = p.get("quality") or {}
+        reasons = "".join(f"<li>{html.escape(str(m))}</li>" for m in q.get("messages") or [])
+        items.append(f"<li>{name} (E{p['from']} → E{p['to']}): {_verdict(p)}<ul>{reasons}</ul></li>")
+    return "<h3>Quality of each period</h3><ul>" + "".join(items) + "</ul>"
 
 
 def _epochs(report: dict) -> str:
