@@ -277,3 +277,18 @@ def test_counted_truth_and_no_change_scoring():
     assert all(row["checks"].values())
     report["uncertainty_m3"]["net"] = 8.0
     assert accuracy.score(report, truth, "nochange", False)["checks"]["0 in 95 %"] is False
+
+
+def test_datum_target_needs_the_intervals_and_the_net_of_the_moved_volume():
+    """Issue 45's rows: net within 1 % of cut + fill, cut and fill within 3 %, and each interval
+    holding the truth; the datum cases and the series' periods are in the matrix."""
+    truth, _ = _truth((74.0, 243.0, 317.0))
+    report = {
+        "volume_m3": {"net": 78.0, "cut": 242.0, "fill": 320.0},  # net +4 m3: 0.7 % of 560 m3 moved
+        "uncertainty_m3": {"net": 6.0, "cut": 3.0, "fill": 2.0},  # fill's misses by 1 m3
+    }
+    row = accuracy.score(report, truth, "datum", dense=False, net_of_moved=True)
+    assert row["err_pct"]["net"] == pytest.approx(100 * 4 / 560)
+    assert row["checks"] == {"net 1%": True, "cut 3%": True, "fill 3%": True, "n/c/f in 95 %": False}
+    names = {c.name for c in accuracy.MATRIX if c.target == "datum"}
+    assert {"datum-gps3", "datum-gps5-exc", "datum-precise", *accuracy.DATUM_SERIES} <= names
