@@ -9,8 +9,8 @@ import struct
 
 import numpy as np
 import pytest
-from conftest import run_python
-from test_robustness import WKT, _cloud, _one_line_error, cli, small_pair
+from conftest import run_python, write_scene
+from test_robustness import WKT, _cloud, _hidden, _one_line_error, cli, small_pair
 
 from soilvolume import api
 from soilvolume.core.types import SoilVolumeError
@@ -159,3 +159,81 @@ def test_a_signal_while_the_program_is_still_importing_is_one_line(start):
     done = run_python(script)
     assert done.returncode == 130, done.stderr
     assert done.stderr.splitlines() == ["soilvolume: error: interrupted by SIGINT; nothing was written"]
+
+
+def _capped(limit: int, *args) -> tuple[int, list[str]]:
+    """The command line in a process that may write no file past ``limit`` bytes (RLIMIT_FSIZE: the
+    write that crosses it fails, EFBIG, as on a full disk; SIGXFSZ ignored): (exit code, stderr lines)."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    def cap() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    cmd = [sys.executable, "-m", "soilvolume", *map(str, args)]
+    done = subprocess.run(cmd, preexec_fn=cap, capture_output=True, text=True, timeout=300)
+    return done.returncode, done.stderr.strip().splitlines()
+
+
+def _dem_pair(folder) -> tuple:
+    """Two 300 x 300 DEM GeoTIFFs of noise (their difference compresses badly: a large file)."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    rng, paths = np.random.default_rng(0), []
+    for name in ("b.tif", "a.tif"):
+        with rasterio.open(
+            folder / name, "w", driver="GTiff", width=300, height=300, count=1, dtype="float64",
+            crs="EPSG:32654", transform=from_origin(500000, 3900300, 1.0, 1.0),
+        ) as ds:  # fmt: skip
+            ds.write(rng.normal(50, 1, (300, 300)), 1)
+        paths.append(folder / name)
+    return tuple(paths)
+
+
+def _sums(folder) -> dict:
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="RLIMIT_FSIZE is POSIX")
+@pytest.mark.parametrize("command", ["volume", "dem"])
+def test_a_raster_cut_off_by_a_full_disk_is_an_error_and_is_not_left(tmp_path, command):
+    """GDAL ignores a write that fails as it closes a GeoTIFF: the file was left short by its last
+    bytes and the command said done. One line naming the file, exit 1, nothing written."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    args = [*_dem_pair(inputs)] if command == "volume" else [write_scene(inputs)[1], "--cell", "0.2"]
+    whole = tmp_path / "whole.tif"
+    code, err = _capped(1 << 40, command, *args, "--out", whole)
+    assert code == 0 and whole.stat().st_size > 100_000, err
+    before = _sums(inputs)
+    out = tmp_path / "out" / "short.tif"
+    out.parent.mkdir()
+    code, err = _capped(whole.stat().st_size - 1, command, *args, "--out", out)
+    _one_line_error(code, err, str(out), "file too large")
+    assert list(out.parent.iterdir()) == [] and _sums(inputs) == before
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="RLIMIT_FSIZE is POSIX")
+@pytest.mark.parametrize("scheduler", ["none", "threads:1"])
+def test_an_estimate_raster_cut_off_by_a_full_disk_fails_the_run(tmp_path, scheduler):
+    """The estimate's largest raster one byte short of room (in-process: write_geotiff; tiled: the
+    COG writer): the run fails naming that raster, and no output folder appears."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    pair = write_scene(inputs)[:2]  # rough ground: 0.2 m DEMs compress to more than the reports
+    tiles = ["--tile-cells", "64"] if scheduler != "none" else []  # its scratch tiles smaller than a raster
+    args = ["estimate", *pair, "--cell", "0.2", "--scheduler", scheduler, *tiles, "--quiet", "--out"]
+    code, err = _capped(1 << 40, *args, tmp_path / "whole")
+    assert code == 0, err
+    sizes = {p.name: p.stat().st_size for p in (tmp_path / "whole").iterdir()}
+    largest = max(sizes, key=sizes.get)
+    others = max(s for n, s in sizes.items() if n != largest)
+    assert largest.endswith(".tif") and others < sizes[largest] - 1, sizes  # only that raster fails
+    before = _sums(inputs)
+    code, err = _capped(sizes[largest] - 1, *args, tmp_path / "out")
+    _one_line_error(code, err, largest, "file too large")
+    assert not (tmp_path / "out").exists() and _hidden(tmp_path) == [] and _sums(inputs) == before

@@ -288,16 +288,16 @@ def test_pipeline_json_that_is_not_utf8_or_nested_too_deep(capsys, pair, tmp_pat
 
 
 def test_a_full_disk_is_named_and_nothing_is_left(pair, tmp_path, monkeypatch):
-    import rasterio
+    from soilvolume.dem import rasterfile
 
-    def full(path, *args, **kwargs):
-        Path(path).write_bytes(b"partial")  # the half-written temporary file
-        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+    def full(src, dst, length=0):
+        dst.write(src.read(100))  # the half-written temporary file
+        raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(rasterio, "open", full)
+    monkeypatch.setattr(rasterfile.shutil, "copyfileobj", full)  # where a raster's bytes are written
     with pytest.raises(SoilVolumeError, match="d.tif: No space left on device"):
         api.cloud_to_dem(pair[0], tmp_path / "d.tif")
-    with pytest.raises(SoilVolumeError, match="/o: No space left on device"):
+    with pytest.raises(SoilVolumeError, match=r"/o/dem_\w+\.tif: No space left on device"):
         api.estimate(*pair, tmp_path / "o")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["after.las", "before.las"]
 

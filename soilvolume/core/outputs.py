@@ -76,8 +76,11 @@ def os_errors(path: Path | None = None) -> Iterator[None]:
 def _write_problem(exc: BaseException, path: Path | None) -> SoilVolumeError:
     """The clearest account of a failed write: the OS error, a full disk, or GDAL's first cause."""
     if isinstance(exc, OSError) and exc.errno:
-        named = exc.filename and STAGING not in str(exc.filename)
-        return os_problem(exc, exc.filename if named else path)
+        where = exc.filename
+        if where and STAGING in str(where):  # a staged file: named where it was going, else the output
+            inner = STAGING in Path(where).parent.name and STAGING not in Path(where).name
+            where = path / Path(where).name if inner and path is not None else path
+        return os_problem(exc, where or path)
     folder = path if path is not None and path.is_dir() else (path.parent if path is not None else Path.cwd())
     try:
         full = shutil.disk_usage(folder).free < 1 << 20

@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
-from ..inputs.io import atomic_path
 from .cellstats import BLOCK, cell_heights
+from .rasterfile import staged_raster
 from .slopes import slopes
 
 NODATA = -9999.0
@@ -329,10 +329,9 @@ def write_geotiff(
     units: str = "metre",
     dtype: str = "float32",
 ) -> Path:
-    """Write a single-band GeoTIFF (NaN -> nodata), atomically; returns the path. Tagged with
-    the grid's horizontal CRS only: the values are metres whatever the input's vertical unit."""
-    import rasterio
-
+    """Write a single-band GeoTIFF (NaN -> nodata), whole or not at all (a full disk raises); returns
+    the path. Tagged with the grid's horizontal CRS only: the values are metres whatever the input's
+    vertical unit."""
     from ..inputs.crs import raster_wkt
 
     path = Path(path)
@@ -350,10 +349,9 @@ def write_geotiff(
         compress="deflate",
         tiled=grid.cols >= 256 and grid.rows >= 256,
     )
-    with atomic_path(path) as tmp:
-        with rasterio.open(tmp, "w", **profile) as dst:
-            dst.write(data, 1)
-            dst.set_band_description(1, description)
-            dst.set_band_unit(1, units)
-            dst.update_tags(AREA_OR_POINT="Area")
+    with staged_raster(path, **profile) as dst:  # GDAL in memory, the bytes by Python: a full disk raises
+        dst.write(data, 1)
+        dst.set_band_description(1, description)
+        dst.set_band_unit(1, units)
+        dst.update_tags(AREA_OR_POINT="Area")
     return path

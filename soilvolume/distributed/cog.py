@@ -10,6 +10,7 @@ import numpy as np
 
 from ..core.types import GridSpec
 from ..dem.grid import NODATA, UINT8_LAYERS, output_layers
+from ..dem.rasterfile import check_complete, staged_copy
 from ..inputs.io import atomic_path
 
 BLOCK = 256
@@ -83,18 +84,24 @@ def _staged(plain: Path, profile: dict, small: bool):
 
 
 def _as_cog(src, path: Path, dtype: str) -> None:
-    """``src`` (a dataset or a file) laid out as a COG at ``path``, atomically."""
+    """``src`` (a dataset or a file) laid out as a COG at ``path``, whole or not at all: a dataset
+    in memory (a small raster) through memory, its bytes written by Python; a file's COG written
+    by GDAL, then checked complete (GDAL ignores a full disk while it closes a file)."""
     import rasterio.shutil
 
-    with atomic_path(path) as tmp:
+    def copy(name) -> None:
+        resampling = "nearest" if dtype == "uint8" else "average"
         rasterio.shutil.copy(
-            src,
-            tmp,
-            driver="COG",
-            compress="DEFLATE",
-            blocksize=BLOCK,
-            overview_resampling="nearest" if dtype == "uint8" else "average",
+            src, name, driver="COG", compress="DEFLATE", blocksize=BLOCK, overview_resampling=resampling
         )
+
+    if not isinstance(src, (str, Path)):
+        staged_copy(path, copy)
+        return
+    check_complete(Path(src), path)  # the blocks file GDAL wrote and closed
+    with atomic_path(path) as tmp:
+        copy(tmp)
+        check_complete(tmp, path)
 
 
 def write_outputs(out, get: Callable[[str, slice, slice], np.ndarray], grid: GridSpec, z0: float, correction: str):

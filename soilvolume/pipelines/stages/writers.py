@@ -8,6 +8,7 @@ import numpy as np
 import pyproj
 
 from ...core.types import SoilVolumeError
+from ...dem.rasterfile import staged_raster
 from ...inputs import io
 from . import gdalgrid, geometry
 from .view import PointView, StageContext
@@ -180,7 +181,7 @@ def write_gdal(view: PointView, opts: dict, ctx: StageContext) -> PointView:
         "crs": crs,
     }
     try:
-        with io.atomic_path(path) as tmp, rasterio.open(tmp, "w", **profile) as dst:
+        with staged_raster(path, **profile) as dst:  # GDAL in memory, the bytes by Python: a full disk raises
             for band, (name, arr) in enumerate(rasters.items(), start=1):
                 dst.write(np.where(np.isnan(arr), nodata, arr).astype(dtype), band)
                 dst.set_band_description(band, name)
