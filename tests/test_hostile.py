@@ -161,9 +161,10 @@ def test_a_signal_while_the_program_is_still_importing_is_one_line(start):
     assert done.stderr.splitlines() == ["soilvolume: error: interrupted by SIGINT; nothing was written"]
 
 
-def _capped(limit: int, *args) -> tuple[int, list[str]]:
+def _capped(limit: int, *args, before: str = "") -> tuple[int, list[str]]:
     """The command line in a process that may write no file past ``limit`` bytes (RLIMIT_FSIZE: the
-    write that crosses it fails, EFBIG, as on a full disk; SIGXFSZ ignored): (exit code, stderr lines)."""
+    write that crosses it fails, EFBIG, as on a full disk; SIGXFSZ ignored), ``before`` run first:
+    (exit code, stderr lines)."""
     import resource
     import signal
     import subprocess
@@ -173,7 +174,8 @@ def _capped(limit: int, *args) -> tuple[int, list[str]]:
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    cmd = [sys.executable, "-m", "soilvolume", *map(str, args)]
+    main = "import sys; from soilvolume.cli import main; sys.exit(main(sys.argv[1:]))"
+    cmd = [sys.executable, "-c", f"{before}\n{main}", *map(str, args)]
     done = subprocess.run(cmd, preexec_fn=cap, capture_output=True, text=True, timeout=300)
     return done.returncode, done.stderr.strip().splitlines()
 
@@ -218,22 +220,25 @@ def test_a_raster_cut_off_by_a_full_disk_is_an_error_and_is_not_left(tmp_path, c
 
 
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="RLIMIT_FSIZE is POSIX")
-@pytest.mark.parametrize("scheduler", ["none", "threads:1"])
+@pytest.mark.parametrize("scheduler", ["none", "threads:1", "threads:1 on disk"])
 def test_an_estimate_raster_cut_off_by_a_full_disk_fails_the_run(tmp_path, scheduler):
     """The estimate's largest raster one byte short of room (in-process: write_geotiff; tiled: the
-    COG writer): the run fails naming that raster, and no output folder appears."""
+    COG writer, its raster staged in memory or, as a large one is, on disk): the run fails naming
+    that raster, and no output folder appears."""
+    disk = "from soilvolume.distributed import cog; cog.IN_MEMORY_CELLS = 0" if "disk" in scheduler else ""
+    scheduler = scheduler.split()[0]
     inputs = tmp_path / "in"
     inputs.mkdir()
     pair = write_scene(inputs)[:2]  # rough ground: 0.2 m DEMs compress to more than the reports
     tiles = ["--tile-cells", "64"] if scheduler != "none" else []  # its scratch tiles smaller than a raster
     args = ["estimate", *pair, "--cell", "0.2", "--scheduler", scheduler, *tiles, "--quiet", "--out"]
-    code, err = _capped(1 << 40, *args, tmp_path / "whole")
+    code, err = _capped(1 << 40, *args, tmp_path / "whole", before=disk)
     assert code == 0, err
     sizes = {p.name: p.stat().st_size for p in (tmp_path / "whole").iterdir()}
     largest = max(sizes, key=sizes.get)
     others = max(s for n, s in sizes.items() if n != largest)
     assert largest.endswith(".tif") and others < sizes[largest] - 1, sizes  # only that raster fails
     before = _sums(inputs)
-    code, err = _capped(sizes[largest] - 1, *args, tmp_path / "out")
-    _one_line_error(code, err, largest, "file too large")
+    code, err = _capped(sizes[largest] - 1, *args, tmp_path / "out", before=disk)
+    _one_line_error(code, err, largest, "file too large" if not disk else "cut off")
     assert not (tmp_path / "out").exists() and _hidden(tmp_path) == [] and _sums(inputs) == before
