@@ -27,7 +27,13 @@ def add_series(sub, add_options, add_progress) -> None:
         "period's volume change (consecutive surveys) and the cumulative one, with intervals.",
         epilog=SERIES_EPILOG,
     )
-    p.add_argument("epochs", type=Path, nargs="+", help="the surveys in time order, E0 first (the formats of estimate)")
+    p.add_argument(
+        "epochs",
+        type=Path,
+        nargs="+",
+        help="the surveys in time order, E0 first (the formats of estimate); refused when their dates "
+        "(--dates, else the LAS headers') are out of that order",
+    )
     p.add_argument("--out", type=Path, required=True, help="output folder (created; must be empty unless --overwrite)")
     p.add_argument("--overwrite", action="store_true", help="replace the output folder of an earlier run as a whole")
     p.add_argument(

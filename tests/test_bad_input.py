@@ -143,3 +143,24 @@ def test_inputs_are_never_modified(tmp_path, good):
     p = run_cli("estimate", good[0], good[1], "--out", tmp_path / "o", "--quiet", "--coarse", "none")
     assert p.returncode == 0, p.stderr
     assert (good[0].read_bytes(), good[1].read_bytes()) == before
+
+
+@pytest.mark.parametrize("link", ["same path", "symlink", "hardlink", "copy"])
+def test_one_survey_as_before_and_after_is_refused(tmp_path, good, link):
+    """The same file as before and after (by another path, a link, or its bytes copied) would
+    give 0 ± 0 m3: estimate, register and volume refuse it naming both files; nothing written."""
+    import os
+
+    b = good[0]
+    twin = b if link == "same path" else tmp_path / "twin.las"
+    {"symlink": os.symlink, "hardlink": os.link, "copy": shutil.copyfile}.get(link, lambda *_: None)(b, twin)
+    how = "a byte-for-byte copy of" if link == "copy" else "the same file as"
+    before = {p: p.read_bytes() for p in (b, twin)}
+    msg = _fails(tmp_path, b, twin, expect=f"{twin}: is {how} the before survey {b}")
+    assert "two surveys" in msg
+    for command, out in (("register", tmp_path / "r.laz"), ("volume", tmp_path / "v.tif")):
+        done = run_cli(command, b, twin, "--out", out)
+        assert done.returncode == 1 and done.stderr.count("\n") == 1 and f"is {how}" in done.stderr, done.stderr
+        assert not out.exists()
+    assert {p: p.read_bytes() for p in (b, twin)} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"before.las", "after.las", twin.name})

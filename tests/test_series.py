@@ -104,6 +104,10 @@ def test_dates_given_override_the_headers(site, tmp_path):
     assert main(args) == 0
     report = json.loads((out / "report.json").read_text())
     assert [e["date"] for e in report["epochs"]] == ["2025-01-05", "2026-03-09"]
+    assert [e["date_source"] for e in report["epochs"]] == ["given", "LAS header"]  # where each came from
+    page = (out / "report.html").read_text()
+    assert "2025-01-05 <span class=note>(given)</span>" in page
+    assert "2026-03-09 <span class=note>(LAS header)</span>" in page
     assert len(report["periods"]) == 1
     assert report["cumulative"]["volume_m3"]["net"] == report["periods"][0]["volume_m3"]["net"]
 
@@ -199,3 +203,88 @@ def test_declared_datum_over_gps_error_is_registered_in_every_period(datum_site)
         right &= all(abs(v[k] - t[k]) <= 0.03 * t[k] for k in ("cut", "fill"))
         right &= all(abs(v[k] - t[k]) <= u[k] for k in ("net", "cut", "fill"))
         assert right or q["verdict"] == VERDICTS[2], (est, t)
+
+
+def _series_refused(capsys, tmp_path, epochs, *extra) -> str:
+    """The series' one-line error (exit 1); nothing written, the epochs' bytes unchanged."""
+    before = {p: p.read_bytes() for p in epochs}
+    capsys.readouterr()
+    code = main(["series", *map(str, epochs), "--out", str(tmp_path / "out"), "--quiet", *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1 and len(err) == 1 and err[0].startswith("soilvolume: error: "), err
+    assert not (tmp_path / "out").exists() and not [p for p in tmp_path.iterdir() if "soilvolume-" in p.name]
+    assert {p: p.read_bytes() for p in epochs} == before
+    return err[0]
+
+
+@pytest.mark.parametrize(
+    "case, words",
+    [
+        (
+            "reversed",
+            ["not in time order", "E1 epoch1.las (2026-03-09, from its LAS header)", "E0 epoch2.las (2026-03-16"],
+        ),
+        ("dates", ["not in time order", "E2 epoch2.las (2026-03-01, given by --dates)", "E1 epoch1.las (2026-03-20"]),
+    ],
+)
+def test_epochs_out_of_time_order_are_refused_naming_them(site, tmp_path, capsys, case, words):
+    """A series is not reordered (E0 is the reference): files whose dates run backwards, or --dates
+    that do, are refused naming the two epochs, their files, dates and where the dates came from."""
+    _, paths, _, _, _ = site
+    epochs, extra = (
+        ([paths[2], paths[1]], []) if case == "reversed" else (paths[:3], ["--dates", ",2026-03-20,2026-03-01"])
+    )
+    err = _series_refused(capsys, tmp_path, epochs, *extra)
+    for w in words:
+        assert w in err, err
+
+
+@pytest.mark.parametrize("link", ["symlink", "hardlink", "copy"])
+def test_one_survey_given_twice_is_refused_naming_both_epochs(site, tmp_path, capsys, link):
+    """The same survey as two epochs (another path to it, or its bytes copied) would be a period of
+    0 ± 0 m3: refused naming both epochs."""
+    import os
+    import shutil
+
+    _, paths, _, _, _ = site
+    twin = tmp_path / "twin.las"
+    {"symlink": os.symlink, "hardlink": os.link, "copy": shutil.copyfile}[link](paths[1], twin)
+    err = _series_refused(capsys, tmp_path, [paths[0], paths[1], twin])
+    how = "a byte-for-byte copy of" if link == "copy" else "the same file as"
+    assert f"E2 twin.las (2026-03-09, from its LAS header) is {how} E1 epoch1.las (2026-03-09" in err, err
+
+
+def test_an_error_of_one_pair_names_its_epochs(site, tmp_path, capsys):
+    """Epochs without dates given the wrong way round (the small later survey as E0): the failed
+    registration says which pair, with their files."""
+    import struct
+
+    _, paths, _, _, _ = site
+    undated = []
+    for k in (3, 0):
+        data = bytearray(paths[k].read_bytes())
+        struct.pack_into("<HH", data, 90, 0, 0)  # no creation day and year
+        undated.append(tmp_path / f"survey{k}.las")
+        undated[-1].write_bytes(bytes(data))
+    err = _series_refused(capsys, tmp_path, undated)
+    assert "E1 survey0.las (no date) against E0 survey3.las (no date): " in err, err
+
+
+@pytest.mark.parametrize(
+    ("day", "year", "date"),
+    [(1, 2026, "2026-01-01"), (60, 2024, "2024-02-29"), (366, 2024, "2024-12-31"), (366, 2023, None), (0, 2026, None)],
+)
+def test_the_las_header_date_is_the_day_of_that_year(tmp_path, day, year, date):
+    """The header's creation day of year counts from 1; a day the year does not have is no date (day
+    366 of 2023 was read as 1 January 2024, a year off)."""
+    import struct
+
+    from soilvolume.inputs.io import write_las
+    from soilvolume.inputs.lasheader import creation_date
+
+    path = tmp_path / "dated.las"
+    write_las(path, np.array([[500000.0, 3900000.0, 50.0]]), None)
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<HH", data, 90, day, year)
+    path.write_bytes(bytes(data))
+    assert creation_date(path) == date

@@ -127,6 +127,7 @@ class Epoch:
     path: Any  # str or pathlib.Path
     pipeline: Any = None  # str or pathlib.Path of a preparation pipeline
     date: str | None = None
+    date_source: str | None = None  # where the date came from: "LAS header" or "given" (--dates)
     kind: str = "survey"  # "survey" | "surface"
 
     @property

@@ -173,7 +173,9 @@ class BoundsCheck:
 
 def creation_date(path: Path) -> str | None:
     """The survey date of a LAS/LAZ/COPC file as ``YYYY-MM-DD``: its header's file creation day
-    of year and year (bytes 90-93); None for other formats or when the header leaves them 0."""
+    of year (1 = 1 January) and year (bytes 90-93); None for other formats, when the header leaves
+    them 0, or for a day the year does not have (day 366 of 2023 is no date, not 1 January 2024)."""
+    import calendar
     import datetime as dt
 
     try:
@@ -184,9 +186,6 @@ def creation_date(path: Path) -> str | None:
     if len(head) < 94 or head[:4] != b"LASF":
         return None
     day, year = struct.unpack_from("<HH", head, 90)
-    if not (1 <= day <= 366 and 1900 <= year <= 9999):
+    if not (1900 <= year <= 9999 and 1 <= day <= 365 + calendar.isleap(year)):
         return None
-    try:
-        return (dt.date(year, 1, 1) + dt.timedelta(days=day - 1)).isoformat()
-    except ValueError:
-        return None
+    return (dt.date(year, 1, 1) + dt.timedelta(days=day - 1)).isoformat()

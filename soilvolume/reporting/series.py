@@ -74,21 +74,23 @@ def _change(c, dates: list, cell_area: float, quality: dict, cumulative: bool = 
     }
 
 
-def build_series_report(paths, dates, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
-    """report.json of a series run (``fits``: the later epochs' registrations; ``vols``: the
-    volume steps of the pairs E0 -> Ek); each period and the cumulative with its quality verdict
-    (:mod:`soilvolume.volumes.seriesquality`)."""
+def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
+    """report.json of a series run (``runs``: the :class:`~soilvolume.core.types.Epoch` s; ``fits``:
+    the later epochs' registrations; ``vols``: the volume steps of the pairs E0 -> Ek); each period
+    and the cumulative with its quality verdict (:mod:`soilvolume.volumes.seriesquality`)."""
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
+    dates = [e.date for e in runs]
     epochs = []
-    for k, path in enumerate(paths):
+    for k, run in enumerate(runs):
         fit = fits[k - 1] if k else None
         cloud = fits[0].prep.before if fit is None else fit.prep.after
         info = fits[0].prep.inputs["before"] if fit is None else fit.prep.inputs["after"]
         epochs.append(
             {
                 "index": k,
-                "path": str(path),
-                "date": dates[k],
+                "path": str(run.path),
+                "date": run.date,
+                "date_source": run.date_source,  # "LAS header", "given" (--dates) or None
                 "points": info.get("points", len(cloud)),
                 "input": info,
                 "registration": _registration(fit, origin),
@@ -164,12 +166,12 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
     gridmod.write_geotiff(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
 
 
-def write_reports(out, paths, dates, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
+def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
     """report.json, the ledger and report.html of a series run into ``out`` (an
     :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
     from .serieshtml import write_series_html
 
-    report = cli_tree(build_series_report(paths, dates, fits, vols, series, grid, options, timer))
+    report = cli_tree(build_series_report(epochs, fits, vols, series, grid, options, timer))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
     report["timings_s"] = timer.totals()

@@ -111,14 +111,11 @@ def _epochs(report: dict) -> str:
         rot = (
             "reference" if r.get("reference") else f"{_fmt(r.get('rotation_deg'), 3)}° / {_fmt(r.get('shift_m'), 3)} m"
         )
-        rows.append(
-            [f"E{e['index']}", html.escape(e.get("date") or "–"), html.escape(Path(e["path"]).name)]
-            + [
-                _fmt(e["points"]),
-                rot,
-            ]
-        )
-    head = ["epoch", "date", "file", "points", "registration into E0 (rotation / shift)"]
+        when = html.escape(e.get("date") or "–")
+        if e.get("date") and e.get("date_source"):
+            when += f" <span class=note>({html.escape(e['date_source'])})</span>"
+        rows.append([f"E{e['index']}", when, html.escape(Path(e["path"]).name), _fmt(e["points"]), rot])
+    head = ["epoch", "date (from)", "file", "points", "registration into E0 (rotation / shift)"]
     return "<h2>Epochs</h2>" + _table(head, rows)
 
 

@@ -9,6 +9,7 @@ from ..core.hooks import Hooks
 from ..core.outputs import check_output_file
 from ..core.types import Epoch, SoilVolumeError
 from ..core.wording import cli_tree
+from ..inputs.distinct import check_two_surveys
 from ..inputs.io import LAS_SUFFIXES
 from ..options import Options
 from ..reporting.report import dem_summary, registration_summary
@@ -26,6 +27,7 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
 
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
     """See :func:`soilvolume.api.register`."""
+    check_two_surveys(before, after)
     out_cloud = check_output_file(out_cloud, [before, after])
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")

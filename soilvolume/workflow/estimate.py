@@ -8,6 +8,7 @@ from pathlib import Path
 from ..core.hooks import Hooks, Result
 from ..core.outputs import RUN_OUTPUTS, os_errors, output_dir
 from ..core.types import Epoch
+from ..inputs.distinct import check_two_surveys
 from ..inputs.surface import is_surface
 from ..options import Options
 from ..pipelines.confine import writers_into
@@ -28,6 +29,8 @@ def run_estimate(
 ) -> Result:
     """See :func:`soilvolume.api.estimate`."""
     timer = Timer()  # first: the timings count from here (and the start-up before)
+    if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
+        check_two_surveys(before, after)
     kind = "surface" if is_surface(before) and before_pipeline is None else "survey"  # a design, an earlier DEM
     epochs = (Epoch(before, before_pipeline, kind=kind), Epoch(after, after_pipeline))
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]

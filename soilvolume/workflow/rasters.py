@@ -16,6 +16,7 @@ from ..core.outputs import check_output_file, os_errors
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.grid import write_geotiff
 from ..inputs.crs import horizontal, parse_crs, xy_unit
+from ..inputs.distinct import check_two_surveys
 from ..inputs.heights import (
     HeightRaster,
     Heights,
@@ -113,6 +114,7 @@ def run_volume_from_rasters(
     before: Path, after: Path, out: Path, *, zones=None, zone_field=None, hooks: Hooks
 ) -> dict[str, Any]:
     """See :func:`soilvolume.api.volume_from_rasters`."""
+    check_two_surveys(before, after, "the before DEM")
     out = check_output_file(out, [before, after, zones])
     hooks.step(5, f"reading {before.name} and {after.name}")
     db, da = open_dem(before), open_dem(after)

@@ -10,16 +10,20 @@ into periods that add up to the cumulative."""
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..core.hooks import Hooks, Result
+from ..core.hooks import Cancelled, Hooks, Result
+from ..core.interrupt import Interrupted
 from ..core.outputs import os_errors, output_dir
 from ..core.types import Epoch, GridSpec, SoilVolumeError
 from ..dem import grid as gridmod
+from ..inputs.distinct import sameness
 from ..inputs.footprint import footprint
 from ..inputs.lasheader import creation_date
 from ..inputs.prepare import Prepared
@@ -39,34 +43,76 @@ class Fit:
     options: Options
 
 
-def epoch_dates(paths: list[Path], given: list[str] | None) -> list[str | None]:
-    """Each epoch's date: ``given`` (``--dates``; an empty entry keeps the file's), else the
-    LAS header's creation day and year, else None."""
+def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | None, str | None]]:
+    """Each epoch's (date, where it came from): ``given`` (``--dates``; an empty entry keeps the
+    file's), else the LAS header's creation day and year, else (None, None)."""
     import datetime as dt
 
     if given is not None and len(given) != len(paths):
         raise SoilVolumeError(f"--dates: {len(given)} dates for {len(paths)} epochs (give one per epoch)")
-    out = []
+    out: list[tuple[str | None, str | None]] = []
     for k, path in enumerate(paths):
         text = (given[k] if given else "").strip()
         if text:
             try:
-                text = dt.date.fromisoformat(text).isoformat()
+                out.append((dt.date.fromisoformat(text).isoformat(), "given"))
             except ValueError:
                 raise SoilVolumeError(f"--dates: {text!r} is not a date (YYYY-MM-DD)") from None
-        out.append(text or creation_date(path))
+            continue
+        found = creation_date(path)
+        out.append((found, "LAS header" if found else None))
     return out
 
 
 def check_epochs(paths: list[Path]) -> None:
-    """At least two epochs, each an existing file or folder, none twice."""
+    """At least two epochs, each an existing file or folder."""
     if len(paths) < 2:
         raise SoilVolumeError(f"series: {len(paths)} epoch given; at least two are needed (E0 and a later survey)")
     for path in paths:
         if not path.exists():
             raise SoilVolumeError(f"{path}: no such file")
-    if len({p.resolve() for p in paths}) < len(paths):
-        raise SoilVolumeError("series: an epoch is given twice")
+
+
+def described(epochs: tuple[Epoch, ...], k: int) -> str:
+    """Epoch ``k`` in an error: its index, file and date with where the date came from."""
+    e = epochs[k]
+    source = {"LAS header": "from its LAS header", "given": "given by --dates"}.get(e.date_source or "", "")
+    return f"E{k} {e.name} ({f'{e.date}, {source}' if e.date else 'no date'})"
+
+
+def check_series(epochs: tuple[Epoch, ...]) -> None:
+    """Every epoch a different survey (:func:`~soilvolume.inputs.distinct.sameness`), and the
+    known dates in the order the epochs are given (a series is not reordered: E0 is the reference)."""
+    for j, k in itertools.combinations(range(len(epochs)), 2):
+        how = sameness(Path(epochs[j].path), Path(epochs[k].path))
+        if how:
+            raise SoilVolumeError(
+                f"series: {described(epochs, k)} {how} {described(epochs, j)}; each epoch must be another survey"
+            )
+    latest = None  # the epoch of the latest date so far
+    for k, e in enumerate(epochs):
+        if not e.date:
+            continue
+        if latest is not None and e.date < epochs[latest].date:
+            raise SoilVolumeError(
+                f"series: the epochs are not in time order: {described(epochs, k)} is given after "
+                f"{described(epochs, latest)}; give the surveys oldest first (E0 the reference) or correct "
+                "their dates with --dates"
+            )
+        latest = k
+
+
+@contextmanager
+def naming(prefix: str) -> Iterator[None]:
+    """A SoilVolumeError raised in the block with ``prefix`` (the epochs it concerns) before its
+    message, its type and fields kept; an interruption as it is."""
+    try:
+        yield
+    except (Interrupted, Cancelled):
+        raise
+    except SoilVolumeError as exc:
+        exc.args = (f"{prefix}: {exc.keyed}", *exc.args[1:])
+        raise
 
 
 def _moved(t: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -125,12 +171,19 @@ def run_series(
 
     timer = Timer()
     check_epochs(paths)
-    epochs = tuple(Epoch(p, date=d) for p, d in zip(paths, epoch_dates(paths, dates), strict=True))
+    dated = zip(paths, epoch_dates(paths, dates), strict=True)
+    epochs = tuple(Epoch(p, date=d, date_source=source) for p, (d, source) in dated)
+    check_series(epochs)
     with output_dir(out_dir, [*paths, options.stable_mask], overwrite) as out, os_errors(out.final):
         run = drive(Run("series", epochs, options, hooks, timer, out=out), Series())
     hooks.step(100, "done")
     moved = out.moved.items()
     return Result(run.report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
+
+
+def pair_named(run, k: int) -> str:
+    """The pair E0 -> Ek of a series in an error."""
+    return f"{described(run.epochs, k)} against {described(run.epochs, 0)}"
 
 
 class Series:
@@ -163,7 +216,8 @@ class Series:
         e0, later = run.epochs[0], run.epochs[1:]
         for k, ek in enumerate(later):
             spans = {"prepare": self._each(run, "prepare", k, len(later))}
-            self.preps.append(prepare_pair(e0.path, ek.path, run.options, run.hooks, None, None, spans))
+            with naming(pair_named(run, k + 1)):
+                self.preps.append(prepare_pair(e0.path, ek.path, run.options, run.hooks, None, None, spans))
 
     def register_step(self, run) -> None:
         from .steps import register_pair
@@ -172,9 +226,9 @@ class Series:
         for k, prep in enumerate(self.preps):
             name = run.epochs[k + 1].name
             progress = (*self._each(run, "register", k, n), f"registering {name} into {run.epochs[0].name}'s frame")
-            reg, opts = register_pair(
-                prep, run.options, run.hooks, run.timer, (prep.after.xyz, prep.before.xyz), progress
-            )
+            with naming(pair_named(run, k + 1)):
+                dense = (prep.after.xyz, prep.before.xyz)
+                reg, opts = register_pair(prep, run.options, run.hooks, run.timer, dense, progress)
             run.hooks.info(
                 f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m"
             )
@@ -189,7 +243,8 @@ class Series:
     def grid(self, run) -> None:
         from .steps import moved_nonsoil
 
-        grid = run.grid = series_grid(self.fits, run.options)
+        with naming("series " + ", ".join(described(run.epochs, k) for k in range(len(run.epochs)))):
+            grid = run.grid = series_grid(self.fits, run.options)
         e0 = self.fits[0].prep.before
         dems = [gridmod.epoch_dem(e0.xyz, grid, run.options.statistic, e0.nonsoil)]
         for f in self.fits:
@@ -202,16 +257,18 @@ class Series:
 
         run.hooks.step(run.at("planes"), correction_step(run.options) + ", each epoch once relative to E0")
         with run.timer("planes"):
-            for f in self.fits:
+            for k, f in enumerate(self.fits, 1):
                 thin = transform_points(f.prep.after_thin, f.reg.transform)
-                self.planes.append(planes_step(f.prep, run.grid, run.dems[0], thin, f.options))
+                with naming(pair_named(run, k)):
+                    self.planes.append(planes_step(f.prep, run.grid, run.dems[0], thin, f.options))
 
     def volume(self, run):
         from ..volumes.series import combine
         from .steps import alternative_move, volume_step
 
         for k, (f, planes) in enumerate(zip(self.fits, self.planes, strict=True), 1):
-            self.vols.append(volume_step((run.dems[k], run.dems[0]), planes[2], run.grid, f.options, f.reg))
+            with naming(pair_named(run, k)):
+                self.vols.append(volume_step((run.dems[k], run.dems[0]), planes[2], run.grid, f.options, f.reg))
         run.hooks.step(run.at("volume", 0.8), "periods, cumulative and their intervals")
         moves = [alternative_move(f.reg) for f in self.fits]
         return combine(self.vols, list(run.dems), moves, run.grid, run.options)
@@ -226,7 +283,5 @@ class Series:
 
         run.hooks.step(run.at("report"), run.message("report"), log=False)
         with run.timer("report"):
-            paths = [e.path for e in run.epochs]
-            dates = [e.date for e in run.epochs]
-            args = (paths, dates, self.fits, self.vols, run.vols, run.grid, run.options, run.timer)
+            args = (run.epochs, self.fits, self.vols, run.vols, run.grid, run.options, run.timer)
             run.report = write_reports(run.out, *args)
