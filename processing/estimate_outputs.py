@@ -141,7 +141,7 @@ def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingCo
         raise QgsProcessingException("The engine wrote no change-area polygons.")
     from osgeo import gdal
 
-    Path(dest).parent.mkdir(parents=True, exist_ok=True)
+    params.dest_folder(Path(dest).parent)
     Path(dest).unlink(missing_ok=True)
     if gdal.VectorTranslate(dest, str(src)) is None:
         raise QgsProcessingException(f"Cannot write {dest} (unsupported vector format?).")

@@ -242,7 +242,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         """Copy a report and any sibling files it links to (e.g. figures) next to it."""
         if src.suffix != ".html":
             return params.deliver_file(src, dest)
-        Path(dest).parent.mkdir(parents=True, exist_ok=True)
+        params.dest_folder(Path(dest).parent)
         text = src.read_text(encoding="utf-8", errors="replace")
         page = reword_html(text)  # parameters, not flags
         params.write_atomically(dest, lambda partial: partial.write_text(page, encoding="utf-8"))

@@ -215,7 +215,7 @@ def deliver_raster(src: Path, dest: str | None) -> str | None:
     """Move an engine GeoTIFF to a destination (converting when it is not a GeoTIFF)."""
     if not dest:
         return None
-    Path(dest).parent.mkdir(parents=True, exist_ok=True)
+    dest_folder(Path(dest).parent)
     if Path(dest).suffix.lower() in RASTER_COPY_SUFFIXES:
         return copy(src, dest)
     from osgeo import gdal
@@ -238,7 +238,7 @@ def deliver_cloud(src: Path, dest: str | None, feedback=None) -> str | None:
     Python: laspy never loads into QGIS)."""
     if not dest:
         return None
-    Path(dest).parent.mkdir(parents=True, exist_ok=True)
+    dest_folder(Path(dest).parent)
     if Path(dest).suffix.lower() == src.suffix.lower():
         return copy(src, dest)
     if not is_las(dest):
@@ -281,8 +281,20 @@ def group_label(pair: tuple[str, str]) -> str:
 def deliver_file(src: Path, dest: str | None) -> str | None:
     if not dest:
         return None
-    Path(dest).parent.mkdir(parents=True, exist_ok=True)
+    dest_folder(Path(dest).parent)
     return copy(src, dest)
+
+
+def dest_folder(folder: Path) -> Path:
+    """``folder`` (and its parents) created where missing; one that cannot be made or written into is
+    one message naming it (the engine has run: its outputs wait in the work folder)."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise QgsProcessingException(f"Cannot write into the folder {folder}: {exc.strerror or exc}") from exc
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise QgsProcessingException(f"Cannot write into the folder {folder}: permission denied")
+    return folder
 
 
 def copy(src: Path, dest: str) -> str:

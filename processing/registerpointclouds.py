@@ -96,7 +96,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         results["RMSE"] = fine.get("rmse")
         dest = self.parameterAsFileOutput(parameters, "TRANSFORM_FILE", context)
         if dest:
-            Path(dest).parent.mkdir(parents=True, exist_ok=True)
+            params.dest_folder(Path(dest).parent)
             text = params.to_json(reg, indent=2) + "\n"
             params.write_atomically(dest, lambda partial: partial.write_text(text, encoding="utf-8"))
             results["TRANSFORM_FILE"] = dest

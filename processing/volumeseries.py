@@ -141,7 +141,7 @@ class VolumeSeries(SoilVolumeAlgorithm):
 
     def deliver(self, report, outputs, folder: Path, parameters, context, feedback) -> dict[str, Any]:
         """Every output copied whole into the folder (and the ledger and report where asked)."""
-        folder.mkdir(parents=True, exist_ok=True)
+        params.dest_folder(folder)
         for src in outputs.values():
             params.copy(src, str(folder / src.name))
         results: dict[str, Any] = {"OUTPUT_FOLDER": str(folder)}

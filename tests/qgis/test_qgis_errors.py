@@ -174,3 +174,37 @@ def test_a_full_disk_while_delivering_leaves_no_half_written_output(plugin_packa
     with pytest.raises(QgsProcessingException, match=r"Cannot write .*d\.tif: No space left on device"):
         params.deliver_raster(src, str(dest))
     assert dest.read_bytes() == b"the previous run" and sorted(p.name for p in dest.parent.iterdir()) == ["d.tif"]
+
+
+@pytest.mark.parametrize("link", ["same path", "hardlink"])
+def test_one_survey_as_before_and_after_is_refused(run_alg, scene_dir, tmp_path, link):
+    """The same file as both surveys (or a hard link to it) would give 0 ± 0 m³ and an empty layer:
+    the engine refuses it, the message names the file; nothing is written."""
+    import os
+
+    before = scene_dir / "after.las"
+    after = before if link == "same path" else tmp_path / "twin.las"
+    if after != before:
+        os.link(before, after)
+    with pytest.raises(QgsProcessingException) as info:
+        run_alg(
+            "estimatevolumechange", {"BEFORE": str(before), "AFTER": str(after), "DIFFERENCE": str(tmp_path / "d.tif")}
+        )
+    assert f"{after}: is the same file as the before survey {before}" in str(info.value), str(info.value)
+    assert not (tmp_path / "d.tif").exists()
+    with pytest.raises(QgsProcessingException) as info:  # and as two epochs of a series
+        run_alg("volumeseries", {"EPOCHS": [str(before), str(after)], "OUTPUT_FOLDER": str(tmp_path / "out")})
+    assert f"E1 {after.name} " in str(info.value) and f"is the same file as E0 {before.name} " in str(info.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_output_folder_that_cannot_be_made_is_one_message_naming_it(run_alg, scene_dir, tmp_path):
+    """The engine ran, then the output's folder cannot be created (a file stands where it would
+    be): one QgsProcessingException naming the folder, not an OSError's traceback."""
+    blocker = tmp_path / "taken"
+    blocker.write_text("a file, not a folder")
+    out = blocker / "sub" / "dem.tif"
+    with pytest.raises(QgsProcessingException) as info:
+        run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "after.las"), "OUTPUT": str(out)})
+    assert f"Cannot write into the folder {out.parent}" in str(info.value), str(info.value)
+    assert blocker.read_text() == "a file, not a folder" and sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
