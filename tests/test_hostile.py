@@ -242,3 +242,30 @@ def test_an_estimate_raster_cut_off_by_a_full_disk_fails_the_run(tmp_path, sched
     code, err = _capped(sizes[largest] - 1, *args, tmp_path / "out", before=disk)
     _one_line_error(code, err, largest, "file too large" if not disk else "cut off")
     assert not (tmp_path / "out").exists() and _hidden(tmp_path) == [] and _sums(inputs) == before
+
+
+@pytest.mark.parametrize("vertex", ["[NaN, NaN]", "[500020, NaN]", "[Infinity, 3900020]"])
+def test_a_zone_with_a_coordinate_that_is_not_a_number_is_one_line(tmp_path, vertex):
+    """A GeoJSON vertex of NaN or infinity (GDAL reads them): shapely's make_valid raised GEOS's
+    exception and the run ended in a traceback, with GEOS's warnings before it. One line naming the
+    file and the zone for volume and estimate, on the zones and the stable-ground mask alike."""
+    from conftest import run_cli
+
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    pair, dems = small_pair(inputs), _dem_pair(inputs)
+    ring = f"[[500000, 3900000], [500020, 3900000], {vertex}, [500000, 3900020], [500000, 3900000]]"
+    zones = inputs / "zones.geojson"
+    zones.write_text(
+        '{"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"name": "pit"}, '
+        f'"geometry": {{"type": "Polygon", "coordinates": [{ring}]}}}}]}}'
+    )
+    before = _sums(inputs)
+    for args in (
+        ["volume", *dems, "--out", tmp_path / "v.tif", "--zones", zones],
+        ["estimate", *pair, "--out", tmp_path / "o", "--quiet", "--zones", zones],
+        ["estimate", *pair, "--out", tmp_path / "o", "--quiet", "--stable-mask", zones],
+    ):
+        done = run_cli(*args)
+        _one_line_error(done.returncode, done.stderr.strip().splitlines(), "zones.geojson", "'pit'", "not a number")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"] and _sums(inputs) == before

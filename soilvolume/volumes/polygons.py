@@ -81,11 +81,11 @@ def _read_pyogrio(path: Path):
     import shapely
     from pyogrio import raw
 
-    with warnings.catch_warnings():  # GDAL's complaints about a broken file: the error says it
+    with warnings.catch_warnings():  # GDAL's and GEOS's complaints about a broken file: the error says it
         warnings.simplefilter("ignore")
         meta, fids, wkb, values = raw.read(str(path), return_fids=True)
+        geoms = shapely.from_wkb(wkb) if wkb is not None else [None] * len(fids)
     names = list(meta["fields"])
-    geoms = shapely.from_wkb(wkb) if wkb is not None else [None] * len(fids)
     feats = [
         (int(fid), {n: v[k] for n, v in zip(names, values, strict=True)}, g)
         for k, (fid, g) in enumerate(zip(fids, geoms, strict=True))
@@ -140,12 +140,18 @@ def _name(props: dict, field: str | None, i: int, path: Path) -> str:
 
 
 def _valid(p: Polygon, path: Path) -> Polygon:
-    """``p`` with a valid polygonal geometry (repaired with ``make_valid``), or an error."""
+    """``p`` with finite coordinates and a valid polygonal geometry (repaired with ``make_valid``),
+    or an error."""
     import shapely
 
+    if not np.isfinite(shapely.get_coordinates(p.geometry)).all():  # GEOS cannot even repair it
+        raise SoilVolumeError(f"{path}: '{p.name}' has a coordinate that is not a number (NaN or infinite)")
     if shapely.is_valid(p.geometry):
         return p
-    fixed = shapely.make_valid(p.geometry)
+    try:
+        fixed = shapely.make_valid(p.geometry)
+    except shapely.errors.GEOSException as exc:
+        raise SoilVolumeError(f"{path}: '{p.name}' is not a valid polygon and cannot be repaired ({exc})") from None
     parts = [g for g in shapely.get_parts(fixed) if g.geom_type in ("Polygon", "MultiPolygon")]
     area = shapely.union_all(parts) if parts else None
     if area is None or area.is_empty or area.area <= 0:
