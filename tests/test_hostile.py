@@ -269,3 +269,37 @@ def test_a_zone_with_a_coordinate_that_is_not_a_number_is_one_line(tmp_path, ver
         done = run_cli(*args)
         _one_line_error(done.returncode, done.stderr.strip().splitlines(), "zones.geojson", "'pit'", "not a number")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"] and _sums(inputs) == before
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="RLIMIT_NOFILE is POSIX")
+def test_too_few_open_files_for_a_local_cluster_is_one_line_naming_the_limit(tmp_path):
+    """``ulimit -n 24`` with --scheduler local:2: Dask's scheduler spun on accept() for minutes,
+    printing its traceback millions of times, before a line naming a scratch folder. Now one line
+    naming the limit and the remedies, at once; nothing written."""
+    import resource
+    import subprocess
+    import sys
+
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    pair = small_pair(inputs)
+    before, err = _sums(inputs), tmp_path / "stderr.txt"
+
+    def few() -> None:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (24, 24))
+
+    cmd = [sys.executable, "-m", "soilvolume", "estimate", *map(str, pair), "--out", str(tmp_path / "o"), "--quiet"]
+    with open(err, "w") as fh:  # a file: the old behaviour wrote gigabytes
+        code = subprocess.run([*cmd, "--scheduler", "local:2"], preexec_fn=few, stderr=fh, timeout=60).returncode
+    lines = err.read_text().splitlines()
+    _one_line_error(code, lines, "--scheduler local:2", "open-file limit (ulimit -n) is 24", "--scheduler none")
+    err.unlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in"] and _sums(inputs) == before
+    script = (
+        "import resource; from soilvolume.distributed.schedule import choose\n"
+        "print(choose('auto', 4.0, 10**9).kind)\n"
+        "resource.setrlimit(resource.RLIMIT_NOFILE, (24, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))\n"
+        "print(choose('auto', 4.0, 10**9).kind)\n"
+    )
+    done = run_python(script)  # auto: worker processes while the limit holds them, else threads
+    assert done.stdout.split() == ["local", "threads"], done.stderr

@@ -131,10 +131,40 @@ def choose(spec: str, memory_limit: float, points: int) -> Schedule:
         return chosen
     if in_process_gb(points) <= budget_gb(memory_limit) or not has_dask():
         return Schedule("none")
-    return Schedule("local" if can_spawn() else "threads", os.cpu_count() or 1)
+    workers = os.cpu_count() or 1
+    return Schedule("local" if can_spawn() and open_files_short(workers) is None else "threads", workers)
 
 
 WORKER_MIN_GB = 0.25  # a worker process: the interpreter, numpy, laspy and a small tile
+
+
+#: open files a LocalCluster's driver holds: the scheduler, a nanny and a worker's connections each
+#: (it failed to start below 48 for 2 workers, 72 for 4; Dask then spins on accept() for minutes)
+FILES_BASE, FILES_PER_WORKER = 32, 12
+
+
+def open_files_short(workers: int) -> tuple[int, int] | None:
+    """(this process's open-file limit, the files a LocalCluster of ``workers`` processes needs)
+    when the limit is below that; None when it is not (or there is no such limit: Windows)."""
+    try:
+        import resource
+    except ImportError:
+        return None
+    soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    need = FILES_BASE + FILES_PER_WORKER * workers
+    return (soft, need) if soft != resource.RLIM_INFINITY and soft < need else None
+
+
+def check_open_files(schedule: Schedule) -> None:
+    """Refuse a LocalCluster the open-file limit (``ulimit -n``) cannot hold, naming the limit and
+    the remedies, before Dask starts it."""
+    short = open_files_short(schedule.workers) if schedule.kind == "local" else None
+    if short is not None:
+        raise SoilVolumeError(
+            f"{opt('scheduler', schedule)}: the open-file limit (ulimit -n) is {short[0]}, below the "
+            f"{short[1]} a Dask cluster of {schedule.workers} worker processes needs; raise it (e.g. "
+            f"ulimit -n {max(1024, short[1])}) or run in-process ({opt('scheduler', 'none')})"
+        )
 
 
 def check_budget(schedule: Schedule, memory_limit: float) -> None:
@@ -192,6 +222,7 @@ def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None)
     from .cluster import START_S, Starting
 
     check_budget(schedule, memory_limit)
+    check_open_files(schedule)
     starting = Starting(lambda: _start(schedule, memory_limit, scratch), str(schedule), START_S[schedule.kind])
     try:
         yield starting
