@@ -86,13 +86,15 @@ class DependencyBar:
         self.item = bar.createMessage(TITLE, f"cannot run yet: {why} (about 800 MB from PyPI).")
         button = QPushButton("Install")
         button.setObjectName("soilvolumeInstallDependencies")
-        button.clicked.connect(self.install)
+        button.clicked.connect(lambda _checked=False: self.install())  # clicked passes `checked`
         self.item.layout().addWidget(button)
         bar.pushWidget(self.item, Qgis.MessageLevel.Warning)
 
     def install(self, done: Callable[[bool, str], None] | None = None) -> QgsProcessingAlgRunnerTask:
         """Run the installer in the background (progress in the task bar, its lines in the log);
-        the bar says the plugin is ready only when the engine's self-test passed."""
+        the bar says the plugin is ready only when the engine's self-test passed. ``done(ready,
+        error)`` is called at the end when given (a callable: never a signal's argument)."""
+        done = done if callable(done) else None
         if self.item is not None:
             self.iface.messageBar().popWidget(self.item)
             self.item = None

@@ -116,3 +116,32 @@ def test_install_button_runs_the_installer_algorithm_as_a_task(provider, qgis_if
     success = fresh_bar.get_messages(Qgis.MessageLevel.Success)
     assert success == ["Soil volume change:Installed and tested: the algorithms are ready."], success
     assert fresh_bar.get_messages(Qgis.MessageLevel.Critical) == []
+
+
+def test_the_bars_install_button_reports_success(plugin_package, qgis_iface, fresh_bar, monkeypatch, tmp_path):
+    """The Install button of the bar itself (its ``clicked`` passes ``checked``, never a callback):
+    the environment becomes ready meanwhile, the install ends with the success message and no
+    error (was: TypeError 'bool' object is not callable, no message)."""
+    import os
+
+    ready = os.environ["SOILVOLUME_ENGINE_ENV"]
+    monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", str(tmp_path / "nothing-here"))
+    plugin = load_plugin(plugin_package, qgis_iface)
+    errors = []
+    monkeypatch.setattr("sys.excepthook", lambda kind, value, tb: errors.append(f"{kind.__name__}: {value}"))
+    try:
+        (item,) = our_items(fresh_bar)
+        monkeypatch.setenv("SOILVOLUME_ENGINE_ENV", ready)  # installed meanwhile: the task ends at once
+        item.findChild(QPushButton, "soilvolumeInstallDependencies").click()
+        deadline = time.time() + 120
+        while not fresh_bar.get_messages(Qgis.MessageLevel.Success) and not errors and time.time() < deadline:
+            QgsApplication.processEvents()
+            time.sleep(0.05)
+        for _ in range(20):
+            QgsApplication.processEvents()
+            time.sleep(0.02)
+    finally:
+        plugin.unload()
+    assert errors == []
+    success = fresh_bar.get_messages(Qgis.MessageLevel.Success)
+    assert success == ["Soil volume change:Installed and tested: the algorithms are ready."], success
