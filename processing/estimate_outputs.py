@@ -131,9 +131,10 @@ def write_zones(
     return dest
 
 
-def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingContext, src, pair) -> str | None:
+def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingContext, src, names) -> str | None:
     """The CHANGE_AREAS output: the engine's cut and fill polygons (GeoJSON) in the format the
-    destination asks for (GDAL of QGIS), styled and named after the pair when loaded."""
+    destination asks for (GDAL of QGIS), styled and named after the pair when loaded (``names``:
+    :func:`params.run_label`'s), on top of the run's group."""
     dest = alg.parameterAsOutputLayer(parameters, "CHANGE_AREAS", context)
     if not dest:
         return None
@@ -145,9 +146,10 @@ def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingCo
     Path(dest).unlink(missing_ok=True)
     if gdal.VectorTranslate(dest, str(src)) is None:
         raise QgsProcessingException(f"Cannot write {dest} (unsupported vector format?).")
-    label = f"Areas of significant change ({pair[1]})" if pair[1] else "Areas of significant change"
-    # sort key 35: under the difference (40), over the correction and the DEMs
-    styles.style_on_load(context, dest, styles.CHANGE_AREAS, label, 35, params.group_label(pair))
+    (_before, after), group = names
+    label = f"Areas of significant change ({after})" if after else "Areas of significant change"
+    # sort key 50: over the difference (40, opaque), the correction and the DEMs
+    styles.style_on_load(context, dest, styles.CHANGE_AREAS, label, 50, group)
     return dest
 
 

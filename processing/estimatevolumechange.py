@@ -53,9 +53,10 @@ none). Nothing is registered against it (the survey must be well georeferenced) 
 corrected by default; the volumes are above (fill) and below (cut) the design over the survey's
 footprint, and the verdict checks that the survey agrees with the design on unchanged ground.</p>
 <h3>Outputs</h3>
-<p>The corrected difference raster (red = cut, blue = fill, on top), both DEMs and the vertical
-correction raster, styled, in a group named after the pair; the areas of significant change as
-cut and fill polygons, each with its area and volume (the headline cut and fill are their sums);
+<p>The areas of significant change as cut and fill polygons on top (outlined red and blue), each
+with its area and volume (the headline cut and fill are their sums); under them the corrected
+difference raster (red = cut, blue = fill), both DEMs and the vertical correction raster, styled,
+in a group of each run named after the pair, its run number and time;
 an HTML report; optionally the JSON report, the per-zone volume table
 and the registered after cloud (off by default: it is the most expensive output). Numbers: net,
 cut and fill volumes (m³) with their ± half-widths, the same over the detected change areas,
@@ -179,33 +180,35 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             result = engine.run(
                 [*args, "--out", str(work / "result")], feedback, skip=("quality (",), hint=CRS_HINT
             )  # the quality lines are logged with the results
-            pair = params.pair_label(before, after)
-            return self.deliver(result, parameters, context, feedback, registered, pair)
+            names = params.run_label(params.pair_label(before, after))
+            return self.deliver(result, parameters, context, feedback, registered, names)
 
-    def deliver(self, result, parameters, context, feedback, registered, pair=("", "")) -> dict[str, Any]:
-        """Copy the engine outputs to the destinations and collect the numeric outputs."""
+    def deliver(self, result, parameters, context, feedback, registered, names=(("", ""), "")) -> dict[str, Any]:
+        """Copy the engine outputs to the destinations and collect the numeric outputs (``names``:
+        :func:`params.run_label`'s, what the loaded layers and their group are called)."""
         outputs = {k: Path(v) for k, v in (result.get("outputs") or {}).items()}
-        results = self.deliver_files(outputs, parameters, context, feedback, registered, pair)
+        results = self.deliver_files(outputs, parameters, context, feedback, registered, names)
         report, summary = result.get("report") or {}, result.get("summary") or {}
         results.update(estimate_outputs.values(report, summary))
         results["ZONE_VOLUMES"] = estimate_outputs.write_zones(self, parameters, context, report)
         results["CHANGE_AREAS"] = estimate_outputs.write_change_areas(
-            self, parameters, context, outputs.get("change_areas"), pair
+            self, parameters, context, outputs.get("change_areas"), names
         )
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
         self.log_summary(results, feedback)
         return results
 
-    def deliver_files(self, outputs, parameters, context, feedback, registered, pair=("", "")) -> dict[str, Any]:
+    def deliver_files(self, outputs, parameters, context, feedback, registered, names=(("", ""), "")) -> dict:
         results: dict[str, Any] = {}
+        pair, group = names
         for key, (out_key, style, name, order) in RASTERS.items():
             dest = self.parameterAsOutputLayer(parameters, key, context)
             if dest and out_key not in outputs:
                 raise QgsProcessingException(f"The engine wrote no {out_key} raster.")
             results[key] = params.deliver_raster(Path(outputs[out_key]), dest) if dest else None
             label = f"{name} ({pair[1] if key != 'DEM_BEFORE' else pair[0]})" if pair[1] else name
-            styles.style_on_load(context, results[key], style, label, order, params.group_label(pair))
+            styles.style_on_load(context, results[key], style, label, order, group)
         if registered and "after_registered" in outputs:
             results["REGISTERED"] = params.deliver_cloud(Path(outputs["after_registered"]), registered, feedback)
         for key, suffix in (("REPORT", ".html"), ("REPORT_JSON", ".json")):

@@ -6,6 +6,8 @@ import json
 import os
 import shutil
 import tempfile
+import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -273,9 +275,22 @@ def pair_label(before: str, after: str) -> tuple[str, str]:
     return stem(before), stem(after)
 
 
-def group_label(pair: tuple[str, str]) -> str:
-    """The Layers-panel group of one run's outputs."""
-    return f"Soil volume: {pair[0]} → {pair[1]}" if pair[1] else ""
+_RUNS: dict[tuple[str, str], int] = {}  # runs of each pair in this QGIS session
+_RUNS_LOCK = threading.Lock()  # Batch rows and models run in worker threads
+
+
+def run_label(pair: tuple[str, str]) -> tuple[tuple[str, str], str]:
+    """(the names the run's layers carry, the Layers-panel group of the run's outputs), unique to
+    the run: QGIS puts outputs into an existing group of the same name, so a second run of a pair
+    in a session has its number in its layers' names (``autzen_bmx_2023, run 2``) and every
+    group its number and time (``Soil volume: a → b (run 2, 14:03:22)``: also unique beside the
+    groups of a project saved in an earlier session)."""
+    if not pair[1]:
+        return pair, ""
+    with _RUNS_LOCK:
+        _RUNS[pair] = number = _RUNS.get(pair, 0) + 1
+    group = f"Soil volume: {pair[0]} → {pair[1]} (run {number}, {time.strftime('%H:%M:%S')})"
+    return (pair if number == 1 else (f"{pair[0]}, run {number}", f"{pair[1]}, run {number}")), group
 
 
 def deliver_file(src: Path, dest: str | None) -> str | None:

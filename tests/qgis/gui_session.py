@@ -138,6 +138,9 @@ def change_area_checks(results: dict) -> dict:
         "sums": sums,
         "headline": {"cut": results["CUT_VOLUME"], "fill": results["FILL_VOLUME"]},
         "categories": sorted(c.value() for c in getattr(renderer, "categories", list)()),
+        "alphas": [
+            [s.color().alpha(), s.symbolLayer(0).strokeColor().alpha()] for s in renderer.symbols(QgsRenderContext())
+        ],
         "crs": layer.crs().authid(),
     }
 

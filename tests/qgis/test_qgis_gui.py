@@ -60,12 +60,13 @@ def test_dialog_widgets(session):
 def test_outputs_loaded_styled_and_stacked(session, truth):
     assert session["net"] == pytest.approx(truth["net"], rel=0.03)
     order = session["order"]
-    assert order[0] == "Difference (after)" and len(order) == 5, order  # named after the pair
-    assert order[1] == "Areas of significant change (after)", order
+    assert order[0] == "Areas of significant change (after)" and len(order) == 5, order  # on top, outlined
+    assert order[1] == "Difference (after)", order  # named after the pair
     assert order.index("Vertical correction (after)") < order.index("DEM before (before)")
     areas = session["change_areas"]
     assert areas["layers"] == ["Areas of significant change (after)"], areas
     assert areas["categories"] == ["cut", "fill"]  # styled: cut red, fill blue
+    assert all(fill <= 64 and outline == 255 for fill, outline in areas["alphas"]), areas  # light fill
     for kind in ("cut", "fill"):  # the polygons hold the headline's volumes
         assert areas["sums"].get(kind, 0.0) == pytest.approx(areas["headline"][kind], rel=1e-3, abs=0.5), areas
     assert (ARTEFACTS / "layers_and_map.png").stat().st_size > 20_000

@@ -201,3 +201,41 @@ def test_quality_messages_name_parameters_not_flags(real_dir, run_alg_session, t
     assert results["VERDICT"] == "use with caution"
     assert "--" not in results["QUALITY_MESSAGES"]
     assert "(GEOREFERENCING)" in results["QUALITY_MESSAGES"]
+
+
+def test_two_runs_of_a_pair_are_two_groups_with_the_polygons_on_top(provider, scene_dir, tmp_path):
+    """Processing's own loading (runAndLoadResults) of two runs of one pair: two groups, each
+    run's layers named apart, in each group the change-area polygons on top of the opaque
+    difference, outlined with a light fill (were: one group holding both runs' layers under
+    the same names, the polygons under the difference)."""
+    from qgis import processing
+
+    project = QgsProject.instance()
+    before = set(project.mapLayers())
+    try:
+        for run in (1, 2):
+            params = {
+                "BEFORE": str(scene_dir / "before.las"),
+                "AFTER": str(scene_dir / "after.las"),
+                "CELL": 1.0,
+                "DIFFERENCE": str(tmp_path / f"difference{run}.tif"),
+                "CHANGE_AREAS": str(tmp_path / f"areas{run}.gpkg"),
+            }
+            processing.runAndLoadResults("soilvolume:estimatevolumechange", params)
+        root = project.layerTreeRoot()
+        groups = {g.name(): [n.layer().name() for n in g.findLayers()] for g in root.findGroups()}
+        ours = {name: layers for name, layers in groups.items() if name.startswith("Soil volume: before → after")}
+        assert len(ours) == 2, groups
+        for layers in ours.values():  # this session's earlier runs of the pair number them on
+            assert [name.split(" (")[0] for name in layers] == ["Areas of significant change", "Difference"], groups
+        names = [name for layers in ours.values() for name in layers]
+        assert len(set(names)) == 4 and sum(", run " in name for name in names) >= 2, groups
+        areas = [layer for layer in project.mapLayers().values() if isinstance(layer, QgsVectorLayer)]
+        for layer in areas:
+            for symbol in layer.renderer().symbols(QgsRenderContext()):
+                assert symbol.color().alpha() <= 64, layer.name()  # a light fill: the difference shows through
+                assert symbol.symbolLayer(0).strokeColor().alpha() == 255 and symbol.symbolLayer(0).strokeWidth() >= 0.5
+    finally:
+        project.removeMapLayers([layer for layer in project.mapLayers() if layer not in before])
+        for group in project.layerTreeRoot().findGroups():
+            project.layerTreeRoot().removeChildNode(group)
