@@ -114,7 +114,7 @@ def write_zones(
     """The ZONE_VOLUMES table: each zone polygon with cut, fill, net and the net's ± (report.json's)."""
     zones = report.get("zones") or []
     source = alg.parameterAsSource(parameters, "ZONES", context) if parameters.get("ZONES") else None
-    if source is None or not zones:
+    if source is None or not zones or params.unset_output(parameters, "ZONE_VOLUMES"):
         return None
     fields = zone_fields(source.fields())
     sink, dest = alg.parameterAsSink(parameters, "ZONE_VOLUMES", context, fields, source.wkbType(), source.sourceCrs())
@@ -135,7 +135,7 @@ def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingCo
     """The CHANGE_AREAS output: the engine's cut and fill polygons (GeoJSON) in the format the
     destination asks for (GDAL of QGIS), styled and named after the pair when loaded (``names``:
     :func:`params.run_label`'s), on top of the run's group."""
-    dest = alg.parameterAsOutputLayer(parameters, "CHANGE_AREAS", context)
+    dest = params.output_layer(alg, parameters, "CHANGE_AREAS", context)
     if not dest:
         return None
     if src is None or not Path(src).is_file():

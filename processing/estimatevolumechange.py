@@ -114,11 +114,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                     key, self.tr(RASTERS[key][2]), optional=True, createByDefault=True
                 )
             )
-        self.addParameter(
-            QgsProcessingParameterFileDestination(
-                "REPORT", self.tr("HTML report"), fileFilter="HTML files (*.html)", optional=True, createByDefault=True
-            )
-        )
+        self.addParameter(params.ReportDestination("REPORT", self.tr("HTML report"), "HTML files (*.html)", True))
         self.addParameter(
             QgsProcessingParameterFileDestination(
                 "REPORT_JSON",
@@ -203,7 +199,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         results: dict[str, Any] = {}
         pair, group = names
         for key, (out_key, style, name, order) in RASTERS.items():
-            dest = self.parameterAsOutputLayer(parameters, key, context)
+            dest = params.output_layer(self, parameters, key, context)
             if dest and out_key not in outputs:
                 raise QgsProcessingException(f"The engine wrote no {out_key} raster.")
             results[key] = params.deliver_raster(Path(outputs[out_key]), dest) if dest else None

@@ -21,8 +21,11 @@ from qgis.core import (
     QgsProcessingAlgorithm,
     QgsProcessingContext,
     QgsProcessingException,
+    QgsProcessingOutputFile,
+    QgsProcessingOutputLayerDefinition,
     QgsProcessingParameterCrs,
     QgsProcessingParameterDefinition,
+    QgsProcessingParameterFileDestination,
     QgsProcessingParameterMapLayer,
     QgsProcessingParameterPointCloudLayer,
     QgsProcessingUtils,
@@ -75,6 +78,7 @@ class CloudOrSurfaceParameter(QgsProcessingParameterMapLayer):
         copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
         copy.setHelp(self.help())
         copy.setFlags(self.flags())
+        copy.setMetadata(self.metadata())
         return copy
 
     def checkValueIsAcceptable(self, value, context=None) -> bool:  # noqa: N802 - Qt API
@@ -83,6 +87,25 @@ class CloudOrSurfaceParameter(QgsProcessingParameterMapLayer):
         if isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in CLOUD_EXTENSIONS:
             return True
         return super().checkValueIsAcceptable(value, context)
+
+
+class ReportDestination(QgsProcessingParameterFileDestination):
+    """An HTML report's destination whose output is a file, not an HTML output: QGIS 3.40's Batch
+    dialog hands every HTML output to its Results Viewer with a call that raises a TypeError
+    (``ProcessingResults.addResult() missing ... 'timestamp'``), once per row."""
+
+    def __init__(self, name: str, description: str, file_filter: str, default: bool) -> None:
+        super().__init__(name, description, fileFilter=file_filter, optional=True, createByDefault=default)
+
+    def toOutputDefinition(self) -> QgsProcessingOutputFile:  # noqa: N802 - Qt API
+        return QgsProcessingOutputFile(self.name(), self.description())
+
+    def clone(self) -> ReportDestination:
+        copy = type(self)(self.name(), self.description(), self.fileFilter(), self.createByDefault())
+        copy.setHelp(self.help())
+        copy.setFlags(self.flags())
+        copy.setMetadata(self.metadata())
+        return copy
 
 
 def is_surface_file(value: Any) -> bool:
@@ -153,6 +176,22 @@ def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcess
     if layer is None and surface:
         layer = alg.parameterAsRasterLayer(parameters, key, context)
     return layer.source() if layer is not None else str(value)
+
+
+def unset_output(parameters: dict[str, Any], key: str) -> bool:
+    """Whether a layer output was left empty (a Batch row's blank column: an output definition
+    with no destination). QGIS's parameterAsOutputLayer/parameterAsSink would register "" as a
+    layer to load, which Batch then reports in red as "not correctly generated"."""
+    value = parameters.get(key)
+    if not isinstance(value, QgsProcessingOutputLayerDefinition):
+        return False  # absent or a plain string: nothing is loaded, QGIS's default applies
+    sink = value.sink
+    return sink.propertyType() == QgsProperty.StaticProperty and sink.staticValue() in (None, "")
+
+
+def output_layer(alg: QgsProcessingAlgorithm, parameters: dict[str, Any], key: str, context) -> str:
+    """The destination of a layer output, "" when it was left empty (see :func:`unset_output`)."""
+    return "" if unset_output(parameters, key) else alg.parameterAsOutputLayer(parameters, key, context)
 
 
 def check_cloud_file(path: str, label: str) -> None:

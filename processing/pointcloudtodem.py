@@ -81,7 +81,7 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         cloud = params.cloud_path(self, parameters, "INPUT", context, "Input")
         crs = params.crs_text(self, parameters, "CRS", context)
         options = optionparams.read_options(self, parameters, context, feedback, "dem")
-        out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
+        out = params.output_layer(self, parameters, "OUTPUT", context)
         args = ["dem", cloud, *engine.option_args(options, "dem"), *self.bounds(parameters, context)]
         args += ["--crs", crs] if crs else []
         with params.work_folder() as work:

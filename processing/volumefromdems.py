@@ -138,7 +138,7 @@ class VolumeFromDems(SoilVolumeAlgorithm):
             field = self.parameterAsString(parameters, "ZONE_FIELD", context)
             args += ["--zone-field", field] if field else []
         zones = "--zones" in args
-        out = self.parameterAsOutputLayer(parameters, "OUTPUT", context)
+        out = params.output_layer(self, parameters, "OUTPUT", context)
         with params.work_folder() as work:
             volumes = engine.run([*args, "--out", str(work / "difference.tif")], feedback)
             params.deliver_raster(work / "difference.tif", out)
@@ -156,9 +156,11 @@ class VolumeFromDems(SoilVolumeAlgorithm):
             f"Volumes (m³): net {total['net']:.2f}, cut {total['cut']:.2f}, "
             f"fill {total['fill']:.2f} over {total['area_m2']:.1f} m²"
         )
-        sink, table_id = self.parameterAsSink(
-            parameters, "TABLE", context, table_fields(), QgsWkbTypes.NoGeometry, QgsCoordinateReferenceSystem()
-        )
+        sink, table_id = (None, None)
+        if not params.unset_output(parameters, "TABLE"):
+            sink, table_id = self.parameterAsSink(
+                parameters, "TABLE", context, table_fields(), QgsWkbTypes.NoGeometry, QgsCoordinateReferenceSystem()
+            )
         if sink is not None:
             rows = (volumes.get("zones") or []) if zones else [{"id": 0, "name": "total", **total}]
             for zone in rows:

@@ -107,15 +107,12 @@ class VolumeSeries(SoilVolumeAlgorithm):
         for param in optionparams.parameters("series"):
             self.addParameter(param)
         self.addParameter(QgsProcessingParameterFolderDestination("OUTPUT_FOLDER", self.tr("Output folder")))
-        for key, label, kind in (
-            ("LEDGER", "Ledger", "CSV files (*.csv)"),
-            ("REPORT", "HTML report", "HTML files (*.html)"),
-        ):
-            self.addParameter(
-                QgsProcessingParameterFileDestination(
-                    key, self.tr(label), fileFilter=kind, optional=True, createByDefault=False
-                )
+        self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "LEDGER", self.tr("Ledger"), fileFilter="CSV files (*.csv)", optional=True, createByDefault=False
             )
+        )
+        self.addParameter(params.ReportDestination("REPORT", self.tr("HTML report"), "HTML files (*.html)", False))
         for key, (_, label) in NUMBERS.items():
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(label)))
         self.addOutput(QgsProcessingOutputString("PERIODS", self.tr("Periods (JSON)")))

@@ -80,3 +80,32 @@ def test_legends_show_the_styled_range(session):
             assert 55 < row["legend"][0] < row["legend"][1] < 75  # the scene's heights, not 0-100
         else:
             assert row["legend"][0] == pytest.approx(-row["legend"][1])
+
+
+def test_batch_of_three_rows_has_no_red_errors(plugins_dir, scene_dir, tmp_path):
+    """QGIS's Batch dialog, three rows of one pair with the HTML report asked for and the DEM
+    columns left blank, results loaded: no "The following layers were not correctly generated"
+    (blank layer outputs were registered as a layer "" to load) and no Python error (QGIS's Batch
+    dialog raises a TypeError for every HTML output it hands to its Results Viewer); three
+    groups, one per run, the polygons on top in each."""
+    env = {k: v for k, v in os.environ.items() if k not in ("QT_QPA_PLATFORM", "PYTHONPATH", "QGIS_OPTIONS_PATH")}
+    env["QGIS_CUSTOM_CONFIG_PATH"] = str(tmp_path / "profile")
+    pair = f"{scene_dir / 'before.las'},{scene_dir / 'after.las'}"
+    command = [XVFB_RUN, "-a", "-s", "-screen 0 1400x1000x24", sys.executable, str(HERE / "batch_session.py")]
+    run = subprocess.run(
+        [*command, str(plugins_dir), str(tmp_path), pair, pair, pair],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=str(tmp_path),
+    )
+    assert run.returncode == 0, run.stderr[-3000:]
+    summary = json.loads(run.stdout.split("RESULT", 1)[1])
+    assert summary["python_errors"] == [], summary["python_errors"]
+    assert "not correctly generated" not in summary["log"], summary["log"][-2000:]
+    assert summary["reports"] == [True] * 3 and None not in summary["nets"], summary
+    runs = {name: layers for name, layers in summary["groups"].items() if name.startswith("Soil volume: before")}
+    assert len(runs) == 3, summary["groups"]
+    for layers in runs.values():
+        assert [name.split(" (")[0] for name in layers] == ["Areas of significant change", "Difference"], runs
