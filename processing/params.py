@@ -33,7 +33,7 @@ from qgis.core import (
     QgsRasterLayer,
 )
 
-from . import engine
+from . import engine, widgets
 
 CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
 SURFACE_EXTENSIONS = ("tif", "tiff")  # a surface as the reference (BEFORE of the estimate): a DEM GeoTIFF
@@ -57,6 +57,7 @@ class CloudParameter(QgsProcessingParameterPointCloudLayer):
         copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
         copy.setHelp(self.help())
         copy.setFlags(self.flags())
+        copy.setMetadata(self.metadata())
         return copy
 
 
@@ -134,7 +135,7 @@ def cloud_param(key: str, label: str, surface: bool = False) -> QgsProcessingPar
             else "."
         )
     )
-    return param
+    return widgets.no_default_layer(param)  # the dialog never preselects the project's first layer
 
 
 def crs_param(key: str, label: str) -> QgsProcessingParameterCrs:

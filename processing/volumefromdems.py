@@ -26,7 +26,7 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QMetaType
 
-from . import engine, params, styles
+from . import engine, params, styles, widgets
 from .base import SoilVolumeAlgorithm
 
 HELP = """\
@@ -92,8 +92,8 @@ class VolumeFromDems(SoilVolumeAlgorithm):
     _group_id = "volume"
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
-        self.addParameter(QgsProcessingParameterRasterLayer("BEFORE", self.tr("Before DEM")))
-        self.addParameter(QgsProcessingParameterRasterLayer("AFTER", self.tr("After DEM")))
+        for key, label in (("BEFORE", "Before DEM"), ("AFTER", "After DEM")):  # no layer preselected
+            self.addParameter(widgets.no_default_layer(QgsProcessingParameterRasterLayer(key, self.tr(label))))
         self.addParameter(
             QgsProcessingParameterFeatureSource(
                 "ZONES", self.tr("Zones (polygons)"), [QgsProcessing.TypeVectorPolygon], optional=True

@@ -21,7 +21,7 @@ from qgis.core import (
     QgsProperty,
 )
 
-from . import engine, optionparams, params
+from . import engine, optionparams, params, widgets
 from .base import SoilVolumeAlgorithm
 
 HELP = """\
@@ -98,7 +98,7 @@ class VolumeSeries(SoilVolumeAlgorithm):
             "EPOCHS", self.tr("Point clouds in time order (the reference survey first)"), QgsProcessing.TypeFile
         )
         epochs.setMinimumNumberInputs(2)
-        self.addParameter(epochs)
+        self.addParameter(widgets.file_list(epochs, params.CLOUD_FILTER))  # keeps the paths it is given
         self.addParameter(
             QgsProcessingParameterString(
                 "DATES", self.tr("Survey dates (YYYY-MM-DD, comma-separated; empty: from the files)"), optional=True

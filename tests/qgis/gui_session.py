@@ -87,6 +87,52 @@ def dialog_checks(before: str, after: str, artefacts: Path) -> dict:
     return out
 
 
+def opened(algorithm: str, values: dict | None = None):
+    """The algorithm's dialog as Processing opens it (``execAlgorithmDialog`` sets ``values``)."""
+    from processing.gui.AlgorithmDialog import AlgorithmDialog
+
+    dialog = AlgorithmDialog(QgsApplication.processingRegistry().createAlgorithmById(algorithm))
+    if values:
+        dialog.setParameters(values)
+    dialog.show()
+    settle(0.2)
+    return dialog
+
+
+def parameters_or_refusal(dialog) -> dict | str:
+    """The parameters the dialog would run with, or the name of the input it refuses to run without."""
+    from processing.gui.AlgorithmDialogBase import AlgorithmDialogBase
+
+    try:
+        return dialog.mainWidget().createProcessingParameters()
+    except AlgorithmDialogBase.InvalidParameterValue as refused:
+        return f"refused: {refused.parameter.name()}"
+
+
+def default_checks(before: str, after: str) -> dict:
+    """With a raster layer in the project: what the Before (and After) dropdowns start on, the
+    surface dialogs' refusal to run without a choice, and the series dialog's pre-set files."""
+    out = {}
+    for algorithm, keys in (
+        ("soilvolume:estimatevolumechange", ("BEFORE",)),
+        ("soilvolume:volumefromdems", ("BEFORE", "AFTER")),
+    ):
+        dialog = opened(algorithm)
+        out[algorithm] = {key: dialog.mainWidget().wrappers[key].widgetValue() for key in keys}
+        out[algorithm]["run"] = str(parameters_or_refusal(dialog))[:80]
+        dialog.close()
+    layer = QgsProject.instance().mapLayersByName("design DEM")[0]
+    dialog = opened("soilvolume:volumefromdems", {"BEFORE": layer, "AFTER": layer.id()})
+    out["picked"] = {key: dialog.mainWidget().wrappers[key].widgetValue() == layer.id() for key in ("BEFORE", "AFTER")}
+    dialog.close()
+    dialog = opened("soilvolume:volumeseries", {"EPOCHS": [after, before, after]})
+    out["series"] = {"widget": dialog.mainWidget().wrappers["EPOCHS"].widgetValue()}
+    run = parameters_or_refusal(dialog)
+    out["series"]["run"] = run.get("EPOCHS") if isinstance(run, dict) else run
+    dialog.close()
+    return out
+
+
 def run_and_load(before: str, after: str, out_dir: Path) -> dict:
     from processing.tools.general import runAndLoadResults
 
@@ -178,7 +224,7 @@ def main(plugins_dir: str, before: str, after: str, out_dir: str, artefacts: str
     folder = Path(artefacts)
     folder.mkdir(parents=True, exist_ok=True)
     design = a_dem_layer(Path(out_dir))  # listed by the dialog's Before dropdown, then removed
-    summary = {"dialog": dialog_checks(before, after, folder)}
+    summary = {"dialog": dialog_checks(before, after, folder), "defaults": default_checks(before, after)}
     QgsProject.instance().removeMapLayer(design.id())
     results = run_and_load(before, after, Path(out_dir))
     summary["net"] = results["NET_VOLUME"]

@@ -57,6 +57,26 @@ def test_dialog_widgets(session):
     assert (ARTEFACTS / "estimate_dialog.png").stat().st_size > 10_000
 
 
+def test_layer_dropdowns_start_empty(session):
+    """A raster in the project (a difference, a DEM) is not preselected as the estimate's Before
+    surface nor as Volume from DEMs' Before and After (was: the project's first raster layer);
+    the dialogs refuse to run until one is picked, and a layer given is kept."""
+    defaults = session["defaults"]
+    estimate, dems = defaults["soilvolume:estimatevolumechange"], defaults["soilvolume:volumefromdems"]
+    assert estimate["BEFORE"] is None and estimate["run"] == "refused: BEFORE", estimate
+    assert dems["BEFORE"] is None and dems["AFTER"] is None and dems["run"] == "refused: BEFORE", dems
+    assert defaults["picked"] == {"BEFORE": True, "AFTER": True}, defaults
+
+
+def test_series_dialog_keeps_preset_files_in_order(session, scene_dir):
+    """The series dialog opened with files (as execAlgorithmDialog passes them) keeps them all, in
+    order, repeats included, and runs with them (was: LAS paths dropped where QGIS cannot load
+    them as layers)."""
+    files = [str(scene_dir / name) for name in ("after.las", "before.las", "after.las")]
+    series = session["defaults"]["series"]
+    assert series["widget"] == files and series["run"] == files, series
+
+
 def test_outputs_loaded_styled_and_stacked(session, truth):
     assert session["net"] == pytest.approx(truth["net"], rel=0.03)
     order = session["order"]
