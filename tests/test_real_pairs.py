@@ -58,6 +58,23 @@ def test_autzen_difference_agrees_with_cloudcompare_m3c2(autzen, real_dir):
     assert float(np.median(np.abs(diffs))) <= 0.15, np.median(np.abs(diffs))
 
 
+def test_autzen_report_says_why_cut_reads_zero(autzen):
+    """The headline cut is 0.00 m3 while the difference map goes down to -1.19 m: report.html says
+    why next to the headline (the lowered cells are on the border of the compared area or too few
+    to form a change area) and which sum to trust, with the every-cell cut it would otherwise be."""
+    import re
+
+    report, out = autzen
+    assert report["volume_m3"]["cut"] == 0.0 and report["volume_all_cells_m3"]["cut"] > 10
+    page = (out / "report.html").read_text()
+    result = page[page.index("<h2>Result</h2>") : page.index("<h2>Volumes")]
+    note = re.sub("<[^>]+>", "", result[result.index("Why cut reads 0.00") :])
+    assert "on the border" in note and "fewer than 3" in note, note
+    assert "(down to -1.19 m on the map)" in note, note
+    assert f"cut is {report['volume_all_cells_m3']['cut']:,.2f} m³" in note and "Trust the headline" in note, note
+    assert result.index("Why cut reads") < result.index("significant gain")  # next to the headline
+
+
 def test_autzen_heights_are_metres(autzen):
     """NAVD88 heights of the track are 129-134 m (423-439 US survey ft in the files)."""
     _, out = autzen

@@ -213,3 +213,35 @@ def test_renders_in_headless_chromium(tmp_path):
     )
     assert shot.exists()
     assert struct.unpack(">II", shot.read_bytes()[16:24]) == (1200, 2000)
+
+
+def test_a_zero_cut_beside_lowered_cells_is_explained():
+    """Headline cut 0 while cells are lowered beyond the level of detection: the note next to
+    the headline counts them by the rule that left them out (border, patch too small, own LoD);
+    no note when the headline cut is not 0 or no cell is lowered at all."""
+    from soilvolume.reporting.headline import zero_notes
+
+    d = np.full((8, 8), 0.05)
+    d[0, 3] = -1.2  # on the border of the compared area
+    d[4, 4] = -0.9  # alone inside: a patch of 1
+    d[2, 2:5] = -0.7  # 3 touching cells: an area, but this one's own LoD is raised (not in ``change``)
+    change = np.zeros_like(d, dtype=bool)
+    change[5:7, 5:7] = True
+    report = {
+        "volume_m3": {"net": 12.0, "cut": 0.0, "fill": 12.0},
+        "volume_all_cells_m3": {"net": 9.5, "cut": 4.1, "fill": 13.6},
+        "volume_thresholded_m3": {"cut": 3.2},
+        "uncertainty_m3": {"lod_m": 0.5, "net": 3.0, "net_all_cells": 6.0},
+    }
+    note = zero_notes(report, {"difference": d, "change": change})
+    assert "Why cut reads 0.00 m³" in note and "fill reads" not in note
+    assert "5 cells are lower than -0.50 m (down to -1.20 m on the map)" in note, note
+    assert "1 on the border, 1 in patches of fewer than 3 such cells, 3 within their own cell" in note, note
+    assert "cut is 4.10 m³" in note and "3.20 m³" in note and "net +12.00 ± 3.00" in note, note
+    assert zero_notes({**report, "volume_m3": {"net": 10.0, "cut": 2.0, "fill": 12.0}}, {"difference": d}) == ""
+    flat = {**report, "volume_all_cells_m3": {"net": 13.6, "cut": 0.0, "fill": 13.6}}
+    assert zero_notes(flat, {"difference": np.abs(d)}) == ""
+    from soilvolume.reporting.html import render_html
+
+    page = render_html(report, {"difference": d, "change": change}, GridSpec(500000.0, 3900008.0, 1.0, 8, 8))
+    assert page.index("Why cut reads") < page.index("<h2>Volumes")

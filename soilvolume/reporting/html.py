@@ -171,8 +171,10 @@ def _volume_rows(report: dict) -> list[list[str]]:
     return rows
 
 
-def _summary(report: dict) -> str:
-    """The result in plain words: volumes with their ±, significance, quality verdict."""
+def _summary(report: dict, arrays: dict | None = None) -> str:
+    """The result in plain words: volumes with their ±, why a cut or fill reads 0 while the map
+    shows some, significance, quality verdict."""
+    from .headline import zero_notes
     from .summary import quality, significance
     from .surface import words
 
@@ -182,7 +184,8 @@ def _summary(report: dict) -> str:
         f"<p class=big>{lead} <b>{_pm(v.get('net'), u.get('net'))} m³</b> "
         f"({cut} {_pm(v.get('cut'), u.get('cut'))} m³, {fill} {_pm(v.get('fill'), u.get('fill'))} m³; "
         f"± at {_fmt(conf * 100, 0)} % confidence) over {_fmt(v.get('area_m2'), 0)} m².</p>"
-        f"<p>{html.escape(significance(report))}</p>"
+        + zero_notes(report, arrays, (lead, cut, fill))
+        + f"<p>{html.escape(significance(report))}</p>"
     )
     q = quality(report)
     if q["verdict"]:
@@ -330,7 +333,7 @@ def _sections(report: dict, arrays: dict, grid: GridSpec) -> list[str]:
         ("Stable-ground residuals", residual_map(arrays.get("residual"), grid, relief)),
     ]
     out = [
-        "<h2>Result</h2>" + _summary(report),
+        "<h2>Result</h2>" + _summary(report, arrays),
         "<h2>Volumes (m³)</h2>"
         + _table(["", "net", "cut", "fill", "area (m²)"], _volume_rows(report))
         + "<p class=note>± = half-width of the interval at the confidence level, including spatially "
