@@ -3,7 +3,7 @@ VENV    := .venv
 PY      := $(VENV)/bin/python
 PYTEST  := QT_QPA_PLATFORM=offscreen $(VENV)/bin/pytest
 
-.PHONY: setup test test-engine test-qgis lint demo bench bench-full accuracy accuracy-quick package deploy clean
+.PHONY: setup test test-engine test-qgis lint demo bench bench-full accuracy accuracy-quick readme-figures package deploy clean
 
 setup:  ## install Debian packages (QGIS LTR, Chromium), the venv and the wheels (idempotent)
 	bash scripts/setup.sh
@@ -36,6 +36,9 @@ accuracy:  ## accuracy harness (issue 10): seeded matrix + real pairs vs targets
 
 accuracy-quick:  ## ~1 minute subset of the accuracy harness (bench/results/accuracy-quick.md)
 	$(PY) bench/accuracy.py --quick
+
+readme-figures:  ## run the real pairs with default options and rewrite README.md's generated table of their volumes
+	$(PY) scripts/readme_figures.py
 
 package:  ## installable plugin zip in dist/
 	bash scripts/package.sh
