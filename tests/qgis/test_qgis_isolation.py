@@ -174,6 +174,7 @@ def test_batch_dialog_runs_two_pairs_and_qgis_keeps_running(cli_nets, tmp_path):
         (layers,) = [v for k, v in groups.items() if k.startswith(f"Soil volume: {before} → {after} (run 1, ")]
         assert layers == [f"Areas of significant change ({after})", f"Difference ({after})"], groups
     assert groups[""] == [], groups  # nothing outside the runs' groups
+    assert summary["python_errors"] == [] and "not correctly generated" not in summary["log"], summary["log"][-2000:]
     after = summary["after"]  # native:rasterlayerstatistics on row 1's difference, after the batch
     assert after["min"] < 0 < after["max"] and abs(after["mean"]) < 1.0, after
     print(f"Batch dialog, two rows: {summary['seconds']:.1f} s")
