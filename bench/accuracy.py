@@ -61,6 +61,9 @@ TARGETS = {
     "works": {"net": 1.0, "cut": 5.0, "fill": 5.0},  # issue 19: yard, landslide, trench, 70 %, sparse high flight
     # issue 45: water, equipment that arrived, a mown meadow: net of the moved volume, or "not reliable"
     "hidden": {"net": 1.0, "cut": 3.0, "fill": 3.0},
+    # issue 45: a before survey short of the after one: net of the moved volume, or "not reliable"; the
+    # change outside the overlap within the bound said for it
+    "unseen": {"net": 1.0, "cut": 3.0, "fill": 3.0},
     # issue 45: files that declare a vertical datum over GPS error: net 1 % of cut + fill, intervals hold
     "datum": {"net": 1.0, "cut": 3.0, "fill": 3.0},
 }
@@ -682,6 +685,28 @@ MATRIX += [
         signals="returns",
     ),
     _nsyn(
+        "overlap60-piles-rgb",
+        "piles 15 %, the before survey reaching 60 % of the after footprint's width (two piles beyond it); RGB",
+        149,
+        "unseen",
+        change="piles",
+        overlap=0.6,
+        **QUARTER,
+        **NUISANCES,
+        **GPS2,
+        **RGB,
+    ),
+    _nsyn(
+        "overlap70-exc-lidar",
+        "excavation 40 % + pile, the before survey reaching 70 % of the after footprint's width; LiDAR",
+        150,
+        "unseen",
+        change="excavation",
+        overlap=0.7,
+        **LIDAR,
+        **LIDAR_SIGNALS,
+    ),
+    _nsyn(
         "equipment-nochange-rgb",
         "no soil change; an excavator, a container, a cabin, a truck and a pipe stack arrived; RGB",
         142,
@@ -902,13 +927,16 @@ def score(report: dict, truth: dict, target: str | None, dense: bool, net_of_mov
         for q, lim in NO_CHANGE_M3.items():
             row["checks"][f"|{q}| {lim:g} m3"] = abs(row["err_m3"][q]) <= lim
         row["checks"]["0 in 95 %"] = bool(row["covered"]["net"])
-    elif target == "hidden" and (report.get("quality") or {}).get("verdict") == "not reliable":
+    elif target in ("hidden", "unseen") and (report.get("quality") or {}).get("verdict") == "not reliable":
         row["checks"]["said not reliable"] = bool((report.get("quality") or {}).get("messages"))
     elif target:
         for q, lim in TARGETS[target].items():
             row["checks"][f"{q} {lim:g}%"] = abs(row["err_pct"][q]) <= lim
     if target in INTERVAL_TARGETS:
         row["checks"]["n/c/f in 95 %"] = all(bool(row["covered"][q]) for q in QUANTITIES)
+    if target == "unseen":  # the change not compared is within the bound the report gives for it
+        bound = float((report.get("coverage") or {}).get("unseen_volume_bound_m3") or 0.0)
+        row["checks"]["net in 95 % + unseen bound"] = abs(row["err_m3"]["net"]) <= (unc.get("net") or 0.0) + bound
     if dense and abs(truth["net"]) > 1e-9:
         hw = row["half_width"]["net"]
         row["checks"][f"net hw {DENSE_WIDTH_PCT:g}%"] = hw is not None and hw <= DENSE_WIDTH_PCT / 100.0 * abs(

@@ -103,3 +103,20 @@ def test_hazard_scenes_keep_their_truth():
     assert len(kit) >= 3 and all(o["epoch"] == "after" and o["volume"] > 5.0 for o in kit)
     meadow = make_pair(5, SceneConfig(**small, change="pile", meadow=0.4, signals="rgb"))
     assert meadow.truth["fill"] == make_pair(5, SceneConfig(**small, change="pile")).truth["fill"]
+
+
+def test_works_beyond_the_before_survey_are_bounded(tmp_path):
+    """A before survey reaching 60 % of the after footprint's width: two piles lie beyond it. The
+    headline is the compared area's; the bound on what could hide beyond holds the missed change
+    (the after survey there against the before ground carried on past its edge), and the verdict
+    is not reliable. Measured: 102 m3 missed; the bound was 77 m3 (the change seen around the gap)
+    before this, 401 m3 now (312 of fill, 87 of cut beyond the edge)."""
+    pair = _pair(tmp_path / "d", 64, change="piles", overlap=0.6, holes=0)
+    rep = estimate(pair[0], pair[1], tmp_path / "r", overwrite=True).report
+    cov = rep["coverage"]
+    missed = pair[2]["net"] - rep["volume_m3"]["net"]
+    assert cov["after_beyond_before_extent_m2"] > 0.3 * cov["after_footprint_m2"]
+    assert missed > 0.1 * pair[2]["net"]
+    assert abs(missed) <= rep["uncertainty_m3"]["net"] + cov["unseen_volume_bound_m3"]
+    assert cov["beyond_change_m3"]["fill_m3"] > 0.5 * missed
+    assert rep["quality"]["verdict"] == "not reliable"

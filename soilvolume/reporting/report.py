@@ -147,8 +147,10 @@ def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
     from ..registration.rigid import transform_points
     from ..volumes import coverage
 
-    beyond = coverage.outside_m2(transform_points(prep.after_thin, reg.transform), grid)
-    return coverage.summary(vols.coverage, grid.cell_area, beyond, vols.uncertainty["lod_m"])
+    after = transform_points(prep.after_thin, reg.transform)
+    beyond = coverage.outside_m2(after, grid)
+    outside = coverage.outside_change(after, grid, vols.dem_b, vols.offset) if beyond else None
+    return coverage.summary(vols.coverage, grid.cell_area, beyond, vols.uncertainty["lod_m"], outside)
 
 
 def build_report(record: RunRecord, timings: dict[str, float]) -> dict:

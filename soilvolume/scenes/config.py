@@ -64,6 +64,7 @@ class SceneConfig:
     water_m: float = 0.0  # standing water in the pits of the after survey (no points on it)
     equipment: int = 0  # equipment and materials that arrived (excavator, container, cabin, ...)
     meadow: float = 0.0  # share of the after footprint of a meadow mown between the surveys
+    overlap: float = 1.0  # share of the after footprint's width (from the west) the before survey reaches
 
     @classmethod
     def paper(cls, **overrides) -> SceneConfig:

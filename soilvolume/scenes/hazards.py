@@ -4,6 +4,8 @@
   and photogrammetry both fail on water); the truth is still the pit's bottom.
 * Equipment and materials that arrived (``equipment``): an excavator, a container, a site cabin,
   a truck and a stack of pipes, in turn, on unchanged ground of the after survey only.
+* A before survey short of the after one (``overlap``: the share of the after footprint's width,
+  from the west, the before survey reaches): the works beyond it were never seen before.
 * A mown meadow (``meadow``, a share of the after footprint): grass 0.3-0.7 m high in the before
   survey, stubble in the after one, with the works on it (fresh soil carries no grass). The
   ground under the grass is seen through its gaps.
@@ -76,4 +78,15 @@ def dry(world, x: np.ndarray, y: np.ndarray, g: np.ndarray, dz: np.ndarray) -> n
     for f, level in world.water:
         near = (dz < 0) & (np.hypot(x - f["x"], y - f["y"]) < f["radius"] + 1.0)
         keep &= ~(near & (g < level))
+    return keep
+
+
+def reached(world, epoch: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Mask of the points a survey returns: not in its occlusion holes, and for a before survey
+    short of the after footprint (``overlap`` < 1) not east of its reach."""
+    keep = np.ones(x.shape, bool)
+    if world.holes[epoch] is not None:
+        keep &= ~world._lookup(world.holes[epoch], world.hole_res, x, y)
+    if epoch == 0 and world.cfg.overlap < 1.0:
+        keep &= x < world.ax0 + world.cfg.overlap * (world.ax1 - world.ax0)
     return keep

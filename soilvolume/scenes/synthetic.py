@@ -102,7 +102,7 @@ def _config_dict(cfg: SceneConfig) -> dict:
 
 
 NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch_change", "crops")
-NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow", "vertical_datum")
+NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow", "vertical_datum", "overlap")
 
 
 def _objects(world: _World) -> list[dict]:

@@ -9,7 +9,7 @@ import numpy as np
 
 from .config import CLASS_BOULDER, CLASS_GROUND, CLASS_OUTLIER, CLASS_VEHICLE, SceneConfig
 from .features import _after_box, _change_features, _clear_of, change_dz
-from .hazards import dry, meadow_row, water_levels
+from .hazards import dry, meadow_row, reached, water_levels
 from .nuisances import CROP, PATCH, boulder, bush, categories, colours, extra_features, returns, vehicle
 
 CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never depend on the caller)
@@ -295,10 +295,8 @@ class _World:
         x = x0 + (ii + rng.random(n)) * sx
         y = y0 + (jj + rng.random(n)) * sy
         del ii, jj
-        holes = self.holes[epoch]
-        if holes is not None:
-            keep = ~self._lookup(holes, self.hole_res, x, y)
-            x, y = x[keep], y[keep]
+        keep = reached(self, epoch, x, y)  # occlusion holes; a before survey short of the after's east
+        x, y = x[keep], y[keep]
         g = self.terrain(x, y)
         fresh = np.zeros(x.shape, bool)
         if epoch == 1:

@@ -15,6 +15,7 @@ from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.record import Georeferencing, QualityInputs
 from ..core.types import GridSpec, SoilVolumeError
+from ..core.wording import opt
 from ..dem import grid as gridmod
 from ..inputs.footprint import footprint
 from ..inputs.prepare import Prepared, prepare
@@ -175,5 +176,5 @@ def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense, 
 def kept_as_georeferenced(reg, outcome: str):
     """The identity registration of coordinates auto kept, its stages saying why."""
     said = "confirmed them" if outcome == "confirmed" else "could not confirm them"
-    note = f"not applied: coordinates used as georeferenced (the registration {said}; see georeferencing)"
+    note = f"not applied: coordinates used as georeferenced (the registration {said}; see {opt('georeferencing')})"
     return replace(reg, coarse=replace(reg.coarse, note=note), fine=replace(reg.fine, note=note))
