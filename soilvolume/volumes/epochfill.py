@@ -33,6 +33,7 @@ RIM = 2  # cells: the weak cells this close to a patch are filled with it
 DETAIL_RATIO = 4.0  # the measured survey's detail beyond this many times the other's own: change
 BULK_M3 = 120.0  # ... even with no change on its rim, when it holds more than a machine (a pile on a meadow)
 PILE_M3 = 40.0  # a shared hole one survey sees a pile in: its departure beyond the terrain's detail, in all
+BULK_MIN_M2 = 100.0  # ... a hole that large at least (smaller shared holes are the difference's to fill)
 
 
 def fill_own_holes(
@@ -123,13 +124,16 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
     filled from its own known cells, harmonically (no overshoot beside the pile's foot), in place
     in ``out``; the error is the two surveys' mean-height errors on holes of the part's size."""
     done, sigma = np.zeros(parts.shape, bool), np.zeros(parts.shape)
-    for k in ids:
+    size = np.bincount(parts.ravel(), minlength=int(parts.max()) + 1)
+    for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
         cells = parts == k
         region = ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
+        if not any(_departure(e, region, cell_area)[1] > PILE_M3 for e in out):
+            continue
         radius = np.array([np.sqrt(region.sum() / np.pi)])
         # the terrain's own detail at that size, on whichever survey has room to measure it
         scale = min(float(_own_detail(e, "harmonic", radius, seed)[0, 0]) for e in out)
-        if not any(_stands_out(e, region, scale, cell_area) for e in out):
+        if not any(_departure(e, region, cell_area)[0] > DETAIL_RATIO * scale for e in out):
             continue
         err = 0.0
         for e in out:
@@ -142,15 +146,15 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
     return done, sigma
 
 
-def _stands_out(e: np.ndarray, region: np.ndarray, scale: float, cell_area: float) -> bool:
-    """Whether a survey's measured cells in ``region`` depart from its own interpolation across
-    it by more than :data:`DETAIL_RATIO` times the terrain's detail ``scale`` (RMS, m) and by
-    more than :data:`PILE_M3` in all: a pile, not the ground's own relief."""
+def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[float, float]:
+    """(RMS in m, volume in m3) of a survey's measured cells in ``region`` off its own harmonic
+    interpolation across it: a pile stands out of the terrain's own detail and holds more than
+    :data:`PILE_M3`; the ground's relief does not."""
     seen = region & np.isfinite(e)
     if not seen.any():
-        return False
+        return 0.0, 0.0
     dd = (e - holes.fill(np.where(region, np.nan, e), region, "harmonic"))[seen]
     dd = dd[np.isfinite(dd)]
     if dd.size == 0:
-        return False
-    return bool(np.sqrt(np.mean(dd * dd)) > DETAIL_RATIO * scale and np.abs(dd).sum() * cell_area > PILE_M3)
+        return 0.0, 0.0
+    return float(np.sqrt(np.mean(dd * dd))), float(np.abs(dd).sum()) * cell_area
