@@ -275,7 +275,7 @@ def _blind(hidden: dict, v: dict) -> list[tuple[str, str]]:
             "unreliable" if reach > BLIND_SHARE * moved else "caution",
             f"{hidden['area_m2']:,.0f} m² inside the works has no point at all in the {where} survey "
             f"({len(items)} hole{'s' if len(items) > 1 else ''}: water, a shadow or no returns): the ground "
-            f"under it is unknown and the volume there lies anywhere from {lo:+,.0f} to {hi:+,.0f} m³ of "
+            f"under it is unknown and the volume there adds anywhere from {lo:+,.0f} to {hi:+,.0f} m³ to "
             "what is counted; the interval is widened by it",
         )
     ]
