@@ -225,17 +225,20 @@ def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: floa
     numbers alone keep the soil points under vegetation (no classification), a cell mostly of
     canopy mixes its ground with canopy points the rule took for soil (a single return off dense
     grass), so its height may sit up to the canopy's above the ground. Each counted cell under a
-    canopy in either survey adds the smaller of its |difference| and :data:`CANOPY_REACH` times
-    that canopy's mean height over the cell's soil height (itself raised by the canopy points)."""
+    canopy in either survey adds the smaller of its |difference| and the larger of
+    :data:`CANOPY_REACH` times that canopy's mean height over the cell's soil height (itself raised
+    by the canopy points) and its height over the other survey's ground (mown grass: the stubble)."""
     reach = np.zeros(diff.shape)
-    for e in epochs:
+    for e, o in (epochs, epochs[::-1]):
         if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
             continue  # a classification is the survey's statement; colour empties such cells
         others = e.nonsoil()
         covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
         with np.errstate(invalid="ignore", divide="ignore"):
-            top = np.where(covered, e.nonsoil_z / np.maximum(others, 1) - e.heights, 0.0)
-        reach = np.maximum(reach, np.nan_to_num(np.clip(CANOPY_REACH * top, 0.0, None)))
+            canopy = e.nonsoil_z / np.maximum(others, 1)
+            # over its own soil height (raised by the canopy points) and over the other survey's ground
+            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
+        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
     d = np.where(counted, np.nan_to_num(diff), 0.0)
     part = np.minimum(np.abs(d), reach)
     fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
