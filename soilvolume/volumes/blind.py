@@ -32,6 +32,7 @@ RIM_SHARE = 0.5  # share of a hole's rim in change areas that makes it a hole in
 DEEPER = 2.0  # the walls carried on into a hole go at most this many times the rim's depth further
 MIN_M3 = 0.5  # ranges below this are noise, not named
 NAMES = ("after", "before")
+PAD = 8  # cells around a hole's box that hold its rings and the ground they are compared with
 BASIN_DROP_M = 0.2  # a hole whose rim lies this much below the ground around it (median): a basin
 
 
@@ -58,12 +59,13 @@ def blind_change(
     items = []
     for name, e in zip(NAMES, epochs, strict=True):
         empty = (e.counts + e.nonsoil()) == 0
-        labels, n = ndimage.label(holes.enclosed_holes(~empty, empty.size), holes.FOUR)
-        for k in range(1, n + 1):
-            cells = labels == k
-            if not _basin(e.heights, cells):
+        labels, _ = ndimage.label(holes.enclosed_holes(~empty, empty.size), holes.FOUR)
+        for k, box in enumerate(ndimage.find_objects(labels), 1):
+            win = tuple(slice(max(b.start - PAD, 0), b.stop + PAD) for b in box)  # the hole and its rings
+            cells = labels[win] == k
+            if not _basin(e.heights[win], cells):
                 continue
-            item = _hole(diff, cells, change, cell_area)
+            item = _hole(diff[win], cells, change[win], cell_area)
             if item is None:
                 continue
             reach = max(abs(v) for v in item["range_m3"])
@@ -82,13 +84,18 @@ def blind_change(
     return Blind(report, bound)
 
 
+def _rings(cells: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(near, far): a hole's ``valid`` cells next to it, and those 3 to 4 cells out."""
+    near = ndimage.binary_dilation(cells) & ~cells & valid
+    far = ndimage.binary_dilation(cells, iterations=4) & ~ndimage.binary_dilation(cells, iterations=2) & valid
+    return near, far
+
+
 def _basin(h: np.ndarray, cells: np.ndarray) -> bool:
     """Whether the survey's own ground falls into the hole from around it (its rim, in the median,
     :data:`BASIN_DROP_M` below the ground a few cells further out): a pond or a pit's bottom. An
     occlusion beside a pile on flat ground, or on its flank, has none, and its refill stands."""
-    near = ndimage.binary_dilation(cells) & ~cells & np.isfinite(h)
-    far = ndimage.binary_dilation(cells, iterations=4) & ~ndimage.binary_dilation(cells, iterations=2)
-    far &= np.isfinite(h)
+    near, far = _rings(cells, np.isfinite(h))
     if near.sum() < 4 or not far.any():
         return False
     total = ndimage.uniform_filter(np.where(far, h, 0.0), 7, mode="constant")
@@ -105,9 +112,7 @@ def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: fl
     ring = ndimage.binary_dilation(cells, iterations=2) & ~cells & np.isfinite(diff)
     if not ring.any() or float(np.mean(change[ring])) < RIM_SHARE:
         return None
-    near = ndimage.binary_dilation(cells) & ~cells & np.isfinite(diff)
-    far = ndimage.binary_dilation(cells, iterations=4) & ~ndimage.binary_dilation(cells, iterations=2)
-    far &= np.isfinite(diff)
+    near, far = _rings(cells, np.isfinite(diff))
     d_near = float(np.median(diff[near])) if near.any() else 0.0
     d_far = float(np.median(diff[far])) if far.any() else d_near
     step = (d_near - d_far) / 2.5  # per cell, going in

@@ -128,12 +128,13 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
     for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
         cells = parts == k
         region = ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
-        if not any(_departure(e, region, cell_area)[1] > PILE_M3 for e in out):
+        departures = [_departure(e, region, cell_area) for e in out]
+        if not any(m3 > PILE_M3 for _, m3 in departures):
             continue
         radius = np.array([np.sqrt(region.sum() / np.pi)])
         # the terrain's own detail at that size, on whichever survey has room to measure it
         scale = min(float(_own_detail(e, "harmonic", radius, seed)[0, 0]) for e in out)
-        if not any(_departure(e, region, cell_area)[0] > DETAIL_RATIO * scale for e in out):
+        if not any(rms > DETAIL_RATIO * scale for rms, _ in departures):
             continue
         err = 0.0
         for e in out:
