@@ -1,11 +1,9 @@
-"""All-or-nothing outputs: a run builds its files in a hidden staging folder next to ``--out``
-(same file system) and swaps it into place only when everything succeeded, so a reader of
-``--out`` sees the complete old set or the complete new set, never a mix.
-
-Hidden siblings are named ``.<name>.soilvolume-staging-<pid>`` (the new set) and
-``.<name>.soilvolume-trash-<pid>`` (the old set during a swap); those of runs that are no longer
-alive (killed) are recognised and removed by the next run, which restores a trashed old set if a
-kill struck between the two renames of a swap.
+"""All-or-nothing outputs: a run builds its files in a hidden staging folder next to ``--out`` (same file
+system) and swaps it into place only when everything succeeded, so a reader of ``--out`` sees the complete
+old set or the complete new set, never a mix. Hidden siblings are named ``.<name>.soilvolume-staging-<pid>``
+(the new set) and ``.<name>.soilvolume-trash-<pid>`` (the old set during a swap); those of runs that are no
+longer alive (killed) are recognised and removed by the next run, which restores a trashed old set if a kill
+struck between the two renames of a swap.
 """
 
 from __future__ import annotations
@@ -108,15 +106,9 @@ def sibling(final: Path, kind: str, pid: int | None = None, suffix: str = "", to
 
 
 def _alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
+    import psutil  # on Windows os.kill(pid, 0) is no test but a Ctrl-C event; only when a sibling is found
+
+    return pid == os.getpid() or psutil.pid_exists(pid)
 
 
 def _remove(path: Path) -> None:
@@ -150,8 +142,7 @@ def sweep(final: Path) -> None:
 
 
 def _sweep_inside(folder: Path) -> None:
-    """Remove staging folders that dead runs left inside ``folder`` (mount points, folders whose
-    parent is not writable)."""
+    """Remove staging folders dead runs left inside ``folder`` (mount points, folders whose parent is not writable)."""
     pattern = re.compile(rf"^\.{STAGING}-(\d+)-\w+$")
     try:
         entries = list(folder.iterdir()) if folder.is_dir() else []
@@ -317,17 +308,28 @@ class OutputDir:
 
     def _swap(self) -> None:
         try:
-            os.rename(self.stage, self.final)  # atomic when final is missing or an empty folder
+            os.rename(self.stage, self.final)  # atomic when final is missing or an empty folder (POSIX)
             return
         except OSError as exc:
             if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise os_problem(exc, self.final) from exc
+        if self._replace_empty():
+            return
         if not self.overwrite:
             raise SoilVolumeError(f"{self.final}: another run filled the output folder meanwhile")
         trash = sibling(self.final, TRASH, token=self.token)
         os.rename(self.final, trash)
         os.rename(self.stage, self.final)
         shutil.rmtree(trash, ignore_errors=True)
+
+    def _replace_empty(self) -> bool:
+        """Windows renames nothing onto a folder, even an empty one: removed (only while empty)."""
+        try:
+            self.final.rmdir()
+        except OSError:
+            return False
+        os.rename(self.stage, self.final)
+        return True
 
     def _restore(self) -> None:
         trash = sibling(self.final, TRASH, token=self.token)

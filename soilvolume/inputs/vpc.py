@@ -10,6 +10,7 @@ must share one CRS.
 from __future__ import annotations
 
 import json
+import nturl2path
 import os
 from dataclasses import dataclass
 from functools import lru_cache
@@ -121,12 +122,30 @@ def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, lis
     return Vpc(str(p), _common_crs(p, crss), tuple(tiles)), [_version(t.path) for t in tiles]
 
 
+def file_url_path(url: str, windows: bool = os.name == "nt") -> str:
+    """The local path of a ``file://`` URL. On Windows a drive letter (``file:///C:/d/t.laz`` ->
+    ``C:\\d\\t.laz``) and a host (``file://server/share/t.laz`` -> the UNC path
+    ``\\\\server\\share\\t.laz``); elsewhere a host other than localhost is another computer:
+    ValueError saying so."""
+    parts = urlparse(url)
+    host = "" if parts.netloc.lower() == "localhost" else parts.netloc
+    if windows:
+        path = nturl2path.url2pathname(parts.path)
+        return f"\\\\{unquote(host)}{path}" if host else path
+    if host:
+        raise ValueError(f"on another computer ({host})")
+    return unquote(parts.path)
+
+
 def _href(vpc: Path, item) -> str:
     """The data asset of an item as an absolute path (relative hrefs are relative to the VPC),
     checked to be a readable regular file."""
     href = item.href
     if href.startswith("file://"):
-        href = unquote(urlparse(href).path)
+        try:
+            href = file_url_path(href)
+        except ValueError as exc:
+            raise SoilVolumeError(f"{vpc}: {item.name}: tile {href} is {exc}: only local files are read") from None
     elif "://" in href:
         raise SoilVolumeError(f"{vpc}: {item.name}: remote tile {href} is not supported (only local files)")
     full = (vpc.parent / href).resolve()
