@@ -18,9 +18,40 @@ from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 
+try:
+    from . import platforms
+except ImportError:  # run as a script (scripts/setup.sh: python3 plugin/environment.py install DIR)
+    import platforms  # type: ignore[no-redef]
+
 POLL_S = 0.1
 GRACE_S = 0.3  # after "cancel" on stdin, then after SIGTERM, before the next, harder stop
 EXIT_S = 30.0  # how long a child that closed its output may take to exit
+# variables of QGIS's process a child must not inherit (OSGeo4W and the macOS bundle set several)
+SCRUBBED_PREFIXES = ("PYTHON", "QT_", "QGIS_", "DYLD_", "CONDA_PYTHON")
+SCRUBBED = {"PROJ_LIB", "PROJ_DATA", "PROJ_NETWORK", "GDAL_DATA", "GDAL_DRIVER_PATH", "GDAL_PLUGINS", "VIRTUAL_ENV"}
+#: Windows' status codes of a crash (NTSTATUS), shown in hex as Windows documents them
+WINDOWS_CRASHES = {
+    0xC0000005: "access violation",
+    0xC0000409: "stack buffer overrun",
+    0xC00000FD: "stack overflow",
+    0xC0000135: "a DLL was not found",
+    0xC0000139: "a DLL entry point was not found",
+    0xC000001D: "illegal instruction",
+    0xC0000017: "out of memory",
+    0xC000013A: "stopped by Ctrl+C or a closed console",
+}
+
+
+def child_environ(extra: dict[str, str] | None = None) -> dict[str, str]:
+    """QGIS's environment without what would steer the child's Python or libraries."""
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in SCRUBBED and not k.upper().startswith(SCRUBBED_PREFIXES) and not k.startswith("LD_PRELOAD")
+    }
+    env["PYTHONIOENCODING"] = "utf-8"  # read only without -I (children run with -X utf8 besides)
+    env.update(extra or {})
+    return env
 
 
 class Cancelled(Exception):
@@ -29,7 +60,7 @@ class Cancelled(Exception):
 
 def detached() -> dict:
     """Popen arguments that put a child in a process group of its own (a stop reaches its
-    workers too), out of QGIS's console and signals."""
+    workers too), out of QGIS's console and signals (the real system's: never a simulated one)."""
     if sys.platform == "win32":
         return {"creationflags": 0x08000000 | 0x00000200}  # CREATE_NO_WINDOW | CREATE_NEW_PROCESS_GROUP
     return {"start_new_session": True}
@@ -234,7 +265,10 @@ def _dispatch(event: dict, events: Events) -> None:
 def crash_text(code: int, tail: Sequence[str]) -> str:
     """One message for a child that ended without its own error line."""
     how = f"exit status {code}"
-    if code < 0:
+    if platforms.is_windows() and (code > 255 or code < -255):  # an NTSTATUS: 0xC0000005, not 3221225477
+        status = code & 0xFFFFFFFF
+        how = f"exit status 0x{status:08X}" + (f", {WINDOWS_CRASHES[status]}" if status in WINDOWS_CRASHES else "")
+    elif code < 0:
         try:
             how = f"signal {signal.Signals(-code).name}"
         except ValueError:

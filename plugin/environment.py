@@ -18,32 +18,32 @@ import hashlib
 import json
 import os
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
-import urllib.parse
-import urllib.request
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 try:
-    from . import child
+    from . import child, interpreters, platforms
 except ImportError:  # run as a script (scripts/setup.sh: python3 plugin/environment.py install DIR)
     import child  # type: ignore[no-redef]
+    import interpreters  # type: ignore[no-redef]
+    import platforms  # type: ignore[no-redef]
 
+InstallError, Capabilities, probe = interpreters.InstallError, interpreters.Capabilities, interpreters.probe
+child_environ = child.child_environ
+PYTHON_VAR, SUPPORTED = interpreters.PYTHON_VAR, interpreters.SUPPORTED
 PLUGIN_DIR = Path(__file__).resolve().parents[1]  # holds the engine package soilvolume/
 LOCK = Path(__file__).resolve().parent / "engine-lock.txt"
 STAMP = "soilvolume-environment.json"
 ENV_VAR = "SOILVOLUME_ENGINE_ENV"  # an environment folder to use instead of the profile's
-PYTHON_VAR = "SOILVOLUME_PYTHON"  # a Python 3.11/3.12 to build it from instead of QGIS's
-SUPPORTED = ((3, 11), (3, 12))
-PIP_JSON = "https://pypi.org/pypi/pip/json"
-# variables of QGIS's process a child must not inherit (OSGeo4W and the macOS bundle set several)
-SCRUBBED_PREFIXES = ("PYTHON", "QT_", "QGIS_", "DYLD_", "CONDA_PYTHON")
-SCRUBBED = {"PROJ_LIB", "PROJ_DATA", "PROJ_NETWORK", "GDAL_DATA", "GDAL_DRIVER_PATH", "GDAL_PLUGINS", "VIRTUAL_ENV"}
+#: every Python the plugin starts: isolated, and UTF-8 on its pipes whatever the system's code page
+#: (with -I, PYTHONIOENCODING is not read: a Windows child would write cp1252)
+FLAGS = ("-I", "-X", "utf8")
 # the engine started in the environment: ``-c BOOT SITE ENGINE_PARENT args...``
 BOOT = (
     "import sys,site\n"
@@ -53,10 +53,6 @@ BOOT = (
     "from soilvolume.__main__ import run\n"
     "sys.exit(run())"
 )
-
-
-class InstallError(Exception):
-    """The environment could not be made; the message ends with the tool's last lines."""
 
 
 @dataclass(frozen=True)
@@ -70,19 +66,20 @@ class Environment:
     key: str  # lock + plugin version it was made for
     versions: dict
     seconds: float = 0.0
+    base: str = ""  # the Python it was built from (a venv's interpreter needs it)
 
     def command(self, args: Sequence[str]) -> list[str]:
         """The command line that runs ``soilvolume ARGS`` in this environment."""
-        flags = ["-I", "-u"] + (["-S"] if self.mode == "target" else [])
+        flags = [*FLAGS, "-u"] + (["-S"] if self.mode == "target" else [])
         return [self.interpreter, *flags, "-c", BOOT, self.site, str(PLUGIN_DIR), *args]
 
     def python(self, args: Sequence[str]) -> list[str]:
         """The command line of this environment's Python with ``args`` (isolated, its packages)."""
         if self.mode == "venv":
-            return [self.interpreter, "-I", "-u", *args]
+            return [self.interpreter, *FLAGS, "-u", *args]
         code = f"import site,sys;site.addsitedir({self.site!r});c=sys.argv.pop(1);exec(c)"
         if args[:1] == ["-c"]:
-            return [self.interpreter, "-I", "-S", "-u", "-c", code, args[1], *args[2:]]
+            return [self.interpreter, *FLAGS, "-S", "-u", "-c", code, args[1], *args[2:]]
         raise ValueError("only -c CODE is supported in a --target environment")
 
 
@@ -100,24 +97,35 @@ def lock_key() -> str:
 
 
 def env_folder(settings_dir: str | Path | None = None) -> Path:
-    """``$SOILVOLUME_ENGINE_ENV``, else ``<QGIS profile folder>/soilvolume/engine``."""
+    """``$SOILVOLUME_ENGINE_ENV``, else ``<QGIS profile folder>/soilvolume/engine``; on Windows in
+    the local, not the roaming, profile (``%LOCALAPPDATA%``: 800 MB must not roam)."""
     if os.environ.get(ENV_VAR):
         return Path(os.environ[ENV_VAR]).expanduser()
     if settings_dir is None:
         from qgis.core import QgsApplication
 
         settings_dir = QgsApplication.qgisSettingsDirPath()
-    return Path(settings_dir) / "soilvolume" / "engine"
+    profile = Path(settings_dir)
+    roaming, local = os.environ.get("APPDATA"), os.environ.get("LOCALAPPDATA")
+    if platforms.is_windows() and roaming and local:
+        try:
+            profile = Path(local) / profile.relative_to(roaming)
+        except ValueError:  # a profile folder chosen elsewhere (--profiles-path): kept there
+            pass
+    return profile / "soilvolume" / "engine"
 
 
 def load(folder: Path) -> Environment | None:
-    """The environment in ``folder`` if it is complete and made for this lock and version."""
+    """The environment in ``folder`` if it is complete, made for this lock and version, and the
+    Python it was built from is still there (a QGIS update removes the old one)."""
     try:
         data = json.loads((folder / STAMP).read_text(encoding="utf-8"))
         env = Environment(**data)
     except (OSError, ValueError, TypeError):
         return None
     if env.key != lock_key() or not Path(env.interpreter).is_file():
+        return None
+    if env.base and not Path(env.base).is_file():
         return None
     return env
 
@@ -126,63 +134,13 @@ def status(folder: Path) -> str:
     """ "" when ready, else why not (one sentence)."""
     if load(folder) is not None:
         return ""
-    if (folder / STAMP).is_file():
-        return "its Python environment was made for another version of the plugin and must be updated"
-    return "its Python environment is not installed yet"
-
-
-def child_environ(extra: dict[str, str] | None = None) -> dict[str, str]:
-    """QGIS's environment without what would steer the child's Python or libraries."""
-    env = {
-        k: v
-        for k, v in os.environ.items()
-        if k not in SCRUBBED and not k.upper().startswith(SCRUBBED_PREFIXES) and not k.startswith("LD_PRELOAD")
-    }
-    env["PYTHONIOENCODING"] = "utf-8"  # read only without -I; harmless with it
-    env.update(extra or {})
-    return env
-
-
-def base_python() -> str:
-    """The interpreter the environment is built from: ``$SOILVOLUME_PYTHON``, else QGIS's own
-    (in embedded Python ``sys.executable`` is often the QGIS binary)."""
-    if os.environ.get(PYTHON_VAR):
-        return os.environ[PYTHON_VAR]
-    exe = Path(sys.executable or "")
-    prefixes = {Path(sys.prefix), Path(sys.exec_prefix), Path(sys.base_prefix)}
-    if exe.name.lower().startswith("python") and any(p in exe.parents for p in prefixes):
-        return str(exe)
-    prefix, v = Path(sys.base_exec_prefix), sys.version_info
-    if sys.platform == "win32":
-        candidates = [prefix / "python.exe", prefix / "python3.exe"]
-    else:
-        candidates = [prefix / "bin" / f"python{v.major}.{v.minor}", prefix / "bin" / "python3"]
-    found = next((c for c in candidates if c.is_file()), None)
-    return str(found) if found else shutil.which("python3") or "python3"
-
-
-@dataclass(frozen=True)
-class Capabilities:
-    """What the base interpreter offers (each may be missing on a stock QGIS)."""
-
-    version: tuple[int, int]
-    venv: bool
-    ensurepip: bool
-    pip: bool
-
-
-PROBE = (
-    "import importlib.util as u,json,sys;"
-    "print(json.dumps([sys.version_info[:2],*[u.find_spec(m) is not None for m in ('venv','ensurepip','pip')]]))"
-)
-
-
-def probe(python: str) -> Capabilities:
-    run = _run([python, "-I", "-c", PROBE], timeout=60)
-    if run.returncode != 0:
-        raise InstallError(f"{python} does not run: {_tail(run.stdout + run.stderr)}")
-    version, venv, ensurepip, pip = json.loads(run.stdout.strip().splitlines()[-1])
-    return Capabilities(tuple(version), venv, ensurepip, pip)
+    try:
+        base = json.loads((folder / STAMP).read_text(encoding="utf-8")).get("base") or ""
+    except (OSError, ValueError, AttributeError):
+        return "its Python environment is not installed yet"
+    if base and not Path(base).is_file():
+        return f"the Python its environment was built from is gone ({base}: QGIS was updated?) and must be rebuilt"
+    return "its Python environment was made for another version of the plugin and must be updated"
 
 
 Log = Callable[[str], None]
@@ -191,8 +149,8 @@ Log = Callable[[str], None]
 @dataclass
 class Installer:
     """Makes (or updates) the environment in ``folder``; ``log`` gets every line, ``progress``
-    0-100, ``cancelled()`` is polled; ``caps`` overrides what the base Python is probed to offer
-    (tests of the fallbacks)."""
+    0-100, ``cancelled()`` is polled; ``python`` is the Python to build it from ("": the one
+    :func:`interpreters.choose` finds); ``caps`` overrides what it is probed to offer (tests)."""
 
     folder: Path
     log: Log = print
@@ -211,7 +169,7 @@ class Installer:
             return existing
         mode, interpreter, site, pip = self.prepare()
         self._install(pip, site)
-        env = Environment(str(self.folder), mode, interpreter, site, lock_key(), {})
+        env = Environment(str(self.folder), mode, interpreter, site, lock_key(), {}, base=self.python)
         self._kernels(env)
         versions = self._selftest(env)
         env = Environment(**{**asdict(env), "versions": versions, "seconds": round(time.perf_counter() - t0, 1)})
@@ -225,13 +183,12 @@ class Installer:
     def prepare(self) -> tuple[str, str, str, list[str]]:
         """The environment's folder made and its own pip found or bootstrapped (the stamp
         removed: not ready until the self-test passed): (mode, interpreter, site, pip command)."""
-        self.python = self.python or base_python()
-        caps = self.caps or probe(self.python)
-        if not SUPPORTED[0] <= tuple(caps.version) <= SUPPORTED[-1]:
-            raise InstallError(
-                f"{self.python} is Python {'.'.join(map(str, caps.version))}; the engine's environment needs "
-                f"Python 3.11 or 3.12. Install one and set the environment variable {PYTHON_VAR} to it."
-            )
+        too_old = platforms.mac_too_old()
+        if too_old:
+            raise InstallError(f"The engine cannot be installed: {too_old}.")
+        self.python, source = interpreters.choose(self.python, os.environ.get(PYTHON_VAR, ""))
+        caps = self.caps or interpreters.check(self.python, source)
+        self.log(f"Building the environment from {self.python} ({source})")
         (self.folder / STAMP).unlink(missing_ok=True)
         self.progress(2)
         mode, interpreter, site = self._create(caps)
@@ -240,53 +197,58 @@ class Installer:
         return mode, interpreter, site, pip
 
     def _quick_check(self, env: Environment) -> bool:
-        run = _run(env.command(["--help"]), timeout=120)
+        run = interpreters.run_quiet(env.command(["--help"]), timeout=120)
         return run.returncode == 0
 
     def _create(self, caps: Capabilities) -> tuple[str, str, str]:
+        """A venv; where ``venv`` is missing, fails, or makes a Python that will not start (a
+        managed Windows may block programs in the profile), a ``--target`` folder."""
         self.folder.mkdir(parents=True, exist_ok=True)
         if caps.venv:
-            interpreter = venv_python(self.folder)
-            if not Path(interpreter).is_file():
-                self.log(f"Creating the environment (venv) in {self.folder}")
-                self._step([self.python, "-I", "-m", "venv", "--without-pip", str(self.folder)], "venv")
-            return "venv", interpreter, ""
+            try:
+                return self._venv()
+            except InstallError as exc:
+                last = str(exc).strip().splitlines()[-1]
+                self.log(f"The venv could not be used ({last}); falling back to a --target folder")
         site = self.folder / "site-packages"
         site.mkdir(exist_ok=True)
-        self.log(f"This Python has no venv module: packages go to {site}, used with 'python -I -S'")
+        self.log(f"Packages go to {site}, used with '{self.python} -I -S' (no venv)")
         return "target", self.python, str(site)
+
+    def _venv(self) -> tuple[str, str, str]:
+        """The venv, made; remade (``--clear``) when its Python no longer starts: the Python it was
+        built from is gone (a QGIS update) or it never worked."""
+        interpreter = venv_python(self.folder)
+        made = (self.folder / "pyvenv.cfg").is_file()
+        if made and interpreters.starts(interpreter):
+            return "venv", interpreter, ""
+        if made:
+            self.log(f"The environment's Python no longer starts ({interpreter}): rebuilding the venv")
+        else:
+            self.log(f"Creating the environment (venv) in {self.folder}")
+        clear = ["--clear"] if made else []
+        self._step([self.python, *FLAGS, "-m", "venv", "--without-pip", *clear, str(self.folder)], "venv")
+        if not interpreters.starts(interpreter):
+            raise InstallError(f"the venv's Python does not start ({interpreter})")
+        return "venv", interpreter, ""
 
     def _pip(self, mode: str, interpreter: str, caps: Capabilities) -> list[str]:
         """The pip command for the environment: its own pip (from ensurepip or PyPI's wheel)."""
+        pip = [interpreter, *FLAGS, "-m", "pip"]
         if mode == "venv":
-            if _run([interpreter, "-I", "-m", "pip", "--version"], timeout=120).returncode == 0:
-                return [interpreter, "-I", "-m", "pip"]
+            if interpreters.run_quiet([*pip, "--version"], timeout=120).returncode == 0:
+                return pip
             if caps.ensurepip:
                 self.log("Adding pip to the environment (ensurepip)")
-                if _run([interpreter, "-I", "-m", "ensurepip", "--default-pip"], timeout=300).returncode == 0:
-                    return [interpreter, "-I", "-m", "pip"]
-            wheel = self._pip_wheel()
-            self._step([interpreter, "-I", str(wheel / "pip"), "install", "--no-index", str(wheel)], "pip")
-            return [interpreter, "-I", "-m", "pip"]
+                ensure = [interpreter, *FLAGS, "-m", "ensurepip", "--default-pip"]
+                if interpreters.run_quiet(ensure, timeout=300).returncode == 0:
+                    return pip
+            wheel = interpreters.pip_wheel(self.folder, self.log)
+            self._step([interpreter, *FLAGS, str(wheel / "pip"), "install", "--no-index", str(wheel)], "pip")
+            return pip
         if caps.pip:
-            return [interpreter, "-I", "-m", "pip"]
-        return [interpreter, "-I", str(self._pip_wheel() / "pip")]
-
-    def _pip_wheel(self) -> Path:
-        """PyPI's pure-Python pip wheel (checked against its SHA-256), for a Python without pip."""
-        self.log(f"This Python has no pip: downloading pip's wheel from PyPI ({PIP_JSON})")
-        with urllib.request.urlopen(PIP_JSON, timeout=60) as answer:  # noqa: S310 - a fixed https URL
-            release = json.load(answer)
-        wheel = next(u for u in release["urls"] if u["filename"].endswith("py3-none-any.whl"))
-        target = self.folder / ".bootstrap" / wheel["filename"]
-        target.parent.mkdir(parents=True, exist_ok=True)
-        url = urllib.parse.urljoin(PIP_JSON, wheel["url"])  # mirrors answer with relative links
-        with urllib.request.urlopen(url, timeout=120) as answer:  # noqa: S310
-            data = answer.read()
-        if hashlib.sha256(data).hexdigest() != wheel["digests"]["sha256"]:
-            raise InstallError(f"pip's wheel from PyPI does not match its SHA-256 ({wheel['filename']})")
-        target.write_bytes(data)
-        return target
+            return pip
+        return [interpreter, *FLAGS, str(interpreters.pip_wheel(self.folder, self.log) / "pip")]
 
     def _install(self, pip: list[str], site: str) -> None:
         count = sum(1 for line in LOCK.read_text().splitlines() if line.strip() and not line.startswith("#"))
@@ -302,27 +264,35 @@ class Installer:
                 seen[0] += 1
                 self.progress(10 + 70 * min(1.0, seen[0] / (count + 2)))
 
-        self._step(command, "pip", advance)
+        try:
+            self._step(command, "pip", advance)
+        except InstallError as exc:
+            raise InstallError(platforms.no_wheel(str(exc)) or str(exc)) from None
 
     def _kernels(self, env: Environment) -> None:
         """The engine's native kernels built with the machine's C compiler, when it has one (beside
         their source in the plugin's engine package; said only when built now or not built);
-        without, the engine runs its numpy path: the same results, slower."""
+        without, the engine runs its numpy path: the same results, slower. On macOS without the
+        command-line tools nothing is tried (``/usr/bin/cc`` would pop Apple's install dialog)."""
+        if not platforms.has_compiler_tools():
+            self.log(
+                "Native kernels: not built (no C compiler: macOS's command-line developer tools are not "
+                "installed; 'xcode-select --install' adds them); the engine runs without them, slower"
+            )
+            return
         code = "import sys;sys.path.insert(0,sys.argv[1]);from soilvolume.native.build import main;sys.exit(main([]))"
-        run = _run(env.python(["-c", code, str(PLUGIN_DIR)]), timeout=300)
-        said = _tail(run.stdout + run.stderr, 2)
+        run = interpreters.run_quiet(env.python(["-c", code, str(PLUGIN_DIR)]), timeout=300)
+        said = interpreters.tail(run.stdout + run.stderr, 2)
         if run.returncode != 0:
             self.log(f"Native kernels: not built ({said}); the engine runs without them, slower")
         elif "built:" in said:
             self.log("Native kernels: built (the engine's faster path)")
 
     def _selftest(self, env: Environment) -> dict:
-        self.log("Testing the engine in its environment (imports, then a tiny seeded estimate)")
+        self.log("Testing the engine in its environment (imports, a spawned Dask worker, a tiny seeded estimate)")
         self.progress(85)
-        with tempfile.TemporaryDirectory(prefix="soilvolume-selftest-") as tmp:
-            out = self._step(
-                env.command(["selftest", "--out", str(Path(tmp) / "run"), "--progress", "jsonl"]), "engine"
-            )
+        with scratch("soilvolume-selftest-") as tmp:
+            out = self._step(env.command(["selftest", "--out", str(tmp / "run"), "--progress", "jsonl"]), "engine")
         for line in reversed(out):
             try:
                 event = json.loads(line)
@@ -354,6 +324,18 @@ class Installer:
         return list(kept)
 
 
+@contextmanager
+def scratch(prefix: str) -> Iterator[Path]:
+    """A temporary folder, removed after as far as it can be: on Windows a file a child still
+    holds (an antivirus scan, a worker closing) raises PermissionError, which must not fail an
+    install that succeeded."""
+    folder = Path(tempfile.mkdtemp(prefix=prefix))
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def _readable(lines) -> list[str]:
     """Protocol lines as their messages (the engine's errors), other lines as they are."""
     out = []
@@ -367,32 +349,12 @@ def _readable(lines) -> list[str]:
 
 
 def venv_python(folder: Path) -> str:
+    """A venv's interpreter: where ``venv`` of the running system puts it (never a simulated one's)."""
     return str(folder / ("Scripts/python.exe" if sys.platform == "win32" else "bin/python"))
 
 
 def size_mb(folder: Path) -> float:
     return sum(p.stat().st_size for p in folder.rglob("*") if p.is_file() and not p.is_symlink()) / 1e6
-
-
-def _run(command: list[str], timeout: float) -> subprocess.CompletedProcess:
-    try:
-        return subprocess.run(
-            command,
-            capture_output=True,
-            text=True,
-            encoding="utf-8",
-            errors="replace",
-            timeout=timeout,
-            env=child_environ(),
-            stdin=subprocess.DEVNULL,
-            **child.detached(),
-        )
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        return subprocess.CompletedProcess(command, 1, "", str(exc))
-
-
-def _tail(text: str, n: int = 8) -> str:
-    return "\n".join(text.strip().splitlines()[-n:])
 
 
 def main(argv: list[str]) -> int:

@@ -59,7 +59,7 @@ def test_a_venv_without_ensurepip_gets_its_own_pip_from_pypi(plugin_package, tmp
     mode, interpreter, site, pip = installer.prepare()
     assert (mode, interpreter, site) == ("venv", environment.venv_python(folder), "")
     assert any("downloading pip's wheel from PyPI" in line for line in lines), lines
-    assert pip == [interpreter, "-I", "-m", "pip"]  # the venv's own pip
+    assert pip == [interpreter, *environment.FLAGS, "-m", "pip"]  # the venv's own pip
     pin = next(line for line in environment.LOCK.read_text().splitlines() if line.startswith("toolz=="))
     done = subprocess.run(
         [*pip, "install", "--no-deps", "--only-binary=:all:", "--no-input", pin],
