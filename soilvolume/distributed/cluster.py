@@ -172,10 +172,11 @@ def connect(address: str):
     return None, c
 
 
-def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None):
+def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None, spawn: bool = False):
     """(LocalCluster, Client): ``workers`` processes of one thread (or one process of
-    ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``."""
-    method = _start_method() if processes else None  # first: the forkserver's imports overlap Dask's here
+    ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``; ``spawn``: workers
+    started as on Windows and macOS, also on Linux (the install's self-test)."""
+    method = "spawn" if spawn else _start_method() if processes else None  # first: the forkserver's imports
     with lean_dask():
         import dask
         from dask.distributed import Client

@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import importlib
 import json
+import os
+import tempfile
 import time
 from pathlib import Path
 
 from ..core.hooks import Hooks
 from ..core.outputs import os_errors, output_dir
 from ..core.types import SoilVolumeError
+from ..distributed import cluster
 from ..options import Options
 
 #: module -> attribute that must exist (an old version lacks it)
@@ -27,6 +30,7 @@ MODULES = {
     "distributed": "LocalCluster",
     "shapely": "make_valid",
     "pyogrio": "read_info",
+    "CSF": "CSF",  # --ground csf
 }
 POINTS = (12_000, 8_000)  # before, after: 0.5 and 1.9 points/m²
 NET_TOLERANCE = 0.1  # relative: a smoke test on 3 m cells (measured 0.8 %), not an accuracy test
@@ -52,6 +56,31 @@ def check_imports() -> dict[str, str]:
     return versions
 
 
+def check_spawned_worker(scratch: Path) -> float:
+    """A Dask LocalCluster of one worker started by ``spawn`` (how Windows and macOS start every
+    worker: a fresh interpreter that must find the engine and its packages) runs an engine task."""
+    started = time.perf_counter()
+    try:
+        made, client = cluster.local(1, True, None, scratch, spawn=True)
+    except Exception as exc:  # noqa: BLE001 - whatever stops a worker from starting
+        raise SoilVolumeError(f"a Dask worker process does not start ({type(exc).__name__}: {exc})") from exc
+    try:
+        answer = client.submit(_answer, 41, pure=False).result(timeout=120)
+    except Exception as exc:  # noqa: BLE001
+        raise SoilVolumeError(f"a Dask worker process cannot run the engine ({type(exc).__name__}: {exc})") from exc
+    finally:
+        cluster.shut(made, client)
+    if answer[:2] != (42, "soilvolume.scenes.selftest") or answer[2] == os.getpid():
+        raise SoilVolumeError(f"a Dask worker process answered {answer!r}")
+    return time.perf_counter() - started
+
+
+def _answer(n: int) -> tuple[int, str, int]:
+    """What a worker answers: the engine module it ran in (imported by the worker itself) and
+    its process."""
+    return n + 1, __name__, os.getpid()
+
+
 def run_selftest(out: Path, hooks: Hooks) -> dict:
     """Imports, then a tiny seeded estimate in ``out`` (replaced as a whole)."""
     from ..api import estimate
@@ -60,6 +89,9 @@ def run_selftest(out: Path, hooks: Hooks) -> dict:
     t0 = time.perf_counter()
     hooks.step(5, "importing the engine's dependencies")
     versions = check_imports()
+    hooks.step(10, "starting a Dask worker process (spawned)")
+    with tempfile.TemporaryDirectory(prefix="soilvolume-selftest-dask-", ignore_cleanup_errors=True) as scratch:
+        worker_s = check_spawned_worker(Path(scratch))
     hooks.step(20, f"writing a seeded pair of {POINTS[0]:,} + {POINTS[1]:,} points")
     with output_dir(Path(out), [], True, ("data", "result")) as staged, os_errors(staged.final):
         data = staged.path("data")
@@ -73,4 +105,10 @@ def run_selftest(out: Path, hooks: Hooks) -> dict:
     if not abs(net - truth["net"]) <= NET_TOLERANCE * abs(truth["net"]):
         raise SoilVolumeError(f"self-test: net {net:+.1f} m³ where the seeded pair holds {truth['net']:+.1f} m³")
     hooks.step(100, f"self-test passed: net {net:+.1f} m³ (true {truth['net']:+.1f} m³)")
-    return {"versions": versions, "net_m3": net, "true_net_m3": truth["net"], "seconds": time.perf_counter() - t0}
+    return {
+        "versions": versions,
+        "dask_worker_s": round(worker_s, 2),
+        "net_m3": net,
+        "true_net_m3": truth["net"],
+        "seconds": time.perf_counter() - t0,
+    }
