@@ -2,8 +2,11 @@
 
 For each target (platform tags, Python version) the lock's environment markers are evaluated for
 that target (pip evaluates them for the running interpreter only), then pip resolves the pins in
-a dry run (wheels' metadata only, nothing installed). Usage: python scripts/check_lock.py [PIP]
-(a recent pip: 23 or newer).
+a dry run (wheels' metadata only, nothing installed). Each macOS target gives pip one tag, the
+oldest macOS the plugin says it supports (``plugin/platforms.py`` MAC_MINIMUM): pip accepts wheels
+for that version and older, so a wheel that needs a newer macOS fails the check (several tags at
+once would only ever test the newest). Usage: python scripts/check_lock.py [PIP] [NAME...]
+(a recent pip: 23 or newer; NAMEs: only the targets whose name starts with one of them).
 """
 
 from __future__ import annotations
@@ -15,7 +18,12 @@ from pathlib import Path
 
 from packaging.requirements import Requirement
 
-LOCK = Path(__file__).resolve().parents[1] / "plugin" / "engine-lock.txt"
+PLUGIN = Path(__file__).resolve().parents[1] / "plugin"
+LOCK = PLUGIN / "engine-lock.txt"
+sys.path.insert(0, str(PLUGIN))
+import platforms  # noqa: E402 - the plugin's own statement of the oldest macOS, standard library only
+
+sys.path.remove(str(PLUGIN))
 LINUX = [
     "manylinux_2_35_x86_64",
     "manylinux_2_31_x86_64",
@@ -27,13 +35,19 @@ TARGETS = {  # name -> (platform tags, python version, marker environment)
     "Linux x86_64 cp311": (LINUX, "3.11", ("linux", "x86_64", "Linux")),
     "Linux x86_64 cp312": (LINUX, "3.12", ("linux", "x86_64", "Linux")),
     "Windows win_amd64 cp312": (["win_amd64"], "3.12", ("win32", "AMD64", "Windows")),
-    "macOS arm64 cp312": ([f"macosx_{v}_0_arm64" for v in (14, 13, 12, 11)], "3.12", ("darwin", "arm64", "Darwin")),
-    "macOS x86_64 cp312": (
-        [f"macosx_{v}_0_x86_64" for v in (14, 13, 12, 11)] + ["macosx_10_15_x86_64", "macosx_10_9_x86_64"],
-        "3.12",
-        ("darwin", "x86_64", "Darwin"),
-    ),
 }
+
+
+def mac_tag(machine: str, version: tuple[int, int]) -> str:
+    return f"macosx_{version[0]}_{version[1]}_{machine}"
+
+
+for _machine, _oldest in platforms.MAC_MINIMUM.items():
+    TARGETS[f"macOS {_oldest[0]} {_machine} cp312"] = (
+        [mac_tag(_machine, _oldest)],
+        "3.12",
+        ("darwin", _machine, "Darwin"),
+    )
 
 
 def pins_for(python: str, env3: tuple[str, str, str]) -> list[str]:
@@ -72,10 +86,11 @@ def check(pip: str, name: str, platforms: list[str], python: str, env3) -> bool:
     return run.returncode == 0
 
 
-def main(pip: str) -> int:
-    results = [check(pip, name, *target) for name, target in TARGETS.items()]
-    return 0 if all(results) else 1
+def main(pip: str, only: list[str] | None = None) -> int:
+    chosen = {n: t for n, t in TARGETS.items() if not only or n.startswith(tuple(only))}
+    results = [check(pip, name, *target) for name, target in chosen.items()]
+    return 0 if results and all(results) else 1
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1] if len(sys.argv) > 1 else "pip"))
+    sys.exit(main(sys.argv[1] if len(sys.argv) > 1 else "pip", sys.argv[2:]))
