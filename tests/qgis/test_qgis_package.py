@@ -77,12 +77,16 @@ def test_zip_contents(plugin_zip):
         "soilvolume/workflow/estimate.py",
         "plugin/engine-lock.txt",
         "plugin/environment.py",
+        "plugin/interpreters.py",
+        "plugin/platforms.py",
         "soilvolume/native/kernels.c",
         "soilvolume/native/build.py",
     ):
         assert f"soilvolume_qgis/{required}" in names, required
     for banned in ("tests/", ".venv/", "__pycache__", ".pyc", ".git/", "egg-info", "bench/", "_soilvolume_kernels-"):
         assert not any(banned in n for n in names), banned
+    # one zip for Linux, Windows and macOS: no compiled file of any one system (the installer builds them)
+    assert not [n for n in names if n.lower().endswith((".so", ".pyd", ".dll", ".dylib", ".exe", ".o"))]
 
 
 def test_metadata_has_every_required_field():
