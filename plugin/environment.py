@@ -158,6 +158,7 @@ class Installer:
     cancelled: Callable[[], bool] = lambda: False
     python: str = ""
     caps: Capabilities | None = None
+    base: str = ""  # the Python the environment depends on (a venv's base), for its stamp
 
     def run(self, force: bool = False) -> Environment:
         t0 = time.perf_counter()
@@ -169,7 +170,7 @@ class Installer:
             return existing
         mode, interpreter, site, pip = self.prepare()
         self._install(pip, site)
-        env = Environment(str(self.folder), mode, interpreter, site, lock_key(), {}, base=self.python)
+        env = Environment(str(self.folder), mode, interpreter, site, lock_key(), {}, base=self.base)
         self._kernels(env)
         versions = self._selftest(env)
         env = Environment(**{**asdict(env), "versions": versions, "seconds": round(time.perf_counter() - t0, 1)})
@@ -210,25 +211,29 @@ class Installer:
             except InstallError as exc:
                 last = str(exc).strip().splitlines()[-1]
                 self.log(f"The venv could not be used ({last}); falling back to a --target folder")
-        site = self.folder / "site-packages"
+        site, self.base = self.folder / "site-packages", self.python
         site.mkdir(exist_ok=True)
         self.log(f"Packages go to {site}, used with '{self.python} -I -S' (no venv)")
         return "target", self.python, str(site)
 
     def _venv(self) -> tuple[str, str, str]:
-        """The venv, made; remade (``--clear``) when its Python no longer starts: the Python it was
-        built from is gone (a QGIS update) or it never worked."""
+        """The venv, made; remade (``--clear``) when its Python no longer starts (the Python it was
+        built from is gone: a QGIS update) or was built from another Python than this one."""
         interpreter = venv_python(self.folder)
         made = (self.folder / "pyvenv.cfg").is_file()
-        if made and interpreters.starts(interpreter):
+        built_from = interpreters.base_of(interpreter) if made else ""
+        if built_from and interpreters.same_file(built_from, interpreters.base_of(self.python) or self.python):
+            self.base = built_from
             return "venv", interpreter, ""
         if made:
-            self.log(f"The environment's Python no longer starts ({interpreter}): rebuilding the venv")
+            why = f"was built from {built_from}" if built_from else f"no longer starts ({interpreter})"
+            self.log(f"The environment's Python {why}: rebuilding the venv from {self.python}")
         else:
             self.log(f"Creating the environment (venv) in {self.folder}")
         clear = ["--clear"] if made else []
         self._step([self.python, *FLAGS, "-m", "venv", "--without-pip", *clear, str(self.folder)], "venv")
-        if not interpreters.starts(interpreter):
+        self.base = interpreters.base_of(interpreter)
+        if not self.base:
             raise InstallError(f"the venv's Python does not start ({interpreter})")
         return "venv", interpreter, ""
 

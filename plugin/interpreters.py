@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import subprocess
 import sys
 import urllib.parse
@@ -133,7 +134,19 @@ def pip_wheel(folder: Path, log) -> Path:
 
 def starts(python: str) -> bool:
     """Whether ``python`` starts (a venv whose base Python was removed does not)."""
-    return Path(python).is_file() and run_quiet([python, "-I", "-c", "pass"], timeout=60).returncode == 0
+    return bool(base_of(python))
+
+
+def base_of(python: str) -> str:
+    """The Python a venv's ``python`` runs on (itself for any other Python); "" when it does not start."""
+    code = "import sys;print(getattr(sys,'_base_executable','') or sys.executable)"
+    run = run_quiet([python, "-I", "-c", code], timeout=60) if Path(python).is_file() else None
+    return run.stdout.strip().splitlines()[-1] if run and run.returncode == 0 and run.stdout.strip() else ""
+
+
+def same_file(a: str, b: str) -> bool:
+    """Whether two paths name one file (through links)."""
+    return os.path.normcase(os.path.realpath(a)) == os.path.normcase(os.path.realpath(b))
 
 
 def run_quiet(command: list[str], timeout: float) -> subprocess.CompletedProcess:

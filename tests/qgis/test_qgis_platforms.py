@@ -111,6 +111,23 @@ def test_a_venv_whose_base_python_was_removed_is_rebuilt(plugin, tmp_path):
     assert interpreters.starts(environment.venv_python(folder))
     assert f"home = {Path(REAL).parent}" in (folder / "pyvenv.cfg").read_text()
     assert any("no longer starts" in line and "rebuilding" in line for line in lines), lines
+    assert installer.base == os.path.realpath(REAL)  # what the stamp records
+
+
+def test_a_venv_built_from_another_python_is_rebuilt_from_the_one_chosen(plugin, tmp_path):
+    """The user chose another Python (the install algorithm's parameter): the venv is remade from
+    it, so the stamp's base is the Python the venv really runs on."""
+    environment, _interpreters, _platforms, _child = plugin
+    other, folder, lines = old_qgis_python(tmp_path), tmp_path / "engine", []
+    first = environment.Installer(folder, log=lines.append, python=REAL, caps=caps_of(environment))
+    first._create(first.caps)
+    again = environment.Installer(folder, log=lines.append, python=REAL, caps=caps_of(environment))
+    again._create(again.caps)
+    assert not any("rebuilding" in line for line in lines)  # the same Python: kept as it is
+    chosen = environment.Installer(folder, log=lines.append, python=str(other), caps=caps_of(environment))
+    chosen._create(chosen.caps)
+    assert chosen.base == str(other) and f"home = {other.parent}" in (folder / "pyvenv.cfg").read_text()
+    assert any("was built from" in line and "rebuilding" in line for line in lines), lines
 
 
 def test_a_venv_launcher_without_its_python_is_rebuilt(plugin, tmp_path):
