@@ -179,7 +179,24 @@ class Installer:
         self.log(
             f"The engine's environment is ready ({self.folder}, {size_mb(self.folder):,.0f} MB, {env.seconds:.0f} s)."
         )
+        self.roaming_note()
         return env
+
+    def roaming_note(self) -> None:
+        """On Windows, an environment an earlier version left in the roaming profile: said, not
+        removed (a QGIS with that version may still use it)."""
+        roaming, local = os.environ.get("APPDATA"), os.environ.get("LOCALAPPDATA")
+        if not (platforms.is_windows() and roaming and local):
+            return
+        try:
+            old = Path(roaming) / self.folder.relative_to(local)
+        except ValueError:
+            return
+        if (old / STAMP).is_file():
+            self.log(
+                f"An earlier version's environment is in the roaming profile ({old}, {size_mb(old):,.0f} MB): "
+                "delete it once no QGIS with that version uses it"
+            )
 
     def prepare(self) -> tuple[str, str, str, list[str]]:
         """The environment's folder made and its own pip found or bootstrapped (the stamp

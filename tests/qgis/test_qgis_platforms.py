@@ -284,6 +284,15 @@ def test_on_windows_the_environment_is_in_the_local_profile(plugin, tmp_path, mo
     platforms.SYSTEM = "windows"
     expected = local / "QGIS" / "QGIS3" / "profiles" / "default" / "soilvolume" / "engine"
     assert environment.env_folder(profile) == expected
+    old = profile / "soilvolume" / "engine"  # where earlier versions put it: said after an install
+    old.mkdir(parents=True)
+    (old / environment.STAMP).write_text("{}")
+    lines = []
+    environment.Installer(expected, log=lines.append).roaming_note()
+    assert lines == [
+        f"An earlier version's environment is in the roaming profile ({old}, 0 MB): "
+        "delete it once no QGIS with that version uses it"
+    ]
     elsewhere = tmp_path / "portable" / "profiles" / "default"  # --profiles-path: kept where chosen
     assert environment.env_folder(elsewhere) == elsewhere / "soilvolume" / "engine"
     platforms.SYSTEM = "linux"
