@@ -207,6 +207,22 @@ def test_a_wrong_python_is_refused_in_one_line(plugin, tmp_path):
         assert said in message and "3.11 or 3.12" in message and "Install dependencies" in message
 
 
+@pytest.mark.skipif(not Path("/usr/bin/python3").is_file(), reason="needs a /usr/bin/python3 to stand for Apple's")
+def test_on_macos_without_developer_tools_usr_bin_python3_is_refused_unrun(plugin, tmp_path, monkeypatch):
+    """Apple's /usr/bin/python3 without the command-line tools is a shim that opens an install
+    dialog: refused from xcode-select's answer, never started."""
+    _environment, interpreters, platforms, _child = plugin
+    platforms.SYSTEM = "macos"
+    script(tmp_path / "bin" / "xcode-select", "exit 2")
+    monkeypatch.setenv("PATH", f"{tmp_path / 'bin'}{os.pathsep}{os.environ['PATH']}")
+    started = []
+    monkeypatch.setattr(interpreters, "probe", lambda python: started.append(python))
+    apple = r"^/usr/bin/python3 \(QGIS's own Python\) is Apple's placeholder"
+    with pytest.raises(interpreters.InstallError, match=apple):
+        interpreters.check("/usr/bin/python3", "QGIS's own Python")
+    assert started == []
+
+
 def test_the_install_algorithm_takes_a_python_and_keeps_it(plugin, provider, tmp_path, monkeypatch):
     """The algorithm's optional PYTHON: a wrong one refused (and not kept), a right one kept in
     QGIS's settings for the message bar's Install button."""
