@@ -72,6 +72,15 @@ def test_pips_no_matching_distribution_becomes_a_sentence_about_the_system(plugi
     assert platforms.no_wheel("pip failed (exit 1): network unreachable") == ""
 
 
+def test_the_installers_pip_refusal_is_that_sentence(plugin, tmp_path):
+    environment, _interpreters, platforms, _child = plugin
+    platforms.SYSTEM, platforms.MACHINE = "linux", "aarch64"
+    pip = script(tmp_path / "pip", "echo 'ERROR: No matching distribution found for open3d-cpu==0.20.0' >&2\nexit 1")
+    with pytest.raises(environment.InstallError) as caught:
+        environment.Installer(tmp_path, log=lambda _l: None)._install([str(pip)], "")
+    assert str(caught.value).startswith("pip found no wheel of open3d-cpu==0.20.0 for this system (linux aarch64)")
+
+
 # item 2: a venv whose base Python was removed by a QGIS update
 
 
