@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 POLL_S = 0.1
 GRACE_S = 0.3  # after "cancel" on stdin, then after SIGTERM, before the next, harder stop
 EXIT_S = 30.0  # how long a child that closed its output may take to exit
+ERROR_PREFIX = "soilvolume: error:"  # the engine's own error line on its standard error
 
 
 class Cancelled(Exception):
@@ -184,7 +185,8 @@ def run_engine(command: Sequence[str], env: dict[str, str], events: Events, cwd:
         for stream, line in lines(proc, events.cancelled):
             if stream == "err":
                 events.stderr.append(line)
-                events.debug(line)
+                if not line.startswith(ERROR_PREFIX):  # its error line: the error event says it once
+                    events.debug(line)
                 continue
             event = _event(line)
             if event is None:

@@ -97,6 +97,13 @@ def values(report: dict[str, Any], summary: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def good_news(report: dict[str, Any]) -> int:
+    """How many of the quality messages, at their head, are good news: the survey's agreement with
+    the design it is compared with (report.json's ``reference.agreement.agrees``)."""
+    agreement = (report.get("reference") or {}).get("agreement") or {}
+    return 1 if agreement.get("agrees") is True else 0
+
+
 def zone_fields(source_fields: QgsFields) -> QgsFields:
     """The zones' own attributes and the volume fields (renamed when a zone field has the name)."""
     fields = QgsFields(source_fields)

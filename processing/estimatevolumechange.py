@@ -192,7 +192,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         )
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
-        self.log_summary(results, feedback)
+        self.log_summary(results, feedback, estimate_outputs.good_news(report))
         return results
 
     def deliver_files(self, outputs, parameters, context, feedback, registered, names=(("", ""), "")) -> dict:
@@ -214,11 +214,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                 feedback.pushWarning(f"The engine wrote no {suffix} report.")
             elif dest:
                 results[key] = self.copy_report(src, dest)
+        self.report = results.get("REPORT")  # listed in the Results Viewer after the run
         return results
 
     @staticmethod
-    def log_summary(results: dict[str, Any], feedback) -> None:
-        """The volumes in the log, and the quality messages as warnings."""
+    def log_summary(results: dict[str, Any], feedback, good_news: int = 0) -> None:
+        """The volumes in the log, and the quality messages as warnings (but a reliable run's, and
+        the first ``good_news`` ones: the survey's agreement with a design, as information)."""
 
         def m3(key: str, sign: str = "") -> str:
             value = results.get(key)
@@ -232,9 +234,9 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         feedback.pushInfo(results["SIGNIFICANCE"])
         if results["VERDICT"]:
             feedback.pushInfo(f"Quality: {results['VERDICT']}")
-        push = feedback.pushInfo if results["VERDICT"] == "reliable" else feedback.pushWarning
-        for line in filter(None, results["QUALITY_MESSAGES"].split("\n")):
-            push(line)  # a reliable run's summary is no warning
+        reliable = results["VERDICT"] == "reliable"
+        for k, line in enumerate(filter(None, results["QUALITY_MESSAGES"].split("\n"))):
+            (feedback.pushInfo if reliable or k < good_news else feedback.pushWarning)(line)
 
     @staticmethod
     def copy_report(src: Path, dest: str) -> str:

@@ -1,0 +1,141 @@
+"""The point cloud (and surface) inputs: their file pickers, and their values written as paths."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from qgis.core import (
+    Qgis,
+    QgsPointCloudLayer,
+    QgsProcessingContext,
+    QgsProcessingParameterMapLayer,
+    QgsProcessingParameterMultipleLayers,
+    QgsProcessingParameterPointCloudLayer,
+    QgsProcessingUtils,
+    QgsRasterLayer,
+)
+
+CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
+SURFACE_EXTENSIONS = ("tif", "tiff")  # a surface as the reference (BEFORE of the estimate): a DEM GeoTIFF
+CLOUD_FILTERS = (
+    "Point clouds (" + " ".join(f"*.{e} *.{e.upper()}" for e in CLOUD_EXTENSIONS) + ")",
+    "LAS/LAZ (*.las *.laz *.LAS *.LAZ)",
+    "PLY (*.ply *.PLY)",
+    "XYZ text (*.xyz *.txt *.csv)",
+    "All files (*.*)",
+)
+CLOUD_FILTER = ";;".join(CLOUD_FILTERS)
+SURFACE_FILTER = "DEM GeoTIFF (a surface as the reference) (*.tif *.tiff *.TIF *.TIFF)"
+# the estimate's BEFORE: point clouds first (a file dialog opens on its first filter), the design second
+CLOUD_OR_SURFACE_FILTER = ";;".join((CLOUD_FILTERS[0], SURFACE_FILTER, *CLOUD_FILTERS[1:]))
+
+
+def file_value(value: Any) -> str | None:
+    """``value`` when it names a point cloud or GeoTIFF file (by its extension), else None."""
+    if isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in CLOUD_EXTENSIONS + SURFACE_EXTENSIONS:
+        return value
+    return None
+
+
+class FileValues:
+    """A layer input whose file paths are written as they are in the log, the history, the Python
+    and qgis_process commands: QGIS's own layer parameters try to open a path as a vector, raster,
+    mesh and point cloud layer to describe it, which logs "Cannot open ....las" (OGR) and prints
+    "Unable to load mesh (null)" (MDAL) for every LAS/LAZ input of every run."""
+
+    def valueAsJsonObject(self, value: Any, context: QgsProcessingContext) -> Any:  # noqa: N802 - Qt API
+        path = file_value(value)
+        return path if path is not None else super().valueAsJsonObject(value, context)
+
+    def valueAsString(self, value: Any, context: QgsProcessingContext) -> tuple[str, bool]:  # noqa: N802 - Qt API
+        path = file_value(value)
+        return (path, True) if path is not None else super().valueAsString(value, context)
+
+    def valueAsPythonString(self, value: Any, context: QgsProcessingContext) -> str:  # noqa: N802 - Qt API
+        path = file_value(value)
+        if path is not None:
+            return QgsProcessingUtils.stringToPythonLiteral(path)
+        return super().valueAsPythonString(value, context)
+
+
+class CloudParameter(FileValues, QgsProcessingParameterPointCloudLayer):
+    """A point cloud input whose file picker lists every format the engine reads (LAS, LAZ,
+    PLY, XYZ, ...), also where QGIS has no PDAL provider and would list only COPC, EPT and VPC."""
+
+    def createFileFilter(self) -> str:  # noqa: N802 - Qt API
+        return CLOUD_FILTER
+
+    def clone(self) -> CloudParameter:
+        copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
+        copy.setHelp(self.help())
+        copy.setFlags(self.flags())
+        copy.setMetadata(self.metadata())
+        return copy
+
+
+class CloudOrSurfaceParameter(FileValues, QgsProcessingParameterMapLayer):
+    """The estimate's BEFORE: a point cloud, or a surface as the reference (a single-band DEM:
+    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered.
+    A map-layer parameter of both types, so the dialog's dropdown lists the project's point
+    cloud and raster layers (and Model Builder accepts either as its input)."""
+
+    TYPES = (Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster)
+
+    def __init__(self, name: str, description: str, default: Any = None, optional: bool = False) -> None:
+        super().__init__(name, description, default, optional, list(self.TYPES))
+
+    def createFileFilter(self) -> str:  # noqa: N802 - Qt API
+        return CLOUD_OR_SURFACE_FILTER
+
+    def clone(self) -> CloudOrSurfaceParameter:
+        copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
+        copy.setHelp(self.help())
+        copy.setFlags(self.flags())
+        copy.setMetadata(self.metadata())
+        return copy
+
+    def checkValueIsAcceptable(self, value, context=None) -> bool:  # noqa: N802 - Qt API
+        if isinstance(value, (QgsRasterLayer, QgsPointCloudLayer)) or is_surface_file(value):
+            return True
+        if isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in CLOUD_EXTENSIONS:
+            return True
+        return super().checkValueIsAcceptable(value, context)
+
+
+def is_surface_file(value: Any) -> bool:
+    """Whether ``value`` names a DEM GeoTIFF (a surface as the estimate's reference)."""
+    return isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in SURFACE_EXTENSIONS
+
+
+class EpochsParameter(QgsProcessingParameterMultipleLayers):
+    """The series' surveys: files (or layers) in time order, at least two; file paths written as
+    they are (see :class:`FileValues`), and fewer than two named as such."""
+
+    def __init__(self, name: str, description: str) -> None:
+        super().__init__(name, description, Qgis.ProcessingSourceType.File)
+        self.setMinimumNumberInputs(2)
+
+    def clone(self) -> EpochsParameter:
+        copy = type(self)(self.name(), self.description())
+        copy.setHelp(self.help())
+        copy.setFlags(self.flags())
+        copy.setMetadata(self.metadata())
+        return copy
+
+    def valueAsJsonObject(self, value: Any, context: QgsProcessingContext) -> Any:  # noqa: N802 - Qt API
+        paths = file_values(value)
+        return paths if paths is not None else super().valueAsJsonObject(value, context)
+
+    def valueAsString(self, value: Any, context: QgsProcessingContext) -> tuple[str, bool]:  # noqa: N802 - Qt API
+        paths = file_values(value)
+        return (";".join(paths), True) if paths is not None else super().valueAsString(value, context)
+
+
+def file_values(value: Any) -> list[str] | None:
+    """``value`` as a list of file paths when every item names a point cloud file, else None."""
+    items = [v for v in value.split(";") if v] if isinstance(value, str) else value
+    if not isinstance(items, (list, tuple)) or not items:
+        return None
+    paths = [file_value(item) for item in items]
+    return None if None in paths else paths
