@@ -26,8 +26,13 @@ RASTERS = {  # parameter -> (engine output key, style, layer name, sort key: hig
     "PLANE_OFFSET": ("plane_offset", styles.DIVERGING, "Vertical correction", 30),
     "DEM_AFTER": ("dem_after", styles.TERRAIN, "DEM after (registered)", 20),
     "DEM_BEFORE": ("dem_before", styles.TERRAIN, "DEM before", 10),
+    "FILLED_MASK": ("filled_mask", styles.MASK, "Refilled cells", 45),  # over the difference, half see-through
 }
-DESCRIPTIONS = {"DIFFERENCE": "Difference (after − before, corrected)"}  # parameter labels
+OPTIONAL_RASTERS = {"FILLED_MASK"}  # not written unless asked
+DESCRIPTIONS = {  # parameter labels
+    "DIFFERENCE": "Difference (after − before, corrected)",
+    "FILLED_MASK": "Refilled cells (1 = interpolated from neighbours: a sparse cell or a hole)",
+}
 REPORT_ASSETS = (".png", ".svg", ".jpg", ".css", ".js")
 CRS_HINT = "Set the 'Before CRS override' / 'After CRS override' parameters to the clouds' CRS."
 
@@ -56,6 +61,8 @@ footprint, and the verdict checks that the survey agrees with the design on unch
 <p>The areas of significant change as cut and fill polygons on top (outlined red and blue), each
 with its area and volume (the headline cut and fill are their sums); under them the corrected
 difference raster (red = cut, blue = fill), both DEMs and the vertical correction raster, styled,
+and optionally the refilled cells (1 where a survey had too few points or a hole and the height was
+interpolated from the neighbouring cells),
 in a group of each run named after the pair, its run number and time;
 an HTML report; optionally the JSON report, the per-zone volume table
 and the registered after cloud (off by default: it is the most expensive output). Numbers: net,
@@ -108,10 +115,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
 
     def add_destinations(self) -> None:
         self.addParameter(QgsProcessingParameterRasterDestination("DIFFERENCE", self.tr(DESCRIPTIONS["DIFFERENCE"])))
-        for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET"):
+        for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET", "FILLED_MASK"):
             self.addParameter(
                 QgsProcessingParameterRasterDestination(
-                    key, self.tr(RASTERS[key][2]), optional=True, createByDefault=True
+                    key,
+                    self.tr(DESCRIPTIONS.get(key, RASTERS[key][2])),
+                    optional=True,
+                    createByDefault=key not in OPTIONAL_RASTERS,
                 )
             )
         self.addParameter(params.ReportDestination("REPORT", self.tr("HTML report"), "HTML files (*.html)", True))
