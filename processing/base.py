@@ -9,7 +9,7 @@ from qgis.core import QgsProcessingAlgorithm, QgsProcessingContext, QgsProcessin
 from qgis.PyQt.QtCore import QCoreApplication
 from qgis.PyQt.QtGui import QIcon
 
-from . import params, resultsviewer
+from . import outputcheck, params, resultsviewer
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icon.svg"
 
@@ -51,6 +51,10 @@ class SoilVolumeAlgorithm(QgsProcessingAlgorithm):
             if not param.checkValueIsAcceptable(parameters.get(param.name()), context):
                 return False, f"Incorrect parameter value for {param.description()}"
         return True, ""
+
+    def check_outputs(self, parameters: dict[str, Any], context: QgsProcessingContext) -> None:
+        """Every output checked writable before any work (:mod:`.outputcheck`)."""
+        outputcheck.check_outputs(self, parameters, context)
 
     def postProcessAlgorithm(  # noqa: N802 - Qt API
         self, context: QgsProcessingContext, feedback: QgsProcessingFeedback

@@ -168,6 +168,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
+        self.check_outputs(parameters, context)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before", surface=True)
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         registered = self.parameterAsFileOutput(parameters, "REGISTERED", context)

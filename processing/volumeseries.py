@@ -132,6 +132,7 @@ class VolumeSeries(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
+        self.check_outputs(parameters, context)
         paths = epoch_paths(self, parameters, context)
         options = optionparams.read_options(self, parameters, context, feedback, "series")
         args = ["series", *paths, *engine.option_args(options, "series")]
