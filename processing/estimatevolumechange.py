@@ -64,7 +64,8 @@ difference raster (red = cut, blue = fill), both DEMs and the vertical correctio
 and optionally the refilled cells (1 where a survey had too few points or a hole and the height was
 interpolated from the neighbouring cells),
 in a group of each run named after the pair, its run number and time;
-an HTML report; optionally the JSON report, the per-zone volume table
+an HTML report; optionally the JSON report, the volumes as a table of one row (which a model
+can return: its outputs are layers and files, not numbers), the per-zone volume table
 and the registered after cloud (off by default: it is the most expensive output). Numbers: net,
 cut and fill volumes (m³) with their ± half-widths, the same over the detected change areas,
 the level of detection (m), compared area, cell size, registration rotation (°) and shift (m);
@@ -153,6 +154,15 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             )
         )
         self.addParameter(
+            QgsProcessingParameterFeatureSink(
+                "VOLUMES",
+                self.tr("Volumes (a table of one row: net, cut, fill and their ±, the verdict)"),
+                QgsProcessing.TypeVector,
+                optional=True,
+                createByDefault=False,
+            )
+        )
+        self.addParameter(
             QgsProcessingParameterFileDestination(
                 "REGISTERED",
                 self.tr("Registered after cloud"),
@@ -203,6 +213,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         )
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
+        results["VOLUMES"] = estimate_outputs.write_volumes(self, parameters, context, results)
         self.log_summary(results, feedback, estimate_outputs.good_news(report))
         return results
 

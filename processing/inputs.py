@@ -1,4 +1,5 @@
-"""The point cloud (and surface) inputs: their file pickers, and their values written as paths."""
+"""The point cloud (and surface) inputs: file-typed for Model Builder, a layer dropdown in the dialog,
+file pickers that open on point clouds, and their values written as paths."""
 
 from __future__ import annotations
 
@@ -9,10 +10,11 @@ from qgis.core import (
     Qgis,
     QgsPointCloudLayer,
     QgsProcessingContext,
+    QgsProcessingParameterFile,
     QgsProcessingParameterMapLayer,
     QgsProcessingParameterMultipleLayers,
-    QgsProcessingParameterPointCloudLayer,
     QgsProcessingUtils,
+    QgsProperty,
     QgsRasterLayer,
 )
 
@@ -59,12 +61,24 @@ class FileValues:
         return super().valueAsPythonString(value, context)
 
 
-class CloudParameter(FileValues, QgsProcessingParameterPointCloudLayer):
-    """A point cloud input whose file picker lists every format the engine reads (LAS, LAZ,
-    PLY, XYZ, ...), also where QGIS has no PDAL provider and would list only COPC, EPT and VPC."""
+class CloudParameter(FileValues, QgsProcessingParameterFile):
+    """A survey input: a point cloud file (LAS, LAZ, COPC, VPC, PLY, PCD, XYZ) or a point cloud
+    layer of the project. Typed as a file, so Model Builder offers File (and String) inputs for it,
+    whose models run in the dialog and in qgis_process also where QGIS has no PDAL provider and
+    cannot open a LAS/LAZ file as a layer (a Point Cloud or Map Layer input of a model is checked by
+    loading it as a layer, which then fails); the algorithm dialog still offers the project's
+    layers (:meth:`dropdown`, see ``widgets.no_default_layer``)."""
+
+    FILTER = CLOUD_FILTER
+    LAYER_TYPES: tuple = (Qgis.ProcessingSourceType.PointCloud,)
+    LAYERS: tuple = (QgsPointCloudLayer,)
+
+    def __init__(self, name: str, description: str, default: Any = None, optional: bool = False) -> None:
+        super().__init__(name, description, Qgis.ProcessingFileParameterBehavior.File, "", default, optional)
+        self.setFileFilter(self.FILTER)
 
     def createFileFilter(self) -> str:  # noqa: N802 - Qt API
-        return CLOUD_FILTER
+        return self.FILTER
 
     def clone(self) -> CloudParameter:
         copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
@@ -73,34 +87,46 @@ class CloudParameter(FileValues, QgsProcessingParameterPointCloudLayer):
         copy.setMetadata(self.metadata())
         return copy
 
+    def checkValueIsAcceptable(self, value: Any, context: QgsProcessingContext | None = None) -> bool:  # noqa: N802
+        """A layer of the accepted kinds, a path, a layer's id or name, or an expression; whether a
+        file is there and readable is the algorithm's check, which names it."""
+        if isinstance(value, self.LAYERS) or isinstance(value, QgsProperty):
+            return True
+        if isinstance(value, str) and value.strip():
+            return True
+        return bool(self.flags() & self.FlagOptional) and value in (None, "")
 
-class CloudOrSurfaceParameter(FileValues, QgsProcessingParameterMapLayer):
+    def dropdown(self) -> QgsProcessingParameterMapLayer:
+        """The algorithm dialog's dropdown: the project's layers of the accepted kinds, its file
+        button opening on this parameter's file filter."""
+        return LayerChoice(self.name(), self.description(), list(self.LAYER_TYPES), self.FILTER)
+
+
+class CloudOrSurfaceParameter(CloudParameter):
     """The estimate's BEFORE: a point cloud, or a surface as the reference (a single-band DEM:
-    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered.
-    A map-layer parameter of both types, so the dialog's dropdown lists the project's point
-    cloud and raster layers (and Model Builder accepts either as its input)."""
+    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered; the
+    dialog's dropdown lists the project's point cloud and raster layers."""
 
-    TYPES = (Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster)
+    FILTER = CLOUD_OR_SURFACE_FILTER
+    LAYER_TYPES = (Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster)
+    LAYERS = (QgsPointCloudLayer, QgsRasterLayer)
 
-    def __init__(self, name: str, description: str, default: Any = None, optional: bool = False) -> None:
-        super().__init__(name, description, default, optional, list(self.TYPES))
+
+class LayerChoice(QgsProcessingParameterMapLayer):
+    """An optional map-layer parameter of the given kinds whose file button uses ``file_filter``
+    (only the dialog's dropdown is built on it)."""
+
+    def __init__(self, name: str, description: str, types: list, file_filter: str) -> None:
+        super().__init__(name, description, None, True, types)
+        self.file_filter = file_filter
 
     def createFileFilter(self) -> str:  # noqa: N802 - Qt API
-        return CLOUD_OR_SURFACE_FILTER
+        return self.file_filter
 
-    def clone(self) -> CloudOrSurfaceParameter:
-        copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
-        copy.setHelp(self.help())
+    def clone(self) -> LayerChoice:
+        copy = type(self)(self.name(), self.description(), self.dataTypes(), self.file_filter)
         copy.setFlags(self.flags())
-        copy.setMetadata(self.metadata())
         return copy
-
-    def checkValueIsAcceptable(self, value, context=None) -> bool:  # noqa: N802 - Qt API
-        if isinstance(value, (QgsRasterLayer, QgsPointCloudLayer)) or is_surface_file(value):
-            return True
-        if isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in CLOUD_EXTENSIONS:
-            return True
-        return super().checkValueIsAcceptable(value, context)
 
 
 def is_surface_file(value: Any) -> bool:

@@ -88,7 +88,7 @@ def _can_create(folder: Path) -> bool:
 
 def file_problem(path: Path, context: QgsProcessingContext) -> str | None:
     """Why the file at ``path`` cannot be replaced, or None."""
-    if path.is_dir():
+    if path.name in ("", ".", "..") or path.is_dir():
         return f"{path} is a folder; give a file name"
     if not path.exists() or not LOCKS_OPEN_FILES:
         return None

@@ -208,7 +208,11 @@ def deliver_raster(src: Path, dest: str | None) -> str | None:
         return copy(src, dest)
     from osgeo import gdal
 
-    if gdal.Translate(dest, str(src)) is None:
+    try:
+        written = gdal.Translate(dest, str(src))
+    except RuntimeError as exc:  # GDAL's exceptions on
+        raise QgsProcessingException(f"Cannot write the raster {dest}: {exc}") from exc
+    if written is None:
         raise QgsProcessingException(f"Cannot write the raster {dest} (unsupported format?).")
     return dest
 

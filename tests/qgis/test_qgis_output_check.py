@@ -122,3 +122,13 @@ def test_elsewhere_a_loaded_geotiff_is_replaced(run_alg, scene_dir, tmp_path):
         assert run_alg("pointcloudtodem", values)["OUTPUT"] == str(out)
     finally:
         QgsProject.instance().removeMapLayer(layer.id())
+
+
+def test_a_file_name_of_dot_dot_is_refused_first(run_alg, scene_dir, tmp_path):
+    """OUTPUT=<folder>/.. names a folder: refused before the engine (was: the engine ran, then
+    GDAL's RuntimeError came through as a traceback, twice)."""
+    message, feedback, _seconds = refused(
+        run_alg, "pointcloudtodem", {"INPUT": str(scene_dir / "after.las"), "OUTPUT": str(tmp_path / "x" / "..")}
+    )
+    assert "is a folder; give a file name" in message and not engine_ran(feedback), message
+    assert list(tmp_path.iterdir()) == []

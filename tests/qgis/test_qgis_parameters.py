@@ -11,7 +11,6 @@ from qgis.core import (
     QgsProcessingParameterDistance,
     QgsProcessingParameterEnum,
     QgsProcessingParameterNumber,
-    QgsProcessingParameterPointCloudLayer,
 )
 
 from soilvolume.options import Options, _opt
@@ -76,18 +75,23 @@ def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
 
 
 def test_one_required_input_per_epoch(estimate):
-    from qgis.core import Qgis, QgsProcessingParameterMapLayer
+    """Each survey is a file-typed input (Model Builder offers File inputs for it: they run without
+    PDAL), whose dialog dropdown lists the project's point cloud layers, and raster layers too for
+    the estimate's Before (a surface as the reference)."""
+    from qgis.core import Qgis, QgsProcessingParameterFile
 
     after, before = estimate.parameterDefinition("AFTER"), estimate.parameterDefinition("BEFORE")
-    assert isinstance(after, QgsProcessingParameterPointCloudLayer)
-    # BEFORE may be a surface too: its dropdown lists point cloud and raster layers
-    assert isinstance(before, QgsProcessingParameterMapLayer)
-    kinds = {Qgis.ProcessingSourceType(t) for t in before.dataTypes()}
-    assert kinds == {Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster}
-    assert "*.tif" in before.createFileFilter() and "*.ply" in before.createFileFilter()
-    for param in (after, before, before.clone()):
+    for param in (after, before, before.clone(), after.clone()):
+        assert isinstance(param, QgsProcessingParameterFile) and param.type() == "file"
         assert not param.flags() & param.FlagOptional
-    assert isinstance(before.clone(), type(before)) and before.clone().dataTypes() == before.dataTypes()
+    kinds = {Qgis.ProcessingSourceType(t) for t in before.dropdown().dataTypes()}
+    assert kinds == {Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster}
+    assert [Qgis.ProcessingSourceType(t) for t in after.dropdown().dataTypes()] == [
+        Qgis.ProcessingSourceType.PointCloud
+    ]
+    assert "*.tif" in before.createFileFilter() and "*.ply" in before.createFileFilter()
+    assert "*.tif" not in after.createFileFilter()
+    assert isinstance(before.clone(), type(before)) and before.clone().createFileFilter() == before.createFileFilter()
     names = {p.name() for p in estimate.parameterDefinitions()}
     assert not {"BEFORE_LAYER", "AFTER_LAYER"} & names
 
