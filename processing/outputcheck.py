@@ -55,7 +55,7 @@ def destination_path(value: Any, context: QgsProcessingContext) -> str:
     if isinstance(value, QgsProcessingOutputLayerDefinition):
         value = value.sink
     if isinstance(value, QgsProperty):
-        value = value.valueAsString(context.expressionContext())
+        value = value.valueAsString(context.expressionContext())[0]  # (text, ok)
     if not isinstance(value, str) or not value.strip() or value == QgsProcessing.TEMPORARY_OUTPUT:
         return ""
     return "" if PROVIDER_URI.match(value) else value

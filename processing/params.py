@@ -112,7 +112,7 @@ def cloud_path(
 def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcessingContext, surface=False) -> str:
     value = parameters.get(key)
     if isinstance(value, QgsProperty):
-        value = value.valueAsString(context.expressionContext())
+        value = value.valueAsString(context.expressionContext())[0]  # (text, ok)
     if isinstance(value, QgsMapLayer):
         return value.source()
     if not value:

@@ -59,7 +59,7 @@ def epoch_paths(alg, parameters: dict[str, Any], context: QgsProcessingContext) 
     single string may list files separated by ';')."""
     value = parameters.get("EPOCHS")
     if isinstance(value, QgsProperty):
-        value = value.valueAsString(context.expressionContext())
+        value = value.valueAsString(context.expressionContext())[0]  # (text, ok)
     if isinstance(value, str):
         value = [v for v in value.split(";") if v.strip()]
     out = []

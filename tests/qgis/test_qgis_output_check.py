@@ -132,3 +132,18 @@ def test_a_file_name_of_dot_dot_is_refused_first(run_alg, scene_dir, tmp_path):
     )
     assert "is a folder; give a file name" in message and not engine_ran(feedback), message
     assert list(tmp_path.iterdir()) == []
+
+
+def test_destinations_as_the_dialog_gives_them_are_checked(run_alg, scene_dir, tmp_path):
+    """The algorithm dialog gives a layer output as an output definition (its path a QgsProperty,
+    whose text QGIS's Python returns with a flag): checked too (was: skipped, so the desktop dialog
+    ran the engine and then failed)."""
+    from qgis.core import QgsProcessingOutputLayerDefinition
+
+    blocker = tmp_path / "taken"
+    blocker.write_text("a file, not a folder")
+    out = QgsProcessingOutputLayerDefinition(str(blocker / "sub" / "dem.tif"))
+    message, feedback, _seconds = refused(
+        run_alg, "pointcloudtodem", {"INPUT": str(scene_dir / "after.las"), "OUTPUT": out}
+    )
+    assert f"{blocker} is a file, not a folder" in message and not engine_ran(feedback), message
