@@ -36,8 +36,8 @@ def check_outputs(alg: QgsProcessingAlgorithm, parameters: dict[str, Any], conte
     """Raise ``QgsProcessingException`` for the first destination of the run that cannot be written."""
     for label, path, is_folder in destinations(alg, parameters, context):
         problem = folder_problem(path if is_folder else path.parent)
-        if problem is None and not is_folder:
-            problem = file_problem(path, context)
+        if problem is None:
+            problem = folder_files_problem(path, context) if is_folder else file_problem(path, context)
         if problem:
             raise QgsProcessingException(f"{label}: {problem}; nothing was computed.")
 
@@ -103,13 +103,34 @@ def file_problem(path: Path, context: QgsProcessingContext) -> str | None:
     return None
 
 
+def folder_files_problem(folder: Path, context: QgsProcessingContext) -> str | None:
+    """Why a file of an output folder (whose files the run replaces) cannot be replaced, or None."""
+    if not LOCKS_OPEN_FILES or not folder.is_dir():
+        return None
+    for source, name in layer_files(context):
+        if source.parent == _normal(folder):
+            return (
+                f"cannot replace the files in {folder}: {source.name} is open in QGIS as the layer '{name}'; "
+                "remove that layer from the project (or choose another folder), then run again"
+            )
+    return None
+
+
 def loaded_layer(path: Path, context: QgsProcessingContext) -> str:
     """The name of a layer of the project whose file is ``path`` ("" for none)."""
+    target = _normal(path)
+    return next((name for source, name in layer_files(context) if source == target), "")
+
+
+def layer_files(context: QgsProcessingContext) -> Iterator[tuple[Path, str]]:
+    """(its file, normalised; its name) of each layer of the project with a file."""
     projects = {id(p): p for p in (context.project(), QgsProject.instance()) if p is not None}
-    target = os.path.normcase(str(path.resolve()))
     for project in projects.values():
         for layer in project.mapLayers().values():
             source = layer.source().split("|")[0]
-            if source and os.path.normcase(str(Path(source).resolve())) == target:
-                return layer.name()
-    return ""
+            if source and Path(source).is_file():
+                yield _normal(Path(source)), layer.name()
+
+
+def _normal(path: Path) -> Path:
+    return Path(os.path.normcase(str(path.resolve())))

@@ -147,3 +147,22 @@ def test_destinations_as_the_dialog_gives_them_are_checked(run_alg, scene_dir, t
         run_alg, "pointcloudtodem", {"INPUT": str(scene_dir / "after.las"), "OUTPUT": out}
     )
     assert f"{blocker} is a file, not a folder" in message and not engine_ran(feedback), message
+
+
+def test_a_series_folder_with_a_loaded_file_is_named_on_windows(run_alg, scene_dir, tmp_path, windows):
+    """The series replaces the files of its output folder: on Windows one of them loaded in QGIS
+    is named before the run, with the layer to remove."""
+    folder = tmp_path / "site"
+    folder.mkdir()
+    dem = folder / "dem_epoch0.tif"
+    run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "after.las"), "CELL": 2.0, "OUTPUT": str(dem)})
+    layer, before = QgsRasterLayer(str(dem), "epoch 0"), dem.read_bytes()
+    QgsProject.instance().addMapLayer(layer)
+    try:
+        epochs = [str(scene_dir / "before.las"), str(scene_dir / "after.las")]
+        message, feedback, _s = refused(run_alg, "volumeseries", {"EPOCHS": epochs, "OUTPUT_FOLDER": str(folder)})
+    finally:
+        QgsProject.instance().removeMapLayer(layer.id())
+    assert "dem_epoch0.tif is open in QGIS as the layer 'epoch 0'; remove that layer" in message, message
+    assert not engine_ran(feedback) and dem.read_bytes() == before
+    assert not [p for p in folder.iterdir() if not p.name.startswith("dem_epoch0.tif")]  # (QGIS's .aux.xml)
