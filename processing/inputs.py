@@ -13,7 +13,6 @@ from qgis.core import (
     QgsProcessingParameterFile,
     QgsProcessingParameterMapLayer,
     QgsProcessingParameterMultipleLayers,
-    QgsProcessingUtils,
     QgsProperty,
     QgsRasterLayer,
 )
@@ -40,34 +39,16 @@ def file_value(value: Any) -> str | None:
     return None
 
 
-class FileValues:
-    """A layer input whose file paths are written as they are in the log, the history, the Python
-    and qgis_process commands: QGIS's own layer parameters try to open a path as a vector, raster,
-    mesh and point cloud layer to describe it, which logs "Cannot open ....las" (OGR) and prints
-    "Unable to load mesh (null)" (MDAL) for every LAS/LAZ input of every run."""
-
-    def valueAsJsonObject(self, value: Any, context: QgsProcessingContext) -> Any:  # noqa: N802 - Qt API
-        path = file_value(value)
-        return path if path is not None else super().valueAsJsonObject(value, context)
-
-    def valueAsString(self, value: Any, context: QgsProcessingContext) -> tuple[str, bool]:  # noqa: N802 - Qt API
-        path = file_value(value)
-        return (path, True) if path is not None else super().valueAsString(value, context)
-
-    def valueAsPythonString(self, value: Any, context: QgsProcessingContext) -> str:  # noqa: N802 - Qt API
-        path = file_value(value)
-        if path is not None:
-            return QgsProcessingUtils.stringToPythonLiteral(path)
-        return super().valueAsPythonString(value, context)
-
-
-class CloudParameter(FileValues, QgsProcessingParameterFile):
+class CloudParameter(QgsProcessingParameterFile):
     """A survey input: a point cloud file (LAS, LAZ, COPC, VPC, PLY, PCD, XYZ) or a point cloud
     layer of the project. Typed as a file, so Model Builder offers File (and String) inputs for it,
     whose models run in the dialog and in qgis_process also where QGIS has no PDAL provider and
     cannot open a LAS/LAZ file as a layer (a Point Cloud or Map Layer input of a model is checked by
     loading it as a layer, which then fails); the algorithm dialog still offers the project's
-    layers (:meth:`dropdown`, see ``widgets.no_default_layer``)."""
+    layers (:meth:`dropdown`, see ``widgets.no_default_layer``). Its paths are written as they are
+    in the log, the history and the Python and qgis_process commands (a layer parameter tries to
+    open a path as a vector, raster, mesh and point cloud layer to describe it: "Cannot open
+    ....las" from OGR in the log and "Unable to load mesh (null)" from MDAL, for every input)."""
 
     FILTER = CLOUD_FILTER
     LAYER_TYPES: tuple = (Qgis.ProcessingSourceType.PointCloud,)
@@ -136,7 +117,8 @@ def is_surface_file(value: Any) -> bool:
 
 class EpochsParameter(QgsProcessingParameterMultipleLayers):
     """The series' surveys: files (or layers) in time order, at least two; file paths written as
-    they are (see :class:`FileValues`), and fewer than two named as such."""
+    they are (QGIS's own tries each as a vector and mesh layer to describe it, see
+    :class:`CloudParameter`)."""
 
     def __init__(self, name: str, description: str) -> None:
         super().__init__(name, description, Qgis.ProcessingSourceType.File)
