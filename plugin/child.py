@@ -54,6 +54,9 @@ def child_environ(extra: dict[str, str] | None = None) -> dict[str, str]:
     return env
 
 
+ERROR_PREFIX = "soilvolume: error:"  # the engine's own error line on its standard error
+
+
 class Cancelled(Exception):
     """The user cancelled; the child was stopped."""
 
@@ -215,7 +218,8 @@ def run_engine(command: Sequence[str], env: dict[str, str], events: Events, cwd:
         for stream, line in lines(proc, events.cancelled):
             if stream == "err":
                 events.stderr.append(line)
-                events.debug(line)
+                if not line.startswith(ERROR_PREFIX):  # its error line: the error event says it once
+                    events.debug(line)
                 continue
             event = _event(line)
             if event is None:

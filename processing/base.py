@@ -5,11 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from qgis.core import QgsProcessingAlgorithm, QgsProcessingContext
+from qgis.core import QgsProcessingAlgorithm, QgsProcessingContext, QgsProcessingFeedback
 from qgis.PyQt.QtCore import QCoreApplication
 from qgis.PyQt.QtGui import QIcon
 
-from . import params
+from . import outputcheck, params, resultsviewer
 
 ICON = Path(__file__).resolve().parent.parent / "resources" / "icon.svg"
 
@@ -51,6 +51,18 @@ class SoilVolumeAlgorithm(QgsProcessingAlgorithm):
             if not param.checkValueIsAcceptable(parameters.get(param.name()), context):
                 return False, f"Incorrect parameter value for {param.description()}"
         return True, ""
+
+    def check_outputs(self, parameters: dict[str, Any], context: QgsProcessingContext) -> None:
+        """Every output checked writable before any work (:mod:`.outputcheck`)."""
+        outputcheck.check_outputs(self, parameters, context)
+
+    def postProcessAlgorithm(  # noqa: N802 - Qt API
+        self, context: QgsProcessingContext, feedback: QgsProcessingFeedback
+    ) -> dict[str, Any]:
+        """After the run, in QGIS's main thread: the HTML report (``self.report``, set by the run)
+        listed in the Results Viewer."""
+        resultsviewer.list_report(self, getattr(self, "report", None))
+        return {}
 
     def tags(self) -> list[str]:
         return self.tr(self._tags).split(",")

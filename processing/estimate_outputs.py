@@ -15,6 +15,7 @@ from qgis.core import (
     QgsProcessingException,
     QgsProcessingOutputNumber,
     QgsProcessingOutputString,
+    QgsWkbTypes,
 )
 from qgis.PyQt.QtCore import QMetaType
 
@@ -97,6 +98,13 @@ def values(report: dict[str, Any], summary: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def good_news(report: dict[str, Any]) -> int:
+    """How many of the quality messages, at their head, are good news: the survey's agreement with
+    the design it is compared with (report.json's ``reference.agreement.agrees``)."""
+    agreement = (report.get("reference") or {}).get("agreement") or {}
+    return 1 if agreement.get("agrees") is True else 0
+
+
 def zone_fields(source_fields: QgsFields) -> QgsFields:
     """The zones' own attributes and the volume fields (renamed when a zone field has the name)."""
     fields = QgsFields(source_fields)
@@ -128,6 +136,35 @@ def write_zones(
     for feature, zone in zip(features, zones, strict=True):
         pm = (zone.get("uncertainty_m3") or {}).get("net")  # the engine's interval (none from tiles yet)
         sink.addFeature(_zone_feature(feature, zone, fields, pm), QgsFeatureSink.FastInsert)
+    return dest
+
+
+VOLUME_FIELDS = (  # the VOLUMES table: field -> output
+    ("net_m3", "NET_VOLUME"),
+    ("net_pm_m3", "NET_UNCERTAINTY"),
+    ("cut_m3", "CUT_VOLUME"),
+    ("cut_pm_m3", "CUT_UNCERTAINTY"),
+    ("fill_m3", "FILL_VOLUME"),
+    ("fill_pm_m3", "FILL_UNCERTAINTY"),
+    ("change_area_m2", "CHANGE_AREA"),
+    ("verdict", "VERDICT"),
+)
+
+
+def write_volumes(alg, parameters: dict[str, Any], context: QgsProcessingContext, results: dict[str, Any]):
+    """The VOLUMES table: one row of the run's numbers (a destination, so a model can make it one of
+    its outputs: QGIS's models return destinations only, not numbers)."""
+    if not parameters.get("VOLUMES") or params.unset_output(parameters, "VOLUMES"):
+        return None
+    fields = QgsFields()
+    for name, key in VOLUME_FIELDS:
+        fields.append(QgsField(name, QMetaType.Type.QString if key == "VERDICT" else QMetaType.Type.Double))
+    sink, dest = alg.parameterAsSink(parameters, "VOLUMES", context, fields, QgsWkbTypes.Type.NoGeometry)
+    if sink is None:
+        return None
+    row = QgsFeature(fields)
+    row.setAttributes([results.get(key) for _name, key in VOLUME_FIELDS])
+    sink.addFeature(row, QgsFeatureSink.FastInsert)
     return dest
 
 

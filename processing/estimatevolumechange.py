@@ -26,8 +26,13 @@ RASTERS = {  # parameter -> (engine output key, style, layer name, sort key: hig
     "PLANE_OFFSET": ("plane_offset", styles.DIVERGING, "Vertical correction", 30),
     "DEM_AFTER": ("dem_after", styles.TERRAIN, "DEM after (registered)", 20),
     "DEM_BEFORE": ("dem_before", styles.TERRAIN, "DEM before", 10),
+    "FILLED_MASK": ("filled_mask", styles.MASK, "Refilled cells", 45),  # over the difference, half see-through
 }
-DESCRIPTIONS = {"DIFFERENCE": "Difference (after − before, corrected)"}  # parameter labels
+OPTIONAL_RASTERS = {"FILLED_MASK"}  # not written unless asked
+DESCRIPTIONS = {  # parameter labels
+    "DIFFERENCE": "Difference (after − before, corrected)",
+    "FILLED_MASK": "Refilled cells (1 = interpolated from neighbours: a sparse cell or a hole)",
+}
 REPORT_ASSETS = (".png", ".svg", ".jpg", ".css", ".js")
 CRS_HINT = "Set the 'Before CRS override' / 'After CRS override' parameters to the clouds' CRS."
 
@@ -56,8 +61,11 @@ footprint, and the verdict checks that the survey agrees with the design on unch
 <p>The areas of significant change as cut and fill polygons on top (outlined red and blue), each
 with its area and volume (the headline cut and fill are their sums); under them the corrected
 difference raster (red = cut, blue = fill), both DEMs and the vertical correction raster, styled,
+and optionally the refilled cells (1 where a survey had too few points or a hole and the height was
+interpolated from the neighbouring cells),
 in a group of each run named after the pair, its run number and time;
-an HTML report; optionally the JSON report, the per-zone volume table
+an HTML report; optionally the JSON report, the volumes as a table of one row (which a model
+can return: its outputs are layers and files, not numbers), the per-zone volume table
 and the registered after cloud (off by default: it is the most expensive output). Numbers: net,
 cut and fill volumes (m³) with their ± half-widths, the same over the detected change areas,
 the level of detection (m), compared area, cell size, registration rotation (°) and shift (m);
@@ -108,10 +116,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
 
     def add_destinations(self) -> None:
         self.addParameter(QgsProcessingParameterRasterDestination("DIFFERENCE", self.tr(DESCRIPTIONS["DIFFERENCE"])))
-        for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET"):
+        for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET", "FILLED_MASK"):
             self.addParameter(
                 QgsProcessingParameterRasterDestination(
-                    key, self.tr(RASTERS[key][2]), optional=True, createByDefault=True
+                    key,
+                    self.tr(DESCRIPTIONS.get(key, RASTERS[key][2])),
+                    optional=True,
+                    createByDefault=key not in OPTIONAL_RASTERS,
                 )
             )
         self.addParameter(params.ReportDestination("REPORT", self.tr("HTML report"), "HTML files (*.html)", True))
@@ -143,6 +154,15 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             )
         )
         self.addParameter(
+            QgsProcessingParameterFeatureSink(
+                "VOLUMES",
+                self.tr("Volumes (a table of one row: net, cut, fill and their ±, the verdict)"),
+                QgsProcessing.TypeVector,
+                optional=True,
+                createByDefault=False,
+            )
+        )
+        self.addParameter(
             QgsProcessingParameterFileDestination(
                 "REGISTERED",
                 self.tr("Registered after cloud"),
@@ -158,6 +178,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
+        self.check_outputs(parameters, context)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before", surface=True)
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         registered = self.parameterAsFileOutput(parameters, "REGISTERED", context)
@@ -192,7 +213,8 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         )
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
-        self.log_summary(results, feedback)
+        results["VOLUMES"] = estimate_outputs.write_volumes(self, parameters, context, results)
+        self.log_summary(results, feedback, estimate_outputs.good_news(report))
         return results
 
     def deliver_files(self, outputs, parameters, context, feedback, registered, names=(("", ""), "")) -> dict:
@@ -214,11 +236,13 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                 feedback.pushWarning(f"The engine wrote no {suffix} report.")
             elif dest:
                 results[key] = self.copy_report(src, dest)
+        self.report = results.get("REPORT")  # listed in the Results Viewer after the run
         return results
 
     @staticmethod
-    def log_summary(results: dict[str, Any], feedback) -> None:
-        """The volumes in the log, and the quality messages as warnings."""
+    def log_summary(results: dict[str, Any], feedback, good_news: int = 0) -> None:
+        """The volumes in the log, and the quality messages as warnings (but a reliable run's, and
+        the first ``good_news`` ones: the survey's agreement with a design, as information)."""
 
         def m3(key: str, sign: str = "") -> str:
             value = results.get(key)
@@ -232,9 +256,9 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         feedback.pushInfo(results["SIGNIFICANCE"])
         if results["VERDICT"]:
             feedback.pushInfo(f"Quality: {results['VERDICT']}")
-        push = feedback.pushInfo if results["VERDICT"] == "reliable" else feedback.pushWarning
-        for line in filter(None, results["QUALITY_MESSAGES"].split("\n")):
-            push(line)  # a reliable run's summary is no warning
+        reliable = results["VERDICT"] == "reliable"
+        for k, line in enumerate(filter(None, results["QUALITY_MESSAGES"].split("\n"))):
+            (feedback.pushInfo if reliable or k < good_news else feedback.pushWarning)(line)
 
     @staticmethod
     def copy_report(src: Path, dest: str) -> str:

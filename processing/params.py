@@ -14,10 +14,8 @@ from pathlib import Path
 from typing import Any
 
 from qgis.core import (
-    Qgis,
     QgsCoordinateReferenceSystem,
     QgsMapLayer,
-    QgsPointCloudLayer,
     QgsProcessingAlgorithm,
     QgsProcessingContext,
     QgsProcessingException,
@@ -26,68 +24,21 @@ from qgis.core import (
     QgsProcessingParameterCrs,
     QgsProcessingParameterDefinition,
     QgsProcessingParameterFileDestination,
-    QgsProcessingParameterMapLayer,
-    QgsProcessingParameterPointCloudLayer,
     QgsProcessingUtils,
     QgsProperty,
-    QgsRasterLayer,
 )
 
 from . import engine, widgets
-
-CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
-SURFACE_EXTENSIONS = ("tif", "tiff")  # a surface as the reference (BEFORE of the estimate): a DEM GeoTIFF
-CLOUD_FILTER = (
-    "Point clouds (" + " ".join(f"*.{e} *.{e.upper()}" for e in CLOUD_EXTENSIONS) + ");;"
-    "LAS/LAZ (*.las *.laz *.LAS *.LAZ);;PLY (*.ply *.PLY);;XYZ text (*.xyz *.txt *.csv);;All files (*.*)"
+from .inputs import (
+    CLOUD_EXTENSIONS,
+    CloudOrSurfaceParameter,
+    CloudParameter,
+    is_surface_file,
 )
+
 LAS_FILTER = "LAZ files (*.laz);;LAS files (*.las)"
 LAS_SUFFIXES = (".las", ".laz")
 RASTER_COPY_SUFFIXES = (".tif", ".tiff")
-
-
-class CloudParameter(QgsProcessingParameterPointCloudLayer):
-    """A point cloud input whose file picker lists every format the engine reads (LAS, LAZ,
-    PLY, XYZ, ...), also where QGIS has no PDAL provider and would list only COPC, EPT and VPC."""
-
-    def createFileFilter(self) -> str:  # noqa: N802 - Qt API
-        return CLOUD_FILTER
-
-    def clone(self) -> CloudParameter:
-        copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
-        copy.setHelp(self.help())
-        copy.setFlags(self.flags())
-        copy.setMetadata(self.metadata())
-        return copy
-
-
-class CloudOrSurfaceParameter(QgsProcessingParameterMapLayer):
-    """The estimate's BEFORE: a point cloud, or a surface as the reference (a single-band DEM:
-    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered.
-    A map-layer parameter of both types, so the dialog's dropdown lists the project's point
-    cloud and raster layers (and Model Builder accepts either as its input)."""
-
-    TYPES = (Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster)
-
-    def __init__(self, name: str, description: str, default: Any = None, optional: bool = False) -> None:
-        super().__init__(name, description, default, optional, list(self.TYPES))
-
-    def createFileFilter(self) -> str:  # noqa: N802 - Qt API
-        return "DEM GeoTIFF (a surface as the reference) (*.tif *.tiff *.TIF *.TIFF);;" + CLOUD_FILTER
-
-    def clone(self) -> CloudOrSurfaceParameter:
-        copy = type(self)(self.name(), self.description(), self.defaultValue(), self.flags() & self.FlagOptional)
-        copy.setHelp(self.help())
-        copy.setFlags(self.flags())
-        copy.setMetadata(self.metadata())
-        return copy
-
-    def checkValueIsAcceptable(self, value, context=None) -> bool:  # noqa: N802 - Qt API
-        if isinstance(value, (QgsRasterLayer, QgsPointCloudLayer)) or is_surface_file(value):
-            return True
-        if isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in CLOUD_EXTENSIONS:
-            return True
-        return super().checkValueIsAcceptable(value, context)
 
 
 class ReportDestination(QgsProcessingParameterFileDestination):
@@ -107,11 +58,6 @@ class ReportDestination(QgsProcessingParameterFileDestination):
         copy.setFlags(self.flags())
         copy.setMetadata(self.metadata())
         return copy
-
-
-def is_surface_file(value: Any) -> bool:
-    """Whether ``value`` names a DEM GeoTIFF (a surface as the estimate's reference)."""
-    return isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in SURFACE_EXTENSIONS
 
 
 def advanced(param: QgsProcessingParameterDefinition) -> QgsProcessingParameterDefinition:
@@ -166,7 +112,7 @@ def cloud_path(
 def _cloud_source(alg, parameters: dict[str, Any], key: str, context: QgsProcessingContext, surface=False) -> str:
     value = parameters.get(key)
     if isinstance(value, QgsProperty):
-        value = value.valueAsString(context.expressionContext())
+        value = value.valueAsString(context.expressionContext())[0]  # (text, ok)
     if isinstance(value, QgsMapLayer):
         return value.source()
     if not value:
@@ -262,7 +208,11 @@ def deliver_raster(src: Path, dest: str | None) -> str | None:
         return copy(src, dest)
     from osgeo import gdal
 
-    if gdal.Translate(dest, str(src)) is None:
+    try:
+        written = gdal.Translate(dest, str(src))
+    except RuntimeError as exc:  # GDAL's exceptions on
+        raise QgsProcessingException(f"Cannot write the raster {dest}: {exc}") from exc
+    if written is None:
         raise QgsProcessingException(f"Cannot write the raster {dest} (unsupported format?).")
     return dest
 

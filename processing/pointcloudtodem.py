@@ -78,6 +78,7 @@ class PointCloudToDem(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
+        self.check_outputs(parameters, context)
         cloud = params.cloud_path(self, parameters, "INPUT", context, "Input")
         crs = params.crs_text(self, parameters, "CRS", context)
         options = optionparams.read_options(self, parameters, context, feedback, "dem")

@@ -77,6 +77,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
+        self.check_outputs(parameters, context)
         before = params.cloud_path(self, parameters, "BEFORE", context, "Before")
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         options = optionparams.read_options(self, parameters, context, feedback, "register")

@@ -125,6 +125,7 @@ class VolumeFromDems(SoilVolumeAlgorithm):
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
+        self.check_outputs(parameters, context)
         before = raster_file(self.parameterAsRasterLayer(parameters, "BEFORE", context), "before")
         after = raster_file(self.parameterAsRasterLayer(parameters, "AFTER", context), "after")
         args = ["volume", before, after]

@@ -8,7 +8,6 @@ from typing import Any
 
 from qgis.core import (
     QgsMapLayer,
-    QgsProcessing,
     QgsProcessingContext,
     QgsProcessingException,
     QgsProcessingFeedback,
@@ -16,12 +15,11 @@ from qgis.core import (
     QgsProcessingOutputString,
     QgsProcessingParameterFileDestination,
     QgsProcessingParameterFolderDestination,
-    QgsProcessingParameterMultipleLayers,
     QgsProcessingParameterString,
     QgsProperty,
 )
 
-from . import engine, optionparams, params, widgets
+from . import engine, inputs, optionparams, params, widgets
 from .base import SoilVolumeAlgorithm
 
 HELP = """\
@@ -61,7 +59,7 @@ def epoch_paths(alg, parameters: dict[str, Any], context: QgsProcessingContext) 
     single string may list files separated by ';')."""
     value = parameters.get("EPOCHS")
     if isinstance(value, QgsProperty):
-        value = value.valueAsString(context.expressionContext())
+        value = value.valueAsString(context.expressionContext())[0]  # (text, ok)
     if isinstance(value, str):
         value = [v for v in value.split(";") if v.strip()]
     out = []
@@ -74,7 +72,10 @@ def epoch_paths(alg, parameters: dict[str, Any], context: QgsProcessingContext) 
         else:
             out.append(str(item))
     if len(out) < 2:
-        raise QgsProcessingException("Give at least two point clouds: the reference survey first, then later ones.")
+        raise QgsProcessingException(
+            f"A series needs at least two surveys ({len(out)} given in 'Point clouds in time order'): "
+            "the reference survey first, then one or more later ones."
+        )
     for k, path in enumerate(out):
         params.check_cloud_file(path, f"Survey {k}")
     return out
@@ -94,11 +95,8 @@ class VolumeSeries(SoilVolumeAlgorithm):
         return self.tr("Cut, fill and net volume per period over surveys of one site, and their sum.")
 
     def initAlgorithm(self, config: dict[str, Any] | None = None) -> None:  # noqa: N802
-        epochs = QgsProcessingParameterMultipleLayers(
-            "EPOCHS", self.tr("Point clouds in time order (the reference survey first)"), QgsProcessing.TypeFile
-        )
-        epochs.setMinimumNumberInputs(2)
-        self.addParameter(widgets.file_list(epochs, params.CLOUD_FILTER))  # keeps the paths it is given
+        epochs = inputs.EpochsParameter("EPOCHS", self.tr("Point clouds in time order (the reference survey first)"))
+        self.addParameter(widgets.file_list(epochs, inputs.CLOUD_FILTER))  # keeps the paths it is given
         self.addParameter(
             QgsProcessingParameterString(
                 "DATES", self.tr("Survey dates (YYYY-MM-DD, comma-separated; empty: from the files)"), optional=True
@@ -117,12 +115,24 @@ class VolumeSeries(SoilVolumeAlgorithm):
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(label)))
         self.addOutput(QgsProcessingOutputString("PERIODS", self.tr("Periods (JSON)")))
 
+    def checkParameterValues(  # noqa: N802 - Qt API
+        self, parameters: dict[str, Any], context: QgsProcessingContext
+    ) -> tuple[bool, str]:
+        """The surveys named (fewer than two, a missing or unsupported file) before QGIS's own
+        check, whose "Incorrect parameter value" says neither which nor why."""
+        try:
+            epoch_paths(self, parameters, context)
+        except QgsProcessingException as exc:
+            return False, str(exc)
+        return super().checkParameterValues(parameters, context)
+
     def processAlgorithm(  # noqa: N802
         self,
         parameters: dict[str, Any],
         context: QgsProcessingContext,
         feedback: QgsProcessingFeedback,
     ) -> dict[str, Any]:
+        self.check_outputs(parameters, context)
         paths = epoch_paths(self, parameters, context)
         options = optionparams.read_options(self, parameters, context, feedback, "series")
         args = ["series", *paths, *engine.option_args(options, "series")]
@@ -147,6 +157,7 @@ class VolumeSeries(SoilVolumeAlgorithm):
             results[key] = str(folder / outputs[name].name) if name in outputs else None
             if dest and name in outputs:
                 results[key] = params.deliver_file(outputs[name], dest)
+        self.report = results.get("REPORT")  # listed in the Results Viewer after the run
         cumulative = report.get("cumulative") or {}
         for key, (path, _) in NUMBERS.items():
             results[key] = (cumulative.get(path[0]) or {}).get(path[1])

@@ -40,7 +40,8 @@ class EmptyFirstWrapper(QgsAbstractProcessingParameterWidgetWrapper):
         self._optional: QgsProcessingParameterDefinition | None = None
 
     def createWidget(self):  # noqa: N802 - Qt API
-        self._optional = self.parameterDefinition().clone()
+        param = self.parameterDefinition()
+        self._optional = param.dropdown() if hasattr(param, "dropdown") else param.clone()  # a file-typed input's
         self._optional.setFlags(self._optional.flags() | QgsProcessingParameterDefinition.FlagOptional)
         combo = QgsProcessingMapLayerComboBox(self._optional, self.type())
         combo.setToolTip(self.parameterDefinition().toolTip())

@@ -40,8 +40,9 @@ def surface_quality(report: dict, record) -> dict:
     diff = record.quality.diff
     unchanged = stable_cells(diff, record.grid.cell)
     agree = reference.agreement(diff, unchanged, record.vols.uncertainty["lod_m"], record.grid.cell_area)
-    report["reference"]["agreement"] = agree
-    return reference.merge(report["quality"], reference.check(agree))
+    found = reference.check(agree)
+    report["reference"]["agreement"] = {**agree, "agrees": not found[0]}  # its sentence is then no warning
+    return reference.merge(report["quality"], found)
 
 
 def words(report: dict) -> tuple[str, str, str]:

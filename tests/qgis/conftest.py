@@ -206,6 +206,7 @@ def estimate_run(qgis_processing, plugin_package, estimate_inputs, tmp_path_fact
         "DEM_BEFORE": str(out / "dem_before.tif"),
         "DEM_AFTER": str(out / "dem_after.tif"),
         "PLANE_OFFSET": str(out / "plane_offset.tif"),
+        "FILLED_MASK": str(out / "filled_mask.tif"),
         "REGISTERED": str(out / "after_registered.laz"),
         "REPORT": str(out / "report.html"),
         "REPORT_JSON": str(out / "report.json"),

@@ -38,6 +38,7 @@ def test_a_raster_layer_as_before(run_alg, design_site, tmp_path):
     assert "agrees with the design" in result["QUALITY_MESSAGES"]
     report = json.loads(Path(result["REPORT_JSON"]).read_text())
     assert report["reference"]["kind"] == "surface" and report["reference"]["path"] == str(design)
+    assert report["reference"]["agreement"]["agrees"] is True  # its sentence is good news, no warning
     assert report["registration"]["kind"] == "none: the reference is a surface"
     dem = QgsRasterLayer(result["DEM_BEFORE"], "dem")
     assert dem.isValid() and dem.crs().authid() == "EPSG:32654"
@@ -101,3 +102,23 @@ def test_a_model_feeds_a_raster_input_to_before(provider, design_site, tmp_path)
     stats = difference.dataProvider().bandStatistics(1)
     cell = difference.rasterUnitsPerPixelX() * difference.rasterUnitsPerPixelY()
     assert stats.sum * cell == pytest.approx(truth["net"], rel=0.03)  # the model's raster holds the net change
+
+
+def test_the_agreement_with_the_design_is_information_not_a_warning(plugin_package):
+    """A run against a design whose verdict is 'use with caution' for another reason: its first
+    sentence, the survey's agreement with the design, goes to the log as information (was: a
+    WARNING); the caution that follows stays a warning."""
+    from soilvolume_qgis.processing import estimate_outputs
+    from soilvolume_qgis.processing.estimatevolumechange import EstimateVolumeChange
+
+    from .recording import RecordingFeedback
+
+    agrees = "The survey agrees with the design over 900 m² of unchanged ground"
+    caution = "Little stable ground surrounds the works"
+    report = {"reference": {"agreement": {"agrees": True}}}
+    results = {"VERDICT": "use with caution", "QUALITY_MESSAGES": f"{agrees}\n{caution}", "SIGNIFICANCE": "s"}
+    feedback = RecordingFeedback()
+    EstimateVolumeChange.log_summary(results, feedback, estimate_outputs.good_news(report))
+    assert agrees in feedback.infos and feedback.warnings == [caution], (feedback.infos, feedback.warnings)
+    assert estimate_outputs.good_news({"reference": {"agreement": {"agrees": False}}}) == 0
+    assert estimate_outputs.good_news({}) == 0

@@ -199,12 +199,12 @@ def test_one_survey_as_before_and_after_is_refused(run_alg, scene_dir, tmp_path,
 
 
 def test_an_output_folder_that_cannot_be_made_is_one_message_naming_it(run_alg, scene_dir, tmp_path):
-    """The engine ran, then the output's folder cannot be created (a file stands where it would
-    be): one QgsProcessingException naming the folder, not an OSError's traceback."""
+    """The output's folder cannot be created (a file stands where it would be): one
+    QgsProcessingException naming the output and the folder, before the engine runs."""
     blocker = tmp_path / "taken"
     blocker.write_text("a file, not a folder")
     out = blocker / "sub" / "dem.tif"
     with pytest.raises(QgsProcessingException) as info:
         run_alg("pointcloudtodem", {"INPUT": str(scene_dir / "after.las"), "OUTPUT": str(out)})
-    assert f"Cannot write into the folder {out.parent}" in str(info.value), str(info.value)
+    assert f"Average-height DEM: cannot write into the folder {out.parent}: {blocker} is a file" in str(info.value)
     assert blocker.read_text() == "a file, not a folder" and sorted(p.name for p in tmp_path.iterdir()) == ["taken"]

@@ -239,3 +239,25 @@ def test_two_runs_of_a_pair_are_two_groups_with_the_polygons_on_top(provider, sc
         project.removeMapLayers([layer for layer in project.mapLayers() if layer not in before])
         for group in project.layerTreeRoot().findGroups():
             project.layerTreeRoot().removeChildNode(group)
+
+
+def test_the_refilled_cells_are_an_output(estimate_run, provider):
+    """The refilled-cell mask the engine writes (filled_mask.tif) is a QGIS output too (was: none):
+    off by default, on the difference's grid, 1 where a height was interpolated, 0 elsewhere; the
+    help says what it holds."""
+    from osgeo import gdal
+    from qgis.core import QgsApplication
+
+    alg = QgsApplication.processingRegistry().algorithmById("soilvolume:estimatevolumechange")
+    param = alg.parameterDefinition("FILLED_MASK")
+    assert param is not None and not param.createByDefault() and "Refilled cells" in param.description()
+    assert "refilled cells" in alg.shortHelpString()
+    mask, diff = (gdal.Open(estimate_run[k]) for k in ("FILLED_MASK", "DIFFERENCE"))
+    assert mask.GetGeoTransform() == diff.GetGeoTransform()
+    assert (mask.RasterXSize, mask.RasterYSize) == (diff.RasterXSize, diff.RasterYSize)
+    values = mask.GetRasterBand(1).ReadAsArray()
+    assert set(values.ravel().tolist()) <= {0, 1} and values.sum() > 0, set(values.ravel().tolist())
+    from soilvolume_qgis.processing import styles
+
+    layer = QgsRasterLayer(estimate_run["FILLED_MASK"], "mask")
+    assert styles.apply_style(layer, styles.MASK) and layer.renderer().type() == "paletted"

@@ -11,7 +11,6 @@ from qgis.core import (
     QgsProcessingParameterDistance,
     QgsProcessingParameterEnum,
     QgsProcessingParameterNumber,
-    QgsProcessingParameterPointCloudLayer,
 )
 
 from soilvolume.options import Options, _opt
@@ -76,18 +75,23 @@ def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
 
 
 def test_one_required_input_per_epoch(estimate):
-    from qgis.core import Qgis, QgsProcessingParameterMapLayer
+    """Each survey is a file-typed input (Model Builder offers File inputs for it: they run without
+    PDAL), whose dialog dropdown lists the project's point cloud layers, and raster layers too for
+    the estimate's Before (a surface as the reference)."""
+    from qgis.core import Qgis, QgsProcessingParameterFile
 
     after, before = estimate.parameterDefinition("AFTER"), estimate.parameterDefinition("BEFORE")
-    assert isinstance(after, QgsProcessingParameterPointCloudLayer)
-    # BEFORE may be a surface too: its dropdown lists point cloud and raster layers
-    assert isinstance(before, QgsProcessingParameterMapLayer)
-    kinds = {Qgis.ProcessingSourceType(t) for t in before.dataTypes()}
-    assert kinds == {Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster}
-    assert "*.tif" in before.createFileFilter() and "*.ply" in before.createFileFilter()
-    for param in (after, before, before.clone()):
+    for param in (after, before, before.clone(), after.clone()):
+        assert isinstance(param, QgsProcessingParameterFile) and param.type() == "file"
         assert not param.flags() & param.FlagOptional
-    assert isinstance(before.clone(), type(before)) and before.clone().dataTypes() == before.dataTypes()
+    kinds = {Qgis.ProcessingSourceType(t) for t in before.dropdown().dataTypes()}
+    assert kinds == {Qgis.ProcessingSourceType.PointCloud, Qgis.ProcessingSourceType.Raster}
+    assert [Qgis.ProcessingSourceType(t) for t in after.dropdown().dataTypes()] == [
+        Qgis.ProcessingSourceType.PointCloud
+    ]
+    assert "*.tif" in before.createFileFilter() and "*.ply" in before.createFileFilter()
+    assert "*.tif" not in after.createFileFilter()
+    assert isinstance(before.clone(), type(before)) and before.clone().createFileFilter() == before.createFileFilter()
     names = {p.name() for p in estimate.parameterDefinitions()}
     assert not {"BEFORE_LAYER", "AFTER_LAYER"} & names
 
@@ -157,3 +161,20 @@ def test_a_point_cloud_layer_is_read_from_its_file(estimate, scene_dir):
     layer = QgsPointCloudLayer(str(scene_dir / "before.las"), "before", "copc")
     path = params.cloud_path(estimate, {"BEFORE": layer}, "BEFORE", QgsProcessingContext(), "Before")
     assert path == str(scene_dir / "before.las")
+
+
+@pytest.mark.parametrize("algorithm", ["estimatevolumechange", "registerpointclouds", "pointcloudtodem"])
+def test_file_pickers_open_on_point_clouds(provider, algorithm):
+    """A file dialog opens on its first filter: every cloud input's is the point clouds (was: the
+    estimate's Before opened on "DEM GeoTIFF", so a folder of .las/.laz files looked empty); the
+    estimate's Before offers the design GeoTIFF as the second choice."""
+    alg = QgsApplication.processingRegistry().algorithmById(f"soilvolume:{algorithm}")
+    for name in ("BEFORE", "AFTER", "INPUT"):
+        param = alg.parameterDefinition(name)
+        if param is None:
+            continue
+        for each in (param, param.clone()):  # the dialogs' widgets are built on clones
+            filters = each.createFileFilter().split(";;")
+            assert filters[0].startswith("Point clouds (") and "*.las" in filters[0] and "*.laz" in filters[0]
+            if name == "BEFORE" and algorithm == "estimatevolumechange":
+                assert filters[1].startswith("DEM GeoTIFF") and "*.tif" in filters[1], filters

@@ -64,8 +64,16 @@ def test_outputs_delivered(series_run):
     assert not any(".partial" in n for n in names)
 
 
-def test_one_cloud_is_refused_before_the_engine_runs(run_alg, series_site, tmp_path):
+def test_one_cloud_is_refused_before_the_engine_runs(provider, run_alg, series_site, tmp_path):
+    """One survey: the parameter check says a series needs two (was QGIS's generic "Incorrect
+    parameter value for Point clouds in time order"), and so does the run; nothing written."""
+    from qgis.core import QgsApplication, QgsProcessingContext
+
     paths, _ = series_site
-    with pytest.raises(QgsProcessingException):
-        run_alg("volumeseries", {"EPOCHS": [str(paths[0])], "OUTPUT_FOLDER": str(tmp_path / "out")})
+    alg = QgsApplication.processingRegistry().algorithmById("soilvolume:volumeseries")
+    values = {"EPOCHS": [str(paths[0])], "OUTPUT_FOLDER": str(tmp_path / "out")}
+    ok, message = alg.checkParameterValues(values, QgsProcessingContext())
+    assert not ok and "needs at least two surveys (1 given" in message, message
+    with pytest.raises(QgsProcessingException, match="at least two surveys"):
+        run_alg("volumeseries", values)
     assert not (tmp_path / "out").exists()
