@@ -36,7 +36,7 @@ def pins(target: str) -> dict[str, str]:
 def test_each_mac_is_checked_alone_on_its_oldest_supported_macos():
     macs = {name: tags for name, (tags, _py, _env) in check_lock.TARGETS.items() if name.startswith("macOS")}
     assert sorted(macs.values()) == [["macosx_13_0_x86_64"], ["macosx_14_0_arm64"]], macs
-    assert platforms.MAC_MINIMUM == {"arm64": (14, 0), "x86_64": (13, 0)}  # what the plugin and README say
+    assert platforms.MAC_MINIMUM == {"arm64": (14, 0), "x86_64": (13, 0)}  # what the plugin and docs/install.md say
 
 
 def test_one_open3d_version_wherever_it_has_wheels():
