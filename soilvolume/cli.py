@@ -16,6 +16,7 @@ from pathlib import Path
 
 from .core import wording
 from .core.interrupt import Interrupted, handle_signals
+from .core.memlimit import out_of_memory, reserve_blas_buffer
 from .core.nativelog import hold_native_stderr
 from .core.outputs import os_problem
 from .core.types import SoilVolumeError
@@ -25,7 +26,6 @@ from .seriescli import add_series, cmd_series
 from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
-OUT_OF_MEMORY = f"out of memory: use a larger {wording.opt('cell')} or crop the clouds first"
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
 (H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
 excluded.tif (what is not soil: vegetation, objects, moved objects; see --exclude),
@@ -371,6 +371,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(ns: argparse.Namespace) -> int:
     try:
+        reserve_blas_buffer()  # under ulimit -v (core.memlimit)
         return COMMANDS[ns.command](ns)
     except Interrupted as exc:
         return _fail(str(exc), exc.exit_code, exc)
@@ -379,7 +380,7 @@ def _run(ns: argparse.Namespace) -> int:
     except OSError as exc:
         return _fail(str(os_problem(exc)))
     except MemoryError:
-        return _fail(wording.cli(OUT_OF_MEMORY), exc=SoilVolumeError(OUT_OF_MEMORY))
+        return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
     except RecursionError:
         return _fail("input nested too deeply")
     except KeyboardInterrupt:  # a signal arrived before the handlers were installed
