@@ -17,7 +17,7 @@ from pathlib import Path
 from .core import wording
 from .core.interrupt import Interrupted, handle_signals
 from .core.memlimit import out_of_memory, reserve_blas_buffer
-from .core.nativelog import hold_native_stderr
+from .core.nativelog import hold_native_stderr, quiet_library_warnings
 from .core.outputs import os_problem
 from .core.types import SoilVolumeError
 from .options import Options, command_fields
@@ -358,15 +358,13 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; every failure is one line on stderr and a non-zero exit: 1 for errors,
     130/143 for SIGINT/SIGTERM (outputs are never half-written)."""
     logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
+    quiet_library_warnings()
     with handle_signals(then_ignore=argv is None):  # None: the program exits right after
         ns = build_parser().parse_args(argv)
         ns.protocol = open_protocol() if getattr(ns, "progress", "text") == "jsonl" else None
         _PROTOCOL[:] = [ns.protocol] if ns.protocol else []
-        with hold_native_stderr() as native:
-            code = _run(ns)
-        if code == 0 and native.text:
-            sys.stderr.write(native.text)
-        return code
+        with hold_native_stderr():  # dropped: no library's message unasked (SOILVOLUME_DEBUG=1 shows them)
+            return _run(ns)
 
 
 def _run(ns: argparse.Namespace) -> int:
