@@ -26,8 +26,9 @@ from .seriescli import add_series, cmd_series
 from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
-EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
-(H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
+EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs, refilled heights where
+filled_mask.tif is 1), difference.tif (H_after - H_before - correction: dem_after - dem_before -
+plane_offset), plane_offset.tif (the correction d_i), filled_mask.tif,
 excluded.tif (what is not soil: vegetation, objects, moved objects; see --exclude),
 report.json, report.html, and with --registered-cloud after_registered.laz.
 change_areas.geojson: the areas of significant change as cut and fill polygons with their volumes.
