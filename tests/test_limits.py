@@ -9,6 +9,7 @@ import resource
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -89,3 +90,44 @@ def test_out_of_memory_names_the_limit(tmp_path):
     assert proc.returncode == 1, proc.stderr
     assert "soilvolume: error: out of memory under the address-space limit of 315 MB" in proc.stderr
     assert not Path(tmp_path / "o").exists()
+
+
+COMMANDS = {
+    "estimate": ["estimate", "{b}", "{a}", "--out", "{ro}/res"],
+    "estimate-overwrite": ["estimate", "{b}", "{a}", "--out", "{ro}", "--overwrite"],
+    "series": ["series", "{b}", "{a}", "--out", "{ro}/res"],
+    "register": ["register", "{b}", "{a}", "--out", "{ro}/reg"],
+    "dem": ["dem", "{b}", "--out", "{ro}/dem.tif"],
+    "volume": ["volume", "{ro}/x.tif", "{ro}/y.tif", "--out", "{ro}/v.tif"],
+    "pipeline": ["pipeline", "{b}", "{a}", "--emit", "{ro}/pipes"],
+    "demo": ["demo", "--out", "{ro}/demo"],
+}
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="runs the CLI as nobody (needs root)")
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(tmp_path_factory, command):
+    """Issue 49 item 2 (the CLI side): every command that writes checks its output's folder before
+    reading anything: one line naming it, exit 1, nothing written, in well under the run's time."""
+    import shutil
+
+    base = Path(tempfile.mkdtemp(prefix="soilvolume-ro-"))
+    try:
+        base.chmod(0o755)
+        paths, _ = write_series(base / "s", 0)
+        ro = base / "ro"
+        ro.mkdir(mode=0o555)
+        ro.chmod(0o555)
+        for p in base.rglob("*"):
+            p.chmod(p.stat().st_mode | 0o444 | (0o111 if p.is_dir() else 0))
+        args = [a.format(b=paths[0], a=paths[1], ro=ro) for a in COMMANDS[command]]
+        nobody = ["setpriv", "--reuid", "65534", "--regid", "65534", "--clear-groups"]
+        t0 = time.monotonic()
+        cmd = [*nobody, sys.executable, "-m", "soilvolume", *args]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        lines = [ln for ln in proc.stderr.strip().splitlines() if not ln.startswith("[")]  # progress
+        assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+        assert str(ro) in lines[0] and ("not writable" in lines[0] or "Permission denied" in lines[0]), lines
+        assert list(ro.iterdir()) == [] and time.monotonic() - t0 < 10
+    finally:
+        shutil.rmtree(base, ignore_errors=True)
