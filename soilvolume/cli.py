@@ -16,7 +16,8 @@ from pathlib import Path
 
 from .core import wording
 from .core.interrupt import Interrupted, handle_signals
-from .core.nativelog import hold_native_stderr
+from .core.memlimit import out_of_memory, reserve_blas_buffer
+from .core.nativelog import hold_native_stderr, quiet_library_warnings
 from .core.outputs import os_problem
 from .core.types import SoilVolumeError
 from .options import Options, command_fields
@@ -25,9 +26,9 @@ from .seriescli import add_series, cmd_series
 from .validate import check_bounds, check_options
 
 SKIP = {"keep_registered_cloud"}
-OUT_OF_MEMORY = f"out of memory: use a larger {wording.opt('cell')} or crop the clouds first"
-EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs), difference.tif
-(H_after - H_before - correction), plane_offset.tif (the correction d_i), filled_mask.tif,
+EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs, refilled heights where
+filled_mask.tif is 1), difference.tif (H_after - H_before - correction: dem_after - dem_before -
+plane_offset), plane_offset.tif (the correction d_i), filled_mask.tif,
 excluded.tif (what is not soil: vegetation, objects, moved objects; see --exclude),
 report.json, report.html, and with --registered-cloud after_registered.laz.
 change_areas.geojson: the areas of significant change as cut and fill polygons with their volumes.
@@ -358,19 +359,18 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command; every failure is one line on stderr and a non-zero exit: 1 for errors,
     130/143 for SIGINT/SIGTERM (outputs are never half-written)."""
     logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
+    quiet_library_warnings()
     with handle_signals(then_ignore=argv is None):  # None: the program exits right after
         ns = build_parser().parse_args(argv)
         ns.protocol = open_protocol() if getattr(ns, "progress", "text") == "jsonl" else None
         _PROTOCOL[:] = [ns.protocol] if ns.protocol else []
-        with hold_native_stderr() as native:
-            code = _run(ns)
-        if code == 0 and native.text:
-            sys.stderr.write(native.text)
-        return code
+        with hold_native_stderr():  # dropped: no library's message unasked (SOILVOLUME_DEBUG=1 shows them)
+            return _run(ns)
 
 
 def _run(ns: argparse.Namespace) -> int:
     try:
+        reserve_blas_buffer()  # under ulimit -v (core.memlimit)
         return COMMANDS[ns.command](ns)
     except Interrupted as exc:
         return _fail(str(exc), exc.exit_code, exc)
@@ -379,7 +379,7 @@ def _run(ns: argparse.Namespace) -> int:
     except OSError as exc:
         return _fail(str(os_problem(exc)))
     except MemoryError:
-        return _fail(wording.cli(OUT_OF_MEMORY), exc=SoilVolumeError(OUT_OF_MEMORY))
+        return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
     except RecursionError:
         return _fail("input nested too deeply")
     except KeyboardInterrupt:  # a signal arrived before the handlers were installed

@@ -287,3 +287,26 @@ def test_disc_erosion_every_is_the_erosion_at_every_step():
         yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
         eroded = ndimage.binary_erosion(mask, xx * xx + yy * yy <= radius * radius)
         assert np.array_equal(disc_erosion_every(mask, radius, step), eroded[::step, ::step])
+
+
+def test_written_dems_give_back_the_difference(tmp_path):
+    """Issue 49: dem_after.tif - dem_before.tif - plane_offset.tif is difference.tif wherever the
+    difference is valid, refilled cells (filled_mask.tif) included, on a seeded pair with holes."""
+    import rasterio
+    from conftest import write_scene
+
+    from soilvolume.api import estimate
+    from soilvolume.options import Options
+
+    b, a, _ = write_scene(tmp_path / "pair", 3)
+    estimate(b, a, tmp_path / "out", Options(min_count_ratio=0.7))
+
+    def read(name):
+        with rasterio.open(tmp_path / "out" / name) as ds:
+            return ds.read(1, masked=True).astype(np.float64).filled(np.nan)
+
+    diff, mask = read("difference.tif"), read("filled_mask.tif") == 1
+    back = read("dem_after.tif") - read("dem_before.tif") - read("plane_offset.tif")
+    valid = np.isfinite(diff)
+    assert (valid & mask).sum() >= 5, (valid & mask).sum()
+    assert np.abs(back - diff)[valid].max() <= 1e-4, np.nanmax(np.abs(back - diff)[valid])

@@ -185,3 +185,20 @@ def test_a_huge_before_dem_is_refused_in_one_line(dems, tmp_path):
     assert p.returncode != 0 and msg.startswith("soilvolume: error:") and len(msg.splitlines()) == 1, msg
     assert str(huge) in msg and "gdalwarp -te" in msg and "gdalwarp -tr" in msg, msg
     assert not (tmp_path / "d.tif").exists() and (huge.read_bytes(), dems[1].read_bytes()) == inputs
+
+
+def test_huge_zone_coordinates_give_one_line_and_no_library_warning(dems, tmp_path):
+    """Issue 49: shapely's 'RuntimeWarning: overflow encountered in area' reached the terminal
+    before the one-line error; no library warning is shown unless asked (python -W)."""
+    huge = [[[1e300, 1e300], [-1e300, 1e300], [-1e300, -1e300], [1e300, -1e300], [1e300, 1e300]]]
+    feat = {"type": "Feature", "properties": {"name": "z"}, "geometry": {"type": "Polygon", "coordinates": huge}}
+    doc = {
+        "type": "FeatureCollection",
+        "crs": {"type": "name", "properties": {"name": "EPSG:32654"}},
+        "features": [feat],
+    }
+    zones = tmp_path / "huge.geojson"
+    zones.write_text(json.dumps(doc))
+    p = run_cli("volume", *dems, "--zones", zones, "--out", tmp_path / "d.tif")
+    assert p.returncode == 1 and not (tmp_path / "d.tif").exists()
+    assert p.stderr.splitlines() == [f"soilvolume: error: {zones}: no zone meets the survey's grid (is its CRS right?)"]

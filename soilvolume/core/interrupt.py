@@ -15,7 +15,9 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
+from .memlimit import out_of_memory
 from .types import SoilVolumeError
+from .watchdog import Watchdog
 
 _pending: list[int] = []
 _cleanups: list[Callable[[], None]] = []
@@ -41,12 +43,21 @@ class Interrupted(SoilVolumeError):
 
 def _record(signum: int, _frame) -> None:
     if _pending:  # second signal: the run is stuck in a long native call; leave now
-        run_cleanups()
-        remove_process_temp_dir()
-        sys.stderr.write(f"soilvolume: error: interrupted by {NAMES.get(signum, signum)} (forced)\n")
-        sys.stderr.flush()
-        os._exit(128 + signum)
+        leave(signum)
     _pending.append(signum)
+
+
+def leave(signum: int | None) -> None:
+    """End the process now, the cleanups run: interrupted by ``signum``, or (None) spinning at the
+    address-space limit (:mod:`.watchdog`)."""
+    run_cleanups()
+    remove_process_temp_dir()
+    said = f"interrupted by {NAMES.get(signum, signum)}; nothing was written" if signum else out_of_memory()
+    try:
+        sys.stderr.write(f"soilvolume: error: {said}\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(128 + signum if signum else 1)
 
 
 def check() -> None:
@@ -65,9 +76,12 @@ def handle_signals(then_ignore: bool = False) -> Iterator[None]:
         yield
         return
     old = {s: signal.signal(s, _record) for s in NAMES}
+    watch = Watchdog(leave)  # a run stuck in native code ends all the same
+    watch.start()
     try:
         yield
     finally:
+        watch.stop()
         for s, h in old.items():
             signal.signal(s, signal.SIG_IGN if then_ignore else h)
         _pending.clear()

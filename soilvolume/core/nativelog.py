@@ -1,6 +1,6 @@
 """What C libraries (libtiff, GDAL, PROJ, Open3D) print straight to the process's stderr, held back
-while a command runs: replayed when it succeeds, dropped when it fails with its own one-line
-error (a full disk otherwise adds dozens of libtiff lines). ``SOILVOLUME_DEBUG=1`` keeps them.
+while a command runs and dropped: a failure says its own one line (a full disk otherwise adds
+dozens of libtiff lines), a success its results. ``SOILVOLUME_DEBUG=1`` shows them.
 
 Python's own ``sys.stderr`` (progress, errors) keeps writing to the terminal.
 """
@@ -12,6 +12,7 @@ import io
 import os
 import sys
 import tempfile
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 
@@ -57,3 +58,13 @@ def hold_native_stderr() -> Iterator[Held]:
             faulthandler.enable(sys.stderr) if was_enabled else faulthandler.disable()
             sink.seek(0)
             held.text = sink.read().decode(errors="replace")
+
+
+def quiet_library_warnings() -> None:
+    """No library's warning (shapely's overflow on huge coordinates, numpy's, GDAL's) reaches the
+    terminal unless asked with ``python -W`` or ``PYTHONWARNINGS``: each failure is its one line.
+    The engine's worker processes (Dask) inherit the choice through ``PYTHONWARNINGS``."""
+    if sys.warnoptions:
+        return
+    warnings.simplefilter("ignore")
+    os.environ["PYTHONWARNINGS"] = "ignore"

@@ -306,8 +306,8 @@ def output_layers(correction: str) -> list[tuple[str, str, str]]:
     """The rasters of an estimate run: (file name, the volume step's array, description); the
     ``dem_`` arrays are local heights (add the origin's z)."""
     return [
-        ("dem_before.tif", "dem_b", "average height, before (m)"),
-        ("dem_after.tif", "dem_a", "average height, after (m)"),
+        ("dem_before.tif", "dem_out_b", "average height, before; refilled where filled_mask is 1 (m)"),
+        ("dem_after.tif", "dem_out_a", "average height, after; refilled where filled_mask is 1 (m)"),
         ("difference.tif", "diff", f"H_after - H_before - correction ({correction}) (m)"),
         ("plane_offset.tif", "offset", f"vertical correction d_i subtracted ({correction}) (m)"),
         ("filled_mask.tif", MASK_LAYER, "1 = difference interpolated (sparse cell or filled hole)"),

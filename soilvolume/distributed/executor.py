@@ -205,7 +205,7 @@ class Tiled:
             get = reader(self.kept)
         else:
             v = run.vols
-            arrays = {"dem_b": v.dem_b, "dem_a": v.dem_a, "diff": v.diff, "offset": v.offset}
+            arrays = {"dem_out_b": v.dem_out_b, "dem_out_a": v.dem_out_a, "diff": v.diff, "offset": v.offset}
             arrays.update(filled_mask=v.filled_mask, classes=v.classes)
             get = lambda key, r, c: arrays[key][r, c]  # noqa: E731
         write_outputs(run.out, get, run.grid, float(run.prep.origin[2]), run.options.correction)

@@ -33,7 +33,7 @@ from .tilestore import TileStore, Window
 from .tiletask import TILE_ARRAYS, empty_value, epoch_dems, grid_tile
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
-VOLUME_ARRAYS = ("dem_a", "dem_b", "diff", "offset", "filled_mask", "classes")
+VOLUME_ARRAYS = ("dem_out_a", "dem_out_b", "diff", "offset", "filled_mask", "classes")
 BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "thresholded", "holes")
 PARTS = ("net", "cut", "fill", "net_compared_area")
 

@@ -32,13 +32,19 @@ def rotation_shift(transform_local: Any) -> dict[str, float]:
 
 
 def significance(report: dict[str, Any]) -> str:
-    """One sentence: is the net change distinguishable from zero at the run's confidence?"""
+    """One sentence: is the net change distinguishable from zero at the run's confidence? None
+    is stated for a run whose verdict is *not reliable* (its interval cannot be relied on)."""
     net = report.get("volume_m3", {}).get("net")
     unc = report.get("uncertainty_m3", {})
     half, conf = unc.get("net"), unc.get("confidence", 0.95)
     if net is None or half is None:
         return "No uncertainty could be estimated, so the significance of the change is unknown."
     level = f"{conf * 100:g} %"
+    if str((report.get("quality") or {}).get("verdict") or "") == "not reliable":
+        return (
+            f"The run is not reliable (see the quality verdict's reasons): the net change of {net:+,.1f} m³ "
+            f"± {half:,.1f} m³ carries no statement of confidence, neither of a gain nor of a loss."
+        )
     if abs(net) > half:
         kind = "gain (fill)" if net > 0 else "loss (cut)"
         return (

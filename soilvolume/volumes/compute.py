@@ -58,6 +58,8 @@ class Volumes:
     zones: list = field(default_factory=list)  # per-polygon budgets (--zones)
     excluded: dict = field(default_factory=dict)  # what is not soil: classes, objects (volumes/nonsoil)
     blind: dict = field(default_factory=dict)  # holes without any point in the works (volumes/blind)
+    dem_out_a: np.ndarray | None = None  # dem_after.tif: dem_a, the refilled heights on filled_mask (local)
+    dem_out_b: np.ndarray | None = None  # dem_before.tif: the same; dem_out_a - dem_out_b - offset = diff
     classes: np.ndarray | None = None  # excluded.tif: the class of each cell (volumes/nonsoil.CLASS_CODES)
     cut_mask: np.ndarray | None = None  # the cut areas of change_mask (the rest of it is fill)
     coverage: dict = field(default_factory=dict)  # the after footprint's cells compared (volumes/coverage)
@@ -127,6 +129,7 @@ def compute_volumes(
     vols = {
         "dem_a": s["heights"][0],
         "dem_b": s["heights"][1],
+        **written_dems(s, filled, filled_mask, options.fill_method),
         "raw": s["raw"],
         "filled": filled,
         "filled_mask": filled_mask,
@@ -190,6 +193,7 @@ def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Option
         heights=(h_a, h_b),
         raw=raw,
         f_a=f_a,
+        f_b=f_b,
         m_a=m_a,
         m_b=m_b,
         filled=filled,
@@ -198,6 +202,20 @@ def _refilled(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Option
         own=own,
         own_sigma=own_sigma,
     )
+
+
+def written_dems(s: dict, filled: np.ndarray, mask: np.ndarray, method: str) -> dict:
+    """The DEMs written beside difference.tif: the heights at the cell centres, and on the refilled
+    cells (``mask``) the before survey's refilled height (its own refill, else interpolated from
+    its neighbours, else the after height less the difference) and that height plus the refilled
+    difference ``filled``: dem_after - dem_before - correction gives difference.tif back."""
+    h_a, h_b = s["heights"]
+    base = np.where(mask, s["f_b"], h_b)
+    gap = mask & ~np.isfinite(base)
+    if gap.any():
+        base = holes.fill(base, gap & ~np.isfinite(h_a), method)
+        base = np.where(gap & np.isfinite(h_a), h_a - filled, base)
+    return {"dem_out_a": np.where(mask, base + filled, h_a), "dem_out_b": base}
 
 
 def _sparse(m_a, m_b, n_a, n_b, given: Given | None) -> tuple[np.ndarray, np.ndarray]:

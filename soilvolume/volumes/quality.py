@@ -45,7 +45,7 @@ def assess(
     out += _blind(hidden, v)
     out += _canopy(excluded, v)
     out += _unclassified(excluded, v["net"], random_half)
-    out += _nonsoil(excluded, random_half)
+    out += _nonsoil(excluded, random_half, u["net"])
     out.extend(("caution", m) for m in zone_messages(report.get("zones") or []))
     unseen = coverage_check(report)
     if unseen is not None:
@@ -175,10 +175,11 @@ def _precise_checks(reg: dict, stable: np.ndarray, diff: np.ndarray | None) -> l
     return out
 
 
-def _nonsoil(excluded: dict, half: float) -> list[tuple[str, str]]:
+def _nonsoil(excluded: dict, half: float, reported: float) -> list[tuple[str, str]]:
     """Cautions when what was excluded as not soil, or counted but flagged, is not small against
-    the net's interval: the headline then rests on that classification. Classes the files' own
-    LAS classification gave are the survey's statement (reported, not doubted here)."""
+    the net's interval without what could not be classified or seen (``half``; ``reported``: the
+    interval the run reports): the headline then rests on that classification. Classes the files'
+    own LAS classification gave are the survey's statement (reported, not doubted here)."""
     from .nonsoil import sentence
 
     moved = excluded.get("moved_objects") or {}
@@ -191,7 +192,15 @@ def _nonsoil(excluded: dict, half: float) -> list[tuple[str, str]]:
     if sum(parts) <= half:
         return []
     words = "; ".join(sentence(excluded))
-    return [("caution", f"{words}: together more than the net's interval (±{half:.1f} m³)")]
+    if half >= reported - 0.005:  # the reported interval is all measurement
+        return [("caution", f"{words}: together more than the net's interval (±{reported:.2f} m³)")]
+    return [
+        (
+            "caution",
+            f"{words}: together more than the part of the net's interval (±{reported:.2f} m³) that is "
+            f"measurement error (±{half:.2f} m³; the rest is change that could not be classified or seen)",
+        )
+    ]
 
 
 def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, str]]:

@@ -205,7 +205,7 @@ def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec) -> None:
         if key in gridmod.UINT8_LAYERS:
             gridmod.write_geotiff(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
             continue
-        if key == "dem_b":
+        if key == "dem_out_b":
             desc = "the reference surface (design) resampled onto the grid, bilinear at the cell centres (m)"
         elif key == "diff":
             desc = "survey - design (m): above design > 0 (fill), below design < 0 (cut)"

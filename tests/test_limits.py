@@ -1,0 +1,133 @@
+"""Every run ends (issue 49): under an address-space limit a run finishes or fails in one line
+naming the limit, and SIGINT/SIGTERM end it within a second even while its threads are stuck in
+native code."""
+
+from __future__ import annotations
+
+import os
+import resource
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from soilvolume.scenes.series import write_series
+
+LIMIT = 614400 * 1024  # ulimit -v 614400
+
+
+def _limited() -> None:
+    resource.setrlimit(resource.RLIMIT_AS, (LIMIT, LIMIT))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS as Linux counts it")
+def test_series_under_an_address_space_limit_ends(tmp_path):
+    """Before: the 4-epoch series under 600 MB spun at 'estimating the vertical bias correction'
+    (OpenBLAS retrying a buffer allocation for ever on the after survey's plane thread) until
+    killed, SIGTERM ignored. Now: one line naming the limit, exit 1, nothing written, in seconds."""
+    paths, _ = write_series(tmp_path / "s", 0)
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "soilvolume", "series", *map(str, paths), "--out", str(out), "--quiet"]
+    t0 = time.monotonic()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, preexec_fn=_limited)
+    except subprocess.TimeoutExpired:
+        pytest.fail("the series under ulimit -v 614400 did not end in 120 s")
+    lines = proc.stderr.strip().splitlines()
+    if proc.returncode == 0:  # it fits: then it finished whole
+        assert (out / "report.json").exists()
+        return
+    assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+    assert "address-space limit of 629 MB (ulimit -v)" in lines[0], lines
+    assert not out.exists() and time.monotonic() - t0 < 110
+    assert [p.name for p in tmp_path.iterdir() if "soilvolume-" in p.name] == []
+
+
+STUCK = """
+import threading, time
+from soilvolume.core.interrupt import handle_signals
+with handle_signals():
+    t = threading.Thread(target=time.sleep, args=(300,))  # a native call that does not return
+    t.start()
+    print("ready", flush=True)
+    t.join()
+"""
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGTERM") or os.name != "posix", reason="POSIX signals")
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_signal_ends_a_run_whose_thread_is_stuck_in_native_code(sig):
+    """Before: the handler only recorded the signal while the main thread waited on a thread in
+    native code (the series' plane thread in OpenBLAS), so the run went on for ever. Now it ends
+    within a second with the run's line and 128 + the signal."""
+    proc = subprocess.Popen([sys.executable, "-c", STUCK], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    t0 = time.monotonic()
+    proc.send_signal(sig)
+    try:
+        code = proc.wait(timeout=5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail(f"{signal.Signals(sig).name} did not end the stuck run in 5 s")
+    assert time.monotonic() - t0 < 1.5
+    assert code == 128 + sig
+    name = signal.Signals(sig).name
+    assert proc.stderr.read().strip() == f"soilvolume: error: interrupted by {name}; nothing was written"
+
+
+def test_out_of_memory_names_the_limit(tmp_path):
+    """A MemoryError under a limit says which limit (a reserve of OpenBLAS's buffer that finds no
+    room fails at once instead of spinning)."""
+    code = (
+        "import resource; resource.setrlimit(resource.RLIMIT_AS, (300 << 20, 300 << 20))\n"
+        "from soilvolume.cli import main; raise SystemExit(main(['estimate', 'a.las', 'b.las', '--out', 'o']))"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert proc.returncode == 1, proc.stderr
+    assert "soilvolume: error: out of memory under the address-space limit of 315 MB" in proc.stderr
+    assert not Path(tmp_path / "o").exists()
+
+
+COMMANDS = {
+    "estimate": ["estimate", "{b}", "{a}", "--out", "{ro}/res"],
+    "estimate-overwrite": ["estimate", "{b}", "{a}", "--out", "{ro}", "--overwrite"],
+    "series": ["series", "{b}", "{a}", "--out", "{ro}/res"],
+    "register": ["register", "{b}", "{a}", "--out", "{ro}/reg"],
+    "dem": ["dem", "{b}", "--out", "{ro}/dem.tif"],
+    "volume": ["volume", "{ro}/x.tif", "{ro}/y.tif", "--out", "{ro}/v.tif"],
+    "pipeline": ["pipeline", "{b}", "{a}", "--emit", "{ro}/pipes"],
+    "demo": ["demo", "--out", "{ro}/demo"],
+}
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="runs the CLI as nobody (needs root)")
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_an_output_that_cannot_be_written_is_refused_before_any_work(tmp_path_factory, command):
+    """Issue 49 item 2 (the CLI side): every command that writes checks its output's folder before
+    reading anything: one line naming it, exit 1, nothing written, in well under the run's time."""
+    import shutil
+
+    base = Path(tempfile.mkdtemp(prefix="soilvolume-ro-"))
+    try:
+        base.chmod(0o755)
+        paths, _ = write_series(base / "s", 0)
+        ro = base / "ro"
+        ro.mkdir(mode=0o555)
+        ro.chmod(0o555)
+        for p in base.rglob("*"):
+            p.chmod(p.stat().st_mode | 0o444 | (0o111 if p.is_dir() else 0))
+        args = [a.format(b=paths[0], a=paths[1], ro=ro) for a in COMMANDS[command]]
+        nobody = ["setpriv", "--reuid", "65534", "--regid", "65534", "--clear-groups"]
+        t0 = time.monotonic()
+        cmd = [*nobody, sys.executable, "-m", "soilvolume", *args]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        lines = [ln for ln in proc.stderr.strip().splitlines() if not ln.startswith("[")]  # progress
+        assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+        assert str(ro) in lines[0] and ("not writable" in lines[0] or "Permission denied" in lines[0]), lines
+        assert list(ro.iterdir()) == [] and time.monotonic() - t0 < 10
+    finally:
+        shutil.rmtree(base, ignore_errors=True)
