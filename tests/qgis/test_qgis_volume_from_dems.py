@@ -15,8 +15,6 @@ from qgis.core import (
 )
 from qgis.PyQt.QtCore import QMetaType
 
-pytest.importorskip("soilvolume.workflow.rasters", reason="engine: soilvolume/workflow/rasters.py not there yet")
-
 
 def zones_layer(dem: str) -> QgsVectorLayer:
     """Two polygons, west and east halves, that together cover the whole DEM."""
