@@ -173,6 +173,26 @@ def test_a_worker_killed_mid_run_is_one_line_and_nothing_written(pair, tmp_path)
     assert _gone(proc.pid) == []
 
 
+def test_a_worker_killed_mid_run_leaves_the_other_to_finish_the_same_volumes(pair, tmp_path):
+    """One of the two local:2 workers SIGKILLed mid-tiles: its tasks go to the other (the data
+    was sent to both) and the run gives the volumes of an undisturbed run."""
+    out = tmp_path / "result"
+    proc = _start(["estimate", *pair, "--scheduler", "local:2", *TILES], out)
+    _wait_for(proc, "gridded tile 1/")
+    workers = [pid for pid in _group(proc.pid) if pid != proc.pid and _parent(pid) != proc.pid]
+    os.kill(workers[0], signal.SIGKILL)
+    code, events, err = _finish(proc)
+    assert code == 0 and events[-1]["type"] == "result", (code, err[-5:])
+    done = run_cli("estimate", *pair, "--scheduler", "threads:2", *TILES, "--out", tmp_path / "undisturbed", "--quiet")
+    assert done.returncode == 0, done.stderr
+    undisturbed = json.loads((tmp_path / "undisturbed" / "report.json").read_text())["volume_m3"]
+    volumes = json.loads((out / "report.json").read_text())["volume_m3"]
+    assert {k: volumes[k] for k in ("net", "cut", "fill")} == pytest.approx(
+        {k: undisturbed[k] for k in ("net", "cut", "fill")}, rel=1e-9
+    )
+    assert _gone(proc.pid) == []
+
+
 def _leftovers(out: Path) -> list[str]:
     return [p.name for p in out.parent.iterdir() if "soilvolume-" in p.name]
 
