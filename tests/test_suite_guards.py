@@ -42,7 +42,8 @@ def test_a_hung_test_is_stopped_and_the_run_goes_on(tmp_path):
     (``-p no:timeout``) the same file hangs until the outer 60 s limit kills it."""
     test = tmp_path / "test_hang.py"
     test.write_text(HANG)
-    args = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-c", str(ROOT / "pyproject.toml")]
+    plugins = ["-p", "no:cacheprovider", "-p", "no:pytest_qgis", "-p", "no:dash"]  # QGIS and Dash: seconds to load
+    args = [sys.executable, "-m", "pytest", "-q", *plugins, "-c", str(ROOT / "pyproject.toml")]
     t0 = time.perf_counter()
     done = subprocess.run(
         [*args, "--rootdir", str(tmp_path), "-o", "timeout=3", str(test)],
