@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import os
+import pwd
 import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 
 import laspy
 import numpy as np
@@ -48,13 +54,36 @@ def test_missing_file(tmp_path, good):
     assert "nope.las" in msg
 
 
-def test_unreadable_file(tmp_path, good):
-    if __import__("os").geteuid() == 0:
-        pytest.skip("root reads files regardless of permissions")
-    bad = tmp_path / "locked.las"
-    shutil.copy(good[0], bad)
-    bad.chmod(0)
-    _fails(tmp_path, bad, good[1], expect="not readable")
+def _as_nobody() -> list[str]:
+    """The command prefix that runs a child as a user without root's right to read any file."""
+    if os.geteuid() != 0:
+        return []
+    return [shutil.which("setpriv") or "/usr/bin/setpriv", "--reuid=nobody", "--regid=nogroup", "--clear-groups"]
+
+
+def test_unreadable_file(good):
+    """A file the user may not read: one line naming it, nothing written. As root (where every
+    file is readable: CI's containers) the command runs as ``nobody`` in a folder it owns, with
+    the locked file root's."""
+    folder = Path(tempfile.mkdtemp(prefix="soilvolume-unreadable-"))  # /tmp: nobody reaches it
+    try:
+        if os.geteuid() == 0:
+            os.chown(folder, pwd.getpwnam("nobody").pw_uid, -1)
+        bad, after = folder / "locked.las", folder / "after.las"
+        shutil.copy(good[0], bad)
+        shutil.copy(good[1], after)
+        bad.chmod(0)
+        after.chmod(0o644)
+        out = folder / "out"
+        cmd = [*_as_nobody(), sys.executable, "-m", "soilvolume", "estimate", str(bad), str(after)]
+        env = {**os.environ, "HOME": str(folder)}
+        p = subprocess.run([*cmd, "--out", str(out), "--quiet"], capture_output=True, text=True, timeout=120, env=env)
+        msg = p.stderr.strip()
+        assert p.returncode != 0 and msg.startswith("soilvolume: error:"), (p.returncode, msg)
+        assert len(msg.splitlines()) == 1 and "not readable" in msg and "locked.las" in msg, msg
+        assert not out.exists() and sorted(x.name for x in folder.iterdir()) == ["after.las", "locked.las"]
+    finally:
+        shutil.rmtree(folder)
 
 
 def test_corrupt_las(tmp_path, good):

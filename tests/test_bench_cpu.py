@@ -20,8 +20,8 @@ def test_the_cpu_of_an_orphan_the_command_leaves_behind_is_counted(tmp_path):
         "import os, time\n"
         "if os.fork() == 0:\n"
         "    t = time.process_time()\n"
-        "    while time.process_time() - t < 0.4: pass\n"
-        "os._exit(0)\n"  # the parent at once, the child after 0.4 s of CPU
+        "    while time.process_time() - t < 1.0: pass\n"
+        "os._exit(0)\n"  # the parent at once, the child after 1 s of CPU
     )
     code = (
         f"import json, sys; sys.path.insert(0, {str(BENCH)!r})\n"
@@ -36,5 +36,7 @@ def test_the_cpu_of_an_orphan_the_command_leaves_behind_is_counted(tmp_path):
     r = run_python(code, timeout=60)
     assert r.returncode == 0, r.stderr
     plain, reaped, wall = json.loads(r.stdout.splitlines()[-1])
-    assert plain < 0.3  # the command alone: its orphan's CPU is lost
-    assert reaped >= 0.35 and wall < 0.35  # counted, but not in the command's wall time
+    assert plain < 0.5 * reaped  # the command alone: its orphan's CPU is lost
+    # counted, but not in the command's wall time (which waiting for the orphan would make at
+    # least its 1 s of CPU: relative, so a loaded machine's slow start-up does not fail it)
+    assert reaped >= 0.95 and wall < reaped, (plain, reaped, wall)

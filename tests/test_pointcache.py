@@ -198,14 +198,15 @@ def test_a_signal_while_the_held_tiles_are_sent_stops_the_wait():
 
     from soilvolume.core import interrupt
 
-    cache, _ = _holding(_SlowClient(5.0), ["a.laz"])
+    hang = 5.0
+    cache, _ = _holding(_SlowClient(hang), ["a.laz"])
     cache.send_held()
     interrupt._pending.append(2)  # SIGINT recorded by the run's handler
     try:
         t = time.perf_counter()
         with pytest.raises(interrupt.Interrupted):
             cache.sent()
-        assert time.perf_counter() - t < 1.0
+        assert time.perf_counter() - t < 0.5 * hang  # relative to the hang: a loaded machine is slow, not 5 s slow
     finally:
         interrupt._pending.clear()
 

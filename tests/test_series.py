@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import time
 
 import numpy as np
@@ -95,6 +96,60 @@ def test_outputs_read_back(site):
     assert rows[0]["from_date"] == "2026-03-02" and rows[-1]["to_date"] == "2026-03-23"
     page = (out / "report.html").read_text()
     assert "<polyline" in page and "Cut and fill over time" in page and page.count("<figure") >= 5
+
+
+def _cells(page: str, heading: str) -> list[list[str]]:
+    """The text of each body row's cells of the table right after ``<h2>heading</h2>``."""
+    table = page.split(f"<h2>{heading}</h2>", 1)[1].split("</table>", 1)[0]
+    rows = table.split("<tr>")[2:]  # [0] before the table's first row, [1] the header
+    return [[re.sub("<[^>]+>", "", c).strip() for c in re.findall(r"<td[^>]*>(.*?)</td>", r)] for r in rows]
+
+
+def _pm_values(text: str) -> tuple[float, float]:
+    value, half = text.replace(",", "").split(" ± ")
+    return float(value), float(half)
+
+
+def test_report_html_holds_the_ledger_the_chart_and_the_epochs_of_report_json(site):
+    """The page's figures are report.json's: each ledger row's epochs, dates, net/cut/fill with
+    their ± and verdict; the chart's polylines at the running cut and fill and the net since E0;
+    the epochs' files, points and registrations; one difference map per period and cumulative."""
+    d, paths, _, report, _ = site
+    page = (d / "out" / "report.html").read_text()
+    changes = [*report["periods"], report["cumulative"]]
+    ledger = _cells(page, "Ledger")
+    assert len(ledger) == len(changes) == 4
+    for row, (name, entry) in zip(ledger, zip(["1", "2", "3", "cumulative"], changes, strict=True), strict=True):
+        assert row[0] == f"{name}: E{entry['from']} → E{entry['to']}", row
+        assert row[1] == " → ".join(entry["dates"]), row
+        for cell, key in zip(row[2:5], ("net", "cut", "fill"), strict=True):
+            value, half = _pm_values(cell)
+            assert value == pytest.approx(entry["volume_m3"][key], abs=0.005), (key, row)
+            assert half == pytest.approx(entry["uncertainty_m3"][key], abs=0.005), (key, row)
+        assert row[6] == entry["quality"]["verdict"], row
+    # the chart: y pixel = top + height * (1 - (v - lo) / (hi - lo)); both ends read off its axis
+    svg = page.split("<h2>Cut and fill over time</h2>", 1)[1].split("</svg>", 1)[0]
+    polylines = re.findall(r'<polyline points="([^"]+)"', svg)
+    lines = [[tuple(map(float, p.split(","))) for p in pts.split()] for pts in polylines]
+    assert len(lines) == 3 and all(len(line) == 4 for line in lines)
+    labels = re.findall(r'y="([-\d.]+)" text-anchor="end">([-\d,]+)<', svg)
+    ticks = [(float(y), float(v.replace(",", ""))) for y, v in labels]
+    (y0, v0), (y1, v1) = ticks[0], ticks[-1]
+    totals = {k: np.cumsum([0.0] + [p["volume_m3"][k] for p in report["periods"]]) for k in ("cut", "fill", "net")}
+    for line, (key, sign) in zip(lines, (("fill", 1), ("cut", -1), ("net", 1)), strict=True):
+        read = [v0 + (y + 4 - y0) * (v1 - v0) / (y1 - y0) for _, y in line]  # tick labels sit 4 px low
+        assert read == pytest.approx([sign * v for v in totals[key]], abs=0.002 * (v1 - v0)), key
+        assert [x for x, _ in line] == sorted(x for x, _ in line)  # epochs left to right
+    assert totals["net"][-1] == pytest.approx(report["cumulative"]["volume_m3"]["net"], abs=1e-6)
+    epochs = _cells(page, "Epochs")
+    assert [r[2] for r in epochs] == [p.name for p in paths]
+    assert [int(r[3].replace(",", "")) for r in epochs] == [e["points"] for e in report["epochs"]]
+    assert epochs[0][4] == "reference"
+    for row, e in zip(epochs[1:], report["epochs"][1:], strict=True):
+        reg = e["registration"]
+        assert row[4] == f"{reg['rotation_deg']:,.3f}° / {reg['shift_m']:,.3f} m", row
+    maps = re.findall(r'<img id="diff-(\d+)-(\d+)"', page)
+    assert maps == [(str(c["from"]), str(c["to"])) for c in changes], maps
 
 
 def test_dates_given_override_the_headers(site, tmp_path):

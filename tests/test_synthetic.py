@@ -35,8 +35,19 @@ def _apply(T, xyz):
     return xyz @ T[:3, :3].T + T[:3, 3]
 
 
-def test_truth_matches_fine_raster_integral(scene):
+@pytest.fixture(params=["fixed", "drawn seed 3", "drawn seed 11"])
+def any_scene(request, scene) -> Scene:
+    """The module's scene, and two whose works the seed draws (truth only: no point sampled)."""
+    if request.param == "fixed":
+        return scene
+    seed = int(request.param.split()[-1])
+    cfg = SceneConfig.small(works="drawn")
+    return Scene(None, None, None, None, scene_truth(seed, cfg), cfg, seed)
+
+
+def test_truth_matches_fine_raster_integral(any_scene):
     """The analytic volumes agree with a 2 cm raster integral of dz to better than 0.05 %."""
+    scene = any_scene
     cfg = scene.config
     cell = 0.02
     fill = cut = 0.0
@@ -45,7 +56,7 @@ def test_truth_matches_fine_raster_integral(scene):
         x0, y0 = f["x"] - cfg.origin[0] - r, f["y"] - cfg.origin[1] - r
         xs = x0 + (np.arange(int(2 * r / cell)) + 0.5) * cell
         ys = y0 + (np.arange(int(2 * r / cell)) + 0.5) * cell
-        dz = change_dz(xs[None, :], ys[:, None], cfg)
+        dz = change_dz(xs[None, :], ys[:, None], cfg, scene.seed)
         fill += dz[dz > 0].sum() * cell * cell
         cut -= dz[dz < 0].sum() * cell * cell
         assert abs(abs(dz.sum()) * cell * cell - f["volume"]) < 5e-4 * f["volume"]
@@ -53,19 +64,63 @@ def test_truth_matches_fine_raster_integral(scene):
     assert abs(fill - t["fill"]) < 5e-4 * t["fill"]
     assert abs(cut - t["cut"]) < 5e-4 * t["cut"]
     assert t["net"] == pytest.approx(t["fill"] - t["cut"])
-    assert 900 < t["fill"] < 1100 and 50 < t["cut"] < 100
+    if cfg.works == "fixed":
+        assert 900 < t["fill"] < 1100 and 50 < t["cut"] < 100
     # dz vanishes outside the features, and on the whole before footprint the raster sum agrees
     xs = (np.arange(int(cfg.before_size[0] / 0.05)) + 0.5) * 0.05
     ys = (np.arange(int(cfg.before_size[1] / 0.05)) + 0.5) * 0.05
-    total = sum(change_dz(xs[None, :], ys[i : i + 500, None], cfg).sum() for i in range(0, len(ys), 500))
+    rows = range(0, len(ys), 500)
+    total = sum(change_dz(xs[None, :], ys[i : i + 500, None], cfg, scene.seed).sum() for i in rows)
     assert total * 0.05**2 == pytest.approx(t["net"], rel=5e-4)
 
 
-def test_change_inside_after_footprint(scene):
-    ax0, ay0, ax1, ay1 = scene.truth["after_footprint"]
-    for f in scene.truth["features"]:
+def test_change_inside_after_footprint(any_scene):
+    ax0, ay0, ax1, ay1 = any_scene.truth["after_footprint"]
+    feats = any_scene.truth["features"]
+    for f in feats:
         assert ax0 + 5 < f["x"] - f["radius"] and f["x"] + f["radius"] < ax1 - 5
         assert ay0 + 5 < f["y"] - f["radius"] and f["y"] + f["radius"] < ay1 - 5
+    for i, f in enumerate(feats):  # and the works do not overlap
+        for g in feats[i + 1 :]:
+            assert np.hypot(f["x"] - g["x"], f["y"] - g["y"]) > f["radius"] + g["radius"], (f, g)
+
+
+SEEDS = (0, 1, 2, 3, 5, 7)
+
+
+def test_fixed_works_are_the_same_for_every_seed():
+    """The default layout (bench/ACCURACY.md, the README, demo and self-test use it): one truth
+    whatever the seed, +953.77 m3 on the small scene."""
+    nets = {seed: round(scene_truth(seed, SceneConfig.small())["net"], 2) for seed in SEEDS}
+    assert set(nets.values()) == {953.77}, nets
+
+
+def test_the_seed_draws_the_works():
+    """works="drawn": the seed draws the piles and pits. Before it could, seeds 0, 1, 2, 3, 5 and
+    7 all gave +953.77 m3 from the same four works; now their counts, shapes, sizes, orientations
+    and positions differ from seed to seed, in the range of the fixed layout."""
+    truths = {seed: scene_truth(seed, SceneConfig.small(works="drawn")) for seed in SEEDS}
+    nets = {seed: round(t["net"], 2) for seed, t in truths.items()}
+    assert len(set(nets.values())) == len(SEEDS), nets
+    counts = {tuple(sum(f["sign"] == s for f in t["features"]) for s in (1, -1)) for t in truths.values()}
+    assert len(counts) >= 3, counts
+    kinds = {f["kind"] for t in truths.values() for f in t["features"] if f["sign"] > 0}
+    assert kinds == {"cone", "rect"}, kinds
+    places = {(round(t["features"][0]["x"]), round(t["features"][0]["y"])) for t in truths.values()}
+    assert len(places) == len(SEEDS), places
+    for t in truths.values():
+        assert 2 <= sum(f["sign"] > 0 for f in t["features"]) <= 4 and t["cut"] > 0
+        assert 250 < t["fill"] < 2000 and 20 < t["cut"] < 300, (t["fill"], t["cut"])
+        assert all(3.0 <= f["height"] <= 3.5 if f["sign"] > 0 else 1.0 <= f["height"] <= 1.6 for f in t["features"])
+    again = scene_truth(3, SceneConfig.small(works="drawn"))
+    assert again == truths[3]  # deterministic
+
+
+def test_drawn_works_are_only_for_the_piles_site():
+    with pytest.raises(ValueError, match="works 'drawn' applies to change 'piles'"):
+        scene_truth(0, SceneConfig.small(change="pit", works="drawn"))
+    with pytest.raises(ValueError, match="unknown works"):
+        scene_truth(0, SceneConfig.small(works="random"))
 
 
 def test_no_change_scene():

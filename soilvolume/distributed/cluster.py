@@ -293,6 +293,7 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
     from dask.distributed import wait
 
     order = {f.key: k for k, f in enumerate(futures)}
+    started = _workers(c)
     while pending:
         check()
         try:
@@ -300,9 +301,9 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
         except TimeoutError:
             done = set()
         except Exception as exc:  # noqa: BLE001 - the connection broke
-            raise _cluster_error(exc, what) from None
+            raise _cluster_error(exc, what, _lost(c, started)) from None
         for fut in sorted(done, key=lambda f: order[f.key]):
-            yield _result(fut, what)
+            yield _result(fut, what, lambda: _lost(c, started))
         if done:
             lonely = None
             continue
@@ -321,7 +322,21 @@ def _check_workers(c, since: float | None, what: str) -> float | None:
     return since if since is not None else now
 
 
-def _result(fut, what: str):
+def _workers(c) -> set[str] | None:
+    """The addresses of the cluster's workers (None when the scheduler does not answer)."""
+    try:
+        return set(c.nthreads())
+    except Exception:  # noqa: BLE001 - a broken connection is reported by the caller
+        return None
+
+
+def _lost(c, started: set[str] | None) -> tuple[int, int]:
+    """(workers of ``started`` gone since, how many there were)."""
+    now = _workers(c)
+    return (len(started - now), len(started)) if started and now is not None else (0, 0)
+
+
+def _result(fut, what: str, lost: Callable[[], tuple[int, int]]):
     try:
         value = fut.result()
     except SoilVolumeError:
@@ -330,20 +345,24 @@ def _result(fut, what: str):
         raise
     except Exception as exc:  # noqa: BLE001 - sorted below
         if type(exc).__module__.split(".")[0] in ("distributed", "concurrent", "asyncio"):
-            raise _cluster_error(exc, what) from None
+            raise _cluster_error(exc, what, lost()) from None
         raise
     fut.release()
     return value
 
 
-def _cluster_error(exc: BaseException, what: str) -> SoilVolumeError:
-    """A cluster's failure as one line (a pending signal first: Ctrl-C also stops workers)."""
+def _cluster_error(exc: BaseException, what: str, lost: tuple[int, int] = (0, 0)) -> SoilVolumeError:
+    """A cluster's failure as one line (a pending signal first: Ctrl-C also stops workers). A
+    worker that died takes the data sent to it along: the tasks needing it are cancelled, which
+    is said as the worker's death (``lost``: workers gone, of how many)."""
     interrupt.check()
     name = type(exc).__name__
+    advice = f"give each worker more with {opt('memory_limit')}, or smaller tiles with {opt('tile_cells')}"
     if name == "KilledWorker":
+        return SoilVolumeError(f"Dask workers died running the same task while {what} (out of memory? {advice})")
+    if lost[0] and "Cancelled" in name:
         return SoilVolumeError(
-            f"Dask workers died running the same task while {what} (out of memory? give each worker "
-            f"more with {opt('memory_limit')}, or smaller tiles with {opt('tile_cells')})"
+            f"{lost[0]} of the {lost[1]} Dask workers died while {what} (killed, or out of memory? {advice})"
         )
     if "Cancelled" in name or "CommClosed" in name or isinstance(exc, OSError):
         return SoilVolumeError(f"the Dask cluster stopped the run's tasks while {what} ({name})")

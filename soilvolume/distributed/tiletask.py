@@ -337,7 +337,7 @@ def map_tiles(
     ref = c.scatter(shared, broadcast=True, timeout=SCATTER_S)
     lists = [[a] * n for a in args] + ([per] if per is not None else [])
     futures = c.map(fn, [ref] * n, windows, *lists, pure=False)
-    for k, result in enumerate(completed(c, futures, f"{verb} tiles", checker(hooks)), 1):
+    for k, result in enumerate(completed(c, futures, f"the tiles were being {verb}", checker(hooks)), 1):
         hooks.step(lo + (hi - lo) * k / n, f"{verb} tile {k}/{n}")
         yield result
 

@@ -40,6 +40,10 @@ class SceneConfig:
     # flat-bottomed pit, 5 %), "pile" (one flat-topped pile, 10 %) or "excavation" (a flat-bottomed
     # excavation over `change_fraction` of the after footprint plus a tall pile near one edge)
     change: str = "piles"
+    # "fixed": the layouts above, the same for every seed (bench/ACCURACY.md, README, demo and
+    # self-test use them); "drawn": the seed also draws the "piles" site's works (2-4 piles and
+    # 1-2 pits: shapes, sizes, orientations, positions; scenes/drawn.py)
+    works: str = "fixed"
     crs: str = "EPSG:32654"
     # a vertical CRS the files also declare (a compound CRS, e.g. "EPSG:5703" NAVD88 height): a
     # declared datum says nothing of the GPS error above, which the surveys still carry

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from .config import SceneConfig
+from .drawn import drawn_features
 
 # ----------------------------------------------------------------------------------------------
 # geometry shared by both epochs
@@ -24,19 +25,27 @@ def _after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
     return cx - aw / 2.0, cy - ah / 2.0, cx + aw / 2.0, cy + ah / 2.0
 
 
+WORKS = ("fixed", "drawn")
 CHANGE_KINDS = ("piles", "none", "pit", "pile", "excavation", "yard", "landslide", "trench", "pillars")
 
 
-def _change_features(cfg: SceneConfig) -> list[dict]:
+def _change_features(cfg: SceneConfig, seed: int = 0) -> list[dict]:
     """The analytic change features (positions relative to the after footprint centre, scaled
-    down if the after footprint is smaller than the default)."""
+    down if the after footprint is smaller than the default); with ``cfg.works == "drawn"`` the
+    "piles" site's works are drawn by ``seed``."""
     if cfg.change == "none":
         return []
     if cfg.change not in CHANGE_KINDS:
         raise ValueError(f"unknown change {cfg.change!r} ({', '.join(CHANGE_KINDS)})")
+    if cfg.works not in WORKS:
+        raise ValueError(f"unknown works {cfg.works!r} ({', '.join(WORKS)})")
+    if cfg.works == "drawn" and cfg.change != "piles":
+        raise ValueError(f"works 'drawn' applies to change 'piles', not {cfg.change!r}")
     x0, y0, x1, y1 = _after_box(cfg)
     cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
     s = min(1.0, (x1 - x0) / 67.0, (y1 - y0) / 62.7)
+    if cfg.works == "drawn":
+        return finish_features(drawn_features(seed, (x0, y0, x1, y1), s))
     if cfg.change in SITE_KINDS:
         from .sites import site_features
 
@@ -248,6 +257,6 @@ def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:
     return dz
 
 
-def change_dz(x: np.ndarray, y: np.ndarray, cfg: SceneConfig) -> np.ndarray:
-    """The analytic ground change dz (m, + = fill) at LOCAL x/y (true frame)."""
-    return features_dz(x, y, _change_features(cfg))
+def change_dz(x: np.ndarray, y: np.ndarray, cfg: SceneConfig, seed: int = 0) -> np.ndarray:
+    """The analytic ground change dz (m, + = fill) at LOCAL x/y (true frame) of ``(seed, cfg)``."""
+    return features_dz(x, y, _change_features(cfg, seed))

@@ -66,7 +66,7 @@ def water_levels(world) -> list[tuple[dict, float]]:
         if f["sign"] < 0:  # water pools at the lowest point of the pit's bottom
             u = np.linspace(-f["radius"], f["radius"], 81)
             x, y = (a.ravel() for a in np.meshgrid(f["x"] + u, f["y"] + u))
-            dz = change_dz(x, y, world.cfg)
+            dz = change_dz(x, y, world.cfg, world.seed)
             bottom = float(np.min((world.terrain(x, y) + dz)[dz < 0]))
             out.append((f, bottom + world.cfg.water_m))
     return out

@@ -46,7 +46,7 @@ def pad_truth(seed: int, config: SceneConfig, pad: Pad, res: float = 0.05) -> di
     out = {"net": 0.0, "cut": 0.0, "fill": 0.0}
     for y in np.arange(y0 + res / 2, y1, res):
         yy = np.full(xs.shape, y)
-        d = world.terrain(xs, yy) + change_dz(xs, yy, config) - pad.heights(world, xs, yy)
+        d = world.terrain(xs, yy) + change_dz(xs, yy, config, seed) - pad.heights(world, xs, yy)
         out["fill"] += float(d[d > 0].sum()) * res * res
         out["cut"] -= float(d[d < 0].sum()) * res * res
     out["net"] = out["fill"] - out["cut"]

@@ -87,7 +87,7 @@ class Scene:
     def change_dz(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The true ground change dz (m) at ABSOLUTE x/y of the true frame."""
         o = self.config.origin
-        return change_dz(np.asarray(x) - o[0], np.asarray(y) - o[1], self.config)
+        return change_dz(np.asarray(x) - o[0], np.asarray(y) - o[1], self.config, self.seed)
 
 
 def _config_dict(cfg: SceneConfig) -> dict:
@@ -102,7 +102,7 @@ def _config_dict(cfg: SceneConfig) -> dict:
 
 
 NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch_change", "crops")
-NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow", "vertical_datum", "overlap")
+NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow", "vertical_datum", "overlap", "works")
 
 
 def _objects(world: _World) -> list[dict]:

@@ -24,7 +24,7 @@ class _World:
         self.seed = int(seed)
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0]))
         self.ax0, self.ay0, self.ax1, self.ay1 = _after_box(cfg)
-        self.changes = _change_features(cfg)
+        self.changes = _change_features(cfg, self.seed)
         self._init_terrain(rng)
         self._init_features(rng)
         self.hole_res = 0.1  # occlusion holes, per epoch
@@ -300,7 +300,7 @@ class _World:
         g = self.terrain(x, y)
         fresh = np.zeros(x.shape, bool)
         if epoch == 1:
-            dz = change_dz(x, y, cfg)
+            dz = change_dz(x, y, cfg, self.seed)
             g += dz
             g += self.deformation(x, y)
             fresh = dz != 0

@@ -10,16 +10,22 @@ import pytest
 import rasterio
 from qgis.core import QgsRasterLayer
 
-NET_TOLERANCE = 0.03  # relative, against the scene's exact truth
+# relative, against the scene's exact truth (small seed-0 pair, 1 m cells, ICP, surface correction):
+# measured net -0.58 %, cut -2.4 %, fill -0.71 %, uncompensated net +1.1 %; each tolerance about
+# 2.5 times that (it was 10 % for cut, fill and the uncompensated net, and cut was allowed 10 % of
+# the fill: a cut of 0 passed where the truth is 68.7 m3)
+NET_TOLERANCE = 0.015
+CUT_TOLERANCE = 0.06
+FILL_TOLERANCE = 0.02
+UNCOMPENSATED_TOLERANCE = 0.03
 RASTERS = ("DIFFERENCE", "DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET")
 
 
 def test_volumes_match_the_truth(estimate_run, truth):
     assert estimate_run["NET_VOLUME"] == pytest.approx(truth["net"], rel=NET_TOLERANCE)
-    assert estimate_run["UNCOMPENSATED_NET_VOLUME"] == pytest.approx(truth["net"], rel=0.1)
-    # cut and fill also carry the survey noise (3 cm in each epoch), net does not
-    assert estimate_run["FILL_VOLUME"] == pytest.approx(truth["fill"], rel=0.1)
-    assert estimate_run["CUT_VOLUME"] == pytest.approx(truth["cut"], abs=0.1 * truth["fill"])
+    assert estimate_run["UNCOMPENSATED_NET_VOLUME"] == pytest.approx(truth["net"], rel=UNCOMPENSATED_TOLERANCE)
+    assert estimate_run["FILL_VOLUME"] == pytest.approx(truth["fill"], rel=FILL_TOLERANCE)
+    assert estimate_run["CUT_VOLUME"] == pytest.approx(truth["cut"], rel=CUT_TOLERANCE)
     assert estimate_run["FILL_VOLUME"] - estimate_run["CUT_VOLUME"] == pytest.approx(estimate_run["NET_VOLUME"])
     assert estimate_run["CELL_SIZE"] == pytest.approx(1.0)
 

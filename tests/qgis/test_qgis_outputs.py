@@ -102,7 +102,9 @@ def test_numbers_and_strings(zoned_run, truth):
     assert results["ALL_CELLS_NET_UNCERTAINTY"] == pytest.approx(report["uncertainty_m3"]["net_all_cells"])
     assert results["VERDICT"] in ("reliable", "use with caution", "not reliable")
     assert results["LEVEL_OF_DETECTION"] == pytest.approx(report["uncertainty_m3"]["lod_m"])
-    assert results["NET_VOLUME"] == pytest.approx(truth["net"], rel=0.1)
+    # measured +4.6 % (the stable mask's six boxes leave the correction less ground than the
+    # automatic choice, which gives -0.58 %); it was 10 %
+    assert results["NET_VOLUME"] == pytest.approx(truth["net"], rel=0.07)
     assert "is a significant gain (fill)" in results["SIGNIFICANCE"]
     assert isinstance(results["VERDICT"], str) and isinstance(results["QUALITY_MESSAGES"], str)
     assert report["options"]["stable_mask"] and report["options"]["zones"]
@@ -111,8 +113,9 @@ def test_numbers_and_strings(zoned_run, truth):
 def test_registration_as_rotation_and_shift(zoned_run, truth):
     results, _ = zoned_run
     mis = truth["misalignment"]  # the GPS error the registration undoes
-    assert results["ROTATION"] == pytest.approx(math.hypot(*mis["rotation_deg"]), abs=0.1)
-    assert results["SHIFT"] == pytest.approx(math.hypot(*mis["shift_m"]), abs=1.0)
+    # measured 2.0309 deg for 2.0322 and 2.527 m for 2.518 m (it was 0.1 deg and 1 m)
+    assert results["ROTATION"] == pytest.approx(math.hypot(*mis["rotation_deg"]), abs=0.02)
+    assert results["SHIFT"] == pytest.approx(math.hypot(*mis["shift_m"]), abs=0.05)
 
 
 def test_per_zone_table(zoned_run, truth):
@@ -124,7 +127,10 @@ def test_per_zone_table(zoned_run, truth):
         assert row["net_m3"] == pytest.approx(row["fill_m3"] - row["cut_m3"])
         assert row["net_pm_m3"] > 0 and row.hasGeometry()
     pile_a = next(f for f in truth["features"] if f["name"].startswith("pile A"))
-    assert rows["pile A"]["net_m3"] == pytest.approx(pile_a["volume"], rel=0.15)
+    pit = next(f for f in truth["features"] if f["name"].startswith("pit"))
+    # measured pile A +0.55 % (it was 15 %), the pit's cut -6.0 % (it was only negative)
+    assert rows["pile A"]["net_m3"] == pytest.approx(pile_a["volume"], rel=0.03)
+    assert rows["pit"]["cut_m3"] == pytest.approx(pit["volume"], rel=0.1)
     assert rows["pit"]["net_m3"] < 0
 
 
