@@ -16,7 +16,7 @@ from pathlib import Path
 
 from .core import wording
 from .core.interrupt import Interrupted, handle_signals
-from .core.memlimit import out_of_memory, reserve_blas_buffer
+from .core.memlimit import out_of_memory, short_of_memory
 from .core.nativelog import hold_native_stderr, quiet_library_warnings
 from .core.outputs import os_problem
 from .core.types import SoilVolumeError
@@ -370,7 +370,6 @@ def main(argv: list[str] | None = None) -> int:
 
 def _run(ns: argparse.Namespace) -> int:
     try:
-        reserve_blas_buffer()  # under ulimit -v (core.memlimit)
         return COMMANDS[ns.command](ns)
     except Interrupted as exc:
         return _fail(str(exc), exc.exit_code, exc)
@@ -385,6 +384,8 @@ def _run(ns: argparse.Namespace) -> int:
     except KeyboardInterrupt:  # a signal arrived before the handlers were installed
         return _fail("interrupted", 130)
     except Exception as exc:  # a bug: for a program reading the protocol, an error line too
+        if short_of_memory(exc):  # a library that cannot be mapped under ulimit -v
+            return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
         if not _PROTOCOL:
             raise
         traceback.print_exc()

@@ -28,7 +28,7 @@ def _limited() -> None:
 def test_series_under_an_address_space_limit_ends(tmp_path):
     """Before: the 4-epoch series under 600 MB spun at 'estimating the vertical bias correction'
     (OpenBLAS retrying a buffer allocation for ever on the after survey's plane thread) until
-    killed, SIGTERM ignored. Now: one line naming the limit, exit 1, nothing written, in seconds."""
+    killed, SIGTERM ignored. Now: one line naming the limit, exit 1, nothing written, in 5 s."""
     paths, _ = write_series(tmp_path / "s", 0)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "soilvolume", "series", *map(str, paths), "--out", str(out), "--quiet"]
@@ -45,6 +45,53 @@ def test_series_under_an_address_space_limit_ends(tmp_path):
     assert "address-space limit of 629 MB (ulimit -v)" in lines[0], lines
     assert not out.exists() and time.monotonic() - t0 < 110
     assert [p.name for p in tmp_path.iterdir() if "soilvolume-" in p.name] == []
+
+
+SPIN = """
+import sys, threading, resource, numpy as np
+from soilvolume.core.interrupt import handle_signals
+resource.setrlimit(resource.RLIMIT_AS, (700 << 20, 700 << 20))
+with handle_signals():
+    a = np.ones((1500, 1500)); a @ a  # OpenBLAS's first buffer, while there is room
+    hold = []
+    try:
+        while True:
+            hold.append(np.ones(1 << 20))
+    except MemoryError:
+        pass
+    del hold[-6:]
+    threading.stack_size(1 << 20)
+    # two products at once: the second thread needs a second buffer and finds no room
+    t = [threading.Thread(target=lambda: [a @ a for _ in range(3)]) for _ in range(2)]
+    [x.start() for x in t]
+    print("ready", flush=True)
+    [x.join() for x in t]
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc as Linux has them")
+@pytest.mark.parametrize("sig", [None, signal.SIGTERM])
+def test_a_thread_spinning_in_openblas_at_the_limit_ends_the_run(sig):
+    """The root cause of the series' hang: OpenBLAS retries a failed buffer allocation for ever.
+    Before: killed at 20 s, SIGTERM or not. Now: one line naming the limit after ~3 s of the spin
+    (5.2 s in all), or SIGTERM's line within a second."""
+    proc = subprocess.Popen([sys.executable, "-c", SPIN], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "ready"
+    t0 = time.monotonic()
+    if sig is not None:
+        time.sleep(0.5)
+        proc.send_signal(sig)
+    try:
+        code = proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("the spinning run did not end in 30 s")
+    err = proc.stderr.read().strip()
+    if sig is None:
+        assert code == 1 and err.startswith("soilvolume: error: out of memory under the address-space limit"), err
+    else:
+        assert code == 128 + sig and time.monotonic() - t0 < 1.8, (code, err)
+        assert err == "soilvolume: error: interrupted by SIGTERM; nothing was written"
 
 
 STUCK = """
@@ -79,17 +126,24 @@ def test_signal_ends_a_run_whose_thread_is_stuck_in_native_code(sig):
     assert proc.stderr.read().strip() == f"soilvolume: error: interrupted by {name}; nothing was written"
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS as Linux counts it")
 def test_out_of_memory_names_the_limit(tmp_path):
-    """A MemoryError under a limit says which limit (a reserve of OpenBLAS's buffer that finds no
-    room fails at once instead of spinning)."""
-    code = (
-        "import resource; resource.setrlimit(resource.RLIMIT_AS, (300 << 20, 300 << 20))\n"
-        "from soilvolume.cli import main; raise SystemExit(main(['estimate', 'a.las', 'b.las', '--out', 'o']))"
-    )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
-    assert proc.returncode == 1, proc.stderr
-    assert "soilvolume: error: out of memory under the address-space limit of 315 MB" in proc.stderr
-    assert not Path(tmp_path / "o").exists()
+    """Out of memory under a limit says which limit, a library that cannot be mapped included.
+    Before, estimate under 350 MB: an ImportError's traceback ('libgfortran...: failed to map
+    segment'); under 420 MB: 'out of memory: ...' without the limit."""
+    paths, _ = write_series(tmp_path / "s", 0)
+    for limit in (350, 420):
+
+        def limited(limit=limit):
+            resource.setrlimit(resource.RLIMIT_AS, (limit * 1024000, limit * 1024000))
+
+        out = tmp_path / f"out{limit}"
+        cmd = [sys.executable, "-m", "soilvolume", "estimate", *map(str, paths[:2]), "--out", str(out), "--quiet"]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120, preexec_fn=limited)
+        lines = proc.stderr.strip().splitlines()
+        assert proc.returncode == 1 and len(lines) == 1, proc.stderr
+        assert f"out of memory under the address-space limit of {limit * 1.024:.0f} MB (ulimit -v)" in lines[0]
+        assert not out.exists()
 
 
 COMMANDS = {

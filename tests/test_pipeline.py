@@ -256,3 +256,32 @@ def test_same_pipeline_through_real_pdal_matches_embedded(tmp_path):
     with rasterio.open(tmp_path / "a.tif") as da, rasterio.open(tmp_path / "b.tif") as db:
         np.testing.assert_allclose(da.read(1), db.read(1), atol=1e-9)
         assert da.transform == db.transform
+
+
+def test_a_writers_side_file_goes_when_the_run_fails(tmp_path):
+    """Issue 49 item 6: a user pipeline whose writer wrote into the output folder, then a failing
+    run: the folder is as it was (the writer was confined to the run's staging folder, removed
+    with it), whether a writers.las stage names the folder or a bare last stage does. Held at
+    01d627d already with the embedded executor (the issue's case was not reproduced)."""
+    from conftest import run_cli, write_scene
+
+    b, a, _ = write_scene(tmp_path / "pair", 0)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.json").write_text("{}")
+    for k, stages in enumerate(
+        [
+            [
+                str(a),
+                {"type": "writers.las", "filename": str(out / "side.las")},
+                {"type": "filters.range", "limits": "Z[1e6:2e6]"},
+            ],
+            [str(a), {"type": "filters.range", "limits": "Z[1e6:2e6]"}, str(out / "side.las")],
+        ]
+    ):
+        pipe = tmp_path / f"p{k}.json"
+        pipe.write_text(json.dumps({"pipeline": stages}))
+        p = run_cli("estimate", b, a, "--after-pipeline", pipe, "--out", out, "--overwrite", "--quiet")
+        assert p.returncode == 1 and "no points left" in p.stderr, p.stderr
+        assert sorted(x.name for x in out.iterdir()) == ["report.json"]
+        assert [x.name for x in tmp_path.iterdir() if "soilvolume-" in x.name] == []

@@ -200,3 +200,19 @@ def test_autzen_dems_give_back_the_difference(autzen):
     assert valid >= 100 and off == 0, (valid, off)
     with rasterio.open(out / "filled_mask.tif") as ds:
         assert ds.read(1).sum() >= 10  # the refilled cells, said
+
+
+def test_tommy_thompson_states_no_confidence_beside_not_reliable(tommy):
+    """Issue 49: the not-reliable run's report said 'a significant gain (fill) at 95 % confidence'
+    a few lines below the verdict; now one statement, consistent with it."""
+    import re
+
+    from soilvolume.cli import front_end_summary
+
+    report, out = tommy
+    assert report["quality"]["verdict"] == "not reliable"
+    page = re.sub("<[^>]+>", "", (out / "report.html").read_text())
+    said = front_end_summary(report)["significance"]
+    for text in (page, said):
+        assert "significant gain" not in text and "not significant" not in text
+    assert "carries no statement of confidence" in said and said in page.replace("&#x27;", "'")

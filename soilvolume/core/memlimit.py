@@ -1,16 +1,13 @@
-"""A process under an address-space limit (``ulimit -v``, RLIMIT_AS) fails in one line naming it,
-never spins.
+"""A process under an address-space limit (``ulimit -v``, RLIMIT_AS) fails in one line naming it.
 
-OpenBLAS takes its work buffer (128 MiB of address space) at the first matrix product large
-enough to need it, and when that allocation fails it retries for ever in C (its
-``blas_memory_alloc`` loops until an allocation succeeds): a series under a 600 MB limit spun at
-the bias correction for minutes, deaf to signals. The buffer, once taken, is kept and reused by
-every later product, so a process under such a limit takes it first (:func:`reserve_blas_buffer`),
-while the address space is still free; a limit too small for it is refused at once."""
+OpenBLAS takes a work buffer (128 MiB of address space) for each thread that runs a matrix
+product at the same time as another, and when that allocation fails it retries for ever in C
+(its ``blas_memory_alloc`` loops until one succeeds): a series under a 600 MB limit spun at the
+bias correction, its two planes on two threads. :mod:`.watchdog` sees such a spin and ends the
+run with :func:`out_of_memory`."""
 
 from __future__ import annotations
 
-import mmap
 import resource
 
 from . import wording
@@ -42,18 +39,10 @@ def out_of_memory(keyed: bool = False) -> str:
     return said if keyed else wording.cli(said)
 
 
-def reserve_blas_buffer() -> None:
-    """Under an address-space limit: one matrix product large enough for OpenBLAS to take its work
-    buffer now (kept for the process's life), so no later product can find the limit reached and
-    spin (see module); without a limit, nothing. MemoryError when the limit leaves no room for it."""
-    if address_limit() is None:
-        return
-    try:  # room for the buffer, else the product itself would spin
-        mmap.mmap(-1, BLAS_BUFFER).close()
-    except OSError:
-        raise MemoryError from None
-    import numpy as np
-
-    a = np.ones((256, 256))
-    if not np.isfinite(float((a @ a)[0, 0])):  # the product is what takes the buffer
-        raise MemoryError
+def short_of_memory(exc: BaseException) -> bool:
+    """Whether ``exc`` says the process ran out of memory: a MemoryError, or a library that could
+    not be mapped (``failed to map segment``, ``cannot allocate memory``) under a limit."""
+    if isinstance(exc, MemoryError):
+        return True
+    text = str(exc).lower()
+    return isinstance(exc, ImportError) and ("failed to map segment" in text or "cannot allocate memory" in text)

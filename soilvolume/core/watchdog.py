@@ -23,6 +23,8 @@ from .memlimit import BLAS_BUFFER, address_limit
 
 GRACE = 0.75  # s: a run that has not stopped this long after a signal is ended
 TICK = 0.25  # s: how often the thread looks
+STACK = 256 << 10  # bytes: the watching thread's stack
+M_ARENA_MAX = -8  # glibc's mallopt parameter
 SPIN_S = 3.0  # s: a thread spinning at the address-space limit this long ends the run
 SPIN_SYSTEM = 0.3  # the share of a second in system time a spinning thread spends (failed mmaps)
 
@@ -45,7 +47,13 @@ class Watchdog:
         except ValueError:  # not the main thread
             self._close()
             return
-        threading.Thread(target=self._watch, name="soilvolume-watchdog", daemon=True).start()
+        if address_limit() is not None:
+            few_arenas()
+        old = threading.stack_size(STACK)  # a small thread: under ulimit -v its space counts
+        try:
+            threading.Thread(target=self._watch, name="soilvolume-watchdog", daemon=True).start()
+        finally:
+            threading.stack_size(old)
 
     def stop(self) -> None:
         if self.read_fd < 0:
@@ -98,6 +106,19 @@ class Spin:
         hot = hot and any(t - prev[1].get(k, t) >= per_tick for k, t in system.items())
         self.since = (self.since or now) if hot else None
         return self.since is not None and now - self.since >= SPIN_S
+
+
+def few_arenas() -> None:
+    """Under an address-space limit, glibc's malloc on two arenas: each thread that allocates
+    otherwise reserves its own 64 MiB of address space, which ``ulimit -v`` counts (glibc only;
+    elsewhere nothing)."""
+    import ctypes
+    import ctypes.util
+
+    try:
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt(M_ARENA_MAX, 2)
+    except (OSError, AttributeError):
+        pass
 
 
 def _sample() -> tuple[int, dict[str, int]] | None:
