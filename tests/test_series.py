@@ -216,7 +216,7 @@ def test_series_through_the_protocol(site, tmp_path):
 def test_every_period_carries_a_quality_verdict(site, capsys):
     """Each period and the cumulative, in report.json, the HTML and the printed ledger: the words
     of a pair's verdict, with its reasons."""
-    from soilvolume.seriescli import ledger_lines
+    from soilvolume.cli.series import ledger_lines
     from soilvolume.volumes.quality import VERDICTS
 
     d, _, _, report, _ = site

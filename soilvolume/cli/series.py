@@ -1,13 +1,17 @@
-"""The ``soilvolume series`` command line (kept beside :mod:`.cli`, which wires it in)."""
+"""``soilvolume series E0 E1 ... --out DIR``: volume change over a series of surveys."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from .options import Options
+from .. import api
+from .feedback import hooks, send_result
+from .flags import add_options, add_progress, options_from
 
-SERIES_EPILOG = """Outputs in DIR: dem_epoch<k>.tif (each epoch's heights in E0's frame, corrected
+NAME = "series"
+
+EPILOG = """Outputs in DIR: dem_epoch<k>.tif (each epoch's heights in E0's frame, corrected
 once relative to E0), difference_<i>_<j>.tif (each period's change), cumulative_0_<n>.tif,
 ledger.csv (one row per period and the cumulative: epochs, dates, net/cut/fill and their ±),
 report.json ("epochs" with each registration's 4x4 into E0's frame, "periods", "cumulative", each
@@ -18,14 +22,14 @@ The outputs appear together or not at all; exit status 0 (done), 1 (error, one l
 2 (bad command line), 130/143 (interrupted; nothing written)."""
 
 
-def add_series(sub, add_options, add_progress) -> None:
-    """The ``series`` sub-command: epochs, --out, --dates, --overwrite, and its options."""
+def add_parser(sub) -> None:
+    """The sub-command: epochs, --out, --dates, --overwrite, and its options."""
     p = sub.add_parser(
-        "series",
+        NAME,
         help="volume change over a series of surveys E0 E1 ... (E0 the reference)",
         description="Register every later survey into E0's frame, grid all on one grid and report each "
         "period's volume change (consecutive surveys) and the cumulative one, with intervals.",
-        epilog=SERIES_EPILOG,
+        epilog=EPILOG,
     )
     p.add_argument(
         "epochs",
@@ -43,16 +47,15 @@ def add_series(sub, add_options, add_progress) -> None:
     )
     p.add_argument("--quiet", action="store_true", help="no progress output")
     add_progress(p)
-    add_options(p, "series")
+    add_options(p, NAME)
 
 
-def cmd_series(ns: argparse.Namespace, options: Options, hooks, result) -> int:
+def run(ns: argparse.Namespace) -> int:
     """Run the series; print the ledger (or send the result through the protocol)."""
-    from .api import series
-
+    options = options_from(ns)
     dates = None if ns.dates is None else ns.dates.split(",")
-    res = series(ns.epochs, ns.out, options, dates=dates, overwrite=ns.overwrite, hooks=hooks)
-    if result(ns, report=res.report, outputs=res.outputs):
+    res = api.series(ns.epochs, ns.out, options, dates=dates, overwrite=ns.overwrite, hooks=hooks(ns))
+    if send_result(ns, report=res.report, outputs=res.outputs):
         return 0
     for line in ledger_lines(res.report):
         print(line)
