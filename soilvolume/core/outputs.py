@@ -1,11 +1,10 @@
-"""All-or-nothing outputs: a run builds its files in a hidden staging folder next to ``--out``
-(same file system) and swaps it into place only when everything succeeded, so a reader of
-``--out`` sees the complete old set or the complete new set, never a mix.
+"""All-or-nothing outputs: a run builds its files in a hidden staging folder next to ``--out`` (same file
+system) and swaps it into place only when everything succeeded, so a reader of ``--out`` sees the complete
+old set or the complete new set, never a mix.
 
-Hidden siblings are named ``.<name>.soilvolume-staging-<pid>`` (the new set) and
-``.<name>.soilvolume-trash-<pid>`` (the old set during a swap); those of runs that are no longer
-alive (killed) are recognised and removed by the next run, which restores a trashed old set if a
-kill struck between the two renames of a swap.
+Hidden siblings are named ``.<name>.soilvolume-staging-<pid>`` (the new set) and ``.<name>.soilvolume-trash-<pid>``
+(the old set during a swap); those of runs that are no longer alive (killed) are recognised and removed by
+the next run, which restores a trashed old set if a kill struck between the two renames of a swap.
 """
 
 from __future__ import annotations
@@ -22,6 +21,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from . import interrupt
+from .replaceable import check_replaceable
 from .types import SoilVolumeError, short_error
 
 try:
@@ -276,6 +276,7 @@ class OutputDir:
             raise os_problem(exc, final) from exc
         if final.is_dir() and not os.access(final, os.W_OK | os.X_OK):
             raise SoilVolumeError(f"{final}: the output folder is not writable")
+        check_replaceable(final)
         if entries and not self.overwrite:
             raise SoilVolumeError(f"{final}: output folder exists and is not empty (use --overwrite)")
         foreign = [e for e in entries if not self._ours(e)]
@@ -391,6 +392,7 @@ def check_output_file(path: Path, inputs: Iterable[Path | str | None]) -> Path:
         raise SoilVolumeError(f"{final.parent}: the output folder does not exist")
     if not os.access(final.parent, os.W_OK | os.X_OK):
         raise SoilVolumeError(f"{final.parent}: the output folder is not writable")
+    check_replaceable(final)
     if len(final.name.encode()) > NAME_MAX:
         raise SoilVolumeError(f"{path}: file name longer than {NAME_MAX} bytes")
     with locked(final.parent):
