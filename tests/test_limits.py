@@ -185,3 +185,33 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_work(tmp_path_fa
         assert list(ro.iterdir()) == [] and time.monotonic() - t0 < 10
     finally:
         shutil.rmtree(base, ignore_errors=True)
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="runs the CLI as nobody (needs root)")
+def test_another_users_output_in_a_sticky_folder_is_refused_before_any_work():
+    """An output file that exists, is root's, in a sticky folder (/tmp's kind) that nobody may
+    write to: 'dem' gridded the whole cloud, then failed at the last rename ('Operation not
+    permitted'). Now refused first, in one line naming it, the file untouched."""
+    import shutil
+
+    base = Path(tempfile.mkdtemp(prefix="soilvolume-sticky-"))
+    try:
+        base.chmod(0o755)
+        paths, _ = write_series(base / "s", 0, density=(1.0, 2.0))
+        for p in base.rglob("*"):
+            p.chmod(p.stat().st_mode | 0o444 | (0o111 if p.is_dir() else 0))
+        sticky = base / "sticky"
+        sticky.mkdir()
+        sticky.chmod(0o1777)
+        (sticky / "dem.tif").write_text("root's")
+        nobody = ["setpriv", "--reuid", "65534", "--regid", "65534", "--clear-groups"]
+        cmd = [*nobody, sys.executable, "-m", "soilvolume", "dem", str(paths[0]), "--out", str(sticky / "dem.tif")]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 1, proc.stderr
+        assert proc.stderr.strip().splitlines() == [
+            f"soilvolume: error: {sticky / 'dem.tif'}: belongs to another user in a folder where only owners may "
+            "replace files; choose another output"
+        ]
+        assert (sticky / "dem.tif").read_text() == "root's" and [p.name for p in sticky.iterdir()] == ["dem.tif"]
+    finally:
+        shutil.rmtree(base, ignore_errors=True)

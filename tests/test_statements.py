@@ -50,3 +50,21 @@ def test_not_reliable_run_states_no_confidence():
     caution = significance(_report(4551.46, 2520.10, 0.0, "use with caution"))
     assert "significant gain" in caution
     assert "not significant" in significance(_report(10.0, 20.0, 0.0, "use with caution"))
+
+
+def test_a_not_reliable_verdict_lists_no_significance():
+    """The verdict's reasons of a not-reliable run said 'it is not significant' too (a statement
+    of confidence the run cannot make); now they give the reasons only, the verdict the same."""
+    import numpy as np
+
+    rep = _report(net=5.0, half=20.0, bound=0.0)
+    rep["excluded"]["unclassified"] = {"count": 1, "fill": 30.0, "cut": 0.0, "signals": False}
+    rep["excluded"]["bound_m3"] = {"net": 30.0}
+    rep["uncertainty_m3"]["net"] = 40.0
+    z = np.zeros((4, 4))
+    q = assess(rep, z.astype(bool), z.astype(bool), z, 1.0, {})
+    assert q["verdict"] == "not reliable", q
+    assert not any("significant" in m for m in q["messages"]), q["messages"]
+    rep["excluded"]["unclassified"]["signals"] = True  # a caution only: the significance is said
+    q = assess(rep, z.astype(bool), z.astype(bool), z, 1.0, {})
+    assert q["verdict"] == "use with caution" and any("not significant" in m for m in q["messages"]), q

@@ -12,7 +12,8 @@ from .flags import add_options, add_progress, options_from
 NAME = "series"
 
 EPILOG = """Outputs in DIR: dem_epoch<k>.tif (each epoch's heights in E0's frame, corrected
-once relative to E0), difference_<i>_<j>.tif (each period's change), cumulative_0_<n>.tif,
+once relative to E0; dem_epoch<j> - dem_epoch<i> = difference_<i>_<j>), difference_<i>_<j>.tif
+(each period's change), cumulative_0_<n>.tif,
 ledger.csv (one row per period and the cumulative: epochs, dates, net/cut/fill and their ±),
 report.json ("epochs" with each registration's 4x4 into E0's frame, "periods", "cumulative", each
 with its quality verdict) and report.html (the ledger with the verdicts, cumulative cut and fill

@@ -20,7 +20,8 @@ from .types import SoilVolumeError
 from .watchdog import Watchdog
 
 _pending: list[int] = []
-_cleanups: list[Callable[[], None]] = []
+_stopping: list[bool] = []
+_cleanups: list[Callable[[], str | None]] = []
 NAMES = {signal.SIGINT: "SIGINT", signal.SIGTERM: "SIGTERM"}
 
 
@@ -50,9 +51,9 @@ def _record(signum: int, _frame) -> None:
 def leave(signum: int | None) -> None:
     """End the process now, the cleanups run: interrupted by ``signum``, or (None) spinning at the
     address-space limit (:mod:`.watchdog`)."""
-    run_cleanups()
+    kept = run_cleanups()
     remove_process_temp_dir()
-    said = f"interrupted by {NAMES.get(signum, signum)}; nothing was written" if signum else out_of_memory()
+    said = str(Interrupted(signum, kept)) if signum else out_of_memory()
     try:
         sys.stderr.write(f"soilvolume: error: {said}\n")
         sys.stderr.flush()
@@ -63,6 +64,7 @@ def leave(signum: int | None) -> None:
 def check() -> None:
     """Raise :class:`Interrupted` when a signal arrived since the handlers were installed."""
     if _pending:
+        _stopping.append(True)  # the run saw it: the watchdog lets it stop
         raise Interrupted(_pending[0])
 
 
@@ -76,7 +78,7 @@ def handle_signals(then_ignore: bool = False) -> Iterator[None]:
         yield
         return
     old = {s: signal.signal(s, _record) for s in NAMES}
-    watch = Watchdog(leave)  # a run stuck in native code ends all the same
+    watch = Watchdog(leave, lambda: bool(_stopping))  # a run stuck in native code ends all the same
     watch.start()
     try:
         yield
@@ -85,11 +87,13 @@ def handle_signals(then_ignore: bool = False) -> Iterator[None]:
         for s, h in old.items():
             signal.signal(s, signal.SIG_IGN if then_ignore else h)
         _pending.clear()
+        _stopping.clear()
 
 
 @contextmanager
-def cleanup_on_exit(fn: Callable[[], None]) -> Iterator[None]:
-    """Run ``fn`` if the process is forced out by a second signal while the block runs."""
+def cleanup_on_exit(fn: Callable[[], str | None]) -> Iterator[None]:
+    """Run ``fn`` if the process is forced out while the block runs (a second signal, a run that
+    does not stop, :mod:`.watchdog`); a path it returns is where finished tiles were kept."""
     _cleanups.append(fn)
     try:
         yield
@@ -97,12 +101,15 @@ def cleanup_on_exit(fn: Callable[[], None]) -> Iterator[None]:
         _cleanups.remove(fn)
 
 
-def run_cleanups() -> None:
+def run_cleanups() -> str | None:
+    """Run the cleanups, last first; the kept tiles' folder when one says it kept them."""
+    kept = None
     for fn in reversed(_cleanups):
         try:
-            fn()
+            kept = fn() or kept
         except Exception:  # noqa: BLE001 - best effort on the way out
             pass
+    return kept
 
 
 def remove_process_temp_dir() -> None:

@@ -20,6 +20,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from . import interrupt
+from .replaceable import check_replaceable
 from .types import SoilVolumeError, short_error
 
 try:
@@ -267,6 +268,7 @@ class OutputDir:
             raise os_problem(exc, final) from exc
         if final.is_dir() and not os.access(final, os.W_OK | os.X_OK):
             raise SoilVolumeError(f"{final}: the output folder is not writable")
+        check_replaceable(final)
         if entries and not self.overwrite:
             raise SoilVolumeError(f"{final}: output folder exists and is not empty (use --overwrite)")
         foreign = [e for e in entries if not self._ours(e)]
@@ -393,6 +395,7 @@ def check_output_file(path: Path, inputs: Iterable[Path | str | None]) -> Path:
         raise SoilVolumeError(f"{final.parent}: the output folder does not exist")
     if not os.access(final.parent, os.W_OK | os.X_OK):
         raise SoilVolumeError(f"{final.parent}: the output folder is not writable")
+    check_replaceable(final)
     if len(final.name.encode()) > NAME_MAX:
         raise SoilVolumeError(f"{path}: file name longer than {NAME_MAX} bytes")
     with locked(final.parent):

@@ -1,9 +1,10 @@
 """Every run ends, whatever C loop its threads are in: a thread beside the run that
 
 - hears SIGINT/SIGTERM through the interpreter's wakeup file descriptor (written by the C-level
-  handler even while the main thread waits on a thread stuck in native code, where the Python
-  handler and :func:`.interrupt.check` never run): when the run has not stopped
-  :data:`GRACE` seconds later, its cleanups run and the process leaves with the usual line;
+  handler even while the main thread waits on a thread stuck in native code, where
+  :func:`.interrupt.check` never runs): when the run has not begun to stop :data:`GRACE` seconds
+  later (or, stopping, has not ended after :data:`STOPPING_S`), its cleanups run and the process
+  leaves with the usual line;
 - under an address-space limit (``ulimit -v``), sees a thread spinning at it: OpenBLAS retries a
   failed buffer allocation for ever (a series' two RANSAC planes on two threads at 600 MB spun for
   12 minutes), in system time, with the address space full and unchanged. After :data:`SPIN_S`
@@ -21,7 +22,8 @@ from collections.abc import Callable
 
 from .memlimit import BLAS_BUFFER, address_limit
 
-GRACE = 0.75  # s: a run that has not stopped this long after a signal is ended
+GRACE = 0.75  # s: a run that has not begun to stop this long after a signal is ended
+STOPPING_S = 10.0  # s: a run stopping (its cleanups, a cluster's shutdown) is ended after this
 TICK = 0.25  # s: how often the thread looks
 STACK = 256 << 10  # bytes: the watching thread's stack
 M_ARENA_MAX = -8  # glibc's mallopt parameter
@@ -33,8 +35,8 @@ class Watchdog:
     """The watching thread of one run (:meth:`start` in the main thread, :meth:`stop` after it);
     ``leave(signum_or_none)`` is called, from the thread, to end the process."""
 
-    def __init__(self, leave: Callable[[int | None], None]) -> None:
-        self.leave = leave
+    def __init__(self, leave: Callable[[int | None], None], stopping: Callable[[], bool]) -> None:
+        self.leave, self.stopping = leave, stopping
         self.done = threading.Event()
         self.old_fd = -1
         self.read_fd = self.write_fd = -1
@@ -77,7 +79,8 @@ class Watchdog:
             if self.done.is_set():
                 break
             if deadline is not None and time.monotonic() > deadline:
-                self.leave(signum)
+                if not self.stopping() or time.monotonic() > deadline - GRACE + STOPPING_S:
+                    self.leave(signum)
             if spin.spinning():
                 self.leave(None)
         self._close()

@@ -166,7 +166,7 @@ def run_store(final: Path) -> Iterator[RunStore]:
     (the :class:`Interrupted` then says where)."""
     store = RunStore(final)
     try:
-        with cleanup_on_exit(lambda: store.close(keep=True)):  # a second signal: out at once
+        with cleanup_on_exit(lambda: str(store.kept) if store.close(keep=True) else None):  # forced: out at once
             yield store
     except Interrupted as exc:
         kept = store.close(keep=True)

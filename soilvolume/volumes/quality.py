@@ -50,7 +50,7 @@ def assess(
     unseen = coverage_check(report)
     if unseen is not None:
         out.append(unseen)
-    if unseen is None or unseen[0] != "unreliable":  # unseen change: not "no change"
+    if all(sev != "unreliable" for sev, _ in out):  # a run not reliable states no confidence
         out += significance_check(v["net"], u["net"])
     return verdict(out)
 

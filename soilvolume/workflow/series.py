@@ -276,7 +276,9 @@ class Series:
     def write(self, run) -> None:
         from ..reporting.series import write_rasters
 
-        write_rasters(run.out, run.vols, self.vols[0].dem_b, run.grid)
+        write_rasters(
+            run.out, run.vols, self.vols[0].dem_out_b, run.grid
+        )  # E0 refilled: the DEMs give back the differences
 
     def report_step(self, run) -> None:
         from ..reporting.series import write_reports
