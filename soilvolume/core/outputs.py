@@ -1,9 +1,6 @@
-"""All-or-nothing outputs: a run builds its files in a hidden staging folder next to ``--out`` (same file
-system) and swaps it into place only when everything succeeded, so a reader of ``--out`` sees the complete
-old set or the complete new set, never a mix. Hidden siblings are named ``.<name>.soilvolume-staging-<pid>``
-(the new set) and ``.<name>.soilvolume-trash-<pid>`` (the old set during a swap); those of runs that are no
-longer alive (killed) are recognised and removed by the next run, which restores a trashed old set if a kill
-struck between the two renames of a swap.
+"""All-or-nothing outputs: files are built in a hidden staging folder beside ``--out``
+(``.<name>.soilvolume-staging-<pid>``) and swapped in only when all succeeded (the old set parked as
+``.<name>.soilvolume-trash-<pid>``); a killed run's siblings are removed, or its old set restored, by the next run.
 """
 
 from __future__ import annotations
