@@ -1,27 +1,38 @@
-"""Building, loading, validating and running PDAL pipelines (embedded executor, real PDAL)."""
+"""Building, loading, validating and running PDAL pipelines: the embedded executor, real PDAL
+when it imports (a stand-in module proves the route here), the same points from both."""
 
 from __future__ import annotations
 
 import json
+import re
+import sys
+import types
 from pathlib import Path
 
+import laspy
 import numpy as np
+import pyproj
 import pytest
 
 from soilvolume.core.types import SoilVolumeError
+from soilvolume.inputs import crs
+from soilvolume.inputs.io import write_las
 from soilvolume.pipelines import pipeline as P
 from soilvolume.pipelines.stages import REGISTRY
 
 REAL = "/work/shared/data/real/autzen_bmx_2010.las"
 FT = 0.304800609601219
 RESOURCES = Path(__file__).resolve().parents[1] / "resources" / "pipelines"
+SQUARE = "POLYGON ((194475 259225, 194505 259225, 194505 259260, 194475 259260, 194475 259225))"
 
 
-def _las(path: Path, xyz: np.ndarray, cls=None, crs="EPSG:32633") -> Path:
-    from soilvolume.inputs.io import write_las
-
-    write_las(path, xyz, __import__("pyproj").CRS(crs).to_wkt(), cls)
+def _las(path: Path, xyz: np.ndarray, cls=None, srs="EPSG:32633") -> Path:
+    write_las(path, xyz, pyproj.CRS(srs).to_wkt(), cls)
     return path
+
+
+def _points(stages, source="<pipeline>"):
+    return P.view_to_raw(P.run_pipeline(stages, engine="embedded", source=source), "x", source)
 
 
 # ----------------------------------------------------------------------------- building
@@ -30,11 +41,8 @@ def test_build_prepare_pipeline_stages_and_json_round_trip(tmp_path):
         REAL,
         in_srs="EPSG:2991+6360",
         out_srs="EPSG:2991+5703",
-        crop={"bounds": (194470, 259220, 194510, 259270)},
-        outlier=(8, 2.5),
+        polygon=SQUARE,
         ground="filter",
-        z_range=(100, None),
-        voxel=0.25,
         output=tmp_path / "out.laz",
     )
     assert [s["type"] for s in stages] == [
@@ -42,18 +50,12 @@ def test_build_prepare_pipeline_stages_and_json_round_trip(tmp_path):
         "filters.reprojection",
         "filters.crop",
         "filters.assign",
-        "filters.outlier",
-        "filters.range",
         "filters.smrf",
         "filters.range",
-        "filters.range",
-        "filters.voxelcenternearestneighbor",
         "writers.las",
     ]
     assert stages[0]["default_srs"] == "EPSG:2991+6360"
-    assert stages[2]["bounds"] == "([194470.0, 194510.0], [259220.0, 259270.0])"
-    assert stages[5]["limits"] == "Classification![7:7]"
-    assert stages[8]["limits"] == "Z[100.0:]"
+    assert stages[2]["polygon"] == SQUARE and stages[5]["limits"] == "Classification[2:2]"
     assert all(s["type"] in REGISTRY for s in stages)
     text = P.dumps(stages)
     assert json.loads(text) == {"pipeline": stages}
@@ -64,19 +66,15 @@ def test_build_prepare_pipeline_stages_and_json_round_trip(tmp_path):
     assert (tmp_path / "out.laz").is_file()
 
 
-def test_build_crop_forms_and_ground_modes(tmp_path):
-    poly = "POLYGON((0 0, 1 0, 1 1, 0 0))"
-    assert P.build_prepare_pipeline(REAL, crop={"polygon": poly})[1]["polygon"] == poly
-    pt = P.build_prepare_pipeline(REAL, crop={"point": (1, 2), "distance": 3})[1]
-    assert pt == {"type": "filters.crop", "point": "POINT(1.0 2.0)", "distance": 3.0}
-    cls = P.build_prepare_pipeline(REAL, ground="class", outlier=None)
+def test_build_ground_modes(tmp_path):
+    cls = P.build_prepare_pipeline(REAL, ground="class")
     assert cls[1] == {"type": "filters.range", "limits": "Classification[2:2]"}
     # autzen_bmx_2010 is all class 2: auto means class; a cloud without class 2 means none
-    assert P.build_prepare_pipeline(REAL, ground="auto", outlier=None) == cls
+    assert P.build_prepare_pipeline(REAL, ground="auto") == cls
     n = _las(tmp_path / "n.las", np.random.default_rng(0).uniform(0, 10, (50, 3)), np.ones(50, dtype=np.uint8))
-    assert len(P.build_prepare_pipeline(n, ground="auto", outlier=None)) == 1
+    assert len(P.build_prepare_pipeline(n, ground="auto")) == 1
     g = _las(tmp_path / "g.las", np.random.default_rng(0).uniform(0, 10, (50, 3)), np.full(50, 2, dtype=np.uint8))
-    assert P.build_prepare_pipeline(g, ground="auto", outlier=None)[1]["limits"] == "Classification[2:2]"
+    assert P.build_prepare_pipeline(g, ground="auto")[1]["limits"] == "Classification[2:2]"
     with pytest.raises(SoilVolumeError, match="ground 'trees'"):
         P.build_prepare_pipeline(REAL, ground="trees")
     with pytest.raises(SoilVolumeError, match=r"\.las or \.laz"):
@@ -86,77 +84,37 @@ def test_build_crop_forms_and_ground_modes(tmp_path):
 def test_text_cloud_without_header_gets_one(tmp_path):
     f = tmp_path / "c.xyz"
     f.write_text("0 0 1 7\n1 0 2 7\n0 1 3 7\n")
-    stages = P.build_prepare_pipeline(f, in_srs="EPSG:32633", outlier=None)
+    stages = P.build_prepare_pipeline(f, in_srs="EPSG:32633")
     assert stages[0]["header"] == "X Y Z ColumnD"
-    raw = P.prepare_cloud(f, in_srs="EPSG:32633", outlier=None, engine="embedded")
+    raw = _points(stages)
     assert raw.xyz[:, 2].tolist() == [1, 2, 3] and "32633" in raw.crs_wkt
 
 
 # ----------------------------------------------------------------------------- running
-def test_prepare_cloud_real_file_vertical_feet_to_metres():
-    base = P.prepare_cloud(REAL, outlier=None, engine="embedded")
-    out = P.prepare_cloud(REAL, out_srs="EPSG:2991+5703", outlier=None, engine="embedded")
+def test_prepared_real_file_vertical_feet_to_metres():
+    base = _points(P.build_prepare_pipeline(REAL))
+    out = _points(P.build_prepare_pipeline(REAL, out_srs="EPSG:2991+5703"))
     np.testing.assert_allclose(out.xyz[:, 2], base.xyz[:, 2] * FT, rtol=1e-12)
     np.testing.assert_allclose(out.xyz[:, :2], base.xyz[:, :2], atol=1e-6)
-    assert out.path == REAL and out.classification is not None
-    import pyproj
-
-    from soilvolume.inputs import crs
-
+    assert out.classification is not None
     assert crs.z_unit(pyproj.CRS.from_wkt(out.crs_wkt)) == 1.0
     assert crs.z_unit(pyproj.CRS.from_wkt(base.crs_wkt)) == pytest.approx(FT)
 
 
-def test_prepare_cloud_crop_outliers_voxel(tmp_path):
-    rng = np.random.default_rng(2)
-    xyz = np.column_stack([rng.uniform(0, 50, 20000), rng.uniform(0, 50, 20000), rng.normal(0, 0.02, 20000)])
-    xyz[:20, 2] = 40.0  # spikes
-    f = _las(tmp_path / "a.las", xyz + [500000, 0, 0])
-    raw = P.prepare_cloud(f, crop={"bounds": (500010, 10, 500040, 40)}, outlier=(8, 2.5), voxel=1.0, engine="embedded")
-    assert raw.xyz[:, 0].min() >= 500010 and raw.xyz[:, 1].max() <= 40
-    assert raw.xyz[:, 2].max() < 1.0  # spikes gone
-    assert len(raw.xyz) <= 31 * 31
-
-
-def test_dem_stage_mean_cells_equal_numpy(tmp_path):
-    import rasterio
-
-    rng = np.random.default_rng(4)
-    xyz = np.column_stack([rng.uniform(0, 20, 5000), rng.uniform(0, 10, 5000), rng.normal(5, 1, 5000)])
-    f = _las(tmp_path / "d.las", xyz)
-    tif = tmp_path / "dem.tif"
-    stages = [P.reader_stage(f), P.build_dem_stage(tif, 2.0, origin=(0, 0), size=(10, 5))]
-    P.run_pipeline(stages, engine="embedded")
-    with rasterio.open(tif) as ds:
-        mean = ds.read(1)
-        assert ds.transform.c == 0 and ds.transform.f == 10 and mean.shape == (5, 10)
-    las = __import__("laspy").read(f)  # the stored (scaled) coordinates
-    x, y, z = np.asarray(las.x), np.asarray(las.y), np.asarray(las.z)
-    col, row = np.floor(x / 2).astype(int), 4 - np.floor(y / 2).astype(int)
-    for r in range(5):
-        for c in range(10):
-            sel = (row == r) & (col == c)
-            assert mean[r, c] == pytest.approx(z[sel].mean(), abs=1e-9)
-
-
 def test_sample_pipelines_run_in_the_embedded_executor(tmp_path):
-    for name in ("prepare_before.json", "prepare_after.json", "dem_mean.json"):
+    for name in ("prepare_before.json", "prepare_after.json"):
         stages = P.load_pipeline(RESOURCES / name)
-        for s in stages:
-            if s["type"].startswith("readers."):
-                s["filename"] = REAL if "prepare" in name else str(tmp_path / "before_prepared.laz")
-            elif "filename" in s:
-                s["filename"] = str(tmp_path / Path(s["filename"]).name)
+        stages[0]["filename"] = REAL
+        stages[-1]["filename"] = str(tmp_path / Path(stages[-1]["filename"]).name)
         view = P.run_pipeline(stages, engine="embedded", source=name)
         assert len(view) > 100, name
-    assert (tmp_path / "before_dem_mean.tif").is_file()
-    assert (tmp_path / "after_prepared.laz").is_file()
+    assert (tmp_path / "before_prepared.laz").is_file() and (tmp_path / "after_prepared.laz").is_file()
 
 
-def test_run_pipeline_file_and_engine_choice(tmp_path, monkeypatch):
+def test_pipeline_file_on_its_own_or_another_input(tmp_path, monkeypatch):
     f = tmp_path / "p.json"
     f.write_text(json.dumps([REAL, {"type": "filters.range", "limits": "Z[0:430]"}]))
-    raw = P.run_pipeline_file(f, engine="embedded")
+    raw = P.prepare_cloud_from_file(f, engine="embedded")
     assert raw.path == REAL and raw.xyz[:, 2].max() <= 430
     other = _las(tmp_path / "o.las", np.array([[0.0, 0, 1], [1, 1, 500]]))
     raw2 = P.prepare_cloud_from_file(f, other, engine="embedded")  # the CLI's BEFORE wins
@@ -164,7 +122,7 @@ def test_run_pipeline_file_and_engine_choice(tmp_path, monkeypatch):
     xyz = tmp_path / "o.xyz"
     xyz.write_text("0 0 1\n1 1 2\n")
     assert P.prepare_cloud_from_file(f, xyz, engine="embedded").xyz.shape == (2, 3)
-    monkeypatch.setattr(P, "_pdal_module", lambda: None)
+    monkeypatch.setitem(sys.modules, "pdal", None)  # `import pdal` fails
     with pytest.raises(SoilVolumeError, match="pdal Python bindings do not import"):
         P.run_pipeline(P.load_pipeline(f), engine="pdal")
     assert len(P.run_pipeline(P.load_pipeline(f), engine="auto")) == len(raw.xyz)
@@ -173,27 +131,28 @@ def test_run_pipeline_file_and_engine_choice(tmp_path, monkeypatch):
 
 
 # ----------------------------------------------------------------------------- errors
-def test_unknown_stage_and_option_give_clear_errors():
+@pytest.mark.parametrize(
+    ("stage", "named"),
+    [
+        ({"type": "filters.sample", "radius": 1.0}, "stage 'filters.sample' needs PDAL"),
+        ({"type": "filters.outlier"}, "stage 'filters.outlier' needs PDAL"),
+        ({"type": "writers.gdal", "resolution": 1.0}, "stage 'writers.gdal' needs PDAL"),
+        ({"type": "filters.crop", "bounds": "([0,1],[0,1])"}, "option 'bounds' of filters.crop needs PDAL"),
+        ({"type": "filters.smrf", "ignore": "Classification[7:7]"}, "option 'ignore' of filters.smrf needs PDAL"),
+    ],
+)
+def test_what_the_embedded_executor_lacks_is_one_line_naming_it(tmp_path, stage, named):
+    """Before: 'is not supported by the embedded executor'. A stage or option beyond the project's
+    own pipelines is refused before any stage runs: the writer ahead of it wrote nothing."""
+    out = tmp_path / "early.las"
+    stages = [{"type": "readers.las", "filename": REAL}, {"type": "writers.las", "filename": str(out)}, stage]
     with pytest.raises(SoilVolumeError) as e:
-        P.run_pipeline(
-            [{"type": "readers.las", "filename": REAL}, {"type": "filters.foo"}], engine="embedded", source="mine.json"
-        )
+        P.run_pipeline(stages, engine="embedded", source="mine.json")
     msg = str(e.value)
-    assert msg.startswith(
-        "pipeline mine.json: stage 'filters.foo' is not supported by the embedded executor (supported: "
-    )
-    assert "filters.smrf" in msg
-    with pytest.raises(SoilVolumeError) as e:
-        P.run_pipeline(
-            [{"type": "readers.las", "filename": REAL}, {"type": "filters.crop", "bounds": "([0,1],[0,1])", "bar": 1}],
-            engine="embedded",
-            source="mine.json",
-        )
-    assert "option 'bar' of filters.crop is not supported" in str(e.value)
-    with pytest.raises(SoilVolumeError, match="exactly one reader"):
-        P.run_pipeline(
-            [{"type": "readers.las", "filename": REAL}, {"type": "readers.las", "filename": REAL}], engine="embedded"
-        )
+    assert msg.startswith(f"pipeline mine.json: {named} (without the pdal Python bindings ")
+    assert "\n" not in msg and not out.exists()
+    with pytest.raises(SoilVolumeError, match="several readers need PDAL"):
+        P.run_pipeline([stages[0], stages[0]], engine="embedded")
 
 
 @pytest.mark.parametrize(
@@ -232,30 +191,86 @@ def test_load_accepts_pdal_forms(tmp_path):
         P.load_pipeline("/no/such.json")
 
 
+def test_the_cli_guide_lists_the_embedded_stages_and_options():
+    """docs/cli.md's table is what the embedded executor runs, stage by stage and option by option."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "cli.md").read_text(encoding="utf-8")
+    listed: dict[str, set[str]] = {}
+    for line in text.splitlines():
+        cells = line.split("|")
+        if line.startswith("| `") and len(cells) == 4:
+            options = set(re.findall(r"`([a-z_]+)`", cells[2].split("(")[0]))
+            for stage in re.findall(r"`([a-z]+\.[a-z]+)`", cells[1]):
+                listed[stage] = options
+    assert listed == {kind: set(opts) for kind, (_, opts) in REGISTRY.items()}
+
+
 # ----------------------------------------------------------------------------- real PDAL
-def test_same_pipeline_through_real_pdal_matches_embedded(tmp_path):
+class _StandIn:
+    """A stand-in for the ``pdal`` bindings: ``Pipeline(json).execute()``, ``.arrays`` (structured
+    arrays in PDAL's dimension names) and ``.srswkt2``; it reads the reader's LAS file with laspy
+    and applies no stage, so its points tell its route from the embedded executor's."""
+
+    def __init__(self) -> None:
+        self.runs: list[list[dict]] = []
+        self.module = types.ModuleType("pdal")
+        self.module.Pipeline = self._pipeline
+
+    def _pipeline(self, text: str):
+        stages = json.loads(text)["pipeline"]
+        self.runs.append(stages)
+        las = laspy.read(stages[0]["filename"])
+        dtype = [("X", "f8"), ("Y", "f8"), ("Z", "f8"), ("Classification", "u1"), ("Intensity", "u2")]
+        data = np.zeros(len(las.x), dtype=dtype)
+        data["X"], data["Y"], data["Z"] = las.x, las.y, las.z
+        data["Classification"] = las.classification
+        run = types.SimpleNamespace(execute=lambda: len(data), arrays=[data[:5], data[5:]])
+        run.srswkt2 = las.header.parse_crs().to_wkt()
+        return run
+
+
+def test_real_pdal_is_taken_whenever_it_imports_else_the_embedded_executor(tmp_path, monkeypatch):
+    """With a ``pdal`` module importable, every pipeline (a stage the embedded executor lacks too)
+    goes to it; without one, the same call runs the embedded executor or names what needs PDAL."""
+    pipe = tmp_path / "p.json"
+    pipe.write_text(
+        json.dumps([REAL, {"type": "filters.sample", "radius": 1.0}, {"type": "filters.range", "limits": "Z[0:430]"}])
+    )
+    fake = _StandIn()
+    monkeypatch.setitem(sys.modules, "pdal", fake.module)
+    raw = P.prepare_cloud_from_file(pipe)
+    assert [s["type"] for s in fake.runs[0]] == ["readers.las", "filters.sample", "filters.range"]
+    las = laspy.read(REAL)
+    np.testing.assert_array_equal(raw.xyz, np.column_stack([las.x, las.y, las.z]))  # both arrays, in order
+    assert raw.classification.dtype == np.uint8 and "ftUS" in raw.crs_wkt and raw.path == REAL
+    monkeypatch.setitem(sys.modules, "pdal", None)
+    with pytest.raises(SoilVolumeError, match=r"^pipeline .*p\.json: stage 'filters.sample' needs PDAL"):
+        P.prepare_cloud_from_file(pipe)
+    pipe.write_text(json.dumps([REAL, {"type": "filters.range", "limits": "Z[0:430]"}]))
+    assert P.prepare_cloud_from_file(pipe).xyz[:, 2].max() <= 430 < raw.xyz[:, 2].max()
+    assert len(fake.runs) == 1
+
+
+@pytest.mark.parametrize("ground", ["none", "class", "filter"])
+def test_same_pipeline_through_real_pdal_matches_embedded(tmp_path, ground):
+    """The project's own pipeline (as ``soilvolume pipeline --emit`` writes it) gives the same
+    points through PDAL and the embedded executor."""
     pytest.importorskip(
         "pdal",
         reason="the pdal Python bindings do not import here (PDAL's C++ library is not "
         "installable on this machine); the PDAL-vs-embedded comparison runs where PDAL exists",
     )
     stages = P.build_prepare_pipeline(
-        REAL, out_srs="EPSG:2991+5703", crop={"bounds": (194475, 259225, 194505, 259260)}, outlier=(8, 2.5), voxel=0.5
+        REAL, out_srs="EPSG:2991+5703", polygon=SQUARE, ground=ground, output=tmp_path / "a.laz"
     )
     a = P.run_pipeline(stages, engine="pdal")
+    stages[-1] = {**stages[-1], "filename": str(tmp_path / "b.laz")}
     b = P.run_pipeline(stages, engine="embedded")
-    assert len(a) == len(b)
+    assert len(a) == len(b) > 0
     oa, ob = np.lexsort(a.xyz.T), np.lexsort(b.xyz.T)
     np.testing.assert_allclose(a.xyz[oa], b.xyz[ob], atol=1e-6)
-    dem = [P.reader_stage(REAL), P.build_dem_stage(tmp_path / "a.tif", 2.0)]
-    P.run_pipeline(dem, engine="pdal")
-    dem[1]["filename"] = str(tmp_path / "b.tif")
-    P.run_pipeline(dem, engine="embedded")
-    import rasterio
-
-    with rasterio.open(tmp_path / "a.tif") as da, rasterio.open(tmp_path / "b.tif") as db:
-        np.testing.assert_allclose(da.read(1), db.read(1), atol=1e-9)
-        assert da.transform == db.transform
+    np.testing.assert_array_equal(a.arrays["Classification"][oa], b.arrays["Classification"][ob])
+    la, lb = laspy.read(tmp_path / "a.laz"), laspy.read(tmp_path / "b.laz")
+    np.testing.assert_allclose(np.sort(np.asarray(la.z)), np.sort(np.asarray(lb.z)), atol=1e-3)
 
 
 def test_a_writers_side_file_goes_when_the_run_fails(tmp_path):

@@ -8,6 +8,7 @@ import hashlib
 import json
 import math
 import struct
+import sys
 from dataclasses import fields
 from pathlib import Path
 
@@ -166,22 +167,44 @@ def test_pipeline_writers_go_into_the_output_and_nowhere_else(capsys, pair, tmp_
     b, a = pair
     work = tmp_path / "work"
     work.mkdir()
-    outside = tmp_path / "outside.tif"
+    outside = tmp_path / "outside.laz"
     pipe = _pipeline(
         work / "p.json",
         {"type": "readers.las", "filename": str(b)},
         {"type": "writers.las", "filename": "../escape.las"},
-        {"type": "writers.gdal", "filename": str(outside), "resolution": 2, "output_type": "mean"},
+        {"type": "writers.las", "filename": str(outside)},
     )
     code, err = cli(capsys, "estimate", b, a, "--out", work / "o", "--before-pipeline", pipe, "--quiet")
     assert code == 0, err
-    assert {"escape.las", "outside.tif", "report.json"} <= {p.name for p in (work / "o").iterdir()}
+    assert {"escape.las", "outside.laz", "report.json"} <= {p.name for p in (work / "o").iterdir()}
     assert not outside.exists() and not (tmp_path / "escape.las").exists()
     # the same writers in a failing run leave nothing anywhere
     code, err = cli(
         capsys, "estimate", b, a, "--out", work / "o2", "--before-pipeline", pipe, "--cell", "50", "--quiet"
     )
     assert code == 1 and not (work / "o2").exists() and not outside.exists() and _hidden(work) == []
+
+
+@pytest.mark.parametrize(
+    ("stage", "named"),
+    [
+        ({"type": "filters.voxelcenternearestneighbor", "cell": 1.0}, "stage 'filters.voxelcenternearestneighbor'"),
+        ({"type": "filters.crop", "bounds": "([0, 1], [0, 1])"}, "option 'bounds' of filters.crop"),
+    ],
+)
+def test_a_pipeline_stage_beyond_the_embedded_executor_says_it_needs_pdal(
+    capsys, pair, tmp_path, monkeypatch, stage, named
+):
+    """Without the pdal bindings, a user's pipeline with a stage or option the embedded executor
+    does not have is one line naming it and saying it needs PDAL; nothing written, inputs intact
+    (before: filters.voxelcenternearestneighbor ran; 'not supported by the embedded executor')."""
+    monkeypatch.setitem(sys.modules, "pdal", None)
+    b, a = pair
+    sums = _md5(b, a)
+    pipe = _pipeline(tmp_path / "p.json", str(b), {"type": "writers.las", "filename": "early.las"}, stage)
+    code, err = cli(capsys, "estimate", b, a, "--out", tmp_path / "o", "--before-pipeline", pipe, "--quiet")
+    _one_line_error(code, err, f"pipeline {pipe}: {named} needs PDAL")
+    assert _md5(b, a) == sums and not (tmp_path / "o").exists() and _hidden(tmp_path) == []
 
 
 def test_a_writer_may_not_take_the_name_of_a_run_output(capsys, pair, tmp_path):

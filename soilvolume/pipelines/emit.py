@@ -33,12 +33,12 @@ def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -
     after_xy = to_frame(raw_a.xyz, crs_a, frame, raw_a.path)[:, :2] / frame.xy_unit
     poly = footprint(after_xy, options.radius / frame.xy_unit)
     srs = frame.crs.to_wkt()
-    common = {"ground": options.ground, "out_srs": srs, "outlier": None}  # the engine's run removes none
+    common = {"ground": options.ground, "out_srs": srs}
     with output_dir(out_dir, [before, after], True, EMITTED) as out, os_errors(out.final):
         stages_b = build_prepare_pipeline(
             before,
             in_srs=options.before_crs,
-            crop={"polygon": polygon_wkt(poly)},
+            polygon=polygon_wkt(poly),
             output=out.final / "before_prepared.laz",
             **common,
         )

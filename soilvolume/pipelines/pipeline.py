@@ -14,23 +14,23 @@ import numpy as np
 
 from ..core.types import SoilVolumeError
 from ..inputs.io import GROUND, LAS_SUFFIXES, RawPoints, atomic_path
+from ..inputs.lasheader import check_las_header
 from . import stages as embedded
 from .confine import confine_writers
 from .load import READERS, TEXT_SUFFIXES, load_pipeline
-from .stages.geometry import format_bounds
-from .stages.readers import SRS_OPTS
+from .stages.csf import DEFAULTS as CSF_DEFAULTS
 from .stages.view import PointView
+
+#: a reader's SRS options, kept when a user's pipeline reads another file (see :func:`with_input`)
+SRS_OPTS = ("override_srs", "spatialreference", "default_srs")
 
 __all__ = [
     "PointView",
     "build_prepare_pipeline",
-    "build_dem_stage",
     "dumps",
     "load_pipeline",
-    "prepare_cloud",
     "prepare_cloud_from_file",
     "run_pipeline",
-    "run_pipeline_file",
     "save_pipeline",
     "view_to_raw",
     "with_input",
@@ -82,8 +82,6 @@ def has_ground_class(path: str | os.PathLike) -> bool:
         return False
     import laspy
 
-    from ..inputs.lasheader import check_las_header
-
     check_las_header(Path(path))
     with laspy.open(path) as reader:
         if "classification" not in reader.header.point_format.dimension_names:
@@ -94,21 +92,16 @@ def has_ground_class(path: str | os.PathLike) -> bool:
     return False
 
 
-def _crop_stage(crop: dict[str, Any]) -> dict[str, Any]:
-    stage: dict[str, Any] = {"type": "filters.crop"}
-    if "polygon" in crop:
-        stage["polygon"] = crop["polygon"]
-    elif "bounds" in crop:
-        stage["bounds"] = format_bounds(*(float(v) for v in crop["bounds"]))
-    elif "point" in crop and "distance" in crop:
-        stage["point"] = "POINT(" + " ".join(repr(float(v)) for v in crop["point"]) + ")"
-        stage["distance"] = float(crop["distance"])
+def _ground_stages(ground: str, smrf: dict[str, Any] | None) -> list[dict[str, Any]]:
+    """The stages keeping the ground points of a ground mode (class, filter, csf or none)."""
+    keep = {"type": "filters.range", "limits": "Classification[2:2]"}
+    if ground == "filter":
+        classify = {"type": "filters.smrf", **(smrf or {})}
+    elif ground == "csf":
+        classify = {"type": "filters.csf", **CSF_DEFAULTS}
     else:
-        raise SoilVolumeError(f"crop {crop!r}: give 'polygon', 'bounds' or 'point' + 'distance'")
-    for key in ("outside", "a_srs"):
-        if key in crop:
-            stage[key] = crop[key]
-    return stage
+        return [keep] if ground == "class" else []
+    return [{"type": "filters.assign", "value": "Classification = 0"}, classify, keep]
 
 
 def build_prepare_pipeline(
@@ -116,23 +109,18 @@ def build_prepare_pipeline(
     *,
     in_srs: str | None = None,
     out_srs: str | None = None,
-    crop: dict[str, Any] | None = None,
-    outlier: tuple[int, float] | None = (8, 2.5),
+    polygon: str | None = None,
     ground: str = "none",
-    z_range: tuple[float | None, float | None] | None = None,
-    voxel: float | None = None,
     output: str | os.PathLike | None = None,
     smrf: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
-    """The preparation of one cloud as PDAL stages.
+    """The preparation of one cloud as PDAL stages, the engine's own pipeline.
 
-    read (``in_srs`` = the CRS when the file has none) -> reproject to ``out_srs`` -> crop
-    (``{"polygon": wkt}``, ``{"bounds": (xmin, ymin, xmax, ymax)}`` or ``{"point": (x, y),
-    "distance": r}``, in ``out_srs`` units) -> ground class (``ground='class'``) -> statistical
-    outliers ``(mean_k, multiplier)`` removed -> SMRF ground filter (``ground='filter'``, options
-    ``smrf``) or the cloth simulation filter (``ground='csf'``, tuned for earthworks) -> Z range ->
-    voxel thinning -> optional LAS/LAZ ``output``. ``ground='auto'`` is
-    'class' when the file has class-2 points, else 'none'.
+    read (``in_srs`` = the CRS when the file has none) -> reproject to ``out_srs`` -> crop to the
+    WKT ``polygon`` (in ``out_srs`` units) -> ground: class 2 (``ground='class'``), the SMRF
+    filter (``'filter'``, options ``smrf``) or the cloth simulation filter (``'csf'``, tuned for
+    earthworks) -> optional LAS/LAZ ``output``. ``ground='auto'`` is 'class' when the file has
+    class-2 points, else 'none'.
     """
     if ground == "auto":
         ground = "class" if has_ground_class(path) else "none"
@@ -141,29 +129,9 @@ def build_prepare_pipeline(
     out: list[dict[str, Any]] = [reader_stage(path, in_srs)]
     if out_srs:
         out.append({"type": "filters.reprojection", "out_srs": out_srs})
-    if crop:
-        out.append(_crop_stage(crop))
-    if ground == "class":
-        out.append({"type": "filters.range", "limits": "Classification[2:2]"})
-    if ground in ("filter", "csf"):
-        out.append({"type": "filters.assign", "value": "Classification = 0"})
-    if outlier is not None:
-        k, mult = outlier
-        out.append({"type": "filters.outlier", "method": "statistical", "mean_k": int(k), "multiplier": float(mult)})
-        out.append({"type": "filters.range", "limits": "Classification![7:7]"})
-    if ground in ("filter", "csf"):
-        if ground == "filter":
-            out.append({"type": "filters.smrf", **(smrf or {})})
-        else:
-            from .stages.csf import DEFAULTS
-
-            out.append({"type": "filters.csf", **DEFAULTS})
-        out.append({"type": "filters.range", "limits": "Classification[2:2]"})
-    if z_range is not None:
-        lo, hi = ("" if v is None else repr(float(v)) for v in z_range)
-        out.append({"type": "filters.range", "limits": f"Z[{lo}:{hi}]"})
-    if voxel:
-        out.append({"type": "filters.voxelcenternearestneighbor", "cell": float(voxel)})
+    if polygon:
+        out.append({"type": "filters.crop", "polygon": polygon})
+    out += _ground_stages(ground, smrf)
     if output is not None:
         if Path(output).suffix.lower() not in LAS_SUFFIXES:
             raise SoilVolumeError(f"{output}: the prepared cloud is written as .las or .laz")
@@ -171,32 +139,6 @@ def build_prepare_pipeline(
             {"type": "writers.las", "filename": str(output), "scale_x": 0.001, "scale_y": 0.001, "scale_z": 0.001}
         )
     return out
-
-
-def build_dem_stage(
-    filename: str | os.PathLike,
-    resolution: float,
-    *,
-    origin: tuple[float, float] | None = None,
-    size: tuple[int, int] | None = None,
-    output_type: str = "mean",
-    nodata: float = -9999.0,
-) -> dict[str, Any]:
-    """writers.gdal for an average-height DEM: plain binning (``binmode``), origin = lower-left
-    corner, ``size`` = (width, height) cells."""
-    stage: dict[str, Any] = {
-        "type": "writers.gdal",
-        "filename": str(filename),
-        "resolution": float(resolution),
-        "binmode": True,
-        "output_type": output_type,
-        "data_type": "float64",
-        "nodata": nodata,
-        "gdaldriver": "GTiff",
-    }
-    if origin is not None and size is not None:
-        stage.update(origin_x=float(origin[0]), origin_y=float(origin[1]), width=int(size[0]), height=int(size[1]))
-    return stage
 
 
 def dumps(stages: list[dict[str, Any]]) -> str:
@@ -218,7 +160,27 @@ def _pdal_module():
     return pdal
 
 
+def _pdal_srs(p) -> str | None:
+    """The SRS of a run PDAL pipeline: ``srswkt2``, or with older bindings the last stage's
+    metadata."""
+    srs = getattr(p, "srswkt2", None)
+    if srs:
+        return srs
+    try:
+        meta = p.metadata
+        meta = json.loads(meta) if isinstance(meta, str) else meta
+        for node in reversed(list(meta["metadata"].values())):
+            node = node[0] if isinstance(node, list) else node
+            srs = node.get("srs", {}).get("wkt") or node.get("comp_spatialreference")
+            if srs:
+                return srs
+    except Exception:  # bindings without metadata, or another layout: no SRS
+        return None
+    return None
+
+
 def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
+    """The stages run by real PDAL; its views' points concatenated in PDAL's dimension names."""
     try:
         p = pdal.Pipeline(json.dumps({"pipeline": stages}))
         p.execute()
@@ -228,24 +190,10 @@ def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
     if not arrays:
         return PointView({k: np.empty(0) for k in "XYZ"}, None)
     data = np.concatenate(arrays) if len(arrays) > 1 else arrays[0]
-    out: dict[str, np.ndarray] = {}
-    for name in data.dtype.names:
-        out[name] = np.asarray(data[name], dtype=np.float64 if name in "XYZ" else None)
+    out = {name: np.asarray(data[name], dtype=np.float64 if name in "XYZ" else None) for name in data.dtype.names}
     if "Classification" in out:
         out["Classification"] = out["Classification"].astype(np.uint8)
-    srs = getattr(p, "srswkt2", None)
-    if not srs:  # older bindings: the SRS is in the metadata of the last stage
-        try:
-            meta = p.metadata
-            meta = json.loads(meta) if isinstance(meta, str) else meta
-            for node in reversed(list(meta["metadata"].values())):
-                node = node[0] if isinstance(node, list) else node
-                srs = node.get("srs", {}).get("wkt") or node.get("comp_spatialreference")
-                if srs:
-                    break
-        except Exception:
-            srs = None
-    return PointView(out, srs or None)
+    return PointView(out, _pdal_srs(p) or None)
 
 
 def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto", source: str = "<pipeline>") -> PointView:
@@ -271,20 +219,6 @@ def view_to_raw(view: PointView, path: str, source: str = "<pipeline>") -> RawPo
         raise SoilVolumeError(f"pipeline {source}: no points left after the pipeline ({path})")
     cls = view.arrays.get("Classification")
     return RawPoints(view.xyz, None if cls is None else cls.astype(np.uint8), view.srs_wkt, path)
-
-
-def prepare_cloud(path: str | os.PathLike, *, engine: str = "auto", **options: Any) -> RawPoints:
-    """Build the preparation pipeline of one cloud (see :func:`build_prepare_pipeline`), run it,
-    and return the points."""
-    stages = build_prepare_pipeline(path, **options)
-    return view_to_raw(run_pipeline(stages, engine=engine, source=str(path)), str(path), str(path))
-
-
-def run_pipeline_file(pipeline: str | os.PathLike, *, engine: str = "auto") -> RawPoints:
-    """A user's preparation pipeline file, run; the points keep the reader's filename as path."""
-    stages = confine_writers(load_pipeline(pipeline), str(pipeline))
-    view = run_pipeline(stages, engine=engine, source=str(pipeline))
-    return view_to_raw(view, stages[0]["filename"], str(pipeline))
 
 
 def with_input(stages: list[dict[str, Any]], path: str | os.PathLike) -> list[dict[str, Any]]:

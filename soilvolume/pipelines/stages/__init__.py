@@ -1,8 +1,9 @@
-"""The embedded executor: PDAL stages re-implemented with numpy/scipy, for machines without PDAL.
+"""The embedded executor: the stages of the project's own pipelines (those ``soilvolume pipeline
+--emit`` writes) re-implemented with numpy/scipy, for machines without PDAL.
 
-Only the stages and options in :data:`REGISTRY` run; anything else raises a
-:class:`~soilvolume.core.types.SoilVolumeError` naming the stage or option, so a pipeline never runs
-with an option silently ignored.
+Only the stages and options in :data:`REGISTRY` run; any other stage or option is one error naming
+it and saying it needs PDAL, raised before any stage runs, so a pipeline never runs with an option
+silently ignored and writes nothing when refused.
 """
 
 from __future__ import annotations
@@ -10,13 +11,13 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ...core.types import SoilVolumeError
-from . import crop, csf, outlier, readers, reprojection, sampling, smrf, writers
+from . import crop, csf, readers, reprojection, smrf, writers
 from . import range as range_stage
 from .view import PointView, StageContext
 
 StageFn = Callable[[PointView | None, dict, StageContext], PointView]
 
-#: options every stage accepts (PDAL's general stage options we can honour)
+#: options every stage accepts (PDAL's general stage options that change nothing here)
 GENERIC = {"type", "tag", "user_data"}
 
 REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
@@ -26,32 +27,28 @@ REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
     "readers.text": (readers.read_text, frozenset(readers.TEXT_OPTS)),
     "filters.reprojection": (reprojection.reproject, frozenset(reprojection.OPTS)),
     "filters.crop": (crop.crop, frozenset(crop.OPTS)),
-    "filters.outlier": (outlier.outlier, frozenset(outlier.OPTS)),
-    "filters.range": (range_stage.filter_range, frozenset(range_stage.RANGE_OPTS)),
     "filters.assign": (range_stage.assign, frozenset(range_stage.ASSIGN_OPTS)),
-    "filters.voxelcenternearestneighbor": (sampling.voxel_center_nn, frozenset(sampling.VOXEL_OPTS)),
-    "filters.sample": (sampling.sample, frozenset(sampling.SAMPLE_OPTS)),
+    "filters.range": (range_stage.filter_range, frozenset(range_stage.RANGE_OPTS)),
     "filters.smrf": (smrf.smrf, frozenset(smrf.OPTS)),
     "filters.csf": (csf.csf, frozenset(csf.OPTS)),
     "writers.las": (writers.write_las, frozenset(writers.LAS_OPTS)),
-    "writers.gdal": (writers.write_gdal, frozenset(writers.GDAL_OPTS)),
 }
 
 
 def check_stage(stage: dict, source: str) -> tuple[StageFn, str]:
-    """The function of a stage, or the error naming the unsupported stage/option."""
+    """The function of a stage, or the error naming the stage or option that needs PDAL."""
     kind = stage.get("type")
     if kind not in REGISTRY:
         raise SoilVolumeError(
-            f"pipeline {source}: stage '{kind}' is not supported by the embedded executor "
-            f"(supported: {', '.join(sorted(REGISTRY))})"
+            f"pipeline {source}: stage '{kind}' needs PDAL (without the pdal Python bindings only the "
+            f"stages of soilvolume's own pipelines run: {', '.join(REGISTRY)})"
         )
     fn, allowed = REGISTRY[kind]
     for name in stage:
         if name not in allowed and name not in GENERIC:
             raise SoilVolumeError(
-                f"pipeline {source}: option '{name}' of {kind} is not supported by the embedded "
-                f"executor (supported: {', '.join(sorted(allowed))})"
+                f"pipeline {source}: option '{name}' of {kind} needs PDAL (without the pdal Python "
+                f"bindings {kind} takes only {', '.join(sorted(allowed))})"
             )
     return fn, kind
 
@@ -62,8 +59,8 @@ def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
     readers_at = [i for i, (_, kind) in enumerate(checked) if kind.startswith("readers.")]
     if readers_at != [0]:
         raise SoilVolumeError(
-            f"pipeline {source}: the embedded executor runs exactly one reader, as the first "
-            "stage (no merging of several inputs)"
+            f"pipeline {source}: several readers need PDAL (the embedded executor runs exactly one "
+            "reader, as the first stage)"
         )
     view: PointView | None = None
     for stage, (fn, kind) in zip(stages, checked, strict=True):

@@ -1,4 +1,4 @@
-"""filters.range (PDAL range syntax) and the simple forms of filters.assign."""
+"""filters.range (PDAL range syntax) and filters.assign's ``value: "Dimension = number"``."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from ...core.types import SoilVolumeError
 from .view import PointView, StageContext
 
 RANGE_OPTS = {"limits"}
-ASSIGN_OPTS = {"value", "assignment"}
+ASSIGN_OPTS = {"value"}
 
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _RANGE = re.compile(rf"\s*([A-Za-z_][A-Za-z0-9_]*)\s*(!?)\s*([\[(])\s*({_NUM})?\s*:\s*({_NUM})?\s*([\])])\s*")
@@ -91,26 +91,14 @@ def filter_range(view: PointView, opts: dict, ctx: StageContext) -> PointView:
 
 
 _VALUE = re.compile(rf"\s*([A-Za-z_][A-Za-z0-9_]*)\s*=\s*({_NUM})\s*")
-_ASSIGNMENT = re.compile(rf"(.*\S)\s*=\s*({_NUM})\s*")
 
 
 def assign(view: PointView, opts: dict, ctx: StageContext) -> PointView:
-    """``value: "Dim = number"`` (no WHERE clause) or the deprecated ``assignment:
-    "Dim[lo:hi]=number"``, applied in order."""
+    """``value: "Dim = number"`` (no WHERE clause), applied in order."""
     for text in ctx.strings(opts, "value"):
         m = _VALUE.fullmatch(text)
         if not m:
-            raise ctx.error(f"value '{text}' is not supported by the embedded executor (only 'Dimension = number')")
+            raise ctx.error(f"value '{text}' needs PDAL (without it only 'Dimension = number')")
         arr = view.ensure(m.group(1))
         arr[:] = float(m.group(2))
-    for text in ctx.strings(opts, "assignment"):
-        m = _ASSIGNMENT.fullmatch(text)
-        try:
-            ranges = parse_ranges(m.group(1)) if m else []
-        except SoilVolumeError:
-            ranges = []
-        if len(ranges) != 1:
-            raise ctx.error(f"assignment '{text}' must look like 'Classification[:]=0'")
-        hit = select(view, ranges, ctx)
-        view.arrays[view.dim(ranges[0].name)][hit] = float(m.group(2))
     return view

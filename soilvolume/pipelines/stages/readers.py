@@ -8,16 +8,14 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
-from ...core.types import short_error
+from ...core.types import SoilVolumeError, short_error
 from ...inputs import io
 from ...inputs.lasheader import BoundsCheck, check_las_header
 from .view import PointView, StageContext
 
-SRS_OPTS = {"override_srs", "spatialreference", "default_srs"}
-COMMON = {"filename", "count"} | SRS_OPTS
-LAS_OPTS = COMMON
-PLY_OPTS = COMMON
-TEXT_OPTS = COMMON | {"header", "separator", "skip"}
+LAS_OPTS = {"filename", "default_srs"}
+PLY_OPTS = LAS_OPTS
+TEXT_OPTS = LAS_OPTS | {"header", "separator"}
 
 _KNOWN = {
     n.lower(): n
@@ -36,21 +34,49 @@ def _path(opts: dict, ctx: StageContext) -> Path:
 
 
 def _srs(view: PointView, opts: dict, ctx: StageContext) -> PointView:
-    """Apply override_srs (synonym spatialreference) / default_srs as PDAL readers do."""
-    override = ctx.string(opts, "override_srs") or ctx.string(opts, "spatialreference")
-    default = ctx.string(opts, "default_srs")
-    if override and default:
-        raise ctx.error("can't use both 'override_srs' and 'default_srs'")
-    text = override or (default if not view.srs_wkt else None)
-    if text:
+    """Apply default_srs as PDAL readers do: the file's own SRS wins."""
+    text = ctx.string(opts, "default_srs")
+    if text and not view.srs_wkt:
         try:
             view.srs_wkt = pyproj.CRS.from_user_input(text).to_wkt()
         except pyproj.exceptions.CRSError as exc:
             raise ctx.error(f"cannot understand SRS '{text[:80]}' ({exc})") from exc
-    count = ctx.integer(opts, "count")
-    if count is not None and count < len(view):
-        view = view.take(np.arange(max(count, 0)))
     return view
+
+
+#: the LAS dimensions read: PDAL's name -> laspy's
+_LAS_DIMS = {
+    "X": "x",
+    "Y": "y",
+    "Z": "z",
+    "Classification": "classification",
+    "ReturnNumber": "return_number",
+    "NumberOfReturns": "number_of_returns",
+    "Intensity": "intensity",
+}
+
+
+def _las_arrays(reader, path: Path) -> tuple[dict[str, np.ndarray], int]:
+    """The dimensions of an open LAS/LAZ file read in chunks, each chunk checked against the
+    header's box; returns the arrays and the number of points read."""
+    header = reader.header
+    n = header.point_count
+    present = set(header.point_format.dimension_names)
+    cols = {k: v for k, v in _LAS_DIMS.items() if v in present or k in "XYZ"}
+    dtypes = {"Intensity": np.uint16, "X": np.float64, "Y": np.float64, "Z": np.float64}
+    arrays = {k: np.empty(n, dtype=dtypes.get(k, np.uint8)) for k in cols}
+    start = 0
+    bounds = BoundsCheck(path, header)
+    for chunk in reader.chunk_iterator(2_000_000):
+        end = start + len(chunk)
+        if end > n:
+            raise SoilVolumeError(f"{path}: corrupt LAS file (more points than the header's {n})")
+        for k, v in cols.items():
+            arrays[k][start:end] = np.asarray(getattr(chunk, v))
+        bounds.update(np.c_[arrays["X"][start:end], arrays["Y"][start:end], arrays["Z"][start:end]])
+        start = end
+    bounds.finish()
+    return arrays, start
 
 
 def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
@@ -60,49 +86,16 @@ def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView
     path = _path(opts, ctx)
     try:
         check_las_header(path)
-    except io.SoilVolumeError as exc:
-        raise ctx.error(str(exc)) from exc
-    names = {
-        "X": "x",
-        "Y": "y",
-        "Z": "z",
-        "Classification": "classification",
-        "ReturnNumber": "return_number",
-        "NumberOfReturns": "number_of_returns",
-        "Intensity": "intensity",
-    }
-    try:
         with laspy.open(path) as reader:
-            header = reader.header
-            wkt = io.las_crs_wkt(header, path)
-            n = header.point_count
-            present = set(header.point_format.dimension_names)
-            cols = {k: v for k, v in names.items() if v in present or k in "XYZ"}
-            arrays = {
-                k: np.empty(n, dtype=np.float64 if k in "XYZ" else (np.uint16 if k == "Intensity" else np.uint8))
-                for k in cols
-            }
-            start = 0
-            bounds = BoundsCheck(path, header)
-            for chunk in reader.chunk_iterator(2_000_000):
-                m = len(chunk)
-                if start + m > n:
-                    raise io.SoilVolumeError(f"{path}: corrupt LAS file (more points than the header's {n})")
-                for k, v in cols.items():
-                    arrays[k][start : start + m] = np.asarray(getattr(chunk, v))
-                bounds.update(
-                    np.c_[
-                        arrays["X"][start : start + m], arrays["Y"][start : start + m], arrays["Z"][start : start + m]
-                    ]
-                )
-                start += m
-            bounds.finish()
+            wkt = io.las_crs_wkt(reader.header, path)
+            n = reader.header.point_count
+            arrays, read = _las_arrays(reader, path)
+    except SoilVolumeError as exc:
+        raise ctx.error(str(exc)) from exc
     except Exception as exc:  # laspy raises many types on broken files
-        if isinstance(exc, io.SoilVolumeError):
-            raise ctx.error(str(exc)) from exc
         raise ctx.error(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
-    if start != n:
-        raise ctx.error(f"{path}: corrupt LAS file (header says {n} points, read {start})")
+    if read != n:
+        raise ctx.error(f"{path}: corrupt LAS file (header says {n} points, read {read})")
     return _srs(PointView(arrays, wkt), opts, ctx)
 
 
@@ -111,7 +104,7 @@ def read_o3d(view: PointView | None, opts: dict, ctx: StageContext) -> PointView
     path = _path(opts, ctx)
     try:
         raw = io.read_points(path)
-    except io.SoilVolumeError as exc:
+    except SoilVolumeError as exc:
         raise ctx.error(str(exc)) from exc
     arrays = {"X": raw.xyz[:, 0].copy(), "Y": raw.xyz[:, 1].copy(), "Z": raw.xyz[:, 2].copy()}
     return _srs(PointView(arrays, None), opts, ctx)
@@ -134,19 +127,14 @@ def _split_header(line: str, sep: str | None) -> tuple[list[str], str]:
 def read_text(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
     """Delimited text as PDAL reads it: a header line names the dimensions (or option 'header'),
     fields split by the header's first non-alphanumeric character (or option 'separator'); a
-    space separator means any run of whitespace. 'skip' lines are ignored first."""
+    space separator means any run of whitespace."""
     path = _path(opts, ctx)
-    skip = ctx.integer(opts, "skip", 0) or 0
-    header = ctx.string(opts, "header")
+    header_line = ctx.string(opts, "header")
+    skiprows = 0
+    if header_line is None:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            header_line, skiprows = next(fh, ""), 1
     sep_opt = ctx.string(opts, "separator")
-    with open(path, encoding="utf-8", errors="replace") as fh:
-        lines = [next(fh, "") for _ in range(skip + 1)]
-    if header is None:
-        header_line = lines[skip] if len(lines) > skip else ""
-        skiprows = skip + 1
-    else:
-        header_line = header
-        skiprows = skip
     names, sep = _split_header(header_line, sep_opt)
     dims = [_KNOWN.get(n.lower(), n) for n in names]
     if not {"X", "Y", "Z"} <= set(dims):

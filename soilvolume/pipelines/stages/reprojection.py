@@ -7,31 +7,30 @@ import pyproj
 
 from .view import PointView, StageContext
 
-OPTS = {"in_srs", "out_srs", "error_on_failure"}
+OPTS = {"out_srs"}
 
 
 def _crs(text: str, name: str, ctx: StageContext) -> pyproj.CRS:
     try:
         return pyproj.CRS.from_user_input(text)
     except pyproj.exceptions.CRSError as exc:
-        raise ctx.error(f"option '{name}': cannot understand SRS '{text[:80]}' ({exc})") from exc
+        raise ctx.error(f"{name}: cannot understand SRS '{text[:80]}' ({exc})") from exc
 
 
 def reproject(view: PointView, opts: dict, ctx: StageContext) -> PointView:
-    """Transform X/Y/Z from ``in_srs`` (default: the points' SRS) to ``out_srs``.
+    """Transform X/Y/Z from the points' SRS to ``out_srs``.
 
     Like PDAL (PROJ via GDAL, OAMS_TRADITIONAL_GIS_ORDER), Z goes through the transformation, so a
     compound CRS with a vertical unit in feet to one in metres converts Z. Points whose
-    transformation fails are dropped, or raise with ``error_on_failure``.
+    transformation fails are dropped.
     """
     out_text = ctx.string(opts, "out_srs")
     if not out_text:
         raise ctx.error("option 'out_srs' is required")
-    in_text = ctx.string(opts, "in_srs") or view.srs_wkt
-    if not in_text:
-        raise ctx.error("the points have no SRS: set 'in_srs' (or the reader's default_srs)")
-    src = _crs(in_text, "in_srs", ctx)
-    dst = _crs(out_text, "out_srs", ctx)
+    if not view.srs_wkt:
+        raise ctx.error("the points have no SRS: set the reader's default_srs")
+    src = _crs(view.srs_wkt, "the points' SRS", ctx)
+    dst = _crs(out_text, "option 'out_srs'", ctx)
     if len(view) and not src.equals(dst):
         try:
             tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)
@@ -42,8 +41,6 @@ def reproject(view: PointView, opts: dict, ctx: StageContext) -> PointView:
         ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
         view.arrays["X"], view.arrays["Y"], view.arrays["Z"] = x, y, z
         if not ok.all():
-            if ctx.boolean(opts, "error_on_failure", False):
-                raise ctx.error(f"{int((~ok).sum())} point(s) failed to transform to {dst.name}")
             view = view.take(ok)
     view.srs_wkt = dst.to_wkt()
     return view

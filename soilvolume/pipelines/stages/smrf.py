@@ -3,12 +3,12 @@
 1. ZImin: the lowest Z per ``cell`` (grid from the points' minimum corner), empty cells filled
    with the mean of the 8 nearest filled cells.
 2. Low outliers: the progressive filter on -ZImin (slope 5, one pixel).
-3. Optional net cutting (``cut``), then the object mask: openings of ZInet with diamond elements
-   of radius 1..ceil(window/cell) pixels; a cell is an object where successive surfaces differ by
-   more than slope * cell * radius.
-4. ZIpro: ZImin without object/low/net cells, refilled the same way.
+3. The object mask: openings of ZImin with diamond elements of radius 1..ceil(window/cell)
+   pixels; a cell is an object where successive surfaces differ by more than slope * cell * radius.
+4. ZIpro: ZImin without object/low cells, refilled the same way.
 5. A point is ground (Classification 2) when |ZIpro - z| <= threshold + scalar * slope(ZIpro),
-   else 1. Points outside ``returns`` or in ``ignore`` ranges keep their classification.
+   else 1. Only last and single returns are classified (PDAL's default ``returns``); the others
+   keep their classification.
 """
 
 from __future__ import annotations
@@ -19,11 +19,9 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ...core.cells import cell_index
-from ...core.types import SoilVolumeError
-from .range import parse_ranges, select
 from .view import PointView, StageContext
 
-OPTS = {"cell", "slope", "window", "threshold", "scalar", "cut", "ignore", "returns"}
+OPTS = {"cell", "slope", "window", "threshold", "scalar"}
 
 
 def _cross(a: np.ndarray, iterations: int, op) -> np.ndarray:
@@ -81,7 +79,7 @@ def _gradient(a: np.ndarray, axis: int) -> np.ndarray:
     return np.gradient(a, axis=axis)  # central inside, one-sided at the edges (MATLAB's)
 
 
-def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, scalar=1.25, cut=0.0) -> np.ndarray:
+def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, scalar=1.25) -> np.ndarray:
     """Ground flags (True = ground) for the given points."""
     minx, miny = float(x.min()), float(y.min())
     cols = int((float(x.max()) - minx) / cell + 1)
@@ -93,16 +91,8 @@ def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, 
     zimin[np.isinf(zimin)] = np.nan
     zimin = knnfill(zimin.reshape(rows, cols), cell)
     low = progressive(-zimin, cell, 5.0, cell)
-    net = np.zeros(zimin.shape, dtype=bool)
-    zinet = zimin
-    if cut > 0:
-        v = int(math.ceil(cut / cell))
-        net[:, ::v] = True
-        net[::v, :] = True
-        opened = dilate(erode(zimin, 2 * v), 2 * v)
-        zinet = np.where(net, opened, zimin)
-    obj = progressive(zinet, cell, slope, window)
-    zipro = knnfill(np.where(obj | low | net, np.nan, zimin), cell)
+    obj = progressive(zimin, cell, slope, window)
+    zipro = knnfill(np.where(obj | low, np.nan, zimin), cell)
     scaled = zipro / cell
     gsurf = np.hypot(_gradient(scaled, 1), _gradient(scaled, 0))
     gsurf = knnfill(gsurf, cell)
@@ -111,10 +101,11 @@ def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, 
     return np.abs(zp - z) <= tp  # NaN comparisons are False: not ground, as PDAL skips them
 
 
-def _returns_mask(view: PointView, returns: list[str], ctx: StageContext) -> np.ndarray:
+def _last_or_only(view: PointView, ctx: StageContext) -> np.ndarray:
+    """The points SMRF classifies: last and single returns (all when the returns are not known)."""
     n = len(view)
     rn_key, nr_key = view.dim("ReturnNumber"), view.dim("NumberOfReturns")
-    if not returns or rn_key is None or nr_key is None:
+    if rn_key is None or nr_key is None:
         return np.ones(n, dtype=bool)
     rn = view.arrays[rn_key].astype(np.int64)
     nr = view.arrays[nr_key].astype(np.int64)
@@ -123,19 +114,7 @@ def _returns_mask(view: PointView, returns: list[str], ctx: StageContext) -> np.
         return np.ones(n, dtype=bool)
     if zero.any():
         raise ctx.error("some NumberOfReturns or ReturnNumber values are 0, but not all")
-    want = np.zeros(n, dtype=bool)
-    for kind in returns:
-        if kind == "first":
-            want |= (rn == 1) & (nr > 1)
-        elif kind == "intermediate":
-            want |= (rn > 1) & (rn < nr)
-        elif kind == "last":
-            want |= (rn == nr) & (nr > 1)
-        elif kind == "only":
-            want |= nr == 1
-        else:
-            raise ctx.error(f"unrecognised 'returns' value '{kind}'")
-    return want
+    return ((rn == nr) & (nr > 1)) | (nr == 1)
 
 
 def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
@@ -146,21 +125,11 @@ def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
         "window": ctx.positive(opts, "window", 18.0 * cell),
         "threshold": ctx.number(opts, "threshold", 0.5),
         "scalar": ctx.number(opts, "scalar", 1.25),
-        "cut": ctx.number(opts, "cut", 0.0),
     }
-    returns = opts.get("returns", "last, only")
-    returns = [
-        s.strip() for t in (returns if isinstance(returns, list) else [returns]) for s in str(t).split(",") if s.strip()
-    ]
     cls = view.ensure("Classification")
     if len(view) == 0:
         return view
-    use = _returns_mask(view, returns, ctx)
-    for text in ctx.strings(opts, "ignore"):
-        try:
-            use &= ~select(view, parse_ranges(text), ctx)
-        except SoilVolumeError as exc:
-            raise ctx.error(str(exc)) from exc
+    use = _last_or_only(view, ctx)
     if not use.any():
         raise ctx.error("no returns to process")
     idx = np.flatnonzero(use)

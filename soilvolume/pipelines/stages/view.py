@@ -3,22 +3,14 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import dataclass
 
 import numpy as np
 
 from ...core.types import SoilVolumeError
 
-#: dtypes of the dimensions the embedded stages know; others are kept as read.
-DIM_TYPES: dict[str, type] = {
-    "X": np.float64,
-    "Y": np.float64,
-    "Z": np.float64,
-    "Classification": np.uint8,
-    "ReturnNumber": np.uint8,
-    "NumberOfReturns": np.uint8,
-}
+#: dtypes of the dimensions the embedded stages create; others are kept as read.
+DIM_TYPES: dict[str, type] = {"Classification": np.uint8}
 
 
 @dataclass
@@ -27,7 +19,6 @@ class PointView:
 
     arrays: dict[str, np.ndarray]
     srs_wkt: str | None = None
-    meta: dict[str, Any] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.arrays["X"].shape[0])
@@ -38,15 +29,12 @@ class PointView:
 
     def take(self, sel: np.ndarray) -> PointView:
         """A new view with the points selected by a boolean mask or an index array."""
-        return PointView({k: v[sel] for k, v in self.arrays.items()}, self.srs_wkt, dict(self.meta))
+        return PointView({k: v[sel] for k, v in self.arrays.items()}, self.srs_wkt)
 
     def dim(self, name: str) -> str | None:
         """The stored spelling of a dimension name (PDAL names are case-insensitive)."""
         low = name.lower()
-        for key in self.arrays:
-            if key.lower() == low:
-                return key
-        return None
+        return next((key for key in self.arrays if key.lower() == low), None)
 
     def ensure(self, name: str) -> np.ndarray:
         """The array of a dimension, created as zeros when missing (PDAL's registerDim)."""
@@ -67,7 +55,7 @@ class StageContext:
     def error(self, problem: str) -> SoilVolumeError:
         return SoilVolumeError(f"pipeline {self.source}: {self.stage}: {problem}")
 
-    # option accessors: PDAL accepts numbers and booleans as JSON values or as strings
+    # option accessors: PDAL accepts numbers as JSON values or as strings
     def number(self, opts: dict, name: str, default: float | None = None) -> float | None:
         if name not in opts:
             return default
@@ -87,22 +75,6 @@ class StageContext:
         if out is not None and out <= 0:
             raise self.error(f"option '{name}' must be > 0, got {opts.get(name)!r}")
         return out
-
-    def integer(self, opts: dict, name: str, default: int | None = None) -> int | None:
-        out = self.number(opts, name, None if default is None else float(default))
-        if out is None:
-            return None
-        if out != int(out):
-            raise self.error(f"option '{name}' must be an integer, got {opts.get(name)!r}")
-        return int(out)
-
-    def boolean(self, opts: dict, name: str, default: bool = False) -> bool:
-        value = opts.get(name, default)
-        if isinstance(value, bool):
-            return value
-        if isinstance(value, str) and value.strip().lower() in ("true", "false"):
-            return value.strip().lower() == "true"
-        raise self.error(f"option '{name}' must be true or false, got {value!r}")
 
     def string(self, opts: dict, name: str, default: str | None = None) -> str | None:
         value = opts.get(name, default)
