@@ -53,3 +53,23 @@ def test_emitted_pipelines_give_the_default_runs_net(tmp_path, before_points, af
     pb, pa = emit_pipelines(b, a, tmp_path / "pipes", Options())
     via = estimate(b, a, tmp_path / "via", Options(), before_pipeline=pb, after_pipeline=pa).report["volume_m3"]["net"]
     assert abs(via - direct) <= 0.005 * abs(direct), (via, direct)
+
+
+def test_emitted_ground_filter_is_the_runs_filter(tmp_path):
+    """``--ground filter`` was emitted as a bare ``filters.smrf``: PDAL's 18 m window and 0.15 slope,
+    which take the piles for objects, where the estimate uses ``--ground-window``/``--ground-slope``.
+    The emitted stage now carries the run's window and slope, and the pipelines give the run's net."""
+    b, a, _ = write_pair(make_pair(0, SceneConfig(before_points=60_000, after_points=40_000)), tmp_path)
+    opts = Options(ground="filter", ground_window=5.0, ground_slope=0.7)
+    pb, pa = emit_pipelines(b, a, tmp_path / "pipes", opts)
+    smrf = [s for s in json.loads(pa.read_text())["pipeline"] if s["type"] == "filters.smrf"]
+    assert smrf == [{"type": "filters.smrf", "window": 5.0, "slope": 0.7}]
+    direct = estimate(b, a, tmp_path / "direct", opts).report["volume_m3"]["net"]
+    via = estimate(b, a, tmp_path / "via", opts, before_pipeline=pb, after_pipeline=pa).report["volume_m3"]["net"]
+    assert abs(via - direct) <= 0.005 * abs(direct), (via, direct)
+
+
+def test_pipeline_command_takes_the_ground_filters_options(tmp_path):
+    """The ``pipeline`` command declares ``--ground-window``/``--ground-slope`` from the option table."""
+    out = run_cli("pipeline", "--help")
+    assert "--ground-window" in out.stdout and "--ground-slope" in out.stdout

@@ -16,8 +16,8 @@ def add_parser(sub) -> None:
         NAME,
         help="write the PDAL pipelines that prepare both clouds",
         description="Write before.json and after.json: read, reproject to the before CRS, crop the before "
-        "cloud to the after footprint + radius, ground, outliers; run them with `pdal pipeline` or pass "
-        "them to `soilvolume estimate --before-pipeline/--after-pipeline`.",
+        "cloud to the after footprint + radius, select ground as the estimate does; run them with "
+        "`pdal pipeline` or pass them to `soilvolume estimate --before-pipeline/--after-pipeline`.",
     )
     pipe.add_argument("before", type=Path)
     pipe.add_argument("after", type=Path)
