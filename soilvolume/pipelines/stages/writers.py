@@ -8,7 +8,7 @@ import numpy as np
 import pyproj
 
 from ...core.types import SoilVolumeError
-from ...dem.rasterfile import staged_raster
+from ...dem.geotiff import Layout, write_geotiff
 from ...inputs import io
 from . import gdalgrid, geometry
 from .view import PointView, StageContext
@@ -170,21 +170,10 @@ def write_gdal(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     srs = ctx.string(opts, "override_srs") or view.srs_wkt or ctx.string(opts, "default_srs")
     crs = pyproj.CRS.from_user_input(srs).to_wkt() if srs else None
     transform = from_origin(grid.x0, grid.y0 + grid.res * grid.height, grid.res, grid.res)
-    profile = {
-        "driver": ctx.string(opts, "gdaldriver", "GTiff"),
-        "width": grid.width,
-        "height": grid.height,
-        "count": len(rasters),
-        "dtype": dtype,
-        "nodata": nodata,
-        "transform": transform,
-        "crs": crs,
-    }
+    driver = ctx.string(opts, "gdaldriver", "GTiff")
+    layout = Layout(grid.width, grid.height, transform, crs, dtype, nodata, len(rasters), tuple(rasters), driver=driver)
     try:
-        with staged_raster(path, **profile) as dst:  # GDAL in memory, the bytes by Python: a full disk raises
-            for band, (name, arr) in enumerate(rasters.items(), start=1):
-                dst.write(np.where(np.isnan(arr), nodata, arr).astype(dtype), band)
-                dst.set_band_description(band, name)
+        write_geotiff(path, list(rasters.values()), layout)
     except rasterio.errors.RasterioError as exc:
         raise ctx.error(f"{path}: cannot write raster ({exc})") from exc
     return view
