@@ -64,23 +64,18 @@ def grid_layout(grid: GridSpec, description: str = "", units: str = "metre", dty
     """A run's single-band raster on ``grid``: its horizontal CRS only (the values are metres
     whatever the input's vertical unit), :data:`NODATA` (255 for integers), DEFLATE, cell areas."""
     nodata = NODATA if np.dtype(dtype).kind == "f" else 255
-    tiled = grid.cols >= BLOCK and grid.rows >= BLOCK
-    return Layout(
-        grid.cols,
-        grid.rows,
-        grid.transform,
-        raster_wkt(grid.crs_wkt),
-        dtype,
-        nodata,
-        descriptions=(description,),
-        units=(units,),
-        tags=(("AREA_OR_POINT", "Area"),),
-        options=(("compress", "deflate"), ("tiled", tiled)),
-    )
+    options = (("compress", "deflate"), ("tiled", grid.cols >= BLOCK and grid.rows >= BLOCK))
+    look = dict(descriptions=(description,), units=(units,), tags=(("AREA_OR_POINT", "Area"),), options=options)
+    return Layout(grid.cols, grid.rows, grid.transform, raster_wkt(grid.crs_wkt), dtype, nodata, **look)
 
 
 def write_grid(
-    path: str | Path, array: np.ndarray, grid: GridSpec, description: str = "", units: str = "metre", dtype="float32"
+    path: str | Path,
+    array: np.ndarray,
+    grid: GridSpec,
+    description: str = "",
+    units: str = "metre",
+    dtype: str = "float32",
 ) -> Path:
     """A run's single-band raster (NaN -> nodata) on ``grid`` (:func:`grid_layout`), whole or not
     at all; returns the path."""
