@@ -7,7 +7,8 @@ import pytest
 import rasterio
 
 from soilvolume.api import cloud_to_dem
-from soilvolume.dem.grid import NODATA, average_height, make_grid
+from soilvolume.dem.geotiff import NODATA
+from soilvolume.dem.grid import average_height, make_grid
 from soilvolume.inputs.io import read_points
 from soilvolume.options import Options
 

@@ -222,10 +222,10 @@ def test_a_raster_cut_off_by_a_full_disk_is_an_error_and_is_not_left(tmp_path, c
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="RLIMIT_FSIZE is POSIX")
 @pytest.mark.parametrize("scheduler", ["none", "threads:1", "threads:1 on disk"])
 def test_an_estimate_raster_cut_off_by_a_full_disk_fails_the_run(tmp_path, scheduler):
-    """The estimate's largest raster one byte short of room (in-process: write_geotiff; tiled: the
-    COG writer, its raster staged in memory or, as a large one is, on disk): the run fails naming
+    """The estimate's largest raster one byte short of room (in-process: dem/geotiff.write_grid; tiled:
+    its COG writer, its raster staged in memory or, as a large one is, on disk): the run fails naming
     that raster, and no output folder appears."""
-    disk = "from soilvolume.distributed import cog; cog.IN_MEMORY_CELLS = 0" if "disk" in scheduler else ""
+    disk = "from soilvolume.dem import geotiff; geotiff.IN_MEMORY_CELLS = 0" if "disk" in scheduler else ""
     scheduler = scheduler.split()[0]
     inputs = tmp_path / "in"
     inputs.mkdir()

@@ -311,13 +311,13 @@ def test_pipeline_json_that_is_not_utf8_or_nested_too_deep(capsys, pair, tmp_pat
 
 
 def test_a_full_disk_is_named_and_nothing_is_left(pair, tmp_path, monkeypatch):
-    from soilvolume.dem import rasterfile
+    from soilvolume.dem import geotiff
 
     def full(src, dst, length=0):
         dst.write(src.read(100))  # the half-written temporary file
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(rasterfile.shutil, "copyfileobj", full)  # where a raster's bytes are written
+    monkeypatch.setattr(geotiff.shutil, "copyfileobj", full)  # where a raster's bytes are written
     with pytest.raises(SoilVolumeError, match="d.tif: No space left on device"):
         api.cloud_to_dem(pair[0], tmp_path / "d.tif")
     with pytest.raises(SoilVolumeError, match=r"/o/dem_\w+\.tif: No space left on device"):
@@ -418,11 +418,11 @@ def test_estimate_overwrite_end_to_end(capsys, pair, tmp_path):
 
 def test_volume_with_bad_zones_writes_nothing(capsys, tmp_path):
     from soilvolume.core.types import GridSpec
-    from soilvolume.dem.grid import write_geotiff
+    from soilvolume.dem.geotiff import write_grid
 
     grid = GridSpec(500000.0, 3900050.0, 1.0, 50, 50, crs_wkt=WKT)
-    write_geotiff(tmp_path / "b.tif", np.zeros((50, 50)), grid)
-    write_geotiff(tmp_path / "a.tif", np.ones((50, 50)), grid)
+    write_grid(tmp_path / "b.tif", np.zeros((50, 50)), grid)
+    write_grid(tmp_path / "a.tif", np.ones((50, 50)), grid)
     (tmp_path / "bad.gpkg").write_text("not a geopackage")
     code, err = cli(
         capsys,

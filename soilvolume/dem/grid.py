@@ -1,4 +1,4 @@
-"""Average-height grids (DEMs) of both clouds on one shared grid, and GeoTIFF writing.
+"""Average-height grids (DEMs) of both clouds on one shared grid (written by :mod:`.geotiff`).
 
 The per-cell statistic is the paper's mean, the median, or (default) a robust mean: the mean of
 the points within 3 robust standard deviations (from the interquartile range, floor 1 cm) of the
@@ -9,17 +9,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
 from .cellstats import BLOCK, cell_heights
-from .rasterfile import staged_raster
 from .slopes import slopes
-
-NODATA = -9999.0
 
 
 @dataclass(frozen=True)
@@ -319,39 +315,3 @@ CLASS_LEGEND = (
     "what is not soil: 0 soil, 1 vegetation, 2 objects by classification, 3 other (noise, water, unclassified), "
     "4 moved object (left out), 5 object in one survey (counted), 6 rough change (counted)"
 )
-
-
-def write_geotiff(
-    path: str | Path,
-    array: np.ndarray,
-    grid: GridSpec,
-    description: str = "",
-    units: str = "metre",
-    dtype: str = "float32",
-) -> Path:
-    """Write a single-band GeoTIFF (NaN -> nodata), whole or not at all (a full disk raises); returns
-    the path. Tagged with the grid's horizontal CRS only: the values are metres whatever the input's
-    vertical unit."""
-    from ..inputs.crs import raster_wkt
-
-    path = Path(path)
-    nodata = NODATA if np.dtype(dtype).kind == "f" else 255
-    data = np.where(np.isfinite(array), array, nodata).astype(dtype)
-    profile = dict(
-        driver="GTiff",
-        width=grid.cols,
-        height=grid.rows,
-        count=1,
-        dtype=dtype,
-        crs=raster_wkt(grid.crs_wkt),
-        transform=grid.transform,
-        nodata=nodata,
-        compress="deflate",
-        tiled=grid.cols >= 256 and grid.rows >= 256,
-    )
-    with staged_raster(path, **profile) as dst:  # GDAL in memory, the bytes by Python: a full disk raises
-        dst.write(data, 1)
-        dst.set_band_description(1, description)
-        dst.set_band_unit(1, units)
-        dst.update_tags(AREA_OR_POINT="Area")
-    return path

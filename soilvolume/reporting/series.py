@@ -12,7 +12,7 @@ import numpy as np
 
 from ..core.types import GridSpec
 from ..core.wording import cli_tree
-from ..dem import grid as gridmod
+from ..dem.geotiff import write_grid
 from ..inputs.io import atomic_path
 from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
@@ -158,12 +158,12 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
     z0 = float(grid.origin[2])
     for k, d in enumerate(series.to_e0):
         desc = f"epoch {k} heights in E0's frame, corrected once relative to E0 (m)"
-        gridmod.write_geotiff(out.path(dem_name(k)), base + d + z0, grid, desc)
+        write_grid(out.path(dem_name(k)), base + d + z0, grid, desc)
     for c in series.periods:
         desc = f"epoch {c.end} - epoch {c.start} (m)"
-        gridmod.write_geotiff(out.path(difference_name(c.start, c.end)), c.diff, grid, desc)
+        write_grid(out.path(difference_name(c.start, c.end)), c.diff, grid, desc)
     c = series.cumulative
-    gridmod.write_geotiff(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
+    write_grid(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
 
 
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:

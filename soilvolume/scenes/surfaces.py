@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..dem.geotiff import Layout, write_geotiff
 from .config import SceneConfig
 from .features import _after_box, change_dz
 from .world import _World
@@ -72,7 +73,6 @@ def write_surface(
     ``unit``: the band's declared unit (heights are converted to it); ``shift_xy``: the raster
     placed that far off (m, e.g. away from the survey); ``pad``: a grading plan instead of the
     before ground."""
-    import rasterio
     from affine import Affine
 
     world = _World(seed, config)
@@ -85,11 +85,6 @@ def write_surface(
     z = ground(xx.ravel(), yy.ravel()).reshape(rows, cols) + o[2] + offset_m
     z = z / 0.3048 if unit in ("ft", "foot", "feet") else z
     transform = Affine(cell, 0.0, o[0] + shift_xy[0], 0.0, -cell, o[1] + shift_xy[1] + h)
-    profile = dict(driver="GTiff", width=cols, height=rows, count=bands, dtype="float32", transform=transform)
-    profile.update(nodata=float("nan"), crs=config.crs if crs == "" else crs)
-    path = Path(path)
-    with rasterio.open(path, "w", **profile) as dst:
-        for b in range(1, bands + 1):
-            dst.write(z.astype("float32"), b)
-            dst.set_band_unit(b, unit)
-    return path
+    crs = config.crs if crs == "" else crs
+    layout = Layout(cols, rows, transform, crs, "float32", float("nan"), bands, units=(unit,) * bands)
+    return write_geotiff(path, [z] * bands, layout)

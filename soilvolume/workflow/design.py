@@ -18,6 +18,7 @@ from ..core.outputs import OutputDir
 from ..core.record import Georeferencing
 from ..core.types import GridSpec, SoilVolumeError, StageQuality
 from ..dem import grid as gridmod
+from ..dem.geotiff import write_grid
 from ..inputs.heights import masked_notes
 from ..inputs.prepare import Prepared
 from ..inputs.surface import Surface, SurfaceSource, on_grid, open_surface, read_over, valid_box
@@ -203,10 +204,10 @@ def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec) -> None:
     for name, key, desc in gridmod.output_layers("none"):
         array = getattr(vols, key)
         if key in gridmod.UINT8_LAYERS:
-            gridmod.write_geotiff(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
+            write_grid(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
             continue
         if key == "dem_out_b":
             desc = "the reference surface (design) resampled onto the grid, bilinear at the cell centres (m)"
         elif key == "diff":
             desc = "survey - design (m): above design > 0 (fill), below design < 0 (cut)"
-        gridmod.write_geotiff(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)
+        write_grid(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..core.types import SoilVolumeError
 from ..dem import grid as gridmod
+from ..dem.geotiff import write_grid
 
 
 class InProcess:
@@ -142,9 +143,9 @@ def _write_rasters(run) -> None:
     for name, key, desc in gridmod.output_layers(run.options.correction):
         array = getattr(vols, key)
         if key in gridmod.UINT8_LAYERS:
-            gridmod.write_geotiff(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
+            write_grid(out.path(name), array.astype("uint8"), grid, desc, "", "uint8")
         else:
-            gridmod.write_geotiff(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)
+            write_grid(out.path(name), array + z0 if key.startswith("dem_") else array, grid, desc)
 
 
 def _prepare_one(run) -> None:
@@ -185,4 +186,4 @@ def _write_one(run) -> None:
 
     desc = f"average height ({run.options.statistic}, cell centres) (m)"
     with os_errors(run.raster_out):
-        gridmod.write_geotiff(run.raster_out, run.dems[0] + run.prep.origin[2], run.grid, desc)
+        write_grid(run.raster_out, run.dems[0] + run.prep.origin[2], run.grid, desc)

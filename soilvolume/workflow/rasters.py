@@ -14,7 +14,7 @@ import pyproj
 from ..core.hooks import Hooks
 from ..core.outputs import check_output_file, os_errors
 from ..core.types import GridSpec, SoilVolumeError
-from ..dem.grid import write_geotiff
+from ..dem.geotiff import write_grid
 from ..inputs.crs import horizontal, parse_crs, xy_unit
 from ..inputs.distinct import check_two_surveys
 from ..inputs.heights import (
@@ -155,7 +155,7 @@ def run_volume_from_rasters(
         result["zones"] = zone_budgets(diff, grid, zones, zone_field)
     hooks.step(90, f"writing {out.name}")
     with os_errors(out):
-        write_geotiff(out, diff, grid, "after - before (m)")
+        write_grid(out, diff, grid, "after - before (m)")
     hooks.step(100, "done")
     return result
 
