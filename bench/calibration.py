@@ -170,13 +170,13 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     name, seeds, default_out = population(args)
     root = (args.cache or accuracy.cache_root()) / "calibration"
-    t0 = time.perf_counter()
+    t0, commit = time.perf_counter(), _commit()
     rows = run_population(seeds, root, args.jobs, args.keep)
     meta = {
         "population": name,
         "seeds": f"{seeds[0]}-{seeds[-1]}" if len(seeds) > 2 else ",".join(map(str, seeds)),
         "n": len(seeds),
-        "commit": _commit(),
+        "commit": commit,
         "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "minutes": (time.perf_counter() - t0) / 60.0,
         "argv": " ".join(argv if argv is not None else sys.argv[1:]),
