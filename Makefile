@@ -3,7 +3,7 @@ VENV    := .venv
 PY      := $(VENV)/bin/python
 PYTEST  := QT_QPA_PLATFORM=offscreen $(VENV)/bin/pytest
 
-.PHONY: setup test test-engine test-qgis lint demo bench bench-full accuracy accuracy-quick readme-figures package deploy clean
+.PHONY: setup test test-engine test-qgis lint demo bench bench-full accuracy accuracy-quick calibration calibration-quick readme-figures package deploy clean
 
 setup:  ## install Debian packages (QGIS LTR, Chromium), the venv and the wheels (idempotent)
 	bash scripts/setup.sh
@@ -36,6 +36,12 @@ accuracy:  ## accuracy harness (issue 10): seeded matrix + real pairs vs targets
 
 accuracy-quick:  ## ~1 minute subset of the accuracy harness (bench/results/accuracy-quick.md)
 	$(PY) bench/accuracy.py --quick
+
+calibration:  ## held-out random sites (issue 53, ~15-30 min): interval coverage, verdict confusion, worst sites; rewrites bench/CALIBRATION.md
+	$(PY) bench/calibration.py
+
+calibration-quick:  ## the first 20 held-out random sites (bench/results/calibration-quick.md)
+	$(PY) bench/calibration.py --quick
 
 readme-figures:  ## run the real pairs with default options and rewrite README.md's generated table of their volumes
 	$(PY) scripts/readme_figures.py
