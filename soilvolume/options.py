@@ -265,6 +265,17 @@ class Options:
         lo=0.0,
         hi=100.0,
     )
+    contour_interval: float = _opt(
+        0.0,
+        "write contours.gpkg: contour lines every this many metres of the difference (layer difference: ELEV below 0 "
+        "is cut, above 0 fill, 0 their border) and of each DEM (layers dem_before, dem_after), by GDAL's contour "
+        "algorithm, none across nodata (0 = none)",
+        label="Contour interval",
+        unit="m",
+        lo=0.0,
+        hi=10000.0,
+        run_control=True,
+    )
     # run control
     threads: int = _opt(
         0,

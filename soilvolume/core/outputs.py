@@ -1,7 +1,6 @@
-"""All-or-nothing outputs: files are built in a hidden staging folder beside ``--out``
-(``.<name>.soilvolume-staging-<pid>``) and swapped in only when all succeeded (the old set parked as
-``.<name>.soilvolume-trash-<pid>``); a killed run's siblings are removed, or its old set restored, by the next run.
-"""
+"""All-or-nothing outputs: files are built in a hidden staging folder beside ``--out`` (``.<name>.soilvolume-
+staging-<pid>``) and swapped in only when all succeeded (the old set parked as ``.<name>.soilvolume-trash-<pid>``);
+a killed run's siblings are removed, or its old set restored, by the next run."""
 
 from __future__ import annotations
 
@@ -42,6 +41,7 @@ RUN_OUTPUTS = (
     "report.json",
     "report.html",
     "change_areas.geojson",
+    "contours.gpkg",
     "after_registered.laz",
 )
 

@@ -16,6 +16,8 @@ from ..core.collector import resume
 from ..core.hooks import Hooks
 from ..core.types import Epoch, GridSpec
 from ..options import Options
+from ..reporting.contours import FILE as CONTOURS
+from ..reporting.contours import write_contours
 from .timing import Timer
 
 #: step -> (start %, end %, message) of an estimate; a shorter run spreads its steps over 0-100
@@ -74,6 +76,7 @@ class Run:
     vols: Any = None  # volumes.compute.Volumes
     report: dict | None = None  # report.json of an estimate
     keyed: dict | None = None  # the same with its options by key (wording.opt), for front ends
+    contours: dict | None = None  # contours.gpkg of an estimate (--contour-interval)
 
     def at(self, step: str, fraction: float = 0.0) -> float:
         """The percent ``fraction`` of the way through ``step``."""
@@ -163,6 +166,9 @@ def _write(run: Run, ex) -> None:
     run.hooks.step(run.at("write"), run.message("write") + ex.raster_note)
     with run.timer("write"):
         ex.write(run)
+        if run.command == "estimate" and run.options.contour_interval > 0:  # from the rasters just written
+            staged = run.out.path(CONTOURS)
+            run.contours = write_contours(staged, staged.parent, run.options.contour_interval)
 
 
 def _report(run: Run, ex) -> None:
@@ -178,6 +184,8 @@ def _report(run: Run, ex) -> None:
         p_b, p_a, _ = run.planes
         record = RunRecord(run.prep, run.reg, run.grid, (p_b, p_a), run.vols, run.options, judged, ex.engine(run))
         report = build_report(record, run.timer.totals())
+        if run.contours:
+            report["contours"] = run.contours
         for line in report["quality"]["messages"]:
             run.hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         write_report_html(run.out, report, *ex.html(run))
