@@ -190,6 +190,37 @@ def write_change_areas(alg, parameters: dict[str, Any], context: QgsProcessingCo
     return dest
 
 
+CONTOUR_LAYERS = (  # layer of contours.gpkg -> name when loaded (the run's pair after it)
+    ("difference", "Contours of the difference"),
+    ("dem_before", "Contours before"),
+    ("dem_after", "Contours after"),
+)
+
+
+def write_contours(alg, parameters: dict[str, Any], context: QgsProcessingContext, src, names) -> str | None:
+    """The CONTOURS output: the engine's contours.gpkg copied, and each of its line layers loaded
+    (on top of the run's group) when Processing loads the outputs."""
+    dest = alg.parameterAsFileOutput(parameters, "CONTOURS", context)
+    if not dest:
+        return None
+    if src is None or not Path(src).is_file():
+        raise QgsProcessingException("The engine wrote no contours (is the contour interval above 0?).")
+    params.deliver_file(Path(src), dest)
+    (before, after), group = names
+    asked = getattr(parameters.get("CONTOURS"), "destinationProject", None) is not None
+    if not (asked or context.willLoadLayerOnCompletion(dest)):
+        return dest
+    loads = context.layersToLoadOnCompletion()
+    context.setLayersToLoadOnCompletion({k: v for k, v in loads.items() if k != dest})  # its layers instead
+    for layer, label in CONTOUR_LAYERS:
+        pair = before if layer == "dem_before" else after
+        name = f"{label} ({pair})" if pair else label
+        details = QgsProcessingContext.LayerDetails(name, context.project(), "CONTOURS")
+        details.groupName, details.layerSortKey = group, 60
+        context.addLayerToLoadOnCompletion(f"{dest}|layername={layer}", details)
+    return dest
+
+
 def _zone_feature(feature: QgsFeature, zone: dict[str, Any], fields: QgsFields, pm) -> QgsFeature:
     out = QgsFeature(fields)
     out.setGeometry(feature.geometry())

@@ -154,6 +154,15 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             )
         )
         self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "CONTOURS",
+                self.tr("Contours (GeoPackage: layers difference, dem_before, dem_after; needs a contour interval)"),
+                fileFilter="GeoPackage (*.gpkg)",
+                optional=True,
+                createByDefault=False,
+            )
+        )
+        self.addParameter(
             QgsProcessingParameterFeatureSink(
                 "VOLUMES",
                 self.tr("Volumes (a table of one row: net, cut, fill and their ±, the verdict)"),
@@ -183,6 +192,8 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         registered = self.parameterAsFileOutput(parameters, "REGISTERED", context)
         options = optionparams.read_options(self, parameters, context, feedback)
+        if self.parameterAsFileOutput(parameters, "CONTOURS", context) and not options.contour_interval > 0:
+            raise QgsProcessingException("Contours: set the Contour interval (CONTOUR_INTERVAL) above 0.")
         args = ["estimate", before, after] + engine.option_args(options, "estimate")
         for key, flag in (("BEFORE_PIPELINE", "--before-pipeline"), ("AFTER_PIPELINE", "--after-pipeline")):
             if self.parameterAsFile(parameters, key, context):
@@ -211,6 +222,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         results["CHANGE_AREAS"] = estimate_outputs.write_change_areas(
             self, parameters, context, outputs.get("change_areas"), names
         )
+        results["CONTOURS"] = estimate_outputs.write_contours(self, parameters, context, outputs.get("contours"), names)
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
         results["VOLUMES"] = estimate_outputs.write_volumes(self, parameters, context, results)
