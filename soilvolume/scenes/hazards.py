@@ -72,10 +72,11 @@ def water_levels(world) -> list[tuple[dict, float]]:
     return out
 
 
-def dry(world, x: np.ndarray, y: np.ndarray, g: np.ndarray, dz: np.ndarray) -> np.ndarray:
-    """Mask of the after survey's points not under water (``g``: the after ground)."""
+def dry(levels, x: np.ndarray, y: np.ndarray, g: np.ndarray, dz: np.ndarray) -> np.ndarray:
+    """Mask of the after survey's points not under water (``levels``: each pit's feature and water
+    level; ``g``: the after ground)."""
     keep = np.ones(x.shape, bool)
-    for f, level in world.water:
+    for f, level in levels:
         near = (dz < 0) & (np.hypot(x - f["x"], y - f["y"]) < f["radius"] + 1.0)
         keep &= ~(near & (g < level))
     return keep

@@ -305,7 +305,7 @@ class _World:
             g += self.deformation(x, y)
             fresh = dz != 0
             if self.water:  # no point on the water of the pits
-                keep = dry(self, x, y, g, dz)
+                keep = dry(self.water, x, y, g, dz)
                 x, y, g, fresh = x[keep], y[keep], g[keep], fresh[keep]
         z = g.copy()
         cls = np.full(x.shape, CLASS_GROUND, dtype=np.uint8)

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..config import SceneConfig
 from ..features import features_dz
+from ..hazards import dry
 from ..synthetic import _truth
 from ..world import _World
 
@@ -88,11 +89,7 @@ class Site:
 
     def dry(self, x: np.ndarray, y: np.ndarray, g: np.ndarray, dz: np.ndarray) -> np.ndarray:
         """Mask of the after points not under the water standing in pits."""
-        keep = np.ones(x.shape, bool)
-        for f, level in self.levels:
-            near = (dz < 0) & (np.hypot(x - f["x"], y - f["y"]) < f["radius"] + 1.0)
-            keep &= ~(near & (g < level))
-        return keep
+        return dry(self.levels, x, y, g, dz)
 
     def _holes(self, rng: np.random.Generator, n: int) -> list[tuple[float, float, float]]:
         """Occlusion holes (discs), a third of them on the edge of a work."""
