@@ -265,6 +265,11 @@ class Options:
         lo=0.0,
         hi=100.0,
     )
+    design_surface: str | None = _opt(
+        None,
+        "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",
+        label="LandXML surface name (a LandXML design as BEFORE)",
+    )
     # run control
     threads: int = _opt(
         0,
