@@ -69,6 +69,25 @@ def test_feet_are_converted_for_xy_and_heights(site, tmp_path, unit):
     assert ref["linear_unit"] == unit and unit in ref["vertical_unit"]
 
 
+def test_the_files_crs_is_honoured_and_a_contradicting_before_crs_refused(site, tmp_path):
+    """The TIN written in the next UTM zone (EPSG:32655, 500 km away in its coordinates): its
+    points taken back into the survey's CRS, the metre file's volumes within 0.5 %; a
+    --before-crs that contradicts the file's CRS is refused, nothing written."""
+    import pyproj
+
+    folder, after, _, (points, faces) = site
+    x, y = pyproj.Transformer.from_crs(EPSG, 32655, always_xy=True).transform(points[:, 0], points[:, 1])
+    other = write_landxml(folder / "z55.xml", np.c_[x, y, points[:, 2]], faces, epsg=32655)
+    v_m, _ = _volumes(write_landxml(folder / "m.xml", points, faces, epsg=EPSG), after, tmp_path / "m")
+    v_55, ref = _volumes(other, after, tmp_path / "z55")
+    print(f"EPSG:{EPSG} {v_m}\nEPSG:32655 {v_55}")
+    for key in ("cut", "fill"):
+        assert v_55[key] == pytest.approx(v_m[key], rel=0.005), (key, v_55, v_m)
+    assert ref["crs"] == "WGS 84 / UTM zone 55N"
+    with pytest.raises(SoilVolumeError, match="differs from the LandXML file's CRS"):
+        landxml.open_tin(other, f"EPSG:{EPSG}")
+
+
 def test_points_are_northing_easting_and_the_files_triangles_are_used(tmp_path):
     """A plane z = 0.1 x + 0.02 y over two triangles of a 10 x 10 m square whose points are
     given N E Z: exact at every cell centre inside, NaN outside (the file's triangles cover only

@@ -60,7 +60,8 @@ class Tin:
     def resolution_m(self) -> float:
         """The median edge length of its triangles (m)."""
         a, b = self.xy[self.faces], np.roll(self.xy[self.faces], 1, axis=1)
-        return float(np.median(np.hypot(*(a - b).reshape(-1, 2).T))) * xy_unit(self.crs)
+        per_unit = 111_320.0 if horizontal(self.crs).is_geographic else xy_unit(self.crs)  # a degree of latitude
+        return float(np.median(np.hypot(*(a - b).reshape(-1, 2).T))) * per_unit
 
     def describe(self) -> dict:
         """report.json's description of the reference (``inputs.before`` and ``reference``)."""
@@ -86,7 +87,9 @@ def _local(tag: str) -> str:
 
 
 def _children(node: ET.Element, name: str) -> list[ET.Element]:
-    return [c for c in node if _local(c.tag) == name]
+    """``node``'s children named ``name`` in ``node``'s own namespace (or none)."""
+    prefix = node.tag[: node.tag.index("}") + 1] if node.tag.startswith("{") else ""
+    return node.findall(prefix + name)
 
 
 def _find(node: ET.Element, name: str) -> ET.Element | None:
@@ -99,7 +102,7 @@ def open_tin(path: Path, crs_override: str | None, name: str | None = None) -> T
         root = ET.parse(path).getroot()
     except (ET.ParseError, OSError) as exc:
         raise SoilVolumeError(f"{path}: cannot read it as LandXML ({short_error(exc)})") from exc
-    surfaces = [s for s in root.iter() if _local(s.tag) == "Surface"]
+    surfaces = [s for group in _children(root, "Surfaces") for s in _children(group, "Surface")]
     names = tuple(s.get("name", f"#{i + 1}") for i, s in enumerate(surfaces))
     if not surfaces:
         raise SoilVolumeError(f"{path}: no <Surface> in this LandXML file (a TIN design surface is needed)")
@@ -110,7 +113,7 @@ def open_tin(path: Path, crs_override: str | None, name: str | None = None) -> T
     crs = _crs(root, path, crs_override)
     ids, yxz = _points(surface, path)
     faces = _faces(surface, ids, path)
-    xy = yxz[:, [1, 0]] * factor / xy_unit(crs)
+    xy = yxz[:, [1, 0]] * (1.0 if horizontal(crs).is_geographic else factor / xy_unit(crs))  # degrees as they are
     return Tin(str(path), names[surfaces.index(surface)], xy, yxz[:, 2] * factor, faces, crs, unit, names)
 
 
@@ -168,15 +171,19 @@ def _faces(surface: ET.Element, ids: list[str], path: Path) -> np.ndarray:
     faces = [f for f in ([] if node is None else _children(node, "F")) if f.get("i", "0") != "1"]
     if not faces:
         raise SoilVolumeError(f"{path}: the surface has no faces (<Faces> with <F>): a TIN is needed")
-    index = {pid.strip(): i for i, pid in enumerate(ids)}
-    names = [(f.text or "").split() for f in faces]
-    bad = next((n for n in names if len(n) != 3), None)
-    if bad is not None:
-        raise SoilVolumeError(f"{path}: a face <F>{' '.join(bad)}</F> does not name three points")
-    missing = next((p for n in names for p in n if p not in index), None)
-    if missing is not None:
+    texts = [f.text or "" for f in faces]
+    names = np.array(" ".join(texts).split())
+    if names.size != 3 * len(texts):
+        bad = next(t for t in texts if len(t.split()) != 3)
+        raise SoilVolumeError(f"{path}: a face <F>{' '.join(bad.split())}</F> does not name three points")
+    keys = np.array([pid.strip() for pid in ids])
+    order = np.argsort(keys, kind="stable")
+    pos = np.minimum(np.searchsorted(keys[order], names), len(keys) - 1)
+    found = keys[order][pos] == names
+    if not found.all():
+        missing = names[~found][0]
         raise SoilVolumeError(f"{path}: a face names point '{missing}', which is not in the surface's <Pnts>")
-    return np.array([[index[p] for p in n] for n in names], dtype=np.int64)
+    return order[pos].reshape(-1, 3).astype(np.int64)
 
 
 def box(tin: Tin, frame_crs: pyproj.CRS, unit: float) -> tuple[np.ndarray, np.ndarray]:
