@@ -116,6 +116,17 @@ BAD = {
         "</Surface></Surfaces>",
         "a face names point '9', which is not in the surface's <Pnts>",
     ),
+    "two-point face": (
+        '<Surfaces><Surface name="s"><Definition surfType="TIN">{pnts}<Faces><F>1 2 3</F><F>1 2</F></Faces>'
+        "</Definition></Surface></Surfaces>",
+        "a face <F>1 2</F> does not name three points",
+    ),
+    "two-number point": (
+        '<Surfaces><Surface name="s"><Definition surfType="TIN"><Pnts><P id="1">1 2</P></Pnts></Definition>'
+        "</Surface></Surfaces>",
+        "each <P> point must be three numbers 'northing easting elevation' (point '1': '1 2')",
+    ),
+    "not xml": ("<Surfaces><Surface", "cannot read it as LandXML"),
     "no crs": (
         '<Surfaces><Surface name="s"><Definition surfType="TIN">{pnts}<Faces><F>1 2 3</F></Faces></Definition>'
         "</Surface></Surfaces>",

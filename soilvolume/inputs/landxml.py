@@ -156,12 +156,15 @@ def _points(surface: ET.Element, path: Path) -> tuple[list[str], np.ndarray]:
     points = [] if pnts is None else _children(pnts, "P")
     if not points:
         raise SoilVolumeError(f"{path}: the surface has no points (<Pnts> with <P>)")
+    texts = [p.text or "" for p in points]
+    bad = next((i for i, t in enumerate(texts) if len(t.split()) != 3), None)
     try:
-        values = np.array(" ".join(p.text or "" for p in points).split(), dtype=np.float64)
+        values = np.array(" ".join(texts).split(), dtype=np.float64)
     except ValueError as exc:
         raise SoilVolumeError(f"{path}: a <P> point is not three numbers ({short_error(exc)})") from exc
-    if values.size != 3 * len(points) or not np.isfinite(values).all():
-        raise SoilVolumeError(f"{path}: each <P> point must be three numbers 'northing easting elevation'")
+    if bad is not None or not np.isfinite(values).all():
+        shown = "" if bad is None else f" (point '{points[bad].get('id', bad + 1)}': '{' '.join(texts[bad].split())}')"
+        raise SoilVolumeError(f"{path}: each <P> point must be three numbers 'northing easting elevation'{shown}")
     return [p.get("id", str(i + 1)) for i, p in enumerate(points)], values.reshape(-1, 3)
 
 
@@ -172,10 +175,10 @@ def _faces(surface: ET.Element, ids: list[str], path: Path) -> np.ndarray:
     if not faces:
         raise SoilVolumeError(f"{path}: the surface has no faces (<Faces> with <F>): a TIN is needed")
     texts = [f.text or "" for f in faces]
-    names = np.array(" ".join(texts).split())
-    if names.size != 3 * len(texts):
-        bad = next(t for t in texts if len(t.split()) != 3)
+    bad = next((t for t in texts if len(t.split()) != 3), None)
+    if bad is not None:
         raise SoilVolumeError(f"{path}: a face <F>{' '.join(bad.split())}</F> does not name three points")
+    names = np.array(" ".join(texts).split())
     keys = np.array([pid.strip() for pid in ids])
     order = np.argsort(keys, kind="stable")
     pos = np.minimum(np.searchsorted(keys[order], names), len(keys) - 1)
