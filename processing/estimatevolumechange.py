@@ -54,7 +54,9 @@ LAZ, COPC, VPC of tiles, PLY, PCD, XYZ/TXT/CSV). Give a CRS override when a file
 polygons mark ground known not to have changed. Advanced parameters tune each step.</p>
 <p><b>A surface as the reference</b>: the before input may be a single-band DEM raster layer or
 GeoTIFF (a grading plan, or an earlier DEM; in its CRS, or the before CRS override when it has
-none). Nothing is registered against it (the survey must be well georeferenced) and no bias is
+none), or a LandXML TIN design file (.xml, .landxml: its first surface, or the one named by the
+LandXML surface name; its units and CRS honoured). Nothing is registered against it (the survey
+must be well georeferenced) and no bias is
 corrected by default; the volumes are above (fill) and below (cut) the design over the survey's
 footprint, and the verdict checks that the survey agrees with the design on unchanged ground.</p>
 <h3>Outputs</h3>

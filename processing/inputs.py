@@ -18,7 +18,8 @@ from qgis.core import (
 )
 
 CLOUD_EXTENSIONS = ("las", "laz", "vpc", "ply", "pcd", "xyz", "txt", "csv")  # .copc.laz is a .laz
-SURFACE_EXTENSIONS = ("tif", "tiff")  # a surface as the reference (BEFORE of the estimate): a DEM GeoTIFF
+# a surface as the reference (BEFORE of the estimate): a DEM GeoTIFF or a LandXML TIN
+SURFACE_EXTENSIONS = ("tif", "tiff", "xml", "landxml")
 CLOUD_FILTERS = (
     "Point clouds (" + " ".join(f"*.{e} *.{e.upper()}" for e in CLOUD_EXTENSIONS) + ")",
     "LAS/LAZ (*.las *.laz *.LAS *.LAZ)",
@@ -28,12 +29,13 @@ CLOUD_FILTERS = (
 )
 CLOUD_FILTER = ";;".join(CLOUD_FILTERS)
 SURFACE_FILTER = "DEM GeoTIFF (a surface as the reference) (*.tif *.tiff *.TIF *.TIFF)"
-# the estimate's BEFORE: point clouds first (a file dialog opens on its first filter), the design second
-CLOUD_OR_SURFACE_FILTER = ";;".join((CLOUD_FILTERS[0], SURFACE_FILTER, *CLOUD_FILTERS[1:]))
+LANDXML_FILTER = "LandXML design (*.xml *.landxml *.XML *.LANDXML)"
+# the estimate's BEFORE: point clouds first (a file dialog opens on its first filter), the designs second
+CLOUD_OR_SURFACE_FILTER = ";;".join((CLOUD_FILTERS[0], SURFACE_FILTER, LANDXML_FILTER, *CLOUD_FILTERS[1:]))
 
 
 def file_value(value: Any) -> str | None:
-    """``value`` when it names a point cloud or GeoTIFF file (by its extension), else None."""
+    """``value`` when it names a point cloud, GeoTIFF or LandXML file (by its extension), else None."""
     if isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in CLOUD_EXTENSIONS + SURFACE_EXTENSIONS:
         return value
     return None
@@ -85,7 +87,7 @@ class CloudParameter(QgsProcessingParameterFile):
 
 class CloudOrSurfaceParameter(CloudParameter):
     """The estimate's BEFORE: a point cloud, or a surface as the reference (a single-band DEM:
-    a raster layer or a GeoTIFF, e.g. a grading plan), against which nothing is registered; the
+    a raster layer or a GeoTIFF, e.g. a grading plan, or a LandXML TIN file), against which nothing is registered; the
     dialog's dropdown lists the project's point cloud and raster layers."""
 
     FILTER = CLOUD_OR_SURFACE_FILTER
@@ -111,7 +113,7 @@ class LayerChoice(QgsProcessingParameterMapLayer):
 
 
 def is_surface_file(value: Any) -> bool:
-    """Whether ``value`` names a DEM GeoTIFF (a surface as the estimate's reference)."""
+    """Whether ``value`` names a DEM GeoTIFF or a LandXML TIN (a surface as the estimate's reference)."""
     return isinstance(value, str) and Path(value).suffix.lower().lstrip(".") in SURFACE_EXTENSIONS
 
 

@@ -76,7 +76,8 @@ def cloud_param(key: str, label: str, surface: bool = False) -> QgsProcessingPar
         f"({', '.join('.' + e for e in CLOUD_EXTENSIONS)})"
         + (
             "; or a surface as the reference: a single-band DEM raster layer or GeoTIFF (a grading plan or an "
-            "earlier DEM), against which nothing is registered (volumes above/below the design)."
+            "earlier DEM) or a LandXML TIN design (.xml), against which nothing is registered (volumes "
+            "above/below the design)."
             if surface
             else "."
         )

@@ -276,6 +276,11 @@ class Options:
         hi=10000.0,
         run_control=True,
     )
+    design_surface: str | None = _opt(
+        None,
+        "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",
+        label="LandXML surface name (a LandXML design as BEFORE)",
+    )
     # run control
     threads: int = _opt(
         0,

@@ -27,6 +27,7 @@ OTHER = {
     "after_crs": "EPSG:32654",
     "radius": 31.0,
     "design_uncertainty": 0.05,
+    "design_surface": "finished grade",
     "coarse": "fpfh",
     "coarse_voxel": 2.0,
     "georeferencing": "precise",

@@ -36,7 +36,8 @@ def add_parser(sub) -> None:
     est.add_argument(
         "before",
         type=Path,
-        help="wide 'before' survey (LAS/LAZ, COPC, VPC of tiles, PLY/PCD/XYZ) or a design DEM GeoTIFF (.tif)",
+        help="wide 'before' survey (LAS/LAZ, COPC, VPC of tiles, PLY/PCD/XYZ) or a design: a DEM GeoTIFF (.tif) "
+        "or a LandXML TIN (.xml, .landxml)",
     )
     est.add_argument("after", type=Path, help="smaller 'after' survey (the same formats)")
     est.add_argument(

@@ -15,14 +15,15 @@ import numpy as np
 import pyproj
 
 from ..core.types import GridSpec, SoilVolumeError
+from . import landxml
 from .crs import WorkFrame, has_vertical, horizontal, parse_crs, raster_wkt
 from .heights import HeightRaster, metres_per_unit, open_heights, read_heights, window_over
 
-SUFFIXES = (".tif", ".tiff")  # a first input with one of these is a surface, not a point cloud
+SUFFIXES = (".tif", ".tiff", *landxml.SUFFIXES)  # a first input with one of these is a surface, not a cloud
 
 
 def is_surface(path: str | Path | None) -> bool:
-    """Whether an estimate's first input is a surface (a GeoTIFF) rather than a point cloud."""
+    """Whether an estimate's first input is a surface (a GeoTIFF or a LandXML TIN), not a point cloud."""
     return path is not None and Path(path).suffix.lower() in SUFFIXES
 
 
@@ -80,19 +81,26 @@ class Surface:
         }
 
 
-def open_surface(path: Path, crs_override: str | None) -> SurfaceSource:
+def open_surface(path: Path, crs_override: str | None, name: str | None = None) -> SurfaceSource | landxml.Tin:
     """Open and check a reference DEM: one band, a CRS (its own, or ``--before-crs`` for a raster
     without one; a contradicting one is refused), heights' unit (the vertical CRS's, or the
-    band's declared unit)."""
+    band's declared unit); a LandXML file's TIN surface (``name``, else its first) read whole."""
+    if landxml.is_landxml(path):
+        return landxml.open_tin(path, crs_override, name)
     raster = open_heights(path)
     crs = _crs(path, raster.crs, crs_override)
     factor, where = metres_per_unit(crs, raster.unit, str(path))
     return SurfaceSource(raster, crs, factor, where)
 
 
-def read_over(source: SurfaceSource, lo: np.ndarray, hi: np.ndarray, frame: WorkFrame, margin_m: float) -> Surface:
+def read_over(
+    source: SurfaceSource | landxml.Tin, lo: np.ndarray, hi: np.ndarray, frame: WorkFrame, margin_m: float
+) -> Surface | landxml.Tin:
     """The surface's heights over the box ``lo``..``hi`` (absolute x/y in ``frame``, metres) and
-    ``margin_m`` around it, plus two of its pixels for the resampling's kernel."""
+    ``margin_m`` around it, plus two of its pixels for the resampling's kernel (a TIN: itself,
+    when it meets the box)."""
+    if isinstance(source, landxml.Tin):
+        return landxml.check_over(source, lo, hi, frame, margin_m)
     lo, hi = (
         (np.asarray(lo[:2], float) - margin_m) / frame.xy_unit,
         (np.asarray(hi[:2], float) + margin_m) / frame.xy_unit,
@@ -131,9 +139,12 @@ def _crs(path: Path, own: pyproj.CRS | None, override: str | None) -> pyproj.CRS
     return own
 
 
-def on_grid(surface: Surface, grid: GridSpec, method: str = "bilinear") -> np.ndarray:
+def on_grid(surface: Surface | landxml.Tin, grid: GridSpec, method: str = "bilinear") -> np.ndarray:
     """The surface's absolute heights (m) at the cell centres of ``grid`` (NaN where it has none):
-    GDAL's warp, reprojecting the raster's horizontal CRS onto the grid's."""
+    GDAL's warp, reprojecting the raster's horizontal CRS onto the grid's; a TIN is linear inside
+    its own triangles whatever ``method`` (it is its own interpolation)."""
+    if isinstance(surface, landxml.Tin):
+        return landxml.on_grid(surface, grid)
     from rasterio.crs import CRS
     from rasterio.warp import Resampling, reproject
 
@@ -152,8 +163,10 @@ def on_grid(surface: Surface, grid: GridSpec, method: str = "bilinear") -> np.nd
     return out
 
 
-def valid_box(surface: Surface, frame_crs: pyproj.CRS, xy_unit: float) -> tuple[np.ndarray, np.ndarray]:
+def valid_box(surface: Surface | landxml.Tin, frame_crs: pyproj.CRS, xy_unit: float) -> tuple[np.ndarray, np.ndarray]:
     """The bounding box (absolute x/y in the frame, metres) of the surface's valid cells."""
+    if isinstance(surface, landxml.Tin):
+        return landxml.box(surface, frame_crs, xy_unit)
     rows, cols = np.nonzero(np.isfinite(surface.heights))
     r = np.array([rows.min(), rows.min(), rows.max() + 1, rows.max() + 1], float)
     c = np.array([cols.min(), cols.max() + 1, cols.min(), cols.max() + 1], float)

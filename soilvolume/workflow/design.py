@@ -20,6 +20,7 @@ from ..core.types import GridSpec, SoilVolumeError, StageQuality
 from ..dem import grid as gridmod
 from ..dem.geotiff import write_grid
 from ..inputs.heights import masked_notes
+from ..inputs.landxml import Tin
 from ..inputs.prepare import Prepared
 from ..inputs.surface import Surface, SurfaceSource, on_grid, open_surface, read_over, valid_box
 from ..options import Options
@@ -50,7 +51,7 @@ class SurfaceReference:
     raster_note = ""
 
     def __init__(self) -> None:
-        self.surface: Surface | None = None
+        self.surface: Surface | Tin | None = None
         self.cell = 0.0
         self.sigma: np.ndarray | None = None
 
@@ -66,7 +67,7 @@ class SurfaceReference:
         from ..registration.register import Registration
 
         design, after = run.epochs
-        source = open_surface(Path(design.path), run.options.before_crs)
+        source = open_surface(Path(design.path), run.options.before_crs, run.options.design_surface)
         run.options = _options(run.options, run.hooks)
         check = run.hooks.ticker(*run.spans["prepare"], "reading")
         prep = prepare_survey(open_source(after.path, after.pipeline), run.options, check=check)
@@ -135,7 +136,7 @@ def survey_cell(prep: Prepared, options: Options) -> float:
     return gridmod.cell_for(prep.after.xyz, footprint(prep.after_thin[:, :2]))
 
 
-def _read_surface(source: SurfaceSource, prep: Prepared, cell: float, hooks: Hooks) -> Surface:
+def _read_surface(source: SurfaceSource | Tin, prep: Prepared, cell: float, hooks: Hooks) -> Surface | Tin:
     """The surface's heights over the survey's box and two cells around it (the grid's edges
     and the resampling's kernel): a design far larger than the site costs only the site's window."""
     thin, origin = prep.after_thin[:, :2], prep.origin[:2]
@@ -145,7 +146,7 @@ def _read_surface(source: SurfaceSource, prep: Prepared, cell: float, hooks: Hoo
     return surface
 
 
-def survey_grid(prep: Prepared, surface: Surface, cell: float) -> GridSpec:
+def survey_grid(prep: Prepared, surface: Surface | Tin, cell: float) -> GridSpec:
     """The grid of ``cell`` over the survey's footprint clipped to the surface's valid extent."""
     from ..validate import check_grid_cells
 
@@ -163,14 +164,14 @@ def survey_grid(prep: Prepared, surface: Surface, cell: float) -> GridSpec:
     return grid
 
 
-def surface_epoch(surface: Surface, grid: GridSpec, given_m: float) -> tuple[gridmod.EpochDEM, np.ndarray]:
+def surface_epoch(surface: Surface | Tin, grid: GridSpec, given_m: float) -> tuple[gridmod.EpochDEM, np.ndarray]:
     """(the surface as the before epoch on ``grid``, each cell's one-sigma error (m)): heights
     bilinear at the cell centres; the error of that resampling taken as its difference from a
     cubic one (it is where the surface curves between its own cells), with the given surface
     uncertainty ``given_m`` in quadrature. Each cell counts :data:`DESIGN_COUNT` points with that
     error as its standard error, so the per-cell level of detection includes it."""
     z = on_grid(surface, grid) - grid.origin[2]
-    cubic = on_grid(surface, grid, "cubic") - grid.origin[2]
+    cubic = z if isinstance(surface, Tin) else on_grid(surface, grid, "cubic") - grid.origin[2]  # a TIN is exact
     valid = np.isfinite(z)
     sigma = np.where(valid, np.hypot(np.nan_to_num(np.abs(z - cubic)), given_m), np.nan)
     counts = np.where(valid, DESIGN_COUNT, 0).astype(np.int64)

@@ -59,6 +59,30 @@ def test_a_geotiff_path_as_before_and_a_bad_one(run_alg, design_site, tmp_path):
         )
 
 
+def test_a_landxml_design_as_before(run_alg, design_site, tmp_path):
+    """A 0.5 m design's pixel centres as a LandXML TIN, browsed to as BEFORE: the GeoTIFF design's
+    volumes within 0.5 %, the reference described as a LandXML TIN."""
+    from soilvolume.scenes.landxml import tin_of, write_landxml
+    from soilvolume.scenes.surfaces import write_surface
+    from soilvolume.scenes.synthetic import SceneConfig
+
+    _, after, truth = design_site
+    cfg = SceneConfig.small(shift_m=(0.0, 0.0, 0.0), rotation_deg=(0.0, 0.0, 0.0))
+    design = write_surface(tmp_path / "design.tif", SEED, cfg, cell=0.5)
+    xml = write_landxml(tmp_path / "design.xml", *tin_of(design), epsg=32654)
+    runs = {}
+    for name, before in (("tif", design), ("xml", xml)):
+        runs[name] = run_alg(
+            "estimatevolumechange",
+            {"BEFORE": str(before), "AFTER": str(after), "REPORT_JSON": str(tmp_path / f"{name}.json")},
+        )
+    for key in ("CUT", "FILL"):
+        assert runs["xml"][f"{key}_VOLUME"] == pytest.approx(runs["tif"][f"{key}_VOLUME"], rel=0.005), key
+    assert runs["xml"]["NET_VOLUME"] == pytest.approx(truth["net"], rel=0.02)
+    report = json.loads(Path(runs["xml"]["REPORT_JSON"]).read_text())
+    assert report["reference"]["format"] == "LandXML TIN" and report["reference"]["path"] == str(xml)
+
+
 def _model(before_param) -> object:
     """A Model Builder model: its two inputs feed the estimate, whose difference is the model's output."""
     from qgis.core import (

@@ -167,7 +167,7 @@ def test_a_point_cloud_layer_is_read_from_its_file(estimate, scene_dir):
 def test_file_pickers_open_on_point_clouds(provider, algorithm):
     """A file dialog opens on its first filter: every cloud input's is the point clouds (was: the
     estimate's Before opened on "DEM GeoTIFF", so a folder of .las/.laz files looked empty); the
-    estimate's Before offers the design GeoTIFF as the second choice."""
+    estimate's Before offers the design GeoTIFF as the second choice, a LandXML design third."""
     alg = QgsApplication.processingRegistry().algorithmById(f"soilvolume:{algorithm}")
     for name in ("BEFORE", "AFTER", "INPUT"):
         param = alg.parameterDefinition(name)
@@ -178,3 +178,4 @@ def test_file_pickers_open_on_point_clouds(provider, algorithm):
             assert filters[0].startswith("Point clouds (") and "*.las" in filters[0] and "*.laz" in filters[0]
             if name == "BEFORE" and algorithm == "estimatevolumechange":
                 assert filters[1].startswith("DEM GeoTIFF") and "*.tif" in filters[1], filters
+                assert filters[2].startswith("LandXML design (*.xml *.landxml"), filters
