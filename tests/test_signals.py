@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 from conftest import run_cli, run_python, write_scene
+from processes import group_alive
 
 from soilvolume.scenes.series import write_series
 
@@ -71,7 +72,7 @@ def _gone(pgid: int, grace_s: float = 5.0) -> list[str]:
     """The command lines of the process group's processes still alive ``grace_s`` after the run
     ended (a worker's own exit follows its driver's by a moment)."""
     end = time.monotonic() + grace_s
-    while (alive := _group(pgid)) and time.monotonic() < end:
+    while (alive := group_alive(pgid)) and time.monotonic() < end:
         time.sleep(0.1)
     return [_cmdline(pid) for pid in alive]
 
@@ -81,19 +82,6 @@ def _cmdline(pid: int) -> str:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()[:200]
     except OSError:
         return f"{pid} (gone)"
-
-
-def _group(pgid: int) -> list[int]:
-    """Processes of the process group ``pgid`` still alive (the run and any worker of it)."""
-    alive = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            alive.append(int(stat.parent.name))
-    return alive
 
 
 def _interrupted(proc: subprocess.Popen, sig: signal.Signals, out: Path, tiles: bool = False) -> None:
@@ -158,7 +146,7 @@ def test_a_worker_killed_mid_run_is_one_line_and_nothing_written(pair, tmp_path)
     out = tmp_path / "result"
     proc = _start(["estimate", *pair, "--scheduler", "local:2", *TILES], out)
     _wait_for(proc, "gridded tile 1/")
-    workers = [pid for pid in _group(proc.pid) if pid != proc.pid and _parent(pid) != proc.pid]
+    workers = [pid for pid in group_alive(proc.pid) if pid != proc.pid and _parent(pid) != proc.pid]
     assert len(workers) == 2, workers  # the run's children: the forkserver and its resource tracker
     for pid in workers:
         os.kill(pid, signal.SIGKILL)
@@ -179,7 +167,7 @@ def test_a_worker_killed_mid_run_leaves_the_other_to_finish_the_same_volumes(pai
     out = tmp_path / "result"
     proc = _start(["estimate", *pair, "--scheduler", "local:2", *TILES], out)
     _wait_for(proc, "gridded tile 1/")
-    workers = [pid for pid in _group(proc.pid) if pid != proc.pid and _parent(pid) != proc.pid]
+    workers = [pid for pid in group_alive(proc.pid) if pid != proc.pid and _parent(pid) != proc.pid]
     os.kill(workers[0], signal.SIGKILL)
     code, events, err = _finish(proc)
     assert code == 0 and events[-1]["type"] == "result", (code, err[-5:])

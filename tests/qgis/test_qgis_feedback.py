@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 
 import pytest
+from processes import group_alive
 from qgis.core import (
     QgsProcessingException,
     QgsProcessingFeedback,
@@ -52,19 +53,6 @@ class CancelAt(RecordingFeedback):
         if progress >= percent and self.at is None:
             self.at = time.perf_counter()
             self.cancel()
-
-
-def group_alive(pgid: int) -> list[int]:
-    """Processes of the process group ``pgid`` still alive (the engine and any worker of it)."""
-    alive = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        if int(fields[2]) == pgid and fields[0] != "Z":
-            alive.append(int(stat.parent.name))
-    return alive
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs /proc")
