@@ -14,7 +14,9 @@ from typing import Any
 
 from .core.types import SoilVolumeError
 from .core.wording import opt
+from .distributed.schedule import spec_problem
 from .options import Options
+from .volumes.polygons import read_polygons
 
 #: fewest grid cells over the compared area that give a meaningful volume
 MIN_CELLS = 25
@@ -78,8 +80,6 @@ def _check_polygon_files(options: Options) -> None:
     """The zones and stable-ground files read once now (missing, unreadable, without polygons,
     invalid beyond repair: said before any point is read; their CRS is checked against the grid
     later)."""
-    from .volumes.polygons import read_polygons
-
     for name, what in (("zones", "zones file"), ("stable_mask", f"{opt('stable_mask')} file")):
         path = getattr(options, name)
         if path:
@@ -88,8 +88,6 @@ def _check_polygon_files(options: Options) -> None:
 
 def _check_scheduler(spec: str) -> None:
     """``--scheduler`` parsed as a run would parse it (its error names the option)."""
-    from .distributed.schedule import spec_problem
-
     problem = spec_problem(spec)
     if problem:
         raise OptionError("scheduler", problem)

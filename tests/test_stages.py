@@ -7,7 +7,8 @@ import pytest
 
 from soilvolume.core import polygons
 from soilvolume.core.types import SoilVolumeError
-from soilvolume.pipelines.stages import StageContext, execute, readers, reprojection, smrf
+from soilvolume.inputs import smrf
+from soilvolume.pipelines.stages import StageContext, execute, ground, readers, reprojection
 from soilvolume.pipelines.stages import crop as crop_stage
 from soilvolume.pipelines.stages import range as range_stage
 from soilvolume.pipelines.stages.view import PointView
@@ -92,21 +93,17 @@ def test_crop_needs_one_wkt_polygon_and_says_the_other_forms_need_pdal():
 
 
 # ----------------------------------------------------------------------------- range / assign
-def test_range_syntax():
-    r = range_stage.parse_ranges("Z[0:100],Classification![7:7], Red(20:40], Blue[:255)")
-    assert [(x.name, x.lo, x.hi, x.lo_closed, x.hi_closed, x.negate) for x in r] == [
-        ("Z", 0, 100, True, True, False),
-        ("Classification", 7, 7, True, True, True),
-        ("Red", 20, 40, False, True, False),
-        ("Blue", None, 255, True, False, False),
-    ]
-    with pytest.raises(SoilVolumeError):
-        range_stage.parse_ranges("Z[0;1]")
+def test_range_takes_closed_ranges_and_says_the_other_forms_need_pdal():
+    v = view([0, 1, 2], [0] * 3, [0, 10, 20])
+    assert run(range_stage.filter_range, v, limits="Z[:10]").arrays["X"].tolist() == [0, 1]
+    for text in ("Z[0;1]", "Z(0:10]", "Z![0:10]"):
+        with pytest.raises(SoilVolumeError, match=r"needs PDAL \(without it only 'Dimension\[lo:hi\]'\)"):
+            run(range_stage.filter_range, v, limits=text)
 
 
 def test_range_or_within_dimension_and_across_dimensions():
     v = view([0, 1, 2, 3, 4], [0] * 5, [0, 10, 20, 30, 40], Classification=np.array([1, 2, 6, 2, 7], dtype=np.uint8))
-    out = run(range_stage.filter_range, v, limits="Classification[1:2],Classification[6:6],Z(0:30]")
+    out = run(range_stage.filter_range, v, limits="Classification[1:2],Classification[6:6],Z[10:30]")
     assert out.arrays["X"].tolist() == [1, 2, 3]
     out = run(range_stage.filter_range, v, limits="z[10:]")  # names are case-insensitive
     assert out.arrays["X"].tolist() == [1, 2, 3, 4]
@@ -225,7 +222,7 @@ def _scene(seed=0):
 def test_smrf_separates_ground_from_boxes_and_vegetation():
     x, y, z, obj = _scene()
     v = view(x, y, z)
-    out = run(smrf.smrf, v)  # PDAL defaults: cell 1, slope .15, window 18, threshold .5
+    out = run(ground.smrf, v)  # PDAL defaults: cell 1, slope .15, window 18, threshold .5
     cls = out.arrays["Classification"]
     assert set(np.unique(cls)) == {1, 2}
     assert (cls[~obj] == 2).mean() > 0.97  # ground kept
@@ -240,7 +237,7 @@ def test_smrf_classifies_last_and_single_returns_only():
     nr[:100], rn[:100] = 2, 1  # first of two returns: not processed (PDAL's default 'last, only')
     nr[100:200], rn[100:200] = 2, 2  # last of two: processed
     v = view(x, y, z, Classification=cls0.copy(), ReturnNumber=rn, NumberOfReturns=nr)
-    cls = run(smrf.smrf, v).arrays["Classification"]
+    cls = run(ground.smrf, v).arrays["Classification"]
     np.testing.assert_array_equal(cls[:100], 7)
     assert set(np.unique(cls[100:])) == {1, 2}
     assert (cls[100:][~obj[100:]] == 2).mean() > 0.97

@@ -4,9 +4,11 @@ median or robust mean), spreads and skews, through one sort of (cell, height) ke
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 
+from .. import native
 from ..core.types import SoilVolumeError
 
 QUANTUM = 1e-4  # m: heights are sorted as whole multiples of it (0.1 mm)
@@ -71,9 +73,7 @@ class _SortedCells:
         self.bits = 62 - id_bits
         self.q = max(QUANTUM, (float(z.max()) - low) / (2**self.bits - 4))
         self.base = math.floor(low / self.q)  # every level rint(z / q) - base is >= 0 and fits the bits
-        from ..native import kernels
-
-        lib = kernels()
+        lib = native.kernels()
         ids = ids.astype(np.int64, copy=False)
         if lib is not None and z.dtype == np.float64 and ids.flags.c_contiguous and z.flags.c_contiguous and len(z):
             key = self._native(lib, ids, z, n_cells, own)
@@ -155,8 +155,6 @@ def _sorted_halves(key: np.ndarray, out: np.ndarray, counts: np.ndarray, bits: i
     cells after it moved apart (each in file order, where timsort finds its runs), then each half
     sorted on its own thread. Sorted integers are one array whatever the route: the same bits as
     ``key.sort()``."""
-    import threading
-
     ends = np.cumsum(counts)
     cell = min(int(np.searchsorted(ends, ends[-1] // 2)) + 1, len(counts))
     split, limit = int(ends[cell - 1]), np.int64(cell) << bits
@@ -184,10 +182,8 @@ def _running_sum(key: np.ndarray, top: int) -> np.ndarray:
     """``[0, cumsum(key & top)]`` in float64, block by block: each block starts from the running
     total, so every value is the one a whole-array cumsum (a sequential sum) gives; in one pass
     on the native kernel (``sv_running_sum``) when it is there."""
-    from ..native import kernels
-
     out = np.empty(len(key) + 1)
-    lib = kernels()
+    lib = native.kernels()
     if lib is not None and key.dtype == np.int64 and key.flags.c_contiguous:
         lib.sv_running_sum(key.ctypes.data, len(key), top, out.ctypes.data)
         return out
@@ -197,3 +193,43 @@ def _running_sum(key: np.ndarray, top: int) -> np.ndarray:
         v[0] += out[i]
         np.cumsum(v, out=out[i + 1 : i + 1 + len(v)])
     return out
+
+
+class OffsetSums:
+    """Per-cell sums of the points' positions within their cells, gathered chunk by chunk; their
+    means say how far each cell's points sit from its centre."""
+
+    def __init__(self, n_cells: int) -> None:
+        self.sx, self.sy = np.zeros(n_cells), np.zeros(n_cells)
+        self.seen: np.ndarray | None = None  # the cells :meth:`add_at` gave points
+
+    def add(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
+        """Points in flat cells ``ids`` at fractional grid coordinates ``col``/``row``."""
+        self.sx += np.bincount(ids, weights=col - np.floor(col), minlength=self.sx.size)
+        self.sy += np.bincount(ids, weights=row - np.floor(row), minlength=self.sy.size)
+
+    def add_at(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
+        """:meth:`add`, point by point into the sums: blocks added this way give the same bits as
+        one :meth:`add` of all of them into empty sums (a bincount adds in the points' order too).
+        Points of cells an earlier block gave points are added one by one (``np.add.at``, 10x
+        slower), the others by a bincount: from zero, in the points' order, the same bits."""
+        if self.seen is None:
+            self.seen = np.zeros(self.sx.size, bool)
+        old = self.seen[ids]
+        self.seen[ids] = True
+        if old.any():
+            for sums, c in ((self.sx, col[old]), (self.sy, row[old])):
+                np.add.at(sums, ids[old], (c - np.floor(c)).astype(np.float64))  # one dtype: numpy's fast path
+            new = ~old
+            ids, col, row = ids[new], col[new], row[new]
+        for sums, c in ((self.sx, col), (self.sy, row)):
+            sums += np.bincount(ids, weights=(c - np.floor(c)).astype(np.float64), minlength=sums.size)
+
+    def means(self, counts: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+        """(east, north) mean offsets (m) from the cell centres, 0 where empty; ``counts``: the
+        points per cell, (rows, cols)."""
+        n = counts.ravel()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            dx = np.where(n > 0, self.sx / n - 0.5, 0.0) * cell
+            dy = np.where(n > 0, 0.5 - self.sy / n, 0.0) * cell
+        return dx.reshape(counts.shape).astype(np.float32), dy.reshape(counts.shape).astype(np.float32)

@@ -13,8 +13,12 @@ from typing import Any
 
 import numpy as np
 
+from .. import native
 from ..core.types import GridSpec, SoilVolumeError
-from .cellstats import BLOCK, cell_heights
+from ..inputs.footprint import inside
+from ..native import axes
+from ..soil.points import OBJECT, OTHER, VEGETATION
+from .cellstats import BLOCK, OffsetSums, cell_heights
 from .slopes import slopes
 
 
@@ -69,46 +73,6 @@ CENTRING_PASSES = 4  # fixed-point passes: a moved cell gives its neighbours bet
 EPOCH_ARRAYS = ("h", "n", "s", "x", "y", "v", "o", "q", "z", "m")  # an EpochDEM's arrays, in field order
 ZERO_WHERE_EMPTY = set("nxyvoqzm")  # arrays that are 0 (not NaN) where a cell has no point
 MOSTLY = 0.5  # a cell whose points are at least this share not soil has no soil height (colour rule)
-
-
-class OffsetSums:
-    """Per-cell sums of the points' positions within their cells, gathered chunk by chunk; their
-    means say how far each cell's points sit from its centre."""
-
-    def __init__(self, n_cells: int) -> None:
-        self.sx, self.sy = np.zeros(n_cells), np.zeros(n_cells)
-        self.seen: np.ndarray | None = None  # the cells :meth:`add_at` gave points
-
-    def add(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
-        """Points in flat cells ``ids`` at fractional grid coordinates ``col``/``row``."""
-        self.sx += np.bincount(ids, weights=col - np.floor(col), minlength=self.sx.size)
-        self.sy += np.bincount(ids, weights=row - np.floor(row), minlength=self.sy.size)
-
-    def add_at(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
-        """:meth:`add`, point by point into the sums: blocks added this way give the same bits as
-        one :meth:`add` of all of them into empty sums (a bincount adds in the points' order too).
-        Points of cells an earlier block gave points are added one by one (``np.add.at``, 10x
-        slower), the others by a bincount: from zero, in the points' order, the same bits."""
-        if self.seen is None:
-            self.seen = np.zeros(self.sx.size, bool)
-        old = self.seen[ids]
-        self.seen[ids] = True
-        if old.any():
-            for sums, c in ((self.sx, col[old]), (self.sy, row[old])):
-                np.add.at(sums, ids[old], (c - np.floor(c)).astype(np.float64))  # one dtype: numpy's fast path
-            new = ~old
-            ids, col, row = ids[new], col[new], row[new]
-        for sums, c in ((self.sx, col), (self.sy, row)):
-            sums += np.bincount(ids, weights=(c - np.floor(c)).astype(np.float64), minlength=sums.size)
-
-    def means(self, counts: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-        """(east, north) mean offsets (m) from the cell centres, 0 where empty; ``counts``: the
-        points per cell, (rows, cols)."""
-        n = counts.ravel()
-        with np.errstate(invalid="ignore", divide="ignore"):
-            dx = np.where(n > 0, self.sx / n - 0.5, 0.0) * cell
-            dy = np.where(n > 0, 0.5 - self.sy / n, 0.0) * cell
-        return dx.reshape(counts.shape).astype(np.float32), dy.reshape(counts.shape).astype(np.float32)
 
 
 def choose_cell(points: int, area_m2: float, per_cell: float = 8.0, minimum: float = 0.5) -> float:
@@ -208,10 +172,8 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
 def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[np.ndarray, np.ndarray]:
     """(flat cell ids, float64 heights) of the points of ``xyz`` inside ``grid``, in order,
     assigned block by block (moved by ``move`` first); their centre offsets into ``sums``."""
-    from ..native import kernels
-
     ids, z = np.empty(len(xyz), np.int64), np.empty(len(xyz), np.float64)  # pages never written stay free
-    m, lib = 0, kernels()
+    m, lib = 0, native.kernels()
     for i in range(0, len(xyz), BLOCK):
         part = xyz[i : i + BLOCK] if move is None else move(xyz[i : i + BLOCK])
         if lib is not None and part.dtype == np.float32 and len(part):
@@ -234,8 +196,6 @@ def native_cells(
     c1) of ``grid``, assigned on the whole grid: their flat ids in the window and float64 heights
     written to ``ids`` and ``z``, their offsets in their cells added to ``sx`` and ``sy`` point by
     point (as :meth:`OffsetSums.add_at`), the bits of numpy's :func:`cell_coords`; returns how many."""
-    from ..native import axes
-
     part, addresses, step = axes(part, np.float32)  # (N, 3) rows or a (3, N) transposed as they are
     return lib.sv_cells(
         *addresses,
@@ -255,8 +215,6 @@ def native_cells(
 def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:
     """(vegetation, objects, other counts, sum of heights) per cell of non-soil points in flat
     cells ``ids`` of a ``shape`` grid (labels of :mod:`soilvolume.soil.points`)."""
-    from ..soil.points import OBJECT, OTHER, VEGETATION
-
     n = shape[0] * shape[1]
     counts = tuple(np.bincount(ids[labels == k], minlength=n).reshape(shape) for k in (VEGETATION, OBJECT, OTHER))
     return (*counts, np.bincount(ids, weights=np.asarray(z, np.float64), minlength=n).reshape(shape))
@@ -281,8 +239,6 @@ def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> 
 def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> float:
     """:func:`choose_cell` from the density of ``xyz`` inside ``polygon`` (local), counted on a
     lattice of at most about a million cells."""
-    from ..inputs.footprint import inside
-
     lo, hi = polygon.min(axis=0), polygon.max(axis=0)
     res = max(1.0, float(np.sqrt(np.prod(hi - lo) / 1e6)))
     lattice = make_grid(np.r_[lo, 0], np.r_[hi, 0], res, np.zeros(3), None)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.outputs import STAGING, sibling
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import Signals
 from .lasheader import check_las_header
@@ -166,8 +167,6 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
     """Yield a hidden temporary sibling path (named for this process, so a killed run's is
     recognised by :func:`soilvolume.core.outputs.sweep`); rename it onto ``final`` only if the block
     succeeds."""
-    from ..core.outputs import STAGING, sibling
-
     final = Path(final)
     tmp = sibling(final, STAGING, suffix=final.suffix)
     try:

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import sys
 
+from ..core.leanimport import without
+
 
 def laspy_module():
     """The ``laspy`` module; on first import ``requests`` is hidden from it (its HTTP COPC reader
     then says requests is missing), unless something imported ``requests`` already."""
     if "laspy" not in sys.modules:
-        from ..core.leanimport import without
-
         with without(("requests",)):
             import laspy
     import laspy

@@ -16,10 +16,12 @@ from ..core.preload import reading_done, reading_epoch
 from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
+from ..soil.points import PointRule
 from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
-from .io import GROUND, RawPoints
-from .stream import ColumnThinner, Loaded, Source, from_raw, load
+from .ground import filtered
+from .io import RawPoints
+from .stream import ColumnThinner, Loaded, Source, load
 
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
 
@@ -65,45 +67,6 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
     return header or given
 
 
-def select_ground(
-    raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0, slope: float = 0.6
-) -> tuple[np.ndarray, str]:
-    """Mask of the points to use, and a note: class 2 when asked for or (auto) present, or the
-    SMRF ground filter (run in metres: ``crs`` gives the file's units) with an earthworks
-    ``window`` and ``slope`` (PDAL's 18 m / 0.15 take the piles themselves for objects)."""
-    n = len(raw.xyz)
-    has_class = raw.classification is not None and bool((raw.classification == GROUND).any())
-    if mode == "none" or (mode == "auto" and not has_class):
-        return np.ones(n, bool), "all points"
-    if mode in ("auto", "class"):
-        if not has_class:
-            raise SoilVolumeError(
-                f"{raw.path}: {opt('ground', 'class')} needs ground-classified (class 2) points; the file has none"
-            )
-        return raw.classification == GROUND, "class 2 (ground)"
-    if mode == "filter":
-        from ..pipelines.stages.smrf import smrf_classify
-        from .crs import xy_unit, z_unit
-
-        h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
-        x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
-        keep = smrf_classify(x, y, z, window=window, slope=slope)
-        return keep, f"SMRF ground filter (window {window:g} m, slope {slope:g})"
-    if mode == "csf":
-        from ..pipelines.stages.csf import DEFAULTS, csf_classify
-        from .crs import xy_unit, z_unit
-
-        h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
-        keep = csf_classify(raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v, **DEFAULTS)
-        return (
-            keep,
-            "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)".format(
-                **DEFAULTS
-            ),
-        )
-    raise SoilVolumeError(f"unknown ground mode '{mode}'")
-
-
 THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
@@ -113,20 +76,6 @@ def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, p
     if src.raw is not None or not (crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
         return src
     return src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])
-
-
-def _filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
-    """(source to stream, ground mode for streaming, note): SMRF and CSF need the whole cloud."""
-    if options.ground not in ("filter", "csf"):
-        return src, options.ground, None
-    raw = src.materialize()
-    keep, note = select_ground(raw, options.ground, crs, options.ground_window, options.ground_slope)
-    if not keep.any():
-        raise SoilVolumeError(f"{src.path}: the {note.split(' (')[0]} found no ground points")
-    sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
-    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
-    out.count = src.count  # report the points read, not the ground points
-    return out, "filter", note
 
 
 def thin_voxel(area_m2: float) -> float:
@@ -158,33 +107,9 @@ def prepare(
     )
     check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
-    before, mode_b, note_b = _filtered(_limit(before, crs_b, frame, origin, poly), crs_b, options)
-    # full resolution only where the registered after footprint can land (GPS error prior + 2 m)
-    reach = options.max_gps_shift + 2.0
-    lo_a, hi_a = bounds(a.thin, 2)
-    box = (lo_a - reach, hi_a + reach) if full else NOTHING
-    within = _padded_box(before, crs_b, frame, origin)  # a crop radius far past the data costs nothing
-    reading_epoch(1)
-    b = loader(
-        before,
-        _local(crs_b, frame, origin, before.path),
-        mode_b,
-        PolygonMask(poly),
-        ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel, within, before.path),
-        check,
-        box,
-        not full,
-        exclude=options.exclude,
+    before, b, note_b = _load_before(
+        before, crs_b, frame, origin, poly, (after.path, a.thin), voxel, options, check, full, loader
     )
-    if b.used < MIN_COLUMNS:  # a handful of points in all: not an overlap problem
-        raise SoilVolumeError(f"{before.path}: too few points to work with ({b.used}, at least {MIN_COLUMNS} needed)")
-    if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
-        raise SoilVolumeError(
-            f"{before.path} and {after.path} do not overlap: the before cloud has "
-            f"{b.extra['cropped']} points within {options.radius:g} m of the after cloud's footprint "
-            f"(check the CRSs and {opt('radius')})"
-        )
-    check_spread(b.thin[:, :2], before.path, "near the after cloud")
     inputs = {
         "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"], b.nonsoil),
         "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"], a.nonsoil),
@@ -208,6 +133,34 @@ def prepare(
         (b.extra["index"], a.extra["index"]),
         poly,
     )
+
+
+def _load_before(
+    src: Source, crs: pyproj.CRS, frame: WorkFrame, origin, poly, after: tuple, voxel, options, check, full, loader
+) -> tuple[Source, Loaded, str | None]:
+    """The before cloud streamed within the radius of the after footprint ``poly``, at full
+    resolution only where the registered after cloud (``after``: its path and thinned points) can
+    land (GPS error prior + 2 m); refused when too few points or no overlap."""
+    after_path, after_thin = after
+    src, mode, note = filtered(_limit(src, crs, frame, origin, poly), crs, options)
+    reach = options.max_gps_shift + 2.0
+    lo_a, hi_a = bounds(after_thin, 2)
+    box = (lo_a - reach, hi_a + reach) if full else NOTHING
+    within = _padded_box(src, crs, frame, origin)  # a crop radius far past the data costs nothing
+    reading_epoch(1)
+    thinner = ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel, within, src.path)
+    local = _local(crs, frame, origin, src.path)
+    b = loader(src, local, mode, PolygonMask(poly), thinner, check, box, not full, exclude=options.exclude)
+    if b.used < MIN_COLUMNS:  # a handful of points in all: not an overlap problem
+        raise SoilVolumeError(f"{src.path}: too few points to work with ({b.used}, at least {MIN_COLUMNS} needed)")
+    if b.extra["cropped"] < 10 or (full and len(b.xyz) == 0):
+        raise SoilVolumeError(
+            f"{src.path} and {after_path} do not overlap: the before cloud has "
+            f"{b.extra['cropped']} points within {options.radius:g} m of the after cloud's footprint "
+            f"(check the CRSs and {opt('radius')})"
+        )
+    check_spread(b.thin[:, :2], src.path, "near the after cloud")
+    return src, b, note
 
 
 def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
@@ -295,7 +248,7 @@ def _load_whole(
     """Every (ground) point of ``src`` kept (within ``box`` when given), thinned over its local box
     lo..hi (padded: the box comes from header bounds). Returns (the source streamed, what was
     loaded, filter note)."""
-    src, mode, note = _filtered(src, crs, options)
+    src, mode, note = filtered(src, crs, options)
     pad = _pad(lo, hi)
     thinner = ColumnThinner(lo - pad, hi + pad, voxel, name=src.path)
     return src, loader(src, to_local, mode, None, thinner, check, box, box is NOTHING, exclude=options.exclude), note
@@ -351,8 +304,6 @@ class Shift:
 
 
 def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int, nonsoil=None) -> dict:
-    from ..soil.points import PointRule
-
     return {
         "soil_rule": (nonsoil.rule if nonsoil is not None else PointRule()).describe(),
         "path": src.path,

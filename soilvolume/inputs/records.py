@@ -89,16 +89,12 @@ def las_records(
     whole_first: bool = False,
     mapped: bool = False,
 ) -> Iterator[tuple]:
-    """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most
-    ``piece`` points (:data:`PIECE`), each chunk of ``size`` points (the numpy path's) ending on a piece marked
-    ``flush``; a point count other than the header's ``count`` is a corrupt file. An uncompressed
-    file is read into ``ring`` buffers in turn (one, when each piece is done with before the next);
-    ``stop``: only the first ``stop`` points (a whole number of chunks or fewer) are read, unchecked;
-    ``whole_first``: the first chunk in one piece (an epoch's rule is decided on it);
-    ``mapped``: an uncompressed file's pieces are views of the file mapped read-only (no buffer).
-    ``direct(has_class)``, asked at each chunk of an uncompressed file: a class table (or None)
-    leaves the chunk in the file as a :class:`FileChunk` (classification and signals None); False
-    reads it."""
+    """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most ``piece``
+    points (:data:`PIECE`), each chunk of ``size`` points ending on a piece marked ``flush``; a point
+    count other than the header's ``count`` is a corrupt file. Uncompressed files are read into
+    ``ring`` buffers in turn, or ``mapped`` read-only; ``stop``: only the first ``stop`` points,
+    unchecked; ``whole_first``: the first chunk in one piece; ``direct(has_class)``, asked at each
+    uncompressed chunk: a class table (or None) leaves it in the file as a :class:`FileChunk`."""
     laspy = laspy_module()
     read = 0
     try:
@@ -111,14 +107,7 @@ def las_records(
             chunks = chunk_pieces(count if stop is None else stop, size, PIECE if piece is None else piece)
             if whole_first and chunks:
                 chunks[0] = [sum(chunks[0])]
-            arrays = (
-                _laz(reader, [m for c in chunks for m in c])
-                if h.are_points_compressed
-                else _mapped(path, h, chunks)
-                if mapped
-                else _raw(path, h, chunks, ring, direct)
-            )
-            for array in arrays:
+            for array in _arrays(reader, path, chunks, ring, direct, mapped):
                 read += len(array)
                 if isinstance(array, FileChunk):
                     array.scales, array.offsets, array.check, array.last = scales, offsets, check, read >= count
@@ -136,6 +125,13 @@ def las_records(
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
     if read != (count if stop is None else stop):
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
+
+
+def _arrays(reader, path: Path, chunks: list[list[int]], ring: int, direct, mapped: bool) -> Iterator:
+    """The pieces of ``chunks`` of an open file: decompressed (LAZ), mapped or read into buffers."""
+    if reader.header.are_points_compressed:
+        return _laz(reader, [m for c in chunks for m in c])
+    return _mapped(path, reader.header, chunks) if mapped else _raw(path, reader.header, chunks, ring, direct)
 
 
 def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Callable) -> tuple:

@@ -17,15 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import native
 from ..core.cells import bounds
 from ..core.readahead import prefetch
-from ..core.types import SoilVolumeError, short_error
+from ..core.types import SoilVolumeError
 from ..soil.points import NonSoil, PointRule, Signals, decide, deciding_dims
 from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
-from .copc import copc_chunks, is_copc
-from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, las_crs_wkt, read_points, validate
-from .lasimport import laspy_module
-from .records import first_chunk_signals, las_chunks, las_records, point_signals, signal_dims
+from .copc import is_copc
+from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, read_points, validate
+from .lasread import file_chunks, las_header, las_ranges
+from .records import first_chunk_signals, las_records
 from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
 
@@ -111,56 +112,10 @@ def _meeting(index, lo, hi) -> list[tuple[int, int]]:
     return [(s, n) for s, n, a, b in index if (a <= hi).all() and (lo <= b).all()]
 
 
-def las_ranges(
-    path: str, ranges: list[tuple[int, int]], size: int, signals: bool | Callable = False, origin=None
-) -> Iterator[tuple]:
-    """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
-    laspy = laspy_module()
-
-    try:
-        with laspy.open(path) as reader:
-            dims = set(reader.header.point_format.dimension_names)
-            has_cls = "classification" in dims
-            for start, count in ranges:
-                reader.seek(start)
-                for i in range(0, count, size):
-                    pts = reader.read_points(min(size, count - i))
-                    xyz = np.empty((len(pts), 3))
-                    xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
-                    xyz = _shifted(xyz, origin)
-                    cls = np.array(pts.classification) if has_cls else None
-                    sig = point_signals(pts, signal_dims(dims, signals, cls)) if signals else None
-                    yield (xyz, cls, sig) if signals else (xyz, cls)
-    except Exception as exc:
-        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
-
-
-def _shifted(xyz: np.ndarray, origin) -> np.ndarray:
-    """``xyz - origin`` in place (``xyz`` as it is without an origin)."""
-    return xyz if origin is None else np.subtract(xyz, origin, out=xyz)
-
-
-def file_chunks(
-    path: str, region, size: int, resolution: float | None = None, signals: bool | Callable = False, origin=None
-) -> Iterator[tuple]:
-    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only its octree nodes
-    meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file.
-    ``origin``: see :meth:`Source.chunks`."""
-    if (region is not None or resolution is not None) and is_copc(path):
-        lo, hi = region if region is not None else (None, None)
-        for part in copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=bool(signals)):
-            yield (_shifted(part[0], origin), *part[1:])
-        return
-    yield from las_chunks(Path(path), _header(Path(path)).count, size, signals, origin)
-
-
-def open_source(path, pipeline=None) -> Source:
-    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now."""
+def open_source(path) -> Source:
+    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now
+    (a cloud prepared by a pipeline: :func:`soilvolume.pipelines.pipeline.open_source`)."""
     p = Path(path)
-    if pipeline:
-        from ..pipelines.pipeline import prepare_cloud_from_file
-
-        return from_raw(prepare_cloud_from_file(pipeline, p))
     if p.suffix.lower() == ".vpc":
         return _open_vpc(p)
     _check_readable(p)
@@ -174,26 +129,8 @@ def open_source(path, pipeline=None) -> Source:
 
 def _header(p: Path) -> Source:
     """A LAS/LAZ/COPC file's source from its header."""
-    laspy = laspy_module()
-
-    try:
-        with laspy.open(p) as reader:
-            h = reader.header
-            wkt = las_crs_wkt(h, p)
-            dims = set(h.point_format.dimension_names)
-            return Source(
-                str(p),
-                wkt,
-                int(h.point_count),
-                np.asarray(h.mins, float),
-                np.asarray(h.maxs, float),
-                "classification" in dims,
-                compressed=bool(h.are_points_compressed),
-            )
-    except SoilVolumeError:
-        raise
-    except Exception as exc:
-        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
+    wkt, count, lo, hi, has_class, compressed = las_header(p)
+    return Source(str(p), wkt, count, lo, hi, has_class, compressed=compressed)
 
 
 def _open_vpc(p: Path) -> Source:
@@ -265,12 +202,12 @@ def _labelled(
     kernel, it subtracts the origin of a plain shift (``prepare.Shift``) in the decoding; then the
     points are local already, and the thread also applies ``keep`` (the footprint test: the
     reading thread has time to spare, the consumer has none)."""
-    native = native_reads(src, to_local, keep)
+    by_kernel = native_reads(src, to_local, keep)
     fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
-    early = keep if fused and not native else None
+    early = keep if fused and not by_kernel else None
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
-    first = src.first_file() if native else None
+    first = src.first_file() if by_kernel else None
     ahead = first is not None and not first.compressed  # the rule decided before the reading
     if ahead:  # on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
         cls, sig = src.first_signals(first, lambda c: deciding_dims(c, mode, exclude))
@@ -282,11 +219,11 @@ def _labelled(
     def direct(has_class: bool):  # a chunk left in the file once its labels need no signal
         return False if rule is None or not whole_files else rule.class_table(has_class)
 
-    whole_files = native and file_kernel()
+    whole_files = by_kernel and file_kernel()
 
     def run() -> Iterator[tuple]:
         nonlocal rule
-        if native:  # a LAZ file's first chunk in one piece, the rule decided on it (once decompressed)
+        if by_kernel:  # a LAZ file's first chunk in one piece, the rule decided on it (once decompressed)
             chunks = src.records(signals=wanted, direct=direct, whole_first=not ahead)
         else:
             chunks = src.chunks(signals=wanted, origin=to_local.origin if fused else None)
@@ -294,18 +231,16 @@ def _labelled(
             if rule is None:
                 rule = epoch_rule(src, cls, sig, mode, exclude)
             inside = None if early is None else early(xyz)
-            item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes and not native else None, inside
+            item = xyz, rule.labels(cls, sig), rule, bounds(xyz, 2) if boxes and not by_kernel else None, inside
             del xyz, cls, sig, inside  # held by the item only
             yield item
 
-    return prefetch(run()), shift, native
+    return prefetch(run()), shift, by_kernel
 
 
 def file_kernel() -> bool:
     """Whether the native library reads whole chunks from files itself (POSIX builds)."""
-    from ..native import kernels
-
-    lib = kernels()
+    lib = native.kernels()
     return lib is not None and hasattr(lib, "sv_file_chunk")
 
 
@@ -313,9 +248,7 @@ def native_reads(src: Source, to_local, keep: Callable | None) -> bool:
     """Whether ``src`` streams through the native chunk kernel: the library is there, the source is
     LAS/LAZ files read whole (not COPC nodes, not indexed ranges), the frame is a plain shift and
     the crop (if any) a rasterized polygon."""
-    from ..native import kernels
-
-    if kernels() is None or src.raw is not None or not hasattr(to_local, "inplace"):
+    if native.kernels() is None or src.raw is not None or not hasattr(to_local, "inplace"):
         return False
     if keep is not None and not hasattr(keep, "framed"):
         return False
@@ -343,16 +276,16 @@ def load(
     are not soil beside them. ``indexed``: also record each chunk's x/y box (``extra["index"]``)."""
     out = Growing(src.count if box is None or (box[1] >= box[0]).all() else 0), Growing(0), Growing(0, None, np.uint8)
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
-    chunks, shift, native = _labelled(src, to_local, index is not None, mode, exclude, keep)
-    if native:
-        from ..native import kernels
-
-        kernel = NativeChunks(kernels(), thinner, keep, box, to_local.origin, CHUNK)
-    work = partial(native_work, kernel, out=out) if native else partial(numpy_work, shift, keep, thinner, box, out=out)
+    chunks, shift, by_kernel = _labelled(src, to_local, index is not None, mode, exclude, keep)
+    if by_kernel:
+        kernel = NativeChunks(native.kernels(), thinner, keep, box, to_local.origin, CHUNK)
+    work = (
+        partial(native_work, kernel, out=out) if by_kernel else partial(numpy_work, shift, keep, thinner, box, out=out)
+    )
     try:
         points, used, cropped, reading, rule = consume(chunks, work, index, check)
     finally:
-        if native:
+        if by_kernel:
             kernel.close()
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()

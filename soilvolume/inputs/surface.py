@@ -16,7 +16,7 @@ import pyproj
 
 from ..core.types import GridSpec, SoilVolumeError
 from . import landxml
-from .crs import WorkFrame, has_vertical, horizontal, parse_crs, raster_wkt
+from .crs import WorkFrame, has_vertical, horizontal, parse_crs, raster_wkt, xy_unit
 from .heights import HeightRaster, metres_per_unit, open_heights, read_heights, window_over
 
 SUFFIXES = (".tif", ".tiff", *landxml.SUFFIXES)  # a first input with one of these is a surface, not a cloud
@@ -58,8 +58,6 @@ class Surface:
     @property
     def resolution_m(self) -> float:
         """The raster's pixel size (m; CRS units times their metres)."""
-        from .crs import xy_unit
-
         return float(np.hypot(self.transform.a, self.transform.d)) * xy_unit(self.crs)
 
     def describe(self) -> dict:

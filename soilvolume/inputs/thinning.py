@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import native
 from ..core.types import SoilVolumeError
 
 #: most columns a thinning grid may have (4 float64 sums each: 2 GB)
@@ -152,9 +153,7 @@ class ColumnThinner:
 
     def _native_result(self, centroids: bool) -> tuple[np.ndarray | None, np.ndarray] | None:
         """:meth:`columns` on the native kernel; None without it."""
-        from ..native import kernels
-
-        lib = kernels()
+        lib = native.kernels()
         if lib is None or not self.sums.flags.c_contiguous:
             return None
         m = int(np.count_nonzero(self.sums[3] > 0))

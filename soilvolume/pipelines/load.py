@@ -35,54 +35,13 @@ MAX_BYTES = 64 << 20
 #: extra text formats the builder reads with an explicit readers.text
 TEXT_SUFFIXES = {".xyz", ".pts", ".txt", ".csv"}
 
-NUMERIC = {
-    "mean_k",
-    "multiplier",
-    "min_k",
-    "radius",
-    "class",
-    "cell",
-    "slope",
-    "window",
-    "threshold",
-    "scalar",
-    "cut",
-    "distance",
-    "resolution",
-    "power",
-    "window_size",
-    "nodata",
-    "origin_x",
-    "origin_y",
-    "width",
-    "height",
-    "scale_x",
-    "scale_y",
-    "scale_z",
-    "skip",
-    "count",
-    "minor_version",
-    "dataformat_id",
+#: the types of the options of the project's own stages (others are left to PDAL to check)
+NUMERIC = {"cell", "window", "slope", "threshold", "scalar", "resolution", "rigidness", "step", "iterations"} | {
+    f"scale_{a}" for a in "xyz"
 }
-BOOLEAN = {"outside", "binmode", "error_on_failure"}
-STRING = {
-    "type",
-    "filename",
-    "in_srs",
-    "out_srs",
-    "a_srs",
-    "method",
-    "header",
-    "separator",
-    "gdaldriver",
-    "data_type",
-    "dimension",
-    "override_srs",
-    "default_srs",
-    "spatialreference",
-    "compression",
-}
-STRING_OR_LIST = {"limits", "polygon", "point", "output_type", "value", "assignment", "ignore", "returns"}
+BOOLEAN = {"smooth"}
+STRING = {"type", "filename", "out_srs", "header", "separator", "default_srs", "override_srs", "spatialreference"}
+STRING_OR_LIST = {"limits", "polygon", "value"}
 
 
 def _check_value(name: str, value: Any, where: str) -> None:

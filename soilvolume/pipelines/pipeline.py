@@ -13,12 +13,14 @@ from typing import Any
 import numpy as np
 
 from ..core.types import SoilVolumeError
+from ..inputs.csf import DEFAULTS as CSF_DEFAULTS
 from ..inputs.io import GROUND, LAS_SUFFIXES, RawPoints, atomic_path
 from ..inputs.lasheader import check_las_header
+from ..inputs.stream import Source, from_raw
+from ..inputs.stream import open_source as open_file
 from . import stages as embedded
 from .confine import confine_writers
 from .load import READERS, TEXT_SUFFIXES, load_pipeline
-from .stages.csf import DEFAULTS as CSF_DEFAULTS
 from .stages.view import PointView
 
 #: a reader's SRS options, kept when a user's pipeline reads another file (see :func:`with_input`)
@@ -243,3 +245,11 @@ def prepare_cloud_from_file(
     stages = confine_writers(stages, str(pipeline))
     view = run_pipeline(stages, engine=engine, source=str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))
+
+
+def open_source(path: str | os.PathLike, pipeline: str | os.PathLike | None = None) -> Source:
+    """A cloud to stream (:func:`soilvolume.inputs.stream.open_source`), or with ``pipeline`` the
+    points that pipeline prepares from ``path``, in memory."""
+    if pipeline:
+        return from_raw(prepare_cloud_from_file(pipeline, path))
+    return open_file(path)

@@ -63,7 +63,7 @@ class SurfaceReference:
         """The surface opened and checked (before any point), then the survey alone, then the
         surface's heights over the survey's box; nothing registered."""
         from ..inputs.prepare import prepare_survey
-        from ..inputs.stream import open_source
+        from ..pipelines.pipeline import open_source
         from ..registration.register import Registration
 
         design, after = run.epochs

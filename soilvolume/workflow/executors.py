@@ -151,7 +151,7 @@ def _write_rasters(run) -> None:
 def _prepare_one(run) -> None:
     """One cloud (``dem``) streamed into its own working frame."""
     from ..inputs.prepare import prepare_single
-    from ..inputs.stream import open_source
+    from ..pipelines.pipeline import open_source
 
     (epoch,) = run.epochs
     check = run.hooks.ticker(*run.spans["prepare"], "reading")

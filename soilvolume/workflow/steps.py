@@ -44,7 +44,7 @@ def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options, poly: 
 
 def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline, spans) -> Prepared:
     """Both clouds read whole (:func:`inputs.prepare.prepare`), progress within ``spans["prepare"]``."""
-    from ..inputs.stream import open_source
+    from ..pipelines.pipeline import open_source
 
     src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
     return prepare(src_b, src_a, options, check=hooks.ticker(*spans["prepare"], "reading"))

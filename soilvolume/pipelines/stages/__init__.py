@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ...core.types import SoilVolumeError
-from . import crop, csf, readers, reprojection, smrf, writers
+from . import crop, ground, readers, reprojection, writers
 from . import range as range_stage
 from .view import PointView, StageContext
 
@@ -29,8 +29,8 @@ REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
     "filters.crop": (crop.crop, frozenset(crop.OPTS)),
     "filters.assign": (range_stage.assign, frozenset(range_stage.ASSIGN_OPTS)),
     "filters.range": (range_stage.filter_range, frozenset(range_stage.RANGE_OPTS)),
-    "filters.smrf": (smrf.smrf, frozenset(smrf.OPTS)),
-    "filters.csf": (csf.csf, frozenset(csf.OPTS)),
+    "filters.smrf": (ground.smrf, frozenset(ground.SMRF_OPTS)),
+    "filters.csf": (ground.csf, frozenset(ground.CSF_OPTS)),
     "writers.las": (writers.write_las, frozenset(writers.LAS_OPTS)),
 }
 

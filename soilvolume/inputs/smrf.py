@@ -1,4 +1,4 @@
-"""filters.smrf: the Simple Morphological Filter (Pingel et al. 2013) as PDAL implements it.
+"""The Simple Morphological Filter (Pingel et al. 2013) as PDAL's filters.smrf implements it.
 
 1. ZImin: the lowest Z per ``cell`` (grid from the points' minimum corner), empty cells filled
    with the mean of the 8 nearest filled cells.
@@ -18,10 +18,7 @@ import math
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ...core.cells import cell_index
-from .view import PointView, StageContext
-
-OPTS = {"cell", "slope", "window", "threshold", "scalar"}
+from ..core.cells import cell_index
 
 
 def _cross(a: np.ndarray, iterations: int, op) -> np.ndarray:
@@ -99,40 +96,3 @@ def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, 
     thresh = threshold + scalar * gsurf
     zp, tp = zipro.ravel()[flat], thresh.ravel()[flat]
     return np.abs(zp - z) <= tp  # NaN comparisons are False: not ground, as PDAL skips them
-
-
-def _last_or_only(view: PointView, ctx: StageContext) -> np.ndarray:
-    """The points SMRF classifies: last and single returns (all when the returns are not known)."""
-    n = len(view)
-    rn_key, nr_key = view.dim("ReturnNumber"), view.dim("NumberOfReturns")
-    if rn_key is None or nr_key is None:
-        return np.ones(n, dtype=bool)
-    rn = view.arrays[rn_key].astype(np.int64)
-    nr = view.arrays[nr_key].astype(np.int64)
-    zero = (rn == 0) | (nr == 0)
-    if zero.all():
-        return np.ones(n, dtype=bool)
-    if zero.any():
-        raise ctx.error("some NumberOfReturns or ReturnNumber values are 0, but not all")
-    return ((rn == nr) & (nr > 1)) | (nr == 1)
-
-
-def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
-    cell = ctx.positive(opts, "cell", 1.0)
-    params = {
-        "cell": cell,
-        "slope": ctx.number(opts, "slope", 0.15),
-        "window": ctx.positive(opts, "window", 18.0 * cell),
-        "threshold": ctx.number(opts, "threshold", 0.5),
-        "scalar": ctx.number(opts, "scalar", 1.25),
-    }
-    cls = view.ensure("Classification")
-    if len(view) == 0:
-        return view
-    use = _last_or_only(view, ctx)
-    if not use.any():
-        raise ctx.error("no returns to process")
-    idx = np.flatnonzero(use)
-    ground = smrf_classify(view.arrays["X"][idx], view.arrays["Y"][idx], view.arrays["Z"][idx], **params)
-    cls[idx] = np.where(ground, 2, 1).astype(cls.dtype)
-    return view

@@ -1,4 +1,4 @@
-"""filters.csf: the Cloth Simulation Filter (Zhang et al. 2016), run by the ``CSF`` module of the
+"""The Cloth Simulation Filter (Zhang et al. 2016), run by the ``CSF`` module of the
 PyPI package ``cloth-simulation-filter`` (the authors' own implementation, which PDAL's filters.csf
 also wraps).
 
@@ -19,21 +19,10 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from ...core.types import SoilVolumeError
-from .view import PointView, StageContext
+from ..core.types import SoilVolumeError
 
-OPTS = {"resolution", "rigidness", "threshold", "smooth", "step", "iterations"}
 DEFAULTS = {"resolution": 0.5, "rigidness": 2, "threshold": 0.3, "smooth": True, "step": 0.65, "iterations": 500}
 PACKAGE = "cloth-simulation-filter"
-
-
-def available() -> bool:
-    """Whether the ``CSF`` module imports."""
-    try:
-        import CSF  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def csf_classify(
@@ -97,26 +86,3 @@ def _quiet_native_stdout() -> Iterator[None]:
         if ours:
             sys.stdout.close()
             sys.stdout = python_stdout
-
-
-def csf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
-    """The stage: Classification 2 for ground, 1 for the rest."""
-    params = {
-        "resolution": ctx.positive(opts, "resolution", DEFAULTS["resolution"]),
-        "rigidness": int(ctx.number(opts, "rigidness", DEFAULTS["rigidness"])),
-        "threshold": ctx.positive(opts, "threshold", DEFAULTS["threshold"]),
-        "smooth": bool(opts.get("smooth", DEFAULTS["smooth"])),
-        "step": ctx.positive(opts, "step", DEFAULTS["step"]),
-        "iterations": int(ctx.positive(opts, "iterations", DEFAULTS["iterations"])),
-    }
-    if params["rigidness"] not in (1, 2, 3):
-        raise ctx.error("'rigidness' must be 1, 2 or 3")
-    cls = view.ensure("Classification")
-    if len(view) == 0:
-        return view
-    try:
-        ground = csf_classify(view.arrays["X"], view.arrays["Y"], view.arrays["Z"], **params)
-    except SoilVolumeError as exc:
-        raise ctx.error(str(exc)) from exc
-    cls[:] = np.where(ground, 2, 1).astype(cls.dtype)
-    return view

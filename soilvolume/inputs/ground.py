@@ -1,0 +1,57 @@
+"""The ground points of a whole cloud: class 2, or the SMRF or cloth simulation filter."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyproj
+
+from ..core.types import SoilVolumeError
+from ..core.wording import opt
+from ..options import Options
+from .crs import xy_unit, z_unit
+from .csf import DEFAULTS, csf_classify
+from .io import GROUND, RawPoints
+from .smrf import smrf_classify
+from .stream import Source, from_raw
+
+SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
+CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
+
+
+def select_ground(
+    raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0, slope: float = 0.6
+) -> tuple[np.ndarray, str]:
+    """Mask of the points to use, and a note: class 2 when asked for or (auto) present, or the
+    SMRF ground filter (run in metres: ``crs`` gives the file's units) with an earthworks
+    ``window`` and ``slope`` (PDAL's 18 m / 0.15 take the piles themselves for objects)."""
+    n = len(raw.xyz)
+    has_class = raw.classification is not None and bool((raw.classification == GROUND).any())
+    if mode == "none" or (mode == "auto" and not has_class):
+        return np.ones(n, bool), "all points"
+    if mode in ("auto", "class"):
+        if not has_class:
+            raise SoilVolumeError(
+                f"{raw.path}: {opt('ground', 'class')} needs ground-classified (class 2) points; the file has none"
+            )
+        return raw.classification == GROUND, "class 2 (ground)"
+    if mode not in ("filter", "csf"):
+        raise SoilVolumeError(f"unknown ground mode '{mode}'")
+    h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
+    x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
+    if mode == "filter":
+        return smrf_classify(x, y, z, window=window, slope=slope), SMRF_NOTE.format(window=window, slope=slope)
+    return csf_classify(x, y, z, **DEFAULTS), CSF_NOTE.format(**DEFAULTS)
+
+
+def filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
+    """(source to stream, ground mode for streaming, note): SMRF and CSF need the whole cloud."""
+    if options.ground not in ("filter", "csf"):
+        return src, options.ground, None
+    raw = src.materialize()
+    keep, note = select_ground(raw, options.ground, crs, options.ground_window, options.ground_slope)
+    if not keep.any():
+        raise SoilVolumeError(f"{src.path}: the {note.split(' (')[0]} found no ground points")
+    sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
+    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
+    out.count = src.count  # report the points read, not the ground points
+    return out, "filter", note

@@ -1,0 +1,76 @@
+"""LAS/LAZ/COPC files read chunk by chunk: whole, by point ranges (LAZ seeks by its chunk table)
+or by the COPC octree nodes meeting a region; and their headers."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..core.types import SoilVolumeError, short_error
+from .copc import copc_chunks, is_copc
+from .io import las_crs_wkt
+from .lasimport import laspy_module
+from .records import las_chunks, point_signals, signal_dims
+
+
+def las_header(p: Path) -> tuple:
+    """(CRS WKT or None, point count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC
+    file's header."""
+    laspy = laspy_module()
+
+    try:
+        with laspy.open(p) as reader:
+            h = reader.header
+            wkt = las_crs_wkt(h, p)
+            dims = set(h.point_format.dimension_names)
+            lo, hi = np.asarray(h.mins, float), np.asarray(h.maxs, float)
+            return wkt, int(h.point_count), lo, hi, "classification" in dims, bool(h.are_points_compressed)
+    except SoilVolumeError:
+        raise
+    except Exception as exc:
+        raise SoilVolumeError(f"{p}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
+
+
+def las_ranges(
+    path: str, ranges: list[tuple[int, int]], size: int, signals: bool | Callable = False, origin=None
+) -> Iterator[tuple]:
+    """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
+    laspy = laspy_module()
+
+    try:
+        with laspy.open(path) as reader:
+            dims = set(reader.header.point_format.dimension_names)
+            has_cls = "classification" in dims
+            for start, count in ranges:
+                reader.seek(start)
+                for i in range(0, count, size):
+                    pts = reader.read_points(min(size, count - i))
+                    xyz = np.empty((len(pts), 3))
+                    xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
+                    xyz = _shifted(xyz, origin)
+                    cls = np.array(pts.classification) if has_cls else None
+                    sig = point_signals(pts, signal_dims(dims, signals, cls)) if signals else None
+                    yield (xyz, cls, sig) if signals else (xyz, cls)
+    except Exception as exc:
+        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
+
+
+def _shifted(xyz: np.ndarray, origin) -> np.ndarray:
+    """``xyz - origin`` in place (``xyz`` as it is without an origin)."""
+    return xyz if origin is None else np.subtract(xyz, origin, out=xyz)
+
+
+def file_chunks(
+    path: str, region, size: int, resolution: float | None = None, signals: bool | Callable = False, origin=None
+) -> Iterator[tuple]:
+    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only its octree nodes
+    meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file.
+    ``origin``: see :meth:`Source.chunks`."""
+    if (region is not None or resolution is not None) and is_copc(path):
+        lo, hi = region if region is not None else (None, None)
+        for part in copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=bool(signals)):
+            yield (_shifted(part[0], origin), *part[1:])
+        return
+    yield from las_chunks(Path(path), las_header(Path(path))[1], size, signals, origin)
