@@ -133,3 +133,33 @@ def lonlat_of(xyz: np.ndarray, crs: pyproj.CRS) -> tuple[float, float]:
     tr = pyproj.Transformer.from_crs(horizontal(crs), "EPSG:4326", always_xy=True)
     lon, lat = tr.transform(cx, cy)
     return float(lon), float(lat)
+
+
+def frame_box(lo: np.ndarray, hi: np.ndarray, crs: pyproj.CRS, frame: WorkFrame, path: str) -> tuple:
+    """The box lo..hi of a file's header (its CRS and units) in the working frame (absolute, metres)."""
+    corners = np.array([[x, y, lo[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])] + [list(hi)], float)
+    corners = to_frame(corners, crs, frame, path)
+    return corners.min(axis=0), corners.max(axis=0)
+
+
+def to_local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
+    """File CRS -> local frame; a plain subtraction when the file is already in the frame's
+    CRS in metres (the common case)."""
+    if crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0:
+        return Shift(origin)
+    return lambda xyz: to_frame(xyz, crs, frame, path) - origin
+
+
+class Shift:
+    """File -> local frame when the file is in the frame's CRS in metres: ``xyz - origin``;
+    :meth:`inplace` on a chunk the reader allocated (no 24 MB array per 1 M points to fault in);
+    a reader given :attr:`origin` subtracts it as it decodes (``stream.Source.chunks``)."""
+
+    def __init__(self, origin: np.ndarray) -> None:
+        self.origin = origin
+
+    def __call__(self, xyz: np.ndarray) -> np.ndarray:
+        return xyz - self.origin
+
+    def inplace(self, xyz: np.ndarray) -> np.ndarray:
+        return np.subtract(xyz, self.origin, out=xyz)

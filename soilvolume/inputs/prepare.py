@@ -17,7 +17,16 @@ from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
 from ..soil.points import PointRule
-from .crs import WorkFrame, lonlat_of, parse_crs, to_frame, work_frame, z_unit
+from .crs import (
+    Shift,  # noqa: F401  (its home was this module)
+    WorkFrame,
+    frame_box,
+    lonlat_of,
+    parse_crs,
+    work_frame,
+    z_unit,
+)
+from .crs import to_local as _local
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
 from .ground import filtered
 from .io import RawPoints
@@ -97,7 +106,7 @@ def prepare(
     crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(before, crs_b)
-    lo, hi = _frame_box(after, crs_a, frame)
+    lo, hi = frame_box(after.lo, after.hi, crs_a, frame, after.path)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
@@ -168,7 +177,7 @@ def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
     run whose reference is a surface (:mod:`soilvolume.inputs.surface`): no before cloud."""
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(after, crs_a)
-    lo, hi = _frame_box(after, crs_a, frame)
+    lo, hi = frame_box(after.lo, after.hi, crs_a, frame, after.path)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     to_a = _local(crs_a, frame, origin, after.path)
@@ -209,7 +218,7 @@ def prepare_single(src: Source, override: str | None, options: Options, check=No
     the local origin at the floor of its bounds."""
     crs = resolve_crs(src, override, opt("crs"))
     frame = _own_frame(src, crs)
-    lo, hi = _frame_box(src, crs, frame)
+    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
     origin = np.floor(lo)
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     to_local = _local(crs, frame, origin, src.path)
@@ -225,12 +234,6 @@ def _own_frame(src: Source, crs: pyproj.CRS) -> WorkFrame:
     geographic, from the header's bounds)."""
     hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
     return work_frame(crs, hint)
-
-
-def _frame_box(src: Source, crs: pyproj.CRS, frame: WorkFrame) -> tuple[np.ndarray, np.ndarray]:
-    """The source's header bounds, in the working frame (absolute, metres)."""
-    corners = to_frame(_box_corners(src.lo, src.hi), crs, frame, src.path)
-    return corners.min(axis=0), corners.max(axis=0)
 
 
 def _load_whole(
@@ -261,7 +264,7 @@ def _pad(lo: np.ndarray, hi: np.ndarray) -> float:
 
 def _padded_box(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray) -> tuple:
     """The local x/y box every point of ``src`` lies in (its header bounds, padded)."""
-    lo, hi = _frame_box(src, crs, frame)
+    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
     pad = _pad(lo, hi)
     return lo[:2] - origin[:2] - pad, hi[:2] - origin[:2] + pad
 
@@ -274,33 +277,6 @@ def _all_points(src: Source, to_local):
             yield to_local(xyz), cls
 
     return chunks
-
-
-def _box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    return np.array([[x, y, lo[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])] + [list(hi)], float)
-
-
-def _local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
-    """File CRS -> local frame; a plain subtraction when the file is already in the frame's
-    CRS in metres (the common case)."""
-    if crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0:
-        return Shift(origin)
-    return lambda xyz: to_frame(xyz, crs, frame, path) - origin
-
-
-class Shift:
-    """File -> local frame when the file is in the frame's CRS in metres: ``xyz - origin``;
-    :meth:`inplace` on a chunk the reader allocated (no 24 MB array per 1 M points to fault in);
-    a reader given :attr:`origin` subtracts it as it decodes (``stream.Source.chunks``)."""
-
-    def __init__(self, origin: np.ndarray) -> None:
-        self.origin = origin
-
-    def __call__(self, xyz: np.ndarray) -> np.ndarray:
-        return xyz - self.origin
-
-    def inplace(self, xyz: np.ndarray) -> np.ndarray:
-        return np.subtract(xyz, self.origin, out=xyz)
 
 
 def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int, nonsoil=None) -> dict:

@@ -162,25 +162,6 @@ def _pdal_module():
     return pdal
 
 
-def _pdal_srs(p) -> str | None:
-    """The SRS of a run PDAL pipeline: ``srswkt2``, or with older bindings the last stage's
-    metadata."""
-    srs = getattr(p, "srswkt2", None)
-    if srs:
-        return srs
-    try:
-        meta = p.metadata
-        meta = json.loads(meta) if isinstance(meta, str) else meta
-        for node in reversed(list(meta["metadata"].values())):
-            node = node[0] if isinstance(node, list) else node
-            srs = node.get("srs", {}).get("wkt") or node.get("comp_spatialreference")
-            if srs:
-                return srs
-    except Exception:  # bindings without metadata, or another layout: no SRS
-        return None
-    return None
-
-
 def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
     """The stages run by real PDAL; its views' points concatenated in PDAL's dimension names."""
     try:
@@ -195,7 +176,7 @@ def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
     out = {name: np.asarray(data[name], dtype=np.float64 if name in "XYZ" else None) for name in data.dtype.names}
     if "Classification" in out:
         out["Classification"] = out["Classification"].astype(np.uint8)
-    return PointView(out, _pdal_srs(p) or None)
+    return PointView(out, getattr(p, "srswkt2", None) or None)  # the bindings' SRS
 
 
 def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto", source: str = "<pipeline>") -> PointView:

@@ -21,9 +21,9 @@ StageFn = Callable[[PointView | None, dict, StageContext], PointView]
 GENERIC = {"type", "tag", "user_data"}
 
 REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
-    "readers.las": (readers.read_las, frozenset(readers.LAS_OPTS)),
-    "readers.ply": (readers.read_o3d, frozenset(readers.PLY_OPTS)),
-    "readers.pcd": (readers.read_o3d, frozenset(readers.PLY_OPTS)),
+    "readers.las": (readers.read_file, frozenset(readers.FILE_OPTS)),
+    "readers.ply": (readers.read_file, frozenset(readers.FILE_OPTS)),
+    "readers.pcd": (readers.read_file, frozenset(readers.FILE_OPTS)),
     "readers.text": (readers.read_text, frozenset(readers.TEXT_OPTS)),
     "filters.reprojection": (reprojection.reproject, frozenset(reprojection.OPTS)),
     "filters.crop": (crop.crop, frozenset(crop.OPTS)),

@@ -8,14 +8,12 @@ from pathlib import Path
 import numpy as np
 import pyproj
 
-from ...core.types import SoilVolumeError, short_error
-from ...inputs import io
-from ...inputs.lasheader import BoundsCheck, check_las_header
+from ...core.types import SoilVolumeError
+from ...inputs.stream import open_source
 from .view import PointView, StageContext
 
-LAS_OPTS = {"filename", "default_srs"}
-PLY_OPTS = LAS_OPTS
-TEXT_OPTS = LAS_OPTS | {"header", "separator"}
+FILE_OPTS = {"filename", "default_srs"}
+TEXT_OPTS = FILE_OPTS | {"header", "separator"}
 
 _KNOWN = {
     n.lower(): n
@@ -44,70 +42,21 @@ def _srs(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     return view
 
 
-#: the LAS dimensions read: PDAL's name -> laspy's
-_LAS_DIMS = {
-    "X": "x",
-    "Y": "y",
-    "Z": "z",
-    "Classification": "classification",
-    "ReturnNumber": "return_number",
-    "NumberOfReturns": "number_of_returns",
-    "Intensity": "intensity",
-}
-
-
-def _las_arrays(reader, path: Path) -> tuple[dict[str, np.ndarray], int]:
-    """The dimensions of an open LAS/LAZ file read in chunks, each chunk checked against the
-    header's box; returns the arrays and the number of points read."""
-    header = reader.header
-    n = header.point_count
-    present = set(header.point_format.dimension_names)
-    cols = {k: v for k, v in _LAS_DIMS.items() if v in present or k in "XYZ"}
-    dtypes = {"Intensity": np.uint16, "X": np.float64, "Y": np.float64, "Z": np.float64}
-    arrays = {k: np.empty(n, dtype=dtypes.get(k, np.uint8)) for k in cols}
-    start = 0
-    bounds = BoundsCheck(path, header)
-    for chunk in reader.chunk_iterator(2_000_000):
-        end = start + len(chunk)
-        if end > n:
-            raise SoilVolumeError(f"{path}: corrupt LAS file (more points than the header's {n})")
-        for k, v in cols.items():
-            arrays[k][start:end] = np.asarray(getattr(chunk, v))
-        bounds.update(np.c_[arrays["X"][start:end], arrays["Y"][start:end], arrays["Z"][start:end]])
-        start = end
-    bounds.finish()
-    return arrays, start
-
-
-def read_las(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
-    """LAS/LAZ with laspy: X, Y, Z, Classification, ReturnNumber, NumberOfReturns, Intensity."""
-    import laspy
-
+def read_file(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
+    """LAS/LAZ (X, Y, Z, Classification, ReturnNumber, NumberOfReturns) and PLY/PCD (X, Y, Z)
+    through the engine's own readers: headers checked, every point counted."""
     path = _path(opts, ctx)
     try:
-        check_las_header(path)
-        with laspy.open(path) as reader:
-            wkt = io.las_crs_wkt(reader.header, path)
-            n = reader.header.point_count
-            arrays, read = _las_arrays(reader, path)
+        raw = open_source(path).materialize()
     except SoilVolumeError as exc:
         raise ctx.error(str(exc)) from exc
-    except Exception as exc:  # laspy raises many types on broken files
-        raise ctx.error(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
-    if read != n:
-        raise ctx.error(f"{path}: corrupt LAS file (header says {n} points, read {read})")
-    return _srs(PointView(arrays, wkt), opts, ctx)
-
-
-def read_o3d(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
-    """PLY/PCD vertices (x, y, z) through the engine's reader."""
-    path = _path(opts, ctx)
-    try:
-        raw = io.read_points(path)
-    except SoilVolumeError as exc:
-        raise ctx.error(str(exc)) from exc
-    arrays = {"X": raw.xyz[:, 0].copy(), "Y": raw.xyz[:, 1].copy(), "Z": raw.xyz[:, 2].copy()}
-    return _srs(PointView(arrays, None), opts, ctx)
+    arrays = {d: raw.xyz[:, k].copy() for k, d in enumerate("XYZ")}
+    if raw.classification is not None:
+        arrays["Classification"] = raw.classification.astype(np.uint8)
+    returns = None if raw.signals is None else raw.signals.returns
+    if returns is not None:
+        arrays["ReturnNumber"], arrays["NumberOfReturns"] = returns[:, 0].copy(), returns[:, 1].copy()
+    return _srs(PointView(arrays, raw.crs_wkt), opts, ctx)
 
 
 def _split_header(line: str, sep: str | None) -> tuple[list[str], str]:
