@@ -177,6 +177,18 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
             tmp.unlink()
 
 
+def _las_header(offsets: np.ndarray, scale: float, crs_wkt: str | None):
+    """A LAS 1.4 header (point format 6) with these offsets, one scale for x/y/z and the CRS."""
+    import pyproj  # here: the command line's start-up imports this module, not pyproj
+
+    header = laspy_module().LasHeader(point_format=6, version="1.4")
+    header.offsets = offsets
+    header.scales = np.array([scale, scale, scale])
+    if crs_wkt:
+        header.add_crs(pyproj.CRS.from_wkt(crs_wkt))
+    return header
+
+
 def write_las_chunked(
     path: str | os.PathLike,
     chunks: Iterable[tuple[np.ndarray, np.ndarray | None]],
@@ -188,14 +200,8 @@ def write_las_chunked(
     """Write (local xyz, classification or None) chunks, optionally through a 4x4 rigid
     ``transform``, as absolute LAS 1.4/LAZ (memory bounded by a chunk), atomically."""
     laspy = laspy_module()
-    import pyproj
-
-    header = laspy.LasHeader(point_format=6, version="1.4")
     origin = np.asarray(origin, float)
-    header.offsets = np.floor(origin)
-    header.scales = np.array([scale, scale, scale])
-    if crs_wkt:
-        header.add_crs(pyproj.CRS.from_wkt(crs_wkt))
+    header = _las_header(np.floor(origin), scale, crs_wkt)
     with atomic_path(path) as tmp:
         with laspy.open(tmp, mode="w", header=header, do_compress=Path(path).suffix.lower() == ".laz") as w:
             for xyz, cls in chunks:
@@ -217,16 +223,8 @@ def write_las(
     scale: float = 0.001,
 ) -> None:
     """Write absolute coordinates as LAS 1.4 (LAZ when the suffix is .laz), atomically."""
-    laspy = laspy_module()
-    import pyproj
-
-    header = laspy.LasHeader(point_format=6, version="1.4")
     lo = np.floor(xyz_abs.min(axis=0)) if len(xyz_abs) else np.zeros(3)
-    header.offsets = lo
-    header.scales = np.array([scale, scale, scale])
-    if crs_wkt:
-        header.add_crs(pyproj.CRS.from_wkt(crs_wkt))
-    las = laspy.LasData(header)
+    las = laspy_module().LasData(_las_header(lo, scale, crs_wkt))
     las.x, las.y, las.z = xyz_abs[:, 0], xyz_abs[:, 1], xyz_abs[:, 2]
     if classification is not None:
         las.classification = classification

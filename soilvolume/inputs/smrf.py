@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..core.cells import cell_index
 
@@ -44,6 +43,8 @@ def dilate(a: np.ndarray, it: int) -> np.ndarray:
 
 def knnfill(z: np.ndarray, cell: float) -> np.ndarray:
     """Fill NaN cells with the mean of the (up to) 8 nearest non-NaN cell centres."""
+    from scipy.spatial import cKDTree  # here: a Dask worker imports this module, never filters
+
     empty = np.isnan(z)
     if not empty.any() or empty.all():
         return z

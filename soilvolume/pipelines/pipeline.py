@@ -26,18 +26,6 @@ from .stages.view import PointView
 #: a reader's SRS options, kept when a user's pipeline reads another file (see :func:`with_input`)
 SRS_OPTS = ("override_srs", "spatialreference", "default_srs")
 
-__all__ = [
-    "PointView",
-    "build_prepare_pipeline",
-    "dumps",
-    "load_pipeline",
-    "prepare_cloud_from_file",
-    "run_pipeline",
-    "save_pipeline",
-    "view_to_raw",
-    "with_input",
-]
-
 
 # ---------------------------------------------------------------------------- building
 def _text_reader(path: Path) -> dict[str, Any]:
