@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..native import kernels, steps
+
 
 def cell_index(v: np.ndarray, lo, cell: float) -> np.ndarray:
     """The index (int64) of the ``cell``-wide bin each coordinate of ``v`` falls in, counted from
@@ -44,8 +46,6 @@ NATIVE_BOUNDS = 50_000  # fewest points whose bounds the native kernel takes (a 
 
 def _native_bounds(xyz: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray] | None:
     """:func:`bounds` on the kernel (``sv_bounds``: one pass over the points), None without it."""
-    from ..native import kernels, steps
-
     lib, walk = kernels(), steps(xyz, np.float64)
     if lib is None or walk is None:
         return None

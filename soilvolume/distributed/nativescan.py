@@ -20,6 +20,7 @@ from ..inputs.copc import is_copc
 from ..inputs.records import FileChunk, las_records
 from ..inputs.stream import CHUNK, file_kernel, native_reads, open_source
 from ..inputs.thinning import ColumnThinner, narrowed
+from ..native import kernels
 from ..soil.points import PointRule
 
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no points kept
@@ -59,8 +60,6 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
 def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinner, keeping: bool) -> tuple:
     """(counts of the scan, ``thinner`` fed, each chunk's kept points and labels when
     ``keeping``) of :func:`native_scan`."""
-    from ..native import kernels
-
     out = Growing(src.count if keeping else 0), Growing(0), Growing(0, None, np.uint8)
     kernel = NativeChunks(kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
     direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None
