@@ -328,7 +328,8 @@ def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_pa
     tiles come from the budget instead; below the smallest tile's need the budget is refused."""
     import laspy
 
-    from soilvolume.distributed.tiletask import MIN_TILE, TILE_BYTES_PER_POINT
+    from soilvolume.distributed.schedule import TILE_BYTES_PER_POINT
+    from soilvolume.distributed.tiletask import MIN_TILE
 
     before, after, _ = pair
     vpc, parts = _quadrant_vpc(before, tmp_path)

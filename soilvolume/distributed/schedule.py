@@ -18,11 +18,13 @@ from ..inputs.io import LAS_SUFFIXES
 from ..inputs.stream import open_source
 from . import cluster
 from .cluster import START_S, Starting
-from .tiletask import TILE_BYTES_PER_POINT
 
 BASE_GB = 0.45  # in-process run of a small pair: imports, registration, rasters (measured 330-460 MB)
 MAX_WORKERS = 1024  # threads or worker processes of threads:N / local:N
 BYTES_PER_POINT = 30.0  # in-process growth per input point (measured ~26 B from 16 M to 64 M points)
+# a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
+# 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
+TILE_BYTES_PER_POINT = 48.0
 
 
 @dataclass(frozen=True)

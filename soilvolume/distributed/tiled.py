@@ -29,8 +29,8 @@ from ..inputs.prepare import Prepared
 from ..options import Options
 from .gridtile import Plan
 from .overview import MAX_CELLS, blocks_for, factor
-from .schedule import Schedule, budget_gb
-from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT
+from .schedule import TILE_BYTES_PER_POINT, Schedule, budget_gb
+from .tiletask import MAX_TILE, MIN_TILE
 
 
 def data_tiling(src, cell: float, side: int) -> tuple[float, float, float] | None:

@@ -15,9 +15,6 @@ from .gridtile import TILE_ARRAYS, Plan, Window, crop_mask, empty_value, grid_ti
 from .tilestore import TileStore
 from .waiting import completed
 
-# a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
-# 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
-TILE_BYTES_PER_POINT = 48.0
 SCATTER_S = 60  # sending a run's plan to every worker
 MIN_TILE, MAX_TILE = 16, 4096  # tile side (cells): small tiles keep very dense data within a task's memory
 
