@@ -10,6 +10,7 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 import pyproj
 
+from .. import native
 from ..core.cells import in_box
 from ..core.types import GridSpec
 from ..dem.grid import (
@@ -28,7 +29,6 @@ from ..inputs.footprint import PolygonMask
 from ..inputs.io import GROUND
 from ..inputs.prepare import _local
 from ..inputs.stream import open_source
-from ..native import kernels
 from ..registration.rigid import transform_points32
 from .pointcache import chunks, kept_chunk
 
@@ -175,7 +175,7 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
     their cells are added to ``offsets`` (None: not needed, as for the points that are not
     soil). ``keep_ids``: the ids come with the indices of the points they belong to."""
     if offsets is not None and not keep_ids and xyz32.dtype == np.float32:
-        lib = kernels()
+        lib = native.kernels()
         if lib is not None:
             return _native_window_cells(lib, xyz32, grid, win, offsets)
     fcol, frow, ok = cell_coords(xyz32, grid, win)

@@ -14,13 +14,13 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import native
 from ..core.types import SoilVolumeError
 from ..inputs.chunkwork import Growing, NativeChunks, consume, native_work
 from ..inputs.copc import is_copc
 from ..inputs.records import FileChunk, las_records
 from ..inputs.stream import CHUNK, file_kernel, native_reads, open_source
 from ..inputs.thinning import ColumnThinner, narrowed
-from ..native import kernels
 from ..soil.points import PointRule
 
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no points kept
@@ -61,7 +61,7 @@ def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinne
     """(counts of the scan, ``thinner`` fed, each chunk's kept points and labels when
     ``keeping``) of :func:`native_scan`."""
     out = Growing(src.count if keeping else 0), Growing(0), Growing(0, None, np.uint8)
-    kernel = NativeChunks(kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
+    kernel = NativeChunks(native.kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
     direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None
     records = las_records(Path(path), src.count, CHUNK, lambda _cls: rule.signal_dims, direct=direct)
     items = ((rec, None if isinstance(rec, FileChunk) else rule.labels(cls, sig), rule) for rec, cls, sig in records)
