@@ -6,7 +6,7 @@ without the GIL (the driver scans tiles while the cluster starts; its imports sh
 What it returns is what :func:`.scan._scan` computes in numpy: the same thinning sums and counts,
 and the same kept chunks (one per chunk of ``CHUNK`` points, the same number of points) with their
 soil points first and the others after them, each in file order: the grid takes soil and other
-points apart (:func:`.tiletask._epoch`), so its sums come out byte-identical."""
+points apart (:func:`.gridtile._epoch`), so its sums come out byte-identical."""
 
 from __future__ import annotations
 

@@ -46,7 +46,7 @@ def halo(cell: float) -> int:
 
 
 def grid_tile_stored(plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
-    """:func:`tiletask.grid_tile`, its arrays kept in ``store``: (window, block sums of both
+    """:func:`.gridtile.grid_tile`, its arrays kept in ``store``: (window, block sums of both
     epochs, count histograms, stats)."""
     win, arrays, stats = grid_tile(plan, win, cached)
     store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
