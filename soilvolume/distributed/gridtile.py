@@ -31,6 +31,7 @@ from ..inputs.prepare import _local
 from ..inputs.stream import open_source
 from ..registration.rigid import transform_points32
 from .pointcache import chunks, kept_chunk
+from .tilestore import Window
 
 TILE_ARRAYS = tuple(f"{k}_{e}" for e in "ab" for k in EPOCH_ARRAYS)  # what a tile task returns: h_a, n_a, ...
 
@@ -66,9 +67,6 @@ class Plan:
 def crop_mask(plan: Plan) -> PolygonMask:
     """The before crop as a lattice: the plan's, or made from its polygon."""
     return plan.mask or PolygonMask(plan.crop)
-
-
-Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 
 
 def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Window, tuple[np.ndarray, ...], dict]:

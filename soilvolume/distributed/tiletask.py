@@ -11,8 +11,8 @@ from ..core.hooks import Hooks
 from ..core.types import GridSpec
 from ..dem.grid import EPOCH_ARRAYS, EpochDEM
 from .cluster import checker
-from .gridtile import TILE_ARRAYS, Plan, Window, crop_mask, empty_value, grid_tile, window_source
-from .tilestore import TileStore
+from .gridtile import TILE_ARRAYS, Plan, crop_mask, empty_value, grid_tile, window_source
+from .tilestore import TileStore, Window
 from .waiting import completed
 
 SCATTER_S = 60  # sending a run's plan to every worker
