@@ -586,10 +586,10 @@ def test_the_bounds_kernel_gives_numpys_min_and_max(lib, monkeypatch):
 
 
 def test_the_window_cells_kernel_gives_the_numpy_bits(lib, monkeypatch):
-    """A grid task's soil points on its window's cells (``tiletask._window_cells``) by the kernel:
+    """A grid task's soil points on its window's cells (``gridtile._window_cells``) by the kernel:
     numpy's cell ids and heights, and the same offset sums bit for bit, chunk after chunk."""
     from soilvolume.dem import grid as gridmod
-    from soilvolume.distributed import tiletask
+    from soilvolume.distributed import gridtile
 
     rng = np.random.default_rng(6)
     grid = gridmod.make_grid(np.array([0.0, 0.0]), np.array([60.0, 40.0]), 0.7, np.zeros(3), None)
@@ -603,7 +603,7 @@ def test_the_window_cells_kernel_gives_the_numpy_bits(lib, monkeypatch):
     def run():
         sums, out = gridmod.OffsetSums((win[1] - win[0]) * (win[3] - win[2])), []
         for c in chunks:
-            ids, z = tiletask._window_cells(c, grid, win, sums)
+            ids, z = gridtile._window_cells(c, grid, win, sums)
             out += [ids.astype(np.int64).tobytes(), z.astype(np.float64).tobytes()]
         return out, sums.sx.tobytes(), sums.sy.tobytes()
 

@@ -365,10 +365,10 @@ def test_overwrite_never_replaces_a_folder_of_other_files_or_inputs(tmp_path):
 def test_two_runs_into_one_folder(tmp_path, monkeypatch, flock):
     """Two runs into one folder take turns (the second refused), with flock or, where it is
     missing (Windows), the lock folder, which never stays behind."""
-    import soilvolume.core.outputs as outputs
+    import soilvolume.core.siblings as siblings
 
     if not flock:
-        monkeypatch.setattr(outputs, "fcntl", None)
+        monkeypatch.setattr(siblings, "fcntl", None)
     final = tmp_path / "result"
     first, second = OutputDir(final, [], False), OutputDir(final, [], False)
     _stage(first, {"report.json": "first"})
@@ -457,10 +457,10 @@ def test_open3d_imported_without_its_plotly_drawing():
 def test_without_flock_the_engine_imports_and_a_stale_lock_is_one_line(tmp_path):
     """Windows has no fcntl: the engine still imports; a lock folder left by a killed run ends
     the wait with a clear line, no hang."""
-    import soilvolume.core.outputs as outputs
+    import soilvolume.core.siblings as siblings
 
     assert run_python("import sys; sys.modules['fcntl'] = None; import soilvolume.core.outputs").returncode == 0
-    (tmp_path / outputs.LOCK_DIR).mkdir()  # a lock left by a killed run: a clear line, no hang
+    (tmp_path / siblings.LOCK_DIR).mkdir()  # a lock left by a killed run: a clear line, no hang
     with pytest.raises(SoilVolumeError, match="soilvolume-lock: another soilvolume run"):
-        with outputs._lock_folder(tmp_path, wait_s=0.2):
+        with siblings._lock_folder(tmp_path, wait_s=0.2):
             pass

@@ -328,7 +328,8 @@ def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_pa
     tiles come from the budget instead; below the smallest tile's need the budget is refused."""
     import laspy
 
-    from soilvolume.distributed.tiletask import MIN_TILE, TILE_BYTES_PER_POINT
+    from soilvolume.distributed.schedule import TILE_BYTES_PER_POINT
+    from soilvolume.distributed.tiletask import MIN_TILE
 
     before, after, _ = pair
     vpc, parts = _quadrant_vpc(before, tmp_path)
@@ -445,7 +446,7 @@ def test_a_tile_takes_its_cells_points_as_the_whole_grid_assigns_them():
     and column inside the window): the same points, ids, heights and offsets, points on cell
     edges, on the window's and the grid's borders and outside them included."""
     from soilvolume.dem.grid import OffsetSums, cell_coords, flat_ids
-    from soilvolume.distributed.tiletask import _window_cells
+    from soilvolume.distributed.gridtile import _window_cells
 
     rng = np.random.default_rng(7)
     grid = GridSpec(xmin=500_000.0, ymax=4_000_030.0, cell=0.5, rows=60, cols=50, origin=(500_010.0, 4_000_000.0, 0.0))
@@ -499,7 +500,7 @@ def test_a_cluster_still_starting_when_the_run_ends_is_shut_down_before_its_scra
 def test_a_grid_task_takes_soil_and_other_points_apart_as_a_mask_would():
     """A chunk whose soil points come first (as the native scan keeps a tile) is cut by slices
     (views, no copies), any other by a mask: the same points, labels and order either way."""
-    from soilvolume.distributed.tiletask import _soil_apart
+    from soilvolume.distributed.gridtile import _soil_apart
 
     rng = np.random.default_rng(3)
     xyz = rng.normal(size=(1000, 3)).astype(np.float32)

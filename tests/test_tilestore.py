@@ -7,18 +7,24 @@ import json
 import os
 import shutil
 import signal
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
+import pyproj
 import pytest
 from test_robustness import WKT, _cloud
 
 from soilvolume.core.interrupt import Interrupted
+from soilvolume.core.types import GridSpec
 from soilvolume.distributed import fingerprint
+from soilvolume.distributed.gridtile import Plan
 from soilvolume.distributed.tilestore import RunStore, run_store
+from soilvolume.distributed.tiletask import plan_parts
+from soilvolume.inputs.crs import WorkFrame
 from soilvolume.inputs.io import write_las
 from soilvolume.inputs.vpc import write_vpc
 from soilvolume.options import Options
+from soilvolume.soil.points import PointRule
 
 #: a value of each option other than its default (the test fails when an option is added
 #: without one, so that a new option is checked to key the tiles, or declared run control)
@@ -259,3 +265,55 @@ def test_tiles_load_from_many_threads_at_once(tmp_path):
         gc.set_threshold(*old[1])
     assert not any(t.is_alive() for t in threads)
     assert errors == []
+
+
+def _plan_parts(windows=((0, 40, 0, 40),), k: int = 1, **changed) -> dict:
+    """The key parts of a small run's tile plan (:func:`tiletask.plan_parts`), with ``changed``
+    fields, cut into ``windows``, its overview ``k`` x ``k`` cells."""
+    crs = pyproj.CRS("EPSG:32654")
+    plan = Plan(
+        "b.las",
+        "a.las",
+        crs.to_wkt(),
+        crs.to_wkt(),
+        WorkFrame(crs, 1.0),
+        np.zeros(3),
+        GridSpec(0.0, 40.0, 1.0, 40, 40),
+        np.eye(4),
+        (False, False),
+        np.zeros((3, 2)),
+        "mean",
+    )
+    return fingerprint.run_parts({}, Options(), plan_parts(replace(plan, **changed), list(windows), k))
+
+
+def test_every_field_of_the_tile_plan_keys_the_tiles():
+    """Tiles are reused only for the same frame, grid, registration, crop, statistic, ground,
+    rules and chunk index: every field of the plan is in the key (a new one too), but the files'
+    names (their content is keyed) and what the driver opened of them."""
+    plain = _plan_parts()
+    shifted = np.eye(4)
+    shifted[0, 3] = 1e-9  # a registration moved by a nanometre
+    other = {
+        "crs_b": pyproj.CRS("EPSG:32655").to_wkt(),
+        "crs_a": pyproj.CRS("EPSG:32655").to_wkt(),
+        "frame": WorkFrame(pyproj.CRS("EPSG:32655"), 1.0),
+        "origin": np.ones(3),
+        "grid": GridSpec(0.0, 40.0, 1.0, 40, 41),
+        "transform": shifted,
+        "ground": (True, False),
+        "crop": np.ones((3, 2)),
+        "statistic": "median",
+        "index": (((0, 10, 0.0, 0.0, 1.0, 1.0),), None),
+        "rules": (PointRule(), None),
+    }
+    opened = {"sources": ("opened", None), "mask": "a lattice", "before": "c.las", "after": "d.las"}
+    for f in fields(Plan):
+        if f.name in opened:
+            assert _plan_parts(**{f.name: opened[f.name]}) == plain, f.name
+            continue
+        assert f.name in other, f"{f.name}: give it a value in `other`"
+        changed = _plan_parts(**{f.name: other[f.name]})
+        assert fingerprint.difference(plain, changed) == "the registration, grid or tiling differs", f.name
+    for other_cut in (_plan_parts(windows=((0, 20, 0, 40), (20, 40, 0, 40))), _plan_parts(k=2)):
+        assert fingerprint.difference(plain, other_cut) == "the registration, grid or tiling differs"

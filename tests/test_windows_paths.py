@@ -14,7 +14,7 @@ import types
 import numpy as np
 import pytest
 
-from soilvolume.core import outputs
+from soilvolume.core import outputs, siblings
 from soilvolume.core.types import SoilVolumeError
 from soilvolume.inputs.io import write_las
 from soilvolume.inputs.vpc import file_url_path, read_vpc, write_vpc
@@ -36,12 +36,12 @@ class SignalsRecorded(types.ModuleType):
 
 def test_liveness_of_a_run_never_signals_it(monkeypatch):
     sent = []
-    monkeypatch.setattr(outputs, "os", SignalsRecorded(sent))
+    monkeypatch.setattr(siblings, "os", SignalsRecorded(sent))
     done = subprocess.run([sys.executable, "-c", "import os;print(os.getpid())"], capture_output=True, text=True)
     dead = int(done.stdout)
     with subprocess.Popen([sys.executable, "-c", "import time;time.sleep(30)"]) as alive:
         try:
-            assert outputs._alive(alive.pid) and not outputs._alive(dead) and outputs._alive(os.getpid())
+            assert siblings._alive(alive.pid) and not siblings._alive(dead) and siblings._alive(os.getpid())
         finally:
             alive.kill()
     assert sent == []

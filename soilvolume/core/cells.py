@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import native
+
 
 def cell_index(v: np.ndarray, lo, cell: float) -> np.ndarray:
     """The index (int64) of the ``cell``-wide bin each coordinate of ``v`` falls in, counted from
@@ -31,9 +33,9 @@ def bounds(xyz: np.ndarray, dims: int | None = None) -> tuple[np.ndarray, np.nda
     C-ordered array steps through k values at a time)."""
     k = xyz.shape[1] if dims is None else dims
     if xyz.dtype == np.float64 and len(xyz) >= NATIVE_BOUNDS and 0 < k <= 3:
-        native = _native_bounds(xyz, k)
-        if native is not None:
-            return native
+        fast = _native_bounds(xyz, k)
+        if fast is not None:
+            return fast
     lo = np.array([xyz[:, j].min() for j in range(k)])
     hi = np.array([xyz[:, j].max() for j in range(k)])
     return lo, hi
@@ -44,9 +46,7 @@ NATIVE_BOUNDS = 50_000  # fewest points whose bounds the native kernel takes (a 
 
 def _native_bounds(xyz: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray] | None:
     """:func:`bounds` on the kernel (``sv_bounds``: one pass over the points), None without it."""
-    from ..native import kernels, steps
-
-    lib, walk = kernels(), steps(xyz, np.float64)
+    lib, walk = native.kernels(), native.steps(xyz, np.float64)
     if lib is None or walk is None:
         return None
     lo, hi = np.empty(k), np.empty(k)

@@ -5,29 +5,20 @@ a killed run's siblings are removed, or its old set restored, by the next run.""
 from __future__ import annotations
 
 import errno
-import hashlib
 import os
-import re
 import secrets
 import shutil
-import time
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from . import interrupt
 from .replaceable import check_replaceable
+from .siblings import NAME_MAX, STAGING, TRASH, locked, remove, sibling, sweep, sweep_inside
 from .types import SoilVolumeError, short_error
 
-try:
-    import fcntl
-except ImportError:  # Windows: no flock; a lock folder made atomically takes its place
-    fcntl = None
-
-STAGING, TRASH = "soilvolume-staging", "soilvolume-trash"
 #: what a folder of a previous run may hold for --overwrite to replace it
 RUN_SUFFIXES = (".tif", ".tiff", ".json", ".html", ".las", ".laz", ".xml", ".csv")
-NAME_MAX = 255
 #: libraries whose write errors (a full disk, a lost mount) arrive as their own exception types
 WRITER_LIBRARIES = ("rasterio", "laspy", "lazrs")
 #: the files ``estimate`` writes itself (pipeline writers may not take these names)
@@ -89,109 +80,6 @@ def _write_problem(exc: BaseException, path: Path | None) -> SoilVolumeError:
     return SoilVolumeError(f"{path}: cannot write ({text})" if path is not None else f"cannot write ({text})")
 
 
-def _tag(name: str) -> str:
-    """``name``, or a short digest of it when hidden siblings would exceed NAME_MAX bytes."""
-    if len(name.encode()) <= NAME_MAX - 40:
-        return name
-    return hashlib.sha1(name.encode()).hexdigest()[:16]
-
-
-def sibling(final: Path, kind: str, pid: int | None = None, suffix: str = "", token: str | None = None) -> Path:
-    """The hidden sibling of ``final`` of this ``kind`` for process ``pid`` (default: this one),
-    told apart from others of the same process by ``token`` (default: a fresh random one)."""
-    token = secrets.token_hex(4) if token is None else token
-    return final.with_name(f".{_tag(final.name)}.{kind}-{pid or os.getpid()}-{token}{suffix}")
-
-
-def _alive(pid: int) -> bool:
-    import psutil  # on Windows os.kill(pid, 0) is no test but a Ctrl-C event; only when a sibling is found
-
-    return pid == os.getpid() or psutil.pid_exists(pid)
-
-
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path, ignore_errors=True)
-    else:
-        path.unlink(missing_ok=True)
-
-
-def dead_siblings(final: Path, kinds: Iterable[str]) -> Iterator[tuple[Path, str]]:
-    """(path, kind) of the hidden siblings of ``final`` of these ``kinds`` whose run is dead."""
-    pattern = re.compile(rf"^\.{re.escape(_tag(final.name))}\.({'|'.join(map(re.escape, kinds))})-(\d+)(-\w*)?(\..*)?$")
-    try:
-        entries = list(final.parent.iterdir())
-    except OSError:
-        return
-    for entry in entries:
-        m = pattern.match(entry.name)
-        if m and not _alive(int(m.group(2))):
-            yield entry, m.group(1)
-
-
-def sweep(final: Path) -> None:
-    """Remove the hidden siblings of ``final`` left by dead runs; a trashed old set whose new set
-    never arrived is put back."""
-    for entry, kind in dead_siblings(final, (STAGING, TRASH)):
-        if kind == TRASH and not final.exists():
-            os.rename(entry, final)
-        else:
-            _remove(entry)
-
-
-def _sweep_inside(folder: Path) -> None:
-    """Remove staging folders dead runs left inside ``folder`` (mount points, folders whose parent is not writable)."""
-    pattern = re.compile(rf"^\.{STAGING}-(\d+)-\w+$")
-    try:
-        entries = list(folder.iterdir()) if folder.is_dir() else []
-    except OSError:
-        return
-    for entry in entries:
-        m = pattern.match(entry.name)
-        if m and not _alive(int(m.group(1))):
-            _remove(entry)
-
-
-LOCK_DIR, LOCK_WAIT_S = ".soilvolume-lock", 120.0
-
-
-@contextmanager
-def locked(folder: Path) -> Iterator[None]:
-    """An exclusive advisory lock on ``folder`` (swaps and sweeps of concurrent runs take turns):
-    ``flock`` on POSIX, else :func:`_lock_folder`."""
-    if fcntl is None:
-        with _lock_folder(folder):
-            yield
-        return
-    fd = os.open(folder, os.O_RDONLY)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        os.close(fd)
-
-
-@contextmanager
-def _lock_folder(folder: Path, wait_s: float = LOCK_WAIT_S) -> Iterator[None]:
-    """The lock where there is no ``flock`` (Windows): a folder ``.soilvolume-lock`` inside
-    ``folder``, made atomically and removed after; a run waits ``wait_s`` for another's at most."""
-    lock, deadline = folder / LOCK_DIR, time.monotonic() + wait_s
-    while True:
-        try:
-            os.mkdir(lock)
-            break
-        except FileExistsError:
-            if time.monotonic() > deadline:
-                raise SoilVolumeError(
-                    f"{lock}: another soilvolume run has held this lock for {wait_s:g} s; remove it if no run is going"
-                ) from None
-            time.sleep(0.05)
-    try:
-        yield
-    finally:
-        os.rmdir(lock)
-
-
 def _inside(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
@@ -226,7 +114,7 @@ class OutputDir:
         self.inputs = {Path(p).resolve() for p in inputs if p}
         self.moved: dict[str, Path] = {}  # name -> final path, once committed
         self.overwrite, self.allowed = overwrite, set(allowed) if allowed is not None else None
-        _sweep_inside(self.final)
+        sweep_inside(self.final)
         self._check()
         self.created = _make_parents(self.final.parent)
         self.token = secrets.token_hex(4)
@@ -299,7 +187,7 @@ class OutputDir:
             self.stage.rmdir()
             for old in self.final.iterdir():
                 if old.name not in names and not old.name.startswith(f".{STAGING}-"):
-                    _remove(old)
+                    remove(old)
         else:
             with locked(self.final.parent), interrupt.cleanup_on_exit(self._restore):
                 self._swap()

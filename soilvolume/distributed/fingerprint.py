@@ -16,6 +16,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+from ..inputs.vpc import read_vpc
 from ..options import Options
 
 WHOLE_BYTES = 16 * 2**20  # files up to this size are hashed whole
@@ -53,8 +54,6 @@ def input_identity(path: str | os.PathLike) -> dict[str, Any]:
     p = Path(path)
     out = {str(p): file_identity(p)}
     if p.suffix.lower() == ".vpc":
-        from ..inputs.vpc import read_vpc
-
         out.update({t.path: file_identity(t.path) for t in read_vpc(p).tiles})
     return out
 

@@ -6,7 +6,7 @@ without the GIL (the driver scans tiles while the cluster starts; its imports sh
 What it returns is what :func:`.scan._scan` computes in numpy: the same thinning sums and counts,
 and the same kept chunks (one per chunk of ``CHUNK`` points, the same number of points) with their
 soil points first and the others after them, each in file order: the grid takes soil and other
-points apart (:func:`.tiletask._epoch`), so its sums come out byte-identical."""
+points apart (:func:`.gridtile._epoch`), so its sums come out byte-identical."""
 
 from __future__ import annotations
 
@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import native
 from ..core.types import SoilVolumeError
 from ..inputs.chunkwork import Growing, NativeChunks, consume, native_work
 from ..inputs.copc import is_copc
@@ -59,10 +60,8 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
 def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinner, keeping: bool) -> tuple:
     """(counts of the scan, ``thinner`` fed, each chunk's kept points and labels when
     ``keeping``) of :func:`native_scan`."""
-    from ..native import kernels
-
     out = Growing(src.count if keeping else 0), Growing(0), Growing(0, None, np.uint8)
-    kernel = NativeChunks(kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
+    kernel = NativeChunks(native.kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
     direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None
     records = las_records(Path(path), src.count, CHUNK, lambda _cls: rule.signal_dims, direct=direct)
     items = ((rec, None if isinstance(rec, FileChunk) else rule.labels(cls, sig), rule) for rec, cls, sig in records)

@@ -5,7 +5,9 @@ full-resolution points are kept, so :func:`prepare.prepare` runs unchanged on a 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import operator
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from itertools import chain
 
@@ -13,12 +15,14 @@ import numpy as np
 
 from ..core import interrupt
 from ..core.cells import bounds, rows
+from ..core.preload import idle
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..inputs.thinning import Block
 from ..soil.points import SOIL, NonSoil, PointRule
 from .nativescan import native_scan
 from .pointcache import KeptTile, kept_chunk, read_tile
+from .waiting import completed
 
 UNIT = 8_000_000  # points per task of a single file
 # COPC files are read for registration only down to the octree level whose spacing puts about
@@ -54,8 +58,6 @@ def scan_keeping(unit: Unit, region, to_local, rule: PointRule, keep, thinning: 
 
 def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached, kept) -> dict:
     """:func:`scan_unit`; ``kept`` (a list or None): each chunk's kept points and labels appended."""
-    import time
-
     path, start, count = unit
     voxel = thinning[2]  # (lo, hi, voxel[, within]) of the driver's ColumnThinner
     resolution = voxel / COPC_POINTS_PER_COLUMN_SIDE if start is None and is_copc(path) else None
@@ -110,8 +112,6 @@ def dask_loader(
     reads that keep full-resolution points, fall back to streaming here); ``wait_check`` runs
     while the tasks are waited for (signals, cancellation); ``cache`` (a
     :class:`.pointcache.PointCache`): the VPC tiles read are kept on the workers for the grid."""
-    from ..core.preload import idle
-    from .cluster import completed
 
     def loader(
         src: Source,
@@ -141,24 +141,37 @@ def dask_loader(
             kept.prefetch()
         if futures:
             idle()  # the driver waits for the workers: the later steps' imports meanwhile
-        parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
-        for k, part in enumerate(chain(here, completed(client, futures, f"reading {src.path}", wait_check)), 1):
-            waiting[position[part.pop("unit")]] = part.pop("sums")
-            _add_in_order(thinner, waiting, k - len(waiting))
-            parts.append(part)
-            if progress:
-                progress(f"scanned {k}/{len(todo)} pieces of {src.path}")
-        single = indexed and src.vpc is None and not is_copc(src.path)
-        index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
-        total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
-        note = "class 2 (ground)" if rule.use_class else "all points"
-        thin, counts = thinner.columns()
-        extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": counts, "index": index}
-        nothing = NonSoil(np.empty((0, 3), np.float32), np.empty(0, np.uint8), rule) if rule.active else None
-        empty = np.empty((0, 3), np.float32)
-        return Loaded(empty, thin, total["points"], total["used"], note, extra, nothing)
+        done = chain(here, completed(client, futures, f"reading {src.path}", wait_check))
+        parts = _gathered(done, todo, thinner, progress, src.path)
+        return _loaded(parts, thinner, rule, indexed and src.vpc is None and not is_copc(src.path))
 
     return loader
+
+
+def _gathered(done: Iterator[dict], todo: list[Unit], thinner: ColumnThinner, progress, path: str) -> list:
+    """The units' summaries as they arrive, their sums added to ``thinner`` in the units' order
+    (:func:`_add_in_order`), each arrival told to ``progress`` (None: not told)."""
+    parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
+    for k, part in enumerate(done, 1):
+        waiting[position[part.pop("unit")]] = part.pop("sums")
+        _add_in_order(thinner, waiting, k - len(waiting))
+        parts.append(part)
+        if progress:
+            progress(f"scanned {k}/{len(todo)} pieces of {path}")
+    return parts
+
+
+def _loaded(parts: list[dict], thinner: ColumnThinner, rule: PointRule, single: bool) -> Loaded:
+    """What :func:`stream.load` returns, from the units' summaries: no points kept, the thinned
+    columns and counts, the totals, the chunk index of a single file (``single``)."""
+    index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
+    total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
+    note = "class 2 (ground)" if rule.use_class else "all points"
+    thin, counts = thinner.columns()
+    extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": counts, "index": index}
+    nothing = NonSoil(np.empty((0, 3), np.float32), np.empty(0, np.uint8), rule) if rule.active else None
+    empty = np.empty((0, 3), np.float32)
+    return Loaded(empty, thin, total["points"], total["used"], note, extra, nothing)
 
 
 def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
@@ -180,8 +193,6 @@ def _submit(client, left: list[Unit], args: tuple, taken: list[tuple], cache, cr
     """The scan tasks of ``left`` (``taken``: per unit, its chunks read ahead or None, and whether
     it is kept): futures of their summaries; a kept unit's :class:`.pointcache.KeptTile` is split
     from its summary on the worker that scanned it, and its future handed to ``cache``."""
-    import operator
-
     if not left:
         return []
     keeping = [k for k, (_, kept) in enumerate(taken) if kept]
@@ -219,8 +230,6 @@ def _rule(client, src: Source, todo: list[Unit], cache, ready: Callable[[], bool
                 return epoch_rule(src, chunks[0][1], chunks[0][2], *how), {path: chunks}
         elif (read := cache.read_ahead(path)) is not None:
             named = replace(src, vpc=None)  # what the rule's messages name, without the tile list
-            from .cluster import completed
-
             decided = client.submit(_first_rule, read, named, how, pure=False)
             rule = next(completed(client, [decided], f"reading {src.path}", check))
             if rule is not None:

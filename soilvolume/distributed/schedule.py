@@ -14,10 +14,17 @@ from pathlib import Path
 
 from ..core.types import SoilVolumeError
 from ..core.wording import opt
+from ..inputs.io import LAS_SUFFIXES
+from ..inputs.stream import open_source
+from . import cluster
+from .cluster import START_S, Starting
 
 BASE_GB = 0.45  # in-process run of a small pair: imports, registration, rasters (measured 330-460 MB)
 MAX_WORKERS = 1024  # threads or worker processes of threads:N / local:N
 BYTES_PER_POINT = 30.0  # in-process growth per input point (measured ~26 B from 16 M to 64 M points)
+# a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
+# 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
+TILE_BYTES_PER_POINT = 48.0
 
 
 @dataclass(frozen=True)
@@ -194,8 +201,6 @@ MAX_TILES = 50_000  # tasks per step a cluster schedules well (each tile is a ta
 def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) -> None:
     """Refuse tilings a cluster cannot run: more than :data:`MAX_TILES` tiles, or a largest tile
     whose points do not fit half of a task's memory share (``--memory-limit``)."""
-    from .tiletask import TILE_BYTES_PER_POINT
-
     given = opt("tile_cells", options.tile_cells) if options.tile_cells else opt("memory_limit")
     if len(windows) > MAX_TILES:
         raise SoilVolumeError(
@@ -219,8 +224,6 @@ def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None)
     background (threads: in this process; local: a LocalCluster sharing the memory budget among
     its worker processes, their scratch space in ``scratch``; tcp: an existing cluster), shut
     down on exit within a timeout."""
-    from .cluster import START_S, Starting
-
     check_budget(schedule, memory_limit)
     check_open_files(schedule)
     starting = Starting(lambda: _start(schedule, memory_limit, scratch), str(schedule), START_S[schedule.kind])
@@ -236,8 +239,6 @@ def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
         raise SoilVolumeError(
             f"{opt('scheduler', schedule)}: needs dask[distributed] (pip install 'dask[distributed]')"
         )
-    from . import cluster
-
     if schedule.kind == "tcp":
         return cluster.connect(str(schedule.address))
     processes = schedule.kind == "local"
@@ -275,9 +276,6 @@ def schedule_for(before, after, options, pipeline: bool) -> Schedule:
 
 def _header_points(path) -> int | None:
     """A LAS/LAZ/COPC file's or a VPC's point count from its header(s); None for other formats."""
-    from ..inputs.io import LAS_SUFFIXES
-    from ..inputs.stream import open_source
-
     suffix = Path(path).suffix.lower()
     if suffix not in LAS_SUFFIXES | {".vpc"}:
         return None

@@ -27,8 +27,10 @@ from ..dem.grid import choose_cell
 from ..inputs.footprint import PolygonMask, footprint, inside, polygon_area
 from ..inputs.prepare import Prepared
 from ..options import Options
-from .schedule import Schedule
-from .tiletask import MAX_TILE, MIN_TILE, TILE_BYTES_PER_POINT, Plan
+from .gridtile import Plan
+from .overview import MAX_CELLS, blocks_for, factor
+from .schedule import TILE_BYTES_PER_POINT, Schedule, budget_gb
+from .tiletask import MAX_TILE, MIN_TILE
 
 
 def data_tiling(src, cell: float, side: int) -> tuple[float, float, float] | None:
@@ -112,9 +114,6 @@ def plan_for(run, cell: float, sources: tuple = (None, None)) -> Plan:
 def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:
     """1 for the volume step on the whole grid in the driver, else the block side of the
     overview the tiled volume step finds the correction on (``--volume-step``)."""
-    from .overview import MAX_CELLS, blocks_for, factor
-    from .schedule import budget_gb
-
     k = factor(grid, budget_gb(options.memory_limit))
     if options.volume_step == "whole" or (options.volume_step == "auto" and k == 1):
         return 1

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.interrupt import Interrupted, cleanup_on_exit
-from ..core.outputs import _tag, dead_siblings
+from ..core.siblings import dead_siblings, tag
 from . import fingerprint
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
@@ -99,7 +99,7 @@ class RunStore:
 
     def __init__(self, final: Path) -> None:
         self.final = Path(final)
-        name = _tag(self.final.name)
+        name = tag(self.final.name)
         self.kept = self.final.with_name(f".{name}.{KEPT}")
         self.folder = self.final.with_name(f".{name}.{KEPT}-{os.getpid()}-{secrets.token_hex(4)}")
         _sweep(self.final)

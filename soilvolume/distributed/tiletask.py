@@ -1,250 +1,34 @@
-"""One tile of the shared grid as a Dask task: both epochs' points on the tile's cells (read only
-where they can meet it), their heights, counts and spreads with :func:`grid.cell_heights` on the
-*global* grid's cell assignment; the tiling of the grid; running the tiles with resume."""
+"""The tiling of the shared grid and the running of its tiles (:mod:`.gridtile`) on a Dask
+client, with progress and resume from a run's tile store."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import fields, replace
 
 import numpy as np
 
-from ..core.cells import in_box
 from ..core.hooks import Hooks
 from ..core.types import GridSpec
-from ..dem.grid import (
-    EPOCH_ARRAYS,
-    ZERO_WHERE_EMPTY,
-    EpochDEM,
-    OffsetSums,
-    cell_coords,
-    cell_heights,
-    finish_epoch,
-    native_cells,
-    nonsoil_sums,
-)
-from ..inputs.crs import WorkFrame
-from ..inputs.footprint import PolygonMask
-from ..inputs.io import GROUND
-from ..inputs.prepare import _local
-from ..inputs.stream import open_source
-from .pointcache import chunks, kept_chunk
-from .tilestore import TileStore
+from ..dem.grid import EPOCH_ARRAYS, EpochDEM
+from .cluster import checker
+from .gridtile import TILE_ARRAYS, Plan, crop_mask, empty_value, grid_tile, window_source
+from .tilestore import TileStore, Window
+from .waiting import completed
 
-# a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
-# 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
-TILE_BYTES_PER_POINT = 48.0
 SCATTER_S = 60  # sending a run's plan to every worker
 MIN_TILE, MAX_TILE = 16, 4096  # tile side (cells): small tiles keep very dense data within a task's memory
-TILE_ARRAYS = tuple(f"{k}_{e}" for e in "ab" for k in EPOCH_ARRAYS)  # what a tile task returns: h_a, n_a, ...
 
 
-def empty_value(name: str) -> float:
-    """A tile array's value where no point fell: 0 for counts and centre offsets, NaN for heights
-    and spreads."""
-    return 0 if name[0] in ZERO_WHERE_EMPTY else np.nan
-
-
-@dataclass(frozen=True)
-class Plan:
-    """Everything a tile task needs (picklable: sent to the workers)."""
-
-    before: str
-    after: str
-    crs_b: str  # WKT of each file's CRS (header or override)
-    crs_a: str
-    frame: WorkFrame
-    origin: np.ndarray
-    grid: GridSpec
-    transform: np.ndarray  # after -> before, local frame
-    ground: tuple[bool, bool]  # (before, after): class 2 only
-    crop: np.ndarray  # the before crop polygon (local), as in-process
-    statistic: str
-    index: tuple = (None, None)  # (before, after): chunk boxes of single files, for bounded reads
-    rules: tuple = (None, None)  # (before, after): soil.points.PointRule of each epoch (None: class 2 by ground)
-    # what the driver opened already, so no task reads them again (not part of the tiles' key):
-    sources: tuple = (None, None)  # (before, after) stream.Source from the headers (a VPC's tiles)
-    mask: PolygonMask | None = None  # the crop as a lattice
-
-
-def crop_mask(plan: Plan) -> PolygonMask:
-    """The before crop as a lattice: the plan's, or made from its polygon."""
-    return plan.mask or PolygonMask(plan.crop)
-
-
-Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 OPENED = ("sources", "mask")  # the Plan's fields derived from the others and the inputs
 
 
 def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
     """What of a run's plan its tiles depend on, beyond its inputs and options: the frame, the
     grid, the registration (to 12 decimals), the crop, the tiling and the overview factor."""
-    from dataclasses import fields
-
     parts = {f.name: getattr(plan, f.name) for f in fields(plan) if f.name not in ("before", "after", *OPENED)}
     parts.update(frame=plan.frame.wkt, grid=repr(plan.grid), transform=np.round(plan.transform, 12))
     parts.update(windows=windows, overview=k)
     return parts
-
-
-def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Window, tuple[np.ndarray, ...], dict]:
-    """(window, arrays of :data:`TILE_ARRAYS`, stats) of one tile: both epochs' points on its
-    cells, their heights, counts, spreads and offsets from the cell centres; stats: points read,
-    seconds. ``cached``: (before, after) {path: KeptTile} of VPC tiles in memory (:mod:`.pointcache`)."""
-    import time
-
-    t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
-    before = _epoch(plan, 0, win, crop_mask(plan), stats, cached[0])
-    after = _epoch(plan, 1, win, None, stats, cached[1])
-    stats["seconds"] = time.perf_counter() - t0
-    arrays = tuple(
-        a.astype(np.int32) if k == "n" else a for e in (after, before) for k, a in zip(EPOCH_ARRAYS, e, strict=True)
-    )
-    return win, arrays, stats
-
-
-def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
-    """(CRS, source read only where it can meet the window, its x/y box or None) of one epoch
-    (0 before, 1 after)."""
-    from dataclasses import replace
-
-    import pyproj
-
-    crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])
-    src = plan.sources[epoch] or open_source((plan.before, plan.after)[epoch])
-    src = replace(src, index=plan.index[epoch])
-    box = _read_box(plan, crs, win, plan.transform if epoch else None)
-    return crs, (src if box is None else src.within(*box)), box
-
-
-def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict | None = None):
-    """Heights, counts, spreads and centre offsets of one epoch (0 before, 1 after) on the
-    window's cells; ``cached``: {path: KeptTile} of the epoch's VPC tiles in memory."""
-    from ..registration.rigid import transform_points32
-
-    transform = plan.transform if epoch else None
-    shape = (win[1] - win[0], win[3] - win[2])
-    ids, zs, offsets = [], [], OffsetSums(shape[0] * shape[1])
-    rule, made = plan.rules[epoch], _FileChunks(plan, epoch, win, keep, stats)
-    if rule is None and plan.ground[epoch]:
-        cached = None  # kept tiles hold every class: class 2 is chosen from the files' classes
-    o_ids, o_lab, o_z = [], [], []
-    for local, labels in chunks(made.src, cached, stats, made):
-        if transform is not None:
-            local = transform_points32(local, transform)
-        if labels is not None:
-            local, other, other_labels = _soil_apart(local, labels)
-            i, z = _window_cells(other, plan.grid, win, None, keep_ids=True)
-            o_ids.append(i[0])
-            o_lab.append(other_labels[i[1]])
-            o_z.append(z)
-        i, z = _window_cells(local, plan.grid, win, offsets)
-        ids.append(i)
-        zs.append(z)
-    z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
-    heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True, skew=True)
-    others = None
-    if rule is not None:
-        others = nonsoil_sums(_joined(o_ids, np.int32), _joined(o_lab, np.uint8), _joined(o_z, np.float32), shape)
-    dem = finish_epoch(heights, offsets.means(heights[1], plan.grid.cell), others, rule)
-    zero = np.zeros(shape)
-    names = [f.name for f in fields(EpochDEM)][: len(EPOCH_ARRAYS)]
-    return tuple(zero if a is None else a for a in (getattr(dem, n) for n in names))
-
-
-def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(soil points, other points, their labels) of a chunk, each in the chunk's order: slices
-    when its soil points come first (as the native scan keeps a tile,
-    :mod:`.nativescan`), else by a mask (a third of a grid task's time on 4 M points)."""
-    soil = labels == 0
-    k = int(np.count_nonzero(soil))
-    if soil[:k].all():
-        return local[:k], local[k:], labels[k:]
-    return local[soil], local[~soil], labels[~soil]
-
-
-class _FileChunks:
-    """File chunks (xyz, classification, signals) of one epoch made what the grid takes, (local
-    float32 xyz, labels or None), as the first pass keeps them (:class:`.pointcache.KeptTile`):
-    labelled, within the window's read box, in the local frame, cropped by ``keep``; ``src``: the
-    epoch's source read only where it can meet the window."""
-
-    def __init__(self, plan: Plan, epoch: int, win: Window, keep, stats: dict) -> None:
-        self.rule, self.ground, self.keep, self.stats = plan.rules[epoch], plan.ground[epoch], keep, stats
-        crs, self.src, self.box = window_source(plan, epoch, win)
-        self.to_local = _local(crs, plan.frame, plan.origin, (plan.before, plan.after)[epoch])
-
-    def __call__(self, file_chunks):
-        rule, box, keep = self.rule, self.box, self.keep
-        for xyz, cls, sig in file_chunks:
-            self.stats["read"] += len(xyz)
-            labels = rule.labels(cls, sig) if rule is not None else None
-            sel = cls == GROUND if rule is None and self.ground and cls is not None else None
-            if box is not None:  # the box has a margin: cells are assigned exactly below
-                near = in_box(xyz, *box)
-                sel = near if sel is None else sel & near
-            if sel is not None:
-                xyz, labels = xyz[sel], None if labels is None else labels[sel]
-            local = self.to_local(xyz)
-            yield kept_chunk(local, labels, None if keep is None else keep(local))
-
-
-def _joined(parts: list, dtype) -> np.ndarray:
-    return np.concatenate(parts) if parts else np.empty(0, dtype)
-
-
-def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums | None, keep_ids: bool = False):
-    """Flat cell ids within the window, and heights, of the points on the window's cells of
-    ``grid`` (cells assigned on the whole grid, exactly as in-process); their positions in
-    their cells are added to ``offsets`` (None: not needed, as for the points that are not
-    soil). ``keep_ids``: the ids come with the indices of the points they belong to."""
-    if offsets is not None and not keep_ids and xyz32.dtype == np.float32:
-        from ..native import kernels
-
-        lib = kernels()
-        if lib is not None:
-            return _native_window_cells(lib, xyz32, grid, win, offsets)
-    fcol, frow, ok = cell_coords(xyz32, grid, win)
-    fcol, frow = fcol[ok], frow[ok]
-    ids = frow.astype(np.int32)  # the cell's row and column: the coordinates truncated, as flat_ids
-    ids -= win[0]
-    ids *= win[3] - win[2]
-    ids += fcol.astype(np.int32)
-    ids -= win[2]
-    if offsets is not None:
-        offsets.add(ids, fcol, frow)
-    return ((ids, np.flatnonzero(ok)) if keep_ids else ids), xyz32[ok, 2]
-
-
-def _native_window_cells(lib, xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums) -> tuple:
-    """:func:`_window_cells` of soil points on the kernel (``sv_cells``): the same ids, heights
-    and offset sums, bit for bit (the chunk's offsets summed from zero, then added, as
-    :meth:`OffsetSums.add` does)."""
-    ids, z = np.empty(len(xyz32), np.int64), np.empty(len(xyz32), np.float64)
-    sx, sy = np.zeros_like(offsets.sx), np.zeros_like(offsets.sy)
-    m = native_cells(lib, xyz32, grid, win, ids, z, sx, sy)
-    offsets.sx += sx
-    offsets.sy += sy
-    return ids[:m], z[:m]
-
-
-def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:
-    """The x/y box (file CRS) a tile's points can come from, for files in the frame's CRS and
-    metres (else None: read everything); ``transform`` maps the file's local points to the grid."""
-    from ..inputs.crs import z_unit
-
-    if not (crs.equals(plan.frame.crs) and plan.frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
-        return None
-    g, o = plan.grid, plan.origin
-    x0, x1 = g.xmin + win[2] * g.cell - o[0], g.xmin + win[3] * g.cell - o[0]
-    y0, y1 = g.ymax - win[1] * g.cell - o[1], g.ymax - win[0] * g.cell - o[1]
-    corners = np.array([[x, y, 0.0] for x in (x0, x1) for y in (y0, y1)])
-    margin = g.cell
-    if transform is not None:  # back into the file's frame: the inverse rigid transform
-        r, t = transform[:3, :3], transform[:3, 3]
-        corners = (corners - t) @ r
-        margin += 0.02 * (x1 - x0 + y1 - y0) + 1.0  # tilt of the unknown z
-    lo, hi = corners[:, :2].min(axis=0) - margin + o[:2], corners[:, :2].max(axis=0) + margin + o[:2]
-    return lo, hi
 
 
 def tiles(
@@ -327,8 +111,6 @@ def map_tiles(
     finish, with progress from ``steps[0]`` to ``steps[1]`` %. ``total``: the tiles of the run,
     when those not in ``windows`` were done by an earlier run; ``per``: one more argument per
     window (futures in it resolved on the worker)."""
-    from .cluster import checker, completed
-
     if len(windows) < total:
         hooks.step(steps[0], f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
     if not windows:
@@ -345,8 +127,6 @@ def map_tiles(
 def epoch_dems(arrays: tuple[np.ndarray, ...], rules: tuple = (None, None)) -> tuple[EpochDEM, EpochDEM]:
     """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order; ``rules``:
     the (before, after) point rules that labelled them (:attr:`Plan.rules`)."""
-    from dataclasses import replace
-
     k = len(EPOCH_ARRAYS)
     return replace(EpochDEM(*arrays[:k]), rule=rules[1]), replace(EpochDEM(*arrays[k:]), rule=rules[0])
 

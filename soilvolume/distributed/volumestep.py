@@ -14,8 +14,9 @@ from ..dem.grid import MASK_LAYER, UINT8_LAYERS, EpochDEM
 from ..volumes.zones import check_inside
 from ..workflow.steps import alternative_move
 from . import overview
+from .gridtile import TILE_ARRAYS
 from .tilestore import TileStore
-from .tiletask import TILE_ARRAYS, map_tiles, window_caches
+from .tiletask import map_tiles, window_caches
 from .volumetiles import VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
 
 

@@ -23,14 +23,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..compensation.planes import plane_offset
 from ..core.types import GridSpec
 from ..options import Options
 from ..volumes import coverage
 from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import TERMS, region_sigma, widen, z_value
 from . import overview
+from .gridtile import TILE_ARRAYS, empty_value, grid_tile
 from .tilestore import TileStore, Window
-from .tiletask import TILE_ARRAYS, empty_value, epoch_dems, grid_tile
+from .tiletask import epoch_dems
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
 VOLUME_ARRAYS = ("dem_out_a", "dem_out_b", "diff", "offset", "filled_mask", "classes")
@@ -44,7 +46,7 @@ def halo(cell: float) -> int:
 
 
 def grid_tile_stored(plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
-    """:func:`tiletask.grid_tile`, its arrays kept in ``store``: (window, block sums of both
+    """:func:`.gridtile.grid_tile`, its arrays kept in ``store``: (window, block sums of both
     epochs, count histograms, stats)."""
     win, arrays, stats = grid_tile(plan, win, cached)
     store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
@@ -78,8 +80,6 @@ class VolumeJob:
 def volume_tile(job: VolumeJob, win: Window) -> dict:
     """The volume step on one tile (with its halo); its core's arrays kept in the store; returns
     its budgets and uncertainty."""
-    from ..compensation.planes import plane_offset
-
     g = job.grid
     r0, r1, c0, c1 = win
     h = halo(g.cell)

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.types import SoilVolumeError
 from .lasimport import laspy_module
+from .records import point_signals
 
 
 def is_copc(path: str | Path) -> bool:
@@ -74,8 +75,6 @@ def copc_chunks(
     the box (down to the level of ``resolution`` when given); with ``signals`` also their colour
     and returns (:func:`records.point_signals`)."""
     laspy = laspy_module()
-
-    from .records import point_signals
 
     try:
         with laspy.CopcReader.open(str(path)) as reader:

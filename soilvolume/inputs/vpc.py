@@ -20,7 +20,9 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
+from .lasheader import check_las_header
 from .lasimport import laspy_module
+from .vpcschema import items
 
 
 @dataclass(frozen=True)
@@ -97,8 +99,6 @@ def _version(path: str) -> tuple[int, int, int] | None:
 
 @lru_cache(maxsize=16)
 def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, list]:
-    from .vpcschema import items
-
     p = Path(path)
     if p.is_dir() or not p.is_file():
         raise SoilVolumeError(f"{p}: not a regular file")
@@ -167,8 +167,6 @@ def _tile_header(vpc: Path, item, tile_path: str):
     it (errors name the tile and never quote its bytes)."""
     laspy = laspy_module()
     import pyproj
-
-    from .lasheader import check_las_header
 
     check_las_header(Path(tile_path))
     try:
