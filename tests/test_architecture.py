@@ -200,3 +200,22 @@ def test_no_engine_function_over_80_lines():
     long = _long_functions()
     assert long - LONG_FUNCTIONS == set(), "new functions over 80 lines"
     assert LONG_FUNCTIONS - long == set(), "split: remove them from LONG_FUNCTIONS"
+
+
+#: packages already at the redesign's limits (issue 52): modules of at most 300 lines, functions
+#: of at most 50, the project's own modules imported at the top of files only
+REDESIGNED = ("volumes",)
+
+
+def test_redesigned_packages_keep_their_limits():
+    for pkg in REDESIGNED:
+        for path in (PKG / pkg).rglob("*.py"):
+            text = path.read_text(encoding="utf-8")
+            assert len(text.splitlines()) <= 300, path
+            for fn in (n for n in ast.walk(ast.parse(text)) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))):
+                assert fn.end_lineno - fn.lineno + 1 <= 50, f"{path}:{fn.name}"
+                for node in ast.walk(fn):
+                    own = isinstance(node, ast.ImportFrom) and (
+                        node.level or (node.module or "").startswith("soilvolume")
+                    )
+                    assert not own, f"{path}:{node.lineno}: the project's own modules are imported at the top"

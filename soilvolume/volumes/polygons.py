@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
+from ..inputs.crs import horizontal
 
 
 @dataclass
@@ -164,8 +165,6 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
     or they are equal); coordinates that cannot be transformed are an error naming the file."""
     import pyproj
     import shapely
-
-    from ..inputs.crs import horizontal
 
     if not src_wkt or not grid.crs_wkt:
         return polys
