@@ -17,11 +17,10 @@ from ..options import Options
 from .difference import difference
 from .holes.epochfill import fill_own_holes
 from .holes.interpolate import enclosed_holes, fill, refill_epoch, weak_cells
-from .holes.testholes import fill_error
+from .holes.testholes import error_by_radius
 from .results import Given
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
-MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
 
 
 @dataclass(frozen=True)
@@ -89,20 +88,14 @@ def written_dems(s: Refill, filled: np.ndarray, method: str) -> tuple[np.ndarray
 def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     """Per-cell one-sigma error (m) of refilled cells: the error of a hole's mean height grows with
     its size, so each refilled patch gets the error measured by refilling known stable cells of the
-    difference with test holes of about its radius (radii 1, 2, 4, ... cells up to the largest
-    patch's, at most ``MAX_TEST_RADIUS``: weak cells spread over a grid finer than the points form
-    one giant "hole"; interpolated in log radius; the largest measured radius for patches too large
-    for the stable ground). 0 where nothing was refilled."""
+    difference with test holes of about its radius (:func:`.holes.testholes.error_by_radius`).
+    0 where nothing was refilled."""
     if not filled_mask.any():
         return np.zeros(diff.shape)
     labels, n = ndimage.label(filled_mask, structure=ndimage.generate_binary_structure(2, 1))
     radius = np.sqrt(np.bincount(labels.ravel())[1:] / np.pi)
-    ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
-    measured = [(r, fill_error(diff, stable, options.fill_method, r, seed=options.seed)) for r in ladder]
-    measured = [(r, s) for r, s in measured if np.isfinite(s)]
-    if not measured:  # no room to measure it: one stable-ground noise level per cell
+    per_patch = error_by_radius(diff, stable, options.fill_method, radius, options.seed)
+    if per_patch is None:  # no room to measure it: one stable-ground noise level per cell
         s = nmad(diff[stable])
         return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
-    r_m, s_m = np.log(np.array(measured)).T
-    per_patch = np.exp(np.interp(np.log(np.maximum(radius, 1.0)), r_m, s_m))
     return np.where(filled_mask, np.r_[0.0, per_patch][labels], 0.0)

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import ndimage
 
 from .interpolate import FOUR, fill
-from .testholes import fill_error
+from .testholes import error_by_radius
 
 SHARED = 0.25  # a hole with this share of its cells empty in both surveys is the difference's whole
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
@@ -101,20 +101,10 @@ def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
 
 def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np.ndarray:
     """Per patch radius (cells): the survey's own (per-cell RMS, mean-height) departures from
-    its interpolation on test holes of about that radius cut from its known cells (radii 1, 2,
-    4, ... interpolated in log radius; the surveys' spread at cell level where there is no room)."""
-    ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), 32.0))) + 1)
-    usable = np.isfinite(h)
-    rows = []
-    for r in ladder:
-        cell, mean = fill_error(h, usable, method, r, seed=seed, per_cell=True)
-        if np.isfinite(cell) and np.isfinite(mean):
-            rows.append((r, cell, mean))
-    if not rows:  # no room to measure: never taken for change
-        return np.full((radius.size, 2), np.inf)
-    r_m, c_m, m_m = np.log(np.maximum(np.array(rows), 1e-9)).T
-    at = np.log(np.maximum(radius, 1.0))
-    return np.exp(np.stack([np.interp(at, r_m, c_m), np.interp(at, r_m, m_m)], axis=1))
+    its interpolation on test holes of about that radius cut from its known cells
+    (:func:`.testholes.error_by_radius`); never taken for change where there is no room."""
+    out = error_by_radius(h, np.isfinite(h), method, radius, seed, per_cell=True, floor=1e-9)
+    return np.full((radius.size, 2), np.inf) if out is None else out
 
 
 def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_area: float):

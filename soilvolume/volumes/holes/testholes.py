@@ -14,6 +14,8 @@ from scipy.sparse.csgraph import connected_components
 from .interpolate import filler, harmonic_instead, stencil_system
 from .solve import TIKHONOV, beyond, group_solver, refined
 
+MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
+
 
 def fill_error(
     h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, seed: int = 0, per_cell=False
@@ -40,6 +42,28 @@ def fill_error(
     mean_err = ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
     mean = float(np.sqrt(np.mean(np.square(mean_err))))
     return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
+
+
+def error_by_radius(
+    h: np.ndarray, usable: np.ndarray, method: str, radius: np.ndarray, seed: int, per_cell=False, floor=0.0
+) -> np.ndarray | None:
+    """:func:`fill_error` on test holes of radii 1, 2, 4, ... cells up to the largest ``radius``
+    (at most :data:`MAX_TEST_RADIUS`: weak cells spread over a grid finer than the points form one
+    giant "hole"), interpolated in log radius at each ``radius`` (the largest measured beyond it):
+    (n,) mean-height errors, or with ``per_cell`` (n, 2) (per-cell RMS, mean-height); None without
+    room to measure. Errors below ``floor`` are taken as it."""
+    ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
+    rows = []
+    for r in ladder:
+        e = np.atleast_1d(fill_error(h, usable, method, r, seed=seed, per_cell=per_cell))
+        if np.isfinite(e).all():
+            rows.append((r, *e))
+    if not rows:
+        return None
+    r_m, *e_m = np.log(np.maximum(np.array(rows), floor)).T
+    at = np.log(np.maximum(radius, 1.0))
+    out = np.exp(np.stack([np.interp(at, r_m, e) for e in e_m], axis=1))
+    return out if per_cell else out[:, 0]
 
 
 def discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, disc: np.ndarray) -> np.ndarray | None:
