@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from soilvolume.dem import holes
-from soilvolume.volumes.epochfill import fill_own_holes
+from soilvolume.volumes.holes import interpolate as holes
+from soilvolume.volumes.holes.epochfill import fill_own_holes
 from soilvolume.volumes.nonsoil import _grass_patches, sentence
 
 CELL = 0.5

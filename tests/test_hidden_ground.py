@@ -14,7 +14,7 @@ from conftest import SITE
 
 from soilvolume.api import estimate
 from soilvolume.scenes.synthetic import SceneConfig, make_pair, write_pair_streaming
-from soilvolume.volumes import blind
+from soilvolume.volumes.holes import blind
 
 
 def _pair(tmp: Path, seed: int, **cfg) -> tuple[Path, Path, dict]:

@@ -7,14 +7,15 @@ import time
 import numpy as np
 import pytest
 
-from soilvolume.dem import holes, testholes
-from soilvolume.dem.holes import (
+from soilvolume.volumes.difference import refilled_budget as summary
+from soilvolume.volumes.holes import solve, testholes
+from soilvolume.volumes.holes.interpolate import (
     biharmonic_fill,
     enclosed_holes,
     harmonic_fill,
     refill_epoch,
-    summary,
 )
+from soilvolume.volumes.holes.testholes import disc_erosion_every
 
 CELL = 0.5
 
@@ -218,14 +219,12 @@ def test_biharmonic_wide_and_oversize_systems(monkeypatch):
     truth, _, _ = cone()
     hole = np.zeros(truth.shape, bool)
     hole[30:40, 30:40] = True
-    monkeypatch.setattr(holes, "_BIG_GROUP", 50)  # oversize sub-systems are filled harmonically
+    monkeypatch.setattr(solve, "_BIG_GROUP", 50)  # oversize sub-systems are filled harmonically
     assert np.array_equal(biharmonic_fill(truth, hole), harmonic_fill(truth, hole))
 
 
 def _test_discs(h: np.ndarray, radius: float, seed: int = 0):
     """fill_error's test discs on h: (centres, offsets, targets)."""
-    from soilvolume.dem.equivalents import disc_erosion_every
-
     r = int(np.ceil(radius))
     step = 2 * r + 5
     cand = np.argwhere(disc_erosion_every(np.isfinite(h), radius + 2, step)) * step
@@ -275,8 +274,6 @@ def test_fill_error_measures_the_fill_it_stands_for():
 
 def test_disc_erosion_every_is_the_erosion_at_every_step():
     from scipy import ndimage
-
-    from soilvolume.dem.equivalents import disc_erosion_every
 
     rng = np.random.default_rng(6)
     for _ in range(200):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from soilvolume.dem import holes
-from soilvolume.volumes.outline import refill_across_outline
+from soilvolume.volumes.holes import interpolate as holes
+from soilvolume.volumes.holes.outline import outline_sigma, refill_across_outline
 
 CELL = 0.5
 
@@ -66,8 +66,6 @@ def test_the_interval_term_covers_what_is_left_of_the_holes_on_the_rim():
     beyond the interval's refilled share): without a share its 95 % holds the error left after
     the side-by-side fill and is under the smooth fill's error; nothing for a part without
     refilled cells."""
-    from soilvolume.volumes.outline import outline_sigma
-
     truth = _pit()
     hole = _rim_holes(truth.shape, [(15.0, 0.0), (-15.0, 5.0), (3.0, 15.0), (-8.0, -15.0)], 2.5)
     values = holes.fill(np.where(hole, np.nan, truth), hole)

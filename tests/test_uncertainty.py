@@ -8,15 +8,9 @@ from scipy import ndimage
 
 from soilvolume.compensation.correction import apply
 from soilvolume.core.types import GridSpec
-from soilvolume.volumes.uncertainty import (
-    correlated_fraction,
-    fit_spherical,
-    semivariogram,
-    spherical,
-    thresholded_volumes,
-    volume_uncertainty,
-    z_value,
-)
+from soilvolume.volumes.difference import thresholded_volumes
+from soilvolume.volumes.uncertainty import volume_uncertainty, z_value
+from soilvolume.volumes.variogram import correlated_fraction, fit_spherical, semivariogram, spherical
 
 CELL = 0.5
 N = 160

@@ -103,20 +103,15 @@ def _geojson(path, rings, crs="EPSG:32654", names=None):
     return path
 
 
-@pytest.mark.parametrize("reader", ["pyogrio", "fiona", "ogr"])
-def test_every_reader_gives_the_same_zones(tmp_path, reader):
-    """pyogrio (the engine's own environment), fiona, GDAL's osgeo.ogr (QGIS's own GDAL)."""
+def test_the_reader_gives_the_zones_and_their_crs(tmp_path):
     from soilvolume.volumes import polygons
 
-    if reader == "fiona":
-        pytest.importorskip("fiona")
     path = _geojson(tmp_path / "z.geojson", [box(500010, 3900010, 500020, 3900030)], names=["pad"])
-    (fid, props, geom), *rest = getattr(polygons, f"_read_{reader}")(path)[0]
-    wkt = getattr(polygons, f"_read_{reader}")(path)[1]
+    ((fid, props, geom), *rest), wkt = polygons._read(path)
     assert not rest and props["name"] == "pad" and geom.area == pytest.approx(200.0) and "UTM zone 54N" in wkt
 
 
-def test_without_pyogrio_the_next_reader_serves(tmp_path, monkeypatch):
+def test_without_pyogrio_one_line_names_it(tmp_path, monkeypatch):
     import builtins
 
     from soilvolume.volumes import polygons
@@ -124,14 +119,14 @@ def test_without_pyogrio_the_next_reader_serves(tmp_path, monkeypatch):
     real = builtins.__import__
 
     def block(name, *args, **kwargs):
-        if name.split(".")[0] in ("pyogrio", "fiona"):
-            raise ImportError(f"No module named '{name}' (blocked by the test)")
+        if name.split(".")[0] == "pyogrio":
+            raise ImportError(f"No module named '{name}' (blocked by the test)", name=name)
         return real(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", block)
     path = _geojson(tmp_path / "z.geojson", [box(500010, 3900010, 500020, 3900030)], names=["pad"])
-    polys, _ = polygons.read_polygons(path)
-    assert [p.name for p in polys] == ["pad"]
+    with pytest.raises(SoilVolumeError, match="z.geojson: reading polygons needs pyogrio"):
+        polygons.read_polygons(path)
 
 
 def test_a_self_intersecting_zone_is_repaired_and_said(tmp_path):

@@ -19,7 +19,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -179,11 +179,9 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
         u[key] = _weighted(tiles, key, cells, over.uncertainty[key])
     u["volume_step"] = {"tiles": len(tiles), "overview_cell_factor": k}
     empty = np.sum([t["empty"] for t in tiles], axis=0)
-    return replace(
-        over,
+    return over.with_(
         uncertainty=u,
         compensated=budgets["compensated"],
-        change_areas=budgets["compensated"],
         all_cells=budgets["all_cells"],
         uncompensated=budgets["uncompensated"],
         paper_plane=budgets["paper_plane"],

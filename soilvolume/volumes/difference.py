@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..compensation.robust import patches
+
 
 def difference(h_after: np.ndarray, h_before: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
     """``H_after - H_before - d_i``; NaN where either grid is empty."""
@@ -27,3 +29,25 @@ def signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray,
     cut = float(-np.nansum(np.where(cut_area, diff, 0.0)) * cell_area) + 0.0
     cells = int((fill_area | cut_area).sum())
     return {"net": fill - cut, "cut": cut, "fill": fill, "cells": cells, "area_m2": cells * cell_area}
+
+
+def refilled_budget(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:
+    """Counts, areas and the net volume contributed by refilled cells (for the report)."""
+    d = np.where(filled_mask, diff, 0.0)
+    n = int(filled_mask.sum())
+    return {"filled_cells": n, "filled_area_m2": n * cell_area, "filled_net_m3": float(np.nansum(d) * cell_area)}
+
+
+def thresholded_volumes(
+    diff: np.ndarray, lod: float | np.ndarray, cell_area: float, min_cells: int = 1
+) -> dict[str, float]:
+    """net/cut/fill (m^3, cut and fill positive, net = fill - cut) over cells with |d| >= lod
+    (``lod`` a float or a per-cell array); with ``min_cells`` > 1, connected same-sign patches
+    smaller than that are dropped too (a spatial-coherence filter against isolated noise)."""
+    keep = np.isfinite(diff) & (np.abs(diff) >= lod)
+    if min_cells > 1:
+        keep = patches(keep & (diff > 0), min_cells) | patches(keep & (diff < 0), min_cells)
+    d = np.where(keep, diff, 0.0)
+    fill = float(d[d > 0].sum() * cell_area)
+    cut = float(-d[d < 0].sum() * cell_area)
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(keep.sum() * cell_area)}

@@ -15,7 +15,9 @@ from scipy import ndimage
 from ..core.types import GridSpec
 from ..core.wording import opt
 from ..dem.grid import EpochDEM
+from ..options import Options
 from ..soil.objects import Blob, find_objects
+from .unclassified import SHARE, UNCLEAR_AREA_M2, bounds, part_budget, rough
 
 # excluded.tif: one byte per cell
 CLASS_CODES = {
@@ -27,26 +29,16 @@ CLASS_CODES = {
     5: "object in one survey only (listed; left out or counted as chosen)",
     6: "rough change: vegetation? (counted, in the interval)",
 }
-SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
 MISSED_SHARE = 0.08  # one-sigma share of an excluded volume the classification may have got wrong
 CLASS_MISSED_SHARE = 0.02  # the same for classes the files' own classification gave
 NEAR_CELLS = 2  # ... where it was left out within this many cells of a counted change area
 MOVED_SHARE = 0.05  # the same for moved objects (matched in size, height and shape)
-MACHINE_M3 = 40.0  # an object in one survey of at most this volume may be a machine (or half a move)
-# Without any signal (no classification, colour or returns) a compact change patch on unchanged
-# ground (a machine, a bush, a grass patch grown or mown, or a small heap) cannot be told from soil:
-# patches of at most this area and volume, and rough cells, are "unclassified". So is a
-# machine-sized object in one survey only, whatever the signals (a machine that left, or soil).
-# Their volume is a bound, not a random error: the interval is widened by it (the net by the
-# larger of the fill and cut parts) and the verdict names it.
-UNCLEAR_AREA_M2, UNCLEAR_M3 = 150.0, MACHINE_M3
 # an object in one survey only above this volume is no machine, cabin or container (an excavator
 # holds ~50 m3 under its outline, a 40 ft container 75 m3): a steep pile, counted as soil
 OBJECT_MAX_M3 = 120.0
 # ... and whose walls' median slope is under this (rise/run, 50 degrees) is no box: a steep heap,
 # counted (piles at their angle of repose read 0.9-1.1, machines and containers 1.3-2.7)
 OBJECT_SLOPE = 1.2
-CANOPY_REACH = 2.0  # how far above the ground a canopy's points taken for soil may lift a cell (x its mean)
 GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shares of such cells and of soil
 
 
@@ -66,102 +58,97 @@ class Exclusion:
 
 def exclude_nonsoil(
     diff: np.ndarray,
-    fill: np.ndarray,
-    cut: np.ndarray,
+    areas: tuple[np.ndarray, np.ndarray],
     epochs: tuple[EpochDEM, EpochDEM],
     offset: np.ndarray,
     grid: GridSpec,
-    mode: str = "auto",
+    options: Options,
     heights: tuple[np.ndarray, np.ndarray] | None = None,
     stable: np.ndarray | None = None,
     refilled: np.ndarray | None = None,
-    objects: str = "exclude",
 ) -> Exclusion:
-    """See module; ``epochs`` (after, before), ``mode`` the ``--exclude`` option (``none``: moved
-    objects stay counted, still listed); ``heights`` (after, before: the heights the difference
-    is taken from) and ``stable`` ground give the rough cells (:mod:`soilvolume.soil.rough`):
-    fill where the after survey is rough, cut where the before survey is; ``refilled``: the
-    interpolated cells (objects are measured without them); ``objects`` the ``--objects`` option
-    (``exclude``: objects in one survey only are left out too, unless ``mode`` is ``none``)."""
+    """See module; ``areas``: the change areas (fill, cut), ``epochs`` (after, before), the
+    options ``exclude`` (``none``: moved objects stay counted, still listed) and ``objects``
+    (``exclude``: objects in one survey only are left out too, unless ``exclude`` is ``none``);
+    ``heights`` (after, before: the heights the difference is taken from) and ``stable`` ground
+    give the rough cells (:mod:`soilvolume.soil.rough`): fill where the after survey is rough,
+    cut where the before survey is; ``refilled``: the interpolated cells (objects are measured
+    without them)."""
+    (fill, cut), mode, area = areas, options.exclude, grid.cell_area
     shares = _shares(epochs)
-    labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
-    unsure = labelled if refilled is None else refilled | labelled
-    found = find_objects(diff, fill, cut, grid.cell, refilled=unsure)
-    leave_out = found.moved if mode != "none" else np.zeros(diff.shape, bool)
-    drop_single = objects == "exclude" and mode != "none"
-    lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
-    lone_ids = set(np.unique(found.labels[lone]).tolist())
-    leave_out = leave_out | lone
-    labelled_veg = shares["vegetation"] >= SHARE
-    bare = _bare_top(diff, epochs, refilled)  # soil measured on the surface that rose
-    grass = _grass_patches(fill | cut, labelled_veg, bare, grid.cell_area)
-    grass &= ~found.moved & ~found.single & (mode != "none")
-    leave_out = leave_out | grass
-    valid = np.isfinite(diff)
-    classes = np.where(valid, 0, 255).astype(np.uint8)
-    report: dict = {"mode": mode, "classes": {}}
-    sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
-    apparent = _apparent(diff, epochs, offset)
-    taken = np.zeros(diff.shape, bool)
+    found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
+    leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
     share = _missed_share(epochs)
     # only what was left out in or beside the counted change areas can bias the headline
     near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
-    for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
-        cells = (shares[name] >= SHARE) & ~taken & ~found.moved & ~found.single
-        taken |= cells
-        classes[cells] = code
-        report["classes"][name] = _budget(apparent, cells, grid.cell_area)
-        part = _budget(apparent, cells & near, grid.cell_area)
-        for k in sigma:
-            sigma[k] = float(np.hypot(sigma[k], share * abs(part[k])))
+    classes, taken, by_class, sigma = _by_class(diff, epochs, offset, shares, found, near, area, share)
+    report: dict = {"mode": mode, "classes": by_class}
     classes[found.moved] = 4
-    classes[grass & ~labelled_veg] = 1
-    report["grass_patches"] = _budget(diff, grass, grid.cell_area)
-    for k in sigma:
-        sigma[k] = float(np.hypot(sigma[k], share * abs(report["grass_patches"][k])))
+    classes[grass & ~(shares["vegetation"] >= SHARE)] = 1
+    report["grass_patches"] = part_budget(diff, grass, area)
+    sigma = {k: float(np.hypot(v, share * abs(report["grass_patches"][k]))) for k, v in sigma.items()}
     classes[found.single] = 5
-    rough = _rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
-    classes[rough] = 6
-    report["rough"] = _budget(diff, rough, grid.cell_area)
-    moved = _budget(np.where(found.moved, diff, 0.0), found.moved, grid.cell_area)
-    report["moved_objects"] = {
-        **moved,
-        "count": len(found.moved_blobs()) // 2,
-        "excluded": mode != "none",
-        "items": [_item(b, grid) for b in found.moved_blobs()],
-    }
-    single = found.single_blobs()
-    report["single_objects"] = {
-        "count": len(single),
-        "net_m3": float(sum(b.sign * b.volume_m3 for b in single)),
-        "counted": not drop_single,
-        "items": [{**_item(b, grid), "counted": b.label not in lone_ids} for b in single],
-    }
+    rough_area = rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
+    classes[rough_area] = 6
+    report["rough"] = part_budget(diff, rough_area, area)
+    report.update(_objects(diff, found, lone, grid, mode, options.objects == "exclude" and mode != "none"))
     if mode != "none":
-        lone_m3 = _budget(diff, lone, grid.cell_area)
-        for k in sigma:
-            sigma[k] = float(np.hypot(sigma[k], MOVED_SHARE * np.hypot(moved[k], lone_m3[k])))
-    bound = _bounds(diff, (fill | cut) & ~leave_out, found, rough, epochs, grid.cell_area, report)
+        moved, lone_m3 = report["moved_objects"], part_budget(diff, lone, area)
+        sigma = {k: float(np.hypot(v, MOVED_SHARE * np.hypot(moved[k], lone_m3[k]))) for k, v in sigma.items()}
+    bound = bounds(diff, (fill | cut) & ~leave_out, found, rough_area, epochs, area, report)
     report["sigma_m3"], report["bound_m3"] = sigma, bound
     return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
 
 
-def _bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) -> dict:
-    """The bound (m3 per part) of what could not be classified or was measured under a canopy
-    (``counted``: the change areas without what was left out); their sections added to
-    ``report``."""
-    signal = any(_labelled(e) for e in epochs)
-    unclear, n = _unclear(diff, counted, found, rough, signal, cell_area)
-    report["unclassified"] = {**_budget(diff, unclear, cell_area), "count": n, "signals": signal}
-    kept, left = _budget(diff, unclear & counted, cell_area), _budget(diff, unclear & ~counted, cell_area)
-    # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
-    below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
-    report["unclassified"]["net_range_m3"] = [-below, above]
-    canopy = _under_canopy(diff, epochs, counted, cell_area)
-    report["under_canopy"] = canopy
-    bound = {k: report["unclassified"][k] + canopy[k] for k in ("cut", "fill")}
-    bound["net"] = max(below, above) + canopy["cut"] + canopy["fill"]
-    return bound
+def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, shares: dict):
+    """(the objects found by shape, those of one survey only left out, the grass patches left
+    out) of the change ``areas`` (fill, cut)."""
+    (fill, cut), mode = areas, options.exclude
+    labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
+    found = find_objects(diff, fill, cut, grid.cell, refilled=labelled if refilled is None else refilled | labelled)
+    drop_single = options.objects == "exclude" and mode != "none"
+    lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
+    bare = _bare_top(diff, epochs, refilled)  # soil measured on the surface that rose
+    grass = _grass_patches(fill | cut, shares["vegetation"] >= SHARE, bare, grid.cell_area)
+    return found, lone, grass & ~found.moved & ~found.single & (mode != "none")
+
+
+def _by_class(diff, epochs, offset, shares: dict, found, near, cell_area: float, share: float):
+    """(the class raster, the cells of the point classes, the report's ``classes``, the
+    one-sigma terms per part) of the cells mostly of points that are not soil: the apparent
+    volume they would have added, a ``share`` of it near the counted change as the term."""
+    classes = np.where(np.isfinite(diff), 0, 255).astype(np.uint8)
+    sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
+    apparent, taken, report = _apparent(diff, epochs, offset), np.zeros(diff.shape, bool), {}
+    for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
+        cells = (shares[name] >= SHARE) & ~taken & ~found.moved & ~found.single
+        taken |= cells
+        classes[cells] = code
+        report[name] = part_budget(apparent, cells, cell_area)
+        part = part_budget(apparent, cells & near, cell_area)
+        sigma = {k: float(np.hypot(v, share * abs(part[k]))) for k, v in sigma.items()}
+    return classes, taken, report, sigma
+
+
+def _objects(diff, found, lone, grid: GridSpec, mode: str, drop_single: bool) -> dict:
+    """The report's ``moved_objects`` and ``single_objects`` (those of ``lone`` left out)."""
+    moved = part_budget(np.where(found.moved, diff, 0.0), found.moved, grid.cell_area)
+    lone_ids = set(np.unique(found.labels[lone]).tolist())
+    single = found.single_blobs()
+    return {
+        "moved_objects": {
+            **moved,
+            "count": len(found.moved_blobs()) // 2,
+            "excluded": mode != "none",
+            "items": [_item(b, grid) for b in found.moved_blobs()],
+        },
+        "single_objects": {
+            "count": len(single),
+            "net_m3": float(sum(b.sign * b.volume_m3 for b in single)),
+            "counted": not drop_single,
+            "items": [{**_item(b, grid), "counted": b.label not in lone_ids} for b in single],
+        },
+    }
 
 
 def _lone(found) -> np.ndarray:
@@ -197,73 +184,6 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
     return np.r_[False, keep][comp]
 
 
-def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
-    """The counted change the engine cannot say is soil, and in how many patches: machine-sized
-    objects in one survey only; without any signal also rough cells and every compact change
-    patch (see :data:`UNCLEAR_AREA_M2`)."""
-    small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
-    out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
-    if not signal:
-        d = np.nan_to_num(diff)
-        for part in (counted & (d > 0), counted & (d < 0)):
-            comp, k = ndimage.label(part, structure=np.ones((3, 3), bool))
-            if not k:
-                continue
-            idx = np.arange(1, k + 1)
-            area = ndimage.sum(part, comp, idx) * cell_area
-            vol = np.abs(ndimage.sum(d, comp, idx)) * cell_area
-            keep = idx[(area <= UNCLEAR_AREA_M2) & (vol <= UNCLEAR_M3)]
-            out |= np.isin(comp, keep) & part
-        out |= rough & counted
-    comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
-    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area if n else np.empty(0)
-    return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
-
-
-def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
-    """What a canopy may have added to the change counted under it (m3 per part): where return
-    numbers alone keep the soil points under vegetation (no classification), a cell mostly of
-    canopy mixes its ground with canopy points the rule took for soil (a single return off dense
-    grass), so its height may sit up to the canopy's above the ground. Each counted cell under a
-    canopy in either survey adds the smaller of its |difference| and the larger of
-    :data:`CANOPY_REACH` times that canopy's mean height over the cell's soil height (itself raised
-    by the canopy points) and its height over the other survey's ground (mown grass: the stubble)."""
-    reach = np.zeros(diff.shape)
-    for e, o in (epochs, epochs[::-1]):
-        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
-            continue  # a classification is the survey's statement; colour empties such cells
-        others = e.nonsoil()
-        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            canopy = e.nonsoil_z / np.maximum(others, 1)
-            # over its own soil height (raised by the canopy points) and over the other survey's ground
-            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
-        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
-    d = np.where(counted, np.nan_to_num(diff), 0.0)
-    part = np.minimum(np.abs(d), reach)
-    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
-    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
-
-
-def _rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
-    """Change cells on rough ground: fill where the after survey is rough, cut where the before is;
-    only where no signal labelled any point (a classification, colour or returns say what is
-    vegetation better than roughness, which curved ground on coarse cells also shows)."""
-    if heights is None or stable is None or any(_labelled(e) for e in epochs):
-        return np.zeros(fill.shape, bool)
-    from ..soil.rough import rough_cells, roughness
-
-    out = []
-    for e, h in zip(epochs, heights, strict=True):
-        out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
-    return (fill & out[0]) | (cut & out[1])
-
-
-def _labelled(e: EpochDEM) -> bool:
-    """Whether a point rule labelled the epoch (or, without its rule, any point is not soil)."""
-    return (e.rule is not None and e.rule.active) or bool(e.nonsoil().any())
-
-
 def _missed_share(epochs: tuple[EpochDEM, EpochDEM]) -> float:
     """The share of an excluded volume the classification may have got wrong: the files' own LAS
     classification (ground returns below a canopy are measured) less than colour or returns."""
@@ -293,12 +213,6 @@ def _apparent(diff: np.ndarray, epochs: tuple[EpochDEM, EpochDEM], offset: np.nd
     after, before = (e.all_points_height() for e in epochs)
     d = after - before - np.nan_to_num(offset)
     return np.nan_to_num(d - diff)
-
-
-def _budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
-    v = np.where(cells, np.nan_to_num(d), 0.0)
-    fill, cut = float(v[v > 0].sum()) * cell_area, float(-v[v < 0].sum()) * cell_area
-    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(cells.sum()) * cell_area}
 
 
 def _item(b: Blob, grid: GridSpec) -> dict:

@@ -1,6 +1,5 @@
 """Polygons from a vector file (GeoPackage, Shapefile, GeoJSON, ...) for zones and stable-ground
-masks: read with pyogrio (its own GDAL; works where GDAL's Python bindings are missing), else
-fiona, else GDAL's ``osgeo.ogr`` (first where it is loaded already, as inside QGIS); invalid
+masks: read with pyogrio (its own GDAL; works where GDAL's Python bindings are missing); invalid
 geometries repaired with shapely's ``make_valid`` (those left without area refused); brought
 into the grid's CRS with pyproj (a file without a CRS is taken to be in the grid's; coordinates
 its declared CRS cannot hold are refused).
@@ -8,6 +7,7 @@ its declared CRS cannot hold are refused).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
+from ..inputs.crs import horizontal
 
 
 @dataclass
@@ -39,9 +40,10 @@ def read_polygons(
     if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
         raise SoilVolumeError(f"{path}: not a regular file (a device or pipe)")
     try:
+        import pyogrio  # noqa: F401 - the reader
         import shapely  # noqa: F401 - validity and repair
-    except ImportError:
-        raise SoilVolumeError(f"{path}: reading polygons needs shapely (pip install shapely)") from None
+    except ImportError as exc:
+        raise SoilVolumeError(f"{path}: reading polygons needs {exc.name} (pip install {exc.name})") from None
     try:
         feats, wkt = _read(path)
     except SoilVolumeError:
@@ -60,24 +62,7 @@ def read_polygons(
 
 
 def _read(path: Path):
-    """[(fid, properties, shapely geometry or None)], CRS WKT, by the first reader installed;
-    GDAL's own bindings first where they are loaded already (inside QGIS: no second GDAL)."""
-    import sys
-
-    readers = [_read_pyogrio, _read_fiona, _read_ogr]
-    if "osgeo.ogr" in sys.modules or "qgis.core" in sys.modules:
-        readers.insert(0, readers.pop())
-    for reader in readers:
-        try:
-            return reader(path)
-        except ImportError:
-            continue
-    raise SoilVolumeError(f"{path}: reading polygons needs pyogrio (pip install pyogrio), fiona or GDAL's Python")
-
-
-def _read_pyogrio(path: Path):
-    import warnings
-
+    """[(fid, properties, shapely geometry or None)], CRS WKT, read with pyogrio."""
     import shapely
     from pyogrio import raw
 
@@ -91,33 +76,6 @@ def _read_pyogrio(path: Path):
         for k, (fid, g) in enumerate(zip(fids, geoms, strict=True))
     ]
     return feats, _wkt(meta.get("crs"))
-
-
-def _read_fiona(path: Path):
-    import fiona
-    from shapely.geometry import shape
-
-    with fiona.open(path) as src:
-        wkt = src.crs_wkt or None
-        feats = [(f.id, dict(f.properties or {}), shape(f.geometry) if f.geometry else None) for f in src]
-    return feats, wkt
-
-
-def _read_ogr(path: Path):
-    import shapely
-    from osgeo import ogr
-
-    ogr.UseExceptions()
-    ds = ogr.Open(str(path))
-    if ds is None or ds.GetLayerCount() == 0:
-        raise SoilVolumeError(f"{path}: not a readable vector file")
-    layer = ds.GetLayer(0)
-    srs = layer.GetSpatialRef()
-    feats = []
-    for f in layer:
-        g = f.GetGeometryRef()
-        feats.append((f.GetFID(), f.items(), shapely.from_wkb(bytes(g.ExportToWkb())) if g else None))
-    return feats, srs.ExportToWkt() if srs is not None else None
 
 
 def _wkt(crs: str | None) -> str | None:
@@ -164,8 +122,6 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
     or they are equal); coordinates that cannot be transformed are an error naming the file."""
     import pyproj
     import shapely
-
-    from ..inputs.crs import horizontal
 
     if not src_wkt or not grid.crs_wkt:
         return polys

@@ -9,9 +9,17 @@ unchanged, the median of (survey - surface) must be within the level of detectio
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+from scipy import ndimage
 
 from ..compensation.robust import nmad
+from ..core.types import GridSpec
+from ..options import Options
+from .results import Volumes
+from .uncertainty import z_value
+from .variogram import bias_sigma
 
 MIN_CELLS = 30  # fewer unchanged cells than this cannot tell an offset
 RING = 1  # cells around the change areas whose sub-detection difference the volumes may miss
@@ -86,8 +94,6 @@ def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: floa
     areas' outline leaves out where the difference fades out slowly, as where a plan meets gently
     sloping ground (a graded pad crossing the terrain's contours). One sigma: that ring's
     same-signed difference; the net's, both in quadrature."""
-    from scipy import ndimage
-
     d, every = np.nan_to_num(diff), counted["net"]
     out = {}
     for key, sign in (("fill", 1.0), ("cut", -1.0)):
@@ -102,8 +108,6 @@ def outline(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, 
     surface's), m³ at ``z``: such a cell counts whole though the survey or the surface covers
     only part of it, so where the works run to the edge its volume is known to half a cell. One
     sigma: half their same-signed volume; the net's, both in quadrature."""
-    from scipy import ndimage
-
     valid = np.isfinite(diff)
     edge = valid & ~ndimage.binary_erosion(valid, border_value=0)
     d, out = np.nan_to_num(diff), {}
@@ -120,3 +124,18 @@ def with_terms(uncertainty: dict, terms: dict) -> dict:
         parts = [uncertainty[key], *(terms[part][key] for part in TERMS)]
         out[key] = float(np.linalg.norm(parts))
     return out
+
+
+def with_surface(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridSpec) -> Volumes:
+    """The volume step's result against a surface: its interval with the surface's terms
+    (:data:`TERMS`; ``sigma``: the surface's per-cell error on the grid, m)."""
+    u = vols.uncertainty
+    cut, change = vols.cut_mask, vols.change_mask
+    counted = {"net": change, "cut": cut & change, "fill": change & ~cut}
+    model = {"nugget": u["nugget_m2"], "psill": u["psill_m2"], "range": u["range_m"]}
+    datum = bias_sigma(u["stable_cells"], grid.cell, model, 1) if options.correction == "none" else 0.0
+    z = z_value(options.lod_confidence)
+    terms = design_terms(counted, sigma, options.design_uncertainty, datum, grid.cell_area, z)
+    terms["truncation"] = truncation(vols.diff, counted, grid.cell_area, z)
+    terms["outline"] = outline(vols.diff, counted, grid.cell_area, z)
+    return replace(vols, uncertainty=with_terms(vols.uncertainty, terms))

@@ -23,8 +23,9 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import cell_lod, cell_sigma, change_areas
-from .compute import Volumes, pose_effect
 from .difference import signed_budget
+from .interval import pose_effect
+from .results import Volumes
 from .seriesunc import period_uncertainty
 from .uncertainty import detection_level, z_value
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .quality import correction_check, registration_checks, significance_check, verdict
+from .placement import registration_checks
+from .quality import correction_check, significance_check, verdict
 
 
 def epoch_checks(registrations: list[dict], vols: list, prior: dict) -> list[list[tuple[str, str]]]:

@@ -29,10 +29,11 @@ import numpy as np
 
 from ..compensation.correction import MODES
 from ..core.types import GridSpec
-from ..dem import holes
 from ..options import Options
-from .change import marginal_volume
 from .difference import signed_budget
+from .holes.interpolate import typical_radius
+from .interval import marginal_terms
+from .refill import refill_sigma
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
 
 
@@ -55,32 +56,31 @@ def period_uncertainty(
     epochs' poses move to their alternatives; ``skews``: the two epochs' (end, start) cell statistics'
     offsets from their medians (:func:`.uncertainty.statistic_bias`); ``fits``: correction
     surfaces in the difference."""
-    from .compute import refill_sigma
-
-    fill_area, cut_area = areas
-    area = grid.cell_area
+    (fill_area, cut_area), area = areas, grid.cell_area
     reg_v = signed_budget(pose, fill_area, cut_area, area)
-    reg_net = abs(float(np.nansum(np.where(works, pose, 0.0)))) * area
-    marginal = {
-        "fill": marginal_volume(diff, fill_area, lod_cell, area),
-        "cut": marginal_volume(diff, cut_area, lod_cell, area),
-    }
-    marginal["net"] = float(np.hypot(marginal["fill"], marginal["cut"]))
+    reg_v["net"] = abs(float(np.nansum(np.where(works, pose, 0.0)))) * area
+    marginal = marginal_terms(diff, fill_area, cut_area, lod_cell, area)
     stat = statistic_bias(skews, refilled, {"net": works, "cut": cut_area, "fill": fill_area}, area)
-    reg_v["net"] = reg_net
     extra = {k: float(np.linalg.norm([reg_v[k], marginal[k], stat[k]])) for k in ("net", "cut", "fill")}
     coef = MODES[options.correction].coefficients
     common = dict(
         n_coef=coef * fits,
         filled_mask=refilled,
         fill_sigma=refill_sigma(diff, refilled, stable, options),
-        interp_fraction=interp_fraction(holes.typical_radius(refilled)),
+        interp_fraction=interp_fraction(typical_radius(refilled)),
         extra_sigma=extra,
         surface=coef > 0,
     )
     conf = options.lod_confidence
     on_works = volume_uncertainty(diff, stable, works, grid, conf, **common)
     on_areas = volume_uncertainty(diff, stable, fill_area | cut_area, grid, conf, **common)
+    named = {"registration_m3": {k: reg_v[k] for k in ("net", "cut", "fill")}, "statistic_m3": stat}
+    return _merged(on_works, on_areas, conf, {**named, "marginal_detections_m3": marginal, "correction_fits": fits})
+
+
+def _merged(on_works: dict, on_areas: dict, conf: float, named: dict) -> dict:
+    """A period's interval: the net's from the works, cut and fill from its own areas, the
+    ``named`` terms."""
     return {
         "net": on_works["net"],
         "cut": on_areas["cut"],
@@ -89,10 +89,7 @@ def period_uncertainty(
         "sigma_m": on_works["sigma_m"],
         "lod_m": on_works["lod_m"],
         **{k: on_works[k] for k in ("nugget_m2", "psill_m2", "range_m", "bias_sigma_m", "stable_cells")},
-        "registration_m3": {k: reg_v[k] for k in ("net", "cut", "fill")},
-        "statistic_m3": stat,
-        "marginal_detections_m3": marginal,
-        "correction_fits": fits,
+        **named,
         "terms_m3": {  # one-sigma: area model, refilled share, refill error, leftover bias, extras
             "net": on_works["terms_m3"]["net"],
             "cut": on_areas["terms_m3"]["cut"],

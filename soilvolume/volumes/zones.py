@@ -15,7 +15,10 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
+from .difference import budget as cell_budget
+from .difference import signed_budget
 from .polygons import Polygon, read_polygons, to_grid_crs
+from .uncertainty import TERMS, widen, z_value
 
 # The grid's transform is given, yet GDAL's scratch raster inside rasterize warns all the same. A
 # filter for the process, not ``catch_warnings``: that swaps the global filter list and is not
@@ -72,8 +75,6 @@ def _crs_hint(wkt: str | None) -> str:
 def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, float]:
     """net/cut/fill (m^3; cut and fill positive, net = fill - cut) and compared area (m^2) of
     the finite cells of ``diff`` in ``mask``."""
-    from .difference import budget as cell_budget
-
     b = cell_budget(diff, cell_area, mask)
     return {k: b[k] for k in ("net", "cut", "fill", "area_m2")}
 
@@ -100,8 +101,6 @@ def zone_budgets(
         row = {"id": p.id, "name": p.name}
         row.update(budget(diff, mask, grid.cell_area))
         if areas is not None:
-            from .difference import signed_budget
-
             split = signed_budget(diff, areas[0] & mask, areas[1] & mask, grid.cell_area)
             row.update(cut=split["cut"], fill=split["fill"], net=split["fill"] - split["cut"])
         row["zone_area_m2"] = float(mask.sum() * grid.cell_area)
@@ -154,8 +153,6 @@ def zone_interval(model: Callable[..., dict], region: np.ndarray, headline: dict
     extras) shared in proportion to the zone's area of each part, and widened by the whole
     run's unclassified change (``unclassified_m3``: where it lies is not kept, so each zone
     may hold all of it)."""
-    from .uncertainty import TERMS, widen, z_value
-
     own = model(change_mask=region & zone, extra_sigma=None)
     extra = TERMS.index("extras")
     out = {}

@@ -99,7 +99,7 @@ class SurfaceReference:
         from ..volumes.compute import compute_volumes
 
         vols = compute_volumes(run.dems[0], run.dems[1], run.planes[2], run.grid, run.options)
-        return _with_surface_terms(vols, self.sigma, run.options, run.grid)
+        return reference.with_surface(vols, self.sigma, run.options, run.grid)
 
     def write(self, run) -> None:
         _write_rasters(run.out, run.vols, run.grid)
@@ -181,22 +181,6 @@ def surface_epoch(surface: Surface | Tin, grid: GridSpec, given_m: float) -> tup
 def _check_overlap(dem_a: gridmod.EpochDEM, dem_s: gridmod.EpochDEM, design: Path, after: Path) -> None:
     if not (np.isfinite(dem_a.heights) & np.isfinite(dem_s.heights)).any():
         raise SoilVolumeError(f"{design} does not overlap {after}: no cell of the survey has a surface height")
-
-
-def _with_surface_terms(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridSpec) -> Volumes:
-    """The volume step's result with the surface's resampling error and given uncertainty in its interval."""
-    from ..volumes.uncertainty import bias_sigma, z_value
-
-    u = vols.uncertainty
-    cut = vols.cut_mask if vols.cut_mask is not None else np.zeros(sigma.shape, bool)
-    counted = {"net": vols.change_mask, "cut": cut & vols.change_mask, "fill": vols.change_mask & ~cut}
-    model = {"nugget": u["nugget_m2"], "psill": u["psill_m2"], "range": u["range_m"]}
-    datum = bias_sigma(u["stable_cells"], grid.cell, model, 1) if options.correction == "none" else 0.0
-    z = z_value(options.lod_confidence)
-    terms = reference.design_terms(counted, sigma, options.design_uncertainty, datum, grid.cell_area, z)
-    terms["truncation"] = reference.truncation(vols.diff, counted, grid.cell_area, z)
-    terms["outline"] = reference.outline(vols.diff, counted, grid.cell_area, z)
-    return replace(vols, uncertainty=reference.with_terms(vols.uncertainty, terms))
 
 
 def _write_rasters(out: OutputDir, vols: Volumes, grid: GridSpec) -> None:

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ..dem import holes
+from .interpolate import FOUR, fill
 
 RING = 2  # cells: the rim of a hole that says what surrounds it
 MIN_SHARE = 0.2  # each side holds at least this share of the rim, or the hole is left as it is
@@ -40,7 +40,7 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
-    labels, n = ndimage.label(hole, holes.FOUR)
+    labels, n = ndimage.label(hole, FOUR)
     if n == 0:
         return out
     candidates = _both_sides(labels, n, change, stable)
@@ -49,14 +49,14 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
             continue
         box = tuple(slice(max(0, s.start - _PAD), s.stop + _PAD) for s in box)
         cells = labels[box] == k
-        rim = ndimage.binary_dilation(cells, holes.FOUR, iterations=RING) & known[box]
+        rim = ndimage.binary_dilation(cells, FOUR, iterations=RING) & known[box]
         n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
         nearer_change = _change_side(cells, change[box], stable[box], method)
         view = out[box]
         for side, own in ((cells & nearer_change, change[box]), (cells & ~nearer_change, stable[box])):
-            filled = holes.fill(np.where(own | side, values[box], np.nan), side, method)
+            filled = fill(np.where(own | side, values[box], np.nan), side, method)
             ok = side & np.isfinite(filled)
             view[ok] = filled[ok]
     return out
@@ -70,7 +70,7 @@ def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, meth
     interpolation finds nothing, the nearer rim."""
     to_change, to_stable = ndimage.distance_transform_edt(~change), ndimage.distance_transform_edt(~stable)
     signed = np.where(change, to_stable - 1.0, np.where(stable, -to_change, np.nan))
-    signed = holes.fill(np.where(cells, np.nan, signed), cells, method)
+    signed = fill(np.where(cells, np.nan, signed), cells, method)
     return np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
 
 
@@ -80,7 +80,7 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     the exact rim is counted again for the holes that pass)."""
     grown = labels
     for _ in range(RING):
-        grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=holes.FOUR))
+        grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=FOUR))
     idx = np.arange(n + 1)
     n_change = ndimage.sum(change, grown, idx)
     n_stable = ndimage.sum(stable, grown, idx)

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
-from ..dem import holes
-from ..dem.grid import EpochDEM
+from ...dem.grid import EpochDEM
+from .interpolate import FOUR, enclosed_holes, fill
 
 RIM_SHARE = 0.5  # share of a hole's rim in change areas that makes it a hole in the works
 DEEPER = 2.0  # the walls carried on into a hole go at most this many times the rim's depth further
@@ -59,7 +59,7 @@ def blind_change(
     items = []
     for name, e in zip(NAMES, epochs, strict=True):
         empty = (e.counts + e.nonsoil()) == 0
-        labels, _ = ndimage.label(holes.enclosed_holes(~empty, empty.size), holes.FOUR)
+        labels, _ = ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
         for k, box in enumerate(ndimage.find_objects(labels), 1):
             win = tuple(slice(max(b.start - PAD, 0), b.stop + PAD) for b in box)  # the hole and its rings
             cells = labels[win] == k
@@ -122,7 +122,7 @@ def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: fl
     extra = np.clip(step * dist, -DEEPER * abs(d_near), DEEPER * abs(d_near))[cells]
     extra_m3 = float(extra.sum()) * cell_area
     shown = np.isfinite(diff[cells])
-    rim_fill = holes.fill(np.where(cells, np.nan, diff), cells, "harmonic")[cells]
+    rim_fill = fill(np.where(cells, np.nan, diff), cells, "harmonic")[cells]
     left_out = float(np.nansum(np.where(shown, 0.0, rim_fill))) * cell_area  # not in the headline
     rng = (left_out, left_out + extra_m3)
     if max(abs(rng[0]), abs(rng[1])) < MIN_M3:

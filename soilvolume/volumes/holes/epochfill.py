@@ -26,7 +26,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from ..dem import holes, testholes
+from .interpolate import FOUR, fill
+from .testholes import error_by_radius
 
 SHARED = 0.25  # a hole with this share of its cells empty in both surveys is the difference's whole
 RIM = 2  # cells: the weak cells this close to a patch are filled with it
@@ -46,7 +47,7 @@ def fill_own_holes(
     others are left to the difference's fill. The error is that survey's mean-height error on
     holes of the patch's size."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
-    parts, m = ndimage.label(hole, holes.FOUR)
+    parts, m = ndimage.label(hole, FOUR)
     share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
     if cell_area > 0 and shared.any():
@@ -56,12 +57,12 @@ def fill_own_holes(
         shared &= ~bulk
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
-        labels, n = ndimage.label(one, holes.FOUR)
+        labels, n = ndimage.label(one, FOUR)
         if n == 0:
             continue
         idx = np.arange(1, n + 1)
         radius = np.sqrt(np.bincount(labels.ravel(), minlength=n + 1)[1:] / np.pi)
-        seen_fill = holes.fill(np.where(one, np.nan, out[seen]), one, method)
+        seen_fill = fill(np.where(one, np.nan, out[seen]), one, method)
         detail = np.sqrt(ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
         scale = _own_detail(out[miss], method, radius, seed)
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
@@ -70,15 +71,14 @@ def fill_own_holes(
         change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | (bulk if cell_area > 0 else False)
         if change.any():  # a patch the survey cannot fill whole is left
             change &= (
-                np.r_[False, ndimage.minimum(np.isfinite(holes.fill(out[miss], change[labels], method)), labels, idx)]
-                > 0
+                np.r_[False, ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)] > 0
             )
         if not change.any():
             continue
         cells = change[labels]
         grown = ndimage.grey_dilation(np.where(cells, labels, 0), footprint=np.ones((2 * RIM + 1,) * 2, bool))
         cells |= weak[miss] & (grown > 0)
-        filled = holes.fill(out[miss], cells, method)
+        filled = fill(out[miss], cells, method)
         ok = cells & np.isfinite(filled)
         out[miss][ok] = filled[ok]
         own |= ok
@@ -101,20 +101,10 @@ def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
 
 def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np.ndarray:
     """Per patch radius (cells): the survey's own (per-cell RMS, mean-height) departures from
-    its interpolation on test holes of about that radius cut from its known cells (radii 1, 2,
-    4, ... interpolated in log radius; the surveys' spread at cell level where there is no room)."""
-    ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), 32.0))) + 1)
-    usable = np.isfinite(h)
-    rows = []
-    for r in ladder:
-        cell, mean = testholes.fill_error(h, usable, method, r, seed=seed, per_cell=True)
-        if np.isfinite(cell) and np.isfinite(mean):
-            rows.append((r, cell, mean))
-    if not rows:  # no room to measure: never taken for change
-        return np.full((radius.size, 2), np.inf)
-    r_m, c_m, m_m = np.log(np.maximum(np.array(rows), 1e-9)).T
-    at = np.log(np.maximum(radius, 1.0))
-    return np.exp(np.stack([np.interp(at, r_m, c_m), np.interp(at, r_m, m_m)], axis=1))
+    its interpolation on test holes of about that radius cut from its known cells
+    (:func:`.testholes.error_by_radius`); never taken for change where there is no room."""
+    out = error_by_radius(h, np.isfinite(h), method, radius, seed, per_cell=True, floor=1e-9)
+    return np.full((radius.size, 2), np.inf) if out is None else out
 
 
 def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_area: float):
@@ -139,7 +129,7 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
         err = 0.0
         for e in out:
             missing = cells & ~np.isfinite(e)
-            e[missing] = holes.fill(e, missing, "harmonic")[missing]
+            e[missing] = fill(e, missing, "harmonic")[missing]
             err = float(np.hypot(err, _own_detail(e, "harmonic", radius, seed)[0, 1]))
         ok = cells & np.isfinite(out[0]) & np.isfinite(out[1])
         done |= ok
@@ -154,7 +144,7 @@ def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[flo
     seen = region & np.isfinite(e)
     if not seen.any():
         return 0.0, 0.0
-    dd = (e - holes.fill(np.where(region, np.nan, e), region, "harmonic"))[seen]
+    dd = (e - fill(np.where(region, np.nan, e), region, "harmonic"))[seen]
     dd = dd[np.isfinite(dd)]
     if dd.size == 0:
         return 0.0, 0.0

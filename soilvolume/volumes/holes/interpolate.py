@@ -19,19 +19,14 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy import linalg, ndimage, sparse
-from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import splu, spsolve
+from scipy import ndimage, sparse
+from scipy.sparse.linalg import cg, spsolve
 
-from .equivalents import lower_triangle, rows_csr
+from .solve import least_squares, rows_csr
 
 FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use conjugate gradients
-TIKHONOV = 1e-10  # biharmonic normal matrix + eps I: factorisable even where the system is singular
-_REFINE_MAX = 30  # iterative-refinement steps removing eps where the system is well posed
-_BAND_EDGES = np.unique(np.ceil(8 * 1.25 ** np.arange(16)).astype(int))  # banded Cholesky up to ~230
-_BIG_GROUP = 200_000  # coupled biharmonic unknowns beyond which a sub-system is filled harmonically
 
 
 def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
@@ -107,8 +102,6 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
     a = sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
     if n <= _DIRECT_MAX:
         return spsolve(a.tocsc(), rhs)
-    from scipy.sparse.linalg import cg
-
     guess = _smooth_guess(values, known, todo)[todo]
     sol, _ = cg(a, rhs, x0=guess, tol=1e-9, maxiter=5000, M=sparse.diags(1.0 / diag))
     return sol
@@ -148,7 +141,7 @@ def biharmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
     simply left out (free, Neumann-like edge) and the problem stays well posed, unlike the
     Laplacian form. Exact for planes, and for quadratics away from such edges. Target components
     with no finite neighbour stay NaN; coupled sub-systems that are ill posed, huge
-    (> ``_BIG_GROUP`` cells) or give values far outside their surroundings get the harmonic fill."""
+    (> ``solve._BIG_GROUP`` cells) or give values far outside their surroundings get the harmonic fill."""
     known = np.isfinite(values) & ~targets
     out = np.where(known, values, np.nan)
     todo = _reachable(targets, known)
@@ -156,7 +149,7 @@ def biharmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
     if not flat.size:
         return out
     mat, rhs, k_rows, k_vals = _second_difference_rows(values, known | todo, todo, flat)
-    x, bad = _least_squares(mat, rhs, k_rows, k_vals)
+    x, bad = least_squares(mat, rhs, k_rows, k_vals)
     out.ravel()[flat] = x
     return harmonic_instead(out, values, targets, flat[bad])
 
@@ -204,132 +197,6 @@ def stencil_system(usable: np.ndarray, todo: np.ndarray, flat: np.ndarray):
     unk = tflat[cols]
     mat = rows_csr(rows[unk], np.searchsorted(flat, cols[unk]), coef[unk], (n_rows, flat.size))
     return mat, (rows[~unk], cols[~unk], coef[~unk]), n_rows
-
-
-def _least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares solution of ``mat x = rhs`` via the normal equations: one factorisation of
-    ``normal + eps I`` and iterative refinement. Returns (x, unknowns to fill harmonically)."""
-    normal = (mat.T @ mat).tocsr()
-    g = mat.T @ rhs
-    n_groups, group = connected_components(normal, directed=False)
-    solve, bad = group_solver(normal + TIKHONOV * sparse.identity(g.size, format="csr"), group, n_groups)
-    x = refined(solve, normal, g)
-    probe = 1.0 + np.random.default_rng(0).random(g.size)
-    null = np.abs(solve(TIKHONOV * probe)) > 0.01  # directions only eps pins down: ill posed
-    bad |= np.bincount(group, weights=null, minlength=n_groups) > 0
-    bad |= _wild(x, group, n_groups, mat, k_rows, k_vals)
-    return x, bad[group]
-
-
-def refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
-    """The solution of ``normal x = g`` (one or more columns) by ``solve`` (of ``normal + eps
-    I``), refined until converged or stalled at round-off (over all columns at once)."""
-    x, last = solve(g), np.inf
-    for _ in range(_REFINE_MAX):
-        dx = solve(g - normal @ x)
-        x += dx
-        step = np.abs(dx).max()
-        if not (step > 1e-9 * (1.0 + np.abs(x).max()) and step < 0.5 * last):
-            break
-        last = step
-    return x
-
-
-def group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
-    """Factorise the block-diagonal SPD ``reg`` (blocks = ``group``): banded Cholesky of blocks
-    kept in row-major order, batched by bandwidth; SuperLU for wider blocks; blocks over
-    ``_BIG_GROUP`` unknowns are skipped (solution 0). Returns (solve, per-group skipped flags)."""
-    low = lower_triangle(reg)
-    row = np.repeat(np.arange(low.shape[0]), np.diff(low.indptr))
-    order, kind = _block_order(low, row, group, n_groups)
-    pos = np.empty_like(order)
-    pos[order] = np.arange(order.size)
-    bounds = np.searchsorted(kind[group[order]], np.arange(_BAND_EDGES.size + 2))
-    pr, pc = pos[row], pos[low.indices]
-    by_row = np.argsort(pr, kind="stable")
-    cut = np.searchsorted(pr[by_row], bounds)
-    blocks, skipped = [], kind > _BAND_EDGES.size
-    for k in range(_BAND_EDGES.size + 1):
-        lo, hi = bounds[k], bounds[k + 1]
-        if hi > lo:
-            e = by_row[cut[k] : cut[k + 1]]
-            try:
-                blocks.append((lo, hi, _factor(k, pr[e] - lo, pc[e] - lo, low.data[e], hi - lo)))
-            except (np.linalg.LinAlgError, RuntimeError):
-                skipped[np.unique(group[order[lo:hi]])] = True
-
-    def solve(b: np.ndarray) -> np.ndarray:
-        y = b[order]
-        y[bounds[-1] :] = 0.0
-        for lo, hi, f in blocks:
-            y[lo:hi] = f(y[lo:hi])
-        x = np.empty_like(y)
-        x[order] = y
-        return x
-
-    return solve, skipped
-
-
-def _block_order(low: sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_groups: int):
-    """Unknowns ordered by solver kind, then group, then grid (row-major) order, and the kind of
-    each group: index into ``_BAND_EDGES`` of its bandwidth in that order, ``_BAND_EDGES.size``
-    if wider (SuperLU), ``_BAND_EDGES.size + 1`` if over ``_BIG_GROUP`` unknowns (skipped)."""
-    size = np.bincount(group, minlength=n_groups)
-    order = np.argsort(group, kind="stable")
-    pos = np.empty_like(order)
-    pos[order] = np.arange(order.size)
-    row_band = np.maximum.reduceat(pos[row] - pos[low.indices], low.indptr[:-1])  # diagonal in every row
-    kind = np.searchsorted(_BAND_EDGES, np.maximum.reduceat(row_band[order], np.cumsum(size) - size))
-    kind[size > _BIG_GROUP] = _BAND_EDGES.size + 1
-    return order[np.argsort(kind[group[order]], kind="stable")], kind
-
-
-def _factor(kind: int, pi: np.ndarray, pj: np.ndarray, data: np.ndarray, n: int):
-    """Solve function of an SPD matrix given by its lower triangle: banded Cholesky (bandwidth
-    ``_BAND_EDGES[kind]``) or, past the last edge, SuperLU. Raises if the factorisation fails."""
-    if kind < _BAND_EDGES.size:
-        ab = np.zeros((_BAND_EDGES[kind] + 1, n))
-        ab[pi - pj, pj] = data
-        chol = linalg.cholesky_banded(ab, lower=True, check_finite=False)
-        return lambda b: linalg.cho_solve_banded((chol, True), b, check_finite=False)
-    tri = sparse.csc_matrix((data, (pi, pj)), shape=(n, n))
-    full = (tri + sparse.tril(tri, -1).T).tocsc()
-    lu = splu(full, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    return lu.solve
-
-
-def _wild(x, group, n_groups, mat, k_rows, k_vals) -> np.ndarray:
-    """Groups whose solution is not finite or leaves the range of their known stencil values by
-    more than a generous, size-aware margin."""
-    has = np.diff(mat.indptr) > 0
-    row_group = np.full(mat.shape[0], -1)
-    row_group[has] = group[mat.indices[mat.indptr[:-1][has]]]
-    kg = row_group[k_rows]
-    lo, hi = _group_range(kg[kg >= 0], k_vals[kg >= 0], n_groups)
-    xlo, xhi = _group_range(group, np.where(np.isfinite(x), x, np.inf), n_groups)
-    return beyond((lo, hi), (xlo, xhi), np.bincount(group, minlength=n_groups))
-
-
-def beyond(known: tuple, solved: tuple, size) -> np.ndarray:
-    """Whether each group's solution (``solved``: its min and max, +inf where not finite) is not
-    finite or leaves the range of its known stencil values (``known``: min, max) by more than a
-    generous margin for its ``size`` unknowns."""
-    (lo, hi), (xlo, xhi) = known, solved
-    with np.errstate(invalid="ignore"):  # groups without known values: NaN margin -> wild
-        allow = (hi - lo) * np.maximum(4.0, np.sqrt(size)) + 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))
-        return ~np.isfinite(xhi) | ~(xlo >= lo - allow) | ~(xhi <= hi + allow)
-
-
-def _group_range(groups: np.ndarray, vals: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per-group min and max of ``vals`` (+inf/-inf for empty groups)."""
-    order = np.argsort(groups, kind="stable")
-    g, v = groups[order], vals[order]
-    lo, hi = np.full(n, np.inf), np.full(n, -np.inf)
-    if g.size:
-        starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-        lo[g[starts]] = np.minimum.reduceat(v, starts)
-        hi[g[starts]] = np.maximum.reduceat(v, starts)
-    return lo, hi
 
 
 _FILLERS: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
@@ -391,10 +258,3 @@ def typical_radius(mask: np.ndarray) -> float:
         return 1.0
     size = np.bincount(labels.ravel())[1:].astype(float)
     return max(1.0, float(np.sqrt((size * size).sum() / size.sum() / np.pi)))
-
-
-def summary(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:
-    """Counts, areas and the net volume contributed by refilled cells (for the report)."""
-    d = np.where(filled_mask, diff, 0.0)
-    n = int(filled_mask.sum())
-    return {"filled_cells": n, "filled_area_m2": n * cell_area, "filled_net_m3": float(np.nansum(d) * cell_area)}

@@ -1,5 +1,5 @@
 """The refill's error measured on known ground: test discs cut out of a grid's known cells,
-refilled (:mod:`.holes`) and compared with what was there. The discs lie apart, each fully
+refilled (:mod:`.interpolate`) and compared with what was there. The discs lie apart, each fully
 surrounded, so for the biharmonic fill every disc's system is the same matrix: factorised once
 per disc shape and solved for all the discs at once."""
 
@@ -11,8 +11,10 @@ import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse.csgraph import connected_components
 
-from .equivalents import disc_erosion_every
-from .holes import TIKHONOV, beyond, filler, group_solver, harmonic_instead, refined, stencil_system
+from .interpolate import filler, harmonic_instead, stencil_system
+from .solve import TIKHONOV, beyond, group_solver, refined
+
+MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
 
 
 def fill_error(
@@ -42,8 +44,30 @@ def fill_error(
     return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
 
 
+def error_by_radius(
+    h: np.ndarray, usable: np.ndarray, method: str, radius: np.ndarray, seed: int, per_cell=False, floor=0.0
+) -> np.ndarray | None:
+    """:func:`fill_error` on test holes of radii 1, 2, 4, ... cells up to the largest ``radius``
+    (at most :data:`MAX_TEST_RADIUS`: weak cells spread over a grid finer than the points form one
+    giant "hole"), interpolated in log radius at each ``radius`` (the largest measured beyond it):
+    (n,) mean-height errors, or with ``per_cell`` (n, 2) (per-cell RMS, mean-height); None without
+    room to measure. Errors below ``floor`` are taken as it."""
+    ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
+    rows = []
+    for r in ladder:
+        e = np.atleast_1d(fill_error(h, usable, method, r, seed=seed, per_cell=per_cell))
+        if np.isfinite(e).all():
+            rows.append((r, *e))
+    if not rows:
+        return None
+    r_m, *e_m = np.log(np.maximum(np.array(rows), floor)).T
+    at = np.log(np.maximum(radius, 1.0))
+    out = np.exp(np.stack([np.interp(at, r_m, e) for e in e_m], axis=1))
+    return out if per_cell else out[:, 0]
+
+
 def discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, disc: np.ndarray) -> np.ndarray | None:
-    """The ``targets`` cells of :func:`.holes.biharmonic_fill` (``values``, ``targets``) where the targets
+    """The ``targets`` cells of :func:`.interpolate.biharmonic_fill` (``values``, ``targets``) where the targets
     are test discs (``centres`` + ``disc`` offsets) far enough apart that no stencil meets two, each
     with every stencil cell around it finite and in the grid (None otherwise): every disc's system
     is then the same matrix with its own right-hand side, factorised once and solved for all the
@@ -97,3 +121,17 @@ def _around(centres: np.ndarray, cells: np.ndarray, size: int) -> tuple[np.ndarr
     r, c = np.divmod(cells, size)
     half = size // 2
     return centres[:, :1] - half + r, centres[:, 1:] - half + c
+
+
+def disc_erosion_every(mask: np.ndarray, radius: float, step: int) -> np.ndarray:
+    """``ndimage.binary_erosion(mask, disc)[::step, ::step]`` for the disc of cells within
+    ``radius`` (outside the grid is not ``mask``), looked up at those cells only: each is True
+    when every cell within ``radius`` of it lies in the grid and in ``mask``."""
+    r = int(np.ceil(radius))
+    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+    near = xx * xx + yy * yy <= radius * radius
+    rows = np.arange(0, mask.shape[0], step)[:, None, None] + yy[near]
+    cols = np.arange(0, mask.shape[1], step)[None, :, None] + xx[near]
+    inside = (rows >= 0) & (rows < mask.shape[0]) & (cols >= 0) & (cols < mask.shape[1])
+    looked = mask[np.clip(rows, 0, mask.shape[0] - 1), np.clip(cols, 0, mask.shape[1] - 1)]
+    return (looked & inside).all(axis=-1)
