@@ -21,8 +21,6 @@ from ..core.types import GridSpec
 
 #: the volume step as the backend runs it: (after DEM, before DEM, d_i, grid) -> Volumes
 VolumeFn = Callable[[Any, Any, np.ndarray, GridSpec], Any]
-#: a window of a run's output array: (the volume step's array name, rows, cols) -> values
-Window = Callable[[str, slice, slice], np.ndarray]
 
 
 @dataclass(frozen=True)
