@@ -21,7 +21,7 @@ from .workflow.estimate import run_estimate
 from .workflow.rasters import run_volume_from_rasters
 from .workflow.series import run_series
 
-__all__ = ["Cancelled", "Hooks", "Result", "cloud_to_dem", "estimate", "register", "volume_from_rasters"]
+__all__ = ["Cancelled", "Hooks", "Result", "cloud_to_dem", "estimate", "register", "series", "volume_from_rasters"]
 
 
 def estimate(
@@ -36,7 +36,6 @@ def estimate(
     after_pipeline: str | Path | None = None,
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
-
     options = check_options(options or Options())
     uses_open3d = options.georeferencing != "precise" and needed(options.fine, options.coarse)
     preload(uses_open3d, options.threads)  # overlaps the reading
