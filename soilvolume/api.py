@@ -12,10 +12,16 @@ from pathlib import Path
 from typing import Any
 
 from .core.hooks import Cancelled, Hooks, Result
+from .core.preload import preload
 from .options import Options
+from .registration.o3d import needed
 from .validate import check_bounds, check_options
+from .workflow.commands import run_cloud_to_dem, run_register
+from .workflow.estimate import run_estimate
+from .workflow.rasters import run_volume_from_rasters
+from .workflow.series import run_series
 
-__all__ = ["Cancelled", "Hooks", "Result", "cloud_to_dem", "estimate", "register", "volume_from_rasters"]
+__all__ = ["Cancelled", "Hooks", "Result", "cloud_to_dem", "estimate", "register", "series", "volume_from_rasters"]
 
 
 def estimate(
@@ -30,14 +36,9 @@ def estimate(
     after_pipeline: str | Path | None = None,
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
-    from .core.preload import preload
-    from .registration.o3d import needed
-
     options = check_options(options or Options())
     uses_open3d = options.georeferencing != "precise" and needed(options.fine, options.coarse)
     preload(uses_open3d, options.threads)  # overlaps the reading
-    from .workflow.estimate import run_estimate
-
     return run_estimate(
         Path(before),
         Path(after),
@@ -62,8 +63,6 @@ def cloud_to_dem(
     """One cloud to an average-height GeoTIFF (``options.cell``/``options.statistic``; ``bounds``
     = xmin, ymin, xmax, ymax in the cloud's CRS, snapped outwards to the cell). Returns the grid
     description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
-    from .workflow.commands import run_cloud_to_dem
-
     return run_cloud_to_dem(
         Path(cloud),
         Path(out_tif),
@@ -85,8 +84,6 @@ def register(
     """Register the after cloud onto the before cloud and write it (LAS/LAZ, before CRS).
     Returns {"transform": 4x4 row-major list (after in before CRS -> before), "coarse": {...},
     "fine": {...}}."""
-    from .workflow.commands import run_register
-
     return run_register(
         Path(before), Path(after), Path(out_cloud), check_options(options or Options()), hooks=hooks or Hooks()
     )
@@ -104,8 +101,6 @@ def volume_from_rasters(
     """Cut/fill/net between two DEMs a user already has (the after raster is resampled onto the
     before grid when they differ). Returns {"total": {"net","cut","fill","area_m2"}, "zones":
     [{"id", "name", "net", "cut", "fill", "area_m2"}, ...]} and writes the difference GeoTIFF."""
-    from .workflow.rasters import run_volume_from_rasters
-
     return run_volume_from_rasters(
         Path(before_tif),
         Path(after_tif),
@@ -129,8 +124,6 @@ def series(
     holds ``epochs`` (each registration into E0's frame), ``periods`` (one per consecutive pair)
     and ``cumulative``; the periods' nets add up to the cumulative net. ``dates``: one per epoch
     (YYYY-MM-DD; empty keeps the file's)."""
-    from .workflow.series import run_series
-
     return run_series(
         [Path(e) for e in epochs],
         Path(out_dir),

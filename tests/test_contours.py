@@ -18,7 +18,7 @@ from conftest import run_cli
 from pyogrio.raw import read
 from rasterio.transform import Affine
 
-import soilvolume.workflow.run as runmod
+import soilvolume.workflow.steps as stepsmod
 from soilvolume.api import estimate
 from soilvolume.core.types import SoilVolumeError
 from soilvolume.options import Options
@@ -145,7 +145,7 @@ def test_nothing_is_written_when_the_contours_fail(misaligned_pair, tmp_path, mo
         Path(path).write_bytes(b"partial")
         raise SoilVolumeError(f"{path}: cannot write (no space left on the device)")
 
-    monkeypatch.setattr(runmod, "write_contours", fail)
+    monkeypatch.setattr(stepsmod, "write_contours", fail)
     before, after, _ = misaligned_pair
     with pytest.raises(SoilVolumeError, match="no space"):
         estimate(before, after, tmp_path / "out", replace(Options(), contour_interval=1.0))

@@ -110,7 +110,7 @@ def test_tiles_the_driver_read_go_out_before_the_registration(vpcs, tmp_path, mo
     ended): they go out to the workers at the end of the reading, beside the registration, not
     when the grid needs them; the result is the run on the workers alone, byte for byte."""
     from soilvolume.distributed import cluster
-    from soilvolume.inputs import prepare as prep_mod
+    from soilvolume.execution import tiled as prep_mod  # where the tiled backend calls prepare
     from soilvolume.workflow import steps
 
     ref, _ = _run(vpcs, tmp_path / "ref", "threads:2")

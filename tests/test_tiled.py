@@ -406,15 +406,15 @@ def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, 
     import signal
 
     from soilvolume.core.interrupt import Interrupted
-    from soilvolume.distributed import tiletask
     from soilvolume.distributed.tiletask import TILE_ARRAYS
+    from soilvolume.execution import tiled
 
     def interrupted(c, plan, windows, hooks, store, stats, *_):
         w = windows[0]
         store.save(w, {n: np.zeros((w[1] - w[0], w[3] - w[2])) for n in TILE_ARRAYS})
         raise Interrupted(signal.SIGINT)
 
-    monkeypatch.setattr(tiletask, "run_tiles", interrupted)
+    monkeypatch.setattr(tiled, "run_tiles", interrupted)  # where the tiled backend calls it
     before, after, _ = pair
     with pytest.raises(Interrupted, match=r"kept in .*\.r\.soilvolume-tiles for the same command to resume") as err:
         estimate(before, after, tmp_path / "r", Options(scheduler="threads:1", volume_step="whole"))

@@ -6,7 +6,10 @@ import argparse
 import json
 from pathlib import Path
 
+import pyproj
+
 from .. import api
+from ..inputs.crs import parse_crs
 from ..inputs.stream import open_source
 from ..validate import check_bounds
 from .feedback import hooks, send_result
@@ -47,12 +50,6 @@ def run(ns: argparse.Namespace) -> int:
 def bounds_in_cloud_crs(cloud: Path, crs: str | None, bounds: tuple, bounds_crs: str) -> tuple:
     """``bounds`` (in ``bounds_crs``) as the box around them in the cloud's CRS (``crs`` when
     given, else its header's); unchanged when the cloud has no CRS."""
-    # lazy: pyproj (and inputs.crs, which imports it) costs ~170 ms a command line without
-    # --bounds-crs never needs
-    import pyproj
-
-    from ..inputs.crs import parse_crs
-
     wkt = crs or open_source(cloud).crs_wkt
     if not wkt:
         return bounds

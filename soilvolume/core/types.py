@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -88,8 +89,6 @@ class GridSpec:
 
     def window(self, r0: int, r1: int, c0: int, c1: int) -> GridSpec:
         """The sub-grid of rows r0..r1 and columns c0..c1 (same cells, same origin)."""
-        from dataclasses import replace
-
         x0, y0 = self.xmin + c0 * self.cell, self.ymax - r0 * self.cell
         return replace(self, xmin=x0, ymax=y0, rows=r1 - r0, cols=c1 - c0)
 
@@ -117,21 +116,45 @@ class StageQuality:
     poses: tuple = ()  # every pose the fine stage refined to (4x4s, those beyond the prior too): its own spread
 
 
+#: where an epoch's heights come from: a point cloud file (optionally prepared by a PDAL
+#: pipeline), tiles (a VPC, a COPC file or a folder of tiles) or a surface (a DEM GeoTIFF or a
+#: LandXML TIN: a design or an earlier DEM)
+SOURCES = ("cloud", "tiles", "surface")
+TILE_SUFFIXES = (".vpc", ".copc.laz")
+
+
 @dataclass(frozen=True)
 class Epoch:
-    """One input of a run, in time order: a survey (a point cloud file, optionally prepared by a
-    PDAL ``pipeline``) or a surface (a DEM raster in metres; ``kind="surface"``), with its date
-    (ISO ``YYYY-MM-DD``) when known. A run takes one epoch (``dem``), two (``estimate``,
-    ``register``: the first is the reference), or more (a series)."""
+    """One survey of a run, in time order: its source (:data:`SOURCES`), the CRS given for a file
+    without one, its date (ISO ``YYYY-MM-DD``) and where the date came from (``"LAS header"`` or
+    ``"given"``), and how far its georeferencing is trusted (``auto``, ``gps``, ``precise``). A
+    product takes one epoch (``dem``), two (``estimate``, ``register``: the first is the
+    reference) or more (a series); the epochs' vertical unit is read from their headers."""
 
-    path: Any  # str or pathlib.Path
-    pipeline: Any = None  # str or pathlib.Path of a preparation pipeline
+    path: Path
+    source: str = "cloud"
+    pipeline: Path | None = None
+    crs: str | None = None
     date: str | None = None
-    date_source: str | None = None  # where the date came from: "LAS header" or "given" (--dates)
-    kind: str = "survey"  # "survey" | "surface"
+    date_source: str | None = None
+    georeferencing: str = "auto"
+
+    def __post_init__(self) -> None:
+        if self.source not in SOURCES:
+            raise ValueError(f"an epoch's source is one of {SOURCES}, not {self.source!r}")
 
     @property
     def name(self) -> str:
-        from pathlib import Path
-
         return Path(self.path).name
+
+    @property
+    def is_surface(self) -> bool:
+        return self.source == "surface"
+
+
+def survey(path, pipeline=None, **fields) -> Epoch:
+    """A survey epoch: ``tiles`` for a VPC, a COPC file or a folder, else ``cloud``."""
+    path = Path(path)
+    tiled = path.is_dir() or path.name.lower().endswith(TILE_SUFFIXES)
+    source = "tiles" if tiled and pipeline is None else "cloud"
+    return Epoch(path, source, None if pipeline is None else Path(pipeline), **fields)

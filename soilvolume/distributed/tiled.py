@@ -1,4 +1,4 @@
-"""The distributed engine's pieces (its executor: :mod:`.executor`): the same method as the
+"""The distributed engine's pieces (its backend: :mod:`soilvolume.execution.tiled`): the same method as the
 in-process run, with the point work done as Dask tasks, so no process holds a survey's points.
 
 1. A first pass of tasks (:mod:`scan`) returns column-thinning sums, counts and chunk boxes;
@@ -23,11 +23,9 @@ import math
 import numpy as np
 
 from ..core.types import GridSpec
-from ..dem.grid import choose_cell
-from ..inputs.footprint import PolygonMask, footprint, inside, polygon_area
+from ..inputs.footprint import footprint, polygon_area
 from ..inputs.prepare import Prepared
 from ..options import Options
-from .gridtile import Plan
 from .overview import MAX_CELLS, blocks_for, factor
 from .schedule import TILE_BYTES_PER_POINT, Schedule, budget_gb
 from .tiletask import MAX_TILE, MIN_TILE
@@ -89,26 +87,6 @@ def points_per_cell(prep: Prepared, cell: float) -> float:
     area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
     used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
     return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
-
-
-def cell_from_columns(prep: Prepared, poly: np.ndarray, minimum: float = 0.5) -> float:
-    """:func:`grid.cell_for` from the thinned subset: the before points behind the column
-    centroids inside the registered after footprint ``poly``, over the footprint's area."""
-    ins = inside(prep.before_thin[:, :2], poly)
-    return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly), minimum=minimum)
-
-
-def plan_for(run, cell: float, sources: tuple = (None, None)) -> Plan:
-    """What every tile task of ``run`` (:class:`soilvolume.workflow.run.Run`) needs (picklable);
-    ``sources``: the (before, after) sources the driver opened (the tasks then open none)."""
-    prep, options = run.prep, run.options
-    b, a = (str(e.path) for e in run.epochs)
-    crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
-    ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], options.radius)
-    grid, t = run.grid, run.reg.transform
-    streamed = tuple(None if s is None or s.raw is not None else s for s in sources)  # never whole clouds
-    parts = (prep.frame, prep.origin, grid, t, prep.ground, ring, options.statistic, prep.index, prep.rules)
-    return Plan(b, a, *crs, *parts, streamed, PolygonMask(ring))
 
 
 def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:

@@ -1,18 +1,15 @@
 """The driver's side of the tiled volume step (see :mod:`volumetiles`; the order is
-:mod:`soilvolume.workflow.run`'s): grid the tiles into the store with an overview, then, given
+:mod:`soilvolume.workflow.steps`'): grid the tiles into the store with an overview, then, given
 the volume step of the overview, the volume step on every tile; the outputs are read from the
 store."""
 
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 
 from ..core.hooks import Hooks
 from ..dem.grid import MASK_LAYER, UINT8_LAYERS, EpochDEM
 from ..volumes.zones import check_inside
-from ..workflow.steps import alternative_move
 from . import overview
 from .gridtile import TILE_ARRAYS
 from .tilestore import TileStore
@@ -20,22 +17,17 @@ from .tiletask import map_tiles, window_caches
 from .volumetiles import VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
 
 
-def tile_volumes(c, store: TileStore, k: int, over, run, medians: tuple):
+def tile_volumes(c, job: VolumeJob, over, hooks: Hooks, steps: tuple):
     """The volume step tile by tile on the workers, given the correction ``over`` found on the
-    overview (the volume step of the overview grid), combined into the grid's ``Volumes``."""
-    grid, options, reg = run.grid, run.options, run.reg
-    p_b, p_a, _ = run.planes
-    moved = alternative_move(reg)
-    job = VolumeJob(store, grid, options, k, over.offset, over.stable, over.params, medians, (p_b, p_a), moved)
-    job = replace(job, rules=run.prep.rules)
-    windows = list(store.windows)
-    steps = (*run.spans["volume"], "volumes of")
-    tiles = list(map_tiles(c, volume_tile, job, windows, hooks=run.hooks, steps=steps))
+    overview (the volume step of the overview grid, in ``job``), combined into the grid's
+    ``Volumes``; progress ``steps`` = (start %, end %, message)."""
+    windows = list(job.store.windows)
+    tiles = list(map_tiles(c, volume_tile, job, windows, hooks=hooks, steps=steps))
     order = {w: i for i, w in enumerate(windows)}
     tiles.sort(key=lambda t: order[t["window"]])  # the same sums whatever the finishing order
-    vols = combine(tiles, over, grid.cell, k)
-    if options.zones:
-        check_inside(vols.zones, options.zones)
+    vols = combine(tiles, over, job.grid.cell, job.k)
+    if job.options.zones:
+        check_inside(vols.zones, job.options.zones)
     return vols
 
 

@@ -1,28 +1,71 @@
-"""The shortened runs of :mod:`.run`: one cloud to a DEM (``soilvolume dem``: prepare, grid,
-write) and registration only (``soilvolume register``: prepare, register, write), in-process."""
+"""The shortened products: one cloud to a DEM (``soilvolume dem``: read, grid, write) and
+registration only (``soilvolume register``: :func:`.pair.register`), in memory."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from ..core.hooks import Hooks
-from ..core.outputs import check_output_file
-from ..core.types import Epoch, SoilVolumeError
+from ..core.outputs import check_output_file, os_errors
+from ..core.types import Epoch, GridSpec, SoilVolumeError, survey
 from ..core.wording import cli_tree
+from ..dem.geotiff import write_grid
+from ..dem.grid import epoch_dem
+from ..execution.inmemory import InMemory
 from ..inputs.distinct import check_two_surveys
 from ..inputs.io import LAS_SUFFIXES
+from ..inputs.prepare import Single, prepare_single
 from ..options import Options
+from ..pipelines.pipeline import open_source
 from ..reporting.report import dem_summary, registration_summary
-from .executors import InProcess
-from .run import Run, drive
+from ..volumes.compute import centred_heights
+from . import pair, steps
+from .context import Context, threads
+from .plan import cloud_cell, plan_grid
+
+DEM = ("prepare", "grid", "write")
 
 
 def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bounds, hooks: Hooks) -> dict:
     """See :func:`soilvolume.api.cloud_to_dem`."""
     out_tif = check_output_file(out_tif, [cloud])
-    run = drive(Run("dem", (Epoch(cloud),), options, hooks, raster_out=out_tif, crs=crs, bounds=bounds), InProcess())
+    threads("dem", options)
+    ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
+    with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
+        one = _read(ctx)
+    with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
+        grid, heights = _grid(ctx, one, bounds)
+    with steps.running(ctx, "write", ctx.message("write")), os_errors(out_tif):
+        desc = f"average height ({options.statistic}, cell centres) (m)"
+        write_grid(out_tif, heights + one.origin[2], grid, desc)
     hooks.step(100, "done")
-    return cli_tree(dem_summary(run.prep, run.grid, run.dems[0]))
+    return cli_tree(dem_summary(one, grid, heights))
+
+
+def _read(ctx: Context) -> Single:
+    """One cloud streamed into its own working frame."""
+    (epoch,) = ctx.epochs
+    check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
+    return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
+
+
+def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np.ndarray]:
+    """The one cloud's grid (``bounds``, else its points' box) and heights at the cell centres."""
+    xyz, origin, frame, options = one.xyz, one.origin, one.frame, ctx.options
+    if bounds is not None:
+        u, b = frame.xy_unit, bounds
+        box = (np.array([b[0] * u, b[1] * u]) - origin[:2], np.array([b[2] * u, b[3] * u]) - origin[:2])
+    else:
+        box = (xyz.min(axis=0)[:2].astype(float), xyz.max(axis=0)[:2].astype(float))
+    cell = cloud_cell(xyz, one.thin, options)
+    grid = plan_grid(cell, [box], origin, frame, f"{ctx.epochs[0].path}: --bounds do not make a grid")
+    ctx.hooks.step(ctx.at("grid", 0.1), f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
+    heights = centred_heights(epoch_dem(xyz, grid, options.statistic), cell, options)
+    if not np.isfinite(heights).any():
+        raise SoilVolumeError(f"{ctx.epochs[0].path}: no points inside the grid (check --bounds)")
+    return grid, heights
 
 
 def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
@@ -31,6 +74,12 @@ def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *
     out_cloud = check_output_file(out_cloud, [before, after])
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
-    run = drive(Run("register", (Epoch(before), Epoch(after)), options, hooks, cloud_out=out_cloud), InProcess())
+    threads("register", options)
+    given = {"georeferencing": options.georeferencing}
+    epochs: tuple[Epoch, ...] = (
+        survey(before, crs=options.before_crs, **given),
+        survey(after, crs=options.after_crs, **given),
+    )
+    prep, reg = pair.register(Context(epochs, options, hooks, pair.REGISTER), InMemory(), out_cloud)
     hooks.step(100, "done")
-    return cli_tree(registration_summary(run.reg, run.prep.origin))  # options worded as flags
+    return cli_tree(registration_summary(reg, prep.origin))  # options worded as flags

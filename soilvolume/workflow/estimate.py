@@ -1,5 +1,6 @@
-"""``soilvolume estimate``: the whole pipeline of :mod:`.run` over two epochs, its outputs
-staged and swapped in when all succeeded."""
+"""``soilvolume estimate``: the pair product (:mod:`.pair`), or the survey against a surface
+(:mod:`.design`) when the first input is one, its outputs staged and swapped in when all
+succeeded; the backend chosen from ``--scheduler`` (:func:`backend_for`)."""
 
 from __future__ import annotations
 
@@ -7,13 +8,28 @@ from pathlib import Path
 
 from ..core.hooks import Hooks, Result
 from ..core.outputs import RUN_OUTPUTS, os_errors, output_dir
-from ..core.types import Epoch
+from ..core.types import Epoch, survey
+from ..distributed.schedule import schedule_for
+from ..execution.inmemory import InMemory
+from ..execution.seam import Backend
+from ..execution.tiled import Tiled
 from ..inputs.distinct import check_two_surveys
 from ..inputs.surface import is_surface
 from ..options import Options
 from ..pipelines.confine import writers_into
-from .run import Run, drive
+from . import design, pair
+from .context import Context, threads
 from .timing import Timer
+
+
+def epochs_of(before: Path, after: Path, options: Options, before_pipeline=None, after_pipeline=None) -> tuple:
+    """The two epochs of an estimate: the first a surface when it is one (a design, an earlier DEM)."""
+    given = {"georeferencing": options.georeferencing}
+    if before_pipeline is None and is_surface(before):
+        first = Epoch(Path(before), "surface", crs=options.before_crs)
+    else:
+        first = survey(before, before_pipeline, crs=options.before_crs, **given)
+    return first, survey(after, after_pipeline, crs=options.after_crs, **given)
 
 
 def run_estimate(
@@ -31,41 +47,32 @@ def run_estimate(
     timer = Timer()  # first: the timings count from here (and the start-up before)
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
         check_two_surveys(before, after)
-    kind = "surface" if is_surface(before) and before_pipeline is None else "survey"  # a design, an earlier DEM
-    epochs = (Epoch(before, before_pipeline, kind=kind), Epoch(after, after_pipeline))
+    epochs = epochs_of(before, after, options, before_pipeline, after_pipeline)
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
+    threads("estimate", options)
     with (
         output_dir(out_dir, inputs, overwrite) as out,
         os_errors(out.final),
         writers_into(out.stage, inputs, RUN_OUTPUTS),
     ):
+        surface = epochs[0].is_surface
         with timer("setup"):  # the output folder checked, the schedule chosen from the headers
-            run = Run("estimate", epochs, options, hooks, timer, out=out)
-            if options.keep_registered_cloud:
-                run.cloud_out = out.path("after_registered.laz")
-            executor = executor_for(run)
-        drive(run, executor)
-        result = Result(run.report, keyed=run.keyed)
+            ctx = Context(epochs, options, hooks, design.STEPS if surface else pair.PAIR, timer, out)
+            backend = InMemory() if surface else backend_for(ctx)
+        if surface:
+            done = design.estimate(ctx, backend)
+        else:
+            cloud = out.path("after_registered.laz") if options.keep_registered_cloud else None
+            done = pair.estimate(ctx, backend, cloud)
+        result = Result(done.report, keyed=done.keyed)
     result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in out.moved.items()}
     hooks.step(100, "done")
     return result
 
 
-def executor_for(run: Run):
-    """The executor the schedule (``--scheduler``, :func:`distributed.schedule.schedule_for`) picks."""
-    from ..distributed.schedule import schedule_for
-    from .executors import InProcess
-
-    b, a = run.epochs
-    if b.kind == "surface":  # the survey alone, in-process (workflow/design)
-        from .design import SurfaceReference
-
-        if run.options.scheduler not in ("none", "auto"):
-            run.hooks.info("{opt:scheduler}: a run against a surface runs in this process")
-        return SurfaceReference()
-    schedule = schedule_for(b.path, a.path, run.options, b.pipeline or a.pipeline)
-    if schedule.kind == "none":
-        return InProcess()
-    from ..distributed.executor import Tiled
-
-    return Tiled(schedule)
+def backend_for(ctx: Context) -> Backend:
+    """The backend ``--scheduler`` names (:func:`distributed.schedule.schedule_for`): in memory,
+    or Dask tiles for any schedule but ``none``."""
+    b, a = ctx.epochs
+    schedule = schedule_for(b.path, a.path, ctx.options, b.pipeline or a.pipeline)
+    return InMemory() if schedule.kind == "none" else Tiled(schedule)

@@ -27,6 +27,7 @@ from ..inputs.heights import (
     window_over,
 )
 from ..volumes.difference import budget
+from ..volumes.zones import zone_budgets
 
 NO_CORRECTION = (
     "volume from the DEM difference as it is: no registration, no vertical bias correction and no "
@@ -150,8 +151,6 @@ def run_volume_from_rasters(
         "inputs": {"before": db.describe(hb), "after": da.describe(ha)},
     }
     if zones:  # before writing: a bad zones file leaves nothing behind
-        from ..volumes.zones import zone_budgets
-
         result["zones"] = zone_budgets(diff, grid, zones, zone_field)
     hooks.step(90, f"writing {out.name}")
     with os_errors(out):

@@ -1,5 +1,5 @@
-"""``soilvolume series E0 E1 ... En``: a site surveyed n + 1 times, E0 the reference, as a run
-of the one pipeline (:mod:`.run`, ``COMMAND_STEPS["series"]``) on the :class:`Series` executor.
+"""``soilvolume series E0 E1 ... En``: a site surveyed n + 1 times, E0 the reference, a
+composition of the method's steps (:mod:`.steps`) over the pairs E0 -> Ek, in memory.
 
 Each later epoch is prepared and registered against E0 (the pair E0 -> Ek, so the stable-ground
 refinement works on ground stable across the two) with the steps of :mod:`.steps` an estimate
@@ -10,6 +10,7 @@ into periods that add up to the cumulative."""
 
 from __future__ import annotations
 
+import datetime as dt
 import itertools
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -18,18 +19,29 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compensation.planes import plane_offset
+from ..core.collector import resume
 from ..core.hooks import Cancelled, Hooks, Result
 from ..core.interrupt import Interrupted
 from ..core.outputs import os_errors, output_dir
-from ..core.types import Epoch, GridSpec, SoilVolumeError
-from ..dem import grid as gridmod
+from ..core.types import Epoch, GridSpec, SoilVolumeError, survey
+from ..dem.grid import epoch_dem
+from ..execution.inmemory import InMemory
+from ..execution.seam import Gridded, done
 from ..inputs.distinct import sameness
 from ..inputs.footprint import footprint
 from ..inputs.lasheader import creation_date
 from ..inputs.prepare import Prepared
 from ..options import Options
+from ..registration.register import Registration
 from ..registration.rigid import transform_points, transform_points32
-from ..validate import check_grid_cells
+from ..reporting.series import write_rasters, write_reports
+from ..volumes.compute import compute_volumes
+from ..volumes.series import combine
+from . import steps
+from .context import Context, threads
+from .pair import PAIR as STEPS
+from .plan import plan_grid, reference_cell
 from .timing import Timer
 
 
@@ -39,15 +51,13 @@ class Fit:
     registration (series frame) and the options its volume step takes (precise surveys: none)."""
 
     prep: Prepared
-    reg: object
+    reg: Registration
     options: Options
 
 
 def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | None, str | None]]:
     """Each epoch's (date, where it came from): ``given`` (``--dates``; an empty entry keeps the
     file's), else the LAS header's creation day and year, else (None, None)."""
-    import datetime as dt
-
     if given is not None and len(given) != len(paths):
         raise SoilVolumeError(f"--dates: {len(given)} dates for {len(paths)} epochs (give one per epoch)")
     out: list[tuple[str | None, str | None]] = []
@@ -148,142 +158,128 @@ def rebase(prep: Prepared, reg, origin: np.ndarray) -> tuple[Prepared, object]:
 
 def series_grid(fits: list[Fit], options: Options) -> GridSpec:
     """One grid over the cells E0 and every registered later epoch cover (their boxes' overlap),
-    cell size from E0's density (as :func:`.steps.shared_grid`)."""
+    the cell from E0's points within the first registered epoch's footprint (:mod:`.plan`)."""
     thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
     prep = fits[0].prep
-    lo = np.max([prep.before_thin.min(axis=0)] + [t.min(axis=0) for t in thins], axis=0)
-    hi = np.min([prep.before_thin.max(axis=0)] + [t.max(axis=0) for t in thins], axis=0)
-    if (hi[:2] <= lo[:2]).any():
-        raise SoilVolumeError("the registered epochs have no area in common with each other and E0")
-    cell = options.cell
-    if cell is None or cell <= 0:
-        cell = gridmod.cell_for(prep.before.xyz, footprint(thins[0][:, :2]))
-    grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
-    check_grid_cells(grid.rows, grid.cols, cell)
-    return grid
+    boxes = [(t.min(axis=0), t.max(axis=0)) for t in (prep.before_thin, *thins)]
+    cell = reference_cell(prep, footprint(thins[0][:, :2]), options)
+    empty = "the registered epochs have no area in common with each other and E0"
+    return plan_grid(cell, boxes, prep.origin, prep.frame, empty)
 
 
 def run_series(
     paths: list[Path], out_dir: Path, options: Options, *, dates=None, overwrite: bool, hooks: Hooks
 ) -> Result:
-    """See :func:`soilvolume.api.series`: the pipeline of :mod:`.run` over E0 and every later epoch."""
-    from .run import Run, drive
-
+    """See :func:`soilvolume.api.series`: the method's steps over E0 and every later epoch."""
     timer = Timer()
     check_epochs(paths)
     dated = zip(paths, epoch_dates(paths, dates), strict=True)
-    epochs = tuple(Epoch(p, date=d, date_source=source) for p, (d, source) in dated)
+    given = {"crs": None, "georeferencing": options.georeferencing}
+    epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
     check_series(epochs)
+    threads("series", options)
     with output_dir(out_dir, [*paths, options.stable_mask], overwrite) as out, os_errors(out.final):
-        run = drive(Run("series", epochs, options, hooks, timer, out=out), Series())
+        report = series(Context(epochs, options, hooks, STEPS, timer, out), InMemory())
     hooks.step(100, "done")
     moved = out.moved.items()
-    return Result(run.report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
+    return Result(report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
 
 
-def pair_named(run, k: int) -> str:
+def pair_named(ctx: Context, k: int) -> str:
     """The pair E0 -> Ek of a series in an error."""
-    return f"{described(run.epochs, k)} against {described(run.epochs, 0)}"
+    return f"{described(ctx.epochs, k)} against {described(ctx.epochs, 0)}"
 
 
-class Series:
-    """The executor of a series run (in-process): each step's work over E0 and every later epoch.
-    ``prepare``: the pairs E0 -> Ek; ``register_step``: each Ek into E0's frame, rebased on one
-    local origin; ``grid``: one grid, every epoch's DEM; ``planes_step``: each pair's planes;
-    ``volume``: each pair's volume step (Ek corrected once relative to E0), then the periods
-    (:func:`soilvolume.volumes.series.combine`); ``write``; ``report_step``."""
+def _each(ctx: Context, step: str, k: int, n: int) -> tuple[float, float]:
+    """The share of the ``k``-th of ``n`` pairs in ``step``'s percent range."""
+    lo, hi = ctx.spans[step]
+    return lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1) / n
 
-    reading_note = ""
-    raster_note = ""
 
-    def __init__(self) -> None:
-        self.preps: list[Prepared] = []
-        self.fits: list[Fit] = []
-        self.vols: list = []
-        self.planes: list = []
+def series(ctx: Context, backend: InMemory) -> dict:
+    """Read and register each pair E0 -> Ek, grid every epoch on one grid, each pair's planes and
+    volume step (Ek corrected once relative to E0), the periods, write, report."""
+    with backend.session(ctx):
+        with steps.running(ctx, "prepare", ctx.message("prepare"), "crop"):
+            preps = [_read(ctx, backend, k) for k in range(1, len(ctx.epochs))]
+        fits = _register(ctx, preps)
+        del preps
+        with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
+            grid, dems = _grid(ctx, fits)
+        fitted = _planes(ctx, fits, grid, dems)
+        with steps.running(ctx, "volume", ctx.message("volume")):
+            vols = _volumes(ctx, backend, fits, fitted, grid, dems)
+            ctx.hooks.step(ctx.at("volume", 0.8), "periods, cumulative and their intervals")
+            combined = combine(vols, list(dems), [steps.alternative_move(f.reg) for f in fits], grid, ctx.options)
+        with steps.running(ctx, "write", ctx.message("write")):
+            write_rasters(ctx.out, combined, vols[0].dem_out_b, grid)  # E0 refilled: the DEMs give back the differences
+        with steps.running(ctx, "report", ctx.message("report"), log=False):
+            return write_reports(ctx.out, ctx.epochs, fits, vols, combined, grid, ctx.options, ctx.timer)
 
-    @contextmanager
-    def session(self, run):
-        yield self
 
-    def _each(self, run, step: str, k: int, n: int) -> tuple[float, float]:
-        lo, hi = run.spans[step]
-        return lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1) / n
+def _read(ctx: Context, backend: InMemory, k: int) -> Prepared:
+    """The pair E0 -> Ek read (progress within its share of the step)."""
+    spans = {**ctx.spans, "prepare": _each(ctx, "prepare", k - 1, len(ctx.epochs) - 1)}
+    with naming(pair_named(ctx, k)):
+        return backend.read(replace(ctx, epochs=(ctx.epochs[0], ctx.epochs[k]), spans=spans))
 
-    def prepare(self, run) -> None:
-        from .steps import prepare_pair
 
-        e0, later = run.epochs[0], run.epochs[1:]
-        for k, ek in enumerate(later):
-            spans = {"prepare": self._each(run, "prepare", k, len(later))}
-            with naming(pair_named(run, k + 1)):
-                self.preps.append(prepare_pair(e0.path, ek.path, run.options, run.hooks, None, None, spans))
+def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
+    """Each Ek registered into E0's frame (on ground stable between the two), rebased on the
+    first pair's local origin; E0's DEM comes from the first pair: later pairs keep E0's subsets."""
+    n, seconds, fits = len(preps), {"coarse": 0.0, "fine": 0.0, "register_other": 0.0}, []
+    for k, prep in enumerate(preps):
+        name = ctx.epochs[k + 1].name
+        progress = (*_each(ctx, "register", k, n), f"registering {name} into {ctx.epochs[0].name}'s frame")
+        with naming(pair_named(ctx, k + 1)):
+            reg, opts = steps.register_pair(prep, ctx, (prep.after.xyz, prep.before.xyz), progress)
+        ctx.hooks.info(f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m")
+        seconds = {s: t + ctx.timer.s[s] for s, t in seconds.items()}
+        if fits:
+            prep = replace(prep, before=replace(prep.before, xyz=prep.before.xyz[:0], nonsoil=None))
+        origin = fits[0].prep.origin if fits else np.asarray(prep.origin, dtype=np.float64)
+        fits.append(Fit(*rebase(prep, reg, origin), opts))
+    ctx.timer.s.update(seconds)
+    resume()
+    return fits
 
-    def register_step(self, run) -> None:
-        from .steps import register_pair
 
-        n, seconds = len(self.preps), {"coarse": 0.0, "fine": 0.0, "register_other": 0.0}
-        for k, prep in enumerate(self.preps):
-            name = run.epochs[k + 1].name
-            progress = (*self._each(run, "register", k, n), f"registering {name} into {run.epochs[0].name}'s frame")
-            with naming(pair_named(run, k + 1)):
-                dense = (prep.after.xyz, prep.before.xyz)
-                reg, opts = register_pair(prep, run.options, run.hooks, run.timer, dense, progress)
-            run.hooks.info(
-                f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m"
-            )
-            seconds = {s: t + run.timer.s[s] for s, t in seconds.items()}
-            if self.fits:  # E0's DEM comes from the first pair: later pairs keep E0's subsets only
-                prep = replace(prep, before=replace(prep.before, xyz=prep.before.xyz[:0], nonsoil=None))
-            origin = self.fits[0].prep.origin if self.fits else np.asarray(prep.origin, dtype=np.float64)
-            self.fits.append(Fit(*rebase(prep, reg, origin), opts))
-        run.timer.s.update(seconds)
-        self.preps = []  # the fits hold them now
+def _grid(ctx: Context, fits: list[Fit]) -> tuple[GridSpec, tuple]:
+    """One grid, every epoch's DEM on it (E0 first)."""
+    names = ", ".join(described(ctx.epochs, k) for k in range(len(ctx.epochs)))
+    with naming("series " + names):
+        grid = series_grid(fits, ctx.options)
+    e0, statistic = fits[0].prep.before, ctx.options.statistic
+    dems = [epoch_dem(e0.xyz, grid, statistic, e0.nonsoil)]
+    for f in fits:
+        nonsoil = None if f.prep.after.nonsoil is None else f.prep.after.nonsoil.moved(f.reg.transform)
+        dems.append(epoch_dem(transform_points32(f.prep.after.xyz, f.reg.transform), grid, statistic, nonsoil))
+    return grid, tuple(dems)
 
-    def grid(self, run) -> None:
-        from .steps import moved_nonsoil
 
-        with naming("series " + ", ".join(described(run.epochs, k) for k in range(len(run.epochs)))):
-            grid = run.grid = series_grid(self.fits, run.options)
-        e0 = self.fits[0].prep.before
-        dems = [gridmod.epoch_dem(e0.xyz, grid, run.options.statistic, e0.nonsoil)]
-        for f in self.fits:
-            xyz = transform_points32(f.prep.after.xyz, f.reg.transform)
-            dems.append(gridmod.epoch_dem(xyz, grid, run.options.statistic, moved_nonsoil(f.prep, f.reg)))
-        run.dems = tuple(dems)
+def _planes(ctx: Context, fits: list[Fit], grid: GridSpec, dems: tuple) -> list[tuple]:
+    """Each pair's planes and d_i, each epoch once relative to E0."""
+    message = steps.correction_message(ctx.options) + ", each epoch once relative to E0"
+    out = []
+    with steps.running(ctx, "planes", message):
+        for k, f in enumerate(fits, 1):
+            thin = transform_points(f.prep.after_thin, f.reg.transform)
+            with naming(pair_named(ctx, k)):
+                p_b, p_a = steps.fit_planes(f.prep, thin, f.options)(grid, dems[0])
+                out.append((p_b, p_a, plane_offset(p_b, p_a, grid)))
+    return out
 
-    def planes_step(self, run) -> None:
-        from .steps import correction_step, planes_step
 
-        run.hooks.step(run.at("planes"), correction_step(run.options) + ", each epoch once relative to E0")
-        with run.timer("planes"):
-            for k, f in enumerate(self.fits, 1):
-                thin = transform_points(f.prep.after_thin, f.reg.transform)
-                with naming(pair_named(run, k)):
-                    self.planes.append(planes_step(f.prep, run.grid, run.dems[0], thin, f.options))
+def _volumes(ctx: Context, backend: InMemory, fits: list[Fit], fitted: list, grid: GridSpec, dems: tuple) -> list:
+    """Each pair's volume step: Ek corrected once relative to E0."""
+    vols = []
+    for k, (f, planes) in enumerate(zip(fits, fitted, strict=True), 1):
+        moved = steps.alternative_move(f.reg)
 
-    def volume(self, run):
-        from ..volumes.series import combine
-        from .steps import alternative_move, volume_step
+        def step(after, before, d_i, on, f=f, moved=moved):
+            return compute_volumes(after, before, d_i, on, f.options, moved=moved)
 
-        for k, (f, planes) in enumerate(zip(self.fits, self.planes, strict=True), 1):
-            with naming(pair_named(run, k)):
-                self.vols.append(volume_step((run.dems[k], run.dems[0]), planes[2], run.grid, f.options, f.reg))
-        run.hooks.step(run.at("volume", 0.8), "periods, cumulative and their intervals")
-        moves = [alternative_move(f.reg) for f in self.fits]
-        return combine(self.vols, list(run.dems), moves, run.grid, run.options)
-
-    def write(self, run) -> None:
-        from ..reporting.series import write_rasters
-
-        write_rasters(
-            run.out, run.vols, self.vols[0].dem_out_b, run.grid
-        )  # E0 refilled: the DEMs give back the differences
-
-    def report_step(self, run) -> None:
-        from ..reporting.series import write_reports
-
-        run.hooks.step(run.at("report"), run.message("report"), log=False)
-        with run.timer("report"):
-            args = (run.epochs, self.fits, self.vols, run.vols, run.grid, run.options, run.timer)
-            run.report = write_reports(run.out, *args)
+        pair = (dems[k], dems[0])
+        with naming(pair_named(ctx, k)):
+            vols.append(backend.volume(ctx, step, Gridded(grid, pair, grid, pair, done(None)), planes, moved))
+    return vols

@@ -1,169 +1,105 @@
-"""The pieces of the steps both executors share (:mod:`.executors`, the tiled
-:mod:`soilvolume.distributed.executor`): reading the pair, registration with its
-georeferencing decision, the shared grid, the planes, the volume step, the quality verdict,
-report.html. The order they run in is :mod:`.run`'s."""
+"""The method's steps, each written once: read, register, grid, planes, volume, write, report.
+
+Each step takes the run's :class:`~.context.Context`, the backend that does its point work
+(:mod:`soilvolume.execution`) and the typed results of the steps before it, reports its progress,
+times itself and returns a frozen typed result. The products (:mod:`.pair`, :mod:`.design`,
+:mod:`.series`, :mod:`.single`) are compositions of these steps."""
 
 from __future__ import annotations
 
-from dataclasses import replace
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.cells import bounds
-from ..core.hooks import Hooks
-from ..core.outputs import OutputDir
-from ..core.record import Georeferencing, QualityInputs
-from ..core.types import GridSpec, SoilVolumeError
-from ..core.wording import opt
-from ..dem import grid as gridmod
+from ..compensation.planes import Plane, plane_offset, ransac_plane
+from ..core.collector import resume
+from ..core.record import Georeferencing, QualityInputs, RunRecord
+from ..core.types import GridSpec
+from ..core.wording import cli_tree, opt
+from ..dem.grid import EpochDEM, output_layers
+from ..execution.seam import Backend, Gridded, Layout
 from ..inputs.footprint import footprint
-from ..inputs.prepare import Prepared, prepare
+from ..inputs.prepare import Prepared
 from ..options import Options
-from ..validate import check_grid_cells
-
-if TYPE_CHECKING:  # the volume step's modules (SciPy's ndimage) are not needed to read the pair
-    from ..volumes.compute import Volumes
-
-
-def shared_grid(prep: Prepared, after_thin: np.ndarray, options: Options, poly: np.ndarray | None = None) -> GridSpec:
-    """The grid over the registered after footprint (``poly``, when the caller has it), cell size
-    from the before density."""
-    poly = footprint(after_thin[:, :2]) if poly is None else poly
-    cell = options.cell
-    if cell is None or cell <= 0:
-        cell = gridmod.cell_for(prep.before.xyz, poly)
-    (lo_a, hi_a), (lo_b, hi_b) = bounds(after_thin, 2), bounds(prep.before_thin, 2)  # x/y: the grid's
-    lo, hi = np.maximum(lo_a, lo_b), np.minimum(hi_a, hi_b)
-    if (hi <= lo).any():
-        raise SoilVolumeError("the registered after cloud does not overlap the before cloud")
-    grid = gridmod.make_grid(lo, hi, cell, prep.origin, prep.frame.wkt, prep.frame.xy_unit)
-    check_grid_cells(grid.rows, grid.cols, cell)
-    return grid
+from ..registration import georef
+from ..registration.register import Registration
+from ..registration.register import register as register_clouds
+from ..registration.rigid import transform_points
+from ..reporting.changeareas import FILE as CHANGE_AREAS
+from ..reporting.changeareas import write_change_areas
+from ..reporting.contours import FILE as CONTOURS
+from ..reporting.contours import write_contours
+from ..reporting.html import write_html
+from ..reporting.report import build_report, write_json
+from ..volumes.compute import Volumes, compute_volumes
+from .context import Context
+from .plan import plan_grid, reference_cell
 
 
-def prepare_pair(before, after, options: Options, hooks: Hooks, before_pipeline, after_pipeline, spans) -> Prepared:
-    """Both clouds read whole (:func:`inputs.prepare.prepare`), progress within ``spans["prepare"]``."""
-    from ..pipelines.pipeline import open_source
+@dataclass(frozen=True)
+class Registered:
+    """The registration step's result: the pose and the options the later steps take (precise
+    georeferencing: no bias correction)."""
 
-    src_b, src_a = open_source(before, before_pipeline), open_source(after, after_pipeline)
-    return prepare(src_b, src_a, options, check=hooks.ticker(*spans["prepare"], "reading"))
-
-
-def moved_nonsoil(prep: Prepared, reg):
-    """The after epoch's points that are not soil, moved by the registration (None without)."""
-    ns = prep.after.nonsoil
-    return None if ns is None else ns.moved(reg.transform)
+    reg: Registration
+    options: Options
 
 
-def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
-    row, col, ok = grid.index(xyz[:, :2])
-    keep = np.zeros(len(xyz), bool)
-    keep[ok] = cells[row[ok], col[ok]]
-    return xyz[keep]
+@dataclass(frozen=True)
+class Reported:
+    """report.json as written (options worded for the command line) and with options by key."""
+
+    report: dict
+    keyed: dict
 
 
-def write_report_html(out: OutputDir, report: dict, vols: Volumes, grid: GridSpec, dem_after: np.ndarray) -> None:
-    """report.html, and the areas of significant change as polygons (its map outlines them)."""
-    from ..reporting.changeareas import FILE, write_change_areas
-
-    write_change_areas(out.path(FILE), vols.diff, vols.change_mask, vols.cut_mask, grid)
-    try:
-        from ..reporting.html import write_html
-    except ImportError:
-        return
-    arrays = {
-        "difference": vols.diff,
-        "residual": np.where(vols.stable, vols.diff, np.nan),
-        "filled_mask": vols.filled_mask,
-        "classes": vols.classes,
-        "dem_after": dem_after,
-        "change": vols.change_mask,
-    }
-    write_html(report, arrays, grid, out.path("report.html"))
+@contextmanager
+def running(ctx: Context, step: str, message: str, timed: str | None = None, log: bool = True) -> Iterator[None]:
+    """A step's progress line, its time in ``timed`` (the step's name), and the collector resumed after it."""
+    ctx.hooks.step(ctx.at(step), message, log=log)
+    with ctx.timer(timed or step):
+        yield
+    resume()  # the garbage collector, after the first step at the latest (core.collector)
 
 
-def planes_step(prep: Prepared, grid: GridSpec, dem_before: gridmod.EpochDEM, after_thin: np.ndarray, options):
-    """The paper's two RANSAC planes (before on its valid cells, registered after) and d_i per
-    cell: (plane before, plane after, d_i). The after plane is found on a second thread meanwhile
-    (its matrix products and counts release the GIL)."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(1) as pool:
-        after = pool.submit(after_plane, after_thin, options)
-        return with_offset(before_plane(prep, grid, dem_before, options), after.result(), grid)
+def read(ctx: Context, backend: Backend) -> Prepared:
+    """Step 1: the pair read into one working frame (:mod:`soilvolume.inputs.prepare`)."""
+    with running(ctx, "prepare", ctx.message("prepare") + backend.reading_note, "crop"):
+        return backend.read(ctx)
 
 
-def before_plane(prep: Prepared, grid: GridSpec, dem_before: gridmod.EpochDEM, options):
-    """The before cloud's RANSAC plane, on its thinned points over the cells it has heights in."""
-    from ..compensation import planes
-
-    sel_b = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
-    return planes.ransac_plane(sel_b, options.plane_threshold, seed=options.seed)
-
-
-def after_plane(after_thin: np.ndarray, options):
-    """The registered after cloud's RANSAC plane."""
-    from ..compensation import planes
-
-    return planes.ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+def register(ctx: Context, prep: Prepared, dense) -> Registered:
+    """Step 2: the georeferencing decision, then coarse + fine registration (``dense``: the
+    full-resolution points of the stable-ground refinement, or None)."""
+    reg, options = register_pair(prep, ctx, dense, (*ctx.spans["register"], ctx.message("register")))
+    fine = reg.fine
+    ctx.hooks.info(f"coarse: {reg.coarse.note}")
+    ctx.hooks.info(f"fine ({fine.method}): fitness {fine.fitness:.3f}, RMSE {fine.rmse:.3f} m, {fine.note}")
+    resume()
+    return Registered(reg, options)
 
 
-def with_offset(p_b, p_a, grid: GridSpec) -> tuple:
-    """(plane before, plane after, d_i on ``grid``)."""
-    from ..compensation import planes
-
-    return p_b, p_a, planes.plane_offset(p_b, p_a, grid)
-
-
-def volume_step(dems: tuple, d_i: np.ndarray, grid: GridSpec, options: Options, reg) -> Volumes:
-    """The volume step (:func:`volumes.compute.compute_volumes`) on the (after, before) DEMs."""
-    from ..volumes.compute import compute_volumes
-
-    return compute_volumes(dems[0], dems[1], d_i, grid, options, moved=alternative_move(reg))
-
-
-def correction_step(options: Options) -> str:
-    """The progress message of the correction step: what it does with these options."""
-    if options.correction == "none":
-        return "comparing the surfaces (no vertical bias correction)"
-    return "estimating the vertical bias correction"
-
-
-def alternative_move(reg) -> np.ndarray | None:
-    """The rigid move (4x4, local) from the accepted pose to the nearly as good one (None)."""
-    alt = reg.fine.alternative
-    return None if alt is None else alt @ np.linalg.inv(reg.transform)
-
-
-def quality_inputs(vols: Volumes, grid: GridSpec, options: Options) -> QualityInputs:
-    """What the quality verdict judges of a run, on ``grid`` (the correction's)."""
-    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
-    return QualityInputs(vols.stable, vols.change_mask, vols.offset, vols.diff, grid.cell_area, prior)
-
-
-def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense, progress: tuple):
+def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple[Registration, Options]:
     """Decide how far the georeferencing is trusted, then register: (Registration, the options
-    the rest of the run uses; precise surveys get no bias correction). Auto with a vertical datum
-    both files declare registers first and keeps the coordinates only when the registration
-    confirms them (:func:`soilvolume.registration.georef.confirm`). ``register_other`` in the
-    timings: the decision and the imports, beside the coarse and fine stages."""
+    the rest of the run uses). Auto with a vertical datum both files declare registers first and
+    keeps the coordinates only when the registration confirms them (:func:`registration.georef.confirm`).
+    ``register_other`` in the timings: the decision, beside the coarse and fine stages."""
+    options, hooks, timer = ctx.options, ctx.hooks, ctx.timer
     with timer("register"):
-        from ..registration import georef
-        from ..registration.register import register
-
-        lo, hi, message = progress  # the run's span and message of the step (workflow/run.PROGRESS)
+        lo, hi, message = progress
         hooks.step(lo, message)
         after, before = prep.after_thin, prep.before_thin
         decided, check = georef.declared(options.georeferencing, prep.inputs), None
         mode, why = decided or ("gps", "")
         ticker = hooks.ticker(lo, hi, message)
-        reg = ran = register(after, before, options, check=ticker, dense=dense, precise=mode == "precise")
+        reg = ran = register_clouds(after, before, options, check=ticker, dense=dense, precise=mode == "precise")
         if decided is None:
             datum = georef.vertical_datum(prep.inputs["after"].get("crs_wkt"))
             mode, why, check = georef.confirm(reg, after, before, datum, options.fine)
             if mode == "precise":
-                reg = kept_as_georeferenced(register(after, before, options, precise=True), check["outcome"])
+                reg = kept_as_georeferenced(register_clouds(after, before, options, precise=True), check["outcome"])
         hooks.info(f"georeferencing: {mode} ({why})")
         if mode == "precise":
             options = options.with_(correction="none")
@@ -173,8 +109,136 @@ def register_pair(prep: Prepared, options: Options, hooks: Hooks, timer, dense, 
     return reg, options
 
 
-def kept_as_georeferenced(reg, outcome: str):
+def kept_as_georeferenced(reg: Registration, outcome: str) -> Registration:
     """The identity registration of coordinates auto kept, its stages saying why."""
     said = "confirmed them" if outcome == "confirmed" else "could not confirm them"
     note = f"not applied: coordinates used as georeferenced (the registration {said}; see {opt('georeferencing')})"
     return replace(reg, coarse=replace(reg.coarse, note=note), fine=replace(reg.fine, note=note))
+
+
+def layout(prep: Prepared, reg: Registration, options: Options) -> Layout:
+    """The grid over the registered after footprint and the before subset (:mod:`.plan`)."""
+    after_thin = transform_points(prep.after_thin, reg.transform)
+    poly = footprint(after_thin[:, :2])
+    boxes = [_box(after_thin), _box(prep.before_thin)]
+    empty = "the registered after cloud does not overlap the before cloud"
+    grid = plan_grid(reference_cell(prep, poly, options), boxes, prep.origin, prep.frame, empty)
+    return Layout(grid, after_thin, poly)
+
+
+def _box(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+
+
+def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> Gridded:
+    """Step 3: the grid planned, each epoch's heights on it, the paper's planes fitted beside."""
+    with running(ctx, "grid", ctx.message("grid"), "grids"):
+        plan = layout(prep, reg, ctx.options)
+        return backend.grid(ctx, prep, reg, plan, fit_planes(prep, plan.after_thin, ctx.options))
+
+
+def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Callable:
+    """The paper's two RANSAC planes, given the grid and the before DEM: the before cloud's on
+    its thinned points over the cells it has heights in, the registered after cloud's."""
+
+    def fit(grid: GridSpec, dem_before: EpochDEM) -> tuple[Plane, Plane]:
+        valid = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
+        before = ransac_plane(valid, options.plane_threshold, seed=options.seed)
+        return before, ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
+
+    return fit
+
+
+def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
+    """The points of ``xyz`` over the grid's ``cells``."""
+    row, col, ok = grid.index(xyz[:, :2])
+    keep = np.zeros(len(xyz), bool)
+    keep[ok] = cells[row[ok], col[ok]]
+    return xyz[keep]
+
+
+def planes(ctx: Context, gridded: Gridded) -> tuple:
+    """Step 4: the paper's planes and d_i on the grid the correction is found on: (plane before,
+    plane after, d_i)."""
+    k = round(gridded.correction_grid.cell / gridded.grid.cell)
+    overview = f"estimating the vertical bias correction on a {k} x {k} overview of the grid"
+    with running(ctx, "planes", overview if k > 1 else correction_message(ctx.options)):
+        p_b, p_a = gridded.beside.result()
+        return p_b, p_a, plane_offset(p_b, p_a, gridded.correction_grid)
+
+
+def correction_message(options: Options) -> str:
+    """The progress message of the correction step: what it does with these options."""
+    if options.correction == "none":
+        return "comparing the surfaces (no vertical bias correction)"
+    return "estimating the vertical bias correction"
+
+
+def volume(ctx: Context, backend: Backend, gridded: Gridded, fitted: tuple, reg: Registration) -> Volumes:
+    """Step 5: difference, refill, correction, change areas, budgets, uncertainty, zones."""
+    moved = alternative_move(reg)
+
+    def step(after: EpochDEM, before: EpochDEM, d_i: np.ndarray, on: GridSpec) -> Volumes:
+        return compute_volumes(after, before, d_i, on, ctx.options, moved=moved)
+
+    with running(ctx, "volume", ctx.message("volume")):
+        return backend.volume(ctx, step, gridded, fitted, moved)
+
+
+def alternative_move(reg: Registration) -> np.ndarray | None:
+    """The rigid move (4x4, local) from the accepted pose to the nearly as good one (None)."""
+    alt = reg.fine.alternative
+    return None if alt is None else alt @ np.linalg.inv(reg.transform)
+
+
+def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec | None, layers: list) -> dict | None:
+    """Step 6: the rasters ``layers`` (and the registered cloud, when kept); with
+    ``--contour-interval``, contours.gpkg drawn from the rasters just staged (its description)."""
+    with running(ctx, "write", ctx.message("write") + backend.raster_note):
+        z0 = 0.0 if grid is None else float(grid.origin[2])  # local -> absolute heights
+        backend.write(ctx, layers, vols, grid, z0)
+        if layers and ctx.options.contour_interval > 0:
+            staged = ctx.out.path(CONTOURS)
+            return write_contours(staged, staged.parent, ctx.options.contour_interval)
+    return None
+
+
+def pair_layers(options: Options) -> list:
+    """The rasters of a pair (:func:`dem.grid.output_layers`)."""
+    return output_layers(options.correction)
+
+
+def report(ctx: Context, record: RunRecord, gridded: Gridded, contours: dict | None) -> Reported:
+    """Step 7: report.json from the run's typed record (the quality verdict in it), report.html
+    and the areas of significant change as polygons."""
+    with running(ctx, "report", ctx.message("report"), log=False):
+        out, vols, z0 = ctx.out, record.vols, float(gridded.grid.origin[2])
+        report = build_report(record, ctx.timer.totals())
+        if contours:
+            report["contours"] = contours
+        for line in report["quality"]["messages"]:
+            ctx.hooks.info(f"quality ({report['quality']['verdict']}): {line}")
+        on = gridded.correction_grid  # a tiled run's overview: the arrays the report shows are its
+        write_change_areas(out.path(CHANGE_AREAS), vols.diff, vols.change_mask, vols.cut_mask, on)
+        dem_after = gridded.correction_dems[0].heights + z0
+        write_html(report, _html_arrays(vols, dem_after), on, out.path("report.html"))
+        worded = cli_tree(report)  # options worded for the command line
+        write_json(out.path("report.json"), worded, ctx.timer.totals())
+        return Reported(worded, report)
+
+
+def _html_arrays(vols: Volumes, dem_after: np.ndarray) -> dict:
+    return {
+        "difference": vols.diff,
+        "residual": np.where(vols.stable, vols.diff, np.nan),
+        "filled_mask": vols.filled_mask,
+        "classes": vols.classes,
+        "dem_after": dem_after,
+        "change": vols.change_mask,
+    }
+
+
+def judged(vols: Volumes, grid: GridSpec, options: Options) -> QualityInputs:
+    """What the quality verdict judges of a run, on ``grid`` (the correction's)."""
+    prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
+    return QualityInputs(vols.stable, vols.change_mask, vols.offset, vols.diff, grid.cell_area, prior)

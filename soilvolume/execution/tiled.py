@@ -1,0 +1,210 @@
+"""The tiled backend: the point work as Dask tasks (:mod:`soilvolume.distributed`), so no process
+holds a survey's points. The reading is a first pass of tasks returning the thinned subsets the
+registration runs on in the driver; the grid is cut into tiles, each task gridding the points that
+meet its tile; the volume step runs on the whole grid, or tile by tile with a halo given its result
+on an overview of the grid (``--volume-step tiles``). Finished tiles are kept in the run's store."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..core.collector import resume
+from ..core.types import SoilVolumeError
+from ..core.wording import opt
+from ..distributed import overview
+from ..distributed.cluster import LazyClient, checker
+from ..distributed.cog import write_outputs
+from ..distributed.fingerprint import input_identities, run_parts
+from ..distributed.pointcache import PointCache, near_after
+from ..distributed.scan import dask_loader
+from ..distributed.schedule import Schedule, budget_gb, check_tiles, client, worker_gb
+from ..distributed.tiled import data_tiling, fits, points_per_cell, tile_side, volume_factor
+from ..distributed.tilestore import run_store
+from ..distributed.tiletask import Plan, epoch_dems, plan_parts, run_tiles, tiles
+from ..distributed.volumestep import grid_tiles, reader, tile_volumes
+from ..distributed.volumetiles import VolumeJob
+from ..inputs.footprint import PolygonMask, footprint
+from ..inputs.io import write_las_chunked
+from ..inputs.prepare import Prepared, prepare
+from ..inputs.stream import open_source
+from .seam import Gridded, Layout, VolumeFn, done
+
+IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read from disk, as the first pass reads them)
+
+
+def _identify(future: Future, paths: list) -> None:
+    """The inputs' identities (zlib's CRC releases the GIL) into ``future``."""
+    try:
+        future.set_result(input_identities(*paths))
+    except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
+        future.set_exception(exc)
+
+
+class Tiled:
+    """Point work as tile tasks on the cluster ``schedule`` names; tiles kept in the run's store."""
+
+    reading_note = " (thinning for registration)"
+    raster_note = " (COG)"
+
+    def __init__(self, schedule: Schedule) -> None:
+        self.schedule = schedule
+        self.c = self.store = self.plan = self.cache = self.starting = self.src_b = self.src_a = None
+        self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
+        self.coarse = self.over_epochs = self.medians = self.identities = self.kept = None
+        self.cloud: tuple | None = None
+
+    @contextmanager
+    def session(self, ctx) -> Iterator[Tiled]:
+        """The run's tile store and cluster; the cluster starts in the background and is waited
+        for at its first use (``cluster_wait``), shut down in the background after its last."""
+        if ctx.options.ground in ("filter", "csf"):
+            raise SoilVolumeError(
+                f"{opt('ground', ctx.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
+                "(or classify the tiles first)"
+            )
+        with run_store(ctx.out.final) as store, client(self.schedule, ctx.options.memory_limit, store.scratch) as s:
+            self.store, self.starting = store, s
+            s.future.add_done_callback(lambda _: resume())  # the garbage collector, once the cluster is up
+
+            def wait():
+                with ctx.timer("cluster_wait"):
+                    return s.result(checker(ctx.hooks))
+
+            # the driver reads tiles itself while a local cluster starts (a remote one's workers read theirs)
+            self.c = LazyClient(wait, s.future.done if self.schedule.kind != "tcp" else lambda: True)
+            yield self
+
+    def read(self, ctx) -> Prepared:
+        """The first pass: the thinned subsets (the inputs hashed beside it, for the tile store)."""
+        hooks, options = ctx.hooks, ctx.options
+        self.identities = Future()
+        paths = [e.path for e in ctx.epochs]
+        threading.Thread(target=_identify, args=(self.identities, paths), daemon=True, name="soilvolume-ids").start()
+        self.src_b, self.src_a = (open_source(e.path) for e in ctx.epochs)
+        direct = self.schedule.kind in ("local", "threads")  # this machine's workers: sent straight to them
+        self.cache = PointCache(self.c, budget_gb(options.memory_limit), direct)
+        self.cache.expect(near_after(self.src_b, self.src_a, options.radius))
+        loader = dask_loader(self.c, lambda m: hooks.step(ctx.at("prepare", 0.46), m), checker(hooks), self.cache)
+        check = lambda: hooks.step(ctx.at("prepare", 0.23), "reading")  # noqa: E731
+        prep = prepare(self.src_b, self.src_a, options, check=check, full=False, loader=loader)
+        if self.c.ready():  # the tiles the driver read go out beside the registration, not before the grid
+            self.cache.send_held()
+        return prep
+
+    def dense(self, prep: Prepared) -> None:
+        return None  # no process holds the full-resolution points
+
+    def grid(self, ctx, prep: Prepared, reg, layout: Layout, beside: Callable) -> Gridded:
+        """The tiles gridded on the workers; ``beside`` on the overview's before DEM (the volume
+        step in tiles) or the grid's."""
+        grid, options = layout.grid, ctx.options
+        self.plan = _plan(prep, ctx, grid, reg, (self.src_b, self.src_a))
+        self.windows, self.side, self.density = self._tiles(ctx, prep, grid)
+        ctx.hooks.step(
+            ctx.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
+        )
+        self.k = volume_factor(options, grid, self.schedule)
+        inputs = self.identities.result(IDENTITY_S)
+        self.said = self.store.bind(run_parts(inputs, options, plan_parts(self.plan, self.windows, self.k)))
+        if self.said:
+            ctx.hooks.step(ctx.at("grid"), self.said)
+        self.kept = self.store.tiles(self.windows)
+        gridded = self._overview(ctx, grid) if self.k > 1 else self._whole(ctx, grid)
+        self.cache.release()  # the workers' memory back for the volume step
+        if self.k == 1:
+            self.starting.close_soon()  # the volume step runs here: the workers are done
+        planes = beside(gridded.correction_grid, gridded.correction_dems[1])
+        return Gridded(grid, gridded.dems, gridded.correction_grid, gridded.correction_dems, done(planes))
+
+    def _whole(self, ctx, grid) -> Gridded:
+        self.stats = {}
+        arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
+        dems = epoch_dems(arrays, self.plan.rules)
+        return Gridded(grid, dems, grid, dems, done(None))
+
+    def _overview(self, ctx, grid) -> Gridded:
+        self.over_epochs, self.medians, self.stats = grid_tiles(
+            self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
+        )
+        self.coarse = overview.coarse(grid, self.k)
+        return Gridded(grid, (), self.coarse, self.over_epochs, done(None))
+
+    def _tiles(self, ctx, prep: Prepared, grid) -> tuple:
+        """(the tile windows, their side in cells, points per cell) for the run's grid."""
+        options, cell = ctx.options, grid.cell
+        task_gb, density = worker_gb(self.schedule, options.memory_limit), points_per_cell(prep, cell)
+        side = tile_side(options, grid, density, task_gb, self.schedule.workers)
+        tiling = None if options.tile_cells else data_tiling(self.src_b, cell, 2 * side)
+        if tiling and not fits(density * (tiling[0] / cell) ** 2, task_gb):
+            tiling = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
+        windows = tiles(grid, side)
+        if tiling:  # snap to the input's tiles (one grid tile per data tile) when that keeps the workers busy
+            pitch = max(1, round(tiling[0] / cell))
+            aligned = tiles(grid, pitch, tiling[0], tiling[1:])
+            if len(aligned) >= min(len(windows), 2 * self.schedule.workers):
+                windows, side = aligned, pitch
+        check_tiles(windows, density, task_gb, options)
+        return windows, side, density
+
+    def volume(self, ctx, step: VolumeFn, gridded: Gridded, planes: tuple, moved) -> object:
+        """``step`` on the whole grid, or on the overview, then tile by tile given its correction."""
+        p_b, p_a, d_i = planes
+        if self.k == 1:
+            return step(*gridded.dems, d_i, gridded.grid)
+        over = step(*self.over_epochs, d_i, self.coarse)
+        parts = (over.offset, over.stable, over.params, self.medians, (p_b, p_a), moved, self.plan.rules)
+        job = VolumeJob(self.kept, gridded.grid, ctx.options, self.k, *parts)
+        vols = tile_volumes(self.c, job, over, ctx.hooks, (*ctx.spans["volume"], "volumes of"))
+        self.starting.close_soon()  # the rest reads the tile store
+        return vols
+
+    def write(self, ctx, layers: list, vols, grid, z0: float) -> None:
+        """The rasters as COGs block by block, from memory or the tile store; then the after cloud
+        streamed through the driver (``--registered-cloud``)."""
+        if layers:  # the pair's layers (a surface as the reference runs in memory)
+            get = reader(self.kept) if self.k > 1 else _arrays(vols)
+            write_outputs(ctx.out, get, grid, z0, ctx.options.correction)
+        if self.cloud is not None:
+            prep, reg, path = self.cloud
+            write_las_chunked(path, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
+
+    def keep_cloud(self, prep: Prepared, reg, path: Path) -> None:
+        self.cloud = (prep, reg, path)
+
+    def engine(self) -> dict:
+        """report.json's ``engine``: where the tiles ran and what they cost."""
+        k, stats = self.k, self.stats
+        return {
+            "scheduler": str(self.schedule),
+            "tiles": len(self.windows),
+            "tile_cells": self.side,
+            "points_per_cell": round(self.density, 3),
+            "volume_step": "whole grid" if k == 1 else f"tiles, overview of {k} x {k} cells",
+            "tiles_resumed": stats["resumed"],
+            "kept_tiles_discarded": self.said,
+            "task_points_read": stats["read"],
+            "task_points_from_memory": stats.get("cached", 0),
+            "points_kept_in_memory": self.cache.points if self.cache is not None else 0,
+            "task_seconds": round(stats["seconds"], 3),
+            "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
+        }
+
+
+def _arrays(vols) -> Callable:
+    """A window of the volume step's arrays in memory."""
+    return lambda key, r, c: getattr(vols, key)[r, c]
+
+
+def _plan(prep: Prepared, ctx, grid, reg, sources: tuple) -> Plan:
+    """What every tile task needs (picklable); ``sources``: the (before, after) sources the driver
+    opened (the tasks then open none; never whole clouds)."""
+    b, a = (str(e.path) for e in ctx.epochs)
+    crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
+    ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], ctx.options.radius)
+    streamed = tuple(None if s is None or s.raw is not None else s for s in sources)
+    parts = (prep.frame, prep.origin, grid, reg.transform, prep.ground, ring, ctx.options.statistic)
+    return Plan(b, a, *crs, *parts, prep.index, prep.rules, streamed, PolygonMask(ring))

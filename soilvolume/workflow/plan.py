@@ -1,0 +1,66 @@
+"""The one grid planner and the one default-cell rule of every product and every backend.
+
+The cell is ``--cell``, else about eight points of the reference epoch per cell over the
+footprint compared (:func:`soilvolume.dem.grid.choose_cell`, rounded up to 5 cm, at least
+0.5 m): the before survey's points within the registered after footprint for a pair or a series,
+the survey's own for a surface as the reference or a single cloud. The points are counted where
+the run holds them; a tiled run, which holds none, counts them from the first pass's columns
+(the points behind each column), so both backends pick the same cell for the same input
+(``tests/test_plan.py``). The grid covers the boxes of every epoch compared, its edges on
+multiples of the cell."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..core.types import GridSpec, SoilVolumeError
+from ..dem.grid import cell_for, choose_cell, make_grid
+from ..inputs.crs import WorkFrame
+from ..inputs.footprint import footprint, inside, polygon_area
+from ..inputs.prepare import Prepared
+from ..options import Options
+from ..validate import check_grid_cells
+
+
+def given_cell(options: Options) -> float | None:
+    """``--cell`` when given (a positive size), else None: the default rule decides."""
+    return options.cell if options.cell is not None and options.cell > 0 else None
+
+
+def reference_cell(prep: Prepared, poly: np.ndarray, options: Options) -> float:
+    """The cell of a pair: ``--cell``, else from the before points within ``poly`` (the
+    registered after footprint): the points themselves, or, when the run holds none (tiled), the
+    counts behind the before columns whose centres are inside it, over its area."""
+    cell = given_cell(options)
+    if cell is not None:
+        return cell
+    if len(prep.before):
+        return cell_for(prep.before.xyz, poly)
+    ins = inside(prep.before_thin[:, :2], poly)
+    return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly))
+
+
+def survey_cell(xyz: np.ndarray, thin: np.ndarray, options: Options) -> float:
+    """The cell of a survey compared with a surface: ``--cell``, else from its points over its footprint."""
+    cell = given_cell(options)
+    return cell if cell is not None else cell_for(xyz, footprint(thin[:, :2]))
+
+
+def cloud_cell(xyz: np.ndarray, thin: np.ndarray, options: Options) -> float:
+    """The cell of one cloud's DEM: ``--cell``, else from all its points over its footprint's area."""
+    cell = given_cell(options)
+    return cell if cell is not None else choose_cell(len(xyz), polygon_area(footprint(thin[:, :2])))
+
+
+def plan_grid(cell: float, boxes: Sequence[tuple], origin: np.ndarray, frame: WorkFrame, empty: str) -> GridSpec:
+    """The grid of ``cell`` over the overlap of ``boxes`` (local (lo, hi) pairs, x/y first);
+    ``empty``: the error when they do not overlap."""
+    lo = np.max([np.asarray(b[0], float)[:2] for b in boxes], axis=0)
+    hi = np.min([np.asarray(b[1], float)[:2] for b in boxes], axis=0)
+    if (hi <= lo).any():
+        raise SoilVolumeError(empty)
+    grid = make_grid(lo, hi, cell, origin, frame.wkt, frame.xy_unit)
+    check_grid_cells(grid.rows, grid.cols, cell)
+    return grid
