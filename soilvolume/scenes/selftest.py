@@ -11,7 +11,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..api import estimate
+from .. import api
 from ..core.hooks import Hooks
 from ..core.outputs import os_errors, output_dir
 from ..core.types import SoilVolumeError
@@ -98,7 +98,7 @@ def run_selftest(out: Path, hooks: Hooks) -> dict:
         before, after, truth_path = write_pair(make_pair(0, cfg), data, "laz")
         truth = json.loads(truth_path.read_text())
         hooks.step(30, "estimating its volume change")
-        res = estimate(before, after, staged.path("result"), Options(cell=3.0), overwrite=True, hooks=Hooks())
+        res = api.estimate(before, after, staged.path("result"), Options(cell=3.0), overwrite=True, hooks=Hooks())
         net = res.report["volume_m3"]["net"]
         if not abs(net - truth["net"]) <= NET_TOLERANCE * abs(truth["net"]):  # nothing is kept then
             raise SoilVolumeError(f"self-test: net {net:+.1f} m³ where the seeded pair holds {truth['net']:+.1f} m³")

@@ -99,6 +99,17 @@ def _points(world, box, n: int, feats: dict, rng) -> np.ndarray:
     return np.column_stack([x, y, z + rng.normal(0.0, world.cfg.noise_m, n)])
 
 
+def _write_epoch(path: Path, xyz: np.ndarray, config: SceneConfig, date: str) -> Path:
+    """One survey as LAS: ground points (class 2), the CRS, the survey date in the header."""
+    header = las_header(config, 0.001)
+    header.creation_date = dt.date.fromisoformat(date)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.classification = np.full(len(xyz), CLASS_GROUND, np.uint8)
+    las.write(str(path))
+    return path
+
+
 def write_series(
     directory, seed: int = 0, density: tuple[float, float] = (6.0, 10.0), datum: bool = False
 ) -> tuple[list[Path], dict]:
@@ -124,13 +135,7 @@ def write_series(
         xyz = _points(world, box, n, fk, rng) + origin
         mk = misalignment(k, centre, errors)
         xyz = xyz @ mk[:3, :3].T + mk[:3, 3]
-        header = las_header(config, 0.001)
-        header.creation_date = dt.date.fromisoformat(DATES[k])
-        las = laspy.LasData(header)
-        las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-        las.classification = np.full(n, CLASS_GROUND, np.uint8)
-        paths.append(d / f"epoch{k}.las")
-        las.write(str(paths[-1]))
+        paths.append(_write_epoch(d / f"epoch{k}.las", xyz, config, DATES[k]))
         to_e0 = m0 @ np.linalg.inv(mk)  # surveyed k -> true -> surveyed 0
         seen = mk[:3, :3] @ centre + mk[:3, 3]  # the works' centre as epoch k surveyed it
         epochs.append(
