@@ -200,3 +200,44 @@ def test_no_engine_function_over_80_lines():
     long = _long_functions()
     assert long - LONG_FUNCTIONS == set(), "new functions over 80 lines"
     assert LONG_FUNCTIONS - long == set(), "split: remove them from LONG_FUNCTIONS"
+
+
+def test_the_qgis_side_imports_one_way():
+    """plugin/ (the engine's environment and the child process it runs in) never imports
+    processing/ (the Processing provider, which runs the engine through it); the plugin class
+    above both is the repository root's ``qgisplugin.py``."""
+    graph = import_graph(("processing", "plugin"))
+    up = {
+        m: sorted(d for d in deps if d.startswith("processing")) for m, deps in graph.items() if m.startswith("plugin")
+    }
+    assert {m: d for m, d in up.items() if d} == {}
+
+
+#: packages whose modules import the project's own modules at the top of the file only
+TOP_IMPORTS_ONLY = (
+    "soilvolume/registration",
+    "soilvolume/scenes",
+    "soilvolume/soil",
+    "soilvolume/compensation",
+    "plugin",
+    "processing",
+)
+
+
+def test_own_modules_are_imported_at_the_top():
+    """No import of the project's own modules inside a function of these packages (lazy imports
+    are for heavy third-party libraries only)."""
+    found = []
+    for folder in TOP_IMPORTS_ONLY:
+        for path in (ROOT / folder).rglob("*.py"):
+            for fn in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    continue
+                for node in ast.walk(fn):
+                    own = isinstance(node, ast.ImportFrom) and (
+                        node.level or (node.module or "").startswith("soilvolume")
+                    )
+                    own |= isinstance(node, ast.Import) and node.names[0].name.startswith("soilvolume")
+                    if own:
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert found == []
