@@ -163,7 +163,6 @@ def feature_points(feats: np.ndarray, feat_zc: np.ndarray, epoch: int, idx, k, p
     # bushes: canopy seen with probability 0.95 - 0.35 rho, else ground below
     bush = (typ == 0) & (rho2 < 1.0) & (r1 < 0.95 - 0.35 * np.sqrt(np.minimum(rho2, 1.0)))
     hb = h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0)) * (0.75 + 0.25 * r2)
-    veg_cls = np.where(hb < 0.5, 3, np.where(hb < 2.0, 4, 5)).astype(np.uint8)
     # vehicles: flat roof at terrain(centre) + h, lower bonnet on one end
     veh = (typ == 1) & (np.abs(u) < a) & (np.abs(v) < b)
     zc = feat_zc[k]
