@@ -241,3 +241,17 @@ def test_own_modules_are_imported_at_the_top():
                     if own:
                         found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert found == []
+
+
+def test_sized_packages_keep_the_target_sizes():
+    """The packages already at the target style: no module over 300 lines, no function over 50."""
+    big, long = {}, []
+    for folder in TOP_IMPORTS_ONLY[:4]:
+        for path in (ROOT / folder).rglob("*.py"):
+            text = path.read_text(encoding="utf-8")
+            if (n := len(text.splitlines())) > 300:
+                big[str(path.relative_to(ROOT))] = n
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno >= 50:
+                    long.append(f"{path.relative_to(ROOT)}:{node.name}")
+    assert big == {} and long == []
