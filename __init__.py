@@ -23,6 +23,6 @@ def plugin_version() -> str:
 
 def classFactory(iface: Any):  # noqa: N802 - QGIS plugin entry point
     """Called by QGIS to create the plugin object."""
-    from .plugin.main import SoilVolumePlugin
+    from .qgisplugin import SoilVolumePlugin
 
     return SoilVolumePlugin(iface)

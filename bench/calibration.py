@@ -1,5 +1,5 @@
 """Calibration harness (issue 53): default-option estimates over a population of random sites drawn
-by :mod:`soilvolume.scenes.composer`, scored against their exact truth.
+by ``bench/composer/``, scored against their exact truth.
 
     .venv/bin/python bench/calibration.py          # held-out population, 200 sites: bench/CALIBRATION.md
     .venv/bin/python bench/calibration.py --dev    # development population: bench/results/calibration-dev.md
@@ -39,8 +39,7 @@ sys.path.insert(0, str(HERE))
 
 import accuracy  # noqa: E402
 import calibration_report  # noqa: E402
-
-from soilvolume.scenes import composer  # noqa: E402
+import composer  # noqa: E402
 
 QUANTITIES = ("net", "cut", "fill")
 LIMITS_PCT = {"net": 1.0, "cut": 3.0, "fill": 3.0}  # of the moved volume
@@ -56,9 +55,10 @@ def _digest(paths) -> str:
 
 
 def code_keys() -> tuple[str, str]:
-    """(scene key: the scenes package's source, engine key: the rest of the engine's source)."""
+    """(scene key: the composer's and the scenes package's source, engine key: the rest of the
+    engine's source)."""
     pkg = REPO / "soilvolume"
-    scenes = list((pkg / "scenes").rglob("*.py"))
+    scenes = list((pkg / "scenes").rglob("*.py")) + list((HERE / "composer").rglob("*.py"))
     engine = [p for p in pkg.rglob("*.py") if "scenes" not in p.relative_to(pkg).parts]
     return _digest(scenes), _digest(engine)
 

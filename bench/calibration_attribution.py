@@ -22,8 +22,7 @@ sys.path.insert(0, str(HERE))
 
 import accuracy  # noqa: E402
 import calibration  # noqa: E402
-
-from soilvolume.scenes import composer  # noqa: E402
+import composer  # noqa: E402
 
 
 def _no_objects(d: dict) -> bool:

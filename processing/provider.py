@@ -5,6 +5,7 @@ from __future__ import annotations
 from qgis.core import QgsProcessingProvider
 from qgis.PyQt.QtGui import QIcon
 
+from .. import plugin_version
 from .base import ICON
 from .estimatevolumechange import EstimateVolumeChange
 from .installdependencies import InstallDependencies
@@ -38,8 +39,6 @@ class SoilVolumeProvider(QgsProcessingProvider):
         return "Soil volume change"
 
     def longName(self) -> str:  # noqa: N802
-        from .. import plugin_version
-
         return f"Soil volume change {plugin_version()}"
 
     def icon(self) -> QIcon:

@@ -2,7 +2,7 @@
 # Build dist/soilvolume_qgis-<version>.zip, the file a user gives to QGIS's
 # "Plugins > Manage and Install Plugins > Install from ZIP" (and to plugins.qgis.org).
 # The zip holds one folder, soilvolume_qgis/, with the plugin and the engine package it needs:
-#   metadata.txt __init__.py LICENSE plugin/ processing/ resources/ soilvolume/
+#   metadata.txt __init__.py qgisplugin.py LICENSE plugin/ processing/ resources/ soilvolume/
 # No tests, no venv, no caches. Output folder: $DIST_DIR (default dist/).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,7 +20,7 @@ fi
 stage=$(mktemp -d)
 trap 'rm -rf "$stage"' EXIT
 mkdir "$stage/$name"
-cp metadata.txt __init__.py "$stage/$name/"
+cp metadata.txt __init__.py qgisplugin.py "$stage/$name/"
 for dir in plugin processing resources soilvolume; do
   cp -R "$dir" "$stage/$name/$dir"
 done

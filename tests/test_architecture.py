@@ -237,3 +237,56 @@ def test_distributed_never_imports_the_products_or_the_seam():
     graph = import_graph()
     up = {(m, d) for m, deps in graph.items() if m.startswith("soilvolume.distributed") for d in deps}
     assert {(m, d) for m, d in up if d.split(".")[1] in ("workflow", "execution")} == set()
+def test_the_qgis_side_imports_one_way():
+    """plugin/ (the engine's environment and the child process it runs in) never imports
+    processing/ (the Processing provider, which runs the engine through it); the plugin class
+    above both is the repository root's ``qgisplugin.py``."""
+    graph = import_graph(("processing", "plugin"))
+    up = {
+        m: sorted(d for d in deps if d.startswith("processing")) for m, deps in graph.items() if m.startswith("plugin")
+    }
+    assert {m: d for m, d in up.items() if d} == {}
+
+
+#: packages whose modules import the project's own modules at the top of the file only
+TOP_IMPORTS_ONLY = (
+    "soilvolume/registration",
+    "soilvolume/scenes",
+    "soilvolume/soil",
+    "soilvolume/compensation",
+    "plugin",
+    "processing",
+)
+
+
+def test_own_modules_are_imported_at_the_top():
+    """No import of the project's own modules inside a function of these packages (lazy imports
+    are for heavy third-party libraries only)."""
+    found = []
+    for folder in TOP_IMPORTS_ONLY:
+        for path in (ROOT / folder).rglob("*.py"):
+            for fn in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+                if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    continue
+                for node in ast.walk(fn):
+                    own = isinstance(node, ast.ImportFrom) and (
+                        node.level or (node.module or "").startswith("soilvolume")
+                    )
+                    own |= isinstance(node, ast.Import) and node.names[0].name.startswith("soilvolume")
+                    if own:
+                        found.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert found == []
+
+
+def test_sized_packages_keep_the_target_sizes():
+    """The packages already at the target style: no module over 300 lines, no function over 50."""
+    big, long = {}, []
+    for folder in TOP_IMPORTS_ONLY[:4]:
+        for path in (ROOT / folder).rglob("*.py"):
+            text = path.read_text(encoding="utf-8")
+            if (n := len(text.splitlines())) > 300:
+                big[str(path.relative_to(ROOT))] = n
+            for node in ast.walk(ast.parse(text)):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.end_lineno - node.lineno >= 50:
+                    long.append(f"{path.relative_to(ROOT)}:{node.name}")
+    assert big == {} and long == []

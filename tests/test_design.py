@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 import rasterio
 from conftest import run_cli
+from designs import Pad, pad_truth, write_surface
 
 from soilvolume.api import estimate
 from soilvolume.options import Options
 from soilvolume.scenes.config import SceneConfig
-from soilvolume.scenes.surfaces import Pad, pad_truth, write_surface
 from soilvolume.scenes.synthetic import make_pair, write_pair
 
 SEED = 3

@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 import rasterio
 from conftest import run_cli, run_python
+from designs import write_surface
 from rasterio.windows import Window
 
 from soilvolume.api import estimate
 from soilvolume.options import Options
 from soilvolume.scenes.config import SceneConfig
-from soilvolume.scenes.surfaces import write_surface
 from soilvolume.scenes.synthetic import make_pair, write_pair
 
 SEED = 3

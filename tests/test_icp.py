@@ -12,7 +12,8 @@ from conftest import run_python, write_scene
 from scipy.spatial import cKDTree
 
 from soilvolume.registration import columns
-from soilvolume.registration.icp import Nearest, point_to_plane
+from soilvolume.registration.icp import point_to_plane
+from soilvolume.registration.nearest import Nearest
 from soilvolume.registration.rigid import transform_points
 
 

@@ -9,14 +9,13 @@ import json
 import numpy as np
 import pytest
 from conftest import run_cli
+from designs import Pad, tin_of, write_landxml, write_surface
 
 from soilvolume.api import estimate
 from soilvolume.core.types import GridSpec, SoilVolumeError
 from soilvolume.inputs import landxml
 from soilvolume.options import Options
 from soilvolume.scenes.config import SceneConfig
-from soilvolume.scenes.landxml import tin_of, write_landxml
-from soilvolume.scenes.surfaces import Pad, write_surface
 from soilvolume.scenes.synthetic import make_pair, write_pair
 
 SEED = 3

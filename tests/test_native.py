@@ -526,7 +526,7 @@ def test_the_grid_index_finds_the_k_d_trees_neighbours(lib):
     the target's box and for a target of one point, within bounds up to none."""
     from scipy.spatial import cKDTree
 
-    from soilvolume.registration.icp import GridIndex
+    from soilvolume.registration.nearest import GridIndex
 
     rng = np.random.default_rng(7)
     gx, gy = np.meshgrid(np.arange(120) * 0.5, np.arange(80) * 0.5)

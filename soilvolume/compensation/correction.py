@@ -15,6 +15,7 @@ import numpy as np
 
 from ..core.types import GridSpec
 from .robust import _TERM_NAMES, fit_poly, residual_stats
+from .stable import find_stable, largest_gap_deg
 
 
 @dataclass(frozen=True)
@@ -61,8 +62,6 @@ def stable_cells(
     """Cells of ``diff`` taken as stable ground (see :func:`soilvolume.compensation.stable.find_stable`: a
     search from the margin of the compared area, so change covering most of it is not taken as
     the reference). ``user_mask`` (True = stable) is returned as given (on valid cells)."""
-    from .stable import find_stable
-
     return find_stable(diff, cell, degree=degree, user_mask=user_mask, k=k, dilate_m=dilate_m, iterations=iterations)[0]
 
 
@@ -98,8 +97,6 @@ def supported_degree(stable: np.ndarray, change: np.ndarray, max_degree: int) ->
     """The highest polynomial degree (up to ``max_degree``) the stable ground supports across the
     change areas: a curved surface needs stable ground all around them, a plane on one side only
     (see :func:`soilvolume.compensation.stable.largest_gap_deg`); a handful of stable cells gets a constant."""
-    from .stable import largest_gap_deg
-
     if stable.sum() < 30:
         return 0
     if largest_gap_deg(stable, change) > 180.0:

@@ -13,6 +13,8 @@ import numpy as np
 from scipy import ndimage
 
 from ..core.cells import bounds, cell_index, in_box, rows
+from ..native import axes as native_axes
+from ..native import kernels, zeros
 
 
 @dataclass
@@ -73,9 +75,6 @@ class Cloud:
 def _cut(base: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """The (3, M) coordinate rows of the points of ``base`` (N, 3) in the x/y box lo..hi, in order:
     by the native kernel (``sv_cut_box``: counted, then copied) when it is there."""
-    from ..native import axes as native_axes
-    from ..native import kernels
-
     lib = kernels()
     if lib is None:
         mask = in_box(base, lo, hi)
@@ -117,8 +116,6 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
     ``floor((v - lo) / cell)`` per axis (:func:`~soilvolume.core.cells.cell_index`, kept in float:
     the flat ids are exact integers), points off the grid go to one extra bin that is dropped
     (each cell's sum runs over its points in order)."""
-    from ..native import kernels
-
     if kernels() is not None and len(xyz):
         return _native_binned(kernels(), xyz, lo, cell, shape)
     n = shape[0] * shape[1]
@@ -138,27 +135,14 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
 
 def _native_binned(lib, xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]) -> Columns:
     """:func:`_binned` on the native kernel (``sv_columns``): the same columns, bit for bit."""
-    from ..native import axes as native_axes
-    from ..native import zeros
-
     n = shape[0] * shape[1]
     xyz, axes, step = native_axes(xyz, np.float64)
     count, sums = zeros("columns_count", n, np.int64), zeros("columns_sums", 3 * n, np.float64)
     has, means = np.empty(min(n, len(xyz)), np.int64), np.empty((min(n, len(xyz)), 3))
     m = lib.sv_columns(
-        *axes,
-        len(xyz),
-        step,
-        float(lo[0]),
-        float(lo[1]),
-        float(cell),
-        shape[0],
-        shape[1],
-        count.ctypes.data,
-        sums.ctypes.data,
-        has.ctypes.data,
-        means.ctypes.data,
-    )
+        *axes, len(xyz), step, float(lo[0]), float(lo[1]), float(cell), shape[0], shape[1],
+        count.ctypes.data, sums.ctypes.data, has.ctypes.data, means.ctypes.data,
+    )  # fmt: skip
     has, means = has[:m], means[:m]
     return Columns(means, has // shape[1], has % shape[1], shape, lo, cell)
 
@@ -168,6 +152,14 @@ def _floor_index(v: np.ndarray, lo: float, cell: float) -> np.ndarray:
     t = np.subtract(v, lo)
     np.divide(t, cell, out=t)
     return np.floor(t, out=t)
+
+
+def column_surface(
+    xyz: Target, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The column means of ``xyz`` (within lo..hi) and their surface normals."""
+    cols = columns(xyz, voxel, lo, hi)
+    return cols.xyz, normals(cols)
 
 
 def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:

@@ -8,7 +8,7 @@ CRS, and on smooth terrain their margin still lies close to the before surface a
 within its own resolution of them, at the after survey's centre:
 
 * horizontally, one side of the finest columns it matches surfaces on
-  (:func:`~soilvolume.registration.register.finest_column`: at least the before cloud's point
+  (:func:`~soilvolume.registration.fine.finest_column`: at least the before cloud's point
   spacing): it cannot place the after survey more finely than that;
 * turned by no more than the angle that moves the survey's farthest point by that much;
 * vertically, :data:`GROUND_AGREES` (the level at which a precise run's report says the ground
@@ -30,6 +30,9 @@ import numpy as np
 import pyproj
 
 from ..core.wording import opt
+from .fine import finest_column
+from .fit import evaluate_surface
+from .ground import margin_points, spacing
 from .rigid import rotation_deg, tilt_deg
 
 AGREE_FITNESS = 0.6  # share of the margin within 0.4 m of the before surface at the given pose
@@ -86,8 +89,6 @@ def spread(reg, centre: np.ndarray) -> dict[str, float]:
 def tolerances(reg, after_xyz: np.ndarray, gap: float) -> dict:
     """The bounds within which the registration cannot tell a pose from the file coordinates
     (see module), by :data:`KEYS`, and its poses' ``spread``."""
-    from .register import finest_column
-
     centre = after_xyz.mean(axis=0)
     radius = float(np.hypot(*(after_xyz[:, :2] - centre[:2]).T).max(initial=1.0))
     column = finest_column(after_xyz, gap)
@@ -131,8 +132,6 @@ def _figures(check: dict) -> str:
 def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine: str) -> tuple[str, str, dict]:
     """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason with the
     figures, the check behind it) from the registration ``reg`` of the pair (see module)."""
-    from .ground import spacing
-
     gap = spacing(before_xyz)
     check = outcome(reg, after_xyz, gap, fine)
     said = _figures(check)
@@ -142,9 +141,6 @@ def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine
     if check["outcome"] == REFUTED:
         why = f"both files declare {datum}, but {said}, its poses agreeing: the coordinates are off, registered"
         return "gps", why, check
-    from .ground import margin_points
-    from .register import evaluate_surface
-
     fit, _ = evaluate_surface(margin_points(after_xyz, gap), before_xyz, np.eye(4), gap=gap)
     check["margin_agreement"] = fit
     unsure = f"both files declare {datum} and {said}, but the registration is not consistent ({disagreement(check)})"

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..compensation.stable import find_stable, margin
 from ..core.cells import bounds, cell_index, rows
+from ..dem.grid import average_height, make_grid
 from ..inputs.footprint import footprint, polygon_area
 from . import columns
 from .rigid import transform_points
@@ -16,12 +18,17 @@ def spacing(xyz: np.ndarray) -> float:
     return float(np.sqrt(polygon_area(footprint(xyz[:, :2])) / max(len(xyz), 1)))
 
 
+def cap_voxel(xyz: np.ndarray, max_points: int) -> float:
+    """The voxel size that leaves about ``max_points`` of a cloud (0 when it has fewer)."""
+    if len(xyz) <= max_points:
+        return 0.0
+    return spacing(xyz) * float(np.sqrt(len(xyz) / max_points))
+
+
 def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
     """The points of a cloud in the margin band of its own footprint (see
     :func:`soilvolume.compensation.stable.margin`): surveys are flown beyond the works, so this band is the
     part of the after survey most likely to be stable ground."""
-    from ..compensation.stable import margin
-
     cell = max(1.0, 2.0 * gap)
     cols = columns.columns(xyz, cell)
     valid = np.zeros(cols.shape, bool)
@@ -43,9 +50,6 @@ def stable_source(
     what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
     ground (searched from the margin of the after footprint) and the degree-2 surface come from
     :mod:`soilvolume.compensation.stable` on median grids."""
-    from ..compensation.stable import find_stable
-    from ..dem.grid import average_height, make_grid
-
     src = transform_points(source_xyz, t)
     target = columns.Cloud.of(target_xyz)
     cell = max(cell, 1.5 * (spacing(target.xyz) if gap is None else gap))  # gap: the target's spacing

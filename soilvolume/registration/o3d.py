@@ -79,10 +79,12 @@ def _import_without_plotly() -> None:
             del sys.modules[PLOTLY]
 
 
-def to_pcd(xyz: np.ndarray, voxel: float | None = None):
-    """Open3D cloud from local float64 coordinates, optionally voxel-thinned."""
+def to_pcd(xyz: np.ndarray, voxel: float | None = None, normals: np.ndarray | None = None):
+    """Open3D cloud from local float64 coordinates, optionally voxel-thinned, or with ``normals``."""
     o3d = _o3d()
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz, dtype=np.float64)))
+    if normals is not None:
+        pcd.normals = o3d.utility.Vector3dVector(normals)
     return pcd.voxel_down_sample(voxel) if voxel else pcd
 
 

@@ -9,12 +9,13 @@ import numpy as np
 
 from .config import SceneConfig
 from .drawn import drawn_features
+from .sites import cone, rect, site_features
 
 # ----------------------------------------------------------------------------------------------
 # geometry shared by both epochs
 
 
-def _after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
+def after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
     """(xmin, ymin, xmax, ymax) of the after footprint, local frame (true frame)."""
     bw, bh = cfg.before_size
     aw, ah = cfg.after_size
@@ -26,10 +27,11 @@ def _after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
 
 
 WORKS = ("fixed", "drawn")
+PILE_C = "pile C (truncated rectangular)"
 CHANGE_KINDS = ("piles", "none", "pit", "pile", "excavation", "yard", "landslide", "trench", "pillars")
 
 
-def _change_features(cfg: SceneConfig, seed: int = 0) -> list[dict]:
+def change_features(cfg: SceneConfig, seed: int = 0) -> list[dict]:
     """The analytic change features (positions relative to the after footprint centre, scaled
     down if the after footprint is smaller than the default); with ``cfg.works == "drawn"`` the
     "piles" site's works are drawn by ``seed``."""
@@ -41,62 +43,20 @@ def _change_features(cfg: SceneConfig, seed: int = 0) -> list[dict]:
         raise ValueError(f"unknown works {cfg.works!r} ({', '.join(WORKS)})")
     if cfg.works == "drawn" and cfg.change != "piles":
         raise ValueError(f"works 'drawn' applies to change 'piles', not {cfg.change!r}")
-    x0, y0, x1, y1 = _after_box(cfg)
+    x0, y0, x1, y1 = after_box(cfg)
     cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
     s = min(1.0, (x1 - x0) / 67.0, (y1 - y0) / 62.7)
     if cfg.works == "drawn":
         return finish_features(drawn_features(seed, (x0, y0, x1, y1), s))
     if cfg.change in SITE_KINDS:
-        from .sites import site_features
-
         return finish_features(site_features(cfg.change, cx, cy, s))
     if cfg.change != "piles":
         return finish_features(_single_features(cfg, x0, y0, x1, y1, s))
     feats = [
-        # flat-topped cone: sign, bottom radius, top radius, height
-        dict(
-            kind="cone",
-            sign=1.0,
-            x=cx - 15 * s,
-            y=cy + 12 * s,
-            r_bottom=8.5 * s,
-            r_top=4.5 * s,
-            height=3.5 * s,
-            name="pile A (truncated cone)",
-        ),
-        dict(
-            kind="cone",
-            sign=1.0,
-            x=cx + 14 * s,
-            y=cy + 14 * s,
-            r_bottom=6.5 * s,
-            r_top=3.0 * s,
-            height=3.0 * s,
-            name="pile B (truncated cone)",
-        ),
-        # rectangular pile, equal side slopes: bottom half-sizes a x b, rotated by angle
-        dict(
-            kind="rect",
-            sign=1.0,
-            x=cx + 12 * s,
-            y=cy - 13 * s,
-            a=8.0 * s,
-            b=5.5 * s,
-            height=3.0 * s,
-            run=3.0 * s,
-            angle_deg=25.0,
-            name="pile C (truncated rectangular)",
-        ),
-        dict(
-            kind="cone",
-            sign=-1.0,
-            x=cx - 14 * s,
-            y=cy - 14 * s,
-            r_bottom=5.0 * s,
-            r_top=2.5 * s,
-            height=1.5 * s,
-            name="pit (truncated cone)",
-        ),
+        cone(1.0, cx - 15 * s, cy + 12 * s, 8.5 * s, 4.5 * s, 3.5 * s, "pile A (truncated cone)", False),
+        cone(1.0, cx + 14 * s, cy + 14 * s, 6.5 * s, 3.0 * s, 3.0 * s, "pile B (truncated cone)", False),
+        rect(1.0, cx + 12 * s, cy - 13 * s, 8.0 * s, 5.5 * s, 3.0 * s, 3.0 * s, 25.0, PILE_C, False),
+        cone(-1.0, cx - 14 * s, cy - 14 * s, 5.0 * s, 2.5 * s, 1.5 * s, "pit (truncated cone)", False),
     ]
     return finish_features(feats)
 
@@ -137,34 +97,10 @@ def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: floa
     area = aw * ah
     if cfg.change == "pit":  # 5 % of the after footprint, 2 m deep
         rb = math.sqrt(0.05 * area / math.pi)
-        return [
-            dict(
-                kind="cone",
-                sign=-1.0,
-                x=cx + 4.0 * s,
-                y=cy - 3.0 * s,
-                r_bottom=rb,
-                r_top=0.55 * rb,
-                height=2.0 * s,
-                exact_outline=True,
-                name="pit (flat-bottomed truncated cone)",
-            )
-        ]
+        return [cone(-1.0, cx + 4.0 * s, cy - 3.0 * s, rb, 0.55 * rb, 2.0 * s, "pit (flat-bottomed truncated cone)")]
     if cfg.change == "pile":  # 10 % of the after footprint, 5 m high
         rb = math.sqrt(0.10 * area / math.pi)
-        return [
-            dict(
-                kind="cone",
-                sign=1.0,
-                x=cx - 3.0 * s,
-                y=cy + 2.0 * s,
-                r_bottom=rb,
-                r_top=0.35 * rb,
-                height=5.0 * s,
-                exact_outline=True,
-                name="pile (flat-topped truncated cone)",
-            )
-        ]
+        return [cone(1.0, cx - 3.0 * s, cy + 2.0 * s, rb, 0.35 * rb, 5.0 * s, "pile (flat-topped truncated cone)")]
     # excavation: 2b tall (most of the footprint's height), 2a wide so that 4ab = f * area; a
     # tall conical pile beside it, the pair centred in x with equal margins
     frac = float(cfg.change_fraction)
@@ -183,31 +119,9 @@ def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: floa
     py = cy + min(0.25 * ah, ah / 2.0 - rp - 2.0 * s)
     depth, run = 2.5 * s, 3.0 * s
     return [
-        dict(
-            kind="rect",
-            sign=-1.0,
-            x=ex,
-            y=cy,
-            a=a,
-            b=b,
-            height=depth,
-            run=run,
-            angle_deg=0.0,
-            exact_outline=True,
-            name=f"excavation (flat-bottomed, {frac:.0%} of the after footprint)",
-        ),
+        rect(-1.0, ex, cy, a, b, depth, run, 0.0, f"excavation (flat-bottomed, {frac:.0%} of the after footprint)"),
         # ~42 degree sides, flat top of 0.3 x its base radius
-        dict(
-            kind="cone",
-            sign=1.0,
-            x=px,
-            y=py,
-            r_bottom=rp,
-            r_top=0.3 * rp,
-            height=0.9 * 0.7 * rp,
-            exact_outline=True,
-            name="tall pile (truncated cone)",
-        ),
+        cone(1.0, px, py, rp, 0.3 * rp, 0.9 * 0.7 * rp, "tall pile (truncated cone)"),
     ]
 
 
@@ -222,7 +136,7 @@ def _outline_distance(f: dict, x: float, y: float) -> float:
     return math.hypot(max(uu, 0.0), max(vv, 0.0))
 
 
-def _clear_of(f: dict, x: float, y: float, r: float) -> bool:
+def clear_of(f: dict, x: float, y: float, r: float) -> bool:
     """(x, y) with radius r is clear of change feature f (bounding circle for the original
     "piles" features, whose placement must not change; true outline for the others)."""
     if f.get("exact_outline"):
@@ -259,4 +173,4 @@ def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:
 
 def change_dz(x: np.ndarray, y: np.ndarray, cfg: SceneConfig, seed: int = 0) -> np.ndarray:
     """The analytic ground change dz (m, + = fill) at LOCAL x/y (true frame) of ``(seed, cfg)``."""
-    return features_dz(x, y, _change_features(cfg, seed))
+    return features_dz(x, y, change_features(cfg, seed))

@@ -1,5 +1,6 @@
 """Site conditions that hide or imitate earthworks on a synthetic pair (issue 45).
 
+* Occlusion holes (``holes``): blobs without points in each survey, some on a change's edge.
 * Standing water (``water_m``): the after survey has no point on the water of its pits (laser
   and photogrammetry both fail on water); the truth is still the pit's bottom.
 * Equipment and materials that arrived (``equipment``): an excavator, a container, a site cabin,
@@ -18,6 +19,7 @@ import math
 import numpy as np
 
 from .config import SceneConfig
+from .features import change_dz, clear_of
 
 BOULDER, PATCH = 2, 3  # the world's feature types (see nuisances)
 VEHICLE = 1
@@ -59,8 +61,6 @@ def meadow_row(cfg: SceneConfig, box: tuple[float, float, float, float], rng: np
 def water_levels(world) -> list[tuple[dict, float]]:
     """(cut feature, its water level in the true local frame) for every pit of the world: the
     given depth of water above the lowest point of its bottom."""
-    from .features import change_dz
-
     out = []
     for f in world.changes:
         if f["sign"] < 0:  # water pools at the lowest point of the pit's bottom
@@ -87,7 +87,53 @@ def reached(world, epoch: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     short of the after footprint (``overlap`` < 1) not east of its reach."""
     keep = np.ones(x.shape, bool)
     if world.holes[epoch] is not None:
-        keep &= ~world._lookup(world.holes[epoch], world.hole_res, x, y)
+        keep &= ~world.lookup(world.holes[epoch], world.hole_res, x, y)
     if epoch == 0 and world.cfg.overlap < 1.0:
         keep &= x < world.ax0 + world.cfg.overlap * (world.ax1 - world.ax0)
     return keep
+
+
+def occlusion_holes(world, rng: np.random.Generator, n: int) -> np.ndarray | None:
+    """An epoch's ``n`` occlusion holes (irregular blobs, every third on a change's edge, the
+    others clear of the change) as a mask on a grid of ``world.hole_res``; None for none."""
+    if n <= 0:
+        return None
+    bw, bh = world.cfg.before_size
+    grid = np.zeros((int(math.ceil(bh / world.hole_res)) + 1, int(math.ceil(bw / world.hole_res)) + 1), dtype=bool)
+    for k in range(n):
+        r = rng.uniform(1.5, 3.0)
+        if k % 3 == 0 and world.changes:  # on a change edge
+            c = world.changes[int(rng.integers(len(world.changes)))]
+            ang = rng.uniform(0, 2 * np.pi)
+            if c.get("exact_outline") and c["kind"] == "rect":  # on the rectangle's edge
+                ca, sa = np.cos(ang), np.sin(ang)
+                reach = 1.0 / max(abs(ca) / c["a"], abs(sa) / c["b"])
+                t = math.radians(c["angle_deg"])
+                u, v = reach * ca, reach * sa
+                x = c["x"] + u * math.cos(t) - v * math.sin(t)
+                y = c["y"] + u * math.sin(t) + v * math.cos(t)
+            else:
+                rr = c["r_bottom"] if c["kind"] == "cone" else min(c["a"], c["b"])
+                x, y = c["x"] + rr * np.cos(ang), c["y"] + rr * np.sin(ang)
+        else:
+            for _try in range(50):
+                x = rng.uniform(world.ax0 + 2, world.ax1 - 2)
+                y = rng.uniform(world.ay0 + 2, world.ay1 - 2)
+                if all(
+                    clear_of(c, x, y, r + 1.0)
+                    if c.get("exact_outline")
+                    else math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
+                    for c in world.changes
+                ):
+                    break
+        # irregular blob: union of three discs
+        for _ in range(3):
+            world.stamp(
+                grid,
+                world.hole_res,
+                x + rng.uniform(-0.6, 0.6) * r,
+                y + rng.uniform(-0.6, 0.6) * r,
+                r * rng.uniform(0.5, 0.9),
+                True,
+            )
+    return grid

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from .config import SceneConfig
+from .config import CLASS_BOULDER, CLASS_GROUND, CLASS_VEHICLE, SceneConfig
 from .hazards import equipment
 
 SIGNALS = ("class", "rgb", "lidar", "returns", "none")
@@ -139,3 +139,44 @@ def boulder(rng: np.random.Generator) -> tuple:
     """A boulder's feature parameters (type 2)."""
     a, b, h = rng.uniform(0.6, 1.5), rng.uniform(0.6, 1.5), rng.uniform(0.5, 1.3)
     return (2, rng.uniform(0, np.pi), a, b, h, a, b, h, max(a, b))
+
+
+def feature_points(feats: np.ndarray, feat_zc: np.ndarray, epoch: int, idx, k, pts: tuple, rng) -> None:
+    """The points ``idx`` of a chunk over features ``k`` (rows of ``feats``, their centres' ground
+    ``feat_zc``) as ``epoch`` sees them: bushes, vehicles, boulders, grass patches and crops lift
+    the heights ``z`` off the ground ``g`` and set the classes ``cls``, in place
+    (``pts``: x, y, g, z, cls)."""
+    x, y, g, z, cls = pts
+    f = feats[k]
+    typ = f[:, 0]
+    u0, v0 = x[idx] - f[:, 1], y[idx] - f[:, 2]
+    ca, sa = np.cos(f[:, 3]), np.sin(f[:, 3])
+    u, v = u0 * ca + v0 * sa, -u0 * sa + v0 * ca
+    a = f[:, 7] if epoch else f[:, 4]
+    b = f[:, 8] if epoch else f[:, 5]
+    h = f[:, 9] if epoch else f[:, 6]
+    with np.errstate(divide="ignore", invalid="ignore"):  # a vehicle absent from this epoch: 0 x 0
+        rho2 = np.nan_to_num((u / a) ** 2 + (v / b) ** 2, nan=np.inf)
+    gi = g[idx]
+    r1 = rng.random(idx.size)
+    r2 = rng.random(idx.size)
+    # bushes: canopy seen with probability 0.95 - 0.35 rho, else ground below
+    bush = (typ == 0) & (rho2 < 1.0) & (r1 < 0.95 - 0.35 * np.sqrt(np.minimum(rho2, 1.0)))
+    hb = h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0)) * (0.75 + 0.25 * r2)
+    # vehicles: flat roof at terrain(centre) + h, lower bonnet on one end
+    veh = (typ == 1) & (np.abs(u) < a) & (np.abs(v) < b)
+    zc = feat_zc[k]
+    hv = zc + np.where(u > 0.55 * a, 0.62 * h, h)
+    # boulders: half-ellipsoid
+    bou = (typ == 2) & (rho2 < 1.0)
+    hbo = gi + h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0))
+    # grass patches (ellipses) and a crop field (rectangle): canopy seen with 0.85 / 0.75
+    box = (np.abs(u) < a) & (np.abs(v) < b)
+    low = ((typ == PATCH) & (rho2 < 1.0) & (r1 < 0.85)) | ((typ == CROP) & box & (r1 < 0.75))
+    bush |= low
+    hb = np.where(low, h * (0.7 + 0.6 * r2), hb)
+    veg_cls = np.where(hb < 0.5, 3, np.where(hb < 2.0, 4, 5)).astype(np.uint8)
+    znew = np.where(bush, gi + hb, np.where(veh, np.maximum(hv, gi + 0.2), np.where(bou, hbo, gi)))
+    cnew = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE, np.where(bou, CLASS_BOULDER, CLASS_GROUND)))
+    z[idx] = znew
+    cls[idx] = cnew.astype(np.uint8)

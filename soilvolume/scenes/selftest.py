@@ -11,11 +11,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from .. import api
 from ..core.hooks import Hooks
 from ..core.outputs import os_errors, output_dir
 from ..core.types import SoilVolumeError
 from ..distributed import cluster
 from ..options import Options
+from ..registration.o3d import _o3d  # Open3D as the engine imports it (without its web drawing)
+from .synthetic import SceneConfig, make_pair, write_pair
 
 #: module -> attribute that must exist (an old version lacks it)
 MODULES = {
@@ -38,8 +41,6 @@ NET_TOLERANCE = 0.1  # relative: a smoke test on 3 m cells (measured 0.8 %), not
 
 def check_imports() -> dict[str, str]:
     """{module: version} of every dependency; SoilVolumeError naming the first that fails."""
-    from ..registration.o3d import _o3d  # Open3D as the engine imports it (without its web drawing)
-
     versions = {}
     for name, attribute in MODULES.items():
         try:
@@ -83,9 +84,6 @@ def _answer(n: int) -> tuple[int, str, int]:
 
 def run_selftest(out: Path, hooks: Hooks) -> dict:
     """Imports, then a tiny seeded estimate in ``out`` (replaced as a whole)."""
-    from ..api import estimate
-    from .synthetic import SceneConfig, make_pair, write_pair
-
     t0 = time.perf_counter()
     hooks.step(5, "importing the engine's dependencies")
     versions = check_imports()
@@ -100,7 +98,7 @@ def run_selftest(out: Path, hooks: Hooks) -> dict:
         before, after, truth_path = write_pair(make_pair(0, cfg), data, "laz")
         truth = json.loads(truth_path.read_text())
         hooks.step(30, "estimating its volume change")
-        res = estimate(before, after, staged.path("result"), Options(cell=3.0), overwrite=True, hooks=Hooks())
+        res = api.estimate(before, after, staged.path("result"), Options(cell=3.0), overwrite=True, hooks=Hooks())
         net = res.report["volume_m3"]["net"]
         if not abs(net - truth["net"]) <= NET_TOLERANCE * abs(truth["net"]):  # nothing is kept then
             raise SoilVolumeError(f"self-test: net {net:+.1f} m³ where the seeded pair holds {truth['net']:+.1f} m³")

@@ -3,7 +3,7 @@ deepened, then partly backfilled; a pile placed, then partly hauled away; a wind
 placed, then removed. Every epoch carries its own GPS error (a rigid misalignment), E0's too, so
 the truth of each epoch's registration into E0's frame is known (``truth["epochs"]``).
 
-The terrain is :class:`world._World`'s (no change features of its own); the features are
+The terrain is :class:`world.World`'s (no change features of its own); the features are
 :func:`features.finish_features` shapes with equal side slopes, nested from one epoch to the
 next, so each feature's change over a period has one sign and its volume is the difference of
 the two epochs' exact volumes."""
@@ -15,11 +15,14 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import laspy
 import numpy as np
 
 from .config import CLASS_GROUND, SceneConfig
-from .features import _after_box, features_dz, finish_features
-from .sites import _cone, _rect
+from .features import after_box, features_dz, finish_features
+from .sites import cone, rect
+from .synthetic import las_header
+from .world import World
 
 DATES = ("2026-03-02", "2026-03-09", "2026-03-16", "2026-03-23")
 #: per epoch: (shift m, roll/pitch/yaw deg) of its GPS error
@@ -46,12 +49,12 @@ def epoch_features(cx: float, cy: float) -> list[dict[str, dict]]:
     """Each epoch's features by slot (pit, pile, windrow), around the later surveys' centre."""
 
     def pit(h: float) -> dict:
-        return _rect(-1.0, cx - 14.0, cy + 9.0, 7.0, 6.0, h, h, 0.0, f"pit {h:g} m deep")
+        return rect(-1.0, cx - 14.0, cy + 9.0, 7.0, 6.0, h, h, 0.0, f"pit {h:g} m deep")
 
     def pile(h: float) -> dict:
-        return _cone(1.0, cx + 13.0, cy - 6.0, 8.0, 8.0 - h / PILE_SLOPE, h, f"pile {h:g} m high")
+        return cone(1.0, cx + 13.0, cy - 6.0, 8.0, 8.0 - h / PILE_SLOPE, h, f"pile {h:g} m high")
 
-    windrow = _rect(1.0, cx - 8.0, cy - 16.0, 10.0, 2.5, 1.8, 1.8, 0.0, "windrow")
+    windrow = rect(1.0, cx - 8.0, cy - 16.0, 10.0, 2.5, 1.8, 1.8, 0.0, "windrow")
     epochs = [{}, {"pit": pit(2.0), "pile": pile(3.6)}]
     epochs += [{"pit": pit(3.5), "pile": pile(1.5), "windrow": windrow}, {"pit": pit(1.0), "pile": pile(1.5)}]
     for feats in epochs:
@@ -96,6 +99,17 @@ def _points(world, box, n: int, feats: dict, rng) -> np.ndarray:
     return np.column_stack([x, y, z + rng.normal(0.0, world.cfg.noise_m, n)])
 
 
+def _write_epoch(path: Path, xyz: np.ndarray, config: SceneConfig, date: str) -> Path:
+    """One survey as LAS: ground points (class 2), the CRS, the survey date in the header."""
+    header = las_header(config, 0.001)
+    header.creation_date = dt.date.fromisoformat(date)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+    las.classification = np.full(len(xyz), CLASS_GROUND, np.uint8)
+    las.write(str(path))
+    return path
+
+
 def write_series(
     directory, seed: int = 0, density: tuple[float, float] = (6.0, 10.0), datum: bool = False
 ) -> tuple[list[Path], dict]:
@@ -103,14 +117,9 @@ def write_series(
     and ``truth.json`` into ``directory``: (paths, truth). ``density``: points per m2 of E0 (the
     wide reference) and of the later surveys (the works' footprint). ``datum``: the three-epoch
     site of :data:`DATUM_CONFIG` and :data:`DATUM_ERRORS` (E0 to E2) instead."""
-    import laspy
-
-    from .synthetic import _las_header
-    from .world import _World
-
     config, errors = (DATUM_CONFIG, DATUM_ERRORS) if datum else (CONFIG, GPS_ERRORS)
-    world = _World(seed, config)
-    ax0, ay0, ax1, ay1 = _after_box(config)
+    world = World(seed, config)
+    ax0, ay0, ax1, ay1 = after_box(config)
     cx, cy = (ax0 + ax1) / 2.0, (ay0 + ay1) / 2.0
     origin = np.asarray(config.origin, dtype=np.float64)
     centre = np.array([cx, cy, float(world.terrain(np.array([cx]), np.array([cy]))[0])]) + origin
@@ -126,13 +135,7 @@ def write_series(
         xyz = _points(world, box, n, fk, rng) + origin
         mk = misalignment(k, centre, errors)
         xyz = xyz @ mk[:3, :3].T + mk[:3, 3]
-        header = _las_header(config, 0.001)
-        header.creation_date = dt.date.fromisoformat(DATES[k])
-        las = laspy.LasData(header)
-        las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-        las.classification = np.full(n, CLASS_GROUND, np.uint8)
-        paths.append(d / f"epoch{k}.las")
-        las.write(str(paths[-1]))
+        paths.append(_write_epoch(d / f"epoch{k}.las", xyz, config, DATES[k]))
         to_e0 = m0 @ np.linalg.inv(mk)  # surveyed k -> true -> surveyed 0
         seen = mk[:3, :3] @ centre + mk[:3, 3]  # the works' centre as epoch k surveyed it
         epochs.append(

@@ -54,7 +54,7 @@ import numpy as np
 from .config import SceneConfig
 from .features import CHANGE_KINDS, change_dz, feature_area, features_dz, finish_features
 from .nuisances import BOULDER, VEHICLE
-from .world import _World
+from .world import World
 
 __all__ = [
     "SceneConfig",
@@ -105,7 +105,7 @@ NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch
 NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow", "vertical_datum", "overlap", "works")
 
 
-def _objects(world: _World) -> list[dict]:
+def _objects(world: World) -> list[dict]:
     """The vehicles and equipment present in one epoch only (role: moved, arrived or left), with their volume
     above the ground (m3; the roof and the lower bonnet over the footprint, approximately)."""
     o = world.cfg.origin
@@ -132,7 +132,7 @@ def _objects(world: _World) -> list[dict]:
     return out
 
 
-def _truth(world: _World) -> dict:
+def world_truth(world: World) -> dict:
     cfg = world.cfg
     fill = sum(f["volume"] for f in world.changes if f["sign"] > 0)
     cut = sum(f["volume"] for f in world.changes if f["sign"] < 0)
@@ -178,13 +178,13 @@ def _truth(world: _World) -> dict:
 
 def scene_truth(seed: int = 0, config: SceneConfig | None = None) -> dict:
     """The truth dict of ``make_pair(seed, config)`` without sampling any point."""
-    return _truth(_World(seed, config or SceneConfig()))
+    return world_truth(World(seed, config or SceneConfig()))
 
 
 def iter_epoch(seed: int, config: SceneConfig, epoch: str) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Yield (xyz absolute float64 (n,3), class uint8) chunks of one epoch ("before"/"after"),
     each at most ~1 M points; concatenated they equal ``make_pair``'s arrays."""
-    world = _World(seed, config)
+    world = World(seed, config)
     e = {"before": 0, "after": 1}[epoch]
     for i in range(world.n_chunks(e)):
         yield world.chunk(e, i)
@@ -193,15 +193,15 @@ def iter_epoch(seed: int, config: SceneConfig, epoch: str) -> Iterator[tuple[np.
 def make_pair(seed: int = 0, config: SceneConfig | None = None) -> Scene:
     """Generate a seeded pair in memory (deterministic for a given seed and config)."""
     config = config or SceneConfig()
-    world = _World(seed, config)
+    world = World(seed, config)
     out = []
     for e in (0, 1):
         parts = [world.chunk(e, i) for i in range(world.n_chunks(e))]
         out.append((np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])))
-    return Scene(out[0][0], out[1][0], out[0][1], out[1][1], _truth(world), config, int(seed))
+    return Scene(out[0][0], out[1][0], out[0][1], out[1][1], world_truth(world), config, int(seed))
 
 
-def _las_header(config: SceneConfig, scale: float):
+def las_header(config: SceneConfig, scale: float):
     import laspy
 
     header = laspy.LasHeader(point_format=7 if config.signals == "rgb" else 6, version="1.4")
@@ -236,7 +236,7 @@ def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) 
         return write_pair_streaming(scene.seed, scene.config, directory, fmt, scale)
     pb, pa, pt = _paths(directory, fmt)
     for path, xyz, cls in ((pb, scene.before, scene.before_class), (pa, scene.after, scene.after_class)):
-        las = laspy.LasData(_las_header(scene.config, scale))
+        las = laspy.LasData(las_header(scene.config, scale))
         las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
         las.classification = cls
         las.write(str(path))
@@ -252,9 +252,9 @@ def write_pair_streaming(
     import laspy
 
     pb, pa, pt = _paths(directory, fmt)
-    world = _World(seed, config)
+    world = World(seed, config)
     for e, path in ((0, pb), (1, pa)):
-        header = _las_header(config, scale)
+        header = las_header(config, scale)
         with laspy.open(str(path), mode="w", header=header) as writer:
             for i in range(world.n_chunks(e)):
                 xyz, cls, fields = world.chunk(e, i, signals=True)
@@ -265,5 +265,5 @@ def write_pair_streaming(
                     rec[name] = values
                 writer.write_points(rec)
                 del xyz, cls, rec
-    _write_truth(pt, _truth(world))
+    _write_truth(pt, world_truth(world))
     return pb, pa, pt

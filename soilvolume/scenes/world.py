@@ -7,15 +7,58 @@ import math
 
 import numpy as np
 
-from .config import CLASS_BOULDER, CLASS_GROUND, CLASS_OUTLIER, CLASS_VEHICLE, SceneConfig
-from .features import _after_box, _change_features, _clear_of, change_dz
-from .hazards import dry, meadow_row, reached, water_levels
-from .nuisances import CROP, PATCH, boulder, bush, categories, colours, extra_features, returns, vehicle
+from .config import CLASS_GROUND, CLASS_OUTLIER, SceneConfig
+from .features import after_box, change_dz, change_features, clear_of
+from .hazards import dry, meadow_row, occlusion_holes, reached, water_levels
+from .nuisances import boulder, bush, categories, colours, extra_features, feature_points, returns, vehicle
+from .terrain import Terrain
 
 CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never depend on the caller)
 
 
-class _World:
+class _Placer:
+    """Features placed at random, non-overlapping and away from the change: each feature
+    ``(type, x, y, angle, a, b, h, a2, b2, h2, rbound)`` in :attr:`feats`."""
+
+    def __init__(self, size, box, changes: list[dict], rng: np.random.Generator) -> None:
+        self.size, self.box, self.changes, self.rng = size, box, changes, rng
+        self.feats: list[tuple] = []
+        self.placed: list[tuple[float, float, float]] = []
+
+    def free(self, x: float, y: float, r: float) -> bool:
+        bw, bh = self.size
+        if not (r < x < bw - r and r < y < bh - r):
+            return False
+        for c in self.changes:
+            if c.get("exact_outline"):
+                if not clear_of(c, x, y, r + 2.0):
+                    return False
+            elif math.hypot(x - c["x"], y - c["y"]) < c["radius"] + r + 2.0:
+                return False
+        return all(math.hypot(x - px, y - py) > r + pr + 0.5 for px, py, pr in self.placed)
+
+    def place(self, n: int, inside_after: bool, make, rng: np.random.Generator | None = None) -> bool:
+        """Place ``n`` features ``make()`` (50 tries each); whether the last one was placed."""
+        rng = self.rng if rng is None else rng
+        ax0, ay0, ax1, ay1 = self.box
+        ok = False
+        for _ in range(n):
+            ok = False
+            for _try in range(50):
+                if inside_after:
+                    x, y = rng.uniform(ax0 + 1, ax1 - 1), rng.uniform(ay0 + 1, ay1 - 1)
+                else:
+                    x, y = rng.uniform(0, self.size[0]), rng.uniform(0, self.size[1])
+                params = make()
+                if self.free(x, y, params[-1]):
+                    self.feats.append((params[0], x, y) + params[1:])
+                    self.placed.append((x, y, params[-1]))
+                    ok = True
+                    break
+        return ok
+
+
+class World:
     """Terrain, features, holes and misalignment of one (seed, config): everything that is not
     per-point randomness. Built from its own RNG stream so epochs/chunks are independent."""
 
@@ -23,56 +66,14 @@ class _World:
         self.cfg = cfg
         self.seed = int(seed)
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 0]))
-        self.ax0, self.ay0, self.ax1, self.ay1 = _after_box(cfg)
-        self.changes = _change_features(cfg, self.seed)
-        self._init_terrain(rng)
+        self.ax0, self.ay0, self.ax1, self.ay1 = after_box(cfg)
+        self.changes = change_features(cfg, self.seed)
+        self.terrain = Terrain(rng, cfg, (self.ax0, self.ay0, self.ax1, self.ay1))
         self._init_features(rng)
         self.hole_res = 0.1  # occlusion holes, per epoch
-        self.holes = [self._holes(rng, cfg.holes) for _ in range(2)]
+        self.holes = [occlusion_holes(self, rng, cfg.holes) for _ in range(2)]
         self._init_misalignment()
         self.water = water_levels(self) if cfg.water_m > 0 else []
-
-    def _init_terrain(self, rng: np.random.Generator) -> None:
-        """Tilt, long waves, hills, roughness, ditches, berm and mounds (``rng``'s first draws)."""
-        cfg = self.cfg
-        bw, bh = cfg.before_size
-        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
-        self.z0 = rng.uniform(58.0, 66.0)
-        self.tilt = rng.uniform(-0.02, 0.02, 2)
-        self.centre = (bw / 2.0, bh / 2.0)
-        waves = []
-        for amp_lo, amp_hi, wl_lo, wl_hi, n in ((0.5, 1.5, 60.0, 200.0, 3), (0.02, 0.08, 2.0, 12.0, 14)):
-            for _ in range(n):
-                th = rng.uniform(0, 2 * np.pi)
-                k = 2 * np.pi / rng.uniform(wl_lo, wl_hi)
-                waves.append((rng.uniform(amp_lo, amp_hi), k * np.cos(th), k * np.sin(th), rng.uniform(0, 2 * np.pi)))
-        self.waves = np.array(waves)
-        self.waves[:3, 0] *= cfg.relief
-        self.hills = np.column_stack(
-            [rng.uniform(-2.5, 3.0, 4), rng.uniform(0, bw, 4), rng.uniform(0, bh, 4), rng.uniform(10.0, 30.0, 4)]
-        )
-        self.hills[:, 0] *= cfg.relief
-        aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
-        th0 = rng.uniform(0, np.pi)
-        lines = []  # (kind, x0, y0, x1, y1, height, width) ; kind 0 ditch (gaussian), 1 berm
-        for kind, ang in ((0, th0), (0, th0 + rng.uniform(1.0, 2.1)), (1, th0 + rng.uniform(0.5, 1.0))):
-            px = acx + rng.uniform(-0.3, 0.3) * aw
-            py = acy + rng.uniform(-0.3, 0.3) * ah
-            half = rng.uniform(25.0, 50.0)
-            dx, dy = np.cos(ang) * half, np.sin(ang) * half
-            height = -rng.uniform(0.5, 1.0) if kind == 0 else rng.uniform(0.6, 1.2)
-            width = rng.uniform(0.6, 1.2) if kind == 0 else rng.uniform(1.2, 2.0)
-            lines.append((kind, px - dx, py - dy, px + dx, py + dy, height, width))
-        self.lines = np.array(lines)
-        nm = 30
-        self.mounds = np.column_stack(
-            [
-                rng.uniform(0.15, 0.5, nm) * rng.choice([-1, 1], nm),
-                rng.uniform(self.ax0 - 10, self.ax1 + 10, nm),
-                rng.uniform(self.ay0 - 10, self.ay1 + 10, nm),
-                rng.uniform(1.0, 3.0, nm),
-            ]
-        )
 
     def _init_features(self, rng: np.random.Generator) -> None:
         """Non-ground features (bushes, vehicles, boulders, the config's extra kinds), placed
@@ -84,38 +85,8 @@ class _World:
         self.fnx = int(math.ceil(bw / self.feat_res)) + 1
         self.fny = int(math.ceil(bh / self.feat_res)) + 1
         self.label = np.zeros((self.fny, self.fnx), dtype=np.int32)  # 0 = none, k+1 = feature k
-        feats: list[tuple] = []  # (type, x, y, angle, a, b, h, a2, b2, h2, rbound)
-        placed: list[tuple[float, float, float]] = []
-
-        def free(x: float, y: float, r: float) -> bool:
-            if not (r < x < bw - r and r < y < bh - r):
-                return False
-            for c in self.changes:
-                if c.get("exact_outline"):
-                    if not _clear_of(c, x, y, r + 2.0):
-                        return False
-                elif math.hypot(x - c["x"], y - c["y"]) < c["radius"] + r + 2.0:
-                    return False
-            return all(math.hypot(x - px, y - py) > r + pr + 0.5 for px, py, pr in placed)
-
-        def place(n: int, inside_after: bool, make, rng=rng) -> bool:
-            ok = False
-            for _ in range(n):
-                ok = False
-                for _try in range(50):
-                    if inside_after:
-                        x = rng.uniform(self.ax0 + 1, self.ax1 - 1)
-                        y = rng.uniform(self.ay0 + 1, self.ay1 - 1)
-                    else:
-                        x, y = rng.uniform(0, bw), rng.uniform(0, bh)
-                    params = make()
-                    if free(x, y, params[-1]):
-                        feats.append((params[0], x, y) + params[1:])
-                        placed.append((x, y, params[-1]))
-                        ok = True
-                        break
-            return ok
-
+        placer = _Placer(cfg.before_size, (self.ax0, self.ay0, self.ax1, self.ay1), self.changes, rng)
+        place, feats = placer.place, placer.feats
         if cfg.vegetation:
             place(int(bw * bh / 600), False, lambda: bush(rng))
             place(int(aw * ah / 250), True, lambda: bush(rng))
@@ -134,7 +105,7 @@ class _World:
         if len(self.feats):
             self.feat_zc = self.terrain(self.feats[:, 1], self.feats[:, 2])
         for k, f in enumerate(self.feats):
-            self._stamp(self.label, self.feat_res, f[1], f[2], f[10] + self.feat_res, k + 1)
+            self.stamp(self.label, self.feat_res, f[1], f[2], f[10] + self.feat_res, k + 1)
 
     def _init_misalignment(self) -> None:
         """The GPS misalignment (local frame): ``p_s = R (p - c) + c + t``."""
@@ -150,7 +121,7 @@ class _World:
 
     # -- helpers --
     @staticmethod
-    def _stamp(grid: np.ndarray, res: float, x: float, y: float, r: float, value) -> None:
+    def stamp(grid: np.ndarray, res: float, x: float, y: float, r: float, value) -> None:
         ny, nx = grid.shape
         i0, i1 = max(0, int((x - r) / res)), min(nx, int((x + r) / res) + 2)
         j0, j1 = max(0, int((y - r) / res)), min(ny, int((y + r) / res) + 2)
@@ -162,90 +133,11 @@ class _World:
         sub = grid[j0:j1, i0:i1]
         sub[(d < r) & (sub == 0)] = value  # features never overlap, bar the meadow under them
 
-    def _holes(self, rng: np.random.Generator, n: int) -> np.ndarray | None:
-        if n <= 0:
-            return None
-        bw, bh = self.cfg.before_size
-        grid = np.zeros((int(math.ceil(bh / self.hole_res)) + 1, int(math.ceil(bw / self.hole_res)) + 1), dtype=bool)
-        for k in range(n):
-            r = rng.uniform(1.5, 3.0)
-            if k % 3 == 0 and self.changes:  # on a change edge
-                c = self.changes[int(rng.integers(len(self.changes)))]
-                ang = rng.uniform(0, 2 * np.pi)
-                if c.get("exact_outline") and c["kind"] == "rect":  # on the rectangle's edge
-                    ca, sa = np.cos(ang), np.sin(ang)
-                    k = 1.0 / max(abs(ca) / c["a"], abs(sa) / c["b"])
-                    t = math.radians(c["angle_deg"])
-                    u, v = k * ca, k * sa
-                    x = c["x"] + u * math.cos(t) - v * math.sin(t)
-                    y = c["y"] + u * math.sin(t) + v * math.cos(t)
-                else:
-                    rr = c["r_bottom"] if c["kind"] == "cone" else min(c["a"], c["b"])
-                    x, y = c["x"] + rr * np.cos(ang), c["y"] + rr * np.sin(ang)
-            else:
-                for _try in range(50):
-                    x = rng.uniform(self.ax0 + 2, self.ax1 - 2)
-                    y = rng.uniform(self.ay0 + 2, self.ay1 - 2)
-                    if all(
-                        _clear_of(c, x, y, r + 1.0)
-                        if c.get("exact_outline")
-                        else math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
-                        for c in self.changes
-                    ):
-                        break
-            # irregular blob: union of three discs
-            for _ in range(3):
-                self._stamp(
-                    grid,
-                    self.hole_res,
-                    x + rng.uniform(-0.6, 0.6) * r,
-                    y + rng.uniform(-0.6, 0.6) * r,
-                    r * rng.uniform(0.5, 0.9),
-                    True,
-                )
-        return grid
-
     @staticmethod
-    def _lookup(grid: np.ndarray, res: float, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def lookup(grid: np.ndarray, res: float, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         i = np.clip((x / res).astype(np.int64), 0, grid.shape[1] - 1)
         j = np.clip((y / res).astype(np.int64), 0, grid.shape[0] - 1)
         return grid[j, i]
-
-    def terrain(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """Ground height (m) of the before epoch at local x/y."""
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
-        z = self.z0 + self.tilt[0] * (x - self.centre[0]) + self.tilt[1] * (y - self.centre[1])
-        if self.cfg.slope_deg:
-            z += math.tan(math.radians(self.cfg.slope_deg)) * (x - self.centre[0])
-        for amp, kx, ky, ph in self.waves:
-            z += amp * np.cos(kx * x + ky * y + ph)
-        for amp, hx, hy, sig in self.hills:
-            z += amp * np.exp(-((x - hx) ** 2 + (y - hy) ** 2) / (2 * sig * sig))
-        for kind, x0, y0, x1, y1, height, width in self.lines:
-            reach = 3.5 * width if kind == 0 else 2.0 * width + 0.5
-            m = (
-                (x > min(x0, x1) - reach)
-                & (x < max(x0, x1) + reach)
-                & (y > min(y0, y1) - reach)
-                & (y < max(y0, y1) + reach)
-            )
-            if not m.any():
-                continue
-            px, py = x[m], y[m]
-            dx, dy = x1 - x0, y1 - y0
-            t = np.clip(((px - x0) * dx + (py - y0) * dy) / (dx * dx + dy * dy), 0.0, 1.0)
-            d = np.hypot(px - x0 - t * dx, py - y0 - t * dy)
-            if kind == 0:  # ditch: gaussian cross-section
-                prof = np.exp(-d * d / (2 * width * width))
-            else:  # berm/embankment: flat crest of half-width `width`, 1:1-ish side slopes
-                prof = np.clip((width + 0.5 + abs(height) - d) / (abs(height) + 0.5), 0.0, 1.0)
-            z[m] += height * prof
-        for amp, mx, my, sig in self.mounds:
-            m = (np.abs(x - mx) < 3 * sig) & (np.abs(y - my) < 3 * sig)
-            if m.any():
-                z[m] += amp * np.exp(-((x[m] - mx) ** 2 + (y[m] - my) ** 2) / (2 * sig * sig))
-        return z
 
     def deformation(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Doming + vertical bias of the after epoch (m) at local x/y."""
@@ -311,37 +203,30 @@ class _World:
         cls = np.full(x.shape, CLASS_GROUND, dtype=np.uint8)
         lab = np.zeros(x.shape, np.int32)
         if len(self.feats):
-            lab = self._lookup(self.label, self.feat_res, x, y)
+            lab = self.lookup(self.label, self.feat_res, x, y)
             idx = np.nonzero(lab)[0]
             if idx.size:
-                self._apply_features(epoch, idx, lab[idx] - 1, x, y, g, z, cls, rng)
+                feature_points(self.feats, self.feat_zc, epoch, idx, lab[idx] - 1, (x, y, g, z, cls), rng)
                 bare = fresh & (cls >= 3) & (cls <= 5)  # no grass on fresh soil
                 z[bare], cls[bare] = g[bare], CLASS_GROUND
         z += rng.normal(0.0, cfg.noise_m, z.shape) if cfg.noise_m > 0 else 0.0
-        o = np.empty(0, np.int64)
-        if cfg.outlier_fraction > 0:
-            o = np.nonzero(rng.random(z.shape) < cfg.outlier_fraction)[0]
-            kind = rng.random(o.size)
-            near = rng.choice([-1.0, 1.0], o.size) * rng.uniform(0.25, 1.5, o.size)
-            off = np.where(
-                kind < 0.5, near, np.where(kind < 0.85, rng.uniform(1.0, 8.0, o.size), -rng.uniform(0.5, 4.0, o.size))
-            )
-            z[o] += off
-            cls[o] = CLASS_OUTLIER
+        o = _outliers(rng, z, cls, cfg.outlier_fraction) if cfg.outlier_fraction > 0 else np.empty(0, np.int64)
         xyz = np.column_stack([x, y, z])
         del x, y, z, g
         if epoch == 1:
-            # element-wise (not BLAS): results do not depend on the chunking (up to 1 ulp)
-            d = xyz - self.c
-            R = self.R
-            xyz = np.column_stack([R[i, 0] * d[:, 0] + R[i, 1] * d[:, 1] + R[i, 2] * d[:, 2] for i in range(3)]) + (
-                self.c + self.t
-            )
-            del d
+            xyz = self._misaligned(xyz)
         xyz += np.asarray(cfg.origin, dtype=np.float64)
         if not signals:
             return xyz, cls
         return (xyz, *self._signals(epoch, index, cls, o, lab, fresh))
+
+    def _misaligned(self, xyz: np.ndarray) -> np.ndarray:
+        """The after points under the GPS misalignment, element-wise (not BLAS): results do not
+        depend on the chunking (up to 1 ulp)."""
+        d, r = xyz - self.c, self.R
+        return np.column_stack([r[i, 0] * d[:, 0] + r[i, 1] * d[:, 1] + r[i, 2] * d[:, 2] for i in range(3)]) + (
+            self.c + self.t
+        )
 
     def _signals(self, epoch: int, index: int, cls, stray, lab, fresh) -> tuple[np.ndarray, dict]:
         """(LAS classes as the survey carries them, other per-point fields) of a chunk."""
@@ -359,38 +244,15 @@ class _World:
         keep = cfg.signals in ("class", "lidar")
         return (cls if keep else np.zeros_like(cls)), fields
 
-    def _apply_features(self, epoch, idx, k, x, y, g, z, cls, rng) -> None:
-        f = self.feats[k]
-        typ = f[:, 0]
-        u0, v0 = x[idx] - f[:, 1], y[idx] - f[:, 2]
-        ca, sa = np.cos(f[:, 3]), np.sin(f[:, 3])
-        u, v = u0 * ca + v0 * sa, -u0 * sa + v0 * ca
-        a = f[:, 7] if epoch else f[:, 4]
-        b = f[:, 8] if epoch else f[:, 5]
-        h = f[:, 9] if epoch else f[:, 6]
-        with np.errstate(divide="ignore", invalid="ignore"):  # a vehicle absent from this epoch: 0 x 0
-            rho2 = np.nan_to_num((u / a) ** 2 + (v / b) ** 2, nan=np.inf)
-        gi = g[idx]
-        r1 = rng.random(idx.size)
-        r2 = rng.random(idx.size)
-        # bushes: canopy seen with probability 0.95 - 0.35 rho, else ground below
-        bush = (typ == 0) & (rho2 < 1.0) & (r1 < 0.95 - 0.35 * np.sqrt(np.minimum(rho2, 1.0)))
-        hb = h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0)) * (0.75 + 0.25 * r2)
-        veg_cls = np.where(hb < 0.5, 3, np.where(hb < 2.0, 4, 5)).astype(np.uint8)
-        # vehicles: flat roof at terrain(centre) + h, lower bonnet on one end
-        veh = (typ == 1) & (np.abs(u) < a) & (np.abs(v) < b)
-        zc = self.feat_zc[k]
-        hv = zc + np.where(u > 0.55 * a, 0.62 * h, h)
-        # boulders: half-ellipsoid
-        bou = (typ == 2) & (rho2 < 1.0)
-        hbo = gi + h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0))
-        # grass patches (ellipses) and a crop field (rectangle): canopy seen with 0.85 / 0.75
-        box = (np.abs(u) < a) & (np.abs(v) < b)
-        low = ((typ == PATCH) & (rho2 < 1.0) & (r1 < 0.85)) | ((typ == CROP) & box & (r1 < 0.75))
-        bush |= low
-        hb = np.where(low, h * (0.7 + 0.6 * r2), hb)
-        veg_cls = np.where(hb < 0.5, 3, np.where(hb < 2.0, 4, 5)).astype(np.uint8)
-        znew = np.where(bush, gi + hb, np.where(veh, np.maximum(hv, gi + 0.2), np.where(bou, hbo, gi)))
-        cnew = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE, np.where(bou, CLASS_BOULDER, CLASS_GROUND)))
-        z[idx] = znew
-        cls[idx] = cnew.astype(np.uint8)
+
+def _outliers(rng: np.random.Generator, z: np.ndarray, cls: np.ndarray, fraction: float) -> np.ndarray:
+    """Points made outliers (moved up or down, classed as such) in place: their indices."""
+    o = np.nonzero(rng.random(z.shape) < fraction)[0]
+    kind = rng.random(o.size)
+    near = rng.choice([-1.0, 1.0], o.size) * rng.uniform(0.25, 1.5, o.size)
+    off = np.where(
+        kind < 0.5, near, np.where(kind < 0.85, rng.uniform(1.0, 8.0, o.size), -rng.uniform(0.5, 4.0, o.size))
+    )
+    z[o] += off
+    cls[o] = CLASS_OUTLIER
+    return o

@@ -18,7 +18,7 @@ from an object: only matching pairs are objects there.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -159,8 +159,6 @@ def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:
 
 def _pairs(blobs: list[Blob]) -> list[Blob]:
     """Fill and cut blobs matched into moved objects, the closest matches first."""
-    from dataclasses import replace
-
     fills, cuts = [b for b in blobs if b.sign > 0], [b for b in blobs if b.sign < 0]
     scored = []
     for f in fills:

@@ -14,7 +14,8 @@ SEED = 3
 
 @pytest.fixture(scope="module")
 def design_site(tmp_path_factory):
-    from soilvolume.scenes.surfaces import write_surface
+    from designs import write_surface
+
     from soilvolume.scenes.synthetic import SceneConfig, make_pair, write_pair
 
     folder = tmp_path_factory.mktemp("design")
@@ -62,8 +63,8 @@ def test_a_geotiff_path_as_before_and_a_bad_one(run_alg, design_site, tmp_path):
 def test_a_landxml_design_as_before(run_alg, design_site, tmp_path):
     """A 0.5 m design's pixel centres as a LandXML TIN, browsed to as BEFORE: the GeoTIFF design's
     volumes within 0.5 %, the reference described as a LandXML TIN."""
-    from soilvolume.scenes.landxml import tin_of, write_landxml
-    from soilvolume.scenes.surfaces import write_surface
+    from designs import tin_of, write_landxml, write_surface
+
     from soilvolume.scenes.synthetic import SceneConfig
 
     _, after, truth = design_site

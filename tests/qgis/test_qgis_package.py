@@ -67,7 +67,7 @@ def test_zip_contents(plugin_zip):
         "metadata.txt",
         "__init__.py",
         "LICENSE",
-        "plugin/main.py",
+        "qgisplugin.py",
         "processing/provider.py",
         "resources/icon.png",
         "resources/icon.svg",

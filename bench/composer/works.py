@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from ..features import finish_features
+from soilvolume.scenes.features import finish_features
 
 WORKS = ("pile", "pit", "trench", "platform", "embankment", "moved stockpile", "compaction")
 WORK_P = (0.28, 0.2, 0.12, 0.1, 0.1, 0.1, 0.1)

@@ -1,6 +1,9 @@
-"""A seeded pair's before ground as a reference surface: the analytic terrain of the before epoch
-written as a single-band DEM GeoTIFF (what a design or an earlier DEM is to ``soilvolume
-estimate DESIGN.tif AFTER.laz``); the truth of the pair is then the truth against the surface."""
+"""Design surfaces for the tests: a seeded pair's before ground (or a graded pad) as a
+single-band DEM GeoTIFF, what a design or an earlier DEM is to ``soilvolume estimate DESIGN.tif
+AFTER.laz`` (the truth of the pair is then the truth against the surface), and a design
+GeoTIFF's pixel centres as a LandXML TIN (two triangles per square of four centres: linear
+inside each triangle, the same design as the GeoTIFF's bilinear resampling to the difference
+of bilinear and linear within a pixel, nil on a plane)."""
 
 from __future__ import annotations
 
@@ -8,11 +11,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import rasterio
+from affine import Affine
 
-from ..dem.geotiff import Layout, write_geotiff
-from .config import SceneConfig
-from .features import _after_box, change_dz
-from .world import _World
+from soilvolume.dem.geotiff import Layout, write_geotiff
+from soilvolume.scenes.config import SceneConfig
+from soilvolume.scenes.features import after_box, change_dz
+from soilvolume.scenes.world import World
+
+NS = "http://www.landxml.org/schema/LandXML-1.2"
+FEET = {"foot": 0.3048, "USSurveyFoot": 1200.0 / 3937.0}
 
 
 @dataclass(frozen=True)
@@ -28,9 +36,9 @@ class Pad:
     level: float = 0.0
     slope: float = 0.5
 
-    def heights(self, world: _World, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    def heights(self, world: World, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The plan's heights (m, local) at local x/y."""
-        x0, y0, x1, y1 = _after_box(world.cfg)
+        x0, y0, x1, y1 = after_box(world.cfg)
         cx, cy = x0 + self.fx * (x1 - x0), y0 + self.fy * (y1 - y0)
         d = np.hypot(np.maximum(np.abs(x - cx) - self.half_x, 0.0), np.maximum(np.abs(y - cy) - self.half_y, 0.0))
         z = float(world.terrain(np.array([cx]), np.array([cy]))[0]) + self.level
@@ -41,8 +49,8 @@ def pad_truth(seed: int, config: SceneConfig, pad: Pad, res: float = 0.05) -> di
     """net, cut, fill (m³) of the after survey's true ground against the plan ``pad`` over the
     after footprint: a midpoint sum on ``res`` cells of the analytic surfaces (the piles' and
     the pad's kinks make it converge as res², well below 0.05 % at 5 cm)."""
-    world = _World(seed, config)
-    x0, y0, x1, y1 = _after_box(config)
+    world = World(seed, config)
+    x0, y0, x1, y1 = after_box(config)
     xs = np.arange(x0 + res / 2, x1, res)
     out = {"net": 0.0, "cut": 0.0, "fill": 0.0}
     for y in np.arange(y0 + res / 2, y1, res):
@@ -73,9 +81,7 @@ def write_surface(
     ``unit``: the band's declared unit (heights are converted to it); ``shift_xy``: the raster
     placed that far off (m, e.g. away from the survey); ``pad``: a grading plan instead of the
     before ground."""
-    from affine import Affine
-
-    world = _World(seed, config)
+    world = World(seed, config)
     (w, h), o = config.before_size, config.origin
     cols, rows = int(np.ceil(w / cell)), int(np.ceil(h / cell))
     x = (np.arange(cols) + 0.5) * cell
@@ -88,3 +94,46 @@ def write_surface(
     crs = config.crs if crs == "" else crs
     layout = Layout(cols, rows, transform, crs, "float32", float("nan"), bands, units=(unit,) * bands)
     return write_geotiff(path, [z] * bands, layout)
+
+
+def tin_of(tif: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """(points (n, 3) x, y, z in the raster's units, faces (m, 3) 0-based) of a GeoTIFF's valid centres."""
+    with rasterio.open(tif) as ds:
+        z, t = ds.read(1).astype(np.float64), ds.transform
+    rows, cols = z.shape
+    cc, rr = np.meshgrid(np.arange(cols) + 0.5, np.arange(rows) + 0.5)
+    x, y = t.c + t.a * cc.ravel(), t.f + t.e * rr.ravel()  # north-up
+    idx = np.arange(rows * cols).reshape(rows, cols)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    faces = np.r_[np.c_[a, b, d], np.c_[a, d, c]]
+    zz = z.ravel()
+    faces = faces[np.isfinite(zz[faces]).all(axis=1)]
+    return np.c_[x, y, zz], faces
+
+
+def write_landxml(
+    path: str | Path,
+    points: np.ndarray,
+    faces: np.ndarray,
+    *,
+    unit: str = "meter",
+    epsg: int | None = None,
+    name: str = "design",
+    namespace: str = NS,
+) -> Path:
+    """Write ``points`` (x, y, z in metres) and ``faces`` (0-based) as a LandXML 1.2 TIN surface:
+    ``P`` as "northing easting elevation" in ``unit`` (meter, foot, USSurveyFoot), ids from 1."""
+    f = FEET.get(unit, 1.0)
+    system = "Imperial" if unit in FEET else "Metric"
+    crs = "" if epsg is None else f'  <CoordinateSystem name="design" epsgCode="{epsg}"/>\n'
+    pts = "\n".join(f'<P id="{i + 1}">{y / f:.6f} {x / f:.6f} {z / f:.6f}</P>' for i, (x, y, z) in enumerate(points))
+    tris = "\n".join(f"<F>{a + 1} {b + 1} {c + 1}</F>" for a, b, c in faces)
+    xmlns = f' xmlns="{namespace}"' if namespace else ""
+    text = (
+        f'<?xml version="1.0" encoding="UTF-8"?>\n<LandXML{xmlns} version="1.2">\n'
+        f'  <Units><{system} linearUnit="{unit}" areaUnit="squareMeter" volumeUnit="cubicMeter"/></Units>\n{crs}'
+        f'  <Surfaces><Surface name="{name}"><Definition surfType="TIN">\n<Pnts>\n{pts}\n</Pnts>\n'
+        f"<Faces>\n{tris}\n</Faces>\n</Definition></Surface></Surfaces>\n</LandXML>\n"
+    )
+    Path(path).write_text(text)
+    return Path(path)

@@ -1,5 +1,5 @@
 """A composed site's world: the drawn description laid on the scenes' terrain and misalignment
-(:class:`..world._World`), its ground in each epoch, and its exact truth."""
+(:class:`..world.World`), its ground in each epoch, and its exact truth."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 
-from ..config import SceneConfig
-from ..features import features_dz
-from ..hazards import dry
-from ..synthetic import _truth
-from ..world import _World
+from soilvolume.scenes.config import SceneConfig
+from soilvolume.scenes.features import features_dz
+from soilvolume.scenes.hazards import dry
+from soilvolume.scenes.synthetic import world_truth
+from soilvolume.scenes.world import World
 
 CRS = (("EPSG:32654", 500_000.0, 3_900_000.0), ("EPSG:32617", 420_000.0, 4_500_000.0))
 CRS += (("EPSG:25832", 690_000.0, 5_330_000.0), ("EPSG:32633", 380_000.0, 6_100_000.0))
@@ -43,7 +43,7 @@ class Site:
             origin=(ox + 1000.0 * (seed % 97), oy + 1000.0 * (seed % 89), round(desc["z0"] - 60.0, 2)),
             overlap=desc["coverage"]["overlap"],
         )
-        self.world = _World(seed, self.config)
+        self.world = World(seed, self.config)
         w = self.world
         dx, dy = w.ax0, w.ay0
         self.change = [_moved(f, dx, dy) for work in desc["works"] for f in work["change"]]
@@ -119,7 +119,7 @@ class Site:
     def truth(self) -> dict:
         """truth.json: the soil's exact net/cut/fill (analytic integrals of the works; nothing
         that is not soil), the misalignment, the features and the drawn description."""
-        t = _truth(self.world)
+        t = world_truth(self.world)
         fill = sum(f["volume"] for f in self.change if f["sign"] > 0)
         cut = sum(f["volume"] for f in self.change if f["sign"] < 0)
         o = self.config.origin

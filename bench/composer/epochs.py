@@ -8,10 +8,12 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import laspy
 import numpy as np
 
-from ..nuisances import CAR, GREEN, SOIL, STONE, STRAY, colours, returns
-from ..synthetic import _las_header
+from soilvolume.scenes.nuisances import CAR, GREEN, SOIL, STONE, STRAY, colours, returns
+from soilvolume.scenes.synthetic import las_header
+
 from .objects import HIT, LIDAR_CLASS, VEGETATION, stamp_surface
 from .site import Site
 
@@ -125,15 +127,13 @@ def epoch_points(site: Site, epoch: int) -> tuple[np.ndarray, np.ndarray, dict]:
 
 def write_site(site: Site, directory, scale: float = 0.001) -> tuple[Path, Path, Path]:
     """Write before.las, after.las (LAS 1.4, the CRS, the sensors' fields) and truth.json."""
-    import laspy
-
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
     paths = (d / "before.las", d / "after.las", d / "truth.json")
     for epoch in (0, 1):
         xyz, cls, fields = epoch_points(site, epoch)
         cfg = replace(site.config, signals=site.desc["sensors"][epoch]["signals"])
-        las = laspy.LasData(_las_header(cfg, scale))
+        las = laspy.LasData(las_header(cfg, scale))
         las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
         las.classification = cls
         for name, values in fields.items():

@@ -1,4 +1,6 @@
-"""The plugin object QGIS creates through ``classFactory``."""
+"""The plugin object QGIS creates through ``classFactory``: the Processing provider registered,
+a menu entry and a toolbar button, the engine's environment checked. Above both ``processing/``
+(the provider) and ``plugin/`` (the engine's environment and the child process it runs in)."""
 
 from __future__ import annotations
 
@@ -8,9 +10,9 @@ from qgis.core import QgsApplication
 from qgis.PyQt.QtGui import QIcon
 from qgis.PyQt.QtWidgets import QAction
 
-from ..processing.base import ICON
-from ..processing.provider import SoilVolumeProvider
-from .installer import DependencyBar
+from .plugin.installer import DependencyBar
+from .processing.base import ICON
+from .processing.provider import SoilVolumeProvider
 
 MENU = "&Soil volume change"
 MAIN_ALGORITHM = "soilvolume:estimatevolumechange"

@@ -1,0 +1,71 @@
+"""The coarse registration: FPFH features + RANSAC (Open3D) on column surfaces, kept only within
+the georeferencing prior unless ``--coarse fpfh`` forces it."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..core.types import StageQuality
+from ..options import Options
+from . import columns
+from .fit import evaluate
+from .ground import cap_voxel
+from .o3d import _o3d, to_pcd
+from .rigid import rotation_deg, shift_at
+
+MAX_COARSE_POINTS = 15_000
+COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
+
+
+def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
+    """The coarse stage (``--coarse``): FPFH + RANSAC, accepted within the GPS error prior (or
+    forced by ``fpfh``), scored point to point at 1.5 voxels; skipped with ``none``."""
+    t0 = time.perf_counter()
+    if options.coarse == "none":
+        return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
+    t = coarse_fpfh(after_xyz, before_xyz, options.coarse_voxel, options.seed)
+    src, tgt = to_pcd(after_xyz, options.coarse_voxel), to_pcd(before_xyz, options.coarse_voxel)
+    fit, rmse = evaluate(src, tgt, t, 1.5 * options.coarse_voxel)
+    centre = after_xyz.mean(axis=0)
+    rot, shift = rotation_deg(t), shift_at(t, centre)
+    within = rot <= options.max_gps_rotation and shift <= options.max_gps_shift
+    accepted = options.coarse == "fpfh" or within
+    note = f"FPFH+RANSAC moved the after centre {shift:.2f} m and rotated {rot:.2f} deg"
+    if not within:
+        note += f"; outside the GPS error prior ({options.max_gps_shift} m, {options.max_gps_rotation} deg)" + (
+            "" if accepted else ": rejected"
+        )
+    return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)
+
+
+def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, seed: int) -> np.ndarray:
+    """FPFH features + RANSAC on a coarse voxel (seeded); returns the 4x4 transform."""
+    o3d = _o3d()
+    reg = o3d.pipelines.registration
+    o3d.utility.random.seed(seed)
+    voxel = max(voxel, cap_voxel(source_xyz, MAX_COARSE_POINTS), cap_voxel(target_xyz, MAX_COARSE_POINTS))
+    src, tgt = _column_pcd(source_xyz, voxel), _column_pcd(target_xyz, voxel)
+    param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+    fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
+    dist = 1.5 * voxel
+    res = reg.registration_ransac_based_on_feature_matching(
+        src,
+        tgt,
+        fs,
+        ft,
+        True,
+        dist,
+        reg.TransformationEstimationPointToPoint(False),
+        3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
+    )
+    return np.asarray(res.transformation)
+
+
+def _column_pcd(xyz: columns.Target, voxel: float):
+    """Open3D cloud of the column means of ``xyz`` with their surface normals."""
+    xyz, normals = columns.column_surface(xyz, voxel)
+    return to_pcd(xyz, normals=normals)

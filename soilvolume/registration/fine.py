@@ -1,0 +1,198 @@
+"""The fine registration: robust coarse-to-fine ICP (:mod:`.icp`) or Open3D's GICP on column
+surfaces from the best starting pose, refined on the stable ground found at the pose reached; or
+the paper's PFH + SAC-IA (:mod:`.pfh`)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from ..core.cells import bounds
+from ..core.types import SoilVolumeError, StageQuality
+from ..options import Options
+from . import columns, icp
+from .fit import best_on, evaluate_surface, judged
+from .ground import cap_voxel, spacing, stable_source
+from .nearest import Nearest, tree_of
+from .o3d import _o3d, to_pcd
+from .pfh import pfh_sac_ia
+from .rigid import rotation_deg, shift_at, tilt_deg, transform_points
+
+# (voxel m, max correspondence distance m, Tukey k m): coarse-to-fine, shrinking distances.
+ICP_LEVELS = ((1.0, 6.0, 3.0), (1.0, 3.0, 1.0), (0.5, 1.5, 0.5), (0.25, 0.8, 0.25), (0.25, 0.4, 0.15))
+REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12))
+MAX_ICP_POINTS = 150_000  # per level: coarser voxels on very large sites
+MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
+ICP_TOL, ICP_ITER = 1e-6, 30
+STABLE_PASSES = 1  # refinements on the stable ground found at the current pose
+
+
+def finest_column(after_xyz: np.ndarray, gap: float) -> float:
+    """The side (m) of the finest columns the fine registration matches surfaces on (its last
+    level's voxel, no finer than the target's point spacing ``gap`` nor coarser than the cap on
+    large clouds): it cannot place the after survey more finely than this horizontally."""
+    return max(ICP_LEVELS[-1][0], gap, cap_voxel(after_xyz, MAX_ICP_POINTS))
+
+
+def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
+    """Whether a pose stays within the georeferencing prior (shift at the after centre, rotation
+    and tilt)."""
+    return (
+        shift_at(t, centre) <= options.max_gps_shift
+        and rotation_deg(t) <= options.max_gps_rotation
+        and tilt_deg(t) <= options.max_gps_tilt
+    )
+
+
+def fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=None) -> StageQuality:
+    """The fine stage from the best of the starting poses: ICP/GICP run their first (1 m) levels
+    from each start and finish from the one that fits best; PFH and none are scored whole.
+    ``before_xyz``: an array or a :class:`~soilvolume.registration.columns.Cloud`."""
+    t0 = time.perf_counter()
+    gap = spacing(columns.Cloud.points(before_xyz))
+    judge = judged(after_xyz, gap)
+    if options.fine in ("icp", "gicp"):
+        (t, label, rejected, (fit, rmse)), alt, refined = _icp_from_best(
+            judge, after_xyz, before_xyz, starts, options, check, gap
+        )
+        return StageQuality(
+            options.fine,
+            fit,
+            rmse,
+            t,
+            True,
+            time.perf_counter() - t0,
+            f"started from the {label} pose",
+            alternative=alt,
+            beyond_prior=rejected,
+            poses=refined,
+        )
+    best: StageQuality | None = None
+    for init, label in starts:
+        if options.fine == "pfh":
+            src, tgt = dense if dense is not None else (after_xyz, columns.Cloud.points(before_xyz))
+            t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed)
+        else:
+            t = init
+        fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
+        q = StageQuality(options.fine, fit, rmse, t, True, 0.0, f"started from the {label} pose")
+        if best is None or _better(q, best):
+            best = q
+    assert best is not None
+    return replace(best, seconds=time.perf_counter() - t0)
+
+
+def _better(a: StageQuality, b: StageQuality) -> bool:
+    if abs(a.fitness - b.fitness) > 0.005:
+        return a.fitness > b.fitness
+    return a.rmse < b.rmse
+
+
+def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, gap: float):
+    """ICP from the best start on the margin of the after survey (``src``: :func:`judged`), then
+    refined twice on the stable ground found at the pose reached (works inside the survey never
+    pull the pose); the pose that fits the margin best within the georeferencing prior wins.
+    Returns ((transform, label, poses rejected beyond the prior, its (fitness, RMSE) on the
+    margin), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
+    uncertainty, None when there is none, and every refined pose, those beyond the prior too)."""
+    method, workers = options.fine, options.threads if options.threads > 0 else -1
+    head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
+    scored = []
+    for init, label in starts:
+        t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, True, gap, workers)
+        scored.append((-fit, rmse, label, t))
+    _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
+    t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap, workers=workers)
+    poses = [(init, lab) for init, lab in starts] + [(t, label)]
+    for _ in range(STABLE_PASSES):
+        src_stable = stable_source(after_xyz, before_xyz, t, gap=gap)
+        if len(src_stable) <= 100:
+            break
+        # src_stable is already in the before frame: refine a correction on top of t.
+        dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap, workers=workers)
+        t = dt @ t
+        poses.append((t, label))
+    centre = after_xyz.mean(axis=0)
+    allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
+    best, scores = best_on(src, before_xyz, allowed, gap)
+    others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
+    rejected = len(poses) - len(allowed)
+    label = best[1] + (f"; {rejected} pose(s) beyond the georeferencing prior rejected" if rejected else "")
+    refined = tuple(p[0] for p in poses[len(starts) :])
+    return (best[0], label, rejected, scores), (others[-1] if others else None), refined
+
+
+def icp_levels(
+    source_xyz: np.ndarray,
+    target_xyz: columns.Target,
+    init: np.ndarray,
+    levels=ICP_LEVELS,
+    method: str = "icp",
+    check: Callable[[], None] | None = None,
+    scores: bool = False,
+    gap: float | None = None,
+    workers: int = -1,
+):
+    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, :mod:`.icp`, or Open3D's
+    GICP) of column-mean surfaces (target normals from the column heights); with ``scores``
+    returns (transform, fitness, inlier RMSE) of the last level. ``gap``: the target's point
+    spacing; ``target_xyz``: an array or a :class:`~soilvolume.registration.columns.Cloud`;
+    ``workers``: the nearest-neighbour searches' threads (-1: all cores)."""
+    t, fit, rmse = init.copy(), 0.0, 0.0
+    cache: dict[float, tuple] = {}
+    cap = cap_voxel(source_xyz, MAX_ICP_POINTS)
+    gap = 1.5 * (spacing(columns.Cloud.points(target_xyz)) if gap is None else gap)  # correspondences at least this far
+    for voxel, dist, k in levels:
+        voxel, dist = max(voxel, cap, gap / 1.5), max(dist, gap)  # no columns finer than the spacing
+        if check:
+            check()
+        if voxel not in cache:
+            src = _sampled(columns.columns(source_xyz, voxel).xyz, MAX_SOURCE_POINTS)
+            cache[voxel] = (src, *_surface(target_xyz, source_xyz, t, voxel, 2.0 + dist), {})
+        src, tgt, normals, kept = cache[voxel]  # kept: the voxel's k-d tree, or GICP's Open3D clouds
+        if method == "gicp":
+            t, fit, rmse = _gicp(src, tgt, normals, dist, t, k, kept)
+        else:
+            if "tree" not in kept:
+                kept["tree"] = tree_of(tgt)
+            nearest = Nearest(tgt, dist, workers, tree=kept["tree"])
+            res = icp.point_to_plane(src, tgt, normals, dist, t, k, ICP_TOL, ICP_ITER, workers, nearest)
+            t, fit, rmse = res.transform, res.fitness, res.inlier_rmse
+    return (t, fit, rmse) if scores else t
+
+
+def _gicp(src, tgt, normals, dist: float, t: np.ndarray, k: float, pcds: dict) -> tuple[np.ndarray, float, float]:
+    """One level of Open3D's generalized ICP (Tukey kernel) of arrays; their Open3D clouds are
+    kept in ``pcds`` for the next level on the same voxel."""
+    reg = _o3d().pipelines.registration
+    if "pcd" not in pcds:
+        pcds["pcd"] = (to_pcd(src), to_pcd(tgt, normals=normals))
+    crit = reg.ICPConvergenceCriteria(relative_fitness=ICP_TOL, relative_rmse=ICP_TOL, max_iteration=ICP_ITER)
+    est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
+    res = reg.registration_generalized_icp(*pcds["pcd"], dist, t, est, crit)
+    return np.asarray(res.transformation).copy(), float(res.fitness), float(res.inlier_rmse)
+
+
+def _surface(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
+    """The target's column surface and normals over the source's box under ``t`` + margin."""
+    lo, hi = bounds(transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t), 2)
+    xyz, normals = columns.column_surface(target_xyz, voxel, lo - margin, hi + margin)
+    if len(xyz) < 3:
+        raise SoilVolumeError(
+            "registration failed: the fine registration drifted off the before cloud "
+            "(no before points left under the after cloud); check that both clouds "
+            "cover the same site and their CRSs"
+        )
+    return xyz, normals
+
+
+def _sampled(xyz: np.ndarray, cap: int) -> np.ndarray:
+    """At most ``cap`` points of a cloud, a fixed-stride sample (deterministic): the source side
+    of ICP needs well-spread points, not all of them; the target keeps its density."""
+    n = len(xyz)
+    if n <= cap:
+        return xyz
+    return xyz[:: int(np.ceil(n / cap))]

@@ -1,0 +1,65 @@
+"""How well a pose fits: the share of the after points near the before surface, on terrain
+(:func:`evaluate_surface`) or point to point (Open3D), and the best of several poses judged on
+the margin of the after survey (works inside it do not fit any correct pose)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.cells import bounds
+from . import columns
+from .ground import margin_points, spacing
+from .o3d import _o3d
+from .rigid import transform_points
+
+EVAL_DISTANCE = 0.4
+
+
+def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> tuple[float, float]:
+    """(fitness, inlier RMSE) of ``t`` at ``distance`` (Open3D, point to point)."""
+    o3d = _o3d()
+    ev = o3d.pipelines.registration.evaluate_registration(source, target, distance, t)
+    return float(ev.fitness), float(ev.inlier_rmse)
+
+
+def evaluate_surface(
+    source_xyz: np.ndarray,
+    target_xyz: columns.Target,
+    t: np.ndarray,
+    distance: float = EVAL_DISTANCE,
+    gap: float | None = None,
+) -> tuple[float, float]:
+    """(fitness, RMSE) on terrain: the fraction of source points within ``distance`` of the
+    tangent plane of the target surface (columns of max(0.25 m, 2 point spacings)), and the RMS
+    of those distances. Meaningful on sparse clouds, unlike point-to-point. ``target_xyz``: an
+    array or a :class:`~soilvolume.registration.columns.Cloud` (its cuts remembered)."""
+    src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
+    gap = spacing(columns.Cloud.points(target_xyz)) if gap is None else gap
+    lo, hi = bounds(src, 2)
+    cols = columns.columns(target_xyz, max(0.25, 2 * gap), lo - 1.0, hi + 1.0)
+    if len(cols.xyz) == 0:
+        return 0.0, float("nan")
+    r = np.abs(columns.plane_residuals(src, cols, columns.normals(cols)))
+    ok = r <= distance
+    fit = float(ok.sum() / max(len(src), 1))
+    return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
+
+
+def judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The after points a pose is judged on: the margin of the after survey (works inside it do
+    not fit any correct pose), or all points when the margin is too thin to judge."""
+    ring = margin_points(after_xyz, gap)
+    return ring if len(ring) >= max(500, 0.05 * len(after_xyz)) else after_xyz
+
+
+def best_on(src, before_xyz, poses, gap: float) -> tuple[tuple[np.ndarray, str], tuple[float, float]]:
+    """The pose under which the margin points fit the before surface best (the last, most
+    refined one on ties): a pass that drifted never replaces a better pose; and its (fitness,
+    RMSE) there (:func:`evaluate_surface`)."""
+    best, best_key, scores = poses[-1], None, (float("nan"), float("nan"))
+    for k, (t, label) in enumerate(poses):
+        fit, rmse = evaluate_surface(src, before_xyz, t, gap=gap)
+        key = (round(fit, 2), -np.nan_to_num(rmse, nan=1e9), k)
+        if best_key is None or key > best_key:
+            best, best_key, scores = (t, label), key, (fit, rmse)
+    return best, scores
