@@ -13,7 +13,7 @@ from shapely.geometry.base import BaseGeometry
 
 from .survey import NOISE_FLOOR, Survey
 
-HALF_WINDOW = 4  # cells each side of a toe point whose heights (those outside) its plane is fitted to
+HALF_WINDOW = 5  # cells each side of a toe point whose heights (those outside) its plane is fitted to
 FEWEST = 6  # cells outside the polygon a toe point's fit needs, else it takes the inside ones too
 TRIM = 2.5  # cells this many robust deviations off a toe point's plane are left out (a skirt: above it)
 PASSES = 3  # fits of a toe point's plane, each without the cells the last one found off it

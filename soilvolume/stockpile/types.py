@@ -72,16 +72,18 @@ def parse_base(text: str, surface: np.ndarray | None = None) -> Base:
     raise PileError(f"base '{text}': use one of {', '.join(TOE_BASES)}, elevation:Z or surface:DEM")
 
 
-def checked_density(density: float | None, name: str) -> float | None:
-    """``density`` (t/m3) if None or a finite number above 0, else a :class:`PileError`."""
+def checked_density(density: float | None, name: str = "") -> float | None:
+    """``density`` (t/m3) if None or a finite number above 0, else a :class:`PileError` naming
+    the pile ``name`` (none: the density given for every pile)."""
     if density is None:
         return None
+    what = f"pile '{name}': density" if name else "density"
     try:
         value = float(density)
     except (TypeError, ValueError):
-        raise PileError(f"pile '{name}': density '{density}' is not a number (t/m3)") from None
+        raise PileError(f"{what} '{density}' is not a number (t/m3)") from None
     if not math.isfinite(value) or value <= 0:
-        raise PileError(f"pile '{name}': density must be above 0 t/m3, not {density}")
+        raise PileError(f"{what} must be above 0 t/m3, not {density}")
     return value
 
 
