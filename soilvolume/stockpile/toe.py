@@ -49,9 +49,10 @@ class Toe:
 
 def toe_points(polygon: BaseGeometry, spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x, y, weight) of points along each exterior ring of ``polygon``: its vertices and points
-    at most ``spacing`` apart, each weighted by half the distance to its neighbours."""
+    at most ``spacing`` apart, each weighted by half the distance to its neighbours; the same
+    points whichever vertex a ring starts at and whichever way it runs (normalised first)."""
     xs, ys, ws = [], [], []
-    for part in shapely.get_parts(polygon):
+    for part in shapely.get_parts(shapely.normalize(polygon)):
         ring = part.exterior
         verts = np.asarray(ring.coords)[:-1]
         at = np.array([ring.project(shapely.Point(v)) for v in verts])
