@@ -4,6 +4,8 @@ warnings, tonnage, and bad polygons and densities refused in one line."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 import shapely
@@ -203,3 +205,14 @@ def test_a_toe_through_another_object_is_warned():
     assert clear.warnings == () and clear.volume_m3 == pytest.approx(volume, rel=0.01)
     crossed = stockpile_inventory(survey, [Pile(outline.buffer(6.5), "crossed")]).piles[0]
     assert any(w.startswith("toe runs over something") for w in crossed.warnings), crossed.warnings
+
+
+def test_a_toe_partly_outside_the_survey_is_warned_without_a_library_warning(yards):
+    yard, survey, _ = yards[0]
+    p = yard.piles[0]
+    beyond = shapely.union(p.polygon, shapely.box(-8, 4, 2, 10))  # its west side 8 m beyond the survey
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r = stockpile_inventory(survey, [Pile(beyond, "edge")]).piles[0]
+    assert any("of the toe has no survey heights" in w for w in r.warnings), r.warnings
+    assert r.area_m2 < beyond.area  # only the covered cells count

@@ -101,6 +101,8 @@ def toe_warnings(toe: Toe) -> tuple[str, ...]:
             f"toe runs over something: {toe.weight[far].sum():.1f} m of it stands up to "
             f"{np.max(np.abs(off[far])):.2f} m off the toe's plane (another object, a pile's skirt or uneven ground)"
         )
+    if toe.missing > 0:
+        out.append(f"{toe.missing:.1f} m of the toe has no survey heights near it (left out of the base)")
     return tuple(out)
 
 

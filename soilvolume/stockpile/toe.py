@@ -25,7 +25,8 @@ class Toe:
     ``z`` (m), each point's share ``weight`` (m) of the toe's length (trapezoid rule: the ring's
     vertices are points, so the mean of any height linear along each edge is exact), the noise
     of each toe height ``sigma`` (m) and of a cell ``noise`` (m), and ``reach`` (m) the side of the
-    window of cells each toe height is fitted to (heights closer than it share cells)."""
+    window of cells each toe height is fitted to (heights closer than it share cells); ``missing``
+    (m) the length of toe without any measured cell near it (left out)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -34,6 +35,7 @@ class Toe:
     sigma: np.ndarray
     noise: float
     reach: float
+    missing: float = 0.0
 
     def plane(self) -> np.ndarray:
         """The least-squares plane ``(a, b, c)`` of ``z = a + b x + c y`` through the toe heights
@@ -78,7 +80,8 @@ def toe_of(polygon: BaseGeometry, survey: Survey) -> Toe | None:
     n = max(4.0, float(np.median(used[ok])))  # a plane's 3 terms fitted: residuals have n - 3 degrees of freedom
     noise = max(NOISE_FLOOR, 1.4826 * float(np.nanmedian(np.abs(resid[ok]))) * np.sqrt(n / (n - 3)))
     sigma = noise * np.sqrt(factor[ok])  # the fitted plane's height at the toe point
-    return Toe(x[ok], y[ok], z[ok], w[ok], sigma, noise, (2 * HALF_WINDOW + 1) * grid.cell)
+    reach = (2 * HALF_WINDOW + 1) * grid.cell
+    return Toe(x[ok], y[ok], z[ok], w[ok], sigma, noise, reach, float(w[~ok].sum()))
 
 
 def _windows(survey: Survey, x: np.ndarray, y: np.ndarray, polygon: BaseGeometry) -> tuple[np.ndarray, ...]:
@@ -113,6 +116,7 @@ def local_planes(survey: Survey, x: np.ndarray, y: np.ndarray, polygon: BaseGeom
         coef, _ = _fit(dx, dy, h, use)
         resid = h - (coef[:, :1] + coef[:, 1:2] * dx + coef[:, 2:] * dy)
         masked = np.where(use, np.abs(resid), np.nan)
+        masked[~use.any(axis=1)] = 0.0  # a toe point without any cell: no all-NaN median (and its warning)
         s = np.maximum(1.4826 * np.nanmedian(masked, axis=1, keepdims=True), NOISE_FLOOR)
         keep = use & (np.abs(resid) < TRIM * s)
         keep |= keep.sum(axis=1, keepdims=True) < 3  # too few left: keep what there is
