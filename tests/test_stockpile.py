@@ -216,3 +216,18 @@ def test_a_toe_partly_outside_the_survey_is_warned_without_a_library_warning(yar
         r = stockpile_inventory(survey, [Pile(beyond, "edge")]).piles[0]
     assert any("of the toe has no survey heights" in w for w in r.warnings), r.warnings
     assert r.area_m2 < beyond.area  # only the covered cells count
+
+
+def test_a_hole_in_a_pile_face_is_interpolated_across(yards):
+    """Points missing over a 2 m disc of each round pile's face (a shadow, a wet patch): the
+    cells are interpolated linearly from around it, the volume stays within 1 % (measured:
+    0.21 % at most)."""
+    yard = yards[0][0]
+    for p in [p for p in yard.piles if p.shape != "windrow" and not p.on_slope]:
+        c = p.outline.centroid
+        r = np.sqrt(p.outline.area / np.pi)
+        hole = np.hypot(yard.x - (c.x + 0.7 * r), yard.y - c.y) < 2
+        survey = survey_from_points(yard.x[~hole], yard.y[~hole], yard.z[~hole])
+        got = stockpile_inventory(survey, [Pile(p.polygon, p.name)]).piles[0]
+        assert got.empty_share > 0.01
+        assert got.volume_m3 == pytest.approx(p.volume_m3, rel=0.01)

@@ -8,7 +8,7 @@ import numpy as np
 from .bases import base_heights, toe_base
 from .coverage import Window, window_of
 from .interval import base_spread, half_width
-from .survey import Survey
+from .survey import Survey, fill_linear
 from .toe import Toe, toe_of
 from .types import TOE_BASES, Base, Pile, PileError, PileVolume, checked_density, checked_polygon
 
@@ -33,7 +33,7 @@ def measure_pile(survey: Survey, pile: Pile, base: Base, index: int = 0, density
     toe = toe_of(polygon, survey)
     if toe is None:
         raise PileError(f"pile '{name}': its toe line lies outside the survey")
-    h = window.of(survey.filled)
+    h = fill_linear(window.of(survey.heights), window.of(survey.filled))
     volumes = {k: _volume(h - toe_base(k, toe, window.x, window.y), window, survey) for k in TOE_BASES}
     d = h - base_heights(base, toe, window)
     if not np.isfinite(d[window.share > 0]).all():
@@ -110,4 +110,4 @@ def _empty_warning(empty: float) -> tuple[str, ...]:
     """A warning when a pile's area is partly without a measured height (filled from the nearest)."""
     if empty <= EMPTY_WARNING:
         return ()
-    return (f"{100 * empty:.0f} % of the pile's area has no measured height (filled from the nearest cells)",)
+    return (f"{100 * empty:.0f} % of the pile's area has no measured height (interpolated from the cells around)",)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
+from scipy.interpolate import griddata
 
 from ..core.types import GridSpec
 from ..dem.grid import average_height, cell_ids, choose_cell, make_grid
@@ -98,3 +99,21 @@ def fill_nearest(h: np.ndarray) -> np.ndarray:
         return h.copy()
     idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
     return h[tuple(idx)]
+
+
+def fill_linear(h: np.ndarray, nearest: np.ndarray) -> np.ndarray:
+    """``h`` (a window of heights) with its empty cells interpolated linearly between the known
+    ones around them (a hole in a pile's face follows the face); those outside the known cells'
+    hull take ``nearest`` (:attr:`Survey.filled`'s)."""
+    empty = ~np.isfinite(h)
+    if not empty.any() or empty.all():
+        return np.where(empty, nearest, h)
+    rows, cols = np.nonzero(~empty)
+    er, ec = np.nonzero(empty)
+    try:
+        z = griddata((rows, cols), h[rows, cols], (er, ec), method="linear")
+    except Exception:  # noqa: BLE001 - Qhull refuses known cells all in a line
+        z = np.full(er.shape, np.nan)
+    out = h.copy()
+    out[er, ec] = np.where(np.isfinite(z), z, nearest[er, ec])
+    return out
