@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from .. import api
+from ..inputs.crs import parse_crs
 from ..inputs.stream import open_source
 from ..validate import check_bounds
 from .feedback import hooks, send_result
@@ -47,11 +48,7 @@ def run(ns: argparse.Namespace) -> int:
 def bounds_in_cloud_crs(cloud: Path, crs: str | None, bounds: tuple, bounds_crs: str) -> tuple:
     """``bounds`` (in ``bounds_crs``) as the box around them in the cloud's CRS (``crs`` when
     given, else its header's); unchanged when the cloud has no CRS."""
-    # lazy: pyproj (and inputs.crs, which imports it) costs ~170 ms a command line without
-    # --bounds-crs never needs
-    import pyproj
-
-    from ..inputs.crs import parse_crs
+    import pyproj  # lazy: ~170 ms, for --bounds-crs only
 
     wkt = crs or open_source(cloud).crs_wkt
     if not wkt:
