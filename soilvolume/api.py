@@ -30,12 +30,7 @@ def estimate(
     after_pipeline: str | Path | None = None,
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
-    from .core.preload import preload
-    from .registration.o3d import needed
-
     options = check_options(options or Options())
-    uses_open3d = options.georeferencing != "precise" and needed(options.fine, options.coarse)
-    preload(uses_open3d, options.threads)  # overlaps the reading
     from .workflow.estimate import run_estimate
 
     return run_estimate(

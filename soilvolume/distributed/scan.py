@@ -110,7 +110,6 @@ def dask_loader(
     reads that keep full-resolution points, fall back to streaming here); ``wait_check`` runs
     while the tasks are waited for (signals, cancellation); ``cache`` (a
     :class:`.pointcache.PointCache`): the VPC tiles read are kept on the workers for the grid."""
-    from ..core.preload import idle
     from .cluster import completed
 
     def loader(
@@ -139,8 +138,6 @@ def dask_loader(
         futures = _submit(client, left, args, taken, kept, crop)
         if send:
             kept.prefetch()
-        if futures:
-            idle()  # the driver waits for the workers: the later steps' imports meanwhile
         parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
         for k, part in enumerate(chain(here, completed(client, futures, f"reading {src.path}", wait_check)), 1):
             waiting[position[part.pop("unit")]] = part.pop("sums")
