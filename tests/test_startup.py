@@ -54,7 +54,8 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
         "try:\n"
         "    info = client.run(lambda: (os.getppid(), os.environ.get('OMP_NUM_THREADS'),\n"
         "                               'soilvolume.distributed.tiletask' in sys.modules,\n"
-        "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0))))\n"
+        "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0)),\n"
+        "                               [sys.modules.get(m, 0) for m in ('requests', 'jinja2')]))\n"
         "finally:\n"
         "    cluster.shut(c, client)\n"
         "print(json.dumps([os.getpid(), sorted(info.values())]))\n"
@@ -66,6 +67,7 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     parents = {w[0] for w in workers}
     assert len(parents) == 1 and driver not in parents  # one server forked both (spawned: the driver)
     assert all(w[1] == "1" and w[2] for w in workers)
+    assert all(w[4] == [None, None] for w in workers)  # the extras hidden (process.hide_extras) before Dask and laspy
     # the server started before any nanny set Dask's pre-spawn environment: it had it from its start
     # (OpenBLAS reads its threads as the server imports numpy), but for Dask's malloc trim threshold
     # (cluster.LOCAL_WORKER_ENV: glibc's own, as in-process)
@@ -193,3 +195,19 @@ def test_the_command_leaves_without_the_interpreters_teardown_its_output_flushed
     probe = entry_probe("atexit", ["atexit.register(lambda: print('teardown'))", "print('done', end='')", "return 3"])
     r = run_python(probe)
     assert r.returncode == 3 and r.stdout == "done", (r.stdout, r.stderr)
+
+
+def test_the_command_hides_the_optional_extras_from_laspy_and_dask():
+    """The command's process sees requests and jinja2 as not installed (``process.hide_extras``):
+    laspy and Dask import without them and work."""
+    probe = entry_probe(
+        "json",
+        [
+            "import laspy, dask.distributed",
+            "print(json.dumps([sys.modules.get(m, 0) for m in ('requests', 'jinja2')] + [laspy.__name__]))",
+            "return 0",
+        ],
+    )
+    r = run_python(probe)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout.splitlines()[-1]) == [None, None, "laspy"]

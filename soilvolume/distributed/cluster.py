@@ -197,8 +197,9 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
 
 # what the tile tasks run (the forkserver imports them once, for every worker it forks)
 TASK_MODULES = ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj")
-#: imported once by the forkserver, for every worker forked from it
-FORKSERVER_PRELOAD = ("distributed", WORKER_INIT, *TASK_MODULES)
+#: imported once by the forkserver, for every worker forked from it (WORKER_INIT first: the
+#: extras it hides are left out of Dask's and laspy's imports)
+FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES)
 
 
 def _start_method() -> str | None:

@@ -1,10 +1,14 @@
-"""Run by every Dask worker process this engine starts (a ``preload``): a terminal's Ctrl-C goes
-to the whole process group, and only the driver acts on it (it stops the run and shuts the
-cluster down); a worker killed by it would fail its tasks (``FutureCancelledError``)."""
+"""Run by every Dask worker process this engine starts (a ``preload``; the local cluster's
+forkserver imports it first, for the workers it forks): a terminal's Ctrl-C goes to the whole
+process group, and only the driver acts on it (it stops the run and shuts the cluster down); a
+worker killed by it would fail its tasks (``FutureCancelledError``). The optional extras no task
+uses are hidden from the imports that follow (:func:`soilvolume.process.hide_extras`)."""
 
 from __future__ import annotations
 
 import signal
+
+from ..process import hide_extras
 
 
 def ignore_interrupts() -> None:
@@ -20,3 +24,4 @@ def dask_setup(worker=None) -> None:  # noqa: ARG001 - the preload protocol
 
 
 ignore_interrupts()
+hide_extras()
