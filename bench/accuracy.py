@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass, field, replace
 from datetime import datetime, timezone
 from pathlib import Path
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as in the command (soilvolume.__main__.one_blas_thread)
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # as in the command (soilvolume.process.one_blas_thread)
 
 import numpy as np  # noqa: E402
 

@@ -12,9 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from .core.hooks import Cancelled, Hooks, Result
-from .core.preload import preload
 from .options import Options
-from .registration.o3d import needed
 from .validate import check_bounds, check_options
 from .workflow.commands import run_cloud_to_dem, run_register
 from .workflow.estimate import run_estimate
@@ -37,8 +35,6 @@ def estimate(
 ) -> Result:
     """The whole method: read, crop, register, compensate, grid, difference, volumes, report."""
     options = check_options(options or Options())
-    uses_open3d = options.georeferencing != "precise" and needed(options.fine, options.coarse)
-    preload(uses_open3d, options.threads)  # overlaps the reading
     return run_estimate(
         Path(before),
         Path(after),

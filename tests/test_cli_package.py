@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import importlib
 import re
+import subprocess
+import sys
 
 import pytest
 
@@ -18,6 +20,9 @@ SKIP = {"keep_registered_cloud"}  # estimate's --registered-cloud says it
 ALL_FLAGS = {"--" + f.name.replace("_", "-") for c in TABLE_COMMANDS for f in command_fields(c)} - {
     "--keep-registered-cloud"
 }
+
+
+COMMANDS = ["estimate", "dem", "register", "volume", "series", "pipeline", "demo", "selftest"]
 
 
 def _commands() -> list[str]:
@@ -72,8 +77,26 @@ def test_each_command_lives_in_its_own_module_with_its_parser_and_its_run(comman
     assert module.NAME == command
     assert callable(module.add_parser) and callable(module.run)
     app = importlib.import_module("soilvolume.cli.app")
-    assert module in app.COMMANDS
-    assert app.RUN[command] is module.run
+    assert app.command(command) is module  # the registry resolves the name to its module
     sub = argparse.ArgumentParser().add_subparsers()
     module.add_parser(sub)
     assert list(sub.choices) == [command]  # the module declares its own sub-parser, and only it
+
+
+@pytest.mark.parametrize("command", [*COMMANDS, None])
+def test_a_command_line_loads_the_module_of_its_command_and_no_other(command):
+    """The registry imports only the module of the command being run (start-up): ``estimate``
+    never loads the scene generators of ``demo`` and ``selftest`` nor ``pipeline``'s emitter;
+    without a command (``--help``) all eight are loaded, to be listed."""
+    argv = [command, "--out", "x"] if command else ["--help"]
+    code = (
+        "import sys\n"
+        "from soilvolume.cli import build_parser\n"
+        f"build_parser({argv!r})\n"
+        f"print(sorted(c for c in {COMMANDS!r} if 'soilvolume.cli.' + c in sys.modules))\n"
+        "print('soilvolume.scenes.demo' in sys.modules, 'soilvolume.pipelines.emit' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    loaded, heavy = done.stdout.splitlines()
+    assert loaded == str(sorted([command] if command else COMMANDS))
+    assert heavy == f"{command in ('demo', None)} {command in ('pipeline', None)}"

@@ -176,6 +176,21 @@ def test_a_library_of_other_source_is_not_loaded(tmp_path, monkeypatch):
     native.reset()
 
 
+def test_without_a_build_the_numpy_path_runs_nothing_is_compiled_and_only_debug_says_so(tmp_path, monkeypatch, capsys):
+    """No library of this source: no compiler is run (the kernels are built at install, never
+    during a run), the numpy path runs, and the line saying so appears under SOILVOLUME_DEBUG only."""
+    monkeypatch.setenv(native.DIR_ENV, str(tmp_path))
+    monkeypatch.setattr(native, "HERE", tmp_path)
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: pytest.fail("a compiler was run"))
+    for debug, said in (("", ""), ("1", f"soilvolume: no {native.library_name()}")):
+        monkeypatch.setenv("SOILVOLUME_DEBUG", debug)
+        native.reset()
+        assert native.kernels() is None
+        err = capsys.readouterr().err
+        assert (err.startswith(said) if said else err == "") and list(tmp_path.iterdir()) == []
+    native.reset()
+
+
 def test_a_run_gives_the_same_outputs_with_and_without_the_kernels(lib, misaligned_pair, tmp_path):
     """A whole estimate: every raster and the change areas byte for byte, and the volumes."""
     before, after, _ = misaligned_pair

@@ -207,7 +207,7 @@ def test_tommy_thompson_states_no_confidence_beside_not_reliable(tommy):
     a few lines below the verdict; now one statement, consistent with it."""
     import re
 
-    from soilvolume.cli import front_end_summary
+    from soilvolume.cli.estimate import front_end_summary
 
     report, out = tommy
     assert report["quality"]["verdict"] == "not reliable"

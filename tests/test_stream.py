@@ -11,7 +11,7 @@ from soilvolume.core.types import SoilVolumeError
 from soilvolume.inputs import stream
 from soilvolume.inputs.footprint import PolygonMask, footprint, inside
 from soilvolume.inputs.io import RawPoints, write_las
-from soilvolume.inputs.stream import ColumnThinner, from_raw, load, open_source, prefetch
+from soilvolume.inputs.stream import ColumnThinner, from_raw, load, open_source
 
 
 @pytest.fixture
@@ -66,17 +66,6 @@ def test_polygon_mask_matches_exact_test_away_from_edges():
     pts = rng.uniform(-10, 60, (50_000, 2))
     fast, exact = PolygonMask(poly, resolution=0.5)(pts), inside(pts, poly)
     assert (fast != exact).mean() < 0.02  # only cells on the boundary can differ
-
-
-def test_read_ahead_errors_reach_the_caller():
-    def chunks():
-        yield 1
-        raise SoilVolumeError("broken chunk")
-
-    it = prefetch(chunks())
-    assert next(it) == 1
-    with pytest.raises(SoilVolumeError, match="broken chunk"):
-        next(it)
 
 
 def test_truncated_las_is_reported(cloud, tmp_path):
@@ -178,29 +167,17 @@ def test_the_hull_is_qhulls_on_every_point(kind):
         assert np.array_equal(fp._hull(xy), pts[ConvexHull(pts).vertices])
 
 
-def test_the_footprint_test_runs_on_the_reading_thread(cloud, monkeypatch):
-    """With a plain shift the chunks arrive local, and the reading thread applies the footprint
-    test (the consumer is the busier thread); after any other conversion the consumer applies it.
-    Both load the same points."""
-    import threading
-
+def test_the_footprint_test_in_the_decoding_loads_what_the_consumer_loads(cloud, monkeypatch):
+    """With a plain shift the chunks arrive local and the footprint test runs in the decoding;
+    after any other conversion the consumer applies it. Both load the same points."""
     from soilvolume.inputs.prepare import Shift
 
     origin = np.array([500_010.0, 3_900_010.0, 49.0])
     monkeypatch.setattr(stream, "CHUNK", 1_000)
     las = open_source(cloud[0])
-    mask = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
-    threads: list[str] = []
-
-    def keep(xyz):
-        threads.append(threading.current_thread().name)
-        return mask(xyz)
-
+    keep = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
     box = np.array([-11.0, -11.0]), np.array([60.0, 40.0])
     fused = load(las, Shift(origin), "auto", keep, ColumnThinner(*box, 0.5))
-    on_reader, threads[:] = list(threads), []
     shifted = load(las, lambda x: x - origin, "auto", keep, ColumnThinner(*box, 0.5))
-    assert len(on_reader) > 3 and "MainThread" not in on_reader
-    assert set(threads) == {"MainThread"}
     assert 0 < fused.extra["cropped"] < fused.points
     assert fused.xyz.tobytes() == shifted.xyz.tobytes() and fused.thin.tobytes() == shifted.thin.tobytes()

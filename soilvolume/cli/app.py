@@ -1,9 +1,15 @@
 """The ``soilvolume`` program: the parser made of the command modules, and the one error path
-(every failure one line on stderr, and an error line for a program reading the protocol)."""
+(every failure one line on stderr, and an error line for a program reading the protocol).
+
+The commands are a registry, :data:`COMMANDS`: a name and its module's name. Only the module of
+the command being run is imported (:func:`command`, by name with importlib): ``soilvolume
+estimate`` never loads the scene generators of ``demo`` or the PDAL emitter of ``pipeline``.
+``--help`` and a command line without a command load them all, to list them."""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import re
 import sys
@@ -15,10 +21,13 @@ from ..core.nativelog import hold_native_stderr, quiet_library_warnings
 from ..core.outputs import os_problem
 from ..core.types import SoilVolumeError
 from ..protocol import Protocol, open_protocol
-from . import dem, demo, estimate, pipeline, register, selftest, series, volume
 
-#: the sub-commands in the order ``--help`` lists them: each module's ``add_parser`` and ``run``
-COMMANDS = (estimate, dem, register, volume, series, pipeline, demo, selftest)
+#: the sub-commands in the order ``--help`` lists them, each a module of this package with its
+#: ``add_parser`` and ``run`` (a new command is a new module named here)
+COMMANDS = {
+    name: f"{__package__}.{name}"
+    for name in ("estimate", "dem", "register", "volume", "series", "pipeline", "demo", "selftest")
+}
 
 
 class Parser(argparse.ArgumentParser):
@@ -30,16 +39,26 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"soilvolume: error: {one_line(text)}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The program's parser: one sub-parser per command module."""
+def command(name: str):
+    """The module of the command ``name`` (imported now if it was not)."""
+    return importlib.import_module(COMMANDS[name])
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The program's parser: one sub-parser per command module; with ``argv`` naming a command
+    first, that command's alone is built (the others listed by name, their modules not loaded)."""
     ap = Parser(
         prog="soilvolume",
         description="Soil volume change between two georeferenced point clouds (Shao et al. method, "
         "with robust registration and stable-ground correction).",
     )
     sub = ap.add_subparsers(dest="command", required=True)
-    for command in COMMANDS:
-        command.add_parser(sub)
+    chosen = argv[0] if argv and argv[0] in COMMANDS else None
+    for name in COMMANDS:
+        if chosen in (None, name):
+            command(name).add_parser(sub)
+        else:
+            sub.add_parser(name)
     return ap
 
 
@@ -68,19 +87,17 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
     quiet_library_warnings()
     with handle_signals(then_ignore=argv is None):  # None: the program exits right after
-        ns = build_parser().parse_args(argv)
+        argv = sys.argv[1:] if argv is None else argv
+        ns = build_parser(argv).parse_args(argv)
         ns.protocol = open_protocol() if getattr(ns, "progress", "text") == "jsonl" else None
         _PROTOCOL[:] = [ns.protocol] if ns.protocol else []
         with hold_native_stderr():  # dropped: no library's message unasked (SOILVOLUME_DEBUG=1 shows them)
             return _run(ns)
 
 
-RUN = {command.NAME: command.run for command in COMMANDS}
-
-
 def _run(ns: argparse.Namespace) -> int:
     try:
-        return RUN[ns.command](ns)
+        return command(ns.command).run(ns)
     except Interrupted as exc:
         return _fail(str(exc), exc.exit_code, exc)
     except SoilVolumeError as exc:

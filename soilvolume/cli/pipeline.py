@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..pipelines.emit import emit_pipelines
 from .flags import add_options, options_from
 
 NAME = "pipeline"
@@ -27,10 +28,6 @@ def add_parser(sub) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """Write the two pipelines; print their paths."""
-    # lazy: pipelines.emit imports pyproj and SciPy at its import (~0.5 s), which no other
-    # command's start-up (nor --help) should pay
-    from ..pipelines.emit import emit_pipelines
-
     for path in emit_pipelines(ns.before, ns.after, ns.emit, options_from(ns)):
         print(path)
     return 0

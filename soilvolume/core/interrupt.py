@@ -17,7 +17,7 @@ from contextlib import contextmanager
 
 from .memlimit import out_of_memory
 from .types import SoilVolumeError
-from .watchdog import Watchdog
+from .watchdog import Watchdog, remove_process_temp_dir
 
 _pending: list[int] = []
 _stopping: list[bool] = []
@@ -110,15 +110,3 @@ def run_cleanups() -> str | None:
         except Exception:  # noqa: BLE001 - best effort on the way out
             pass
     return kept
-
-
-def remove_process_temp_dir() -> None:
-    """The folder multiprocessing made in TMPDIR for this process (the socket of the Dask workers'
-    forkserver): the interpreter's exit removes it, an exit through ``os._exit`` (the command's
-    quick one, a forced one) does not."""
-    process = sys.modules.get("multiprocessing.process")
-    tempdir = process.current_process()._config.get("tempdir") if process else None
-    if tempdir:
-        import shutil
-
-        shutil.rmtree(tempdir, ignore_errors=True)

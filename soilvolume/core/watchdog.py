@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import os
 import select
+import shutil
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -136,3 +138,13 @@ def _sample() -> tuple[int, dict[str, int]] | None:
     except (OSError, ValueError, IndexError):
         return None
     return size, system
+
+
+def remove_process_temp_dir() -> None:
+    """The folder multiprocessing made in TMPDIR for this process (the socket of the Dask workers'
+    forkserver): the interpreter's exit removes it, an exit through ``os._exit`` (the command's
+    quick one, a forced one) does not."""
+    process = sys.modules.get("multiprocessing.process")
+    tempdir = process.current_process()._config.get("tempdir") if process else None
+    if tempdir:
+        shutil.rmtree(tempdir, ignore_errors=True)

@@ -17,7 +17,6 @@ from pathlib import Path
 
 from ..core import interrupt
 from ..core.hooks import Cancelled
-from ..core.leanimport import fast_yaml, lean_dask
 from ..core.types import SoilVolumeError, short_error
 from ..core.wording import opt
 
@@ -150,8 +149,7 @@ def shut(cluster, client) -> None:
 
 def connect(address: str):
     """(None, Client) of an existing cluster at ``address``, with at least one worker."""
-    with lean_dask():
-        from dask.distributed import Client
+    from dask.distributed import Client
 
     try:
         c = Client(address, timeout=CONNECT_S)
@@ -178,9 +176,8 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
     ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``; ``spawn``: workers
     started as on Windows and macOS, also on Linux (the install's self-test)."""
     method = "spawn" if spawn else _start_method() if processes else None  # first: the forkserver's imports
-    with lean_dask():
-        import dask
-        from dask.distributed import Client
+    import dask
+    from dask.distributed import Client
 
     extra = {"preload": [WORKER_INIT]} if processes else {}
     if scratch is not None:
@@ -199,10 +196,11 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
         raise
 
 
-# what the tile tasks run (a worker imports them as it starts: workerinit.warm)
+# what the tile tasks run (the forkserver imports them once, for every worker it forks)
 TASK_MODULES = ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj")
-#: imported once for every forked worker, with the garbage collector paused (forkpause, forkready)
-FORKSERVER_PRELOAD = (f"{__package__}.forkpause", "distributed", WORKER_INIT, *TASK_MODULES, f"{__package__}.forkready")
+#: imported once by the forkserver, for every worker forked from it (WORKER_INIT first: the
+#: extras it hides are left out of Dask's and laspy's imports)
+FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES)
 
 
 def _start_method() -> str | None:
@@ -220,9 +218,8 @@ def _start_method() -> str | None:
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
     os.environ.update(pre_spawn_environ())  # what each nanny sets before its worker starts: the server's, for all
     forkserver.ensure_running()
-    with lean_dask():
-        import dask
-        from distributed.utils import get_mp_context
+    import dask
+    from distributed.utils import get_mp_context
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         get_mp_context()  # Dask sets its preload list on first use: for a server running already, a no-op
@@ -236,19 +233,16 @@ def pre_spawn_environ() -> dict[str, str]:
     before Distributed is imported (0.3 s): its defaults are loaded as importing it would."""
     from importlib.util import find_spec
 
-    with lean_dask():
-        import dask
+    import dask
 
     spec = find_spec("distributed")
     defaults = Path(spec.origin).parent / "distributed.yaml" if spec is not None and spec.origin else None
     if defaults is not None and defaults.is_file():
         import yaml
 
-        with fast_yaml():
-            dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
+        dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
     else:  # a Distributed laid out otherwise: imported for its defaults
-        with lean_dask():
-            import distributed  # noqa: F401
+        import distributed  # noqa: F401
     env = dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}
     env = {**env, **LOCAL_WORKER_ENV}
     return {k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None}

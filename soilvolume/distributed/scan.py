@@ -15,7 +15,6 @@ import numpy as np
 
 from ..core import interrupt
 from ..core.cells import bounds, rows
-from ..core.preload import idle
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..inputs.thinning import Block
@@ -139,8 +138,6 @@ def dask_loader(
         futures = _submit(client, left, args, taken, kept, crop)
         if send:
             kept.prefetch()
-        if futures:
-            idle()  # the driver waits for the workers: the later steps' imports meanwhile
         done = chain(here, completed(client, futures, f"reading {src.path}", wait_check))
         parts = _gathered(done, todo, thinner, progress, src.path)
         return _loaded(parts, thinner, rule, indexed and src.vpc is None and not is_copc(src.path))

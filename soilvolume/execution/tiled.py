@@ -12,7 +12,6 @@ from concurrent.futures import Future
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..core.collector import resume
 from ..core.types import SoilVolumeError
 from ..core.wording import opt
 from ..distributed import overview
@@ -68,7 +67,6 @@ class Tiled:
             )
         with run_store(ctx.out.final) as store, client(self.schedule, ctx.options.memory_limit, store.scratch) as s:
             self.store, self.starting = store, s
-            s.future.add_done_callback(lambda _: resume())  # the garbage collector, once the cluster is up
 
             def wait():
                 with ctx.timer("cluster_wait"):

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.cells import in_box, rows
-from ..core.preload import off_the_gil
 from ..core.types import SoilVolumeError
 from ..native.chunk import ChunkArgs, address
 from ..soil.points import SOIL
@@ -119,7 +118,6 @@ class NativeChunks:
         """``sv_file_chunk``: the chunk read and worked on in the kernel (its file opened once)."""
         if rec.path not in self.files:
             self.files[rec.path] = os.open(rec.path, os.O_RDONLY)
-            off_the_gil()  # the held-back imports go ahead beside the kernel
         if self.buf is None:
             self.buf = np.empty(PIECE * rec.dtype.itemsize, np.uint8)
         room = len(self.buf) // rec.dtype.itemsize

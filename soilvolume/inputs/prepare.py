@@ -11,8 +11,6 @@ import numpy as np
 import pyproj
 
 from ..core.cells import bounds
-from ..core.heap import keep_freed_memory
-from ..core.preload import reading_done, reading_epoch
 from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
@@ -102,7 +100,6 @@ def prepare(
     before points within the radius of the after footprint, and thinned subsets of both
     (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
     ``loader`` streams one source (:func:`stream.load`, or the same as Dask tasks)."""
-    keep_freed_memory(before.count + after.count)  # large pairs: temporaries not faulted in anew
     crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(before, crs_b)
@@ -110,7 +107,6 @@ def prepare(
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
     voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
     original_after, to_a = after, _local(crs_a, frame, origin, after.path)
-    reading_epoch(0)
     after, a, note_a = _load_whole(
         after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check, None if full else NOTHING, loader
     )
@@ -125,7 +121,6 @@ def prepare(
     }
     read_s = a.extra["read_s"] + b.extra["read_s"]
     wkt = frame.wkt
-    reading_done()  # the memory peak is behind: held-back imports may go ahead
     return Prepared(
         Cloud(b.xyz, origin, wkt, before.path, nonsoil=b.nonsoil),
         Cloud(a.xyz, origin, wkt, after.path, nonsoil=a.nonsoil),
@@ -156,7 +151,6 @@ def _load_before(
     lo_a, hi_a = bounds(after_thin, 2)
     box = (lo_a - reach, hi_a + reach) if full else NOTHING
     within = _padded_box(src, crs, frame, origin)  # a crop radius far past the data costs nothing
-    reading_epoch(1)
     thinner = ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel, within, src.path)
     local = _local(crs, frame, origin, src.path)
     b = loader(src, local, mode, PolygonMask(poly), thinner, check, box, not full, exclude=options.exclude)

@@ -3,9 +3,8 @@
 
 Uncompressed files are read into three buffers used in turn (no fresh memory per chunk: on a
 virtual machine a page fault costs microseconds, and laspy's reader zeroes and faults a new
-buffer for every chunk); LAZ chunks are the records lazrs decompresses. A consumer may hold one
-chunk while the next waits in a queue of one (:func:`soilvolume.core.readahead.prefetch`) and the
-reader fills the third."""
+buffer for every chunk); LAZ chunks are the records lazrs decompresses. A consumer may hold a
+chunk while the reader fills the next."""
 
 from __future__ import annotations
 

@@ -19,7 +19,6 @@ import numpy as np
 
 from .. import native
 from ..core.cells import bounds
-from ..core.readahead import prefetch
 from ..core.types import SoilVolumeError
 from ..soil.points import NonSoil, PointRule, Signals, decide, deciding_dims
 from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
@@ -192,16 +191,15 @@ def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str
 def _labelled(
     src: Source, to_local, boxes: bool, mode: str, exclude: str, keep: Callable | None = None
 ) -> tuple[Iterator[tuple], Callable, bool]:
-    """The chunks of ``src`` read ahead by a thread (:func:`prefetch`) as (points, labels or None,
+    """The chunks of ``src`` as (points, labels or None,
     the epoch's rule, x/y box of the file coordinates when ``boxes``, ``keep`` of the points or
     None), the conversion to the local frame still to apply to the points, and whether they come
     as undecoded :class:`~soilvolume.inputs.records.Records` (the native kernel decodes, crops and
     thins them: :func:`native_reads`). The rule is decided on the first chunk (:func:`epoch_rule`;
-    for the kernel, whose pieces are smaller, that chunk is read beforehand as a whole); the thread
-    labels every chunk and reads only the signals the rule (or its decision) uses. Without the
-    kernel, it subtracts the origin of a plain shift (``prepare.Shift``) in the decoding; then the
-    points are local already, and the thread also applies ``keep`` (the footprint test: the
-    reading thread has time to spare, the consumer has none)."""
+    for the kernel, whose pieces are smaller, that chunk is read beforehand as a whole); every chunk
+    is labelled and only the signals the rule (or its decision) uses are read. Without the
+    kernel, the origin of a plain shift (``prepare.Shift``) is subtracted in the decoding; then the
+    points are local already, and ``keep`` (the footprint test) is applied there too."""
     by_kernel = native_reads(src, to_local, keep)
     fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
     early = keep if fused and not by_kernel else None
@@ -235,7 +233,7 @@ def _labelled(
             del xyz, cls, sig, inside  # held by the item only
             yield item
 
-    return prefetch(run()), shift, by_kernel
+    return run(), shift, by_kernel
 
 
 def file_kernel() -> bool:

@@ -3,9 +3,11 @@ many passes over memory, loaded with ctypes when a build of this very source is 
 file name carries the source's digest: a library built from other code is never used), else the
 numpy path runs (the same bits, slower). ``SOILVOLUME_NATIVE=0`` turns them off.
 
-Built by ``python -m soilvolume.native.build`` (``make setup``; the plugin's installer when the
-machine has a C compiler; ``make package`` ships the source only, no binary). A ctypes call releases
-the GIL: a kernel on the reading thread runs beside Python on the other."""
+Built by ``python -m soilvolume.native.build`` when the environment is installed (``make setup``;
+the plugin's installer when the machine has a C compiler; ``make package`` ships the source only,
+no binary), never during a run: without a build the numpy path runs, said only under
+``SOILVOLUME_DEBUG``. A ctypes call releases the GIL: a kernel on the reading thread runs beside
+Python on the other."""
 
 from __future__ import annotations
 
@@ -18,6 +20,8 @@ import threading
 from pathlib import Path
 
 import numpy as np
+
+from .chunk import declare
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "kernels.c"
@@ -60,6 +64,8 @@ def _load() -> ctypes.CDLL | None:
     name = library_name()
     path = next((f / name for f in folders() if (f / name).is_file()), None)
     if path is None:
+        if os.environ.get("SOILVOLUME_DEBUG"):
+            sys.stderr.write(f"soilvolume: no {name} (python -m soilvolume.native.build): the numpy path runs\n")
         return None
     try:
         lib = ctypes.CDLL(str(path))
@@ -68,8 +74,6 @@ def _load() -> ctypes.CDLL | None:
             return None
     except (OSError, AttributeError):
         return None
-    from .chunk import declare
-
     declare(lib)
     _declare(lib)
     return lib

@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from ..compensation.planes import plane_offset
-from ..core.collector import resume
 from ..core.hooks import Cancelled, Hooks, Result
 from ..core.interrupt import Interrupted
 from ..core.outputs import os_errors, output_dir
@@ -240,7 +239,6 @@ def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
         origin = fits[0].prep.origin if fits else np.asarray(prep.origin, dtype=np.float64)
         fits.append(Fit(*rebase(prep, reg, origin), opts))
     ctx.timer.s.update(seconds)
-    resume()
     return fits
 
 

@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..compensation.planes import Plane, plane_offset, ransac_plane
-from ..core.collector import resume
 from ..core.record import Georeferencing, QualityInputs, RunRecord
 from ..core.types import GridSpec
 from ..core.wording import cli_tree, opt
@@ -57,11 +56,10 @@ class Reported:
 
 @contextmanager
 def running(ctx: Context, step: str, message: str, timed: str | None = None, log: bool = True) -> Iterator[None]:
-    """A step's progress line, its time in ``timed`` (the step's name), and the collector resumed after it."""
+    """A step's progress line and its time in ``timed`` (the step's name)."""
     ctx.hooks.step(ctx.at(step), message, log=log)
     with ctx.timer(timed or step):
         yield
-    resume()  # the garbage collector, after the first step at the latest (core.collector)
 
 
 def read(ctx: Context, backend: Backend) -> Prepared:
@@ -77,7 +75,6 @@ def register(ctx: Context, prep: Prepared, dense) -> Registered:
     fine = reg.fine
     ctx.hooks.info(f"coarse: {reg.coarse.note}")
     ctx.hooks.info(f"fine ({fine.method}): fitness {fine.fitness:.3f}, RMSE {fine.rmse:.3f} m, {fine.note}")
-    resume()
     return Registered(reg, options)
 
 
