@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,7 +13,11 @@ import numpy as np
 from ..core.types import GridSpec, StageQuality
 from ..core.wording import cli_tree
 from ..inputs.io import atomic_path
-from ..registration.rigid import rotation_deg, shift_at, tilt_deg
+from ..registration.rigid import rotation_deg, shift_at, tilt_deg, transform_points
+from ..volumes import coverage
+from ..volumes.nonsoil import sentence
+from ..volumes.quality import assess
+from .surface import amend, is_surface, surface_quality
 
 if TYPE_CHECKING:
     from ..core.record import RunRecord
@@ -121,16 +126,12 @@ def summary_lines(report: dict) -> list[str]:
 
 
 def _coverage_line(report: dict) -> list[str]:
-    from ..volumes.coverage import line
-
-    said = line(report)
+    said = coverage.line(report)
     return [said] if said else []
 
 
 def nonsoil_lines(report: dict) -> list[str]:
     """What was excluded as not soil, or counted and listed, in plain sentences."""
-    from ..volumes.nonsoil import sentence
-
     return sentence(report.get("excluded") or {})
 
 
@@ -144,9 +145,6 @@ def quality_lines(report: dict) -> list[str]:
 
 def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
     """report.json's ``coverage`` (see :mod:`soilvolume.volumes.coverage`)."""
-    from ..registration.rigid import transform_points
-    from ..volumes import coverage
-
     after = transform_points(prep.after_thin, reg.transform)
     beyond = coverage.outside_m2(after, grid)
     outside = coverage.outside_change(after, grid, vols.dem_b, vols.offset) if beyond else None
@@ -155,9 +153,6 @@ def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
 
 def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
     """report.json of an estimate run, its quality verdict in it (``timings``: seconds per stage so far)."""
-    from ..volumes.quality import assess
-    from .surface import is_surface, surface_quality
-
     report = _report(record, timings)
     q = record.quality
     report["quality"] = assess(report, q.stable, q.change, q.offset, q.cell_area, q.prior, q.diff)
@@ -169,10 +164,6 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
 
 
 def _report(record: RunRecord, timings: dict[str, float]) -> dict:
-    from dataclasses import asdict
-
-    from .surface import amend
-
     prep, reg, grid, vols, options = record.prep, record.reg, record.grid, record.vols, record.options
     p_b, p_a = record.planes
     t_abs = absolute_transform(reg.transform, prep.origin)

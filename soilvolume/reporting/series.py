@@ -18,6 +18,7 @@ from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 from ..volumes.seriesquality import epoch_checks, period_quality
 from .report import absolute_transform, stage_dict, write_json
+from .serieshtml import write_series_html
 
 LEDGER = "ledger.csv"
 LEDGER_COLUMNS = (
@@ -169,8 +170,6 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
     """report.json, the ledger and report.html of a series run into ``out`` (an
     :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
-    from .serieshtml import write_series_html
-
     report = cli_tree(build_series_report(epochs, fits, vols, series, grid, options, timer))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
