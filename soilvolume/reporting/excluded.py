@@ -11,7 +11,9 @@ import numpy as np
 
 from ..core.types import GridSpec
 from ..volumes.nonsoil import sentence
-from .figures import _extent_text, _factors, _float_2d, _like, _map_figure, _repeat, _shade, hillshade
+from .figures import _factors, _float_2d, _like, _shade, hillshade
+from .raster import _repeat
+from .svgparts import extent_text, map_figure
 from .text import Table
 
 # excluded.tif codes (volumes/nonsoil.CLASS_CODES) -> colour (as resources/styles/excluded.qml)
@@ -57,9 +59,9 @@ def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "
     )
     caption = (
         "What is not soil (excluded.tif): cells whose points were mostly not soil, objects found by their shape "
-        f"(walls, compact, on unchanged ground) and rough change. {_extent_text(grid, c.shape, k)}"
+        f"(walls, compact, on unchanged ground) and rough change. {extent_text(grid, c.shape, k)}"
     )
-    return _map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, f"<p>{legend}</p>", caption)
+    return map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, f"<p>{legend}</p>", caption)
 
 
 def _row(name: str, part: dict) -> list[str]:

@@ -11,7 +11,8 @@ import numpy as np
 
 from ..core.types import GridSpec
 from . import page
-from .figures import _ticks, difference_map
+from .figures import difference_map
+from .svgparts import round_ticks
 from .text import fmt, pm
 
 SERIES_COLOURS = {"cut": "#c0392b", "fill": "#2471a3", "net": "#222"}
@@ -35,7 +36,7 @@ def chart_svg(report: dict) -> str:
     n = len(totals["net"]) - 1
     lo = min(0.0, min(totals["net"]), -max(totals["cut"]))
     hi = max(1.0, max(totals["fill"]), max(totals["net"]))
-    ticks, _ = _ticks(lo, hi, 6)
+    ticks, _ = round_ticks(lo, hi, 6)
     lo, hi = min(lo, ticks[0]), max(hi, ticks[-1])
 
     def sx(k: float) -> float:
