@@ -4,27 +4,24 @@ never imports matplotlib."""
 from __future__ import annotations
 
 import base64
+import json
+import math
 import re
 import shutil
 import struct
 import subprocess
 import zlib
+from html import unescape
 
 import numpy as np
 import pytest
-from conftest import run_python
+from conftest import run_cli, run_python, write_scene
 
 from soilvolume.core.types import GridSpec
-from soilvolume.reporting.html import (
-    PUOR,
-    RDBU,
-    block_mean,
-    colour_ramp,
-    difference_map,
-    hillshade,
-    png_bytes,
-    write_html,
-)
+from soilvolume.reporting.figures import PUOR, RDBU, colour_ramp, difference_map, hillshade
+from soilvolume.reporting.headline import zero_notes
+from soilvolume.reporting.html import render_html, write_html
+from soilvolume.reporting.raster import block_mean, png_bytes
 
 GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=160, cols=200, origin=(500000.0, 3900000.0, 0.0))
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -78,6 +75,48 @@ def png_size(uri: str) -> tuple[int, int]:
     data = base64.b64decode(uri.split(",", 1)[1])
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     return struct.unpack(">II", data[16:24])
+
+
+def test_the_page_states_the_reports_facts():
+    """The page (a Jinja2 template) words report.json's numbers: the headline, the volume table,
+    the registration as rotation and shift, the inputs and the correction."""
+    rep = report()
+    rep["registration"]["transform_local"] = [[1, 0, 0, 2.5], [0, 1, 0, -1.25], [0, 0, 1, 0.5], [0, 0, 0, 1]]
+    page = render_html(rep, arrays(), GRID, "2026-01-02 03:04 UTC")
+    cells = [unescape(re.sub("<[^>]+>", "", c)).strip() for c in re.findall(r"<td[^>]*>(.*?)</td>", page)]
+    assert "Net change <b>1,040.20 ± 6.30 m³</b> (cut 12.50 ± 1.20 m³, fill 1,052.70 ± 6.10 m³" in page
+    assert "over 8,000 m²" in page and "Run on 2026-01-02 03:04 UTC with soilvolume unknown." in page
+    headline = cells.index("areas of significant change (headline)")
+    assert cells[headline : headline + 5] == ["areas of significant change (headline)"] + [
+        "1,040.20 ± 6.30",
+        "12.50 ± 1.20",
+        "1,052.70 ± 6.10",
+        "8,000.0",
+    ]
+    assert cells[cells.index("without the vertical correction") + 1] == "1,101.00"
+    assert cells[cells.index("fine") : cells.index("fine") + 4] == ["fine", "icp", "0.970", "0.031"]
+    shift = math.hypot(2.5, -1.25, 0.5)
+    assert [f"{shift:,.3f}", "2.500", "-1.250", "0.500"] == cells[cells.index("0.000") + 3 : cells.index("0.000") + 7]
+    assert cells[cells.index("before") : cells.index("before") + 3] == ["before", "before <1>.las", "2,500,000"]
+    assert cells[cells.index("x") + 1] == "0.001" and "Method: <b>surface</b>" in page
+    assert cells[cells.index("level of detection (m)") + 1] == "0.0500"
+
+
+def test_a_seeded_run_pages_text_is_its_report_json(tmp_path):
+    """report.html of a seeded run: its headline, volume table and quality verdict are report.json's."""
+    out = tmp_path / "o"
+    before, after, _ = write_scene(tmp_path, 0)
+    done = run_cli("estimate", before, after, "--out", out)
+    assert done.returncode == 0, done.stderr
+    rep = json.loads((out / "report.json").read_text())
+    page = (out / "report.html").read_text()
+    text = unescape(re.sub(r"\s+", " ", re.sub("<[^>]+>", " ", page)))
+    v, u = rep["volume_m3"], rep["uncertainty_m3"]
+    assert f"Net change {v['net']:,.2f} ± {u['net']:,.2f} m³" in text, text[:400]
+    assert f"cut {v['cut']:,.2f} ± {u['cut']:,.2f} m³, fill {v['fill']:,.2f} ± {u['fill']:,.2f} m³" in text
+    assert f"Quality: {rep['quality']['verdict']}" in text
+    assert all(unescape(m) in text for m in rep["quality"]["messages"])
+    assert "Template" not in text and "{{" not in page and "{%" not in page
 
 
 def test_html_is_self_contained_and_tolerant(tmp_path):
@@ -219,8 +258,6 @@ def test_a_zero_cut_beside_lowered_cells_is_explained():
     """Headline cut 0 while cells are lowered beyond the level of detection: the note next to
     the headline counts them by the rule that left them out (border, patch too small, own LoD);
     no note when the headline cut is not 0 or no cell is lowered at all."""
-    from soilvolume.reporting.headline import zero_notes
-
     d = np.full((8, 8), 0.05)
     d[0, 3] = -1.2  # on the border of the compared area
     d[4, 4] = -0.9  # alone inside: a patch of 1
@@ -233,15 +270,15 @@ def test_a_zero_cut_beside_lowered_cells_is_explained():
         "volume_thresholded_m3": {"cut": 3.2},
         "uncertainty_m3": {"lod_m": 0.5, "net": 3.0, "net_all_cells": 6.0},
     }
-    note = zero_notes(report, {"difference": d, "change": change})
-    assert "Why cut reads 0.00 m³" in note and "fill reads" not in note
+    notes = zero_notes(report, {"difference": d, "change": change})
+    assert [word for word, _ in notes] == ["cut"]
+    note = notes[0][1]
     assert "5 cells are lower than -0.50 m (down to -1.20 m on the map)" in note, note
     assert "1 on the border, 1 in patches of fewer than 3 such cells, 3 within their own cell" in note, note
     assert "cut is 4.10 m³" in note and "3.20 m³" in note and "net +12.00 ± 3.00" in note, note
-    assert zero_notes({**report, "volume_m3": {"net": 10.0, "cut": 2.0, "fill": 12.0}}, {"difference": d}) == ""
+    assert zero_notes({**report, "volume_m3": {"net": 10.0, "cut": 2.0, "fill": 12.0}}, {"difference": d}) == []
     flat = {**report, "volume_all_cells_m3": {"net": 13.6, "cut": 0.0, "fill": 13.6}}
-    assert zero_notes(flat, {"difference": np.abs(d)}) == ""
-    from soilvolume.reporting.html import render_html
+    assert zero_notes(flat, {"difference": np.abs(d)}) == []
 
     page = render_html(report, {"difference": d, "change": change}, GridSpec(500000.0, 3900008.0, 1.0, 8, 8))
     assert page.index("Why cut reads") < page.index("<h2>Volumes")

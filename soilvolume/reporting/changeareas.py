@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import GridSpec
+from ..inputs.crs import raster_wkt
 
 FILE = "change_areas.geojson"
 
@@ -68,8 +69,6 @@ def write_change_areas(path: str | Path, diff: np.ndarray, change: np.ndarray, c
     """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically); ``cut``:
     the cut areas of ``change``; returns {"file", "cut_polygons", "fill_polygons", "cut_m3",
     "fill_m3"}."""
-    from ..inputs.crs import raster_wkt
-
     path = Path(path)
     feats = features(diff, change, cut, grid)
     crs = {"type": "name", "properties": {"name": _crs_name(raster_wkt(grid.crs_wkt))}}

@@ -10,7 +10,11 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec
-from .figures import _extent_text, _factors, _float_2d, _like, _map_figure, _repeat, _shade, hillshade
+from ..volumes.nonsoil import sentence
+from .figures import _factors, _float_2d, _like, _shade, hillshade
+from .raster import _repeat
+from .svgparts import extent_text, map_figure
+from .text import Table
 
 # excluded.tif codes (volumes/nonsoil.CLASS_CODES) -> colour (as resources/styles/excluded.qml)
 PALETTE = {
@@ -55,49 +59,47 @@ def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "
     )
     caption = (
         "What is not soil (excluded.tif): cells whose points were mostly not soil, objects found by their shape "
-        f"(walls, compact, on unchanged ground) and rough change. {_extent_text(grid, c.shape, k)}"
+        f"(walls, compact, on unchanged ground) and rough change. {extent_text(grid, c.shape, k)}"
     )
-    return _map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, f"<p>{legend}</p>", caption)
+    return map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, f"<p>{legend}</p>", caption)
 
 
-def excluded_section(report: dict, table) -> str:
-    """Tables of the ``excluded`` section of report.json (``table``: the report's table helper)."""
-    from ..volumes.nonsoil import sentence
+def _row(name: str, part: dict) -> list[str]:
+    return [name, *(f"{part.get(k, 0.0):,.1f}" for k in ("net", "cut", "fill", "area_m2"))]
 
-    ex = report.get("excluded")
-    if not isinstance(ex, dict) or not ex:
-        return "<p class=note>not available</p>"
-    rule = ex.get("rule") or {}
-    out = "".join(f"<p>{html.escape(e)}: {html.escape(str(r))}</p>" for e, r in rule.items())
-    rows = []
-    for name, part in (ex.get("classes") or {}).items():
-        rows.append([html.escape(name), *(f"{part.get(k, 0.0):,.1f}" for k in ("net", "cut", "fill", "area_m2"))])
+
+def _change_rows(ex: dict) -> list[list[str]]:
+    """The apparent change of each class left out, the rough change, grass patches, moved objects."""
+    rows = [_row(name, part) for name, part in (ex.get("classes") or {}).items()]
     for key, name in (("rough", "rough change (counted)"), ("grass_patches", "grass patches (left out)")):
-        part = ex.get(key)
-        if isinstance(part, dict):
-            rows.append([html.escape(name), *(f"{part.get(k, 0.0):,.1f}" for k in ("net", "cut", "fill", "area_m2"))])
+        if isinstance(ex.get(key), dict):
+            rows.append(_row(name, ex[key]))
     m = ex.get("moved_objects") or {}
     if m:
-        label = "moved objects (" + ("left out" if m.get("excluded") else "counted") + f", {m.get('count', 0)})"
-        rows.append([html.escape(label), *(f"{m.get(k, 0.0):,.1f}" for k in ("net", "cut", "fill", "area_m2"))])
-    out += table(["apparent change", "net (m³)", "cut (m³)", "fill (m³)", "area (m²)"], rows)
-    items = (m.get("items") or []) + ((ex.get("single_objects") or {}).get("items") or [])
-    if items:
-        out += table(
-            ["object", "x", "y", "area (m²)", "height (m)", "volume (m³)"],
-            [
-                [
-                    html.escape(("moved, " if i["moved"] else "one survey only, ") + i["kind"]),
-                    f"{i['x']:.1f}",
-                    f"{i['y']:.1f}",
-                    f"{i['area_m2']:.1f}",
-                    f"{i['height_m']:.2f}",
-                    f"{i['volume_m3']:.1f}",
-                ]
-                for i in items
-            ],
-        )
-    words = sentence(ex)
-    if words:
-        out += "<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in words) + "</ul>"
-    return out
+        rows.append(_row(f"moved objects ({'left out' if m.get('excluded') else 'counted'}, {m.get('count', 0)})", m))
+    return rows
+
+
+def _objects(ex: dict) -> Table | None:
+    items = ((ex.get("moved_objects") or {}).get("items") or []) + ((ex.get("single_objects") or {}).get("items") or [])
+    rows = [
+        [("moved, " if i["moved"] else "one survey only, ") + i["kind"], f"{i['x']:.1f}", f"{i['y']:.1f}"]
+        + [f"{i['area_m2']:.1f}", f"{i['height_m']:.2f}", f"{i['volume_m3']:.1f}"]
+        for i in items
+    ]
+    return Table(["object", "x", "y", "area (m²)", "height (m)", "volume (m³)"], rows) if rows else None
+
+
+def tables(report: dict) -> dict | None:
+    """The ``excluded`` section of report.json for the page (None without one): ``rule`` [(epoch,
+    rule)], the ``change`` and ``objects`` tables and its sentences (``words``)."""
+    ex = report.get("excluded")
+    if not isinstance(ex, dict) or not ex:
+        return None
+    head = ["apparent change", "net (m³)", "cut (m³)", "fill (m³)", "area (m²)"]
+    return {
+        "rule": [(e, str(r)) for e, r in (ex.get("rule") or {}).items()],
+        "change": Table(head, _change_rows(ex)),
+        "objects": _objects(ex),
+        "words": sentence(ex),
+    }

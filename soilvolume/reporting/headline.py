@@ -4,7 +4,6 @@ them out, how many cells each rule left out, and which of the report's sums to t
 
 from __future__ import annotations
 
-import html
 from typing import Any
 
 import numpy as np
@@ -14,9 +13,11 @@ from ..volumes.change import BUFFER_CELLS, MIN_CELLS
 ZERO = 0.005  # m³: what "0.00" shows
 
 
-def zero_notes(report: dict, arrays: dict | None, words: tuple[str, str, str] = ("", "cut", "fill")) -> str:
-    """One ``<p class=note>`` per headline kind (cut, fill) that reads 0 while the compared cells
-    hold some of that kind; "" when none does. ``words``: the headline's (lead, cut, fill) words."""
+def zero_notes(
+    report: dict, arrays: dict | None, words: tuple[str, str, str] = ("", "cut", "fill")
+) -> list[tuple[str, str]]:
+    """(word, why) per headline kind (cut, fill) that reads 0 while the compared cells hold some of
+    that kind; none when none does. ``words``: the headline's (lead, cut, fill) words."""
     volumes = report.get("volume_m3") or {}
     every = report.get("volume_all_cells_m3") or {}
     lod = (report.get("uncertainty_m3") or {}).get("lod_m")
@@ -26,8 +27,8 @@ def zero_notes(report: dict, arrays: dict | None, words: tuple[str, str, str] = 
         if not _number(shown) or abs(shown) >= ZERO or not _number(anywhere) or anywhere < ZERO:
             continue
         cells = _left_out((arrays or {}).get("difference"), (arrays or {}).get("change"), sign, lod)
-        out.append(f"<p class=note><b>Why {html.escape(word)} reads 0.00 m³:</b> {_why(report, kind, sign, cells)}</p>")
-    return "".join(out)
+        out.append((word, _why(report, kind, sign, cells)))
+    return out
 
 
 def _why(report: dict, kind: str, sign: float, cells: dict[str, Any] | None) -> str:
@@ -70,7 +71,7 @@ def _sums(report: dict, kind: str) -> str:
             f"Trust the headline (net {net:+,.2f}{_pm(unc.get('net'))} m³): the every-cell net "
             f"({net_all:+,.2f}{_pm(unc.get('net_all_cells'))} m³) adds the noise and its wider interval."
         )
-    return html.escape(text)
+    return text
 
 
 def _left_out(diff: Any, change: Any, sign: float, lod: Any) -> dict[str, Any] | None:

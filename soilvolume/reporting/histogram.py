@@ -8,7 +8,8 @@ import math
 
 import numpy as np
 
-from .figures import RDBU, _count_label, _float_2d, _halo, _positive, _tick_label, _ticks, colour_ramp
+from .figures import RDBU, _float_2d, _positive, colour_ramp
+from .svgparts import count_label, halo, round_ticks, tick_label
 
 _HIST_BINS = 71
 
@@ -17,6 +18,28 @@ def _hist_limit(v: np.ndarray, lod: float | None) -> float:
     """Symmetric histogram range: the 0.5-99.5 percentiles (of a subsample), wide enough for ±1.5 LoD."""
     lo, hi = np.percentile(v[:: max(1, v.size // 250_000)], [0.5, 99.5])
     return max(abs(float(lo)), abs(float(hi)), 1.5 * (lod or 0.0), 1e-3)
+
+
+def _lod_band(sx, top: float, ph: float, lod: float) -> list[str]:
+    """The shaded ±LoD band and its dashed edges (``sx``: x in metres -> px)."""
+    band = (
+        f'<rect x="{sx(-lod):.1f}" y="{top}" width="{sx(lod) - sx(-lod):.1f}" height="{ph}" '
+        'fill="#f39c12" fill-opacity=".3"/>'
+    )
+    edges = [
+        f'<line x1="{sx(x):.1f}" x2="{sx(x):.1f}" y1="{top}" y2="{top + ph}" stroke="#d35400" stroke-dasharray="4 3"/>'
+        for x in (-lod, lod)
+    ]
+    return [band, *edges]
+
+
+def _lod_legend(right: float, top: float, lod_label: str) -> str:
+    """The band's key at the top right of the plot (``right``: the plot's right edge)."""
+    return (
+        f'<rect x="{right - 22}" y="{top + 8}" width="14" height="12" fill="#f39c12" '
+        f'fill-opacity=".5"/><text x="{right - 28}" y="{top + 18}" text-anchor="end" '
+        f"{halo(12)}>{html.escape(lod_label)}</text>"
+    )
 
 
 def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str, ident: str) -> str:
@@ -37,7 +60,7 @@ def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str,
     fills = colour_ramp((edges[:-1] + edges[1:]) / 2, lim, RDBU)
     parts = [
         f'<line x1="{left}" x2="{left + pw}" y1="{sy(10**p):.1f}" y2="{sy(10**p):.1f}" stroke="#e4e4e4"/>'
-        f'<text x="{left - 6}" y="{sy(10**p) + 4:.1f}" text-anchor="end">{_count_label(10**p)}</text>'
+        f'<text x="{left - 6}" y="{sy(10**p) + 4:.1f}" text-anchor="end">{count_label(10**p)}</text>'
         for p in range(0, math.floor(y_hi) + 1)
     ]
     parts += [
@@ -47,19 +70,11 @@ def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str,
         if c > 0
         for r, g, b in [fills[i, :3].tolist()]
     ]
-    if lod:
-        parts += [
-            f'<rect x="{sx(-lod):.1f}" y="{top}" width="{sx(lod) - sx(-lod):.1f}" height="{ph}" '
-            'fill="#f39c12" fill-opacity=".3"/>'
-        ] + [
-            f'<line x1="{sx(x):.1f}" x2="{sx(x):.1f}" y1="{top}" y2="{top + ph}" stroke="#d35400" '
-            'stroke-dasharray="4 3"/>'
-            for x in (-lod, lod)
-        ]
-    ticks, step = _ticks(-lim, lim, 8)
+    parts += _lod_band(sx, top, ph, lod) if lod else []
+    ticks, step = round_ticks(-lim, lim, 8)
     parts += [
         f'<line x1="{sx(t):.1f}" x2="{sx(t):.1f}" y1="{top + ph}" y2="{top + ph + 5}" stroke="#000"/>'
-        f'<text x="{sx(t):.1f}" y="{top + ph + 18}" text-anchor="middle">{_tick_label(t, step)}</text>'
+        f'<text x="{sx(t):.1f}" y="{top + ph + 18}" text-anchor="middle">{tick_label(t, step)}</text>'
         for t in ticks
     ]
     parts.append(
@@ -70,12 +85,7 @@ def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str,
         f'<text transform="translate(16,{top + ph / 2}) rotate(-90)" text-anchor="middle">'
         "cells (log scale)</text>"
     )
-    if lod:
-        parts.append(
-            f'<rect x="{left + pw - 22}" y="{top + 8}" width="14" height="12" fill="#f39c12" '
-            f'fill-opacity=".5"/><text x="{left + pw - 28}" y="{top + 18}" text-anchor="end" '
-            f"{_halo(12)}>{html.escape(lod_label)}</text>"
-        )
+    parts += [_lod_legend(left + pw, top, lod_label)] if lod else []
     return (
         f'<svg class=plot id="{ident}" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-size="12" '
         f'role="img"><title>Histogram of after − before differences</title>{"".join(parts)}</svg>'

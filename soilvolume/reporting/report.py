@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,11 +13,17 @@ import numpy as np
 from ..core.types import GridSpec, StageQuality
 from ..core.wording import cli_tree
 from ..inputs.io import atomic_path
-from ..registration.rigid import rotation_deg, shift_at, tilt_deg
+from ..registration.rigid import rotation_deg, shift_at, tilt_deg, transform_points
+from ..volumes import coverage
+from ..volumes.nonsoil import sentence
+from ..volumes.quality import assess
+from .surface import amend, is_surface, surface_quality
 
 if TYPE_CHECKING:
     from ..core.record import RunRecord
     from ..inputs.prepare import Prepared
+    from ..options import Options
+    from ..registration.register import Registration
     from ..volumes.compute import Volumes
 
 
@@ -121,16 +128,12 @@ def summary_lines(report: dict) -> list[str]:
 
 
 def _coverage_line(report: dict) -> list[str]:
-    from ..volumes.coverage import line
-
-    said = line(report)
+    said = coverage.line(report)
     return [said] if said else []
 
 
 def nonsoil_lines(report: dict) -> list[str]:
     """What was excluded as not soil, or counted and listed, in plain sentences."""
-    from ..volumes.nonsoil import sentence
-
     return sentence(report.get("excluded") or {})
 
 
@@ -144,9 +147,6 @@ def quality_lines(report: dict) -> list[str]:
 
 def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
     """report.json's ``coverage`` (see :mod:`soilvolume.volumes.coverage`)."""
-    from ..registration.rigid import transform_points
-    from ..volumes import coverage
-
     after = transform_points(prep.after_thin, reg.transform)
     beyond = coverage.outside_m2(after, grid)
     outside = coverage.outside_change(after, grid, vols.dem_b, vols.offset) if beyond else None
@@ -155,9 +155,6 @@ def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
 
 def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
     """report.json of an estimate run, its quality verdict in it (``timings``: seconds per stage so far)."""
-    from ..volumes.quality import assess
-    from .surface import is_surface, surface_quality
-
     report = _report(record, timings)
     q = record.quality
     report["quality"] = assess(report, q.stable, q.change, q.offset, q.cell_area, q.prior, q.diff)
@@ -168,43 +165,80 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
     return report
 
 
+VOLUME_METHOD = (  # report.json's volume_method
+    "fill and cut summed over the areas of significant change: cells whose corrected "
+    "difference exceeds their level of detection, in patches of at least 3 cells, grown into "
+    "connected cells of the same sign above half of it; survey noise elsewhere is not counted. "
+    "A cell's height in each epoch is the robust mean of its points, moved to the cell's centre "
+    "along the local slope where its points cover it unevenly; cells with too few points and "
+    "enclosed holes are interpolated from the surrounding difference (filled_mask.tif). Only soil "
+    "counts: points the epochs' rules say are not soil are not gridded, objects that moved between the "
+    "surveys are left out, objects in one survey only of a machine's size are left out (or counted with "
+    "objects=count) and listed (excluded, excluded.tif); holes without any point inside the works (water, "
+    "shadow) widen the interval by what they may hide (blind)"
+)
+
+
+def _uncertainty_m3(vols: Volumes) -> dict:
+    """report.json's ``uncertainty_m3``: the headline's ± and those of the other sums."""
+    return {
+        "net": vols.uncertainty["net"],
+        "cut": vols.uncertainty["cut"],
+        "fill": vols.uncertainty["fill"],
+        "net_change_areas": vols.uncertainty["net"],
+        "net_all_cells": vols.uncertainty["net_compared_area"],
+        "lod_m": vols.uncertainty["lod_m"],
+        "confidence": vols.uncertainty["confidence"],
+    }
+
+
+def _registration(prep: Prepared, reg: Registration) -> dict:
+    """report.json's ``registration``: the transform, each stage's fit and the motion in words."""
+    return {
+        "transform": absolute_transform(reg.transform, prep.origin),
+        "transform_local": reg.transform,
+        "local_origin": prep.origin,
+        "coarse": stage_dict(reg.coarse),
+        "fine": stage_dict(reg.fine),
+        "georeferencing": _georeferencing(reg),
+        "rotation_deg": rotation_deg(reg.transform),
+        "tilt_deg": tilt_deg(reg.transform),
+        "shift_m": shift_at(reg.transform, prep.after_thin.mean(axis=0)),
+    }
+
+
+def _grid(prep: Prepared, grid: GridSpec, vols: Volumes, options: Options) -> dict:
+    """report.json's ``grid``: the rasters' grid, CRS, compared area and empty cells."""
+    return {
+        "cell_m": grid.cell,
+        "rows": grid.rows,
+        "cols": grid.cols,
+        "crs": prep.frame.crs.name,
+        "crs_wkt": prep.frame.wkt,
+        "transform": list(grid.transform)[:6],
+        "compared_area_m2": vols.all_cells["area_m2"],
+        "compared_cells": vols.all_cells["cells"],
+        "change_area_m2": vols.compensated["area_m2"],
+        "empty_cells": vols.empty_cells,
+        "empty_before": vols.empty_before,
+        "empty_after": vols.empty_after,
+        "statistic": options.statistic,
+    }
+
+
 def _report(record: RunRecord, timings: dict[str, float]) -> dict:
-    from dataclasses import asdict
-
-    from .surface import amend
-
     prep, reg, grid, vols, options = record.prep, record.reg, record.grid, record.vols, record.options
     p_b, p_a = record.planes
-    t_abs = absolute_transform(reg.transform, prep.origin)
     report = {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
         "volume_m3": vols.compensated,
-        "volume_method": (
-            "fill and cut summed over the areas of significant change: cells whose corrected "
-            "difference exceeds their level of detection, in patches of at least 3 cells, grown into "
-            "connected cells of the same sign above half of it; survey noise elsewhere is not counted. "
-            "A cell's height in each epoch is the robust mean of its points, moved to the cell's centre "
-            "along the local slope where its points cover it unevenly; cells with too few points and "
-            "enclosed holes are interpolated from the surrounding difference (filled_mask.tif). Only soil "
-            "counts: points the epochs' rules say are not soil are not gridded, objects that moved between the "
-            "surveys are left out, objects in one survey only of a machine's size are left out (or counted with "
-            "objects=count) and listed (excluded, excluded.tif); holes without any point inside the works (water, "
-            "shadow) widen the interval by what they may hide (blind)"
-        ),
+        "volume_method": VOLUME_METHOD,
         "volume_all_cells_m3": vols.all_cells,
         "volume_uncompensated_m3": vols.uncompensated,
         "volume_paper_plane_m3": vols.paper_plane,
         "volume_change_areas_m3": vols.change_areas,
         "volume_thresholded_m3": vols.thresholded,
-        "uncertainty_m3": {
-            "net": vols.uncertainty["net"],
-            "cut": vols.uncertainty["cut"],
-            "fill": vols.uncertainty["fill"],
-            "net_change_areas": vols.uncertainty["net"],
-            "net_all_cells": vols.uncertainty["net_compared_area"],
-            "lod_m": vols.uncertainty["lod_m"],
-            "confidence": vols.uncertainty["confidence"],
-        },
+        "uncertainty_m3": _uncertainty_m3(vols),
         "uncertainty": vols.uncertainty,
         "excluded": {
             **vols.excluded,
@@ -214,33 +248,9 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
         "blind": vols.blind,
         "zones": vols.zones,
         "correction": {"method": options.correction, "params": vols.params},
-        "registration": {
-            "transform": t_abs,
-            "transform_local": reg.transform,
-            "local_origin": prep.origin,
-            "coarse": stage_dict(reg.coarse),
-            "fine": stage_dict(reg.fine),
-            "georeferencing": _georeferencing(reg),
-            "rotation_deg": rotation_deg(reg.transform),
-            "tilt_deg": tilt_deg(reg.transform),
-            "shift_m": shift_at(reg.transform, prep.after_thin.mean(axis=0)),
-        },
+        "registration": _registration(prep, reg),
         "planes": {"before": p_b.as_dict(prep.origin), "after": p_a.as_dict(prep.origin)},
-        "grid": {
-            "cell_m": grid.cell,
-            "rows": grid.rows,
-            "cols": grid.cols,
-            "crs": prep.frame.crs.name,
-            "crs_wkt": prep.frame.wkt,
-            "transform": list(grid.transform)[:6],
-            "compared_area_m2": vols.all_cells["area_m2"],
-            "compared_cells": vols.all_cells["cells"],
-            "change_area_m2": vols.compensated["area_m2"],
-            "empty_cells": vols.empty_cells,
-            "empty_before": vols.empty_before,
-            "empty_after": vols.empty_after,
-            "statistic": options.statistic,
-        },
+        "grid": _grid(prep, grid, vols, options),
         "holes": vols.holes,
         "coverage": _coverage(prep, reg, grid, vols),
         "inputs": prep.inputs,

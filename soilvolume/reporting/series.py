@@ -18,6 +18,7 @@ from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 from ..volumes.seriesquality import epoch_checks, period_quality
 from .report import absolute_transform, stage_dict, write_json
+from .serieshtml import write_series_html
 
 LEDGER = "ledger.csv"
 LEDGER_COLUMNS = (
@@ -74,30 +75,58 @@ def _change(c, dates: list, cell_area: float, quality: dict, cumulative: bool = 
     }
 
 
+SERIES_METHOD = (  # report.json's method of a series run
+    "every later epoch registered into E0's frame and corrected once relative to E0 on stable "
+    "ground; all epochs on one grid and one set of cells; a period's net is summed over the "
+    "works (every period's areas of significant change), so the periods add up to the "
+    "cumulative net; cut and fill over each period's own areas of significant change; "
+    "below_detection = net - (fill - cut)"
+)
+
+
+def _epoch(k: int, run, fits, vols, origin: np.ndarray) -> dict:
+    """report.json's entry of epoch ``k``: its file, date and where the date came from, points,
+    registration into E0 and correction."""
+    fit = fits[k - 1] if k else None
+    cloud = fits[0].prep.before if fit is None else fit.prep.after
+    info = fits[0].prep.inputs["before"] if fit is None else fit.prep.inputs["after"]
+    return {
+        "index": k,
+        "path": str(run.path),
+        "date": run.date,
+        "date_source": run.date_source,  # "LAS header", "given" (--dates) or None
+        "points": info.get("points", len(cloud)),
+        "input": info,
+        "registration": _registration(fit, origin),
+        "correction": None if k == 0 else {"method": fit.options.correction, "params": vols[k - 1].params},
+        "dem": dem_name(k),
+    }
+
+
+def _series_grid(grid: GridSpec, series, origin: np.ndarray) -> dict:
+    """report.json's ``grid`` of a series run: the one grid, its compared, works and refilled areas."""
+    area = grid.cell_area
+    return {
+        "cell_m": grid.cell,
+        "rows": grid.rows,
+        "cols": grid.cols,
+        "crs_wkt": grid.crs_wkt,
+        "transform": list(grid.transform)[:6],
+        "compared_area_m2": float(series.valid.sum()) * area,
+        "works_area_m2": float(series.works.sum()) * area,
+        "refilled_area_m2": float(series.refilled.sum()) * area,
+        "stable_cells": int(series.stable.sum()),
+        "local_origin": origin,
+    }
+
+
 def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
     """report.json of a series run (``runs``: the :class:`~soilvolume.core.types.Epoch` s; ``fits``:
     the later epochs' registrations; ``vols``: the volume steps of the pairs E0 -> Ek); each period
     and the cumulative with its quality verdict (:mod:`soilvolume.volumes.seriesquality`)."""
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
     dates = [e.date for e in runs]
-    epochs = []
-    for k, run in enumerate(runs):
-        fit = fits[k - 1] if k else None
-        cloud = fits[0].prep.before if fit is None else fit.prep.after
-        info = fits[0].prep.inputs["before"] if fit is None else fit.prep.inputs["after"]
-        epochs.append(
-            {
-                "index": k,
-                "path": str(run.path),
-                "date": run.date,
-                "date_source": run.date_source,  # "LAS header", "given" (--dates) or None
-                "points": info.get("points", len(cloud)),
-                "input": info,
-                "registration": _registration(fit, origin),
-                "correction": None if k == 0 else {"method": fit.options.correction, "params": vols[k - 1].params},
-                "dem": dem_name(k),
-            }
-        )
+    epochs = [_epoch(k, run, fits, vols, origin) for k, run in enumerate(runs)]
     area = grid.cell_area
     prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
     checks = epoch_checks([e["registration"] for e in epochs], vols, prior)
@@ -108,13 +137,7 @@ def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Optio
     return {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
         "command": "series",
-        "method": (
-            "every later epoch registered into E0's frame and corrected once relative to E0 on stable "
-            "ground; all epochs on one grid and one set of cells; a period's net is summed over the "
-            "works (every period's areas of significant change), so the periods add up to the "
-            "cumulative net; cut and fill over each period's own areas of significant change; "
-            "below_detection = net - (fill - cut)"
-        ),
+        "method": SERIES_METHOD,
         "epochs": epochs,
         "periods": [change(c) for c in series.periods],
         "cumulative": change(series.cumulative, cumulative=True),
@@ -122,18 +145,7 @@ def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Optio
             "periods_net_sum_m3": float(sum(c.volume["net"] for c in series.periods)),
             "cumulative_net_m3": series.cumulative.volume["net"],
         },
-        "grid": {
-            "cell_m": grid.cell,
-            "rows": grid.rows,
-            "cols": grid.cols,
-            "crs_wkt": grid.crs_wkt,
-            "transform": list(grid.transform)[:6],
-            "compared_area_m2": float(series.valid.sum()) * area,
-            "works_area_m2": float(series.works.sum()) * area,
-            "refilled_area_m2": float(series.refilled.sum()) * area,
-            "stable_cells": int(series.stable.sum()),
-            "local_origin": origin,
-        },
+        "grid": _series_grid(grid, series, origin),
         "options": asdict(options),
         "timings_s": dict(timer.s),
     }
@@ -169,8 +181,6 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
     """report.json, the ledger and report.html of a series run into ``out`` (an
     :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
-    from .serieshtml import write_series_html
-
     report = cli_tree(build_series_report(epochs, fits, vols, series, grid, options, timer))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)

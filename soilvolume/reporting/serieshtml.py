@@ -1,17 +1,19 @@
-"""report.html of a series run: the ledger, the cumulative cut and fill over time as an inline SVG
-chart, the epochs' registrations and each period's difference map (:mod:`.figures`)."""
+"""report.html of a series run (``templates/series.html.j2``): the ledger, the cumulative cut and
+fill over time as an inline SVG chart, the epochs' registrations and each period's difference map
+(:mod:`.figures`)."""
 
 from __future__ import annotations
 
 import html
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..core.types import GridSpec
-from .figures import _ticks, difference_map
-from .html import _CSS, _fmt, _pm, _table
+from . import page
+from .figures import difference_map
+from .svgparts import round_ticks
+from .text import fmt, pm
 
 SERIES_COLOURS = {"cut": "#c0392b", "fill": "#2471a3", "net": "#222"}
 
@@ -34,7 +36,7 @@ def chart_svg(report: dict) -> str:
     n = len(totals["net"]) - 1
     lo = min(0.0, min(totals["net"]), -max(totals["cut"]))
     hi = max(1.0, max(totals["fill"]), max(totals["net"]))
-    ticks, _ = _ticks(lo, hi, 6)
+    ticks, _ = round_ticks(lo, hi, 6)
     lo, hi = min(lo, ticks[0]), max(hi, ticks[-1])
 
     def sx(k: float) -> float:
@@ -75,74 +77,54 @@ def _changes(report: dict) -> list[tuple[str, dict]]:
     return [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
 
 
-def _ledger(report: dict) -> str:
+def ledger(report: dict) -> list[dict]:
+    """A row per period and the cumulative: epochs, dates, net/cut/fill with their ±, verdict, reasons."""
     rows = []
     for name, p in _changes(report):
-        v, u = p["volume_m3"], p["uncertainty_m3"]
-        dates = "<span style='white-space:nowrap'>" + " → ".join(html.escape(d or "?") for d in p["dates"]) + "</span>"
+        v, u, q = p["volume_m3"], p["uncertainty_m3"], p.get("quality") or {}
         rows.append(
-            [f"{name}: E{p['from']} → E{p['to']}", dates]
-            + [_pm(v[k], u[k]) for k in ("net", "cut", "fill")]
-            + [_fmt(v["below_detection"]), _verdict(p)]
+            {
+                "name": f"{name}: E{p['from']} → E{p['to']}",
+                "short": f"{name} (E{p['from']} → E{p['to']})",
+                "dates": " → ".join(d or "?" for d in p["dates"]),
+                "volumes": [pm(v[k], u[k]) for k in ("net", "cut", "fill")] + [fmt(v["below_detection"])],
+                "verdict": str(q.get("verdict") or "–"),
+                "reasons": [str(m) for m in q.get("messages") or []],
+            }
         )
-    head = ["period", "dates", "net (m³)", "cut (m³)", "fill (m³)", "of the net below detection (m³)", "quality"]
-    return "<h2>Ledger</h2>" + _table(head, rows) + _reasons(report)
+    return rows
 
 
-def _verdict(entry: dict) -> str:
-    said = html.escape(str((entry.get("quality") or {}).get("verdict") or "–"))
-    return f"<span class='verdict {said.replace(' ', '-')}'>{said}</span>"
-
-
-def _reasons(report: dict) -> str:
-    """Each period's quality verdict with its reasons, as a pair's report gives them."""
-    items = []
-    for name, p in _changes(report):
-        q = p.get("quality") or {}
-        reasons = "".join(f"<li>{html.escape(str(m))}</li>" for m in q.get("messages") or [])
-        items.append(f"<li>{name} (E{p['from']} → E{p['to']}): {_verdict(p)}<ul>{reasons}</ul></li>")
-    return "<h3>Quality of each period</h3><ul>" + "".join(items) + "</ul>"
-
-
-def _epochs(report: dict) -> str:
+def epochs(report: dict) -> list[dict]:
+    """A row per epoch: date and where it came from, file, points, registration into E0."""
     rows = []
     for e in report["epochs"]:
         r = e["registration"]
-        rot = (
-            "reference" if r.get("reference") else f"{_fmt(r.get('rotation_deg'), 3)}° / {_fmt(r.get('shift_m'), 3)} m"
-        )
-        when = html.escape(e.get("date") or "–")
-        if e.get("date") and e.get("date_source"):
-            when += f" <span class=note>({html.escape(e['date_source'])})</span>"
-        rows.append([f"E{e['index']}", when, html.escape(Path(e["path"]).name), _fmt(e["points"]), rot])
-    head = ["epoch", "date (from)", "file", "points", "registration into E0 (rotation / shift)"]
-    return "<h2>Epochs</h2>" + _table(head, rows)
+        rot = "reference" if r.get("reference") else f"{fmt(r.get('rotation_deg'), 3)}° / {fmt(r.get('shift_m'), 3)} m"
+        source = e.get("date_source") if e.get("date") else None
+        cells = [Path(e["path"]).name, fmt(e["points"]), rot]
+        rows.append({"name": f"E{e['index']}", "date": e.get("date") or "–", "source": source, "cells": cells})
+    return rows
 
 
 def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray) -> str:
-    title = "Soil volume change over a series of surveys"
-    parts = [
-        f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title><style>{_CSS}</style>"
-        f"</head><body><h1>{title}</h1><p class=note>soilvolume {_fmt(report['software']['version'])}; "
-        f"± at {_fmt(100 * report['options']['lod_confidence'], 0)} % confidence. The periods add up to "
-        "the cumulative net.</p>",
-        _ledger(report),
-        "<h2>Cut and fill over time</h2>",
-        chart_svg(report),
-        _epochs(report),
-        "<h2>Differences</h2>",
-    ]
+    """The page of ``series`` (its periods and cumulative with their differences)."""
+    maps = []
     for c in [*series.periods, series.cumulative]:
-        title_c = f"E{c.end} − E{c.start}"
-        fig = difference_map(c.diff, grid, relief, series.refilled, title_c, f"diff-{c.start}-{c.end}")
-        parts.append(fig or f"<p class=note>{title_c}: no data</p>")
-    return "\n".join(parts) + "</body></html>"
+        title = f"E{c.end} − E{c.start}"
+        fig = difference_map(c.diff, grid, relief, series.refilled, title, f"diff-{c.start}-{c.end}")
+        maps.append((title, page.figure(fig)))
+    return page.render(
+        "series.html.j2",
+        version=fmt(report["software"]["version"]),
+        confidence=fmt(100 * report["options"]["lod_confidence"], 0),
+        ledger=ledger(report),
+        chart=page.figure(chart_svg(report)),
+        epochs=epochs(report),
+        figures=maps,
+    )
 
 
 def write_series_html(path: Path, report: dict, series, grid: GridSpec, relief: np.ndarray) -> Path:
     """Write report.html atomically."""
-    text = render_series_html(report, series, grid, relief)
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return page.write(path, render_series_html(report, series, grid, relief))

@@ -3,7 +3,9 @@ volumes above and below the design, and the reference in place of the registrati
 
 from __future__ import annotations
 
-import html
+from ..compensation.correction import stable_cells
+from ..volumes import reference
+from .text import Table
 
 NONE = "none: the reference is a surface"  # report.json's registration.kind of such a run
 WORDING = {"fill": "above design", "cut": "below design", "net": "above minus below design"}
@@ -34,9 +36,6 @@ def surface_quality(report: dict, record) -> dict:
     """The verdict of a run against a surface (``record``: core/record.RunRecord): the survey's
     agreement with the surface on the cells its change detection deems unchanged
     (:mod:`soilvolume.volumes.reference`, recorded as ``reference.agreement``) first."""
-    from ..compensation.correction import stable_cells
-    from ..volumes import reference
-
     diff = record.quality.diff
     unchanged = stable_cells(diff, record.grid.cell)
     agree = reference.agreement(diff, unchanged, record.vols.uncertainty["lod_m"], record.grid.cell_area)
@@ -52,9 +51,8 @@ def words(report: dict) -> tuple[str, str, str]:
     return "Net change", "cut", "fill"
 
 
-def section(report: dict, table) -> str:
-    """The reference surface and the survey's agreement with it on unchanged ground (``table``:
-    html's table builder, ``table(header, rows)``)."""
+def section(report: dict) -> Table:
+    """The reference surface and the survey's agreement with it on unchanged ground."""
     ref = report.get("reference") or {}
     agree = ref.get("agreement") or {}
 
@@ -62,18 +60,13 @@ def section(report: dict, table) -> str:
         return "n/a" if not isinstance(value, (int, float)) else f"{value:,.{digits}f}"
 
     rows = [
-        ["surface", html.escape(str(ref.get("path", "")))],
-        ["CRS", html.escape(str(ref.get("crs", "")))],
+        ["surface", str(ref.get("path", ""))],
+        ["CRS", str(ref.get("crs", ""))],
         ["resolution (m)", fmt(ref.get("resolution_m"))],
-        ["heights' unit from", html.escape(str(ref.get("vertical_unit", "")))],
+        ["heights' unit from", str(ref.get("vertical_unit", ""))],
         ["unchanged ground compared (m²)", fmt(agree.get("area_m2"), 0)],
         ["median survey − design there (m)", fmt(agree.get("median_m"))],
         ["NMAD there (m)", fmt(agree.get("nmad_m"))],
         ["level of detection (m)", fmt(agree.get("lod_m"))],
     ]
-    return table(["", "value"], rows) + (
-        "<p class=note>Nothing is registered against a surface: the survey is used as georeferenced. Where the "
-        "design is the existing ground the survey must agree with it; a median offset there beyond the level of "
-        "detection is a datum or georeferencing offset, counted as earthworks. The design is taken as exact "
-        "unless a design uncertainty is given; its resampling error is in the interval.</p>"
-    )
+    return Table(["", "value"], rows)

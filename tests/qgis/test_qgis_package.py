@@ -81,6 +81,9 @@ def test_zip_contents(plugin_zip):
         "plugin/platforms.py",
         "soilvolume/native/kernels.c",
         "soilvolume/native/build.py",
+        "soilvolume/reporting/templates/base.html.j2",  # report.html's templates
+        "soilvolume/reporting/templates/report.html.j2",
+        "soilvolume/reporting/templates/series.html.j2",
     ):
         assert f"soilvolume_qgis/{required}" in names, required
     for banned in ("tests/", ".venv/", "__pycache__", ".pyc", ".git/", "egg-info", "bench/", "_soilvolume_kernels-"):

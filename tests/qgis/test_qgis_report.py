@@ -4,6 +4,7 @@ internal keys."""
 
 from __future__ import annotations
 
+import html
 import json
 import re
 from dataclasses import fields
@@ -43,7 +44,7 @@ def test_registration_as_rotation_and_shift(page):
 def test_volumes_significance_and_no_internal_keys(page, estimate_run):
     text = visible_text(page)
     assert "areas of significant change (headline)" in text and "every compared cell" in text
-    assert estimate_run["SIGNIFICANCE"] in text.replace("&#x27;", "'")
+    assert estimate_run["SIGNIFICANCE"] in html.unescape(text)
     for key in INTERNAL:
         assert key not in text, key
 

@@ -1,0 +1,38 @@
+"""The Jinja2 templates of report.html (``templates/``, shipped with the package), rendered with
+one :class:`jinja2.Environment`, and the page written whole."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from jinja2 import Environment, FileSystemLoader, StrictUndefined
+from markupsafe import Markup
+
+TEMPLATES = Path(__file__).resolve().parent / "templates"
+ENV = Environment(
+    loader=FileSystemLoader(TEMPLATES),
+    autoescape=True,
+    undefined=StrictUndefined,
+    trim_blocks=True,
+    lstrip_blocks=True,
+)
+
+
+def figure(html: str | None) -> Markup | None:
+    """A figure drawn by :mod:`.figures` (HTML it escaped itself) for a template; None stays None."""
+    return None if html is None else Markup(html)
+
+
+def render(template: str, **context) -> str:
+    """``template`` of :data:`TEMPLATES` rendered with ``context`` (plain text is escaped)."""
+    return ENV.get_template(template).render(**context)
+
+
+def write(path: str | Path, text: str) -> Path:
+    """Write the page ``text`` to ``path`` atomically (a partial file renamed into place)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+    return path
