@@ -15,10 +15,10 @@ from ..core.nativelog import hold_native_stderr, quiet_library_warnings
 from ..core.outputs import os_problem
 from ..core.types import SoilVolumeError
 from ..protocol import Protocol, open_protocol
-from . import dem, demo, estimate, pipeline, register, selftest, series, volume
+from . import dem, demo, estimate, pipeline, register, selftest, series, stockpile, volume
 
 #: the sub-commands in the order ``--help`` lists them: each module's ``add_parser`` and ``run``
-COMMANDS = (estimate, dem, register, volume, series, pipeline, demo, selftest)
+COMMANDS = (estimate, dem, register, volume, series, stockpile, pipeline, demo, selftest)
 
 
 class Parser(argparse.ArgumentParser):
