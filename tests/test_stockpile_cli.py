@@ -192,3 +192,26 @@ def test_elevation_and_surface_bases(yard_files, tmp_path):
         for p, r in zip(yard.piles, rows_, strict=True):
             want = truth(p) if truth else p.volume_m3
             assert abs(r["volume_m3"] - want) / want < 0.01, (base, p.name, r["volume_m3"], want)
+
+
+def test_a_building_classified_as_such_is_no_pile(tmp_path):
+    """The yard (class 2) with a strip of level ground to the north holding a building (class 6,
+    8 x 8 m, 5 m high): the ground and soil points alone are gridded, so the piles found are the
+    yard's own; with every point taken (``--ground none``) the building is found as a 13th pile."""
+    yard, rng = stockpile_yard(1), np.random.default_rng(3)
+    x, y = rng.uniform(0, 2 * yard.east, 100_000), rng.uniform(64, 90, 100_000)
+    bx, by = rng.uniform(40, 48, 20_000), rng.uniform(72, 80, 20_000)
+    xs, ys = np.concatenate([yard.x, x, bx]), np.concatenate([yard.y, y, by])
+    zs = np.concatenate([yard.z, yard.ground(x, y) + rng.normal(0, 0.02, x.size), np.full(bx.size, 105.0)])
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales, header.offsets = np.array([0.001] * 3), np.array([EAST, NORTH, 0.0])
+    header.add_crs(CRS)
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = xs + EAST, ys + NORTH, zs
+    las.classification = np.concatenate([np.full(xs.size - bx.size, 2), np.full(bx.size, 6)]).astype(np.uint8)
+    las.write(str(tmp_path / "site.las"))
+    counts = {}
+    for ground in ("auto", "none"):
+        assert _run(tmp_path / "site.las", "--ground", ground, "--out", tmp_path / ground) == 0
+        counts[ground] = len(json.loads((tmp_path / ground / "report.json").read_text())["piles"])
+    assert counts == {"auto": len(yard.piles), "none": len(yard.piles) + 1}
