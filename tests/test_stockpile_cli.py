@@ -71,7 +71,8 @@ def test_polygons_give_the_truth_and_every_output(yard_files, tmp_path):
     with open(out / "piles.csv", newline="") as f:
         table = list(csv.DictReader(f))
     assert tuple(table[0]) == COLUMNS and len(table) == len(yard.piles)
-    assert "Stockpile inventory" in (out / "report.html").read_text()
+    html = (out / "report.html").read_text()
+    assert "Stockpile inventory" in html and "data:image/png;base64," in html and yard.piles[0].name in html
 
 
 def test_piles_found_without_polygons(yard_files, tmp_path):

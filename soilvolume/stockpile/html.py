@@ -3,6 +3,7 @@ warnings (from report.json's dictionary, so both say the same)."""
 
 from __future__ import annotations
 
+import base64
 import os
 from html import escape
 from pathlib import Path
@@ -32,8 +33,8 @@ def _cell(value) -> str:
     return escape(f"{value:,.1f}" if isinstance(value, float) else str(value))
 
 
-def page(report: dict) -> str:
-    """The page's HTML."""
+def page(report: dict, png: bytes | None = None) -> str:
+    """The page's HTML; ``png``: the map (:func:`.map.map_png`), embedded."""
     head = "".join(f"<th>{escape(h)}</th>" for _, h in COLUMNS)
     rows = "".join(
         "<tr>" + "".join(f"<td>{_cell(p.get(k))}</td>" for k, _ in COLUMNS) + "</tr>" for p in report["piles"]
@@ -46,14 +47,23 @@ def page(report: dict) -> str:
         f"<style>{STYLE}</style></head><body><h1>Stockpile inventory</h1>"
         f"<p>Survey {escape(report['survey'])}; {len(report['piles'])} piles {how}; cell {report['cell_m']} m; "
         f"base {escape(report['base'])}. Total {total}.</p>"
-        f"<table><tr>{head}</tr>{rows}</table><h2>Warnings</h2><ul>{warnings}</ul></body></html>"
+        f"<table><tr>{head}</tr>{rows}</table>{_map(png)}<h2>Warnings</h2><ul>{warnings}</ul></body></html>"
     )
 
 
-def write_html(path: str | Path, report: dict) -> Path:
+def _map(png: bytes | None) -> str:
+    """The map's figure (none without a map)."""
+    if png is None:
+        return ""
+    uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+    caption = "The survey's hillshade (north up; white: no height), each pile's polygon outlined in red."
+    return f"<h2>Map</h2><figure><img src='{uri}' alt='map of the piles'><figcaption>{caption}</figcaption></figure>"
+
+
+def write_html(path: str | Path, report: dict, png: bytes | None = None) -> Path:
     """Write report.html beside its destination and rename it into place."""
     path = Path(path)
     part = path.with_name(f".{path.name}.part")
-    part.write_text(page(report), encoding="utf-8")
+    part.write_text(page(report, png), encoding="utf-8")
     os.replace(part, path)
     return path

@@ -22,6 +22,7 @@ from ..options import Options
 from ..pipelines.pipeline import open_source
 from ..stockpile import Base, Inventory, Pile, PileError, Survey, parse_base, stockpile_inventory
 from ..stockpile.html import write_html
+from ..stockpile.map import map_png
 from ..stockpile.reader import local_piles, read_piles
 from ..stockpile.survey import fill_nearest, standard_errors
 from ..stockpile.writers import report_piles, write_csv, write_gpkg
@@ -71,7 +72,7 @@ def run_stockpile(
             inventory = stockpile_inventory(pile_survey, local, base, options.density)
         with steps.running(ctx, "write", ctx.message("write")):
             report = _report(cloud, piles.path, grid, one, inventory, options)
-            _write(folder, report, inventory, grid)
+            _write(folder, report, inventory, pile_survey)
     hooks.step(100, "done")
     return {"out": str(folder.final), "piles": len(inventory.piles), "volume_m3": report["volume_m3"]}
 
@@ -161,10 +162,10 @@ def _tonnes(piles: list[dict]) -> float | None:
     return round(sum(tonnes), 3) if tonnes and None not in tonnes else None
 
 
-def _write(folder, report: dict, inventory: Inventory, grid: GridSpec) -> None:
+def _write(folder, report: dict, inventory: Inventory, pile_survey: Survey) -> None:
     """The four outputs into the staging folder (committed together by :func:`output_dir`)."""
     if inventory.piles:
-        write_gpkg(folder.path("piles.gpkg"), inventory, grid)
+        write_gpkg(folder.path("piles.gpkg"), inventory, pile_survey.grid)
     write_csv(folder.path("piles.csv"), inventory)
-    write_html(folder.path("report.html"), report)
+    write_html(folder.path("report.html"), report, map_png(pile_survey, inventory))
     folder.path("report.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
