@@ -11,6 +11,7 @@ from .estimatevolumechange import EstimateVolumeChange
 from .installdependencies import InstallDependencies
 from .pointcloudtodem import PointCloudToDem
 from .registerpointclouds import RegisterPointClouds
+from .stockpilevolumes import StockpileVolumes
 from .volumefromdems import VolumeFromDems
 from .volumeseries import VolumeSeries
 
@@ -21,6 +22,7 @@ ALGORITHMS = (
     PointCloudToDem,
     RegisterPointClouds,
     VolumeFromDems,
+    StockpileVolumes,
     InstallDependencies,
 )
 

@@ -15,12 +15,13 @@ ESTIMATE = ("estimate",)
 VOLUME = ("estimate", "series")  # the volume step (a series runs it once per later epoch)
 REGISTER = ("estimate", "register", "series")
 PREPARE = ("estimate", "register", "pipeline", "series")  # reading both clouds
-GRID = ("estimate", "dem", "series")
-GROUND = ("estimate", "register", "dem", "pipeline", "series")
-GROUND_FILTER = ("estimate", "register", "dem", "series", "pipeline")
-POINTS = ("estimate", "register", "dem", "series")  # what is read of each cloud (the soil rule)
+GRID = ("estimate", "dem", "series", "stockpile")
+GROUND = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
+GROUND_FILTER = ("estimate", "register", "dem", "series", "pipeline", "stockpile")
+POINTS = ("estimate", "register", "dem", "series", "stockpile")  # what is read of each cloud (the soil rule)
 CELLS = ("estimate", "dem", "series")  # the heights of each cell
-COMMANDS = ("estimate", "register", "dem", "pipeline", "series")
+STOCKPILE = ("stockpile",)  # one survey's stockpile inventory
+COMMANDS = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
 
 
 def _opt(
@@ -280,6 +281,26 @@ class Options:
         None,
         "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",
         label="LandXML surface name (a LandXML design as BEFORE)",
+    )
+    # stockpile inventory
+    base: str = _opt(
+        "triangulated",
+        "what each pile's volume is measured from: triangulated (a surface through its toe line, the common "
+        "practice), plane (a plane fit to the toe), lowest, average or highest (a level at the toe's lowest, mean or "
+        "highest height), elevation:Z (a level at Z metres, the survey's heights), surface:DEM (a GeoTIFF such as an "
+        "earlier survey's DEM or a design, resampled onto the grid)",
+        label="Stockpile base surface",
+        commands=STOCKPILE,
+    )
+    density: float | None = _opt(
+        None,
+        "bulk density (t/m3) for tonnage, for every pile without its own density field",
+        label="Bulk density",
+        unit="t/m3",
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+        commands=STOCKPILE,
     )
     # run control
     threads: int = _opt(

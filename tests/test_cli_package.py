@@ -22,7 +22,7 @@ ALL_FLAGS = {"--" + f.name.replace("_", "-") for c in TABLE_COMMANDS for f in co
 }
 
 
-COMMANDS = ["estimate", "dem", "register", "volume", "series", "pipeline", "demo", "selftest"]
+COMMANDS = ["estimate", "dem", "register", "volume", "series", "stockpile", "pipeline", "demo", "selftest"]
 
 
 def _commands() -> list[str]:
@@ -42,11 +42,23 @@ def _listed(flag: str, text: str) -> bool:
     return re.search(re.escape(flag) + r"(?![-\w])", text) is not None
 
 
-def test_the_program_has_its_eight_commands_in_order():
-    assert _commands() == ["estimate", "dem", "register", "volume", "series", "pipeline", "demo", "selftest"]
+def test_the_program_has_its_nine_commands_in_order():
+    assert _commands() == [
+        "estimate",
+        "dem",
+        "register",
+        "volume",
+        "series",
+        "stockpile",
+        "pipeline",
+        "demo",
+        "selftest",
+    ]
 
 
-@pytest.mark.parametrize("command", ["estimate", "dem", "register", "volume", "series", "pipeline", "demo", "selftest"])
+@pytest.mark.parametrize(
+    "command", ["estimate", "dem", "register", "volume", "series", "stockpile", "pipeline", "demo", "selftest"]
+)
 def test_each_help_lists_the_options_the_table_declares_for_its_command_with_their_help(capsys, command):
     """Every option of ``command_fields(command)`` in ``--help`` with the table's help and default;
     a command of the table takes no other option of it."""
@@ -69,7 +81,9 @@ def test_the_table_reaches_every_option_through_some_command():
     assert fields == set(Options.__dataclass_fields__)
 
 
-@pytest.mark.parametrize("command", ["estimate", "dem", "register", "volume", "series", "pipeline", "demo", "selftest"])
+@pytest.mark.parametrize(
+    "command", ["estimate", "dem", "register", "volume", "series", "stockpile", "pipeline", "demo", "selftest"]
+)
 def test_each_command_lives_in_its_own_module_with_its_parser_and_its_run(command):
     """``soilvolume.cli.<command>`` declares the sub-parser (``add_parser``) and runs it (``run``);
     the program's parser and dispatch are made of those modules alone."""

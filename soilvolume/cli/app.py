@@ -26,7 +26,7 @@ from ..protocol import Protocol, open_protocol
 #: ``add_parser`` and ``run`` (a new command is a new module named here)
 COMMANDS = {
     name: f"{__package__}.{name}"
-    for name in ("estimate", "dem", "register", "volume", "series", "pipeline", "demo", "selftest")
+    for name in ("estimate", "dem", "register", "volume", "series", "stockpile", "pipeline", "demo", "selftest")
 }
 
 

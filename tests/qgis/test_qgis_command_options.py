@@ -10,7 +10,7 @@ from qgis.core import QgsApplication
 
 from soilvolume.options import Options, command_fields
 
-TOOLS = {"registerpointclouds": "register", "pointcloudtodem": "dem"}
+TOOLS = {"registerpointclouds": "register", "pointcloudtodem": "dem", "stockpilevolumes": "stockpile"}
 
 
 class Captured(Exception):
@@ -22,6 +22,8 @@ def other_value(field):
     meta, default = field.metadata, field.default
     if field.name.endswith("_crs"):
         return "EPSG:32654"
+    if field.name == "base":
+        return "plane"
     if meta["choices"]:
         return next(c for c in meta["choices"] if c != default)
     lo, hi = meta["lo"], meta["hi"]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import pytest
 from qgis.core import (
@@ -13,7 +13,7 @@ from qgis.core import (
     QgsProcessingParameterNumber,
 )
 
-from soilvolume.options import Options, _opt
+from soilvolume.options import Options, _opt, command_fields
 
 ESTIMATE = "soilvolume:estimatevolumechange"
 
@@ -24,7 +24,8 @@ def estimate(provider):
 
 
 def option_fields():
-    return [f for f in fields(Options) if f.name != "keep_registered_cloud"]
+    """The estimate's options (the stockpile's base and density are the stockpile algorithm's)."""
+    return [f for f in command_fields("estimate") if f.name != "keep_registered_cloud"]
 
 
 def test_every_option_is_a_parameter(estimate):

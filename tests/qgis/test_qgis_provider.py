@@ -14,6 +14,7 @@ ALGORITHMS = {
     "pointcloudtodem",
     "registerpointclouds",
     "volumefromdems",
+    "stockpilevolumes",
     "installdependencies",
 }
 
