@@ -101,7 +101,7 @@ def test_each_command_lives_in_its_own_module_with_its_parser_and_its_run(comman
 def test_a_command_line_loads_the_module_of_its_command_and_no_other(command):
     """The registry imports only the module of the command being run (start-up): ``estimate``
     never loads the scene generators of ``demo`` and ``selftest`` nor ``pipeline``'s emitter;
-    without a command (``--help``) all eight are loaded, to be listed."""
+    without a command (``--help``) all nine are loaded, to be listed."""
     argv = [command, "--out", "x"] if command else ["--help"]
     code = (
         "import sys\n"
