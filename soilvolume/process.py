@@ -16,8 +16,10 @@ import sys
 from .core.watchdog import remove_process_temp_dir
 
 #: optional extras libraries import when installed, for functions the engine never calls:
-#: requests (laspy: COPC over HTTP), jinja2 (Dask: notebook HTML of its objects)
-EXTRAS = ("requests", "jinja2")
+#: requests (laspy: COPC over HTTP); in the Dask workers also jinja2 (Dask: notebook HTML of its
+#: objects), which the command's own process needs for report.html
+EXTRAS = ("requests",)
+WORKER_EXTRAS = (*EXTRAS, "jinja2")
 
 
 def settle() -> None:
@@ -27,13 +29,13 @@ def settle() -> None:
     hide_extras()
 
 
-def hide_extras() -> None:
-    """The modules :data:`EXTRAS` not imported yet seen as not installed by every later import in
+def hide_extras(names: tuple[str, ...] = EXTRAS) -> None:
+    """The modules ``names`` not imported yet seen as not installed by every later import in
     this process (a library then leaves its optional extra out, as it allows): laspy's and Dask's
-    imports take no ``requests`` and ``jinja2`` (LAS tiles on local:2 without it: +14 % wall,
-    +12 % CPU). Also made by the local cluster's workers (``distributed/workerinit``), whose
-    forkserver imports laspy and Dask for them."""
-    for name in EXTRAS:
+    imports take no ``requests`` (and in the workers no ``jinja2``; LAS tiles on local:2 without
+    this: +14 % wall, +12 % CPU). Also made by the local cluster's workers with
+    :data:`WORKER_EXTRAS` (``distributed/workerinit``), whose forkserver imports laspy and Dask."""
+    for name in names:
         sys.modules.setdefault(name, None)  # type: ignore[arg-type]
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import signal
 
-from ..process import hide_extras
+from ..process import WORKER_EXTRAS, hide_extras
 
 
 def ignore_interrupts() -> None:
@@ -24,4 +24,4 @@ def dask_setup(worker=None) -> None:  # noqa: ARG001 - the preload protocol
 
 
 ignore_interrupts()
-hide_extras()
+hide_extras(WORKER_EXTRAS)
