@@ -2,7 +2,8 @@
 
 The CLI, the engine's entry points and the QGIS algorithms all call :func:`check_options`, so a
 value is refused the same way everywhere: an :class:`OptionError` naming the option, the allowed
-range and the value given.
+range and the value given. ``--scheduler`` is parsed once per run, where the run starts
+(:func:`schedule_of`), into the typed schedule its context carries.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any
 
 from .core.types import SoilVolumeError
 from .core.wording import opt
-from .distributed.schedule import spec_problem
+from .distributed.schedule import BadSchedule, Schedule, parse
 from .options import Options
 from .volumes.polygons import read_polygons
 
@@ -60,7 +61,8 @@ def check_number(field: str, value: Any, meta: dict[str, Any], integer: bool = F
 
 
 def check_options(options: Options) -> Options:
-    """Every field of ``options`` against its declared choices and range; returns ``options``."""
+    """Every field of ``options`` against its declared choices and range; returns ``options``
+    (``scheduler`` is parsed where a run starts: :func:`schedule_of`)."""
     for f in fields(options):
         value, meta = getattr(options, f.name), f.metadata
         if value is None:
@@ -71,7 +73,6 @@ def check_options(options: Options) -> Options:
             check_number(f.name, value, meta, integer=f.type in ("int", int))
         elif f.type in ("str | None", "str") and not isinstance(value, str):
             raise OptionError(f.name, f"must be text (got {value!r})")
-    _check_scheduler(options.scheduler)
     _check_polygon_files(options)
     return options
 
@@ -86,11 +87,13 @@ def _check_polygon_files(options: Options) -> None:
             read_polygons(path, what=what)
 
 
-def _check_scheduler(spec: str) -> None:
-    """``--scheduler`` parsed as a run would parse it (its error names the option)."""
-    problem = spec_problem(spec)
-    if problem:
-        raise OptionError("scheduler", problem)
+def schedule_of(options: Options) -> Schedule | None:
+    """``--scheduler`` parsed, once per run, before any work: the run's :class:`Schedule` (None
+    for ``auto``, chosen from the inputs later); a bad value is an :class:`OptionError`."""
+    try:
+        return parse(options.scheduler)
+    except BadSchedule as exc:
+        raise OptionError("scheduler", exc.problem) from None
 
 
 def check_bounds(bounds: Sequence[float] | None, name: str = "--bounds") -> tuple[float, ...] | None:

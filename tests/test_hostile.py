@@ -297,9 +297,9 @@ def test_too_few_open_files_for_a_local_cluster_is_one_line_naming_the_limit(tmp
     assert sorted(p.name for p in tmp_path.iterdir()) == ["in"] and _sums(inputs) == before
     script = (
         "import resource; from soilvolume.distributed.schedule import choose\n"
-        "print(choose('auto', 4.0, 10**9).kind)\n"
+        "print(choose(4.0, 10**9).kind)\n"
         "resource.setrlimit(resource.RLIMIT_NOFILE, (24, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))\n"
-        "print(choose('auto', 4.0, 10**9).kind)\n"
+        "print(choose(4.0, 10**9).kind)\n"
     )
     done = run_python(script)  # auto: worker processes while the limit holds them, else threads
     assert done.stdout.split() == ["local", "threads"], done.stderr

@@ -95,8 +95,8 @@ def test_schedule_parsing_and_auto():
     for bad in ("local:0", "cluster", "threads:x"):
         with pytest.raises(SoilVolumeError, match="--scheduler"):
             parse(bad)
-    assert choose("auto", 4.0, 4_000_000).kind == "none"
-    assert choose("auto", 1.0, 64_000_000).kind == "local"
+    assert choose(4.0, 4_000_000).kind == "none"
+    assert choose(1.0, 64_000_000).kind == "local"
 
 
 def test_tiles_cover_the_grid_once():
@@ -207,7 +207,7 @@ def test_auto_inside_qgis_uses_threads(monkeypatch):
     import sys
 
     monkeypatch.setattr(sys, "executable", "/usr/bin/qgis")
-    assert choose("auto", 1.0, 64_000_000).kind == "threads"
+    assert choose(1.0, 64_000_000).kind == "threads"
 
 
 def test_auto_without_dask_runs_in_process(monkeypatch):
@@ -215,7 +215,7 @@ def test_auto_without_dask_runs_in_process(monkeypatch):
     from soilvolume.distributed import schedule
 
     monkeypatch.setattr(schedule, "has_dask", lambda: False)
-    assert schedule.choose("auto", 1.0, 64_000_000).kind == "none"
+    assert schedule.choose(1.0, 64_000_000).kind == "none"
     monkeypatch.undo()
     assert schedule.has_dask() is True  # installed by make setup
 

@@ -11,6 +11,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 from ..core.types import SoilVolumeError
 from ..core.wording import opt
@@ -29,31 +30,42 @@ TILE_BYTES_PER_POINT = 48.0
 
 @dataclass(frozen=True)
 class Schedule:
-    """A parsed ``--scheduler``: kind is none, threads, local or tcp."""
+    """A parsed ``--scheduler``: in-process (none), tiles on threads, on a LocalCluster of worker
+    processes (local), or on an existing cluster (tcp); ``str`` gives report.json's value."""
 
-    kind: str
+    kind: Literal["none", "threads", "local", "tcp"]
     workers: int = 1
     address: str | None = None
 
+    @property
+    def in_process(self) -> bool:
+        """Whether the run keeps whole clouds in this process (``none``): no tiles, no cluster."""
+        return self.kind == "none"
+
+    @property
+    def on_this_machine(self) -> bool:
+        """Whether its workers run on this machine (every kind but an existing cluster, tcp)."""
+        return self.kind != "tcp"
+
     def __str__(self) -> str:
         return {"none": "none", "tcp": str(self.address)}.get(self.kind, f"{self.kind}:{self.workers}")
+
+
+class BadSchedule(SoilVolumeError):
+    """A ``--scheduler`` value :func:`parse` refuses; ``problem`` says what is wrong with it."""
+
+    def __init__(self, spec: str, problem: str) -> None:
+        self.problem = problem
+        super().__init__(f"{opt('scheduler', spec)}: {problem}")
 
 
 EXPECTED = f"expected none, threads[:N], local[:N] (N from 1 to {MAX_WORKERS}), tcp://HOST:PORT or auto"
 DEFAULT_PORT = 8786  # Dask's scheduler port
 
 
-def spec_problem(spec: str) -> str | None:
-    """What is wrong with a ``--scheduler`` value (None when it is right)."""
-    try:
-        parse(spec)
-    except SoilVolumeError as exc:
-        return str(exc).split(": ", 1)[1]
-    return None
-
-
 def parse(spec: str) -> Schedule | None:
-    """``none``, ``threads[:N]``, ``local[:N]``, ``tcp://HOST[:PORT]`` (None for ``auto``)."""
+    """``none``, ``threads[:N]``, ``local[:N]``, ``tcp://HOST[:PORT]`` (None for ``auto``); a run
+    parses its value once (:func:`soilvolume.validate.schedule_of`), a :class:`BadSchedule` when wrong."""
     spec = (spec or "auto").strip()
     if spec == "auto":
         return None
@@ -63,7 +75,7 @@ def parse(spec: str) -> Schedule | None:
         return Schedule("tcp", address=_address(spec))
     m = re.fullmatch(r"(threads|local)(?::(\d+))?", spec)
     if not m or (m.group(2) is not None and not 1 <= int(m.group(2)) <= MAX_WORKERS):
-        raise SoilVolumeError(f"{opt('scheduler', spec)}: {EXPECTED}")
+        raise BadSchedule(spec, EXPECTED)
     return Schedule(m.group(1), int(m.group(2) or (os.cpu_count() or 1)))
 
 
@@ -71,8 +83,8 @@ def _address(spec: str) -> str:
     """A Dask scheduler's address ``tcp://HOST:PORT`` (port 8786 when not given), checked."""
     from urllib.parse import urlsplit
 
-    def bad(problem: str) -> SoilVolumeError:
-        return SoilVolumeError(f"{opt('scheduler', spec)}: {problem}")
+    def bad(problem: str) -> BadSchedule:
+        return BadSchedule(spec, problem)
 
     scheme = spec.split("://", 1)[0].lower()
     if scheme == "tls":
@@ -131,11 +143,9 @@ def in_process_gb(points: int) -> float:
     return BASE_GB + BYTES_PER_POINT * points / 2**30
 
 
-def choose(spec: str, memory_limit: float, points: int) -> Schedule:
-    """The schedule of a run over ``points`` input points (``auto`` resolved)."""
-    chosen = parse(spec)
-    if chosen is not None:
-        return chosen
+def choose(memory_limit: float, points: int) -> Schedule:
+    """What ``auto`` picks for a run over ``points`` input points: in-process when they fit the
+    memory budget (or without Dask), else a LocalCluster (threads when processes cannot start)."""
     if in_process_gb(points) <= budget_gb(memory_limit) or not has_dask():
         return Schedule("none")
     workers = os.cpu_count() or 1
@@ -256,17 +266,16 @@ def worker_gb(schedule: Schedule, memory_limit: float) -> float:
     return budget_gb(memory_limit) / max(1, schedule.workers)
 
 
-def schedule_for(before, after, options, pipeline: bool) -> Schedule:
-    """The schedule of a run: ``--scheduler``, or for ``auto`` in-process when the pair's points
-    (from the LAS/COPC/VPC headers) fit the memory budget; pipelines and other formats run
-    in-process."""
-    if options.scheduler == "auto":
+def schedule_for(chosen: Schedule | None, before, after, options, pipeline: bool) -> Schedule:
+    """The schedule of a run: the parsed ``--scheduler`` (``chosen``), or for ``auto`` (None)
+    in-process when the pair's points (from the LAS/COPC/VPC headers) fit the memory budget;
+    pipelines and other formats run in-process."""
+    if chosen is None:
         points = [_header_points(p) for p in (before, after)]
         if pipeline or None in points:
             return Schedule("none")
-        return choose("auto", options.memory_limit, sum(points))
-    chosen = parse(options.scheduler)
-    if pipeline and chosen.kind != "none":
+        return choose(options.memory_limit, sum(points))
+    if pipeline and not chosen.in_process:
         raise SoilVolumeError(
             f"{opt('scheduler', options.scheduler)}: preparation pipelines run in-process only "
             f"(use {opt('scheduler', 'none')})"

@@ -73,7 +73,7 @@ class Tiled:
                     return s.result(checker(ctx.hooks))
 
             # the driver reads tiles itself while a local cluster starts (a remote one's workers read theirs)
-            self.c = LazyClient(wait, s.future.done if self.schedule.kind != "tcp" else lambda: True)
+            self.c = LazyClient(wait, s.future.done if self.schedule.on_this_machine else lambda: True)
             yield self
 
     def read(self, ctx) -> Prepared:
@@ -83,7 +83,7 @@ class Tiled:
         paths = [e.path for e in ctx.epochs]
         threading.Thread(target=_identify, args=(self.identities, paths), daemon=True, name="soilvolume-ids").start()
         self.src_b, self.src_a = (open_source(e.path) for e in ctx.epochs)
-        direct = self.schedule.kind in ("local", "threads")  # this machine's workers: sent straight to them
+        direct = self.schedule.on_this_machine  # this machine's workers: sent straight to them
         self.cache = PointCache(self.c, budget_gb(options.memory_limit), direct)
         self.cache.expect(near_after(self.src_b, self.src_a, options.radius))
         loader = dask_loader(self.c, lambda m: hooks.step(ctx.at("prepare", 0.46), m), checker(hooks), self.cache)

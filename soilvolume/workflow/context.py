@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.types import Epoch
+from ..distributed.schedule import Schedule
 from ..options import Options, command_fields
 from .timing import Timer
 
@@ -39,7 +40,9 @@ def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
 @dataclass(frozen=True)
 class Context:
     """A product's run: its epochs, options, callbacks, timer and output folder (None for the
-    commands writing one file), and the percent range of each of its steps (:func:`spans`)."""
+    commands writing one file), the percent range of each of its steps (:func:`spans`), and its
+    ``--scheduler`` as parsed once (:func:`soilvolume.validate.schedule_of`; None for ``auto`` and
+    for the commands without it): every later use reads this value, never the option's text."""
 
     epochs: tuple[Epoch, ...]
     options: Options
@@ -48,6 +51,7 @@ class Context:
     timer: Timer = field(default_factory=Timer)
     out: OutputDir | None = None
     spans: dict[str, tuple[float, float]] = field(default_factory=dict)
+    schedule: Schedule | None = None
 
     def __post_init__(self) -> None:
         if not self.spans:

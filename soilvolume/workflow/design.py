@@ -16,7 +16,6 @@ from ..core.hooks import Hooks
 from ..core.record import Georeferencing, RunRecord
 from ..core.types import GridSpec, SoilVolumeError, StageQuality
 from ..dem.grid import EpochDEM, epoch_dem, output_layers
-from ..distributed.schedule import parse
 from ..execution.seam import Backend, Gridded, done
 from ..inputs.heights import masked_notes
 from ..inputs.landxml import Tin
@@ -50,8 +49,7 @@ class NoPlane:
 
 def estimate(ctx: Context, backend: Backend) -> Reported:
     """Read the surface and the survey, grid, volume (with the surface's terms), write, report."""
-    schedule = parse(ctx.options.scheduler)  # None for auto
-    if schedule is not None and schedule.kind != "none":
+    if ctx.schedule is not None and not ctx.schedule.in_process:  # None: auto
         ctx.hooks.info("{opt:scheduler}: a run against a surface runs in this process")
     with backend.session(ctx):
         ctx, survey = read(ctx)

@@ -17,6 +17,7 @@ from ..inputs.distinct import check_two_surveys
 from ..inputs.surface import is_surface
 from ..options import Options
 from ..pipelines.confine import writers_into
+from ..validate import schedule_of
 from . import design, pair
 from .context import Context, threads
 from .timing import Timer
@@ -45,6 +46,7 @@ def run_estimate(
 ) -> Result:
     """See :func:`soilvolume.api.estimate`."""
     timer = Timer()  # first: the timings count from here (and the start-up before)
+    schedule = schedule_of(options)  # the one parse of --scheduler, before any file is read
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
         check_two_surveys(before, after)
     epochs = epochs_of(before, after, options, before_pipeline, after_pipeline)
@@ -57,7 +59,8 @@ def run_estimate(
     ):
         surface = epochs[0].is_surface
         with timer("setup"):  # the output folder checked, the schedule chosen from the headers
-            ctx = Context(epochs, options, hooks, design.STEPS if surface else pair.PAIR, timer, out)
+            steps = design.STEPS if surface else pair.PAIR
+            ctx = Context(epochs, options, hooks, steps, timer, out, schedule=schedule)
             backend = InMemory() if surface else backend_for(ctx)
         if surface:
             done = design.estimate(ctx, backend)
@@ -71,8 +74,8 @@ def run_estimate(
 
 
 def backend_for(ctx: Context) -> Backend:
-    """The backend ``--scheduler`` names (:func:`distributed.schedule.schedule_for`): in memory,
-    or Dask tiles for any schedule but ``none``."""
+    """The backend of the run's schedule (``auto`` resolved by :func:`distributed.schedule.schedule_for`):
+    in memory, or Dask tiles for any schedule but ``none``."""
     b, a = ctx.epochs
-    schedule = schedule_for(b.path, a.path, ctx.options, b.pipeline or a.pipeline)
-    return InMemory() if schedule.kind == "none" else Tiled(schedule)
+    schedule = schedule_for(ctx.schedule, b.path, a.path, ctx.options, b.pipeline or a.pipeline)
+    return InMemory() if schedule.in_process else Tiled(schedule)

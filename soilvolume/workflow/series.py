@@ -35,6 +35,7 @@ from ..options import Options
 from ..registration.register import Registration
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.series import write_rasters, write_reports
+from ..validate import schedule_of
 from ..volumes.compute import compute_volumes
 from ..volumes.series import combine
 from . import steps
@@ -171,6 +172,7 @@ def run_series(
 ) -> Result:
     """See :func:`soilvolume.api.series`: the method's steps over E0 and every later epoch."""
     timer = Timer()
+    schedule = schedule_of(options)  # parsed once, before any work (a series runs in this process)
     check_epochs(paths)
     dated = zip(paths, epoch_dates(paths, dates), strict=True)
     given = {"crs": None, "georeferencing": options.georeferencing}
@@ -178,7 +180,7 @@ def run_series(
     check_series(epochs)
     threads("series", options)
     with output_dir(out_dir, [*paths, options.stable_mask], overwrite) as out, os_errors(out.final):
-        report = series(Context(epochs, options, hooks, STEPS, timer, out), InMemory())
+        report = series(Context(epochs, options, hooks, STEPS, timer, out, schedule=schedule), InMemory())
     hooks.step(100, "done")
     moved = out.moved.items()
     return Result(report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
