@@ -282,6 +282,24 @@ class Options:
         "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",
         label="LandXML surface name (a LandXML design as BEFORE)",
     )
+    bulking: float | None = _opt(
+        None,
+        "bulking (swell) factor, loose/bank volume (e.g. 1.25): report.json's quantities give the loose volumes "
+        "(a zone's own: its 'bulking' attribute in the zones file)",
+        label="Bulking factor (loose/bank)",
+        lo=0.0,
+        lo_open=True,
+        hi=10.0,
+    )
+    shrinkage: float | None = _opt(
+        None,
+        "shrinkage factor, compacted/bank volume (e.g. 0.90): report.json's quantities give the compacted volumes "
+        "(a zone's own: its 'shrinkage' attribute in the zones file)",
+        label="Shrinkage factor (compacted/bank)",
+        lo=0.0,
+        lo_open=True,
+        hi=10.0,
+    )
     # stockpile inventory
     base: str = _opt(
         "triangulated",

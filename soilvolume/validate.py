@@ -17,6 +17,7 @@ from .core.wording import opt
 from .distributed.schedule import spec_problem
 from .options import Options
 from .volumes.polygons import read_polygons
+from .volumes.quantities import zone_factors
 
 #: fewest grid cells over the compared area that give a meaningful volume
 MIN_CELLS = 25
@@ -84,6 +85,8 @@ def _check_polygon_files(options: Options) -> None:
         path = getattr(options, name)
         if path:
             read_polygons(path, what=what)
+    if options.zones:  # a zone's own bulking or shrinkage factor: a number > 0
+        zone_factors(options.zones)
 
 
 def _check_scheduler(spec: str) -> None:

@@ -5,7 +5,6 @@ report.html (:mod:`.serieshtml`)."""
 from __future__ import annotations
 
 import csv
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ from ..inputs.io import atomic_path
 from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 from ..volumes.seriesquality import epoch_checks, period_quality
-from .report import absolute_transform, stage_dict, write_json
+from .report import absolute_transform, recorded_options, stage_dict, write_json
 from .serieshtml import write_series_html
 
 LEDGER = "ledger.csv"
@@ -146,7 +145,7 @@ def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Optio
             "cumulative_net_m3": series.cumulative.volume["net"],
         },
         "grid": _series_grid(grid, series, origin),
-        "options": asdict(options),
+        "options": recorded_options(options),
         "timings_s": dict(timer.s),
     }
 
