@@ -300,6 +300,17 @@ class Options:
         lo_open=True,
         hi=10.0,
     )
+    tolerance: float | None = _opt(
+        None,
+        "when BEFORE is a design: the on-grade tolerance (m, e.g. 0.05): grade.tif classes each cell as cut to go "
+        "(survey above design by more than it), on grade or fill to go; report.json's grade gives the share on "
+        "grade and the cut and fill still to go, overall and per zone",
+        label="On-grade tolerance (a design as BEFORE)",
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+    )
     # stockpile inventory
     base: str = _opt(
         "triangulated",

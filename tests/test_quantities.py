@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from conftest import run_cli
 from designs import write_surface
@@ -95,3 +96,93 @@ def test_factors_of_zero_or_below_are_refused(plain, tmp_path):
     zones = tmp_path / "zones.gpkg"
     write_zones(zones, before, [{"Bulking": 0.0}])
     _refused(tmp_path, design, after, "field 'bulking' must be a number > 0 (got 0.0)", "--zones", zones)
+
+
+# --- progress against a design: --tolerance on a seeded plane -------------------------------------
+UTM = "EPSG:32654"
+X0, Y0, W, H = 500000.0, 3900000.0, 60.0, 40.0
+OFFSETS = (-0.2, 0.03, 0.3, -0.04)  # design - survey per 15 m strip: cut to go, on grade, fill to go, on grade
+
+
+def plane(x, y):
+    return 50.0 + 0.03 * (x - X0) - 0.02 * (y - Y0)
+
+
+@pytest.fixture(scope="module")
+def graded(tmp_path_factory):
+    """(folder, survey, design on the run's grid with a known offset per strip, that grid)."""
+    import pyproj
+    import rasterio
+    from affine import Affine
+
+    from soilvolume.dem.geotiff import Layout, write_geotiff
+    from soilvolume.inputs.io import write_las
+
+    folder = tmp_path_factory.mktemp("grade")
+    rng = np.random.default_rng(54)
+    xy = rng.uniform((X0, Y0), (X0 + W, Y0 + H), (int(W * H * 40), 2))
+    xyz = np.column_stack([xy, plane(xy[:, 0], xy[:, 1])])
+    survey = folder / "survey.las"
+    write_las(survey, xyz, pyproj.CRS(UTM).to_wkt(), np.full(len(xyz), 2, np.uint8), scale=1e-6)
+
+    def design_tif(path, transform, cols, rows, offsets):
+        x = transform.c + transform.a * (np.arange(cols) + 0.5)
+        y = transform.f + transform.e * (np.arange(rows) + 0.5)
+        xx, yy = np.meshgrid(x, y)
+        strip = np.clip(((xx - X0) // 15).astype(int), 0, 3)
+        z = plane(xx, yy) + np.asarray(offsets)[strip]
+        return write_geotiff(path, [z], Layout(cols, rows, transform, UTM, "float64", float("nan")))
+
+    first = design_tif(folder / "first.tif", Affine(0.5, 0, X0 - 10, 0, -0.5, Y0 + H + 10), 160, 120, (0,) * 4)
+    run = estimate(first, survey, folder / "first", Options(cell=1.0)).report
+    with rasterio.open(folder / "first" / "difference.tif") as ds:
+        t, (rows, cols) = ds.transform, ds.shape
+    big = Affine(t.a, 0, t.c - 5 * t.a, 0, t.e, t.f - 5 * t.e)  # the run's grid, 5 cells wider
+    design = design_tif(folder / "design.tif", big, cols + 10, rows + 10, OFFSETS)
+    assert run["grid"]["cell_m"] == 1.0
+    return folder, survey, design, (t, rows, cols)
+
+
+def test_grade_classes_and_volumes_to_go_are_exact(graded, tmp_path):
+    import rasterio
+
+    folder, survey, design, (t, rows, cols) = graded
+    zones = tmp_path / "zones.gpkg"
+    report0 = {"grid": {"transform": list(t)[:6], "rows": rows, "cols": cols, "crs_wkt": _wkt()}}
+    write_zones(zones, report0, [{}, {}])  # west and east halves
+    out = tmp_path / "out"
+    report = estimate(design, survey, out, Options(cell=1.0, tolerance=0.05, zones=str(zones))).report
+    with rasterio.open(out / "grade.tif") as ds, rasterio.open(out / "difference.tif") as dd:
+        cls, diff, gt = ds.read(1), dd.read(1, masked=True), ds.transform
+        assert ds.dtypes[0] == "uint8" and ds.nodata == 255 and gt == t
+    x = gt.c + gt.a * (np.arange(cols) + 0.5)
+    strip = np.clip(((x - X0) // 15).astype(int), 0, 3)
+    expected = np.broadcast_to(np.array([1, 2, 3, 2])[strip], cls.shape)
+    compared = ~np.ma.getmaskarray(diff)
+    assert compared.sum() > 0.95 * rows * cols
+    assert (cls[compared] == expected[compared]).all() and (cls[~compared] == 255).all()
+    g, area = report["grade"], t.a * -t.e
+    n = [int((compared & (expected == k)).sum()) for k in (1, 2, 3)]
+    um = 1e-5 * area  # exact to 10 micrometres a cell (the run's heights are float32 at 50 m: ~4 um)
+    assert g["cut_to_go_m3"] == pytest.approx(0.2 * n[0] * area, abs=um * n[0])
+    assert g["fill_to_go_m3"] == pytest.approx(0.3 * n[2] * area, abs=um * n[2])
+    assert g["on_grade_share"] == pytest.approx(n[1] / sum(n), abs=1e-12)
+    west, east = g["zones"]
+    assert west["cut_to_go_m3"] == pytest.approx(g["cut_to_go_m3"], rel=1e-12) and west["fill_to_go_m3"] == 0
+    assert east["fill_to_go_m3"] == pytest.approx(g["fill_to_go_m3"], rel=1e-12) and east["cut_to_go_m3"] == 0
+    assert "Progress against the design" in (out / "report.html").read_text()
+
+
+def _wkt():
+    import pyproj
+
+    return pyproj.CRS(UTM).to_wkt()
+
+
+def test_a_tolerance_needs_a_design(plain, tmp_path):
+    folder, design, after, _ = plain
+    before = folder / "before.laz" if (folder / "before.laz").exists() else next(folder.glob("before*"))
+    _refused(
+        tmp_path, before, after, "--tolerance: an on-grade tolerance needs a design as BEFORE", "--tolerance", "0.05"
+    )
+    _refused(tmp_path, design, after, "--tolerance: must be a finite number > 0", "--tolerance", "0")

@@ -151,6 +151,7 @@ def render_html(report: dict, arrays: dict, grid: GridSpec, run_date: str | None
         result=result(report, arrays),
         volumes=Table(["", "net", "cut", "fill", "area (m²)"], volume_rows(report)),
         quantities=earthworks.quantities(report),
+        grade=earthworks.grade(report),
         figures=figures(report, arrays, grid),
         nonsoil_map=page.figure(excluded.classes_map(arrays.get("classes"), grid, arrays.get("dem_after"))),
         excluded=excluded.tables(report),
