@@ -290,6 +290,7 @@ class Options:
         lo=0.0,
         lo_open=True,
         hi=10.0,
+        commands=VOLUME,
     )
     shrinkage: float | None = _opt(
         None,
@@ -299,6 +300,7 @@ class Options:
         lo=0.0,
         lo_open=True,
         hi=10.0,
+        commands=VOLUME,
     )
     tolerance: float | None = _opt(
         None,

@@ -186,3 +186,17 @@ def test_a_tolerance_needs_a_design(plain, tmp_path):
         tmp_path, before, after, "--tolerance: an on-grade tolerance needs a design as BEFORE", "--tolerance", "0.05"
     )
     _refused(tmp_path, design, after, "--tolerance: must be a finite number > 0", "--tolerance", "0")
+
+
+def test_a_series_gives_each_period_its_quantities(tmp_path):
+    from soilvolume.api import series
+    from soilvolume.scenes.series import write_series
+
+    paths, _ = write_series(tmp_path / "scene", seed=0)
+    report = series(paths[:3], tmp_path / "out", Options(bulking=1.3, shrinkage=0.85)).report
+    for p in [*report["periods"], report["cumulative"]]:
+        q = p["quantities"]
+        _scaled(q["bank"], p["volume_m3"], p["uncertainty_m3"], 1.0)
+        _scaled(q["loose"], p["volume_m3"], p["uncertainty_m3"], 1.3)
+        _scaled(q["compacted"], p["volume_m3"], p["uncertainty_m3"], 0.85)
+    assert json.loads((tmp_path / "out" / "report.json").read_text())["options"]["bulking"] == 1.3
