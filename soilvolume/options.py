@@ -282,6 +282,37 @@ class Options:
         "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",
         label="LandXML surface name (a LandXML design as BEFORE)",
     )
+    bulking: float | None = _opt(
+        None,
+        "bulking (swell) factor, loose/bank volume (e.g. 1.25): report.json's quantities give the loose volumes "
+        "(a zone's own: its 'bulking' attribute in the zones file)",
+        label="Bulking factor (loose/bank)",
+        lo=0.0,
+        lo_open=True,
+        hi=10.0,
+        commands=VOLUME,
+    )
+    shrinkage: float | None = _opt(
+        None,
+        "shrinkage factor, compacted/bank volume (e.g. 0.90): report.json's quantities give the compacted volumes "
+        "(a zone's own: its 'shrinkage' attribute in the zones file)",
+        label="Shrinkage factor (compacted/bank)",
+        lo=0.0,
+        lo_open=True,
+        hi=10.0,
+        commands=VOLUME,
+    )
+    tolerance: float | None = _opt(
+        None,
+        "when BEFORE is a design: the on-grade tolerance (m, e.g. 0.05): grade.tif classes each cell as cut to go "
+        "(survey above design by more than it), on grade or fill to go; report.json's grade gives the share on "
+        "grade and the cut and fill still to go, overall and per zone",
+        label="On-grade tolerance (a design as BEFORE)",
+        unit="m",
+        lo=0.0,
+        lo_open=True,
+        hi=100.0,
+    )
     # stockpile inventory
     base: str = _opt(
         "triangulated",

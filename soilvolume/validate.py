@@ -18,6 +18,7 @@ from .core.wording import opt
 from .distributed.schedule import BadSchedule, Schedule, parse
 from .options import Options
 from .volumes.polygons import read_polygons
+from .volumes.quantities import zone_factors
 
 #: fewest grid cells over the compared area that give a meaningful volume
 MIN_CELLS = 25
@@ -85,6 +86,8 @@ def _check_polygon_files(options: Options) -> None:
         path = getattr(options, name)
         if path:
             read_polygons(path, what=what)
+    if options.zones:  # a zone's own bulking or shrinkage factor: a number > 0
+        zone_factors(options.zones)
 
 
 def schedule_of(options: Options) -> Schedule | None:

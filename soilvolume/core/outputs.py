@@ -33,6 +33,7 @@ RUN_OUTPUTS = (
     "report.html",
     "change_areas.geojson",
     "contours.gpkg",
+    "grade.tif",
     "after_registered.laz",
 )
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from ..core import wording
 from ..core.types import GridSpec
 from ..options import Options
-from . import excluded, page, surface
+from . import earthworks, excluded, page, surface
 from .figures import difference_map, residual_map
 from .headline import zero_notes
 from .histogram import histogram
@@ -150,6 +150,8 @@ def render_html(report: dict, arrays: dict, grid: GridSpec, run_date: str | None
         version=fmt(get(report, "software", "version") or "unknown"),
         result=result(report, arrays),
         volumes=Table(["", "net", "cut", "fill", "area (m²)"], volume_rows(report)),
+        quantities=earthworks.quantities(report),
+        grade=earthworks.grade(report),
         figures=figures(report, arrays, grid),
         nonsoil_map=page.figure(excluded.classes_map(arrays.get("classes"), grid, arrays.get("dem_after"))),
         excluded=excluded.tables(report),

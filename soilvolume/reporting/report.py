@@ -17,6 +17,7 @@ from ..registration.rigid import rotation_deg, shift_at, tilt_deg, transform_poi
 from ..volumes import coverage
 from ..volumes.nonsoil import sentence
 from ..volumes.quality import assess
+from ..volumes.quantities import quantities
 from .surface import amend, is_surface, surface_quality
 
 if TYPE_CHECKING:
@@ -162,7 +163,21 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
         report["quality"] = surface_quality(report, record)
     if record.engine is not None:
         report["engine"] = record.engine
+    o = record.options
+    q = quantities(report, o.bulking, o.shrinkage, o.zones)
+    if q is not None:
+        report["quantities"] = q
     return report
+
+
+#: options recorded in report.json only when set: each adds its own keys to the report, so a run
+#: without them reads as before they existed
+WHEN_SET = ("bulking", "shrinkage", "tolerance")
+
+
+def recorded_options(options: Options) -> dict:
+    """report.json's ``options``: every option, those of :data:`WHEN_SET` only when given."""
+    return {k: v for k, v in asdict(options).items() if not (k in WHEN_SET and v is None)}
 
 
 VOLUME_METHOD = (  # report.json's volume_method
@@ -254,7 +269,7 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
         "holes": vols.holes,
         "coverage": _coverage(prep, reg, grid, vols),
         "inputs": prep.inputs,
-        "options": asdict(options),
+        "options": recorded_options(options),
         "timings_s": timings,
     }
     return amend(report, prep, vols)  # a run against a surface: its reference

@@ -5,7 +5,6 @@ report.html (:mod:`.serieshtml`)."""
 from __future__ import annotations
 
 import csv
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +15,9 @@ from ..dem.geotiff import write_grid
 from ..inputs.io import atomic_path
 from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
+from ..volumes.quantities import scaled
 from ..volumes.seriesquality import epoch_checks, period_quality
-from .report import absolute_transform, stage_dict, write_json
+from .report import absolute_transform, recorded_options, stage_dict, write_json
 from .serieshtml import write_series_html
 
 LEDGER = "ledger.csv"
@@ -146,9 +146,19 @@ def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Optio
             "cumulative_net_m3": series.cumulative.volume["net"],
         },
         "grid": _series_grid(grid, series, origin),
-        "options": asdict(options),
+        "options": recorded_options(options),
         "timings_s": dict(timer.s),
     }
+
+
+def with_quantities(report: dict, options: Options) -> dict:
+    """``report`` with each period's and the cumulative's ``quantities`` (bank, loose and compacted
+    volumes, :func:`~soilvolume.volumes.quantities.scaled`) when ``--bulking`` or ``--shrinkage`` is given."""
+    factors = {"bulking": options.bulking, "shrinkage": options.shrinkage}
+    if options.bulking is not None or options.shrinkage is not None:
+        for p in [*report["periods"], report["cumulative"]]:
+            p["quantities"] = scaled(p["volume_m3"], p["uncertainty_m3"], factors)
+    return report
 
 
 def write_ledger(path: Path, report: dict) -> None:
@@ -181,7 +191,7 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
     """report.json, the ledger and report.html of a series run into ``out`` (an
     :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
-    report = cli_tree(build_series_report(epochs, fits, vols, series, grid, options, timer))
+    report = cli_tree(with_quantities(build_series_report(epochs, fits, vols, series, grid, options, timer), options))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
     report["timings_s"] = timer.totals()

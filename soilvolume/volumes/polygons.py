@@ -61,6 +61,18 @@ def read_polygons(
     return polys, wkt
 
 
+def feature_fields(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
+    """[(feature id, attributes)] of the polygon features of ``path``'s first layer (ids as
+    :func:`read_polygons` gives them)."""
+    feats, _ = _read(Path(path))
+    polygonal = ("Polygon", "MultiPolygon")
+    return [
+        (int(fid if fid is not None else i), props)
+        for i, (fid, props, g) in enumerate(feats)
+        if g is not None and not g.is_empty and g.geom_type in polygonal
+    ]
+
+
 def _read(path: Path):
     """[(fid, properties, shapely geometry or None)], CRS WKT, read with pyogrio."""
     import shapely

@@ -15,6 +15,7 @@ import numpy as np
 from ..core.hooks import Hooks
 from ..core.record import Georeferencing, RunRecord
 from ..core.types import GridSpec, SoilVolumeError, StageQuality
+from ..dem.geotiff import write_grid
 from ..dem.grid import EpochDEM, epoch_dem, output_layers
 from ..execution.seam import Backend, Gridded, done
 from ..inputs.heights import masked_notes
@@ -27,6 +28,7 @@ from ..registration.register import Registration
 from ..reporting.surface import NONE
 from ..volumes import reference
 from ..volumes.compute import Volumes, compute_volumes
+from ..volumes.grade import grade
 from . import steps
 from .context import Context
 from .plan import plan_grid, survey_cell
@@ -63,10 +65,22 @@ def estimate(ctx: Context, backend: Backend) -> Reported:
         with steps.running(ctx, "volume", ctx.message("volume")):
             vols = backend.volume(ctx, step, gridded, fitted, None)
         contours = steps.write(ctx, backend, vols, gridded.grid, layers())
+        graded = write_grade(ctx, vols.diff, gridded.grid)
         judged = steps.judged(vols, gridded.grid, ctx.options)
         reg = _not_registered(ctx.options)
         record = RunRecord(prep, reg, gridded.grid, fitted[:2], vols, ctx.options, judged, backend.engine())
-        return steps.report(ctx, record, gridded, contours)
+        return steps.report(ctx, record, gridded, contours, graded)
+
+
+def write_grade(ctx: Context, diff: np.ndarray, on: GridSpec) -> dict | None:
+    """With ``--tolerance``: grade.tif (uint8: 1 cut to go, 2 on grade, 3 fill to go, 255 not
+    compared) and report.json's ``grade`` (:func:`volumes.grade.grade`); None without it."""
+    if ctx.options.tolerance is None:
+        return None
+    cls, summary = grade(diff, on, ctx.options.tolerance, ctx.options.zones)
+    said = f"1 cut to go, 2 on grade (within {ctx.options.tolerance:g} m of the design), 3 fill to go"
+    write_grid(ctx.out.path("grade.tif"), cls, on, said, units="", dtype="uint8")
+    return {"grade": summary}
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..core.hooks import Hooks, Result
 from ..core.outputs import RUN_OUTPUTS, os_errors, output_dir
-from ..core.types import Epoch, survey
+from ..core.types import Epoch, SoilVolumeError, survey
 from ..distributed.schedule import schedule_for
 from ..execution.inmemory import InMemory
 from ..execution.seam import Backend
@@ -50,6 +50,11 @@ def run_estimate(
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
         check_two_surveys(before, after)
     epochs = epochs_of(before, after, options, before_pipeline, after_pipeline)
+    if options.tolerance is not None and not epochs[0].is_surface:
+        raise SoilVolumeError(
+            "{opt:tolerance}: an on-grade tolerance needs a design as BEFORE (a GeoTIFF or LandXML surface), "
+            f"not the point cloud {before}"
+        )
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
     threads("estimate", options)
     with (

@@ -205,12 +205,14 @@ def pair_layers(options: Options) -> list:
     return output_layers(options.correction)
 
 
-def report(ctx: Context, record: RunRecord, gridded: Gridded, contours: dict | None) -> Reported:
-    """Step 7: report.json from the run's typed record (the quality verdict in it), report.html
-    and the areas of significant change as polygons."""
+def report(
+    ctx: Context, record: RunRecord, gridded: Gridded, contours: dict | None, extra: dict | None = None
+) -> Reported:
+    """Step 7: report.json from the run's typed record (the quality verdict in it; ``extra``:
+    a product's own keys), report.html and the areas of significant change as polygons."""
     with running(ctx, "report", ctx.message("report"), log=False):
         out, vols, z0 = ctx.out, record.vols, float(gridded.grid.origin[2])
-        report = build_report(record, ctx.timer.totals())
+        report = {**build_report(record, ctx.timer.totals()), **(extra or {})}
         if contours:
             report["contours"] = contours
         for line in report["quality"]["messages"]:

@@ -1,0 +1,62 @@
+"""Progress against a design: each compared cell's class by an on-grade tolerance ``T`` (survey
+above the design by more than ``T``: cut to go; within ``±T``: on grade; below by more than
+``T``: fill to go), the share of the compared area on grade and the cut and fill still to go
+(m^3: the survey - design difference summed over the cut-to-go and the fill-to-go cells; the
+whole depth to the design, not only its part beyond ``T``), overall and per zone."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..core.types import GridSpec
+from .polygons import read_polygons, to_grid_crs
+from .zones import polygon_masks
+
+CUT, ON_GRADE, FILL = 1, 2, 3  # grade.tif's classes (255: not compared)
+CLASSES = {"1": "cut to go: survey above design by more than T", "2": "on grade: within ±T", "3": "fill to go"}
+
+
+def classes(diff: np.ndarray, tolerance: float) -> np.ndarray:
+    """Each cell's class (float: NaN where ``diff``, survey - design, is not finite)."""
+    out = np.full(diff.shape, np.nan)
+    ok = np.isfinite(diff)
+    out[ok] = ON_GRADE
+    out[ok & (diff > tolerance)] = CUT
+    out[ok & (diff < -tolerance)] = FILL
+    return out
+
+
+def summary(diff: np.ndarray, cls: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -> dict[str, Any]:
+    """The compared area (m^2), its share on grade, and the cut and fill to go (m^3) over the
+    compared cells (of ``mask`` when given)."""
+    inside = np.isfinite(cls) if mask is None else np.isfinite(cls) & mask
+    n = int(inside.sum())
+    cut, fill = inside & (cls == CUT), inside & (cls == FILL)
+    return {
+        "compared_area_m2": n * cell_area,
+        "on_grade_share": float((inside & (cls == ON_GRADE)).sum() / n) if n else None,
+        "on_grade_area_m2": float((inside & (cls == ON_GRADE)).sum() * cell_area),
+        "cut_to_go_m3": float(diff[cut].sum() * cell_area),
+        "fill_to_go_m3": float(-diff[fill].sum() * cell_area),
+        "cut_to_go_area_m2": float(cut.sum() * cell_area),
+        "fill_to_go_area_m2": float(fill.sum() * cell_area),
+    }
+
+
+def grade(diff: np.ndarray, grid: GridSpec, tolerance: float, zones: str | Path | None) -> tuple[np.ndarray, dict]:
+    """(the class grid, report.json's ``grade``: the tolerance, the classes, the overall
+    :func:`summary` and each zone's)."""
+    cls = classes(diff, tolerance)
+    out = {"tolerance_m": tolerance, "classes": CLASSES, **summary(diff, cls, grid.cell_area)}
+    if zones:
+        polys, wkt = read_polygons(zones)
+        polys = to_grid_crs(polys, wkt, grid, zones)
+        masks = polygon_masks(polys, grid)
+        out["zones"] = [
+            {"id": p.id, "name": p.name, **summary(diff, cls, grid.cell_area, m)}
+            for p, m in zip(polys, masks, strict=True)
+        ]
+    return cls, out
