@@ -4,31 +4,19 @@ one :class:`jinja2.Environment`, and the page written whole."""
 from __future__ import annotations
 
 import os
-import sys
-from functools import cache
 from pathlib import Path
 
+from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from markupsafe import Markup
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
-
-
-@cache
-def environment():
-    """The one ``jinja2.Environment`` of the pages, made when the first page is drawn: the command
-    hides jinja2 from Dask's and laspy's imports (``process.hide_extras``), so it is imported only
-    now, unhidden, once the run's libraries are loaded."""
-    if "jinja2" in sys.modules and sys.modules["jinja2"] is None:
-        del sys.modules["jinja2"]
-    from jinja2 import Environment, FileSystemLoader, StrictUndefined
-
-    return Environment(
-        loader=FileSystemLoader(TEMPLATES),
-        autoescape=True,
-        undefined=StrictUndefined,
-        trim_blocks=True,
-        lstrip_blocks=True,
-    )
+ENV = Environment(
+    loader=FileSystemLoader(TEMPLATES),
+    autoescape=True,
+    undefined=StrictUndefined,
+    trim_blocks=True,
+    lstrip_blocks=True,
+)
 
 
 def figure(html: str | None) -> Markup | None:
@@ -38,7 +26,7 @@ def figure(html: str | None) -> Markup | None:
 
 def render(template: str, **context) -> str:
     """``template`` of :data:`TEMPLATES` rendered with ``context`` (plain text is escaped)."""
-    return environment().get_template(template).render(**context)
+    return ENV.get_template(template).render(**context)
 
 
 def write(path: str | Path, text: str) -> Path:
