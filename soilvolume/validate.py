@@ -16,7 +16,7 @@ from .core.types import SoilVolumeError
 from .core.wording import opt
 from .distributed.schedule import spec_problem
 from .options import Options
-from .volumes.polygons import read_polygons
+from .volumes.polygons import read_lines, read_polygons
 
 #: fewest grid cells over the compared area that give a meaningful volume
 MIN_CELLS = 25
@@ -77,13 +77,15 @@ def check_options(options: Options) -> Options:
 
 
 def _check_polygon_files(options: Options) -> None:
-    """The zones and stable-ground files read once now (missing, unreadable, without polygons,
+    """The zones, stable-ground and sections files read once now (missing, unreadable, without polygons,
     invalid beyond repair: said before any point is read; their CRS is checked against the grid
     later)."""
     for name, what in (("zones", "zones file"), ("stable_mask", f"{opt('stable_mask')} file")):
         path = getattr(options, name)
         if path:
             read_polygons(path, what=what)
+    if options.sections:
+        read_lines(options.sections, what=f"{opt('sections')} file")
 
 
 def _check_scheduler(spec: str) -> None:

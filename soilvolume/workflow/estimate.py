@@ -48,7 +48,7 @@ def run_estimate(
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
         check_two_surveys(before, after)
     epochs = epochs_of(before, after, options, before_pipeline, after_pipeline)
-    inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
+    inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask, options.sections]
     threads("estimate", options)
     with (
         output_dir(out_dir, inputs, overwrite) as out,
