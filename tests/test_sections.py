@@ -130,3 +130,22 @@ def test_stations_run_on_across_parts():
 def test_no_sections_without_the_option(misaligned_result):
     _res, _truth, out = misaligned_result
     assert not (out / "sections.csv").exists() and "sections" not in json.loads((out / "report.json").read_text())
+
+
+def test_against_a_design_the_before_is_the_design(pair, tmp_path):
+    """A survey against a surface: the first height column is the design, sampled from it."""
+    from designs import write_surface
+
+    from soilvolume.scenes.synthetic import SceneConfig
+
+    design = write_surface(tmp_path / "design.tif", 0, SceneConfig.small())
+    x, y, height, _r = PILE
+    path = _lines_file(tmp_path / "lines.geojson", [LineString([(x - 20, y), (x + 20, y)])], ["A"])
+    out = tmp_path / "out"
+    estimate(design, pair[1], out, Options(sections=str(path)))
+    rows = _rows(out)
+    assert list(rows[0])[5:] == ["design", "after", "difference"]
+    rise = np.array([_float(r["after"]) - _float(r["design"]) for r in rows])
+    assert np.nanmax(rise) - np.nanmedian(rise) == pytest.approx(height, abs=0.4)  # the after survey is not registered
+    svg = (out / "sections" / "A.svg").read_text()
+    assert ">design</text>" in svg
