@@ -221,6 +221,23 @@ def write_contours(alg, parameters: dict[str, Any], context: QgsProcessingContex
     return dest
 
 
+def write_sections(alg, parameters: dict[str, Any], context: QgsProcessingContext, outputs: dict) -> str | None:
+    """The SECTION_PROFILES output: the engine's sections.csv copied, and its pictures into the
+    folder named after it (``profiles.csv`` -> ``profiles/``)."""
+    dest = alg.parameterAsFileOutput(parameters, "SECTION_PROFILES", context)
+    if not dest:
+        return None
+    src = Path(outputs["sections"]).parent / "sections.csv" if outputs.get("sections") else None
+    if src is None or not src.is_file():
+        raise QgsProcessingException("The engine wrote no cross-sections (are the section lines given?).")
+    params.deliver_file(src, dest)
+    pictures = Path(dest).with_suffix("")
+    for svg in sorted((src.parent / "sections").glob("*.svg")):
+        params.dest_folder(pictures)
+        params.copy(svg, str(pictures / svg.name))
+    return dest
+
+
 def _zone_feature(feature: QgsFeature, zone: dict[str, Any], fields: QgsFields, pm) -> QgsFeature:
     out = QgsFeature(fields)
     out.setGeometry(feature.geometry())

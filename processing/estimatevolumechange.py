@@ -165,6 +165,15 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             )
         )
         self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "SECTION_PROFILES",
+                self.tr("Cross-sections (CSV; an SVG picture per line in the folder of its name; needs section lines)"),
+                fileFilter="CSV (*.csv)",
+                optional=True,
+                createByDefault=False,
+            )
+        )
+        self.addParameter(
             QgsProcessingParameterFeatureSink(
                 "VOLUMES",
                 self.tr("Volumes (a table of one row: net, cut, fill and their ±, the verdict)"),
@@ -196,6 +205,8 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         options = optionparams.read_options(self, parameters, context, feedback)
         if self.parameterAsFileOutput(parameters, "CONTOURS", context) and not options.contour_interval > 0:
             raise QgsProcessingException("Contours: set the Contour interval (CONTOUR_INTERVAL) above 0.")
+        if self.parameterAsFileOutput(parameters, "SECTION_PROFILES", context) and not options.sections:
+            raise QgsProcessingException("Cross-sections: give the Cross-section lines (SECTIONS).")
         args = ["estimate", before, after] + engine.option_args(options, "estimate")
         for key, flag in (("BEFORE_PIPELINE", "--before-pipeline"), ("AFTER_PIPELINE", "--after-pipeline")):
             if self.parameterAsFile(parameters, key, context):
@@ -225,6 +236,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             self, parameters, context, outputs.get("change_areas"), names
         )
         results["CONTOURS"] = estimate_outputs.write_contours(self, parameters, context, outputs.get("contours"), names)
+        results["SECTION_PROFILES"] = estimate_outputs.write_sections(self, parameters, context, outputs)
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
         results["VOLUMES"] = estimate_outputs.write_volumes(self, parameters, context, results)

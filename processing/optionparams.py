@@ -31,6 +31,7 @@ from .params import crs_text
 
 CRS_FIELDS = {"before_crs", "after_crs"}
 POLYGON_FIELDS = {"stable_mask", "zones"}
+LINE_FIELDS = {"sections"}  # a layer of lines
 BASIC = (
     "before_crs",
     "after_crs",
@@ -66,10 +67,10 @@ def _make(field: Field) -> QgsProcessingParameterDefinition:
     optional = default is None
     if field.name in CRS_FIELDS:
         return QgsProcessingParameterCrs(name, label, optional=True)
-    if field.name in POLYGON_FIELDS:
-        return QgsProcessingParameterFeatureSource(
-            name, label, [Qgis.ProcessingSourceType.VectorPolygon], optional=True
-        )
+    if field.name in POLYGON_FIELDS | LINE_FIELDS:
+        types = Qgis.ProcessingSourceType
+        kind = types.VectorLine if field.name in LINE_FIELDS else types.VectorPolygon
+        return QgsProcessingParameterFeatureSource(name, label, [kind], optional=True)
     if meta.get("choices"):
         return QgsProcessingParameterEnum(
             name, label, options=list(meta["choices"]), defaultValue=default, usesStaticStrings=True
@@ -133,7 +134,7 @@ def _value(alg, field: Field, parameters: dict[str, Any], context, feedback) -> 
     name = key(field)
     if field.name in CRS_FIELDS:
         return crs_text(alg, parameters, name, context)
-    if field.name in POLYGON_FIELDS:
+    if field.name in POLYGON_FIELDS | LINE_FIELDS:
         if not parameters.get(name):
             return None
         return (

@@ -277,6 +277,14 @@ class Options:
         hi=10000.0,
         run_control=True,
     )
+    sections: str | None = _opt(
+        None,
+        "a vector file of lines (any OGR format; its CRS honoured): a cross-section along each, the heights before "
+        "(the design against a surface), after and their difference every half cell, in sections.csv (line id and "
+        "name, chainage in m, x, y, before, after, difference) and one picture per line, sections/NAME.svg",
+        label="Cross-section lines",
+        run_control=True,
+    )
     design_surface: str | None = _opt(
         None,
         "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",

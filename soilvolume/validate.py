@@ -17,7 +17,7 @@ from .core.types import SoilVolumeError
 from .core.wording import opt
 from .distributed.schedule import BadSchedule, Schedule, parse
 from .options import Options
-from .volumes.polygons import read_polygons
+from .volumes.polygons import read_lines, read_polygons
 from .volumes.quantities import zone_factors
 
 #: fewest grid cells over the compared area that give a meaningful volume
@@ -79,7 +79,7 @@ def check_options(options: Options) -> Options:
 
 
 def _check_polygon_files(options: Options) -> None:
-    """The zones and stable-ground files read once now (missing, unreadable, without polygons,
+    """The zones, stable-ground and sections files read once now (missing, unreadable, without polygons,
     invalid beyond repair: said before any point is read; their CRS is checked against the grid
     later)."""
     for name, what in (("zones", "zones file"), ("stable_mask", f"{opt('stable_mask')} file")):
@@ -88,6 +88,8 @@ def _check_polygon_files(options: Options) -> None:
             read_polygons(path, what=what)
     if options.zones:  # a zone's own bulking or shrinkage factor: a number > 0
         zone_factors(options.zones)
+    if options.sections:
+        read_lines(options.sections, what=f"{opt('sections')} file")
 
 
 def schedule_of(options: Options) -> Schedule | None:

@@ -17,8 +17,9 @@ filled_mask.tif is 1), difference.tif (H_after - H_before - correction: dem_afte
 plane_offset), plane_offset.tif (the correction d_i), filled_mask.tif,
 excluded.tif (what is not soil: vegetation, objects, moved objects; see --exclude),
 report.json, report.html, and with --registered-cloud after_registered.laz.
-change_areas.geojson: the areas of significant change as cut and fill polygons with their volumes.
-With --contour-interval M also contours.gpkg (layers difference, dem_before, dem_after: lines every M m).
+change_areas.geojson and .gpkg: the areas of significant change as cut and fill polygons with their volumes.
+With --contour-interval M also contours.gpkg (layers difference, dem_before, dem_after: lines every M m);
+with --zones also zones.gpkg and zones.csv; with --sections LINES sections.csv and sections/NAME.svg.
 Volumes are in cubic metres: fill = material added, cut = removed,
 net = fill - cut. Lengths are metres in the before cloud's CRS (vertical feet are converted).
 The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),

@@ -1,6 +1,7 @@
 """The areas of significant change as polygons: each connected patch of significant cut or
 fill (the cells the headline cut and fill are summed over) becomes one polygon with its kind,
-area and volume, written as GeoJSON next to the rasters (``change_areas.geojson``) and outlined
+area and volume, written as GeoJSON next to the rasters (``change_areas.geojson``, and as
+``change_areas.gpkg``) and outlined
 on report.html's map. The polygons' volumes add up to the headline cut and fill; where the
 volume step goes tile by tile, they are drawn on the overview grid the report's map shows (its
 cells are k x k of the run's), and their volumes are that grid's."""
@@ -15,6 +16,7 @@ import numpy as np
 
 from ..core.types import GridSpec
 from ..inputs.crs import raster_wkt
+from .vectors import write_change_area_gpkg
 
 FILE = "change_areas.geojson"
 
@@ -66,7 +68,8 @@ def features(diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSp
 
 
 def write_change_areas(path: str | Path, diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSpec) -> dict:
-    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically); ``cut``:
+    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically, and the same as
+    ``change_areas.gpkg`` beside it); ``cut``:
     the cut areas of ``change``; returns {"file", "cut_polygons", "fill_polygons", "cut_m3",
     "fill_m3"}."""
     path = Path(path)
@@ -76,6 +79,7 @@ def write_change_areas(path: str | Path, diff: np.ndarray, change: np.ndarray, c
     tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
     tmp.write_text(json.dumps(doc), encoding="utf-8")
     os.replace(tmp, path)
+    write_change_area_gpkg(path.parent, feats, raster_wkt(grid.crs_wkt))
     by = {k: [f["properties"]["volume_m3"] for f in feats if f["properties"]["kind"] == k] for k in ("cut", "fill")}
     return {
         "file": path.name,

@@ -156,3 +156,30 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
             )
         out.append(Polygon(p.id, p.name, geom, p.repaired))
     return out
+
+
+def read_lines(path: str | Path, what: str = "sections file") -> tuple[list[Polygon], str | None]:
+    """(lines, CRS WKT or None) of the first layer of ``path``: its (multi)line features, each
+    named by a field called name, id or label (else ``line N``). Raises SoilVolumeError naming
+    ``what`` and the file when it is missing, unreadable or holds no line."""
+    import shapely
+
+    path = Path(path)
+    if not path.is_file() and not path.is_dir():
+        raise SoilVolumeError(f"{path}: {what} not found" if not path.exists() else f"{path}: not a regular file")
+    try:
+        feats, wkt = _read(path)
+    except Exception as exc:  # noqa: BLE001 - driver errors come in many types
+        raise SoilVolumeError(f"{path}: cannot read lines from this {what} ({short_error(exc)})") from None
+    lines = []
+    for i, (fid, props, geom) in enumerate(feats):
+        if geom is None or geom.is_empty or geom.geom_type not in ("LineString", "MultiLineString"):
+            continue
+        if not np.isfinite(shapely.get_coordinates(geom)).all():
+            raise SoilVolumeError(f"{path}: line {i + 1} has a coordinate that is not a number")
+        key = next((k for k in props if k.lower() in ("name", "id", "label")), None)
+        name = str(props[key]) if key and props[key] is not None else f"line {i + 1}"
+        lines.append(Polygon(int(fid if fid is not None else i), name, geom))
+    if not lines:
+        raise SoilVolumeError(f"{path}: no line features in this {what}")
+    return lines, wkt

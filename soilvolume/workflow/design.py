@@ -64,12 +64,12 @@ def estimate(ctx: Context, backend: Backend) -> Reported:
 
         with steps.running(ctx, "volume", ctx.message("volume")):
             vols = backend.volume(ctx, step, gridded, fitted, None)
-        contours = steps.write(ctx, backend, vols, gridded.grid, layers())
+        extras = steps.write(ctx, backend, vols, gridded.grid, layers())
         graded = write_grade(ctx, vols.diff, gridded.grid)
         judged = steps.judged(vols, gridded.grid, ctx.options)
         reg = _not_registered(ctx.options)
         record = RunRecord(prep, reg, gridded.grid, fitted[:2], vols, ctx.options, judged, backend.engine())
-        return steps.report(ctx, record, gridded, contours, graded)
+        return steps.report(ctx, record, gridded, {**(extras or {}), **(graded or {})})
 
 
 def write_grade(ctx: Context, diff: np.ndarray, on: GridSpec) -> dict | None:

@@ -55,7 +55,7 @@ def run_estimate(
             "{opt:tolerance}: an on-grade tolerance needs a design as BEFORE (a GeoTIFF or LandXML surface), "
             f"not the point cloud {before}"
         )
-    inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask]
+    inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask, options.sections]
     threads("estimate", options)
     with (
         output_dir(out_dir, inputs, overwrite) as out,

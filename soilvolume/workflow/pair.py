@@ -28,10 +28,10 @@ def estimate(ctx: Context, backend: Backend, cloud: Path | None = None) -> Repor
         gridded = steps.grid(ctx, backend, prep, reg)
         fitted = steps.planes(ctx, gridded)
         vols = steps.volume(ctx, backend, gridded, fitted, reg)
-        contours = steps.write(ctx, backend, vols, gridded.grid, steps.pair_layers(ctx.options))
+        extras = steps.write(ctx, backend, vols, gridded.grid, steps.pair_layers(ctx.options))
         judged = steps.judged(vols, gridded.correction_grid, ctx.options)
         parts = (prep, reg, gridded.grid, fitted[:2], vols, ctx.options, judged, backend.engine())
-        return steps.report(ctx, RunRecord(*parts), gridded, contours)
+        return steps.report(ctx, RunRecord(*parts), gridded, extras)
 
 
 def register(ctx: Context, backend: Backend, cloud: Path) -> tuple:

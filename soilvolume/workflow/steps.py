@@ -32,6 +32,8 @@ from ..reporting.contours import FILE as CONTOURS
 from ..reporting.contours import write_contours
 from ..reporting.html import write_html
 from ..reporting.report import build_report, write_json
+from ..reporting.sections import write_sections
+from ..reporting.vectors import write_zones
 from ..volumes.compute import Volumes, compute_volumes
 from .context import Context
 from .plan import plan_grid, reference_cell
@@ -188,16 +190,21 @@ def alternative_move(reg: Registration) -> np.ndarray | None:
     return None if alt is None else alt @ np.linalg.inv(reg.transform)
 
 
-def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec | None, layers: list) -> dict | None:
-    """Step 6: the rasters ``layers`` (and the registered cloud, when kept); with
-    ``--contour-interval``, contours.gpkg drawn from the rasters just staged (its description)."""
+def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec | None, layers: list) -> dict:
+    """Step 6: the rasters ``layers`` (and the registered cloud, when kept); drawn from the rasters
+    just staged: with ``--contour-interval``, contours.gpkg, with ``--sections``, the sections'
+    profiles; returns their descriptions for report.json (``contours``, ``sections``)."""
+    extras = {}
     with running(ctx, "write", ctx.message("write") + backend.raster_note):
         z0 = 0.0 if grid is None else float(grid.origin[2])  # local -> absolute heights
         backend.write(ctx, layers, vols, grid, z0)
+        staged = ctx.out.path(CONTOURS)
         if layers and ctx.options.contour_interval > 0:
-            staged = ctx.out.path(CONTOURS)
-            return write_contours(staged, staged.parent, ctx.options.contour_interval)
-    return None
+            extras["contours"] = write_contours(staged, staged.parent, ctx.options.contour_interval)
+        if layers and grid is not None and ctx.options.sections:
+            before = "design" if ctx.epochs[0].is_surface else "before"
+            extras["sections"] = write_sections(ctx.options.sections, staged.parent, grid, before)
+    return extras
 
 
 def pair_layers(options: Options) -> list:
@@ -205,20 +212,19 @@ def pair_layers(options: Options) -> list:
     return output_layers(options.correction)
 
 
-def report(
-    ctx: Context, record: RunRecord, gridded: Gridded, contours: dict | None, extra: dict | None = None
-) -> Reported:
-    """Step 7: report.json from the run's typed record (the quality verdict in it; ``extra``:
-    a product's own keys), report.html and the areas of significant change as polygons."""
+def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | None) -> Reported:
+    """Step 7: report.json from the run's typed record (the quality verdict in it, the write
+    step's ``extras``), report.html and the areas of significant change as polygons."""
     with running(ctx, "report", ctx.message("report"), log=False):
         out, vols, z0 = ctx.out, record.vols, float(gridded.grid.origin[2])
-        report = {**build_report(record, ctx.timer.totals()), **(extra or {})}
-        if contours:
-            report["contours"] = contours
+        report = build_report(record, ctx.timer.totals())
+        report.update(extras or {})
         for line in report["quality"]["messages"]:
             ctx.hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         on = gridded.correction_grid  # a tiled run's overview: the arrays the report shows are its
         write_change_areas(out.path(CHANGE_AREAS), vols.diff, vols.change_mask, vols.cut_mask, on)
+        if ctx.options.zones and report.get("zones"):  # zones.gpkg, zones.csv
+            write_zones(out.path(CHANGE_AREAS).parent, report["zones"], ctx.options.zones, gridded.grid)
         dem_after = gridded.correction_dems[0].heights + z0
         write_html(report, _html_arrays(vols, dem_after), on, out.path("report.html"))
         worded = cli_tree(report)  # options worded for the command line

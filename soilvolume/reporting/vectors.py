@@ -1,0 +1,114 @@
+"""The vector deliverables a GIS analyst files beside the GeoJSON: ``change_areas.gpkg`` (the
+areas of significant change with their attributes), ``zones.gpkg`` (each ``--zones`` polygon in
+the run's CRS with its budget) and ``zones.csv`` (one row per zone: net, cut and fill with their
+intervals at the run's confidence, areas and flags), written by pyogrio (a runtime dependency),
+each beside its destination and renamed into place (in the run's staging folder)."""
+
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+
+import numpy as np
+import shapely
+from pyogrio import raw
+from shapely.geometry import shape
+
+from ..core.types import GridSpec
+from ..inputs.crs import raster_wkt
+from ..volumes.polygons import read_polygons, to_grid_crs
+
+CHANGE_AREAS = "change_areas.gpkg"
+ZONES = "zones.gpkg"
+ZONES_CSV = "zones.csv"
+#: change_areas.gpkg's attributes (the GeoJSON's properties)
+AREA_COLUMNS = ("id", "kind", "area_m2", "volume_m3", "mean_change_m", "extreme_change_m")
+#: zones.csv's and zones.gpkg's columns, in order (intervals as their low and high ends)
+ZONE_COLUMNS = (
+    "id",
+    "name",
+    "net_m3",
+    "net_low_m3",
+    "net_high_m3",
+    "cut_m3",
+    "cut_low_m3",
+    "cut_high_m3",
+    "fill_m3",
+    "fill_low_m3",
+    "fill_high_m3",
+    "area_m2",
+    "zone_area_m2",
+    "polygon_area_m2",
+    "outside_grid",
+    "repaired",
+)
+TEXT = {"kind", "name"}
+INTEGER = {"id", "outside_grid", "repaired"}
+
+
+def write_layer(path: Path, layer: str, geoms: list, rows: list[dict], columns: tuple, wkt: str | None) -> Path:
+    """One GeoPackage layer of (multi)polygons ``geoms`` with ``columns`` of ``rows`` as attributes,
+    in the CRS ``wkt``; written beside ``path`` and renamed into place."""
+    part = path.with_name(f".{path.name}.part.gpkg")
+    part.unlink(missing_ok=True)
+    raw.write(
+        str(part),
+        geometry=shapely.to_wkb(geoms) if geoms else np.array([], dtype=object),
+        field_data=[_column(rows, k) for k in columns],
+        fields=list(columns),
+        layer=layer,
+        driver="GPKG",
+        geometry_type="MultiPolygon",
+        crs=wkt or None,
+        promote_to_multi=True,
+    )
+    os.replace(part, path)
+    return path
+
+
+def _column(rows: list[dict], key: str) -> np.ndarray:
+    """One attribute as pyogrio takes it: text, integers, or floats (None as NaN)."""
+    if key in TEXT:
+        return np.array([str(r[key]) for r in rows], dtype=object)
+    if key in INTEGER:
+        return np.array([int(r[key]) for r in rows], dtype=np.int64)
+    return np.array([np.nan if r[key] is None else float(r[key]) for r in rows], dtype=np.float64)
+
+
+def write_change_area_gpkg(folder: Path, feats: list[dict], wkt: str | None) -> Path:
+    """``change_areas.gpkg`` (layer ``change_areas``) of the GeoJSON features ``feats``."""
+    geoms = [shape(f["geometry"]) for f in feats]
+    rows = [f["properties"] for f in feats]
+    return write_layer(folder / CHANGE_AREAS, "change_areas", geoms, rows, AREA_COLUMNS, wkt)
+
+
+def zone_row(zone: dict) -> dict:
+    """One row of :data:`ZONE_COLUMNS` from report.json's ``zones`` item (no interval: empty)."""
+    pm = zone.get("uncertainty_m3") or {}
+    row = {"id": zone["id"], "name": zone["name"], "area_m2": zone["area_m2"]}
+    for part in ("net", "cut", "fill"):
+        value, half = zone[part], pm.get(part)
+        row[f"{part}_m3"] = value
+        row[f"{part}_low_m3"] = None if half is None else value - half
+        row[f"{part}_high_m3"] = None if half is None else value + half
+    for key in ("zone_area_m2", "polygon_area_m2", "outside_grid", "repaired"):
+        row[key] = zone.get(key)
+    return row
+
+
+def write_zones(folder: Path, zones: list[dict], zones_path: str | Path, grid: GridSpec) -> list[str]:
+    """``zones.gpkg`` (layer ``zones``: each polygon of ``zones_path`` in the grid's CRS, as the
+    budgets were measured) and ``zones.csv`` of report.json's ``zones``; returns their names."""
+    polys, wkt = read_polygons(zones_path)
+    polys = to_grid_crs(polys, wkt, grid, zones_path)
+    rows = [zone_row(z) for z in zones]
+    write_layer(folder / ZONES, "zones", [p.geometry for p in polys], rows, ZONE_COLUMNS, raster_wkt(grid.crs_wkt))
+    part = folder / f".{ZONES_CSV}.part"
+    with open(part, "w", newline="", encoding="utf-8") as f:
+        out = csv.DictWriter(f, fieldnames=ZONE_COLUMNS)
+        out.writeheader()
+        for row in rows:
+            out.writerow({k: "" if v is None else (int(v) if isinstance(v, bool) else v) for k, v in row.items()})
+    os.replace(part, folder / ZONES_CSV)
+    return [ZONES, ZONES_CSV]
