@@ -1,5 +1,5 @@
 """The shortened runs (``register``, ``dem``) go through the estimate's steps: each reads
-exactly the options declared for it (``commands=`` in soilvolume/options.py, from which the CLI
+exactly the options declared for it (``commands=`` in soilvolume/options/, from which the CLI
 and QGIS build their inputs), and ``register`` decides the georeferencing as ``estimate`` does."""
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ import numpy as np
 from ..core.types import GridSpec, StageQuality
 from ..core.wording import cli_tree
 from ..inputs.io import atomic_path
+from ..options import command_fields
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg, transform_points
 from ..volumes import coverage
 from ..volumes.nonsoil import sentence
@@ -172,12 +173,14 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
 
 #: options recorded in report.json only when set: each adds its own keys to the report, so a run
 #: without them reads as before they existed
-WHEN_SET = ("bulking", "shrinkage", "tolerance")
+WHEN_SET = ("bulking", "shrinkage", "tolerance", "sections")
 
 
 def recorded_options(options: Options) -> dict:
-    """report.json's ``options``: every option, those of :data:`WHEN_SET` only when given."""
-    return {k: v for k, v in asdict(options).items() if not (k in WHEN_SET and v is None)}
+    """report.json's ``options``: every option an estimate takes (not another command's, such as
+    the stockpile's base), those of :data:`WHEN_SET` only when given."""
+    taken = {f.name for f in command_fields("estimate")}
+    return {k: v for k, v in asdict(options).items() if k in taken and not (k in WHEN_SET and v is None)}
 
 
 VOLUME_METHOD = (  # report.json's volume_method

@@ -13,7 +13,8 @@ from qgis.core import (
     QgsProcessingParameterNumber,
 )
 
-from soilvolume.options import Options, _opt, command_fields
+from soilvolume.options import Options, command_fields
+from soilvolume.options.table import option
 
 ESTIMATE = "soilvolume:estimatevolumechange"
 
@@ -66,7 +67,7 @@ def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
 
     @dataclass(frozen=True)
     class Wider(Options):
-        max_slope: float = _opt(2.0, "steepest slope kept (m per m)", label="Steepest slope", lo=0.0, hi=10.0)
+        max_slope: float = option(2.0, "steepest slope kept (m per m)", label="Steepest slope", lo=0.0, hi=10.0)
 
     monkeypatch.setattr(optiontable, "options_class", lambda: Wider)
     alg = estimate.create({})  # a fresh instance, initAlgorithm run again

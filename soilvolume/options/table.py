@@ -1,0 +1,42 @@
+"""The option table's vocabulary: which commands take an option, and how an option is declared."""
+
+from __future__ import annotations
+
+from dataclasses import field
+from typing import Any
+
+#: which commands take an option (``commands=`` of each field below): the command line builds
+#: each subcommand's flags from it and the QGIS algorithms their parameters
+ESTIMATE = ("estimate",)
+VOLUME = ("estimate", "series")  # the volume step (a series runs it once per later epoch)
+REGISTER = ("estimate", "register", "series")
+PREPARE = ("estimate", "register", "pipeline", "series")  # reading both clouds
+GRID = ("estimate", "dem", "series", "stockpile")
+GROUND = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
+GROUND_FILTER = ("estimate", "register", "dem", "series", "pipeline", "stockpile")
+POINTS = ("estimate", "register", "dem", "series", "stockpile")  # what is read of each cloud (the soil rule)
+CELLS = ("estimate", "dem", "series")  # the heights of each cell
+STOCKPILE = ("stockpile",)  # one survey's stockpile inventory
+COMMANDS = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
+
+
+def option(
+    default: Any,
+    help: str,
+    choices: tuple | None = None,
+    *,
+    label: str | None = None,
+    unit: str | None = None,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    commands: tuple[str, ...] = ESTIMATE,
+    run_control: bool = False,
+) -> Any:
+    """An option: default, one-line help, choices; ``label`` (short title for GUIs), ``unit``
+    ("m", "m2", "deg", ...), the allowed range ``lo``..``hi`` (``lo`` excluded when
+    ``lo_open``) that every front end validates against, the ``commands`` that take it, and
+    ``run_control``: where and how the run goes, never its numbers (every other option keys the
+    work a resumed run may reuse)."""
+    meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
+    return field(default=default, metadata={**meta, "commands": commands, "run_control": run_control})
