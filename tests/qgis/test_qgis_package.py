@@ -128,6 +128,7 @@ def test_zip_installs_and_loads(plugin_zip, tmp_path):
             "installdependencies",
             "pointcloudtodem",
             "registerpointclouds",
+            "stockpilevolumes",
             "volumefromdems",
             "volumeseries",
         )
