@@ -32,10 +32,16 @@ RUN_OUTPUTS = (
     "report.json",
     "report.html",
     "change_areas.geojson",
+    "change_areas.gpkg",
+    "zones.gpkg",
+    "zones.csv",
+    "sections.csv",
     "contours.gpkg",
     "grade.tif",
     "after_registered.laz",
 )
+#: the folders ``estimate`` writes itself (one picture per cross-section line)
+RUN_FOLDERS = ("sections",)
 
 
 def os_problem(exc: OSError, path: str | os.PathLike | None = None) -> SoilVolumeError:
@@ -168,8 +174,10 @@ class OutputDir:
         if self.allowed is not None:
             return entry.name in self.allowed
         old_staging = entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
-        return old_staging or (
-            entry.is_file() and (entry.name in RUN_OUTPUTS or entry.name.lower().endswith(RUN_SUFFIXES))
+        return (
+            old_staging
+            or (entry.is_file() and (entry.name in RUN_OUTPUTS or entry.name.lower().endswith(RUN_SUFFIXES)))
+            or (entry.is_dir() and entry.name in RUN_FOLDERS)
         )
 
     def path(self, name: str) -> Path:

@@ -14,10 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import rasterio
 import shapely
-from rasterio.transform import rowcol
-from rasterio.windows import Window
 
 from ..core.types import GridSpec, SoilVolumeError
 from ..volumes.polygons import read_lines, to_grid_crs
@@ -55,6 +52,10 @@ def stations(line, step: float) -> tuple[np.ndarray, np.ndarray]:
 def sample(folder: Path, xy: np.ndarray) -> np.ndarray:
     """(n, 3) heights of :data:`RASTERS` in ``folder`` at ``xy`` (nearest cell; NaN off the grid
     or on nodata)."""
+    import rasterio  # heavy: only a run with --sections loads it here
+    from rasterio.transform import rowcol
+    from rasterio.windows import Window
+
     out = np.full((len(xy), len(RASTERS)), np.nan)
     for k, name in enumerate(RASTERS):
         with rasterio.open(folder / name) as ds:

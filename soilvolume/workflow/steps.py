@@ -198,7 +198,7 @@ def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec |
     with running(ctx, "write", ctx.message("write") + backend.raster_note):
         z0 = 0.0 if grid is None else float(grid.origin[2])  # local -> absolute heights
         backend.write(ctx, layers, vols, grid, z0)
-        staged = ctx.out.path(CONTOURS)
+        staged = ctx.out.path(CONTOURS) if layers else None
         if layers and ctx.options.contour_interval > 0:
             extras["contours"] = write_contours(staged, staged.parent, ctx.options.contour_interval)
         if layers and grid is not None and ctx.options.sections:
