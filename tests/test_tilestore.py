@@ -63,6 +63,7 @@ OTHER = {
     "volume_step": "tiles",
     "keep_registered_cloud": True,
     "contour_interval": 0.5,
+    "sections": "lines.geojson",
 }
 FILES = ("zones", "stable_mask")
 
@@ -77,8 +78,15 @@ def _polygons(path, x0: float = 500000.0) -> str:
 def test_every_option_but_run_control_keys_the_tiles(tmp_path):
     plain = fingerprint.number_options(Options())
     run_control = {f.name for f in fields(Options) if f.metadata["run_control"]}
-    # contours are drawn from the rasters written: they never change a tile's numbers
-    assert run_control == {"threads", "scheduler", "memory_limit", "keep_registered_cloud", "contour_interval"}
+    # contours and sections are drawn from the rasters written: they never change a tile's numbers
+    assert run_control == {
+        "threads",
+        "scheduler",
+        "memory_limit",
+        "keep_registered_cloud",
+        "contour_interval",
+        "sections",
+    }
     for f in fields(Options):
         if f.name in FILES:
             changed = Options(**{f.name: _polygons(tmp_path / f"{f.name}.geojson")})
