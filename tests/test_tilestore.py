@@ -64,6 +64,11 @@ OTHER = {
     "keep_registered_cloud": True,
     "contour_interval": 0.5,
     "sections": "lines.geojson",
+    "bulking": 1.25,
+    "shrinkage": 0.9,
+    "tolerance": 0.05,
+    "base": "plane",
+    "density": 1.8,
 }
 FILES = ("zones", "stable_mask")
 
