@@ -88,7 +88,12 @@ def main(argv: list[str] | None = None) -> int:
     quiet_library_warnings()
     with handle_signals(then_ignore=argv is None):  # None: the program exits right after
         argv = sys.argv[1:] if argv is None else argv
-        ns = build_parser(argv).parse_args(argv)
+        try:  # the parser imports the command's module: under ulimit -v a library may not map
+            ns = build_parser(argv).parse_args(argv)
+        except ImportError as exc:
+            if not short_of_memory(exc):
+                raise
+            return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
         ns.protocol = open_protocol() if getattr(ns, "progress", "text") == "jsonl" else None
         _PROTOCOL[:] = [ns.protocol] if ns.protocol else []
         with hold_native_stderr():  # dropped: no library's message unasked (SOILVOLUME_DEBUG=1 shows them)

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 import shapely
-from pyogrio import raw
 from shapely.geometry import shape
 
 from ..core.types import GridSpec
@@ -50,6 +49,8 @@ INTEGER = {"id", "outside_grid", "repaired"}
 def write_layer(path: Path, layer: str, geoms: list, rows: list[dict], columns: tuple, wkt: str | None) -> Path:
     """One GeoPackage layer of (multi)polygons ``geoms`` with ``columns`` of ``rows`` as attributes,
     in the CRS ``wkt``; written beside ``path`` and renamed into place."""
+    from pyogrio import raw  # heavy (its own GDAL): loaded by the step that writes a GeoPackage
+
     part = path.with_name(f".{path.name}.part.gpkg")
     part.unlink(missing_ok=True)
     raw.write(
