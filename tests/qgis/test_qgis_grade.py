@@ -5,9 +5,11 @@ On-grade tolerance is set, copied out, styled and loaded with the run's layers."
 from __future__ import annotations
 
 import json
+from importlib import import_module
 
 import numpy as np
 import pytest
+from designs import write_surface
 from osgeo import gdal
 from qgis.core import (
     QgsProcessingContext,
@@ -17,6 +19,8 @@ from qgis.core import (
     QgsRasterLayer,
 )
 
+from soilvolume.scenes.synthetic import SceneConfig, make_pair, write_pair
+
 SEED = 3  # the design tests' seed
 
 TOLERANCE = 0.05
@@ -25,10 +29,6 @@ TOLERANCE = 0.05
 @pytest.fixture(scope="module")
 def design_pair(tmp_path_factory):
     """(design GeoTIFF, after LAS) of the design tests' seed."""
-    from designs import write_surface
-
-    from soilvolume.scenes.synthetic import SceneConfig, make_pair, write_pair
-
     folder = tmp_path_factory.mktemp("grade")
     cfg = SceneConfig.small(shift_m=(0.0, 0.0, 0.0), rotation_deg=(0.0, 0.0, 0.0))
     _, after, _ = write_pair(make_pair(SEED, cfg), folder)
@@ -38,8 +38,7 @@ def design_pair(tmp_path_factory):
 def test_grade_is_a_loaded_output_with_a_tolerance(run_alg, plugin_package, design_pair, tmp_path):
     """GRADE copied to its destination on the difference's grid, its classes those report.json
     counts (the share on grade), styled as three classes and loaded with the run's layers."""
-    from soilvolume_qgis.processing import styles
-
+    styles = import_module("soilvolume_qgis.processing.styles")  # the plugin as QGIS imports it
     design, after = design_pair
     project, context = QgsProject.instance(), QgsProcessingContext()
     context.setProject(project)
