@@ -10,6 +10,7 @@ from qgis.core import (
     QgsFeatureSink,
     QgsField,
     QgsFields,
+    QgsProcessing,
     QgsProcessingAlgorithm,
     QgsProcessingContext,
     QgsProcessingException,
@@ -96,6 +97,14 @@ def values(report: dict[str, Any], summary: dict[str, Any]) -> dict[str, Any]:
     out["SIGNIFICANCE"] = str(summary.get("significance") or "")
     out["TRANSFORM"] = params.to_json((report.get("registration") or {}).get("transform"))
     return out
+
+
+def asked_for(parameters: dict[str, Any], key: str) -> bool:
+    """Whether a layer output was given a file of its own (not left empty, not a temporary one)."""
+    value = parameters.get(key)
+    sink = getattr(value, "sink", None)
+    text = sink.staticValue() if sink is not None else value
+    return bool(text) and str(text) != QgsProcessing.TEMPORARY_OUTPUT
 
 
 def good_news(report: dict[str, Any]) -> int:

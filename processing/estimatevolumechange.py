@@ -27,10 +27,13 @@ RASTERS = {  # parameter -> (engine output key, style, layer name, sort key: hig
     "DEM_AFTER": ("dem_after", styles.TERRAIN, "DEM after (registered)", 20),
     "DEM_BEFORE": ("dem_before", styles.TERRAIN, "DEM before", 10),
     "FILLED_MASK": ("filled_mask", styles.MASK, "Refilled cells", 45),  # over the difference, half see-through
+    "GRADE": ("grade", styles.GRADE, "Grade: cut to go, on grade, fill to go", 42),
 }
 OPTIONAL_RASTERS = {"FILLED_MASK"}  # not written unless asked
+WITH_TOLERANCE = {"GRADE"}  # written by the engine only with an on-grade tolerance (a design as BEFORE)
 DESCRIPTIONS = {  # parameter labels
     "DIFFERENCE": "Difference (after − before, corrected)",
+    "GRADE": "Grade classes (1 cut to go, 2 on grade, 3 fill to go; with an on-grade tolerance)",
     "FILLED_MASK": "Refilled cells (1 = interpolated from neighbours: a sparse cell or a hole)",
 }
 REPORT_ASSETS = (".png", ".svg", ".jpg", ".css", ".js")
@@ -64,7 +67,8 @@ footprint, and the verdict checks that the survey agrees with the design on unch
 with its area and volume (the headline cut and fill are their sums); under them the corrected
 difference raster (red = cut, blue = fill), both DEMs and the vertical correction raster, styled,
 and optionally the refilled cells (1 where a survey had too few points or a hole and the height was
-interpolated from the neighbouring cells),
+interpolated from the neighbouring cells) and, against a design with an on-grade tolerance, the grade
+classes (cut to go, on grade, fill to go),
 in a group of each run named after the pair, its run number and time;
 an HTML report; optionally the JSON report, the volumes as a table of one row (which a model
 can return: its outputs are layers and files, not numbers), the per-zone volume table
@@ -118,7 +122,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
 
     def add_destinations(self) -> None:
         self.addParameter(QgsProcessingParameterRasterDestination("DIFFERENCE", self.tr(DESCRIPTIONS["DIFFERENCE"])))
-        for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET", "FILLED_MASK"):
+        for key in ("DEM_BEFORE", "DEM_AFTER", "PLANE_OFFSET", "FILLED_MASK", "GRADE"):
             self.addParameter(
                 QgsProcessingParameterRasterDestination(
                     key,
@@ -207,6 +211,8 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             raise QgsProcessingException("Contours: set the Contour interval (CONTOUR_INTERVAL) above 0.")
         if self.parameterAsFileOutput(parameters, "SECTION_PROFILES", context) and not options.sections:
             raise QgsProcessingException("Cross-sections: give the Cross-section lines (SECTIONS).")
+        if options.tolerance is None and estimate_outputs.asked_for(parameters, "GRADE"):
+            raise QgsProcessingException("Grade classes (GRADE): set the On-grade tolerance (TOLERANCE).")
         args = ["estimate", before, after] + engine.option_args(options, "estimate")
         for key, flag in (("BEFORE_PIPELINE", "--before-pipeline"), ("AFTER_PIPELINE", "--after-pipeline")):
             if self.parameterAsFile(parameters, key, context):
@@ -247,6 +253,9 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         results: dict[str, Any] = {}
         pair, group = names
         for key, (out_key, style, name, order) in RASTERS.items():
+            if key in WITH_TOLERANCE and out_key not in outputs:  # no tolerance: nothing to load
+                results[key] = None
+                continue
             dest = params.output_layer(self, parameters, key, context)
             if dest and out_key not in outputs:
                 raise QgsProcessingException(f"The engine wrote no {out_key} raster.")

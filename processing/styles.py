@@ -24,6 +24,7 @@ STYLES_DIR = Path(__file__).resolve().parent.parent / "resources" / "styles"
 DIVERGING = "difference"
 TERRAIN = "dem"
 MASK = "filled_mask"  # a 0/1 mask: 1 orange, half see-through
+GRADE = "grade"  # classes: 1 cut to go red, 2 on grade green, 3 fill to go blue
 CHANGE_AREAS = "change_areas"  # polygons: cut red, fill blue, by their "kind"
 FILL_ALPHA = 40  # of 255: the change areas' light fill
 
