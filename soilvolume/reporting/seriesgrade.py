@@ -74,4 +74,4 @@ def progress_table(report: dict) -> Table | None:
 
 
 def _to_go(g: dict) -> list[str]:
-    return [fmt(g["cut_to_go_m3"], 1), fmt(g["fill_to_go_m3"], 1)]
+    return [fmt(g["cut_to_go_m3"] + 0.0, 1), fmt(g["fill_to_go_m3"] + 0.0, 1)]  # no -0.0
