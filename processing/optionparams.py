@@ -22,16 +22,19 @@ from qgis.core import (
     QgsProcessingParameterDistance,
     QgsProcessingParameterEnum,
     QgsProcessingParameterFeatureSource,
+    QgsProcessingParameterFile,
     QgsProcessingParameterNumber,
     QgsProcessingParameterString,
 )
 
+from .inputs import LANDXML_FILTER, SURFACE_FILTER
 from .optiontable import description, key, option_fields, options_class, qgis_wording, value_kind
 from .params import crs_text
 
 CRS_FIELDS = {"before_crs", "after_crs"}
 POLYGON_FIELDS = {"stable_mask", "zones"}
 LINE_FIELDS = {"sections"}  # a layer of lines
+SURFACE_FIELDS = {"design"}  # a series' design: a GeoTIFF or a LandXML file
 BASIC = (
     "before_crs",
     "after_crs",
@@ -71,6 +74,8 @@ def _make(field: Field) -> QgsProcessingParameterDefinition:
         types = Qgis.ProcessingSourceType
         kind = types.VectorLine if field.name in LINE_FIELDS else types.VectorPolygon
         return QgsProcessingParameterFeatureSource(name, label, [kind], optional=True)
+    if field.name in SURFACE_FIELDS:
+        return QgsProcessingParameterFile(name, label, fileFilter=f"{SURFACE_FILTER};;{LANDXML_FILTER}", optional=True)
     if meta.get("choices"):
         return QgsProcessingParameterEnum(
             name, label, options=list(meta["choices"]), defaultValue=default, usesStaticStrings=True

@@ -37,7 +37,10 @@ around it, and the cumulative's comes from the first and the last surveys only.<
 XYZ/TXT/CSV files, or point cloud layers). Optional <b>survey dates</b> (YYYY-MM-DD, one per
 cloud, comma-separated; an empty entry keeps the date of the file: a LAS header's creation
 day). The 'Before CRS override' applies to the first cloud, the 'After CRS override' to the
-others. Advanced parameters tune each step as in "Estimate soil volume change".</p>
+others. Advanced parameters tune each step as in "Estimate soil volume change". With a <b>Design
+surface</b> (a DEM GeoTIFF or a LandXML TIN) and an <b>On-grade tolerance</b>, each survey is graded
+against the design (its share on grade, the cut and fill still to go, per zone with Zones) and each
+period's progress is the cut and fill to go it did.</p>
 <h3>Outputs</h3>
 <p>A folder with each survey's DEM, each period's difference and the cumulative difference
 (GeoTIFFs), the ledger (CSV: one row per period and the cumulative, with dates, net, cut, fill

@@ -19,6 +19,9 @@ report.json ("epochs" with each registration's 4x4 into E0's frame, "periods", "
 with its quality verdict) and report.html (the ledger with the verdicts, cumulative cut and fill
 over time, the difference maps). The periods'
 nets add up to the cumulative net. --before-crs applies to E0, --after-crs to every later epoch.
+With --design DESIGN.tif|.xml --tolerance T (and --zones): grade_epoch<k>.tif, each epoch's share on
+grade and cut and fill still to go against the design, each period's cut and fill done (report.json's
+"grade" and "progress", the ledger's last columns, report.html).
 The outputs appear together or not at all; exit status 0 (done), 1 (error, one line on stderr),
 2 (bad command line), 130/143 (interrupted; nothing written)."""
 

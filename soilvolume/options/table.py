@@ -16,6 +16,7 @@ GROUND = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
 GROUND_FILTER = ("estimate", "register", "dem", "series", "pipeline", "stockpile")
 POINTS = ("estimate", "register", "dem", "series", "stockpile")  # what is read of each cloud (the soil rule)
 CELLS = ("estimate", "dem", "series")  # the heights of each cell
+DESIGNED = ("estimate", "series")  # against a design (a series: --design)
 STOCKPILE = ("stockpile",)  # one survey's stockpile inventory
 COMMANDS = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .table import CELLS, GRID, GROUND, GROUND_FILTER, POINTS, VOLUME, option
+from .table import CELLS, DESIGNED, GRID, GROUND, GROUND_FILTER, POINTS, VOLUME, option
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,12 @@ class VolumeOptions:
         hi=0.999,
         commands=VOLUME,
     )
-    zones: str | None = option(None, "optional polygon file: volumes per polygon", label="Zones (polygons)")
+    zones: str | None = option(
+        None,
+        "optional polygon file: volumes per polygon (a series with a design: its progress per polygon)",
+        label="Zones (polygons)",
+        commands=DESIGNED,
+    )
     design_uncertainty: float = option(
         0.0,
         "when BEFORE is a surface (a design DEM GeoTIFF): its vertical uncertainty (m, one sigma, common to the "
@@ -131,6 +136,7 @@ class VolumeOptions:
         None,
         "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",
         label="LandXML surface name (a LandXML design as BEFORE)",
+        commands=DESIGNED,
     )
     bulking: float | None = option(
         None,
@@ -162,4 +168,13 @@ class VolumeOptions:
         lo=0.0,
         lo_open=True,
         hi=100.0,
+        commands=DESIGNED,
+    )
+    design: str | None = option(
+        None,
+        "a series' design surface (a DEM GeoTIFF or a LandXML TIN), resampled onto the series' grid: with "
+        "{opt:tolerance}, each epoch's share on grade and cut and fill still to go, and each period's progress "
+        "(the cut and fill to go it did)",
+        label="Design surface (a series' progress)",
+        commands=("series",),
     )

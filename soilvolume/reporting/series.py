@@ -18,6 +18,7 @@ from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 from ..volumes.quantities import scaled
 from ..volumes.seriesquality import epoch_checks, period_quality
 from .report import absolute_transform, recorded_options, stage_dict, write_json
+from .seriesgrade import LEDGER_GRADE, ledger_figures, with_grade, write_grades
 from .serieshtml import write_series_html
 
 LEDGER = "ledger.csv"
@@ -162,21 +163,25 @@ def with_quantities(report: dict, options: Options) -> dict:
 
 
 def write_ledger(path: Path, report: dict) -> None:
-    """One row per period and one for the cumulative: epochs, dates, net/cut/fill and their ±."""
+    """One row per period and one for the cumulative: epochs, dates, net/cut/fill and their ±
+    (with a design: the grade at its end and the cut and fill to go it did, :data:`LEDGER_GRADE`)."""
     rows = [(str(k + 1), p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
+    designed = "design" in report
     with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
-        w.writerow(LEDGER_COLUMNS)
+        w.writerow(LEDGER_COLUMNS + (LEDGER_GRADE if designed else ()))
         for name, p in rows:
             v, u = p["volume_m3"], p["uncertainty_m3"]
             dates = [d or "" for d in p["dates"]]
             figures = [f"{x:.3f}" for k in ("net", "cut", "fill") for x in (v[k], u[k])]
-            w.writerow([name, p["from"], p["to"], *dates, *figures])
+            w.writerow([name, p["from"], p["to"], *dates, *figures, *(ledger_figures(p) if designed else ())])
 
 
-def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
-    """Each epoch's corrected DEM (E0's heights ``base`` at the cell centres + D_k, absolute)
-    and every difference."""
+def write_rasters(out, series, base: np.ndarray, grid: GridSpec, graded=None) -> None:
+    """Each epoch's corrected DEM (E0's heights ``base`` at the cell centres + D_k, absolute),
+    every difference, and with a design each epoch's grade (:func:`.seriesgrade.write_grades`)."""
+    if graded is not None:
+        write_grades(out, graded, grid)
     z0 = float(grid.origin[2])
     for k, d in enumerate(series.to_e0):
         desc = f"epoch {k} heights in E0's frame, corrected once relative to E0 (m)"
@@ -188,10 +193,12 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec) -> None:
     write_grid(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
 
 
-def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
+def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer, graded=None) -> dict:
     """report.json, the ledger and report.html of a series run into ``out`` (an
-    :class:`~soilvolume.core.outputs.OutputDir`); returns the report."""
-    report = cli_tree(with_quantities(build_series_report(epochs, fits, vols, series, grid, options, timer), options))
+    :class:`~soilvolume.core.outputs.OutputDir`), with the progress against a design when
+    ``graded``; returns the report."""
+    report = with_quantities(build_series_report(epochs, fits, vols, series, grid, options, timer), options)
+    report = cli_tree(with_grade(report, graded))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
     report["timings_s"] = timer.totals()

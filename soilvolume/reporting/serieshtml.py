@@ -12,6 +12,7 @@ import numpy as np
 from ..core.types import GridSpec
 from . import page
 from .figures import difference_map
+from .seriesgrade import progress_table
 from .svgparts import round_ticks
 from .text import fmt, pm
 
@@ -121,6 +122,7 @@ def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray)
         ledger=ledger(report),
         chart=page.figure(chart_svg(report)),
         epochs=epochs(report),
+        progress=progress_table(report),
         figures=maps,
     )
 

@@ -60,3 +60,22 @@ def grade(diff: np.ndarray, grid: GridSpec, tolerance: float, zones: str | Path 
             for p, m in zip(polys, masks, strict=True)
         ]
     return cls, out
+
+
+def progress(start: dict, end: dict) -> dict:
+    """A period's progress from the :func:`grade` summary at its start to the one at its end:
+    the cut and fill to go it did (m^3: to go at the start minus to go at the end), the area it
+    brought on grade (m^2), and the share on grade and the cut and fill to go at its end;
+    per zone when the summaries have zones."""
+    out = {
+        "cut_done_m3": start["cut_to_go_m3"] - end["cut_to_go_m3"],
+        "fill_done_m3": start["fill_to_go_m3"] - end["fill_to_go_m3"],
+        "on_grade_gained_m2": end["on_grade_area_m2"] - start["on_grade_area_m2"],
+        "on_grade_share": end["on_grade_share"],
+        "cut_to_go_m3": end["cut_to_go_m3"],
+        "fill_to_go_m3": end["fill_to_go_m3"],
+    }
+    if "zones" in start:
+        pairs = zip(start["zones"], end["zones"], strict=True)
+        out["zones"] = [{"id": a["id"], "name": a["name"], **progress(a, b)} for a, b in pairs]
+    return out

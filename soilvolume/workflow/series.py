@@ -42,6 +42,7 @@ from . import steps
 from .context import Context, threads
 from .pair import PAIR as STEPS
 from .plan import plan_grid, reference_cell
+from .seriesgrade import grade_epochs, open_design
 from .timing import Timer
 
 
@@ -178,9 +179,12 @@ def run_series(
     given = {"crs": None, "georeferencing": options.georeferencing}
     epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
     check_series(epochs)
+    design = open_design(options)  # checked before any point is read
     threads("series", options)
-    with output_dir(out_dir, [*paths, options.stable_mask], overwrite) as out, os_errors(out.final):
-        report = series(Context(epochs, options, hooks, STEPS, timer, out, schedule=schedule), InMemory())
+    inputs = [*paths, options.stable_mask, options.design, options.zones]
+    with output_dir(out_dir, inputs, overwrite) as out, os_errors(out.final):
+        ctx = Context(epochs, options.with_(zones=None), hooks, STEPS, timer, out, schedule=schedule)
+        report = series(ctx, InMemory(), design)
     hooks.step(100, "done")
     moved = out.moved.items()
     return Result(report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
@@ -197,9 +201,10 @@ def _each(ctx: Context, step: str, k: int, n: int) -> tuple[float, float]:
     return lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1) / n
 
 
-def series(ctx: Context, backend: InMemory) -> dict:
+def series(ctx: Context, backend: InMemory, design=None) -> dict:
     """Read and register each pair E0 -> Ek, grid every epoch on one grid, each pair's planes and
-    volume step (Ek corrected once relative to E0), the periods, write, report."""
+    volume step (Ek corrected once relative to E0), the periods, each epoch against the
+    ``design`` (:func:`.seriesgrade.open_design`) when given, write, report."""
     with backend.session(ctx):
         with steps.running(ctx, "prepare", ctx.message("prepare"), "crop"):
             preps = [_read(ctx, backend, k) for k in range(1, len(ctx.epochs))]
@@ -212,10 +217,13 @@ def series(ctx: Context, backend: InMemory) -> dict:
             vols = _volumes(ctx, backend, fits, fitted, grid, dems)
             ctx.hooks.step(ctx.at("volume", 0.8), "periods, cumulative and their intervals")
             combined = combine(vols, list(dems), [steps.alternative_move(f.reg) for f in fits], grid, ctx.options)
+            heights = [vols[0].dem_out_b + d for d in combined.to_e0]  # as dem_epoch<k>.tif, local
+            graded = None if design is None else grade_epochs(design, heights, grid, fits[0].prep.frame)
         with steps.running(ctx, "write", ctx.message("write")):
-            write_rasters(ctx.out, combined, vols[0].dem_out_b, grid)  # E0 refilled: the DEMs give back the differences
+            # E0 refilled: the DEMs give back the differences
+            write_rasters(ctx.out, combined, vols[0].dem_out_b, grid, graded)
         with steps.running(ctx, "report", ctx.message("report"), log=False):
-            return write_reports(ctx.out, ctx.epochs, fits, vols, combined, grid, ctx.options, ctx.timer)
+            return write_reports(ctx.out, ctx.epochs, fits, vols, combined, grid, ctx.options, ctx.timer, graded)
 
 
 def _read(ctx: Context, backend: InMemory, k: int) -> Prepared:

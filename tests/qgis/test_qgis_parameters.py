@@ -181,3 +181,21 @@ def test_file_pickers_open_on_point_clouds(provider, algorithm):
             if name == "BEFORE" and algorithm == "estimatevolumechange":
                 assert filters[1].startswith("DEM GeoTIFF") and "*.tif" in filters[1], filters
                 assert filters[2].startswith("LandXML design (*.xml *.landxml"), filters
+
+
+def test_a_series_takes_a_design_file_and_its_tolerance(provider, tmp_path):
+    """The series' --design is a file picker on GeoTIFF and LandXML designs, read into the engine's Options."""
+    from qgis.core import QgsProcessingContext, QgsProcessingFeedback, QgsProcessingParameterFile
+    from soilvolume_qgis.processing import optionparams, optiontable
+
+    alg = QgsApplication.processingRegistry().algorithmById("soilvolume:volumeseries").create({})
+    param = alg.parameterDefinition("DESIGN")
+    assert isinstance(param, QgsProcessingParameterFile) and param.flags() & param.FlagOptional
+    assert "*.tif" in param.fileFilter() and "*.xml" in param.fileFilter()
+    assert alg.parameterDefinition("TOLERANCE") is not None and alg.parameterDefinition("ZONES") is not None
+    design = tmp_path / "design.xml"
+    design.write_text("<LandXML/>")
+    given = {"DESIGN": str(design), "TOLERANCE": 0.05}
+    options = optionparams.read_options(alg, given, QgsProcessingContext(), QgsProcessingFeedback(), "series")
+    assert (options.design, options.tolerance) == (str(design), 0.05)
+    assert "{" not in optiontable.qgis_wording("{opt:design} x.tif: give {opt:tolerance}")
