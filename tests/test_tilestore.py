@@ -64,6 +64,8 @@ OTHER = {
     "keep_registered_cloud": True,
     "contour_interval": 0.5,
     "sections": "lines.geojson",
+    "gpkg": True,
+    "design": "design.tif",
     "bulking": 1.25,
     "shrinkage": 0.9,
     "tolerance": 0.05,
@@ -91,6 +93,7 @@ def test_every_option_but_run_control_keys_the_tiles(tmp_path):
         "keep_registered_cloud",
         "contour_interval",
         "sections",
+        "gpkg",
     }
     for f in fields(Options):
         if f.name in FILES:

@@ -24,8 +24,18 @@ def _read(path, layer=None):
     return rows, shapely.from_wkb(wkb), meta
 
 
-def test_change_areas_geopackage_holds_the_geojson(misaligned_result):
+def test_change_areas_geopackage_only_when_asked(misaligned_result):
+    """GeoPackage copies load pyogrio (its own GDAL, ~0.2 s): written with --gpkg only."""
     _res, _truth, out = misaligned_result
+    assert (out / "change_areas.geojson").exists() and not (out / "change_areas.gpkg").exists()
+
+
+def test_change_areas_geopackage_holds_the_geojson(tmp_path):
+    from conftest import write_scene
+
+    b, a, _truth = write_scene(tmp_path / "pair", seed=0)
+    out = tmp_path / "out"
+    estimate(b, a, out, Options(gpkg=True))
     doc = json.loads((out / "change_areas.geojson").read_text())
     rows, geoms, _meta = _read(out / "change_areas.gpkg")
     assert read_info(out / "change_areas.gpkg")["crs"] == "EPSG:32654"
@@ -60,7 +70,7 @@ def test_zones_geopackage_and_csv_equal_the_report(tmp_path):
     west, east = box(500000, 3900000, 500081.5, 3900200), box(500081.5, 3900000, 500200, 3900200)
     zones = _zones_file(tmp_path / "zones.geojson", [west, east], ["west", "east"])
     out = tmp_path / "out"
-    estimate(b, a, out, Options(zones=str(zones)))
+    estimate(b, a, out, Options(zones=str(zones), gpkg=True))
     report = json.loads((out / "report.json").read_text())["zones"]
     rows, geoms, _meta = _read(out / "zones.gpkg")
     assert read_info(out / "zones.gpkg")["crs"] == "EPSG:32654"

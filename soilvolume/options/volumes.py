@@ -132,6 +132,13 @@ class VolumeOptions:
         label="Cross-section lines",
         run_control=True,
     )
+    gpkg: bool = option(
+        False,
+        "also write the areas of significant change as change_areas.gpkg and, with {opt:zones}, the zones with their "
+        "budgets as zones.gpkg (GeoPackage, in the run's CRS; zones.csv is written with {opt:zones} either way)",
+        label="GeoPackage copies of the change areas and zones",
+        run_control=True,
+    )
     design_surface: str | None = option(
         None,
         "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",

@@ -67,9 +67,11 @@ def features(diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSp
     return out
 
 
-def write_change_areas(path: str | Path, diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSpec) -> dict:
-    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically, and the same as
-    ``change_areas.gpkg`` beside it); ``cut``:
+def write_change_areas(
+    path: str | Path, diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSpec, gpkg: bool = False
+) -> dict:
+    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically, and with ``gpkg``
+    the same as ``change_areas.gpkg`` beside it); ``cut``:
     the cut areas of ``change``; returns {"file", "cut_polygons", "fill_polygons", "cut_m3",
     "fill_m3"}."""
     path = Path(path)
@@ -79,7 +81,8 @@ def write_change_areas(path: str | Path, diff: np.ndarray, change: np.ndarray, c
     tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
     tmp.write_text(json.dumps(doc), encoding="utf-8")
     os.replace(tmp, path)
-    write_change_area_gpkg(path.parent, feats, raster_wkt(grid.crs_wkt))
+    if gpkg:
+        write_change_area_gpkg(path.parent, feats, raster_wkt(grid.crs_wkt))
     by = {k: [f["properties"]["volume_m3"] for f in feats if f["properties"]["kind"] == k] for k in ("cut", "fill")}
     return {
         "file": path.name,

@@ -173,14 +173,14 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
 
 #: options recorded in report.json only when set: each adds its own keys to the report, so a run
 #: without them reads as before they existed
-WHEN_SET = ("bulking", "shrinkage", "tolerance", "sections")
+WHEN_SET = ("bulking", "shrinkage", "tolerance", "sections", "gpkg")
 
 
 def recorded_options(options: Options) -> dict:
     """report.json's ``options``: every option an estimate takes (not another command's, such as
     the stockpile's base), those of :data:`WHEN_SET` only when given."""
     taken = {f.name for f in command_fields("estimate")}
-    return {k: v for k, v in asdict(options).items() if k in taken and not (k in WHEN_SET and v is None)}
+    return {k: v for k, v in asdict(options).items() if k in taken and not (k in WHEN_SET and v in (None, False))}
 
 
 VOLUME_METHOD = (  # report.json's volume_method

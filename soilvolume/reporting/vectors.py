@@ -98,13 +98,16 @@ def zone_row(zone: dict) -> dict:
     return row
 
 
-def write_zones(folder: Path, zones: list[dict], zones_path: str | Path, grid: GridSpec) -> list[str]:
-    """``zones.gpkg`` (layer ``zones``: each polygon of ``zones_path`` in the grid's CRS, as the
-    budgets were measured) and ``zones.csv`` of report.json's ``zones``; returns their names."""
-    polys, wkt = read_polygons(zones_path)
-    polys = to_grid_crs(polys, wkt, grid, zones_path)
+def write_zones(
+    folder: Path, zones: list[dict], zones_path: str | Path, grid: GridSpec, gpkg: bool = False
+) -> list[str]:
+    """``zones.csv`` of report.json's ``zones`` and with ``gpkg`` ``zones.gpkg`` (layer ``zones``: each
+    polygon of ``zones_path`` in the grid's CRS, as the budgets were measured); returns their names."""
     rows = [zone_row(z) for z in zones]
-    write_layer(folder / ZONES, "zones", [p.geometry for p in polys], rows, ZONE_COLUMNS, raster_wkt(grid.crs_wkt))
+    if gpkg:
+        polys, wkt = read_polygons(zones_path)
+        polys = to_grid_crs(polys, wkt, grid, zones_path)
+        write_layer(folder / ZONES, "zones", [p.geometry for p in polys], rows, ZONE_COLUMNS, raster_wkt(grid.crs_wkt))
     part = folder / f".{ZONES_CSV}.part"
     with open(part, "w", newline="", encoding="utf-8") as f:
         out = csv.DictWriter(f, fieldnames=ZONE_COLUMNS)
@@ -112,4 +115,4 @@ def write_zones(folder: Path, zones: list[dict], zones_path: str | Path, grid: G
         for row in rows:
             out.writerow({k: "" if v is None else (int(v) if isinstance(v, bool) else v) for k, v in row.items()})
     os.replace(part, folder / ZONES_CSV)
-    return [ZONES, ZONES_CSV]
+    return [ZONES, ZONES_CSV] if gpkg else [ZONES_CSV]

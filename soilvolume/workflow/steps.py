@@ -222,9 +222,10 @@ def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | Non
         for line in report["quality"]["messages"]:
             ctx.hooks.info(f"quality ({report['quality']['verdict']}): {line}")
         on = gridded.correction_grid  # a tiled run's overview: the arrays the report shows are its
-        write_change_areas(out.path(CHANGE_AREAS), vols.diff, vols.change_mask, vols.cut_mask, on)
-        if ctx.options.zones and report.get("zones"):  # zones.gpkg, zones.csv
-            write_zones(out.path(CHANGE_AREAS).parent, report["zones"], ctx.options.zones, gridded.grid)
+        gpkg = ctx.options.gpkg
+        write_change_areas(out.path(CHANGE_AREAS), vols.diff, vols.change_mask, vols.cut_mask, on, gpkg)
+        if ctx.options.zones and report.get("zones"):  # zones.csv (and zones.gpkg)
+            write_zones(out.path(CHANGE_AREAS).parent, report["zones"], ctx.options.zones, gridded.grid, gpkg)
         dem_after = gridded.correction_dems[0].heights + z0
         write_html(report, _html_arrays(vols, dem_after), on, out.path("report.html"))
         worded = cli_tree(report)  # options worded for the command line
