@@ -8,11 +8,11 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-import pyproj
 import shapely
 from pyogrio import raw
 
 from ..core.types import GridSpec, short_error
+from ..volumes.polygons import grid_transform
 from .types import Pile, PileError, checked_density, checked_polygon
 
 NAME_FIELDS = ("name", "pile", "label", "id")  # a name field found without one given
@@ -65,11 +65,7 @@ def local_piles(piles: list[Pile], crs_wkt: str | None, grid: GridSpec) -> list[
     """``piles`` (in CRS ``crs_wkt``; None: the grid's) in the grid's local frame (metres from its
     origin), reprojected with pyproj when the two CRSs differ."""
     shift = np.array(grid.origin[:2])
-    project = None
-    if crs_wkt and grid.crs_wkt:
-        src, dst = pyproj.CRS.from_user_input(crs_wkt), pyproj.CRS.from_user_input(grid.crs_wkt)
-        if not src.equals(dst, ignore_axis_order=True):
-            project = pyproj.Transformer.from_crs(src, dst, always_xy=True)
+    project = grid_transform(crs_wkt, grid.crs_wkt)
 
     def move(xy: np.ndarray) -> np.ndarray:
         if project is not None:

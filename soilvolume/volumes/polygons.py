@@ -17,6 +17,8 @@ import numpy as np
 from ..core.types import SoilVolumeError, short_error
 from ..inputs.crs import horizontal
 
+POLYGONAL = ("Polygon", "MultiPolygon")
+
 
 @dataclass
 class Polygon:
@@ -35,6 +37,20 @@ def read_polygons(
     """(polygons, CRS WKT or None) of the first layer of ``path``; non-polygon features are
     skipped. Raises SoilVolumeError naming ``what`` and the file when it cannot be used."""
     path = Path(path)
+    feats, wkt = _features(path, what, "polygons", POLYGONAL)
+    polys = []
+    for i, fid, props, geom in feats:
+        name = _name(props, name_field, i, path)
+        polys.append(_valid(Polygon(fid, name, geom), path))
+    if not polys:
+        raise SoilVolumeError(f"{path}: no polygon features in this {what}")
+    return polys, wkt
+
+
+def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple[list[tuple], str | None]:
+    """([(index, id, attributes, geometry)] of the non-empty features of ``kinds`` in the first
+    layer of ``path``, its CRS WKT or None): the checks every reader of a user's vector file
+    makes, each failure one line naming ``what`` and the file."""
     if not path.exists():
         raise SoilVolumeError(f"{path}: {what} not found")
     if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
@@ -43,33 +59,29 @@ def read_polygons(
         import pyogrio  # noqa: F401 - the reader
         import shapely  # noqa: F401 - validity and repair
     except ImportError as exc:
-        raise SoilVolumeError(f"{path}: reading polygons needs {exc.name} (pip install {exc.name})") from None
+        raise SoilVolumeError(f"{path}: reading {noun} needs {exc.name} (pip install {exc.name})") from None
     try:
         feats, wkt = _read(path)
     except SoilVolumeError:
         raise
     except Exception as exc:  # noqa: BLE001 - driver errors come in many types
-        raise SoilVolumeError(f"{path}: cannot read polygons from this {what} ({short_error(exc)})") from None
-    polys = []
-    for i, (fid, props, geom) in enumerate(feats):
-        if geom is None or geom.is_empty or geom.geom_type not in ("Polygon", "MultiPolygon"):
-            continue
-        name = _name(props, name_field, i, path)
-        polys.append(_valid(Polygon(int(fid if fid is not None else i), name, geom), path))
-    if not polys:
-        raise SoilVolumeError(f"{path}: no polygon features in this {what}")
-    return polys, wkt
+        raise SoilVolumeError(f"{path}: cannot read {noun} from this {what} ({short_error(exc)})") from None
+    kept = [
+        (i, int(fid if fid is not None else i), props, geom)
+        for i, (fid, props, geom) in enumerate(feats)
+        if geom is not None and not geom.is_empty and geom.geom_type in kinds
+    ]
+    return kept, wkt
 
 
 def feature_fields(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
     """[(feature id, attributes)] of the polygon features of ``path``'s first layer (ids as
     :func:`read_polygons` gives them)."""
     feats, _ = _read(Path(path))
-    polygonal = ("Polygon", "MultiPolygon")
     return [
         (int(fid if fid is not None else i), props)
         for i, (fid, props, g) in enumerate(feats)
-        if g is not None and not g.is_empty and g.geom_type in polygonal
+        if g is not None and not g.is_empty and g.geom_type in POLYGONAL
     ]
 
 
@@ -129,19 +141,30 @@ def _valid(p: Polygon, path: Path) -> Polygon:
     return Polygon(p.id, p.name, area, repaired=True)
 
 
+def grid_transform(src_wkt: str | None, grid_wkt: str | None):
+    """The pyproj Transformer from a vector file's CRS to a grid's, compared on their horizontal
+    parts (a 2-D file against a compound survey CRS is no reprojection); None when either CRS
+    is unknown or they are equal."""
+    import pyproj
+
+    if not src_wkt or not grid_wkt:
+        return None
+    src = horizontal(pyproj.CRS.from_user_input(src_wkt))
+    dst = horizontal(pyproj.CRS.from_user_input(grid_wkt))
+    if src.equals(dst, ignore_axis_order=True):
+        return None
+    return pyproj.Transformer.from_crs(src, dst, always_xy=True)
+
+
 def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Path = "") -> list[Polygon]:
     """Polygons reprojected to the grid's horizontal CRS (unchanged when either CRS is unknown
     or they are equal); coordinates that cannot be transformed are an error naming the file."""
     import pyproj
     import shapely
 
-    if not src_wkt or not grid.crs_wkt:
+    tr = grid_transform(src_wkt, grid.crs_wkt)
+    if tr is None:
         return polys
-    src = horizontal(pyproj.CRS.from_user_input(src_wkt))
-    dst = horizontal(pyproj.CRS.from_user_input(grid.crs_wkt))
-    if src.equals(dst, ignore_axis_order=True):
-        return polys
-    tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)
 
     def move(xy: np.ndarray) -> np.ndarray:
         return np.column_stack(tr.transform(xy[:, 0], xy[:, 1]))
@@ -150,6 +173,7 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
     for p in polys:
         geom = shapely.transform(p.geometry, move)
         if not np.isfinite(shapely.get_coordinates(geom)).all():
+            src, dst = (horizontal(pyproj.CRS.from_user_input(w)) for w in (src_wkt, grid.crs_wkt))
             raise SoilVolumeError(
                 f"{path}: '{p.name}' cannot be brought from {src.name} into the survey's {dst.name} "
                 "(are its coordinates really in the CRS the file declares?)"
@@ -165,21 +189,14 @@ def read_lines(path: str | Path, what: str = "sections file") -> tuple[list[Poly
     import shapely
 
     path = Path(path)
-    if not path.is_file() and not path.is_dir():
-        raise SoilVolumeError(f"{path}: {what} not found" if not path.exists() else f"{path}: not a regular file")
-    try:
-        feats, wkt = _read(path)
-    except Exception as exc:  # noqa: BLE001 - driver errors come in many types
-        raise SoilVolumeError(f"{path}: cannot read lines from this {what} ({short_error(exc)})") from None
+    feats, wkt = _features(path, what, "lines", ("LineString", "MultiLineString"))
     lines = []
-    for i, (fid, props, geom) in enumerate(feats):
-        if geom is None or geom.is_empty or geom.geom_type not in ("LineString", "MultiLineString"):
-            continue
+    for i, fid, props, geom in feats:
         if not np.isfinite(shapely.get_coordinates(geom)).all():
             raise SoilVolumeError(f"{path}: line {i + 1} has a coordinate that is not a number")
         key = next((k for k in props if k.lower() in ("name", "id", "label")), None)
         name = str(props[key]) if key and props[key] is not None else f"line {i + 1}"
-        lines.append(Polygon(int(fid if fid is not None else i), name, geom))
+        lines.append(Polygon(fid, name, geom))
     if not lines:
         raise SoilVolumeError(f"{path}: no line features in this {what}")
     return lines, wkt
