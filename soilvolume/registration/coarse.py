@@ -1,5 +1,4 @@
-"""The coarse registration: FPFH features + RANSAC (Open3D) on column surfaces, kept only within
-the georeferencing prior unless ``--coarse fpfh`` forces it."""
+"""The coarse registration: FPFH + RANSAC (Open3D) on column surfaces, within the GPS prior."""
 
 from __future__ import annotations
 
@@ -20,8 +19,7 @@ COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
 
 
 def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
-    """The coarse stage (``--coarse``): FPFH + RANSAC, accepted within the GPS error prior (or
-    forced by ``fpfh``), scored point to point at 1.5 voxels; skipped with ``none``."""
+    """``--coarse``: FPFH + RANSAC, accepted within the GPS prior (or forced by ``fpfh``)."""
     t0 = time.perf_counter()
     if options.coarse == "none":
         return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")

@@ -1,9 +1,5 @@
-"""Terrain surfaces for registration: a cloud summarised on a regular grid of columns.
-
-Each occupied column becomes one point at its mean x, y, z; the target's normals come from the
-gradient of the (lightly smoothed) column heights. On 2.5D terrain this replaces voxel
-down-sampling plus k-d tree normal estimation (seconds on ~10^5 points) by a few array passes.
-"""
+"""Terrain surfaces for registration: each occupied grid column one point at its mean, normals from
+the gradient of the smoothed column heights (a few array passes, not k-d tree normal estimation)."""
 
 from __future__ import annotations
 
@@ -30,11 +26,9 @@ class Columns:
 
 
 class Cloud:
-    """A cloud (N, 3) with its cuts to boxes remembered: a grid over a box needs only the points in
-    it, and a superset of them in the cloud's order gives the same per-cell sums. A registration asks
-    for many nearby boxes on the same target: each is served from the tightest remembered cut that
-    holds it (cut anew, with :data:`SLACK` m of room, when none is tight). Cuts are kept as (3, M)
-    coordinate rows (each axis contiguous) and handed out as their (M, 3) transposed views."""
+    """A cloud (N, 3) with its cuts to boxes remembered (a superset in order gives the same per-cell
+    sums): a box is served from the tightest cut holding it, else cut anew with :data:`SLACK` m of
+    room. Cuts are kept as (3, M) rows and handed out transposed."""
 
     SLACK = 2.0  # m around a new cut, so that the nearby boxes asked next fit in it
     TIGHT = 1.3  # a remembered cut serves a box when its area is at most this many times the box's
@@ -73,8 +67,8 @@ class Cloud:
 
 
 def _cut(base: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """The (3, M) coordinate rows of the points of ``base`` (N, 3) in the x/y box lo..hi, in order:
-    by the native kernel (``sv_cut_box``: counted, then copied) when it is there."""
+    """The (3, M) rows of the points of ``base`` (N, 3) in the x/y box lo..hi, in order (``sv_cut_box``
+    when built)."""
     lib = kernels()
     if lib is None:
         mask = in_box(base, lo, hi)
@@ -94,10 +88,8 @@ Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cut
 
 
 def columns(xyz: Target, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
-    """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped).
-    Given a box, only the points in it with a cell of margin are binned (a superset of the points
-    the grid keeps, in their order: the same sums, on a fraction of a large target's points; a
-    :class:`Cloud` remembers its cuts for the next boxes)."""
+    """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped); given a
+    box, only its points with a cell of margin are binned (the same sums)."""
     pts = Cloud.points(xyz)
     cut = lo is not None and hi is not None
     if not cut:
@@ -112,10 +104,8 @@ def columns(xyz: Target, cell: float, lo: np.ndarray | None = None, hi: np.ndarr
 
 
 def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]) -> Columns:
-    """:func:`columns` of the points ``xyz`` on the grid from ``lo``: each point's cell is
-    ``floor((v - lo) / cell)`` per axis (:func:`~soilvolume.core.cells.cell_index`, kept in float:
-    the flat ids are exact integers), points off the grid go to one extra bin that is dropped
-    (each cell's sum runs over its points in order)."""
+    """:func:`columns` of ``xyz`` on the grid from ``lo``: cells ``floor((v - lo) / cell)`` in float
+    (exact integers), points off the grid in one dropped extra bin."""
     if kernels() is not None and len(xyz):
         return _native_binned(kernels(), xyz, lo, cell, shape)
     n = shape[0] * shape[1]
@@ -134,7 +124,7 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
 
 
 def _native_binned(lib, xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]) -> Columns:
-    """:func:`_binned` on the native kernel (``sv_columns``): the same columns, bit for bit."""
+    """:func:`_binned` by ``sv_columns``: the same bits."""
     n = shape[0] * shape[1]
     xyz, axes, step = native_axes(xyz, np.float64)
     count, sums = zeros("columns_count", n, np.int64), zeros("columns_sums", 3 * n, np.float64)
@@ -163,8 +153,8 @@ def column_surface(
 
 
 def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:
-    """Upward unit normals of the column surface from the gradient of its heights (Gaussian
-    smoothed by ``smooth`` cells, normalized convolution over empty columns)."""
+    """Upward unit normals from the gradient of the column heights (Gaussian smoothed by ``smooth``
+    cells, normalized convolution over empty columns)."""
     flat = c.row * c.shape[1] + c.col
     h = np.zeros(c.shape)
     w = np.zeros(c.shape)
@@ -186,9 +176,8 @@ def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:
 
 
 def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """(dz/dy, dz/dx) with central differences where both neighbours are valid, one-sided where
-    one is, 0 where none (y grows with the row index here): each cell's forward plus backward
-    difference (0.0 where a neighbour is missing) over their count."""
+    """(dz/dy, dz/dx): central differences where both neighbours are valid, one-sided where one is, 0
+    where none (the sum of the valid differences over their count)."""
     out = []
     for axis in (0, 1):
         a, b = [slice(None)] * 2, [slice(None)] * 2
@@ -209,8 +198,7 @@ def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray
 
 
 def plane_residuals(points: np.ndarray, c: Columns, n: np.ndarray) -> np.ndarray:
-    """Point-to-plane distance of each point to the tangent plane of the column it falls in
-    (NaN for points over empty columns or off the grid)."""
+    """Each point's distance to the tangent plane of its column (NaN over empty columns, off grid)."""
     ix, iy = cell_index(points[:, 0], c.lo[0], c.cell), cell_index(points[:, 1], c.lo[1], c.cell)
     ok = (ix >= 0) & (iy >= 0) & (ix < c.shape[1]) & (iy < c.shape[0])
     lut = np.full(c.shape[0] * c.shape[1], -1, np.int64)

@@ -1,6 +1,5 @@
-"""The fine registration: robust coarse-to-fine ICP (:mod:`.icp`) or Open3D's GICP on column
-surfaces from the best starting pose, refined on the stable ground found at the pose reached; or
-the paper's PFH + SAC-IA (:mod:`.pfh`)."""
+"""The fine registration: ICP (:mod:`.icp`) or Open3D's GICP on column surfaces from the best start,
+refined on stable ground; or the paper's PFH + SAC-IA (:mod:`.pfh`)."""
 
 from __future__ import annotations
 
@@ -31,15 +30,13 @@ STABLE_PASSES = 1  # refinements on the stable ground found at the current pose
 
 
 def finest_column(after_xyz: np.ndarray, gap: float) -> float:
-    """The side (m) of the finest columns the fine registration matches surfaces on (its last
-    level's voxel, no finer than the target's point spacing ``gap`` nor coarser than the cap on
-    large clouds): it cannot place the after survey more finely than this horizontally."""
+    """The side (m) of the finest columns matched (the last level's, at least the spacing ``gap`` and
+    the large-cloud cap): the horizontal resolution of the registration."""
     return max(ICP_LEVELS[-1][0], gap, cap_voxel(after_xyz, MAX_ICP_POINTS))
 
 
 def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
-    """Whether a pose stays within the georeferencing prior (shift at the after centre, rotation
-    and tilt)."""
+    """Whether a pose stays within the georeferencing prior (shift at ``centre``, rotation, tilt)."""
     return (
         shift_at(t, centre) <= options.max_gps_shift
         and rotation_deg(t) <= options.max_gps_rotation
@@ -48,9 +45,8 @@ def within_prior(t: np.ndarray, centre: np.ndarray, options: Options) -> bool:
 
 
 def fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=None) -> StageQuality:
-    """The fine stage from the best of the starting poses: ICP/GICP run their first (1 m) levels
-    from each start and finish from the one that fits best; PFH and none are scored whole.
-    ``before_xyz``: an array or a :class:`~soilvolume.registration.columns.Cloud`."""
+    """The fine stage from the best start: ICP/GICP run their 1 m levels from each and finish from the
+    best; PFH and none are scored whole. ``before_xyz``: an array or a :class:`.columns.Cloud`."""
     t0 = time.perf_counter()
     gap = spacing(columns.Cloud.points(before_xyz))
     judge = judged(after_xyz, gap)
@@ -92,12 +88,9 @@ def _better(a: StageQuality, b: StageQuality) -> bool:
 
 
 def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, gap: float):
-    """ICP from the best start on the margin of the after survey (``src``: :func:`judged`), then
-    refined twice on the stable ground found at the pose reached (works inside the survey never
-    pull the pose); the pose that fits the margin best within the georeferencing prior wins.
-    Returns ((transform, label, poses rejected beyond the prior, its (fitness, RMSE) on the
-    margin), the other refined pose (margin-only or stable-ground ICP) as an alternative for the
-    uncertainty, None when there is none, and every refined pose, those beyond the prior too)."""
+    """ICP from the best start on the after survey's margin (``src``), refined on the stable ground at
+    the pose reached; the pose fitting the margin best within the prior wins. Returns ((transform,
+    label, poses beyond the prior, (fitness, RMSE)), the other refined pose or None, every refined pose)."""
     method, workers = options.fine, options.threads if options.threads > 0 else -1
     head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
     scored = []
@@ -136,11 +129,8 @@ def icp_levels(
     gap: float | None = None,
     workers: int = -1,
 ):
-    """Robust coarse-to-fine ICP (point-to-plane with a Tukey kernel, :mod:`.icp`, or Open3D's
-    GICP) of column-mean surfaces (target normals from the column heights); with ``scores``
-    returns (transform, fitness, inlier RMSE) of the last level. ``gap``: the target's point
-    spacing; ``target_xyz``: an array or a :class:`~soilvolume.registration.columns.Cloud`;
-    ``workers``: the nearest-neighbour searches' threads (-1: all cores)."""
+    """Coarse-to-fine ICP (:mod:`.icp`) or GICP of column surfaces; with ``scores`` (transform, fitness,
+    RMSE) of the last level. ``gap``: the target's spacing; ``workers``: search threads (-1: all)."""
     t, fit, rmse = init.copy(), 0.0, 0.0
     cache: dict[float, tuple] = {}
     cap = cap_voxel(source_xyz, MAX_ICP_POINTS)
@@ -150,7 +140,8 @@ def icp_levels(
         if check:
             check()
         if voxel not in cache:
-            src = _sampled(columns.columns(source_xyz, voxel).xyz, MAX_SOURCE_POINTS)
+            src = columns.columns(source_xyz, voxel).xyz
+            src = src[:: max(1, -(-len(src) // MAX_SOURCE_POINTS))]  # a fixed stride: spread, not density
             cache[voxel] = (src, *_surface(target_xyz, source_xyz, t, voxel, 2.0 + dist), {})
         src, tgt, normals, kept = cache[voxel]  # kept: the voxel's k-d tree, or GICP's Open3D clouds
         if method == "gicp":
@@ -165,8 +156,7 @@ def icp_levels(
 
 
 def _gicp(src, tgt, normals, dist: float, t: np.ndarray, k: float, pcds: dict) -> tuple[np.ndarray, float, float]:
-    """One level of Open3D's generalized ICP (Tukey kernel) of arrays; their Open3D clouds are
-    kept in ``pcds`` for the next level on the same voxel."""
+    """One level of Open3D's GICP (Tukey); the clouds kept in ``pcds`` for the next level."""
     reg = _o3d().pipelines.registration
     if "pcd" not in pcds:
         pcds["pcd"] = (to_pcd(src), to_pcd(tgt, normals=normals))
@@ -187,12 +177,3 @@ def _surface(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, 
             "cover the same site and their CRSs"
         )
     return xyz, normals
-
-
-def _sampled(xyz: np.ndarray, cap: int) -> np.ndarray:
-    """At most ``cap`` points of a cloud, a fixed-stride sample (deterministic): the source side
-    of ICP needs well-spread points, not all of them; the target keeps its density."""
-    n = len(xyz)
-    if n <= cap:
-        return xyz
-    return xyz[:: int(np.ceil(n / cap))]

@@ -1,6 +1,5 @@
-"""How well a pose fits: the share of the after points near the before surface, on terrain
-(:func:`evaluate_surface`) or point to point (Open3D), and the best of several poses judged on
-the margin of the after survey (works inside it do not fit any correct pose)."""
+"""How well a pose fits: the share of after points near the before surface (on terrain or point to
+point) and the best of several poses judged on the after survey's margin."""
 
 from __future__ import annotations
 
@@ -29,10 +28,8 @@ def evaluate_surface(
     distance: float = EVAL_DISTANCE,
     gap: float | None = None,
 ) -> tuple[float, float]:
-    """(fitness, RMSE) on terrain: the fraction of source points within ``distance`` of the
-    tangent plane of the target surface (columns of max(0.25 m, 2 point spacings)), and the RMS
-    of those distances. Meaningful on sparse clouds, unlike point-to-point. ``target_xyz``: an
-    array or a :class:`~soilvolume.registration.columns.Cloud` (its cuts remembered)."""
+    """(fitness, RMSE) on terrain: the share of source points within ``distance`` of the target's
+    tangent planes (columns of max(0.25 m, 2 spacings)) and their RMS; meaningful on sparse clouds."""
     src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
     gap = spacing(columns.Cloud.points(target_xyz)) if gap is None else gap
     lo, hi = bounds(src, 2)
@@ -46,16 +43,13 @@ def evaluate_surface(
 
 
 def judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
-    """The after points a pose is judged on: the margin of the after survey (works inside it do
-    not fit any correct pose), or all points when the margin is too thin to judge."""
+    """The after points a pose is judged on: the survey's margin (works fit no pose), else all."""
     ring = margin_points(after_xyz, gap)
     return ring if len(ring) >= max(500, 0.05 * len(after_xyz)) else after_xyz
 
 
 def best_on(src, before_xyz, poses, gap: float) -> tuple[tuple[np.ndarray, str], tuple[float, float]]:
-    """The pose under which the margin points fit the before surface best (the last, most
-    refined one on ties): a pass that drifted never replaces a better pose; and its (fitness,
-    RMSE) there (:func:`evaluate_surface`)."""
+    """The pose the margin points fit best (the last on ties) and its (fitness, RMSE)."""
     best, best_key, scores = poses[-1], None, (float("nan"), float("nan"))
     for k, (t, label) in enumerate(poses):
         fit, rmse = evaluate_surface(src, before_xyz, t, gap=gap)

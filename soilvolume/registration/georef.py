@@ -1,28 +1,13 @@
-"""How far the surveys' georeferencing is trusted: ``gps`` (register within the prior),
-``precise`` (use the coordinates as they are), or ``auto``: gps unless both files declare the
-same vertical datum; when they do, the registration decides (:func:`confirm`). A declared datum
-is no proof of precise coordinates: GPS-tagged surveys carry metres and degrees of error in any
-CRS, and on smooth terrain their margin still lies close to the before surface as surveyed.
-
-:func:`confirm` keeps the file coordinates only when the pose the registration found stays
-within its own resolution of them, at the after survey's centre:
-
-* horizontally, one side of the finest columns it matches surfaces on
-  (:func:`~soilvolume.registration.fine.finest_column`: at least the before cloud's point
-  spacing): it cannot place the after survey more finely than that;
-* turned by no more than the angle that moves the survey's farthest point by that much;
-* vertically, :data:`GROUND_AGREES` (the level at which a precise run's report says the ground
-  outside the works disagrees, :mod:`soilvolume.volumes.quality`): precise runs correct no bias;
-* tilted by no more than the angle that lifts the survey's farthest point by that much.
-
-The registration's precision on the pair is the spread of its own poses (the margin fit and the
-stable-ground refinements, those beyond the prior too). When they agree within the same bounds
-and none wanted more than the prior allows, it is consistent: a pose within the bounds confirms
-the coordinates (precise), one beyond refutes them (gps, the registered pose). When its poses
-disagree (works covering the survey pull them apart), it can neither confirm nor refute them:
-they are kept when the after survey's margin agrees with the before surface as surveyed
-(:data:`AGREE_FITNESS`), the report saying the registration could not confirm them (a caution in
-the verdict), else registered."""
+"""How far the surveys' georeferencing is trusted: ``gps`` (register within the prior), ``precise``
+(the coordinates as they are) or ``auto``: gps unless both files declare one vertical datum; then
+the registration decides (:func:`confirm`), since a declared datum is no proof of precise
+coordinates. It keeps them when its pose stays within its own resolution of them at the after
+centre: horizontally one side of the finest columns (:func:`.fine.finest_column`), vertically
+:data:`GROUND_AGREES`, turned or tilted by no more than moves the farthest point that much. Its
+precision is the spread of its own poses: when they agree within the same bounds and none wanted
+more than the prior, a pose within the bounds confirms the coordinates, one beyond refutes them.
+When they disagree, the coordinates are kept (with a caution) if the after survey's margin agrees
+with the before surface as surveyed (:data:`AGREE_FITNESS`), else registered."""
 
 from __future__ import annotations
 
@@ -55,9 +40,8 @@ def vertical_datum(wkt: str | None) -> str | None:
 
 
 def declared(mode: str, inputs: dict) -> tuple[str, str] | None:
-    """(``gps`` or ``precise``, the reason) when decided before registering: the explicit modes,
-    and auto when the files do not both declare one vertical datum; None when the registration
-    must decide (:func:`confirm`)."""
+    """(``gps`` or ``precise``, the reason) when decided before registering; None when the
+    registration must decide (:func:`confirm`)."""
     if mode != "auto":
         return mode, opt("georeferencing", mode)
     vb = vertical_datum(inputs["before"].get("crs_wkt"))
@@ -68,15 +52,13 @@ def declared(mode: str, inputs: dict) -> tuple[str, str] | None:
 
 
 def move_at(t: np.ndarray, centre: np.ndarray) -> dict[str, float]:
-    """How a 4x4 departs from the identity (:data:`KEYS`): its rotation and tilt (deg) and its
-    horizontal and vertical move of ``centre`` (m)."""
+    """How a 4x4 departs from the identity (:data:`KEYS`), its moves taken at ``centre``."""
     d = t[:3, :3] @ centre + t[:3, 3] - centre
     return dict(zip(KEYS, (rotation_deg(t), tilt_deg(t), float(np.hypot(d[0], d[1])), float(abs(d[2]))), strict=True))
 
 
 def spread(reg, centre: np.ndarray) -> dict[str, float]:
-    """The largest departures (:data:`KEYS`) between the accepted pose and the other poses the
-    fine stage refined to: the registration's own precision on this pair."""
+    """The largest departures (:data:`KEYS`) of the fine stage's refined poses from the accepted one."""
     inv = np.linalg.inv(reg.transform)
     moved = reg.transform[:3, :3] @ centre + reg.transform[:3, 3]
     out = dict.fromkeys(KEYS, 0.0)
@@ -87,8 +69,7 @@ def spread(reg, centre: np.ndarray) -> dict[str, float]:
 
 
 def tolerances(reg, after_xyz: np.ndarray, gap: float) -> dict:
-    """The bounds within which the registration cannot tell a pose from the file coordinates
-    (see module), by :data:`KEYS`, and its poses' ``spread``."""
+    """The bounds (:data:`KEYS`) within which a pose equals the file coordinates, and the ``spread``."""
     centre = after_xyz.mean(axis=0)
     radius = float(np.hypot(*(after_xyz[:, :2] - centre[:2]).T).max(initial=1.0))
     column = finest_column(after_xyz, gap)
@@ -98,9 +79,7 @@ def tolerances(reg, after_xyz: np.ndarray, gap: float) -> dict:
 
 
 def outcome(reg, after_xyz: np.ndarray, gap: float, fine: str) -> dict:
-    """What the registration says of the file coordinates: ``inconclusive`` when it is not
-    consistent, else ``confirmed`` (its pose within the tolerances of them) or ``refuted``; with
-    the figures (the pose's move, the tolerances, its poses' spread, those beyond the prior)."""
+    """``confirmed``, ``refuted`` or (not consistent) ``inconclusive``, with the figures behind it."""
     tol = tolerances(reg, after_xyz, gap)
     move = move_at(reg.transform, after_xyz.mean(axis=0))
     within = all(move[k] <= tol[k] for k in KEYS)
@@ -130,8 +109,7 @@ def _figures(check: dict) -> str:
 
 
 def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine: str) -> tuple[str, str, dict]:
-    """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason with the
-    figures, the check behind it) from the registration ``reg`` of the pair (see module)."""
+    """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason, the check)."""
     gap = spacing(before_xyz)
     check = outcome(reg, after_xyz, gap, fine)
     said = _figures(check)

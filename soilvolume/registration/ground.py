@@ -1,5 +1,5 @@
-"""The ground a registration is judged and refined on: the point spacing of a cloud, the margin
-band of the after survey (most likely stable) and the after points on stable ground at a pose."""
+"""The ground a registration is judged and refined on: point spacing, the after survey's margin
+band, its points on stable ground at a pose."""
 
 from __future__ import annotations
 
@@ -26,9 +26,8 @@ def cap_voxel(xyz: np.ndarray, max_points: int) -> float:
 
 
 def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
-    """The points of a cloud in the margin band of its own footprint (see
-    :func:`soilvolume.compensation.stable.margin`): surveys are flown beyond the works, so this band is the
-    part of the after survey most likely to be stable ground."""
+    """The points in the margin band of a cloud's own footprint (:func:`.stable.margin`): surveys
+    are flown beyond the works, so it is most likely stable."""
     cell = max(1.0, 2.0 * gap)
     cols = columns.columns(xyz, cell)
     valid = np.zeros(cols.shape, bool)
@@ -46,10 +45,8 @@ def stable_source(
     cell: float = 1.0,
     gap: float | None = None,
 ) -> np.ndarray:
-    """The source with its fitted low-order deformation removed and its change areas dropped:
-    what the last ICP levels should see (smooth terrain constrains x/y only weakly). Stable
-    ground (searched from the margin of the after footprint) and the degree-2 surface come from
-    :mod:`soilvolume.compensation.stable` on median grids."""
+    """The source at ``t`` on stable ground only, its degree-2 deformation removed (both from
+    :mod:`soilvolume.compensation.stable` on median grids): what the last ICP levels should see."""
     src = transform_points(source_xyz, t)
     target = columns.Cloud.of(target_xyz)
     cell = max(cell, 1.5 * (spacing(target.xyz) if gap is None else gap))  # gap: the target's spacing

@@ -1,13 +1,6 @@
-"""Robust point-to-plane ICP (Tukey kernel) over numpy arrays, computed as Open3D's
-``registration_icp`` with ``TransformationEstimationPointToPlane(TukeyLoss(k))`` computes it:
-the nearest target point within the correspondence distance, a Gauss-Newton step of the
-weighted point-to-plane residuals, the step applied to the moved source, stop when neither
-fitness nor inlier RMSE changes by the tolerance. Poses agree with Open3D's to ~1e-14.
-
-Without Open3D's ~0.4-0.6 s import, and faster: an iteration moves the points by millimetres,
-so the nearest neighbours found are kept while a bound proves them unchanged
-(:class:`~soilvolume.registration.nearest.Nearest`).
-"""
+"""Robust point-to-plane ICP (Tukey kernel) over numpy arrays, as Open3D's ``registration_icp`` with
+``TransformationEstimationPointToPlane(TukeyLoss(k))`` (poses agree to ~1e-14), without its ~0.5 s
+import and faster: neighbours are kept while a bound proves them (:class:`.nearest.Nearest`)."""
 
 from __future__ import annotations
 
@@ -25,8 +18,7 @@ PERIODS = range(2, 9)  # the cycles looked for: ICP on gentle terrain can go rou
 
 @dataclass(frozen=True)
 class IcpResult:
-    """The transform (source -> target), the fraction of source points with a correspondence
-    and the RMS of their point-to-point distances, at the last iteration."""
+    """The transform (source -> target), fitness and inlier RMSE at the last iteration."""
 
     transform: np.ndarray
     fitness: float
@@ -46,12 +38,10 @@ def point_to_plane(
     workers: int = -1,
     nearest: Nearest | None = None,
 ) -> IcpResult:
-    """ICP of ``source`` (N, 3) onto ``target`` (M, 3) with its unit ``normals``: correspondences
-    within ``dist`` m, Tukey weights of constant ``k`` m on the point-to-plane residuals, from
-    ``init``; stops when fitness and inlier RMSE change by less than ``tol`` or after ``max_iter``
-    steps, or once a pose repeats one a few steps before (within :data:`CYCLE`: the ICP goes
-    round a cycle of :data:`PERIODS` poses till its last step) on the pose that last step would
-    reach. ``nearest``: a :class:`Nearest` of this target and distance to reuse."""
+    """ICP of ``source`` (N, 3) onto ``target`` (M, 3) with unit ``normals``: correspondences within
+    ``dist``, Tukey ``k``, from ``init``; stops when fitness and RMSE change by under ``tol``, after
+    ``max_iter`` steps, or on a cycle of poses (:data:`PERIODS`) at the pose its last step would reach.
+    ``nearest``: a :class:`Nearest` of this target and distance to reuse."""
     t = np.array(init, dtype=float)
     pts = np.ascontiguousarray(source.T, dtype=float)
     if not np.array_equal(t, np.eye(4)):
@@ -78,9 +68,8 @@ def point_to_plane(
 
 
 def _cycled(poses: list[tuple], left: int) -> tuple | None:
-    """The (pose, fitness, RMSE) the ICP ends on ``left`` iterations on, when the latest of
-    ``poses`` (oldest first) repeats the one a period before: the poses repeat from there on;
-    None when no period of :data:`PERIODS` repeats."""
+    """The (pose, fitness, RMSE) ``left`` iterations on when the latest of ``poses`` repeats the one a
+    period before (None when none does)."""
     for p in PERIODS:
         if len(poses) > p and float(np.abs(poses[-1][0] - poses[-1 - p][0]).max()) < CYCLE:
             return poses[-1 - p + left % p] if left % p else poses[-1]
@@ -98,8 +87,8 @@ def _matches(nn: Nearest, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, floa
 
 
 def _step(pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: np.ndarray, nrm: np.ndarray, k: float):
-    """The step (4x4) of the points ``pts[:, sel]`` on the planes of their targets ``target[:, j]``
-    and normals ``nrm[:, j]``: its per-point terms by the native kernel when it is there."""
+    """The step (4x4) of ``pts[:, sel]`` on the planes of ``target[:, j]``, ``nrm[:, j]`` (native terms
+    when built)."""
     lib = kernels()
     if lib is not None and pts.flags.c_contiguous and nrm.flags.c_contiguous and target.flags.c_contiguous:
         return _native_step(lib, pts, sel, j, target, nrm, k)
@@ -107,9 +96,8 @@ def _step(pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: np.ndarray, n
 
 
 def _numpy_step(p: np.ndarray, q: np.ndarray, n: np.ndarray, k: float) -> np.ndarray:
-    """The Gauss-Newton step (4x4) of the Tukey-weighted point-to-plane residuals of points
-    ``p`` on planes (``q``, ``n``), all (3, K): identity when there are none or the system is
-    singular."""
+    """The Gauss-Newton step (4x4) of Tukey-weighted residuals of ``p`` on planes (``q``, ``n``), all
+    (3, K); identity for none or a singular system."""
     if p.shape[1] == 0:
         return np.eye(4)
     dq = p - q
@@ -139,8 +127,7 @@ def _solved(jw: np.ndarray, jac: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 def _native_step(lib, pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: np.ndarray, nrm: np.ndarray, k: float):
-    """:func:`_numpy_step` with its per-point terms from the native kernel (``sv_icp_terms``) and
-    the same matrix products: the same step, bit for bit."""
+    """:func:`_numpy_step` with its per-point terms from ``sv_icp_terms``: the same bits."""
     m = len(sel)
     if m == 0:
         return np.eye(4)

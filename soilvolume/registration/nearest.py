@@ -1,8 +1,5 @@
-"""The nearest target point of each source point, for a source that moves a little between
-calls (the ICP's correspondences): the neighbours found are kept while a bound proves them
-unchanged (:class:`Nearest`), and only the others are searched again, on the native kernel's
-bucket grid (:class:`GridIndex`), else SciPy's k-d tree: the same neighbours either way.
-"""
+"""The ICP's nearest neighbours for a source that moves a little between calls: kept while a bound
+proves them, the others searched again on the native bucket grid or SciPy's k-d tree (same result)."""
 
 from __future__ import annotations
 
@@ -18,8 +15,7 @@ THREADED = 4096  # fewest points searched on several threads
 
 
 def tree_of(target: np.ndarray) -> cKDTree | GridIndex:
-    """What :class:`Nearest` searches a target (N, 3) with: a :class:`GridIndex` on the native
-    kernel when it is there, else SciPy's k-d tree (the same neighbours)."""
+    """A :class:`GridIndex` of a target (N, 3) when the kernel is built, else a k-d tree."""
     lib = kernels()
     if lib is not None and len(target):
         return GridIndex(lib, target)
@@ -27,11 +23,8 @@ def tree_of(target: np.ndarray) -> cKDTree | GridIndex:
 
 
 class GridIndex:
-    """A target's points counted into a grid of x/y cells (``sv_grid_build``): the nearest and
-    second-nearest target of each point within a bound, searched ring by ring of cells round
-    the point's (``sv_grid_nearest2``), as ``cKDTree.query(k=2, distance_upper_bound=...)``
-    finds them, distances summed in its order. A registration's targets are column surfaces,
-    about one point per cell: building it is one counting pass, a search a few cells."""
+    """A target counted into x/y cells (``sv_grid_build``), searched ring by ring for the nearest and
+    second-nearest within a bound (``sv_grid_nearest2``) as ``cKDTree.query(k=2, ...)`` finds them."""
 
     MAX_CELLS_PER_POINT = 4  # a sparse target's grid is coarsened to this many cells a point
 
@@ -53,8 +46,7 @@ class GridIndex:
         )  # fmt: skip
 
     def nearest2(self, points: np.ndarray, bound: float) -> tuple[np.ndarray, np.ndarray]:
-        """(index of the nearest target, M for none nearer than ``bound``; distance to the second
-        nearest, ``bound`` for none) of each of the (3, N) C-contiguous float64 ``points``."""
+        """(nearest index or M, second-nearest distance or ``bound``) of (3, N) float64 ``points``."""
         n = points.shape[1]
         idx, second = np.empty(n, np.int64), np.empty(n)
         self.lib.sv_grid_nearest2(
@@ -66,9 +58,7 @@ class GridIndex:
 
 @dataclass
 class _Found:
-    """What the searches found for each point: where it was searched from (3, N), its nearest
-    target (M, the one at infinity, for none within the bound) and the second-nearest distance
-    (at most the bound)."""
+    """Per point: where it was searched from (3, N), its nearest (M: none) and second distance."""
 
     at: np.ndarray
     index: np.ndarray
@@ -85,15 +75,10 @@ class _Found:
 
 
 class Nearest:
-    """The nearest target point of each source point, for a source that moves a little between
-    calls: exact wherever it is within ``dist`` (a point proven farther from every target gets
-    none). Each k-d tree search looks ``SLACK * dist`` far and keeps the nearest and the
-    second-nearest distance; at the next call a point whose old nearest is still closer than the
-    second nearest can now be (that distance less how far the point moved) keeps it, and so does
-    a point with none that cannot have come within ``dist``; the others are searched again. The
-    two latest searches of each point are kept (ICP can swing between two poses).
-    ``workers``: the k-d tree's threads (-1: all cores); ``tree``: :func:`tree_of` the target,
-    when another distance searched it already."""
+    """Each source point's nearest target, exact within ``dist``. A search looks ``SLACK * dist`` far
+    and keeps the second-nearest distance: a point keeps its nearest while that is closer than the
+    second can now be (less how far it moved); the others are searched again. The two latest
+    searches are kept (ICP can swing between two poses). ``tree``: :func:`tree_of` the target."""
 
     def __init__(
         self, target: np.ndarray, dist: float, workers: int = -1, tree: cKDTree | GridIndex | None = None
@@ -107,8 +92,7 @@ class Nearest:
         self.older: _Found | None = None
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(distance, index) of each point's nearest target ((3, N) points; inf and M where
-        none is within ``dist``)."""
+        """(distance, index) of each (3, N) point's nearest target (inf and M: none within ``dist``)."""
         if self.last is None or len(self.last.index) != points.shape[1]:
             self.last, self.older = self._search(points), None
             return self._distances(self.last, points), self.last.index
@@ -139,8 +123,7 @@ class Nearest:
         return d, self.last.index
 
     def _native(self, lib, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`__call__` with the kept neighbours proven, swapped and set aside by the native
-        kernel (``sv_nearest_kept``), the rest searched here: the same distances and state."""
+        """:meth:`__call__` with the kept neighbours proven by ``sv_nearest_kept``: the same state."""
         n, last = points.shape[1], self.last
         old = self.older if self.older is not None else last
         d, todo = np.empty(n), np.empty(n, np.int64)
@@ -160,8 +143,7 @@ class Nearest:
         return d, last.index
 
     def _proven(self, found: _Found, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The distance to each point's found nearest, and whether that is still its nearest
-        (or, for none, whether none can be within ``dist``)."""
+        """The distance to each point's found nearest and whether it is proven still nearest."""
         d = self._distances(found, points)
         moved = _norms(points - found.at)
         moved += 1e-9  # rounding room: a kept neighbour is proven, never assumed

@@ -1,5 +1,4 @@
-"""Open3D helpers of the registration: clouds from numpy arrays, upward normals (Open3D imported on
-first use, quiet)."""
+"""Open3D helpers: imported on first use (quiet), clouds from arrays, upward normals."""
 
 from __future__ import annotations
 
@@ -18,25 +17,14 @@ def _o3d():
     import open3d as o3d
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    try:
+    if _WANTED:
         _apply(o3d.utility, _WANTED.pop())  # a limit asked for before the import
-    except IndexError:
-        pass
     return o3d
 
 
-def needed(fine: str, coarse: str) -> bool:
-    """Whether a registration with these ``--fine`` and ``--coarse`` methods surely uses Open3D
-    (the default point-to-plane ICP does not; ``--coarse auto`` imports it only when it runs)."""
-    return fine in ("gicp", "pfh") or coarse == "fpfh"
-
-
 def limit_threads(threads: int) -> None:
-    """Open3D's CPU threads, ``threads`` (0: all cores): Open3D 0.19+ runs on oneTBB, which ignores
-    OMP_NUM_THREADS (``--threads`` sets that too, for OpenMP libraries); older releases have no
-    ``set_max_threads`` and follow OMP_NUM_THREADS. A process that never asks for a limit keeps
-    Open3D's own setting; one that did gets all cores back with 0. Before Open3D is imported the
-    limit is only remembered: a run whose registration never needs Open3D does not import it."""
+    """Open3D's CPU threads (0: all cores; 0.19+ runs on oneTBB, deaf to OMP_NUM_THREADS): only
+    remembered until Open3D is imported; a process that never asked keeps Open3D's own setting."""
     import sys
 
     _WANTED.clear()
@@ -56,10 +44,8 @@ def _apply(utility, threads: int) -> None:
 
 
 def _import_without_plotly() -> None:
-    """Import Open3D without its Plotly/Dash web drawing (~0.6 s of imports the engine never
-    uses): a placeholder stands in for ``open3d.visualization.draw_plotly`` while ``open3d``
-    imports and is dropped after, so an explicit import of that module still gets the real one.
-    Should a future Open3D need more from it, Open3D is imported as it comes."""
+    """Import Open3D without its Plotly/Dash drawing (~0.6 s): a placeholder module stands in while
+    ``open3d`` imports, dropped after (an explicit import then gets the real one)."""
     import sys
     import types
 

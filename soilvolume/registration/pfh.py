@@ -1,12 +1,6 @@
-"""The paper's precise registration: PFH descriptors + SAC-IA on a 6 m x 6 m patch.
-
-PFH (Rusu 2008) is not in Open3D; it is computed here vectorised: for each keypoint, every pair
-of points in its neighbourhood gives the Darboux-frame angles (alpha, phi, theta), binned 5 x 5 x 5
-into a 125-bin histogram. SAC-IA draws three source keypoints, matches each to one of its most
-similar target descriptors, solves the rigid transform (Kabsch), scores it by the Huber-truncated
-distance of all source keypoints to the target, and keeps the best (seeded, batched). The winner
-is refitted on its inlier correspondences.
-"""
+"""The paper's precise registration: PFH descriptors (Rusu 2008, not in Open3D: the Darboux angles of
+every pair in a keypoint's neighbourhood, 5 x 5 x 5 bins) + SAC-IA (seeded, batched Kabsch on three
+matched keypoints, Huber-scored, the winner refitted on its inliers) on a 6 m x 6 m patch."""
 
 from __future__ import annotations
 
@@ -83,8 +77,7 @@ def choose_patch(source: np.ndarray, target: np.ndarray, size: float) -> np.ndar
 
 
 def _triples(src: np.ndarray, n: int, min_dist: float, rng) -> np.ndarray:
-    """``n`` random index triples whose points are at least ``min_dist`` apart (PCL's
-    min_sample_distance)."""
+    """``n`` random index triples at least ``min_dist`` apart (PCL's min_sample_distance)."""
     pick = rng.integers(0, len(src), size=(4 * n, 3))
     p = src[pick]
     d = np.stack([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in ((0, 1), (0, 2), (1, 2))], 1)
@@ -105,9 +98,8 @@ def sac_ia(
     max_rotation: float = 6.0,
     max_shift: float = 4.0,
 ) -> np.ndarray:
-    """SAC-IA: source keypoints ``src`` with descriptors ``fs``; target points ``tgt`` whose
-    keypoints ``kt`` have descriptors ``ft``. Returns the best 4x4 transform (refitted on inliers).
-    Hypotheses beyond the prior (``max_rotation`` degrees, ``max_shift`` m) are discarded."""
+    """SAC-IA of keypoints ``src`` (descriptors ``fs``) onto ``tgt`` (keypoints ``kt``, descriptors
+    ``ft``): the best 4x4, hypotheses beyond ``max_rotation`` deg or ``max_shift`` m discarded."""
     rng = np.random.default_rng(seed)
     _, sim = cKDTree(ft).query(fs, k=k_sim)
     tree = cKDTree(tgt)
@@ -149,8 +141,7 @@ def pfh_sac_ia(
     voxel: float = 0.15,
     margin: float = 3.0,
 ) -> np.ndarray:
-    """The paper's precise registration on a ``patch`` x ``patch`` m square; returns the 4x4
-    transform (source -> target, composed with ``init``)."""
+    """The paper's precise registration on a ``patch`` m square: the 4x4 composed with ``init``."""
     src_all = transform_points(source_xyz, init)
     c = choose_patch(src_all, target_xyz, patch)
     h = patch / 2

@@ -1,10 +1,5 @@
-"""Coarse (FPFH + RANSAC, :mod:`.coarse`) and fine (robust point-to-plane ICP, GICP, or the
-paper's PFH + SAC-IA, :mod:`.fine`) registration of the after cloud onto the before cloud, in
-local coordinates.
-
-Every stage returns a :class:`~soilvolume.core.types.StageQuality` carrying its 4x4 transform (after
--> before, local frame), fitness and inlier RMSE, as Open3D's registration pipelines do.
-"""
+"""Coarse (:mod:`.coarse`) and fine (:mod:`.fine`) registration of the after cloud onto the before
+cloud, local frame; each stage a :class:`~soilvolume.core.types.StageQuality` (transform, fitness, RMSE)."""
 
 from __future__ import annotations
 
@@ -28,8 +23,7 @@ AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the 
 
 @dataclass(frozen=True)
 class Registration:
-    """The accepted transform (after -> before, local frame), each stage's quality and how far
-    the georeferencing was trusted (filled in by :func:`soilvolume.workflow.steps.register_pair`)."""
+    """The accepted transform (after -> before), each stage's quality, the georeferencing trust."""
 
     transform: np.ndarray
     coarse: StageQuality
@@ -45,9 +39,8 @@ def register(
     dense: tuple[np.ndarray, np.ndarray] | None = None,
     precise: bool = False,
 ) -> Registration:
-    """Register after onto before (both local, typically the thinned subsets; ``before_xyz`` is
-    the before cloud cropped to the after footprint + radius). ``dense``: the full-resolution
-    (after, before) clouds, for the paper's PFH patch matching."""
+    """Register after onto before (local, thinned; before cropped to the after footprint + radius).
+    ``dense``: the full-resolution (after, before) clouds, for the paper's PFH."""
     eye = np.eye(4)
     if precise:
         fit, rmse = evaluate_surface(judged(after_xyz, spacing(before_xyz)), before_xyz, eye)

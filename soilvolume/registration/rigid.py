@@ -29,13 +29,9 @@ CACHE_ROWS = 1 << 15  # rows of a product whose points stay in the cache through
 
 
 def transform_points32(xyz: np.ndarray, t: np.ndarray, chunk: int = 4_000_000) -> np.ndarray:
-    """A rigid transform of float32 local points, in chunks of ``chunk`` rows (no float64 copy of
-    the cloud), as ``xyz @ R.T + shift`` in float32 gives it. Computed as ``R @ xyz.T`` into a
-    (3, N) array, returned as its (N, 3) transpose: BLAS takes a 3 x 3 times 3 x N product 3-6x
-    faster than an N x 3 times 3 x 3 one, with the same bits (each value is the same three-term
-    dot product), and each coordinate of the result is contiguous. A matrix product gives each
-    point the same bits whatever the chunk it is in, but a chunk of one point would go through a
-    matrix-vector product (another rounding): a lone last point joins the chunk before it."""
+    """``xyz @ R.T + shift`` of float32 points in float32, in chunks (no float64 copy): as ``R @ xyz.T``
+    (same bits, 3-6x faster in BLAS), returned transposed. A lone last point joins the chunk before
+    it (a matrix-vector product would round otherwise)."""
     out = np.empty((3, len(xyz)), np.float32)
     r, s = t[:3, :3].astype(np.float32), t[:3, 3].astype(np.float32)
     n = len(xyz)

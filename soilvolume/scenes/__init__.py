@@ -1,3 +1,1 @@
-"""Seeded synthetic before/after scenes with known volumes and the soilvolume demo command (not
-part of the method).
-"""
+"""Seeded synthetic scenes with known volumes, the demo and the self-test (not part of the method)."""

@@ -1,2 +1,1 @@
-"""What is soil: per-point labels from classification, colour and returns; objects and excluded
-volumes for the volume step."""
+"""What is soil: per-point labels, objects and rough cells for the volume step."""

@@ -1,19 +1,13 @@
-"""Objects in the difference: compact blobs with near-vertical walls standing on unchanged
-ground (vehicles, containers, the test pillars of the seed paper), found by their shape alone.
+"""Objects in the difference, by shape alone: compact blobs with near-vertical walls on unchanged
+ground (vehicles, containers, the seed paper's pillars). A fill blob and a cut blob alike in size,
+height and shape are one object that moved (left out of the headline); an object in one survey
+only is listed, left out or counted as ``objects`` says.
 
-A blob of apparent fill and a blob of apparent cut of matching size, height and shape are one
-object that moved between the surveys: not earthworks, left out of the headline. An object in
-one survey only (a machine that arrived or left, a container, a pillar placed on purpose) is
-listed, and left out or counted as the ``objects`` option says.
-
-Walls: soil stands at its angle of repose (under about 45 degrees), so the band between 20 % and
-80 % of a pile's height is wide; an object's is about one mixed cell. A blob is an object when
-the width of that band (its area over the blob's perimeter) implies a slope of at least
-:data:`WALL_SLOPE`, or is below what the cell size resolves (a small steep pile on coarse cells
-looks the same: only a matching pair is left out), its footprint is under
-:data:`MAX_AREA_M2`, not elongated (a trench is not an object) and the ring around it is mostly
-unchanged ground. On cells coarser than :data:`MAX_SINGLE_CELL` a lone steep pile cannot be told
-from an object: only matching pairs are objects there.
+Soil stands under about 45 degrees, so its band between 20 % and 80 % of the height is wide; an
+object's is about one mixed cell. A blob is an object when that band's width (area over
+perimeter) implies a slope of at least :data:`WALL_SLOPE` or is unresolved by the cells, its
+footprint is under :data:`MAX_AREA_M2`, not elongated and mostly ringed by unchanged ground. On
+cells coarser than :data:`MAX_SINGLE_CELL` only matching pairs are objects.
 """
 
 from __future__ import annotations
@@ -55,8 +49,7 @@ class Blob:
 
 @dataclass(frozen=True)
 class Objects:
-    """The objects found: their blobs, a label grid of them, the cells of moved objects (left out
-    of the headline) and of objects in one survey only (counted, listed)."""
+    """The blobs, their label grid, the cells of moved objects and of one-survey objects."""
 
     blobs: tuple[Blob, ...]
     labels: np.ndarray
@@ -73,10 +66,8 @@ class Objects:
 def find_objects(
     diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, pair: bool = True, refilled=None
 ) -> Objects:
-    """Object blobs of the corrected difference within the ``fill`` and ``cut`` change areas
-    (see module); ``pair``: match moved objects (else every object is listed as single);
-    ``refilled``: interpolated cells, which join a blob's area but not its measurements (a refilled
-    canopy beside a machine is interpolated from the machine's roof)."""
+    """Object blobs of the difference in the ``fill`` and ``cut`` areas; ``pair``: match moved ones;
+    ``refilled``: interpolated cells, in a blob's area but not its measurements."""
     labels = np.zeros(diff.shape, np.int32)
     blobs: list[Blob] = []
     changed, unknown = fill | cut, ~np.isfinite(diff)
@@ -102,9 +93,8 @@ def find_objects(
 
 
 def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
-    """The blob of component ``k`` (``d``: its sign's difference, positive), or None when it is
-    not an object; ``masks``: (changed cells, refilled cells or None, cells without a difference).
-    A ring around cells no survey saw (a pit's walls around its pond) is no object."""
+    """The blob of component ``k`` (``d`` positive), None when no object (a ring around unseen cells
+    is none); ``masks``: (changed, refilled or None, without a difference)."""
     pad = 3
     r0, c0 = max(sl[0].start - pad, 0), max(sl[1].start - pad, 0)
     win = (slice(r0, sl[0].stop + pad), slice(c0, sl[1].stop + pad))
@@ -141,9 +131,8 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
 
 
 def _wall_slope(dd: np.ndarray, whole: np.ndarray, height: float, cell: float) -> float:
-    """Median slope (rise/run) of a blob's cells between 20 % and 80 % of its height: about 1 or
-    less on a pile's flank at its angle of repose, 1.5 and more on a box's walls, whose mixed
-    cells rise by most of its height within a cell or two."""
+    """Median slope (rise/run) of a blob's cells between 20 % and 80 % of its height (about 1 on a
+    pile's flank, 1.5 and more on a box's walls)."""
     gy, gx = np.gradient(dd, cell)
     band = whole & (dd >= 0.2 * height) & (dd <= 0.8 * height)
     return float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell

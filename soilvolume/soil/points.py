@@ -1,23 +1,13 @@
-"""What is soil, point by point, from the signals a survey carries: a real LAS classification,
-colour (photogrammetric clouds) and return numbers (LiDAR).
+"""What is soil, point by point: a rule (:class:`PointRule`) decided on each epoch's first chunk and
+applied to every chunk alike, in-process and in the tiled tasks. Labels :data:`SOIL`,
+:data:`VEGETATION`, :data:`OBJECT`, :data:`OTHER`.
 
-The rule is decided once per epoch, from its first chunk (as the class-2 selection is), and is a
-small frozen :class:`PointRule` that labels every later chunk the same way in-process and in the
-tiled engine's tasks. Labels: :data:`SOIL`, :data:`VEGETATION`, :data:`OBJECT` (buildings, wires,
-bridges), :data:`OTHER` (noise, water, unclassified).
-
-* Classification (a file with class 2 points): class 2 is soil; 3-5 vegetation; 6, 10 and 13-17
-  objects; everything else other.
-* Colour (RGB without a real classification): the excess-green index ExG = 2g - r - b on
-  chromatic coordinates (r + g + b = 1); a point is vegetation when ExG exceeds the epoch's
-  threshold and green is its strongest channel (yellow machines are not vegetation). The
-  threshold is Otsu's split of the first chunk's ExG when it shows a green mode, clamped to
-  0.06..0.20, else 0.10 (what the split gives on vegetated sites, so an epoch whose first chunk
-  happens to hold little vegetation is labelled alike); points too dark to have a colour
-  (shadows) are left as soil. Bare soil, brown or grey, has ExG near 0 and red or blue as strong
-  as green: the rule fires on a few noisy points only, never on most of a cell's.
-* Returns (no real classification): a point that is not the last of several returns is
-  vegetation (the canopy); the last return below it is ground.
+* Classification (class 2 present): 2 soil; 3-5 vegetation; 6, 10, 13-17 objects; others other.
+* Colour (RGB, no classification): vegetation where ExG = 2g - r - b (chromatic) exceeds the
+  epoch's threshold and green is the strongest channel; the threshold is Otsu's split of the first
+  chunk's ExG when it shows a green mode, clamped to 0.06..0.20, else 0.10; points too dark for a
+  colour stay soil.
+* Returns (no classification): a point before the last of several returns is vegetation.
 """
 
 from __future__ import annotations
@@ -27,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 
 SOIL, VEGETATION, OBJECT, OTHER = 0, 1, 2, 3
-NAMES = ("soil", "vegetation", "objects", "other")
 GROUND = 2
 _BY_CLASS = np.full(256, OTHER, np.uint8)
 _BY_CLASS[GROUND] = SOIL
@@ -74,8 +63,8 @@ class PointRule:
 
     @property
     def empties_cells(self) -> bool:
-        """Whether a cell mostly of non-soil points has no soil height (photogrammetry sees no
-        ground under a canopy; LiDAR's ground returns below one are real)."""
+        """Whether a cell mostly of non-soil points has no soil height (photogrammetry: no ground
+        under a canopy)."""
         return self.green is not None and not self.use_class
 
     @property
@@ -89,9 +78,8 @@ class PointRule:
         return dims
 
     def class_table(self, has_class: bool) -> np.ndarray | None | bool:
-        """The labels of the 256 LAS classes when a point's label depends on its classification
-        alone (None: every point is soil, as :meth:`labels` gives None); False when it needs colour
-        or returns. ``has_class``: the points carry a classification."""
+        """The labels of the 256 LAS classes when the classification alone decides (None: all soil);
+        False when colour or returns are needed."""
         if self.use_class and has_class:
             return _BY_CLASS
         if self.green is None and not (self.returns and not self.use_class):
@@ -167,17 +155,14 @@ def _signals_may_decide(mode: str, exclude: str) -> bool:
 
 
 def deciding_dims(cls: np.ndarray | None, mode: str, exclude: str = "auto") -> set[str]:
-    """The LAS dimensions :func:`decide` reads beyond ``cls``, the first chunk's classification
-    (none when the classification or the options decide alone)."""
+    """The LAS dimensions :func:`decide` reads beyond the first chunk's classification ``cls``."""
     if _uses_class(cls, mode) or not _signals_may_decide(mode, exclude):
         return set()
     return {*RGB_DIMS, *RETURN_DIMS}
 
 
 def decide(cls: np.ndarray | None, sig: Signals | None, mode: str, exclude: str = "auto") -> PointRule:
-    """The epoch's rule from its first chunk: ``mode`` is ``--ground`` (class / auto use a real
-    classification; filter: SMRF's ground, then colour and returns), ``exclude`` ``--exclude``
-    (``none``: no colour or returns)."""
+    """The epoch's rule from its first chunk, by ``--ground`` ``mode`` and ``--exclude``."""
     use_class = _uses_class(cls, mode)
     if not _signals_may_decide(mode, exclude) or sig is None:
         return PointRule(use_class)
@@ -210,8 +195,7 @@ def colour_threshold(rgb: np.ndarray) -> tuple[float | None, float]:
 
 @dataclass(frozen=True)
 class NonSoil:
-    """One epoch's points that are not soil (float32 local xyz, their labels) and the rule that
-    labelled them (also when it found none)."""
+    """One epoch's non-soil points (float32 local xyz, labels) and the rule that labelled them."""
 
     xyz: np.ndarray
     labels: np.ndarray

@@ -1,7 +1,5 @@
-"""Rough cells: a canopy (grass, crops, bushes) stands in a cell as a spread of heights that the
-slope of the ground does not explain; soil, even on a pile's flank, is smooth at the scale of a
-cell. Used only where no signal (classification, colour, returns) labelled any point: such cells
-are flagged, counted, and their volume is carried in the interval and the verdict."""
+"""Rough cells: a canopy is a spread of heights a cell's slope does not explain (soil is smooth at a
+cell's scale); used where no signal labelled any point, their volume carried in the interval."""
 
 from __future__ import annotations
 
@@ -14,9 +12,8 @@ MIN_POINTS = 6  # a spread of fewer points says little
 
 
 def roughness(spread: np.ndarray, heights: np.ndarray, counts: np.ndarray, cell: float) -> np.ndarray:
-    """Per-cell spread of heights (m) left after the part a plane of the cell's slope explains
-    (points spread uniformly over a cell on a slope g: a standard deviation of |g| c / sqrt(12),
-    and :data:`IQR_SPREAD` times that as an interquartile spread); NaN where too few points."""
+    """Per-cell spread of heights (m) beyond a slope g's (|g| c / sqrt(12), times :data:`IQR_SPREAD`
+    as an interquartile spread); NaN where too few points."""
     g2 = _steepest(heights, 1) ** 2 + _steepest(heights, 0) ** 2
     planar = IQR_SPREAD**2 * g2 / 12.0  # steps are per cell: g c
     with np.errstate(invalid="ignore"):
@@ -25,8 +22,8 @@ def roughness(spread: np.ndarray, heights: np.ndarray, counts: np.ndarray, cell:
 
 
 def _steepest(h: np.ndarray, axis: int) -> np.ndarray:
-    """Per cell, the larger of the two one-sided height steps (m per cell) along ``axis``: at a
-    break of slope (a pile's toe or crest) a central difference halves the flank's slope."""
+    """Per cell, the larger one-sided height step along ``axis`` (a central one halves a flank at a
+    break of slope)."""
     step = np.abs(np.diff(h, axis=axis))
     pad = [(0, 0), (0, 0)]
     pad[axis] = (1, 0)
@@ -37,8 +34,7 @@ def _steepest(h: np.ndarray, axis: int) -> np.ndarray:
 
 
 def rough_cells(r: np.ndarray, stable: np.ndarray) -> np.ndarray:
-    """Cells whose residual spread ``r`` is over :data:`ROUGH_FACTOR` times the stable ground's
-    median (at least :data:`ROUGH_MIN_M`)."""
+    """Cells whose spread ``r`` is over :data:`ROUGH_FACTOR` times stable ground's (>= :data:`ROUGH_MIN_M`)."""
     ref = r[stable & np.isfinite(r)]
     level = float(np.median(ref)) if ref.size else 0.0
     with np.errstate(invalid="ignore"):
