@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from soilvolume.compensation.correction import apply, fit_surface, stable_cells
+from soilvolume.compensation.correction import apply, fit_surface
+from soilvolume.compensation.stable import find_stable
 from soilvolume.core.types import GridSpec
 
 CELL = 0.5
@@ -50,12 +51,12 @@ def test_surface_removes_doming_and_bias():
 
 def test_stable_cells_exclude_change_areas_with_a_margin():
     diff, truth = domed_pair(1)
-    stable = stable_cells(diff, CELL, dilate_m=2.0)
+    stable = find_stable(diff, CELL, dilate_m=2.0)[0]
     assert not (stable & (np.abs(truth) > 0.05)).any()
     assert stable.mean() > 0.7
     user = np.zeros(diff.shape, bool)
     user[:20] = True
-    assert (stable_cells(diff, CELL, user_mask=user) == user).all()
+    assert (find_stable(diff, CELL, user_mask=user)[0] == user).all()
 
 
 def test_fit_surface_recovers_a_known_polynomial():

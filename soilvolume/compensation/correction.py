@@ -1,10 +1,6 @@
-"""Stable-ground bias correction of a DEM of difference (generalises the paper's plane offset).
-
-Stable cells come from :mod:`soilvolume.compensation.stable` (a search that starts at the margin of the
-compared area, so works covering most of it never become the reference). The correction surface
-(constant, plane or degree-2 polynomial, lowered to a plane when the stable ground lies on one
-side of the change areas only) is least squares on the stable cells and subtracted.
-"""
+"""Stable-ground bias correction of a DEM of difference (generalises the paper's plane offset): a
+constant, plane or degree-2 surface (lowered to a plane when stable ground lies on one side of the
+change only) fitted by least squares on the stable cells of :mod:`.stable` and subtracted."""
 
 from __future__ import annotations
 
@@ -39,8 +35,7 @@ METHODS = tuple(name for name, mode in MODES.items() if not mode.paper_plane)  #
 
 @dataclass
 class CorrectionResult:
-    """``corrected = diff - surface``; ``change_mask`` = valid cells outside the stable ground
-    (the dilated change areas); ``params`` as :func:`fit_surface` returns them."""
+    """``corrected = diff - surface``; ``change_mask``: valid cells off stable ground; ``params``."""
 
     corrected: np.ndarray
     surface: np.ndarray
@@ -49,29 +44,11 @@ class CorrectionResult:
     params: dict[str, Any] = field(default_factory=dict)
 
 
-def stable_cells(
-    diff: np.ndarray,
-    cell: float,
-    *,
-    dilate_m: float = 2.0,
-    user_mask: np.ndarray | None = None,
-    iterations: int = 8,
-    k: float = 3.0,
-    degree: int = 2,
-) -> np.ndarray:
-    """Cells of ``diff`` taken as stable ground (see :func:`soilvolume.compensation.stable.find_stable`: a
-    search from the margin of the compared area, so change covering most of it is not taken as
-    the reference). ``user_mask`` (True = stable) is returned as given (on valid cells)."""
-    return find_stable(diff, cell, degree=degree, user_mask=user_mask, k=k, dilate_m=dilate_m, iterations=iterations)[0]
-
-
 def fit_surface(
     diff: np.ndarray, stable_mask: np.ndarray, grid: GridSpec, method: str = "surface"
 ) -> tuple[np.ndarray, dict[str, Any]]:
-    """Least-squares correction surface on the stable cells: ``surface`` (degree-2 polynomial),
-    ``plane``, ``constant`` or ``none`` (zeros). Returns (surface (rows, cols), params) with
-    params = method, terms, coefficients (in scaled local coordinates), centre_local, scale_m,
-    and ``residuals`` (mean, std, nmad, rmse, n_cells of diff - surface on stable cells)."""
+    """Least-squares ``method`` surface on the stable cells: (surface, params: method, terms,
+    coefficients (scaled local frame), centre_local, scale_m, residuals after and before)."""
     if method not in METHODS:
         raise ValueError(f"unknown correction method {method!r} (expected one of {METHODS})")
     mask = stable_mask & np.isfinite(diff)
@@ -94,9 +71,8 @@ def fit_surface(
 
 
 def supported_degree(stable: np.ndarray, change: np.ndarray, max_degree: int) -> int:
-    """The highest polynomial degree (up to ``max_degree``) the stable ground supports across the
-    change areas: a curved surface needs stable ground all around them, a plane on one side only
-    (see :func:`soilvolume.compensation.stable.largest_gap_deg`); a handful of stable cells gets a constant."""
+    """The highest degree (up to ``max_degree``) the stable ground supports: a curve needs it all
+    around the change, a plane one side (:func:`.stable.largest_gap_deg`), a handful a constant."""
     if stable.sum() < 30:
         return 0
     if largest_gap_deg(stable, change) > 180.0:
@@ -114,10 +90,9 @@ def apply(
     iterations: int = 8,
     select_degree: bool = True,
 ) -> CorrectionResult:
-    """Find stable ground, fit the ``method`` surface on it and subtract it. Stable ground is
-    found the same way whatever the method (so ``none`` still yields residual statistics); with
-    ``select_degree`` the surface's degree is lowered to what the stable ground supports."""
-    stable = stable_cells(diff, grid.cell, dilate_m=dilate_m, user_mask=user_mask, iterations=iterations)
+    """Find stable ground (whatever the method: ``none`` still has residual statistics), fit the
+    ``method`` surface on it (``select_degree``: lowered to what it supports) and subtract it."""
+    stable = find_stable(diff, grid.cell, user_mask=user_mask, dilate_m=dilate_m, iterations=iterations)[0]
     used = method
     if select_degree and method in ("surface", "plane"):
         degree = supported_degree(stable, np.isfinite(diff) & ~stable, MODES[method].degree)

@@ -35,8 +35,7 @@ def ransac_plane(
     seed: int = 0,
     sample: int = 20_000,
 ) -> Plane:
-    """Seeded RANSAC plane (3-point hypotheses scored on a subsample), refined by least squares
-    on its inliers."""
+    """Seeded RANSAC plane (3-point hypotheses on a subsample), refined by least squares on its inliers."""
     if len(xyz) < 3:
         raise SoilVolumeError("a RANSAC plane needs at least 3 points")
     rng = np.random.default_rng(seed)
@@ -54,11 +53,9 @@ def ransac_plane(
 
 
 def _inlier_counts(pts: np.ndarray, normal: np.ndarray, d: np.ndarray, threshold: float) -> np.ndarray:
-    """Points of ``pts`` within ``threshold`` of each plane ``normal . p + d = 0``, hypotheses in
-    blocks of 8 (their distances stay in cache). The distances are the bits of the products of
-    ``pts`` by blocks of 64 normals (a matrix product sums each in the same order for any block
-    of 2 or more, transposed or not); a lone normal in the last block of 64 went through a
-    matrix-vector product (other rounding): it is scored as it was."""
+    """Points of ``pts`` within ``threshold`` of each plane ``normal . p + d = 0``, in blocks of 8 (in
+    cache), the bits of products by blocks of 64 (any block of 2+ sums alike); a lone normal in the
+    last block of 64 went through a matrix-vector product: it is scored as it was."""
     pts_t = np.ascontiguousarray(pts.T)
     n = len(normal)
     lone = 1 if n % 64 == 1 else 0

@@ -1,13 +1,8 @@
-"""Stable ground: the cells of a DEM of difference where nothing changed, found so that real
-change never becomes the reference, even when the works cover most of the after survey.
-
-Surveys are flown beyond the works, so the search starts from the margin of the after
-footprint: a low-order surface is fitted robustly there (Tukey IRLS, change in part of the
-margin is rejected), every cell within k noise levels of it is stable, the change areas are
-dilated, and the surface is refitted on the stable cells until the set stops changing. The
-noise level comes from differences between neighbouring cells, which a smooth offset, tilt or
-doming does not inflate and which change areas inflate only along their edges.
-"""
+"""Stable ground: the cells of a DEM of difference where nothing changed, even when works cover most
+of the survey. From the footprint's margin (surveys are flown beyond the works) a low-order surface
+is fitted robustly (Tukey IRLS); cells within k noise levels are stable, change areas dilated, the
+surface refitted until the set stops changing. The noise comes from neighbouring cells'
+differences, which smooth offsets, tilts or doming do not inflate."""
 
 from __future__ import annotations
 
@@ -55,8 +50,8 @@ def find_stable(
     min_change_cells: int = 3,
     iterations: int = 8,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(stable mask, fitted surface of ``degree``) of a difference grid. ``seed``: cells to start
-    from (default: the margin of the valid area); ``user_mask`` (True = stable) is taken as given."""
+    """(stable mask, fitted surface of ``degree``) of a difference grid. ``seed``: cells to start from
+    (default: the margin); ``user_mask`` (True = stable) is taken as given (on valid cells)."""
     valid = np.isfinite(diff)
     y, x = np.mgrid[0 : diff.shape[0], 0 : diff.shape[1]] * float(cell)
     if user_mask is not None:
@@ -94,8 +89,7 @@ def _surface(x, y, diff, mask, degree: int, robust: bool = False) -> np.ndarray:
 
 
 def largest_gap_deg(stable: np.ndarray, change: np.ndarray) -> float:
-    """Largest angular gap (degrees) of the stable cells seen from the centre of the change
-    areas: above 180 the stable ground lies on one side of the works only."""
+    """Largest angular gap (deg) of the stable cells seen from the change's centre (>180: one side)."""
     if not change.any() or not stable.any():
         return 0.0
     cr, cc = np.argwhere(change).mean(axis=0)

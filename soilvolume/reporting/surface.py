@@ -3,7 +3,7 @@ volumes above and below the design, and the reference in place of the registrati
 
 from __future__ import annotations
 
-from ..compensation.correction import stable_cells
+from ..compensation.stable import find_stable
 from ..volumes import reference
 from .text import Table
 
@@ -37,7 +37,7 @@ def surface_quality(report: dict, record) -> dict:
     agreement with the surface on the cells its change detection deems unchanged
     (:mod:`soilvolume.volumes.reference`, recorded as ``reference.agreement``) first."""
     diff = record.quality.diff
-    unchanged = stable_cells(diff, record.grid.cell)
+    unchanged = find_stable(diff, record.grid.cell)[0]
     agree = reference.agreement(diff, unchanged, record.vols.uncertainty["lod_m"], record.grid.cell_area)
     found = reference.check(agree)
     report["reference"]["agreement"] = {**agree, "agrees": not found[0]}  # its sentence is then no warning

@@ -1,7 +1,5 @@
-"""Works drawn by the seed (``SceneConfig.works == "drawn"``): the "piles" site's piles and pits
-with seeded counts, shapes, sizes, orientations and positions, in the ranges the fixed layout
-of :mod:`features` spans (2-4 piles of 3-3.5 m, 1-2 pits of 1-1.6 m, all inside the after
-footprint, clear of its edges and of each other)."""
+"""Works drawn by the seed (``works="drawn"``): 2-4 piles of 3-3.5 m and 1-2 pits of 1-1.6 m in the
+fixed layout's ranges, inside the after footprint, clear of its edges and of each other."""
 
 from __future__ import annotations
 
@@ -53,8 +51,7 @@ def _bound(f: dict) -> float:
 
 
 def _place(rng: np.random.Generator, feats: list[dict], box: tuple[float, float, float, float], s: float) -> bool:
-    """Give every feature an x, y inside ``box`` clear of its edges and of each other (by
-    bounding circles); False when the draw does not fit."""
+    """Give every feature an x, y in ``box`` clear of its edges and each other; False if none fits."""
     x0, y0, x1, y1 = box
     placed: list[tuple[float, float, float]] = []
     for f in feats:
@@ -73,8 +70,7 @@ def _place(rng: np.random.Generator, feats: list[dict], box: tuple[float, float,
 
 
 def drawn_features(seed: int, box: tuple[float, float, float, float], s: float) -> list[dict]:
-    """The seed's piles and pits in the after footprint ``box`` (scaled by ``s``), unfinished
-    (see :func:`features.finish_features`)."""
+    """The seed's piles and pits in the after ``box`` (scaled by ``s``), not yet finished."""
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), WORKS_STREAM]))
     while True:
         n_piles, n_pits = int(rng.integers(2, 5)), int(rng.integers(1, 3))

@@ -11,9 +11,6 @@ from .config import SceneConfig
 from .drawn import drawn_features
 from .sites import cone, rect, site_features
 
-# ----------------------------------------------------------------------------------------------
-# geometry shared by both epochs
-
 
 def after_box(cfg: SceneConfig) -> tuple[float, float, float, float]:
     """(xmin, ymin, xmax, ymax) of the after footprint, local frame (true frame)."""
@@ -32,9 +29,8 @@ CHANGE_KINDS = ("piles", "none", "pit", "pile", "excavation", "yard", "landslide
 
 
 def change_features(cfg: SceneConfig, seed: int = 0) -> list[dict]:
-    """The analytic change features (positions relative to the after footprint centre, scaled
-    down if the after footprint is smaller than the default); with ``cfg.works == "drawn"`` the
-    "piles" site's works are drawn by ``seed``."""
+    """The analytic change features around the after footprint's centre (scaled down on a smaller
+    one); ``works="drawn"``: the "piles" site's drawn by ``seed``."""
     if cfg.change == "none":
         return []
     if cfg.change not in CHANGE_KINDS:
@@ -65,10 +61,8 @@ SITE_KINDS = ("yard", "landslide", "trench", "pillars")  # scenes/sites.py
 
 
 def finish_features(feats: list[dict]) -> list[dict]:
-    """Add the exact ``volume`` (m3, >= 0) and the bounding ``radius`` (m) to analytic change
-    features: ``cone`` (x, y, r_bottom, r_top, height; a flat-topped cone or flat-bottomed conical
-    pit) and ``rect`` (x, y, a, b bottom half-sizes, height, run = horizontal run of the equal side
-    slopes, angle_deg; a flat-topped pile or flat-bottomed excavation). ``sign`` +1 fill, -1 cut."""
+    """Add the exact ``volume`` (m3, >= 0) and bounding ``radius`` (m) to ``cone`` and ``rect``
+    features (:mod:`.sites`; ``sign`` +1 fill, -1 cut)."""
     for f in feats:
         if f["kind"] == "cone":
             h, r1, r2 = f["height"], f["r_top"], f["r_bottom"]
@@ -90,8 +84,8 @@ def feature_area(f: dict) -> float:
 
 
 def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: float, s: float) -> list[dict]:
-    """Features of the "pit", "pile" and "excavation" kinds. They carry ``exact_outline``: the
-    placement of clutter and holes uses their true outline, not the bounding circle."""
+    """Features of the "pit", "pile" and "excavation" kinds (``exact_outline``: clutter and holes keep
+    clear of their true outline)."""
     aw, ah = x1 - x0, y1 - y0
     cx, cy = (x0 + x1) / 2.0, (y0 + y1) / 2.0
     area = aw * ah
@@ -137,16 +131,15 @@ def _outline_distance(f: dict, x: float, y: float) -> float:
 
 
 def clear_of(f: dict, x: float, y: float, r: float) -> bool:
-    """(x, y) with radius r is clear of change feature f (bounding circle for the original
-    "piles" features, whose placement must not change; true outline for the others)."""
+    """Whether (x, y) with radius r is clear of feature f (its true outline, or bounding circle for
+    the original "piles" features, whose placement must not change)."""
     if f.get("exact_outline"):
         return _outline_distance(f, x, y) > r
     return math.hypot(x - f["x"], y - f["y"]) > f["radius"] + r
 
 
 def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:
-    """The ground change dz (m, + = fill) of analytic features (see :func:`finish_features`)
-    at x/y in the features' frame."""
+    """The ground change dz (m, + = fill) of analytic features at x/y in their frame."""
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     dz = np.zeros(np.broadcast(x, y).shape)

@@ -1,16 +1,8 @@
-"""Site conditions that hide or imitate earthworks on a synthetic pair (issue 45).
-
-* Occlusion holes (``holes``): blobs without points in each survey, some on a change's edge.
-* Standing water (``water_m``): the after survey has no point on the water of its pits (laser
-  and photogrammetry both fail on water); the truth is still the pit's bottom.
-* Equipment and materials that arrived (``equipment``): an excavator, a container, a site cabin,
-  a truck and a stack of pipes, in turn, on unchanged ground of the after survey only.
-* A before survey short of the after one (``overlap``: the share of the after footprint's width,
-  from the west, the before survey reaches): the works beyond it were never seen before.
-* A mown meadow (``meadow``, a share of the after footprint): grass 0.3-0.7 m high in the before
-  survey, stubble in the after one, with the works on it (fresh soil carries no grass). The
-  ground under the grass is seen through its gaps.
-"""
+"""Site conditions that hide or imitate earthworks (issue 45): occlusion holes (``holes``, some on a
+change's edge); standing water in the after survey's pits (``water_m``: no point on it, the truth
+still the bottom); equipment that arrived (``equipment``); a before survey short of the after one
+(``overlap``: the share of the after footprint's width it reaches from the west); a meadow mown
+between the surveys (``meadow``: 0.3-0.7 m grass, then stubble; fresh soil carries none)."""
 
 from __future__ import annotations
 
@@ -34,8 +26,7 @@ EQUIPMENT = (
 
 
 def equipment(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
-    """Place ``cfg.equipment`` pieces of :data:`EQUIPMENT` (in turn) in the after survey only,
-    with ``place(inside_after, params)``; their roles ("arrived")."""
+    """Place ``cfg.equipment`` pieces of :data:`EQUIPMENT` in turn in the after survey: their roles."""
     roles = []
     for k in range(cfg.equipment):
         _, typ, a, b, h = EQUIPMENT[k % len(EQUIPMENT)]
@@ -47,8 +38,7 @@ def equipment(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
 
 
 def meadow_row(cfg: SceneConfig, box: tuple[float, float, float, float], rng: np.random.Generator) -> tuple:
-    """The meadow's feature row (type, x, y, angle, a, b, h0, a, b, h1, r): an ellipse covering
-    ``cfg.meadow`` of the after footprint ``box`` around its centre, grass mown to stubble."""
+    """The meadow's feature row: an ellipse over ``cfg.meadow`` of the after ``box``, mown to stubble."""
     x0, y0, x1, y1 = box
     area = cfg.meadow * (x1 - x0) * (y1 - y0)
     ratio = (x1 - x0) / (y1 - y0)
@@ -59,8 +49,7 @@ def meadow_row(cfg: SceneConfig, box: tuple[float, float, float, float], rng: np
 
 
 def water_levels(world) -> list[tuple[dict, float]]:
-    """(cut feature, its water level in the true local frame) for every pit of the world: the
-    given depth of water above the lowest point of its bottom."""
+    """(pit, its water level: ``water_m`` above its lowest point) for every pit of the world."""
     out = []
     for f in world.changes:
         if f["sign"] < 0:  # water pools at the lowest point of the pit's bottom
@@ -73,8 +62,7 @@ def water_levels(world) -> list[tuple[dict, float]]:
 
 
 def dry(levels, x: np.ndarray, y: np.ndarray, g: np.ndarray, dz: np.ndarray) -> np.ndarray:
-    """Mask of the after survey's points not under water (``levels``: each pit's feature and water
-    level; ``g``: the after ground)."""
+    """Mask of the after survey's points (ground ``g``) not under the water ``levels``."""
     keep = np.ones(x.shape, bool)
     for f, level in levels:
         near = (dz < 0) & (np.hypot(x - f["x"], y - f["y"]) < f["radius"] + 1.0)
@@ -83,8 +71,7 @@ def dry(levels, x: np.ndarray, y: np.ndarray, g: np.ndarray, dz: np.ndarray) -> 
 
 
 def reached(world, epoch: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Mask of the points a survey returns: not in its occlusion holes, and for a before survey
-    short of the after footprint (``overlap`` < 1) not east of its reach."""
+    """Mask of the points a survey returns: not in its holes nor (before) east of its reach."""
     keep = np.ones(x.shape, bool)
     if world.holes[epoch] is not None:
         keep &= ~world.lookup(world.holes[epoch], world.hole_res, x, y)
@@ -94,8 +81,7 @@ def reached(world, epoch: int, x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def occlusion_holes(world, rng: np.random.Generator, n: int) -> np.ndarray | None:
-    """An epoch's ``n`` occlusion holes (irregular blobs, every third on a change's edge, the
-    others clear of the change) as a mask on a grid of ``world.hole_res``; None for none."""
+    """An epoch's ``n`` occlusion holes (blobs, every third on a change's edge) as a mask; None for none."""
     if n <= 0:
         return None
     bw, bh = world.cfg.before_size

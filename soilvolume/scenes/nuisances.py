@@ -1,16 +1,8 @@
-"""What is not soil on a synthetic site, and the per-point signals a survey carries.
-
-* Features beyond the original bushes, vehicles and boulders (drawn from their own random stream,
-  so pairs without them are unchanged): vehicles that moved between the surveys (one feature per
-  epoch, at different places and headings), vehicles that arrived or left, low vegetation patches
-  that grew or were mown, and a crop field.
-* Per-point colour for photogrammetric scenes (``signals="rgb"``): soil brown or grey with
-  brightness noise and shadows (fresh soil on the works a little darker), vegetation green but
-  not saturated (some points dry or mixed with the soil below), vehicles painted (yellow machines
-  are not green), boulders grey.
-* Return numbers for LiDAR scenes: canopy points are early returns of several, the ground seen
-  below them is the last return; hard surfaces give single returns.
-"""
+"""What is not soil on a synthetic site, and the per-point signals a survey carries: vehicles that
+moved, arrived or left, grass patches grown or mown, a crop field (their own random stream, so pairs
+without them are unchanged); colour (``signals="rgb"``: soil brown or grey with shadows, vegetation
+green but not saturated, vehicles painted, boulders grey); LiDAR returns (canopy points early returns
+of several, the ground below the last, hard surfaces single)."""
 
 from __future__ import annotations
 
@@ -36,10 +28,8 @@ def vehicle_shape(rng: np.random.Generator) -> tuple[float, float, float]:
 
 
 def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
-    """Place this config's moved, arriving and leaving vehicles, vegetation patches and crop field
-    with ``place(inside_after, params)`` (params as the world's feature rows without x/y; it
-    returns False when no free spot was found). Returns the role of each feature placed, in
-    order ("moved", "arrived", "left", "vegetation")."""
+    """Place the config's moved, arriving and leaving vehicles, patches and crop field with
+    ``place(inside_after, params)`` (False: no free spot): each placed feature's role, in order."""
     if cfg.signals not in SIGNALS:
         raise ValueError(f"unknown signals {cfg.signals!r} ({', '.join(SIGNALS)})")
     roles: list[str] = []
@@ -75,8 +65,7 @@ def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[st
 
 
 def categories(cls: np.ndarray, stray: np.ndarray) -> np.ndarray:
-    """Per-point category (:data:`SOIL` ...) from the world's classes (before the LAS classes
-    are withheld) and the mask of stray points (outliers)."""
+    """Per-point category (:data:`SOIL` ...) from the world's classes and the ``stray`` (outlier) mask."""
     cat = np.full(cls.shape, SOIL, np.uint8)
     cat[(cls >= 3) & (cls <= 5)] = GREEN
     cat[cls == 6] = CAR
@@ -86,8 +75,7 @@ def categories(cls: np.ndarray, stray: np.ndarray) -> np.ndarray:
 
 
 def colours(cat: np.ndarray, feature: np.ndarray, fresh: np.ndarray, cfg: SceneConfig, rng) -> np.ndarray:
-    """RGB (uint16, LAS 16-bit scale) per point: see module. ``feature``: the feature index of
-    each point (-1 none; vehicles take a paint by it), ``fresh``: points on the works."""
+    """RGB (uint16) per point; ``feature``: each point's feature (-1 none), ``fresh``: on the works."""
     n = cat.size
     soil = np.array(SOIL_RGB.get(cfg.site_tone, SOIL_RGB["brown"]), float)
     rgb = np.broadcast_to(soil, (n, 3)).copy()
@@ -109,8 +97,8 @@ def colours(cat: np.ndarray, feature: np.ndarray, fresh: np.ndarray, cfg: SceneC
 
 
 def returns(cat: np.ndarray, under: np.ndarray, rng) -> tuple[np.ndarray, np.ndarray]:
-    """(return number, number of returns) per point: canopy points mostly the first of 2-3 (a
-    fifth single, dense foliage), ground ``under`` vegetation the last of 2, others single."""
+    """(return number, number of returns) per point: canopy mostly first of 2-3, ground ``under``
+    vegetation last of 2, others single."""
     n = cat.size
     num = np.ones(n, np.uint8)
     ret = np.ones(n, np.uint8)
@@ -142,10 +130,8 @@ def boulder(rng: np.random.Generator) -> tuple:
 
 
 def feature_points(feats: np.ndarray, feat_zc: np.ndarray, epoch: int, idx, k, pts: tuple, rng) -> None:
-    """The points ``idx`` of a chunk over features ``k`` (rows of ``feats``, their centres' ground
-    ``feat_zc``) as ``epoch`` sees them: bushes, vehicles, boulders, grass patches and crops lift
-    the heights ``z`` off the ground ``g`` and set the classes ``cls``, in place
-    (``pts``: x, y, g, z, cls)."""
+    """The points ``idx`` over features ``k`` as ``epoch`` sees them: their heights ``z`` lifted off the
+    ground ``g`` and classes ``cls`` set, in place (``pts``: x, y, g, z, cls)."""
     x, y, g, z, cls = pts
     f = feats[k]
     typ = f[:, 0]

@@ -1,12 +1,7 @@
-"""A seeded site surveyed four times, with exact analytic volumes per period: a pit dug, then
-deepened, then partly backfilled; a pile placed, then partly hauled away; a windrow of spoil
-placed, then removed. Every epoch carries its own GPS error (a rigid misalignment), E0's too, so
-the truth of each epoch's registration into E0's frame is known (``truth["epochs"]``).
-
-The terrain is :class:`world.World`'s (no change features of its own); the features are
-:func:`features.finish_features` shapes with equal side slopes, nested from one epoch to the
-next, so each feature's change over a period has one sign and its volume is the difference of
-the two epochs' exact volumes."""
+"""A seeded site surveyed four times with exact volumes per period (a pit dug, deepened, partly
+backfilled; a pile placed, partly hauled away; a windrow placed, removed), each epoch with its own
+GPS error, so each registration into E0's frame is known (``truth["epochs"]``). Terrain from
+:class:`world.World`; features nested from epoch to epoch, so each one's change has one sign."""
 
 from __future__ import annotations
 
@@ -22,7 +17,7 @@ from .config import CLASS_GROUND, SceneConfig
 from .features import after_box, features_dz, finish_features
 from .sites import cone, rect
 from .synthetic import las_header
-from .world import World
+from .world import World, rotation
 
 DATES = ("2026-03-02", "2026-03-09", "2026-03-16", "2026-03-23")
 #: per epoch: (shift m, roll/pitch/yaw deg) of its GPS error
@@ -74,20 +69,12 @@ def change_truth(a: dict[str, dict], b: dict[str, dict]) -> dict[str, float]:
     return {"net": fill - cut, "cut": cut, "fill": fill}
 
 
-def _rotation(deg) -> np.ndarray:
-    roll, pitch, yaw = np.radians(deg)
-    rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
-    ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
-    rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
-    return rz @ ry @ rx
-
-
 def misalignment(k: int, centre_abs: np.ndarray, errors=GPS_ERRORS) -> np.ndarray:
     """Epoch ``k``'s GPS error (``errors[k]``) as a 4x4 on absolute coordinates: true -> surveyed,
     ``p_s = R (p - c) + c + t``."""
     shift, deg = errors[k]
     m = np.eye(4)
-    m[:3, :3] = _rotation(deg)
+    m[:3, :3] = rotation(deg)
     m[:3, 3] = centre_abs + np.asarray(shift) - m[:3, :3] @ centre_abs
     return m
 
@@ -113,10 +100,9 @@ def _write_epoch(path: Path, xyz: np.ndarray, config: SceneConfig, date: str) ->
 def write_series(
     directory, seed: int = 0, density: tuple[float, float] = (6.0, 10.0), datum: bool = False
 ) -> tuple[list[Path], dict]:
-    """Write ``epoch0.las`` .. ``epoch3.las`` (class 2, the CRS, the survey date in the header)
-    and ``truth.json`` into ``directory``: (paths, truth). ``density``: points per m2 of E0 (the
-    wide reference) and of the later surveys (the works' footprint). ``datum``: the three-epoch
-    site of :data:`DATUM_CONFIG` and :data:`DATUM_ERRORS` (E0 to E2) instead."""
+    """Write ``epoch0.las`` .. ``epoch3.las`` (class 2, CRS, survey date) and ``truth.json``: (paths,
+    truth). ``density``: points per m2 of E0 and of the later surveys; ``datum``: the three-epoch
+    site of :data:`DATUM_CONFIG` and :data:`DATUM_ERRORS` instead."""
     config, errors = (DATUM_CONFIG, DATUM_ERRORS) if datum else (CONFIG, GPS_ERRORS)
     world = World(seed, config)
     ax0, ay0, ax1, ay1 = after_box(config)

@@ -1,8 +1,5 @@
-"""Further kinds of site (``SceneConfig.change``), as analytic features of
-:func:`features.finish_features` (all with exact outlines, so clutter and holes keep clear of
-them): a stockpile yard, a landslide (on a site with ``slope_deg`` of about 30), a trench
-crossing the survey with its spoil beside it, and the seed paper's known change: three pillars
-(two boxes and a cylinder, 1030 m3) placed on the after survey."""
+"""The ``cone`` and ``rect`` features, and further sites (``SceneConfig.change``): a stockpile yard, a
+landslide (on ``slope_deg`` about 30), a trench with its spoil, the seed paper's three pillars."""
 
 from __future__ import annotations
 
@@ -10,14 +7,12 @@ WALL = 0.01  # horizontal run (m) of a vertical wall
 
 
 def cone(sign, x, y, rb, rt, h, name, exact: bool = True) -> dict:
-    """A flat-topped cone (``sign`` +1) or flat-bottomed conical pit (-1): bottom and top radii,
-    height; ``exact``: clutter and holes keep clear of its true outline, not its bounding circle."""
+    """A flat-topped cone (``sign`` +1) or conical pit (-1); ``exact``: keep clear of its true outline."""
     return _named(dict(kind="cone", sign=sign, x=x, y=y, r_bottom=rb, r_top=rt, height=h), exact, name)
 
 
 def rect(sign, x, y, a, b, h, run, angle, name, exact: bool = True) -> dict:
-    """A flat-topped pile or flat-bottomed excavation: bottom half-sizes ``a`` x ``b``, height, the
-    horizontal ``run`` of its equal side slopes, turned by ``angle`` degrees."""
+    """A flat-topped pile or excavation: half-sizes ``a`` x ``b``, height, side ``run``, ``angle`` deg."""
     return _named(dict(kind="rect", sign=sign, x=x, y=y, a=a, b=b, height=h, run=run, angle_deg=angle), exact, name)
 
 

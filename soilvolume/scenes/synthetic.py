@@ -1,44 +1,18 @@
-"""Seeded synthetic before/after point-cloud pairs with a KNOWN soil volume change.
-
-The geometry follows the paper (Shao et al.): a wide "before" UAV/SfM survey of about
-158 m x 154 m and a smaller "after" survey of about 67 m x 62.7 m inside it, in a UTM CRS with a
-realistic absolute offset (default EPSG:32654, x = 500 000 + local x, y = 3 900 000 + local y,
-z about 50-80 m).
-
-Pure numpy (no Open3D); the paper-sized pair (4 M points) generates in a few seconds, and
+"""Seeded synthetic before/after pairs with a KNOWN soil volume change, in pure numpy: the paper's
+geometry (Shao et al.): a before survey of about 158 m x 154 m, a smaller after one of 67 m x 62.7 m
+inside it, in a UTM CRS (default EPSG:32654, absolute = local + ``config.origin``).
 :func:`write_pair_streaming` writes pairs of any size chunk by chunk in bounded memory.
 
-Frames and truth convention
----------------------------
-* Local coordinates: ``x`` in ``[0, before_size[0]]``, ``y`` in ``[0, before_size[1]]``;
-  absolute = local + ``config.origin``. The *true* frame is the before survey's frame.
-* The after survey is sampled on its footprint in the true frame from
-  ``terrain + dz + doming + bias`` (plus vegetation, objects, noise, outliers), then the GPS
-  misalignment is applied: ``p_surveyed = R (p - c) + c + shift`` with ``R = Rz(yaw) Ry(pitch)
-  Rx(roll)`` and ``c`` the after footprint centre on the terrain. ``truth["transform"]`` is the
-  4x4 matrix (absolute coordinates, row-major list) mapping surveyed-after points onto the true
-  frame, i.e. the inverse of that misalignment.
-* ``truth["fill"]``/``truth["cut"]`` (both >= 0, m3) and ``truth["net"] = fill - cut`` are exact
-  integrals of the analytic ground change ``dz(x, y)`` (three piles: two flat-topped cones and one
-  flat-topped rectangular pile with equal side slopes, plus one flat-bottomed conical pit). They
-  EXCLUDE vegetation growth, objects, doming, vertical bias, noise and outliers: a perfect method
-  recovers exactly these numbers. The piles and the pit do not overlap, so cut is the pit and
-  fill the piles.
-* Other change kinds (``SceneConfig.change``), for pairs where the change dominates: ``"pit"``
-  (one flat-bottomed conical pit over 5 % of the after footprint), ``"pile"`` (one flat-topped
-  conical pile over 10 %), ``"excavation"`` (a flat-bottomed rectangular excavation with sloped
-  sides whose outline covers exactly ``change_fraction`` of the after footprint, plus a tall
-  conical pile beside it near one edge; 2-75 %) and ``"none"``. Their volumes are the same exact
-  analytic integrals and their features never overlap (cut = the pits/excavation, fill = the
-  piles). Clutter and holes are placed around their true outlines.
+Truth: the true frame is the before survey's. The after survey is sampled on its footprint from
+``terrain + dz + doming + bias`` (plus vegetation, objects, noise, outliers), then misaligned:
+``p_surveyed = R (p - c) + c + shift`` (``R = Rz(yaw) Ry(pitch) Rx(roll)``, ``c`` the after
+footprint's centre on the terrain); ``truth["transform"]`` (absolute, row-major) is its inverse.
+``truth["fill"]``/``["cut"]`` (>= 0, m3) and ``["net"]`` are exact integrals of the analytic ground
+change ``dz(x, y)`` of the ``SceneConfig.change`` kind (features never overlap: cut is the pits,
+fill the piles), excluding vegetation, objects, doming, bias, noise and outliers.
 
-LAS classes
------------
-``2`` ground (including the changed ground, i.e. pile and pit surfaces); ``3``/``4``/``5`` low /
-medium / high vegetation (by height above ground: < 0.5 m, < 2 m, above); ``6`` vehicles;
-``1`` (unclassified) boulders AND outliers/floaters: outliers are deliberately NOT given class 7,
-so a pipeline must reject them with its own filters (those that hit ground-classified areas keep
-class 1, so a class-2 filter removes them; the others remain for robust statistics to handle).
+LAS classes: 2 ground (the changed ground too); 3/4/5 vegetation under 0.5 m, 2 m, above; 6
+vehicles; 1 boulders AND outliers (deliberately not 7: a pipeline must reject them itself).
 """
 
 from __future__ import annotations
@@ -52,24 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from .config import SceneConfig
-from .features import CHANGE_KINDS, change_dz, feature_area, features_dz, finish_features
+from .features import CHANGE_KINDS, change_dz, feature_area, features_dz, finish_features  # noqa: F401 (re-exported)
 from .nuisances import BOULDER, VEHICLE
 from .world import World
-
-__all__ = [
-    "SceneConfig",
-    "Scene",
-    "make_pair",
-    "write_pair",
-    "write_pair_streaming",
-    "scene_truth",
-    "iter_epoch",
-    "change_dz",
-    "features_dz",
-    "finish_features",
-    "feature_area",
-    "CHANGE_KINDS",
-]
 
 
 @dataclass
@@ -106,8 +65,7 @@ NEWER_FIELDS += ("slope_deg", "site_tone", "water_m", "equipment", "meadow", "ve
 
 
 def _objects(world: World) -> list[dict]:
-    """The vehicles and equipment present in one epoch only (role: moved, arrived or left), with their volume
-    above the ground (m3; the roof and the lower bonnet over the footprint, approximately)."""
+    """The vehicles and equipment in one epoch only (moved, arrived or left), their approximate volume."""
     o = world.cfg.origin
     out = []
     for f, role in zip(world.feats[world.n_plain :], world.roles, strict=True):
@@ -182,8 +140,7 @@ def scene_truth(seed: int = 0, config: SceneConfig | None = None) -> dict:
 
 
 def iter_epoch(seed: int, config: SceneConfig, epoch: str) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Yield (xyz absolute float64 (n,3), class uint8) chunks of one epoch ("before"/"after"),
-    each at most ~1 M points; concatenated they equal ``make_pair``'s arrays."""
+    """(xyz absolute (n, 3), class uint8) chunks of one epoch ("before"/"after"): ``make_pair``'s arrays."""
     world = World(seed, config)
     e = {"before": 0, "after": 1}[epoch]
     for i in range(world.n_chunks(e)):
@@ -228,8 +185,7 @@ def _write_truth(path: Path, truth: dict) -> None:
 
 
 def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) -> tuple[Path, Path, Path]:
-    """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, point format 6, CRS as WKT VLR,
-    classification) and ``truth.json`` into ``directory``; return the three paths."""
+    """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, format 6, CRS) and ``truth.json``: the paths."""
     import laspy
 
     if scene.config.signals != "class":  # colours and returns come from the generator's chunks
@@ -247,8 +203,7 @@ def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) 
 def write_pair_streaming(
     seed: int, config: SceneConfig, directory, fmt: str = "las", scale: float = 0.001
 ) -> tuple[Path, Path, Path]:
-    """Like ``write_pair(make_pair(seed, config), ...)`` but chunk by chunk, in bounded memory
-    (~0.3 GB whatever the size): for pairs of tens of millions of points."""
+    """``write_pair(make_pair(seed, config), ...)`` chunk by chunk, in ~0.3 GB whatever the size."""
     import laspy
 
     pb, pa, pt = _paths(directory, fmt)

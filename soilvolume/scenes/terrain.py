@@ -11,8 +11,7 @@ from .config import SceneConfig
 
 
 class Terrain:
-    """The before epoch's ground height (m) at local x/y: ``terrain(x, y)``. Drawn from ``rng``'s
-    first draws over the before area of ``cfg``, with the after ``box`` (x0, y0, x1, y1)."""
+    """The before epoch's ground height (m) at local x/y, drawn from ``rng`` over ``cfg``'s area."""
 
     def __init__(self, rng: np.random.Generator, cfg: SceneConfig, box: tuple[float, float, float, float]) -> None:
         bw, bh = cfg.before_size
@@ -87,8 +86,7 @@ def _waves(rng: np.random.Generator) -> np.ndarray:
 
 
 def _lines(rng: np.random.Generator, box: tuple[float, float, float, float]) -> np.ndarray:
-    """(kind, x0, y0, x1, y1, height, width) of two ditches (kind 0, gaussian) and a berm (1)
-    across the after ``box``."""
+    """(kind, x0, y0, x1, y1, height, width) of two ditches (0) and a berm (1) across the after ``box``."""
     ax0, ay0, ax1, ay1 = box
     acx, acy = (ax0 + ax1) / 2.0, (ay0 + ay1) / 2.0
     aw, ah = ax1 - ax0, ay1 - ay0

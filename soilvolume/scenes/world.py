@@ -17,8 +17,8 @@ CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never de
 
 
 class _Placer:
-    """Features placed at random, non-overlapping and away from the change: each feature
-    ``(type, x, y, angle, a, b, h, a2, b2, h2, rbound)`` in :attr:`feats`."""
+    """Features ``(type, x, y, angle, a, b, h, a2, b2, h2, rbound)`` placed at random, apart and away
+    from the change."""
 
     def __init__(self, size, box, changes: list[dict], rng: np.random.Generator) -> None:
         self.size, self.box, self.changes, self.rng = size, box, changes, rng
@@ -59,8 +59,8 @@ class _Placer:
 
 
 class World:
-    """Terrain, features, holes and misalignment of one (seed, config): everything that is not
-    per-point randomness. Built from its own RNG stream so epochs/chunks are independent."""
+    """Everything of one (seed, config) but per-point randomness, from its own RNG stream (so epochs
+    and chunks are independent)."""
 
     def __init__(self, seed: int, cfg: SceneConfig):
         self.cfg = cfg
@@ -76,8 +76,7 @@ class World:
         self.water = water_levels(self) if cfg.water_m > 0 else []
 
     def _init_features(self, rng: np.random.Generator) -> None:
-        """Non-ground features (bushes, vehicles, boulders, the config's extra kinds), placed
-        non-overlapping and away from the change, and their label grid."""
+        """Non-ground features placed apart and away from the change, and their label grid."""
         cfg = self.cfg
         bw, bh = cfg.before_size
         aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
@@ -111,11 +110,7 @@ class World:
         """The GPS misalignment (local frame): ``p_s = R (p - c) + c + t``."""
         cfg = self.cfg
         acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
-        roll, pitch, yaw = np.radians(cfg.rotation_deg)
-        rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
-        ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
-        rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
-        self.R = rz @ ry @ rx
+        self.R = rotation(cfg.rotation_deg)
         self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
         self.t = np.asarray(cfg.shift_m, dtype=np.float64)
 
@@ -171,10 +166,9 @@ class World:
         return (ny + rows - 1) // rows
 
     def chunk(self, epoch: int, index: int, signals: bool = False) -> tuple:
-        """(xyz absolute (n,3) float64, class uint8) of chunk ``index`` of ``epoch`` (0 before,
-        1 after as surveyed); with ``signals`` also a dict of the per-point fields the config's
-        ``signals`` writes (``red``/``green``/``blue``, ``return_number``/``number_of_returns``;
-        the classes are zeroed where the survey carries none)."""
+        """(xyz absolute (n, 3), class uint8) of chunk ``index`` of ``epoch`` (0 before, 1 after as
+        surveyed); with ``signals`` also the per-point fields the config writes (classes zeroed where
+        the survey carries none)."""
         cfg = self.cfg
         x0, y0, w, h, nx, ny = self.grid_shape(epoch)
         rows = max(1, CHUNK_POINTS // nx)
@@ -221,8 +215,7 @@ class World:
         return (xyz, *self._signals(epoch, index, cls, o, lab, fresh))
 
     def _misaligned(self, xyz: np.ndarray) -> np.ndarray:
-        """The after points under the GPS misalignment, element-wise (not BLAS): results do not
-        depend on the chunking (up to 1 ulp)."""
+        """The after points misaligned element-wise (not BLAS): the same whatever the chunking."""
         d, r = xyz - self.c, self.R
         return np.column_stack([r[i, 0] * d[:, 0] + r[i, 1] * d[:, 1] + r[i, 2] * d[:, 2] for i in range(3)]) + (
             self.c + self.t
@@ -243,6 +236,15 @@ class World:
             fields["return_number"], fields["number_of_returns"] = returns(cat, lab > 0, rng)
         keep = cfg.signals in ("class", "lidar")
         return (cls if keep else np.zeros_like(cls)), fields
+
+
+def rotation(deg) -> np.ndarray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)`` of (roll, pitch, yaw) degrees."""
+    roll, pitch, yaw = np.radians(deg)
+    rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
+    ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
+    rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+    return rz @ ry @ rx
 
 
 def _outliers(rng: np.random.Generator, z: np.ndarray, cls: np.ndarray, fraction: float) -> np.ndarray:
