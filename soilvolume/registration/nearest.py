@@ -1,5 +1,5 @@
-"""The ICP's nearest neighbours for a source that moves a little between calls: kept while a bound
-proves them, the others searched again on the native bucket grid or SciPy's k-d tree (same result)."""
+"""The ICP's nearest neighbours for a source that moves a little between calls: kept while the native
+kernel proves them, the others searched again on its bucket grid (else SciPy's k-d tree, same result)."""
 
 from __future__ import annotations
 
@@ -67,9 +67,6 @@ class _Found:
     def copy(self) -> _Found:
         return _Found(self.at.copy(), self.index.copy(), self.second.copy())
 
-    def take(self, idx: np.ndarray) -> _Found:
-        return _Found(np.take(self.at, idx, axis=1), self.index[idx], self.second[idx])
-
     def put(self, idx: np.ndarray, other: _Found) -> None:
         self.at[:, idx], self.index[idx], self.second[idx] = other.at, other.index, other.second
 
@@ -92,35 +89,14 @@ class Nearest:
         self.older: _Found | None = None
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(distance, index) of each (3, N) point's nearest target (inf and M: none within ``dist``)."""
-        if self.last is None or len(self.last.index) != points.shape[1]:
-            self.last, self.older = self._search(points), None
-            return self._distances(self.last, points), self.last.index
-        lib = kernels()
-        if lib is not None and points.flags.c_contiguous and points.dtype == np.float64:
+        """(distance, index) of each (3, N) point's nearest target (inf and M: none within ``dist``);
+        the kept neighbours are proven by the native kernel, without it every point is searched."""
+        lib, n = kernels(), points.shape[1]
+        kept = self.last is not None and len(self.last.index) == n
+        if lib is not None and kept and points.flags.c_contiguous and points.dtype == np.float64:
             return self._native(lib, points)
-        d, ok = self._proven(self.last, points)
-        idx = np.flatnonzero(~ok)
-        if len(idx) and self.older is not None:
-            pts = np.take(points, idx, axis=1)
-            back = self.older.take(idx)
-            d_back, ok = self._proven(back, pts)
-            swap = idx[ok]
-            ahead = self.last.take(swap)
-            self.last.put(swap, back.take(np.flatnonzero(ok)))
-            self.older.put(swap, ahead)
-            d[swap] = d_back[ok]
-            idx = idx[~ok]
-        if len(idx):
-            if self.older is None:
-                self.older = self.last.copy()
-            else:
-                self.older.put(idx, self.last.take(idx))
-            pts = np.take(points, idx, axis=1)
-            found = self._search(pts)
-            self.last.put(idx, found)
-            d[idx] = self._distances(found, pts)
-        return d, self.last.index
+        self.last, self.older = self._search(points), None
+        return self._distances(self.last, points), self.last.index
 
     def _native(self, lib, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`__call__` with the kept neighbours proven by ``sv_nearest_kept``: the same state."""
@@ -141,14 +117,6 @@ class Nearest:
             last.put(idx, found)
             d[idx] = self._distances(found, pts)
         return d, last.index
-
-    def _proven(self, found: _Found, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The distance to each point's found nearest and whether it is proven still nearest."""
-        d = self._distances(found, points)
-        moved = _norms(points - found.at)
-        moved += 1e-9  # rounding room: a kept neighbour is proven, never assumed
-        has = found.index < self.m
-        return d, np.where(has, d + moved < found.second, moved < self.bound - self.dist)
 
     def _search(self, points: np.ndarray) -> _Found:
         if isinstance(self.tree, GridIndex):
