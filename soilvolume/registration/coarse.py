@@ -9,7 +9,6 @@ import numpy as np
 from ..core.types import StageQuality
 from ..options import Options
 from . import columns
-from .fit import evaluate
 from .ground import cap_voxel
 from .o3d import _o3d, to_pcd
 from .rigid import rotation_deg, shift_at
@@ -25,7 +24,8 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
         return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
     t = coarse_fpfh(after_xyz, before_xyz, options.coarse_voxel, options.seed)
     src, tgt = to_pcd(after_xyz, options.coarse_voxel), to_pcd(before_xyz, options.coarse_voxel)
-    fit, rmse = evaluate(src, tgt, t, 1.5 * options.coarse_voxel)
+    ev = _o3d().pipelines.registration.evaluate_registration(src, tgt, 1.5 * options.coarse_voxel, t)  # point to point
+    fit, rmse = float(ev.fitness), float(ev.inlier_rmse)
     centre = after_xyz.mean(axis=0)
     rot, shift = rotation_deg(t), shift_at(t, centre)
     within = rot <= options.max_gps_rotation and shift <= options.max_gps_shift

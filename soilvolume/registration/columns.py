@@ -71,11 +71,7 @@ def _cut(base: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     when built)."""
     lib = kernels()
     if lib is None:
-        mask = in_box(base, lo, hi)
-        cut = np.empty((3, int(np.count_nonzero(mask))))
-        for k in range(3):
-            np.compress(mask, base[:, k], out=cut[k])
-        return cut
+        return np.ascontiguousarray(rows(base, in_box(base, lo, hi)).T, dtype=np.float64)
     base, axes, step = native_axes(base, np.float64)
     box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
     m = lib.sv_cut_box(*axes, len(base), step, *box, None, 0)

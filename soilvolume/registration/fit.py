@@ -1,5 +1,5 @@
-"""How well a pose fits: the share of after points near the before surface (on terrain or point to
-point) and the best of several poses judged on the after survey's margin."""
+"""How well a pose fits: the share of after points near the before surface, and the best of several
+poses judged on the after survey's margin."""
 
 from __future__ import annotations
 
@@ -8,17 +8,9 @@ import numpy as np
 from ..core.cells import bounds
 from . import columns
 from .ground import margin_points, spacing
-from .o3d import _o3d
 from .rigid import transform_points
 
 EVAL_DISTANCE = 0.4
-
-
-def evaluate(source, target, t: np.ndarray, distance: float = EVAL_DISTANCE) -> tuple[float, float]:
-    """(fitness, inlier RMSE) of ``t`` at ``distance`` (Open3D, point to point)."""
-    o3d = _o3d()
-    ev = o3d.pipelines.registration.evaluate_registration(source, target, distance, t)
-    return float(ev.fitness), float(ev.inlier_rmse)
 
 
 def evaluate_surface(

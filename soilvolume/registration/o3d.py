@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import sys
+import types
+
 import numpy as np
 
 PLOTLY = "open3d.visualization.draw_plotly"
@@ -10,8 +13,6 @@ _WANTED: list[int] = []  # the threads asked for before Open3D was imported
 
 
 def _o3d():
-    import sys
-
     if "open3d" not in sys.modules:
         _import_without_plotly()
     import open3d as o3d
@@ -25,8 +26,6 @@ def _o3d():
 def limit_threads(threads: int) -> None:
     """Open3D's CPU threads (0: all cores; 0.19+ runs on oneTBB, deaf to OMP_NUM_THREADS): only
     remembered until Open3D is imported; a process that never asked keeps Open3D's own setting."""
-    import sys
-
     _WANTED.clear()
     if "open3d" in sys.modules:
         _apply(_o3d().utility, threads)
@@ -46,8 +45,6 @@ def _apply(utility, threads: int) -> None:
 def _import_without_plotly() -> None:
     """Import Open3D without its Plotly/Dash drawing (~0.6 s): a placeholder module stands in while
     ``open3d`` imports, dropped after (an explicit import then gets the real one)."""
-    import sys
-    import types
 
     def unavailable(*_args, **_kwargs):
         raise ImportError(f"import {PLOTLY} for Open3D's Plotly drawing")

@@ -180,10 +180,6 @@ def _paths(directory, fmt: str) -> tuple[Path, Path, Path]:
     return d / f"before.{fmt}", d / f"after.{fmt}", d / "truth.json"
 
 
-def _write_truth(path: Path, truth: dict) -> None:
-    path.write_text(json.dumps(truth, indent=2) + "\n")
-
-
 def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) -> tuple[Path, Path, Path]:
     """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, format 6, CRS) and ``truth.json``: the paths."""
     import laspy
@@ -196,7 +192,7 @@ def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) 
         las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
         las.classification = cls
         las.write(str(path))
-    _write_truth(pt, scene.truth)
+    pt.write_text(json.dumps(scene.truth, indent=2) + "\n")
     return pb, pa, pt
 
 
@@ -220,5 +216,5 @@ def write_pair_streaming(
                     rec[name] = values
                 writer.write_points(rec)
                 del xyz, cls, rec
-    _write_truth(pt, world_truth(world))
+    pt.write_text(json.dumps(world_truth(world), indent=2) + "\n")
     return pb, pa, pt
