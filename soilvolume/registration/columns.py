@@ -39,10 +39,6 @@ class Cloud:
         self._box: tuple[np.ndarray, np.ndarray] | None = None
 
     @staticmethod
-    def of(xyz: np.ndarray | Cloud) -> Cloud:
-        return xyz if isinstance(xyz, Cloud) else Cloud(xyz)
-
-    @staticmethod
     def points(xyz: np.ndarray | Cloud) -> np.ndarray:
         return xyz.xyz if isinstance(xyz, Cloud) else xyz
 

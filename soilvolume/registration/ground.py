@@ -48,7 +48,7 @@ def stable_source(
     """The source at ``t`` on stable ground only, its degree-2 deformation removed (both from
     :mod:`soilvolume.compensation.stable` on median grids): what the last ICP levels should see."""
     src = transform_points(source_xyz, t)
-    target = columns.Cloud.of(target_xyz)
+    target = target_xyz if isinstance(target_xyz, columns.Cloud) else columns.Cloud(target_xyz)
     cell = max(cell, 1.5 * (spacing(target.xyz) if gap is None else gap))  # gap: the target's spacing
     grid = make_grid(*bounds(src), cell, np.zeros(3), None)
     top = np.array([grid.xmin + (grid.cols + 1) * grid.cell, grid.ymax + grid.cell])

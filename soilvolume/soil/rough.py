@@ -24,12 +24,8 @@ def roughness(spread: np.ndarray, heights: np.ndarray, counts: np.ndarray, cell:
 def _steepest(h: np.ndarray, axis: int) -> np.ndarray:
     """Per cell, the larger one-sided height step along ``axis`` (a central one halves a flank at a
     break of slope)."""
-    step = np.abs(np.diff(h, axis=axis))
-    pad = [(0, 0), (0, 0)]
-    pad[axis] = (1, 0)
-    before = np.pad(step, pad, constant_values=np.nan)
-    pad[axis] = (0, 1)
-    after = np.pad(step, pad, constant_values=np.nan)
+    before = np.abs(np.diff(h, axis=axis, prepend=np.nan))
+    after = np.abs(np.diff(h, axis=axis, append=np.nan))
     return np.nan_to_num(np.fmax(before, after))
 
 
