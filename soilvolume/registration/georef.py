@@ -123,17 +123,11 @@ def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine
     check["margin_agreement"] = fit
     unsure = f"both files declare {datum} and {said}, but the registration is not consistent ({disagreement(check)})"
     if fit < AGREE_FITNESS:
-        return (
-            "gps",
-            f"{unsure} and only {fit:.0%} of the after survey's margin agrees as georeferenced: registered",
-            check,
-        )
-    return (
-        "precise",
-        (
-            f"{unsure}: it cannot confirm the coordinates; {fit:.0%} of the after survey's margin agrees "
-            f"with the before surface as georeferenced: used as they are (no bias correction); use "
-            f"{opt('georeferencing', 'gps')} to register anyway"
-        ),
-        check,
+        why = f"{unsure} and only {fit:.0%} of the after survey's margin agrees as georeferenced: registered"
+        return "gps", why, check
+    why = (
+        f"{unsure}: it cannot confirm the coordinates; {fit:.0%} of the after survey's margin agrees "
+        f"with the before surface as georeferenced: used as they are (no bias correction); use "
+        f"{opt('georeferencing', 'gps')} to register anyway"
     )
+    return "precise", why, check

@@ -81,9 +81,8 @@ class World:
         bw, bh = cfg.before_size
         aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
         self.feat_res = 0.25
-        self.fnx = int(math.ceil(bw / self.feat_res)) + 1
-        self.fny = int(math.ceil(bh / self.feat_res)) + 1
-        self.label = np.zeros((self.fny, self.fnx), dtype=np.int32)  # 0 = none, k+1 = feature k
+        shape = (int(math.ceil(bh / self.feat_res)) + 1, int(math.ceil(bw / self.feat_res)) + 1)
+        self.label = np.zeros(shape, dtype=np.int32)  # 0 = none, k+1 = feature k
         placer = _Placer(cfg.before_size, (self.ax0, self.ay0, self.ax1, self.ay1), self.changes, rng)
         place, feats = placer.place, placer.feats
         if cfg.vegetation:
@@ -114,7 +113,6 @@ class World:
         self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
         self.t = np.asarray(cfg.shift_m, dtype=np.float64)
 
-    # -- helpers --
     @staticmethod
     def stamp(grid: np.ndarray, res: float, x: float, y: float, r: float, value) -> None:
         ny, nx = grid.shape
@@ -148,7 +146,6 @@ class World:
             out += cfg.vertical_bias_m * (1.0 + 0.5 * u - 0.3 * v)
         return out
 
-    # -- per-epoch sampling --
     def grid_shape(self, epoch: int) -> tuple[float, float, float, float, int, int]:
         cfg = self.cfg
         if epoch == 0:
