@@ -36,25 +36,21 @@ class SceneConfig:
     vegetation: bool = False  # bushes in both epochs, grown in the after epoch (class 3/4/5)
     objects: bool = False  # vehicles (class 6) and boulders (class 1), same place in both epochs
     relief: float = 1.0  # scale of the long waves and hills (0 = a tilted plane with local detail)
-    # "piles" (3 piles ~1020 m3 + one pit ~69 m3, ~15 % of the after footprint), "none", "pit" (one
-    # flat-bottomed pit, 5 %), "pile" (one flat-topped pile, 10 %) or "excavation" (a flat-bottomed
-    # excavation over `change_fraction` of the after footprint plus a tall pile near one edge)
+    # "piles" (3 piles ~1020 m3 + a pit ~69 m3, ~15 % of the after footprint), "none", "pit" (5 %), "pile"
+    # (10 %), "excavation" (`change_fraction` of the footprint, a tall pile beside it) or a site of sites.py
     change: str = "piles"
-    # "fixed": the layouts above, the same for every seed (bench/ACCURACY.md, README, demo and
-    # self-test use them); "drawn": the seed also draws the "piles" site's works (2-4 piles and
-    # 1-2 pits: shapes, sizes, orientations, positions; scenes/drawn.py)
+    # "fixed": the layouts above, the same for every seed (bench/ACCURACY.md, README, demo, self-test);
+    # "drawn": the seed also draws the "piles" site's works (scenes/drawn.py)
     works: str = "fixed"
     crs: str = "EPSG:32654"
-    # a vertical CRS the files also declare (a compound CRS, e.g. "EPSG:5703" NAVD88 height): a
-    # declared datum says nothing of the GPS error above, which the surveys still carry
+    # a vertical CRS the files also declare (compound, e.g. "EPSG:5703"): the GPS error above remains
     vertical_datum: str | None = None
     origin: tuple[float, float, float] = (500_000.0, 3_900_000.0, 0.0)  # added to local coords
     # change="excavation": fraction of the after footprint the excavation's outline covers
     change_fraction: float = 0.4
     # --- what is not soil, and the signals a survey carries (see scenes/nuisances.py) ---
-    # per-point signals written: "class" (LAS classification, as above), "rgb" (photogrammetric:
-    # never classified (class 0), RGB colour), "lidar" (classification and return numbers),
-    # "returns" (return numbers only, class 0), "none" (xyz only, class 0)
+    # signals written: "class" (classification), "rgb" (colour, class 0), "lidar" (classification and
+    # return numbers), "returns" (return numbers, class 0), "none" (xyz, class 0)
     signals: str = "class"
     movers: int = 0  # vehicles on the after footprint that moved between the surveys
     arrivals: int = 0  # vehicles present in the after survey only
