@@ -138,9 +138,7 @@ def feature_points(feats: np.ndarray, feat_zc: np.ndarray, epoch: int, idx, k, p
     u0, v0 = x[idx] - f[:, 1], y[idx] - f[:, 2]
     ca, sa = np.cos(f[:, 3]), np.sin(f[:, 3])
     u, v = u0 * ca + v0 * sa, -u0 * sa + v0 * ca
-    a = f[:, 7] if epoch else f[:, 4]
-    b = f[:, 8] if epoch else f[:, 5]
-    h = f[:, 9] if epoch else f[:, 6]
+    a, b, h = (f[:, 7:10] if epoch else f[:, 4:7]).T
     with np.errstate(divide="ignore", invalid="ignore"):  # a vehicle absent from this epoch: 0 x 0
         rho2 = np.nan_to_num((u / a) ** 2 + (v / b) ** 2, nan=np.inf)
     gi = g[idx]
