@@ -68,7 +68,8 @@ def _check_value(name: str, value: Any, where: str) -> None:
             raise bad("a string or a list of strings")
 
 
-def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
+def normalise(raw: Any, name: str) -> list[dict[str, Any]]:
+    """The stages of a parsed pipeline, shorthand forms made stages and options type-checked."""
     if isinstance(raw, dict):
         if "pipeline" not in raw:
             raise SoilVolumeError(f"pipeline {name}: an object needs a 'pipeline' list")
@@ -149,4 +150,4 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
         ) from exc
     except RecursionError as exc:
         raise SoilVolumeError(f"pipeline {name}: invalid JSON (nested too deeply)") from exc
-    return _normalise(raw, name)
+    return normalise(raw, name)

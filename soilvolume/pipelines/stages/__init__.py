@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ...core.types import SoilVolumeError
+from ..load import normalise
 from . import crop, ground, readers, reprojection, writers
 from . import range as range_stage
 from .view import PointView, StageContext
@@ -54,10 +55,11 @@ def check_stage(stage: dict, source: str) -> tuple[StageFn, str]:
 
 
 def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
-    """Run a linear pipeline (one reader first, then filters and writers in order)."""
+    """Run a linear pipeline (one reader first, then filters and writers in order), its stages and
+    options checked as a loaded file's (:func:`soilvolume.pipelines.load.normalise`)."""
+    stages = normalise(stages, source)
     checked = [check_stage(s, source) for s in stages]
-    readers_at = [i for i, (_, kind) in enumerate(checked) if kind.startswith("readers.")]
-    if readers_at != [0]:
+    if [kind.startswith("readers.") for _, kind in checked].count(True) > 1:
         raise SoilVolumeError(
             f"pipeline {source}: several readers need PDAL (the embedded executor runs exactly one "
             "reader, as the first stage)"
@@ -65,7 +67,6 @@ def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
     view: PointView | None = None
     for stage, (fn, kind) in zip(stages, checked, strict=True):
         view = fn(view, stage, StageContext(source, kind))
-    assert view is not None
     return view
 
 
