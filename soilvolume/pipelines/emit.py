@@ -1,11 +1,6 @@
-"""``soilvolume pipeline``: the preparation of both clouds as PDAL pipeline JSON files.
-
-The before pipeline crops to the after cloud's GPS footprint plus the radius (the same polygon
-the engine uses), both pipelines select ground as the engine's run does (no statistical outlier
-filter: the run has none, and one moved a sparse pair's net by 1 to 2.6 %), and write the
-prepared clouds; ``soilvolume estimate --before-pipeline/--after-pipeline`` runs them (with PDAL
-when it imports, else the embedded executor), as does ``pdal pipeline`` on a server.
-"""
+"""``soilvolume pipeline``: both clouds' preparation as PDAL pipeline JSON, as the run prepares
+them: the before cropped to the after's GPS footprint plus the radius, ground kept as the run keeps
+it, no statistical outlier filter (the run has none; one moved a sparse pair's net by 1 to 2.6 %)."""
 
 from __future__ import annotations
 
@@ -25,8 +20,8 @@ EMITTED = ("before.json", "after.json", "before_prepared.laz", "after_prepared.l
 
 
 def smrf_options(options: Options, xy_unit: float) -> dict[str, float] | None:
-    """The SMRF stage's options of ``--ground filter`` as the run uses them (its window in the frame's
-    units; PDAL's own defaults, 18 m and 0.15, take the piles for objects)."""
+    """The SMRF options of ``--ground filter`` as the run's (window in the frame's units; PDAL's
+    defaults, 18 m and 0.15, take the piles for objects)."""
     if options.ground != "filter":
         return None
     return {"window": options.ground_window / xy_unit, "slope": options.ground_slope}

@@ -132,10 +132,8 @@ def _read_text(path: Path, name: str) -> str:
 
 
 def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
-    """Stages of a pipeline file (or JSON text), validated; errors name the file and problem.
-
-    Accepts ``{"pipeline": [...]}`` or a bare list; strings are filenames (the first a reader,
-    the last a writer, types inferred from the extension as PDAL does)."""
+    """Stages of a pipeline file or JSON text (``{"pipeline": [...]}`` or a list; strings are a
+    reader's or a writer's filename, as PDAL takes them), checked; errors name the file."""
     text = str(path_or_text)
     if isinstance(path_or_text, os.PathLike) or not text.lstrip().startswith(("[", "{")):
         name = text

@@ -10,9 +10,6 @@ from ...inputs.csf import DEFAULTS, csf_classify
 from ...inputs.smrf import smrf_classify
 from .view import PointView, StageContext
 
-SMRF_OPTS = {"cell", "slope", "window", "threshold", "scalar"}
-CSF_OPTS = set(DEFAULTS)
-
 
 def _last_or_only(view: PointView, ctx: StageContext) -> np.ndarray:
     """The points SMRF classifies: last and single returns (all when the returns are not known)."""

@@ -11,9 +11,6 @@ from ...core.types import SoilVolumeError
 from ...inputs.stream import open_source
 from .view import PointView, StageContext
 
-FILE_OPTS = {"filename", "default_srs"}
-TEXT_OPTS = FILE_OPTS | {"header", "separator"}
-
 _KNOWN = {
     n.lower(): n
     for n in ("X", "Y", "Z", "Classification", "Intensity", "ReturnNumber", "NumberOfReturns", "Red", "Green", "Blue")
@@ -36,8 +33,7 @@ def _srs(view: PointView, opts: dict, ctx: StageContext) -> PointView:
 
 
 def read_file(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
-    """LAS/LAZ (X, Y, Z, Classification, ReturnNumber, NumberOfReturns) and PLY/PCD (X, Y, Z)
-    through the engine's own readers: headers checked, every point counted."""
+    """LAS/LAZ (X, Y, Z, Classification, returns) and PLY/PCD (X, Y, Z) by the engine's readers."""
     path = _path(opts, ctx)
     try:
         raw = open_source(path).materialize()
@@ -67,9 +63,8 @@ def _split_header(line: str, sep: str | None) -> tuple[list[str], str]:
 
 
 def read_text(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
-    """Delimited text as PDAL reads it: a header line names the dimensions (or option 'header'),
-    fields split by the header's first non-alphanumeric character (or option 'separator'); a
-    space separator means any run of whitespace."""
+    """Delimited text as PDAL reads it: dimensions named by the first line (or 'header'), split by
+    its first non-alphanumeric character (or 'separator'; a space: any whitespace)."""
     path = _path(opts, ctx)
     header_line = opts.get("header")
     skiprows = 0

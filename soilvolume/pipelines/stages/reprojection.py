@@ -7,16 +7,10 @@ import pyproj
 
 from .view import PointView, StageContext
 
-OPTS = {"out_srs"}
-
 
 def reproject(view: PointView, opts: dict, ctx: StageContext) -> PointView:
-    """Transform X/Y/Z from the points' SRS to ``out_srs``.
-
-    Like PDAL (PROJ via GDAL, OAMS_TRADITIONAL_GIS_ORDER), Z goes through the transformation, so a
-    compound CRS with a vertical unit in feet to one in metres converts Z. Points whose
-    transformation fails are dropped.
-    """
+    """X/Y/Z from the points' SRS to ``out_srs``; Z transformed too, as PDAL does (a vertical unit in
+    feet becomes metres); points whose transformation fails dropped."""
     out_text = opts.get("out_srs")
     if not out_text:
         raise ctx.error("option 'out_srs' is required")
