@@ -1,13 +1,8 @@
-"""The engine's native kernels (``kernels.c``): one-pass loops over the points where numpy makes
-many passes over memory, loaded with ctypes when a build of this very source is present (its
-file name carries the source's digest: a library built from other code is never used), else the
-numpy path runs (the same bits, slower). ``SOILVOLUME_NATIVE=0`` turns them off.
-
-Built by ``python -m soilvolume.native.build`` when the environment is installed (``make setup``;
-the plugin's installer when the machine has a C compiler; ``make package`` ships the source only,
-no binary), never during a run: without a build the numpy path runs, said only under
-``SOILVOLUME_DEBUG``. A ctypes call releases the GIL: a kernel on the reading thread runs beside
-Python on the other."""
+"""The engine's native kernels (``kernels.c``): one-pass loops where numpy makes many passes,
+loaded with ctypes when a build of this very source is present (its name carries the source's
+digest), else the numpy path runs (the same bits, slower; said under ``SOILVOLUME_DEBUG``).
+``SOILVOLUME_NATIVE=0`` turns them off. Built by ``python -m soilvolume.native.build`` when the
+environment is installed, never during a run. A ctypes call releases the GIL."""
 
 from __future__ import annotations
 
@@ -21,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .chunk import declare
+from .chunk import TYPES, declare
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "kernels.c"
@@ -30,6 +25,21 @@ ENV = "SOILVOLUME_NATIVE"  # "0": the numpy path only
 DIR_ENV = "SOILVOLUME_NATIVE_DIR"  # another folder holding the built library (the plugin's environment)
 
 _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
+#: each kernel's result and arguments (:data:`.chunk.TYPES`' letters; "-": no result)
+PROTOTYPES = {
+    "sv_columns": ("i", "pppiidddiipppp"),
+    "sv_cells": ("i", "pppiifffiiiipppp"),
+    "sv_sort_keys": ("-", "pipiipp"),
+    "sv_keys": ("-", "ppiidipp"),
+    "sv_running_sum": ("-", "piip"),
+    "sv_nearest_kept": ("i", "pippppppipiidpp"),
+    "sv_cut_box": ("i", "pppiiddddpi"),
+    "sv_bounds": ("-", "piiiipp"),
+    "sv_grid_build": ("-", "piidddiipp"),
+    "sv_grid_nearest2": ("-", "pipiidddiippdpp"),
+    "sv_icp_terms": ("-", "pippipipidppp"),
+    "sv_centroids": ("i", "pipp"),
+}
 
 
 def tag() -> str:
@@ -80,33 +90,10 @@ def _load() -> ctypes.CDLL | None:
 
 
 def _declare(lib: ctypes.CDLL) -> None:
-    """The prototypes of the kernels other than the chunk's."""
-    i64, f64, ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
-    lib.sv_columns.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, ptr, ptr]
-    lib.sv_columns.restype = i64
-    f32 = ctypes.c_float
-    lib.sv_cells.argtypes = [ptr, ptr, ptr, i64, i64, f32, f32, f32, i64, i64, i64, i64, ptr, ptr, ptr, ptr]
-    lib.sv_cells.restype = i64
-    lib.sv_sort_keys.argtypes = [ptr, i64, ptr, i64, i64, ptr, ptr]
-    lib.sv_sort_keys.restype = None
-    lib.sv_keys.argtypes = [ptr, ptr, i64, i64, f64, i64, ptr, ptr]
-    lib.sv_keys.restype = None
-    lib.sv_running_sum.argtypes = [ptr, i64, i64, ptr]
-    lib.sv_running_sum.restype = None
-    lib.sv_nearest_kept.argtypes = [ptr, i64, ptr, ptr, ptr, ptr, ptr, ptr, i64, ptr, i64, i64, f64, ptr, ptr]
-    lib.sv_nearest_kept.restype = i64
-    lib.sv_cut_box.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, f64, ptr, i64]
-    lib.sv_cut_box.restype = i64
-    lib.sv_bounds.argtypes = [ptr, i64, i64, i64, i64, ptr, ptr]
-    lib.sv_bounds.restype = None
-    lib.sv_grid_build.argtypes = [ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr]
-    lib.sv_grid_build.restype = None
-    lib.sv_grid_nearest2.argtypes = [ptr, i64, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, f64, ptr, ptr]
-    lib.sv_grid_nearest2.restype = None
-    lib.sv_icp_terms.argtypes = [ptr, i64, ptr, ptr, i64, ptr, i64, ptr, i64, f64, ptr, ptr, ptr]
-    lib.sv_icp_terms.restype = None
-    lib.sv_centroids.argtypes = [ptr, i64, ptr, ptr]
-    lib.sv_centroids.restype = i64
+    """The prototypes of the kernels other than the chunk's (:data:`PROTOTYPES`)."""
+    for name, (result, args) in PROTOTYPES.items():
+        getattr(lib, name).argtypes = [TYPES[kind] for kind in args]
+        getattr(lib, name).restype = TYPES.get(result)
 
 
 _scratch = threading.local()

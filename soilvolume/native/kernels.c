@@ -1,11 +1,7 @@
-/* soilvolume's native kernels: loops of the engine that numpy runs as many passes over memory,
- * done in one pass each.
- *
- * Plain C99, no Python or numpy headers: loaded with ctypes, which releases the GIL for the call,
- * so a kernel on one thread runs beside Python on another. Each kernel computes what its numpy
- * twin computes (named in its comment), with the same double operations in the same order: the
- * library is built with -ffp-contract=off (no fused multiply-adds), and a run gives the same bits
- * with or without it (tests/test_native.py). Build: python -m soilvolume.native.build. */
+/* soilvolume's native kernels: loops numpy runs as many passes over memory, in one pass each.
+ * Plain C99 loaded with ctypes (the GIL released for the call). Each kernel does its numpy twin's
+ * (named in its comment) double operations in the same order, built with -ffp-contract=off: a run
+ * gives the same bits with or without it (tests/test_native.py). */
 
 #define _POSIX_C_SOURCE 200809L /* pread */
 #include <math.h>
@@ -19,9 +15,7 @@
 #endif
 
 /* The layout version of the structures below; the loader refuses a library of another. */
-#define SV_ABI 1
-
-int64_t sv_abi(void) { return SV_ABI; }
+int64_t sv_abi(void) { return 1; }
 
 /* One chunk of a LAS/LAZ file streamed into the working frame (numpy twin:
  * soilvolume.inputs.chunkwork.numpy_chunk). */
@@ -38,13 +32,11 @@ typedef struct {
     const uint8_t *framed;
     double plo[2], pres;
     int64_t prows, pcols;
-    /* the thinning lattice (soilvolume.inputs.thinning.ColumnThinner): column sums x, y, z and
-     * count (sums: 4 x ncols). numpy adds each chunk's sums (bincount's, from zero in point
-     * order) to them; here a column's points are added straight onto its sums, the sums a column
-     * held from earlier chunks set aside first (side_ids, side: 4 doubles each) and added back
-     * when the chunk ends (flush): a + b is b + a, the same bits, with no chunk-sized array of
-     * sums to fault in. mark (int32, ncols, zeros): the chunk (counted from 1, chunk) that last
-     * touched each column. */
+    /* the thinning lattice (inputs.thinning.ColumnThinner): column sums x, y, z, count (4 x ncols).
+     * numpy adds each chunk's sums (from zero in point order) to them; here a point is added onto
+     * its column's sums, those of earlier chunks set aside first (side_ids, side: 4 doubles each)
+     * and added back when the chunk ends (flush): b + a, the same bits, no chunk-sized sums to
+     * fault in. mark (int32, ncols, zeros): the chunk (from 1) that last touched each column. */
     double tlo[2], voxel;
     int64_t first[2], shape[2], ncols;
     double *sums;
@@ -72,8 +64,7 @@ static inline int32_t load_i32(const uint8_t *p) {
 /* The polygon lattice's index of a coordinate: int((v - lo) / res) clipped to -1..top
  * (PolygonMask._cell). */
 static inline int64_t lattice(double v, double lo, double res, int64_t top) {
-    double t = v - lo;
-    t = t / res;
+    double t = (v - lo) / res;
     if (!(t >= -1.0)) return -1; /* NaN too */
     if (t > (double)top) return top;
     return (int64_t)t;
@@ -82,8 +73,7 @@ static inline int64_t lattice(double v, double lo, double res, int64_t top) {
 /* A thinning column along one axis: int((v - lo) / voxel) - first (ColumnThinner._index), or -1
  * where numpy's conversion would overflow (the caller's unsigned bound test fails both). */
 static inline int64_t column(double v, double lo, double voxel, int64_t first) {
-    double t = v - lo;
-    t = t / voxel;
+    double t = (v - lo) / voxel;
     if (!(t > -9.2e18 && t < 9.2e18)) return -1;
     return (int64_t)t - first;
 }
@@ -99,32 +89,29 @@ static inline int in_box(const double *p, const double *box) {
 static inline void thin_add(sv_chunk_t *c, int64_t id, const double *p) {
     int64_t n = c->ncols;
     double *s = c->sums;
+    const double v[4] = {p[0], p[1], p[2], 1.0};
     if (c->mark[id] != (int32_t)c->chunk) {
-        if (c->mark[id] == 0) { /* 0.0 + v: the bits of the zero sums plus v (-0.0 too) */
-            c->mark[id] = (int32_t)c->chunk;
-            s[id] = 0.0 + p[0], s[n + id] = 0.0 + p[1], s[2 * n + id] = 0.0 + p[2], s[3 * n + id] = 1.0;
+        int fresh = c->mark[id] == 0;
+        c->mark[id] = (int32_t)c->chunk;
+        if (fresh) { /* 0.0 + v: the bits of the zero sums plus v (-0.0 too) */
+            for (int a = 0; a < 4; a++) s[a * n + id] = 0.0 + v[a];
             return;
         }
         double *keep = c->side + 4 * c->nside;
         c->side_ids[c->nside++] = id;
-        keep[0] = s[id], keep[1] = s[n + id], keep[2] = s[2 * n + id], keep[3] = s[3 * n + id];
-        s[id] = s[n + id] = s[2 * n + id] = s[3 * n + id] = 0.0;
-        c->mark[id] = (int32_t)c->chunk;
+        for (int a = 0; a < 4; a++) keep[a] = s[a * n + id], s[a * n + id] = 0.0;
     }
-    s[id] += p[0], s[n + id] += p[1], s[2 * n + id] += p[2], s[3 * n + id] += 1.0;
+    for (int a = 0; a < 4; a++) s[a * n + id] += v[a];
 }
 
 /* The end of a chunk: the sums set aside added back (numpy: earlier sums + this chunk's). */
 static void thin_flush(sv_chunk_t *c) {
     int64_t n = c->ncols;
-    for (int64_t k = 0; k < c->nside; k++) {
-        int64_t id = c->side_ids[k];
-        const double *keep = c->side + 4 * k;
-        c->sums[id] = keep[0] + c->sums[id];
-        c->sums[n + id] = keep[1] + c->sums[n + id];
-        c->sums[2 * n + id] = keep[2] + c->sums[2 * n + id];
-        c->sums[3 * n + id] = keep[3] + c->sums[3 * n + id];
-    }
+    for (int64_t k = 0; k < c->nside; k++)
+        for (int a = 0; a < 4; a++) {
+            double *sum = c->sums + a * n + c->side_ids[k];
+            *sum = c->side[4 * k + a] + *sum;
+        }
     c->nside = 0;
     c->chunk++;
 }
@@ -307,33 +294,9 @@ int64_t sv_cells(const float *x, const float *y, const float *z, int64_t n, int6
     return m;
 }
 
-/* Sort v[0..n) ascending: quicksort (median of three) down to runs of 16, then insertion sort. */
-static void sort_i64(int64_t *v, int64_t n) {
-    while (n > 16) {
-        int64_t a = v[0], b = v[n / 2], c = v[n - 1];
-        int64_t pivot = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
-        int64_t i = 0, j = n - 1;
-        while (i <= j) {
-            while (v[i] < pivot) i++;
-            while (v[j] > pivot) j--;
-            if (i <= j) {
-                int64_t t = v[i];
-                v[i++] = v[j], v[j--] = t;
-            }
-        }
-        if (j + 1 < n - i) { /* the smaller side by recursion, the larger by the loop */
-            sort_i64(v, j + 1);
-            v += i, n -= i;
-        } else {
-            sort_i64(v + i, n - i);
-            n = j + 1;
-        }
-    }
-    for (int64_t i = 1; i < n; i++) {
-        int64_t x = v[i], j = i - 1;
-        while (j >= 0 && v[j] > x) v[j + 1] = v[j], j--;
-        v[j + 1] = x;
-    }
+static int cmp_i64(const void *a, const void *b) {
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
 }
 
 /* Sort v[0..n) ascending, all of them within lo + 256^passes: least significant digit first, one
@@ -355,19 +318,23 @@ static void radix_i64(int64_t *v, int64_t n, int64_t lo, int passes, int64_t *tm
     if (src != v) memcpy(v, src, (size_t)n * sizeof *v);
 }
 
-/* Sort one cell's keys v[0..n): by their bytes (radix_i64, through tmp when there is one) when
- * they span under 2^24 and are many enough for it, else sort_i64. */
+/* Sort one cell's keys v[0..n): a few by insertion, more by their bytes (radix_i64 through tmp)
+ * when they span under 2^24, else (or without tmp) by qsort. */
 static void sort_cell(int64_t *v, int64_t n, int64_t *tmp) {
-    if (n <= 32 || tmp == NULL) {
-        sort_i64(v, n);
+    if (n <= 32) {
+        for (int64_t i = 1; i < n; i++) {
+            int64_t x = v[i], j = i - 1;
+            while (j >= 0 && v[j] > x) v[j + 1] = v[j], j--;
+            v[j + 1] = x;
+        }
         return;
     }
     int64_t lo = v[0], hi = v[0];
     for (int64_t i = 1; i < n; i++) lo = v[i] < lo ? v[i] : lo, hi = v[i] > hi ? v[i] : hi;
     uint64_t span = (uint64_t)(hi - lo);
     int passes = span < 256 ? 1 : span < 65536 ? 2 : span < (1u << 24) ? 3 : 0;
-    if (passes == 0)
-        sort_i64(v, n);
+    if (passes == 0 || tmp == NULL)
+        qsort(v, (size_t)n, sizeof *v, cmp_i64);
     else
         radix_i64(v, n, lo, passes, tmp);
 }
@@ -380,7 +347,7 @@ void sv_sort_keys(const int64_t *key, int64_t n, const int64_t *counts, int64_t 
     int64_t at = 0, most = 0;
     for (int64_t c = 0; c < ncells; c++) next[c] = at, at += counts[c], most = counts[c] > most ? counts[c] : most;
     for (int64_t i = 0; i < n; i++) out[next[key[i] >> bits]++] = key[i];
-    int64_t *tmp = most > 32 ? malloc((size_t)most * sizeof *tmp) : NULL; /* NULL: sort_i64 throughout */
+    int64_t *tmp = most > 32 ? malloc((size_t)most * sizeof *tmp) : NULL;
     at = 0;
     for (int64_t c = 0; c < ncells; c++) {
         sort_cell(out + at, counts[c], tmp);
