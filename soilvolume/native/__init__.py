@@ -100,8 +100,7 @@ _scratch = threading.local()
 
 
 def zeros(name: str, size: int, dtype) -> np.ndarray:
-    """A thread's array of at least ``size`` zeros kept for the kernels that leave it zero (one
-    per ``name``: no fresh pages to fault in at every call)."""
+    """A thread's kept array of at least ``size`` zeros, per ``name``, for kernels that leave it zero."""
     have = getattr(_scratch, name, None)
     if have is None or have.size < size:
         have = np.zeros(max(size, 1), dtype)
@@ -110,9 +109,8 @@ def zeros(name: str, size: int, dtype) -> np.ndarray:
 
 
 def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
-    """(values from one point to the next, from one axis to the next) of ``points``, an (N, k)
-    array of ``dtype`` or its transposed (k, N) rows, as a kernel walks them; None when the
-    kernels cannot walk it so (another dtype, strides not whole values, or not positive)."""
+    """(values from one point to the next, from one axis to the next) of an (N, k) ``points`` array
+    of ``dtype`` (or its transposed rows); None when a kernel cannot walk it so."""
     size = np.dtype(dtype).itemsize
     if points.dtype != dtype or points.ndim != 2 or min(points.strides) <= 0 or any(s % size for s in points.strides):
         return None
@@ -120,10 +118,8 @@ def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
 
 
 def axes(points: np.ndarray, dtype) -> tuple[np.ndarray, tuple[int, int, int], int]:
-    """(the points as the kernels read them, the addresses of their first x, y and z, the values
-    from one point's to the next's): an (N, 3) array of ``dtype`` or its transposed (3, N) rows as
-    they are (:func:`steps`), any other copied into a C-ordered one of ``dtype`` (keep the array
-    while the addresses are used)."""
+    """(the points as the kernels read them, their first x, y, z addresses, the step between
+    points): walkable ones as they are (:func:`steps`), others copied (keep the array alive)."""
     walk = steps(points, dtype)
     if walk is None:
         points = np.ascontiguousarray(points, dtype)
