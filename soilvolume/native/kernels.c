@@ -239,12 +239,10 @@ void sv_bounds(const double *p, int64_t n, int64_t step, int64_t axis, int64_t d
     for (int64_t j = 0; j < dims; j++) lo[j] = nan >> j & 1 ? NAN : a[j], hi[j] = nan >> j & 1 ? NAN : b[j];
 }
 
-/* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): each point's
- * column is floor((v - lo) / cell) per axis, points off the grid are dropped, each column's sums
- * run over its points in order from zero (bincount's). x, y, z: the points' coordinates, step
- * doubles apart. count (rows * cols) and sums (3 x rows * cols) are zeros and are left zeros.
- * Writes the occupied columns' flat ids, in order, to has and their means (m x 3) to means;
- * returns m. */
+/* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): a point's column
+ * floor((v - lo) / cell) per axis (off the grid: dropped), its sums in point order from zero. x, y,
+ * z step doubles apart; count (rows * cols) and sums (3 x rows * cols): zeros, left zeros. The
+ * occupied columns' ids, in order, to has, their means (m x 3) to means; returns m. */
 int64_t sv_columns(const double *x, const double *y, const double *z, int64_t n, int64_t step, double lo0,
                    double lo1, double cell, int64_t rows, int64_t cols, int64_t *count, double *sums,
                    int64_t *has, double *means) {
@@ -271,13 +269,11 @@ int64_t sv_columns(const double *x, const double *y, const double *z, int64_t n,
     return m;
 }
 
-/* Points to the cells of a window of a grid (numpy twins: soilvolume.dem.grid._cells_of on a block,
- * soilvolume.distributed.tiletask._window_cells): float32 coordinates x, y, z (step floats apart)
- * to fractional column (x - xmin) * inv and row (ymax - y) * inv on the whole grid in float32, as
- * numpy computes them; the points in the window's rows r0..r1 and columns c0..c1 get their flat
- * cell id in the window and float64 height appended to ids and z, and their offsets within the
- * cell (col - floor(col), row - floor(row)) added to sx and sy in order (OffsetSums.add_at).
- * Returns the number appended. */
+/* Points to the cells of a grid's window (numpy twins: soilvolume.dem.grid._cells_of on a block,
+ * distributed.tiletask._window_cells): float32 x, y, z (step floats apart) to column (x - xmin) *
+ * inv and row (ymax - y) * inv in float32, as numpy; those in rows r0..r1, columns c0..c1: their
+ * flat id in the window and float64 height appended to ids and z, their offsets in the cell added
+ * to sx and sy in order (OffsetSums.add_at). Returns the number appended. */
 int64_t sv_cells(const float *x, const float *y, const float *z, int64_t n, int64_t step, float xmin, float ymax,
                  float inv, int64_t r0, int64_t r1, int64_t c0, int64_t c1, int64_t *ids, double *zout, double *sx,
                  double *sy) {
@@ -339,9 +335,8 @@ static void sort_cell(int64_t *v, int64_t n, int64_t *tmp) {
         radix_i64(v, n, lo, passes, tmp);
 }
 
-/* Sort int64 keys whose cell is key >> bits (counts: the keys of each of ncells cells) into out,
- * with next (ncells) for scratch: the keys moved to their cells (in order), then each cell's
- * sorted. The result is the sorted array, the same as any sort gives. */
+/* Sort int64 keys whose cell is key >> bits (counts: per cell of ncells) into out, next (ncells)
+ * for scratch: the keys moved to their cells, then each cell's sorted (the array any sort gives). */
 void sv_sort_keys(const int64_t *key, int64_t n, const int64_t *counts, int64_t ncells, int64_t bits, int64_t *out,
                   int64_t *next) {
     int64_t at = 0, most = 0;
@@ -367,9 +362,8 @@ void sv_running_sum(const int64_t *key, int64_t n, int64_t top, double *out) {
     }
 }
 
-/* The (cell, height) keys of points (numpy twin: soilvolume.dem.cellstats._SortedCells): key =
- * id << bits | (rint(z / q) - base), into key (which may be ids itself), and the points per cell
- * added to counts. */
+/* The (cell, height) keys id << bits | (rint(z / q) - base) into key (ids itself may be), the points
+ * per cell added to counts (numpy twin: soilvolume.dem.cellstats._SortedCells). */
 void sv_keys(const int64_t *ids, const double *z, int64_t n, int64_t base, double q, int64_t bits, int64_t *key,
              int64_t *counts) {
     for (int64_t i = 0; i < n; i++) {
@@ -399,12 +393,11 @@ static inline int proven(const double *pts, int64_t n, int64_t i, const double *
     return idx[i] < m ? *d + moved < second[i] : moved < free;
 }
 
-/* The ICP's nearest neighbours kept while a bound proves them (numpy twin: the part of
- * registration.icp.Nearest.__call__ before its k-d tree search): each point's distance to its
- * kept nearest (last: at 3 x n, idx, second) into d; a point the last search no longer proves
- * but the one before (old, when has_old) does swaps them; the others' last search is copied to
- * old (when has_old) and their indices written to todo (to be searched again). free: the bound
- * less the correspondence distance. Returns the number in todo. */
+/* The ICP's nearest neighbours kept while a bound proves them (numpy twin: registration.icp.Nearest.
+ * __call__ before its k-d tree search): each point's distance to its kept nearest (last: at 3 x n,
+ * idx, second) into d; where only the search before (old, when has_old) proves it, the two swap;
+ * the others' last search copied to old and their indices to todo. free: the bound less the
+ * correspondence distance. Returns the number in todo. */
 int64_t sv_nearest_kept(const double *pts, int64_t n, double *last_at, int64_t *last_idx, double *last_second,
                         double *old_at, int64_t *old_idx, double *old_second, int64_t has_old, const double *t,
                         int64_t tn, int64_t m, double free, double *d, int64_t *todo) {

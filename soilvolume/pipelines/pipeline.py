@@ -134,14 +134,6 @@ def save_pipeline(stages: list[dict[str, Any]], path: str | os.PathLike) -> None
         Path(tmp).write_text(dumps(stages), encoding="utf-8")
 
 
-def _pdal_module():
-    try:
-        import pdal  # type: ignore[import-not-found]
-    except Exception:  # ImportError, or a broken libpdal
-        return None
-    return pdal
-
-
 def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
     """The stages run by real PDAL; its views' points concatenated in PDAL's dimension names."""
     try:
@@ -164,7 +156,12 @@ def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto", source: 
     it imports (``auto``)."""
     if engine not in ("auto", "pdal", "embedded"):
         raise SoilVolumeError(f"engine '{engine}': use auto, pdal or embedded")
-    pdal = None if engine == "embedded" else _pdal_module()
+    pdal = None
+    if engine != "embedded":
+        try:
+            import pdal  # type: ignore[import-not-found]
+        except Exception:  # ImportError, or a broken libpdal
+            pdal = None
     if engine == "pdal" and pdal is None:
         raise SoilVolumeError(
             "engine 'pdal' requested but the pdal Python bindings do not import "
