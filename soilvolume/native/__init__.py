@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .chunk import TYPES, declare
+from .chunk import TYPES
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "kernels.c"
@@ -27,6 +27,8 @@ DIR_ENV = "SOILVOLUME_NATIVE_DIR"  # another folder holding the built library (t
 _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
 #: each kernel's result and arguments (:data:`.chunk.TYPES`' letters; "-": no result)
 PROTOTYPES = {
+    "sv_chunk": ("-", "c"),
+    "sv_file_chunk": ("i", "ciiipipii"),
     "sv_columns": ("i", "pppiidddiipppp"),
     "sv_cells": ("i", "pppiifffiiiipppp"),
     "sv_sort_keys": ("-", "pipiipp"),
@@ -84,16 +86,11 @@ def _load() -> ctypes.CDLL | None:
             return None
     except (OSError, AttributeError):
         return None
-    declare(lib)
-    _declare(lib)
-    return lib
-
-
-def _declare(lib: ctypes.CDLL) -> None:
-    """The prototypes of the kernels other than the chunk's (:data:`PROTOTYPES`)."""
     for name, (result, args) in PROTOTYPES.items():
-        getattr(lib, name).argtypes = [TYPES[kind] for kind in args]
-        getattr(lib, name).restype = TYPES.get(result)
+        if hasattr(lib, name):  # all but sv_file_chunk (POSIX builds only)
+            getattr(lib, name).argtypes = [TYPES[kind] for kind in args]
+            getattr(lib, name).restype = TYPES.get(result)
+    return lib
 
 
 _scratch = threading.local()

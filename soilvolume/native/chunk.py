@@ -7,7 +7,8 @@ import ctypes
 
 import numpy as np
 
-#: the C types of the kernels' arguments and fields by letter: int64, double, float, a pointer
+#: the C types of the kernels' arguments and fields by letter: int64, double, float, a pointer (and
+#: "c", an ``sv_chunk_t *``)
 TYPES = {"i": ctypes.c_int64, "d": ctypes.c_double, "f": ctypes.c_float, "p": ctypes.c_void_p}
 #: ``sv_chunk_t`` of kernels.c field for field: name, type letter and array length
 FIELDS = (
@@ -26,13 +27,7 @@ class ChunkArgs(ctypes.Structure):
     ]
 
 
-def declare(lib: ctypes.CDLL) -> None:
-    """The prototypes of the chunk kernels (``sv_file_chunk``: POSIX builds only)."""
-    lib.sv_chunk.argtypes, lib.sv_chunk.restype = [ctypes.POINTER(ChunkArgs)], None
-    if hasattr(lib, "sv_file_chunk"):
-        i64, ptr = ctypes.c_int64, ctypes.c_void_p
-        lib.sv_file_chunk.argtypes = [ctypes.POINTER(ChunkArgs), i64, i64, i64, ptr, i64, ptr, i64, i64]
-        lib.sv_file_chunk.restype = i64
+TYPES["c"] = ctypes.POINTER(ChunkArgs)
 
 
 def address(a: np.ndarray | None) -> int | None:
