@@ -27,31 +27,25 @@ def cell_heights(
     own: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`average_height` of heights ``z`` in flat cells ``ids`` of a ``shape`` grid (a tile gets
-    the whole grid's cells); with ``skew`` also each cell's height minus its median (NaN where
+    the whole grid's cells); with ``skew`` also each cell's height minus its median (0 for median, NaN where
     empty). ``own``: ``ids`` and ``z`` may be overwritten."""
     if statistic not in ("mean", "median", "robust-mean"):
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     n = shape[0] * shape[1]
+    median = statistic == "median" and len(z) > 0
     if statistic == "mean" or len(z) == 0:
         counts = np.bincount(ids, minlength=n)
-        mean = _mean(ids, z, counts, n)
-        out = (mean.reshape(shape), counts.reshape(shape))
-        if spread:
-            sq = _mean(ids, z * z, counts, n)
-            out += (np.sqrt(np.maximum(sq - mean * mean, 0.0)).reshape(shape),)
-        if skew:
-            med = _SortedCells(ids, z, n, own).quantile(0.5) if len(z) else mean
-            out += ((mean - med).reshape(shape),)
-        return out
-    keys = _SortedCells(ids, z, n, own)
-    med = keys.quantile(0.5)
-    iqr_sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
-    extra = (iqr_sigma.reshape(shape),) if spread else ()
-    if statistic == "median":
-        return (med.reshape(shape), keys.counts.reshape(shape), *extra, *((np.zeros(shape),) if skew else ()))
-    sigma = np.maximum(iqr_sigma, 0.01)
-    h = keys.mean_between(med - k_mad * sigma, med + k_mad * sigma)
-    return (h.reshape(shape), keys.counts.reshape(shape), *extra, *(((h - med).reshape(shape),) if skew else ()))
+        h = _mean(ids, z, counts, n)
+        sigma = np.sqrt(np.maximum(_mean(ids, z * z, counts, n) - h * h, 0.0)) if spread else None
+        med = (_SortedCells(ids, z, n, own).quantile(0.5) if len(z) else h) if skew else None
+    else:
+        keys = _SortedCells(ids, z, n, own)
+        counts, med = keys.counts, keys.quantile(0.5)
+        sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
+        bound = k_mad * np.maximum(sigma, 0.01)
+        h = med if median else keys.mean_between(med - bound, med + bound)
+    out = (h.reshape(shape), counts.reshape(shape), *((sigma.reshape(shape),) if spread else ()))
+    return out + (((np.zeros(shape) if median else (h - med).reshape(shape)),) if skew else ())
 
 
 class _SortedCells:
