@@ -37,17 +37,10 @@ def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -
     poly = footprint(after_xy, options.radius / frame.xy_unit)
     srs = frame.crs.to_wkt()
     common = {"ground": options.ground, "out_srs": srs, "smrf": smrf_options(options, frame.xy_unit)}
+    epochs = (("before", before, options.before_crs, polygon_wkt(poly)), ("after", after, options.after_crs, None))
     with output_dir(out_dir, [before, after], True, EMITTED) as out, os_errors(out.final):
-        stages_b = build_prepare_pipeline(
-            before,
-            in_srs=options.before_crs,
-            polygon=polygon_wkt(poly),
-            output=out.final / "before_prepared.laz",
-            **common,
-        )
-        stages_a = build_prepare_pipeline(
-            after, in_srs=options.after_crs, output=out.final / "after_prepared.laz", **common
-        )
-        save_pipeline(stages_b, out.path("before.json"))
-        save_pipeline(stages_a, out.path("after.json"))
+        for name, path, in_srs, polygon in epochs:
+            output = out.final / f"{name}_prepared.laz"
+            stages = build_prepare_pipeline(path, in_srs=in_srs, polygon=polygon, output=output, **common)
+            save_pipeline(stages, out.path(f"{name}.json"))
     return out.final / "before.json", out.final / "after.json"
