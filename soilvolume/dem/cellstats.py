@@ -26,46 +26,34 @@ def cell_heights(
     skew: bool = False,
     own: bool = False,
 ) -> tuple[np.ndarray, ...]:
-    """:func:`average_height` of heights ``z`` already assigned to flat cell ``ids`` of a
-    ``shape`` grid (a tile of a larger grid computes the same cells as the whole grid); with
-    ``skew`` (and ``spread``) also each cell's height minus its median (0 for ``median``, NaN
-    where empty; for ``mean`` the plain mean's). ``own``: ``ids`` and ``z`` may be overwritten."""
+    """:func:`average_height` of heights ``z`` in flat cells ``ids`` of a ``shape`` grid (a tile gets
+    the whole grid's cells); with ``skew`` also each cell's height minus its median (0 for median, NaN where
+    empty). ``own``: ``ids`` and ``z`` may be overwritten."""
     if statistic not in ("mean", "median", "robust-mean"):
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     n = shape[0] * shape[1]
+    median = statistic == "median" and len(z) > 0
     if statistic == "mean" or len(z) == 0:
         counts = np.bincount(ids, minlength=n)
-        mean = _mean(ids, z, counts, n)
-        out = (mean.reshape(shape), counts.reshape(shape))
-        if spread:
-            sq = _mean(ids, z * z, counts, n)
-            out += (np.sqrt(np.maximum(sq - mean * mean, 0.0)).reshape(shape),)
-        if skew:
-            med = _SortedCells(ids, z, n, own).quantile(0.5) if len(z) else mean
-            out += ((mean - med).reshape(shape),)
-        return out
-    keys = _SortedCells(ids, z, n, own)
-    med = keys.quantile(0.5)
-    iqr_sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
-    extra = (iqr_sigma.reshape(shape),) if spread else ()
-    if statistic == "median":
-        return (med.reshape(shape), keys.counts.reshape(shape), *extra, *((np.zeros(shape),) if skew else ()))
-    sigma = np.maximum(iqr_sigma, 0.01)
-    h = keys.mean_between(med - k_mad * sigma, med + k_mad * sigma)
-    return (h.reshape(shape), keys.counts.reshape(shape), *extra, *(((h - med).reshape(shape),) if skew else ()))
+        h = _mean(ids, z, counts, n)
+        sigma = np.sqrt(np.maximum(_mean(ids, z * z, counts, n) - h * h, 0.0)) if spread else None
+        med = (_SortedCells(ids, z, n, own).quantile(0.5) if len(z) else h) if skew else None
+    else:
+        keys = _SortedCells(ids, z, n, own)
+        counts, med = keys.counts, keys.quantile(0.5)
+        sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
+        bound = k_mad * np.maximum(sigma, 0.01)
+        h = med if median else keys.mean_between(med - bound, med + bound)
+    out = (h.reshape(shape), counts.reshape(shape), *((sigma.reshape(shape),) if spread else ()))
+    return out + (((np.zeros(shape) if median else (h - med).reshape(shape)),) if skew else ())
 
 
 class _SortedCells:
-    """Heights sorted by (cell, height) through one sort of int64 keys ``cell << bits | level``:
-    a height's level is ``rint(z / q)`` (q = :data:`QUANTUM`, coarser only for a huge height
-    range) less the lowest level's floor (``base``), so any subset of the points (a tile's
-    window, the whole grid) quantises each height alike and gives its cells the same bits (from
-    each call's lowest point, a tiled run's DEM differed from the one-process run's by up to
-    1.4 cm where a point crossed the robust mean's bound). ``own``: ``ids`` (int64)
-    and ``z`` (float64) are the caller's to overwrite: the keys are built in them (no 8 B per
-    point arrays faulted in anew), and from :data:`SPLIT_SORT` keys on they are sorted as two
-    halves on two threads (into ``z``, spent by then); the temporaries stay within :data:`BLOCK`
-    points."""
+    """Heights sorted by (cell, height) through one sort of int64 keys ``cell << bits | level``,
+    a level ``rint(z / q)`` less ``base``: any subset of the points (a tile, the whole grid)
+    quantises a height alike (from each call's lowest point, a tiled DEM differed by up to 1.4 cm).
+    ``own``: the keys are built in ``ids`` and ``z`` (no arrays faulted in anew), from
+    :data:`SPLIT_SORT` keys on sorted as two halves on two threads."""
 
     def __init__(self, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool = False) -> None:
         low = float(z.min())
@@ -101,8 +89,7 @@ class _SortedCells:
         return key
 
     def _native(self, lib, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool) -> np.ndarray:
-        """The same keys, counts and sorted keys on the native kernels (``sv_keys``: one pass;
-        ``sv_sort_keys``: by cell, then each cell's keys), into ``ids`` and ``z`` when ``own``."""
+        """The same on the native kernels (``sv_keys``, ``sv_sort_keys``), into ``ids`` and ``z`` when ``own``."""
         key = ids if own else np.empty_like(ids)
         self.counts = np.zeros(n_cells, np.int64)
         counts = self.counts.ctypes.data
@@ -151,10 +138,8 @@ def _spare(z: np.ndarray, key: np.ndarray) -> bool:
 
 
 def _sorted_halves(key: np.ndarray, out: np.ndarray, counts: np.ndarray, bits: int) -> np.ndarray:
-    """``key`` sorted into ``out``: the keys of the cells before the middle point and those of the
-    cells after it moved apart (each in file order, where timsort finds its runs), then each half
-    sorted on its own thread. Sorted integers are one array whatever the route: the same bits as
-    ``key.sort()``."""
+    """``key`` sorted into ``out``: the cells before and after the middle point moved apart (in file
+    order, where timsort finds its runs), each half sorted on its own thread (``key.sort()``'s bits)."""
     ends = np.cumsum(counts)
     cell = min(int(np.searchsorted(ends, ends[-1] // 2)) + 1, len(counts))
     split, limit = int(ends[cell - 1]), np.int64(cell) << bits
@@ -179,9 +164,8 @@ def _mean(ids: np.ndarray, z: np.ndarray, counts: np.ndarray, n: int) -> np.ndar
 
 
 def _running_sum(key: np.ndarray, top: int) -> np.ndarray:
-    """``[0, cumsum(key & top)]`` in float64, block by block: each block starts from the running
-    total, so every value is the one a whole-array cumsum (a sequential sum) gives; in one pass
-    on the native kernel (``sv_running_sum``) when it is there."""
+    """``[0, cumsum(key & top)]`` in float64, block by block from the running total (a whole
+    cumsum's values), or by ``sv_running_sum``."""
     out = np.empty(len(key) + 1)
     lib = native.kernels()
     if lib is not None and key.dtype == np.int64 and key.flags.c_contiguous:
@@ -196,8 +180,7 @@ def _running_sum(key: np.ndarray, top: int) -> np.ndarray:
 
 
 class OffsetSums:
-    """Per-cell sums of the points' positions within their cells, gathered chunk by chunk; their
-    means say how far each cell's points sit from its centre."""
+    """Per-cell sums of the points' positions within their cells, gathered chunk by chunk."""
 
     def __init__(self, n_cells: int) -> None:
         self.sx, self.sy = np.zeros(n_cells), np.zeros(n_cells)
@@ -209,10 +192,8 @@ class OffsetSums:
         self.sy += np.bincount(ids, weights=row - np.floor(row), minlength=self.sy.size)
 
     def add_at(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
-        """:meth:`add`, point by point into the sums: blocks added this way give the same bits as
-        one :meth:`add` of all of them into empty sums (a bincount adds in the points' order too).
-        Points of cells an earlier block gave points are added one by one (``np.add.at``, 10x
-        slower), the others by a bincount: from zero, in the points' order, the same bits."""
+        """:meth:`add` point by point, blocks giving the bits of one :meth:`add` of all: points of cells
+        an earlier block gave points one by one (``np.add.at``, 10x slower), the others by a bincount."""
         if self.seen is None:
             self.seen = np.zeros(self.sx.size, bool)
         old = self.seen[ids]
@@ -226,8 +207,7 @@ class OffsetSums:
             sums += np.bincount(ids, weights=(c - np.floor(c)).astype(np.float64), minlength=sums.size)
 
     def means(self, counts: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-        """(east, north) mean offsets (m) from the cell centres, 0 where empty; ``counts``: the
-        points per cell, (rows, cols)."""
+        """(east, north) mean offsets (m) from the cell centres, 0 where empty, (rows, cols) as ``counts``."""
         n = counts.ravel()
         with np.errstate(invalid="ignore", divide="ignore"):
             dx = np.where(n > 0, self.sx / n - 0.5, 0.0) * cell

@@ -1,14 +1,8 @@
-"""Every GeoTIFF the engine writes, written here, whole or not at all, also on a full disk.
-
-One :class:`Layout` says what a file holds besides its values (size, CRS, transform, nodata,
-data type, band descriptions and units, tags, compression and tiling); three writers lay it out:
-:func:`write_geotiff` (bands in memory), :func:`write_cog` (a Cloud-Optimized GeoTIFF filled
-window by window, staged on disk when large) and :func:`write_grid` (a run's single-band raster
-on its grid). GDAL ignores a write that fails while it closes a file (the last blocks, the
-directory): the file is left truncated and no error reaches Python. So a raster is laid out by
-GDAL in memory (``/vsimem/``) and its bytes are written by Python, whose writes raise on a full
-disk; a raster too large for that is written by GDAL and checked afterwards (:func:`check_complete`).
-"""
+"""Every GeoTIFF the engine writes, whole or not at all, also on a full disk: a :class:`Layout`
+and three writers, :func:`write_geotiff` (bands in memory), :func:`write_cog` (filled window by
+window) and :func:`write_grid` (a run's raster on its grid). GDAL ignores a write failing while it
+closes a file (left truncated, no error): so GDAL lays a raster out in memory and Python writes its
+bytes (raising on a full disk); one too large for that is checked after GDAL (:func:`check_complete`)."""
 
 from __future__ import annotations
 
@@ -27,12 +21,13 @@ NODATA = -9999.0  # of a run's float rasters; its uint8 ones: 255
 COPY_CHUNK = 1 << 22  # bytes per write when a raster staged in memory is saved
 BLOCK = 256  # a COG's tile side
 IN_MEMORY_CELLS = 1 << 24  # up to this many cells a COG is staged in memory (64 MB of float32), not on disk
+PROFILE = ("driver", "width", "height", "count", "dtype", "crs", "transform", "nodata")  # a Layout's, for rasterio
 
 
 @dataclass(frozen=True)
 class Layout:
-    """What a GeoTIFF holds besides its values. ``options``: GDAL creation options (compression,
-    tiling); ``tags``: dataset tags; ``descriptions``/``units``: one per band, or none."""
+    """What a GeoTIFF holds besides its values: ``options`` GDAL's creation options, ``tags`` the
+    dataset's, ``descriptions``/``units`` one per band or none."""
 
     width: int
     height: int
@@ -49,9 +44,7 @@ class Layout:
 
     def profile(self) -> dict:
         """rasterio's keyword arguments for a file of this layout."""
-        base = dict(driver=self.driver, width=self.width, height=self.height, count=self.count, dtype=self.dtype)
-        base.update(crs=self.crs, transform=self.transform, nodata=self.nodata)
-        return {**base, **dict(self.options)}
+        return {**{key: getattr(self, key) for key in PROFILE}, **dict(self.options)}
 
     def filled(self, values: np.ndarray) -> np.ndarray:
         """``values`` in the layout's data type, NaN and infinities as nodata."""
@@ -77,14 +70,13 @@ def write_grid(
     units: str = "metre",
     dtype: str = "float32",
 ) -> Path:
-    """A run's single-band raster (NaN -> nodata) on ``grid`` (:func:`grid_layout`), whole or not
-    at all; returns the path."""
+    """A run's single-band raster (NaN -> nodata) on ``grid`` (:func:`grid_layout`); returns the path."""
     return write_geotiff(path, [array], grid_layout(grid, description, units, dtype))
 
 
 def write_geotiff(path: str | Path, bands: Sequence[np.ndarray], layout: Layout) -> Path:
-    """``bands`` (NaN -> nodata) as a GeoTIFF of ``layout``, laid out by GDAL in memory and written
-    by Python (a full disk raises an OSError naming ``path``), atomically; returns the path."""
+    """``bands`` (NaN -> nodata) as a GeoTIFF of ``layout``, laid out in memory and written
+    atomically (a full disk raises an OSError naming ``path``); returns the path."""
     from rasterio.io import MemoryFile
 
     path = Path(path)
@@ -108,8 +100,7 @@ def _describe(dst, layout: Layout) -> None:
 
 
 def _save(mem, final: Path) -> None:
-    """The bytes of the in-memory file ``mem`` written to ``final`` by Python, atomically: a full
-    disk raises an OSError naming ``final``, and nothing is left half-written."""
+    """The in-memory file ``mem`` written to ``final`` atomically (a full disk: an OSError naming it)."""
     mem.seek(0)
     try:
         with atomic_path(final) as tmp:
@@ -121,10 +112,9 @@ def _save(mem, final: Path) -> None:
 
 
 def write_cog(path: str | Path, layout: Layout, piece: Callable[[slice, slice], np.ndarray]) -> Path:
-    """A single-band Cloud-Optimized GeoTIFF (DEFLATE, :data:`BLOCK` tiles, internal overviews)
-    of ``layout``, its values ``piece(rows, cols)`` (NaN -> nodata) filled block row by block row,
-    whole or not at all; returns the path. Staged in GDAL's memory up to :data:`IN_MEMORY_CELLS`
-    cells, else as a tiled GeoTIFF on disk (memory stays bounded), checked complete."""
+    """A single-band COG of ``layout`` (DEFLATE, :data:`BLOCK` tiles, overviews), its values
+    ``piece(rows, cols)`` filled block row by block row, staged in memory up to
+    :data:`IN_MEMORY_CELLS` cells, else on disk and checked complete; returns the path."""
     path = Path(path)
     tiles = (("compress", "deflate"), ("tiled", True), ("blockxsize", BLOCK), ("blockysize", BLOCK))
     layout = replace(layout, options=(*tiles, ("BIGTIFF", "IF_SAFER")))
@@ -144,14 +134,11 @@ def write_cog(path: str | Path, layout: Layout, piece: Callable[[slice, slice], 
 
 
 def _blocks_dataset(plain: Path, layout: Layout, small: bool):
-    """Where a COG's blocks are written before it is laid out from them: GDAL's MEM driver for a
-    small raster, else a tiled GeoTIFF on disk at ``plain``."""
+    """Where a COG's blocks are written first: GDAL's MEM driver when ``small``, else ``plain``."""
     import rasterio
 
     if small:
-        keep = ("width", "height", "count", "dtype", "crs", "transform", "nodata")
-        profile = layout.profile()
-        return rasterio.open("", "w", driver="MEM", **{k: profile[k] for k in keep})
+        return rasterio.open("", "w", driver="MEM", **{key: getattr(layout, key) for key in PROFILE[1:]})
     return rasterio.open(plain, "w", **layout.profile())
 
 
@@ -168,9 +155,8 @@ def _fill(dst, layout: Layout, piece: Callable[[slice, slice], np.ndarray]) -> N
 
 
 def _as_cog(src, path: Path, dtype: str) -> None:
-    """``src`` (a dataset or a file) laid out as a COG at ``path``, whole or not at all: a dataset
-    in memory (a small raster) through memory, its bytes written by Python; a file's COG written
-    by GDAL, then checked complete (GDAL ignores a full disk while it closes a file)."""
+    """``src`` as a COG at ``path``, whole or not at all: a dataset through memory, a file's COG
+    written by GDAL and checked complete."""
     import rasterio.shutil
     from rasterio.io import MemoryFile
 
@@ -192,8 +178,8 @@ def _as_cog(src, path: Path, dtype: str) -> None:
 
 
 def check_complete(path: Path, final: Path) -> None:
-    """Refuse a GeoTIFF GDAL wrote at ``path`` (for ``final``) that lacks its directory or whose
-    blocks (of every band and overview) reach past the end of the file."""
+    """Refuse a GeoTIFF at ``path`` (for ``final``) without its directory or with blocks (of any band
+    or overview) past its end."""
     import rasterio
 
     size = path.stat().st_size

@@ -1,9 +1,5 @@
-"""Average-height grids (DEMs) of both clouds on one shared grid (written by :mod:`.geotiff`).
-
-The per-cell statistic is the paper's mean, the median, or (default) a robust mean: the mean of
-the points within 3 robust standard deviations (from the interquartile range, floor 1 cm) of the
-cell median, which keeps stray outliers and floaters from becoming a whole cell's height.
-"""
+"""Average-height grids (DEMs) of both clouds on one shared grid: per cell the paper's mean, the
+median or (default) a robust mean, which keeps stray outliers from becoming a cell's height."""
 
 from __future__ import annotations
 
@@ -45,8 +41,7 @@ class EpochDEM:
         return sum(parts) if parts else np.zeros(self.counts.shape, np.int64)
 
     def all_points_height(self) -> np.ndarray:
-        """Each cell's mean height with its non-soil points in (what a grid of every point would
-        hold; NaN where the cell has no point at all)."""
+        """Each cell's mean height of every point, non-soil ones too (NaN where it has none)."""
         if self.nonsoil_z is None:
             return self.heights
         m = self.nonsoil()
@@ -55,10 +50,9 @@ class EpochDEM:
             return np.where(self.counts + m > 0, (soil + self.nonsoil_z) / (self.counts + m), np.nan)
 
     def centred(self, cell: float, skip: np.ndarray | None = None) -> np.ndarray:
-        """Heights moved from where each cell's points lie to the cell's centre, along the slope
-        of the neighbouring cells: a cell covered on one side only (at a hole or the survey's
-        edge) otherwise holds the height of that side, on a slope too high or too low. ``skip``:
-        cells too weak to give their neighbours a slope (left as they are)."""
+        """Heights moved from where each cell's points lie to its centre along the neighbours' slope (a
+        cell covered on one side only, at a hole or an edge, otherwise holds that side's height);
+        ``skip``: cells too weak to give a slope, left as they are."""
         if self.dx is None or self.dy is None:
             return self.heights
         base = self.heights if skip is None else np.where(skip, np.nan, self.heights)
@@ -104,9 +98,8 @@ def make_grid(
 
 
 def cell_coords(xyz: np.ndarray, grid: GridSpec, window: tuple | None = None) -> tuple[np.ndarray, ...]:
-    """Column and row coordinates (in cells, fractional) of every point, and the mask of those
-    inside the grid (computed in the points' own precision: float32 stays float32); with a
-    ``window`` (r0, r1, c0, c1 of the grid's cells), of those in the window's cells."""
+    """Fractional column and row of every point (in its own precision) and the mask of those in the
+    grid, or in its ``window`` of cells (r0, r1, c0, c1)."""
     inv = 1.0 / grid.cell
     col = (xyz[:, 0] - (grid.xmin - grid.origin[0])) * inv
     row = ((grid.ymax - grid.origin[1]) - xyz[:, 1]) * inv
@@ -116,9 +109,8 @@ def cell_coords(xyz: np.ndarray, grid: GridSpec, window: tuple | None = None) ->
 
 
 def flat_ids(col: np.ndarray, row: np.ndarray, n_cols: int) -> np.ndarray:
-    """Flat cell ids (int64) of non-negative column and row coordinates inside a grid (truncation
-    is floor). The coordinates go through int32 (a grid has at most 4e8 cells), which the CPU
-    converts to in vectors; floats to int64 are converted one by one."""
+    """Flat int64 cell ids of coordinates inside a grid, through int32 (at most 4e8 cells): the CPU
+    converts floats to int32 in vectors, to int64 one by one."""
     ids = row.astype(np.int32).astype(np.int64)
     ids *= n_cols
     ids += col.astype(np.int32)
@@ -138,24 +130,18 @@ def average_height(
     k_mad: float = 3.0,
     spread: bool = False,
 ) -> tuple[np.ndarray, ...]:
-    """Per-cell height (NaN where empty) and point count, both (rows, cols); with ``spread``
-    also the per-cell robust spread of the heights (m: IQR / 1.349, the standard deviation for
-    ``mean``), which objects, vegetation and steep edges inside a cell inflate.
-
-    ``robust-mean``: the mean of the points within ``k_mad`` robust standard deviations (from the
-    cell's interquartile range, floor 1 cm) of the cell median; one sort of (cell, height) keys."""
+    """Per-cell height (NaN where empty) and count, with ``spread`` the robust spread (IQR / 1.349;
+    the standard deviation for ``mean``). ``robust-mean``: the mean within ``k_mad`` robust
+    standard deviations (from the IQR, floor 1 cm) of the cell's median."""
     ids, ok = cell_ids(xyz, grid)
     z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
     return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
 
 
 def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", nonsoil=None, move=None) -> EpochDEM:
-    """:func:`average_height` of one epoch's soil points with their spreads and offsets from
-    the cell centres, and the per-cell counts of its ``nonsoil`` points (``soil.points.NonSoil``,
-    in the grid's frame), as an :class:`EpochDEM` (see :func:`finish_epoch`). ``move``: applied
-    to each block of :data:`BLOCK` points first (the after cloud's registration, block by block:
-    no moved copy of the cloud). The points are assigned to cells block by block; only their
-    cell ids and heights are kept whole (the same arrays, in the same order, as in one piece)."""
+    """An :class:`EpochDEM` of one epoch's soil points (spreads, offsets from the cell centres) and
+    its ``nonsoil`` points' counts (:func:`finish_epoch`). ``move``: applied to each block of
+    :data:`BLOCK` points (no moved copy of the cloud); only cell ids and heights are kept whole."""
     n = grid.rows * grid.cols
     sums = OffsetSums(n)
     ids, z = _cells_of(xyz, grid, move, sums)
@@ -170,8 +156,8 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
 
 
 def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[np.ndarray, np.ndarray]:
-    """(flat cell ids, float64 heights) of the points of ``xyz`` inside ``grid``, in order,
-    assigned block by block (moved by ``move`` first); their centre offsets into ``sums``."""
+    """(flat cell ids, float64 heights) of the points in ``grid``, in order, block by block (moved
+    by ``move``); their centre offsets added to ``sums``."""
     ids, z = np.empty(len(xyz), np.int64), np.empty(len(xyz), np.float64)  # pages never written stay free
     m, lib = 0, native.kernels()
     for i in range(0, len(xyz), BLOCK):
@@ -192,10 +178,9 @@ def _cells_of(xyz: np.ndarray, grid: GridSpec, move, sums: OffsetSums) -> tuple[
 def native_cells(
     lib, part: np.ndarray, grid: GridSpec, win: tuple, ids: np.ndarray, z: np.ndarray, sx: np.ndarray, sy: np.ndarray
 ) -> int:
-    """``sv_cells``: the float32 points of ``part`` on the cells of the window ``win`` (r0, r1, c0,
-    c1) of ``grid``, assigned on the whole grid: their flat ids in the window and float64 heights
-    written to ``ids`` and ``z``, their offsets in their cells added to ``sx`` and ``sy`` point by
-    point (as :meth:`OffsetSums.add_at`), the bits of numpy's :func:`cell_coords`; returns how many."""
+    """``sv_cells``: the float32 points of ``part`` in the window ``win`` (r0, r1, c0, c1) of ``grid``:
+    flat ids and heights into ``ids`` and ``z``, offsets added to ``sx``/``sy`` (as
+    :meth:`OffsetSums.add_at`), the bits of :func:`cell_coords`; returns how many."""
     part, addresses, step = axes(part, np.float32)  # (N, 3) rows or a (3, N) transposed as they are
     return lib.sv_cells(
         *addresses,
@@ -213,18 +198,16 @@ def native_cells(
 
 
 def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:
-    """(vegetation, objects, other counts, sum of heights) per cell of non-soil points in flat
-    cells ``ids`` of a ``shape`` grid (labels of :mod:`soilvolume.soil.points`)."""
+    """(vegetation, objects, other counts, sum of heights) per cell of non-soil points ``ids``."""
     n = shape[0] * shape[1]
     counts = tuple(np.bincount(ids[labels == k], minlength=n).reshape(shape) for k in (VEGETATION, OBJECT, OTHER))
     return (*counts, np.bincount(ids, weights=np.asarray(z, np.float64), minlength=n).reshape(shape))
 
 
 def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> EpochDEM:
-    """An :class:`EpochDEM` from its soil heights (h, n, s, skew), centre offsets (dx, dy) and
-    non-soil sums (:func:`nonsoil_sums`, None without a rule); with a colour rule
-    (``rule.empties_cells``) a cell mostly of non-soil points has no soil height: its remaining
-    "soil" points are canopy seen at a slant or mixed pixels, not the ground."""
+    """An :class:`EpochDEM` from soil heights (h, n, s, skew), offsets and non-soil sums (None without
+    a rule); with a colour rule a cell mostly not soil has no height (its "soil" points are canopy
+    seen at a slant or mixed pixels)."""
     h, n, s, skew = heights
     if others is None:
         return EpochDEM(h, n, s, *offsets, skew=skew, rule=rule)
@@ -237,8 +220,7 @@ def finish_epoch(heights: tuple, offsets: tuple, others: tuple | None, rule) -> 
 
 
 def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> float:
-    """:func:`choose_cell` from the density of ``xyz`` inside ``polygon`` (local), counted on a
-    lattice of at most about a million cells."""
+    """:func:`choose_cell` from the density of ``xyz`` in ``polygon``, on about a million cells."""
     lo, hi = polygon.min(axis=0), polygon.max(axis=0)
     res = max(1.0, float(np.sqrt(np.prod(hi - lo) / 1e6)))
     lattice = make_grid(np.r_[lo, 0], np.r_[hi, 0], res, np.zeros(3), None)
@@ -255,8 +237,7 @@ UINT8_LAYERS = (MASK_LAYER, CLASS_LAYER)
 
 
 def output_layers(correction: str) -> list[tuple[str, str, str]]:
-    """The rasters of an estimate run: (file name, the volume step's array, description); the
-    ``dem_`` arrays are local heights (add the origin's z)."""
+    """An estimate's rasters: (file, the volume step's array, description); ``dem_`` ones local."""
     return [
         ("dem_before.tif", "dem_out_b", "average height, before; refilled where filled_mask is 1 (m)"),
         ("dem_after.tif", "dem_out_a", "average height, after; refilled where filled_mask is 1 (m)"),

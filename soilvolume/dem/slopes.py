@@ -9,12 +9,9 @@ KINK_M = 0.1  # a change of slope this high over one cell is an edge (a bush, a 
 
 
 def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """dh/dx (east) and dh/dy (north) per cell: central differences where both neighbours have
-    data, NaN where neither has. Where one has, the one-sided step, limited by the next step
-    beyond it where the two differ by a kink (:func:`_limited`, minmod): a cell at a hole next to
-    a bush, a vehicle or a rim otherwise takes the step onto it as its slope, and its points, all
-    on that side, are moved by it (0.46 m on a 0.5 m cell beside a bush at a pit's rim,
-    paper-veg20m-rgb); on a steady slope (a pit's wall, a pile's flank) the two steps agree."""
+    """dh/dx (east) and dh/dy (north) per cell: central differences, else the one-sided step limited
+    by the next one at a kink (:func:`_limited`; a cell at a hole beside a bush took the step onto it:
+    0.46 m on a 0.5 m cell, paper-veg20m-rgb), NaN without neighbours."""
     out = []
     for axis in (1, 0):
         fwd = np.full(h.shape, np.nan)
@@ -36,9 +33,8 @@ def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _limited(step: np.ndarray, beyond: np.ndarray, cell: float) -> np.ndarray:
-    """``step`` limited by ``beyond`` where the two differ by a kink of :data:`KINK_M` over a
-    cell or more (see :func:`slopes`; kept where ``beyond`` is unknown, and where they differ by
-    the heights' noise only: a sparse survey's edge cells keep the terrain's slope)."""
+    """``step`` limited by ``beyond`` (minmod) where they differ by :data:`KINK_M` or more over a cell;
+    kept elsewhere (noise only: a sparse survey's edge cells keep the terrain's slope)."""
     with np.errstate(invalid="ignore"):
         agree = step * beyond > 0
         limited = np.where(agree, np.sign(step) * np.minimum(np.abs(step), np.abs(beyond)), 0.0)

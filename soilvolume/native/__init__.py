@@ -1,13 +1,8 @@
-"""The engine's native kernels (``kernels.c``): one-pass loops over the points where numpy makes
-many passes over memory, loaded with ctypes when a build of this very source is present (its
-file name carries the source's digest: a library built from other code is never used), else the
-numpy path runs (the same bits, slower). ``SOILVOLUME_NATIVE=0`` turns them off.
-
-Built by ``python -m soilvolume.native.build`` when the environment is installed (``make setup``;
-the plugin's installer when the machine has a C compiler; ``make package`` ships the source only,
-no binary), never during a run: without a build the numpy path runs, said only under
-``SOILVOLUME_DEBUG``. A ctypes call releases the GIL: a kernel on the reading thread runs beside
-Python on the other."""
+"""The engine's native kernels (``kernels.c``): one-pass loops where numpy makes many passes,
+loaded with ctypes when a build of this very source is present (its name carries the source's
+digest), else the numpy path runs (the same bits, slower; said under ``SOILVOLUME_DEBUG``).
+``SOILVOLUME_NATIVE=0`` turns them off. Built by ``python -m soilvolume.native.build`` when the
+environment is installed, never during a run. A ctypes call releases the GIL."""
 
 from __future__ import annotations
 
@@ -21,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .chunk import declare
+from .chunk import TYPES
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "kernels.c"
@@ -30,6 +25,23 @@ ENV = "SOILVOLUME_NATIVE"  # "0": the numpy path only
 DIR_ENV = "SOILVOLUME_NATIVE_DIR"  # another folder holding the built library (the plugin's environment)
 
 _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
+#: each kernel's result and arguments (:data:`.chunk.TYPES`' letters; "-": no result)
+PROTOTYPES = {
+    "sv_chunk": ("-", "c"),
+    "sv_file_chunk": ("i", "ciiipipii"),
+    "sv_columns": ("i", "pppiidddiipppp"),
+    "sv_cells": ("i", "pppiifffiiiipppp"),
+    "sv_sort_keys": ("-", "pipiipp"),
+    "sv_keys": ("-", "ppiidipp"),
+    "sv_running_sum": ("-", "piip"),
+    "sv_nearest_kept": ("i", "pippppppipiidpp"),
+    "sv_cut_box": ("i", "pppiiddddpi"),
+    "sv_bounds": ("-", "piiiipp"),
+    "sv_grid_build": ("-", "piidddiipp"),
+    "sv_grid_nearest2": ("-", "pipiidddiippdpp"),
+    "sv_icp_terms": ("-", "pippipipidppp"),
+    "sv_centroids": ("i", "pipp"),
+}
 
 
 def tag() -> str:
@@ -74,47 +86,18 @@ def _load() -> ctypes.CDLL | None:
             return None
     except (OSError, AttributeError):
         return None
-    declare(lib)
-    _declare(lib)
+    for name, (result, args) in PROTOTYPES.items():
+        if hasattr(lib, name):  # all but sv_file_chunk (POSIX builds only)
+            getattr(lib, name).argtypes = [TYPES[kind] for kind in args]
+            getattr(lib, name).restype = TYPES.get(result)
     return lib
-
-
-def _declare(lib: ctypes.CDLL) -> None:
-    """The prototypes of the kernels other than the chunk's."""
-    i64, f64, ptr = ctypes.c_int64, ctypes.c_double, ctypes.c_void_p
-    lib.sv_columns.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, ptr, ptr]
-    lib.sv_columns.restype = i64
-    f32 = ctypes.c_float
-    lib.sv_cells.argtypes = [ptr, ptr, ptr, i64, i64, f32, f32, f32, i64, i64, i64, i64, ptr, ptr, ptr, ptr]
-    lib.sv_cells.restype = i64
-    lib.sv_sort_keys.argtypes = [ptr, i64, ptr, i64, i64, ptr, ptr]
-    lib.sv_sort_keys.restype = None
-    lib.sv_keys.argtypes = [ptr, ptr, i64, i64, f64, i64, ptr, ptr]
-    lib.sv_keys.restype = None
-    lib.sv_running_sum.argtypes = [ptr, i64, i64, ptr]
-    lib.sv_running_sum.restype = None
-    lib.sv_nearest_kept.argtypes = [ptr, i64, ptr, ptr, ptr, ptr, ptr, ptr, i64, ptr, i64, i64, f64, ptr, ptr]
-    lib.sv_nearest_kept.restype = i64
-    lib.sv_cut_box.argtypes = [ptr, ptr, ptr, i64, i64, f64, f64, f64, f64, ptr, i64]
-    lib.sv_cut_box.restype = i64
-    lib.sv_bounds.argtypes = [ptr, i64, i64, i64, i64, ptr, ptr]
-    lib.sv_bounds.restype = None
-    lib.sv_grid_build.argtypes = [ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr]
-    lib.sv_grid_build.restype = None
-    lib.sv_grid_nearest2.argtypes = [ptr, i64, ptr, i64, i64, f64, f64, f64, i64, i64, ptr, ptr, f64, ptr, ptr]
-    lib.sv_grid_nearest2.restype = None
-    lib.sv_icp_terms.argtypes = [ptr, i64, ptr, ptr, i64, ptr, i64, ptr, i64, f64, ptr, ptr, ptr]
-    lib.sv_icp_terms.restype = None
-    lib.sv_centroids.argtypes = [ptr, i64, ptr, ptr]
-    lib.sv_centroids.restype = i64
 
 
 _scratch = threading.local()
 
 
 def zeros(name: str, size: int, dtype) -> np.ndarray:
-    """A thread's array of at least ``size`` zeros kept for the kernels that leave it zero (one
-    per ``name``: no fresh pages to fault in at every call)."""
+    """A thread's kept array of at least ``size`` zeros, per ``name``, for kernels that leave it zero."""
     have = getattr(_scratch, name, None)
     if have is None or have.size < size:
         have = np.zeros(max(size, 1), dtype)
@@ -123,9 +106,8 @@ def zeros(name: str, size: int, dtype) -> np.ndarray:
 
 
 def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
-    """(values from one point to the next, from one axis to the next) of ``points``, an (N, k)
-    array of ``dtype`` or its transposed (k, N) rows, as a kernel walks them; None when the
-    kernels cannot walk it so (another dtype, strides not whole values, or not positive)."""
+    """(values from one point to the next, from one axis to the next) of an (N, k) ``points`` array
+    of ``dtype`` (or its transposed rows); None when a kernel cannot walk it so."""
     size = np.dtype(dtype).itemsize
     if points.dtype != dtype or points.ndim != 2 or min(points.strides) <= 0 or any(s % size for s in points.strides):
         return None
@@ -133,10 +115,8 @@ def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
 
 
 def axes(points: np.ndarray, dtype) -> tuple[np.ndarray, tuple[int, int, int], int]:
-    """(the points as the kernels read them, the addresses of their first x, y and z, the values
-    from one point's to the next's): an (N, 3) array of ``dtype`` or its transposed (3, N) rows as
-    they are (:func:`steps`), any other copied into a C-ordered one of ``dtype`` (keep the array
-    while the addresses are used)."""
+    """(the points as the kernels read them, their first x, y, z addresses, the step between
+    points): walkable ones as they are (:func:`steps`), others copied (keep the array alive)."""
     walk = steps(points, dtype)
     if walk is None:
         points = np.ascontiguousarray(points, dtype)

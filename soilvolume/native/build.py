@@ -1,9 +1,7 @@
 """Build the native kernels: ``python -m soilvolume.native.build [--out DIR] [--cc CC] [--quiet]``.
 
-Compiles ``kernels.c`` with the machine's C compiler (``CC``, else cc, gcc or clang) into the
-library :func:`soilvolume.native.library_name` names, written under a temporary name and renamed
-when complete. Exit status 0 when the library is there (built now or already), 1 when it could
-not be built: the engine then runs its numpy path, the same results, slower."""
+``kernels.c`` compiled into the library :func:`soilvolume.native.library_name` names (renamed into
+place when complete). Exit status 0 when the library is there, 1 when it could not be built."""
 
 from __future__ import annotations
 
@@ -22,14 +20,9 @@ COMPILE_S = 120.0  # at most this long for the compiler
 
 
 def compiler(given: str | None = None) -> str | None:
-    """The C compiler to use: ``given`` (None when it is not on the PATH), else ``$CC`` or the
-    first of cc, gcc, clang on the PATH."""
-    if given:
-        return given if shutil.which(given.split()[0]) else None
-    for name in (os.environ.get("CC"), "cc", "gcc", "clang"):
-        if name and shutil.which(name.split()[0]):
-            return name
-    return None
+    """``given`` (None when not on the PATH), else ``$CC`` or the first of cc, gcc, clang on the PATH."""
+    names = [given] if given else [os.environ.get("CC"), "cc", "gcc", "clang"]
+    return next((name for name in names if name and shutil.which(name.split()[0])), None)
 
 
 def build(out: Path = HERE, cc: str | None = None) -> tuple[Path | None, str]:

@@ -7,61 +7,27 @@ import ctypes
 
 import numpy as np
 
-_D3, _D2, _D4 = ctypes.c_double * 3, ctypes.c_double * 2, ctypes.c_double * 4
-_I3, _I2 = ctypes.c_int64 * 3, ctypes.c_int64 * 2
-_P = ctypes.c_void_p
+#: the C types of the kernels' arguments and fields by letter: int64, double, float, a pointer (and
+#: "c", an ``sv_chunk_t *``)
+TYPES = {"i": ctypes.c_int64, "d": ctypes.c_double, "f": ctypes.c_float, "p": ctypes.c_void_p}
+#: ``sv_chunk_t`` of kernels.c field for field: name, type letter and array length
+FIELDS = (
+    "rec p, n i, stride i, field i3, scale d3, offset d3, origin d3, labels p, framed p, plo d2, pres d, prows i, "
+    "pcols i, tlo d2, voxel d, first i2, shape i2, ncols i, sums p, mark p, side_ids p, side p, nside i, chunk i, "
+    "flush i, use_box i, box d4, out p, others p, other_labels p, cropped i, kept i, other i, soil i, lo d3, hi d3"
+)
 
 
 class ChunkArgs(ctypes.Structure):
-    """``sv_chunk_t`` of kernels.c, field for field."""
+    """``sv_chunk_t`` of kernels.c, field for field (:data:`FIELDS`)."""
 
     _fields_ = [
-        ("rec", _P),
-        ("n", ctypes.c_int64),
-        ("stride", ctypes.c_int64),
-        ("field", _I3),
-        ("scale", _D3),
-        ("offset", _D3),
-        ("origin", _D3),
-        ("labels", _P),
-        ("framed", _P),
-        ("plo", _D2),
-        ("pres", ctypes.c_double),
-        ("prows", ctypes.c_int64),
-        ("pcols", ctypes.c_int64),
-        ("tlo", _D2),
-        ("voxel", ctypes.c_double),
-        ("first", _I2),
-        ("shape", _I2),
-        ("ncols", ctypes.c_int64),
-        ("sums", _P),
-        ("mark", _P),
-        ("side_ids", _P),
-        ("side", _P),
-        ("nside", ctypes.c_int64),
-        ("chunk", ctypes.c_int64),
-        ("flush", ctypes.c_int64),
-        ("use_box", ctypes.c_int64),
-        ("box", _D4),
-        ("out", _P),
-        ("others", _P),
-        ("other_labels", _P),
-        ("cropped", ctypes.c_int64),
-        ("kept", ctypes.c_int64),
-        ("other", ctypes.c_int64),
-        ("soil", ctypes.c_int64),
-        ("lo", _D3),
-        ("hi", _D3),
+        (name, TYPES[kind[0]] * int(kind[1:]) if kind[1:] else TYPES[kind])
+        for name, kind in (field.split() for field in FIELDS.split(", "))
     ]
 
 
-def declare(lib: ctypes.CDLL) -> None:
-    """The prototypes of the chunk kernels (``sv_file_chunk``: POSIX builds only)."""
-    lib.sv_chunk.argtypes, lib.sv_chunk.restype = [ctypes.POINTER(ChunkArgs)], None
-    if hasattr(lib, "sv_file_chunk"):
-        i64 = ctypes.c_int64
-        lib.sv_file_chunk.argtypes = [ctypes.POINTER(ChunkArgs), i64, i64, i64, _P, i64, _P, i64, i64]
-        lib.sv_file_chunk.restype = i64
+TYPES["c"] = ctypes.POINTER(ChunkArgs)
 
 
 def address(a: np.ndarray | None) -> int | None:

@@ -1,11 +1,7 @@
-/* soilvolume's native kernels: loops of the engine that numpy runs as many passes over memory,
- * done in one pass each.
- *
- * Plain C99, no Python or numpy headers: loaded with ctypes, which releases the GIL for the call,
- * so a kernel on one thread runs beside Python on another. Each kernel computes what its numpy
- * twin computes (named in its comment), with the same double operations in the same order: the
- * library is built with -ffp-contract=off (no fused multiply-adds), and a run gives the same bits
- * with or without it (tests/test_native.py). Build: python -m soilvolume.native.build. */
+/* soilvolume's native kernels: loops numpy runs as many passes over memory, in one pass each.
+ * Plain C99 loaded with ctypes (the GIL released for the call). Each kernel does its numpy twin's
+ * (named in its comment) double operations in the same order, built with -ffp-contract=off: a run
+ * gives the same bits with or without it (tests/test_native.py). */
 
 #define _POSIX_C_SOURCE 200809L /* pread */
 #include <math.h>
@@ -19,9 +15,7 @@
 #endif
 
 /* The layout version of the structures below; the loader refuses a library of another. */
-#define SV_ABI 1
-
-int64_t sv_abi(void) { return SV_ABI; }
+int64_t sv_abi(void) { return 1; }
 
 /* One chunk of a LAS/LAZ file streamed into the working frame (numpy twin:
  * soilvolume.inputs.chunkwork.numpy_chunk). */
@@ -38,13 +32,11 @@ typedef struct {
     const uint8_t *framed;
     double plo[2], pres;
     int64_t prows, pcols;
-    /* the thinning lattice (soilvolume.inputs.thinning.ColumnThinner): column sums x, y, z and
-     * count (sums: 4 x ncols). numpy adds each chunk's sums (bincount's, from zero in point
-     * order) to them; here a column's points are added straight onto its sums, the sums a column
-     * held from earlier chunks set aside first (side_ids, side: 4 doubles each) and added back
-     * when the chunk ends (flush): a + b is b + a, the same bits, with no chunk-sized array of
-     * sums to fault in. mark (int32, ncols, zeros): the chunk (counted from 1, chunk) that last
-     * touched each column. */
+    /* the thinning lattice (inputs.thinning.ColumnThinner): column sums x, y, z, count (4 x ncols).
+     * numpy adds each chunk's sums (from zero in point order) to them; here a point is added onto
+     * its column's sums, those of earlier chunks set aside first (side_ids, side: 4 doubles each)
+     * and added back when the chunk ends (flush): b + a, the same bits, no chunk-sized sums to
+     * fault in. mark (int32, ncols, zeros): the chunk (from 1) that last touched each column. */
     double tlo[2], voxel;
     int64_t first[2], shape[2], ncols;
     double *sums;
@@ -72,8 +64,7 @@ static inline int32_t load_i32(const uint8_t *p) {
 /* The polygon lattice's index of a coordinate: int((v - lo) / res) clipped to -1..top
  * (PolygonMask._cell). */
 static inline int64_t lattice(double v, double lo, double res, int64_t top) {
-    double t = v - lo;
-    t = t / res;
+    double t = (v - lo) / res;
     if (!(t >= -1.0)) return -1; /* NaN too */
     if (t > (double)top) return top;
     return (int64_t)t;
@@ -82,8 +73,7 @@ static inline int64_t lattice(double v, double lo, double res, int64_t top) {
 /* A thinning column along one axis: int((v - lo) / voxel) - first (ColumnThinner._index), or -1
  * where numpy's conversion would overflow (the caller's unsigned bound test fails both). */
 static inline int64_t column(double v, double lo, double voxel, int64_t first) {
-    double t = v - lo;
-    t = t / voxel;
+    double t = (v - lo) / voxel;
     if (!(t > -9.2e18 && t < 9.2e18)) return -1;
     return (int64_t)t - first;
 }
@@ -99,32 +89,29 @@ static inline int in_box(const double *p, const double *box) {
 static inline void thin_add(sv_chunk_t *c, int64_t id, const double *p) {
     int64_t n = c->ncols;
     double *s = c->sums;
+    const double v[4] = {p[0], p[1], p[2], 1.0};
     if (c->mark[id] != (int32_t)c->chunk) {
-        if (c->mark[id] == 0) { /* 0.0 + v: the bits of the zero sums plus v (-0.0 too) */
-            c->mark[id] = (int32_t)c->chunk;
-            s[id] = 0.0 + p[0], s[n + id] = 0.0 + p[1], s[2 * n + id] = 0.0 + p[2], s[3 * n + id] = 1.0;
+        int fresh = c->mark[id] == 0;
+        c->mark[id] = (int32_t)c->chunk;
+        if (fresh) { /* 0.0 + v: the bits of the zero sums plus v (-0.0 too) */
+            for (int a = 0; a < 4; a++) s[a * n + id] = 0.0 + v[a];
             return;
         }
         double *keep = c->side + 4 * c->nside;
         c->side_ids[c->nside++] = id;
-        keep[0] = s[id], keep[1] = s[n + id], keep[2] = s[2 * n + id], keep[3] = s[3 * n + id];
-        s[id] = s[n + id] = s[2 * n + id] = s[3 * n + id] = 0.0;
-        c->mark[id] = (int32_t)c->chunk;
+        for (int a = 0; a < 4; a++) keep[a] = s[a * n + id], s[a * n + id] = 0.0;
     }
-    s[id] += p[0], s[n + id] += p[1], s[2 * n + id] += p[2], s[3 * n + id] += 1.0;
+    for (int a = 0; a < 4; a++) s[a * n + id] += v[a];
 }
 
 /* The end of a chunk: the sums set aside added back (numpy: earlier sums + this chunk's). */
 static void thin_flush(sv_chunk_t *c) {
     int64_t n = c->ncols;
-    for (int64_t k = 0; k < c->nside; k++) {
-        int64_t id = c->side_ids[k];
-        const double *keep = c->side + 4 * k;
-        c->sums[id] = keep[0] + c->sums[id];
-        c->sums[n + id] = keep[1] + c->sums[n + id];
-        c->sums[2 * n + id] = keep[2] + c->sums[2 * n + id];
-        c->sums[3 * n + id] = keep[3] + c->sums[3 * n + id];
-    }
+    for (int64_t k = 0; k < c->nside; k++)
+        for (int a = 0; a < 4; a++) {
+            double *sum = c->sums + a * n + c->side_ids[k];
+            *sum = c->side[4 * k + a] + *sum;
+        }
     c->nside = 0;
     c->chunk++;
 }
@@ -252,12 +239,10 @@ void sv_bounds(const double *p, int64_t n, int64_t step, int64_t axis, int64_t d
     for (int64_t j = 0; j < dims; j++) lo[j] = nan >> j & 1 ? NAN : a[j], hi[j] = nan >> j & 1 ? NAN : b[j];
 }
 
-/* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): each point's
- * column is floor((v - lo) / cell) per axis, points off the grid are dropped, each column's sums
- * run over its points in order from zero (bincount's). x, y, z: the points' coordinates, step
- * doubles apart. count (rows * cols) and sums (3 x rows * cols) are zeros and are left zeros.
- * Writes the occupied columns' flat ids, in order, to has and their means (m x 3) to means;
- * returns m. */
+/* Column means on a grid (numpy twin: soilvolume.registration.columns._binned): a point's column
+ * floor((v - lo) / cell) per axis (off the grid: dropped), its sums in point order from zero. x, y,
+ * z step doubles apart; count (rows * cols) and sums (3 x rows * cols): zeros, left zeros. The
+ * occupied columns' ids, in order, to has, their means (m x 3) to means; returns m. */
 int64_t sv_columns(const double *x, const double *y, const double *z, int64_t n, int64_t step, double lo0,
                    double lo1, double cell, int64_t rows, int64_t cols, int64_t *count, double *sums,
                    int64_t *has, double *means) {
@@ -284,13 +269,11 @@ int64_t sv_columns(const double *x, const double *y, const double *z, int64_t n,
     return m;
 }
 
-/* Points to the cells of a window of a grid (numpy twins: soilvolume.dem.grid._cells_of on a block,
- * soilvolume.distributed.tiletask._window_cells): float32 coordinates x, y, z (step floats apart)
- * to fractional column (x - xmin) * inv and row (ymax - y) * inv on the whole grid in float32, as
- * numpy computes them; the points in the window's rows r0..r1 and columns c0..c1 get their flat
- * cell id in the window and float64 height appended to ids and z, and their offsets within the
- * cell (col - floor(col), row - floor(row)) added to sx and sy in order (OffsetSums.add_at).
- * Returns the number appended. */
+/* Points to the cells of a grid's window (numpy twins: soilvolume.dem.grid._cells_of on a block,
+ * distributed.tiletask._window_cells): float32 x, y, z (step floats apart) to column (x - xmin) *
+ * inv and row (ymax - y) * inv in float32, as numpy; those in rows r0..r1, columns c0..c1: their
+ * flat id in the window and float64 height appended to ids and z, their offsets in the cell added
+ * to sx and sy in order (OffsetSums.add_at). Returns the number appended. */
 int64_t sv_cells(const float *x, const float *y, const float *z, int64_t n, int64_t step, float xmin, float ymax,
                  float inv, int64_t r0, int64_t r1, int64_t c0, int64_t c1, int64_t *ids, double *zout, double *sx,
                  double *sy) {
@@ -307,33 +290,9 @@ int64_t sv_cells(const float *x, const float *y, const float *z, int64_t n, int6
     return m;
 }
 
-/* Sort v[0..n) ascending: quicksort (median of three) down to runs of 16, then insertion sort. */
-static void sort_i64(int64_t *v, int64_t n) {
-    while (n > 16) {
-        int64_t a = v[0], b = v[n / 2], c = v[n - 1];
-        int64_t pivot = a < b ? (b < c ? b : (a < c ? c : a)) : (a < c ? a : (b < c ? c : b));
-        int64_t i = 0, j = n - 1;
-        while (i <= j) {
-            while (v[i] < pivot) i++;
-            while (v[j] > pivot) j--;
-            if (i <= j) {
-                int64_t t = v[i];
-                v[i++] = v[j], v[j--] = t;
-            }
-        }
-        if (j + 1 < n - i) { /* the smaller side by recursion, the larger by the loop */
-            sort_i64(v, j + 1);
-            v += i, n -= i;
-        } else {
-            sort_i64(v + i, n - i);
-            n = j + 1;
-        }
-    }
-    for (int64_t i = 1; i < n; i++) {
-        int64_t x = v[i], j = i - 1;
-        while (j >= 0 && v[j] > x) v[j + 1] = v[j], j--;
-        v[j + 1] = x;
-    }
+static int cmp_i64(const void *a, const void *b) {
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
 }
 
 /* Sort v[0..n) ascending, all of them within lo + 256^passes: least significant digit first, one
@@ -355,32 +314,35 @@ static void radix_i64(int64_t *v, int64_t n, int64_t lo, int passes, int64_t *tm
     if (src != v) memcpy(v, src, (size_t)n * sizeof *v);
 }
 
-/* Sort one cell's keys v[0..n): by their bytes (radix_i64, through tmp when there is one) when
- * they span under 2^24 and are many enough for it, else sort_i64. */
+/* Sort one cell's keys v[0..n): a few by insertion, more by their bytes (radix_i64 through tmp)
+ * when they span under 2^24, else (or without tmp) by qsort. */
 static void sort_cell(int64_t *v, int64_t n, int64_t *tmp) {
-    if (n <= 32 || tmp == NULL) {
-        sort_i64(v, n);
+    if (n <= 32) {
+        for (int64_t i = 1; i < n; i++) {
+            int64_t x = v[i], j = i - 1;
+            while (j >= 0 && v[j] > x) v[j + 1] = v[j], j--;
+            v[j + 1] = x;
+        }
         return;
     }
     int64_t lo = v[0], hi = v[0];
     for (int64_t i = 1; i < n; i++) lo = v[i] < lo ? v[i] : lo, hi = v[i] > hi ? v[i] : hi;
     uint64_t span = (uint64_t)(hi - lo);
     int passes = span < 256 ? 1 : span < 65536 ? 2 : span < (1u << 24) ? 3 : 0;
-    if (passes == 0)
-        sort_i64(v, n);
+    if (passes == 0 || tmp == NULL)
+        qsort(v, (size_t)n, sizeof *v, cmp_i64);
     else
         radix_i64(v, n, lo, passes, tmp);
 }
 
-/* Sort int64 keys whose cell is key >> bits (counts: the keys of each of ncells cells) into out,
- * with next (ncells) for scratch: the keys moved to their cells (in order), then each cell's
- * sorted. The result is the sorted array, the same as any sort gives. */
+/* Sort int64 keys whose cell is key >> bits (counts: per cell of ncells) into out, next (ncells)
+ * for scratch: the keys moved to their cells, then each cell's sorted (the array any sort gives). */
 void sv_sort_keys(const int64_t *key, int64_t n, const int64_t *counts, int64_t ncells, int64_t bits, int64_t *out,
                   int64_t *next) {
     int64_t at = 0, most = 0;
     for (int64_t c = 0; c < ncells; c++) next[c] = at, at += counts[c], most = counts[c] > most ? counts[c] : most;
     for (int64_t i = 0; i < n; i++) out[next[key[i] >> bits]++] = key[i];
-    int64_t *tmp = most > 32 ? malloc((size_t)most * sizeof *tmp) : NULL; /* NULL: sort_i64 throughout */
+    int64_t *tmp = most > 32 ? malloc((size_t)most * sizeof *tmp) : NULL;
     at = 0;
     for (int64_t c = 0; c < ncells; c++) {
         sort_cell(out + at, counts[c], tmp);
@@ -400,9 +362,8 @@ void sv_running_sum(const int64_t *key, int64_t n, int64_t top, double *out) {
     }
 }
 
-/* The (cell, height) keys of points (numpy twin: soilvolume.dem.cellstats._SortedCells): key =
- * id << bits | (rint(z / q) - base), into key (which may be ids itself), and the points per cell
- * added to counts. */
+/* The (cell, height) keys id << bits | (rint(z / q) - base) into key (ids itself may be), the points
+ * per cell added to counts (numpy twin: soilvolume.dem.cellstats._SortedCells). */
 void sv_keys(const int64_t *ids, const double *z, int64_t n, int64_t base, double q, int64_t bits, int64_t *key,
              int64_t *counts) {
     for (int64_t i = 0; i < n; i++) {
@@ -432,12 +393,11 @@ static inline int proven(const double *pts, int64_t n, int64_t i, const double *
     return idx[i] < m ? *d + moved < second[i] : moved < free;
 }
 
-/* The ICP's nearest neighbours kept while a bound proves them (numpy twin: the part of
- * registration.icp.Nearest.__call__ before its k-d tree search): each point's distance to its
- * kept nearest (last: at 3 x n, idx, second) into d; a point the last search no longer proves
- * but the one before (old, when has_old) does swaps them; the others' last search is copied to
- * old (when has_old) and their indices written to todo (to be searched again). free: the bound
- * less the correspondence distance. Returns the number in todo. */
+/* The ICP's nearest neighbours kept while a bound proves them (numpy twin: registration.icp.Nearest.
+ * __call__ before its k-d tree search): each point's distance to its kept nearest (last: at 3 x n,
+ * idx, second) into d; where only the search before (old, when has_old) proves it, the two swap;
+ * the others' last search copied to old and their indices to todo. free: the bound less the
+ * correspondence distance. Returns the number in todo. */
 int64_t sv_nearest_kept(const double *pts, int64_t n, double *last_at, int64_t *last_idx, double *last_second,
                         double *old_at, int64_t *old_idx, double *old_second, int64_t has_old, const double *t,
                         int64_t tn, int64_t m, double free, double *d, int64_t *todo) {

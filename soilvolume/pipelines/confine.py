@@ -1,10 +1,6 @@
-"""Writers of users' pipelines may never touch an input or write outside the run's output.
-
-Within a run (:func:`writers_into`) every ``writers.*`` stage is redirected into the run's staging
-folder under its file name, so its file is committed with the other outputs or removed with them.
-Outside a run, a writer whose file is one of the pipeline's inputs is refused. Paths are resolved
-(symlinks, ``..``) before deciding.
-"""
+"""Writers of users' pipelines never touch an input nor write outside the run's output: within a
+run (:func:`writers_into`) each goes into its staging folder under its file name (committed or
+removed with the outputs); a writer onto an input (symlinks, ``..`` resolved) is refused."""
 
 from __future__ import annotations
 

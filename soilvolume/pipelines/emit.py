@@ -1,11 +1,6 @@
-"""``soilvolume pipeline``: the preparation of both clouds as PDAL pipeline JSON files.
-
-The before pipeline crops to the after cloud's GPS footprint plus the radius (the same polygon
-the engine uses), both pipelines select ground as the engine's run does (no statistical outlier
-filter: the run has none, and one moved a sparse pair's net by 1 to 2.6 %), and write the
-prepared clouds; ``soilvolume estimate --before-pipeline/--after-pipeline`` runs them (with PDAL
-when it imports, else the embedded executor), as does ``pdal pipeline`` on a server.
-"""
+"""``soilvolume pipeline``: both clouds' preparation as PDAL pipeline JSON, as the run prepares
+them: the before cropped to the after's GPS footprint plus the radius, ground kept as the run keeps
+it, no statistical outlier filter (the run has none; one moved a sparse pair's net by 1 to 2.6 %)."""
 
 from __future__ import annotations
 
@@ -25,8 +20,8 @@ EMITTED = ("before.json", "after.json", "before_prepared.laz", "after_prepared.l
 
 
 def smrf_options(options: Options, xy_unit: float) -> dict[str, float] | None:
-    """The SMRF stage's options of ``--ground filter`` as the run uses them (its window in the frame's
-    units; PDAL's own defaults, 18 m and 0.15, take the piles for objects)."""
+    """The SMRF options of ``--ground filter`` as the run's (window in the frame's units; PDAL's
+    defaults, 18 m and 0.15, take the piles for objects)."""
     if options.ground != "filter":
         return None
     return {"window": options.ground_window / xy_unit, "slope": options.ground_slope}
@@ -42,17 +37,10 @@ def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -
     poly = footprint(after_xy, options.radius / frame.xy_unit)
     srs = frame.crs.to_wkt()
     common = {"ground": options.ground, "out_srs": srs, "smrf": smrf_options(options, frame.xy_unit)}
+    epochs = (("before", before, options.before_crs, polygon_wkt(poly)), ("after", after, options.after_crs, None))
     with output_dir(out_dir, [before, after], True, EMITTED) as out, os_errors(out.final):
-        stages_b = build_prepare_pipeline(
-            before,
-            in_srs=options.before_crs,
-            polygon=polygon_wkt(poly),
-            output=out.final / "before_prepared.laz",
-            **common,
-        )
-        stages_a = build_prepare_pipeline(
-            after, in_srs=options.after_crs, output=out.final / "after_prepared.laz", **common
-        )
-        save_pipeline(stages_b, out.path("before.json"))
-        save_pipeline(stages_a, out.path("after.json"))
+        for name, path, in_srs, polygon in epochs:
+            output = out.final / f"{name}_prepared.laz"
+            stages = build_prepare_pipeline(path, in_srs=in_srs, polygon=polygon, output=output, **common)
+            save_pipeline(stages, out.path(f"{name}.json"))
     return out.final / "before.json", out.final / "after.json"

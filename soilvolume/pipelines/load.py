@@ -68,7 +68,8 @@ def _check_value(name: str, value: Any, where: str) -> None:
             raise bad("a string or a list of strings")
 
 
-def _normalise(raw: Any, name: str) -> list[dict[str, Any]]:
+def normalise(raw: Any, name: str) -> list[dict[str, Any]]:
+    """The stages of a parsed pipeline, shorthand forms made stages and options type-checked."""
     if isinstance(raw, dict):
         if "pipeline" not in raw:
             raise SoilVolumeError(f"pipeline {name}: an object needs a 'pipeline' list")
@@ -131,10 +132,8 @@ def _read_text(path: Path, name: str) -> str:
 
 
 def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
-    """Stages of a pipeline file (or JSON text), validated; errors name the file and problem.
-
-    Accepts ``{"pipeline": [...]}`` or a bare list; strings are filenames (the first a reader,
-    the last a writer, types inferred from the extension as PDAL does)."""
+    """Stages of a pipeline file or JSON text (``{"pipeline": [...]}`` or a list; strings are a
+    reader's or a writer's filename, as PDAL takes them), checked; errors name the file."""
     text = str(path_or_text)
     if isinstance(path_or_text, os.PathLike) or not text.lstrip().startswith(("[", "{")):
         name = text
@@ -149,4 +148,4 @@ def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
         ) from exc
     except RecursionError as exc:
         raise SoilVolumeError(f"pipeline {name}: invalid JSON (nested too deeply)") from exc
-    return _normalise(raw, name)
+    return normalise(raw, name)

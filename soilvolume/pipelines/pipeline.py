@@ -1,7 +1,5 @@
-"""PDAL pipelines for preparing a cloud: build them from the engine's options, load users' files,
-and run them with the ``pdal`` Python bindings when they import, else with the embedded executor
-(:mod:`soilvolume.pipelines.stages`), which implements the same stages with PDAL's documented semantics.
-"""
+"""PDAL pipelines preparing a cloud: built from the engine's options, or users' files, run by the
+``pdal`` bindings when they import, else by the embedded executor (:mod:`.stages`)."""
 
 from __future__ import annotations
 
@@ -27,7 +25,6 @@ from .stages.view import PointView
 SRS_OPTS = ("override_srs", "spatialreference", "default_srs")
 
 
-# ---------------------------------------------------------------------------- building
 def _text_reader(path: Path) -> dict[str, Any]:
     """readers.text for a file; a header is supplied when the first line holds numbers."""
     stage: dict[str, Any] = {"type": "readers.text", "filename": str(path)}
@@ -83,7 +80,8 @@ def has_ground_class(path: str | os.PathLike) -> bool:
 
 
 def _ground_stages(ground: str, smrf: dict[str, Any] | None) -> list[dict[str, Any]]:
-    """The stages keeping the ground points of a ground mode (class, filter, csf or none)."""
+    """The stages keeping the ground of a mode: class 2, the SMRF (``filter``, options ``smrf``) or
+    the cloth simulation (``csf``) filter, or none."""
     keep = {"type": "filters.range", "limits": "Classification[2:2]"}
     if ground == "filter":
         classify = {"type": "filters.smrf", **(smrf or {})}
@@ -104,14 +102,9 @@ def build_prepare_pipeline(
     output: str | os.PathLike | None = None,
     smrf: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
-    """The preparation of one cloud as PDAL stages, the engine's own pipeline.
-
-    read (``in_srs`` = the CRS when the file has none) -> reproject to ``out_srs`` -> crop to the
-    WKT ``polygon`` (in ``out_srs`` units) -> ground: class 2 (``ground='class'``), the SMRF
-    filter (``'filter'``, options ``smrf``) or the cloth simulation filter (``'csf'``, tuned for
-    earthworks) -> optional LAS/LAZ ``output``. ``ground='auto'`` is 'class' when the file has
-    class-2 points, else 'none'.
-    """
+    """The engine's preparation of one cloud as PDAL stages: read (``in_srs`` when the file has no
+    CRS), reproject to ``out_srs``, crop to the WKT ``polygon``, keep the ground (:func:`_ground_stages`;
+    ``auto``: class when the file has class 2, else none), write the LAS/LAZ ``output``."""
     if ground == "auto":
         ground = "class" if has_ground_class(path) else "none"
     if ground not in ("none", "class", "filter", "csf"):
@@ -141,15 +134,6 @@ def save_pipeline(stages: list[dict[str, Any]], path: str | os.PathLike) -> None
         Path(tmp).write_text(dumps(stages), encoding="utf-8")
 
 
-# ---------------------------------------------------------------------------- running
-def _pdal_module():
-    try:
-        import pdal  # type: ignore[import-not-found]
-    except Exception:  # ImportError, or a broken libpdal
-        return None
-    return pdal
-
-
 def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
     """The stages run by real PDAL; its views' points concatenated in PDAL's dimension names."""
     try:
@@ -168,11 +152,16 @@ def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
 
 
 def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto", source: str = "<pipeline>") -> PointView:
-    """Run stages with real PDAL (``engine='pdal'``), the embedded executor ('embedded'), or
-    PDAL when ``import pdal`` works else embedded ('auto')."""
+    """Run stages with real PDAL (``pdal``), the embedded executor (``embedded``) or the first when
+    it imports (``auto``)."""
     if engine not in ("auto", "pdal", "embedded"):
         raise SoilVolumeError(f"engine '{engine}': use auto, pdal or embedded")
-    pdal = None if engine == "embedded" else _pdal_module()
+    pdal = None
+    if engine != "embedded":
+        try:
+            import pdal  # type: ignore[import-not-found]
+        except Exception:  # ImportError, or a broken libpdal
+            pdal = None
     if engine == "pdal" and pdal is None:
         raise SoilVolumeError(
             "engine 'pdal' requested but the pdal Python bindings do not import "
@@ -184,8 +173,7 @@ def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto", source: 
 
 
 def view_to_raw(view: PointView, path: str, source: str = "<pipeline>") -> RawPoints:
-    """A pipeline's result as the engine's :class:`RawPoints` (coordinates in the view's SRS
-    units; the engine converts Z to metres itself)."""
+    """A pipeline's result as :class:`RawPoints` (in the view's SRS units: the engine converts Z)."""
     if len(view) == 0:
         raise SoilVolumeError(f"pipeline {source}: no points left after the pipeline ({path})")
     cls = view.arrays.get("Classification")
@@ -193,9 +181,8 @@ def view_to_raw(view: PointView, path: str, source: str = "<pipeline>") -> RawPo
 
 
 def with_input(stages: list[dict[str, Any]], path: str | os.PathLike) -> list[dict[str, Any]]:
-    """The stages reading ``path`` instead of the reader's filename (like ``pdal pipeline
-    --readers.las.filename=...``); the reader changes type when the file's format needs it, keeping
-    its SRS options."""
+    """The stages reading ``path`` (``pdal pipeline --readers.las.filename=...``), the reader's type
+    that of its format, its SRS options kept."""
     reader = dict(stages[0])
     fresh = reader_stage(path)
     if fresh["type"] != reader["type"]:
@@ -217,8 +204,7 @@ def prepare_cloud_from_file(
 
 
 def open_source(path: str | os.PathLike, pipeline: str | os.PathLike | None = None) -> Source:
-    """A cloud to stream (:func:`soilvolume.inputs.stream.open_source`), or with ``pipeline`` the
-    points that pipeline prepares from ``path``, in memory."""
+    """A cloud to stream, or the points ``pipeline`` prepares from ``path``, in memory."""
     if pipeline:
         return from_raw(prepare_cloud_from_file(pipeline, path))
     return open_file(path)

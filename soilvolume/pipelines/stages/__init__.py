@@ -1,16 +1,14 @@
-"""The embedded executor: the stages of the project's own pipelines (those ``soilvolume pipeline
---emit`` writes) re-implemented with numpy/scipy, for machines without PDAL.
-
-Only the stages and options in :data:`REGISTRY` run; any other stage or option is one error naming
-it and saying it needs PDAL, raised before any stage runs, so a pipeline never runs with an option
-silently ignored and writes nothing when refused.
-"""
+"""The embedded executor, for machines without PDAL: only the stages and options of the project's
+own pipelines (:data:`REGISTRY`); any other is one error saying it needs PDAL, before any stage runs
+(no option silently ignored, nothing written)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
 from ...core.types import SoilVolumeError
+from ...inputs.csf import DEFAULTS as CSF_DEFAULTS
+from ..load import normalise
 from . import crop, ground, readers, reprojection, writers
 from . import range as range_stage
 from .view import PointView, StageContext
@@ -20,18 +18,20 @@ StageFn = Callable[[PointView | None, dict, StageContext], PointView]
 #: options every stage accepts (PDAL's general stage options that change nothing here)
 GENERIC = {"type", "tag", "user_data"}
 
+_FILE = frozenset({"filename", "default_srs"})
+#: each stage's function and options (docs/cli.md lists them)
 REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
-    "readers.las": (readers.read_file, frozenset(readers.FILE_OPTS)),
-    "readers.ply": (readers.read_file, frozenset(readers.FILE_OPTS)),
-    "readers.pcd": (readers.read_file, frozenset(readers.FILE_OPTS)),
-    "readers.text": (readers.read_text, frozenset(readers.TEXT_OPTS)),
-    "filters.reprojection": (reprojection.reproject, frozenset(reprojection.OPTS)),
-    "filters.crop": (crop.crop, frozenset(crop.OPTS)),
-    "filters.assign": (range_stage.assign, frozenset(range_stage.ASSIGN_OPTS)),
-    "filters.range": (range_stage.filter_range, frozenset(range_stage.RANGE_OPTS)),
-    "filters.smrf": (ground.smrf, frozenset(ground.SMRF_OPTS)),
-    "filters.csf": (ground.csf, frozenset(ground.CSF_OPTS)),
-    "writers.las": (writers.write_las, frozenset(writers.LAS_OPTS)),
+    "readers.las": (readers.read_file, _FILE),
+    "readers.ply": (readers.read_file, _FILE),
+    "readers.pcd": (readers.read_file, _FILE),
+    "readers.text": (readers.read_text, _FILE | {"header", "separator"}),
+    "filters.reprojection": (reprojection.reproject, frozenset({"out_srs"})),
+    "filters.crop": (crop.crop, frozenset({"polygon"})),
+    "filters.assign": (range_stage.assign, frozenset({"value"})),
+    "filters.range": (range_stage.filter_range, frozenset({"limits"})),
+    "filters.smrf": (ground.smrf, frozenset({"cell", "slope", "window", "threshold", "scalar"})),
+    "filters.csf": (ground.csf, frozenset(CSF_DEFAULTS)),
+    "writers.las": (writers.write_las, frozenset({"filename", "scale_x", "scale_y", "scale_z"})),
 }
 
 
@@ -54,10 +54,11 @@ def check_stage(stage: dict, source: str) -> tuple[StageFn, str]:
 
 
 def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
-    """Run a linear pipeline (one reader first, then filters and writers in order)."""
+    """Run a linear pipeline (one reader first, then filters and writers in order), its stages and
+    options checked as a loaded file's (:func:`soilvolume.pipelines.load.normalise`)."""
+    stages = normalise(stages, source)
     checked = [check_stage(s, source) for s in stages]
-    readers_at = [i for i, (_, kind) in enumerate(checked) if kind.startswith("readers.")]
-    if readers_at != [0]:
+    if [kind.startswith("readers.") for _, kind in checked].count(True) > 1:
         raise SoilVolumeError(
             f"pipeline {source}: several readers need PDAL (the embedded executor runs exactly one "
             "reader, as the first stage)"
@@ -65,7 +66,6 @@ def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
     view: PointView | None = None
     for stage, (fn, kind) in zip(stages, checked, strict=True):
         view = fn(view, stage, StageContext(source, kind))
-    assert view is not None
     return view
 
 

@@ -10,9 +10,6 @@ from ...inputs.csf import DEFAULTS, csf_classify
 from ...inputs.smrf import smrf_classify
 from .view import PointView, StageContext
 
-SMRF_OPTS = {"cell", "slope", "window", "threshold", "scalar"}
-CSF_OPTS = set(DEFAULTS)
-
 
 def _last_or_only(view: PointView, ctx: StageContext) -> np.ndarray:
     """The points SMRF classifies: last and single returns (all when the returns are not known)."""
@@ -32,11 +29,11 @@ def _last_or_only(view: PointView, ctx: StageContext) -> np.ndarray:
 
 def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     """SMRF on the last and single returns, with PDAL's options and defaults."""
-    cell = ctx.positive(opts, "cell", 1.0)
+    cell = ctx.number(opts, "cell", 1.0, positive=True)
     params = {
         "cell": cell,
         "slope": ctx.number(opts, "slope", 0.15),
-        "window": ctx.positive(opts, "window", 18.0 * cell),
+        "window": ctx.number(opts, "window", 18.0 * cell, positive=True),
         "threshold": ctx.number(opts, "threshold", 0.5),
         "scalar": ctx.number(opts, "scalar", 1.25),
     }
@@ -55,12 +52,12 @@ def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
 def csf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     """The cloth simulation filter on every point."""
     params = {
-        "resolution": ctx.positive(opts, "resolution", DEFAULTS["resolution"]),
+        "resolution": ctx.number(opts, "resolution", DEFAULTS["resolution"], positive=True),
         "rigidness": int(ctx.number(opts, "rigidness", DEFAULTS["rigidness"])),
-        "threshold": ctx.positive(opts, "threshold", DEFAULTS["threshold"]),
+        "threshold": ctx.number(opts, "threshold", DEFAULTS["threshold"], positive=True),
         "smooth": bool(opts.get("smooth", DEFAULTS["smooth"])),
-        "step": ctx.positive(opts, "step", DEFAULTS["step"]),
-        "iterations": int(ctx.positive(opts, "iterations", DEFAULTS["iterations"])),
+        "step": ctx.number(opts, "step", DEFAULTS["step"], positive=True),
+        "iterations": int(ctx.number(opts, "iterations", DEFAULTS["iterations"], positive=True)),
     }
     if params["rigidness"] not in (1, 2, 3):
         raise ctx.error("'rigidness' must be 1, 2 or 3")

@@ -10,9 +10,6 @@ import numpy as np
 
 from .view import PointView, StageContext
 
-RANGE_OPTS = {"limits"}
-ASSIGN_OPTS = {"value"}
-
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _RANGE = re.compile(rf"\s*([A-Za-z_]\w*)\s*\[\s*({_NUM})?\s*:\s*({_NUM})?\s*\]\s*")
 _VALUE = re.compile(rf"\s*([A-Za-z_]\w*)\s*=\s*({_NUM})\s*")

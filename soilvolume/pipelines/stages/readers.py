@@ -6,14 +6,10 @@ import re
 from pathlib import Path
 
 import numpy as np
-import pyproj
 
 from ...core.types import SoilVolumeError
 from ...inputs.stream import open_source
 from .view import PointView, StageContext
-
-FILE_OPTS = {"filename", "default_srs"}
-TEXT_OPTS = FILE_OPTS | {"header", "separator"}
 
 _KNOWN = {
     n.lower(): n
@@ -22,10 +18,7 @@ _KNOWN = {
 
 
 def _path(opts: dict, ctx: StageContext) -> Path:
-    name = ctx.string(opts, "filename")
-    if not name:
-        raise ctx.error("option 'filename' is required")
-    path = Path(name)
+    path = Path(opts["filename"])  # a reader's filename, checked by load.normalise
     if not path.is_file():
         raise ctx.error(f"{path}: file not found")
     return path
@@ -33,18 +26,14 @@ def _path(opts: dict, ctx: StageContext) -> Path:
 
 def _srs(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     """Apply default_srs as PDAL readers do: the file's own SRS wins."""
-    text = ctx.string(opts, "default_srs")
+    text = opts.get("default_srs")
     if text and not view.srs_wkt:
-        try:
-            view.srs_wkt = pyproj.CRS.from_user_input(text).to_wkt()
-        except pyproj.exceptions.CRSError as exc:
-            raise ctx.error(f"cannot understand SRS '{text[:80]}' ({exc})") from exc
+        view.srs_wkt = ctx.crs(text, "").to_wkt()
     return view
 
 
 def read_file(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
-    """LAS/LAZ (X, Y, Z, Classification, ReturnNumber, NumberOfReturns) and PLY/PCD (X, Y, Z)
-    through the engine's own readers: headers checked, every point counted."""
+    """LAS/LAZ (X, Y, Z, Classification, returns) and PLY/PCD (X, Y, Z) by the engine's readers."""
     path = _path(opts, ctx)
     try:
         raw = open_source(path).materialize()
@@ -74,17 +63,15 @@ def _split_header(line: str, sep: str | None) -> tuple[list[str], str]:
 
 
 def read_text(view: PointView | None, opts: dict, ctx: StageContext) -> PointView:
-    """Delimited text as PDAL reads it: a header line names the dimensions (or option 'header'),
-    fields split by the header's first non-alphanumeric character (or option 'separator'); a
-    space separator means any run of whitespace."""
+    """Delimited text as PDAL reads it: dimensions named by the first line (or 'header'), split by
+    its first non-alphanumeric character (or 'separator'; a space: any whitespace)."""
     path = _path(opts, ctx)
-    header_line = ctx.string(opts, "header")
+    header_line = opts.get("header")
     skiprows = 0
     if header_line is None:
         with open(path, encoding="utf-8", errors="replace") as fh:
             header_line, skiprows = next(fh, ""), 1
-    sep_opt = ctx.string(opts, "separator")
-    names, sep = _split_header(header_line, sep_opt)
+    names, sep = _split_header(header_line, opts.get("separator"))
     dims = [_KNOWN.get(n.lower(), n) for n in names]
     if not {"X", "Y", "Z"} <= set(dims):
         raise ctx.error(f"{path}: the header '{header_line.strip()[:80]}' does not name X, Y and Z")

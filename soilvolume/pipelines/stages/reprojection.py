@@ -7,30 +7,16 @@ import pyproj
 
 from .view import PointView, StageContext
 
-OPTS = {"out_srs"}
-
-
-def _crs(text: str, name: str, ctx: StageContext) -> pyproj.CRS:
-    try:
-        return pyproj.CRS.from_user_input(text)
-    except pyproj.exceptions.CRSError as exc:
-        raise ctx.error(f"{name}: cannot understand SRS '{text[:80]}' ({exc})") from exc
-
 
 def reproject(view: PointView, opts: dict, ctx: StageContext) -> PointView:
-    """Transform X/Y/Z from the points' SRS to ``out_srs``.
-
-    Like PDAL (PROJ via GDAL, OAMS_TRADITIONAL_GIS_ORDER), Z goes through the transformation, so a
-    compound CRS with a vertical unit in feet to one in metres converts Z. Points whose
-    transformation fails are dropped.
-    """
-    out_text = ctx.string(opts, "out_srs")
+    """X/Y/Z from the points' SRS to ``out_srs``; Z transformed too, as PDAL does (a vertical unit in
+    feet becomes metres); points whose transformation fails dropped."""
+    out_text = opts.get("out_srs")
     if not out_text:
         raise ctx.error("option 'out_srs' is required")
     if not view.srs_wkt:
         raise ctx.error("the points have no SRS: set the reader's default_srs")
-    src = _crs(view.srs_wkt, "the points' SRS", ctx)
-    dst = _crs(out_text, "option 'out_srs'", ctx)
+    src, dst = ctx.crs(view.srs_wkt, "the points' SRS: "), ctx.crs(out_text, "option 'out_srs': ")
     if len(view) and not src.equals(dst):
         try:
             tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import pyproj
 
 from ...core.types import SoilVolumeError
 
@@ -46,7 +47,8 @@ class PointView:
 
 
 class StageContext:
-    """What a stage needs to report errors: the pipeline's name and the stage's type."""
+    """A stage's errors (naming the pipeline and the stage) and its options, their types checked
+    by :func:`soilvolume.pipelines.load.normalise` already (numbers may be JSON strings)."""
 
     def __init__(self, source: str, stage: str) -> None:
         self.source = source
@@ -55,40 +57,24 @@ class StageContext:
     def error(self, problem: str) -> SoilVolumeError:
         return SoilVolumeError(f"pipeline {self.source}: {self.stage}: {problem}")
 
-    # option accessors: PDAL accepts numbers as JSON values or as strings
-    def number(self, opts: dict, name: str, default: float | None = None) -> float | None:
-        if name not in opts:
-            return default
-        value = opts[name]
-        try:
-            if isinstance(value, bool):
-                raise ValueError
-            out = float(value)
-        except (TypeError, ValueError):
-            raise self.error(f"option '{name}' must be a number, got {value!r}") from None
-        if not math.isfinite(out):
-            raise self.error(f"option '{name}' must be finite, got {value!r}")
+    def number(self, opts: dict, name: str, default: float, positive: bool = False) -> float:
+        """A finite number (> 0 with ``positive``), ``default`` when not given."""
+        out = float(opts.get(name, default))
+        if not math.isfinite(out) or (positive and out <= 0):
+            raise self.error(f"option '{name}' must be {'> 0' if positive else 'finite'}, got {opts.get(name)!r}")
         return out
-
-    def positive(self, opts: dict, name: str, default: float | None = None) -> float | None:
-        out = self.number(opts, name, default)
-        if out is not None and out <= 0:
-            raise self.error(f"option '{name}' must be > 0, got {opts.get(name)!r}")
-        return out
-
-    def string(self, opts: dict, name: str, default: str | None = None) -> str | None:
-        value = opts.get(name, default)
-        if value is not None and not isinstance(value, str):
-            raise self.error(f"option '{name}' must be a string, got {value!r}")
-        return value
 
     def strings(self, opts: dict, name: str) -> list[str]:
         """A multi-valued option: a string or a list of strings."""
-        value = opts.get(name)
-        if value is None:
-            return []
-        items = value if isinstance(value, list) else [value]
-        for item in items:
-            if not isinstance(item, str):
-                raise self.error(f"option '{name}' must be a string or a list of strings")
-        return list(items)
+        items = opts.get(name, [])
+        items = items if isinstance(items, list) else [items]
+        if not all(isinstance(item, str) for item in items):
+            raise self.error(f"option '{name}' must be a string or a list of strings")
+        return items
+
+    def crs(self, text: str, what: str) -> pyproj.CRS:
+        """``text`` (the SRS ``what`` names) as a CRS, or the error saying it is not one."""
+        try:
+            return pyproj.CRS.from_user_input(text)
+        except pyproj.exceptions.CRSError as exc:
+            raise self.error(f"{what}cannot understand SRS '{text[:80]}' ({exc})") from exc

@@ -7,12 +7,10 @@ from pathlib import Path
 from ...inputs import io
 from .view import PointView, StageContext
 
-LAS_OPTS = {"filename", "scale_x", "scale_y", "scale_z"}
-
 
 def write_las(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     """LAS 1.4 / LAZ by suffix; one scale for X/Y/Z (PDAL's default 0.01), automatic offsets."""
-    name = ctx.string(opts, "filename")
+    name = opts.get("filename")
     if not name:
         raise ctx.error("option 'filename' is required")
     if "#" in name:
