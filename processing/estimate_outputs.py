@@ -1,4 +1,4 @@
-"""The estimate's numbers and strings as Processing outputs, and the per-zone volume table."""
+"""The estimate's numbers and strings as Processing outputs, and the per-zone volume tables."""
 
 from __future__ import annotations
 
@@ -245,6 +245,18 @@ def write_sections(alg, parameters: dict[str, Any], context: QgsProcessingContex
         params.dest_folder(pictures)
         params.copy(svg, str(pictures / svg.name))
     return dest
+
+
+def write_zone_table(alg, parameters: dict[str, Any], context: QgsProcessingContext, outputs: dict) -> str | None:
+    """The ZONES_CSV output: the engine's zones.csv (a row per zone: net, cut and fill with their
+    interval's ends, areas) copied."""
+    dest = alg.parameterAsFileOutput(parameters, "ZONES_CSV", context)
+    if not dest:
+        return None
+    folder = Path(outputs["report_json"]).parent if outputs.get("report_json") else None
+    if folder is None or not (folder / "zones.csv").is_file():
+        raise QgsProcessingException("The engine wrote no zones.csv (do the zones overlap the surveys?).")
+    return params.deliver_file(folder / "zones.csv", dest)
 
 
 def _zone_feature(feature: QgsFeature, zone: dict[str, Any], fields: QgsFields, pm) -> QgsFeature:

@@ -71,7 +71,8 @@ interpolated from the neighbouring cells) and, against a design with an on-grade
 classes (cut to go, on grade, fill to go),
 in a group of each run named after the pair, its run number and time;
 an HTML report; optionally the JSON report, the volumes as a table of one row (which a model
-can return: its outputs are layers and files, not numbers), the per-zone volume table
+can return: its outputs are layers and files, not numbers), the per-zone volume table (as a layer
+and as a CSV)
 and the registered after cloud (off by default: it is the most expensive output). Numbers: net,
 cut and fill volumes (m³) with their ± half-widths, the same over the detected change areas,
 the level of detection (m), compared area, cell size, registration rotation (°) and shift (m);
@@ -178,6 +179,15 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             )
         )
         self.addParameter(
+            QgsProcessingParameterFileDestination(
+                "ZONES_CSV",
+                self.tr("Volumes per zone (CSV: a row per zone, its interval's ends; needs zones)"),
+                fileFilter="CSV (*.csv)",
+                optional=True,
+                createByDefault=False,
+            )
+        )
+        self.addParameter(
             QgsProcessingParameterFeatureSink(
                 "VOLUMES",
                 self.tr("Volumes (a table of one row: net, cut, fill and their ±, the verdict)"),
@@ -211,6 +221,8 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             raise QgsProcessingException("Contours: set the Contour interval (CONTOUR_INTERVAL) above 0.")
         if self.parameterAsFileOutput(parameters, "SECTION_PROFILES", context) and not options.sections:
             raise QgsProcessingException("Cross-sections: give the Cross-section lines (SECTIONS).")
+        if self.parameterAsFileOutput(parameters, "ZONES_CSV", context) and not options.zones:
+            raise QgsProcessingException("Volumes per zone (CSV): give the Zones (ZONES).")
         if options.tolerance is None and estimate_outputs.asked_for(parameters, "GRADE"):
             raise QgsProcessingException("Grade classes (GRADE): set the On-grade tolerance (TOLERANCE).")
         args = ["estimate", before, after] + engine.option_args(options, "estimate")
@@ -243,6 +255,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         )
         results["CONTOURS"] = estimate_outputs.write_contours(self, parameters, context, outputs.get("contours"), names)
         results["SECTION_PROFILES"] = estimate_outputs.write_sections(self, parameters, context, outputs)
+        results["ZONES_CSV"] = estimate_outputs.write_zone_table(self, parameters, context, outputs)
         if results["NET_VOLUME"] is None:
             raise QgsProcessingException("The engine reported no volumes (no compared cells?).")
         results["VOLUMES"] = estimate_outputs.write_volumes(self, parameters, context, results)

@@ -23,12 +23,34 @@ def toe_base(kind: str, toe: Toe, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     if kind == "plane":
         a, b, c = toe.plane()
         return a + b * x + c * y
-    level = {"lowest": np.min, "highest": np.max}.get(kind)
-    if level is not None:
-        return np.full(x.shape, float(level(toe.z)))
+    if kind in ("lowest", "highest"):
+        return np.full(x.shape, float(level_heights(toe)[0][extreme(kind, toe)]))
     if kind == "average":
         return np.full(x.shape, toe.mean())
     raise PileError(f"base '{kind}': not a toe base ({', '.join(TOE_BASES)})")
+
+
+def level_heights(toe: Toe) -> tuple[np.ndarray, np.ndarray]:
+    """(heights, gain) the lowest and highest levels are taken from: the toe's plane plus each
+    toe height's departure ``r`` from it shrunk by the non-negative garrote ``r - t^2 / r`` at the
+    universal threshold ``t = sigma sqrt(2 ln n)`` (0 within it: noise, else kept, less and less
+    shrunk); ``gain`` is the garrote's slope (0 or ``1 + t^2 / r^2``). The extreme of many noisy
+    heights lies beyond the true extreme by about 2 sigma; departures the noise cannot make are kept."""
+    a, b, c = toe.plane()
+    plane = a + b * toe.x + c * toe.y
+    r = toe.z - plane
+    t2 = toe.sigma**2 * 2 * np.log(max(len(toe.z), 2))
+    kept = r * r > t2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shrunk = np.where(kept, r - t2 / r, 0.0)
+        gain = np.where(kept, 1 + t2 / (r * r), 0.0)
+    return plane + shrunk, gain
+
+
+def extreme(kind: str, toe: Toe) -> int:
+    """The toe point whose :func:`level_heights` is the ``lowest`` or ``highest``."""
+    z = level_heights(toe)[0]
+    return int(np.argmin(z) if kind == "lowest" else np.argmax(z))
 
 
 @dataclass(frozen=True)

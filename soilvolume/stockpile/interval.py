@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .bases import tin_at
+from .bases import extreme, level_heights, tin_at
 from .coverage import Window
 from .toe import Toe
 from .types import FOLLOWING, TOE_BASES, Base
@@ -62,8 +62,16 @@ def base_weights(kind: str, toe: Toe, x: np.ndarray, y: np.ndarray, area: np.nda
         return plane_weights(toe, x, y, area)
     if kind == "average":
         return area.sum() * toe.weight / toe.weight.sum()
-    w = np.zeros(len(toe.z))
-    w[np.argmin(toe.z) if kind == "lowest" else np.argmax(toe.z)] = area.sum()
+    return level_weights(kind, toe, area.sum())
+
+
+def level_weights(kind: str, toe: Toe, area: float) -> np.ndarray:
+    """:func:`base_weights` of the ``lowest`` or ``highest`` level over ``area`` (m2): its toe
+    point's plane height, plus its departure from the plane times the garrote's ``gain``."""
+    k = extreme(kind, toe)
+    gain = level_heights(toe)[1][k]
+    w = (1 - gain) * plane_weights(toe, toe.x[k : k + 1], toe.y[k : k + 1], np.array([area]))
+    w[k] += gain * area
     return w
 
 

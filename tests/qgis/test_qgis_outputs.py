@@ -1,8 +1,9 @@
-"""The estimate's numbers, strings and per-zone table as Processing outputs; the rasters' CRS,
+"""The estimate's numbers, strings and per-zone tables (layer and CSV) as Processing outputs; the rasters' CRS,
 nodata, stacking order and legends once Processing loads them."""
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 from pathlib import Path
@@ -18,6 +19,7 @@ from qgis.core import (
     QgsLegendSettings,
     QgsPointXY,
     QgsProcessingContext,
+    QgsProcessingException,
     QgsProcessingFeedback,
     QgsProcessingOutputLayerDefinition,
     QgsProject,
@@ -79,6 +81,7 @@ def zoned_run(run_alg_session, scene_dir, tmp_path_factory):
         "ZONES": str(zones),
         "STABLE_MASK": str(stable),
         "ZONE_VOLUMES": str(out / "zone_volumes.gpkg"),
+        "ZONES_CSV": str(out / "tables" / "per zone.csv"),
         "REPORT_JSON": str(out / "report.json"),
         **loaded,
     }
@@ -132,6 +135,29 @@ def test_per_zone_table(zoned_run, truth):
     assert rows["pile A"]["net_m3"] == pytest.approx(pile_a["volume"], rel=0.03)
     assert rows["pit"]["cut_m3"] == pytest.approx(pit["volume"], rel=0.1)
     assert rows["pit"]["net_m3"] < 0
+
+
+def test_per_zone_csv_is_an_output(zoned_run):
+    """ZONES_CSV: the engine's zones.csv, a row per zone with the layer's volumes and the ends of
+    each interval (the layer's net ± as their half-difference)."""
+    results, _ = zoned_run
+    assert results["ZONES_CSV"].endswith("per zone.csv")
+    with open(results["ZONES_CSV"], newline="", encoding="utf-8") as f:
+        rows = {r["name"]: r for r in csv.DictReader(f)}
+    layer = {f["name"]: f for f in QgsVectorLayer(results["ZONE_VOLUMES"], "zones", "ogr").getFeatures()}
+    assert set(rows) == set(ZONES) == set(layer)
+    for name, row in rows.items():
+        for field in ("net_m3", "cut_m3", "fill_m3"):
+            assert float(row[field]) == pytest.approx(layer[name][field]), (name, field)
+        half = (float(row["net_high_m3"]) - float(row["net_low_m3"])) / 2
+        assert half == pytest.approx(layer[name]["net_pm_m3"])
+
+
+def test_per_zone_csv_without_zones_is_refused(run_alg, estimate_inputs, tmp_path):
+    params = {**estimate_inputs, "DIFFERENCE": str(tmp_path / "d.tif"), "ZONES_CSV": str(tmp_path / "z.csv")}
+    with pytest.raises(QgsProcessingException, match=r"Volumes per zone \(CSV\): give the Zones"):
+        run_alg("estimatevolumechange", params)
+    assert not (tmp_path / "d.tif").exists() and not (tmp_path / "z.csv").exists()
 
 
 def test_difference_on_top_and_legends_match_the_style(zoned_run):

@@ -36,6 +36,11 @@ def test_sections_csv_and_pictures_are_delivered(run_alg, estimate_inputs, truth
     rise = max(float(r["after"]) - float(r["before"]) for r in rows if r["after"] and r["before"])
     assert rise == pytest.approx(pile["height"], abs=0.5)
     assert (tmp_path / "profiles" / "A-A.svg").read_text().startswith("<svg")
+    uri = f"{dest.as_uri()}?type=csv&detectTypes=yes&geomType=none"
+    layer = QgsVectorLayer(uri, "profiles", "delimitedtext")  # the CSV loads in QGIS as a table
+    assert layer.isValid() and layer.featureCount() == len(rows)
+    chainage = layer.fields().field("chainage_m")
+    assert chainage.isNumeric() and max(f["chainage_m"] for f in layer.getFeatures()) == pytest.approx(40.0, abs=0.01)
 
 
 def test_sections_output_without_lines_is_refused(run_alg, estimate_inputs, tmp_path):
