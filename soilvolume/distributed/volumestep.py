@@ -5,15 +5,16 @@ store."""
 
 from __future__ import annotations
 
+from itertools import chain
+
 import numpy as np
 
 from ..core.hooks import Hooks
 from ..dem.grid import MASK_LAYER, UINT8_LAYERS, EpochDEM
 from ..volumes.zones import check_inside
 from . import overview
-from .gridtile import TILE_ARRAYS
 from .tilestore import TileStore
-from .tiletask import map_tiles, window_caches
+from .tiletask import add_stats, kept_and_todo, map_tiles, window_caches
 from .volumetiles import VolumeJob, combine, grid_tile_stored, summarize_grid_tile, volume_tile
 
 
@@ -37,24 +38,17 @@ def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
     coarse = overview.coarse(plan.grid, k)
     sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
     hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
-    stats = {"read": 0, "cached": 0, "seconds": 0.0}
-
-    def add(summary) -> None:
-        _, blocks, hist = summary[:3]
+    kept, todo = kept_and_todo(store, store.windows)
+    stats = {"read": 0, "cached": 0, "seconds": 0.0, "resumed": len(kept)}
+    done = [summarize_grid_tile(w, arrays, k) for w, arrays in kept]
+    per = window_caches(plan, todo, cache)
+    tasks = map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per)
+    for _, blocks, hist, *task in chain(done, tasks):
         for e in range(2):
             overview.add_blocks(sums[e], blocks[e])
             hists[e] += hist[e]
-
-    todo = [w for w in store.windows if not store.has(TILE_ARRAYS, w)]
-    for w in store.windows:
-        if w not in todo:
-            add(summarize_grid_tile(w, [store.load(n, w) for n in TILE_ARRAYS], k))
-    per = window_caches(plan, todo, cache)
-    for summary in map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per):
-        add(summary)
-        for key in ("read", "cached", "seconds"):
-            stats[key] += summary[3][key]
-    stats["resumed"] = len(store.windows) - len(todo)
+        if task:
+            add_stats(stats, task[0])
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):

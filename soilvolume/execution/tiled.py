@@ -14,16 +14,27 @@ from pathlib import Path
 
 from ..core.types import SoilVolumeError
 from ..core.wording import opt
+from ..dem.geotiff import grid_layout, write_cog
+from ..dem.grid import UINT8_LAYERS, output_layers
 from ..distributed import overview
 from ..distributed.cluster import LazyClient, checker
-from ..distributed.cog import write_outputs
 from ..distributed.fingerprint import input_identities, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
 from ..distributed.schedule import Schedule, budget_gb, check_tiles, client, worker_gb
-from ..distributed.tiled import data_tiling, fits, points_per_cell, tile_side, volume_factor
 from ..distributed.tilestore import run_store
-from ..distributed.tiletask import Plan, epoch_dems, plan_parts, run_tiles, tiles
+from ..distributed.tiletask import (
+    Plan,
+    data_tiling,
+    epoch_dems,
+    fits,
+    plan_parts,
+    points_per_cell,
+    run_tiles,
+    tile_side,
+    tiles,
+    volume_factor,
+)
 from ..distributed.volumestep import grid_tiles, reader, tile_volumes
 from ..distributed.volumetiles import VolumeJob
 from ..inputs.footprint import PolygonMask, footprint
@@ -165,7 +176,7 @@ class Tiled:
         streamed through the driver (``--registered-cloud``)."""
         if layers:  # the pair's layers (a surface as the reference runs in memory)
             get = reader(self.kept) if self.k > 1 else _arrays(vols)
-            write_outputs(ctx.out, get, grid, z0, ctx.options.correction)
+            _write_cogs(ctx.out, get, grid, z0, ctx.options.correction)
         if self.cloud is not None:
             prep, reg, path = self.cloud
             write_las_chunked(path, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
@@ -190,6 +201,18 @@ class Tiled:
             "task_seconds": round(stats["seconds"], 3),
             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
         }
+
+
+def _write_cogs(out, get: Callable, grid, z0: float, correction: str) -> None:
+    """The run's rasters (:func:`grid.output_layers`) as COGs, block by block; ``get(name, rows,
+    cols)``: the window of the grid array ``name`` (heights local)."""
+    for name, key, desc in output_layers(correction):
+        if key in UINT8_LAYERS:
+            layout = grid_layout(grid, desc, "", "uint8")
+            write_cog(out.path(name), layout, lambda r, c, key=key: get(key, r, c).astype("uint8"))
+        else:
+            add = z0 if key.startswith("dem_") else 0.0
+            write_cog(out.path(name), grid_layout(grid, desc), lambda r, c, key=key, add=add: get(key, r, c) + add)
 
 
 def _arrays(vols) -> Callable:
