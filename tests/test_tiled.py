@@ -379,7 +379,7 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
     from soilvolume.api import Hooks
     from soilvolume.distributed.tilestore import TileStore
     from soilvolume.distributed.tiletask import TILE_ARRAYS
-    from soilvolume.distributed.volumestep import grid_tiles
+    from soilvolume.distributed.volumetiles import grid_tiles
 
     plan = _plan_of_missing_inputs(tmp_path)
     g = plan.grid

@@ -8,7 +8,7 @@ the point work done as Dask tasks, so no process holds a survey's points.
    :mod:`pointcache`) and gives its cells the heights of :func:`grid.cell_heights` on the *global*
    grid's cells: a point belongs to one cell, so no halo is needed.
 3. ``--volume-step whole``: the tiles' rasters (a few numbers per cell) are gathered and the volume
-   step runs as in-process; ``tiles``: see :mod:`volumestep`. Outputs are COGs written block by
+   step runs as in-process; ``tiles``: see :mod:`volumetiles`. Outputs are COGs written block by
    block. Finished tiles are kept after an interruption, keyed by what they were computed from
    (:mod:`tilestore`), so the same command resumes.
 """

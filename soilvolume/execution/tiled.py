@@ -35,8 +35,7 @@ from ..distributed.tiletask import (
     tiles,
     volume_factor,
 )
-from ..distributed.volumestep import grid_tiles, reader, tile_volumes
-from ..distributed.volumetiles import VolumeJob
+from ..distributed.volumetiles import VolumeJob, grid_tiles, reader, tile_volumes
 from ..inputs.footprint import PolygonMask, footprint
 from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared, prepare
