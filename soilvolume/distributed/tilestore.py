@@ -1,16 +1,14 @@
-"""Tiles of a grid kept on disk between the steps of a tiled run, and between an interrupted run
-and the same command run again.
+"""Tiles of a grid kept on disk between a tiled run's steps, and for the same command run again
+after an interruption.
 
-:class:`TileStore`: one ``.npy`` file per array and tile, named with the run's key (see
-:mod:`fingerprint`), written atomically under a name no other writer uses, read back as any
-window of the grid (memory-mapped: a window costs what it holds, not what its tiles hold).
+:class:`TileStore`: one ``.npy`` file per array and tile, named with the run's key
+(:mod:`fingerprint`), written atomically, read back as any window of the grid (memory-mapped).
 
-:class:`RunStore`: each run has a store of its own, a hidden sibling of the output folder
-(``.NAME.soilvolume-tiles-PID-TOKEN``); it holds the Dask workers' scratch space too. A run that
-succeeds or fails removes it; an interrupted one (SIGINT/SIGTERM) keeps its finished tiles as
-``.NAME.soilvolume-tiles``, which the next run into the same folder claims (one atomic rename:
-of two runs, one gets it) and uses only if what the tiles were computed from (``store.json``)
-is what this run computes from; else it discards them, saying why in one line.
+:class:`RunStore`: each run's own store, a hidden sibling of the output folder
+(``.NAME.soilvolume-tiles-PID-TOKEN``), the Dask workers' scratch space in it; removed when the
+run succeeds or fails. An interrupted run keeps its finished tiles as ``.NAME.soilvolume-tiles``,
+which the next run into the folder claims (one atomic rename: one run gets it) and uses only if
+they were computed from what it computes from (``store.json``), else discards, saying why.
 """
 
 from __future__ import annotations
@@ -42,8 +40,8 @@ _HEADERS = threading.Lock()
 
 @dataclass(frozen=True)
 class TileStore:
-    """A folder of per-tile arrays of a grid cut into ``windows``, each file named with ``key``
-    (picklable: sent to tasks; the folder must be visible to every worker)."""
+    """Per-tile arrays of a grid cut into ``windows``, files named with ``key`` (picklable: sent to
+    tasks; the folder must be visible to every worker)."""
 
     folder: str
     windows: tuple[Window, ...]
@@ -53,11 +51,11 @@ class TileStore:
         return Path(self.folder) / "{}_{}_{}_{}_{}_{}.npy".format(self.key, name, *win)
 
     def has(self, names, win: Window) -> bool:
-        """Whether every array of ``names`` of tile ``win`` is on disk (a finished tile)."""
+        """Whether the arrays ``names`` of tile ``win`` are all on disk (a finished tile)."""
         return all(self._file(n, win).exists() for n in names)
 
     def save(self, win: Window, arrays: dict[str, np.ndarray]) -> None:
-        """Write the tile's arrays (each atomically: an interrupted task leaves no partial tile)."""
+        """Write the tile's arrays, each atomically (an interrupted task leaves no partial tile)."""
         for name, arr in arrays.items():
             final = self._file(name, win)
             tmp = final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}")
@@ -75,8 +73,7 @@ class TileStore:
             return np.load(self._file(name, win), mmap_mode="r")
 
     def read(self, name: str, win: Window, fill=np.nan, dtype=None) -> np.ndarray:
-        """The array ``name`` on any window of the grid, from the tiles meeting it (``fill``
-        where no tile covers a cell)."""
+        """The array ``name`` on any window of the grid (``fill`` where no tile covers a cell)."""
         r0, r1, c0, c1 = win
         out = None
         for t in self.windows:
@@ -94,8 +91,7 @@ class TileStore:
 
 
 class RunStore:
-    """The tile store of one run (see module): :meth:`bind` once the plan is known, then
-    :meth:`close` with how the run ended."""
+    """The tile store of one run (see module): :meth:`bind` once the plan is known, then :meth:`close`."""
 
     def __init__(self, final: Path) -> None:
         self.final = Path(final)
@@ -117,8 +113,8 @@ class RunStore:
         self.key = ""
 
     def bind(self, parts: dict) -> str | None:
-        """Key the store by what the run computes from; the tiles of another computation are
-        discarded: returns the reason in a line for the log (None when nothing was discarded)."""
+        """Key the store by what the run computes from, discarding another computation's tiles:
+        the reason in a line for the log (None when nothing was discarded)."""
         self.key = fingerprint.digest(parts)
         manifest = self.folder / MANIFEST
         said = None
@@ -142,8 +138,8 @@ class RunStore:
         return TileStore(str(self.folder), tuple(windows), self.key)
 
     def close(self, keep: bool) -> bool:
-        """Remove the store, or with ``keep`` (an interruption) leave its finished tiles where
-        the same command finds them; returns whether they were kept."""
+        """Remove the store, or with ``keep`` (an interruption) leave its finished tiles where the
+        same command finds them; whether they were kept."""
         shutil.rmtree(self.scratch, ignore_errors=True)
         for partial in self.folder.glob(".*.npy.*"):  # a tile write cut short (a worker killed mid-write)
             partial.unlink(missing_ok=True)
@@ -162,8 +158,7 @@ class RunStore:
 
 @contextmanager
 def run_store(final: Path) -> Iterator[RunStore]:
-    """The run's :class:`RunStore`, removed when the block ends, kept when it is interrupted
-    (the :class:`Interrupted` then says where)."""
+    """The run's :class:`RunStore`, removed at the block's end, kept on an interruption (which says where)."""
     store = RunStore(final)
     try:
         with cleanup_on_exit(lambda: str(store.kept) if store.close(keep=True) else None):  # forced: out at once

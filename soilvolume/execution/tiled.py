@@ -18,7 +18,7 @@ from ..dem.geotiff import grid_layout, write_cog
 from ..dem.grid import UINT8_LAYERS, output_layers
 from ..distributed import overview
 from ..distributed.cluster import LazyClient, checker
-from ..distributed.fingerprint import input_identities, run_parts
+from ..distributed.fingerprint import input_identity, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
 from ..distributed.schedule import Schedule, budget_gb, check_tiles, client, worker_gb
@@ -46,9 +46,9 @@ IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read fr
 
 
 def _identify(future: Future, paths: list) -> None:
-    """The inputs' identities (zlib's CRC releases the GIL) into ``future``."""
+    """The (before, after) inputs' identities (zlib's CRC releases the GIL) into ``future``."""
     try:
-        future.set_result(input_identities(*paths))
+        future.set_result({"before": input_identity(paths[0]), "after": input_identity(paths[1])})
     except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
         future.set_exception(exc)
 
@@ -121,25 +121,21 @@ class Tiled:
         if self.said:
             ctx.hooks.step(ctx.at("grid"), self.said)
         self.kept = self.store.tiles(self.windows)
-        gridded = self._overview(ctx, grid) if self.k > 1 else self._whole(ctx, grid)
+        if self.k > 1:
+            self.over_epochs, self.medians, self.stats = grid_tiles(
+                self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
+            )
+            self.coarse = overview.coarse(grid, self.k)
+            dems, at, at_dems = (), self.coarse, self.over_epochs
+        else:
+            self.stats = {}
+            arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
+            dems = at_dems = epoch_dems(arrays, self.plan.rules)
+            at = grid
         self.cache.release()  # the workers' memory back for the volume step
         if self.k == 1:
             self.starting.close_soon()  # the volume step runs here: the workers are done
-        planes = beside(gridded.correction_grid, gridded.correction_dems[1])
-        return Gridded(grid, gridded.dems, gridded.correction_grid, gridded.correction_dems, done(planes))
-
-    def _whole(self, ctx, grid) -> Gridded:
-        self.stats = {}
-        arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
-        dems = epoch_dems(arrays, self.plan.rules)
-        return Gridded(grid, dems, grid, dems, done(None))
-
-    def _overview(self, ctx, grid) -> Gridded:
-        self.over_epochs, self.medians, self.stats = grid_tiles(
-            self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
-        )
-        self.coarse = overview.coarse(grid, self.k)
-        return Gridded(grid, (), self.coarse, self.over_epochs, done(None))
+        return Gridded(grid, dems, at, at_dems, done(beside(at, at_dems[1])))
 
     def _tiles(self, ctx, prep: Prepared, grid) -> tuple:
         """(the tile windows, their side in cells, points per cell) for the run's grid."""
