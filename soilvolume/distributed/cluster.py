@@ -173,9 +173,8 @@ def connect(address: str):
 
 
 def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None, spawn: bool = False):
-    """(LocalCluster, Client): ``workers`` processes of one thread (or one process of ``workers``
-    threads), no dashboard, quiet, scratch space in ``scratch``; ``spawn``: workers started as
-    on Windows and macOS, also on Linux (the install's self-test)."""
+    """(LocalCluster, Client): ``workers`` processes of one thread (or one of ``workers`` threads),
+    quiet, scratch space in ``scratch``; ``spawn``: as on Windows and macOS (the self-test)."""
     method = "spawn" if spawn else _start_method() if processes else None  # first: the forkserver's imports
     import dask
     from dask.distributed import Client, LocalCluster
@@ -229,10 +228,9 @@ def _start_method() -> str | None:
 
 
 def pre_spawn_environ() -> dict[str, str]:
-    """Dask's ``distributed.nanny.pre-spawn-environ`` as a nanny applies it (the user's variables
-    win), with :data:`LOCAL_WORKER_ENV`: one OpenMP/BLAS thread per worker. C libraries read them
-    as a process starts, so the forkserver needs them before it forks; it starts before
-    Distributed is imported (0.3 s), so its defaults are loaded as importing it would."""
+    """Dask's ``distributed.nanny.pre-spawn-environ`` (the user's variables win) with
+    :data:`LOCAL_WORKER_ENV`: one OpenMP/BLAS thread per worker, read by C libraries as a process
+    starts, so set before the forkserver, which starts before Distributed is imported (0.3 s)."""
     from importlib.util import find_spec
 
     import dask

@@ -134,9 +134,8 @@ def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _file_chunks(plan: Plan, epoch: int, win: Window, keep, stats: dict) -> tuple:
-    """(the epoch's source read only where it can meet the window, a function making its file
-    chunks (xyz, classification, signals) what the grid takes, as the first pass keeps them
-    (:class:`.pointcache.KeptTile`): labelled, within the read box, local, cropped by ``keep``)."""
+    """(the epoch's source where it can meet the window, a function making its file chunks what
+    the grid takes, as a :class:`.pointcache.KeptTile`: labelled, boxed, local, cropped by ``keep``)."""
     rule, ground = plan.rules[epoch], plan.ground[epoch]
     crs, src, box = window_source(plan, epoch, win)
     to_local = _local(crs, plan.frame, plan.origin, (plan.before, plan.after)[epoch])

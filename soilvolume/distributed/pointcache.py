@@ -31,9 +31,8 @@ Key = tuple  # (tile path, PolygonMask.key() of the crop its kept points passed,
 
 @dataclass(frozen=True)
 class KeptTile:
-    """A VPC tile as the grid needs it: per file chunk (:data:`stream.CHUNK`), the local float32
-    xyz of the points the epoch's crop keeps, in file order, and their labels (None: all soil);
-    ``points``: the tile's points."""
+    """A VPC tile as the grid needs it: per file chunk, the local float32 xyz the epoch's crop keeps,
+    in file order, and their labels (None: all soil); ``points``: the tile's points."""
 
     chunks: tuple
     points: int
@@ -223,9 +222,8 @@ def chunks(src: Source, cached: dict | None, stats: dict, made: Callable[[Iterat
 
 
 def near_after(before: Source, after: Source, radius: float) -> Source:
-    """The before VPC where the after's header box plus the crop radius reaches (the tiles its
-    first pass reads: the crop polygon lies there), both in one projected CRS; else the before
-    without its VPC (nothing expected)."""
+    """The before VPC where the after's header box plus the crop radius reaches (the tiles its first
+    pass reads), both in one projected CRS; else the before without its VPC (nothing expected)."""
     import pyproj
 
     same = before.crs_wkt is not None and before.crs_wkt == after.crs_wkt

@@ -43,9 +43,8 @@ def units(src: Source) -> list[Unit]:
 def scan_unit(
     unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None, kept=None
 ) -> dict:
-    """Thinning sums, counts and chunk boxes of one unit's soil points (by the epoch's ``rule``);
-    ``cached``: its chunks read already (:func:`.pointcache.read_tile`), left intact; ``kept`` (a
-    list): each chunk's kept points and labels appended."""
+    """Thinning sums, counts and chunk boxes of one unit's soil points; ``cached``: its chunks read
+    already, left intact; ``kept`` (a list): each chunk's kept points and labels appended."""
     path, start, count = unit
     voxel = thinning[2]  # (lo, hi, voxel[, within]) of the driver's ColumnThinner
     resolution = voxel / COPC_POINTS_PER_COLUMN_SIDE if start is None and is_copc(path) else None
@@ -230,10 +229,8 @@ def _first_rule(chunks: tuple, src: Source, how: tuple) -> PointRule | None:
 
 
 def _scan_here(src: Source, todo: list[Unit], args: tuple, kept: tuple, ready: Callable[[], bool], check) -> tuple:
-    """(parts, units left): the VPC tiles of ``todo`` scanned here, in order, while the cluster
-    starts (``ready()`` false) and they fit the cache of ``kept`` (cache, crop key, {path: chunks}
-    read already), held for the workers (:meth:`.pointcache.PointCache.hold`): the driver's
-    reading overlaps the workers' start."""
+    """(parts, units left): the VPC tiles of ``todo`` scanned here in order while the cluster starts
+    and they fit the cache of ``kept`` (cache, crop key, {path: chunks} read), held for the workers."""
     cache, crop, pre = kept
     parts = []
     while todo and cache is not None and src.vpc is not None and not ready():

@@ -217,9 +217,8 @@ def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) 
 
 @contextmanager
 def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None) -> Iterator[Starting]:
-    """A :class:`cluster.Starting` of a Dask client for ``schedule``, started in the background
-    (threads: in this process; local: a LocalCluster sharing the budget among its worker
-    processes, their scratch space in ``scratch``; tcp: an existing cluster), shut on exit."""
+    """A :class:`cluster.Starting` of the Dask client of ``schedule`` (a LocalCluster's workers share
+    the budget, their scratch space in ``scratch``), shut on exit."""
     check_local(schedule, memory_limit)
     starting = Starting(lambda: _start(schedule, memory_limit, scratch), str(schedule), START_S[schedule.kind])
     try:
@@ -247,9 +246,8 @@ def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
 
 
 def schedule_for(chosen: Schedule | None, before, after, options, pipeline: bool) -> Schedule:
-    """The run's schedule: the parsed ``--scheduler`` (``chosen``), or for ``auto`` (None)
-    in-process when the pair's points (from the LAS/COPC/VPC headers) fit the memory budget;
-    pipelines and other formats run in-process."""
+    """The parsed ``--scheduler`` (``chosen``), or for ``auto`` (None) :func:`choose` by the LAS/COPC/VPC
+    headers' points; pipelines and other formats in-process."""
     if chosen is None:
         points = [
             open_source(p).count if Path(p).suffix.lower() in LAS_SUFFIXES | {".vpc"} else None for p in (before, after)

@@ -135,10 +135,8 @@ def kept_and_todo(store: TileStore | None, windows) -> tuple[list, list]:
 def run_tiles(
     c, plan: Plan, windows: list[Window], hooks: Hooks, store: TileStore | None = None, stats=None, cache=None
 ) -> tuple[np.ndarray, ...]:
-    """Every tile run on the client ``c``, the arrays of :data:`TILE_ARRAYS` assembled on the grid
-    (:func:`epoch_dems` makes them DEMs). Tiles in ``store`` (an interrupted run's of the same
-    computation) are not run again; finished tiles are saved there. ``stats``: the tasks' points
-    read (``cached``: from the workers' memory, ``cache``), seconds and tiles resumed."""
+    """The arrays of :data:`TILE_ARRAYS` on the grid, each tile not in ``store`` (an interrupted
+    run's) run on ``c`` and saved there; ``stats``: points read (and ``cached``), seconds, resumed."""
     stats = stats if stats is not None else {}
     stats.update(dict.fromkeys(STATS, 0), resumed=0)
     g = plan.grid

@@ -191,9 +191,8 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
 
 
 def tile_volumes(c, job: VolumeJob, over, hooks: Hooks, steps: tuple):
-    """The volume step tile by tile on the workers, given the correction ``over`` found on the
-    overview (the volume step of the overview grid, in ``job``), combined into the grid's
-    ``Volumes``; progress ``steps`` = (start %, end %, message)."""
+    """The grid's ``Volumes`` from the volume step tile by tile, given ``over``, the overview's
+    (its correction in ``job``); progress ``steps`` = (start %, end %, message)."""
     windows = list(job.store.windows)
     tiles = list(map_tiles(c, volume_tile, job, windows, hooks=hooks, steps=steps))
     order = {w: i for i, w in enumerate(windows)}
