@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import os
-import secrets
 import shutil
 import threading
 from collections.abc import Iterator
@@ -26,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.interrupt import Interrupted, cleanup_on_exit
-from ..core.siblings import dead_siblings, tag
+from ..core.siblings import dead_siblings, remove, sibling, tag
+from ..inputs.io import atomic_path
 from . import fingerprint
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
@@ -57,15 +57,8 @@ class TileStore:
     def save(self, win: Window, arrays: dict[str, np.ndarray]) -> None:
         """Write the tile's arrays, each atomically (an interrupted task leaves no partial tile)."""
         for name, arr in arrays.items():
-            final = self._file(name, win)
-            tmp = final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}")
-            try:
-                with open(tmp, "wb") as f:
-                    np.save(f, np.ascontiguousarray(arr))
-                tmp.replace(final)
-            except BaseException:
-                tmp.unlink(missing_ok=True)
-                raise
+            with atomic_path(self._file(name, win)) as tmp, open(tmp, "wb") as f:
+                np.save(f, np.ascontiguousarray(arr))
 
     def load(self, name: str, win: Window) -> np.ndarray:
         """The tile's array ``name``, memory-mapped (see :data:`_HEADERS`)."""
@@ -97,7 +90,7 @@ class RunStore:
         self.final = Path(final)
         name = tag(self.final.name)
         self.kept = self.final.with_name(f".{name}.{KEPT}")
-        self.folder = self.final.with_name(f".{name}.{KEPT}-{os.getpid()}-{secrets.token_hex(4)}")
+        self.folder = sibling(self.final, KEPT)
         _sweep(self.final)
         try:  # claim the tiles an interrupted run kept (atomic: one run gets them)
             os.rename(self.kept, self.folder)
@@ -128,10 +121,9 @@ class RunStore:
                 said = f"discarding the tiles kept by an interrupted run: {why}; starting afresh"
                 for entry in self.folder.iterdir():
                     if entry != self.scratch:
-                        shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
-        tmp = manifest.with_name(f".{MANIFEST}.tmp")
-        tmp.write_text(json.dumps(parts, sort_keys=True))
-        tmp.replace(manifest)
+                        remove(entry)
+        with atomic_path(manifest) as tmp:
+            tmp.write_text(json.dumps(parts, sort_keys=True))
         return said
 
     def tiles(self, windows) -> TileStore:
@@ -141,12 +133,10 @@ class RunStore:
         """Remove the store, or with ``keep`` (an interruption) leave its finished tiles where the
         same command finds them; whether they were kept."""
         shutil.rmtree(self.scratch, ignore_errors=True)
-        for partial in self.folder.glob(".*.npy.*"):  # a tile write cut short (a worker killed mid-write)
+        for partial in self.folder.glob(".*"):  # a tile write cut short (a worker killed mid-write)
             partial.unlink(missing_ok=True)
         if keep and self.key and any(self.folder.glob(f"{self.key}_*.npy")):
-            if self.kept.is_symlink() or self.kept.is_file():
-                self.kept.unlink()
-            shutil.rmtree(self.kept, ignore_errors=True)  # an older interruption's: ours is newer
+            remove(self.kept)  # an older interruption's (ours is newer), or not ours: never followed
             try:
                 os.rename(self.folder, self.kept)
                 return True
@@ -175,4 +165,4 @@ def run_store(final: Path) -> Iterator[RunStore]:
 def _sweep(final: Path) -> None:
     """Remove the run stores of runs into ``final`` that are no longer alive (killed)."""
     for entry, _ in dead_siblings(final, (KEPT,)):
-        shutil.rmtree(entry, ignore_errors=True)
+        remove(entry)
