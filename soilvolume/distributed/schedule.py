@@ -125,11 +125,6 @@ def budget_gb(memory_limit: float) -> float:
     return total / 2**30 / 2
 
 
-def worker_gb(schedule: Schedule, memory_limit: float) -> float:
-    """The memory (GB) one task may use: the budget shared by the workers (or threads)."""
-    return budget_gb(memory_limit) / max(1, schedule.workers)
-
-
 def can_spawn() -> bool:
     """Whether this process runs a Python interpreter that can start worker processes (inside
     QGIS, ``sys.executable`` is QGIS itself and spawned workers would start QGIS)."""

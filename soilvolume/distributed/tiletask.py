@@ -16,7 +16,7 @@ from ..options import Options
 from .cluster import checker
 from .gridtile import TILE_ARRAYS, Plan, crop_mask, empty_value, grid_tile, window_source
 from .overview import MAX_CELLS, blocks_for, factor
-from .schedule import TILE_BYTES_PER_POINT, Schedule, budget_gb
+from .schedule import TILE_BYTES_PER_POINT, Schedule, budget_gb, check_tiles
 from .tilestore import TileStore, Window
 from .waiting import completed
 
@@ -58,27 +58,33 @@ def _mode(values: np.ndarray) -> int | None:
     return int(v[np.argmax(n)])
 
 
-def fits(points: float, task_gb: float) -> bool:
-    """Whether a tile of ``points`` points fits half of one task's memory."""
-    return points * TILE_BYTES_PER_POINT <= 0.5 * task_gb * 2**30
-
-
-def tile_side(options: Options, grid: GridSpec, points_per_cell: float, task_gb: float, workers: int) -> int:
-    """Tile side (cells): ``options.tile_cells``, else what a task's memory share holds, small
-    enough for two tiles per worker."""
-    if options.tile_cells > 0:
-        return int(options.tile_cells)
-    points = min(TILE_POINTS, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT)
-    side = math.sqrt(points / max(points_per_cell, 1e-3))
-    side = min(side, math.sqrt(grid.rows * grid.cols / (2 * max(1, workers))))
-    return int(np.clip(side, MIN_TILE, MAX_TILE))
-
-
 def points_per_cell(prep, cell: float) -> float:
     """Expected points (both epochs) per grid cell: each epoch's points over its footprint."""
     area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
     used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
     return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
+
+
+def tile_windows(options: Options, grid: GridSpec, prep, schedule: Schedule, src) -> tuple:
+    """(the tile windows, their side in cells, points per cell) of the run's grid; ``src``: the
+    before source (its VPC's tiling)."""
+    cell, workers = grid.cell, max(1, schedule.workers)
+    task_gb, density = budget_gb(options.memory_limit) / workers, points_per_cell(prep, cell)
+    side = int(options.tile_cells)
+    if side <= 0:  # what a task's memory holds, small enough for two tiles per worker
+        area = min(TILE_POINTS, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT) / max(density, 1e-3)
+        side = int(np.clip(math.sqrt(min(area, grid.rows * grid.cols / (2 * workers))), MIN_TILE, MAX_TILE))
+    tiling = None if options.tile_cells else data_tiling(src, cell, 2 * side)
+    if tiling and density * (tiling[0] / cell) ** 2 * TILE_BYTES_PER_POINT > 0.5 * task_gb * 2**30:
+        tiling = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
+    windows = tiles(grid, side)
+    if tiling:  # snap to the input's tiles (one grid tile per data tile) when that keeps the workers busy
+        pitch = max(1, round(tiling[0] / cell))
+        aligned = tiles(grid, pitch, tiling[0], tiling[1:])
+        if len(aligned) >= min(len(windows), 2 * schedule.workers):
+            windows, side = aligned, pitch
+    check_tiles(windows, density, task_gb, options)
+    return windows, side, density
 
 
 def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:

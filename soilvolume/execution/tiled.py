@@ -21,20 +21,9 @@ from ..distributed.cluster import LazyClient, checker
 from ..distributed.fingerprint import input_identity, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
-from ..distributed.schedule import Schedule, budget_gb, check_tiles, client, worker_gb
+from ..distributed.schedule import Schedule, budget_gb, client
 from ..distributed.tilestore import run_store
-from ..distributed.tiletask import (
-    Plan,
-    data_tiling,
-    epoch_dems,
-    fits,
-    plan_parts,
-    points_per_cell,
-    run_tiles,
-    tile_side,
-    tiles,
-    volume_factor,
-)
+from ..distributed.tiletask import Plan, epoch_dems, plan_parts, run_tiles, tile_windows, volume_factor
 from ..distributed.volumetiles import VolumeJob, grid_tiles, reader, tile_volumes
 from ..inputs.footprint import PolygonMask, footprint
 from ..inputs.io import write_las_chunked
@@ -111,7 +100,7 @@ class Tiled:
         step in tiles) or the grid's."""
         grid, options = layout.grid, ctx.options
         self.plan = _plan(prep, ctx, grid, reg, (self.src_b, self.src_a))
-        self.windows, self.side, self.density = self._tiles(ctx, prep, grid)
+        self.windows, self.side, self.density = tile_windows(options, grid, prep, self.schedule, self.src_b)
         ctx.hooks.step(
             ctx.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
         )
@@ -137,23 +126,6 @@ class Tiled:
             self.starting.close_soon()  # the volume step runs here: the workers are done
         return Gridded(grid, dems, at, at_dems, done(beside(at, at_dems[1])))
 
-    def _tiles(self, ctx, prep: Prepared, grid) -> tuple:
-        """(the tile windows, their side in cells, points per cell) for the run's grid."""
-        options, cell = ctx.options, grid.cell
-        task_gb, density = worker_gb(self.schedule, options.memory_limit), points_per_cell(prep, cell)
-        side = tile_side(options, grid, density, task_gb, self.schedule.workers)
-        tiling = None if options.tile_cells else data_tiling(self.src_b, cell, 2 * side)
-        if tiling and not fits(density * (tiling[0] / cell) ** 2, task_gb):
-            tiling = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
-        windows = tiles(grid, side)
-        if tiling:  # snap to the input's tiles (one grid tile per data tile) when that keeps the workers busy
-            pitch = max(1, round(tiling[0] / cell))
-            aligned = tiles(grid, pitch, tiling[0], tiling[1:])
-            if len(aligned) >= min(len(windows), 2 * self.schedule.workers):
-                windows, side = aligned, pitch
-        check_tiles(windows, density, task_gb, options)
-        return windows, side, density
-
     def volume(self, ctx, step: VolumeFn, gridded: Gridded, planes: tuple, moved) -> object:
         """``step`` on the whole grid, or on the overview, then tile by tile given its correction."""
         p_b, p_a, d_i = planes
@@ -170,7 +142,7 @@ class Tiled:
         """The rasters as COGs block by block, from memory or the tile store; then the after cloud
         streamed through the driver (``--registered-cloud``)."""
         if layers:  # the pair's layers (a surface as the reference runs in memory)
-            get = reader(self.kept) if self.k > 1 else _arrays(vols)
+            get = reader(self.kept) if self.k > 1 else lambda key, r, c: getattr(vols, key)[r, c]
             _write_cogs(ctx.out, get, grid, z0, ctx.options.correction)
         if self.cloud is not None:
             prep, reg, path = self.cloud
@@ -208,11 +180,6 @@ def _write_cogs(out, get: Callable, grid, z0: float, correction: str) -> None:
         else:
             add = z0 if key.startswith("dem_") else 0.0
             write_cog(out.path(name), grid_layout(grid, desc), lambda r, c, key=key, add=add: get(key, r, c) + add)
-
-
-def _arrays(vols) -> Callable:
-    """A window of the volume step's arrays in memory."""
-    return lambda key, r, c: getattr(vols, key)[r, c]
 
 
 def _plan(prep: Prepared, ctx, grid, reg, sources: tuple) -> Plan:
