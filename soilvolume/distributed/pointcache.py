@@ -64,7 +64,6 @@ class PointCache:
         self.points = 0
         self.expected: list[Source] = []
         self.held: dict[Key, KeptTile] = {}  # tiles the driver scanned, until the workers are up
-        self.sending: set[Key] = set()  # held tiles on their way to the workers
         self.senders: list[threading.Thread] = []
         self.failed: BaseException | None = None
 
@@ -128,7 +127,6 @@ class PointCache:
         """Send the held tiles to the workers on a thread (the driver goes on with its next tasks
         and the registration); :meth:`sent` waits for them."""
         held, self.held = self.held, {}
-        self.sending.update(held)
         if not held:
             return
         resolve = getattr(self.client, "resolve", None)  # a cluster still starting: waited for here, in the driver
@@ -141,11 +139,8 @@ class PointCache:
         """All of ``held`` in one scatter (one call per tile took twice as long: 17 tiles of
         3.8 M points, 0.10-0.15 s through the scheduler, 0.05 s straight and at once)."""
         try:
-            keys = list(held)
-            futures = client.scatter([held[k] for k in keys], hash=False, direct=self.direct)
-            for key, future in zip(keys, futures, strict=True):
-                self.futures[key] = future
-                self.sending.discard(key)
+            futures = client.scatter(list(held.values()), hash=False, direct=self.direct)
+            self.futures.update(zip(held, futures, strict=True))
         except BaseException as exc:  # noqa: BLE001 - raised in the driver by sent()
             self.failed = exc
 
