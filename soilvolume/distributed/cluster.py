@@ -234,15 +234,10 @@ def pre_spawn_environ() -> dict[str, str]:
     from importlib.util import find_spec
 
     import dask
+    import yaml
 
-    spec = find_spec("distributed")
-    defaults = Path(spec.origin).parent / "distributed.yaml" if spec is not None and spec.origin else None
-    if defaults is not None and defaults.is_file():
-        import yaml
-
-        dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
-    else:  # a Distributed laid out otherwise: imported for its defaults
-        import distributed  # noqa: F401
+    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"
+    dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
     env = {**(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}), **LOCAL_WORKER_ENV}
     return {k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None}
 

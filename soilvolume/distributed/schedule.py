@@ -116,12 +116,9 @@ def budget_gb(memory_limit: float) -> float:
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (AttributeError, ValueError, OSError):  # not POSIX
-        try:
-            import psutil
+        import psutil  # a dependency; lazily: 16 ms
 
-            total = psutil.virtual_memory().total
-        except ImportError:
-            total = 8 * 2**30
+        total = psutil.virtual_memory().total
     return total / 2**30 / 2
 
 
