@@ -1,8 +1,5 @@
-"""The tiled backend: the point work as Dask tasks (:mod:`soilvolume.distributed`), so no process
-holds a survey's points. The reading is a first pass of tasks returning the thinned subsets the
-registration runs on in the driver; the grid is cut into tiles, each task gridding the points that
-meet its tile; the volume step runs on the whole grid, or tile by tile with a halo given its result
-on an overview of the grid (``--volume-step tiles``). Finished tiles are kept in the run's store."""
+"""The tiled backend: the point work as Dask tasks of :mod:`soilvolume.distributed` (see there), so
+no process holds a survey's points; finished tiles kept in the run's store."""
 
 from __future__ import annotations
 
@@ -35,7 +32,7 @@ IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read fr
 
 
 def _identify(future: Future, paths: list) -> None:
-    """The (before, after) inputs' identities (zlib's CRC releases the GIL) into ``future``."""
+    """The (before, after) inputs' identities into ``future`` (zlib's CRC releases the GIL)."""
     try:
         future.set_result({"before": input_identity(paths[0]), "after": input_identity(paths[1])})
     except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
@@ -57,8 +54,8 @@ class Tiled:
 
     @contextmanager
     def session(self, ctx) -> Iterator[Tiled]:
-        """The run's tile store and cluster; the cluster starts in the background and is waited
-        for at its first use (``cluster_wait``), shut down in the background after its last."""
+        """The run's tile store and cluster, started in the background, waited for at its first use
+        (``cluster_wait``), shut down in the background after its last."""
         if ctx.options.ground in ("filter", "csf"):
             raise SoilVolumeError(
                 f"{opt('ground', ctx.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
@@ -96,8 +93,7 @@ class Tiled:
         return None  # no process holds the full-resolution points
 
     def grid(self, ctx, prep: Prepared, reg, layout: Layout, beside: Callable) -> Gridded:
-        """The tiles gridded on the workers; ``beside`` on the overview's before DEM (the volume
-        step in tiles) or the grid's."""
+        """The tiles gridded on the workers; ``beside`` on the overview's before DEM (``k`` > 1) or the grid's."""
         grid, options = layout.grid, ctx.options
         self.plan = _plan(prep, ctx, grid, reg, (self.src_b, self.src_a))
         self.windows, self.side, self.density = tile_windows(options, grid, prep, self.schedule, self.src_b)
@@ -139,8 +135,7 @@ class Tiled:
         return vols
 
     def write(self, ctx, layers: list, vols, grid, z0: float) -> None:
-        """The rasters as COGs block by block, from memory or the tile store; then the after cloud
-        streamed through the driver (``--registered-cloud``)."""
+        """The rasters as COGs from memory or the tile store; the after cloud streamed through the driver."""
         if layers:  # the pair's layers (a surface as the reference runs in memory)
             get = reader(self.kept) if self.k > 1 else lambda key, r, c: getattr(vols, key)[r, c]
             _write_cogs(ctx.out, get, grid, z0, ctx.options.correction)
@@ -184,7 +179,7 @@ def _write_cogs(out, get: Callable, grid, z0: float, correction: str) -> None:
 
 def _plan(prep: Prepared, ctx, grid, reg, sources: tuple) -> Plan:
     """What every tile task needs (picklable); ``sources``: the (before, after) sources the driver
-    opened (the tasks then open none; never whole clouds)."""
+    opened (the tasks open none again; never whole clouds)."""
     b, a = (str(e.path) for e in ctx.epochs)
     crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
     ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], ctx.options.radius)
