@@ -123,9 +123,8 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
 
 
 def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(soil points, other points, their labels) of a chunk in its order: slices when its soil
-    points come first (as :mod:`.nativescan` keeps a tile), else by a mask (a third of a grid
-    task's time on 4 M points)."""
+    """(soil points, other points, their labels) of a chunk in order: slices when soil comes first
+    (as :mod:`.nativescan` keeps a tile), else a mask (a third of a task's time on 4 M points)."""
     soil = labels == 0
     k = int(np.count_nonzero(soil))
     if soil[:k].all():
@@ -161,9 +160,8 @@ def _joined(parts: list, dtype) -> np.ndarray:
 
 
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums | None, keep_ids: bool = False):
-    """Flat cell ids within the window and heights of the points on its cells (assigned on the
-    whole grid, as in-process); their positions in their cells added to ``offsets`` (None: not
-    needed, as for non-soil points). ``keep_ids``: the ids with the indices of their points."""
+    """Flat cell ids (on the whole grid's cells) and heights of the points on the window; positions
+    in their cells added to ``offsets`` (if any); ``keep_ids``: ids with their points' indices."""
     if offsets is not None and not keep_ids and xyz32.dtype == np.float32:
         lib = native.kernels()
         if lib is not None:

@@ -68,9 +68,8 @@ class PointCache:
         self.failed: BaseException | None = None
 
     def expect(self, src: Source) -> None:
-        """Read the tiles of ``src`` (a VPC, within its region) behind the first tiles taken, so
-        the later epoch's reads overlap the driver's work between the epochs; only when all fit
-        the budget (a tile read but not scanned is merely not needed)."""
+        """Read the tiles of ``src`` (a VPC's region) ahead, behind the first tiles taken, so the later
+        epoch's reads overlap the driver's work; only when all fit the budget."""
         if src.vpc is not None:
             self.expected.append(src)
 
@@ -200,9 +199,8 @@ def _count(src: Source, path: str) -> int | None:
 
 
 def chunks(src: Source, cached: dict | None, stats: dict, made: Callable[[Iterator], Iterator]) -> Iterator:
-    """The chunks of ``src`` as the grid takes them, (local float32 xyz, labels or None): the tiles
-    in ``cached`` ({path: KeptTile}) from memory (counted in ``stats``), the others read and made
-    so by ``made``: the same chunks in the same order, so the grid sums come out byte-identical."""
+    """The chunks of ``src`` as the grid takes them: ``cached`` ({path: KeptTile}) from memory, the
+    others made so by ``made``; the same chunks in the same order (byte-identical grid sums)."""
     if not cached or src.vpc is None:
         yield from made(src.chunks(signals=True))
         return

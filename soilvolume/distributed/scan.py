@@ -102,9 +102,8 @@ def dask_loader(
     wait_check: Callable[[], None] = interrupt.check,
     cache=None,
 ) -> Callable[..., Loaded]:
-    """A :func:`stream.load` running its units on ``client`` (sources in memory and reads keeping
-    full-resolution points stream here); ``wait_check`` runs while the tasks are waited for;
-    ``cache`` (:class:`.pointcache.PointCache`): the VPC tiles read kept on the workers."""
+    """A :func:`stream.load` running its units on ``client`` (reads keeping points stream here);
+    ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
 
     def loader(
         src: Source,
@@ -180,9 +179,8 @@ def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
 
 
 def _submit(client, left: list[Unit], args: tuple, taken: list[tuple], cache, crop) -> list:
-    """Futures of the summaries of ``left``'s scans (``taken``: per unit, its chunks read ahead or
-    None, and whether it is kept); a kept unit's :class:`.pointcache.KeptTile` is split from its
-    summary on the worker that scanned it, its future handed to ``cache``."""
+    """Futures of ``left``'s scans (``taken``: per unit, its chunks read ahead or None, whether kept);
+    a kept unit's :class:`.pointcache.KeptTile` split off on its worker, its future to ``cache``."""
 
     def submit(fn, ks: list[int]) -> list:
         reads = [taken[k][0] for k in ks]

@@ -108,9 +108,8 @@ def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
 def tiles(
     grid: GridSpec, side: int, align: float | None = None, corner: tuple[float, float] = (0.0, 0.0)
 ) -> list[Window]:
-    """The grid cut into tiles of ``side`` x ``side`` cells (row-major); with ``align`` (metres),
-    tile edges fall on ``corner`` (absolute x, y) plus multiples of it (the input's own tiling:
-    each data tile is then read by one task), slivers merged into their neighbours."""
+    """The grid cut into ``side`` x ``side`` tiles (row-major); with ``align`` (m), edges on ``corner``
+    (x, y) plus multiples of it (the input's tiling: one task per data tile), slivers merged."""
     r_off = c_off = 0
     if align:
         c_off = round(((corner[0] - grid.xmin) % align) / grid.cell) % side

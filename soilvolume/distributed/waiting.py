@@ -82,9 +82,8 @@ def _result(fut, what: str, lost: Callable[[], tuple[int, int]]):
 
 
 def _cluster_error(exc: BaseException, what: str, lost: tuple[int, int] = (0, 0)) -> SoilVolumeError:
-    """A cluster's failure as one line (a pending signal first: Ctrl-C also stops workers). A dead
-    worker's data goes with it, the tasks needing it cancelled: said as its death (``lost``:
-    workers gone, of how many)."""
+    """A cluster's failure as one line (a pending signal first: Ctrl-C stops workers too); tasks
+    cancelled with a dead worker's data said as its death (``lost``: workers gone, of how many)."""
     interrupt.check()
     name = type(exc).__name__
     advice = f"give each worker more with {opt('memory_limit')}, or smaller tiles with {opt('tile_cells')}"
