@@ -4,6 +4,7 @@ the scheduler. Waiting for its tasks: :mod:`.waiting`."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
@@ -94,10 +95,8 @@ class Starting:
         if self.closing is not None:
             self.closing.join(2 * CLOSE_S + 1)
             return
-        try:
+        with contextlib.suppress(FutureTimeout):
             self.future.exception(timeout=CLOSE_S)
-        except FutureTimeout:
-            pass
         self._shut()
 
     def _shut(self) -> None:
@@ -141,11 +140,9 @@ class LazyClient:
 def shut(cluster, client) -> None:
     """Close the client and the cluster, each within :data:`CLOSE_S` (never raises)."""
     for thing in (client, cluster):
-        try:
+        with contextlib.suppress(Exception):  # a cluster gone already, or too slow to say goodbye
             if thing is not None:
                 thing.close(timeout=CLOSE_S)
-        except Exception:  # noqa: BLE001 - a cluster gone already, or too slow to say goodbye
-            pass
 
 
 def connect(address: str):

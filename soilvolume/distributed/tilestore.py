@@ -13,6 +13,7 @@ they were computed from what it computes from (``store.json``), else discards, s
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -88,15 +89,13 @@ class RunStore:
 
     def __init__(self, final: Path) -> None:
         self.final = Path(final)
-        name = tag(self.final.name)
-        self.kept = self.final.with_name(f".{name}.{KEPT}")
+        self.kept = self.final.with_name(f".{tag(self.final.name)}.{KEPT}")
         self.folder = sibling(self.final, KEPT)
         _sweep(self.final)
-        try:  # claim the tiles an interrupted run kept (atomic: one run gets them)
+        self.claimed = False
+        with contextlib.suppress(OSError):  # claim the tiles an interrupted run kept (atomic: one run gets them)
             os.rename(self.kept, self.folder)
             self.claimed = True
-        except OSError:
-            self.claimed = False
         if self.claimed and (self.folder.is_symlink() or not self.folder.is_dir()):  # not ours: never follow it
             self.folder.unlink()
             self.claimed = False
@@ -137,11 +136,9 @@ class RunStore:
             partial.unlink(missing_ok=True)
         if keep and self.key and any(self.folder.glob(f"{self.key}_*.npy")):
             remove(self.kept)  # an older interruption's (ours is newer), or not ours: never followed
-            try:
+            with contextlib.suppress(OSError):
                 os.rename(self.folder, self.kept)
                 return True
-            except OSError:
-                pass
         shutil.rmtree(self.folder, ignore_errors=True)
         return False
 
