@@ -132,10 +132,7 @@ def has_dask() -> bool:
     """Whether dask.distributed can be imported (``auto`` runs in-process without it)."""
     import importlib.util
 
-    try:
-        return importlib.util.find_spec("distributed") is not None
-    except (ImportError, ValueError):
-        return False
+    return importlib.util.find_spec("distributed") is not None
 
 
 def choose(memory_limit: float, points: int) -> Schedule:
