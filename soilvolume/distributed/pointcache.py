@@ -57,7 +57,7 @@ class PointCache:
 
     def __init__(self, client, budget_gb: float, direct: bool = False) -> None:
         self.client, self.left, self.direct = client, budget_gb * CACHE_SHARE * 2**30, direct
-        self.futures: dict[Key, object] = {}  # the kept tiles, for the grid
+        self.futures: dict[Key, object] = {}  # the kept tiles (a scan task's KeptTile), for the grid
         self.reads: dict[str, object] = {}  # tiles of an epoch to come read ahead, for its scan
         self.charged: set[str] = set()  # the tiles counted against the budget
         self.scanned: set[str] = set()  # tiles whose scan is done or on its way
@@ -77,15 +77,14 @@ class PointCache:
         """Per tile of ``paths`` (of ``src``) whose scan is submitted now: (the future of its chunks
         read ahead, or None; whether the scan keeps it, :meth:`admit`). :meth:`prefetch` follows."""
         self.send_held()
-        self._started(src)
-        out = [(self.reads.pop(p, None), self.admit(src, p)) for p in paths]
-        self.scanned.update(paths)
-        return out
+        return [(self.reads.pop(p, None), kept) for p, kept in zip(paths, self._begun(src, paths), strict=True)]
 
-    def _started(self, src: Source) -> None:
-        """The scan of ``src`` has begun: too late to read it ahead (only the tiles of its expected
-        region it does not scan would be)."""
+    def _begun(self, src: Source, paths: list[str]) -> list[bool]:
+        """The scan of ``paths`` of ``src`` has begun (too late to read ``src`` ahead: only the tiles of
+        its expected region it does not scan would be): whether each is kept (:meth:`admit`)."""
         self.expected = [e for e in self.expected if e.path != src.path]
+        self.scanned.update(paths)
+        return [self.admit(src, p) for p in paths]
 
     def admit(self, src: Source, path: str) -> bool:
         """Whether the tile ``path`` of ``src`` is kept: a VPC tile, not COPC, that fits what is
@@ -100,10 +99,6 @@ class PointCache:
         self.charged.add(path)
         return True
 
-    def keep(self, key: Key, future) -> None:
-        """The future of a kept tile (a scan task's :class:`KeptTile`), for the grid."""
-        self.futures[key] = future
-
     def fits(self, src: Source, path: str) -> bool:
         """Whether the driver may scan and hold the tile ``path`` of the VPC ``src``: it fits the
         budget and what the driver holds (:data:`HELD_POINTS` at most, till the workers are up)."""
@@ -117,9 +112,7 @@ class PointCache:
     def hold(self, src: Source, key: Key, kept: KeptTile) -> None:
         """Keep a tile the driver scanned (see :meth:`fits`), sent to the workers at the next
         :meth:`take`."""
-        self._started(src)
-        self.admit(src, key[0])
-        self.scanned.add(key[0])
+        self._begun(src, [key[0]])
         self.held[key] = kept
 
     def send_held(self) -> None:

@@ -195,7 +195,7 @@ def _submit(client, left: list[Unit], args: tuple, taken: list[tuple], cache, cr
         tiles = client.map(operator.getitem, both, [1] * len(both), pure=False)
         for k, part, tile in zip(keeping, parts, tiles, strict=True):
             futures[k] = part
-            cache.keep((left[k][0], crop), tile)
+            cache.futures[(left[k][0], crop)] = tile
     return [futures[k] for k in range(len(left))]
 
 
