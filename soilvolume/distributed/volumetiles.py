@@ -100,19 +100,15 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
     job.store.save(win, {n: getattr(vols, n)[core] for n in VOLUME_ARRAYS})
     out = {b: getattr(vols, b) for b in BUDGETS}
+    edges = (ext[0] == 0, ext[1] == g.rows, ext[2] == 0, ext[3] == g.cols)  # the grid's edge: top, bottom, left, right
     out.update(
         window=win,
         uncertainty=vols.uncertainty,
         zones=vols.zones,
         empty=(vols.empty_cells, vols.empty_before, vols.empty_after),
-        coverage=coverage.counts(after.counts, before.counts, vols.filled_mask, vols.diff, core, _edges(ext, g)),
+        coverage=coverage.counts(after.counts, before.counts, vols.filled_mask, vols.diff, core, edges),
     )
     return out
-
-
-def _edges(ext: Window, grid: GridSpec) -> tuple[bool, bool, bool, bool]:
-    """Which sides of a window (top, bottom, left, right) are the grid's edge."""
-    return ext[0] == 0, ext[1] == grid.rows, ext[2] == 0, ext[3] == grid.cols
 
 
 def _sum_dicts(dicts: list[dict]) -> dict:

@@ -48,10 +48,10 @@ def _check_workers(c, since: float | None, what: str) -> float | None:
     """When the cluster first had no worker (None: it has some); an error after NO_WORKERS_S."""
     if c.scheduler_info().get("workers"):
         return None
-    now = time.monotonic()
-    if since is not None and now - since > NO_WORKERS_S:
+    since = since or time.monotonic()
+    if time.monotonic() - since > NO_WORKERS_S:
         raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")
-    return since if since is not None else now
+    return since
 
 
 def _workers(c) -> set[str] | None:
