@@ -102,8 +102,8 @@ def dask_loader(
     wait_check: Callable[[], None] = interrupt.check,
     cache=None,
 ) -> Callable[..., Loaded]:
-    """A :func:`stream.load` running its units on ``client`` (reads keeping points stream here);
-    ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
+    """A :func:`stream.load` running its units on ``client`` (sources in memory and reads keeping the
+    points stream here); ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
 
     def loader(
         src: Source,

@@ -111,7 +111,7 @@ class Tiled:
                 self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
             )
             self.coarse = overview.coarse(grid, self.k)
-            dems, at, at_dems = (), self.coarse, self.over_epochs
+            dems, at, at_dems = (), self.coarse, self.over_epochs  # the correction found on the overview
         else:
             self.stats = {}
             arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
