@@ -456,7 +456,7 @@ def _tile_scan(path, to_local, rule, keep, thinning: tuple, keeping: bool):
 
     def run():
         kept = []
-        got = scan._scan(
+        got = scan.scan_unit(
             (str(path), None, None), None, to_local, rule, keep, thinning, False, None, kept if keeping else None
         )
         counts = tuple(got[k] for k in ("points", "used", "cropped"))
@@ -513,7 +513,7 @@ def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):
     thinning, to_local = (np.zeros(2), np.full(2, 10.0), 0.5, None), Shift(np.zeros(3))
     rule, kept = PointRule(use_class=True), []
     assert nativescan.native_scan(str(path), to_local, rule, None, thinning, []) is None
-    got = scan._scan((str(path), None, None), None, to_local, rule, None, thinning, False, None, kept)
+    got = scan.scan_unit((str(path), None, None), None, to_local, rule, None, thinning, False, None, kept)
     assert (got["points"], got["used"], got["cropped"], len(got["sums"][0]), kept) == (0, 0, 0, 0, [])
 
 

@@ -119,7 +119,7 @@ def test_the_data_tiling_comes_from_the_tiles_corners_not_their_point_boxes():
     cross no data tile (a 49.999 m pitch drifted a window edge 42 m off the tile edges here)."""
     from types import SimpleNamespace
 
-    from soilvolume.distributed.tiled import data_tiling
+    from soilvolume.distributed.tiletask import data_tiling
     from soilvolume.inputs.vpc import Tile
 
     def tile(i, j, inset=0.0):
@@ -350,7 +350,7 @@ def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_pa
 
 def test_overview_factor_from_budget_and_size():
     from soilvolume.distributed import overview
-    from soilvolume.distributed.tiled import volume_factor
+    from soilvolume.distributed.tiletask import volume_factor
 
     small = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=1000, cols=1000)  # 1e6 cells: ~200 MB
     huge = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=20_000, cols=20_000)  # 4e8 cells
@@ -379,7 +379,7 @@ def test_tiled_volume_step_resumes_from_its_store(tmp_path):
     from soilvolume.api import Hooks
     from soilvolume.distributed.tilestore import TileStore
     from soilvolume.distributed.tiletask import TILE_ARRAYS
-    from soilvolume.distributed.volumestep import grid_tiles
+    from soilvolume.distributed.volumetiles import grid_tiles
 
     plan = _plan_of_missing_inputs(tmp_path)
     g = plan.grid

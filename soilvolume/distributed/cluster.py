@@ -1,10 +1,10 @@
 """Every wait on a Dask cluster, with a timeout: starting it or connecting to it (no answer, no
-workers, a server that speaks something else), waiting for its tasks (with a heartbeat that
-checks for SIGINT/SIGTERM, a lost scheduler and workers that all went away) and shutting it down.
-Each failure is one line naming the scheduler."""
+workers, a server that speaks something else) and shutting it down; each failure one line naming
+the scheduler. Waiting for its tasks: :mod:`.waiting`."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import sys
@@ -34,11 +34,16 @@ QUIET = {"distributed.worker.profile.enabled": False}
 # mmap threshold at 128 KB, so every larger temporary goes back to the kernel when freed and is
 # faulted in again (0.14 s of the paper pair's 2.5 s as a VPC on local:2); None: not set
 LOCAL_WORKER_ENV = {"MALLOC_TRIM_THRESHOLD_": None}
+# what the tile tasks run (the forkserver imports them once, for every worker it forks)
+TASK_MODULES = ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj")
+#: imported once by the forkserver, for every worker forked from it (WORKER_INIT first: the
+#: extras it hides are left out of Dask's and laspy's imports)
+FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES)
 
 
 class Starting:
-    """A (cluster or None, client) being started on a daemon thread: waiting for it never blocks
-    longer than its timeout, and one nobody waits for any more is closed when it arrives."""
+    """A (cluster or None, client) started on a daemon thread: a wait for it ends at its timeout,
+    and one nobody waits for any more is shut when it arrives."""
 
     def __init__(self, start: Callable[[], tuple], what: str, timeout: float) -> None:
         self.what, self.timeout = what, timeout
@@ -83,18 +88,15 @@ class Starting:
                 ) from None
 
     def close(self) -> None:
-        """Shut the cluster down; after :meth:`close_soon`, wait (bounded) for that shutdown to end.
-        A cluster still starting (a run ended by an error or a signal meanwhile) is waited for, at
-        most :data:`CLOSE_S`, and shut down here: its workers would otherwise come up after this
-        process, into the run's scratch space removed already. Past that, its starting thread
-        shuts it when it arrives."""
+        """Shut the cluster down, or wait (bounded) for :meth:`close_soon`'s shutdown. A cluster
+        still starting (the run ended by an error or a signal) is waited for, at most
+        :data:`CLOSE_S`, and shut here: its workers would otherwise come up after this process,
+        into the run's scratch space removed already; later, its starting thread shuts it."""
         if self.closing is not None:
             self.closing.join(2 * CLOSE_S + 1)
             return
-        try:
+        with contextlib.suppress(FutureTimeout):
             self.future.exception(timeout=CLOSE_S)
-        except FutureTimeout:
-            pass
         self._shut()
 
     def _shut(self) -> None:
@@ -105,17 +107,16 @@ class Starting:
             shut(*self.future.result())
 
     def close_soon(self) -> None:
-        """Start shutting the cluster down on a thread (it takes ~1 s: the driver's last steps
-        overlap it) once the run needs it no more; :meth:`close` waits for it."""
+        """Shut the cluster down on a thread (~1 s, overlapping the driver's last steps) once the
+        run needs it no more; :meth:`close` waits for it."""
         if self.closing is None:
             self.closing = threading.Thread(target=self._shut, daemon=True, name="soilvolume-cluster-close")
             self.closing.start()
 
 
 class LazyClient:
-    """The client of a cluster still starting: the first use waits for it (``wait``), so the
-    driver's own work before then (opening the sources, reading their first chunks) overlaps
-    the start of the workers."""
+    """The client of a cluster still starting, waited for (``wait``) at its first use: the driver's
+    work until then (opening the sources, reading their first chunks) overlaps the workers' start."""
 
     def __init__(self, wait: Callable[[], object], started: Callable[[], bool] = lambda: True) -> None:
         self._wait, self._started, self._client = wait, started, None
@@ -139,12 +140,9 @@ class LazyClient:
 def shut(cluster, client) -> None:
     """Close the client and the cluster, each within :data:`CLOSE_S` (never raises)."""
     for thing in (client, cluster):
-        if thing is None:
-            continue
-        try:
-            thing.close(timeout=CLOSE_S)
-        except Exception:  # noqa: BLE001 - a cluster gone already, or too slow to say goodbye
-            pass
+        with contextlib.suppress(Exception):  # a cluster gone already, or too slow to say goodbye
+            if thing is not None:
+                thing.close(timeout=CLOSE_S)
 
 
 def connect(address: str):
@@ -172,12 +170,11 @@ def connect(address: str):
 
 
 def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None, spawn: bool = False):
-    """(LocalCluster, Client): ``workers`` processes of one thread (or one process of
-    ``workers`` threads), no dashboard, quiet, scratch space in ``scratch``; ``spawn``: workers
-    started as on Windows and macOS, also on Linux (the install's self-test)."""
+    """(LocalCluster, Client): ``workers`` processes of one thread (or one of ``workers`` threads),
+    quiet, scratch space in ``scratch``; ``spawn``: as on Windows and macOS (the self-test)."""
     method = "spawn" if spawn else _start_method() if processes else None  # first: the forkserver's imports
     import dask
-    from dask.distributed import Client
+    from dask.distributed import Client, LocalCluster
 
     extra = {"preload": [WORKER_INIT]} if processes else {}
     if scratch is not None:
@@ -188,7 +185,16 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
     if method:
         settings["distributed.worker.multiprocessing-method"] = method
     with dask.config.set(settings):
-        cluster = _local_cluster(workers, processes, per_worker_gb, extra)
+        cluster = LocalCluster(
+            n_workers=workers if processes else 1,
+            threads_per_worker=1 if processes else workers,
+            processes=processes,
+            memory_limit=f"{per_worker_gb:.3f}GiB" if per_worker_gb else None,
+            dashboard_address=None,
+            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},  # no port 8787 warning
+            silence_logs=logging.CRITICAL,
+            **extra,
+        )
     try:
         return cluster, Client(cluster)
     except BaseException:
@@ -196,20 +202,12 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
         raise
 
 
-# what the tile tasks run (the forkserver imports them once, for every worker it forks)
-TASK_MODULES = ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj")
-#: imported once by the forkserver, for every worker forked from it (WORKER_INIT first: the
-#: extras it hides are left out of Dask's and laspy's imports)
-FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES)
-
-
 def _start_method() -> str | None:
     """``forkserver`` on Linux: one server process imports Dask and the tasks' modules once and
     forks each worker from it (a spawned worker imports them itself, ~0.6 s of CPU each, which on
-    a small machine the driver's reading waits for). The server starts at once, before this
-    process imports Dask and starts the scheduler and the nannies: its imports (~0.4 s) overlap
-    them instead of following them. None elsewhere: Dask's default, spawn (Windows has no fork;
-    on macOS system libraries are not safe to use after one)."""
+    a small machine the driver's reading waits for). It starts before this process imports Dask
+    and starts the scheduler and the nannies: its imports (~0.4 s) overlap them. None elsewhere:
+    Dask's default, spawn (Windows has no fork; on macOS system libraries are not fork-safe)."""
     import multiprocessing
     from multiprocessing import forkserver
 
@@ -227,40 +225,18 @@ def _start_method() -> str | None:
 
 
 def pre_spawn_environ() -> dict[str, str]:
-    """Dask's ``distributed.nanny.pre-spawn-environ`` as a nanny applies it (variables the user set
-    win), with :data:`LOCAL_WORKER_ENV`: one OpenMP/BLAS thread per worker. C libraries read them as a
-    process starts, so the forkserver needs them before its workers are forked, and it starts
-    before Distributed is imported (0.3 s): its defaults are loaded as importing it would."""
+    """Dask's ``distributed.nanny.pre-spawn-environ`` (the user's variables win) with
+    :data:`LOCAL_WORKER_ENV`: one OpenMP/BLAS thread per worker, read by C libraries as a process
+    starts, so set before the forkserver, which starts before Distributed is imported (0.3 s)."""
     from importlib.util import find_spec
 
     import dask
+    import yaml
 
-    spec = find_spec("distributed")
-    defaults = Path(spec.origin).parent / "distributed.yaml" if spec is not None and spec.origin else None
-    if defaults is not None and defaults.is_file():
-        import yaml
-
-        dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
-    else:  # a Distributed laid out otherwise: imported for its defaults
-        import distributed  # noqa: F401
-    env = dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}
-    env = {**env, **LOCAL_WORKER_ENV}
+    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"
+    dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
+    env = {**(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}), **LOCAL_WORKER_ENV}
     return {k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None}
-
-
-def _local_cluster(workers: int, processes: bool, per_worker_gb: float | None, extra: dict):
-    from dask.distributed import LocalCluster
-
-    return LocalCluster(
-        n_workers=workers if processes else 1,
-        threads_per_worker=1 if processes else workers,
-        processes=processes,
-        memory_limit=f"{per_worker_gb:.3f}GiB" if per_worker_gb else None,
-        dashboard_address=None,
-        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},  # no port 8787 warning
-        silence_logs=logging.CRITICAL,
-        **extra,
-    )
 
 
 def checker(hooks) -> Callable[[], None]:

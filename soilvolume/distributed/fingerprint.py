@@ -1,9 +1,7 @@
-"""What a tiled run's kept tiles were computed from, so a resume never reuses work of other
-inputs, options or code: the content identity of every input file (size, modification time and
-a CRC of its header, its end and samples of its body; small files hashed whole), every option
-that changes numbers (all those not declared run control in :class:`~soilvolume.options.Options`,
-so a new option cannot be forgotten), the engine's source and the run's plan (grid, registration,
-tiling)."""
+"""What a tiled run's kept tiles were computed from, so a resume never reuses work of other inputs,
+options or code: every input file's content identity, every option that changes numbers (all not
+declared run control in :class:`~soilvolume.options.Options`: a new one cannot be forgotten), the
+engine's source and the run's plan (grid, registration, tiling)."""
 
 from __future__ import annotations
 
@@ -26,11 +24,10 @@ FILE_OPTIONS = ("zones", "stable_mask")  # options naming files whose content ma
 
 
 def file_identity(path: str | os.PathLike) -> dict[str, Any]:
-    """Size, modification time (ns) and a CRC-32 of ``path``'s content (whole when small, else
-    its first and last :data:`HEAD_BYTES` and :data:`SAMPLES` blocks between). A change
-    detector, not a seal: a file edited in place keeps its size and time only if someone
-    sets them back, and then the CRC still catches all but one edit in 4 billion; zlib's CRC
-    reads 3-4 GB/s, where BLAKE2 read under 1 GB/s (a run hashes every tile it reads)."""
+    """Size, modification time (ns) and a CRC-32 of ``path``'s content (whole when small, else its
+    first and last :data:`HEAD_BYTES` and :data:`SAMPLES` blocks between). A change detector:
+    an edit in place keeps size and time only if set back, and the CRC still catches all but one
+    in 4 billion; zlib's CRC reads 3-4 GB/s, BLAKE2 under 1 GB/s (a run hashes every tile)."""
     p = Path(path)
     st = p.stat()
     crc = 0
@@ -58,14 +55,8 @@ def input_identity(path: str | os.PathLike) -> dict[str, Any]:
     return out
 
 
-def input_identities(before, after) -> dict[str, Any]:
-    """{"before": ..., "after": ...}: both inputs' :func:`input_identity`."""
-    return {"before": input_identity(before), "after": input_identity(after)}
-
-
 def number_options(options: Options) -> dict[str, Any]:
-    """Every option that changes the numbers (all but those declared ``run_control``), files
-    named by an option replaced by their identity."""
+    """Every option that changes the numbers (not ``run_control``), a file named by one as its identity."""
     out: dict[str, Any] = {}
     for f in fields(options):
         if f.metadata.get("run_control"):
@@ -78,8 +69,7 @@ def number_options(options: Options) -> dict[str, Any]:
 
 
 def _vector_identity(path: Path) -> dict[str, Any]:
-    """A vector file's identity: the file and its sidecars (a Shapefile's .dbf, .prj, ...), or
-    every file of a folder."""
+    """A vector file's and its sidecars' identities (a Shapefile's .dbf, .prj, ...), or a folder's files'."""
     files = sorted(path.iterdir()) if path.is_dir() else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
     return {p.name: file_identity(p) for p in files if p.is_file()}
 
@@ -96,16 +86,9 @@ def code_identity() -> str:
 
 
 def run_parts(inputs: dict[str, Any], options: Options, plan: dict[str, Any]) -> dict[str, Any]:
-    """What the tiles of a run are computed from, as plain JSON values (see module); ``inputs``:
-    the inputs' identities (:func:`input_identities`)."""
-    return _plain(
-        {
-            "code": code_identity(),
-            "inputs": inputs,
-            "options": number_options(options),
-            "plan": plan,
-        }
-    )
+    """What a run's tiles are computed from, as plain JSON values; ``inputs``: {"before": ...,
+    "after": ...} of :func:`input_identity`."""
+    return _plain({"code": code_identity(), "inputs": inputs, "options": number_options(options), "plan": plan})
 
 
 def digest(parts: dict[str, Any]) -> str:

@@ -1,6 +1,5 @@
-"""One tile of the shared grid as a Dask task: both epochs' points on the tile's cells (read only
-where they can meet it), their heights, counts and spreads with :func:`grid.cell_heights` on the
-*global* grid's cell assignment, exactly as in-process."""
+"""One tile of the shared grid as a Dask task: both epochs' points that can meet it, their heights,
+counts and spreads by :func:`grid.cell_heights` on the *global* grid's cells, as in-process."""
 
 from __future__ import annotations
 
@@ -37,8 +36,7 @@ TILE_ARRAYS = tuple(f"{k}_{e}" for e in "ab" for k in EPOCH_ARRAYS)  # what a ti
 
 
 def empty_value(name: str) -> float:
-    """A tile array's value where no point fell: 0 for counts and centre offsets, NaN for heights
-    and spreads."""
+    """A tile array's value where no point fell: 0 (counts, centre offsets) or NaN."""
     return 0 if name[0] in ZERO_WHERE_EMPTY else np.nan
 
 
@@ -70,9 +68,8 @@ def crop_mask(plan: Plan) -> PolygonMask:
 
 
 def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Window, tuple[np.ndarray, ...], dict]:
-    """(window, arrays of :data:`TILE_ARRAYS`, stats) of one tile: both epochs' points on its
-    cells, their heights, counts, spreads and offsets from the cell centres; stats: points read,
-    seconds. ``cached``: (before, after) {path: KeptTile} of VPC tiles in memory (:mod:`.pointcache`)."""
+    """(window, arrays of :data:`TILE_ARRAYS`, stats: points read, seconds) of one tile;
+    ``cached``: (before, after) {path: KeptTile} of VPC tiles in memory (:mod:`.pointcache`)."""
     t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
     before = _epoch(plan, 0, win, crop_mask(plan), stats, cached[0])
     after = _epoch(plan, 1, win, None, stats, cached[1])
@@ -84,8 +81,7 @@ def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Wi
 
 
 def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
-    """(CRS, source read only where it can meet the window, its x/y box or None) of one epoch
-    (0 before, 1 after)."""
+    """(CRS, source read only where it can meet the window, that x/y box or None) of epoch 0 or 1."""
     crs = pyproj.CRS.from_wkt((plan.crs_b, plan.crs_a)[epoch])
     src = plan.sources[epoch] or open_source((plan.before, plan.after)[epoch])
     src = replace(src, index=plan.index[epoch])
@@ -94,16 +90,16 @@ def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
 
 
 def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict | None = None):
-    """Heights, counts, spreads and centre offsets of one epoch (0 before, 1 after) on the
-    window's cells; ``cached``: {path: KeptTile} of the epoch's VPC tiles in memory."""
+    """Heights, counts, spreads and centre offsets of epoch 0 or 1 on the window's cells;
+    ``cached``: {path: KeptTile} of the epoch's VPC tiles in memory."""
     transform = plan.transform if epoch else None
     shape = (win[1] - win[0], win[3] - win[2])
     ids, zs, offsets = [], [], OffsetSums(shape[0] * shape[1])
-    rule, made = plan.rules[epoch], _FileChunks(plan, epoch, win, keep, stats)
+    rule, (src, made) = plan.rules[epoch], _file_chunks(plan, epoch, win, keep, stats)
     if rule is None and plan.ground[epoch]:
         cached = None  # kept tiles hold every class: class 2 is chosen from the files' classes
     o_ids, o_lab, o_z = [], [], []
-    for local, labels in chunks(made.src, cached, stats, made):
+    for local, labels in chunks(src, cached, stats, made):
         if transform is not None:
             local = transform_points32(local, transform)
         if labels is not None:
@@ -127,9 +123,8 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
 
 
 def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(soil points, other points, their labels) of a chunk, each in the chunk's order: slices
-    when its soil points come first (as the native scan keeps a tile,
-    :mod:`.nativescan`), else by a mask (a third of a grid task's time on 4 M points)."""
+    """(soil points, other points, their labels) of a chunk in order: slices when soil comes first
+    (as :mod:`.nativescan` keeps a tile), else a mask (a third of a task's time on 4 M points)."""
     soil = labels == 0
     k = int(np.count_nonzero(soil))
     if soil[:k].all():
@@ -137,30 +132,27 @@ def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.n
     return local[soil], local[~soil], labels[~soil]
 
 
-class _FileChunks:
-    """File chunks (xyz, classification, signals) of one epoch made what the grid takes, (local
-    float32 xyz, labels or None), as the first pass keeps them (:class:`.pointcache.KeptTile`):
-    labelled, within the window's read box, in the local frame, cropped by ``keep``; ``src``: the
-    epoch's source read only where it can meet the window."""
+def _file_chunks(plan: Plan, epoch: int, win: Window, keep, stats: dict) -> tuple:
+    """(the epoch's source where it can meet the window, a function making its file chunks what
+    the grid takes, as a :class:`.pointcache.KeptTile`: labelled, boxed, local, cropped by ``keep``)."""
+    rule, ground = plan.rules[epoch], plan.ground[epoch]
+    crs, src, box = window_source(plan, epoch, win)
+    to_local = _local(crs, plan.frame, plan.origin, (plan.before, plan.after)[epoch])
 
-    def __init__(self, plan: Plan, epoch: int, win: Window, keep, stats: dict) -> None:
-        self.rule, self.ground, self.keep, self.stats = plan.rules[epoch], plan.ground[epoch], keep, stats
-        crs, self.src, self.box = window_source(plan, epoch, win)
-        self.to_local = _local(crs, plan.frame, plan.origin, (plan.before, plan.after)[epoch])
-
-    def __call__(self, file_chunks):
-        rule, box, keep = self.rule, self.box, self.keep
+    def made(file_chunks):
         for xyz, cls, sig in file_chunks:
-            self.stats["read"] += len(xyz)
+            stats["read"] += len(xyz)
             labels = rule.labels(cls, sig) if rule is not None else None
-            sel = cls == GROUND if rule is None and self.ground and cls is not None else None
+            sel = cls == GROUND if rule is None and ground and cls is not None else None
             if box is not None:  # the box has a margin: cells are assigned exactly below
                 near = in_box(xyz, *box)
                 sel = near if sel is None else sel & near
             if sel is not None:
                 xyz, labels = xyz[sel], None if labels is None else labels[sel]
-            local = self.to_local(xyz)
+            local = to_local(xyz)
             yield kept_chunk(local, labels, None if keep is None else keep(local))
+
+    return src, made
 
 
 def _joined(parts: list, dtype) -> np.ndarray:
@@ -168,10 +160,8 @@ def _joined(parts: list, dtype) -> np.ndarray:
 
 
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums | None, keep_ids: bool = False):
-    """Flat cell ids within the window, and heights, of the points on the window's cells of
-    ``grid`` (cells assigned on the whole grid, exactly as in-process); their positions in
-    their cells are added to ``offsets`` (None: not needed, as for the points that are not
-    soil). ``keep_ids``: the ids come with the indices of the points they belong to."""
+    """Flat cell ids (on the whole grid's cells) and heights of the points on the window; positions
+    in their cells added to ``offsets`` (if any); ``keep_ids``: ids with their points' indices."""
     if offsets is not None and not keep_ids and xyz32.dtype == np.float32:
         lib = native.kernels()
         if lib is not None:
@@ -189,9 +179,8 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
 
 
 def _native_window_cells(lib, xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums) -> tuple:
-    """:func:`_window_cells` of soil points on the kernel (``sv_cells``): the same ids, heights
-    and offset sums, bit for bit (the chunk's offsets summed from zero, then added, as
-    :meth:`OffsetSums.add` does)."""
+    """:func:`_window_cells` of soil points on the kernel (``sv_cells``), bit for bit (the chunk's
+    offsets summed from zero, then added, as :meth:`OffsetSums.add` does)."""
     ids, z = np.empty(len(xyz32), np.int64), np.empty(len(xyz32), np.float64)
     sx, sy = np.zeros_like(offsets.sx), np.zeros_like(offsets.sy)
     m = native_cells(lib, xyz32, grid, win, ids, z, sx, sy)
@@ -202,7 +191,7 @@ def _native_window_cells(lib, xyz32: np.ndarray, grid: GridSpec, win: Window, of
 
 def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:
     """The x/y box (file CRS) a tile's points can come from, for files in the frame's CRS and
-    metres (else None: read everything); ``transform`` maps the file's local points to the grid."""
+    metres (else None: read all); ``transform``: the file's local points to the grid."""
     if not (crs.equals(plan.frame.crs) and plan.frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
         return None
     g, o = plan.grid, plan.origin

@@ -1,12 +1,11 @@
-"""The first pass's scan of one whole LAS/LAZ file on the native chunk kernel
+"""The first pass's scan of a whole LAS/LAZ file on the native chunk kernel
 (:class:`~soilvolume.inputs.chunkwork.NativeChunks`, as :func:`soilvolume.inputs.stream.load`
-streams a file): decode, crop, labels, thinning and the points kept for the grid in one pass,
+streams one): decode, crop, labels, thinning and the points kept for the grid in one pass,
 without the GIL (the driver scans tiles while the cluster starts; its imports share the cores).
 
-What it returns is what :func:`.scan._scan` computes in numpy: the same thinning sums and counts,
-and the same kept chunks (one per chunk of ``CHUNK`` points, the same number of points) with their
-soil points first and the others after them, each in file order: the grid takes soil and other
-points apart (:func:`.gridtile._epoch`), so its sums come out byte-identical."""
+It returns what :func:`.scan.scan_unit` computes in numpy: the same sums and counts, the same
+kept chunks (one per ``CHUNK`` points) with soil points first, then the others, each in file
+order: the grid takes them apart (:func:`.gridtile._epoch`), its sums byte-identical."""
 
 from __future__ import annotations
 
@@ -27,14 +26,12 @@ NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no 
 
 
 def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kept: list | None) -> dict | None:
-    """The scan of the file ``path`` (points, soil points used, points cropped in, read seconds,
-    the thinning ``sums``, a :class:`.thinning.Block`; each chunk's kept points and labels
-    appended to ``kept`` when it is a list), or None where the kernel does not apply: no library,
-    a frame that is not a plain shift, a crop that is not a lattice, a COPC file, an empty or
-    unreadable one. The tile is thinned on the columns of ``thinning`` that meet its header's
-    box (points outside it fail the reader's bounds check), not on the whole epoch's, zeroed and
-    swept for each tile; if a point still missed them, the tile is scanned again on all of them
-    (and its sums are those of its columns with points)."""
+    """The scan of the file ``path`` (counts, read seconds, the thinning ``sums`` as a
+    :class:`.thinning.Block`; each chunk's kept points and labels appended to ``kept``, a list),
+    or None where the kernel does not apply: no library, a frame not a plain shift, a crop not a
+    lattice, a COPC, empty or unreadable file. Thinned on the columns meeting its header's box
+    (points outside fail the reader's bounds check), not the epoch's, zeroed and swept per tile;
+    if a point missed them, scanned again on all (its sums those of its columns with points)."""
     if is_copc(path):
         return None
     try:
@@ -58,8 +55,7 @@ def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kep
 
 
 def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinner, keeping: bool) -> tuple:
-    """(counts of the scan, ``thinner`` fed, each chunk's kept points and labels when
-    ``keeping``) of :func:`native_scan`."""
+    """(the scan's counts, ``thinner`` fed, each chunk's kept points and labels if ``keeping``)."""
     out = Growing(src.count if keeping else 0), Growing(0), Growing(0, None, np.uint8)
     kernel = NativeChunks(native.kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
     direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None

@@ -1,6 +1,6 @@
-"""An overview of a grid too large for one process: block sums of k x k cells that the gridding
-tasks return with their tiles, the overview grid they add up to, each epoch's median point
-count from the tasks' count histograms, and the overview's correction brought back to cells."""
+"""An overview of a grid too large for one process: the k x k block sums the gridding tasks
+return, the overview grid they add up to, each epoch's median point count from the tasks' count
+histograms, the overview's correction brought back to cells."""
 
 from __future__ import annotations
 
@@ -38,9 +38,8 @@ def coarse(grid: GridSpec, k: int) -> GridSpec:
 
 
 def block_sums(win, k: int, h: np.ndarray, n: np.ndarray) -> tuple:
-    """(first block row, first block col, (sum of heights, valid cells, sum of counts)) of one
-    tile's k x k blocks on the whole grid's block lattice (blocks cut by tile edges get the rest
-    from the neighbouring tile)."""
+    """(first block row, first block col, (height sum, valid cells, count sum)) of a tile's k x k
+    blocks on the grid's block lattice (blocks cut by tile edges get the rest from the next tile)."""
     r0, r1, c0, c1 = win
     br = np.arange(r0, r1) // k - r0 // k
     bc = np.arange(c0, c1) // k - c0 // k
@@ -82,8 +81,8 @@ def add_blocks(target: tuple[np.ndarray, ...], part: tuple) -> None:
 
 
 def to_cells(values: np.ndarray, k: int, win, nearest: bool = False) -> np.ndarray:
-    """An overview raster on the grid cells of window ``win``: bilinear between block centres
-    (NaN blocks first take their nearest finite block's value), or the block's value."""
+    """An overview raster on the cells of window ``win``: bilinear between block centres (NaN
+    blocks take their nearest finite block's value first), or ``nearest`` the block's value."""
     from scipy import ndimage
 
     r0, r1, c0, c1 = win

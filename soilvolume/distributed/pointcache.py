@@ -1,9 +1,8 @@
-"""The first pass's points kept on the workers for the grid pass, when they fit the memory
-budget: the task that scans a whole VPC tile (not COPC: its first pass reads a thinned level)
-also makes what the grid needs of it, a :class:`KeptTile` (the local float32 points the crop
-keeps, with their labels), which stays on its worker as a Dask future; the grid tasks whose
-boxes meet the tile take it instead of decoding, labelling, shifting and cropping the file
-again. Tiles beyond the budget are read again by the grid tasks, as without the cache."""
+"""The first pass's VPC tiles kept on the workers for the grid pass while they fit the memory
+budget: the scan of a whole VPC tile (not COPC: its first pass reads a thinned level) also makes
+its :class:`KeptTile`, which stays on its worker as a Dask future; the grid tasks meeting the
+tile take it instead of decoding, labelling, shifting and cropping the file again. Tiles beyond
+the budget are read again by the grid tasks."""
 
 from __future__ import annotations
 
@@ -32,68 +31,60 @@ Key = tuple  # (tile path, PolygonMask.key() of the crop its kept points passed,
 
 @dataclass(frozen=True)
 class KeptTile:
-    """A VPC tile as the grid pass needs it: per chunk of the file (:data:`stream.CHUNK`), the
-    local float32 x, y, z of the points the epoch's crop keeps, in the file's order, and their
-    labels (:mod:`soil.points`; None: every point is soil); ``points``: the tile's points."""
+    """A VPC tile as the grid needs it: per file chunk, the local float32 xyz the epoch's crop keeps,
+    in file order, and their labels (None: all soil); ``points``: the tile's points."""
 
     chunks: tuple
     points: int
 
 
 def kept_chunk(local: np.ndarray, labels: np.ndarray | None, inside: np.ndarray | None) -> tuple:
-    """(local float32 xyz, labels) of the points of a chunk ``inside`` keeps (all when None): a chunk
-    of a :class:`KeptTile` as the first pass makes it, and as a grid task makes it from the file."""
+    """(local float32 xyz, labels) of the points of a chunk ``inside`` keeps (all when None), as
+    the first pass keeps it and as a grid task makes it from the file."""
     if inside is None:
         return local.astype(np.float32), labels
     return rows(local, inside).astype(np.float32), None if labels is None else labels[inside]
 
 
 def read_tile(path: str) -> tuple:
-    """The chunks (xyz, classification, signals) of one whole LAS/LAZ file, as the grid tasks'
-    reads yield them (:func:`stream.file_chunks`)."""
+    """The chunks (xyz, classification, signals) of a whole LAS/LAZ file, as the grid reads them."""
     return tuple(file_chunks(path, None, CHUNK, signals=True))
 
 
 class PointCache:
-    """Futures of the VPC tiles kept in the workers' memory (:class:`KeptTile`), within ``budget_gb``;
-    ``direct``: the tiles the driver scanned are sent straight to the workers (a cluster of this
-    machine), not through the scheduler."""
+    """Futures of the VPC tiles kept in the workers' memory within ``budget_gb``; ``direct``: the
+    tiles the driver scanned go straight to the workers (a cluster of this machine)."""
 
     def __init__(self, client, budget_gb: float, direct: bool = False) -> None:
         self.client, self.left, self.direct = client, budget_gb * CACHE_SHARE * 2**30, direct
-        self.futures: dict[Key, object] = {}  # the kept tiles, for the grid
+        self.futures: dict[Key, object] = {}  # the kept tiles (a scan task's KeptTile), for the grid
         self.reads: dict[str, object] = {}  # tiles of an epoch to come read ahead, for its scan
         self.charged: set[str] = set()  # the tiles counted against the budget
         self.scanned: set[str] = set()  # tiles whose scan is done or on its way
         self.points = 0
         self.expected: list[Source] = []
         self.held: dict[Key, KeptTile] = {}  # tiles the driver scanned, until the workers are up
-        self.sending: set[Key] = set()  # held tiles on their way to the workers
         self.senders: list[threading.Thread] = []
         self.failed: BaseException | None = None
 
     def expect(self, src: Source) -> None:
-        """Read the tiles of ``src`` (a VPC, within its region) as soon as the first tiles are
-        taken, behind them: the later epoch's reads then overlap the driver's work between the
-        epochs and the first epoch's last tasks. Only when every tile expected fits the budget;
-        a tile read but not scanned is merely not needed (the grid reads what it meets)."""
+        """Read the tiles of ``src`` (a VPC's region) ahead, behind the first tiles taken, so the later
+        epoch's reads overlap the driver's work; only when all fit the budget."""
         if src.vpc is not None:
             self.expected.append(src)
 
     def take(self, src: Source, paths: list[str]) -> list[tuple]:
-        """Per tile of ``paths`` (of ``src``) whose scan is submitted now: (the future of its
-        chunks read ahead, or None: the scan reads the file; whether the scan keeps the tile,
-        :meth:`admit`). :meth:`prefetch` follows the submission of the scans."""
+        """Per tile of ``paths`` (of ``src``) whose scan is submitted now: (the future of its chunks
+        read ahead, or None; whether the scan keeps it, :meth:`admit`). :meth:`prefetch` follows."""
         self.send_held()
-        self._started(src)
-        out = [(self.reads.pop(p, None), self.admit(src, p)) for p in paths]
-        self.scanned.update(paths)
-        return out
+        return [(self.reads.pop(p, None), kept) for p, kept in zip(paths, self._begun(src, paths), strict=True)]
 
-    def _started(self, src: Source) -> None:
-        """The scan of ``src`` has begun: reading its tiles ahead is too late (it would read only
-        those of the expected region it does not scan)."""
+    def _begun(self, src: Source, paths: list[str]) -> list[bool]:
+        """The scan of ``paths`` of ``src`` has begun (too late to read ``src`` ahead: only the tiles of
+        its expected region it does not scan would be): whether each is kept (:meth:`admit`)."""
         self.expected = [e for e in self.expected if e.path != src.path]
+        self.scanned.update(paths)
+        return [self.admit(src, p) for p in paths]
 
     def admit(self, src: Source, path: str) -> bool:
         """Whether the tile ``path`` of ``src`` is kept: a VPC tile, not COPC, that fits what is
@@ -108,35 +99,26 @@ class PointCache:
         self.charged.add(path)
         return True
 
-    def keep(self, key: Key, future) -> None:
-        """The future of a kept tile (a scan task's :class:`KeptTile`), for the grid."""
-        self.futures[key] = future
-
     def fits(self, src: Source, path: str) -> bool:
-        """Whether the driver may scan and hold the tile ``path`` of ``src`` (a VPC): it fits the
+        """Whether the driver may scan and hold the tile ``path`` of the VPC ``src``: it fits the
         budget and what the driver holds (:data:`HELD_POINTS` at most, till the workers are up)."""
         count = _count(src, path)
         held = sum(k.points for k in self.held.values())
         return count is not None and self._room(path, count) and held + count <= HELD_POINTS
 
     def _room(self, path: str, count: int) -> bool:
-        """Whether a tile of ``count`` points is counted already or fits what is left of the budget."""
         return path in self.charged or count * CACHE_BYTES_PER_POINT <= self.left
 
     def hold(self, src: Source, key: Key, kept: KeptTile) -> None:
-        """Keep a tile the driver scanned (see :meth:`fits`) for the workers: sent to them at the
-        next :meth:`take` (what a worker's scan keeps)."""
-        self._started(src)
-        self.admit(src, key[0])
-        self.scanned.add(key[0])
+        """Keep a tile the driver scanned (see :meth:`fits`), sent to the workers at the next
+        :meth:`take`."""
+        self._begun(src, [key[0]])
         self.held[key] = kept
 
     def send_held(self) -> None:
-        """The tiles the driver holds (:meth:`hold`) sent to the workers, by a thread: the driver
-        goes on with its next tasks and the registration while they go out; :meth:`sent` waits
-        for them."""
+        """Send the held tiles to the workers on a thread (the driver goes on with its next tasks
+        and the registration); :meth:`sent` waits for them."""
         held, self.held = self.held, {}
-        self.sending.update(held)
         if not held:
             return
         resolve = getattr(self.client, "resolve", None)  # a cluster still starting: waited for here, in the driver
@@ -149,17 +131,14 @@ class PointCache:
         """All of ``held`` in one scatter (one call per tile took twice as long: 17 tiles of
         3.8 M points, 0.10-0.15 s through the scheduler, 0.05 s straight and at once)."""
         try:
-            keys = list(held)
-            futures = client.scatter([held[k] for k in keys], hash=False, direct=self.direct)
-            for key, future in zip(keys, futures, strict=True):
-                self.futures[key] = future
-                self.sending.discard(key)
+            futures = client.scatter(list(held.values()), hash=False, direct=self.direct)
+            self.futures.update(zip(held, futures, strict=True))
         except BaseException as exc:  # noqa: BLE001 - raised in the driver by sent()
             self.failed = exc
 
     def sent(self) -> None:
-        """Wait (at most :data:`SEND_S`, a signal checked every 0.25 s) until the tiles being sent
-        have their futures; a failure to send them is raised here, as one line."""
+        """Wait (at most :data:`SEND_S`, a signal checked every 0.25 s) until the tiles sent have
+        their futures; a failure to send them raised here, as one line."""
         while self.senders:
             sender, deadline = self.senders.pop(0), time.monotonic() + SEND_S
             while sender.is_alive() and time.monotonic() < deadline:
@@ -167,19 +146,15 @@ class PointCache:
                 interrupt.check()
             if sender.is_alive():
                 raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
-        if self.failed is not None:
-            failed, self.failed = self.failed, None
-            if isinstance(failed, SoilVolumeError):
-                raise failed
+        failed, self.failed = self.failed, None
+        if isinstance(failed, SoilVolumeError):
+            raise failed
+        if failed is not None:
             raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
 
-    def read_ahead(self, path: str):
-        """The future of the tile ``path`` read ahead (:meth:`prefetch`), None if it was not."""
-        return self.reads.get(path)
-
     def prefetch(self) -> None:
-        """Start the reads :meth:`expect` asked for, once, behind the tasks submitted so far (a
-        read submitted first would take the workers before the scans that wait for them)."""
+        """Start the reads :meth:`expect` asked for, once, behind the tasks submitted so far (read
+        first, they would take the workers before the scans that wait for them)."""
         expected, self.expected = self.expected, []
         todo = [(s, [p for p in s.tiles() if p not in self.scanned and p not in self.reads]) for s in expected]
         fresh = {p: _count(s, p) or 0 for s, paths in todo for p in paths if p not in self.charged}
@@ -191,13 +166,12 @@ class PointCache:
                     self.reads[p] = self.client.submit(read_tile, p, pure=False, priority=-1)
 
     def arrived(self) -> None:
-        """Every held tile sent and its future here (:meth:`send_held`, then :meth:`sent`)."""
+        """Every held tile sent and its future here."""
         self.send_held()
         self.sent()
 
     def meeting(self, src: Source, crop: str | None) -> dict:
-        """{path: future} of the tiles kept with the crop ``crop`` (:data:`Key`) that a read of
-        ``src`` (its region) opens."""
+        """{path: future} of the tiles kept with the crop ``crop`` that a read of ``src`` opens."""
         self.arrived()
         if src.vpc is None:
             return {}
@@ -218,10 +192,8 @@ def _count(src: Source, path: str) -> int | None:
 
 
 def chunks(src: Source, cached: dict | None, stats: dict, made: Callable[[Iterator], Iterator]) -> Iterator:
-    """The chunks of ``src`` as the grid takes them, (local float32 xyz, labels or None): the
-    tiles in ``cached`` ({path: KeptTile}) from memory (their points counted in ``stats["cached"]``
-    and ``stats["read"]``), the others read and made so by ``made`` (file chunks -> that form):
-    the same chunks in the same order, so the grid sums come out byte-identical."""
+    """The chunks of ``src`` as the grid takes them: ``cached`` ({path: KeptTile}) from memory, the
+    others made so by ``made``; the same chunks in the same order (byte-identical grid sums)."""
     if not cached or src.vpc is None:
         yield from made(src.chunks(signals=True))
         return
@@ -236,9 +208,8 @@ def chunks(src: Source, cached: dict | None, stats: dict, made: Callable[[Iterat
 
 
 def near_after(before: Source, after: Source, radius: float) -> Source:
-    """The before VPC where the after cloud's header box plus the crop radius can reach (the
-    tiles its first pass will read: the crop polygon lies in that box), when both are in the
-    same CRS; else the before as it is (without a VPC: nothing expected)."""
+    """The before VPC where the after's header box plus the crop radius reaches (the tiles its first
+    pass reads), both in one projected CRS; else the before without its VPC (nothing expected)."""
     import pyproj
 
     same = before.crs_wkt is not None and before.crs_wkt == after.crs_wkt

@@ -1,7 +1,6 @@
-"""The first pass of the distributed engine as Dask tasks: each task streams one unit of a source
-(a range of a LAS/LAZ file's points, or one VPC tile) and returns its column-thinning sums,
-counts and chunk boxes; the driver adds them up. A drop-in for :func:`stream.load` when no
-full-resolution points are kept, so :func:`prepare.prepare` runs unchanged on a cluster."""
+"""The tiled engine's first pass as Dask tasks, each streaming one unit of a source (a range of a
+LAS/LAZ file's points, or a VPC tile) and returning its column-thinning sums, counts and chunk
+boxes: a drop-in for :func:`stream.load` keeping no full-resolution points, for :func:`prepare.prepare`."""
 
 from __future__ import annotations
 
@@ -41,22 +40,11 @@ def units(src: Source) -> list[Unit]:
     return [(src.path, s, min(UNIT, src.count - s)) for s in range(0, src.count, UNIT)]
 
 
-def scan_unit(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None) -> dict:
-    """Thinning sums, counts and chunk boxes of one unit (its soil points, by the epoch's ``rule``);
-    ``cached``: the unit's chunks read already (a future of :func:`.pointcache.read_tile`), left intact."""
-    return _scan(unit, region, to_local, rule, keep, thinning, indexed, cached, None)
-
-
-def scan_keeping(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None):
-    """(:func:`scan_unit`'s summary, the unit's :class:`.pointcache.KeptTile`): the points ``keep``
-    keeps, local float32, with their labels, for the grid pass."""
-    kept: list = []
-    out = _scan(unit, region, to_local, rule, keep, thinning, indexed, cached, kept)
-    return out, KeptTile(tuple(kept), out["points"])
-
-
-def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached, kept) -> dict:
-    """:func:`scan_unit`; ``kept`` (a list or None): each chunk's kept points and labels appended."""
+def scan_unit(
+    unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None, kept=None
+) -> dict:
+    """Thinning sums, counts and chunk boxes of one unit's soil points; ``cached``: its chunks read
+    already, left intact; ``kept`` (a list): each chunk's kept points and labels appended."""
     path, start, count = unit
     voxel = thinning[2]  # (lo, hi, voxel[, within]) of the driver's ColumnThinner
     resolution = voxel / COPC_POINTS_PER_COLUMN_SIDE if start is None and is_copc(path) else None
@@ -101,16 +89,21 @@ def _scan(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, 
     return out
 
 
+def scan_keeping(unit: Unit, region, to_local, rule: PointRule, keep, thinning: tuple, indexed: bool, cached=None):
+    """(:func:`scan_unit`'s summary, the unit's :class:`.pointcache.KeptTile` for the grid pass)."""
+    kept: list = []
+    out = scan_unit(unit, region, to_local, rule, keep, thinning, indexed, cached, kept)
+    return out, KeptTile(tuple(kept), out["points"])
+
+
 def dask_loader(
     client,
     progress: Callable[[str], None] | None = None,
     wait_check: Callable[[], None] = interrupt.check,
     cache=None,
 ) -> Callable[..., Loaded]:
-    """A :func:`stream.load` running its units on ``client`` (sources kept whole in memory, and
-    reads that keep full-resolution points, fall back to streaming here); ``wait_check`` runs
-    while the tasks are waited for (signals, cancellation); ``cache`` (a
-    :class:`.pointcache.PointCache`): the VPC tiles read are kept on the workers for the grid."""
+    """A :func:`stream.load` running its units on ``client`` (sources in memory and reads keeping the
+    points stream here); ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
 
     def loader(
         src: Source,
@@ -146,8 +139,8 @@ def dask_loader(
 
 
 def _gathered(done: Iterator[dict], todo: list[Unit], thinner: ColumnThinner, progress, path: str) -> list:
-    """The units' summaries as they arrive, their sums added to ``thinner`` in the units' order
-    (:func:`_add_in_order`), each arrival told to ``progress`` (None: not told)."""
+    """The units' summaries as they arrive, their sums added to ``thinner`` in the units' order,
+    each arrival told to ``progress`` (if any)."""
     parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
     for k, part in enumerate(done, 1):
         waiting[position[part.pop("unit")]] = part.pop("sums")
@@ -159,8 +152,8 @@ def _gathered(done: Iterator[dict], todo: list[Unit], thinner: ColumnThinner, pr
 
 
 def _loaded(parts: list[dict], thinner: ColumnThinner, rule: PointRule, single: bool) -> Loaded:
-    """What :func:`stream.load` returns, from the units' summaries: no points kept, the thinned
-    columns and counts, the totals, the chunk index of a single file (``single``)."""
+    """:func:`stream.load`'s result from the units' summaries: no points, the thinned columns and
+    counts, the totals, a single file's chunk index (``single``)."""
     index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
     total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
     note = "class 2 (ground)" if rule.use_class else "all points"
@@ -173,9 +166,8 @@ def _loaded(parts: list[dict], thinner: ColumnThinner, rule: PointRule, single: 
 
 def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
     """Add the units' sums ({position: (columns, sums) or a :class:`Block`}) to ``thinner`` in the
-    units' order, however the tasks finish: floating-point sums in one order give the same bits
-    every run. ``added``: how many were added before; those that cannot go yet wait for the ones
-    before them."""
+    units' order, however the tasks finish (the same bits every run); ``added``: how many were
+    added before; later ones wait for those before them."""
     while added in waiting:
         part = waiting.pop(added)
         if isinstance(part, Block):
@@ -187,45 +179,37 @@ def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
 
 
 def _submit(client, left: list[Unit], args: tuple, taken: list[tuple], cache, crop) -> list:
-    """The scan tasks of ``left`` (``taken``: per unit, its chunks read ahead or None, and whether
-    it is kept): futures of their summaries; a kept unit's :class:`.pointcache.KeptTile` is split
-    from its summary on the worker that scanned it, and its future handed to ``cache``."""
-    if not left:
-        return []
-    keeping = [k for k, (_, kept) in enumerate(taken) if kept]
-    plain = [k for k, (_, kept) in enumerate(taken) if not kept]
-    futures = [None] * len(left)
+    """Futures of ``left``'s scans (``taken``: per unit, its chunks read ahead or None, whether kept);
+    a kept unit's :class:`.pointcache.KeptTile` split off on its worker, its future to ``cache``."""
 
     def submit(fn, ks: list[int]) -> list:
-        if not ks:
-            return []
-        units, reads = [left[k] for k in ks], [taken[k][0] for k in ks]
-        return client.map(fn, units, *[[a] * len(ks) for a in args], reads, pure=False)
+        reads = [taken[k][0] for k in ks]
+        return client.map(fn, [left[k] for k in ks], *[[a] * len(ks) for a in args], reads, pure=False) if ks else []
 
-    for k, f in zip(plain, submit(scan_unit, plain), strict=True):
-        futures[k] = f
+    keeping = [k for k, t in enumerate(taken) if t[1]]
+    plain = [k for k, t in enumerate(taken) if not t[1]]
+    futures = dict(zip(plain, submit(scan_unit, plain), strict=True))
     both = submit(scan_keeping, keeping)
     if both:
         parts = client.map(operator.getitem, both, [0] * len(both), pure=False)
-        kept = client.map(operator.getitem, both, [1] * len(both), pure=False)
-        for k, part, tile in zip(keeping, parts, kept, strict=True):
+        tiles = client.map(operator.getitem, both, [1] * len(both), pure=False)
+        for k, part, tile in zip(keeping, parts, tiles, strict=True):
             futures[k] = part
-            cache.keep((left[k][0], crop), tile)
-    return futures
+            cache.futures[(left[k][0], crop)] = tile
+    return [futures[k] for k in range(len(left))]
 
 
 def _rule(client, src: Source, todo: list[Unit], cache, ready: Callable[[], bool], how: tuple, check) -> tuple:
-    """(the epoch's rule, {path: chunks} of its first tile when it was read whole for it): decided
-    on the source's first chunk (:func:`stream.epoch_rule`; ``how``: mode, exclude). When the
-    driver is to scan the first tile (:func:`_scan_here`), it decodes it once; when a worker read
-    it ahead (:meth:`.pointcache.PointCache.prefetch`), the worker decides."""
+    """(the epoch's rule, {path: chunks} of its first tile if read whole for it), decided on the
+    source's first chunk (:func:`stream.epoch_rule`; ``how``: mode, exclude): by the driver when it
+    scans that tile (decoded once), by the worker that read it ahead."""
     path = todo[0][0] if todo and src.vpc is not None else None
     if path is not None and cache is not None and not is_copc(path):
         if not ready() and cache.fits(src, path):
             chunks = read_tile(path)
             if chunks:
                 return epoch_rule(src, chunks[0][1], chunks[0][2], *how), {path: chunks}
-        elif (read := cache.read_ahead(path)) is not None:
+        elif (read := cache.reads.get(path)) is not None:
             named = replace(src, vpc=None)  # what the rule's messages name, without the tile list
             decided = client.submit(_first_rule, read, named, how, pure=False)
             rule = next(completed(client, [decided], f"reading {src.path}", check))
@@ -243,11 +227,8 @@ def _first_rule(chunks: tuple, src: Source, how: tuple) -> PointRule | None:
 
 
 def _scan_here(src: Source, todo: list[Unit], args: tuple, kept: tuple, ready: Callable[[], bool], check) -> tuple:
-    """(parts, units left): the VPC tiles of ``todo`` scanned in this process, in order, while
-    the cluster is still starting (``ready()`` false) and the tiles fit the cache of ``kept``
-    (cache, crop key, {path: chunks} read already), which hands what the grid needs of them to
-    the workers once they are up (:meth:`.pointcache.PointCache.hold`): the driver's reading
-    overlaps the workers' start instead of waiting for it."""
+    """(parts, units left): the VPC tiles of ``todo`` scanned here in order while the cluster starts
+    and they fit the cache of ``kept`` (cache, crop key, {path: chunks} read), held for the workers."""
     cache, crop, pre = kept
     parts = []
     while todo and cache is not None and src.vpc is not None and not ready():

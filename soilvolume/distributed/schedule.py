@@ -26,6 +26,13 @@ BYTES_PER_POINT = 30.0  # in-process growth per input point (measured ~26 B from
 # a task's peak per point of its tile (both epochs, ids, sort keys, chunk): measured 22 B (a
 # 73 M-point tile of the 256 M-point VPC pair peaked at 1.6 GB), counted twice over
 TILE_BYTES_PER_POINT = 48.0
+WORKER_MIN_GB = 0.25  # a worker process: the interpreter, numpy, laspy and a small tile
+#: open files a LocalCluster's driver holds: the scheduler, a nanny and a worker's connections each
+#: (it failed to start below 48 for 2 workers, 72 for 4; Dask then spins on accept() for minutes)
+FILES_BASE, FILES_PER_WORKER = 32, 12
+MAX_TILES = 50_000  # tasks per step a cluster schedules well (each tile is a task of each step)
+EXPECTED = f"expected none, threads[:N], local[:N] (N from 1 to {MAX_WORKERS}), tcp://HOST:PORT or auto"
+DEFAULT_PORT = 8786  # Dask's scheduler port
 
 
 @dataclass(frozen=True)
@@ -44,7 +51,7 @@ class Schedule:
 
     @property
     def on_this_machine(self) -> bool:
-        """Whether its workers run on this machine (every kind but an existing cluster, tcp)."""
+        """Whether its workers run on this machine (all but an existing cluster, tcp)."""
         return self.kind != "tcp"
 
     def __str__(self) -> str:
@@ -59,13 +66,9 @@ class BadSchedule(SoilVolumeError):
         super().__init__(f"{opt('scheduler', spec)}: {problem}")
 
 
-EXPECTED = f"expected none, threads[:N], local[:N] (N from 1 to {MAX_WORKERS}), tcp://HOST:PORT or auto"
-DEFAULT_PORT = 8786  # Dask's scheduler port
-
-
 def parse(spec: str) -> Schedule | None:
-    """``none``, ``threads[:N]``, ``local[:N]``, ``tcp://HOST[:PORT]`` (None for ``auto``); a run
-    parses its value once (:func:`soilvolume.validate.schedule_of`), a :class:`BadSchedule` when wrong."""
+    """``none``, ``threads[:N]``, ``local[:N]``, ``tcp://HOST[:PORT]`` (None for ``auto``), parsed
+    once per run (:func:`soilvolume.validate.schedule_of`); a :class:`BadSchedule` when wrong."""
     spec = (spec or "auto").strip()
     if spec == "auto":
         return None
@@ -83,25 +86,25 @@ def _address(spec: str) -> str:
     """A Dask scheduler's address ``tcp://HOST:PORT`` (port 8786 when not given), checked."""
     from urllib.parse import urlsplit
 
-    def bad(problem: str) -> BadSchedule:
-        return BadSchedule(spec, problem)
-
     scheme = spec.split("://", 1)[0].lower()
     if scheme == "tls":
-        raise bad("TLS clusters need certificates, which this command does not take; use tcp:// (e.g. over a tunnel)")
+        raise BadSchedule(
+            spec, "TLS clusters need certificates, which this command does not take; use tcp:// (e.g. over a tunnel)"
+        )
     if scheme != "tcp":
-        raise bad(f"unsupported protocol '{scheme}://'; {EXPECTED}")
+        raise BadSchedule(spec, f"unsupported protocol '{scheme}://'; {EXPECTED}")
+    port_range = "the port must be a number from 1 to 65535"
     try:
         url = urlsplit(spec)
         port = url.port
     except ValueError:
-        raise bad("the port must be a number from 1 to 65535") from None
+        raise BadSchedule(spec, port_range) from None
     if not url.hostname:
-        raise bad("no host: expected tcp://HOST:PORT")
+        raise BadSchedule(spec, "no host: expected tcp://HOST:PORT")
     if url.path not in ("", "/") or url.query or url.fragment or url.username or url.password:
-        raise bad("expected tcp://HOST:PORT, nothing more")
+        raise BadSchedule(spec, "expected tcp://HOST:PORT, nothing more")
     if port is not None and not 1 <= port <= 65535:
-        raise bad("the port must be a number from 1 to 65535")
+        raise BadSchedule(spec, port_range)
     host = f"[{url.hostname}]" if ":" in url.hostname else url.hostname
     return f"tcp://{host}:{port or DEFAULT_PORT}"
 
@@ -113,17 +116,14 @@ def budget_gb(memory_limit: float) -> float:
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (AttributeError, ValueError, OSError):  # not POSIX
-        try:
-            import psutil
+        import psutil  # a dependency; lazily: 16 ms
 
-            total = psutil.virtual_memory().total
-        except ImportError:
-            total = 8 * 2**30
+        total = psutil.virtual_memory().total
     return total / 2**30 / 2
 
 
 def can_spawn() -> bool:
-    """Whether worker processes can be started: this process runs a Python interpreter (inside
+    """Whether this process runs a Python interpreter that can start worker processes (inside
     QGIS, ``sys.executable`` is QGIS itself and spawned workers would start QGIS)."""
     return Path(sys.executable).name.lower().startswith("python")
 
@@ -132,37 +132,21 @@ def has_dask() -> bool:
     """Whether dask.distributed can be imported (``auto`` runs in-process without it)."""
     import importlib.util
 
-    try:
-        return importlib.util.find_spec("distributed") is not None
-    except (ImportError, ValueError):
-        return False
-
-
-def in_process_gb(points: int) -> float:
-    """Expected peak memory (GB) of an in-process run over ``points`` input points."""
-    return BASE_GB + BYTES_PER_POINT * points / 2**30
+    return importlib.util.find_spec("distributed") is not None
 
 
 def choose(memory_limit: float, points: int) -> Schedule:
-    """What ``auto`` picks for a run over ``points`` input points: in-process when they fit the
-    memory budget (or without Dask), else a LocalCluster (threads when processes cannot start)."""
-    if in_process_gb(points) <= budget_gb(memory_limit) or not has_dask():
+    """What ``auto`` picks for ``points`` input points: in-process when their expected peak fits
+    the memory budget (or without Dask), else a LocalCluster (threads when processes cannot start)."""
+    if BASE_GB + BYTES_PER_POINT * points / 2**30 <= budget_gb(memory_limit) or not has_dask():
         return Schedule("none")
     workers = os.cpu_count() or 1
     return Schedule("local" if can_spawn() and open_files_short(workers) is None else "threads", workers)
 
 
-WORKER_MIN_GB = 0.25  # a worker process: the interpreter, numpy, laspy and a small tile
-
-
-#: open files a LocalCluster's driver holds: the scheduler, a nanny and a worker's connections each
-#: (it failed to start below 48 for 2 workers, 72 for 4; Dask then spins on accept() for minutes)
-FILES_BASE, FILES_PER_WORKER = 32, 12
-
-
 def open_files_short(workers: int) -> tuple[int, int] | None:
-    """(this process's open-file limit, the files a LocalCluster of ``workers`` processes needs)
-    when the limit is below that; None when it is not (or there is no such limit: Windows)."""
+    """(the open-file limit, the files a LocalCluster of ``workers`` processes needs) when the limit
+    is below that; None when it is not (or there is no such limit: Windows)."""
     try:
         import resource
     except ImportError:
@@ -172,40 +156,32 @@ def open_files_short(workers: int) -> tuple[int, int] | None:
     return (soft, need) if soft != resource.RLIM_INFINITY and soft < need else None
 
 
-def check_open_files(schedule: Schedule) -> None:
-    """Refuse a LocalCluster the open-file limit (``ulimit -n``) cannot hold, naming the limit and
-    the remedies, before Dask starts it."""
-    short = open_files_short(schedule.workers) if schedule.kind == "local" else None
-    if short is not None:
-        raise SoilVolumeError(
-            f"{opt('scheduler', schedule)}: the open-file limit (ulimit -n) is {short[0]}, below the "
-            f"{short[1]} a Dask cluster of {schedule.workers} worker processes needs; raise it (e.g. "
-            f"ulimit -n {max(1024, short[1])}) or run in-process ({opt('scheduler', 'none')})"
-        )
-
-
-def check_budget(schedule: Schedule, memory_limit: float) -> None:
-    """Refuse a memory budget below what each worker process needs to start and hold a tile
-    (below it Dask pauses or restarts workers for ever)."""
+def check_local(schedule: Schedule, memory_limit: float) -> None:
+    """Refuse, before Dask starts it, a LocalCluster whose workers' budget share is below what one
+    needs to start and hold a tile (below it Dask pauses or restarts workers for ever), or that
+    the open-file limit (``ulimit -n``) cannot hold."""
     if schedule.kind != "local":
         return
-    per_worker = budget_gb(memory_limit) / schedule.workers
-    if per_worker >= WORKER_MIN_GB:
-        return
-    share = f"{per_worker:.3g} GB for each of the {schedule.workers} worker processes of {schedule}"
-    if memory_limit <= 0:
+    n = schedule.workers
+    per_worker = budget_gb(memory_limit) / n
+    share = f"{per_worker:.3g} GB for each of the {n} worker processes of {schedule}"
+    if per_worker < WORKER_MIN_GB and memory_limit <= 0:
         raise SoilVolumeError(
             f"{opt('scheduler', schedule)}: {share} (half of this machine's memory), below the {WORKER_MIN_GB:g} GB a "
             "worker needs; use fewer workers"
         )
-    raise SoilVolumeError(
-        f"{opt('memory_limit', f'{memory_limit:g}')}: {share}, below the {WORKER_MIN_GB:g} GB a worker needs "
-        "(give at least "
-        f"{WORKER_MIN_GB * schedule.workers:g}, or 0 for half of this machine's memory)"
-    )
-
-
-MAX_TILES = 50_000  # tasks per step a cluster schedules well (each tile is a task of each step)
+    if per_worker < WORKER_MIN_GB:
+        raise SoilVolumeError(
+            f"{opt('memory_limit', f'{memory_limit:g}')}: {share}, below the {WORKER_MIN_GB:g} GB a worker needs "
+            f"(give at least {WORKER_MIN_GB * n:g}, or 0 for half of this machine's memory)"
+        )
+    short = open_files_short(n)
+    if short is not None:
+        raise SoilVolumeError(
+            f"{opt('scheduler', schedule)}: the open-file limit (ulimit -n) is {short[0]}, below the "
+            f"{short[1]} a Dask cluster of {n} worker processes needs; raise it (e.g. "
+            f"ulimit -n {max(1024, short[1])}) or run in-process ({opt('scheduler', 'none')})"
+        )
 
 
 def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) -> None:
@@ -223,19 +199,16 @@ def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) 
         fix = f"a smaller {opt('tile_cells')} or a larger budget" if options.tile_cells else "a larger budget"
         raise SoilVolumeError(
             f"{given}: {task_gb:.3g} GB per task ({opt('memory_limit', f'{options.memory_limit:g}')}) "
-            "cannot hold a tile of "
-            f"{cells:,} cells of this pair ({cells * points_per_cell:,.0f} points need {need:.3g} GB); give {fix}"
+            f"cannot hold a tile of {cells:,} cells of this pair ({cells * points_per_cell:,.0f} points need "
+            f"{need:.3g} GB); give {fix}"
         )
 
 
 @contextmanager
-def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None) -> Iterator:
-    """A :class:`cluster.Starting` of a ``dask.distributed.Client`` for ``schedule``, started in the
-    background (threads: in this process; local: a LocalCluster sharing the memory budget among
-    its worker processes, their scratch space in ``scratch``; tcp: an existing cluster), shut
-    down on exit within a timeout."""
-    check_budget(schedule, memory_limit)
-    check_open_files(schedule)
+def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None) -> Iterator[Starting]:
+    """A :class:`cluster.Starting` of the Dask client of ``schedule`` (a LocalCluster's workers share
+    the budget, their scratch space in ``scratch``), shut on exit."""
+    check_local(schedule, memory_limit)
     starting = Starting(lambda: _start(schedule, memory_limit, scratch), str(schedule), START_S[schedule.kind])
     try:
         yield starting
@@ -261,17 +234,13 @@ def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
     return cluster.local(schedule.workers, processes, per_worker, scratch)
 
 
-def worker_gb(schedule: Schedule, memory_limit: float) -> float:
-    """The memory (GB) one task may use: the budget shared by the workers (or threads)."""
-    return budget_gb(memory_limit) / max(1, schedule.workers)
-
-
 def schedule_for(chosen: Schedule | None, before, after, options, pipeline: bool) -> Schedule:
-    """The schedule of a run: the parsed ``--scheduler`` (``chosen``), or for ``auto`` (None)
-    in-process when the pair's points (from the LAS/COPC/VPC headers) fit the memory budget;
-    pipelines and other formats run in-process."""
+    """The parsed ``--scheduler`` (``chosen``), or for ``auto`` (None) :func:`choose` by the LAS/COPC/VPC
+    headers' points; pipelines and other formats in-process."""
     if chosen is None:
-        points = [_header_points(p) for p in (before, after)]
+        points = [
+            open_source(p).count if Path(p).suffix.lower() in LAS_SUFFIXES | {".vpc"} else None for p in (before, after)
+        ]
         if pipeline or None in points:
             return Schedule("none")
         return choose(options.memory_limit, sum(points))
@@ -281,11 +250,3 @@ def schedule_for(chosen: Schedule | None, before, after, options, pipeline: bool
             f"(use {opt('scheduler', 'none')})"
         )
     return chosen
-
-
-def _header_points(path) -> int | None:
-    """A LAS/LAZ/COPC file's or a VPC's point count from its header(s); None for other formats."""
-    suffix = Path(path).suffix.lower()
-    if suffix not in LAS_SUFFIXES | {".vpc"}:
-        return None
-    return open_source(path).count

@@ -1,23 +1,21 @@
-"""Tiles of a grid kept on disk between the steps of a tiled run, and between an interrupted run
-and the same command run again.
+"""Tiles of a grid kept on disk between a tiled run's steps, and for the same command run again
+after an interruption.
 
-:class:`TileStore`: one ``.npy`` file per array and tile, named with the run's key (see
-:mod:`fingerprint`), written atomically under a name no other writer uses, read back as any
-window of the grid (memory-mapped: a window costs what it holds, not what its tiles hold).
+:class:`TileStore`: one ``.npy`` file per array and tile, named with the run's key
+(:mod:`fingerprint`), written atomically, read back as any window of the grid (memory-mapped).
 
-:class:`RunStore`: each run has a store of its own, a hidden sibling of the output folder
-(``.NAME.soilvolume-tiles-PID-TOKEN``); it holds the Dask workers' scratch space too. A run that
-succeeds or fails removes it; an interrupted one (SIGINT/SIGTERM) keeps its finished tiles as
-``.NAME.soilvolume-tiles``, which the next run into the same folder claims (one atomic rename:
-of two runs, one gets it) and uses only if what the tiles were computed from (``store.json``)
-is what this run computes from; else it discards them, saying why in one line.
+:class:`RunStore`: each run's own store, a hidden sibling of the output folder
+(``.NAME.soilvolume-tiles-PID-TOKEN``), the Dask workers' scratch space in it; removed when the
+run succeeds or fails. An interrupted run keeps its finished tiles as ``.NAME.soilvolume-tiles``,
+which the next run into the folder claims (one atomic rename: one run gets it) and uses only if
+they were computed from what it computes from (``store.json``), else discards, saying why.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-import secrets
 import shutil
 import threading
 from collections.abc import Iterator
@@ -28,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from ..core.interrupt import Interrupted, cleanup_on_exit
-from ..core.siblings import dead_siblings, tag
+from ..core.siblings import dead_siblings, remove, sibling, tag
+from ..inputs.io import atomic_path
 from . import fingerprint
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
@@ -42,8 +41,8 @@ _HEADERS = threading.Lock()
 
 @dataclass(frozen=True)
 class TileStore:
-    """A folder of per-tile arrays of a grid cut into ``windows``, each file named with ``key``
-    (picklable: sent to tasks; the folder must be visible to every worker)."""
+    """Per-tile arrays of a grid cut into ``windows``, files named with ``key`` (picklable: sent to
+    tasks; the folder must be visible to every worker)."""
 
     folder: str
     windows: tuple[Window, ...]
@@ -53,21 +52,14 @@ class TileStore:
         return Path(self.folder) / "{}_{}_{}_{}_{}_{}.npy".format(self.key, name, *win)
 
     def has(self, names, win: Window) -> bool:
-        """Whether every array of ``names`` of tile ``win`` is on disk (a finished tile)."""
+        """Whether the arrays ``names`` of tile ``win`` are all on disk (a finished tile)."""
         return all(self._file(n, win).exists() for n in names)
 
     def save(self, win: Window, arrays: dict[str, np.ndarray]) -> None:
-        """Write the tile's arrays (each atomically: an interrupted task leaves no partial tile)."""
+        """Write the tile's arrays, each atomically (an interrupted task leaves no partial tile)."""
         for name, arr in arrays.items():
-            final = self._file(name, win)
-            tmp = final.with_name(f".{final.name}.{os.getpid()}-{secrets.token_hex(4)}")
-            try:
-                with open(tmp, "wb") as f:
-                    np.save(f, np.ascontiguousarray(arr))
-                tmp.replace(final)
-            except BaseException:
-                tmp.unlink(missing_ok=True)
-                raise
+            with atomic_path(self._file(name, win)) as tmp, open(tmp, "wb") as f:
+                np.save(f, np.ascontiguousarray(arr))
 
     def load(self, name: str, win: Window) -> np.ndarray:
         """The tile's array ``name``, memory-mapped (see :data:`_HEADERS`)."""
@@ -75,8 +67,7 @@ class TileStore:
             return np.load(self._file(name, win), mmap_mode="r")
 
     def read(self, name: str, win: Window, fill=np.nan, dtype=None) -> np.ndarray:
-        """The array ``name`` on any window of the grid, from the tiles meeting it (``fill``
-        where no tile covers a cell)."""
+        """The array ``name`` on any window of the grid (``fill`` where no tile covers a cell)."""
         r0, r1, c0, c1 = win
         out = None
         for t in self.windows:
@@ -94,20 +85,17 @@ class TileStore:
 
 
 class RunStore:
-    """The tile store of one run (see module): :meth:`bind` once the plan is known, then
-    :meth:`close` with how the run ended."""
+    """The tile store of one run (see module): :meth:`bind` once the plan is known, then :meth:`close`."""
 
     def __init__(self, final: Path) -> None:
         self.final = Path(final)
-        name = tag(self.final.name)
-        self.kept = self.final.with_name(f".{name}.{KEPT}")
-        self.folder = self.final.with_name(f".{name}.{KEPT}-{os.getpid()}-{secrets.token_hex(4)}")
+        self.kept = self.final.with_name(f".{tag(self.final.name)}.{KEPT}")
+        self.folder = sibling(self.final, KEPT)
         _sweep(self.final)
-        try:  # claim the tiles an interrupted run kept (atomic: one run gets them)
+        self.claimed = False
+        with contextlib.suppress(OSError):  # claim the tiles an interrupted run kept (atomic: one run gets them)
             os.rename(self.kept, self.folder)
             self.claimed = True
-        except OSError:
-            self.claimed = False
         if self.claimed and (self.folder.is_symlink() or not self.folder.is_dir()):  # not ours: never follow it
             self.folder.unlink()
             self.claimed = False
@@ -117,8 +105,8 @@ class RunStore:
         self.key = ""
 
     def bind(self, parts: dict) -> str | None:
-        """Key the store by what the run computes from; the tiles of another computation are
-        discarded: returns the reason in a line for the log (None when nothing was discarded)."""
+        """Key the store by what the run computes from, discarding another computation's tiles:
+        the reason in a line for the log (None when nothing was discarded)."""
         self.key = fingerprint.digest(parts)
         manifest = self.folder / MANIFEST
         said = None
@@ -132,38 +120,32 @@ class RunStore:
                 said = f"discarding the tiles kept by an interrupted run: {why}; starting afresh"
                 for entry in self.folder.iterdir():
                     if entry != self.scratch:
-                        shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
-        tmp = manifest.with_name(f".{MANIFEST}.tmp")
-        tmp.write_text(json.dumps(parts, sort_keys=True))
-        tmp.replace(manifest)
+                        remove(entry)
+        with atomic_path(manifest) as tmp:
+            tmp.write_text(json.dumps(parts, sort_keys=True))
         return said
 
     def tiles(self, windows) -> TileStore:
         return TileStore(str(self.folder), tuple(windows), self.key)
 
     def close(self, keep: bool) -> bool:
-        """Remove the store, or with ``keep`` (an interruption) leave its finished tiles where
-        the same command finds them; returns whether they were kept."""
+        """Remove the store, or with ``keep`` (an interruption) leave its finished tiles where the
+        same command finds them; whether they were kept."""
         shutil.rmtree(self.scratch, ignore_errors=True)
-        for partial in self.folder.glob(".*.npy.*"):  # a tile write cut short (a worker killed mid-write)
+        for partial in self.folder.glob(".*"):  # a tile write cut short (a worker killed mid-write)
             partial.unlink(missing_ok=True)
         if keep and self.key and any(self.folder.glob(f"{self.key}_*.npy")):
-            if self.kept.is_symlink() or self.kept.is_file():
-                self.kept.unlink()
-            shutil.rmtree(self.kept, ignore_errors=True)  # an older interruption's: ours is newer
-            try:
+            remove(self.kept)  # an older interruption's (ours is newer), or not ours: never followed
+            with contextlib.suppress(OSError):
                 os.rename(self.folder, self.kept)
                 return True
-            except OSError:
-                pass
         shutil.rmtree(self.folder, ignore_errors=True)
         return False
 
 
 @contextmanager
 def run_store(final: Path) -> Iterator[RunStore]:
-    """The run's :class:`RunStore`, removed when the block ends, kept when it is interrupted
-    (the :class:`Interrupted` then says where)."""
+    """The run's :class:`RunStore`, removed at the block's end, kept on an interruption (which says where)."""
     store = RunStore(final)
     try:
         with cleanup_on_exit(lambda: str(store.kept) if store.close(keep=True) else None):  # forced: out at once
@@ -180,4 +162,4 @@ def run_store(final: Path) -> Iterator[RunStore]:
 def _sweep(final: Path) -> None:
     """Remove the run stores of runs into ``final`` that are no longer alive (killed)."""
     for entry, _ in dead_siblings(final, (KEPT,)):
-        shutil.rmtree(entry, ignore_errors=True)
+        remove(entry)

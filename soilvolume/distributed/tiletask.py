@@ -1,8 +1,9 @@
-"""The tiling of the shared grid and the running of its tiles (:mod:`.gridtile`) on a Dask
-client, with progress and resume from a run's tile store."""
+"""The grid cut into tiles (their size from the memory budget and the input's own tiling) and the
+tiles run (:mod:`.gridtile`) on a Dask client, with progress and resume from a run's tile store."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import fields, replace
 
 import numpy as np
@@ -10,16 +11,89 @@ import numpy as np
 from ..core.hooks import Hooks
 from ..core.types import GridSpec
 from ..dem.grid import EPOCH_ARRAYS, EpochDEM
+from ..inputs.footprint import footprint, polygon_area
+from ..options import Options
 from .cluster import checker
 from .gridtile import TILE_ARRAYS, Plan, crop_mask, empty_value, grid_tile, window_source
+from .overview import MAX_CELLS, blocks_for, factor
+from .schedule import TILE_BYTES_PER_POINT, Schedule, budget_gb, check_tiles
 from .tilestore import TileStore, Window
 from .waiting import completed
 
 SCATTER_S = 60  # sending a run's plan to every worker
 MIN_TILE, MAX_TILE = 16, 4096  # tile side (cells): small tiles keep very dense data within a task's memory
-
-
+TILE_POINTS = 32e6  # points per tile at most: ~1.3 GB per task; fewer reads of dense LAZ tiles
 OPENED = ("sources", "mask")  # the Plan's fields derived from the others and the inputs
+STATS = ("read", "cached", "seconds")  # what the tasks' stats add up
+
+
+def data_tiling(src, cell: float, side: int) -> tuple[float, float, float] | None:
+    """(pitch m, x, y of a tile corner) of a VPC's square tiling, snapped to ``cell``, when a grid
+    tile can hold one data tile (else None). From the tiles' lower-left corners, not the header
+    boxes' widths: those span the points (49.999 m in a 50 m tiling), and windows cut on a
+    49.999 m pitch would cross every data tile, each then read by several tasks."""
+    if src.vpc is None or len(src.vpc.tiles) < 2:
+        return None
+    lows = np.array([t.lo[:2] for t in src.vpc.tiles], float)
+    steps = np.rint(lows / cell).astype(np.int64)  # corners in cells (a tile's first points sit at its corner)
+    pitch = _mode(np.concatenate([np.diff(_shared(steps[:, k])) for k in (0, 1)]))
+    if pitch is None or not 0 < pitch <= side:
+        return None
+    x0, y0 = (_mode(steps[:, k] % pitch) for k in (0, 1))
+    return pitch * cell, x0 * cell, y0 * cell
+
+
+def _shared(corners: np.ndarray) -> np.ndarray:
+    """The corner coordinates (one axis) at least a median number of tiles share: a row or column
+    of a tiling shares its edge, an edge tile whose points start inside it has its own."""
+    v, n = np.unique(corners, return_counts=True)
+    return v[n >= np.median(n)]
+
+
+def _mode(values: np.ndarray) -> int | None:
+    """The most common of ``values`` (the smallest on ties), None when there are none."""
+    if len(values) == 0:
+        return None
+    v, n = np.unique(values, return_counts=True)
+    return int(v[np.argmax(n)])
+
+
+def points_per_cell(prep, cell: float) -> float:
+    """Expected points (both epochs) per grid cell: each epoch's points over its footprint."""
+    area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
+    used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
+    return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
+
+
+def tile_windows(options: Options, grid: GridSpec, prep, schedule: Schedule, src) -> tuple:
+    """(the tile windows, their side in cells, points per cell) of the run's grid; ``src``: the
+    before source (its VPC's tiling)."""
+    cell, workers = grid.cell, max(1, schedule.workers)
+    task_gb, density = budget_gb(options.memory_limit) / workers, points_per_cell(prep, cell)
+    side = int(options.tile_cells)
+    if side <= 0:  # what a task's memory holds, small enough for two tiles per worker
+        area = min(TILE_POINTS, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT) / max(density, 1e-3)
+        side = int(np.clip(math.sqrt(min(area, grid.rows * grid.cols / (2 * workers))), MIN_TILE, MAX_TILE))
+    tiling = None if options.tile_cells else data_tiling(src, cell, 2 * side)
+    if tiling and density * (tiling[0] / cell) ** 2 * TILE_BYTES_PER_POINT > 0.5 * task_gb * 2**30:
+        tiling = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
+    windows = tiles(grid, side)
+    if tiling:  # snap to the input's tiles (one grid tile per data tile) when that keeps the workers busy
+        pitch = max(1, round(tiling[0] / cell))
+        aligned = tiles(grid, pitch, tiling[0], tiling[1:])
+        if len(aligned) >= min(len(windows), 2 * schedule.workers):
+            windows, side = aligned, pitch
+    check_tiles(windows, density, task_gb, options)
+    return windows, side, density
+
+
+def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:
+    """1 for the volume step on the whole grid in the driver, else the block side of the
+    overview the tiled volume step finds the correction on (``--volume-step``)."""
+    k = factor(grid, budget_gb(options.memory_limit))
+    if options.volume_step == "whole" or (options.volume_step == "auto" and k == 1):
+        return 1
+    return max(k, 2, blocks_for(grid, MAX_CELLS))  # the overview's volume step stays short
 
 
 def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
@@ -34,9 +108,8 @@ def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
 def tiles(
     grid: GridSpec, side: int, align: float | None = None, corner: tuple[float, float] = (0.0, 0.0)
 ) -> list[Window]:
-    """The grid cut into tiles of ``side`` x ``side`` cells (row-major); with ``align`` (metres),
-    tile edges fall on ``corner`` (absolute x, y) plus multiples of it (the input's own tiling:
-    each data tile is then read by one task), slivers merged into their neighbours."""
+    """The grid cut into ``side`` x ``side`` tiles (row-major); with ``align`` (m), edges on ``corner``
+    (x, y) plus multiples of it (the input's tiling: one task per data tile), slivers merged."""
     r_off = c_off = 0
     if align:
         c_off = round(((corner[0] - grid.xmin) % align) / grid.cell) % side
@@ -49,47 +122,47 @@ def tiles(
 
 def _edges(n: int, offset: int, side: int) -> list[int]:
     """0, offset, offset + side, ..., n, without edges closer than side / 4 to the next."""
-    inner = [e for e in range(offset, n, side) if e > 0]
     edges = [0]
-    for e in inner:
-        if e - edges[-1] >= side // 4 and n - e >= side // 4:
+    for e in range(offset, n, side):
+        if e > 0 and e - edges[-1] >= side // 4 and n - e >= side // 4:
             edges.append(e)
     return edges + [n]
 
 
+def kept_and_todo(store: TileStore | None, windows) -> tuple[list, list]:
+    """(the tiles of ``windows`` ``store`` holds, with their arrays; the windows still to run)."""
+    if store is None:
+        return [], list(windows)
+    done = [w for w in windows if store.has(TILE_ARRAYS, w)]
+    return [(w, [store.load(k, w) for k in TILE_ARRAYS]) for w in done], [w for w in windows if w not in done]
+
+
 def run_tiles(
-    c,
-    plan: Plan,
-    windows: list[Window],
-    hooks: Hooks,
-    store: TileStore | None = None,
-    stats: dict | None = None,
-    cache=None,
+    c, plan: Plan, windows: list[Window], hooks: Hooks, store: TileStore | None = None, stats=None, cache=None
 ) -> tuple[np.ndarray, ...]:
-    """Run every tile on the client ``c`` and assemble the arrays of :data:`TILE_ARRAYS` on the
-    grid (:func:`epoch_dems` makes them the two epochs' DEMs). Tiles found in ``store`` (from an
-    interrupted run of the same computation) are not run again; finished tiles are saved there.
-    ``stats`` sums the tasks' points read (``cached``: of those, taken from the workers' memory)
-    and seconds; ``cache``: the first pass's tiles on the workers (:class:`.pointcache.PointCache`)."""
+    """The arrays of :data:`TILE_ARRAYS` on the grid, each tile not in ``store`` (an interrupted
+    run's) run on ``c`` and saved there; ``stats``: points read (and ``cached``), seconds, resumed."""
     stats = stats if stats is not None else {}
-    stats.update(read=0, cached=0, seconds=0.0, resumed=0)
+    stats.update(dict.fromkeys(STATS, 0), resumed=0)
     g = plan.grid
     out = tuple(np.full((g.rows, g.cols), empty_value(k), np.int64 if k[0] == "n" else float) for k in TILE_ARRAYS)
-    todo = []
-    for win in windows:
-        if store is not None and store.has(TILE_ARRAYS, win):
-            _place(out, win, [store.load(k, win) for k in TILE_ARRAYS])
-        else:
-            todo.append(win)
+    kept, todo = kept_and_todo(store, windows)
+    for win, arrays in kept:
+        _place(out, win, arrays)
     per = window_caches(plan, todo, cache)
     for win, arrays, task in map_tiles(c, grid_tile, plan, todo, hooks=hooks, total=len(windows), per=per):
-        for key in ("read", "cached", "seconds"):
-            stats[key] += task[key]
+        add_stats(stats, task)
         _place(out, win, arrays)
         if store is not None:
             store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
-    stats["resumed"] = len(windows) - len(todo)
+    stats["resumed"] = len(kept)
     return out
+
+
+def add_stats(stats: dict, task: dict) -> None:
+    """Add a task's :data:`STATS` to the run's."""
+    for key in STATS:
+        stats[key] += task[key]
 
 
 def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
@@ -106,11 +179,10 @@ def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
 def map_tiles(
     c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: int = 0, steps=(55, 70, "gridded"), per=None
 ):
-    """``fn(shared, window, *args[, per[i]])`` for every window as Dask tasks on the client ``c``
-    (``shared`` sent to the workers once, not with every task), yielding the results as tasks
-    finish, with progress from ``steps[0]`` to ``steps[1]`` %. ``total``: the tiles of the run,
-    when those not in ``windows`` were done by an earlier run; ``per``: one more argument per
-    window (futures in it resolved on the worker)."""
+    """``fn(shared, window, *args[, per[i]])`` for every window as Dask tasks on ``c`` (``shared``
+    sent to the workers once), yielding results as tasks finish, progress from ``steps[0]`` to
+    ``steps[1]`` %. ``total``: the run's tiles, when an earlier run did those not in ``windows``;
+    ``per``: one more argument per window (futures in it resolved on the worker)."""
     if len(windows) < total:
         hooks.step(steps[0], f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
     if not windows:
@@ -125,8 +197,8 @@ def map_tiles(
 
 
 def epoch_dems(arrays: tuple[np.ndarray, ...], rules: tuple = (None, None)) -> tuple[EpochDEM, EpochDEM]:
-    """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`, in that order; ``rules``:
-    the (before, after) point rules that labelled them (:attr:`Plan.rules`)."""
+    """(after, before) DEMs from the arrays of :data:`TILE_ARRAYS`; ``rules``: the (before, after)
+    point rules that labelled them (:attr:`Plan.rules`)."""
     k = len(EPOCH_ARRAYS)
     return replace(EpochDEM(*arrays[:k]), rule=rules[1]), replace(EpochDEM(*arrays[k:]), rule=rules[0])
 

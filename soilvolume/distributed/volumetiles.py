@@ -2,37 +2,39 @@
 
 1. The gridding tasks keep their tiles on disk (:class:`TileStore`) and return the block sums of
    an overview of the grid (:mod:`overview`) and their count histograms.
-2. The driver runs the whole volume step on the overview (cells k times larger): stable ground,
-   the correction surface and the paper's planes are found there, over the whole site, as
-   in-process; each epoch's median point count comes from the histograms.
-3. One task per tile runs the volume step on its window plus a halo, with that correction and
-   stable ground brought to its cells (:class:`soilvolume.volumes.compute.Given`); its own
-   stable residuals give its level of detection and error model. Budgets are summed over the
-   tiles' cores. Each part's half-width combines, as in-process: the error model (the tiles'
-   semivariograms pooled) over the part's whole area, correlated across tile edges as within
-   them; the systematic terms summed across tiles (the refilled share of change, leftover
-   bias); the independent ones in quadrature (refill errors, small detections); and what every
-   tile shares: the correction's bias (the overview's, over the whole area) and the volume
-   effect of the other registration pose.
-4. Outputs are COGs written block by block from the tiles on disk.
+2. The driver runs the volume step on the overview (cells k times larger): stable ground, the
+   correction and the paper's planes found over the whole site, as in-process; each epoch's
+   median point count from the histograms.
+3. One task per tile runs the volume step on its window plus a halo, given that correction and
+   stable ground on its cells (:class:`soilvolume.volumes.compute.Given`); its own stable
+   residuals give its LoD and error model. Budgets are summed over the tiles' cores; each part's
+   half-width combines, as in-process: the error model (the tiles' semivariograms pooled) over
+   the part's whole area, correlated across tile edges; the systematic terms summed (refilled
+   share, leftover bias); the independent ones in quadrature (refill errors, small detections);
+   what every tile shares: the overview's correction bias and the other registration pose.
+4. Outputs are COGs written block by block from the tiles on disk (:func:`reader`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import chain
 
 import numpy as np
 
 from ..compensation.planes import plane_offset
+from ..core.hooks import Hooks
 from ..core.types import GridSpec
+from ..dem.grid import MASK_LAYER, UINT8_LAYERS, EpochDEM
 from ..options import Options
 from ..volumes import coverage
 from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import TERMS, region_sigma, widen, z_value
+from ..volumes.zones import check_inside
 from . import overview
 from .gridtile import TILE_ARRAYS, empty_value, grid_tile
 from .tilestore import TileStore, Window
-from .tiletask import epoch_dems
+from .tiletask import add_stats, epoch_dems, kept_and_todo, map_tiles, window_caches
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
 VOLUME_ARRAYS = ("dem_out_a", "dem_out_b", "diff", "offset", "filled_mask", "classes")
@@ -46,8 +48,7 @@ def halo(cell: float) -> int:
 
 
 def grid_tile_stored(plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
-    """:func:`.gridtile.grid_tile`, its arrays kept in ``store``: (window, block sums of both
-    epochs, count histograms, stats)."""
+    """:func:`.gridtile.grid_tile` kept in ``store``: (window, block sums, count histograms, stats)."""
     win, arrays, stats = grid_tile(plan, win, cached)
     store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
     return summarize_grid_tile(win, arrays, k) + (stats,)
@@ -78,8 +79,8 @@ class VolumeJob:
 
 
 def volume_tile(job: VolumeJob, win: Window) -> dict:
-    """The volume step on one tile (with its halo); its core's arrays kept in the store; returns
-    its budgets and uncertainty."""
+    """The volume step on one tile with its halo, its core's arrays kept in the store: its budgets
+    and uncertainty."""
     g = job.grid
     r0, r1, c0, c1 = win
     h = halo(g.cell)
@@ -99,19 +100,15 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
     job.store.save(win, {n: getattr(vols, n)[core] for n in VOLUME_ARRAYS})
     out = {b: getattr(vols, b) for b in BUDGETS}
+    edges = (ext[0] == 0, ext[1] == g.rows, ext[2] == 0, ext[3] == g.cols)  # the grid's edge: top, bottom, left, right
     out.update(
         window=win,
         uncertainty=vols.uncertainty,
         zones=vols.zones,
         empty=(vols.empty_cells, vols.empty_before, vols.empty_after),
-        coverage=coverage.counts(after.counts, before.counts, vols.filled_mask, vols.diff, core, _edges(ext, g)),
+        coverage=coverage.counts(after.counts, before.counts, vols.filled_mask, vols.diff, core, edges),
     )
     return out
-
-
-def _edges(ext: Window, grid: GridSpec) -> tuple[bool, bool, bool, bool]:
-    """Which sides of a window (top, bottom, left, right) are the grid's edge."""
-    return ext[0] == 0, ext[1] == grid.rows, ext[2] == 0, ext[3] == grid.cols
 
 
 def _sum_dicts(dicts: list[dict]) -> dict:
@@ -147,9 +144,8 @@ def _pooled_model(tiles: list[dict]) -> dict[str, float]:
 
 
 def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
-    """The run's Volumes: budgets summed over the tiles, half-widths combined with the
-    overview's (of ``k`` x ``k`` cells), the overview's rasters (for the report's map, histogram
-    and quality checks)."""
+    """The run's Volumes: budgets summed over the tiles, half-widths combined with the overview's
+    (of ``k`` x ``k`` cells), the overview's rasters (the report's map, histogram and checks)."""
     budgets = {b: _sum_dicts([t[b] for t in tiles]) for b in BUDGETS}
     u = dict(over.uncertainty)
     z = z_value(over.uncertainty["confidence"])
@@ -181,15 +177,61 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     empty = np.sum([t["empty"] for t in tiles], axis=0)
     return over.with_(
         uncertainty=u,
-        compensated=budgets["compensated"],
-        all_cells=budgets["all_cells"],
-        uncompensated=budgets["uncompensated"],
-        paper_plane=budgets["paper_plane"],
-        thresholded=budgets["thresholded"],
-        holes=budgets["holes"],
+        **budgets,
         empty_cells=int(empty[0]),
         empty_before=int(empty[1]),
         empty_after=int(empty[2]),
         zones=_zones(tiles),
         coverage=coverage.combine([t["coverage"] for t in tiles]),
     )
+
+
+def tile_volumes(c, job: VolumeJob, over, hooks: Hooks, steps: tuple):
+    """The grid's ``Volumes`` from the volume step tile by tile, given ``over``, the overview's
+    (its correction in ``job``); progress ``steps`` = (start %, end %, message)."""
+    windows = list(job.store.windows)
+    tiles = list(map_tiles(c, volume_tile, job, windows, hooks=hooks, steps=steps))
+    order = {w: i for i, w in enumerate(windows)}
+    tiles.sort(key=lambda t: order[t["window"]])  # the same sums whatever the finishing order
+    vols = combine(tiles, over, job.grid.cell, job.k)
+    if job.options.zones:
+        check_inside(vols.zones, job.options.zones)
+    return vols
+
+
+def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
+    """Grid every tile into ``store`` (tiles already there are summarized, not run again):
+    ((after, before) DEMs of the overview, (after, before) median counts, stats)."""
+    coarse = overview.coarse(plan.grid, k)
+    sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
+    hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
+    kept, todo = kept_and_todo(store, store.windows)
+    stats = {"read": 0, "cached": 0, "seconds": 0.0, "resumed": len(kept)}
+    done = [summarize_grid_tile(w, arrays, k) for w, arrays in kept]
+    per = window_caches(plan, todo, cache)
+    tasks = map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per)
+    for _, blocks, hist, *task in chain(done, tasks):
+        for e in range(2):
+            overview.add_blocks(sums[e], blocks[e])
+            hists[e] += hist[e]
+        if task:
+            add_stats(stats, task[0])
+    epochs = []
+    for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            heights = np.where(valid > 0, total / valid, np.nan)
+        epochs.append(EpochDEM(heights, count.astype(np.int64), np.zeros(heights.shape)))
+    medians = (overview.median_from_histogram(hists[0]), overview.median_from_histogram(hists[1]))
+    return tuple(epochs), medians, stats
+
+
+def reader(store: TileStore):
+    """A window of an output array, read from the tile store."""
+
+    def get(key: str, rows: slice, cols: slice) -> np.ndarray:
+        win = (rows.start, rows.stop, cols.start, cols.stop)
+        if key in UINT8_LAYERS:  # the refilled mask, the classes: no NaN to fill with
+            return store.read(key, win, fill=0, dtype=bool if key == MASK_LAYER else np.uint8)
+        return store.read(key, win)
+
+    return get

@@ -1,6 +1,6 @@
-"""Waiting for a Dask cluster's tasks: their results as they finish, with a heartbeat that checks
-for SIGINT/SIGTERM and cancellation, a lost scheduler and workers that all went away; a
-cluster's failure as one line naming what the tasks were doing."""
+"""Waiting for a Dask cluster's tasks: results as they finish, a heartbeat checking for signals,
+cancellation, a lost scheduler or workers all gone; a cluster's failure one line saying what the
+tasks were doing."""
 
 from __future__ import annotations
 
@@ -14,12 +14,11 @@ from .cluster import NO_WORKERS_S, POLL_S
 
 
 def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt.check) -> Iterator:
-    """The results of ``futures`` as they finish. Every :data:`POLL_S`: ``check()`` (signals,
-    cancellation), the client's connection, and workers (none for :data:`NO_WORKERS_S`: an
-    error). A task's failure is re-raised as it is (engine errors are one line already), a
-    cluster's as one line naming ``what`` the tasks were doing. No futures: nothing imported (the
-    driver's own scans end while the cluster's thread may still be importing Dask: its module lock
-    would hold them up)."""
+    """The results of ``futures`` as they finish; every :data:`POLL_S`, ``check()`` (signals,
+    cancellation), the connection and the workers (none for :data:`NO_WORKERS_S`: an error). A
+    task's failure re-raised as it is, a cluster's as one line naming ``what`` the tasks were
+    doing. No futures: nothing imported (the cluster's thread may still be importing Dask: its
+    module lock would hold the driver's own scans up)."""
     pending, lonely = set(futures), None
     if not pending:
         return
@@ -49,10 +48,10 @@ def _check_workers(c, since: float | None, what: str) -> float | None:
     """When the cluster first had no worker (None: it has some); an error after NO_WORKERS_S."""
     if c.scheduler_info().get("workers"):
         return None
-    now = time.monotonic()
-    if since is not None and now - since > NO_WORKERS_S:
+    since = since or time.monotonic()
+    if time.monotonic() - since > NO_WORKERS_S:
         raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")
-    return since if since is not None else now
+    return since
 
 
 def _workers(c) -> set[str] | None:
@@ -72,9 +71,7 @@ def _lost(c, started: set[str] | None) -> tuple[int, int]:
 def _result(fut, what: str, lost: Callable[[], tuple[int, int]]):
     try:
         value = fut.result()
-    except SoilVolumeError:
-        raise
-    except MemoryError:
+    except (SoilVolumeError, MemoryError):
         raise
     except Exception as exc:  # noqa: BLE001 - sorted below
         if type(exc).__module__.split(".")[0] in ("distributed", "concurrent", "asyncio"):
@@ -85,9 +82,8 @@ def _result(fut, what: str, lost: Callable[[], tuple[int, int]]):
 
 
 def _cluster_error(exc: BaseException, what: str, lost: tuple[int, int] = (0, 0)) -> SoilVolumeError:
-    """A cluster's failure as one line (a pending signal first: Ctrl-C also stops workers). A
-    worker that died takes the data sent to it along: the tasks needing it are cancelled, which
-    is said as the worker's death (``lost``: workers gone, of how many)."""
+    """A cluster's failure as one line (a pending signal first: Ctrl-C stops workers too); tasks
+    cancelled with a dead worker's data said as its death (``lost``: workers gone, of how many)."""
     interrupt.check()
     name = type(exc).__name__
     advice = f"give each worker more with {opt('memory_limit')}, or smaller tiles with {opt('tile_cells')}"

@@ -1,11 +1,10 @@
-"""Run by every Dask worker process this engine starts (a ``preload``; the local cluster's
-forkserver imports it first, for the workers it forks): a terminal's Ctrl-C goes to the whole
-process group, and only the driver acts on it (it stops the run and shuts the cluster down); a
-worker killed by it would fail its tasks (``FutureCancelledError``). The optional extras no task
-uses are hidden from the imports that follow (:func:`soilvolume.process.hide_extras`)."""
+"""Every Dask worker process of this engine's preload (the forkserver imports it first): a
+terminal's Ctrl-C reaches the whole process group and only the driver acts on it (a worker it
+killed would fail its tasks); the extras no task uses hidden (:func:`soilvolume.process.hide_extras`)."""
 
 from __future__ import annotations
 
+import contextlib
 import signal
 
 from ..process import WORKER_EXTRAS, hide_extras
@@ -13,10 +12,8 @@ from ..process import WORKER_EXTRAS, hide_extras
 
 def ignore_interrupts() -> None:
     """SIGINT ignored in this process (from its main thread; elsewhere the main thread's handler has it)."""
-    try:
+    with contextlib.suppress(ValueError):  # not the main thread
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # not the main thread: the signal goes to the main thread's handler
-        pass
 
 
 def dask_setup(worker=None) -> None:  # noqa: ARG001 - the preload protocol

@@ -60,19 +60,10 @@ class InMemory:
 
     def grid(self, ctx, prep: Prepared, reg, layout: Layout, beside: Callable) -> Gridded:
         """The after epoch's heights here (moved block by block: no registered copy), the before
-        epoch's on the second thread, then ``beside`` there (two threads at a time)."""
+        epoch's on a second thread, then ``beside`` on them."""
         grid, statistic = layout.grid, ctx.options.statistic
-        heights: Future = Future()
-
-        def before() -> object:
-            try:
-                heights.set_result(gridmod.epoch_dem(prep.before.xyz, grid, statistic, prep.before.nonsoil))
-            except BaseException as err:
-                heights.set_exception(err)
-                raise
-            return beside(grid, heights.result())
-
-        later = self.pool.submit(before)
+        heights = self.pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, statistic, prep.before.nonsoil)
+        later = self.pool.submit(lambda: beside(grid, heights.result()))
         move = partial(transform_points32, t=reg.transform, chunk=CACHE_ROWS)
         nonsoil = None if prep.after.nonsoil is None else prep.after.nonsoil.moved(reg.transform)
         dem_a = gridmod.epoch_dem(prep.after.xyz, grid, statistic, nonsoil, move)

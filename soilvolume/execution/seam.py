@@ -34,10 +34,8 @@ class Layout:
 
 @dataclass(frozen=True)
 class Gridded:
-    """Each epoch's heights on the grid, (after, before) ``dems.grid.EpochDEM`` s, and where the
-    planes and the bias correction are found (``correction_grid``/``correction_dems``: the
-    grid itself, or a tiled run's overview of it); ``beside``: what the step asked to run on
-    the before DEM as soon as it existed (the planes' fit)."""
+    """(after, before) ``EpochDEM`` s on the grid; ``correction_grid``/``_dems``: where the planes and
+    the correction are found (the grid, or a tiled run's overview); ``beside``: the planes' fit."""
 
     grid: GridSpec
     dems: tuple
@@ -65,9 +63,8 @@ class Backend(Protocol):
         """Both epochs' heights on ``layout.grid``; ``beside(grid, before DEM)`` run meanwhile."""
 
     def volume(self, ctx, step: VolumeFn, gridded: Gridded, planes: tuple, moved) -> Any:
-        """``step`` over the grid (whole, or tile by tile given its result on the overview);
-        ``planes``: (plane before, plane after, d_i on the correction's grid); ``moved``: the
-        registration's alternative pose (a 4x4 move, or None)."""
+        """``step`` over the grid (or by tiles given the overview's); ``planes``: (before, after, d_i
+        on the correction's grid); ``moved``: the registration's other pose (a 4x4 move, or None)."""
 
     def write(self, ctx, layers: list, vols, grid: GridSpec, z0: float) -> None:
         """The rasters ``layers`` (file name, array name, description) of ``vols`` on ``grid``."""

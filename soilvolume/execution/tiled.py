@@ -1,8 +1,5 @@
-"""The tiled backend: the point work as Dask tasks (:mod:`soilvolume.distributed`), so no process
-holds a survey's points. The reading is a first pass of tasks returning the thinned subsets the
-registration runs on in the driver; the grid is cut into tiles, each task gridding the points that
-meet its tile; the volume step runs on the whole grid, or tile by tile with a halo given its result
-on an overview of the grid (``--volume-step tiles``). Finished tiles are kept in the run's store."""
+"""The tiled backend: the point work as Dask tasks of :mod:`soilvolume.distributed` (see there), so
+no process holds a survey's points; finished tiles kept in the run's store."""
 
 from __future__ import annotations
 
@@ -14,18 +11,17 @@ from pathlib import Path
 
 from ..core.types import SoilVolumeError
 from ..core.wording import opt
+from ..dem.geotiff import grid_layout, write_cog
+from ..dem.grid import UINT8_LAYERS, output_layers
 from ..distributed import overview
 from ..distributed.cluster import LazyClient, checker
-from ..distributed.cog import write_outputs
-from ..distributed.fingerprint import input_identities, run_parts
+from ..distributed.fingerprint import input_identity, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
-from ..distributed.schedule import Schedule, budget_gb, check_tiles, client, worker_gb
-from ..distributed.tiled import data_tiling, fits, points_per_cell, tile_side, volume_factor
+from ..distributed.schedule import Schedule, budget_gb, client
 from ..distributed.tilestore import run_store
-from ..distributed.tiletask import Plan, epoch_dems, plan_parts, run_tiles, tiles
-from ..distributed.volumestep import grid_tiles, reader, tile_volumes
-from ..distributed.volumetiles import VolumeJob
+from ..distributed.tiletask import Plan, epoch_dems, plan_parts, run_tiles, tile_windows, volume_factor
+from ..distributed.volumetiles import VolumeJob, grid_tiles, reader, tile_volumes
 from ..inputs.footprint import PolygonMask, footprint
 from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared, prepare
@@ -36,9 +32,9 @@ IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read fr
 
 
 def _identify(future: Future, paths: list) -> None:
-    """The inputs' identities (zlib's CRC releases the GIL) into ``future``."""
+    """The (before, after) inputs' identities into ``future`` (zlib's CRC releases the GIL)."""
     try:
-        future.set_result(input_identities(*paths))
+        future.set_result({"before": input_identity(paths[0]), "after": input_identity(paths[1])})
     except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
         future.set_exception(exc)
 
@@ -58,8 +54,8 @@ class Tiled:
 
     @contextmanager
     def session(self, ctx) -> Iterator[Tiled]:
-        """The run's tile store and cluster; the cluster starts in the background and is waited
-        for at its first use (``cluster_wait``), shut down in the background after its last."""
+        """The run's tile store and cluster, started in the background, waited for at its first use
+        (``cluster_wait``), shut down in the background after its last."""
         if ctx.options.ground in ("filter", "csf"):
             raise SoilVolumeError(
                 f"{opt('ground', ctx.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
@@ -97,11 +93,10 @@ class Tiled:
         return None  # no process holds the full-resolution points
 
     def grid(self, ctx, prep: Prepared, reg, layout: Layout, beside: Callable) -> Gridded:
-        """The tiles gridded on the workers; ``beside`` on the overview's before DEM (the volume
-        step in tiles) or the grid's."""
+        """The tiles gridded on the workers; ``beside`` on the overview's before DEM (``k`` > 1) or the grid's."""
         grid, options = layout.grid, ctx.options
         self.plan = _plan(prep, ctx, grid, reg, (self.src_b, self.src_a))
-        self.windows, self.side, self.density = self._tiles(ctx, prep, grid)
+        self.windows, self.side, self.density = tile_windows(options, grid, prep, self.schedule, self.src_b)
         ctx.hooks.step(
             ctx.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
         )
@@ -111,42 +106,21 @@ class Tiled:
         if self.said:
             ctx.hooks.step(ctx.at("grid"), self.said)
         self.kept = self.store.tiles(self.windows)
-        gridded = self._overview(ctx, grid) if self.k > 1 else self._whole(ctx, grid)
+        if self.k > 1:
+            self.over_epochs, self.medians, self.stats = grid_tiles(
+                self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
+            )
+            self.coarse = overview.coarse(grid, self.k)
+            dems, at, at_dems = (), self.coarse, self.over_epochs  # the correction found on the overview
+        else:
+            self.stats = {}
+            arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
+            dems = at_dems = epoch_dems(arrays, self.plan.rules)
+            at = grid
         self.cache.release()  # the workers' memory back for the volume step
         if self.k == 1:
             self.starting.close_soon()  # the volume step runs here: the workers are done
-        planes = beside(gridded.correction_grid, gridded.correction_dems[1])
-        return Gridded(grid, gridded.dems, gridded.correction_grid, gridded.correction_dems, done(planes))
-
-    def _whole(self, ctx, grid) -> Gridded:
-        self.stats = {}
-        arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
-        dems = epoch_dems(arrays, self.plan.rules)
-        return Gridded(grid, dems, grid, dems, done(None))
-
-    def _overview(self, ctx, grid) -> Gridded:
-        self.over_epochs, self.medians, self.stats = grid_tiles(
-            self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
-        )
-        self.coarse = overview.coarse(grid, self.k)
-        return Gridded(grid, (), self.coarse, self.over_epochs, done(None))
-
-    def _tiles(self, ctx, prep: Prepared, grid) -> tuple:
-        """(the tile windows, their side in cells, points per cell) for the run's grid."""
-        options, cell = ctx.options, grid.cell
-        task_gb, density = worker_gb(self.schedule, options.memory_limit), points_per_cell(prep, cell)
-        side = tile_side(options, grid, density, task_gb, self.schedule.workers)
-        tiling = None if options.tile_cells else data_tiling(self.src_b, cell, 2 * side)
-        if tiling and not fits(density * (tiling[0] / cell) ** 2, task_gb):
-            tiling = None  # a data tile too dense for one task's memory: smaller tiles, read more than once
-        windows = tiles(grid, side)
-        if tiling:  # snap to the input's tiles (one grid tile per data tile) when that keeps the workers busy
-            pitch = max(1, round(tiling[0] / cell))
-            aligned = tiles(grid, pitch, tiling[0], tiling[1:])
-            if len(aligned) >= min(len(windows), 2 * self.schedule.workers):
-                windows, side = aligned, pitch
-        check_tiles(windows, density, task_gb, options)
-        return windows, side, density
+        return Gridded(grid, dems, at, at_dems, done(beside(at, at_dems[1])))
 
     def volume(self, ctx, step: VolumeFn, gridded: Gridded, planes: tuple, moved) -> object:
         """``step`` on the whole grid, or on the overview, then tile by tile given its correction."""
@@ -161,11 +135,10 @@ class Tiled:
         return vols
 
     def write(self, ctx, layers: list, vols, grid, z0: float) -> None:
-        """The rasters as COGs block by block, from memory or the tile store; then the after cloud
-        streamed through the driver (``--registered-cloud``)."""
+        """The rasters as COGs from memory or the tile store; the after cloud streamed through the driver."""
         if layers:  # the pair's layers (a surface as the reference runs in memory)
-            get = reader(self.kept) if self.k > 1 else _arrays(vols)
-            write_outputs(ctx.out, get, grid, z0, ctx.options.correction)
+            get = reader(self.kept) if self.k > 1 else lambda key, r, c: getattr(vols, key)[r, c]
+            _write_cogs(ctx.out, get, grid, z0, ctx.options.correction)
         if self.cloud is not None:
             prep, reg, path = self.cloud
             write_las_chunked(path, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
@@ -192,14 +165,21 @@ class Tiled:
         }
 
 
-def _arrays(vols) -> Callable:
-    """A window of the volume step's arrays in memory."""
-    return lambda key, r, c: getattr(vols, key)[r, c]
+def _write_cogs(out, get: Callable, grid, z0: float, correction: str) -> None:
+    """The run's rasters (:func:`grid.output_layers`) as COGs, block by block; ``get(name, rows,
+    cols)``: the window of the grid array ``name`` (heights local)."""
+    for name, key, desc in output_layers(correction):
+        if key in UINT8_LAYERS:
+            layout = grid_layout(grid, desc, "", "uint8")
+            write_cog(out.path(name), layout, lambda r, c, key=key: get(key, r, c).astype("uint8"))
+        else:
+            add = z0 if key.startswith("dem_") else 0.0
+            write_cog(out.path(name), grid_layout(grid, desc), lambda r, c, key=key, add=add: get(key, r, c) + add)
 
 
 def _plan(prep: Prepared, ctx, grid, reg, sources: tuple) -> Plan:
     """What every tile task needs (picklable); ``sources``: the (before, after) sources the driver
-    opened (the tasks then open none; never whole clouds)."""
+    opened (the tasks open none again; never whole clouds)."""
     b, a = (str(e.path) for e in ctx.epochs)
     crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
     ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], ctx.options.radius)
