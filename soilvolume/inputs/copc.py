@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from ..core.types import SoilVolumeError
-from .lasimport import laspy_module
 from .records import point_signals
 
 
@@ -46,7 +45,7 @@ def read_fraction(path: str | Path, lo=None, hi=None, resolution: float | None =
     """The share of the points of the nodes meeting the box that a read at ``resolution`` returns,
     from the octree hierarchy alone (1.0 for a full-resolution read): what scales the counts of a
     thinned read back to the survey's density."""
-    laspy = laspy_module()
+    import laspy
     from laspy.copc import load_octree_for_query
 
     if resolution is None:
@@ -74,7 +73,7 @@ def copc_chunks(
     x/y box lo..hi (inclusive), at most ``size`` at a time, read from the octree nodes meeting
     the box (down to the level of ``resolution`` when given); with ``signals`` also their colour
     and returns (:func:`records.point_signals`)."""
-    laspy = laspy_module()
+    import laspy
 
     try:
         with laspy.CopcReader.open(str(path)) as reader:

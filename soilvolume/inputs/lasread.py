@@ -10,15 +10,45 @@ import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
 from .copc import copc_chunks, is_copc
-from .io import las_crs_wkt
-from .lasimport import laspy_module
 from .records import las_chunks, point_signals, signal_dims
+
+CRS_RECORDS = {2111, 2112, 34735, 34736, 34737}  # WKT (math transform, CRS) and GeoTIFF keys
+WKT_STARTS = (b"PROJCS", b"PROJCRS", b"GEOGCS", b"GEOGCRS", b"COMPD_CS", b"COMPOUNDCRS", b"GEODCRS")
+
+
+def las_crs_wkt(header, path: Path) -> str | None:
+    """The CRS of a LAS header (WKT VLR or GeoTIFF keys) as WKT, or None when it has no CRS
+    record; a CRS record that cannot be read is an error, not 'no CRS'."""
+    try:
+        crs = header.parse_crs()
+    except Exception as exc:  # laspy raises several types on broken VLRs
+        raise SoilVolumeError(f"{path}: the CRS stored in the header cannot be read ({short_error(exc)})") from exc
+    if crs is None:
+        broken = next((v for v in header.vlrs if _looks_like_crs(v)), None)
+        if broken is not None:
+            user = "".join(c if c.isprintable() else "?" for c in str(broken.user_id))
+            raise SoilVolumeError(
+                f"{path}: the header's CRS record (VLR '{user}' {broken.record_id}) cannot be read (corrupt header?)"
+            )
+        return None
+    return crs.to_wkt()
+
+
+def _looks_like_crs(vlr) -> bool:
+    """A VLR that was meant to hold the CRS: its ids, or WKT-looking content."""
+    from difflib import SequenceMatcher
+
+    user = str(getattr(vlr, "user_id", "")).strip("\x00 ")
+    if SequenceMatcher(None, user.lower(), "lasf_projection").ratio() > 0.8 or vlr.record_id in CRS_RECORDS:
+        return True
+    data = getattr(vlr, "record_data", b"") or b""
+    return bytes(data[:16]).lstrip().upper().startswith(WKT_STARTS)
 
 
 def las_header(p: Path) -> tuple:
     """(CRS WKT or None, point count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC
     file's header."""
-    laspy = laspy_module()
+    import laspy
 
     try:
         with laspy.open(p) as reader:
@@ -37,7 +67,7 @@ def las_ranges(
     path: str, ranges: list[tuple[int, int]], size: int, signals: bool | Callable = False, origin=None
 ) -> Iterator[tuple]:
     """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
-    laspy = laspy_module()
+    import laspy
 
     try:
         with laspy.open(path) as reader:

@@ -17,7 +17,6 @@ import numpy as np
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import Signals
 from .lasheader import BoundsCheck
-from .lasimport import laspy_module
 
 PIECE = 125_000  # points read at a time (a chunk of 1 M points in 8 pieces: 3.75 MB buffers of 30-byte records)
 RING = 3  # buffers of an uncompressed read in turn: the consumer's, the queued one, the one being read
@@ -94,7 +93,8 @@ def las_records(
     ``ring`` buffers in turn, or ``mapped`` read-only; ``stop``: only the first ``stop`` points,
     unchecked; ``whole_first``: the first chunk in one piece; ``direct(has_class)``, asked at each
     uncompressed chunk: a class table (or None) leaves it in the file as a :class:`FileChunk`."""
-    laspy = laspy_module()
+    import laspy
+
     read = 0
     try:
         with laspy.open(path) as reader:

@@ -21,7 +21,6 @@ import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
 from .lasheader import check_las_header
-from .lasimport import laspy_module
 from .vpcschema import items
 
 
@@ -165,7 +164,7 @@ def _href(vpc: Path, item) -> str:
 def _tile_header(vpc: Path, item, tile_path: str):
     """(point count, mins, maxs, CRS or None) from the tile's header, checked before laspy reads
     it (errors name the tile and never quote its bytes)."""
-    laspy = laspy_module()
+    import laspy
     import pyproj
 
     check_las_header(Path(tile_path))
@@ -248,7 +247,7 @@ def _to_wgs84(mins, maxs, crs) -> list[float]:
 def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative: bool = True) -> Path:
     """Write a ``.vpc`` grouping LAS/LAZ/COPC ``tiles`` (boxes, counts and CRS from their headers;
     hrefs relative to the VPC unless ``relative`` is False)."""
-    laspy = laspy_module()
+    import laspy
 
     out = Path(path)
     features = []
