@@ -80,11 +80,10 @@ def las_records(
     whole_first: bool = False,
     mapped: bool = False,
 ) -> Iterator[tuple]:
-    """(Records, classification or None[, signals]) in pieces of at most ``piece`` points, each chunk
-    of ``size`` ending on a ``flush`` piece; a count other than ``count`` is a corrupt file. ``ring``
-    buffers in turn, or ``mapped``; ``stop``: the first ``stop`` points only; ``whole_first``: the
-    first chunk in one piece; ``direct(has_class)`` giving a class table (or None) at an uncompressed
-    chunk leaves it in the file as a :class:`FileChunk`."""
+    """(Records, classification or None[, signals]) in pieces of at most ``piece`` points, chunks of
+    ``size`` ending on ``flush``; not ``count`` points: corrupt. ``ring`` buffers, or ``mapped``; ``stop``:
+    the first points only; ``whole_first``: the first chunk in one piece; ``direct(has_class)`` giving
+    a class table (or None) leaves an uncompressed chunk in the file (:class:`FileChunk`)."""
     import laspy
 
     read = 0
@@ -92,7 +91,6 @@ def las_records(
         with laspy.open(path) as reader:
             h = reader.header
             dims = set(h.point_format.dimension_names)
-            has_cls = "classification" in dims
             scales, offsets = np.asarray(h.scales, float), np.asarray(h.offsets, float)
             check = BoundsCheck(path, h)
             chunks = chunk_pieces(count if stop is None else stop, size, PIECE if piece is None else piece)
@@ -109,7 +107,7 @@ def las_records(
                     yield (array, None, None) if signals else (array, None)
                     continue
                 rec = laspy.ScaleAwarePointRecord(array, h.point_format, scales, offsets)
-                cls = np.array(rec.classification) if has_cls else None
+                cls = np.array(rec.classification) if "classification" in dims else None
                 sig = point_signals(rec, signal_dims(dims, signals, cls)) if signals else None
                 item = Records(array, scales, offsets, check, read >= count, read % size == 0 or read >= count)
                 yield (item, cls, sig) if signals else (item, cls)

@@ -1,11 +1,7 @@
-"""Virtual point clouds (``.vpc``): a STAC ItemCollection of point cloud tiles, as written by
-PDAL wrench ``build_vpc`` and QGIS "Build virtual point cloud" (``vpc-spec.md`` in PDAL/wrench).
-
-The document's structure is checked against the STAC fields read (:mod:`vpcschema`); every tile's
-header is read once and its box and point count must match what the VPC says (``proj:bbox`` in
-the native CRS, else the WGS 84 ``bbox``); only the tiles meeting a query box are read. All tiles
-must share one CRS.
-"""
+"""Virtual point clouds (``.vpc``): STAC ItemCollections of point cloud tiles, as PDAL wrench's
+``build_vpc`` and QGIS write them. The structure is checked by :mod:`vpcschema`; each tile's header
+is read once and must match the VPC's box (``proj:bbox``, else the WGS 84 ``bbox``) and count; all
+tiles share one CRS; only the tiles meeting a query box are read."""
 
 from __future__ import annotations
 
@@ -70,9 +66,8 @@ NATIVE_TOL, WGS84_TOL = 0.01, 1.0
 
 
 def read_vpc(path: str | os.PathLike) -> Vpc:
-    """Parse a ``.vpc`` (its structure checked by :mod:`vpcschema`), each tile's header read and
-    compared with the box and count the VPC gives it; one-line errors name the file, the item and
-    the field or the tile at fault. Cached per file version (tile tasks open it often)."""
+    """Parse and check a ``.vpc`` (see module; errors name the file, the item and the field or tile),
+    cached per version of it and its tiles (tile tasks open it often)."""
     p = Path(path)
     try:
         st = p.stat()
@@ -122,10 +117,8 @@ def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, lis
 
 
 def file_url_path(url: str, windows: bool = os.name == "nt") -> str:
-    """The local path of a ``file://`` URL. On Windows a drive letter (``file:///C:/d/t.laz`` ->
-    ``C:\\d\\t.laz``) and a host (``file://server/share/t.laz`` -> the UNC path
-    ``\\\\server\\share\\t.laz``); elsewhere a host other than localhost is another computer:
-    ValueError saying so."""
+    """The local path of a ``file://`` URL: on Windows a drive letter or a host's UNC path; elsewhere a
+    host other than localhost is another computer (ValueError)."""
     parts = urlparse(url)
     host = "" if parts.netloc.lower() == "localhost" else parts.netloc
     if windows:
@@ -137,8 +130,7 @@ def file_url_path(url: str, windows: bool = os.name == "nt") -> str:
 
 
 def _href(vpc: Path, item) -> str:
-    """The data asset of an item as an absolute path (relative hrefs are relative to the VPC),
-    checked to be a readable regular file."""
+    """An item's data asset as an absolute path (relative to the VPC), a readable regular file."""
     href = item.href
     if href.startswith("file://"):
         try:
@@ -162,8 +154,7 @@ def _href(vpc: Path, item) -> str:
 
 
 def _tile_header(vpc: Path, item, tile_path: str):
-    """(point count, mins, maxs, CRS or None) from the tile's header, checked before laspy reads
-    it (errors name the tile and never quote its bytes)."""
+    """(point count, mins, maxs, CRS or None) of a tile's header, checked before laspy reads it."""
     import laspy
     import pyproj
 
@@ -194,8 +185,7 @@ def _common_crs(vpc: Path, crss: list) -> str | None:
 
 
 def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
-    """The tile with its header's box and count, after checking the VPC's own against them (a
-    wrong box would skip or misplace the tile's points)."""
+    """The tile with its header's box and count, the VPC's checked against them."""
     count, lo, hi, _ = head
     name = Path(tile_path).name
     if item.count is not None and item.count != count:
@@ -208,9 +198,8 @@ def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
 
 
 def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, exact: bool) -> None:
-    """The VPC's x/y box of a tile (what decides whether it is read) against its header's: equal
-    within ``tol`` (plus a relative 1e-9), or with ``exact`` False, holding it. Heights come from
-    the header."""
+    """The VPC's x/y box of a tile against its header's: equal within ``tol`` (and 1e-9 relative), or
+    holding it unless ``exact``."""
     box = list(box)
     half = len(box) // 2
     blo, bhi = np.asarray(box[:2]), np.asarray(box[half : half + 2])
@@ -245,8 +234,7 @@ def _to_wgs84(mins, maxs, crs) -> list[float]:
 
 
 def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative: bool = True) -> Path:
-    """Write a ``.vpc`` grouping LAS/LAZ/COPC ``tiles`` (boxes, counts and CRS from their headers;
-    hrefs relative to the VPC unless ``relative`` is False)."""
+    """Write a ``.vpc`` of LAS/LAZ/COPC ``tiles`` from their headers (hrefs relative unless not ``relative``)."""
     import laspy
 
     out = Path(path)
