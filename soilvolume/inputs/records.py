@@ -177,6 +177,17 @@ def decoded_xyz(chunk, origin: np.ndarray | None = None) -> tuple[np.ndarray, np
     return xyz, lows.min(axis=1), highs.max(axis=1)
 
 
+def decoded_points(pts, dims: set[str], signals, origin=None) -> tuple:
+    """(xyz float64 minus ``origin``, classification or None[, signals: :func:`signal_dims`]) of
+    laspy points decoded by laspy."""
+    xyz = np.empty((len(pts), 3))
+    xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
+    if origin is not None:
+        np.subtract(xyz, origin, out=xyz)
+    cls = np.array(pts.classification) if "classification" in dims else None
+    return (xyz, cls, point_signals(pts, signal_dims(dims, signals, cls))) if signals else (xyz, cls)
+
+
 def point_signals(record, dims: set[str]) -> Signals | None:
     """The colour and return numbers of a laspy point record (None when it has neither)."""
     rgb = ret = None
