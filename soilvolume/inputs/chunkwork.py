@@ -114,20 +114,10 @@ class NativeChunks:
             self.files[rec.path] = os.open(rec.path, os.O_RDONLY)
         if self.buf is None:
             self.buf = np.empty(PIECE * rec.dtype.itemsize, np.uint8)
-        room = len(self.buf) // rec.dtype.itemsize
-        table = None if rec.table is None else np.ascontiguousarray(rec.table, np.uint8)
-        failed = self.lib.sv_file_chunk(
-            ctypes.byref(self.args),
-            self.files[rec.path],
-            rec.offset,
-            rec.count,
-            address(self.buf),
-            room,
-            address(table),
-            rec.cls_at,
-            rec.cls_mask,
-        )
-        if failed:
+        buf, room = address(self.buf), len(self.buf) // rec.dtype.itemsize
+        table = None if rec.table is None else np.ascontiguousarray(rec.table, np.uint8)  # alive through the call
+        where = (self.files[rec.path], rec.offset, rec.count)
+        if self.lib.sv_file_chunk(ctypes.byref(self.args), *where, buf, room, address(table), rec.cls_at, rec.cls_mask):
             raise SoilVolumeError(f"{rec.path}: corrupt LAS file (its points end before the header's count)")
 
     def close(self) -> None:

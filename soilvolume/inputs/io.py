@@ -1,8 +1,5 @@
 """Read and write point clouds: LAS/LAZ (laspy + lazrs), PLY/PCD (Open3D), XYZ/TXT/CSV (numpy).
-
-Readers return absolute float64 coordinates in the file's own CRS and units; CRS handling lives in
-:mod:`soilvolume.inputs.crs`. Writers go through a temporary name and rename when complete.
-"""
+Readers return absolute float64 coordinates in the file's CRS and units; writers rename when done."""
 
 from __future__ import annotations
 
@@ -113,9 +110,8 @@ def _read_text(path: Path) -> RawPoints:
 
 @contextmanager
 def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
-    """Yield a hidden temporary sibling path (named for this process, so a killed run's is
-    recognised by :func:`soilvolume.core.outputs.sweep`); rename it onto ``final`` only if the block
-    succeeds."""
+    """A hidden sibling path (named for this process: ``core.outputs.sweep`` knows a killed run's),
+    renamed onto ``final`` only if the block succeeds."""
     final = Path(final)
     tmp = sibling(final, STAGING, suffix=final.suffix)
     try:
@@ -147,8 +143,7 @@ def write_las_chunked(
     transform: np.ndarray | None = None,
     scale: float = 0.001,
 ) -> None:
-    """Write (local xyz, classification or None) chunks, optionally through a 4x4 rigid
-    ``transform``, as absolute LAS 1.4/LAZ (memory bounded by a chunk), atomically."""
+    """Write (local xyz, classification) chunks, through a rigid ``transform``, as LAS 1.4/LAZ atomically."""
     import laspy
 
     origin = np.asarray(origin, float)

@@ -216,21 +216,15 @@ def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, 
 
 def _from_wgs84(bbox, crs) -> list[float]:
     """A WGS 84 bbox (2D or 3D) as an x/y box in ``crs`` (densified edges)."""
-    import pyproj
-
     b = [float(v) for v in bbox]
-    w, s, e, n = (b[0], b[1], b[3], b[4]) if len(b) == 6 else b
-    t = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
-    return list(t.transform_bounds(w, s, e, n, densify_pts=21))
+    return _box_to("EPSG:4326", crs, *((b[0], b[1], b[3], b[4]) if len(b) == 6 else b))
 
 
-def _to_wgs84(mins, maxs, crs) -> list[float]:
-    """A native 3D box as a WGS 84 3D bbox (GeoJSON requires WGS 84 boundaries)."""
+def _box_to(src, dst, w: float, s: float, e: float, n: float) -> list[float]:
+    """The x/y box w, s, e, n in ``src`` as one in ``dst`` (densified edges)."""
     import pyproj
 
-    t = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
-    w, s, e, n = t.transform_bounds(float(mins[0]), float(mins[1]), float(maxs[0]), float(maxs[1]), densify_pts=21)
-    return [w, s, float(mins[2]), e, n, float(maxs[2])]
+    return list(pyproj.Transformer.from_crs(src, dst, always_xy=True).transform_bounds(w, s, e, n, densify_pts=21))
 
 
 def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative: bool = True) -> Path:
@@ -254,7 +248,8 @@ def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative:
         feature = {"type": "Feature", "stac_version": "1.0.0", "id": t.stem}
         if crs is not None:
             props["proj:wkt2"] = crs.to_wkt()
-            feature["bbox"] = _to_wgs84(h.mins, h.maxs, crs)
+            w, s, e, n = _box_to(crs, "EPSG:4326", *map(float, (*h.mins[:2], *h.maxs[:2])))
+            feature["bbox"] = [w, s, float(h.mins[2]), e, n, float(h.maxs[2])]  # GeoJSON: WGS 84
         features.append(
             {
                 **feature,
