@@ -209,8 +209,7 @@ def check_over(tin: Tin, lo: np.ndarray, hi: np.ndarray, frame: WorkFrame, margi
 
 
 def on_grid(tin: Tin, grid: GridSpec) -> np.ndarray:
-    """The TIN's heights (m) at the cell centres of ``grid`` (NaN outside every triangle): its
-    points taken into the grid's CRS, then linear inside each of its own triangles."""
+    """The TIN's heights (m) at ``grid``'s cell centres in its CRS, linear in each triangle, else NaN."""
     xy = _in(tin, pyproj.CRS.from_wkt(raster_wkt(grid.crs_wkt)))
     t = grid.transform  # north-up
     uv = np.c_[(xy[:, 0] - t.c) / t.a - 0.5, (xy[:, 1] - t.f) / t.e - 0.5]

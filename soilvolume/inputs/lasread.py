@@ -17,8 +17,7 @@ WKT_STARTS = (b"PROJCS", b"PROJCRS", b"GEOGCS", b"GEOGCRS", b"COMPD_CS", b"COMPO
 
 
 def las_crs_wkt(header, path: Path) -> str | None:
-    """The CRS of a LAS header (WKT VLR or GeoTIFF keys) as WKT, or None when it has no CRS
-    record; a CRS record that cannot be read is an error, not 'no CRS'."""
+    """A LAS header's CRS (WKT VLR or GeoTIFF keys) as WKT, None without any; an unreadable one: an error."""
     try:
         crs = header.parse_crs()
     except Exception as exc:  # laspy raises several types on broken VLRs
@@ -46,8 +45,7 @@ def _looks_like_crs(vlr) -> bool:
 
 
 def las_header(p: Path) -> tuple:
-    """(CRS WKT or None, point count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC
-    file's header."""
+    """(CRS WKT or None, count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC header."""
     import laspy
 
     try:

@@ -1,6 +1,5 @@
-"""Step 1: stream both clouds into one working frame (before CRS, metres, local origin), select
-ground points, crop the before cloud to the after footprint plus the radius, and thin both for
-registration on the way."""
+"""Step 1: both clouds streamed into one working frame (before CRS, metres, local origin), ground
+selected, the before cropped to the after footprint plus the radius, both thinned on the way."""
 
 from __future__ import annotations
 

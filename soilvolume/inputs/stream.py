@@ -136,8 +136,8 @@ def from_raw(raw: RawPoints) -> Source:
 
 @dataclass
 class Loaded:
-    """One epoch streamed: kept soil points (float32 local), the thinned subset (float64 local),
-    counts, and the points its rule says are not soil within the same box (``NonSoil``)."""
+    """One epoch streamed: kept soil points (float32), the thinned subset, counts, and the points its
+    rule says are not soil within the same box."""
 
     xyz: np.ndarray
     thin: np.ndarray
@@ -214,9 +214,7 @@ def native_reads(src: Source, to_local, keep: Callable | None) -> bool:
         return False
     if keep is not None and not hasattr(keep, "framed"):
         return False
-    if src.region is not None and (src.index is not None or any(is_copc(t) for t in src.tiles())):
-        return False
-    return True
+    return src.region is None or (src.index is None and not any(is_copc(t) for t in src.tiles()))
 
 
 def load(
