@@ -117,15 +117,13 @@ def _header(p: Path) -> Source:
 
 
 def _open_vpc(p: Path) -> Source:
-    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from its items."""
+    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from the tiles' headers
+    (checked finite by :func:`lasheader.check_las_header`)."""
     vpc = read_vpc(p)
     first = _header(Path(vpc.tiles[0].path))
     if vpc.count == 0:
         raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
-    lo, hi = vpc.lo, vpc.hi
-    lo[2] = first.lo[2] if not np.isfinite(lo[2]) else lo[2]
-    hi[2] = first.hi[2] if not np.isfinite(hi[2]) else hi[2]
-    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
+    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, vpc.lo, vpc.hi, first.has_class, vpc=vpc)
 
 
 def from_raw(raw: RawPoints) -> Source:
