@@ -280,7 +280,7 @@ def test_whole_chunks_read_by_the_kernel_load_what_numpy_loads(lib, tmp_path, mo
     """A LAS file streamed with its later chunks left to the kernel to read (``sv_file_chunk``,
     labels from the classification byte) loads what the numpy path loads, bit for bit."""
     from soilvolume.inputs import stream
-    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.crs import Shift
     from soilvolume.inputs.records import class_byte
 
     rng = np.random.default_rng(point_format)
@@ -345,7 +345,7 @@ def test_the_rule_is_decided_on_the_first_chunk_not_its_first_piece(lib, tmp_pat
     chunk, as numpy decides it: ground points only after the first piece still make the rule
     select class 2, and a colour threshold comes from the whole chunk's colours."""
     from soilvolume.inputs import records, stream
-    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.crs import Shift
 
     rng = np.random.default_rng(9)
     n = 12_000
@@ -420,7 +420,7 @@ def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeyp
     thinning sums and counts bit for bit, and kept chunks of numpy's sizes whose soil points and
     other points (with their labels) are numpy's, each in order: what the grid takes apart."""
     from soilvolume.distributed import nativescan, scan
-    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.crs import Shift
     from soilvolume.soil.points import PointRule
 
     rng = np.random.default_rng(7)
@@ -475,7 +475,7 @@ def test_a_tile_with_points_off_its_header_box_is_thinned_on_all_columns(lib, tm
     """The kernel's scan thins a tile on the columns its header's box meets: a point that missed
     them (a box too small) makes it scan the tile again on all of them, and it gives numpy's bits."""
     from soilvolume.distributed import nativescan
-    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.crs import Shift
     from soilvolume.soil.points import PointRule
 
     rng = np.random.default_rng(8)
@@ -505,7 +505,7 @@ def test_a_tile_with_points_off_its_header_box_is_thinned_on_all_columns(lib, tm
 def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):
     """A VPC tile without points: the kernel's scan steps aside and the numpy scan finds nothing."""
     from soilvolume.distributed import nativescan, scan
-    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.crs import Shift
     from soilvolume.soil.points import PointRule
 
     path = tmp_path / "empty.las"

@@ -218,8 +218,8 @@ def test_a_kept_tile_holds_the_points_its_crop_keeps_as_the_grid_would_make_them
     import pyproj
 
     from soilvolume.distributed.scan import scan_keeping, scan_unit
+    from soilvolume.inputs.crs import Shift
     from soilvolume.inputs.footprint import PolygonMask
-    from soilvolume.inputs.prepare import Shift
     from soilvolume.soil.points import PointRule
 
     rng = np.random.default_rng(4)

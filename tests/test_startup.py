@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 from conftest import run_python, write_scene
 
+from soilvolume.inputs.crs import Shift
 from soilvolume.inputs.io import RawPoints
-from soilvolume.inputs.prepare import Shift
 from soilvolume.inputs.stream import ColumnThinner, from_raw, load, open_source
 
 

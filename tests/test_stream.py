@@ -101,7 +101,7 @@ def _coloured(tmp_path, n=6_000):
 def test_narrowed_signals_and_fused_shift_change_nothing(cloud, tmp_path, monkeypatch, classified):
     """Reading only the signals the rule uses, with the origin subtracted in the decoding, loads
     bit for bit what reading every signal and shifting afterwards loads."""
-    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.crs import Shift
     from soilvolume.soil import points
 
     path = cloud[0] if classified else _coloured(tmp_path)
@@ -170,7 +170,7 @@ def test_the_hull_is_qhulls_on_every_point(kind):
 def test_the_footprint_test_in_the_decoding_loads_what_the_consumer_loads(cloud, monkeypatch):
     """With a plain shift the chunks arrive local and the footprint test runs in the decoding;
     after any other conversion the consumer applies it. Both load the same points."""
-    from soilvolume.inputs.prepare import Shift
+    from soilvolume.inputs.crs import Shift
 
     origin = np.array([500_010.0, 3_900_010.0, 49.0])
     monkeypatch.setattr(stream, "CHUNK", 1_000)

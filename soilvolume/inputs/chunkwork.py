@@ -1,9 +1,6 @@
-"""A streamed chunk's work on the native kernel (``sv_chunk``, :mod:`soilvolume.native`): decode the
-point records into the working frame, crop to the footprint, split soil from the rest, add the
-soil points to the thinning columns and keep those within the box as float32, in one pass.
-
-Its numpy twin is :func:`numpy_chunk` (the path :func:`soilvolume.inputs.stream.load` takes without
-the library): the same values, bit for bit."""
+"""A streamed chunk's work on the native kernel (``sv_chunk``): decode into the working frame, crop,
+split soil from the rest, thin and keep the points within the box as float32, in one pass. Its
+numpy twin, :func:`numpy_chunk` (the path without the library), gives the same bits."""
 
 from __future__ import annotations
 
@@ -24,8 +21,8 @@ from .thinning import ColumnThinner
 
 
 class Growing:
-    """Rows appended into one buffer sized up front (pages never written are never resident) and
-    grown by doubling past it; :meth:`room` hands a kernel the free tail to write into."""
+    """Rows appended into one buffer sized up front (pages never written are never resident), doubled
+    past it; :meth:`room` hands a kernel the free tail to write into."""
 
     def __init__(self, capacity: int, width: int | None = 3, dtype=np.float32) -> None:
         self.shape = (width,) if width else ()
@@ -50,8 +47,7 @@ class Growing:
 
 @dataclass
 class Counted:
-    """What one chunk gave: points cropped in (soil within the footprint), soil points, and the
-    per-axis bounds of the decoded absolute coordinates."""
+    """One chunk's soil points within the footprint, soil points, and absolute per-axis bounds."""
 
     cropped: int
     soil: int
@@ -60,10 +56,9 @@ class Counted:
 
 
 class NativeChunks:
-    """One epoch's chunks on ``sv_chunk``: the crop ``polygon`` (a ``PolygonMask`` or None), the
-    ``thinner``, the x/y ``box`` of the points kept at full resolution (None: all) and the local
-    ``origin`` stay; each :meth:`add` passes one piece of a chunk (``chunk``: the most points of a
-    chunk, whose column sums are added up when its last piece has passed: :class:`Records`)."""
+    """One epoch's chunks on ``sv_chunk`` with its crop ``polygon`` (``PolygonMask`` or None),
+    ``thinner``, full-resolution x/y ``box`` (None: all) and ``origin``; :meth:`add` passes a piece
+    (``chunk``: the most points of a chunk, whose column sums are added up after its last piece)."""
 
     def __init__(self, lib: ctypes.CDLL, thinner: ColumnThinner, polygon, box, origin: np.ndarray, chunk: int) -> None:
         self.lib, self.thinner = lib, thinner
@@ -90,9 +85,8 @@ class NativeChunks:
         self.span: tuple | None = None  # x/y bounds of the pieces since the last flush
 
     def add(self, rec, labels: np.ndarray | None, parts: Growing, others: Growing, other_labels: Growing):
-        """One piece (:class:`Records` with their ``labels``) or a whole chunk left in its file
-        (:class:`FileChunk`): its kept soil points appended to ``parts``, the points that are not
-        soil (within the crop and the box) to ``others`` with their labels; returns :class:`Counted`."""
+        """A piece (:class:`Records` and ``labels``) or a :class:`FileChunk`: kept soil points appended
+        to ``parts``, the others within the crop and box to ``others`` with their labels."""
         a, n = self.args, len(rec)
         file = isinstance(rec, FileChunk)
         array = None if file else np.ascontiguousarray(rec.array)
@@ -115,25 +109,15 @@ class NativeChunks:
         return Counted(a.cropped, a.soil, np.array(a.lo[:]), np.array(a.hi[:]))
 
     def _from_file(self, rec: FileChunk) -> None:
-        """``sv_file_chunk``: the chunk read and worked on in the kernel (its file opened once)."""
+        """``sv_file_chunk``: the chunk read and worked on in the kernel (each file opened once)."""
         if rec.path not in self.files:
             self.files[rec.path] = os.open(rec.path, os.O_RDONLY)
         if self.buf is None:
             self.buf = np.empty(PIECE * rec.dtype.itemsize, np.uint8)
-        room = len(self.buf) // rec.dtype.itemsize
-        table = None if rec.table is None else np.ascontiguousarray(rec.table, np.uint8)
-        failed = self.lib.sv_file_chunk(
-            ctypes.byref(self.args),
-            self.files[rec.path],
-            rec.offset,
-            rec.count,
-            address(self.buf),
-            room,
-            address(table),
-            rec.cls_at,
-            rec.cls_mask,
-        )
-        if failed:
+        buf, room = address(self.buf), len(self.buf) // rec.dtype.itemsize
+        table = None if rec.table is None else np.ascontiguousarray(rec.table, np.uint8)  # alive through the call
+        where = (self.files[rec.path], rec.offset, rec.count)
+        if self.lib.sv_file_chunk(ctypes.byref(self.args), *where, buf, room, address(table), rec.cls_at, rec.cls_mask):
             raise SoilVolumeError(f"{rec.path}: corrupt LAS file (its points end before the header's count)")
 
     def close(self) -> None:
@@ -154,8 +138,7 @@ def numpy_chunk(
     others: Growing,
     other_labels: Growing,
 ) -> Counted:
-    """:meth:`NativeChunks.add` in numpy (the twin the tests hold the kernel to; the streaming
-    without the library runs the same steps, split between its reading and consuming threads)."""
+    """:meth:`NativeChunks.add` in numpy: the twin the tests hold the kernel to."""
     local, lo, hi = decoded_xyz(rec, origin)
     soil = None if labels is None else labels == 0
     inside = None if polygon is None else polygon(local)
@@ -163,8 +146,7 @@ def numpy_chunk(
 
 
 def keep_chunk(local, soil, inside, labels, thinner, box, parts, others, other_labels) -> tuple[int, int]:
-    """The numpy consumer's part of a chunk of ``local`` points (``soil`` and ``inside``: masks or
-    None for all): (points cropped in, soil points)."""
+    """(points cropped in, soil points) of ``local`` points kept by numpy (masks None: all)."""
     n_soil = len(local) if soil is None else int(soil.sum())
     if soil is not None:  # the points that are not soil, within the crop and the box
         other = ~soil if inside is None else ~soil & inside
@@ -186,9 +168,8 @@ def keep_chunk(local, soil, inside, labels, thinner, box, parts, others, other_l
 
 
 def consume(chunks: Iterator[tuple], work: Callable, index: list | None, check) -> tuple:
-    """Every chunk through ``work`` (the native kernel's or numpy's: (points cropped in, soil
-    points, the x/y box of a whole chunk or None)), each chunk's box into ``index``; returns
-    (points, soil points, points cropped in, seconds spent waiting for chunks, the epoch's rule)."""
+    """Every chunk through ``work`` ((cropped, soil, x/y box of a whole chunk or None)), the boxes into
+    ``index``; returns (points, soil points, cropped, seconds waiting for chunks, the rule)."""
     points = used = cropped = start = 0
     reading, rule = 0.0, None
     while True:
@@ -213,8 +194,7 @@ def consume(chunks: Iterator[tuple], work: Callable, index: list | None, check) 
 
 
 def native_work(kernel: NativeChunks, item: tuple, out: tuple) -> tuple:
-    """One piece or chunk through the native kernel; the box of a whole chunk (bounds of the
-    pieces since the last flush) when it ends one."""
+    """One piece through the native kernel; the x/y box of the pieces since the last flush at a flush."""
     local, labels = item[:2]
     got = kernel.add(local, labels, *out)
     local.check.extend(got.lo, got.hi)

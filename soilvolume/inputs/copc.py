@@ -1,20 +1,16 @@
-"""Cloud-Optimized Point Clouds (``.copc.laz``): bounded reads through laspy's COPC reader.
-
-A COPC file is also a valid LAZ 1.4 file, so a whole-file read streams it like any LAZ; a read
-within an x/y box fetches and decompresses only the octree nodes meeting the box, and a
-``resolution`` stops at the octree level with that point spacing (a thinned read).
-"""
+"""Cloud-Optimized Point Clouds (``.copc.laz``) through laspy's COPC reader: read whole like any
+LAZ, or only the octree nodes meeting an x/y box, down to the level of a ``resolution`` (thinned)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from ..core.types import SoilVolumeError
-from .lasimport import laspy_module
-from .records import point_signals
+from .records import decoded_points
 
 
 def is_copc(path: str | Path) -> bool:
@@ -32,63 +28,45 @@ def is_copc(path: str | Path) -> bool:
     return len(head) > 377 + 20 and head[377 : 377 + 4] == b"copc"  # user id of the first VLR (LAS 1.4)
 
 
-def _levels(reader, resolution: float | None) -> range | None:
-    """The octree levels a read at ``resolution`` (point spacing, file units) needs, as laspy
-    computes them; None for all."""
-    import math
-
-    if resolution is None:
-        return None
-    return range(0, max(1, math.ceil(math.log2(reader.copc_info.spacing / resolution)) + 1))
-
-
 def read_fraction(path: str | Path, lo=None, hi=None, resolution: float | None = None) -> float:
-    """The share of the points of the nodes meeting the box that a read at ``resolution`` returns,
-    from the octree hierarchy alone (1.0 for a full-resolution read): what scales the counts of a
-    thinned read back to the survey's density."""
-    laspy = laspy_module()
+    """The share of the points of the nodes meeting the box a read at ``resolution`` returns, from the
+    octree hierarchy alone: what scales a thinned read's counts back to the survey's density."""
+    import laspy
     from laspy.copc import load_octree_for_query
 
     if resolution is None:
         return 1.0
     with laspy.CopcReader.open(str(path)) as reader:
-        bounds = None
-        if lo is not None:
-            bounds = laspy.copc.Bounds(mins=np.asarray(lo[:2], float), maxs=np.asarray(hi[:2], float))
+        bounds = _bounds(lo, hi)
+        if bounds is not None:
             bounds = bounds.ensure_3d(reader.header.mins, reader.header.maxs)
         args = (reader.source, reader.copc_info, reader.root_page, bounds)
         every = sum(n.point_count for n in load_octree_for_query(*args))
-        read = sum(n.point_count for n in load_octree_for_query(*args, _levels(reader, resolution)))
+        levels = range(0, max(1, math.ceil(math.log2(reader.copc_info.spacing / resolution)) + 1))  # as laspy's
+        read = sum(n.point_count for n in load_octree_for_query(*args, levels))
     return read / every if every else 1.0
 
 
 def copc_chunks(
-    path: str | Path,
-    lo=None,
-    hi=None,
-    resolution: float | None = None,
-    size: int = 1_000_000,
-    signals: bool = False,
+    path: str | Path, lo=None, hi=None, resolution=None, size: int = 1_000_000, signals=False, origin=None
 ) -> Iterator[tuple]:
-    """(absolute xyz float64, classification or None) of the points of a COPC file within the
-    x/y box lo..hi (inclusive), at most ``size`` at a time, read from the octree nodes meeting
-    the box (down to the level of ``resolution`` when given); with ``signals`` also their colour
-    and returns (:func:`records.point_signals`)."""
-    laspy = laspy_module()
+    """(absolute xyz float64 minus ``origin``, classification or None[, signals]) of a COPC file's
+    points within the x/y box lo..hi, at most ``size`` at a time, from the octree nodes meeting it
+    (down to the level of ``resolution``)."""
+    import laspy
 
     try:
         with laspy.CopcReader.open(str(path)) as reader:
-            bounds = None
-            if lo is not None:
-                bounds = laspy.copc.Bounds(mins=np.asarray(lo[:2], float), maxs=np.asarray(hi[:2], float))
-            pts = reader.query(bounds=bounds, resolution=resolution)
+            pts = reader.query(bounds=_bounds(lo, hi), resolution=resolution)
             dims = set(reader.header.point_format.dimension_names)
-            has_cls = "classification" in dims
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable COPC file ({exc})") from exc
     for i in range(0, len(pts), size):
-        part = pts[i : i + size]
-        xyz = np.empty((len(part), 3))
-        xyz[:, 0], xyz[:, 1], xyz[:, 2] = part.x, part.y, part.z
-        cls = np.array(part.classification) if has_cls else None
-        yield (xyz, cls, point_signals(part, dims)) if signals else (xyz, cls)
+        yield decoded_points(pts[i : i + size], dims, signals, origin)
+
+
+def _bounds(lo, hi):
+    """laspy's query box of the x/y box lo..hi (None: everything)."""
+    import laspy
+
+    return None if lo is None else laspy.copc.Bounds(mins=np.asarray(lo[:2], float), maxs=np.asarray(hi[:2], float))

@@ -1,9 +1,5 @@
-"""One working frame for both clouds: the before cloud's projected CRS, x/y/z in metres.
-
-Honours each file's horizontal and vertical units (e.g. NAD83 / Oregon LCC + NAVD88 height in US
-survey feet); a geographic before CRS is replaced by its UTM zone. ``WorkFrame.xy_unit`` is the
-number of metres per horizontal CRS unit, used when writing rasters back in the CRS's own units.
-"""
+"""One working frame for both clouds: the before cloud's projected CRS (a geographic one: its UTM
+zone), x/y/z in metres, each file's horizontal and vertical units honoured (e.g. US survey feet)."""
 
 from __future__ import annotations
 
@@ -49,8 +45,7 @@ def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
 
 
 def raster_wkt(wkt: str | None) -> str | None:
-    """WKT of the horizontal part of ``wkt`` (2D): rasters hold heights in metres, so a vertical
-    CRS in other units (e.g. NAVD88 height in US survey feet) would mislabel them."""
+    """WKT of the 2D horizontal part of ``wkt``: rasters hold metres, which a vertical CRS in feet would mislabel."""
     if not wkt:
         return None
     return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt()
@@ -69,8 +64,7 @@ def xy_unit(crs: pyproj.CRS) -> float:
 
 
 def z_unit(crs: pyproj.CRS) -> float:
-    """Metres per vertical unit: the vertical CRS's axis; without one, LAS convention: the
-    horizontal linear unit (metres for geographic CRSs)."""
+    """Metres per vertical unit: the vertical CRS's axis, else (LAS convention) the horizontal unit."""
     if crs.is_compound:
         return float(crs.sub_crs_list[1].axis_info[0].unit_conversion_factor)
     if len(crs.axis_info) == 3:
@@ -96,11 +90,8 @@ def work_frame(before: pyproj.CRS, lonlat_hint: tuple[float, float] | None = Non
 
 
 def to_frame(xyz: np.ndarray, src: pyproj.CRS, frame: WorkFrame, path: str) -> np.ndarray:
-    """Absolute coordinates in ``src`` to the frame: x/y in metres-scaled frame units, z in metres.
-
-    Uses a 3D transformation when both CRSs carry a vertical component (datum shifts and vertical
-    unit changes are then pyproj's), else converts z with the source's vertical unit.
-    """
+    """Absolute coordinates in ``src`` to the frame, in metres: a 3D transformation when both CRSs
+    have a vertical part (datum shifts are pyproj's), else z by the source's vertical unit."""
     dst = frame.crs
     out = np.empty_like(xyz, dtype=np.float64)
     if src.equals(dst):
@@ -143,17 +134,15 @@ def frame_box(lo: np.ndarray, hi: np.ndarray, crs: pyproj.CRS, frame: WorkFrame,
 
 
 def to_local(crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, path: str):
-    """File CRS -> local frame; a plain subtraction when the file is already in the frame's
-    CRS in metres (the common case)."""
+    """File CRS -> local frame; a plain :class:`Shift` when already in the frame's CRS in metres."""
     if crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0:
         return Shift(origin)
     return lambda xyz: to_frame(xyz, crs, frame, path) - origin
 
 
 class Shift:
-    """File -> local frame when the file is in the frame's CRS in metres: ``xyz - origin``;
-    :meth:`inplace` on a chunk the reader allocated (no 24 MB array per 1 M points to fault in);
-    a reader given :attr:`origin` subtracts it as it decodes (``stream.Source.chunks``)."""
+    """File -> local frame in the frame's CRS in metres: ``xyz - origin``; :meth:`inplace` on a chunk
+    the reader allocated (no 24 MB array per 1 M points to fault in), or by a reader as it decodes."""
 
     def __init__(self, origin: np.ndarray) -> None:
         self.origin = origin

@@ -1,13 +1,8 @@
-"""The Cloth Simulation Filter (Zhang et al. 2016), run by the ``CSF`` module of the
-PyPI package ``cloth-simulation-filter`` (the authors' own implementation, which PDAL's filters.csf
-also wraps).
-
-The cloud is turned upside down and a cloth of ``resolution`` cells dropped onto it; points within
-``threshold`` of where the cloth settles are ground (Classification 2), the rest 1. Tuned for
-earthworks by default: a fine cloth (0.5 m) of medium stiffness (``rigidness`` 2) with slope
-smoothing follows piles and pits, which are the signal, while it bridges vehicles, containers and
-bushes (a stiff cloth on flat ground, rigidness 3, would bridge small piles too).
-"""
+"""The Cloth Simulation Filter (Zhang et al. 2016) by the authors' ``CSF`` module (PyPI
+``cloth-simulation-filter``, which PDAL's filters.csf wraps too): a cloth of ``resolution`` cells
+dropped on the upturned cloud; points within ``threshold`` of it are ground. The earthworks
+defaults, a fine cloth (0.5 m) of medium stiffness (``rigidness`` 2) with slope smoothing, follow
+piles and pits yet bridge vehicles and bushes (rigidness 3 would bridge small piles too)."""
 
 from __future__ import annotations
 
@@ -25,19 +20,8 @@ DEFAULTS = {"resolution": 0.5, "rigidness": 2, "threshold": 0.3, "smooth": True,
 PACKAGE = "cloth-simulation-filter"
 
 
-def csf_classify(
-    x: np.ndarray,
-    y: np.ndarray,
-    z: np.ndarray,
-    *,
-    resolution: float = 0.5,
-    rigidness: int = 2,
-    threshold: float = 0.3,
-    smooth: bool = True,
-    step: float = 0.65,
-    iterations: int = 500,
-) -> np.ndarray:
-    """Ground mask of the points (metres) by the cloth simulation (see module)."""
+def csf_classify(x: np.ndarray, y: np.ndarray, z: np.ndarray, **params) -> np.ndarray:
+    """Ground mask of the points (metres) by the cloth simulation of ``params`` (:data:`DEFAULTS`)."""
     try:
         import CSF
     except ImportError as exc:
@@ -47,10 +31,10 @@ def csf_classify(
     n = len(x)
     if n == 0:
         return np.zeros(0, bool)
-    sim = CSF.CSF()
+    sim, q = CSF.CSF(), {**DEFAULTS, **params}
     p = sim.params
-    p.bSloopSmooth, p.cloth_resolution, p.rigidness = bool(smooth), float(resolution), int(rigidness)
-    p.class_threshold, p.time_step, p.interations = float(threshold), float(step), int(iterations)
+    p.bSloopSmooth, p.cloth_resolution, p.rigidness = bool(q["smooth"]), float(q["resolution"]), int(q["rigidness"])
+    p.class_threshold, p.time_step, p.interations = float(q["threshold"]), float(q["step"]), int(q["iterations"])
     origin = np.array([x.min(), y.min(), z.min()])  # small coordinates: the module works in doubles
     sim.setPointCloud(np.column_stack([x, y, z]).astype(np.float64) - origin)
     ground, other = CSF.VecInt(), CSF.VecInt()

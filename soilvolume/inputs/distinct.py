@@ -11,8 +11,7 @@ from ..core.types import SoilVolumeError
 
 
 def sameness(a: Path, b: Path) -> str | None:
-    """How ``b`` is ``a``: "is the same file as" (one file: a path, link or hard link to it), "is a
-    byte-for-byte copy of" (the sizes first, then the bytes up to the first that differs), or None."""
+    """How ``b`` is ``a``: "is the same file as" (a path or link to it), "is a byte-for-byte copy of", or None."""
     try:
         if os.path.samefile(a, b):
             return "is the same file as"

@@ -1,8 +1,5 @@
-"""Alignment initialisation: crop the before cloud to the after cloud's footprint plus a radius.
-
-The footprint is the convex hull of the after cloud's x/y (its GPS position), buffered by the
-radius; the same polygon is what a PDAL ``filters.crop`` receives, so both paths agree.
-"""
+"""Alignment initialisation: the before cloud cropped to the after cloud's footprint, its x/y convex
+hull buffered by the radius: the polygon a PDAL ``filters.crop`` receives too."""
 
 from __future__ import annotations
 
@@ -16,8 +13,7 @@ MIN_COLUMNS = 30  # fewest thinned columns a cloud needs to be registered, gridd
 
 
 def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
-    """Refuse a cloud whose (thinned) x/y are too few or all on a line: nothing can be registered
-    or gridded on it."""
+    """Refuse a cloud whose (thinned) x/y are too few or on a line: nothing to register or grid."""
     if len(xy) < MIN_COLUMNS:
         raise SoilVolumeError(
             f"{path}: too few points to work with ({len(xy)} distinct positions {what}, at least {MIN_COLUMNS} needed)"
@@ -32,8 +28,8 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
 
 
 def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.ndarray:
-    """Convex hull of ``xy`` buffered by ``radius`` (exact Minkowski sum with a 'segments'-gon
-    circumscribing the circle), as a closed-free (K, 2) vertex array, counter-clockwise."""
+    """Convex hull of ``xy`` buffered by ``radius`` (a Minkowski sum with a circumscribed
+    ``segments``-gon), (K, 2) vertices counter-clockwise, not closed."""
     return _buffered(_hull(xy), radius, segments)
 
 
@@ -51,10 +47,8 @@ def _hull(xy: np.ndarray) -> np.ndarray:
 
 
 def _not_inside_extremes(xy: np.ndarray) -> np.ndarray:
-    """Indices of the points that are not well inside the octagon of the extreme points in x, y,
-    x + y and x - y (Akl-Toussaint): no hull vertex is among the others, and Qhull gives the same
-    hull, vertex for vertex, on a fraction of the points. Points within 1e-9 of the extent from an
-    edge stay (rounding)."""
+    """Indices of the points not well inside the octagon of the extremes in x, y, x + y and x - y
+    (Akl-Toussaint): Qhull gives the same hull on them, a fraction (1e-9 of the extent kept)."""
     if len(xy) < 64:
         return np.arange(len(xy))
     x, y = np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1])  # strided: 2x slower
@@ -87,14 +81,13 @@ def _buffered(verts: np.ndarray, radius: float, segments: int) -> np.ndarray:
 
 
 def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Boolean mask of points inside a polygon (vertices (K, 2)), boundary included: the same
-    test the embedded filters.crop applies to this polygon."""
+    """Mask of points inside a polygon (K, 2), boundary included, as the embedded filters.crop tests."""
     return covers([polygon], xy[:, 0], xy[:, 1])
 
 
 class PolygonMask:
-    """Fast point-in-polygon for streaming: the polygon rasterized on a lattice of at most about
-    ``max_cells`` cells of at least ``resolution`` m (a cell is in when its centre is)."""
+    """Point-in-polygon for streaming: the polygon rasterized on about ``max_cells`` cells at most, of
+    ``resolution`` m at least (a cell is in when its centre is)."""
 
     def __init__(self, polygon: np.ndarray, resolution: float = 0.5, max_cells: int = 4_000_000) -> None:
         self.lo = polygon.min(axis=0)
@@ -108,8 +101,7 @@ class PolygonMask:
         self.framed = np.pad(self.mask, 1)  # a border of False: indices clipped onto it are out
 
     def __call__(self, xyz: np.ndarray) -> np.ndarray:
-        """Whether each point's x/y falls in a cell of the mask, block by block (the temporaries
-        of a block stay in the cache)."""
+        """Whether each point falls in a cell of the mask, block by block (temporaries in the cache)."""
         n = len(xyz)
         out = np.empty(n, bool)
         flat = self.framed.ravel()
@@ -134,8 +126,7 @@ class PolygonMask:
         return hashlib.sha1(head + np.packbits(self.mask).tobytes(), usedforsecurity=False).hexdigest()
 
     def _cell(self, v: np.ndarray, axis: int, t: np.ndarray, out: np.ndarray) -> None:
-        """The lattice index along ``axis`` of coordinates ``v`` into ``out``: ``int((v - lo) / res)``
-        clipped to -1..n (the frame), through the float scratch ``t``."""
+        """``int((v - lo) / res)`` along ``axis`` clipped to -1..n (the frame) into ``out``, via ``t``."""
         np.subtract(v, self.lo[axis], out=t)
         t /= self.res
         np.copyto(out, t, casting="unsafe")  # as astype(np.int64)

@@ -1,4 +1,4 @@
-"""The ground points of a whole cloud: class 2, or the SMRF or cloth simulation filter."""
+"""The ground points of a whole cloud by the SMRF or cloth simulation filter (class 2 is streamed)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,10 @@ import numpy as np
 import pyproj
 
 from ..core.types import SoilVolumeError
-from ..core.wording import opt
 from ..options import Options
 from .crs import xy_unit, z_unit
 from .csf import DEFAULTS, csf_classify
-from .io import GROUND, RawPoints
+from .io import RawPoints
 from .smrf import smrf_classify
 from .stream import Source, from_raw
 
@@ -18,25 +17,10 @@ SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
 CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
 
 
-def select_ground(
-    raw: RawPoints, mode: str, crs: pyproj.CRS | None = None, window: float = 6.0, slope: float = 0.6
-) -> tuple[np.ndarray, str]:
-    """Mask of the points to use, and a note: class 2 when asked for or (auto) present, or the
-    SMRF ground filter (run in metres: ``crs`` gives the file's units) with an earthworks
-    ``window`` and ``slope`` (PDAL's 18 m / 0.15 take the piles themselves for objects)."""
-    n = len(raw.xyz)
-    has_class = raw.classification is not None and bool((raw.classification == GROUND).any())
-    if mode == "none" or (mode == "auto" and not has_class):
-        return np.ones(n, bool), "all points"
-    if mode in ("auto", "class"):
-        if not has_class:
-            raise SoilVolumeError(
-                f"{raw.path}: {opt('ground', 'class')} needs ground-classified (class 2) points; the file has none"
-            )
-        return raw.classification == GROUND, "class 2 (ground)"
-    if mode not in ("filter", "csf"):
-        raise SoilVolumeError(f"unknown ground mode '{mode}'")
-    h, v = (xy_unit(crs), z_unit(crs)) if crs is not None else (1.0, 1.0)
+def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS, window: float, slope: float) -> tuple[np.ndarray, str]:
+    """Mask of the ground points and a note: SMRF (``filter``) with an earthworks ``window`` and
+    ``slope`` (PDAL's 18 m / 0.15 take the piles for objects) or CSF, run in metres."""
+    h, v = xy_unit(crs), z_unit(crs)
     x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
     if mode == "filter":
         return smrf_classify(x, y, z, window=window, slope=slope), SMRF_NOTE.format(window=window, slope=slope)

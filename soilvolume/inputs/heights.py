@@ -1,17 +1,12 @@
-"""A height raster (a design surface, a DEM) read as heights in metres, the one way every command
-reads one: its band's declared scale and offset applied (an int16 raster of centimetres with
-scale 0.01 holds metres / 100), its declared nodata and GDAL mask masked exactly, its unit
-honoured (a vertical CRS's axis, else the band's declared unit; a contradiction between the two
-is refused), and read over a window only, so a raster far larger than the site is never loaded
-whole: more cells at once than :func:`max_cells` is refused in one line naming the raster and
-the remedy.
+"""A height raster (a design surface, a DEM) read in metres, the one way every command reads one: the
+band's scale and offset applied, its nodata and GDAL mask masked, its unit honoured (a vertical CRS's
+axis, else the band's unit; contradicting: refused), over a window only (more cells than
+:func:`max_cells` refused in one line naming the remedy).
 
-A value no height on Earth can take is never a height: beyond :data:`NOT_A_HEIGHT_M` from the
-datum (the 1e30, 3.4e38 or -3.4e38 a program leaves in cells it has no height for without
-declaring it nodata), and an undeclared conventional fill (:data:`FILLS`, e.g. -9999) more than
-:data:`FAR_BELOW_M` below the raster's median height. Such cells are masked as nodata and said
-(:attr:`Heights.masked`, in report.json and on the log): refusing the raster would stop a survey
-over a common export quirk, taking them as heights would turn them into millions of m³."""
+Values no height can take, beyond :data:`NOT_A_HEIGHT_M` (an undeclared 1e30 or -3.4e38 fill) or an
+undeclared :data:`FILLS` value :data:`FAR_BELOW_M` below the median, are masked and said
+(:attr:`Heights.masked`): refusing would stop a survey over a common export quirk, taking them as
+heights would give millions of m³."""
 
 from __future__ import annotations
 
@@ -108,9 +103,8 @@ def open_heights(path: Path) -> HeightRaster:
 
 
 def metres_per_unit(crs: pyproj.CRS, unit: str, path: str) -> tuple[float, str]:
-    """(metres per stored height unit, where that came from in words): a vertical CRS's axis,
-    else the band's declared unit (none: metres). A band unit contradicting the vertical CRS is
-    refused rather than one of them silently ignored."""
+    """(metres per stored height unit, its source in words): a vertical CRS's axis, else the band's
+    unit (none: metres); a band unit contradicting the vertical CRS is refused."""
     band = FEET.get(unit, SMALLER.get(unit, 1.0 if unit in METRES else None))
     if crs.is_compound or len(crs.axis_info) == 3:
         factor = z_unit(crs)
@@ -128,9 +122,8 @@ def metres_per_unit(crs: pyproj.CRS, unit: str, path: str) -> tuple[float, str]:
 def window_over(
     raster: HeightRaster, crs: pyproj.CRS, lo: np.ndarray, hi: np.ndarray, box_crs: pyproj.CRS, pad: int = 2
 ) -> tuple[int, int, int, int] | None:
-    """The window (col_off, row_off, cols, rows) of ``raster`` (in ``crs``: its own, or the one
-    given for it) covering the box ``lo``..``hi`` (x/y in ``box_crs``'s units), ``pad`` pixels
-    more on each side; None when the box misses the raster."""
+    """The window (col_off, row_off, cols, rows) of ``raster`` (in ``crs``) covering the box lo..hi (in
+    ``box_crs``) and ``pad`` pixels more; None when the box misses the raster."""
     src, dst = horizontal(box_crs), horizontal(crs)
     x0, y0, x1, y1 = float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
     if not src.equals(dst):
@@ -162,8 +155,7 @@ def read_heights(raster: HeightRaster, factor: float, window: tuple[int, int, in
 
 
 def _read(raster: HeightRaster, factor: float, window: tuple[int, int, int, int]) -> np.ndarray:
-    """The window's heights, converted a block of rows at a time (the stored values' copy stays
-    :data:`BLOCK_CELLS` small)."""
+    """The window's heights, converted :data:`BLOCK_CELLS` at a time."""
     import rasterio
     from rasterio.windows import Window
 
@@ -208,8 +200,7 @@ def _mask_absurd(z: np.ndarray, raster: HeightRaster, factor: float) -> list[dic
 
 
 def max_cells() -> int:
-    """Cells read at once at most: their float64 heights within a quarter of this machine's
-    memory, at least 2^26 (0.5 GB), at most :data:`MAX_CELLS`."""
+    """Cells read at once at most: a quarter of the memory in float64, within 2^26..:data:`MAX_CELLS`."""
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (AttributeError, ValueError, OSError):  # not POSIX
@@ -228,8 +219,7 @@ def _check_size(raster: HeightRaster, cols: int, rows: int, whole: bool) -> None
 
 
 def _remedy(raster: HeightRaster, cells: int, whole: bool) -> str:
-    """How to make the raster small enough: coarser cells (gdalwarp -tr), or cropped to the site
-    (gdalwarp -te) when it is read whole."""
+    """How to make the raster small enough: coarser cells (gdalwarp -tr), or cropped if read whole."""
     pixel = math.hypot(raster.transform.a, raster.transform.d)
     coarser = pixel * math.sqrt(cells / max_cells()) * 1.05
     shown = f"{coarser:.2g}" if coarser < 1 else f"{math.ceil(coarser):d}"

@@ -1,8 +1,5 @@
 """Read and write point clouds: LAS/LAZ (laspy + lazrs), PLY/PCD (Open3D), XYZ/TXT/CSV (numpy).
-
-Readers return absolute float64 coordinates in the file's own CRS and units; CRS handling lives in
-:mod:`soilvolume.inputs.crs`. Writers go through a temporary name and rename when complete.
-"""
+Readers return absolute float64 coordinates in the file's CRS and units; writers rename when done."""
 
 from __future__ import annotations
 
@@ -15,10 +12,10 @@ from pathlib import Path
 import numpy as np
 
 from ..core.outputs import STAGING, sibling
-from ..core.types import SoilVolumeError, short_error
+from ..core.types import SoilVolumeError
 from ..soil.points import Signals
 from .lasheader import check_las_header
-from .lasimport import laspy_module
+from .lasread import las_header
 from .records import las_chunks
 
 LAS_SUFFIXES = {".las", ".laz"}
@@ -59,12 +56,7 @@ def read_points(path: str | os.PathLike) -> RawPoints:
     p = Path(path)
     _check_readable(p)
     suffix = p.suffix.lower()
-    if suffix in LAS_SUFFIXES:
-        raw = _read_las(p)
-    elif suffix in O3D_SUFFIXES:
-        raw = _read_o3d(p)
-    else:
-        raw = _read_text(p)
+    raw = (_read_las if suffix in LAS_SUFFIXES else _read_o3d if suffix in O3D_SUFFIXES else _read_text)(p)
     validate(raw)
     return raw
 
@@ -78,58 +70,12 @@ def validate(raw: RawPoints) -> None:
         raise SoilVolumeError(f"{raw.path}: {int(bad.sum())} point(s) have NaN or infinite coordinates")
 
 
-CRS_RECORDS = {2111, 2112, 34735, 34736, 34737}  # WKT (math transform, CRS) and GeoTIFF keys
-WKT_STARTS = (b"PROJCS", b"PROJCRS", b"GEOGCS", b"GEOGCRS", b"COMPD_CS", b"COMPOUNDCRS", b"GEODCRS")
-
-
-def las_crs_wkt(header, path: Path) -> str | None:
-    """The CRS of a LAS header (WKT VLR or GeoTIFF keys) as WKT, or None when it has no CRS
-    record; a CRS record that cannot be read is an error, not 'no CRS'."""
-    try:
-        crs = header.parse_crs()
-    except Exception as exc:  # laspy raises several types on broken VLRs
-        raise SoilVolumeError(f"{path}: the CRS stored in the header cannot be read ({short_error(exc)})") from exc
-    if crs is None:
-        broken = next((v for v in header.vlrs if _looks_like_crs(v)), None)
-        if broken is not None:
-            user = "".join(c if c.isprintable() else "?" for c in str(broken.user_id))
-            raise SoilVolumeError(
-                f"{path}: the header's CRS record (VLR '{user}' {broken.record_id}) cannot be read (corrupt header?)"
-            )
-        return None
-    return crs.to_wkt()
-
-
-def _looks_like_crs(vlr) -> bool:
-    """A VLR that was meant to hold the CRS: its ids, or WKT-looking content."""
-    from difflib import SequenceMatcher
-
-    user = str(getattr(vlr, "user_id", "")).strip("\x00 ")
-    if SequenceMatcher(None, user.lower(), "lasf_projection").ratio() > 0.8 or vlr.record_id in CRS_RECORDS:
-        return True
-    data = getattr(vlr, "record_data", b"") or b""
-    return bytes(data[:16]).lstrip().upper().startswith(WKT_STARTS)
-
-
 def _read_las(path: Path) -> RawPoints:
-    laspy = laspy_module()
-
-    try:
-        with laspy.open(path) as reader:
-            header = reader.header
-            wkt = las_crs_wkt(header, path)
-            n = header.point_count
-            has_cls = "classification" in set(header.point_format.dimension_names)
-    except SoilVolumeError:
-        raise
-    except Exception as exc:
-        raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
+    wkt, n, _, _, has_cls, _ = las_header(path)
     xyz = np.empty((n, 3))
     cls = np.empty(n, dtype=np.uint8) if has_cls else None
     start = 0
     for part, part_cls in las_chunks(path, n, 2_000_000):  # raises unless exactly n points come
-        if start + len(part) > n:
-            raise SoilVolumeError(f"{path}: corrupt LAS file (more points than the header's {n})")
         xyz[start : start + len(part)] = part
         if cls is not None:
             cls[start : start + len(part)] = part_cls
@@ -164,9 +110,8 @@ def _read_text(path: Path) -> RawPoints:
 
 @contextmanager
 def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
-    """Yield a hidden temporary sibling path (named for this process, so a killed run's is
-    recognised by :func:`soilvolume.core.outputs.sweep`); rename it onto ``final`` only if the block
-    succeeds."""
+    """A hidden sibling path (named for this process: ``core.outputs.sweep`` knows a killed run's),
+    renamed onto ``final`` only if the block succeeds."""
     final = Path(final)
     tmp = sibling(final, STAGING, suffix=final.suffix)
     try:
@@ -179,9 +124,10 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
 
 def _las_header(offsets: np.ndarray, scale: float, crs_wkt: str | None):
     """A LAS 1.4 header (point format 6) with these offsets, one scale for x/y/z and the CRS."""
+    import laspy
     import pyproj  # here: the command line's start-up imports this module, not pyproj
 
-    header = laspy_module().LasHeader(point_format=6, version="1.4")
+    header = laspy.LasHeader(point_format=6, version="1.4")
     header.offsets = offsets
     header.scales = np.array([scale, scale, scale])
     if crs_wkt:
@@ -197,9 +143,9 @@ def write_las_chunked(
     transform: np.ndarray | None = None,
     scale: float = 0.001,
 ) -> None:
-    """Write (local xyz, classification or None) chunks, optionally through a 4x4 rigid
-    ``transform``, as absolute LAS 1.4/LAZ (memory bounded by a chunk), atomically."""
-    laspy = laspy_module()
+    """Write (local xyz, classification) chunks, through a rigid ``transform``, as LAS 1.4/LAZ atomically."""
+    import laspy
+
     origin = np.asarray(origin, float)
     header = _las_header(np.floor(origin), scale, crs_wkt)
     with atomic_path(path) as tmp:
@@ -223,8 +169,10 @@ def write_las(
     scale: float = 0.001,
 ) -> None:
     """Write absolute coordinates as LAS 1.4 (LAZ when the suffix is .laz), atomically."""
+    import laspy
+
     lo = np.floor(xyz_abs.min(axis=0)) if len(xyz_abs) else np.zeros(3)
-    las = laspy_module().LasData(_las_header(lo, scale, crs_wkt))
+    las = laspy.LasData(_las_header(lo, scale, crs_wkt))
     las.x, las.y, las.z = xyz_abs[:, 0], xyz_abs[:, 1], xyz_abs[:, 2]
     if classification is not None:
         las.classification = classification

@@ -1,10 +1,7 @@
-"""A LandXML TIN design surface as the reference (what Civil 3D, Trimble Business Center, Carlson
-and Pix4Dmatic exchange): read with the standard library's XML parser (namespace-agnostic), its
-``<Units>`` and ``<CoordinateSystem>`` honoured, and its triangles (the file's ``<Faces>``, never
-a re-triangulation) rasterised onto a run's grid by linear interpolation inside each triangle
-(:mod:`soilvolume.inputs.tinraster`); cells outside every triangle are nodata.
-
-LandXML points are ``northing easting elevation`` (y x z)."""
+"""A LandXML TIN design surface as the reference (Civil 3D, Trimble Business Center, Carlson,
+Pix4Dmatic), read with the standard library's XML parser (namespace-agnostic), ``<Units>`` and
+``<CoordinateSystem>`` honoured; its own ``<Faces>`` rasterised on a run's grid, linear inside each
+triangle, nodata outside. LandXML points are ``northing easting elevation`` (y x z)."""
 
 from __future__ import annotations
 
@@ -16,7 +13,7 @@ import numpy as np
 import pyproj
 
 from ..core.types import GridSpec, SoilVolumeError, short_error
-from .crs import WorkFrame, horizontal, parse_crs, raster_wkt, xy_unit
+from .crs import WorkFrame, has_vertical, horizontal, parse_crs, raster_wkt, xy_unit
 from .tinraster import rasterise
 
 SUFFIXES = (".xml", ".landxml")
@@ -136,18 +133,22 @@ def _crs(root: ET.Element, path: Path, override: str | None) -> pyproj.CRS:
     if text is not None and text.strip().isdigit():
         text = f"EPSG:{text.strip()}"
     own = parse_crs(text, f"{path}: its CoordinateSystem")
+    missing = "the LandXML file declares no CRS (CoordinateSystem epsgCode or ogcWktCode)"
+    return surface_crs(path, own, override, missing, ("the LandXML file's", "a file"))
+
+
+def surface_crs(path, own: pyproj.CRS | None, override: str | None, missing: str, words: tuple, vertical=False):
+    """A surface's ``own`` CRS, else ``--before-crs`` (also with ``vertical``, when that one has a
+    vertical part); both and horizontally differing: refused. ``missing``, ``words``: the wording."""
     given = parse_crs(override, "{opt:before_crs}")
     if own is None and given is None:
-        raise SoilVolumeError(
-            f"{path}: the LandXML file declares no CRS (CoordinateSystem epsgCode or ogcWktCode); "
-            "give {opt:before_crs} (e.g. EPSG:32654)"
-        )
+        raise SoilVolumeError(f"{path}: {missing}; give {{opt:before_crs}} (e.g. EPSG:32654)")
     if own is not None and given is not None and not horizontal(own).equals(horizontal(given), ignore_axis_order=True):
         raise SoilVolumeError(
-            f"{path}: {{opt:before_crs={override}}} differs from the LandXML file's CRS ({own.name}); "
-            "{opt:before_crs} applies only to a file without one"
+            f"{path}: {{opt:before_crs={override}}} differs from {words[0]} CRS ({own.name}); "
+            f"{{opt:before_crs}} applies only to {words[1]} without one"
         )
-    return given if own is None else own
+    return given if own is None or (vertical and given is not None and has_vertical(given)) else own
 
 
 def _points(surface: ET.Element, path: Path) -> tuple[list[str], np.ndarray]:
@@ -208,8 +209,7 @@ def check_over(tin: Tin, lo: np.ndarray, hi: np.ndarray, frame: WorkFrame, margi
 
 
 def on_grid(tin: Tin, grid: GridSpec) -> np.ndarray:
-    """The TIN's heights (m) at the cell centres of ``grid`` (NaN outside every triangle): its
-    points taken into the grid's CRS, then linear inside each of its own triangles."""
+    """The TIN's heights (m) at ``grid``'s cell centres in its CRS, linear in each triangle, else NaN."""
     xy = _in(tin, pyproj.CRS.from_wkt(raster_wkt(grid.crs_wkt)))
     t = grid.transform  # north-up
     uv = np.c_[(xy[:, 0] - t.c) / t.a - 0.5, (xy[:, 1] - t.f) / t.e - 0.5]

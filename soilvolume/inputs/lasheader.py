@@ -1,11 +1,7 @@
-"""Sanity of a LAS/LAZ header before any reader trusts it.
-
-Checked against the file size with plain ``struct`` reads, in a bounded number of steps: the
-signature and version, header size and point data offset, each VLR lying between the header and
-the points, the point format and record length, the point count (exactly, for uncompressed LAS),
-and finite, non-zero scales, finite offsets and bounds. Readers then also compare the points
-they decode with the header's bounds (:class:`BoundsCheck`).
-"""
+"""Sanity of a LAS/LAZ header before any reader trusts it, checked against the file size with plain
+``struct`` reads in a bounded number of steps (signature, version, header size, point data offset,
+each (E)VLR within bounds, point format and record length, point count, finite non-zero scales,
+finite offsets and bounds); readers also check the points they decode (:class:`BoundsCheck`)."""
 
 from __future__ import annotations
 
@@ -15,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.cells import bounds
 from ..core.types import SoilVolumeError
 
 VLR_HEADER, EVLR_HEADER = 54, 60
@@ -45,43 +40,32 @@ def check_las_header(path: Path) -> int:
         header_size, offset, n_vlrs = struct.unpack_from("<HII", head, 94)
         if not MIN_HEADER[minor] <= header_size <= offset <= size:
             raise _fail(path, f"header size {header_size} / point data offset {offset} for a {size}-byte file")
-        _check_vlrs(fh, path, header_size, offset, n_vlrs)
-        if minor >= 4:
-            _check_evlrs(fh, path, *struct.unpack_from("<QI", head, 235), offset, size)
+        _walk_records(fh, path, header_size, n_vlrs, offset, "VLR", ("in", "into"), "the point data")
+        evlr_start, n_evlrs = struct.unpack_from("<QI", head, 235) if minor >= 4 else (0, 0)
+        if n_evlrs and not offset <= evlr_start <= size:
+            raise _fail(path, f"{n_evlrs} EVLRs declared at byte {evlr_start} of a {size}-byte file")
+        _walk_records(fh, path, evlr_start, n_evlrs, size, "EVLR", ("past", "past"), "the end of the file")
     fmt_byte, rec_len = struct.unpack_from("<BH", head, 104)
     fmt, compressed = fmt_byte & 0x3F, bool(fmt_byte & 0xC0)
     if fmt not in MIN_RECORD or rec_len < MIN_RECORD[fmt]:
         raise _fail(path, f"point format {fmt} with {rec_len}-byte records")
-    count = _point_count(head, minor)
+    count = struct.unpack_from("<I", head, 107)[0]
+    if minor >= 4:
+        count = struct.unpack_from("<Q", head, 247)[0] or count
     by_return = sum(struct.unpack_from("<15Q", head, 255)) if minor >= 4 else 0
     by_return = by_return or sum(struct.unpack_from("<5I", head, 111))
     if by_return > count:
         raise _fail(path, f"{by_return} points counted by return, the header says {count}")
     _check_numbers(path, struct.unpack_from("<12d", head, 131), count)
     compressed = compressed or path.suffix.lower() == ".laz"
-    _check_count(path, head, minor, count, rec_len, offset, size, compressed)
+    _check_count(path, count, rec_len, evlr_start if n_evlrs else size, offset, compressed)
     return count
 
 
-def _check_vlrs(fh, path: Path, header_size: int, offset: int, n_vlrs: int) -> None:
-    """Walk the VLRs: each must end at or before the point data."""
-    _walk_records(fh, path, header_size, n_vlrs, offset, ("VLR", VLR_HEADER, "<H"), ("in", "into"), "the point data")
-
-
-def _check_evlrs(fh, path: Path, start: int, n_evlrs: int, offset: int, size: int) -> None:
-    """Walk the extended VLRs after the point data: each must end within the file."""
-    if not n_evlrs:
-        return
-    if not offset <= start <= size:
-        raise _fail(path, f"{n_evlrs} EVLRs declared at byte {start} of a {size}-byte file")
-    _walk_records(fh, path, start, n_evlrs, size, ("EVLR", EVLR_HEADER, "<Q"), ("past", "past"), "the end of the file")
-
-
-def _walk_records(fh, path: Path, pos: int, count: int, end: int, record: tuple, words: tuple, limit: str) -> None:
-    """Step over ``count`` records from byte ``pos``; ``record`` = (kind, header size, struct
-    format of its length at byte 20). Each must end by byte ``end`` (at most one step per record
+def _walk_records(fh, path: Path, pos: int, count: int, end: int, kind: str, words: tuple, limit: str) -> None:
+    """Step over ``count`` (E)VLRs from byte ``pos``, each to end by byte ``end`` (one step per record
     that fits, so an absurd count stops at the first that does not)."""
-    kind, header, length_format = record
+    header, length_format = (VLR_HEADER, "<H") if kind == "VLR" else (EVLR_HEADER, "<Q")
     for i in range(count):
         if pos + header > end:
             raise _fail(path, f"{count} {kind}s declared, {kind} {i + 1} would start {words[0]} {limit}")
@@ -92,16 +76,9 @@ def _walk_records(fh, path: Path, pos: int, count: int, end: int, record: tuple,
             raise _fail(path, f"{kind} {i + 1} runs {words[1]} {limit}")
 
 
-def _point_count(head: bytes, minor: int) -> int:
-    legacy = struct.unpack_from("<I", head, 107)[0]
-    if minor >= 4:
-        return struct.unpack_from("<Q", head, 247)[0] or legacy
-    return legacy
-
-
 def _check_numbers(path: Path, values: tuple[float, ...], count: int) -> None:
-    """Finite non-zero scales, finite offsets and bounds; with points, each axis's bounds in
-    order and within what its 32-bit integers can store (offset +- scale * 2^31)."""
+    """Finite non-zero scales, finite offsets and bounds; with points, bounds in order and within
+    what 32-bit integers store (offset +- scale * 2^31)."""
     scales, offsets, bounds = values[:3], values[3:6], values[6:]
     if not all(math.isfinite(s) and s != 0 for s in scales):
         raise _fail(path, f"scale factors {scales} must be finite and non-zero")
@@ -115,14 +92,8 @@ def _check_numbers(path: Path, values: tuple[float, ...], count: int) -> None:
             raise _fail(path, f"{axis} bounds {lo:g}..{hi:g} impossible with offset {offset:g} and scale {scale:g}")
 
 
-def _check_count(
-    path: Path, head: bytes, minor: int, count: int, rec_len: int, offset: int, size: int, compressed: bool
-) -> None:
-    end = size
-    if minor >= 4:
-        evlr_start, n_evlr = struct.unpack_from("<QI", head, 235)
-        if n_evlr and offset <= evlr_start <= size:
-            end = evlr_start
+def _check_count(path: Path, count: int, rec_len: int, end: int, offset: int, compressed: bool) -> None:
+    """The point data, from ``offset`` to ``end``, holds ``count`` points (at least, compressed)."""
     data = end - offset
     if compressed:
         if count * MIN_LAZ_BYTES_PER_POINT > data + 1:
@@ -139,19 +110,15 @@ def _check_count(
 
 
 class BoundsCheck:
-    """Decoded points against the header's bounds, chunk by chunk: none may lie outside by more
-    than a scale step, and together they must reach each bound within :data:`LOOSE` of the extent
-    (a corrupt scale or offset otherwise gives plausible-looking, wrongly scaled coordinates)."""
+    """Decoded points against the header's bounds, chunk by chunk: none outside by more than a scale
+    step, and together reaching each bound within :data:`LOOSE` of the extent (a corrupt scale or
+    offset otherwise gives plausible-looking, wrongly scaled coordinates)."""
 
     def __init__(self, path: Path | str, header) -> None:
         self.path = path
         self.lo, self.hi = np.asarray(header.mins, float), np.asarray(header.maxs, float)
         self.tol = np.abs(np.asarray(header.scales, float)) + 1e-12 * np.maximum(abs(self.lo), abs(self.hi))
         self.seen_lo, self.seen_hi = np.full(3, np.inf), np.full(3, -np.inf)
-
-    def update(self, xyz: np.ndarray) -> None:
-        if len(xyz):
-            self.extend(*bounds(xyz))
 
     def extend(self, lo: np.ndarray, hi: np.ndarray) -> None:
         """Take in a (non-empty) chunk's per-axis min ``lo`` and max ``hi``."""
@@ -172,9 +139,8 @@ class BoundsCheck:
 
 
 def creation_date(path: Path) -> str | None:
-    """The survey date of a LAS/LAZ/COPC file as ``YYYY-MM-DD``: its header's file creation day
-    of year (1 = 1 January) and year (bytes 90-93); None for other formats, when the header leaves
-    them 0, or for a day the year does not have (day 366 of 2023 is no date, not 1 January 2024)."""
+    """The survey date of a LAS/LAZ/COPC file, ``YYYY-MM-DD``, from its header's creation day of year
+    and year (bytes 90-93); None for other formats, zeros, or a day the year lacks (366 of 2023)."""
     import calendar
     import datetime as dt
 

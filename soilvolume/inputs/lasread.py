@@ -10,15 +10,43 @@ import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
 from .copc import copc_chunks, is_copc
-from .io import las_crs_wkt
-from .lasimport import laspy_module
-from .records import las_chunks, point_signals, signal_dims
+from .records import decoded_points, las_chunks
+
+CRS_RECORDS = {2111, 2112, 34735, 34736, 34737}  # WKT (math transform, CRS) and GeoTIFF keys
+WKT_STARTS = (b"PROJCS", b"PROJCRS", b"GEOGCS", b"GEOGCRS", b"COMPD_CS", b"COMPOUNDCRS", b"GEODCRS")
+
+
+def las_crs_wkt(header, path: Path) -> str | None:
+    """A LAS header's CRS (WKT VLR or GeoTIFF keys) as WKT, None without any; an unreadable one: an error."""
+    try:
+        crs = header.parse_crs()
+    except Exception as exc:  # laspy raises several types on broken VLRs
+        raise SoilVolumeError(f"{path}: the CRS stored in the header cannot be read ({short_error(exc)})") from exc
+    if crs is None:
+        broken = next((v for v in header.vlrs if _looks_like_crs(v)), None)
+        if broken is not None:
+            user = "".join(c if c.isprintable() else "?" for c in str(broken.user_id))
+            raise SoilVolumeError(
+                f"{path}: the header's CRS record (VLR '{user}' {broken.record_id}) cannot be read (corrupt header?)"
+            )
+        return None
+    return crs.to_wkt()
+
+
+def _looks_like_crs(vlr) -> bool:
+    """A VLR that was meant to hold the CRS: its ids, or WKT-looking content."""
+    from difflib import SequenceMatcher
+
+    user = str(getattr(vlr, "user_id", "")).strip("\x00 ")
+    if SequenceMatcher(None, user.lower(), "lasf_projection").ratio() > 0.8 or vlr.record_id in CRS_RECORDS:
+        return True
+    data = getattr(vlr, "record_data", b"") or b""
+    return bytes(data[:16]).lstrip().upper().startswith(WKT_STARTS)
 
 
 def las_header(p: Path) -> tuple:
-    """(CRS WKT or None, point count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC
-    file's header."""
-    laspy = laspy_module()
+    """(CRS WKT or None, count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC header."""
+    import laspy
 
     try:
         with laspy.open(p) as reader:
@@ -37,40 +65,26 @@ def las_ranges(
     path: str, ranges: list[tuple[int, int]], size: int, signals: bool | Callable = False, origin=None
 ) -> Iterator[tuple]:
     """Chunks of the (start, count) point ranges of a LAS/LAZ file (LAZ seeks by its chunk table)."""
-    laspy = laspy_module()
+    import laspy
 
     try:
         with laspy.open(path) as reader:
             dims = set(reader.header.point_format.dimension_names)
-            has_cls = "classification" in dims
             for start, count in ranges:
                 reader.seek(start)
                 for i in range(0, count, size):
-                    pts = reader.read_points(min(size, count - i))
-                    xyz = np.empty((len(pts), 3))
-                    xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
-                    xyz = _shifted(xyz, origin)
-                    cls = np.array(pts.classification) if has_cls else None
-                    sig = point_signals(pts, signal_dims(dims, signals, cls)) if signals else None
-                    yield (xyz, cls, sig) if signals else (xyz, cls)
+                    yield decoded_points(reader.read_points(min(size, count - i)), dims, signals, origin)
     except Exception as exc:
         raise SoilVolumeError(f"{path}: not a readable LAS/LAZ file ({short_error(exc)})") from exc
-
-
-def _shifted(xyz: np.ndarray, origin) -> np.ndarray:
-    """``xyz - origin`` in place (``xyz`` as it is without an origin)."""
-    return xyz if origin is None else np.subtract(xyz, origin, out=xyz)
 
 
 def file_chunks(
     path: str, region, size: int, resolution: float | None = None, signals: bool | Callable = False, origin=None
 ) -> Iterator[tuple]:
-    """Chunks of one LAS/LAZ/COPC file: a COPC file with a ``region`` reads only its octree nodes
-    meeting it, with a ``resolution`` only its levels down to that spacing; else the whole file.
-    ``origin``: see :meth:`Source.chunks`."""
+    """Chunks of one LAS/LAZ/COPC file (:meth:`Source.chunks`): of a COPC file with a ``region`` or a
+    ``resolution``, only the octree nodes meeting it, down to that spacing; else the whole file."""
     if (region is not None or resolution is not None) and is_copc(path):
         lo, hi = region if region is not None else (None, None)
-        for part in copc_chunks(path, lo, hi, resolution=resolution, size=size, signals=bool(signals)):
-            yield (_shifted(part[0], origin), *part[1:])
+        yield from copc_chunks(path, lo, hi, resolution, size, bool(signals), origin)
         return
     yield from las_chunks(Path(path), las_header(Path(path))[1], size, signals, origin)

@@ -1,6 +1,5 @@
-"""Step 1: stream both clouds into one working frame (before CRS, metres, local origin), select
-ground points, crop the before cloud to the after footprint plus the radius, and thin both for
-registration on the way."""
+"""Step 1: both clouds streamed into one working frame (before CRS, metres, local origin), ground
+selected, the before cropped to the after footprint plus the radius, both thinned on the way."""
 
 from __future__ import annotations
 
@@ -15,15 +14,7 @@ from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
 from ..soil.points import PointRule
-from .crs import (
-    Shift,  # noqa: F401  (its home was this module)
-    WorkFrame,
-    frame_box,
-    lonlat_of,
-    parse_crs,
-    work_frame,
-    z_unit,
-)
+from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, z_unit
 from .crs import to_local as _local
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
 from .ground import filtered
@@ -35,8 +26,8 @@ CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as cla
 
 @dataclass(frozen=True)
 class Prepared:
-    """Both clouds in the local working frame (absolute = xyz + origin, in ``frame.crs``):
-    full-resolution float32 points and float64 column-thinned subsets for registration."""
+    """Both clouds in the local working frame (absolute = xyz + origin): full-resolution float32
+    points and float64 column-thinned subsets for registration."""
 
     before: Cloud  # within the after box + the GPS error prior (the thinned subset: + radius)
     after: Cloud
@@ -60,8 +51,7 @@ class Prepared:
 
 
 def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyproj.CRS:
-    """The file's header CRS, else the one given by ``flag`` (for files without one); a flag
-    that contradicts the header is refused rather than silently applied or ignored."""
+    """The file's header CRS, else the one given by ``flag``; a flag contradicting the header is refused."""
     given, header = parse_crs(override, flag), parse_crs(raw.crs_wkt, raw.path)
     if header is None and given is None:
         raise SoilVolumeError(f"{raw.path}: the file has no CRS in its header; pass {flag} (e.g. EPSG:32654)")
@@ -78,8 +68,7 @@ THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
 def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, poly: np.ndarray) -> Source:
-    """``src`` read only where it meets the bounding box of the local polygon ``poly`` (VPC tiles
-    and COPC nodes outside it are skipped), when the file is in the frame's CRS and metres."""
+    """``src`` read only within the box of the local polygon ``poly`` when in the frame's CRS and metres."""
     if src.raw is not None or not (crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
         return src
     return src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])
@@ -96,17 +85,14 @@ NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 def prepare(
     before: Source, after: Source, options: Options, check=None, full: bool = True, loader: Callable[..., Loaded] = load
 ) -> Prepared:
-    """Stream both clouds into the working frame with a local origin: all after points, the
-    before points within the radius of the after footprint, and thinned subsets of both
-    (only the thinned subsets when ``full`` is False: the tiled engine reads points per tile).
-    ``loader`` streams one source (:func:`stream.load`, or the same as Dask tasks)."""
+    """Stream both clouds into the working frame: all after points, the before points within the
+    radius of the after footprint, and thinned subsets of both (only these unless ``full``: the tiled
+    engine reads points per tile). ``loader`` streams one source (:func:`stream.load`, or as tasks)."""
     crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(before, crs_b)
-    lo, hi = frame_box(after.lo, after.hi, crs_a, frame, after.path)
-    origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
-    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
-    original_after, to_a = after, _local(crs_a, frame, origin, after.path)
+    lo, hi, origin, voxel, to_a = _setup(after, crs_a, frame)
+    original_after = after
     after, a, note_a = _load_whole(
         after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check, None if full else NOTHING, loader
     )
@@ -142,9 +128,8 @@ def prepare(
 def _load_before(
     src: Source, crs: pyproj.CRS, frame: WorkFrame, origin, poly, after: tuple, voxel, options, check, full, loader
 ) -> tuple[Source, Loaded, str | None]:
-    """The before cloud streamed within the radius of the after footprint ``poly``, at full
-    resolution only where the registered after cloud (``after``: its path and thinned points) can
-    land (GPS error prior + 2 m); refused when too few points or no overlap."""
+    """The before cloud streamed within the after footprint ``poly``, at full resolution only where the
+    after cloud (``after``: path, thinned points) can land (GPS prior + 2 m); refused without overlap."""
     after_path, after_thin = after
     src, mode, note = filtered(_limit(src, crs, frame, origin, poly), crs, options)
     reach = options.max_gps_shift + 2.0
@@ -167,25 +152,17 @@ def _load_before(
 
 
 def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
-    """Stream the after survey alone into its own working frame, as :func:`prepare` does, for a
-    run whose reference is a surface (:mod:`soilvolume.inputs.surface`): no before cloud."""
+    """The after survey alone in its own working frame, as :func:`prepare` streams it, for a run
+    whose reference is a surface: no before cloud."""
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
-    frame = _own_frame(after, crs_a)
-    lo, hi = frame_box(after.lo, after.hi, crs_a, frame, after.path)
-    origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]])
-    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
-    to_a = _local(crs_a, frame, origin, after.path)
-    streamed, a, note = _load_whole(after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check)
-    if len(a.xyz) == 0:
-        raise SoilVolumeError(f"{after.path}: no points left after the ground selection ({note or a.note})")
-    check_spread(a.thin[:, :2], after.path, "after the ground selection")
+    streamed, a, note, frame, origin, voxel, to_a = _survey(after, crs_a, options, check, centred=True)
     none = np.empty((0, 3))
     return Prepared(
         Cloud(none.astype(np.float32), origin, frame.wkt, ""),
         Cloud(a.xyz, origin, frame.wkt, after.path, nonsoil=a.nonsoil),
         frame,
         origin,
-        {"after": _describe(streamed, crs_a, a.used, note or a.note, a.extra["cropped"], a.nonsoil)},
+        {"after": _describe(streamed, crs_a, a.used, note, a.extra["cropped"], a.nonsoil)},
         none,
         a.thin,
         voxel,
@@ -211,21 +188,33 @@ def prepare_single(src: Source, override: str | None, options: Options, check=No
     """Stream one cloud (ground selection as ``options.ground``) into its own working frame, with
     the local origin at the floor of its bounds."""
     crs = resolve_crs(src, override, opt("crs"))
+    _, one, note, frame, origin, _, _ = _survey(src, crs, options, check, centred=False)
+    return Single(one.xyz, one.thin, frame, origin, note)
+
+
+def _survey(src: Source, crs: pyproj.CRS, options: Options, check, centred: bool) -> tuple:
+    """One survey streamed whole into its own frame, refused without points left: (the source
+    streamed, what was loaded, selection note, frame, origin, voxel, file -> local)."""
     frame = _own_frame(src, crs)
-    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
-    origin = np.floor(lo)
-    voxel = thin_voxel(float(np.prod(hi[:2] - lo[:2])))
-    to_local = _local(crs, frame, origin, src.path)
-    src, one, note = _load_whole(src, crs, to_local, lo - origin, hi - origin, voxel, options, check)
+    lo, hi, origin, voxel, to_local = _setup(src, crs, frame, centred)
+    streamed, one, note = _load_whole(src, crs, to_local, lo - origin, hi - origin, voxel, options, check)
+    note = note or one.note
     if len(one.xyz) == 0:
-        raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note or one.note})")
+        raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note})")
     check_spread(one.thin[:, :2], src.path, "after the ground selection")
-    return Single(one.xyz, one.thin, frame, origin, note or one.note)
+    return streamed, one, note, frame, origin, voxel, to_local
+
+
+def _setup(src: Source, crs: pyproj.CRS, frame: WorkFrame, centred: bool = True) -> tuple:
+    """(lo, hi of ``src`` in ``frame``, local origin: the floor of lo, or of its x/y centre when
+    ``centred``, thinning voxel, file -> local)."""
+    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
+    origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]]) if centred else np.floor(lo)
+    return lo, hi, origin, thin_voxel(float(np.prod(hi[:2] - lo[:2]))), _local(crs, frame, origin, src.path)
 
 
 def _own_frame(src: Source, crs: pyproj.CRS) -> WorkFrame:
-    """The working frame of a run whose reference cloud is ``src`` (its UTM zone when ``crs`` is
-    geographic, from the header's bounds)."""
+    """The working frame of a run whose reference is ``src`` (a UTM zone for a geographic CRS)."""
     hint = lonlat_of(np.array([src.lo, src.hi]), crs) if crs.is_geographic else None
     return work_frame(crs, hint)
 
@@ -242,9 +231,8 @@ def _load_whole(
     box=None,
     loader=load,
 ) -> tuple[Source, Loaded, str | None]:
-    """Every (ground) point of ``src`` kept (within ``box`` when given), thinned over its local box
-    lo..hi (padded: the box comes from header bounds). Returns (the source streamed, what was
-    loaded, filter note)."""
+    """(source streamed, loaded, filter note): every (ground) point of ``src`` (within ``box``),
+    thinned over its local box lo..hi padded (header bounds)."""
     src, mode, note = filtered(src, crs, options)
     pad = _pad(lo, hi)
     thinner = ColumnThinner(lo - pad, hi + pad, voxel, name=src.path)
@@ -265,12 +253,7 @@ def _padded_box(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarr
 
 def _all_points(src: Source, to_local):
     """Every point of ``src`` (all classes), chunk by chunk in the local frame, with its class."""
-
-    def chunks():
-        for xyz, cls in src.chunks():
-            yield to_local(xyz), cls
-
-    return chunks
+    return lambda: ((to_local(xyz), cls) for xyz, cls in src.chunks())
 
 
 def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int, nonsoil=None) -> dict:

@@ -1,10 +1,7 @@
-"""A LAS/LAZ file's points as raw point records, chunk by chunk, for the native kernels
-(:mod:`soilvolume.native`), which decode them in the same pass as the rest of a chunk's work.
-
-Uncompressed files are read into three buffers used in turn (no fresh memory per chunk: on a
-virtual machine a page fault costs microseconds, and laspy's reader zeroes and faults a new
-buffer for every chunk); LAZ chunks are the records lazrs decompresses. A consumer may hold a
-chunk while the reader fills the next."""
+"""A LAS/LAZ file's raw point records, chunk by chunk, for the native kernels, which decode them in
+the same pass as the rest of a chunk's work. Uncompressed files are read into three buffers in turn
+(on a virtual machine a page fault costs microseconds, and laspy's reader faults a new buffer per
+chunk), so a consumer may hold one while the next fills; LAZ chunks are what lazrs decompresses."""
 
 from __future__ import annotations
 
@@ -17,7 +14,6 @@ import numpy as np
 from ..core.types import SoilVolumeError, short_error
 from ..soil.points import Signals
 from .lasheader import BoundsCheck
-from .lasimport import laspy_module
 
 PIECE = 125_000  # points read at a time (a chunk of 1 M points in 8 pieces: 3.75 MB buffers of 30-byte records)
 RING = 3  # buffers of an uncompressed read in turn: the consumer's, the queued one, the one being read
@@ -25,10 +21,8 @@ RING = 3  # buffers of an uncompressed read in turn: the consumer's, the queued 
 
 @dataclass
 class Records:
-    """One piece of a chunk of a file's point records, not decoded: its structured array (laspy's
-    point format), the header's scales and offsets, the file's bounds check (the consumer extends
-    it with the piece's decoded bounds) and whether it is the file's last piece (then the consumer
-    finishes the check)."""
+    """One undecoded piece of a chunk (laspy's point format), the header's scales and offsets, the
+    file's bounds check (the consumer extends it, and finishes it on the file's ``last`` piece)."""
 
     array: np.ndarray
     scales: np.ndarray
@@ -43,10 +37,8 @@ class Records:
 
 @dataclass
 class FileChunk:
-    """A whole chunk of an uncompressed LAS file left in the file for the native kernel to read
-    (``sv_file_chunk``: no Python between its pieces), its points labelled by ``table`` (the
-    labels of the LAS classes, by the classification byte at ``cls_at`` masked by ``cls_mask``;
-    None: every point soil)."""
+    """A whole chunk of an uncompressed LAS file left for the native kernel to read (``sv_file_chunk``),
+    labelled by ``table`` (by LAS class: the byte at ``cls_at`` masked by ``cls_mask``; None: soil)."""
 
     path: str
     offset: int  # of its first record in the file
@@ -66,8 +58,8 @@ class FileChunk:
 
 
 def class_byte(dtype: np.dtype) -> tuple[int, int] | None:
-    """(byte offset, mask) of the LAS classification in a point record (formats 0-5: the low 5
-    bits of ``raw_classification``; 6-10: a byte of its own), None without one."""
+    """(byte offset, mask) of the classification in a point record (formats 0-5: the low 5 bits of
+    ``raw_classification``; 6-10: its own byte), None without one."""
     fields = dtype.fields or {}
     if "classification" in fields and fields["classification"][0] == np.uint8:
         return fields["classification"][1], 0xFF
@@ -88,32 +80,34 @@ def las_records(
     whole_first: bool = False,
     mapped: bool = False,
 ) -> Iterator[tuple]:
-    """(Records, classification or None[, signals]) of a LAS/LAZ file in pieces of at most ``piece``
-    points (:data:`PIECE`), each chunk of ``size`` points ending on a piece marked ``flush``; a point
-    count other than the header's ``count`` is a corrupt file. Uncompressed files are read into
-    ``ring`` buffers in turn, or ``mapped`` read-only; ``stop``: only the first ``stop`` points,
-    unchecked; ``whole_first``: the first chunk in one piece; ``direct(has_class)``, asked at each
-    uncompressed chunk: a class table (or None) leaves it in the file as a :class:`FileChunk`."""
-    laspy = laspy_module()
+    """(Records, classification or None[, signals]) in pieces of at most ``piece`` points, chunks of
+    ``size`` ending on ``flush``; not ``count`` points: corrupt. ``ring`` buffers, or ``mapped``; ``stop``:
+    the first points only; ``whole_first``: the first chunk in one piece; ``direct(has_class)`` giving
+    a class table (or None) leaves an uncompressed chunk in the file (:class:`FileChunk`)."""
+    import laspy
+
     read = 0
     try:
         with laspy.open(path) as reader:
             h = reader.header
             dims = set(h.point_format.dimension_names)
-            has_cls = "classification" in dims
             scales, offsets = np.asarray(h.scales, float), np.asarray(h.offsets, float)
             check = BoundsCheck(path, h)
             chunks = chunk_pieces(count if stop is None else stop, size, PIECE if piece is None else piece)
             if whole_first and chunks:
                 chunks[0] = [sum(chunks[0])]
-            for array in _arrays(reader, path, chunks, ring, direct, mapped):
+            if h.are_points_compressed:
+                arrays = _laz(reader, [m for c in chunks for m in c])
+            else:
+                arrays = _mapped(path, h, chunks) if mapped else _raw(path, h, chunks, ring, direct)
+            for array in arrays:
                 read += len(array)
                 if isinstance(array, FileChunk):
                     array.scales, array.offsets, array.check, array.last = scales, offsets, check, read >= count
                     yield (array, None, None) if signals else (array, None)
                     continue
                 rec = laspy.ScaleAwarePointRecord(array, h.point_format, scales, offsets)
-                cls = np.array(rec.classification) if has_cls else None
+                cls = np.array(rec.classification) if "classification" in dims else None
                 sig = point_signals(rec, signal_dims(dims, signals, cls)) if signals else None
                 item = Records(array, scales, offsets, check, read >= count, read % size == 0 or read >= count)
                 yield (item, cls, sig) if signals else (item, cls)
@@ -126,17 +120,9 @@ def las_records(
         raise SoilVolumeError(f"{path}: corrupt LAS file (header says {count} points, read {read})")
 
 
-def _arrays(reader, path: Path, chunks: list[list[int]], ring: int, direct, mapped: bool) -> Iterator:
-    """The pieces of ``chunks`` of an open file: decompressed (LAZ), mapped or read into buffers."""
-    if reader.header.are_points_compressed:
-        return _laz(reader, [m for c in chunks for m in c])
-    return _mapped(path, reader.header, chunks) if mapped else _raw(path, reader.header, chunks, ring, direct)
-
-
 def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Callable) -> tuple:
-    """(classification or None, signals or None) of the first chunk of ``size`` points of a
-    LAS/LAZ file, read without decoding its coordinates: what an epoch's rule is decided on
-    (:func:`soilvolume.soil.points.decide`), the same points the numpy path decides it on."""
+    """(classification, signals) of a LAS/LAZ file's first chunk, coordinates not decoded: what the
+    epoch's rule is decided on, the same points the numpy path decides it on."""
     for _rec, cls, *sig in las_records(path, count, size, signals, piece=size, stop=min(size, count), mapped=True):
         return cls, sig[0] if sig else None  # the chunk in one piece, as the numpy path reads it
     return None, None
@@ -145,12 +131,8 @@ def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Calla
 def las_chunks(
     path: Path, count: int, size: int, signals: bool | Callable = False, origin: np.ndarray | None = None
 ) -> Iterator[tuple]:
-    """(absolute xyz float64, classification or None) of a LAS/LAZ file, ``size`` points at a
-    time; a point count other than the header's ``count`` is reported as a corrupt file. With
-    ``signals``, a third item: the points' colour and returns (:func:`point_signals`; a function:
-    of the dimensions it names for each chunk's classification, see :func:`signal_dims`).
-    With ``origin``, the coordinates are ``xyz - origin`` (the subtraction done in the decoding).
-    The records are decoded here, so one read buffer serves every chunk."""
+    """(absolute xyz float64, classification or None[, signals: :func:`signal_dims`]) of a LAS/LAZ
+    file, ``size`` points at a time (one read buffer); with ``origin``, ``xyz - origin``."""
     for rec, cls, *sig in las_records(path, count, size, signals, piece=size, ring=1):
         xyz, lo, hi = decoded_xyz(rec, origin)
         if len(xyz):
@@ -163,8 +145,7 @@ def las_chunks(
 
 
 def signal_dims(dims: set[str], signals, cls: np.ndarray | None) -> set[str]:
-    """The dimensions of ``dims`` a read with ``signals`` returns for a chunk of classification
-    ``cls``: all (True), or those ``signals(cls)`` names."""
+    """The dimensions of ``dims`` read for a chunk of classes ``cls``: all, or those ``signals(cls)`` names."""
     return dims if signals is True else dims & set(signals(cls))
 
 
@@ -172,10 +153,8 @@ BLOCK = 1 << 14  # points decoded at a time: a block's column stays in the cache
 
 
 def decoded_xyz(chunk, origin: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(xyz, lo, hi) of a laspy point record: the (N, 3) float64 coordinates ``X * scale + offset``
-    as laspy computes them (minus ``origin`` when given, as ``xyz - origin`` would), and the
-    per-axis min and max of ``X * scale + offset`` (the absolute coordinates), block by block
-    through a small scratch column (one pass over memory instead of one per operation)."""
+    """(xyz, lo, hi) of a point record: ``X * scale + offset`` as laspy computes it (minus ``origin``)
+    and its per-axis bounds, block by block through a small scratch column (one pass over memory)."""
     n = len(chunk)
     xyz = np.empty((n, 3))
     if n == 0:
@@ -198,9 +177,19 @@ def decoded_xyz(chunk, origin: np.ndarray | None = None) -> tuple[np.ndarray, np
     return xyz, lows.min(axis=1), highs.max(axis=1)
 
 
+def decoded_points(pts, dims: set[str], signals, origin=None) -> tuple:
+    """(xyz float64 minus ``origin``, classification or None[, signals: :func:`signal_dims`]) of
+    laspy points decoded by laspy."""
+    xyz = np.empty((len(pts), 3))
+    xyz[:, 0], xyz[:, 1], xyz[:, 2] = pts.x, pts.y, pts.z
+    if origin is not None:
+        np.subtract(xyz, origin, out=xyz)
+    cls = np.array(pts.classification) if "classification" in dims else None
+    return (xyz, cls, point_signals(pts, signal_dims(dims, signals, cls))) if signals else (xyz, cls)
+
+
 def point_signals(record, dims: set[str]) -> Signals | None:
-    """The colour (red, green, blue) and return numbers of a laspy point record, when its point
-    format has them (None when it has neither)."""
+    """The colour and return numbers of a laspy point record (None when it has neither)."""
     rgb = ret = None
     if {"red", "green", "blue"} <= dims:
         rgb = np.column_stack([np.asarray(record.red), np.asarray(record.green), np.asarray(record.blue)])
@@ -210,8 +199,7 @@ def point_signals(record, dims: set[str]) -> Signals | None:
 
 
 def chunk_pieces(count: int, size: int, piece: int) -> list[list[int]]:
-    """The lengths of the pieces of ``count`` points read in chunks of ``size``, chunk by chunk,
-    each chunk in pieces of at most ``piece`` (no piece straddles two chunks)."""
+    """Per chunk of ``size`` of ``count`` points, its pieces' lengths (at most ``piece``)."""
     return [
         [min(piece, m - k) for k in range(0, m, piece)] for m in (min(size, count - s) for s in range(0, count, size))
     ]
@@ -226,9 +214,8 @@ def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
 
 
 def _mapped(path: Path, header, chunks: list[list[int]]) -> Iterator[np.ndarray]:
-    """The pieces of an uncompressed file as views of it mapped read-only: the page cache's pages,
-    not a buffer faulted in and copied into (what deciding an epoch's rule on its first chunk
-    reads: one look at its classes and signals)."""
+    """The pieces of an uncompressed file as read-only mapped views: the page cache's pages, not a
+    buffer faulted in (for one look at the first chunk's classes and signals)."""
     dtype = header.point_format.dtype()
     base = header.offset_to_point_data
     n = min(sum(map(sum, chunks)), max(0, (path.stat().st_size - base) // dtype.itemsize))
@@ -245,9 +232,8 @@ def _mapped(path: Path, header, chunks: list[list[int]]) -> Iterator[np.ndarray]
 
 
 def _raw(path: Path, header, chunks: list[list[int]], ring: int, direct=None) -> Iterator:
-    """The records of an uncompressed file, ``chunks`` of pieces read into ``ring`` buffers in
-    turn, or a whole chunk left in the file as a :class:`FileChunk` where ``direct`` says (see
-    :func:`las_records`)."""
+    """An uncompressed file's pieces read into ``ring`` buffers in turn, or a chunk left in the file
+    where ``direct`` says (:func:`las_records`)."""
     dtype = header.point_format.dtype()
     stride, cls, base = dtype.itemsize, class_byte(dtype), header.offset_to_point_data
     room = max((m for chunk in chunks for m in chunk), default=0) * stride

@@ -1,15 +1,8 @@
-"""The Simple Morphological Filter (Pingel et al. 2013) as PDAL's filters.smrf implements it.
-
-1. ZImin: the lowest Z per ``cell`` (grid from the points' minimum corner), empty cells filled
-   with the mean of the 8 nearest filled cells.
-2. Low outliers: the progressive filter on -ZImin (slope 5, one pixel).
-3. The object mask: openings of ZImin with diamond elements of radius 1..ceil(window/cell)
-   pixels; a cell is an object where successive surfaces differ by more than slope * cell * radius.
-4. ZIpro: ZImin without object/low cells, refilled the same way.
-5. A point is ground (Classification 2) when |ZIpro - z| <= threshold + scalar * slope(ZIpro),
-   else 1. Only last and single returns are classified (PDAL's default ``returns``); the others
-   keep their classification.
-"""
+"""The Simple Morphological Filter (Pingel et al. 2013) as PDAL's filters.smrf implements it: ZImin,
+the lowest Z per ``cell``, empty cells the mean of the 8 nearest; low outliers by the progressive
+filter on -ZImin (slope 5, one pixel); objects where openings of ZImin by diamonds of radius
+1..ceil(window/cell) differ by more than slope * cell * radius; ZIpro, ZImin without those, refilled;
+ground where |ZIpro - z| <= threshold + scalar * slope(ZIpro) (last and single returns only)."""
 
 from __future__ import annotations
 

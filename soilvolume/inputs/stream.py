@@ -1,12 +1,7 @@
-"""Streaming input: read a cloud chunk by chunk (laspy), bring each chunk into the working frame,
-keep only the points later steps need (float32, local coordinates) and build the voxel-thinned
-registration subset on the way, so memory stays bounded by the kept points, not the file.
-
-A source is a LAS/LAZ file, a COPC file or a virtual point cloud (``.vpc``) of such tiles; with a
-``region`` only the VPC tiles and COPC octree nodes meeting it are read (plain LAS/LAZ files are
-read whole and the caller filters). Non-LAS files and clouds produced by a preparation pipeline
-arrive whole and are one chunk.
-"""
+"""Streaming input: a cloud read chunk by chunk into the working frame, only the points later steps
+need kept (float32, local) and the thinned registration subset built on the way: memory bounded by
+the kept points. A source is a LAS/LAZ/COPC file or a ``.vpc`` of them (with a ``region``, only the
+tiles and COPC nodes meeting it); other files and pipeline outputs arrive whole, as one chunk."""
 
 from __future__ import annotations
 
@@ -49,11 +44,8 @@ class Source:
     compressed: bool = False  # a LAZ file's points
 
     def chunks(self, size: int | None = None, signals: bool | Callable = False, origin=None) -> Iterator[tuple]:
-        """(xyz float64 absolute in the file CRS, classification or None) per chunk of ``size``
-        points (default ``CHUNK``); with a ``region``, chunks may hold points outside it. With
-        ``signals``, a third item: the chunk's colour and returns (``soil.points.Signals`` or None;
-        a function: those it names, see :func:`records.las_chunks`). With ``origin``, xyz are
-        ``xyz - origin`` (in the decoding of LAS/LAZ files)."""
+        """(absolute xyz float64, classification or None[, signals]) per chunk (``records.las_chunks``);
+        with a ``region``, chunks may hold points outside it; with ``origin``, xyz minus it."""
         if self.raw is not None:
             raw = self.raw
             xyz = raw.xyz if origin is None else raw.xyz - origin
@@ -69,18 +61,11 @@ class Source:
         """The first file with points this source's reads open, as its header gives it."""
         return next((h for h in map(_header, map(Path, self.tiles())) if h.count), None)
 
-    @staticmethod
-    def first_signals(first: Source, signals: bool | Callable) -> tuple:
-        """(classification, signals) of the first chunk a read of the file ``first`` yields."""
-        return first_chunk_signals(Path(first.path), first.count, CHUNK, signals)
-
     def records(
         self, size: int | None = None, signals: bool | Callable = False, direct=None, whole_first: bool = False
     ) -> Iterator[tuple]:
-        """(:class:`~soilvolume.inputs.records.Records`, classification or None, signals) of each
-        chunk of the source's LAS/LAZ files read whole, undecoded, or a chunk left in its file
-        where ``direct`` says (:func:`~soilvolume.inputs.records.las_records`): the native kernel's
-        input (:func:`native_reads` says when a source can)."""
+        """The undecoded chunks of the source's LAS/LAZ files (:func:`records.las_records`): the
+        native kernel's input (:func:`native_reads` says when a source can)."""
         for path in self.tiles():
             count = _header(Path(path)).count
             yield from las_records(Path(path), count, size or CHUNK, signals, direct=direct, whole_first=whole_first)
@@ -112,8 +97,7 @@ def _meeting(index, lo, hi) -> list[tuple[int, int]]:
 
 
 def open_source(path) -> Source:
-    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now
-    (a cloud prepared by a pipeline: :func:`soilvolume.pipelines.pipeline.open_source`)."""
+    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now."""
     p = Path(path)
     if p.suffix.lower() == ".vpc":
         return _open_vpc(p)
@@ -133,35 +117,25 @@ def _header(p: Path) -> Source:
 
 
 def _open_vpc(p: Path) -> Source:
-    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from its items."""
+    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from the tiles' headers
+    (checked finite by :func:`lasheader.check_las_header`)."""
     vpc = read_vpc(p)
     first = _header(Path(vpc.tiles[0].path))
     if vpc.count == 0:
         raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
-    lo, hi = vpc.lo, vpc.hi
-    lo[2] = first.lo[2] if not np.isfinite(lo[2]) else lo[2]
-    hi[2] = first.hi[2] if not np.isfinite(hi[2]) else hi[2]
-    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
+    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, vpc.lo, vpc.hi, first.has_class, vpc=vpc)
 
 
 def from_raw(raw: RawPoints) -> Source:
     validate(raw)
-    return Source(
-        raw.path,
-        raw.crs_wkt,
-        len(raw.xyz),
-        raw.xyz.min(axis=0),
-        raw.xyz.max(axis=0),
-        raw.classification is not None,
-        raw,
-    )
+    lo, hi = raw.xyz.min(axis=0), raw.xyz.max(axis=0)
+    return Source(raw.path, raw.crs_wkt, len(raw.xyz), lo, hi, raw.classification is not None, raw)
 
 
 @dataclass
 class Loaded:
-    """One epoch after streaming: kept soil points (float32 local), the thinned subset (float64
-    local), and what was read and kept; ``nonsoil``: the points the epoch's rule says are not
-    soil (``soil.points.NonSoil``: float32 local xyz, labels, the rule) within the same box."""
+    """One epoch streamed: kept soil points (float32), the thinned subset, counts, and the points its
+    rule says are not soil within the same box."""
 
     xyz: np.ndarray
     thin: np.ndarray
@@ -172,34 +146,23 @@ class Loaded:
     nonsoil: NonSoil | None = None
 
 
-def ground_mode(src: Source, first_cls: np.ndarray | None, mode: str) -> bool:
-    """Whether to keep only class 2: ``class`` always (error without it), ``auto`` when the file
-    has ground-classified points (decided on its first chunk)."""
-    has = first_cls is not None and bool((first_cls == GROUND).any())
+def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str) -> PointRule:
+    """The epoch's point rule from its first chunk (:func:`soil.points.decide`), keeping class 2
+    only for ``class`` (an error without any) or ``auto`` when the chunk has some."""
+    has = cls is not None and bool((cls == GROUND).any())
     if mode == "class" and not has:
         raise SoilVolumeError(f"{src.path}: {{opt:ground=class}} needs ground (class 2) points; the file has none")
-    return mode == "class" or (mode == "auto" and has)
-
-
-def epoch_rule(src: Source, cls: np.ndarray | None, sig, mode: str, exclude: str) -> PointRule:
-    """The epoch's point rule from its first chunk (:func:`soil.points.decide`), with the
-    class-2 selection of ``mode`` (an error when ``class`` finds none)."""
-    rule = decide(cls, sig, mode, exclude)
-    return replace(rule, use_class=ground_mode(src, cls, mode))
+    return replace(decide(cls, sig, mode, exclude), use_class=mode == "class" or (mode == "auto" and has))
 
 
 def _labelled(
     src: Source, to_local, boxes: bool, mode: str, exclude: str, keep: Callable | None = None
 ) -> tuple[Iterator[tuple], Callable, bool]:
-    """The chunks of ``src`` as (points, labels or None,
-    the epoch's rule, x/y box of the file coordinates when ``boxes``, ``keep`` of the points or
-    None), the conversion to the local frame still to apply to the points, and whether they come
-    as undecoded :class:`~soilvolume.inputs.records.Records` (the native kernel decodes, crops and
-    thins them: :func:`native_reads`). The rule is decided on the first chunk (:func:`epoch_rule`;
-    for the kernel, whose pieces are smaller, that chunk is read beforehand as a whole); every chunk
-    is labelled and only the signals the rule (or its decision) uses are read. Without the
-    kernel, the origin of a plain shift (``prepare.Shift``) is subtracted in the decoding; then the
-    points are local already, and ``keep`` (the footprint test) is applied there too."""
+    """(chunks as (points, labels, rule, x/y box when ``boxes``, ``keep`` of the points or None),
+    the conversion to local still to apply, whether the chunks are undecoded records for the native
+    kernel). The rule is decided on the first chunk (read whole beforehand for the kernel's smaller
+    pieces); only the signals it uses are read. Without the kernel a plain ``Shift`` is subtracted
+    in the decoding, and ``keep`` applied there too."""
     by_kernel = native_reads(src, to_local, keep)
     fused = src.raw is None and not boxes and hasattr(to_local, "inplace")
     early = keep if fused and not by_kernel else None
@@ -208,7 +171,7 @@ def _labelled(
     first = src.first_file() if by_kernel else None
     ahead = first is not None and not first.compressed  # the rule decided before the reading
     if ahead:  # on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
-        cls, sig = src.first_signals(first, lambda c: deciding_dims(c, mode, exclude))
+        cls, sig = first_chunk_signals(Path(first.path), first.count, CHUNK, lambda c: deciding_dims(c, mode, exclude))
         rule = epoch_rule(src, cls, sig, mode, exclude)
 
     def wanted(cls) -> set[str]:
@@ -243,16 +206,13 @@ def file_kernel() -> bool:
 
 
 def native_reads(src: Source, to_local, keep: Callable | None) -> bool:
-    """Whether ``src`` streams through the native chunk kernel: the library is there, the source is
-    LAS/LAZ files read whole (not COPC nodes, not indexed ranges), the frame is a plain shift and
-    the crop (if any) a rasterized polygon."""
+    """Whether ``src`` streams through the native chunk kernel: the library is there, whole LAS/LAZ
+    files (no COPC nodes or indexed ranges), a plain shift and a rasterized crop polygon (or none)."""
     if native.kernels() is None or src.raw is not None or not hasattr(to_local, "inplace"):
         return False
     if keep is not None and not hasattr(keep, "framed"):
         return False
-    if src.region is not None and (src.index is not None or any(is_copc(t) for t in src.tiles())):
-        return False
-    return True
+    return src.region is None or (src.index is None and not any(is_copc(t) for t in src.tiles()))
 
 
 def load(
@@ -266,12 +226,10 @@ def load(
     indexed: bool = False,
     exclude: str = "auto",
 ) -> Loaded:
-    """Stream ``src``: label its points (the epoch's rule, decided on the first chunk from
-    ``mode`` in auto/class/none and ``exclude``; ``filter`` needs the whole cloud and is done by
-    the caller), convert with ``to_local`` (file CRS -> local frame), keep the soil points for
-    which ``keep`` is true (all when None) and feed them to ``thinner``; only those within the
-    x/y ``box`` (lo, hi; everything when None) are kept at full resolution, with the points that
-    are not soil beside them. ``indexed``: also record each chunk's x/y box (``extra["index"]``)."""
+    """Stream ``src``: label its points (:func:`epoch_rule` of ``mode`` and ``exclude``), convert
+    with ``to_local``, feed the soil points ``keep`` passes (all when None) to ``thinner`` and keep
+    those within the x/y ``box`` (all when None) at full resolution, the non-soil ones beside them.
+    ``indexed``: also record each chunk's x/y box (``extra["index"]``)."""
     out = Growing(src.count if box is None or (box[1] >= box[0]).all() else 0), Growing(0), Growing(0, None, np.uint8)
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
     chunks, shift, by_kernel = _labelled(src, to_local, index is not None, mode, exclude, keep)
@@ -288,11 +246,6 @@ def load(
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()
     thin, counts = thinner.columns()
-    extra = {
-        "read_s": reading,
-        "cropped": cropped,
-        "counts": counts,
-        "index": None if index is None else tuple(index),
-    }
+    extra = {"read_s": reading, "cropped": cropped, "counts": counts, "index": None if index is None else tuple(index)}
     nonsoil = NonSoil(out[1].result(), out[2].result(), rule) if rule.active else None
     return Loaded(out[0].result(), thin, points, used, note, extra, nonsoil)

@@ -1,9 +1,7 @@
-"""A surface as the reference: a single-band DEM GeoTIFF (a grading plan, or an earlier DEM)
-opened and checked before any point is read (:func:`open_surface`), its heights read in metres
-over the survey's box only (:func:`read_over`, through :mod:`soilvolume.inputs.heights`: scale,
-offset, nodata and unit honoured; a raster far larger than the site costs only the site's
-window), and resampled onto a run's grid (GDAL's warp through rasterio: bilinear at the cell
-centres, reprojected when the raster's CRS is not the grid's)."""
+"""A surface as the reference: a single-band DEM GeoTIFF (a grading plan, an earlier DEM) opened and
+checked before any point is read, its heights read in metres over the survey's box only
+(:mod:`heights`) and resampled onto a run's grid by GDAL's warp (bilinear, reprojected if need be);
+or a LandXML TIN (:mod:`landxml`)."""
 
 from __future__ import annotations
 
@@ -16,7 +14,7 @@ import pyproj
 
 from ..core.types import GridSpec, SoilVolumeError
 from . import landxml
-from .crs import WorkFrame, has_vertical, horizontal, parse_crs, raster_wkt, xy_unit
+from .crs import WorkFrame, horizontal, raster_wkt, xy_unit
 from .heights import HeightRaster, metres_per_unit, open_heights, read_heights, window_over
 
 SUFFIXES = (".tif", ".tiff", *landxml.SUFFIXES)  # a first input with one of these is a surface, not a cloud
@@ -61,8 +59,7 @@ class Surface:
         return float(np.hypot(self.transform.a, self.transform.d)) * xy_unit(self.crs)
 
     def describe(self) -> dict:
-        """report.json's description of the reference (``inputs.before`` and ``reference``): the
-        whole raster's rows and cols, the window read over the survey, its valid cells."""
+        """report.json's description of the reference: the whole raster, the window read, its valid cells."""
         return {
             "kind": "surface",
             "path": self.path,
@@ -80,13 +77,13 @@ class Surface:
 
 
 def open_surface(path: Path, crs_override: str | None, name: str | None = None) -> SurfaceSource | landxml.Tin:
-    """Open and check a reference DEM: one band, a CRS (its own, or ``--before-crs`` for a raster
-    without one; a contradicting one is refused), heights' unit (the vertical CRS's, or the
-    band's declared unit); a LandXML file's TIN surface (``name``, else its first) read whole."""
+    """Open and check a reference DEM (one band, a CRS: :func:`landxml.surface_crs`, heights' unit), or
+    read a LandXML file's TIN surface (``name``, else its first) whole."""
     if landxml.is_landxml(path):
         return landxml.open_tin(path, crs_override, name)
     raster = open_heights(path)
-    crs = _crs(path, raster.crs, crs_override)
+    words = ("the raster's", "a raster")
+    crs = landxml.surface_crs(path, raster.crs, crs_override, "the raster has no CRS", words, vertical=True)
     factor, where = metres_per_unit(crs, raster.unit, str(path))
     return SurfaceSource(raster, crs, factor, where)
 
@@ -94,9 +91,8 @@ def open_surface(path: Path, crs_override: str | None, name: str | None = None) 
 def read_over(
     source: SurfaceSource | landxml.Tin, lo: np.ndarray, hi: np.ndarray, frame: WorkFrame, margin_m: float
 ) -> Surface | landxml.Tin:
-    """The surface's heights over the box ``lo``..``hi`` (absolute x/y in ``frame``, metres) and
-    ``margin_m`` around it, plus two of its pixels for the resampling's kernel (a TIN: itself,
-    when it meets the box)."""
+    """The surface's heights over the box lo..hi (absolute, metres) plus ``margin_m`` and two pixels
+    for the resampling's kernel (a TIN: itself, when it meets the box)."""
     if isinstance(source, landxml.Tin):
         return landxml.check_over(source, lo, hi, frame, margin_m)
     lo, hi = (
@@ -123,24 +119,9 @@ def read_over(
     )
 
 
-def _crs(path: Path, own: pyproj.CRS | None, override: str | None) -> pyproj.CRS:
-    given = parse_crs(override, "{opt:before_crs}")
-    if own is None and given is None:
-        raise SoilVolumeError(f"{path}: the raster has no CRS; give {{opt:before_crs}} (e.g. EPSG:32654)")
-    if own is not None and given is not None and not horizontal(own).equals(horizontal(given), ignore_axis_order=True):
-        raise SoilVolumeError(
-            f"{path}: {{opt:before_crs={override}}} differs from the raster's CRS ({own.name}); "
-            "{opt:before_crs} applies only to a raster without one"
-        )
-    if given is not None and (own is None or has_vertical(given)):
-        return given
-    return own
-
-
 def on_grid(surface: Surface | landxml.Tin, grid: GridSpec, method: str = "bilinear") -> np.ndarray:
-    """The surface's absolute heights (m) at the cell centres of ``grid`` (NaN where it has none):
-    GDAL's warp, reprojecting the raster's horizontal CRS onto the grid's; a TIN is linear inside
-    its own triangles whatever ``method`` (it is its own interpolation)."""
+    """The surface's heights (m) at the cell centres of ``grid`` (NaN where none) by GDAL's warp; a TIN
+    linear inside its own triangles whatever ``method``."""
     if isinstance(surface, landxml.Tin):
         return landxml.on_grid(surface, grid)
     from rasterio.crs import CRS

@@ -1,5 +1,4 @@
-"""Voxel thinning while streaming: the centroid of each column of a fixed grid, accumulated
-chunk by chunk (the thinned subsets registration and the footprint work on)."""
+"""Voxel thinning while streaming: the centroid of each column of a fixed grid, chunk by chunk."""
 
 from __future__ import annotations
 
@@ -15,9 +14,8 @@ MAX_COLUMNS = 1 << 26
 
 
 def narrowed(thinning: tuple, box: tuple) -> tuple:
-    """``thinning`` (a thinner's lo, hi, voxel[, within]) with ``within`` narrowed to ``box`` (a
-    local x/y box where all the points to come lie): a thinner on the same lattice, over the
-    columns of the first that meet the box (one VPC tile's, not the whole epoch's)."""
+    """A thinner's (lo, hi, voxel[, within]) with ``within`` narrowed to ``box``, where all points to
+    come lie: the same lattice, over the columns meeting it (one VPC tile's, not the epoch's)."""
     lo, hi, voxel, within = (*thinning, None)[:4]
     if within is not None:
         box = (np.maximum(box[0][:2], within[0][:2]), np.minimum(box[1][:2], within[1][:2]))
@@ -26,9 +24,8 @@ def narrowed(thinning: tuple, box: tuple) -> tuple:
 
 @dataclass(frozen=True)
 class Block:
-    """The sums of a thinner cut from a wider one (:func:`narrowed`), to add to the wider one
-    (:meth:`ColumnThinner.add_block`): its first column (x, y) on the lattice, its shape (rows,
-    columns) and its sums (4, rows * columns)."""
+    """A narrowed thinner's first column (x, y), shape (rows, columns) and sums (4, rows * columns), to
+    add to the wider one (:meth:`ColumnThinner.add_block`)."""
 
     first: tuple[int, int]
     shape: tuple[int, int]
@@ -36,10 +33,8 @@ class Block:
 
 
 class ColumnThinner:
-    """Voxel thinning of a terrain cloud while streaming: the centroid of the points in each
-    ``voxel`` x ``voxel`` column of a fixed box, accumulated chunk by chunk. With ``within``
-    (a local x/y box where all points lie), the box is cut to the columns meeting it, on the
-    same lattice (the same centroids, in the same order). ``name`` (the file) prefixes errors."""
+    """The centroid of the points in each ``voxel`` column of a fixed box, chunk by chunk; with ``within``
+    (an x/y box holding all points) only the columns meeting it, on the same lattice. ``name``: errors'."""
 
     def __init__(self, lo: np.ndarray, hi: np.ndarray, voxel: float, within=None, name: str = "") -> None:
         self.lo, self.hi, self.voxel = np.asarray(lo[:2], float), np.asarray(hi[:2], float), float(voxel)
@@ -62,8 +57,7 @@ class ColumnThinner:
         self._added = False  # by :meth:`add`: one thinner is fed by numpy or by the kernel, never both
 
     def occupied(self) -> tuple[np.ndarray, np.ndarray]:
-        """(the ids of the columns with points, their sums): what a scan of part of a cloud hands
-        back to add (a tile meets few of the epoch's columns)."""
+        """(ids of the columns with points, their sums): what a scan of a tile hands back."""
         has = np.flatnonzero(self.sums[3])
         return has, self.sums[:, has]
 
@@ -72,9 +66,7 @@ class ColumnThinner:
         return Block((int(self.first[0]), int(self.first[1])), self.shape, self.sums)
 
     def add_block(self, block: Block) -> None:
-        """Add the sums of ``block`` (a thinner on this one's lattice, over columns of this one)
-        where it has points: as adding them column by column (a column's sums plus the block's),
-        without gathering and scattering the columns."""
+        """Add the sums of ``block`` (over columns of this lattice) where it has points, in place."""
         h, w = block.shape
         if h * w == 0:
             return
@@ -86,9 +78,8 @@ class ColumnThinner:
         np.add(view, part, out=view, where=part[3] > 0)
 
     def native_state(self, chunk: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """What the native kernel keeps beside the sums (made once; ``chunk``: the most points
-        between two flushes): the chunk that last touched each column (int32 zeros), and room to
-        set aside the sums of ``chunk`` columns (ids, 4 values each)."""
+        """The native kernel's state beside the sums, made once: the chunk that last touched each column,
+        and room for the sums of ``chunk`` columns (the most points between two flushes)."""
         if self._native is None:
             if self._added:  # the kernel writes a column's first point over its sums: they must be zero
                 raise RuntimeError("a thinner fed by numpy cannot go on with the native kernel")
@@ -98,8 +89,7 @@ class ColumnThinner:
         return self._native
 
     def add(self, xyz: np.ndarray) -> None:
-        """Add a chunk's points: sums over the span of column ids the chunk meets only (a chunk
-        covers a strip of a large site; the whole sums are not swept for each chunk)."""
+        """Add a chunk's points, over the span of columns it meets only (not the whole sums)."""
         if self._native is not None:  # columns it left at zero would be written over by the kernel
             raise RuntimeError("a thinner fed by the native kernel cannot go on with numpy")
         self._added = True
@@ -137,8 +127,7 @@ class ColumnThinner:
         return self.columns(centroids=False)[1]
 
     def columns(self, centroids: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
-        """(the centroids, or None when not ``centroids``; the points behind each, same order) in
-        one pass: by the native kernel (``sv_centroids``) when it is there."""
+        """(centroids or None unless ``centroids``, points behind each) in one pass (``sv_centroids``)."""
         native = self._native_result(centroids)
         if native is not None:
             return native

@@ -1,6 +1,5 @@
-"""A small numpy rasteriser of a triangulated surface: linear (barycentric) interpolation inside
-each given triangle at the centres of a grid's cells, NaN outside every triangle. Vectorised over
-the cells of the triangles' bounding boxes, in chunks of bounded memory."""
+"""A triangulated surface rasterised in numpy at a grid's cell centres: barycentric inside each
+triangle, NaN outside, over the cells of the triangles' boxes in chunks of bounded memory."""
 
 from __future__ import annotations
 
@@ -11,9 +10,8 @@ EPS = 1e-9  # barycentric tolerance: a centre on a shared edge belongs to both t
 
 
 def rasterise(uv: np.ndarray, z: np.ndarray, faces: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """Heights at integer (col, row) positions of a ``shape`` (rows, cols) grid: ``uv`` the
-    points' (col, row) in cell units (cell centres at integers), ``z`` their heights, ``faces``
-    (m, 3) point indices."""
+    """Heights at the integer (col, row) positions of a ``shape`` grid of the points ``uv`` (col, row
+    in cells), heights ``z``, triangles ``faces`` (m, 3)."""
     out = np.full(shape, np.nan)
     tri = uv[faces]  # (m, 3, 2)
     c0 = np.maximum(np.ceil(tri[..., 0].min(axis=1) - EPS), 0).astype(np.int64)

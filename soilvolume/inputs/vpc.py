@@ -1,11 +1,7 @@
-"""Virtual point clouds (``.vpc``): a STAC ItemCollection of point cloud tiles, as written by
-PDAL wrench ``build_vpc`` and QGIS "Build virtual point cloud" (``vpc-spec.md`` in PDAL/wrench).
-
-The document's structure is checked against the STAC fields read (:mod:`vpcschema`); every tile's
-header is read once and its box and point count must match what the VPC says (``proj:bbox`` in
-the native CRS, else the WGS 84 ``bbox``); only the tiles meeting a query box are read. All tiles
-must share one CRS.
-"""
+"""Virtual point clouds (``.vpc``): STAC ItemCollections of point cloud tiles, as PDAL wrench's
+``build_vpc`` and QGIS write them. The structure is checked by :mod:`vpcschema`; each tile's header
+is read once and must match the VPC's box (``proj:bbox``, else the WGS 84 ``bbox``) and count; all
+tiles share one CRS; only the tiles meeting a query box are read."""
 
 from __future__ import annotations
 
@@ -21,7 +17,6 @@ import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
 from .lasheader import check_las_header
-from .lasimport import laspy_module
 from .vpcschema import items
 
 
@@ -71,9 +66,8 @@ NATIVE_TOL, WGS84_TOL = 0.01, 1.0
 
 
 def read_vpc(path: str | os.PathLike) -> Vpc:
-    """Parse a ``.vpc`` (its structure checked by :mod:`vpcschema`), each tile's header read and
-    compared with the box and count the VPC gives it; one-line errors name the file, the item and
-    the field or the tile at fault. Cached per file version (tile tasks open it often)."""
+    """Parse and check a ``.vpc`` (see module; errors name the file, the item and the field or tile),
+    cached per version of it and its tiles (tile tasks open it often)."""
     p = Path(path)
     try:
         st = p.stat()
@@ -123,10 +117,8 @@ def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, lis
 
 
 def file_url_path(url: str, windows: bool = os.name == "nt") -> str:
-    """The local path of a ``file://`` URL. On Windows a drive letter (``file:///C:/d/t.laz`` ->
-    ``C:\\d\\t.laz``) and a host (``file://server/share/t.laz`` -> the UNC path
-    ``\\\\server\\share\\t.laz``); elsewhere a host other than localhost is another computer:
-    ValueError saying so."""
+    """The local path of a ``file://`` URL: on Windows a drive letter or a host's UNC path; elsewhere a
+    host other than localhost is another computer (ValueError)."""
     parts = urlparse(url)
     host = "" if parts.netloc.lower() == "localhost" else parts.netloc
     if windows:
@@ -138,8 +130,7 @@ def file_url_path(url: str, windows: bool = os.name == "nt") -> str:
 
 
 def _href(vpc: Path, item) -> str:
-    """The data asset of an item as an absolute path (relative hrefs are relative to the VPC),
-    checked to be a readable regular file."""
+    """An item's data asset as an absolute path (relative to the VPC), a readable regular file."""
     href = item.href
     if href.startswith("file://"):
         try:
@@ -163,9 +154,8 @@ def _href(vpc: Path, item) -> str:
 
 
 def _tile_header(vpc: Path, item, tile_path: str):
-    """(point count, mins, maxs, CRS or None) from the tile's header, checked before laspy reads
-    it (errors name the tile and never quote its bytes)."""
-    laspy = laspy_module()
+    """(point count, mins, maxs, CRS or None) of a tile's header, checked before laspy reads it."""
+    import laspy
     import pyproj
 
     check_las_header(Path(tile_path))
@@ -195,8 +185,7 @@ def _common_crs(vpc: Path, crss: list) -> str | None:
 
 
 def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
-    """The tile with its header's box and count, after checking the VPC's own against them (a
-    wrong box would skip or misplace the tile's points)."""
+    """The tile with its header's box and count, the VPC's checked against them."""
     count, lo, hi, _ = head
     name = Path(tile_path).name
     if item.count is not None and item.count != count:
@@ -209,9 +198,8 @@ def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
 
 
 def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, exact: bool) -> None:
-    """The VPC's x/y box of a tile (what decides whether it is read) against its header's: equal
-    within ``tol`` (plus a relative 1e-9), or with ``exact`` False, holding it. Heights come from
-    the header."""
+    """The VPC's x/y box of a tile against its header's: equal within ``tol`` (and 1e-9 relative), or
+    holding it unless ``exact``."""
     box = list(box)
     half = len(box) // 2
     blo, bhi = np.asarray(box[:2]), np.asarray(box[half : half + 2])
@@ -228,27 +216,20 @@ def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, 
 
 def _from_wgs84(bbox, crs) -> list[float]:
     """A WGS 84 bbox (2D or 3D) as an x/y box in ``crs`` (densified edges)."""
-    import pyproj
-
     b = [float(v) for v in bbox]
-    w, s, e, n = (b[0], b[1], b[3], b[4]) if len(b) == 6 else b
-    t = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
-    return list(t.transform_bounds(w, s, e, n, densify_pts=21))
+    return _box_to("EPSG:4326", crs, *((b[0], b[1], b[3], b[4]) if len(b) == 6 else b))
 
 
-def _to_wgs84(mins, maxs, crs) -> list[float]:
-    """A native 3D box as a WGS 84 3D bbox (GeoJSON requires WGS 84 boundaries)."""
+def _box_to(src, dst, w: float, s: float, e: float, n: float) -> list[float]:
+    """The x/y box w, s, e, n in ``src`` as one in ``dst`` (densified edges)."""
     import pyproj
 
-    t = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
-    w, s, e, n = t.transform_bounds(float(mins[0]), float(mins[1]), float(maxs[0]), float(maxs[1]), densify_pts=21)
-    return [w, s, float(mins[2]), e, n, float(maxs[2])]
+    return list(pyproj.Transformer.from_crs(src, dst, always_xy=True).transform_bounds(w, s, e, n, densify_pts=21))
 
 
 def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative: bool = True) -> Path:
-    """Write a ``.vpc`` grouping LAS/LAZ/COPC ``tiles`` (boxes, counts and CRS from their headers;
-    hrefs relative to the VPC unless ``relative`` is False)."""
-    laspy = laspy_module()
+    """Write a ``.vpc`` of LAS/LAZ/COPC ``tiles`` from their headers (hrefs relative unless not ``relative``)."""
+    import laspy
 
     out = Path(path)
     features = []
@@ -267,7 +248,8 @@ def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative:
         feature = {"type": "Feature", "stac_version": "1.0.0", "id": t.stem}
         if crs is not None:
             props["proj:wkt2"] = crs.to_wkt()
-            feature["bbox"] = _to_wgs84(h.mins, h.maxs, crs)
+            w, s, e, n = _box_to(crs, "EPSG:4326", *map(float, (*h.mins[:2], *h.maxs[:2])))
+            feature["bbox"] = [w, s, float(h.mins[2]), e, n, float(h.maxs[2])]  # GeoJSON: WGS 84
         features.append(
             {
                 **feature,

@@ -1,14 +1,7 @@
-"""The part of the STAC ItemCollection schema a virtual point cloud (``.vpc``) is read by, checked
-field by field before anything trusts it: one error naming the file, the item and the field.
-
-What is read (PDAL wrench ``vpc-spec.md``, STAC 1.0 items with the pointcloud and projection
-extensions): a ``FeatureCollection`` object whose ``features`` are items; each item an object with
-an optional string ``id``, an ``assets`` object of asset objects (the data asset: key ``data``, or
-the first whose ``roles`` list holds ``"data"``) with a string ``href``, an optional ``properties``
-object (``pc:count`` a non-negative integer, ``proj:bbox`` 4 or 6 finite numbers in order,
-``proj:wkt2`` a WKT string, ``proj:projjson`` an object, ``proj:epsg`` a positive integer or null)
-and an optional WGS 84 ``bbox`` (4 or 6 finite numbers, longitudes and latitudes in range).
-"""
+"""The STAC fields a ``.vpc`` is read by (PDAL wrench's ``vpc-spec.md``), checked field by field: one
+error naming the file, the item and the field. A ``FeatureCollection`` of items: an optional ``id``,
+``assets`` (the data asset: key or role ``data``, with an ``href``), optional ``properties``
+(``pc:count``, ``proj:bbox``, ``proj:wkt2``/``projjson``/``epsg``) and WGS 84 ``bbox``."""
 
 from __future__ import annotations
 
@@ -42,17 +35,13 @@ def _clip(text: str, limit: int = 60) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+KINDS = ((type(None), "null"), (bool, "a boolean"), (int | float, "a number"), (str, "a string"))
+KINDS += ((list, "a list"), (dict, "an object"))
+
+
 def _kind(value: Any) -> str:
     """The JSON type of ``value`` as a word (never its content)."""
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, int | float):
-        return "a number"
-    if isinstance(value, str):
-        return "a string"
-    return "a list" if isinstance(value, list) else "an object" if isinstance(value, dict) else type(value).__name__
+    return next((word for kind, word in KINDS if isinstance(value, kind)), type(value).__name__)
 
 
 def items(path, doc: Any) -> list[Item]:
@@ -85,9 +74,7 @@ def _item(fail, k: int, f: Any) -> Item:
         where = f"{where} ('{_clip(ident)}')"
     if f.get("type", "Feature") != "Feature":
         raise fail(f"{where}.type", 'must be "Feature"')
-    props = f.get("properties", {})
-    if props is None:
-        props = {}
+    props = {} if f.get("properties") is None else f["properties"]
     if not isinstance(props, dict):
         raise fail(f"{where}.properties", f"must be an object (got {_kind(props)})")
     return Item(
@@ -150,8 +137,8 @@ def _box(fail, where: str, value: Any, wgs84: bool) -> tuple[float, ...] | None:
 
 
 def _crs(fail, where: str, props: dict) -> tuple[str, Any] | None:
-    """The first CRS field given (``proj:wkt2``, ``proj:projjson``, ``proj:epsg``), parsed;
-    every one given is type-checked (a CRS that cannot be read is named, never ignored)."""
+    """The first CRS field given (``proj:wkt2``, ``proj:projjson``, ``proj:epsg``), parsed; each one
+    given type-checked (a CRS that cannot be read is named, never ignored)."""
     import pyproj
 
     given = []
