@@ -1,9 +1,7 @@
-"""What the volume step leaves out of the soil, and says so: objects that moved between the
-surveys (found by shape, :mod:`soilvolume.soil.objects`) are taken out of the change areas;
-cells whose points were mostly not soil (vegetation, objects, other by the epochs' point rules)
-are listed with the apparent volume they would have added; objects in one survey only
-(machines, containers, materials) are left out too and listed, or counted with
-``--objects count``. The class raster (``excluded.tif``) draws all of it."""
+"""What the volume step leaves out of the soil, and says so: moved objects (by shape,
+:mod:`soilvolume.soil.objects`) out of the change areas; cells mostly of points not soil listed
+with the volume they would have added; objects in one survey only left out and listed (or counted
+with ``--objects count``); the class raster (``excluded.tif``) draws it all."""
 
 from __future__ import annotations
 
@@ -44,9 +42,8 @@ GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shar
 
 @dataclass(frozen=True)
 class Exclusion:
-    """The change areas without moved objects, the class raster, the report's ``excluded``
-    section and the one-sigma volume terms (m3 per part) of what the classification may have
-    missed or wrongly removed."""
+    """The change areas without what was left out, the class raster, the report's ``excluded`` and
+    the one-sigma terms and bound (m3 per part) of the classification."""
 
     fill: np.ndarray
     cut: np.ndarray
@@ -67,13 +64,9 @@ def exclude_nonsoil(
     stable: np.ndarray | None = None,
     refilled: np.ndarray | None = None,
 ) -> Exclusion:
-    """See module; ``areas``: the change areas (fill, cut), ``epochs`` (after, before), the
-    options ``exclude`` (``none``: moved objects stay counted, still listed) and ``objects``
-    (``exclude``: objects in one survey only are left out too, unless ``exclude`` is ``none``);
-    ``heights`` (after, before: the heights the difference is taken from) and ``stable`` ground
-    give the rough cells (:mod:`soilvolume.soil.rough`): fill where the after survey is rough,
-    cut where the before survey is; ``refilled``: the interpolated cells (objects are measured
-    without them)."""
+    """See module; ``areas``: (fill, cut), ``epochs``: (after, before); ``exclude none`` counts
+    moved objects (still listed), ``objects exclude`` leaves out single ones; ``heights`` and
+    ``stable`` give the rough cells; ``refilled``: interpolated cells, no part of an object."""
     (fill, cut), mode, area = areas, options.exclude, grid.cell_area
     shares = _shares(epochs)
     found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
@@ -101,8 +94,7 @@ def exclude_nonsoil(
 
 
 def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, shares: dict):
-    """(the objects found by shape, those of one survey only left out, the grass patches left
-    out) of the change ``areas`` (fill, cut)."""
+    """(objects found by shape, those of one survey left out, grass patches left out) of ``areas``."""
     (fill, cut), mode = areas, options.exclude
     labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
     found = find_objects(diff, fill, cut, grid.cell, refilled=labelled if refilled is None else refilled | labelled)
@@ -114,9 +106,8 @@ def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, s
 
 
 def _by_class(diff, epochs, offset, shares: dict, found, near, cell_area: float, share: float):
-    """(the class raster, the cells of the point classes, the report's ``classes``, the
-    one-sigma terms per part) of the cells mostly of points that are not soil: the apparent
-    volume they would have added, a ``share`` of it near the counted change as the term."""
+    """(class raster, cells of the point classes, the report's ``classes``, one-sigma terms): the
+    volume cells mostly not soil would have added, a ``share`` of it near the change the term."""
     classes = np.where(np.isfinite(diff), 0, 255).astype(np.uint8)
     sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
     apparent, taken, report = _apparent(diff, epochs, offset), np.zeros(diff.shape, bool), {}
@@ -152,26 +143,22 @@ def _objects(diff, found, lone, grid: GridSpec, mode: str, drop_single: bool) ->
 
 
 def _lone(found) -> np.ndarray:
-    """The cells of the objects in one survey only of a machine's, a container's or a stack's
-    size (at most :data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`): left out of
-    the headline by default."""
+    """Objects in one survey only of a machine's size (:data:`OBJECT_MAX_M3`) with a box's walls
+    (:data:`OBJECT_SLOPE`): left out by default."""
     ids = [b.label for b in found.single_blobs() if b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE]
     return found.single & np.isin(found.labels, ids)
 
 
 def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray | None) -> np.ndarray:
-    """Cells whose higher surface (the after survey's on a fill, the before's on a cut) was
-    measured soil: a pile raised on a mown meadow is soil, whatever grew there before."""
+    """Cells whose higher surface was measured soil (a pile on a mown meadow is soil)."""
     after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)
     top = np.where(np.nan_to_num(diff) >= 0, after, before)
     return top if refilled is None else top & ~refilled
 
 
 def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:
-    """Compact change patches (at most :data:`UNCLEAR_AREA_M2`) mostly of cells whose points were
-    vegetation (at least :data:`GRASS_VEG`) with little soil measured on the surface that rose
-    (``bare``, under :data:`GRASS_SOIL`; the rest interpolated under the canopy): grass whose dry
-    blades the colour test missed in a few cells, not soil (a heap of fine soil is measured soil)."""
+    """Compact change patches (:data:`UNCLEAR_AREA_M2`) mostly of vegetation cells (:data:`GRASS_VEG`)
+    with little ``bare`` soil on top (:data:`GRASS_SOIL`): grass the colour test half missed."""
     comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
     if n == 0:
         return np.zeros(change.shape, bool)
@@ -185,8 +172,8 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
 
 
 def _missed_share(epochs: tuple[EpochDEM, EpochDEM]) -> float:
-    """The share of an excluded volume the classification may have got wrong: the files' own LAS
-    classification (ground returns below a canopy are measured) less than colour or returns."""
+    """The share of an excluded volume the classification may have got wrong (a LAS classification's
+    less: its ground under a canopy is measured)."""
     by_class = all(e.rule is not None and e.rule.use_class for e in epochs)
     return CLASS_MISSED_SHARE if by_class else MISSED_SHARE
 
@@ -208,8 +195,7 @@ def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
 
 
 def _apparent(diff: np.ndarray, epochs: tuple[EpochDEM, EpochDEM], offset: np.ndarray) -> np.ndarray:
-    """Per cell, the difference every point would have given minus the soil's (m; 0 where
-    either is unknown): what the excluded points would have added."""
+    """Per cell, what the excluded points would have added to the difference (m; 0 if unknown)."""
     after, before = (e.all_points_height() for e in epochs)
     d = after - before - np.nan_to_num(offset)
     return np.nan_to_num(d - diff)
@@ -243,13 +229,12 @@ def sentence(report: dict) -> list[str]:
     for name, part in (report.get("classes") or {}).items():
         if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
             out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
-    r = report.get("rough") or {}
+    r, g = report.get("rough") or {}, report.get("grass_patches") or {}
     if r.get("area_m2") and abs(r.get("net", 0.0)) >= 0.5:
         out.append(
             f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
             "counted: no classification, colour or returns said what it is"
         )
-    g = report.get("grass_patches") or {}
     if g.get("area_m2") and abs(g.get("net", 0.0)) >= 0.5:
         out.append(
             f"{g['net']:+.0f} m³ of change on {g['area_m2']:.0f} m² of compact patches mostly of vegetation, with "
@@ -262,20 +247,13 @@ def sentence(report: dict) -> list[str]:
             "objects or rough areas could not be classified (counted; the interval holds both readings)"
         )
     s = report.get("single_objects") or {}
-    if s.get("count"):
-        items = s.get("items") or []
-        kept = [i for i in items if i.get("counted", s.get("counted", True))]
-        left = [i for i in items if i not in kept]
-        if left:
-            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in left)
-            out.append(
-                f"{len(left)} object{'s' if len(left) > 1 else ''} in one survey only ({m3:+.0f} m³) left out as "
-                f"machines, containers or materials ({opt('objects', 'exclude')})"
-            )
-        if kept:
-            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in kept)
-            out.append(
-                f"{len(kept)} object{'s' if len(kept) > 1 else ''} in one survey only ({m3:+.0f} m³) counted: "
-                "check that they are soil"
-            )
+    kept = [i for i in s.get("items") or [] if i.get("counted", s.get("counted", True))]
+    left = [i for i in s.get("items") or [] if i not in kept]
+    for group, words in (
+        (left, f"left out as machines, containers or materials ({opt('objects', 'exclude')})"),
+        (kept, "counted: check that they are soil"),
+    ):
+        if s.get("count") and group:
+            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in group)
+            out.append(f"{len(group)} object{'s' if len(group) > 1 else ''} in one survey only ({m3:+.0f} m³) {words}")
     return out

@@ -1,8 +1,6 @@
-"""The quality gate: whether a run's volumes can be trusted, in plain words.
-
-Each check returns a sentence and a severity: ``caution`` (the number stands, read it with the
-reason in mind) or ``unreliable`` (the number must not be used as it is). The verdict is the worst.
-"""
+"""The quality gate: whether a run's volumes can be trusted, in plain words. Each check gives a
+severity, ``caution`` (read the number with the reason in mind) or ``unreliable`` (do not use it as
+it is), and a sentence; the verdict is the worst."""
 
 from __future__ import annotations
 
@@ -32,161 +30,122 @@ def assess(
     """``{"verdict", "trusted", "messages"}`` for a finished run (see module)."""
     v, u = report["volume_m3"], report["uncertainty_m3"]
     out = registration_checks(report["registration"], stable, change, offset, prior, diff)
-    corr = float(np.nansum(np.where(change, offset, 0.0)) * cell_area)
-    out += correction_check(corr, v["net"], u["net"])
-    excluded = report.get("excluded") or {}
-    bound = float((excluded.get("bound_m3") or {}).get("net", 0.0))
-    hidden = report.get("blind") or {}
-    bound += float((hidden.get("bound_m3") or {}).get("net", 0.0))
+    out += correction_check(float(np.nansum(np.where(change, offset, 0.0)) * cell_area), v["net"], u["net"])
+    excluded, hidden = report.get("excluded") or {}, report.get("blind") or {}
+    bound = sum(float((r.get("bound_m3") or {}).get("net", 0.0)) for r in (excluded, hidden))
     random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified or seen
-    out += _blind(hidden, v)
-    out += _canopy(excluded, v)
-    out += _unclassified(excluded, v["net"], random_half)
+    out += _blind(hidden, v) + _canopy(excluded, v) + _unclassified(excluded, v["net"], random_half)
     out += _nonsoil(excluded, random_half, u["net"])
-    out.extend(("caution", m) for m in zone_messages(report.get("zones") or []))
+    out += [("caution", m) for m in zone_messages(report.get("zones") or [])]
     unseen = coverage_check(report)
-    if unseen is not None:
-        out.append(unseen)
+    out += [unseen] if unseen else []
     if all(sev != "unreliable" for sev, _ in out):  # a run not reliable states no confidence
         out += significance_check(v["net"], u["net"])
     return verdict(out)
 
 
 def correction_check(corr: float, net: float, half: float) -> list[tuple[str, str]]:
-    """When the bias correction over the change areas (``corr`` m3) is comparable to the net
-    (a correction within the net's interval ``half`` cannot matter)."""
+    """When the bias correction over the change areas (``corr`` m3) is comparable to the net (and
+    beyond its interval ``half``)."""
     size = max(abs(net), 1e-9)
     if abs(corr) <= 0.5 * size or abs(corr) <= half:
         return []
-    sev = "unreliable" if abs(corr) > 2 * size else "caution"
     said = f"the bias correction ({corr:+.1f} m³ over the change areas) is comparable to the net change ({net:+.1f} m³)"
-    return [(sev, said)]
+    return [("unreliable" if abs(corr) > 2 * size else "caution", said)]
 
 
 def significance_check(net: float, half: float) -> list[tuple[str, str]]:
     """A caution when the net lies within its 95 % interval of zero."""
-    if abs(net) > half:
-        return []
-    return [
-        (
-            "caution",
-            f"the net change ({net:+.1f} m³) is within its 95 % interval (±{half:.1f} m³) of zero: "
-            "it is not significant",
-        )
-    ]
+    said = f"the net change ({net:+.1f} m³) is within its 95 % interval (±{half:.1f} m³) of zero: it is not significant"
+    return [] if abs(net) > half else [("caution", said)]
 
 
 def _nonsoil(excluded: dict, half: float, reported: float) -> list[tuple[str, str]]:
-    """Cautions when what was excluded as not soil, or counted but flagged, is not small against
-    the net's interval without what could not be classified or seen (``half``; ``reported``: the
-    interval the run reports): the headline then rests on that classification. Classes the files'
-    own LAS classification gave are the survey's statement (reported, not doubted here)."""
+    """A caution when what was excluded as not soil, or counted but flagged, is over the net's
+    interval without the unclassified and unseen (``half``; ``reported``: the whole). Classes of
+    the files' own LAS classification are the survey's statement, not doubted here."""
     moved = excluded.get("moved_objects") or {}
     parts = [moved.get("fill", 0.0) + moved.get("cut", 0.0) if moved.get("excluded") else 0.0]
     if not excluded.get("by_classification"):
         parts += [abs(c.get("net", 0.0)) for c in (excluded.get("classes") or {}).values()]
     parts += [abs((excluded.get("rough") or {}).get("net", 0.0))]
-    single = excluded.get("single_objects") or {}
-    parts += [sum(abs(i.get("volume_m3", 0.0)) for i in single.get("items") or [])]
+    parts += [sum(abs(i.get("volume_m3", 0.0)) for i in (excluded.get("single_objects") or {}).get("items") or [])]
     if sum(parts) <= half:
         return []
     words = "; ".join(sentence(excluded))
     if half >= reported - 0.005:  # the reported interval is all measurement
         return [("caution", f"{words}: together more than the net's interval (±{reported:.2f} m³)")]
-    return [
-        (
-            "caution",
-            f"{words}: together more than the part of the net's interval (±{reported:.2f} m³) that is "
-            f"measurement error (±{half:.2f} m³; the rest is change that could not be classified or seen)",
-        )
-    ]
+    said = (
+        f"{words}: together more than the part of the net's interval (±{reported:.2f} m³) that is measurement "
+        f"error (±{half:.2f} m³; the rest is change that could not be classified or seen)"
+    )
+    return [("caution", said)]
 
 
 def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, str]]:
-    """When the change that could not be classified (:mod:`.nonsoil`: compact patches and rough
-    cells without any signal, machine-sized objects in one survey only) is over the net's
-    interval and :data:`UNCLASSIFIED_SHARE` of the net: not reliable without any signal (the
-    number then rests on a guess), use with caution when only objects in one survey are open (the
-    signals said what the rest is); the interval is widened by it either way."""
+    """When the change that could not be classified (:mod:`.unclassified`) is over the net's interval
+    and :data:`UNCLASSIFIED_SHARE` of the net: not reliable without any signal (a guess), a caution
+    when only objects in one survey are open; the interval is widened by it either way."""
     u = excluded.get("unclassified") or {}
-    bound = float((excluded.get("bound_m3") or {}).get("net", 0.0))
-    if bound <= max(half, UNCLASSIFIED_SHARE * abs(net)):
+    if float((excluded.get("bound_m3") or {}).get("net", 0.0)) <= max(half, UNCLASSIFIED_SHARE * abs(net)):
         return []
-    why = (
-        "these are machine-sized objects in one survey only"
-        if u.get("signals", True)
-        else "the files carry no classification, colour or return numbers to say what they are"
-    )
+    signals = u.get("signals", True)
+    why = "these are machine-sized objects in one survey only"
+    why = why if signals else "the files carry no classification, colour or return numbers to say what they are"
     below, above = u.get("net_range_m3") or (-u.get("fill", 0.0), u.get("cut", 0.0))
-    lo, hi = net + below, net + above
-    sev = "caution" if u.get("signals", True) else "unreliable"  # signals said the rest: only objects are open
-    return [
-        (
-            sev,
-            f"{u.get('fill', 0.0) + u.get('cut', 0.0):.0f} m³ of change in {u.get('count', 0)} compact objects or "
-            f"rough areas could not be classified as soil or not ({why}): the soil's net lies anywhere "
-            f"from {lo:+.0f} to {hi:+.0f} m³, and the interval is widened by it",
-        )
-    ]
+    said = (
+        f"{u.get('fill', 0.0) + u.get('cut', 0.0):.0f} m³ of change in {u.get('count', 0)} compact objects or "
+        f"rough areas could not be classified as soil or not ({why}): the soil's net lies anywhere "
+        f"from {net + below:+.0f} to {net + above:+.0f} m³, and the interval is widened by it"
+    )
+    return [("caution" if signals else "unreliable", said)]  # signals said the rest: only objects are open
+
+
+def _moved(v: dict) -> float:
+    """The volume moved (cut + fill, m3; never 0)."""
+    return max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)
 
 
 def _canopy(excluded: dict, v: dict) -> list[tuple[str, str]]:
-    """Change measured under vegetation with return numbers alone (:mod:`.nonsoil`): not reliable
-    over :data:`CANOPY_SHARE` of the volume moved, a caution over a fifth of that."""
+    """Change under vegetation told by return numbers alone: not reliable over
+    :data:`CANOPY_SHARE` of the volume moved, a caution over a fifth of that."""
     c = excluded.get("under_canopy") or {}
     reach = c.get("cut", 0.0) + c.get("fill", 0.0)
-    moved = max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)
-    if reach <= 0.2 * CANOPY_SHARE * moved or reach < 1.0:
+    if reach <= 0.2 * CANOPY_SHARE * _moved(v) or reach < 1.0:
         return []
-    return [
-        (
-            "unreliable" if reach > CANOPY_SHARE * moved else "caution",
-            f"{c.get('area_m2', 0.0):,.0f} m² of the change lies under vegetation that only return numbers "
-            f"told apart (no classification): a dense canopy's single returns may be taken for ground there, "
-            f"so up to {reach:,.0f} m³ of it may be vegetation; the interval is widened by it (a ground "
-            f"classification, or {opt('ground', 'csf')}, measures the ground itself)",
-        )
-    ]
-
-
-def _interpolated(part: dict, v: dict) -> list[tuple[str, str]]:
-    """Change counted where one survey's ground was interpolated under a large hole (grass over a
-    meadow in photogrammetry): not reliable over :data:`BLIND_SHARE` of the volume moved."""
-    m3 = part.get("cut", 0.0) + part.get("fill", 0.0)
-    if m3 <= BLIND_SHARE * max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9):
-        return []
-    return [
-        (
-            "unreliable",
-            f"{m3:,.0f} m³ of the change ({part.get('area_m2', 0.0):,.0f} m²) stands where one survey saw no "
-            "ground over a large area (vegetation or no returns): its ground there was interpolated from "
-            "around it, and the volume carries that interpolation's error (in the interval)",
-        )
-    ]
+    said = (
+        f"{c.get('area_m2', 0.0):,.0f} m² of the change lies under vegetation that only return numbers "
+        f"told apart (no classification): a dense canopy's single returns may be taken for ground there, "
+        f"so up to {reach:,.0f} m³ of it may be vegetation; the interval is widened by it (a ground "
+        f"classification, or {opt('ground', 'csf')}, measures the ground itself)"
+    )
+    return [("unreliable" if reach > CANOPY_SHARE * _moved(v) else "caution", said)]
 
 
 def _blind(hidden: dict, v: dict) -> list[tuple[str, str]]:
-    """Holes without any point inside the works (:mod:`.blind`): not reliable when what they may
-    hide is over :data:`BLIND_SHARE` of the volume moved (the number cannot then be trusted to
-    that), a caution otherwise."""
-    out = _interpolated(hidden.get("interpolated") or {}, v)
+    """Change on one survey's ground interpolated under a large hole, and holes without any point
+    in the works (:mod:`.holes.blind`): not reliable over :data:`BLIND_SHARE` of the volume moved."""
+    out, part = [], hidden.get("interpolated") or {}
+    m3 = part.get("cut", 0.0) + part.get("fill", 0.0)
+    if m3 > BLIND_SHARE * _moved(v):
+        said = (
+            f"{m3:,.0f} m³ of the change ({part.get('area_m2', 0.0):,.0f} m²) stands where one survey saw no "
+            "ground over a large area (vegetation or no returns): its ground there was interpolated from "
+            "around it, and the volume carries that interpolation's error (in the interval)"
+        )
+        out.append(("unreliable", said))
     items = hidden.get("items") or []
     if not items:
         return out
     reach = float((hidden.get("bound_m3") or {}).get("net", 0.0))
-    moved = max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)
-    lo = sum(min(i["range_m3"]) for i in items)
-    hi = sum(max(i["range_m3"]) for i in items)
-    where = " and ".join(sorted({i["survey"] for i in items}))
-    return out + [
-        (
-            "unreliable" if reach > BLIND_SHARE * moved else "caution",
-            f"{hidden['area_m2']:,.0f} m² inside the works has no point at all in the {where} survey "
-            f"({len(items)} hole{'s' if len(items) > 1 else ''}: water, a shadow or no returns): the ground "
-            f"under it is unknown and the volume there adds anywhere from {lo:+,.0f} to {hi:+,.0f} m³ to "
-            "what is counted; the interval is widened by it",
-        )
-    ]
+    lo, hi = sum(min(i["range_m3"]) for i in items), sum(max(i["range_m3"]) for i in items)
+    said = (
+        f"{hidden['area_m2']:,.0f} m² inside the works has no point at all in the "
+        f"{' and '.join(sorted({i['survey'] for i in items}))} survey ({len(items)} hole{'s' if len(items) > 1 else ''}"
+        f": water, a shadow or no returns): the ground under it is unknown and the volume there adds anywhere from "
+        f"{lo:+,.0f} to {hi:+,.0f} m³ to what is counted; the interval is widened by it"
+    )
+    return out + [("unreliable" if reach > BLIND_SHARE * _moved(v) else "caution", said)]
 
 
 def verdict(found: list[tuple[str, str]]) -> dict:

@@ -1,10 +1,5 @@
-"""Level of detection and volume uncertainty from the stable-ground residuals.
-
-* LoD (GCD-style): ``z * sigma`` per cell, sigma = NMAD of the stable residuals, optionally
-  combined in quadrature with a per-cell standard error.
-* Volume uncertainty with spatially correlated error (:mod:`.variogram`), the refills', the
-  correction's leftover bias and what a caller adds, at a confidence.
-"""
+"""Level of detection (GCD-style ``z * NMAD`` of the stable residuals) and volume uncertainty: the
+correlated error (:mod:`.variogram`), the refills', the correction's leftover bias, a caller's terms."""
 
 from __future__ import annotations
 
@@ -23,10 +18,8 @@ INTERP_FRACTION = 0.15
 
 
 def interp_fraction(patch_radius_cells: float) -> float:
-    """One-sigma error of refilled change volume, as a share of it (fully correlated): refills over
-    change edges overshoot convex toes and rims, and the partly covered cells around a hole bias
-    it; both sit at the patch's rim, so the share falls as 1 / radius in cells (measured: 30-80 %
-    on holes of about 2 cells, under 5 % on holes of 6 cells)."""
+    """One-sigma error of refilled change volume as a share of it (fully correlated): overshoot at toes
+    and rims falls as 1 / radius (measured: 30-80 % on holes of ~2 cells, under 5 % on 6 cells)."""
     return float(min(0.5, max(INTERP_FRACTION, 1.0 / max(patch_radius_cells, 1.0))))
 
 
@@ -35,8 +28,7 @@ def z_value(confidence: float = 0.95) -> float:
     return NormalDist().inv_cdf(0.5 + confidence / 2)
 
 
-#: the one-sigma terms (m^3) of ``terms_m3[part]``, in their order: the area's error model, the
-#: refilled share of change, the refill error, the leftover bias, extras (what a caller adds)
+#: the one-sigma terms (m^3) of ``terms_m3[part]``, in order (extras: what a caller adds)
 TERMS = ("area_model", "refilled_share", "refill_error", "leftover_bias", "extras")
 
 
@@ -57,14 +49,10 @@ def volume_uncertainty(
     surface: bool = True,
     bound_m3: dict[str, float] | None = None,
 ) -> dict[str, Any]:
-    """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
-    (all valid cells when None; cut/fill by the sign of the difference) and ``net_compared_area``
-    over every valid cell, with the error model's figures (lod_m, sigma_m, the variogram and its
-    model, areas, ``terms_m3`` per part in the order of :data:`TERMS`). ``n_coef``: coefficients
-    of the correction surface (6 surface, 3 plane, 1 constant, 0 none); the refills and
-    ``surface``: see :class:`_PartTerms`; ``extra_sigma``: further one-sigma terms (m^3) per part;
-    ``counted``: the cells the volumes sum over (a tile's core), while the error model uses every
-    stable cell; ``bound_m3``: volume per part that may or may not be soil, added as it is (:func:`widen`)."""
+    """± half-widths (m^3) at ``confidence`` of net/cut/fill over ``change_mask`` (all valid if None)
+    and ``net_compared_area``, with the error model's figures and ``terms_m3`` (:data:`TERMS`).
+    ``n_coef``: the correction's coefficients; refills and ``surface``: :class:`_PartTerms`;
+    ``counted``: the cells summed (a tile's core); ``bound_m3``: added as it is (:func:`widen`)."""
     d, valid = diff_corrected, np.isfinite(diff_corrected)
     stable = stable_mask & valid
     if counted is not None:
@@ -92,9 +80,8 @@ def volume_uncertainty(
 
 
 def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, float]:
-    """Half-widths (m3) widened by what the classification could not attribute (``bound``, m3
-    per part): the truth lies anywhere between counting all of it and none, so it adds as it is
-    (the net's half-width over every compared cell too)."""
+    """Half-widths (m3) widened by the unattributed ``bound`` per part (all of it or none: it adds
+    as it is; the net's to ``net_compared_area`` too)."""
     b = bound or {}
     out = {k: v + float(b.get(k, 0.0)) for k, v in half.items()}
     if "net_compared_area" in out:
@@ -103,15 +90,10 @@ def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, f
 
 
 class _PartTerms:
-    """The one-sigma terms (m^3) of a part beyond its area's error model: the refilled share of
-    its change (``interp``), the refill error (``refill``) and the correction's leftover bias
-    (``unmodelled``). ``filled_mask``: interpolated cells; their volume gets a fully correlated
-    error of ``fraction`` x its absolute value (hole fills over change edges were off by 10-22 %
-    of their volume on synthetic pairs), and ``fill_sigma`` (m, per cell: the error of refilling
-    known ground) summed fully correlated within each connected refilled patch; ``own``: the
-    refilled cells filled in their own survey (volumes/holes/epochfill), ``fill_sigma`` only.
-    ``surface``: a correction surface was fitted (its leftover's spread on stable ground is
-    carried over the part's area, fully correlated)."""
+    """A part's one-sigma terms (m^3) beyond its area's model: ``fraction`` of its refilled |volume|
+    (hole fills over change edges were off 10-22 % on synthetic pairs; not ``own`` cells, filled in
+    their own survey), ``fill_sigma`` summed per refilled patch, and the correction's leftover bias
+    (with ``surface``, its spread on stable ground over the part's area)."""
 
     def __init__(
         self, diff, valid, stable, grid: GridSpec, filled_mask, own, fill_sigma, fraction: float, surface: bool
@@ -123,8 +105,6 @@ class _PartTerms:
         self.labels, self.n_patches = ndimage.label(self.filled)
         self.fs = np.zeros(valid.shape) if fill_sigma is None else np.where(self.filled, fill_sigma, 0.0)
         self.leftover = leftover_bias(diff, stable, grid.cell)
-        # the correction surface's residual systematic error where it cannot be seen: the spread of
-        # its leftover over the stable ground, carried fully correlated over the part's area
         seen = self.leftover[stable & np.isfinite(self.leftover)] if surface else np.empty(0)  # no surface, none
         self.residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
 
@@ -158,11 +138,8 @@ class _PartTerms:
 
 
 def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
-    """One-sigma volume (m3) per part of the cell statistic's own bias where outliers, walls or
-    canopy leftovers fall in cells: how far the statistic moved each epoch's cells from their
-    medians, differenced, summed over the part (fully correlated: a wall or a rim biases all its
-    cells alike). ``skews``: (after, before) per-cell height minus median (None: 0); refilled
-    cells carry no statistic of their own."""
+    """One-sigma volume (m3) per part of the cell statistic's bias: ``skews`` (after, before: height
+    minus median, None: 0) differenced and summed, fully correlated; refilled cells none."""
     d = np.zeros(refilled.shape)
     for sign, sk in zip((1.0, -1.0), skews, strict=True):
         if sk is not None:
@@ -172,9 +149,8 @@ def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarr
 
 
 def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
-    """Level of detection (m) of one cell: from the stable-ground residuals (see :func:`_lod`),
-    but at most twice the LoD of the neighbour-difference noise, so real change left in what
-    was taken as stable ground (e.g. a thin layer on well georeferenced surveys) cannot inflate it."""
+    """A cell's level of detection (m): :func:`_lod` of the stable residuals, at most twice the
+    neighbour noise's (change left in the stable ground cannot inflate it)."""
     r = diff[stable & np.isfinite(diff)]
     lod = _lod(r, nmad(r), confidence) if r.size else None
     noise = noise_sigma(diff)
@@ -184,9 +160,8 @@ def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.
 
 
 def leftover_bias(residual: np.ndarray, stable: np.ndarray, cell: float, scale_m: float = 10.0) -> np.ndarray:
-    """The bias the correction surface left, carried into the change areas: the stable-ground
-    residuals smoothed over ``scale_m`` (normalized convolution; NaN far from stable ground). A
-    dome that is not quite a degree-2 surface leaves millimetres here that a volume multiplies."""
+    """The stable residuals smoothed over ``scale_m`` into the change areas (NaN far from stable
+    ground): the millimetres a dome not quite of degree 2 leaves, which a volume multiplies."""
     w = (stable & np.isfinite(residual)).astype(float)
     s = max(1.0, scale_m / cell)
     num = ndimage.gaussian_filter(np.where(w > 0, residual, 0.0), s)
@@ -196,8 +171,7 @@ def leftover_bias(residual: np.ndarray, stable: np.ndarray, cell: float, scale_m
 
 
 def _lod(stable_residuals: np.ndarray, sigma: float, confidence: float) -> float | None:
-    """LoD at ``confidence``: z x NMAD, or the empirical quantile of |stable residuals| when the
-    residuals have heavier tails than a normal distribution (they usually do)."""
+    """LoD at ``confidence``: z x NMAD, or the |residuals|' quantile when heavier-tailed (usually)."""
     if not np.isfinite(sigma):
         return None
     r = np.abs(stable_residuals[np.isfinite(stable_residuals)])

@@ -1,21 +1,9 @@
-"""Change no survey could see: holes with no point at all (water, a shadow, no returns) inside
-the works.
+"""Change no survey could see: holes without any point (water, a shadow) inside the works.
 
-A hole of one survey is refilled from its rim (small ones) or left out (large ones). On
-unchanged ground that is right; inside a pit it is not: the rim of a pond is its water line, and
-a surface interpolated from it is the water's, not the pit's bottom (a 2 m pit with 0.8 m of
-water read 82 % of its cut). The ground under such a hole is unknown, so the volume there is a
-range, not a number:
-
-* at one end, the difference interpolated from the rim (what the headline holds for a refilled
-  hole; for one left out, its volume is added to the range);
-* at the other, the difference carried on into the hole at the rim's own slope (a pit's walls
-  going on down, capped at :data:`DEEPER` times the depth seen at the rim).
-
-The interval is widened by that range (it holds both readings) and the verdict says why. A hole
-counts when most of its rim is in a change area and the survey's ground falls into it from all
-around (a basin: water gathers there; an occlusion beside or on a pile has no such rim, and the
-refill from it stands); holes on unchanged ground are not change.
+Filled from its rim, a pond in a pit reads the water, not the bottom (a 2 m pit with 0.8 m of water
+read 82 % of its cut). So a hole whose rim is mostly change and whose ground falls into it from all
+around (a basin) is a range: from the fill of its rim to the rim's slope carried on inwards (capped
+at :data:`DEEPER` times the rim's depth). The interval is widened by it and the verdict says why.
 """
 
 from __future__ import annotations
@@ -51,10 +39,9 @@ def blind_change(
     cell_area: float,
     seen_once: np.ndarray | None = None,
 ) -> Blind:
-    """The holes without any point of either survey (``epochs``: after, before) whose rim is mostly
-    in the ``change`` areas, and the range of the change under them (see module); ``seen_once``:
-    cells of a large hole of one survey filled from its own ground around it, the other survey
-    measuring a pile across it (their counted change is reported: it rests on that fill)."""
+    """The basins without any point of either survey (``epochs``: after, before) in the ``change``
+    areas, their range (see module), and the counted change on ``seen_once`` cells (filled in one
+    survey from its own ground, the other measuring a pile across them)."""
     bound = dict.fromkeys(("net", "cut", "fill"), 0.0)
     items = []
     for name, e in zip(NAMES, epochs, strict=True):
@@ -92,9 +79,8 @@ def _rings(cells: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def _basin(h: np.ndarray, cells: np.ndarray) -> bool:
-    """Whether the survey's own ground falls into the hole from around it (its rim, in the median,
-    :data:`BASIN_DROP_M` below the ground a few cells further out): a pond or a pit's bottom. An
-    occlusion beside a pile on flat ground, or on its flank, has none, and its refill stands."""
+    """Whether the hole's rim lies (median) :data:`BASIN_DROP_M` below the ground a few cells out: a
+    pond or a pit's bottom, not an occlusion beside or on a pile (whose refill stands)."""
     near, far = _rings(cells, np.isfinite(h))
     if near.sum() < 4 or not far.any():
         return False
@@ -107,8 +93,7 @@ def _basin(h: np.ndarray, cells: np.ndarray) -> bool:
 
 
 def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: float) -> dict | None:
-    """One hole's range (m3, relative to what the headline holds there), or None when its rim is
-    not in the works or what it may hide is negligible."""
+    """One hole's range (m3, against the headline), or None off the works or when negligible."""
     ring = ndimage.binary_dilation(cells, iterations=2) & ~cells & np.isfinite(diff)
     if not ring.any() or float(np.mean(change[ring])) < RIM_SHARE:
         return None

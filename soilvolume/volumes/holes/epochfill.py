@@ -1,24 +1,11 @@
-"""Holes of one survey filled from that survey's own neighbours, where the other survey sees
-change across them.
+"""Holes of one survey filled from its own neighbours where the other sees change across them.
 
-A hole of the difference is interpolated from the difference around it, which is smooth on
-unchanged ground whatever the terrain (the terrain's detail inside the hole is the same in both
-surveys and cancels). Where one survey has a hole and the other sees an object's wall or a
-pile's flank across it, the difference is not smooth: interpolated across a 5 m wall, a
-before-survey hole on a pillar's side dipped to -3...-5 m (accuracy harness, paper-pillars-rgb:
--19 m3 on a 299 m3 pillar). There the other survey's heights hold the change, and the survey
-with the hole only misses its own ground: that ground is interpolated from its own neighbours
-(its own detail is all the error) and the difference taken from the measured survey.
-
-The choice is made per hole from what the data say: the measured survey's heights inside the
-hole against their own interpolation from its rim (its detail there) are compared with how far
-the survey with the hole departs from its own interpolation on holes of that size on its known
-ground (its typical detail). Detail far beyond that is change, not shared terrain, when the
-hole's rim shows change too (an object of the other survey standing wholly inside a hole, with
-no change around it, is left to the difference: a machine that left over a hole of the later
-survey is no soil cut). A hole with a quarter or more of its cells empty in both surveys is the
-difference's to fill whole (a cell filled in its own survey beside them anchored that fill:
-one moved a 72-cell hole by 13 m3).
+The difference is smooth on unchanged ground, not across an object's wall: interpolated across a
+5 m wall, a hole on a pillar's side dipped to -3...-5 m (paper-pillars-rgb: -19 m3 on a 299 m3
+pillar). Such a hole is filled in its own survey when the measured survey's detail inside it is
+far beyond the other's typical detail on holes of that size, and its rim shows change too (a
+machine that left over a hole is no soil cut). A hole a quarter or more empty in both surveys is
+the difference's to fill (a cell filled in its own survey beside them moved a 72-cell hole by 13 m3).
 """
 
 from __future__ import annotations
@@ -40,12 +27,9 @@ BULK_MIN_M2 = 100.0  # ... a hole that large at least (smaller shared holes are 
 def fill_own_holes(
     h_a: np.ndarray, h_b: np.ndarray, hole: np.ndarray, weak: tuple, method: str, seed: int = 0, cell_area: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(after, before, cells filled in their own survey, their one-sigma error in m): the
-    ``hole`` cells empty in one survey only whose other survey sees change across them (see
-    module) interpolated in the survey they are missing from, with that survey's ``weak`` cells
-    (after, before: refilled, or few points: partly covered beside a hole) next to them; the
-    others are left to the difference's fill. The error is that survey's mean-height error on
-    holes of the patch's size."""
+    """(after, before, cells filled in their own survey, their one-sigma error in m): ``hole`` cells
+    the other survey sees change across (see module) filled in the survey that misses them, with its
+    ``weak`` cells (after, before) next to them; the error is its mean-height error at that size."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
     parts, m = ndimage.label(hole, FOUR)
     share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
@@ -87,8 +71,7 @@ def fill_own_holes(
 
 
 def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
-    """Per patch, the change its rim shows (m): the larger of the rim's typical |difference| and
-    its spread (upper minus lower decile); 0 without a measured rim."""
+    """Per patch, its rim's change (m): the larger of its typical |difference| and its 10-90 % spread."""
     grown = ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
     ring = (labels == 0) & (grown > 0) & np.isfinite(d)
     out = np.zeros(n)
@@ -100,19 +83,16 @@ def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
 
 
 def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np.ndarray:
-    """Per patch radius (cells): the survey's own (per-cell RMS, mean-height) departures from
-    its interpolation on test holes of about that radius cut from its known cells
-    (:func:`.testholes.error_by_radius`); never taken for change where there is no room."""
+    """Per radius, the survey's own (per-cell RMS, mean-height) fill error
+    (:func:`.testholes.error_by_radius`; infinite without room: never change)."""
     out = error_by_radius(h, np.isfinite(h), method, radius, seed, per_cell=True, floor=1e-9)
     return np.full((radius.size, 2), np.inf) if out is None else out
 
 
 def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_area: float):
-    """(cells filled, one-sigma error in m) of the shared holes in which a survey measures more
-    than a machine's volume off its own interpolation (:data:`BULK_M3`: a pile raised on a meadow
-    whose grass hides the ground of both surveys around it): each survey's missing cells there
-    filled from its own known cells, harmonically (no overshoot beside the pile's foot), in place
-    in ``out``; the error is the two surveys' mean-height errors on holes of the part's size."""
+    """(cells filled, one-sigma error in m) of the shared holes a survey sees a pile in (a pile on a
+    meadow whose grass hides both surveys' ground): filled harmonically (no overshoot at the foot)
+    in each survey, in place in ``out``; the error is both surveys' at the hole's size."""
     done, sigma = np.zeros(parts.shape, bool), np.zeros(parts.shape)
     size = np.bincount(parts.ravel(), minlength=int(parts.max()) + 1)
     for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
@@ -138,9 +118,8 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
 
 
 def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[float, float]:
-    """(RMS in m, volume in m3) of a survey's measured cells in ``region`` off its own harmonic
-    interpolation across it: a pile stands out of the terrain's own detail and holds more than
-    :data:`PILE_M3`; the ground's relief does not."""
+    """(RMS in m, volume in m3) of a survey's measured cells in ``region`` off its own harmonic fill
+    across it (a pile's is over :data:`PILE_M3`, the ground's relief not)."""
     seen = region & np.isfinite(e)
     if not seen.any():
         return 0.0, 0.0
