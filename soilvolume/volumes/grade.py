@@ -12,8 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec
-from .polygons import read_polygons, to_grid_crs
-from .zones import polygon_masks
+from .zones import on_grid, polygon_masks
 
 CUT, ON_GRADE, FILL = 1, 2, 3  # grade.tif's classes (255: not compared)
 CLASSES = {"1": "cut to go: survey above design by more than T", "2": "on grade: within ±T", "3": "fill to go"}
@@ -52,12 +51,10 @@ def grade(diff: np.ndarray, grid: GridSpec, tolerance: float, zones: str | Path 
     cls = classes(diff, tolerance)
     out = {"tolerance_m": tolerance, "classes": CLASSES, **summary(diff, cls, grid.cell_area)}
     if zones:
-        polys, wkt = read_polygons(zones)
-        polys = to_grid_crs(polys, wkt, grid, zones)
-        masks = polygon_masks(polys, grid)
+        polys, _ = on_grid(zones, grid)
         out["zones"] = [
             {"id": p.id, "name": p.name, **summary(diff, cls, grid.cell_area, m)}
-            for p, m in zip(polys, masks, strict=True)
+            for p, m in zip(polys, polygon_masks(polys, grid), strict=True)
         ]
     return cls, out
 

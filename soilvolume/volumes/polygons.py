@@ -1,9 +1,6 @@
-"""Polygons from a vector file (GeoPackage, Shapefile, GeoJSON, ...) for zones and stable-ground
-masks: read with pyogrio (its own GDAL; works where GDAL's Python bindings are missing); invalid
-geometries repaired with shapely's ``make_valid`` (those left without area refused); brought
-into the grid's CRS with pyproj (a file without a CRS is taken to be in the grid's; coordinates
-its declared CRS cannot hold are refused).
-"""
+"""Polygons (and lines) of a user's vector file: read with pyogrio (its own GDAL), invalid geometries
+repaired with shapely's ``make_valid`` (refused without area), brought into the grid's CRS with
+pyproj (a file without a CRS is taken to be in the grid's; coordinates its CRS cannot hold refused)."""
 
 from __future__ import annotations
 
@@ -22,8 +19,7 @@ POLYGONAL = ("Polygon", "MultiPolygon")
 
 @dataclass
 class Polygon:
-    """One feature: a polygonal shapely geometry (in the file's CRS until reprojected), its id,
-    display name and whether its geometry had to be repaired."""
+    """One feature: its id, display name, shapely geometry and whether it was repaired."""
 
     id: int
     name: str
@@ -34,23 +30,19 @@ class Polygon:
 def read_polygons(
     path: str | Path, name_field: str | None = None, what: str = "zones file"
 ) -> tuple[list[Polygon], str | None]:
-    """(polygons, CRS WKT or None) of the first layer of ``path``; non-polygon features are
-    skipped. Raises SoilVolumeError naming ``what`` and the file when it cannot be used."""
+    """(polygons, CRS WKT or None) of the first layer of ``path`` (other features skipped); an error
+    naming ``what`` and the file when it cannot be used."""
     path = Path(path)
     feats, wkt = _features(path, what, "polygons", POLYGONAL)
-    polys = []
-    for i, fid, props, geom in feats:
-        name = _name(props, name_field, i, path)
-        polys.append(_valid(Polygon(fid, name, geom), path))
+    polys = [_valid(Polygon(fid, _name(props, name_field, i, path), geom), path) for i, fid, props, geom in feats]
     if not polys:
         raise SoilVolumeError(f"{path}: no polygon features in this {what}")
     return polys, wkt
 
 
 def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple[list[tuple], str | None]:
-    """([(index, id, attributes, geometry)] of the non-empty features of ``kinds`` in the first
-    layer of ``path``, its CRS WKT or None): the checks every reader of a user's vector file
-    makes, each failure one line naming ``what`` and the file."""
+    """([(index, id, attributes, geometry)] of the non-empty ``kinds`` features of the first layer of
+    ``path``, CRS WKT or None); each failure one line naming ``what`` and the file."""
     if not path.exists():
         raise SoilVolumeError(f"{path}: {what} not found")
     if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
@@ -75,14 +67,8 @@ def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple
 
 
 def feature_fields(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
-    """[(feature id, attributes)] of the polygon features of ``path``'s first layer (ids as
-    :func:`read_polygons` gives them)."""
-    feats, _ = _read(Path(path))
-    return [
-        (int(fid if fid is not None else i), props)
-        for i, (fid, props, g) in enumerate(feats)
-        if g is not None and not g.is_empty and g.geom_type in POLYGONAL
-    ]
+    """[(feature id, attributes)] of the polygon features of ``path`` (as :func:`read_polygons`)."""
+    return [(fid, props) for _, fid, props, _ in _features(Path(path), "zones file", "polygons", POLYGONAL)[0]]
 
 
 def _read(path: Path):
@@ -122,8 +108,7 @@ def _name(props: dict, field: str | None, i: int, path: Path) -> str:
 
 
 def _valid(p: Polygon, path: Path) -> Polygon:
-    """``p`` with finite coordinates and a valid polygonal geometry (repaired with ``make_valid``),
-    or an error."""
+    """``p`` with finite coordinates and a valid polygonal geometry (repaired), or an error."""
     import shapely
 
     if not np.isfinite(shapely.get_coordinates(p.geometry)).all():  # GEOS cannot even repair it
@@ -134,7 +119,7 @@ def _valid(p: Polygon, path: Path) -> Polygon:
         fixed = shapely.make_valid(p.geometry)
     except shapely.errors.GEOSException as exc:
         raise SoilVolumeError(f"{path}: '{p.name}' is not a valid polygon and cannot be repaired ({exc})") from None
-    parts = [g for g in shapely.get_parts(fixed) if g.geom_type in ("Polygon", "MultiPolygon")]
+    parts = [g for g in shapely.get_parts(fixed) if g.geom_type in POLYGONAL]
     area = shapely.union_all(parts) if parts else None
     if area is None or area.is_empty or area.area <= 0:
         raise SoilVolumeError(f"{path}: '{p.name}' is not a valid polygon and has no area once repaired")
@@ -142,9 +127,8 @@ def _valid(p: Polygon, path: Path) -> Polygon:
 
 
 def grid_transform(src_wkt: str | None, grid_wkt: str | None):
-    """The pyproj Transformer from a vector file's CRS to a grid's, compared on their horizontal
-    parts (a 2-D file against a compound survey CRS is no reprojection); None when either CRS
-    is unknown or they are equal."""
+    """The pyproj Transformer between the horizontal parts of a file's CRS and a grid's; None when
+    either is unknown or they are equal."""
     import pyproj
 
     if not src_wkt or not grid_wkt:
@@ -157,8 +141,8 @@ def grid_transform(src_wkt: str | None, grid_wkt: str | None):
 
 
 def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Path = "") -> list[Polygon]:
-    """Polygons reprojected to the grid's horizontal CRS (unchanged when either CRS is unknown
-    or they are equal); coordinates that cannot be transformed are an error naming the file."""
+    """Polygons in the grid's horizontal CRS (:func:`grid_transform`); coordinates that cannot be
+    transformed are an error naming the file."""
     import pyproj
     import shapely
 
@@ -183,9 +167,8 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
 
 
 def read_lines(path: str | Path, what: str = "sections file") -> tuple[list[Polygon], str | None]:
-    """(lines, CRS WKT or None) of the first layer of ``path``: its (multi)line features, each
-    named by a field called name, id or label (else ``line N``). Raises SoilVolumeError naming
-    ``what`` and the file when it is missing, unreadable or holds no line."""
+    """(lines, CRS WKT or None) of the first layer of ``path``, named by a field name, id or label
+    (else ``line N``); an error naming ``what`` and the file when it cannot be used."""
     import shapely
 
     path = Path(path)

@@ -1,16 +1,8 @@
-"""Volumes of a series of surveys E0, E1, ... En on one grid, built so that the periods add up.
-
-Each later epoch k is corrected once into E0's frame: the volume step of the pair E0 -> Ek
-(:func:`.compute.compute_volumes`: weak cells and holes refilled, the bias correction on stable
-ground) gives ``D_k``, Ek's corrected surface minus E0's, with ``D_0 = 0``. All epochs then share
-one set of cells: the cells every pair compares (``valid``), one set of refilled cells (any
-pair's) and one stable ground (stable in every pair). A period i -> j is ``D_j - D_i``, the
-cumulative ``D_n``; its net is summed over one set of cells for every period, the works (the
-union of every period's and the cumulative's areas of significant change), so the nets
-telescope: ``sum_i (W_{i+1} - W_i) = W_n`` with ``W_k`` the sum of ``D_k`` over the works. Cut and
-fill are each period's own areas of significant change (as in an estimate run);
-``below_detection`` is the rest of the net, the change over the works outside them.
-The intervals: :mod:`.seriesunc`."""
+"""Volumes of a series E0 ... En on one grid, built so that the periods add up: the volume step of
+each pair E0 -> Ek gives ``D_k`` (``D_0 = 0``) on the cells every pair compares, refilled in any,
+stable in all. A period i -> j is ``D_j - D_i``; its net is summed over the works (every period's
+change areas), so the nets telescope to ``W_n``; cut and fill are its own change areas,
+``below_detection`` the rest of the net. The intervals: :mod:`.seriesunc`."""
 
 from __future__ import annotations
 
@@ -58,20 +50,6 @@ class SeriesVolumes:
     works_m3: list[float]  # W_k: D_k summed over the works
 
 
-def common_cells(vols: list[Volumes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(valid, refilled, stable): compared by every pair, refilled by any, stable in all."""
-    valid = np.logical_and.reduce([np.isfinite(v.diff) for v in vols])
-    refilled = np.logical_or.reduce([v.filled_mask for v in vols]) & valid
-    stable = np.logical_and.reduce([v.stable for v in vols]) & valid & ~refilled
-    return valid, refilled, stable
-
-
-def _areas(diff, se: tuple, refilled, stable, options: Options):
-    lod = detection_level(diff, stable, options.lod_confidence)
-    lod_cell = cell_lod(lod, se[0], se[1], z_value(options.lod_confidence))
-    return change_areas(diff, lod_cell, refilled=refilled), lod_cell
-
-
 def combine(
     vols: list[Volumes],
     dems: list[EpochDEM],
@@ -79,9 +57,11 @@ def combine(
     grid: GridSpec,
     options: Options,
 ) -> SeriesVolumes:
-    """The series from the pairs E0 -> Ek (``vols[k-1]``), each epoch's DEM (``dems[k]``,
-    E0 first) and each later epoch's move to its alternative pose (``moves[k-1]``, or None)."""
-    valid, refilled, stable = common_cells(vols)
+    """The series from the pairs E0 -> Ek (``vols[k-1]``), each epoch's DEM (``dems[k]``, E0 first)
+    and each later epoch's move to its alternative pose (``moves[k-1]``, or None)."""
+    valid = np.logical_and.reduce([np.isfinite(v.diff) for v in vols])
+    refilled = np.logical_or.reduce([v.filled_mask for v in vols]) & valid
+    stable = np.logical_and.reduce([v.stable for v in vols]) & valid & ~refilled
     to_e0 = [np.where(valid, 0.0, np.nan)] + [np.where(valid, v.diff, np.nan) for v in vols]
     se = [np.where(refilled, np.nan, cell_sigma(d.spread, d.counts)) for d in dems]
     pose = [np.zeros((grid.rows, grid.cols))] + [
@@ -92,7 +72,9 @@ def combine(
     found = {}
     for i, j in pairs:
         diff = to_e0[j] - to_e0[i]
-        found[i, j] = (diff, *_areas(diff, (se[i], se[j]), refilled, stable, options))
+        lod = detection_level(diff, stable, options.lod_confidence)
+        lod_cell = cell_lod(lod, se[i], se[j], z_value(options.lod_confidence))
+        found[i, j] = (diff, change_areas(diff, lod_cell, refilled=refilled), lod_cell)
     works = np.logical_or.reduce([fill | cut for _, (fill, cut), _ in found.values()])
     works_m3 = [math.fsum(d[works & valid].tolist()) * grid.cell_area for d in to_e0]
     changes = []

@@ -1,26 +1,11 @@
-"""The interval of a period of a series of surveys (see :mod:`.series`).
+"""The interval of a period of a series (:mod:`.series`).
 
-Covariance. Write epoch k's corrected surface as ``Z_k = T_k + e_k`` (truth plus error; E0
-defines the frame, so its registration error is nil, not its height error). Each later epoch
-is corrected once, relative to E0: ``D_k = Z_k - Z_0``, so the period difference is
-``D_j - D_i = (T_j - T_i) + (e_j - e_i)``: E0's error cancels from every period that does not
-start at E0, and a period's error holds only the errors of its own two epochs. Hence
-
-- ``var(V_ij) = var(E_i) + var(E_j)`` (volumes ``E_k`` of ``e_k`` over the period's cells);
-- ``cov(V_hi, V_ij) = -var(E_i)``: two consecutive periods share epoch i's error with opposite
-  signs (a survey that reads high makes the period before it too large and the one after it too
-  small), so the sum of the periods is not the root-sum-square of their intervals;
-- the cumulative ``D_n - D_0 = D_n`` holds E0's and the last epoch's errors only, whatever
-  happened between: the intermediate errors cancel in the telescoping sum.
-
-Each interval is therefore computed on its own difference ``D_j - D_i``, whose stable-ground
-residuals are exactly ``e_j - e_i`` there: the error model of
-:func:`.uncertainty.volume_uncertainty` (variogram, refills, leftover bias) sees the two epochs'
-combined error, never a third epoch's. The fitted correction surfaces: one for a period from E0
-and for the cumulative (E0 is not corrected), two (each later epoch's own, independent) for a
-period between two later epochs. The registration term is the change of the period's volume
-when both epochs' poses move to their nearly as good alternatives (``pose_j - pose_i``, per
-cell, so the shared epoch's pose enters its two periods with opposite signs as well).
+With ``Z_k = T_k + e_k`` and ``D_k = Z_k - Z_0``, a period's difference ``D_j - D_i`` holds only
+its two epochs' errors: ``var(V_ij) = var(E_i) + var(E_j)``, consecutive periods covary by
+``-var(E_i)`` (so their sum is not the root-sum-square of their intervals) and the cumulative
+``D_n`` holds E0's and the last epoch's only. Each interval is thus computed on its own difference,
+whose stable residuals are ``e_j - e_i``, with one correction surface fitted from E0 (and the
+cumulative), two between later epochs; its registration term is ``pose_j - pose_i`` per cell.
 """
 
 from __future__ import annotations
@@ -50,12 +35,9 @@ def period_uncertainty(
     options: Options,
     fits: int,
 ) -> dict:
-    """± half-widths (m3, at ``options.lod_confidence``) of a period's net (summed over
-    ``works``), cut and fill (over its own ``areas``: fill, cut), from its difference ``diff``
-    (see the module's covariance). ``pose``: per-cell change of the difference (m) when the two
-    epochs' poses move to their alternatives; ``skews``: the two epochs' (end, start) cell statistics'
-    offsets from their medians (:func:`.uncertainty.statistic_bias`); ``fits``: correction
-    surfaces in the difference."""
+    """± half-widths (m3) of a period's net (over ``works``), cut and fill (its ``areas``: fill, cut)
+    from its ``diff`` (see module); ``pose``: the difference's change at the alternative poses (m),
+    ``skews``: (end, start) cell statistics' (:func:`.uncertainty.statistic_bias`), ``fits``: surfaces."""
     (fill_area, cut_area), area = areas, grid.cell_area
     reg_v = signed_budget(pose, fill_area, cut_area, area)
     reg_v["net"] = abs(float(np.nansum(np.where(works, pose, 0.0)))) * area
@@ -81,18 +63,12 @@ def period_uncertainty(
 def _merged(on_works: dict, on_areas: dict, conf: float, named: dict) -> dict:
     """A period's interval: the net's from the works, cut and fill from its own areas, the
     ``named`` terms."""
+    by = {"net": on_works, "cut": on_areas, "fill": on_areas}
+    kept = ("sigma_m", "lod_m", "nugget_m2", "psill_m2", "range_m", "bias_sigma_m", "stable_cells")
     return {
-        "net": on_works["net"],
-        "cut": on_areas["cut"],
-        "fill": on_areas["fill"],
+        **{k: u[k] for k, u in by.items()},
         "confidence": conf,
-        "sigma_m": on_works["sigma_m"],
-        "lod_m": on_works["lod_m"],
-        **{k: on_works[k] for k in ("nugget_m2", "psill_m2", "range_m", "bias_sigma_m", "stable_cells")},
+        **{k: on_works[k] for k in kept},
         **named,
-        "terms_m3": {  # one-sigma: area model, refilled share, refill error, leftover bias, extras
-            "net": on_works["terms_m3"]["net"],
-            "cut": on_areas["terms_m3"]["cut"],
-            "fill": on_areas["terms_m3"]["fill"],
-        },
+        "terms_m3": {k: u["terms_m3"][k] for k, u in by.items()},  # one-sigma, in the order of uncertainty.TERMS
     }
