@@ -1,7 +1,5 @@
-"""Stage 5 of the volume step, the budgets: cut, fill and net of the headline (the change
-areas) and beside it (every compared cell, uncompensated, the paper's plane, thresholded,
-refilled), the zones' (``--zones``), and the cells compared (empty cells, coverage), each
-counted on a tile's core only."""
+"""Stage 5, the budgets: the headline's (the change areas) and those beside it, the zones', and the
+cells compared, each counted on a tile's core only."""
 
 from __future__ import annotations
 
@@ -32,8 +30,7 @@ def budgets(
     grid: GridSpec,
     options: Options,
 ) -> tuple[Budgets, Cells]:
-    """The budgets and the cells compared (see module); ``d_i``: the paper's plane offsets,
-    ``epochs``: after, before, ``options``: the run's :class:`Options`."""
+    """The budgets and the cells compared; ``d_i``: the paper's plane offsets."""
     core, area = c.core, grid.cell_area
     d, filled = c.diff[core], c.filled[core]
     out = Budgets(
@@ -49,7 +46,7 @@ def budgets(
 
 
 def _cells(s: Refill, c: Corrected, epochs: tuple[EpochDEM, EpochDEM]) -> Cells:
-    """The empty cells of the grid (either survey, the before, the after) and the coverage."""
+    """The empty cells (either survey, the before, the after) and the coverage."""
     core, (n_a, n_b) = c.core, (e.counts for e in epochs)
     return Cells(
         empty_cells=int((~np.isfinite(s.raw[core])).sum()),
@@ -60,8 +57,7 @@ def _cells(s: Refill, c: Corrected, epochs: tuple[EpochDEM, EpochDEM]) -> Cells:
 
 
 def _zones(c: Corrected, a: Areas, iv: Interval, grid: GridSpec, options: Options) -> list:
-    """The zones' budgets over the counted change cells, fill and cut over the change areas as
-    the headline's, with their intervals (whole grid only)."""
+    """The zones' budgets over the counted change, as the headline's, with intervals (whole grid)."""
     (rows, cols), whole, d = c.core, not c.tile, c.diff[c.core]
     zgrid = grid if whole else grid.window(rows.start, rows.stop, cols.start, cols.stop)
     interval = partial(zone_interval, iv.model, a.counted, iv.uncertainty) if whole else None  # tiles: not yet

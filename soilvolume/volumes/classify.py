@@ -1,6 +1,5 @@
-"""Stage 3 of the volume step, the classification: the areas of significant change
-(:mod:`.change`), what in them is not soil left out and listed (:mod:`.nonsoil`), and the
-stable ground of the error model kept away from the change."""
+"""Stage 3, the classification: the change areas (:mod:`.change`), what in them is not soil
+(:mod:`.nonsoil`), the error model's stable ground away from the change."""
 
 from __future__ import annotations
 
@@ -22,8 +21,7 @@ MIN_QUIET = 12  # stable cells away from the change the error model needs, else 
 
 @dataclass(frozen=True)
 class Areas:
-    """The change areas counted (fill, cut: moved objects and what is not soil left out), what
-    was left out (``exclusion``) and the stable ground of the error model."""
+    """The change areas counted (what is not soil left out), the ``exclusion``, the stable ground."""
 
     fill: np.ndarray
     cut: np.ndarray
@@ -37,9 +35,8 @@ class Areas:
 
 
 def classify(s: Refill, c: Corrected, epochs: tuple[EpochDEM, EpochDEM], grid: GridSpec, options: Options) -> Areas:
-    """The change areas of the corrected difference and what is not soil in them; ``epochs``:
-    after, before. Stable ground for the error model is never a cell of (or next to) a detected
-    change area, unless the user drew it."""
+    """The change areas and what is not soil in them; the error model's stable ground never in or
+    next to a change area, unless the user drew it."""
     refilled = s.filled_mask & ~s.seen_once
     fill, cut = change_areas(c.diff, c.lod_cell, refilled=refilled)
     ex = exclude_nonsoil(c.diff, (fill, cut), epochs, c.offset, grid, options, s.heights, c.stable, refilled)

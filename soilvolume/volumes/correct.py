@@ -1,7 +1,5 @@
-"""Stage 2 of the volume step, the correction: the bias found on stable ground
-(:mod:`soilvolume.compensation.correction`; a tile is given the overview's) subtracted from the
-refilled difference, each cell's level of detection, and the holes whose rim holds both change
-and unchanged ground refilled from each side of the outline (:mod:`.holes.outline`)."""
+"""Stage 2, the correction: the bias found on stable ground (a tile is given the overview's)
+subtracted, each cell's level of detection, holes across the outline refilled (:mod:`.holes.outline`)."""
 
 from __future__ import annotations
 
@@ -45,8 +43,7 @@ class Corrected:
 def correct(
     s: Refill, epochs: tuple[EpochDEM, EpochDEM], d_i, grid: GridSpec, options: Options, given: Given | None
 ) -> Corrected:
-    """The correction of the refilled difference (see module); ``epochs``: after, before;
-    ``given``: the window of a tiled run, its correction given."""
+    """The correction of the refilled difference (see module); ``given``: a tiled run's window."""
     if given is None:
         offset, params, stable, _ = correction(s.filled, d_i, grid, options)
         core = WHOLE
@@ -66,8 +63,7 @@ def correct(
 
 
 def _cell_lods(epochs: tuple[EpochDEM, EpochDEM], s: Refill, lod: float, fill_sigma, confidence: float) -> np.ndarray:
-    """Each cell's level of detection: the stable ground's, the epochs' own height errors, the
-    refill error of refilled cells."""
+    """Each cell's LoD: the stable ground's, the epochs' height errors, the refilled cells' error."""
     (after, before), z = epochs, z_value(confidence)
     se_a = np.where(s.m_a, np.nan, cell_sigma(after.spread, after.counts))
     se_b = np.where(s.m_b, np.nan, cell_sigma(before.spread, before.counts))
@@ -75,10 +71,8 @@ def _cell_lods(epochs: tuple[EpochDEM, EpochDEM], s: Refill, lod: float, fill_si
 
 
 def correction(diff, d_i, grid: GridSpec, options: Options):
-    """(correction surface to subtract, its parameters, stable-cell mask, change mask).
-
-    Stable ground is found the same way for every method, so residual statistics and the
-    uncertainty are comparable; ``paper-plane`` subtracts the paper's ``d_i`` first."""
+    """(correction surface, its parameters, stable mask, change mask): stable ground found alike for
+    every method (comparable residuals); ``paper-plane`` subtracts the paper's ``d_i`` first."""
     method = options.correction
     paper = MODES[method].paper_plane
     base = d_i if paper else 0.0

@@ -1,7 +1,5 @@
-"""Stage 4 of the volume step, the interval: the error model over the counted change
-(:func:`.uncertainty.volume_uncertainty`) with the terms beyond it by name (the registration's,
-the marginal detections', the cell statistic's, the classification's, the outline's) and the
-bound of what no survey saw (:mod:`.holes.blind`)."""
+"""Stage 4, the interval: the error model over the counted change (:mod:`.uncertainty`), the terms
+beyond it by name and the bound of what no survey saw (:mod:`.holes.blind`)."""
 
 from __future__ import annotations
 
@@ -28,8 +26,7 @@ from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
 
 @dataclass(frozen=True)
 class Interval:
-    """report.json's ``uncertainty``, the error model (for the zones' intervals) and the holes
-    no survey saw."""
+    """report.json's ``uncertainty``, the error model (for the zones) and the holes no survey saw."""
 
     uncertainty: dict
     model: Callable[..., dict]
@@ -39,9 +36,8 @@ class Interval:
 def interval(
     s: Refill, c: Corrected, a: Areas, epochs: tuple[EpochDEM, EpochDEM], grid: GridSpec, options: Options, moved
 ) -> Interval:
-    """The interval of the counted change (see module); ``moved``: the rigid move from the
-    accepted pose to a nearly as good one. A tile's pose and bias are common to all tiles: its
-    registration term and correction coefficients are left to their combination."""
+    """The interval of the counted change; ``moved``: see :func:`pose_effect`. A tile's registration
+    term and correction coefficients are left to the tiles' combination (common to all)."""
     area, ex = grid.cell_area, a.exclusion
     d, fa, ca = c.diff[c.core], a.fill[c.core], a.cut[c.core]  # areas decided with the halo, counted on the core
     parts = {"net": fa | ca, "cut": ca, "fill": fa}
@@ -64,15 +60,14 @@ def interval(
 
 
 def marginal_terms(d: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod_cell, cell_area: float) -> dict:
-    """The marginal detections' volume (m3) per part (:func:`.change.marginal_volume`)."""
+    """:func:`.change.marginal_volume` per part (m3)."""
     out = {"fill": marginal_volume(d, fill, lod_cell, cell_area), "cut": marginal_volume(d, cut, lod_cell, cell_area)}
     out["net"] = float(np.hypot(out["fill"], out["cut"]))
     return out
 
 
 def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Options, bound: dict):
-    """The error model (:func:`.uncertainty.volume_uncertainty` with the run's arguments) over
-    the cells a caller gives: the headline's change areas, a zone's."""
+    """:func:`.uncertainty.volume_uncertainty` with the run's arguments, over a caller's cells."""
     coefficients = MODES[options.correction].coefficients
     counted, tile = None, c.tile
     if tile:  # the cells it counts: its core; the overview has the bias
@@ -96,8 +91,8 @@ def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Optio
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:
-    """Change of the difference (m per cell) if the after surface moved horizontally by ``moved``
-    (4x4, local): -grad(H) . u; its vertical part and tilt are absorbed by the bias correction."""
+    """The difference's change (m per cell) if the after surface moved horizontally by ``moved`` (4x4,
+    local): -grad(H) . u (vertical part and tilt go to the bias correction)."""
     if moved is None:
         return np.zeros(h_after.shape)
     x, y = grid.centers_local()

@@ -1,6 +1,8 @@
 """The quality gate: whether a run's volumes can be trusted, in plain words. Each check gives a
 severity, ``caution`` (read the number with the reason in mind) or ``unreliable`` (do not use it as
-it is), and a sentence; the verdict is the worst."""
+it is), and a sentence; the verdict is the worst. A series' period rests on its two epochs'
+placements into E0's frame (each judged as an estimate's, on its pair E0 -> Ek) and its own
+correction and significance."""
 
 from __future__ import annotations
 
@@ -156,3 +158,24 @@ def verdict(found: list[tuple[str, str]]) -> dict:
         "the georeferencing prior and the net change is significant"
     ]
     return {"verdict": VERDICTS[worst], "trusted": worst == 0, "messages": messages}
+
+
+def epoch_checks(registrations: list[dict], vols: list, prior: dict) -> list[list[tuple[str, str]]]:
+    """Each epoch's placement checks (E0's: none), worded with the epoch: ``registrations[k]``
+    is report.json's ``epochs[k].registration``, ``vols[k - 1]`` the volume step of E0 -> Ek."""
+    out: list[list[tuple[str, str]]] = [[]]
+    for k, (reg, v) in enumerate(zip(registrations[1:], vols, strict=True), 1):
+        found = registration_checks(reg, v.stable, v.change_mask, v.offset, prior, v.diff)
+        out.append([(sev, f"E{k} in E0's frame: {said}") for sev, said in found])
+    return out
+
+
+def period_quality(change, checks: list[list[tuple[str, str]]], vols: list, cell_area: float) -> dict:
+    """The verdict of a series' period ``change`` from its epochs' ``checks`` (:func:`epoch_checks`)
+    and its own correction and significance."""
+    i, j = change.start, change.end
+    found = (checks[i] if i else []) + checks[j]
+    offsets = [np.zeros_like(vols[0].offset)] + [v.offset for v in vols]
+    corr = float(np.nansum(np.where(change.fill_area | change.cut_area, offsets[j] - offsets[i], 0.0)) * cell_area)
+    net, half = change.volume["net"], change.uncertainty["net"]
+    return verdict(found + correction_check(corr, net, half) + significance_check(net, half))

@@ -2,7 +2,14 @@
 each pair E0 -> Ek gives ``D_k`` (``D_0 = 0``) on the cells every pair compares, refilled in any,
 stable in all. A period i -> j is ``D_j - D_i``; its net is summed over the works (every period's
 change areas), so the nets telescope to ``W_n``; cut and fill are its own change areas,
-``below_detection`` the rest of the net. The intervals: :mod:`.seriesunc`."""
+``below_detection`` the rest of the net.
+
+The intervals: with ``Z_k = T_k + e_k`` and ``D_k = Z_k - Z_0``, a period's difference holds only
+its two epochs' errors: ``var(V_ij) = var(E_i) + var(E_j)``, consecutive periods covary by
+``-var(E_i)`` (so their sum is not the root-sum-square of their intervals) and the cumulative
+``D_n`` holds E0's and the last epoch's only. Each interval is thus computed on its own difference,
+whose stable residuals are ``e_j - e_i``, with one correction surface fitted from E0 (and the
+cumulative), two between later epochs; its registration term is ``pose_j - pose_i`` per cell."""
 
 from __future__ import annotations
 
@@ -11,15 +18,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import cell_lod, cell_sigma, change_areas
 from .difference import signed_budget
-from .interval import pose_effect
+from .holes.interpolate import typical_radius
+from .interval import marginal_terms, pose_effect
+from .refill import refill_sigma
 from .results import Volumes
-from .seriesunc import period_uncertainty
-from .uncertainty import detection_level, z_value
+from .uncertainty import detection_level, interp_fraction, statistic_bias, volume_uncertainty, z_value
 
 
 @dataclass(frozen=True)
@@ -83,10 +92,62 @@ def combine(
         b = signed_budget(diff, fill, cut, grid.cell_area)
         net = works_m3[j] - works_m3[i]
         volume = {"net": net, "cut": b["cut"], "fill": b["fill"], "below_detection": net - (b["fill"] - b["cut"])}
-        fits = 1 if i == 0 else 2  # E0 is never corrected: see seriesunc
+        fits = 1 if i == 0 else 2  # E0 is never corrected (see module)
         skews = (dems[j].skew, dems[i].skew)
         unc = period_uncertainty(
             diff, (fill, cut), works & valid, stable, refilled, lod_cell, pose[j] - pose[i], skews, grid, options, fits
         )
         changes.append(Change(i, j, diff, fill, cut, volume, unc))
     return SeriesVolumes(to_e0, valid, refilled, stable, works & valid, changes[:-1], changes[-1], works_m3)
+
+
+def period_uncertainty(
+    diff: np.ndarray,
+    areas: tuple[np.ndarray, np.ndarray],
+    works: np.ndarray,
+    stable: np.ndarray,
+    refilled: np.ndarray,
+    lod_cell: np.ndarray,
+    pose: np.ndarray,
+    skews: tuple,
+    grid: GridSpec,
+    options: Options,
+    fits: int,
+) -> dict:
+    """± half-widths (m3) of a period's net (over ``works``), cut and fill (its ``areas``: fill, cut)
+    from its ``diff`` (see module); ``pose``: the difference's change at the alternative poses (m),
+    ``skews``: (end, start) cell statistics' (:func:`.uncertainty.statistic_bias`), ``fits``: surfaces."""
+    (fill_area, cut_area), area = areas, grid.cell_area
+    reg_v = signed_budget(pose, fill_area, cut_area, area)
+    reg_v["net"] = abs(float(np.nansum(np.where(works, pose, 0.0)))) * area
+    marginal = marginal_terms(diff, fill_area, cut_area, lod_cell, area)
+    stat = statistic_bias(skews, refilled, {"net": works, "cut": cut_area, "fill": fill_area}, area)
+    extra = {k: float(np.linalg.norm([reg_v[k], marginal[k], stat[k]])) for k in ("net", "cut", "fill")}
+    coef = MODES[options.correction].coefficients
+    common = dict(
+        n_coef=coef * fits,
+        filled_mask=refilled,
+        fill_sigma=refill_sigma(diff, refilled, stable, options),
+        interp_fraction=interp_fraction(typical_radius(refilled)),
+        extra_sigma=extra,
+        surface=coef > 0,
+    )
+    conf = options.lod_confidence
+    on_works = volume_uncertainty(diff, stable, works, grid, conf, **common)
+    on_areas = volume_uncertainty(diff, stable, fill_area | cut_area, grid, conf, **common)
+    named = {"registration_m3": {k: reg_v[k] for k in ("net", "cut", "fill")}, "statistic_m3": stat}
+    return _merged(on_works, on_areas, conf, {**named, "marginal_detections_m3": marginal, "correction_fits": fits})
+
+
+def _merged(on_works: dict, on_areas: dict, conf: float, named: dict) -> dict:
+    """A period's interval: the net's from the works, cut and fill from its own areas, the
+    ``named`` terms."""
+    by = {"net": on_works, "cut": on_areas, "fill": on_areas}
+    kept = ("sigma_m", "lod_m", "nugget_m2", "psill_m2", "range_m", "bias_sigma_m", "stable_cells")
+    return {
+        **{k: u[k] for k, u in by.items()},
+        "confidence": conf,
+        **{k: on_works[k] for k in kept},
+        **named,
+        "terms_m3": {k: u["terms_m3"][k] for k, u in by.items()},  # one-sigma, in the order of uncertainty.TERMS
+    }
