@@ -29,12 +29,7 @@ def cell_lod(lod: float, se_a: np.ndarray, se_b: np.ndarray, z: float) -> np.nda
 
 
 def change_areas(
-    diff: np.ndarray,
-    lod: np.ndarray | float,
-    *,
-    refilled: np.ndarray | None = None,
-    min_cells: int = MIN_CELLS,
-    buffer_cells: int = BUFFER_CELLS,
+    diff: np.ndarray, lod: np.ndarray | float, *, refilled: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """(fill, cut) masks (see module); a buffer cell both reach is neither's. ``refilled`` cells never
     start an area, and a refilled patch joins a touching area of its sign no smaller in volume (a
@@ -45,9 +40,8 @@ def change_areas(
     measured = ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered
     if refilled is not None:
         measured &= ~refilled
-    fill_core, cut_core = patches(measured & (d > lod), min_cells), patches(measured & (d < -lod), min_cells)
-    grow = (lambda m: ndimage.binary_dilation(m, _EIGHT, iterations=buffer_cells)) if buffer_cells else (lambda m: m)
-    fill, cut = grow(fill_core) & valid, grow(cut_core) & valid
+    fill_core, cut_core = patches(measured & (d > lod), MIN_CELLS), patches(measured & (d < -lod), MIN_CELLS)
+    fill, cut = (ndimage.binary_dilation(m, _EIGHT, iterations=BUFFER_CELLS) & valid for m in (fill_core, cut_core))
     both = fill & cut
     fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
     if refilled is not None and refilled.any():

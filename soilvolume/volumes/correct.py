@@ -53,21 +53,16 @@ def correct(
     diff = s.filled - offset
     fill_sigma = np.where(s.own, s.own_sigma, refill_sigma(diff, s.filled_mask, stable, options))
     lod = detection_level(diff, stable, options.lod_confidence)
-    lod_cell = _cell_lods(epochs, s, lod, fill_sigma, options.lod_confidence)
+    (after, before), z = epochs, z_value(options.lod_confidence)  # each cell's: the epochs' errors, the refill's
+    se_a = np.where(s.m_a, np.nan, cell_sigma(after.spread, after.counts))
+    se_b = np.where(s.m_b, np.nan, cell_sigma(before.spread, before.counts))
+    lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
     significant = patches(~s.filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
     sides = refill_across_outline(diff, s.filled_mask & ~s.own, significant, options.fill_method)
     outline = np.nan_to_num(sides - diff)  # where the outline runs in the holes: a term
     return Corrected(
         offset, params, stable, given is not None, core, sides, sides + offset, fill_sigma, lod, lod_cell, outline
     )
-
-
-def _cell_lods(epochs: tuple[EpochDEM, EpochDEM], s: Refill, lod: float, fill_sigma, confidence: float) -> np.ndarray:
-    """Each cell's LoD: the stable ground's, the epochs' height errors, the refilled cells' error."""
-    (after, before), z = epochs, z_value(confidence)
-    se_a = np.where(s.m_a, np.nan, cell_sigma(after.spread, after.counts))
-    se_b = np.where(s.m_b, np.nan, cell_sigma(before.spread, before.counts))
-    return np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
 
 
 def correction(diff, d_i, grid: GridSpec, options: Options):

@@ -89,32 +89,25 @@ def check(report: dict) -> tuple[str, str] | None:
     unseen, share = cov["unseen_m2"], 1.0 - cov["compared_share"]
     bound, interval = cov["unseen_volume_bound_m3"], report["uncertainty_m3"]["net"]
     before = cov["before_missing_m2"] >= 0.5 * unseen
-    surface = (report.get("reference") or {}).get("kind") == "surface"
     who = "the before survey does not cover" if before else "the surveys do not both cover"
-    who = "the design does not cover" if surface else who
+    who = "the design does not cover" if _surface(report) else who
     said = f"{who} {unseen:,.0f} m² ({share:.0%}) of the after footprint"
     noise = 2.0 * unseen * float(report["uncertainty_m3"].get("lod_m") or 0.0)  # change at noise level: none
     if share > MAX_SHARE or bound > max(interval, noise):
-        return (
-            "unreliable",
-            f"{said}: change there is not in the volumes (up to ~{bound:,.0f} m³ {_source(cov)}, "
-            f"against their ±{interval:,.1f} m³ interval)",
-        )
+        out, source = cov.get("beyond_change_m3") or {}, "at the change seen around it"
+        if out.get("fill_m3", 0.0) + out.get("cut_m3", 0.0) > 0.5 * bound:
+            source = "from what the after survey shows beyond the before survey's edge, against its ground carried on"
+        said += f": change there is not in the volumes (up to ~{bound:,.0f} m³ {source}, "
+        return "unreliable", f"{said}against their ±{interval:,.1f} m³ interval)"
     if share > CAUTION_SHARE:
-        return (
-            "caution",
-            f"{said}: the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around "
-            f"it would make up to ~{bound:,.0f} m³ there, within their interval)",
-        )
+        said += f": the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around it "
+        return "caution", f"{said}would make up to ~{bound:,.0f} m³ there, within their interval)"
     return None
 
 
-def _source(cov: dict) -> str:
-    """Where the unseen bound comes from, in words."""
-    out = cov.get("beyond_change_m3") or {}
-    if out.get("fill_m3", 0.0) + out.get("cut_m3", 0.0) > 0.5 * cov["unseen_volume_bound_m3"]:
-        return "from what the after survey shows beyond the before survey's edge, against its ground carried on"
-    return "at the change seen around it"
+def _surface(report: dict) -> bool:
+    """Whether the run compared a survey with a surface (a design)."""
+    return (report.get("reference") or {}).get("kind") == "surface"
 
 
 def line(report: dict) -> str | None:
@@ -122,8 +115,11 @@ def line(report: dict) -> str | None:
     cov = report.get("coverage")
     if not cov:
         return None
-    surface = (report.get("reference") or {}).get("kind") == "surface"
-    who = ("the design covers", "the design misses") if surface else ("both surveys cover", "the before survey misses")
+    who = (
+        ("the design covers", "the design misses")
+        if _surface(report)
+        else ("both surveys cover", "the before survey misses")
+    )
     text = f"coverage: {who[0]} {cov['compared_share']:.1%} of the after footprint"
     if cov["before_missing_m2"] > 0:
         text += f" ({who[1]} {cov['before_missing_m2']:,.0f} m2)"

@@ -5,7 +5,7 @@ with ``--objects count``); the class raster (``excluded.tif``) draws it all."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -50,7 +50,7 @@ class Exclusion:
     classes: np.ndarray
     report: dict
     sigma: dict
-    bound: dict = field(default_factory=lambda: dict.fromkeys(("net", "cut", "fill"), 0.0))  # unclassified (m3)
+    bound: dict  # unclassified (m3)
 
 
 def exclude_nonsoil(
@@ -60,9 +60,9 @@ def exclude_nonsoil(
     offset: np.ndarray,
     grid: GridSpec,
     options: Options,
-    heights: tuple[np.ndarray, np.ndarray] | None = None,
-    stable: np.ndarray | None = None,
-    refilled: np.ndarray | None = None,
+    heights: tuple[np.ndarray, np.ndarray],
+    stable: np.ndarray,
+    refilled: np.ndarray,
 ) -> Exclusion:
     """See module; ``areas``: (fill, cut), ``epochs``: (after, before); ``exclude none`` counts
     moved objects (still listed), ``objects exclude`` leaves out single ones; ``heights`` and
@@ -71,7 +71,8 @@ def exclude_nonsoil(
     shares = _shares(epochs)
     found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
     leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
-    share = _missed_share(epochs)
+    # the share of an excluded volume it may have got wrong: less by a LAS classification (its ground is measured)
+    share = CLASS_MISSED_SHARE if all(e.rule is not None and e.rule.use_class for e in epochs) else MISSED_SHARE
     # only what was left out in or beside the counted change areas can bias the headline
     near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
     classes, taken, by_class, sigma = _by_class(diff, epochs, offset, shares, found, near, area, share)
@@ -97,7 +98,7 @@ def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, s
     """(objects found by shape, those of one survey left out, grass patches left out) of ``areas``."""
     (fill, cut), mode = areas, options.exclude
     labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
-    found = find_objects(diff, fill, cut, grid.cell, refilled=labelled if refilled is None else refilled | labelled)
+    found = find_objects(diff, fill, cut, grid.cell, refilled=refilled | labelled)
     drop_single = options.objects == "exclude" and mode != "none"
     lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
     bare = _bare_top(diff, epochs, refilled)  # soil measured on the surface that rose
@@ -110,7 +111,9 @@ def _by_class(diff, epochs, offset, shares: dict, found, near, cell_area: float,
     volume cells mostly not soil would have added, a ``share`` of it near the change the term."""
     classes = np.where(np.isfinite(diff), 0, 255).astype(np.uint8)
     sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
-    apparent, taken, report = _apparent(diff, epochs, offset), np.zeros(diff.shape, bool), {}
+    after, before = (e.all_points_height() for e in epochs)  # what the excluded points would have added:
+    apparent = np.nan_to_num(after - before - np.nan_to_num(offset) - diff)
+    taken, report = np.zeros(diff.shape, bool), {}
     for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
         cells = (shares[name] >= SHARE) & ~taken & ~found.moved & ~found.single
         taken |= cells
@@ -149,11 +152,10 @@ def _lone(found) -> np.ndarray:
     return found.single & np.isin(found.labels, ids)
 
 
-def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray | None) -> np.ndarray:
+def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray) -> np.ndarray:
     """Cells whose higher surface was measured soil (a pile on a mown meadow is soil)."""
     after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)
-    top = np.where(np.nan_to_num(diff) >= 0, after, before)
-    return top if refilled is None else top & ~refilled
+    return np.where(np.nan_to_num(diff) >= 0, after, before) & ~refilled
 
 
 def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:
@@ -169,13 +171,6 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
     soil_share = ndimage.sum(soil, comp, idx) / size
     keep = (size * cell_area <= UNCLEAR_AREA_M2) & (veg_share >= GRASS_VEG) & (soil_share < GRASS_SOIL)
     return np.r_[False, keep][comp]
-
-
-def _missed_share(epochs: tuple[EpochDEM, EpochDEM]) -> float:
-    """The share of an excluded volume the classification may have got wrong (a LAS classification's
-    less: its ground under a canopy is measured)."""
-    by_class = all(e.rule is not None and e.rule.use_class for e in epochs)
-    return CLASS_MISSED_SHARE if by_class else MISSED_SHARE
 
 
 def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
@@ -194,26 +189,11 @@ def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
     return out
 
 
-def _apparent(diff: np.ndarray, epochs: tuple[EpochDEM, EpochDEM], offset: np.ndarray) -> np.ndarray:
-    """Per cell, what the excluded points would have added to the difference (m; 0 if unknown)."""
-    after, before = (e.all_points_height() for e in epochs)
-    d = after - before - np.nan_to_num(offset)
-    return np.nan_to_num(d - diff)
-
-
 def _item(b: Blob, grid: GridSpec) -> dict:
     """An object for the report: absolute centroid, footprint, height, volume."""
-    x = grid.xmin + (b.x + 0.5) * grid.cell
-    y = grid.ymax - (b.y + 0.5) * grid.cell
-    return {
-        "kind": "fill" if b.sign > 0 else "cut",
-        "x": x,
-        "y": y,
-        "area_m2": b.area_m2,
-        "height_m": b.height_m,
-        "volume_m3": b.volume_m3,
-        "moved": bool(b.partner),
-    }
+    x, y = grid.xmin + (b.x + 0.5) * grid.cell, grid.ymax - (b.y + 0.5) * grid.cell
+    kind, height = "fill" if b.sign > 0 else "cut", b.height_m
+    return dict(kind=kind, x=x, y=y, area_m2=b.area_m2, height_m=height, volume_m3=b.volume_m3, moved=bool(b.partner))
 
 
 def sentence(report: dict) -> list[str]:

@@ -1,7 +1,5 @@
-"""What the volume step cannot say is soil or not: the change no signal classified (compact
-patches, rough cells, machine-sized objects in one survey only) and what a canopy may have added
-to the change counted under it. Their volume is a bound the interval is widened by
-(:mod:`.nonsoil`)."""
+"""What cannot be said to be soil or not: the change no signal classified and what a canopy may
+have added under it; a bound the interval is widened by (:mod:`.nonsoil`)."""
 
 from __future__ import annotations
 
@@ -24,9 +22,8 @@ CANOPY_REACH = 2.0  # how far above the ground a canopy's points taken for soil 
 
 
 def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) -> dict:
-    """The bound (m3 per part) of what could not be classified or was measured under a canopy
-    (``counted``: the change areas without what was left out); their sections added to
-    ``report``."""
+    """The bound (m3 per part) of what could not be classified or lies under a canopy in ``counted``;
+    their sections added to ``report``."""
     signal = any(labelled(e) for e in epochs)
     unclear, n = _unclear(diff, counted, found, rough, signal, cell_area)
     report["unclassified"] = {**part_budget(diff, unclear, cell_area), "count": n, "signals": signal}
@@ -42,9 +39,8 @@ def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) 
 
 
 def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
-    """The counted change the engine cannot say is soil, and in how many patches: machine-sized
-    objects in one survey only; without any signal also rough cells and every compact change
-    patch (see :data:`UNCLEAR_AREA_M2`)."""
+    """(the counted change not said to be soil, its patches): machine-sized single objects, and
+    without any signal rough cells and compact patches (:data:`UNCLEAR_AREA_M2`)."""
     small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
     out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
     if not signal:
@@ -65,13 +61,9 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
 
 
 def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
-    """What a canopy may have added to the change counted under it (m3 per part): where return
-    numbers alone keep the soil points under vegetation (no classification), a cell mostly of
-    canopy mixes its ground with canopy points the rule took for soil (a single return off dense
-    grass), so its height may sit up to the canopy's above the ground. Each counted cell under a
-    canopy in either survey adds the smaller of its |difference| and the larger of
-    :data:`CANOPY_REACH` times that canopy's mean height over the cell's soil height (itself raised
-    by the canopy points) and its height over the other survey's ground (mown grass: the stubble)."""
+    """What a canopy told by return numbers alone may have added (m3 per part; single returns off
+    dense grass taken for soil): per counted cell under it, its |difference| at most the larger of
+    :data:`CANOPY_REACH` x the canopy over the cell and the canopy over the other survey's ground."""
     reach = np.zeros(diff.shape)
     for e, o in (epochs, epochs[::-1]):
         if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
@@ -90,10 +82,9 @@ def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: floa
 
 
 def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
-    """Change cells on rough ground: fill where the after survey is rough, cut where the before is;
-    only where no signal labelled any point (a classification, colour or returns say what is
-    vegetation better than roughness, which curved ground on coarse cells also shows)."""
-    if heights is None or stable is None or any(labelled(e) for e in epochs):
+    """Change cells on rough ground (fill: the after survey's, cut: the before's) where no signal
+    labelled any point (they tell vegetation better than roughness, which curved ground shows too)."""
+    if any(labelled(e) for e in epochs):
         return np.zeros(fill.shape, bool)
     out = []
     for e, h in zip(epochs, heights, strict=True):

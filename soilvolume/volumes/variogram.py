@@ -1,8 +1,6 @@
-"""The spatially correlated error of a volume (Rolstad et al. 2009; Anderson 2019): an empirical
-semivariogram of the stable-ground residuals (exact, from grid shifts) fitted by a spherical
-model ``nugget + psill * sph(h, range)``; a volume over ``n`` cells of area ``A`` then has
-variance ``n * nugget * cell^4`` (uncorrelated) ``+ A^2 * psill * f(A, range)`` (correlated),
-plus the error of the correction surface's level estimated on the stable ground."""
+"""The spatially correlated error of a volume (Rolstad et al. 2009; Anderson 2019): the stable
+residuals' semivariogram fitted by ``nugget + psill * sph(h, range)``; over ``n`` cells of area ``A``
+the variance is ``n * nugget * cell^4 + A^2 * psill * f(A, range)`` plus the correction's level."""
 
 from __future__ import annotations
 
@@ -10,23 +8,19 @@ import math
 
 import numpy as np
 
+N_LAGS = 24
 
-def semivariogram(
-    residual: np.ndarray,
-    mask: np.ndarray,
-    cell: float,
-    n_lags: int = 24,
-    max_lag_cells: int | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Isotropic empirical semivariogram from row/column shifts of the masked residuals:
-    (lags_m, gamma_m2, n_pairs) for roughly log-spaced lags up to half the masked extent."""
+
+def semivariogram(residual: np.ndarray, mask: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Isotropic semivariogram from row/column shifts of the masked residuals: (lags_m, gamma_m2,
+    n_pairs) at :data:`N_LAGS` roughly log-spaced lags up to half the masked extent."""
     z = np.where(mask & np.isfinite(residual), residual, np.nan)
     rr, cc = np.nonzero(np.isfinite(z))
     if rr.size < 2:
         return np.empty(0), np.empty(0), np.empty(0, int)
     extent = max(np.ptp(rr), np.ptp(cc)) + 1
-    top = max(1, min(max_lag_cells or extent // 2, extent - 1))
-    lags = np.unique(np.round(np.geomspace(1, top, n_lags)).astype(int))
+    top = max(1, min(extent // 2, extent - 1))
+    lags = np.unique(np.round(np.geomspace(1, top, N_LAGS)).astype(int))
     out_l, out_g, out_n = [], [], []
     for h in lags:
         d = np.concatenate([(z[:, h:] - z[:, :-h]).ravel(), (z[h:] - z[:-h]).ravel()])
@@ -49,11 +43,9 @@ RANGE_ROUNDS = 4  # rounds, each on the bracket of the round before's best range
 
 
 def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> dict[str, float]:
-    """Weighted least-squares spherical fit (weights: the pairs behind each lag): {nugget, psill,
-    range} (m^2, m^2, m), nugget and psill within [0, 2 max(gamma)], the range within
-    [lags[0] / 2, 2 lags[-1]]. For a given range the model is linear in nugget and psill, solved
-    exactly (:func:`_best_levels`); the range is searched on a log grid refined around its best
-    point, so the fit is the global least-squares one, not a local optimum from a start."""
+    """The pair-weighted least-squares spherical fit {nugget, psill, range} (levels within [0, 2 max
+    gamma], range within [lags[0] / 2, 2 lags[-1]]): levels exact per range (:func:`_best_levels`),
+    the range on a refined log grid, so the global optimum."""
     if lags.size < 3:
         g = float(gamma.mean()) if gamma.size else 0.0
         return {"nugget": g, "psill": 0.0, "range": float(lags.max()) if lags.size else 0.0}
@@ -70,9 +62,8 @@ def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> d
 def _best_levels(
     lags: np.ndarray, gamma: np.ndarray, w: np.ndarray, ranges: np.ndarray, cap: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """For each of ``ranges``: the weighted least-squares cost of the spherical model and its
-    (nugget, psill) within [0, ``cap``] (a convex problem in two unknowns: the unconstrained
-    solution when it is inside the box, else the best one on the box's edges), as (R,), (2, R)."""
+    """Per range, the model's least cost and its (nugget, psill) within [0, ``cap``]: (R,), (2, R)
+    (convex: the free solution if inside the box, else the best on its edges)."""
     s = np.minimum(lags[None, :] / ranges[:, None], 1.0)
     b = 1.5 * s - 0.5 * s**3  # (R, L): the model's shape at each lag
     sw, sg, sb, sbb, sgb = w.sum(), w @ gamma, b @ w, (b * b) @ w, b @ (w * gamma)
@@ -101,9 +92,7 @@ def _best_levels(
 def correlated_fraction(area: float, rng: float) -> float:
     """Rolstad et al. (2009): variance of the mean of a spherically correlated field over a
     disc-equivalent area, as a fraction of the point variance."""
-    if area <= 0:
-        return 0.0
-    if rng <= 0:
+    if area <= 0 or rng <= 0:
         return 0.0
     radius = math.sqrt(area / math.pi)
     if radius >= rng:

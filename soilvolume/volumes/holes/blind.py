@@ -8,7 +8,7 @@ at :data:`DEEPER` times the rim's depth). The interval is widened by it and the 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
@@ -29,7 +29,7 @@ class Blind:
     """The report's ``blind`` section and the bound (m3 per part) it adds to the interval."""
 
     report: dict
-    bound: dict = field(default_factory=lambda: dict.fromkeys(("net", "cut", "fill"), 0.0))
+    bound: dict
 
 
 def blind_change(
@@ -37,7 +37,7 @@ def blind_change(
     epochs: tuple[EpochDEM, EpochDEM],
     change: np.ndarray,
     cell_area: float,
-    seen_once: np.ndarray | None = None,
+    seen_once: np.ndarray,
 ) -> Blind:
     """The basins without any point of either survey (``epochs``: after, before) in the ``change``
     areas, their range (see module), and the counted change on ``seen_once`` cells (filled in one
@@ -50,24 +50,18 @@ def blind_change(
         for k, box in enumerate(ndimage.find_objects(labels), 1):
             win = tuple(slice(max(b.start - PAD, 0), b.stop + PAD) for b in box)  # the hole and its rings
             cells = labels[win] == k
-            if not _basin(e.heights[win], cells):
-                continue
-            item = _hole(diff[win], cells, change[win], cell_area)
+            item = _hole(diff[win], cells, change[win], cell_area) if _basin(e.heights[win], cells) else None
             if item is None:
                 continue
             reach = max(abs(v) for v in item["range_m3"])
             bound["cut" if item["rim_difference_m"] < 0 else "fill"] += reach
             bound["net"] += reach
             items.append({**item, "survey": name})
-    area = sum(i["area_m2"] for i in items)
-    report = {"count": len(items), "area_m2": area, "bound_m3": bound, "items": items}
-    once = change & (seen_once if seen_once is not None else np.zeros(change.shape, bool))
+    report = {"count": len(items), "area_m2": sum(i["area_m2"] for i in items), "bound_m3": bound, "items": items}
+    once = change & seen_once
     d = np.where(once, np.nan_to_num(diff), 0.0)
-    report["interpolated"] = {
-        "area_m2": float(once.sum()) * cell_area,
-        "cut": float(-d[d < 0].sum()) * cell_area,
-        "fill": float(d[d > 0].sum()) * cell_area,
-    }
+    cut, fill = float(-d[d < 0].sum()) * cell_area, float(d[d > 0].sum()) * cell_area
+    report["interpolated"] = {"area_m2": float(once.sum()) * cell_area, "cut": cut, "fill": fill}
     return Blind(report, bound)
 
 
