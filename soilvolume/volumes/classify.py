@@ -9,12 +9,12 @@ import numpy as np
 from scipy import ndimage
 
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import change_areas
 from .correct import Corrected
 from .nonsoil import Exclusion, exclude_nonsoil
 from .refill import Refill
+from .results import Epochs
 
 MIN_QUIET = 12  # stable cells away from the change the error model needs, else it keeps them all
 
@@ -34,7 +34,7 @@ class Areas:
         return self.fill | self.cut
 
 
-def classify(s: Refill, c: Corrected, epochs: tuple[EpochDEM, EpochDEM], grid: GridSpec, options: Options) -> Areas:
+def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: Options) -> Areas:
     """The change areas and what is not soil in them; the error model's stable ground never in or
     next to a change area, unless the user drew it."""
     refilled = s.filled_mask & ~s.seen_once

@@ -11,12 +11,11 @@ from ..compensation.correction import MODES
 from ..compensation.correction import apply as apply_correction
 from ..compensation.robust import patches
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import MIN_CELLS, cell_lod, cell_sigma
 from .holes.outline import refill_across_outline
 from .refill import Refill, refill_sigma
-from .results import Given
+from .results import Epochs, Given
 from .uncertainty import detection_level, z_value
 from .zones import polygons_mask
 
@@ -40,9 +39,7 @@ class Corrected:
     outline: np.ndarray  # the side-by-side refill minus the plain one (m; 0 elsewhere)
 
 
-def correct(
-    s: Refill, epochs: tuple[EpochDEM, EpochDEM], d_i, grid: GridSpec, options: Options, given: Given | None
-) -> Corrected:
+def correct(s: Refill, epochs: Epochs, d_i, grid: GridSpec, options: Options, given: Given | None) -> Corrected:
     """The correction of the refilled difference (see module); ``given``: a tiled run's window."""
     if given is None:
         offset, params, stable, _ = correction(s.filled, d_i, grid, options)

@@ -11,7 +11,6 @@ import numpy as np
 
 from ..compensation.correction import MODES
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import marginal_volume
 from .classify import Areas
@@ -21,6 +20,7 @@ from .holes.blind import Blind, blind_change
 from .holes.interpolate import typical_radius
 from .holes.outline import outline_sigma
 from .refill import Refill
+from .results import Epochs
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
 
 
@@ -33,9 +33,7 @@ class Interval:
     blind: Blind
 
 
-def interval(
-    s: Refill, c: Corrected, a: Areas, epochs: tuple[EpochDEM, EpochDEM], grid: GridSpec, options: Options, moved
-) -> Interval:
+def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, options: Options, moved) -> Interval:
     """The interval of the counted change; ``moved``: see :func:`pose_effect`. A tile's registration
     term and correction coefficients are left to the tiles' combination (common to all)."""
     area, ex = grid.cell_area, a.exclusion

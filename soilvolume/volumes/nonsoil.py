@@ -12,9 +12,9 @@ from scipy import ndimage
 
 from ..core.types import GridSpec
 from ..core.wording import opt
-from ..dem.grid import EpochDEM
 from ..options import Options
 from ..soil.objects import Blob, find_objects
+from .results import Epochs
 from .unclassified import SHARE, UNCLEAR_AREA_M2, bounds, part_budget, rough
 
 # excluded.tif: one byte per cell
@@ -56,7 +56,7 @@ class Exclusion:
 def exclude_nonsoil(
     diff: np.ndarray,
     areas: tuple[np.ndarray, np.ndarray],
-    epochs: tuple[EpochDEM, EpochDEM],
+    epochs: Epochs,
     offset: np.ndarray,
     grid: GridSpec,
     options: Options,
@@ -173,7 +173,7 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
     return np.r_[False, keep][comp]
 
 
-def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
+def _shares(epochs: Epochs) -> dict[str, np.ndarray]:
     """Per class, the largest share of a cell's points (either epoch) that are of that class."""
     out = {}
     for name, attr in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):

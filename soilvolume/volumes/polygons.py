@@ -85,15 +85,11 @@ def _read(path: Path):
         (int(fid), {n: v[k] for n, v in zip(names, values, strict=True)}, g)
         for k, (fid, g) in enumerate(zip(fids, geoms, strict=True))
     ]
-    return feats, _wkt(meta.get("crs"))
-
-
-def _wkt(crs: str | None) -> str | None:
-    if not crs:
-        return None
+    if not meta.get("crs"):
+        return feats, None
     import pyproj
 
-    return pyproj.CRS.from_user_input(crs).to_wkt()
+    return feats, pyproj.CRS.from_user_input(meta["crs"]).to_wkt()
 
 
 def _name(props: dict, field: str | None, i: int, path: Path) -> str:

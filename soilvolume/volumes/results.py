@@ -6,6 +6,10 @@ from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
+from ..dem.grid import EpochDEM
+
+Epochs = tuple[EpochDEM, EpochDEM]  # (after, before)
+
 
 @dataclass(frozen=True)
 class Grids:

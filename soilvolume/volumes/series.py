@@ -60,11 +60,7 @@ class SeriesVolumes:
 
 
 def combine(
-    vols: list[Volumes],
-    dems: list[EpochDEM],
-    moves: list[np.ndarray | None],
-    grid: GridSpec,
-    options: Options,
+    vols: list[Volumes], dems: list[EpochDEM], moves: list[np.ndarray | None], grid: GridSpec, options: Options
 ) -> SeriesVolumes:
     """The series from the pairs E0 -> Ek (``vols[k-1]``), each epoch's DEM (``dems[k]``, E0 first)
     and each later epoch's move to its alternative pose (``moves[k-1]``, or None)."""

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from ...dem.grid import EpochDEM
+from ..results import Epochs
 from .interpolate import FOUR, enclosed_holes, fill
 
 RIM_SHARE = 0.5  # share of a hole's rim in change areas that makes it a hole in the works
@@ -33,11 +33,7 @@ class Blind:
 
 
 def blind_change(
-    diff: np.ndarray,
-    epochs: tuple[EpochDEM, EpochDEM],
-    change: np.ndarray,
-    cell_area: float,
-    seen_once: np.ndarray,
+    diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area: float, seen_once: np.ndarray
 ) -> Blind:
     """The basins without any point of either survey (``epochs``: after, before) in the ``change``
     areas, their range (see module), and the counted change on ``seen_once`` cells (filled in one

@@ -51,16 +51,6 @@ def _reachable(targets: np.ndarray, known: np.ndarray) -> np.ndarray:
     return ok[labels]
 
 
-def _neighbour(flat: np.ndarray, shape: tuple[int, int], dr: int, dc: int, usable: np.ndarray):
-    """Flat index of each flat cell's (dr, dc) neighbour (0 outside the grid), and whether it is
-    inside and ``usable``."""
-    r, c = np.divmod(flat, shape[1])
-    rr, cc = r + dr, c + dc
-    inside = (rr >= 0) & (rr < shape[0]) & (cc >= 0) & (cc < shape[1])
-    nb = np.where(inside, rr * shape[1] + cc, 0)
-    return nb, inside & usable[nb]
-
-
 def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
     """Solve deg_i u_i - sum_{unknown j} u_j = sum_{known k} v_k on the ``todo`` cells
     (Neumann at cells that are neither known nor todo)."""
@@ -68,8 +58,12 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
     usable, kflat, vflat = (known | todo).ravel(), known.ravel(), values.ravel()
     n = flat.size
     diag, rhs, ri, ci = np.zeros(n), np.zeros(n), [np.arange(n)], [np.arange(n)]
-    for dr, dc in _STEPS:
-        nb, ok = _neighbour(flat, todo.shape, dr, dc, usable)
+    (n_r, n_c), (r, c) = todo.shape, np.divmod(flat, todo.shape[1])
+    for dr, dc in _STEPS:  # each neighbour (index 0 outside the grid), ok when inside and usable
+        rr, cc = r + dr, c + dc
+        inside = (rr >= 0) & (rr < n_r) & (cc >= 0) & (cc < n_c)
+        nb = np.where(inside, rr * n_c + cc, 0)
+        ok = inside & usable[nb]
         diag += ok
         k = ok & kflat[nb]
         rhs[k] += vflat[nb[k]]
