@@ -66,25 +66,15 @@ def marginal_terms(d: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod_cell, c
 
 def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Options, bound: dict):
     """:func:`.uncertainty.volume_uncertainty` with the run's arguments, over a caller's cells."""
-    coefficients = MODES[options.correction].coefficients
-    counted, tile = None, c.tile
-    if tile:  # the cells it counts: its core; the overview has the bias
+    coefficients, counted = MODES[options.correction].coefficients, None
+    if c.tile:  # the cells it counts: its core; the overview has the bias
         counted = np.zeros(c.diff.shape, bool)
         counted[c.core] = True
+    fraction = interp_fraction(typical_radius(s.filled_mask & ~s.own))
+    fills = dict(filled_mask=s.filled_mask, own_fill=s.own, fill_sigma=c.fill_sigma, interp_fraction=fraction)
+    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, surface=not c.tile and coefficients > 0)
     return partial(
-        volume_uncertainty,
-        c.diff,
-        stable,
-        grid=grid,
-        confidence=options.lod_confidence,
-        n_coef=0 if tile else coefficients,
-        filled_mask=s.filled_mask,
-        own_fill=s.own,
-        fill_sigma=c.fill_sigma,
-        interp_fraction=interp_fraction(typical_radius(s.filled_mask & ~s.own)),
-        counted=counted,
-        surface=not tile and coefficients > 0,
-        bound_m3=bound,
+        volume_uncertainty, c.diff, stable, n_coef=0 if c.tile else coefficients, bound_m3=bound, **run, **fills
     )
 
 

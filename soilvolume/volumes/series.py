@@ -119,31 +119,22 @@ def period_uncertainty(
     marginal = marginal_terms(diff, fill_area, cut_area, lod_cell, area)
     stat = statistic_bias(skews, refilled, {"net": works, "cut": cut_area, "fill": fill_area}, area)
     extra = {k: float(np.linalg.norm([reg_v[k], marginal[k], stat[k]])) for k in ("net", "cut", "fill")}
-    coef = MODES[options.correction].coefficients
+    coef, conf = MODES[options.correction].coefficients, options.lod_confidence
+    sigma, fraction = refill_sigma(diff, refilled, stable, options), interp_fraction(typical_radius(refilled))
     common = dict(
-        n_coef=coef * fits,
-        filled_mask=refilled,
-        fill_sigma=refill_sigma(diff, refilled, stable, options),
-        interp_fraction=interp_fraction(typical_radius(refilled)),
-        extra_sigma=extra,
-        surface=coef > 0,
+        n_coef=coef * fits, filled_mask=refilled, fill_sigma=sigma, interp_fraction=fraction, surface=coef > 0
     )
-    conf = options.lod_confidence
-    on_works = volume_uncertainty(diff, stable, works, grid, conf, **common)
-    on_areas = volume_uncertainty(diff, stable, fill_area | cut_area, grid, conf, **common)
-    named = {"registration_m3": {k: reg_v[k] for k in ("net", "cut", "fill")}, "statistic_m3": stat}
-    return _merged(on_works, on_areas, conf, {**named, "marginal_detections_m3": marginal, "correction_fits": fits})
-
-
-def _merged(on_works: dict, on_areas: dict, conf: float, named: dict) -> dict:
-    """A period's interval: the net's from the works, cut and fill from its own areas, the
-    ``named`` terms."""
-    by = {"net": on_works, "cut": on_areas, "fill": on_areas}
+    on_works = volume_uncertainty(diff, stable, works, grid, conf, **common, extra_sigma=extra)
+    on_areas = volume_uncertainty(diff, stable, fill_area | cut_area, grid, conf, **common, extra_sigma=extra)
+    by = {"net": on_works, "cut": on_areas, "fill": on_areas}  # the net's from the works, cut and fill their areas
     kept = ("sigma_m", "lod_m", "nugget_m2", "psill_m2", "range_m", "bias_sigma_m", "stable_cells")
     return {
         **{k: u[k] for k, u in by.items()},
         "confidence": conf,
         **{k: on_works[k] for k in kept},
-        **named,
+        "registration_m3": {k: reg_v[k] for k in ("net", "cut", "fill")},
+        "statistic_m3": stat,
+        "marginal_detections_m3": marginal,
+        "correction_fits": fits,
         "terms_m3": {k: u["terms_m3"][k] for k, u in by.items()},  # one-sigma, in the order of uncertainty.TERMS
     }

@@ -65,7 +65,9 @@ def volume_uncertainty(
     pt = _PartTerms(d, valid, stable, grid, filled_mask, own_fill, fill_sigma, interp_fraction, surface)
     extra = extra_sigma or {}
     area_model = {k: region_sigma(int(m.sum()), grid.cell, model, b) for k, m in parts.items()}
-    terms = {k: pt.terms(m, area_model[k], extra.get(k, 0.0)) for k, m in parts.items()}
+    terms = {
+        k: [area_model[k], pt.interp(m), pt.refill(m), pt.unmodelled(m), extra.get(k, 0.0)] for k, m in parts.items()
+    }
     out: dict[str, Any] = widen({k: z_value(confidence) * float(np.linalg.norm(t)) for k, t in terms.items()}, bound_m3)
     sigma = nmad(d[stable]) if stable.any() else float("nan")
     out.update(confidence=confidence, sigma_m=sigma, lod_m=_lod(d[stable], sigma, confidence))
@@ -119,10 +121,6 @@ class _PartTerms:
             "change_area_m2": float(region.sum()) * cell_area,
             "part_area_m2": {k: float(m.sum()) * cell_area for k, m in parts.items()},
         }
-
-    def terms(self, m: np.ndarray, area_model: float, extras: float) -> list[float]:
-        """The one-sigma terms of the part ``m``, in the order of :data:`TERMS`."""
-        return [area_model, self.interp(m), self.refill(m), self.unmodelled(m), extras]
 
     def interp(self, m: np.ndarray) -> float:
         return self.fraction * float(self.absd[m & self.shared].sum()) * self.cell_area
