@@ -52,8 +52,6 @@ def change_areas(
 def _join_refilled(d, patches, fill, cut):
     """(fill, cut) with the refilled ``patches`` that join them (see :func:`change_areas`)."""
     labels, n = ndimage.label(patches, structure=_EIGHT)
-    if n == 0:
-        return fill, cut
     idx = np.arange(1, n + 1)
     vol = ndimage.sum(d, labels, idx)
     rim = ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
@@ -67,8 +65,6 @@ def _join_refilled(d, patches, fill, cut):
 def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray:
     """Per cell of ``area``, its connected area's volume of ``sign`` (m x cells; 0 if of the other)."""
     comp, k = ndimage.label(area, structure=_EIGHT)
-    if k == 0:
-        return np.zeros(d.shape)
     v = sign * ndimage.sum(d, comp, np.arange(1, k + 1))
     return np.r_[0.0, np.maximum(v, 0.0)][comp]
 
@@ -77,8 +73,6 @@ def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float,
     """Volume (m3) of the areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice
     their LoD: detections noise alone could make, uncertain whole."""
     labels, n = ndimage.label(area, structure=_EIGHT)
-    if n == 0:
-        return 0.0
     idx = np.arange(1, n + 1)
     d = np.where(np.isfinite(diff), diff, 0.0)
     mean_abs = ndimage.mean(np.abs(d), labels, idx)

@@ -1,8 +1,6 @@
-"""Progress against a design: each compared cell's class by an on-grade tolerance ``T`` (survey
-above the design by more than ``T``: cut to go; within ``±T``: on grade; below by more than
-``T``: fill to go), the share of the compared area on grade and the cut and fill still to go
-(m^3: the survey - design difference summed over the cut-to-go and the fill-to-go cells; the
-whole depth to the design, not only its part beyond ``T``), overall and per zone."""
+"""Progress against a design, overall and per zone: each cell's class by a tolerance ``T`` (cut to go
+above it, on grade within ±T, fill to go below), the share on grade and the cut and fill to go (m^3:
+the whole survey - design depth over those cells, not only its part beyond ``T``)."""
 
 from __future__ import annotations
 
@@ -46,8 +44,7 @@ def summary(diff: np.ndarray, cls: np.ndarray, cell_area: float, mask: np.ndarra
 
 
 def grade(diff: np.ndarray, grid: GridSpec, tolerance: float, zones: str | Path | None) -> tuple[np.ndarray, dict]:
-    """(the class grid, report.json's ``grade``: the tolerance, the classes, the overall
-    :func:`summary` and each zone's)."""
+    """(the class grid, report.json's ``grade``: tolerance, classes, the :func:`summary` and each zone's)."""
     cls = classes(diff, tolerance)
     out = {"tolerance_m": tolerance, "classes": CLASSES, **summary(diff, cls, grid.cell_area)}
     if zones:
@@ -60,10 +57,8 @@ def grade(diff: np.ndarray, grid: GridSpec, tolerance: float, zones: str | Path 
 
 
 def progress(start: dict, end: dict) -> dict:
-    """A period's progress from the :func:`grade` summary at its start to the one at its end:
-    the cut and fill to go it did (m^3: to go at the start minus to go at the end), the area it
-    brought on grade (m^2), and the share on grade and the cut and fill to go at its end;
-    per zone when the summaries have zones."""
+    """A period's progress between the :func:`grade` summaries at its start and end: the cut and fill
+    done (m^3), the area brought on grade (m^2), at its end the share on grade and what is to go; per zone."""
     out = {
         "cut_done_m3": start["cut_to_go_m3"] - end["cut_to_go_m3"],
         "fill_done_m3": start["fill_to_go_m3"] - end["fill_to_go_m3"],

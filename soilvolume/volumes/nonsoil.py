@@ -162,8 +162,6 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
     """Compact change patches (:data:`UNCLEAR_AREA_M2`) mostly of vegetation cells (:data:`GRASS_VEG`)
     with little ``bare`` soil on top (:data:`GRASS_SOIL`): grass the colour test half missed."""
     comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
-    if n == 0:
-        return np.zeros(change.shape, bool)
     idx = np.arange(1, n + 1)
     size = np.bincount(comp.ravel(), minlength=n + 1)[1:]
     soil = change & bare

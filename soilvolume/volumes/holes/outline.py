@@ -28,11 +28,9 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     change, stable = known & change, known & ~change
     out = values.copy()
     labels, n = ndimage.label(hole, FOUR)
-    if n == 0:
-        return out
     candidates = _both_sides(labels, n, change, stable)
     for k, box in enumerate(ndimage.find_objects(labels), start=1):
-        if box is None or not candidates[k]:
+        if not candidates[k]:
             continue
         box = tuple(slice(max(0, s.start - _PAD), s.stop + _PAD) for s in box)
         cells = labels[box] == k
@@ -65,9 +63,7 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     for _ in range(RING):
         grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=FOUR))
     idx = np.arange(n + 1)
-    n_change = ndimage.sum(change, grown, idx)
-    n_stable = ndimage.sum(stable, grown, idx)
-    return np.minimum(n_change, n_stable) >= MIN_SIDE
+    return np.minimum(ndimage.sum(change, grown, idx), ndimage.sum(stable, grown, idx)) >= MIN_SIDE
 
 
 def outline_sigma(
@@ -76,8 +72,6 @@ def outline_sigma(
     """One-sigma volume (m3) per part of the side-by-side fill's change ``delta`` summed per hole
     (independent), beyond the interval's refilled ``share`` of the |difference| there."""
     labels, n = ndimage.label(delta != 0, np.ones((3, 3), bool))
-    if n == 0:
-        return {k: 0.0 for k in parts}
     idx = np.arange(1, n + 1)
     out = {}
     for k, m in parts.items():
