@@ -31,9 +31,8 @@ def cell_lod(lod: float, se_a: np.ndarray, se_b: np.ndarray, z: float) -> np.nda
 def change_areas(
     diff: np.ndarray, lod: np.ndarray | float, *, refilled: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(fill, cut) masks (see module); a buffer cell both reach is neither's. ``refilled`` cells never
-    start an area, and a refilled patch joins a touching area of its sign no smaller in volume (a
-    hole beside a bush next to a noise cut took 1.4 m3 of a 69 m3 pit's cut in paper-veg20m-rgb)."""
+    """(fill, cut) masks (see module); a buffer cell both reach is neither's. ``refilled`` cells start none; a refilled
+    patch joins a touching area of its sign no smaller (1.4 m3 of a 69 m3 pit's cut otherwise: paper-veg20m-rgb)."""
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
@@ -70,8 +69,8 @@ def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray
 
 
 def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:
-    """Volume (m3) of the areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice
-    their LoD: detections noise alone could make, uncertain whole."""
+    """Volume (m3) of areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice their LoD (noise could
+    make them)."""
     labels, n = ndimage.label(area, structure=_EIGHT)
     idx = np.arange(1, n + 1)
     d = np.where(np.isfinite(diff), diff, 0.0)

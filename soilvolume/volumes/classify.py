@@ -35,8 +35,7 @@ class Areas:
 
 
 def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: Options) -> Areas:
-    """The change areas and what is not soil in them; the error model's stable ground never in or
-    next to a change area, unless the user drew it."""
+    """The change areas, what is not soil in them, stable ground never in or next to them unless the user drew it."""
     refilled = s.filled_mask & ~s.seen_once
     fill, cut = change_areas(c.diff, c.lod_cell, refilled=refilled)
     ex = exclude_nonsoil(c.diff, (fill, cut), epochs, c.offset, grid, options, s.heights, c.stable, refilled)

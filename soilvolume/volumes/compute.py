@@ -20,8 +20,7 @@ __all__ = ["Given", "Volumes", "centred_heights", "compute_volumes", "pose_effec
 def compute_volumes(
     after: EpochDEM, before: EpochDEM, d_i, grid: GridSpec, options: Options, moved=None, given: Given | None = None
 ) -> Volumes:
-    """The stages in turn on the two epochs' grids; ``moved``: the rigid move from the accepted pose
-    to a nearly as good one (registration uncertainty); ``given``: a tiled run's window."""
+    """The stages in turn; ``moved``: the move to a nearly as good pose, ``given``: a tiled run's window."""
     epochs = (after, before)
     s = refill(after, before, grid, options, given)
     c = correct(s, epochs, d_i, grid, options, given)

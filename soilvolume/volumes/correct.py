@@ -63,8 +63,8 @@ def correct(s: Refill, epochs: Epochs, d_i, grid: GridSpec, options: Options, gi
 
 
 def correction(diff, d_i, grid: GridSpec, options: Options):
-    """(correction surface, its parameters, stable mask, change mask): stable ground found alike for
-    every method (comparable residuals); ``paper-plane`` subtracts the paper's ``d_i`` first."""
+    """(surface, parameters, stable mask, change mask): stable ground found alike for every method; ``paper-plane``
+    takes ``d_i`` first."""
     method = options.correction
     paper = MODES[method].paper_plane
     base = d_i if paper else 0.0

@@ -14,10 +14,8 @@ _P95 = {"abs_diff": "compared", "gap_ring": "gap_ring", "edge_ring": "edge_ring"
 
 
 def counts(n_after, n_before, refilled, diff, core=(slice(None), slice(None)), edges=(True,) * 4) -> dict:
-    """Cells of the after footprint on the ``core`` of a window, those compared, those without
-    before data; the |difference| 95th percentiles of the compared cells, of those within
-    :data:`RING` of such gaps and along the window's sides that are the grid's edge (``edges``:
-    top, bottom, left, right)."""
+    """Cells of the after footprint on the ``core``, compared, without before data; the |difference| p95 of the compared
+    cells, near such gaps and along the ``edges`` (top, bottom, left, right) that are the grid's."""
     from scipy import ndimage
 
     footprint = (n_after > 0) | refilled
@@ -46,16 +44,14 @@ def combine(parts: list[dict]) -> dict:
 
 
 def outside_m2(after_thin: np.ndarray, grid) -> float:
-    """Area (m2) of the after survey beyond the grid: the lattice's cells past its edges holding its
-    registration columns (``after_thin``: registered, local)."""
+    """Area (m2) of the lattice's cells past the grid holding the after survey's registered ``after_thin`` columns."""
     row, col, ok = grid.index(after_thin[:, :2])
     return float(len(np.unique(np.c_[row[~ok], col[~ok]], axis=0)) * grid.cell_area)
 
 
 def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outside: dict | None = None) -> dict:
-    """report.json's ``coverage``: the footprint, what was compared, what the before misses and the
-    volume that could hide there: the unseen area times the |difference| p95 around it (at least the
-    LoD), or beyond the grid :func:`outside_change` (``outside``) if larger."""
+    """report.json's ``coverage``; what could hide unseen: the area times the |difference| p95 around it (at least the
+    LoD), or beyond the grid ``outside``."""
     footprint = cells["after_cells"] * cell_area + beyond_m2
     compared = cells["compared_cells"] * cell_area
     inside = max(cells["after_cells"] - cells["compared_cells"], 0) * cell_area
@@ -80,9 +76,8 @@ def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outsi
 
 
 def check(report: dict) -> tuple[str, str] | None:
-    """(severity, sentence) of the unseen footprint: ``unreliable`` over :data:`MAX_SHARE` or when what
-    could hide there exceeds the net's interval (and twice the LoD over it), ``caution`` over
-    :data:`CAUTION_SHARE`; else None."""
+    """(severity, sentence) of the unseen footprint: unreliable over :data:`MAX_SHARE` or over the net's interval (and
+    twice the LoD), caution over :data:`CAUTION_SHARE`."""
     cov = report.get("coverage")
     if not cov or cov["after_footprint_m2"] <= 0:
         return None
@@ -130,8 +125,8 @@ EDGE_FIT = 10  # cells along the grid's edge the before ground beyond it is carr
 
 
 def outside_change(after_reg: np.ndarray, grid, dem_b: np.ndarray, offset: np.ndarray) -> dict:
-    """Fill and cut (m3) of the after survey beyond the grid against the before ground carried on (a
-    plane on its heights within :data:`EDGE_FIT` of the edge, plus the correction's median): a bound."""
+    """Fill and cut (m3) of the after survey beyond the grid over the before ground carried on (a plane within
+    :data:`EDGE_FIT` of the edge)."""
     none = {"fill_m3": 0.0, "cut_m3": 0.0}
     row, col, ok = grid.index(after_reg[:, :2])
     if ok.all() or dem_b is None or dem_b.shape != (grid.rows, grid.cols):

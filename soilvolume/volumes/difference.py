@@ -35,8 +35,8 @@ def refilled_budget(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float)
 def thresholded_volumes(
     diff: np.ndarray, lod: float | np.ndarray, cell_area: float, min_cells: int = 1
 ) -> dict[str, float]:
-    """Net, cut, fill (m^3) over cells with |d| >= ``lod`` (a float or per cell), without same-sign
-    patches under ``min_cells`` (against isolated noise)."""
+    """Net, cut, fill (m^3) over cells with |d| >= ``lod``, without same-sign patches under ``min_cells`` (isolated
+    noise)."""
     keep = np.isfinite(diff) & (np.abs(diff) >= lod)
     if min_cells > 1:
         keep = patches(keep & (diff > 0), min_cells) | patches(keep & (diff < 0), min_cells)

@@ -27,8 +27,7 @@ def classes(diff: np.ndarray, tolerance: float) -> np.ndarray:
 
 
 def summary(diff: np.ndarray, cls: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -> dict[str, Any]:
-    """The compared area (m^2), its share on grade, and the cut and fill to go (m^3) over the
-    compared cells (of ``mask`` when given)."""
+    """The compared area (m^2), its share on grade, the cut and fill to go (m^3), over ``mask`` when given."""
     inside = np.isfinite(cls) if mask is None else np.isfinite(cls) & mask
     n = int(inside.sum())
     cut, fill = inside & (cls == CUT), inside & (cls == FILL)

@@ -34,8 +34,8 @@ class Interval:
 
 
 def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, options: Options, moved) -> Interval:
-    """The interval of the counted change; ``moved``: see :func:`pose_effect`. A tile's registration
-    term and correction coefficients are left to the tiles' combination (common to all)."""
+    """The interval of the counted change; a tile's registration and correction terms are left to the tiles'
+    combination."""
     area, ex = grid.cell_area, a.exclusion
     d, fa, ca = c.diff[c.core], a.fill[c.core], a.cut[c.core]  # areas decided with the halo, counted on the core
     parts = {"net": fa | ca, "cut": ca, "fill": fa}
@@ -79,8 +79,7 @@ def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Optio
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:
-    """The difference's change (m per cell) if the after surface moved horizontally by ``moved`` (4x4,
-    local): -grad(H) . u (vertical part and tilt go to the bias correction)."""
+    """The difference's change (m) if the after surface moved by ``moved`` (4x4, local): -grad(H) . u horizontally."""
     if moved is None:
         return np.zeros(h_after.shape)
     x, y = grid.centers_local()

@@ -42,8 +42,7 @@ GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shar
 
 @dataclass(frozen=True)
 class Exclusion:
-    """The change areas without what was left out, the class raster, the report's ``excluded`` and
-    the one-sigma terms and bound (m3 per part) of the classification."""
+    """The change areas without what was left out, the class raster, the report, its one-sigma terms and bound (m3)."""
 
     fill: np.ndarray
     cut: np.ndarray
@@ -64,9 +63,8 @@ def exclude_nonsoil(
     stable: np.ndarray,
     refilled: np.ndarray,
 ) -> Exclusion:
-    """See module; ``areas``: (fill, cut), ``epochs``: (after, before); ``exclude none`` counts
-    moved objects (still listed), ``objects exclude`` leaves out single ones; ``heights`` and
-    ``stable`` give the rough cells; ``refilled``: interpolated cells, no part of an object."""
+    """See module; ``areas``: (fill, cut); ``heights`` and ``stable`` give rough cells; ``refilled`` cells are no
+    object's."""
     (fill, cut), mode, area = areas, options.exclude, grid.cell_area
     shares = _shares(epochs)
     found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
@@ -107,8 +105,7 @@ def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, s
 
 
 def _by_class(diff, epochs, offset, shares: dict, found, near, cell_area: float, share: float):
-    """(class raster, cells of the point classes, the report's ``classes``, one-sigma terms): the
-    volume cells mostly not soil would have added, a ``share`` of it near the change the term."""
+    """(class raster, point class cells, report, one-sigma terms): what cells mostly not soil would have added."""
     classes = np.where(np.isfinite(diff), 0, 255).astype(np.uint8)
     sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
     after, before = (e.all_points_height() for e in epochs)  # what the excluded points would have added:
@@ -146,8 +143,7 @@ def _objects(diff, found, lone, grid: GridSpec, mode: str, drop_single: bool) ->
 
 
 def _lone(found) -> np.ndarray:
-    """Objects in one survey only of a machine's size (:data:`OBJECT_MAX_M3`) with a box's walls
-    (:data:`OBJECT_SLOPE`): left out by default."""
+    """Single objects of a machine's size (:data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`)."""
     ids = [b.label for b in found.single_blobs() if b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE]
     return found.single & np.isin(found.labels, ids)
 
@@ -159,8 +155,7 @@ def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray) -> np.ndarray:
 
 
 def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:
-    """Compact change patches (:data:`UNCLEAR_AREA_M2`) mostly of vegetation cells (:data:`GRASS_VEG`)
-    with little ``bare`` soil on top (:data:`GRASS_SOIL`): grass the colour test half missed."""
+    """Compact change patches mostly of vegetation with little ``bare`` soil: grass the colour test half missed."""
     comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
     idx = np.arange(1, n + 1)
     size = np.bincount(comp.ravel(), minlength=n + 1)[1:]

@@ -35,9 +35,8 @@ class Blind:
 def blind_change(
     diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area: float, seen_once: np.ndarray
 ) -> Blind:
-    """The basins without any point of either survey (``epochs``: after, before) in the ``change``
-    areas, their range (see module), and the counted change on ``seen_once`` cells (filled in one
-    survey from its own ground, the other measuring a pile across them)."""
+    """The basins without any point in the ``change`` areas and their range (see module), and the change counted on
+    ``seen_once`` cells (filled in one survey from its own ground)."""
     bound = dict.fromkeys(("net", "cut", "fill"), 0.0)
     items = []
     for name, e in zip(NAMES, epochs, strict=True):

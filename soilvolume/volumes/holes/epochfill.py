@@ -27,9 +27,8 @@ BULK_MIN_M2 = 100.0  # ... a hole that large at least (smaller shared holes are 
 def fill_own_holes(
     h_a: np.ndarray, h_b: np.ndarray, hole: np.ndarray, weak: tuple, method: str, seed: int = 0, cell_area: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(after, before, cells filled in their own survey, their one-sigma error in m): ``hole`` cells
-    the other survey sees change across (see module) filled in the survey that misses them, with its
-    ``weak`` cells (after, before) next to them; the error is its mean-height error at that size."""
+    """(after, before, cells filled in their own survey, their one-sigma error m): ``hole`` cells the other sees change
+    across filled, with ``weak`` cells beside them (see module)."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
     parts, m = ndimage.label(hole, FOUR)
     share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
@@ -83,16 +82,14 @@ def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
 
 
 def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np.ndarray:
-    """Per radius, the survey's own (per-cell RMS, mean-height) fill error
-    (:func:`.testholes.error_by_radius`; infinite without room: never change)."""
+    """Per radius, the survey's own (per-cell RMS, mean-height) fill error (infinite without room: never change)."""
     out = error_by_radius(h, np.isfinite(h), method, radius, seed, per_cell=True, floor=1e-9)
     return np.full((radius.size, 2), np.inf) if out is None else out
 
 
 def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_area: float):
-    """(cells filled, one-sigma error in m) of the shared holes a survey sees a pile in (a pile on a
-    meadow whose grass hides both surveys' ground): filled harmonically (no overshoot at the foot)
-    in each survey, in place in ``out``; the error is both surveys' at the hole's size."""
+    """(cells filled, one-sigma error m) of shared holes a survey sees a pile in (grass hiding a meadow's ground),
+    filled harmonically in each survey, in ``out``."""
     done, sigma = np.zeros(parts.shape, bool), np.zeros(parts.shape)
     size = np.bincount(parts.ravel(), minlength=int(parts.max()) + 1)
     for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
@@ -118,8 +115,8 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
 
 
 def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[float, float]:
-    """(RMS in m, volume in m3) of a survey's measured cells in ``region`` off its own harmonic fill
-    across it (a pile's is over :data:`PILE_M3`, the ground's relief not)."""
+    """(RMS m, volume m3) of a survey's cells in ``region`` off its own harmonic fill (a pile's over
+    :data:`PILE_M3`)."""
     seen = region & np.isfinite(e)
     if not seen.any():
         return 0.0, 0.0

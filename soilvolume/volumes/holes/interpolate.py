@@ -20,8 +20,7 @@ _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use c
 
 
 def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
-    """Empty 4-connected components of at most ``max_cells`` cells not touching the grid border
-    (``None``/0: none)."""
+    """Empty 4-connected components of at most ``max_cells`` (``None``/0: none) not touching the grid border."""
     if not max_cells or max_cells <= 0:
         return np.zeros(valid.shape, bool)
     labels, n = ndimage.label(~valid, structure=FOUR)
@@ -31,8 +30,7 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
 
 
 def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """``values`` with ``targets`` harmonically interpolated from the finite other cells (NaN where
-    a component has no finite neighbour)."""
+    """``values`` with ``targets`` harmonically interpolated (NaN in a component without a finite neighbour)."""
     known = np.isfinite(values) & ~targets
     out = np.where(known, values, np.nan)
     todo = _reachable(targets, known)
@@ -52,8 +50,7 @@ def _reachable(targets: np.ndarray, known: np.ndarray) -> np.ndarray:
 
 
 def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
-    """Solve deg_i u_i - sum_{unknown j} u_j = sum_{known k} v_k on the ``todo`` cells
-    (Neumann at cells that are neither known nor todo)."""
+    """Solve deg_i u_i - sum_{unknown j} u_j = sum_{known k} v_k on ``todo`` (Neumann at the other cells)."""
     flat = np.flatnonzero(todo)
     usable, kflat, vflat = (known | todo).ravel(), known.ravel(), values.ravel()
     n = flat.size
@@ -104,10 +101,8 @@ _STENCILS = (  # second differences (offset, weight): u_xx, u_yy and sqrt(2) u_x
 
 
 def biharmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """``values`` with ``targets`` biharmonically interpolated: the least squared second differences
-    u_xx^2 + 2 u_xy^2 + u_yy^2 over every complete stencil touching a target (stencils cut by NaN or
-    the border left out: a free edge, still well posed). NaN where a component has no finite
-    neighbour; ill-posed, huge (> ``solve._BIG_GROUP``) or wild sub-systems filled harmonically."""
+    """``values`` with ``targets`` filled by the least u_xx^2 + 2 u_xy^2 + u_yy^2 over complete stencils (cut ones left
+    out: a free edge); ill-posed, huge or wild groups harmonically."""
     known = np.isfinite(values) & ~targets
     out = np.where(known, values, np.nan)
     todo = _reachable(targets, known)
@@ -123,8 +118,7 @@ def biharmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 
 def harmonic_instead(out: np.ndarray, values: np.ndarray, targets: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """``out`` with the flat ``cells`` (biharmonic targets its checks refused) filled harmonically
-    from ``values``, the other targets left out."""
+    """``out`` with the flat ``cells`` its checks refused filled harmonically from ``values``."""
     if cells.size:
         sub = np.zeros(targets.shape, bool)
         sub.ravel()[cells] = True
@@ -133,8 +127,8 @@ def harmonic_instead(out: np.ndarray, values: np.ndarray, targets: np.ndarray, c
 
 
 def stencil_system(usable: np.ndarray, todo: np.ndarray, flat: np.ndarray):
-    """Every ``_STENCILS`` row whose cells are all ``usable`` and hold a ``todo`` cell (``flat``:
-    theirs, sorted): (matrix over the todo cells, (row, cell, coefficient) of each known term, rows)."""
+    """The ``_STENCILS`` rows on ``usable`` cells holding a ``todo`` one (``flat``): (matrix, known terms' (row, cell,
+    coefficient), rows)."""
     (n_r, n_c), (r0, c0) = todo.shape, np.divmod(flat, todo.shape[1])
     ok_cell, tflat = usable.ravel(), todo.ravel()
     rows, cols, coef, n_rows = [], [], [], 0
@@ -174,8 +168,8 @@ def fill(values: np.ndarray, targets: np.ndarray, method: str = "biharmonic") ->
 
 
 def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0, median: float | None = None) -> np.ndarray:
-    """Cells with 0 < count < max(``min_points``, ``ratio`` x the median count of cells with data, or
-    ``median``: the whole grid's, for a tile); none when ``ratio`` <= 0."""
+    """Cells with 0 < count < max(``min_points``, ``ratio`` x the median count, or ``median`` for a tile); none if
+    ``ratio`` <= 0."""
     has = counts > 0
     if ratio <= 0 or not has.any():
         return np.zeros(counts.shape, bool)
@@ -192,8 +186,8 @@ def refill_epoch(
     min_points: int = 0,
     median: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(one epoch's DEM with its :func:`weak_cells` and enclosed holes of at most ``max_hole_cells``
-    refilled, the refilled cells given a value); weak cells that cannot be refilled become NaN."""
+    """(the DEM with its :func:`weak_cells` and holes up to ``max_hole_cells`` refilled, the cells refilled); weak cells
+    left NaN if not."""
     valid = np.isfinite(h)
     targets = (weak_cells(counts, ratio, min_points, median) & valid) | enclosed_holes(valid, max_hole_cells)
     filled = filler(method)(h, targets)

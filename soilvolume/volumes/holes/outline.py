@@ -22,8 +22,7 @@ _PAD = 8  # cells of context around a hole
 
 
 def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarray, method: str) -> np.ndarray:
-    """``values`` with each ``hole`` whose rim holds both ``change`` and unchanged cells refilled
-    side by side (see module)."""
+    """``values`` with each ``hole`` whose rim holds change and unchanged cells refilled side by side."""
     known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
@@ -48,8 +47,8 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
 
 
 def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, method: str) -> np.ndarray:
-    """The hole ``cells`` on the works' side: the signed distance to the outline (+ in the works, zero
-    on the last change cells' centres) interpolated across the hole; else the nearer rim."""
+    """The hole ``cells`` on the works' side: the signed distance to the outline interpolated across it, else the nearer
+    rim."""
     to_change, to_stable = ndimage.distance_transform_edt(~change), ndimage.distance_transform_edt(~stable)
     signed = np.where(change, to_stable - 1.0, np.where(stable, -to_change, np.nan))
     signed = fill(np.where(cells, np.nan, signed), cells, method)
@@ -57,8 +56,7 @@ def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, meth
 
 
 def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarray) -> np.ndarray:
-    """Per hole label, whether its rim may hold enough of both sides (counted on the labels grown by
-    ``RING``; the exact rim is counted again for those that pass)."""
+    """Per hole, whether its rim (on the labels grown by ``RING``) may hold enough of both sides."""
     grown = labels
     for _ in range(RING):
         grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=FOUR))
@@ -69,8 +67,8 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
 def outline_sigma(
     delta: np.ndarray, diff: np.ndarray, parts: dict[str, np.ndarray], share: float, cell_area: float
 ) -> dict[str, float]:
-    """One-sigma volume (m3) per part of the side-by-side fill's change ``delta`` summed per hole
-    (independent), beyond the interval's refilled ``share`` of the |difference| there."""
+    """One-sigma volume (m3) per part of ``delta`` summed per hole, beyond the refilled ``share`` of the
+    |difference|."""
     labels, n = ndimage.label(delta != 0, np.ones((3, 3), bool))
     idx = np.arange(1, n + 1)
     out = {}

@@ -18,8 +18,7 @@ _BIG_GROUP = 200_000  # coupled biharmonic unknowns beyond which a sub-system is
 
 
 def rows_csr(rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[int, int]) -> sparse.csr_matrix:
-    """``csr_matrix((data, (rows, cols)))`` of entries given row by row, columns increasing, built
-    directly (the same arrays and index type)."""
+    """``csr_matrix((data, (rows, cols)))`` of entries row by row, columns increasing, built directly."""
     idx = np.int32 if max(shape[0], shape[1], data.size) < np.iinfo(np.int32).max else np.int64
     indptr = np.zeros(shape[0] + 1, idx)
     np.cumsum(np.bincount(rows, minlength=shape[0]), out=indptr[1:])
@@ -39,8 +38,7 @@ def lower_triangle(a: sparse.csr_matrix) -> sparse.csr_matrix:
 
 
 def least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
-    """(least-squares ``mat x = rhs`` by one factorisation of ``normal + eps I`` and refinement,
-    the unknowns to fill harmonically)."""
+    """(``mat x = rhs`` by one factorisation of ``normal + eps I`` refined, the unknowns to fill harmonically)."""
     normal = (mat.T @ mat).tocsr()
     g = mat.T @ rhs
     n_groups, group = connected_components(normal, directed=False)
@@ -54,8 +52,7 @@ def least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
 
 
 def refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
-    """``normal x = g`` (one or more columns) by ``solve`` (of ``normal + eps I``), refined until
-    converged or stalled at round-off."""
+    """``normal x = g`` by ``solve`` (of ``normal + eps I``), refined until converged or stalled at round-off."""
     x, last = solve(g), np.inf
     for _ in range(_REFINE_MAX):
         dx = solve(g - normal @ x)
@@ -115,8 +112,7 @@ def _block_order(low: sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_g
 
 
 def _factor(kind: int, pi: np.ndarray, pj: np.ndarray, data: np.ndarray, n: int):
-    """The solve of an SPD matrix from its lower triangle: banded Cholesky of bandwidth
-    ``_BAND_EDGES[kind]``, SuperLU past the last edge; raises if it fails."""
+    """The solve of an SPD matrix's lower triangle: banded Cholesky of ``_BAND_EDGES[kind]``, else SuperLU."""
     if kind < _BAND_EDGES.size:
         ab = np.zeros((_BAND_EDGES[kind] + 1, n))
         ab[pi - pj, pj] = data

@@ -18,8 +18,8 @@ MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
 def fill_error(
     h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, seed: int = 0, per_cell=False
 ) -> float | tuple[float, float]:
-    """One-sigma error (m) of a refilled hole's MEAN height: discs of ``radius`` cut out of ``usable``
-    cells of ``h`` and refilled (NaN if no room); ``per_cell``: (the cells' RMS error, that)."""
+    """One-sigma error (m) of a hole's MEAN height, on discs of ``radius`` cut from ``usable`` ``h`` (NaN if no room);
+    ``per_cell``: (RMS, that)."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
     step = 2 * r + 5
@@ -43,10 +43,8 @@ def fill_error(
 def error_by_radius(
     h: np.ndarray, usable: np.ndarray, method: str, radius: np.ndarray, seed: int, per_cell=False, floor=0.0
 ) -> np.ndarray | None:
-    """:func:`fill_error` at radii 1, 2, 4, ... up to the largest ``radius`` (at most
-    :data:`MAX_TEST_RADIUS`: weak cells over a grid finer than the points form one giant "hole"),
-    interpolated in log radius at each ``radius``: (n,), or (n, 2) with ``per_cell``; None without
-    room. Errors below ``floor`` are taken as it."""
+    """:func:`fill_error` at radii 1, 2, 4 ... up to :data:`MAX_TEST_RADIUS`, interpolated in log radius at each
+    ``radius`` (at least ``floor``); None without room."""
     ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
     rows = []
     for r in ladder:
@@ -62,9 +60,8 @@ def error_by_radius(
 
 
 def discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, disc: np.ndarray) -> np.ndarray | None:
-    """:func:`.interpolate.biharmonic_fill` of test discs (``centres`` + ``disc``) no stencil joins,
-    each surrounded by finite cells in the grid (else None): one matrix, factorised once and solved
-    for every disc at once, with the whole system's arithmetic per disc."""
+    """:func:`.interpolate.biharmonic_fill` of apart, surrounded test discs (else None): one matrix factorised once,
+    solved for all."""
     reach = int(np.abs(disc).max()) + 2  # the stencils touching a disc stay within 2 cells of it
     if (centres.min(axis=0) < reach).any() or (centres.max(axis=0) + reach >= values.shape).any():
         return None
@@ -115,8 +112,8 @@ def _around(centres: np.ndarray, cells: np.ndarray, size: int) -> tuple[np.ndarr
 
 
 def disc_erosion_every(mask: np.ndarray, radius: float, step: int) -> np.ndarray:
-    """``ndimage.binary_erosion(mask, disc of radius)[::step, ::step]`` (outside the grid is not
-    ``mask``), looked up at those cells only."""
+    """``ndimage.binary_erosion(mask, disc)[::step, ::step]`` (outside the grid is not ``mask``), at those cells
+    only."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
     near = xx * xx + yy * yy <= radius * radius
