@@ -30,8 +30,7 @@ class Polygon:
 def read_polygons(
     path: str | Path, name_field: str | None = None, what: str = "zones file"
 ) -> tuple[list[Polygon], str | None]:
-    """(polygons, CRS WKT or None) of the first layer of ``path`` (other features skipped); an error
-    naming ``what`` and the file when it cannot be used."""
+    """(polygons, CRS WKT or None) of ``path``'s first layer; an error naming ``what`` and the file if unusable."""
     path = Path(path)
     feats, wkt = _features(path, what, "polygons", POLYGONAL)
     polys = [_valid(Polygon(fid, _name(props, name_field, i, path), geom), path) for i, fid, props, geom in feats]
@@ -41,8 +40,7 @@ def read_polygons(
 
 
 def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple[list[tuple], str | None]:
-    """([(index, id, attributes, geometry)] of the non-empty ``kinds`` features of the first layer of
-    ``path``, CRS WKT or None); each failure one line naming ``what`` and the file."""
+    """([(index, id, attributes, geometry)] of the ``kinds`` features, CRS WKT); a failure one line naming the file."""
     if not path.exists():
         raise SoilVolumeError(f"{path}: {what} not found")
     if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
@@ -123,8 +121,7 @@ def _valid(p: Polygon, path: Path) -> Polygon:
 
 
 def grid_transform(src_wkt: str | None, grid_wkt: str | None):
-    """The pyproj Transformer between the horizontal parts of a file's CRS and a grid's; None when
-    either is unknown or they are equal."""
+    """The Transformer between a file's and a grid's horizontal CRSs; None if either is unknown or they are equal."""
     import pyproj
 
     if not src_wkt or not grid_wkt:
@@ -137,8 +134,7 @@ def grid_transform(src_wkt: str | None, grid_wkt: str | None):
 
 
 def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Path = "") -> list[Polygon]:
-    """Polygons in the grid's horizontal CRS (:func:`grid_transform`); coordinates that cannot be
-    transformed are an error naming the file."""
+    """Polygons in the grid's horizontal CRS; coordinates that cannot be moved an error naming the file."""
     import pyproj
     import shapely
 
@@ -163,8 +159,7 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
 
 
 def read_lines(path: str | Path, what: str = "sections file") -> tuple[list[Polygon], str | None]:
-    """(lines, CRS WKT or None) of the first layer of ``path``, named by a field name, id or label
-    (else ``line N``); an error naming ``what`` and the file when it cannot be used."""
+    """(lines named by a field name, id or label, CRS WKT or None) of ``path``'s first layer; an error if unusable."""
     import shapely
 
     path = Path(path)

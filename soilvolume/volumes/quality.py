@@ -51,8 +51,7 @@ def assess(
 
 
 def correction_check(corr: float, net: float, half: float) -> list[tuple[str, str]]:
-    """When the bias correction over the change areas (``corr`` m3) is comparable to the net (and
-    beyond its interval ``half``)."""
+    """When the bias correction over the change areas (``corr`` m3) is comparable to the net, beyond ``half``."""
     size = max(abs(net), 1e-9)
     if abs(corr) <= 0.5 * size or abs(corr) <= half:
         return []
@@ -67,9 +66,8 @@ def significance_check(net: float, half: float) -> list[tuple[str, str]]:
 
 
 def _nonsoil(excluded: dict, half: float, reported: float) -> list[tuple[str, str]]:
-    """A caution when what was excluded as not soil, or counted but flagged, is over the net's
-    interval without the unclassified and unseen (``half``; ``reported``: the whole). Classes of
-    the files' own LAS classification are the survey's statement, not doubted here."""
+    """When what was excluded or flagged exceeds the measurement part ``half`` of the net's interval (a LAS
+    classification not doubted)."""
     moved = excluded.get("moved_objects") or {}
     parts = [moved.get("fill", 0.0) + moved.get("cut", 0.0) if moved.get("excluded") else 0.0]
     if not excluded.get("by_classification"):
@@ -89,9 +87,8 @@ def _nonsoil(excluded: dict, half: float, reported: float) -> list[tuple[str, st
 
 
 def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, str]]:
-    """When the change that could not be classified (:mod:`.unclassified`) is over the net's interval
-    and :data:`UNCLASSIFIED_SHARE` of the net: not reliable without any signal (a guess), a caution
-    when only objects in one survey are open; the interval is widened by it either way."""
+    """When the unclassified change exceeds the interval and :data:`UNCLASSIFIED_SHARE` of the net: unreliable without
+    signals."""
     u = excluded.get("unclassified") or {}
     if float((excluded.get("bound_m3") or {}).get("net", 0.0)) <= max(half, UNCLASSIFIED_SHARE * abs(net)):
         return []
@@ -113,8 +110,8 @@ def _moved(v: dict) -> float:
 
 
 def _canopy(excluded: dict, v: dict) -> list[tuple[str, str]]:
-    """Change under vegetation told by return numbers alone: not reliable over
-    :data:`CANOPY_SHARE` of the volume moved, a caution over a fifth of that."""
+    """Change under vegetation told by returns alone: unreliable over :data:`CANOPY_SHARE` of the moved, caution over a
+    fifth."""
     c = excluded.get("under_canopy") or {}
     reach = c.get("cut", 0.0) + c.get("fill", 0.0)
     if reach <= 0.2 * CANOPY_SHARE * _moved(v) or reach < 1.0:
@@ -129,8 +126,7 @@ def _canopy(excluded: dict, v: dict) -> list[tuple[str, str]]:
 
 
 def _blind(hidden: dict, v: dict) -> list[tuple[str, str]]:
-    """Change on one survey's ground interpolated under a large hole, and holes without any point
-    in the works (:mod:`.holes.blind`): not reliable over :data:`BLIND_SHARE` of the volume moved."""
+    """Change on ground interpolated under a large hole, and holes without points in the works (:mod:`.holes.blind`)."""
     out, part = [], hidden.get("interpolated") or {}
     m3 = part.get("cut", 0.0) + part.get("fill", 0.0)
     if m3 > BLIND_SHARE * _moved(v):
@@ -233,8 +229,7 @@ def _precise_checks(reg: dict, stable: np.ndarray, diff: np.ndarray | None) -> l
 
 
 def epoch_checks(registrations: list[dict], vols: list, prior: dict) -> list[list[tuple[str, str]]]:
-    """Each epoch's placement checks (E0's: none), worded with the epoch: ``registrations[k]``
-    is report.json's ``epochs[k].registration``, ``vols[k - 1]`` the volume step of E0 -> Ek."""
+    """Each epoch's placement checks (E0's none) in words naming it; ``vols[k - 1]``: the pair E0 -> Ek."""
     out: list[list[tuple[str, str]]] = [[]]
     for k, (reg, v) in enumerate(zip(registrations[1:], vols, strict=True), 1):
         found = registration_checks(reg, v.stable, v.change_mask, v.offset, prior, v.diff)
@@ -243,8 +238,7 @@ def epoch_checks(registrations: list[dict], vols: list, prior: dict) -> list[lis
 
 
 def period_quality(change, checks: list[list[tuple[str, str]]], vols: list, cell_area: float) -> dict:
-    """The verdict of a series' period ``change`` from its epochs' ``checks`` (:func:`epoch_checks`)
-    and its own correction and significance."""
+    """A series' period's verdict: its epochs' ``checks``, its own correction and significance."""
     i, j = change.start, change.end
     found = (checks[i] if i else []) + checks[j]
     offsets = [np.zeros_like(vols[0].offset)] + [v.offset for v in vols]

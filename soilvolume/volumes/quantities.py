@@ -17,8 +17,8 @@ PARTS = ("net", "cut", "fill")
 
 
 def zone_factors(path: str | Path) -> dict[int, dict[str, float]]:
-    """{feature id: {factor: value}} of the zones file's ``bulking``/``shrinkage`` attributes that
-    are set; a value that is not a number > 0 is an error naming the file, the zone and the field."""
+    """{feature id: {factor: value}} of the zones' set factors; one not a number > 0 an error naming file, zone,
+    field."""
     out: dict[int, dict[str, float]] = {}
     for fid, props in feature_fields(path):
         lower = {str(k).lower(): v for k, v in props.items()}
@@ -38,8 +38,8 @@ def zone_factors(path: str | Path) -> dict[int, dict[str, float]]:
 
 
 def scaled(volumes: dict[str, Any], half: dict[str, Any] | None, factors: dict[str, float]) -> dict[str, Any]:
-    """``{"bank", "loose", "compacted"}`` (the latter for the factors given): net/cut/fill (m^3) and
-    ``interval_m3`` times the factor."""
+    """``bank``, ``loose`` and ``compacted`` (for the factors given): net/cut/fill and ``interval_m3`` times the
+    factor."""
     out = {"bank": _times(volumes, half, 1.0)}
     for key, name in (("loose", "bulking"), ("compacted", "shrinkage")):
         if factors.get(name) is not None:
@@ -55,8 +55,7 @@ def _times(volumes: dict[str, Any], half: dict[str, Any] | None, factor: float) 
 
 
 def quantities(report: dict, bulking: float | None, shrinkage: float | None, zones: str | None) -> dict | None:
-    """report.json's ``quantities`` and each zone row's own (set in ``report["zones"]``); None when no
-    factor is given."""
+    """report.json's ``quantities``, each zone row's set in ``report["zones"]``; None when no factor is given."""
     overall = {"bulking": bulking, "shrinkage": shrinkage}
     per_zone = zone_factors(zones) if zones else {}
     if bulking is None and shrinkage is None and not any(per_zone.values()):

@@ -58,8 +58,7 @@ def check(agree: dict) -> tuple[str, str]:
 
 
 def merge(quality: dict, found: tuple[str, str]) -> dict:
-    """The verdict with the agreement's sentence first (a reliable one's alone: the registration's
-    does not apply)."""
+    """The verdict with the agreement's sentence first (alone if reliable: the registration's does not apply)."""
     severity, sentence = found
     worst = max(VERDICTS.index(quality["verdict"]), SEVERITY.get(severity, 0))
     kept = quality["messages"] if quality["verdict"] != VERDICTS[0] else []
@@ -69,10 +68,8 @@ def merge(quality: dict, found: tuple[str, str]) -> dict:
 def design_terms(
     counted: dict[str, np.ndarray], sigma_cell: np.ndarray, given_m: float, datum_m: float, cell_area: float, z: float
 ) -> dict:
-    """The surface's terms of the interval (m³ at ``z``) per budget (``counted``: net, cut, fill
-    masks): its resampling error ``sigma_cell`` (independent cells), a ``given_m`` uncertainty of
-    its level and the datum known as well as the unchanged ground measures it (``datum_m``), both
-    common to the counted area."""
+    """The surface's interval terms (m³ at ``z``) per budget mask: its resampling ``sigma_cell`` (independent), a
+    ``given_m`` level and the ``datum_m`` (common)."""
     out: dict[str, dict[str, float]] = {"resampling": {}, "given": {}, "datum": {}}
     for key, mask in counted.items():
         s, area = np.nan_to_num(sigma_cell[mask]), float(mask.sum()) * cell_area
@@ -83,8 +80,7 @@ def design_terms(
 
 
 def _sided(diff: np.ndarray, cells: dict[str, np.ndarray], cell_area: float, z: float, share: float = 1.0) -> dict:
-    """``share`` of the same-signed difference over the fill and cut ``cells`` (m³ at ``z``), the
-    net both in quadrature."""
+    """``share`` of the same-signed difference over the fill and cut ``cells`` (m³ at ``z``); the net in quadrature."""
     d = np.nan_to_num(diff)
     out = {k: float(z * share * np.clip(s * d[cells[k]], 0.0, None).sum() * cell_area) for k, s in _SIGNS}
     out["net"] = float(np.hypot(out["fill"], out["cut"]))
@@ -92,24 +88,20 @@ def _sided(diff: np.ndarray, cells: dict[str, np.ndarray], cell_area: float, z: 
 
 
 def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
-    """The change just below detection in the ring (:data:`RING`) around the fill and cut areas,
-    not counted: what the outline leaves out where the difference fades slowly (a graded pad
-    crossing the terrain's contours)."""
+    """The change below detection in the :data:`RING` around the areas, not counted (a graded pad crossing contours)."""
     ring = {k: ndimage.binary_dilation(counted[k], iterations=RING) & ~counted["net"] for k, _ in _SIGNS}
     return _sided(diff, {k: m & np.isfinite(diff) for k, m in ring.items()}, cell_area, z)
 
 
 def outline(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
-    """The change areas' cells on the compared area's outline, known to half a cell: half their
-    same-signed volume."""
+    """The change areas' cells on the compared area's outline, known to half a cell: half their volume."""
     valid = np.isfinite(diff)
     edge = valid & ~ndimage.binary_erosion(valid, border_value=0)
     return _sided(diff, {k: edge & counted[k] for k, _ in _SIGNS}, cell_area, z, 0.5)
 
 
 def with_surface(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridSpec) -> Volumes:
-    """The volume step's result with the surface's :data:`TERMS` added in quadrature to its net,
-    cut and fill (``sigma``: the surface's per-cell error on the grid, m)."""
+    """The volume step's result with the surface's :data:`TERMS` (``sigma``: its per-cell error) in quadrature."""
     u, cut, change = vols.uncertainty, vols.cut_mask, vols.change_mask
     counted = {"net": change, "cut": cut & change, "fill": change & ~cut}
     model = {"nugget": u["nugget_m2"], "psill": u["psill_m2"], "range": u["range_m"]}

@@ -67,8 +67,7 @@ def centred_heights(dem: EpochDEM, cell: float, options: Options, median: float 
 
 
 def written_dems(s: Refill, filled: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
-    """(dem_after.tif, dem_before.tif): the heights, on refilled cells the before survey's refilled
-    one (else interpolated, else after less ``filled``) and it plus ``filled``: they give the difference."""
+    """(dem_after.tif, dem_before.tif): refilled cells get the before's refilled height and it plus ``filled``."""
     (h_a, h_b), mask = s.heights, s.filled_mask
     base = np.where(mask, s.f_b, h_b)
     gap = mask & ~np.isfinite(base)
@@ -79,8 +78,8 @@ def written_dems(s: Refill, filled: np.ndarray, method: str) -> tuple[np.ndarray
 
 
 def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
-    """Per-cell one-sigma error (m) of refilled cells: each patch's, measured on test holes of its
-    radius in the stable difference (:func:`.holes.testholes.error_by_radius`); 0 elsewhere."""
+    """Per-cell one-sigma error (m) of refilled cells: their patch's, on test holes of its radius in the stable
+    difference."""
     if not filled_mask.any():
         return np.zeros(diff.shape)
     labels, n = ndimage.label(filled_mask, structure=ndimage.generate_binary_structure(2, 1))

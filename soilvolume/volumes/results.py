@@ -55,8 +55,8 @@ class Cells:
 
 @dataclass(frozen=True)
 class Volumes:
-    """The volume step's parts, the correction's ``params``, the ``uncertainty``, what is not soil
-    (``excluded``) and no survey saw (``blind``); each part's fields read on the whole too."""
+    """The volume step's parts, ``params``, ``uncertainty``, ``excluded`` and ``blind``; parts' fields read on the
+    whole."""
 
     grids: Grids
     budgets: Budgets
@@ -86,8 +86,8 @@ Volumes.change_areas = _from("budgets", "compensated")  # the headline's other n
 
 @dataclass(frozen=True)
 class Given:
-    """What a tile of a grid too large for one process takes from the whole grid (its overview): the
-    correction and stable ground, the median counts, and the core it counts (the rest is halo)."""
+    """What a tile takes from the whole grid's overview: correction, stable ground, median counts, the core it
+    counts."""
 
     offset: np.ndarray  # the correction surface on the window (m)
     stable: np.ndarray  # stable ground on the window

@@ -33,8 +33,7 @@ from .uncertainty import detection_level, interp_fraction, statistic_bias, volum
 
 @dataclass(frozen=True)
 class Change:
-    """One period (or the cumulative): epochs ``start`` -> ``end``, its difference (m), areas
-    of significant change, budgets and interval (m3)."""
+    """One period (or the cumulative) ``start`` -> ``end``: difference (m), change areas, budgets, interval (m3)."""
 
     start: int
     end: int
@@ -62,8 +61,7 @@ class SeriesVolumes:
 def combine(
     vols: list[Volumes], dems: list[EpochDEM], moves: list[np.ndarray | None], grid: GridSpec, options: Options
 ) -> SeriesVolumes:
-    """The series from the pairs E0 -> Ek (``vols[k-1]``), each epoch's DEM (``dems[k]``, E0 first)
-    and each later epoch's move to its alternative pose (``moves[k-1]``, or None)."""
+    """The series from the pairs E0 -> Ek (``vols[k-1]``), the DEMs (E0 first), the moves to alternative poses."""
     valid = np.logical_and.reduce([np.isfinite(v.diff) for v in vols])
     refilled = np.logical_or.reduce([v.filled_mask for v in vols]) & valid
     stable = np.logical_and.reduce([v.stable for v in vols]) & valid & ~refilled
@@ -110,9 +108,8 @@ def period_uncertainty(
     options: Options,
     fits: int,
 ) -> dict:
-    """± half-widths (m3) of a period's net (over ``works``), cut and fill (its ``areas``: fill, cut)
-    from its ``diff`` (see module); ``pose``: the difference's change at the alternative poses (m),
-    ``skews``: (end, start) cell statistics' (:func:`.uncertainty.statistic_bias`), ``fits``: surfaces."""
+    """± (m3) of a period's net over ``works``, cut and fill over its ``areas``; ``pose``, ``skews``, ``fits``: see
+    module."""
     (fill_area, cut_area), area = areas, grid.cell_area
     reg_v = signed_budget(pose, fill_area, cut_area, area)
     reg_v["net"] = abs(float(np.nansum(np.where(works, pose, 0.0)))) * area

@@ -18,8 +18,7 @@ INTERP_FRACTION = 0.15
 
 
 def interp_fraction(patch_radius_cells: float) -> float:
-    """One-sigma error of refilled change volume as a share of it (fully correlated): overshoot at toes
-    and rims falls as 1 / radius (measured: 30-80 % on holes of ~2 cells, under 5 % on 6 cells)."""
+    """Refilled change volume's one-sigma share: falls as 1 / radius (30-80 % on ~2-cell holes, under 5 % on 6)."""
     return float(min(0.5, max(INTERP_FRACTION, 1.0 / max(patch_radius_cells, 1.0))))
 
 
@@ -49,10 +48,8 @@ def volume_uncertainty(
     surface: bool = True,
     bound_m3: dict[str, float] | None = None,
 ) -> dict[str, Any]:
-    """± half-widths (m^3) at ``confidence`` of net/cut/fill over ``change_mask`` (all valid if None)
-    and ``net_compared_area``, with the error model's figures and ``terms_m3`` (:data:`TERMS`).
-    ``n_coef``: the correction's coefficients; refills and ``surface``: :class:`_PartTerms`;
-    ``counted``: the cells summed (a tile's core); ``bound_m3``: added as it is (:func:`widen`)."""
+    """± (m^3) at ``confidence`` over ``change_mask`` (all if None), the model's figures, :data:`TERMS`; ``n_coef``: the
+    correction's, ``counted``: a tile's core, ``bound_m3``: added as is."""
     d, valid = diff_corrected, np.isfinite(diff_corrected)
     stable = stable_mask & valid
     if counted is not None:
@@ -82,8 +79,7 @@ def volume_uncertainty(
 
 
 def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, float]:
-    """Half-widths (m3) widened by the unattributed ``bound`` per part (all of it or none: it adds
-    as it is; the net's to ``net_compared_area`` too)."""
+    """Half-widths (m3) widened by the unattributed ``bound`` (all or none: it adds as it is)."""
     b = bound or {}
     out = {k: v + float(b.get(k, 0.0)) for k, v in half.items()}
     if "net_compared_area" in out:
@@ -92,10 +88,8 @@ def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, f
 
 
 class _PartTerms:
-    """A part's one-sigma terms (m^3) beyond its area's model: ``fraction`` of its refilled |volume|
-    (hole fills over change edges were off 10-22 % on synthetic pairs; not ``own`` cells, filled in
-    their own survey), ``fill_sigma`` summed per refilled patch, and the correction's leftover bias
-    (with ``surface``, its spread on stable ground over the part's area)."""
+    """A part's terms beyond its area's: ``fraction`` of refilled |volume| (10-22 % off on synthetic pairs),
+    ``fill_sigma``, leftover bias."""
 
     def __init__(
         self, diff, valid, stable, grid: GridSpec, filled_mask, own, fill_sigma, fraction: float, surface: bool
@@ -136,8 +130,7 @@ class _PartTerms:
 
 
 def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
-    """One-sigma volume (m3) per part of the cell statistic's bias: ``skews`` (after, before: height
-    minus median, None: 0) differenced and summed, fully correlated; refilled cells none."""
+    """One-sigma volume (m3) per part of the cell statistic's bias: ``skews`` differenced, summed (not refilled)."""
     d = np.zeros(refilled.shape)
     for sign, sk in zip((1.0, -1.0), skews, strict=True):
         if sk is not None:
@@ -147,8 +140,7 @@ def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarr
 
 
 def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
-    """A cell's level of detection (m): :func:`_lod` of the stable residuals, at most twice the
-    neighbour noise's (change left in the stable ground cannot inflate it)."""
+    """A cell's LoD (m): :func:`_lod` of the stable residuals, at most twice the neighbour noise's."""
     r = diff[stable & np.isfinite(diff)]
     lod = _lod(r, nmad(r), confidence) if r.size else None
     noise = noise_sigma(diff)
@@ -158,8 +150,7 @@ def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.
 
 
 def leftover_bias(residual: np.ndarray, stable: np.ndarray, cell: float, scale_m: float = 10.0) -> np.ndarray:
-    """The stable residuals smoothed over ``scale_m`` into the change areas (NaN far from stable
-    ground): the millimetres a dome not quite of degree 2 leaves, which a volume multiplies."""
+    """The stable residuals smoothed over ``scale_m`` into the change (a dome not quite of degree 2 leaves mm)."""
     w = (stable & np.isfinite(residual)).astype(float)
     s = max(1.0, scale_m / cell)
     num = ndimage.gaussian_filter(np.where(w > 0, residual, 0.0), s)

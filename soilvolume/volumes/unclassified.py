@@ -22,8 +22,7 @@ CANOPY_REACH = 2.0  # how far above the ground a canopy's points taken for soil 
 
 
 def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) -> dict:
-    """The bound (m3 per part) of what could not be classified or lies under a canopy in ``counted``;
-    their sections added to ``report``."""
+    """The bound (m3) of the unclassified and under-canopy change in ``counted``; their sections set in ``report``."""
     signal = any(labelled(e) for e in epochs)
     unclear, n = _unclear(diff, counted, found, rough, signal, cell_area)
     report["unclassified"] = {**part_budget(diff, unclear, cell_area), "count": n, "signals": signal}
@@ -39,8 +38,8 @@ def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) 
 
 
 def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
-    """(the counted change not said to be soil, its patches): machine-sized single objects, and
-    without any signal rough cells and compact patches (:data:`UNCLEAR_AREA_M2`)."""
+    """(the change not said to be soil, its patches): single machine-sized objects; without signals rough and
+    compact."""
     small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
     out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
     if not signal:
@@ -61,9 +60,8 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
 
 
 def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
-    """What a canopy told by return numbers alone may have added (m3 per part; single returns off
-    dense grass taken for soil): per counted cell under it, its |difference| at most the larger of
-    :data:`CANOPY_REACH` x the canopy over the cell and the canopy over the other survey's ground."""
+    """What a canopy told by returns alone may add (m3): each cell's |difference|, at most :data:`CANOPY_REACH` x its
+    canopy or that over the other's ground."""
     reach = np.zeros(diff.shape)
     for e, o in (epochs, epochs[::-1]):
         if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
@@ -82,8 +80,7 @@ def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: floa
 
 
 def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
-    """Change cells on rough ground (fill: the after survey's, cut: the before's) where no signal
-    labelled any point (they tell vegetation better than roughness, which curved ground shows too)."""
+    """Change on rough ground (fill: after's, cut: before's) where no signal labelled a point (they tell better)."""
     if any(labelled(e) for e in epochs):
         return np.zeros(fill.shape, bool)
     out = []

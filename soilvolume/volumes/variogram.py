@@ -12,8 +12,7 @@ N_LAGS = 24
 
 
 def semivariogram(residual: np.ndarray, mask: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Isotropic semivariogram from row/column shifts of the masked residuals: (lags_m, gamma_m2,
-    n_pairs) at :data:`N_LAGS` roughly log-spaced lags up to half the masked extent."""
+    """Isotropic semivariogram of the masked residuals by shifts: (lags_m, gamma_m2, n_pairs) up to half the extent."""
     z = np.where(mask & np.isfinite(residual), residual, np.nan)
     rr, cc = np.nonzero(np.isfinite(z))
     if rr.size < 2:
@@ -43,9 +42,8 @@ RANGE_ROUNDS = 4  # rounds, each on the bracket of the round before's best range
 
 
 def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> dict[str, float]:
-    """The pair-weighted least-squares spherical fit {nugget, psill, range} (levels within [0, 2 max
-    gamma], range within [lags[0] / 2, 2 lags[-1]]): levels exact per range (:func:`_best_levels`),
-    the range on a refined log grid, so the global optimum."""
+    """The pair-weighted spherical fit {nugget, psill, range}: levels exact per range, the range on a refined log
+    grid."""
     if lags.size < 3:
         g = float(gamma.mean()) if gamma.size else 0.0
         return {"nugget": g, "psill": 0.0, "range": float(lags.max()) if lags.size else 0.0}
@@ -62,8 +60,7 @@ def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> d
 def _best_levels(
     lags: np.ndarray, gamma: np.ndarray, w: np.ndarray, ranges: np.ndarray, cap: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per range, the model's least cost and its (nugget, psill) within [0, ``cap``]: (R,), (2, R)
-    (convex: the free solution if inside the box, else the best on its edges)."""
+    """Per range, the least cost and (nugget, psill) within [0, ``cap``] (the free solution, else the box's edges)."""
     s = np.minimum(lags[None, :] / ranges[:, None], 1.0)
     b = 1.5 * s - 0.5 * s**3  # (R, L): the model's shape at each lag
     sw, sg, sb, sbb, sgb = w.sum(), w @ gamma, b @ w, (b * b) @ w, b @ (w * gamma)
@@ -90,8 +87,7 @@ def _best_levels(
 
 
 def correlated_fraction(area: float, rng: float) -> float:
-    """Rolstad et al. (2009): variance of the mean of a spherically correlated field over a
-    disc-equivalent area, as a fraction of the point variance."""
+    """Rolstad et al. (2009): a disc-equivalent area's mean variance as a fraction of the point variance."""
     if area <= 0 or rng <= 0:
         return 0.0
     radius = math.sqrt(area / math.pi)
@@ -113,8 +109,7 @@ def region_sigma(n_cells: int, cell: float, model: dict[str, float], bias_sigma:
 
 
 def bias_sigma(n_stable: int, cell: float, model: dict[str, float], n_coef: int) -> float:
-    """One-sigma error of the correction surface's level at a change cell: the mean error over
-    the stable ground, inflated by the number of fitted coefficients."""
+    """One-sigma error of the correction's level: the stable ground's mean error, inflated by the coefficients."""
     if n_stable <= 0:
         return 0.0
     area = n_stable * cell * cell

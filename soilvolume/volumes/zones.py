@@ -76,9 +76,8 @@ def zone_budgets(
     interval: Callable[[np.ndarray], dict[str, float]] | None = None,
     areas: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[dict[str, Any]]:
-    """Per polygon of ``zones_path``: id, name, budget, zone (grid cells) and polygon area, repaired
-    (on the ``whole`` grid :func:`check_inside`); ``interval``: its ± from its mask; ``areas``: the
-    (fill, cut) areas its fill and cut are summed over, as the headline's (else each cell's sign)."""
+    """Per polygon: id, name, budget, zone and polygon areas; ``interval`` its ±; fill and cut over ``areas`` as the
+    headline's."""
     polys, wkt = on_grid(zones_path, grid, name_field)
     out = []
     for p, mask in zip(polys, polygon_masks(polys, grid), strict=True):
@@ -124,9 +123,8 @@ def _names(names: list[str], limit: int = 5) -> str:
 
 
 def zone_interval(model: Callable[..., dict], region: np.ndarray, headline: dict, zone: np.ndarray) -> dict[str, float]:
-    """A zone's ± half-widths (m^3): the run's error ``model`` over ``region`` (the headline's
-    change) in ``zone``, the headline's extras shared by the zone's share of each part's area, and
-    widened by the run's whole unclassified change (where it lies is not kept)."""
+    """A zone's ± (m^3): ``model`` over ``region`` in ``zone``, a share of the extras, widened by all the
+    unclassified."""
     own = model(change_mask=region & zone, extra_sigma=None)
     extra = TERMS.index("extras")
     out = {}
