@@ -36,9 +36,8 @@ class Areas:
 
 def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: Options) -> Areas:
     """The change areas, what is not soil in them, stable ground never in or next to them unless the user drew it."""
-    refilled = s.filled_mask & ~s.seen_once
-    fill, cut = change_areas(c.diff, c.lod_cell, refilled=refilled)
-    ex = exclude_nonsoil(c.diff, (fill, cut), epochs, c.offset, grid, options, s.heights, c.stable, refilled)
+    fill, cut = change_areas(c.diff, c.lod_cell, refilled=s.filled_mask & ~s.seen_once)
+    ex = exclude_nonsoil(s, c, (fill, cut), epochs, grid, options)
     quiet = c.stable & ~ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
     stable = quiet if not options.stable_mask and quiet.sum() >= MIN_QUIET else c.stable
     return Areas(ex.fill, ex.cut, ex, stable)

@@ -14,6 +14,8 @@ from ..core.types import GridSpec
 from ..core.wording import opt
 from ..options import Options
 from ..soil.objects import Blob, find_objects
+from .correct import Corrected
+from .refill import Refill
 from .results import Epochs
 from .unclassified import SHARE, UNCLEAR_AREA_M2, bounds, part_budget, rough
 
@@ -53,19 +55,11 @@ class Exclusion:
 
 
 def exclude_nonsoil(
-    diff: np.ndarray,
-    areas: tuple[np.ndarray, np.ndarray],
-    epochs: Epochs,
-    offset: np.ndarray,
-    grid: GridSpec,
-    options: Options,
-    heights: tuple[np.ndarray, np.ndarray],
-    stable: np.ndarray,
-    refilled: np.ndarray,
+    s: Refill, c: Corrected, areas: tuple[np.ndarray, np.ndarray], epochs: Epochs, grid: GridSpec, options: Options
 ) -> Exclusion:
-    """See module; ``areas``: (fill, cut); ``heights`` and ``stable`` give rough cells; ``refilled`` cells are no
-    object's."""
-    (fill, cut), mode, area = areas, options.exclude, grid.cell_area
+    """See module; ``areas``: the change areas (fill, cut) of the refill ``s`` corrected by ``c``."""
+    (fill, cut), mode, area, diff = areas, options.exclude, grid.cell_area, c.diff
+    refilled = s.filled_mask & ~s.seen_once  # interpolated cells: no object's
     shares = _shares(epochs)
     found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
     leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
@@ -73,14 +67,16 @@ def exclude_nonsoil(
     share = CLASS_MISSED_SHARE if all(e.rule is not None and e.rule.use_class for e in epochs) else MISSED_SHARE
     # only what was left out in or beside the counted change areas can bias the headline
     near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
-    classes, taken, by_class, sigma = _by_class(diff, epochs, offset, shares, found, near, area, share)
+    classes, taken, by_class, sigma = _by_class(diff, epochs, c.offset, shares, found, near, area, share)
     report: dict = {"mode": mode, "classes": by_class}
     classes[found.moved] = 4
     classes[grass & ~(shares["vegetation"] >= SHARE)] = 1
     report["grass_patches"] = part_budget(diff, grass, area)
     sigma = {k: float(np.hypot(v, share * abs(report["grass_patches"][k]))) for k, v in sigma.items()}
     classes[found.single] = 5
-    rough_area = rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
+    rough_area = (
+        rough(epochs, s.heights, c.stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
+    )
     classes[rough_area] = 6
     report["rough"] = part_budget(diff, rough_area, area)
     report.update(_objects(diff, found, lone, grid, mode, options.objects == "exclude" and mode != "none"))

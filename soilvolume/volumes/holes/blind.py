@@ -1,10 +1,7 @@
-"""Change no survey could see: holes without any point (water, a shadow) inside the works.
-
-Filled from its rim, a pond in a pit reads the water, not the bottom (a 2 m pit with 0.8 m of water
-read 82 % of its cut). So a hole whose rim is mostly change and whose ground falls into it from all
-around (a basin) is a range: from the fill of its rim to the rim's slope carried on inwards (capped
-at :data:`DEEPER` times the rim's depth). The interval is widened by it and the verdict says why.
-"""
+"""Change no survey could see: holes without any point in the works. From its rim, a pond reads the
+water, not the pit's bottom (0.8 m of water: 82 % of a 2 m pit's cut). A basin mostly rimmed by change
+is a range, from its rim's fill to the rim's slope carried inwards (at most :data:`DEEPER` times the
+rim's depth), widening the interval; the verdict says why."""
 
 from __future__ import annotations
 

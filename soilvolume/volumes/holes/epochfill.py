@@ -1,12 +1,8 @@
-"""Holes of one survey filled from its own neighbours where the other sees change across them.
-
-The difference is smooth on unchanged ground, not across an object's wall: interpolated across a
-5 m wall, a hole on a pillar's side dipped to -3...-5 m (paper-pillars-rgb: -19 m3 on a 299 m3
-pillar). Such a hole is filled in its own survey when the measured survey's detail inside it is
-far beyond the other's typical detail on holes of that size, and its rim shows change too (a
-machine that left over a hole is no soil cut). A hole a quarter or more empty in both surveys is
-the difference's to fill (a cell filled in its own survey beside them moved a 72-cell hole by 13 m3).
-"""
+"""Holes of one survey filled from its own neighbours where the other sees change across them: the
+difference is not smooth across a wall (a hole on a pillar's side dipped 3-5 m: -19 m3 of 299 m3 in
+paper-pillars-rgb). So when the other's detail there is far beyond the survey's own on holes that
+size and the rim shows change (a machine gone over a hole is no cut); holes a quarter empty in both
+are the difference's (filling one's cells moved a 72-cell hole by 13 m3)."""
 
 from __future__ import annotations
 

@@ -1,12 +1,7 @@
-"""Holes across the outline of the works, filled from each side.
-
-A smooth fill rounds the kink where ground meets a pile's foot or a pit's rim (paper-density pairs:
-net -1.76 % on a 259 m3 pit, +0.45 % on 954 m3 of piles; -0.08 % and -0.00 % filled this way). A hole
-whose rim holds both change and unchanged ground is split along the outline carried on through it
-(the signed distance to it interpolated: a straight outline goes on straight; splitting by the
-nearer rim cut a trench's edge like a pie: -3.6 m3 and +4.0 m3 on works-trench), each side filled
-from its own rim. The fills' difference is a term of the interval (:func:`outline_sigma`).
-"""
+"""Holes across the outline of the works, filled from each side: a smooth fill rounds the kink at a
+pile's foot or a pit's rim (paper-density: -1.76 % of a 259 m3 pit, +0.45 % of 954 m3 of piles; -0.08 %
+and -0.00 % this way). The outline is carried through the hole (its signed distance interpolated; the
+nearer rim cut a trench's edge like a pie: -3.6 and +4.0 m3), the difference a term (:func:`outline_sigma`)."""
 
 from __future__ import annotations
 
