@@ -15,8 +15,7 @@ from ..core.types import GridSpec
 from ..options import Options
 from .quality import VERDICTS
 from .results import Volumes
-from .uncertainty import z_value
-from .variogram import bias_sigma
+from .uncertainty import bias_sigma, z_value
 
 MIN_CELLS = 30  # fewer unchanged cells than this cannot tell an offset
 RING = 1  # cells around the change areas whose sub-detection difference the volumes may miss
