@@ -1,2 +1,1 @@
-"""Step 5: V = S_g * sum(H_after - H_before - d_i) as a chain of typed stages (:mod:`.compute`), hole
-filling (:mod:`.holes`) and the quality verdict."""
+"""Step 5: V = S_g * sum(H_after - H_before - d_i) in typed stages (:mod:`.compute`), holes, verdict."""

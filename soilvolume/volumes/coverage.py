@@ -58,10 +58,10 @@ def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outsi
     floor = lod_m if np.isfinite(lod_m) else 0.0
     outside = outside or {"fill_m3": 0.0, "cut_m3": 0.0}
     shown = outside["fill_m3"] + outside["cut_m3"]
-
-    def near(key: str) -> float:
-        return max(cells[f"{key}_p95_m"] if cells[f"{key}_cells"] else cells["abs_diff_p95_m"], floor)
-
+    p95 = {
+        k: cells[f"{k}_p95_m"] if cells[f"{k}_cells"] else cells["abs_diff_p95_m"] for k in ("gap_ring", "edge_ring")
+    }
+    near = {k: max(v, floor) for k, v in p95.items()}  # the |difference| around the gaps, at least the LoD
     return {
         "after_footprint_m2": footprint,
         "compared_m2": compared,
@@ -69,9 +69,9 @@ def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outsi
         "before_missing_m2": cells["before_missing_cells"] * cell_area + beyond_m2,
         "after_beyond_before_extent_m2": beyond_m2,
         "unseen_m2": inside + beyond_m2,
-        "unseen_volume_bound_m3": inside * near("gap_ring") + max(beyond_m2 * near("edge_ring"), shown),
+        "unseen_volume_bound_m3": inside * near["gap_ring"] + max(beyond_m2 * near["edge_ring"], shown),
         "beyond_change_m3": outside,
-        "abs_difference_p95_m": {"near_gaps": near("gap_ring"), "along_edge": near("edge_ring")},
+        "abs_difference_p95_m": {"near_gaps": near["gap_ring"], "along_edge": near["edge_ring"]},
     }
 
 

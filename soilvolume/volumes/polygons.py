@@ -142,12 +142,9 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
     if tr is None:
         return polys
 
-    def move(xy: np.ndarray) -> np.ndarray:
-        return np.column_stack(tr.transform(xy[:, 0], xy[:, 1]))
-
     out = []
     for p in polys:
-        geom = shapely.transform(p.geometry, move)
+        geom = shapely.transform(p.geometry, lambda xy: np.column_stack(tr.transform(xy[:, 0], xy[:, 1])))
         if not np.isfinite(shapely.get_coordinates(geom)).all():
             src, dst = (horizontal(pyproj.CRS.from_user_input(w)) for w in (src_wkt, grid.crs_wkt))
             raise SoilVolumeError(

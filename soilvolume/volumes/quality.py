@@ -40,7 +40,8 @@ def assess(
     excluded, hidden = report.get("excluded") or {}, report.get("blind") or {}
     bound = sum(float((r.get("bound_m3") or {}).get("net", 0.0)) for r in (excluded, hidden))
     random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified or seen
-    out += _blind(hidden, v) + _canopy(excluded, v) + _unclassified(excluded, v["net"], random_half)
+    moved = max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)  # the volume moved
+    out += _blind(hidden, moved) + _canopy(excluded, moved) + _unclassified(excluded, v["net"], random_half)
     out += _nonsoil(excluded, random_half, u["net"])
     out += [("caution", m) for m in zone_messages(report.get("zones") or [])]
     unseen = coverage_check(report)
@@ -104,17 +105,12 @@ def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, st
     return [("caution" if signals else "unreliable", said)]  # signals said the rest: only objects are open
 
 
-def _moved(v: dict) -> float:
-    """The volume moved (cut + fill, m3; never 0)."""
-    return max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)
-
-
-def _canopy(excluded: dict, v: dict) -> list[tuple[str, str]]:
+def _canopy(excluded: dict, moved: float) -> list[tuple[str, str]]:
     """Change under vegetation told by returns alone: unreliable over :data:`CANOPY_SHARE` of the moved, caution over a
     fifth."""
     c = excluded.get("under_canopy") or {}
     reach = c.get("cut", 0.0) + c.get("fill", 0.0)
-    if reach <= 0.2 * CANOPY_SHARE * _moved(v) or reach < 1.0:
+    if reach <= 0.2 * CANOPY_SHARE * moved or reach < 1.0:
         return []
     said = (
         f"{c.get('area_m2', 0.0):,.0f} m² of the change lies under vegetation that only return numbers "
@@ -122,14 +118,14 @@ def _canopy(excluded: dict, v: dict) -> list[tuple[str, str]]:
         f"so up to {reach:,.0f} m³ of it may be vegetation; the interval is widened by it (a ground "
         f"classification, or {opt('ground', 'csf')}, measures the ground itself)"
     )
-    return [("unreliable" if reach > CANOPY_SHARE * _moved(v) else "caution", said)]
+    return [("unreliable" if reach > CANOPY_SHARE * moved else "caution", said)]
 
 
-def _blind(hidden: dict, v: dict) -> list[tuple[str, str]]:
+def _blind(hidden: dict, moved: float) -> list[tuple[str, str]]:
     """Change on ground interpolated under a large hole, and holes without points in the works (:mod:`.holes.blind`)."""
     out, part = [], hidden.get("interpolated") or {}
     m3 = part.get("cut", 0.0) + part.get("fill", 0.0)
-    if m3 > BLIND_SHARE * _moved(v):
+    if m3 > BLIND_SHARE * moved:
         said = (
             f"{m3:,.0f} m³ of the change ({part.get('area_m2', 0.0):,.0f} m²) stands where one survey saw no "
             "ground over a large area (vegetation or no returns): its ground there was interpolated from "
@@ -147,7 +143,7 @@ def _blind(hidden: dict, v: dict) -> list[tuple[str, str]]:
         f": water, a shadow or no returns): the ground under it is unknown and the volume there adds anywhere from "
         f"{lo:+,.0f} to {hi:+,.0f} m³ to what is counted; the interval is widened by it"
     )
-    return out + [("unreliable" if reach > BLIND_SHARE * _moved(v) else "caution", said)]
+    return out + [("unreliable" if reach > BLIND_SHARE * moved else "caution", said)]
 
 
 def verdict(found: list[tuple[str, str]]) -> dict:

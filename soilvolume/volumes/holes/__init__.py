@@ -1,2 +1,1 @@
-"""Hole filling: the interpolants (:mod:`.interpolate`, :mod:`.solve`), their error (:mod:`.testholes`),
-a survey's own holes (:mod:`.epochfill`), the outline's (:mod:`.outline`), the unseen (:mod:`.blind`)."""
+"""Hole filling: interpolants and their error, a survey's own holes, the outline's, the unseen ones."""
