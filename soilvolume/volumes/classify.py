@@ -27,11 +27,7 @@ class Areas:
     cut: np.ndarray
     exclusion: Exclusion
     stable: np.ndarray
-
-    @property
-    def counted(self) -> np.ndarray:
-        """The change areas the headline sums."""
-        return self.fill | self.cut
+    counted: np.ndarray  # fill | cut: the change areas the headline sums
 
 
 def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: Options) -> Areas:
@@ -40,4 +36,4 @@ def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: O
     ex = exclude_nonsoil(s, c, (fill, cut), epochs, grid, options)
     quiet = c.stable & ~ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
     stable = quiet if not options.stable_mask and quiet.sum() >= MIN_QUIET else c.stable
-    return Areas(ex.fill, ex.cut, ex, stable)
+    return Areas(ex.fill, ex.cut, ex, stable, ex.fill | ex.cut)

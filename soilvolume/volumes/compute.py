@@ -10,11 +10,11 @@ from ..options import Options
 from .budgets import budgets
 from .classify import classify
 from .correct import correct
-from .interval import interval, pose_effect
-from .refill import centred_heights, refill, refill_sigma, written_dems
+from .interval import interval
+from .refill import centred_heights, refill, written_dems
 from .results import Given, Grids, Volumes
 
-__all__ = ["Given", "Volumes", "centred_heights", "compute_volumes", "pose_effect", "refill_sigma"]
+__all__ = ["Given", "Volumes", "centred_heights", "compute_volumes"]
 
 
 def compute_volumes(

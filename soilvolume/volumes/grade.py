@@ -58,14 +58,9 @@ def grade(diff: np.ndarray, grid: GridSpec, tolerance: float, zones: str | Path 
 def progress(start: dict, end: dict) -> dict:
     """A period's progress between the :func:`grade` summaries at its start and end: the cut and fill
     done (m^3), the area brought on grade (m^2), at its end the share on grade and what is to go; per zone."""
-    out = {
-        "cut_done_m3": start["cut_to_go_m3"] - end["cut_to_go_m3"],
-        "fill_done_m3": start["fill_to_go_m3"] - end["fill_to_go_m3"],
-        "on_grade_gained_m2": end["on_grade_area_m2"] - start["on_grade_area_m2"],
-        "on_grade_share": end["on_grade_share"],
-        "cut_to_go_m3": end["cut_to_go_m3"],
-        "fill_to_go_m3": end["fill_to_go_m3"],
-    }
+    out = {f"{k}_done_m3": start[f"{k}_to_go_m3"] - end[f"{k}_to_go_m3"] for k in ("cut", "fill")}
+    out["on_grade_gained_m2"] = end["on_grade_area_m2"] - start["on_grade_area_m2"]
+    out.update({k: end[k] for k in ("on_grade_share", "cut_to_go_m3", "fill_to_go_m3")})
     if "zones" in start:
         pairs = zip(start["zones"], end["zones"], strict=True)
         out["zones"] = [{"id": a["id"], "name": a["name"], **progress(a, b)} for a, b in pairs]

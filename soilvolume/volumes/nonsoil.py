@@ -65,8 +65,9 @@ def exclude_nonsoil(
     leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
     # the share of an excluded volume it may have got wrong: less by a LAS classification (its ground is measured)
     share = CLASS_MISSED_SHARE if all(e.rule is not None and e.rule.use_class for e in epochs) else MISSED_SHARE
+    fill, cut = fill & ~leave_out, cut & ~leave_out  # what the headline counts
     # only what was left out in or beside the counted change areas can bias the headline
-    near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
+    near = ndimage.binary_dilation(fill | cut, iterations=NEAR_CELLS)
     classes, taken, by_class, sigma = _by_class(diff, epochs, c.offset, shares, found, near, area, share)
     report: dict = {"mode": mode, "classes": by_class}
     classes[found.moved] = 4
@@ -74,18 +75,16 @@ def exclude_nonsoil(
     report["grass_patches"] = part_budget(diff, grass, area)
     sigma = {k: float(np.hypot(v, share * abs(report["grass_patches"][k]))) for k, v in sigma.items()}
     classes[found.single] = 5
-    rough_area = (
-        rough(epochs, s.heights, c.stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
-    )
+    rough_area = rough(epochs, s.heights, c.stable, grid.cell, fill, cut) & ~taken & ~found.single
     classes[rough_area] = 6
     report["rough"] = part_budget(diff, rough_area, area)
     report.update(_objects(diff, found, lone, grid, mode, options.objects == "exclude" and mode != "none"))
     if mode != "none":
         moved, lone_m3 = report["moved_objects"], part_budget(diff, lone, area)
         sigma = {k: float(np.hypot(v, MOVED_SHARE * np.hypot(moved[k], lone_m3[k]))) for k, v in sigma.items()}
-    bound = bounds(diff, (fill | cut) & ~leave_out, found, rough_area, epochs, area, report)
+    bound = bounds(diff, fill | cut, found, rough_area, epochs, area, report)
     report["sigma_m3"], report["bound_m3"] = sigma, bound
-    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
+    return Exclusion(fill, cut, classes, report, sigma, bound)
 
 
 def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, shares: dict):

@@ -57,9 +57,9 @@ def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple
     except Exception as exc:  # noqa: BLE001 - driver errors come in many types
         raise SoilVolumeError(f"{path}: cannot read {noun} from this {what} ({short_error(exc)})") from None
     kept = [
-        (i, int(fid if fid is not None else i), props, geom)
-        for i, (fid, props, geom) in enumerate(feats)
-        if geom is not None and not geom.is_empty and geom.geom_type in kinds
+        (i, fid, props, g)
+        for i, (fid, props, g) in enumerate(feats)
+        if g is not None and g.geom_type in kinds and not g.is_empty
     ]
     return kept, wkt
 
@@ -91,14 +91,10 @@ def _read(path: Path):
 
 
 def _name(props: dict, field: str | None, i: int, path: Path) -> str:
-    if field:
-        if field not in props:
-            raise SoilVolumeError(f"{path}: no field '{field}' (fields: {', '.join(props)})")
-        return str(props[field])
-    for key in props:
-        if key.lower() in ("name", "zone", "label"):
-            return str(props[key])
-    return f"zone {i + 1}"
+    if field and field not in props:
+        raise SoilVolumeError(f"{path}: no field '{field}' (fields: {', '.join(props)})")
+    key = field or next((k for k in props if k.lower() in ("name", "zone", "label")), None)
+    return str(props[key]) if key else f"zone {i + 1}"
 
 
 def _valid(p: Polygon, path: Path) -> Polygon:

@@ -67,16 +67,14 @@ def combine(
     stable = np.logical_and.reduce([v.stable for v in vols]) & valid & ~refilled
     to_e0 = [np.where(valid, 0.0, np.nan)] + [np.where(valid, v.diff, np.nan) for v in vols]
     se = [np.where(refilled, np.nan, cell_sigma(d.spread, d.counts)) for d in dems]
-    pose = [np.zeros((grid.rows, grid.cols))] + [
-        pose_effect(v.dem_a, grid, m) for v, m in zip(vols, moves, strict=True)
-    ]
+    pose = [np.zeros(valid.shape), *(pose_effect(v.dem_a, grid, m) for v, m in zip(vols, moves, strict=True))]
     n = len(to_e0) - 1
     pairs = [(i, i + 1) for i in range(n)] + [(0, n)]
     found = {}
     for i, j in pairs:
         diff = to_e0[j] - to_e0[i]
-        lod = detection_level(diff, stable, options.lod_confidence)
-        lod_cell = cell_lod(lod, se[i], se[j], z_value(options.lod_confidence))
+        conf = options.lod_confidence
+        lod_cell = cell_lod(detection_level(diff, stable, conf), se[i], se[j], z_value(conf))
         found[i, j] = (diff, change_areas(diff, lod_cell, refilled=refilled), lod_cell)
     works = np.logical_or.reduce([fill | cut for _, (fill, cut), _ in found.values()])
     works_m3 = [math.fsum(d[works & valid].tolist()) * grid.cell_area for d in to_e0]

@@ -30,8 +30,7 @@ def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) 
     # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
     below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
     report["unclassified"]["net_range_m3"] = [-below, above]
-    canopy = _under_canopy(diff, epochs, counted, cell_area)
-    report["under_canopy"] = canopy
+    report["under_canopy"] = canopy = _under_canopy(diff, epochs, counted, cell_area)
     bound = {k: report["unclassified"][k] + canopy[k] for k in ("cut", "fill")}
     bound["net"] = max(below, above) + canopy["cut"] + canopy["fill"]
     return bound
@@ -46,8 +45,6 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
         d = np.nan_to_num(diff)
         for part in (counted & (d > 0), counted & (d < 0)):
             comp, k = ndimage.label(part, structure=np.ones((3, 3), bool))
-            if not k:
-                continue
             idx = np.arange(1, k + 1)
             area = ndimage.sum(part, comp, idx) * cell_area
             vol = np.abs(ndimage.sum(d, comp, idx)) * cell_area
@@ -55,7 +52,7 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
             out |= np.isin(comp, keep) & part
         out |= rough & counted
     comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
-    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area if n else np.empty(0)
+    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
     return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
 
 

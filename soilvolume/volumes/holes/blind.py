@@ -16,7 +16,6 @@ from .interpolate import FOUR, enclosed_holes, fill
 RIM_SHARE = 0.5  # share of a hole's rim in change areas that makes it a hole in the works
 DEEPER = 2.0  # the walls carried on into a hole go at most this many times the rim's depth further
 MIN_M3 = 0.5  # ranges below this are noise, not named
-NAMES = ("after", "before")
 PAD = 8  # cells around a hole's box that hold its rings and the ground they are compared with
 BASIN_DROP_M = 0.2  # a hole whose rim lies this much below the ground around it (median): a basin
 
@@ -36,7 +35,7 @@ def blind_change(
     ``seen_once`` cells (filled in one survey from its own ground)."""
     bound = dict.fromkeys(("net", "cut", "fill"), 0.0)
     items = []
-    for name, e in zip(NAMES, epochs, strict=True):
+    for name, e in zip(("after", "before"), epochs, strict=True):
         empty = (e.counts + e.nonsoil()) == 0
         labels, _ = ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
         for k, box in enumerate(ndimage.find_objects(labels), 1):
