@@ -1,5 +1,5 @@
 """Stage 2, the correction: the bias found on stable ground (a tile is given the overview's)
-subtracted, each cell's level of detection, holes across the outline refilled (:mod:`.holes.outline`)."""
+subtracted, each cell's level of detection, holes across the outline refilled (:mod:`.holes.works`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from ..compensation.robust import patches
 from ..core.types import GridSpec
 from ..options import Options
 from .change import MIN_CELLS, cell_lod, cell_sigma
-from .holes.outline import refill_across_outline
+from .holes.works import refill_across_outline
 from .refill import Refill, refill_sigma
 from .results import Epochs, Given
 from .uncertainty import detection_level, z_value

@@ -1,5 +1,5 @@
 """Stage 4, the interval: the error model over the counted change (:mod:`.uncertainty`), the terms
-beyond it by name and the bound of what no survey saw (:mod:`.holes.blind`)."""
+beyond it by name and the bound of what no survey saw (:mod:`.holes.works`)."""
 
 from __future__ import annotations
 
@@ -16,9 +16,8 @@ from .change import marginal_volume
 from .classify import Areas
 from .correct import Corrected
 from .difference import signed_budget
-from .holes.blind import Blind, blind_change
 from .holes.interpolate import typical_radius
-from .holes.outline import outline_sigma
+from .holes.works import Blind, blind_change, outline_sigma
 from .refill import Refill
 from .results import Epochs
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty

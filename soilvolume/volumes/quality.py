@@ -122,7 +122,7 @@ def _canopy(excluded: dict, moved: float) -> list[tuple[str, str]]:
 
 
 def _blind(hidden: dict, moved: float) -> list[tuple[str, str]]:
-    """Change on ground interpolated under a large hole, and holes without points in the works (:mod:`.holes.blind`)."""
+    """Change on ground interpolated under a large hole, and holes without points in the works (:mod:`.holes.works`)."""
     out, part = [], hidden.get("interpolated") or {}
     m3 = part.get("cut", 0.0) + part.get("fill", 0.0)
     if m3 > BLIND_SHARE * moved:

@@ -1,5 +1,5 @@
 """Stage 1, the refill: heights at the cell centres, each epoch's weak cells refilled from its own
-neighbours, a survey's own holes where the other sees change across them (:mod:`.holes.epochfill`),
+neighbours, a survey's own holes where the other sees change across them (:mod:`.holes.works`),
 and the enclosed holes of the difference from the difference around them."""
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from ..compensation.robust import nmad
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
-from .holes.epochfill import fill_own_holes
 from .holes.interpolate import enclosed_holes, fill, refill_epoch, weak_cells
 from .holes.testholes import error_by_radius
+from .holes.works import fill_own_holes
 from .results import Given
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
@@ -34,7 +34,7 @@ class Refill:
     filled: np.ndarray  # the difference of the refilled heights, its enclosed holes filled
     filled_mask: np.ndarray  # every refilled cell with a value
     seen_once: np.ndarray  # a pile on a meadow: measured in one survey, may start a change area
-    own: np.ndarray  # the cells filled in their own survey (holes/epochfill)
+    own: np.ndarray  # the cells filled in their own survey (holes/works)
     own_sigma: np.ndarray  # their one-sigma error (m)
 
 
