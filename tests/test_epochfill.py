@@ -9,7 +9,8 @@ import numpy as np
 
 from soilvolume.volumes.holes import interpolate as holes
 from soilvolume.volumes.holes.works import fill_own_holes
-from soilvolume.volumes.nonsoil import _grass_patches, sentence
+from soilvolume.volumes.nonsoil import _grass_patches
+from soilvolume.volumes.quality import sentence
 
 CELL = 0.5
 

@@ -1,7 +1,9 @@
 """What the volume step leaves out of the soil, and says so: moved objects (by shape,
 :mod:`soilvolume.soil.objects`) out of the change areas; cells mostly of points not soil listed
 with the volume they would have added; objects in one survey only left out and listed (or counted
-with ``--objects count``); the class raster (``excluded.tif``) draws it all."""
+with ``--objects count``); the class raster (``excluded.tif``) draws it all. What cannot be said to
+be soil or not (the change no signal classified, what a canopy may have added under it) is a bound
+the interval is widened by."""
 
 from __future__ import annotations
 
@@ -11,14 +13,24 @@ import numpy as np
 from scipy import ndimage
 
 from ..core.types import GridSpec
-from ..core.wording import opt
+from ..dem.grid import EpochDEM
 from ..options import Options
 from ..soil.objects import Blob, find_objects
+from ..soil.rough import rough_cells, roughness
 from .correct import Corrected
 from .refill import Refill
 from .results import Epochs
-from .unclassified import SHARE, UNCLEAR_AREA_M2, bounds, part_budget, rough
 
+SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
+MACHINE_M3 = 40.0  # an object in one survey of at most this volume may be a machine (or half a move)
+# Without any signal (no classification, colour or returns) a compact change patch on unchanged
+# ground (a machine, a bush, a grass patch grown or mown, or a small heap) cannot be told from soil:
+# patches of at most this area and volume, and rough cells, are "unclassified". So is a
+# machine-sized object in one survey only, whatever the signals (a machine that left, or soil).
+# Their volume is a bound, not a random error: the interval is widened by it (the net by the
+# larger of the fill and cut parts) and the verdict names it.
+UNCLEAR_AREA_M2, UNCLEAR_M3 = 150.0, MACHINE_M3
+CANOPY_REACH = 2.0  # how far above the ground a canopy's points taken for soil may lift a cell (x its mean)
 # excluded.tif: one byte per cell
 CLASS_CODES = {
     0: "soil",
@@ -184,44 +196,78 @@ def _item(b: Blob, grid: GridSpec) -> dict:
     return dict(kind=kind, x=x, y=y, area_m2=b.area_m2, height_m=height, volume_m3=b.volume_m3, moved=bool(b.partner))
 
 
-def sentence(report: dict) -> list[str]:
-    """Plain sentences on what was excluded and listed (for the verdict and the CLI)."""
+def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) -> dict:
+    """The bound (m3) of the unclassified and under-canopy change in ``counted``; their sections set in ``report``."""
+    signal = any(labelled(e) for e in epochs)
+    unclear, n = _unclear(diff, counted, found, rough, signal, cell_area)
+    report["unclassified"] = {**part_budget(diff, unclear, cell_area), "count": n, "signals": signal}
+    kept, left = part_budget(diff, unclear & counted, cell_area), part_budget(diff, unclear & ~counted, cell_area)
+    # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
+    below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
+    report["unclassified"]["net_range_m3"] = [-below, above]
+    report["under_canopy"] = canopy = _under_canopy(diff, epochs, counted, cell_area)
+    bound = {k: report["unclassified"][k] + canopy[k] for k in ("cut", "fill")}
+    bound["net"] = max(below, above) + canopy["cut"] + canopy["fill"]
+    return bound
+
+
+def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
+    """(the change not said to be soil, its patches): single machine-sized objects; without signals rough and
+    compact."""
+    small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
+    out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
+    if not signal:
+        d = np.nan_to_num(diff)
+        for part in (counted & (d > 0), counted & (d < 0)):
+            comp, k = ndimage.label(part, structure=np.ones((3, 3), bool))
+            idx = np.arange(1, k + 1)
+            area = ndimage.sum(part, comp, idx) * cell_area
+            vol = np.abs(ndimage.sum(d, comp, idx)) * cell_area
+            keep = idx[(area <= UNCLEAR_AREA_M2) & (vol <= UNCLEAR_M3)]
+            out |= np.isin(comp, keep) & part
+        out |= rough & counted
+    comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
+    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
+    return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
+
+
+def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
+    """What a canopy told by returns alone may add (m3): each cell's |difference|, at most :data:`CANOPY_REACH` x its
+    canopy or that over the other's ground."""
+    reach = np.zeros(diff.shape)
+    for e, o in (epochs, epochs[::-1]):
+        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
+            continue  # a classification is the survey's statement; colour empties such cells
+        others = e.nonsoil()
+        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            canopy = e.nonsoil_z / np.maximum(others, 1)
+            # over its own soil height (raised by the canopy points) and over the other survey's ground
+            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
+        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
+    d = np.where(counted, np.nan_to_num(diff), 0.0)
+    part = np.minimum(np.abs(d), reach)
+    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
+
+
+def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
+    """Change on rough ground (fill: after's, cut: before's) where no signal labelled a point (they tell better)."""
+    if any(labelled(e) for e in epochs):
+        return np.zeros(fill.shape, bool)
     out = []
-    m = report.get("moved_objects") or {}
-    if m.get("count"):
-        verb = "excluded" if m.get("excluded") else f"counted ({opt('exclude', 'none')})"
-        out.append(
-            f"{m['fill']:.0f} m³ of apparent fill and {m['cut']:.0f} m³ of apparent cut in {m['count']} "
-            f"moved object{'s' if m['count'] > 1 else ''} {verb}"
-        )
-    for name, part in (report.get("classes") or {}).items():
-        if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
-            out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
-    r, g = report.get("rough") or {}, report.get("grass_patches") or {}
-    if r.get("area_m2") and abs(r.get("net", 0.0)) >= 0.5:
-        out.append(
-            f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
-            "counted: no classification, colour or returns said what it is"
-        )
-    if g.get("area_m2") and abs(g.get("net", 0.0)) >= 0.5:
-        out.append(
-            f"{g['net']:+.0f} m³ of change on {g['area_m2']:.0f} m² of compact patches mostly of vegetation, with "
-            "little soil measured in them, left out as grass"
-        )
-    u = report.get("unclassified") or {}
-    if u.get("count") and u.get("fill", 0.0) + u.get("cut", 0.0) >= 0.5:
-        out.append(
-            f"{u['fill']:.0f} m³ of apparent fill and {u['cut']:.0f} m³ of apparent cut in {u['count']} compact "
-            "objects or rough areas could not be classified (counted; the interval holds both readings)"
-        )
-    s = report.get("single_objects") or {}
-    kept = [i for i in s.get("items") or [] if i.get("counted", s.get("counted", True))]
-    left = [i for i in s.get("items") or [] if i not in kept]
-    for group, words in (
-        (left, f"left out as machines, containers or materials ({opt('objects', 'exclude')})"),
-        (kept, "counted: check that they are soil"),
-    ):
-        if s.get("count") and group:
-            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in group)
-            out.append(f"{len(group)} object{'s' if len(group) > 1 else ''} in one survey only ({m3:+.0f} m³) {words}")
-    return out
+    for e, h in zip(epochs, heights, strict=True):
+        out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
+    return (fill & out[0]) | (cut & out[1])
+
+
+def labelled(e: EpochDEM) -> bool:
+    """Whether a point rule labelled the epoch (or, without its rule, any point is not soil)."""
+    return (e.rule is not None and e.rule.active) or bool(e.nonsoil().any())
+
+
+def part_budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
+    """Net, cut, fill (m3) and area (m2) of ``d`` over ``cells`` (NaN as 0)."""
+    v = np.where(cells, np.nan_to_num(d), 0.0)
+    fill, cut = float(v[v > 0].sum()) * cell_area, float(-v[v < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(cells.sum()) * cell_area}

@@ -11,7 +11,6 @@ from ..compensation.stable import largest_gap_deg
 from ..core.wording import opt
 from ..registration.georef import GROUND_AGREES, INCONCLUSIVE, disagreement
 from .coverage import check as coverage_check
-from .nonsoil import sentence
 from .zones import zone_messages
 
 VERDICTS = ("reliable", "use with caution", "not reliable")
@@ -221,6 +220,49 @@ def _precise_checks(reg: dict, stable: np.ndarray, diff: np.ndarray | None) -> l
             f"corrected (coordinates used as georeferenced): check the datums, or use {opt('georeferencing', 'gps')}"
         )
         out.append(("caution", f"{said} if it is a survey offset"))
+    return out
+
+
+def sentence(report: dict) -> list[str]:
+    """Plain sentences on what was excluded and listed (for the verdict and the CLI)."""
+    out = []
+    m = report.get("moved_objects") or {}
+    if m.get("count"):
+        verb = "excluded" if m.get("excluded") else f"counted ({opt('exclude', 'none')})"
+        out.append(
+            f"{m['fill']:.0f} m³ of apparent fill and {m['cut']:.0f} m³ of apparent cut in {m['count']} "
+            f"moved object{'s' if m['count'] > 1 else ''} {verb}"
+        )
+    for name, part in (report.get("classes") or {}).items():
+        if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
+            out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
+    r, g = report.get("rough") or {}, report.get("grass_patches") or {}
+    if r.get("area_m2") and abs(r.get("net", 0.0)) >= 0.5:
+        out.append(
+            f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
+            "counted: no classification, colour or returns said what it is"
+        )
+    if g.get("area_m2") and abs(g.get("net", 0.0)) >= 0.5:
+        out.append(
+            f"{g['net']:+.0f} m³ of change on {g['area_m2']:.0f} m² of compact patches mostly of vegetation, with "
+            "little soil measured in them, left out as grass"
+        )
+    u = report.get("unclassified") or {}
+    if u.get("count") and u.get("fill", 0.0) + u.get("cut", 0.0) >= 0.5:
+        out.append(
+            f"{u['fill']:.0f} m³ of apparent fill and {u['cut']:.0f} m³ of apparent cut in {u['count']} compact "
+            "objects or rough areas could not be classified (counted; the interval holds both readings)"
+        )
+    s = report.get("single_objects") or {}
+    kept = [i for i in s.get("items") or [] if i.get("counted", s.get("counted", True))]
+    left = [i for i in s.get("items") or [] if i not in kept]
+    for group, words in (
+        (left, f"left out as machines, containers or materials ({opt('objects', 'exclude')})"),
+        (kept, "counted: check that they are soil"),
+    ):
+        if s.get("count") and group:
+            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in group)
+            out.append(f"{len(group)} object{'s' if len(group) > 1 else ''} in one survey only ({m3:+.0f} m³) {words}")
     return out
 
 
