@@ -29,4 +29,4 @@ def compute_volumes(
     parts = budgets(s, c, a, iv, d_i, epochs, grid, options)
     layers = (s.raw, c.filled, s.filled_mask, c.offset, c.diff, a.stable, a.counted, a.cut, a.exclusion.classes)
     grids = Grids(*s.heights, *layers, *written_dems(s, c.filled, options.fill_method))
-    return Volumes(grids, *parts, c.params, iv.uncertainty, a.exclusion.report, iv.blind.report)
+    return Volumes(grids, *parts, c.params, iv.uncertainty, a.exclusion.report, iv.blind)

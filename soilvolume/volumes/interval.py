@@ -17,7 +17,7 @@ from .classify import Areas
 from .correct import Corrected
 from .difference import signed_budget
 from .holes.interpolate import typical_radius
-from .holes.works import Blind, blind_change, outline_sigma
+from .holes.works import blind_change, outline_sigma
 from .refill import Refill
 from .results import Epochs
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
@@ -29,7 +29,7 @@ class Interval:
 
     uncertainty: dict
     model: Callable[..., dict]
-    blind: Blind
+    blind: dict  # report.json's ``blind``: the holes no survey saw, their bound (m3 per part)
 
 
 def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, options: Options, moved) -> Interval:
@@ -44,13 +44,13 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     statistic = statistic_bias(skews, s.filled_mask[c.core], parts, area)
     outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(typical_radius(s.filled_mask)), area)
     reg_in = 0.0 if c.tile else 1.0
-    terms = (registration, marginal, ex.sigma, statistic)
+    terms = (registration, marginal, ex.report["sigma_m3"], statistic)
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
-    bound = {k: ex.bound[k] + hidden.bound[k] for k in ex.bound}
+    bound = {k: v + hidden["bound_m3"][k] for k, v in ex.report["bound_m3"].items()}
     model = _error_model(s, c, a.stable, grid, options, bound)
-    named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": ex.sigma}
+    named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
     named.update(statistic_m3=statistic, outline_m3=outline)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}
     return Interval(unc, model, hidden)

@@ -56,14 +56,12 @@ GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shar
 
 @dataclass(frozen=True)
 class Exclusion:
-    """The change areas without what was left out, the class raster, the report, its one-sigma terms and bound (m3)."""
+    """The change areas without what was left out, the class raster and report.json's ``excluded``."""
 
     fill: np.ndarray
     cut: np.ndarray
     classes: np.ndarray
-    report: dict
-    sigma: dict
-    bound: dict  # unclassified (m3)
+    report: dict  # with the one-sigma terms (``sigma_m3``) and the unclassified bound (``bound_m3``)
 
 
 def exclude_nonsoil(
@@ -94,9 +92,8 @@ def exclude_nonsoil(
     if mode != "none":
         moved, lone_m3 = report["moved_objects"], part_budget(diff, lone, area)
         sigma = {k: float(np.hypot(v, MOVED_SHARE * np.hypot(moved[k], lone_m3[k]))) for k, v in sigma.items()}
-    bound = bounds(diff, fill | cut, found, rough_area, epochs, area, report)
-    report["sigma_m3"], report["bound_m3"] = sigma, bound
-    return Exclusion(fill, cut, classes, report, sigma, bound)
+    report["sigma_m3"], report["bound_m3"] = sigma, bounds(diff, fill | cut, found, rough_area, epochs, area, report)
+    return Exclusion(fill, cut, classes, report)
 
 
 def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, shares: dict):

@@ -18,8 +18,6 @@ the verdict says why."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy import ndimage
 
@@ -204,17 +202,7 @@ def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[flo
     return float(np.sqrt(np.mean(dd * dd))), float(np.abs(dd).sum()) * cell_area
 
 
-@dataclass(frozen=True)
-class Blind:
-    """The report's ``blind`` section and the bound (m3 per part) it adds to the interval."""
-
-    report: dict
-    bound: dict
-
-
-def blind_change(
-    diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area: float, seen_once: np.ndarray
-) -> Blind:
+def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area: float, seen_once: np.ndarray) -> dict:
     """The basins without any point in the ``change`` areas and their range (see module), and the change counted on
     ``seen_once`` cells (filled in one survey from its own ground)."""
     bound = dict.fromkeys(("net", "cut", "fill"), 0.0)
@@ -237,7 +225,7 @@ def blind_change(
     d = np.where(once, np.nan_to_num(diff), 0.0)
     cut, fill = float(-d[d < 0].sum()) * cell_area, float(d[d > 0].sum()) * cell_area
     report["interpolated"] = {"area_m2": float(once.sum()) * cell_area, "cut": cut, "fill": fill}
-    return Blind(report, bound)
+    return report
 
 
 def _rings(cells: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
