@@ -45,6 +45,5 @@ def _zones(c: Corrected, a: Areas, iv: Interval, grid: GridSpec, options: Option
     zgrid = grid if whole else grid.window(rows.start, rows.stop, cols.start, cols.stop)
     interval = partial(zone_interval, iv.model, a.counted, iv.uncertainty) if whole else None  # tiles: not yet
     counted = np.where(a.counted[c.core], d, np.where(np.isfinite(d), 0.0, np.nan))
-    return zone_budgets(
-        counted, zgrid, options.zones, whole=whole, interval=interval, areas=(a.fill[rows, cols], a.cut[rows, cols])
-    )
+    areas = (a.fill[c.core], a.cut[c.core])
+    return zone_budgets(counted, zgrid, options.zones, whole=whole, interval=interval, areas=areas)

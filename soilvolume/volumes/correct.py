@@ -19,8 +19,6 @@ from .results import Epochs, Given
 from .uncertainty import detection_level, z_value
 from .zones import polygons_mask
 
-WHOLE = (slice(None), slice(None))  # the core of a whole grid: every cell counts
-
 
 @dataclass(frozen=True)
 class Corrected:
@@ -43,7 +41,7 @@ def correct(s: Refill, epochs: Epochs, d_i, grid: GridSpec, options: Options, gi
     """The correction of the refilled difference (see module); ``given``: a tiled run's window."""
     if given is None:
         offset, params, stable, _ = correction(s.filled, d_i, grid, options)
-        core = WHOLE
+        core = (slice(None), slice(None))  # a whole grid's: every cell counts
     else:
         offset = np.where(np.isfinite(s.filled), given.offset, np.nan)
         params, stable, core = given.params, given.stable & np.isfinite(s.filled), given.core

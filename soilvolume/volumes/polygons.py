@@ -122,11 +122,8 @@ def grid_transform(src_wkt: str | None, grid_wkt: str | None):
 
     if not src_wkt or not grid_wkt:
         return None
-    src = horizontal(pyproj.CRS.from_user_input(src_wkt))
-    dst = horizontal(pyproj.CRS.from_user_input(grid_wkt))
-    if src.equals(dst, ignore_axis_order=True):
-        return None
-    return pyproj.Transformer.from_crs(src, dst, always_xy=True)
+    src, dst = (horizontal(pyproj.CRS.from_user_input(w)) for w in (src_wkt, grid_wkt))
+    return None if src.equals(dst, ignore_axis_order=True) else pyproj.Transformer.from_crs(src, dst, always_xy=True)
 
 
 def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Path = "") -> list[Polygon]:

@@ -184,12 +184,8 @@ def _stable_checks(stable: np.ndarray, change: np.ndarray, offset: np.ndarray) -
 def _prior_checks(reg: dict, prior: dict) -> list[tuple[str, str]]:
     """The pose within the georeferencing prior, the fit of the after survey."""
     out: list[tuple[str, str]] = []
-    for key, limit, unit in (
-        ("rotation_deg", prior["rotation"], "deg"),
-        ("tilt_deg", prior["tilt"], "deg"),
-        ("shift_m", prior["shift"], "m"),
-    ):
-        val = reg.get(key, 0.0)
+    for key, unit in (("rotation_deg", "deg"), ("tilt_deg", "deg"), ("shift_m", "m")):
+        val, limit = reg.get(key, 0.0), prior[key.split("_")[0]]
         if limit > 0 and val > PRIOR_MARGIN * limit:
             said = f"the registration used {val:.2f} {unit} of a {limit:g} {unit} georeferencing prior"
             out.append(("caution", f"{said} ({key.split('_')[0]})"))

@@ -44,7 +44,8 @@ def refill(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Options, 
     n_a, n_b = after.counts, before.counts
     h_a, h_b = centred_heights(after, grid.cell, options, med_a), centred_heights(before, grid.cell, options, med_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
-    weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS, method=options.fill_method)
+    method = options.fill_method
+    weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS, method=method)
     f_b, m_b = refill_epoch(h_b, n_b, **weak, median=med_b)
     f_a, m_a = refill_epoch(h_a, n_a, **weak, median=med_a)
     known = np.isfinite(f_a - f_b)
@@ -53,10 +54,8 @@ def refill(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Options, 
     own_holes = enclosed_holes(known, known.size) if max_cells else hole
     one = own_holes & ~hole & (np.isfinite(f_a) != np.isfinite(f_b))  # measured in one survey, beyond a hole
     sparse = m_a | weak_cells(n_a, 0.5, MIN_POINTS, med_a), m_b | weak_cells(n_b, 0.5, MIN_POINTS, med_b)
-    f_a, f_b, own, own_sigma = fill_own_holes(
-        f_a, f_b, own_holes, sparse, options.fill_method, options.seed, grid.cell_area
-    )
-    filled = fill(f_a - f_b, hole & ~own, options.fill_method)
+    f_a, f_b, own, own_sigma = fill_own_holes(f_a, f_b, own_holes, sparse, method, options.seed, grid.cell_area)
+    filled = fill(f_a - f_b, hole & ~own, method)
     filled_mask = (m_a | m_b | hole | own) & np.isfinite(filled)
     return Refill((h_a, h_b), h_a - h_b, f_a, f_b, m_a, m_b, filled, filled_mask, one & own, own, own_sigma)
 

@@ -224,8 +224,7 @@ def _best_levels(
     lags: np.ndarray, gamma: np.ndarray, w: np.ndarray, ranges: np.ndarray, cap: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per range, the least cost and (nugget, psill) within [0, ``cap``] (the free solution, else the box's edges)."""
-    s = np.minimum(lags[None, :] / ranges[:, None], 1.0)
-    b = 1.5 * s - 0.5 * s**3  # (R, L): the model's shape at each lag
+    b = spherical(lags[None, :], 0.0, 1.0, ranges[:, None])  # (R, L): the model's shape at each lag
     sw, sg, sb, sbb, sgb = w.sum(), w @ gamma, b @ w, (b * b) @ w, b @ (w * gamma)
     det = sw * sbb - sb * sb
     with np.errstate(invalid="ignore", divide="ignore"):

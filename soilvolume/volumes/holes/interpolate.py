@@ -31,22 +31,21 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
 
 def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """``values`` with ``targets`` harmonically interpolated (NaN in a component without a finite neighbour)."""
-    known = np.isfinite(values) & ~targets
-    out = np.where(known, values, np.nan)
-    todo = _reachable(targets, known)
+    known, out, todo = _start(values, targets)
     if not todo.any():
         return out
     out[todo] = _solve_laplace(np.where(known, values, 0.0), known, todo)
     return out
 
 
-def _reachable(targets: np.ndarray, known: np.ndarray) -> np.ndarray:
-    """Target cells in 4-connected components that touch at least one known cell."""
+def _start(values: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the known cells, ``values`` there and NaN elsewhere, the targets in components touching a known cell)."""
+    known = np.isfinite(values) & ~targets
     labels, n = ndimage.label(targets, structure=FOUR)
     ok = np.zeros(n + 1, bool)
     ok[labels[ndimage.binary_dilation(known, FOUR) & targets]] = True
     ok[0] = False
-    return ok[labels]
+    return known, np.where(known, values, np.nan), ok[labels]
 
 
 def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
@@ -103,9 +102,7 @@ _STENCILS = (  # second differences (offset, weight): u_xx, u_yy and sqrt(2) u_x
 def biharmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """``values`` with ``targets`` filled by the least u_xx^2 + 2 u_xy^2 + u_yy^2 over complete stencils (cut ones left
     out: a free edge); ill-posed, huge or wild groups harmonically."""
-    known = np.isfinite(values) & ~targets
-    out = np.where(known, values, np.nan)
-    todo = _reachable(targets, known)
+    known, out, todo = _start(values, targets)
     flat = np.flatnonzero(todo)
     if not flat.size:
         return out

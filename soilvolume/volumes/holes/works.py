@@ -128,9 +128,8 @@ def fill_own_holes(
         bulk = np.abs(ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
         change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | (bulk if cell_area > 0 else False)
         if change.any():  # a patch the survey cannot fill whole is left
-            change &= (
-                np.r_[False, ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)] > 0
-            )
+            whole = ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)
+            change &= np.r_[False, whole] > 0
         if not change.any():
             continue
         cells = change[labels]
@@ -205,8 +204,7 @@ def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[flo
 def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area: float, seen_once: np.ndarray) -> dict:
     """The basins without any point in the ``change`` areas and their range (see module), and the change counted on
     ``seen_once`` cells (filled in one survey from its own ground)."""
-    bound = dict.fromkeys(("net", "cut", "fill"), 0.0)
-    items = []
+    bound, items = dict.fromkeys(("net", "cut", "fill"), 0.0), []
     for name, e in zip(("after", "before"), epochs, strict=True):
         empty = (e.counts + e.nonsoil()) == 0
         labels, _ = ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
