@@ -18,12 +18,8 @@ CLASSES = {"1": "cut to go: survey above design by more than T", "2": "on grade:
 
 def classes(diff: np.ndarray, tolerance: float) -> np.ndarray:
     """Each cell's class (float: NaN where ``diff``, survey - design, is not finite)."""
-    out = np.full(diff.shape, np.nan)
     ok = np.isfinite(diff)
-    out[ok] = ON_GRADE
-    out[ok & (diff > tolerance)] = CUT
-    out[ok & (diff < -tolerance)] = FILL
-    return out
+    return np.select([ok & (diff > tolerance), ok & (diff < -tolerance), ok], [CUT, FILL, ON_GRADE], np.nan)
 
 
 def summary(diff: np.ndarray, cls: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -> dict[str, Any]:

@@ -55,8 +55,7 @@ def volume_uncertainty(
     correction's, ``counted``: a tile's core, ``bound_m3``: added as is."""
     d, valid = diff_corrected, np.isfinite(diff_corrected)
     stable = stable_mask & valid
-    if counted is not None:
-        valid = valid & counted
+    valid = valid if counted is None else valid & counted
     region = valid if change_mask is None else change_mask & valid
     vario = semivariogram(d, stable, grid.cell)
     model = fit_spherical(*vario)
@@ -84,10 +83,7 @@ def volume_uncertainty(
 def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, float]:
     """Half-widths (m3) widened by the unattributed ``bound`` (all or none: it adds as it is)."""
     b = bound or {}
-    out = {k: v + float(b.get(k, 0.0)) for k, v in half.items()}
-    if "net_compared_area" in out:
-        out["net_compared_area"] = half["net_compared_area"] + float(b.get("net", 0.0))
-    return out
+    return {k: v + float(b.get("net" if k == "net_compared_area" else k, 0.0)) for k, v in half.items()}
 
 
 class _PartTerms:

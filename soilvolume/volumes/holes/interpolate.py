@@ -78,9 +78,7 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
 
 def _smooth_guess(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
     """Multi-scale normalized convolution: a fast first guess for the iterative solver."""
-    out = np.where(known, values, 0.0)
-    left = todo.copy()
-    sigma = 1.0
+    out, left, sigma = np.where(known, values, 0.0), todo.copy(), 1.0
     while left.any() and sigma < max(todo.shape):
         num = ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
         den = ndimage.gaussian_filter(known.astype(float), sigma)

@@ -58,11 +58,10 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
         nearer_change = _change_side(cells, change[box], stable[box], method)
-        view = out[box]
         for side, own in ((cells & nearer_change, change[box]), (cells & ~nearer_change, stable[box])):
             filled = fill(np.where(own | side, values[box], np.nan), side, method)
             ok = side & np.isfinite(filled)
-            view[ok] = filled[ok]
+            out[box][ok] = filled[ok]
     return out
 
 
