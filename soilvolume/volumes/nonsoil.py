@@ -163,9 +163,8 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
     comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
     idx = np.arange(1, n + 1)
     size = np.bincount(comp.ravel(), minlength=n + 1)[1:]
-    soil = change & bare
     veg_share = ndimage.sum(veg, comp, idx) / size
-    soil_share = ndimage.sum(soil, comp, idx) / size
+    soil_share = ndimage.sum(change & bare, comp, idx) / size
     keep = (size * cell_area <= UNCLEAR_AREA_M2) & (veg_share >= GRASS_VEG) & (soil_share < GRASS_SOIL)
     return np.r_[False, keep][comp]
 
