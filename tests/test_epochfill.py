@@ -1,4 +1,4 @@
-"""Holes of one survey across change are filled in that survey (volumes/epochfill), and compact
+"""Holes of one survey across change are filled in that survey (volumes/holes/works), and compact
 change patches of vegetation with little measured soil are left out as grass (volumes/nonsoil):
 issue 19, the seed paper's pillars and the trench's dry grass (accuracy harness:
 paper-pillars-rgb net -0.78 -> -0.55 %, half-width 7.1 -> 2.6 %; works-trench +1.98 -> +0.97 %)."""
@@ -8,8 +8,9 @@ from __future__ import annotations
 import numpy as np
 
 from soilvolume.volumes.holes import interpolate as holes
-from soilvolume.volumes.holes.epochfill import fill_own_holes
-from soilvolume.volumes.nonsoil import _grass_patches, sentence
+from soilvolume.volumes.holes.works import fill_own_holes
+from soilvolume.volumes.nonsoil import _grass_patches
+from soilvolume.volumes.quality import sentence
 
 CELL = 0.5
 

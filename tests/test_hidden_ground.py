@@ -14,7 +14,7 @@ from conftest import SITE
 
 from soilvolume.api import estimate
 from soilvolume.scenes.synthetic import SceneConfig, make_pair, write_pair_streaming
-from soilvolume.volumes.holes import blind
+from soilvolume.volumes.holes import works
 
 
 def _pair(tmp: Path, seed: int, **cfg) -> tuple[Path, Path, dict]:
@@ -58,12 +58,12 @@ def test_basin_tells_a_pond_from_an_occlusion():
     r = np.hypot(xx - 30, yy - 30)
     pit = 100.0 - np.clip((15 - r) * 0.5, 0.0, 3.0)  # a pit with 0.5 slopes, 3 m deep
     pond = r < 10  # the water line on the walls
-    assert blind._basin(np.where(pond, np.nan, pit), pond)
+    assert works._basin(np.where(pond, np.nan, pit), pond)
     flat = np.full((60, 60), 100.0) + np.clip((12 - np.hypot(xx - 40, yy - 30)) * 0.5, 0.0, 3.0)
     beside = np.hypot(xx - 25, yy - 30) < 4  # an occlusion at the pile's foot
-    assert not blind._basin(np.where(beside, np.nan, flat), beside)
+    assert not works._basin(np.where(beside, np.nan, flat), beside)
     flank = np.hypot(xx - 40, yy - 21) < 3  # on its flank
-    assert not blind._basin(np.where(flank, np.nan, flat), flank)
+    assert not works._basin(np.where(flank, np.nan, flat), flank)
 
 
 def test_pile_on_a_mown_meadow_counts(tmp_path):

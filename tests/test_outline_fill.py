@@ -6,7 +6,7 @@ import numpy as np
 from scipy import ndimage
 
 from soilvolume.volumes.holes import interpolate as holes
-from soilvolume.volumes.holes.outline import outline_sigma, refill_across_outline
+from soilvolume.volumes.holes.works import outline_sigma, refill_across_outline
 
 CELL = 0.5
 

@@ -9,8 +9,14 @@ from scipy import ndimage
 from soilvolume.compensation.correction import apply
 from soilvolume.core.types import GridSpec
 from soilvolume.volumes.difference import thresholded_volumes
-from soilvolume.volumes.uncertainty import volume_uncertainty, z_value
-from soilvolume.volumes.variogram import correlated_fraction, fit_spherical, semivariogram, spherical
+from soilvolume.volumes.uncertainty import (
+    correlated_fraction,
+    fit_spherical,
+    semivariogram,
+    spherical,
+    volume_uncertainty,
+    z_value,
+)
 
 CELL = 0.5
 N = 160

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec
-from ..volumes.nonsoil import sentence
+from ..volumes.quality import sentence
 from .figures import _factors, _float_2d, _like, _shade, hillshade
 from .raster import _repeat
 from .svgparts import extent_text, map_figure

@@ -16,8 +16,7 @@ from ..inputs.io import atomic_path
 from ..options import command_fields
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg, transform_points
 from ..volumes import coverage
-from ..volumes.nonsoil import sentence
-from ..volumes.quality import assess
+from ..volumes.quality import assess, sentence
 from ..volumes.quantities import quantities
 from .surface import amend, is_surface, surface_quality
 

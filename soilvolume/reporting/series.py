@@ -15,8 +15,8 @@ from ..dem.geotiff import write_grid
 from ..inputs.io import atomic_path
 from ..options import Options
 from ..registration.rigid import rotation_deg, shift_at, tilt_deg
+from ..volumes.quality import epoch_checks, period_quality
 from ..volumes.quantities import scaled
-from ..volumes.seriesquality import epoch_checks, period_quality
 from .report import absolute_transform, recorded_options, stage_dict, write_json
 from .seriesgrade import LEDGER_GRADE, ledger_figures, with_grade, write_grades
 from .serieshtml import write_series_html
@@ -124,7 +124,7 @@ def _series_grid(grid: GridSpec, series, origin: np.ndarray) -> dict:
 def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
     """report.json of a series run (``runs``: the :class:`~soilvolume.core.types.Epoch` s; ``fits``:
     the later epochs' registrations; ``vols``: the volume steps of the pairs E0 -> Ek); each period
-    and the cumulative with its quality verdict (:mod:`soilvolume.volumes.seriesquality`)."""
+    and the cumulative with its quality verdict (:mod:`soilvolume.volumes.quality`)."""
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
     dates = [e.date for e in runs]
     epochs = [_epoch(k, run, fits, vols, origin) for k, run in enumerate(runs)]

@@ -1,4 +1,1 @@
-"""Step 5: the DEM of difference and V = S_g * sum(H_after - H_before - d_i), as a chain of
-typed stages (:mod:`.compute`): refill, correction, classification, interval, budgets; hole
-filling in :mod:`.holes`; the quality verdict.
-"""
+"""Step 5: V = S_g * sum(H_after - H_before - d_i) in typed stages (:mod:`.compute`), holes, verdict."""

@@ -1,7 +1,5 @@
-"""Stage 5 of the volume step, the budgets: cut, fill and net of the headline (the change
-areas) and beside it (every compared cell, uncompensated, the paper's plane, thresholded,
-refilled), the zones' (``--zones``), and the cells compared (empty cells, coverage), each
-counted on a tile's core only."""
+"""Stage 5, the budgets: the headline's (the change areas) and those beside it, the zones', and the
+cells compared, each counted on a tile's core only."""
 
 from __future__ import annotations
 
@@ -10,7 +8,6 @@ from functools import partial
 import numpy as np
 
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from . import coverage
 from .classify import Areas
@@ -18,22 +15,14 @@ from .correct import Corrected
 from .difference import budget, refilled_budget, signed_budget, thresholded_volumes
 from .interval import Interval
 from .refill import Refill
-from .results import Budgets, Cells
+from .results import Budgets, Cells, Epochs
 from .zones import zone_budgets, zone_interval
 
 
 def budgets(
-    s: Refill,
-    c: Corrected,
-    a: Areas,
-    iv: Interval,
-    d_i,
-    epochs: tuple[EpochDEM, EpochDEM],
-    grid: GridSpec,
-    options: Options,
+    s: Refill, c: Corrected, a: Areas, iv: Interval, d_i, epochs: Epochs, grid: GridSpec, options: Options
 ) -> tuple[Budgets, Cells]:
-    """The budgets and the cells compared (see module); ``d_i``: the paper's plane offsets,
-    ``epochs``: after, before, ``options``: the run's :class:`Options`."""
+    """The budgets and the cells compared; ``d_i``: the paper's plane offsets."""
     core, area = c.core, grid.cell_area
     d, filled = c.diff[core], c.filled[core]
     out = Budgets(
@@ -45,31 +34,16 @@ def budgets(
         holes=refilled_budget(d, s.filled_mask[core], area),
         zones=_zones(c, a, iv, grid, options) if options.zones else [],
     )
-    return out, _cells(s, c, epochs)
-
-
-def _cells(s: Refill, c: Corrected, epochs: tuple[EpochDEM, EpochDEM]) -> Cells:
-    """The empty cells of the grid (either survey, the before, the after) and the coverage."""
-    core, (n_a, n_b) = c.core, (e.counts for e in epochs)
-    return Cells(
-        empty_cells=int((~np.isfinite(s.raw[core])).sum()),
-        empty_before=int((n_b[core] == 0).sum()),
-        empty_after=int((n_a[core] == 0).sum()),
-        coverage=coverage.counts(n_a, n_b, s.filled_mask, c.diff, core, edges=(not c.tile,) * 4),
-    )
+    n_a, n_b = (e.counts for e in epochs)  # the empty cells (either survey, the before, the after), the coverage
+    empty = (int((~np.isfinite(s.raw[core])).sum()), int((n_b[core] == 0).sum()), int((n_a[core] == 0).sum()))
+    return out, Cells(*empty, coverage.counts(n_a, n_b, s.filled_mask, c.diff, core, edges=(not c.tile,) * 4))
 
 
 def _zones(c: Corrected, a: Areas, iv: Interval, grid: GridSpec, options: Options) -> list:
-    """The zones' budgets over the counted change cells, fill and cut over the change areas as
-    the headline's, with their intervals (whole grid only)."""
+    """The zones' budgets over the counted change, as the headline's, with intervals (whole grid)."""
     (rows, cols), whole, d = c.core, not c.tile, c.diff[c.core]
     zgrid = grid if whole else grid.window(rows.start, rows.stop, cols.start, cols.stop)
     interval = partial(zone_interval, iv.model, a.counted, iv.uncertainty) if whole else None  # tiles: not yet
-    return zone_budgets(
-        np.where(a.counted[c.core], d, np.where(np.isfinite(d), 0.0, np.nan)),
-        zgrid,
-        options.zones,
-        whole=whole,
-        interval=interval,
-        areas=(a.fill[c.core], a.cut[c.core]),
-    )
+    counted = np.where(a.counted[c.core], d, np.where(np.isfinite(d), 0.0, np.nan))
+    areas = (a.fill[c.core], a.cut[c.core])
+    return zone_budgets(counted, zgrid, options.zones, whole=whole, interval=interval, areas=areas)

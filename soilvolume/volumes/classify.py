@@ -1,6 +1,5 @@
-"""Stage 3 of the volume step, the classification: the areas of significant change
-(:mod:`.change`), what in them is not soil left out and listed (:mod:`.nonsoil`), and the
-stable ground of the error model kept away from the change."""
+"""Stage 3, the classification: the change areas (:mod:`.change`), what in them is not soil
+(:mod:`.nonsoil`), the error model's stable ground away from the change."""
 
 from __future__ import annotations
 
@@ -10,39 +9,31 @@ import numpy as np
 from scipy import ndimage
 
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import change_areas
 from .correct import Corrected
 from .nonsoil import Exclusion, exclude_nonsoil
 from .refill import Refill
+from .results import Epochs
 
 MIN_QUIET = 12  # stable cells away from the change the error model needs, else it keeps them all
 
 
 @dataclass(frozen=True)
 class Areas:
-    """The change areas counted (fill, cut: moved objects and what is not soil left out), what
-    was left out (``exclusion``) and the stable ground of the error model."""
+    """The change areas counted (what is not soil left out), the ``exclusion``, the stable ground."""
 
     fill: np.ndarray
     cut: np.ndarray
     exclusion: Exclusion
     stable: np.ndarray
-
-    @property
-    def counted(self) -> np.ndarray:
-        """The change areas the headline sums."""
-        return self.fill | self.cut
+    counted: np.ndarray  # fill | cut: the change areas the headline sums
 
 
-def classify(s: Refill, c: Corrected, epochs: tuple[EpochDEM, EpochDEM], grid: GridSpec, options: Options) -> Areas:
-    """The change areas of the corrected difference and what is not soil in them; ``epochs``:
-    after, before. Stable ground for the error model is never a cell of (or next to) a detected
-    change area, unless the user drew it."""
-    refilled = s.filled_mask & ~s.seen_once
-    fill, cut = change_areas(c.diff, c.lod_cell, refilled=refilled)
-    ex = exclude_nonsoil(c.diff, (fill, cut), epochs, c.offset, grid, options, s.heights, c.stable, refilled)
+def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: Options) -> Areas:
+    """The change areas, what is not soil in them, stable ground never in or next to them unless the user drew it."""
+    fill, cut = change_areas(c.diff, c.lod_cell, refilled=s.filled_mask & ~s.seen_once)
+    ex = exclude_nonsoil(s, c, (fill, cut), epochs, grid, options)
     quiet = c.stable & ~ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
     stable = quiet if not options.stable_mask and quiet.sum() >= MIN_QUIET else c.stable
-    return Areas(ex.fill, ex.cut, ex, stable)
+    return Areas(ex.fill, ex.cut, ex, stable, ex.fill | ex.cut)

@@ -1,7 +1,5 @@
-"""Stage 2 of the volume step, the correction: the bias found on stable ground
-(:mod:`soilvolume.compensation.correction`; a tile is given the overview's) subtracted from the
-refilled difference, each cell's level of detection, and the holes whose rim holds both change
-and unchanged ground refilled from each side of the outline (:mod:`.holes.outline`)."""
+"""Stage 2, the correction: the bias found on stable ground (a tile is given the overview's)
+subtracted, each cell's level of detection, holes across the outline refilled (:mod:`.holes.works`)."""
 
 from __future__ import annotations
 
@@ -13,16 +11,13 @@ from ..compensation.correction import MODES
 from ..compensation.correction import apply as apply_correction
 from ..compensation.robust import patches
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import MIN_CELLS, cell_lod, cell_sigma
-from .holes.outline import refill_across_outline
+from .holes.works import refill_across_outline
 from .refill import Refill, refill_sigma
-from .results import Given
+from .results import Epochs, Given
 from .uncertainty import detection_level, z_value
 from .zones import polygons_mask
-
-WHOLE = (slice(None), slice(None))  # the core of a whole grid: every cell counts
 
 
 @dataclass(frozen=True)
@@ -42,21 +37,21 @@ class Corrected:
     outline: np.ndarray  # the side-by-side refill minus the plain one (m; 0 elsewhere)
 
 
-def correct(
-    s: Refill, epochs: tuple[EpochDEM, EpochDEM], d_i, grid: GridSpec, options: Options, given: Given | None
-) -> Corrected:
-    """The correction of the refilled difference (see module); ``epochs``: after, before;
-    ``given``: the window of a tiled run, its correction given."""
+def correct(s: Refill, epochs: Epochs, d_i, grid: GridSpec, options: Options, given: Given | None) -> Corrected:
+    """The correction of the refilled difference (see module); ``given``: a tiled run's window."""
     if given is None:
         offset, params, stable, _ = correction(s.filled, d_i, grid, options)
-        core = WHOLE
+        core = (slice(None), slice(None))  # a whole grid's: every cell counts
     else:
         offset = np.where(np.isfinite(s.filled), given.offset, np.nan)
         params, stable, core = given.params, given.stable & np.isfinite(s.filled), given.core
     diff = s.filled - offset
     fill_sigma = np.where(s.own, s.own_sigma, refill_sigma(diff, s.filled_mask, stable, options))
     lod = detection_level(diff, stable, options.lod_confidence)
-    lod_cell = _cell_lods(epochs, s, lod, fill_sigma, options.lod_confidence)
+    (after, before), z = epochs, z_value(options.lod_confidence)  # each cell's: the epochs' errors, the refill's
+    se_a = np.where(s.m_a, np.nan, cell_sigma(after.spread, after.counts))
+    se_b = np.where(s.m_b, np.nan, cell_sigma(before.spread, before.counts))
+    lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
     significant = patches(~s.filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
     sides = refill_across_outline(diff, s.filled_mask & ~s.own, significant, options.fill_method)
     outline = np.nan_to_num(sides - diff)  # where the outline runs in the holes: a term
@@ -65,20 +60,9 @@ def correct(
     )
 
 
-def _cell_lods(epochs: tuple[EpochDEM, EpochDEM], s: Refill, lod: float, fill_sigma, confidence: float) -> np.ndarray:
-    """Each cell's level of detection: the stable ground's, the epochs' own height errors, the
-    refill error of refilled cells."""
-    (after, before), z = epochs, z_value(confidence)
-    se_a = np.where(s.m_a, np.nan, cell_sigma(after.spread, after.counts))
-    se_b = np.where(s.m_b, np.nan, cell_sigma(before.spread, before.counts))
-    return np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
-
-
 def correction(diff, d_i, grid: GridSpec, options: Options):
-    """(correction surface to subtract, its parameters, stable-cell mask, change mask).
-
-    Stable ground is found the same way for every method, so residual statistics and the
-    uncertainty are comparable; ``paper-plane`` subtracts the paper's ``d_i`` first."""
+    """(surface, parameters, stable mask, change mask): stable ground found alike for every method; ``paper-plane``
+    takes ``d_i`` first."""
     method = options.correction
     paper = MODES[method].paper_plane
     base = d_i if paper else 0.0

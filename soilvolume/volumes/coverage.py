@@ -1,13 +1,6 @@
-"""Coverage: the share of the after survey's footprint where both surveys have data, so a before
-survey that misses part of the works can never pass for "no change".
-
-The after footprint is every grid cell with after points (or refilled from them) plus the after
-survey's area beyond the grid (the grid stops where the before survey's extent does). What is
-compared there has a volume; what is not is unseen, and the quality gate (:func:`check`) says so:
-not reliable when more than :data:`MAX_SHARE` of the footprint is unseen, or when what change like
-that around the gaps (their |difference| 95th percentile) would amount to over them exceeds the
-net's interval; use with caution above :data:`CAUTION_SHARE`.
-"""
+"""Coverage: the share of the after survey's footprint (its cells, refilled ones, and its area beyond
+the grid) both surveys cover, so a before survey missing part of the works never passes for "no
+change"; the rest is unseen, and :func:`check` says so."""
 
 from __future__ import annotations
 
@@ -17,13 +10,12 @@ CAUTION_SHARE = 0.005  # unseen share of the after footprint that is named in th
 MAX_SHARE = 0.05  # more than this unseen: not reliable, whatever its surroundings say
 RING = 3  # cells around a gap (or along the grid's edge) whose difference tells what it may hide
 COUNTS = ("after_cells", "compared_cells", "before_missing_cells", "gap_ring_cells", "edge_ring_cells")
+_P95 = {"abs_diff": "compared", "gap_ring": "gap_ring", "edge_ring": "edge_ring"}  # percentile: its cells
 
 
 def counts(n_after, n_before, refilled, diff, core=(slice(None), slice(None)), edges=(True,) * 4) -> dict:
-    """Cells of the after footprint on (the ``core`` of) a window of the grid, those compared,
-    those without before data (and not refilled); the |difference| 95th percentiles of all
-    compared cells, of those within :data:`RING` cells of such gaps, and of those along the
-    sides of the window that are the grid's edge (``edges``: top, bottom, left, right)."""
+    """Cells of the after footprint on the ``core``, compared, without before data; the |difference| p95 of the compared
+    cells, near such gaps and along the ``edges`` (top, bottom, left, right) that are the grid's."""
     from scipy import ndimage
 
     footprint = (n_after > 0) | refilled
@@ -31,35 +23,20 @@ def counts(n_after, n_before, refilled, diff, core=(slice(None), slice(None)), e
     missing = footprint & (n_before == 0) & ~compared
     near_gap = ndimage.binary_dilation(missing, iterations=RING) & compared if missing.any() else missing
     edge = np.zeros(diff.shape, bool)
-    for side, cut in zip(
-        edges,
-        ((slice(0, RING), ...), (slice(-RING, None), ...), (..., slice(0, RING)), (..., slice(-RING, None))),
-        strict=True,
-    ):
-        if side:
-            edge[cut] = True
+    for side, cut in zip(edges, (np.s_[:RING], np.s_[-RING:], np.s_[:, :RING], np.s_[:, -RING:]), strict=True):
+        edge[cut] |= side
     edge &= compared
     d = np.abs(diff[core])
-    return {
-        "after_cells": int(footprint[core].sum()),
-        "compared_cells": int(compared[core].sum()),
-        "before_missing_cells": int(missing[core].sum()),
-        "gap_ring_cells": int(near_gap[core].sum()),
-        "edge_ring_cells": int(edge[core].sum()),
-        "abs_diff_p95_m": _p95(d[compared[core]]),
-        "gap_ring_p95_m": _p95(d[near_gap[core]]),
-        "edge_ring_p95_m": _p95(d[edge[core]]),
-    }
-
-
-def _p95(values: np.ndarray) -> float:
-    return float(np.percentile(values, 95)) if values.size else 0.0
+    out = {k: int(m[core].sum()) for k, m in zip(COUNTS, (footprint, compared, missing, near_gap, edge), strict=True)}
+    for key, m in zip(_P95, (compared, near_gap, edge), strict=True):
+        out[f"{key}_p95_m"] = float(np.percentile(d[m[core]], 95)) if m[core].any() else 0.0
+    return out
 
 
 def combine(parts: list[dict]) -> dict:
     """:func:`counts` of tiles added up (each percentile weighted by the cells behind it)."""
     out = {k: int(sum(p[k] for p in parts)) for k in COUNTS}
-    for key, cells in (("abs_diff", "compared"), ("gap_ring", "gap_ring"), ("edge_ring", "edge_ring")):
+    for key, cells in _P95.items():
         w = np.array([p[f"{cells}_cells"] for p in parts], float)
         v = np.array([p[f"{key}_p95_m"] for p in parts], float)
         out[f"{key}_p95_m"] = float(np.sum(w * v) / w.sum()) if w.sum() > 0 else 0.0
@@ -67,28 +44,24 @@ def combine(parts: list[dict]) -> dict:
 
 
 def outside_m2(after_thin: np.ndarray, grid) -> float:
-    """Area (m2) of the after survey beyond the grid: the cells of the grid's lattice, extended
-    past its edges, that hold its registration columns (``after_thin``: registered, local)."""
+    """Area (m2) of the lattice's cells past the grid holding the after survey's registered ``after_thin`` columns."""
     row, col, ok = grid.index(after_thin[:, :2])
     return float(len(np.unique(np.c_[row[~ok], col[~ok]], axis=0)) * grid.cell_area)
 
 
 def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outside: dict | None = None) -> dict:
-    """report.json's ``coverage``: the after footprint, what of it was compared, what the
-    before survey misses, and the volume that could hide there: the unseen area times the 95th
-    percentile |difference| around it (next to the gaps, along the grid's edge for the area
-    beyond it; at least the level of detection), or beyond it what the after survey shows against
-    the before ground carried on (``outside``: :func:`outside_change`), whichever is larger."""
+    """report.json's ``coverage``; what could hide unseen: the area times the |difference| p95 around it (at least the
+    LoD), or beyond the grid ``outside``."""
     footprint = cells["after_cells"] * cell_area + beyond_m2
     compared = cells["compared_cells"] * cell_area
     inside = max(cells["after_cells"] - cells["compared_cells"], 0) * cell_area
     floor = lod_m if np.isfinite(lod_m) else 0.0
     outside = outside or {"fill_m3": 0.0, "cut_m3": 0.0}
     shown = outside["fill_m3"] + outside["cut_m3"]
-
-    def near(key: str) -> float:
-        return max(cells[f"{key}_p95_m"] if cells[f"{key}_cells"] else cells["abs_diff_p95_m"], floor)
-
+    p95 = {
+        k: cells[f"{k}_p95_m"] if cells[f"{k}_cells"] else cells["abs_diff_p95_m"] for k in ("gap_ring", "edge_ring")
+    }
+    near = {k: max(v, floor) for k, v in p95.items()}  # the |difference| around the gaps, at least the LoD
     return {
         "after_footprint_m2": footprint,
         "compared_m2": compared,
@@ -96,49 +69,40 @@ def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outsi
         "before_missing_m2": cells["before_missing_cells"] * cell_area + beyond_m2,
         "after_beyond_before_extent_m2": beyond_m2,
         "unseen_m2": inside + beyond_m2,
-        "unseen_volume_bound_m3": inside * near("gap_ring") + max(beyond_m2 * near("edge_ring"), shown),
+        "unseen_volume_bound_m3": inside * near["gap_ring"] + max(beyond_m2 * near["edge_ring"], shown),
         "beyond_change_m3": outside,
-        "abs_difference_p95_m": {"near_gaps": near("gap_ring"), "along_edge": near("edge_ring")},
+        "abs_difference_p95_m": {"near_gaps": near["gap_ring"], "along_edge": near["edge_ring"]},
     }
 
 
 def check(report: dict) -> tuple[str, str] | None:
-    """(severity, sentence) when part of the after footprint was not compared: ``unreliable``
-    when what could hide there exceeds the net's interval (and what change at the level of
-    detection, twice over, would make over the unseen area), ``caution`` when it is more than
-    :data:`CAUTION_SHARE` of the footprint; None otherwise (or without a coverage record)."""
+    """(severity, sentence) of the unseen footprint: unreliable over :data:`MAX_SHARE` or over the net's interval (and
+    twice the LoD), caution over :data:`CAUTION_SHARE`."""
     cov = report.get("coverage")
     if not cov or cov["after_footprint_m2"] <= 0:
         return None
     unseen, share = cov["unseen_m2"], 1.0 - cov["compared_share"]
     bound, interval = cov["unseen_volume_bound_m3"], report["uncertainty_m3"]["net"]
     before = cov["before_missing_m2"] >= 0.5 * unseen
-    surface = (report.get("reference") or {}).get("kind") == "surface"
     who = "the before survey does not cover" if before else "the surveys do not both cover"
-    who = "the design does not cover" if surface else who
+    who = "the design does not cover" if _surface(report) else who
     said = f"{who} {unseen:,.0f} m² ({share:.0%}) of the after footprint"
     noise = 2.0 * unseen * float(report["uncertainty_m3"].get("lod_m") or 0.0)  # change at noise level: none
     if share > MAX_SHARE or bound > max(interval, noise):
-        return (
-            "unreliable",
-            f"{said}: change there is not in the volumes (up to ~{bound:,.0f} m³ {_source(cov)}, "
-            f"against their ±{interval:,.1f} m³ interval)",
-        )
+        out, source = cov.get("beyond_change_m3") or {}, "at the change seen around it"
+        if out.get("fill_m3", 0.0) + out.get("cut_m3", 0.0) > 0.5 * bound:
+            source = "from what the after survey shows beyond the before survey's edge, against its ground carried on"
+        said += f": change there is not in the volumes (up to ~{bound:,.0f} m³ {source}, "
+        return "unreliable", f"{said}against their ±{interval:,.1f} m³ interval)"
     if share > CAUTION_SHARE:
-        return (
-            "caution",
-            f"{said}: the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around "
-            f"it would make up to ~{bound:,.0f} m³ there, within their interval)",
-        )
+        said += f": the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around it "
+        return "caution", f"{said}would make up to ~{bound:,.0f} m³ there, within their interval)"
     return None
 
 
-def _source(cov: dict) -> str:
-    """Where the unseen bound comes from, in words."""
-    out = cov.get("beyond_change_m3") or {}
-    if out.get("fill_m3", 0.0) + out.get("cut_m3", 0.0) > 0.5 * cov["unseen_volume_bound_m3"]:
-        return "from what the after survey shows beyond the before survey's edge, against its ground carried on"
-    return "at the change seen around it"
+def _surface(report: dict) -> bool:
+    """Whether the run compared a survey with a surface (a design)."""
+    return (report.get("reference") or {}).get("kind") == "surface"
 
 
 def line(report: dict) -> str | None:
@@ -146,8 +110,11 @@ def line(report: dict) -> str | None:
     cov = report.get("coverage")
     if not cov:
         return None
-    surface = (report.get("reference") or {}).get("kind") == "surface"
-    who = ("the design covers", "the design misses") if surface else ("both surveys cover", "the before survey misses")
+    who = (
+        ("the design covers", "the design misses")
+        if _surface(report)
+        else ("both surveys cover", "the before survey misses")
+    )
     text = f"coverage: {who[0]} {cov['compared_share']:.1%} of the after footprint"
     if cov["before_missing_m2"] > 0:
         text += f" ({who[1]} {cov['before_missing_m2']:,.0f} m2)"
@@ -158,10 +125,8 @@ EDGE_FIT = 10  # cells along the grid's edge the before ground beyond it is carr
 
 
 def outside_change(after_reg: np.ndarray, grid, dem_b: np.ndarray, offset: np.ndarray) -> dict:
-    """What the after survey shows beyond the before survey's extent (the grid) against the before
-    ground carried on past its edge (a plane fitted to the before heights within
-    :data:`EDGE_FIT` cells of the edge, plus the correction's median): the change that could hide
-    there, fill and cut apart (m3). Relief the plane does not follow counts too: an upper bound."""
+    """Fill and cut (m3) of the after survey beyond the grid over the before ground carried on (a plane within
+    :data:`EDGE_FIT` of the edge)."""
     none = {"fill_m3": 0.0, "cut_m3": 0.0}
     row, col, ok = grid.index(after_reg[:, :2])
     if ok.all() or dem_b is None or dem_b.shape != (grid.rows, grid.cols):
@@ -169,9 +134,8 @@ def outside_change(after_reg: np.ndarray, grid, dem_b: np.ndarray, offset: np.nd
     xs, ys = grid.centers_local()
     edge = np.zeros(dem_b.shape, bool)  # the sides the after survey runs past
     r, c = row[~ok], col[~ok]
-    for side, past in ((np.s_[:EDGE_FIT], r < 0), (np.s_[-EDGE_FIT:], r >= grid.rows)):
-        edge[side] |= bool(past.any())
-    for side, past in ((np.s_[:, :EDGE_FIT], c < 0), (np.s_[:, -EDGE_FIT:], c >= grid.cols)):
+    sides = (np.s_[:EDGE_FIT], np.s_[-EDGE_FIT:], np.s_[:, :EDGE_FIT], np.s_[:, -EDGE_FIT:])
+    for side, past in zip(sides, (r < 0, r >= grid.rows, c < 0, c >= grid.cols), strict=True):
         edge[side] |= bool(past.any())
     use = edge & np.isfinite(dem_b)
     if use.sum() < 3:

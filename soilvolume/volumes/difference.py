@@ -1,17 +1,11 @@
-"""Difference raster and the paper's volume ``V = S_g * sum(H_after - H_before - d_i)``:
-fill (material added, >= 0), cut (material removed, >= 0) and net = fill - cut."""
+"""The paper's volume ``V = S_g * sum(H_after - H_before - d_i)``: fill (added, >= 0), cut
+(removed, >= 0) and net = fill - cut."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..compensation.robust import patches
-
-
-def difference(h_after: np.ndarray, h_before: np.ndarray, offset: np.ndarray | None = None) -> np.ndarray:
-    """``H_after - H_before - d_i``; NaN where either grid is empty."""
-    d = h_after - h_before
-    return d if offset is None else d - offset
 
 
 def budget(diff: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -> dict[str, float]:
@@ -32,7 +26,7 @@ def signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray,
 
 
 def refilled_budget(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:
-    """Counts, areas and the net volume contributed by refilled cells (for the report)."""
+    """The refilled cells' count, area and net volume."""
     d = np.where(filled_mask, diff, 0.0)
     n = int(filled_mask.sum())
     return {"filled_cells": n, "filled_area_m2": n * cell_area, "filled_net_m3": float(np.nansum(d) * cell_area)}
@@ -41,9 +35,8 @@ def refilled_budget(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float)
 def thresholded_volumes(
     diff: np.ndarray, lod: float | np.ndarray, cell_area: float, min_cells: int = 1
 ) -> dict[str, float]:
-    """net/cut/fill (m^3, cut and fill positive, net = fill - cut) over cells with |d| >= lod
-    (``lod`` a float or a per-cell array); with ``min_cells`` > 1, connected same-sign patches
-    smaller than that are dropped too (a spatial-coherence filter against isolated noise)."""
+    """Net, cut, fill (m^3) over cells with |d| >= ``lod``, without same-sign patches under ``min_cells`` (isolated
+    noise)."""
     keep = np.isfinite(diff) & (np.abs(diff) >= lod)
     if min_cells > 1:
         keep = patches(keep & (diff > 0), min_cells) | patches(keep & (diff < 0), min_cells)

@@ -1,8 +1,6 @@
-"""Progress against a design: each compared cell's class by an on-grade tolerance ``T`` (survey
-above the design by more than ``T``: cut to go; within ``±T``: on grade; below by more than
-``T``: fill to go), the share of the compared area on grade and the cut and fill still to go
-(m^3: the survey - design difference summed over the cut-to-go and the fill-to-go cells; the
-whole depth to the design, not only its part beyond ``T``), overall and per zone."""
+"""Progress against a design, overall and per zone: each cell's class by a tolerance ``T`` (cut to go
+above it, on grade within ±T, fill to go below), the share on grade and the cut and fill to go (m^3:
+the whole survey - design depth over those cells, not only its part beyond ``T``)."""
 
 from __future__ import annotations
 
@@ -12,8 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec
-from .polygons import read_polygons, to_grid_crs
-from .zones import polygon_masks
+from .zones import on_grid, polygon_masks
 
 CUT, ON_GRADE, FILL = 1, 2, 3  # grade.tif's classes (255: not compared)
 CLASSES = {"1": "cut to go: survey above design by more than T", "2": "on grade: within ±T", "3": "fill to go"}
@@ -21,17 +18,12 @@ CLASSES = {"1": "cut to go: survey above design by more than T", "2": "on grade:
 
 def classes(diff: np.ndarray, tolerance: float) -> np.ndarray:
     """Each cell's class (float: NaN where ``diff``, survey - design, is not finite)."""
-    out = np.full(diff.shape, np.nan)
     ok = np.isfinite(diff)
-    out[ok] = ON_GRADE
-    out[ok & (diff > tolerance)] = CUT
-    out[ok & (diff < -tolerance)] = FILL
-    return out
+    return np.select([ok & (diff > tolerance), ok & (diff < -tolerance), ok], [CUT, FILL, ON_GRADE], np.nan)
 
 
 def summary(diff: np.ndarray, cls: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -> dict[str, Any]:
-    """The compared area (m^2), its share on grade, and the cut and fill to go (m^3) over the
-    compared cells (of ``mask`` when given)."""
+    """The compared area (m^2), its share on grade, the cut and fill to go (m^3), over ``mask`` when given."""
     inside = np.isfinite(cls) if mask is None else np.isfinite(cls) & mask
     n = int(inside.sum())
     cut, fill = inside & (cls == CUT), inside & (cls == FILL)
@@ -47,34 +39,24 @@ def summary(diff: np.ndarray, cls: np.ndarray, cell_area: float, mask: np.ndarra
 
 
 def grade(diff: np.ndarray, grid: GridSpec, tolerance: float, zones: str | Path | None) -> tuple[np.ndarray, dict]:
-    """(the class grid, report.json's ``grade``: the tolerance, the classes, the overall
-    :func:`summary` and each zone's)."""
+    """(the class grid, report.json's ``grade``: tolerance, classes, the :func:`summary` and each zone's)."""
     cls = classes(diff, tolerance)
     out = {"tolerance_m": tolerance, "classes": CLASSES, **summary(diff, cls, grid.cell_area)}
     if zones:
-        polys, wkt = read_polygons(zones)
-        polys = to_grid_crs(polys, wkt, grid, zones)
-        masks = polygon_masks(polys, grid)
+        polys, _ = on_grid(zones, grid)
         out["zones"] = [
             {"id": p.id, "name": p.name, **summary(diff, cls, grid.cell_area, m)}
-            for p, m in zip(polys, masks, strict=True)
+            for p, m in zip(polys, polygon_masks(polys, grid), strict=True)
         ]
     return cls, out
 
 
 def progress(start: dict, end: dict) -> dict:
-    """A period's progress from the :func:`grade` summary at its start to the one at its end:
-    the cut and fill to go it did (m^3: to go at the start minus to go at the end), the area it
-    brought on grade (m^2), and the share on grade and the cut and fill to go at its end;
-    per zone when the summaries have zones."""
-    out = {
-        "cut_done_m3": start["cut_to_go_m3"] - end["cut_to_go_m3"],
-        "fill_done_m3": start["fill_to_go_m3"] - end["fill_to_go_m3"],
-        "on_grade_gained_m2": end["on_grade_area_m2"] - start["on_grade_area_m2"],
-        "on_grade_share": end["on_grade_share"],
-        "cut_to_go_m3": end["cut_to_go_m3"],
-        "fill_to_go_m3": end["fill_to_go_m3"],
-    }
+    """A period's progress between the :func:`grade` summaries at its start and end: the cut and fill
+    done (m^3), the area brought on grade (m^2), at its end the share on grade and what is to go; per zone."""
+    out = {f"{k}_done_m3": start[f"{k}_to_go_m3"] - end[f"{k}_to_go_m3"] for k in ("cut", "fill")}
+    out["on_grade_gained_m2"] = end["on_grade_area_m2"] - start["on_grade_area_m2"]
+    out.update({k: end[k] for k in ("on_grade_share", "cut_to_go_m3", "fill_to_go_m3")})
     if "zones" in start:
         pairs = zip(start["zones"], end["zones"], strict=True)
         out["zones"] = [{"id": a["id"], "name": a["name"], **progress(a, b)} for a, b in pairs]

@@ -1,7 +1,5 @@
-"""Stage 4 of the volume step, the interval: the error model over the counted change
-(:func:`.uncertainty.volume_uncertainty`) with the terms beyond it by name (the registration's,
-the marginal detections', the cell statistic's, the classification's, the outline's) and the
-bound of what no survey saw (:mod:`.holes.blind`)."""
+"""Stage 4, the interval: the error model over the counted change (:mod:`.uncertainty`), the terms
+beyond it by name and the bound of what no survey saw (:mod:`.holes.works`)."""
 
 from __future__ import annotations
 
@@ -13,35 +11,30 @@ import numpy as np
 
 from ..compensation.correction import MODES
 from ..core.types import GridSpec
-from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import marginal_volume
 from .classify import Areas
 from .correct import Corrected
 from .difference import signed_budget
-from .holes.blind import Blind, blind_change
 from .holes.interpolate import typical_radius
-from .holes.outline import outline_sigma
+from .holes.works import blind_change, outline_sigma
 from .refill import Refill
+from .results import Epochs
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
 
 
 @dataclass(frozen=True)
 class Interval:
-    """report.json's ``uncertainty``, the error model (for the zones' intervals) and the holes
-    no survey saw."""
+    """report.json's ``uncertainty``, the error model (for the zones) and the holes no survey saw."""
 
     uncertainty: dict
     model: Callable[..., dict]
-    blind: Blind
+    blind: dict  # report.json's ``blind``: the holes no survey saw, their bound (m3 per part)
 
 
-def interval(
-    s: Refill, c: Corrected, a: Areas, epochs: tuple[EpochDEM, EpochDEM], grid: GridSpec, options: Options, moved
-) -> Interval:
-    """The interval of the counted change (see module); ``moved``: the rigid move from the
-    accepted pose to a nearly as good one. A tile's pose and bias are common to all tiles: its
-    registration term and correction coefficients are left to their combination."""
+def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, options: Options, moved) -> Interval:
+    """The interval of the counted change; a tile's registration and correction terms are left to the tiles'
+    combination."""
     area, ex = grid.cell_area, a.exclusion
     d, fa, ca = c.diff[c.core], a.fill[c.core], a.cut[c.core]  # areas decided with the halo, counted on the core
     parts = {"net": fa | ca, "cut": ca, "fill": fa}
@@ -51,53 +44,41 @@ def interval(
     statistic = statistic_bias(skews, s.filled_mask[c.core], parts, area)
     outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(typical_radius(s.filled_mask)), area)
     reg_in = 0.0 if c.tile else 1.0
-    terms = (registration, marginal, ex.sigma, statistic)
+    terms = (registration, marginal, ex.report["sigma_m3"], statistic)
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
-    bound = {k: ex.bound[k] + hidden.bound[k] for k in ex.bound}
+    bound = {k: v + hidden["bound_m3"][k] for k, v in ex.report["bound_m3"].items()}
     model = _error_model(s, c, a.stable, grid, options, bound)
-    named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": ex.sigma}
+    named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
     named.update(statistic_m3=statistic, outline_m3=outline)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}
     return Interval(unc, model, hidden)
 
 
 def marginal_terms(d: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod_cell, cell_area: float) -> dict:
-    """The marginal detections' volume (m3) per part (:func:`.change.marginal_volume`)."""
+    """:func:`.change.marginal_volume` per part (m3)."""
     out = {"fill": marginal_volume(d, fill, lod_cell, cell_area), "cut": marginal_volume(d, cut, lod_cell, cell_area)}
     out["net"] = float(np.hypot(out["fill"], out["cut"]))
     return out
 
 
 def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Options, bound: dict):
-    """The error model (:func:`.uncertainty.volume_uncertainty` with the run's arguments) over
-    the cells a caller gives: the headline's change areas, a zone's."""
-    coefficients = MODES[options.correction].coefficients
-    counted, tile = None, c.tile
-    if tile:  # the cells it counts: its core; the overview has the bias
+    """:func:`.uncertainty.volume_uncertainty` with the run's arguments, over a caller's cells."""
+    coefficients, counted = MODES[options.correction].coefficients, None
+    if c.tile:  # the cells it counts: its core; the overview has the bias
         counted = np.zeros(c.diff.shape, bool)
         counted[c.core] = True
+    fraction = interp_fraction(typical_radius(s.filled_mask & ~s.own))
+    fills = dict(filled_mask=s.filled_mask, own_fill=s.own, fill_sigma=c.fill_sigma, interp_fraction=fraction)
+    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, surface=not c.tile and coefficients > 0)
     return partial(
-        volume_uncertainty,
-        c.diff,
-        stable,
-        grid=grid,
-        confidence=options.lod_confidence,
-        n_coef=0 if tile else coefficients,
-        filled_mask=s.filled_mask,
-        own_fill=s.own,
-        fill_sigma=c.fill_sigma,
-        interp_fraction=interp_fraction(typical_radius(s.filled_mask & ~s.own)),
-        counted=counted,
-        surface=not tile and coefficients > 0,
-        bound_m3=bound,
+        volume_uncertainty, c.diff, stable, n_coef=0 if c.tile else coefficients, bound_m3=bound, **run, **fills
     )
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:
-    """Change of the difference (m per cell) if the after surface moved horizontally by ``moved``
-    (4x4, local): -grad(H) . u; its vertical part and tilt are absorbed by the bias correction."""
+    """The difference's change (m) if the after surface moved by ``moved`` (4x4, local): -grad(H) . u horizontally."""
     if moved is None:
         return np.zeros(h_after.shape)
     x, y = grid.centers_local()

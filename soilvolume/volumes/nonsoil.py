@@ -1,24 +1,36 @@
-"""What the volume step leaves out of the soil, and says so: objects that moved between the
-surveys (found by shape, :mod:`soilvolume.soil.objects`) are taken out of the change areas;
-cells whose points were mostly not soil (vegetation, objects, other by the epochs' point rules)
-are listed with the apparent volume they would have added; objects in one survey only
-(machines, containers, materials) are left out too and listed, or counted with
-``--objects count``. The class raster (``excluded.tif``) draws all of it."""
+"""What the volume step leaves out of the soil, and says so: moved objects (by shape,
+:mod:`soilvolume.soil.objects`) out of the change areas; cells mostly of points not soil listed
+with the volume they would have added; objects in one survey only left out and listed (or counted
+with ``--objects count``); the class raster (``excluded.tif``) draws it all. What cannot be said to
+be soil or not (the change no signal classified, what a canopy may have added under it) is a bound
+the interval is widened by."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
 
 from ..core.types import GridSpec
-from ..core.wording import opt
 from ..dem.grid import EpochDEM
 from ..options import Options
 from ..soil.objects import Blob, find_objects
-from .unclassified import SHARE, UNCLEAR_AREA_M2, bounds, part_budget, rough
+from ..soil.rough import rough_cells, roughness
+from .correct import Corrected
+from .refill import Refill
+from .results import Epochs
 
+SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
+MACHINE_M3 = 40.0  # an object in one survey of at most this volume may be a machine (or half a move)
+# Without any signal (no classification, colour or returns) a compact change patch on unchanged
+# ground (a machine, a bush, a grass patch grown or mown, or a small heap) cannot be told from soil:
+# patches of at most this area and volume, and rough cells, are "unclassified". So is a
+# machine-sized object in one survey only, whatever the signals (a machine that left, or soil).
+# Their volume is a bound, not a random error: the interval is widened by it (the net by the
+# larger of the fill and cut parts) and the verdict names it.
+UNCLEAR_AREA_M2, UNCLEAR_M3 = 150.0, MACHINE_M3
+CANOPY_REACH = 2.0  # how far above the ground a canopy's points taken for soil may lift a cell (x its mean)
 # excluded.tif: one byte per cell
 CLASS_CODES = {
     0: "soil",
@@ -44,68 +56,51 @@ GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shar
 
 @dataclass(frozen=True)
 class Exclusion:
-    """The change areas without moved objects, the class raster, the report's ``excluded``
-    section and the one-sigma volume terms (m3 per part) of what the classification may have
-    missed or wrongly removed."""
+    """The change areas without what was left out, the class raster and report.json's ``excluded``."""
 
     fill: np.ndarray
     cut: np.ndarray
     classes: np.ndarray
-    report: dict
-    sigma: dict
-    bound: dict = field(default_factory=lambda: dict.fromkeys(("net", "cut", "fill"), 0.0))  # unclassified (m3)
+    report: dict  # with the one-sigma terms (``sigma_m3``) and the unclassified bound (``bound_m3``)
 
 
 def exclude_nonsoil(
-    diff: np.ndarray,
-    areas: tuple[np.ndarray, np.ndarray],
-    epochs: tuple[EpochDEM, EpochDEM],
-    offset: np.ndarray,
-    grid: GridSpec,
-    options: Options,
-    heights: tuple[np.ndarray, np.ndarray] | None = None,
-    stable: np.ndarray | None = None,
-    refilled: np.ndarray | None = None,
+    s: Refill, c: Corrected, areas: tuple[np.ndarray, np.ndarray], epochs: Epochs, grid: GridSpec, options: Options
 ) -> Exclusion:
-    """See module; ``areas``: the change areas (fill, cut), ``epochs`` (after, before), the
-    options ``exclude`` (``none``: moved objects stay counted, still listed) and ``objects``
-    (``exclude``: objects in one survey only are left out too, unless ``exclude`` is ``none``);
-    ``heights`` (after, before: the heights the difference is taken from) and ``stable`` ground
-    give the rough cells (:mod:`soilvolume.soil.rough`): fill where the after survey is rough,
-    cut where the before survey is; ``refilled``: the interpolated cells (objects are measured
-    without them)."""
-    (fill, cut), mode, area = areas, options.exclude, grid.cell_area
+    """See module; ``areas``: the change areas (fill, cut) of the refill ``s`` corrected by ``c``."""
+    (fill, cut), mode, area, diff = areas, options.exclude, grid.cell_area, c.diff
+    refilled = s.filled_mask & ~s.seen_once  # interpolated cells: no object's
     shares = _shares(epochs)
     found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
     leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
-    share = _missed_share(epochs)
+    # the share of an excluded volume it may have got wrong: less by a LAS classification (its ground is measured)
+    share = CLASS_MISSED_SHARE if all(e.rule is not None and e.rule.use_class for e in epochs) else MISSED_SHARE
+    fill, cut = fill & ~leave_out, cut & ~leave_out  # what the headline counts
     # only what was left out in or beside the counted change areas can bias the headline
-    near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
-    classes, taken, by_class, sigma = _by_class(diff, epochs, offset, shares, found, near, area, share)
+    near = ndimage.binary_dilation(fill | cut, iterations=NEAR_CELLS)
+    classes, taken, by_class, sigma = _by_class(diff, epochs, c.offset, shares, found, near, area, share)
     report: dict = {"mode": mode, "classes": by_class}
     classes[found.moved] = 4
     classes[grass & ~(shares["vegetation"] >= SHARE)] = 1
     report["grass_patches"] = part_budget(diff, grass, area)
     sigma = {k: float(np.hypot(v, share * abs(report["grass_patches"][k]))) for k, v in sigma.items()}
     classes[found.single] = 5
-    rough_area = rough(epochs, heights, stable, grid.cell, fill & ~leave_out, cut & ~leave_out) & ~taken & ~found.single
+    rough_area = rough(epochs, s.heights, c.stable, grid.cell, fill, cut) & ~taken & ~found.single
     classes[rough_area] = 6
     report["rough"] = part_budget(diff, rough_area, area)
     report.update(_objects(diff, found, lone, grid, mode, options.objects == "exclude" and mode != "none"))
     if mode != "none":
         moved, lone_m3 = report["moved_objects"], part_budget(diff, lone, area)
         sigma = {k: float(np.hypot(v, MOVED_SHARE * np.hypot(moved[k], lone_m3[k]))) for k, v in sigma.items()}
-    bound = bounds(diff, (fill | cut) & ~leave_out, found, rough_area, epochs, area, report)
-    report["sigma_m3"], report["bound_m3"] = sigma, bound
-    return Exclusion(fill & ~leave_out, cut & ~leave_out, classes, report, sigma, bound)
+    report["sigma_m3"], report["bound_m3"] = sigma, bounds(diff, fill | cut, found, rough_area, epochs, area, report)
+    return Exclusion(fill, cut, classes, report)
 
 
 def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, shares: dict):
-    """(the objects found by shape, those of one survey only left out, the grass patches left
-    out) of the change ``areas`` (fill, cut)."""
+    """(objects found by shape, those of one survey left out, grass patches left out) of ``areas``."""
     (fill, cut), mode = areas, options.exclude
     labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
-    found = find_objects(diff, fill, cut, grid.cell, refilled=labelled if refilled is None else refilled | labelled)
+    found = find_objects(diff, fill, cut, grid.cell, refilled=refilled | labelled)
     drop_single = options.objects == "exclude" and mode != "none"
     lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
     bare = _bare_top(diff, epochs, refilled)  # soil measured on the surface that rose
@@ -114,12 +109,12 @@ def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, s
 
 
 def _by_class(diff, epochs, offset, shares: dict, found, near, cell_area: float, share: float):
-    """(the class raster, the cells of the point classes, the report's ``classes``, the
-    one-sigma terms per part) of the cells mostly of points that are not soil: the apparent
-    volume they would have added, a ``share`` of it near the counted change as the term."""
+    """(class raster, point class cells, report, one-sigma terms): what cells mostly not soil would have added."""
     classes = np.where(np.isfinite(diff), 0, 255).astype(np.uint8)
     sigma = dict.fromkeys(("net", "cut", "fill"), 0.0)
-    apparent, taken, report = _apparent(diff, epochs, offset), np.zeros(diff.shape, bool), {}
+    after, before = (e.all_points_height() for e in epochs)  # what the excluded points would have added:
+    apparent = np.nan_to_num(after - before - np.nan_to_num(offset) - diff)
+    taken, report = np.zeros(diff.shape, bool), {}
     for code, name in ((2, "objects"), (1, "vegetation"), (3, "other")):
         cells = (shares[name] >= SHARE) & ~taken & ~found.moved & ~found.single
         taken |= cells
@@ -152,46 +147,29 @@ def _objects(diff, found, lone, grid: GridSpec, mode: str, drop_single: bool) ->
 
 
 def _lone(found) -> np.ndarray:
-    """The cells of the objects in one survey only of a machine's, a container's or a stack's
-    size (at most :data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`): left out of
-    the headline by default."""
+    """Single objects of a machine's size (:data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`)."""
     ids = [b.label for b in found.single_blobs() if b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE]
     return found.single & np.isin(found.labels, ids)
 
 
-def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray | None) -> np.ndarray:
-    """Cells whose higher surface (the after survey's on a fill, the before's on a cut) was
-    measured soil: a pile raised on a mown meadow is soil, whatever grew there before."""
+def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray) -> np.ndarray:
+    """Cells whose higher surface was measured soil (a pile on a mown meadow is soil)."""
     after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)
-    top = np.where(np.nan_to_num(diff) >= 0, after, before)
-    return top if refilled is None else top & ~refilled
+    return np.where(np.nan_to_num(diff) >= 0, after, before) & ~refilled
 
 
 def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:
-    """Compact change patches (at most :data:`UNCLEAR_AREA_M2`) mostly of cells whose points were
-    vegetation (at least :data:`GRASS_VEG`) with little soil measured on the surface that rose
-    (``bare``, under :data:`GRASS_SOIL`; the rest interpolated under the canopy): grass whose dry
-    blades the colour test missed in a few cells, not soil (a heap of fine soil is measured soil)."""
+    """Compact change patches mostly of vegetation with little ``bare`` soil: grass the colour test half missed."""
     comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
-    if n == 0:
-        return np.zeros(change.shape, bool)
     idx = np.arange(1, n + 1)
     size = np.bincount(comp.ravel(), minlength=n + 1)[1:]
-    soil = change & bare
     veg_share = ndimage.sum(veg, comp, idx) / size
-    soil_share = ndimage.sum(soil, comp, idx) / size
+    soil_share = ndimage.sum(change & bare, comp, idx) / size
     keep = (size * cell_area <= UNCLEAR_AREA_M2) & (veg_share >= GRASS_VEG) & (soil_share < GRASS_SOIL)
     return np.r_[False, keep][comp]
 
 
-def _missed_share(epochs: tuple[EpochDEM, EpochDEM]) -> float:
-    """The share of an excluded volume the classification may have got wrong: the files' own LAS
-    classification (ground returns below a canopy are measured) less than colour or returns."""
-    by_class = all(e.rule is not None and e.rule.use_class for e in epochs)
-    return CLASS_MISSED_SHARE if by_class else MISSED_SHARE
-
-
-def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
+def _shares(epochs: Epochs) -> dict[str, np.ndarray]:
     """Per class, the largest share of a cell's points (either epoch) that are of that class."""
     out = {}
     for name, attr in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
@@ -207,75 +185,85 @@ def _shares(epochs: tuple[EpochDEM, EpochDEM]) -> dict[str, np.ndarray]:
     return out
 
 
-def _apparent(diff: np.ndarray, epochs: tuple[EpochDEM, EpochDEM], offset: np.ndarray) -> np.ndarray:
-    """Per cell, the difference every point would have given minus the soil's (m; 0 where
-    either is unknown): what the excluded points would have added."""
-    after, before = (e.all_points_height() for e in epochs)
-    d = after - before - np.nan_to_num(offset)
-    return np.nan_to_num(d - diff)
-
-
 def _item(b: Blob, grid: GridSpec) -> dict:
     """An object for the report: absolute centroid, footprint, height, volume."""
-    x = grid.xmin + (b.x + 0.5) * grid.cell
-    y = grid.ymax - (b.y + 0.5) * grid.cell
-    return {
-        "kind": "fill" if b.sign > 0 else "cut",
-        "x": x,
-        "y": y,
-        "area_m2": b.area_m2,
-        "height_m": b.height_m,
-        "volume_m3": b.volume_m3,
-        "moved": bool(b.partner),
-    }
+    x, y = grid.xmin + (b.x + 0.5) * grid.cell, grid.ymax - (b.y + 0.5) * grid.cell
+    kind, height = "fill" if b.sign > 0 else "cut", b.height_m
+    return dict(kind=kind, x=x, y=y, area_m2=b.area_m2, height_m=height, volume_m3=b.volume_m3, moved=bool(b.partner))
 
 
-def sentence(report: dict) -> list[str]:
-    """Plain sentences on what was excluded and listed (for the verdict and the CLI)."""
+def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) -> dict:
+    """The bound (m3) of the unclassified and under-canopy change in ``counted``; their sections set in ``report``."""
+    signal = any(labelled(e) for e in epochs)
+    unclear, n = _unclear(diff, counted, found, rough, signal, cell_area)
+    report["unclassified"] = {**part_budget(diff, unclear, cell_area), "count": n, "signals": signal}
+    kept, left = part_budget(diff, unclear & counted, cell_area), part_budget(diff, unclear & ~counted, cell_area)
+    # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
+    below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
+    report["unclassified"]["net_range_m3"] = [-below, above]
+    report["under_canopy"] = canopy = _under_canopy(diff, epochs, counted, cell_area)
+    bound = {k: report["unclassified"][k] + canopy[k] for k in ("cut", "fill")}
+    bound["net"] = max(below, above) + canopy["cut"] + canopy["fill"]
+    return bound
+
+
+def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
+    """(the change not said to be soil, its patches): single machine-sized objects; without signals rough and
+    compact."""
+    small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
+    out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
+    if not signal:
+        d = np.nan_to_num(diff)
+        for part in (counted & (d > 0), counted & (d < 0)):
+            comp, k = ndimage.label(part, structure=np.ones((3, 3), bool))
+            idx = np.arange(1, k + 1)
+            area = ndimage.sum(part, comp, idx) * cell_area
+            vol = np.abs(ndimage.sum(d, comp, idx)) * cell_area
+            keep = idx[(area <= UNCLEAR_AREA_M2) & (vol <= UNCLEAR_M3)]
+            out |= np.isin(comp, keep) & part
+        out |= rough & counted
+    comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
+    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
+    return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
+
+
+def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
+    """What a canopy told by returns alone may add (m3): each cell's |difference|, at most :data:`CANOPY_REACH` x its
+    canopy or that over the other's ground."""
+    reach = np.zeros(diff.shape)
+    for e, o in (epochs, epochs[::-1]):
+        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
+            continue  # a classification is the survey's statement; colour empties such cells
+        others = e.nonsoil()
+        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            canopy = e.nonsoil_z / np.maximum(others, 1)
+            # over its own soil height (raised by the canopy points) and over the other survey's ground
+            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
+        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
+    d = np.where(counted, np.nan_to_num(diff), 0.0)
+    part = np.minimum(np.abs(d), reach)
+    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
+
+
+def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
+    """Change on rough ground (fill: after's, cut: before's) where no signal labelled a point (they tell better)."""
+    if any(labelled(e) for e in epochs):
+        return np.zeros(fill.shape, bool)
     out = []
-    m = report.get("moved_objects") or {}
-    if m.get("count"):
-        verb = "excluded" if m.get("excluded") else f"counted ({opt('exclude', 'none')})"
-        out.append(
-            f"{m['fill']:.0f} m³ of apparent fill and {m['cut']:.0f} m³ of apparent cut in {m['count']} "
-            f"moved object{'s' if m['count'] > 1 else ''} {verb}"
-        )
-    for name, part in (report.get("classes") or {}).items():
-        if part["area_m2"] > 0 and abs(part["net"]) >= 0.5:
-            out.append(f"{part['net']:+.0f} m³ of apparent change on {part['area_m2']:.0f} m² of {name} excluded")
-    r = report.get("rough") or {}
-    if r.get("area_m2") and abs(r.get("net", 0.0)) >= 0.5:
-        out.append(
-            f"{r['net']:+.0f} m³ of the change is on {r['area_m2']:.0f} m² of rough ground (vegetation?) and "
-            "counted: no classification, colour or returns said what it is"
-        )
-    g = report.get("grass_patches") or {}
-    if g.get("area_m2") and abs(g.get("net", 0.0)) >= 0.5:
-        out.append(
-            f"{g['net']:+.0f} m³ of change on {g['area_m2']:.0f} m² of compact patches mostly of vegetation, with "
-            "little soil measured in them, left out as grass"
-        )
-    u = report.get("unclassified") or {}
-    if u.get("count") and u.get("fill", 0.0) + u.get("cut", 0.0) >= 0.5:
-        out.append(
-            f"{u['fill']:.0f} m³ of apparent fill and {u['cut']:.0f} m³ of apparent cut in {u['count']} compact "
-            "objects or rough areas could not be classified (counted; the interval holds both readings)"
-        )
-    s = report.get("single_objects") or {}
-    if s.get("count"):
-        items = s.get("items") or []
-        kept = [i for i in items if i.get("counted", s.get("counted", True))]
-        left = [i for i in items if i not in kept]
-        if left:
-            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in left)
-            out.append(
-                f"{len(left)} object{'s' if len(left) > 1 else ''} in one survey only ({m3:+.0f} m³) left out as "
-                f"machines, containers or materials ({opt('objects', 'exclude')})"
-            )
-        if kept:
-            m3 = sum(i["volume_m3"] * (1 if i["kind"] == "fill" else -1) for i in kept)
-            out.append(
-                f"{len(kept)} object{'s' if len(kept) > 1 else ''} in one survey only ({m3:+.0f} m³) counted: "
-                "check that they are soil"
-            )
-    return out
+    for e, h in zip(epochs, heights, strict=True):
+        out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
+    return (fill & out[0]) | (cut & out[1])
+
+
+def labelled(e: EpochDEM) -> bool:
+    """Whether a point rule labelled the epoch (or, without its rule, any point is not soil)."""
+    return (e.rule is not None and e.rule.active) or bool(e.nonsoil().any())
+
+
+def part_budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
+    """Net, cut, fill (m3) and area (m2) of ``d`` over ``cells`` (NaN as 0)."""
+    v = np.where(cells, np.nan_to_num(d), 0.0)
+    fill, cut = float(v[v > 0].sum()) * cell_area, float(-v[v < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(cells.sum()) * cell_area}

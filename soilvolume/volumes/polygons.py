@@ -1,9 +1,6 @@
-"""Polygons from a vector file (GeoPackage, Shapefile, GeoJSON, ...) for zones and stable-ground
-masks: read with pyogrio (its own GDAL; works where GDAL's Python bindings are missing); invalid
-geometries repaired with shapely's ``make_valid`` (those left without area refused); brought
-into the grid's CRS with pyproj (a file without a CRS is taken to be in the grid's; coordinates
-its declared CRS cannot hold are refused).
-"""
+"""Polygons (and lines) of a user's vector file: read with pyogrio (its own GDAL), invalid geometries
+repaired with shapely's ``make_valid`` (refused without area), brought into the grid's CRS with
+pyproj (a file without a CRS is taken to be in the grid's; coordinates its CRS cannot hold refused)."""
 
 from __future__ import annotations
 
@@ -22,8 +19,7 @@ POLYGONAL = ("Polygon", "MultiPolygon")
 
 @dataclass
 class Polygon:
-    """One feature: a polygonal shapely geometry (in the file's CRS until reprojected), its id,
-    display name and whether its geometry had to be repaired."""
+    """One feature: its id, display name, shapely geometry and whether it was repaired."""
 
     id: int
     name: str
@@ -34,23 +30,17 @@ class Polygon:
 def read_polygons(
     path: str | Path, name_field: str | None = None, what: str = "zones file"
 ) -> tuple[list[Polygon], str | None]:
-    """(polygons, CRS WKT or None) of the first layer of ``path``; non-polygon features are
-    skipped. Raises SoilVolumeError naming ``what`` and the file when it cannot be used."""
+    """(polygons, CRS WKT or None) of ``path``'s first layer; an error naming ``what`` and the file if unusable."""
     path = Path(path)
     feats, wkt = _features(path, what, "polygons", POLYGONAL)
-    polys = []
-    for i, fid, props, geom in feats:
-        name = _name(props, name_field, i, path)
-        polys.append(_valid(Polygon(fid, name, geom), path))
+    polys = [_valid(Polygon(fid, _name(props, name_field, i, path), geom), path) for i, fid, props, geom in feats]
     if not polys:
         raise SoilVolumeError(f"{path}: no polygon features in this {what}")
     return polys, wkt
 
 
 def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple[list[tuple], str | None]:
-    """([(index, id, attributes, geometry)] of the non-empty features of ``kinds`` in the first
-    layer of ``path``, its CRS WKT or None): the checks every reader of a user's vector file
-    makes, each failure one line naming ``what`` and the file."""
+    """([(index, id, attributes, geometry)] of the ``kinds`` features, CRS WKT); a failure one line naming the file."""
     if not path.exists():
         raise SoilVolumeError(f"{path}: {what} not found")
     if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
@@ -67,22 +57,16 @@ def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple
     except Exception as exc:  # noqa: BLE001 - driver errors come in many types
         raise SoilVolumeError(f"{path}: cannot read {noun} from this {what} ({short_error(exc)})") from None
     kept = [
-        (i, int(fid if fid is not None else i), props, geom)
-        for i, (fid, props, geom) in enumerate(feats)
-        if geom is not None and not geom.is_empty and geom.geom_type in kinds
+        (i, fid, props, g)
+        for i, (fid, props, g) in enumerate(feats)
+        if g is not None and g.geom_type in kinds and not g.is_empty
     ]
     return kept, wkt
 
 
 def feature_fields(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
-    """[(feature id, attributes)] of the polygon features of ``path``'s first layer (ids as
-    :func:`read_polygons` gives them)."""
-    feats, _ = _read(Path(path))
-    return [
-        (int(fid if fid is not None else i), props)
-        for i, (fid, props, g) in enumerate(feats)
-        if g is not None and not g.is_empty and g.geom_type in POLYGONAL
-    ]
+    """[(feature id, attributes)] of the polygon features of ``path`` (as :func:`read_polygons`)."""
+    return [(fid, props) for _, fid, props, _ in _features(Path(path), "zones file", "polygons", POLYGONAL)[0]]
 
 
 def _read(path: Path):
@@ -99,31 +83,22 @@ def _read(path: Path):
         (int(fid), {n: v[k] for n, v in zip(names, values, strict=True)}, g)
         for k, (fid, g) in enumerate(zip(fids, geoms, strict=True))
     ]
-    return feats, _wkt(meta.get("crs"))
-
-
-def _wkt(crs: str | None) -> str | None:
-    if not crs:
-        return None
+    if not meta.get("crs"):
+        return feats, None
     import pyproj
 
-    return pyproj.CRS.from_user_input(crs).to_wkt()
+    return feats, pyproj.CRS.from_user_input(meta["crs"]).to_wkt()
 
 
 def _name(props: dict, field: str | None, i: int, path: Path) -> str:
-    if field:
-        if field not in props:
-            raise SoilVolumeError(f"{path}: no field '{field}' (fields: {', '.join(props)})")
-        return str(props[field])
-    for key in props:
-        if key.lower() in ("name", "zone", "label"):
-            return str(props[key])
-    return f"zone {i + 1}"
+    if field and field not in props:
+        raise SoilVolumeError(f"{path}: no field '{field}' (fields: {', '.join(props)})")
+    key = field or next((k for k in props if k.lower() in ("name", "zone", "label")), None)
+    return str(props[key]) if key else f"zone {i + 1}"
 
 
 def _valid(p: Polygon, path: Path) -> Polygon:
-    """``p`` with finite coordinates and a valid polygonal geometry (repaired with ``make_valid``),
-    or an error."""
+    """``p`` with finite coordinates and a valid polygonal geometry (repaired), or an error."""
     import shapely
 
     if not np.isfinite(shapely.get_coordinates(p.geometry)).all():  # GEOS cannot even repair it
@@ -134,7 +109,7 @@ def _valid(p: Polygon, path: Path) -> Polygon:
         fixed = shapely.make_valid(p.geometry)
     except shapely.errors.GEOSException as exc:
         raise SoilVolumeError(f"{path}: '{p.name}' is not a valid polygon and cannot be repaired ({exc})") from None
-    parts = [g for g in shapely.get_parts(fixed) if g.geom_type in ("Polygon", "MultiPolygon")]
+    parts = [g for g in shapely.get_parts(fixed) if g.geom_type in POLYGONAL]
     area = shapely.union_all(parts) if parts else None
     if area is None or area.is_empty or area.area <= 0:
         raise SoilVolumeError(f"{path}: '{p.name}' is not a valid polygon and has no area once repaired")
@@ -142,23 +117,17 @@ def _valid(p: Polygon, path: Path) -> Polygon:
 
 
 def grid_transform(src_wkt: str | None, grid_wkt: str | None):
-    """The pyproj Transformer from a vector file's CRS to a grid's, compared on their horizontal
-    parts (a 2-D file against a compound survey CRS is no reprojection); None when either CRS
-    is unknown or they are equal."""
+    """The Transformer between a file's and a grid's horizontal CRSs; None if either is unknown or they are equal."""
     import pyproj
 
     if not src_wkt or not grid_wkt:
         return None
-    src = horizontal(pyproj.CRS.from_user_input(src_wkt))
-    dst = horizontal(pyproj.CRS.from_user_input(grid_wkt))
-    if src.equals(dst, ignore_axis_order=True):
-        return None
-    return pyproj.Transformer.from_crs(src, dst, always_xy=True)
+    src, dst = (horizontal(pyproj.CRS.from_user_input(w)) for w in (src_wkt, grid_wkt))
+    return None if src.equals(dst, ignore_axis_order=True) else pyproj.Transformer.from_crs(src, dst, always_xy=True)
 
 
 def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Path = "") -> list[Polygon]:
-    """Polygons reprojected to the grid's horizontal CRS (unchanged when either CRS is unknown
-    or they are equal); coordinates that cannot be transformed are an error naming the file."""
+    """Polygons in the grid's horizontal CRS; coordinates that cannot be moved an error naming the file."""
     import pyproj
     import shapely
 
@@ -166,12 +135,9 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
     if tr is None:
         return polys
 
-    def move(xy: np.ndarray) -> np.ndarray:
-        return np.column_stack(tr.transform(xy[:, 0], xy[:, 1]))
-
     out = []
     for p in polys:
-        geom = shapely.transform(p.geometry, move)
+        geom = shapely.transform(p.geometry, lambda xy: np.column_stack(tr.transform(xy[:, 0], xy[:, 1])))
         if not np.isfinite(shapely.get_coordinates(geom)).all():
             src, dst = (horizontal(pyproj.CRS.from_user_input(w)) for w in (src_wkt, grid.crs_wkt))
             raise SoilVolumeError(
@@ -183,9 +149,7 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
 
 
 def read_lines(path: str | Path, what: str = "sections file") -> tuple[list[Polygon], str | None]:
-    """(lines, CRS WKT or None) of the first layer of ``path``: its (multi)line features, each
-    named by a field called name, id or label (else ``line N``). Raises SoilVolumeError naming
-    ``what`` and the file when it is missing, unreadable or holds no line."""
+    """(lines named by a field name, id or label, CRS WKT or None) of ``path``'s first layer; an error if unusable."""
     import shapely
 
     path = Path(path)

@@ -1,12 +1,6 @@
-"""Earthworks quantities: the measured (bank) cut, fill and net with their loose and compacted
-volumes by the run's bulking and shrinkage factors, overall and per zone.
-
-Bank volumes are the measured ones; ``loose = bank * bulking`` (swell, e.g. 1.25: what a truck
-hauls) and ``compacted = bank * shrinkage`` (e.g. 0.90: what it makes once placed); their
-intervals are scaled the same way. A zone takes its own factors from its polygon's ``bulking`` and
-``shrinkage`` attributes (field names matched without regard to case; an empty value takes the
-run's option), else the run's options.
-"""
+"""Earthworks quantities, overall and per zone: the measured (bank) volumes and intervals, ``loose =
+bank * bulking`` (swell, e.g. 1.25: what a truck hauls) and ``compacted = bank * shrinkage`` (e.g.
+0.90: once placed); a zone's own factors from its polygon's attributes (any case; empty: the run's)."""
 
 from __future__ import annotations
 
@@ -23,8 +17,8 @@ PARTS = ("net", "cut", "fill")
 
 
 def zone_factors(path: str | Path) -> dict[int, dict[str, float]]:
-    """{feature id: {factor: value}} of the zones file's ``bulking``/``shrinkage`` attributes that
-    are set; a value that is not a number > 0 is an error naming the file, the zone and the field."""
+    """{feature id: {factor: value}} of the zones' set factors; one not a number > 0 an error naming file, zone,
+    field."""
     out: dict[int, dict[str, float]] = {}
     for fid, props in feature_fields(path):
         lower = {str(k).lower(): v for k, v in props.items()}
@@ -44,13 +38,12 @@ def zone_factors(path: str | Path) -> dict[int, dict[str, float]]:
 
 
 def scaled(volumes: dict[str, Any], half: dict[str, Any] | None, factors: dict[str, float]) -> dict[str, Any]:
-    """``{"bank": ..., "loose": ..., "compacted": ...}`` (the latter two only for the factors
-    given), each net/cut/fill (m^3) and ``interval_m3`` (their ± half-widths) times its factor."""
+    """``bank``, ``loose`` and ``compacted`` (for the factors given): net/cut/fill and ``interval_m3`` times the
+    factor."""
     out = {"bank": _times(volumes, half, 1.0)}
-    if factors.get("bulking") is not None:
-        out["loose"] = {**_times(volumes, half, factors["bulking"]), "factor": factors["bulking"]}
-    if factors.get("shrinkage") is not None:
-        out["compacted"] = {**_times(volumes, half, factors["shrinkage"]), "factor": factors["shrinkage"]}
+    for key, name in (("loose", "bulking"), ("compacted", "shrinkage")):
+        if factors.get(name) is not None:
+            out[key] = {**_times(volumes, half, factors[name]), "factor": factors[name]}
     return out
 
 
@@ -62,9 +55,7 @@ def _times(volumes: dict[str, Any], half: dict[str, Any] | None, factor: float) 
 
 
 def quantities(report: dict, bulking: float | None, shrinkage: float | None, zones: str | None) -> dict | None:
-    """report.json's ``quantities`` (the headline's bank, loose and compacted volumes) and each
-    zone row's own ``quantities``, set in ``report["zones"]``; None when no factor is given (the
-    run's options or the zones' attributes)."""
+    """report.json's ``quantities``, each zone row's set in ``report["zones"]``; None when no factor is given."""
     overall = {"bulking": bulking, "shrinkage": shrinkage}
     per_zone = zone_factors(zones) if zones else {}
     if bulking is None and shrinkage is None and not any(per_zone.values()):

@@ -1,11 +1,7 @@
-"""A survey against a reference surface (a design, or an earlier DEM): whether they agree where
-the surface is the existing ground, the surface's error terms of the volume, and the verdict.
-
-Nothing is registered against a surface and no bias is removed by default (a design is not the
-existing ground: fitting one onto it would absorb the works), so an offset between the survey's
-and the surface's datum shows only here: on the cells the survey's change detection deems
-unchanged, the median of (survey - surface) must be within the level of detection.
-"""
+"""A survey against a reference surface (a design, or an earlier DEM): their agreement on unchanged
+ground, the surface's terms of the interval, the verdict. Nothing is registered nor, by default,
+corrected against a surface (it would absorb the works), so a datum offset shows only here: the
+median of (survey - surface) on unchanged cells must be within the level of detection."""
 
 from __future__ import annotations
 
@@ -17,20 +13,19 @@ from scipy import ndimage
 from ..compensation.robust import nmad
 from ..core.types import GridSpec
 from ..options import Options
+from .quality import VERDICTS
 from .results import Volumes
-from .uncertainty import z_value
-from .variogram import bias_sigma
+from .uncertainty import bias_sigma, z_value
 
 MIN_CELLS = 30  # fewer unchanged cells than this cannot tell an offset
 RING = 1  # cells around the change areas whose sub-detection difference the volumes may miss
 TERMS = ("resampling", "given", "datum", "truncation", "outline")  # the surface's terms of the interval (m³)
-VERDICTS = ("reliable", "use with caution", "not reliable")  # as volumes/quality
 SEVERITY = {"caution": 1, "unreliable": 2}
+_SIGNS = (("fill", 1.0), ("cut", -1.0))
 
 
 def agreement(filled: np.ndarray, unchanged: np.ndarray, lod_m: float, cell_area: float) -> dict:
-    """report.json's ``reference.agreement``: the median and NMAD of (survey - surface) on the
-    ``unchanged`` cells, against the level of detection."""
+    """report.json's ``reference.agreement``: median and NMAD of (survey - surface) on ``unchanged``."""
     d = filled[unchanged & np.isfinite(filled)]
     return {
         "cells": int(d.size),
@@ -62,8 +57,7 @@ def check(agree: dict) -> tuple[str, str]:
 
 
 def merge(quality: dict, found: tuple[str, str]) -> dict:
-    """The quality verdict with the agreement check's sentence first; a run whose verdict was
-    reliable gets it instead of the registration sentence that does not apply."""
+    """The verdict with the agreement's sentence first (alone if reliable: the registration's does not apply)."""
     severity, sentence = found
     worst = max(VERDICTS.index(quality["verdict"]), SEVERITY.get(severity, 0))
     kept = quality["messages"] if quality["verdict"] != VERDICTS[0] else []
@@ -73,12 +67,8 @@ def merge(quality: dict, found: tuple[str, str]) -> dict:
 def design_terms(
     counted: dict[str, np.ndarray], sigma_cell: np.ndarray, given_m: float, datum_m: float, cell_area: float, z: float
 ) -> dict:
-    """The surface's share of the volume's interval (m³, at the ``z`` of the confidence), per
-    budget (``counted``: net, cut, fill cell masks): its resampling error per cell
-    (``sigma_cell``, independent between cells); a given uncertainty of the surface (``given_m``,
-    one error common to the counted area: a design's level is one number); and the datum between
-    survey and surface, known only as well as the unchanged ground measures it (``datum_m``, one
-    sigma of its mean there; nothing removes it), common to the counted area too."""
+    """The surface's interval terms (m³ at ``z``) per budget mask: its resampling ``sigma_cell`` (independent), a
+    ``given_m`` level and the ``datum_m`` (common)."""
     out: dict[str, dict[str, float]] = {"resampling": {}, "given": {}, "datum": {}}
     for key, mask in counted.items():
         s, area = np.nan_to_num(sigma_cell[mask]), float(mask.sum()) * cell_area
@@ -88,49 +78,30 @@ def design_terms(
     return out
 
 
-def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
-    """The change just below the detection level along the change areas (the ring of cells
-    around the fill areas, and the cut areas, not counted; :data:`RING`), m³ at ``z``: what the
-    areas' outline leaves out where the difference fades out slowly, as where a plan meets gently
-    sloping ground (a graded pad crossing the terrain's contours). One sigma: that ring's
-    same-signed difference; the net's, both in quadrature."""
-    d, every = np.nan_to_num(diff), counted["net"]
-    out = {}
-    for key, sign in (("fill", 1.0), ("cut", -1.0)):
-        ring = ndimage.binary_dilation(counted[key], iterations=RING) & ~every & np.isfinite(diff)
-        out[key] = float(z * np.clip(sign * d[ring], 0.0, None).sum() * cell_area)
+def _sided(diff: np.ndarray, cells: dict[str, np.ndarray], cell_area: float, z: float, share: float = 1.0) -> dict:
+    """``share`` of the same-signed difference over the fill and cut ``cells`` (m³ at ``z``); the net in quadrature."""
+    d = np.nan_to_num(diff)
+    out = {k: float(z * share * np.clip(s * d[cells[k]], 0.0, None).sum() * cell_area) for k, s in _SIGNS}
     out["net"] = float(np.hypot(out["fill"], out["cut"]))
     return out
+
+
+def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
+    """The change below detection in the :data:`RING` around the areas, not counted (a graded pad crossing contours)."""
+    ring = {k: ndimage.binary_dilation(counted[k], iterations=RING) & ~counted["net"] for k, _ in _SIGNS}
+    return _sided(diff, {k: m & np.isfinite(diff) for k, m in ring.items()}, cell_area, z)
 
 
 def outline(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
-    """The change areas' cells on the outline of the compared area (the survey's edge, or the
-    surface's), m³ at ``z``: such a cell counts whole though the survey or the surface covers
-    only part of it, so where the works run to the edge its volume is known to half a cell. One
-    sigma: half their same-signed volume; the net's, both in quadrature."""
+    """The change areas' cells on the compared area's outline, known to half a cell: half their volume."""
     valid = np.isfinite(diff)
     edge = valid & ~ndimage.binary_erosion(valid, border_value=0)
-    d, out = np.nan_to_num(diff), {}
-    for key, sign in (("fill", 1.0), ("cut", -1.0)):
-        out[key] = float(z * 0.5 * np.clip(sign * d[edge & counted[key]], 0.0, None).sum() * cell_area)
-    out["net"] = float(np.hypot(out["fill"], out["cut"]))
-    return out
-
-
-def with_terms(uncertainty: dict, terms: dict) -> dict:
-    """The uncertainty record with the surface's terms added in quadrature to net, cut, fill."""
-    out = {**uncertainty, "reference_m3": terms}
-    for key in ("net", "cut", "fill"):
-        parts = [uncertainty[key], *(terms[part][key] for part in TERMS)]
-        out[key] = float(np.linalg.norm(parts))
-    return out
+    return _sided(diff, {k: edge & counted[k] for k, _ in _SIGNS}, cell_area, z, 0.5)
 
 
 def with_surface(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridSpec) -> Volumes:
-    """The volume step's result against a surface: its interval with the surface's terms
-    (:data:`TERMS`; ``sigma``: the surface's per-cell error on the grid, m)."""
-    u = vols.uncertainty
-    cut, change = vols.cut_mask, vols.change_mask
+    """The volume step's result with the surface's :data:`TERMS` (``sigma``: its per-cell error) in quadrature."""
+    u, cut, change = vols.uncertainty, vols.cut_mask, vols.change_mask
     counted = {"net": change, "cut": cut & change, "fill": change & ~cut}
     model = {"nugget": u["nugget_m2"], "psill": u["psill_m2"], "range": u["range_m"]}
     datum = bias_sigma(u["stable_cells"], grid.cell, model, 1) if options.correction == "none" else 0.0
@@ -138,4 +109,7 @@ def with_surface(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridS
     terms = design_terms(counted, sigma, options.design_uncertainty, datum, grid.cell_area, z)
     terms["truncation"] = truncation(vols.diff, counted, grid.cell_area, z)
     terms["outline"] = outline(vols.diff, counted, grid.cell_area, z)
-    return replace(vols, uncertainty=with_terms(vols.uncertainty, terms))
+    out = {**u, "reference_m3": terms}
+    for key in ("net", "cut", "fill"):
+        out[key] = float(np.linalg.norm([u[key], *(terms[part][key] for part in TERMS)]))
+    return replace(vols, uncertainty=out)

@@ -1,7 +1,6 @@
-"""Stage 1 of the volume step, the refill: both epochs' heights at the cell centres, each
-epoch's weak cells refilled from its own neighbours, a survey's own holes filled where the
-other sees change across them, and the enclosed holes of the difference filled from the
-difference around them (the interpolants: :mod:`.holes`)."""
+"""Stage 1, the refill: heights at the cell centres, each epoch's weak cells refilled from its own
+neighbours, a survey's own holes where the other sees change across them (:mod:`.holes.works`),
+and the enclosed holes of the difference from the difference around them."""
 
 from __future__ import annotations
 
@@ -14,10 +13,9 @@ from ..compensation.robust import nmad
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
-from .difference import difference
-from .holes.epochfill import fill_own_holes
 from .holes.interpolate import enclosed_holes, fill, refill_epoch, weak_cells
 from .holes.testholes import error_by_radius
+from .holes.works import fill_own_holes
 from .results import Given
 
 MIN_POINTS = 3  # a robust cell height needs at least this many points
@@ -36,7 +34,7 @@ class Refill:
     filled: np.ndarray  # the difference of the refilled heights, its enclosed holes filled
     filled_mask: np.ndarray  # every refilled cell with a value
     seen_once: np.ndarray  # a pile on a meadow: measured in one survey, may start a change area
-    own: np.ndarray  # the cells filled in their own survey (holes/epochfill)
+    own: np.ndarray  # the cells filled in their own survey (holes/works)
     own_sigma: np.ndarray  # their one-sigma error (m)
 
 
@@ -46,36 +44,29 @@ def refill(after: EpochDEM, before: EpochDEM, grid: GridSpec, options: Options, 
     n_a, n_b = after.counts, before.counts
     h_a, h_b = centred_heights(after, grid.cell, options, med_a), centred_heights(before, grid.cell, options, med_b)
     max_cells = int(options.fill_holes / grid.cell_area) if options.fill_holes > 0 else None
-    weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS, method=options.fill_method)
+    method = options.fill_method
+    weak = dict(ratio=options.min_count_ratio, min_points=MIN_POINTS, method=method)
     f_b, m_b = refill_epoch(h_b, n_b, **weak, median=med_b)
     f_a, m_a = refill_epoch(h_a, n_a, **weak, median=med_a)
-    known = np.isfinite(difference(f_a, f_b))
+    known = np.isfinite(f_a - f_b)
     hole = enclosed_holes(known, max_cells)
     # holes of one survey of any size are its own to fill where the other sees a pile across them
     own_holes = enclosed_holes(known, known.size) if max_cells else hole
     one = own_holes & ~hole & (np.isfinite(f_a) != np.isfinite(f_b))  # measured in one survey, beyond a hole
     sparse = m_a | weak_cells(n_a, 0.5, MIN_POINTS, med_a), m_b | weak_cells(n_b, 0.5, MIN_POINTS, med_b)
-    f_a, f_b, own, own_sigma = fill_own_holes(
-        f_a, f_b, own_holes, sparse, options.fill_method, options.seed, grid.cell_area
-    )
-    filled = fill(difference(f_a, f_b), hole & ~own, options.fill_method)
+    f_a, f_b, own, own_sigma = fill_own_holes(f_a, f_b, own_holes, sparse, method, options.seed, grid.cell_area)
+    filled = fill(f_a - f_b, hole & ~own, method)
     filled_mask = (m_a | m_b | hole | own) & np.isfinite(filled)
-    raw = difference(h_a, h_b)
-    return Refill((h_a, h_b), raw, f_a, f_b, m_a, m_b, filled, filled_mask, one & own, own, own_sigma)
+    return Refill((h_a, h_b), h_a - h_b, f_a, f_b, m_a, m_b, filled, filled_mask, one & own, own, own_sigma)
 
 
 def centred_heights(dem: EpochDEM, cell: float, options: Options, median: float | None = None) -> np.ndarray:
-    """The epoch's heights at its cell centres (:meth:`EpochDEM.centred`); its weak cells (see
-    :func:`.holes.interpolate.weak_cells`, ``median``: the whole grid's median count for a tile)
-    give no slope."""
+    """The epoch's heights at its cell centres (:meth:`EpochDEM.centred`); its weak cells give no slope."""
     return dem.centred(cell, weak_cells(dem.counts, options.min_count_ratio, MIN_POINTS, median))
 
 
 def written_dems(s: Refill, filled: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
-    """(dem_after.tif, dem_before.tif): the heights at the cell centres, and on the refilled
-    cells the before survey's refilled height (its own refill, else interpolated from its
-    neighbours, else the after height less the difference) and that height plus the refilled
-    difference ``filled``: dem_after - dem_before - correction gives difference.tif back."""
+    """(dem_after.tif, dem_before.tif): refilled cells get the before's refilled height and it plus ``filled``."""
     (h_a, h_b), mask = s.heights, s.filled_mask
     base = np.where(mask, s.f_b, h_b)
     gap = mask & ~np.isfinite(base)
@@ -86,10 +77,8 @@ def written_dems(s: Refill, filled: np.ndarray, method: str) -> tuple[np.ndarray
 
 
 def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
-    """Per-cell one-sigma error (m) of refilled cells: the error of a hole's mean height grows with
-    its size, so each refilled patch gets the error measured by refilling known stable cells of the
-    difference with test holes of about its radius (:func:`.holes.testholes.error_by_radius`).
-    0 where nothing was refilled."""
+    """Per-cell one-sigma error (m) of refilled cells: their patch's, on test holes of its radius in the stable
+    difference."""
     if not filled_mask.any():
         return np.zeros(diff.shape)
     labels, n = ndimage.label(filled_mask, structure=ndimage.generate_binary_structure(2, 1))

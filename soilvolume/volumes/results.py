@@ -1,11 +1,14 @@
-"""The volume step's frozen results: :class:`Volumes` in typed parts (its grids, budgets and
-cell counts), and what a tile of a grid too large for one process is given (:class:`Given`)."""
+"""The volume step's frozen results: :class:`Volumes` in typed parts, and a tile's :class:`Given`."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
+
+from ..dem.grid import EpochDEM
+
+Epochs = tuple[EpochDEM, EpochDEM]  # (after, before)
 
 
 @dataclass(frozen=True)
@@ -21,7 +24,7 @@ class Grids:
     diff: np.ndarray  # the corrected difference: filled - offset
     stable: np.ndarray  # the stable cells of the error model
     change_mask: np.ndarray  # the areas of significant change (moved objects left out)
-    cut_mask: np.ndarray  # the cut areas of change_mask (the rest of it is fill)
+    cut_mask: np.ndarray  # the cut areas of change_mask, after the exclusions (the rest of it is fill)
     classes: np.ndarray  # excluded.tif: the class of each cell (volumes/nonsoil.CLASS_CODES)
     dem_out_a: np.ndarray  # dem_after.tif: dem_a, the refilled heights on filled_mask (local)
     dem_out_b: np.ndarray  # dem_before.tif: the same; dem_out_a - dem_out_b - offset = diff
@@ -52,10 +55,8 @@ class Cells:
 
 @dataclass(frozen=True)
 class Volumes:
-    """The volume step's result: its ``grids``, ``budgets`` and ``cells``, the correction's
-    ``params``, the ``uncertainty`` (half-widths and terms), what is not soil (``excluded``,
-    volumes/nonsoil) and the holes no survey saw (``blind``, volumes/holes/blind). Each part's
-    fields read as attributes of the whole too (``vols.diff``, ``vols.compensated``)."""
+    """The volume step's parts, ``params``, ``uncertainty``, ``excluded`` and ``blind``; parts' fields read on the
+    whole."""
 
     grids: Grids
     budgets: Budgets
@@ -85,10 +86,8 @@ Volumes.change_areas = _from("budgets", "compensated")  # the headline's other n
 
 @dataclass(frozen=True)
 class Given:
-    """What a tile of a grid too large for one process takes from the whole grid instead of
-    finding it in its own window: the correction surface and stable ground (from an overview
-    of the grid), each epoch's median point count (weak cells), and the window's core (the
-    cells it counts; the rest is halo, context only)."""
+    """What a tile takes from the whole grid's overview: correction, stable ground, median counts, the core it
+    counts."""
 
     offset: np.ndarray  # the correction surface on the window (m)
     stable: np.ndarray  # stable ground on the window

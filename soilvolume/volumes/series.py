@@ -1,16 +1,15 @@
-"""Volumes of a series of surveys E0, E1, ... En on one grid, built so that the periods add up.
+"""Volumes of a series E0 ... En on one grid, built so that the periods add up: the volume step of
+each pair E0 -> Ek gives ``D_k`` (``D_0 = 0``) on the cells every pair compares, refilled in any,
+stable in all. A period i -> j is ``D_j - D_i``; its net is summed over the works (every period's
+change areas), so the nets telescope to ``W_n``; cut and fill are its own change areas,
+``below_detection`` the rest of the net.
 
-Each later epoch k is corrected once into E0's frame: the volume step of the pair E0 -> Ek
-(:func:`.compute.compute_volumes`: weak cells and holes refilled, the bias correction on stable
-ground) gives ``D_k``, Ek's corrected surface minus E0's, with ``D_0 = 0``. All epochs then share
-one set of cells: the cells every pair compares (``valid``), one set of refilled cells (any
-pair's) and one stable ground (stable in every pair). A period i -> j is ``D_j - D_i``, the
-cumulative ``D_n``; its net is summed over one set of cells for every period, the works (the
-union of every period's and the cumulative's areas of significant change), so the nets
-telescope: ``sum_i (W_{i+1} - W_i) = W_n`` with ``W_k`` the sum of ``D_k`` over the works. Cut and
-fill are each period's own areas of significant change (as in an estimate run);
-``below_detection`` is the rest of the net, the change over the works outside them.
-The intervals: :mod:`.seriesunc`."""
+The intervals: with ``Z_k = T_k + e_k`` and ``D_k = Z_k - Z_0``, a period's difference holds only
+its two epochs' errors: ``var(V_ij) = var(E_i) + var(E_j)``, consecutive periods covary by
+``-var(E_i)`` (so their sum is not the root-sum-square of their intervals) and the cumulative
+``D_n`` holds E0's and the last epoch's only. Each interval is thus computed on its own difference,
+whose stable residuals are ``e_j - e_i``, with one correction surface fitted from E0 (and the
+cumulative), two between later epochs; its registration term is ``pose_j - pose_i`` per cell."""
 
 from __future__ import annotations
 
@@ -19,21 +18,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import cell_lod, cell_sigma, change_areas
 from .difference import signed_budget
-from .interval import pose_effect
+from .holes.interpolate import typical_radius
+from .interval import marginal_terms, pose_effect
+from .refill import refill_sigma
 from .results import Volumes
-from .seriesunc import period_uncertainty
-from .uncertainty import detection_level, z_value
+from .uncertainty import detection_level, interp_fraction, statistic_bias, volume_uncertainty, z_value
 
 
 @dataclass(frozen=True)
 class Change:
-    """One period (or the cumulative): epochs ``start`` -> ``end``, its difference (m), areas
-    of significant change, budgets and interval (m3)."""
+    """One period (or the cumulative) ``start`` -> ``end``: difference (m), change areas, budgets, interval (m3)."""
 
     start: int
     end: int
@@ -58,41 +58,24 @@ class SeriesVolumes:
     works_m3: list[float]  # W_k: D_k summed over the works
 
 
-def common_cells(vols: list[Volumes]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(valid, refilled, stable): compared by every pair, refilled by any, stable in all."""
+def combine(
+    vols: list[Volumes], dems: list[EpochDEM], moves: list[np.ndarray | None], grid: GridSpec, options: Options
+) -> SeriesVolumes:
+    """The series from the pairs E0 -> Ek (``vols[k-1]``), the DEMs (E0 first), the moves to alternative poses."""
     valid = np.logical_and.reduce([np.isfinite(v.diff) for v in vols])
     refilled = np.logical_or.reduce([v.filled_mask for v in vols]) & valid
     stable = np.logical_and.reduce([v.stable for v in vols]) & valid & ~refilled
-    return valid, refilled, stable
-
-
-def _areas(diff, se: tuple, refilled, stable, options: Options):
-    lod = detection_level(diff, stable, options.lod_confidence)
-    lod_cell = cell_lod(lod, se[0], se[1], z_value(options.lod_confidence))
-    return change_areas(diff, lod_cell, refilled=refilled), lod_cell
-
-
-def combine(
-    vols: list[Volumes],
-    dems: list[EpochDEM],
-    moves: list[np.ndarray | None],
-    grid: GridSpec,
-    options: Options,
-) -> SeriesVolumes:
-    """The series from the pairs E0 -> Ek (``vols[k-1]``), each epoch's DEM (``dems[k]``,
-    E0 first) and each later epoch's move to its alternative pose (``moves[k-1]``, or None)."""
-    valid, refilled, stable = common_cells(vols)
     to_e0 = [np.where(valid, 0.0, np.nan)] + [np.where(valid, v.diff, np.nan) for v in vols]
     se = [np.where(refilled, np.nan, cell_sigma(d.spread, d.counts)) for d in dems]
-    pose = [np.zeros((grid.rows, grid.cols))] + [
-        pose_effect(v.dem_a, grid, m) for v, m in zip(vols, moves, strict=True)
-    ]
+    pose = [np.zeros(valid.shape), *(pose_effect(v.dem_a, grid, m) for v, m in zip(vols, moves, strict=True))]
     n = len(to_e0) - 1
     pairs = [(i, i + 1) for i in range(n)] + [(0, n)]
     found = {}
     for i, j in pairs:
         diff = to_e0[j] - to_e0[i]
-        found[i, j] = (diff, *_areas(diff, (se[i], se[j]), refilled, stable, options))
+        conf = options.lod_confidence
+        lod_cell = cell_lod(detection_level(diff, stable, conf), se[i], se[j], z_value(conf))
+        found[i, j] = (diff, change_areas(diff, lod_cell, refilled=refilled), lod_cell)
     works = np.logical_or.reduce([fill | cut for _, (fill, cut), _ in found.values()])
     works_m3 = [math.fsum(d[works & valid].tolist()) * grid.cell_area for d in to_e0]
     changes = []
@@ -101,10 +84,52 @@ def combine(
         b = signed_budget(diff, fill, cut, grid.cell_area)
         net = works_m3[j] - works_m3[i]
         volume = {"net": net, "cut": b["cut"], "fill": b["fill"], "below_detection": net - (b["fill"] - b["cut"])}
-        fits = 1 if i == 0 else 2  # E0 is never corrected: see seriesunc
+        fits = 1 if i == 0 else 2  # E0 is never corrected (see module)
         skews = (dems[j].skew, dems[i].skew)
         unc = period_uncertainty(
             diff, (fill, cut), works & valid, stable, refilled, lod_cell, pose[j] - pose[i], skews, grid, options, fits
         )
         changes.append(Change(i, j, diff, fill, cut, volume, unc))
     return SeriesVolumes(to_e0, valid, refilled, stable, works & valid, changes[:-1], changes[-1], works_m3)
+
+
+def period_uncertainty(
+    diff: np.ndarray,
+    areas: tuple[np.ndarray, np.ndarray],
+    works: np.ndarray,
+    stable: np.ndarray,
+    refilled: np.ndarray,
+    lod_cell: np.ndarray,
+    pose: np.ndarray,
+    skews: tuple,
+    grid: GridSpec,
+    options: Options,
+    fits: int,
+) -> dict:
+    """± (m3) of a period's net over ``works``, cut and fill over its ``areas``; ``pose``, ``skews``, ``fits``: see
+    module."""
+    (fill_area, cut_area), area = areas, grid.cell_area
+    reg_v = signed_budget(pose, fill_area, cut_area, area)
+    reg_v["net"] = abs(float(np.nansum(np.where(works, pose, 0.0)))) * area
+    marginal = marginal_terms(diff, fill_area, cut_area, lod_cell, area)
+    stat = statistic_bias(skews, refilled, {"net": works, "cut": cut_area, "fill": fill_area}, area)
+    extra = {k: float(np.linalg.norm([reg_v[k], marginal[k], stat[k]])) for k in ("net", "cut", "fill")}
+    coef, conf = MODES[options.correction].coefficients, options.lod_confidence
+    sigma, fraction = refill_sigma(diff, refilled, stable, options), interp_fraction(typical_radius(refilled))
+    common = dict(
+        n_coef=coef * fits, filled_mask=refilled, fill_sigma=sigma, interp_fraction=fraction, surface=coef > 0
+    )
+    on_works = volume_uncertainty(diff, stable, works, grid, conf, **common, extra_sigma=extra)
+    on_areas = volume_uncertainty(diff, stable, fill_area | cut_area, grid, conf, **common, extra_sigma=extra)
+    by = {"net": on_works, "cut": on_areas, "fill": on_areas}  # the net's from the works, cut and fill their areas
+    kept = ("sigma_m", "lod_m", "nugget_m2", "psill_m2", "range_m", "bias_sigma_m", "stable_cells")
+    return {
+        **{k: u[k] for k, u in by.items()},
+        "confidence": conf,
+        **{k: on_works[k] for k in kept},
+        "registration_m3": {k: reg_v[k] for k in ("net", "cut", "fill")},
+        "statistic_m3": stat,
+        "marginal_detections_m3": marginal,
+        "correction_fits": fits,
+        "terms_m3": {k: u["terms_m3"][k] for k, u in by.items()},  # one-sigma, in the order of uncertainty.TERMS
+    }

@@ -1,13 +1,12 @@
-"""Level of detection and volume uncertainty from the stable-ground residuals.
-
-* LoD (GCD-style): ``z * sigma`` per cell, sigma = NMAD of the stable residuals, optionally
-  combined in quadrature with a per-cell standard error.
-* Volume uncertainty with spatially correlated error (:mod:`.variogram`), the refills', the
-  correction's leftover bias and what a caller adds, at a confidence.
-"""
+"""Level of detection (GCD-style ``z * NMAD`` of the stable residuals) and volume uncertainty: the
+correlated error, the refills', the correction's leftover bias, a caller's terms. The correlated error
+(Rolstad et al. 2009; Anderson 2019): the stable residuals' semivariogram fitted by ``nugget + psill *
+sph(h, range)``; over ``n`` cells of area ``A`` the variance is ``n * nugget * cell^4 + A^2 * psill *
+f(A, range)`` plus the correction's level."""
 
 from __future__ import annotations
 
+import math
 from statistics import NormalDist
 from typing import Any
 
@@ -17,16 +16,12 @@ from scipy import ndimage
 from ..compensation.robust import nmad
 from ..compensation.stable import noise_sigma
 from ..core.types import GridSpec
-from .variogram import bias_sigma, fit_spherical, region_sigma, semivariogram
 
 INTERP_FRACTION = 0.15
 
 
 def interp_fraction(patch_radius_cells: float) -> float:
-    """One-sigma error of refilled change volume, as a share of it (fully correlated): refills over
-    change edges overshoot convex toes and rims, and the partly covered cells around a hole bias
-    it; both sit at the patch's rim, so the share falls as 1 / radius in cells (measured: 30-80 %
-    on holes of about 2 cells, under 5 % on holes of 6 cells)."""
+    """Refilled change volume's one-sigma share: falls as 1 / radius (30-80 % on ~2-cell holes, under 5 % on 6)."""
     return float(min(0.5, max(INTERP_FRACTION, 1.0 / max(patch_radius_cells, 1.0))))
 
 
@@ -35,8 +30,7 @@ def z_value(confidence: float = 0.95) -> float:
     return NormalDist().inv_cdf(0.5 + confidence / 2)
 
 
-#: the one-sigma terms (m^3) of ``terms_m3[part]``, in their order: the area's error model, the
-#: refilled share of change, the refill error, the leftover bias, extras (what a caller adds)
+#: the one-sigma terms (m^3) of ``terms_m3[part]``, in order (extras: what a caller adds)
 TERMS = ("area_model", "refilled_share", "refill_error", "leftover_bias", "extras")
 
 
@@ -57,18 +51,11 @@ def volume_uncertainty(
     surface: bool = True,
     bound_m3: dict[str, float] | None = None,
 ) -> dict[str, Any]:
-    """+- half-widths (m^3) at ``confidence`` of the net/cut/fill summed over ``change_mask``
-    (all valid cells when None; cut/fill by the sign of the difference) and ``net_compared_area``
-    over every valid cell, with the error model's figures (lod_m, sigma_m, the variogram and its
-    model, areas, ``terms_m3`` per part in the order of :data:`TERMS`). ``n_coef``: coefficients
-    of the correction surface (6 surface, 3 plane, 1 constant, 0 none); the refills and
-    ``surface``: see :class:`_PartTerms`; ``extra_sigma``: further one-sigma terms (m^3) per part;
-    ``counted``: the cells the volumes sum over (a tile's core), while the error model uses every
-    stable cell; ``bound_m3``: volume per part that may or may not be soil, added as it is (:func:`widen`)."""
+    """± (m^3) at ``confidence`` over ``change_mask`` (all if None), the model's figures, :data:`TERMS`; ``n_coef``: the
+    correction's, ``counted``: a tile's core, ``bound_m3``: added as is."""
     d, valid = diff_corrected, np.isfinite(diff_corrected)
     stable = stable_mask & valid
-    if counted is not None:
-        valid = valid & counted
+    valid = valid if counted is None else valid & counted
     region = valid if change_mask is None else change_mask & valid
     vario = semivariogram(d, stable, grid.cell)
     model = fit_spherical(*vario)
@@ -77,7 +64,9 @@ def volume_uncertainty(
     pt = _PartTerms(d, valid, stable, grid, filled_mask, own_fill, fill_sigma, interp_fraction, surface)
     extra = extra_sigma or {}
     area_model = {k: region_sigma(int(m.sum()), grid.cell, model, b) for k, m in parts.items()}
-    terms = {k: pt.terms(m, area_model[k], extra.get(k, 0.0)) for k, m in parts.items()}
+    terms = {
+        k: [area_model[k], pt.interp(m), pt.refill(m), pt.unmodelled(m), extra.get(k, 0.0)] for k, m in parts.items()
+    }
     out: dict[str, Any] = widen({k: z_value(confidence) * float(np.linalg.norm(t)) for k, t in terms.items()}, bound_m3)
     sigma = nmad(d[stable]) if stable.any() else float("nan")
     out.update(confidence=confidence, sigma_m=sigma, lod_m=_lod(d[stable], sigma, confidence))
@@ -92,26 +81,14 @@ def volume_uncertainty(
 
 
 def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, float]:
-    """Half-widths (m3) widened by what the classification could not attribute (``bound``, m3
-    per part): the truth lies anywhere between counting all of it and none, so it adds as it is
-    (the net's half-width over every compared cell too)."""
+    """Half-widths (m3) widened by the unattributed ``bound`` (all or none: it adds as it is)."""
     b = bound or {}
-    out = {k: v + float(b.get(k, 0.0)) for k, v in half.items()}
-    if "net_compared_area" in out:
-        out["net_compared_area"] = half["net_compared_area"] + float(b.get("net", 0.0))
-    return out
+    return {k: v + float(b.get("net" if k == "net_compared_area" else k, 0.0)) for k, v in half.items()}
 
 
 class _PartTerms:
-    """The one-sigma terms (m^3) of a part beyond its area's error model: the refilled share of
-    its change (``interp``), the refill error (``refill``) and the correction's leftover bias
-    (``unmodelled``). ``filled_mask``: interpolated cells; their volume gets a fully correlated
-    error of ``fraction`` x its absolute value (hole fills over change edges were off by 10-22 %
-    of their volume on synthetic pairs), and ``fill_sigma`` (m, per cell: the error of refilling
-    known ground) summed fully correlated within each connected refilled patch; ``own``: the
-    refilled cells filled in their own survey (volumes/holes/epochfill), ``fill_sigma`` only.
-    ``surface``: a correction surface was fitted (its leftover's spread on stable ground is
-    carried over the part's area, fully correlated)."""
+    """A part's terms beyond its area's: ``fraction`` of refilled |volume| (10-22 % off on synthetic pairs),
+    ``fill_sigma``, leftover bias."""
 
     def __init__(
         self, diff, valid, stable, grid: GridSpec, filled_mask, own, fill_sigma, fraction: float, surface: bool
@@ -123,8 +100,6 @@ class _PartTerms:
         self.labels, self.n_patches = ndimage.label(self.filled)
         self.fs = np.zeros(valid.shape) if fill_sigma is None else np.where(self.filled, fill_sigma, 0.0)
         self.leftover = leftover_bias(diff, stable, grid.cell)
-        # the correction surface's residual systematic error where it cannot be seen: the spread of
-        # its leftover over the stable ground, carried fully correlated over the part's area
         seen = self.leftover[stable & np.isfinite(self.leftover)] if surface else np.empty(0)  # no surface, none
         self.residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
 
@@ -140,10 +115,6 @@ class _PartTerms:
             "part_area_m2": {k: float(m.sum()) * cell_area for k, m in parts.items()},
         }
 
-    def terms(self, m: np.ndarray, area_model: float, extras: float) -> list[float]:
-        """The one-sigma terms of the part ``m``, in the order of :data:`TERMS`."""
-        return [area_model, self.interp(m), self.refill(m), self.unmodelled(m), extras]
-
     def interp(self, m: np.ndarray) -> float:
         return self.fraction * float(self.absd[m & self.shared].sum()) * self.cell_area
 
@@ -158,11 +129,7 @@ class _PartTerms:
 
 
 def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
-    """One-sigma volume (m3) per part of the cell statistic's own bias where outliers, walls or
-    canopy leftovers fall in cells: how far the statistic moved each epoch's cells from their
-    medians, differenced, summed over the part (fully correlated: a wall or a rim biases all its
-    cells alike). ``skews``: (after, before) per-cell height minus median (None: 0); refilled
-    cells carry no statistic of their own."""
+    """One-sigma volume (m3) per part of the cell statistic's bias: ``skews`` differenced, summed (not refilled)."""
     d = np.zeros(refilled.shape)
     for sign, sk in zip((1.0, -1.0), skews, strict=True):
         if sk is not None:
@@ -172,9 +139,7 @@ def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarr
 
 
 def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
-    """Level of detection (m) of one cell: from the stable-ground residuals (see :func:`_lod`),
-    but at most twice the LoD of the neighbour-difference noise, so real change left in what
-    was taken as stable ground (e.g. a thin layer on well georeferenced surveys) cannot inflate it."""
+    """A cell's LoD (m): :func:`_lod` of the stable residuals, at most twice the neighbour noise's."""
     r = diff[stable & np.isfinite(diff)]
     lod = _lod(r, nmad(r), confidence) if r.size else None
     noise = noise_sigma(diff)
@@ -184,9 +149,7 @@ def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.
 
 
 def leftover_bias(residual: np.ndarray, stable: np.ndarray, cell: float, scale_m: float = 10.0) -> np.ndarray:
-    """The bias the correction surface left, carried into the change areas: the stable-ground
-    residuals smoothed over ``scale_m`` (normalized convolution; NaN far from stable ground). A
-    dome that is not quite a degree-2 surface leaves millimetres here that a volume multiplies."""
+    """The stable residuals smoothed over ``scale_m`` into the change (a dome not quite of degree 2 leaves mm)."""
     w = (stable & np.isfinite(residual)).astype(float)
     s = max(1.0, scale_m / cell)
     num = ndimage.gaussian_filter(np.where(w > 0, residual, 0.0), s)
@@ -196,10 +159,117 @@ def leftover_bias(residual: np.ndarray, stable: np.ndarray, cell: float, scale_m
 
 
 def _lod(stable_residuals: np.ndarray, sigma: float, confidence: float) -> float | None:
-    """LoD at ``confidence``: z x NMAD, or the empirical quantile of |stable residuals| when the
-    residuals have heavier tails than a normal distribution (they usually do)."""
+    """LoD at ``confidence``: z x NMAD, or the |residuals|' quantile when heavier-tailed (usually)."""
     if not np.isfinite(sigma):
         return None
     r = np.abs(stable_residuals[np.isfinite(stable_residuals)])
     empirical = float(np.quantile(r, confidence)) if r.size >= 20 else 0.0
     return max(z_value(confidence) * sigma, empirical)
+
+
+N_LAGS = 24
+
+
+def semivariogram(residual: np.ndarray, mask: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Isotropic semivariogram of the masked residuals by shifts: (lags_m, gamma_m2, n_pairs) up to half the extent."""
+    z = np.where(mask & np.isfinite(residual), residual, np.nan)
+    rr, cc = np.nonzero(np.isfinite(z))
+    if rr.size < 2:
+        return np.empty(0), np.empty(0), np.empty(0, int)
+    extent = max(np.ptp(rr), np.ptp(cc)) + 1
+    top = max(1, min(extent // 2, extent - 1))
+    lags = np.unique(np.round(np.geomspace(1, top, N_LAGS)).astype(int))
+    out_l, out_g, out_n = [], [], []
+    for h in lags:
+        d = np.concatenate([(z[:, h:] - z[:, :-h]).ravel(), (z[h:] - z[:-h]).ravel()])
+        d = d[np.isfinite(d)]
+        if d.size >= 10:
+            out_l.append(h * cell)
+            out_g.append(0.5 * float(np.mean(d * d)))
+            out_n.append(d.size)
+    return np.array(out_l), np.array(out_g), np.array(out_n)
+
+
+def spherical(h: np.ndarray, nugget: float, psill: float, rng: float) -> np.ndarray:
+    """Spherical semivariogram model with a nugget (gamma(0+) = nugget)."""
+    s = np.minimum(np.asarray(h, float) / rng, 1.0)
+    return nugget + psill * (1.5 * s - 0.5 * s**3)
+
+
+RANGE_GRID = 192  # ranges tried in each round of the fit's range search
+RANGE_ROUNDS = 4  # rounds, each on the bracket of the round before's best range (~1e-7 relative)
+
+
+def fit_spherical(lags: np.ndarray, gamma: np.ndarray, n_pairs: np.ndarray) -> dict[str, float]:
+    """The pair-weighted spherical fit {nugget, psill, range}: levels exact per range, the range on a refined log
+    grid."""
+    if lags.size < 3:
+        g = float(gamma.mean()) if gamma.size else 0.0
+        return {"nugget": g, "psill": 0.0, "range": float(lags.max()) if lags.size else 0.0}
+    w, cap = np.asarray(n_pairs, float), 2.0 * float(gamma.max())
+    lo, hi = math.log(float(lags[0]) * 0.5), math.log(float(lags[-1]) * 2.0)
+    for _ in range(RANGE_ROUNDS):
+        logs = np.linspace(lo, hi, RANGE_GRID)
+        cost, levels = _best_levels(lags, gamma, w, np.exp(logs), cap)
+        i = int(np.argmin(cost))
+        lo, hi = logs[max(i - 1, 0)], logs[min(i + 1, RANGE_GRID - 1)]
+    return {"nugget": float(levels[0, i]), "psill": float(levels[1, i]), "range": float(np.exp(logs[i]))}
+
+
+def _best_levels(
+    lags: np.ndarray, gamma: np.ndarray, w: np.ndarray, ranges: np.ndarray, cap: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per range, the least cost and (nugget, psill) within [0, ``cap``] (the free solution, else the box's edges)."""
+    b = spherical(lags[None, :], 0.0, 1.0, ranges[:, None])  # (R, L): the model's shape at each lag
+    sw, sg, sb, sbb, sgb = w.sum(), w @ gamma, b @ w, (b * b) @ w, b @ (w * gamma)
+    det = sw * sbb - sb * sb
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a, c = (sbb * sg - sb * sgb) / det, (sw * sgb - sb * sg) / det  # unconstrained
+        edges = [
+            (np.zeros_like(sb), sgb / sbb),  # no nugget
+            (np.full_like(sb, cap), (sgb - cap * sb) / sbb),  # nugget at its bound
+            (np.full_like(sb, sg / sw), np.zeros_like(sb)),  # no sill
+            ((sg - cap * sb) / sw, np.full_like(sb, cap)),  # sill at its bound
+        ]
+    inside = (det > 0) & (a >= 0) & (a <= cap) & (c >= 0) & (c <= cap)
+    candidates = [(np.where(inside, a, 0.0), np.where(inside, c, 0.0), inside)]
+    candidates += [(*(np.clip(np.nan_to_num(v), 0.0, cap) for v in edge), True) for edge in edges]
+    cost, levels = np.full(len(ranges), np.inf), np.zeros((2, len(ranges)))
+    for nugget, psill, ok in candidates:
+        r = gamma[None, :] - nugget[:, None] - psill[:, None] * b
+        here = np.where(ok, (r * r) @ w, np.inf)
+        better = here < cost
+        cost = np.where(better, here, cost)
+        levels = np.where(better, np.stack([nugget, psill]), levels)
+    return cost, levels
+
+
+def correlated_fraction(area: float, rng: float) -> float:
+    """Rolstad et al. (2009): a disc-equivalent area's mean variance as a fraction of the point variance."""
+    if area <= 0 or rng <= 0:
+        return 0.0
+    radius = math.sqrt(area / math.pi)
+    if radius >= rng:
+        return math.pi * rng * rng / (5 * area)
+    q = radius / rng
+    return 1 - q + q**3 / 5
+
+
+def region_sigma(n_cells: int, cell: float, model: dict[str, float], bias_sigma: float = 0.0) -> float:
+    """One-sigma volume uncertainty (m^3) over ``n_cells`` cells."""
+    if n_cells <= 0:
+        return 0.0
+    area = n_cells * cell * cell
+    var_unc = n_cells * model["nugget"] * cell**4
+    var_cor = area * area * model["psill"] * correlated_fraction(area, model["range"])
+    var_sys = (area * bias_sigma) ** 2
+    return math.sqrt(var_unc + var_cor + var_sys)
+
+
+def bias_sigma(n_stable: int, cell: float, model: dict[str, float], n_coef: int) -> float:
+    """One-sigma error of the correction's level: the stable ground's mean error, inflated by the coefficients."""
+    if n_stable <= 0:
+        return 0.0
+    area = n_stable * cell * cell
+    var_mean = model["nugget"] / n_stable + model["psill"] * correlated_fraction(area, model["range"])
+    return math.sqrt(max(n_coef, 1) * var_mean)

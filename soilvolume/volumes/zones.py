@@ -1,9 +1,6 @@
-"""Per-zone volume budgets and polygon masks from a vector file (GeoPackage/Shapefile/GeoJSON).
-
-Polygons are read, repaired and brought into the grid's CRS by :mod:`polygons`, and rasterized
-(cell centres inside) with rasterio. A zone with no cell centre on the grid (outside the survey,
-or in the wrong CRS) is flagged, never a silent 0 m3; when no zone meets the grid the run fails.
-"""
+"""Per-zone volume budgets and polygon masks of a vector file (read and reprojected by
+:mod:`.polygons`, cell centres inside rasterised with rasterio). A zone with no cell on the grid is
+flagged, never a silent 0 m3; when no zone meets the grid the run fails."""
 
 from __future__ import annotations
 
@@ -26,34 +23,26 @@ from .uncertainty import TERMS, widen, z_value
 warnings.filterwarnings("ignore", message="Dataset has no geotransform", module="rasterio.features")
 
 
-def _grid_transform(grid: GridSpec):
-    """Affine of the grid in its CRS units (GridSpec.transform when it has one)."""
-    from rasterio.transform import Affine  # rasterio imported when zones are used
-
-    t = getattr(grid, "transform", None)
-    if t is not None:
-        return t
-    return Affine(grid.cell, 0.0, grid.xmin, 0.0, -grid.cell, grid.ymax)
+def on_grid(path: str | Path, grid: GridSpec, name_field: str | None = None, what: str = "zones file"):
+    """(the polygons of ``path`` in the grid's CRS, the file's CRS WKT)."""
+    polys, wkt = read_polygons(path, name_field, what)
+    return to_grid_crs(polys, wkt, grid, path), wkt
 
 
 def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
     """One boolean (rows, cols) mask per polygon (cells whose centre is inside)."""
     from rasterio import features
 
-    tf = _grid_transform(grid)
+    shape = (grid.rows, grid.cols)
     return [
-        features.rasterize(
-            [(p.geometry, 1)], out_shape=(grid.rows, grid.cols), transform=tf, fill=0, dtype="uint8"
-        ).astype(bool)
+        features.rasterize([(p.geometry, 1)], out_shape=shape, transform=grid.transform, dtype="uint8").astype(bool)
         for p in polys
     ]
 
 
 def polygons_mask(path: str | Path, grid: GridSpec, what: str = "{opt:stable_mask} file") -> np.ndarray:
-    """Union of the polygons of ``path`` as a (rows, cols) mask (e.g. a stable-ground mask); one
-    that covers no cell of the grid is an error naming the file."""
-    polys, wkt = read_polygons(path, what=what)
-    polys = to_grid_crs(polys, wkt, grid, path)
+    """Union of the polygons of ``path`` as a (rows, cols) mask; none meeting the grid is an error."""
+    polys, wkt = on_grid(path, grid, what=what)
     if not any(_meets(p, grid) for p in polys):
         raise SoilVolumeError(f"{path}: no polygon of this {what} meets the survey's grid{_crs_hint(wkt)}")
     return np.logical_or.reduce(polygon_masks(polys, grid))
@@ -73,8 +62,7 @@ def _crs_hint(wkt: str | None) -> str:
 
 
 def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, float]:
-    """net/cut/fill (m^3; cut and fill positive, net = fill - cut) and compared area (m^2) of
-    the finite cells of ``diff`` in ``mask``."""
+    """net/cut/fill (m^3) and compared area (m^2) of the finite cells of ``diff`` in ``mask``."""
     b = cell_budget(diff, cell_area, mask)
     return {k: b[k] for k in ("net", "cut", "fill", "area_m2")}
 
@@ -88,18 +76,12 @@ def zone_budgets(
     interval: Callable[[np.ndarray], dict[str, float]] | None = None,
     areas: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> list[dict[str, Any]]:
-    """[{id, name, net, cut, fill, area_m2, zone_area_m2, polygon_area_m2, repaired}] per polygon
-    of ``zones_path`` (overlapping zones each count their cells; ``zone_area_m2`` = grid cells
-    inside the polygon); on the ``whole`` grid (not a tile's window), see :func:`check_inside`.
-    ``interval``: a zone's ± (net, cut, fill) from its mask (:func:`zone_interval`), kept as
-    ``uncertainty_m3``. ``areas``: the (fill, cut) areas a zone's fill and cut are summed over,
-    as the headline's (else by each cell's sign: noise in a pile's buffer would be cut)."""
-    polys, wkt = read_polygons(zones_path, name_field)
-    polys = to_grid_crs(polys, wkt, grid, zones_path)
+    """Per polygon: id, name, budget, zone and polygon areas; ``interval`` its ±; fill and cut over ``areas`` as the
+    headline's."""
+    polys, wkt = on_grid(zones_path, grid, name_field)
     out = []
     for p, mask in zip(polys, polygon_masks(polys, grid), strict=True):
-        row = {"id": p.id, "name": p.name}
-        row.update(budget(diff, mask, grid.cell_area))
+        row = {"id": p.id, "name": p.name, **budget(diff, mask, grid.cell_area)}
         if areas is not None:
             split = signed_budget(diff, areas[0] & mask, areas[1] & mask, grid.cell_area)
             row.update(cut=split["cut"], fill=split["fill"], net=split["fill"] - split["cut"])
@@ -122,22 +104,17 @@ def check_inside(rows: list[dict[str, Any]], path: str | Path, wkt: str | None =
 
 
 def zone_messages(rows: list[dict[str, Any]]) -> list[str]:
-    """Sentences for the quality verdict about zones that lie outside the grid, in part or whole,
-    or whose geometry was repaired."""
-    out = []
+    """The verdict's sentences on zones outside the grid, in part or whole, or repaired."""
     outside = [r["name"] for r in rows if r.get("outside_grid")]
-    if outside:
-        out.append(
-            "zones without a grid cell centre inside (outside the survey, in another CRS than declared, or "
-            f"smaller than a cell): their volumes are not measured: {_names(outside)}"
-        )
     part = [r["name"] for r in rows if not r.get("outside_grid") and r["zone_area_m2"] < 0.9 * r["polygon_area_m2"]]
-    if part:
-        out.append(f"zones only partly on the surveyed grid (their volumes cover that part): {_names(part)}")
     fixed = [r["name"] for r in rows if r.get("repaired")]
-    if fixed:
-        out.append(f"zones whose invalid geometry (e.g. self-intersecting) was repaired: {_names(fixed)}")
-    return out
+    said = (
+        "zones without a grid cell centre inside (outside the survey, in another CRS than declared, or smaller "
+        "than a cell): their volumes are not measured: {}",
+        "zones only partly on the surveyed grid (their volumes cover that part): {}",
+        "zones whose invalid geometry (e.g. self-intersecting) was repaired: {}",
+    )
+    return [words.format(_names(names)) for words, names in zip(said, (outside, part, fixed), strict=True) if names]
 
 
 def _names(names: list[str], limit: int = 5) -> str:
@@ -146,20 +123,14 @@ def _names(names: list[str], limit: int = 5) -> str:
 
 
 def zone_interval(model: Callable[..., dict], region: np.ndarray, headline: dict, zone: np.ndarray) -> dict[str, float]:
-    """A zone's ± half-widths (m^3, net/cut/fill at the run's confidence): the run's error model
-    (``model``: :func:`~.uncertainty.volume_uncertainty` with the run's arguments) over the cells
-    of ``region`` (the headline's change areas) inside ``zone``; the headline's further terms
-    (registration, small detections, classification, cell statistic: ``headline["terms_m3"]``'s
-    extras) shared in proportion to the zone's area of each part, and widened by the whole
-    run's unclassified change (``unclassified_m3``: where it lies is not kept, so each zone
-    may hold all of it)."""
+    """A zone's ± (m^3): ``model`` over ``region`` in ``zone``, a share of the extras, widened by all the
+    unclassified."""
     own = model(change_mask=region & zone, extra_sigma=None)
     extra = TERMS.index("extras")
     out = {}
     for part in ("net", "cut", "fill"):
         whole = headline["part_area_m2"][part]
-        share = own["part_area_m2"][part] / whole if whole > 0 else 0.0
         terms = list(own["terms_m3"][part])
-        terms[extra] = share * headline["terms_m3"][part][extra]
+        terms[extra] = (own["part_area_m2"][part] / whole if whole > 0 else 0.0) * headline["terms_m3"][part][extra]
         out[part] = z_value(headline["confidence"]) * float(np.linalg.norm(terms))
     return widen(out, headline.get("unclassified_m3"))

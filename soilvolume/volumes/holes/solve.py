@@ -1,8 +1,6 @@
-"""The biharmonic refill's least-squares solve: the normal equations split into their coupled
-groups, each factorised once (banded Cholesky batched by bandwidth, SuperLU for wider ones),
-iterative refinement, and the checks that send an ill-posed or wild group to the harmonic fill.
-CSR matrices are taken straight from their rows (what ``scipy.sparse`` builds through
-coordinates, the same arrays without the round trip)."""
+"""The biharmonic refill's least-squares solve: the normal equations' coupled groups each factorised
+once (banded Cholesky batched by bandwidth, SuperLU if wider), refined, and ill-posed or wild groups
+sent to the harmonic fill. CSR matrices are built from their rows (scipy's arrays, no COO trip)."""
 
 from __future__ import annotations
 
@@ -20,9 +18,7 @@ _BIG_GROUP = 200_000  # coupled biharmonic unknowns beyond which a sub-system is
 
 
 def rows_csr(rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[int, int]) -> sparse.csr_matrix:
-    """The CSR matrix of entries given row by row, each row's columns increasing (what
-    ``csr_matrix((data, (rows, cols)))`` builds from them, without the conversion from
-    coordinates: the same arrays and index type)."""
+    """``csr_matrix((data, (rows, cols)))`` of entries row by row, columns increasing, built directly."""
     idx = np.int32 if max(shape[0], shape[1], data.size) < np.iinfo(np.int32).max else np.int64
     indptr = np.zeros(shape[0] + 1, idx)
     np.cumsum(np.bincount(rows, minlength=shape[0]), out=indptr[1:])
@@ -30,9 +26,7 @@ def rows_csr(rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[
 
 
 def lower_triangle(a: sparse.csr_matrix) -> sparse.csr_matrix:
-    """``sparse.tril(a, format="csr")`` of a CSR matrix in canonical form (sorted, no duplicate
-    entries), taken from its rows directly: the same arrays without the round trip through
-    coordinates."""
+    """``sparse.tril(a, format="csr")``, taken from the rows directly when ``a`` is canonical."""
     a = a.tocsr()
     if not a.has_canonical_format:
         return sparse.tril(a, format="csr")
@@ -44,8 +38,7 @@ def lower_triangle(a: sparse.csr_matrix) -> sparse.csr_matrix:
 
 
 def least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares solution of ``mat x = rhs`` via the normal equations: one factorisation of
-    ``normal + eps I`` and iterative refinement. Returns (x, unknowns to fill harmonically)."""
+    """(``mat x = rhs`` by one factorisation of ``normal + eps I`` refined, the unknowns to fill harmonically)."""
     normal = (mat.T @ mat).tocsr()
     g = mat.T @ rhs
     n_groups, group = connected_components(normal, directed=False)
@@ -59,8 +52,7 @@ def least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
 
 
 def refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
-    """The solution of ``normal x = g`` (one or more columns) by ``solve`` (of ``normal + eps
-    I``), refined until converged or stalled at round-off (over all columns at once)."""
+    """``normal x = g`` by ``solve`` (of ``normal + eps I``), refined until converged or stalled at round-off."""
     x, last = solve(g), np.inf
     for _ in range(_REFINE_MAX):
         dx = solve(g - normal @ x)
@@ -73,9 +65,8 @@ def refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix
 
 
 def group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
-    """Factorise the block-diagonal SPD ``reg`` (blocks = ``group``): banded Cholesky of blocks
-    kept in row-major order, batched by bandwidth; SuperLU for wider blocks; blocks over
-    ``_BIG_GROUP`` unknowns are skipped (solution 0). Returns (solve, per-group skipped flags)."""
+    """(solve, per-group skipped flags) of the block-diagonal SPD ``reg`` (blocks: ``group``): banded
+    Cholesky batched by bandwidth, SuperLU if wider, blocks over ``_BIG_GROUP`` skipped (0)."""
     low = lower_triangle(reg)
     row = np.repeat(np.arange(low.shape[0]), np.diff(low.indptr))
     order, kind = _block_order(low, row, group, n_groups)
@@ -108,9 +99,8 @@ def group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
 
 
 def _block_order(low: sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_groups: int):
-    """Unknowns ordered by solver kind, then group, then grid (row-major) order, and the kind of
-    each group: index into ``_BAND_EDGES`` of its bandwidth in that order, ``_BAND_EDGES.size``
-    if wider (SuperLU), ``_BAND_EDGES.size + 1`` if over ``_BIG_GROUP`` unknowns (skipped)."""
+    """(unknowns ordered by solver kind, group, grid order; each group's kind: its bandwidth's index
+    in ``_BAND_EDGES``, that size if wider (SuperLU), one more if over ``_BIG_GROUP`` (skipped))."""
     size = np.bincount(group, minlength=n_groups)
     order = np.argsort(group, kind="stable")
     pos = np.empty_like(order)
@@ -122,8 +112,7 @@ def _block_order(low: sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_g
 
 
 def _factor(kind: int, pi: np.ndarray, pj: np.ndarray, data: np.ndarray, n: int):
-    """Solve function of an SPD matrix given by its lower triangle: banded Cholesky (bandwidth
-    ``_BAND_EDGES[kind]``) or, past the last edge, SuperLU. Raises if the factorisation fails."""
+    """The solve of an SPD matrix's lower triangle: banded Cholesky of ``_BAND_EDGES[kind]``, else SuperLU."""
     if kind < _BAND_EDGES.size:
         ab = np.zeros((_BAND_EDGES[kind] + 1, n))
         ab[pi - pj, pj] = data
@@ -136,8 +125,7 @@ def _factor(kind: int, pi: np.ndarray, pj: np.ndarray, data: np.ndarray, n: int)
 
 
 def _wild(x, group, n_groups, mat, k_rows, k_vals) -> np.ndarray:
-    """Groups whose solution is not finite or leaves the range of their known stencil values by
-    more than a generous, size-aware margin."""
+    """Groups whose solution is not finite or far outside their known stencil values (:func:`beyond`)."""
     has = np.diff(mat.indptr) > 0
     row_group = np.full(mat.shape[0], -1)
     row_group[has] = group[mat.indices[mat.indptr[:-1][has]]]
@@ -148,9 +136,8 @@ def _wild(x, group, n_groups, mat, k_rows, k_vals) -> np.ndarray:
 
 
 def beyond(known: tuple, solved: tuple, size) -> np.ndarray:
-    """Whether each group's solution (``solved``: its min and max, +inf where not finite) is not
-    finite or leaves the range of its known stencil values (``known``: min, max) by more than a
-    generous margin for its ``size`` unknowns."""
+    """Whether each group's solution (``solved``: min, max; +inf if not finite) is not finite or leaves
+    its known stencil values' range (``known``: min, max) by a generous margin for ``size`` unknowns."""
     (lo, hi), (xlo, xhi) = known, solved
     with np.errstate(invalid="ignore"):  # groups without known values: NaN margin -> wild
         allow = (hi - lo) * np.maximum(4.0, np.sqrt(size)) + 1e-9 * (1.0 + np.abs(lo) + np.abs(hi))

@@ -1,7 +1,5 @@
-"""The refill's error measured on known ground: test discs cut out of a grid's known cells,
-refilled (:mod:`.interpolate`) and compared with what was there. The discs lie apart, each fully
-surrounded, so for the biharmonic fill every disc's system is the same matrix: factorised once
-per disc shape and solved for all the discs at once."""
+"""The refill's error on known ground: test discs cut out of known cells, refilled and compared with
+what was there; apart and surrounded, every disc's biharmonic system is one matrix, solved at once."""
 
 from __future__ import annotations
 
@@ -20,10 +18,8 @@ MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
 def fill_error(
     h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, seed: int = 0, per_cell=False
 ) -> float | tuple[float, float]:
-    """One-sigma error (m) of the MEAN height of a refilled hole, measured on known ground: discs
-    of ``radius`` cells are cut out of ``usable`` cells of ``h`` (apart, fully surrounded by
-    usable cells), refilled with ``method`` and compared with what was there (NaN if no room).
-    ``per_cell``: (the cells' RMS error, that) instead."""
+    """One-sigma error (m) of a hole's MEAN height, on discs of ``radius`` cut from ``usable`` ``h`` (NaN if no room);
+    ``per_cell``: (RMS, that)."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
     step = 2 * r + 5
@@ -47,11 +43,8 @@ def fill_error(
 def error_by_radius(
     h: np.ndarray, usable: np.ndarray, method: str, radius: np.ndarray, seed: int, per_cell=False, floor=0.0
 ) -> np.ndarray | None:
-    """:func:`fill_error` on test holes of radii 1, 2, 4, ... cells up to the largest ``radius``
-    (at most :data:`MAX_TEST_RADIUS`: weak cells spread over a grid finer than the points form one
-    giant "hole"), interpolated in log radius at each ``radius`` (the largest measured beyond it):
-    (n,) mean-height errors, or with ``per_cell`` (n, 2) (per-cell RMS, mean-height); None without
-    room to measure. Errors below ``floor`` are taken as it."""
+    """:func:`fill_error` at radii 1, 2, 4 ... up to :data:`MAX_TEST_RADIUS`, interpolated in log radius at each
+    ``radius`` (at least ``floor``); None without room."""
     ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
     rows = []
     for r in ladder:
@@ -67,11 +60,8 @@ def error_by_radius(
 
 
 def discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, disc: np.ndarray) -> np.ndarray | None:
-    """The ``targets`` cells of :func:`.interpolate.biharmonic_fill` (``values``, ``targets``) where the targets
-    are test discs (``centres`` + ``disc`` offsets) far enough apart that no stencil meets two, each
-    with every stencil cell around it finite and in the grid (None otherwise): every disc's system
-    is then the same matrix with its own right-hand side, factorised once and solved for all the
-    discs at once, with the same arithmetic per disc as the whole system's solution."""
+    """:func:`.interpolate.biharmonic_fill` of apart, surrounded test discs (else None): one matrix factorised once,
+    solved for all."""
     reach = int(np.abs(disc).max()) + 2  # the stencils touching a disc stay within 2 cells of it
     if (centres.min(axis=0) < reach).any() or (centres.max(axis=0) + reach >= values.shape).any():
         return None
@@ -97,9 +87,8 @@ def discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, d
 
 @lru_cache(maxsize=16)
 def _disc_system(disc: bytes, reach: int):
-    """The system of one test disc (its offsets' bytes; stencils within ``reach`` of its centre):
-    (patch size, the disc's flat cells in the patch, matrix, normal matrix, known terms as
-    :func:`stencil_system`, solve of normal + eps I; None when it is not one factorisable group)."""
+    """One test disc's system (offsets' bytes; stencils within ``reach``): (patch size, its flat cells,
+    matrix, normal matrix, :func:`stencil_system`'s known terms, solve of normal + eps I or None)."""
     size = 2 * reach + 1
     offsets = np.frombuffer(disc, np.int64).reshape(-1, 2)
     todo = np.zeros((size, size), bool)
@@ -116,17 +105,15 @@ def _disc_system(disc: bytes, reach: int):
 
 
 def _around(centres: np.ndarray, cells: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, cols), each (discs, cells): the grid cells of the flat ``cells`` of a ``size`` x
-    ``size`` patch centred on each centre."""
+    """(rows, cols), each (discs, cells): the flat ``cells`` of a ``size``-wide patch on each centre."""
     r, c = np.divmod(cells, size)
     half = size // 2
     return centres[:, :1] - half + r, centres[:, 1:] - half + c
 
 
 def disc_erosion_every(mask: np.ndarray, radius: float, step: int) -> np.ndarray:
-    """``ndimage.binary_erosion(mask, disc)[::step, ::step]`` for the disc of cells within
-    ``radius`` (outside the grid is not ``mask``), looked up at those cells only: each is True
-    when every cell within ``radius`` of it lies in the grid and in ``mask``."""
+    """``ndimage.binary_erosion(mask, disc)[::step, ::step]`` (outside the grid is not ``mask``), at those cells
+    only."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
     near = xx * xx + yy * yy <= radius * radius
