@@ -9,13 +9,13 @@ cells are k x k of the run's), and their volumes are that grid's."""
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..core.types import GridSpec
 from ..inputs.crs import raster_wkt
+from ..inputs.io import atomic_path
 from .vectors import write_change_area_gpkg
 
 FILE = "change_areas.geojson"
@@ -78,9 +78,8 @@ def write_change_areas(
     feats = features(diff, change, cut, grid)
     crs = {"type": "name", "properties": {"name": _crs_name(raster_wkt(grid.crs_wkt))}}
     doc = {"type": "FeatureCollection", "name": "change_areas", "crs": crs, "features": feats}
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    tmp.write_text(json.dumps(doc), encoding="utf-8")
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(doc), encoding="utf-8")
     if gpkg:
         write_change_area_gpkg(path.parent, feats, raster_wkt(grid.crs_wkt))
     by = {k: [f["properties"]["volume_m3"] for f in feats if f["properties"]["kind"] == k] for k in ("cut", "fill")}

@@ -17,14 +17,7 @@ from .svgparts import extent_text, map_figure
 from .text import Table
 
 # excluded.tif codes (volumes/nonsoil.CLASS_CODES) -> colour (as resources/styles/excluded.qml)
-PALETTE = {
-    1: (77, 175, 74),
-    2: (152, 78, 163),
-    3: (153, 153, 153),
-    4: (255, 127, 0),
-    5: (228, 26, 28),
-    6: (166, 216, 84),
-}
+PALETTE = dict(enumerate((tuple(bytes.fromhex(c)) for c in "4daf4a 984ea3 999999 ff7f00 e41a1c a6d854".split()), 1))
 NAMES = {
     1: "vegetation (not gridded)",
     2: "objects by classification (not gridded)",

@@ -14,39 +14,15 @@ from ..core.types import GridSpec
 from .raster import _block_any, _repeat, block_mean
 from .svgparts import DISPLAY, colour_bar, extent_text, map_figure
 
+
+def ramp(colours: str) -> np.ndarray:
+    """A colour table (n, 3) of floats from hex colours separated by spaces."""
+    return np.array([list(bytes.fromhex(c)) for c in colours.split()], float)
+
+
 # ColorBrewer 11-class ramps, low -> high (as matplotlib's RdBu / PuOr): red = cut, blue = fill.
-RDBU = np.array(
-    [
-        [103, 0, 31],
-        [178, 24, 43],
-        [214, 96, 77],
-        [244, 165, 130],
-        [253, 219, 199],
-        [247, 247, 247],
-        [209, 229, 240],
-        [146, 197, 222],
-        [67, 147, 195],
-        [33, 102, 172],
-        [5, 48, 97],
-    ],
-    float,
-)
-PUOR = np.array(
-    [
-        [127, 59, 8],
-        [179, 88, 6],
-        [224, 130, 20],
-        [253, 184, 99],
-        [254, 224, 182],
-        [247, 247, 247],
-        [216, 218, 235],
-        [178, 171, 210],
-        [128, 115, 172],
-        [84, 39, 136],
-        [45, 0, 75],
-    ],
-    float,
-)
+RDBU = ramp("67001f b2182b d6604d f4a582 fddbc7 f7f7f7 d1e5f0 92c5de 4393c3 2166ac 053061")
+PUOR = ramp("7f3b08 b35806 e08214 fdb863 fee0b6 f7f7f7 d8daeb b2abd2 8073ac 542788 2d004b")
 _MAX_PX = 900  # longest side of an embedded map (larger rasters are block-averaged)
 _AZIMUTH, _ALTITUDE = 315.0, 45.0
 
@@ -76,17 +52,11 @@ def _like(a: Any, ref: np.ndarray) -> np.ndarray | None:
     return np.asarray(a) if a is not None and np.shape(a) == ref.shape else None
 
 
-# ---------------------------------------------------------------- colour limits
-
-
 def _sym_limit(a: np.ndarray) -> float:
     """Symmetric colour limit: the 99th percentile of |a| (1 when degenerate)."""
     v = np.abs(a[np.isfinite(a)])
     lim = float(np.percentile(v, 99)) if v.size else 1.0
     return lim if lim > 0 else (float(v.max()) if v.size and v.max() > 0 else 1.0)
-
-
-# ---------------------------------------------------------------- rasters -> RGBA -> PNG
 
 
 def _factors(shape: tuple[int, ...]) -> tuple[int, int]:
@@ -153,9 +123,6 @@ def _outline(mask: np.ndarray) -> np.ndarray:
     inner[:, 1:] &= mask[:, :-1]
     inner[:, :-1] &= mask[:, 1:]
     return mask & ~inner
-
-
-# ---------------------------------------------------------------- figures
 
 
 CHANGE_OUTLINE = (0, 150, 0, 255)

@@ -3,11 +3,12 @@ one :class:`jinja2.Environment`, and the page written whole."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from markupsafe import Markup
+
+from ..inputs.io import atomic_path
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 ENV = Environment(
@@ -31,8 +32,6 @@ def render(template: str, **context) -> str:
 
 def write(path: str | Path, text: str) -> Path:
     """Write the page ``text`` to ``path`` atomically (a partial file renamed into place)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)

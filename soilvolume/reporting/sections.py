@@ -8,7 +8,6 @@ x, y, before, after, difference) and one picture per line, ``sections/<name>.svg
 from __future__ import annotations
 
 import csv
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +16,7 @@ import numpy as np
 import shapely
 
 from ..core.types import GridSpec, SoilVolumeError
+from ..inputs.io import atomic_path
 from ..volumes.polygons import read_lines, to_grid_crs
 from .sectionsvg import profile_svg
 
@@ -91,14 +91,12 @@ def write_sections(path: str | Path, folder: Path, grid: GridSpec, before: str =
     of the lines of ``path``; ``before``: what the before heights are called (``design``
     against a surface). Returns report.json's ``sections``."""
     found = profiles(path, folder, grid)
-    part = folder / f".{FILE}.part"
-    with open(part, "w", newline="", encoding="utf-8") as f:
+    with atomic_path(folder / FILE) as part, open(part, "w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
         out.writerow([before if c == "before" else c for c in COLUMNS])
         for p in found:
             for c, (x, y), h in zip(p.chainage, p.xy, p.heights, strict=True):
                 out.writerow([p.id, p.name, round(float(c), 3), x, y, *("" if np.isnan(v) else v for v in h)])
-    os.replace(part, folder / FILE)
     pictures = write_pictures(found, folder / FOLDER, before)
     return {"file": FILE, "lines": len(found), "pictures": pictures}
 
