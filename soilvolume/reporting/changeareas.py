@@ -1,10 +1,6 @@
-"""The areas of significant change as polygons: each connected patch of significant cut or
-fill (the cells the headline cut and fill are summed over) becomes one polygon with its kind,
-area and volume, written as GeoJSON next to the rasters (``change_areas.geojson``, and as
-``change_areas.gpkg``) and outlined
-on report.html's map. The polygons' volumes add up to the headline cut and fill; where the
-volume step goes tile by tile, they are drawn on the overview grid the report's map shows (its
-cells are k x k of the run's), and their volumes are that grid's."""
+"""Each connected patch of significant cut or fill (the cells the headline sums) as one polygon with
+its kind, area and volume: ``change_areas.geojson`` (and ``.gpkg``), outlined on report.html's map.
+Tile by tile, they are drawn on the overview grid the map shows, and their volumes are that grid's."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""The report's section on what is not soil: each epoch's point rule, the volumes left out per
-class, the moved objects and the objects in one survey only, and a map of the class raster
-(``excluded.tif``) over the hillshaded after DEM."""
+"""report.html's *What is not soil*: each epoch's point rule, what was left out or counted per class
+and object, and the class raster (``excluded.tif``) mapped over the hillshaded after DEM."""
 
 from __future__ import annotations
 

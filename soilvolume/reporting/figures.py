@@ -1,6 +1,5 @@
-"""Figures of report.html, drawn in numpy without a plotting library: maps as embedded PNGs
-(coloured and hillshaded, encoded with zlib) with colour bars, scale bars and north arrows as
-inline SVG, and the histogram of the difference as inline SVG."""
+"""report.html's maps, drawn in numpy without a plotting library: coloured and hillshaded PNGs with
+colour bars, scale bars and north arrows as inline SVG."""
 
 from __future__ import annotations
 

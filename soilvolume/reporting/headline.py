@@ -1,6 +1,5 @@
-"""report.html's note beside the headline when its cut (or fill) reads 0 while the difference map
-shows cells of that sign: which rule of the change areas (:mod:`soilvolume.volumes.change`) left
-them out, how many cells each rule left out, and which of the report's sums to trust."""
+"""report.html's note when the headline's cut (or fill) reads 0 while the map shows such cells: which
+rule of the change areas (:mod:`soilvolume.volumes.change`) left how many out, which sum to trust."""
 
 from __future__ import annotations
 

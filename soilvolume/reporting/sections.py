@@ -1,9 +1,6 @@
-"""Cross-section profiles along the lines of ``--sections`` (any OGR vector file of lines, brought
-into the run's CRS as the zones are): the heights of the run's written DEMs (``dem_before.tif``,
-``dem_after.tif``; against a surface, the before is the design) and its difference raster sampled
-every half cell along each line, written as ``sections.csv`` (line id and name, chainage in m,
-x, y, before, after, difference) and one picture per line, ``sections/<name>.svg``
-(:mod:`.sectionsvg`). A cell without a height is an empty value."""
+"""``--sections``: the written DEMs and difference sampled every half cell along each line (brought
+into the run's CRS as the zones are), as ``sections.csv`` (a cell without a height: an empty value)
+and one picture per line, ``sections/<name>.svg`` (:mod:`.sectionsvg`)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""report.html of a series run (``templates/series.html.j2``): the ledger, the cumulative cut and
-fill over time as an inline SVG chart, the epochs' registrations and each period's difference map
-(:mod:`.figures`)."""
+"""report.html of a series (``templates/series.html.j2``): the ledger, the cumulative cut and fill
+chart (inline SVG), the epochs' registrations and each period's difference map."""
 
 from __future__ import annotations
 

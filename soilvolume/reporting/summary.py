@@ -1,6 +1,5 @@
-"""Plain-language figures of a run, shared by the HTML report and the QGIS outputs: the
-registration as a rotation (degrees) and a shift (metres), and whether the net change is
-significant."""
+"""Plain-language figures shared by report.html and QGIS: the registration as rotation and shift,
+and whether the net change is significant."""
 
 from __future__ import annotations
 

@@ -1,8 +1,5 @@
-"""The vector deliverables a GIS analyst files beside the GeoJSON: ``change_areas.gpkg`` (the
-areas of significant change with their attributes), ``zones.gpkg`` (each ``--zones`` polygon in
-the run's CRS with its budget) and ``zones.csv`` (one row per zone: net, cut and fill with their
-intervals at the run's confidence, areas and flags), written by pyogrio (a runtime dependency),
-each beside its destination and renamed into place (in the run's staging folder)."""
+"""``change_areas.gpkg``, ``zones.gpkg`` (each ``--zones`` polygon in the run's CRS with its budget)
+and ``zones.csv`` (each zone's net, cut and fill with their intervals, areas and flags), by pyogrio."""
 
 from __future__ import annotations
 
