@@ -35,13 +35,12 @@ def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "
     k, f = _factors(c.shape)
     rel = _float_2d(_like(relief, c))
     z = np.where(c < 255, 0.0, np.nan) if rel is None else rel
-    step = max(1, k)
-    shown = c[::step, ::step]
+    shown = c[::k, ::k]
     rgba = np.zeros((*shown.shape, 4), np.uint8)
     rgba[shown < 255] = (240, 240, 240, 255)
     for code, colour in PALETTE.items():
         rgba[shown == code] = (*colour, 255)
-    rgba = _shade(rgba, hillshade(z[::step, ::step], grid.cell * step))
+    rgba = _shade(rgba, hillshade(z[::k, ::k], grid.cell * k))
     rgba = _repeat(rgba, f)
     legend = "".join(
         f'<span style="display:inline-block;width:1em;height:1em;background:rgb{PALETTE[k_]};'

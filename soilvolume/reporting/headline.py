@@ -90,13 +90,8 @@ def _left_out(diff: Any, change: Any, sign: float, lod: Any) -> dict[str, Any] |
     small = np.isin(labels, 1 + np.flatnonzero(np.bincount(labels.ravel(), minlength=n + 1)[1:] < MIN_CELLS))
     extreme = float(np.nanmin(d) if sign < 0 else np.nanmax(d))
     count, on_border, in_small = int(beyond.sum()), int((beyond & border).sum()), int((inner & small).sum())
-    return {
-        "count": count,
-        "border": on_border,
-        "small": in_small,
-        "raised": count - on_border - in_small,
-        "extreme": extreme,
-    }
+    raised = count - on_border - in_small
+    return {"count": count, "border": on_border, "small": in_small, "raised": raised, "extreme": extreme}
 
 
 def _number(value: Any) -> bool:

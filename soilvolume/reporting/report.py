@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -30,20 +29,8 @@ if TYPE_CHECKING:
 
 
 def _clean(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _clean(v.tolist())
-    if isinstance(v, (np.floating, float)):
-        f = float(v)
-        return f if math.isfinite(f) else None
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.bool_):
-        return bool(v)
-    return v
+    """``v`` as JSON reads it back: numpy values as Python's, tuples as lists, NaN and infinities None."""
+    return json.loads(json.dumps(v, default=lambda x: x.tolist()), parse_constant=lambda _: None)
 
 
 def stage_dict(q: StageQuality) -> dict:
@@ -194,15 +181,9 @@ VOLUME_METHOD = (  # report.json's volume_method
 
 def _uncertainty_m3(vols: Volumes) -> dict:
     """report.json's ``uncertainty_m3``: the headline's ± and those of the other sums."""
-    return {
-        "net": vols.uncertainty["net"],
-        "cut": vols.uncertainty["cut"],
-        "fill": vols.uncertainty["fill"],
-        "net_change_areas": vols.uncertainty["net"],
-        "net_all_cells": vols.uncertainty["net_compared_area"],
-        "lod_m": vols.uncertainty["lod_m"],
-        "confidence": vols.uncertainty["confidence"],
-    }
+    u = vols.uncertainty
+    keys = {"net": "net", "cut": "cut", "fill": "fill", "net_change_areas": "net", "net_all_cells": "net_compared_area"}
+    return {**{k: u[v] for k, v in keys.items()}, "lod_m": u["lod_m"], "confidence": u["confidence"]}
 
 
 def _registration(prep: Prepared, reg: Registration) -> dict:
