@@ -1,8 +1,9 @@
-"""The Jinja2 templates of report.html (``templates/``, shipped with the package), rendered with
-one :class:`jinja2.Environment`, and the page written whole."""
+"""The Jinja2 templates of report.html and its figures (``templates/``, shipped with the package),
+rendered with one :class:`jinja2.Environment`, and the page written whole."""
 
 from __future__ import annotations
 
+import html
 from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
@@ -18,6 +19,7 @@ ENV = Environment(
     trim_blocks=True,
     lstrip_blocks=True,
 )
+ENV.filters.update(f=lambda v, digits=1: f"{v:.{digits}f}", esc=lambda text: Markup(html.escape(text)))
 
 
 def figure(html: str | None) -> Markup | None:
@@ -28,6 +30,11 @@ def figure(html: str | None) -> Markup | None:
 def render(template: str, **context) -> str:
     """``template`` of :data:`TEMPLATES` rendered with ``context`` (plain text is escaped)."""
     return ENV.get_template(template).render(**context)
+
+
+def macro(name: str, /, **args) -> Markup:
+    """The markup of the macro ``name`` of ``figures.html.j2`` (a figure's SVG) with ``args``."""
+    return getattr(ENV.get_template("figures.html.j2").module, name)(**args)
 
 
 def write(path: str | Path, text: str) -> Path:
