@@ -18,9 +18,8 @@ FILE = "change_areas.geojson"
 
 
 def patches(change: np.ndarray, cut: np.ndarray) -> tuple[np.ndarray, list[tuple[str, int]]]:
-    """(labels, [(kind, label), ...]): connected patches (4-neighbours) of the cut areas
-    (``cut``) and of the fill areas (the rest of ``change``), as the headline sums them (a
-    buffer cell of a pile counts with the pile whatever its sign); label 0 = no patch."""
+    """(labels, [(kind, label), ...]): 4-connected patches of the cut areas (``cut``) and of the fill
+    areas (the rest of ``change``), as the headline sums them; label 0 = no patch."""
     from scipy import ndimage
 
     labels = np.zeros(change.shape, np.int32)
@@ -66,10 +65,8 @@ def features(diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSp
 def write_change_areas(
     path: str | Path, diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSpec, gpkg: bool = False
 ) -> dict:
-    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically, and with ``gpkg``
-    the same as ``change_areas.gpkg`` beside it); ``cut``:
-    the cut areas of ``change``; returns {"file", "cut_polygons", "fill_polygons", "cut_m3",
-    "fill_m3"}."""
+    """Write the polygons (GeoJSON naming the grid's horizontal CRS; with ``gpkg`` also
+    change_areas.gpkg); returns {"file", "cut_polygons", "fill_polygons", "cut_m3", "fill_m3"}."""
     path = Path(path)
     feats = features(diff, change, cut, grid)
     crs = {"type": "name", "properties": {"name": _crs_name(raster_wkt(grid.crs_wkt))}}

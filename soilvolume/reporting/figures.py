@@ -136,9 +136,8 @@ def difference_map(
     ident: str = "difference-map",
     change: np.ndarray | None = None,
 ) -> str | None:
-    """HTML figure: ``diff`` on a diverging ramp centred on 0 (red cut, blue fill), hillshaded by
-    ``relief`` (else by ``diff``), refilled cells outlined in black, the areas of significant
-    change (``change``: the headline's cells) outlined in green; None without data."""
+    """HTML figure: ``diff`` red (cut) to blue (fill), hillshaded by ``relief`` (else ``diff``), refilled
+    cells outlined black, the change areas (``change``) green; None without data."""
     d = _float_2d(diff)
     if d is None:
         return None

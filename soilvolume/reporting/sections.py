@@ -84,9 +84,8 @@ def profiles(path: str | Path, folder: Path, grid: GridSpec) -> list[Profile]:
 
 
 def write_sections(path: str | Path, folder: Path, grid: GridSpec, before: str = "before") -> dict:
-    """``sections.csv`` and ``sections/<name>.svg`` in ``folder`` (the staged rasters' folder)
-    of the lines of ``path``; ``before``: what the before heights are called (``design``
-    against a surface). Returns report.json's ``sections``."""
+    """``sections.csv`` and ``sections/<name>.svg`` in ``folder`` (the staged rasters') of the lines of
+    ``path``; ``before``: the before heights' name (``design`` against a surface). report.json's ``sections``."""
     found = profiles(path, folder, grid)
     with atomic_path(folder / FILE) as part, open(part, "w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)

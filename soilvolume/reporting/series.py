@@ -106,9 +106,8 @@ def _series_grid(grid: GridSpec, series, origin: np.ndarray) -> dict:
 
 
 def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
-    """report.json of a series run (``runs``: the :class:`~soilvolume.core.types.Epoch` s; ``fits``:
-    the later epochs' registrations; ``vols``: the volume steps of the pairs E0 -> Ek); each period
-    and the cumulative with its quality verdict (:mod:`soilvolume.volumes.seriesquality`)."""
+    """report.json of a series run (``runs``: its epochs; ``fits``: the later epochs' registrations;
+    ``vols``: the volume steps E0 -> Ek), each period and the cumulative with its quality verdict."""
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
     dates = [e.date for e in runs]
     epochs = [_epoch(k, run, fits, vols, origin) for k, run in enumerate(runs)]
@@ -178,9 +177,8 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec, graded=None) ->
 
 
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer, graded=None) -> dict:
-    """report.json, the ledger and report.html of a series run into ``out`` (an
-    :class:`~soilvolume.core.outputs.OutputDir`), with the progress against a design when
-    ``graded``; returns the report."""
+    """report.json, the ledger and report.html of a series run into the output folder ``out`` (with
+    the progress against a design when ``graded``); returns the report."""
     report = with_quantities(build_series_report(epochs, fits, vols, series, grid, options, timer), options)
     report = cli_tree(with_grade(report, graded))
     write_ledger(out.path(LEDGER), report)

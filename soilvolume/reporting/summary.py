@@ -10,9 +10,8 @@ import numpy as np
 
 
 def rotation_shift(transform_local: Any) -> dict[str, float]:
-    """Rotation angle (degrees, about any axis), its tilt part (degrees off vertical) and yaw,
-    and the shift (metres: horizontal, vertical, total) of a 4x4 transform in local
-    coordinates (the engine's origin is inside the data, so the shift is where the data is)."""
+    """Rotation (°, about any axis), its tilt and yaw, and the shift (m: horizontal, vertical, total)
+    of a local 4x4 (the origin is inside the data, so the shift is where the data is)."""
     t = np.asarray(transform_local, dtype=float)
     r, s = t[:3, :3], t[:3, 3]
     cos_angle = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
