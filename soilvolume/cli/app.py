@@ -1,10 +1,6 @@
-"""The ``soilvolume`` program: the parser made of the command modules, and the one error path
-(every failure one line on stderr, and an error line for a program reading the protocol).
-
-The commands are a registry, :data:`COMMANDS`: a name and its module's name. Only the module of
-the command being run is imported (:func:`command`, by name with importlib): ``soilvolume
-estimate`` never loads the scene generators of ``demo`` or the PDAL emitter of ``pipeline``.
-``--help`` and a command line without a command load them all, to list them."""
+"""The ``soilvolume`` program: the parser made of the command modules, and the one error path (every
+failure one line on stderr, and an error line for a program reading the protocol). Only the module
+of the command being run is imported (:data:`COMMANDS`); ``--help`` loads them all, to list them."""
 
 from __future__ import annotations
 
@@ -72,6 +68,10 @@ def _fail(message: str, code: int = 1, exc: BaseException | None = None) -> int:
     return code
 
 
+def _out_of_memory() -> int:
+    return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
+
+
 _PROTOCOL: list[Protocol] = []  # the run's protocol, while one runs
 
 
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         except ImportError as exc:
             if not short_of_memory(exc):
                 raise
-            return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
+            return _out_of_memory()
         ns.protocol = open_protocol() if getattr(ns, "progress", "text") == "jsonl" else None
         _PROTOCOL[:] = [ns.protocol] if ns.protocol else []
         with hold_native_stderr():  # dropped: no library's message unasked (SOILVOLUME_DEBUG=1 shows them)
@@ -110,14 +110,14 @@ def _run(ns: argparse.Namespace) -> int:
     except OSError as exc:
         return _fail(str(os_problem(exc)))
     except MemoryError:
-        return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
+        return _out_of_memory()
     except RecursionError:
         return _fail("input nested too deeply")
     except KeyboardInterrupt:  # a signal arrived before the handlers were installed
         return _fail("interrupted", 130)
     except Exception as exc:  # a bug: for a program reading the protocol, an error line too
         if short_of_memory(exc):  # a library that cannot be mapped under ulimit -v
-            return _fail(out_of_memory(), exc=SoilVolumeError(out_of_memory(keyed=True)))
+            return _out_of_memory()
         if not _PROTOCOL:
             raise
         traceback.print_exc()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import pyproj
@@ -12,7 +11,7 @@ from .. import api
 from ..inputs.crs import parse_crs
 from ..inputs.stream import open_source
 from ..validate import check_bounds
-from .feedback import hooks, send_result
+from .feedback import hooks, result
 from .flags import add_options, add_progress, options_from
 
 NAME = "dem"
@@ -41,10 +40,7 @@ def run(ns: argparse.Namespace) -> int:
     options, bounds = options_from(ns), check_bounds(ns.bounds)
     if bounds is not None and ns.bounds_crs:
         bounds = bounds_in_cloud_crs(ns.cloud, ns.crs, bounds, ns.bounds_crs)
-    info = api.cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds, hooks=hooks(ns))
-    if not send_result(ns, **info):
-        print(json.dumps(info, indent=2))
-    return 0
+    return result(ns, api.cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds, hooks=hooks(ns)))
 
 
 def bounds_in_cloud_crs(cloud: Path, crs: str | None, bounds: tuple, bounds_crs: str) -> tuple:

@@ -82,9 +82,7 @@ def run(ns: argparse.Namespace) -> int:
     )
     if send_result(ns, report=res.report, outputs=res.outputs, summary=front_end_summary(res.keyed or res.report)):
         return 0
-    for line in summary_lines(res.report):
-        print(line)
-    print(f"outputs in {ns.out}")
+    print("\n".join([*summary_lines(res.report), f"outputs in {ns.out}"]))
     return 0
 
 

@@ -3,18 +3,17 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 
 from ..core.hooks import Hooks
-from ..protocol import Protocol
 
 
 def hooks(ns: argparse.Namespace) -> Hooks:
     """The protocol's progress, log and cancel; else progress for people on stderr where the command has
     ``--quiet`` (the estimate) and it is not given; else none (dem, register, volume print only JSON)."""
-    proto: Protocol | None = getattr(ns, "protocol", None)
-    if proto is not None:
-        return Hooks(progress=proto.progress, log=proto.log, cancel=proto.is_cancelled, keyed=True)
+    if ns.protocol is not None:
+        return Hooks(progress=ns.protocol.progress, log=ns.protocol.log, cancel=ns.protocol.is_cancelled, keyed=True)
     if getattr(ns, "quiet", True):
         return Hooks()
 
@@ -26,8 +25,13 @@ def hooks(ns: argparse.Namespace) -> Hooks:
 
 def send_result(ns: argparse.Namespace, **data) -> bool:
     """Send a command's result as the protocol's last line; False without the protocol."""
-    proto: Protocol | None = getattr(ns, "protocol", None)
-    if proto is None:
-        return False
-    proto.emit("result", command=ns.command, **data)
-    return True
+    if ns.protocol is not None:
+        ns.protocol.emit("result", command=ns.command, **data)
+    return ns.protocol is not None
+
+
+def result(ns: argparse.Namespace, data: dict) -> int:
+    """Send ``data`` through the protocol, else print it as JSON; the exit status 0."""
+    if not send_result(ns, **data):
+        print(json.dumps(data, indent=2))
+    return 0

@@ -14,17 +14,13 @@ SKIP = {"keep_registered_cloud"}  # estimate's --registered-cloud says it
 
 def add_options(p: argparse.ArgumentParser, command: str) -> None:
     """One ``--flag`` per option ``command`` takes (``command_fields``; ``--registered-cloud`` is its own)."""
-    for f in command_fields(command):
-        if f.name in SKIP:
-            continue
-        flag = "--" + f.name.replace("_", "-")
+    for f in (f for f in command_fields(command) if f.name not in SKIP):
         kind = {"float": float, "int": int, "float | None": float}.get(str(f.type), str)
-        choices = f.metadata["choices"]
         p.add_argument(
-            flag,
+            "--" + f.name.replace("_", "-"),
             dest=f.name,
             type=kind,
-            choices=choices,
+            choices=f.metadata["choices"],
             default=None,
             help=f"{wording.cli(f.metadata['help'])} (default: {f.default})",
         )

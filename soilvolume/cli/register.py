@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from .. import api
-from .feedback import hooks, send_result
+from .feedback import hooks, result
 from .flags import add_options, add_progress, options_from
 
 NAME = "register"
@@ -25,7 +24,4 @@ def add_parser(sub) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """Register; print the transform and what was written as JSON (or send it through the protocol)."""
-    res = api.register(ns.before, ns.after, ns.out, options_from(ns), hooks=hooks(ns))
-    if not send_result(ns, **res):
-        print(json.dumps(res, indent=2))
-    return 0
+    return result(ns, api.register(ns.before, ns.after, ns.out, options_from(ns), hooks=hooks(ns)))

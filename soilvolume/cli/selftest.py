@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from ..scenes.selftest import run_selftest
-from .feedback import hooks, send_result
+from .feedback import hooks, result
 from .flags import add_progress
 
 NAME = "selftest"
@@ -27,7 +26,4 @@ def add_parser(sub) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """Run the check; print its findings as JSON (or send them through the protocol)."""
-    res = run_selftest(ns.out, hooks(ns))
-    if not send_result(ns, **res):
-        print(json.dumps(res, indent=2))
-    return 0
+    return result(ns, run_selftest(ns.out, hooks(ns)))

@@ -56,14 +56,11 @@ def add_parser(sub) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """Run the series; print the ledger (or send the result through the protocol)."""
-    options = options_from(ns)
     dates = None if ns.dates is None else ns.dates.split(",")
-    res = api.series(ns.epochs, ns.out, options, dates=dates, overwrite=ns.overwrite, hooks=hooks(ns))
+    res = api.series(ns.epochs, ns.out, options_from(ns), dates=dates, overwrite=ns.overwrite, hooks=hooks(ns))
     if send_result(ns, report=res.report, outputs=res.outputs):
         return 0
-    for line in ledger_lines(res.report):
-        print(line)
-    print(f"outputs in {ns.out}")
+    print("\n".join([*ledger_lines(res.report), f"outputs in {ns.out}"]))
     return 0
 
 

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from ..workflow.stockpile import PileInput, run_stockpile
-from .feedback import hooks, send_result
+from .feedback import hooks, result
 from .flags import add_options, add_progress, options_from
 
 NAME = "stockpile"
@@ -36,16 +35,5 @@ def add_parser(sub) -> None:
 def run(ns: argparse.Namespace) -> int:
     """Measure the piles; print what was written as JSON (or send it through the protocol)."""
     piles = PileInput(ns.piles, ns.name_field, ns.density_field)
-    info = run_stockpile(
-        ns.survey,
-        ns.out,
-        options_from(ns),
-        crs=ns.crs,
-        pipeline=ns.pipeline,
-        piles=piles,
-        overwrite=ns.overwrite,
-        hooks=hooks(ns),
-    )
-    if not send_result(ns, **info):
-        print(json.dumps(info, indent=2))
-    return 0
+    given = {"crs": ns.crs, "pipeline": ns.pipeline, "piles": piles, "overwrite": ns.overwrite, "hooks": hooks(ns)}
+    return result(ns, run_stockpile(ns.survey, ns.out, options_from(ns), **given))

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from .. import api
-from .feedback import hooks, send_result
+from .feedback import hooks, result
 from .flags import add_progress
 
 NAME = "volume"
@@ -29,6 +28,4 @@ def run(ns: argparse.Namespace) -> int:
     res = api.volume_from_rasters(
         ns.before_dem, ns.after_dem, ns.out, zones=ns.zones, zone_field=ns.zone_field, hooks=hooks(ns)
     )
-    if not send_result(ns, **res):
-        print(json.dumps(res, indent=2))
-    return 0
+    return result(ns, res)

@@ -1,30 +1,25 @@
-"""The areas of significant change as polygons: each connected patch of significant cut or
-fill (the cells the headline cut and fill are summed over) becomes one polygon with its kind,
-area and volume, written as GeoJSON next to the rasters (``change_areas.geojson``, and as
-``change_areas.gpkg``) and outlined
-on report.html's map. The polygons' volumes add up to the headline cut and fill; where the
-volume step goes tile by tile, they are drawn on the overview grid the report's map shows (its
-cells are k x k of the run's), and their volumes are that grid's."""
+"""Each connected patch of significant cut or fill (the cells the headline sums) as one polygon with
+its kind, area and volume: ``change_areas.geojson`` (and ``.gpkg``), outlined on report.html's map.
+Tile by tile, they are drawn on the overview grid the map shows, and their volumes are that grid's."""
 
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..core.types import GridSpec
 from ..inputs.crs import raster_wkt
+from ..inputs.io import atomic_path
 from .vectors import write_change_area_gpkg
 
 FILE = "change_areas.geojson"
 
 
 def patches(change: np.ndarray, cut: np.ndarray) -> tuple[np.ndarray, list[tuple[str, int]]]:
-    """(labels, [(kind, label), ...]): connected patches (4-neighbours) of the cut areas
-    (``cut``) and of the fill areas (the rest of ``change``), as the headline sums them (a
-    buffer cell of a pile counts with the pile whatever its sign); label 0 = no patch."""
+    """(labels, [(kind, label), ...]): 4-connected patches of the cut areas (``cut``) and of the fill
+    areas (the rest of ``change``), as the headline sums them; label 0 = no patch."""
     from scipy import ndimage
 
     labels = np.zeros(change.shape, np.int32)
@@ -70,17 +65,14 @@ def features(diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSp
 def write_change_areas(
     path: str | Path, diff: np.ndarray, change: np.ndarray, cut: np.ndarray, grid: GridSpec, gpkg: bool = False
 ) -> dict:
-    """Write the polygons (GeoJSON with the grid's horizontal CRS named, atomically, and with ``gpkg``
-    the same as ``change_areas.gpkg`` beside it); ``cut``:
-    the cut areas of ``change``; returns {"file", "cut_polygons", "fill_polygons", "cut_m3",
-    "fill_m3"}."""
+    """Write the polygons (GeoJSON naming the grid's horizontal CRS; with ``gpkg`` also
+    change_areas.gpkg); returns {"file", "cut_polygons", "fill_polygons", "cut_m3", "fill_m3"}."""
     path = Path(path)
     feats = features(diff, change, cut, grid)
     crs = {"type": "name", "properties": {"name": _crs_name(raster_wkt(grid.crs_wkt))}}
     doc = {"type": "FeatureCollection", "name": "change_areas", "crs": crs, "features": feats}
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    tmp.write_text(json.dumps(doc), encoding="utf-8")
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(doc), encoding="utf-8")
     if gpkg:
         write_change_area_gpkg(path.parent, feats, raster_wkt(grid.crs_wkt))
     by = {k: [f["properties"]["volume_m3"] for f in feats if f["properties"]["kind"] == k] for k in ("cut", "fill")}

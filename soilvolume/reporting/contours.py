@@ -1,10 +1,6 @@
-"""Contour lines of a run's rasters by GDAL's contour algorithm (``GDALContourGenerateEx``), as
-the layers of one GeoPackage (``contours.gpkg``): ``difference`` (ELEV in m, below 0 cut, above 0
-fill, 0 their border; ``change`` says which), ``dem_before`` and ``dem_after``, in the rasters'
-CRS. No line is drawn across a nodata cell. GDAL's Python bindings (``osgeo``) are used where they
-import; pip-installed engines have none, and rasterio exposes no contouring, so there the same C
-function is called (:mod:`ctypes`) in the GDAL library rasterio loaded (:mod:`.gdalcapi`).
-"""
+"""``contours.gpkg``: GDAL's ``GDALContourGenerateEx`` on the difference (``change``: cut, fill or
+none) and both DEMs, one layer each, no line across nodata; through GDAL's Python bindings where
+they import, else by :mod:`ctypes` in the GDAL rasterio loaded (:mod:`.gdalcapi`)."""
 
 from __future__ import annotations
 

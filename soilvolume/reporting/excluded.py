@@ -1,30 +1,22 @@
-"""The report's section on what is not soil: each epoch's point rule, the volumes left out per
-class, the moved objects and the objects in one survey only, and a map of the class raster
-(``excluded.tif``) over the hillshaded after DEM."""
+"""report.html's *What is not soil*: each epoch's point rule, what was left out or counted per class
+and object, and the class raster (``excluded.tif``) mapped over the hillshaded after DEM."""
 
 from __future__ import annotations
 
-import html
 from typing import Any
 
 import numpy as np
 
 from ..core.types import GridSpec
 from ..volumes.quality import sentence
+from . import page
 from .figures import _factors, _float_2d, _like, _shade, hillshade
 from .raster import _repeat
 from .svgparts import extent_text, map_figure
 from .text import Table
 
 # excluded.tif codes (volumes/nonsoil.CLASS_CODES) -> colour (as resources/styles/excluded.qml)
-PALETTE = {
-    1: (77, 175, 74),
-    2: (152, 78, 163),
-    3: (153, 153, 153),
-    4: (255, 127, 0),
-    5: (228, 26, 28),
-    6: (166, 216, 84),
-}
+PALETTE = dict(enumerate((tuple(bytes.fromhex(c)) for c in "4daf4a 984ea3 999999 ff7f00 e41a1c a6d854".split()), 1))
 NAMES = {
     1: "vegetation (not gridded)",
     2: "objects by classification (not gridded)",
@@ -43,25 +35,16 @@ def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "
     k, f = _factors(c.shape)
     rel = _float_2d(_like(relief, c))
     z = np.where(c < 255, 0.0, np.nan) if rel is None else rel
-    step = max(1, k)
-    shown = c[::step, ::step]
+    shown = c[::k, ::k]
     rgba = np.zeros((*shown.shape, 4), np.uint8)
     rgba[shown < 255] = (240, 240, 240, 255)
     for code, colour in PALETTE.items():
         rgba[shown == code] = (*colour, 255)
-    rgba = _shade(rgba, hillshade(z[::step, ::step], grid.cell * step))
+    rgba = _shade(rgba, hillshade(z[::k, ::k], grid.cell * k))
     rgba = _repeat(rgba, f)
-    legend = "".join(
-        f'<span style="display:inline-block;width:1em;height:1em;background:rgb{PALETTE[k_]};'
-        f'margin:0 .3em 0 .8em;vertical-align:middle"></span>{html.escape(n)}'
-        for k_, n in NAMES.items()
-        if (shown == k_).any()
-    )
-    caption = (
-        "What is not soil (excluded.tif): cells whose points were mostly not soil, objects found by their shape "
-        f"(walls, compact, on unchanged ground) and rough change. {extent_text(grid, c.shape, k)}"
-    )
-    return map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, f"<p>{legend}</p>", caption)
+    legend = page.macro("classes_legend", classes=[(PALETTE[k_], n) for k_, n in NAMES.items() if (shown == k_).any()])
+    caption = page.macro("classes_caption", extent=extent_text(grid, c.shape, k))
+    return map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, legend, caption)
 
 
 def _row(name: str, part: dict) -> list[str]:

@@ -1,52 +1,27 @@
-"""Figures of report.html, drawn in numpy without a plotting library: maps as embedded PNGs
-(coloured and hillshaded, encoded with zlib) with colour bars, scale bars and north arrows as
-inline SVG, and the histogram of the difference as inline SVG."""
+"""report.html's maps, drawn in numpy without a plotting library: coloured and hillshaded PNGs with
+colour bars, scale bars and north arrows as inline SVG."""
 
 from __future__ import annotations
 
-import html
 import math
 from typing import Any
 
 import numpy as np
 
 from ..core.types import GridSpec
+from . import page
 from .raster import _block_any, _repeat, block_mean
 from .svgparts import DISPLAY, colour_bar, extent_text, map_figure
 
+
+def ramp(colours: str) -> np.ndarray:
+    """A colour table (n, 3) of floats from hex colours separated by spaces."""
+    return np.array([list(bytes.fromhex(c)) for c in colours.split()], float)
+
+
 # ColorBrewer 11-class ramps, low -> high (as matplotlib's RdBu / PuOr): red = cut, blue = fill.
-RDBU = np.array(
-    [
-        [103, 0, 31],
-        [178, 24, 43],
-        [214, 96, 77],
-        [244, 165, 130],
-        [253, 219, 199],
-        [247, 247, 247],
-        [209, 229, 240],
-        [146, 197, 222],
-        [67, 147, 195],
-        [33, 102, 172],
-        [5, 48, 97],
-    ],
-    float,
-)
-PUOR = np.array(
-    [
-        [127, 59, 8],
-        [179, 88, 6],
-        [224, 130, 20],
-        [253, 184, 99],
-        [254, 224, 182],
-        [247, 247, 247],
-        [216, 218, 235],
-        [178, 171, 210],
-        [128, 115, 172],
-        [84, 39, 136],
-        [45, 0, 75],
-    ],
-    float,
-)
+RDBU = ramp("67001f b2182b d6604d f4a582 fddbc7 f7f7f7 d1e5f0 92c5de 4393c3 2166ac 053061")
+PUOR = ramp("7f3b08 b35806 e08214 fdb863 fee0b6 f7f7f7 d8daeb b2abd2 8073ac 542788 2d004b")
 _MAX_PX = 900  # longest side of an embedded map (larger rasters are block-averaged)
 _AZIMUTH, _ALTITUDE = 315.0, 45.0
 
@@ -76,17 +51,11 @@ def _like(a: Any, ref: np.ndarray) -> np.ndarray | None:
     return np.asarray(a) if a is not None and np.shape(a) == ref.shape else None
 
 
-# ---------------------------------------------------------------- colour limits
-
-
 def _sym_limit(a: np.ndarray) -> float:
     """Symmetric colour limit: the 99th percentile of |a| (1 when degenerate)."""
     v = np.abs(a[np.isfinite(a)])
     lim = float(np.percentile(v, 99)) if v.size else 1.0
     return lim if lim > 0 else (float(v.max()) if v.size and v.max() > 0 else 1.0)
-
-
-# ---------------------------------------------------------------- rasters -> RGBA -> PNG
 
 
 def _factors(shape: tuple[int, ...]) -> tuple[int, int]:
@@ -155,14 +124,7 @@ def _outline(mask: np.ndarray) -> np.ndarray:
     return mask & ~inner
 
 
-# ---------------------------------------------------------------- figures
-
-
 CHANGE_OUTLINE = (0, 150, 0, 255)
-CHANGE_CAPTION = (
-    "Green outline: the areas of significant change the headline cut and fill are summed over "
-    "(polygons in change_areas.geojson). "
-)
 
 
 def difference_map(
@@ -174,9 +136,8 @@ def difference_map(
     ident: str = "difference-map",
     change: np.ndarray | None = None,
 ) -> str | None:
-    """HTML figure: ``diff`` on a diverging ramp centred on 0 (red cut, blue fill), hillshaded by
-    ``relief`` (else by ``diff``), refilled cells outlined in black, the areas of significant
-    change (``change``: the headline's cells) outlined in green; None without data."""
+    """HTML figure: ``diff`` red (cut) to blue (fill), hillshaded by ``relief`` (else ``diff``), refilled
+    cells outlined black, the change areas (``change``) green; None without data."""
     d = _float_2d(diff)
     if d is None:
         return None
@@ -187,20 +148,14 @@ def difference_map(
     z = block_mean(rel, k) if rel is not None else shown
     rgba = _shade(colour_ramp(shown, lim, RDBU), hillshade(z * _exaggeration(z, grid.cell * k), grid.cell * k))
     rgba = _repeat(rgba, f)
-    mask = _like(filled_mask, d)
-    if mask is not None and mask.any():
+    mask, areas = _like(filled_mask, d), _like(change, d)
+    refilled, outlined = (x is not None and bool(x.any()) for x in (mask, areas))
+    if refilled:
         rgba[_outline(_repeat(_block_any(mask, k), f))] = (0, 0, 0, 255)
-    areas = _like(change, d)
-    if areas is not None and areas.any():
+    if outlined:
         rgba[_outline(_repeat(_block_any(areas, k), f))] = CHANGE_OUTLINE
-    caption = (
-        f"{html.escape(title)}: after − before, red = cut (lowered), blue = fill (raised), ramp "
-        f"±{lim:.3g} m (99th percentile of |difference|; larger values in the end colours), "
-        f"hillshaded{' by the after DEM' if rel is not None else ''}. "
-        f"{'Black outline: refilled cells. ' if mask is not None and mask.any() else ''}"
-        f"{CHANGE_CAPTION if areas is not None and areas.any() else ''}"
-        f"Hatched: no data. {extent_text(grid, d.shape, k)}"
-    )
+    said = {"lim": f"{lim:.3g}", "relief": rel is not None, "refilled": refilled, "areas": outlined}
+    caption = page.macro("difference_caption", title=title, extent=extent_text(grid, d.shape, k), **said)
     bar = colour_bar(RDBU, lim, "after − before (m)", ident, ("cut", "fill"))
     return map_figure(ident, title, rgba, d.shape[1] * grid.cell, bar, caption)
 
@@ -223,10 +178,8 @@ def residual_map(
         grey = np.clip(205 + 45 * (hillshade(rel, grid.cell * k) / math.sin(math.radians(_ALTITUDE)) - 1), 0, 255)
         context = (rgba[..., 3] == 0) & np.isfinite(rel)
         rgba[context] = np.stack([grey[context]] * 3 + [np.full(grey[context].shape, 255.0)], axis=-1)
-    caption = (
-        f"Residuals on stable ground after the bias correction, ramp ±{lim:.3g} m (99th percentile "
-        f"of |residual|). {'Grey relief: not stable ground. ' if rel is not None else ''}"
-        f"Hatched: no data. {extent_text(grid, r.shape, k)}"
+    caption = page.macro(
+        "residual_caption", lim=f"{lim:.3g}", relief=rel is not None, extent=extent_text(grid, r.shape, k)
     )
     bar = colour_bar(PUOR, lim, "residual on stable ground (m)", ident)
     return map_figure(ident, "Stable-ground residuals", _repeat(rgba, f), r.shape[1] * grid.cell, bar, caption)

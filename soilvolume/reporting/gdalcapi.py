@@ -1,8 +1,5 @@
-"""GDAL's contour algorithm through its C API (:mod:`ctypes`), in the GDAL library rasterio
-loaded: a pip-installed engine has no GDAL Python bindings, and rasterio does not expose
-``GDALContourGenerateEx``. The library is the one of rasterio's wheel (``rasterio.libs``,
-``rasterio/.dylibs``) or, for a rasterio built against a system GDAL, that one.
-"""
+"""GDAL's contour algorithm by :mod:`ctypes` in the GDAL library rasterio loaded (its wheel's, else a
+system one): a pip-installed engine has no GDAL bindings, and rasterio exposes no contouring."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
-"""report.html's note beside the headline when its cut (or fill) reads 0 while the difference map
-shows cells of that sign: which rule of the change areas (:mod:`soilvolume.volumes.change`) left
-them out, how many cells each rule left out, and which of the report's sums to trust."""
+"""report.html's note when the headline's cut (or fill) reads 0 while the map shows such cells: which
+rule of the change areas (:mod:`soilvolume.volumes.change`) left how many out, which sum to trust."""
 
 from __future__ import annotations
 
@@ -91,13 +90,8 @@ def _left_out(diff: Any, change: Any, sign: float, lod: Any) -> dict[str, Any] |
     small = np.isin(labels, 1 + np.flatnonzero(np.bincount(labels.ravel(), minlength=n + 1)[1:] < MIN_CELLS))
     extreme = float(np.nanmin(d) if sign < 0 else np.nanmax(d))
     count, on_border, in_small = int(beyond.sum()), int((beyond & border).sum()), int((inner & small).sum())
-    return {
-        "count": count,
-        "border": on_border,
-        "small": in_small,
-        "raised": count - on_border - in_small,
-        "extreme": extreme,
-    }
+    raised = count - on_border - in_small
+    return {"count": count, "border": on_border, "small": in_small, "raised": raised, "extreme": extreme}
 
 
 def _number(value: Any) -> bool:

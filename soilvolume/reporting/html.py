@@ -1,8 +1,6 @@
-"""The self-contained report.html of a run, a pair or a survey against a design
-(``templates/report.html.j2``; the figures from :mod:`.figures`): the result in plain words
-(volumes with their uncertainty, significance, quality verdict), run date, software version, inputs
-and every parameter, registration as rotation and shift. No network access, no scripts, tolerant
-of missing report keys and arrays."""
+"""report.html of a pair or a survey against a design (``templates/report.html.j2``): the result in
+plain words, the figures, inputs, parameters and registration; no network access, no scripts,
+tolerant of missing report keys and arrays."""
 
 from __future__ import annotations
 

@@ -1,13 +1,15 @@
-"""The Jinja2 templates of report.html (``templates/``, shipped with the package), rendered with
-one :class:`jinja2.Environment`, and the page written whole."""
+"""The Jinja2 templates of report.html and its figures (``templates/``, shipped with the package),
+rendered with one :class:`jinja2.Environment`, and the page written whole."""
 
 from __future__ import annotations
 
-import os
+import html
 from pathlib import Path
 
 from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from markupsafe import Markup
+
+from ..inputs.io import atomic_path
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
 ENV = Environment(
@@ -17,6 +19,7 @@ ENV = Environment(
     trim_blocks=True,
     lstrip_blocks=True,
 )
+ENV.filters.update(f=lambda v, digits=1: f"{v:.{digits}f}", esc=lambda text: Markup(html.escape(text)))
 
 
 def figure(html: str | None) -> Markup | None:
@@ -29,10 +32,13 @@ def render(template: str, **context) -> str:
     return ENV.get_template(template).render(**context)
 
 
+def macro(name: str, /, **args) -> Markup:
+    """The markup of the macro ``name`` of ``figures.html.j2`` (a figure's SVG) with ``args``."""
+    return getattr(ENV.get_template("figures.html.j2").module, name)(**args)
+
+
 def write(path: str | Path, text: str) -> Path:
     """Write the page ``text`` to ``path`` atomically (a partial file renamed into place)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)

@@ -10,17 +10,12 @@ import numpy as np
 
 
 def _fold(a: np.ndarray, k: int, axis: int) -> np.ndarray:
-    """Sums of k consecutive entries along ``axis`` (0 or 1; the last group may be shorter)."""
-    shape = list(a.shape)
-    shape[axis] = -(-shape[axis] // k)
-    out = np.zeros(shape, np.float64 if a.dtype.kind == "f" else np.int32)
+    """Sums of k consecutive entries along ``axis`` (the last group may be shorter), added in turn."""
+    a = np.moveaxis(a, axis, 0)
+    out = np.zeros((-(-len(a) // k), *a.shape[1:]), np.float64 if a.dtype.kind == "f" else np.int32)
     for i in range(k):
-        x = a[i::k] if axis == 0 else a[:, i::k]
-        if axis == 0:
-            out[: x.shape[0]] += x
-        else:
-            out[:, : x.shape[1]] += x
-    return out
+        out[: len(a[i::k])] += a[i::k]
+    return np.moveaxis(out, 0, axis)
 
 
 def block_mean(a: np.ndarray, k: int) -> np.ndarray:

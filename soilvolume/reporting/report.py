@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,20 +28,8 @@ if TYPE_CHECKING:
 
 
 def _clean(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _clean(v.tolist())
-    if isinstance(v, (np.floating, float)):
-        f = float(v)
-        return f if math.isfinite(f) else None
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.bool_):
-        return bool(v)
-    return v
+    """``v`` as JSON reads it back: numpy values as Python's, tuples as lists, NaN and infinities None."""
+    return json.loads(json.dumps(v, default=lambda x: x.tolist()), parse_constant=lambda _: None)
 
 
 def stage_dict(q: StageQuality) -> dict:
@@ -65,16 +52,20 @@ def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return s @ t_local @ s_inv
 
 
-def registration_summary(reg, origin: np.ndarray) -> dict:
+def stages(reg: Registration) -> dict:
+    """Each stage's fit and the georeferencing decision of a registration."""
+    geo = {} if reg.georeferencing is None else reg.georeferencing.as_dict()
+    return {"coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine), "georeferencing": geo}
+
+
+def motion(t: np.ndarray, after: np.ndarray) -> dict:
+    """The local transform ``t`` as rotation and tilt (°) and the shift (m) at the ``after`` points' mean."""
+    return {"rotation_deg": rotation_deg(t), "tilt_deg": tilt_deg(t), "shift_m": shift_at(t, after.mean(axis=0))}
+
+
+def registration_summary(reg: Registration, origin: np.ndarray) -> dict:
     """What ``soilvolume register`` returns: the absolute 4x4, each stage and the georeferencing decision."""
-    return _clean(
-        {
-            "transform": absolute_transform(reg.transform, origin),
-            "coarse": stage_dict(reg.coarse),
-            "fine": stage_dict(reg.fine),
-            "georeferencing": _georeferencing(reg),
-        }
-    )
+    return _clean({"transform": absolute_transform(reg.transform, origin), **stages(reg)})
 
 
 def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
@@ -89,10 +80,6 @@ def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
         "valid_cells": int(np.isfinite(heights).sum()),
         "selection": one.note,
     }
-
-
-def _georeferencing(reg) -> dict:
-    return {} if reg.georeferencing is None else reg.georeferencing.as_dict()
 
 
 def write_json(path: Path, report: dict, timings: dict[str, float] | None = None) -> None:
@@ -120,17 +107,12 @@ def summary_lines(report: dict) -> list[str]:
             f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
             f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
             f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
-            *_coverage_line(report),
+            *filter(None, [coverage.line(report)]),
             f"total time {sum(report['timings_s'].values()):.2f} s",
             *(f"not soil: {line}" for line in nonsoil_lines(report)),
             *quality_lines(report),
         ]
     )
-
-
-def _coverage_line(report: dict) -> list[str]:
-    said = coverage.line(report)
-    return [said] if said else []
 
 
 def nonsoil_lines(report: dict) -> list[str]:
@@ -198,29 +180,20 @@ VOLUME_METHOD = (  # report.json's volume_method
 
 def _uncertainty_m3(vols: Volumes) -> dict:
     """report.json's ``uncertainty_m3``: the headline's ± and those of the other sums."""
-    return {
-        "net": vols.uncertainty["net"],
-        "cut": vols.uncertainty["cut"],
-        "fill": vols.uncertainty["fill"],
-        "net_change_areas": vols.uncertainty["net"],
-        "net_all_cells": vols.uncertainty["net_compared_area"],
-        "lod_m": vols.uncertainty["lod_m"],
-        "confidence": vols.uncertainty["confidence"],
-    }
+    u = vols.uncertainty
+    keys = {"net": "net", "cut": "cut", "fill": "fill", "net_change_areas": "net", "net_all_cells": "net_compared_area"}
+    return {**{k: u[v] for k, v in keys.items()}, "lod_m": u["lod_m"], "confidence": u["confidence"]}
 
 
 def _registration(prep: Prepared, reg: Registration) -> dict:
     """report.json's ``registration``: the transform, each stage's fit and the motion in words."""
+    t = reg.transform
     return {
-        "transform": absolute_transform(reg.transform, prep.origin),
-        "transform_local": reg.transform,
+        "transform": absolute_transform(t, prep.origin),
+        "transform_local": t,
         "local_origin": prep.origin,
-        "coarse": stage_dict(reg.coarse),
-        "fine": stage_dict(reg.fine),
-        "georeferencing": _georeferencing(reg),
-        "rotation_deg": rotation_deg(reg.transform),
-        "tilt_deg": tilt_deg(reg.transform),
-        "shift_m": shift_at(reg.transform, prep.after_thin.mean(axis=0)),
+        **stages(reg),
+        **motion(t, prep.after_thin),
     }
 
 

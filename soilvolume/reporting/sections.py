@@ -1,14 +1,10 @@
-"""Cross-section profiles along the lines of ``--sections`` (any OGR vector file of lines, brought
-into the run's CRS as the zones are): the heights of the run's written DEMs (``dem_before.tif``,
-``dem_after.tif``; against a surface, the before is the design) and its difference raster sampled
-every half cell along each line, written as ``sections.csv`` (line id and name, chainage in m,
-x, y, before, after, difference) and one picture per line, ``sections/<name>.svg``
-(:mod:`.sectionsvg`). A cell without a height is an empty value."""
+"""``--sections``: the written DEMs and difference sampled every half cell along each line (brought
+into the run's CRS as the zones are), as ``sections.csv`` (a cell without a height: an empty value)
+and one picture per line, ``sections/<name>.svg`` (:mod:`.sectionsvg`)."""
 
 from __future__ import annotations
 
 import csv
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +13,7 @@ import numpy as np
 import shapely
 
 from ..core.types import GridSpec, SoilVolumeError
+from ..inputs.io import atomic_path
 from ..volumes.polygons import read_lines, to_grid_crs
 from .sectionsvg import profile_svg
 
@@ -87,18 +84,15 @@ def profiles(path: str | Path, folder: Path, grid: GridSpec) -> list[Profile]:
 
 
 def write_sections(path: str | Path, folder: Path, grid: GridSpec, before: str = "before") -> dict:
-    """``sections.csv`` and ``sections/<name>.svg`` in ``folder`` (the staged rasters' folder)
-    of the lines of ``path``; ``before``: what the before heights are called (``design``
-    against a surface). Returns report.json's ``sections``."""
+    """``sections.csv`` and ``sections/<name>.svg`` in ``folder`` (the staged rasters') of the lines of
+    ``path``; ``before``: the before heights' name (``design`` against a surface). report.json's ``sections``."""
     found = profiles(path, folder, grid)
-    part = folder / f".{FILE}.part"
-    with open(part, "w", newline="", encoding="utf-8") as f:
+    with atomic_path(folder / FILE) as part, open(part, "w", newline="", encoding="utf-8") as f:
         out = csv.writer(f)
         out.writerow([before if c == "before" else c for c in COLUMNS])
         for p in found:
             for c, (x, y), h in zip(p.chainage, p.xy, p.heights, strict=True):
                 out.writerow([p.id, p.name, round(float(c), 3), x, y, *("" if np.isnan(v) else v for v in h)])
-    os.replace(part, folder / FILE)
     pictures = write_pictures(found, folder / FOLDER, before)
     return {"file": FILE, "lines": len(found), "pictures": pictures}
 

@@ -14,27 +14,15 @@ from ..core.wording import cli_tree
 from ..dem.geotiff import write_grid
 from ..inputs.io import atomic_path
 from ..options import Options
-from ..registration.rigid import rotation_deg, shift_at, tilt_deg
 from ..volumes.quality import epoch_checks, period_quality
 from ..volumes.quantities import scaled
-from .report import absolute_transform, recorded_options, stage_dict, write_json
+from .report import absolute_transform, motion, recorded_options, stages, write_json
 from .seriesgrade import LEDGER_GRADE, ledger_figures, with_grade, write_grades
 from .serieshtml import write_series_html
 
 LEDGER = "ledger.csv"
-LEDGER_COLUMNS = (
-    "period",
-    "from",
-    "to",
-    "from_date",
-    "to_date",
-    "net_m3",
-    "net_pm_m3",
-    "cut_m3",
-    "cut_pm_m3",
-    "fill_m3",
-    "fill_pm_m3",
-)
+_FIGURES = tuple(f"{k}{pm}_m3" for k in ("net", "cut", "fill") for pm in ("", "_pm"))  # net_m3, net_pm_m3, ...
+LEDGER_COLUMNS = ("period", "from", "to", "from_date", "to_date", *_FIGURES)
 
 
 def dem_name(k: int) -> str:
@@ -48,16 +36,12 @@ def difference_name(i: int, j: int, cumulative: bool = False) -> str:
 def _registration(fit, origin: np.ndarray) -> dict:
     if fit is None:  # E0: the frame itself
         return {"transform": np.eye(4), "reference": True}
-    reg = fit.reg
+    t = fit.reg.transform
     return {
-        "transform": absolute_transform(reg.transform, origin),
-        "transform_local": reg.transform,
-        "rotation_deg": rotation_deg(reg.transform),
-        "tilt_deg": tilt_deg(reg.transform),
-        "shift_m": shift_at(reg.transform, fit.prep.after_thin.mean(axis=0)),
-        "coarse": stage_dict(reg.coarse),
-        "fine": stage_dict(reg.fine),
-        "georeferencing": {} if reg.georeferencing is None else reg.georeferencing.as_dict(),
+        "transform": absolute_transform(t, origin),
+        "transform_local": t,
+        **motion(t, fit.prep.after_thin),
+        **stages(fit.reg),
     }
 
 
@@ -122,9 +106,8 @@ def _series_grid(grid: GridSpec, series, origin: np.ndarray) -> dict:
 
 
 def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Options, timer) -> dict:
-    """report.json of a series run (``runs``: the :class:`~soilvolume.core.types.Epoch` s; ``fits``:
-    the later epochs' registrations; ``vols``: the volume steps of the pairs E0 -> Ek); each period
-    and the cumulative with its quality verdict (:mod:`soilvolume.volumes.quality`)."""
+    """report.json of a series run (``runs``: its epochs; ``fits``: the later epochs' registrations;
+    ``vols``: the volume steps E0 -> Ek), each period and the cumulative with its quality verdict."""
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
     dates = [e.date for e in runs]
     epochs = [_epoch(k, run, fits, vols, origin) for k, run in enumerate(runs)]
@@ -194,9 +177,8 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec, graded=None) ->
 
 
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer, graded=None) -> dict:
-    """report.json, the ledger and report.html of a series run into ``out`` (an
-    :class:`~soilvolume.core.outputs.OutputDir`), with the progress against a design when
-    ``graded``; returns the report."""
+    """report.json, the ledger and report.html of a series run into the output folder ``out`` (with
+    the progress against a design when ``graded``); returns the report."""
     report = with_quantities(build_series_report(epochs, fits, vols, series, grid, options, timer), options)
     report = cli_tree(with_grade(report, graded))
     write_ledger(out.path(LEDGER), report)

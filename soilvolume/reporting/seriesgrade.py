@@ -1,7 +1,5 @@
-"""A series' progress against a design (``--design``, :mod:`soilvolume.workflow.seriesgrade`) in
-its outputs: each epoch's class grid (grade_epoch<k>.tif), report.json's ``design``, each epoch's
-``grade`` and each period's (and the cumulative's) ``progress``, the ledger's columns and
-report.html's table."""
+"""A series against a design in its outputs: grade_epoch<k>.tif, report.json's ``design``, each
+epoch's ``grade``, each period's ``progress``, the ledger's columns and report.html's table."""
 
 from __future__ import annotations
 

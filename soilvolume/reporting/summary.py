@@ -1,6 +1,5 @@
-"""Plain-language figures of a run, shared by the HTML report and the QGIS outputs: the
-registration as a rotation (degrees) and a shift (metres), and whether the net change is
-significant."""
+"""Plain-language figures shared by report.html and QGIS: the registration as rotation and shift,
+and whether the net change is significant."""
 
 from __future__ import annotations
 
@@ -11,9 +10,8 @@ import numpy as np
 
 
 def rotation_shift(transform_local: Any) -> dict[str, float]:
-    """Rotation angle (degrees, about any axis), its tilt part (degrees off vertical) and yaw,
-    and the shift (metres: horizontal, vertical, total) of a 4x4 transform in local
-    coordinates (the engine's origin is inside the data, so the shift is where the data is)."""
+    """Rotation (°, about any axis), its tilt and yaw, and the shift (m: horizontal, vertical, total)
+    of a local 4x4 (the origin is inside the data, so the shift is where the data is)."""
     t = np.asarray(transform_local, dtype=float)
     r, s = t[:3, :3], t[:3, 3]
     cos_angle = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))

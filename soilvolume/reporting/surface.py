@@ -33,9 +33,8 @@ def amend(report: dict, prep, vols) -> dict:
 
 
 def surface_quality(report: dict, record) -> dict:
-    """The verdict of a run against a surface (``record``: core/record.RunRecord): the survey's
-    agreement with the surface on the cells its change detection deems unchanged
-    (:mod:`soilvolume.volumes.reference`, recorded as ``reference.agreement``) first."""
+    """The verdict against a surface (``record``: a RunRecord): the survey's agreement with it on the
+    cells deemed unchanged (``reference.agreement``) first."""
     diff = record.quality.diff
     unchanged = find_stable(diff, record.grid.cell)[0]
     agree = reference.agreement(diff, unchanged, record.vols.uncertainty["lod_m"], record.grid.cell_area)

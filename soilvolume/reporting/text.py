@@ -45,7 +45,6 @@ LABELS = {  # report keys -> words (units in brackets)
     "planes": "reference planes",
     "volume": "volumes and uncertainty",
     "write": "writing rasters",
-    "report": "report",
 }
 UNIT_WORDS = {"m": "m", "m2": "m²", "m3": "m³", "deg": "°", "s": "s"}
 

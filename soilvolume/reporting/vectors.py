@@ -1,13 +1,9 @@
-"""The vector deliverables a GIS analyst files beside the GeoJSON: ``change_areas.gpkg`` (the
-areas of significant change with their attributes), ``zones.gpkg`` (each ``--zones`` polygon in
-the run's CRS with its budget) and ``zones.csv`` (one row per zone: net, cut and fill with their
-intervals at the run's confidence, areas and flags), written by pyogrio (a runtime dependency),
-each beside its destination and renamed into place (in the run's staging folder)."""
+"""``change_areas.gpkg``, ``zones.gpkg`` (each ``--zones`` polygon in the run's CRS with its budget)
+and ``zones.csv`` (each zone's net, cut and fill with their intervals, areas and flags), by pyogrio."""
 
 from __future__ import annotations
 
 import csv
-import os
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +12,7 @@ from shapely.geometry import shape
 
 from ..core.types import GridSpec
 from ..inputs.crs import raster_wkt
+from ..inputs.io import atomic_path
 from ..volumes.polygons import read_polygons, to_grid_crs
 
 CHANGE_AREAS = "change_areas.gpkg"
@@ -24,24 +21,8 @@ ZONES_CSV = "zones.csv"
 #: change_areas.gpkg's attributes (the GeoJSON's properties)
 AREA_COLUMNS = ("id", "kind", "area_m2", "volume_m3", "mean_change_m", "extreme_change_m")
 #: zones.csv's and zones.gpkg's columns, in order (intervals as their low and high ends)
-ZONE_COLUMNS = (
-    "id",
-    "name",
-    "net_m3",
-    "net_low_m3",
-    "net_high_m3",
-    "cut_m3",
-    "cut_low_m3",
-    "cut_high_m3",
-    "fill_m3",
-    "fill_low_m3",
-    "fill_high_m3",
-    "area_m2",
-    "zone_area_m2",
-    "polygon_area_m2",
-    "outside_grid",
-    "repaired",
-)
+_BUDGET = (f"{k}{end}_m3" for k in ("net", "cut", "fill") for end in ("", "_low", "_high"))  # net_m3, net_low_m3, ...
+ZONE_COLUMNS = ("id", "name", *_BUDGET, "area_m2", "zone_area_m2", "polygon_area_m2", "outside_grid", "repaired")
 TEXT = {"kind", "name"}
 INTEGER = {"id", "outside_grid", "repaired"}
 
@@ -51,20 +32,18 @@ def write_layer(path: Path, layer: str, geoms: list, rows: list[dict], columns: 
     in the CRS ``wkt``; written beside ``path`` and renamed into place."""
     from pyogrio import raw  # heavy (its own GDAL): loaded by the step that writes a GeoPackage
 
-    part = path.with_name(f".{path.name}.part.gpkg")
-    part.unlink(missing_ok=True)
-    raw.write(
-        str(part),
-        geometry=shapely.to_wkb(geoms) if geoms else np.array([], dtype=object),
-        field_data=[_column(rows, k) for k in columns],
-        fields=list(columns),
-        layer=layer,
-        driver="GPKG",
-        geometry_type="MultiPolygon",
-        crs=wkt or None,
-        promote_to_multi=True,
-    )
-    os.replace(part, path)
+    with atomic_path(path) as part:
+        raw.write(
+            str(part),
+            geometry=shapely.to_wkb(geoms) if geoms else np.array([], dtype=object),
+            field_data=[_column(rows, k) for k in columns],
+            fields=list(columns),
+            layer=layer,
+            driver="GPKG",
+            geometry_type="MultiPolygon",
+            crs=wkt or None,
+            promote_to_multi=True,
+        )
     return path
 
 
@@ -108,11 +87,9 @@ def write_zones(
         polys, wkt = read_polygons(zones_path)
         polys = to_grid_crs(polys, wkt, grid, zones_path)
         write_layer(folder / ZONES, "zones", [p.geometry for p in polys], rows, ZONE_COLUMNS, raster_wkt(grid.crs_wkt))
-    part = folder / f".{ZONES_CSV}.part"
-    with open(part, "w", newline="", encoding="utf-8") as f:
+    with atomic_path(folder / ZONES_CSV) as part, open(part, "w", newline="", encoding="utf-8") as f:
         out = csv.DictWriter(f, fieldnames=ZONE_COLUMNS)
         out.writeheader()
         for row in rows:
             out.writerow({k: "" if v is None else (int(v) if isinstance(v, bool) else v) for k, v in row.items()})
-    os.replace(part, folder / ZONES_CSV)
     return [ZONES, ZONES_CSV] if gpkg else [ZONES_CSV]
