@@ -12,24 +12,10 @@ from typing import Any
 from .inputs import InputOptions
 from .products import ProductOptions
 from .registration import RegistrationOptions
-from .table import CELLS, COMMANDS, ESTIMATE, GRID, GROUND, GROUND_FILTER, POINTS, PREPARE, REGISTER, STOCKPILE, VOLUME
+from .table import COMMANDS
 from .volumes import VolumeOptions
 
-__all__ = [
-    "Options",
-    "command_fields",
-    "CELLS",
-    "COMMANDS",
-    "ESTIMATE",
-    "GRID",
-    "GROUND",
-    "GROUND_FILTER",
-    "POINTS",
-    "PREPARE",
-    "REGISTER",
-    "STOCKPILE",
-    "VOLUME",
-]
+__all__ = ["COMMANDS", "Options", "command_fields"]
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import field
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 #: which commands take an option (``commands=`` of each field below): the command line builds
@@ -23,21 +24,35 @@ COMMANDS = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
 
 def option(
     default: Any,
-    help: str,
-    choices: tuple | None = None,
-    *,
-    label: str | None = None,
+    label: str,
+    commands: tuple[str, ...] = ESTIMATE,
     unit: str | None = None,
     lo: float | None = None,
     hi: float | None = None,
+    *,
+    choices: tuple | None = None,
     lo_open: bool = False,
-    commands: tuple[str, ...] = ESTIMATE,
     run_control: bool = False,
+    help: str | None = None,
 ) -> Any:
-    """An option: default, one-line help, choices; ``label`` (short title for GUIs), ``unit``
-    ("m", "m2", "deg", ...), the allowed range ``lo``..``hi`` (``lo`` excluded when
-    ``lo_open``) that every front end validates against, the ``commands`` that take it, and
-    ``run_control``: where and how the run goes, never its numbers (every other option keys the
-    work a resumed run may reuse)."""
+    """An option: its default, ``label`` (short title for GUIs), the ``commands`` that take it, ``unit``
+    ("m", "m2", "deg", ...), the allowed range ``lo``..``hi`` (``lo`` excluded when ``lo_open``) that
+    every front end validates against, ``choices``, and ``run_control``: where and how the run goes,
+    never its numbers (every other option keys the work a resumed run may reuse); its one-line
+    ``help`` here or from :func:`options`."""
     meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
     return field(default=default, metadata={**meta, "commands": commands, "run_control": run_control})
+
+
+def options(helps: dict[str, str]) -> Callable[[type], type]:
+    """A frozen dataclass of :func:`option` fields, each with its help from ``helps`` (by name; one each)."""
+
+    def make(cls: type) -> type:
+        if helps.keys() != cls.__annotations__.keys():
+            raise TypeError(f"{cls.__name__}: the help texts do not match the fields")
+        for name, text in helps.items():
+            f = getattr(cls, name)
+            setattr(cls, name, field(default=f.default, metadata={**f.metadata, "help": text}))
+        return dataclass(frozen=True)(cls)
+
+    return make
