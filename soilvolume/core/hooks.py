@@ -73,3 +73,9 @@ class Result:
     report: dict[str, Any]
     outputs: dict[str, Path] = field(default_factory=dict)
     keyed: dict[str, Any] | None = None  # the report with its options by key (wording.opt), for front ends
+
+    @classmethod
+    def written(cls, report: dict[str, Any], moved: dict[str, Path], keyed: dict[str, Any] | None = None) -> Result:
+        """The result of a run whose output folder holds ``moved`` (file name -> path)."""
+        named = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved.items()}
+        return cls(report, named, keyed)

@@ -47,13 +47,6 @@ class Cloud:
     def __len__(self) -> int:
         return int(self.xyz.shape[0])
 
-    def subset(self, mask: np.ndarray) -> Cloud:
-        cls = None if self.classification is None else self.classification[mask]
-        return Cloud(self.xyz[mask], self.origin, self.crs_wkt, self.path, cls)
-
-    def absolute(self) -> np.ndarray:
-        return self.xyz + self.origin
-
 
 @dataclass(frozen=True)
 class GridSpec:

@@ -46,11 +46,6 @@ def cli(text: str) -> str:
     return render(text, cli_name)
 
 
-def keys(text: str) -> list[str]:
-    """The options ``text`` names, in order."""
-    return [m.group(1) for m in MARKER.finditer(text)]
-
-
 def cli_tree(value: Any) -> Any:
     """A JSON-like value (a report) with every string in the command line's words."""
     if isinstance(value, str):

@@ -4,6 +4,7 @@ registration only (``soilvolume register``: :func:`.pair.register`), in memory."
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -20,6 +21,7 @@ from ..inputs.prepare import Single, prepare_single
 from ..options import Options
 from ..pipelines.pipeline import open_source
 from ..reporting.report import dem_summary, registration_summary
+from ..validate import check_bounds, check_options
 from ..volumes.compute import centred_heights
 from . import pair, steps
 from .context import Context, threads
@@ -28,9 +30,20 @@ from .plan import cloud_cell, plan_grid
 DEM = ("prepare", "grid", "write")
 
 
-def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bounds, hooks: Hooks) -> dict:
-    """See :func:`soilvolume.api.cloud_to_dem`."""
-    out_tif = check_output_file(out_tif, [cloud])
+def run_cloud_to_dem(
+    cloud: str | Path,
+    out_tif: str | Path,
+    options: Options | None = None,
+    *,
+    crs: str | None = None,
+    bounds: tuple[float, float, float, float] | None = None,
+    hooks: Hooks | None = None,
+) -> dict[str, Any]:
+    """One cloud to an average-height GeoTIFF (``api.cloud_to_dem``; ``options.cell``/``options.statistic``;
+    ``bounds`` = xmin, ymin, xmax, ymax in the cloud's CRS, snapped outwards to the cell). Returns the grid
+    description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
+    options, bounds, hooks = check_options(options or Options()), check_bounds(bounds), hooks or Hooks()
+    cloud, out_tif = Path(cloud), check_output_file(Path(out_tif), [cloud])
     threads("dem", options)
     ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
     with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
@@ -68,10 +81,20 @@ def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np
     return grid, heights
 
 
-def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
-    """See :func:`soilvolume.api.register`."""
+def run_register(
+    before: str | Path,
+    after: str | Path,
+    out_cloud: str | Path,
+    options: Options | None = None,
+    *,
+    hooks: Hooks | None = None,
+) -> dict[str, Any]:
+    """Register the after cloud onto the before cloud and write it (``api.register``; LAS/LAZ, before CRS).
+    Returns {"transform": 4x4 row-major list (after in before CRS -> before), "coarse": {...},
+    "fine": {...}}."""
+    options, hooks, before, after = check_options(options or Options()), hooks or Hooks(), Path(before), Path(after)
     check_two_surveys(before, after)
-    out_cloud = check_output_file(out_cloud, [before, after])
+    out_cloud = check_output_file(Path(out_cloud), [before, after])
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
     threads("register", options)

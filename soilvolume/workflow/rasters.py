@@ -112,11 +112,20 @@ def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
 
 
 def run_volume_from_rasters(
-    before: Path, after: Path, out: Path, *, zones=None, zone_field=None, hooks: Hooks
+    before: str | Path,
+    after: str | Path,
+    out: str | Path,
+    *,
+    zones: str | Path | None = None,
+    zone_field: str | None = None,
+    hooks: Hooks | None = None,
 ) -> dict[str, Any]:
-    """See :func:`soilvolume.api.volume_from_rasters`."""
+    """Cut/fill/net between two DEMs a user already has (``api.volume_from_rasters``; the after raster is
+    resampled onto the before grid when they differ). Returns {"total": {"net","cut","fill","area_m2"}, "zones":
+    [{"id", "name", "net", "cut", "fill", "area_m2"}, ...]} and writes the difference GeoTIFF."""
+    before, after, hooks = Path(before), Path(after), hooks or Hooks()
     check_two_surveys(before, after, "the before DEM")
-    out = check_output_file(out, [before, after, zones])
+    out = check_output_file(Path(out), [before, after, zones])
     hooks.step(5, f"reading {before.name} and {after.name}")
     db, da = open_dem(before), open_dem(after)
     hb = read_heights(db.raster, db.factor)  # the whole before DEM: the difference's grid

@@ -1,12 +1,9 @@
-"""``soilvolume series E0 E1 ... En``: a site surveyed n + 1 times, E0 the reference, a
-composition of the method's steps (:mod:`.steps`) over the pairs E0 -> Ek, in memory.
+"""``soilvolume series E0 E1 ... En``: the method's steps (:mod:`.steps`) over the pairs E0 -> Ek, in memory.
 
-Each later epoch is prepared and registered against E0 (the pair E0 -> Ek, so the stable-ground
-refinement works on ground stable across the two) with the steps of :mod:`.steps` an estimate
-takes, every epoch is moved into one frame (E0's, with the first pair's local origin) and
-gridded on one grid (the cells every registered epoch covers), each pair's volume step corrects
-Ek once relative to E0, and :mod:`soilvolume.volumes.series` turns the corrected differences
-into periods that add up to the cumulative."""
+Each Ek is read and registered against E0 (so the stable-ground refinement works on ground stable across
+the two), every epoch is moved into E0's frame and gridded on one grid (the cells every registered epoch
+covers), each pair's volume step corrects Ek once relative to E0, and :mod:`soilvolume.volumes.series`
+turns the corrected differences into periods that add up to the cumulative."""
 
 from __future__ import annotations
 
@@ -35,8 +32,7 @@ from ..options import Options
 from ..registration.register import Registration
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.series import write_rasters, write_reports
-from ..validate import schedule_of
-from ..volumes.compute import compute_volumes
+from ..validate import check_options, schedule_of
 from ..volumes.series import combine
 from . import steps
 from .context import Context, threads
@@ -75,20 +71,26 @@ def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | 
     return out
 
 
-def check_epochs(paths: list[Path]) -> None:
-    """At least two epochs, each an existing file or folder."""
-    if len(paths) < 2:
-        raise SoilVolumeError(f"series: {len(paths)} epoch given; at least two are needed (E0 and a later survey)")
-    for path in paths:
-        if not path.exists():
-            raise SoilVolumeError(f"{path}: no such file")
-
-
 def described(epochs: tuple[Epoch, ...], k: int) -> str:
     """Epoch ``k`` in an error: its index, file and date with where the date came from."""
     e = epochs[k]
     source = {"LAS header": "from its LAS header", "given": "given by --dates"}.get(e.date_source or "", "")
     return f"E{k} {e.name} ({f'{e.date}, {source}' if e.date else 'no date'})"
+
+
+def series_epochs(paths: list[Path], dates: list[str] | None, options: Options) -> tuple[Epoch, ...]:
+    """The epochs of a series (at least two, each an existing file or folder), dated
+    (:func:`epoch_dates`) and checked (:func:`check_series`)."""
+    if len(paths) < 2:
+        raise SoilVolumeError(f"series: {len(paths)} epoch given; at least two are needed (E0 and a later survey)")
+    for path in paths:
+        if not path.exists():
+            raise SoilVolumeError(f"{path}: no such file")
+    dated = zip(paths, epoch_dates(paths, dates), strict=True)
+    given = {"crs": None, "georeferencing": options.georeferencing}
+    epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
+    check_series(epochs)
+    return epochs
 
 
 def check_series(epochs: tuple[Epoch, ...]) -> None:
@@ -169,36 +171,35 @@ def series_grid(fits: list[Fit], options: Options) -> GridSpec:
 
 
 def run_series(
-    paths: list[Path], out_dir: Path, options: Options, *, dates=None, overwrite: bool, hooks: Hooks
+    epochs: list[str | Path],
+    out_dir: str | Path,
+    options: Options | None = None,
+    *,
+    dates: list[str] | None = None,
+    overwrite: bool = False,
+    hooks: Hooks | None = None,
 ) -> Result:
-    """See :func:`soilvolume.api.series`: the method's steps over E0 and every later epoch."""
+    """Volume change over a series of surveys (``api.series``), E0 (``epochs[0]``) the reference: report.json
+    holds ``epochs`` (each registration into E0's frame), ``periods`` (one per consecutive pair)
+    and ``cumulative``; the periods' nets add up to the cumulative net. ``dates``: one per epoch
+    (YYYY-MM-DD; empty keeps the file's)."""
+    paths, options, hooks = [Path(e) for e in epochs], check_options(options or Options()), hooks or Hooks()
     timer = Timer()
     schedule = schedule_of(options)  # parsed once, before any work (a series runs in this process)
-    check_epochs(paths)
-    dated = zip(paths, epoch_dates(paths, dates), strict=True)
-    given = {"crs": None, "georeferencing": options.georeferencing}
-    epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
-    check_series(epochs)
+    epochs = series_epochs(paths, dates, options)
     design = open_design(options)  # checked before any point is read
     threads("series", options)
     inputs = [*paths, options.stable_mask, options.design, options.zones]
-    with output_dir(out_dir, inputs, overwrite) as out, os_errors(out.final):
+    with output_dir(Path(out_dir), inputs, overwrite) as out, os_errors(out.final):
         ctx = Context(epochs, options.with_(zones=None), hooks, STEPS, timer, out, schedule=schedule)
         report = series(ctx, InMemory(), design)
     hooks.step(100, "done")
-    moved = out.moved.items()
-    return Result(report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
+    return Result.written(report, out.moved)
 
 
 def pair_named(ctx: Context, k: int) -> str:
     """The pair E0 -> Ek of a series in an error."""
     return f"{described(ctx.epochs, k)} against {described(ctx.epochs, 0)}"
-
-
-def _each(ctx: Context, step: str, k: int, n: int) -> tuple[float, float]:
-    """The share of the ``k``-th of ``n`` pairs in ``step``'s percent range."""
-    lo, hi = ctx.spans[step]
-    return lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1) / n
 
 
 def series(ctx: Context, backend: InMemory, design=None) -> dict:
@@ -228,7 +229,8 @@ def series(ctx: Context, backend: InMemory, design=None) -> dict:
 
 def _read(ctx: Context, backend: InMemory, k: int) -> Prepared:
     """The pair E0 -> Ek read (progress within its share of the step)."""
-    spans = {**ctx.spans, "prepare": _each(ctx, "prepare", k - 1, len(ctx.epochs) - 1)}
+    n = len(ctx.epochs) - 1
+    spans = {**ctx.spans, "prepare": (ctx.at("prepare", (k - 1) / n), ctx.at("prepare", k / n))}
     with naming(pair_named(ctx, k)):
         return backend.read(replace(ctx, epochs=(ctx.epochs[0], ctx.epochs[k]), spans=spans))
 
@@ -239,7 +241,8 @@ def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
     n, seconds, fits = len(preps), {"coarse": 0.0, "fine": 0.0, "register_other": 0.0}, []
     for k, prep in enumerate(preps):
         name = ctx.epochs[k + 1].name
-        progress = (*_each(ctx, "register", k, n), f"registering {name} into {ctx.epochs[0].name}'s frame")
+        span = (ctx.at("register", k / n), ctx.at("register", (k + 1) / n))
+        progress = (*span, f"registering {name} into {ctx.epochs[0].name}'s frame")
         with naming(pair_named(ctx, k + 1)):
             reg, opts = steps.register_pair(prep, ctx, (prep.after.xyz, prep.before.xyz), progress)
         ctx.hooks.info(f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m")
@@ -282,12 +285,8 @@ def _volumes(ctx: Context, backend: InMemory, fits: list[Fit], fitted: list, gri
     """Each pair's volume step: Ek corrected once relative to E0."""
     vols = []
     for k, (f, planes) in enumerate(zip(fits, fitted, strict=True), 1):
-        moved = steps.alternative_move(f.reg)
-
-        def step(after, before, d_i, on, f=f, moved=moved):
-            return compute_volumes(after, before, d_i, on, f.options, moved=moved)
-
-        pair = (dems[k], dems[0])
+        pair, step = (dems[k], dems[0]), steps.volume_step(f.reg, f.options)
         with naming(pair_named(ctx, k)):
-            vols.append(backend.volume(ctx, step, Gridded(grid, pair, grid, pair, done(None)), planes, moved))
+            gridded = Gridded(grid, pair, grid, pair, done(None))
+            vols.append(backend.volume(ctx, step, gridded, planes, steps.alternative_move(f.reg)))
     return vols

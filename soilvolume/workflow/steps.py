@@ -175,13 +175,18 @@ def correction_message(options: Options) -> str:
 
 def volume(ctx: Context, backend: Backend, gridded: Gridded, fitted: tuple, reg: Registration) -> Volumes:
     """Step 5: difference, refill, correction, change areas, budgets, uncertainty, zones."""
+    with running(ctx, "volume", ctx.message("volume")):
+        return backend.volume(ctx, volume_step(reg, ctx.options), gridded, fitted, alternative_move(reg))
+
+
+def volume_step(reg: Registration, options: Options) -> Callable:
+    """The volume step of a pair registered by ``reg``, as a backend runs it (``seam.VolumeFn``)."""
     moved = alternative_move(reg)
 
     def step(after: EpochDEM, before: EpochDEM, d_i: np.ndarray, on: GridSpec) -> Volumes:
-        return compute_volumes(after, before, d_i, on, ctx.options, moved=moved)
+        return compute_volumes(after, before, d_i, on, options, moved=moved)
 
-    with running(ctx, "volume", ctx.message("volume")):
-        return backend.volume(ctx, step, gridded, fitted, moved)
+    return step
 
 
 def alternative_move(reg: Registration) -> np.ndarray | None:
