@@ -7,11 +7,35 @@ message)``, ``log(message)`` and ``cancel() -> bool`` callbacks of its :class:`H
 file and the problem. Outputs are written atomically.
 """
 
+from __future__ import annotations
+
+import functools
+import inspect
+from collections.abc import Callable
+
 from .core.hooks import Cancelled, Hooks, Result
-from .workflow.commands import run_cloud_to_dem as cloud_to_dem
-from .workflow.commands import run_register as register
-from .workflow.estimate import run_estimate as estimate
+from .options import Options
+from .validate import check_options
+from .workflow.commands import run_cloud_to_dem, run_register
+from .workflow.estimate import run_estimate
 from .workflow.rasters import run_volume_from_rasters as volume_from_rasters
-from .workflow.series import run_series as series
+from .workflow.series import run_series
 
 __all__ = ["Cancelled", "Hooks", "Result", "cloud_to_dem", "estimate", "register", "series", "volume_from_rasters"]
+
+
+def checked(run: Callable) -> Callable:
+    """``run`` (same signature and docstring) with its ``options`` (default: the defaults) checked first."""
+    signature = inspect.signature(run)
+
+    @functools.wraps(run)
+    def call(*args, **kwargs):
+        bound = signature.bind(*args, **kwargs)
+        bound.arguments["options"] = check_options(bound.arguments.get("options") or Options())
+        return run(*bound.args, **bound.kwargs)
+
+    return call
+
+
+estimate, series = checked(run_estimate), checked(run_series)
+cloud_to_dem, register = checked(run_cloud_to_dem), checked(run_register)

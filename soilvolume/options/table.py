@@ -1,4 +1,4 @@
-"""The option table's vocabulary: which commands take an option, and how an option is declared."""
+"""How an option of the table (:class:`soilvolume.options.Options`) is declared."""
 
 from __future__ import annotations
 
@@ -6,20 +6,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-#: which commands take an option (``commands=`` of each field below): the command line builds
-#: each subcommand's flags from it and the QGIS algorithms their parameters
-ESTIMATE = ("estimate",)
-VOLUME = ("estimate", "series")  # the volume step (a series runs it once per later epoch)
-REGISTER = ("estimate", "register", "series")
-PREPARE = ("estimate", "register", "pipeline", "series")  # reading both clouds
-GRID = ("estimate", "dem", "series", "stockpile")
-GROUND = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
-GROUND_FILTER = ("estimate", "register", "dem", "series", "pipeline", "stockpile")
-POINTS = ("estimate", "register", "dem", "series", "stockpile")  # what is read of each cloud (the soil rule)
-CELLS = ("estimate", "dem", "series")  # the heights of each cell
-DESIGNED = ("estimate", "series")  # against a design (a series: --design)
-STOCKPILE = ("stockpile",)  # one survey's stockpile inventory
-COMMANDS = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
+ESTIMATE = ("estimate",)  # the commands that take an option unless it says otherwise
 
 
 def option(

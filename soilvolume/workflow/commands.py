@@ -21,7 +21,7 @@ from ..inputs.prepare import Single, prepare_single
 from ..options import Options
 from ..pipelines.pipeline import open_source
 from ..reporting.report import dem_summary, registration_summary
-from ..validate import check_bounds, check_options
+from ..validate import check_bounds
 from ..volumes.compute import centred_heights
 from . import pair, steps
 from .context import Context, threads
@@ -42,7 +42,7 @@ def run_cloud_to_dem(
     """One cloud to an average-height GeoTIFF (``api.cloud_to_dem``; ``options.cell``/``options.statistic``;
     ``bounds`` = xmin, ymin, xmax, ymax in the cloud's CRS, snapped outwards to the cell). Returns the grid
     description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
-    options, bounds, hooks = check_options(options or Options()), check_bounds(bounds), hooks or Hooks()
+    options, bounds, hooks = options or Options(), check_bounds(bounds), hooks or Hooks()
     cloud, out_tif = Path(cloud), check_output_file(Path(out_tif), [cloud])
     threads("dem", options)
     ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
@@ -92,7 +92,7 @@ def run_register(
     """Register the after cloud onto the before cloud and write it (``api.register``; LAS/LAZ, before CRS).
     Returns {"transform": 4x4 row-major list (after in before CRS -> before), "coarse": {...},
     "fine": {...}}."""
-    options, hooks, before, after = check_options(options or Options()), hooks or Hooks(), Path(before), Path(after)
+    options, hooks, before, after = options or Options(), hooks or Hooks(), Path(before), Path(after)
     check_two_surveys(before, after)
     out_cloud = check_output_file(Path(out_cloud), [before, after])
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:

@@ -17,7 +17,7 @@ from ..inputs.distinct import check_two_surveys
 from ..inputs.surface import is_surface
 from ..options import Options
 from ..pipelines.confine import writers_into
-from ..validate import check_options, schedule_of
+from ..validate import schedule_of
 from . import design, pair
 from .context import Context, threads
 from .timing import Timer
@@ -45,7 +45,7 @@ def run_estimate(
     after_pipeline: str | Path | None = None,
 ) -> Result:
     """The whole method (``api.estimate``): read, crop, register, compensate, grid, difference, volumes, report."""
-    options, hooks, before, after = check_options(options or Options()), hooks or Hooks(), Path(before), Path(after)
+    options, hooks, before, after = options or Options(), hooks or Hooks(), Path(before), Path(after)
     timer = Timer()  # first: the timings count from here (and the start-up before)
     schedule = schedule_of(options)  # the one parse of --scheduler, before any file is read
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file

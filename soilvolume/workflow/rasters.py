@@ -128,19 +128,8 @@ def run_volume_from_rasters(
     out = check_output_file(Path(out), [before, after, zones])
     hooks.step(5, f"reading {before.name} and {after.name}")
     db, da = open_dem(before), open_dem(after)
-    hb = read_heights(db.raster, db.factor)  # the whole before DEM: the difference's grid
-    pb = db.profile(hb)
-    rb, ra = db.raster, da.raster
-    if (ra.transform, ra.width, ra.height) == (rb.transform, rb.width, rb.height) and da.crs.equals(db.crs):
-        ha = read_heights(ra, da.factor)
-        za = ha.z
-    else:
-        hooks.info(f"resampling {after.name} onto the grid of {before.name}")
-        za, ha = after_on_before(da, db, pb)
-    for note in masked_notes(rb.path, hb.masked) + masked_notes(ra.path, ha.masked):
-        hooks.info(note)
-    grid, zb = grid_of(pb), hb.z
-    diff = za - zb
+    hb, ha, za = read_both(db, da, hooks)
+    grid, diff = grid_of(db.profile(hb)), za - hb.z
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
     hooks.step(60, "computing cut and fill")
@@ -151,7 +140,9 @@ def run_volume_from_rasters(
         "a datum or georeferencing offset between the DEMs shows here and is counted as volume"
     )
     result: dict[str, Any] = {
-        "total": _public(budget(diff, grid.cell_area)),
+        "total": {
+            k: v for k, v in budget(diff, grid.cell_area).items() if k in ("net", "cut", "fill", "area_m2", "cells")
+        },
         "zones": [],
         "cell_m": grid.cell,
         "crs": parse_crs(grid.crs_wkt, "raster").name,
@@ -168,5 +159,17 @@ def run_volume_from_rasters(
     return result
 
 
-def _public(b: dict) -> dict:
-    return {"net": b["net"], "cut": b["cut"], "fill": b["fill"], "area_m2": b["area_m2"], "cells": b["cells"]}
+def read_both(db: Dem, da: Dem, hooks: Hooks) -> tuple[Heights, Heights, np.ndarray]:
+    """(the whole before DEM: the difference's grid, the after DEM read, its heights on that grid:
+    resampled when the grids differ), their masked values said."""
+    hb = read_heights(db.raster, db.factor)
+    rb, ra = db.raster, da.raster
+    if (ra.transform, ra.width, ra.height) == (rb.transform, rb.width, rb.height) and da.crs.equals(db.crs):
+        ha = read_heights(ra, da.factor)
+        za = ha.z
+    else:
+        hooks.info(f"resampling {Path(ra.path).name} onto the grid of {Path(rb.path).name}")
+        za, ha = after_on_before(da, db, db.profile(hb))
+    for note in masked_notes(rb.path, hb.masked) + masked_notes(ra.path, ha.masked):
+        hooks.info(note)
+    return hb, ha, za

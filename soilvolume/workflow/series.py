@@ -32,7 +32,7 @@ from ..options import Options
 from ..registration.register import Registration
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.series import write_rasters, write_reports
-from ..validate import check_options, schedule_of
+from ..validate import schedule_of
 from ..volumes.series import combine
 from . import steps
 from .context import Context, threads
@@ -183,7 +183,7 @@ def run_series(
     holds ``epochs`` (each registration into E0's frame), ``periods`` (one per consecutive pair)
     and ``cumulative``; the periods' nets add up to the cumulative net. ``dates``: one per epoch
     (YYYY-MM-DD; empty keeps the file's)."""
-    paths, options, hooks = [Path(e) for e in epochs], check_options(options or Options()), hooks or Hooks()
+    paths, options, hooks = [Path(e) for e in epochs], options or Options(), hooks or Hooks()
     timer = Timer()
     schedule = schedule_of(options)  # parsed once, before any work (a series runs in this process)
     epochs = series_epochs(paths, dates, options)
