@@ -44,8 +44,8 @@ from .timing import Timer
 
 @dataclass(frozen=True)
 class Fit:
-    """A later epoch registered into E0's frame: its pair (rebased on the series origin), the
-    registration (series frame) and the options its volume step takes (precise surveys: none)."""
+    """A later epoch registered into E0's frame: its pair and registration rebased on the series
+    origin, and the options its volume step takes (precise surveys: no correction)."""
 
     prep: Prepared
     reg: Registration
@@ -53,8 +53,7 @@ class Fit:
 
 
 def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | None, str | None]]:
-    """Each epoch's (date, where it came from): ``given`` (``--dates``; an empty entry keeps the
-    file's), else the LAS header's creation day and year, else (None, None)."""
+    """Each epoch's (date, its source): ``--dates`` (empty keeps the file's), else the LAS header's, else None."""
     if given is not None and len(given) != len(paths):
         raise SoilVolumeError(f"--dates: {len(given)} dates for {len(paths)} epochs (give one per epoch)")
     out: list[tuple[str | None, str | None]] = []
@@ -94,31 +93,27 @@ def series_epochs(paths: list[Path], dates: list[str] | None, options: Options) 
 
 
 def check_series(epochs: tuple[Epoch, ...]) -> None:
-    """Every epoch a different survey (:func:`~soilvolume.inputs.distinct.sameness`), and the
-    known dates in the order the epochs are given (a series is not reordered: E0 is the reference)."""
+    """Every epoch another survey (:func:`~soilvolume.inputs.distinct.sameness`), the known dates in
+    the epochs' order (a series is not reordered: E0 is the reference)."""
     for j, k in itertools.combinations(range(len(epochs)), 2):
         how = sameness(Path(epochs[j].path), Path(epochs[k].path))
         if how:
             raise SoilVolumeError(
                 f"series: {described(epochs, k)} {how} {described(epochs, j)}; each epoch must be another survey"
             )
-    latest = None  # the epoch of the latest date so far
-    for k, e in enumerate(epochs):
-        if not e.date:
-            continue
-        if latest is not None and e.date < epochs[latest].date:
+    dated = [k for k, e in enumerate(epochs) if e.date]
+    for latest, k in itertools.pairwise(dated):
+        if epochs[k].date < epochs[latest].date:
             raise SoilVolumeError(
                 f"series: the epochs are not in time order: {described(epochs, k)} is given after "
                 f"{described(epochs, latest)}; give the surveys oldest first (E0 the reference) or correct "
                 "their dates with --dates"
             )
-        latest = k
 
 
 @contextmanager
 def naming(prefix: str) -> Iterator[None]:
-    """A SoilVolumeError raised in the block with ``prefix`` (the epochs it concerns) before its
-    message, its type and fields kept; an interruption as it is."""
+    """A SoilVolumeError of the block prefixed with ``prefix`` (its epochs), its type kept; not an interruption."""
     try:
         yield
     except (Interrupted, Cancelled):
@@ -160,8 +155,8 @@ def rebase(prep: Prepared, reg, origin: np.ndarray) -> tuple[Prepared, object]:
 
 
 def series_grid(fits: list[Fit], options: Options) -> GridSpec:
-    """One grid over the cells E0 and every registered later epoch cover (their boxes' overlap),
-    the cell from E0's points within the first registered epoch's footprint (:mod:`.plan`)."""
+    """One grid over the overlap of E0's and every registered epoch's boxes, the cell from E0's points
+    within the first registered epoch's footprint (:mod:`.plan`)."""
     thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
     prep = fits[0].prep
     boxes = [(t.min(axis=0), t.max(axis=0)) for t in (prep.before_thin, *thins)]
