@@ -1,6 +1,5 @@
-"""``soilvolume estimate``: the pair product (:mod:`.pair`), or the survey against a surface
-(:mod:`.design`) when the first input is one, its outputs staged and swapped in when all
-succeeded; the backend chosen from ``--scheduler`` (:func:`backend_for`)."""
+"""``soilvolume estimate``: a pair (:mod:`.pair`, on the backend of ``--scheduler``) or a survey against a
+surface (:mod:`.design`), its outputs staged and swapped in when all succeeded."""
 
 from __future__ import annotations
 

@@ -1,13 +1,11 @@
-"""The one grid planner and the one default-cell rule of every product and every backend.
+"""The one grid planner and default-cell rule of every product and backend.
 
-The cell is ``--cell``, else about eight points of the reference epoch per cell over the
-footprint compared (:func:`soilvolume.dem.grid.choose_cell`, rounded up to 5 cm, at least
-0.5 m): the before survey's points within the registered after footprint for a pair or a series,
-the survey's own for a surface as the reference or a single cloud. The points are counted where
-the run holds them; a tiled run, which holds none, counts them from the first pass's columns
-(the points behind each column), so both backends pick the same cell for the same input
-(``tests/test_plan.py``). The grid covers the boxes of every epoch compared, its edges on
-multiples of the cell."""
+The cell is ``--cell``, else about eight points of the reference epoch per cell over the footprint
+compared (:func:`soilvolume.dem.grid.choose_cell`: rounded up to 5 cm, at least 0.5 m): the before
+points within the registered after footprint (pair, series), else the survey's own. A tiled run,
+holding no points, counts them from the first pass's columns, so both backends pick the same cell
+(``tests/test_plan.py``). The grid covers the overlap of the epochs' boxes, its edges on multiples
+of the cell."""
 
 from __future__ import annotations
 
@@ -30,9 +28,8 @@ def given_cell(options: Options) -> float | None:
 
 
 def reference_cell(prep: Prepared, poly: np.ndarray, options: Options) -> float:
-    """The cell of a pair: ``--cell``, else from the before points within ``poly`` (the
-    registered after footprint): the points themselves, or, when the run holds none (tiled), the
-    counts behind the before columns whose centres are inside it, over its area."""
+    """The cell of a pair: ``--cell``, else from the before points within ``poly`` (the registered
+    after footprint), or in a tiled run the counts behind the before columns centred inside it."""
     cell = given_cell(options)
     if cell is not None:
         return cell

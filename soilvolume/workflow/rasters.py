@@ -1,6 +1,5 @@
-"""Volume between two DEM rasters a user already has (optionally per polygon zone): each read
-in metres through :mod:`soilvolume.inputs.heights` (scale, offset, nodata, unit), the after DEM
-over the before's extent only and resampled onto its grid when the grids differ."""
+"""Volume between two DEMs a user already has (optionally per zone): each read in metres
+(:mod:`soilvolume.inputs.heights`), the after's over the before's extent, resampled when the grids differ."""
 
 from __future__ import annotations
 

@@ -1,9 +1,8 @@
 """The method's steps, each written once: read, register, grid, planes, volume, write, report.
 
-Each step takes the run's :class:`~.context.Context`, the backend that does its point work
-(:mod:`soilvolume.execution`) and the typed results of the steps before it, reports its progress,
-times itself and returns a frozen typed result. The products (:mod:`.pair`, :mod:`.design`,
-:mod:`.series`, :mod:`.single`) are compositions of these steps."""
+Each takes the run's :class:`~.context.Context`, the backend doing its point work and the earlier
+steps' results, reports its progress, times itself and returns a frozen typed result; the products
+(:mod:`.pair`, :mod:`.design`, :mod:`.series`, ...) are compositions of them."""
 
 from __future__ import annotations
 
@@ -17,7 +16,7 @@ from ..compensation.planes import Plane, plane_offset, ransac_plane
 from ..core.record import Georeferencing, QualityInputs, RunRecord
 from ..core.types import GridSpec
 from ..core.wording import cli_tree, opt
-from ..dem.grid import EpochDEM, output_layers
+from ..dem.grid import EpochDEM
 from ..execution.seam import Backend, Gridded, Layout
 from ..inputs.footprint import footprint
 from ..inputs.prepare import Prepared
@@ -41,8 +40,7 @@ from .plan import plan_grid, reference_cell
 
 @dataclass(frozen=True)
 class Registered:
-    """The registration step's result: the pose and the options the later steps take (precise
-    georeferencing: no bias correction)."""
+    """The registration and the options the later steps take (precise georeferencing: no correction)."""
 
     reg: Registration
     options: Options
@@ -81,10 +79,10 @@ def register(ctx: Context, prep: Prepared, dense) -> Registered:
 
 
 def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple[Registration, Options]:
-    """Decide how far the georeferencing is trusted, then register: (Registration, the options
-    the rest of the run uses). Auto with a vertical datum both files declare registers first and
-    keeps the coordinates only when the registration confirms them (:func:`registration.georef.confirm`).
-    ``register_other`` in the timings: the decision, beside the coarse and fine stages."""
+    """How far the georeferencing is trusted, then the registration: (Registration, the options the
+    rest of the run uses). Auto with a vertical datum both files declare keeps the coordinates only
+    when the registration confirms them (:func:`registration.georef.confirm`); ``register_other``
+    times the decision."""
     options, hooks, timer = ctx.options, ctx.hooks, ctx.timer
     with timer("register"):
         lo, hi, message = progress
@@ -137,8 +135,8 @@ def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> G
 
 
 def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Callable:
-    """The paper's two RANSAC planes, given the grid and the before DEM: the before cloud's on
-    its thinned points over the cells it has heights in, the registered after cloud's."""
+    """The paper's two RANSAC planes on a grid and its before DEM: the before's thinned points over
+    the cells it has heights in, and the registered after's."""
 
     def fit(grid: GridSpec, dem_before: EpochDEM) -> tuple[Plane, Plane]:
         valid = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
@@ -157,8 +155,7 @@ def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
 
 
 def planes(ctx: Context, gridded: Gridded) -> tuple:
-    """Step 4: the paper's planes and d_i on the grid the correction is found on: (plane before,
-    plane after, d_i)."""
+    """Step 4: (plane before, plane after, d_i) on the grid the correction is found on."""
     k = round(gridded.correction_grid.cell / gridded.grid.cell)
     overview = f"estimating the vertical bias correction on a {k} x {k} overview of the grid"
     with running(ctx, "planes", overview if k > 1 else correction_message(ctx.options)):
@@ -196,9 +193,8 @@ def alternative_move(reg: Registration) -> np.ndarray | None:
 
 
 def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec | None, layers: list) -> dict:
-    """Step 6: the rasters ``layers`` (and the registered cloud, when kept); drawn from the rasters
-    just staged: with ``--contour-interval``, contours.gpkg, with ``--sections``, the sections'
-    profiles; returns their descriptions for report.json (``contours``, ``sections``)."""
+    """Step 6: the rasters ``layers`` (and the registered cloud, when kept), then from them contours.gpkg
+    (``--contour-interval``) and the sections (``--sections``): their report.json entries."""
     extras = {}
     with running(ctx, "write", ctx.message("write") + backend.raster_note):
         z0 = 0.0 if grid is None else float(grid.origin[2])  # local -> absolute heights
@@ -212,14 +208,9 @@ def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec |
     return extras
 
 
-def pair_layers(options: Options) -> list:
-    """The rasters of a pair (:func:`dem.grid.output_layers`)."""
-    return output_layers(options.correction)
-
-
 def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | None) -> Reported:
-    """Step 7: report.json from the run's typed record (the quality verdict in it, the write
-    step's ``extras``), report.html and the areas of significant change as polygons."""
+    """Step 7: report.json from the run's record (its verdict, the write step's ``extras``),
+    report.html and the areas of significant change as polygons."""
     with running(ctx, "report", ctx.message("report"), log=False):
         out, vols, z0 = ctx.out, record.vols, float(gridded.grid.origin[2])
         report = build_report(record, ctx.timer.totals())

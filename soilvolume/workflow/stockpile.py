@@ -1,6 +1,5 @@
-"""The stockpile product (``soilvolume stockpile``): one survey read and prepared as ``dem`` reads
-it (CRS, units, local origin, pipeline, its ground and soil points only), gridded with the one
-cell rule, then the stockpile inventory (:mod:`soilvolume.stockpile`), written all or nothing."""
+"""``soilvolume stockpile``: one survey read as ``dem`` reads it (its ground and soil points), gridded by the
+one cell rule, its stockpile inventory (:mod:`soilvolume.stockpile`) written all or nothing."""
 
 from __future__ import annotations
 
