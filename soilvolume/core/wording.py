@@ -1,14 +1,9 @@
-"""Options named by key in the engine's messages; each front end words them its own way.
+"""Options named by key in the engine's messages, worded by each front end its own way.
 
-An engine message refers to an option of :class:`soilvolume.options.Options` with a marker
-:func:`opt` writes: ``{opt:KEY}`` or, with the value it is set to, ``{opt:KEY=VALUE}``
-("use {opt:georeferencing=gps} to register anyway"). The command line words a marker as its
-flag (:func:`cli`: ``--georeferencing gps``), the QGIS plugin as its parameter
-(``'Georeferencing' (GEOREFERENCING) = gps``), both through :func:`render`. Messages keep their
-markers until they leave the engine: ``str()`` of a ``SoilVolumeError``, report.json and the
-command line's text are worded for the command line (:func:`cli`, :func:`cli_tree`), report.html
-carries them as ``<span data-option=KEY>`` elements (:func:`html`), and the ``--progress jsonl``
-protocol keeps the markers for its front end to word. Standard library only (QGIS imports it).
+A message marks an option ``{opt:KEY}`` or ``{opt:KEY=VALUE}`` (:func:`opt`): the command line words it
+``--key value`` (:func:`cli`, :func:`cli_tree`: ``str()`` of an error, report.json), the QGIS plugin as its
+parameter (both through :func:`render`), report.html as a ``<span data-option=KEY>`` (:func:`html`), and
+``--progress jsonl`` keeps the markers. Standard library only (QGIS imports it).
 """
 
 from __future__ import annotations

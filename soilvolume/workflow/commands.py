@@ -17,9 +17,8 @@ from ..dem.grid import epoch_dem
 from ..execution.inmemory import InMemory
 from ..inputs.distinct import check_two_surveys
 from ..inputs.io import LAS_SUFFIXES
-from ..inputs.prepare import Single, prepare_single
+from ..inputs.prepare import Single
 from ..options import Options
-from ..pipelines.pipeline import open_source
 from ..reporting.report import dem_summary, registration_summary
 from ..validate import check_bounds
 from ..volumes.compute import centred_heights
@@ -47,7 +46,7 @@ def run_cloud_to_dem(
     threads("dem", options)
     ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
     with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
-        one = _read(ctx)
+        one = steps.read_one(ctx)
     with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
         grid, heights = _grid(ctx, one, bounds)
     with steps.running(ctx, "write", ctx.message("write")), os_errors(out_tif):
@@ -55,13 +54,6 @@ def run_cloud_to_dem(
         write_grid(out_tif, heights + one.origin[2], grid, desc)
     hooks.step(100, "done")
     return cli_tree(dem_summary(one, grid, heights))
-
-
-def _read(ctx: Context) -> Single:
-    """One cloud streamed into its own working frame."""
-    (epoch,) = ctx.epochs
-    check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
-    return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
 
 
 def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np.ndarray]:

@@ -19,8 +19,9 @@ from ..core.wording import cli_tree, opt
 from ..dem.grid import EpochDEM
 from ..execution.seam import Backend, Gridded, Layout
 from ..inputs.footprint import footprint
-from ..inputs.prepare import Prepared
+from ..inputs.prepare import Prepared, Single, prepare_single
 from ..options import Options
+from ..pipelines.pipeline import open_source
 from ..registration import georef
 from ..registration.register import Registration
 from ..registration.register import register as register_clouds
@@ -66,6 +67,13 @@ def read(ctx: Context, backend: Backend) -> Prepared:
     """Step 1: the pair read into one working frame (:mod:`soilvolume.inputs.prepare`)."""
     with running(ctx, "prepare", ctx.message("prepare") + backend.reading_note, "crop"):
         return backend.read(ctx)
+
+
+def read_one(ctx: Context) -> Single:
+    """Step 1 of one survey (``dem``, ``stockpile``): streamed into its own frame, its ground and soil points."""
+    (epoch,) = ctx.epochs
+    check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
+    return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
 
 
 def register(ctx: Context, prep: Prepared, dense) -> Registered:

@@ -15,10 +15,9 @@ from ..core.hooks import Hooks
 from ..core.outputs import check_input_file, output_dir
 from ..core.types import GridSpec, survey
 from ..dem.grid import average_height
-from ..inputs.prepare import Single, prepare_single
+from ..inputs.prepare import Single
 from ..inputs.surface import on_grid, open_surface, read_over
 from ..options import Options
-from ..pipelines.pipeline import open_source
 from ..stockpile import Base, Inventory, Pile, PileError, Survey, parse_base, stockpile_inventory
 from ..stockpile.html import write_html
 from ..stockpile.map import map_png
@@ -62,7 +61,7 @@ def run_stockpile(
     ctx = Context((survey(cloud, pipeline, crs=crs),), options, hooks, STEPS)
     with output_dir(out, [cloud, pipeline, piles.path, surface_path], overwrite, OUTPUTS) as folder:
         with steps.running(ctx, "prepare", ctx.message("prepare"), "crop"):
-            one = _read(ctx)
+            one = steps.read_one(ctx)
         with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
             grid, pile_survey = _grid(one, options)
         with steps.running(ctx, "volume", "measuring the piles"):
@@ -88,13 +87,6 @@ def _base_text(text: str) -> tuple[str, Path | None]:
     path = Path(arg)
     check_input_file(path)
     return text, path
-
-
-def _read(ctx: Context) -> Single:
-    """The survey streamed into its own working frame, its ground and soil points only."""
-    (epoch,) = ctx.epochs
-    check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
-    return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
 
 
 def _grid(one: Single, options: Options) -> tuple[GridSpec, Survey]:
