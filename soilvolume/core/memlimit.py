@@ -21,15 +21,11 @@ def address_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
-def limit_words() -> str:
-    """`` under the address-space limit of N MB (ulimit -v)``, or nothing without a limit."""
-    limit = address_limit()
-    return f" under the address-space limit of {limit / 1e6:,.0f} MB (ulimit -v)" if limit else ""
-
-
 def out_of_memory(keyed: bool = False) -> str:
     """The out-of-memory line, naming the limit (``keyed``: its option as a marker, else as a flag)."""
-    said = f"out of memory{limit_words()}: use a larger {wording.opt('cell')} or crop the clouds first"
+    limit = address_limit()
+    under = f" under the address-space limit of {limit / 1e6:,.0f} MB (ulimit -v)" if limit else ""
+    said = f"out of memory{under}: use a larger {wording.opt('cell')} or crop the clouds first"
     return said if keyed else wording.cli(said)
 
 

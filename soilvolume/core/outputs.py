@@ -56,12 +56,8 @@ def os_errors(path: Path | None = None) -> Iterator[None]:
     """OSErrors and the writer libraries' errors of the block as one line naming ``path`` or the error's file."""
     try:
         yield
-    except SoilVolumeError:
-        raise
-    except OSError as exc:
-        raise _write_problem(exc, path) from exc
     except Exception as exc:
-        if type(exc).__module__.startswith(WRITER_LIBRARIES):
+        if isinstance(exc, OSError) or type(exc).__module__.startswith(WRITER_LIBRARIES):
             raise _write_problem(exc, path) from exc
         raise
 
