@@ -1,11 +1,7 @@
-"""The engine's public entry points: what the CLI, the QGIS algorithms and servers call.
-
-Every function takes file paths and an :class:`~soilvolume.options.Options` (checked first,
-:func:`~soilvolume.validate.check_options`), reports through the optional ``progress(percent,
-message)``, ``log(message)`` and ``cancel() -> bool`` callbacks of its :class:`Hooks`, and raises
-:class:`~soilvolume.core.types.SoilVolumeError` (or :class:`Cancelled`) with a message naming the
-file and the problem. Outputs are written atomically.
-"""
+"""The engine's public entry points (the CLI's, QGIS's, servers'): each takes file paths and an
+:class:`~soilvolume.options.Options` (checked first), reports through its optional :class:`Hooks` and
+raises :class:`~soilvolume.core.types.SoilVolumeError` (or :class:`Cancelled`) naming the file and the
+problem; outputs are written atomically."""
 
 from __future__ import annotations
 

@@ -114,9 +114,8 @@ TILE_SUFFIXES = (".vpc", ".copc.laz")
 
 @dataclass(frozen=True)
 class Epoch:
-    """One survey of a run, in time order: its source (:data:`SOURCES`), the CRS given for a file without
-    one, its ISO date and where it came from (``"LAS header"``, ``"given"``), and how far its
-    georeferencing is trusted. A product takes one (``dem``), two (the first the reference) or more."""
+    """One survey of a run, in time order: its source (:data:`SOURCES`), the CRS given for a file without one,
+    its ISO date and its source (``"LAS header"``, ``"given"``), how far its georeferencing is trusted."""
 
     path: Path
     source: str = "cloud"

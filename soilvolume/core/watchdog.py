@@ -1,12 +1,7 @@
-"""Every run ends, whatever C loop its threads are in: a thread beside the run that
-
-- hears SIGINT/SIGTERM through the interpreter's wakeup fd (written by the C-level handler even while
-  the main thread waits on a thread stuck in native code): a run not stopping :data:`GRACE` s later
-  (or not ended :data:`STOPPING_S` s after it began to) has its cleanups run and leaves with the usual line;
-- under ``ulimit -v``, sees a thread spinning at the limit (OpenBLAS retries a failed buffer allocation
-  for ever, in system time: a series' two planes at 600 MB spun for 12 minutes) and after :data:`SPIN_S` s
-  fails the run in one line naming the limit.
-"""
+"""Every run ends, whatever C loop its threads are in: a thread beside it hears SIGINT/SIGTERM through the
+wakeup fd (written even while the main thread waits on native code) and ends a run not stopping within
+:data:`GRACE` s (or not ended :data:`STOPPING_S` s after); under ``ulimit -v`` it sees a thread spinning at
+the limit (OpenBLAS's endless retry: a series at 600 MB spun 12 minutes) and fails the run after :data:`SPIN_S` s."""
 
 from __future__ import annotations
 

@@ -1,10 +1,6 @@
-"""Options named by key in the engine's messages, worded by each front end its own way.
-
-A message marks an option ``{opt:KEY}`` or ``{opt:KEY=VALUE}`` (:func:`opt`): the command line words it
-``--key value`` (:func:`cli`, :func:`cli_tree`: ``str()`` of an error, report.json), the QGIS plugin as its
-parameter (both through :func:`render`), report.html as a ``<span data-option=KEY>`` (:func:`html`), and
-``--progress jsonl`` keeps the markers. Standard library only (QGIS imports it).
-"""
+"""Options marked by key in the engine's messages (``{opt:KEY}``, ``{opt:KEY=VALUE}``: :func:`opt`), worded by
+each front end (:func:`render`): ``--key value`` (:func:`cli`, :func:`cli_tree`), QGIS's parameter, report.html's
+``<span data-option=KEY>`` (:func:`html`); ``--progress jsonl`` keeps them. Standard library only (QGIS imports it)."""
 
 from __future__ import annotations
 

@@ -1,9 +1,5 @@
-"""Every knob of the pipeline in one frozen dataclass, :class:`Options`, each declared once
-(:func:`.table.option`): default, one-line help, GUI label, unit, range and the commands that take it.
-
-The CLI builds its ``--help`` from the help, the QGIS algorithms map their parameters onto the same
-fields, so all front ends share one set of defaults.
-"""
+"""Every knob of the pipeline in one frozen dataclass, :class:`Options`, each declared once (:func:`.table.option`):
+the CLI's flags and the QGIS algorithms' parameters are made from it, so all front ends share its defaults."""
 
 from __future__ import annotations
 

@@ -22,11 +22,9 @@ def option(
     run_control: bool = False,
     help: str | None = None,
 ) -> Any:
-    """An option: its default, ``label`` (short title for GUIs), the ``commands`` that take it, ``unit``
-    ("m", "m2", "deg", ...), the allowed range ``lo``..``hi`` (``lo`` excluded when ``lo_open``) that
-    every front end validates against, ``choices``, and ``run_control``: where and how the run goes,
-    never its numbers (every other option keys the work a resumed run may reuse); its one-line
-    ``help`` here or from :func:`options`."""
+    """An option: default, GUI ``label``, the ``commands`` taking it, ``unit``, range ``lo``..``hi`` (``lo`` excluded
+    when ``lo_open``), ``choices``, ``help`` (or from :func:`options`) and ``run_control``: where and how the run
+    goes, never its numbers (every other option keys the work a resumed run may reuse)."""
     meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
     return field(default=default, metadata={**meta, "commands": commands, "run_control": run_control})
 

@@ -38,9 +38,8 @@ def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
 
 @dataclass(frozen=True)
 class Context:
-    """A product's run: epochs, options, callbacks, timer, output folder (None: one file written), each
-    step's percent range (:func:`spans`) and ``--scheduler`` parsed once (:func:`soilvolume.validate.schedule_of`;
-    None for ``auto`` and the commands without it): later uses read it, never the option's text."""
+    """A product's run: epochs, options, callbacks, timer, output folder (None: one file), each step's percent
+    range (:func:`spans`), ``--scheduler`` as parsed once (None: ``auto``), never its text again."""
 
     epochs: tuple[Epoch, ...]
     options: Options

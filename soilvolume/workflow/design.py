@@ -169,10 +169,8 @@ def survey_grid(prep: Prepared, surface: Surface | Tin, cell: float) -> GridSpec
 
 
 def surface_epoch(surface: Surface | Tin, grid: GridSpec, given_m: float) -> tuple[EpochDEM, np.ndarray]:
-    """(the surface as the before epoch on ``grid``, each cell's one-sigma error (m)): heights bilinear
-    at the cell centres, their error the difference from cubic ones (where the surface curves) with
-    ``given_m`` in quadrature; each cell counts :data:`DESIGN_COUNT` points of that standard error, so
-    the per-cell level of detection includes it."""
+    """(the surface bilinear at ``grid``'s centres as the before epoch, each cell's one-sigma error: its difference
+    from cubic with ``given_m`` in quadrature, the standard error of :data:`DESIGN_COUNT` points so the LoD has it)."""
     z = on_grid(surface, grid) - grid.origin[2]
     cubic = z if isinstance(surface, Tin) else on_grid(surface, grid, "cubic") - grid.origin[2]  # a TIN is exact
     valid = np.isfinite(z)

@@ -1,11 +1,6 @@
-"""The one grid planner and default-cell rule of every product and backend.
-
-The cell is ``--cell``, else about eight points of the reference epoch per cell over the footprint
-compared (:func:`soilvolume.dem.grid.choose_cell`: rounded up to 5 cm, at least 0.5 m): the before
-points within the registered after footprint (pair, series), else the survey's own. A tiled run,
-holding no points, counts them from the first pass's columns, so both backends pick the same cell
-(``tests/test_plan.py``). The grid covers the overlap of the epochs' boxes, its edges on multiples
-of the cell."""
+"""The one grid planner and default-cell rule of every product and backend: ``--cell``, else about eight
+reference points per cell over the footprint compared (:func:`soilvolume.dem.grid.choose_cell`), counted by
+a tiled run from its columns so both backends pick the same cell; the grid over the epochs' boxes' overlap."""
 
 from __future__ import annotations
 

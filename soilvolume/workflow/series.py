@@ -1,9 +1,6 @@
-"""``soilvolume series E0 E1 ... En``: the method's steps (:mod:`.steps`) over the pairs E0 -> Ek, in memory.
-
-Each Ek is read and registered against E0 (so the stable-ground refinement works on ground stable across
-the two), every epoch is moved into E0's frame and gridded on one grid (the cells every registered epoch
-covers), each pair's volume step corrects Ek once relative to E0, and :mod:`soilvolume.volumes.series`
-turns the corrected differences into periods that add up to the cumulative."""
+"""``soilvolume series E0 E1 ... En``: the method's steps over the pairs E0 -> Ek (each registered on ground
+stable between the two), in memory: every epoch in E0's frame on one grid, each Ek corrected once relative
+to E0, the periods adding up to the cumulative (:mod:`soilvolume.volumes.series`)."""
 
 from __future__ import annotations
 
@@ -174,10 +171,8 @@ def run_series(
     overwrite: bool = False,
     hooks: Hooks | None = None,
 ) -> Result:
-    """Volume change over a series of surveys (``api.series``), E0 (``epochs[0]``) the reference: report.json
-    holds ``epochs`` (each registration into E0's frame), ``periods`` (one per consecutive pair)
-    and ``cumulative``; the periods' nets add up to the cumulative net. ``dates``: one per epoch
-    (YYYY-MM-DD; empty keeps the file's)."""
+    """Volume change over surveys (``api.series``), E0 the reference: report.json's ``epochs``, ``periods`` and
+    ``cumulative`` (the periods' nets add up to it); ``dates``: one per epoch (YYYY-MM-DD; empty: the file's)."""
     paths, options, hooks = [Path(e) for e in epochs], options or Options(), hooks or Hooks()
     timer = Timer()
     schedule = schedule_of(options)  # parsed once, before any work (a series runs in this process)
