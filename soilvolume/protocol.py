@@ -27,7 +27,6 @@ import os
 import sys
 import threading
 import warnings
-from pathlib import Path
 from typing import IO, Any
 
 
@@ -46,9 +45,7 @@ def _finite(value: Any) -> Any:
         return {str(k): _finite(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [_finite(v) for v in value]
-    if isinstance(value, Path):
-        return str(value)
-    return value
+    return value  # a Path: str by _plain
 
 
 class Protocol:

@@ -91,22 +91,21 @@ def schedule_of(options: Options) -> Schedule | None:
         raise OptionError("scheduler", exc.problem) from None
 
 
-def check_bounds(bounds: Sequence[float] | None, name: str = "--bounds") -> tuple[float, ...] | None:
+def check_bounds(bounds: Sequence[float] | None) -> tuple[float, ...] | None:
     """``xmin, ymin, xmax, ymax``: four finite numbers with xmin < xmax and ymin < ymax."""
     if bounds is None:
         return None
     b = tuple(bounds)
     if len(b) != 4 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in b):
-        raise SoilVolumeError(f"{name}: must be four finite numbers XMIN YMIN XMAX YMAX (got {b})")
+        raise SoilVolumeError(f"--bounds: must be four finite numbers XMIN YMIN XMAX YMAX (got {b})")
     if not (b[0] < b[2] and b[1] < b[3]):
-        raise SoilVolumeError(f"{name}: XMIN must be < XMAX and YMIN < YMAX (got {' '.join(f'{v:g}' for v in b)})")
+        raise SoilVolumeError(f"--bounds: XMIN must be < XMAX and YMIN < YMAX (got {' '.join(f'{v:g}' for v in b)})")
     return b
 
 
-def check_grid_cells(rows: int, cols: int, cell: float, valid: int | None = None) -> None:
-    """Refuse a grid of fewer than :data:`MIN_CELLS` (valid) cells: a cell as large as the site makes noise."""
-    n = rows * cols if valid is None else valid
-    if n < MIN_CELLS:
+def check_grid_cells(rows: int, cols: int, cell: float) -> None:
+    """Refuse a grid of fewer than :data:`MIN_CELLS` cells: a cell as large as the site makes noise."""
+    if (n := rows * cols) < MIN_CELLS:
         raise OptionError(
             "cell",
             f"a {cell:g} m grid has only {n} cell(s) over the compared area "
