@@ -52,15 +52,21 @@ def remove(path: Path) -> None:
 
 def dead_siblings(final: Path, kinds: Iterable[str]) -> Iterator[tuple[Path, str]]:
     """(path, kind) of the hidden siblings of ``final`` of these ``kinds`` whose run is dead."""
-    pattern = re.compile(rf"^\.{re.escape(tag(final.name))}\.({'|'.join(map(re.escape, kinds))})-(\d+)(-\w*)?(\..*)?$")
+    name, kind = re.escape(tag(final.name)), "|".join(map(re.escape, kinds))
+    for entry, m in _dead(final.parent, rf"^\.{name}\.(?P<kind>{kind})-(?P<pid>\d+)(-\w*)?(\..*)?$"):
+        yield entry, m["kind"]
+
+
+def _dead(folder: Path, pattern: str) -> Iterator[tuple[Path, re.Match]]:
+    """The entries of ``folder`` matching ``pattern`` whose run (its ``pid`` group) is dead."""
     try:
-        entries = list(final.parent.iterdir())
+        entries = list(folder.iterdir())
     except OSError:
         return
     for entry in entries:
-        m = pattern.match(entry.name)
-        if m and not _alive(int(m.group(2))):
-            yield entry, m.group(1)
+        m = re.match(pattern, entry.name)
+        if m and not _alive(int(m["pid"])):
+            yield entry, m
 
 
 def sweep(final: Path) -> None:
@@ -74,15 +80,8 @@ def sweep(final: Path) -> None:
 
 def sweep_inside(folder: Path) -> None:
     """Remove staging folders dead runs left inside ``folder`` (mount points, folders whose parent is not writable)."""
-    pattern = re.compile(rf"^\.{STAGING}-(\d+)-\w+$")
-    try:
-        entries = list(folder.iterdir()) if folder.is_dir() else []
-    except OSError:
-        return
-    for entry in entries:
-        m = pattern.match(entry.name)
-        if m and not _alive(int(m.group(1))):
-            remove(entry)
+    for entry, _ in _dead(folder, rf"^\.{STAGING}-(?P<pid>\d+)-\w+$") if folder.is_dir() else ():
+        remove(entry)
 
 
 LOCK_DIR, LOCK_WAIT_S = ".soilvolume-lock", 120.0
