@@ -3,12 +3,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyproj
 
 from ..core.hooks import Hooks
 from ..core.outputs import check_output_file, os_errors
@@ -17,7 +15,6 @@ from ..dem.geotiff import write_grid
 from ..inputs.crs import horizontal, parse_crs, xy_unit
 from ..inputs.distinct import check_two_surveys
 from ..inputs.heights import (
-    HeightRaster,
     Heights,
     masked_notes,
     metres_per_unit,
@@ -25,6 +22,7 @@ from ..inputs.heights import (
     read_heights,
     window_over,
 )
+from ..inputs.surface import SurfaceSource as Dem
 from ..volumes.difference import budget
 from ..volumes.zones import zone_budgets
 
@@ -34,35 +32,28 @@ NO_CORRECTION = (
 )
 
 
-@dataclass(frozen=True)
-class Dem:
-    """A DEM opened and checked (:mod:`soilvolume.inputs.heights`): its CRS and heights' unit."""
-
-    raster: HeightRaster
-    crs: pyproj.CRS
-    factor: float  # metres per stored unit (after the band's scale and offset)
-    where: str  # where the unit came from, in words
-
-    def profile(self, heights: Heights) -> dict:
-        """The grid of ``heights`` (a window of the DEM) for GDAL's warp and :func:`grid_of`."""
-        rows, cols = heights.z.shape
-        return {"transform": heights.transform, "crs": self.crs, "height": rows, "width": cols}
-
-    def describe(self, heights: Heights) -> dict:
-        return {
-            "path": self.raster.path,
-            "vertical_unit": self.where,
-            **self.raster.describe(),
-            "masked_as_nodata": heights.masked,
-        }
-
-
 def open_dem(path: Path) -> Dem:
     """A DEM opened, its CRS (required) and heights' unit checked; no pixel read."""
     raster = open_heights(path)
     if raster.crs is None:
         raise SoilVolumeError(f"{path}: the raster has no CRS")
     return Dem(raster, raster.crs, *metres_per_unit(raster.crs, raster.unit, str(path)))
+
+
+def profile(dem: Dem, heights: Heights) -> dict:
+    """The grid of ``heights`` (a window of ``dem``) for GDAL's warp and :func:`grid_of`."""
+    rows, cols = heights.z.shape
+    return {"transform": heights.transform, "crs": dem.crs, "height": rows, "width": cols}
+
+
+def describe(dem: Dem, heights: Heights) -> dict:
+    """report's description of an input DEM and what of it was read."""
+    return {
+        "path": dem.path,
+        "vertical_unit": dem.vertical_unit,
+        **dem.raster.describe(),
+        "masked_as_nodata": heights.masked,
+    }
 
 
 def after_on_before(after: Dem, before: Dem, grid: dict) -> tuple[np.ndarray, Heights]:
@@ -77,7 +68,7 @@ def after_on_before(after: Dem, before: Dem, grid: dict) -> tuple[np.ndarray, He
     if window is None:
         raise SoilVolumeError(f"{before.raster.path} and {after.raster.path} do not overlap")
     got = read_heights(after.raster, after.factor, window)
-    return resample_onto(got.z, after.profile(got), grid), got
+    return resample_onto(got.z, profile(after, got), grid), got
 
 
 def grid_of(profile: dict) -> GridSpec:
@@ -128,7 +119,7 @@ def run_volume_from_rasters(
     hooks.step(5, f"reading {before.name} and {after.name}")
     db, da = open_dem(before), open_dem(after)
     hb, ha, za = read_both(db, da, hooks)
-    grid, diff = grid_of(db.profile(hb)), za - hb.z
+    grid, diff = grid_of(profile(db, hb)), za - hb.z
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
     hooks.step(60, "computing cut and fill")
@@ -147,7 +138,7 @@ def run_volume_from_rasters(
         "crs": parse_crs(grid.crs_wkt, "raster").name,
         "median_difference_m": median,
         "method": NO_CORRECTION,
-        "inputs": {"before": db.describe(hb), "after": da.describe(ha)},
+        "inputs": {"before": describe(db, hb), "after": describe(da, ha)},
     }
     if zones:  # before writing: a bad zones file leaves nothing behind
         result["zones"] = zone_budgets(diff, grid, zones, zone_field)
@@ -168,7 +159,7 @@ def read_both(db: Dem, da: Dem, hooks: Hooks) -> tuple[Heights, Heights, np.ndar
         za = ha.z
     else:
         hooks.info(f"resampling {Path(ra.path).name} onto the grid of {Path(rb.path).name}")
-        za, ha = after_on_before(da, db, db.profile(hb))
+        za, ha = after_on_before(da, db, profile(db, hb))
     for note in masked_notes(rb.path, hb.masked) + masked_notes(ra.path, ha.masked):
         hooks.info(note)
     return hb, ha, za
