@@ -162,9 +162,8 @@ class OutputDir:
     def _ours(self, entry: Path) -> bool:
         if self.allowed is not None:
             return entry.name in self.allowed
-        old_staging = entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
         return (
-            old_staging
+            entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
             or (entry.is_file() and (entry.name in RUN_OUTPUTS or entry.name.lower().endswith(RUN_SUFFIXES)))
             or (entry.is_dir() and entry.name in RUN_FOLDERS)
         )
@@ -198,7 +197,12 @@ class OutputDir:
         except OSError as exc:
             if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise os_problem(exc, self.final) from exc
-        if self._replace_empty():
+        try:
+            self.final.rmdir()  # Windows renames nothing onto a folder, even an empty one: removed while empty
+        except OSError:
+            pass
+        else:
+            os.rename(self.stage, self.final)
             return
         if not self.overwrite:
             raise SoilVolumeError(f"{self.final}: another run filled the output folder meanwhile")
@@ -206,15 +210,6 @@ class OutputDir:
         os.rename(self.final, trash)
         os.rename(self.stage, self.final)
         shutil.rmtree(trash, ignore_errors=True)
-
-    def _replace_empty(self) -> bool:
-        """Windows renames nothing onto a folder, even an empty one: removed (only while empty)."""
-        try:
-            self.final.rmdir()
-        except OSError:
-            return False
-        os.rename(self.stage, self.final)
-        return True
 
     def _restore(self) -> None:
         trash = sibling(self.final, TRASH, token=self.token)
