@@ -1,5 +1,4 @@
-"""The shortened products: one cloud to a DEM (``soilvolume dem``: read, grid, write) and
-registration only (``soilvolume register``: :func:`.pair.register`), in memory."""
+"""The short products, in memory: one cloud to a DEM (``soilvolume dem``) and registration only (``register``)."""
 
 from __future__ import annotations
 
@@ -38,9 +37,8 @@ def run_cloud_to_dem(
     bounds: tuple[float, float, float, float] | None = None,
     hooks: Hooks | None = None,
 ) -> dict[str, Any]:
-    """One cloud to an average-height GeoTIFF (``api.cloud_to_dem``; ``options.cell``/``options.statistic``;
-    ``bounds`` = xmin, ymin, xmax, ymax in the cloud's CRS, snapped outwards to the cell). Returns the grid
-    description (cell_m, rows, cols, crs, transform, points, valid_cells)."""
+    """One cloud to an average-height GeoTIFF (``api.cloud_to_dem``; ``bounds``: xmin, ymin, xmax, ymax in its
+    CRS, snapped outwards to the cell); returns the grid (cell_m, rows, cols, crs, transform, points, valid_cells)."""
     options, bounds, hooks = options or Options(), check_bounds(bounds), hooks or Hooks()
     cloud, out_tif = Path(cloud), check_output_file(Path(out_tif), [cloud])
     threads("dem", options)
@@ -81,9 +79,8 @@ def run_register(
     *,
     hooks: Hooks | None = None,
 ) -> dict[str, Any]:
-    """Register the after cloud onto the before cloud and write it (``api.register``; LAS/LAZ, before CRS).
-    Returns {"transform": 4x4 row-major list (after in before CRS -> before), "coarse": {...},
-    "fine": {...}}."""
+    """The after cloud registered onto the before and written (``api.register``; LAS/LAZ, before CRS); returns
+    {"transform": 4x4 row-major (after in before CRS -> before), "coarse": {...}, "fine": {...}}."""
     options, hooks, before, after = options or Options(), hooks or Hooks(), Path(before), Path(after)
     check_two_surveys(before, after)
     out_cloud = check_output_file(Path(out_cloud), [before, after])

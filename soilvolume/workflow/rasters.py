@@ -110,9 +110,8 @@ def run_volume_from_rasters(
     zone_field: str | None = None,
     hooks: Hooks | None = None,
 ) -> dict[str, Any]:
-    """Cut/fill/net between two DEMs a user already has (``api.volume_from_rasters``; the after raster is
-    resampled onto the before grid when they differ). Returns {"total": {"net","cut","fill","area_m2"}, "zones":
-    [{"id", "name", "net", "cut", "fill", "area_m2"}, ...]} and writes the difference GeoTIFF."""
+    """Cut/fill/net between two DEMs (``api.volume_from_rasters``), the after resampled onto the before's grid:
+    {"total": {"net", "cut", "fill", "area_m2", "cells"}, "zones": [...], ...}; writes the difference GeoTIFF."""
     before, after, hooks = Path(before), Path(after), hooks or Hooks()
     check_two_surveys(before, after, "the before DEM")
     out = check_output_file(Path(out), [before, after, zones])

@@ -193,9 +193,8 @@ def pair_named(ctx: Context, k: int) -> str:
 
 
 def series(ctx: Context, backend: InMemory, design=None) -> dict:
-    """Read and register each pair E0 -> Ek, grid every epoch on one grid, each pair's planes and
-    volume step (Ek corrected once relative to E0), the periods, each epoch against the
-    ``design`` (:func:`.seriesgrade.open_design`) when given, write, report."""
+    """Read and register each pair E0 -> Ek, grid every epoch on one grid, each pair's planes and volume
+    step, the periods, each epoch against the ``design`` (:func:`.seriesgrade.open_design`), write, report."""
     with backend.session(ctx):
         with steps.running(ctx, "prepare", ctx.message("prepare"), "crop"):
             preps = [_read(ctx, backend, k) for k in range(1, len(ctx.epochs))]
