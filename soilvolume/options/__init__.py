@@ -56,32 +56,17 @@ HELP = {
     "objects": "objects in one survey only (a machine, a container, a cabin or a stack of materials that arrived or left, found by their near-vertical walls): exclude (left out of the headline and listed with their volume; only earthworks count), count (counted as fill or cut and listed: the seed paper's test pillars)",
     "lod_confidence": "confidence of the level of detection and of the volume uncertainty",
     "zones": "optional polygon file: volumes per polygon (a series with a design: its progress per polygon)",
-    "design_uncertainty": "when BEFORE is a surface (a design DEM GeoTIFF): its vertical uncertainty (m, one sigma, common to the "
-    "compared area), added to the volumes' interval; 0 takes the design as exact",
-    "contour_interval": "write contours.gpkg: contour lines every this many metres of the difference (layer difference: ELEV below 0 "
-    "is cut, above 0 fill, 0 their border) and of each DEM (layers dem_before, dem_after), by GDAL's contour "
-    "algorithm, none across nodata (0 = none)",
-    "sections": "a vector file of lines (any OGR format; its CRS honoured): a cross-section along each, the heights before "
-    "(the design against a surface), after and their difference every half cell, in sections.csv (line id and "
-    "name, chainage in m, x, y, before, after, difference) and one picture per line, sections/NAME.svg",
-    "gpkg": "also write the areas of significant change as change_areas.gpkg and, with {opt:zones}, the zones with their "
-    "budgets as zones.gpkg (GeoPackage, in the run's CRS; zones.csv is written with {opt:zones} either way)",
+    "design_uncertainty": "when BEFORE is a surface (a design DEM GeoTIFF): its vertical uncertainty (m, one sigma, common to the compared area), added to the volumes' interval; 0 takes the design as exact",
+    "contour_interval": "write contours.gpkg: contour lines every this many metres of the difference (layer difference: ELEV below 0 is cut, above 0 fill, 0 their border) and of each DEM (layers dem_before, dem_after), by GDAL's contour algorithm, none across nodata (0 = none)",
+    "sections": "a vector file of lines (any OGR format; its CRS honoured): a cross-section along each, the heights before (the design against a surface), after and their difference every half cell, in sections.csv (line id and name, chainage in m, x, y, before, after, difference) and one picture per line, sections/NAME.svg",
+    "gpkg": "also write the areas of significant change as change_areas.gpkg and, with {opt:zones}, the zones with their budgets as zones.gpkg (GeoPackage, in the run's CRS; zones.csv is written with {opt:zones} either way)",
     "design_surface": "when BEFORE is a LandXML file: the name of its TIN surface to use (default: the file's first surface)",
-    "bulking": "bulking (swell) factor, loose/bank volume (e.g. 1.25): report.json's quantities give the loose volumes "
-    "(a zone's own: its 'bulking' attribute in the zones file)",
-    "shrinkage": "shrinkage factor, compacted/bank volume (e.g. 0.90): report.json's quantities give the compacted volumes "
-    "(a zone's own: its 'shrinkage' attribute in the zones file)",
-    "tolerance": "when BEFORE is a design: the on-grade tolerance (m, e.g. 0.05): grade.tif classes each cell as cut to go "
-    "(survey above design by more than it), on grade or fill to go; report.json's grade gives the share on "
-    "grade and the cut and fill still to go, overall and per zone",
-    "design": "a series' design surface (a DEM GeoTIFF or a LandXML TIN), resampled onto the series' grid: with "
-    "{opt:tolerance}, each epoch's share on grade and cut and fill still to go, and each period's progress "
-    "(the cut and fill to go it did)",
+    "bulking": "bulking (swell) factor, loose/bank volume (e.g. 1.25): report.json's quantities give the loose volumes (a zone's own: its 'bulking' attribute in the zones file)",
+    "shrinkage": "shrinkage factor, compacted/bank volume (e.g. 0.90): report.json's quantities give the compacted volumes (a zone's own: its 'shrinkage' attribute in the zones file)",
+    "tolerance": "when BEFORE is a design: the on-grade tolerance (m, e.g. 0.05): grade.tif classes each cell as cut to go (survey above design by more than it), on grade or fill to go; report.json's grade gives the share on grade and the cut and fill still to go, overall and per zone",
+    "design": "a series' design surface (a DEM GeoTIFF or a LandXML TIN), resampled onto the series' grid: with {opt:tolerance}, each epoch's share on grade and cut and fill still to go, and each period's progress (the cut and fill to go it did)",
     # the stockpile inventory and the run control (where and how a run goes, never its numbers)
-    "base": "what each pile's volume is measured from: triangulated (a surface through its toe line, the common "
-    "practice), plane (a plane fit to the toe), lowest, average or highest (a level at the toe's lowest, mean or "
-    "highest height), elevation:Z (a level at Z metres, the survey's heights), surface:DEM (a GeoTIFF such as an "
-    "earlier survey's DEM or a design, resampled onto the grid)",
+    "base": "what each pile's volume is measured from: triangulated (a surface through its toe line, the common practice), plane (a plane fit to the toe), lowest, average or highest (a level at the toe's lowest, mean or highest height), elevation:Z (a level at Z metres, the survey's heights), surface:DEM (a GeoTIFF such as an earlier survey's DEM or a design, resampled onto the grid)",
     "density": "bulk density (t/m3) for tonnage, for every pile without its own density field",
     "threads": "worker threads of the registration (its nearest-neighbour searches and Open3D; 0 = all cores)",
     "scheduler": "where the work runs: none (in-process), threads[:N] (tiles on N threads), local[:N] (tiles on a Dask LocalCluster of N worker processes), tcp://HOST[:PORT] (an existing Dask cluster, port 8786 by default; its workers must see the input paths), auto (in-process when the pair fits {opt:memory_limit}, else local)",
