@@ -67,6 +67,12 @@ class GridSpec:
         u = self.xy_unit
         return Affine(self.cell / u, 0.0, self.xmin / u, 0.0, -self.cell / u, self.ymax / u)
 
+    def box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The grid's (lo, hi) corners, absolute x/y (metres)."""
+        return np.array([self.xmin, self.ymax - self.rows * self.cell]), np.array(
+            [self.xmin + self.cols * self.cell, self.ymax]
+        )
+
     @property
     def cell_area(self) -> float:
         return self.cell * self.cell
@@ -124,10 +130,6 @@ class Epoch:
     date: str | None = None
     date_source: str | None = None
     georeferencing: str = "auto"
-
-    def __post_init__(self) -> None:
-        if self.source not in SOURCES:
-            raise ValueError(f"an epoch's source is one of {SOURCES}, not {self.source!r}")
 
     @property
     def name(self) -> str:

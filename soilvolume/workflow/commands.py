@@ -41,7 +41,6 @@ def run_cloud_to_dem(
     CRS, snapped outwards to the cell); returns the grid (cell_m, rows, cols, crs, transform, points, valid_cells)."""
     options, bounds, hooks = options or Options(), check_bounds(bounds), hooks or Hooks()
     cloud, out_tif = Path(cloud), check_output_file(Path(out_tif), [cloud])
-    threads("dem", options)
     ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
     with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
         one = steps.read_one(ctx)
@@ -57,11 +56,10 @@ def run_cloud_to_dem(
 def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np.ndarray]:
     """The one cloud's grid (``bounds``, else its points' box) and heights at the cell centres."""
     xyz, origin, frame, options = one.xyz, one.origin, one.frame, ctx.options
+    box = xyz
     if bounds is not None:
         u, b = frame.xy_unit, bounds
         box = (np.array([b[0] * u, b[1] * u]) - origin[:2], np.array([b[2] * u, b[3] * u]) - origin[:2])
-    else:
-        box = (xyz.min(axis=0)[:2].astype(float), xyz.max(axis=0)[:2].astype(float))
     cell = cloud_cell(xyz, one.thin, options)
     grid = plan_grid(cell, [box], origin, frame, f"{ctx.epochs[0].path}: --bounds do not make a grid")
     ctx.hooks.step(ctx.at("grid", 0.1), f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
@@ -86,7 +84,7 @@ def run_register(
     out_cloud = check_output_file(Path(out_cloud), [before, after])
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
-    threads("register", options)
+    threads(options)
     given = {"georeferencing": options.georeferencing}
     epochs: tuple[Epoch, ...] = (
         survey(before, crs=options.before_crs, **given),

@@ -9,7 +9,7 @@ from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.types import Epoch
 from ..distributed.schedule import Schedule
-from ..options import Options, command_fields
+from ..options import Options
 from .timing import Timer
 
 #: step -> (start %, end %, message) of an estimate; a shorter product spreads its steps over 0-100
@@ -68,8 +68,8 @@ class Context:
         return replace(self, options=options)
 
 
-def threads(command: str, options: Options) -> None:
-    """``--threads`` as OMP_NUM_THREADS for OpenMP libraries (Open3D 0.19+ runs on oneTBB:
-    :func:`soilvolume.registration.o3d.limit_threads`; BLAS: :func:`soilvolume.process.one_blas_thread`)."""
-    if any(f.name == "threads" for f in command_fields(command)) and options.threads > 0:
+def threads(options: Options) -> None:
+    """``--threads`` (of the commands taking it) as OMP_NUM_THREADS for OpenMP libraries (Open3D 0.19+ runs
+    on oneTBB: :func:`soilvolume.registration.o3d.limit_threads`; BLAS: :func:`soilvolume.process.one_blas_thread`)."""
+    if options.threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(options.threads))

@@ -160,7 +160,7 @@ def survey_grid(prep: Prepared, surface: Surface | Tin, cell: float) -> GridSpec
     """The grid of ``cell`` over the survey's footprint clipped to the surface's valid extent."""
     box_lo, box_hi = valid_box(surface, prep.frame.crs, prep.frame.xy_unit)
     thin, origin = prep.after_thin[:, :2], prep.origin[:2]
-    boxes = [(thin.min(axis=0), thin.max(axis=0)), (box_lo - origin, box_hi - origin)]
+    boxes = [thin, (box_lo - origin, box_hi - origin)]
     empty = (
         f"{surface.path} does not overlap {prep.after.path}: the surface's valid extent misses the survey "
         "(check the CRSs)"

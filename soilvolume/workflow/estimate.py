@@ -56,7 +56,7 @@ def run_estimate(
             f"not the point cloud {before}"
         )
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask, options.sections]
-    threads("estimate", options)
+    threads(options)
     with (
         output_dir(Path(out_dir), inputs, overwrite) as out,
         os_errors(out.final),

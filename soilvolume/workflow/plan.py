@@ -47,8 +47,9 @@ def cloud_cell(xyz: np.ndarray, thin: np.ndarray, options: Options) -> float:
 
 
 def plan_grid(cell: float, boxes: Sequence[tuple], origin: np.ndarray, frame: WorkFrame, empty: str) -> GridSpec:
-    """The grid of ``cell`` over the overlap of ``boxes`` (local (lo, hi) pairs, x/y first);
-    ``empty``: the error when they do not overlap."""
+    """The grid of ``cell`` over the overlap of ``boxes`` (local (lo, hi) pairs, x/y first, or the points'
+    own); ``empty``: the error when they do not overlap."""
+    boxes = [(b[:, :2].min(axis=0), b[:, :2].max(axis=0)) if isinstance(b, np.ndarray) else b for b in boxes]
     lo = np.max([np.asarray(b[0], float)[:2] for b in boxes], axis=0)
     hi = np.min([np.asarray(b[1], float)[:2] for b in boxes], axis=0)
     if (hi <= lo).any():

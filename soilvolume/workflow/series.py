@@ -156,7 +156,7 @@ def series_grid(fits: list[Fit], options: Options) -> GridSpec:
     within the first registered epoch's footprint (:mod:`.plan`)."""
     thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
     prep = fits[0].prep
-    boxes = [(t.min(axis=0), t.max(axis=0)) for t in (prep.before_thin, *thins)]
+    boxes = [prep.before_thin, *thins]
     cell = reference_cell(prep, footprint(thins[0][:, :2]), options)
     empty = "the registered epochs have no area in common with each other and E0"
     return plan_grid(cell, boxes, prep.origin, prep.frame, empty)
@@ -178,7 +178,7 @@ def run_series(
     schedule = schedule_of(options)  # parsed once, before any work (a series runs in this process)
     epochs = series_epochs(paths, dates, options)
     design = open_design(options)  # checked before any point is read
-    threads("series", options)
+    threads(options)
     inputs = [*paths, options.stable_mask, options.design, options.zones]
     with output_dir(Path(out_dir), inputs, overwrite) as out, os_errors(out.final):
         ctx = Context(epochs, options.with_(zones=None), hooks, STEPS, timer, out, schedule=schedule)

@@ -59,9 +59,7 @@ def open_design(options: Options) -> Design | None:
 
 def design_heights(source: SurfaceSource | Tin, grid: GridSpec, frame: WorkFrame, valid: np.ndarray) -> np.ndarray:
     """The design's local heights at the cell centres; refused without any on the compared cells."""
-    lo = np.array([grid.xmin, grid.ymax - grid.rows * grid.cell])
-    hi = np.array([grid.xmin + grid.cols * grid.cell, grid.ymax])
-    z = on_grid(read_over(source, lo, hi, frame, 2 * grid.cell), grid) - grid.origin[2]
+    z = on_grid(read_over(source, *grid.box(), frame, 2 * grid.cell), grid) - grid.origin[2]
     if not (np.isfinite(z) & valid).any():
         raise SoilVolumeError(f"{source.path} does not overlap the series: no compared cell has a design height")
     return z

@@ -125,14 +125,10 @@ def layout(prep: Prepared, reg: Registration, options: Options) -> Layout:
     """The grid over the registered after footprint and the before subset (:mod:`.plan`)."""
     after_thin = transform_points(prep.after_thin, reg.transform)
     poly = footprint(after_thin[:, :2])
-    boxes = [_box(after_thin), _box(prep.before_thin)]
+    boxes = [after_thin, prep.before_thin]
     empty = "the registered after cloud does not overlap the before cloud"
     grid = plan_grid(reference_cell(prep, poly, options), boxes, prep.origin, prep.frame, empty)
     return Layout(grid, after_thin, poly)
-
-
-def _box(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
 
 
 def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> Gridded:

@@ -92,8 +92,7 @@ def _base_text(text: str) -> tuple[str, Path | None]:
 def _grid(one: Single, options: Options) -> tuple[GridSpec, Survey]:
     """The survey's grid (its points' box, the one cell rule) and its :class:`Survey` on it."""
     xyz = one.xyz.astype(np.float64)
-    box = (xyz.min(axis=0)[:2], xyz.max(axis=0)[:2])
-    grid = plan_grid(cloud_cell(one.xyz, one.thin, options), [box], one.origin, one.frame, "no grid")
+    grid = plan_grid(cloud_cell(one.xyz, one.thin, options), [xyz], one.origin, one.frame, "no grid")
     h, n = average_height(xyz, grid, options.statistic)
     return grid, Survey(grid, h, n, standard_errors(xyz, grid, h, n), fill_nearest(h))
 
@@ -104,19 +103,13 @@ def _base(text: str, source, grid: GridSpec, one: Single) -> Base:
     if source is None:
         base = parse_base(text)
         return base if base.z is None else Base("elevation", z=base.z - float(one.origin[2]))
-    surface = read_over(source, *_box(grid), one.frame, 2 * grid.cell)
+    surface = read_over(source, *grid.box(), one.frame, 2 * grid.cell)
     return parse_base("surface", on_grid(surface, grid) - grid.origin[2])
-
-
-def _box(grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
-    """The grid's box in absolute frame coordinates (metres)."""
-    ymin = grid.ymax - grid.rows * grid.cell
-    return np.array([grid.xmin, ymin]), np.array([grid.xmin + grid.cols * grid.cell, grid.ymax])
 
 
 def _inside(piles: list[Pile], grid: GridSpec, path: Path | None) -> list[Pile]:
     """``piles``, each checked to lie at least partly over the survey's grid."""
-    lo, hi = _box(grid)
+    lo, hi = grid.box()
     extent = shapely.box(*(lo - np.asarray(grid.origin[:2])), *(hi - np.asarray(grid.origin[:2])))
     for p in piles:
         if not p.polygon.intersects(extent):
