@@ -1,9 +1,5 @@
-"""``python -m soilvolume`` and the ``soilvolume`` console command.
-
-Before anything else: a signal that arrives while the program is still importing ends it with
-one line, like one during a run, and the process is settled (:func:`soilvolume.process.settle`:
-read by numpy as it loads); then the command line is imported and run, and the process leaves
-(:func:`soilvolume.process.leave`)."""
+"""``python -m soilvolume`` and the ``soilvolume`` command: a signal while still importing ends it in one
+line, the process is settled (:func:`soilvolume.process.settle`), the command line run, the process left."""
 
 import os
 import signal

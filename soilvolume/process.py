@@ -1,11 +1,6 @@
-"""The settings of the ``soilvolume`` command's own process, in one place, made by
-:mod:`soilvolume.__main__` only (a program importing the engine keeps its process as it is).
-
-Each is kept because a benchmark shows its gain today (``bench/README.md``, *Process settings*:
-the paper-sized pair, and its 50 m LAS tiles on ``--scheduler local:2``, with and without,
-interleaved); the others, which gained under 5 % of the wall time and 10 % of the peak memory,
-were removed. It imports no numpy (nor anything that does): :func:`settle` runs before numpy is loaded.
-"""
+"""The ``soilvolume`` command's own process settings, made by :mod:`soilvolume.__main__` only, each kept
+for its measured gain (``bench/README.md``, *Process settings*; those under 5 % wall and 10 % peak memory
+were removed). No numpy here: :func:`settle` runs before it loads."""
 
 from __future__ import annotations
 
@@ -15,44 +10,36 @@ import sys
 
 from .core.watchdog import remove_process_temp_dir
 
-#: optional extras libraries import when installed, for functions the engine never calls:
-#: requests (laspy: COPC over HTTP); in the Dask workers also jinja2 (Dask: notebook HTML of its
-#: objects), which the command's own process needs for report.html
+#: optional extras libraries import for functions the engine never calls: requests (laspy's COPC over
+#: HTTP); in the Dask workers jinja2 too (Dask's notebook HTML; the command needs it for report.html)
 EXTRAS = ("requests",)
 WORKER_EXTRAS = (*EXTRAS, "jinja2")
 
 
 def settle() -> None:
-    """Set what numpy reads as it loads, in this process and the Dask workers it starts (they
-    inherit the environment): :func:`one_blas_thread`; and :func:`hide_extras`."""
+    """:func:`one_blas_thread` (read by numpy as it loads, here and in the Dask workers) and :func:`hide_extras`."""
     one_blas_thread()
     hide_extras()
 
 
 def hide_extras(names: tuple[str, ...] = EXTRAS) -> None:
-    """The modules ``names`` not imported yet seen as not installed by every later import in
-    this process (a library then leaves its optional extra out, as it allows): laspy's and Dask's
-    imports take no ``requests`` (and in the workers no ``jinja2``; LAS tiles on local:2 without
-    this: +14 % wall, +12 % CPU). Also made by the local cluster's workers with
-    :data:`WORKER_EXTRAS` (``distributed/workerinit``), whose forkserver imports laspy and Dask."""
+    """The modules ``names`` not yet imported seen as not installed by later imports, so laspy and Dask
+    leave their extras out (LAS tiles on local:2 without it: +14 % wall, +12 % CPU); the workers hide
+    :data:`WORKER_EXTRAS` (``distributed/workerinit``)."""
     for name in names:
         sys.modules.setdefault(name, None)  # type: ignore[arg-type]
 
 
 def one_blas_thread() -> None:
-    """numpy's OpenBLAS on one thread, unless the user's environment says otherwise
-    (``OPENBLAS_NUM_THREADS``). The engine's matrix products are points times a 3x3 or small
-    least squares, memory-bound; with a thread per core OpenBLAS's idle threads spin after every
-    product, taking the cores from Open3D's threads and the reading (paper pair: +27 % CPU and
-    about +80 % wall time with two threads)."""
+    """numpy's OpenBLAS on one thread unless ``OPENBLAS_NUM_THREADS`` says otherwise: its products are
+    memory-bound, and idle BLAS threads spin after each, taking the cores from Open3D and the reading
+    (paper pair with two threads: +27 % CPU, about +80 % wall time)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 
 def leave(code: int) -> int:
-    """End the process with ``code`` once the command returned, without the interpreter's
-    teardown (freeing numpy, pyproj, rasterio and Open3D's objects one by one: paper pair +34 %
-    wall time with it): by then every output is written and closed, every pool and cluster
-    shut; what the teardown would remove from TMPDIR is removed here."""
+    """End the process with ``code`` once the command returned (outputs closed, pools and clusters shut),
+    without the interpreter's teardown (paper pair: +34 % wall time), its TMPDIR folder removed here."""
     logging.shutdown()
     remove_process_temp_dir()
     for stream in (sys.stdout, sys.stderr):

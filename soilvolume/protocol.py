@@ -1,7 +1,6 @@
 """``--progress jsonl``: the command line's machine-readable progress, one JSON object per line.
 
-Front ends that run the engine as a subprocess (the QGIS plugin) read these lines and never parse
-human text. Each object has a ``type``:
+Front ends running the engine as a subprocess (QGIS) read these, never human text. Each has a ``type``:
 
 - ``progress``: ``percent`` (0-100) and ``message``;
 - ``log``: ``message`` (a step or a note, once each);
@@ -11,16 +10,13 @@ human text. Each object has a ``type``:
 - ``result``: ``command`` and what the command returns (estimate: ``report``, ``outputs``,
   ``summary``), the last line of a successful run.
 
-Texts name options by key, as markers of :mod:`soilvolume.core.wording` (``{opt:scheduler}``, with its
-value ``{opt:scheduler=none}``), never as command-line flags: the front end words them its own way
-(the CLI's text output says ``--scheduler none``; the QGIS plugin names its parameter). The
-``result`` line's ``report`` is report.json (worded for the command line); its ``summary`` keeps
-the markers.
+Texts name options by key, as markers of :mod:`soilvolume.core.wording` (``{opt:scheduler=none}``), never as
+flags: the front end words them (the QGIS plugin as its parameter). The ``result`` line's ``report`` is
+report.json (worded for the command line), its ``summary`` keeps the markers.
 
-The protocol goes to the process's original standard output; anything else that would have gone
-there (C libraries' prints) is sent to standard error. A line ``cancel`` on standard input cancels
-the run as a user's Cancel does (nothing is written; exit 1 with an ``error`` line).
-Stdlib only.
+The lines go to the original standard output (anything else there, such as C libraries' prints, to standard
+error). A line ``cancel`` on standard input cancels the run as a user's Cancel does (nothing written; exit 1
+with an ``error`` line). Stdlib only.
 """
 
 from __future__ import annotations
@@ -31,7 +27,6 @@ import os
 import sys
 import threading
 import warnings
-from pathlib import Path
 from typing import IO, Any
 
 
@@ -50,9 +45,7 @@ def _finite(value: Any) -> Any:
         return {str(k): _finite(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [_finite(v) for v in value]
-    if isinstance(value, Path):
-        return str(value)
-    return value
+    return value  # a Path: str by _plain
 
 
 class Protocol:
@@ -109,8 +102,7 @@ class Protocol:
 
 
 def open_protocol() -> Protocol:
-    """The protocol on the original standard output; fd 1 and ``sys.stdout`` then point at
-    standard error, so nothing else can interleave with the lines."""
+    """The protocol on the original standard output, fd 1 and ``sys.stdout`` then on standard error."""
     sys.stdout.flush()
     stream = os.fdopen(os.dup(1), "w", buffering=1, encoding="utf-8", errors="backslashreplace")
     os.dup2(2, 1)

@@ -1,10 +1,6 @@
-"""One check of every option against the ranges declared in :class:`~soilvolume.options.Options`.
-
-The CLI, the engine's entry points and the QGIS algorithms all call :func:`check_options`, so a
-value is refused the same way everywhere: an :class:`OptionError` naming the option, the allowed
-range and the value given. ``--scheduler`` is parsed once per run, where the run starts
-(:func:`schedule_of`), into the typed schedule its context carries.
-"""
+"""One check of every option against its declared range (:func:`check_options`, called by the CLI, the
+entry points and QGIS alike): an :class:`OptionError` naming the option, the range and the value.
+``--scheduler`` is parsed once, where a run starts (:func:`schedule_of`)."""
 
 from __future__ import annotations
 
@@ -49,9 +45,7 @@ def _range_text(meta: dict[str, Any], integer: bool) -> str:
 
 def check_number(field: str, value: Any, meta: dict[str, Any], integer: bool = False) -> None:
     """Refuse a value that is not a number, not finite, or outside ``meta``'s lo..hi."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise OptionError(field, f"{_range_text(meta, integer)} (got {value!r})")
-    if integer and not isinstance(value, int):
+    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
         raise OptionError(field, f"{_range_text(meta, integer)} (got {value!r})")
     lo, hi = meta.get("lo"), meta.get("hi")
     bad = not math.isfinite(value)
@@ -62,8 +56,7 @@ def check_number(field: str, value: Any, meta: dict[str, Any], integer: bool = F
 
 
 def check_options(options: Options) -> Options:
-    """Every field of ``options`` against its declared choices and range; returns ``options``
-    (``scheduler`` is parsed where a run starts: :func:`schedule_of`)."""
+    """Every field of ``options`` against its declared choices and range; returns ``options``."""
     for f in fields(options):
         value, meta = getattr(options, f.name), f.metadata
         if value is None:
@@ -79,9 +72,7 @@ def check_options(options: Options) -> Options:
 
 
 def _check_polygon_files(options: Options) -> None:
-    """The zones, stable-ground and sections files read once now (missing, unreadable, without polygons,
-    invalid beyond repair: said before any point is read; their CRS is checked against the grid
-    later)."""
+    """The zones, stable-ground and sections files read now, before any point (their CRS is checked later)."""
     for name, what in (("zones", "zones file"), ("stable_mask", f"{opt('stable_mask')} file")):
         path = getattr(options, name)
         if path:
@@ -93,31 +84,28 @@ def _check_polygon_files(options: Options) -> None:
 
 
 def schedule_of(options: Options) -> Schedule | None:
-    """``--scheduler`` parsed, once per run, before any work: the run's :class:`Schedule` (None
-    for ``auto``, chosen from the inputs later); a bad value is an :class:`OptionError`."""
+    """``--scheduler`` parsed once, before any work (None for ``auto``); a bad value is an :class:`OptionError`."""
     try:
         return parse(options.scheduler)
     except BadSchedule as exc:
         raise OptionError("scheduler", exc.problem) from None
 
 
-def check_bounds(bounds: Sequence[float] | None, name: str = "--bounds") -> tuple[float, ...] | None:
+def check_bounds(bounds: Sequence[float] | None) -> tuple[float, ...] | None:
     """``xmin, ymin, xmax, ymax``: four finite numbers with xmin < xmax and ymin < ymax."""
     if bounds is None:
         return None
     b = tuple(bounds)
     if len(b) != 4 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in b):
-        raise SoilVolumeError(f"{name}: must be four finite numbers XMIN YMIN XMAX YMAX (got {b})")
+        raise SoilVolumeError(f"--bounds: must be four finite numbers XMIN YMIN XMAX YMAX (got {b})")
     if not (b[0] < b[2] and b[1] < b[3]):
-        raise SoilVolumeError(f"{name}: XMIN must be < XMAX and YMIN < YMAX (got {' '.join(f'{v:g}' for v in b)})")
+        raise SoilVolumeError(f"--bounds: XMIN must be < XMAX and YMIN < YMAX (got {' '.join(f'{v:g}' for v in b)})")
     return b
 
 
-def check_grid_cells(rows: int, cols: int, cell: float, valid: int | None = None) -> None:
-    """Refuse a grid with fewer than :data:`MIN_CELLS` cells (or valid cells) over the compared
-    area: a cell as large as the site turns a volume into noise."""
-    n = rows * cols if valid is None else valid
-    if n < MIN_CELLS:
+def check_grid_cells(rows: int, cols: int, cell: float) -> None:
+    """Refuse a grid of fewer than :data:`MIN_CELLS` cells: a cell as large as the site makes noise."""
+    if (n := rows * cols) < MIN_CELLS:
         raise OptionError(
             "cell",
             f"a {cell:g} m grid has only {n} cell(s) over the compared area "

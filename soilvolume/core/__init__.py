@@ -1,3 +1,1 @@
-"""Shared building blocks every step depends on: plain data types and errors, run hooks, interrupt
-flags, all-or-nothing outputs, native stderr capture.
-"""
+"""Shared building blocks: data types and errors, run hooks, interrupts, all-or-nothing outputs."""

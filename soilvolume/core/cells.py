@@ -9,10 +9,8 @@ from .. import native
 
 
 def cell_index(v: np.ndarray, lo, cell: float) -> np.ndarray:
-    """The index (int64) of the ``cell``-wide bin each coordinate of ``v`` falls in, counted from
-    ``lo``: ``floor((v - lo) / cell)``. ``v`` is one axis (with a scalar ``lo``) or (N, k)
-    coordinates (with ``lo`` of k values). Coordinates off the grid get negative or too large
-    indices: callers drop or clip them."""
+    """``floor((v - lo) / cell)`` as int64, for one axis (scalar ``lo``) or (N, k) coordinates; off the
+    grid the indices are negative or too large: callers drop or clip them."""
     return np.floor((v - lo) / cell).astype(np.int64)
 
 
@@ -28,9 +26,8 @@ def xy_in_box(x: np.ndarray, y: np.ndarray, lo, hi) -> np.ndarray:
 
 
 def bounds(xyz: np.ndarray, dims: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per-column (min, max) of (N, k) points (the first ``dims`` columns): the same values as
-    ``xyz.min(axis=0)``, ``xyz.max(axis=0)``, ~10x faster (a reduction over axis 0 of a narrow
-    C-ordered array steps through k values at a time)."""
+    """Per-column (min, max) of the first ``dims`` columns: ``xyz.min(axis=0)``, ``xyz.max(axis=0)``, ~10x
+    faster (numpy's reduction over axis 0 of a narrow array steps k values at a time)."""
     k = xyz.shape[1] if dims is None else dims
     if xyz.dtype == np.float64 and len(xyz) >= NATIVE_BOUNDS and 0 < k <= 3:
         fast = _native_bounds(xyz, k)

@@ -1,5 +1,4 @@
-"""Run hooks (progress, log, cancellation) and a run's result: what every step reports through
-and what the entry points return."""
+"""Run hooks (progress, log, cancellation) and a run's result."""
 
 from __future__ import annotations
 
@@ -23,10 +22,8 @@ class Cancelled(SoilVolumeError):
 
 @dataclass
 class Hooks:
-    """Progress, log and cancellation callbacks (all optional). A message is logged once even
-    when a stage reports it many times (e.g. once per ICP level). Options in the messages are
-    worded for the command line, or with ``keyed`` left as markers (:mod:`soilvolume.core.wording`)
-    for a front end that words them its own way."""
+    """Optional progress, log and cancellation callbacks; a message is logged once however often a stage
+    reports it; options in it worded as flags, or with ``keyed`` left as markers (:mod:`.wording`)."""
 
     progress: Progress | None = None
     log: Log | None = None
@@ -35,8 +32,7 @@ class Hooks:
     _last: str | None = field(default=None, repr=False)
 
     def step(self, percent: float, message: str, log: bool = True) -> None:
-        """Check for cancellation (:class:`Cancelled`, or ``Interrupted`` after SIGINT/SIGTERM),
-        move the progress bar and log ``message`` (once)."""
+        """Check for cancellation (:class:`Cancelled`, ``Interrupted``), move the bar, log ``message`` once."""
         interrupt.check()
         if self.cancel is not None and self.cancel():
             raise Cancelled("cancelled by the user")
@@ -51,9 +47,8 @@ class Hooks:
             self.log(message if self.keyed else cli(message))
 
     def ticker(self, start: float, end: float, message: str, expected: int = 8) -> Callable[[], None]:
-        """A ``check()`` callback for a long stage of unknown length (logged by the step that
-        started it): each call checks for cancellation and moves the bar from ``start`` towards
-        ``end`` (about 90 % of the way after ``expected`` calls, never reaching it)."""
+        """A ``check()`` callback of a long stage: each call checks for cancellation and moves the bar from
+        ``start`` towards ``end`` (90 % of the way after ``expected`` calls, never reaching it)."""
         calls = [0]
         rate = 0.1 ** (1.0 / max(expected, 1))
 
@@ -66,10 +61,15 @@ class Hooks:
 
 @dataclass
 class Result:
-    """The single source of a run's numbers: ``report`` is exactly what report.json holds,
-    ``outputs`` maps output names (dem_before, dem_after, difference, plane_offset,
-    after_registered, report_json, report_html, ...) to written paths."""
+    """A run's numbers: ``report`` as report.json holds it, ``outputs`` each output's name
+    (dem_before, ..., report_json) and path."""
 
     report: dict[str, Any]
     outputs: dict[str, Path] = field(default_factory=dict)
     keyed: dict[str, Any] | None = None  # the report with its options by key (wording.opt), for front ends
+
+    @classmethod
+    def written(cls, report: dict[str, Any], moved: dict[str, Path], keyed: dict[str, Any] | None = None) -> Result:
+        """The result of a run whose output folder holds ``moved`` (file name -> path)."""
+        named = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved.items()}
+        return cls(report, named, keyed)

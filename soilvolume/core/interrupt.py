@@ -1,10 +1,6 @@
-"""SIGINT/SIGTERM as a flag the engine checks between steps, never an exception raised inside
-native code (Open3D, laspy, numpy).
-
-:func:`handle_signals` installs handlers that only record the signal; :func:`check` (called by
-:meth:`soilvolume.api.Hooks.step` and every iteration callback) raises :class:`Interrupted`.
-A second signal of a run that does not stop runs the registered cleanups and exits at once.
-"""
+"""SIGINT/SIGTERM as a flag the engine checks between steps (:func:`check`, called by ``Hooks.step`` and
+every iteration callback), never an exception raised inside native code. A second signal of a run that
+does not stop runs the registered cleanups and exits at once."""
 
 from __future__ import annotations
 
@@ -49,8 +45,7 @@ def _record(signum: int, _frame) -> None:
 
 
 def leave(signum: int | None) -> None:
-    """End the process now, the cleanups run: interrupted by ``signum``, or (None) spinning at the
-    address-space limit (:mod:`.watchdog`)."""
+    """End the process now, the cleanups run: interrupted by ``signum``, or (None) out of memory."""
     kept = run_cleanups()
     remove_process_temp_dir()
     said = str(Interrupted(signum, kept)) if signum else out_of_memory()
@@ -70,10 +65,8 @@ def check() -> None:
 
 @contextmanager
 def handle_signals(then_ignore: bool = False) -> Iterator[None]:
-    """Record SIGINT/SIGTERM for :func:`check` while the block runs (in the main thread; elsewhere
-    Python cannot install handlers and the block runs unchanged). Afterwards the previous handlers
-    come back, or with ``then_ignore`` the signals stay ignored: a finished program on its way out
-    must not be killed between its last write and its exit status."""
+    """Record SIGINT/SIGTERM for :func:`check` while the block runs (main thread only), then restore the
+    handlers, or with ``then_ignore`` ignore the signals (a finished program is not killed on its way out)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -92,8 +85,7 @@ def handle_signals(then_ignore: bool = False) -> Iterator[None]:
 
 @contextmanager
 def cleanup_on_exit(fn: Callable[[], str | None]) -> Iterator[None]:
-    """Run ``fn`` if the process is forced out while the block runs (a second signal, a run that
-    does not stop, :mod:`.watchdog`); a path it returns is where finished tiles were kept."""
+    """Run ``fn`` if the process is forced out in the block; a path it returns is where tiles were kept."""
     _cleanups.append(fn)
     try:
         yield

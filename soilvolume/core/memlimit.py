@@ -1,10 +1,6 @@
-"""A process under an address-space limit (``ulimit -v``, RLIMIT_AS) fails in one line naming it.
-
-OpenBLAS takes a work buffer (128 MiB of address space) for each thread that runs a matrix
-product at the same time as another, and when that allocation fails it retries for ever in C
-(its ``blas_memory_alloc`` loops until one succeeds): a series under a 600 MB limit spun at the
-bias correction, its two planes on two threads. :mod:`.watchdog` sees such a spin and ends the
-run with :func:`out_of_memory`."""
+"""A process under an address-space limit (``ulimit -v``) fails in one line naming it. OpenBLAS's
+``blas_memory_alloc`` retries a failed 128 MiB buffer for ever (a series at 600 MB spun at its two
+planes): :mod:`.watchdog` ends such a spin with :func:`out_of_memory`."""
 
 from __future__ import annotations
 
@@ -25,23 +21,16 @@ def address_limit() -> int | None:
     return None if soft == resource.RLIM_INFINITY else int(soft)
 
 
-def limit_words() -> str:
-    """How the out-of-memory line names the limit: `` under the address-space limit of N MB (ulimit
-    -v)``, or nothing when there is none."""
-    limit = address_limit()
-    return f" under the address-space limit of {limit / 1e6:,.0f} MB (ulimit -v)" if limit else ""
-
-
 def out_of_memory(keyed: bool = False) -> str:
-    """The line of a run that ran out of memory, naming the limit when there is one (``keyed``: its
-    option by key, :mod:`.wording`, else in the command line's words)."""
-    said = f"out of memory{limit_words()}: use a larger {wording.opt('cell')} or crop the clouds first"
+    """The out-of-memory line, naming the limit (``keyed``: its option as a marker, else as a flag)."""
+    limit = address_limit()
+    under = f" under the address-space limit of {limit / 1e6:,.0f} MB (ulimit -v)" if limit else ""
+    said = f"out of memory{under}: use a larger {wording.opt('cell')} or crop the clouds first"
     return said if keyed else wording.cli(said)
 
 
 def short_of_memory(exc: BaseException) -> bool:
-    """Whether ``exc`` says the process ran out of memory: a MemoryError, or a library that could
-    not be mapped (``failed to map segment``, ``cannot allocate memory``) under a limit."""
+    """Whether ``exc`` is a MemoryError or a library that could not be mapped under a limit."""
     if isinstance(exc, MemoryError):
         return True
     text = str(exc).lower()

@@ -1,9 +1,6 @@
-"""What C libraries (libtiff, GDAL, PROJ, Open3D) print straight to the process's stderr, held back
-while a command runs and dropped: a failure says its own one line (a full disk otherwise adds
-dozens of libtiff lines), a success its results. ``SOILVOLUME_DEBUG=1`` shows them.
-
-Python's own ``sys.stderr`` (progress, errors) keeps writing to the terminal.
-"""
+"""What C libraries print straight to stderr, held back while a command runs and dropped (a full disk
+adds dozens of libtiff lines to the one error); ``SOILVOLUME_DEBUG=1`` shows them. ``sys.stderr`` still
+writes to the terminal."""
 
 from __future__ import annotations
 
@@ -61,9 +58,8 @@ def hold_native_stderr() -> Iterator[Held]:
 
 
 def quiet_library_warnings() -> None:
-    """No library's warning (shapely's overflow on huge coordinates, numpy's, GDAL's) reaches the
-    terminal unless asked with ``python -W`` or ``PYTHONWARNINGS``: each failure is its one line.
-    The engine's worker processes (Dask) inherit the choice through ``PYTHONWARNINGS``."""
+    """No library's warning reaches the terminal unless asked (``python -W``, ``PYTHONWARNINGS``, which
+    the Dask workers inherit): each failure is its one line."""
     if sys.warnoptions:
         return
     warnings.simplefilter("ignore")

@@ -53,16 +53,11 @@ def os_problem(exc: OSError, path: str | os.PathLike | None = None) -> SoilVolum
 
 @contextmanager
 def os_errors(path: Path | None = None) -> Iterator[None]:
-    """OSErrors and GDAL's or laspy's write errors raised in the block become one-line SoilVolumeErrors
-    naming ``path`` (the output being written) or the file the error names."""
+    """OSErrors and the writer libraries' errors of the block as one line naming ``path`` or the error's file."""
     try:
         yield
-    except SoilVolumeError:
-        raise
-    except OSError as exc:
-        raise _write_problem(exc, path) from exc
     except Exception as exc:
-        if type(exc).__module__.startswith(WRITER_LIBRARIES):
+        if isinstance(exc, OSError) or type(exc).__module__.startswith(WRITER_LIBRARIES):
             raise _write_problem(exc, path) from exc
         raise
 
@@ -87,10 +82,6 @@ def _write_problem(exc: BaseException, path: Path | None) -> SoilVolumeError:
     return SoilVolumeError(f"{path}: cannot write ({text})" if path is not None else f"cannot write ({text})")
 
 
-def _inside(path: Path, folder: Path) -> bool:
-    return path == folder or folder in path.parents
-
-
 def _make_parents(folder: Path) -> list[Path]:
     """Create ``folder`` and its missing parents; returns those created (deepest last)."""
     missing = [p for p in [folder, *folder.parents] if not p.exists()][::-1]
@@ -108,9 +99,8 @@ def _make_parents(folder: Path) -> list[Path]:
 
 
 class OutputDir:
-    """Staging for one run's output folder; ``commit()`` swaps it into place, ``abort()`` removes
-    it. ``inputs`` may never be written, replaced or lie inside the folder; ``allowed`` says which
-    entries of an existing folder ``--overwrite`` may replace (default: files a run writes)."""
+    """Staging for one run's output folder: ``commit()`` swaps it in, ``abort()`` removes it; ``inputs`` never
+    lie inside it; ``allowed``: what ``--overwrite`` may replace (default: files a run writes)."""
 
     def __init__(
         self, final: Path, inputs: Iterable[Path | str | None], overwrite: bool, allowed: Iterable[str] | None = None
@@ -142,15 +132,14 @@ class OutputDir:
         return self.final / f".{STAGING}-{os.getpid()}-{self.token}"
 
     def _empty_writable(self) -> bool:
-        """An existing, empty, writable folder: its outputs can be staged inside it (no old set
-        to mix with)."""
+        """An existing, empty, writable folder: its outputs can be staged inside it."""
         f = self.final
         return f.is_dir() and not any(f.iterdir()) and os.access(f, os.W_OK | os.X_OK)
 
     def _check(self) -> None:
         final = self.final
         for p in self.inputs:
-            if _inside(p, final):
+            if p.is_relative_to(final):
                 raise SoilVolumeError(f"{final}: the output folder is or contains the input {p}")
         if final.exists() and not final.is_dir():
             raise SoilVolumeError(f"{final}: exists and is not a folder")
@@ -173,9 +162,8 @@ class OutputDir:
     def _ours(self, entry: Path) -> bool:
         if self.allowed is not None:
             return entry.name in self.allowed
-        old_staging = entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
         return (
-            old_staging
+            entry.name.startswith(".soilvolume-partial-")  # earlier versions' staging
             or (entry.is_file() and (entry.name in RUN_OUTPUTS or entry.name.lower().endswith(RUN_SUFFIXES)))
             or (entry.is_dir() and entry.name in RUN_FOLDERS)
         )
@@ -209,7 +197,12 @@ class OutputDir:
         except OSError as exc:
             if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise os_problem(exc, self.final) from exc
-        if self._replace_empty():
+        try:
+            self.final.rmdir()  # Windows renames nothing onto a folder, even an empty one: removed while empty
+        except OSError:
+            pass
+        else:
+            os.rename(self.stage, self.final)
             return
         if not self.overwrite:
             raise SoilVolumeError(f"{self.final}: another run filled the output folder meanwhile")
@@ -217,15 +210,6 @@ class OutputDir:
         os.rename(self.final, trash)
         os.rename(self.stage, self.final)
         shutil.rmtree(trash, ignore_errors=True)
-
-    def _replace_empty(self) -> bool:
-        """Windows renames nothing onto a folder, even an empty one: removed (only while empty)."""
-        try:
-            self.final.rmdir()
-        except OSError:
-            return False
-        os.rename(self.stage, self.final)
-        return True
 
     def _restore(self) -> None:
         trash = sibling(self.final, TRASH, token=self.token)
@@ -265,8 +249,7 @@ def output_dir(
 
 
 def check_input_file(path: Path) -> None:
-    """Refuse, in one line, an input that is missing or not a regular file (a FIFO would block
-    GDAL for ever)."""
+    """Refuse an input that is missing or not a regular file (a FIFO would block GDAL for ever)."""
     if not path.exists():
         raise SoilVolumeError(f"{path}: file not found")
     if not path.is_file():
@@ -274,8 +257,8 @@ def check_input_file(path: Path) -> None:
 
 
 def check_output_file(path: Path, inputs: Iterable[Path | str | None]) -> Path:
-    """A single output file's absolute path, after checking it is not an input, its folder
-    exists and is writable; removes stale staging files of killed runs next to it."""
+    """A single output file's absolute path, checked (not an input, its folder writable); killed runs'
+    staging files beside it removed."""
     final = Path(os.path.abspath(path))
     if final.exists():
         final = final.resolve()

@@ -9,11 +9,8 @@ from .cells import xy_in_box
 
 
 def covers(rings: list[np.ndarray], x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Even-odd point-in-polygon over all rings, boundary included.
-
-    Only the points in the rings' bounding box are tested (a wide survey cropped to a small
-    footprint sorts a fraction of its points): the others are outside, as the test finds them.
-    """
+    """Even-odd point-in-polygon over all rings, boundary included; only the points in the rings'
+    box are tested (a wide survey cropped to a small footprint sorts a fraction of its points)."""
     vertices = np.vstack(rings)
     box = xy_in_box(x, y, vertices.min(axis=0), vertices.max(axis=0))
     if box.all():
@@ -25,9 +22,8 @@ def covers(rings: list[np.ndarray], x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def _covers(rings: list[np.ndarray], x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """:func:`covers` of every point: the points are sorted by y once; each edge then only
-    touches the points in its y band, so the cost is about (number of points) x (edges crossed
-    by a horizontal line), not points x edges."""
+    """:func:`covers` of every point, sorted by y once: each edge touches only its y band's points
+    (cost: points x edges crossed by a horizontal line, not points x edges)."""
     n = x.shape[0]
     order = np.argsort(y, kind="stable")
     ys, xs = y[order], x[order]

@@ -1,6 +1,4 @@
-"""The typed record of a run, what :mod:`soilvolume.reporting.report` turns into report.json
-(the one place that does): the georeferencing decision, each step's typed result (budgets and
-uncertainty terms are the volume step's ``Volumes``) and what the quality verdict judges."""
+"""The typed record of a run that :mod:`soilvolume.reporting.report` (only) turns into report.json."""
 
 from __future__ import annotations
 
@@ -29,9 +27,8 @@ class Georeferencing:
 
 @dataclass(frozen=True)
 class QualityInputs:
-    """What ``volumes/quality.assess`` judges beside report.json's figures: the cells of stable
-    ground and of change, the correction surface and the difference (on the grid the correction
-    was found on), its cell area, and the georeferencing prior (shift m, rotation and tilt deg)."""
+    """What ``volumes/quality.assess`` judges beside report.json: stable and change cells, correction and
+    difference (on the correction's grid), its cell area, the georeferencing prior (m, deg)."""
 
     stable: np.ndarray
     change: np.ndarray

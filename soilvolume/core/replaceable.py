@@ -11,9 +11,7 @@ from .types import SoilVolumeError
 
 
 def check_replaceable(final: Path) -> None:
-    """Refuse ``final`` when it is another user's in a folder where only owners replace files
-    (the sticky bit of /tmp): the run's last rename would find it only after the whole
-    computation."""
+    """Refuse ``final`` when another user's in a sticky folder (/tmp), before the run's last rename would."""
     try:
         st, folder = final.lstat(), final.parent.stat()
     except OSError:

@@ -1,6 +1,5 @@
-"""The hidden siblings of an output (``.<name>.<kind>-<pid>-<token>``: a run's staging folder, the
-old set it replaces, a tiled run's tile store), found and removed when their run is dead, and the
-lock under which concurrent runs swap and sweep them."""
+"""An output's hidden siblings (``.<name>.<kind>-<pid>-<token>``: staging, the old set, a tile store),
+removed when their run is dead, and the lock concurrent runs swap and sweep under."""
 
 from __future__ import annotations
 
@@ -33,8 +32,7 @@ def tag(name: str) -> str:
 
 
 def sibling(final: Path, kind: str, pid: int | None = None, suffix: str = "", token: str | None = None) -> Path:
-    """The hidden sibling of ``final`` of this ``kind`` for process ``pid`` (default: this one),
-    told apart from others of the same process by ``token`` (default: a fresh random one)."""
+    """The hidden sibling of ``final`` of this ``kind`` for process ``pid`` (this one) and ``token`` (random)."""
     token = secrets.token_hex(4) if token is None else token
     return final.with_name(f".{tag(final.name)}.{kind}-{pid or os.getpid()}-{token}{suffix}")
 
@@ -54,20 +52,25 @@ def remove(path: Path) -> None:
 
 def dead_siblings(final: Path, kinds: Iterable[str]) -> Iterator[tuple[Path, str]]:
     """(path, kind) of the hidden siblings of ``final`` of these ``kinds`` whose run is dead."""
-    pattern = re.compile(rf"^\.{re.escape(tag(final.name))}\.({'|'.join(map(re.escape, kinds))})-(\d+)(-\w*)?(\..*)?$")
+    name, kind = re.escape(tag(final.name)), "|".join(map(re.escape, kinds))
+    for entry, m in _dead(final.parent, rf"^\.{name}\.(?P<kind>{kind})-(?P<pid>\d+)(-\w*)?(\..*)?$"):
+        yield entry, m["kind"]
+
+
+def _dead(folder: Path, pattern: str) -> Iterator[tuple[Path, re.Match]]:
+    """The entries of ``folder`` matching ``pattern`` whose run (its ``pid`` group) is dead."""
     try:
-        entries = list(final.parent.iterdir())
+        entries = list(folder.iterdir())
     except OSError:
         return
     for entry in entries:
-        m = pattern.match(entry.name)
-        if m and not _alive(int(m.group(2))):
-            yield entry, m.group(1)
+        m = re.match(pattern, entry.name)
+        if m and not _alive(int(m["pid"])):
+            yield entry, m
 
 
 def sweep(final: Path) -> None:
-    """Remove the hidden siblings of ``final`` left by dead runs; a trashed old set whose new set
-    never arrived is put back."""
+    """Remove dead runs' hidden siblings of ``final``; a trashed old set whose new one never came is put back."""
     for entry, kind in dead_siblings(final, (STAGING, TRASH)):
         if kind == TRASH and not final.exists():
             os.rename(entry, final)
@@ -77,15 +80,8 @@ def sweep(final: Path) -> None:
 
 def sweep_inside(folder: Path) -> None:
     """Remove staging folders dead runs left inside ``folder`` (mount points, folders whose parent is not writable)."""
-    pattern = re.compile(rf"^\.{STAGING}-(\d+)-\w+$")
-    try:
-        entries = list(folder.iterdir()) if folder.is_dir() else []
-    except OSError:
-        return
-    for entry in entries:
-        m = pattern.match(entry.name)
-        if m and not _alive(int(m.group(1))):
-            remove(entry)
+    for entry, _ in _dead(folder, rf"^\.{STAGING}-(?P<pid>\d+)-\w+$") if folder.is_dir() else ():
+        remove(entry)
 
 
 LOCK_DIR, LOCK_WAIT_S = ".soilvolume-lock", 120.0
@@ -93,8 +89,7 @@ LOCK_DIR, LOCK_WAIT_S = ".soilvolume-lock", 120.0
 
 @contextmanager
 def locked(folder: Path) -> Iterator[None]:
-    """An exclusive advisory lock on ``folder`` (swaps and sweeps of concurrent runs take turns):
-    ``flock`` on POSIX, else :func:`_lock_folder`."""
+    """An exclusive advisory lock on ``folder``: ``flock`` on POSIX, else :func:`_lock_folder`."""
     if fcntl is None:
         with _lock_folder(folder):
             yield
@@ -109,8 +104,8 @@ def locked(folder: Path) -> Iterator[None]:
 
 @contextmanager
 def _lock_folder(folder: Path, wait_s: float = LOCK_WAIT_S) -> Iterator[None]:
-    """The lock where there is no ``flock`` (Windows): a folder ``.soilvolume-lock`` inside
-    ``folder``, made atomically and removed after; a run waits ``wait_s`` for another's at most."""
+    """Without ``flock`` (Windows): a folder ``.soilvolume-lock`` made atomically inside ``folder``, waited
+    for ``wait_s`` at most."""
     lock, deadline = folder / LOCK_DIR, time.monotonic() + wait_s
     while True:
         try:

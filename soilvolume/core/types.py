@@ -13,9 +13,8 @@ from .wording import cli
 
 
 class SoilVolumeError(Exception):
-    """An input or processing problem a user can act on; the message names the file and problem.
-    Options in it are markers (:func:`soilvolume.core.wording.opt`): ``str()`` words them for the
-    command line, :attr:`keyed` keeps them for a front end that words them its own way."""
+    """A problem a user can act on, naming the file; its option markers (:func:`.wording.opt`) worded
+    as flags by ``str()``, kept by :attr:`keyed`."""
 
     @property
     def keyed(self) -> str:
@@ -26,16 +25,14 @@ class SoilVolumeError(Exception):
 
 
 def short_error(exc: BaseException, limit: int = 160) -> str:
-    """A library exception's message for a one-line error: one line, any WKT it quotes replaced
-    by '<WKT>', at most ``limit`` characters (the exception's type when it has no message)."""
+    """A library exception's message on one line, WKT as '<WKT>', at most ``limit`` characters (else its type)."""
     text = re.sub(r"[A-Z_]{4,}\[.*\]", "<WKT>", " ".join(str(exc).split())) or type(exc).__name__
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 @dataclass(frozen=True)
 class Cloud:
-    """A point cloud in local coordinates: absolute = ``xyz + origin`` (metres, horizontal and
-    vertical, in ``crs``). ``xyz`` is float64; float32 copies for Open3D are made from it."""
+    """A point cloud in local coordinates: absolute = ``xyz + origin`` (metres, in ``crs``), ``xyz`` float64."""
 
     xyz: np.ndarray
     origin: np.ndarray
@@ -47,18 +44,11 @@ class Cloud:
     def __len__(self) -> int:
         return int(self.xyz.shape[0])
 
-    def subset(self, mask: np.ndarray) -> Cloud:
-        cls = None if self.classification is None else self.classification[mask]
-        return Cloud(self.xyz[mask], self.origin, self.crs_wkt, self.path, cls)
-
-    def absolute(self) -> np.ndarray:
-        return self.xyz + self.origin
-
 
 @dataclass(frozen=True)
 class GridSpec:
-    """A north-up raster grid: ``xmin``/``ymax`` are absolute coordinates of the top-left corner,
-    aligned to multiples of ``cell``; ``origin`` is the local origin the engine's arrays use."""
+    """A north-up grid: ``xmin``/``ymax`` the absolute top-left corner on multiples of ``cell``, ``origin``
+    the local origin of the engine's arrays."""
 
     xmin: float
     ymax: float
@@ -76,6 +66,12 @@ class GridSpec:
 
         u = self.xy_unit
         return Affine(self.cell / u, 0.0, self.xmin / u, 0.0, -self.cell / u, self.ymax / u)
+
+    def box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The grid's (lo, hi) corners, absolute x/y (metres)."""
+        return np.array([self.xmin, self.ymax - self.rows * self.cell]), np.array(
+            [self.xmin + self.cols * self.cell, self.ymax]
+        )
 
     @property
     def cell_area(self) -> float:
@@ -116,20 +112,16 @@ class StageQuality:
     poses: tuple = ()  # every pose the fine stage refined to (4x4s, those beyond the prior too): its own spread
 
 
-#: where an epoch's heights come from: a point cloud file (optionally prepared by a PDAL
-#: pipeline), tiles (a VPC, a COPC file or a folder of tiles) or a surface (a DEM GeoTIFF or a
-#: LandXML TIN: a design or an earlier DEM)
+#: where an epoch's heights come from: a point cloud file (maybe through a PDAL pipeline), tiles
+#: (a VPC, a COPC file or a folder) or a surface (a DEM GeoTIFF or a LandXML TIN)
 SOURCES = ("cloud", "tiles", "surface")
 TILE_SUFFIXES = (".vpc", ".copc.laz")
 
 
 @dataclass(frozen=True)
 class Epoch:
-    """One survey of a run, in time order: its source (:data:`SOURCES`), the CRS given for a file
-    without one, its date (ISO ``YYYY-MM-DD``) and where the date came from (``"LAS header"`` or
-    ``"given"``), and how far its georeferencing is trusted (``auto``, ``gps``, ``precise``). A
-    product takes one epoch (``dem``), two (``estimate``, ``register``: the first is the
-    reference) or more (a series); the epochs' vertical unit is read from their headers."""
+    """One survey of a run, in time order: its source (:data:`SOURCES`), the CRS given for a file without one,
+    its ISO date and its source (``"LAS header"``, ``"given"``), how far its georeferencing is trusted."""
 
     path: Path
     source: str = "cloud"
@@ -138,10 +130,6 @@ class Epoch:
     date: str | None = None
     date_source: str | None = None
     georeferencing: str = "auto"
-
-    def __post_init__(self) -> None:
-        if self.source not in SOURCES:
-            raise ValueError(f"an epoch's source is one of {SOURCES}, not {self.source!r}")
 
     @property
     def name(self) -> str:

@@ -1,15 +1,7 @@
-"""Every run ends, whatever C loop its threads are in: a thread beside the run that
-
-- hears SIGINT/SIGTERM through the interpreter's wakeup file descriptor (written by the C-level
-  handler even while the main thread waits on a thread stuck in native code, where
-  :func:`.interrupt.check` never runs): when the run has not begun to stop :data:`GRACE` seconds
-  later (or, stopping, has not ended after :data:`STOPPING_S`), its cleanups run and the process
-  leaves with the usual line;
-- under an address-space limit (``ulimit -v``), sees a thread spinning at it: OpenBLAS retries a
-  failed buffer allocation for ever (a series' two RANSAC planes on two threads at 600 MB spun for
-  12 minutes), in system time, with the address space full and unchanged. After :data:`SPIN_S`
-  seconds of that, the run fails in one line naming the limit.
-"""
+"""Every run ends, whatever C loop its threads are in: a thread beside it hears SIGINT/SIGTERM through the
+wakeup fd (written even while the main thread waits on native code) and ends a run not stopping within
+:data:`GRACE` s (or not ended :data:`STOPPING_S` s after); under ``ulimit -v`` it sees a thread spinning at
+the limit (OpenBLAS's endless retry: a series at 600 MB spun 12 minutes) and fails the run after :data:`SPIN_S` s."""
 
 from __future__ import annotations
 
@@ -89,9 +81,8 @@ class Watchdog:
 
 
 class Spin:
-    """Whether a thread of this process has spun at the address-space limit ``limit`` (bytes, None:
-    none) for :data:`SPIN_S` seconds: the space within :data:`.memlimit.BLAS_BUFFER` of the limit
-    and unchanged, a thread's system time growing by :data:`SPIN_SYSTEM` of the wall time."""
+    """Whether a thread spun at the address-space ``limit`` (bytes; None: none) for :data:`SPIN_S` s: the space
+    unchanged within :data:`.memlimit.BLAS_BUFFER` of it, a thread's system time growing by :data:`SPIN_SYSTEM`."""
 
     def __init__(self, limit: int | None) -> None:
         self.limit = limit
@@ -114,9 +105,7 @@ class Spin:
 
 
 def few_arenas() -> None:
-    """Under an address-space limit, glibc's malloc on two arenas: each thread that allocates
-    otherwise reserves its own 64 MiB of address space, which ``ulimit -v`` counts (glibc only;
-    elsewhere nothing)."""
+    """glibc's malloc on two arenas (under ``ulimit -v``, each thread's own 64 MiB arena counts); else nothing."""
     import ctypes
     import ctypes.util
 
@@ -141,9 +130,7 @@ def _sample() -> tuple[int, dict[str, int]] | None:
 
 
 def remove_process_temp_dir() -> None:
-    """The folder multiprocessing made in TMPDIR for this process (the socket of the Dask workers'
-    forkserver): the interpreter's exit removes it, an exit through ``os._exit`` (the command's
-    quick one, a forced one) does not."""
+    """The folder multiprocessing made in TMPDIR (the Dask forkserver's socket), which ``os._exit`` leaves."""
     process = sys.modules.get("multiprocessing.process")
     tempdir = process.current_process()._config.get("tempdir") if process else None
     if tempdir:

@@ -1,15 +1,6 @@
-"""Options named by key in the engine's messages; each front end words them its own way.
-
-An engine message refers to an option of :class:`soilvolume.options.Options` with a marker
-:func:`opt` writes: ``{opt:KEY}`` or, with the value it is set to, ``{opt:KEY=VALUE}``
-("use {opt:georeferencing=gps} to register anyway"). The command line words a marker as its
-flag (:func:`cli`: ``--georeferencing gps``), the QGIS plugin as its parameter
-(``'Georeferencing' (GEOREFERENCING) = gps``), both through :func:`render`. Messages keep their
-markers until they leave the engine: ``str()`` of a ``SoilVolumeError``, report.json and the
-command line's text are worded for the command line (:func:`cli`, :func:`cli_tree`), report.html
-carries them as ``<span data-option=KEY>`` elements (:func:`html`), and the ``--progress jsonl``
-protocol keeps the markers for its front end to word. Standard library only (QGIS imports it).
-"""
+"""Options marked by key in the engine's messages (``{opt:KEY}``, ``{opt:KEY=VALUE}``: :func:`opt`), worded by
+each front end (:func:`render`): ``--key value`` (:func:`cli`, :func:`cli_tree`), QGIS's parameter, report.html's
+``<span data-option=KEY>`` (:func:`html`); ``--progress jsonl`` keeps them. Standard library only (QGIS imports it)."""
 
 from __future__ import annotations
 
@@ -44,11 +35,6 @@ def cli_name(key: str, value: str | None) -> str:
 def cli(text: str) -> str:
     """``text`` in the command line's words."""
     return render(text, cli_name)
-
-
-def keys(text: str) -> list[str]:
-    """The options ``text`` names, in order."""
-    return [m.group(1) for m in MARKER.finditer(text)]
 
 
 def cli_tree(value: Any) -> Any:

@@ -1,43 +1,43 @@
-"""The option table's vocabulary: which commands take an option, and how an option is declared."""
+"""How an option of the table (:class:`soilvolume.options.Options`) is declared."""
 
 from __future__ import annotations
 
-from dataclasses import field
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
-#: which commands take an option (``commands=`` of each field below): the command line builds
-#: each subcommand's flags from it and the QGIS algorithms their parameters
-ESTIMATE = ("estimate",)
-VOLUME = ("estimate", "series")  # the volume step (a series runs it once per later epoch)
-REGISTER = ("estimate", "register", "series")
-PREPARE = ("estimate", "register", "pipeline", "series")  # reading both clouds
-GRID = ("estimate", "dem", "series", "stockpile")
-GROUND = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
-GROUND_FILTER = ("estimate", "register", "dem", "series", "pipeline", "stockpile")
-POINTS = ("estimate", "register", "dem", "series", "stockpile")  # what is read of each cloud (the soil rule)
-CELLS = ("estimate", "dem", "series")  # the heights of each cell
-DESIGNED = ("estimate", "series")  # against a design (a series: --design)
-STOCKPILE = ("stockpile",)  # one survey's stockpile inventory
-COMMANDS = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
+ESTIMATE = ("estimate",)  # the commands that take an option unless it says otherwise
 
 
 def option(
     default: Any,
-    help: str,
-    choices: tuple | None = None,
-    *,
-    label: str | None = None,
+    label: str,
+    commands: tuple[str, ...] = ESTIMATE,
     unit: str | None = None,
     lo: float | None = None,
     hi: float | None = None,
+    *,
+    choices: tuple | None = None,
     lo_open: bool = False,
-    commands: tuple[str, ...] = ESTIMATE,
     run_control: bool = False,
+    help: str | None = None,
 ) -> Any:
-    """An option: default, one-line help, choices; ``label`` (short title for GUIs), ``unit``
-    ("m", "m2", "deg", ...), the allowed range ``lo``..``hi`` (``lo`` excluded when
-    ``lo_open``) that every front end validates against, the ``commands`` that take it, and
-    ``run_control``: where and how the run goes, never its numbers (every other option keys the
-    work a resumed run may reuse)."""
+    """An option: default, GUI ``label``, the ``commands`` taking it, ``unit``, range ``lo``..``hi`` (``lo`` excluded
+    when ``lo_open``), ``choices``, ``help`` (or from :func:`options`) and ``run_control``: where and how the run
+    goes, never its numbers (every other option keys the work a resumed run may reuse)."""
     meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
     return field(default=default, metadata={**meta, "commands": commands, "run_control": run_control})
+
+
+def options(helps: dict[str, str]) -> Callable[[type], type]:
+    """A frozen dataclass of :func:`option` fields, each with its help from ``helps`` (by name; one each)."""
+
+    def make(cls: type) -> type:
+        if helps.keys() != cls.__annotations__.keys():
+            raise TypeError(f"{cls.__name__}: the help texts do not match the fields")
+        for name, text in helps.items():
+            f = getattr(cls, name)
+            setattr(cls, name, field(default=f.default, metadata={**f.metadata, "help": text}))
+        return dataclass(frozen=True)(cls)
+
+    return make

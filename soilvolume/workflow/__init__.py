@@ -1,3 +1,1 @@
-"""The method's orchestration: the estimate run step by step, and the other commands (DEM of one
-cloud, registration only, volume between two DEMs).
-"""
+"""The products: the method's steps composed for each command."""

@@ -1,9 +1,9 @@
-"""The shortened products: one cloud to a DEM (``soilvolume dem``: read, grid, write) and
-registration only (``soilvolume register``: :func:`.pair.register`), in memory."""
+"""The short products, in memory: one cloud to a DEM (``soilvolume dem``) and registration only (``register``)."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -16,10 +16,10 @@ from ..dem.grid import epoch_dem
 from ..execution.inmemory import InMemory
 from ..inputs.distinct import check_two_surveys
 from ..inputs.io import LAS_SUFFIXES
-from ..inputs.prepare import Single, prepare_single
+from ..inputs.prepare import Single
 from ..options import Options
-from ..pipelines.pipeline import open_source
 from ..reporting.report import dem_summary, registration_summary
+from ..validate import check_bounds
 from ..volumes.compute import centred_heights
 from . import pair, steps
 from .context import Context, threads
@@ -28,13 +28,22 @@ from .plan import cloud_cell, plan_grid
 DEM = ("prepare", "grid", "write")
 
 
-def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bounds, hooks: Hooks) -> dict:
-    """See :func:`soilvolume.api.cloud_to_dem`."""
-    out_tif = check_output_file(out_tif, [cloud])
-    threads("dem", options)
+def run_cloud_to_dem(
+    cloud: str | Path,
+    out_tif: str | Path,
+    options: Options | None = None,
+    *,
+    crs: str | None = None,
+    bounds: tuple[float, float, float, float] | None = None,
+    hooks: Hooks | None = None,
+) -> dict[str, Any]:
+    """One cloud to an average-height GeoTIFF (``api.cloud_to_dem``; ``bounds``: xmin, ymin, xmax, ymax in its
+    CRS, snapped outwards to the cell); returns the grid (cell_m, rows, cols, crs, transform, points, valid_cells)."""
+    options, bounds, hooks = options or Options(), check_bounds(bounds), hooks or Hooks()
+    cloud, out_tif = Path(cloud), check_output_file(Path(out_tif), [cloud])
     ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
     with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
-        one = _read(ctx)
+        one = steps.read_one(ctx)
     with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
         grid, heights = _grid(ctx, one, bounds)
     with steps.running(ctx, "write", ctx.message("write")), os_errors(out_tif):
@@ -44,21 +53,13 @@ def run_cloud_to_dem(cloud: Path, out_tif: Path, options: Options, *, crs, bound
     return cli_tree(dem_summary(one, grid, heights))
 
 
-def _read(ctx: Context) -> Single:
-    """One cloud streamed into its own working frame."""
-    (epoch,) = ctx.epochs
-    check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
-    return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
-
-
 def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np.ndarray]:
     """The one cloud's grid (``bounds``, else its points' box) and heights at the cell centres."""
     xyz, origin, frame, options = one.xyz, one.origin, one.frame, ctx.options
+    box = xyz
     if bounds is not None:
         u, b = frame.xy_unit, bounds
         box = (np.array([b[0] * u, b[1] * u]) - origin[:2], np.array([b[2] * u, b[3] * u]) - origin[:2])
-    else:
-        box = (xyz.min(axis=0)[:2].astype(float), xyz.max(axis=0)[:2].astype(float))
     cell = cloud_cell(xyz, one.thin, options)
     grid = plan_grid(cell, [box], origin, frame, f"{ctx.epochs[0].path}: --bounds do not make a grid")
     ctx.hooks.step(ctx.at("grid", 0.1), f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
@@ -68,13 +69,22 @@ def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np
     return grid, heights
 
 
-def run_register(before: Path, after: Path, out_cloud: Path, options: Options, *, hooks: Hooks) -> dict:
-    """See :func:`soilvolume.api.register`."""
+def run_register(
+    before: str | Path,
+    after: str | Path,
+    out_cloud: str | Path,
+    options: Options | None = None,
+    *,
+    hooks: Hooks | None = None,
+) -> dict[str, Any]:
+    """The after cloud registered onto the before and written (``api.register``; LAS/LAZ, before CRS); returns
+    {"transform": 4x4 row-major (after in before CRS -> before), "coarse": {...}, "fine": {...}}."""
+    options, hooks, before, after = options or Options(), hooks or Hooks(), Path(before), Path(after)
     check_two_surveys(before, after)
-    out_cloud = check_output_file(out_cloud, [before, after])
+    out_cloud = check_output_file(Path(out_cloud), [before, after])
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
-    threads("register", options)
+    threads(options)
     given = {"georeferencing": options.georeferencing}
     epochs: tuple[Epoch, ...] = (
         survey(before, crs=options.before_crs, **given),

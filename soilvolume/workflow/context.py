@@ -1,5 +1,4 @@
-"""What every step of a product is given: a small immutable context (the epochs, the options,
-the callbacks, the timer, the output folder) and the progress table the steps report on."""
+"""What every step of a product is given: an immutable :class:`Context`, and the progress table."""
 
 from __future__ import annotations
 
@@ -10,7 +9,7 @@ from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
 from ..core.types import Epoch
 from ..distributed.schedule import Schedule
-from ..options import Options, command_fields
+from ..options import Options
 from .timing import Timer
 
 #: step -> (start %, end %, message) of an estimate; a shorter product spreads its steps over 0-100
@@ -39,10 +38,8 @@ def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
 
 @dataclass(frozen=True)
 class Context:
-    """A product's run: its epochs, options, callbacks, timer and output folder (None for the
-    commands writing one file), the percent range of each of its steps (:func:`spans`), and its
-    ``--scheduler`` as parsed once (:func:`soilvolume.validate.schedule_of`; None for ``auto`` and
-    for the commands without it): every later use reads this value, never the option's text."""
+    """A product's run: epochs, options, callbacks, timer, output folder (None: one file), each step's percent
+    range (:func:`spans`), ``--scheduler`` as parsed once (None: ``auto``), never its text again."""
 
     epochs: tuple[Epoch, ...]
     options: Options
@@ -71,9 +68,8 @@ class Context:
         return replace(self, options=options)
 
 
-def threads(command: str, options: Options) -> None:
-    """``--threads`` of the commands that take it, for OpenMP libraries (OMP_NUM_THREADS; Open3D 0.19+
-    runs on oneTBB and gets it from :func:`soilvolume.registration.o3d.limit_threads`; numpy's BLAS
-    runs on one thread in the command's process: :func:`soilvolume.__main__.one_blas_thread`)."""
-    if any(f.name == "threads" for f in command_fields(command)) and options.threads > 0:
+def threads(options: Options) -> None:
+    """``--threads`` (of the commands taking it) as OMP_NUM_THREADS for OpenMP libraries (Open3D 0.19+ runs
+    on oneTBB: :func:`soilvolume.registration.o3d.limit_threads`; BLAS: :func:`soilvolume.process.one_blas_thread`)."""
+    if options.threads > 0:
         os.environ.setdefault("OMP_NUM_THREADS", str(options.threads))

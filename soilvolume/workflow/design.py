@@ -1,9 +1,7 @@
-"""``soilvolume estimate DESIGN.tif AFTER.laz``: a survey against a surface (a grading plan or an
-earlier DEM, :mod:`soilvolume.inputs.surface`), a composition of the method's steps without the
-before cloud: nothing is registered against a surface, the surface is resampled onto the survey's
-grid as the before DEM, and the volume step runs as for a pair (bias correction off unless asked)
-with the surface's error terms; the survey's agreement with the surface on unchanged ground leads
-the verdict (volumes/reference, through reporting/surface). It runs in memory."""
+"""``soilvolume estimate DESIGN.tif AFTER.laz``: a survey against a surface (a grading plan or an earlier DEM,
+:mod:`soilvolume.inputs.surface`), in memory: nothing registered, the surface resampled onto the survey's grid
+as the before DEM, the volume step as for a pair (no bias correction unless asked) with the surface's error
+terms; the survey's agreement with the surface on unchanged ground leads the verdict (volumes/reference)."""
 
 from __future__ import annotations
 
@@ -85,8 +83,7 @@ def write_grade(ctx: Context, diff: np.ndarray, on: GridSpec) -> dict | None:
 
 @dataclass(frozen=True)
 class Survey:
-    """The reading step's result: the survey in its own frame, the surface's heights over it,
-    and the grid's cell."""
+    """The reading step's result: the survey in its own frame, the surface's heights over it, the cell."""
 
     prep: Prepared
     surface: Surface | Tin
@@ -94,8 +91,8 @@ class Survey:
 
 
 def read(ctx: Context) -> tuple[Context, Survey]:
-    """The surface opened and checked (before any point), then the survey alone, then the
-    surface's heights over the survey's box: (the run with its options for a surface, the survey)."""
+    """The surface opened and checked (before any point), the survey, the surface's heights over its
+    box: (the run with its options for a surface, the survey)."""
     design, after = ctx.epochs
     with steps.running(ctx, "prepare", ctx.message("prepare") + " (the reference is a surface)", "crop"):
         source = open_surface(Path(design.path), ctx.options.before_crs, ctx.options.design_surface)
@@ -119,14 +116,17 @@ def _not_registered(options: Options) -> Registration:
 
 
 def grid(ctx: Context, survey: Survey) -> tuple[Gridded, np.ndarray]:
-    """The survey's grid clipped to the surface, its DEM, and the surface resampled onto it:
-    (the (survey, surface) DEMs, the surface's per-cell error)."""
+    """The survey's grid clipped to the surface, its DEM and the surface's on it: (the DEMs, the surface's
+    per-cell error)."""
     prep, surface = survey.prep, survey.surface
     with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
         on = survey_grid(prep, surface, survey.cell)
         dem_a = epoch_dem(prep.after.xyz, on, ctx.options.statistic, prep.after.nonsoil)
         dem_s, sigma = surface_epoch(surface, on, ctx.options.design_uncertainty)
-        _check_overlap(dem_a, dem_s, surface.path, prep.after.path)
+        if not (np.isfinite(dem_a.heights) & np.isfinite(dem_s.heights)).any():
+            raise SoilVolumeError(
+                f"{surface.path} does not overlap {prep.after.path}: no cell of the survey has a surface height"
+            )
     return Gridded(on, (dem_a, dem_s), on, (dem_a, dem_s), done(None)), sigma
 
 
@@ -147,8 +147,8 @@ def _options(options: Options, hooks: Hooks) -> Options:
 
 
 def _read_surface(source: SurfaceSource | Tin, prep: Prepared, cell: float, hooks: Hooks) -> Surface | Tin:
-    """The surface's heights over the survey's box and two cells around it (the grid's edges
-    and the resampling's kernel): a design far larger than the site costs only the site's window."""
+    """The surface's heights over the survey's box and two cells around it (the grid's edges, the
+    resampling's kernel): a design far larger than the site costs only the site's window."""
     thin, origin = prep.after_thin[:, :2], prep.origin[:2]
     surface = read_over(source, thin.min(axis=0) + origin, thin.max(axis=0) + origin, prep.frame, 2 * cell)
     for note in masked_notes(source.path, surface.masked):
@@ -160,7 +160,7 @@ def survey_grid(prep: Prepared, surface: Surface | Tin, cell: float) -> GridSpec
     """The grid of ``cell`` over the survey's footprint clipped to the surface's valid extent."""
     box_lo, box_hi = valid_box(surface, prep.frame.crs, prep.frame.xy_unit)
     thin, origin = prep.after_thin[:, :2], prep.origin[:2]
-    boxes = [(thin.min(axis=0), thin.max(axis=0)), (box_lo - origin, box_hi - origin)]
+    boxes = [thin, (box_lo - origin, box_hi - origin)]
     empty = (
         f"{surface.path} does not overlap {prep.after.path}: the surface's valid extent misses the survey "
         "(check the CRSs)"
@@ -169,22 +169,14 @@ def survey_grid(prep: Prepared, surface: Surface | Tin, cell: float) -> GridSpec
 
 
 def surface_epoch(surface: Surface | Tin, grid: GridSpec, given_m: float) -> tuple[EpochDEM, np.ndarray]:
-    """(the surface as the before epoch on ``grid``, each cell's one-sigma error (m)): heights
-    bilinear at the cell centres; the error of that resampling taken as its difference from a
-    cubic one (it is where the surface curves between its own cells), with the given surface
-    uncertainty ``given_m`` in quadrature. Each cell counts :data:`DESIGN_COUNT` points with that
-    error as its standard error, so the per-cell level of detection includes it."""
+    """(the surface bilinear at ``grid``'s centres as the before epoch, each cell's one-sigma error: its difference
+    from cubic with ``given_m`` in quadrature, the standard error of :data:`DESIGN_COUNT` points so the LoD has it)."""
     z = on_grid(surface, grid) - grid.origin[2]
     cubic = z if isinstance(surface, Tin) else on_grid(surface, grid, "cubic") - grid.origin[2]  # a TIN is exact
     valid = np.isfinite(z)
     sigma = np.where(valid, np.hypot(np.nan_to_num(np.abs(z - cubic)), given_m), np.nan)
     counts = np.where(valid, DESIGN_COUNT, 0).astype(np.int64)
     return EpochDEM(z, counts, sigma * np.sqrt(DESIGN_COUNT)), sigma
-
-
-def _check_overlap(dem_a: EpochDEM, dem_s: EpochDEM, design: Path, after: Path) -> None:
-    if not (np.isfinite(dem_a.heights) & np.isfinite(dem_s.heights)).any():
-        raise SoilVolumeError(f"{design} does not overlap {after}: no cell of the survey has a surface height")
 
 
 def layers() -> list:

@@ -1,6 +1,5 @@
-"""``soilvolume estimate``: the pair product (:mod:`.pair`), or the survey against a surface
-(:mod:`.design`) when the first input is one, its outputs staged and swapped in when all
-succeeded; the backend chosen from ``--scheduler`` (:func:`backend_for`)."""
+"""``soilvolume estimate``: a pair (:mod:`.pair`, on the backend of ``--scheduler``) or a survey against a
+surface (:mod:`.design`), its outputs staged and swapped in when all succeeded."""
 
 from __future__ import annotations
 
@@ -34,17 +33,18 @@ def epochs_of(before: Path, after: Path, options: Options, before_pipeline=None,
 
 
 def run_estimate(
-    before: Path,
-    after: Path,
-    out_dir: Path,
-    options: Options,
+    before: str | Path,
+    after: str | Path,
+    out_dir: str | Path,
+    options: Options | None = None,
     *,
-    overwrite: bool,
-    hooks: Hooks,
-    before_pipeline=None,
-    after_pipeline=None,
+    overwrite: bool = False,
+    hooks: Hooks | None = None,
+    before_pipeline: str | Path | None = None,
+    after_pipeline: str | Path | None = None,
 ) -> Result:
-    """See :func:`soilvolume.api.estimate`."""
+    """The whole method (``api.estimate``): read, crop, register, compensate, grid, difference, volumes, report."""
+    options, hooks, before, after = options or Options(), hooks or Hooks(), Path(before), Path(after)
     timer = Timer()  # first: the timings count from here (and the start-up before)
     schedule = schedule_of(options)  # the one parse of --scheduler, before any file is read
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
@@ -56,9 +56,9 @@ def run_estimate(
             f"not the point cloud {before}"
         )
     inputs = [before, after, before_pipeline, after_pipeline, options.zones, options.stable_mask, options.sections]
-    threads("estimate", options)
+    threads(options)
     with (
-        output_dir(out_dir, inputs, overwrite) as out,
+        output_dir(Path(out_dir), inputs, overwrite) as out,
         os_errors(out.final),
         writers_into(out.stage, inputs, RUN_OUTPUTS),
     ):
@@ -72,10 +72,8 @@ def run_estimate(
         else:
             cloud = out.path("after_registered.laz") if options.keep_registered_cloud else None
             done = pair.estimate(ctx, backend, cloud)
-        result = Result(done.report, keyed=done.keyed)
-    result.outputs = {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in out.moved.items()}
     hooks.step(100, "done")
-    return result
+    return Result.written(done.report, out.moved, done.keyed)
 
 
 def backend_for(ctx: Context) -> Backend:

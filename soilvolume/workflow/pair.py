@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..core.record import RunRecord
+from ..dem.grid import output_layers
 from ..execution.seam import Backend
 from . import steps
 from .context import Context
@@ -28,7 +29,7 @@ def estimate(ctx: Context, backend: Backend, cloud: Path | None = None) -> Repor
         gridded = steps.grid(ctx, backend, prep, reg)
         fitted = steps.planes(ctx, gridded)
         vols = steps.volume(ctx, backend, gridded, fitted, reg)
-        extras = steps.write(ctx, backend, vols, gridded.grid, steps.pair_layers(ctx.options))
+        extras = steps.write(ctx, backend, vols, gridded.grid, output_layers(ctx.options.correction))
         judged = steps.judged(vols, gridded.correction_grid, ctx.options)
         parts = (prep, reg, gridded.grid, fitted[:2], vols, ctx.options, judged, backend.engine())
         return steps.report(ctx, RunRecord(*parts), gridded, extras)

@@ -1,13 +1,6 @@
-"""The one grid planner and the one default-cell rule of every product and every backend.
-
-The cell is ``--cell``, else about eight points of the reference epoch per cell over the
-footprint compared (:func:`soilvolume.dem.grid.choose_cell`, rounded up to 5 cm, at least
-0.5 m): the before survey's points within the registered after footprint for a pair or a series,
-the survey's own for a surface as the reference or a single cloud. The points are counted where
-the run holds them; a tiled run, which holds none, counts them from the first pass's columns
-(the points behind each column), so both backends pick the same cell for the same input
-(``tests/test_plan.py``). The grid covers the boxes of every epoch compared, its edges on
-multiples of the cell."""
+"""The one grid planner and default-cell rule of every product and backend: ``--cell``, else about eight
+reference points per cell over the footprint compared (:func:`soilvolume.dem.grid.choose_cell`), counted by
+a tiled run from its columns so both backends pick the same cell; the grid over the epochs' boxes' overlap."""
 
 from __future__ import annotations
 
@@ -30,9 +23,8 @@ def given_cell(options: Options) -> float | None:
 
 
 def reference_cell(prep: Prepared, poly: np.ndarray, options: Options) -> float:
-    """The cell of a pair: ``--cell``, else from the before points within ``poly`` (the
-    registered after footprint): the points themselves, or, when the run holds none (tiled), the
-    counts behind the before columns whose centres are inside it, over its area."""
+    """The cell of a pair: ``--cell``, else from the before points within ``poly`` (the registered
+    after footprint), or in a tiled run the counts behind the before columns centred inside it."""
     cell = given_cell(options)
     if cell is not None:
         return cell
@@ -55,8 +47,9 @@ def cloud_cell(xyz: np.ndarray, thin: np.ndarray, options: Options) -> float:
 
 
 def plan_grid(cell: float, boxes: Sequence[tuple], origin: np.ndarray, frame: WorkFrame, empty: str) -> GridSpec:
-    """The grid of ``cell`` over the overlap of ``boxes`` (local (lo, hi) pairs, x/y first);
-    ``empty``: the error when they do not overlap."""
+    """The grid of ``cell`` over the overlap of ``boxes`` (local (lo, hi) pairs, x/y first, or the points'
+    own); ``empty``: the error when they do not overlap."""
+    boxes = [(b[:, :2].min(axis=0), b[:, :2].max(axis=0)) if isinstance(b, np.ndarray) else b for b in boxes]
     lo = np.max([np.asarray(b[0], float)[:2] for b in boxes], axis=0)
     hi = np.min([np.asarray(b[1], float)[:2] for b in boxes], axis=0)
     if (hi <= lo).any():

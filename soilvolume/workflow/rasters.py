@@ -1,15 +1,12 @@
-"""Volume between two DEM rasters a user already has (optionally per polygon zone): each read
-in metres through :mod:`soilvolume.inputs.heights` (scale, offset, nodata, unit), the after DEM
-over the before's extent only and resampled onto its grid when the grids differ."""
+"""Volume between two DEMs a user already has (optionally per zone): each read in metres
+(:mod:`soilvolume.inputs.heights`), the after's over the before's extent, resampled when the grids differ."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pyproj
 
 from ..core.hooks import Hooks
 from ..core.outputs import check_output_file, os_errors
@@ -18,7 +15,6 @@ from ..dem.geotiff import write_grid
 from ..inputs.crs import horizontal, parse_crs, xy_unit
 from ..inputs.distinct import check_two_surveys
 from ..inputs.heights import (
-    HeightRaster,
     Heights,
     masked_notes,
     metres_per_unit,
@@ -26,6 +22,7 @@ from ..inputs.heights import (
     read_heights,
     window_over,
 )
+from ..inputs.surface import SurfaceSource as Dem
 from ..volumes.difference import budget
 from ..volumes.zones import zone_budgets
 
@@ -35,35 +32,28 @@ NO_CORRECTION = (
 )
 
 
-@dataclass(frozen=True)
-class Dem:
-    """A DEM opened and checked (:mod:`soilvolume.inputs.heights`): its CRS and heights' unit."""
-
-    raster: HeightRaster
-    crs: pyproj.CRS
-    factor: float  # metres per stored unit (after the band's scale and offset)
-    where: str  # where the unit came from, in words
-
-    def profile(self, heights: Heights) -> dict:
-        """The grid of ``heights`` (a window of the DEM) for GDAL's warp and :func:`grid_of`."""
-        rows, cols = heights.z.shape
-        return {"transform": heights.transform, "crs": self.crs, "height": rows, "width": cols}
-
-    def describe(self, heights: Heights) -> dict:
-        return {
-            "path": self.raster.path,
-            "vertical_unit": self.where,
-            **self.raster.describe(),
-            "masked_as_nodata": heights.masked,
-        }
-
-
 def open_dem(path: Path) -> Dem:
     """A DEM opened, its CRS (required) and heights' unit checked; no pixel read."""
     raster = open_heights(path)
     if raster.crs is None:
         raise SoilVolumeError(f"{path}: the raster has no CRS")
     return Dem(raster, raster.crs, *metres_per_unit(raster.crs, raster.unit, str(path)))
+
+
+def profile(dem: Dem, heights: Heights) -> dict:
+    """The grid of ``heights`` (a window of ``dem``) for GDAL's warp and :func:`grid_of`."""
+    rows, cols = heights.z.shape
+    return {"transform": heights.transform, "crs": dem.crs, "height": rows, "width": cols}
+
+
+def describe(dem: Dem, heights: Heights) -> dict:
+    """report's description of an input DEM and what of it was read."""
+    return {
+        "path": dem.path,
+        "vertical_unit": dem.vertical_unit,
+        **dem.raster.describe(),
+        "masked_as_nodata": heights.masked,
+    }
 
 
 def after_on_before(after: Dem, before: Dem, grid: dict) -> tuple[np.ndarray, Heights]:
@@ -78,7 +68,7 @@ def after_on_before(after: Dem, before: Dem, grid: dict) -> tuple[np.ndarray, He
     if window is None:
         raise SoilVolumeError(f"{before.raster.path} and {after.raster.path} do not overlap")
     got = read_heights(after.raster, after.factor, window)
-    return resample_onto(got.z, after.profile(got), grid), got
+    return resample_onto(got.z, profile(after, got), grid), got
 
 
 def grid_of(profile: dict) -> GridSpec:
@@ -112,26 +102,23 @@ def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
 
 
 def run_volume_from_rasters(
-    before: Path, after: Path, out: Path, *, zones=None, zone_field=None, hooks: Hooks
+    before: str | Path,
+    after: str | Path,
+    out: str | Path,
+    *,
+    zones: str | Path | None = None,
+    zone_field: str | None = None,
+    hooks: Hooks | None = None,
 ) -> dict[str, Any]:
-    """See :func:`soilvolume.api.volume_from_rasters`."""
+    """Cut/fill/net between two DEMs (``api.volume_from_rasters``), the after resampled onto the before's grid:
+    {"total": {"net", "cut", "fill", "area_m2", "cells"}, "zones": [...], ...}; writes the difference GeoTIFF."""
+    before, after, hooks = Path(before), Path(after), hooks or Hooks()
     check_two_surveys(before, after, "the before DEM")
-    out = check_output_file(out, [before, after, zones])
+    out = check_output_file(Path(out), [before, after, zones])
     hooks.step(5, f"reading {before.name} and {after.name}")
     db, da = open_dem(before), open_dem(after)
-    hb = read_heights(db.raster, db.factor)  # the whole before DEM: the difference's grid
-    pb = db.profile(hb)
-    rb, ra = db.raster, da.raster
-    if (ra.transform, ra.width, ra.height) == (rb.transform, rb.width, rb.height) and da.crs.equals(db.crs):
-        ha = read_heights(ra, da.factor)
-        za = ha.z
-    else:
-        hooks.info(f"resampling {after.name} onto the grid of {before.name}")
-        za, ha = after_on_before(da, db, pb)
-    for note in masked_notes(rb.path, hb.masked) + masked_notes(ra.path, ha.masked):
-        hooks.info(note)
-    grid, zb = grid_of(pb), hb.z
-    diff = za - zb
+    hb, ha, za = read_both(db, da, hooks)
+    grid, diff = grid_of(profile(db, hb)), za - hb.z
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
     hooks.step(60, "computing cut and fill")
@@ -142,13 +129,15 @@ def run_volume_from_rasters(
         "a datum or georeferencing offset between the DEMs shows here and is counted as volume"
     )
     result: dict[str, Any] = {
-        "total": _public(budget(diff, grid.cell_area)),
+        "total": {
+            k: v for k, v in budget(diff, grid.cell_area).items() if k in ("net", "cut", "fill", "area_m2", "cells")
+        },
         "zones": [],
         "cell_m": grid.cell,
         "crs": parse_crs(grid.crs_wkt, "raster").name,
         "median_difference_m": median,
         "method": NO_CORRECTION,
-        "inputs": {"before": db.describe(hb), "after": da.describe(ha)},
+        "inputs": {"before": describe(db, hb), "after": describe(da, ha)},
     }
     if zones:  # before writing: a bad zones file leaves nothing behind
         result["zones"] = zone_budgets(diff, grid, zones, zone_field)
@@ -159,5 +148,17 @@ def run_volume_from_rasters(
     return result
 
 
-def _public(b: dict) -> dict:
-    return {"net": b["net"], "cut": b["cut"], "fill": b["fill"], "area_m2": b["area_m2"], "cells": b["cells"]}
+def read_both(db: Dem, da: Dem, hooks: Hooks) -> tuple[Heights, Heights, np.ndarray]:
+    """(the whole before DEM: the difference's grid, the after DEM read, its heights on that grid:
+    resampled when the grids differ), their masked values said."""
+    hb = read_heights(db.raster, db.factor)
+    rb, ra = db.raster, da.raster
+    if (ra.transform, ra.width, ra.height) == (rb.transform, rb.width, rb.height) and da.crs.equals(db.crs):
+        ha = read_heights(ra, da.factor)
+        za = ha.z
+    else:
+        hooks.info(f"resampling {Path(ra.path).name} onto the grid of {Path(rb.path).name}")
+        za, ha = after_on_before(da, db, profile(db, hb))
+    for note in masked_notes(rb.path, hb.masked) + masked_notes(ra.path, ha.masked):
+        hooks.info(note)
+    return hb, ha, za

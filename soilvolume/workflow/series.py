@@ -1,12 +1,6 @@
-"""``soilvolume series E0 E1 ... En``: a site surveyed n + 1 times, E0 the reference, a
-composition of the method's steps (:mod:`.steps`) over the pairs E0 -> Ek, in memory.
-
-Each later epoch is prepared and registered against E0 (the pair E0 -> Ek, so the stable-ground
-refinement works on ground stable across the two) with the steps of :mod:`.steps` an estimate
-takes, every epoch is moved into one frame (E0's, with the first pair's local origin) and
-gridded on one grid (the cells every registered epoch covers), each pair's volume step corrects
-Ek once relative to E0, and :mod:`soilvolume.volumes.series` turns the corrected differences
-into periods that add up to the cumulative."""
+"""``soilvolume series E0 E1 ... En``: the method's steps over the pairs E0 -> Ek (each registered on ground
+stable between the two), in memory: every epoch in E0's frame on one grid, each Ek corrected once relative
+to E0, the periods adding up to the cumulative (:mod:`soilvolume.volumes.series`)."""
 
 from __future__ import annotations
 
@@ -36,7 +30,6 @@ from ..registration.register import Registration
 from ..registration.rigid import transform_points, transform_points32
 from ..reporting.series import write_rasters, write_reports
 from ..validate import schedule_of
-from ..volumes.compute import compute_volumes
 from ..volumes.series import combine
 from . import steps
 from .context import Context, threads
@@ -48,8 +41,8 @@ from .timing import Timer
 
 @dataclass(frozen=True)
 class Fit:
-    """A later epoch registered into E0's frame: its pair (rebased on the series origin), the
-    registration (series frame) and the options its volume step takes (precise surveys: none)."""
+    """A later epoch registered into E0's frame: its pair and registration rebased on the series
+    origin, and the options its volume step takes (precise surveys: no correction)."""
 
     prep: Prepared
     reg: Registration
@@ -57,8 +50,7 @@ class Fit:
 
 
 def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | None, str | None]]:
-    """Each epoch's (date, where it came from): ``given`` (``--dates``; an empty entry keeps the
-    file's), else the LAS header's creation day and year, else (None, None)."""
+    """Each epoch's (date, its source): ``--dates`` (empty keeps the file's), else the LAS header's, else None."""
     if given is not None and len(given) != len(paths):
         raise SoilVolumeError(f"--dates: {len(given)} dates for {len(paths)} epochs (give one per epoch)")
     out: list[tuple[str | None, str | None]] = []
@@ -75,15 +67,6 @@ def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | 
     return out
 
 
-def check_epochs(paths: list[Path]) -> None:
-    """At least two epochs, each an existing file or folder."""
-    if len(paths) < 2:
-        raise SoilVolumeError(f"series: {len(paths)} epoch given; at least two are needed (E0 and a later survey)")
-    for path in paths:
-        if not path.exists():
-            raise SoilVolumeError(f"{path}: no such file")
-
-
 def described(epochs: tuple[Epoch, ...], k: int) -> str:
     """Epoch ``k`` in an error: its index, file and date with where the date came from."""
     e = epochs[k]
@@ -91,32 +74,43 @@ def described(epochs: tuple[Epoch, ...], k: int) -> str:
     return f"E{k} {e.name} ({f'{e.date}, {source}' if e.date else 'no date'})"
 
 
+def series_epochs(paths: list[Path], dates: list[str] | None, options: Options) -> tuple[Epoch, ...]:
+    """The epochs of a series (at least two, each an existing file or folder), dated
+    (:func:`epoch_dates`) and checked (:func:`check_series`)."""
+    if len(paths) < 2:
+        raise SoilVolumeError(f"series: {len(paths)} epoch given; at least two are needed (E0 and a later survey)")
+    for path in paths:
+        if not path.exists():
+            raise SoilVolumeError(f"{path}: no such file")
+    dated = zip(paths, epoch_dates(paths, dates), strict=True)
+    given = {"crs": None, "georeferencing": options.georeferencing}
+    epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
+    check_series(epochs)
+    return epochs
+
+
 def check_series(epochs: tuple[Epoch, ...]) -> None:
-    """Every epoch a different survey (:func:`~soilvolume.inputs.distinct.sameness`), and the
-    known dates in the order the epochs are given (a series is not reordered: E0 is the reference)."""
+    """Every epoch another survey (:func:`~soilvolume.inputs.distinct.sameness`), the known dates in
+    the epochs' order (a series is not reordered: E0 is the reference)."""
     for j, k in itertools.combinations(range(len(epochs)), 2):
         how = sameness(Path(epochs[j].path), Path(epochs[k].path))
         if how:
             raise SoilVolumeError(
                 f"series: {described(epochs, k)} {how} {described(epochs, j)}; each epoch must be another survey"
             )
-    latest = None  # the epoch of the latest date so far
-    for k, e in enumerate(epochs):
-        if not e.date:
-            continue
-        if latest is not None and e.date < epochs[latest].date:
+    dated = [k for k, e in enumerate(epochs) if e.date]
+    for latest, k in itertools.pairwise(dated):
+        if epochs[k].date < epochs[latest].date:
             raise SoilVolumeError(
                 f"series: the epochs are not in time order: {described(epochs, k)} is given after "
                 f"{described(epochs, latest)}; give the surveys oldest first (E0 the reference) or correct "
                 "their dates with --dates"
             )
-        latest = k
 
 
 @contextmanager
 def naming(prefix: str) -> Iterator[None]:
-    """A SoilVolumeError raised in the block with ``prefix`` (the epochs it concerns) before its
-    message, its type and fields kept; an interruption as it is."""
+    """A SoilVolumeError of the block prefixed with ``prefix`` (its epochs), its type kept; not an interruption."""
     try:
         yield
     except (Interrupted, Cancelled):
@@ -158,36 +152,39 @@ def rebase(prep: Prepared, reg, origin: np.ndarray) -> tuple[Prepared, object]:
 
 
 def series_grid(fits: list[Fit], options: Options) -> GridSpec:
-    """One grid over the cells E0 and every registered later epoch cover (their boxes' overlap),
-    the cell from E0's points within the first registered epoch's footprint (:mod:`.plan`)."""
+    """One grid over the overlap of E0's and every registered epoch's boxes, the cell from E0's points
+    within the first registered epoch's footprint (:mod:`.plan`)."""
     thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
     prep = fits[0].prep
-    boxes = [(t.min(axis=0), t.max(axis=0)) for t in (prep.before_thin, *thins)]
+    boxes = [prep.before_thin, *thins]
     cell = reference_cell(prep, footprint(thins[0][:, :2]), options)
     empty = "the registered epochs have no area in common with each other and E0"
     return plan_grid(cell, boxes, prep.origin, prep.frame, empty)
 
 
 def run_series(
-    paths: list[Path], out_dir: Path, options: Options, *, dates=None, overwrite: bool, hooks: Hooks
+    epochs: list[str | Path],
+    out_dir: str | Path,
+    options: Options | None = None,
+    *,
+    dates: list[str] | None = None,
+    overwrite: bool = False,
+    hooks: Hooks | None = None,
 ) -> Result:
-    """See :func:`soilvolume.api.series`: the method's steps over E0 and every later epoch."""
+    """Volume change over surveys (``api.series``), E0 the reference: report.json's ``epochs``, ``periods`` and
+    ``cumulative`` (the periods' nets add up to it); ``dates``: one per epoch (YYYY-MM-DD; empty: the file's)."""
+    paths, options, hooks = [Path(e) for e in epochs], options or Options(), hooks or Hooks()
     timer = Timer()
     schedule = schedule_of(options)  # parsed once, before any work (a series runs in this process)
-    check_epochs(paths)
-    dated = zip(paths, epoch_dates(paths, dates), strict=True)
-    given = {"crs": None, "georeferencing": options.georeferencing}
-    epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
-    check_series(epochs)
+    epochs = series_epochs(paths, dates, options)
     design = open_design(options)  # checked before any point is read
-    threads("series", options)
+    threads(options)
     inputs = [*paths, options.stable_mask, options.design, options.zones]
-    with output_dir(out_dir, inputs, overwrite) as out, os_errors(out.final):
+    with output_dir(Path(out_dir), inputs, overwrite) as out, os_errors(out.final):
         ctx = Context(epochs, options.with_(zones=None), hooks, STEPS, timer, out, schedule=schedule)
         report = series(ctx, InMemory(), design)
     hooks.step(100, "done")
-    moved = out.moved.items()
-    return Result(report, {n.replace(".", "_") if n.startswith("report.") else Path(n).stem: p for n, p in moved})
+    return Result.written(report, out.moved)
 
 
 def pair_named(ctx: Context, k: int) -> str:
@@ -195,16 +192,9 @@ def pair_named(ctx: Context, k: int) -> str:
     return f"{described(ctx.epochs, k)} against {described(ctx.epochs, 0)}"
 
 
-def _each(ctx: Context, step: str, k: int, n: int) -> tuple[float, float]:
-    """The share of the ``k``-th of ``n`` pairs in ``step``'s percent range."""
-    lo, hi = ctx.spans[step]
-    return lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1) / n
-
-
 def series(ctx: Context, backend: InMemory, design=None) -> dict:
-    """Read and register each pair E0 -> Ek, grid every epoch on one grid, each pair's planes and
-    volume step (Ek corrected once relative to E0), the periods, each epoch against the
-    ``design`` (:func:`.seriesgrade.open_design`) when given, write, report."""
+    """Read and register each pair E0 -> Ek, grid every epoch on one grid, each pair's planes and volume
+    step, the periods, each epoch against the ``design`` (:func:`.seriesgrade.open_design`), write, report."""
     with backend.session(ctx):
         with steps.running(ctx, "prepare", ctx.message("prepare"), "crop"):
             preps = [_read(ctx, backend, k) for k in range(1, len(ctx.epochs))]
@@ -228,7 +218,8 @@ def series(ctx: Context, backend: InMemory, design=None) -> dict:
 
 def _read(ctx: Context, backend: InMemory, k: int) -> Prepared:
     """The pair E0 -> Ek read (progress within its share of the step)."""
-    spans = {**ctx.spans, "prepare": _each(ctx, "prepare", k - 1, len(ctx.epochs) - 1)}
+    n = len(ctx.epochs) - 1
+    spans = {**ctx.spans, "prepare": (ctx.at("prepare", (k - 1) / n), ctx.at("prepare", k / n))}
     with naming(pair_named(ctx, k)):
         return backend.read(replace(ctx, epochs=(ctx.epochs[0], ctx.epochs[k]), spans=spans))
 
@@ -239,7 +230,8 @@ def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
     n, seconds, fits = len(preps), {"coarse": 0.0, "fine": 0.0, "register_other": 0.0}, []
     for k, prep in enumerate(preps):
         name = ctx.epochs[k + 1].name
-        progress = (*_each(ctx, "register", k, n), f"registering {name} into {ctx.epochs[0].name}'s frame")
+        span = (ctx.at("register", k / n), ctx.at("register", (k + 1) / n))
+        progress = (*span, f"registering {name} into {ctx.epochs[0].name}'s frame")
         with naming(pair_named(ctx, k + 1)):
             reg, opts = steps.register_pair(prep, ctx, (prep.after.xyz, prep.before.xyz), progress)
         ctx.hooks.info(f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m")
@@ -282,12 +274,8 @@ def _volumes(ctx: Context, backend: InMemory, fits: list[Fit], fitted: list, gri
     """Each pair's volume step: Ek corrected once relative to E0."""
     vols = []
     for k, (f, planes) in enumerate(zip(fits, fitted, strict=True), 1):
-        moved = steps.alternative_move(f.reg)
-
-        def step(after, before, d_i, on, f=f, moved=moved):
-            return compute_volumes(after, before, d_i, on, f.options, moved=moved)
-
-        pair = (dems[k], dems[0])
+        pair, step = (dems[k], dems[0]), steps.volume_step(f.reg, f.options)
         with naming(pair_named(ctx, k)):
-            vols.append(backend.volume(ctx, step, Gridded(grid, pair, grid, pair, done(None)), planes, moved))
+            gridded = Gridded(grid, pair, grid, pair, done(None))
+            vols.append(backend.volume(ctx, step, gridded, planes, steps.alternative_move(f.reg)))
     return vols

@@ -1,9 +1,7 @@
-"""``soilvolume series E0 ... En --design DESIGN --tolerance T``: progress against a design over a
-series. The design (a DEM GeoTIFF or a LandXML TIN, :mod:`soilvolume.inputs.surface`) is opened
-and checked before any point is read, resampled onto the series' one grid, and each epoch's
-corrected DEM is graded against it (:func:`soilvolume.volumes.grade.grade` on epoch - design):
-its share on grade and the cut and fill still to go, overall and per zone; a period's progress
-is the cut and fill to go at its start minus those at its end."""
+"""``soilvolume series E0 ... En --design DESIGN --tolerance T``: progress against a design. The design (a DEM
+GeoTIFF or a LandXML TIN) is checked before any point is read, resampled onto the series' grid, and each
+epoch's corrected DEM graded against it (:func:`soilvolume.volumes.grade.grade`): its share on grade and the
+cut and fill still to go, overall and per zone; a period's progress is the change of those."""
 
 from __future__ import annotations
 
@@ -31,8 +29,7 @@ class Design:
 
 @dataclass(frozen=True)
 class Graded:
-    """Each epoch graded against the design: the design on the grid (local heights), each
-    epoch's class grid and report.json's ``grade``."""
+    """Each epoch graded: the design on the grid (local heights), each epoch's classes and ``grade``."""
 
     design: str
     tolerance: float
@@ -43,9 +40,8 @@ class Graded:
 
 
 def open_design(options: Options) -> Design | None:
-    """The series' design opened and checked (None without ``--design``); ``--tolerance`` and
-    ``--zones`` are a design's and need it, ``--design`` needs a tolerance. The zones grade the
-    epochs only (the periods' volume steps do not take them)."""
+    """The series' design opened and checked (None without ``--design``, which ``--tolerance``,
+    ``--zones`` and ``--design-surface`` need and which needs a tolerance); its zones grade the epochs only."""
     if options.design is None:
         for name in ("tolerance", "zones", "design_surface"):
             if getattr(options, name) is not None:
@@ -62,11 +58,8 @@ def open_design(options: Options) -> Design | None:
 
 
 def design_heights(source: SurfaceSource | Tin, grid: GridSpec, frame: WorkFrame, valid: np.ndarray) -> np.ndarray:
-    """The design's heights (m, local) at the grid's cell centres; refused when it has none on
-    the cells the series compares."""
-    lo = np.array([grid.xmin, grid.ymax - grid.rows * grid.cell])
-    hi = np.array([grid.xmin + grid.cols * grid.cell, grid.ymax])
-    z = on_grid(read_over(source, lo, hi, frame, 2 * grid.cell), grid) - grid.origin[2]
+    """The design's local heights at the cell centres; refused without any on the compared cells."""
+    z = on_grid(read_over(source, *grid.box(), frame, 2 * grid.cell), grid) - grid.origin[2]
     if not (np.isfinite(z) & valid).any():
         raise SoilVolumeError(f"{source.path} does not overlap the series: no compared cell has a design height")
     return z

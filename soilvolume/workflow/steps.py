@@ -1,9 +1,8 @@
 """The method's steps, each written once: read, register, grid, planes, volume, write, report.
 
-Each step takes the run's :class:`~.context.Context`, the backend that does its point work
-(:mod:`soilvolume.execution`) and the typed results of the steps before it, reports its progress,
-times itself and returns a frozen typed result. The products (:mod:`.pair`, :mod:`.design`,
-:mod:`.series`, :mod:`.single`) are compositions of these steps."""
+Each takes the run's :class:`~.context.Context`, the backend doing its point work and the earlier
+steps' results, reports its progress, times itself and returns a frozen typed result; the products
+(:mod:`.pair`, :mod:`.design`, :mod:`.series`, ...) are compositions of them."""
 
 from __future__ import annotations
 
@@ -17,11 +16,12 @@ from ..compensation.planes import Plane, plane_offset, ransac_plane
 from ..core.record import Georeferencing, QualityInputs, RunRecord
 from ..core.types import GridSpec
 from ..core.wording import cli_tree, opt
-from ..dem.grid import EpochDEM, output_layers
+from ..dem.grid import EpochDEM
 from ..execution.seam import Backend, Gridded, Layout
 from ..inputs.footprint import footprint
-from ..inputs.prepare import Prepared
+from ..inputs.prepare import Prepared, Single, prepare_single
 from ..options import Options
+from ..pipelines.pipeline import open_source
 from ..registration import georef
 from ..registration.register import Registration
 from ..registration.register import register as register_clouds
@@ -41,8 +41,7 @@ from .plan import plan_grid, reference_cell
 
 @dataclass(frozen=True)
 class Registered:
-    """The registration step's result: the pose and the options the later steps take (precise
-    georeferencing: no bias correction)."""
+    """The registration and the options the later steps take (precise georeferencing: no correction)."""
 
     reg: Registration
     options: Options
@@ -70,6 +69,13 @@ def read(ctx: Context, backend: Backend) -> Prepared:
         return backend.read(ctx)
 
 
+def read_one(ctx: Context) -> Single:
+    """Step 1 of one survey (``dem``, ``stockpile``): streamed into its own frame, its ground and soil points."""
+    (epoch,) = ctx.epochs
+    check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
+    return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
+
+
 def register(ctx: Context, prep: Prepared, dense) -> Registered:
     """Step 2: the georeferencing decision, then coarse + fine registration (``dense``: the
     full-resolution points of the stable-ground refinement, or None)."""
@@ -81,10 +87,10 @@ def register(ctx: Context, prep: Prepared, dense) -> Registered:
 
 
 def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple[Registration, Options]:
-    """Decide how far the georeferencing is trusted, then register: (Registration, the options
-    the rest of the run uses). Auto with a vertical datum both files declare registers first and
-    keeps the coordinates only when the registration confirms them (:func:`registration.georef.confirm`).
-    ``register_other`` in the timings: the decision, beside the coarse and fine stages."""
+    """How far the georeferencing is trusted, then the registration: (Registration, the options the
+    rest of the run uses). Auto with a vertical datum both files declare keeps the coordinates only
+    when the registration confirms them (:func:`registration.georef.confirm`); ``register_other``
+    times the decision."""
     options, hooks, timer = ctx.options, ctx.hooks, ctx.timer
     with timer("register"):
         lo, hi, message = progress
@@ -119,14 +125,10 @@ def layout(prep: Prepared, reg: Registration, options: Options) -> Layout:
     """The grid over the registered after footprint and the before subset (:mod:`.plan`)."""
     after_thin = transform_points(prep.after_thin, reg.transform)
     poly = footprint(after_thin[:, :2])
-    boxes = [_box(after_thin), _box(prep.before_thin)]
+    boxes = [after_thin, prep.before_thin]
     empty = "the registered after cloud does not overlap the before cloud"
     grid = plan_grid(reference_cell(prep, poly, options), boxes, prep.origin, prep.frame, empty)
     return Layout(grid, after_thin, poly)
-
-
-def _box(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
 
 
 def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> Gridded:
@@ -137,8 +139,8 @@ def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> G
 
 
 def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Callable:
-    """The paper's two RANSAC planes, given the grid and the before DEM: the before cloud's on
-    its thinned points over the cells it has heights in, the registered after cloud's."""
+    """The paper's two RANSAC planes on a grid and its before DEM: the before's thinned points over
+    the cells it has heights in, and the registered after's."""
 
     def fit(grid: GridSpec, dem_before: EpochDEM) -> tuple[Plane, Plane]:
         valid = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
@@ -157,8 +159,7 @@ def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
 
 
 def planes(ctx: Context, gridded: Gridded) -> tuple:
-    """Step 4: the paper's planes and d_i on the grid the correction is found on: (plane before,
-    plane after, d_i)."""
+    """Step 4: (plane before, plane after, d_i) on the grid the correction is found on."""
     k = round(gridded.correction_grid.cell / gridded.grid.cell)
     overview = f"estimating the vertical bias correction on a {k} x {k} overview of the grid"
     with running(ctx, "planes", overview if k > 1 else correction_message(ctx.options)):
@@ -175,13 +176,18 @@ def correction_message(options: Options) -> str:
 
 def volume(ctx: Context, backend: Backend, gridded: Gridded, fitted: tuple, reg: Registration) -> Volumes:
     """Step 5: difference, refill, correction, change areas, budgets, uncertainty, zones."""
+    with running(ctx, "volume", ctx.message("volume")):
+        return backend.volume(ctx, volume_step(reg, ctx.options), gridded, fitted, alternative_move(reg))
+
+
+def volume_step(reg: Registration, options: Options) -> Callable:
+    """The volume step of a pair registered by ``reg``, as a backend runs it (``seam.VolumeFn``)."""
     moved = alternative_move(reg)
 
     def step(after: EpochDEM, before: EpochDEM, d_i: np.ndarray, on: GridSpec) -> Volumes:
-        return compute_volumes(after, before, d_i, on, ctx.options, moved=moved)
+        return compute_volumes(after, before, d_i, on, options, moved=moved)
 
-    with running(ctx, "volume", ctx.message("volume")):
-        return backend.volume(ctx, step, gridded, fitted, moved)
+    return step
 
 
 def alternative_move(reg: Registration) -> np.ndarray | None:
@@ -191,9 +197,8 @@ def alternative_move(reg: Registration) -> np.ndarray | None:
 
 
 def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec | None, layers: list) -> dict:
-    """Step 6: the rasters ``layers`` (and the registered cloud, when kept); drawn from the rasters
-    just staged: with ``--contour-interval``, contours.gpkg, with ``--sections``, the sections'
-    profiles; returns their descriptions for report.json (``contours``, ``sections``)."""
+    """Step 6: the rasters ``layers`` (and the registered cloud, when kept), then from them contours.gpkg
+    (``--contour-interval``) and the sections (``--sections``): their report.json entries."""
     extras = {}
     with running(ctx, "write", ctx.message("write") + backend.raster_note):
         z0 = 0.0 if grid is None else float(grid.origin[2])  # local -> absolute heights
@@ -207,14 +212,9 @@ def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec |
     return extras
 
 
-def pair_layers(options: Options) -> list:
-    """The rasters of a pair (:func:`dem.grid.output_layers`)."""
-    return output_layers(options.correction)
-
-
 def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | None) -> Reported:
-    """Step 7: report.json from the run's typed record (the quality verdict in it, the write
-    step's ``extras``), report.html and the areas of significant change as polygons."""
+    """Step 7: report.json from the run's record (its verdict, the write step's ``extras``),
+    report.html and the areas of significant change as polygons."""
     with running(ctx, "report", ctx.message("report"), log=False):
         out, vols, z0 = ctx.out, record.vols, float(gridded.grid.origin[2])
         report = build_report(record, ctx.timer.totals())

@@ -1,6 +1,5 @@
-"""The stockpile product (``soilvolume stockpile``): one survey read and prepared as ``dem`` reads
-it (CRS, units, local origin, pipeline, its ground and soil points only), gridded with the one
-cell rule, then the stockpile inventory (:mod:`soilvolume.stockpile`), written all or nothing."""
+"""``soilvolume stockpile``: one survey read as ``dem`` reads it (its ground and soil points), gridded by the
+one cell rule, its stockpile inventory (:mod:`soilvolume.stockpile`) written all or nothing."""
 
 from __future__ import annotations
 
@@ -16,10 +15,9 @@ from ..core.hooks import Hooks
 from ..core.outputs import check_input_file, output_dir
 from ..core.types import GridSpec, survey
 from ..dem.grid import average_height
-from ..inputs.prepare import Single, prepare_single
+from ..inputs.prepare import Single
 from ..inputs.surface import on_grid, open_surface, read_over
 from ..options import Options
-from ..pipelines.pipeline import open_source
 from ..stockpile import Base, Inventory, Pile, PileError, Survey, parse_base, stockpile_inventory
 from ..stockpile.html import write_html
 from ..stockpile.map import map_png
@@ -63,7 +61,7 @@ def run_stockpile(
     ctx = Context((survey(cloud, pipeline, crs=crs),), options, hooks, STEPS)
     with output_dir(out, [cloud, pipeline, piles.path, surface_path], overwrite, OUTPUTS) as folder:
         with steps.running(ctx, "prepare", ctx.message("prepare"), "crop"):
-            one = _read(ctx)
+            one = steps.read_one(ctx)
         with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
             grid, pile_survey = _grid(one, options)
         with steps.running(ctx, "volume", "measuring the piles"):
@@ -91,18 +89,10 @@ def _base_text(text: str) -> tuple[str, Path | None]:
     return text, path
 
 
-def _read(ctx: Context) -> Single:
-    """The survey streamed into its own working frame, its ground and soil points only."""
-    (epoch,) = ctx.epochs
-    check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
-    return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
-
-
 def _grid(one: Single, options: Options) -> tuple[GridSpec, Survey]:
     """The survey's grid (its points' box, the one cell rule) and its :class:`Survey` on it."""
     xyz = one.xyz.astype(np.float64)
-    box = (xyz.min(axis=0)[:2], xyz.max(axis=0)[:2])
-    grid = plan_grid(cloud_cell(one.xyz, one.thin, options), [box], one.origin, one.frame, "no grid")
+    grid = plan_grid(cloud_cell(one.xyz, one.thin, options), [xyz], one.origin, one.frame, "no grid")
     h, n = average_height(xyz, grid, options.statistic)
     return grid, Survey(grid, h, n, standard_errors(xyz, grid, h, n), fill_nearest(h))
 
@@ -113,19 +103,13 @@ def _base(text: str, source, grid: GridSpec, one: Single) -> Base:
     if source is None:
         base = parse_base(text)
         return base if base.z is None else Base("elevation", z=base.z - float(one.origin[2]))
-    surface = read_over(source, *_box(grid), one.frame, 2 * grid.cell)
+    surface = read_over(source, *grid.box(), one.frame, 2 * grid.cell)
     return parse_base("surface", on_grid(surface, grid) - grid.origin[2])
-
-
-def _box(grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
-    """The grid's box in absolute frame coordinates (metres)."""
-    ymin = grid.ymax - grid.rows * grid.cell
-    return np.array([grid.xmin, ymin]), np.array([grid.xmin + grid.cols * grid.cell, grid.ymax])
 
 
 def _inside(piles: list[Pile], grid: GridSpec, path: Path | None) -> list[Pile]:
     """``piles``, each checked to lie at least partly over the survey's grid."""
-    lo, hi = _box(grid)
+    lo, hi = grid.box()
     extent = shapely.box(*(lo - np.asarray(grid.origin[:2])), *(hi - np.asarray(grid.origin[:2])))
     for p in piles:
         if not p.polygon.intersects(extent):

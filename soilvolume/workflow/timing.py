@@ -1,5 +1,4 @@
-"""Per-stage wall times of a run that add up to the process's wall time: the start-up of the
-process before the run (imports included), each stage, and what no stage timed."""
+"""Per-stage wall times adding up to the process's: its start-up (imports included), each stage, the rest."""
 
 from __future__ import annotations
 
@@ -9,10 +8,8 @@ from contextlib import contextmanager
 
 
 def process_age() -> float | None:
-    """Seconds since this process started (Linux: /proc), or None where that is not known. The
-    kernel gives the start in clock ticks (10 ms): the middle of its tick is taken, against the
-    time since boot to the nanosecond, so the age is within about half a tick (/proc/uptime's and
-    the tick's truncations made it up to two ticks too much)."""
+    """Seconds since this process started (Linux: /proc; else None): the middle of its start's clock
+    tick against the boot-time clock, within half a tick (/proc/uptime's truncations made two)."""
     try:
         with open("/proc/self/stat", encoding="ascii") as f:
             start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
@@ -23,9 +20,8 @@ def process_age() -> float | None:
 
 
 class Timer:
-    """Per-stage wall times (seconds), in the order they ran; :meth:`totals` adds the process's
-    ``startup`` (process start to this timer's creation) and ``other`` (the run's time no stage
-    timed), so the values sum to the wall time since the process started."""
+    """Per-stage wall times (s) in the order they ran; :meth:`totals` adds ``startup`` (process start to
+    this timer) and ``other`` (untimed), so they sum to the process's wall time."""
 
     def __init__(self) -> None:
         self.s: dict[str, float] = {}
@@ -36,8 +32,7 @@ class Timer:
 
     @contextmanager
     def __call__(self, name: str):
-        """Time the stage ``name``; a stage timed within another (e.g. ``cluster_wait`` within
-        ``crop``) is left out of the enclosing one, so the stages still add up."""
+        """Time the stage ``name``, less the stages timed within it (``cluster_wait`` in ``crop``)."""
         outer = next(reversed(self._open), None)
         t0 = self._open[name] = time.perf_counter()
         try:

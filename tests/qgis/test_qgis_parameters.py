@@ -67,7 +67,7 @@ def test_a_new_option_appears_without_plugin_changes(estimate, monkeypatch):
 
     @dataclass(frozen=True)
     class Wider(Options):
-        max_slope: float = option(2.0, "steepest slope kept (m per m)", label="Steepest slope", lo=0.0, hi=10.0)
+        max_slope: float = option(2.0, "Steepest slope", lo=0.0, hi=10.0, help="steepest slope kept (m per m)")
 
     monkeypatch.setattr(optiontable, "options_class", lambda: Wider)
     alg = estimate.create({})  # a fresh instance, initAlgorithm run again
