@@ -28,6 +28,7 @@ from .cli import main  # noqa: E402 - after the handlers and the settings: it lo
 
 def run() -> int:
     """Run the command line and leave with its exit status."""
+    process.import_ahead(sys.argv[1:])
     return process.leave(main())
 
 

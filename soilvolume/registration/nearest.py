@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+import scipy
 
 from ..native import kernels
 
@@ -17,19 +17,19 @@ SLACK = 1.5  # the searches look this many correspondence distances far: room to
 THREADED = 4096  # fewest points searched on several threads
 
 
-def tree_of(target: np.ndarray) -> cKDTree | GridIndex:
+def tree_of(target: np.ndarray) -> scipy.spatial.cKDTree | GridIndex:
     """What :class:`Nearest` searches a target (N, 3) with: a :class:`GridIndex` on the native
     kernel when it is there, else SciPy's k-d tree (the same neighbours)."""
     lib = kernels()
     if lib is not None and len(target):
         return GridIndex(lib, target)
-    return cKDTree(target, balanced_tree=False)
+    return scipy.spatial.cKDTree(target, balanced_tree=False)
 
 
 class GridIndex:
     """A target's points counted into a grid of x/y cells (``sv_grid_build``): the nearest and
     second-nearest target of each point within a bound, searched ring by ring of cells round
-    the point's (``sv_grid_nearest2``), as ``cKDTree.query(k=2, distance_upper_bound=...)``
+    the point's (``sv_grid_nearest2``), as ``scipy.spatial.cKDTree.query(k=2, distance_upper_bound=...)``
     finds them, distances summed in its order. A registration's targets are column surfaces,
     about one point per cell: building it is one counting pass, a search a few cells."""
 
@@ -96,7 +96,7 @@ class Nearest:
     when another distance searched it already."""
 
     def __init__(
-        self, target: np.ndarray, dist: float, workers: int = -1, tree: cKDTree | GridIndex | None = None
+        self, target: np.ndarray, dist: float, workers: int = -1, tree: scipy.spatial.cKDTree | GridIndex | None = None
     ) -> None:
         self.target = np.full((3, len(target) + 1), np.inf)  # (3, M) and a target at infinity
         self.target[:, :-1] = target.T

@@ -4,19 +4,26 @@ one :class:`jinja2.Environment`, and the page written whole."""
 from __future__ import annotations
 
 import os
+from functools import cache
 from pathlib import Path
 
-from jinja2 import Environment, FileSystemLoader, StrictUndefined
 from markupsafe import Markup
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
-ENV = Environment(
-    loader=FileSystemLoader(TEMPLATES),
-    autoescape=True,
-    undefined=StrictUndefined,
-    trim_blocks=True,
-    lstrip_blocks=True,
-)
+
+
+@cache
+def environment():
+    """The one Jinja2 environment of :data:`TEMPLATES` (Jinja2 loaded when a page is first rendered)."""
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined
+
+    return Environment(
+        loader=FileSystemLoader(TEMPLATES),
+        autoescape=True,
+        undefined=StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+    )
 
 
 def figure(html: str | None) -> Markup | None:
@@ -26,7 +33,7 @@ def figure(html: str | None) -> Markup | None:
 
 def render(template: str, **context) -> str:
     """``template`` of :data:`TEMPLATES` rendered with ``context`` (plain text is escaped)."""
-    return ENV.get_template(template).render(**context)
+    return environment().get_template(template).render(**context)
 
 
 def write(path: str | Path, text: str) -> Path:

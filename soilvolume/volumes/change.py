@@ -13,7 +13,7 @@ by its sign and bias cut and fill outward. Survey noise elsewhere is not counted
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..compensation.robust import patches
 
@@ -54,11 +54,13 @@ def change_areas(
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
-    measured = ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered
+    measured = scipy.ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered
     if refilled is not None:
         measured &= ~refilled
     fill_core, cut_core = patches(measured & (d > lod), min_cells), patches(measured & (d < -lod), min_cells)
-    grow = (lambda m: ndimage.binary_dilation(m, _EIGHT, iterations=buffer_cells)) if buffer_cells else (lambda m: m)
+    grow = (
+        (lambda m: scipy.ndimage.binary_dilation(m, _EIGHT, iterations=buffer_cells)) if buffer_cells else (lambda m: m)
+    )
     fill, cut = grow(fill_core) & valid, grow(cut_core) & valid
     both = fill & cut
     fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
@@ -68,15 +70,15 @@ def change_areas(
 
 
 def _join_refilled(d, patches, fill, cut):
-    labels, n = ndimage.label(patches, structure=_EIGHT)
+    labels, n = scipy.ndimage.label(patches, structure=_EIGHT)
     if n == 0:
         return fill, cut
     idx = np.arange(1, n + 1)
-    vol = ndimage.sum(d, labels, idx)
-    rim = ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
+    vol = scipy.ndimage.sum(d, labels, idx)
+    rim = scipy.ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
     out = []
     for area, sign in ((fill, 1.0), (cut, -1.0)):
-        works = ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
+        works = scipy.ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
         out.append(area | np.r_[False, (sign * vol > 0) & (works >= sign * vol)][labels])
     return out[0], out[1]
 
@@ -85,10 +87,10 @@ def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray
     """Per cell of ``area``, its connected area's volume (m x cells) of the ``sign`` of its kind,
     0 where that is not of its sign (a cut area whose sum is above zero is noise and its buffer)
     and outside it."""
-    comp, k = ndimage.label(area, structure=_EIGHT)
+    comp, k = scipy.ndimage.label(area, structure=_EIGHT)
     if k == 0:
         return np.zeros(d.shape)
-    v = sign * ndimage.sum(d, comp, np.arange(1, k + 1))
+    v = sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1))
     return np.r_[0.0, np.maximum(v, 0.0)][comp]
 
 
@@ -96,13 +98,13 @@ def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float,
     """Volume (m3, absolute) of the small change areas in ``area`` (under ``MARGINAL_CELLS``
     cells) whose mean |difference| is under twice their LoD: detections that noise alone could
     have made, counted as uncertain whole. Large coherent areas are never noise."""
-    labels, n = ndimage.label(area, structure=_EIGHT)
+    labels, n = scipy.ndimage.label(area, structure=_EIGHT)
     if n == 0:
         return 0.0
     idx = np.arange(1, n + 1)
     d = np.where(np.isfinite(diff), diff, 0.0)
-    mean_abs = ndimage.mean(np.abs(d), labels, idx)
-    mean_lod = ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
-    vol = np.abs(ndimage.sum(d, labels, idx)) * cell_area
+    mean_abs = scipy.ndimage.mean(np.abs(d), labels, idx)
+    mean_lod = scipy.ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
+    vol = np.abs(scipy.ndimage.sum(d, labels, idx)) * cell_area
     size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
     return float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
@@ -43,6 +43,6 @@ def classify(s: Refill, c: Corrected, epochs: tuple[EpochDEM, EpochDEM], grid: G
     refilled = s.filled_mask & ~s.seen_once
     fill, cut = change_areas(c.diff, c.lod_cell, refilled=refilled)
     ex = exclude_nonsoil(c.diff, (fill, cut), epochs, c.offset, grid, options, s.heights, c.stable, refilled)
-    quiet = c.stable & ~ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
+    quiet = c.stable & ~scipy.ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
     stable = quiet if not options.stable_mask and quiet.sum() >= MIN_QUIET else c.stable
     return Areas(ex.fill, ex.cut, ex, stable)

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..core.types import GridSpec
 from ..core.wording import opt
@@ -80,7 +80,7 @@ def exclude_nonsoil(
     leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
     share = _missed_share(epochs)
     # only what was left out in or beside the counted change areas can bias the headline
-    near = ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
+    near = scipy.ndimage.binary_dilation((fill | cut) & ~leave_out, iterations=NEAR_CELLS)
     classes, taken, by_class, sigma = _by_class(diff, epochs, offset, shares, found, near, area, share)
     report: dict = {"mode": mode, "classes": by_class}
     classes[found.moved] = 4
@@ -172,14 +172,14 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
     vegetation (at least :data:`GRASS_VEG`) with little soil measured on the surface that rose
     (``bare``, under :data:`GRASS_SOIL`; the rest interpolated under the canopy): grass whose dry
     blades the colour test missed in a few cells, not soil (a heap of fine soil is measured soil)."""
-    comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
+    comp, n = scipy.ndimage.label(change, structure=np.ones((3, 3), bool))
     if n == 0:
         return np.zeros(change.shape, bool)
     idx = np.arange(1, n + 1)
     size = np.bincount(comp.ravel(), minlength=n + 1)[1:]
     soil = change & bare
-    veg_share = ndimage.sum(veg, comp, idx) / size
-    soil_share = ndimage.sum(soil, comp, idx) / size
+    veg_share = scipy.ndimage.sum(veg, comp, idx) / size
+    soil_share = scipy.ndimage.sum(soil, comp, idx) / size
     keep = (size * cell_area <= UNCLEAR_AREA_M2) & (veg_share >= GRASS_VEG) & (soil_share < GRASS_SOIL)
     return np.r_[False, keep][comp]
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..compensation.robust import nmad
 from ..core.types import GridSpec
@@ -97,7 +97,7 @@ def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: floa
     d, every = np.nan_to_num(diff), counted["net"]
     out = {}
     for key, sign in (("fill", 1.0), ("cut", -1.0)):
-        ring = ndimage.binary_dilation(counted[key], iterations=RING) & ~every & np.isfinite(diff)
+        ring = scipy.ndimage.binary_dilation(counted[key], iterations=RING) & ~every & np.isfinite(diff)
         out[key] = float(z * np.clip(sign * d[ring], 0.0, None).sum() * cell_area)
     out["net"] = float(np.hypot(out["fill"], out["cut"]))
     return out
@@ -109,7 +109,7 @@ def outline(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, 
     only part of it, so where the works run to the edge its volume is known to half a cell. One
     sigma: half their same-signed volume; the net's, both in quadrature."""
     valid = np.isfinite(diff)
-    edge = valid & ~ndimage.binary_erosion(valid, border_value=0)
+    edge = valid & ~scipy.ndimage.binary_erosion(valid, border_value=0)
     d, out = np.nan_to_num(diff), {}
     for key, sign in (("fill", 1.0), ("cut", -1.0)):
         out[key] = float(z * 0.5 * np.clip(sign * d[edge & counted[key]], 0.0, None).sum() * cell_area)

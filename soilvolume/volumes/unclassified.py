@@ -6,7 +6,7 @@ to the change counted under it. Their volume is a bound the interval is widened 
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..dem.grid import EpochDEM
 from ..soil.rough import rough_cells, roughness
@@ -50,17 +50,17 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     if not signal:
         d = np.nan_to_num(diff)
         for part in (counted & (d > 0), counted & (d < 0)):
-            comp, k = ndimage.label(part, structure=np.ones((3, 3), bool))
+            comp, k = scipy.ndimage.label(part, structure=np.ones((3, 3), bool))
             if not k:
                 continue
             idx = np.arange(1, k + 1)
-            area = ndimage.sum(part, comp, idx) * cell_area
-            vol = np.abs(ndimage.sum(d, comp, idx)) * cell_area
+            area = scipy.ndimage.sum(part, comp, idx) * cell_area
+            vol = np.abs(scipy.ndimage.sum(d, comp, idx)) * cell_area
             keep = idx[(area <= UNCLEAR_AREA_M2) & (vol <= UNCLEAR_M3)]
             out |= np.isin(comp, keep) & part
         out |= rough & counted
-    comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
-    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area if n else np.empty(0)
+    comp, n = scipy.ndimage.label(out, structure=np.ones((3, 3), bool))
+    vols = np.abs(scipy.ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area if n else np.empty(0)
     return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
 
 

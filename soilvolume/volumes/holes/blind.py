@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ...dem.grid import EpochDEM
 from .interpolate import FOUR, enclosed_holes, fill
@@ -59,8 +59,8 @@ def blind_change(
     items = []
     for name, e in zip(NAMES, epochs, strict=True):
         empty = (e.counts + e.nonsoil()) == 0
-        labels, _ = ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
-        for k, box in enumerate(ndimage.find_objects(labels), 1):
+        labels, _ = scipy.ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
+        for k, box in enumerate(scipy.ndimage.find_objects(labels), 1):
             win = tuple(slice(max(b.start - PAD, 0), b.stop + PAD) for b in box)  # the hole and its rings
             cells = labels[win] == k
             if not _basin(e.heights[win], cells):
@@ -86,8 +86,10 @@ def blind_change(
 
 def _rings(cells: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(near, far): a hole's ``valid`` cells next to it, and those 3 to 4 cells out."""
-    near = ndimage.binary_dilation(cells) & ~cells & valid
-    far = ndimage.binary_dilation(cells, iterations=4) & ~ndimage.binary_dilation(cells, iterations=2) & valid
+    near = scipy.ndimage.binary_dilation(cells) & ~cells & valid
+    far = (
+        scipy.ndimage.binary_dilation(cells, iterations=4) & ~scipy.ndimage.binary_dilation(cells, iterations=2) & valid
+    )
     return near, far
 
 
@@ -98,8 +100,8 @@ def _basin(h: np.ndarray, cells: np.ndarray) -> bool:
     near, far = _rings(cells, np.isfinite(h))
     if near.sum() < 4 or not far.any():
         return False
-    total = ndimage.uniform_filter(np.where(far, h, 0.0), 7, mode="constant")
-    count = ndimage.uniform_filter(far.astype(float), 7, mode="constant")
+    total = scipy.ndimage.uniform_filter(np.where(far, h, 0.0), 7, mode="constant")
+    count = scipy.ndimage.uniform_filter(far.astype(float), 7, mode="constant")
     with np.errstate(invalid="ignore", divide="ignore"):
         around = np.where(count > 0, total / count, np.nan)  # the ground a few cells out, on average
     drop = (around - h)[near]
@@ -109,7 +111,7 @@ def _basin(h: np.ndarray, cells: np.ndarray) -> bool:
 def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: float) -> dict | None:
     """One hole's range (m3, relative to what the headline holds there), or None when its rim is
     not in the works or what it may hide is negligible."""
-    ring = ndimage.binary_dilation(cells, iterations=2) & ~cells & np.isfinite(diff)
+    ring = scipy.ndimage.binary_dilation(cells, iterations=2) & ~cells & np.isfinite(diff)
     if not ring.any() or float(np.mean(change[ring])) < RIM_SHARE:
         return None
     near, far = _rings(cells, np.isfinite(diff))
@@ -118,7 +120,7 @@ def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: fl
     step = (d_near - d_far) / 2.5  # per cell, going in
     if step * d_near <= 0:  # the rim does not deepen inwards: nothing to carry on
         step = 0.0
-    dist = ndimage.distance_transform_edt(cells)
+    dist = scipy.ndimage.distance_transform_edt(cells)
     extra = np.clip(step * dist, -DEEPER * abs(d_near), DEEPER * abs(d_near))[cells]
     extra_m3 = float(extra.sum()) * cell_area
     shown = np.isfinite(diff[cells])

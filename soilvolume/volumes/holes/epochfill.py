@@ -24,7 +24,7 @@ one moved a 72-cell hole by 13 m3).
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from .interpolate import FOUR, fill
 from .testholes import error_by_radius
@@ -47,8 +47,8 @@ def fill_own_holes(
     others are left to the difference's fill. The error is that survey's mean-height error on
     holes of the patch's size."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
-    parts, m = ndimage.label(hole, FOUR)
-    share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
+    parts, m = scipy.ndimage.label(hole, FOUR)
+    share = scipy.ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
     if cell_area > 0 and shared.any():
         bulk, bulk_sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
@@ -57,26 +57,27 @@ def fill_own_holes(
         shared &= ~bulk
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
-        labels, n = ndimage.label(one, FOUR)
+        labels, n = scipy.ndimage.label(one, FOUR)
         if n == 0:
             continue
         idx = np.arange(1, n + 1)
         radius = np.sqrt(np.bincount(labels.ravel(), minlength=n + 1)[1:] / np.pi)
         seen_fill = fill(np.where(one, np.nan, out[seen]), one, method)
-        detail = np.sqrt(ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
+        detail = np.sqrt(scipy.ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
         scale = _own_detail(out[miss], method, radius, seed)
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
         # no machine: the measured survey's departure from its own fill is beyond any machine's volume
-        bulk = np.abs(ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
+        bulk = np.abs(scipy.ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
         change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | (bulk if cell_area > 0 else False)
         if change.any():  # a patch the survey cannot fill whole is left
             change &= (
-                np.r_[False, ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)] > 0
+                np.r_[False, scipy.ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)]
+                > 0
             )
         if not change.any():
             continue
         cells = change[labels]
-        grown = ndimage.grey_dilation(np.where(cells, labels, 0), footprint=np.ones((2 * RIM + 1,) * 2, bool))
+        grown = scipy.ndimage.grey_dilation(np.where(cells, labels, 0), footprint=np.ones((2 * RIM + 1,) * 2, bool))
         cells |= weak[miss] & (grown > 0)
         filled = fill(out[miss], cells, method)
         ok = cells & np.isfinite(filled)
@@ -89,7 +90,7 @@ def fill_own_holes(
 def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     """Per patch, the change its rim shows (m): the larger of the rim's typical |difference| and
     its spread (upper minus lower decile); 0 without a measured rim."""
-    grown = ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
+    grown = scipy.ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
     ring = (labels == 0) & (grown > 0) & np.isfinite(d)
     out = np.zeros(n)
     lab, val = grown[ring], d[ring]
@@ -117,7 +118,7 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
     size = np.bincount(parts.ravel(), minlength=int(parts.max()) + 1)
     for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
         cells = parts == k
-        region = ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
+        region = scipy.ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
         departures = [_departure(e, region, cell_area) for e in out]
         if not any(m3 > PILE_M3 for _, m3 in departures):
             continue

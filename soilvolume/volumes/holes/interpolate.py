@@ -19,12 +19,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy import ndimage, sparse
-from scipy.sparse.linalg import cg, spsolve
+import scipy
 
 from .solve import least_squares, rows_csr
 
-FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
+FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use conjugate gradients
 
@@ -34,7 +33,7 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
     grid border (so they are enclosed by valid cells). ``None``/0 -> none."""
     if not max_cells or max_cells <= 0:
         return np.zeros(valid.shape, bool)
-    labels, n = ndimage.label(~valid, structure=FOUR)
+    labels, n = scipy.ndimage.label(~valid, structure=FOUR)
     if n == 0:
         return np.zeros(valid.shape, bool)
     sizes = np.bincount(labels.ravel(), minlength=n + 1)
@@ -62,10 +61,10 @@ def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 def _reachable(targets: np.ndarray, known: np.ndarray) -> np.ndarray:
     """Target cells in 4-connected components that touch at least one known cell."""
-    labels, n = ndimage.label(targets, structure=FOUR)
+    labels, n = scipy.ndimage.label(targets, structure=FOUR)
     if n == 0:
         return targets & False
-    touching = np.unique(labels[ndimage.binary_dilation(known, FOUR) & targets])
+    touching = np.unique(labels[scipy.ndimage.binary_dilation(known, FOUR) & targets])
     ok = np.zeros(n + 1, bool)
     ok[touching] = True
     ok[0] = False
@@ -99,11 +98,11 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
         ci.append(np.searchsorted(flat, nb[u]))
     ri, ci = np.concatenate(ri), np.concatenate(ci)
     data = np.concatenate([diag, -np.ones(ri.size - n)])
-    a = sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
+    a = scipy.sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
     if n <= _DIRECT_MAX:
-        return spsolve(a.tocsc(), rhs)
+        return scipy.sparse.linalg.spsolve(a.tocsc(), rhs)
     guess = _smooth_guess(values, known, todo)[todo]
-    sol, _ = cg(a, rhs, x0=guess, tol=1e-9, maxiter=5000, M=sparse.diags(1.0 / diag))
+    sol, _ = scipy.sparse.linalg.cg(a, rhs, x0=guess, tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag))
     return sol
 
 
@@ -113,8 +112,8 @@ def _smooth_guess(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np
     left = todo.copy()
     sigma = 1.0
     while left.any() and sigma < max(todo.shape):
-        num = ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
-        den = ndimage.gaussian_filter(known.astype(float), sigma)
+        num = scipy.ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
+        den = scipy.ndimage.gaussian_filter(known.astype(float), sigma)
         ok = left & (den > 1e-6)
         out[ok] = num[ok] / den[ok]
         left &= ~ok
@@ -253,7 +252,7 @@ def refill_epoch(
 def typical_radius(mask: np.ndarray) -> float:
     """Radius (cells) of a disc the size of a typical component of ``mask``, weighted by area
     (what the filled volume mostly sits in); 1 when there is none."""
-    labels, n = ndimage.label(mask, structure=FOUR)
+    labels, n = scipy.ndimage.label(mask, structure=FOUR)
     if n == 0:
         return 1.0
     size = np.bincount(labels.ravel())[1:].astype(float)

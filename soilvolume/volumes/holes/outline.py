@@ -23,7 +23,7 @@ give those cells is a term of the interval by name (:func:`outline_sigma`).
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from .interpolate import FOUR, fill
 
@@ -40,16 +40,16 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
-    labels, n = ndimage.label(hole, FOUR)
+    labels, n = scipy.ndimage.label(hole, FOUR)
     if n == 0:
         return out
     candidates = _both_sides(labels, n, change, stable)
-    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+    for k, box in enumerate(scipy.ndimage.find_objects(labels), start=1):
         if box is None or not candidates[k]:
             continue
         box = tuple(slice(max(0, s.start - _PAD), s.stop + _PAD) for s in box)
         cells = labels[box] == k
-        rim = ndimage.binary_dilation(cells, FOUR, iterations=RING) & known[box]
+        rim = scipy.ndimage.binary_dilation(cells, FOUR, iterations=RING) & known[box]
         n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
@@ -68,7 +68,7 @@ def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, meth
     across the hole, its zero the outline. A cell holding part of the change is a change cell,
     so the outline runs through the last change cells: their centres are its zero. Where the
     interpolation finds nothing, the nearer rim."""
-    to_change, to_stable = ndimage.distance_transform_edt(~change), ndimage.distance_transform_edt(~stable)
+    to_change, to_stable = scipy.ndimage.distance_transform_edt(~change), scipy.ndimage.distance_transform_edt(~stable)
     signed = np.where(change, to_stable - 1.0, np.where(stable, -to_change, np.nan))
     signed = fill(np.where(cells, np.nan, signed), cells, method)
     return np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
@@ -80,10 +80,10 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     the exact rim is counted again for the holes that pass)."""
     grown = labels
     for _ in range(RING):
-        grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=FOUR))
+        grown = np.where(grown > 0, grown, scipy.ndimage.grey_dilation(grown, footprint=FOUR))
     idx = np.arange(n + 1)
-    n_change = ndimage.sum(change, grown, idx)
-    n_stable = ndimage.sum(stable, grown, idx)
+    n_change = scipy.ndimage.sum(change, grown, idx)
+    n_stable = scipy.ndimage.sum(stable, grown, idx)
     return np.minimum(n_change, n_stable) >= MIN_SIDE
 
 
@@ -94,13 +94,13 @@ def outline_sigma(
     side beyond what the interval's refilled share (``share`` of the refilled |difference|)
     already gives their cells: ``delta``, the side-by-side fill minus the plain one (0
     elsewhere), summed per hole over the part's cells, the holes independent."""
-    labels, n = ndimage.label(delta != 0, np.ones((3, 3), bool))
+    labels, n = scipy.ndimage.label(delta != 0, np.ones((3, 3), bool))
     if n == 0:
         return {k: 0.0 for k in parts}
     idx = np.arange(1, n + 1)
     out = {}
     for k, m in parts.items():
-        moved = np.abs(ndimage.sum(np.where(m, delta, 0.0), labels, idx))
-        given = share * ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
+        moved = np.abs(scipy.ndimage.sum(np.where(m, delta, 0.0), labels, idx))
+        given = share * scipy.ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
         out[k] = float(np.linalg.norm(np.maximum(moved - given, 0.0))) * cell_area
     return out
