@@ -2,8 +2,9 @@
 
 Before anything else: a signal that arrives while the program is still importing ends it with
 one line, like one during a run, and the process is settled (:func:`soilvolume.process.settle`:
-read by numpy as it loads); then the command line is imported and run, and the process leaves
-(:func:`soilvolume.process.leave`)."""
+read by numpy as it loads); then the command line is imported, a run's heavy libraries are
+imported ahead in the background (:func:`soilvolume.process.import_ahead`), the command runs, and
+the process leaves (:func:`soilvolume.process.leave`)."""
 
 import os
 import signal
