@@ -5,7 +5,6 @@ carry their CRS, and the harness scores a tiny population end to end and writes 
 from __future__ import annotations
 
 import copy
-import hashlib
 import json
 import sys
 from pathlib import Path
@@ -66,18 +65,24 @@ def test_deterministic_by_seed(few_points):
     np.testing.assert_array_equal(pa[1], pb[1])
 
 
-#: sha-256 of seed 10003's before and after point records and truth.json (15 k points per epoch),
-#: as written when the composer lived in soilvolume/scenes/composer/: moving it changed no site
-SITE_10003 = "c1d52ba3440f8e6795be7347522cb7118e5785ee36b73933441f2c592b18c634"
+#: seed 10003 (15 k points per epoch) as written when the composer lived in soilvolume/scenes/composer/:
+#: each epoch's point count and mean x, y, z, and the truth's net, cut and fill (m3). Not a hash of the
+#: bytes: numpy's SIMD paths (AVX-512 or not) move a few points' last millimetre from one CPU to another
+SITE_10003 = (
+    (14950, 392040.93632341136, 6135046.382575921, 73.07113217391304),
+    (14692, 392043.9508546147, 6135043.510817315, 72.51137122243398),
+    (-98.4758805367009, 102.2170929927658, 3.741212456064896),
+)
 
 
-def test_same_site_bytes_as_before_the_move(tmp_path, few_points):
+def test_same_site_as_before_the_move(tmp_path, few_points):
     before, after, truth = composer.compose(10_003, tmp_path)
-    h = hashlib.sha256()
-    for path in (before, after):
-        h.update(laspy.read(str(path)).points.array.tobytes())  # the header carries today's date
-    h.update(truth.read_bytes())
-    assert h.hexdigest() == SITE_10003
+    for path, (count, *means) in zip((before, after), SITE_10003, strict=False):
+        las = laspy.read(str(path))
+        assert len(las.points) == count
+        np.testing.assert_allclose([np.mean(las.x), np.mean(las.y), np.mean(las.z)], means, rtol=0, atol=1e-6)
+    t = json.loads(truth.read_text())
+    np.testing.assert_allclose([t["net"], t["cut"], t["fill"]], SITE_10003[2], rtol=1e-9)
 
 
 def test_seeds_draw_different_sites():

@@ -17,23 +17,54 @@ from soilvolume.inputs.io import RawPoints
 from soilvolume.inputs.stream import ColumnThinner, from_raw, load, open_source
 
 
-def test_engine_modules_leave_open3d_and_rasterio_to_the_run(tmp_path):
+def test_engine_modules_leave_the_heavy_libraries_to_the_run(tmp_path):
     """Importing the CLI and the engine's products (the project's own modules at the top of their
-    files) imports neither Open3D nor rasterio (heavy libraries, imported by the steps that use them)."""
+    files) imports none of Open3D, rasterio, SciPy's submodules, shapely or Jinja2 (heavy libraries,
+    imported by the steps that use them: ``soilvolume estimate --help`` stays quick)."""
     b, _, _ = write_scene(tmp_path)
     code = (
         "import sys, json\n"
         "import soilvolume.cli, soilvolume.workflow.estimate\n"
         "from soilvolume.inputs.stream import open_source\n"
         f"n = open_source({str(b)!r}).count\n"
-        "mods = ('open3d', 'rasterio', 'laspy', 'scipy.optimize')\n"
+        f"mods = ('laspy', *{HEAVY!r})\n"
         "print(json.dumps([n] + [m in sys.modules for m in mods]))\n"
     )
     r = run_python(code)
     assert r.returncode == 0, r.stderr
-    count, open3d, rasterio, laspy, optimize = json.loads(r.stdout)
+    count, laspy, *heavy = json.loads(r.stdout)
     assert count > 1000 and laspy
-    assert not open3d and not rasterio and not optimize
+    assert dict(zip(HEAVY, heavy, strict=True)) == dict.fromkeys(HEAVY, False)
+
+
+HEAVY = ("open3d", "rasterio", "scipy.optimize", "scipy.ndimage", "scipy.sparse", "scipy.spatial", "shapely", "jinja2")
+
+
+def ahead_probe(argv: list[str]) -> str:
+    """The command's entry run with ``argv`` and a command line that reports, once the
+    background imports are done, which of :data:`soilvolume.process.AHEAD` are loaded."""
+    body = [
+        "import threading",
+        "from soilvolume.process import AHEAD",
+        "ahead = [t for t in threading.enumerate() if t.name == 'soilvolume-import-ahead']",
+        "[t.join(60) for t in ahead]",
+        "print(json.dumps([len(ahead), [m in sys.modules for m in AHEAD]]))",
+        "return 0",
+    ]
+    return f"import sys; sys.argv = {['soilvolume', *argv]!r}\n" + entry_probe("json", body)
+
+
+def test_a_run_imports_its_heavy_libraries_ahead_in_the_background_its_help_does_not():
+    """``soilvolume estimate ...`` starts one background thread importing what the later steps
+    use (:data:`soilvolume.process.AHEAD`), beside the reading; ``--help`` and ``pipeline`` none."""
+    r = run_python(ahead_probe(["estimate", "a.las", "b.las", "--out", "o"]))
+    assert r.returncode == 0, r.stderr
+    threads, loaded = json.loads(r.stdout.splitlines()[-1])
+    assert threads == 1 and all(loaded), loaded
+    for argv in (["estimate", "--help"], ["pipeline", "x.json"]):
+        r = run_python(ahead_probe(argv))
+        assert r.returncode == 0, r.stderr
+        assert json.loads(r.stdout.splitlines()[-1])[0] == 0, argv
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forkserver workers on Linux only")

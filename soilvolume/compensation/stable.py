@@ -7,7 +7,7 @@ differences, which smooth offsets, tilts or doming do not inflate."""
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from .robust import fit_poly, nmad, patches
 
@@ -26,8 +26,8 @@ def margin(valid: np.ndarray, cell: float, fraction: float = MARGIN_FRACTION) ->
     first): at least three cells, ``fraction`` of the largest inside distance."""
     if not valid.any():
         return valid
-    region = ndimage.binary_fill_holes(ndimage.binary_closing(np.pad(valid, 3), iterations=2))
-    inside = ndimage.distance_transform_edt(region)[3:-3, 3:-3]
+    region = scipy.ndimage.binary_fill_holes(scipy.ndimage.binary_closing(np.pad(valid, 3), iterations=2))
+    inside = scipy.ndimage.distance_transform_edt(region)[3:-3, 3:-3]
     band = max(3.0, fraction * float(inside.max()))
     return valid & (inside <= band)
 
@@ -71,7 +71,7 @@ def find_stable(
         thr = k * (max(spread, noise) if np.isfinite(noise) else spread)
         change = patches(valid & (np.abs(resid) > thr), min_change_cells)
         if disk is not None and change.any():
-            change = ndimage.binary_dilation(change, disk)
+            change = scipy.ndimage.binary_dilation(change, disk)
         new = valid & ~change
         if new.sum() < 12:
             break

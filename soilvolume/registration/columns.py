@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..core.cells import bounds, cell_index, in_box, rows
 from ..native import axes as native_axes
@@ -153,7 +153,7 @@ def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:
     h.ravel()[flat] = c.xyz[:, 2]  # h * w is h itself: 0 where w is 0, h * 1.0 elsewhere
     w.ravel()[flat] = 1.0
     if smooth > 0:
-        hs, ws = ndimage.gaussian_filter(h, smooth), ndimage.gaussian_filter(w, smooth)
+        hs, ws = scipy.ndimage.gaussian_filter(h, smooth), scipy.ndimage.gaussian_filter(w, smooth)
         with np.errstate(invalid="ignore", divide="ignore"):
             h = np.where(ws > 1e-3, hs / ws, 0.0)
         w = (ws > 1e-3).astype(float)

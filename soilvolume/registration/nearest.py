@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
+import scipy
 
 from ..native import kernels
 
@@ -14,17 +14,17 @@ SLACK = 1.5  # the searches look this many correspondence distances far: room to
 THREADED = 4096  # fewest points searched on several threads
 
 
-def tree_of(target: np.ndarray) -> cKDTree | GridIndex:
+def tree_of(target: np.ndarray) -> scipy.spatial.cKDTree | GridIndex:
     """A :class:`GridIndex` of a target (N, 3) when the kernel is built, else a k-d tree."""
     lib = kernels()
     if lib is not None and len(target):
         return GridIndex(lib, target)
-    return cKDTree(target, balanced_tree=False)
+    return scipy.spatial.cKDTree(target, balanced_tree=False)
 
 
 class GridIndex:
     """A target counted into x/y cells (``sv_grid_build``), searched ring by ring for the nearest and
-    second-nearest within a bound (``sv_grid_nearest2``) as ``cKDTree.query(k=2, ...)`` finds them."""
+    second-nearest within a bound (``sv_grid_nearest2``) as ``scipy.spatial.cKDTree.query(k=2, ...)`` finds them."""
 
     MAX_CELLS_PER_POINT = 4  # a sparse target's grid is coarsened to this many cells a point
 
@@ -78,7 +78,7 @@ class Nearest:
     searches are kept (ICP can swing between two poses). ``tree``: :func:`tree_of` the target."""
 
     def __init__(
-        self, target: np.ndarray, dist: float, workers: int = -1, tree: cKDTree | GridIndex | None = None
+        self, target: np.ndarray, dist: float, workers: int = -1, tree: scipy.spatial.cKDTree | GridIndex | None = None
     ) -> None:
         self.target = np.full((3, len(target) + 1), np.inf)  # (3, M) and a target at infinity
         self.target[:, :-1] = target.T

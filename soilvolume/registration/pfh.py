@@ -5,7 +5,7 @@ matched keypoints, Huber-scored, the winner refitted on its inliers) on a 6 m x 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
+import scipy
 
 from .o3d import to_pcd, with_normals
 from .rigid import transform_points
@@ -15,7 +15,7 @@ BINS = 5
 
 def pfh_features(xyz: np.ndarray, normals: np.ndarray, keys: np.ndarray, radius: float, k: int = 16) -> np.ndarray:
     """PFH histograms (len(keys), 125) of keypoints ``keys`` (indices into xyz)."""
-    tree = cKDTree(xyz)
+    tree = scipy.spatial.cKDTree(xyz)
     dist, idx = tree.query(xyz[keys], k=k, distance_upper_bound=radius)
     valid = np.isfinite(dist)
     idx = np.where(valid, idx, keys[:, None])  # pad with the keypoint itself (zero-length pairs)
@@ -63,7 +63,7 @@ def choose_patch(source: np.ndarray, target: np.ndarray, size: float) -> np.ndar
     lo, hi = source[:, :2].min(axis=0) + size, source[:, :2].max(axis=0) - size
     xs, ys = np.meshgrid(np.arange(lo[0], hi[0], size / 2), np.arange(lo[1], hi[1], size / 2))
     centres = np.c_[xs.ravel(), ys.ravel()]
-    ts, tt = cKDTree(source[:, :2]), cKDTree(target[:, :2])
+    ts, tt = scipy.spatial.cKDTree(source[:, :2]), scipy.spatial.cKDTree(target[:, :2])
     best, score = centres[0] if len(centres) else source[:, :2].mean(axis=0), -np.inf
     for c in centres:
         zs = source[ts.query_ball_point(c, size / 2), 2]
@@ -101,8 +101,8 @@ def sac_ia(
     """SAC-IA of keypoints ``src`` (descriptors ``fs``) onto ``tgt`` (keypoints ``kt``, descriptors
     ``ft``): the best 4x4, hypotheses beyond ``max_rotation`` deg or ``max_shift`` m discarded."""
     rng = np.random.default_rng(seed)
-    _, sim = cKDTree(ft).query(fs, k=k_sim)
-    tree = cKDTree(tgt)
+    _, sim = scipy.spatial.cKDTree(ft).query(fs, k=k_sim)
+    tree = scipy.spatial.cKDTree(tgt)
     best_t, best_err = np.eye(4), _score(tree, src, np.eye(4), inlier)
     centre = src.mean(axis=0)
     cos_max = np.cos(np.radians(max_rotation))
@@ -125,7 +125,7 @@ def sac_ia(
     return best_t
 
 
-def _score(tree: cKDTree, src: np.ndarray, t: np.ndarray, inlier: float) -> float:
+def _score(tree: scipy.spatial.cKDTree, src: np.ndarray, t: np.ndarray, inlier: float) -> float:
     """Huber-truncated sum of distances of the transformed source keypoints to the target."""
     d, _ = tree.query(transform_points(src, t), distance_upper_bound=1.0)
     d = np.minimum(d, 1.0)

@@ -10,7 +10,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import shapely
 
 from ..core.types import GridSpec, SoilVolumeError
 from ..inputs.io import atomic_path
@@ -37,6 +36,8 @@ class Profile:
 def stations(line, step: float) -> tuple[np.ndarray, np.ndarray]:
     """(chainage, xy) every ``step`` along ``line`` (CRS units) and at each part's end; a
     multi-line's parts follow each other, its chainage running on."""
+    import shapely  # heavy: only a run with --sections loads it
+
     chain, points, start = [], [], 0.0
     for part in shapely.get_parts(line):
         along = np.append(np.arange(0.0, part.length, step), part.length)

@@ -7,8 +7,6 @@ import csv
 from pathlib import Path
 
 import numpy as np
-import shapely
-from shapely.geometry import shape
 
 from ..core.types import GridSpec
 from ..inputs.crs import raster_wkt
@@ -30,7 +28,8 @@ INTEGER = {"id", "outside_grid", "repaired"}
 def write_layer(path: Path, layer: str, geoms: list, rows: list[dict], columns: tuple, wkt: str | None) -> Path:
     """One GeoPackage layer of (multi)polygons ``geoms`` with ``columns`` of ``rows`` as attributes,
     in the CRS ``wkt``; written beside ``path`` and renamed into place."""
-    from pyogrio import raw  # heavy (its own GDAL): loaded by the step that writes a GeoPackage
+    import shapely  # heavy, like pyogrio (its own GDAL): loaded by the step that writes a GeoPackage
+    from pyogrio import raw
 
     with atomic_path(path) as part:
         raw.write(
@@ -58,6 +57,8 @@ def _column(rows: list[dict], key: str) -> np.ndarray:
 
 def write_change_area_gpkg(folder: Path, feats: list[dict], wkt: str | None) -> Path:
     """``change_areas.gpkg`` (layer ``change_areas``) of the GeoJSON features ``feats``."""
+    from shapely.geometry import shape  # heavy: only a run writing a GeoPackage loads it
+
     geoms = [shape(f["geometry"]) for f in feats]
     rows = [f["properties"] for f in feats]
     return write_layer(folder / CHANGE_AREAS, "change_areas", geoms, rows, AREA_COLUMNS, wkt)

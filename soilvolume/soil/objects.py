@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 WALL_SLOPE = 1.6  # rise over run (58 degrees)
 UNRESOLVED = 1.2  # walls narrower than this many cells cannot be told from vertical
@@ -73,8 +73,8 @@ def find_objects(
     changed, unknown = fill | cut, ~np.isfinite(diff)
     d0 = np.nan_to_num(diff)
     for sign, area in ((1, fill), (-1, cut)):
-        comp, _ = ndimage.label(area, structure=_EIGHT)
-        for k, sl in enumerate(ndimage.find_objects(comp), 1):
+        comp, _ = scipy.ndimage.label(area, structure=_EIGHT)
+        for k, sl in enumerate(scipy.ndimage.find_objects(comp), 1):
             blob = _measure(sign * d0, comp, k, sl, (changed, refilled, unknown), cell, sign, len(blobs) + 1)
             if blob is not None:
                 labels[sl][comp[sl] == k] = blob.label
@@ -87,7 +87,7 @@ def find_objects(
     labels = np.where(np.isin(labels, kept), labels, 0)
     moved_ids = [b.label for b in blobs if b.partner]
     moved = np.isin(labels, moved_ids) & (labels > 0)
-    moved = ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls
+    moved = scipy.ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls
     single = (labels > 0) & ~moved
     return Objects(tuple(blobs), labels, moved, single)
 
@@ -100,7 +100,7 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     win = (slice(r0, sl[0].stop + pad), slice(c0, sl[1].stop + pad))
     changed, refilled, unknown = masks
     whole = comp[win] == k
-    if (ndimage.binary_fill_holes(whole) & ~whole & unknown[win]).sum() > RING_HOLE * whole.sum():
+    if (scipy.ndimage.binary_fill_holes(whole) & ~whole & unknown[win]).sum() > RING_HOLE * whole.sum():
         return None
     mine = whole if refilled is None else whole & ~refilled[win]
     dd = np.where(mine, d[win], 0.0)
@@ -113,7 +113,7 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     if not MIN_AREA_M2 <= area <= MAX_AREA_M2:
         return None
     base, top = float((mine & (dd >= 0.2 * height)).sum()), float((mine & (dd >= 0.8 * height)).sum())
-    edge = half & ~ndimage.binary_erosion(half, _EIGHT)
+    edge = half & ~scipy.ndimage.binary_erosion(half, _EIGHT)
     width = (base - top) * a / max(float(edge.sum()) * cell, cell)
     if width > max(0.6 * height / WALL_SLOPE, UNRESOLVED * cell):
         return None
@@ -121,8 +121,8 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     elong = _elongation(rr, cc)
     if elong > MAX_ELONGATION:
         return None
-    grown = ndimage.binary_dilation(whole, _EIGHT, iterations=2)
-    ring = grown & ~ndimage.binary_dilation(whole, _EIGHT)
+    grown = scipy.ndimage.binary_dilation(whole, _EIGHT, iterations=2)
+    ring = grown & ~scipy.ndimage.binary_dilation(whole, _EIGHT)
     if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
         return None
     vol = float(np.where(whole, d[win], 0.0).sum()) * a

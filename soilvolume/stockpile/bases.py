@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import Delaunay
+import scipy
 
 from .coverage import Window
 from .toe import Toe
@@ -55,7 +55,7 @@ def extreme(kind: str, toe: Toe) -> int:
 
 @dataclass(frozen=True)
 class Tin:
-    """Where points fall in the Delaunay triangulation of the toe points: for each point, its
+    """Where points fall in the scipy.spatial.Delaunay triangulation of the toe points: for each point, its
     triangle's three toe points ``corners`` (points, 3) and its barycentric ``weights`` (points,
     3); ``inside`` False for points outside the triangulation."""
 
@@ -68,7 +68,7 @@ def tin_at(toe: Toe, x: np.ndarray, y: np.ndarray) -> Tin:
     """The :class:`Tin` of the toe points at points ``x``, ``y`` (flattened): each point's
     barycentric coordinates in every triangle at once, in blocks (scipy's ``find_simplex`` walk
     crawls over a toe's long thin triangles)."""
-    tri = Delaunay(np.column_stack([toe.x, toe.y]))
+    tri = scipy.spatial.Delaunay(np.column_stack([toe.x, toe.y]))
     t = _transforms(tri.points[tri.simplices])
     pts = np.column_stack([np.ravel(x), np.ravel(y)])
     found = np.full(len(pts), -1)
@@ -86,7 +86,7 @@ def tin_at(toe: Toe, x: np.ndarray, y: np.ndarray) -> Tin:
 
 
 def _transforms(corners: np.ndarray) -> np.ndarray:
-    """Each triangle's (3, 2) barycentric transform as scipy's ``Delaunay.transform`` holds it
+    """Each triangle's (3, 2) barycentric transform as scipy's ``scipy.spatial.Delaunay.transform`` holds it
     (the inverse of its edge matrix, then its third corner), NaN for a flat triangle; computed
     directly: scipy's takes seconds over a toe's near-flat triangles."""
     a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
@@ -100,7 +100,7 @@ def _transforms(corners: np.ndarray) -> np.ndarray:
 
 
 def triangulated(toe: Toe, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The toe heights' Delaunay triangulation, linear in each triangle, at ``x``, ``y``; points
+    """The toe heights' scipy.spatial.Delaunay triangulation, linear in each triangle, at ``x``, ``y``; points
     outside it (centres of cells the boundary crosses) take the toe's plane."""
     tin = tin_at(toe, x, y)
     z = np.sum(tin.weights * toe.z[tin.corners], axis=1)

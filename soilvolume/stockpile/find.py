@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy
 import shapely
-from scipy import ndimage
 from shapely.geometry.base import BaseGeometry
 
 from .survey import Survey
@@ -45,12 +45,12 @@ def find_piles(survey: Survey, settings: FindSettings | None = None) -> list[Pil
     noise = survey.noise()
     top = settings.min_height_m if settings.min_height_m is not None else max(LEAST_HEIGHT, TOP_SIGMAS * noise)
     least = settings.min_area_m2 if settings.min_area_m2 is not None else LEAST_CELLS * cell * cell
-    labels, count = ndimage.label(above > EDGE_SIGMAS * noise, structure=np.ones((3, 3)))
+    labels, count = scipy.ndimage.label(above > EDGE_SIGMAS * noise, structure=np.ones((3, 3)))
     if count == 0:
         return []
     index = np.arange(1, count + 1)
-    highest = ndimage.maximum(above, labels, index)
-    cells = ndimage.sum_labels(np.ones_like(above), labels, index)
+    highest = scipy.ndimage.maximum(above, labels, index)
+    cells = scipy.ndimage.sum_labels(np.ones_like(above), labels, index)
     keep = index[(np.asarray(highest) >= top) & (np.asarray(cells) * cell * cell >= least)]
     polygons = [outline(labels == k, survey) for k in keep]
     polygons.sort(key=lambda p: (-round(p.centroid.y / (4 * cell)), p.centroid.x))
@@ -66,7 +66,7 @@ def ground_of(survey: Survey, widest_m: float) -> np.ndarray:
     pad = k // 2 + 1
     h = survey.filled
     wide = np.maximum(np.pad(h, pad, mode="reflect", reflect_type="odd"), np.pad(h, pad, mode="edge"))
-    return ndimage.grey_opening(wide, size=(k, k))[pad:-pad, pad:-pad]
+    return scipy.ndimage.grey_opening(wide, size=(k, k))[pad:-pad, pad:-pad]
 
 
 def outline(mask: np.ndarray, survey: Survey) -> BaseGeometry:

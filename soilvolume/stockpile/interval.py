@@ -5,7 +5,7 @@ their windows overlap) and how far the bases that follow the toe move it."""
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
+import scipy
 
 from .bases import extreme, level_heights, tin_at
 from .coverage import Window
@@ -42,7 +42,7 @@ def toe_variance(kind: str, toe: Toe, window: Window, cell_area: float) -> float
     some = window.share > 0
     a = base_weights(kind, toe, window.x[some], window.y[some], window.share[some] * cell_area) * toe.sigma
     xy = np.column_stack([toe.x, toe.y])
-    pairs = cKDTree(xy).query_pairs(toe.reach * np.sqrt(2), output_type="ndarray")
+    pairs = scipy.spatial.cKDTree(xy).query_pairs(toe.reach * np.sqrt(2), output_type="ndarray")
     d = np.abs(xy[pairs[:, 0]] - xy[pairs[:, 1]]) / toe.reach
     rho = np.prod(np.clip(1 - d, 0, None), axis=1)
     total = np.sum(a * a) + 2 * np.sum(a[pairs[:, 0]] * a[pairs[:, 1]] * rho)

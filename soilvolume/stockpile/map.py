@@ -4,8 +4,8 @@ outlined and numbered as in the table, a PNG drawn in numpy (:mod:`soilvolume.re
 from __future__ import annotations
 
 import numpy as np
+import scipy
 import shapely
-from scipy import ndimage
 
 from ..reporting.figures import hillshade
 from ..reporting.raster import png_bytes
@@ -36,7 +36,7 @@ def map_png(survey: Survey, inventory: Inventory) -> bytes:
     rgba = np.dstack([grey, grey, grey, np.full(grey.shape, 255, np.uint8)])
     rgba[~np.isfinite(survey.heights)] = EMPTY
     labels = pile_labels(survey, inventory)
-    edge = (labels > 0) & (ndimage.minimum_filter(labels, size=3) != ndimage.maximum_filter(labels, size=3))
+    edge = (labels > 0) & (scipy.ndimage.minimum_filter(labels, size=3) != scipy.ndimage.maximum_filter(labels, size=3))
     rgba[edge] = OUTLINE
     step = int(np.ceil(max(rgba.shape[:2]) / LARGEST))
     rgba = rgba[::step, ::step]

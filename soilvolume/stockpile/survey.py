@@ -6,8 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
-from scipy.interpolate import griddata
+import scipy
 
 from ..core.types import GridSpec
 from ..dem.grid import average_height, cell_ids, choose_cell, make_grid
@@ -37,8 +36,8 @@ class Survey:
         """A robust estimate of the heights' noise per cell (m): the spread of each height about
         its 3 x 3 neighbours' mean, where all nine are known (slopes cancel in the mean)."""
         known = np.isfinite(self.heights)
-        local = ndimage.uniform_filter(self.filled, size=3, mode="nearest")
-        full = ndimage.minimum_filter(known.astype(np.uint8), size=3, mode="constant") > 0
+        local = scipy.ndimage.uniform_filter(self.filled, size=3, mode="nearest")
+        full = scipy.ndimage.minimum_filter(known.astype(np.uint8), size=3, mode="constant") > 0
         resid = (self.filled - local)[full]
         if resid.size < 9:
             return NOISE_FLOOR
@@ -97,7 +96,7 @@ def fill_nearest(h: np.ndarray) -> np.ndarray:
     empty = ~np.isfinite(h)
     if not empty.any():
         return h.copy()
-    idx = ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
+    idx = scipy.ndimage.distance_transform_edt(empty, return_distances=False, return_indices=True)
     return h[tuple(idx)]
 
 
@@ -111,7 +110,7 @@ def fill_linear(h: np.ndarray, nearest: np.ndarray) -> np.ndarray:
     rows, cols = np.nonzero(~empty)
     er, ec = np.nonzero(empty)
     try:
-        z = griddata((rows, cols), h[rows, cols], (er, ec), method="linear")
+        z = scipy.interpolate.griddata((rows, cols), h[rows, cols], (er, ec), method="linear")
     except Exception:  # noqa: BLE001 - Qhull refuses known cells all in a line
         z = np.full(er.shape, np.nan)
     out = h.copy()

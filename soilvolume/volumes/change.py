@@ -6,7 +6,7 @@ and rims of pits (a buffer of one sign would select noise by its sign and bias c
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..compensation.robust import patches
 
@@ -36,11 +36,13 @@ def change_areas(
     valid = np.isfinite(diff)
     d = np.where(valid, diff, 0.0)
     lod = np.broadcast_to(lod, d.shape)
-    measured = ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered
+    measured = scipy.ndimage.binary_erosion(valid, border_value=0)  # border cells are partly covered
     if refilled is not None:
         measured &= ~refilled
     fill_core, cut_core = patches(measured & (d > lod), MIN_CELLS), patches(measured & (d < -lod), MIN_CELLS)
-    fill, cut = (ndimage.binary_dilation(m, _EIGHT, iterations=BUFFER_CELLS) & valid for m in (fill_core, cut_core))
+    fill, cut = (
+        scipy.ndimage.binary_dilation(m, _EIGHT, iterations=BUFFER_CELLS) & valid for m in (fill_core, cut_core)
+    )
     both = fill & cut
     fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
     if refilled is not None and refilled.any():
@@ -50,32 +52,32 @@ def change_areas(
 
 def _join_refilled(d, patches, fill, cut):
     """(fill, cut) with the refilled ``patches`` that join them (see :func:`change_areas`)."""
-    labels, n = ndimage.label(patches, structure=_EIGHT)
+    labels, n = scipy.ndimage.label(patches, structure=_EIGHT)
     idx = np.arange(1, n + 1)
-    vol = ndimage.sum(d, labels, idx)
-    rim = ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
+    vol = scipy.ndimage.sum(d, labels, idx)
+    rim = scipy.ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
     out = []
     for area, sign in ((fill, 1.0), (cut, -1.0)):
-        works = ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
+        works = scipy.ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
         out.append(area | np.r_[False, (sign * vol > 0) & (works >= sign * vol)][labels])
     return out[0], out[1]
 
 
 def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray:
     """Per cell of ``area``, its connected area's volume of ``sign`` (m x cells; 0 if of the other)."""
-    comp, k = ndimage.label(area, structure=_EIGHT)
-    v = sign * ndimage.sum(d, comp, np.arange(1, k + 1))
+    comp, k = scipy.ndimage.label(area, structure=_EIGHT)
+    v = sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1))
     return np.r_[0.0, np.maximum(v, 0.0)][comp]
 
 
 def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:
     """Volume (m3) of areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice their LoD (noise could
     make them)."""
-    labels, n = ndimage.label(area, structure=_EIGHT)
+    labels, n = scipy.ndimage.label(area, structure=_EIGHT)
     idx = np.arange(1, n + 1)
     d = np.where(np.isfinite(diff), diff, 0.0)
-    mean_abs = ndimage.mean(np.abs(d), labels, idx)
-    mean_lod = ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
-    vol = np.abs(ndimage.sum(d, labels, idx)) * cell_area
+    mean_abs = scipy.ndimage.mean(np.abs(d), labels, idx)
+    mean_lod = scipy.ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
+    vol = np.abs(scipy.ndimage.sum(d, labels, idx)) * cell_area
     size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
     return float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())

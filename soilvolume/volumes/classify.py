@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..core.types import GridSpec
 from ..options import Options
@@ -34,6 +34,6 @@ def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: O
     """The change areas, what is not soil in them, stable ground never in or next to them unless the user drew it."""
     fill, cut = change_areas(c.diff, c.lod_cell, refilled=s.filled_mask & ~s.seen_once)
     ex = exclude_nonsoil(s, c, (fill, cut), epochs, grid, options)
-    quiet = c.stable & ~ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
+    quiet = c.stable & ~scipy.ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
     stable = quiet if not options.stable_mask and quiet.sum() >= MIN_QUIET else c.stable
     return Areas(ex.fill, ex.cut, ex, stable, ex.fill | ex.cut)

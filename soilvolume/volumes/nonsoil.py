@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
@@ -77,7 +77,7 @@ def exclude_nonsoil(
     share = CLASS_MISSED_SHARE if all(e.rule is not None and e.rule.use_class for e in epochs) else MISSED_SHARE
     fill, cut = fill & ~leave_out, cut & ~leave_out  # what the headline counts
     # only what was left out in or beside the counted change areas can bias the headline
-    near = ndimage.binary_dilation(fill | cut, iterations=NEAR_CELLS)
+    near = scipy.ndimage.binary_dilation(fill | cut, iterations=NEAR_CELLS)
     classes, taken, by_class, sigma = _by_class(diff, epochs, c.offset, shares, found, near, area, share)
     report: dict = {"mode": mode, "classes": by_class}
     classes[found.moved] = 4
@@ -160,11 +160,11 @@ def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray) -> np.ndarray:
 
 def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:
     """Compact change patches mostly of vegetation with little ``bare`` soil: grass the colour test half missed."""
-    comp, n = ndimage.label(change, structure=np.ones((3, 3), bool))
+    comp, n = scipy.ndimage.label(change, structure=np.ones((3, 3), bool))
     idx = np.arange(1, n + 1)
     size = np.bincount(comp.ravel(), minlength=n + 1)[1:]
-    veg_share = ndimage.sum(veg, comp, idx) / size
-    soil_share = ndimage.sum(change & bare, comp, idx) / size
+    veg_share = scipy.ndimage.sum(veg, comp, idx) / size
+    soil_share = scipy.ndimage.sum(change & bare, comp, idx) / size
     keep = (size * cell_area <= UNCLEAR_AREA_M2) & (veg_share >= GRASS_VEG) & (soil_share < GRASS_SOIL)
     return np.r_[False, keep][comp]
 
@@ -215,15 +215,15 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     if not signal:
         d = np.nan_to_num(diff)
         for part in (counted & (d > 0), counted & (d < 0)):
-            comp, k = ndimage.label(part, structure=np.ones((3, 3), bool))
+            comp, k = scipy.ndimage.label(part, structure=np.ones((3, 3), bool))
             idx = np.arange(1, k + 1)
-            area = ndimage.sum(part, comp, idx) * cell_area
-            vol = np.abs(ndimage.sum(d, comp, idx)) * cell_area
+            area = scipy.ndimage.sum(part, comp, idx) * cell_area
+            vol = np.abs(scipy.ndimage.sum(d, comp, idx)) * cell_area
             keep = idx[(area <= UNCLEAR_AREA_M2) & (vol <= UNCLEAR_M3)]
             out |= np.isin(comp, keep) & part
         out |= rough & counted
-    comp, n = ndimage.label(out, structure=np.ones((3, 3), bool))
-    vols = np.abs(ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
+    comp, n = scipy.ndimage.label(out, structure=np.ones((3, 3), bool))
+    vols = np.abs(scipy.ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
     return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..compensation.robust import nmad
 from ..core.types import GridSpec
@@ -88,14 +88,14 @@ def _sided(diff: np.ndarray, cells: dict[str, np.ndarray], cell_area: float, z: 
 
 def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
     """The change below detection in the :data:`RING` around the areas, not counted (a graded pad crossing contours)."""
-    ring = {k: ndimage.binary_dilation(counted[k], iterations=RING) & ~counted["net"] for k, _ in _SIGNS}
+    ring = {k: scipy.ndimage.binary_dilation(counted[k], iterations=RING) & ~counted["net"] for k, _ in _SIGNS}
     return _sided(diff, {k: m & np.isfinite(diff) for k, m in ring.items()}, cell_area, z)
 
 
 def outline(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
     """The change areas' cells on the compared area's outline, known to half a cell: half their volume."""
     valid = np.isfinite(diff)
-    edge = valid & ~ndimage.binary_erosion(valid, border_value=0)
+    edge = valid & ~scipy.ndimage.binary_erosion(valid, border_value=0)
     return _sided(diff, {k: edge & counted[k] for k, _ in _SIGNS}, cell_area, z, 0.5)
 
 

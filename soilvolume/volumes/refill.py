@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..compensation.robust import nmad
 from ..core.types import GridSpec
@@ -81,7 +81,7 @@ def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     difference."""
     if not filled_mask.any():
         return np.zeros(diff.shape)
-    labels, n = ndimage.label(filled_mask, structure=ndimage.generate_binary_structure(2, 1))
+    labels, n = scipy.ndimage.label(filled_mask, structure=scipy.ndimage.generate_binary_structure(2, 1))
     radius = np.sqrt(np.bincount(labels.ravel())[1:] / np.pi)
     per_patch = error_by_radius(diff, stable, options.fill_method, radius, options.seed)
     if per_patch is None:  # no room to measure it: one stable-ground noise level per cell

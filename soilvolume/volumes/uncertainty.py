@@ -11,7 +11,7 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..compensation.robust import nmad
 from ..compensation.stable import noise_sigma
@@ -97,7 +97,7 @@ class _PartTerms:
         self.filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
         self.shared = self.filled if own is None else self.filled & ~own  # interpolated in the difference
         self.absd = np.abs(np.where(valid, diff, 0.0))
-        self.labels, self.n_patches = ndimage.label(self.filled)
+        self.labels, self.n_patches = scipy.ndimage.label(self.filled)
         self.fs = np.zeros(valid.shape) if fill_sigma is None else np.where(self.filled, fill_sigma, 0.0)
         self.leftover = leftover_bias(diff, stable, grid.cell)
         seen = self.leftover[stable & np.isfinite(self.leftover)] if surface else np.empty(0)  # no surface, none
@@ -120,7 +120,7 @@ class _PartTerms:
 
     def refill(self, m: np.ndarray) -> float:
         labels, n = self.labels, self.n_patches
-        per_patch = ndimage.sum(np.where(m, self.fs, 0.0), labels, np.arange(1, n + 1)) * self.cell_area
+        per_patch = scipy.ndimage.sum(np.where(m, self.fs, 0.0), labels, np.arange(1, n + 1)) * self.cell_area
         return float(np.sqrt(np.sum(np.square(per_patch)))) if n else 0.0
 
     def unmodelled(self, m: np.ndarray) -> float:  # fully correlated over the part
@@ -152,8 +152,8 @@ def leftover_bias(residual: np.ndarray, stable: np.ndarray, cell: float, scale_m
     """The stable residuals smoothed over ``scale_m`` into the change (a dome not quite of degree 2 leaves mm)."""
     w = (stable & np.isfinite(residual)).astype(float)
     s = max(1.0, scale_m / cell)
-    num = ndimage.gaussian_filter(np.where(w > 0, residual, 0.0), s)
-    den = ndimage.gaussian_filter(w, s)
+    num = scipy.ndimage.gaussian_filter(np.where(w > 0, residual, 0.0), s)
+    den = scipy.ndimage.gaussian_filter(w, s)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(den > 0.05, num / den, np.nan)
 

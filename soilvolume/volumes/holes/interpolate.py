@@ -9,12 +9,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy import ndimage, sparse
-from scipy.sparse.linalg import cg, spsolve
+import scipy
 
 from .solve import least_squares, rows_csr
 
-FOUR = ndimage.generate_binary_structure(2, 1)  # 4-connectivity: cells sharing an edge
+FOUR = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)  # 4-connectivity: cells sharing an edge
 _STEPS = ((1, 0), (-1, 0), (0, 1), (0, -1))
 _DIRECT_MAX = 600_000  # unknowns solved directly; larger harmonic systems use conjugate gradients
 
@@ -23,7 +22,7 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
     """Empty 4-connected components of at most ``max_cells`` (``None``/0: none) not touching the grid border."""
     if not max_cells or max_cells <= 0:
         return np.zeros(valid.shape, bool)
-    labels, n = ndimage.label(~valid, structure=FOUR)
+    labels, n = scipy.ndimage.label(~valid, structure=FOUR)
     keep = np.bincount(labels.ravel(), minlength=n + 1) <= max_cells
     keep[np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1], [0]])] = False
     return keep[labels]
@@ -41,9 +40,9 @@ def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
 def _start(values: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(the known cells, ``values`` there and NaN elsewhere, the targets in components touching a known cell)."""
     known = np.isfinite(values) & ~targets
-    labels, n = ndimage.label(targets, structure=FOUR)
+    labels, n = scipy.ndimage.label(targets, structure=FOUR)
     ok = np.zeros(n + 1, bool)
-    ok[labels[ndimage.binary_dilation(known, FOUR) & targets]] = True
+    ok[labels[scipy.ndimage.binary_dilation(known, FOUR) & targets]] = True
     ok[0] = False
     return known, np.where(known, values, np.nan), ok[labels]
 
@@ -68,11 +67,11 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
         ci.append(np.searchsorted(flat, nb[u]))
     ri, ci = np.concatenate(ri), np.concatenate(ci)
     data = np.concatenate([diag, -np.ones(ri.size - n)])
-    a = sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
+    a = scipy.sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
     if n <= _DIRECT_MAX:
-        return spsolve(a.tocsc(), rhs)
+        return scipy.sparse.linalg.spsolve(a.tocsc(), rhs)
     guess = _smooth_guess(values, known, todo)[todo]
-    sol, _ = cg(a, rhs, x0=guess, tol=1e-9, maxiter=5000, M=sparse.diags(1.0 / diag))
+    sol, _ = scipy.sparse.linalg.cg(a, rhs, x0=guess, tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag))
     return sol
 
 
@@ -80,8 +79,8 @@ def _smooth_guess(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np
     """Multi-scale normalized convolution: a fast first guess for the iterative solver."""
     out, left, sigma = np.where(known, values, 0.0), todo.copy(), 1.0
     while left.any() and sigma < max(todo.shape):
-        num = ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
-        den = ndimage.gaussian_filter(known.astype(float), sigma)
+        num = scipy.ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
+        den = scipy.ndimage.gaussian_filter(known.astype(float), sigma)
         ok = left & (den > 1e-6)
         out[ok] = num[ok] / den[ok]
         left &= ~ok
@@ -191,7 +190,7 @@ def refill_epoch(
 
 def typical_radius(mask: np.ndarray) -> float:
     """Radius (cells) of a disc the size of ``mask``'s area-weighted typical component (1 if none)."""
-    labels, n = ndimage.label(mask, structure=FOUR)
+    labels, n = scipy.ndimage.label(mask, structure=FOUR)
     if n == 0:
         return 1.0
     size = np.bincount(labels.ravel())[1:].astype(float)

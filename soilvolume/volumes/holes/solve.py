@@ -7,9 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from scipy import linalg, sparse
-from scipy.sparse.csgraph import connected_components
-from scipy.sparse.linalg import splu
+import scipy
 
 TIKHONOV = 1e-10  # biharmonic normal matrix + eps I: factorisable even where the system is singular
 _REFINE_MAX = 30  # iterative-refinement steps removing eps where the system is well posed
@@ -17,32 +15,32 @@ _BAND_EDGES = np.unique(np.ceil(8 * 1.25 ** np.arange(16)).astype(int))  # bande
 _BIG_GROUP = 200_000  # coupled biharmonic unknowns beyond which a sub-system is filled harmonically
 
 
-def rows_csr(rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[int, int]) -> sparse.csr_matrix:
+def rows_csr(rows: np.ndarray, cols: np.ndarray, data: np.ndarray, shape: tuple[int, int]) -> scipy.sparse.csr_matrix:
     """``csr_matrix((data, (rows, cols)))`` of entries row by row, columns increasing, built directly."""
     idx = np.int32 if max(shape[0], shape[1], data.size) < np.iinfo(np.int32).max else np.int64
     indptr = np.zeros(shape[0] + 1, idx)
     np.cumsum(np.bincount(rows, minlength=shape[0]), out=indptr[1:])
-    return sparse.csr_matrix((data, cols.astype(idx), indptr), shape=shape)
+    return scipy.sparse.csr_matrix((data, cols.astype(idx), indptr), shape=shape)
 
 
-def lower_triangle(a: sparse.csr_matrix) -> sparse.csr_matrix:
-    """``sparse.tril(a, format="csr")``, taken from the rows directly when ``a`` is canonical."""
+def lower_triangle(a: scipy.sparse.csr_matrix) -> scipy.sparse.csr_matrix:
+    """``scipy.sparse.tril(a, format="csr")``, taken from the rows directly when ``a`` is canonical."""
     a = a.tocsr()
     if not a.has_canonical_format:
-        return sparse.tril(a, format="csr")
+        return scipy.sparse.tril(a, format="csr")
     row = np.repeat(np.arange(a.shape[0]), np.diff(a.indptr))
     keep = a.indices <= row
     indptr = np.zeros_like(a.indptr)
     np.cumsum(np.bincount(row[keep], minlength=a.shape[0]), out=indptr[1:])
-    return sparse.csr_matrix((a.data[keep], a.indices[keep], indptr), shape=a.shape)
+    return scipy.sparse.csr_matrix((a.data[keep], a.indices[keep], indptr), shape=a.shape)
 
 
 def least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
     """(``mat x = rhs`` by one factorisation of ``normal + eps I`` refined, the unknowns to fill harmonically)."""
     normal = (mat.T @ mat).tocsr()
     g = mat.T @ rhs
-    n_groups, group = connected_components(normal, directed=False)
-    solve, bad = group_solver(normal + TIKHONOV * sparse.identity(g.size, format="csr"), group, n_groups)
+    n_groups, group = scipy.sparse.csgraph.connected_components(normal, directed=False)
+    solve, bad = group_solver(normal + TIKHONOV * scipy.sparse.identity(g.size, format="csr"), group, n_groups)
     x = refined(solve, normal, g)
     probe = 1.0 + np.random.default_rng(0).random(g.size)
     null = np.abs(solve(TIKHONOV * probe)) > 0.01  # directions only eps pins down: ill posed
@@ -51,7 +49,7 @@ def least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
     return x, bad[group]
 
 
-def refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
+def refined(solve: Callable[[np.ndarray], np.ndarray], normal: scipy.sparse.csr_matrix, g: np.ndarray) -> np.ndarray:
     """``normal x = g`` by ``solve`` (of ``normal + eps I``), refined until converged or stalled at round-off."""
     x, last = solve(g), np.inf
     for _ in range(_REFINE_MAX):
@@ -64,7 +62,7 @@ def refined(solve: Callable[[np.ndarray], np.ndarray], normal: sparse.csr_matrix
     return x
 
 
-def group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
+def group_solver(reg: scipy.sparse.spmatrix, group: np.ndarray, n_groups: int):
     """(solve, per-group skipped flags) of the block-diagonal SPD ``reg`` (blocks: ``group``): banded
     Cholesky batched by bandwidth, SuperLU if wider, blocks over ``_BIG_GROUP`` skipped (0)."""
     low = lower_triangle(reg)
@@ -98,7 +96,7 @@ def group_solver(reg: sparse.spmatrix, group: np.ndarray, n_groups: int):
     return solve, skipped
 
 
-def _block_order(low: sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_groups: int):
+def _block_order(low: scipy.sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_groups: int):
     """(unknowns ordered by solver kind, group, grid order; each group's kind: its bandwidth's index
     in ``_BAND_EDGES``, that size if wider (SuperLU), one more if over ``_BIG_GROUP`` (skipped))."""
     size = np.bincount(group, minlength=n_groups)
@@ -116,11 +114,13 @@ def _factor(kind: int, pi: np.ndarray, pj: np.ndarray, data: np.ndarray, n: int)
     if kind < _BAND_EDGES.size:
         ab = np.zeros((_BAND_EDGES[kind] + 1, n))
         ab[pi - pj, pj] = data
-        chol = linalg.cholesky_banded(ab, lower=True, check_finite=False)
-        return lambda b: linalg.cho_solve_banded((chol, True), b, check_finite=False)
-    tri = sparse.csc_matrix((data, (pi, pj)), shape=(n, n))
-    full = (tri + sparse.tril(tri, -1).T).tocsc()
-    lu = splu(full, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
+        chol = scipy.linalg.cholesky_banded(ab, lower=True, check_finite=False)
+        return lambda b: scipy.linalg.cho_solve_banded((chol, True), b, check_finite=False)
+    tri = scipy.sparse.csc_matrix((data, (pi, pj)), shape=(n, n))
+    full = (tri + scipy.sparse.tril(tri, -1).T).tocsc()
+    lu = scipy.sparse.linalg.splu(
+        full, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
+    )
     return lu.solve
 
 

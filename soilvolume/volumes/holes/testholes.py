@@ -6,8 +6,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy import ndimage, sparse
-from scipy.sparse.csgraph import connected_components
+import scipy
 
 from .interpolate import filler, harmonic_instead, stencil_system
 from .solve import TIKHONOV, beyond, group_solver, refined
@@ -35,7 +34,7 @@ def fill_error(
     values = np.where(targets, np.nan, h)
     filled = discs_filled(values, targets, centres, disc) if method == "biharmonic" else None
     err = (filler(method)(values, targets) if filled is None else filled) - h
-    mean_err = ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
+    mean_err = scipy.ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
     mean = float(np.sqrt(np.mean(np.square(mean_err))))
     return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
 
@@ -96,10 +95,10 @@ def _disc_system(disc: bytes, reach: int):
     flat = np.flatnonzero(todo)
     mat, known, _ = stencil_system(np.ones_like(todo), todo, flat)
     normal = (mat.T @ mat).tocsr()
-    n_groups, group = connected_components(normal, directed=False)
+    n_groups, group = scipy.sparse.csgraph.connected_components(normal, directed=False)
     solve = None
     if n_groups == 1:
-        solve, skipped = group_solver(normal + TIKHONOV * sparse.identity(flat.size, format="csr"), group, 1)
+        solve, skipped = group_solver(normal + TIKHONOV * scipy.sparse.identity(flat.size, format="csr"), group, 1)
         solve = None if skipped[0] else solve
     return size, flat, mat, normal, known, solve
 
@@ -112,7 +111,7 @@ def _around(centres: np.ndarray, cells: np.ndarray, size: int) -> tuple[np.ndarr
 
 
 def disc_erosion_every(mask: np.ndarray, radius: float, step: int) -> np.ndarray:
-    """``ndimage.binary_erosion(mask, disc)[::step, ::step]`` (outside the grid is not ``mask``), at those cells
+    """``scipy.ndimage.binary_erosion(mask, disc)[::step, ::step]`` (outside the grid is not ``mask``), at those cells
     only."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r : r + 1, -r : r + 1]

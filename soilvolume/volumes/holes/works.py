@@ -19,7 +19,7 @@ the verdict says why."""
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
+import scipy
 
 from ..results import Epochs
 from .interpolate import FOUR, enclosed_holes, fill
@@ -46,14 +46,14 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
-    labels, n = ndimage.label(hole, FOUR)
+    labels, n = scipy.ndimage.label(hole, FOUR)
     candidates = _both_sides(labels, n, change, stable)
-    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+    for k, box in enumerate(scipy.ndimage.find_objects(labels), start=1):
         if not candidates[k]:
             continue
         box = tuple(slice(max(0, s.start - PAD), s.stop + PAD) for s in box)
         cells = labels[box] == k
-        rim = ndimage.binary_dilation(cells, FOUR, iterations=RING) & known[box]
+        rim = scipy.ndimage.binary_dilation(cells, FOUR, iterations=RING) & known[box]
         n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
@@ -68,7 +68,7 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
 def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, method: str) -> np.ndarray:
     """The hole ``cells`` on the works' side: the signed distance to the outline interpolated across it, else the nearer
     rim."""
-    to_change, to_stable = ndimage.distance_transform_edt(~change), ndimage.distance_transform_edt(~stable)
+    to_change, to_stable = scipy.ndimage.distance_transform_edt(~change), scipy.ndimage.distance_transform_edt(~stable)
     signed = np.where(change, to_stable - 1.0, np.where(stable, -to_change, np.nan))
     signed = fill(np.where(cells, np.nan, signed), cells, method)
     return np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
@@ -78,9 +78,9 @@ def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarr
     """Per hole, whether its rim (on the labels grown by ``RING``) may hold enough of both sides."""
     grown = labels
     for _ in range(RING):
-        grown = np.where(grown > 0, grown, ndimage.grey_dilation(grown, footprint=FOUR))
+        grown = np.where(grown > 0, grown, scipy.ndimage.grey_dilation(grown, footprint=FOUR))
     idx = np.arange(n + 1)
-    return np.minimum(ndimage.sum(change, grown, idx), ndimage.sum(stable, grown, idx)) >= MIN_SIDE
+    return np.minimum(scipy.ndimage.sum(change, grown, idx), scipy.ndimage.sum(stable, grown, idx)) >= MIN_SIDE
 
 
 def outline_sigma(
@@ -88,12 +88,12 @@ def outline_sigma(
 ) -> dict[str, float]:
     """One-sigma volume (m3) per part of ``delta`` summed per hole, beyond the refilled ``share`` of the
     |difference|."""
-    labels, n = ndimage.label(delta != 0, np.ones((3, 3), bool))
+    labels, n = scipy.ndimage.label(delta != 0, np.ones((3, 3), bool))
     idx = np.arange(1, n + 1)
     out = {}
     for k, m in parts.items():
-        moved = np.abs(ndimage.sum(np.where(m, delta, 0.0), labels, idx))
-        given = share * ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
+        moved = np.abs(scipy.ndimage.sum(np.where(m, delta, 0.0), labels, idx))
+        given = share * scipy.ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
         out[k] = float(np.linalg.norm(np.maximum(moved - given, 0.0))) * cell_area
     return out
 
@@ -104,8 +104,8 @@ def fill_own_holes(
     """(after, before, cells filled in their own survey, their one-sigma error m): ``hole`` cells the other sees change
     across filled, with ``weak`` cells beside them (see module)."""
     out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
-    parts, m = ndimage.label(hole, FOUR)
-    share = ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
+    parts, m = scipy.ndimage.label(hole, FOUR)
+    share = scipy.ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
     if cell_area > 0 and shared.any():
         bulk, bulk_sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
@@ -114,25 +114,25 @@ def fill_own_holes(
         shared &= ~bulk
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
-        labels, n = ndimage.label(one, FOUR)
+        labels, n = scipy.ndimage.label(one, FOUR)
         if n == 0:
             continue
         idx = np.arange(1, n + 1)
         radius = np.sqrt(np.bincount(labels.ravel(), minlength=n + 1)[1:] / np.pi)
         seen_fill = fill(np.where(one, np.nan, out[seen]), one, method)
-        detail = np.sqrt(ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
+        detail = np.sqrt(scipy.ndimage.mean(np.nan_to_num(np.square(out[seen] - seen_fill)), labels, idx))
         scale = _own_detail(out[miss], method, radius, seed)
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
         # no machine: the measured survey's departure from its own fill is beyond any machine's volume
-        bulk = np.abs(ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
+        bulk = np.abs(scipy.ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
         change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | (bulk if cell_area > 0 else False)
         if change.any():  # a patch the survey cannot fill whole is left
-            whole = ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)
+            whole = scipy.ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)
             change &= np.r_[False, whole] > 0
         if not change.any():
             continue
         cells = change[labels]
-        grown = ndimage.grey_dilation(np.where(cells, labels, 0), footprint=np.ones((2 * RIM + 1,) * 2, bool))
+        grown = scipy.ndimage.grey_dilation(np.where(cells, labels, 0), footprint=np.ones((2 * RIM + 1,) * 2, bool))
         cells |= weak[miss] & (grown > 0)
         filled = fill(out[miss], cells, method)
         ok = cells & np.isfinite(filled)
@@ -144,7 +144,7 @@ def fill_own_holes(
 
 def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     """Per patch, its rim's change (m): the larger of its typical |difference| and its 10-90 % spread."""
-    grown = ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
+    grown = scipy.ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
     ring = (labels == 0) & (grown > 0) & np.isfinite(d)
     out = np.zeros(n)
     lab, val = grown[ring], d[ring]
@@ -167,7 +167,7 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
     size = np.bincount(parts.ravel(), minlength=int(parts.max()) + 1)
     for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
         cells = parts == k
-        region = ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
+        region = scipy.ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
         departures = [_departure(e, region, cell_area) for e in out]
         if not any(m3 > PILE_M3 for _, m3 in departures):
             continue
@@ -206,8 +206,8 @@ def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area
     bound, items = dict.fromkeys(("net", "cut", "fill"), 0.0), []
     for name, e in zip(("after", "before"), epochs, strict=True):
         empty = (e.counts + e.nonsoil()) == 0
-        labels, _ = ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
-        for k, box in enumerate(ndimage.find_objects(labels), 1):
+        labels, _ = scipy.ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
+        for k, box in enumerate(scipy.ndimage.find_objects(labels), 1):
             win = tuple(slice(max(b.start - PAD, 0), b.stop + PAD) for b in box)  # the hole and its rings
             cells = labels[win] == k
             item = _hole(diff[win], cells, change[win], cell_area) if _basin(e.heights[win], cells) else None
@@ -227,8 +227,10 @@ def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area
 
 def _rings(cells: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(near, far): a hole's ``valid`` cells next to it, and those 3 to 4 cells out."""
-    near = ndimage.binary_dilation(cells) & ~cells & valid
-    far = ndimage.binary_dilation(cells, iterations=4) & ~ndimage.binary_dilation(cells, iterations=2) & valid
+    near = scipy.ndimage.binary_dilation(cells) & ~cells & valid
+    far = (
+        scipy.ndimage.binary_dilation(cells, iterations=4) & ~scipy.ndimage.binary_dilation(cells, iterations=2) & valid
+    )
     return near, far
 
 
@@ -238,8 +240,8 @@ def _basin(h: np.ndarray, cells: np.ndarray) -> bool:
     near, far = _rings(cells, np.isfinite(h))
     if near.sum() < 4 or not far.any():
         return False
-    total = ndimage.uniform_filter(np.where(far, h, 0.0), 7, mode="constant")
-    count = ndimage.uniform_filter(far.astype(float), 7, mode="constant")
+    total = scipy.ndimage.uniform_filter(np.where(far, h, 0.0), 7, mode="constant")
+    count = scipy.ndimage.uniform_filter(far.astype(float), 7, mode="constant")
     with np.errstate(invalid="ignore", divide="ignore"):
         around = np.where(count > 0, total / count, np.nan)  # the ground a few cells out, on average
     drop = (around - h)[near]
@@ -248,7 +250,7 @@ def _basin(h: np.ndarray, cells: np.ndarray) -> bool:
 
 def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: float) -> dict | None:
     """One hole's range (m3, against the headline), or None off the works or when negligible."""
-    ring = ndimage.binary_dilation(cells, iterations=2) & ~cells & np.isfinite(diff)
+    ring = scipy.ndimage.binary_dilation(cells, iterations=2) & ~cells & np.isfinite(diff)
     if not ring.any() or float(np.mean(change[ring])) < RIM_SHARE:
         return None
     near, far = _rings(cells, np.isfinite(diff))
@@ -257,7 +259,7 @@ def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: fl
     step = (d_near - d_far) / 2.5  # per cell, going in
     if step * d_near <= 0:  # the rim does not deepen inwards: nothing to carry on
         step = 0.0
-    dist = ndimage.distance_transform_edt(cells)
+    dist = scipy.ndimage.distance_transform_edt(cells)
     extra = np.clip(step * dist, -DEEPER * abs(d_near), DEEPER * abs(d_near))[cells]
     extra_m3 = float(extra.sum()) * cell_area
     shown = np.isfinite(diff[cells])
