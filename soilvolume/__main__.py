@@ -1,7 +1,5 @@
 """``python -m soilvolume`` and the ``soilvolume`` command: a signal while still importing ends it in one
-line, the process is settled (:func:`soilvolume.process.settle`), the command line imported, a run's heavy
-libraries imported ahead in the background (:func:`soilvolume.process.import_ahead`), the command run, the
-process left."""
+line, the process is settled (:func:`soilvolume.process.settle`), the command line run, the process left."""
 
 import os
 import signal
@@ -26,7 +24,6 @@ from .cli import main  # noqa: E402 - after the handlers and the settings: it lo
 
 def run() -> int:
     """Run the command line and leave with its exit status."""
-    process.import_ahead(sys.argv[1:])
     return process.leave(main())
 
 

@@ -4,11 +4,9 @@ were removed). No numpy here: :func:`settle` runs before it loads."""
 
 from __future__ import annotations
 
-import importlib
 import logging
 import os
 import sys
-import threading
 
 from .core.watchdog import remove_process_temp_dir
 
@@ -16,11 +14,6 @@ from .core.watchdog import remove_process_temp_dir
 #: HTTP); in the Dask workers jinja2 too (Dask's notebook HTML; the command needs it for report.html)
 EXTRAS = ("requests",)
 WORKER_EXTRAS = (*EXTRAS, "jinja2")
-#: the heavy libraries a run's later steps import where they use them, in the order they are first
-#: needed (the registration's neighbours, the volume step's labels and sparse solvers, the GeoTIFFs, the report)
-AHEAD = ("scipy.spatial", "scipy.ndimage", "scipy.sparse.linalg", "rasterio.io", "jinja2")
-#: the commands that read surveys and run the method (the others need none of :data:`AHEAD` soon)
-RUNS = frozenset({"estimate", "series", "register", "volume", "dem", "stockpile"})
 
 
 def settle() -> None:
@@ -42,27 +35,6 @@ def one_blas_thread() -> None:
     memory-bound, and idle BLAS threads spin after each, taking the cores from Open3D and the reading
     (paper pair with two threads: +27 % CPU, about +80 % wall time)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-
-def import_ahead(argv: list[str]) -> threading.Thread | None:
-    """For a command that runs the method (:data:`RUNS`, not its ``--help``), import :data:`AHEAD`
-    in a background thread: an import holds the GIL, the reading of the inputs (the native kernel)
-    does not, so they overlap and the steps find the libraries loaded (paper pair: see
-    ``bench/README.md``, *Process settings*). A library that fails to import is left to the step
-    that needs it to report."""
-    if not argv or argv[0] not in RUNS or {"-h", "--help"} & set(argv):
-        return None
-    worker = threading.Thread(target=_import_all, name="soilvolume-import-ahead", daemon=True)
-    worker.start()
-    return worker
-
-
-def _import_all() -> None:
-    for name in AHEAD:
-        try:
-            importlib.import_module(name)
-        except Exception:  # noqa: BLE001 - the step that uses it says what is missing
-            return
 
 
 def leave(code: int) -> int:
