@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import shapely
 
+from soilvolume.dem.grid import average_height
 from soilvolume.scenes.yards import radial, stockpile_yard
 from soilvolume.stockpile import (
     Base,
@@ -19,6 +20,7 @@ from soilvolume.stockpile import (
     survey_from_dem,
     survey_from_points,
 )
+from soilvolume.stockpile.survey import Survey, fill_nearest, standard_errors
 from soilvolume.stockpile.types import TOE_BASES
 
 SEEDS = (0, 1, 2, 3)  # seed 3: a windrow whose raw highest toe height stood 6 mm high (1.08 % off)
@@ -73,16 +75,57 @@ def test_each_base_within_one_percent_of_its_analytic_answer(yards):
     assert max(worst.values()) < 0.01, worst
 
 
-def test_intervals_hold_the_truth(yards):
-    """A 95 % interval: over 36 piles about 2 may miss; none by much."""
-    ratios = []
-    for yard, _, inv in yards:
-        for p, r in zip(yard.piles, inv.piles, strict=True):
-            lo, hi = r.interval_m3
-            ratios.append(abs(r.volume_m3 - p.volume_m3) / ((hi - lo) / 2))
-    ratios = np.array(ratios)
-    assert np.mean(ratios <= 1) >= 0.9
+COVERAGE_SEEDS = range(10)  # 120 piles: a 95 % interval may miss 6; 4 seeds (48 piles) could not tell 90 % from 95 %
+
+
+@pytest.fixture(scope="module")
+def coverage():
+    """Each pile of seeds 0-9 as (truth, volume, half-width) above the triangulated base (toe
+    noise and the bases' spread in its interval) and a level 0.3 m under the level field (the
+    cells' terms only: it missed 8 % of the piles before the cell statistic's shift was in)."""
+    out = {"triangulated": [], "elevation": []}
+    for seed in COVERAGE_SEEDS:
+        yard = stockpile_yard(seed)
+        survey = survey_from_points(yard.x, yard.y, yard.z)
+        piles = [Pile(p.polygon, p.name) for p in yard.piles]
+        level = f"elevation:{yard.z0 - 0.3}"
+        for kind, base in (("triangulated", "triangulated"), ("elevation", level)):
+            for p, r in zip(yard.piles, stockpile_inventory(survey, piles, base=base).piles, strict=True):
+                out[kind].append((p.truth(base), r.volume_m3, (r.interval_m3[1] - r.interval_m3[0]) / 2))
+    return {k: np.array(v) for k, v in out.items()}
+
+
+@pytest.mark.parametrize("kind", ["triangulated", "elevation"])
+def test_intervals_hold_the_truth(coverage, kind):
+    """A 95 % interval holds the truth on at least 95 % of 120 piles, and misses none by much.
+    Measured over seeds 0-19 (240 piles): see docs/stockpiles.md's table."""
+    truth, volume, half = coverage[kind].T
+    ratios = np.abs(volume - truth) / half
+    assert len(ratios) == 12 * len(COVERAGE_SEEDS)
+    assert np.mean(ratios <= 1) >= 0.95, np.sort(ratios)[-8:]
     assert ratios.max() < 1.6
+
+
+def test_the_interval_holds_what_the_cell_statistic_moves(yards):
+    """The robust mean drops the points of a cell a pile's toe or crest crosses (the face's points
+    stand off the ground's like outliers): a toe cell comes out low, a crest cell high, the pile
+    low (its toe is longer than its crest). The interval carries the volume the plain mean of the
+    points (the surface's integral) would give instead; on the plain mean's grid that term is 0."""
+    yard, survey, _ = yards[0]
+    xyz = np.column_stack([yard.x, yard.y, yard.z])
+    h, n = average_height(xyz, survey.grid, "mean")
+    plain = Survey(survey.grid, h, n, standard_errors(xyz, survey.grid, h, n), fill_nearest(h))
+    assert np.abs(plain.errors.offset).max() < 1e-9
+    piles = [Pile(p.polygon, p.name) for p in yard.piles]
+    level = f"elevation:{yard.z0 - 0.3}"
+    robust = stockpile_inventory(survey, piles, base=level).piles
+    mean = stockpile_inventory(plain, piles, base=level).piles
+    moved = np.array([m.volume_m3 - r.volume_m3 for r, m in zip(robust, mean, strict=True)])
+    assert np.sum(moved) > 0
+    for r, m, shift in zip(robust, mean, np.abs(moved), strict=True):
+        wider = (r.interval_m3[1] - r.interval_m3[0] - m.interval_m3[1] + m.interval_m3[0]) / 2
+        assert shift <= wider <= shift + 0.01 * (m.interval_m3[1] - m.volume_m3)
+        assert r.interval_m3[0] <= m.volume_m3 <= r.interval_m3[1]
 
 
 def test_toe_on_a_slope_is_warned(yards):

@@ -1,6 +1,7 @@
 """A pile volume's 95 % interval: the noise of its cells, the noise of the toe heights its base
 is built from (carried through the base's own weights, neighbouring toe heights correlated as
-their windows overlap) and how far the bases that follow the toe move it."""
+their windows overlap), how far the bases that follow the toe move it and how far the cell
+statistic moves it from the plain mean of the points."""
 
 from __future__ import annotations
 
@@ -15,13 +16,22 @@ from .types import FOLLOWING, TOE_BASES, Base
 Z95 = 1.959964  # two-sided 95 % of a normal distribution
 
 
-def half_width(base: Base, toe: Toe, window: Window, cell_area: float, sigma: np.ndarray, spread: float) -> float:
-    """The interval's half-width (m3): 95 % of the cells' and the toe's noise, plus ``spread``
-    (m3, :func:`base_spread`), for cell standard errors ``sigma`` (the window's, m)."""
+def half_width(base: Base, toe: Toe, window: Window, cell_area: float, sigma: np.ndarray, shifts: float) -> float:
+    """The interval's half-width (m3): 95 % of the cells' and the toe's noise, plus ``shifts``
+    (m3: :func:`base_spread` and :func:`statistic_shift`), for cell standard errors ``sigma``
+    (the window's, m)."""
     area = window.share * cell_area
     sigma = np.where(np.isfinite(sigma) & (sigma > 0), sigma, toe.noise)
     cells = float(np.sum((area * sigma) ** 2))
-    return Z95 * np.sqrt(cells + toe_variance(base.kind, toe, window, cell_area)) + spread
+    return Z95 * np.sqrt(cells + toe_variance(base.kind, toe, window, cell_area)) + shifts
+
+
+def statistic_shift(window: Window, cell_area: float, offset: np.ndarray) -> float:
+    """How far the plain mean of each cell's points would move the volume (m3), for the window's
+    cell ``offset`` (m, :class:`~.survey.CellErrors`). The plain mean's sum is the surface's
+    integral; a robust statistic drops the points of a cell a break line crosses (a toe, a crest)
+    as outliers, which no single cell tells from real ones: the interval holds both."""
+    return abs(float(np.sum(window.share * cell_area * offset)))
 
 
 def base_spread(volumes: dict[str, float], volume: float, base: Base, level: bool) -> float:

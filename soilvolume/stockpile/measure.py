@@ -7,7 +7,7 @@ import numpy as np
 
 from .bases import base_heights, toe_base
 from .coverage import Window, window_of
-from .interval import base_spread, half_width
+from .interval import base_spread, half_width, statistic_shift
 from .survey import Survey, fill_linear
 from .toe import Toe, toe_of
 from .types import TOE_BASES, Base, Pile, PileError, PileVolume, checked_density, checked_polygon
@@ -40,7 +40,8 @@ def measure_pile(survey: Survey, pile: Pile, base: Base, index: int = 0, density
         raise PileError(f"pile '{name}': the base surface has no height over part of its polygon")
     fill, cut = _sums(d, window, survey)
     spread = base_spread(volumes, fill - cut, base, toe_rise(toe) <= TOE_SIGMAS * toe.noise)
-    half = half_width(base, toe, window, survey.grid.cell_area, window.of(survey.sigma), spread)
+    shift = statistic_shift(window, survey.grid.cell_area, window.of(survey.errors.offset))
+    half = half_width(base, toe, window, survey.grid.cell_area, window.of(survey.sigma), spread + shift)
     vol = fill - cut
     warnings = toe_warnings(toe) + _empty_warning(empty)
     return PileVolume(

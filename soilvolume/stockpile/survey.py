@@ -16,17 +16,30 @@ NOISE_FLOOR = 0.002  # m: the least noise per cell assumed (a synthetic surface 
 
 
 @dataclass(frozen=True)
+class CellErrors:
+    """Each cell height's ``sigma`` (standard error, m; NaN where unknown) and ``offset`` (the plain
+    mean of its points less its height, m; 0 where unknown): what the cell statistic moved it by."""
+
+    sigma: np.ndarray
+    offset: np.ndarray
+
+
+@dataclass(frozen=True)
 class Survey:
     """A survey on a grid: ``heights`` (local m, NaN where empty), ``counts`` (points per cell, 1
-    per known cell for a DEM), ``sigma`` (each cell height's standard error, m: :func:`standard_errors`;
-    NaN where unknown), ``filled`` (heights with empty cells
-    filled from their nearest known cell, for morphology and toe fits)."""
+    per known cell for a DEM), ``errors`` (:class:`CellErrors`: :func:`standard_errors`), ``filled``
+    (heights with empty cells filled from their nearest known cell, for morphology and toe fits)."""
 
     grid: GridSpec
     heights: np.ndarray
     counts: np.ndarray
-    sigma: np.ndarray
+    errors: CellErrors
     filled: np.ndarray
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """Each cell height's standard error (m; NaN where unknown)."""
+        return self.errors.sigma
 
     def centres(self) -> tuple[np.ndarray, np.ndarray]:
         """Cell-centre x and y (local), each (rows, cols)."""
@@ -67,15 +80,19 @@ def survey_from_points(
     return Survey(grid, h, n, standard_errors(xyz, grid, h, n), fill_nearest(h))
 
 
-def standard_errors(xyz: np.ndarray, grid: GridSpec, h: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Each cell height's standard error (m): the root mean square of its points' heights about
-    it over the root of their count less one (NaN with fewer than 2 points). Not the robust
-    spread: the interquartile range of a cell's few points underestimates their spread."""
+def standard_errors(xyz: np.ndarray, grid: GridSpec, h: np.ndarray, n: np.ndarray) -> CellErrors:
+    """The :class:`CellErrors` of heights ``h``: each one's standard error (the root mean square of
+    its points' heights about it over the root of their count less one; NaN with fewer than 2
+    points; not the robust spread: the interquartile range of a few points underestimates their
+    spread) and the mean of those departures (the offset; 0 for the plain mean)."""
     ids, ok = cell_ids(xyz, grid)
     resid = xyz[ok, 2] - h.ravel()[ids]
+    total = np.bincount(ids, weights=resid, minlength=h.size).reshape(h.shape)
     sq = np.bincount(ids, weights=resid * resid, minlength=h.size).reshape(h.shape)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(n > 1, np.sqrt(sq / np.maximum(n - 1, 1) / np.maximum(n, 1)), np.nan)
+        sigma = np.where(n > 1, np.sqrt(sq / np.maximum(n - 1, 1) / np.maximum(n, 1)), np.nan)
+        offset = np.where((n > 0) & np.isfinite(h), total / np.maximum(n, 1), 0.0)
+    return CellErrors(sigma, offset)
 
 
 def survey_from_dem(heights: np.ndarray, grid: GridSpec, noise_m: float | None = None) -> Survey:
@@ -88,7 +105,7 @@ def survey_from_dem(heights: np.ndarray, grid: GridSpec, noise_m: float | None =
         raise PileError("the DEM has no height")
     n = np.isfinite(h).astype(np.int64)
     sigma = np.full(h.shape, np.nan if noise_m is None else float(noise_m))
-    return Survey(grid, h, n, sigma, fill_nearest(h))
+    return Survey(grid, h, n, CellErrors(sigma, np.zeros(h.shape)), fill_nearest(h))
 
 
 def fill_nearest(h: np.ndarray) -> np.ndarray:
