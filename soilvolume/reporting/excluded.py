@@ -3,13 +3,13 @@ and object, and the class raster (``excluded.tif``) mapped over the hillshaded a
 
 from __future__ import annotations
 
+import html
 from typing import Any
 
 import numpy as np
 
 from ..core.types import GridSpec
 from ..volumes.quality import sentence
-from . import page
 from .figures import _factors, _float_2d, _like, _shade, hillshade
 from .raster import _repeat
 from .svgparts import extent_text, map_figure
@@ -42,9 +42,17 @@ def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "
         rgba[shown == code] = (*colour, 255)
     rgba = _shade(rgba, hillshade(z[::k, ::k], grid.cell * k))
     rgba = _repeat(rgba, f)
-    legend = page.macro("classes_legend", classes=[(PALETTE[k_], n) for k_, n in NAMES.items() if (shown == k_).any()])
-    caption = page.macro("classes_caption", extent=extent_text(grid, c.shape, k))
-    return map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, legend, caption)
+    legend = "".join(
+        f'<span style="display:inline-block;width:1em;height:1em;background:rgb{PALETTE[k_]};'
+        f'margin:0 .3em 0 .8em;vertical-align:middle"></span>{html.escape(n)}'
+        for k_, n in NAMES.items()
+        if (shown == k_).any()
+    )
+    caption = (
+        "What is not soil (excluded.tif): cells whose points were mostly not soil, objects found by their shape "
+        f"(walls, compact, on unchanged ground) and rough change. {extent_text(grid, c.shape, k)}"
+    )
+    return map_figure(ident, "What is not soil", rgba, c.shape[1] * grid.cell, f"<p>{legend}</p>", caption)
 
 
 def _row(name: str, part: dict) -> list[str]:

@@ -3,13 +3,13 @@ colour bars, scale bars and north arrows as inline SVG."""
 
 from __future__ import annotations
 
+import html
 import math
 from typing import Any
 
 import numpy as np
 
 from ..core.types import GridSpec
-from . import page
 from .raster import _block_any, _repeat, block_mean
 from .svgparts import DISPLAY, colour_bar, extent_text, map_figure
 
@@ -125,6 +125,10 @@ def _outline(mask: np.ndarray) -> np.ndarray:
 
 
 CHANGE_OUTLINE = (0, 150, 0, 255)
+CHANGE_CAPTION = (
+    "Green outline: the areas of significant change the headline cut and fill are summed over "
+    "(polygons in change_areas.geojson). "
+)
 
 
 def difference_map(
@@ -148,14 +152,20 @@ def difference_map(
     z = block_mean(rel, k) if rel is not None else shown
     rgba = _shade(colour_ramp(shown, lim, RDBU), hillshade(z * _exaggeration(z, grid.cell * k), grid.cell * k))
     rgba = _repeat(rgba, f)
-    mask, areas = _like(filled_mask, d), _like(change, d)
-    refilled, outlined = (x is not None and bool(x.any()) for x in (mask, areas))
-    if refilled:
+    mask = _like(filled_mask, d)
+    if mask is not None and mask.any():
         rgba[_outline(_repeat(_block_any(mask, k), f))] = (0, 0, 0, 255)
-    if outlined:
+    areas = _like(change, d)
+    if areas is not None and areas.any():
         rgba[_outline(_repeat(_block_any(areas, k), f))] = CHANGE_OUTLINE
-    said = {"lim": f"{lim:.3g}", "relief": rel is not None, "refilled": refilled, "areas": outlined}
-    caption = page.macro("difference_caption", title=title, extent=extent_text(grid, d.shape, k), **said)
+    caption = (
+        f"{html.escape(title)}: after − before, red = cut (lowered), blue = fill (raised), ramp "
+        f"±{lim:.3g} m (99th percentile of |difference|; larger values in the end colours), "
+        f"hillshaded{' by the after DEM' if rel is not None else ''}. "
+        f"{'Black outline: refilled cells. ' if mask is not None and mask.any() else ''}"
+        f"{CHANGE_CAPTION if areas is not None and areas.any() else ''}"
+        f"Hatched: no data. {extent_text(grid, d.shape, k)}"
+    )
     bar = colour_bar(RDBU, lim, "after − before (m)", ident, ("cut", "fill"))
     return map_figure(ident, title, rgba, d.shape[1] * grid.cell, bar, caption)
 
@@ -178,8 +188,10 @@ def residual_map(
         grey = np.clip(205 + 45 * (hillshade(rel, grid.cell * k) / math.sin(math.radians(_ALTITUDE)) - 1), 0, 255)
         context = (rgba[..., 3] == 0) & np.isfinite(rel)
         rgba[context] = np.stack([grey[context]] * 3 + [np.full(grey[context].shape, 255.0)], axis=-1)
-    caption = page.macro(
-        "residual_caption", lim=f"{lim:.3g}", relief=rel is not None, extent=extent_text(grid, r.shape, k)
+    caption = (
+        f"Residuals on stable ground after the bias correction, ramp ±{lim:.3g} m (99th percentile "
+        f"of |residual|). {'Grey relief: not stable ground. ' if rel is not None else ''}"
+        f"Hatched: no data. {extent_text(grid, r.shape, k)}"
     )
     bar = colour_bar(PUOR, lim, "residual on stable ground (m)", ident)
     return map_figure(ident, "Stable-ground residuals", _repeat(rgba, f), r.shape[1] * grid.cell, bar, caption)
