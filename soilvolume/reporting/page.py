@@ -1,9 +1,8 @@
-"""The Jinja2 templates of report.html and its figures (``templates/``, shipped with the package),
-rendered with one :class:`jinja2.Environment`, and the page written whole."""
+"""The Jinja2 templates of report.html (``templates/``, shipped with the package), rendered with
+one :class:`jinja2.Environment`, and the page written whole."""
 
 from __future__ import annotations
 
-import html
 from functools import cache
 from pathlib import Path
 
@@ -19,15 +18,13 @@ def environment():
     """The one Jinja2 environment of :data:`TEMPLATES` (Jinja2 loaded when a page is first rendered)."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
 
-    env = Environment(
+    return Environment(
         loader=FileSystemLoader(TEMPLATES),
         autoescape=True,
         undefined=StrictUndefined,
         trim_blocks=True,
         lstrip_blocks=True,
     )
-    env.filters.update(f=lambda v, digits=1: f"{v:.{digits}f}", esc=lambda text: Markup(html.escape(text)))
-    return env
 
 
 def figure(html: str | None) -> Markup | None:
@@ -38,11 +35,6 @@ def figure(html: str | None) -> Markup | None:
 def render(template: str, **context) -> str:
     """``template`` of :data:`TEMPLATES` rendered with ``context`` (plain text is escaped)."""
     return environment().get_template(template).render(**context)
-
-
-def macro(name: str, /, **args) -> Markup:
-    """The markup of the macro ``name`` of ``figures.html.j2`` (a figure's SVG) with ``args``."""
-    return getattr(environment().get_template("figures.html.j2").module, name)(**args)
 
 
 def write(path: str | Path, text: str) -> Path:

@@ -3,6 +3,7 @@ chart (inline SVG), the epochs' registrations and each period's difference map."
 
 from __future__ import annotations
 
+import html
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,8 @@ def running_totals(report: dict) -> dict[str, list[float]]:
 def chart_svg(report: dict) -> str:
     """Cumulative cut, fill and net (m3) against the epochs (their dates where known)."""
     totals = running_totals(report)
-    left, top, pw, ph = 72, 14, 568, 234
+    w, h, left, right, top, bottom = 760, 300, 72, 120, 14, 52
+    pw, ph = w - left - right, h - top - bottom
     n = len(totals["net"]) - 1
     lo = min(0.0, min(totals["net"]), -max(totals["cut"]))
     hi = max(1.0, max(totals["fill"]), max(totals["net"]))
@@ -43,17 +45,31 @@ def chart_svg(report: dict) -> str:
     def sy(v: float) -> float:
         return top + ph * (1 - (v - lo) / (hi - lo))
 
-    lines = [
-        (SERIES_COLOURS[key], label, [(sx(k), sy(sign * v)) for k, v in enumerate(totals[key])])
-        for key, sign, label in (
-            ("fill", 1.0, "fill (added)"),
-            ("cut", -1.0, "cut (removed)"),
-            ("net", 1.0, "net since E0"),
-        )
+    parts = [
+        f'<line x1="{left}" x2="{left + pw}" y1="{sy(t):.1f}" y2="{sy(t):.1f}" stroke="#e4e4e4"/>'
+        f'<text x="{left - 6}" y="{sy(t) + 4:.1f}" text-anchor="end">{t:,.0f}</text>'
+        for t in ticks
     ]
-    labels = [(sx(k), e.get("date") or f"E{k}") for k, e in enumerate(report["epochs"])]
-    grid = [(sy(t), f"{t:,.0f}") for t in ticks]
-    return page.macro("chart", left=left, top=top, pw=pw, ph=ph, grid=grid, labels=labels, lines=lines, zero=sy(0))
+    for k, e in enumerate(report["epochs"]):
+        name = html.escape(e.get("date") or f"E{k}")
+        parts.append(f'<text x="{sx(k):.1f}" y="{top + ph + 18}" text-anchor="middle">{name}</text>')
+    for key, sign in (("fill", 1.0), ("cut", -1.0), ("net", 1.0)):
+        pts = " ".join(f"{sx(k):.1f},{sy(sign * v):.1f}" for k, v in enumerate(totals[key]))
+        colour = SERIES_COLOURS[key]
+        parts.append(f'<polyline points="{pts}" fill="none" stroke="{colour}" stroke-width="2"/>')
+        parts += [f'<circle cx="{p.split(",")[0]}" cy="{p.split(",")[1]}" r="3" fill="{colour}"/>' for p in pts.split()]
+        label = {"fill": "fill (added)", "cut": "cut (removed)", "net": "net since E0"}[key]
+        y_end = sy(sign * totals[key][-1])
+        parts.append(f'<text x="{left + pw + 6}" y="{y_end + 4:.1f}" fill="{colour}">{label}</text>')
+    parts.append(f'<line x1="{left}" x2="{left + pw}" y1="{sy(0):.1f}" y2="{sy(0):.1f}" stroke="#888"/>')
+    parts.append(f'<text x="14" y="{top + ph / 2:.0f}" transform="rotate(-90 14 {top + ph / 2:.0f})">m³</text>')
+    return (
+        f'<figure><svg class=plot viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-size="12">'
+        + "".join(parts)
+        + "</svg><figcaption>Cumulative cut and fill since the first survey (running sums of the "
+        "periods', cut drawn below 0), and the net change from the first survey to each epoch (its "
+        "last point is the cumulative net).</figcaption></figure>"
+    )
 
 
 def _changes(report: dict) -> list[tuple[str, dict]]:

@@ -1,16 +1,15 @@
-"""The pieces of report.html's figures: round ticks and their labels, a map's figure (its PNG
-embedded, its scale bar, north arrow and colour bar drawn by ``templates/figures.html.j2``)."""
+"""The SVG and HTML pieces around report.html's figures: round ticks and their labels, text with a
+halo, the scale bar, north arrow and colour bar of a map, and a map's figure (its PNG embedded)."""
 
 from __future__ import annotations
 
 import base64
+import html
 import math
 
 import numpy as np
-from markupsafe import Markup
 
 from ..core.types import GridSpec
-from . import page
 from .raster import png_bytes
 
 DISPLAY = 760  # longest side of a map on the page (CSS px)
@@ -38,12 +37,6 @@ def tick_label(v: float, step: float) -> str:
     return "0" if float(s) == 0 else s.replace("-", "−")
 
 
-def labelled(lo: float, hi: float, n: int) -> list[tuple[float, str]]:
-    """About ``n`` round ticks in [lo, hi] with their labels."""
-    ticks, step = round_ticks(lo, hi, n)
-    return [(t, tick_label(t, step)) for t in ticks]
-
-
 def metres(length: float) -> str:
     return f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
 
@@ -55,10 +48,63 @@ def count_label(c: float) -> str:
     return f"{c:g}"
 
 
+def png_uri(rgba: np.ndarray) -> str:
+    return "data:image/png;base64," + base64.b64encode(png_bytes(rgba)).decode("ascii")
+
+
+def halo(size: float) -> str:
+    """SVG text attributes: ``size`` px with a white outline, readable over any background."""
+    return f'font-size="{size}" paint-order="stroke" stroke="#fff" stroke-width="3" stroke-linejoin="round"'
+
+
+def scale_bar(width: float, height: float, span_m: float) -> str:
+    """Bottom-left scale bar, half black half white, with a nice length in metres."""
+    length = nice_length(span_m)
+    px, x, y = length / span_m * width, 14.0, height - 16.0
+    box = max(px, 44.0) + 12
+    return (
+        f'<rect x="{x - 6}" y="{y - 22:.1f}" width="{box:.1f}" height="34" rx="3" fill="#fff" '
+        f'fill-opacity=".75"/><rect x="{x}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#000"/>'
+        f'<rect x="{x + px / 2:.1f}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#fff" '
+        f'stroke="#000"/><text x="{x + px / 2:.1f}" y="{y - 5:.1f}" text-anchor="middle" '
+        f'font-size="13">{metres(length)}</text>'
+    )
+
+
+def north_arrow(width: float) -> str:
+    return (
+        f'<g transform="translate({width - 24:.1f},10)"><polygon points="0,0 9,26 0,19 -9,26" '
+        f'fill="#000" stroke="#fff" stroke-width="1.5"/>'
+        f'<text x="0" y="42" text-anchor="middle" font-weight="bold" {halo(14)}>N</text></g>'
+    )
+
+
 def colour_bar(table: np.ndarray, limit: float, label: str, ident: str, ends: tuple[str, str] = ("", "")) -> str:
     """A horizontal SVG colour bar from -limit to +limit with ticks in metres."""
-    ticks = [(30 + (t + limit) / (2 * limit) * 420, text) for t, text in labelled(-limit, limit, 4)]
-    return page.macro("colour_bar", table=table, label=label, ident=ident, ends=ends, ticks=ticks)
+    w, x0, x1, y, h = 480, 30, 450, 4, 14
+    stops = "".join(
+        f'<stop offset="{i / (len(table) - 1):.3f}" stop-color="rgb({r:.0f},{g:.0f},{b:.0f})"/>'
+        for i, (r, g, b) in enumerate(table)
+    )
+    ticks, step = round_ticks(-limit, limit, 4)
+    marks = "".join(
+        f'<line x1="{x:.1f}" x2="{x:.1f}" y1="{y + h}" y2="{y + h + 4}" stroke="#000"/>'
+        f'<text x="{x:.1f}" y="{y + h + 16}" text-anchor="middle">{tick_label(t, step)}</text>'
+        for t in ticks
+        for x in [x0 + (t + limit) / (2 * limit) * (x1 - x0)]
+    )
+    end_text = (
+        f'<text x="{x0}" y="54">{html.escape(ends[0])}</text>'
+        f'<text x="{x1}" y="54" text-anchor="end">{html.escape(ends[1])}</text>'
+    )
+    return (
+        f'<svg class=plot id="{ident}-colour-bar" viewBox="0 0 {w} 60" width="{w}" height="60" '
+        f'font-size="12" role="img" aria-label="{html.escape(label)}">'
+        f'<defs><linearGradient id="{ident}-ramp">{stops}</linearGradient></defs>'
+        f'<rect x="{x0}" y="{y}" width="{x1 - x0}" height="{h}" fill="url(#{ident}-ramp)" stroke="#666"/>'
+        f'{marks}{end_text}<text x="{(x0 + x1) / 2}" y="54" text-anchor="middle">{html.escape(label)}</text>'
+        "</svg>"
+    )
 
 
 def extent_text(grid: GridSpec, shape: tuple[int, int], k: int) -> str:
@@ -77,9 +123,13 @@ def map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_b
     """The PNG map with a scale bar and north arrow overlaid, its colour bar and caption."""
     h, w = rgba.shape[:2]
     s = DISPLAY / max(h, w)
-    wd, hd, length = round(w * s), round(h * s), nice_length(span_m)
-    uri = "data:image/png;base64," + base64.b64encode(png_bytes(rgba)).decode("ascii")
-    size = {"w": w, "h": h, "wd": wd, "hd": hd, "metres": metres(length), "px": length / span_m * wd}
-    return page.macro(
-        "map_figure", ident=ident, title=title, uri=uri, **size, caption=Markup(caption), colour_bar=Markup(colour_bar)
+    wd, hd = round(w * s), round(h * s)
+    overlay = (
+        f'<svg viewBox="0 0 {wd} {hd}" font-family="sans-serif" aria-hidden="true">'
+        f"{scale_bar(wd, hd, span_m)}{north_arrow(wd)}</svg>"
+    )
+    return (
+        f'<figure><div class=map style="width:{wd}px"><img id="{ident}" alt="{html.escape(title)}" '
+        f'src="{png_uri(rgba)}" width="{w}" height="{h}">{overlay}</div>{colour_bar}'
+        f"<figcaption>{caption}</figcaption></figure>"
     )
