@@ -20,10 +20,12 @@ for _sig in (signal.SIGINT, signal.SIGTERM):  # main() installs the run's own ha
 process.settle()
 
 from .cli import main  # noqa: E402 - after the handlers and the settings: it loads numpy
+from .native import OFF_THE_GIL  # noqa: E402
 
 
 def run() -> int:
     """Run the command line and leave with its exit status."""
+    process.import_ahead(sys.argv[1:], OFF_THE_GIL)
     return process.leave(main())
 
 

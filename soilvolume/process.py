@@ -4,9 +4,11 @@ were removed). No numpy here: :func:`settle` runs before it loads."""
 
 from __future__ import annotations
 
+import importlib
 import logging
 import os
 import sys
+import threading
 
 from .core.watchdog import remove_process_temp_dir
 
@@ -35,6 +37,27 @@ def one_blas_thread() -> None:
     memory-bound, and idle BLAS threads spin after each, taking the cores from Open3D and the reading
     (paper pair with two threads: +27 % CPU, about +80 % wall time)."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+#: the heavy libraries a run's later steps import where they use them, in the order first needed
+AHEAD = ("scipy.spatial", "scipy.ndimage", "scipy.sparse.linalg", "rasterio.io", "jinja2")
+RUNS = frozenset({"estimate", "series", "register", "dem", "stockpile"})
+
+
+def import_ahead(argv: list[str], gate: threading.Event) -> None:
+    """For a run (:data:`RUNS`), import :data:`AHEAD` in a background thread, each only while ``gate``
+    is set (the native kernel reading a file without the GIL)."""
+    if argv and argv[0] in RUNS and not {"-h", "--help"} & set(argv):
+        threading.Thread(target=_import_all, args=(gate,), name="soilvolume-import-ahead", daemon=True).start()
+
+
+def _import_all(gate: threading.Event) -> None:
+    for name in AHEAD:
+        gate.wait()
+        try:
+            importlib.import_module(name)
+        except Exception:  # noqa: BLE001 - the step that uses it says what is missing
+            return
 
 
 def leave(code: int) -> int:

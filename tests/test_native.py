@@ -15,11 +15,13 @@ import numpy as np
 import pytest
 
 from soilvolume import native
+from soilvolume.inputs import chunkwork
 from soilvolume.inputs.chunkwork import Growing, NativeChunks, numpy_chunk
 from soilvolume.inputs.footprint import PolygonMask
 from soilvolume.inputs.lasheader import BoundsCheck
 from soilvolume.inputs.records import Records, chunk_pieces
 from soilvolume.inputs.thinning import ColumnThinner
+from soilvolume.native import OFF_THE_GIL
 
 
 @pytest.fixture(scope="module")
@@ -305,13 +307,15 @@ def test_whole_chunks_read_by_the_kernel_load_what_numpy_loads(lib, tmp_path, mo
         ns = (got.nonsoil.xyz.tobytes(), got.nonsoil.labels.tobytes()) if got.nonsoil else None
         return got.xyz.tobytes(), got.thin.tobytes(), got.used, got.extra["cropped"], ns
 
-    calls = []
+    calls, gate = [], []
     monkeypatch.setattr(
         NativeChunks, "_from_file", lambda self, rec, f=NativeChunks._from_file: calls.append(1) or f(self, rec)
     )
+    monkeypatch.setattr(chunkwork, "address", lambda a, f=chunkwork.address: gate.append(OFF_THE_GIL.is_set()) or f(a))
     a, b = _both(monkeypatch, run)
     assert a == b and len(calls) == 5  # every chunk, the first too (its rule decided beforehand)
     assert (a[2] < n) == classified and (a[4] is not None) == classified
+    assert any(gate) and not OFF_THE_GIL.is_set()  # said while the kernel reads a file, and only then
 
 
 def test_the_icp_kernels_give_the_numpy_bits(lib, monkeypatch):

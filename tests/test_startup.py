@@ -40,6 +40,38 @@ def test_engine_modules_leave_the_heavy_libraries_to_the_run(tmp_path):
 HEAVY = ("open3d", "rasterio", "scipy.optimize", "scipy.ndimage", "scipy.sparse", "scipy.spatial", "shapely", "jinja2")
 
 
+def ahead_probe(argv: list[str]) -> str:
+    """The command's entry run with ``argv``: which of :data:`soilvolume.process.AHEAD` are loaded
+    before the native reading says it runs without the GIL, and once it has."""
+    body = [
+        "import threading, time",
+        "from soilvolume.native import OFF_THE_GIL",
+        "from soilvolume.process import AHEAD",
+        "ahead = [t for t in threading.enumerate() if t.name == 'soilvolume-import-ahead']",
+        "time.sleep(0.3)",
+        "held = [m in sys.modules for m in AHEAD]",
+        "OFF_THE_GIL.set()",
+        "[t.join(60) for t in ahead]",
+        "print(json.dumps([len(ahead), held, [m in sys.modules for m in AHEAD]]))",
+        "return 0",
+    ]
+    return f"import sys; sys.argv = {['soilvolume', *argv]!r}\n" + entry_probe("json", body)
+
+
+def test_a_run_imports_its_heavy_libraries_while_the_kernel_reads():
+    """``soilvolume estimate ...`` imports what its later steps use (:data:`soilvolume.process.AHEAD`)
+    in one background thread, and only while the native kernel reads without the GIL
+    (``native.OFF_THE_GIL``); ``--help`` and ``pipeline`` start no thread."""
+    r = run_python(ahead_probe(["estimate", "a.las", "b.las", "--out", "o"]))
+    assert r.returncode == 0, r.stderr
+    threads, held, loaded = json.loads(r.stdout.splitlines()[-1])
+    assert threads == 1 and not any(held) and all(loaded), (held, loaded)
+    for argv in (["estimate", "--help"], ["pipeline", "x.json"]):
+        r = run_python(ahead_probe(argv))
+        assert r.returncode == 0, r.stderr
+        assert json.loads(r.stdout.splitlines()[-1])[0] == 0, argv
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="forkserver workers on Linux only")
 def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     """A local cluster's workers come from one forkserver that imported Dask and the tasks'

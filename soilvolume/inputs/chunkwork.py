@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.cells import in_box, rows
 from ..core.types import SoilVolumeError
+from ..native import OFF_THE_GIL
 from ..native.chunk import ChunkArgs, address
 from ..soil.points import SOIL
 from .records import PIECE, FileChunk, Records, decoded_xyz
@@ -117,7 +118,14 @@ class NativeChunks:
         buf, room = address(self.buf), len(self.buf) // rec.dtype.itemsize
         table = None if rec.table is None else np.ascontiguousarray(rec.table, np.uint8)  # alive through the call
         where = (self.files[rec.path], rec.offset, rec.count)
-        if self.lib.sv_file_chunk(ctypes.byref(self.args), *where, buf, room, address(table), rec.cls_at, rec.cls_mask):
+        OFF_THE_GIL.set()
+        try:
+            failed = self.lib.sv_file_chunk(
+                ctypes.byref(self.args), *where, buf, room, address(table), rec.cls_at, rec.cls_mask
+            )
+        finally:
+            OFF_THE_GIL.clear()
+        if failed:
             raise SoilVolumeError(f"{rec.path}: corrupt LAS file (its points end before the header's count)")
 
     def close(self) -> None:

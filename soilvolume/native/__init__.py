@@ -25,6 +25,9 @@ ENV = "SOILVOLUME_NATIVE"  # "0": the numpy path only
 DIR_ENV = "SOILVOLUME_NATIVE_DIR"  # another folder holding the built library (the plugin's environment)
 
 _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
+#: set while a long kernel runs without the GIL (a whole chunk of a file read and worked on): another
+#: thread may use the interpreter meanwhile without slowing this one
+OFF_THE_GIL = threading.Event()
 #: each kernel's result and arguments (:data:`.chunk.TYPES`' letters; "-": no result)
 PROTOTYPES = {
     "sv_chunk": ("-", "c"),
