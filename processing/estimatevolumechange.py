@@ -12,7 +12,6 @@ from qgis.core import (
     QgsProcessingFeedback,
     QgsProcessingParameterFeatureSink,
     QgsProcessingParameterFile,
-    QgsProcessingParameterFileDestination,
     QgsProcessingParameterRasterDestination,
     QgsProcessingParameterVectorDestination,
 )
@@ -133,15 +132,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                 )
             )
         self.addParameter(params.ReportDestination("REPORT", self.tr("HTML report"), "HTML files (*.html)", True))
-        self.addParameter(
-            QgsProcessingParameterFileDestination(
-                "REPORT_JSON",
-                self.tr("JSON report"),
-                fileFilter="JSON files (*.json)",
-                optional=True,
-                createByDefault=False,
-            )
-        )
+        self.addParameter(params.optional_file("REPORT_JSON", self.tr("JSON report"), "JSON files (*.json)"))
         self.addParameter(
             QgsProcessingParameterFeatureSink(
                 "ZONE_VOLUMES",
@@ -161,30 +152,24 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
             )
         )
         self.addParameter(
-            QgsProcessingParameterFileDestination(
+            params.optional_file(
                 "CONTOURS",
                 self.tr("Contours (GeoPackage: layers difference, dem_before, dem_after; needs a contour interval)"),
-                fileFilter="GeoPackage (*.gpkg)",
-                optional=True,
-                createByDefault=False,
+                "GeoPackage (*.gpkg)",
             )
         )
         self.addParameter(
-            QgsProcessingParameterFileDestination(
+            params.optional_file(
                 "SECTION_PROFILES",
                 self.tr("Cross-sections (CSV; an SVG picture per line in the folder of its name; needs section lines)"),
-                fileFilter="CSV (*.csv)",
-                optional=True,
-                createByDefault=False,
+                "CSV (*.csv)",
             )
         )
         self.addParameter(
-            QgsProcessingParameterFileDestination(
+            params.optional_file(
                 "ZONES_CSV",
                 self.tr("Volumes per zone (CSV: a row per zone, its interval's ends; needs zones)"),
-                fileFilter="CSV (*.csv)",
-                optional=True,
-                createByDefault=False,
+                "CSV (*.csv)",
             )
         )
         self.addParameter(
@@ -196,15 +181,7 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
                 createByDefault=False,
             )
         )
-        self.addParameter(
-            QgsProcessingParameterFileDestination(
-                "REGISTERED",
-                self.tr("Registered after cloud"),
-                fileFilter=params.LAS_FILTER,
-                optional=True,
-                createByDefault=False,
-            )
-        )
+        self.addParameter(params.optional_file("REGISTERED", self.tr("Registered after cloud"), params.LAS_FILTER))
 
     def processAlgorithm(  # noqa: N802
         self,
@@ -217,12 +194,17 @@ class EstimateVolumeChange(SoilVolumeAlgorithm):
         after = params.cloud_path(self, parameters, "AFTER", context, "After")
         registered = self.parameterAsFileOutput(parameters, "REGISTERED", context)
         options = optionparams.read_options(self, parameters, context, feedback)
-        if self.parameterAsFileOutput(parameters, "CONTOURS", context) and not options.contour_interval > 0:
-            raise QgsProcessingException("Contours: set the Contour interval (CONTOUR_INTERVAL) above 0.")
-        if self.parameterAsFileOutput(parameters, "SECTION_PROFILES", context) and not options.sections:
-            raise QgsProcessingException("Cross-sections: give the Cross-section lines (SECTIONS).")
-        if self.parameterAsFileOutput(parameters, "ZONES_CSV", context) and not options.zones:
-            raise QgsProcessingException("Volumes per zone (CSV): give the Zones (ZONES).")
+        for key, given, needs in (
+            (
+                "CONTOURS",
+                options.contour_interval > 0,
+                "Contours: set the Contour interval (CONTOUR_INTERVAL) above 0.",
+            ),
+            ("SECTION_PROFILES", options.sections, "Cross-sections: give the Cross-section lines (SECTIONS)."),
+            ("ZONES_CSV", options.zones, "Volumes per zone (CSV): give the Zones (ZONES)."),
+        ):
+            if self.parameterAsFileOutput(parameters, key, context) and not given:
+                raise QgsProcessingException(needs)
         if options.tolerance is None and estimate_outputs.asked_for(parameters, "GRADE"):
             raise QgsProcessingException("Grade classes (GRADE): set the On-grade tolerance (TOLERANCE).")
         args = ["estimate", before, after] + engine.option_args(options, "estimate")

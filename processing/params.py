@@ -38,6 +38,15 @@ from .inputs import (
 
 LAS_FILTER = "LAZ files (*.laz);;LAS files (*.las)"
 LAS_SUFFIXES = (".las", ".laz")
+
+
+def optional_file(key: str, label: str, file_filter: str) -> QgsProcessingParameterFileDestination:
+    """A file output the user asks for: optional, not created unless given a path."""
+    return QgsProcessingParameterFileDestination(
+        key, label, fileFilter=file_filter, optional=True, createByDefault=False
+    )
+
+
 RASTER_COPY_SUFFIXES = (".tif", ".tiff")
 
 

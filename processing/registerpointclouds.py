@@ -56,15 +56,7 @@ class RegisterPointClouds(SoilVolumeAlgorithm):
                 "OUTPUT", self.tr("Registered after cloud"), fileFilter=params.LAS_FILTER
             )
         )
-        self.addParameter(
-            QgsProcessingParameterFileDestination(
-                "TRANSFORM_FILE",
-                self.tr("Transform (JSON)"),
-                fileFilter="JSON files (*.json)",
-                optional=True,
-                createByDefault=False,
-            )
-        )
+        self.addParameter(params.optional_file("TRANSFORM_FILE", self.tr("Transform (JSON)"), "JSON files (*.json)"))
         self.addOutput(
             QgsProcessingOutputString("TRANSFORM", self.tr("Transform (4×4, row-major JSON, after → before)"))
         )

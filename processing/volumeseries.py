@@ -13,7 +13,6 @@ from qgis.core import (
     QgsProcessingFeedback,
     QgsProcessingOutputNumber,
     QgsProcessingOutputString,
-    QgsProcessingParameterFileDestination,
     QgsProcessingParameterFolderDestination,
     QgsProcessingParameterString,
     QgsProperty,
@@ -108,11 +107,7 @@ class VolumeSeries(SoilVolumeAlgorithm):
         for param in optionparams.parameters("series"):
             self.addParameter(param)
         self.addParameter(QgsProcessingParameterFolderDestination("OUTPUT_FOLDER", self.tr("Output folder")))
-        self.addParameter(
-            QgsProcessingParameterFileDestination(
-                "LEDGER", self.tr("Ledger"), fileFilter="CSV files (*.csv)", optional=True, createByDefault=False
-            )
-        )
+        self.addParameter(params.optional_file("LEDGER", self.tr("Ledger"), "CSV files (*.csv)"))
         self.addParameter(params.ReportDestination("REPORT", self.tr("HTML report"), "HTML files (*.html)", False))
         for key, (_, label) in NUMBERS.items():
             self.addOutput(QgsProcessingOutputNumber(key, self.tr(label)))
