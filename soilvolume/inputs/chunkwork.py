@@ -14,8 +14,7 @@ import numpy as np
 
 from ..core.cells import in_box, rows
 from ..core.types import SoilVolumeError
-from ..native import OFF_THE_GIL
-from ..native.chunk import ChunkArgs, address
+from ..native import OFF_THE_GIL, ChunkArgs, address
 from ..soil.points import SOIL
 from .records import PIECE, FileChunk, Records, decoded_xyz
 from .thinning import ColumnThinner

@@ -2,7 +2,8 @@
 loaded with ctypes when a build of this very source is present (its name carries the source's
 digest), else the numpy path runs (the same bits, slower; said under ``SOILVOLUME_DEBUG``).
 ``SOILVOLUME_NATIVE=0`` turns them off. Built by ``python -m soilvolume.native.build`` when the
-environment is installed, never during a run. A ctypes call releases the GIL."""
+environment is installed, never during a run. A ctypes call releases the GIL. :class:`ChunkArgs`: the
+ctypes side of ``sv_chunk`` (one chunk of point records streamed into the working frame in one pass)."""
 
 from __future__ import annotations
 
@@ -16,14 +17,33 @@ from pathlib import Path
 
 import numpy as np
 
-from .chunk import TYPES
-
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE / "kernels.c"
 ABI = 1  # sv_abi() of kernels.c
 ENV = "SOILVOLUME_NATIVE"  # "0": the numpy path only
 DIR_ENV = "SOILVOLUME_NATIVE_DIR"  # another folder holding the built library (the plugin's environment)
 
+#: the C types of the kernels' arguments and fields by letter: int64, double, float, a pointer (and
+#: "c", an ``sv_chunk_t *``)
+TYPES = {"i": ctypes.c_int64, "d": ctypes.c_double, "f": ctypes.c_float, "p": ctypes.c_void_p}
+#: ``sv_chunk_t`` of kernels.c field for field: name, type letter and array length
+FIELDS = (
+    "rec p, n i, stride i, field i3, scale d3, offset d3, origin d3, labels p, framed p, plo d2, pres d, prows i, "
+    "pcols i, tlo d2, voxel d, first i2, shape i2, ncols i, sums p, mark p, side_ids p, side p, nside i, chunk i, "
+    "flush i, use_box i, box d4, out p, others p, other_labels p, cropped i, kept i, other i, soil i, lo d3, hi d3"
+)
+
+
+class ChunkArgs(ctypes.Structure):
+    """``sv_chunk_t`` of kernels.c, field for field (:data:`FIELDS`)."""
+
+    _fields_ = [
+        (name, TYPES[kind[0]] * int(kind[1:]) if kind[1:] else TYPES[kind])
+        for name, kind in (field.split() for field in FIELDS.split(", "))
+    ]
+
+
+TYPES["c"] = ctypes.POINTER(ChunkArgs)
 _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
 #: set while a long kernel runs without the GIL (a whole chunk of a file read and worked on): another
 #: thread may use the interpreter meanwhile without slowing this one
@@ -59,12 +79,6 @@ def library_name() -> str:
     return f"_soilvolume_kernels-{digest}-{tag()}{suffix}"
 
 
-def folders() -> list[Path]:
-    """Where a built library is looked for: ``SOILVOLUME_NATIVE_DIR``, then beside the source."""
-    extra = os.environ.get(DIR_ENV)
-    return ([Path(extra)] if extra else []) + [HERE]
-
-
 def kernels() -> ctypes.CDLL | None:
     """The loaded library with its prototypes, or None (no build of this source, or turned off)."""
     global _lib
@@ -77,7 +91,8 @@ def _load() -> ctypes.CDLL | None:
     if os.environ.get(ENV, "1") == "0" or not SOURCE.exists():
         return None
     name = library_name()
-    path = next((f / name for f in folders() if (f / name).is_file()), None)
+    folders = [Path(os.environ[DIR_ENV])] if os.environ.get(DIR_ENV) else []  # then beside the source
+    path = next((f / name for f in [*folders, HERE] if (f / name).is_file()), None)
     if path is None:
         if os.environ.get("SOILVOLUME_DEBUG"):
             sys.stderr.write(f"soilvolume: no {name} (python -m soilvolume.native.build): the numpy path runs\n")
@@ -126,6 +141,14 @@ def axes(points: np.ndarray, dtype) -> tuple[np.ndarray, tuple[int, int, int], i
         walk = steps(points, dtype)
     (step, axis), at, size = walk, points.ctypes.data, np.dtype(dtype).itemsize
     return points, (at, at + size * axis, at + 2 * size * axis), step
+
+
+def address(a: np.ndarray | None) -> int | None:
+    """The data address of a C-contiguous array (None for None)."""
+    if a is None:
+        return None
+    assert a.flags.c_contiguous
+    return a.ctypes.data
 
 
 def reset() -> None:

@@ -78,6 +78,8 @@ static inline int64_t column(double v, double lo, double voxel, int64_t first) {
     return (int64_t)t - first;
 }
 
+static inline void put3f(float *o, const double *p) { o[0] = (float)p[0], o[1] = (float)p[1], o[2] = (float)p[2]; }
+
 static inline int in_box(const double *p, const double *box) {
     return p[0] >= box[0] && p[0] <= box[2] && p[1] >= box[1] && p[1] <= box[3];
 }
@@ -141,11 +143,7 @@ static void chunk_points(sv_chunk_t *c, const uint8_t *rec, int64_t n, const uin
         }
         int near = !c->use_box || in_box(p, c->box);
         if (label != 0) {
-            if (near) {
-                float *o = c->others + 3 * other;
-                o[0] = (float)p[0], o[1] = (float)p[1], o[2] = (float)p[2];
-                c->other_labels[other++] = label;
-            }
+            if (near) put3f(c->others + 3 * other, p), c->other_labels[other++] = label;
             continue;
         }
         cropped++;
@@ -153,10 +151,7 @@ static void chunk_points(sv_chunk_t *c, const uint8_t *rec, int64_t n, const uin
         int64_t iy = column(p[1], c->tlo[1], c->voxel, c->first[1]);
         if ((uint64_t)ix < (uint64_t)c->shape[1] && (uint64_t)iy < (uint64_t)c->shape[0])
             thin_add(c, iy * c->shape[1] + ix, p);
-        if (near) {
-            float *o = c->out + 3 * kept++;
-            o[0] = (float)p[0], o[1] = (float)p[1], o[2] = (float)p[2];
-        }
+        if (near) put3f(c->out + 3 * kept++, p);
     }
     c->cropped += cropped, c->kept = kept, c->other = other, c->soil += soil;
 }
@@ -290,11 +285,6 @@ int64_t sv_cells(const float *x, const float *y, const float *z, int64_t n, int6
     return m;
 }
 
-static int cmp_i64(const void *a, const void *b) {
-    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
-    return (x > y) - (x < y);
-}
-
 /* Sort v[0..n) ascending, all of them within lo + 256^passes: least significant digit first, one
  * byte of v - lo a pass, through tmp (n). */
 static void radix_i64(int64_t *v, int64_t n, int64_t lo, int passes, int64_t *tmp) {
@@ -314,8 +304,8 @@ static void radix_i64(int64_t *v, int64_t n, int64_t lo, int passes, int64_t *tm
     if (src != v) memcpy(v, src, (size_t)n * sizeof *v);
 }
 
-/* Sort one cell's keys v[0..n): a few by insertion, more by their bytes (radix_i64 through tmp)
- * when they span under 2^24, else (or without tmp) by qsort. */
+/* Sort one cell's keys v[0..n): a few by insertion, more by their bytes (radix_i64 through tmp,
+ * as many passes as the bytes of their span). */
 static void sort_cell(int64_t *v, int64_t n, int64_t *tmp) {
     if (n <= 32) {
         for (int64_t i = 1; i < n; i++) {
@@ -327,12 +317,9 @@ static void sort_cell(int64_t *v, int64_t n, int64_t *tmp) {
     }
     int64_t lo = v[0], hi = v[0];
     for (int64_t i = 1; i < n; i++) lo = v[i] < lo ? v[i] : lo, hi = v[i] > hi ? v[i] : hi;
-    uint64_t span = (uint64_t)(hi - lo);
-    int passes = span < 256 ? 1 : span < 65536 ? 2 : span < (1u << 24) ? 3 : 0;
-    if (passes == 0 || tmp == NULL)
-        qsort(v, (size_t)n, sizeof *v, cmp_i64);
-    else
-        radix_i64(v, n, lo, passes, tmp);
+    int passes = 1;
+    while (passes < 8 && (uint64_t)(hi - lo) >> (8 * passes)) passes++;
+    radix_i64(v, n, lo, passes, tmp);
 }
 
 /* Sort int64 keys whose cell is key >> bits (counts: per cell of ncells) into out, next (ncells)
@@ -374,13 +361,17 @@ void sv_keys(const int64_t *ids, const double *z, int64_t n, int64_t base, doubl
     }
 }
 
+/* a * a + b * b + c * c, summed in that order (numpy's and scipy's cKDTree's order). */
+static inline double sq3(double a, double b, double c) { return a * a + b * b + c * c; }
+
 /* The distance of point i (of n, columns of pts: 3 x n) to target column j (of t: 3 x tn). */
 static inline double dist_to(const double *pts, int64_t n, int64_t i, const double *t, int64_t tn, int64_t j) {
-    double a = pts[i] - t[j], b = pts[n + i] - t[tn + j], c = pts[2 * n + i] - t[2 * tn + j];
-    double s = a * a;
-    s += b * b;
-    s += c * c;
-    return sqrt(s);
+    return sqrt(sq3(pts[i] - t[j], pts[n + i] - t[tn + j], pts[2 * n + i] - t[2 * tn + j]));
+}
+
+static inline void swap_d(double *a, double *b) {
+    double t = *a;
+    *a = *b, *b = t;
 }
 
 /* Whether the nearest target kept for point i (at: where it was searched from, idx, second: the
@@ -407,14 +398,10 @@ int64_t sv_nearest_kept(const double *pts, int64_t n, double *last_at, int64_t *
         if (has_old) {
             double db;
             if (proven(pts, n, i, old_at, old_idx, old_second, t, tn, m, free, &db)) {
-                for (int c = 0; c < 3; c++) {
-                    double a = last_at[c * n + i];
-                    last_at[c * n + i] = old_at[c * n + i], old_at[c * n + i] = a;
-                }
+                for (int c = 0; c < 3; c++) swap_d(&last_at[c * n + i], &old_at[c * n + i]);
+                swap_d(&last_second[i], &old_second[i]);
                 int64_t j = last_idx[i];
                 last_idx[i] = old_idx[i], old_idx[i] = j;
-                double s = last_second[i];
-                last_second[i] = old_second[i], old_second[i] = s;
                 d[i] = db;
                 continue;
             }
@@ -457,11 +444,8 @@ static void grid_row(const double *t, int64_t tn, const int64_t *start, const in
     for (int64_t c = cy * nx + lo; c <= cy * nx + hi; c++) {
         for (int64_t e = start[c]; e < start[c + 1]; e++) {
             int64_t j = order[e];
-            double dx = px - t[j], dy = py - t[tn + j], dz = pz - t[2 * tn + j];
-            double d = 0.0;  /* summed as scipy's cKDTree sums it (its unrolled loop leaves 0.0 first) */
-            d += dx * dx;
-            d += dy * dy;
-            d += dz * dz;
+            /* cKDTree's unrolled loop adds to 0.0 first: 0.0 + dx * dx is dx * dx */
+            double d = sq3(px - t[j], py - t[tn + j], pz - t[2 * tn + j]);
             if (d < *b1) {
                 *b2 = *b1, *b1 = d, *i1 = j;
             } else if (d < *b2) {
@@ -527,12 +511,8 @@ void sv_icp_terms(const double *pts, int64_t n, const int64_t *sel, const int64_
         int64_t s = sel[i], c = j[i];
         double p0 = pts[s], p1 = pts[n + s], p2 = pts[2 * n + s];
         double n0 = nrm[c], n1 = nrm[nn + c], n2 = nrm[2 * nn + c];
-        double res = (p0 - t[c]) * n0;
-        res += (p1 - t[tn + c]) * n1;
-        res += (p2 - t[2 * tn + c]) * n2;
-        double u = res / k;
-        u *= u;
-        u = 1.0 - u;
+        double res = (p0 - t[c]) * n0 + (p1 - t[tn + c]) * n1 + (p2 - t[2 * tn + c]) * n2;
+        double u = 1.0 - (res / k) * (res / k);
         u *= u;
         double w = fabs(res) <= k ? u : 0.0;
         double row[6] = {p1 * n2 - p2 * n1, p2 * n0 - p0 * n2, p0 * n1 - p1 * n0, n0, n1, n2};
