@@ -28,8 +28,8 @@ def test_two_sorted_halves_give_the_one_sort_s_statistics(statistic, layout, mon
     else:
         ids = rng.integers(cells - 40, cells, n)
     z = rng.normal(50.0, 1.5, n) + 0.01 * (ids % 97)
-    whole = cell_heights(ids.copy(), z.copy(), shape, statistic, spread=True, skew=True)
-    halves = cell_heights(ids.copy(), z.copy(), shape, statistic, spread=True, skew=True, own=True)
+    whole = cell_heights(ids.copy(), z.copy(), shape, statistic, full=True)
+    halves = cell_heights(ids.copy(), z.copy(), shape, statistic, full=True, own=True)
     assert len(whole) == len(halves) == 4
     for a, b in zip(whole, halves, strict=True):
         assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)
@@ -46,10 +46,10 @@ def test_a_window_of_the_grid_gives_the_whole_grids_cells_bit_for_bit(statistic)
     rows, cols = rng.integers(0, shape[0], n), rng.integers(0, shape[1], n)
     z = 40.0 + 0.05 * rows + 0.02 * cols + rng.normal(0, 0.3, n)  # each window's lowest point its own
     z[rng.random(n) < 0.03] += 2.0  # strays the robust mean trims
-    whole = cell_heights(rows * shape[1] + cols, z, shape, statistic, spread=True, skew=True)
+    whole = cell_heights(rows * shape[1] + cols, z, shape, statistic, full=True)
     for r0, r1, c0, c1 in [(0, 30, 0, 40), (30, 60, 40, 80), (10, 50, 20, 70), (59, 60, 0, 80)]:
         inside = (rows >= r0) & (rows < r1) & (cols >= c0) & (cols < c1)
         ids = (rows[inside] - r0) * (c1 - c0) + (cols[inside] - c0)
-        part = cell_heights(ids, z[inside], (r1 - r0, c1 - c0), statistic, spread=True, skew=True)
+        part = cell_heights(ids, z[inside], (r1 - r0, c1 - c0), statistic, full=True)
         for a, b in zip(whole, part, strict=True):
             assert np.array_equal(a[r0:r1, c0:c1], b, equal_nan=True), (statistic, (r0, r1, c0, c1))

@@ -13,6 +13,7 @@ from ..core.types import SoilVolumeError
 
 QUANTUM = 1e-4  # m: heights are sorted as whole multiples of it (0.1 mm)
 BLOCK = 4_000_000  # points per block of the key and running-sum loops (32 MB temporaries)
+K_MAD = 3.0  # robust-mean: the heights within this many robust standard deviations of the cell's median
 SPLIT_SORT = 2_000_000  # fewest keys sorted as two halves on two threads (when the caller's arrays are ours)
 
 
@@ -21,14 +22,14 @@ def cell_heights(
     z: np.ndarray,
     shape: tuple[int, int],
     statistic: str = "robust-mean",
-    k_mad: float = 3.0,
-    spread: bool = False,
-    skew: bool = False,
+    full: bool = False,
     own: bool = False,
 ) -> tuple[np.ndarray, ...]:
-    """:func:`average_height` of heights ``z`` in flat cells ``ids`` of a ``shape`` grid (a tile gets
-    the whole grid's cells); with ``skew`` also each cell's height minus its median (0 for median, NaN where
-    empty). ``own``: ``ids`` and ``z`` may be overwritten."""
+    """Per-cell height (NaN where empty) and count of heights ``z`` in flat cells ``ids`` of a ``shape``
+    grid (a tile gets the whole grid's cells); ``robust-mean``: the mean within :data:`K_MAD` robust
+    standard deviations (from the IQR, floor 1 cm) of the cell's median. With ``full`` also the robust
+    spread (IQR / 1.349; the standard deviation for ``mean``) and each cell's height minus its median
+    (0 for median, NaN where empty). ``own``: ``ids`` and ``z`` may be overwritten."""
     if statistic not in ("mean", "median", "robust-mean"):
         raise SoilVolumeError(f"unknown cell statistic '{statistic}'")
     n = shape[0] * shape[1]
@@ -36,16 +37,18 @@ def cell_heights(
     if statistic == "mean" or len(z) == 0:
         counts = np.bincount(ids, minlength=n)
         h = _mean(ids, z, counts, n)
-        sigma = np.sqrt(np.maximum(_mean(ids, z * z, counts, n) - h * h, 0.0)) if spread else None
-        med = (_SortedCells(ids, z, n, own).quantile(0.5) if len(z) else h) if skew else None
+        if not full:
+            return h.reshape(shape), counts.reshape(shape)
+        sigma = np.sqrt(np.maximum(_mean(ids, z * z, counts, n) - h * h, 0.0))
+        med = _SortedCells(ids, z, n, own).quantile(0.5) if len(z) else h
     else:
         keys = _SortedCells(ids, z, n, own)
         counts, med = keys.counts, keys.quantile(0.5)
         sigma = (keys.quantile(0.75) - keys.quantile(0.25)) / 1.349
-        bound = k_mad * np.maximum(sigma, 0.01)
+        bound = K_MAD * np.maximum(sigma, 0.01)
         h = med if median else keys.mean_between(med - bound, med + bound)
-    out = (h.reshape(shape), counts.reshape(shape), *((sigma.reshape(shape),) if spread else ()))
-    return out + (((np.zeros(shape) if median else (h - med).reshape(shape)),) if skew else ())
+    out = (h.reshape(shape), counts.reshape(shape))
+    return out + ((sigma.reshape(shape), np.zeros(shape) if median else (h - med).reshape(shape)) if full else ())
 
 
 class _SortedCells:

@@ -123,19 +123,11 @@ def cell_ids(xyz: np.ndarray, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
     return flat_ids(col[ok], row[ok], grid.cols), ok
 
 
-def average_height(
-    xyz: np.ndarray,
-    grid: GridSpec,
-    statistic: str = "robust-mean",
-    k_mad: float = 3.0,
-    spread: bool = False,
-) -> tuple[np.ndarray, ...]:
-    """Per-cell height (NaN where empty) and count, with ``spread`` the robust spread (IQR / 1.349;
-    the standard deviation for ``mean``). ``robust-mean``: the mean within ``k_mad`` robust
-    standard deviations (from the IQR, floor 1 cm) of the cell's median."""
+def average_height(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean") -> tuple[np.ndarray, ...]:
+    """Per-cell height (NaN where empty) and count of the points ``xyz`` on ``grid`` (:func:`cell_heights`)."""
     ids, ok = cell_ids(xyz, grid)
     z = np.asarray(np.compress(ok, xyz[:, 2]), dtype=np.float64)
-    return cell_heights(ids, z, (grid.rows, grid.cols), statistic, k_mad, spread)
+    return cell_heights(ids, z, (grid.rows, grid.cols), statistic)
 
 
 def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", nonsoil=None, move=None) -> EpochDEM:
@@ -145,13 +137,13 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
     n = grid.rows * grid.cols
     sums = OffsetSums(n)
     ids, z = _cells_of(xyz, grid, move, sums)
-    heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, spread=True, skew=True, own=True)
+    heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, full=True, own=True)
     del ids, z
-    others = None
+    others, rule = None, None
     if nonsoil is not None:
         o_ids, o_ok = cell_ids(nonsoil.xyz, grid)
         others = nonsoil_sums(o_ids, nonsoil.labels[o_ok], nonsoil.xyz[o_ok, 2], (grid.rows, grid.cols))
-    rule = nonsoil.rule if nonsoil is not None else None
+        rule = nonsoil.rule
     return finish_epoch(heights, sums.means(heights[1], grid.cell), others, rule)
 
 

@@ -12,24 +12,20 @@ def slopes(h: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """dh/dx (east) and dh/dy (north) per cell: central differences, else the one-sided step limited
     by the next one at a kink (:func:`_limited`; a cell at a hole beside a bush took the step onto it:
     0.46 m on a 0.5 m cell, paper-veg20m-rgb), NaN without neighbours."""
-    out = []
-    for axis in (1, 0):
-        fwd = np.full(h.shape, np.nan)
-        bwd = np.full(h.shape, np.nan)
-        ahead = [slice(None)] * 2
-        behind = [slice(None)] * 2
-        ahead[axis], behind[axis] = slice(1, None), slice(None, -1)
-        step = (h[tuple(ahead)] - h[tuple(behind)]) / cell
-        fwd[tuple(behind)] = step
-        bwd[tuple(ahead)] = step
-        fwd2 = np.full(h.shape, np.nan)  # the step beyond the forward one, and behind the backward one
-        bwd2 = np.full(h.shape, np.nan)
-        fwd2[tuple(behind)] = fwd[tuple(ahead)]
-        bwd2[tuple(ahead)] = bwd[tuple(behind)]
-        both = np.isfinite(fwd) & np.isfinite(bwd)
-        one = np.where(np.isfinite(fwd), _limited(fwd, fwd2, cell), _limited(bwd, bwd2, cell))
-        out.append(np.where(both, 0.5 * (fwd + bwd), one))
-    return out[0], -out[1]  # rows run south
+    return _along_rows(h, cell), -_along_rows(h.T, cell).T  # rows run south
+
+
+def _along_rows(h: np.ndarray, cell: float) -> np.ndarray:
+    """:func:`slopes` along each row of ``h``."""
+    step = np.diff(h, axis=1) / cell
+
+    def padded(a: np.ndarray, before: int, after: int) -> np.ndarray:
+        return np.pad(a, ((0, 0), (before, after)), constant_values=np.nan)
+
+    fwd, bwd = padded(step, 0, 1), padded(step, 1, 0)
+    fwd2, bwd2 = padded(fwd[:, 1:], 0, 1), padded(bwd[:, :-1], 1, 0)  # the steps beyond them
+    one = np.where(np.isfinite(fwd), _limited(fwd, fwd2, cell), _limited(bwd, bwd2, cell))
+    return np.where(np.isfinite(fwd) & np.isfinite(bwd), 0.5 * (fwd + bwd), one)
 
 
 def _limited(step: np.ndarray, beyond: np.ndarray, cell: float) -> np.ndarray:

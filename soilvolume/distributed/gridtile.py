@@ -112,7 +112,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
         ids.append(i)
         zs.append(z)
     z = np.concatenate(zs).astype(np.float64)  # float32 local heights, as in-process
-    heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, spread=True, skew=True)
+    heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, full=True)
     others = None
     if rule is not None:
         others = nonsoil_sums(_joined(o_ids, np.int32), _joined(o_lab, np.uint8), _joined(o_z, np.float32), shape)
