@@ -18,7 +18,7 @@ from soilvolume.core.types import SoilVolumeError
 from soilvolume.inputs import crs
 from soilvolume.inputs.io import write_las
 from soilvolume.pipelines import pipeline as P
-from soilvolume.pipelines.stages import REGISTRY
+from soilvolume.pipelines.stages import REGISTRY, execute
 
 REAL = "/work/shared/data/real/autzen_bmx_2010.las"
 FT = 0.304800609601219
@@ -32,7 +32,7 @@ def _las(path: Path, xyz: np.ndarray, cls=None, srs="EPSG:32633") -> Path:
 
 
 def _points(stages, source="<pipeline>"):
-    return P.view_to_raw(P.run_pipeline(stages, engine="embedded", source=source), "x", source)
+    return P.view_to_raw(execute(stages, source), "x", source)
 
 
 # ----------------------------------------------------------------------------- building
@@ -62,7 +62,7 @@ def test_build_prepare_pipeline_stages_and_json_round_trip(tmp_path):
     f = tmp_path / "p.json"
     P.save_pipeline(stages, f)
     assert P.load_pipeline(f) == stages
-    P.run_pipeline(P.load_pipeline(f), engine="embedded", source=str(f))
+    execute(P.load_pipeline(f), str(f))
     assert (tmp_path / "out.laz").is_file()
 
 
@@ -106,28 +106,24 @@ def test_sample_pipelines_run_in_the_embedded_executor(tmp_path):
         stages = P.load_pipeline(RESOURCES / name)
         stages[0]["filename"] = REAL
         stages[-1]["filename"] = str(tmp_path / Path(stages[-1]["filename"]).name)
-        view = P.run_pipeline(stages, engine="embedded", source=name)
+        view = execute(stages, name)
         assert len(view) > 100, name
     assert (tmp_path / "before_prepared.laz").is_file() and (tmp_path / "after_prepared.laz").is_file()
 
 
 def test_pipeline_file_on_its_own_or_another_input(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "pdal", None)  # `import pdal` fails: the embedded executor runs
     f = tmp_path / "p.json"
     f.write_text(json.dumps([REAL, {"type": "filters.range", "limits": "Z[0:430]"}]))
-    raw = P.prepare_cloud_from_file(f, engine="embedded")
+    raw = P.prepare_cloud_from_file(f)
     assert raw.path == REAL and raw.xyz[:, 2].max() <= 430
     other = _las(tmp_path / "o.las", np.array([[0.0, 0, 1], [1, 1, 500]]))
-    raw2 = P.prepare_cloud_from_file(f, other, engine="embedded")  # the CLI's BEFORE wins
+    raw2 = P.prepare_cloud_from_file(f, other)  # the CLI's BEFORE wins
     assert raw2.path == str(other) and raw2.xyz[:, 2].tolist() == [1.0]
     xyz = tmp_path / "o.xyz"
     xyz.write_text("0 0 1\n1 1 2\n")
-    assert P.prepare_cloud_from_file(f, xyz, engine="embedded").xyz.shape == (2, 3)
-    monkeypatch.setitem(sys.modules, "pdal", None)  # `import pdal` fails
-    with pytest.raises(SoilVolumeError, match="pdal Python bindings do not import"):
-        P.run_pipeline(P.load_pipeline(f), engine="pdal")
-    assert len(P.run_pipeline(P.load_pipeline(f), engine="auto")) == len(raw.xyz)
-    with pytest.raises(SoilVolumeError, match="engine 'gpu'"):
-        P.run_pipeline([], engine="gpu")
+    assert P.prepare_cloud_from_file(f, xyz).xyz.shape == (2, 3)
+    assert len(P.run_pipeline(P.load_pipeline(f))) == len(raw.xyz)
 
 
 # ----------------------------------------------------------------------------- errors
@@ -147,12 +143,12 @@ def test_what_the_embedded_executor_lacks_is_one_line_naming_it(tmp_path, stage,
     out = tmp_path / "early.las"
     stages = [{"type": "readers.las", "filename": REAL}, {"type": "writers.las", "filename": str(out)}, stage]
     with pytest.raises(SoilVolumeError) as e:
-        P.run_pipeline(stages, engine="embedded", source="mine.json")
+        execute(stages, "mine.json")
     msg = str(e.value)
     assert msg.startswith(f"pipeline mine.json: {named} (without the pdal Python bindings ")
     assert "\n" not in msg and not out.exists()
     with pytest.raises(SoilVolumeError, match="several readers need PDAL"):
-        P.run_pipeline([stages[0], stages[0]], engine="embedded")
+        execute([stages[0], stages[0]])
 
 
 @pytest.mark.parametrize(
@@ -262,9 +258,9 @@ def test_same_pipeline_through_real_pdal_matches_embedded(tmp_path, ground):
     stages = P.build_prepare_pipeline(
         REAL, out_srs="EPSG:2991+5703", polygon=SQUARE, ground=ground, output=tmp_path / "a.laz"
     )
-    a = P.run_pipeline(stages, engine="pdal")
+    a = P.run_pipeline(stages)  # PDAL imports here
     stages[-1] = {**stages[-1], "filename": str(tmp_path / "b.laz")}
-    b = P.run_pipeline(stages, engine="embedded")
+    b = execute(stages)
     assert len(a) == len(b) > 0
     oa, ob = np.lexsort(a.xyz.T), np.lexsort(b.xyz.T)
     np.testing.assert_allclose(a.xyz[oa], b.xyz[ob], atol=1e-6)

@@ -19,14 +19,6 @@ from .pipeline import build_prepare_pipeline, save_pipeline
 EMITTED = ("before.json", "after.json", "before_prepared.laz", "after_prepared.laz")
 
 
-def smrf_options(options: Options, xy_unit: float) -> dict[str, float] | None:
-    """The SMRF options of ``--ground filter`` as the run's (window in the frame's units; PDAL's
-    defaults, 18 m and 0.15, take the piles for objects)."""
-    if options.ground != "filter":
-        return None
-    return {"window": options.ground_window / xy_unit, "slope": options.ground_slope}
-
-
 def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -> tuple[Path, Path]:
     """Write ``before.json`` and ``after.json`` into ``out_dir``; returns their paths."""
     raw_b, raw_a = read_points(before), read_points(after)
@@ -36,7 +28,10 @@ def emit_pipelines(before: Path, after: Path, out_dir: Path, options: Options) -
     after_xy = to_frame(raw_a.xyz, crs_a, frame, raw_a.path)[:, :2] / frame.xy_unit
     poly = footprint(after_xy, options.radius / frame.xy_unit)
     srs = frame.crs.to_wkt()
-    common = {"ground": options.ground, "out_srs": srs, "smrf": smrf_options(options, frame.xy_unit)}
+    # --ground filter's SMRF as the run's (window in the frame's units; PDAL's defaults, 18 m and 0.15,
+    # take the piles for objects)
+    smrf = {"window": options.ground_window / frame.xy_unit, "slope": options.ground_slope}
+    common = {"ground": options.ground, "out_srs": srs, "smrf": smrf if options.ground == "filter" else None}
     epochs = (("before", before, options.before_crs, polygon_wkt(poly)), ("after", after, options.after_crs, None))
     with output_dir(out_dir, [before, after], True, EMITTED) as out, os_errors(out.final):
         for name, path, in_srs, polygon in epochs:

@@ -10,30 +10,14 @@ from typing import Any
 
 from ..core.types import SoilVolumeError
 
-#: PDAL's reader/writer inference from a filename's extension
-READERS = {
-    ".las": "readers.las",
-    ".laz": "readers.las",
-    ".ply": "readers.ply",
-    ".pcd": "readers.pcd",
-    ".txt": "readers.text",
-    ".csv": "readers.text",
-}
+#: PDAL's reader/writer inference from a filename's extension: its format's readers./writers. stage
+FORMATS = {".las": "las", ".laz": "las", ".ply": "ply", ".pcd": "pcd", ".txt": "text", ".csv": "text"}
+READERS = {suffix: f"readers.{name}" for suffix, name in FORMATS.items()}
 WRITERS = {
-    ".las": "writers.las",
-    ".laz": "writers.las",
-    ".tif": "writers.gdal",
-    ".tiff": "writers.gdal",
-    ".vrt": "writers.gdal",
-    ".txt": "writers.text",
-    ".csv": "writers.text",
-    ".ply": "writers.ply",
-    ".pcd": "writers.pcd",
+    suffix: f"writers.{name}" for suffix, name in {**FORMATS, ".tif": "gdal", ".tiff": "gdal", ".vrt": "gdal"}.items()
 }
 #: largest pipeline file read (a pipeline with a detailed crop polygon is a few MB)
 MAX_BYTES = 64 << 20
-#: extra text formats the builder reads with an explicit readers.text
-TEXT_SUFFIXES = {".xyz", ".pts", ".txt", ".csv"}
 
 #: the types of the options of the project's own stages (others are left to PDAL to check)
 NUMERIC = {"cell", "window", "slope", "threshold", "scalar", "resolution", "rigidness", "step", "iterations"} | {

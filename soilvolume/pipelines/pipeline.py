@@ -12,13 +12,13 @@ import numpy as np
 
 from ..core.types import SoilVolumeError
 from ..inputs.csf import DEFAULTS as CSF_DEFAULTS
-from ..inputs.io import GROUND, LAS_SUFFIXES, RawPoints, atomic_path
+from ..inputs.io import GROUND, LAS_SUFFIXES, TEXT_SUFFIXES, RawPoints, atomic_path
 from ..inputs.lasheader import check_las_header
 from ..inputs.stream import Source, from_raw
 from ..inputs.stream import open_source as open_file
 from . import stages as embedded
 from .confine import confine_writers
-from .load import READERS, TEXT_SUFFIXES, load_pipeline
+from .load import READERS, load_pipeline
 from .stages.view import PointView
 
 #: a reader's SRS options, kept when a user's pipeline reads another file (see :func:`with_input`)
@@ -146,30 +146,16 @@ def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
         return PointView({k: np.empty(0) for k in "XYZ"}, None)
     data = np.concatenate(arrays) if len(arrays) > 1 else arrays[0]
     out = {name: np.asarray(data[name], dtype=np.float64 if name in "XYZ" else None) for name in data.dtype.names}
-    if "Classification" in out:
-        out["Classification"] = out["Classification"].astype(np.uint8)
     return PointView(out, getattr(p, "srswkt2", None) or None)  # the bindings' SRS
 
 
-def run_pipeline(stages: list[dict[str, Any]], *, engine: str = "auto", source: str = "<pipeline>") -> PointView:
-    """Run stages with real PDAL (``pdal``), the embedded executor (``embedded``) or the first when
-    it imports (``auto``)."""
-    if engine not in ("auto", "pdal", "embedded"):
-        raise SoilVolumeError(f"engine '{engine}': use auto, pdal or embedded")
-    pdal = None
-    if engine != "embedded":
-        try:
-            import pdal  # type: ignore[import-not-found]
-        except Exception:  # ImportError, or a broken libpdal
-            pdal = None
-    if engine == "pdal" and pdal is None:
-        raise SoilVolumeError(
-            "engine 'pdal' requested but the pdal Python bindings do not import "
-            "(install PDAL from conda-forge or OSGeo4W)"
-        )
-    if pdal is not None:
-        return _run_pdal(pdal, stages, source)
-    return embedded.execute(stages, source)
+def run_pipeline(stages: list[dict[str, Any]], source: str = "<pipeline>") -> PointView:
+    """Run stages with real PDAL when its bindings import, else with the embedded executor."""
+    try:
+        import pdal  # type: ignore[import-not-found]
+    except Exception:  # ImportError, or a broken libpdal
+        return embedded.execute(stages, source)
+    return _run_pdal(pdal, stages, source)
 
 
 def view_to_raw(view: PointView, path: str, source: str = "<pipeline>") -> RawPoints:
@@ -191,15 +177,13 @@ def with_input(stages: list[dict[str, Any]], path: str | os.PathLike) -> list[di
     return [reader, *stages[1:]]
 
 
-def prepare_cloud_from_file(
-    pipeline: str | os.PathLike, path: str | os.PathLike | None = None, *, engine: str = "auto"
-) -> RawPoints:
+def prepare_cloud_from_file(pipeline: str | os.PathLike, path: str | os.PathLike | None = None) -> RawPoints:
     """A user's preparation pipeline run on ``path`` (default: the pipeline's own reader file)."""
     stages = load_pipeline(pipeline)
     if path is not None:
         stages = with_input(stages, path)
     stages = confine_writers(stages, str(pipeline))
-    view = run_pipeline(stages, engine=engine, source=str(pipeline))
+    view = run_pipeline(stages, str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))
 
 

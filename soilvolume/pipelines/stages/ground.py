@@ -51,14 +51,12 @@ def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
 
 def csf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     """The cloth simulation filter on every point."""
-    params = {
-        "resolution": ctx.number(opts, "resolution", DEFAULTS["resolution"], positive=True),
-        "rigidness": int(ctx.number(opts, "rigidness", DEFAULTS["rigidness"])),
-        "threshold": ctx.number(opts, "threshold", DEFAULTS["threshold"], positive=True),
-        "smooth": bool(opts.get("smooth", DEFAULTS["smooth"])),
-        "step": ctx.number(opts, "step", DEFAULTS["step"], positive=True),
-        "iterations": int(ctx.number(opts, "iterations", DEFAULTS["iterations"], positive=True)),
+    params = {  # numbers > 0 (rigidness checked below) of the type of their default
+        key: type(value)(ctx.number(opts, key, value, positive=key != "rigidness"))
+        for key, value in DEFAULTS.items()
+        if key != "smooth"
     }
+    params["smooth"] = bool(opts.get("smooth", DEFAULTS["smooth"]))
     if params["rigidness"] not in (1, 2, 3):
         raise ctx.error("'rigidness' must be 1, 2 or 3")
     cls = view.ensure("Classification")

@@ -10,9 +10,6 @@ import pyproj
 
 from ...core.types import SoilVolumeError
 
-#: dtypes of the dimensions the embedded stages create; others are kept as read.
-DIM_TYPES: dict[str, type] = {"Classification": np.uint8}
-
 
 @dataclass
 class PointView:
@@ -38,11 +35,12 @@ class PointView:
         return next((key for key in self.arrays if key.lower() == low), None)
 
     def ensure(self, name: str) -> np.ndarray:
-        """The array of a dimension, created as zeros when missing (PDAL's registerDim)."""
+        """The array of a dimension, created as zeros when missing (PDAL's registerDim; Classification
+        uint8, others float64)."""
         key = self.dim(name)
         if key is None:
             key = name
-            self.arrays[key] = np.zeros(len(self), dtype=DIM_TYPES.get(name, np.float64))
+            self.arrays[key] = np.zeros(len(self), np.uint8 if name == "Classification" else np.float64)
         return self.arrays[key]
 
 
