@@ -113,37 +113,36 @@ def _save(mem, final: Path) -> None:
 
 def write_cog(path: str | Path, layout: Layout, piece: Callable[[slice, slice], np.ndarray]) -> Path:
     """A single-band COG of ``layout`` (DEFLATE, :data:`BLOCK` tiles, overviews), its values
-    ``piece(rows, cols)`` filled block row by block row, staged in memory up to
-    :data:`IN_MEMORY_CELLS` cells, else on disk and checked complete; returns the path."""
+    ``piece(rows, cols)`` filled block row by block row, staged in memory (GDAL's MEM driver, the
+    COG through memory) up to :data:`IN_MEMORY_CELLS` cells, else on disk and checked complete."""
+    import rasterio
+    from rasterio.io import MemoryFile
+
     path = Path(path)
     tiles = (("compress", "deflate"), ("tiled", True), ("blockxsize", BLOCK), ("blockysize", BLOCK))
     layout = replace(layout, options=(*tiles, ("BIGTIFF", "IF_SAFER")))
-    small = layout.width * layout.height <= IN_MEMORY_CELLS
+    if layout.width * layout.height <= IN_MEMORY_CELLS:
+        with rasterio.open("", "w", driver="MEM", **{key: getattr(layout, key) for key in PROFILE[1:]}) as dst:
+            _fill(dst, layout, piece)
+            with MemoryFile(ext=path.suffix) as mem:
+                _cog_copy(dst, mem.name, layout.dtype)
+                _save(mem, path)
+        return path
     plain = path.with_name(f".{path.stem}.blocks.tif")
     try:
-        with _blocks_dataset(plain, layout, small) as dst:
+        with rasterio.open(plain, "w", **layout.profile()) as dst:
             _fill(dst, layout, piece)
-            _describe(dst, layout)
-            if small:
-                _as_cog(dst, path, layout.dtype)
-        if not small:
-            _as_cog(plain, path, layout.dtype)
+        check_complete(plain, path)  # the blocks file GDAL wrote and closed
+        with atomic_path(path) as tmp:
+            _cog_copy(plain, tmp, layout.dtype)
+            check_complete(tmp, path)
     finally:
         plain.unlink(missing_ok=True)
     return path
 
 
-def _blocks_dataset(plain: Path, layout: Layout, small: bool):
-    """Where a COG's blocks are written first: GDAL's MEM driver when ``small``, else ``plain``."""
-    import rasterio
-
-    if small:
-        return rasterio.open("", "w", driver="MEM", **{key: getattr(layout, key) for key in PROFILE[1:]})
-    return rasterio.open(plain, "w", **layout.profile())
-
-
 def _fill(dst, layout: Layout, piece: Callable[[slice, slice], np.ndarray]) -> None:
-    """``dst``'s band filled by windows of one block row and eight blocks."""
+    """``dst``'s band filled by windows of one block row and eight blocks, and described."""
     from rasterio.windows import Window
 
     for r0 in range(0, layout.height, BLOCK):
@@ -152,29 +151,15 @@ def _fill(dst, layout: Layout, piece: Callable[[slice, slice], np.ndarray]) -> N
             cols = slice(c0, min(c0 + 8 * BLOCK, layout.width))
             data = layout.filled(piece(rows, cols))
             dst.write(data, 1, window=Window(cols.start, rows.start, data.shape[1], data.shape[0]))
+    _describe(dst, layout)
 
 
-def _as_cog(src, path: Path, dtype: str) -> None:
-    """``src`` as a COG at ``path``, whole or not at all: a dataset through memory, a file's COG
-    written by GDAL and checked complete."""
+def _cog_copy(src, name, dtype: str) -> None:
+    """``src`` (a dataset or a file) copied by GDAL as a COG to ``name``."""
     import rasterio.shutil
-    from rasterio.io import MemoryFile
 
-    def copy(name) -> None:
-        resampling = "nearest" if dtype == "uint8" else "average"
-        rasterio.shutil.copy(
-            src, name, driver="COG", compress="DEFLATE", blocksize=BLOCK, overview_resampling=resampling
-        )
-
-    if not isinstance(src, (str, Path)):
-        with MemoryFile(ext=path.suffix) as mem:
-            copy(mem.name)
-            _save(mem, path)
-        return
-    check_complete(Path(src), path)  # the blocks file GDAL wrote and closed
-    with atomic_path(path) as tmp:
-        copy(tmp)
-        check_complete(tmp, path)
+    resampling = "nearest" if dtype == "uint8" else "average"
+    rasterio.shutil.copy(src, name, driver="COG", compress="DEFLATE", blocksize=BLOCK, overview_resampling=resampling)
 
 
 def check_complete(path: Path, final: Path) -> None:
@@ -197,11 +182,8 @@ def _block_end(ds, path: Path, band: int, ovr: int | None) -> int:
     """Where the last byte of a band's (or its overview's) blocks lies in the file."""
     import rasterio
 
-    if ovr is None:
-        (rows, cols), height, width = ds.block_shapes[band - 1], ds.height, ds.width
-    else:
-        with rasterio.open(path, overview_level=ovr) as level:
-            (rows, cols), height, width = level.block_shapes[band - 1], level.height, level.width
+    with rasterio.open(path, overview_level=ovr) as level:  # None: the full resolution
+        (rows, cols), height, width = level.block_shapes[band - 1], level.height, level.width
     end = 0
     for y in range(-(-height // rows)):
         for x in range(-(-width // cols)):

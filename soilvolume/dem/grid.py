@@ -174,19 +174,9 @@ def native_cells(
     flat ids and heights into ``ids`` and ``z``, offsets added to ``sx``/``sy`` (as
     :meth:`OffsetSums.add_at`), the bits of :func:`cell_coords`; returns how many."""
     part, addresses, step = axes(part, np.float32)  # (N, 3) rows or a (3, N) transposed as they are
-    return lib.sv_cells(
-        *addresses,
-        len(part),
-        step,
-        float(grid.xmin - grid.origin[0]),
-        float(grid.ymax - grid.origin[1]),
-        1.0 / grid.cell,
-        *(int(v) for v in win),
-        ids.ctypes.data,
-        z.ctypes.data,
-        sx.ctypes.data,
-        sy.ctypes.data,
-    )
+    corner = (float(grid.xmin - grid.origin[0]), float(grid.ymax - grid.origin[1]), 1.0 / grid.cell)
+    outs = (a.ctypes.data for a in (ids, z, sx, sy))
+    return lib.sv_cells(*addresses, len(part), step, *corner, *(int(v) for v in win), *outs)
 
 
 def nonsoil_sums(ids: np.ndarray, labels: np.ndarray, z: np.ndarray, shape: tuple[int, int]) -> tuple:
