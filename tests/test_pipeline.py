@@ -179,10 +179,13 @@ def test_bad_pipeline_files_name_file_and_problem(tmp_path, content, problem):
 
 
 def test_load_accepts_pdal_forms(tmp_path):
-    stages = P.load_pipeline('["in.laz", {"type": "filters.range", "limits": "Z[0:1]"}, "out.tif"]')
+    f, g = tmp_path / "f.json", tmp_path / "g.json"
+    f.write_text('["in.laz", {"type": "filters.range", "limits": "Z[0:1]"}, "out.tif"]')
+    g.write_text('{"pipeline": [{"filename": "a.ply"}]}')
+    stages = P.load_pipeline(f)
     assert stages[0] == {"type": "readers.las", "filename": "in.laz"}
     assert stages[-1] == {"type": "writers.gdal", "filename": "out.tif"}
-    assert P.load_pipeline('{"pipeline": [{"filename": "a.ply"}]}')[0]["type"] == "readers.ply"
+    assert P.load_pipeline(g)[0]["type"] == "readers.ply"
     with pytest.raises(SoilVolumeError, match="pipeline /no/such.json: cannot read"):
         P.load_pipeline("/no/such.json")
 

@@ -80,12 +80,11 @@ class _SortedCells:
         t = np.divide(z, self.q, out=z if own and z.dtype == np.float64 else None)  # rounded in place
         np.rint(t, out=t)
         t -= self.base  # whole numbers: exact
-        for i in range(0, len(key), BLOCK):
-            key[i : i + BLOCK] |= t[i : i + BLOCK].astype(np.int64)
-        del t
         self.counts = np.zeros(n_cells, np.int64)
         for i in range(0, len(key), BLOCK):
+            key[i : i + BLOCK] |= t[i : i + BLOCK].astype(np.int64)
             self.counts += np.bincount(key[i : i + BLOCK] >> self.bits, minlength=n_cells)
+        del t
         if own and len(key) >= SPLIT_SORT and _spare(z, key):
             return _sorted_halves(key, z.view(np.int64), self.counts, self.bits)
         key.sort(kind="stable")  # the same keys in order; timsort runs on file order (~2.5x faster)
@@ -187,7 +186,7 @@ class OffsetSums:
 
     def __init__(self, n_cells: int) -> None:
         self.sx, self.sy = np.zeros(n_cells), np.zeros(n_cells)
-        self.seen: np.ndarray | None = None  # the cells :meth:`add_at` gave points
+        self.seen = np.zeros(n_cells, bool)  # the cells :meth:`add_at` gave points (pages untouched: free)
 
     def add(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
         """Points in flat cells ``ids`` at fractional grid coordinates ``col``/``row``."""
@@ -197,8 +196,6 @@ class OffsetSums:
     def add_at(self, ids: np.ndarray, col: np.ndarray, row: np.ndarray) -> None:
         """:meth:`add` point by point, blocks giving the bits of one :meth:`add` of all: points of cells
         an earlier block gave points one by one (``np.add.at``, 10x slower), the others by a bincount."""
-        if self.seen is None:
-            self.seen = np.zeros(self.sx.size, bool)
         old = self.seen[ids]
         self.seen[ids] = True
         if old.any():

@@ -115,15 +115,11 @@ def _read_text(path: Path, name: str) -> str:
         raise SoilVolumeError(f"pipeline {name}: not UTF-8 text (byte {exc.start})") from exc
 
 
-def load_pipeline(path_or_text: str | os.PathLike) -> list[dict[str, Any]]:
-    """Stages of a pipeline file or JSON text (``{"pipeline": [...]}`` or a list; strings are a
-    reader's or a writer's filename, as PDAL takes them), checked; errors name the file."""
-    text = str(path_or_text)
-    if isinstance(path_or_text, os.PathLike) or not text.lstrip().startswith(("[", "{")):
-        name = text
-        text = _read_text(Path(path_or_text), name)
-    else:
-        name = "<text>"
+def load_pipeline(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """Stages of a pipeline file (``{"pipeline": [...]}`` or a list; strings are a reader's or a
+    writer's filename, as PDAL takes them), checked; errors name the file."""
+    name = str(path)
+    text = _read_text(Path(path), name)
     try:
         raw = json.loads(text)
     except json.JSONDecodeError as exc:
