@@ -105,9 +105,8 @@ def _load() -> ctypes.CDLL | None:
     except (OSError, AttributeError):
         return None
     for name, (result, args) in PROTOTYPES.items():
-        if hasattr(lib, name):  # all but sv_file_chunk (POSIX builds only)
-            getattr(lib, name).argtypes = [TYPES[kind] for kind in args]
-            getattr(lib, name).restype = TYPES.get(result)
+        if (fn := getattr(lib, name, None)) is not None:  # all but sv_file_chunk (POSIX builds only)
+            fn.argtypes, fn.restype = [TYPES[kind] for kind in args], TYPES.get(result)
     return lib
 
 

@@ -19,18 +19,14 @@ FLAGS = ["-O2", "-std=c99", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-
 COMPILE_S = 120.0  # at most this long for the compiler
 
 
-def compiler(given: str | None = None) -> str | None:
-    """``given`` (None when not on the PATH), else ``$CC`` or the first of cc, gcc, clang on the PATH."""
-    names = [given] if given else [os.environ.get("CC"), "cc", "gcc", "clang"]
-    return next((name for name in names if name and shutil.which(name.split()[0])), None)
-
-
 def build(out: Path = HERE, cc: str | None = None) -> tuple[Path | None, str]:
     """(the library, what happened); (None, why) when it could not be built."""
     target = out / library_name()
     if target.is_file():
         return target, f"present: {target}"
-    tool = compiler(cc)
+    # ``cc`` (none when not on the PATH), else ``$CC`` or the first of cc, gcc, clang on the PATH
+    names = [cc] if cc else [os.environ.get("CC"), "cc", "gcc", "clang"]
+    tool = next((name for name in names if name and shutil.which(name.split()[0])), None)
     if tool is None:
         return None, "no C compiler (cc, gcc or clang) found: the engine runs its numpy path"
     out.mkdir(parents=True, exist_ok=True)
