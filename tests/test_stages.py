@@ -8,9 +8,7 @@ import pytest
 from soilvolume.core import polygons
 from soilvolume.core.types import SoilVolumeError
 from soilvolume.inputs import smrf
-from soilvolume.pipelines.stages import StageContext, execute, ground, readers, reprojection
-from soilvolume.pipelines.stages import crop as crop_stage
-from soilvolume.pipelines.stages import range as range_stage
+from soilvolume.pipelines.stages import StageContext, execute, files, filters, ground
 from soilvolume.pipelines.stages.view import PointView
 
 REAL = "/work/shared/data/real/autzen_bmx_2010.las"
@@ -42,7 +40,7 @@ def test_crop_polygon_covers_boundary_and_excludes_holes():
     x = [0, 10, 5, 5, 2, 4, 5, 11, -0.001, 7]
     y = [0, 5, 0, 5, 2, 5, 4, 5, 5, 10]
     # vertex, right edge, bottom edge, hole centre, inside, hole edge, hole edge, out, out, top
-    kept = run(crop_stage.crop, view(x, y), polygon=wkt)
+    kept = run(filters.crop, view(x, y), polygon=wkt)
     assert sorted(zip(kept.arrays["X"].tolist(), kept.arrays["Y"].tolist(), strict=True)) == sorted(
         [(0, 0), (10, 5), (5, 0), (2, 2), (4, 5), (5, 4), (7, 10)]
     )
@@ -78,8 +76,8 @@ def test_polygon_cover_of_a_wide_cloud_tests_only_the_polygons_box_and_agrees():
 def test_crop_multipolygon():
     mp = "MULTIPOLYGON(((0 0, 1 0, 1 1, 0 1, 0 0)), ((5 5, 6 5, 6 6, 5 6, 5 5)))"
     v = view([0.5, 5.5, 3], [0.5, 5.5, 3])
-    assert run(crop_stage.crop, v, polygon=mp).arrays["X"].tolist() == [0.5, 5.5]
-    assert run(crop_stage.crop, v, polygon=[mp]).arrays["X"].tolist() == [0.5, 5.5]  # a list of one
+    assert run(filters.crop, v, polygon=mp).arrays["X"].tolist() == [0.5, 5.5]
+    assert run(filters.crop, v, polygon=[mp]).arrays["X"].tolist() == [0.5, 5.5]  # a list of one
 
 
 def test_crop_needs_one_wkt_polygon_and_says_the_other_forms_need_pdal():
@@ -87,45 +85,45 @@ def test_crop_needs_one_wkt_polygon_and_says_the_other_forms_need_pdal():
     geojson = {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 0]]]}
     for opts in ({}, {"polygon": [square, square]}, {"polygon": geojson}):
         with pytest.raises(SoilVolumeError, match=r"^pipeline test.json: stage: needs one WKT 'polygon' .*need PDAL"):
-            run(crop_stage.crop, view([0], [0]), **opts)
+            run(filters.crop, view([0], [0]), **opts)
     with pytest.raises(SoilVolumeError, match="expected WKT POLYGON"):
-        run(crop_stage.crop, view([0], [0]), polygon="POINT(0 0)")
+        run(filters.crop, view([0], [0]), polygon="POINT(0 0)")
 
 
 # ----------------------------------------------------------------------------- range / assign
 def test_range_takes_closed_ranges_and_says_the_other_forms_need_pdal():
     v = view([0, 1, 2], [0] * 3, [0, 10, 20])
-    assert run(range_stage.filter_range, v, limits="Z[:10]").arrays["X"].tolist() == [0, 1]
+    assert run(filters.filter_range, v, limits="Z[:10]").arrays["X"].tolist() == [0, 1]
     for text in ("Z[0;1]", "Z(0:10]", "Z![0:10]"):
         with pytest.raises(SoilVolumeError, match=r"needs PDAL \(without it only 'Dimension\[lo:hi\]'\)"):
-            run(range_stage.filter_range, v, limits=text)
+            run(filters.filter_range, v, limits=text)
 
 
 def test_range_or_within_dimension_and_across_dimensions():
     v = view([0, 1, 2, 3, 4], [0] * 5, [0, 10, 20, 30, 40], Classification=np.array([1, 2, 6, 2, 7], dtype=np.uint8))
-    out = run(range_stage.filter_range, v, limits="Classification[1:2],Classification[6:6],Z[10:30]")
+    out = run(filters.filter_range, v, limits="Classification[1:2],Classification[6:6],Z[10:30]")
     assert out.arrays["X"].tolist() == [1, 2, 3]
-    out = run(range_stage.filter_range, v, limits="z[10:]")  # names are case-insensitive
+    out = run(filters.filter_range, v, limits="z[10:]")  # names are case-insensitive
     assert out.arrays["X"].tolist() == [1, 2, 3, 4]
     with pytest.raises(SoilVolumeError, match="invalid dimension name 'Intensity'"):
-        run(range_stage.filter_range, v, limits="Intensity[0:1]")
+        run(filters.filter_range, v, limits="Intensity[0:1]")
 
 
 def test_assign_value():
     v = view([0, 1], [0, 0], Classification=np.array([2, 7], dtype=np.uint8))
-    out = run(range_stage.assign, v, value="Classification = 0")
+    out = run(filters.assign, v, value="Classification = 0")
     assert out.arrays["Classification"].tolist() == [0, 0]
-    fresh = run(range_stage.assign, view([0, 1], [0, 0]), value="Classification = 0")
+    fresh = run(filters.assign, view([0, 1], [0, 0]), value="Classification = 0")
     assert fresh.arrays["Classification"].dtype == np.uint8 and fresh.arrays["Classification"].tolist() == [0, 0]
     with pytest.raises(SoilVolumeError, match="needs PDAL"):
-        run(range_stage.assign, v, value="Classification = 2 WHERE Z > 1")
+        run(filters.assign, v, value="Classification = 2 WHERE Z > 1")
 
 
 # ----------------------------------------------------------------------------- reprojection
 def test_reprojection_geographic_to_utm_known_point():
     v = view([15.0], [0.0], [7.0])
     v.srs_wkt = "EPSG:4326"
-    out = run(reprojection.reproject, v, out_srs="EPSG:32633")
+    out = run(filters.reproject, v, out_srs="EPSG:32633")
     assert out.arrays["X"][0] == pytest.approx(500000.0, abs=1e-6)
     assert out.arrays["Y"][0] == pytest.approx(0.0, abs=1e-6)
     assert out.arrays["Z"][0] == 7.0
@@ -135,7 +133,7 @@ def test_reprojection_geographic_to_utm_known_point():
 def test_reprojection_vertical_us_survey_feet_to_metres():
     v = view([194480.0, 194500.0], [259230.0, 259250.0], [100.0, 430.0])
     v.srs_wkt = "EPSG:2991+6360"
-    out = run(reprojection.reproject, v, out_srs="EPSG:2991+5703")
+    out = run(filters.reproject, v, out_srs="EPSG:2991+5703")
     np.testing.assert_allclose(out.arrays["Z"], [100 * FT, 430 * FT], rtol=1e-12)
     np.testing.assert_allclose(out.arrays["X"], [194480.0, 194500.0], atol=1e-6)
 
@@ -154,21 +152,21 @@ def test_reprojection_real_autzen_file_header_srs():
 
 def test_reprojection_needs_a_source_srs():
     with pytest.raises(SoilVolumeError, match="no SRS"):
-        run(reprojection.reproject, view([0], [0]), out_srs="EPSG:4326")
+        run(filters.reproject, view([0], [0]), out_srs="EPSG:4326")
 
 
 # ----------------------------------------------------------------------------- readers
 def test_readers_text_header_forms(tmp_path):
     f = tmp_path / "a.csv"
     f.write_text("X,Y,Z,Classification\n1,2,3,2\n4,5,6,7\n")
-    v = readers.read_text(None, {"filename": str(f)}, ctx("readers.text"))
+    v = files.read_text(None, {"filename": str(f)}, ctx("readers.text"))
     assert v.arrays["Z"].tolist() == [3, 6] and v.arrays["Classification"].dtype == np.uint8
     g = tmp_path / "b.xyz"
     g.write_text("1 2 3\n\n4  5 6\n")
-    v = readers.read_text(None, {"filename": str(g), "header": "X Y Z"}, ctx("readers.text"))
+    v = files.read_text(None, {"filename": str(g), "header": "X Y Z"}, ctx("readers.text"))
     assert v.arrays["X"].tolist() == [1, 4]
     with pytest.raises(SoilVolumeError, match="does not name X, Y and Z"):
-        readers.read_text(None, {"filename": str(g)}, ctx("readers.text"))
+        files.read_text(None, {"filename": str(g)}, ctx("readers.text"))
 
 
 def test_readers_las_and_default_srs(tmp_path):

@@ -1,5 +1,5 @@
 """A fast vectorised point-in-polygon test whose boundary counts as inside (GEOS ``covers``): the
-footprint crop and PDAL's filters.crop (:mod:`soilvolume.pipelines.stages.crop`) share it."""
+footprint crop and PDAL's filters.crop (:mod:`soilvolume.pipelines.stages.filters`) share it."""
 
 from __future__ import annotations
 

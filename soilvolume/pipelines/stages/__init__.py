@@ -9,8 +9,7 @@ from collections.abc import Callable
 from ...core.types import SoilVolumeError
 from ...inputs.csf import DEFAULTS as CSF_DEFAULTS
 from ..load import normalise
-from . import crop, ground, readers, reprojection, writers
-from . import range as range_stage
+from . import files, filters, ground
 from .view import PointView, StageContext
 
 StageFn = Callable[[PointView | None, dict, StageContext], PointView]
@@ -21,17 +20,17 @@ GENERIC = {"type", "tag", "user_data"}
 _FILE = frozenset({"filename", "default_srs"})
 #: each stage's function and options (docs/cli.md lists them)
 REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
-    "readers.las": (readers.read_file, _FILE),
-    "readers.ply": (readers.read_file, _FILE),
-    "readers.pcd": (readers.read_file, _FILE),
-    "readers.text": (readers.read_text, _FILE | {"header", "separator"}),
-    "filters.reprojection": (reprojection.reproject, frozenset({"out_srs"})),
-    "filters.crop": (crop.crop, frozenset({"polygon"})),
-    "filters.assign": (range_stage.assign, frozenset({"value"})),
-    "filters.range": (range_stage.filter_range, frozenset({"limits"})),
+    "readers.las": (files.read_file, _FILE),
+    "readers.ply": (files.read_file, _FILE),
+    "readers.pcd": (files.read_file, _FILE),
+    "readers.text": (files.read_text, _FILE | {"header", "separator"}),
+    "filters.reprojection": (filters.reproject, frozenset({"out_srs"})),
+    "filters.crop": (filters.crop, frozenset({"polygon"})),
+    "filters.assign": (filters.assign, frozenset({"value"})),
+    "filters.range": (filters.filter_range, frozenset({"limits"})),
     "filters.smrf": (ground.smrf, frozenset({"cell", "slope", "window", "threshold", "scalar"})),
     "filters.csf": (ground.csf, frozenset(CSF_DEFAULTS)),
-    "writers.las": (writers.write_las, frozenset({"filename", "scale_x", "scale_y", "scale_z"})),
+    "writers.las": (files.write_las, frozenset({"filename", "scale_x", "scale_y", "scale_z"})),
 }
 
 

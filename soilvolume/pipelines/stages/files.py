@@ -1,4 +1,5 @@
-"""readers.las, readers.ply, readers.pcd, readers.text: files to a :class:`PointView`."""
+"""readers.las, readers.ply, readers.pcd, readers.text: files to a :class:`PointView`; writers.las
+through :func:`soilvolume.inputs.io.write_las`."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ...core.types import SoilVolumeError
+from ...inputs import io
 from ...inputs.stream import open_source
 from .view import PointView, StageContext
 
@@ -88,3 +90,21 @@ def read_text(view: PointView | None, opts: dict, ctx: StageContext) -> PointVie
     if "Classification" in arrays:
         arrays["Classification"] = arrays["Classification"].astype(np.uint8)
     return _srs(PointView(arrays, None), opts, ctx)
+
+
+def write_las(view: PointView, opts: dict, ctx: StageContext) -> PointView:
+    """LAS 1.4 / LAZ by suffix; one scale for X/Y/Z (PDAL's default 0.01), automatic offsets."""
+    name = opts.get("filename")
+    if not name:
+        raise ctx.error("option 'filename' is required")
+    if "#" in name:
+        raise ctx.error("'#' placeholders (one file per view) need PDAL")
+    path = Path(name)
+    scales = {ctx.number(opts, f"scale_{a}", 0.01) for a in "xyz"}
+    if len(scales) != 1:
+        raise ctx.error("different scale_x/scale_y/scale_z need PDAL")
+    try:
+        io.write_las(path, view.xyz, view.srs_wkt, view.arrays.get("Classification"), scale=scales.pop())
+    except OSError as exc:
+        raise ctx.error(f"{path}: cannot write ({exc})") from exc
+    return view
