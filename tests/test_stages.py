@@ -8,7 +8,7 @@ import pytest
 from soilvolume.core import polygons
 from soilvolume.core.types import SoilVolumeError
 from soilvolume.inputs import smrf
-from soilvolume.pipelines.stages import StageContext, execute, files, filters, ground
+from soilvolume.pipelines.stages import StageContext, execute, files, filters
 from soilvolume.pipelines.stages.view import PointView
 
 REAL = "/work/shared/data/real/autzen_bmx_2010.las"
@@ -220,7 +220,7 @@ def _scene(seed=0):
 def test_smrf_separates_ground_from_boxes_and_vegetation():
     x, y, z, obj = _scene()
     v = view(x, y, z)
-    out = run(ground.smrf, v)  # PDAL defaults: cell 1, slope .15, window 18, threshold .5
+    out = run(filters.smrf, v)  # PDAL defaults: cell 1, slope .15, window 18, threshold .5
     cls = out.arrays["Classification"]
     assert set(np.unique(cls)) == {1, 2}
     assert (cls[~obj] == 2).mean() > 0.97  # ground kept
@@ -235,7 +235,7 @@ def test_smrf_classifies_last_and_single_returns_only():
     nr[:100], rn[:100] = 2, 1  # first of two returns: not processed (PDAL's default 'last, only')
     nr[100:200], rn[100:200] = 2, 2  # last of two: processed
     v = view(x, y, z, Classification=cls0.copy(), ReturnNumber=rn, NumberOfReturns=nr)
-    cls = run(ground.smrf, v).arrays["Classification"]
+    cls = run(filters.smrf, v).arrays["Classification"]
     np.testing.assert_array_equal(cls[:100], 7)
     assert set(np.unique(cls[100:])) == {1, 2}
     assert (cls[100:][~obj[100:]] == 2).mean() > 0.97

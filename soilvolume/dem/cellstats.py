@@ -66,11 +66,11 @@ class _SortedCells:
         self.base = math.floor(low / self.q)  # every level rint(z / q) - base is >= 0 and fits the bits
         lib = native.kernels()
         ids = ids.astype(np.int64, copy=False)
+        self.counts = np.zeros(n_cells, np.int64)
         if lib is not None and z.dtype == np.float64 and ids.flags.c_contiguous and z.flags.c_contiguous and len(z):
-            key = self._native(lib, ids, z, n_cells, own)
+            self.key = self._native(lib, ids, z, n_cells, own)
         else:
-            key = self._numpy(ids, z, n_cells, own)
-        self.key = key
+            self.key = self._numpy(ids, z, n_cells, own)
         self.starts = np.concatenate([[0], np.cumsum(self.counts)[:-1]])
         self.has = self.counts > 0
 
@@ -80,7 +80,6 @@ class _SortedCells:
         t = np.divide(z, self.q, out=z if own and z.dtype == np.float64 else None)  # rounded in place
         np.rint(t, out=t)
         t -= self.base  # whole numbers: exact
-        self.counts = np.zeros(n_cells, np.int64)
         for i in range(0, len(key), BLOCK):
             key[i : i + BLOCK] |= t[i : i + BLOCK].astype(np.int64)
             self.counts += np.bincount(key[i : i + BLOCK] >> self.bits, minlength=n_cells)
@@ -93,7 +92,6 @@ class _SortedCells:
     def _native(self, lib, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool) -> np.ndarray:
         """The same on the native kernels (``sv_keys``, ``sv_sort_keys``), into ``ids`` and ``z`` when ``own``."""
         key = ids if own else np.empty_like(ids)
-        self.counts = np.zeros(n_cells, np.int64)
         counts = self.counts.ctypes.data
         lib.sv_keys(ids.ctypes.data, z.ctypes.data, len(z), self.base, self.q, self.bits, key.ctypes.data, counts)
         out = z.view(np.int64) if own and _spare(z, key) else np.empty_like(key)

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from ...core.types import SoilVolumeError
 from ...inputs.csf import DEFAULTS as CSF_DEFAULTS
 from ..load import normalise
-from . import files, filters, ground
+from . import files, filters
 from .view import PointView, StageContext
 
 StageFn = Callable[[PointView | None, dict, StageContext], PointView]
@@ -28,8 +28,8 @@ REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
     "filters.crop": (filters.crop, frozenset({"polygon"})),
     "filters.assign": (filters.assign, frozenset({"value"})),
     "filters.range": (filters.filter_range, frozenset({"limits"})),
-    "filters.smrf": (ground.smrf, frozenset({"cell", "slope", "window", "threshold", "scalar"})),
-    "filters.csf": (ground.csf, frozenset(CSF_DEFAULTS)),
+    "filters.smrf": (filters.smrf, frozenset({"cell", "slope", "window", "threshold", "scalar"})),
+    "filters.csf": (filters.csf, frozenset(CSF_DEFAULTS)),
     "writers.las": (files.write_las, frozenset({"filename", "scale_x", "scale_y", "scale_z"})),
 }
 
