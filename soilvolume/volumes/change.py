@@ -70,14 +70,17 @@ def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray
     return np.r_[0.0, np.maximum(v, 0.0)][comp]
 
 
-def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:
-    """Volume (m3) of areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice their LoD (noise could
-    make them)."""
-    labels, n = scipy.ndimage.label(area, structure=_EIGHT)
-    idx = np.arange(1, n + 1)
-    d = np.where(np.isfinite(diff), diff, 0.0)
-    mean_abs = scipy.ndimage.mean(np.abs(d), labels, idx)
-    mean_lod = scipy.ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
-    vol = np.abs(scipy.ndimage.sum(d, labels, idx)) * cell_area
-    size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
-    return float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())
+def marginal_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod, cell_area: float) -> dict:
+    """Per part, the volume (m3) of areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice their
+    LoD (noise could make them); the net's in quadrature."""
+    d, out = np.where(np.isfinite(diff), diff, 0.0), {}
+    for key, area in (("fill", fill), ("cut", cut)):
+        labels, n = scipy.ndimage.label(area, structure=_EIGHT)
+        idx = np.arange(1, n + 1)
+        mean_abs = scipy.ndimage.mean(np.abs(d), labels, idx)
+        mean_lod = scipy.ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
+        vol = np.abs(scipy.ndimage.sum(d, labels, idx)) * cell_area
+        size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+        out[key] = float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())
+    out["net"] = float(np.hypot(out["fill"], out["cut"]))
+    return out

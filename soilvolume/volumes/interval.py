@@ -12,11 +12,10 @@ import numpy as np
 from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..options import Options
-from .change import marginal_volume
+from .change import marginal_terms
 from .classify import Areas
 from .correct import Corrected
 from .difference import signed_budget
-from .holes.interpolate import typical_radius
 from .holes.works import blind_change, outline_sigma
 from .refill import Refill
 from .results import Epochs
@@ -42,7 +41,7 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     marginal = marginal_terms(d, fa, ca, c.lod_cell[c.core], area)
     skews = tuple(None if e.skew is None else e.skew[c.core] for e in epochs)
     statistic = statistic_bias(skews, s.filled_mask[c.core], parts, area)
-    outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(typical_radius(s.filled_mask)), area)
+    outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(s.filled_mask), area)
     reg_in = 0.0 if c.tile else 1.0
     terms = (registration, marginal, ex.report["sigma_m3"], statistic)
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
@@ -56,25 +55,15 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     return Interval(unc, model, hidden)
 
 
-def marginal_terms(d: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod_cell, cell_area: float) -> dict:
-    """:func:`.change.marginal_volume` per part (m3)."""
-    out = {"fill": marginal_volume(d, fill, lod_cell, cell_area), "cut": marginal_volume(d, cut, lod_cell, cell_area)}
-    out["net"] = float(np.hypot(out["fill"], out["cut"]))
-    return out
-
-
 def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Options, bound: dict):
     """:func:`.uncertainty.volume_uncertainty` with the run's arguments, over a caller's cells."""
     coefficients, counted = MODES[options.correction].coefficients, None
     if c.tile:  # the cells it counts: its core; the overview has the bias
         counted = np.zeros(c.diff.shape, bool)
         counted[c.core] = True
-    fraction = interp_fraction(typical_radius(s.filled_mask & ~s.own))
-    fills = dict(filled_mask=s.filled_mask, own_fill=s.own, fill_sigma=c.fill_sigma, interp_fraction=fraction)
-    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, surface=not c.tile and coefficients > 0)
-    return partial(
-        volume_uncertainty, c.diff, stable, n_coef=0 if c.tile else coefficients, bound_m3=bound, **run, **fills
-    )
+    fills = dict(filled_mask=s.filled_mask, own_fill=s.own, fill_sigma=c.fill_sigma)
+    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=0 if c.tile else coefficients)
+    return partial(volume_uncertainty, c.diff, stable, bound_m3=bound, **run, **fills)
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:

@@ -186,12 +186,3 @@ def refill_epoch(
     targets = (weak_cells(counts, ratio, min_points, median) & valid) | enclosed_holes(valid, max_hole_cells)
     filled = filler(method)(h, targets)
     return filled, targets & np.isfinite(filled)
-
-
-def typical_radius(mask: np.ndarray) -> float:
-    """Radius (cells) of a disc the size of ``mask``'s area-weighted typical component (1 if none)."""
-    labels, n = scipy.ndimage.label(mask, structure=FOUR)
-    if n == 0:
-        return 1.0
-    size = np.bincount(labels.ravel())[1:].astype(float)
-    return max(1.0, float(np.sqrt((size * size).sum() / size.sum() / np.pi)))
