@@ -6,8 +6,6 @@ a cone's foot, but carries noise further)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import scipy
 
@@ -149,16 +147,11 @@ def stencil_system(usable: np.ndarray, todo: np.ndarray, flat: np.ndarray):
 _FILLERS = {"harmonic": harmonic_fill, "biharmonic": biharmonic_fill}
 
 
-def filler(method: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """The interpolant named ``method``."""
-    if method not in _FILLERS:
-        raise ValueError(f"unknown fill method {method!r}; use one of {sorted(_FILLERS)}")
-    return _FILLERS[method]
-
-
 def fill(values: np.ndarray, targets: np.ndarray, method: str = "biharmonic") -> np.ndarray:
     """``values`` with the ``targets`` cells interpolated by ``method`` (no-op without targets)."""
-    return filler(method)(values, targets) if targets.any() else values
+    if method not in _FILLERS:
+        raise ValueError(f"unknown fill method {method!r}; use one of {sorted(_FILLERS)}")
+    return _FILLERS[method](values, targets) if targets.any() else values
 
 
 def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0, median: float | None = None) -> np.ndarray:
@@ -184,5 +177,5 @@ def refill_epoch(
     left NaN if not."""
     valid = np.isfinite(h)
     targets = (weak_cells(counts, ratio, min_points, median) & valid) | enclosed_holes(valid, max_hole_cells)
-    filled = filler(method)(h, targets)
+    filled = fill(h, targets, method)
     return filled, targets & np.isfinite(filled)

@@ -8,7 +8,7 @@ from functools import lru_cache
 import numpy as np
 import scipy
 
-from .interpolate import filler, harmonic_instead, stencil_system
+from .interpolate import fill, harmonic_instead, stencil_system
 from .solve import TIKHONOV, beyond, group_solver, refined
 
 MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
@@ -33,7 +33,7 @@ def fill_error(
     targets = labels > 0
     values = np.where(targets, np.nan, h)
     filled = discs_filled(values, targets, centres, disc) if method == "biharmonic" else None
-    err = (filler(method)(values, targets) if filled is None else filled) - h
+    err = (fill(values, targets, method) if filled is None else filled) - h
     mean_err = scipy.ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
     mean = float(np.sqrt(np.mean(np.square(mean_err))))
     return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
