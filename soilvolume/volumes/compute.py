@@ -27,6 +27,6 @@ def compute_volumes(
     a = classify(s, c, epochs, grid, options)
     iv = interval(s, c, a, epochs, grid, options, moved)
     parts = budgets(s, c, a, iv, d_i, epochs, grid, options)
-    layers = (s.raw, c.filled, s.filled_mask, c.offset, c.diff, a.stable, a.counted, a.cut, a.exclusion.classes)
+    layers = (s.raw, c.filled, s.filled_mask, c.offset, c.diff, a.stable, a.counted, a.cut, a.classes)
     grids = Grids(*s.heights, *layers, *written_dems(s, c.filled, options.fill_method))
-    return Volumes(grids, *parts, c.params, iv.uncertainty, a.exclusion.report, iv.blind)
+    return Volumes(grids, *parts, c.params, iv.uncertainty, a.excluded, iv.blind)

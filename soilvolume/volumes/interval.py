@@ -34,7 +34,7 @@ class Interval:
 def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, options: Options, moved) -> Interval:
     """The interval of the counted change; a tile's registration and correction terms are left to the tiles'
     combination."""
-    area, ex = grid.cell_area, a.exclusion
+    area, ex = grid.cell_area, a.excluded
     d, fa, ca = c.diff[c.core], a.fill[c.core], a.cut[c.core]  # areas decided with the halo, counted on the core
     parts = {"net": fa | ca, "cut": ca, "fill": fa}
     registration = signed_budget(pose_effect(s.f_a, grid, moved)[c.core], fa, ca, area)
@@ -43,11 +43,11 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     statistic = statistic_bias(skews, s.filled_mask[c.core], parts, area)
     outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(s.filled_mask), area)
     reg_in = 0.0 if c.tile else 1.0
-    terms = (registration, marginal, ex.report["sigma_m3"], statistic)
+    terms = (registration, marginal, ex["sigma_m3"], statistic)
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
-    bound = {k: v + hidden["bound_m3"][k] for k, v in ex.report["bound_m3"].items()}
+    bound = {k: v + hidden["bound_m3"][k] for k, v in ex["bound_m3"].items()}
     model = _error_model(s, c, a.stable, grid, options, bound)
     named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
     named.update(statistic_m3=statistic, outline_m3=outline)

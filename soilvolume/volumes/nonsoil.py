@@ -7,8 +7,6 @@ the interval is widened by."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy
 
@@ -54,20 +52,11 @@ OBJECT_SLOPE = 1.2
 GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shares of such cells and of soil
 
 
-@dataclass(frozen=True)
-class Exclusion:
-    """The change areas without what was left out, the class raster and report.json's ``excluded``."""
-
-    fill: np.ndarray
-    cut: np.ndarray
-    classes: np.ndarray
-    report: dict  # with the one-sigma terms (``sigma_m3``) and the unclassified bound (``bound_m3``)
-
-
 def exclude_nonsoil(
     s: Refill, c: Corrected, areas: tuple[np.ndarray, np.ndarray], epochs: Epochs, grid: GridSpec, options: Options
-) -> Exclusion:
-    """See module; ``areas``: the change areas (fill, cut) of the refill ``s`` corrected by ``c``."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """(the change areas without what was left out, the class raster, report.json's ``excluded`` with the one-sigma
+    terms ``sigma_m3`` and the unclassified bound ``bound_m3``): see module; ``areas``: (fill, cut) of ``s``, ``c``."""
     (fill, cut), mode, area, diff = areas, options.exclude, grid.cell_area, c.diff
     refilled = s.filled_mask & ~s.seen_once  # interpolated cells: no object's
     shares = _shares(epochs)
@@ -93,7 +82,7 @@ def exclude_nonsoil(
         moved, lone_m3 = report["moved_objects"], part_budget(diff, lone, area)
         sigma = {k: float(np.hypot(v, MOVED_SHARE * np.hypot(moved[k], lone_m3[k]))) for k, v in sigma.items()}
     report["sigma_m3"], report["bound_m3"] = sigma, bounds(diff, fill | cut, found, rough_area, epochs, area, report)
-    return Exclusion(fill, cut, classes, report)
+    return fill, cut, classes, report
 
 
 def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, shares: dict):
