@@ -52,8 +52,6 @@ def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple
         raise SoilVolumeError(f"{path}: reading {noun} needs {exc.name} (pip install {exc.name})") from None
     try:
         feats, wkt = _read(path)
-    except SoilVolumeError:
-        raise
     except Exception as exc:  # noqa: BLE001 - driver errors come in many types
         raise SoilVolumeError(f"{path}: cannot read {noun} from this {what} ({short_error(exc)})") from None
     kept = [

@@ -190,10 +190,7 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
 def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[float, float]:
     """(RMS m, volume m3) of a survey's cells in ``region`` off its own harmonic fill (a pile's over
     :data:`PILE_M3`)."""
-    seen = region & np.isfinite(e)
-    if not seen.any():
-        return 0.0, 0.0
-    dd = (e - fill(np.where(region, np.nan, e), region, "harmonic"))[seen]
+    dd = (e - fill(np.where(region, np.nan, e), region, "harmonic"))[region & np.isfinite(e)]
     dd = dd[np.isfinite(dd)]
     if dd.size == 0:
         return 0.0, 0.0
