@@ -57,13 +57,12 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
 
 def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Options, bound: dict):
     """:func:`.uncertainty.volume_uncertainty` with the run's arguments, over a caller's cells."""
-    coefficients, counted = MODES[options.correction].coefficients, None
+    counted = np.zeros(c.diff.shape, bool) if c.tile else None
     if c.tile:  # the cells it counts: its core; the overview has the bias
-        counted = np.zeros(c.diff.shape, bool)
         counted[c.core] = True
-    fills = dict(filled_mask=s.filled_mask, own_fill=s.own, fill_sigma=c.fill_sigma)
-    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=0 if c.tile else coefficients)
-    return partial(volume_uncertainty, c.diff, stable, bound_m3=bound, **run, **fills)
+    coefficients = 0 if c.tile else MODES[options.correction].coefficients
+    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=coefficients, bound_m3=bound)
+    return partial(volume_uncertainty, c.diff, stable, fills=(s.filled_mask, s.own, c.fill_sigma), **run)
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:

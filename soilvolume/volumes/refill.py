@@ -87,4 +87,4 @@ def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     if per_patch is None:  # no room to measure it: one stable-ground noise level per cell
         s = nmad(diff[stable])
         return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
-    return np.where(filled_mask, np.r_[0.0, per_patch][labels], 0.0)
+    return np.where(filled_mask, np.r_[0.0, per_patch[:, 1]][labels], 0.0)

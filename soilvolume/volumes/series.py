@@ -97,7 +97,7 @@ def _period(i: int, j: int, diff, areas: tuple, lod_cell, works_m3: list, pose, 
     stat = statistic_bias(skews, refilled, {"net": works, "cut": cut_area, "fill": fill_area}, area)
     extra = {k: float(np.linalg.norm([reg_v[k], marginal[k], stat[k]])) for k in ("net", "cut", "fill")}
     coef, conf = MODES[options.correction].coefficients, options.lod_confidence
-    common = dict(n_coef=coef * fits, filled_mask=refilled, fill_sigma=refill_sigma(diff, refilled, stable, options))
+    common = dict(n_coef=coef * fits, fills=(refilled, None, refill_sigma(diff, refilled, stable, options)))
     on_works = volume_uncertainty(diff, stable, works, grid, conf, **common, extra_sigma=extra)
     on_areas = volume_uncertainty(diff, stable, fill_area | cut_area, grid, conf, **common, extra_sigma=extra)
     by = {"net": on_works, "cut": on_areas, "fill": on_areas}  # the net's from the works, cut and fill their areas

@@ -46,15 +46,14 @@ def volume_uncertainty(
     confidence: float = 0.95,
     *,
     n_coef: int = 6,
-    filled_mask: np.ndarray | None = None,
-    own_fill: np.ndarray | None = None,  # see filled_mask
-    fill_sigma: np.ndarray | None = None,
+    fills: tuple = (None, None, None),
     extra_sigma: dict[str, float] | None = None,
     counted: np.ndarray | None = None,
     bound_m3: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """± (m^3) at ``confidence`` over ``change_mask`` (all if None), the model's figures, :data:`TERMS`; ``n_coef``: the
-    correction's (0: no surface, no leftover bias), ``counted``: a tile's core, ``bound_m3``: added as is."""
+    correction's (0: no surface, no leftover bias), ``fills``: the refilled cells, those filled in their own survey and
+    their one-sigma error (m), ``counted``: a tile's core, ``bound_m3``: added as is."""
     d, valid = diff_corrected, np.isfinite(diff_corrected)
     stable = stable_mask & valid
     valid = valid if counted is None else valid & counted
@@ -63,7 +62,7 @@ def volume_uncertainty(
     model = fit_spherical(*vario)
     b = bias_sigma(int(stable.sum()), grid.cell, model, n_coef) if n_coef else 0.0
     parts = {"net": region, "cut": region & (d < 0), "fill": region & (d > 0), "net_compared_area": valid}
-    beyond, fraction, residual = _beyond_area(d, valid, stable, grid, (filled_mask, own_fill, fill_sigma), n_coef > 0)
+    beyond, fraction, residual = _beyond_area(d, valid, stable, grid, fills, n_coef > 0)
     extra, area = extra_sigma or {}, grid.cell_area
     terms = {
         k: [region_sigma(int(m.sum()), grid.cell, model, b), *beyond(m), extra.get(k, 0.0)] for k, m in parts.items()

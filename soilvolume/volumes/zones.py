@@ -12,8 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
-from .difference import budget as cell_budget
-from .difference import signed_budget
+from .difference import budget, signed_budget
 from .polygons import Polygon, read_polygons, to_grid_crs
 from .uncertainty import TERMS, widen, z_value
 
@@ -61,12 +60,6 @@ def _crs_hint(wkt: str | None) -> str:
     return " (the file has no CRS: is it in the survey's?)" if not wkt else " (is its CRS right?)"
 
 
-def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, float]:
-    """net/cut/fill (m^3) and compared area (m^2) of the finite cells of ``diff`` in ``mask``."""
-    b = cell_budget(diff, cell_area, mask)
-    return {k: b[k] for k in ("net", "cut", "fill", "area_m2")}
-
-
 def zone_budgets(
     diff: np.ndarray,
     grid: GridSpec,
@@ -81,7 +74,8 @@ def zone_budgets(
     polys, wkt = on_grid(zones_path, grid, name_field)
     out = []
     for p, mask in zip(polys, polygon_masks(polys, grid), strict=True):
-        row = {"id": p.id, "name": p.name, **budget(diff, mask, grid.cell_area)}
+        b = budget(diff, grid.cell_area, mask)  # the finite cells' net, cut, fill and compared area
+        row = {"id": p.id, "name": p.name, **{k: b[k] for k in ("net", "cut", "fill", "area_m2")}}
         if areas is not None:
             split = signed_budget(diff, areas[0] & mask, areas[1] & mask, grid.cell_area)
             row.update(cut=split["cut"], fill=split["fill"], net=split["fill"] - split["cut"])

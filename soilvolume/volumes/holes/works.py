@@ -107,7 +107,7 @@ def fill_own_holes(
     parts, m = scipy.ndimage.label(hole, FOUR)
     share = scipy.ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
-    if cell_area > 0 and shared.any():
+    if shared.any():
         bulk, bulk_sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
         own |= bulk
         sigma[bulk] = bulk_sigma[bulk]
@@ -125,7 +125,7 @@ def fill_own_holes(
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
         # no machine: the measured survey's departure from its own fill is beyond any machine's volume
         bulk = np.abs(scipy.ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
-        change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | (bulk if cell_area > 0 else False)
+        change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | bulk
         if change.any():  # a patch the survey cannot fill whole is left
             whole = scipy.ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)
             change &= np.r_[False, whole] > 0
@@ -146,17 +146,16 @@ def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     """Per patch, its rim's change (m): the larger of its typical |difference| and its 10-90 % spread."""
     grown = scipy.ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
     ring = (labels == 0) & (grown > 0) & np.isfinite(d)
-    out = np.zeros(n)
-    lab, val = grown[ring], d[ring]
-    for k in np.unique(lab):
-        v = val[lab == k]
-        out[k - 1] = max(float(np.percentile(np.abs(v), 75)), float(np.percentile(v, 90) - np.percentile(v, 10)))
-    return out
+
+    def change(v: np.ndarray) -> float:
+        return max(float(np.percentile(np.abs(v), 75)), float(np.percentile(v, 90) - np.percentile(v, 10)))
+
+    return scipy.ndimage.labeled_comprehension(d[ring], grown[ring], np.arange(1, n + 1), change, float, 0.0)
 
 
 def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np.ndarray:
     """Per radius, the survey's own (per-cell RMS, mean-height) fill error (infinite without room: never change)."""
-    out = error_by_radius(h, np.isfinite(h), method, radius, seed, per_cell=True, floor=1e-9)
+    out = error_by_radius(h, np.isfinite(h), method, radius, seed, floor=1e-9)
     return np.full((radius.size, 2), np.inf) if out is None else out
 
 
