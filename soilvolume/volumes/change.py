@@ -58,16 +58,11 @@ def _join_refilled(d, patches, fill, cut):
     rim = scipy.ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
     out = []
     for area, sign in ((fill, 1.0), (cut, -1.0)):
-        works = scipy.ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
+        comp, k = scipy.ndimage.label(area, structure=_EIGHT)  # per cell of the area, its volume of that sign
+        measured = np.r_[0.0, np.maximum(sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1)), 0.0)][comp]
+        works = scipy.ndimage.maximum(measured, rim, idx)
         out.append(area | np.r_[False, (sign * vol > 0) & (works >= sign * vol)][labels])
     return out[0], out[1]
-
-
-def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray:
-    """Per cell of ``area``, its connected area's volume of ``sign`` (m x cells; 0 if of the other)."""
-    comp, k = scipy.ndimage.label(area, structure=_EIGHT)
-    v = sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1))
-    return np.r_[0.0, np.maximum(v, 0.0)][comp]
 
 
 def marginal_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod, cell_area: float) -> dict:

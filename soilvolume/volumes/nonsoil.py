@@ -92,7 +92,8 @@ def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, s
     found = find_objects(diff, fill, cut, grid.cell, refilled=refilled | labelled)
     drop_single = options.objects == "exclude" and mode != "none"
     lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
-    bare = _bare_top(diff, epochs, refilled)  # soil measured on the surface that rose
+    after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)  # soil measured on the surface that rose
+    bare = np.where(np.nan_to_num(diff) >= 0, after, before) & ~refilled  # (a pile on a mown meadow is soil)
     grass = _grass_patches(fill | cut, shares["vegetation"] >= SHARE, bare, grid.cell_area)
     return found, lone, grass & ~found.moved & ~found.single & (mode != "none")
 
@@ -139,12 +140,6 @@ def _lone(found) -> np.ndarray:
     """Single objects of a machine's size (:data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`)."""
     ids = [b.label for b in found.single_blobs() if b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE]
     return found.single & np.isin(found.labels, ids)
-
-
-def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray) -> np.ndarray:
-    """Cells whose higher surface was measured soil (a pile on a mown meadow is soil)."""
-    after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)
-    return np.where(np.nan_to_num(diff) >= 0, after, before) & ~refilled
 
 
 def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:

@@ -68,22 +68,16 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
     a = scipy.sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
     if n <= _DIRECT_MAX:
         return scipy.sparse.linalg.spsolve(a.tocsc(), rhs)
-    guess = _smooth_guess(values, known, todo)[todo]
-    sol, _ = scipy.sparse.linalg.cg(a, rhs, x0=guess, tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag))
-    return sol
-
-
-def _smooth_guess(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
-    """Multi-scale normalized convolution: a fast first guess for the iterative solver."""
-    out, left, sigma = np.where(known, values, 0.0), todo.copy(), 1.0
-    while left.any() and sigma < max(todo.shape):
+    guess, left, sigma = np.where(known, values, 0.0), todo.copy(), 1.0  # a fast first guess for the iterative solver:
+    while left.any() and sigma < max(todo.shape):  # multi-scale normalized convolution
         num = scipy.ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
         den = scipy.ndimage.gaussian_filter(known.astype(float), sigma)
         ok = left & (den > 1e-6)
-        out[ok] = num[ok] / den[ok]
+        guess[ok] = num[ok] / den[ok]
         left &= ~ok
         sigma *= 2.0
-    return out
+    sol, _ = scipy.sparse.linalg.cg(a, rhs, x0=guess[todo], tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag))
+    return sol
 
 
 _R2 = float(np.sqrt(2.0))

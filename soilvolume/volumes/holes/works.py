@@ -47,7 +47,11 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     change, stable = known & change, known & ~change
     out = values.copy()
     labels, n = scipy.ndimage.label(hole, FOUR)
-    candidates = _both_sides(labels, n, change, stable)
+    grown = labels  # each hole whose rim (on the labels grown by RING) may hold enough of both sides
+    for _ in range(RING):
+        grown = np.where(grown > 0, grown, scipy.ndimage.grey_dilation(grown, footprint=FOUR))
+    idx = np.arange(n + 1)
+    candidates = np.minimum(scipy.ndimage.sum(change, grown, idx), scipy.ndimage.sum(stable, grown, idx)) >= MIN_SIDE
     for k, box in enumerate(scipy.ndimage.find_objects(labels), start=1):
         if not candidates[k]:
             continue
@@ -57,30 +61,17 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
         n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
-        nearer_change = _change_side(cells, change[box], stable[box], method)
+        # the works' side: the signed distance to the outline interpolated across the hole, else the nearer rim
+        to_change = scipy.ndimage.distance_transform_edt(~change[box])
+        to_stable = scipy.ndimage.distance_transform_edt(~stable[box])
+        signed = np.where(change[box], to_stable - 1.0, np.where(stable[box], -to_change, np.nan))
+        signed = fill(np.where(cells, np.nan, signed), cells, method)
+        nearer_change = np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
         for side, own in ((cells & nearer_change, change[box]), (cells & ~nearer_change, stable[box])):
             filled = fill(np.where(own | side, values[box], np.nan), side, method)
             ok = side & np.isfinite(filled)
             out[box][ok] = filled[ok]
     return out
-
-
-def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, method: str) -> np.ndarray:
-    """The hole ``cells`` on the works' side: the signed distance to the outline interpolated across it, else the nearer
-    rim."""
-    to_change, to_stable = scipy.ndimage.distance_transform_edt(~change), scipy.ndimage.distance_transform_edt(~stable)
-    signed = np.where(change, to_stable - 1.0, np.where(stable, -to_change, np.nan))
-    signed = fill(np.where(cells, np.nan, signed), cells, method)
-    return np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
-
-
-def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarray) -> np.ndarray:
-    """Per hole, whether its rim (on the labels grown by ``RING``) may hold enough of both sides."""
-    grown = labels
-    for _ in range(RING):
-        grown = np.where(grown > 0, grown, scipy.ndimage.grey_dilation(grown, footprint=FOUR))
-    idx = np.arange(n + 1)
-    return np.minimum(scipy.ndimage.sum(change, grown, idx), scipy.ndimage.sum(stable, grown, idx)) >= MIN_SIDE
 
 
 def outline_sigma(
