@@ -48,21 +48,16 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
     bound = {k: v + hidden["bound_m3"][k] for k, v in ex["bound_m3"].items()}
-    model = _error_model(s, c, a.stable, grid, options, bound)
+    counted = np.zeros(c.diff.shape, bool) if c.tile else None  # the error model over a caller's cells:
+    if c.tile:  # those a tile counts, its core; the overview has the bias
+        counted[c.core] = True
+    n_coef = 0 if c.tile else MODES[options.correction].coefficients
+    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=n_coef, bound_m3=bound)
+    model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma), **run)
     named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
     named.update(statistic_m3=statistic, outline_m3=outline)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}
     return Interval(unc, model, hidden)
-
-
-def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Options, bound: dict):
-    """:func:`.uncertainty.volume_uncertainty` with the run's arguments, over a caller's cells."""
-    counted = np.zeros(c.diff.shape, bool) if c.tile else None
-    if c.tile:  # the cells it counts: its core; the overview has the bias
-        counted[c.core] = True
-    coefficients = 0 if c.tile else MODES[options.correction].coefficients
-    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=coefficients, bound_m3=bound)
-    return partial(volume_uncertainty, c.diff, stable, fills=(s.filled_mask, s.own, c.fill_sigma), **run)
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:

@@ -185,7 +185,21 @@ def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) 
     # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
     below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
     report["unclassified"]["net_range_m3"] = [-below, above]
-    report["under_canopy"] = canopy = _under_canopy(diff, epochs, counted, cell_area)
+    reach = np.zeros(diff.shape)  # what a canopy told by returns alone may add: each cell's |difference|, at most
+    for e, o in (epochs, epochs[::-1]):  # CANOPY_REACH x its canopy or that over the other's ground
+        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
+            continue  # a classification is the survey's statement; colour empties such cells
+        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            canopy = e.nonsoil_z / np.maximum(e.nonsoil(), 1)
+            # over its own soil height (raised by the canopy points) and over the other survey's ground
+            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
+        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
+    d = np.where(counted, np.nan_to_num(diff), 0.0)
+    part = np.minimum(np.abs(d), reach)
+    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
+    canopy = {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
+    report["under_canopy"] = canopy
     bound = {k: report["unclassified"][k] + canopy[k] for k in ("cut", "fill")}
     bound["net"] = max(below, above) + canopy["cut"] + canopy["fill"]
     return bound
@@ -209,26 +223,6 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     comp, n = scipy.ndimage.label(out, structure=np.ones((3, 3), bool))
     vols = np.abs(scipy.ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
     return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
-
-
-def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
-    """What a canopy told by returns alone may add (m3): each cell's |difference|, at most :data:`CANOPY_REACH` x its
-    canopy or that over the other's ground."""
-    reach = np.zeros(diff.shape)
-    for e, o in (epochs, epochs[::-1]):
-        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
-            continue  # a classification is the survey's statement; colour empties such cells
-        others = e.nonsoil()
-        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            canopy = e.nonsoil_z / np.maximum(others, 1)
-            # over its own soil height (raised by the canopy points) and over the other survey's ground
-            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
-        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
-    d = np.where(counted, np.nan_to_num(diff), 0.0)
-    part = np.minimum(np.abs(d), reach)
-    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
-    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
 
 
 def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:

@@ -42,18 +42,14 @@ def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
 def polygons_mask(path: str | Path, grid: GridSpec, what: str = "{opt:stable_mask} file") -> np.ndarray:
     """Union of the polygons of ``path`` as a (rows, cols) mask; none meeting the grid is an error."""
     polys, wkt = on_grid(path, grid, what=what)
-    if not any(_meets(p, grid) for p in polys):
-        raise SoilVolumeError(f"{path}: no polygon of this {what} meets the survey's grid{_crs_hint(wkt)}")
-    return np.logical_or.reduce(polygon_masks(polys, grid))
-
-
-def _meets(p: Polygon, grid: GridSpec) -> bool:
-    """Whether the polygon's bounds meet the grid's extent (both in the grid's CRS units)."""
-    u = grid.xy_unit
-    x0, y0, x1, y1 = p.geometry.bounds
+    u = grid.xy_unit  # the grid's extent in its CRS's units, met by a polygon's bounds
     gx0, gy1 = grid.xmin / u, grid.ymax / u
     gx1, gy0 = gx0 + grid.cols * grid.cell / u, gy1 - grid.rows * grid.cell / u
-    return x0 <= gx1 and gx0 <= x1 and y0 <= gy1 and gy0 <= y1
+    if not any(
+        x0 <= gx1 and gx0 <= x1 and y0 <= gy1 and gy0 <= y1 for x0, y0, x1, y1 in (p.geometry.bounds for p in polys)
+    ):
+        raise SoilVolumeError(f"{path}: no polygon of this {what} meets the survey's grid{_crs_hint(wkt)}")
+    return np.logical_or.reduce(polygon_masks(polys, grid))
 
 
 def _crs_hint(wkt: str | None) -> str:

@@ -158,7 +158,13 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
     for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
         cells = parts == k
         region = scipy.ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
-        departures = [_departure(e, region, cell_area) for e in out]
+        departures = []  # each survey's cells in it off its own harmonic fill: (RMS m, m3; a pile's over PILE_M3)
+        for e in out:
+            dd = (e - fill(np.where(region, np.nan, e), region, "harmonic"))[region & np.isfinite(e)]
+            dd = dd[np.isfinite(dd)]
+            departures.append(
+                (float(np.sqrt(np.mean(dd * dd))) if dd.size else 0.0, float(np.abs(dd).sum()) * cell_area)
+            )
         if not any(m3 > PILE_M3 for _, m3 in departures):
             continue
         radius = np.array([np.sqrt(region.sum() / np.pi)])
@@ -175,16 +181,6 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
         done |= ok
         sigma[ok] = err
     return done, sigma
-
-
-def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[float, float]:
-    """(RMS m, volume m3) of a survey's cells in ``region`` off its own harmonic fill (a pile's over
-    :data:`PILE_M3`)."""
-    dd = (e - fill(np.where(region, np.nan, e), region, "harmonic"))[region & np.isfinite(e)]
-    dd = dd[np.isfinite(dd)]
-    if dd.size == 0:
-        return 0.0, 0.0
-    return float(np.sqrt(np.mean(dd * dd))), float(np.abs(dd).sum()) * cell_area
 
 
 def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area: float, seen_once: np.ndarray) -> dict:
