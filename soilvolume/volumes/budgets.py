@@ -24,7 +24,14 @@ def budgets(
 ) -> tuple[Budgets, Cells]:
     """The budgets and the cells compared; ``d_i``: the paper's plane offsets."""
     core, area = c.core, grid.cell_area
-    d, filled = c.diff[core], c.filled[core]
+    d, filled, zones = c.diff[core], c.filled[core], []
+    if options.zones:  # over the counted change, as the headline's, with intervals (whole grid; tiles: not yet)
+        (rows, cols), whole = core, not c.tile
+        zgrid = grid if whole else grid.window(rows.start, rows.stop, cols.start, cols.stop)
+        interval = partial(zone_interval, iv.model, a.counted, iv.uncertainty) if whole else None
+        counted = np.where(a.counted[core], d, np.where(np.isfinite(d), 0.0, np.nan))
+        areas = (a.fill[core], a.cut[core])
+        zones = zone_budgets(counted, zgrid, options.zones, whole=whole, interval=interval, areas=areas)
     out = Budgets(
         compensated=signed_budget(d, a.fill[core], a.cut[core], area),
         all_cells=budget(d, area),
@@ -32,18 +39,8 @@ def budgets(
         paper_plane=budget(filled - d_i[core], area),
         thresholded=thresholded_volumes(d, c.lod, area),
         holes=refilled_budget(d, s.filled_mask[core], area),
-        zones=_zones(c, a, iv, grid, options) if options.zones else [],
+        zones=zones,
     )
     n_a, n_b = (e.counts for e in epochs)  # the empty cells (either survey, the before, the after), the coverage
     empty = (int((~np.isfinite(s.raw[core])).sum()), int((n_b[core] == 0).sum()), int((n_a[core] == 0).sum()))
     return out, Cells(*empty, coverage.counts(n_a, n_b, s.filled_mask, c.diff, core, edges=(not c.tile,) * 4))
-
-
-def _zones(c: Corrected, a: Areas, iv: Interval, grid: GridSpec, options: Options) -> list:
-    """The zones' budgets over the counted change, as the headline's, with intervals (whole grid)."""
-    (rows, cols), whole, d = c.core, not c.tile, c.diff[c.core]
-    zgrid = grid if whole else grid.window(rows.start, rows.stop, cols.start, cols.stop)
-    interval = partial(zone_interval, iv.model, a.counted, iv.uncertainty) if whole else None  # tiles: not yet
-    counted = np.where(a.counted[c.core], d, np.where(np.isfinite(d), 0.0, np.nan))
-    areas = (a.fill[c.core], a.cut[c.core])
-    return zone_budgets(counted, zgrid, options.zones, whole=whole, interval=interval, areas=areas)

@@ -45,22 +45,17 @@ def change_areas(
     )
     both = fill & cut
     fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
-    if refilled is not None and refilled.any():
-        fill, cut = _join_refilled(d, refilled & valid & ~fill & ~cut, fill, cut)
-    return fill, cut
-
-
-def _join_refilled(d, patches, fill, cut):
-    """(fill, cut) with the refilled ``patches`` that join them (see :func:`change_areas`)."""
-    labels, n = scipy.ndimage.label(patches, structure=_EIGHT)
+    if refilled is None or not refilled.any():
+        return fill, cut
+    labels, n = scipy.ndimage.label(refilled & valid & ~fill & ~cut, structure=_EIGHT)  # the refilled patches
     idx = np.arange(1, n + 1)
     vol = scipy.ndimage.sum(d, labels, idx)
     rim = scipy.ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
     out = []
     for area, sign in ((fill, 1.0), (cut, -1.0)):
         comp, k = scipy.ndimage.label(area, structure=_EIGHT)  # per cell of the area, its volume of that sign
-        measured = np.r_[0.0, np.maximum(sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1)), 0.0)][comp]
-        works = scipy.ndimage.maximum(measured, rim, idx)
+        volume = np.r_[0.0, np.maximum(sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1)), 0.0)][comp]
+        works = scipy.ndimage.maximum(volume, rim, idx)
         out.append(area | np.r_[False, (sign * vol > 0) & (works >= sign * vol)][labels])
     return out[0], out[1]
 
