@@ -53,10 +53,9 @@ def correct(s: Refill, epochs: Epochs, d_i, grid: GridSpec, options: Options, gi
     diff = s.filled - offset
     fill_sigma = np.where(s.own, s.own_sigma, refill_sigma(diff, s.filled_mask, stable, options))
     lod = detection_level(diff, stable, options.lod_confidence)
-    (after, before), z = epochs, z_value(options.lod_confidence)  # each cell's: the epochs' errors, the refill's
-    se_a = np.where(s.m_a, np.nan, cell_sigma(after.spread, after.counts))
-    se_b = np.where(s.m_b, np.nan, cell_sigma(before.spread, before.counts))
-    lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
+    z = z_value(options.lod_confidence)  # each cell's: the epochs' errors, the refill's
+    se = (np.where(m, np.nan, cell_sigma(e.spread, e.counts)) for e, m in zip(epochs, (s.m_a, s.m_b), strict=True))
+    lod_cell = np.maximum(cell_lod(lod, *se, z), z * fill_sigma)
     significant = patches(~s.filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
     sides = refill_across_outline(diff, s.filled_mask & ~s.own, significant, options.fill_method)
     outline = np.nan_to_num(sides - diff)  # where the outline runs in the holes: a term

@@ -128,7 +128,6 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
     tr = grid_transform(src_wkt, grid.crs_wkt)
     if tr is None:
         return polys
-
     out = []
     for p in polys:
         geom = shapely.transform(p.geometry, lambda xy: np.column_stack(tr.transform(xy[:, 0], xy[:, 1])))

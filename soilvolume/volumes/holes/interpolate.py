@@ -27,27 +27,12 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
 
 
 def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """``values`` with ``targets`` harmonically interpolated (NaN in a component without a finite neighbour)."""
+    """``values`` with ``targets`` harmonically interpolated (NaN in a component without a finite neighbour): deg_i u_i
+    - sum_{unknown j} u_j = sum_{known k} v_k on them (Neumann at the other cells)."""
     known, out, todo = _start(values, targets)
-    if not todo.any():
-        return out
-    out[todo] = _solve_laplace(np.where(known, values, 0.0), known, todo)
-    return out
-
-
-def _start(values: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(the known cells, ``values`` there and NaN elsewhere, the targets in components touching a known cell)."""
-    known = np.isfinite(values) & ~targets
-    labels, n = scipy.ndimage.label(targets, structure=FOUR)
-    ok = np.zeros(n + 1, bool)
-    ok[labels[scipy.ndimage.binary_dilation(known, FOUR) & targets]] = True
-    ok[0] = False
-    return known, np.where(known, values, np.nan), ok[labels]
-
-
-def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
-    """Solve deg_i u_i - sum_{unknown j} u_j = sum_{known k} v_k on ``todo`` (Neumann at the other cells)."""
     flat = np.flatnonzero(todo)
+    if not flat.size:
+        return out
     usable, kflat, vflat = (known | todo).ravel(), known.ravel(), values.ravel()
     n = flat.size
     diag, rhs, ri, ci = np.zeros(n), np.zeros(n), [np.arange(n)], [np.arange(n)]
@@ -67,7 +52,8 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
     data = np.concatenate([diag, -np.ones(ri.size - n)])
     a = scipy.sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
     if n <= _DIRECT_MAX:
-        return scipy.sparse.linalg.spsolve(a.tocsc(), rhs)
+        out[todo] = scipy.sparse.linalg.spsolve(a.tocsc(), rhs)
+        return out
     guess, left, sigma = np.where(known, values, 0.0), todo.copy(), 1.0  # a fast first guess for the iterative solver:
     while left.any() and sigma < max(todo.shape):  # multi-scale normalized convolution
         num = scipy.ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
@@ -76,8 +62,20 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
         guess[ok] = num[ok] / den[ok]
         left &= ~ok
         sigma *= 2.0
-    sol, _ = scipy.sparse.linalg.cg(a, rhs, x0=guess[todo], tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag))
-    return sol
+    out[todo], _ = scipy.sparse.linalg.cg(
+        a, rhs, x0=guess[todo], tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag)
+    )
+    return out
+
+
+def _start(values: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the known cells, ``values`` there and NaN elsewhere, the targets in components touching a known cell)."""
+    known = np.isfinite(values) & ~targets
+    labels, n = scipy.ndimage.label(targets, structure=FOUR)
+    ok = np.zeros(n + 1, bool)
+    ok[labels[scipy.ndimage.binary_dilation(known, FOUR) & targets]] = True
+    ok[0] = False
+    return known, np.where(known, values, np.nan), ok[labels]
 
 
 _R2 = float(np.sqrt(2.0))
