@@ -239,9 +239,8 @@ def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: fl
     near, far = _rings(cells, np.isfinite(diff))
     d_near = float(np.median(diff[near])) if near.any() else 0.0
     d_far = float(np.median(diff[far])) if far.any() else d_near
-    step = (d_near - d_far) / 2.5  # per cell, going in
-    if step * d_near <= 0:  # the rim does not deepen inwards: nothing to carry on
-        step = 0.0
+    step = (d_near - d_far) / 2.5  # per cell, going in; none if the rim does not deepen inwards
+    step = 0.0 if step * d_near <= 0 else step
     dist = scipy.ndimage.distance_transform_edt(cells)
     extra = np.clip(step * dist, -DEEPER * abs(d_near), DEEPER * abs(d_near))[cells]
     extra_m3 = float(extra.sum()) * cell_area
