@@ -10,10 +10,10 @@ import numpy as np
 from ..core.types import GridSpec
 from ..options import Options
 from . import coverage
-from .classify import Areas
 from .correct import Corrected
 from .difference import budget, refilled_budget, signed_budget, thresholded_volumes
 from .interval import Interval
+from .nonsoil import Areas
 from .refill import Refill
 from .results import Budgets, Cells, Epochs
 from .zones import zone_budgets, zone_interval

@@ -1,5 +1,5 @@
 """The volume step: five stages taking and returning frozen typed results, refill (:mod:`.refill`),
-correction (:mod:`.correct`), classification (:mod:`.classify`), interval (:mod:`.interval`) and
+correction (:mod:`.correct`), classification (:func:`.nonsoil.classify`), interval (:mod:`.interval`) and
 budgets (:mod:`.budgets`), gathered in a :class:`Volumes`."""
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from .budgets import budgets
-from .classify import classify
 from .correct import correct
 from .holes.interpolate import fill
 from .interval import interval
+from .nonsoil import classify
 from .refill import centred_heights, refill
 from .results import Given, Grids, Volumes
 

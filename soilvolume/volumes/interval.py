@@ -13,10 +13,10 @@ from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..options import Options
 from .change import marginal_terms
-from .classify import Areas
 from .correct import Corrected
 from .difference import signed_budget
 from .holes.works import blind_change, outline_sigma
+from .nonsoil import Areas
 from .refill import Refill
 from .results import Epochs
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty

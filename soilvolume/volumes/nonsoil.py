@@ -1,11 +1,13 @@
-"""What the volume step leaves out of the soil, and says so: moved objects (by shape,
-:mod:`soilvolume.soil.objects`) out of the change areas; cells mostly of points not soil listed
-with the volume they would have added; objects in one survey only left out and listed (or counted
-with ``--objects count``); the class raster (``excluded.tif``) draws it all. What cannot be said to
-be soil or not (the change no signal classified, what a canopy may have added under it) is a bound
-the interval is widened by."""
+"""Stage 3, the classification (:func:`classify`): the change areas (:mod:`.change`), what in them is not soil, the
+error model's stable ground away from the change. What the volume step leaves out of the soil, and says so: moved
+objects (by shape, :mod:`soilvolume.soil.objects`) out of the change areas; cells mostly of points not soil listed
+with the volume they would have added; objects in one survey only left out and listed (or counted with ``--objects
+count``); the class raster (``excluded.tif``) draws it all. What cannot be said to be soil or not (the change no
+signal classified, what a canopy may have added under it) is a bound the interval is widened by."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy
@@ -15,6 +17,7 @@ from ..dem.grid import EpochDEM
 from ..options import Options
 from ..soil.objects import Blob, find_objects
 from ..soil.rough import rough_cells, roughness
+from .change import change_areas
 from .correct import Corrected
 from .refill import Refill
 from .results import Epochs
@@ -50,6 +53,29 @@ OBJECT_MAX_M3 = 120.0
 # counted (piles at their angle of repose read 0.9-1.1, machines and containers 1.3-2.7)
 OBJECT_SLOPE = 1.2
 GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shares of such cells and of soil
+MIN_QUIET = 12  # stable cells away from the change the error model needs, else it keeps them all
+
+
+@dataclass(frozen=True)
+class Areas:
+    """The change areas counted (what is not soil left out), the class raster, report.json's ``excluded`` (with its
+    terms, :func:`exclude_nonsoil`), the stable ground."""
+
+    fill: np.ndarray
+    cut: np.ndarray
+    classes: np.ndarray
+    excluded: dict
+    stable: np.ndarray
+    counted: np.ndarray  # fill | cut: the change areas the headline sums
+
+
+def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: Options) -> Areas:
+    """The change areas, what is not soil in them, stable ground never in or next to them unless the user drew it."""
+    fill, cut = change_areas(c.diff, c.lod_cell, refilled=s.filled_mask & ~s.seen_once)
+    kept = exclude_nonsoil(s, c, (fill, cut), epochs, grid, options)
+    quiet = c.stable & ~scipy.ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
+    stable = quiet if not options.stable_mask and quiet.sum() >= MIN_QUIET else c.stable
+    return Areas(*kept, stable, kept[0] | kept[1])
 
 
 def exclude_nonsoil(
