@@ -247,9 +247,7 @@ def correlated_fraction(area: float, rng: float) -> float:
 
 
 def region_sigma(n_cells: int, cell: float, model: dict[str, float], bias_sigma: float = 0.0) -> float:
-    """One-sigma volume uncertainty (m^3) over ``n_cells`` cells."""
-    if n_cells <= 0:
-        return 0.0
+    """One-sigma volume uncertainty (m^3) over ``n_cells`` cells (0 over none)."""
     area = n_cells * cell * cell
     var_unc = n_cells * model["nugget"] * cell**4
     var_cor = area * area * model["psill"] * correlated_fraction(area, model["range"])
