@@ -13,6 +13,7 @@ from conftest import write_scene
 
 from soilvolume.api import estimate
 from soilvolume.compensation import stable
+from soilvolume.core.record import QualityInputs
 from soilvolume.options import Options
 from soilvolume.volumes import quality
 from soilvolume.volumes.change import change_areas
@@ -130,31 +131,35 @@ def test_quality_gate_words():
     change = np.zeros_like(grid, bool)
     change[15:25, 15:25] = True
     around = ~change
-    good = quality.assess(_report(500.0, 20.0), around, change, grid, 1.0, PRIOR)
+    good = quality.assess(_report(500.0, 20.0), QualityInputs(around, change, grid, None, 1.0, PRIOR))
     assert good["verdict"] == "reliable" and good["trusted"]
 
     little = around & (np.arange(40)[:, None] < 1)  # one row of stable ground: 2.5 %
-    bad = quality.assess(_report(500.0, 20.0), little, ~little, grid, 1.0, PRIOR)
+    bad = quality.assess(_report(500.0, 20.0), QualityInputs(little, ~little, grid, None, 1.0, PRIOR))
     assert bad["verdict"] == "not reliable"
     assert any("too little stable ground" in m for m in bad["messages"])
     thin = np.zeros_like(change)  # a ring of stable ground around the works, 9.75 % of the area
     thin[[0, -1], :] = thin[:, [0, -1]] = True
-    low = quality.assess(_report(500.0, 20.0), thin, ~thin, grid, 1.0, PRIOR)
+    low = quality.assess(_report(500.0, 20.0), QualityInputs(thin, ~thin, grid, None, 1.0, PRIOR))
     assert low["verdict"] == "use with caution"
     assert any(m.startswith("little stable ground (10% of") for m in low["messages"]), low
 
     one_side = around & (np.arange(40)[None, :] < 12)
-    lop = quality.assess(_report(500.0, 20.0), one_side, change, grid, 1.0, PRIOR)
+    lop = quality.assess(_report(500.0, 20.0), QualityInputs(one_side, change, grid, None, 1.0, PRIOR))
     assert any("one side" in m for m in lop["messages"])
 
-    zero = quality.assess(_report(5.0, 20.0), around, change, grid, 1.0, PRIOR)
+    zero = quality.assess(_report(5.0, 20.0), QualityInputs(around, change, grid, None, 1.0, PRIOR))
     assert zero["verdict"] == "use with caution"
     assert any("not significant" in m for m in zero["messages"])
 
-    biased = quality.assess(_report(50.0, 10.0), around, change, np.full(grid.shape, 0.5), 1.0, PRIOR)
+    biased = quality.assess(
+        _report(50.0, 10.0), QualityInputs(around, change, np.full(grid.shape, 0.5), None, 1.0, PRIOR)
+    )
     assert any("comparable to the net" in m for m in biased["messages"])
     # a correction within the net's interval cannot have made it wrong (a pair without change)
-    small = quality.assess(_report(0.1, 0.3), around, change, np.full(grid.shape, 0.002), 1.0, PRIOR)
+    small = quality.assess(
+        _report(0.1, 0.3), QualityInputs(around, change, np.full(grid.shape, 0.002), None, 1.0, PRIOR)
+    )
     assert not any("comparable to the net" in m for m in small["messages"]), small
 
 
@@ -167,7 +172,7 @@ def test_quality_reads_the_poses_rejected_beyond_the_prior_not_the_note():
     def words(fine: dict) -> list[str]:
         report = _report(500.0, 20.0)
         report["registration"]["fine"].update(fine)
-        return quality.assess(report, ~change, change, offset, 1.0, PRIOR)["messages"]
+        return quality.assess(report, QualityInputs(~change, change, offset, None, 1.0, PRIOR))["messages"]
 
     said = "registration wanted a pose beyond the georeferencing prior"
     assert not any(said in m for m in words({"note": "2 pose(s) beyond the georeferencing prior rejected"}))

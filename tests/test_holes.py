@@ -265,7 +265,7 @@ def test_fill_error_measures_the_fill_it_stands_for():
     y, x = np.mgrid[0:120, 0:140].astype(float)
     h = 0.02 * x + rng.normal(0, 0.1, x.shape)
     for radius in (1.0, 2.0, 4.0):
-        cell, mean = testholes.fill_error(h, np.isfinite(h), "biharmonic", radius, per_cell=True)
+        cell, mean = testholes.fill_error(h, np.isfinite(h), "biharmonic", radius)
         centres, disc, targets = _test_discs(h, radius)
         err = biharmonic_fill(np.where(targets, np.nan, h), targets) - h
         assert cell == pytest.approx(np.sqrt(np.mean(err[targets] ** 2)), rel=1e-9)

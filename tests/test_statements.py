@@ -3,6 +3,7 @@ interval the run reports, and a run judged not reliable makes no statement of co
 
 from __future__ import annotations
 
+from soilvolume.core.record import QualityInputs
 from soilvolume.reporting.summary import significance
 from soilvolume.volumes.quality import assess
 
@@ -32,7 +33,7 @@ def test_nonsoil_caution_quotes_the_reported_interval():
 
     rep = _report(net=200.0, half=48.97, bound=25.17)
     z = np.zeros((4, 4))
-    q = assess(rep, z.astype(bool), z.astype(bool), z, 1.0, {})
+    q = assess(rep, QualityInputs(z.astype(bool), z.astype(bool), z, None, 1.0, {}))
     said = [m for m in q["messages"] if "together more than" in m]
     assert len(said) == 1, q["messages"]
     assert "±48.97 m³" in said[0]
@@ -62,9 +63,9 @@ def test_a_not_reliable_verdict_lists_no_significance():
     rep["excluded"]["bound_m3"] = {"net": 30.0}
     rep["uncertainty_m3"]["net"] = 40.0
     z = np.zeros((4, 4))
-    q = assess(rep, z.astype(bool), z.astype(bool), z, 1.0, {})
+    q = assess(rep, QualityInputs(z.astype(bool), z.astype(bool), z, None, 1.0, {}))
     assert q["verdict"] == "not reliable", q
     assert not any("significant" in m for m in q["messages"]), q["messages"]
     rep["excluded"]["unclassified"]["signals"] = True  # a caution only: the significance is said
-    q = assess(rep, z.astype(bool), z.astype(bool), z, 1.0, {})
+    q = assess(rep, QualityInputs(z.astype(bool), z.astype(bool), z, None, 1.0, {}))
     assert q["verdict"] == "use with caution" and any("not significant" in m for m in q["messages"]), q

@@ -9,7 +9,8 @@ import pyproj
 import pytest
 
 from soilvolume.core.types import GridSpec, SoilVolumeError
-from soilvolume.volumes.zones import budget, polygons_mask, zone_budgets
+from soilvolume.volumes.difference import budget
+from soilvolume.volumes.zones import polygons_mask, zone_budgets
 
 UTM = pyproj.CRS.from_epsg(32654)
 GRID = GridSpec(
@@ -48,12 +49,12 @@ def test_zone_sums_equal_totals_after_reprojection(tmp_path):
     )
     d = diff()
     zones = zone_budgets(d, GRID, path)
-    total = budget(d, np.ones(d.shape, bool), GRID.cell_area)
+    total = budget(d, GRID.cell_area, np.ones(d.shape, bool))
     assert [z["name"] for z in zones] == ["west", "east"]
     for key in ("net", "cut", "fill", "area_m2"):
         assert sum(z[key] for z in zones) == pytest.approx(total[key], rel=1e-9, abs=1e-9)
     assert zones[0]["zone_area_m2"] == pytest.approx(5000.0)
-    west = budget(d[:, :100], np.ones((200, 100), bool), GRID.cell_area)
+    west = budget(d[:, :100], GRID.cell_area, np.ones((200, 100), bool))
     assert zones[0]["net"] == pytest.approx(west["net"])
 
 

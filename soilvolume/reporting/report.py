@@ -140,7 +140,7 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
     """report.json of an estimate run, its quality verdict in it (``timings``: seconds per stage so far)."""
     report = _report(record, timings)
     q = record.quality
-    report["quality"] = assess(report, q.stable, q.change, q.offset, q.cell_area, q.prior, q.diff)
+    report["quality"] = assess(report, q)
     if is_surface(report):  # the survey's agreement with the reference surface leads the verdict
         report["quality"] = surface_quality(report, record)
     if record.engine is not None:

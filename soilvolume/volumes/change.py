@@ -45,39 +45,32 @@ def change_areas(
     )
     both = fill & cut
     fill, cut = (fill & ~both) | fill_core, (cut & ~both) | cut_core
-    if refilled is not None and refilled.any():
-        fill, cut = _join_refilled(d, refilled & valid & ~fill & ~cut, fill, cut)
-    return fill, cut
-
-
-def _join_refilled(d, patches, fill, cut):
-    """(fill, cut) with the refilled ``patches`` that join them (see :func:`change_areas`)."""
-    labels, n = scipy.ndimage.label(patches, structure=_EIGHT)
+    if refilled is None or not refilled.any():
+        return fill, cut
+    labels, n = scipy.ndimage.label(refilled & valid & ~fill & ~cut, structure=_EIGHT)  # the refilled patches
     idx = np.arange(1, n + 1)
     vol = scipy.ndimage.sum(d, labels, idx)
     rim = scipy.ndimage.grey_dilation(labels, footprint=_EIGHT) * (labels == 0)  # each patch's ring of known cells
     out = []
     for area, sign in ((fill, 1.0), (cut, -1.0)):
-        works = scipy.ndimage.maximum(_measured_volume(d, area, sign), rim, idx)
+        comp, k = scipy.ndimage.label(area, structure=_EIGHT)  # per cell of the area, its volume of that sign
+        volume = np.r_[0.0, np.maximum(sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1)), 0.0)][comp]
+        works = scipy.ndimage.maximum(volume, rim, idx)
         out.append(area | np.r_[False, (sign * vol > 0) & (works >= sign * vol)][labels])
     return out[0], out[1]
 
 
-def _measured_volume(d: np.ndarray, area: np.ndarray, sign: float) -> np.ndarray:
-    """Per cell of ``area``, its connected area's volume of ``sign`` (m x cells; 0 if of the other)."""
-    comp, k = scipy.ndimage.label(area, structure=_EIGHT)
-    v = sign * scipy.ndimage.sum(d, comp, np.arange(1, k + 1))
-    return np.r_[0.0, np.maximum(v, 0.0)][comp]
-
-
-def marginal_volume(diff: np.ndarray, area: np.ndarray, lod: np.ndarray | float, cell_area: float) -> float:
-    """Volume (m3) of areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice their LoD (noise could
-    make them)."""
-    labels, n = scipy.ndimage.label(area, structure=_EIGHT)
-    idx = np.arange(1, n + 1)
-    d = np.where(np.isfinite(diff), diff, 0.0)
-    mean_abs = scipy.ndimage.mean(np.abs(d), labels, idx)
-    mean_lod = scipy.ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
-    vol = np.abs(scipy.ndimage.sum(d, labels, idx)) * cell_area
-    size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
-    return float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())
+def marginal_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod, cell_area: float) -> dict:
+    """Per part, the volume (m3) of areas under ``MARGINAL_CELLS`` cells whose mean |difference| is under twice their
+    LoD (noise could make them); the net's in quadrature."""
+    d, out = np.where(np.isfinite(diff), diff, 0.0), {}
+    for key, area in (("fill", fill), ("cut", cut)):
+        labels, n = scipy.ndimage.label(area, structure=_EIGHT)
+        idx = np.arange(1, n + 1)
+        mean_abs = scipy.ndimage.mean(np.abs(d), labels, idx)
+        mean_lod = scipy.ndimage.mean(np.broadcast_to(lod, d.shape), labels, idx)
+        vol = np.abs(scipy.ndimage.sum(d, labels, idx)) * cell_area
+        size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
+        out[key] = float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())
+    out["net"] = float(np.hypot(out["fill"], out["cut"]))
+    return out

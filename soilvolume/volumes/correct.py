@@ -39,34 +39,26 @@ class Corrected:
 
 def correct(s: Refill, epochs: Epochs, d_i, grid: GridSpec, options: Options, given: Given | None) -> Corrected:
     """The correction of the refilled difference (see module); ``given``: a tiled run's window."""
-    if given is None:
-        offset, params, stable, _ = correction(s.filled, d_i, grid, options)
-        core = (slice(None), slice(None))  # a whole grid's: every cell counts
+    if given is None:  # stable ground found alike for every method; ``paper-plane`` takes ``d_i`` first
+        method, core = options.correction, (slice(None), slice(None))  # a whole grid's: every cell counts
+        user = polygons_mask(options.stable_mask, grid) if options.stable_mask else None
+        paper = MODES[method].paper_plane
+        base = d_i if paper else 0.0
+        res = apply_correction(s.filled - base, "none" if paper else method, grid, user_mask=user)
+        offset = np.where(np.isfinite(s.filled), base + res.surface, np.nan)
+        params, stable = {**res.params, "method": method}, res.stable_mask
     else:
         offset = np.where(np.isfinite(s.filled), given.offset, np.nan)
         params, stable, core = given.params, given.stable & np.isfinite(s.filled), given.core
     diff = s.filled - offset
     fill_sigma = np.where(s.own, s.own_sigma, refill_sigma(diff, s.filled_mask, stable, options))
     lod = detection_level(diff, stable, options.lod_confidence)
-    (after, before), z = epochs, z_value(options.lod_confidence)  # each cell's: the epochs' errors, the refill's
-    se_a = np.where(s.m_a, np.nan, cell_sigma(after.spread, after.counts))
-    se_b = np.where(s.m_b, np.nan, cell_sigma(before.spread, before.counts))
-    lod_cell = np.maximum(cell_lod(lod, se_a, se_b, z), z * fill_sigma)
+    z = z_value(options.lod_confidence)  # each cell's: the epochs' errors, the refill's
+    se = (np.where(m, np.nan, cell_sigma(e.spread, e.counts)) for e, m in zip(epochs, (s.m_a, s.m_b), strict=True))
+    lod_cell = np.maximum(cell_lod(lod, *se, z), z * fill_sigma)
     significant = patches(~s.filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
     sides = refill_across_outline(diff, s.filled_mask & ~s.own, significant, options.fill_method)
     outline = np.nan_to_num(sides - diff)  # where the outline runs in the holes: a term
     return Corrected(
         offset, params, stable, given is not None, core, sides, sides + offset, fill_sigma, lod, lod_cell, outline
     )
-
-
-def correction(diff, d_i, grid: GridSpec, options: Options):
-    """(surface, parameters, stable mask, change mask): stable ground found alike for every method; ``paper-plane``
-    takes ``d_i`` first."""
-    method = options.correction
-    paper = MODES[method].paper_plane
-    base = d_i if paper else 0.0
-    user_mask = polygons_mask(options.stable_mask, grid) if options.stable_mask else None
-    res = apply_correction(diff - base, "none" if paper else method, grid, user_mask=user_mask)
-    offset = np.where(np.isfinite(diff), base + res.surface, np.nan)
-    return offset, {**res.params, "method": method}, res.stable_mask, res.change_mask

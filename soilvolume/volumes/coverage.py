@@ -85,7 +85,7 @@ def check(report: dict) -> tuple[str, str] | None:
     bound, interval = cov["unseen_volume_bound_m3"], report["uncertainty_m3"]["net"]
     before = cov["before_missing_m2"] >= 0.5 * unseen
     who = "the before survey does not cover" if before else "the surveys do not both cover"
-    who = "the design does not cover" if _surface(report) else who
+    who = "the design does not cover" if (report.get("reference") or {}).get("kind") == "surface" else who
     said = f"{who} {unseen:,.0f} m² ({share:.0%}) of the after footprint"
     noise = 2.0 * unseen * float(report["uncertainty_m3"].get("lod_m") or 0.0)  # change at noise level: none
     if share > MAX_SHARE or bound > max(interval, noise):
@@ -100,11 +100,6 @@ def check(report: dict) -> tuple[str, str] | None:
     return None
 
 
-def _surface(report: dict) -> bool:
-    """Whether the run compared a survey with a surface (a design)."""
-    return (report.get("reference") or {}).get("kind") == "surface"
-
-
 def line(report: dict) -> str | None:
     """The summary's coverage line."""
     cov = report.get("coverage")
@@ -112,7 +107,7 @@ def line(report: dict) -> str | None:
         return None
     who = (
         ("the design covers", "the design misses")
-        if _surface(report)
+        if (report.get("reference") or {}).get("kind") == "surface"
         else ("both surveys cover", "the before survey misses")
     )
     text = f"coverage: {who[0]} {cov['compared_share']:.1%} of the after footprint"

@@ -12,12 +12,11 @@ import numpy as np
 from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..options import Options
-from .change import marginal_volume
-from .classify import Areas
+from .change import marginal_terms
 from .correct import Corrected
 from .difference import signed_budget
-from .holes.interpolate import typical_radius
 from .holes.works import blind_change, outline_sigma
+from .nonsoil import Areas
 from .refill import Refill
 from .results import Epochs
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
@@ -35,46 +34,30 @@ class Interval:
 def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, options: Options, moved) -> Interval:
     """The interval of the counted change; a tile's registration and correction terms are left to the tiles'
     combination."""
-    area, ex = grid.cell_area, a.exclusion
+    area, ex = grid.cell_area, a.excluded
     d, fa, ca = c.diff[c.core], a.fill[c.core], a.cut[c.core]  # areas decided with the halo, counted on the core
     parts = {"net": fa | ca, "cut": ca, "fill": fa}
     registration = signed_budget(pose_effect(s.f_a, grid, moved)[c.core], fa, ca, area)
     marginal = marginal_terms(d, fa, ca, c.lod_cell[c.core], area)
     skews = tuple(None if e.skew is None else e.skew[c.core] for e in epochs)
     statistic = statistic_bias(skews, s.filled_mask[c.core], parts, area)
-    outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(typical_radius(s.filled_mask)), area)
+    outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(s.filled_mask), area)
     reg_in = 0.0 if c.tile else 1.0
-    terms = (registration, marginal, ex.report["sigma_m3"], statistic)
+    terms = (registration, marginal, ex["sigma_m3"], statistic)
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
-    bound = {k: v + hidden["bound_m3"][k] for k, v in ex.report["bound_m3"].items()}
-    model = _error_model(s, c, a.stable, grid, options, bound)
+    bound = {k: v + hidden["bound_m3"][k] for k, v in ex["bound_m3"].items()}
+    counted = np.zeros(c.diff.shape, bool) if c.tile else None  # the error model over a caller's cells:
+    if c.tile:  # those a tile counts, its core; the overview has the bias
+        counted[c.core] = True
+    n_coef = 0 if c.tile else MODES[options.correction].coefficients
+    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=n_coef, bound_m3=bound)
+    model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma), **run)
     named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
     named.update(statistic_m3=statistic, outline_m3=outline)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}
     return Interval(unc, model, hidden)
-
-
-def marginal_terms(d: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod_cell, cell_area: float) -> dict:
-    """:func:`.change.marginal_volume` per part (m3)."""
-    out = {"fill": marginal_volume(d, fill, lod_cell, cell_area), "cut": marginal_volume(d, cut, lod_cell, cell_area)}
-    out["net"] = float(np.hypot(out["fill"], out["cut"]))
-    return out
-
-
-def _error_model(s: Refill, c: Corrected, stable, grid: GridSpec, options: Options, bound: dict):
-    """:func:`.uncertainty.volume_uncertainty` with the run's arguments, over a caller's cells."""
-    coefficients, counted = MODES[options.correction].coefficients, None
-    if c.tile:  # the cells it counts: its core; the overview has the bias
-        counted = np.zeros(c.diff.shape, bool)
-        counted[c.core] = True
-    fraction = interp_fraction(typical_radius(s.filled_mask & ~s.own))
-    fills = dict(filled_mask=s.filled_mask, own_fill=s.own, fill_sigma=c.fill_sigma, interp_fraction=fraction)
-    run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, surface=not c.tile and coefficients > 0)
-    return partial(
-        volume_uncertainty, c.diff, stable, n_coef=0 if c.tile else coefficients, bound_m3=bound, **run, **fills
-    )
 
 
 def pose_effect(h_after: np.ndarray, grid: GridSpec, moved: np.ndarray | None) -> np.ndarray:

@@ -1,9 +1,9 @@
-"""What the volume step leaves out of the soil, and says so: moved objects (by shape,
-:mod:`soilvolume.soil.objects`) out of the change areas; cells mostly of points not soil listed
-with the volume they would have added; objects in one survey only left out and listed (or counted
-with ``--objects count``); the class raster (``excluded.tif``) draws it all. What cannot be said to
-be soil or not (the change no signal classified, what a canopy may have added under it) is a bound
-the interval is widened by."""
+"""Stage 3, the classification (:func:`classify`): the change areas (:mod:`.change`), what in them is not soil, the
+error model's stable ground away from the change. What the volume step leaves out of the soil, and says so: moved
+objects (by shape, :mod:`soilvolume.soil.objects`) out of the change areas; cells mostly of points not soil listed
+with the volume they would have added; objects in one survey only left out and listed (or counted with ``--objects
+count``); the class raster (``excluded.tif``) draws it all. What cannot be said to be soil or not (the change no
+signal classified, what a canopy may have added under it) is a bound the interval is widened by."""
 
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from ..dem.grid import EpochDEM
 from ..options import Options
 from ..soil.objects import Blob, find_objects
 from ..soil.rough import rough_cells, roughness
+from .change import change_areas
 from .correct import Corrected
 from .refill import Refill
 from .results import Epochs
@@ -52,22 +53,36 @@ OBJECT_MAX_M3 = 120.0
 # counted (piles at their angle of repose read 0.9-1.1, machines and containers 1.3-2.7)
 OBJECT_SLOPE = 1.2
 GRASS_VEG, GRASS_SOIL = 0.5, 1.0 / 3.0  # a change patch of vegetation: its shares of such cells and of soil
+MIN_QUIET = 12  # stable cells away from the change the error model needs, else it keeps them all
 
 
 @dataclass(frozen=True)
-class Exclusion:
-    """The change areas without what was left out, the class raster and report.json's ``excluded``."""
+class Areas:
+    """The change areas counted (what is not soil left out), the class raster, report.json's ``excluded`` (with its
+    terms, :func:`exclude_nonsoil`), the stable ground."""
 
     fill: np.ndarray
     cut: np.ndarray
     classes: np.ndarray
-    report: dict  # with the one-sigma terms (``sigma_m3``) and the unclassified bound (``bound_m3``)
+    excluded: dict
+    stable: np.ndarray
+    counted: np.ndarray  # fill | cut: the change areas the headline sums
+
+
+def classify(s: Refill, c: Corrected, epochs: Epochs, grid: GridSpec, options: Options) -> Areas:
+    """The change areas, what is not soil in them, stable ground never in or next to them unless the user drew it."""
+    fill, cut = change_areas(c.diff, c.lod_cell, refilled=s.filled_mask & ~s.seen_once)
+    kept = exclude_nonsoil(s, c, (fill, cut), epochs, grid, options)
+    quiet = c.stable & ~scipy.ndimage.binary_dilation(fill | cut, iterations=max(1, round(2.0 / grid.cell)))
+    stable = quiet if not options.stable_mask and quiet.sum() >= MIN_QUIET else c.stable
+    return Areas(*kept, stable, kept[0] | kept[1])
 
 
 def exclude_nonsoil(
     s: Refill, c: Corrected, areas: tuple[np.ndarray, np.ndarray], epochs: Epochs, grid: GridSpec, options: Options
-) -> Exclusion:
-    """See module; ``areas``: the change areas (fill, cut) of the refill ``s`` corrected by ``c``."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """(the change areas without what was left out, the class raster, report.json's ``excluded`` with the one-sigma
+    terms ``sigma_m3`` and the unclassified bound ``bound_m3``): see module; ``areas``: (fill, cut) of ``s``, ``c``."""
     (fill, cut), mode, area, diff = areas, options.exclude, grid.cell_area, c.diff
     refilled = s.filled_mask & ~s.seen_once  # interpolated cells: no object's
     shares = _shares(epochs)
@@ -93,7 +108,7 @@ def exclude_nonsoil(
         moved, lone_m3 = report["moved_objects"], part_budget(diff, lone, area)
         sigma = {k: float(np.hypot(v, MOVED_SHARE * np.hypot(moved[k], lone_m3[k]))) for k, v in sigma.items()}
     report["sigma_m3"], report["bound_m3"] = sigma, bounds(diff, fill | cut, found, rough_area, epochs, area, report)
-    return Exclusion(fill, cut, classes, report)
+    return fill, cut, classes, report
 
 
 def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, shares: dict):
@@ -103,7 +118,8 @@ def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, s
     found = find_objects(diff, fill, cut, grid.cell, refilled=refilled | labelled)
     drop_single = options.objects == "exclude" and mode != "none"
     lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
-    bare = _bare_top(diff, epochs, refilled)  # soil measured on the surface that rose
+    after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)  # soil measured on the surface that rose
+    bare = np.where(np.nan_to_num(diff) >= 0, after, before) & ~refilled  # (a pile on a mown meadow is soil)
     grass = _grass_patches(fill | cut, shares["vegetation"] >= SHARE, bare, grid.cell_area)
     return found, lone, grass & ~found.moved & ~found.single & (mode != "none")
 
@@ -152,12 +168,6 @@ def _lone(found) -> np.ndarray:
     return found.single & np.isin(found.labels, ids)
 
 
-def _bare_top(diff: np.ndarray, epochs, refilled: np.ndarray) -> np.ndarray:
-    """Cells whose higher surface was measured soil (a pile on a mown meadow is soil)."""
-    after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)
-    return np.where(np.nan_to_num(diff) >= 0, after, before) & ~refilled
-
-
 def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_area: float) -> np.ndarray:
     """Compact change patches mostly of vegetation with little ``bare`` soil: grass the colour test half missed."""
     comp, n = scipy.ndimage.label(change, structure=np.ones((3, 3), bool))
@@ -201,7 +211,21 @@ def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) 
     # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
     below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
     report["unclassified"]["net_range_m3"] = [-below, above]
-    report["under_canopy"] = canopy = _under_canopy(diff, epochs, counted, cell_area)
+    reach = np.zeros(diff.shape)  # what a canopy told by returns alone may add: each cell's |difference|, at most
+    for e, o in (epochs, epochs[::-1]):  # CANOPY_REACH x its canopy or that over the other's ground
+        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
+            continue  # a classification is the survey's statement; colour empties such cells
+        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            canopy = e.nonsoil_z / np.maximum(e.nonsoil(), 1)
+            # over its own soil height (raised by the canopy points) and over the other survey's ground
+            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
+        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
+    d = np.where(counted, np.nan_to_num(diff), 0.0)
+    part = np.minimum(np.abs(d), reach)
+    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
+    canopy = {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
+    report["under_canopy"] = canopy
     bound = {k: report["unclassified"][k] + canopy[k] for k in ("cut", "fill")}
     bound["net"] = max(below, above) + canopy["cut"] + canopy["fill"]
     return bound
@@ -225,26 +249,6 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     comp, n = scipy.ndimage.label(out, structure=np.ones((3, 3), bool))
     vols = np.abs(scipy.ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
     return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
-
-
-def _under_canopy(diff: np.ndarray, epochs, counted: np.ndarray, cell_area: float) -> dict:
-    """What a canopy told by returns alone may add (m3): each cell's |difference|, at most :data:`CANOPY_REACH` x its
-    canopy or that over the other's ground."""
-    reach = np.zeros(diff.shape)
-    for e, o in (epochs, epochs[::-1]):
-        if e.rule is None or e.rule.use_class or not e.rule.returns or e.veg is None or e.nonsoil_z is None:
-            continue  # a classification is the survey's statement; colour empties such cells
-        others = e.nonsoil()
-        covered = (e.veg > 0) & (e.veg >= SHARE * (e.counts + e.veg)) & (e.counts > 0)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            canopy = e.nonsoil_z / np.maximum(others, 1)
-            # over its own soil height (raised by the canopy points) and over the other survey's ground
-            top = np.fmax(CANOPY_REACH * (canopy - e.heights), canopy - o.heights)
-        reach = np.maximum(reach, np.where(covered, np.nan_to_num(np.clip(top, 0.0, None)), 0.0))
-    d = np.where(counted, np.nan_to_num(diff), 0.0)
-    part = np.minimum(np.abs(d), reach)
-    fill, cut = float(part[d > 0].sum()) * cell_area, float(part[d < 0].sum()) * cell_area
-    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float((part > 0).sum()) * cell_area}
 
 
 def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:

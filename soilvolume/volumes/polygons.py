@@ -33,10 +33,13 @@ def read_polygons(
     """(polygons, CRS WKT or None) of ``path``'s first layer; an error naming ``what`` and the file if unusable."""
     path = Path(path)
     feats, wkt = _features(path, what, "polygons", POLYGONAL)
-    polys = [_valid(Polygon(fid, _name(props, name_field, i, path), geom), path) for i, fid, props, geom in feats]
-    if not polys:
+    if not feats:
         raise SoilVolumeError(f"{path}: no polygon features in this {what}")
-    return polys, wkt
+    fields = feats[0][2]  # one layer's: every feature's
+    if name_field and name_field not in fields:
+        raise SoilVolumeError(f"{path}: no field '{name_field}' (fields: {', '.join(fields)})")
+    key = name_field or next((k for k in fields if k.lower() in ("name", "zone", "label")), None)
+    return [_valid(Polygon(fid, str(p[key]) if key else f"zone {i + 1}", g), path) for i, fid, p, g in feats], wkt
 
 
 def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple[list[tuple], str | None]:
@@ -52,8 +55,6 @@ def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple
         raise SoilVolumeError(f"{path}: reading {noun} needs {exc.name} (pip install {exc.name})") from None
     try:
         feats, wkt = _read(path)
-    except SoilVolumeError:
-        raise
     except Exception as exc:  # noqa: BLE001 - driver errors come in many types
         raise SoilVolumeError(f"{path}: cannot read {noun} from this {what} ({short_error(exc)})") from None
     kept = [
@@ -88,13 +89,6 @@ def _read(path: Path):
     import pyproj
 
     return feats, pyproj.CRS.from_user_input(meta["crs"]).to_wkt()
-
-
-def _name(props: dict, field: str | None, i: int, path: Path) -> str:
-    if field and field not in props:
-        raise SoilVolumeError(f"{path}: no field '{field}' (fields: {', '.join(props)})")
-    key = field or next((k for k in props if k.lower() in ("name", "zone", "label")), None)
-    return str(props[key]) if key else f"zone {i + 1}"
 
 
 def _valid(p: Polygon, path: Path) -> Polygon:
@@ -134,7 +128,6 @@ def to_grid_crs(polys: list[Polygon], src_wkt: str | None, grid, path: str | Pat
     tr = grid_transform(src_wkt, grid.crs_wkt)
     if tr is None:
         return polys
-
     out = []
     for p in polys:
         geom = shapely.transform(p.geometry, lambda xy: np.column_stack(tr.transform(xy[:, 0], xy[:, 1])))

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..compensation.stable import largest_gap_deg
+from ..core.record import QualityInputs
 from ..core.wording import opt
 from ..registration.georef import GROUND_AGREES, INCONCLUSIVE, disagreement
 from .coverage import check as coverage_check
@@ -23,19 +24,11 @@ MIN_STABLE_CELLS = 30
 PRIOR_MARGIN = 0.8  # a pose using more than this share of the prior is suspicious
 
 
-def assess(
-    report: dict,
-    stable: np.ndarray,
-    change: np.ndarray,
-    offset: np.ndarray,
-    cell_area: float,
-    prior: dict,
-    diff: np.ndarray | None = None,
-) -> dict:
+def assess(report: dict, q: QualityInputs) -> dict:
     """``{"verdict", "trusted", "messages"}`` for a finished run (see module)."""
     v, u = report["volume_m3"], report["uncertainty_m3"]
-    out = registration_checks(report["registration"], stable, change, offset, prior, diff)
-    out += correction_check(float(np.nansum(np.where(change, offset, 0.0)) * cell_area), v["net"], u["net"])
+    out = registration_checks(report["registration"], q.stable, q.change, q.offset, q.prior, q.diff)
+    out += correction_check(float(np.nansum(np.where(q.change, q.offset, 0.0)) * q.cell_area), v["net"], u["net"])
     excluded, hidden = report.get("excluded") or {}, report.get("blind") or {}
     bound = sum(float((r.get("bound_m3") or {}).get("net", 0.0)) for r in (excluded, hidden))
     random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified or seen

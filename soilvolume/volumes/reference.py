@@ -64,20 +64,6 @@ def merge(quality: dict, found: tuple[str, str]) -> dict:
     return {"verdict": VERDICTS[worst], "trusted": worst == 0, "messages": [sentence, *kept]}
 
 
-def design_terms(
-    counted: dict[str, np.ndarray], sigma_cell: np.ndarray, given_m: float, datum_m: float, cell_area: float, z: float
-) -> dict:
-    """The surface's interval terms (m³ at ``z``) per budget mask: its resampling ``sigma_cell`` (independent), a
-    ``given_m`` level and the ``datum_m`` (common)."""
-    out: dict[str, dict[str, float]] = {"resampling": {}, "given": {}, "datum": {}}
-    for key, mask in counted.items():
-        s, area = np.nan_to_num(sigma_cell[mask]), float(mask.sum()) * cell_area
-        out["resampling"][key] = float(z * np.sqrt(np.sum(s * s)) * cell_area)
-        out["given"][key] = float(z * given_m * area)
-        out["datum"][key] = float(z * datum_m * area)
-    return out
-
-
 def _sided(diff: np.ndarray, cells: dict[str, np.ndarray], cell_area: float, z: float, share: float = 1.0) -> dict:
     """``share`` of the same-signed difference over the fill and cut ``cells`` (m³ at ``z``); the net in quadrature."""
     d = np.nan_to_num(diff)
@@ -105,8 +91,12 @@ def with_surface(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridS
     counted = {"net": change, "cut": cut & change, "fill": change & ~cut}
     model = {"nugget": u["nugget_m2"], "psill": u["psill_m2"], "range": u["range_m"]}
     datum = bias_sigma(u["stable_cells"], grid.cell, model, 1) if options.correction == "none" else 0.0
-    z = z_value(options.lod_confidence)
-    terms = design_terms(counted, sigma, options.design_uncertainty, datum, grid.cell_area, z)
+    z, terms = z_value(options.lod_confidence), {part: {} for part in TERMS[:3]}
+    for key, mask in counted.items():  # resampling: independent; the given level and the datum: common
+        s, area = np.nan_to_num(sigma[mask]), float(mask.sum()) * grid.cell_area
+        terms["resampling"][key] = float(z * np.sqrt(np.sum(s * s)) * grid.cell_area)
+        terms["given"][key] = float(z * options.design_uncertainty * area)
+        terms["datum"][key] = float(z * datum * area)
     terms["truncation"] = truncation(vols.diff, counted, grid.cell_area, z)
     terms["outline"] = outline(vols.diff, counted, grid.cell_area, z)
     out = {**u, "reference_m3": terms}

@@ -65,17 +65,6 @@ def centred_heights(dem: EpochDEM, cell: float, options: Options, median: float 
     return dem.centred(cell, weak_cells(dem.counts, options.min_count_ratio, MIN_POINTS, median))
 
 
-def written_dems(s: Refill, filled: np.ndarray, method: str) -> tuple[np.ndarray, np.ndarray]:
-    """(dem_after.tif, dem_before.tif): refilled cells get the before's refilled height and it plus ``filled``."""
-    (h_a, h_b), mask = s.heights, s.filled_mask
-    base = np.where(mask, s.f_b, h_b)
-    gap = mask & ~np.isfinite(base)
-    if gap.any():
-        base = fill(base, gap & ~np.isfinite(h_a), method)
-        base = np.where(gap & np.isfinite(h_a), h_a - filled, base)
-    return np.where(mask, base + filled, h_a), base
-
-
 def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     """Per-cell one-sigma error (m) of refilled cells: their patch's, on test holes of its radius in the stable
     difference."""
@@ -87,4 +76,4 @@ def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
     if per_patch is None:  # no room to measure it: one stable-ground noise level per cell
         s = nmad(diff[stable])
         return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
-    return np.where(filled_mask, np.r_[0.0, per_patch][labels], 0.0)
+    return np.where(filled_mask, np.r_[0.0, per_patch[:, 1]][labels], 0.0)

@@ -22,13 +22,12 @@ from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
-from .change import cell_lod, cell_sigma, change_areas
+from .change import cell_lod, cell_sigma, change_areas, marginal_terms
 from .difference import signed_budget
-from .holes.interpolate import typical_radius
-from .interval import marginal_terms, pose_effect
+from .interval import pose_effect
 from .refill import refill_sigma
 from .results import Volumes
-from .uncertainty import detection_level, interp_fraction, statistic_bias, volume_uncertainty, z_value
+from .uncertainty import detection_level, statistic_bias, volume_uncertainty, z_value
 
 
 @dataclass(frozen=True)
@@ -76,54 +75,34 @@ def combine(
         conf = options.lod_confidence
         lod_cell = cell_lod(detection_level(diff, stable, conf), se[i], se[j], z_value(conf))
         found[i, j] = (diff, change_areas(diff, lod_cell, refilled=refilled), lod_cell)
-    works = np.logical_or.reduce([fill | cut for _, (fill, cut), _ in found.values()])
-    works_m3 = [math.fsum(d[works & valid].tolist()) * grid.cell_area for d in to_e0]
-    changes = []
-    for i, j in pairs:
-        diff, (fill, cut), lod_cell = found[i, j]
-        b = signed_budget(diff, fill, cut, grid.cell_area)
-        net = works_m3[j] - works_m3[i]
-        volume = {"net": net, "cut": b["cut"], "fill": b["fill"], "below_detection": net - (b["fill"] - b["cut"])}
-        fits = 1 if i == 0 else 2  # E0 is never corrected (see module)
-        skews = (dems[j].skew, dems[i].skew)
-        unc = period_uncertainty(
-            diff, (fill, cut), works & valid, stable, refilled, lod_cell, pose[j] - pose[i], skews, grid, options, fits
-        )
-        changes.append(Change(i, j, diff, fill, cut, volume, unc))
-    return SeriesVolumes(to_e0, valid, refilled, stable, works & valid, changes[:-1], changes[-1], works_m3)
+    works = np.logical_or.reduce([fill | cut for _, (fill, cut), _ in found.values()]) & valid
+    works_m3 = [math.fsum(d[works].tolist()) * grid.cell_area for d in to_e0]
+    run = (works, stable, refilled, grid, options)
+    skews = [d.skew for d in dems]
+    changes = [_period(i, j, *found[i, j], works_m3, pose[j] - pose[i], (skews[j], skews[i]), run) for i, j in pairs]
+    return SeriesVolumes(to_e0, valid, refilled, stable, works, changes[:-1], changes[-1], works_m3)
 
 
-def period_uncertainty(
-    diff: np.ndarray,
-    areas: tuple[np.ndarray, np.ndarray],
-    works: np.ndarray,
-    stable: np.ndarray,
-    refilled: np.ndarray,
-    lod_cell: np.ndarray,
-    pose: np.ndarray,
-    skews: tuple,
-    grid: GridSpec,
-    options: Options,
-    fits: int,
-) -> dict:
-    """± (m3) of a period's net over ``works``, cut and fill over its ``areas``; ``pose``, ``skews``, ``fits``: see
-    module."""
-    (fill_area, cut_area), area = areas, grid.cell_area
+def _period(i: int, j: int, diff, areas: tuple, lod_cell, works_m3: list, pose, skews: tuple, run: tuple) -> Change:
+    """The period ``i`` -> ``j``: its budgets, the ± (m3) of its net over the works, of cut and fill over its
+    ``areas``; ``pose``, ``skews``: see module."""
+    (fill_area, cut_area), (works, stable, refilled, grid, options) = areas, run
+    area, fits = grid.cell_area, 1 if i == 0 else 2  # E0 is never corrected (see module)
+    b = signed_budget(diff, fill_area, cut_area, area)
+    net = works_m3[j] - works_m3[i]
+    volume = {"net": net, "cut": b["cut"], "fill": b["fill"], "below_detection": net - (b["fill"] - b["cut"])}
     reg_v = signed_budget(pose, fill_area, cut_area, area)
     reg_v["net"] = abs(float(np.nansum(np.where(works, pose, 0.0)))) * area
     marginal = marginal_terms(diff, fill_area, cut_area, lod_cell, area)
     stat = statistic_bias(skews, refilled, {"net": works, "cut": cut_area, "fill": fill_area}, area)
     extra = {k: float(np.linalg.norm([reg_v[k], marginal[k], stat[k]])) for k in ("net", "cut", "fill")}
     coef, conf = MODES[options.correction].coefficients, options.lod_confidence
-    sigma, fraction = refill_sigma(diff, refilled, stable, options), interp_fraction(typical_radius(refilled))
-    common = dict(
-        n_coef=coef * fits, filled_mask=refilled, fill_sigma=sigma, interp_fraction=fraction, surface=coef > 0
-    )
+    common = dict(n_coef=coef * fits, fills=(refilled, None, refill_sigma(diff, refilled, stable, options)))
     on_works = volume_uncertainty(diff, stable, works, grid, conf, **common, extra_sigma=extra)
     on_areas = volume_uncertainty(diff, stable, fill_area | cut_area, grid, conf, **common, extra_sigma=extra)
     by = {"net": on_works, "cut": on_areas, "fill": on_areas}  # the net's from the works, cut and fill their areas
     kept = ("sigma_m", "lod_m", "nugget_m2", "psill_m2", "range_m", "bias_sigma_m", "stable_cells")
-    return {
+    unc = {
         **{k: u[k] for k, u in by.items()},
         "confidence": conf,
         **{k: on_works[k] for k in kept},
@@ -133,3 +112,4 @@ def period_uncertainty(
         "correction_fits": fits,
         "terms_m3": {k: u["terms_m3"][k] for k, u in by.items()},  # one-sigma, in the order of uncertainty.TERMS
     }
+    return Change(i, j, diff, fill_area, cut_area, volume, unc)

@@ -20,9 +20,13 @@ from ..core.types import GridSpec
 INTERP_FRACTION = 0.15
 
 
-def interp_fraction(patch_radius_cells: float) -> float:
-    """Refilled change volume's one-sigma share: falls as 1 / radius (30-80 % on ~2-cell holes, under 5 % on 6)."""
-    return float(min(0.5, max(INTERP_FRACTION, 1.0 / max(patch_radius_cells, 1.0))))
+def interp_fraction(refilled: np.ndarray) -> float:
+    """Refilled change volume's one-sigma share by the radius (cells) of ``refilled``'s area-weighted typical patch:
+    falls as 1 / radius (30-80 % on ~2-cell holes, under 5 % on 6)."""
+    labels, n = scipy.ndimage.label(refilled)
+    size = np.bincount(labels.ravel())[1:].astype(float)
+    radius = max(1.0, float(np.sqrt((size * size).sum() / size.sum() / np.pi))) if n else 1.0
+    return float(min(0.5, max(INTERP_FRACTION, 1.0 / radius)))
 
 
 def z_value(confidence: float = 0.95) -> float:
@@ -42,17 +46,14 @@ def volume_uncertainty(
     confidence: float = 0.95,
     *,
     n_coef: int = 6,
-    filled_mask: np.ndarray | None = None,
-    own_fill: np.ndarray | None = None,  # see filled_mask
-    interp_fraction: float = INTERP_FRACTION,
-    fill_sigma: np.ndarray | None = None,
+    fills: tuple = (None, None, None),
     extra_sigma: dict[str, float] | None = None,
     counted: np.ndarray | None = None,
-    surface: bool = True,
     bound_m3: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """± (m^3) at ``confidence`` over ``change_mask`` (all if None), the model's figures, :data:`TERMS`; ``n_coef``: the
-    correction's, ``counted``: a tile's core, ``bound_m3``: added as is."""
+    correction's (0: no surface, no leftover bias), ``fills``: the refilled cells, those filled in their own survey and
+    their one-sigma error (m), ``counted``: a tile's core, ``bound_m3``: added as is."""
     d, valid = diff_corrected, np.isfinite(diff_corrected)
     stable = stable_mask & valid
     valid = valid if counted is None else valid & counted
@@ -61,18 +62,23 @@ def volume_uncertainty(
     model = fit_spherical(*vario)
     b = bias_sigma(int(stable.sum()), grid.cell, model, n_coef) if n_coef else 0.0
     parts = {"net": region, "cut": region & (d < 0), "fill": region & (d > 0), "net_compared_area": valid}
-    pt = _PartTerms(d, valid, stable, grid, filled_mask, own_fill, fill_sigma, interp_fraction, surface)
-    extra = extra_sigma or {}
-    area_model = {k: region_sigma(int(m.sum()), grid.cell, model, b) for k, m in parts.items()}
+    beyond, fraction, residual = _beyond_area(d, valid, stable, grid, fills, n_coef > 0)
+    extra, area = extra_sigma or {}, grid.cell_area
     terms = {
-        k: [area_model[k], pt.interp(m), pt.refill(m), pt.unmodelled(m), extra.get(k, 0.0)] for k, m in parts.items()
+        k: [region_sigma(int(m.sum()), grid.cell, model, b), *beyond(m), extra.get(k, 0.0)] for k, m in parts.items()
     }
     out: dict[str, Any] = widen({k: z_value(confidence) * float(np.linalg.norm(t)) for k, t in terms.items()}, bound_m3)
     sigma = nmad(d[stable]) if stable.any() else float("nan")
     out.update(confidence=confidence, sigma_m=sigma, lod_m=_lod(d[stable], sigma, confidence))
     out.update(nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"], bias_sigma_m=b)
-    out.update(pt.described(region, parts, stable, grid.cell_area))
     out.update(
+        interpolated_m3=terms["net"][1] / max(fraction, 1e-12),
+        refill_sigma_m3=terms["net"][2],
+        unmodelled_bias_m3=terms["net"][3],
+        correction_residual_m3=residual * float(region.sum()) * area,
+        stable_cells=int(stable.sum()),
+        change_area_m2=float(region.sum()) * area,
+        part_area_m2={k: float(m.sum()) * area for k, m in parts.items()},
         unclassified_m3={k: float((bound_m3 or {}).get(k, 0.0)) for k in ("net", "cut", "fill")},
         terms_m3=terms,  # one-sigma: area model, refilled share, refill error, leftover bias, extras
         variogram={"lag_m": vario[0].tolist(), "gamma_m2": vario[1].tolist(), "pairs": vario[2].tolist()},
@@ -86,46 +92,31 @@ def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, f
     return {k: v + float(b.get("net" if k == "net_compared_area" else k, 0.0)) for k, v in half.items()}
 
 
-class _PartTerms:
-    """A part's terms beyond its area's: ``fraction`` of refilled |volume| (10-22 % off on synthetic pairs),
-    ``fill_sigma``, leftover bias."""
+def _beyond_area(diff, valid, stable, grid: GridSpec, fills: tuple, surface: bool):
+    """(a part's terms beyond its area's, m3: the refilled share of its |volume| (10-22 % off on synthetic pairs), the
+    refills' ``fill_sigma`` per patch, the leftover bias; the share; the correction's residual m)."""
+    (filled_mask, own, fill_sigma), area = fills, grid.cell_area
+    given = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask
+    filled = given & valid
+    shared = filled if own is None else filled & ~own  # interpolated in the difference
+    fraction = interp_fraction(given if own is None else given & ~own)
+    absd = np.abs(np.where(valid, diff, 0.0))
+    labels, n = scipy.ndimage.label(filled)
+    fs = np.zeros(valid.shape) if fill_sigma is None else np.where(filled, fill_sigma, 0.0)
+    leftover = leftover_bias(diff, stable, grid.cell)
+    seen = leftover[stable & np.isfinite(leftover)] if surface else np.empty(0)  # no surface, none
+    residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
 
-    def __init__(
-        self, diff, valid, stable, grid: GridSpec, filled_mask, own, fill_sigma, fraction: float, surface: bool
-    ):
-        self.cell_area, self.fraction = grid.cell_area, fraction
-        self.filled = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask & valid
-        self.shared = self.filled if own is None else self.filled & ~own  # interpolated in the difference
-        self.absd = np.abs(np.where(valid, diff, 0.0))
-        self.labels, self.n_patches = scipy.ndimage.label(self.filled)
-        self.fs = np.zeros(valid.shape) if fill_sigma is None else np.where(self.filled, fill_sigma, 0.0)
-        self.leftover = leftover_bias(diff, stable, grid.cell)
-        seen = self.leftover[stable & np.isfinite(self.leftover)] if surface else np.empty(0)  # no surface, none
-        self.residual = float(np.sqrt(np.mean(np.square(seen)))) if seen.size else 0.0
+    def terms(m: np.ndarray) -> list[float]:
+        per_patch = scipy.ndimage.sum(np.where(m, fs, 0.0), labels, np.arange(1, n + 1)) * area
+        signed = abs(float(np.nansum(np.where(m, leftover, 0.0)))) * area  # fully correlated over the part
+        return [
+            fraction * float(absd[m & shared].sum()) * area,
+            float(np.sqrt(np.sum(np.square(per_patch)))) if n else 0.0,
+            float(np.hypot(signed, residual * float(m.sum()) * area)),
+        ]
 
-    def described(self, region: np.ndarray, parts: dict, stable: np.ndarray, cell_area: float) -> dict:
-        """The report's totals of the terms over ``region`` and the areas (stable, change, parts)."""
-        return {
-            "interpolated_m3": self.interp(region) / max(self.fraction, 1e-12),
-            "refill_sigma_m3": self.refill(region),
-            "unmodelled_bias_m3": self.unmodelled(region),
-            "correction_residual_m3": self.residual * float(region.sum()) * cell_area,
-            "stable_cells": int(stable.sum()),
-            "change_area_m2": float(region.sum()) * cell_area,
-            "part_area_m2": {k: float(m.sum()) * cell_area for k, m in parts.items()},
-        }
-
-    def interp(self, m: np.ndarray) -> float:
-        return self.fraction * float(self.absd[m & self.shared].sum()) * self.cell_area
-
-    def refill(self, m: np.ndarray) -> float:
-        labels, n = self.labels, self.n_patches
-        per_patch = scipy.ndimage.sum(np.where(m, self.fs, 0.0), labels, np.arange(1, n + 1)) * self.cell_area
-        return float(np.sqrt(np.sum(np.square(per_patch)))) if n else 0.0
-
-    def unmodelled(self, m: np.ndarray) -> float:  # fully correlated over the part
-        signed = abs(float(np.nansum(np.where(m, self.leftover, 0.0)))) * self.cell_area
-        return float(np.hypot(signed, self.residual * float(m.sum()) * self.cell_area))
+    return terms, fraction, residual
 
 
 def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
@@ -256,9 +247,7 @@ def correlated_fraction(area: float, rng: float) -> float:
 
 
 def region_sigma(n_cells: int, cell: float, model: dict[str, float], bias_sigma: float = 0.0) -> float:
-    """One-sigma volume uncertainty (m^3) over ``n_cells`` cells."""
-    if n_cells <= 0:
-        return 0.0
+    """One-sigma volume uncertainty (m^3) over ``n_cells`` cells (0 over none)."""
     area = n_cells * cell * cell
     var_unc = n_cells * model["nugget"] * cell**4
     var_cor = area * area * model["psill"] * correlated_fraction(area, model["range"])

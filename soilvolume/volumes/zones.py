@@ -12,8 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
-from .difference import budget as cell_budget
-from .difference import signed_budget
+from .difference import budget, signed_budget
 from .polygons import Polygon, read_polygons, to_grid_crs
 from .uncertainty import TERMS, widen, z_value
 
@@ -43,28 +42,18 @@ def polygon_masks(polys: list[Polygon], grid: GridSpec) -> list[np.ndarray]:
 def polygons_mask(path: str | Path, grid: GridSpec, what: str = "{opt:stable_mask} file") -> np.ndarray:
     """Union of the polygons of ``path`` as a (rows, cols) mask; none meeting the grid is an error."""
     polys, wkt = on_grid(path, grid, what=what)
-    if not any(_meets(p, grid) for p in polys):
+    u = grid.xy_unit  # the grid's extent in its CRS's units, met by a polygon's bounds
+    gx0, gy1 = grid.xmin / u, grid.ymax / u
+    gx1, gy0 = gx0 + grid.cols * grid.cell / u, gy1 - grid.rows * grid.cell / u
+    if not any(
+        x0 <= gx1 and gx0 <= x1 and y0 <= gy1 and gy0 <= y1 for x0, y0, x1, y1 in (p.geometry.bounds for p in polys)
+    ):
         raise SoilVolumeError(f"{path}: no polygon of this {what} meets the survey's grid{_crs_hint(wkt)}")
     return np.logical_or.reduce(polygon_masks(polys, grid))
 
 
-def _meets(p: Polygon, grid: GridSpec) -> bool:
-    """Whether the polygon's bounds meet the grid's extent (both in the grid's CRS units)."""
-    u = grid.xy_unit
-    x0, y0, x1, y1 = p.geometry.bounds
-    gx0, gy1 = grid.xmin / u, grid.ymax / u
-    gx1, gy0 = gx0 + grid.cols * grid.cell / u, gy1 - grid.rows * grid.cell / u
-    return x0 <= gx1 and gx0 <= x1 and y0 <= gy1 and gy0 <= y1
-
-
 def _crs_hint(wkt: str | None) -> str:
     return " (the file has no CRS: is it in the survey's?)" if not wkt else " (is its CRS right?)"
-
-
-def budget(diff: np.ndarray, mask: np.ndarray, cell_area: float) -> dict[str, float]:
-    """net/cut/fill (m^3) and compared area (m^2) of the finite cells of ``diff`` in ``mask``."""
-    b = cell_budget(diff, cell_area, mask)
-    return {k: b[k] for k in ("net", "cut", "fill", "area_m2")}
 
 
 def zone_budgets(
@@ -81,7 +70,8 @@ def zone_budgets(
     polys, wkt = on_grid(zones_path, grid, name_field)
     out = []
     for p, mask in zip(polys, polygon_masks(polys, grid), strict=True):
-        row = {"id": p.id, "name": p.name, **budget(diff, mask, grid.cell_area)}
+        b = budget(diff, grid.cell_area, mask)  # the finite cells' net, cut, fill and compared area
+        row = {"id": p.id, "name": p.name, **{k: b[k] for k in ("net", "cut", "fill", "area_m2")}}
         if areas is not None:
             split = signed_budget(diff, areas[0] & mask, areas[1] & mask, grid.cell_area)
             row.update(cut=split["cut"], fill=split["fill"], net=split["fill"] - split["cut"])

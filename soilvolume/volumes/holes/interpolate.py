@@ -6,8 +6,6 @@ a cone's foot, but carries noise further)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import scipy
 
@@ -29,27 +27,12 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
 
 
 def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """``values`` with ``targets`` harmonically interpolated (NaN in a component without a finite neighbour)."""
+    """``values`` with ``targets`` harmonically interpolated (NaN in a component without a finite neighbour): deg_i u_i
+    - sum_{unknown j} u_j = sum_{known k} v_k on them (Neumann at the other cells)."""
     known, out, todo = _start(values, targets)
-    if not todo.any():
-        return out
-    out[todo] = _solve_laplace(np.where(known, values, 0.0), known, todo)
-    return out
-
-
-def _start(values: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(the known cells, ``values`` there and NaN elsewhere, the targets in components touching a known cell)."""
-    known = np.isfinite(values) & ~targets
-    labels, n = scipy.ndimage.label(targets, structure=FOUR)
-    ok = np.zeros(n + 1, bool)
-    ok[labels[scipy.ndimage.binary_dilation(known, FOUR) & targets]] = True
-    ok[0] = False
-    return known, np.where(known, values, np.nan), ok[labels]
-
-
-def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
-    """Solve deg_i u_i - sum_{unknown j} u_j = sum_{known k} v_k on ``todo`` (Neumann at the other cells)."""
     flat = np.flatnonzero(todo)
+    if not flat.size:
+        return out
     usable, kflat, vflat = (known | todo).ravel(), known.ravel(), values.ravel()
     n = flat.size
     diag, rhs, ri, ci = np.zeros(n), np.zeros(n), [np.arange(n)], [np.arange(n)]
@@ -69,23 +52,30 @@ def _solve_laplace(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> n
     data = np.concatenate([diag, -np.ones(ri.size - n)])
     a = scipy.sparse.csr_matrix((data, (ri, ci)), shape=(n, n))
     if n <= _DIRECT_MAX:
-        return scipy.sparse.linalg.spsolve(a.tocsc(), rhs)
-    guess = _smooth_guess(values, known, todo)[todo]
-    sol, _ = scipy.sparse.linalg.cg(a, rhs, x0=guess, tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag))
-    return sol
-
-
-def _smooth_guess(values: np.ndarray, known: np.ndarray, todo: np.ndarray) -> np.ndarray:
-    """Multi-scale normalized convolution: a fast first guess for the iterative solver."""
-    out, left, sigma = np.where(known, values, 0.0), todo.copy(), 1.0
-    while left.any() and sigma < max(todo.shape):
+        out[todo] = scipy.sparse.linalg.spsolve(a.tocsc(), rhs)
+        return out
+    guess, left, sigma = np.where(known, values, 0.0), todo.copy(), 1.0  # a fast first guess for the iterative solver:
+    while left.any() and sigma < max(todo.shape):  # multi-scale normalized convolution
         num = scipy.ndimage.gaussian_filter(np.where(known, values, 0.0), sigma)
         den = scipy.ndimage.gaussian_filter(known.astype(float), sigma)
         ok = left & (den > 1e-6)
-        out[ok] = num[ok] / den[ok]
+        guess[ok] = num[ok] / den[ok]
         left &= ~ok
         sigma *= 2.0
+    out[todo], _ = scipy.sparse.linalg.cg(
+        a, rhs, x0=guess[todo], tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag)
+    )
     return out
+
+
+def _start(values: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the known cells, ``values`` there and NaN elsewhere, the targets in components touching a known cell)."""
+    known = np.isfinite(values) & ~targets
+    labels, n = scipy.ndimage.label(targets, structure=FOUR)
+    ok = np.zeros(n + 1, bool)
+    ok[labels[scipy.ndimage.binary_dilation(known, FOUR) & targets]] = True
+    ok[0] = False
+    return known, np.where(known, values, np.nan), ok[labels]
 
 
 _R2 = float(np.sqrt(2.0))
@@ -149,16 +139,11 @@ def stencil_system(usable: np.ndarray, todo: np.ndarray, flat: np.ndarray):
 _FILLERS = {"harmonic": harmonic_fill, "biharmonic": biharmonic_fill}
 
 
-def filler(method: str) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
-    """The interpolant named ``method``."""
-    if method not in _FILLERS:
-        raise ValueError(f"unknown fill method {method!r}; use one of {sorted(_FILLERS)}")
-    return _FILLERS[method]
-
-
 def fill(values: np.ndarray, targets: np.ndarray, method: str = "biharmonic") -> np.ndarray:
     """``values`` with the ``targets`` cells interpolated by ``method`` (no-op without targets)."""
-    return filler(method)(values, targets) if targets.any() else values
+    if method not in _FILLERS:
+        raise ValueError(f"unknown fill method {method!r}; use one of {sorted(_FILLERS)}")
+    return _FILLERS[method](values, targets) if targets.any() else values
 
 
 def weak_cells(counts: np.ndarray, ratio: float = 0.5, min_points: int = 0, median: float | None = None) -> np.ndarray:
@@ -184,14 +169,5 @@ def refill_epoch(
     left NaN if not."""
     valid = np.isfinite(h)
     targets = (weak_cells(counts, ratio, min_points, median) & valid) | enclosed_holes(valid, max_hole_cells)
-    filled = filler(method)(h, targets)
+    filled = fill(h, targets, method)
     return filled, targets & np.isfinite(filled)
-
-
-def typical_radius(mask: np.ndarray) -> float:
-    """Radius (cells) of a disc the size of ``mask``'s area-weighted typical component (1 if none)."""
-    labels, n = scipy.ndimage.label(mask, structure=FOUR)
-    if n == 0:
-        return 1.0
-    size = np.bincount(labels.ravel())[1:].astype(float)
-    return max(1.0, float(np.sqrt((size * size).sum() / size.sum() / np.pi)))

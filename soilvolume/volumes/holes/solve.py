@@ -45,7 +45,13 @@ def least_squares(mat, rhs, k_rows, k_vals) -> tuple[np.ndarray, np.ndarray]:
     probe = 1.0 + np.random.default_rng(0).random(g.size)
     null = np.abs(solve(TIKHONOV * probe)) > 0.01  # directions only eps pins down: ill posed
     bad |= np.bincount(group, weights=null, minlength=n_groups) > 0
-    bad |= _wild(x, group, n_groups, mat, k_rows, k_vals)
+    has = np.diff(mat.indptr) > 0  # each row's group (its first unknown's): the range of the known values it holds
+    row_group = np.full(mat.shape[0], -1)
+    row_group[has] = group[mat.indices[mat.indptr[:-1][has]]]
+    kg = row_group[k_rows]
+    known = _group_range(kg[kg >= 0], k_vals[kg >= 0], n_groups)
+    solved = _group_range(group, np.where(np.isfinite(x), x, np.inf), n_groups)
+    bad |= beyond(known, solved, np.bincount(group, minlength=n_groups))  # wild: not finite, or far outside them
     return x, bad[group]
 
 
@@ -67,8 +73,16 @@ def group_solver(reg: scipy.sparse.spmatrix, group: np.ndarray, n_groups: int):
     Cholesky batched by bandwidth, SuperLU if wider, blocks over ``_BIG_GROUP`` skipped (0)."""
     low = lower_triangle(reg)
     row = np.repeat(np.arange(low.shape[0]), np.diff(low.indptr))
-    order, kind = _block_order(low, row, group, n_groups)
+    size = np.bincount(group, minlength=n_groups)
+    order = np.argsort(group, kind="stable")
     pos = np.empty_like(order)
+    pos[order] = np.arange(order.size)
+    row_band = np.maximum.reduceat(pos[row] - pos[low.indices], low.indptr[:-1])  # diagonal in every row
+    # each group's kind: its bandwidth's index in _BAND_EDGES, that size if wider (SuperLU), one more if over
+    # _BIG_GROUP (skipped); the unknowns ordered by kind, group, grid order
+    kind = np.searchsorted(_BAND_EDGES, np.maximum.reduceat(row_band[order], np.cumsum(size) - size))
+    kind[size > _BIG_GROUP] = _BAND_EDGES.size + 1
+    order = order[np.argsort(kind[group[order]], kind="stable")]
     pos[order] = np.arange(order.size)
     bounds = np.searchsorted(kind[group[order]], np.arange(_BAND_EDGES.size + 2))
     pr, pc = pos[row], pos[low.indices]
@@ -96,19 +110,6 @@ def group_solver(reg: scipy.sparse.spmatrix, group: np.ndarray, n_groups: int):
     return solve, skipped
 
 
-def _block_order(low: scipy.sparse.csr_matrix, row: np.ndarray, group: np.ndarray, n_groups: int):
-    """(unknowns ordered by solver kind, group, grid order; each group's kind: its bandwidth's index
-    in ``_BAND_EDGES``, that size if wider (SuperLU), one more if over ``_BIG_GROUP`` (skipped))."""
-    size = np.bincount(group, minlength=n_groups)
-    order = np.argsort(group, kind="stable")
-    pos = np.empty_like(order)
-    pos[order] = np.arange(order.size)
-    row_band = np.maximum.reduceat(pos[row] - pos[low.indices], low.indptr[:-1])  # diagonal in every row
-    kind = np.searchsorted(_BAND_EDGES, np.maximum.reduceat(row_band[order], np.cumsum(size) - size))
-    kind[size > _BIG_GROUP] = _BAND_EDGES.size + 1
-    return order[np.argsort(kind[group[order]], kind="stable")], kind
-
-
 def _factor(kind: int, pi: np.ndarray, pj: np.ndarray, data: np.ndarray, n: int):
     """The solve of an SPD matrix's lower triangle: banded Cholesky of ``_BAND_EDGES[kind]``, else SuperLU."""
     if kind < _BAND_EDGES.size:
@@ -122,17 +123,6 @@ def _factor(kind: int, pi: np.ndarray, pj: np.ndarray, data: np.ndarray, n: int)
         full, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True}
     )
     return lu.solve
-
-
-def _wild(x, group, n_groups, mat, k_rows, k_vals) -> np.ndarray:
-    """Groups whose solution is not finite or far outside their known stencil values (:func:`beyond`)."""
-    has = np.diff(mat.indptr) > 0
-    row_group = np.full(mat.shape[0], -1)
-    row_group[has] = group[mat.indices[mat.indptr[:-1][has]]]
-    kg = row_group[k_rows]
-    lo, hi = _group_range(kg[kg >= 0], k_vals[kg >= 0], n_groups)
-    xlo, xhi = _group_range(group, np.where(np.isfinite(x), x, np.inf), n_groups)
-    return beyond((lo, hi), (xlo, xhi), np.bincount(group, minlength=n_groups))
 
 
 def beyond(known: tuple, solved: tuple, size) -> np.ndarray:

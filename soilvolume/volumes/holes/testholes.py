@@ -8,23 +8,23 @@ from functools import lru_cache
 import numpy as np
 import scipy
 
-from .interpolate import filler, harmonic_instead, stencil_system
+from .interpolate import fill, harmonic_instead, stencil_system
 from .solve import TIKHONOV, beyond, group_solver, refined
 
 MAX_TEST_RADIUS = 32.0  # cells: the largest test hole of the refill error
 
 
 def fill_error(
-    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, seed: int = 0, per_cell=False
-) -> float | tuple[float, float]:
-    """One-sigma error (m) of a hole's MEAN height, on discs of ``radius`` cut from ``usable`` ``h`` (NaN if no room);
-    ``per_cell``: (RMS, that)."""
+    h: np.ndarray, usable: np.ndarray, method: str = "biharmonic", radius: float = 3.0, seed: int = 0
+) -> tuple[float, float]:
+    """(RMS, one-sigma error of a hole's MEAN height) of the fill (m), on discs of ``radius`` cut from ``usable`` ``h``
+    (NaN if no room)."""
     r = int(np.ceil(radius))
     yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
     step = 2 * r + 5
     cand = np.argwhere(disc_erosion_every(usable & np.isfinite(h), radius + 2, step)) * step
     if len(cand) < 5:
-        return (float("nan"),) * 2 if per_cell else float("nan")
+        return float("nan"), float("nan")
     rng = np.random.default_rng(seed)
     centres = cand[rng.choice(len(cand), min(40, len(cand)), replace=False)]  # 40 test holes
     labels = np.zeros(h.shape, np.int32)
@@ -33,29 +33,27 @@ def fill_error(
     targets = labels > 0
     values = np.where(targets, np.nan, h)
     filled = discs_filled(values, targets, centres, disc) if method == "biharmonic" else None
-    err = (filler(method)(values, targets) if filled is None else filled) - h
+    err = (fill(values, targets, method) if filled is None else filled) - h
     mean_err = scipy.ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
-    mean = float(np.sqrt(np.mean(np.square(mean_err))))
-    return (float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), mean) if per_cell else mean
+    return float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), float(np.sqrt(np.mean(np.square(mean_err))))
 
 
 def error_by_radius(
-    h: np.ndarray, usable: np.ndarray, method: str, radius: np.ndarray, seed: int, per_cell=False, floor=0.0
+    h: np.ndarray, usable: np.ndarray, method: str, radius: np.ndarray, seed: int, floor=0.0
 ) -> np.ndarray | None:
     """:func:`fill_error` at radii 1, 2, 4 ... up to :data:`MAX_TEST_RADIUS`, interpolated in log radius at each
-    ``radius`` (at least ``floor``); None without room."""
+    ``radius`` (at least ``floor``): (radii, 2); None without room."""
     ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
     rows = []
     for r in ladder:
-        e = np.atleast_1d(fill_error(h, usable, method, r, seed=seed, per_cell=per_cell))
+        e = fill_error(h, usable, method, r, seed=seed)
         if np.isfinite(e).all():
             rows.append((r, *e))
     if not rows:
         return None
     r_m, *e_m = np.log(np.maximum(np.array(rows), floor)).T
     at = np.log(np.maximum(radius, 1.0))
-    out = np.exp(np.stack([np.interp(at, r_m, e) for e in e_m], axis=1))
-    return out if per_cell else out[:, 0]
+    return np.exp(np.stack([np.interp(at, r_m, e) for e in e_m], axis=1))
 
 
 def discs_filled(values: np.ndarray, targets: np.ndarray, centres: np.ndarray, disc: np.ndarray) -> np.ndarray | None:

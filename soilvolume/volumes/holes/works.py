@@ -47,7 +47,11 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
     change, stable = known & change, known & ~change
     out = values.copy()
     labels, n = scipy.ndimage.label(hole, FOUR)
-    candidates = _both_sides(labels, n, change, stable)
+    grown = labels  # each hole whose rim (on the labels grown by RING) may hold enough of both sides
+    for _ in range(RING):
+        grown = np.where(grown > 0, grown, scipy.ndimage.grey_dilation(grown, footprint=FOUR))
+    idx = np.arange(n + 1)
+    candidates = np.minimum(scipy.ndimage.sum(change, grown, idx), scipy.ndimage.sum(stable, grown, idx)) >= MIN_SIDE
     for k, box in enumerate(scipy.ndimage.find_objects(labels), start=1):
         if not candidates[k]:
             continue
@@ -57,30 +61,17 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
         n_change, n_stable = int((rim & change[box]).sum()), int((rim & stable[box]).sum())
         if min(n_change, n_stable) < max(MIN_SIDE, MIN_SHARE * int(rim.sum())):
             continue
-        nearer_change = _change_side(cells, change[box], stable[box], method)
+        # the works' side: the signed distance to the outline interpolated across the hole, else the nearer rim
+        to_change = scipy.ndimage.distance_transform_edt(~change[box])
+        to_stable = scipy.ndimage.distance_transform_edt(~stable[box])
+        signed = np.where(change[box], to_stable - 1.0, np.where(stable[box], -to_change, np.nan))
+        signed = fill(np.where(cells, np.nan, signed), cells, method)
+        nearer_change = np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
         for side, own in ((cells & nearer_change, change[box]), (cells & ~nearer_change, stable[box])):
             filled = fill(np.where(own | side, values[box], np.nan), side, method)
             ok = side & np.isfinite(filled)
             out[box][ok] = filled[ok]
     return out
-
-
-def _change_side(cells: np.ndarray, change: np.ndarray, stable: np.ndarray, method: str) -> np.ndarray:
-    """The hole ``cells`` on the works' side: the signed distance to the outline interpolated across it, else the nearer
-    rim."""
-    to_change, to_stable = scipy.ndimage.distance_transform_edt(~change), scipy.ndimage.distance_transform_edt(~stable)
-    signed = np.where(change, to_stable - 1.0, np.where(stable, -to_change, np.nan))
-    signed = fill(np.where(cells, np.nan, signed), cells, method)
-    return np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
-
-
-def _both_sides(labels: np.ndarray, n: int, change: np.ndarray, stable: np.ndarray) -> np.ndarray:
-    """Per hole, whether its rim (on the labels grown by ``RING``) may hold enough of both sides."""
-    grown = labels
-    for _ in range(RING):
-        grown = np.where(grown > 0, grown, scipy.ndimage.grey_dilation(grown, footprint=FOUR))
-    idx = np.arange(n + 1)
-    return np.minimum(scipy.ndimage.sum(change, grown, idx), scipy.ndimage.sum(stable, grown, idx)) >= MIN_SIDE
 
 
 def outline_sigma(
@@ -107,7 +98,7 @@ def fill_own_holes(
     parts, m = scipy.ndimage.label(hole, FOUR)
     share = scipy.ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
-    if cell_area > 0 and shared.any():
+    if shared.any():
         bulk, bulk_sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
         own |= bulk
         sigma[bulk] = bulk_sigma[bulk]
@@ -125,7 +116,7 @@ def fill_own_holes(
         change = np.r_[False, detail > DETAIL_RATIO * scale[:, 0]]
         # no machine: the measured survey's departure from its own fill is beyond any machine's volume
         bulk = np.abs(scipy.ndimage.sum(np.nan_to_num(out[seen] - seen_fill), labels, idx)) * cell_area > BULK_M3
-        change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | (bulk if cell_area > 0 else False)
+        change[1:] &= (_rim_change(out[0] - out[1], labels, n) > detail / 2) | bulk
         if change.any():  # a patch the survey cannot fill whole is left
             whole = scipy.ndimage.minimum(np.isfinite(fill(out[miss], change[labels], method)), labels, idx)
             change &= np.r_[False, whole] > 0
@@ -146,17 +137,16 @@ def _rim_change(d: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
     """Per patch, its rim's change (m): the larger of its typical |difference| and its 10-90 % spread."""
     grown = scipy.ndimage.grey_dilation(labels, footprint=np.ones((2 * RIM + 1,) * 2, bool))
     ring = (labels == 0) & (grown > 0) & np.isfinite(d)
-    out = np.zeros(n)
-    lab, val = grown[ring], d[ring]
-    for k in np.unique(lab):
-        v = val[lab == k]
-        out[k - 1] = max(float(np.percentile(np.abs(v), 75)), float(np.percentile(v, 90) - np.percentile(v, 10)))
-    return out
+
+    def change(v: np.ndarray) -> float:
+        return max(float(np.percentile(np.abs(v), 75)), float(np.percentile(v, 90) - np.percentile(v, 10)))
+
+    return scipy.ndimage.labeled_comprehension(d[ring], grown[ring], np.arange(1, n + 1), change, float, 0.0)
 
 
 def _own_detail(h: np.ndarray, method: str, radius: np.ndarray, seed: int) -> np.ndarray:
     """Per radius, the survey's own (per-cell RMS, mean-height) fill error (infinite without room: never change)."""
-    out = error_by_radius(h, np.isfinite(h), method, radius, seed, per_cell=True, floor=1e-9)
+    out = error_by_radius(h, np.isfinite(h), method, radius, seed, floor=1e-9)
     return np.full((radius.size, 2), np.inf) if out is None else out
 
 
@@ -168,7 +158,13 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
     for k in ids[size[ids] * cell_area >= BULK_MIN_M2]:  # the small ones are the difference's to fill
         cells = parts == k
         region = scipy.ndimage.binary_fill_holes(cells)  # cells measured in both inside it anchor nothing
-        departures = [_departure(e, region, cell_area) for e in out]
+        departures = []  # each survey's cells in it off its own harmonic fill: (RMS m, m3; a pile's over PILE_M3)
+        for e in out:
+            dd = (e - fill(np.where(region, np.nan, e), region, "harmonic"))[region & np.isfinite(e)]
+            dd = dd[np.isfinite(dd)]
+            departures.append(
+                (float(np.sqrt(np.mean(dd * dd))) if dd.size else 0.0, float(np.abs(dd).sum()) * cell_area)
+            )
         if not any(m3 > PILE_M3 for _, m3 in departures):
             continue
         radius = np.array([np.sqrt(region.sum() / np.pi)])
@@ -185,19 +181,6 @@ def _bulk_holes(out: list, parts: np.ndarray, ids: np.ndarray, seed: int, cell_a
         done |= ok
         sigma[ok] = err
     return done, sigma
-
-
-def _departure(e: np.ndarray, region: np.ndarray, cell_area: float) -> tuple[float, float]:
-    """(RMS m, volume m3) of a survey's cells in ``region`` off its own harmonic fill (a pile's over
-    :data:`PILE_M3`)."""
-    seen = region & np.isfinite(e)
-    if not seen.any():
-        return 0.0, 0.0
-    dd = (e - fill(np.where(region, np.nan, e), region, "harmonic"))[seen]
-    dd = dd[np.isfinite(dd)]
-    if dd.size == 0:
-        return 0.0, 0.0
-    return float(np.sqrt(np.mean(dd * dd))), float(np.abs(dd).sum()) * cell_area
 
 
 def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area: float, seen_once: np.ndarray) -> dict:
@@ -256,9 +239,8 @@ def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: fl
     near, far = _rings(cells, np.isfinite(diff))
     d_near = float(np.median(diff[near])) if near.any() else 0.0
     d_far = float(np.median(diff[far])) if far.any() else d_near
-    step = (d_near - d_far) / 2.5  # per cell, going in
-    if step * d_near <= 0:  # the rim does not deepen inwards: nothing to carry on
-        step = 0.0
+    step = (d_near - d_far) / 2.5  # per cell, going in; none if the rim does not deepen inwards
+    step = 0.0 if step * d_near <= 0 else step
     dist = scipy.ndimage.distance_transform_edt(cells)
     extra = np.clip(step * dist, -DEEPER * abs(d_near), DEEPER * abs(d_near))[cells]
     extra_m3 = float(extra.sum()) * cell_area
