@@ -36,6 +36,17 @@ def test_harmonic_fill_is_exact_on_a_plane():
     assert np.allclose(out, plane, atol=1e-9)
 
 
+def test_large_harmonic_systems_use_conjugate_gradients(monkeypatch):
+    """Above the direct solver's size the iterative path (SciPy's ``cg``) gives the direct answer."""
+    rng = np.random.default_rng(3)
+    values = rng.normal(0, 1, (50, 70)).cumsum(axis=1)
+    targets = np.zeros(values.shape, bool)
+    targets[5:45, 10:60] = True
+    direct = harmonic_fill(values, targets)
+    monkeypatch.setattr("soilvolume.volumes.holes.interpolate._DIRECT_MAX", 100)
+    assert np.allclose(harmonic_fill(values, targets), direct, atol=1e-6)
+
+
 def test_refill_epoch_recovers_pile_volume():
     """Cells of one epoch holding a single stray point (an outlier becomes the whole cell height)
     are refilled from that epoch's neighbours; the other epoch's heights are kept."""

@@ -63,7 +63,7 @@ def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
         left &= ~ok
         sigma *= 2.0
     out[todo], _ = scipy.sparse.linalg.cg(
-        a, rhs, x0=guess[todo], tol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag)
+        a, rhs, x0=guess[todo], rtol=1e-9, maxiter=5000, M=scipy.sparse.diags(1.0 / diag)
     )
     return out
 
