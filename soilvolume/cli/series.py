@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from .. import api
-from .feedback import hooks, send_result
+from .feedback import hooks, result
 from .flags import add_options, add_progress, options_from
 
 NAME = "series"
@@ -58,10 +58,8 @@ def run(ns: argparse.Namespace) -> int:
     """Run the series; print the ledger (or send the result through the protocol)."""
     dates = None if ns.dates is None else ns.dates.split(",")
     res = api.series(ns.epochs, ns.out, options_from(ns), dates=dates, overwrite=ns.overwrite, hooks=hooks(ns))
-    if send_result(ns, report=res.report, outputs=res.outputs):
-        return 0
-    print("\n".join([*ledger_lines(res.report), f"outputs in {ns.out}"]))
-    return 0
+    data = {"report": res.report, "outputs": res.outputs}
+    return result(ns, data, [*ledger_lines(res.report), f"outputs in {ns.out}"])
 
 
 def ledger_lines(report: dict) -> list[str]:

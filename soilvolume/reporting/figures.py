@@ -8,10 +8,10 @@ import math
 from typing import Any
 
 import numpy as np
+from markupsafe import Markup
 
 from ..core.types import GridSpec
-from .raster import _block_any, _repeat, block_mean
-from .svgparts import DISPLAY, colour_bar, extent_text, map_figure
+from .svgparts import DISPLAY, _block_any, _repeat, block_mean, colour_bar, extent_text, map_figure
 
 
 def ramp(colours: str) -> np.ndarray:
@@ -139,7 +139,7 @@ def difference_map(
     title: str = "DEM of difference",
     ident: str = "difference-map",
     change: np.ndarray | None = None,
-) -> str | None:
+) -> Markup | None:
     """HTML figure: ``diff`` red (cut) to blue (fill), hillshaded by ``relief`` (else ``diff``), refilled
     cells outlined black, the change areas (``change``) green; None without data."""
     d = _float_2d(diff)
@@ -172,7 +172,7 @@ def difference_map(
 
 def residual_map(
     residual: np.ndarray, grid: GridSpec, relief: np.ndarray | None = None, ident: str = "residual-map"
-) -> str | None:
+) -> Markup | None:
     """HTML figure: stable-ground residuals (after correction) on a symmetric ramp, over a faint grey
     hillshade of ``relief`` for context; None without data."""
     r = _float_2d(residual)

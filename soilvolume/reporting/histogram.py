@@ -7,6 +7,7 @@ import html
 import math
 
 import numpy as np
+from markupsafe import Markup
 
 from .figures import RDBU, _float_2d, _positive, colour_ramp
 from .svgparts import count_label, halo, round_ticks, tick_label
@@ -94,7 +95,7 @@ def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str,
 
 def histogram(
     diff: np.ndarray, lod: float | None = None, confidence: float | None = None, ident: str = "histogram"
-) -> str | None:
+) -> Markup | None:
     """HTML figure: inline-SVG histogram of the finite differences with the ±LoD band shaded; None
     without data."""
     d = _float_2d(diff)
@@ -112,4 +113,4 @@ def histogram(
         f"(0.5–99.5th percentiles){f'; {hidden:,} cells beyond not shown' if hidden else ''}. "
         + ("Shaded: level of detection." if lod else "No level of detection in the report.")
     )
-    return f"<figure>{_hist_svg(counts, lim, lod, label, ident)}<figcaption>{caption}</figcaption></figure>"
+    return Markup(f"<figure>{_hist_svg(counts, lim, lod, label, ident)}<figcaption>{caption}</figcaption></figure>")

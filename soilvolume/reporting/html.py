@@ -8,6 +8,8 @@ from dataclasses import MISSING, fields
 from datetime import datetime
 from pathlib import Path
 
+from markupsafe import Markup
+
 from ..core import wording
 from ..core.types import GridSpec
 from ..options import Options
@@ -121,16 +123,16 @@ def correction(report: dict) -> dict:
     return {"method": fmt(c.get("method") or params.get("method")), "terms": terms, "residuals": residuals}
 
 
-def figures(report: dict, arrays: dict, grid: GridSpec) -> list[tuple[str, object]]:
+def figures(report: dict, arrays: dict, grid: GridSpec) -> list[tuple[str, Markup | None]]:
     """(title, figure or None) of the difference map, the histogram and the residual map."""
     diff, relief = arrays.get("difference"), arrays.get("dem_after")
     lod = get(report, "uncertainty", "lod_m") or get(report, "uncertainty_m3", "lod_m") or get(report, "lod_m")
     conf = get(report, "uncertainty", "confidence") or get(report, "uncertainty_m3", "confidence")
     change = arrays.get("change")
     return [
-        ("Difference map", page.figure(difference_map(diff, grid, relief, arrays.get("filled_mask"), change=change))),
-        ("Histogram", page.figure(histogram(diff, lod, conf))),
-        ("Stable-ground residuals", page.figure(residual_map(arrays.get("residual"), grid, relief))),
+        ("Difference map", difference_map(diff, grid, relief, arrays.get("filled_mask"), change=change)),
+        ("Histogram", histogram(diff, lod, conf)),
+        ("Stable-ground residuals", residual_map(arrays.get("residual"), grid, relief)),
     ]
 
 
@@ -151,7 +153,7 @@ def render_html(report: dict, arrays: dict, grid: GridSpec, run_date: str | None
         quantities=earthworks.quantities(report),
         grade=earthworks.grade(report),
         figures=figures(report, arrays, grid),
-        nonsoil_map=page.figure(excluded.classes_map(arrays.get("classes"), grid, arrays.get("dem_after"))),
+        nonsoil_map=excluded.classes_map(arrays.get("classes"), grid, arrays.get("dem_after")),
         excluded=excluded.tables(report),
         uncertainty=uncertainty(report),
         correction=correction(report),

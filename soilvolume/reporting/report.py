@@ -33,16 +33,8 @@ def _clean(v: Any) -> Any:
 
 
 def stage_dict(q: StageQuality) -> dict:
-    return {
-        "method": q.method,
-        "fitness": q.fitness,
-        "rmse": q.rmse,
-        "accepted": q.accepted,
-        "seconds": q.seconds,
-        "note": q.note,
-        "poses_beyond_prior": q.beyond_prior,
-        "transform_local": q.transform,
-    }
+    fit = {k: getattr(q, k) for k in ("method", "fitness", "rmse", "accepted", "seconds", "note")}
+    return {**fit, "poses_beyond_prior": q.beyond_prior, "transform_local": q.transform}
 
 
 def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -123,9 +115,7 @@ def nonsoil_lines(report: dict) -> list[str]:
 def quality_lines(report: dict) -> list[str]:
     """The quality verdict and its reasons, one line each."""
     q = report.get("quality")
-    if not q:
-        return []
-    return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]]
+    return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]] if q else []
 
 
 def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:

@@ -7,6 +7,7 @@ import html
 from pathlib import Path
 
 import numpy as np
+from markupsafe import Markup
 
 from ..core.types import GridSpec
 from . import page
@@ -28,7 +29,7 @@ def running_totals(report: dict) -> dict[str, list[float]]:
     return out
 
 
-def chart_svg(report: dict) -> str:
+def chart_svg(report: dict) -> Markup:
     """Cumulative cut, fill and net (m3) against the epochs (their dates where known)."""
     totals = running_totals(report)
     w, h, left, right, top, bottom = 760, 300, 72, 120, 14, 52
@@ -63,7 +64,7 @@ def chart_svg(report: dict) -> str:
         parts.append(f'<text x="{left + pw + 6}" y="{y_end + 4:.1f}" fill="{colour}">{label}</text>')
     parts.append(f'<line x1="{left}" x2="{left + pw}" y1="{sy(0):.1f}" y2="{sy(0):.1f}" stroke="#888"/>')
     parts.append(f'<text x="14" y="{top + ph / 2:.0f}" transform="rotate(-90 14 {top + ph / 2:.0f})">m³</text>')
-    return (
+    return Markup(
         f'<figure><svg class=plot viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-size="12">'
         + "".join(parts)
         + "</svg><figcaption>Cumulative cut and fill since the first survey (running sums of the "
@@ -109,17 +110,17 @@ def epochs(report: dict) -> list[dict]:
 
 def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray) -> str:
     """The page of ``series`` (its periods and cumulative with their differences)."""
-    maps = []
-    for c in [*series.periods, series.cumulative]:
-        title = f"E{c.end} − E{c.start}"
-        fig = difference_map(c.diff, grid, relief, series.refilled, title, f"diff-{c.start}-{c.end}")
-        maps.append((title, page.figure(fig)))
+    maps = [
+        (t, difference_map(c.diff, grid, relief, series.refilled, t, f"diff-{c.start}-{c.end}"))
+        for c in [*series.periods, series.cumulative]
+        for t in [f"E{c.end} − E{c.start}"]
+    ]
     return page.render(
         "series.html.j2",
         version=fmt(report["software"]["version"]),
         confidence=fmt(100 * report["options"]["lod_confidence"], 0),
         ledger=ledger(report),
-        chart=page.figure(chart_svg(report)),
+        chart=chart_svg(report),
         epochs=epochs(report),
         progress=progress_table(report),
         figures=maps,
