@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from .. import api
+from ..reporting.serieshtml import changes
 from .feedback import hooks, result
 from .flags import add_options, add_progress, options_from
 
@@ -65,11 +66,11 @@ def run(ns: argparse.Namespace) -> int:
 def ledger_lines(report: dict) -> list[str]:
     """The ledger in words: one line per period and the cumulative, each with its quality
     verdict and reasons."""
-    rows = [(f"period {k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
     lines = []
-    for name, p in rows:
+    for name, p in changes(report):
         v, u = p["volume_m3"], p["uncertainty_m3"]
         when = " -> ".join(d or "?" for d in p["dates"])
+        name = name if name == "cumulative" else f"period {name}"
         lines.append(
             f"{name} E{p['from']} -> E{p['to']} ({when}): net {v['net']:+.2f} ± {u['net']:.2f} m3  "
             f"cut {v['cut']:.2f} ± {u['cut']:.2f}  fill {v['fill']:.2f} ± {u['fill']:.2f}"
