@@ -59,24 +59,6 @@ def changes(report: dict) -> list[tuple[str, dict]]:
     return [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
 
 
-def ledger(report: dict) -> list[dict]:
-    """A row per period and the cumulative: epochs, dates, net/cut/fill with their ±, verdict, reasons."""
-    rows = []
-    for name, p in changes(report):
-        v, u, q = p["volume_m3"], p["uncertainty_m3"], p.get("quality") or {}
-        rows.append(
-            {
-                "name": f"{name}: E{p['from']} → E{p['to']}",
-                "short": f"{name} (E{p['from']} → E{p['to']})",
-                "dates": " → ".join(d or "?" for d in p["dates"]),
-                "volumes": [pm(v[k], u[k]) for k in ("net", "cut", "fill")] + [fmt(v["below_detection"])],
-                "verdict": str(q.get("verdict") or "–"),
-                "reasons": [str(m) for m in q.get("messages") or []],
-            }
-        )
-    return rows
-
-
 def epochs(report: dict) -> list[dict]:
     """A row per epoch: date and where it came from, file, points, registration into E0."""
     rows = []
@@ -98,9 +80,11 @@ def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray)
     ]
     return page.render(
         "series.html.j2",
+        fmt=fmt,
+        pm=pm,
         version=fmt(report["software"]["version"]),
         confidence=fmt(100 * report["options"]["lod_confidence"], 0),
-        ledger=ledger(report),
+        ledger=changes(report),
         chart=chart(report),
         epochs=epochs(report),
         progress=progress_table(report),
