@@ -15,12 +15,6 @@ from .svgparts import count_label, halo, round_ticks, tick_label
 _HIST_BINS = 71
 
 
-def _hist_limit(v: np.ndarray, lod: float | None) -> float:
-    """Symmetric histogram range: the 0.5-99.5 percentiles (of a subsample), wide enough for ±1.5 LoD."""
-    lo, hi = np.percentile(v[:: max(1, v.size // 250_000)], [0.5, 99.5])
-    return max(abs(float(lo)), abs(float(hi)), 1.5 * (lod or 0.0), 1e-3)
-
-
 def _lod_band(sx, top: float, ph: float, lod: float) -> list[str]:
     """The shaded ±LoD band and its dashed edges (``sx``: x in metres -> px)."""
     band = (
@@ -103,7 +97,8 @@ def histogram(
         return None
     v = d[np.isfinite(d)]
     lod = _positive(lod)
-    lim = _hist_limit(v, lod)
+    lo, hi = np.percentile(v[:: max(1, v.size // 250_000)], [0.5, 99.5])  # of a subsample; wide enough for ±1.5 LoD
+    lim = max(abs(float(lo)), abs(float(hi)), 1.5 * (lod or 0.0), 1e-3)
     counts, _ = np.histogram(v, bins=_HIST_BINS, range=(-lim, lim))
     conf = _positive(confidence)
     label = f"±LoD{f'{conf * 100:g}' if conf and conf < 1 else ''} = {lod:.3f} m" if lod else ""

@@ -38,11 +38,6 @@ def block_mean(a: np.ndarray, k: int) -> np.ndarray:
         return np.where(count > 0, total / count, np.nan)
 
 
-def _block_any(m: np.ndarray, k: int) -> np.ndarray:
-    m = np.asarray(m, bool)
-    return m if k <= 1 else _fold(_fold(m, k, 0), k, 1) > 0
-
-
 def _repeat(a: np.ndarray, f: int) -> np.ndarray:
     return a if f <= 1 else np.repeat(np.repeat(a, f, axis=0), f, axis=1)
 
@@ -90,10 +85,6 @@ def tick_label(v: float, step: float) -> str:
     return "0" if float(s) == 0 else s.replace("-", "−")
 
 
-def metres(length: float) -> str:
-    return f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
-
-
 def count_label(c: float) -> str:
     for div, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
         if c >= div:
@@ -109,6 +100,7 @@ def halo(size: float) -> str:
 def scale_bar(width: float, height: float, span_m: float) -> str:
     """Bottom-left scale bar, half black half white, with a nice length in metres."""
     length = nice_length(span_m)
+    label = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
     px, x, y = length / span_m * width, 14.0, height - 16.0
     box = max(px, 44.0) + 12
     return (
@@ -116,7 +108,7 @@ def scale_bar(width: float, height: float, span_m: float) -> str:
         f'fill-opacity=".75"/><rect x="{x}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#000"/>'
         f'<rect x="{x + px / 2:.1f}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#fff" '
         f'stroke="#000"/><text x="{x + px / 2:.1f}" y="{y - 5:.1f}" text-anchor="middle" '
-        f'font-size="13">{metres(length)}</text>'
+        f'font-size="13">{label}</text>'
     )
 
 
