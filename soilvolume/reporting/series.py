@@ -158,11 +158,9 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec, graded=None) ->
     for k, d in enumerate(series.to_e0):
         desc = f"epoch {k} heights in E0's frame, corrected once relative to E0 (m)"
         write_grid(out.path(dem_name(k)), base + d + z0, grid, desc)
-    for c in series.periods:
-        desc = f"epoch {c.end} - epoch {c.start} (m)"
-        write_grid(out.path(difference_name(c.start, c.end)), c.diff, grid, desc)
-    c = series.cumulative
-    write_grid(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
+    for c in [*series.periods, series.cumulative]:  # the cumulative's start is E0
+        name = difference_name(c.start, c.end, c is series.cumulative)
+        write_grid(out.path(name), c.diff, grid, f"epoch {c.end} - epoch {c.start} (m)")
 
 
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer, graded=None) -> dict:
