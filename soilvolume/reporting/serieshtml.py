@@ -59,18 +59,6 @@ def changes(report: dict) -> list[tuple[str, dict]]:
     return [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
 
 
-def epochs(report: dict) -> list[dict]:
-    """A row per epoch: date and where it came from, file, points, registration into E0."""
-    rows = []
-    for e in report["epochs"]:
-        r = e["registration"]
-        rot = "reference" if r.get("reference") else f"{fmt(r.get('rotation_deg'), 3)}° / {fmt(r.get('shift_m'), 3)} m"
-        source = e.get("date_source") if e.get("date") else None
-        cells = [Path(e["path"]).name, fmt(e["points"]), rot]
-        rows.append({"name": f"E{e['index']}", "date": e.get("date") or "–", "source": source, "cells": cells})
-    return rows
-
-
 def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray) -> str:
     """The page of ``series`` (its periods and cumulative with their differences)."""
     maps = [
@@ -86,7 +74,8 @@ def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray)
         confidence=fmt(100 * report["options"]["lod_confidence"], 0),
         ledger=changes(report),
         chart=chart(report),
-        epochs=epochs(report),
+        epochs=report["epochs"],
+        file_name=lambda path: Path(path).name,
         progress=progress_table(report),
         figures=maps,
     )
