@@ -63,14 +63,12 @@ def _column(rows: list[dict], key: str) -> np.ndarray:
 def zone_row(zone: dict) -> dict:
     """One row of :data:`ZONE_COLUMNS` from report.json's ``zones`` item (no interval: empty)."""
     pm = zone.get("uncertainty_m3") or {}
-    row = {"id": zone["id"], "name": zone["name"], "area_m2": zone["area_m2"]}
+    row = {k: zone.get(k) for k in ZONE_COLUMNS if not k.endswith("_m3")}  # id, name, areas and flags
     for part in ("net", "cut", "fill"):
         value, half = zone[part], pm.get(part)
         row[f"{part}_m3"] = value
         row[f"{part}_low_m3"] = None if half is None else value - half
         row[f"{part}_high_m3"] = None if half is None else value + half
-    for key in ("zone_area_m2", "polygon_area_m2", "outside_grid", "repaired"):
-        row[key] = zone.get(key)
     return row
 
 
