@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from soilvolume.core.types import GridSpec
-from soilvolume.reporting.changeareas import features, patches
+from soilvolume.reporting.vectors import features, patches
 
 
 def test_polygons_hold_the_headline_volumes(misaligned_result):

@@ -19,9 +19,8 @@ from conftest import run_cli, run_python, write_scene
 
 from soilvolume.core.types import GridSpec
 from soilvolume.reporting.figures import PUOR, RDBU, colour_ramp, difference_map, hillshade
-from soilvolume.reporting.headline import zero_notes
-from soilvolume.reporting.html import render_html, write_html
-from soilvolume.reporting.raster import block_mean, png_bytes
+from soilvolume.reporting.html import render_html, write_html, zero_notes
+from soilvolume.reporting.svgparts import block_mean, png_bytes
 
 GRID = GridSpec(xmin=500000.0, ymax=3900100.0, cell=0.5, rows=160, cols=200, origin=(500000.0, 3900000.0, 0.0))
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

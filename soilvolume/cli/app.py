@@ -11,7 +11,7 @@ import re
 import sys
 import traceback
 
-from ..core.interrupt import Interrupted, handle_signals
+from ..core.interrupt import handle_signals
 from ..core.memlimit import out_of_memory, short_of_memory
 from ..core.nativelog import hold_native_stderr, quiet_library_warnings
 from ..core.outputs import os_problem
@@ -103,10 +103,8 @@ def main(argv: list[str] | None = None) -> int:
 def _run(ns: argparse.Namespace) -> int:
     try:
         return command(ns.command).run(ns)
-    except Interrupted as exc:
-        return _fail(str(exc), exc.exit_code, exc)
-    except SoilVolumeError as exc:
-        return _fail(str(exc), exc=exc)
+    except SoilVolumeError as exc:  # an Interrupted one exits 130/143
+        return _fail(str(exc), getattr(exc, "exit_code", 1), exc)
     except OSError as exc:
         return _fail(str(os_problem(exc)))
     except MemoryError:

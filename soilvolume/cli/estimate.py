@@ -8,7 +8,7 @@ from pathlib import Path
 from .. import api
 from ..reporting import summary
 from ..reporting.report import summary_lines
-from .feedback import hooks, send_result
+from .feedback import hooks, result
 from .flags import add_options, add_progress, options_from
 
 NAME = "estimate"
@@ -80,10 +80,8 @@ def run(ns: argparse.Namespace) -> int:
         before_pipeline=ns.before_pipeline,
         after_pipeline=ns.after_pipeline,
     )
-    if send_result(ns, report=res.report, outputs=res.outputs, summary=front_end_summary(res.keyed or res.report)):
-        return 0
-    print("\n".join([*summary_lines(res.report), f"outputs in {ns.out}"]))
-    return 0
+    data = {"report": res.report, "outputs": res.outputs, "summary": front_end_summary(res.keyed or res.report)}
+    return result(ns, data, [*summary_lines(res.report), f"outputs in {ns.out}"])
 
 
 def front_end_summary(report: dict) -> dict:

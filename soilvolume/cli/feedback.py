@@ -23,15 +23,10 @@ def hooks(ns: argparse.Namespace) -> Hooks:
     return Hooks(progress=show)
 
 
-def send_result(ns: argparse.Namespace, **data) -> bool:
-    """Send a command's result as the protocol's last line; False without the protocol."""
+def result(ns: argparse.Namespace, data: dict, lines: list[str] | None = None) -> int:
+    """Send ``data`` as the protocol's last line, else print ``lines`` (default: ``data`` as JSON); exit 0."""
     if ns.protocol is not None:
         ns.protocol.emit("result", command=ns.command, **data)
-    return ns.protocol is not None
-
-
-def result(ns: argparse.Namespace, data: dict) -> int:
-    """Send ``data`` through the protocol, else print it as JSON; the exit status 0."""
-    if not send_result(ns, **data):
-        print(json.dumps(data, indent=2))
+    else:
+        print("\n".join(lines) if lines is not None else json.dumps(data, indent=2))
     return 0

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 
 from .. import api
-from .feedback import hooks, send_result
+from ..reporting.serieshtml import changes
+from .feedback import hooks, result
 from .flags import add_options, add_progress, options_from
 
 NAME = "series"
@@ -58,20 +59,18 @@ def run(ns: argparse.Namespace) -> int:
     """Run the series; print the ledger (or send the result through the protocol)."""
     dates = None if ns.dates is None else ns.dates.split(",")
     res = api.series(ns.epochs, ns.out, options_from(ns), dates=dates, overwrite=ns.overwrite, hooks=hooks(ns))
-    if send_result(ns, report=res.report, outputs=res.outputs):
-        return 0
-    print("\n".join([*ledger_lines(res.report), f"outputs in {ns.out}"]))
-    return 0
+    data = {"report": res.report, "outputs": res.outputs}
+    return result(ns, data, [*ledger_lines(res.report), f"outputs in {ns.out}"])
 
 
 def ledger_lines(report: dict) -> list[str]:
     """The ledger in words: one line per period and the cumulative, each with its quality
     verdict and reasons."""
-    rows = [(f"period {k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
     lines = []
-    for name, p in rows:
+    for name, p in changes(report):
         v, u = p["volume_m3"], p["uncertainty_m3"]
         when = " -> ".join(d or "?" for d in p["dates"])
+        name = name if name == "cumulative" else f"period {name}"
         lines.append(
             f"{name} E{p['from']} -> E{p['to']} ({when}): net {v['net']:+.2f} ± {u['net']:.2f} m3  "
             f"cut {v['cut']:.2f} ± {u['cut']:.2f}  fill {v['fill']:.2f} ± {u['fill']:.2f}"

@@ -7,12 +7,12 @@ import html
 from typing import Any
 
 import numpy as np
+from markupsafe import Markup
 
 from ..core.types import GridSpec
 from ..volumes.quality import sentence
 from .figures import _factors, _float_2d, _like, _shade, hillshade
-from .raster import _repeat
-from .svgparts import extent_text, map_figure
+from .svgparts import _repeat, extent_text, map_figure
 from .text import Table
 
 # excluded.tif codes (volumes/nonsoil.CLASS_CODES) -> colour (as resources/styles/excluded.qml)
@@ -27,7 +27,7 @@ NAMES = {
 }
 
 
-def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "excluded-map") -> str | None:
+def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "excluded-map") -> Markup | None:
     """HTML figure of the class raster over the hillshaded ``relief``; None when every cell is soil."""
     c = np.asarray(classes) if classes is not None else None
     if c is None or c.ndim != 2 or not ((c > 0) & (c < 255)).any():

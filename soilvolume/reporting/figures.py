@@ -8,10 +8,10 @@ import math
 from typing import Any
 
 import numpy as np
+from markupsafe import Markup
 
 from ..core.types import GridSpec
-from .raster import _block_any, _repeat, block_mean
-from .svgparts import DISPLAY, colour_bar, extent_text, map_figure
+from .svgparts import DISPLAY, _repeat, block_mean, colour_bar, extent_text, map_figure
 
 
 def ramp(colours: str) -> np.ndarray:
@@ -124,6 +124,7 @@ def _outline(mask: np.ndarray) -> np.ndarray:
     return mask & ~inner
 
 
+FILLED_OUTLINE, FILLED_CAPTION = (0, 0, 0, 255), "Black outline: refilled cells. "
 CHANGE_OUTLINE = (0, 150, 0, 255)
 CHANGE_CAPTION = (
     "Green outline: the areas of significant change the headline cut and fill are summed over "
@@ -139,7 +140,7 @@ def difference_map(
     title: str = "DEM of difference",
     ident: str = "difference-map",
     change: np.ndarray | None = None,
-) -> str | None:
+) -> Markup | None:
     """HTML figure: ``diff`` red (cut) to blue (fill), hillshaded by ``relief`` (else ``diff``), refilled
     cells outlined black, the change areas (``change``) green; None without data."""
     d = _float_2d(diff)
@@ -152,19 +153,20 @@ def difference_map(
     z = block_mean(rel, k) if rel is not None else shown
     rgba = _shade(colour_ramp(shown, lim, RDBU), hillshade(z * _exaggeration(z, grid.cell * k), grid.cell * k))
     rgba = _repeat(rgba, f)
-    mask = _like(filled_mask, d)
-    if mask is not None and mask.any():
-        rgba[_outline(_repeat(_block_any(mask, k), f))] = (0, 0, 0, 255)
-    areas = _like(change, d)
-    if areas is not None and areas.any():
-        rgba[_outline(_repeat(_block_any(areas, k), f))] = CHANGE_OUTLINE
+    outlined = {
+        "Black outline: refilled cells. ": (filled_mask, (0, 0, 0, 255)),
+        CHANGE_CAPTION: (change, CHANGE_OUTLINE),
+    }
+    said = ""
+    for words, (marks, colour) in outlined.items():
+        if (m := _like(marks, d)) is not None and m.any():  # outlined at display scale
+            rgba[_outline(_repeat(block_mean(np.asarray(m, float), k) > 0, f))] = colour
+            said += words
     caption = (
         f"{html.escape(title)}: after − before, red = cut (lowered), blue = fill (raised), ramp "
         f"±{lim:.3g} m (99th percentile of |difference|; larger values in the end colours), "
         f"hillshaded{' by the after DEM' if rel is not None else ''}. "
-        f"{'Black outline: refilled cells. ' if mask is not None and mask.any() else ''}"
-        f"{CHANGE_CAPTION if areas is not None and areas.any() else ''}"
-        f"Hatched: no data. {extent_text(grid, d.shape, k)}"
+        f"{said}Hatched: no data. {extent_text(grid, d.shape, k)}"
     )
     bar = colour_bar(RDBU, lim, "after − before (m)", ident, ("cut", "fill"))
     return map_figure(ident, title, rgba, d.shape[1] * grid.cell, bar, caption)
@@ -172,7 +174,7 @@ def difference_map(
 
 def residual_map(
     residual: np.ndarray, grid: GridSpec, relief: np.ndarray | None = None, ident: str = "residual-map"
-) -> str | None:
+) -> Markup | None:
     """HTML figure: stable-ground residuals (after correction) on a symmetric ramp, over a faint grey
     hillshade of ``relief`` for context; None without data."""
     r = _float_2d(residual)

@@ -7,6 +7,7 @@ import html
 import math
 
 import numpy as np
+from markupsafe import Markup
 
 from .figures import RDBU, _float_2d, _positive, colour_ramp
 from .svgparts import count_label, halo, round_ticks, tick_label
@@ -14,14 +15,9 @@ from .svgparts import count_label, halo, round_ticks, tick_label
 _HIST_BINS = 71
 
 
-def _hist_limit(v: np.ndarray, lod: float | None) -> float:
-    """Symmetric histogram range: the 0.5-99.5 percentiles (of a subsample), wide enough for ±1.5 LoD."""
-    lo, hi = np.percentile(v[:: max(1, v.size // 250_000)], [0.5, 99.5])
-    return max(abs(float(lo)), abs(float(hi)), 1.5 * (lod or 0.0), 1e-3)
-
-
-def _lod_band(sx, top: float, ph: float, lod: float) -> list[str]:
-    """The shaded ±LoD band and its dashed edges (``sx``: x in metres -> px)."""
+def _lod_marks(sx, top: float, ph: float, right: float, lod: float, label: str) -> tuple[list[str], str]:
+    """The shaded ±LoD band with its dashed edges, and its key at the top right of the plot (``sx``: x in
+    metres -> px; ``right``: the plot's right edge)."""
     band = (
         f'<rect x="{sx(-lod):.1f}" y="{top}" width="{sx(lod) - sx(-lod):.1f}" height="{ph}" '
         'fill="#f39c12" fill-opacity=".3"/>'
@@ -30,16 +26,12 @@ def _lod_band(sx, top: float, ph: float, lod: float) -> list[str]:
         f'<line x1="{sx(x):.1f}" x2="{sx(x):.1f}" y1="{top}" y2="{top + ph}" stroke="#d35400" stroke-dasharray="4 3"/>'
         for x in (-lod, lod)
     ]
-    return [band, *edges]
-
-
-def _lod_legend(right: float, top: float, lod_label: str) -> str:
-    """The band's key at the top right of the plot (``right``: the plot's right edge)."""
-    return (
+    key = (
         f'<rect x="{right - 22}" y="{top + 8}" width="14" height="12" fill="#f39c12" '
         f'fill-opacity=".5"/><text x="{right - 28}" y="{top + 18}" text-anchor="end" '
-        f"{halo(12)}>{html.escape(lod_label)}</text>"
+        f"{halo(12)}>{html.escape(label)}</text>"
     )
+    return [band, *edges], key
 
 
 def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str, ident: str) -> str:
@@ -70,7 +62,8 @@ def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str,
         if c > 0
         for r, g, b in [fills[i, :3].tolist()]
     ]
-    parts += _lod_band(sx, top, ph, lod) if lod else []
+    band, key = _lod_marks(sx, top, ph, left + pw, lod, lod_label) if lod else ([], "")
+    parts += band
     ticks, step = round_ticks(-lim, lim, 8)
     parts += [
         f'<line x1="{sx(t):.1f}" x2="{sx(t):.1f}" y1="{top + ph}" y2="{top + ph + 5}" stroke="#000"/>'
@@ -85,7 +78,7 @@ def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str,
         f'<text transform="translate(16,{top + ph / 2}) rotate(-90)" text-anchor="middle">'
         "cells (log scale)</text>"
     )
-    parts += [_lod_legend(left + pw, top, lod_label)] if lod else []
+    parts.append(key)
     return (
         f'<svg class=plot id="{ident}" viewBox="0 0 {w} {h}" width="{w}" height="{h}" font-size="12" '
         f'role="img"><title>Histogram of after − before differences</title>{"".join(parts)}</svg>'
@@ -94,7 +87,7 @@ def _hist_svg(counts: np.ndarray, lim: float, lod: float | None, lod_label: str,
 
 def histogram(
     diff: np.ndarray, lod: float | None = None, confidence: float | None = None, ident: str = "histogram"
-) -> str | None:
+) -> Markup | None:
     """HTML figure: inline-SVG histogram of the finite differences with the ±LoD band shaded; None
     without data."""
     d = _float_2d(diff)
@@ -102,7 +95,8 @@ def histogram(
         return None
     v = d[np.isfinite(d)]
     lod = _positive(lod)
-    lim = _hist_limit(v, lod)
+    lo, hi = np.percentile(v[:: max(1, v.size // 250_000)], [0.5, 99.5])  # of a subsample; wide enough for ±1.5 LoD
+    lim = max(abs(float(lo)), abs(float(hi)), 1.5 * (lod or 0.0), 1e-3)
     counts, _ = np.histogram(v, bins=_HIST_BINS, range=(-lim, lim))
     conf = _positive(confidence)
     label = f"±LoD{f'{conf * 100:g}' if conf and conf < 1 else ''} = {lod:.3f} m" if lod else ""
@@ -112,4 +106,4 @@ def histogram(
         f"(0.5–99.5th percentiles){f'; {hidden:,} cells beyond not shown' if hidden else ''}. "
         + ("Shaded: level of detection." if lod else "No level of detection in the report.")
     )
-    return f"<figure>{_hist_svg(counts, lim, lod, label, ident)}<figcaption>{caption}</figcaption></figure>"
+    return Markup(f"<figure>{_hist_svg(counts, lim, lod, label, ident)}<figcaption>{caption}</figcaption></figure>")

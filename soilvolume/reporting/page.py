@@ -6,8 +6,6 @@ from __future__ import annotations
 from functools import cache
 from pathlib import Path
 
-from markupsafe import Markup
-
 from ..inputs.io import atomic_path
 
 TEMPLATES = Path(__file__).resolve().parent / "templates"
@@ -25,11 +23,6 @@ def environment():
         trim_blocks=True,
         lstrip_blocks=True,
     )
-
-
-def figure(html: str | None) -> Markup | None:
-    """A figure drawn by :mod:`.figures` (HTML it escaped itself) for a template; None stays None."""
-    return None if html is None else Markup(html)
 
 
 def render(template: str, **context) -> str:

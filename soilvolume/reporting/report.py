@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..core.types import GridSpec, StageQuality
+from ..core.types import GridSpec
 from ..core.wording import cli_tree
 from ..inputs.io import atomic_path
 from ..options import command_fields
@@ -32,19 +32,6 @@ def _clean(v: Any) -> Any:
     return json.loads(json.dumps(v, default=lambda x: x.tolist()), parse_constant=lambda _: None)
 
 
-def stage_dict(q: StageQuality) -> dict:
-    return {
-        "method": q.method,
-        "fitness": q.fitness,
-        "rmse": q.rmse,
-        "accepted": q.accepted,
-        "seconds": q.seconds,
-        "note": q.note,
-        "poses_beyond_prior": q.beyond_prior,
-        "transform_local": q.transform,
-    }
-
-
 def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
     """The local-frame transform expressed on absolute coordinates: S(o) T S(-o)."""
     s, s_inv = np.eye(4), np.eye(4)
@@ -54,8 +41,11 @@ def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
 
 def stages(reg: Registration) -> dict:
     """Each stage's fit and the georeferencing decision of a registration."""
-    geo = {} if reg.georeferencing is None else reg.georeferencing.as_dict()
-    return {"coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine), "georeferencing": geo}
+    out = {}
+    for name, q in (("coarse", reg.coarse), ("fine", reg.fine)):
+        fit = {k: getattr(q, k) for k in ("method", "fitness", "rmse", "accepted", "seconds", "note")}
+        out[name] = {**fit, "poses_beyond_prior": q.beyond_prior, "transform_local": q.transform}
+    return {**out, "georeferencing": {} if reg.georeferencing is None else reg.georeferencing.as_dict()}
 
 
 def motion(t: np.ndarray, after: np.ndarray) -> dict:
@@ -123,9 +113,7 @@ def nonsoil_lines(report: dict) -> list[str]:
 def quality_lines(report: dict) -> list[str]:
     """The quality verdict and its reasons, one line each."""
     q = report.get("quality")
-    if not q:
-        return []
-    return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]]
+    return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]] if q else []
 
 
 def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:

@@ -18,7 +18,7 @@ from ..volumes.quality import epoch_checks, period_quality
 from ..volumes.quantities import scaled
 from .report import absolute_transform, motion, recorded_options, stages, write_json
 from .seriesgrade import LEDGER_GRADE, ledger_figures, with_grade, write_grades
-from .serieshtml import write_series_html
+from .serieshtml import changes, write_series_html
 
 LEDGER = "ledger.csv"
 _FIGURES = tuple(f"{k}{pm}_m3" for k in ("net", "cut", "fill") for pm in ("", "_pm"))  # net_m3, net_pm_m3, ...
@@ -135,25 +135,14 @@ def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Optio
     }
 
 
-def with_quantities(report: dict, options: Options) -> dict:
-    """``report`` with each period's and the cumulative's ``quantities`` (bank, loose and compacted
-    volumes, :func:`~soilvolume.volumes.quantities.scaled`) when ``--bulking`` or ``--shrinkage`` is given."""
-    factors = {"bulking": options.bulking, "shrinkage": options.shrinkage}
-    if options.bulking is not None or options.shrinkage is not None:
-        for p in [*report["periods"], report["cumulative"]]:
-            p["quantities"] = scaled(p["volume_m3"], p["uncertainty_m3"], factors)
-    return report
-
-
 def write_ledger(path: Path, report: dict) -> None:
     """One row per period and one for the cumulative: epochs, dates, net/cut/fill and their ±
     (with a design: the grade at its end and the cut and fill to go it did, :data:`LEDGER_GRADE`)."""
-    rows = [(str(k + 1), p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
     designed = "design" in report
     with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(LEDGER_COLUMNS + (LEDGER_GRADE if designed else ()))
-        for name, p in rows:
+        for name, p in changes(report):
             v, u = p["volume_m3"], p["uncertainty_m3"]
             dates = [d or "" for d in p["dates"]]
             figures = [f"{x:.3f}" for k in ("net", "cut", "fill") for x in (v[k], u[k])]
@@ -169,17 +158,19 @@ def write_rasters(out, series, base: np.ndarray, grid: GridSpec, graded=None) ->
     for k, d in enumerate(series.to_e0):
         desc = f"epoch {k} heights in E0's frame, corrected once relative to E0 (m)"
         write_grid(out.path(dem_name(k)), base + d + z0, grid, desc)
-    for c in series.periods:
-        desc = f"epoch {c.end} - epoch {c.start} (m)"
-        write_grid(out.path(difference_name(c.start, c.end)), c.diff, grid, desc)
-    c = series.cumulative
-    write_grid(out.path(difference_name(c.start, c.end, True)), c.diff, grid, f"epoch {c.end} - epoch 0 (m)")
+    for c in [*series.periods, series.cumulative]:  # the cumulative's start is E0
+        name = difference_name(c.start, c.end, c is series.cumulative)
+        write_grid(out.path(name), c.diff, grid, f"epoch {c.end} - epoch {c.start} (m)")
 
 
 def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Options, timer, graded=None) -> dict:
-    """report.json, the ledger and report.html of a series run into the output folder ``out`` (with
-    the progress against a design when ``graded``); returns the report."""
-    report = with_quantities(build_series_report(epochs, fits, vols, series, grid, options, timer), options)
+    """report.json, the ledger and report.html of a series run into the output folder ``out`` (with each
+    period's quantities by ``--bulking``/``--shrinkage``, the progress against a design when ``graded``)."""
+    report = build_series_report(epochs, fits, vols, series, grid, options, timer)
+    factors = {"bulking": options.bulking, "shrinkage": options.shrinkage}
+    if options.bulking is not None or options.shrinkage is not None:  # bank, loose and compacted volumes
+        for p in [*report["periods"], report["cumulative"]]:
+            p["quantities"] = scaled(p["volume_m3"], p["uncertainty_m3"], factors)
     report = cli_tree(with_grade(report, graded))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)

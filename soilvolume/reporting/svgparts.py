@@ -1,18 +1,66 @@
-"""The SVG and HTML pieces around report.html's figures: round ticks and their labels, text with a
-halo, the scale bar, north arrow and colour bar of a map, and a map's figure (its PNG embedded)."""
+"""The pieces of report.html's figures: block averaging of large grids, PNG encoding with zlib (no
+imaging library), round ticks and their labels, text with a halo, the scale bar, north arrow and
+colour bar of a map, and a map's figure (its PNG embedded)."""
 
 from __future__ import annotations
 
 import base64
 import html
 import math
+import struct
+import zlib
 
 import numpy as np
+from markupsafe import Markup
 
 from ..core.types import GridSpec
-from .raster import png_bytes
 
 DISPLAY = 760  # longest side of a map on the page (CSS px)
+
+
+def _fold(a: np.ndarray, k: int, axis: int) -> np.ndarray:
+    """Sums of k consecutive entries along ``axis`` (the last group may be shorter), added in turn."""
+    a = np.moveaxis(a, axis, 0)
+    out = np.zeros((-(-len(a) // k), *a.shape[1:]), np.float64 if a.dtype.kind == "f" else np.int32)
+    for i in range(k):
+        out[: len(a[i::k])] += a[i::k]
+    return np.moveaxis(out, 0, axis)
+
+
+def block_mean(a: np.ndarray, k: int) -> np.ndarray:
+    """NaN-aware mean over k x k blocks (partial blocks at the edges); NaN where a block has no data."""
+    if k <= 1:
+        return a
+    ok = np.isfinite(a)
+    total = _fold(_fold(np.where(ok, a, 0.0), k, 0), k, 1)
+    count = _fold(_fold(ok, k, 0), k, 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(count > 0, total / count, np.nan)
+
+
+def _repeat(a: np.ndarray, f: int) -> np.ndarray:
+    return a if f <= 1 else np.repeat(np.repeat(a, f, axis=0), f, axis=1)
+
+
+def png_bytes(rgba: np.ndarray) -> bytes:
+    """An (h, w, 4) uint8 array as an 8-bit RGBA PNG: every row but the first filtered by the
+    row above it ("Up", zeros where a repeated row repeats it), fast zlib."""
+    h, w = rgba.shape[:2]
+    rows = np.ascontiguousarray(rgba, np.uint8).reshape(h, 4 * w)
+    raw = np.empty((h, 1 + 4 * w), np.uint8)
+    raw[:, 0] = 2
+    raw[0] = np.r_[np.uint8(0), rows[0]]
+    np.subtract(rows[1:], rows[:-1], out=raw[1:, 1:])  # modulo 256, as PNG's filter
+
+    def chunk(tag: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data))
+
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 6, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(raw.tobytes(), 1))
+        + chunk(b"IEND", b"")
+    )
 
 
 def nice_length(span: float) -> float:
@@ -37,19 +85,11 @@ def tick_label(v: float, step: float) -> str:
     return "0" if float(s) == 0 else s.replace("-", "−")
 
 
-def metres(length: float) -> str:
-    return f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
-
-
 def count_label(c: float) -> str:
     for div, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
         if c >= div:
             return f"{c / div:g}{unit}"
     return f"{c:g}"
-
-
-def png_uri(rgba: np.ndarray) -> str:
-    return "data:image/png;base64," + base64.b64encode(png_bytes(rgba)).decode("ascii")
 
 
 def halo(size: float) -> str:
@@ -60,6 +100,7 @@ def halo(size: float) -> str:
 def scale_bar(width: float, height: float, span_m: float) -> str:
     """Bottom-left scale bar, half black half white, with a nice length in metres."""
     length = nice_length(span_m)
+    label = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
     px, x, y = length / span_m * width, 14.0, height - 16.0
     box = max(px, 44.0) + 12
     return (
@@ -67,7 +108,7 @@ def scale_bar(width: float, height: float, span_m: float) -> str:
         f'fill-opacity=".75"/><rect x="{x}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#000"/>'
         f'<rect x="{x + px / 2:.1f}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#fff" '
         f'stroke="#000"/><text x="{x + px / 2:.1f}" y="{y - 5:.1f}" text-anchor="middle" '
-        f'font-size="13">{metres(length)}</text>'
+        f'font-size="13">{label}</text>'
     )
 
 
@@ -119,8 +160,8 @@ def extent_text(grid: GridSpec, shape: tuple[int, int], k: int) -> str:
     )
 
 
-def map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_bar: str, caption: str) -> str:
-    """The PNG map with a scale bar and north arrow overlaid, its colour bar and caption."""
+def map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_bar: str, caption: str) -> Markup:
+    """The PNG map with a scale bar and north arrow overlaid, its colour bar and caption (escaped here)."""
     h, w = rgba.shape[:2]
     s = DISPLAY / max(h, w)
     wd, hd = round(w * s), round(h * s)
@@ -128,8 +169,9 @@ def map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_b
         f'<svg viewBox="0 0 {wd} {hd}" font-family="sans-serif" aria-hidden="true">'
         f"{scale_bar(wd, hd, span_m)}{north_arrow(wd)}</svg>"
     )
-    return (
+    png = base64.b64encode(png_bytes(rgba)).decode("ascii")
+    return Markup(
         f'<figure><div class=map style="width:{wd}px"><img id="{ident}" alt="{html.escape(title)}" '
-        f'src="{png_uri(rgba)}" width="{w}" height="{h}">{overlay}</div>{colour_bar}'
+        f'src="data:image/png;base64,{png}" width="{w}" height="{h}">{overlay}</div>{colour_bar}'
         f"<figcaption>{caption}</figcaption></figure>"
     )

@@ -16,7 +16,6 @@ LABELS = {  # report keys -> words (units in brackets)
     "net_compared_area": "net, all compared cells (m³)",
     "net_all_cells": "net, every compared cell (m³)",
     "net_change_areas": "net, change areas (m³)",
-    "interpolation_sigma_m3": "interpolation error, 1σ (m³)",
     "confidence": "confidence level",
     "sigma_m": "noise on stable ground, NMAD (m)",
     "lod_m": "level of detection (m)",

@@ -8,7 +8,7 @@ import scipy
 import shapely
 
 from ..reporting.figures import hillshade
-from ..reporting.raster import png_bytes
+from ..reporting.svgparts import png_bytes
 from .survey import Survey
 from .types import Inventory
 

@@ -26,14 +26,13 @@ from ..registration import georef
 from ..registration.register import Registration
 from ..registration.register import register as register_clouds
 from ..registration.rigid import transform_points
-from ..reporting.changeareas import FILE as CHANGE_AREAS
-from ..reporting.changeareas import write_change_areas
 from ..reporting.contours import FILE as CONTOURS
 from ..reporting.contours import write_contours
 from ..reporting.html import write_html
 from ..reporting.report import build_report, write_json
 from ..reporting.sections import write_sections
-from ..reporting.vectors import write_zones
+from ..reporting.vectors import FILE as CHANGE_AREAS
+from ..reporting.vectors import write_change_areas, write_zones
 from ..volumes.compute import Volumes, compute_volumes
 from .context import Context
 from .plan import plan_grid, reference_cell
