@@ -123,7 +123,8 @@ def _open_vpc(p: Path) -> Source:
     first = _header(Path(vpc.tiles[0].path))
     if vpc.count == 0:
         raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
-    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, vpc.lo, vpc.hi, first.has_class, vpc=vpc)
+    lo, hi = np.min([t.lo for t in vpc.tiles], axis=0), np.max([t.hi for t in vpc.tiles], axis=0)
+    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
 
 
 def from_raw(raw: RawPoints) -> Source:
