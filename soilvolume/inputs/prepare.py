@@ -67,13 +67,6 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
 THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
-def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, poly: np.ndarray) -> Source:
-    """``src`` read only within the box of the local polygon ``poly`` when in the frame's CRS and metres."""
-    if src.raw is not None or not (crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
-        return src
-    return src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])
-
-
 def thin_voxel(area_m2: float) -> float:
     """Column size (m) of the registration subset: about THIN_POINTS over ``area_m2``, >= 0.15 m."""
     return max(0.15, float(np.sqrt(max(area_m2, 1.0) / THIN_POINTS)))
@@ -91,11 +84,9 @@ def prepare(
     crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(before, crs_b)
-    lo, hi, origin, voxel, to_a = _setup(after, crs_a, frame)
+    origin, voxel, to_a, thinner = _setup(after, crs_a, frame)
     original_after = after
-    after, a, note_a = _load_whole(
-        after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check, None if full else NOTHING, loader
-    )
+    after, a, note_a = _load_whole(after, crs_a, to_a, thinner, options, check, None if full else NOTHING, loader)
     check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
     before, b, note_b = _load_before(
@@ -131,7 +122,9 @@ def _load_before(
     """The before cloud streamed within the after footprint ``poly``, at full resolution only where the
     after cloud (``after``: path, thinned points) can land (GPS prior + 2 m); refused without overlap."""
     after_path, after_thin = after
-    src, mode, note = filtered(_limit(src, crs, frame, origin, poly), crs, options)
+    if src.raw is None and crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0:
+        src = src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])  # its reads: the crop's box
+    src, mode, note = filtered(src, crs, options)
     reach = options.max_gps_shift + 2.0
     lo_a, hi_a = bounds(after_thin, 2)
     box = (lo_a - reach, hi_a + reach) if full else NOTHING
@@ -196,8 +189,8 @@ def _survey(src: Source, crs: pyproj.CRS, options: Options, check, centred: bool
     """One survey streamed whole into its own frame, refused without points left: (the source
     streamed, what was loaded, selection note, frame, origin, voxel, file -> local)."""
     frame = _own_frame(src, crs)
-    lo, hi, origin, voxel, to_local = _setup(src, crs, frame, centred)
-    streamed, one, note = _load_whole(src, crs, to_local, lo - origin, hi - origin, voxel, options, check)
+    origin, voxel, to_local, thinner = _setup(src, crs, frame, centred)
+    streamed, one, note = _load_whole(src, crs, to_local, thinner, options, check)
     note = note or one.note
     if len(one.xyz) == 0:
         raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note})")
@@ -206,11 +199,13 @@ def _survey(src: Source, crs: pyproj.CRS, options: Options, check, centred: bool
 
 
 def _setup(src: Source, crs: pyproj.CRS, frame: WorkFrame, centred: bool = True) -> tuple:
-    """(lo, hi of ``src`` in ``frame``, local origin: the floor of lo, or of its x/y centre when
-    ``centred``, thinning voxel, file -> local)."""
+    """(local origin: the floor of the low corner of ``src`` in ``frame``, or of its x/y centre when
+    ``centred``, thinning voxel, file -> local, the thinner over its local box padded (header bounds))."""
     lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]]) if centred else np.floor(lo)
-    return lo, hi, origin, thin_voxel(float(np.prod(hi[:2] - lo[:2]))), _local(crs, frame, origin, src.path)
+    voxel, pad = thin_voxel(float(np.prod(hi[:2] - lo[:2]))), _pad(lo, hi)
+    thinner = ColumnThinner(lo - origin - pad, hi - origin + pad, voxel, name=src.path)
+    return origin, voxel, _local(crs, frame, origin, src.path), thinner
 
 
 def _own_frame(src: Source, crs: pyproj.CRS) -> WorkFrame:
@@ -220,22 +215,10 @@ def _own_frame(src: Source, crs: pyproj.CRS) -> WorkFrame:
 
 
 def _load_whole(
-    src: Source,
-    crs: pyproj.CRS,
-    to_local,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    voxel: float,
-    options: Options,
-    check,
-    box=None,
-    loader=load,
+    src: Source, crs: pyproj.CRS, to_local, thinner: ColumnThinner, options: Options, check, box=None, loader=load
 ) -> tuple[Source, Loaded, str | None]:
-    """(source streamed, loaded, filter note): every (ground) point of ``src`` (within ``box``),
-    thinned over its local box lo..hi padded (header bounds)."""
+    """(source streamed, loaded, filter note): every (ground) point of ``src`` (within ``box``) to ``thinner``."""
     src, mode, note = filtered(src, crs, options)
-    pad = _pad(lo, hi)
-    thinner = ColumnThinner(lo - pad, hi + pad, voxel, name=src.path)
     return src, loader(src, to_local, mode, None, thinner, check, box, box is NOTHING, exclude=options.exclude), note
 
 
