@@ -39,9 +39,7 @@ def parse_crs(text: str | None, what: str) -> pyproj.CRS | None:
 
 def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
     """The horizontal part of a (possibly compound) CRS."""
-    if crs.is_compound:
-        return crs.sub_crs_list[0]
-    return crs
+    return crs.sub_crs_list[0] if crs.is_compound else crs
 
 
 def raster_wkt(wkt: str | None) -> str | None:
