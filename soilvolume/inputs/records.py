@@ -81,8 +81,8 @@ def las_records(
     mapped: bool = False,
 ) -> Iterator[tuple]:
     """(Records, classification or None[, signals]) in pieces of at most ``piece`` points, chunks of
-    ``size`` ending on ``flush``; not ``count`` points: corrupt. ``ring`` buffers, or ``mapped``; ``stop``:
-    the first points only; ``whole_first``: the first chunk in one piece; ``direct(has_class)`` giving
+    ``size`` ending on ``flush``; not ``count`` points: corrupt. ``ring`` buffers, or ``mapped`` (all in one
+    view); ``stop``: the first points only; ``whole_first``: the first chunk in one piece; ``direct(has_class)`` giving
     a class table (or None) leaves an uncompressed chunk in the file (:class:`FileChunk`)."""
     import laspy
 
@@ -99,7 +99,7 @@ def las_records(
             if h.are_points_compressed:
                 arrays = _laz(reader, [m for c in chunks for m in c])
             else:
-                arrays = _mapped(path, h, chunks) if mapped else _raw(path, h, chunks, ring, direct)
+                arrays = _mapped(path, h, sum(map(sum, chunks))) if mapped else _raw(path, h, chunks, ring, direct)
             for array in arrays:
                 read += len(array)
                 if isinstance(array, FileChunk):
@@ -213,22 +213,15 @@ def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
         yield part.array
 
 
-def _mapped(path: Path, header, chunks: list[list[int]]) -> Iterator[np.ndarray]:
-    """The pieces of an uncompressed file as read-only mapped views: the page cache's pages, not a
-    buffer faulted in (for one look at the first chunk's classes and signals)."""
+def _mapped(path: Path, header, m: int) -> Iterator[np.ndarray]:
+    """The first ``m`` points of an uncompressed file (fewer when it is short) as one read-only mapped
+    view: the page cache's pages, not a buffer faulted in (for one look at the first chunk's classes
+    and signals)."""
     dtype = header.point_format.dtype()
     base = header.offset_to_point_data
-    n = min(sum(map(sum, chunks)), max(0, (path.stat().st_size - base) // dtype.itemsize))
-    if n == 0:
-        return
-    points = np.memmap(path, dtype, mode="r", offset=base, shape=(n,))
-    at = 0
-    for m in (m for chunk in chunks for m in chunk):
-        part = points[at : at + m].view(np.ndarray)
-        at += len(part)
-        yield part
-        if len(part) < m:
-            return
+    n = min(m, max(0, (path.stat().st_size - base) // dtype.itemsize))
+    if n > 0:
+        yield np.memmap(path, dtype, mode="r", offset=base, shape=(n,)).view(np.ndarray)
 
 
 def _raw(path: Path, header, chunks: list[list[int]], ring: int, direct=None) -> Iterator:
