@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pyproj
 
 from ..core.types import SoilVolumeError
@@ -17,22 +16,20 @@ SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
 CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
 
 
-def select_ground(raw: RawPoints, mode: str, crs: pyproj.CRS, window: float, slope: float) -> tuple[np.ndarray, str]:
-    """Mask of the ground points and a note: SMRF (``filter``) with an earthworks ``window`` and
-    ``slope`` (PDAL's 18 m / 0.15 take the piles for objects) or CSF, run in metres."""
-    h, v = xy_unit(crs), z_unit(crs)
-    x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
-    if mode == "filter":
-        return smrf_classify(x, y, z, window=window, slope=slope), SMRF_NOTE.format(window=window, slope=slope)
-    return csf_classify(x, y, z, **DEFAULTS), CSF_NOTE.format(**DEFAULTS)
-
-
 def filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
-    """(source to stream, ground mode for streaming, note): SMRF and CSF need the whole cloud."""
+    """(source to stream, ground mode for streaming, note): SMRF (``filter``) with an earthworks
+    window and slope (PDAL's 18 m / 0.15 take the piles for objects) or CSF, run in metres on the
+    whole cloud."""
     if options.ground not in ("filter", "csf"):
         return src, options.ground, None
     raw = src.materialize()
-    keep, note = select_ground(raw, options.ground, crs, options.ground_window, options.ground_slope)
+    h, v = xy_unit(crs), z_unit(crs)
+    x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
+    if options.ground == "filter":
+        keep = smrf_classify(x, y, z, window=options.ground_window, slope=options.ground_slope)
+        note = SMRF_NOTE.format(window=options.ground_window, slope=options.ground_slope)
+    else:
+        keep, note = csf_classify(x, y, z, **DEFAULTS), CSF_NOTE.format(**DEFAULTS)
     if not keep.any():
         raise SoilVolumeError(f"{src.path}: the {note.split(' (')[0]} found no ground points")
     sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green

@@ -144,7 +144,12 @@ def read_heights(raster: HeightRaster, factor: float, window: tuple[int, int, in
     from affine import Affine
 
     c0, r0, cols, rows = window or (0, 0, raster.width, raster.height)
-    _check_size(raster, cols, rows, window is None)
+    if cols * rows > max_cells():
+        where = "in the raster" if window is None else "over the site"
+        raise SoilVolumeError(
+            f"{raster.path}: {rows:,} x {cols:,} cells {where} are too many to read "
+            f"({max_cells():,} at most){_remedy(raster, cols * rows, window is None)}"
+        )
     try:
         z = _read(raster, factor, (c0, r0, cols, rows))
         masked = _mask_absurd(z, raster, factor)
@@ -206,16 +211,6 @@ def max_cells() -> int:
     except (AttributeError, ValueError, OSError):  # not POSIX
         total = 8 << 30
     return int(min(MAX_CELLS, max(1 << 26, total // 32)))
-
-
-def _check_size(raster: HeightRaster, cols: int, rows: int, whole: bool) -> None:
-    limit = max_cells()
-    if cols * rows > limit:
-        where = "in the raster" if whole else "over the site"
-        raise SoilVolumeError(
-            f"{raster.path}: {rows:,} x {cols:,} cells {where} are too many to read "
-            f"({limit:,} at most){_remedy(raster, cols * rows, whole)}"
-        )
 
 
 def _remedy(raster: HeightRaster, cells: int, whole: bool) -> str:
