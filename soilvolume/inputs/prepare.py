@@ -1,5 +1,6 @@
 """Step 1: both clouds streamed into one working frame (before CRS, metres, local origin), ground
-selected, the before cropped to the after footprint plus the radius, both thinned on the way."""
+selected (class 2 streamed, or the SMRF or cloth simulation filter on a whole cloud), the before
+cropped to the after footprint plus the radius, both thinned on the way."""
 
 from __future__ import annotations
 
@@ -14,14 +15,17 @@ from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
 from ..soil.points import PointRule
-from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, z_unit
+from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, xy_unit, z_unit
 from .crs import to_local as _local
+from .csf import DEFAULTS, csf_classify
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
-from .ground import filtered
 from .io import RawPoints
-from .stream import ColumnThinner, Loaded, Source, load
+from .smrf import smrf_classify
+from .stream import ColumnThinner, Loaded, Source, from_raw, load
 
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
+SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
+CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
 
 
 @dataclass(frozen=True)
@@ -250,3 +254,25 @@ def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int, non
         "crs": crs.name,
         "crs_wkt": crs.to_wkt(),
     }
+
+
+def filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
+    """(source to stream, ground mode for streaming, note): SMRF (``filter``) with an earthworks
+    window and slope (PDAL's 18 m / 0.15 take the piles for objects) or CSF, run in metres on the
+    whole cloud."""
+    if options.ground not in ("filter", "csf"):
+        return src, options.ground, None
+    raw = src.materialize()
+    h, v = xy_unit(crs), z_unit(crs)
+    x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
+    if options.ground == "filter":
+        keep = smrf_classify(x, y, z, window=options.ground_window, slope=options.ground_slope)
+        note = SMRF_NOTE.format(window=options.ground_window, slope=options.ground_slope)
+    else:
+        keep, note = csf_classify(x, y, z, **DEFAULTS), CSF_NOTE.format(**DEFAULTS)
+    if not keep.any():
+        raise SoilVolumeError(f"{src.path}: the {note.split(' (')[0]} found no ground points")
+    sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
+    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
+    out.count = src.count  # report the points read, not the ground points
+    return out, "filter", note
