@@ -139,9 +139,11 @@ def window_over(
 
 
 def read_heights(raster: HeightRaster, factor: float, window: tuple[int, int, int, int] | None = None) -> Heights:
-    """The heights (m) of ``window`` (the whole raster when None): stored value x scale + offset,
-    x ``factor`` (metres per unit); nodata and values no height can take NaN."""
+    """The heights (m) of ``window`` (the whole raster when None), :data:`BLOCK_CELLS` at a time:
+    stored value x scale + offset, x ``factor`` (metres per unit); nodata and values no height can take NaN."""
+    import rasterio
     from affine import Affine
+    from rasterio.windows import Window
 
     c0, r0, cols, rows = window or (0, 0, raster.width, raster.height)
     if cols * rows > max_cells():
@@ -150,24 +152,9 @@ def read_heights(raster: HeightRaster, factor: float, window: tuple[int, int, in
             f"{raster.path}: {rows:,} x {cols:,} cells {where} are too many to read "
             f"({max_cells():,} at most){_remedy(raster, cols * rows, window is None)}"
         )
-    try:
-        z = _read(raster, factor, (c0, r0, cols, rows))
-        masked = _mask_absurd(z, raster, factor)
-    except MemoryError as exc:
-        remedy = _remedy(raster, rows * cols, window is None)
-        raise SoilVolumeError(f"{raster.path}: out of memory reading {rows:,} x {cols:,} cells{remedy}") from exc
-    return Heights(z, raster.transform @ Affine.translation(c0, r0), (c0, r0, cols, rows), masked)
-
-
-def _read(raster: HeightRaster, factor: float, window: tuple[int, int, int, int]) -> np.ndarray:
-    """The window's heights, converted :data:`BLOCK_CELLS` at a time."""
-    import rasterio
-    from rasterio.windows import Window
-
-    c0, r0, cols, rows = window
-    z = np.empty((rows, cols), np.float64)
     step = max(1, BLOCK_CELLS // max(cols, 1))
     try:
+        z = np.empty((rows, cols), np.float64)
         with rasterio.open(raster.path) as ds:
             for top in range(0, rows, step):
                 n = min(step, rows - top)
@@ -175,9 +162,13 @@ def _read(raster: HeightRaster, factor: float, window: tuple[int, int, int, int]
                 values = (block.data.astype(np.float64) * raster.scale + raster.offset) * factor
                 values[np.ma.getmaskarray(block)] = np.nan
                 z[top : top + n] = values
+        masked = _mask_absurd(z, raster, factor)
     except rasterio.errors.RasterioError as exc:
         raise SoilVolumeError(f"{raster.path}: its cells cannot be read ({' '.join(str(exc).split())[:200]})") from exc
-    return z
+    except MemoryError as exc:
+        remedy = _remedy(raster, rows * cols, window is None)
+        raise SoilVolumeError(f"{raster.path}: out of memory reading {rows:,} x {cols:,} cells{remedy}") from exc
+    return Heights(z, raster.transform @ Affine.translation(c0, r0), (c0, r0, cols, rows), masked)
 
 
 def _mask_absurd(z: np.ndarray, raster: HeightRaster, factor: float) -> list[dict]:

@@ -132,7 +132,9 @@ def _load_before(
     reach = options.max_gps_shift + 2.0
     lo_a, hi_a = bounds(after_thin, 2)
     box = (lo_a - reach, hi_a + reach) if full else NOTHING
-    within = _padded_box(src, crs, frame, origin)  # a crop radius far past the data costs nothing
+    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)  # its header box, padded below: every point lies in it
+    pad = _pad(lo, hi)
+    within = lo[:2] - origin[:2] - pad, hi[:2] - origin[:2] + pad  # a crop radius far past the data costs nothing
     thinner = ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel, within, src.path)
     local = _local(crs, frame, origin, src.path)
     b = loader(src, local, mode, PolygonMask(poly), thinner, check, box, not full, exclude=options.exclude)
@@ -229,13 +231,6 @@ def _load_whole(
 def _pad(lo: np.ndarray, hi: np.ndarray) -> float:
     """Margin (m) around a box from header bounds: reprojected corners may not enclose every point."""
     return 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
-
-
-def _padded_box(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray) -> tuple:
-    """The local x/y box every point of ``src`` lies in (its header bounds, padded)."""
-    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
-    pad = _pad(lo, hi)
-    return lo[:2] - origin[:2] - pad, hi[:2] - origin[:2] + pad
 
 
 def _all_points(src: Source, to_local):

@@ -52,14 +52,12 @@ class Source:
             yield (xyz, raw.classification, raw.signals) if signals else (xyz, raw.classification)
             return
         if self.index is not None and self.region is not None and not is_copc(self.path):
-            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK, signals, origin)
+            lo, hi = self.region  # the (start, count) of the indexed chunks whose x/y box meets it
+            ranges = [(s, n) for s, n, a, b in self.index if (a <= hi).all() and (lo <= b).all()]
+            yield from las_ranges(self.path, ranges, size or CHUNK, signals, origin)
             return
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
-
-    def first_file(self) -> Source | None:
-        """The first file with points this source's reads open, as its header gives it."""
-        return next((h for h in map(_header, map(Path, self.tiles())) if h.count), None)
 
     def records(
         self, size: int | None = None, signals: bool | Callable = False, direct=None, whole_first: bool = False
@@ -89,11 +87,6 @@ class Source:
         xyz, cls, sig = zip(*self.chunks(signals=True), strict=True)
         cls = None if cls[0] is None else np.concatenate(cls)
         return RawPoints(np.concatenate(xyz), cls, self.crs_wkt, self.path, Signals.join(sig))
-
-
-def _meeting(index, lo, hi) -> list[tuple[int, int]]:
-    """(start, count) of the indexed chunks whose x/y box meets lo..hi."""
-    return [(s, n) for s, n, a, b in index if (a <= hi).all() and (lo <= b).all()]
 
 
 def open_source(path) -> Source:
@@ -169,8 +162,8 @@ def _labelled(
     early = keep if fused and not by_kernel else None
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
-    first = src.first_file() if by_kernel else None
-    ahead = first is not None and not first.compressed  # the rule decided before the reading
+    first = next((h for h in map(_header, map(Path, src.tiles())) if h.count), None) if by_kernel else None
+    ahead = first is not None and not first.compressed  # the rule decided before the reading (first file with points)
     if ahead:  # on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
         cls, sig = first_chunk_signals(Path(first.path), first.count, CHUNK, lambda c: deciding_dims(c, mode, exclude))
         rule = epoch_rule(src, cls, sig, mode, exclude)
