@@ -96,23 +96,20 @@ def prepare(
     before, b, note_b = _load_before(
         before, crs_b, frame, origin, poly, (after.path, a.thin), voxel, options, check, full, loader
     )
-    inputs = {
-        "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"], b.nonsoil),
-        "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"], a.nonsoil),
-    }
-    read_s = a.extra["read_s"] + b.extra["read_s"]
-    wkt = frame.wkt
     return Prepared(
-        Cloud(b.xyz, origin, wkt, before.path, nonsoil=b.nonsoil),
-        Cloud(a.xyz, origin, wkt, after.path, nonsoil=a.nonsoil),
+        Cloud(b.xyz, origin, frame.wkt, before.path, nonsoil=b.nonsoil),
+        Cloud(a.xyz, origin, frame.wkt, after.path, nonsoil=a.nonsoil),
         frame,
         origin,
-        inputs,
+        {
+            "before": _describe(before, crs_b, b, note_b or b.note),
+            "after": _describe(after, crs_a, a, note_a or a.note),
+        },
         b.thin,
         a.thin,
         voxel,
         _all_points(original_after, to_a),
-        read_s,
+        a.extra["read_s"] + b.extra["read_s"],
         b.extra["counts"],
         (b.note == CLASS_NOTE, a.note == CLASS_NOTE),
         (b.extra["index"], a.extra["index"]),
@@ -161,7 +158,7 @@ def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
         Cloud(a.xyz, origin, frame.wkt, after.path, nonsoil=a.nonsoil),
         frame,
         origin,
-        {"after": _describe(streamed, crs_a, a.used, note, a.extra["cropped"], a.nonsoil)},
+        {"after": _describe(streamed, crs_a, a, note)},
         none,
         a.thin,
         voxel,
@@ -238,13 +235,14 @@ def _all_points(src: Source, to_local):
     return lambda: ((to_local(xyz), cls) for xyz, cls in src.chunks())
 
 
-def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int, nonsoil=None) -> dict:
+def _describe(src: Source, crs: pyproj.CRS, loaded: Loaded, note: str) -> dict:
+    """report.json's description of an input: what was read of ``src`` and kept of it (``loaded``)."""
     return {
-        "soil_rule": (nonsoil.rule if nonsoil is not None else PointRule()).describe(),
+        "soil_rule": (loaded.nonsoil.rule if loaded.nonsoil is not None else PointRule()).describe(),
         "path": src.path,
         "points": int(src.count),
-        "points_used": used,
-        "points_after_crop": kept,
+        "points_used": loaded.used,
+        "points_after_crop": loaded.extra["cropped"],
         "selection": note,
         "crs": crs.name,
         "crs_wkt": crs.to_wkt(),

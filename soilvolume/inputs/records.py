@@ -80,7 +80,7 @@ def las_records(
     whole_first: bool = False,
     mapped: bool = False,
 ) -> Iterator[tuple]:
-    """(Records, classification or None[, signals]) in pieces of at most ``piece`` points, chunks of
+    """(Records, classification or None, signals or None) in pieces of at most ``piece`` points, chunks of
     ``size`` ending on ``flush``; not ``count`` points: corrupt. ``ring`` buffers, or ``mapped`` (all in one
     view); ``stop``: the first points only; ``whole_first``: the first chunk in one piece; ``direct(has_class)`` giving
     a class table (or None) leaves an uncompressed chunk in the file (:class:`FileChunk`)."""
@@ -104,14 +104,13 @@ def las_records(
                 read += len(array)
                 if isinstance(array, FileChunk):
                     array.scales, array.offsets, array.check, array.last = scales, offsets, check, read >= count
-                    yield (array, None, None) if signals else (array, None)
+                    yield array, None, None
                     continue
                 rec = laspy.ScaleAwarePointRecord(array, h.point_format, scales, offsets)
                 cls = np.array(rec.classification) if "classification" in dims else None
                 sig = point_signals(rec, signal_dims(dims, signals, cls)) if signals else None
-                item = Records(array, scales, offsets, check, read >= count, read % size == 0 or read >= count)
-                yield (item, cls, sig) if signals else (item, cls)
-                del rec, item, array
+                yield Records(array, scales, offsets, check, read >= count, read % size == 0 or read >= count), cls, sig
+                del rec, array
     except SoilVolumeError:
         raise
     except Exception as exc:
@@ -123,8 +122,8 @@ def las_records(
 def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Callable) -> tuple:
     """(classification, signals) of a LAS/LAZ file's first chunk, coordinates not decoded: what the
     epoch's rule is decided on, the same points the numpy path decides it on."""
-    for _rec, cls, *sig in las_records(path, count, size, signals, piece=size, stop=min(size, count), mapped=True):
-        return cls, sig[0] if sig else None  # the chunk in one piece, as the numpy path reads it
+    for _rec, cls, sig in las_records(path, count, size, signals, piece=size, stop=min(size, count), mapped=True):
+        return cls, sig  # the chunk in one piece, as the numpy path reads it
     return None, None
 
 
@@ -133,13 +132,13 @@ def las_chunks(
 ) -> Iterator[tuple]:
     """(absolute xyz float64, classification or None[, signals: :func:`signal_dims`]) of a LAS/LAZ
     file, ``size`` points at a time (one read buffer); with ``origin``, ``xyz - origin``."""
-    for rec, cls, *sig in las_records(path, count, size, signals, piece=size, ring=1):
+    for rec, cls, sig in las_records(path, count, size, signals, piece=size, ring=1):
         xyz, lo, hi = decoded_xyz(rec, origin)
         if len(xyz):
             rec.check.extend(lo, hi)
         if rec.last:
             rec.check.finish()
-        item = (xyz, cls, sig[0]) if signals else (xyz, cls)
+        item = (xyz, cls, sig) if signals else (xyz, cls)
         del rec, xyz, cls, sig  # the record is not held while the consumer works (or the queue is full)
         yield item
 
