@@ -17,9 +17,8 @@ from ..core.cells import bounds
 from ..core.types import SoilVolumeError
 from ..soil.points import NonSoil, PointRule, Signals, decide, deciding_dims
 from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
-from .copc import is_copc
 from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, read_points, validate
-from .lasread import file_chunks, las_header, las_ranges
+from .lasread import file_chunks, is_copc, las_header, las_ranges
 from .records import first_chunk_signals, las_records
 from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
