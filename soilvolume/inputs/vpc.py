@@ -11,6 +11,7 @@ import os
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 from urllib.parse import unquote, urlparse
 
 import numpy as np
@@ -100,10 +101,9 @@ def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, lis
         if tile_path in seen:
             raise SoilVolumeError(f"{p}: {item.name} lists the tile {item.href} that {seen[tile_path]} lists already")
         seen[tile_path] = item.name
-        head = _tile_header(tile_path)
-        crs = head[3] if item.crs is None else item.crs
+        tile, crs = _tile(p, item, tile_path)
         crss.append((crs, tile_path))
-        tiles.append(_tile(p, item, tile_path, head, crs))
+        tiles.append(tile)
     return Vpc(str(p), _common_crs(p, crss), tuple(tiles)), [_version(t.path) for t in tiles]
 
 
@@ -144,15 +144,6 @@ def _href(vpc: Path, item) -> str:
     return str(full)
 
 
-def _tile_header(tile_path: str):
-    """(point count, mins, maxs, CRS or None) of a tile's header, checked before laspy reads it."""
-    import pyproj
-
-    check_las_header(Path(tile_path))
-    wkt, count, lo, hi, _, _ = las_header(Path(tile_path))
-    return count, tuple(map(float, lo)), tuple(map(float, hi)), None if wkt is None else pyproj.CRS.from_wkt(wkt)
-
-
 def _common_crs(vpc: Path, crss: list) -> str | None:
     """The one CRS of all tiles (WKT), or an error naming two tiles that differ."""
     known = [(c, t) for c, t in crss if c is not None]
@@ -168,10 +159,15 @@ def _common_crs(vpc: Path, crss: list) -> str | None:
     return first.to_wkt()
 
 
-def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
-    """The tile with its header's box and count, the VPC's checked against them."""
-    count, lo, hi, _ = head
-    name = Path(tile_path).name
+def _tile(vpc: Path, item, tile_path: str) -> tuple[Tile, Any]:
+    """The tile with its header's box and count (the header checked before laspy reads it), the VPC's
+    checked against them; and its CRS (the VPC's, else the header's, or None)."""
+    import pyproj
+
+    check_las_header(Path(tile_path))
+    wkt, count, lo, hi, _, _ = las_header(Path(tile_path))
+    lo, hi, name = tuple(map(float, lo)), tuple(map(float, hi)), Path(tile_path).name
+    crs = item.crs if item.crs is not None else None if wkt is None else pyproj.CRS.from_wkt(wkt)
     if item.count is not None and item.count != count:
         raise SoilVolumeError(f"{vpc}: {item.name}: pc:count {item.count} but the header of {name} says {count} points")
     if item.proj_bbox is not None:
@@ -180,7 +176,7 @@ def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
         b = item.bbox
         box = _box_to("EPSG:4326", crs, *((b[0], b[1], b[3], b[4]) if len(b) == 6 else b))
         _check_box(vpc, item, name, "bbox (WGS 84)", box, lo, hi, WGS84_TOL, exact=False)
-    return Tile(tile_path, count, lo, hi)
+    return Tile(tile_path, count, lo, hi), crs
 
 
 def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, exact: bool) -> None:
