@@ -23,11 +23,12 @@ from ..core.outputs import check_input_file
 from ..core.types import SoilVolumeError
 from .crs import horizontal, z_unit
 
-FEET = {"ft": 0.3048, "foot": 0.3048, "feet": 0.3048, "us survey foot": 0.3048006096, "us-ft": 0.3048006096}
-FEET |= {"ftus": 0.3048006096, "us_survey_foot": 0.3048006096}
-METRES = {"", "m", "metre", "meter", "metres", "meters"}
-SMALLER = {"cm": 0.01, "centimetre": 0.01, "centimeter": 0.01, "centimetres": 0.01, "centimeters": 0.01}
-SMALLER |= {"mm": 0.001, "millimetre": 0.001, "millimeter": 0.001, "millimetres": 0.001, "millimeters": 0.001}
+#: metres per height unit, by the band's unit name (lower case; none: metres)
+UNITS = dict.fromkeys(("", "m", "metre", "meter", "metres", "meters"), 1.0)
+UNITS |= dict.fromkeys(("ft", "foot", "feet"), 0.3048)
+UNITS |= dict.fromkeys(("us survey foot", "us-ft", "ftus", "us_survey_foot"), 0.3048006096)
+UNITS |= dict.fromkeys(("cm", "centimetre", "centimeter", "centimetres", "centimeters"), 0.01)
+UNITS |= dict.fromkeys(("mm", "millimetre", "millimeter", "millimetres", "millimeters"), 0.001)
 NOT_A_HEIGHT_M = 1e5  # m from the datum: no height on Earth is this far (Everest 8.8 km, the deepest sea 11 km)
 FILLS = (-9999.0, -99999.0, -32767.0, -32768.0)  # stored values programs leave for "no height"
 FAR_BELOW_M = 1000.0  # an undeclared fill this far below the median height is no height
@@ -105,7 +106,7 @@ def open_heights(path: Path) -> HeightRaster:
 def metres_per_unit(crs: pyproj.CRS, unit: str, path: str) -> tuple[float, str]:
     """(metres per stored height unit, its source in words): a vertical CRS's axis, else the band's
     unit (none: metres); a band unit contradicting the vertical CRS is refused."""
-    band = FEET.get(unit, SMALLER.get(unit, 1.0 if unit in METRES else None))
+    band = UNITS.get(unit)
     if crs.is_compound or len(crs.axis_info) == 3:
         factor = z_unit(crs)
         if unit and band is not None and not math.isclose(band, factor, rel_tol=1e-6):
