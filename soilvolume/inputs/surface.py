@@ -93,10 +93,8 @@ def read_over(
     for the resampling's kernel (a TIN: itself, when it meets the box)."""
     if isinstance(source, landxml.Tin):
         return landxml.check_over(source, lo, hi, frame, margin_m)
-    lo, hi = (
-        (np.asarray(lo[:2], float) - margin_m) / frame.xy_unit,
-        (np.asarray(hi[:2], float) + margin_m) / frame.xy_unit,
-    )
+    lo = (np.asarray(lo[:2], float) - margin_m) / frame.xy_unit
+    hi = (np.asarray(hi[:2], float) + margin_m) / frame.xy_unit
     window = window_over(source.raster, source.crs, lo, hi, frame.crs, pad=2)
     if window is None:
         raise SoilVolumeError(
