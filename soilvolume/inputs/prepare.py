@@ -71,11 +71,6 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
 THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
-def thin_voxel(area_m2: float) -> float:
-    """Column size (m) of the registration subset: about THIN_POINTS over ``area_m2``, >= 0.15 m."""
-    return max(0.15, float(np.sqrt(max(area_m2, 1.0) / THIN_POINTS)))
-
-
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 
 
@@ -206,7 +201,8 @@ def _setup(src: Source, crs: pyproj.CRS, frame: WorkFrame, centred: bool = True)
     ``centred``, thinning voxel, file -> local, the thinner over its local box padded (header bounds))."""
     lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]]) if centred else np.floor(lo)
-    voxel, pad = thin_voxel(float(np.prod(hi[:2] - lo[:2]))), _pad(lo, hi)
+    area = max(float(np.prod(hi[:2] - lo[:2])), 1.0)
+    voxel, pad = max(0.15, float(np.sqrt(area / THIN_POINTS))), _pad(lo, hi)  # about THIN_POINTS columns, >= 0.15 m
     thinner = ColumnThinner(lo - origin - pad, hi - origin + pad, voxel, name=src.path)
     return origin, voxel, _local(crs, frame, origin, src.path), thinner
 
