@@ -111,8 +111,8 @@ def test_a_thinner_cut_to_the_data_gives_the_same_columns():
         whole.add(part)
         cut.add(part)
     assert cut.sums.shape[1] < whole.sums.shape[1] / 100
-    assert np.array_equal(cut.result(), whole.result())
-    assert np.array_equal(cut.counts(), whole.counts())
+    assert np.array_equal(cut.columns()[0], whole.columns()[0])
+    assert np.array_equal(cut.columns()[1], whole.columns()[1])
 
 
 def test_a_crop_radius_far_larger_than_the_before_cloud_runs_small(pair, tmp_path):

@@ -21,7 +21,7 @@ STRICT = (
     "soilvolume/core/wording.py",
     "soilvolume/inputs/vpc.py",
     "soilvolume/inputs/vpcschema.py",
-    "soilvolume/inputs/copc.py",
+    "soilvolume/inputs/lasread.py",
     "soilvolume/volumes/quantities.py",
     "soilvolume/volumes/grade.py",
     "soilvolume/reporting/earthworks.py",

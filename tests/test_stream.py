@@ -54,7 +54,7 @@ def test_column_thinner_gives_column_means():
     t = ColumnThinner(np.zeros(2), np.full(2, 10.0), 2.5)
     t.add(pts[:2_000])
     t.add(pts[2_000:])
-    got = t.result()
+    got = t.columns()[0]
     ids = (pts[:, 1] // 2.5).astype(int) * t.shape[1] + (pts[:, 0] // 2.5).astype(int)
     want = np.array([pts[ids == k].mean(axis=0) for k in np.unique(ids)])
     assert np.allclose(got, want)

@@ -52,12 +52,10 @@ def test_thinner_sums_match_the_formula_to_the_bit(dtype, within):
     ref = reference_sums(chunks, np.zeros(2), np.full(2, 400.0), 0.73, within)
     assert th.sums.tobytes() == ref.tobytes()
     filled = ref[3] > 0
-    assert len(th.result()) == int(filled.sum()) > 1000
-    assert th.result().tobytes() == (ref[:3, filled] / ref[3, filled]).T.copy().tobytes()
-    assert (th.counts() == ref[3, filled]).all()
     centroids, counts = th.columns()  # both in one pass, as the streaming takes them
-    assert centroids.tobytes() == th.result().tobytes() and counts.tobytes() == th.counts().tobytes()
-    assert th.columns(centroids=False)[0] is None
+    assert len(centroids) == int(filled.sum()) > 1000
+    assert centroids.tobytes() == (ref[:3, filled] / ref[3, filled]).T.copy().tobytes()
+    assert (counts == ref[3, filled]).all()
 
 
 @pytest.mark.parametrize("within", [None, ((40.0, 55.0), (310.0, 390.0))])

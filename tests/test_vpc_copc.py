@@ -201,7 +201,7 @@ def test_copc_registration_pass_reads_a_thinning_level(tmp_path):
     import pyproj
 
     from soilvolume.distributed.scan import scan_unit
-    from soilvolume.inputs.copc import copc_chunks, read_fraction
+    from soilvolume.inputs.lasread import copc_chunks, read_fraction
     from soilvolume.inputs.stream import ColumnThinner
     from soilvolume.soil.points import PointRule
 

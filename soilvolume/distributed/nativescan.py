@@ -16,7 +16,7 @@ import numpy as np
 from .. import native
 from ..core.types import SoilVolumeError
 from ..inputs.chunkwork import Growing, NativeChunks, consume, native_work
-from ..inputs.copc import is_copc
+from ..inputs.lasread import is_copc
 from ..inputs.records import FileChunk, las_records
 from ..inputs.stream import CHUNK, file_kernel, native_reads, open_source
 from ..inputs.thinning import ColumnThinner, narrowed

@@ -16,7 +16,7 @@ import numpy as np
 from ..core import interrupt
 from ..core.cells import rows
 from ..core.types import SoilVolumeError, short_error
-from ..inputs.copc import is_copc
+from ..inputs.lasread import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
 
 # a tile read ahead (xyz float64, classification, RGB, returns: 33 B and the chunk lists) while its

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..core import interrupt
 from ..core.cells import bounds, rows
-from ..inputs.copc import is_copc, read_fraction
+from ..inputs.lasread import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
 from ..inputs.thinning import Block
 from ..soil.points import SOIL, NonSoil, PointRule

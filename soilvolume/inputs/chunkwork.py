@@ -178,15 +178,9 @@ def consume(chunks: Iterator[tuple], work: Callable, index: list | None, check) 
     """Every chunk through ``work`` ((cropped, soil, x/y box of a whole chunk or None)), the boxes into
     ``index``; returns (points, soil points, cropped, seconds waiting for chunks, the rule)."""
     points = used = cropped = start = 0
-    reading, rule = 0.0, None
-    while True:
-        t0 = time.perf_counter()
-        try:
-            item = next(chunks)
-        except StopIteration:
-            break
-        finally:
-            reading += time.perf_counter() - t0
+    reading, rule, t0 = 0.0, None, time.perf_counter()
+    for item in chunks:
+        reading += time.perf_counter() - t0
         if check:
             check()
         rule = item[2]
@@ -197,7 +191,8 @@ def consume(chunks: Iterator[tuple], work: Callable, index: list | None, check) 
         start = start if xy_box is None else points
         used += n_soil
         cropped += n_crop
-    return points, used, cropped, reading, rule
+        t0 = time.perf_counter()
+    return points, used, cropped, reading + time.perf_counter() - t0, rule
 
 
 def native_work(kernel: NativeChunks, item: tuple, out: tuple) -> tuple:
@@ -207,7 +202,10 @@ def native_work(kernel: NativeChunks, item: tuple, out: tuple) -> tuple:
     local.check.extend(got.lo, got.hi)
     if local.last:
         local.check.finish()
-    piece = (got.lo[:2], got.hi[:2]) if kernel.span is None else _joined(kernel.span, got)
+    span = kernel.span
+    piece = (
+        (got.lo[:2], got.hi[:2]) if span is None else (np.minimum(span[0], got.lo[:2]), np.maximum(span[1], got.hi[:2]))
+    )
     kernel.span, box = (None, piece) if local.flush else (piece, None)
     return got.cropped, got.soil, box
 
@@ -220,8 +218,3 @@ def numpy_work(shift, keep, thinner: ColumnThinner, box, item: tuple, out: tuple
         inside = keep(local)
     soil = None if labels is None else labels == SOIL
     return (*keep_chunk(local, soil, inside, labels, thinner, box, *out), xy_box)
-
-
-def _joined(span: tuple, got) -> tuple[np.ndarray, np.ndarray]:
-    """An x/y box grown by a piece's bounds."""
-    return np.minimum(span[0], got.lo[:2]), np.maximum(span[1], got.hi[:2])

@@ -39,9 +39,7 @@ def parse_crs(text: str | None, what: str) -> pyproj.CRS | None:
 
 def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
     """The horizontal part of a (possibly compound) CRS."""
-    if crs.is_compound:
-        return crs.sub_crs_list[0]
-    return crs
+    return crs.sub_crs_list[0] if crs.is_compound else crs
 
 
 def raster_wkt(wkt: str | None) -> str | None:
@@ -119,10 +117,8 @@ def to_frame(xyz: np.ndarray, src: pyproj.CRS, frame: WorkFrame, path: str) -> n
 
 def lonlat_of(xyz: np.ndarray, crs: pyproj.CRS) -> tuple[float, float]:
     """Longitude/latitude of the centre of a cloud's bounding box."""
-    cx = float((xyz[:, 0].min() + xyz[:, 0].max()) / 2)
-    cy = float((xyz[:, 1].min() + xyz[:, 1].max()) / 2)
-    tr = pyproj.Transformer.from_crs(horizontal(crs), "EPSG:4326", always_xy=True)
-    lon, lat = tr.transform(cx, cy)
+    cx, cy = ((xyz[:, :2].min(axis=0) + xyz[:, :2].max(axis=0)) / 2).tolist()
+    lon, lat = pyproj.Transformer.from_crs(horizontal(crs), "EPSG:4326", always_xy=True).transform(cx, cy)
     return float(lon), float(lat)
 
 

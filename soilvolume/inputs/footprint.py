@@ -29,8 +29,17 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
 
 def footprint(xy: np.ndarray, radius: float = 0.0, segments: int = 64) -> np.ndarray:
     """Convex hull of ``xy`` buffered by ``radius`` (a Minkowski sum with a circumscribed
-    ``segments``-gon), (K, 2) vertices counter-clockwise, not closed."""
-    return _buffered(_hull(xy), radius, segments)
+    ``segments``-gon), (K, 2) vertices counter-clockwise, not closed; the hull itself when ``radius`` <= 0."""
+    verts = _hull(xy)
+    if radius <= 0:
+        return verts
+    from scipy.spatial import ConvexHull
+
+    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    r = radius / np.cos(np.pi / segments)
+    circle = np.c_[np.cos(ang), np.sin(ang)] * r
+    pts = (verts[:, None, :] + circle[None, :, :]).reshape(-1, 2)
+    return pts[ConvexHull(pts).vertices]
 
 
 def _hull(xy: np.ndarray) -> np.ndarray:
@@ -65,19 +74,6 @@ def _not_inside_extremes(xy: np.ndarray) -> np.ndarray:
         left -= ey * x  # |edge| x the distance left of the edge, plus the constant below
         keep |= left <= ex * a[1] - ey * a[0] + tol * float(np.hypot(ex, ey))
     return np.flatnonzero(keep)
-
-
-def _buffered(verts: np.ndarray, radius: float, segments: int) -> np.ndarray:
-    """A hull ``verts`` buffered by ``radius`` (unchanged when ``radius`` <= 0)."""
-    if radius <= 0:
-        return verts
-    from scipy.spatial import ConvexHull
-
-    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
-    r = radius / np.cos(np.pi / segments)
-    circle = np.c_[np.cos(ang), np.sin(ang)] * r
-    pts = (verts[:, None, :] + circle[None, :, :]).reshape(-1, 2)
-    return pts[ConvexHull(pts).vertices]
 
 
 def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:

@@ -23,11 +23,12 @@ from ..core.outputs import check_input_file
 from ..core.types import SoilVolumeError
 from .crs import horizontal, z_unit
 
-FEET = {"ft": 0.3048, "foot": 0.3048, "feet": 0.3048, "us survey foot": 0.3048006096, "us-ft": 0.3048006096}
-FEET |= {"ftus": 0.3048006096, "us_survey_foot": 0.3048006096}
-METRES = {"", "m", "metre", "meter", "metres", "meters"}
-SMALLER = {"cm": 0.01, "centimetre": 0.01, "centimeter": 0.01, "centimetres": 0.01, "centimeters": 0.01}
-SMALLER |= {"mm": 0.001, "millimetre": 0.001, "millimeter": 0.001, "millimetres": 0.001, "millimeters": 0.001}
+#: metres per height unit, by the band's unit name (lower case; none: metres)
+UNITS = dict.fromkeys(("", "m", "metre", "meter", "metres", "meters"), 1.0)
+UNITS |= dict.fromkeys(("ft", "foot", "feet"), 0.3048)
+UNITS |= dict.fromkeys(("us survey foot", "us-ft", "ftus", "us_survey_foot"), 0.3048006096)
+UNITS |= dict.fromkeys(("cm", "centimetre", "centimeter", "centimetres", "centimeters"), 0.01)
+UNITS |= dict.fromkeys(("mm", "millimetre", "millimeter", "millimetres", "millimeters"), 0.001)
 NOT_A_HEIGHT_M = 1e5  # m from the datum: no height on Earth is this far (Everest 8.8 km, the deepest sea 11 km)
 FILLS = (-9999.0, -99999.0, -32767.0, -32768.0)  # stored values programs leave for "no height"
 FAR_BELOW_M = 1000.0  # an undeclared fill this far below the median height is no height
@@ -105,7 +106,7 @@ def open_heights(path: Path) -> HeightRaster:
 def metres_per_unit(crs: pyproj.CRS, unit: str, path: str) -> tuple[float, str]:
     """(metres per stored height unit, its source in words): a vertical CRS's axis, else the band's
     unit (none: metres); a band unit contradicting the vertical CRS is refused."""
-    band = FEET.get(unit, SMALLER.get(unit, 1.0 if unit in METRES else None))
+    band = UNITS.get(unit)
     if crs.is_compound or len(crs.axis_info) == 3:
         factor = z_unit(crs)
         if unit and band is not None and not math.isclose(band, factor, rel_tol=1e-6):
@@ -139,30 +140,22 @@ def window_over(
 
 
 def read_heights(raster: HeightRaster, factor: float, window: tuple[int, int, int, int] | None = None) -> Heights:
-    """The heights (m) of ``window`` (the whole raster when None): stored value x scale + offset,
-    x ``factor`` (metres per unit); nodata and values no height can take NaN."""
-    from affine import Affine
-
-    c0, r0, cols, rows = window or (0, 0, raster.width, raster.height)
-    _check_size(raster, cols, rows, window is None)
-    try:
-        z = _read(raster, factor, (c0, r0, cols, rows))
-        masked = _mask_absurd(z, raster, factor)
-    except MemoryError as exc:
-        remedy = _remedy(raster, rows * cols, window is None)
-        raise SoilVolumeError(f"{raster.path}: out of memory reading {rows:,} x {cols:,} cells{remedy}") from exc
-    return Heights(z, raster.transform @ Affine.translation(c0, r0), (c0, r0, cols, rows), masked)
-
-
-def _read(raster: HeightRaster, factor: float, window: tuple[int, int, int, int]) -> np.ndarray:
-    """The window's heights, converted :data:`BLOCK_CELLS` at a time."""
+    """The heights (m) of ``window`` (the whole raster when None), :data:`BLOCK_CELLS` at a time:
+    stored value x scale + offset, x ``factor`` (metres per unit); nodata and values no height can take NaN."""
     import rasterio
+    from affine import Affine
     from rasterio.windows import Window
 
-    c0, r0, cols, rows = window
-    z = np.empty((rows, cols), np.float64)
+    c0, r0, cols, rows = window or (0, 0, raster.width, raster.height)
+    if cols * rows > max_cells():
+        where = "in the raster" if window is None else "over the site"
+        raise SoilVolumeError(
+            f"{raster.path}: {rows:,} x {cols:,} cells {where} are too many to read "
+            f"({max_cells():,} at most){_remedy(raster, cols * rows, window is None)}"
+        )
     step = max(1, BLOCK_CELLS // max(cols, 1))
     try:
+        z = np.empty((rows, cols), np.float64)
         with rasterio.open(raster.path) as ds:
             for top in range(0, rows, step):
                 n = min(step, rows - top)
@@ -170,9 +163,13 @@ def _read(raster: HeightRaster, factor: float, window: tuple[int, int, int, int]
                 values = (block.data.astype(np.float64) * raster.scale + raster.offset) * factor
                 values[np.ma.getmaskarray(block)] = np.nan
                 z[top : top + n] = values
+        masked = _mask_absurd(z, raster, factor)
     except rasterio.errors.RasterioError as exc:
         raise SoilVolumeError(f"{raster.path}: its cells cannot be read ({' '.join(str(exc).split())[:200]})") from exc
-    return z
+    except MemoryError as exc:
+        remedy = _remedy(raster, rows * cols, window is None)
+        raise SoilVolumeError(f"{raster.path}: out of memory reading {rows:,} x {cols:,} cells{remedy}") from exc
+    return Heights(z, raster.transform @ Affine.translation(c0, r0), (c0, r0, cols, rows), masked)
 
 
 def _mask_absurd(z: np.ndarray, raster: HeightRaster, factor: float) -> list[dict]:
@@ -206,16 +203,6 @@ def max_cells() -> int:
     except (AttributeError, ValueError, OSError):  # not POSIX
         total = 8 << 30
     return int(min(MAX_CELLS, max(1 << 26, total // 32)))
-
-
-def _check_size(raster: HeightRaster, cols: int, rows: int, whole: bool) -> None:
-    limit = max_cells()
-    if cols * rows > limit:
-        where = "in the raster" if whole else "over the site"
-        raise SoilVolumeError(
-            f"{raster.path}: {rows:,} x {cols:,} cells {where} are too many to read "
-            f"({limit:,} at most){_remedy(raster, cols * rows, whole)}"
-        )
 
 
 def _remedy(raster: HeightRaster, cells: int, whole: bool) -> str:

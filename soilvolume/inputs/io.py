@@ -72,15 +72,9 @@ def validate(raw: RawPoints) -> None:
 
 def _read_las(path: Path) -> RawPoints:
     wkt, n, _, _, has_cls, _ = las_header(path)
-    xyz = np.empty((n, 3))
-    cls = np.empty(n, dtype=np.uint8) if has_cls else None
-    start = 0
-    for part, part_cls in las_chunks(path, n, 2_000_000):  # raises unless exactly n points come
-        xyz[start : start + len(part)] = part
-        if cls is not None:
-            cls[start : start + len(part)] = part_cls
-        start += len(part)
-    return RawPoints(xyz, cls, wkt, str(path))
+    parts = list(las_chunks(path, n, 2_000_000)) or [(np.empty((0, 3)), np.empty(0, np.uint8))]  # all n points
+    xyz, cls = zip(*parts, strict=True)
+    return RawPoints(np.concatenate(xyz), np.concatenate(cls) if has_cls else None, wkt, str(path))
 
 
 def _read_o3d(path: Path) -> RawPoints:
@@ -122,8 +116,9 @@ def atomic_path(final: str | os.PathLike) -> Iterator[Path]:
             tmp.unlink()
 
 
-def _las_header(offsets: np.ndarray, scale: float, crs_wkt: str | None):
-    """A LAS 1.4 header (point format 6) with these offsets, one scale for x/y/z and the CRS."""
+def _write(path: str | os.PathLike, offsets: np.ndarray, scale: float, crs_wkt: str | None, chunks: Iterable) -> None:
+    """Absolute (xyz, classification or None) chunks as LAS 1.4 point format 6 with these offsets, one
+    scale for x/y/z and the CRS (LAZ when the suffix is .laz), atomically."""
     import laspy
     import pyproj  # here: the command line's start-up imports this module, not pyproj
 
@@ -132,7 +127,14 @@ def _las_header(offsets: np.ndarray, scale: float, crs_wkt: str | None):
     header.scales = np.array([scale, scale, scale])
     if crs_wkt:
         header.add_crs(pyproj.CRS.from_wkt(crs_wkt))
-    return header
+    with atomic_path(path) as tmp:
+        with laspy.open(tmp, mode="w", header=header, do_compress=Path(path).suffix.lower() == ".laz") as w:
+            for xyz, cls in chunks:
+                rec = laspy.ScaleAwarePointRecord.zeros(len(xyz), header=header)
+                rec.x, rec.y, rec.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
+                if cls is not None:
+                    rec.classification = cls
+                w.write_points(rec)
 
 
 def write_las_chunked(
@@ -144,21 +146,16 @@ def write_las_chunked(
     scale: float = 0.001,
 ) -> None:
     """Write (local xyz, classification) chunks, through a rigid ``transform``, as LAS 1.4/LAZ atomically."""
-    import laspy
-
     origin = np.asarray(origin, float)
-    header = _las_header(np.floor(origin), scale, crs_wkt)
-    with atomic_path(path) as tmp:
-        with laspy.open(tmp, mode="w", header=header, do_compress=Path(path).suffix.lower() == ".laz") as w:
-            for xyz, cls in chunks:
-                part = np.asarray(xyz, dtype=np.float64)
-                if transform is not None:
-                    part = part @ transform[:3, :3].T + transform[:3, 3]
-                rec = laspy.ScaleAwarePointRecord.zeros(len(part), header=header)
-                rec.x, rec.y, rec.z = part[:, 0] + origin[0], part[:, 1] + origin[1], part[:, 2] + origin[2]
-                if cls is not None:
-                    rec.classification = cls
-                w.write_points(rec)
+
+    def absolute() -> Iterator[tuple]:
+        for xyz, cls in chunks:
+            part = np.asarray(xyz, dtype=np.float64)
+            if transform is not None:
+                part = part @ transform[:3, :3].T + transform[:3, 3]
+            yield part + origin, cls
+
+    _write(path, np.floor(origin), scale, crs_wkt, absolute())
 
 
 def write_las(
@@ -169,12 +166,5 @@ def write_las(
     scale: float = 0.001,
 ) -> None:
     """Write absolute coordinates as LAS 1.4 (LAZ when the suffix is .laz), atomically."""
-    import laspy
-
     lo = np.floor(xyz_abs.min(axis=0)) if len(xyz_abs) else np.zeros(3)
-    las = laspy.LasData(_las_header(lo, scale, crs_wkt))
-    las.x, las.y, las.z = xyz_abs[:, 0], xyz_abs[:, 1], xyz_abs[:, 2]
-    if classification is not None:
-        las.classification = classification
-    with atomic_path(path) as tmp:
-        las.write(str(tmp), do_compress=Path(path).suffix.lower() == ".laz")
+    _write(path, lo, scale, crs_wkt, [(xyz_abs, classification)])

@@ -1,5 +1,6 @@
 """Step 1: both clouds streamed into one working frame (before CRS, metres, local origin), ground
-selected, the before cropped to the after footprint plus the radius, both thinned on the way."""
+selected (class 2 streamed, or the SMRF or cloth simulation filter on a whole cloud), the before
+cropped to the after footprint plus the radius, both thinned on the way."""
 
 from __future__ import annotations
 
@@ -14,14 +15,17 @@ from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
 from ..soil.points import PointRule
-from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, z_unit
+from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, xy_unit, z_unit
 from .crs import to_local as _local
+from .csf import DEFAULTS, csf_classify
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
-from .ground import filtered
 from .io import RawPoints
-from .stream import ColumnThinner, Loaded, Source, load
+from .smrf import smrf_classify
+from .stream import ColumnThinner, Loaded, Source, from_raw, load
 
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
+SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
+CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
 
 
 @dataclass(frozen=True)
@@ -67,18 +71,6 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
 THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
-def _limit(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray, poly: np.ndarray) -> Source:
-    """``src`` read only within the box of the local polygon ``poly`` when in the frame's CRS and metres."""
-    if src.raw is not None or not (crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0):
-        return src
-    return src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])
-
-
-def thin_voxel(area_m2: float) -> float:
-    """Column size (m) of the registration subset: about THIN_POINTS over ``area_m2``, >= 0.15 m."""
-    return max(0.15, float(np.sqrt(max(area_m2, 1.0) / THIN_POINTS)))
-
-
 NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 
 
@@ -91,33 +83,28 @@ def prepare(
     crs_b = resolve_crs(before, options.before_crs, opt("before_crs"))
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(before, crs_b)
-    lo, hi, origin, voxel, to_a = _setup(after, crs_a, frame)
+    origin, voxel, to_a, thinner = _setup(after, crs_a, frame)
     original_after = after
-    after, a, note_a = _load_whole(
-        after, crs_a, to_a, lo - origin, hi - origin, voxel, options, check, None if full else NOTHING, loader
-    )
+    after, a, note_a = _load_whole(after, crs_a, to_a, thinner, options, check, None if full else NOTHING, loader)
     check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
     before, b, note_b = _load_before(
         before, crs_b, frame, origin, poly, (after.path, a.thin), voxel, options, check, full, loader
     )
-    inputs = {
-        "before": _describe(before, crs_b, b.used, note_b or b.note, b.extra["cropped"], b.nonsoil),
-        "after": _describe(after, crs_a, a.used, note_a or a.note, a.extra["cropped"], a.nonsoil),
-    }
-    read_s = a.extra["read_s"] + b.extra["read_s"]
-    wkt = frame.wkt
     return Prepared(
-        Cloud(b.xyz, origin, wkt, before.path, nonsoil=b.nonsoil),
-        Cloud(a.xyz, origin, wkt, after.path, nonsoil=a.nonsoil),
+        Cloud(b.xyz, origin, frame.wkt, before.path, nonsoil=b.nonsoil),
+        Cloud(a.xyz, origin, frame.wkt, after.path, nonsoil=a.nonsoil),
         frame,
         origin,
-        inputs,
+        {
+            "before": _describe(before, crs_b, b, note_b or b.note),
+            "after": _describe(after, crs_a, a, note_a or a.note),
+        },
         b.thin,
         a.thin,
         voxel,
         _all_points(original_after, to_a),
-        read_s,
+        a.extra["read_s"] + b.extra["read_s"],
         b.extra["counts"],
         (b.note == CLASS_NOTE, a.note == CLASS_NOTE),
         (b.extra["index"], a.extra["index"]),
@@ -131,11 +118,15 @@ def _load_before(
     """The before cloud streamed within the after footprint ``poly``, at full resolution only where the
     after cloud (``after``: path, thinned points) can land (GPS prior + 2 m); refused without overlap."""
     after_path, after_thin = after
-    src, mode, note = filtered(_limit(src, crs, frame, origin, poly), crs, options)
+    if src.raw is None and crs.equals(frame.crs) and frame.xy_unit == 1.0 and z_unit(crs) == 1.0:
+        src = src.within(poly.min(axis=0) + origin[:2], poly.max(axis=0) + origin[:2])  # its reads: the crop's box
+    src, mode, note = filtered(src, crs, options)
     reach = options.max_gps_shift + 2.0
     lo_a, hi_a = bounds(after_thin, 2)
     box = (lo_a - reach, hi_a + reach) if full else NOTHING
-    within = _padded_box(src, crs, frame, origin)  # a crop radius far past the data costs nothing
+    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)  # its header box, padded below: every point lies in it
+    pad = _pad(lo, hi)
+    within = lo[:2] - origin[:2] - pad, hi[:2] - origin[:2] + pad  # a crop radius far past the data costs nothing
     thinner = ColumnThinner(poly.min(axis=0), poly.max(axis=0), voxel, within, src.path)
     local = _local(crs, frame, origin, src.path)
     b = loader(src, local, mode, PolygonMask(poly), thinner, check, box, not full, exclude=options.exclude)
@@ -162,7 +153,7 @@ def prepare_survey(after: Source, options: Options, check=None) -> Prepared:
         Cloud(a.xyz, origin, frame.wkt, after.path, nonsoil=a.nonsoil),
         frame,
         origin,
-        {"after": _describe(streamed, crs_a, a.used, note, a.extra["cropped"], a.nonsoil)},
+        {"after": _describe(streamed, crs_a, a, note)},
         none,
         a.thin,
         voxel,
@@ -196,8 +187,8 @@ def _survey(src: Source, crs: pyproj.CRS, options: Options, check, centred: bool
     """One survey streamed whole into its own frame, refused without points left: (the source
     streamed, what was loaded, selection note, frame, origin, voxel, file -> local)."""
     frame = _own_frame(src, crs)
-    lo, hi, origin, voxel, to_local = _setup(src, crs, frame, centred)
-    streamed, one, note = _load_whole(src, crs, to_local, lo - origin, hi - origin, voxel, options, check)
+    origin, voxel, to_local, thinner = _setup(src, crs, frame, centred)
+    streamed, one, note = _load_whole(src, crs, to_local, thinner, options, check)
     note = note or one.note
     if len(one.xyz) == 0:
         raise SoilVolumeError(f"{src.path}: no points left after the ground selection ({note})")
@@ -206,11 +197,14 @@ def _survey(src: Source, crs: pyproj.CRS, options: Options, check, centred: bool
 
 
 def _setup(src: Source, crs: pyproj.CRS, frame: WorkFrame, centred: bool = True) -> tuple:
-    """(lo, hi of ``src`` in ``frame``, local origin: the floor of lo, or of its x/y centre when
-    ``centred``, thinning voxel, file -> local)."""
+    """(local origin: the floor of the low corner of ``src`` in ``frame``, or of its x/y centre when
+    ``centred``, thinning voxel, file -> local, the thinner over its local box padded (header bounds))."""
     lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
     origin = np.floor(np.r_[(lo[:2] + hi[:2]) / 2, lo[2]]) if centred else np.floor(lo)
-    return lo, hi, origin, thin_voxel(float(np.prod(hi[:2] - lo[:2]))), _local(crs, frame, origin, src.path)
+    area = max(float(np.prod(hi[:2] - lo[:2])), 1.0)
+    voxel, pad = max(0.15, float(np.sqrt(area / THIN_POINTS))), _pad(lo, hi)  # about THIN_POINTS columns, >= 0.15 m
+    thinner = ColumnThinner(lo - origin - pad, hi - origin + pad, voxel, name=src.path)
+    return origin, voxel, _local(crs, frame, origin, src.path), thinner
 
 
 def _own_frame(src: Source, crs: pyproj.CRS) -> WorkFrame:
@@ -220,22 +214,10 @@ def _own_frame(src: Source, crs: pyproj.CRS) -> WorkFrame:
 
 
 def _load_whole(
-    src: Source,
-    crs: pyproj.CRS,
-    to_local,
-    lo: np.ndarray,
-    hi: np.ndarray,
-    voxel: float,
-    options: Options,
-    check,
-    box=None,
-    loader=load,
+    src: Source, crs: pyproj.CRS, to_local, thinner: ColumnThinner, options: Options, check, box=None, loader=load
 ) -> tuple[Source, Loaded, str | None]:
-    """(source streamed, loaded, filter note): every (ground) point of ``src`` (within ``box``),
-    thinned over its local box lo..hi padded (header bounds)."""
+    """(source streamed, loaded, filter note): every (ground) point of ``src`` (within ``box``) to ``thinner``."""
     src, mode, note = filtered(src, crs, options)
-    pad = _pad(lo, hi)
-    thinner = ColumnThinner(lo - pad, hi + pad, voxel, name=src.path)
     return src, loader(src, to_local, mode, None, thinner, check, box, box is NOTHING, exclude=options.exclude), note
 
 
@@ -244,26 +226,42 @@ def _pad(lo: np.ndarray, hi: np.ndarray) -> float:
     return 1.0 + 0.02 * float(np.max(hi[:2] - lo[:2]))
 
 
-def _padded_box(src: Source, crs: pyproj.CRS, frame: WorkFrame, origin: np.ndarray) -> tuple:
-    """The local x/y box every point of ``src`` lies in (its header bounds, padded)."""
-    lo, hi = frame_box(src.lo, src.hi, crs, frame, src.path)
-    pad = _pad(lo, hi)
-    return lo[:2] - origin[:2] - pad, hi[:2] - origin[:2] + pad
-
-
 def _all_points(src: Source, to_local):
     """Every point of ``src`` (all classes), chunk by chunk in the local frame, with its class."""
     return lambda: ((to_local(xyz), cls) for xyz, cls in src.chunks())
 
 
-def _describe(src: Source, crs: pyproj.CRS, used: int, note: str, kept: int, nonsoil=None) -> dict:
+def _describe(src: Source, crs: pyproj.CRS, loaded: Loaded, note: str) -> dict:
+    """report.json's description of an input: what was read of ``src`` and kept of it (``loaded``)."""
     return {
-        "soil_rule": (nonsoil.rule if nonsoil is not None else PointRule()).describe(),
+        "soil_rule": (loaded.nonsoil.rule if loaded.nonsoil is not None else PointRule()).describe(),
         "path": src.path,
         "points": int(src.count),
-        "points_used": used,
-        "points_after_crop": kept,
+        "points_used": loaded.used,
+        "points_after_crop": loaded.extra["cropped"],
         "selection": note,
         "crs": crs.name,
         "crs_wkt": crs.to_wkt(),
     }
+
+
+def filtered(src: Source, crs: pyproj.CRS, options: Options) -> tuple[Source, str, str | None]:
+    """(source to stream, ground mode for streaming, note): SMRF (``filter``) with an earthworks
+    window and slope (PDAL's 18 m / 0.15 take the piles for objects) or CSF, run in metres on the
+    whole cloud."""
+    if options.ground not in ("filter", "csf"):
+        return src, options.ground, None
+    raw = src.materialize()
+    h, v = xy_unit(crs), z_unit(crs)
+    x, y, z = raw.xyz[:, 0] * h, raw.xyz[:, 1] * h, raw.xyz[:, 2] * v
+    if options.ground == "filter":
+        keep = smrf_classify(x, y, z, window=options.ground_window, slope=options.ground_slope)
+        note = SMRF_NOTE.format(window=options.ground_window, slope=options.ground_slope)
+    else:
+        keep, note = csf_classify(x, y, z, **DEFAULTS), CSF_NOTE.format(**DEFAULTS)
+    if not keep.any():
+        raise SoilVolumeError(f"{src.path}: the {note.split(' (')[0]} found no ground points")
+    sig = None if raw.signals is None else raw.signals.select(keep)  # colour still says what is green
+    out = from_raw(RawPoints(raw.xyz[keep], None, raw.crs_wkt, raw.path, sig))
+    out.count = src.count  # report the points read, not the ground points
+    return out, "filter", note

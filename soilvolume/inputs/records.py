@@ -80,9 +80,9 @@ def las_records(
     whole_first: bool = False,
     mapped: bool = False,
 ) -> Iterator[tuple]:
-    """(Records, classification or None[, signals]) in pieces of at most ``piece`` points, chunks of
-    ``size`` ending on ``flush``; not ``count`` points: corrupt. ``ring`` buffers, or ``mapped``; ``stop``:
-    the first points only; ``whole_first``: the first chunk in one piece; ``direct(has_class)`` giving
+    """(Records, classification or None, signals or None) in pieces of at most ``piece`` points, chunks of
+    ``size`` ending on ``flush``; not ``count`` points: corrupt. ``ring`` buffers, or ``mapped`` (all in one
+    view); ``stop``: the first points only; ``whole_first``: the first chunk in one piece; ``direct(has_class)`` giving
     a class table (or None) leaves an uncompressed chunk in the file (:class:`FileChunk`)."""
     import laspy
 
@@ -99,19 +99,18 @@ def las_records(
             if h.are_points_compressed:
                 arrays = _laz(reader, [m for c in chunks for m in c])
             else:
-                arrays = _mapped(path, h, chunks) if mapped else _raw(path, h, chunks, ring, direct)
+                arrays = _mapped(path, h, sum(map(sum, chunks))) if mapped else _raw(path, h, chunks, ring, direct)
             for array in arrays:
                 read += len(array)
                 if isinstance(array, FileChunk):
                     array.scales, array.offsets, array.check, array.last = scales, offsets, check, read >= count
-                    yield (array, None, None) if signals else (array, None)
+                    yield array, None, None
                     continue
                 rec = laspy.ScaleAwarePointRecord(array, h.point_format, scales, offsets)
                 cls = np.array(rec.classification) if "classification" in dims else None
                 sig = point_signals(rec, signal_dims(dims, signals, cls)) if signals else None
-                item = Records(array, scales, offsets, check, read >= count, read % size == 0 or read >= count)
-                yield (item, cls, sig) if signals else (item, cls)
-                del rec, item, array
+                yield Records(array, scales, offsets, check, read >= count, read % size == 0 or read >= count), cls, sig
+                del rec, array
     except SoilVolumeError:
         raise
     except Exception as exc:
@@ -123,8 +122,8 @@ def las_records(
 def first_chunk_signals(path: Path, count: int, size: int, signals: bool | Callable) -> tuple:
     """(classification, signals) of a LAS/LAZ file's first chunk, coordinates not decoded: what the
     epoch's rule is decided on, the same points the numpy path decides it on."""
-    for _rec, cls, *sig in las_records(path, count, size, signals, piece=size, stop=min(size, count), mapped=True):
-        return cls, sig[0] if sig else None  # the chunk in one piece, as the numpy path reads it
+    for _rec, cls, sig in las_records(path, count, size, signals, piece=size, stop=min(size, count), mapped=True):
+        return cls, sig  # the chunk in one piece, as the numpy path reads it
     return None, None
 
 
@@ -133,13 +132,13 @@ def las_chunks(
 ) -> Iterator[tuple]:
     """(absolute xyz float64, classification or None[, signals: :func:`signal_dims`]) of a LAS/LAZ
     file, ``size`` points at a time (one read buffer); with ``origin``, ``xyz - origin``."""
-    for rec, cls, *sig in las_records(path, count, size, signals, piece=size, ring=1):
+    for rec, cls, sig in las_records(path, count, size, signals, piece=size, ring=1):
         xyz, lo, hi = decoded_xyz(rec, origin)
         if len(xyz):
             rec.check.extend(lo, hi)
         if rec.last:
             rec.check.finish()
-        item = (xyz, cls, sig[0]) if signals else (xyz, cls)
+        item = (xyz, cls, sig) if signals else (xyz, cls)
         del rec, xyz, cls, sig  # the record is not held while the consumer works (or the queue is full)
         yield item
 
@@ -213,22 +212,15 @@ def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
         yield part.array
 
 
-def _mapped(path: Path, header, chunks: list[list[int]]) -> Iterator[np.ndarray]:
-    """The pieces of an uncompressed file as read-only mapped views: the page cache's pages, not a
-    buffer faulted in (for one look at the first chunk's classes and signals)."""
+def _mapped(path: Path, header, m: int) -> Iterator[np.ndarray]:
+    """The first ``m`` points of an uncompressed file (fewer when it is short) as one read-only mapped
+    view: the page cache's pages, not a buffer faulted in (for one look at the first chunk's classes
+    and signals)."""
     dtype = header.point_format.dtype()
     base = header.offset_to_point_data
-    n = min(sum(map(sum, chunks)), max(0, (path.stat().st_size - base) // dtype.itemsize))
-    if n == 0:
-        return
-    points = np.memmap(path, dtype, mode="r", offset=base, shape=(n,))
-    at = 0
-    for m in (m for chunk in chunks for m in chunk):
-        part = points[at : at + m].view(np.ndarray)
-        at += len(part)
-        yield part
-        if len(part) < m:
-            return
+    n = min(m, max(0, (path.stat().st_size - base) // dtype.itemsize))
+    if n > 0:
+        yield np.memmap(path, dtype, mode="r", offset=base, shape=(n,)).view(np.ndarray)
 
 
 def _raw(path: Path, header, chunks: list[list[int]], ring: int, direct=None) -> Iterator:

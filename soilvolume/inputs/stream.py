@@ -17,9 +17,8 @@ from ..core.cells import bounds
 from ..core.types import SoilVolumeError
 from ..soil.points import NonSoil, PointRule, Signals, decide, deciding_dims
 from .chunkwork import Growing, NativeChunks, consume, native_work, numpy_work
-from .copc import is_copc
 from .io import GROUND, LAS_SUFFIXES, RawPoints, _check_readable, read_points, validate
-from .lasread import file_chunks, las_header, las_ranges
+from .lasread import file_chunks, is_copc, las_header, las_ranges
 from .records import first_chunk_signals, las_records
 from .thinning import MAX_COLUMNS, ColumnThinner  # noqa: F401  (their home was this module)
 from .vpc import Vpc, read_vpc
@@ -52,14 +51,12 @@ class Source:
             yield (xyz, raw.classification, raw.signals) if signals else (xyz, raw.classification)
             return
         if self.index is not None and self.region is not None and not is_copc(self.path):
-            yield from las_ranges(self.path, _meeting(self.index, *self.region), size or CHUNK, signals, origin)
+            lo, hi = self.region  # the (start, count) of the indexed chunks whose x/y box meets it
+            ranges = [(s, n) for s, n, a, b in self.index if (a <= hi).all() and (lo <= b).all()]
+            yield from las_ranges(self.path, ranges, size or CHUNK, signals, origin)
             return
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
-
-    def first_file(self) -> Source | None:
-        """The first file with points this source's reads open, as its header gives it."""
-        return next((h for h in map(_header, map(Path, self.tiles())) if h.count), None)
 
     def records(
         self, size: int | None = None, signals: bool | Callable = False, direct=None, whole_first: bool = False
@@ -91,11 +88,6 @@ class Source:
         return RawPoints(np.concatenate(xyz), cls, self.crs_wkt, self.path, Signals.join(sig))
 
 
-def _meeting(index, lo, hi) -> list[tuple[int, int]]:
-    """(start, count) of the indexed chunks whose x/y box meets lo..hi."""
-    return [(s, n) for s, n, a, b in index if (a <= hi).all() and (lo <= b).all()]
-
-
 def open_source(path) -> Source:
     """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now."""
     p = Path(path)
@@ -123,7 +115,8 @@ def _open_vpc(p: Path) -> Source:
     first = _header(Path(vpc.tiles[0].path))
     if vpc.count == 0:
         raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
-    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, vpc.lo, vpc.hi, first.has_class, vpc=vpc)
+    lo, hi = np.min([t.lo for t in vpc.tiles], axis=0), np.max([t.hi for t in vpc.tiles], axis=0)
+    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
 
 
 def from_raw(raw: RawPoints) -> Source:
@@ -168,8 +161,8 @@ def _labelled(
     early = keep if fused and not by_kernel else None
     shift = (lambda xyz: xyz) if fused else to_local if src.raw is not None else getattr(to_local, "inplace", to_local)
     rule: PointRule | None = None
-    first = src.first_file() if by_kernel else None
-    ahead = first is not None and not first.compressed  # the rule decided before the reading
+    first = next((h for h in map(_header, map(Path, src.tiles())) if h.count), None) if by_kernel else None
+    ahead = first is not None and not first.compressed  # the rule decided before the reading (first file with points)
     if ahead:  # on the first chunk as a whole, as numpy decides it (the kernel gets pieces)
         cls, sig = first_chunk_signals(Path(first.path), first.count, CHUNK, lambda c: deciding_dims(c, mode, exclude))
         rule = epoch_rule(src, cls, sig, mode, exclude)

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pyproj
@@ -15,7 +14,7 @@ import pyproj
 from ..core.types import GridSpec, SoilVolumeError
 from . import landxml
 from .crs import WorkFrame, horizontal, raster_wkt, xy_unit
-from .heights import HeightRaster, metres_per_unit, open_heights, read_heights, window_over
+from .heights import HeightRaster, Heights, metres_per_unit, open_heights, read_heights, window_over
 
 SUFFIXES = (".tif", ".tiff", *landxml.SUFFIXES)  # a first input with one of these is a surface, not a cloud
 
@@ -41,37 +40,36 @@ class SurfaceSource:
 
 @dataclass(frozen=True)
 class Surface:
-    """A reference surface: heights in metres (NaN where it has none) over the window of its
-    raster that covers the survey."""
+    """A reference surface (``source``) and its heights in metres (NaN where it has none) over the
+    window of its raster that covers the survey (``got``)."""
 
-    path: str
-    heights: np.ndarray  # (rows, cols) float64, metres, of the window read
-    transform: Any  # affine.Affine of the window, in the raster's CRS's units
-    crs: pyproj.CRS  # the raster's CRS (or --before-crs), possibly with a vertical part
-    vertical_unit: str  # where the heights' unit came from, in words
-    raster: HeightRaster  # what the whole raster declares
-    window: tuple[int, int, int, int]  # (col_off, row_off, cols, rows) read
-    masked: tuple[dict, ...] = ()  # values taken as nodata though not declared (heights.Heights.masked)
+    source: SurfaceSource
+    got: Heights
 
     @property
-    def resolution_m(self) -> float:
-        """The raster's pixel size (m; CRS units times their metres)."""
-        return float(np.hypot(self.transform.a, self.transform.d)) * xy_unit(self.crs)
+    def path(self) -> str:
+        return self.source.path
+
+    @property
+    def masked(self) -> tuple[dict, ...]:
+        """Values taken as nodata though not declared (:attr:`heights.Heights.masked`)."""
+        return tuple(self.got.masked)
 
     def describe(self) -> dict:
         """report.json's description of the reference: the whole raster, the window read, its valid cells."""
+        raster, crs, t = self.source.raster, self.source.crs, self.got.transform
         return {
             "kind": "surface",
             "path": self.path,
-            "crs": self.crs.name,
-            "crs_wkt": self.crs.to_wkt(),
-            "rows": self.raster.height,
-            "cols": self.raster.width,
-            "window": dict(zip(("col_off", "row_off", "cols", "rows"), self.window, strict=True)),
-            "resolution_m": self.resolution_m,
-            "valid_cells": int(np.isfinite(self.heights).sum()),
-            "vertical_unit": self.vertical_unit,
-            **self.raster.describe(),
+            "crs": crs.name,
+            "crs_wkt": crs.to_wkt(),
+            "rows": raster.height,
+            "cols": raster.width,
+            "window": dict(zip(("col_off", "row_off", "cols", "rows"), self.got.window, strict=True)),
+            "resolution_m": float(np.hypot(t.a, t.d)) * xy_unit(crs),  # CRS units times their metres
+            "valid_cells": int(np.isfinite(self.got.z).sum()),
+            "vertical_unit": self.source.vertical_unit,
+            **raster.describe(),
             "masked_as_nodata": list(self.masked),
         }
 
@@ -95,10 +93,8 @@ def read_over(
     for the resampling's kernel (a TIN: itself, when it meets the box)."""
     if isinstance(source, landxml.Tin):
         return landxml.check_over(source, lo, hi, frame, margin_m)
-    lo, hi = (
-        (np.asarray(lo[:2], float) - margin_m) / frame.xy_unit,
-        (np.asarray(hi[:2], float) + margin_m) / frame.xy_unit,
-    )
+    lo = (np.asarray(lo[:2], float) - margin_m) / frame.xy_unit
+    hi = (np.asarray(hi[:2], float) + margin_m) / frame.xy_unit
     window = window_over(source.raster, source.crs, lo, hi, frame.crs, pad=2)
     if window is None:
         raise SoilVolumeError(
@@ -107,16 +103,7 @@ def read_over(
     got = read_heights(source.raster, source.factor, window)
     if not np.isfinite(got.z).any():
         raise SoilVolumeError(f"{source.path} does not overlap the survey: every cell of it over the survey is nodata")
-    return Surface(
-        source.path,
-        got.z,
-        got.transform,
-        source.crs,
-        source.vertical_unit,
-        source.raster,
-        got.window,
-        tuple(got.masked),
-    )
+    return Surface(source, got)
 
 
 def on_grid(surface: Surface | landxml.Tin, grid: GridSpec, method: str = "bilinear") -> np.ndarray:
@@ -129,10 +116,10 @@ def on_grid(surface: Surface | landxml.Tin, grid: GridSpec, method: str = "bilin
 
     out = np.full((grid.rows, grid.cols), np.nan)
     reproject(
-        surface.heights,
+        surface.got.z,
         out,
-        src_transform=surface.transform,
-        src_crs=CRS.from_wkt(horizontal(surface.crs).to_2d().to_wkt()),
+        src_transform=surface.got.transform,
+        src_crs=CRS.from_wkt(horizontal(surface.source.crs).to_2d().to_wkt()),
         src_nodata=np.nan,
         dst_transform=grid.transform,
         dst_crs=CRS.from_wkt(raster_wkt(grid.crs_wkt)),
@@ -146,12 +133,12 @@ def valid_box(surface: Surface | landxml.Tin, frame_crs: pyproj.CRS, xy_unit: fl
     """The bounding box (absolute x/y in the frame, metres) of the surface's valid cells."""
     if isinstance(surface, landxml.Tin):
         return landxml.box(surface, frame_crs, xy_unit)
-    rows, cols = np.nonzero(np.isfinite(surface.heights))
+    rows, cols = np.nonzero(np.isfinite(surface.got.z))
     r = np.array([rows.min(), rows.min(), rows.max() + 1, rows.max() + 1], float)
     c = np.array([cols.min(), cols.max() + 1, cols.min(), cols.max() + 1], float)
-    t = surface.transform
+    t = surface.got.transform
     x, y = t.a * c + t.b * r + t.c, t.d * c + t.e * r + t.f
-    src, dst = horizontal(surface.crs), horizontal(frame_crs)
+    src, dst = horizontal(surface.source.crs), horizontal(frame_crs)
     if not src.equals(dst):
         x, y = pyproj.Transformer.from_crs(src, dst, always_xy=True).transform(x, y, errcheck=False)
         x, y = np.asarray(x, float), np.asarray(y, float)

@@ -118,40 +118,17 @@ class ColumnThinner:
         out -= self.first[axis]
         return out
 
-    def result(self) -> np.ndarray:
-        """The centroids (float64, (M, 3))."""
-        return self.columns()[0]
-
-    def counts(self) -> np.ndarray:
-        """The number of points behind each centroid of :meth:`result` (same order)."""
-        return self.columns(centroids=False)[1]
-
-    def columns(self, centroids: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
-        """(centroids or None unless ``centroids``, points behind each) in one pass (``sv_centroids``)."""
-        native = self._native_result(centroids)
-        if native is not None:
-            return native
-        filled = self._filled()
-        count = self.sums[3].take(filled)
-        out = None
-        if centroids:
-            out = np.empty((len(filled), 3))
-            for k in range(3):  # column by column: no (3, M) temporaries and transposed copy
-                np.divide(self.sums[k].take(filled), count, out=out[:, k])
-        return out, count.astype(np.int64)
-
-    def _native_result(self, centroids: bool) -> tuple[np.ndarray | None, np.ndarray] | None:
-        """:meth:`columns` on the native kernel; None without it."""
+    def columns(self) -> tuple[np.ndarray, np.ndarray]:
+        """(centroids float64 (M, 3), points behind each) in one pass (``sv_centroids``)."""
         lib = native.kernels()
-        if lib is None or not self.sums.flags.c_contiguous:
-            return None
-        m = int(np.count_nonzero(self.sums[3] > 0))
-        out, counts = np.empty((m, 3)) if centroids else None, np.empty(m, np.int64)
-        lib.sv_centroids(
-            self.sums.ctypes.data, self.sums.shape[1], None if out is None else out.ctypes.data, counts.ctypes.data
-        )
-        return out, counts
-
-    def _filled(self) -> np.ndarray:
-        """The ids of the columns that have points, in order."""
-        return np.flatnonzero(self.sums[3] > 0)
+        if lib is not None and self.sums.flags.c_contiguous:
+            m = int(np.count_nonzero(self.sums[3] > 0))
+            out, counts = np.empty((m, 3)), np.empty(m, np.int64)
+            lib.sv_centroids(self.sums.ctypes.data, self.sums.shape[1], out.ctypes.data, counts.ctypes.data)
+            return out, counts
+        filled = np.flatnonzero(self.sums[3] > 0)
+        count = self.sums[3].take(filled)
+        out = np.empty((len(filled), 3))
+        for k in range(3):  # column by column: no (3, M) temporaries and transposed copy
+            np.divide(self.sums[k].take(filled), count, out=out[:, k])
+        return out, count.astype(np.int64)

@@ -11,12 +11,14 @@ import os
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 from urllib.parse import unquote, urlparse
 
 import numpy as np
 
 from ..core.types import SoilVolumeError, short_error
 from .lasheader import check_las_header
+from .lasread import las_header
 from .vpcschema import items
 
 
@@ -28,10 +30,6 @@ class Tile:
     count: int
     lo: tuple[float, float, float]
     hi: tuple[float, float, float]
-
-    def meets(self, lo, hi) -> bool:
-        """Whether the tile's x/y box meets the x/y box lo..hi."""
-        return bool(self.lo[0] <= hi[0] and lo[0] <= self.hi[0] and self.lo[1] <= hi[1] and lo[1] <= self.hi[1])
 
 
 @dataclass(frozen=True)
@@ -46,17 +44,11 @@ class Vpc:
     def count(self) -> int:
         return sum(t.count for t in self.tiles)
 
-    @property
-    def lo(self) -> np.ndarray:
-        return np.min([t.lo for t in self.tiles], axis=0)
-
-    @property
-    def hi(self) -> np.ndarray:
-        return np.max([t.hi for t in self.tiles], axis=0)
-
     def tiles_meeting(self, lo=None, hi=None) -> list[Tile]:
-        """The tiles whose box meets the x/y box lo..hi (all when None)."""
-        return [t for t in self.tiles if lo is None or t.meets(lo, hi)]
+        """The tiles whose x/y box meets the x/y box lo..hi (all when None)."""
+        return [
+            t for t in self.tiles if lo is None or (np.less_equal(t.lo[:2], hi) & np.less_equal(lo, t.hi[:2])).all()
+        ]
 
 
 MAX_BYTES = 256 * 2**20  # a .vpc lists tiles: far larger is not one
@@ -109,10 +101,9 @@ def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, lis
         if tile_path in seen:
             raise SoilVolumeError(f"{p}: {item.name} lists the tile {item.href} that {seen[tile_path]} lists already")
         seen[tile_path] = item.name
-        head = _tile_header(p, item, tile_path)
-        crs = item.crs[1] if item.crs else head[3]
+        tile, crs = _tile(p, item, tile_path)
         crss.append((crs, tile_path))
-        tiles.append(_tile(p, item, tile_path, head, crs))
+        tiles.append(tile)
     return Vpc(str(p), _common_crs(p, crss), tuple(tiles)), [_version(t.path) for t in tiles]
 
 
@@ -153,22 +144,6 @@ def _href(vpc: Path, item) -> str:
     return str(full)
 
 
-def _tile_header(vpc: Path, item, tile_path: str):
-    """(point count, mins, maxs, CRS or None) of a tile's header, checked before laspy reads it."""
-    import laspy
-    import pyproj
-
-    check_las_header(Path(tile_path))
-    try:
-        with laspy.open(tile_path) as r:
-            h = r.header
-            crs = h.parse_crs()
-            head = int(h.point_count), tuple(map(float, h.mins)), tuple(map(float, h.maxs))
-    except Exception as exc:  # laspy raises many types on broken files
-        raise SoilVolumeError(f"{tile_path}: not a readable LAS/LAZ tile ({type(exc).__name__})") from None
-    return (*head, None if crs is None else pyproj.CRS.from_user_input(crs))
-
-
 def _common_crs(vpc: Path, crss: list) -> str | None:
     """The one CRS of all tiles (WKT), or an error naming two tiles that differ."""
     known = [(c, t) for c, t in crss if c is not None]
@@ -184,17 +159,24 @@ def _common_crs(vpc: Path, crss: list) -> str | None:
     return first.to_wkt()
 
 
-def _tile(vpc: Path, item, tile_path: str, head, crs) -> Tile:
-    """The tile with its header's box and count, the VPC's checked against them."""
-    count, lo, hi, _ = head
-    name = Path(tile_path).name
+def _tile(vpc: Path, item, tile_path: str) -> tuple[Tile, Any]:
+    """The tile with its header's box and count (the header checked before laspy reads it), the VPC's
+    checked against them; and its CRS (the VPC's, else the header's, or None)."""
+    import pyproj
+
+    check_las_header(Path(tile_path))
+    wkt, count, lo, hi, _, _ = las_header(Path(tile_path))
+    lo, hi, name = tuple(map(float, lo)), tuple(map(float, hi)), Path(tile_path).name
+    crs = item.crs if item.crs is not None else None if wkt is None else pyproj.CRS.from_wkt(wkt)
     if item.count is not None and item.count != count:
         raise SoilVolumeError(f"{vpc}: {item.name}: pc:count {item.count} but the header of {name} says {count} points")
     if item.proj_bbox is not None:
         _check_box(vpc, item, name, "proj:bbox", item.proj_bbox, lo, hi, NATIVE_TOL, exact=True)
     elif item.bbox is not None and crs is not None:
-        _check_box(vpc, item, name, "bbox (WGS 84)", _from_wgs84(item.bbox, crs), lo, hi, WGS84_TOL, exact=False)
-    return Tile(tile_path, count, lo, hi)
+        b = item.bbox
+        box = _box_to("EPSG:4326", crs, *((b[0], b[1], b[3], b[4]) if len(b) == 6 else b))
+        _check_box(vpc, item, name, "bbox (WGS 84)", box, lo, hi, WGS84_TOL, exact=False)
+    return Tile(tile_path, count, lo, hi), crs
 
 
 def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, exact: bool) -> None:
@@ -214,12 +196,6 @@ def _check_box(vpc: Path, item, name: str, field: str, box, lo, hi, tol: float, 
         )
 
 
-def _from_wgs84(bbox, crs) -> list[float]:
-    """A WGS 84 bbox (2D or 3D) as an x/y box in ``crs`` (densified edges)."""
-    b = [float(v) for v in bbox]
-    return _box_to("EPSG:4326", crs, *((b[0], b[1], b[3], b[4]) if len(b) == 6 else b))
-
-
 def _box_to(src, dst, w: float, s: float, e: float, n: float) -> list[float]:
     """The x/y box w, s, e, n in ``src`` as one in ``dst`` (densified edges)."""
     import pyproj
@@ -232,35 +208,22 @@ def write_vpc(path: str | os.PathLike, tiles: list[str | os.PathLike], relative:
     import laspy
 
     out = Path(path)
+    ext = ("pointcloud/v1.0.0", "projection/v1.1.0")
     features = []
     for t in map(Path, tiles):
         with laspy.open(t) as r:
             h = r.header
             crs = h.parse_crs()
         href = os.path.relpath(t.resolve(), out.resolve().parent) if relative else str(t.resolve())
-        props = {
-            "datetime": "1970-01-01T00:00:00Z",
-            "pc:count": int(h.point_count),
-            "pc:type": "lidar",
-            "pc:encoding": "?",
-            "proj:bbox": [*map(float, h.mins), *map(float, h.maxs)],
-        }
+        props = {"datetime": "1970-01-01T00:00:00Z", "pc:count": int(h.point_count), "pc:type": "lidar"}
+        props |= {"pc:encoding": "?", "proj:bbox": [*map(float, h.mins), *map(float, h.maxs)]}
         feature = {"type": "Feature", "stac_version": "1.0.0", "id": t.stem}
         if crs is not None:
             props["proj:wkt2"] = crs.to_wkt()
             w, s, e, n = _box_to(crs, "EPSG:4326", *map(float, (*h.mins[:2], *h.maxs[:2])))
             feature["bbox"] = [w, s, float(h.mins[2]), e, n, float(h.maxs[2])]  # GeoJSON: WGS 84
-        features.append(
-            {
-                **feature,
-                "stac_extensions": [
-                    "https://stac-extensions.github.io/pointcloud/v1.0.0/schema.json",
-                    "https://stac-extensions.github.io/projection/v1.1.0/schema.json",
-                ],
-                "geometry": None,
-                "properties": props,
-                "assets": {"data": {"href": href.replace(os.sep, "/"), "roles": ["data"]}},
-            }
-        )
+        feature["stac_extensions"] = [f"https://stac-extensions.github.io/{e}/schema.json" for e in ext]
+        feature |= {"geometry": None, "properties": props}
+        features.append({**feature, "assets": {"data": {"href": href.replace(os.sep, "/"), "roles": ["data"]}}})
     out.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=1))
     return out

@@ -14,20 +14,14 @@ from ..core.types import SoilVolumeError
 
 @dataclass(frozen=True)
 class Item:
-    """One validated item of a VPC."""
+    """One validated item of a VPC; ``name``: how messages name it, ``features[3] ('tile_3')``."""
 
-    index: int
-    id: str
+    name: str
     href: str
     count: int | None
     proj_bbox: tuple[float, ...] | None
-    crs: tuple[str, Any] | None  # (field name, value) of the first CRS field given
+    crs: Any  # the CRS of the first CRS field given (pyproj), or None
     bbox: tuple[float, ...] | None
-
-    @property
-    def name(self) -> str:
-        """How messages name the item: ``features[3] ('tile_3')``."""
-        return f"features[{self.index}]" + (f" ('{_clip(self.id)}')" if self.id else "")
 
 
 def _clip(text: str, limit: int = 60) -> str:
@@ -69,17 +63,15 @@ def _item(fail, k: int, f: Any) -> Item:
     ident = f.get("id", "")
     if not isinstance(ident, str | int) or isinstance(ident, bool):
         raise fail(f"{where}.id", f"must be a string (got {_kind(ident)})")
-    ident = str(ident)
-    if ident:
-        where = f"{where} ('{_clip(ident)}')"
+    if str(ident):
+        where = f"{where} ('{_clip(str(ident))}')"
     if f.get("type", "Feature") != "Feature":
         raise fail(f"{where}.type", 'must be "Feature"')
     props = {} if f.get("properties") is None else f["properties"]
     if not isinstance(props, dict):
         raise fail(f"{where}.properties", f"must be an object (got {_kind(props)})")
     return Item(
-        k,
-        ident,
+        where,
         _href(fail, where, f.get("assets")),
         _count(fail, where, props.get("pc:count")),
         _box(fail, f"{where}.properties.proj:bbox", props.get("proj:bbox"), wgs84=False),
@@ -136,7 +128,7 @@ def _box(fail, where: str, value: Any, wgs84: bool) -> tuple[float, ...] | None:
     return box
 
 
-def _crs(fail, where: str, props: dict) -> tuple[str, Any] | None:
+def _crs(fail, where: str, props: dict) -> Any:
     """The first CRS field given (``proj:wkt2``, ``proj:projjson``, ``proj:epsg``), parsed; each one
     given type-checked (a CRS that cannot be read is named, never ignored)."""
     import pyproj
@@ -157,6 +149,6 @@ def _crs(fail, where: str, props: dict) -> tuple[str, Any] | None:
         return None
     key, value = given[0]
     try:
-        return key, pyproj.CRS.from_user_input(f"EPSG:{value}" if key == "proj:epsg" else value)
+        return pyproj.CRS.from_user_input(f"EPSG:{value}" if key == "proj:epsg" else value)
     except (pyproj.exceptions.CRSError, TypeError, ValueError):
         raise fail(f"{where}.properties.{key}", "is not a CRS pyproj can read") from None
