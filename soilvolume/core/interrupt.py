@@ -11,9 +11,9 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
+from . import watchdog
 from .memlimit import out_of_memory
 from .types import SoilVolumeError
-from .watchdog import Watchdog, remove_process_temp_dir
 
 _pending: list[int] = []
 _stopping: list[bool] = []
@@ -45,9 +45,15 @@ def _record(signum: int, _frame) -> None:
 
 
 def leave(signum: int | None) -> None:
-    """End the process now, the cleanups run: interrupted by ``signum``, or (None) out of memory."""
-    kept = run_cleanups()
-    remove_process_temp_dir()
+    """End the process now, the cleanups run (last first): interrupted by ``signum``, or (None) out of memory;
+    the kept tiles' folder named when a cleanup says it kept them."""
+    kept = None
+    for fn in reversed(_cleanups):
+        try:
+            kept = fn() or kept
+        except Exception:  # noqa: BLE001 - best effort on the way out
+            pass
+    watchdog.remove_process_temp_dir()
     said = str(Interrupted(signum, kept)) if signum else out_of_memory()
     try:
         sys.stderr.write(f"soilvolume: error: {said}\n")
@@ -71,12 +77,11 @@ def handle_signals(then_ignore: bool = False) -> Iterator[None]:
         yield
         return
     old = {s: signal.signal(s, _record) for s in NAMES}
-    watch = Watchdog(leave, lambda: bool(_stopping))  # a run stuck in native code ends all the same
-    watch.start()
+    stop = watchdog.start(leave, lambda: bool(_stopping))  # a run stuck in native code ends all the same
     try:
         yield
     finally:
-        watch.stop()
+        stop()
         for s, h in old.items():
             signal.signal(s, signal.SIG_IGN if then_ignore else h)
         _pending.clear()
@@ -91,14 +96,3 @@ def cleanup_on_exit(fn: Callable[[], str | None]) -> Iterator[None]:
         yield
     finally:
         _cleanups.remove(fn)
-
-
-def run_cleanups() -> str | None:
-    """Run the cleanups, last first; the kept tiles' folder when one says it kept them."""
-    kept = None
-    for fn in reversed(_cleanups):
-        try:
-            kept = fn() or kept
-        except Exception:  # noqa: BLE001 - best effort on the way out
-            pass
-    return kept

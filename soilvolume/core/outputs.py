@@ -238,10 +238,6 @@ def output_dir(
     with interrupt.cleanup_on_exit(out.abort):
         try:
             yield out
-        except BaseException:
-            out.abort()
-            raise
-        try:
             out.moved = out.commit()
         except BaseException:
             out.abort()
