@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from ..core.hooks import Hooks
 from ..core.outputs import OutputDir
@@ -62,10 +62,6 @@ class Context:
     def message(self, step: str) -> str:
         """The progress table's message of ``step``, naming the run's epochs."""
         return PROGRESS[step][2].format(epochs=" and ".join(e.name for e in self.epochs))
-
-    def with_options(self, options: Options) -> Context:
-        """The same run with ``options`` (precise georeferencing turns the correction off)."""
-        return replace(self, options=options)
 
 
 def threads(options: Options) -> None:

@@ -68,12 +68,12 @@ def run_estimate(
             ctx = Context(epochs, options, hooks, steps, timer, out, schedule=schedule)
             backend = InMemory() if surface else backend_for(ctx)
         if surface:
-            done = design.estimate(ctx, backend)
+            report, keyed = design.estimate(ctx, backend)
         else:
             cloud = out.path("after_registered.laz") if options.keep_registered_cloud else None
-            done = pair.estimate(ctx, backend, cloud)
+            report, keyed = pair.estimate(ctx, backend, cloud)
     hooks.step(100, "done")
-    return Result.written(done.report, out.moved, done.keyed)
+    return Result.written(report, out.moved, keyed)
 
 
 def backend_for(ctx: Context) -> Backend:

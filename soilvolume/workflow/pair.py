@@ -3,6 +3,7 @@ over two surveys, the first the reference, on any backend."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from ..core.record import RunRecord
@@ -10,20 +11,19 @@ from ..dem.grid import output_layers
 from ..execution.seam import Backend
 from . import steps
 from .context import Context
-from .steps import Reported
 
 #: the steps of a pair, in order (the progress table's)
 PAIR = ("prepare", "register", "grid", "planes", "volume", "write", "report")
 REGISTER = ("prepare", "register", "write")
 
 
-def estimate(ctx: Context, backend: Backend, cloud: Path | None = None) -> Reported:
+def estimate(ctx: Context, backend: Backend, cloud: Path | None = None) -> tuple[dict, dict]:
     """Read, register, grid, planes, volume, write, report; ``cloud``: where the registered
     after cloud goes (``--registered-cloud``), else None."""
     with backend.session(ctx):
         prep = steps.read(ctx, backend)
-        registered = steps.register(ctx, prep, backend.dense(prep))
-        ctx, reg = ctx.with_options(registered.options), registered.reg
+        reg, options = steps.register(ctx, prep, backend.dense(prep))
+        ctx = replace(ctx, options=options)
         if cloud is not None:
             backend.keep_cloud(prep, reg, cloud)
         gridded = steps.grid(ctx, backend, prep, reg)
@@ -39,7 +39,7 @@ def register(ctx: Context, backend: Backend, cloud: Path) -> tuple:
     """Read, register and write the after cloud moved onto the before one: (Prepared, Registration)."""
     with backend.session(ctx):
         prep = steps.read(ctx, backend)
-        reg = steps.register(ctx, prep, backend.dense(prep)).reg
+        reg, _ = steps.register(ctx, prep, backend.dense(prep))
         backend.keep_cloud(prep, reg, cloud)
         steps.write(ctx, backend, None, None, [])
         return prep, reg

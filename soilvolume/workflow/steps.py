@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -39,22 +39,6 @@ from .context import Context
 from .plan import plan_grid, reference_cell
 
 
-@dataclass(frozen=True)
-class Registered:
-    """The registration and the options the later steps take (precise georeferencing: no correction)."""
-
-    reg: Registration
-    options: Options
-
-
-@dataclass(frozen=True)
-class Reported:
-    """report.json as written (options worded for the command line) and with options by key."""
-
-    report: dict
-    keyed: dict
-
-
 @contextmanager
 def running(ctx: Context, step: str, message: str, timed: str | None = None, log: bool = True) -> Iterator[None]:
     """A step's progress line and its time in ``timed`` (the step's name)."""
@@ -76,14 +60,15 @@ def read_one(ctx: Context) -> Single:
     return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
 
 
-def register(ctx: Context, prep: Prepared, dense) -> Registered:
-    """Step 2: the georeferencing decision, then coarse + fine registration (``dense``: the
-    full-resolution points of the stable-ground refinement, or None)."""
+def register(ctx: Context, prep: Prepared, dense) -> tuple[Registration, Options]:
+    """Step 2: the georeferencing decision, then coarse + fine registration (``dense``: the full-resolution
+    points of the stable-ground refinement, or None): the registration and the options the later steps take
+    (precise georeferencing: no correction)."""
     reg, options = register_pair(prep, ctx, dense, (*ctx.spans["register"], ctx.message("register")))
     fine = reg.fine
     ctx.hooks.info(f"coarse: {reg.coarse.note}")
     ctx.hooks.info(f"fine ({fine.method}): fitness {fine.fitness:.3f}, RMSE {fine.rmse:.3f} m, {fine.note}")
-    return Registered(reg, options)
+    return reg, options
 
 
 def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple[Registration, Options]:
@@ -212,9 +197,10 @@ def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec |
     return extras
 
 
-def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | None) -> Reported:
-    """Step 7: report.json from the run's record (its verdict, the write step's ``extras``),
-    report.html and the areas of significant change as polygons."""
+def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | None) -> tuple[dict, dict]:
+    """Step 7: report.json from the run's record (its verdict, the write step's ``extras``), report.html and
+    the areas of significant change as polygons: report.json as written (options worded for the command
+    line) and with options by key."""
     with running(ctx, "report", ctx.message("report"), log=False):
         out, vols, z0 = ctx.out, record.vols, float(gridded.grid.origin[2])
         report = build_report(record, ctx.timer.totals())
@@ -226,22 +212,18 @@ def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | Non
         write_change_areas(out.path(CHANGE_AREAS), vols.diff, vols.change_mask, vols.cut_mask, on, gpkg)
         if ctx.options.zones and report.get("zones"):  # zones.csv (and zones.gpkg)
             write_zones(out.path(CHANGE_AREAS).parent, report["zones"], ctx.options.zones, gridded.grid, gpkg)
-        dem_after = gridded.correction_dems[0].heights + z0
-        write_html(report, _html_arrays(vols, dem_after), on, out.path("report.html"))
+        arrays = {
+            "difference": vols.diff,
+            "residual": np.where(vols.stable, vols.diff, np.nan),
+            "filled_mask": vols.filled_mask,
+            "classes": vols.classes,
+            "dem_after": gridded.correction_dems[0].heights + z0,
+            "change": vols.change_mask,
+        }
+        write_html(report, arrays, on, out.path("report.html"))
         worded = cli_tree(report)  # options worded for the command line
         write_json(out.path("report.json"), worded, ctx.timer.totals())
-        return Reported(worded, report)
-
-
-def _html_arrays(vols: Volumes, dem_after: np.ndarray) -> dict:
-    return {
-        "difference": vols.diff,
-        "residual": np.where(vols.stable, vols.diff, np.nan),
-        "filled_mask": vols.filled_mask,
-        "classes": vols.classes,
-        "dem_after": dem_after,
-        "change": vols.change_mask,
-    }
+        return worded, report
 
 
 def judged(vols: Volumes, grid: GridSpec, options: Options) -> QualityInputs:
