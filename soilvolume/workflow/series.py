@@ -49,24 +49,6 @@ class Fit:
     options: Options
 
 
-def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | None, str | None]]:
-    """Each epoch's (date, its source): ``--dates`` (empty keeps the file's), else the LAS header's, else None."""
-    if given is not None and len(given) != len(paths):
-        raise SoilVolumeError(f"--dates: {len(given)} dates for {len(paths)} epochs (give one per epoch)")
-    out: list[tuple[str | None, str | None]] = []
-    for k, path in enumerate(paths):
-        text = (given[k] if given else "").strip()
-        if text:
-            try:
-                out.append((dt.date.fromisoformat(text).isoformat(), "given"))
-            except ValueError:
-                raise SoilVolumeError(f"--dates: {text!r} is not a date (YYYY-MM-DD)") from None
-            continue
-        found = creation_date(path)
-        out.append((found, "LAS header" if found else None))
-    return out
-
-
 def described(epochs: tuple[Epoch, ...], k: int) -> str:
     """Epoch ``k`` in an error: its index, file and date with where the date came from."""
     e = epochs[k]
@@ -75,16 +57,27 @@ def described(epochs: tuple[Epoch, ...], k: int) -> str:
 
 
 def series_epochs(paths: list[Path], dates: list[str] | None, options: Options) -> tuple[Epoch, ...]:
-    """The epochs of a series (at least two, each an existing file or folder), dated
-    (:func:`epoch_dates`) and checked (:func:`check_series`)."""
+    """The epochs of a series (at least two, each an existing file or folder), each dated by ``--dates``
+    (empty keeps the file's), else by its LAS header, else not; checked (:func:`check_series`)."""
     if len(paths) < 2:
         raise SoilVolumeError(f"series: {len(paths)} epoch given; at least two are needed (E0 and a later survey)")
     for path in paths:
         if not path.exists():
             raise SoilVolumeError(f"{path}: no such file")
-    dated = zip(paths, epoch_dates(paths, dates), strict=True)
+    if dates is not None and len(dates) != len(paths):
+        raise SoilVolumeError(f"--dates: {len(dates)} dates for {len(paths)} epochs (give one per epoch)")
+    dated: list[tuple[str | None, str | None]] = []
+    for path, text in zip(paths, [d.strip() for d in dates or [""] * len(paths)], strict=True):
+        if not text:
+            found = creation_date(path)
+            dated.append((found, "LAS header" if found else None))
+            continue
+        try:
+            dated.append((dt.date.fromisoformat(text).isoformat(), "given"))
+        except ValueError:
+            raise SoilVolumeError(f"--dates: {text!r} is not a date (YYYY-MM-DD)") from None
     given = {"crs": None, "georeferencing": options.georeferencing}
-    epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
+    epochs = tuple(survey(p, date=d, date_source=ds, **given) for p, (d, ds) in zip(paths, dated, strict=True))
     check_series(epochs)
     return epochs
 
@@ -149,17 +142,6 @@ def rebase(prep: Prepared, reg, origin: np.ndarray) -> tuple[Prepared, object]:
     alt = reg.fine.alternative
     fine = reg.fine if alt is None else replace(reg.fine, alternative=_moved(alt, d))
     return prep, replace(reg, transform=_moved(reg.transform, d), fine=fine)
-
-
-def series_grid(fits: list[Fit], options: Options) -> GridSpec:
-    """One grid over the overlap of E0's and every registered epoch's boxes, the cell from E0's points
-    within the first registered epoch's footprint (:mod:`.plan`)."""
-    thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
-    prep = fits[0].prep
-    boxes = [prep.before_thin, *thins]
-    cell = reference_cell(prep, footprint(thins[0][:, :2]), options)
-    empty = "the registered epochs have no area in common with each other and E0"
-    return plan_grid(cell, boxes, prep.origin, prep.frame, empty)
 
 
 def run_series(
@@ -245,10 +227,14 @@ def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
 
 
 def _grid(ctx: Context, fits: list[Fit]) -> tuple[GridSpec, tuple]:
-    """One grid, every epoch's DEM on it (E0 first)."""
-    names = ", ".join(described(ctx.epochs, k) for k in range(len(ctx.epochs)))
-    with naming("series " + names):
-        grid = series_grid(fits, ctx.options)
+    """One grid over the overlap of E0's and every registered epoch's boxes (:mod:`.plan`), every epoch's DEM
+    on it (E0 first)."""
+    thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
+    prep, names = fits[0].prep, ", ".join(described(ctx.epochs, k) for k in range(len(ctx.epochs)))
+    with naming("series " + names):  # the cell from E0's points within the first registered epoch's footprint
+        cell = reference_cell(prep, footprint(thins[0][:, :2]), ctx.options)
+        empty = "the registered epochs have no area in common with each other and E0"
+        grid = plan_grid(cell, [prep.before_thin, *thins], prep.origin, prep.frame, empty)
     e0, statistic = fits[0].prep.before, ctx.options.statistic
     dems = [epoch_dem(e0.xyz, grid, statistic, e0.nonsoil)]
     for f in fits:
