@@ -9,7 +9,7 @@ import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.outputs import check_output_file, os_errors
-from ..core.types import Epoch, GridSpec, SoilVolumeError, survey
+from ..core.types import GridSpec, SoilVolumeError, survey
 from ..core.wording import cli_tree
 from ..dem.geotiff import write_grid
 from ..dem.grid import epoch_dem
@@ -85,11 +85,8 @@ def run_register(
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
     threads(options)
-    given = {"georeferencing": options.georeferencing}
-    epochs: tuple[Epoch, ...] = (
-        survey(before, crs=options.before_crs, **given),
-        survey(after, crs=options.after_crs, **given),
-    )
+    given = ((before, options.before_crs), (after, options.after_crs))
+    epochs = tuple(survey(path, crs=crs, georeferencing=options.georeferencing) for path, crs in given)
     prep, reg = pair.register(Context(epochs, options, hooks, pair.REGISTER), InMemory(), out_cloud)
     hooks.step(100, "done")
     return cli_tree(registration_summary(reg, prep.origin))  # options worded as flags

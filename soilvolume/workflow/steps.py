@@ -106,21 +106,16 @@ def kept_as_georeferenced(reg: Registration, outcome: str) -> Registration:
     return replace(reg, coarse=replace(reg.coarse, note=note), fine=replace(reg.fine, note=note))
 
 
-def layout(prep: Prepared, reg: Registration, options: Options) -> Layout:
-    """The grid over the registered after footprint and the before subset (:mod:`.plan`)."""
-    after_thin = transform_points(prep.after_thin, reg.transform)
-    poly = footprint(after_thin[:, :2])
-    boxes = [after_thin, prep.before_thin]
-    empty = "the registered after cloud does not overlap the before cloud"
-    grid = plan_grid(reference_cell(prep, poly, options), boxes, prep.origin, prep.frame, empty)
-    return Layout(grid, after_thin, poly)
-
-
 def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> Gridded:
-    """Step 3: the grid planned, each epoch's heights on it, the paper's planes fitted beside."""
+    """Step 3: the grid planned over the registered after footprint and the before subset (:mod:`.plan`),
+    each epoch's heights on it, the paper's planes fitted beside."""
     with running(ctx, "grid", ctx.message("grid"), "grids"):
-        plan = layout(prep, reg, ctx.options)
-        return backend.grid(ctx, prep, reg, plan, fit_planes(prep, plan.after_thin, ctx.options))
+        after_thin = transform_points(prep.after_thin, reg.transform)
+        poly = footprint(after_thin[:, :2])
+        empty = "the registered after cloud does not overlap the before cloud"
+        cell = reference_cell(prep, poly, ctx.options)
+        plan = Layout(plan_grid(cell, [after_thin, prep.before_thin], prep.origin, prep.frame, empty), after_thin, poly)
+        return backend.grid(ctx, prep, reg, plan, fit_planes(prep, after_thin, ctx.options))
 
 
 def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Callable:
@@ -128,19 +123,13 @@ def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Call
     the cells it has heights in, and the registered after's."""
 
     def fit(grid: GridSpec, dem_before: EpochDEM) -> tuple[Plane, Plane]:
-        valid = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
-        before = ransac_plane(valid, options.plane_threshold, seed=options.seed)
+        row, col, ok = grid.index(prep.before_thin[:, :2])
+        valid = np.zeros(len(prep.before_thin), bool)
+        valid[ok] = np.isfinite(dem_before.heights)[row[ok], col[ok]]
+        before = ransac_plane(prep.before_thin[valid], options.plane_threshold, seed=options.seed)
         return before, ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
 
     return fit
-
-
-def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
-    """The points of ``xyz`` over the grid's ``cells``."""
-    row, col, ok = grid.index(xyz[:, :2])
-    keep = np.zeros(len(xyz), bool)
-    keep[ok] = cells[row[ok], col[ok]]
-    return xyz[keep]
 
 
 def planes(ctx: Context, gridded: Gridded) -> tuple:
