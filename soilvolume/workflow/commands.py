@@ -21,7 +21,7 @@ from ..options import Options
 from ..reporting.report import dem_summary, registration_summary
 from ..validate import check_bounds
 from ..volumes.compute import centred_heights
-from . import pair, steps
+from . import steps
 from .context import Context, threads
 from .plan import cloud_cell, plan_grid
 
@@ -87,6 +87,11 @@ def run_register(
     threads(options)
     given = ((before, options.before_crs), (after, options.after_crs))
     epochs = tuple(survey(path, crs=crs, georeferencing=options.georeferencing) for path, crs in given)
-    prep, reg = pair.register(Context(epochs, options, hooks, pair.REGISTER), InMemory(), out_cloud)
+    ctx, backend = Context(epochs, options, hooks, ("prepare", "register", "write")), InMemory()
+    with backend.session(ctx):  # read, register and write the after cloud moved onto the before one
+        prep = steps.read(ctx, backend)
+        reg, _ = steps.register(ctx, prep, backend.dense(prep))
+        backend.keep_cloud(prep, reg, out_cloud)
+        steps.write(ctx, backend, None, None, [])
     hooks.step(100, "done")
     return cli_tree(registration_summary(reg, prep.origin))  # options worded as flags

@@ -22,6 +22,7 @@ PROGRESS: dict[str, tuple[float, float, str]] = {
     "write": (85, 97, "writing outputs"),
     "report": (97, 100, "writing the report"),
 }
+PAIR = tuple(PROGRESS)  # the steps of a pair, in order
 
 
 def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:

@@ -32,8 +32,7 @@ from ..reporting.series import write_rasters, write_reports
 from ..validate import schedule_of
 from ..volumes.series import combine
 from . import steps
-from .context import Context, threads
-from .pair import PAIR as STEPS
+from .context import PAIR, Context, threads
 from .plan import plan_grid, reference_cell
 from .seriesgrade import grade_epochs, open_design
 from .timing import Timer
@@ -163,7 +162,7 @@ def run_series(
     threads(options)
     inputs = [*paths, options.stable_mask, options.design, options.zones]
     with output_dir(Path(out_dir), inputs, overwrite) as out, os_errors(out.final):
-        ctx = Context(epochs, options.with_(zones=None), hooks, STEPS, timer, out, schedule=schedule)
+        ctx = Context(epochs, options.with_(zones=None), hooks, PAIR, timer, out, schedule=schedule)
         report = series(ctx, InMemory(), design)
     hooks.step(100, "done")
     return Result.written(report, out.moved)
