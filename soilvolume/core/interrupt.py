@@ -12,8 +12,8 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from . import watchdog
-from .memlimit import out_of_memory
 from .types import SoilVolumeError
+from .watchdog import out_of_memory
 
 _pending: list[int] = []
 _stopping: list[bool] = []

@@ -1,11 +1,13 @@
 """Every run ends, whatever C loop its threads are in: a thread beside it hears SIGINT/SIGTERM through the
 wakeup fd (written even while the main thread waits on native code) and ends a run not stopping within
 :data:`GRACE` s (or not ended :data:`STOPPING_S` s after); under ``ulimit -v`` it sees a thread spinning at
-the limit (OpenBLAS's endless retry: a series at 600 MB spun 12 minutes) and fails the run after :data:`SPIN_S` s."""
+the limit (OpenBLAS's endless retry: a series at 600 MB spun 12 minutes) and fails the run after :data:`SPIN_S` s.
+A process under an address-space limit fails in one line naming it (:func:`out_of_memory`)."""
 
 from __future__ import annotations
 
 import os
+import resource
 import select
 import shutil
 import signal
@@ -14,7 +16,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 
-from .memlimit import BLAS_BUFFER, address_limit
+from . import wording
 
 GRACE = 0.75  # s: a run that has not begun to stop this long after a signal is ended
 STOPPING_S = 10.0  # s: a run stopping (its cleanups, a cluster's shutdown) is ended after this
@@ -23,6 +25,33 @@ STACK = 256 << 10  # bytes: the watching thread's stack
 M_ARENA_MAX = -8  # glibc's mallopt parameter
 SPIN_S = 3.0  # s: a thread spinning at the address-space limit this long ends the run
 SPIN_SYSTEM = 0.3  # the share of a second in system time a spinning thread spends (failed mmaps)
+#: the address space OpenBLAS's buffer takes (its 128 MiB and glibc's arena around it), with margin
+BLAS_BUFFER = 192 << 20
+
+
+def address_limit() -> int | None:
+    """The process's address-space limit in bytes (RLIMIT_AS's soft limit), None when unlimited."""
+    try:
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (OSError, ValueError):
+        return None
+    return None if soft == resource.RLIM_INFINITY else int(soft)
+
+
+def out_of_memory(keyed: bool = False) -> str:
+    """The out-of-memory line, naming the limit (``keyed``: its option as a marker, else as a flag)."""
+    limit = address_limit()
+    under = f" under the address-space limit of {limit / 1e6:,.0f} MB (ulimit -v)" if limit else ""
+    said = f"out of memory{under}: use a larger {wording.opt('cell')} or crop the clouds first"
+    return said if keyed else wording.cli(said)
+
+
+def short_of_memory(exc: BaseException) -> bool:
+    """Whether ``exc`` is a MemoryError or a library that could not be mapped under a limit."""
+    if isinstance(exc, MemoryError):
+        return True
+    text = str(exc).lower()
+    return isinstance(exc, ImportError) and ("failed to map segment" in text or "cannot allocate memory" in text)
 
 
 def start(leave: Callable[[int | None], None], stopping: Callable[[], bool]) -> Callable[[], None]:
@@ -77,7 +106,7 @@ def _close(*fds: int) -> None:
 
 def _spinning(limit: int | None) -> Iterator[bool]:
     """At each tick, whether a thread spun at the address-space ``limit`` (bytes; None: none) for :data:`SPIN_S`
-    s: the space unchanged within :data:`.memlimit.BLAS_BUFFER` of it, a thread's system time growing by
+    s: the space unchanged within :data:`BLAS_BUFFER` of it, a thread's system time growing by
     :data:`SPIN_SYSTEM`."""
     since, last = None, None
     while True:
