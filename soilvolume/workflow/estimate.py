@@ -22,8 +22,7 @@ from ..options import Options
 from ..pipelines.confine import writers_into
 from ..validate import schedule_of
 from . import design, steps
-from .context import PAIR, Context, threads
-from .timing import Timer
+from .context import PAIR, Context, Timer, threads
 
 
 def epochs_of(before: Path, after: Path, options: Options, before_pipeline=None, after_pipeline=None) -> tuple:

@@ -32,10 +32,9 @@ from ..reporting.series import write_rasters, write_reports
 from ..validate import schedule_of
 from ..volumes.series import combine
 from . import steps
-from .context import PAIR, Context, threads
+from .context import PAIR, Context, Timer, threads
 from .plan import plan_grid, reference_cell
 from .seriesgrade import grade_epochs, open_design
-from .timing import Timer
 
 
 @dataclass(frozen=True)
