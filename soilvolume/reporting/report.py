@@ -54,7 +54,7 @@ def absolute_transform(t_local: np.ndarray, origin: np.ndarray) -> np.ndarray:
 
 def stages(reg: Registration) -> dict:
     """Each stage's fit and the georeferencing decision of a registration."""
-    geo = {} if reg.georeferencing is None else reg.georeferencing.as_dict()
+    geo = {} if reg.georeferencing is None else asdict(reg.georeferencing)
     return {"coarse": stage_dict(reg.coarse), "fine": stage_dict(reg.fine), "georeferencing": geo}
 
 

@@ -20,7 +20,6 @@ from ..core.outputs import os_errors, output_dir
 from ..core.types import Epoch, GridSpec, SoilVolumeError, survey
 from ..dem.grid import epoch_dem
 from ..execution.inmemory import InMemory
-from ..execution.seam import Gridded, done
 from ..inputs.distinct import sameness
 from ..inputs.footprint import footprint
 from ..inputs.lasheader import creation_date
@@ -129,14 +128,8 @@ def rebase(prep: Prepared, reg, origin: np.ndarray) -> tuple[Prepared, object]:
         ns = None if ns is None else replace(ns, xyz=(ns.xyz + d).astype(ns.xyz.dtype))
         return replace(c, xyz=(c.xyz + d).astype(c.xyz.dtype), origin=origin, nonsoil=ns)
 
-    prep = replace(
-        prep,
-        before=cloud(prep.before),
-        after=cloud(prep.after),
-        origin=origin,
-        before_thin=prep.before_thin + d,
-        after_thin=prep.after_thin + d,
-    )
+    thin = {"before_thin": prep.before_thin + d, "after_thin": prep.after_thin + d}
+    prep = replace(prep, before=cloud(prep.before), after=cloud(prep.after), origin=origin, **thin)
     alt = reg.fine.alternative
     fine = reg.fine if alt is None else replace(reg.fine, alternative=_moved(alt, d))
     return prep, replace(reg, transform=_moved(reg.transform, d), fine=fine)
@@ -184,7 +177,7 @@ def series(ctx: Context, backend: InMemory, design=None) -> dict:
             grid, dems = _grid(ctx, fits)
         fitted = _planes(ctx, fits, grid, dems)
         with steps.running(ctx, "volume", ctx.message("volume")):
-            vols = _volumes(ctx, backend, fits, fitted, grid, dems)
+            vols = _volumes(ctx, fits, fitted, grid, dems)
             ctx.hooks.step(ctx.at("volume", 0.8), "periods, cumulative and their intervals")
             combined = combine(vols, list(dems), [steps.alternative_move(f.reg) for f in fits], grid, ctx.options)
             heights = [vols[0].dem_out_b + d for d in combined.to_e0]  # as dem_epoch<k>.tif, local
@@ -254,12 +247,10 @@ def _planes(ctx: Context, fits: list[Fit], grid: GridSpec, dems: tuple) -> list[
     return out
 
 
-def _volumes(ctx: Context, backend: InMemory, fits: list[Fit], fitted: list, grid: GridSpec, dems: tuple) -> list:
-    """Each pair's volume step: Ek corrected once relative to E0."""
+def _volumes(ctx: Context, fits: list[Fit], fitted: list, grid: GridSpec, dems: tuple) -> list:
+    """Each pair's volume step on the whole grid, in this process: Ek corrected once relative to E0."""
     vols = []
     for k, (f, planes) in enumerate(zip(fits, fitted, strict=True), 1):
-        pair, step = (dems[k], dems[0]), steps.volume_step(f.reg, f.options)
         with naming(pair_named(ctx, k)):
-            gridded = Gridded(grid, pair, grid, pair, done(None))
-            vols.append(backend.volume(ctx, step, gridded, planes, steps.alternative_move(f.reg)))
+            vols.append(steps.volume_step(f.reg, f.options)(dems[k], dems[0], planes[2], grid))
     return vols
