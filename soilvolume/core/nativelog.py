@@ -13,17 +13,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 
-def _real_stderr() -> bool:
-    try:
-        return sys.stderr.fileno() == 2 and not os.environ.get("SOILVOLUME_DEBUG")
-    except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
-        return False
-
-
 @contextmanager
 def hold_native_stderr() -> Iterator[None]:
     """Point file descriptor 2 at the null device and ``sys.stderr`` at the terminal."""
-    if not _real_stderr():
+    try:
+        real = sys.stderr.fileno() == 2 and not os.environ.get("SOILVOLUME_DEBUG")
+    except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
+        real = False
+    if not real:
         yield
         return
     sys.stderr.flush()

@@ -122,20 +122,16 @@ class OutputDir:
             self.stage = self._inner() if self.inside else sibling(self.final, STAGING, token=self.token)
             try:
                 self.stage.mkdir()
-            except OSError as exc:
-                if not self._empty_writable():
+            except OSError as exc:  # parent not writable: an existing, empty, writable folder stages inside itself
+                f = self.final
+                if not (f.is_dir() and not any(f.iterdir()) and os.access(f, os.W_OK | os.X_OK)):
                     self._drop_parents()
                     raise os_problem(exc, self.final.parent) from exc
-                self.inside, self.stage = True, self._inner()  # parent not writable: stage inside
+                self.inside, self.stage = True, self._inner()
                 self.stage.mkdir()
 
     def _inner(self) -> Path:
         return self.final / f".{STAGING}-{os.getpid()}-{self.token}"
-
-    def _empty_writable(self) -> bool:
-        """An existing, empty, writable folder: its outputs can be staged inside it."""
-        f = self.final
-        return f.is_dir() and not any(f.iterdir()) and os.access(f, os.W_OK | os.X_OK)
 
     def _check(self) -> None:
         final = self.final

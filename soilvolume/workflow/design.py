@@ -37,6 +37,11 @@ NOT_REGISTERED = (
 )
 DESIGN_COUNT = 1000  # the points a surface cell stands for: never weak, never refilled as sparse
 STEPS = ("prepare", "grid", "volume", "write", "report")  # nothing registered, no planes
+#: the estimate's rasters said otherwise against a surface (dem_before.tif is the surface on the grid)
+SAID = {
+    "dem_out_b": "the reference surface (design) resampled onto the grid, bilinear at the cell centres (m)",
+    "diff": "survey - design (m): above design > 0 (fill), below design < 0 (cut)",
+}
 
 
 class NoPlane:
@@ -60,7 +65,8 @@ def estimate(ctx: Context, backend: Backend) -> tuple[dict, dict]:
 
         with steps.running(ctx, "volume", ctx.message("volume")):
             vols = backend.volume(ctx, step, gridded, fitted, None)
-        extras = steps.write(ctx, backend, vols, gridded.grid, layers())
+        layers = [(name, key, SAID.get(key, desc)) for name, key, desc in output_layers("none")]
+        extras = steps.write(ctx, backend, vols, gridded.grid, layers)
         graded = write_grade(ctx, vols.diff, gridded.grid)
         judged = steps.judged(vols, gridded.grid, ctx.options)
         stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)  # nothing registered
@@ -144,12 +150,3 @@ def surface_epoch(surface: Surface | Tin, grid: GridSpec, given_m: float) -> tup
     sigma = np.where(valid, np.hypot(np.nan_to_num(np.abs(z - cubic)), given_m), np.nan)
     counts = np.where(valid, DESIGN_COUNT, 0).astype(np.int64)
     return EpochDEM(z, counts, sigma * np.sqrt(DESIGN_COUNT)), sigma
-
-
-def layers() -> list:
-    """The estimate's rasters; dem_before.tif is the surface on the grid."""
-    said = {
-        "dem_out_b": "the reference surface (design) resampled onto the grid, bilinear at the cell centres (m)",
-        "diff": "survey - design (m): above design > 0 (fill), below design < 0 (cut)",
-    }
-    return [(name, key, said.get(key, desc)) for name, key, desc in output_layers("none")]

@@ -68,7 +68,9 @@ def run_estimate(
         surface = epochs[0].is_surface
         with timer("setup"):  # the output folder checked, the schedule chosen from the headers
             ctx = Context(epochs, options, hooks, design.STEPS if surface else PAIR, timer, out, schedule=schedule)
-            backend = InMemory() if surface else backend_for(ctx)
+            b, a = epochs  # the backend of the run's schedule (auto resolved from the headers): tiles but for none
+            plan = None if surface else schedule_for(schedule, b.path, a.path, options, b.pipeline or a.pipeline)
+            backend = InMemory() if surface or plan.in_process else Tiled(plan)
         if surface:
             report, keyed = design.estimate(ctx, backend)
         else:
@@ -76,14 +78,6 @@ def run_estimate(
             report, keyed = estimate_pair(ctx, backend, cloud)
     hooks.step(100, "done")
     return Result.written(report, out.moved, keyed)
-
-
-def backend_for(ctx: Context) -> Backend:
-    """The backend of the run's schedule (``auto`` resolved by :func:`distributed.schedule.schedule_for`):
-    in memory, or Dask tiles for any schedule but ``none``."""
-    b, a = ctx.epochs
-    schedule = schedule_for(ctx.schedule, b.path, a.path, ctx.options, b.pipeline or a.pipeline)
-    return InMemory() if schedule.in_process else Tiled(schedule)
 
 
 def estimate_pair(ctx: Context, backend: Backend, cloud: Path | None = None) -> tuple[dict, dict]:

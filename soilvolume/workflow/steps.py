@@ -88,8 +88,12 @@ def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple
         if decided is None:
             datum = georef.vertical_datum(prep.inputs["after"].get("crs_wkt"))
             mode, why, check = georef.confirm(reg, after, before, datum, options.fine)
-            if mode == "precise":
-                reg = kept_as_georeferenced(register_clouds(after, before, options, precise=True), check["outcome"])
+            if mode == "precise":  # the identity registration of coordinates auto kept, its stages saying why
+                kept = register_clouds(after, before, options, precise=True)
+                said = "confirmed them" if check["outcome"] == "confirmed" else "could not confirm them"
+                note = "not applied: coordinates used as georeferenced (the registration "
+                note += f"{said}; see {opt('georeferencing')})"
+                reg = replace(kept, coarse=replace(kept.coarse, note=note), fine=replace(kept.fine, note=note))
         hooks.info(f"georeferencing: {mode} ({why})")
         if mode == "precise":
             options = options.with_(correction="none")
@@ -97,13 +101,6 @@ def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple
     timer.s["coarse"], timer.s["fine"] = ran.coarse.seconds, ran.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - ran.coarse.seconds - ran.fine.seconds)
     return reg, options
-
-
-def kept_as_georeferenced(reg: Registration, outcome: str) -> Registration:
-    """The identity registration of coordinates auto kept, its stages saying why."""
-    said = "confirmed them" if outcome == "confirmed" else "could not confirm them"
-    note = f"not applied: coordinates used as georeferenced (the registration {said}; see {opt('georeferencing')})"
-    return replace(reg, coarse=replace(reg.coarse, note=note), fine=replace(reg.fine, note=note))
 
 
 def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> Gridded:
