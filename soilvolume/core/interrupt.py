@@ -26,16 +26,11 @@ class Interrupted(SoilVolumeError):
     its finished tiles for the same command to resume)."""
 
     def __init__(self, signum: int, kept: str | None = None) -> None:
-        self.signum = signum
+        self.signum, self.exit_code = signum, 128 + signum  # the shell's convention: 130 SIGINT, 143 SIGTERM
         said = f"interrupted by {NAMES.get(signum, signum)}; nothing was written"
         if kept:
             said += f" to the output folder; finished tiles are kept in {kept} for the same command to resume"
         super().__init__(said)
-
-    @property
-    def exit_code(self) -> int:
-        """The shell's convention: 128 + the signal number (130 SIGINT, 143 SIGTERM)."""
-        return 128 + self.signum
 
 
 def _record(signum: int, _frame) -> None:

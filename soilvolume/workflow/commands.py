@@ -57,9 +57,9 @@ def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np
     """The one cloud's grid (``bounds``, else its points' box) and heights at the cell centres."""
     xyz, origin, frame, options = one.xyz, one.origin, one.frame, ctx.options
     box = xyz
-    if bounds is not None:
-        u, b = frame.xy_unit, bounds
-        box = (np.array([b[0] * u, b[1] * u]) - origin[:2], np.array([b[2] * u, b[3] * u]) - origin[:2])
+    if bounds is not None:  # in CRS units
+        b = np.asarray(bounds, dtype=np.float64) * frame.xy_unit
+        box = (b[:2] - origin[:2], b[2:] - origin[:2])
     cell = cloud_cell(xyz, one.thin, options)
     grid = plan_grid(cell, [box], origin, frame, f"{ctx.epochs[0].path}: --bounds do not make a grid")
     ctx.hooks.step(ctx.at("grid", 0.1), f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")

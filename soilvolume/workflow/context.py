@@ -30,7 +30,7 @@ PAIR = tuple(PROGRESS)  # the steps of a pair, in order
 
 def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
     """Each step's percent range: the table's for a whole run, its share of 0-100 for a shorter one."""
-    if steps == tuple(PROGRESS):
+    if steps == PAIR:
         return {s: PROGRESS[s][:2] for s in steps}
     widths = [PROGRESS[s][1] - PROGRESS[s][0] for s in steps]
     total, at, out = sum(widths), 0.0, {}
