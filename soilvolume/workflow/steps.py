@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -153,12 +154,7 @@ def volume(ctx: Context, backend: Backend, gridded: Gridded, fitted: tuple, reg:
 
 def volume_step(reg: Registration, options: Options) -> Callable:
     """The volume step of a pair registered by ``reg``, as a backend runs it (``seam.VolumeFn``)."""
-    moved = alternative_move(reg)
-
-    def step(after: EpochDEM, before: EpochDEM, d_i: np.ndarray, on: GridSpec) -> Volumes:
-        return compute_volumes(after, before, d_i, on, options, moved=moved)
-
-    return step
+    return partial(compute_volumes, options=options, moved=alternative_move(reg))
 
 
 def alternative_move(reg: Registration) -> np.ndarray | None:
