@@ -32,9 +32,7 @@ from typing import IO, Any
 
 def _plain(value: Any) -> Any:
     """JSON for numpy values and paths (``tolist`` covers numpy arrays and scalars)."""
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    return str(value)
+    return value.tolist() if hasattr(value, "tolist") else str(value)
 
 
 def _finite(value: Any) -> Any:

@@ -35,11 +35,8 @@ def _num(v: float) -> str:
 def _range_text(meta: dict[str, Any], integer: bool) -> str:
     kind = "an integer" if integer else "a finite number"
     lo, hi = meta.get("lo"), meta.get("hi")
-    parts = []
-    if lo is not None:
-        parts.append(f"{'>' if meta.get('lo_open') else '>='} {_num(lo)}")
-    if hi is not None:
-        parts.append(f"<= {_num(hi)}")
+    parts = [] if lo is None else [f"{'>' if meta.get('lo_open') else '>='} {_num(lo)}"]
+    parts += [] if hi is None else [f"<= {_num(hi)}"]
     return f"must be {kind} {' and '.join(parts)}".rstrip()
 
 

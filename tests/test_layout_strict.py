@@ -15,7 +15,6 @@ STRICT = (
     "soilvolume/distributed",
     "soilvolume/core/outputs.py",
     "soilvolume/core/siblings.py",
-    "soilvolume/core/replaceable.py",
     "soilvolume/core/cells.py",
     "soilvolume/core/polygons.py",
     "soilvolume/core/wording.py",

@@ -62,7 +62,7 @@ def _heights_product(ctx: Context, backend) -> np.ndarray:
     the after epoch's heights on the shared grid."""
     with backend.session(ctx):
         prep = steps.read(ctx, backend)
-        reg = steps.register(ctx, prep, backend.dense(prep)).reg
+        reg, _ = steps.register(ctx, prep, backend.dense(prep))
         return steps.grid(ctx, backend, prep, reg).dems[0].heights
 
 

@@ -162,7 +162,7 @@ def test_a_stage_timed_within_another_is_left_out_of_it(monkeypatch):
     counts its own time and the stages still add up to the wall time."""
     import time as clock
 
-    from soilvolume.workflow.timing import Timer
+    from soilvolume.workflow.context import Timer
 
     now = [100.0]
     monkeypatch.setattr(clock, "perf_counter", lambda: now[0])

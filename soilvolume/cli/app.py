@@ -12,10 +12,10 @@ import sys
 import traceback
 
 from ..core.interrupt import handle_signals
-from ..core.memlimit import out_of_memory, short_of_memory
 from ..core.nativelog import hold_native_stderr, quiet_library_warnings
 from ..core.outputs import os_problem
 from ..core.types import SoilVolumeError
+from ..core.watchdog import out_of_memory, short_of_memory
 from ..protocol import Protocol, open_protocol
 
 #: the sub-commands in the order ``--help`` lists them, each a module of this package with its

@@ -11,10 +11,6 @@ from . import interrupt
 from .types import SoilVolumeError
 from .wording import cli
 
-Progress = Callable[[float, str], None]
-Log = Callable[[str], None]
-Cancel = Callable[[], bool]
-
 
 class Cancelled(SoilVolumeError):
     """The user cancelled the run; nothing was written."""
@@ -25,9 +21,9 @@ class Hooks:
     """Optional progress, log and cancellation callbacks; a message is logged once however often a stage
     reports it; options in it worded as flags, or with ``keyed`` left as markers (:mod:`.wording`)."""
 
-    progress: Progress | None = None
-    log: Log | None = None
-    cancel: Cancel | None = None
+    progress: Callable[[float, str], None] | None = None
+    log: Callable[[str], None] | None = None
+    cancel: Callable[[], bool] | None = None
     keyed: bool = False
     _last: str | None = field(default=None, repr=False)
 
@@ -46,11 +42,10 @@ class Hooks:
         if self.log is not None:
             self.log(message if self.keyed else cli(message))
 
-    def ticker(self, start: float, end: float, message: str, expected: int = 8) -> Callable[[], None]:
+    def ticker(self, start: float, end: float, message: str) -> Callable[[], None]:
         """A ``check()`` callback of a long stage: each call checks for cancellation and moves the bar from
-        ``start`` towards ``end`` (90 % of the way after ``expected`` calls, never reaching it)."""
-        calls = [0]
-        rate = 0.1 ** (1.0 / max(expected, 1))
+        ``start`` towards ``end`` (90 % of the way after 8 calls, never reaching it)."""
+        calls, rate = [0], 0.1 ** (1.0 / 8)
 
         def check() -> None:
             calls[0] += 1

@@ -11,9 +11,9 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-from .memlimit import out_of_memory
+from . import watchdog
 from .types import SoilVolumeError
-from .watchdog import Watchdog, remove_process_temp_dir
+from .watchdog import out_of_memory
 
 _pending: list[int] = []
 _stopping: list[bool] = []
@@ -26,16 +26,11 @@ class Interrupted(SoilVolumeError):
     its finished tiles for the same command to resume)."""
 
     def __init__(self, signum: int, kept: str | None = None) -> None:
-        self.signum = signum
+        self.signum, self.exit_code = signum, 128 + signum  # the shell's convention: 130 SIGINT, 143 SIGTERM
         said = f"interrupted by {NAMES.get(signum, signum)}; nothing was written"
         if kept:
             said += f" to the output folder; finished tiles are kept in {kept} for the same command to resume"
         super().__init__(said)
-
-    @property
-    def exit_code(self) -> int:
-        """The shell's convention: 128 + the signal number (130 SIGINT, 143 SIGTERM)."""
-        return 128 + self.signum
 
 
 def _record(signum: int, _frame) -> None:
@@ -45,9 +40,15 @@ def _record(signum: int, _frame) -> None:
 
 
 def leave(signum: int | None) -> None:
-    """End the process now, the cleanups run: interrupted by ``signum``, or (None) out of memory."""
-    kept = run_cleanups()
-    remove_process_temp_dir()
+    """End the process now, the cleanups run (last first): interrupted by ``signum``, or (None) out of memory;
+    the kept tiles' folder named when a cleanup says it kept them."""
+    kept = None
+    for fn in reversed(_cleanups):
+        try:
+            kept = fn() or kept
+        except Exception:  # noqa: BLE001 - best effort on the way out
+            pass
+    watchdog.remove_process_temp_dir()
     said = str(Interrupted(signum, kept)) if signum else out_of_memory()
     try:
         sys.stderr.write(f"soilvolume: error: {said}\n")
@@ -71,12 +72,11 @@ def handle_signals(then_ignore: bool = False) -> Iterator[None]:
         yield
         return
     old = {s: signal.signal(s, _record) for s in NAMES}
-    watch = Watchdog(leave, lambda: bool(_stopping))  # a run stuck in native code ends all the same
-    watch.start()
+    stop = watchdog.start(leave, lambda: bool(_stopping))  # a run stuck in native code ends all the same
     try:
         yield
     finally:
-        watch.stop()
+        stop()
         for s, h in old.items():
             signal.signal(s, signal.SIG_IGN if then_ignore else h)
         _pending.clear()
@@ -91,14 +91,3 @@ def cleanup_on_exit(fn: Callable[[], str | None]) -> Iterator[None]:
         yield
     finally:
         _cleanups.remove(fn)
-
-
-def run_cleanups() -> str | None:
-    """Run the cleanups, last first; the kept tiles' folder when one says it kept them."""
-    kept = None
-    for fn in reversed(_cleanups):
-        try:
-            kept = fn() or kept
-        except Exception:  # noqa: BLE001 - best effort on the way out
-            pass
-    return kept

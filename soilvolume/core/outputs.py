@@ -1,6 +1,7 @@
 """All-or-nothing outputs: files are built in a hidden staging folder beside ``--out`` (``.<name>.soilvolume-
 staging-<pid>``) and swapped in only when all succeeded (the old set parked as ``.<name>.soilvolume-trash-<pid>``);
-a killed run's siblings are removed, or its old set restored, by the next run."""
+a killed run's siblings are removed, or its old set restored, by the next run; an existing output this user
+may not replace although its folder is writable is refused before any work."""
 
 from __future__ import annotations
 
@@ -8,12 +9,12 @@ import errno
 import os
 import secrets
 import shutil
+import stat
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from . import interrupt
-from .replaceable import check_replaceable
 from .siblings import NAME_MAX, STAGING, TRASH, locked, remove, sibling, sweep, sweep_inside
 from .types import SoilVolumeError, short_error
 
@@ -121,20 +122,16 @@ class OutputDir:
             self.stage = self._inner() if self.inside else sibling(self.final, STAGING, token=self.token)
             try:
                 self.stage.mkdir()
-            except OSError as exc:
-                if not self._empty_writable():
+            except OSError as exc:  # parent not writable: an existing, empty, writable folder stages inside itself
+                f = self.final
+                if not (f.is_dir() and not any(f.iterdir()) and os.access(f, os.W_OK | os.X_OK)):
                     self._drop_parents()
                     raise os_problem(exc, self.final.parent) from exc
-                self.inside, self.stage = True, self._inner()  # parent not writable: stage inside
+                self.inside, self.stage = True, self._inner()
                 self.stage.mkdir()
 
     def _inner(self) -> Path:
         return self.final / f".{STAGING}-{os.getpid()}-{self.token}"
-
-    def _empty_writable(self) -> bool:
-        """An existing, empty, writable folder: its outputs can be staged inside it."""
-        f = self.final
-        return f.is_dir() and not any(f.iterdir()) and os.access(f, os.W_OK | os.X_OK)
 
     def _check(self) -> None:
         final = self.final
@@ -238,14 +235,23 @@ def output_dir(
     with interrupt.cleanup_on_exit(out.abort):
         try:
             yield out
-        except BaseException:
-            out.abort()
-            raise
-        try:
             out.moved = out.commit()
         except BaseException:
             out.abort()
             raise
+
+
+def check_replaceable(final: Path) -> None:
+    """Refuse ``final`` when another user's in a sticky folder (/tmp), before the run's last rename would."""
+    try:
+        st, folder = final.lstat(), final.parent.stat()
+    except OSError:
+        return
+    uid = os.geteuid() if hasattr(os, "geteuid") else 0
+    if folder.st_mode & stat.S_ISVTX and uid not in (0, st.st_uid, folder.st_uid):
+        raise SoilVolumeError(
+            f"{final}: belongs to another user in a folder where only owners may replace files; choose another output"
+        )
 
 
 def check_input_file(path: Path) -> None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,9 +20,6 @@ class Georeferencing:
     # auto with a declared vertical datum: what the registration said of the coordinates (outcome
     # confirmed / refuted / inconclusive, the pose's move, the tolerances; registration/georef)
     check: dict | None = None
-
-    def as_dict(self) -> dict[str, str]:
-        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -112,16 +112,15 @@ class StageQuality:
     poses: tuple = ()  # every pose the fine stage refined to (4x4s, those beyond the prior too): its own spread
 
 
-#: where an epoch's heights come from: a point cloud file (maybe through a PDAL pipeline), tiles
-#: (a VPC, a COPC file or a folder) or a surface (a DEM GeoTIFF or a LandXML TIN)
-SOURCES = ("cloud", "tiles", "surface")
 TILE_SUFFIXES = (".vpc", ".copc.laz")
 
 
 @dataclass(frozen=True)
 class Epoch:
-    """One survey of a run, in time order: its source (:data:`SOURCES`), the CRS given for a file without one,
-    its ISO date and its source (``"LAS header"``, ``"given"``), how far its georeferencing is trusted."""
+    """One survey of a run, in time order: its source (``cloud``: a point cloud file, maybe through a PDAL
+    pipeline; ``tiles``: a VPC, a COPC file or a folder; ``surface``: a DEM GeoTIFF or a LandXML TIN), the CRS
+    given for a file without one, its ISO date and its source (``"LAS header"``, ``"given"``), how far its
+    georeferencing is trusted."""
 
     path: Path
     source: str = "cloud"

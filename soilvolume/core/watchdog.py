@@ -1,20 +1,22 @@
 """Every run ends, whatever C loop its threads are in: a thread beside it hears SIGINT/SIGTERM through the
 wakeup fd (written even while the main thread waits on native code) and ends a run not stopping within
 :data:`GRACE` s (or not ended :data:`STOPPING_S` s after); under ``ulimit -v`` it sees a thread spinning at
-the limit (OpenBLAS's endless retry: a series at 600 MB spun 12 minutes) and fails the run after :data:`SPIN_S` s."""
+the limit (OpenBLAS's endless retry: a series at 600 MB spun 12 minutes) and fails the run after :data:`SPIN_S` s.
+A process under an address-space limit fails in one line naming it (:func:`out_of_memory`)."""
 
 from __future__ import annotations
 
 import os
+import resource
 import select
 import shutil
 import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
-from .memlimit import BLAS_BUFFER, address_limit
+from . import wording
 
 GRACE = 0.75  # s: a run that has not begun to stop this long after a signal is ended
 STOPPING_S = 10.0  # s: a run stopping (its cleanups, a cluster's shutdown) is ended after this
@@ -23,85 +25,99 @@ STACK = 256 << 10  # bytes: the watching thread's stack
 M_ARENA_MAX = -8  # glibc's mallopt parameter
 SPIN_S = 3.0  # s: a thread spinning at the address-space limit this long ends the run
 SPIN_SYSTEM = 0.3  # the share of a second in system time a spinning thread spends (failed mmaps)
+#: the address space OpenBLAS's buffer takes (its 128 MiB and glibc's arena around it), with margin
+BLAS_BUFFER = 192 << 20
 
 
-class Watchdog:
-    """The watching thread of one run (:meth:`start` in the main thread, :meth:`stop` after it);
+def address_limit() -> int | None:
+    """The process's address-space limit in bytes (RLIMIT_AS's soft limit), None when unlimited."""
+    try:
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+    except (OSError, ValueError):
+        return None
+    return None if soft == resource.RLIM_INFINITY else int(soft)
+
+
+def out_of_memory(keyed: bool = False) -> str:
+    """The out-of-memory line, naming the limit (``keyed``: its option as a marker, else as a flag)."""
+    limit = address_limit()
+    under = f" under the address-space limit of {limit / 1e6:,.0f} MB (ulimit -v)" if limit else ""
+    said = f"out of memory{under}: use a larger {wording.opt('cell')} or crop the clouds first"
+    return said if keyed else wording.cli(said)
+
+
+def short_of_memory(exc: BaseException) -> bool:
+    """Whether ``exc`` is a MemoryError or a library that could not be mapped under a limit."""
+    if isinstance(exc, MemoryError):
+        return True
+    text = str(exc).lower()
+    return isinstance(exc, ImportError) and ("failed to map segment" in text or "cannot allocate memory" in text)
+
+
+def start(leave: Callable[[int | None], None], stopping: Callable[[], bool]) -> Callable[[], None]:
+    """Start the watching thread of one run (from the main thread); returns what stops it.
     ``leave(signum_or_none)`` is called, from the thread, to end the process."""
+    read_fd, write_fd = os.pipe()
+    os.set_blocking(write_fd, False)
+    try:
+        old_fd = signal.set_wakeup_fd(write_fd, warn_on_full_buffer=False)
+    except ValueError:  # not the main thread
+        _close(read_fd, write_fd)
+        return lambda: None
+    done, limit = threading.Event(), address_limit()
+    if limit is not None:
+        few_arenas()
+    old = threading.stack_size(STACK)  # a small thread: under ulimit -v its space counts
+    try:
+        watch = (read_fd, write_fd, done, leave, stopping, limit)
+        threading.Thread(target=_watch, args=watch, name="soilvolume-watchdog", daemon=True).start()
+    finally:
+        threading.stack_size(old)
 
-    def __init__(self, leave: Callable[[int | None], None], stopping: Callable[[], bool]) -> None:
-        self.leave, self.stopping = leave, stopping
-        self.done = threading.Event()
-        self.old_fd = -1
-        self.read_fd = self.write_fd = -1
+    def stop() -> None:
+        done.set()
+        signal.set_wakeup_fd(old_fd)
 
-    def start(self) -> None:
-        self.read_fd, self.write_fd = os.pipe()
-        os.set_blocking(self.write_fd, False)
-        try:
-            self.old_fd = signal.set_wakeup_fd(self.write_fd, warn_on_full_buffer=False)
-        except ValueError:  # not the main thread
-            self._close()
-            return
-        if address_limit() is not None:
-            few_arenas()
-        old = threading.stack_size(STACK)  # a small thread: under ulimit -v its space counts
-        try:
-            threading.Thread(target=self._watch, name="soilvolume-watchdog", daemon=True).start()
-        finally:
-            threading.stack_size(old)
-
-    def stop(self) -> None:
-        if self.read_fd < 0:
-            return
-        self.done.set()
-        signal.set_wakeup_fd(self.old_fd)
-
-    def _close(self) -> None:
-        for fd in (self.read_fd, self.write_fd):
-            os.close(fd)
-        self.read_fd = self.write_fd = -1
-
-    def _watch(self) -> None:
-        deadline, spin = None, Spin(address_limit())
-        while not self.done.is_set():
-            ready, _, _ = select.select([self.read_fd], [], [], TICK)
-            if ready:
-                got = os.read(self.read_fd, 64)
-                if got and deadline is None:
-                    deadline, signum = time.monotonic() + GRACE, got[0]
-            if self.done.is_set():
-                break
-            if deadline is not None and time.monotonic() > deadline:
-                if not self.stopping() or time.monotonic() > deadline - GRACE + STOPPING_S:
-                    self.leave(signum)
-            if spin.spinning():
-                self.leave(None)
-        self._close()
+    return stop
 
 
-class Spin:
-    """Whether a thread spun at the address-space ``limit`` (bytes; None: none) for :data:`SPIN_S` s: the space
-    unchanged within :data:`.memlimit.BLAS_BUFFER` of it, a thread's system time growing by :data:`SPIN_SYSTEM`."""
+def _watch(read_fd: int, write_fd: int, done: threading.Event, leave, stopping, limit: int | None) -> None:
+    deadline, spin = None, _spinning(limit)
+    while not done.is_set():
+        ready, _, _ = select.select([read_fd], [], [], TICK)
+        if ready:
+            got = os.read(read_fd, 64)
+            if got and deadline is None:
+                deadline, signum = time.monotonic() + GRACE, got[0]
+        if done.is_set():
+            break
+        if deadline is not None and time.monotonic() > deadline:
+            if not stopping() or time.monotonic() > deadline - GRACE + STOPPING_S:
+                leave(signum)
+        if next(spin):
+            leave(None)
+    _close(read_fd, write_fd)
 
-    def __init__(self, limit: int | None) -> None:
-        self.limit = limit
-        self.since: float | None = None
-        self.last: tuple[int, dict[str, int]] | None = None
 
-    def spinning(self) -> bool:
-        if self.limit is None:
-            return False
-        now, sample = time.monotonic(), _sample()
-        if sample is None:
-            return False
-        size, system = sample
-        prev, self.last = self.last, sample
-        hot = prev is not None and size == prev[0] and size + BLAS_BUFFER > self.limit
-        per_tick = SPIN_SYSTEM * TICK * os.sysconf("SC_CLK_TCK")
-        hot = hot and any(t - prev[1].get(k, t) >= per_tick for k, t in system.items())
-        self.since = (self.since or now) if hot else None
-        return self.since is not None and now - self.since >= SPIN_S
+def _close(*fds: int) -> None:
+    for fd in fds:
+        os.close(fd)
+
+
+def _spinning(limit: int | None) -> Iterator[bool]:
+    """At each tick, whether a thread spun at the address-space ``limit`` (bytes; None: none) for :data:`SPIN_S`
+    s: the space unchanged within :data:`BLAS_BUFFER` of it, a thread's system time growing by
+    :data:`SPIN_SYSTEM`."""
+    since, last = None, None
+    while True:
+        now, sample = time.monotonic(), None if limit is None else _sample()
+        if sample is not None:
+            (size, system), prev, last = sample, last, sample
+            hot = prev is not None and size == prev[0] and size + BLAS_BUFFER > limit
+            per_tick = SPIN_SYSTEM * TICK * os.sysconf("SC_CLK_TCK")
+            hot = hot and any(t - prev[1].get(k, t) >= per_tick for k, t in system.items())
+            since = (since or now) if hot else None
+        yield sample is not None and since is not None and now - since >= SPIN_S
 
 
 def few_arenas() -> None:

@@ -43,10 +43,8 @@ def cli_tree(value: Any) -> Any:
         return cli(value) if "{opt:" in value else value
     if isinstance(value, dict):
         return {k: cli_tree(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [cli_tree(v) for v in value]
-    if isinstance(value, tuple):
-        return tuple(cli_tree(v) for v in value)
+    if isinstance(value, (list, tuple)):
+        return type(value)(cli_tree(v) for v in value)
     return value
 
 

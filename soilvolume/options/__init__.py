@@ -1,28 +1,62 @@
-"""Every knob of the pipeline in one frozen dataclass, :class:`Options`, each declared once (:func:`.table.option`):
+"""Every knob of the pipeline in one frozen dataclass, :class:`Options`, each declared once (:func:`option`):
 the CLI's flags and the QGIS algorithms' parameters are made from it, so all front ends share its defaults."""
 
 from __future__ import annotations
 
-from dataclasses import Field, fields, replace
+from collections.abc import Callable
+from dataclasses import Field, dataclass, field, fields, replace
 from typing import Any
 
-from .table import ESTIMATE, option, options
-
-__all__ = ["COMMANDS", "Options", "command_fields"]
+__all__ = ["COMMANDS", "Options", "command_fields", "option"]
 
 #: which commands take an option (``commands`` of each field below): the command line builds
 #: each subcommand's flags from it and the QGIS algorithms their parameters
+ESTIMATE = ("estimate",)  # the commands that take an option unless it says otherwise
 VOLUME = ("estimate", "series")  # the volume step (a series runs it once per later epoch)
 REGISTER = ("estimate", "register", "series")
 PREPARE = ("estimate", "register", "pipeline", "series")  # reading both clouds
 GRID = ("estimate", "dem", "series", "stockpile")
-GROUND = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
-GROUND_FILTER = ("estimate", "register", "dem", "series", "pipeline", "stockpile")
+GROUND = ("estimate", "register", "dem", "pipeline", "series", "stockpile")  # the ground and its filters
 POINTS = ("estimate", "register", "dem", "series", "stockpile")  # what is read of each cloud (the soil rule)
 CELLS = ("estimate", "dem", "series")  # the heights of each cell
 DESIGNED = ("estimate", "series")  # against a design (a series: --design)
 STOCKPILE = ("stockpile",)  # one survey's stockpile inventory
 COMMANDS = ("estimate", "register", "dem", "pipeline", "series", "stockpile")
+
+
+def option(
+    default: Any,
+    label: str,
+    commands: tuple[str, ...] = ESTIMATE,
+    unit: str | None = None,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    choices: tuple | None = None,
+    lo_open: bool = False,
+    run_control: bool = False,
+    help: str | None = None,
+) -> Any:
+    """An option: default, GUI ``label``, the ``commands`` taking it, ``unit``, range ``lo``..``hi`` (``lo`` excluded
+    when ``lo_open``), ``choices``, ``help`` (or from :func:`options`) and ``run_control``: where and how the run
+    goes, never its numbers (every other option keys the work a resumed run may reuse)."""
+    meta = {"help": help, "choices": choices, "label": label, "unit": unit, "lo": lo, "hi": hi, "lo_open": lo_open}
+    return field(default=default, metadata={**meta, "commands": commands, "run_control": run_control})
+
+
+def options(helps: dict[str, str]) -> Callable[[type], type]:
+    """A frozen dataclass of :func:`option` fields, each with its help from ``helps`` (by name; one each)."""
+
+    def make(cls: type) -> type:
+        if helps.keys() != cls.__annotations__.keys():
+            raise TypeError(f"{cls.__name__}: the help texts do not match the fields")
+        for name, text in helps.items():
+            f = getattr(cls, name)
+            setattr(cls, name, field(default=f.default, metadata={**f.metadata, "help": text}))
+        return dataclass(frozen=True)(cls)
+
+    return make
+
 
 #: each option's help, by topic in table order
 HELP = {
@@ -110,8 +144,8 @@ class Options:
     fill_holes: float = option(100.0, "Largest hole to fill", VOLUME, "m2", 0.0, 1e7)
     fill_method: str = option("biharmonic", "Hole interpolation", VOLUME, choices=("biharmonic", "harmonic"))
     ground: str = option("auto", "Ground points", GROUND, choices=("auto", "class", "filter", "csf", "none"))
-    ground_window: float = option(6.0, "Ground filter window", GROUND_FILTER, "m", 0.5, 500.0)
-    ground_slope: float = option(0.6, "Ground filter slope (rise/run)", GROUND_FILTER, None, 0.01, 10.0)
+    ground_window: float = option(6.0, "Ground filter window", GROUND, "m", 0.5, 500.0)
+    ground_slope: float = option(0.6, "Ground filter slope (rise/run)", GROUND, None, 0.01, 10.0)
     exclude: str = option("auto", "Exclude what is not soil", POINTS, choices=("auto", "none"))
     objects: str = option("exclude", "Objects in one survey only", VOLUME, choices=("exclude", "count"))
     lod_confidence: float = option(0.95, "Confidence level", VOLUME, None, 0.5, 0.999)

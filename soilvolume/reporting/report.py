@@ -45,7 +45,7 @@ def stages(reg: Registration) -> dict:
     for name, q in (("coarse", reg.coarse), ("fine", reg.fine)):
         fit = {k: getattr(q, k) for k in ("method", "fitness", "rmse", "accepted", "seconds", "note")}
         out[name] = {**fit, "poses_beyond_prior": q.beyond_prior, "transform_local": q.transform}
-    return {**out, "georeferencing": {} if reg.georeferencing is None else reg.georeferencing.as_dict()}
+    return {**out, "georeferencing": {} if reg.georeferencing is None else asdict(reg.georeferencing)}
 
 
 def motion(t: np.ndarray, after: np.ndarray) -> dict:

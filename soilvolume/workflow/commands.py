@@ -9,19 +9,18 @@ import numpy as np
 
 from ..core.hooks import Hooks
 from ..core.outputs import check_output_file, os_errors
-from ..core.types import Epoch, GridSpec, SoilVolumeError, survey
+from ..core.types import SoilVolumeError, survey
 from ..core.wording import cli_tree
 from ..dem.geotiff import write_grid
 from ..dem.grid import epoch_dem
 from ..execution.inmemory import InMemory
 from ..inputs.distinct import check_two_surveys
 from ..inputs.io import LAS_SUFFIXES
-from ..inputs.prepare import Single
 from ..options import Options
 from ..reporting.report import dem_summary, registration_summary
 from ..validate import check_bounds
 from ..volumes.compute import centred_heights
-from . import pair, steps
+from . import steps
 from .context import Context, threads
 from .plan import cloud_cell, plan_grid
 
@@ -44,29 +43,25 @@ def run_cloud_to_dem(
     ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
     with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
         one = steps.read_one(ctx)
-    with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
-        grid, heights = _grid(ctx, one, bounds)
+    with steps.running(ctx, "grid", ctx.message("grid"), "grids"):  # on --bounds, else the points' box
+        xyz, origin = one.xyz, one.origin
+        box = xyz
+        if bounds is not None:  # in CRS units
+            b = np.asarray(bounds, dtype=np.float64) * one.frame.xy_unit
+            box = (b[:2] - origin[:2], b[2:] - origin[:2])
+        cell = cloud_cell(xyz, one.thin, options)
+        grid = plan_grid(cell, [box], origin, one.frame, f"{cloud}: --bounds do not make a grid")
+        ctx.hooks.step(
+            ctx.at("grid", 0.1), f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m"
+        )
+        heights = centred_heights(epoch_dem(xyz, grid, options.statistic), cell, options)  # at the cell centres
+        if not np.isfinite(heights).any():
+            raise SoilVolumeError(f"{cloud}: no points inside the grid (check --bounds)")
     with steps.running(ctx, "write", ctx.message("write")), os_errors(out_tif):
         desc = f"average height ({options.statistic}, cell centres) (m)"
         write_grid(out_tif, heights + one.origin[2], grid, desc)
     hooks.step(100, "done")
     return cli_tree(dem_summary(one, grid, heights))
-
-
-def _grid(ctx: Context, one: Single, bounds: tuple | None) -> tuple[GridSpec, np.ndarray]:
-    """The one cloud's grid (``bounds``, else its points' box) and heights at the cell centres."""
-    xyz, origin, frame, options = one.xyz, one.origin, one.frame, ctx.options
-    box = xyz
-    if bounds is not None:
-        u, b = frame.xy_unit, bounds
-        box = (np.array([b[0] * u, b[1] * u]) - origin[:2], np.array([b[2] * u, b[3] * u]) - origin[:2])
-    cell = cloud_cell(xyz, one.thin, options)
-    grid = plan_grid(cell, [box], origin, frame, f"{ctx.epochs[0].path}: --bounds do not make a grid")
-    ctx.hooks.step(ctx.at("grid", 0.1), f"gridding {len(xyz):,} points on {grid.rows} x {grid.cols} cells of {cell} m")
-    heights = centred_heights(epoch_dem(xyz, grid, options.statistic), cell, options)
-    if not np.isfinite(heights).any():
-        raise SoilVolumeError(f"{ctx.epochs[0].path}: no points inside the grid (check --bounds)")
-    return grid, heights
 
 
 def run_register(
@@ -85,11 +80,13 @@ def run_register(
     if out_cloud.suffix.lower() not in LAS_SUFFIXES:
         raise SoilVolumeError(f"{out_cloud}: the registered cloud is written as .las or .laz")
     threads(options)
-    given = {"georeferencing": options.georeferencing}
-    epochs: tuple[Epoch, ...] = (
-        survey(before, crs=options.before_crs, **given),
-        survey(after, crs=options.after_crs, **given),
-    )
-    prep, reg = pair.register(Context(epochs, options, hooks, pair.REGISTER), InMemory(), out_cloud)
+    given = ((before, options.before_crs), (after, options.after_crs))
+    epochs = tuple(survey(path, crs=crs, georeferencing=options.georeferencing) for path, crs in given)
+    ctx, backend = Context(epochs, options, hooks, ("prepare", "register", "write")), InMemory()
+    with backend.session(ctx):  # read, register and write the after cloud moved onto the before one
+        prep = steps.read(ctx, backend)
+        reg, _ = steps.register(ctx, prep, backend.dense(prep))
+        backend.keep_cloud(prep, reg, out_cloud)
+        steps.write(ctx, backend, None, None, [])
     hooks.step(100, "done")
     return cli_tree(registration_summary(reg, prep.origin))  # options worded as flags

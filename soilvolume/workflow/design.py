@@ -5,7 +5,7 @@ terms; the survey's agreement with the surface on unchanged ground leads the ver
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +19,7 @@ from ..execution.seam import Backend, Gridded, done
 from ..inputs.heights import masked_notes
 from ..inputs.landxml import Tin
 from ..inputs.prepare import Prepared, prepare_survey
-from ..inputs.surface import Surface, SurfaceSource, on_grid, open_surface, read_over, valid_box
+from ..inputs.surface import Surface, on_grid, open_surface, read_over, valid_box
 from ..options import Options
 from ..pipelines.pipeline import open_source
 from ..registration.register import Registration
@@ -30,7 +30,6 @@ from ..volumes.grade import grade
 from . import steps
 from .context import Context
 from .plan import plan_grid, survey_cell
-from .steps import Reported
 
 NOT_REGISTERED = (
     f"registration: {NONE} (nothing is registered against a design: the survey must be well georeferenced; "
@@ -38,6 +37,11 @@ NOT_REGISTERED = (
 )
 DESIGN_COUNT = 1000  # the points a surface cell stands for: never weak, never refilled as sparse
 STEPS = ("prepare", "grid", "volume", "write", "report")  # nothing registered, no planes
+#: the estimate's rasters said otherwise against a surface (dem_before.tif is the surface on the grid)
+SAID = {
+    "dem_out_b": "the reference surface (design) resampled onto the grid, bilinear at the cell centres (m)",
+    "diff": "survey - design (m): above design > 0 (fill), below design < 0 (cut)",
+}
 
 
 class NoPlane:
@@ -47,14 +51,13 @@ class NoPlane:
         return None
 
 
-def estimate(ctx: Context, backend: Backend) -> Reported:
+def estimate(ctx: Context, backend: Backend) -> tuple[dict, dict]:
     """Read the surface and the survey, grid, volume (with the surface's terms), write, report."""
     if ctx.schedule is not None and not ctx.schedule.in_process:  # None: auto
         ctx.hooks.info("{opt:scheduler}: a run against a surface runs in this process")
     with backend.session(ctx):
-        ctx, survey = read(ctx)
-        prep = survey.prep
-        gridded, sigma = grid(ctx, survey)
+        ctx, prep, surface, cell = read(ctx)
+        gridded, sigma = grid(ctx, prep, surface, cell)
         fitted = (NoPlane(), NoPlane(), np.zeros((gridded.grid.rows, gridded.grid.cols)))
 
         def step(after: EpochDEM, before: EpochDEM, d_i: np.ndarray, on: GridSpec) -> Volumes:
@@ -62,10 +65,13 @@ def estimate(ctx: Context, backend: Backend) -> Reported:
 
         with steps.running(ctx, "volume", ctx.message("volume")):
             vols = backend.volume(ctx, step, gridded, fitted, None)
-        extras = steps.write(ctx, backend, vols, gridded.grid, layers())
+        layers = [(name, key, SAID.get(key, desc)) for name, key, desc in output_layers("none")]
+        extras = steps.write(ctx, backend, vols, gridded.grid, layers)
         graded = write_grade(ctx, vols.diff, gridded.grid)
         judged = steps.judged(vols, gridded.grid, ctx.options)
-        reg = _not_registered(ctx.options)
+        stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)  # nothing registered
+        geo = Georeferencing(ctx.options.georeferencing, "none", "the reference is a surface")
+        reg = Registration(np.eye(4), stage, stage, geo)
         record = RunRecord(prep, reg, gridded.grid, fitted[:2], vols, ctx.options, judged, backend.engine())
         return steps.report(ctx, record, gridded, {**(extras or {}), **(graded or {})})
 
@@ -81,52 +87,41 @@ def write_grade(ctx: Context, diff: np.ndarray, on: GridSpec) -> dict | None:
     return {"grade": summary}
 
 
-@dataclass(frozen=True)
-class Survey:
-    """The reading step's result: the survey in its own frame, the surface's heights over it, the cell."""
-
-    prep: Prepared
-    surface: Surface | Tin
-    cell: float
-
-
-def read(ctx: Context) -> tuple[Context, Survey]:
-    """The surface opened and checked (before any point), the survey, the surface's heights over its
-    box: (the run with its options for a surface, the survey)."""
+def read(ctx: Context) -> tuple[Context, Prepared, Surface | Tin, float]:
+    """The surface opened and checked (before any point), the survey, the cell, the surface's heights over
+    the survey's box and two cells around it (the grid's edges, the resampling's kernel: a design far larger
+    than the site costs only the site's window): (the run with its options for a surface, the survey, the
+    surface, the cell)."""
     design, after = ctx.epochs
     with steps.running(ctx, "prepare", ctx.message("prepare") + " (the reference is a surface)", "crop"):
         source = open_surface(Path(design.path), ctx.options.before_crs, ctx.options.design_surface)
-        ctx = ctx.with_options(_options(ctx.options, ctx.hooks))
+        ctx = replace(ctx, options=_options(ctx.options, ctx.hooks))
         check = ctx.hooks.ticker(*ctx.spans["prepare"], "reading")
         prep = prepare_survey(open_source(after.path, after.pipeline), ctx.options, check=check)
         ctx.timer.s["read"] = prep.read_s
         ctx.timer.s["crop"] = ctx.timer.s.get("crop", 0.0) - prep.read_s
         cell = survey_cell(prep.after.xyz, prep.after_thin, ctx.options)
-        surface = _read_surface(source, prep, cell, ctx.hooks)
+        thin, origin = prep.after_thin[:, :2], prep.origin[:2]
+        surface = read_over(source, thin.min(axis=0) + origin, thin.max(axis=0) + origin, prep.frame, 2 * cell)
+        for note in masked_notes(source.path, surface.masked):
+            ctx.hooks.info(note)
         ctx.hooks.info(NOT_REGISTERED)
-    return ctx, Survey(replace(prep, inputs={"before": surface.describe(), **prep.inputs}), surface, cell)
+    return ctx, replace(prep, inputs={"before": surface.describe(), **prep.inputs}), surface, cell
 
 
-def _not_registered(options: Options) -> Registration:
-    """The identity registration of a survey against a surface."""
-    stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)
-    return Registration(
-        np.eye(4), stage, stage, Georeferencing(options.georeferencing, "none", "the reference is a surface")
-    )
-
-
-def grid(ctx: Context, survey: Survey) -> tuple[Gridded, np.ndarray]:
-    """The survey's grid clipped to the surface, its DEM and the surface's on it: (the DEMs, the surface's
-    per-cell error)."""
-    prep, surface = survey.prep, survey.surface
+def grid(ctx: Context, prep: Prepared, surface: Surface | Tin, cell: float) -> tuple[Gridded, np.ndarray]:
+    """The survey's grid of ``cell`` over its footprint clipped to the surface's valid extent, its DEM and the
+    surface's on it: (the DEMs, the surface's per-cell error)."""
     with steps.running(ctx, "grid", ctx.message("grid"), "grids"):
-        on = survey_grid(prep, surface, survey.cell)
+        box_lo, box_hi = valid_box(surface, prep.frame.crs, prep.frame.xy_unit)
+        thin, origin = prep.after_thin[:, :2], prep.origin[:2]
+        missed = f"{surface.path} does not overlap {prep.after.path}"
+        empty = f"{missed}: the surface's valid extent misses the survey (check the CRSs)"
+        on = plan_grid(cell, [thin, (box_lo - origin, box_hi - origin)], prep.origin, prep.frame, empty)
         dem_a = epoch_dem(prep.after.xyz, on, ctx.options.statistic, prep.after.nonsoil)
         dem_s, sigma = surface_epoch(surface, on, ctx.options.design_uncertainty)
         if not (np.isfinite(dem_a.heights) & np.isfinite(dem_s.heights)).any():
-            raise SoilVolumeError(
-                f"{surface.path} does not overlap {prep.after.path}: no cell of the survey has a surface height"
-            )
+            raise SoilVolumeError(f"{missed}: no cell of the survey has a surface height")
     return Gridded(on, (dem_a, dem_s), on, (dem_a, dem_s), done(None)), sigma
 
 
@@ -146,28 +141,6 @@ def _options(options: Options, hooks: Hooks) -> Options:
     return options.with_(keep_registered_cloud=False)
 
 
-def _read_surface(source: SurfaceSource | Tin, prep: Prepared, cell: float, hooks: Hooks) -> Surface | Tin:
-    """The surface's heights over the survey's box and two cells around it (the grid's edges, the
-    resampling's kernel): a design far larger than the site costs only the site's window."""
-    thin, origin = prep.after_thin[:, :2], prep.origin[:2]
-    surface = read_over(source, thin.min(axis=0) + origin, thin.max(axis=0) + origin, prep.frame, 2 * cell)
-    for note in masked_notes(source.path, surface.masked):
-        hooks.info(note)
-    return surface
-
-
-def survey_grid(prep: Prepared, surface: Surface | Tin, cell: float) -> GridSpec:
-    """The grid of ``cell`` over the survey's footprint clipped to the surface's valid extent."""
-    box_lo, box_hi = valid_box(surface, prep.frame.crs, prep.frame.xy_unit)
-    thin, origin = prep.after_thin[:, :2], prep.origin[:2]
-    boxes = [thin, (box_lo - origin, box_hi - origin)]
-    empty = (
-        f"{surface.path} does not overlap {prep.after.path}: the surface's valid extent misses the survey "
-        "(check the CRSs)"
-    )
-    return plan_grid(cell, boxes, prep.origin, prep.frame, empty)
-
-
 def surface_epoch(surface: Surface | Tin, grid: GridSpec, given_m: float) -> tuple[EpochDEM, np.ndarray]:
     """(the surface bilinear at ``grid``'s centres as the before epoch, each cell's one-sigma error: its difference
     from cubic with ``given_m`` in quadrature, the standard error of :data:`DESIGN_COUNT` points so the LoD has it)."""
@@ -177,12 +150,3 @@ def surface_epoch(surface: Surface | Tin, grid: GridSpec, given_m: float) -> tup
     sigma = np.where(valid, np.hypot(np.nan_to_num(np.abs(z - cubic)), given_m), np.nan)
     counts = np.where(valid, DESIGN_COUNT, 0).astype(np.int64)
     return EpochDEM(z, counts, sigma * np.sqrt(DESIGN_COUNT)), sigma
-
-
-def layers() -> list:
-    """The estimate's rasters; dem_before.tif is the surface on the grid."""
-    said = {
-        "dem_out_b": "the reference surface (design) resampled onto the grid, bilinear at the cell centres (m)",
-        "diff": "survey - design (m): above design > 0 (fill), below design < 0 (cut)",
-    }
-    return [(name, key, said.get(key, desc)) for name, key, desc in output_layers("none")]

@@ -1,13 +1,17 @@
-"""``soilvolume estimate``: a pair (:mod:`.pair`, on the backend of ``--scheduler``) or a survey against a
-surface (:mod:`.design`), its outputs staged and swapped in when all succeeded."""
+"""``soilvolume estimate``: a pair (:func:`estimate_pair`: the method's steps over two surveys, the first the
+reference, on the backend of ``--scheduler``) or a survey against a surface (:mod:`.design`), its outputs staged
+and swapped in when all succeeded."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 from ..core.hooks import Hooks, Result
 from ..core.outputs import RUN_OUTPUTS, os_errors, output_dir
+from ..core.record import RunRecord
 from ..core.types import Epoch, SoilVolumeError, survey
+from ..dem.grid import output_layers
 from ..distributed.schedule import schedule_for
 from ..execution.inmemory import InMemory
 from ..execution.seam import Backend
@@ -17,9 +21,8 @@ from ..inputs.surface import is_surface
 from ..options import Options
 from ..pipelines.confine import writers_into
 from ..validate import schedule_of
-from . import design, pair
-from .context import Context, threads
-from .timing import Timer
+from . import design, steps
+from .context import PAIR, Context, Timer, threads
 
 
 def epochs_of(before: Path, after: Path, options: Options, before_pipeline=None, after_pipeline=None) -> tuple:
@@ -64,21 +67,32 @@ def run_estimate(
     ):
         surface = epochs[0].is_surface
         with timer("setup"):  # the output folder checked, the schedule chosen from the headers
-            steps = design.STEPS if surface else pair.PAIR
-            ctx = Context(epochs, options, hooks, steps, timer, out, schedule=schedule)
-            backend = InMemory() if surface else backend_for(ctx)
+            ctx = Context(epochs, options, hooks, design.STEPS if surface else PAIR, timer, out, schedule=schedule)
+            b, a = epochs  # the backend of the run's schedule (auto resolved from the headers): tiles but for none
+            plan = None if surface else schedule_for(schedule, b.path, a.path, options, b.pipeline or a.pipeline)
+            backend = InMemory() if surface or plan.in_process else Tiled(plan)
         if surface:
-            done = design.estimate(ctx, backend)
+            report, keyed = design.estimate(ctx, backend)
         else:
             cloud = out.path("after_registered.laz") if options.keep_registered_cloud else None
-            done = pair.estimate(ctx, backend, cloud)
+            report, keyed = estimate_pair(ctx, backend, cloud)
     hooks.step(100, "done")
-    return Result.written(done.report, out.moved, done.keyed)
+    return Result.written(report, out.moved, keyed)
 
 
-def backend_for(ctx: Context) -> Backend:
-    """The backend of the run's schedule (``auto`` resolved by :func:`distributed.schedule.schedule_for`):
-    in memory, or Dask tiles for any schedule but ``none``."""
-    b, a = ctx.epochs
-    schedule = schedule_for(ctx.schedule, b.path, a.path, ctx.options, b.pipeline or a.pipeline)
-    return InMemory() if schedule.in_process else Tiled(schedule)
+def estimate_pair(ctx: Context, backend: Backend, cloud: Path | None = None) -> tuple[dict, dict]:
+    """Read, register, grid, planes, volume, write, report; ``cloud``: where the registered
+    after cloud goes (``--registered-cloud``), else None."""
+    with backend.session(ctx):
+        prep = steps.read(ctx, backend)
+        reg, options = steps.register(ctx, prep, backend.dense(prep))
+        ctx = replace(ctx, options=options)
+        if cloud is not None:
+            backend.keep_cloud(prep, reg, cloud)
+        gridded = steps.grid(ctx, backend, prep, reg)
+        fitted = steps.planes(ctx, gridded)
+        vols = steps.volume(ctx, backend, gridded, fitted, reg)
+        extras = steps.write(ctx, backend, vols, gridded.grid, output_layers(ctx.options.correction))
+        judged = steps.judged(vols, gridded.correction_grid, ctx.options)
+        parts = (prep, reg, gridded.grid, fitted[:2], vols, ctx.options, judged, backend.engine())
+        return steps.report(ctx, RunRecord(*parts), gridded, extras)

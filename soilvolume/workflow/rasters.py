@@ -40,12 +40,6 @@ def open_dem(path: Path) -> Dem:
     return Dem(raster, raster.crs, *metres_per_unit(raster.crs, raster.unit, str(path)))
 
 
-def profile(dem: Dem, heights: Heights) -> dict:
-    """The grid of ``heights`` (a window of ``dem``) for GDAL's warp and :func:`grid_of`."""
-    rows, cols = heights.z.shape
-    return {"transform": heights.transform, "crs": dem.crs, "height": rows, "width": cols}
-
-
 def describe(dem: Dem, heights: Heights) -> dict:
     """report's description of an input DEM and what of it was read."""
     return {
@@ -56,11 +50,13 @@ def describe(dem: Dem, heights: Heights) -> dict:
     }
 
 
-def after_on_before(after: Dem, before: Dem, grid: dict) -> tuple[np.ndarray, Heights]:
-    """The after DEM's heights on the before's grid ``grid``: read over the before's extent only
-    (two of its cells around), resampled bilinearly."""
-    t, w, h = grid["transform"], grid["width"], grid["height"]
-    pad = 2.0
+def after_on_before(after: Dem, before: Dem, hb: Heights) -> tuple[np.ndarray, Heights]:
+    """The after DEM's heights on the grid of the before's ``hb``: read over the before's extent only
+    (two of its cells around), resampled bilinearly by GDAL's warp (horizontal CRSs)."""
+    from rasterio.crs import CRS
+    from rasterio.warp import Resampling, reproject
+
+    t, (h, w), pad = hb.transform, hb.z.shape, 2.0
     xs, ys = zip(*(t @ (c, r) for c in (-pad, w + pad) for r in (-pad, h + pad)), strict=True)
     window = window_over(
         after.raster, after.crs, np.array([min(xs), min(ys)]), np.array([max(xs), max(ys)]), before.crs
@@ -68,37 +64,29 @@ def after_on_before(after: Dem, before: Dem, grid: dict) -> tuple[np.ndarray, He
     if window is None:
         raise SoilVolumeError(f"{before.raster.path} and {after.raster.path} do not overlap")
     got = read_heights(after.raster, after.factor, window)
-    return resample_onto(got.z, profile(after, got), grid), got
-
-
-def grid_of(profile: dict) -> GridSpec:
-    """The engine's grid description of a north-up raster (square cells required)."""
-    t = profile["transform"]
-    if t.b != 0 or t.d != 0 or abs(abs(t.e) - t.a) > 1e-9 * t.a:
-        raise SoilVolumeError("rasters must be north-up with square cells")
-    crs = parse_crs(profile["crs"].to_wkt(), "raster")
-    u = xy_unit(crs)
-    return GridSpec(t.c * u, t.f * u, t.a * u, profile["height"], profile["width"], (0.0, 0.0, 0.0), crs.to_wkt(), u)
-
-
-def resample_onto(z: np.ndarray, src: dict, dst: dict) -> np.ndarray:
-    """``z`` (grid ``src``) resampled bilinearly onto the grid ``dst`` (horizontal CRSs)."""
-    from rasterio.crs import CRS
-    from rasterio.warp import Resampling, reproject
-
-    out = np.full((dst["height"], dst["width"]), np.nan)
+    out = np.full((h, w), np.nan)
     reproject(
-        z,
+        got.z,
         out,
-        src_transform=src["transform"],
-        src_crs=CRS.from_wkt(horizontal(src["crs"]).to_2d().to_wkt()),
+        src_transform=got.transform,
+        src_crs=CRS.from_wkt(horizontal(after.crs).to_2d().to_wkt()),
         src_nodata=np.nan,
-        dst_transform=dst["transform"],
-        dst_crs=CRS.from_wkt(horizontal(dst["crs"]).to_2d().to_wkt()),
+        dst_transform=t,
+        dst_crs=CRS.from_wkt(horizontal(before.crs).to_2d().to_wkt()),
         dst_nodata=np.nan,
         resampling=Resampling.bilinear,
     )
-    return out
+    return out, got
+
+
+def grid_of(dem: Dem, heights: Heights) -> GridSpec:
+    """The engine's grid description of ``heights`` (a north-up window of ``dem``: square cells required)."""
+    t = heights.transform
+    if t.b != 0 or t.d != 0 or abs(abs(t.e) - t.a) > 1e-9 * t.a:
+        raise SoilVolumeError("rasters must be north-up with square cells")
+    crs = parse_crs(dem.crs.to_wkt(), "raster")
+    u, (rows, cols) = xy_unit(crs), heights.z.shape
+    return GridSpec(t.c * u, t.f * u, t.a * u, rows, cols, (0.0, 0.0, 0.0), crs.to_wkt(), u)
 
 
 def run_volume_from_rasters(
@@ -118,7 +106,7 @@ def run_volume_from_rasters(
     hooks.step(5, f"reading {before.name} and {after.name}")
     db, da = open_dem(before), open_dem(after)
     hb, ha, za = read_both(db, da, hooks)
-    grid, diff = grid_of(profile(db, hb)), za - hb.z
+    grid, diff = grid_of(db, hb), za - hb.z
     if not np.isfinite(diff).any():
         raise SoilVolumeError(f"{before} and {after} do not overlap (no cell has both heights)")
     hooks.step(60, "computing cut and fill")
@@ -158,7 +146,7 @@ def read_both(db: Dem, da: Dem, hooks: Hooks) -> tuple[Heights, Heights, np.ndar
         za = ha.z
     else:
         hooks.info(f"resampling {Path(ra.path).name} onto the grid of {Path(rb.path).name}")
-        za, ha = after_on_before(da, db, profile(db, hb))
+        za, ha = after_on_before(da, db, hb)
     for note in masked_notes(rb.path, hb.masked) + masked_notes(ra.path, ha.masked):
         hooks.info(note)
     return hb, ha, za

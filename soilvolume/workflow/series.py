@@ -20,7 +20,6 @@ from ..core.outputs import os_errors, output_dir
 from ..core.types import Epoch, GridSpec, SoilVolumeError, survey
 from ..dem.grid import epoch_dem
 from ..execution.inmemory import InMemory
-from ..execution.seam import Gridded, done
 from ..inputs.distinct import sameness
 from ..inputs.footprint import footprint
 from ..inputs.lasheader import creation_date
@@ -32,11 +31,9 @@ from ..reporting.series import write_rasters, write_reports
 from ..validate import schedule_of
 from ..volumes.series import combine
 from . import steps
-from .context import Context, threads
-from .pair import PAIR as STEPS
+from .context import PAIR, Context, Timer, threads
 from .plan import plan_grid, reference_cell
 from .seriesgrade import grade_epochs, open_design
-from .timing import Timer
 
 
 @dataclass(frozen=True)
@@ -49,24 +46,6 @@ class Fit:
     options: Options
 
 
-def epoch_dates(paths: list[Path], given: list[str] | None) -> list[tuple[str | None, str | None]]:
-    """Each epoch's (date, its source): ``--dates`` (empty keeps the file's), else the LAS header's, else None."""
-    if given is not None and len(given) != len(paths):
-        raise SoilVolumeError(f"--dates: {len(given)} dates for {len(paths)} epochs (give one per epoch)")
-    out: list[tuple[str | None, str | None]] = []
-    for k, path in enumerate(paths):
-        text = (given[k] if given else "").strip()
-        if text:
-            try:
-                out.append((dt.date.fromisoformat(text).isoformat(), "given"))
-            except ValueError:
-                raise SoilVolumeError(f"--dates: {text!r} is not a date (YYYY-MM-DD)") from None
-            continue
-        found = creation_date(path)
-        out.append((found, "LAS header" if found else None))
-    return out
-
-
 def described(epochs: tuple[Epoch, ...], k: int) -> str:
     """Epoch ``k`` in an error: its index, file and date with where the date came from."""
     e = epochs[k]
@@ -75,16 +54,27 @@ def described(epochs: tuple[Epoch, ...], k: int) -> str:
 
 
 def series_epochs(paths: list[Path], dates: list[str] | None, options: Options) -> tuple[Epoch, ...]:
-    """The epochs of a series (at least two, each an existing file or folder), dated
-    (:func:`epoch_dates`) and checked (:func:`check_series`)."""
+    """The epochs of a series (at least two, each an existing file or folder), each dated by ``--dates``
+    (empty keeps the file's), else by its LAS header, else not; checked (:func:`check_series`)."""
     if len(paths) < 2:
         raise SoilVolumeError(f"series: {len(paths)} epoch given; at least two are needed (E0 and a later survey)")
     for path in paths:
         if not path.exists():
             raise SoilVolumeError(f"{path}: no such file")
-    dated = zip(paths, epoch_dates(paths, dates), strict=True)
+    if dates is not None and len(dates) != len(paths):
+        raise SoilVolumeError(f"--dates: {len(dates)} dates for {len(paths)} epochs (give one per epoch)")
+    dated: list[tuple[str | None, str | None]] = []
+    for path, text in zip(paths, [d.strip() for d in dates or [""] * len(paths)], strict=True):
+        if not text:
+            found = creation_date(path)
+            dated.append((found, "LAS header" if found else None))
+            continue
+        try:
+            dated.append((dt.date.fromisoformat(text).isoformat(), "given"))
+        except ValueError:
+            raise SoilVolumeError(f"--dates: {text!r} is not a date (YYYY-MM-DD)") from None
     given = {"crs": None, "georeferencing": options.georeferencing}
-    epochs = tuple(survey(p, date=d, date_source=source, **given) for p, (d, source) in dated)
+    epochs = tuple(survey(p, date=d, date_source=ds, **given) for p, (d, ds) in zip(paths, dated, strict=True))
     check_series(epochs)
     return epochs
 
@@ -138,28 +128,11 @@ def rebase(prep: Prepared, reg, origin: np.ndarray) -> tuple[Prepared, object]:
         ns = None if ns is None else replace(ns, xyz=(ns.xyz + d).astype(ns.xyz.dtype))
         return replace(c, xyz=(c.xyz + d).astype(c.xyz.dtype), origin=origin, nonsoil=ns)
 
-    prep = replace(
-        prep,
-        before=cloud(prep.before),
-        after=cloud(prep.after),
-        origin=origin,
-        before_thin=prep.before_thin + d,
-        after_thin=prep.after_thin + d,
-    )
+    thin = {"before_thin": prep.before_thin + d, "after_thin": prep.after_thin + d}
+    prep = replace(prep, before=cloud(prep.before), after=cloud(prep.after), origin=origin, **thin)
     alt = reg.fine.alternative
     fine = reg.fine if alt is None else replace(reg.fine, alternative=_moved(alt, d))
     return prep, replace(reg, transform=_moved(reg.transform, d), fine=fine)
-
-
-def series_grid(fits: list[Fit], options: Options) -> GridSpec:
-    """One grid over the overlap of E0's and every registered epoch's boxes, the cell from E0's points
-    within the first registered epoch's footprint (:mod:`.plan`)."""
-    thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
-    prep = fits[0].prep
-    boxes = [prep.before_thin, *thins]
-    cell = reference_cell(prep, footprint(thins[0][:, :2]), options)
-    empty = "the registered epochs have no area in common with each other and E0"
-    return plan_grid(cell, boxes, prep.origin, prep.frame, empty)
 
 
 def run_series(
@@ -181,7 +154,7 @@ def run_series(
     threads(options)
     inputs = [*paths, options.stable_mask, options.design, options.zones]
     with output_dir(Path(out_dir), inputs, overwrite) as out, os_errors(out.final):
-        ctx = Context(epochs, options.with_(zones=None), hooks, STEPS, timer, out, schedule=schedule)
+        ctx = Context(epochs, options.with_(zones=None), hooks, PAIR, timer, out, schedule=schedule)
         report = series(ctx, InMemory(), design)
     hooks.step(100, "done")
     return Result.written(report, out.moved)
@@ -204,7 +177,7 @@ def series(ctx: Context, backend: InMemory, design=None) -> dict:
             grid, dems = _grid(ctx, fits)
         fitted = _planes(ctx, fits, grid, dems)
         with steps.running(ctx, "volume", ctx.message("volume")):
-            vols = _volumes(ctx, backend, fits, fitted, grid, dems)
+            vols = _volumes(ctx, fits, fitted, grid, dems)
             ctx.hooks.step(ctx.at("volume", 0.8), "periods, cumulative and their intervals")
             combined = combine(vols, list(dems), [steps.alternative_move(f.reg) for f in fits], grid, ctx.options)
             heights = [vols[0].dem_out_b + d for d in combined.to_e0]  # as dem_epoch<k>.tif, local
@@ -245,10 +218,14 @@ def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
 
 
 def _grid(ctx: Context, fits: list[Fit]) -> tuple[GridSpec, tuple]:
-    """One grid, every epoch's DEM on it (E0 first)."""
-    names = ", ".join(described(ctx.epochs, k) for k in range(len(ctx.epochs)))
-    with naming("series " + names):
-        grid = series_grid(fits, ctx.options)
+    """One grid over the overlap of E0's and every registered epoch's boxes (:mod:`.plan`), every epoch's DEM
+    on it (E0 first)."""
+    thins = [transform_points(f.prep.after_thin, f.reg.transform) for f in fits]
+    prep, names = fits[0].prep, ", ".join(described(ctx.epochs, k) for k in range(len(ctx.epochs)))
+    with naming("series " + names):  # the cell from E0's points within the first registered epoch's footprint
+        cell = reference_cell(prep, footprint(thins[0][:, :2]), ctx.options)
+        empty = "the registered epochs have no area in common with each other and E0"
+        grid = plan_grid(cell, [prep.before_thin, *thins], prep.origin, prep.frame, empty)
     e0, statistic = fits[0].prep.before, ctx.options.statistic
     dems = [epoch_dem(e0.xyz, grid, statistic, e0.nonsoil)]
     for f in fits:
@@ -270,12 +247,10 @@ def _planes(ctx: Context, fits: list[Fit], grid: GridSpec, dems: tuple) -> list[
     return out
 
 
-def _volumes(ctx: Context, backend: InMemory, fits: list[Fit], fitted: list, grid: GridSpec, dems: tuple) -> list:
-    """Each pair's volume step: Ek corrected once relative to E0."""
+def _volumes(ctx: Context, fits: list[Fit], fitted: list, grid: GridSpec, dems: tuple) -> list:
+    """Each pair's volume step on the whole grid, in this process: Ek corrected once relative to E0."""
     vols = []
     for k, (f, planes) in enumerate(zip(fits, fitted, strict=True), 1):
-        pair, step = (dems[k], dems[0]), steps.volume_step(f.reg, f.options)
         with naming(pair_named(ctx, k)):
-            gridded = Gridded(grid, pair, grid, pair, done(None))
-            vols.append(backend.volume(ctx, step, gridded, planes, steps.alternative_move(f.reg)))
+            vols.append(steps.volume_step(f.reg, f.options)(dems[k], dems[0], planes[2], grid))
     return vols

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -38,22 +39,6 @@ from .context import Context
 from .plan import plan_grid, reference_cell
 
 
-@dataclass(frozen=True)
-class Registered:
-    """The registration and the options the later steps take (precise georeferencing: no correction)."""
-
-    reg: Registration
-    options: Options
-
-
-@dataclass(frozen=True)
-class Reported:
-    """report.json as written (options worded for the command line) and with options by key."""
-
-    report: dict
-    keyed: dict
-
-
 @contextmanager
 def running(ctx: Context, step: str, message: str, timed: str | None = None, log: bool = True) -> Iterator[None]:
     """A step's progress line and its time in ``timed`` (the step's name)."""
@@ -75,14 +60,15 @@ def read_one(ctx: Context) -> Single:
     return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
 
 
-def register(ctx: Context, prep: Prepared, dense) -> Registered:
-    """Step 2: the georeferencing decision, then coarse + fine registration (``dense``: the
-    full-resolution points of the stable-ground refinement, or None)."""
+def register(ctx: Context, prep: Prepared, dense) -> tuple[Registration, Options]:
+    """Step 2: the georeferencing decision, then coarse + fine registration (``dense``: the full-resolution
+    points of the stable-ground refinement, or None): the registration and the options the later steps take
+    (precise georeferencing: no correction)."""
     reg, options = register_pair(prep, ctx, dense, (*ctx.spans["register"], ctx.message("register")))
     fine = reg.fine
     ctx.hooks.info(f"coarse: {reg.coarse.note}")
     ctx.hooks.info(f"fine ({fine.method}): fitness {fine.fitness:.3f}, RMSE {fine.rmse:.3f} m, {fine.note}")
-    return Registered(reg, options)
+    return reg, options
 
 
 def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple[Registration, Options]:
@@ -102,8 +88,12 @@ def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple
         if decided is None:
             datum = georef.vertical_datum(prep.inputs["after"].get("crs_wkt"))
             mode, why, check = georef.confirm(reg, after, before, datum, options.fine)
-            if mode == "precise":
-                reg = kept_as_georeferenced(register_clouds(after, before, options, precise=True), check["outcome"])
+            if mode == "precise":  # the identity registration of coordinates auto kept, its stages saying why
+                kept = register_clouds(after, before, options, precise=True)
+                said = "confirmed them" if check["outcome"] == "confirmed" else "could not confirm them"
+                note = "not applied: coordinates used as georeferenced (the registration "
+                note += f"{said}; see {opt('georeferencing')})"
+                reg = replace(kept, coarse=replace(kept.coarse, note=note), fine=replace(kept.fine, note=note))
         hooks.info(f"georeferencing: {mode} ({why})")
         if mode == "precise":
             options = options.with_(correction="none")
@@ -113,28 +103,16 @@ def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple
     return reg, options
 
 
-def kept_as_georeferenced(reg: Registration, outcome: str) -> Registration:
-    """The identity registration of coordinates auto kept, its stages saying why."""
-    said = "confirmed them" if outcome == "confirmed" else "could not confirm them"
-    note = f"not applied: coordinates used as georeferenced (the registration {said}; see {opt('georeferencing')})"
-    return replace(reg, coarse=replace(reg.coarse, note=note), fine=replace(reg.fine, note=note))
-
-
-def layout(prep: Prepared, reg: Registration, options: Options) -> Layout:
-    """The grid over the registered after footprint and the before subset (:mod:`.plan`)."""
-    after_thin = transform_points(prep.after_thin, reg.transform)
-    poly = footprint(after_thin[:, :2])
-    boxes = [after_thin, prep.before_thin]
-    empty = "the registered after cloud does not overlap the before cloud"
-    grid = plan_grid(reference_cell(prep, poly, options), boxes, prep.origin, prep.frame, empty)
-    return Layout(grid, after_thin, poly)
-
-
 def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> Gridded:
-    """Step 3: the grid planned, each epoch's heights on it, the paper's planes fitted beside."""
+    """Step 3: the grid planned over the registered after footprint and the before subset (:mod:`.plan`),
+    each epoch's heights on it, the paper's planes fitted beside."""
     with running(ctx, "grid", ctx.message("grid"), "grids"):
-        plan = layout(prep, reg, ctx.options)
-        return backend.grid(ctx, prep, reg, plan, fit_planes(prep, plan.after_thin, ctx.options))
+        after_thin = transform_points(prep.after_thin, reg.transform)
+        poly = footprint(after_thin[:, :2])
+        empty = "the registered after cloud does not overlap the before cloud"
+        cell = reference_cell(prep, poly, ctx.options)
+        plan = Layout(plan_grid(cell, [after_thin, prep.before_thin], prep.origin, prep.frame, empty), after_thin, poly)
+        return backend.grid(ctx, prep, reg, plan, fit_planes(prep, after_thin, ctx.options))
 
 
 def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Callable:
@@ -142,19 +120,13 @@ def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Call
     the cells it has heights in, and the registered after's."""
 
     def fit(grid: GridSpec, dem_before: EpochDEM) -> tuple[Plane, Plane]:
-        valid = points_on(prep.before_thin, grid, np.isfinite(dem_before.heights))
-        before = ransac_plane(valid, options.plane_threshold, seed=options.seed)
+        row, col, ok = grid.index(prep.before_thin[:, :2])
+        valid = np.zeros(len(prep.before_thin), bool)
+        valid[ok] = np.isfinite(dem_before.heights)[row[ok], col[ok]]
+        before = ransac_plane(prep.before_thin[valid], options.plane_threshold, seed=options.seed)
         return before, ransac_plane(after_thin, options.plane_threshold, seed=options.seed + 1)
 
     return fit
-
-
-def points_on(xyz: np.ndarray, grid: GridSpec, cells: np.ndarray) -> np.ndarray:
-    """The points of ``xyz`` over the grid's ``cells``."""
-    row, col, ok = grid.index(xyz[:, :2])
-    keep = np.zeros(len(xyz), bool)
-    keep[ok] = cells[row[ok], col[ok]]
-    return xyz[keep]
 
 
 def planes(ctx: Context, gridded: Gridded) -> tuple:
@@ -181,12 +153,7 @@ def volume(ctx: Context, backend: Backend, gridded: Gridded, fitted: tuple, reg:
 
 def volume_step(reg: Registration, options: Options) -> Callable:
     """The volume step of a pair registered by ``reg``, as a backend runs it (``seam.VolumeFn``)."""
-    moved = alternative_move(reg)
-
-    def step(after: EpochDEM, before: EpochDEM, d_i: np.ndarray, on: GridSpec) -> Volumes:
-        return compute_volumes(after, before, d_i, on, options, moved=moved)
-
-    return step
+    return partial(compute_volumes, options=options, moved=alternative_move(reg))
 
 
 def alternative_move(reg: Registration) -> np.ndarray | None:
@@ -211,9 +178,10 @@ def write(ctx: Context, backend: Backend, vols: Volumes | None, grid: GridSpec |
     return extras
 
 
-def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | None) -> Reported:
-    """Step 7: report.json from the run's record (its verdict, the write step's ``extras``),
-    report.html and the areas of significant change as polygons."""
+def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | None) -> tuple[dict, dict]:
+    """Step 7: report.json from the run's record (its verdict, the write step's ``extras``), report.html and
+    the areas of significant change as polygons: report.json as written (options worded for the command
+    line) and with options by key."""
     with running(ctx, "report", ctx.message("report"), log=False):
         out, vols, z0 = ctx.out, record.vols, float(gridded.grid.origin[2])
         report = build_report(record, ctx.timer.totals())
@@ -225,22 +193,18 @@ def report(ctx: Context, record: RunRecord, gridded: Gridded, extras: dict | Non
         write_change_areas(out.path(CHANGE_AREAS), vols.diff, vols.change_mask, vols.cut_mask, on, gpkg)
         if ctx.options.zones and report.get("zones"):  # zones.csv (and zones.gpkg)
             write_zones(out.path(CHANGE_AREAS).parent, report["zones"], ctx.options.zones, gridded.grid, gpkg)
-        dem_after = gridded.correction_dems[0].heights + z0
-        write_html(report, _html_arrays(vols, dem_after), on, out.path("report.html"))
+        arrays = {
+            "difference": vols.diff,
+            "residual": np.where(vols.stable, vols.diff, np.nan),
+            "filled_mask": vols.filled_mask,
+            "classes": vols.classes,
+            "dem_after": gridded.correction_dems[0].heights + z0,
+            "change": vols.change_mask,
+        }
+        write_html(report, arrays, on, out.path("report.html"))
         worded = cli_tree(report)  # options worded for the command line
         write_json(out.path("report.json"), worded, ctx.timer.totals())
-        return Reported(worded, report)
-
-
-def _html_arrays(vols: Volumes, dem_after: np.ndarray) -> dict:
-    return {
-        "difference": vols.diff,
-        "residual": np.where(vols.stable, vols.diff, np.nan),
-        "filled_mask": vols.filled_mask,
-        "classes": vols.classes,
-        "dem_after": dem_after,
-        "change": vols.change_mask,
-    }
+        return worded, report
 
 
 def judged(vols: Volumes, grid: GridSpec, options: Options) -> QualityInputs:

@@ -13,8 +13,7 @@ from qgis.core import (
     QgsProcessingParameterNumber,
 )
 
-from soilvolume.options import Options, command_fields
-from soilvolume.options.table import option
+from soilvolume.options import Options, command_fields, option
 
 ESTIMATE = "soilvolume:estimatevolumechange"
 
