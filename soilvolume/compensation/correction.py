@@ -80,21 +80,12 @@ def supported_degree(stable: np.ndarray, change: np.ndarray, max_degree: int) ->
     return max_degree
 
 
-def apply(
-    diff: np.ndarray,
-    method: str,
-    grid: GridSpec,
-    *,
-    user_mask: np.ndarray | None = None,
-    dilate_m: float = 2.0,
-    iterations: int = 8,
-    select_degree: bool = True,
-) -> CorrectionResult:
+def apply(diff: np.ndarray, method: str, grid: GridSpec, user_mask: np.ndarray | None = None) -> CorrectionResult:
     """Find stable ground (whatever the method: ``none`` still has residual statistics), fit the
-    ``method`` surface on it (``select_degree``: lowered to what it supports) and subtract it."""
-    stable = find_stable(diff, grid.cell, user_mask=user_mask, dilate_m=dilate_m, iterations=iterations)[0]
+    ``method`` surface on it (lowered to the degree it supports) and subtract it."""
+    stable = find_stable(diff, grid.cell, user_mask=user_mask)[0]
     used = method
-    if select_degree and method in ("surface", "plane"):
+    if method in ("surface", "plane"):
         degree = supported_degree(stable, np.isfinite(diff) & ~stable, MODES[method].degree)
         used = next(name for name in METHODS if MODES[name].degree == degree)
     surface, params = fit_surface(diff, stable, grid, used)

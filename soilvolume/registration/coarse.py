@@ -23,7 +23,7 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     if options.coarse == "none":
         return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
     t = coarse_fpfh(after_xyz, before_xyz, options.coarse_voxel, options.seed)
-    src, tgt = to_pcd(after_xyz, options.coarse_voxel), to_pcd(before_xyz, options.coarse_voxel)
+    src, tgt = to_pcd(after_xyz, voxel=options.coarse_voxel), to_pcd(before_xyz, voxel=options.coarse_voxel)
     ev = _o3d().pipelines.registration.evaluate_registration(src, tgt, 1.5 * options.coarse_voxel, t)  # point to point
     fit, rmse = float(ev.fitness), float(ev.inlier_rmse)
     centre = after_xyz.mean(axis=0)
@@ -39,12 +39,12 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
 
 
 def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, seed: int) -> np.ndarray:
-    """FPFH features + RANSAC on a coarse voxel (seeded); returns the 4x4 transform."""
+    """FPFH features + RANSAC of the column surfaces on a coarse voxel (seeded); returns the 4x4 transform."""
     o3d = _o3d()
     reg = o3d.pipelines.registration
     o3d.utility.random.seed(seed)
     voxel = max(voxel, cap_voxel(source_xyz, MAX_COARSE_POINTS), cap_voxel(target_xyz, MAX_COARSE_POINTS))
-    src, tgt = _column_pcd(source_xyz, voxel), _column_pcd(target_xyz, voxel)
+    src, tgt = (to_pcd(*columns.column_surface(xyz, voxel)) for xyz in (source_xyz, target_xyz))
     param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
     fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
     dist = 1.5 * voxel
@@ -61,9 +61,3 @@ def coarse_fpfh(source_xyz: np.ndarray, target_xyz: np.ndarray, voxel: float, se
         reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
     )
     return np.asarray(res.transformation)
-
-
-def _column_pcd(xyz: columns.Target, voxel: float):
-    """Open3D cloud of the column means of ``xyz`` with their surface normals."""
-    xyz, normals = columns.column_surface(xyz, voxel)
-    return to_pcd(xyz, normals=normals)

@@ -101,7 +101,7 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
     if kernels() is not None and len(xyz):
         return _native_binned(kernels(), xyz, lo, cell, shape)
     n = shape[0] * shape[1]
-    fx, fy = _floor_index(xyz[:, 0], lo[0], cell), _floor_index(xyz[:, 1], lo[1], cell)
+    fx, fy = (np.floor((xyz[:, k] - lo[k]) / cell) for k in (0, 1))  # the values of ``cell_index`` before the cast
     off = ~((fx >= 0) & (fy >= 0) & (fx < shape[1]) & (fy < shape[0]))
     fy *= shape[1]
     fy += fx
@@ -127,13 +127,6 @@ def _native_binned(lib, xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tup
     )  # fmt: skip
     has, means = has[:m], means[:m]
     return Columns(means, has // shape[1], has % shape[1], shape, lo, cell)
-
-
-def _floor_index(v: np.ndarray, lo: float, cell: float) -> np.ndarray:
-    """``floor((v - lo) / cell)`` as float64 (the values of ``cell_index`` before the cast)."""
-    t = np.subtract(v, lo)
-    np.divide(t, cell, out=t)
-    return np.floor(t, out=t)
 
 
 def column_surface(
@@ -171,21 +164,14 @@ def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray
     """(dz/dy, dz/dx): central differences where both neighbours are valid, one-sided where one is, 0
     where none (the sum of the valid differences over their count)."""
     out = []
-    for axis in (0, 1):
-        a, b = [slice(None)] * 2, [slice(None)] * 2
-        a[axis], b[axis] = slice(0, -1), slice(1, None)
-        a, b = tuple(a), tuple(b)
-        ok = valid[b] & valid[a]
-        step = np.where(ok, h[b] - h[a], 0.0)
-        num, den = np.zeros_like(h), np.zeros_like(h)
-        num[a] = step
-        num[b] += step
-        first = [slice(None)] * 2
-        first[axis] = slice(0, 1)
-        num[tuple(first)] += 0.0  # plus its missing backward difference, as the sum did: -0.0 becomes 0.0
-        den[a] = ok
-        den[b] += ok
-        out.append(np.where(den > 0, num / np.maximum(den, 1) / cell, 0.0))
+    for hh, vv in ((h, valid), (h.T, valid.T)):
+        ok = (vv[1:] & vv[:-1]).astype(float)
+        step = np.where(ok > 0, hh[1:] - hh[:-1], 0.0)
+        after, before = ((0, 1), (0, 0)), ((1, 0), (0, 0))  # each cell's forward and backward difference
+        num = np.pad(step, after) + np.pad(step, before)  # an end's missing one is 0.0: -0.0 becomes 0.0
+        den = np.pad(ok, after) + np.pad(ok, before)
+        g = np.where(den > 0, num / np.maximum(den, 1) / cell, 0.0)
+        out.append(g if hh is h else g.T)
     return out[0], out[1]
 
 

@@ -62,8 +62,8 @@ def _import_without_plotly() -> None:
             del sys.modules[PLOTLY]
 
 
-def to_pcd(xyz: np.ndarray, voxel: float | None = None, normals: np.ndarray | None = None):
-    """Open3D cloud from local float64 coordinates, optionally voxel-thinned, or with ``normals``."""
+def to_pcd(xyz: np.ndarray, normals: np.ndarray | None = None, voxel: float | None = None):
+    """Open3D cloud from local float64 coordinates, with ``normals``, or optionally voxel-thinned."""
     o3d = _o3d()
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz, dtype=np.float64)))
     if normals is not None:
