@@ -105,12 +105,7 @@ def occlusion_holes(world, rng: np.random.Generator, n: int) -> np.ndarray | Non
             for _try in range(50):
                 x = rng.uniform(world.ax0 + 2, world.ax1 - 2)
                 y = rng.uniform(world.ay0 + 2, world.ay1 - 2)
-                if all(
-                    clear_of(c, x, y, r + 1.0)
-                    if c.get("exact_outline")
-                    else math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
-                    for c in world.changes
-                ):
+                if all(clear_of(c, x, y, r + 1.0) for c in world.changes):
                     break
         # irregular blob: union of three discs
         for _ in range(3):

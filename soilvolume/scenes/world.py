@@ -4,6 +4,7 @@ misalignment, and the points of each epoch generated chunk by chunk."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 
@@ -29,12 +30,8 @@ class _Placer:
         bw, bh = self.size
         if not (r < x < bw - r and r < y < bh - r):
             return False
-        for c in self.changes:
-            if c.get("exact_outline"):
-                if not clear_of(c, x, y, r + 2.0):
-                    return False
-            elif math.hypot(x - c["x"], y - c["y"]) < c["radius"] + r + 2.0:
-                return False
+        if not all(clear_of(c, x, y, r + 2.0) for c in self.changes):
+            return False
         return all(math.hypot(x - px, y - py) > r + pr + 0.5 for px, py, pr in self.placed)
 
     def place(self, n: int, inside_after: bool, make, rng: np.random.Generator | None = None) -> bool:
@@ -157,10 +154,11 @@ class World:
         ny = max(1, int(round(n / nx)))
         return x0, y0, w, h, nx, ny
 
-    def n_chunks(self, epoch: int) -> int:
+    def chunks(self, epoch: int, signals: bool = False) -> Iterator[tuple]:
+        """Each :meth:`chunk` of ``epoch`` in turn."""
         *_, nx, ny = self.grid_shape(epoch)
         rows = max(1, CHUNK_POINTS // nx)
-        return (ny + rows - 1) // rows
+        return (self.chunk(epoch, i, signals) for i in range((ny + rows - 1) // rows))
 
     def chunk(self, epoch: int, index: int, signals: bool = False) -> tuple:
         """(xyz absolute (n, 3), class uint8) of chunk ``index`` of ``epoch`` (0 before, 1 after as
