@@ -12,8 +12,7 @@ from ..core.cells import bounds
 from ..core.types import SoilVolumeError, StageQuality
 from ..options import Options
 from . import columns, icp
-from .fit import best_on, evaluate_surface, judged
-from .ground import cap_voxel, spacing, stable_source
+from .ground import best_on, cap_voxel, evaluate_surface, judged, spacing, stable_source
 from .nearest import Nearest, tree_of
 from .o3d import _o3d, to_pcd
 from .pfh import pfh_sac_ia

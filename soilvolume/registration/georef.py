@@ -16,8 +16,7 @@ import pyproj
 
 from ..core.wording import opt
 from .fine import finest_column
-from .fit import evaluate_surface
-from .ground import margin_points, spacing
+from .ground import evaluate_surface, margin_points, spacing
 from .rigid import rotation_deg, tilt_deg
 
 AGREE_FITNESS = 0.6  # share of the margin within 0.4 m of the before surface at the given pose

@@ -14,8 +14,7 @@ from ..options import Options
 from . import columns
 from .coarse import coarse_stage
 from .fine import fine_stage
-from .fit import EVAL_DISTANCE, evaluate_surface, judged
-from .ground import spacing
+from .ground import EVAL_DISTANCE, evaluate_surface, judged, spacing
 from .o3d import limit_threads
 
 AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse

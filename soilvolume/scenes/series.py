@@ -14,8 +14,7 @@ import laspy
 import numpy as np
 
 from .config import CLASS_GROUND, SceneConfig
-from .features import after_box, features_dz, finish_features
-from .sites import cone, rect
+from .features import after_box, cone, features_dz, finish_features, rect
 from .synthetic import las_header
 from .world import World, rotation
 
