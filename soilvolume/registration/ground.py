@@ -41,18 +41,12 @@ def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
     return rows(xyz, band[iy, ix])
 
 
-def stable_source(
-    source_xyz: np.ndarray,
-    target_xyz: columns.Target,
-    t: np.ndarray,
-    cell: float = 1.0,
-    gap: float | None = None,
-) -> np.ndarray:
+def stable_source(source_xyz: np.ndarray, target_xyz: columns.Target, t: np.ndarray, gap: float) -> np.ndarray:
     """The source at ``t`` on stable ground only, its degree-2 deformation removed (both from
     :mod:`soilvolume.compensation.stable` on median grids): what the last ICP levels should see."""
     src = transform_points(source_xyz, t)
     target = target_xyz if isinstance(target_xyz, columns.Cloud) else columns.Cloud(target_xyz)
-    cell = max(cell, 1.5 * (spacing(target.xyz) if gap is None else gap))  # gap: the target's spacing
+    cell = max(1.0, 1.5 * gap)  # gap: the target's spacing
     grid = make_grid(*bounds(src), cell, np.zeros(3), None)
     top = np.array([grid.xmin + (grid.cols + 1) * grid.cell, grid.ymax + grid.cell])
     near = target.within(np.array([grid.xmin - grid.cell, grid.ymax - (grid.rows + 1) * grid.cell]), top)
@@ -69,22 +63,17 @@ def stable_source(
 
 
 def evaluate_surface(
-    source_xyz: np.ndarray,
-    target_xyz: columns.Target,
-    t: np.ndarray,
-    distance: float = EVAL_DISTANCE,
-    gap: float | None = None,
+    source_xyz: np.ndarray, target_xyz: columns.Target, t: np.ndarray, gap: float
 ) -> tuple[float, float]:
-    """(fitness, RMSE) on terrain: the share of source points within ``distance`` of the target's
-    tangent planes (columns of max(0.25 m, 2 spacings)) and their RMS; meaningful on sparse clouds."""
+    """(fitness, RMSE) on terrain: the share of source points within :data:`EVAL_DISTANCE` of the target's
+    tangent planes (columns of max(0.25 m, 2 spacings ``gap``)) and their RMS; meaningful on sparse clouds."""
     src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
-    gap = spacing(columns.Cloud.points(target_xyz)) if gap is None else gap
     lo, hi = bounds(src, 2)
     cols = columns.columns(target_xyz, max(0.25, 2 * gap), lo - 1.0, hi + 1.0)
     if len(cols.xyz) == 0:
         return 0.0, float("nan")
     r = np.abs(columns.plane_residuals(src, cols, columns.normals(cols)))
-    ok = r <= distance
+    ok = r <= EVAL_DISTANCE
     fit = float(ok.sum() / max(len(src), 1))
     return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
 

@@ -42,7 +42,8 @@ def register(
     ``dense``: the full-resolution (after, before) clouds, for the paper's PFH."""
     eye = np.eye(4)
     if precise:
-        fit, rmse = evaluate_surface(judged(after_xyz, spacing(before_xyz)), before_xyz, eye)
+        gap = spacing(before_xyz)
+        fit, rmse = evaluate_surface(judged(after_xyz, gap), before_xyz, eye, gap)
         skipped = "skipped: coordinates used as georeferenced ({opt:georeferencing})"
         return Registration(
             eye,
