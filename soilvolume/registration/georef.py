@@ -60,11 +60,8 @@ def spread(reg, centre: np.ndarray) -> dict[str, float]:
     """The largest departures (:data:`KEYS`) of the fine stage's refined poses from the accepted one."""
     inv = np.linalg.inv(reg.transform)
     moved = reg.transform[:3, :3] @ centre + reg.transform[:3, 3]
-    out = dict.fromkeys(KEYS, 0.0)
-    for p in reg.fine.poses:
-        d = move_at(p @ inv, moved)
-        out = {k: max(out[k], d[k]) for k in KEYS}
-    return out
+    moves = [move_at(p @ inv, moved) for p in reg.fine.poses]
+    return {k: max([0.0, *(d[k] for d in moves)]) for k in KEYS}
 
 
 def tolerances(reg, after_xyz: np.ndarray, gap: float) -> dict:

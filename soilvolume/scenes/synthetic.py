@@ -166,30 +166,24 @@ def las_header(config: SceneConfig, scale: float):
     return header
 
 
-def _paths(directory, fmt: str) -> tuple[Path, Path, Path]:
+def write_pair(scene: Scene, directory, fmt: str = "las") -> tuple[Path, Path, Path]:
+    """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, format 6, CRS, mm) and ``truth.json``: the
+    paths (the scene's seed and config written chunk by chunk: the same bytes as its arrays)."""
+    return write_pair_streaming(scene.seed, scene.config, directory, fmt)
+
+
+def write_pair_streaming(seed: int, config: SceneConfig, directory, fmt: str = "las") -> tuple[Path, Path, Path]:
+    """``write_pair(make_pair(seed, config), ...)`` chunk by chunk, in ~0.3 GB whatever the size."""
+    import laspy
+
     if fmt not in ("las", "laz"):
         raise ValueError(f"fmt must be 'las' or 'laz', not {fmt!r}")
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
-    return d / f"before.{fmt}", d / f"after.{fmt}", d / "truth.json"
-
-
-def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) -> tuple[Path, Path, Path]:
-    """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, format 6, CRS) and ``truth.json``: the paths
-    (the scene's seed and config written chunk by chunk: the same bytes as its arrays)."""
-    return write_pair_streaming(scene.seed, scene.config, directory, fmt, scale)
-
-
-def write_pair_streaming(
-    seed: int, config: SceneConfig, directory, fmt: str = "las", scale: float = 0.001
-) -> tuple[Path, Path, Path]:
-    """``write_pair(make_pair(seed, config), ...)`` chunk by chunk, in ~0.3 GB whatever the size."""
-    import laspy
-
-    pb, pa, pt = _paths(directory, fmt)
+    pb, pa, pt = d / f"before.{fmt}", d / f"after.{fmt}", d / "truth.json"
     world = World(seed, config)
     for e, path in ((0, pb), (1, pa)):
-        header = las_header(config, scale)
+        header = las_header(config, 0.001)
         with laspy.open(str(path), mode="w", header=header) as writer:
             for xyz, cls, fields in world.chunks(e, signals=True):
                 rec = laspy.ScaleAwarePointRecord.zeros(len(cls), header=header)

@@ -23,16 +23,16 @@ class _Placer:
 
     def __init__(self, size, box, changes: list[dict], rng: np.random.Generator) -> None:
         self.size, self.box, self.changes, self.rng = size, box, changes, rng
-        self.feats: list[tuple] = []
-        self.placed: list[tuple[float, float, float]] = []
+        self.feats: list[tuple] = []  # their last field: the bounding radius
 
     def free(self, x: float, y: float, r: float) -> bool:
         bw, bh = self.size
-        if not (r < x < bw - r and r < y < bh - r):
-            return False
-        if not all(clear_of(c, x, y, r + 2.0) for c in self.changes):
-            return False
-        return all(math.hypot(x - px, y - py) > r + pr + 0.5 for px, py, pr in self.placed)
+        return (
+            r < x < bw - r
+            and r < y < bh - r
+            and all(clear_of(c, x, y, r + 2.0) for c in self.changes)
+            and all(math.hypot(x - f[1], y - f[2]) > r + f[-1] + 0.5 for f in self.feats)
+        )
 
     def place(self, n: int, inside_after: bool, make, rng: np.random.Generator | None = None) -> bool:
         """Place ``n`` features ``make()`` (50 tries each); whether the last one was placed."""
@@ -49,7 +49,6 @@ class _Placer:
                 params = make()
                 if self.free(x, y, params[-1]):
                     self.feats.append((params[0], x, y) + params[1:])
-                    self.placed.append((x, y, params[-1]))
                     ok = True
                     break
         return ok
