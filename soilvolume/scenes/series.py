@@ -13,10 +13,11 @@ from pathlib import Path
 import laspy
 import numpy as np
 
+from ..registration.rigid import rotation_zyx
 from .config import CLASS_GROUND, SceneConfig
 from .features import after_box, cone, features_dz, finish_features, rect
 from .synthetic import las_header
-from .world import World, rotation
+from .world import World
 
 DATES = ("2026-03-02", "2026-03-09", "2026-03-16", "2026-03-23")
 #: per epoch: (shift m, roll/pitch/yaw deg) of its GPS error
@@ -73,7 +74,7 @@ def misalignment(k: int, centre_abs: np.ndarray, errors=GPS_ERRORS) -> np.ndarra
     ``p_s = R (p - c) + c + t``."""
     shift, deg = errors[k]
     m = np.eye(4)
-    m[:3, :3] = rotation(deg)
+    m[:3, :3] = rotation_zyx(*np.radians(deg))
     m[:3, 3] = centre_abs + np.asarray(shift) - m[:3, :3] @ centre_abs
     return m
 

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from ..registration.rigid import rotation_zyx
 from .config import CLASS_GROUND, CLASS_OUTLIER, SceneConfig
 from .features import after_box, change_dz, change_features, clear_of
 from .hazards import dry, meadow_row, occlusion_holes, reached, water_levels
@@ -105,7 +106,7 @@ class World:
         """The GPS misalignment (local frame): ``p_s = R (p - c) + c + t``."""
         cfg = self.cfg
         acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
-        self.R = rotation(cfg.rotation_deg)
+        self.R = rotation_zyx(*np.radians(cfg.rotation_deg))  # roll, pitch, yaw
         self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
         self.t = np.asarray(cfg.shift_m, dtype=np.float64)
 
@@ -230,15 +231,6 @@ class World:
             fields["return_number"], fields["number_of_returns"] = returns(cat, lab > 0, rng)
         keep = cfg.signals in ("class", "lidar")
         return (cls if keep else np.zeros_like(cls)), fields
-
-
-def rotation(deg) -> np.ndarray:
-    """``Rz(yaw) Ry(pitch) Rx(roll)`` of (roll, pitch, yaw) degrees."""
-    roll, pitch, yaw = np.radians(deg)
-    rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
-    ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
-    rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
-    return rz @ ry @ rx
 
 
 def _outliers(rng: np.random.Generator, z: np.ndarray, cls: np.ndarray, fraction: float) -> np.ndarray:
