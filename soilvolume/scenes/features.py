@@ -169,23 +169,18 @@ def _single_features(cfg: SceneConfig, x0: float, y0: float, x1: float, y1: floa
     ]
 
 
-def _outline_distance(f: dict, x: float, y: float) -> float:
-    """Distance (m) from (x, y) to the outline of a change feature (0 inside)."""
+def clear_of(f: dict, x: float, y: float, r: float) -> bool:
+    """Whether (x, y) with radius r is clear of feature f: of its true outline, or of its bounding
+    circle for the original "piles" features, whose placement must not change."""
     u, v = x - f["x"], y - f["y"]
+    if not f.get("exact_outline"):
+        return math.hypot(u, v) > f["radius"] + r
     if f["kind"] == "cone":
-        return max(0.0, math.hypot(u, v) - f["r_bottom"])
+        return max(0.0, math.hypot(u, v) - f["r_bottom"]) > r
     t = math.radians(f["angle_deg"])
     uu = abs(u * math.cos(t) + v * math.sin(t)) - f["a"]
     vv = abs(-u * math.sin(t) + v * math.cos(t)) - f["b"]
-    return math.hypot(max(uu, 0.0), max(vv, 0.0))
-
-
-def clear_of(f: dict, x: float, y: float, r: float) -> bool:
-    """Whether (x, y) with radius r is clear of feature f (its true outline, or bounding circle for
-    the original "piles" features, whose placement must not change)."""
-    if f.get("exact_outline"):
-        return _outline_distance(f, x, y) > r
-    return math.hypot(x - f["x"], y - f["y"]) > f["radius"] + r
+    return math.hypot(max(uu, 0.0), max(vv, 0.0)) > r
 
 
 def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:

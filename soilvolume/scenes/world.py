@@ -36,12 +36,10 @@ class _Placer:
         )
 
     def place(self, n: int, inside_after: bool, make, rng: np.random.Generator | None = None) -> bool:
-        """Place ``n`` features ``make()`` (50 tries each); whether the last one was placed."""
-        rng = self.rng if rng is None else rng
+        """Place ``n`` features ``make()`` (50 tries each); whether any was placed."""
+        rng, placed = self.rng if rng is None else rng, len(self.feats)
         ax0, ay0, ax1, ay1 = self.box
-        ok = False
         for _ in range(n):
-            ok = False
             for _try in range(50):
                 if inside_after:
                     x, y = rng.uniform(ax0 + 1, ax1 - 1), rng.uniform(ay0 + 1, ay1 - 1)
@@ -50,9 +48,8 @@ class _Placer:
                 params = make()
                 if self.free(x, y, params[-1]):
                     self.feats.append((params[0], x, y) + params[1:])
-                    ok = True
                     break
-        return ok
+        return len(self.feats) > placed
 
 
 class World:
