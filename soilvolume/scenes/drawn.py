@@ -53,19 +53,17 @@ def _bound(f: dict) -> float:
 def _place(rng: np.random.Generator, feats: list[dict], box: tuple[float, float, float, float], s: float) -> bool:
     """Give every feature an x, y in ``box`` clear of its edges and each other; False if none fits."""
     x0, y0, x1, y1 = box
-    placed: list[tuple[float, float, float]] = []
-    for f in feats:
+    for k, f in enumerate(feats):
         r = _bound(f) + EDGE_M * s
         if 2 * r >= min(x1 - x0, y1 - y0):
             return False
         for _try in range(200):
             x, y = rng.uniform(x0 + r, x1 - r), rng.uniform(y0 + r, y1 - r)
-            if all(math.hypot(x - px, y - py) > _bound(f) + GAP_M * s + pr for px, py, pr in placed):
+            if all(math.hypot(x - g["x"], y - g["y"]) > _bound(f) + GAP_M * s + _bound(g) for g in feats[:k]):
                 break
         else:
             return False
         f["x"], f["y"] = float(x), float(y)
-        placed.append((x, y, _bound(f)))
     return True
 
 
