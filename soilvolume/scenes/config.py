@@ -40,7 +40,7 @@ class SceneConfig:
     # (10 %), "excavation" (`change_fraction` of the footprint, a tall pile beside it) or a site of sites.py
     change: str = "piles"
     # "fixed": the layouts above, the same for every seed (bench/ACCURACY.md, README, demo, self-test);
-    # "drawn": the seed also draws the "piles" site's works (scenes/drawn.py)
+    # "drawn": the seed also draws the "piles" site's works (scenes/features.py)
     works: str = "fixed"
     crs: str = "EPSG:32654"
     # a vertical CRS the files also declare (compound, e.g. "EPSG:5703"): the GPS error above remains
