@@ -78,7 +78,7 @@ def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[st
 
 
 def categories(cls: np.ndarray, stray: np.ndarray) -> np.ndarray:
-    """Per-point category (:data:`SOIL` ...) from the world's classes and the ``stray`` (outlier) mask."""
+    """Per-point category (:data:`SOIL` ...) from the world's classes and the ``stray`` (outlier) points."""
     cat = np.full(cls.shape, SOIL, np.uint8)
     cat[(cls >= 3) & (cls <= 5)] = GREEN
     cat[cls == 6] = CAR

@@ -66,7 +66,10 @@ class World:
         self._init_features(rng)
         self.hole_res = 0.1  # occlusion holes, per epoch
         self.holes = [occlusion_holes(self, rng, cfg.holes) for _ in range(2)]
-        self._init_misalignment()
+        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0  # the GPS misalignment (local frame):
+        self.R = rotation_zyx(*np.radians(cfg.rotation_deg))  # p_s = R (p - c) + c + t; roll, pitch, yaw
+        self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
+        self.t = np.asarray(cfg.shift_m, dtype=np.float64)
         self.water = water_levels(self) if cfg.water_m > 0 else []
 
     def _init_features(self, rng: np.random.Generator) -> None:
@@ -98,14 +101,6 @@ class World:
             self.feat_zc = self.terrain(self.feats[:, 1], self.feats[:, 2])
         for k, f in enumerate(self.feats):
             self.stamp(self.label, self.feat_res, f[1], f[2], f[10] + self.feat_res, k + 1)
-
-    def _init_misalignment(self) -> None:
-        """The GPS misalignment (local frame): ``p_s = R (p - c) + c + t``."""
-        cfg = self.cfg
-        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
-        self.R = rotation_zyx(*np.radians(cfg.rotation_deg))  # roll, pitch, yaw
-        self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
-        self.t = np.asarray(cfg.shift_m, dtype=np.float64)
 
     @staticmethod
     def stamp(grid: np.ndarray, res: float, x: float, y: float, r: float, value) -> None:
@@ -217,9 +212,7 @@ class World:
         """(LAS classes as the survey carries them, other per-point fields) of a chunk."""
         cfg = self.cfg
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 11 + epoch, index]))
-        mask = np.zeros(cls.shape, bool)
-        mask[stray] = True
-        cat = categories(cls, mask)
+        cat = categories(cls, stray)
         fields: dict = {}
         if cfg.signals == "rgb":
             rgb = colours(cat, lab - 1, fresh, cfg, rng)
