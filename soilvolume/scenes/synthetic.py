@@ -50,14 +50,13 @@ class Scene:
 
 
 def _config_dict(cfg: SceneConfig) -> dict:
-    d = asdict(cfg)
-    if cfg.change != "excavation":  # only meaningful there; keeps older truth files identical
-        d.pop("change_fraction")
-    plain = SceneConfig()
-    for k in NEWER_FIELDS:  # at their defaults: older truth files stay identical
-        if d[k] == getattr(plain, k):
-            d.pop(k)
-    return d
+    """The config without the newer fields at their defaults, nor ``change_fraction`` (only meaningful
+    for an excavation): older truth files stay identical."""
+    d, plain = asdict(cfg), asdict(SceneConfig())
+    skip = {k for k in NEWER_FIELDS if d[k] == plain[k]} | (
+        {"change_fraction"} if cfg.change != "excavation" else set()
+    )
+    return {k: v for k, v in d.items() if k not in skip}
 
 
 NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch_change", "crops")
