@@ -33,12 +33,6 @@ def margin(valid: np.ndarray, cell: float, fraction: float = MARGIN_FRACTION) ->
     return valid & (inside <= band)
 
 
-def _disk(radius_cells: float) -> np.ndarray:
-    r = int(np.ceil(radius_cells))
-    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
-    return xx * xx + yy * yy <= radius_cells * radius_cells + 1e-9
-
-
 def find_stable(
     diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None = None, dilate_m: float = 2.0
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -55,7 +49,10 @@ def find_stable(
     if stable.sum() < 12:
         stable = valid
     noise = noise_sigma(diff)
-    disk = _disk(dilate_m / cell) if dilate_m > 0 else None
+    r = dilate_m / cell  # change areas dilated by a disk of r cells
+    n = int(np.ceil(r))
+    yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
+    disk = (xx * xx + yy * yy <= r * r + 1e-9) if dilate_m > 0 else None
     surface = _surface(x, y, diff, stable, 1, robust=True)
     for it in range(ITERATIONS):
         resid = diff - surface

@@ -60,16 +60,11 @@ def fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=Non
             t = init
         fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         q = StageQuality(options.fine, fit, rmse, t, True, 0.0, f"started from the {label} pose")
-        if best is None or _better(q, best):
+        far = best is not None and abs(q.fitness - best.fitness) > 0.005  # else the lower RMSE wins
+        if best is None or (q.fitness > best.fitness if far else q.rmse < best.rmse):
             best = q
     assert best is not None
     return replace(best, seconds=time.perf_counter() - t0)
-
-
-def _better(a: StageQuality, b: StageQuality) -> bool:
-    if abs(a.fitness - b.fitness) > 0.005:
-        return a.fitness > b.fitness
-    return a.rmse < b.rmse
 
 
 def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, gap: float) -> StageQuality:

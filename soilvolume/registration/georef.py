@@ -94,21 +94,17 @@ def disagreement(check: dict) -> str:
     )
 
 
-def _figures(check: dict) -> str:
+def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine: str) -> tuple[str, str, dict]:
+    """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason, the check)."""
+    gap = spacing(before_xyz)
+    check = outcome(reg, after_xyz, gap, fine)
     m, t = check["move"], check["tolerance"]
-    return (
+    said = (
         f"the registration moved the after survey's centre {m['horizontal_m']:.2f} m across and "
         f"{m['vertical_m']:.2f} m up or down, turned it {m['rotation_deg']:.2f}° and tilted it "
         f"{m['tilt_deg']:.2f}° (tolerances {t['horizontal_m']:.2f} m, {t['vertical_m']:.2f} m, "
         f"{t['rotation_deg']:.2f}° and {t['tilt_deg']:.2f}°)"
     )
-
-
-def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine: str) -> tuple[str, str, dict]:
-    """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason, the check)."""
-    gap = spacing(before_xyz)
-    check = outcome(reg, after_xyz, gap, fine)
-    said = _figures(check)
     if check["outcome"] == CONFIRMED:
         why = f"both files declare {datum} and {said}, its poses agreeing: coordinates confirmed, used as they are"
         return "precise", why, check

@@ -112,12 +112,8 @@ class Nearest:
         return [points.copy(), j[:, 0].astype(np.int64), np.minimum(d[:, 1], self.bound)]
 
     def _distances(self, found: list[np.ndarray], points: np.ndarray) -> np.ndarray:
-        return _norms(points - np.take(self.target, found[1], axis=1))
-
-
-def _norms(v: np.ndarray) -> np.ndarray:
-    """Euclidean norm of each column of a (3, N) array."""
-    out = v[0] * v[0]
-    out += v[1] * v[1]
-    out += v[2] * v[2]
-    return np.sqrt(out, out=out)
+        v = points - np.take(self.target, found[1], axis=1)  # each column's Euclidean norm
+        out = v[0] * v[0]
+        out += v[1] * v[1]
+        out += v[2] * v[2]
+        return np.sqrt(out, out=out)

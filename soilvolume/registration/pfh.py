@@ -79,14 +79,6 @@ def choose_patch(source: np.ndarray, target: np.ndarray, size: float) -> np.ndar
     return best
 
 
-def _triples(src: np.ndarray, n: int, min_dist: float, rng) -> np.ndarray:
-    """``n`` random index triples at least ``min_dist`` apart (PCL's min_sample_distance)."""
-    pick = rng.integers(0, len(src), size=(4 * n, 3))
-    p = src[pick]
-    d = np.stack([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in ((0, 1), (0, 2), (1, 2))], 1)
-    return pick[(d >= min_dist).all(axis=1)][:n]
-
-
 def sac_ia(src: np.ndarray, fs: np.ndarray, tgt: np.ndarray, ft: np.ndarray, kt: np.ndarray, seed: int) -> np.ndarray:
     """SAC-IA of keypoints ``src`` (descriptors ``fs``) onto ``tgt`` (keypoints ``kt``, descriptors
     ``ft``): the best 4x4, hypotheses beyond :data:`MAX_ROTATION` deg or :data:`MAX_SHIFT` m discarded."""
@@ -97,7 +89,10 @@ def sac_ia(src: np.ndarray, fs: np.ndarray, tgt: np.ndarray, ft: np.ndarray, kt:
     centre = src.mean(axis=0)
     cos_max = np.cos(np.radians(MAX_ROTATION))
     for start in range(0, SAC_ITER, 500):
-        pick = _triples(src, min(500, SAC_ITER - start), 1.0, rng)
+        pick = rng.integers(0, len(src), size=(4 * min(500, SAC_ITER - start), 3))  # keypoint triples,
+        p = src[pick]  # those at least 1 m apart kept (PCL's min_sample_distance)
+        d = np.stack([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in ((0, 1), (0, 2), (1, 2))], 1)
+        pick = pick[(d >= 1.0).all(axis=1)][: min(500, SAC_ITER - start)]
         match = kt[sim[pick, rng.integers(0, K_SIM, size=pick.shape)]]
         ts = kabsch(src[pick], tgt[match])
         cos = (np.trace(ts[:, :3, :3], axis1=1, axis2=2) - 1) / 2
