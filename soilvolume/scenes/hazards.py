@@ -87,12 +87,6 @@ def occlusion_holes(world, rng: np.random.Generator, n: int) -> np.ndarray | Non
                     break
         # irregular blob: union of three discs
         for _ in range(3):
-            world.stamp(
-                grid,
-                world.hole_res,
-                x + rng.uniform(-0.6, 0.6) * r,
-                y + rng.uniform(-0.6, 0.6) * r,
-                r * rng.uniform(0.5, 0.9),
-                True,
-            )
+            cx, cy = x + rng.uniform(-0.6, 0.6) * r, y + rng.uniform(-0.6, 0.6) * r
+            world.stamp(grid, world.hole_res, cx, cy, r * rng.uniform(0.5, 0.9), True)
     return grid

@@ -57,13 +57,9 @@ def epoch_features(cx: float, cy: float) -> list[dict[str, dict]]:
     return epochs
 
 
-def _signed(feats: dict[str, dict]) -> dict[str, float]:
-    return {k: f["sign"] * f["volume"] for k, f in feats.items()}
-
-
 def change_truth(a: dict[str, dict], b: dict[str, dict]) -> dict[str, float]:
     """net/cut/fill (m3) from features ``a`` to ``b``: each slot's change has one sign."""
-    va, vb = _signed(a), _signed(b)
+    va, vb = ({k: f["sign"] * f["volume"] for k, f in feats.items()} for feats in (a, b))  # signed volumes
     moves = [vb.get(k, 0.0) - va.get(k, 0.0) for k in set(va) | set(vb)]
     fill, cut = sum(m for m in moves if m > 0), -sum(m for m in moves if m < 0)
     return {"net": fill - cut, "cut": cut, "fill": fill}
