@@ -117,7 +117,16 @@ def icp_levels(
         if voxel not in cache:
             src = columns.columns(source_xyz, voxel).xyz
             src = src[:: max(1, -(-len(src) // MAX_SOURCE_POINTS))]  # a fixed stride: spread, not density
-            cache[voxel] = (src, *_surface(target_xyz, source_xyz, t, voxel, 2.0 + dist), {})
+            margin = 2.0 + dist  # the target's surface over the source's box under t, and this margin
+            lo, hi = bounds(transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t), 2)
+            tgt, normals = columns.column_surface(target_xyz, voxel, lo - margin, hi + margin)
+            if len(tgt) < 3:
+                raise SoilVolumeError(
+                    "registration failed: the fine registration drifted off the before cloud "
+                    "(no before points left under the after cloud); check that both clouds "
+                    "cover the same site and their CRSs"
+                )
+            cache[voxel] = (src, tgt, normals, {})
         src, tgt, normals, kept = cache[voxel]  # kept: the voxel's k-d tree, or GICP's Open3D clouds
         if options.fine == "gicp":
             t, fit, rmse = _gicp(src, tgt, normals, dist, t, k, kept)
@@ -139,16 +148,3 @@ def _gicp(src, tgt, normals, dist: float, t: np.ndarray, k: float, pcds: dict) -
     est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
     res = reg.registration_generalized_icp(*pcds["pcd"], dist, t, est, crit)
     return np.asarray(res.transformation).copy(), float(res.fitness), float(res.inlier_rmse)
-
-
-def _surface(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
-    """The target's column surface and normals over the source's box under ``t`` + margin."""
-    lo, hi = bounds(transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t), 2)
-    xyz, normals = columns.column_surface(target_xyz, voxel, lo - margin, hi + margin)
-    if len(xyz) < 3:
-        raise SoilVolumeError(
-            "registration failed: the fine registration drifted off the before cloud "
-            "(no before points left under the after cloud); check that both clouds "
-            "cover the same site and their CRSs"
-        )
-    return xyz, normals
