@@ -52,12 +52,9 @@ def fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=Non
             _icp_from_best(judge, after_xyz, before_xyz, starts, options, check, gap), seconds=time.perf_counter() - t0
         )
     best: StageQuality | None = None
+    src, tgt = dense if dense is not None else (after_xyz, columns.Cloud.points(before_xyz))
     for init, label in starts:
-        if options.fine == "pfh":
-            src, tgt = dense if dense is not None else (after_xyz, columns.Cloud.points(before_xyz))
-            t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed)
-        else:
-            t = init
+        t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed) if options.fine == "pfh" else init
         fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         q = StageQuality(options.fine, fit, rmse, t, True, 0.0, f"started from the {label} pose")
         far = best is not None and abs(q.fitness - best.fitness) > 0.005  # else the lower RMSE wins
