@@ -108,7 +108,7 @@ def change_features(cfg: SceneConfig, seed: int = 0) -> list[dict]:
     return finish_features(feats)
 
 
-SITE_KINDS = ("yard", "landslide", "trench", "pillars")  # scenes/sites.py
+SITE_KINDS = ("yard", "landslide", "trench", "pillars")  # site_features
 
 
 def finish_features(feats: list[dict]) -> list[dict]:
