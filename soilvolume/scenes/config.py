@@ -37,7 +37,7 @@ class SceneConfig:
     objects: bool = False  # vehicles (class 6) and boulders (class 1), same place in both epochs
     relief: float = 1.0  # scale of the long waves and hills (0 = a tilted plane with local detail)
     # "piles" (3 piles ~1020 m3 + a pit ~69 m3, ~15 % of the after footprint), "none", "pit" (5 %), "pile"
-    # (10 %), "excavation" (`change_fraction` of the footprint, a tall pile beside it) or a site of features.site_features
+    # (10 %), "excavation" (`change_fraction` of the footprint, a tall pile beside it) or a site (features.py)
     change: str = "piles"
     # "fixed": the layouts above, the same for every seed (bench/ACCURACY.md, README, demo, self-test);
     # "drawn": the seed also draws the "piles" site's works (scenes/features.py)

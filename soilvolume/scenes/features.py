@@ -113,7 +113,7 @@ SITE_KINDS = ("yard", "landslide", "trench", "pillars")  # site_features
 
 def finish_features(feats: list[dict]) -> list[dict]:
     """Add the exact ``volume`` (m3, >= 0) and bounding ``radius`` (m) to ``cone`` and ``rect``
-    features (:mod:`.sites`; ``sign`` +1 fill, -1 cut)."""
+    features (``sign`` +1 fill, -1 cut)."""
     for f in feats:
         if f["kind"] == "cone":
             h, r1, r2 = f["height"], f["r_top"], f["r_bottom"]
