@@ -113,13 +113,11 @@ def returns(cat: np.ndarray, under: np.ndarray, rng) -> tuple[np.ndarray, np.nda
     """(return number, number of returns) per point: canopy mostly first of 2-3, ground ``under``
     vegetation last of 2, others single."""
     n = cat.size
-    num = np.ones(n, np.uint8)
-    ret = np.ones(n, np.uint8)
+    num, ret = np.ones(n, np.uint8), np.ones(n, np.uint8)
     canopy = (cat == GREEN) & (rng.random(n) >= 0.2)
     num[canopy] = rng.integers(2, 4, int(canopy.sum()))
     ground = under & (cat == SOIL)
-    num[ground] = 2
-    ret[ground] = 2
+    num[ground] = ret[ground] = 2
     return ret, num
 
 
