@@ -46,7 +46,7 @@ def test_full_pipeline_under_1_percent_on_paper_geometry(tmp_path, seed):
     """Default options (GPS misalignment on, FPFH/ICP registration, surface correction, hole fill)
     recover the net volume within 1 % on paper-geometry pairs.
 
-    The seed draws the works (scenes/drawn.py). Measured (net error, seeds 1..8): +0.95, -0.34,
+    The seed draws the works (scenes/features.py). Measured (net error, seeds 1..8): +0.95, -0.34,
     -0.19, -0.05, -0.30, -0.82, +0.02, -0.08 % (seed 1's +0.95 %: a hole refilled on a small
     pile's flank). With the fixed works, the same for every seed: +0.15, -0.52, -0.50, -0.04,
     +0.02, -0.03, -0.06, -0.12 %. Seeds 1 and 2 are the first two, not picked for luck."""
@@ -218,7 +218,7 @@ def test_median_error_of_small_pairs(coverage_runs):
     2.06 % seed 18). Fixed works: median 0.31 %, largest 1.04 %. With piles of 2-2.5 m beside
     a pit the draw once gave -13 % and -18 % (seeds 12, 14): on these 1.8 m cells the engine
     took pile and pit for one moved object (soil/objects.py), so piles are drawn 3-3.5 m high
-    as the fixed layout's (scenes/drawn.py)."""
+    as the fixed layout's (scenes/features.py)."""
     errs = [abs(r["error"]) / r["truth"] for r in coverage_runs]
     assert float(np.median(errs)) < 0.01, errs
     assert max(errs) < 0.03, errs

@@ -70,37 +70,20 @@ def fit_surface(
     return surface, params
 
 
-def supported_degree(stable: np.ndarray, change: np.ndarray, max_degree: int) -> int:
-    """The highest degree (up to ``max_degree``) the stable ground supports: a curve needs it all
-    around the change, a plane one side (:func:`.stable.largest_gap_deg`), a handful a constant."""
-    if stable.sum() < 30:
-        return 0
-    if largest_gap_deg(stable, change) > 180.0:
-        return min(max_degree, 1)
-    return max_degree
-
-
-def apply(
-    diff: np.ndarray,
-    method: str,
-    grid: GridSpec,
-    *,
-    user_mask: np.ndarray | None = None,
-    dilate_m: float = 2.0,
-    iterations: int = 8,
-    select_degree: bool = True,
-) -> CorrectionResult:
+def apply(diff: np.ndarray, method: str, grid: GridSpec, user_mask: np.ndarray | None = None) -> CorrectionResult:
     """Find stable ground (whatever the method: ``none`` still has residual statistics), fit the
-    ``method`` surface on it (``select_degree``: lowered to what it supports) and subtract it."""
-    stable = find_stable(diff, grid.cell, user_mask=user_mask, dilate_m=dilate_m, iterations=iterations)[0]
+    ``method`` surface on it, lowered to what it supports (a curve needs it all around the change, a
+    plane one side: :func:`.stable.largest_gap_deg`, a handful a constant), and subtract it."""
+    stable = find_stable(diff, grid.cell, user_mask=user_mask)[0]
+    valid = np.isfinite(diff)
     used = method
-    if select_degree and method in ("surface", "plane"):
-        degree = supported_degree(stable, np.isfinite(diff) & ~stable, MODES[method].degree)
-        used = next(name for name in METHODS if MODES[name].degree == degree)
+    if method in ("surface", "plane") and stable.sum() < 30:
+        used = "constant"
+    elif method == "surface" and largest_gap_deg(stable, valid & ~stable) > 180.0:
+        used = "plane"
     surface, params = fit_surface(diff, stable, grid, used)
     params["method"], params["fitted"] = method, used
-    surface = np.where(np.isfinite(diff), surface, np.nan)
-    valid = np.isfinite(diff)
+    surface = np.where(valid, surface, np.nan)
     params["stable_cells"] = int(stable.sum())
     params["stable_fraction"] = float(stable.sum() / max(valid.sum(), 1))
     return CorrectionResult(diff - surface, surface, stable, valid & ~stable, params)

@@ -9,6 +9,8 @@ import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
 
+ITERATIONS, SAMPLE = 500, 20_000
+
 
 @dataclass(frozen=True)
 class Plane:
@@ -28,19 +30,14 @@ class Plane:
         return {"a": self.a, "b": self.b, "c": float(c_abs), "inlier_fraction": self.inliers}
 
 
-def ransac_plane(
-    xyz: np.ndarray,
-    threshold: float = 0.15,
-    iterations: int = 500,
-    seed: int = 0,
-    sample: int = 20_000,
-) -> Plane:
-    """Seeded RANSAC plane (3-point hypotheses on a subsample), refined by least squares on its inliers."""
+def ransac_plane(xyz: np.ndarray, threshold: float = 0.15, seed: int = 0) -> Plane:
+    """Seeded RANSAC plane (:data:`ITERATIONS` 3-point hypotheses on a subsample of :data:`SAMPLE`
+    points), refined by least squares on its inliers."""
     if len(xyz) < 3:
         raise SoilVolumeError("a RANSAC plane needs at least 3 points")
     rng = np.random.default_rng(seed)
-    pts = xyz[rng.choice(len(xyz), min(sample, len(xyz)), replace=False)]
-    tri = pts[rng.integers(0, len(pts), size=(iterations, 3))]
+    pts = xyz[rng.choice(len(xyz), min(SAMPLE, len(xyz)), replace=False)]
+    tri = pts[rng.integers(0, len(pts), size=(ITERATIONS, 3))]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     norm = np.linalg.norm(normal, axis=1)
     ok = norm > 1e-9

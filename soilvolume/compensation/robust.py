@@ -42,13 +42,6 @@ def _terms(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
 _TERM_NAMES = ("1", "x", "y", "x2", "xy", "y2")
 
 
-def _scaled(x: np.ndarray, y: np.ndarray, mask: np.ndarray):
-    """Centre and scale coordinates on the masked cells (conditioning)."""
-    cx, cy = float(x[mask].mean()), float(y[mask].mean())
-    s = float(max(np.ptp(x[mask]), np.ptp(y[mask]), 1e-9) / 2)
-    return (x - cx) / s, (y - cy) / s, (cx, cy, s)
-
-
 def _lstsq(a: np.ndarray, z: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Weighted least squares of the design matrix ``a`` (:func:`_terms`) on ``z``."""
     sw = np.sqrt(w)
@@ -58,14 +51,15 @@ def _lstsq(a: np.ndarray, z: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 def fit_poly(x, y, diff, mask, degree: int, robust: bool = False):
     """(surface over the whole grid, coefficients, (cx, cy, scale)); Tukey-IRLS if ``robust``."""
-    xs, ys, frame = _scaled(x, y, mask)
+    cx, cy = float(x[mask].mean()), float(y[mask].mean())  # centred and scaled on the masked cells (conditioning)
+    s = float(max(np.ptp(x[mask]), np.ptp(y[mask]), 1e-9) / 2)
+    xs, ys = (x - cx) / s, (y - cy) / s
     idx = np.flatnonzero(mask)
     if idx.size > _MAX_FIT:  # a regular subsample keeps large grids fast
         idx = idx[:: -(-idx.size // _MAX_FIT)]
     px, py, z = xs.ravel()[idx], ys.ravel()[idx], diff.ravel()[idx]
     a = _terms(px, py, degree)  # the same design matrix for every reweighting
-    w = np.ones_like(z)
-    coef = _lstsq(a, z, w)
+    coef = _lstsq(a, z, np.ones_like(z))
     for _ in range(8 if robust else 0):
         r = z - a @ coef
         c = 4.685 * max(nmad(r), 1e-6)
@@ -73,7 +67,7 @@ def fit_poly(x, y, diff, mask, degree: int, robust: bool = False):
         if np.count_nonzero(w) <= degree * 3 + 1:
             break
         coef = _lstsq(a, z, w)
-    return _terms(xs, ys, degree) @ coef, coef, frame
+    return _terms(xs, ys, degree) @ coef, coef, (cx, cy, s)
 
 
 def patches(mask: np.ndarray, min_cells: int) -> np.ndarray:

@@ -12,6 +12,7 @@ import scipy
 from .robust import fit_poly, nmad, patches
 
 MARGIN_FRACTION = 0.15  # margin band width as a fraction of the footprint's inradius
+K_NOISE, MIN_CHANGE_CELLS, ITERATIONS = 3.0, 3, 8  # change: beyond K noise levels, in patches of 3+ cells
 
 
 def noise_sigma(diff: np.ndarray) -> float:
@@ -32,53 +33,39 @@ def margin(valid: np.ndarray, cell: float, fraction: float = MARGIN_FRACTION) ->
     return valid & (inside <= band)
 
 
-def _disk(radius_cells: float) -> np.ndarray:
-    r = int(np.ceil(radius_cells))
-    yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
-    return xx * xx + yy * yy <= radius_cells * radius_cells + 1e-9
-
-
 def find_stable(
-    diff: np.ndarray,
-    cell: float,
-    *,
-    degree: int = 2,
-    seed: np.ndarray | None = None,
-    user_mask: np.ndarray | None = None,
-    k: float = 3.0,
-    dilate_m: float = 2.0,
-    min_change_cells: int = 3,
-    iterations: int = 8,
+    diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None = None, dilate_m: float = 2.0
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(stable mask, fitted surface of ``degree``) of a difference grid. ``seed``: cells to start from
-    (default: the margin); ``user_mask`` (True = stable) is taken as given (on valid cells)."""
+    """(stable mask, fitted degree-2 surface) of a difference grid, from its margin; ``user_mask``
+    (True = stable) is taken as given (on valid cells)."""
     valid = np.isfinite(diff)
     y, x = np.mgrid[0 : diff.shape[0], 0 : diff.shape[1]] * float(cell)
     if user_mask is not None:
         stable = valid & user_mask.astype(bool)
-        return stable, _surface(x, y, diff, stable, degree)
+        return stable, _surface(x, y, diff, stable, 2)
     if valid.sum() < 12:
         return valid, np.zeros(diff.shape)
-    stable = margin(valid, cell) if seed is None else valid & seed
+    stable = margin(valid, cell)
     if stable.sum() < 12:
         stable = valid
     noise = noise_sigma(diff)
-    disk = _disk(dilate_m / cell) if dilate_m > 0 else None
-    surface = _surface(x, y, diff, stable, min(degree, 1), robust=True)
-    for it in range(iterations):
+    r = dilate_m / cell  # change areas dilated by a disk of r cells
+    n = int(np.ceil(r))
+    yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
+    disk = (xx * xx + yy * yy <= r * r + 1e-9) if dilate_m > 0 else None
+    surface = _surface(x, y, diff, stable, 1, robust=True)
+    for it in range(ITERATIONS):
         resid = diff - surface
         spread = nmad(resid[stable])
-        thr = k * (max(spread, noise) if np.isfinite(noise) else spread)
-        change = patches(valid & (np.abs(resid) > thr), min_change_cells)
+        thr = K_NOISE * (max(spread, noise) if np.isfinite(noise) else spread)
+        change = patches(valid & (np.abs(resid) > thr), MIN_CHANGE_CELLS)
         if disk is not None and change.any():
             change = scipy.ndimage.binary_dilation(change, disk)
         new = valid & ~change
-        if new.sum() < 12:
-            break
-        if it > 0 and np.array_equal(new, stable):  # converged: the surface is the one fitted on it
+        if new.sum() < 12 or (it > 0 and np.array_equal(new, stable)):  # converged: the surface is the one fitted on it
             break
         stable = new
-        surface = _surface(x, y, diff, stable, degree, robust=True)
+        surface = _surface(x, y, diff, stable, 2, robust=True)
     return stable, surface
 
 

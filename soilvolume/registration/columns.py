@@ -82,12 +82,8 @@ Target = np.ndarray | Cloud  # a target cloud: an array, or one with its box cut
 def columns(xyz: Target, cell: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None) -> Columns:
     """Mean point of every occupied ``cell`` x ``cell`` column (points outside lo..hi dropped); given a
     box, only its points with a cell of margin are binned (the same sums)."""
-    pts = Cloud.points(xyz)
-    cut = lo is not None and hi is not None
-    if not cut:
-        box = bounds(pts, 2)
-    lo = box[0] if lo is None else np.asarray(lo[:2], float)
-    hi = box[1] if hi is None else np.asarray(hi[:2], float)
+    pts, cut = Cloud.points(xyz), lo is not None  # a box is given whole or not at all
+    lo, hi = (np.asarray(lo[:2], float), np.asarray(hi[:2], float)) if cut else bounds(pts, 2)
     shape = (int((hi[1] - lo[1]) // cell) + 1, int((hi[0] - lo[0]) // cell) + 1)
     if cut:
         box = (lo - cell, lo + (np.array(shape[::-1]) + 1) * cell)
@@ -101,7 +97,7 @@ def _binned(xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int]
     if kernels() is not None and len(xyz):
         return _native_binned(kernels(), xyz, lo, cell, shape)
     n = shape[0] * shape[1]
-    fx, fy = _floor_index(xyz[:, 0], lo[0], cell), _floor_index(xyz[:, 1], lo[1], cell)
+    fx, fy = (np.floor((xyz[:, k] - lo[k]) / cell) for k in (0, 1))  # the values of ``cell_index`` before the cast
     off = ~((fx >= 0) & (fy >= 0) & (fx < shape[1]) & (fy < shape[0]))
     fy *= shape[1]
     fy += fx
@@ -129,13 +125,6 @@ def _native_binned(lib, xyz: np.ndarray, lo: np.ndarray, cell: float, shape: tup
     return Columns(means, has // shape[1], has % shape[1], shape, lo, cell)
 
 
-def _floor_index(v: np.ndarray, lo: float, cell: float) -> np.ndarray:
-    """``floor((v - lo) / cell)`` as float64 (the values of ``cell_index`` before the cast)."""
-    t = np.subtract(v, lo)
-    np.divide(t, cell, out=t)
-    return np.floor(t, out=t)
-
-
 def column_surface(
     xyz: Target, voxel: float, lo: np.ndarray | None = None, hi: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -144,48 +133,34 @@ def column_surface(
     return cols.xyz, normals(cols)
 
 
-def normals(c: Columns, smooth: float = 1.0) -> np.ndarray:
-    """Upward unit normals from the gradient of the column heights (Gaussian smoothed by ``smooth``
-    cells, normalized convolution over empty columns)."""
+def normals(c: Columns) -> np.ndarray:
+    """Upward unit normals from the gradient of the column heights (Gaussian smoothed by one cell,
+    normalized convolution over empty columns)."""
     flat = c.row * c.shape[1] + c.col
-    h = np.zeros(c.shape)
-    w = np.zeros(c.shape)
+    h, w = np.zeros(c.shape), np.zeros(c.shape)
     h.ravel()[flat] = c.xyz[:, 2]  # h * w is h itself: 0 where w is 0, h * 1.0 elsewhere
     w.ravel()[flat] = 1.0
-    if smooth > 0:
-        hs, ws = scipy.ndimage.gaussian_filter(h, smooth), scipy.ndimage.gaussian_filter(w, smooth)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            h = np.where(ws > 1e-3, hs / ws, 0.0)
-        w = (ws > 1e-3).astype(float)
-    gy, gx = _gradient(h, w > 0, c.cell)
+    hs, ws = scipy.ndimage.gaussian_filter(h, 1.0), scipy.ndimage.gaussian_filter(w, 1.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h = np.where(ws > 1e-3, hs / ws, 0.0)
+    gy, gx = _gradient(h, ws > 1e-3, c.cell)
     gx, gy = gx.ravel()[flat], gy.ravel()[flat]
     norm = np.sqrt((gx * gx + gy * gy) + 1.0)  # |(-gx, -gy, 1)| summed in that order
-    n = np.empty((len(flat), 3))
-    np.divide(-gx, norm, out=n[:, 0])
-    np.divide(-gy, norm, out=n[:, 1])
-    np.divide(1.0, norm, out=n[:, 2])
-    return n
+    return np.column_stack([-gx, -gy, np.ones_like(gx)]) / norm[:, None]
 
 
 def _gradient(h: np.ndarray, valid: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     """(dz/dy, dz/dx): central differences where both neighbours are valid, one-sided where one is, 0
     where none (the sum of the valid differences over their count)."""
     out = []
-    for axis in (0, 1):
-        a, b = [slice(None)] * 2, [slice(None)] * 2
-        a[axis], b[axis] = slice(0, -1), slice(1, None)
-        a, b = tuple(a), tuple(b)
-        ok = valid[b] & valid[a]
-        step = np.where(ok, h[b] - h[a], 0.0)
-        num, den = np.zeros_like(h), np.zeros_like(h)
-        num[a] = step
-        num[b] += step
-        first = [slice(None)] * 2
-        first[axis] = slice(0, 1)
-        num[tuple(first)] += 0.0  # plus its missing backward difference, as the sum did: -0.0 becomes 0.0
-        den[a] = ok
-        den[b] += ok
-        out.append(np.where(den > 0, num / np.maximum(den, 1) / cell, 0.0))
+    for hh, vv in ((h, valid), (h.T, valid.T)):
+        ok = (vv[1:] & vv[:-1]).astype(float)
+        step = np.where(ok > 0, hh[1:] - hh[:-1], 0.0)
+        after, before = ((0, 1), (0, 0)), ((1, 0), (0, 0))  # each cell's forward and backward difference
+        num = np.pad(step, after) + np.pad(step, before)  # an end's missing one is 0.0: -0.0 becomes 0.0
+        den = np.pad(ok, after) + np.pad(ok, before)
+        g = np.where(den > 0, num / np.maximum(den, 1) / cell, 0.0)
+        out.append(g if hh is h else g.T)
     return out[0], out[1]
 
 

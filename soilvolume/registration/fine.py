@@ -4,7 +4,6 @@ refined on stable ground; or the paper's PFH + SAC-IA (:mod:`.pfh`)."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -13,8 +12,7 @@ from ..core.cells import bounds
 from ..core.types import SoilVolumeError, StageQuality
 from ..options import Options
 from . import columns, icp
-from .fit import best_on, evaluate_surface, judged
-from .ground import cap_voxel, spacing, stable_source
+from .ground import best_on, cap_voxel, evaluate_surface, judged, spacing, stable_source
 from .nearest import Nearest, tree_of
 from .o3d import _o3d, to_pcd
 from .pfh import pfh_sac_ia
@@ -26,7 +24,6 @@ REFINE_LEVELS = ((0.5, 0.8, 0.25), (0.25, 0.4, 0.12))
 MAX_ICP_POINTS = 150_000  # per level: coarser voxels on very large sites
 MAX_SOURCE_POINTS = 30_000  # ICP source points per level (the target keeps its density)
 ICP_TOL, ICP_ITER = 1e-6, 30
-STABLE_PASSES = 1  # refinements on the stable ground found at the current pose
 
 
 def finest_column(after_xyz: np.ndarray, gap: float) -> float:
@@ -51,90 +48,65 @@ def fine_stage(after_xyz, before_xyz, starts, options: Options, check, dense=Non
     gap = spacing(columns.Cloud.points(before_xyz))
     judge = judged(after_xyz, gap)
     if options.fine in ("icp", "gicp"):
-        (t, label, rejected, (fit, rmse)), alt, refined = _icp_from_best(
-            judge, after_xyz, before_xyz, starts, options, check, gap
-        )
-        return StageQuality(
-            options.fine,
-            fit,
-            rmse,
-            t,
-            True,
-            time.perf_counter() - t0,
-            f"started from the {label} pose",
-            alternative=alt,
-            beyond_prior=rejected,
-            poses=refined,
+        return replace(
+            _icp_from_best(judge, after_xyz, before_xyz, starts, options, check, gap), seconds=time.perf_counter() - t0
         )
     best: StageQuality | None = None
+    src, tgt = dense if dense is not None else (after_xyz, columns.Cloud.points(before_xyz))
     for init, label in starts:
-        if options.fine == "pfh":
-            src, tgt = dense if dense is not None else (after_xyz, columns.Cloud.points(before_xyz))
-            t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed)
-        else:
-            t = init
+        t = pfh_sac_ia(src, tgt, init, options.pfh_patch, options.seed) if options.fine == "pfh" else init
         fit, rmse = evaluate_surface(judge, before_xyz, t, gap=gap)
         q = StageQuality(options.fine, fit, rmse, t, True, 0.0, f"started from the {label} pose")
-        if best is None or _better(q, best):
+        far = best is not None and abs(q.fitness - best.fitness) > 0.005  # else the lower RMSE wins
+        if best is None or (q.fitness > best.fitness if far else q.rmse < best.rmse):
             best = q
     assert best is not None
     return replace(best, seconds=time.perf_counter() - t0)
 
 
-def _better(a: StageQuality, b: StageQuality) -> bool:
-    if abs(a.fitness - b.fitness) > 0.005:
-        return a.fitness > b.fitness
-    return a.rmse < b.rmse
-
-
-def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, gap: float):
+def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, gap: float) -> StageQuality:
     """ICP from the best start on the after survey's margin (``src``), refined on the stable ground at
-    the pose reached; the pose fitting the margin best within the prior wins. Returns ((transform,
-    label, poses beyond the prior, (fitness, RMSE)), the other refined pose or None, every refined pose)."""
-    method, workers = options.fine, options.threads if options.threads > 0 else -1
-    head, tail = ICP_LEVELS[:2], ICP_LEVELS[2:]
+    the pose reached; the pose fitting the margin best within the prior wins, the other refined pose
+    its ``alternative``, those beyond the prior counted."""
     scored = []
     for init, label in starts:
-        t, fit, rmse = icp_levels(src, before_xyz, init, head, method, check, True, gap, workers)
+        t, fit, rmse = icp_levels(src, before_xyz, init, ICP_LEVELS[:2], options, check, gap)
         scored.append((-fit, rmse, label, t))
     _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
-    t = icp_levels(src, before_xyz, t, tail, method, check, gap=gap, workers=workers)
+    t = icp_levels(src, before_xyz, t, ICP_LEVELS[2:], options, check, gap)[0]
     poses = [(init, lab) for init, lab in starts] + [(t, label)]
-    for _ in range(STABLE_PASSES):
-        src_stable = stable_source(after_xyz, before_xyz, t, gap=gap)
-        if len(src_stable) <= 100:
-            break
-        # src_stable is already in the before frame: refine a correction on top of t.
-        dt = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, method, check, gap=gap, workers=workers)
-        t = dt @ t
+    src_stable = stable_source(after_xyz, before_xyz, t, gap=gap)
+    if len(src_stable) > 100:  # a refinement on the stable ground found at the pose, already in the before frame
+        t = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, options, check, gap)[0] @ t
         poses.append((t, label))
     centre = after_xyz.mean(axis=0)
     allowed = [p for p in poses if within_prior(p[0], centre, options)] or poses[:1]
-    best, scores = best_on(src, before_xyz, allowed, gap)
+    best, (fit, rmse) = best_on(src, before_xyz, allowed, gap)
     others = [p[0] for p in allowed[len(starts) :] if p[0] is not best[0]]
     rejected = len(poses) - len(allowed)
     label = best[1] + (f"; {rejected} pose(s) beyond the georeferencing prior rejected" if rejected else "")
-    refined = tuple(p[0] for p in poses[len(starts) :])
-    return (best[0], label, rejected, scores), (others[-1] if others else None), refined
+    return StageQuality(
+        options.fine,
+        fit,
+        rmse,
+        best[0],
+        note=f"started from the {label} pose",
+        alternative=others[-1] if others else None,
+        beyond_prior=rejected,
+        poses=tuple(p[0] for p in poses[len(starts) :]),
+    )
 
 
 def icp_levels(
-    source_xyz: np.ndarray,
-    target_xyz: columns.Target,
-    init: np.ndarray,
-    levels=ICP_LEVELS,
-    method: str = "icp",
-    check: Callable[[], None] | None = None,
-    scores: bool = False,
-    gap: float | None = None,
-    workers: int = -1,
+    source_xyz: np.ndarray, target_xyz: columns.Target, init: np.ndarray, levels, options: Options, check, gap: float
 ):
-    """Coarse-to-fine ICP (:mod:`.icp`) or GICP of column surfaces; with ``scores`` (transform, fitness,
-    RMSE) of the last level. ``gap``: the target's spacing; ``workers``: search threads (-1: all)."""
+    """(transform, fitness, RMSE of the last level) of coarse-to-fine ICP (:mod:`.icp`) or GICP of
+    column surfaces; ``gap``: the target's spacing; search threads: ``options.threads`` (0: all)."""
     t, fit, rmse = init.copy(), 0.0, 0.0
     cache: dict[float, tuple] = {}
     cap = cap_voxel(source_xyz, MAX_ICP_POINTS)
-    gap = 1.5 * (spacing(columns.Cloud.points(target_xyz)) if gap is None else gap)  # correspondences at least this far
+    workers = options.threads if options.threads > 0 else -1
+    gap = 1.5 * gap  # correspondences at least this far
     for voxel, dist, k in levels:
         voxel, dist = max(voxel, cap, gap / 1.5), max(dist, gap)  # no columns finer than the spacing
         if check:
@@ -142,9 +114,18 @@ def icp_levels(
         if voxel not in cache:
             src = columns.columns(source_xyz, voxel).xyz
             src = src[:: max(1, -(-len(src) // MAX_SOURCE_POINTS))]  # a fixed stride: spread, not density
-            cache[voxel] = (src, *_surface(target_xyz, source_xyz, t, voxel, 2.0 + dist), {})
+            margin = 2.0 + dist  # the target's surface over the source's box under t, and this margin
+            lo, hi = bounds(transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t), 2)
+            tgt, normals = columns.column_surface(target_xyz, voxel, lo - margin, hi + margin)
+            if len(tgt) < 3:
+                raise SoilVolumeError(
+                    "registration failed: the fine registration drifted off the before cloud "
+                    "(no before points left under the after cloud); check that both clouds "
+                    "cover the same site and their CRSs"
+                )
+            cache[voxel] = (src, tgt, normals, {})
         src, tgt, normals, kept = cache[voxel]  # kept: the voxel's k-d tree, or GICP's Open3D clouds
-        if method == "gicp":
+        if options.fine == "gicp":
             t, fit, rmse = _gicp(src, tgt, normals, dist, t, k, kept)
         else:
             if "tree" not in kept:
@@ -152,28 +133,15 @@ def icp_levels(
             nearest = Nearest(tgt, dist, workers, tree=kept["tree"])
             res = icp.point_to_plane(src, tgt, normals, dist, t, k, ICP_TOL, ICP_ITER, workers, nearest)
             t, fit, rmse = res.transform, res.fitness, res.inlier_rmse
-    return (t, fit, rmse) if scores else t
+    return t, fit, rmse
 
 
 def _gicp(src, tgt, normals, dist: float, t: np.ndarray, k: float, pcds: dict) -> tuple[np.ndarray, float, float]:
     """One level of Open3D's GICP (Tukey); the clouds kept in ``pcds`` for the next level."""
     reg = _o3d().pipelines.registration
     if "pcd" not in pcds:
-        pcds["pcd"] = (to_pcd(src), to_pcd(tgt, normals=normals))
+        pcds["pcd"] = (to_pcd(src), to_pcd(tgt, normals))
     crit = reg.ICPConvergenceCriteria(relative_fitness=ICP_TOL, relative_rmse=ICP_TOL, max_iteration=ICP_ITER)
     est = reg.TransformationEstimationForGeneralizedICP(reg.TukeyLoss(k=k))
     res = reg.registration_generalized_icp(*pcds["pcd"], dist, t, est, crit)
     return np.asarray(res.transformation).copy(), float(res.fitness), float(res.inlier_rmse)
-
-
-def _surface(target_xyz: columns.Target, source_xyz: np.ndarray, t: np.ndarray, voxel: float, margin: float):
-    """The target's column surface and normals over the source's box under ``t`` + margin."""
-    lo, hi = bounds(transform_points(source_xyz[:: max(1, len(source_xyz) // 20_000)], t), 2)
-    xyz, normals = columns.column_surface(target_xyz, voxel, lo - margin, hi + margin)
-    if len(xyz) < 3:
-        raise SoilVolumeError(
-            "registration failed: the fine registration drifted off the before cloud "
-            "(no before points left under the after cloud); check that both clouds "
-            "cover the same site and their CRSs"
-        )
-    return xyz, normals

@@ -16,8 +16,7 @@ import pyproj
 
 from ..core.wording import opt
 from .fine import finest_column
-from .fit import evaluate_surface
-from .ground import margin_points, spacing
+from .ground import evaluate_surface, margin_points, spacing
 from .rigid import rotation_deg, tilt_deg
 
 AGREE_FITNESS = 0.6  # share of the margin within 0.4 m of the before surface at the given pose
@@ -61,11 +60,8 @@ def spread(reg, centre: np.ndarray) -> dict[str, float]:
     """The largest departures (:data:`KEYS`) of the fine stage's refined poses from the accepted one."""
     inv = np.linalg.inv(reg.transform)
     moved = reg.transform[:3, :3] @ centre + reg.transform[:3, 3]
-    out = dict.fromkeys(KEYS, 0.0)
-    for p in reg.fine.poses:
-        d = move_at(p @ inv, moved)
-        out = {k: max(out[k], d[k]) for k in KEYS}
-    return out
+    moves = [move_at(p @ inv, moved) for p in reg.fine.poses]
+    return {k: max([0.0, *(d[k] for d in moves)]) for k in KEYS}
 
 
 def tolerances(reg, after_xyz: np.ndarray, gap: float) -> dict:
@@ -98,21 +94,17 @@ def disagreement(check: dict) -> str:
     )
 
 
-def _figures(check: dict) -> str:
+def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine: str) -> tuple[str, str, dict]:
+    """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason, the check)."""
+    gap = spacing(before_xyz)
+    check = outcome(reg, after_xyz, gap, fine)
     m, t = check["move"], check["tolerance"]
-    return (
+    said = (
         f"the registration moved the after survey's centre {m['horizontal_m']:.2f} m across and "
         f"{m['vertical_m']:.2f} m up or down, turned it {m['rotation_deg']:.2f}° and tilted it "
         f"{m['tilt_deg']:.2f}° (tolerances {t['horizontal_m']:.2f} m, {t['vertical_m']:.2f} m, "
         f"{t['rotation_deg']:.2f}° and {t['tilt_deg']:.2f}°)"
     )
-
-
-def confirm(reg, after_xyz: np.ndarray, before_xyz: np.ndarray, datum: str, fine: str) -> tuple[str, str, dict]:
-    """auto with a shared vertical ``datum``: (``gps`` or ``precise``, the reason, the check)."""
-    gap = spacing(before_xyz)
-    check = outcome(reg, after_xyz, gap, fine)
-    said = _figures(check)
     if check["outcome"] == CONFIRMED:
         why = f"both files declare {datum} and {said}, its poses agreeing: coordinates confirmed, used as they are"
         return "precise", why, check

@@ -1,5 +1,6 @@
 """The ground a registration is judged and refined on: point spacing, the after survey's margin
-band, its points on stable ground at a pose."""
+band, its points on stable ground at a pose; how well a pose fits: the share of after points near
+the before surface, and the best of several poses judged on the margin."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ from ..dem.grid import average_height, make_grid
 from ..inputs.footprint import footprint, polygon_area
 from . import columns
 from .rigid import transform_points
+
+EVAL_DISTANCE = 0.4
 
 
 def spacing(xyz: np.ndarray) -> float:
@@ -38,18 +41,12 @@ def margin_points(xyz: np.ndarray, gap: float) -> np.ndarray:
     return rows(xyz, band[iy, ix])
 
 
-def stable_source(
-    source_xyz: np.ndarray,
-    target_xyz: columns.Target,
-    t: np.ndarray,
-    cell: float = 1.0,
-    gap: float | None = None,
-) -> np.ndarray:
+def stable_source(source_xyz: np.ndarray, target_xyz: columns.Target, t: np.ndarray, gap: float) -> np.ndarray:
     """The source at ``t`` on stable ground only, its degree-2 deformation removed (both from
     :mod:`soilvolume.compensation.stable` on median grids): what the last ICP levels should see."""
     src = transform_points(source_xyz, t)
     target = target_xyz if isinstance(target_xyz, columns.Cloud) else columns.Cloud(target_xyz)
-    cell = max(cell, 1.5 * (spacing(target.xyz) if gap is None else gap))  # gap: the target's spacing
+    cell = max(1.0, 1.5 * gap)  # gap: the target's spacing
     grid = make_grid(*bounds(src), cell, np.zeros(3), None)
     top = np.array([grid.xmin + (grid.cols + 1) * grid.cell, grid.ymax + grid.cell])
     near = target.within(np.array([grid.xmin - grid.cell, grid.ymax - (grid.rows + 1) * grid.cell]), top)
@@ -63,3 +60,36 @@ def stable_source(
     out = rows(src, keep)
     out[:, 2] -= trend[row[keep], col[keep]]
     return out
+
+
+def evaluate_surface(
+    source_xyz: np.ndarray, target_xyz: columns.Target, t: np.ndarray, gap: float
+) -> tuple[float, float]:
+    """(fitness, RMSE) on terrain: the share of source points within :data:`EVAL_DISTANCE` of the target's
+    tangent planes (columns of max(0.25 m, 2 spacings ``gap``)) and their RMS; meaningful on sparse clouds."""
+    src = transform_points(source_xyz[:: max(1, len(source_xyz) // 100_000)], t)
+    lo, hi = bounds(src, 2)
+    cols = columns.columns(target_xyz, max(0.25, 2 * gap), lo - 1.0, hi + 1.0)
+    if len(cols.xyz) == 0:
+        return 0.0, float("nan")
+    r = np.abs(columns.plane_residuals(src, cols, columns.normals(cols)))
+    ok = r <= EVAL_DISTANCE
+    fit = float(ok.sum() / max(len(src), 1))
+    return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
+
+
+def judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
+    """The after points a pose is judged on: the survey's margin (works fit no pose), else all."""
+    ring = margin_points(after_xyz, gap)
+    return ring if len(ring) >= max(500, 0.05 * len(after_xyz)) else after_xyz
+
+
+def best_on(src, before_xyz, poses, gap: float) -> tuple[tuple[np.ndarray, str], tuple[float, float]]:
+    """The pose the margin points fit best (the last on ties) and its (fitness, RMSE)."""
+    best, best_key, scores = poses[-1], None, (float("nan"), float("nan"))
+    for k, (t, label) in enumerate(poses):
+        fit, rmse = evaluate_surface(src, before_xyz, t, gap=gap)
+        key = (round(fit, 2), -np.nan_to_num(rmse, nan=1e9), k)
+        if best_key is None or key > best_key:
+            best, best_key, scores = (t, label), key, (fit, rmse)
+    return best, scores

@@ -10,6 +10,7 @@ import numpy as np
 
 from ..native import kernels
 from .nearest import Nearest
+from .rigid import rotation_zyx
 
 DET_MIN = 1e-6  # a normal matrix with a smaller determinant gives no step (as Open3D)
 CYCLE = 1e-12  # a pose closer than this to one a few iterations before: ICP goes round a cycle of poses
@@ -142,14 +143,8 @@ def _native_step(lib, pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: n
 
 def _matrix(x: np.ndarray) -> np.ndarray:
     """The 4x4 transform of a small motion (rx, ry, rz, tx, ty, tz): Rz Ry Rx, then the shift."""
-    ca, sa = np.cos(x[0]), np.sin(x[0])
-    cb, sb = np.cos(x[1]), np.sin(x[1])
-    cc, sc = np.cos(x[2]), np.sin(x[2])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
-    ry = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
-    rz = np.array([[cc, -sc, 0.0], [sc, cc, 0.0], [0.0, 0.0, 1.0]])
     out = np.eye(4)
-    out[:3, :3] = rz @ ry @ rx
+    out[:3, :3] = rotation_zyx(*x[:3])
     out[:3, 3] = x[3:]
     return out
 

@@ -3,8 +3,6 @@ kernel proves them, the others searched again on its bucket grid (else SciPy's k
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy
 
@@ -56,21 +54,6 @@ class GridIndex:
         return idx, second
 
 
-@dataclass
-class _Found:
-    """Per point: where it was searched from (3, N), its nearest (M: none) and second distance."""
-
-    at: np.ndarray
-    index: np.ndarray
-    second: np.ndarray
-
-    def copy(self) -> _Found:
-        return _Found(self.at.copy(), self.index.copy(), self.second.copy())
-
-    def put(self, idx: np.ndarray, other: _Found) -> None:
-        self.at[:, idx], self.index[idx], self.second[idx] = other.at, other.index, other.second
-
-
 class Nearest:
     """Each source point's nearest target, exact within ``dist``. A search looks ``SLACK * dist`` far
     and keeps the second-nearest distance: a point keeps its nearest while that is closer than the
@@ -85,55 +68,52 @@ class Nearest:
         self.m = len(target)
         self.dist, self.bound, self.workers = dist, SLACK * dist, workers
         self.tree = tree_of(target) if tree is None else tree
-        self.last: _Found | None = None
-        self.older: _Found | None = None
+        # per point: where it was searched from (3, N), its nearest (M: none), the second distance
+        self.last: list[np.ndarray] | None = None
+        self.older: list[np.ndarray] | None = None
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(distance, index) of each (3, N) point's nearest target (inf and M: none within ``dist``);
         the kept neighbours are proven by the native kernel, without it every point is searched."""
         lib, n = kernels(), points.shape[1]
-        kept = self.last is not None and len(self.last.index) == n
+        kept = self.last is not None and len(self.last[1]) == n
         if lib is not None and kept and points.flags.c_contiguous and points.dtype == np.float64:
             return self._native(lib, points)
         self.last, self.older = self._search(points), None
-        return self._distances(self.last, points), self.last.index
+        return self._distances(self.last, points), self.last[1]
 
     def _native(self, lib, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`__call__` with the kept neighbours proven by ``sv_nearest_kept``: the same state."""
         n, last = points.shape[1], self.last
         old = self.older if self.older is not None else last
         d, todo = np.empty(n), np.empty(n, np.int64)
-        kept = (last.at, last.index, last.second, old.at, old.index, old.second)
         k = lib.sv_nearest_kept(
-            points.ctypes.data, n, *(a.ctypes.data for a in kept), int(self.older is not None), self.target.ctypes.data,
-            self.target.shape[1], self.m, self.bound - self.dist, d.ctypes.data, todo.ctypes.data,
+            points.ctypes.data, n, *(a.ctypes.data for a in (*last, *old)), int(self.older is not None),
+            self.target.ctypes.data, self.target.shape[1], self.m, self.bound - self.dist, d.ctypes.data,
+            todo.ctypes.data,
         )  # fmt: skip
         if k:
             idx = todo[:k]
             if self.older is None:
-                self.older = last.copy()
+                self.older = [a.copy() for a in last]
             pts = np.take(points, idx, axis=1)
             found = self._search(pts)
-            last.put(idx, found)
+            for a, b in zip(last, found, strict=True):
+                a[..., idx] = b
             d[idx] = self._distances(found, pts)
-        return d, last.index
+        return d, last[1]
 
-    def _search(self, points: np.ndarray) -> _Found:
+    def _search(self, points: np.ndarray) -> list[np.ndarray]:
         if isinstance(self.tree, GridIndex):
             points = np.ascontiguousarray(points, dtype=np.float64)
-            idx, second = self.tree.nearest2(points, self.bound)
-            return _Found(points.copy(), idx, second)
+            return [points.copy(), *self.tree.nearest2(points, self.bound)]
         workers = self.workers if points.shape[1] >= THREADED else 1  # threads cost more than a few searches
         d, j = self.tree.query(points.T, k=2, distance_upper_bound=self.bound, workers=workers)
-        return _Found(points.copy(), j[:, 0].astype(np.int64), np.minimum(d[:, 1], self.bound))
+        return [points.copy(), j[:, 0].astype(np.int64), np.minimum(d[:, 1], self.bound)]
 
-    def _distances(self, found: _Found, points: np.ndarray) -> np.ndarray:
-        return _norms(points - np.take(self.target, found.index, axis=1))
-
-
-def _norms(v: np.ndarray) -> np.ndarray:
-    """Euclidean norm of each column of a (3, N) array."""
-    out = v[0] * v[0]
-    out += v[1] * v[1]
-    out += v[2] * v[2]
-    return np.sqrt(out, out=out)
+    def _distances(self, found: list[np.ndarray], points: np.ndarray) -> np.ndarray:
+        v = points - np.take(self.target, found[1], axis=1)  # each column's Euclidean norm
+        out = v[0] * v[0]
+        out += v[1] * v[1]
+        out += v[2] * v[2]
+        return np.sqrt(out, out=out)

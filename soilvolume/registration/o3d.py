@@ -9,37 +9,30 @@ import numpy as np
 
 PLOTLY = "open3d.visualization.draw_plotly"
 _LIMITED = False  # whether limit_threads set a limit (a later run without one lifts it)
-_WANTED: list[int] = []  # the threads asked for before Open3D was imported
+_ASKED: list[int] = []  # the threads asked for, applied when Open3D is (or is next) imported
 
 
 def _o3d():
+    global _LIMITED
     if "open3d" not in sys.modules:
         _import_without_plotly()
     import open3d as o3d
 
     o3d.utility.set_verbosity_level(o3d.utility.VerbosityLevel.Error)
-    if _WANTED:
-        _apply(o3d.utility, _WANTED.pop())  # a limit asked for before the import
+    if _ASKED:
+        threads = _ASKED.pop()
+        if (threads > 0 or _LIMITED) and hasattr(o3d.utility, "set_max_threads"):
+            o3d.utility.set_max_threads(max(0, int(threads)))
+            _LIMITED = threads > 0
     return o3d
 
 
 def limit_threads(threads: int) -> None:
     """Open3D's CPU threads (0: all cores; 0.19+ runs on oneTBB, deaf to OMP_NUM_THREADS): only
     remembered until Open3D is imported; a process that never asked keeps Open3D's own setting."""
-    _WANTED.clear()
+    _ASKED[:] = [threads]
     if "open3d" in sys.modules:
-        _apply(_o3d().utility, threads)
-    else:
-        _WANTED.append(threads)
-
-
-def _apply(utility, threads: int) -> None:
-    global _LIMITED
-    if threads <= 0 and not _LIMITED:
-        return
-    if hasattr(utility, "set_max_threads"):
-        utility.set_max_threads(max(0, int(threads)))
-        _LIMITED = threads > 0
+        _o3d()
 
 
 def _import_without_plotly() -> None:
@@ -62,8 +55,8 @@ def _import_without_plotly() -> None:
             del sys.modules[PLOTLY]
 
 
-def to_pcd(xyz: np.ndarray, voxel: float | None = None, normals: np.ndarray | None = None):
-    """Open3D cloud from local float64 coordinates, optionally voxel-thinned, or with ``normals``."""
+def to_pcd(xyz: np.ndarray, normals: np.ndarray | None = None, voxel: float | None = None):
+    """Open3D cloud from local float64 coordinates, with ``normals``, or optionally voxel-thinned."""
     o3d = _o3d()
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(np.ascontiguousarray(xyz, dtype=np.float64)))
     if normals is not None:

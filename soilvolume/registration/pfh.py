@@ -11,6 +11,9 @@ from .o3d import to_pcd, with_normals
 from .rigid import transform_points
 
 BINS = 5
+VOXEL, MARGIN = 0.15, 3.0  # m: the patch's voxels; how much wider the target's patch is
+SAC_ITER, K_SIM, INLIER = 3000, 4, 0.15  # SAC-IA hypotheses, similar descriptors drawn from, inlier distance (m)
+MAX_ROTATION, MAX_SHIFT = 6.0, 4.0  # deg, m: hypotheses beyond are discarded
 
 
 def pfh_features(xyz: np.ndarray, normals: np.ndarray, keys: np.ndarray, radius: float, k: int = 16) -> np.ndarray:
@@ -76,49 +79,31 @@ def choose_patch(source: np.ndarray, target: np.ndarray, size: float) -> np.ndar
     return best
 
 
-def _triples(src: np.ndarray, n: int, min_dist: float, rng) -> np.ndarray:
-    """``n`` random index triples at least ``min_dist`` apart (PCL's min_sample_distance)."""
-    pick = rng.integers(0, len(src), size=(4 * n, 3))
-    p = src[pick]
-    d = np.stack([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in ((0, 1), (0, 2), (1, 2))], 1)
-    return pick[(d >= min_dist).all(axis=1)][:n]
-
-
-def sac_ia(
-    src,
-    fs,
-    tgt,
-    ft,
-    seed: int,
-    *,
-    kt: np.ndarray,
-    iterations: int = 3000,
-    k_sim: int = 4,
-    inlier: float = 0.15,
-    max_rotation: float = 6.0,
-    max_shift: float = 4.0,
-) -> np.ndarray:
+def sac_ia(src: np.ndarray, fs: np.ndarray, tgt: np.ndarray, ft: np.ndarray, kt: np.ndarray, seed: int) -> np.ndarray:
     """SAC-IA of keypoints ``src`` (descriptors ``fs``) onto ``tgt`` (keypoints ``kt``, descriptors
-    ``ft``): the best 4x4, hypotheses beyond ``max_rotation`` deg or ``max_shift`` m discarded."""
+    ``ft``): the best 4x4, hypotheses beyond :data:`MAX_ROTATION` deg or :data:`MAX_SHIFT` m discarded."""
     rng = np.random.default_rng(seed)
-    _, sim = scipy.spatial.cKDTree(ft).query(fs, k=k_sim)
+    _, sim = scipy.spatial.cKDTree(ft).query(fs, k=K_SIM)
     tree = scipy.spatial.cKDTree(tgt)
-    best_t, best_err = np.eye(4), _score(tree, src, np.eye(4), inlier)
+    best_t, best_err = np.eye(4), _score(tree, src, np.eye(4), INLIER)
     centre = src.mean(axis=0)
-    cos_max = np.cos(np.radians(max_rotation))
-    for start in range(0, iterations, 500):
-        pick = _triples(src, min(500, iterations - start), 1.0, rng)
-        match = kt[sim[pick, rng.integers(0, k_sim, size=pick.shape)]]
+    cos_max = np.cos(np.radians(MAX_ROTATION))
+    for start in range(0, SAC_ITER, 500):
+        pick = rng.integers(0, len(src), size=(4 * min(500, SAC_ITER - start), 3))  # keypoint triples,
+        p = src[pick]  # those at least 1 m apart kept (PCL's min_sample_distance)
+        d = np.stack([np.linalg.norm(p[:, i] - p[:, j], axis=1) for i, j in ((0, 1), (0, 2), (1, 2))], 1)
+        pick = pick[(d >= 1.0).all(axis=1)][: min(500, SAC_ITER - start)]
+        match = kt[sim[pick, rng.integers(0, K_SIM, size=pick.shape)]]
         ts = kabsch(src[pick], tgt[match])
         cos = (np.trace(ts[:, :3, :3], axis1=1, axis2=2) - 1) / 2
         moved = np.linalg.norm(ts[:, :3, :3] @ centre + ts[:, :3, 3] - centre, axis=1)
-        for t in ts[(cos >= cos_max) & (moved <= max_shift)]:
-            err = _score(tree, src, t, inlier)
+        for t in ts[(cos >= cos_max) & (moved <= MAX_SHIFT)]:
+            err = _score(tree, src, t, INLIER)
             if err < best_err:
                 best_t, best_err = t, err
     for _ in range(5):  # refit the winner on its inlier correspondences
         d, j = tree.query(transform_points(src, best_t))
-        ok = d < inlier
+        ok = d < INLIER
         if ok.sum() < 6:
             break
         best_t = kabsch(src[ok][None], tgt[j[ok]][None])[0]
@@ -132,31 +117,22 @@ def _score(tree: scipy.spatial.cKDTree, src: np.ndarray, t: np.ndarray, inlier: 
     return float(np.where(d < inlier, 0.5 * d * d, inlier * (d - 0.5 * inlier)).sum())
 
 
-def pfh_sac_ia(
-    source_xyz: np.ndarray,
-    target_xyz: np.ndarray,
-    init: np.ndarray,
-    patch: float = 6.0,
-    seed: int = 0,
-    voxel: float = 0.15,
-    margin: float = 3.0,
-) -> np.ndarray:
-    """The paper's precise registration on a ``patch`` m square: the 4x4 composed with ``init``."""
+def pfh_sac_ia(source_xyz: np.ndarray, target_xyz: np.ndarray, init: np.ndarray, patch: float, seed: int) -> np.ndarray:
+    """The paper's precise registration on a ``patch`` m square (the target's :data:`MARGIN` m wider),
+    on :data:`VOXEL` m voxels: the 4x4 composed with ``init``."""
     src_all = transform_points(source_xyz, init)
     c = choose_patch(src_all, target_xyz, patch)
     h = patch / 2
     in_s = (np.abs(src_all[:, :2] - c) <= h).all(axis=1)
-    in_t = (np.abs(target_xyz[:, :2] - c) <= h + margin).all(axis=1)
+    in_t = (np.abs(target_xyz[:, :2] - c) <= h + MARGIN).all(axis=1)
     if in_s.sum() < 50 or in_t.sum() < 50:
         return init
-    s = with_normals(to_pcd(src_all[in_s], voxel), 4 * voxel)
-    t = with_normals(to_pcd(target_xyz[in_t], voxel), 4 * voxel)
+    s = with_normals(to_pcd(src_all[in_s], voxel=VOXEL), 4 * VOXEL)
+    t = with_normals(to_pcd(target_xyz[in_t], voxel=VOXEL), 4 * VOXEL)
     sp, sn = np.asarray(s.points), np.asarray(s.normals)
     tp, tn = np.asarray(t.points), np.asarray(t.normals)
     rng = np.random.default_rng(seed)
     ks = rng.choice(len(sp), min(600, len(sp)), replace=False)
     kt = rng.choice(len(tp), min(2500, len(tp)), replace=False)
-    fs = pfh_features(sp, sn, ks, 5 * voxel)
-    ft = pfh_features(tp, tn, kt, 5 * voxel)
-    dt = sac_ia(sp[ks], fs, tp, ft, seed, kt=kt)
-    return dt @ init
+    fs, ft = pfh_features(sp, sn, ks, 5 * VOXEL), pfh_features(tp, tn, kt, 5 * VOXEL)
+    return sac_ia(sp[ks], fs, tp, ft, kt, seed) @ init

@@ -1,8 +1,10 @@
-"""Coarse (:mod:`.coarse`) and fine (:mod:`.fine`) registration of the after cloud onto the before
-cloud, local frame; each stage a :class:`~soilvolume.core.types.StageQuality` (transform, fitness, RMSE)."""
+"""Coarse (FPFH + RANSAC on column surfaces, within the GPS prior) and fine (:mod:`.fine`) registration
+of the after cloud onto the before cloud, local frame; each stage a
+:class:`~soilvolume.core.types.StageQuality` (transform, fitness, RMSE)."""
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -12,13 +14,14 @@ from ..core.record import Georeferencing
 from ..core.types import SoilVolumeError, StageQuality
 from ..options import Options
 from . import columns
-from .coarse import coarse_stage
 from .fine import fine_stage
-from .fit import EVAL_DISTANCE, evaluate_surface, judged
-from .ground import spacing
-from .o3d import limit_threads
+from .ground import EVAL_DISTANCE, cap_voxel, evaluate_surface, judged, spacing
+from .o3d import _o3d, limit_threads, to_pcd
+from .rigid import rotation_deg, shift_at
 
 AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse
+MAX_COARSE_POINTS = 15_000
+COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
 
 
 @dataclass(frozen=True)
@@ -43,7 +46,8 @@ def register(
     ``dense``: the full-resolution (after, before) clouds, for the paper's PFH."""
     eye = np.eye(4)
     if precise:
-        fit, rmse = evaluate_surface(judged(after_xyz, spacing(before_xyz)), before_xyz, eye)
+        gap = spacing(before_xyz)
+        fit, rmse = evaluate_surface(judged(after_xyz, gap), before_xyz, eye, gap)
         skipped = "skipped: coordinates used as georeferenced ({opt:georeferencing})"
         return Registration(
             eye,
@@ -77,3 +81,45 @@ def register(
             "clouds cover the same site and their CRSs"
         )
     return Registration(best.transform, coarse, best)
+
+
+def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
+    """``--coarse``: FPFH features + RANSAC of the column surfaces on a coarse voxel (seeded), accepted
+    within the GPS prior (or forced by ``fpfh``)."""
+    t0 = time.perf_counter()
+    if options.coarse == "none":
+        return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
+    o3d = _o3d()
+    reg = o3d.pipelines.registration
+    o3d.utility.random.seed(options.seed)
+    voxel = max(options.coarse_voxel, cap_voxel(after_xyz, MAX_COARSE_POINTS), cap_voxel(before_xyz, MAX_COARSE_POINTS))
+    src, tgt = (to_pcd(*columns.column_surface(xyz, voxel)) for xyz in (after_xyz, before_xyz))
+    param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
+    fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
+    dist = 1.5 * voxel
+    res = reg.registration_ransac_based_on_feature_matching(
+        src,
+        tgt,
+        fs,
+        ft,
+        True,
+        dist,
+        reg.TransformationEstimationPointToPoint(False),
+        3,
+        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
+        reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
+    )
+    t = np.asarray(res.transformation)
+    src, tgt = to_pcd(after_xyz, voxel=options.coarse_voxel), to_pcd(before_xyz, voxel=options.coarse_voxel)
+    ev = reg.evaluate_registration(src, tgt, 1.5 * options.coarse_voxel, t)  # point to point
+    fit, rmse = float(ev.fitness), float(ev.inlier_rmse)
+    centre = after_xyz.mean(axis=0)
+    rot, shift = rotation_deg(t), shift_at(t, centre)
+    within = rot <= options.max_gps_rotation and shift <= options.max_gps_shift
+    accepted = options.coarse == "fpfh" or within
+    note = f"FPFH+RANSAC moved the after centre {shift:.2f} m and rotated {rot:.2f} deg"
+    if not within:
+        note += f"; outside the GPS error prior ({options.max_gps_shift} m, {options.max_gps_rotation} deg)" + (
+            "" if accepted else ": rejected"
+        )
+    return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)

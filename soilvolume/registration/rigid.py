@@ -21,6 +21,17 @@ def shift_at(t: np.ndarray, point: np.ndarray) -> float:
     return float(np.linalg.norm(t[:3, :3] @ point + t[:3, 3] - point))
 
 
+def rotation_zyx(rx: float, ry: float, rz: float) -> np.ndarray:
+    """``Rz Ry Rx``: the rotation by ``rx``, then ``ry``, then ``rz`` radians about x, y and z."""
+    ca, sa = np.cos(rx), np.sin(rx)
+    cb, sb = np.cos(ry), np.sin(ry)
+    cc, sc = np.cos(rz), np.sin(rz)
+    rot_x = np.array([[1.0, 0.0, 0.0], [0.0, ca, -sa], [0.0, sa, ca]])
+    rot_y = np.array([[cb, 0.0, sb], [0.0, 1.0, 0.0], [-sb, 0.0, cb]])
+    rot_z = np.array([[cc, -sc, 0.0], [sc, cc, 0.0], [0.0, 0.0, 1.0]])
+    return rot_z @ rot_y @ rot_x
+
+
 def transform_points(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
     return xyz @ t[:3, :3].T + t[:3, 3]
 

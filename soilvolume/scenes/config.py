@@ -37,10 +37,10 @@ class SceneConfig:
     objects: bool = False  # vehicles (class 6) and boulders (class 1), same place in both epochs
     relief: float = 1.0  # scale of the long waves and hills (0 = a tilted plane with local detail)
     # "piles" (3 piles ~1020 m3 + a pit ~69 m3, ~15 % of the after footprint), "none", "pit" (5 %), "pile"
-    # (10 %), "excavation" (`change_fraction` of the footprint, a tall pile beside it) or a site of sites.py
+    # (10 %), "excavation" (`change_fraction` of the footprint, a tall pile beside it) or a site (features.py)
     change: str = "piles"
     # "fixed": the layouts above, the same for every seed (bench/ACCURACY.md, README, demo, self-test);
-    # "drawn": the seed also draws the "piles" site's works (scenes/drawn.py)
+    # "drawn": the seed also draws the "piles" site's works (scenes/features.py)
     works: str = "fixed"
     crs: str = "EPSG:32654"
     # a vertical CRS the files also declare (compound, e.g. "EPSG:5703"): the GPS error above remains

@@ -1,6 +1,6 @@
-"""Site conditions that hide or imitate earthworks (issue 45): occlusion holes (``holes``, some on a
-change's edge); standing water in the after survey's pits (``water_m``: no point on it, the truth
-still the bottom); equipment that arrived (``equipment``); a before survey short of the after one
+"""Site conditions that hide or imitate earthworks (issue 45; its arrived equipment in :mod:`.nuisances`):
+occlusion holes (``holes``, some on a change's edge); standing water in the after survey's pits
+(``water_m``: no point on it, the truth still the bottom); a before survey short of the after one
 (``overlap``: the share of the after footprint's width it reaches from the west); a meadow mown
 between the surveys (``meadow``: 0.3-0.7 m grass, then stubble; fresh soil carries none)."""
 
@@ -12,29 +12,7 @@ import numpy as np
 
 from .config import SceneConfig
 from .features import change_dz, clear_of
-
-BOULDER, PATCH = 2, 3  # the world's feature types (see nuisances)
-VEHICLE = 1
-# (name, feature type, half length, half width, height): boxes as vehicles, pipes as a mound
-EQUIPMENT = (
-    ("excavator", VEHICLE, 2.9, 1.5, 3.0),
-    ("container", VEHICLE, 3.05, 1.22, 2.6),
-    ("site cabin", VEHICLE, 2.2, 1.3, 2.8),
-    ("truck", VEHICLE, 3.8, 1.25, 3.2),
-    ("pipe stack", BOULDER, 3.0, 1.6, 1.4),
-)
-
-
-def equipment(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
-    """Place ``cfg.equipment`` pieces of :data:`EQUIPMENT` in turn in the after survey: their roles."""
-    roles = []
-    for k in range(cfg.equipment):
-        _, typ, a, b, h = EQUIPMENT[k % len(EQUIPMENT)]
-        j = rng.uniform(0.9, 1.1)
-        params = (typ, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a * j, b * j, h, math.hypot(a, b) * j)
-        if place(True, params):
-            roles.append("arrived")
-    return roles
+from .nuisances import PATCH
 
 
 def meadow_row(cfg: SceneConfig, box: tuple[float, float, float, float], rng: np.random.Generator) -> tuple:
@@ -105,21 +83,10 @@ def occlusion_holes(world, rng: np.random.Generator, n: int) -> np.ndarray | Non
             for _try in range(50):
                 x = rng.uniform(world.ax0 + 2, world.ax1 - 2)
                 y = rng.uniform(world.ay0 + 2, world.ay1 - 2)
-                if all(
-                    clear_of(c, x, y, r + 1.0)
-                    if c.get("exact_outline")
-                    else math.hypot(x - c["x"], y - c["y"]) > c["radius"] + r + 1.0
-                    for c in world.changes
-                ):
+                if all(clear_of(c, x, y, r + 1.0) for c in world.changes):
                     break
         # irregular blob: union of three discs
         for _ in range(3):
-            world.stamp(
-                grid,
-                world.hole_res,
-                x + rng.uniform(-0.6, 0.6) * r,
-                y + rng.uniform(-0.6, 0.6) * r,
-                r * rng.uniform(0.5, 0.9),
-                True,
-            )
+            cx, cy = x + rng.uniform(-0.6, 0.6) * r, y + rng.uniform(-0.6, 0.6) * r
+            world.stamp(grid, world.hole_res, cx, cy, r * rng.uniform(0.5, 0.9), True)
     return grid

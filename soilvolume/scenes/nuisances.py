@@ -1,8 +1,8 @@
 """What is not soil on a synthetic site, and the per-point signals a survey carries: vehicles that
-moved, arrived or left, grass patches grown or mown, a crop field (their own random stream, so pairs
-without them are unchanged); colour (``signals="rgb"``: soil brown or grey with shadows, vegetation
-green but not saturated, vehicles painted, boulders grey); LiDAR returns (canopy points early returns
-of several, the ground below the last, hard surfaces single)."""
+moved, arrived or left, equipment that arrived, grass patches grown or mown, a crop field (their own
+random stream, so pairs without them are unchanged); colour (``signals="rgb"``: soil brown or grey
+with shadows, vegetation green but not saturated, vehicles painted, boulders grey); LiDAR returns
+(canopy points early returns of several, the ground below the last, hard surfaces single)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,6 @@ import math
 import numpy as np
 
 from .config import CLASS_BOULDER, CLASS_GROUND, CLASS_VEHICLE, SceneConfig
-from .hazards import equipment
 
 SIGNALS = ("class", "rgb", "lidar", "returns", "none")
 # feature types of the world's feature table
@@ -20,6 +19,15 @@ BUSH, VEHICLE, BOULDER, PATCH, CROP = 0, 1, 2, 3, 4
 SOIL, GREEN, CAR, STONE, STRAY = 0, 1, 2, 3, 4
 PAINT = np.array([[205, 165, 45], [215, 214, 208], [72, 74, 78], [205, 105, 40], [55, 72, 140]], float)
 SOIL_RGB = {"brown": (128, 102, 78), "grey": (118, 116, 110)}
+# equipment and materials that arrived (``equipment``), in turn: (name, feature type, half length, half
+# width, height): boxes as vehicles, pipes as a mound
+EQUIPMENT = (
+    ("excavator", VEHICLE, 2.9, 1.5, 3.0),
+    ("container", VEHICLE, 3.05, 1.22, 2.6),
+    ("site cabin", VEHICLE, 2.2, 1.3, 2.8),
+    ("truck", VEHICLE, 3.8, 1.25, 3.2),
+    ("pipe stack", BOULDER, 3.0, 1.6, 1.4),
+)
 
 
 def vehicle_shape(rng: np.random.Generator) -> tuple[float, float, float]:
@@ -28,7 +36,7 @@ def vehicle_shape(rng: np.random.Generator) -> tuple[float, float, float]:
 
 
 def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[str]:
-    """Place the config's moved, arriving and leaving vehicles, patches and crop field with
+    """Place the config's moved, arriving and leaving vehicles, patches, crop field and equipment with
     ``place(inside_after, params)`` (False: no free spot): each placed feature's role, in order."""
     if cfg.signals not in SIGNALS:
         raise ValueError(f"unknown signals {cfg.signals!r} ({', '.join(SIGNALS)})")
@@ -61,11 +69,16 @@ def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[st
         a, b = rng.uniform(8.0, 10.0), rng.uniform(5.0, 7.0)
         if place(True, (CROP, rng.uniform(-0.3, 0.3), a, b, 0.2, a, b, 0.8, math.hypot(a, b))):
             roles.append("vegetation")
-    return roles + equipment(cfg, rng, place)
+    for k in range(cfg.equipment):
+        _, typ, a, b, h = EQUIPMENT[k % len(EQUIPMENT)]
+        j = rng.uniform(0.9, 1.1)
+        if place(True, (typ, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a * j, b * j, h, math.hypot(a, b) * j)):
+            roles.append("arrived")
+    return roles
 
 
 def categories(cls: np.ndarray, stray: np.ndarray) -> np.ndarray:
-    """Per-point category (:data:`SOIL` ...) from the world's classes and the ``stray`` (outlier) mask."""
+    """Per-point category (:data:`SOIL` ...) from the world's classes and the ``stray`` (outlier) points."""
     cat = np.full(cls.shape, SOIL, np.uint8)
     cat[(cls >= 3) & (cls <= 5)] = GREEN
     cat[cls == 6] = CAR
@@ -100,13 +113,11 @@ def returns(cat: np.ndarray, under: np.ndarray, rng) -> tuple[np.ndarray, np.nda
     """(return number, number of returns) per point: canopy mostly first of 2-3, ground ``under``
     vegetation last of 2, others single."""
     n = cat.size
-    num = np.ones(n, np.uint8)
-    ret = np.ones(n, np.uint8)
+    num, ret = np.ones(n, np.uint8), np.ones(n, np.uint8)
     canopy = (cat == GREEN) & (rng.random(n) >= 0.2)
     num[canopy] = rng.integers(2, 4, int(canopy.sum()))
     ground = under & (cat == SOIL)
-    num[ground] = 2
-    ret[ground] = 2
+    num[ground] = ret[ground] = 2
     return ret, num
 
 

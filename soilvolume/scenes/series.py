@@ -13,11 +13,11 @@ from pathlib import Path
 import laspy
 import numpy as np
 
+from ..registration.rigid import rotation_zyx
 from .config import CLASS_GROUND, SceneConfig
-from .features import after_box, features_dz, finish_features
-from .sites import cone, rect
+from .features import after_box, cone, features_dz, finish_features, rect
 from .synthetic import las_header
-from .world import World, rotation
+from .world import World
 
 DATES = ("2026-03-02", "2026-03-09", "2026-03-16", "2026-03-23")
 #: per epoch: (shift m, roll/pitch/yaw deg) of its GPS error
@@ -57,13 +57,9 @@ def epoch_features(cx: float, cy: float) -> list[dict[str, dict]]:
     return epochs
 
 
-def _signed(feats: dict[str, dict]) -> dict[str, float]:
-    return {k: f["sign"] * f["volume"] for k, f in feats.items()}
-
-
 def change_truth(a: dict[str, dict], b: dict[str, dict]) -> dict[str, float]:
     """net/cut/fill (m3) from features ``a`` to ``b``: each slot's change has one sign."""
-    va, vb = _signed(a), _signed(b)
+    va, vb = ({k: f["sign"] * f["volume"] for k, f in feats.items()} for feats in (a, b))  # signed volumes
     moves = [vb.get(k, 0.0) - va.get(k, 0.0) for k in set(va) | set(vb)]
     fill, cut = sum(m for m in moves if m > 0), -sum(m for m in moves if m < 0)
     return {"net": fill - cut, "cut": cut, "fill": fill}
@@ -74,7 +70,7 @@ def misalignment(k: int, centre_abs: np.ndarray, errors=GPS_ERRORS) -> np.ndarra
     ``p_s = R (p - c) + c + t``."""
     shift, deg = errors[k]
     m = np.eye(4)
-    m[:3, :3] = rotation(deg)
+    m[:3, :3] = rotation_zyx(*np.radians(deg))
     m[:3, 3] = centre_abs + np.asarray(shift) - m[:3, :3] @ centre_abs
     return m
 

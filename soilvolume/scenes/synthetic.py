@@ -50,14 +50,13 @@ class Scene:
 
 
 def _config_dict(cfg: SceneConfig) -> dict:
-    d = asdict(cfg)
-    if cfg.change != "excavation":  # only meaningful there; keeps older truth files identical
-        d.pop("change_fraction")
-    plain = SceneConfig()
-    for k in NEWER_FIELDS:  # at their defaults: older truth files stay identical
-        if d[k] == getattr(plain, k):
-            d.pop(k)
-    return d
+    """The config without the newer fields at their defaults, nor ``change_fraction`` (only meaningful
+    for an excavation): older truth files stay identical."""
+    d, plain = asdict(cfg), asdict(SceneConfig())
+    skip = {k for k in NEWER_FIELDS if d[k] == plain[k]} | (
+        {"change_fraction"} if cfg.change != "excavation" else set()
+    )
+    return {k: v for k, v in d.items() if k not in skip}
 
 
 NEWER_FIELDS = ("signals", "movers", "arrivals", "departures", "patches", "patch_change", "crops")
@@ -141,21 +140,15 @@ def scene_truth(seed: int = 0, config: SceneConfig | None = None) -> dict:
 
 def iter_epoch(seed: int, config: SceneConfig, epoch: str) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """(xyz absolute (n, 3), class uint8) chunks of one epoch ("before"/"after"): ``make_pair``'s arrays."""
-    world = World(seed, config)
-    e = {"before": 0, "after": 1}[epoch]
-    for i in range(world.n_chunks(e)):
-        yield world.chunk(e, i)
+    return World(seed, config).chunks({"before": 0, "after": 1}[epoch])
 
 
 def make_pair(seed: int = 0, config: SceneConfig | None = None) -> Scene:
     """Generate a seeded pair in memory (deterministic for a given seed and config)."""
     config = config or SceneConfig()
     world = World(seed, config)
-    out = []
-    for e in (0, 1):
-        parts = [world.chunk(e, i) for i in range(world.n_chunks(e))]
-        out.append((np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])))
-    return Scene(out[0][0], out[1][0], out[0][1], out[1][1], world_truth(world), config, int(seed))
+    (b, bc), (a, ac) = ([np.concatenate(part) for part in zip(*world.chunks(e), strict=True)] for e in (0, 1))
+    return Scene(b, a, bc, ac, world_truth(world), config, int(seed))
 
 
 def las_header(config: SceneConfig, scale: float):
@@ -172,43 +165,26 @@ def las_header(config: SceneConfig, scale: float):
     return header
 
 
-def _paths(directory, fmt: str) -> tuple[Path, Path, Path]:
+def write_pair(scene: Scene, directory, fmt: str = "las") -> tuple[Path, Path, Path]:
+    """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, format 6, CRS, mm) and ``truth.json``: the
+    paths (the scene's seed and config written chunk by chunk: the same bytes as its arrays)."""
+    return write_pair_streaming(scene.seed, scene.config, directory, fmt)
+
+
+def write_pair_streaming(seed: int, config: SceneConfig, directory, fmt: str = "las") -> tuple[Path, Path, Path]:
+    """``write_pair(make_pair(seed, config), ...)`` chunk by chunk, in ~0.3 GB whatever the size."""
+    import laspy
+
     if fmt not in ("las", "laz"):
         raise ValueError(f"fmt must be 'las' or 'laz', not {fmt!r}")
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
-    return d / f"before.{fmt}", d / f"after.{fmt}", d / "truth.json"
-
-
-def write_pair(scene: Scene, directory, fmt: str = "las", scale: float = 0.001) -> tuple[Path, Path, Path]:
-    """Write ``before.<fmt>``, ``after.<fmt>`` (LAS 1.4, format 6, CRS) and ``truth.json``: the paths."""
-    import laspy
-
-    if scene.config.signals != "class":  # colours and returns come from the generator's chunks
-        return write_pair_streaming(scene.seed, scene.config, directory, fmt, scale)
-    pb, pa, pt = _paths(directory, fmt)
-    for path, xyz, cls in ((pb, scene.before, scene.before_class), (pa, scene.after, scene.after_class)):
-        las = laspy.LasData(las_header(scene.config, scale))
-        las.x, las.y, las.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-        las.classification = cls
-        las.write(str(path))
-    pt.write_text(json.dumps(scene.truth, indent=2) + "\n")
-    return pb, pa, pt
-
-
-def write_pair_streaming(
-    seed: int, config: SceneConfig, directory, fmt: str = "las", scale: float = 0.001
-) -> tuple[Path, Path, Path]:
-    """``write_pair(make_pair(seed, config), ...)`` chunk by chunk, in ~0.3 GB whatever the size."""
-    import laspy
-
-    pb, pa, pt = _paths(directory, fmt)
+    pb, pa, pt = d / f"before.{fmt}", d / f"after.{fmt}", d / "truth.json"
     world = World(seed, config)
     for e, path in ((0, pb), (1, pa)):
-        header = las_header(config, scale)
+        header = las_header(config, 0.001)
         with laspy.open(str(path), mode="w", header=header) as writer:
-            for i in range(world.n_chunks(e)):
-                xyz, cls, fields = world.chunk(e, i, signals=True)
+            for xyz, cls, fields in world.chunks(e, signals=True):
                 rec = laspy.ScaleAwarePointRecord.zeros(len(cls), header=header)
                 rec.x, rec.y, rec.z = xyz[:, 0], xyz[:, 1], xyz[:, 2]
                 rec.classification = cls

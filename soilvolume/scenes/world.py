@@ -4,9 +4,11 @@ misalignment, and the points of each epoch generated chunk by chunk."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 
+from ..registration.rigid import rotation_zyx
 from .config import CLASS_GROUND, CLASS_OUTLIER, SceneConfig
 from .features import after_box, change_dz, change_features, clear_of
 from .hazards import dry, meadow_row, occlusion_holes, reached, water_levels
@@ -22,28 +24,22 @@ class _Placer:
 
     def __init__(self, size, box, changes: list[dict], rng: np.random.Generator) -> None:
         self.size, self.box, self.changes, self.rng = size, box, changes, rng
-        self.feats: list[tuple] = []
-        self.placed: list[tuple[float, float, float]] = []
+        self.feats: list[tuple] = []  # their last field: the bounding radius
 
     def free(self, x: float, y: float, r: float) -> bool:
         bw, bh = self.size
-        if not (r < x < bw - r and r < y < bh - r):
-            return False
-        for c in self.changes:
-            if c.get("exact_outline"):
-                if not clear_of(c, x, y, r + 2.0):
-                    return False
-            elif math.hypot(x - c["x"], y - c["y"]) < c["radius"] + r + 2.0:
-                return False
-        return all(math.hypot(x - px, y - py) > r + pr + 0.5 for px, py, pr in self.placed)
+        return (
+            r < x < bw - r
+            and r < y < bh - r
+            and all(clear_of(c, x, y, r + 2.0) for c in self.changes)
+            and all(math.hypot(x - f[1], y - f[2]) > r + f[-1] + 0.5 for f in self.feats)
+        )
 
     def place(self, n: int, inside_after: bool, make, rng: np.random.Generator | None = None) -> bool:
-        """Place ``n`` features ``make()`` (50 tries each); whether the last one was placed."""
-        rng = self.rng if rng is None else rng
+        """Place ``n`` features ``make()`` (50 tries each); whether any was placed."""
+        rng, placed = self.rng if rng is None else rng, len(self.feats)
         ax0, ay0, ax1, ay1 = self.box
-        ok = False
         for _ in range(n):
-            ok = False
             for _try in range(50):
                 if inside_after:
                     x, y = rng.uniform(ax0 + 1, ax1 - 1), rng.uniform(ay0 + 1, ay1 - 1)
@@ -52,10 +48,8 @@ class _Placer:
                 params = make()
                 if self.free(x, y, params[-1]):
                     self.feats.append((params[0], x, y) + params[1:])
-                    self.placed.append((x, y, params[-1]))
-                    ok = True
                     break
-        return ok
+        return len(self.feats) > placed
 
 
 class World:
@@ -72,7 +66,10 @@ class World:
         self._init_features(rng)
         self.hole_res = 0.1  # occlusion holes, per epoch
         self.holes = [occlusion_holes(self, rng, cfg.holes) for _ in range(2)]
-        self._init_misalignment()
+        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0  # the GPS misalignment (local frame):
+        self.R = rotation_zyx(*np.radians(cfg.rotation_deg))  # p_s = R (p - c) + c + t; roll, pitch, yaw
+        self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
+        self.t = np.asarray(cfg.shift_m, dtype=np.float64)
         self.water = water_levels(self) if cfg.water_m > 0 else []
 
     def _init_features(self, rng: np.random.Generator) -> None:
@@ -104,14 +101,6 @@ class World:
             self.feat_zc = self.terrain(self.feats[:, 1], self.feats[:, 2])
         for k, f in enumerate(self.feats):
             self.stamp(self.label, self.feat_res, f[1], f[2], f[10] + self.feat_res, k + 1)
-
-    def _init_misalignment(self) -> None:
-        """The GPS misalignment (local frame): ``p_s = R (p - c) + c + t``."""
-        cfg = self.cfg
-        acx, acy = (self.ax0 + self.ax1) / 2.0, (self.ay0 + self.ay1) / 2.0
-        self.R = rotation(cfg.rotation_deg)
-        self.c = np.array([acx, acy, float(self.terrain(np.array([acx]), np.array([acy]))[0])])
-        self.t = np.asarray(cfg.shift_m, dtype=np.float64)
 
     @staticmethod
     def stamp(grid: np.ndarray, res: float, x: float, y: float, r: float, value) -> None:
@@ -157,10 +146,11 @@ class World:
         ny = max(1, int(round(n / nx)))
         return x0, y0, w, h, nx, ny
 
-    def n_chunks(self, epoch: int) -> int:
+    def chunks(self, epoch: int, signals: bool = False) -> Iterator[tuple]:
+        """Each :meth:`chunk` of ``epoch`` in turn."""
         *_, nx, ny = self.grid_shape(epoch)
         rows = max(1, CHUNK_POINTS // nx)
-        return (ny + rows - 1) // rows
+        return (self.chunk(epoch, i, signals) for i in range((ny + rows - 1) // rows))
 
     def chunk(self, epoch: int, index: int, signals: bool = False) -> tuple:
         """(xyz absolute (n, 3), class uint8) of chunk ``index`` of ``epoch`` (0 before, 1 after as
@@ -222,9 +212,7 @@ class World:
         """(LAS classes as the survey carries them, other per-point fields) of a chunk."""
         cfg = self.cfg
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, 11 + epoch, index]))
-        mask = np.zeros(cls.shape, bool)
-        mask[stray] = True
-        cat = categories(cls, mask)
+        cat = categories(cls, stray)
         fields: dict = {}
         if cfg.signals == "rgb":
             rgb = colours(cat, lab - 1, fresh, cfg, rng)
@@ -233,15 +221,6 @@ class World:
             fields["return_number"], fields["number_of_returns"] = returns(cat, lab > 0, rng)
         keep = cfg.signals in ("class", "lidar")
         return (cls if keep else np.zeros_like(cls)), fields
-
-
-def rotation(deg) -> np.ndarray:
-    """``Rz(yaw) Ry(pitch) Rx(roll)`` of (roll, pitch, yaw) degrees."""
-    roll, pitch, yaw = np.radians(deg)
-    rx = np.array([[1, 0, 0], [0, np.cos(roll), -np.sin(roll)], [0, np.sin(roll), np.cos(roll)]])
-    ry = np.array([[np.cos(pitch), 0, np.sin(pitch)], [0, 1, 0], [-np.sin(pitch), 0, np.cos(pitch)]])
-    rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
-    return rz @ ry @ rx
 
 
 def _outliers(rng: np.random.Generator, z: np.ndarray, cls: np.ndarray, fraction: float) -> np.ndarray:

@@ -63,10 +63,8 @@ class Objects:
         return [b for b in self.blobs if not b.partner]
 
 
-def find_objects(
-    diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, pair: bool = True, refilled=None
-) -> Objects:
-    """Object blobs of the difference in the ``fill`` and ``cut`` areas; ``pair``: match moved ones;
+def find_objects(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, refilled=None) -> Objects:
+    """Object blobs of the difference in the ``fill`` and ``cut`` areas, moved ones matched;
     ``refilled``: interpolated cells, in a blob's area but not its measurements."""
     labels = np.zeros(diff.shape, np.int32)
     blobs: list[Blob] = []
@@ -79,8 +77,7 @@ def find_objects(
             if blob is not None:
                 labels[sl][comp[sl] == k] = blob.label
                 blobs.append(blob)
-    if pair:
-        blobs = _pairs(blobs)
+    blobs = _pairs(blobs)
     if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs only
         blobs = [b for b in blobs if b.partner]
     kept = [b.label for b in blobs]

@@ -164,15 +164,11 @@ def deciding_dims(cls: np.ndarray | None, mode: str, exclude: str = "auto") -> s
 def decide(cls: np.ndarray | None, sig: Signals | None, mode: str, exclude: str = "auto") -> PointRule:
     """The epoch's rule from its first chunk, by ``--ground`` ``mode`` and ``--exclude``."""
     use_class = _uses_class(cls, mode)
-    if not _signals_may_decide(mode, exclude) or sig is None:
+    if use_class or sig is None or not _signals_may_decide(mode, exclude):
         return PointRule(use_class)
-    green, scale = None, 65535.0
-    if sig.rgb is not None and len(sig.rgb) and not use_class:
-        green, scale = colour_threshold(sig.rgb)
-    multi = False
-    if sig.returns is not None and len(sig.returns) and not use_class:
-        multi = float(np.mean(sig.returns[:, 1] > 1)) >= MIN_MULTI_RETURNS
-    return PointRule(use_class, green, scale, multi)
+    green, scale = colour_threshold(sig.rgb) if sig.rgb is not None and len(sig.rgb) else (None, 65535.0)
+    multi = sig.returns is not None and len(sig.returns) > 0
+    return PointRule(use_class, green, scale, multi and float(np.mean(sig.returns[:, 1] > 1)) >= MIN_MULTI_RETURNS)
 
 
 def colour_threshold(rgb: np.ndarray) -> tuple[float | None, float]:
@@ -186,11 +182,8 @@ def colour_threshold(rgb: np.ndarray) -> tuple[float | None, float]:
     if bright.size < 100:
         return GREEN_DEFAULT, scale
     split = otsu(bright)
-    upper = bright[bright > split]
-    lo, hi = GREEN_RANGE
-    if upper.size >= MIN_GREEN_SHARE * bright.size and lo <= split <= hi:
-        return split, scale
-    return GREEN_DEFAULT, scale
+    green_mode = np.count_nonzero(bright > split) >= MIN_GREEN_SHARE * bright.size
+    return (split if green_mode and GREEN_RANGE[0] <= split <= GREEN_RANGE[1] else GREEN_DEFAULT), scale
 
 
 @dataclass(frozen=True)
