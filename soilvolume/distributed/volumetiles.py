@@ -18,7 +18,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import chain
 
 import numpy as np
 
@@ -32,9 +31,9 @@ from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import TERMS, region_sigma, widen, z_value
 from ..volumes.zones import check_inside
 from . import overview
-from .gridtile import TILE_ARRAYS, empty_value, grid_tile
+from .gridtile import TILE_ARRAYS, empty_value
 from .tilestore import TileStore, Window
-from .tiletask import add_stats, epoch_dems, kept_and_todo, map_tiles, window_caches
+from .tiletask import epoch_dems, grid_stored, map_tiles
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
 VOLUME_ARRAYS = ("dem_out_a", "dem_out_b", "diff", "offset", "filled_mask", "classes")
@@ -45,20 +44,6 @@ PARTS = ("net", "cut", "fill", "net_compared_area")
 def halo(cell: float) -> int:
     """Cells of context around a tile: ``HALO_CELLS``, or ``HALO_M`` metres on fine grids."""
     return max(HALO_CELLS, int(np.ceil(HALO_M / cell)))
-
-
-def grid_tile_stored(plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
-    """:func:`.gridtile.grid_tile` kept in ``store``: (window, block sums, count histograms, stats)."""
-    win, arrays, stats = grid_tile(plan, win, cached)
-    store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
-    return summarize_grid_tile(win, arrays, k) + (stats,)
-
-
-def summarize_grid_tile(win: Window, arrays, k: int) -> tuple:
-    """(window, (after, before) block sums, (after, before) count histograms)."""
-    a = dict(zip(TILE_ARRAYS, arrays, strict=True))
-    blocks = tuple(overview.block_sums(win, k, a[f"h_{e}"], a[f"n_{e}"]) for e in "ab")
-    return win, blocks, tuple(overview.count_histogram(a[f"n_{e}"]) for e in "ab")
 
 
 @dataclass(frozen=True)
@@ -200,22 +185,16 @@ def tile_volumes(c, job: VolumeJob, over, hooks: Hooks, steps: tuple):
 
 
 def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
-    """Grid every tile into ``store`` (tiles already there are summarized, not run again):
-    ((after, before) DEMs of the overview, (after, before) median counts, stats)."""
+    """Grid every tile into ``store`` (:func:`.tiletask.grid_stored`): ((after, before) DEMs of the
+    overview, (after, before) median counts, stats)."""
     coarse = overview.coarse(plan.grid, k)
     sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
     hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
-    kept, todo = kept_and_todo(store, store.windows)
-    stats = {"read": 0, "cached": 0, "seconds": 0.0, "resumed": len(kept)}
-    done = [summarize_grid_tile(w, arrays, k) for w, arrays in kept]
-    per = window_caches(plan, todo, cache)
-    tasks = map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per)
-    for _, blocks, hist, *task in chain(done, tasks):
+    stats: dict = {}
+    for _, blocks, hist in grid_stored(c, plan, store, hooks, stats, cache, k):
         for e in range(2):
             overview.add_blocks(sums[e], blocks[e])
             hists[e] += hist[e]
-        if task:
-            add_stats(stats, task[0])
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):

@@ -114,7 +114,7 @@ class Tiled:
             dems, at, at_dems = (), self.coarse, self.over_epochs  # the correction found on the overview
         else:
             self.stats = {}
-            arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
+            arrays = run_tiles(self.c, self.plan, ctx.hooks, self.kept, self.stats, self.cache)
             dems = at_dems = epoch_dems(arrays, self.plan.rules)
             at = grid
         self.cache.release()  # the workers' memory back for the volume step
