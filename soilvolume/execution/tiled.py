@@ -9,7 +9,7 @@ from concurrent.futures import Future
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..core.types import SoilVolumeError
+from ..core.types import GridSpec, SoilVolumeError
 from ..core.wording import opt
 from ..dem.geotiff import grid_layout, write_cog
 from ..dem.grid import UINT8_LAYERS, output_layers
@@ -26,7 +26,7 @@ from ..inputs.footprint import PolygonMask, footprint
 from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared, prepare
 from ..inputs.stream import open_source
-from .seam import Gridded, Layout, VolumeFn, done
+from .seam import Gridded, VolumeFn, done
 
 IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read from disk, as the first pass reads them)
 
@@ -92,9 +92,9 @@ class Tiled:
     def dense(self, prep: Prepared) -> None:
         return None  # no process holds the full-resolution points
 
-    def grid(self, ctx, prep: Prepared, reg, layout: Layout, beside: Callable) -> Gridded:
+    def grid(self, ctx, prep: Prepared, reg, grid: GridSpec, beside: Callable) -> Gridded:
         """The tiles gridded on the workers; ``beside`` on the overview's before DEM (``k`` > 1) or the grid's."""
-        grid, options = layout.grid, ctx.options
+        options = ctx.options
         self.plan = _plan(prep, ctx, grid, reg, (self.src_b, self.src_a))
         self.windows, self.side, self.density = tile_windows(options, grid, prep, self.schedule, self.src_b)
         ctx.hooks.step(

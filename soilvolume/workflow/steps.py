@@ -17,7 +17,7 @@ from ..core.record import Georeferencing, QualityInputs, RunRecord
 from ..core.types import GridSpec
 from ..core.wording import cli_tree, opt
 from ..dem.grid import EpochDEM
-from ..execution.seam import Backend, Gridded, Layout
+from ..execution.seam import Backend, Gridded
 from ..inputs.footprint import footprint
 from ..inputs.prepare import Prepared, Single, prepare_single
 from ..options import Options
@@ -121,21 +121,22 @@ def kept_as_georeferenced(reg: Registration, outcome: str) -> Registration:
     return replace(reg, coarse=replace(reg.coarse, note=note), fine=replace(reg.fine, note=note))
 
 
-def layout(prep: Prepared, reg: Registration, options: Options) -> Layout:
-    """The grid over the registered after footprint and the before subset (:mod:`.plan`)."""
+def layout(prep: Prepared, reg: Registration, options: Options) -> tuple[GridSpec, np.ndarray]:
+    """(the grid over the registered after footprint and the before subset (:mod:`.plan`), the
+    registered after subset)."""
     after_thin = transform_points(prep.after_thin, reg.transform)
     poly = footprint(after_thin[:, :2])
     boxes = [after_thin, prep.before_thin]
     empty = "the registered after cloud does not overlap the before cloud"
     grid = plan_grid(reference_cell(prep, poly, options), boxes, prep.origin, prep.frame, empty)
-    return Layout(grid, after_thin, poly)
+    return grid, after_thin
 
 
 def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> Gridded:
     """Step 3: the grid planned, each epoch's heights on it, the paper's planes fitted beside."""
     with running(ctx, "grid", ctx.message("grid"), "grids"):
-        plan = layout(prep, reg, ctx.options)
-        return backend.grid(ctx, prep, reg, plan, fit_planes(prep, plan.after_thin, ctx.options))
+        on, after_thin = layout(prep, reg, ctx.options)
+        return backend.grid(ctx, prep, reg, on, fit_planes(prep, after_thin, ctx.options))
 
 
 def fit_planes(prep: Prepared, after_thin: np.ndarray, options: Options) -> Callable:
