@@ -164,14 +164,14 @@ def grid_stored(c, plan: Plan, store: TileStore, hooks: Hooks, stats: dict, cach
         yield part
 
 
-def run_tiles(c, plan: Plan, hooks: Hooks, store: TileStore, stats=None, cache=None) -> tuple[np.ndarray, ...]:
-    """The arrays of :data:`TILE_ARRAYS` on the grid, read from ``store`` once every tile is there
-    (:func:`grid_stored`)."""
+def run_tiles(c, plan: Plan, hooks: Hooks, store: TileStore, stats=None, cache=None) -> tuple[EpochDEM, EpochDEM]:
+    """(after, before) DEMs of the grid, read from ``store`` once every tile is there (:func:`grid_stored`)."""
     for _ in grid_stored(c, plan, store, hooks, {} if stats is None else stats, cache):
         pass
     g = plan.grid
     whole = (0, g.rows, 0, g.cols)
-    return tuple(store.read(n, whole, empty_value(n), np.int64 if n[0] == "n" else float) for n in TILE_ARRAYS)
+    arrays = [store.read(n, whole, empty_value(n), np.int64 if n[0] == "n" else float) for n in TILE_ARRAYS]
+    return epoch_dems(arrays, plan.rules)
 
 
 def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:

@@ -4,8 +4,10 @@ tasks were doing."""
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future
 
 from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
@@ -42,6 +44,20 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
         if c.status not in ("running", "connecting", "newly-created"):
             raise SoilVolumeError(f"lost the connection to the Dask scheduler while {what}")
         lonely = _check_workers(c, lonely, what)
+
+
+def in_thread(fn: Callable, *args, name: str) -> Future:
+    """``fn(*args)`` on a daemon thread called ``name``: its result, or what it raised, in the future."""
+    future: Future = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(fn(*args))
+        except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
+            future.set_exception(exc)
+
+    threading.Thread(target=run, daemon=True, name=name).start()
+    return future
 
 
 def _check_workers(c, since: float | None, what: str) -> float | None:

@@ -3,9 +3,7 @@ no process holds a survey's points; finished tiles kept in the run's store."""
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -20,8 +18,9 @@ from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
 from ..distributed.schedule import Schedule, budget_gb, client
 from ..distributed.tilestore import run_store
-from ..distributed.tiletask import Plan, epoch_dems, plan_parts, run_tiles, tile_windows, volume_factor
+from ..distributed.tiletask import Plan, plan_parts, run_tiles, tile_windows, volume_factor
 from ..distributed.volumetiles import VolumeJob, grid_tiles, reader, tile_volumes
+from ..distributed.waiting import in_thread
 from ..inputs.footprint import PolygonMask, footprint
 from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared, prepare
@@ -29,14 +28,6 @@ from ..inputs.stream import open_source
 from .seam import Gridded, VolumeFn, done
 
 IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read from disk, as the first pass reads them)
-
-
-def _identify(future: Future, paths: list) -> None:
-    """The (before, after) inputs' identities into ``future`` (zlib's CRC releases the GIL)."""
-    try:
-        future.set_result({"before": input_identity(paths[0]), "after": input_identity(paths[1])})
-    except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
-        future.set_exception(exc)
 
 
 class Tiled:
@@ -49,8 +40,7 @@ class Tiled:
         self.schedule = schedule
         self.c = self.store = self.plan = self.cache = self.starting = self.src_b = self.src_a = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
-        self.coarse = self.over_epochs = self.medians = self.identities = self.kept = None
-        self.cloud: tuple | None = None
+        self.medians = self.identities = self.kept = self.cloud = None
 
     @contextmanager
     def session(self, ctx) -> Iterator[Tiled]:
@@ -75,9 +65,10 @@ class Tiled:
     def read(self, ctx) -> Prepared:
         """The first pass: the thinned subsets (the inputs hashed beside it, for the tile store)."""
         hooks, options = ctx.hooks, ctx.options
-        self.identities = Future()
-        paths = [e.path for e in ctx.epochs]
-        threading.Thread(target=_identify, args=(self.identities, paths), daemon=True, name="soilvolume-ids").start()
+        paths = [e.path for e in ctx.epochs]  # hashed by zlib's CRC, which releases the GIL
+        self.identities = in_thread(
+            lambda: {"before": input_identity(paths[0]), "after": input_identity(paths[1])}, name="soilvolume-ids"
+        )
         self.src_b, self.src_a = (open_source(e.path) for e in ctx.epochs)
         direct = self.schedule.on_this_machine  # this machine's workers: sent straight to them
         self.cache = PointCache(self.c, budget_gb(options.memory_limit), direct)
@@ -105,18 +96,13 @@ class Tiled:
         self.said = self.store.bind(run_parts(inputs, options, plan_parts(self.plan, self.windows, self.k)))
         if self.said:
             ctx.hooks.step(ctx.at("grid"), self.said)
-        self.kept = self.store.tiles(self.windows)
-        if self.k > 1:
-            self.over_epochs, self.medians, self.stats = grid_tiles(
-                self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
-            )
-            self.coarse = overview.coarse(grid, self.k)
-            dems, at, at_dems = (), self.coarse, self.over_epochs  # the correction found on the overview
+        self.kept, self.stats = self.store.tiles(self.windows), {}
+        if self.k > 1:  # the correction found on the overview
+            at, dems = overview.coarse(grid, self.k), ()
+            at_dems, self.medians, self.stats = grid_tiles(self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache)
         else:
-            self.stats = {}
-            arrays = run_tiles(self.c, self.plan, ctx.hooks, self.kept, self.stats, self.cache)
-            dems = at_dems = epoch_dems(arrays, self.plan.rules)
-            at = grid
+            at, dems = grid, run_tiles(self.c, self.plan, ctx.hooks, self.kept, self.stats, self.cache)
+            at_dems = dems
         self.cache.release()  # the workers' memory back for the volume step
         if self.k == 1:
             self.starting.close_soon()  # the volume step runs here: the workers are done
@@ -127,7 +113,7 @@ class Tiled:
         p_b, p_a, d_i = planes
         if self.k == 1:
             return step(*gridded.dems, d_i, gridded.grid)
-        over = step(*self.over_epochs, d_i, self.coarse)
+        over = step(*gridded.correction_dems, d_i, gridded.correction_grid)
         parts = (over.offset, over.stable, over.params, self.medians, (p_b, p_a), moved, self.plan.rules)
         job = VolumeJob(self.kept, gridded.grid, ctx.options, self.k, *parts)
         vols = tile_volumes(self.c, job, over, ctx.hooks, (*ctx.spans["volume"], "volumes of"))
