@@ -92,7 +92,7 @@ class PointCache:
         if path in self.charged:
             return True
         count = _count(src, path)
-        if count is None or is_copc(path) or not self._room(path, count):
+        if count is None or is_copc(path) or count * CACHE_BYTES_PER_POINT > self.left:
             return False
         self.left -= count * CACHE_BYTES_PER_POINT
         self.points += count
@@ -103,11 +103,9 @@ class PointCache:
         """Whether the driver may scan and hold the tile ``path`` of the VPC ``src``: it fits the
         budget and what the driver holds (:data:`HELD_POINTS` at most, till the workers are up)."""
         count = _count(src, path)
-        held = sum(k.points for k in self.held.values())
-        return count is not None and self._room(path, count) and held + count <= HELD_POINTS
-
-    def _room(self, path: str, count: int) -> bool:
-        return path in self.charged or count * CACHE_BYTES_PER_POINT <= self.left
+        if count is None or (path not in self.charged and count * CACHE_BYTES_PER_POINT > self.left):
+            return False
+        return sum(k.points for k in self.held.values()) + count <= HELD_POINTS
 
     def hold(self, src: Source, key: Key, kept: KeptTile) -> None:
         """Keep a tile the driver scanned (see :meth:`fits`), sent to the workers at the next
@@ -132,8 +130,9 @@ class PointCache:
         self.futures.update(zip(held, futures, strict=True))
 
     def sent(self) -> None:
-        """Wait (at most :data:`SEND_S`, a signal checked every 0.25 s) until the tiles sent have
-        their futures; a failure to send them raised here, as one line."""
+        """Every held tile sent and its future here (waited for at most :data:`SEND_S`, a signal
+        checked every 0.25 s); a failure to send them raised here, as one line."""
+        self.send_held()
         while self.sending:
             sending, deadline = self.sending.pop(0), time.monotonic() + SEND_S
             while not wait([sending], 0.25).done:
@@ -141,10 +140,10 @@ class PointCache:
                 if time.monotonic() > deadline:
                     raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
             failed = sending.exception()
-            if failed is not None and not isinstance(failed, SoilVolumeError):
-                raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
-            if failed is not None:
+            if isinstance(failed, SoilVolumeError):
                 raise failed
+            if failed is not None:
+                raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
 
     def prefetch(self) -> None:
         """Start the reads :meth:`expect` asked for, once, behind the tasks submitted so far (read
@@ -159,14 +158,9 @@ class PointCache:
                 if self.admit(s, p):  # after the scans of the tiles taken now
                     self.reads[p] = self.client.submit(read_tile, p, pure=False, priority=-1)
 
-    def arrived(self) -> None:
-        """Every held tile sent and its future here."""
-        self.send_held()
-        self.sent()
-
     def meeting(self, src: Source, crop: str | None) -> dict:
         """{path: future} of the tiles kept with the crop ``crop`` that a read of ``src`` opens."""
-        self.arrived()
+        self.sent()
         if src.vpc is None:
             return {}
         return {p: self.futures[(p, crop)] for p in src.tiles() if (p, crop) in self.futures}

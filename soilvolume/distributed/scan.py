@@ -12,7 +12,6 @@ from itertools import chain
 
 import numpy as np
 
-from ..core import interrupt
 from ..core.cells import bounds, rows
 from ..inputs.copc import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
@@ -97,10 +96,7 @@ def scan_keeping(unit: Unit, region, to_local, rule: PointRule, keep, thinning: 
 
 
 def dask_loader(
-    client,
-    progress: Callable[[str], None] | None = None,
-    wait_check: Callable[[], None] = interrupt.check,
-    cache=None,
+    client, progress: Callable[[str], None], wait_check: Callable[[], None], cache
 ) -> Callable[..., Loaded]:
     """A :func:`stream.load` running its units on ``client`` (sources in memory and reads keeping the
     points stream here); ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
@@ -140,14 +136,13 @@ def dask_loader(
 
 def _gathered(done: Iterator[dict], todo: list[Unit], thinner: ColumnThinner, progress, path: str) -> list:
     """The units' summaries as they arrive, their sums added to ``thinner`` in the units' order,
-    each arrival told to ``progress`` (if any)."""
+    each arrival told to ``progress``."""
     parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
     for k, part in enumerate(done, 1):
         waiting[position[part.pop("unit")]] = part.pop("sums")
         _add_in_order(thinner, waiting, k - len(waiting))
         parts.append(part)
-        if progress:
-            progress(f"scanned {k}/{len(todo)} pieces of {path}")
+        progress(f"scanned {k}/{len(todo)} pieces of {path}")
     return parts
 
 

@@ -178,7 +178,7 @@ def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
     """Per window, the (before, after) {path: future} of the cached VPC tiles its reads open
     (None without a cache)."""
     if cache is not None:
-        cache.arrived()  # tiles the driver read while the cluster started
+        cache.sent()  # tiles the driver read while the cluster started
     if cache is None or not cache.futures:
         return None
     crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
