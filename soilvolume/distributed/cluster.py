@@ -169,18 +169,15 @@ def connect(address: str):
     return None, c
 
 
-def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None, spawn: bool = False):
+def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path, spawn: bool = False):
     """(LocalCluster, Client): ``workers`` processes of one thread (or one of ``workers`` threads),
     quiet, scratch space in ``scratch``; ``spawn``: as on Windows and macOS (the self-test)."""
     method = "spawn" if spawn else _start_method() if processes else None  # first: the forkserver's imports
     import dask
     from dask.distributed import Client, LocalCluster
 
-    extra = {"preload": [WORKER_INIT]} if processes else {}
-    if scratch is not None:
-        scratch.mkdir(parents=True, exist_ok=True)
-        extra["local_directory"] = str(scratch)
-    settings = {"temporary-directory": str(scratch) if scratch is not None else None, **QUIET}
+    scratch.mkdir(parents=True, exist_ok=True)
+    settings = {"temporary-directory": str(scratch), **QUIET}
     settings.update({f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in LOCAL_WORKER_ENV.items()})
     if method:
         settings["distributed.worker.multiprocessing-method"] = method
@@ -193,7 +190,8 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
             dashboard_address=None,
             scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},  # no port 8787 warning
             silence_logs=logging.CRITICAL,
-            **extra,
+            local_directory=str(scratch),
+            **({"preload": [WORKER_INIT]} if processes else {}),
         )
     try:
         return cluster, Client(cluster)

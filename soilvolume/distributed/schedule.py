@@ -205,7 +205,7 @@ def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) 
 
 
 @contextmanager
-def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None) -> Iterator[Starting]:
+def client(schedule: Schedule, memory_limit: float, scratch: Path) -> Iterator[Starting]:
     """A :class:`cluster.Starting` of the Dask client of ``schedule`` (a LocalCluster's workers share
     the budget, their scratch space in ``scratch``), shut on exit."""
     check_local(schedule, memory_limit)
@@ -216,7 +216,7 @@ def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None)
         starting.close()
 
 
-def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
+def _start(schedule: Schedule, memory_limit: float, scratch: Path):
     """(LocalCluster or None, Client) for ``schedule``."""
     if not has_dask():  # pragma: no cover - a dependency
         raise SoilVolumeError(
