@@ -101,21 +101,11 @@ def dask_loader(
     """A :func:`stream.load` running its units on ``client`` (sources in memory and reads keeping the
     points stream here); ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
 
-    def loader(
-        src: Source,
-        to_local,
-        mode: str,
-        keep,
-        thinner: ColumnThinner,
-        check=None,
-        box=None,
-        indexed: bool = False,
-        exclude: str = "auto",
-    ) -> Loaded:
+    def loader(src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check, box, indexed, exclude) -> Loaded:
         keeps_points = box is None or (box[1] >= box[0]).all()
         if src.raw is not None or keeps_points:
             return load(src, to_local, mode, keep, thinner, check, box, indexed, exclude)
-        todo, ready = units(src), getattr(client, "ready", lambda: True)
+        todo, ready = units(src), client.ready
         crop = None if keep is None else getattr(keep, "key", lambda: False)()  # False: not a lattice, not kept
         kept = cache if crop is not False else None
         rule, pre = _rule(client, src, todo, kept, ready, (mode, exclude), wait_check)
