@@ -62,16 +62,18 @@ def number_options(options: Options) -> dict[str, Any]:
         if f.metadata.get("run_control"):
             continue
         value = getattr(options, f.name)
-        if f.name in FILE_OPTIONS and value:
-            value = {"path": str(value), "files": _vector_identity(Path(value))}
+        if (
+            f.name in FILE_OPTIONS and value
+        ):  # a vector file and its sidecars (a Shapefile's .dbf, .prj, ...), or a folder
+            path = Path(value)
+            files = (
+                sorted(path.iterdir())
+                if path.is_dir()
+                else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
+            )
+            value = {"path": str(value), "files": {p.name: file_identity(p) for p in files if p.is_file()}}
         out[f.name] = value
     return out
-
-
-def _vector_identity(path: Path) -> dict[str, Any]:
-    """A vector file's and its sidecars' identities (a Shapefile's .dbf, .prj, ...), or a folder's files'."""
-    files = sorted(path.iterdir()) if path.is_dir() else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
-    return {p.name: file_identity(p) for p in files if p.is_file()}
 
 
 @lru_cache(maxsize=1)

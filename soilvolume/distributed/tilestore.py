@@ -91,7 +91,8 @@ class RunStore:
         self.final = Path(final)
         self.kept = self.final.with_name(f".{tag(self.final.name)}.{KEPT}")
         self.folder = sibling(self.final, KEPT)
-        _sweep(self.final)
+        for entry, _ in dead_siblings(self.final, (KEPT,)):  # the stores of runs no longer alive (killed)
+            remove(entry)
         self.claimed = False
         with contextlib.suppress(OSError):  # claim the tiles an interrupted run kept (atomic: one run gets them)
             os.rename(self.kept, self.folder)
@@ -157,9 +158,3 @@ def run_store(final: Path) -> Iterator[RunStore]:
         store.close(keep=False)
         raise
     store.close(keep=False)
-
-
-def _sweep(final: Path) -> None:
-    """Remove the run stores of runs into ``final`` that are no longer alive (killed)."""
-    for entry, _ in dead_siblings(final, (KEPT,)):
-        remove(entry)

@@ -155,7 +155,12 @@ def grid_stored(c, plan: Plan, store: TileStore, hooks: Hooks, stats: dict, cach
     for w in store.windows:
         if w not in todo:
             yield summary(w, [store.load(n, w) for n in TILE_ARRAYS], k) if k > 1 else w
-    per = window_caches(plan, todo, cache)
+    if cache is not None:
+        cache.sent()  # tiles the driver read while the cluster started
+    per = None  # per window, the (before, after) {path: future} of the cached VPC tiles its reads open
+    if cache is not None and cache.futures:
+        crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
+        per = [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in todo]
     for part, task in map_tiles(
         c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per
     ):
@@ -172,17 +177,6 @@ def run_tiles(c, plan: Plan, hooks: Hooks, store: TileStore, stats=None, cache=N
     whole = (0, g.rows, 0, g.cols)
     arrays = [store.read(n, whole, empty_value(n), np.int64 if n[0] == "n" else float) for n in TILE_ARRAYS]
     return epoch_dems(arrays, plan.rules)
-
-
-def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
-    """Per window, the (before, after) {path: future} of the cached VPC tiles its reads open
-    (None without a cache)."""
-    if cache is not None:
-        cache.sent()  # tiles the driver read while the cluster started
-    if cache is None or not cache.futures:
-        return None
-    crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
-    return [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in windows]
 
 
 def map_tiles(

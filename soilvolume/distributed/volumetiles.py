@@ -101,10 +101,6 @@ def _sum_dicts(dicts: list[dict]) -> dict:
     return {k: type(dicts[0][k])(sum(d[k] for d in dicts)) for k in keys}
 
 
-def _rss(values) -> float:
-    return float(np.sqrt(np.sum(np.square(list(values)))))
-
-
 def _zones(tiles: list[dict]) -> list[dict]:
     if not tiles[0]["zones"]:
         return []
@@ -152,8 +148,9 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     unclear["net"] = max(unclear.values())  # as volumes/nonsoil: between net - fill and net + cut
     u.update(widen({p: u[p] for p in PARTS}, unclear), unclassified_m3=unclear)
     u["registration_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}
+    marginal = [t["uncertainty"]["marginal_detections_m3"] for t in tiles]  # in quadrature
     u["marginal_detections_m3"] = {
-        p: _rss(t["uncertainty"]["marginal_detections_m3"][p] for t in tiles) for p in ("net", "cut", "fill")
+        p: float(np.sqrt(np.sum(np.square([m[p] for m in marginal])))) for p in ("net", "cut", "fill")
     }
     cells = np.array([t["all_cells"]["cells"] for t in tiles], float)
     for key in ("lod_m", "sigma_m"):
