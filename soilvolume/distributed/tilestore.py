@@ -152,9 +152,6 @@ def run_store(final: Path) -> Iterator[RunStore]:
         with cleanup_on_exit(lambda: str(store.kept) if store.close(keep=True) else None):  # forced: out at once
             yield store
     except Interrupted as exc:
-        kept = store.close(keep=True)
-        raise Interrupted(exc.signum, kept=str(store.kept) if kept else None) from None
-    except BaseException:
-        store.close(keep=False)
-        raise
-    store.close(keep=False)
+        raise Interrupted(exc.signum, kept=str(store.kept) if store.close(keep=True) else None) from None
+    finally:
+        store.close(keep=False)  # after keeping (renamed), nothing left to remove

@@ -144,8 +144,8 @@ class Tiled:
             "tiles_resumed": stats["resumed"],
             "kept_tiles_discarded": self.said,
             "task_points_read": stats["read"],
-            "task_points_from_memory": stats.get("cached", 0),
-            "points_kept_in_memory": self.cache.points if self.cache is not None else 0,
+            "task_points_from_memory": stats["cached"],
+            "points_kept_in_memory": self.cache.points,
             "task_seconds": round(stats["seconds"], 3),
             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
         }
