@@ -73,13 +73,8 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     a = [job.store.read(n, ext, fill=empty_value(n)) for n in TILE_ARRAYS]
     wgrid = g.window(*ext)
     core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
-    given = Given(
-        offset=overview.to_cells(job.offset, job.k, ext),
-        stable=overview.to_cells(job.stable, job.k, ext, nearest=True).astype(bool),
-        params=job.params,
-        median_counts=job.medians,
-        core=core,
-    )
+    stable = overview.to_cells(job.stable, job.k, ext, nearest=True).astype(bool)
+    given = Given(overview.to_cells(job.offset, job.k, ext), stable, job.params, job.medians, core)
     d_i = plane_offset(job.planes[0], job.planes[1], wgrid)
     after, before = epoch_dems(a, job.rules)
     vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
@@ -118,12 +113,6 @@ def _weighted(tiles: list[dict], key: str, weights: np.ndarray, default: float) 
     return float(np.sum(v[ok] * weights[ok]) / weights[ok].sum()) if ok.any() else default
 
 
-def _pooled_model(tiles: list[dict]) -> dict[str, float]:
-    """The tiles' semivariogram models averaged, weighted by their stable cells."""
-    w = np.array([t["uncertainty"]["stable_cells"] for t in tiles], float)
-    return {k: _weighted(tiles, f"{k}_{u}", w, 0.0) for k, u in (("nugget", "m2"), ("psill", "m2"), ("range", "m"))}
-
-
 def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     """The run's Volumes: budgets summed over the tiles, half-widths combined with the overview's
     (of ``k`` x ``k`` cells), the overview's rasters (the report's map, histogram and checks)."""
@@ -132,7 +121,8 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     z = z_value(over.uncertainty["confidence"])
     reg = {p: sum(t["uncertainty"]["registration_m3"][p] for t in tiles) for p in ("net", "cut", "fill")}
     reg["net_compared_area"] = reg["net"]
-    model = _pooled_model(tiles)
+    w = np.array([t["uncertainty"]["stable_cells"] for t in tiles], float)  # the models pooled by stable cells
+    model = {k: _weighted(tiles, f"{k}_{u}", w, 0.0) for k, u in (("nugget", "m2"), ("psill", "m2"), ("range", "m"))}
     u.update(nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"])
     for part in PARTS:
         area = sum(t["uncertainty"]["part_area_m2"][part] for t in tiles)
