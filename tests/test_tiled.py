@@ -355,11 +355,10 @@ def test_overview_factor_from_budget_and_size():
 
     small = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=1000, cols=1000)  # 1e6 cells: ~200 MB
     huge = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=20_000, cols=20_000)  # 4e8 cells
-    sched = Schedule("local", 2)
-    assert volume_factor(Options(memory_limit=8.0), small, sched) == 1  # auto: the whole grid fits
-    assert volume_factor(Options(memory_limit=8.0, volume_step="tiles"), small, sched) == 2
-    assert volume_factor(Options(memory_limit=0.1, volume_step="whole"), small, sched) == 1
-    k = volume_factor(Options(memory_limit=8.0), huge, sched)
+    assert volume_factor(Options(memory_limit=8.0), small) == 1  # auto: the whole grid fits
+    assert volume_factor(Options(memory_limit=8.0, volume_step="tiles"), small) == 2
+    assert volume_factor(Options(memory_limit=0.1, volume_step="whole"), small) == 1
+    k = volume_factor(Options(memory_limit=8.0), huge)
     assert k > 1 and huge.rows * huge.cols / k**2 <= overview.MAX_CELLS
     assert overview.factor(huge, 8.0) <= k
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator
 from dataclasses import fields, replace
+from itertools import pairwise
 
 import numpy as np
 
@@ -89,7 +90,7 @@ def tile_windows(options: Options, grid: GridSpec, prep, schedule: Schedule, src
     return windows, side, density
 
 
-def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:
+def volume_factor(options: Options, grid: GridSpec) -> int:
     """1 for the volume step on the whole grid in the driver, else the block side of the
     overview the tiled volume step finds the correction on (``--volume-step``)."""
     k = factor(grid, budget_gb(options.memory_limit))
@@ -117,9 +118,7 @@ def tiles(
         c_off = round(((corner[0] - grid.xmin) % align) / grid.cell) % side
         r_off = round(((grid.ymax - corner[1]) % align) / grid.cell) % side
     rows, cols = _edges(grid.rows, r_off, side), _edges(grid.cols, c_off, side)
-    return [
-        (r0, r1, c0, c1) for r0, r1 in zip(rows, rows[1:], strict=False) for c0, c1 in zip(cols, cols[1:], strict=False)
-    ]
+    return [(*r, *c) for r in pairwise(rows) for c in pairwise(cols)]
 
 
 def _edges(n: int, offset: int, side: int) -> list[int]:

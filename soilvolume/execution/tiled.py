@@ -91,7 +91,7 @@ class Tiled:
         ctx.hooks.step(
             ctx.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
         )
-        self.k = volume_factor(options, grid, self.schedule)
+        self.k = volume_factor(options, grid)
         inputs = self.identities.result(IDENTITY_S)
         self.said = self.store.bind(run_parts(inputs, options, plan_parts(self.plan, self.windows, self.k)))
         if self.said:
