@@ -34,12 +34,8 @@ class InMemory:
 
     @contextmanager
     def session(self, ctx) -> Iterator[InMemory]:
-        with ThreadPoolExecutor(2) as pool:
-            self.pool = pool
-            try:
-                yield self
-            finally:
-                self.pool = None
+        with ThreadPoolExecutor(2) as self.pool:
+            yield self
 
     def read(self, ctx) -> Prepared:
         """Both clouds streamed whole (:func:`inputs.prepare.prepare`)."""
