@@ -87,9 +87,7 @@ def _lost(c, started: set[str] | None) -> tuple[int, int]:
 def _result(fut, what: str, lost: Callable[[], tuple[int, int]]):
     try:
         value = fut.result()
-    except (SoilVolumeError, MemoryError):
-        raise
-    except Exception as exc:  # noqa: BLE001 - sorted below
+    except Exception as exc:  # noqa: BLE001 - a task's own error (SoilVolumeError, MemoryError, ...) as it is
         if type(exc).__module__.split(".")[0] in ("distributed", "concurrent", "asyncio"):
             raise _cluster_error(exc, what, lost()) from None
         raise
