@@ -69,18 +69,14 @@ class TileStore:
     def read(self, name: str, win: Window, fill=np.nan, dtype=None) -> np.ndarray:
         """The array ``name`` on any window of the grid (``fill`` where no tile covers a cell)."""
         r0, r1, c0, c1 = win
-        out = None
+        out = None  # the tiles cover the grid: some tile meets any window of it
         for t in self.windows:
-            a0, a1 = max(r0, t[0]), min(r1, t[1])
-            b0, b1 = max(c0, t[2]), min(c1, t[3])
-            if a0 >= a1 or b0 >= b1:
-                continue
-            part = self.load(name, t)[a0 - t[0] : a1 - t[0], b0 - t[2] : b1 - t[2]]
-            if out is None:
-                out = np.full((r1 - r0, c1 - c0), fill, dtype or part.dtype)
-            out[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0] = part
-        if out is None:
-            out = np.full((r1 - r0, c1 - c0), fill, dtype or float)
+            a0, a1, b0, b1 = max(r0, t[0]), min(r1, t[1]), max(c0, t[2]), min(c1, t[3])
+            if a0 < a1 and b0 < b1:
+                part = self.load(name, t)[a0 - t[0] : a1 - t[0], b0 - t[2] : b1 - t[2]]
+                if out is None:
+                    out = np.full((r1 - r0, c1 - c0), fill, dtype or part.dtype)
+                out[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0] = part
         return out
 
 
