@@ -42,15 +42,34 @@ FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES)
 
 
 class Starting:
-    """A (cluster or None, client) started on a daemon thread: a wait for it ends at its timeout,
-    and one nobody waits for any more is shut when it arrives."""
+    """A (cluster or None, client) started on a daemon thread, used as its client: waited for
+    (:attr:`wait`) at its first use, so the driver's work until then (opening the sources, reading
+    their first chunks) overlaps the workers' start. A wait ends at its timeout; a cluster nobody
+    waits for any more is shut when it arrives. ``here``: its workers run on this machine."""
 
-    def __init__(self, start: Callable[[], tuple], what: str, timeout: float) -> None:
-        self.what, self.timeout = what, timeout
+    def __init__(self, start: Callable[[], tuple], what: str, timeout: float, here: bool = True) -> None:
+        self.what, self.timeout, self.here, self._client = what, timeout, here, None
         self.future: Future = Future()
         self.lock, self.abandoned = threading.Lock(), False
         self.closing: threading.Thread | None = None
+        self.wait: Callable[[], object] = self.result  # the first use's wait (a run's: timed, cancellable)
         threading.Thread(target=self._run, args=(start,), daemon=True, name="soilvolume-cluster").start()
+
+    def ready(self) -> bool:
+        """Whether the cluster is up (or failed: the next use says why); a remote one always (its
+        workers read their tiles, the driver none)."""
+        return self._client is not None or self.future.done() or not self.here
+
+    def resolve(self):
+        """The client (waiting for it the first time)."""
+        if self._client is None:
+            self._client = self.wait()
+        return self._client
+
+    def __getattr__(self, name: str):  # the client's own
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self.resolve(), name)
 
     def _run(self, start) -> None:
         try:
@@ -112,29 +131,6 @@ class Starting:
         if self.closing is None:
             self.closing = threading.Thread(target=self._shut, daemon=True, name="soilvolume-cluster-close")
             self.closing.start()
-
-
-class LazyClient:
-    """The client of a cluster still starting, waited for (``wait``) at its first use: the driver's
-    work until then (opening the sources, reading their first chunks) overlaps the workers' start."""
-
-    def __init__(self, wait: Callable[[], object], started: Callable[[], bool] = lambda: True) -> None:
-        self._wait, self._started, self._client = wait, started, None
-
-    def ready(self) -> bool:
-        """Whether the cluster is up (or failed: the next use says why)."""
-        return self._client is not None or self._started()
-
-    def resolve(self):
-        """The client (waiting for it the first time)."""
-        if self._client is None:
-            self._client = self._wait()
-        return self._client
-
-    def __getattr__(self, name: str):
-        if name.startswith("_"):
-            raise AttributeError(name)
-        return getattr(self.resolve(), name)
 
 
 def shut(cluster, client) -> None:

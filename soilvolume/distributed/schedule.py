@@ -209,7 +209,8 @@ def client(schedule: Schedule, memory_limit: float, scratch: Path) -> Iterator[S
     """A :class:`cluster.Starting` of the Dask client of ``schedule`` (a LocalCluster's workers share
     the budget, their scratch space in ``scratch``), shut on exit."""
     check_local(schedule, memory_limit)
-    starting = Starting(lambda: _start(schedule, memory_limit, scratch), str(schedule), START_S[schedule.kind])
+    start = lambda: _start(schedule, memory_limit, scratch)  # noqa: E731
+    starting = Starting(start, str(schedule), START_S[schedule.kind], schedule.on_this_machine)
     try:
         yield starting
     finally:

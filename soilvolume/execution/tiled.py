@@ -12,7 +12,7 @@ from ..core.wording import opt
 from ..dem.geotiff import grid_layout, write_cog
 from ..dem.grid import UINT8_LAYERS, output_layers
 from ..distributed import overview
-from ..distributed.cluster import LazyClient, checker
+from ..distributed.cluster import checker
 from ..distributed.fingerprint import input_identity, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
@@ -38,7 +38,7 @@ class Tiled:
 
     def __init__(self, schedule: Schedule) -> None:
         self.schedule = schedule
-        self.c = self.store = self.plan = self.cache = self.starting = self.src_b = self.src_a = None
+        self.c = self.store = self.plan = self.cache = self.src_b = self.src_a = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
         self.medians = self.identities = self.kept = self.cloud = None
 
@@ -51,15 +51,13 @@ class Tiled:
                 f"{opt('ground', ctx.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
                 "(or classify the tiles first)"
             )
-        with run_store(ctx.out.final) as store, client(self.schedule, ctx.options.memory_limit, store.scratch) as s:
-            self.store, self.starting = store, s
+        with run_store(ctx.out.final) as store, client(self.schedule, ctx.options.memory_limit, store.scratch) as c:
 
             def wait():
                 with ctx.timer("cluster_wait"):
-                    return s.result(checker(ctx.hooks))
+                    return c.result(checker(ctx.hooks))
 
-            # the driver reads tiles itself while a local cluster starts (a remote one's workers read theirs)
-            self.c = LazyClient(wait, s.future.done if self.schedule.on_this_machine else lambda: True)
+            self.store, self.c, c.wait = store, c, wait
             yield self
 
     def read(self, ctx) -> Prepared:
@@ -105,7 +103,7 @@ class Tiled:
             at_dems = dems
         self.cache.release()  # the workers' memory back for the volume step
         if self.k == 1:
-            self.starting.close_soon()  # the volume step runs here: the workers are done
+            self.c.close_soon()  # the volume step runs here: the workers are done
         return Gridded(grid, dems, at, at_dems, done(beside(at, at_dems[1])))
 
     def volume(self, ctx, step: VolumeFn, gridded: Gridded, planes: tuple, moved) -> object:
@@ -117,7 +115,7 @@ class Tiled:
         parts = (over.offset, over.stable, over.params, self.medians, (p_b, p_a), moved, self.plan.rules)
         job = VolumeJob(self.kept, gridded.grid, ctx.options, self.k, *parts)
         vols = tile_volumes(self.c, job, over, ctx.hooks, (*ctx.spans["volume"], "volumes of"))
-        self.starting.close_soon()  # the rest reads the tile store
+        self.c.close_soon()  # the rest reads the tile store
         return vols
 
     def write(self, ctx, layers: list, vols, grid, z0: float) -> None:
