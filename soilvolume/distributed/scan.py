@@ -119,7 +119,15 @@ def dask_loader(
             kept.prefetch()
         done = chain(here, completed(client, futures, f"reading {src.path}", wait_check))
         parts = _gathered(done, todo, thinner, progress, src.path)
-        return _loaded(parts, thinner, rule, indexed and src.vpc is None and not is_copc(src.path))
+        single = indexed and src.vpc is None and not is_copc(src.path)  # a single file's chunk index
+        index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
+        points, used, cropped = (sum(p[k] for p in parts) for k in ("points", "used", "cropped"))
+        thin, counts = thinner.columns()
+        extra = {"read_s": 0.0, "cropped": cropped, "counts": counts, "index": index}
+        empty = np.empty((0, 3), np.float32)  # stream.load's result without points: columns, counts, totals
+        nothing = NonSoil(empty, np.empty(0, np.uint8), rule) if rule.active else None
+        note = "class 2 (ground)" if rule.use_class else "all points"
+        return Loaded(empty, thin, points, used, note, extra, nothing)
 
     return loader
 
@@ -134,19 +142,6 @@ def _gathered(done: Iterator[dict], todo: list[Unit], thinner: ColumnThinner, pr
         parts.append(part)
         progress(f"scanned {k}/{len(todo)} pieces of {path}")
     return parts
-
-
-def _loaded(parts: list[dict], thinner: ColumnThinner, rule: PointRule, single: bool) -> Loaded:
-    """:func:`stream.load`'s result from the units' summaries: no points, the thinned columns and
-    counts, the totals, a single file's chunk index (``single``)."""
-    index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
-    total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
-    note = "class 2 (ground)" if rule.use_class else "all points"
-    thin, counts = thinner.columns()
-    extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": counts, "index": index}
-    nothing = NonSoil(np.empty((0, 3), np.float32), np.empty(0, np.uint8), rule) if rule.active else None
-    empty = np.empty((0, 3), np.float32)
-    return Loaded(empty, thin, total["points"], total["used"], note, extra, nothing)
 
 
 def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
