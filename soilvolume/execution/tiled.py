@@ -10,7 +10,7 @@ from pathlib import Path
 from ..core.types import GridSpec, SoilVolumeError
 from ..core.wording import opt
 from ..dem.geotiff import grid_layout, write_cog
-from ..dem.grid import UINT8_LAYERS, output_layers
+from ..dem.grid import UINT8_LAYERS
 from ..distributed import overview
 from ..distributed.cluster import checker
 from ..distributed.fingerprint import input_identity, run_parts
@@ -120,9 +120,15 @@ class Tiled:
 
     def write(self, ctx, layers: list, vols, grid, z0: float) -> None:
         """The rasters as COGs from memory or the tile store; the after cloud streamed through the driver."""
-        if layers:  # the pair's layers (a surface as the reference runs in memory)
-            get = reader(self.kept) if self.k > 1 else lambda key, r, c: getattr(vols, key)[r, c]
-            _write_cogs(ctx.out, get, grid, z0, ctx.options.correction)
+        get = reader(self.kept) if self.k > 1 else lambda key, r, c: getattr(vols, key)[r, c]  # heights local
+        for name, key, desc in layers:  # the pair's layers (a surface as the reference runs in memory)
+            if key in UINT8_LAYERS:
+                layout = grid_layout(grid, desc, "", "uint8")
+                write_cog(ctx.out.path(name), layout, lambda r, c, key=key: get(key, r, c).astype("uint8"))
+            else:
+                add = z0 if key.startswith("dem_") else 0.0
+                piece = lambda r, c, key=key, add=add: get(key, r, c) + add  # noqa: E731
+                write_cog(ctx.out.path(name), grid_layout(grid, desc), piece)
         if self.cloud is not None:
             prep, reg, path = self.cloud
             write_las_chunked(path, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
@@ -147,18 +153,6 @@ class Tiled:
             "task_seconds": round(stats["seconds"], 3),
             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
         }
-
-
-def _write_cogs(out, get: Callable, grid, z0: float, correction: str) -> None:
-    """The run's rasters (:func:`grid.output_layers`) as COGs, block by block; ``get(name, rows,
-    cols)``: the window of the grid array ``name`` (heights local)."""
-    for name, key, desc in output_layers(correction):
-        if key in UINT8_LAYERS:
-            layout = grid_layout(grid, desc, "", "uint8")
-            write_cog(out.path(name), layout, lambda r, c, key=key: get(key, r, c).astype("uint8"))
-        else:
-            add = z0 if key.startswith("dem_") else 0.0
-            write_cog(out.path(name), grid_layout(grid, desc), lambda r, c, key=key, add=add: get(key, r, c) + add)
 
 
 def _plan(prep: Prepared, ctx, grid, reg, sources: tuple) -> Plan:
