@@ -87,7 +87,9 @@ def code_identity() -> str:
 def run_parts(inputs: dict[str, Any], options: Options, plan: dict[str, Any]) -> dict[str, Any]:
     """What a run's tiles are computed from, as plain JSON values; ``inputs``: {"before": ...,
     "after": ...} of :func:`input_identity`."""
-    return _plain({"code": code_identity(), "inputs": inputs, "options": number_options(options), "plan": plan})
+    parts = {"code": code_identity(), "inputs": inputs, "options": number_options(options), "plan": plan}
+    plain = lambda v: v.tolist() if hasattr(v, "tolist") else str(v)  # noqa: E731 - numpy values as Python
+    return json.loads(json.dumps(parts, default=plain))  # tuples as lists: JSON-comparable
 
 
 def digest(parts: dict[str, Any]) -> str:
@@ -123,8 +125,3 @@ def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
 def _short(value: Any) -> str:
     text = json.dumps(value) if isinstance(value, dict) else str(value)
     return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _plain(value: Any) -> Any:
-    """``value`` as JSON-comparable plain values (tuples as lists, numpy values as Python)."""
-    return json.loads(json.dumps(value, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))
