@@ -43,7 +43,10 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
             continue
         if c.status not in ("running", "connecting", "newly-created"):
             raise SoilVolumeError(f"lost the connection to the Dask scheduler while {what}")
-        lonely = _check_workers(c, lonely, what)
+        if c.scheduler_info().get("workers"):
+            lonely = None
+        elif time.monotonic() - (lonely := lonely or time.monotonic()) > NO_WORKERS_S:  # since it first had none
+            raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")
 
 
 def in_thread(fn: Callable, *args, name: str) -> Future:
@@ -58,16 +61,6 @@ def in_thread(fn: Callable, *args, name: str) -> Future:
 
     threading.Thread(target=run, daemon=True, name=name).start()
     return future
-
-
-def _check_workers(c, since: float | None, what: str) -> float | None:
-    """When the cluster first had no worker (None: it has some); an error after NO_WORKERS_S."""
-    if c.scheduler_info().get("workers"):
-        return None
-    since = since or time.monotonic()
-    if time.monotonic() - since > NO_WORKERS_S:
-        raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")
-    return since
 
 
 def _workers(c) -> set[str] | None:
