@@ -61,18 +61,14 @@ def _mode(values: np.ndarray) -> int | None:
     return int(v[np.argmax(n)])
 
 
-def points_per_cell(prep, cell: float) -> float:
-    """Expected points (both epochs) per grid cell: each epoch's points over its footprint."""
-    area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
-    used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
-    return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
-
-
 def tile_windows(options: Options, grid: GridSpec, prep, schedule: Schedule, src) -> tuple:
     """(the tile windows, their side in cells, points per cell) of the run's grid; ``src``: the
     before source (its VPC's tiling)."""
     cell, workers = grid.cell, max(1, schedule.workers)
-    task_gb, density = budget_gb(options.memory_limit) / workers, points_per_cell(prep, cell)
+    area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
+    used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
+    density = sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2  # each epoch's over its footprint
+    task_gb = budget_gb(options.memory_limit) / workers
     side = int(options.tile_cells)
     if side <= 0:  # what a task's memory holds, small enough for two tiles per worker
         area = min(TILE_POINTS, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT) / max(density, 1e-3)
