@@ -83,8 +83,12 @@ class Tiled:
 
     def grid(self, ctx, prep: Prepared, reg, grid: GridSpec, beside: Callable) -> Gridded:
         """The tiles gridded on the workers; ``beside`` on the overview's before DEM (``k`` > 1) or the grid's."""
-        options = ctx.options
-        self.plan = _plan(prep, ctx, grid, reg, (self.src_b, self.src_a))
+        options, (b, a) = ctx.options, (str(e.path) for e in ctx.epochs)
+        crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
+        ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], options.radius)
+        opened = tuple(None if s is None or s.raw is not None else s for s in (self.src_b, self.src_a))  # no task opens
+        parts = (prep.frame, prep.origin, grid, reg.transform, prep.ground, ring, options.statistic)
+        self.plan = Plan(b, a, *crs, *parts, prep.index, prep.rules, opened, PolygonMask(ring))  # what each task needs
         self.windows, self.side, self.density = tile_windows(options, grid, prep, self.schedule, self.src_b)
         ctx.hooks.step(
             ctx.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
@@ -153,14 +157,3 @@ class Tiled:
             "task_seconds": round(stats["seconds"], 3),
             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
         }
-
-
-def _plan(prep: Prepared, ctx, grid, reg, sources: tuple) -> Plan:
-    """What every tile task needs (picklable); ``sources``: the (before, after) sources the driver
-    opened (the tasks open none again; never whole clouds)."""
-    b, a = (str(e.path) for e in ctx.epochs)
-    crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
-    ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], ctx.options.radius)
-    streamed = tuple(None if s is None or s.raw is not None else s for s in sources)
-    parts = (prep.frame, prep.origin, grid, reg.transform, prep.ground, ring, ctx.options.statistic)
-    return Plan(b, a, *crs, *parts, prep.index, prep.rules, streamed, PolygonMask(ring))
