@@ -86,7 +86,8 @@ class Tiled:
         options, (b, a) = ctx.options, (str(e.path) for e in ctx.epochs)
         crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
         ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], options.radius)
-        opened = tuple(None if s is None or s.raw is not None else s for s in (self.src_b, self.src_a))  # no task opens
+        # the sources opened here, so that no task opens them again (never whole clouds)
+        opened = tuple(None if s is None or s.raw is not None else s for s in (self.src_b, self.src_a))
         parts = (prep.frame, prep.origin, grid, reg.transform, prep.ground, ring, options.statistic)
         self.plan = Plan(b, a, *crs, *parts, prep.index, prep.rules, opened, PolygonMask(ring))  # what each task needs
         self.windows, self.side, self.density = tile_windows(options, grid, prep, self.schedule, self.src_b)
