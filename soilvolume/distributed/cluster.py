@@ -203,34 +203,27 @@ def _start_method() -> str | None:
     and starts the scheduler and the nannies: its imports (~0.4 s) overlap them. None elsewhere:
     Dask's default, spawn (Windows has no fork; on macOS system libraries are not fork-safe)."""
     import multiprocessing
+    from importlib.util import find_spec
     from multiprocessing import forkserver
+
+    import dask
+    import yaml
 
     if not sys.platform.startswith("linux") or "forkserver" not in multiprocessing.get_all_start_methods():
         return None
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
-    os.environ.update(pre_spawn_environ())  # what each nanny sets before its worker starts: the server's, for all
+    # what each nanny sets before its worker starts, the server's for all (one OpenMP/BLAS thread per worker, read
+    # by C libraries as a process starts): Dask's pre-spawn-environ (the user's variables win), LOCAL_WORKER_ENV
+    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"  # Distributed not imported (0.3 s)
+    dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
+    env = {**(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}), **LOCAL_WORKER_ENV}
+    os.environ.update({k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None})
     forkserver.ensure_running()
-    import dask
     from distributed.utils import get_mp_context
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         get_mp_context()  # Dask sets its preload list on first use: for a server running already, a no-op
     return "forkserver"
-
-
-def pre_spawn_environ() -> dict[str, str]:
-    """Dask's ``distributed.nanny.pre-spawn-environ`` (the user's variables win) with
-    :data:`LOCAL_WORKER_ENV`: one OpenMP/BLAS thread per worker, read by C libraries as a process
-    starts, so set before the forkserver, which starts before Distributed is imported (0.3 s)."""
-    from importlib.util import find_spec
-
-    import dask
-    import yaml
-
-    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"
-    dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
-    env = {**(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}), **LOCAL_WORKER_ENV}
-    return {k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None}
 
 
 def checker(hooks) -> Callable[[], None]:
