@@ -92,12 +92,6 @@ def run_parts(inputs: dict[str, Any], options: Options, plan: dict[str, Any]) ->
     return json.loads(json.dumps(parts, default=plain))  # tuples as lists: JSON-comparable
 
 
-def digest(parts: dict[str, Any]) -> str:
-    """The key of ``parts``: 20 hex digits."""
-    text = json.dumps(parts, sort_keys=True, separators=(",", ":"))
-    return hashlib.blake2b(text.encode(), digest_size=10).hexdigest()
-
-
 def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
     """Why the tiles of ``old`` parts cannot serve ``new`` ones, in a few words ("" when equal)."""
     if old.get("code") != new.get("code"):
