@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import operator
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import replace
 from itertools import chain
 
@@ -118,7 +118,12 @@ def dask_loader(
         if send:
             kept.prefetch()
         done = chain(here, completed(client, futures, f"reading {src.path}", wait_check))
-        parts = _gathered(done, todo, thinner, progress, src.path)
+        parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
+        for k, part in enumerate(done, 1):  # the units' sums added in the units' order as they arrive
+            waiting[position[part.pop("unit")]] = part.pop("sums")
+            _add_in_order(thinner, waiting, k - len(waiting))
+            parts.append(part)
+            progress(f"scanned {k}/{len(todo)} pieces of {src.path}")
         single = indexed and src.vpc is None and not is_copc(src.path)  # a single file's chunk index
         index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
         points, used, cropped = (sum(p[k] for p in parts) for k in ("points", "used", "cropped"))
@@ -130,18 +135,6 @@ def dask_loader(
         return Loaded(empty, thin, points, used, note, extra, nothing)
 
     return loader
-
-
-def _gathered(done: Iterator[dict], todo: list[Unit], thinner: ColumnThinner, progress, path: str) -> list:
-    """The units' summaries as they arrive, their sums added to ``thinner`` in the units' order,
-    each arrival told to ``progress``."""
-    parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
-    for k, part in enumerate(done, 1):
-        waiting[position[part.pop("unit")]] = part.pop("sums")
-        _add_in_order(thinner, waiting, k - len(waiting))
-        parts.append(part)
-        progress(f"scanned {k}/{len(todo)} pieces of {path}")
-    return parts
 
 
 def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:
