@@ -96,7 +96,7 @@ def test_tiles_the_driver_read_while_the_cluster_started(vpcs, tmp_path, monkeyp
         calls["n"] += 1
         return calls["n"] > 5
 
-    monkeypatch.setattr(cluster.LazyClient, "ready", starting)
+    monkeypatch.setattr(cluster.Starting, "ready", starting)
     held = []
     hold = pointcache.PointCache.hold
     monkeypatch.setattr(pointcache.PointCache, "hold", lambda self, *a: (held.append(a[1]), hold(self, *a)))
@@ -123,7 +123,7 @@ def test_tiles_the_driver_read_go_out_before_the_registration(vpcs, tmp_path, mo
         return out
 
     monkeypatch.setattr(prep_mod, "prepare", prepare)
-    monkeypatch.setattr(cluster.LazyClient, "ready", lambda self: read["done"])
+    monkeypatch.setattr(cluster.Starting, "ready", lambda self: read["done"])
     send_held = pointcache.PointCache.send_held
     monkeypatch.setattr(
         pointcache.PointCache, "send_held", lambda self: (events.append(("send", len(self.held))), send_held(self))
@@ -308,7 +308,7 @@ def test_the_epoch_rule_is_decided_where_its_first_tile_was_read_ahead(vpcs, tmp
     driver does not decode that tile a second time); the same result as the driver deciding."""
     from soilvolume.distributed import cluster, scan
 
-    monkeypatch.setattr(cluster.LazyClient, "ready", lambda self: True)  # up before the first tile
+    monkeypatch.setattr(cluster.Starting, "ready", lambda self: True)  # up before the first tile
     monkeypatch.setattr(scan, "_first_rule", _counted_first_rule)  # (a task: pickled by reference)
     DECIDED.clear()
     got, eng = _run(vpcs, tmp_path / "tiled", "threads:2")

@@ -79,10 +79,11 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     reads); Dask's pre-spawn environment (one BLAS/OpenMP thread per worker) still reaches them and
     their server, which starts before Dask is imported."""
     code = (
-        "import json, os, sys\n"
+        "import json, os, pathlib, sys, tempfile\n"
         "os.environ.pop('MALLOC_TRIM_THRESHOLD_', None)\n"
         "from soilvolume.distributed import cluster\n"
-        "c, client = cluster.local(2, True, 1.0, None)\n"
+        "scratch = tempfile.TemporaryDirectory()  # the workers' scratch space, removed at exit\n"
+        "c, client = cluster.local(2, True, 1.0, pathlib.Path(scratch.name))\n"
         "try:\n"
         "    info = client.run(lambda: (os.getppid(), os.environ.get('OMP_NUM_THREADS'),\n"
         "                               'soilvolume.distributed.tiletask' in sys.modules,\n"

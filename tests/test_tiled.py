@@ -180,13 +180,14 @@ def test_resume_runs_only_the_missing_tiles(tmp_path):
         arrays = [_tile_array(n, shape, k, np.ones(shape, np.int32)) for n in TILE_ARRAYS]
         store.save((r0, r1, c0, c1), dict(zip(TILE_ARRAYS, arrays, strict=True)))
     with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
-        h_a, n_a, *_ = run_tiles(c, plan, windows, Hooks(), store)
+        after, _ = run_tiles(c, plan, Hooks(), store)
+        h_a, n_a = after.heights, after.counts
         assert h_a[0, 0] == 0 and h_a[39, 39] == 3 and (n_a == 1).all()
         with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):  # tiles of another key
-            run_tiles(c, plan, windows, Hooks(), TileStore(str(tmp_path), tuple(windows), "k2"))
+            run_tiles(c, plan, Hooks(), TileStore(str(tmp_path), tuple(windows), "k2"))
         (tmp_path / "k1_h_a_20_40_20_40.npy").unlink()
         with pytest.raises(SoilVolumeError, match="gone_b.las: file not found"):
-            run_tiles(c, plan, windows, Hooks(), store)
+            run_tiles(c, plan, Hooks(), store)
 
 
 def test_existing_cluster_by_address(pair, in_process, tmp_path):
@@ -354,11 +355,10 @@ def test_overview_factor_from_budget_and_size():
 
     small = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=1000, cols=1000)  # 1e6 cells: ~200 MB
     huge = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=20_000, cols=20_000)  # 4e8 cells
-    sched = Schedule("local", 2)
-    assert volume_factor(Options(memory_limit=8.0), small, sched) == 1  # auto: the whole grid fits
-    assert volume_factor(Options(memory_limit=8.0, volume_step="tiles"), small, sched) == 2
-    assert volume_factor(Options(memory_limit=0.1, volume_step="whole"), small, sched) == 1
-    k = volume_factor(Options(memory_limit=8.0), huge, sched)
+    assert volume_factor(Options(memory_limit=8.0), small) == 1  # auto: the whole grid fits
+    assert volume_factor(Options(memory_limit=8.0, volume_step="tiles"), small) == 2
+    assert volume_factor(Options(memory_limit=0.1, volume_step="whole"), small) == 1
+    k = volume_factor(Options(memory_limit=8.0), huge)
     assert k > 1 and huge.rows * huge.cols / k**2 <= overview.MAX_CELLS
     assert overview.factor(huge, 8.0) <= k
 
@@ -409,8 +409,8 @@ def test_an_interrupted_tiled_run_says_where_its_tiles_are_kept(pair, tmp_path, 
     from soilvolume.distributed.tiletask import TILE_ARRAYS
     from soilvolume.execution import tiled
 
-    def interrupted(c, plan, windows, hooks, store, stats, *_):
-        w = windows[0]
+    def interrupted(c, plan, hooks, store, *_):
+        w = store.windows[0]
         store.save(w, {n: np.zeros((w[1] - w[0], w[3] - w[2])) for n in TILE_ARRAYS})
         raise Interrupted(signal.SIGINT)
 

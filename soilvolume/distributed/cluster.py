@@ -42,15 +42,34 @@ FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES)
 
 
 class Starting:
-    """A (cluster or None, client) started on a daemon thread: a wait for it ends at its timeout,
-    and one nobody waits for any more is shut when it arrives."""
+    """A (cluster or None, client) started on a daemon thread, used as its client: waited for
+    (:attr:`wait`) at its first use, so the driver's work until then (opening the sources, reading
+    their first chunks) overlaps the workers' start. A wait ends at its timeout; a cluster nobody
+    waits for any more is shut when it arrives. ``here``: its workers run on this machine."""
 
-    def __init__(self, start: Callable[[], tuple], what: str, timeout: float) -> None:
-        self.what, self.timeout = what, timeout
+    def __init__(self, start: Callable[[], tuple], what: str, timeout: float, here: bool = True) -> None:
+        self.what, self.timeout, self.here, self._client = what, timeout, here, None
         self.future: Future = Future()
         self.lock, self.abandoned = threading.Lock(), False
         self.closing: threading.Thread | None = None
+        self.wait: Callable[[], object] = self.result  # the first use's wait (a run's: timed, cancellable)
         threading.Thread(target=self._run, args=(start,), daemon=True, name="soilvolume-cluster").start()
+
+    def ready(self) -> bool:
+        """Whether the cluster is up (or failed: the next use says why); a remote one always (its
+        workers read their tiles, the driver none)."""
+        return self._client is not None or self.future.done() or not self.here
+
+    def resolve(self):
+        """The client (waiting for it the first time)."""
+        if self._client is None:
+            self._client = self.wait()
+        return self._client
+
+    def __getattr__(self, name: str):  # the client's own
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self.resolve(), name)
 
     def _run(self, start) -> None:
         try:
@@ -114,29 +133,6 @@ class Starting:
             self.closing.start()
 
 
-class LazyClient:
-    """The client of a cluster still starting, waited for (``wait``) at its first use: the driver's
-    work until then (opening the sources, reading their first chunks) overlaps the workers' start."""
-
-    def __init__(self, wait: Callable[[], object], started: Callable[[], bool] = lambda: True) -> None:
-        self._wait, self._started, self._client = wait, started, None
-
-    def ready(self) -> bool:
-        """Whether the cluster is up (or failed: the next use says why)."""
-        return self._client is not None or self._started()
-
-    def resolve(self):
-        """The client (waiting for it the first time)."""
-        if self._client is None:
-            self._client = self._wait()
-        return self._client
-
-    def __getattr__(self, name: str):
-        if name.startswith("_"):
-            raise AttributeError(name)
-        return getattr(self.resolve(), name)
-
-
 def shut(cluster, client) -> None:
     """Close the client and the cluster, each within :data:`CLOSE_S` (never raises)."""
     for thing in (client, cluster):
@@ -169,18 +165,15 @@ def connect(address: str):
     return None, c
 
 
-def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path | None, spawn: bool = False):
+def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: Path, spawn: bool = False):
     """(LocalCluster, Client): ``workers`` processes of one thread (or one of ``workers`` threads),
     quiet, scratch space in ``scratch``; ``spawn``: as on Windows and macOS (the self-test)."""
     method = "spawn" if spawn else _start_method() if processes else None  # first: the forkserver's imports
     import dask
     from dask.distributed import Client, LocalCluster
 
-    extra = {"preload": [WORKER_INIT]} if processes else {}
-    if scratch is not None:
-        scratch.mkdir(parents=True, exist_ok=True)
-        extra["local_directory"] = str(scratch)
-    settings = {"temporary-directory": str(scratch) if scratch is not None else None, **QUIET}
+    scratch.mkdir(parents=True, exist_ok=True)
+    settings = {"temporary-directory": str(scratch), **QUIET}
     settings.update({f"distributed.nanny.pre-spawn-environ.{k}": v for k, v in LOCAL_WORKER_ENV.items()})
     if method:
         settings["distributed.worker.multiprocessing-method"] = method
@@ -193,7 +186,8 @@ def local(workers: int, processes: bool, per_worker_gb: float | None, scratch: P
             dashboard_address=None,
             scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},  # no port 8787 warning
             silence_logs=logging.CRITICAL,
-            **extra,
+            local_directory=str(scratch),
+            **({"preload": [WORKER_INIT]} if processes else {}),
         )
     try:
         return cluster, Client(cluster)
@@ -209,34 +203,27 @@ def _start_method() -> str | None:
     and starts the scheduler and the nannies: its imports (~0.4 s) overlap them. None elsewhere:
     Dask's default, spawn (Windows has no fork; on macOS system libraries are not fork-safe)."""
     import multiprocessing
+    from importlib.util import find_spec
     from multiprocessing import forkserver
+
+    import dask
+    import yaml
 
     if not sys.platform.startswith("linux") or "forkserver" not in multiprocessing.get_all_start_methods():
         return None
     multiprocessing.get_context("forkserver").set_forkserver_preload(list(FORKSERVER_PRELOAD))
-    os.environ.update(pre_spawn_environ())  # what each nanny sets before its worker starts: the server's, for all
+    # what each nanny sets before its worker starts, the server's for all (one OpenMP/BLAS thread per worker, read
+    # by C libraries as a process starts): Dask's pre-spawn-environ (the user's variables win), LOCAL_WORKER_ENV
+    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"  # Distributed not imported (0.3 s)
+    dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
+    env = {**(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}), **LOCAL_WORKER_ENV}
+    os.environ.update({k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None})
     forkserver.ensure_running()
-    import dask
     from distributed.utils import get_mp_context
 
     with dask.config.set({"distributed.worker.multiprocessing-method": "forkserver"}):
         get_mp_context()  # Dask sets its preload list on first use: for a server running already, a no-op
     return "forkserver"
-
-
-def pre_spawn_environ() -> dict[str, str]:
-    """Dask's ``distributed.nanny.pre-spawn-environ`` (the user's variables win) with
-    :data:`LOCAL_WORKER_ENV`: one OpenMP/BLAS thread per worker, read by C libraries as a process
-    starts, so set before the forkserver, which starts before Distributed is imported (0.3 s)."""
-    from importlib.util import find_spec
-
-    import dask
-    import yaml
-
-    defaults = Path(find_spec("distributed").origin).parent / "distributed.yaml"
-    dask.config.update_defaults(yaml.safe_load(defaults.read_text(encoding="utf-8")))
-    env = {**(dask.config.get("distributed.nanny.pre-spawn-environ", {}) or {}), **LOCAL_WORKER_ENV}
-    return {k: os.environ.get(k, str(v)) for k, v in env.items() if v is not None}
 
 
 def checker(hooks) -> Callable[[], None]:

@@ -30,19 +30,16 @@ def file_identity(path: str | os.PathLike) -> dict[str, Any]:
     in 4 billion; zlib's CRC reads 3-4 GB/s, BLAKE2 under 1 GB/s (a run hashes every tile)."""
     p = Path(path)
     st = p.stat()
+    step = (st.st_size - 2 * HEAD_BYTES) // (SAMPLES + 1)
+    samples = [(HEAD_BYTES + k * step, SAMPLE_BYTES) for k in range(1, SAMPLES + 1)]
+    spans = (
+        [(0, None)] if st.st_size <= WHOLE_BYTES else [(0, HEAD_BYTES), *samples, (st.st_size - HEAD_BYTES, HEAD_BYTES)]
+    )
     crc = 0
     with open(p, "rb") as f:
-        if st.st_size <= WHOLE_BYTES:
-            for block in iter(lambda: f.read(1 << 20), b""):
-                crc = zlib.crc32(block, crc)
-        else:
-            crc = zlib.crc32(f.read(HEAD_BYTES))
-            step = (st.st_size - 2 * HEAD_BYTES) // (SAMPLES + 1)
-            for k in range(1, SAMPLES + 1):
-                f.seek(HEAD_BYTES + k * step)
-                crc = zlib.crc32(f.read(SAMPLE_BYTES), crc)
-            f.seek(st.st_size - HEAD_BYTES)
-            crc = zlib.crc32(f.read(HEAD_BYTES), crc)
+        for at, size in spans:
+            f.seek(at)
+            crc = zlib.crc32(f.read(size), crc)
     return {"size": st.st_size, "mtime_ns": st.st_mtime_ns, "hash": f"crc32:{crc:08x}"}
 
 
@@ -62,16 +59,18 @@ def number_options(options: Options) -> dict[str, Any]:
         if f.metadata.get("run_control"):
             continue
         value = getattr(options, f.name)
-        if f.name in FILE_OPTIONS and value:
-            value = {"path": str(value), "files": _vector_identity(Path(value))}
+        if (
+            f.name in FILE_OPTIONS and value
+        ):  # a vector file and its sidecars (a Shapefile's .dbf, .prj, ...), or a folder
+            path = Path(value)
+            files = (
+                sorted(path.iterdir())
+                if path.is_dir()
+                else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
+            )
+            value = {"path": str(value), "files": {p.name: file_identity(p) for p in files if p.is_file()}}
         out[f.name] = value
     return out
-
-
-def _vector_identity(path: Path) -> dict[str, Any]:
-    """A vector file's and its sidecars' identities (a Shapefile's .dbf, .prj, ...), or a folder's files'."""
-    files = sorted(path.iterdir()) if path.is_dir() else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
-    return {p.name: file_identity(p) for p in files if p.is_file()}
 
 
 @lru_cache(maxsize=1)
@@ -88,13 +87,9 @@ def code_identity() -> str:
 def run_parts(inputs: dict[str, Any], options: Options, plan: dict[str, Any]) -> dict[str, Any]:
     """What a run's tiles are computed from, as plain JSON values; ``inputs``: {"before": ...,
     "after": ...} of :func:`input_identity`."""
-    return _plain({"code": code_identity(), "inputs": inputs, "options": number_options(options), "plan": plan})
-
-
-def digest(parts: dict[str, Any]) -> str:
-    """The key of ``parts``: 20 hex digits."""
-    text = json.dumps(parts, sort_keys=True, separators=(",", ":"))
-    return hashlib.blake2b(text.encode(), digest_size=10).hexdigest()
+    parts = {"code": code_identity(), "inputs": inputs, "options": number_options(options), "plan": plan}
+    plain = lambda v: v.tolist() if hasattr(v, "tolist") else str(v)  # noqa: E731 - numpy values as Python
+    return json.loads(json.dumps(parts, default=plain))  # tuples as lists: JSON-comparable
 
 
 def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
@@ -124,8 +119,3 @@ def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
 def _short(value: Any) -> str:
     text = json.dumps(value) if isinstance(value, dict) else str(value)
     return text if len(text) <= 40 else text[:37] + "..."
-
-
-def _plain(value: Any) -> Any:
-    """``value`` as JSON-comparable plain values (tuples as lists, numpy values as Python)."""
-    return json.loads(json.dumps(value, default=lambda v: v.tolist() if hasattr(v, "tolist") else str(v)))

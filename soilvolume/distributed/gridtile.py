@@ -162,10 +162,16 @@ def _joined(parts: list, dtype) -> np.ndarray:
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums | None, keep_ids: bool = False):
     """Flat cell ids (on the whole grid's cells) and heights of the points on the window; positions
     in their cells added to ``offsets`` (if any); ``keep_ids``: ids with their points' indices."""
-    if offsets is not None and not keep_ids and xyz32.dtype == np.float32:
-        lib = native.kernels()
-        if lib is not None:
-            return _native_window_cells(lib, xyz32, grid, win, offsets)
+    lib = native.kernels() if offsets is not None and not keep_ids and xyz32.dtype == np.float32 else None
+    if (
+        lib is not None
+    ):  # soil points on the kernel (sv_cells), bit for bit: the chunk's offsets summed from zero, then added
+        ids, z = np.empty(len(xyz32), np.int64), np.empty(len(xyz32), np.float64)
+        sx, sy = np.zeros_like(offsets.sx), np.zeros_like(offsets.sy)
+        m = native_cells(lib, xyz32, grid, win, ids, z, sx, sy)
+        offsets.sx += sx
+        offsets.sy += sy
+        return ids[:m], z[:m]
     fcol, frow, ok = cell_coords(xyz32, grid, win)
     fcol, frow = fcol[ok], frow[ok]
     ids = frow.astype(np.int32)  # the cell's row and column: the coordinates truncated, as flat_ids
@@ -176,17 +182,6 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
     if offsets is not None:
         offsets.add(ids, fcol, frow)
     return ((ids, np.flatnonzero(ok)) if keep_ids else ids), xyz32[ok, 2]
-
-
-def _native_window_cells(lib, xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums) -> tuple:
-    """:func:`_window_cells` of soil points on the kernel (``sv_cells``), bit for bit (the chunk's
-    offsets summed from zero, then added, as :meth:`OffsetSums.add` does)."""
-    ids, z = np.empty(len(xyz32), np.int64), np.empty(len(xyz32), np.float64)
-    sx, sy = np.zeros_like(offsets.sx), np.zeros_like(offsets.sy)
-    m = native_cells(lib, xyz32, grid, win, ids, z, sx, sy)
-    offsets.sx += sx
-    offsets.sy += sy
-    return ids[:m], z[:m]
 
 
 def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.ndarray] | None:

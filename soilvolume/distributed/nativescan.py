@@ -9,6 +9,7 @@ order: the grid takes them apart (:func:`.gridtile._epoch`), its sums byte-ident
 
 from __future__ import annotations
 
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -77,16 +78,10 @@ def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinne
     finally:
         kernel.close()
     res = {"points": points, "used": used, "cropped": cropped, "index": [], "read_s": read_s}
-    chunks = _kept_chunks(*(g.result() for g in out), ends, labelled) if keeping else []
+    chunks = []  # each kept chunk's (local float32 xyz, labels or None): its soil points, then its others
+    if keeping:
+        soil, other, labels = (g.result() for g in out)
+        for (a0, b0), (a1, b1) in pairwise([(0, 0), *ends]):
+            lab = np.concatenate([np.zeros(a1 - a0, np.uint8), labels[b0:b1]]) if labelled else None
+            chunks.append((np.concatenate([soil[a0:a1], other[b0:b1]]), lab))
     return res, thinner, chunks
-
-
-def _kept_chunks(soil: np.ndarray, other: np.ndarray, labels: np.ndarray, ends: list, labelled: bool) -> list:
-    """(local float32 xyz, labels or None) of each chunk: its soil points, then its others."""
-    chunks, a0, b0 = [], 0, 0
-    for a1, b1 in ends:
-        xyz = np.concatenate([soil[a0:a1], other[b0:b1]])
-        lab = np.concatenate([np.zeros(a1 - a0, np.uint8), labels[b0:b1]]) if labelled else None
-        chunks.append((xyz, lab))
-        a0, b0 = a1, b1
-    return chunks

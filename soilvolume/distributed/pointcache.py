@@ -6,9 +6,9 @@ the budget are read again by the grid tasks."""
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future, wait
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -18,6 +18,7 @@ from ..core.cells import rows
 from ..core.types import SoilVolumeError, short_error
 from ..inputs.lasread import is_copc
 from ..inputs.stream import CHUNK, Source, file_chunks
+from .waiting import in_thread
 
 # a tile read ahead (xyz float64, classification, RGB, returns: 33 B and the chunk lists) while its
 # kept form (float32 xyz and a label: 13 B) is made from it
@@ -64,8 +65,7 @@ class PointCache:
         self.points = 0
         self.expected: list[Source] = []
         self.held: dict[Key, KeptTile] = {}  # tiles the driver scanned, until the workers are up
-        self.senders: list[threading.Thread] = []
-        self.failed: BaseException | None = None
+        self.sending: list[Future] = []  # the scatters of held tiles on their way
 
     def expect(self, src: Source) -> None:
         """Read the tiles of ``src`` (a VPC's region) ahead, behind the first tiles taken, so the later
@@ -92,7 +92,7 @@ class PointCache:
         if path in self.charged:
             return True
         count = _count(src, path)
-        if count is None or is_copc(path) or not self._room(path, count):
+        if count is None or is_copc(path) or count * CACHE_BYTES_PER_POINT > self.left:
             return False
         self.left -= count * CACHE_BYTES_PER_POINT
         self.points += count
@@ -103,11 +103,9 @@ class PointCache:
         """Whether the driver may scan and hold the tile ``path`` of the VPC ``src``: it fits the
         budget and what the driver holds (:data:`HELD_POINTS` at most, till the workers are up)."""
         count = _count(src, path)
-        held = sum(k.points for k in self.held.values())
-        return count is not None and self._room(path, count) and held + count <= HELD_POINTS
-
-    def _room(self, path: str, count: int) -> bool:
-        return path in self.charged or count * CACHE_BYTES_PER_POINT <= self.left
+        if count is None or (path not in self.charged and count * CACHE_BYTES_PER_POINT > self.left):
+            return False
+        return sum(k.points for k in self.held.values()) + count <= HELD_POINTS
 
     def hold(self, src: Source, key: Key, kept: KeptTile) -> None:
         """Keep a tile the driver scanned (see :meth:`fits`), sent to the workers at the next
@@ -123,34 +121,29 @@ class PointCache:
             return
         resolve = getattr(self.client, "resolve", None)  # a cluster still starting: waited for here, in the driver
         client = resolve() if resolve else self.client
-        sender = threading.Thread(target=self._send, args=(client, held), daemon=True, name="soilvolume-send-tiles")
-        self.senders.append(sender)
-        sender.start()
+        self.sending.append(in_thread(self._send, client, held, name="soilvolume-send-tiles"))
 
     def _send(self, client, held: dict[Key, KeptTile]) -> None:
         """All of ``held`` in one scatter (one call per tile took twice as long: 17 tiles of
         3.8 M points, 0.10-0.15 s through the scheduler, 0.05 s straight and at once)."""
-        try:
-            futures = client.scatter(list(held.values()), hash=False, direct=self.direct)
-            self.futures.update(zip(held, futures, strict=True))
-        except BaseException as exc:  # noqa: BLE001 - raised in the driver by sent()
-            self.failed = exc
+        futures = client.scatter(list(held.values()), hash=False, direct=self.direct)
+        self.futures.update(zip(held, futures, strict=True))
 
     def sent(self) -> None:
-        """Wait (at most :data:`SEND_S`, a signal checked every 0.25 s) until the tiles sent have
-        their futures; a failure to send them raised here, as one line."""
-        while self.senders:
-            sender, deadline = self.senders.pop(0), time.monotonic() + SEND_S
-            while sender.is_alive() and time.monotonic() < deadline:
-                sender.join(0.25)
+        """Every held tile sent and its future here (waited for at most :data:`SEND_S`, a signal
+        checked every 0.25 s); a failure to send them raised here, as one line."""
+        self.send_held()
+        while self.sending:
+            sending, deadline = self.sending.pop(0), time.monotonic() + SEND_S
+            while not wait([sending], 0.25).done:
                 interrupt.check()
-            if sender.is_alive():
-                raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
-        failed, self.failed = self.failed, None
-        if isinstance(failed, SoilVolumeError):
-            raise failed
-        if failed is not None:
-            raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
+                if time.monotonic() > deadline:
+                    raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
+            failed = sending.exception()
+            if isinstance(failed, SoilVolumeError):
+                raise failed
+            if failed is not None:
+                raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
 
     def prefetch(self) -> None:
         """Start the reads :meth:`expect` asked for, once, behind the tasks submitted so far (read
@@ -165,14 +158,9 @@ class PointCache:
                 if self.admit(s, p):  # after the scans of the tiles taken now
                     self.reads[p] = self.client.submit(read_tile, p, pure=False, priority=-1)
 
-    def arrived(self) -> None:
-        """Every held tile sent and its future here."""
-        self.send_held()
-        self.sent()
-
     def meeting(self, src: Source, crop: str | None) -> dict:
         """{path: future} of the tiles kept with the crop ``crop`` that a read of ``src`` opens."""
-        self.arrived()
+        self.sent()
         if src.vpc is None:
             return {}
         return {p: self.futures[(p, crop)] for p in src.tiles() if (p, crop) in self.futures}

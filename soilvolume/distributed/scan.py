@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import operator
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import replace
 from itertools import chain
 
 import numpy as np
 
-from ..core import interrupt
 from ..core.cells import bounds, rows
 from ..inputs.lasread import is_copc, read_fraction
 from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
@@ -97,29 +96,16 @@ def scan_keeping(unit: Unit, region, to_local, rule: PointRule, keep, thinning: 
 
 
 def dask_loader(
-    client,
-    progress: Callable[[str], None] | None = None,
-    wait_check: Callable[[], None] = interrupt.check,
-    cache=None,
+    client, progress: Callable[[str], None], wait_check: Callable[[], None], cache
 ) -> Callable[..., Loaded]:
     """A :func:`stream.load` running its units on ``client`` (sources in memory and reads keeping the
     points stream here); ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
 
-    def loader(
-        src: Source,
-        to_local,
-        mode: str,
-        keep,
-        thinner: ColumnThinner,
-        check=None,
-        box=None,
-        indexed: bool = False,
-        exclude: str = "auto",
-    ) -> Loaded:
+    def loader(src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check, box, indexed, exclude) -> Loaded:
         keeps_points = box is None or (box[1] >= box[0]).all()
         if src.raw is not None or keeps_points:
             return load(src, to_local, mode, keep, thinner, check, box, indexed, exclude)
-        todo, ready = units(src), getattr(client, "ready", lambda: True)
+        todo, ready = units(src), client.ready
         crop = None if keep is None else getattr(keep, "key", lambda: False)()  # False: not a lattice, not kept
         kept = cache if crop is not False else None
         rule, pre = _rule(client, src, todo, kept, ready, (mode, exclude), wait_check)
@@ -132,36 +118,23 @@ def dask_loader(
         if send:
             kept.prefetch()
         done = chain(here, completed(client, futures, f"reading {src.path}", wait_check))
-        parts = _gathered(done, todo, thinner, progress, src.path)
-        return _loaded(parts, thinner, rule, indexed and src.vpc is None and not is_copc(src.path))
+        parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
+        for k, part in enumerate(done, 1):  # the units' sums added in the units' order as they arrive
+            waiting[position[part.pop("unit")]] = part.pop("sums")
+            _add_in_order(thinner, waiting, k - len(waiting))
+            parts.append(part)
+            progress(f"scanned {k}/{len(todo)} pieces of {src.path}")
+        single = indexed and src.vpc is None and not is_copc(src.path)  # a single file's chunk index
+        index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
+        points, used, cropped = (sum(p[k] for p in parts) for k in ("points", "used", "cropped"))
+        thin, counts = thinner.columns()
+        extra = {"read_s": 0.0, "cropped": cropped, "counts": counts, "index": index}
+        empty = np.empty((0, 3), np.float32)  # stream.load's result without points: columns, counts, totals
+        nothing = NonSoil(empty, np.empty(0, np.uint8), rule) if rule.active else None
+        note = "class 2 (ground)" if rule.use_class else "all points"
+        return Loaded(empty, thin, points, used, note, extra, nothing)
 
     return loader
-
-
-def _gathered(done: Iterator[dict], todo: list[Unit], thinner: ColumnThinner, progress, path: str) -> list:
-    """The units' summaries as they arrive, their sums added to ``thinner`` in the units' order,
-    each arrival told to ``progress`` (if any)."""
-    parts, position, waiting = [], {u: k for k, u in enumerate(todo)}, {}
-    for k, part in enumerate(done, 1):
-        waiting[position[part.pop("unit")]] = part.pop("sums")
-        _add_in_order(thinner, waiting, k - len(waiting))
-        parts.append(part)
-        if progress:
-            progress(f"scanned {k}/{len(todo)} pieces of {path}")
-    return parts
-
-
-def _loaded(parts: list[dict], thinner: ColumnThinner, rule: PointRule, single: bool) -> Loaded:
-    """:func:`stream.load`'s result from the units' summaries: no points, the thinned columns and
-    counts, the totals, a single file's chunk index (``single``)."""
-    index = tuple(sorted((e for p in parts for e in p["index"]), key=lambda e: e[0])) if single else None
-    total = {k: sum(p[k] for p in parts) for k in ("points", "used", "cropped")}
-    note = "class 2 (ground)" if rule.use_class else "all points"
-    thin, counts = thinner.columns()
-    extra = {"read_s": 0.0, "cropped": total["cropped"], "counts": counts, "index": index}
-    nothing = NonSoil(np.empty((0, 3), np.float32), np.empty(0, np.uint8), rule) if rule.active else None
-    empty = np.empty((0, 3), np.float32)
-    return Loaded(empty, thin, total["points"], total["used"], note, extra, nothing)
 
 
 def _add_in_order(thinner: ColumnThinner, waiting: dict, added: int) -> None:

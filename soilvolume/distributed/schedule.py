@@ -74,17 +74,12 @@ def parse(spec: str) -> Schedule | None:
         return None
     if spec == "none":
         return Schedule("none")
-    if "://" in spec:
-        return Schedule("tcp", address=_address(spec))
-    m = re.fullmatch(r"(threads|local)(?::(\d+))?", spec)
-    if not m or (m.group(2) is not None and not 1 <= int(m.group(2)) <= MAX_WORKERS):
-        raise BadSchedule(spec, EXPECTED)
-    return Schedule(m.group(1), int(m.group(2) or (os.cpu_count() or 1)))
-
-
-def _address(spec: str) -> str:
-    """A Dask scheduler's address ``tcp://HOST:PORT`` (port 8786 when not given), checked."""
-    from urllib.parse import urlsplit
+    if "://" not in spec:
+        m = re.fullmatch(r"(threads|local)(?::(\d+))?", spec)
+        if not m or (m.group(2) is not None and not 1 <= int(m.group(2)) <= MAX_WORKERS):
+            raise BadSchedule(spec, EXPECTED)
+        return Schedule(m.group(1), int(m.group(2) or (os.cpu_count() or 1)))
+    from urllib.parse import urlsplit  # a Dask scheduler's address tcp://HOST:PORT (port 8786 when not given)
 
     scheme = spec.split("://", 1)[0].lower()
     if scheme == "tls":
@@ -106,7 +101,7 @@ def _address(spec: str) -> str:
     if port is not None and not 1 <= port <= 65535:
         raise BadSchedule(spec, port_range)
     host = f"[{url.hostname}]" if ":" in url.hostname else url.hostname
-    return f"tcp://{host}:{port or DEFAULT_PORT}"
+    return Schedule("tcp", address=f"tcp://{host}:{port or DEFAULT_PORT}")
 
 
 def budget_gb(memory_limit: float) -> float:
@@ -205,18 +200,19 @@ def check_tiles(windows: list, points_per_cell: float, task_gb: float, options) 
 
 
 @contextmanager
-def client(schedule: Schedule, memory_limit: float, scratch: Path | None = None) -> Iterator[Starting]:
+def client(schedule: Schedule, memory_limit: float, scratch: Path) -> Iterator[Starting]:
     """A :class:`cluster.Starting` of the Dask client of ``schedule`` (a LocalCluster's workers share
     the budget, their scratch space in ``scratch``), shut on exit."""
     check_local(schedule, memory_limit)
-    starting = Starting(lambda: _start(schedule, memory_limit, scratch), str(schedule), START_S[schedule.kind])
+    start = lambda: _start(schedule, memory_limit, scratch)  # noqa: E731
+    starting = Starting(start, str(schedule), START_S[schedule.kind], schedule.on_this_machine)
     try:
         yield starting
     finally:
         starting.close()
 
 
-def _start(schedule: Schedule, memory_limit: float, scratch: Path | None):
+def _start(schedule: Schedule, memory_limit: float, scratch: Path):
     """(LocalCluster or None, Client) for ``schedule``."""
     if not has_dask():  # pragma: no cover - a dependency
         raise SoilVolumeError(

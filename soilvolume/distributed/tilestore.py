@@ -14,6 +14,7 @@ they were computed from what it computes from (``store.json``), else discards, s
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import shutil
@@ -69,18 +70,14 @@ class TileStore:
     def read(self, name: str, win: Window, fill=np.nan, dtype=None) -> np.ndarray:
         """The array ``name`` on any window of the grid (``fill`` where no tile covers a cell)."""
         r0, r1, c0, c1 = win
-        out = None
+        out = None  # the tiles cover the grid: some tile meets any window of it
         for t in self.windows:
-            a0, a1 = max(r0, t[0]), min(r1, t[1])
-            b0, b1 = max(c0, t[2]), min(c1, t[3])
-            if a0 >= a1 or b0 >= b1:
-                continue
-            part = self.load(name, t)[a0 - t[0] : a1 - t[0], b0 - t[2] : b1 - t[2]]
-            if out is None:
-                out = np.full((r1 - r0, c1 - c0), fill, dtype or part.dtype)
-            out[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0] = part
-        if out is None:
-            out = np.full((r1 - r0, c1 - c0), fill, dtype or float)
+            a0, a1, b0, b1 = max(r0, t[0]), min(r1, t[1]), max(c0, t[2]), min(c1, t[3])
+            if a0 < a1 and b0 < b1:
+                part = self.load(name, t)[a0 - t[0] : a1 - t[0], b0 - t[2] : b1 - t[2]]
+                if out is None:
+                    out = np.full((r1 - r0, c1 - c0), fill, dtype or part.dtype)
+                out[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0] = part
         return out
 
 
@@ -91,7 +88,8 @@ class RunStore:
         self.final = Path(final)
         self.kept = self.final.with_name(f".{tag(self.final.name)}.{KEPT}")
         self.folder = sibling(self.final, KEPT)
-        _sweep(self.final)
+        for entry, _ in dead_siblings(self.final, (KEPT,)):  # the stores of runs no longer alive (killed)
+            remove(entry)
         self.claimed = False
         with contextlib.suppress(OSError):  # claim the tiles an interrupted run kept (atomic: one run gets them)
             os.rename(self.kept, self.folder)
@@ -107,7 +105,8 @@ class RunStore:
     def bind(self, parts: dict) -> str | None:
         """Key the store by what the run computes from, discarding another computation's tiles:
         the reason in a line for the log (None when nothing was discarded)."""
-        self.key = fingerprint.digest(parts)
+        text = json.dumps(parts, sort_keys=True, separators=(",", ":"))
+        self.key = hashlib.blake2b(text.encode(), digest_size=10).hexdigest()  # 20 hex digits
         manifest = self.folder / MANIFEST
         said = None
         if self.claimed:
@@ -151,15 +150,6 @@ def run_store(final: Path) -> Iterator[RunStore]:
         with cleanup_on_exit(lambda: str(store.kept) if store.close(keep=True) else None):  # forced: out at once
             yield store
     except Interrupted as exc:
-        kept = store.close(keep=True)
-        raise Interrupted(exc.signum, kept=str(store.kept) if kept else None) from None
-    except BaseException:
-        store.close(keep=False)
-        raise
-    store.close(keep=False)
-
-
-def _sweep(final: Path) -> None:
-    """Remove the run stores of runs into ``final`` that are no longer alive (killed)."""
-    for entry, _ in dead_siblings(final, (KEPT,)):
-        remove(entry)
+        raise Interrupted(exc.signum, kept=str(store.kept) if store.close(keep=True) else None) from None
+    finally:
+        store.close(keep=False)  # after keeping (renamed), nothing left to remove

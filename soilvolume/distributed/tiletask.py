@@ -4,7 +4,9 @@ tiles run (:mod:`.gridtile`) on a Dask client, with progress and resume from a r
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import fields, replace
+from itertools import pairwise
 
 import numpy as np
 
@@ -13,6 +15,7 @@ from ..core.types import GridSpec
 from ..dem.grid import EPOCH_ARRAYS, EpochDEM
 from ..inputs.footprint import footprint, polygon_area
 from ..options import Options
+from . import overview
 from .cluster import checker
 from .gridtile import TILE_ARRAYS, Plan, crop_mask, empty_value, grid_tile, window_source
 from .overview import MAX_CELLS, blocks_for, factor
@@ -58,18 +61,14 @@ def _mode(values: np.ndarray) -> int | None:
     return int(v[np.argmax(n)])
 
 
-def points_per_cell(prep, cell: float) -> float:
-    """Expected points (both epochs) per grid cell: each epoch's points over its footprint."""
-    area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
-    used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
-    return sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2
-
-
 def tile_windows(options: Options, grid: GridSpec, prep, schedule: Schedule, src) -> tuple:
     """(the tile windows, their side in cells, points per cell) of the run's grid; ``src``: the
     before source (its VPC's tiling)."""
     cell, workers = grid.cell, max(1, schedule.workers)
-    task_gb, density = budget_gb(options.memory_limit) / workers, points_per_cell(prep, cell)
+    area = [polygon_area(footprint(t[:, :2])) for t in (prep.before_thin, prep.after_thin)]
+    used = [prep.inputs[e]["points_after_crop"] for e in ("before", "after")]
+    density = sum(n / max(a, 1.0) for n, a in zip(used, area, strict=True)) * cell**2  # each epoch's over its footprint
+    task_gb = budget_gb(options.memory_limit) / workers
     side = int(options.tile_cells)
     if side <= 0:  # what a task's memory holds, small enough for two tiles per worker
         area = min(TILE_POINTS, task_gb * 2**30 * 0.5 / TILE_BYTES_PER_POINT) / max(density, 1e-3)
@@ -87,7 +86,7 @@ def tile_windows(options: Options, grid: GridSpec, prep, schedule: Schedule, src
     return windows, side, density
 
 
-def volume_factor(options: Options, grid: GridSpec, schedule: Schedule) -> int:
+def volume_factor(options: Options, grid: GridSpec) -> int:
     """1 for the volume step on the whole grid in the driver, else the block side of the
     overview the tiled volume step finds the correction on (``--volume-step``)."""
     k = factor(grid, budget_gb(options.memory_limit))
@@ -115,9 +114,7 @@ def tiles(
         c_off = round(((corner[0] - grid.xmin) % align) / grid.cell) % side
         r_off = round(((grid.ymax - corner[1]) % align) / grid.cell) % side
     rows, cols = _edges(grid.rows, r_off, side), _edges(grid.cols, c_off, side)
-    return [
-        (r0, r1, c0, c1) for r0, r1 in zip(rows, rows[1:], strict=False) for c0, c1 in zip(cols, cols[1:], strict=False)
-    ]
+    return [(*r, *c) for r in pairwise(rows) for c in pairwise(cols)]
 
 
 def _edges(n: int, offset: int, side: int) -> list[int]:
@@ -129,51 +126,52 @@ def _edges(n: int, offset: int, side: int) -> list[int]:
     return edges + [n]
 
 
-def kept_and_todo(store: TileStore | None, windows) -> tuple[list, list]:
-    """(the tiles of ``windows`` ``store`` holds, with their arrays; the windows still to run)."""
-    if store is None:
-        return [], list(windows)
-    done = [w for w in windows if store.has(TILE_ARRAYS, w)]
-    return [(w, [store.load(k, w) for k in TILE_ARRAYS]) for w in done], [w for w in windows if w not in done]
+def grid_tile_stored(plan: Plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
+    """:func:`.gridtile.grid_tile` kept in ``store``: (:func:`summary` of the tile (``k`` > 1) or its
+    window, stats)."""
+    win, arrays, stats = grid_tile(plan, win, cached)
+    store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
+    return (summary(win, arrays, k) if k > 1 else win), stats
 
 
-def run_tiles(
-    c, plan: Plan, windows: list[Window], hooks: Hooks, store: TileStore | None = None, stats=None, cache=None
-) -> tuple[np.ndarray, ...]:
-    """The arrays of :data:`TILE_ARRAYS` on the grid, each tile not in ``store`` (an interrupted
-    run's) run on ``c`` and saved there; ``stats``: points read (and ``cached``), seconds, resumed."""
-    stats = stats if stats is not None else {}
-    stats.update(dict.fromkeys(STATS, 0), resumed=0)
-    g = plan.grid
-    out = tuple(np.full((g.rows, g.cols), empty_value(k), np.int64 if k[0] == "n" else float) for k in TILE_ARRAYS)
-    kept, todo = kept_and_todo(store, windows)
-    for win, arrays in kept:
-        _place(out, win, arrays)
-    per = window_caches(plan, todo, cache)
-    for win, arrays, task in map_tiles(c, grid_tile, plan, todo, hooks=hooks, total=len(windows), per=per):
-        add_stats(stats, task)
-        _place(out, win, arrays)
-        if store is not None:
-            store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
-    stats["resumed"] = len(kept)
-    return out
+def summary(win: Window, arrays, k: int) -> tuple:
+    """(window, (after, before) block sums of the overview of ``k`` x ``k`` cells, their count histograms)."""
+    a = dict(zip(TILE_ARRAYS, arrays, strict=True))
+    blocks = tuple(overview.block_sums(win, k, a[f"h_{e}"], a[f"n_{e}"]) for e in "ab")
+    return win, blocks, tuple(overview.count_histogram(a[f"n_{e}"]) for e in "ab")
 
 
-def add_stats(stats: dict, task: dict) -> None:
-    """Add a task's :data:`STATS` to the run's."""
-    for key in STATS:
-        stats[key] += task[key]
-
-
-def window_caches(plan: Plan, windows: list[Window], cache) -> list | None:
-    """Per window, the (before, after) {path: future} of the cached VPC tiles its reads open
-    (None without a cache)."""
+def grid_stored(c, plan: Plan, store: TileStore, hooks: Hooks, stats: dict, cache=None, k: int = 1) -> Iterator:
+    """Every tile of ``store`` not there yet (an interrupted run's are kept) gridded into it on ``c``:
+    the :func:`grid_tile_stored` of each, the kept ones' first; ``stats``: points read (and from
+    memory), seconds, tiles resumed."""
+    todo = [w for w in store.windows if not store.has(TILE_ARRAYS, w)]
+    stats.update(dict.fromkeys(STATS, 0), resumed=len(store.windows) - len(todo))
+    for w in store.windows:
+        if w not in todo:
+            yield summary(w, [store.load(n, w) for n in TILE_ARRAYS], k) if k > 1 else w
     if cache is not None:
-        cache.arrived()  # tiles the driver read while the cluster started
-    if cache is None or not cache.futures:
-        return None
-    crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
-    return [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in windows]
+        cache.sent()  # tiles the driver read while the cluster started
+    per = None  # per window, the (before, after) {path: future} of the cached VPC tiles its reads open
+    if cache is not None and cache.futures:
+        crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
+        per = [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in todo]
+    for part, task in map_tiles(
+        c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per
+    ):
+        for key in STATS:
+            stats[key] += task[key]
+        yield part
+
+
+def run_tiles(c, plan: Plan, hooks: Hooks, store: TileStore, stats=None, cache=None) -> tuple[EpochDEM, EpochDEM]:
+    """(after, before) DEMs of the grid, read from ``store`` once every tile is there (:func:`grid_stored`)."""
+    for _ in grid_stored(c, plan, store, hooks, {} if stats is None else stats, cache):
+        pass
+    g = plan.grid
+    whole = (0, g.rows, 0, g.cols)
+    arrays = [store.read(n, whole, empty_value(n), np.int64 if n[0] == "n" else float) for n in TILE_ARRAYS]
+    return epoch_dems(arrays, plan.rules)
 
 
 def map_tiles(
@@ -201,9 +199,3 @@ def epoch_dems(arrays: tuple[np.ndarray, ...], rules: tuple = (None, None)) -> t
     point rules that labelled them (:attr:`Plan.rules`)."""
     k = len(EPOCH_ARRAYS)
     return replace(EpochDEM(*arrays[:k]), rule=rules[1]), replace(EpochDEM(*arrays[k:]), rule=rules[0])
-
-
-def _place(out: tuple[np.ndarray, ...], win: Window, arrays) -> None:
-    r0, r1, c0, c1 = win
-    for full, part in zip(out, arrays, strict=True):
-        full[r0:r1, c0:c1] = part

@@ -18,7 +18,6 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import chain
 
 import numpy as np
 
@@ -32,9 +31,9 @@ from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import TERMS, region_sigma, widen, z_value
 from ..volumes.zones import check_inside
 from . import overview
-from .gridtile import TILE_ARRAYS, empty_value, grid_tile
+from .gridtile import TILE_ARRAYS, empty_value
 from .tilestore import TileStore, Window
-from .tiletask import add_stats, epoch_dems, kept_and_todo, map_tiles, window_caches
+from .tiletask import epoch_dems, grid_stored, map_tiles
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
 VOLUME_ARRAYS = ("dem_out_a", "dem_out_b", "diff", "offset", "filled_mask", "classes")
@@ -45,20 +44,6 @@ PARTS = ("net", "cut", "fill", "net_compared_area")
 def halo(cell: float) -> int:
     """Cells of context around a tile: ``HALO_CELLS``, or ``HALO_M`` metres on fine grids."""
     return max(HALO_CELLS, int(np.ceil(HALO_M / cell)))
-
-
-def grid_tile_stored(plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
-    """:func:`.gridtile.grid_tile` kept in ``store``: (window, block sums, count histograms, stats)."""
-    win, arrays, stats = grid_tile(plan, win, cached)
-    store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
-    return summarize_grid_tile(win, arrays, k) + (stats,)
-
-
-def summarize_grid_tile(win: Window, arrays, k: int) -> tuple:
-    """(window, (after, before) block sums, (after, before) count histograms)."""
-    a = dict(zip(TILE_ARRAYS, arrays, strict=True))
-    blocks = tuple(overview.block_sums(win, k, a[f"h_{e}"], a[f"n_{e}"]) for e in "ab")
-    return win, blocks, tuple(overview.count_histogram(a[f"n_{e}"]) for e in "ab")
 
 
 @dataclass(frozen=True)
@@ -88,13 +73,8 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     a = [job.store.read(n, ext, fill=empty_value(n)) for n in TILE_ARRAYS]
     wgrid = g.window(*ext)
     core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
-    given = Given(
-        offset=overview.to_cells(job.offset, job.k, ext),
-        stable=overview.to_cells(job.stable, job.k, ext, nearest=True).astype(bool),
-        params=job.params,
-        median_counts=job.medians,
-        core=core,
-    )
+    stable = overview.to_cells(job.stable, job.k, ext, nearest=True).astype(bool)
+    given = Given(overview.to_cells(job.offset, job.k, ext), stable, job.params, job.medians, core)
     d_i = plane_offset(job.planes[0], job.planes[1], wgrid)
     after, before = epoch_dems(a, job.rules)
     vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
@@ -116,10 +96,6 @@ def _sum_dicts(dicts: list[dict]) -> dict:
     return {k: type(dicts[0][k])(sum(d[k] for d in dicts)) for k in keys}
 
 
-def _rss(values) -> float:
-    return float(np.sqrt(np.sum(np.square(list(values)))))
-
-
 def _zones(tiles: list[dict]) -> list[dict]:
     if not tiles[0]["zones"]:
         return []
@@ -137,12 +113,6 @@ def _weighted(tiles: list[dict], key: str, weights: np.ndarray, default: float) 
     return float(np.sum(v[ok] * weights[ok]) / weights[ok].sum()) if ok.any() else default
 
 
-def _pooled_model(tiles: list[dict]) -> dict[str, float]:
-    """The tiles' semivariogram models averaged, weighted by their stable cells."""
-    w = np.array([t["uncertainty"]["stable_cells"] for t in tiles], float)
-    return {k: _weighted(tiles, f"{k}_{u}", w, 0.0) for k, u in (("nugget", "m2"), ("psill", "m2"), ("range", "m"))}
-
-
 def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     """The run's Volumes: budgets summed over the tiles, half-widths combined with the overview's
     (of ``k`` x ``k`` cells), the overview's rasters (the report's map, histogram and checks)."""
@@ -151,7 +121,8 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     z = z_value(over.uncertainty["confidence"])
     reg = {p: sum(t["uncertainty"]["registration_m3"][p] for t in tiles) for p in ("net", "cut", "fill")}
     reg["net_compared_area"] = reg["net"]
-    model = _pooled_model(tiles)
+    w = np.array([t["uncertainty"]["stable_cells"] for t in tiles], float)  # the models pooled by stable cells
+    model = {k: _weighted(tiles, f"{k}_{u}", w, 0.0) for k, u in (("nugget", "m2"), ("psill", "m2"), ("range", "m"))}
     u.update(nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"])
     for part in PARTS:
         area = sum(t["uncertainty"]["part_area_m2"][part] for t in tiles)
@@ -167,8 +138,9 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     unclear["net"] = max(unclear.values())  # as volumes/nonsoil: between net - fill and net + cut
     u.update(widen({p: u[p] for p in PARTS}, unclear), unclassified_m3=unclear)
     u["registration_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}
+    marginal = [t["uncertainty"]["marginal_detections_m3"] for t in tiles]  # in quadrature
     u["marginal_detections_m3"] = {
-        p: _rss(t["uncertainty"]["marginal_detections_m3"][p] for t in tiles) for p in ("net", "cut", "fill")
+        p: float(np.sqrt(np.sum(np.square([m[p] for m in marginal])))) for p in ("net", "cut", "fill")
     }
     cells = np.array([t["all_cells"]["cells"] for t in tiles], float)
     for key in ("lod_m", "sigma_m"):
@@ -200,22 +172,16 @@ def tile_volumes(c, job: VolumeJob, over, hooks: Hooks, steps: tuple):
 
 
 def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
-    """Grid every tile into ``store`` (tiles already there are summarized, not run again):
-    ((after, before) DEMs of the overview, (after, before) median counts, stats)."""
+    """Grid every tile into ``store`` (:func:`.tiletask.grid_stored`): ((after, before) DEMs of the
+    overview, (after, before) median counts, stats)."""
     coarse = overview.coarse(plan.grid, k)
     sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
     hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
-    kept, todo = kept_and_todo(store, store.windows)
-    stats = {"read": 0, "cached": 0, "seconds": 0.0, "resumed": len(kept)}
-    done = [summarize_grid_tile(w, arrays, k) for w, arrays in kept]
-    per = window_caches(plan, todo, cache)
-    tasks = map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per)
-    for _, blocks, hist, *task in chain(done, tasks):
+    stats: dict = {}
+    for _, blocks, hist in grid_stored(c, plan, store, hooks, stats, cache, k):
         for e in range(2):
             overview.add_blocks(sums[e], blocks[e])
             hists[e] += hist[e]
-        if task:
-            add_stats(stats, task[0])
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):

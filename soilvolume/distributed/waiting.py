@@ -4,8 +4,10 @@ tasks were doing."""
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Iterator
+from concurrent.futures import Future
 
 from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
@@ -41,17 +43,24 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
             continue
         if c.status not in ("running", "connecting", "newly-created"):
             raise SoilVolumeError(f"lost the connection to the Dask scheduler while {what}")
-        lonely = _check_workers(c, lonely, what)
+        if c.scheduler_info().get("workers"):
+            lonely = None
+        elif time.monotonic() - (lonely := lonely or time.monotonic()) > NO_WORKERS_S:  # since it first had none
+            raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")
 
 
-def _check_workers(c, since: float | None, what: str) -> float | None:
-    """When the cluster first had no worker (None: it has some); an error after NO_WORKERS_S."""
-    if c.scheduler_info().get("workers"):
-        return None
-    since = since or time.monotonic()
-    if time.monotonic() - since > NO_WORKERS_S:
-        raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")
-    return since
+def in_thread(fn: Callable, *args, name: str) -> Future:
+    """``fn(*args)`` on a daemon thread called ``name``: its result, or what it raised, in the future."""
+    future: Future = Future()
+
+    def run() -> None:
+        try:
+            future.set_result(fn(*args))
+        except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
+            future.set_exception(exc)
+
+    threading.Thread(target=run, daemon=True, name=name).start()
+    return future
 
 
 def _workers(c) -> set[str] | None:
@@ -71,9 +80,7 @@ def _lost(c, started: set[str] | None) -> tuple[int, int]:
 def _result(fut, what: str, lost: Callable[[], tuple[int, int]]):
     try:
         value = fut.result()
-    except (SoilVolumeError, MemoryError):
-        raise
-    except Exception as exc:  # noqa: BLE001 - sorted below
+    except Exception as exc:  # noqa: BLE001 - a task's own error (SoilVolumeError, MemoryError, ...) as it is
         if type(exc).__module__.split(".")[0] in ("distributed", "concurrent", "asyncio"):
             raise _cluster_error(exc, what, lost()) from None
         raise

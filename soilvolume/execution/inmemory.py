@@ -10,13 +10,14 @@ from functools import partial
 from pathlib import Path
 
 from ..core.outputs import os_errors
+from ..core.types import GridSpec
 from ..dem import grid as gridmod
 from ..dem.geotiff import write_grid
 from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared, prepare
 from ..pipelines.pipeline import open_source
 from ..registration.rigid import CACHE_ROWS, transform_points32
-from .seam import Gridded, Layout, VolumeFn
+from .seam import Gridded, VolumeFn
 
 
 class InMemory:
@@ -33,12 +34,8 @@ class InMemory:
 
     @contextmanager
     def session(self, ctx) -> Iterator[InMemory]:
-        with ThreadPoolExecutor(2) as pool:
-            self.pool = pool
-            try:
-                yield self
-            finally:
-                self.pool = None
+        with ThreadPoolExecutor(2) as self.pool:
+            yield self
 
     def read(self, ctx) -> Prepared:
         """Both clouds streamed whole (:func:`inputs.prepare.prepare`)."""
@@ -58,10 +55,10 @@ class InMemory:
         """The full-resolution points the fine registration's stable-ground refinement grids."""
         return prep.after.xyz, prep.before.xyz
 
-    def grid(self, ctx, prep: Prepared, reg, layout: Layout, beside: Callable) -> Gridded:
+    def grid(self, ctx, prep: Prepared, reg, grid: GridSpec, beside: Callable) -> Gridded:
         """The after epoch's heights here (moved block by block: no registered copy), the before
         epoch's on a second thread, then ``beside`` on them."""
-        grid, statistic = layout.grid, ctx.options.statistic
+        statistic = ctx.options.statistic
         heights = self.pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, statistic, prep.before.nonsoil)
         later = self.pool.submit(lambda: beside(grid, heights.result()))
         move = partial(transform_points32, t=reg.transform, chunk=CACHE_ROWS)

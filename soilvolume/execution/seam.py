@@ -24,15 +24,6 @@ VolumeFn = Callable[[Any, Any, np.ndarray, GridSpec], Any]
 
 
 @dataclass(frozen=True)
-class Layout:
-    """The grid step's plan: the grid, the registered after subset and its footprint."""
-
-    grid: GridSpec
-    after_thin: np.ndarray
-    footprint: np.ndarray
-
-
-@dataclass(frozen=True)
 class Gridded:
     """(after, before) ``EpochDEM`` s on the grid; ``correction_grid``/``_dems``: where the planes and
     the correction are found (the grid, or a tiled run's overview); ``beside``: the planes' fit."""
@@ -59,8 +50,8 @@ class Backend(Protocol):
     def dense(self, prep) -> tuple | None:
         """The full-resolution (after, before) points the registration may refine on, or None."""
 
-    def grid(self, ctx, prep, reg, layout: Layout, beside: Callable) -> Gridded:
-        """Both epochs' heights on ``layout.grid``; ``beside(grid, before DEM)`` run meanwhile."""
+    def grid(self, ctx, prep, reg, grid: GridSpec, beside: Callable) -> Gridded:
+        """Both epochs' heights on ``grid``; ``beside(grid, before DEM)`` run meanwhile."""
 
     def volume(self, ctx, step: VolumeFn, gridded: Gridded, planes: tuple, moved) -> Any:
         """``step`` over the grid (or by tiles given the overview's); ``planes``: (before, after, d_i

@@ -3,40 +3,31 @@ no process holds a survey's points; finished tiles kept in the run's store."""
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..core.types import SoilVolumeError
+from ..core.types import GridSpec, SoilVolumeError
 from ..core.wording import opt
 from ..dem.geotiff import grid_layout, write_cog
-from ..dem.grid import UINT8_LAYERS, output_layers
+from ..dem.grid import UINT8_LAYERS
 from ..distributed import overview
-from ..distributed.cluster import LazyClient, checker
+from ..distributed.cluster import checker
 from ..distributed.fingerprint import input_identity, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
 from ..distributed.schedule import Schedule, budget_gb, client
 from ..distributed.tilestore import run_store
-from ..distributed.tiletask import Plan, epoch_dems, plan_parts, run_tiles, tile_windows, volume_factor
+from ..distributed.tiletask import Plan, plan_parts, run_tiles, tile_windows, volume_factor
 from ..distributed.volumetiles import VolumeJob, grid_tiles, reader, tile_volumes
+from ..distributed.waiting import in_thread
 from ..inputs.footprint import PolygonMask, footprint
 from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared, prepare
 from ..inputs.stream import open_source
-from .seam import Gridded, Layout, VolumeFn, done
+from .seam import Gridded, VolumeFn, done
 
 IDENTITY_S = 600.0  # at most this long for hashing the inputs (they are read from disk, as the first pass reads them)
-
-
-def _identify(future: Future, paths: list) -> None:
-    """The (before, after) inputs' identities into ``future`` (zlib's CRC releases the GIL)."""
-    try:
-        future.set_result({"before": input_identity(paths[0]), "after": input_identity(paths[1])})
-    except BaseException as exc:  # noqa: BLE001 - raised where the result is taken
-        future.set_exception(exc)
 
 
 class Tiled:
@@ -47,10 +38,9 @@ class Tiled:
 
     def __init__(self, schedule: Schedule) -> None:
         self.schedule = schedule
-        self.c = self.store = self.plan = self.cache = self.starting = self.src_b = self.src_a = None
+        self.c = self.store = self.plan = self.cache = self.src_b = self.src_a = None
         self.k, self.stats, self.said, self.side, self.density, self.windows = 1, {}, None, 0, 0.0, []
-        self.coarse = self.over_epochs = self.medians = self.identities = self.kept = None
-        self.cloud: tuple | None = None
+        self.medians = self.identities = self.kept = self.cloud = None
 
     @contextmanager
     def session(self, ctx) -> Iterator[Tiled]:
@@ -61,23 +51,22 @@ class Tiled:
                 f"{opt('ground', ctx.options.ground)} needs whole clouds: use {opt('scheduler', 'none')} "
                 "(or classify the tiles first)"
             )
-        with run_store(ctx.out.final) as store, client(self.schedule, ctx.options.memory_limit, store.scratch) as s:
-            self.store, self.starting = store, s
+        with run_store(ctx.out.final) as store, client(self.schedule, ctx.options.memory_limit, store.scratch) as c:
 
             def wait():
                 with ctx.timer("cluster_wait"):
-                    return s.result(checker(ctx.hooks))
+                    return c.result(checker(ctx.hooks))
 
-            # the driver reads tiles itself while a local cluster starts (a remote one's workers read theirs)
-            self.c = LazyClient(wait, s.future.done if self.schedule.on_this_machine else lambda: True)
+            self.store, self.c, c.wait = store, c, wait
             yield self
 
     def read(self, ctx) -> Prepared:
         """The first pass: the thinned subsets (the inputs hashed beside it, for the tile store)."""
         hooks, options = ctx.hooks, ctx.options
-        self.identities = Future()
-        paths = [e.path for e in ctx.epochs]
-        threading.Thread(target=_identify, args=(self.identities, paths), daemon=True, name="soilvolume-ids").start()
+        paths = [e.path for e in ctx.epochs]  # hashed by zlib's CRC, which releases the GIL
+        self.identities = in_thread(
+            lambda: {"before": input_identity(paths[0]), "after": input_identity(paths[1])}, name="soilvolume-ids"
+        )
         self.src_b, self.src_a = (open_source(e.path) for e in ctx.epochs)
         direct = self.schedule.on_this_machine  # this machine's workers: sent straight to them
         self.cache = PointCache(self.c, budget_gb(options.memory_limit), direct)
@@ -92,34 +81,34 @@ class Tiled:
     def dense(self, prep: Prepared) -> None:
         return None  # no process holds the full-resolution points
 
-    def grid(self, ctx, prep: Prepared, reg, layout: Layout, beside: Callable) -> Gridded:
+    def grid(self, ctx, prep: Prepared, reg, grid: GridSpec, beside: Callable) -> Gridded:
         """The tiles gridded on the workers; ``beside`` on the overview's before DEM (``k`` > 1) or the grid's."""
-        grid, options = layout.grid, ctx.options
-        self.plan = _plan(prep, ctx, grid, reg, (self.src_b, self.src_a))
+        options, (b, a) = ctx.options, (str(e.path) for e in ctx.epochs)
+        crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
+        ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], options.radius)
+        # the sources opened here, so that no task opens them again (never whole clouds)
+        opened = tuple(None if s is None or s.raw is not None else s for s in (self.src_b, self.src_a))
+        parts = (prep.frame, prep.origin, grid, reg.transform, prep.ground, ring, options.statistic)
+        self.plan = Plan(b, a, *crs, *parts, prep.index, prep.rules, opened, PolygonMask(ring))  # what each task needs
         self.windows, self.side, self.density = tile_windows(options, grid, prep, self.schedule, self.src_b)
         ctx.hooks.step(
             ctx.at("grid"), f"gridding {len(self.windows)} tiles of {self.side} x {self.side} cells on {self.schedule}"
         )
-        self.k = volume_factor(options, grid, self.schedule)
+        self.k = volume_factor(options, grid)
         inputs = self.identities.result(IDENTITY_S)
         self.said = self.store.bind(run_parts(inputs, options, plan_parts(self.plan, self.windows, self.k)))
         if self.said:
             ctx.hooks.step(ctx.at("grid"), self.said)
-        self.kept = self.store.tiles(self.windows)
-        if self.k > 1:
-            self.over_epochs, self.medians, self.stats = grid_tiles(
-                self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache
-            )
-            self.coarse = overview.coarse(grid, self.k)
-            dems, at, at_dems = (), self.coarse, self.over_epochs  # the correction found on the overview
+        self.kept, self.stats = self.store.tiles(self.windows), {}
+        if self.k > 1:  # the correction found on the overview
+            at, dems = overview.coarse(grid, self.k), ()
+            at_dems, self.medians, self.stats = grid_tiles(self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache)
         else:
-            self.stats = {}
-            arrays = run_tiles(self.c, self.plan, self.windows, ctx.hooks, self.kept, self.stats, self.cache)
-            dems = at_dems = epoch_dems(arrays, self.plan.rules)
-            at = grid
+            at, dems = grid, run_tiles(self.c, self.plan, ctx.hooks, self.kept, self.stats, self.cache)
+            at_dems = dems
         self.cache.release()  # the workers' memory back for the volume step
         if self.k == 1:
-            self.starting.close_soon()  # the volume step runs here: the workers are done
+            self.c.close_soon()  # the volume step runs here: the workers are done
         return Gridded(grid, dems, at, at_dems, done(beside(at, at_dems[1])))
 
     def volume(self, ctx, step: VolumeFn, gridded: Gridded, planes: tuple, moved) -> object:
@@ -127,18 +116,24 @@ class Tiled:
         p_b, p_a, d_i = planes
         if self.k == 1:
             return step(*gridded.dems, d_i, gridded.grid)
-        over = step(*self.over_epochs, d_i, self.coarse)
+        over = step(*gridded.correction_dems, d_i, gridded.correction_grid)
         parts = (over.offset, over.stable, over.params, self.medians, (p_b, p_a), moved, self.plan.rules)
         job = VolumeJob(self.kept, gridded.grid, ctx.options, self.k, *parts)
         vols = tile_volumes(self.c, job, over, ctx.hooks, (*ctx.spans["volume"], "volumes of"))
-        self.starting.close_soon()  # the rest reads the tile store
+        self.c.close_soon()  # the rest reads the tile store
         return vols
 
     def write(self, ctx, layers: list, vols, grid, z0: float) -> None:
         """The rasters as COGs from memory or the tile store; the after cloud streamed through the driver."""
-        if layers:  # the pair's layers (a surface as the reference runs in memory)
-            get = reader(self.kept) if self.k > 1 else lambda key, r, c: getattr(vols, key)[r, c]
-            _write_cogs(ctx.out, get, grid, z0, ctx.options.correction)
+        get = reader(self.kept) if self.k > 1 else lambda key, r, c: getattr(vols, key)[r, c]  # heights local
+        for name, key, desc in layers:  # the pair's layers (a surface as the reference runs in memory)
+            if key in UINT8_LAYERS:
+                layout = grid_layout(grid, desc, "", "uint8")
+                write_cog(ctx.out.path(name), layout, lambda r, c, key=key: get(key, r, c).astype("uint8"))
+            else:
+                add = z0 if key.startswith("dem_") else 0.0
+                piece = lambda r, c, key=key, add=add: get(key, r, c) + add  # noqa: E731
+                write_cog(ctx.out.path(name), grid_layout(grid, desc), piece)
         if self.cloud is not None:
             prep, reg, path = self.cloud
             write_las_chunked(path, prep.after_chunks(), prep.origin, prep.frame.wkt, reg.transform)
@@ -158,31 +153,8 @@ class Tiled:
             "tiles_resumed": stats["resumed"],
             "kept_tiles_discarded": self.said,
             "task_points_read": stats["read"],
-            "task_points_from_memory": stats.get("cached", 0),
-            "points_kept_in_memory": self.cache.points if self.cache is not None else 0,
+            "task_points_from_memory": stats["cached"],
+            "points_kept_in_memory": self.cache.points,
             "task_seconds": round(stats["seconds"], 3),
             "points_per_task_second": round(stats["read"] / max(stats["seconds"], 1e-9)),
         }
-
-
-def _write_cogs(out, get: Callable, grid, z0: float, correction: str) -> None:
-    """The run's rasters (:func:`grid.output_layers`) as COGs, block by block; ``get(name, rows,
-    cols)``: the window of the grid array ``name`` (heights local)."""
-    for name, key, desc in output_layers(correction):
-        if key in UINT8_LAYERS:
-            layout = grid_layout(grid, desc, "", "uint8")
-            write_cog(out.path(name), layout, lambda r, c, key=key: get(key, r, c).astype("uint8"))
-        else:
-            add = z0 if key.startswith("dem_") else 0.0
-            write_cog(out.path(name), grid_layout(grid, desc), lambda r, c, key=key, add=add: get(key, r, c) + add)
-
-
-def _plan(prep: Prepared, ctx, grid, reg, sources: tuple) -> Plan:
-    """What every tile task needs (picklable); ``sources``: the (before, after) sources the driver
-    opened (the tasks open none again; never whole clouds)."""
-    b, a = (str(e.path) for e in ctx.epochs)
-    crs = prep.inputs["before"]["crs_wkt"], prep.inputs["after"]["crs_wkt"]
-    ring = prep.crop if prep.crop is not None else footprint(prep.after_thin[:, :2], ctx.options.radius)
-    streamed = tuple(None if s is None or s.raw is not None else s for s in sources)
-    parts = (prep.frame, prep.origin, grid, reg.transform, prep.ground, ring, ctx.options.statistic)
-    return Plan(b, a, *crs, *parts, prep.index, prep.rules, streamed, PolygonMask(ring))

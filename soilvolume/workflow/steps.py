@@ -18,7 +18,7 @@ from ..core.record import Georeferencing, QualityInputs, RunRecord
 from ..core.types import GridSpec
 from ..core.wording import cli_tree, opt
 from ..dem.grid import EpochDEM
-from ..execution.seam import Backend, Gridded, Layout
+from ..execution.seam import Backend, Gridded
 from ..inputs.footprint import footprint
 from ..inputs.prepare import Prepared, Single, prepare_single
 from ..options import Options
@@ -111,7 +111,7 @@ def grid(ctx: Context, backend: Backend, prep: Prepared, reg: Registration) -> G
         poly = footprint(after_thin[:, :2])
         empty = "the registered after cloud does not overlap the before cloud"
         cell = reference_cell(prep, poly, ctx.options)
-        plan = Layout(plan_grid(cell, [after_thin, prep.before_thin], prep.origin, prep.frame, empty), after_thin, poly)
+        plan = plan_grid(cell, [after_thin, prep.before_thin], prep.origin, prep.frame, empty)
         return backend.grid(ctx, prep, reg, plan, fit_planes(prep, after_thin, ctx.options))
 
 
