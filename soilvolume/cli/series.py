@@ -7,8 +7,7 @@ from pathlib import Path
 
 from .. import api
 from ..reporting.serieshtml import changes
-from .feedback import hooks, result
-from .flags import add_options, add_progress, options_from
+from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "series"
 
