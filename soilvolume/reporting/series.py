@@ -16,7 +16,7 @@ from ..inputs.io import atomic_path
 from ..options import Options
 from ..volumes.quality import epoch_checks, period_quality
 from ..volumes.quantities import scaled
-from .report import absolute_transform, motion, recorded_options, stages, write_json
+from .report import recorded_options, registration_entry, write_json
 from .seriesgrade import LEDGER_GRADE, ledger_figures, with_grade, write_grades
 from .serieshtml import changes, write_series_html
 
@@ -36,13 +36,7 @@ def difference_name(i: int, j: int, cumulative: bool = False) -> str:
 def _registration(fit, origin: np.ndarray) -> dict:
     if fit is None:  # E0: the frame itself
         return {"transform": np.eye(4), "reference": True}
-    t = fit.reg.transform
-    return {
-        "transform": absolute_transform(t, origin),
-        "transform_local": t,
-        **motion(t, fit.prep.after_thin),
-        **stages(fit.reg),
-    }
+    return registration_entry(fit.reg, origin, fit.prep.after_thin)
 
 
 def _change(c, dates: list, cell_area: float, quality: dict, cumulative: bool = False) -> dict:
