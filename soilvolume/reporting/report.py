@@ -61,14 +61,15 @@ def registration_summary(reg: Registration, origin: np.ndarray) -> dict:
     return _clean({"transform": absolute_transform(reg.transform, origin), **stages(reg)})
 
 
+def grid_keys(grid: GridSpec, **crs) -> dict:
+    """The keys of a ``grid`` in report.json: cell size, rows, columns, ``crs`` and the affine transform."""
+    return {"cell_m": grid.cell, "rows": grid.rows, "cols": grid.cols, **crs, "transform": list(grid.transform)[:6]}
+
+
 def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
     """What ``soilvolume dem`` returns: the grid written and the points behind it."""
     return {
-        "cell_m": grid.cell,
-        "rows": grid.rows,
-        "cols": grid.cols,
-        "crs": one.frame.crs.name,
-        "transform": list(grid.transform)[:6],
+        **grid_keys(grid, crs=one.frame.crs.name),
         "points": int(len(one.xyz)),
         "valid_cells": int(np.isfinite(heights).sum()),
         "selection": one.note,
@@ -170,12 +171,7 @@ def _uncertainty_m3(vols: Volumes) -> dict:
 def _grid(prep: Prepared, grid: GridSpec, vols: Volumes, options: Options) -> dict:
     """report.json's ``grid``: the rasters' grid, CRS, compared area and empty cells."""
     return {
-        "cell_m": grid.cell,
-        "rows": grid.rows,
-        "cols": grid.cols,
-        "crs": prep.frame.crs.name,
-        "crs_wkt": prep.frame.wkt,
-        "transform": list(grid.transform)[:6],
+        **grid_keys(grid, crs=prep.frame.crs.name, crs_wkt=prep.frame.wkt),
         "compared_area_m2": vols.all_cells["area_m2"],
         "compared_cells": vols.all_cells["cells"],
         "change_area_m2": vols.compensated["area_m2"],

@@ -16,7 +16,7 @@ from ..inputs.io import atomic_path
 from ..options import Options
 from ..volumes.quality import epoch_checks, period_quality
 from ..volumes.quantities import scaled
-from .report import recorded_options, registration_entry, write_json
+from .report import grid_keys, recorded_options, registration_entry, write_json
 from .seriesgrade import LEDGER_GRADE, ledger_figures, with_grade, write_grades
 from .serieshtml import changes, write_series_html
 
@@ -86,11 +86,7 @@ def _series_grid(grid: GridSpec, series, origin: np.ndarray) -> dict:
     """report.json's ``grid`` of a series run: the one grid, its compared, works and refilled areas."""
     area = grid.cell_area
     return {
-        "cell_m": grid.cell,
-        "rows": grid.rows,
-        "cols": grid.cols,
-        "crs_wkt": grid.crs_wkt,
-        "transform": list(grid.transform)[:6],
+        **grid_keys(grid, crs_wkt=grid.crs_wkt),
         "compared_area_m2": float(series.valid.sum()) * area,
         "works_area_m2": float(series.works.sum()) * area,
         "refilled_area_m2": float(series.refilled.sum()) * area,
