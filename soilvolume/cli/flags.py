@@ -56,11 +56,7 @@ def hooks(ns: argparse.Namespace) -> Hooks:
         return Hooks(progress=ns.protocol.progress, log=ns.protocol.log, cancel=ns.protocol.is_cancelled, keyed=True)
     if getattr(ns, "quiet", True):
         return Hooks()
-
-    def show(pct: float, msg: str) -> None:
-        print(f"[{pct:5.1f}%] {msg}", file=sys.stderr, flush=True)
-
-    return Hooks(progress=show)
+    return Hooks(progress=lambda pct, msg: print(f"[{pct:5.1f}%] {msg}", file=sys.stderr, flush=True))
 
 
 def result(ns: argparse.Namespace, data: dict, lines: list[str] | None = None) -> int:

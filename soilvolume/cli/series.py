@@ -74,7 +74,6 @@ def ledger_lines(report: dict) -> list[str]:
             f"{name} E{p['from']} -> E{p['to']} ({when}): net {v['net']:+.2f} ± {u['net']:.2f} m3  "
             f"cut {v['cut']:.2f} ± {u['cut']:.2f}  fill {v['fill']:.2f} ± {u['fill']:.2f}"
         )
-        q = p.get("quality") or {}
-        if q:
+        if q := p.get("quality"):
             lines += [f"  quality: {q['verdict'].upper()}"] + [f"    - {m}" for m in q["messages"]]
     return lines

@@ -142,8 +142,8 @@ def difference_map(
     lim = _sym_limit(shown)
     rel = _float_2d(_like(relief, d))
     z = block_mean(rel, k) if rel is not None else shown
-    rgba = _shade(colour_ramp(shown, lim, RDBU), hillshade(z * _exaggeration(z, grid.cell * k), grid.cell * k))
-    rgba = _repeat(rgba, f)
+    shaded = hillshade(z * _exaggeration(z, grid.cell * k), grid.cell * k)
+    rgba = _repeat(_shade(colour_ramp(shown, lim, RDBU), shaded), f)
     outlined = {
         "Black outline: refilled cells. ": (filled_mask, (0, 0, 0, 255)),
         "Green outline: the areas of significant change the headline cut and fill are summed over "

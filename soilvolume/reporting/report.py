@@ -76,10 +76,9 @@ def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
     }
 
 
-def write_json(path: Path, report: dict, timings: dict[str, float] | None = None) -> None:
+def write_json(path: Path, report: dict, timings: dict[str, float]) -> None:
     """report.json, atomically (``timings``: the run's final ``timings_s``, taken last)."""
-    if timings is not None:
-        report["timings_s"] = timings
+    report["timings_s"] = timings
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(_clean(cli_tree(report)), indent=2))  # options worded as flags
 
@@ -129,8 +128,7 @@ def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
     if record.engine is not None:
         report["engine"] = record.engine
     o = record.options
-    q = quantities(report, o.bulking, o.shrinkage, o.zones)
-    if q is not None:
+    if (q := quantities(report, o.bulking, o.shrinkage, o.zones)) is not None:
         report["quantities"] = q
     return report
 

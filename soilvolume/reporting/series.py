@@ -164,6 +164,5 @@ def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Opti
     report = cli_tree(with_grade(report, graded))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
-    report["timings_s"] = timer.totals()
-    write_json(out.path("report.json"), report)
+    write_json(out.path("report.json"), report, timer.totals())
     return report
