@@ -101,12 +101,11 @@ def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Optio
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
     dates = [e.date for e in runs]
     epochs = [_epoch(k, run, fits, vols, origin) for k, run in enumerate(runs)]
-    area = grid.cell_area
     prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
     checks = epoch_checks([e["registration"] for e in epochs], vols, prior)
 
     def change(c, cumulative: bool = False) -> dict:
-        return _change(c, dates, area, period_quality(c, checks, vols, area), cumulative)
+        return _change(c, dates, grid.cell_area, period_quality(c, checks, vols, grid.cell_area), cumulative)
 
     return {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
