@@ -85,10 +85,9 @@ def tables(report: dict) -> dict | None:
     ex = report.get("excluded")
     if not isinstance(ex, dict) or not ex:
         return None
-    head = ["apparent change", "net (m³)", "cut (m³)", "fill (m³)", "area (m²)"]
     return {
         "rule": [(e, str(r)) for e, r in (ex.get("rule") or {}).items()],
-        "change": Table(head, _change_rows(ex)),
+        "change": Table(["apparent change", "net (m³)", "cut (m³)", "fill (m³)", "area (m²)"], _change_rows(ex)),
         "objects": _objects(ex),
         "words": sentence(ex),
     }

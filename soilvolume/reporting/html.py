@@ -129,9 +129,8 @@ def figures(report: dict, arrays: dict, grid: GridSpec) -> list[tuple[str, Marku
     diff, relief = arrays.get("difference"), arrays.get("dem_after")
     lod = get(report, "uncertainty", "lod_m") or get(report, "uncertainty_m3", "lod_m") or get(report, "lod_m")
     conf = get(report, "uncertainty", "confidence") or get(report, "uncertainty_m3", "confidence")
-    change = arrays.get("change")
     return [
-        ("Difference map", difference_map(diff, grid, relief, arrays.get("filled_mask"), change=change)),
+        ("Difference map", difference_map(diff, grid, relief, arrays.get("filled_mask"), change=arrays.get("change"))),
         ("Histogram", histogram(diff, lod, conf)),
         ("Stable-ground residuals", residual_map(arrays.get("residual"), grid, relief)),
     ]
