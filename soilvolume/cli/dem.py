@@ -11,8 +11,7 @@ from .. import api
 from ..inputs.crs import parse_crs
 from ..inputs.stream import open_source
 from ..validate import check_bounds
-from .feedback import hooks, result
-from .flags import add_options, add_progress, options_from
+from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "dem"
 

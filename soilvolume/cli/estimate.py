@@ -8,8 +8,7 @@ from pathlib import Path
 from .. import api
 from ..reporting import summary
 from ..reporting.report import summary_lines
-from .feedback import hooks, result
-from .flags import add_options, add_progress, options_from
+from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "estimate"
 EPILOG = """Outputs in DIR: dem_before.tif, dem_after.tif (average-height DEMs, refilled heights where

@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..scenes.selftest import run_selftest
-from .feedback import hooks, result
-from .flags import add_progress
+from .flags import add_progress, hooks, result
 
 NAME = "selftest"
 

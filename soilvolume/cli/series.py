@@ -7,8 +7,7 @@ from pathlib import Path
 
 from .. import api
 from ..reporting.serieshtml import changes
-from .feedback import hooks, result
-from .flags import add_options, add_progress, options_from
+from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "series"
 
@@ -75,7 +74,6 @@ def ledger_lines(report: dict) -> list[str]:
             f"{name} E{p['from']} -> E{p['to']} ({when}): net {v['net']:+.2f} ± {u['net']:.2f} m3  "
             f"cut {v['cut']:.2f} ± {u['cut']:.2f}  fill {v['fill']:.2f} ± {u['fill']:.2f}"
         )
-        q = p.get("quality") or {}
-        if q:
+        if q := p.get("quality"):
             lines += [f"  quality: {q['verdict'].upper()}"] + [f"    - {m}" for m in q["messages"]]
     return lines

@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 
 from ..workflow.stockpile import PileInput, run_stockpile
-from .feedback import hooks, result
-from .flags import add_options, add_progress, options_from
+from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "stockpile"
 

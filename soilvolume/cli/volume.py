@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 
 from .. import api
-from .feedback import hooks, result
-from .flags import add_progress
+from .flags import add_progress, hooks, result
 
 NAME = "volume"
 

@@ -40,8 +40,7 @@ def classes_map(classes: Any, grid: GridSpec, relief: Any = None, ident: str = "
     rgba[shown < 255] = (240, 240, 240, 255)
     for code, colour in PALETTE.items():
         rgba[shown == code] = (*colour, 255)
-    rgba = _shade(rgba, hillshade(z[::k, ::k], grid.cell * k))
-    rgba = _repeat(rgba, f)
+    rgba = _repeat(_shade(rgba, hillshade(z[::k, ::k], grid.cell * k)), f)
     legend = "".join(
         f'<span style="display:inline-block;width:1em;height:1em;background:rgb{PALETTE[k_]};'
         f'margin:0 .3em 0 .8em;vertical-align:middle"></span>{html.escape(n)}'
@@ -65,8 +64,7 @@ def _change_rows(ex: dict) -> list[list[str]]:
     for key, name in (("rough", "rough change (counted)"), ("grass_patches", "grass patches (left out)")):
         if isinstance(ex.get(key), dict):
             rows.append(_row(name, ex[key]))
-    m = ex.get("moved_objects") or {}
-    if m:
+    if m := ex.get("moved_objects"):
         rows.append(_row(f"moved objects ({'left out' if m.get('excluded') else 'counted'}, {m.get('count', 0)})", m))
     return rows
 
@@ -87,10 +85,9 @@ def tables(report: dict) -> dict | None:
     ex = report.get("excluded")
     if not isinstance(ex, dict) or not ex:
         return None
-    head = ["apparent change", "net (m³)", "cut (m³)", "fill (m³)", "area (m²)"]
     return {
         "rule": [(e, str(r)) for e, r in (ex.get("rule") or {}).items()],
-        "change": Table(head, _change_rows(ex)),
+        "change": Table(["apparent change", "net (m³)", "cut (m³)", "fill (m³)", "area (m²)"], _change_rows(ex)),
         "objects": _objects(ex),
         "words": sentence(ex),
     }

@@ -71,7 +71,6 @@ def colour_ramp(values: np.ndarray, limit: float, table: np.ndarray = RDBU) -> n
     ±limit and beyond the end colours, NaN transparent."""
     v = np.asarray(values, float)
     ok = np.isfinite(v)
-    limit = _positive(limit) or 1.0
     t = np.clip(np.where(ok, v, 0.0) / (2 * limit) + 0.5, 0.0, 1.0) * (len(table) - 1)
     knots = np.arange(len(table))
     out = np.empty(v.shape + (4,), np.uint8)
@@ -124,14 +123,6 @@ def _outline(mask: np.ndarray) -> np.ndarray:
     return mask & ~inner
 
 
-FILLED_OUTLINE, FILLED_CAPTION = (0, 0, 0, 255), "Black outline: refilled cells. "
-CHANGE_OUTLINE = (0, 150, 0, 255)
-CHANGE_CAPTION = (
-    "Green outline: the areas of significant change the headline cut and fill are summed over "
-    "(polygons in change_areas.geojson). "
-)
-
-
 def difference_map(
     diff: np.ndarray,
     grid: GridSpec,
@@ -151,11 +142,12 @@ def difference_map(
     lim = _sym_limit(shown)
     rel = _float_2d(_like(relief, d))
     z = block_mean(rel, k) if rel is not None else shown
-    rgba = _shade(colour_ramp(shown, lim, RDBU), hillshade(z * _exaggeration(z, grid.cell * k), grid.cell * k))
-    rgba = _repeat(rgba, f)
+    shaded = hillshade(z * _exaggeration(z, grid.cell * k), grid.cell * k)
+    rgba = _repeat(_shade(colour_ramp(shown, lim, RDBU), shaded), f)
     outlined = {
         "Black outline: refilled cells. ": (filled_mask, (0, 0, 0, 255)),
-        CHANGE_CAPTION: (change, CHANGE_OUTLINE),
+        "Green outline: the areas of significant change the headline cut and fill are summed over "
+        "(polygons in change_areas.geojson). ": (change, (0, 150, 0, 255)),
     }
     said = ""
     for words, (marks, colour) in outlined.items():

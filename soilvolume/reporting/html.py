@@ -129,9 +129,8 @@ def figures(report: dict, arrays: dict, grid: GridSpec) -> list[tuple[str, Marku
     diff, relief = arrays.get("difference"), arrays.get("dem_after")
     lod = get(report, "uncertainty", "lod_m") or get(report, "uncertainty_m3", "lod_m") or get(report, "lod_m")
     conf = get(report, "uncertainty", "confidence") or get(report, "uncertainty_m3", "confidence")
-    change = arrays.get("change")
     return [
-        ("Difference map", difference_map(diff, grid, relief, arrays.get("filled_mask"), change=change)),
+        ("Difference map", difference_map(diff, grid, relief, arrays.get("filled_mask"), change=arrays.get("change"))),
         ("Histogram", histogram(diff, lod, conf)),
         ("Stable-ground residuals", residual_map(arrays.get("residual"), grid, relief)),
     ]
@@ -175,26 +174,21 @@ def write_html(report: dict, arrays: dict, grid: GridSpec, path: str | Path) -> 
 ZERO = 0.005  # m³: what "0.00" shows
 
 
-def zero_notes(
-    report: dict, arrays: dict | None, words: tuple[str, str, str] = ("", "cut", "fill")
-) -> list[tuple[str, str]]:
+def zero_notes(report: dict, arrays: dict, words: tuple[str, str, str] = ("", "cut", "fill")) -> list[tuple[str, str]]:
     """(word, why) per headline kind (cut, fill) that reads 0 while the compared cells hold some of
     that kind; none when none does. ``words``: the headline's (lead, cut, fill) words."""
-    volumes = report.get("volume_m3") or {}
-    every = report.get("volume_all_cells_m3") or {}
-    lod = (report.get("uncertainty_m3") or {}).get("lod_m")
-    out = []
-    for kind, sign, word in (("cut", -1.0, words[1]), ("fill", 1.0, words[2])):
-        shown, anywhere = volumes.get(kind), every.get(kind)
-        if not _number(shown) or abs(shown) >= ZERO or not _number(anywhere) or anywhere < ZERO:
-            continue
-        cells = _left_out((arrays or {}).get("difference"), (arrays or {}).get("change"), sign, lod)
-        out.append((word, _why(report, kind, sign, cells)))
-    return out
+    volumes, every = report.get("volume_m3") or {}, report.get("volume_all_cells_m3") or {}
+    return [
+        (word, _why(report, kind, sign, arrays))
+        for kind, sign, word in (("cut", -1.0, words[1]), ("fill", 1.0, words[2]))
+        if _number(shown := volumes.get(kind)) and abs(shown) < ZERO
+        if _number(anywhere := every.get(kind)) and anywhere >= ZERO
+    ]
 
 
-def _why(report: dict, kind: str, sign: float, cells: dict[str, Any] | None) -> str:
+def _why(report: dict, kind: str, sign: float, arrays: dict) -> str:
     lod = (report.get("uncertainty_m3") or {}).get("lod_m")
+    cells = _left_out(arrays.get("difference"), arrays.get("change"), sign, lod)
     beyond = "lower" if sign < 0 else "higher"
     threshold = f"{sign * lod:+.2f} m" if _number(lod) else "their level of detection"
     level = f"{lod:.2f} m" if _number(lod) else "its level"

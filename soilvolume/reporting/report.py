@@ -17,7 +17,7 @@ from ..registration.rigid import rotation_deg, shift_at, tilt_deg, transform_poi
 from ..volumes import coverage
 from ..volumes.quality import assess, sentence
 from ..volumes.quantities import quantities
-from .surface import amend, is_surface, surface_quality
+from .surface import amend, is_surface, surface_quality, words
 
 if TYPE_CHECKING:
     from ..core.record import RunRecord
@@ -48,9 +48,12 @@ def stages(reg: Registration) -> dict:
     return {**out, "georeferencing": {} if reg.georeferencing is None else asdict(reg.georeferencing)}
 
 
-def motion(t: np.ndarray, after: np.ndarray) -> dict:
-    """The local transform ``t`` as rotation and tilt (°) and the shift (m) at the ``after`` points' mean."""
-    return {"rotation_deg": rotation_deg(t), "tilt_deg": tilt_deg(t), "shift_m": shift_at(t, after.mean(axis=0))}
+def registration_entry(reg: Registration, origin: np.ndarray, after: np.ndarray, **extra) -> dict:
+    """report.json's ``registration``: the transform (absolute, local, then ``extra``), each stage's fit, and
+    the motion as rotation and tilt (°) and the shift (m) at the ``after`` points' mean."""
+    t = reg.transform
+    motion = {"rotation_deg": rotation_deg(t), "tilt_deg": tilt_deg(t), "shift_m": shift_at(t, after.mean(axis=0))}
+    return {"transform": absolute_transform(t, origin), "transform_local": t, **extra, **stages(reg), **motion}
 
 
 def registration_summary(reg: Registration, origin: np.ndarray) -> dict:
@@ -58,49 +61,47 @@ def registration_summary(reg: Registration, origin: np.ndarray) -> dict:
     return _clean({"transform": absolute_transform(reg.transform, origin), **stages(reg)})
 
 
+def grid_keys(grid: GridSpec, **crs) -> dict:
+    """The keys of a ``grid`` in report.json: cell size, rows, columns, ``crs`` and the affine transform."""
+    return {"cell_m": grid.cell, "rows": grid.rows, "cols": grid.cols, **crs, "transform": list(grid.transform)[:6]}
+
+
 def dem_summary(one, grid: GridSpec, heights: np.ndarray) -> dict:
     """What ``soilvolume dem`` returns: the grid written and the points behind it."""
     return {
-        "cell_m": grid.cell,
-        "rows": grid.rows,
-        "cols": grid.cols,
-        "crs": one.frame.crs.name,
-        "transform": list(grid.transform)[:6],
+        **grid_keys(grid, crs=one.frame.crs.name),
         "points": int(len(one.xyz)),
         "valid_cells": int(np.isfinite(heights).sum()),
         "selection": one.note,
     }
 
 
-def write_json(path: Path, report: dict, timings: dict[str, float] | None = None) -> None:
+def write_json(path: Path, report: dict, timings: dict[str, float]) -> None:
     """report.json, atomically (``timings``: the run's final ``timings_s``, taken last)."""
-    if timings is not None:
-        report["timings_s"] = timings
+    report["timings_s"] = timings
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(_clean(cli_tree(report)), indent=2))  # options worded as flags
 
 
 def summary_lines(report: dict) -> list[str]:
     """A few human lines for the terminal (options worded as flags)."""
-    v, u = report["volume_m3"], report["volume_uncompensated_m3"]
-    g = report["grid"]
-    fine = report["registration"]["fine"]
-    surface = (report.get("reference") or {}).get("kind") == "surface"
+    v, u, g = report["volume_m3"], report["volume_uncompensated_m3"], report["grid"]
+    fine, q, surface = report["registration"]["fine"], report.get("quality"), is_surface(report)
     reg = fine["method"] if surface else f"{fine['method']} fitness {fine['fitness']:.3f}, RMSE {fine['rmse']:.3f} m"
-    words = ("net", "below design", "above design") if surface else ("net", "cut", "fill")
+    _, cut, fill = words(report)
     return cli_tree(  # options worded as flags
         [
             f"compared area {g['compared_area_m2']:.1f} m2 on {g['cell_m']} m cells ({g['rows']} x {g['cols']})",
             f"registration: {reg}",
             f"volume (change areas, {report['correction']['method']} correction): "
-            f"{words[0]} {v['net']:+.2f} m3  {words[1]} {v['cut']:.2f} m3  {words[2]} {v['fill']:.2f} m3",
+            f"net {v['net']:+.2f} m3  {cut} {v['cut']:.2f} m3  {fill} {v['fill']:.2f} m3",
             f"volume (uncompensated): net {u['net']:+.2f} m3  cut {u['cut']:.2f} m3  fill {u['fill']:.2f} m3",
             f"uncertainty (95 %): net ±{report['uncertainty_m3']['net']:.2f} m3, "
             f"level of detection {report['uncertainty_m3']['lod_m']:.3f} m",
             *filter(None, [coverage.line(report)]),
             f"total time {sum(report['timings_s'].values()):.2f} s",
             *(f"not soil: {line}" for line in nonsoil_lines(report)),
-            *quality_lines(report),
+            *([f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]] if q else []),
         ]
     )
 
@@ -108,12 +109,6 @@ def summary_lines(report: dict) -> list[str]:
 def nonsoil_lines(report: dict) -> list[str]:
     """What was excluded as not soil, or counted and listed, in plain sentences."""
     return sentence(report.get("excluded") or {})
-
-
-def quality_lines(report: dict) -> list[str]:
-    """The quality verdict and its reasons, one line each."""
-    q = report.get("quality")
-    return [f"quality: {q['verdict'].upper()}"] + [f"  - {m}" for m in q["messages"]] if q else []
 
 
 def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
@@ -127,15 +122,13 @@ def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
 def build_report(record: RunRecord, timings: dict[str, float]) -> dict:
     """report.json of an estimate run, its quality verdict in it (``timings``: seconds per stage so far)."""
     report = _report(record, timings)
-    q = record.quality
-    report["quality"] = assess(report, q)
+    report["quality"] = assess(report, record.quality)
     if is_surface(report):  # the survey's agreement with the reference surface leads the verdict
         report["quality"] = surface_quality(report, record)
     if record.engine is not None:
         report["engine"] = record.engine
     o = record.options
-    q = quantities(report, o.bulking, o.shrinkage, o.zones)
-    if q is not None:
+    if (q := quantities(report, o.bulking, o.shrinkage, o.zones)) is not None:
         report["quantities"] = q
     return report
 
@@ -173,27 +166,10 @@ def _uncertainty_m3(vols: Volumes) -> dict:
     return {**{k: u[v] for k, v in keys.items()}, "lod_m": u["lod_m"], "confidence": u["confidence"]}
 
 
-def _registration(prep: Prepared, reg: Registration) -> dict:
-    """report.json's ``registration``: the transform, each stage's fit and the motion in words."""
-    t = reg.transform
-    return {
-        "transform": absolute_transform(t, prep.origin),
-        "transform_local": t,
-        "local_origin": prep.origin,
-        **stages(reg),
-        **motion(t, prep.after_thin),
-    }
-
-
 def _grid(prep: Prepared, grid: GridSpec, vols: Volumes, options: Options) -> dict:
     """report.json's ``grid``: the rasters' grid, CRS, compared area and empty cells."""
     return {
-        "cell_m": grid.cell,
-        "rows": grid.rows,
-        "cols": grid.cols,
-        "crs": prep.frame.crs.name,
-        "crs_wkt": prep.frame.wkt,
-        "transform": list(grid.transform)[:6],
+        **grid_keys(grid, crs=prep.frame.crs.name, crs_wkt=prep.frame.wkt),
         "compared_area_m2": vols.all_cells["area_m2"],
         "compared_cells": vols.all_cells["cells"],
         "change_area_m2": vols.compensated["area_m2"],
@@ -226,7 +202,7 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
         "blind": vols.blind,
         "zones": vols.zones,
         "correction": {"method": options.correction, "params": vols.params},
-        "registration": _registration(prep, reg),
+        "registration": registration_entry(reg, prep.origin, prep.after_thin, local_origin=prep.origin),
         "planes": {"before": p_b.as_dict(prep.origin), "after": p_a.as_dict(prep.origin)},
         "grid": _grid(prep, grid, vols, options),
         "holes": vols.holes,

@@ -16,7 +16,7 @@ from ..inputs.io import atomic_path
 from ..options import Options
 from ..volumes.quality import epoch_checks, period_quality
 from ..volumes.quantities import scaled
-from .report import absolute_transform, motion, recorded_options, stages, write_json
+from .report import grid_keys, recorded_options, registration_entry, write_json
 from .seriesgrade import LEDGER_GRADE, ledger_figures, with_grade, write_grades
 from .serieshtml import changes, write_series_html
 
@@ -36,13 +36,7 @@ def difference_name(i: int, j: int, cumulative: bool = False) -> str:
 def _registration(fit, origin: np.ndarray) -> dict:
     if fit is None:  # E0: the frame itself
         return {"transform": np.eye(4), "reference": True}
-    t = fit.reg.transform
-    return {
-        "transform": absolute_transform(t, origin),
-        "transform_local": t,
-        **motion(t, fit.prep.after_thin),
-        **stages(fit.reg),
-    }
+    return registration_entry(fit.reg, origin, fit.prep.after_thin)
 
 
 def _change(c, dates: list, cell_area: float, quality: dict, cumulative: bool = False) -> dict:
@@ -92,11 +86,7 @@ def _series_grid(grid: GridSpec, series, origin: np.ndarray) -> dict:
     """report.json's ``grid`` of a series run: the one grid, its compared, works and refilled areas."""
     area = grid.cell_area
     return {
-        "cell_m": grid.cell,
-        "rows": grid.rows,
-        "cols": grid.cols,
-        "crs_wkt": grid.crs_wkt,
-        "transform": list(grid.transform)[:6],
+        **grid_keys(grid, crs_wkt=grid.crs_wkt),
         "compared_area_m2": float(series.valid.sum()) * area,
         "works_area_m2": float(series.works.sum()) * area,
         "refilled_area_m2": float(series.refilled.sum()) * area,
@@ -111,12 +101,11 @@ def build_series_report(runs, fits, vols, series, grid: GridSpec, options: Optio
     origin = np.asarray(fits[0].prep.origin, dtype=np.float64)
     dates = [e.date for e in runs]
     epochs = [_epoch(k, run, fits, vols, origin) for k, run in enumerate(runs)]
-    area = grid.cell_area
     prior = {"shift": options.max_gps_shift, "rotation": options.max_gps_rotation, "tilt": options.max_gps_tilt}
     checks = epoch_checks([e["registration"] for e in epochs], vols, prior)
 
     def change(c, cumulative: bool = False) -> dict:
-        return _change(c, dates, area, period_quality(c, checks, vols, area), cumulative)
+        return _change(c, dates, grid.cell_area, period_quality(c, checks, vols, grid.cell_area), cumulative)
 
     return {
         "software": {"name": "soilvolume", "version": __import__("soilvolume").__version__},
@@ -174,6 +163,5 @@ def write_reports(out, epochs, fits, vols, series, grid: GridSpec, options: Opti
     report = cli_tree(with_grade(report, graded))
     write_ledger(out.path(LEDGER), report)
     write_series_html(out.path("report.html"), report, series, grid, vols[0].dem_b)
-    report["timings_s"] = timer.totals()
-    write_json(out.path("report.json"), report)
+    write_json(out.path("report.json"), report, timer.totals())
     return report

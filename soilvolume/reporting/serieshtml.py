@@ -22,20 +22,14 @@ LINES = (
 )
 
 
-def running_totals(report: dict) -> dict[str, list[float]]:
-    """Cut and fill moved since E0 (running sums of the periods'), and the net from E0 to each
-    epoch (the running sum of the periods' nets: the cumulative's at the end)."""
-    out = {"cut": [0.0], "fill": [0.0], "net": [0.0]}
-    for p in report["periods"]:
-        for k in out:
-            out[k].append(out[k][-1] + p["volume_m3"][k])
-    return out
-
-
 def chart(report: dict) -> dict:
     """Cumulative cut, fill and net (m3) against the epochs (their dates where known): the pixel
-    positions the template draws (the plot 568 x 234 px at (72, 14) of 760 x 300)."""
-    totals = running_totals(report)
+    positions the template draws (the plot 568 x 234 px at (72, 14) of 760 x 300). Cut and fill are
+    running sums of the periods', the net at each epoch that of their nets (the cumulative's at the end)."""
+    totals = {"cut": [0.0], "fill": [0.0], "net": [0.0]}
+    for p in report["periods"]:
+        for k, run in totals.items():
+            run.append(run[-1] + p["volume_m3"][k])
     n = len(totals["net"]) - 1
     lo = min(0.0, min(totals["net"]), -max(totals["cut"]))
     hi = max(1.0, max(totals["fill"]), max(totals["net"]))
@@ -59,14 +53,14 @@ def changes(report: dict) -> list[tuple[str, dict]]:
     return [(f"{k + 1}", p) for k, p in enumerate(report["periods"])] + [("cumulative", report["cumulative"])]
 
 
-def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray) -> str:
-    """The page of ``series`` (its periods and cumulative with their differences)."""
+def write_series_html(path: Path, report: dict, series, grid: GridSpec, relief: np.ndarray) -> Path:
+    """Write the page of ``series`` (its periods and cumulative with their differences) atomically."""
     maps = [
         (t, difference_map(c.diff, grid, relief, series.refilled, t, f"diff-{c.start}-{c.end}"))
         for c in [*series.periods, series.cumulative]
         for t in [f"E{c.end} − E{c.start}"]
     ]
-    return page.render(
+    text = page.render(
         "series.html.j2",
         fmt=fmt,
         pm=pm,
@@ -79,8 +73,4 @@ def render_series_html(report: dict, series, grid: GridSpec, relief: np.ndarray)
         progress=progress_table(report),
         figures=maps,
     )
-
-
-def write_series_html(path: Path, report: dict, series, grid: GridSpec, relief: np.ndarray) -> Path:
-    """Write report.html atomically."""
-    return page.write(path, render_series_html(report, series, grid, relief))
+    return page.write(path, text)

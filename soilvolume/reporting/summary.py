@@ -15,12 +15,10 @@ def rotation_shift(transform_local: Any) -> dict[str, float]:
     t = np.asarray(transform_local, dtype=float)
     r, s = t[:3, :3], t[:3, 3]
     cos_angle = float(np.clip((np.trace(r) - 1.0) / 2.0, -1.0, 1.0))
-    tilt = math.degrees(math.acos(float(np.clip(r[2, 2], -1.0, 1.0))))
-    yaw = math.degrees(math.atan2(r[1, 0], r[0, 0]))
     return {
         "rotation_deg": math.degrees(math.acos(cos_angle)),
-        "tilt_deg": tilt,
-        "yaw_deg": yaw,
+        "tilt_deg": math.degrees(math.acos(float(np.clip(r[2, 2], -1.0, 1.0)))),
+        "yaw_deg": math.degrees(math.atan2(r[1, 0], r[0, 0])),
         "shift_m": float(np.linalg.norm(s)),
         "shift_horizontal_m": float(np.hypot(s[0], s[1])),
         "shift_vertical_m": float(s[2]),

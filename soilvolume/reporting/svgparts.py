@@ -63,13 +63,6 @@ def png_bytes(rgba: np.ndarray) -> bytes:
     )
 
 
-def nice_length(span: float) -> float:
-    """The largest 1/2/5 x 10^n not longer than a quarter of ``span``."""
-    raw = span / 4
-    base = 10 ** math.floor(math.log10(raw))
-    return max(m * base for m in (1, 2, 5) if m * base <= raw)
-
-
 def round_ticks(lo: float, hi: float, n: int = 5) -> tuple[list[float], float]:
     """About ``n`` round tick values in [lo, hi] and their step."""
     raw = (hi - lo) / n
@@ -98,8 +91,11 @@ def halo(size: float) -> str:
 
 
 def scale_bar(width: float, height: float, span_m: float) -> str:
-    """Bottom-left scale bar, half black half white, with a nice length in metres."""
-    length = nice_length(span_m)
+    """Bottom-left scale bar, half black half white, as long as the largest 1/2/5 x 10^n metres not
+    longer than a quarter of the map's ``span_m``."""
+    raw = span_m / 4
+    base = 10 ** math.floor(math.log10(raw))
+    length = max(m * base for m in (1, 2, 5) if m * base <= raw)
     label = f"{length / 1000:g} km" if length >= 1000 else f"{length:g} m"
     px, x, y = length / span_m * width, 14.0, height - 16.0
     box = max(px, 44.0) + 12
@@ -109,14 +105,6 @@ def scale_bar(width: float, height: float, span_m: float) -> str:
         f'<rect x="{x + px / 2:.1f}" y="{y:.1f}" width="{px / 2:.1f}" height="6" fill="#fff" '
         f'stroke="#000"/><text x="{x + px / 2:.1f}" y="{y - 5:.1f}" text-anchor="middle" '
         f'font-size="13">{label}</text>'
-    )
-
-
-def north_arrow(width: float) -> str:
-    return (
-        f'<g transform="translate({width - 24:.1f},10)"><polygon points="0,0 9,26 0,19 -9,26" '
-        f'fill="#000" stroke="#fff" stroke-width="1.5"/>'
-        f'<text x="0" y="42" text-anchor="middle" font-weight="bold" {halo(14)}>N</text></g>'
     )
 
 
@@ -167,7 +155,9 @@ def map_figure(ident: str, title: str, rgba: np.ndarray, span_m: float, colour_b
     wd, hd = round(w * s), round(h * s)
     overlay = (
         f'<svg viewBox="0 0 {wd} {hd}" font-family="sans-serif" aria-hidden="true">'
-        f"{scale_bar(wd, hd, span_m)}{north_arrow(wd)}</svg>"
+        f'{scale_bar(wd, hd, span_m)}<g transform="translate({wd - 24:.1f},10)"><polygon '
+        'points="0,0 9,26 0,19 -9,26" fill="#000" stroke="#fff" stroke-width="1.5"/>'
+        f'<text x="0" y="42" text-anchor="middle" font-weight="bold" {halo(14)}>N</text></g></svg>'
     )
     png = base64.b64encode(png_bytes(rgba)).decode("ascii")
     return Markup(
