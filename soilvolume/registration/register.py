@@ -22,6 +22,7 @@ from .rigid import rotation_deg, shift_at
 AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse
 MAX_COARSE_POINTS = 15_000
 COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
+NAN = float("nan")
 
 
 @dataclass(frozen=True)
@@ -49,11 +50,8 @@ def register(
         gap = spacing(before_xyz)
         fit, rmse = evaluate_surface(judged(after_xyz, gap), before_xyz, eye, gap)
         skipped = "skipped: coordinates used as georeferenced ({opt:georeferencing})"
-        return Registration(
-            eye,
-            StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
-            StageQuality("none", fit, rmse, eye, True, 0.0, skipped),
-        )
+        coarse = StageQuality("none", NAN, NAN, accepted=False, note=skipped)
+        return Registration(eye, coarse, StageQuality("none", fit, rmse, note=skipped))
     limit_threads(options.threads)
     target = columns.Cloud(before_xyz)  # the fine stage's many boxes on the before cloud share its cuts
     if options.coarse == "auto" and options.fine != "none":
@@ -64,7 +62,7 @@ def register(
                 f"after cloud within {EVAL_DISTANCE} m); {{opt:coarse=fpfh}} forces it"
             )
             return Registration(
-                first.transform, StageQuality("fpfh-ransac", float("nan"), float("nan"), eye, False, 0.0, note), first
+                first.transform, StageQuality("fpfh-ransac", NAN, NAN, accepted=False, note=note), first
             )
     coarse = coarse_stage(after_xyz, before_xyz, options)
     starts = [(eye, "gps")]
@@ -88,7 +86,7 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     within the GPS prior (or forced by ``fpfh``)."""
     t0 = time.perf_counter()
     if options.coarse == "none":
-        return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
+        return StageQuality("none", NAN, NAN, accepted=False, note="skipped")
     o3d = _o3d()
     reg = o3d.pipelines.registration
     o3d.utility.random.seed(options.seed)
