@@ -235,16 +235,9 @@ def _pile(rng: np.random.Generator, s: float, k: int) -> dict:
         rt = min(rb * rng.uniform(0.35, 0.6), rb - 0.9 * h)  # sides no steeper than ~48 degrees
         return dict(kind="cone", sign=1.0, r_bottom=rb, r_top=rt, height=h, name=f"drawn pile {k} (truncated cone)")
     a, b = rng.uniform(5.5, 9.0) * s, rng.uniform(4.5, 6.5) * s
-    return dict(
-        kind="rect",
-        sign=1.0,
-        a=a,
-        b=b,
-        height=h,
-        run=min(rng.uniform(0.9, 1.2) * h, 0.75 * min(a, b)),
-        angle_deg=float(rng.uniform(0.0, 180.0)),
-        name=f"drawn pile {k} (truncated rectangular)",
-    )
+    run, angle = min(rng.uniform(0.9, 1.2) * h, 0.75 * min(a, b)), float(rng.uniform(0.0, 180.0))
+    name = f"drawn pile {k} (truncated rectangular)"
+    return dict(kind="rect", sign=1.0, a=a, b=b, height=h, run=run, angle_deg=angle, name=name)
 
 
 def _pit(rng: np.random.Generator, s: float, k: int) -> dict:
