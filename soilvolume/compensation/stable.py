@@ -13,6 +13,7 @@ from .robust import fit_poly, nmad, patches
 
 MARGIN_FRACTION = 0.15  # margin band width as a fraction of the footprint's inradius
 K_NOISE, MIN_CHANGE_CELLS, ITERATIONS = 3.0, 3, 8  # change: beyond K noise levels, in patches of 3+ cells
+DILATE_M = 2.0  # change areas dilated by a disk of this radius
 
 
 def noise_sigma(diff: np.ndarray) -> float:
@@ -33,9 +34,7 @@ def margin(valid: np.ndarray, cell: float, fraction: float = MARGIN_FRACTION) ->
     return valid & (inside <= band)
 
 
-def find_stable(
-    diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None = None, dilate_m: float = 2.0
-) -> tuple[np.ndarray, np.ndarray]:
+def find_stable(diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(stable mask, fitted degree-2 surface) of a difference grid, from its margin; ``user_mask``
     (True = stable) is taken as given (on valid cells)."""
     valid = np.isfinite(diff)
@@ -49,17 +48,17 @@ def find_stable(
     if stable.sum() < 12:
         stable = valid
     noise = noise_sigma(diff)
-    r = dilate_m / cell  # change areas dilated by a disk of r cells
+    r = DILATE_M / cell  # in cells
     n = int(np.ceil(r))
     yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
-    disk = (xx * xx + yy * yy <= r * r + 1e-9) if dilate_m > 0 else None
+    disk = xx * xx + yy * yy <= r * r + 1e-9
     surface = _surface(x, y, diff, stable, 1, robust=True)
     for it in range(ITERATIONS):
         resid = diff - surface
         spread = nmad(resid[stable])
         thr = K_NOISE * (max(spread, noise) if np.isfinite(noise) else spread)
         change = patches(valid & (np.abs(resid) > thr), MIN_CHANGE_CELLS)
-        if disk is not None and change.any():
+        if change.any():
             change = scipy.ndimage.binary_dilation(change, disk)
         new = valid & ~change
         if new.sum() < 12 or (it > 0 and np.array_equal(new, stable)):  # converged: the surface is the one fitted on it
