@@ -41,7 +41,7 @@ def find_stable(diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None =
     y, x = np.mgrid[0 : diff.shape[0], 0 : diff.shape[1]] * float(cell)
     if user_mask is not None:
         stable = valid & user_mask.astype(bool)
-        return stable, _surface(x, y, diff, stable, 2)
+        return stable, fit_poly(x, y, diff, stable, 2)[0] if stable.sum() >= 12 else np.zeros(diff.shape)
     if valid.sum() < 12:
         return valid, np.zeros(diff.shape)
     stable = margin(valid, cell)
@@ -52,7 +52,7 @@ def find_stable(diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None =
     n = int(np.ceil(r))
     yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
     disk = xx * xx + yy * yy <= r * r + 1e-9
-    surface = _surface(x, y, diff, stable, 1, robust=True)
+    surface = fit_poly(x, y, diff, stable, 1, robust=True)[0]  # (12 cells and more from here on)
     for it in range(ITERATIONS):
         resid = diff - surface
         spread = nmad(resid[stable])
@@ -64,14 +64,8 @@ def find_stable(diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None =
         if new.sum() < 12 or (it > 0 and np.array_equal(new, stable)):  # converged: the surface is the one fitted on it
             break
         stable = new
-        surface = _surface(x, y, diff, stable, 2, robust=True)
+        surface = fit_poly(x, y, diff, stable, 2, robust=True)[0]
     return stable, surface
-
-
-def _surface(x, y, diff, mask, degree: int, robust: bool = False) -> np.ndarray:
-    if mask.sum() < 12:
-        return np.zeros(diff.shape)
-    return fit_poly(x, y, diff, mask, degree, robust=robust)[0]
 
 
 def largest_gap_deg(stable: np.ndarray, change: np.ndarray) -> float:
