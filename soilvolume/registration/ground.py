@@ -74,8 +74,7 @@ def evaluate_surface(
         return 0.0, float("nan")
     r = np.abs(columns.plane_residuals(src, cols, columns.normals(cols)))
     ok = r <= EVAL_DISTANCE
-    fit = float(ok.sum() / max(len(src), 1))
-    return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
+    return float(ok.sum() / max(len(src), 1)), float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
 
 
 def judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:

@@ -27,10 +27,7 @@ def rect(sign, x, y, a, b, h, run, angle, name, exact: bool = True) -> dict:
 
 
 def _named(f: dict, exact: bool, name: str) -> dict:
-    if exact:
-        f["exact_outline"] = True
-    f["name"] = name
-    return f
+    return f | ({"exact_outline": True} if exact else {}) | {"name": name}
 
 
 def site_features(kind: str, cx: float, cy: float, s: float) -> list[dict]:
@@ -186,8 +183,7 @@ def clear_of(f: dict, x: float, y: float, r: float) -> bool:
 
 def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:
     """The ground change dz (m, + = fill) of analytic features at x/y in their frame."""
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     dz = np.zeros(np.broadcast(x, y).shape)
     x, y = np.broadcast_to(x, dz.shape), np.broadcast_to(y, dz.shape)
     for f in feats:
