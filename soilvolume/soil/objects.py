@@ -128,17 +128,12 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     ring = grown & ~scipy.ndimage.binary_dilation(whole, _EIGHT)
     if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
         return None
-    vol = float(np.where(whole, d[win], 0.0).sum()) * a
-    slope = _wall_slope(np.where(whole, d[win], 0.0), whole, height, cell)
+    dw = np.where(whole, d[win], 0.0)
+    gy, gx = np.gradient(dw, cell)  # the walls' median slope: about 1 on a pile's flank, 1.5 and more on a box's
+    band = whole & (dw >= 0.2 * height) & (dw <= 0.8 * height)
+    slope = float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell
+    vol = float(dw.sum()) * a
     return Blob(sign, area, height, vol, float(cc.mean() + c0), float(rr.mean() + r0), elong, label, slope=slope)
-
-
-def _wall_slope(dd: np.ndarray, whole: np.ndarray, height: float, cell: float) -> float:
-    """Median slope (rise/run) of a blob's cells between 20 % and 80 % of its height (about 1 on a
-    pile's flank, 1.5 and more on a box's walls)."""
-    gy, gx = np.gradient(dd, cell)
-    band = whole & (dd >= 0.2 * height) & (dd <= 0.8 * height)
-    return float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell
 
 
 def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:
