@@ -110,9 +110,7 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     t = np.asarray(res.transformation)
     src, tgt = to_pcd(after_xyz, voxel=options.coarse_voxel), to_pcd(before_xyz, voxel=options.coarse_voxel)
     ev = reg.evaluate_registration(src, tgt, 1.5 * options.coarse_voxel, t)  # point to point
-    fit, rmse = float(ev.fitness), float(ev.inlier_rmse)
-    centre = after_xyz.mean(axis=0)
-    rot, shift = rotation_deg(t), shift_at(t, centre)
+    rot, shift = rotation_deg(t), shift_at(t, after_xyz.mean(axis=0))
     within = rot <= options.max_gps_rotation and shift <= options.max_gps_shift
     accepted = options.coarse == "fpfh" or within
     note = f"FPFH+RANSAC moved the after centre {shift:.2f} m and rotated {rot:.2f} deg"
@@ -120,4 +118,5 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
         note += f"; outside the GPS error prior ({options.max_gps_shift} m, {options.max_gps_rotation} deg)" + (
             "" if accepted else ": rejected"
         )
+    fit, rmse = float(ev.fitness), float(ev.inlier_rmse)
     return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)
