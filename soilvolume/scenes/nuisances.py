@@ -45,11 +45,8 @@ def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[st
         a, b, h = vehicle_shape(rng)
         r = math.hypot(a, b)
         if place(True, (VEHICLE, rng.uniform(0, np.pi), a, b, h, 0.0, 0.0, 0.0, r)):
-            roles.append("moved")
-            if place(True, (VEHICLE, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a, b, h, r)):
-                roles.append("moved")
-            else:  # no room for its new place: it left
-                roles[-1] = "left"
+            moved = place(True, (VEHICLE, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a, b, h, r))
+            roles += ["moved", "moved"] if moved else ["left"]  # no room for its new place: it left
     for n, after in ((cfg.arrivals, True), (cfg.departures, False)):
         for _ in range(n):
             a, b, h = vehicle_shape(rng)

@@ -88,8 +88,7 @@ def _lines(rng: np.random.Generator, box: tuple[float, float, float, float]) -> 
     th0 = rng.uniform(0, np.pi)
     lines = []
     for kind, ang in ((0, th0), (0, th0 + rng.uniform(1.0, 2.1)), (1, th0 + rng.uniform(0.5, 1.0))):
-        px = acx + rng.uniform(-0.3, 0.3) * aw
-        py = acy + rng.uniform(-0.3, 0.3) * ah
+        px, py = acx + rng.uniform(-0.3, 0.3) * aw, acy + rng.uniform(-0.3, 0.3) * ah
         half = rng.uniform(25.0, 50.0)
         dx, dy = np.cos(ang) * half, np.sin(ang) * half
         height = -rng.uniform(0.5, 1.0) if kind == 0 else rng.uniform(0.6, 1.2)

@@ -95,9 +95,7 @@ class World:
     def stamp(grid: np.ndarray, res: float, x: float, y: float, r: float, value) -> None:
         ny, nx = grid.shape
         i0, i1 = max(0, int((x - r) / res)), min(nx, int((x + r) / res) + 2)
-        j0, j1 = max(0, int((y - r) / res)), min(ny, int((y + r) / res) + 2)
-        if i0 >= i1 or j0 >= j1:
-            return
+        j0, j1 = max(0, int((y - r) / res)), min(ny, int((y + r) / res) + 2)  # (empty off the grid)
         xs = (np.arange(i0, i1) + 0.5) * res
         ys = (np.arange(j0, j1) + 0.5) * res
         d = np.hypot(xs[None, :] - x, ys[:, None] - y)
@@ -186,9 +184,7 @@ class World:
         if epoch == 1:
             xyz = self._misaligned(xyz)
         xyz += np.asarray(cfg.origin, dtype=np.float64)
-        if not signals:
-            return xyz, cls
-        return (xyz, *self._signals(epoch, index, cls, o, lab, fresh))
+        return (xyz, *self._signals(epoch, index, cls, o, lab, fresh)) if signals else (xyz, cls)
 
     def _misaligned(self, xyz: np.ndarray) -> np.ndarray:
         """The after points misaligned element-wise (not BLAS): the same whatever the chunking."""
@@ -208,8 +204,7 @@ class World:
             fields.update(red=rgb[:, 0], green=rgb[:, 1], blue=rgb[:, 2])
         if cfg.signals in ("lidar", "returns"):
             fields["return_number"], fields["number_of_returns"] = returns(cat, lab > 0, rng)
-        keep = cfg.signals in ("class", "lidar")
-        return (cls if keep else np.zeros_like(cls)), fields
+        return (cls if cfg.signals in ("class", "lidar") else np.zeros_like(cls)), fields
 
 
 def _outliers(rng: np.random.Generator, z: np.ndarray, cls: np.ndarray, fraction: float) -> np.ndarray:
