@@ -51,7 +51,7 @@ def test_surface_removes_doming_and_bias():
 
 def test_stable_cells_exclude_change_areas_with_a_margin():
     diff, truth = domed_pair(1)
-    stable = find_stable(diff, CELL, dilate_m=2.0)[0]
+    stable = find_stable(diff, CELL)[0]
     assert not (stable & (np.abs(truth) > 0.05)).any()
     assert stable.mean() > 0.7
     user = np.zeros(diff.shape, bool)

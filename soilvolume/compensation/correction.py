@@ -61,10 +61,8 @@ def fit_surface(
     else:
         x, y = grid.centers_local()
         surface, coef, (cx, cy, s) = fit_poly(x, y, diff, mask, degree)
-        n = len(coef)
-        params.update(
-            terms=list(_TERM_NAMES[:n]), coefficients=[float(c) for c in coef], centre_local=[cx, cy], scale_m=s
-        )
+        terms, coefficients = list(_TERM_NAMES[: len(coef)]), [float(c) for c in coef]
+        params.update(terms=terms, coefficients=coefficients, centre_local=[cx, cy], scale_m=s)
     params["residuals"] = residual_stats(diff - surface, mask)
     params["residuals_before"] = residual_stats(diff, mask)
     return surface, params
@@ -84,6 +82,5 @@ def apply(diff: np.ndarray, method: str, grid: GridSpec, user_mask: np.ndarray |
     surface, params = fit_surface(diff, stable, grid, used)
     params["method"], params["fitted"] = method, used
     surface = np.where(valid, surface, np.nan)
-    params["stable_cells"] = int(stable.sum())
-    params["stable_fraction"] = float(stable.sum() / max(valid.sum(), 1))
+    params.update(stable_cells=int(stable.sum()), stable_fraction=float(stable.sum() / max(valid.sum(), 1)))
     return CorrectionResult(diff - surface, surface, stable, valid & ~stable, params)

@@ -46,7 +46,9 @@ def ransac_plane(xyz: np.ndarray, threshold: float = 0.15, seed: int = 0) -> Pla
     assert len(normal)
     j = int(np.argmax(_inlier_counts(pts, normal, d, threshold)))  # the first best hypothesis
     inl = np.abs(pts @ normal[j] + d[j]) < threshold
-    return _fit(pts[inl], float(inl.mean()))
+    q = pts[inl]  # refined by least squares
+    coef, *_ = np.linalg.lstsq(np.c_[q[:, 0], q[:, 1], np.ones(len(q))], q[:, 2], rcond=None)
+    return Plane(float(coef[0]), float(coef[1]), float(coef[2]), float(inl.mean()))
 
 
 def _inlier_counts(pts: np.ndarray, normal: np.ndarray, d: np.ndarray, threshold: float) -> np.ndarray:
@@ -67,12 +69,6 @@ def _inlier_counts(pts: np.ndarray, normal: np.ndarray, d: np.ndarray, threshold
     if lone:
         counts[-1] = int((np.abs(pts @ normal[-1:].T + d[-1:]) < threshold).sum())
     return counts
-
-
-def _fit(pts: np.ndarray, inlier_fraction: float) -> Plane:
-    a = np.c_[pts[:, 0], pts[:, 1], np.ones(len(pts))]
-    coef, *_ = np.linalg.lstsq(a, pts[:, 2], rcond=None)
-    return Plane(float(coef[0]), float(coef[1]), float(coef[2]), inlier_fraction)
 
 
 def plane_offset(before: Plane, after: Plane, grid: GridSpec) -> np.ndarray:

@@ -31,11 +31,7 @@ def residual_stats(residual: np.ndarray, mask: np.ndarray) -> dict[str, float]:
 
 
 def _terms(x: np.ndarray, y: np.ndarray, degree: int) -> np.ndarray:
-    cols = [np.ones_like(x)]
-    if degree >= 1:
-        cols += [x, y]
-    if degree >= 2:
-        cols += [x * x, x * y, y * y]
+    cols = [np.ones_like(x)] + ([x, y] if degree >= 1 else []) + ([x * x, x * y, y * y] if degree >= 2 else [])
     return np.stack(cols, axis=-1)
 
 

@@ -13,6 +13,7 @@ from .robust import fit_poly, nmad, patches
 
 MARGIN_FRACTION = 0.15  # margin band width as a fraction of the footprint's inradius
 K_NOISE, MIN_CHANGE_CELLS, ITERATIONS = 3.0, 3, 8  # change: beyond K noise levels, in patches of 3+ cells
+DILATE_M = 2.0  # change areas dilated by a disk of this radius
 
 
 def noise_sigma(diff: np.ndarray) -> float:
@@ -33,46 +34,38 @@ def margin(valid: np.ndarray, cell: float, fraction: float = MARGIN_FRACTION) ->
     return valid & (inside <= band)
 
 
-def find_stable(
-    diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None = None, dilate_m: float = 2.0
-) -> tuple[np.ndarray, np.ndarray]:
+def find_stable(diff: np.ndarray, cell: float, *, user_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(stable mask, fitted degree-2 surface) of a difference grid, from its margin; ``user_mask``
     (True = stable) is taken as given (on valid cells)."""
     valid = np.isfinite(diff)
     y, x = np.mgrid[0 : diff.shape[0], 0 : diff.shape[1]] * float(cell)
     if user_mask is not None:
         stable = valid & user_mask.astype(bool)
-        return stable, _surface(x, y, diff, stable, 2)
+        return stable, fit_poly(x, y, diff, stable, 2)[0] if stable.sum() >= 12 else np.zeros(diff.shape)
     if valid.sum() < 12:
         return valid, np.zeros(diff.shape)
     stable = margin(valid, cell)
     if stable.sum() < 12:
         stable = valid
     noise = noise_sigma(diff)
-    r = dilate_m / cell  # change areas dilated by a disk of r cells
+    r = DILATE_M / cell  # in cells
     n = int(np.ceil(r))
     yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
-    disk = (xx * xx + yy * yy <= r * r + 1e-9) if dilate_m > 0 else None
-    surface = _surface(x, y, diff, stable, 1, robust=True)
+    disk = xx * xx + yy * yy <= r * r + 1e-9
+    surface = fit_poly(x, y, diff, stable, 1, robust=True)[0]  # (12 cells and more from here on)
     for it in range(ITERATIONS):
         resid = diff - surface
         spread = nmad(resid[stable])
         thr = K_NOISE * (max(spread, noise) if np.isfinite(noise) else spread)
         change = patches(valid & (np.abs(resid) > thr), MIN_CHANGE_CELLS)
-        if disk is not None and change.any():
+        if change.any():
             change = scipy.ndimage.binary_dilation(change, disk)
         new = valid & ~change
         if new.sum() < 12 or (it > 0 and np.array_equal(new, stable)):  # converged: the surface is the one fitted on it
             break
         stable = new
-        surface = _surface(x, y, diff, stable, 2, robust=True)
+        surface = fit_poly(x, y, diff, stable, 2, robust=True)[0]
     return stable, surface
-
-
-def _surface(x, y, diff, mask, degree: int, robust: bool = False) -> np.ndarray:
-    if mask.sum() < 12:
-        return np.zeros(diff.shape)
-    return fit_poly(x, y, diff, mask, degree, robust=robust)[0]
 
 
 def largest_gap_deg(stable: np.ndarray, change: np.ndarray) -> float:

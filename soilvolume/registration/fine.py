@@ -68,13 +68,10 @@ def _icp_from_best(src, after_xyz, before_xyz, starts, options: Options, check, 
     """ICP from the best start on the after survey's margin (``src``), refined on the stable ground at
     the pose reached; the pose fitting the margin best within the prior wins, the other refined pose
     its ``alternative``, those beyond the prior counted."""
-    scored = []
-    for init, label in starts:
-        t, fit, rmse = icp_levels(src, before_xyz, init, ICP_LEVELS[:2], options, check, gap)
-        scored.append((-fit, rmse, label, t))
-    _, _, label, t = min(scored, key=lambda s: (round(s[0], 3), s[1]))
+    scored = [(icp_levels(src, before_xyz, init, ICP_LEVELS[:2], options, check, gap), lab) for init, lab in starts]
+    (t, _, _), label = min(scored, key=lambda s: (round(-s[0][1], 3), s[0][2]))  # the best fit, then RMSE
     t = icp_levels(src, before_xyz, t, ICP_LEVELS[2:], options, check, gap)[0]
-    poses = [(init, lab) for init, lab in starts] + [(t, label)]
+    poses = [*starts, (t, label)]
     src_stable = stable_source(after_xyz, before_xyz, t, gap=gap)
     if len(src_stable) > 100:  # a refinement on the stable ground found at the pose, already in the before frame
         t = icp_levels(src_stable, before_xyz, np.eye(4), REFINE_LEVELS, options, check, gap)[0] @ t

@@ -43,8 +43,7 @@ def declared(mode: str, inputs: dict) -> tuple[str, str] | None:
     registration must decide (:func:`confirm`)."""
     if mode != "auto":
         return mode, opt("georeferencing", mode)
-    vb = vertical_datum(inputs["before"].get("crs_wkt"))
-    va = vertical_datum(inputs["after"].get("crs_wkt"))
+    vb, va = (vertical_datum(inputs[k].get("crs_wkt")) for k in ("before", "after"))
     if vb is None or vb != va:
         return "gps", "the files do not both declare the same vertical datum: registered within the GPS prior"
     return None
@@ -56,22 +55,18 @@ def move_at(t: np.ndarray, centre: np.ndarray) -> dict[str, float]:
     return dict(zip(KEYS, (rotation_deg(t), tilt_deg(t), float(np.hypot(d[0], d[1])), float(abs(d[2]))), strict=True))
 
 
-def spread(reg, centre: np.ndarray) -> dict[str, float]:
-    """The largest departures (:data:`KEYS`) of the fine stage's refined poses from the accepted one."""
-    inv = np.linalg.inv(reg.transform)
-    moved = reg.transform[:3, :3] @ centre + reg.transform[:3, 3]
-    moves = [move_at(p @ inv, moved) for p in reg.fine.poses]
-    return {k: max([0.0, *(d[k] for d in moves)]) for k in KEYS}
-
-
 def tolerances(reg, after_xyz: np.ndarray, gap: float) -> dict:
-    """The bounds (:data:`KEYS`) within which a pose equals the file coordinates, and the ``spread``."""
+    """The bounds (:data:`KEYS`) within which a pose equals the file coordinates, and the ``spread``:
+    the largest departures of the fine stage's refined poses from the accepted one."""
     centre = after_xyz.mean(axis=0)
     radius = float(np.hypot(*(after_xyz[:, :2] - centre[:2]).T).max(initial=1.0))
     column = finest_column(after_xyz, gap)
     turn, lift = (float(np.degrees(np.arctan(x / radius))) for x in (column, GROUND_AGREES))
     bounds = dict(zip(KEYS, (turn, lift, column, GROUND_AGREES), strict=True))
-    return {**bounds, "spread": spread(reg, centre), "column_m": column, "radius_m": radius}
+    inv, moved = np.linalg.inv(reg.transform), reg.transform[:3, :3] @ centre + reg.transform[:3, 3]
+    moves = [move_at(p @ inv, moved) for p in reg.fine.poses]
+    spread = {k: max([0.0, *(d[k] for d in moves)]) for k in KEYS}
+    return {**bounds, "spread": spread, "column_m": column, "radius_m": radius}
 
 
 def outcome(reg, after_xyz: np.ndarray, gap: float, fine: str) -> dict:

@@ -74,8 +74,7 @@ def evaluate_surface(
         return 0.0, float("nan")
     r = np.abs(columns.plane_residuals(src, cols, columns.normals(cols)))
     ok = r <= EVAL_DISTANCE
-    fit = float(ok.sum() / max(len(src), 1))
-    return fit, float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
+    return float(ok.sum() / max(len(src), 1)), float(np.sqrt(np.mean(r[ok] ** 2))) if ok.any() else float("nan")
 
 
 def judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
@@ -86,10 +85,6 @@ def judged(after_xyz: np.ndarray, gap: float) -> np.ndarray:
 
 def best_on(src, before_xyz, poses, gap: float) -> tuple[tuple[np.ndarray, str], tuple[float, float]]:
     """The pose the margin points fit best (the last on ties) and its (fitness, RMSE)."""
-    best, best_key, scores = poses[-1], None, (float("nan"), float("nan"))
-    for k, (t, label) in enumerate(poses):
-        fit, rmse = evaluate_surface(src, before_xyz, t, gap=gap)
-        key = (round(fit, 2), -np.nan_to_num(rmse, nan=1e9), k)
-        if best_key is None or key > best_key:
-            best, best_key, scores = (t, label), key, (fit, rmse)
-    return best, scores
+    scored = [(evaluate_surface(src, before_xyz, t, gap=gap), k) for k, (t, _) in enumerate(poses)]
+    scores, k = max(scored, key=lambda s: (round(s[0][0], 2), -np.nan_to_num(s[0][1], nan=1e9), s[1]))
+    return poses[k], scores

@@ -119,12 +119,15 @@ def _numpy_step(p: np.ndarray, q: np.ndarray, n: np.ndarray, k: float) -> np.nda
 
 
 def _solved(jw: np.ndarray, jac: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The step (4x4) of the normal equations ``jw jac^T x = -jw r`` (identity when singular)."""
-    a = jw @ jac.T
+    """The step (4x4) of the normal equations ``jw jac^T x = -jw r`` (identity when singular): the small
+    motion x = (rx, ry, rz, tx, ty, tz) as Rz Ry Rx, then the shift."""
+    a, out = jw @ jac.T, np.eye(4)
     det = np.linalg.det(a)
     if not np.isfinite(det) or abs(det) < DET_MIN:
-        return np.eye(4)
-    return _matrix(np.linalg.solve(a, -(jw @ r)))
+        return out
+    x = np.linalg.solve(a, -(jw @ r))
+    out[:3, :3], out[:3, 3] = rotation_zyx(*x[:3]), x[3:]
+    return out
 
 
 def _native_step(lib, pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: np.ndarray, nrm: np.ndarray, k: float):
@@ -139,14 +142,6 @@ def _native_step(lib, pts: np.ndarray, sel: np.ndarray, j: np.ndarray, target: n
         nrm.ctypes.data, nrm.shape[1], float(k), jac.ctypes.data, jw.ctypes.data, r.ctypes.data,
     )  # fmt: skip
     return _solved(jw, jac, r)
-
-
-def _matrix(x: np.ndarray) -> np.ndarray:
-    """The 4x4 transform of a small motion (rx, ry, rz, tx, ty, tz): Rz Ry Rx, then the shift."""
-    out = np.eye(4)
-    out[:3, :3] = rotation_zyx(*x[:3])
-    out[:3, 3] = x[3:]
-    return out
 
 
 def _moved(pts: np.ndarray, t: np.ndarray) -> np.ndarray:

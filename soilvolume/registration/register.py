@@ -22,6 +22,7 @@ from .rigid import rotation_deg, shift_at
 AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse
 MAX_COARSE_POINTS = 15_000
 COARSE_ITER = 20_000  # RANSAC iterations of the coarse stage
+NAN = float("nan")
 
 
 @dataclass(frozen=True)
@@ -49,11 +50,8 @@ def register(
         gap = spacing(before_xyz)
         fit, rmse = evaluate_surface(judged(after_xyz, gap), before_xyz, eye, gap)
         skipped = "skipped: coordinates used as georeferenced ({opt:georeferencing})"
-        return Registration(
-            eye,
-            StageQuality("none", float("nan"), float("nan"), eye, False, 0.0, skipped),
-            StageQuality("none", fit, rmse, eye, True, 0.0, skipped),
-        )
+        coarse = StageQuality("none", NAN, NAN, accepted=False, note=skipped)
+        return Registration(eye, coarse, StageQuality("none", fit, rmse, note=skipped))
     limit_threads(options.threads)
     target = columns.Cloud(before_xyz)  # the fine stage's many boxes on the before cloud share its cuts
     if options.coarse == "auto" and options.fine != "none":
@@ -64,7 +62,7 @@ def register(
                 f"after cloud within {EVAL_DISTANCE} m); {{opt:coarse=fpfh}} forces it"
             )
             return Registration(
-                first.transform, StageQuality("fpfh-ransac", float("nan"), float("nan"), eye, False, 0.0, note), first
+                first.transform, StageQuality("fpfh-ransac", NAN, NAN, accepted=False, note=note), first
             )
     coarse = coarse_stage(after_xyz, before_xyz, options)
     starts = [(eye, "gps")]
@@ -88,7 +86,7 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     within the GPS prior (or forced by ``fpfh``)."""
     t0 = time.perf_counter()
     if options.coarse == "none":
-        return StageQuality("none", float("nan"), float("nan"), np.eye(4), False, 0.0, "skipped")
+        return StageQuality("none", NAN, NAN, accepted=False, note="skipped")
     o3d = _o3d()
     reg = o3d.pipelines.registration
     o3d.utility.random.seed(options.seed)
@@ -112,9 +110,7 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     t = np.asarray(res.transformation)
     src, tgt = to_pcd(after_xyz, voxel=options.coarse_voxel), to_pcd(before_xyz, voxel=options.coarse_voxel)
     ev = reg.evaluate_registration(src, tgt, 1.5 * options.coarse_voxel, t)  # point to point
-    fit, rmse = float(ev.fitness), float(ev.inlier_rmse)
-    centre = after_xyz.mean(axis=0)
-    rot, shift = rotation_deg(t), shift_at(t, centre)
+    rot, shift = rotation_deg(t), shift_at(t, after_xyz.mean(axis=0))
     within = rot <= options.max_gps_rotation and shift <= options.max_gps_shift
     accepted = options.coarse == "fpfh" or within
     note = f"FPFH+RANSAC moved the after centre {shift:.2f} m and rotated {rot:.2f} deg"
@@ -122,4 +118,5 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
         note += f"; outside the GPS error prior ({options.max_gps_shift} m, {options.max_gps_rotation} deg)" + (
             "" if accepted else ": rejected"
         )
+    fit, rmse = float(ev.fitness), float(ev.inlier_rmse)
     return StageQuality("fpfh-ransac", fit, rmse, t, accepted, time.perf_counter() - t0, note)

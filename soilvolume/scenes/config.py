@@ -6,8 +6,7 @@ from dataclasses import dataclass, replace
 
 CLASS_GROUND = 2
 CLASS_VEHICLE = 6
-CLASS_BOULDER = 1
-CLASS_OUTLIER = 1
+CLASS_BOULDER = CLASS_OUTLIER = 1  # not 7: a pipeline must reject outliers itself
 
 
 #: GPS errors of pairs whose files declare a vertical datum (:meth:`SceneConfig.declared_datum`):

@@ -9,7 +9,7 @@ from ..api import Hooks, estimate
 from ..core.outputs import os_errors, output_dir
 from ..options import Options
 from ..validate import check_number
-from .synthetic import SceneConfig, make_pair, write_pair
+from .synthetic import SceneConfig, write_pair_streaming
 
 
 def run_demo(out: Path, size: str = "small", seed: int = 0) -> int:
@@ -18,17 +18,11 @@ def run_demo(out: Path, size: str = "small", seed: int = 0) -> int:
     with output_dir(out, [], True, ("data", "result")) as staged, os_errors(staged.final):
         data = staged.path("data")
         data.mkdir()
-        before, after, truth_path = write_pair(make_pair(seed, cfg), data, "laz")
+        before, after, truth_path = write_pair_streaming(seed, cfg, data, "laz")  # make_pair's bytes
         truth = json.loads(truth_path.read_text())
         print(f"synthetic pair ({size}, seed {seed}) in {out / 'data'}")
-        res = estimate(
-            before,
-            after,
-            staged.path("result"),
-            Options(seed=seed),
-            overwrite=True,
-            hooks=Hooks(progress=lambda p, m: print(f"[{p:5.1f}%] {m}", flush=True)),
-        )
+        hooks = Hooks(progress=lambda p, m: print(f"[{p:5.1f}%] {m}", flush=True))
+        res = estimate(before, after, staged.path("result"), Options(seed=seed), overwrite=True, hooks=hooks)
     r = res.report
     rows = [
         ("all compared cells", r["volume_m3"]),

@@ -27,10 +27,7 @@ def rect(sign, x, y, a, b, h, run, angle, name, exact: bool = True) -> dict:
 
 
 def _named(f: dict, exact: bool, name: str) -> dict:
-    if exact:
-        f["exact_outline"] = True
-    f["name"] = name
-    return f
+    return f | ({"exact_outline": True} if exact else {}) | {"name": name}
 
 
 def site_features(kind: str, cx: float, cy: float, s: float) -> list[dict]:
@@ -186,8 +183,7 @@ def clear_of(f: dict, x: float, y: float, r: float) -> bool:
 
 def features_dz(x: np.ndarray, y: np.ndarray, feats: list[dict]) -> np.ndarray:
     """The ground change dz (m, + = fill) of analytic features at x/y in their frame."""
-    x = np.asarray(x, dtype=np.float64)
-    y = np.asarray(y, dtype=np.float64)
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     dz = np.zeros(np.broadcast(x, y).shape)
     x, y = np.broadcast_to(x, dz.shape), np.broadcast_to(y, dz.shape)
     for f in feats:
@@ -235,16 +231,9 @@ def _pile(rng: np.random.Generator, s: float, k: int) -> dict:
         rt = min(rb * rng.uniform(0.35, 0.6), rb - 0.9 * h)  # sides no steeper than ~48 degrees
         return dict(kind="cone", sign=1.0, r_bottom=rb, r_top=rt, height=h, name=f"drawn pile {k} (truncated cone)")
     a, b = rng.uniform(5.5, 9.0) * s, rng.uniform(4.5, 6.5) * s
-    return dict(
-        kind="rect",
-        sign=1.0,
-        a=a,
-        b=b,
-        height=h,
-        run=min(rng.uniform(0.9, 1.2) * h, 0.75 * min(a, b)),
-        angle_deg=float(rng.uniform(0.0, 180.0)),
-        name=f"drawn pile {k} (truncated rectangular)",
-    )
+    run, angle = min(rng.uniform(0.9, 1.2) * h, 0.75 * min(a, b)), float(rng.uniform(0.0, 180.0))
+    name = f"drawn pile {k} (truncated rectangular)"
+    return dict(kind="rect", sign=1.0, a=a, b=b, height=h, run=run, angle_deg=angle, name=name)
 
 
 def _pit(rng: np.random.Generator, s: float, k: int) -> dict:

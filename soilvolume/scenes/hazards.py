@@ -81,8 +81,7 @@ def occlusion_holes(world, rng: np.random.Generator, n: int) -> np.ndarray | Non
                 x, y = c["x"] + rr * np.cos(ang), c["y"] + rr * np.sin(ang)
         else:
             for _try in range(50):
-                x = rng.uniform(world.ax0 + 2, world.ax1 - 2)
-                y = rng.uniform(world.ay0 + 2, world.ay1 - 2)
+                x, y = rng.uniform(world.ax0 + 2, world.ax1 - 2), rng.uniform(world.ay0 + 2, world.ay1 - 2)
                 if all(clear_of(c, x, y, r + 1.0) for c in world.changes):
                     break
         # irregular blob: union of three discs

@@ -45,11 +45,8 @@ def extra_features(cfg: SceneConfig, rng: np.random.Generator, place) -> list[st
         a, b, h = vehicle_shape(rng)
         r = math.hypot(a, b)
         if place(True, (VEHICLE, rng.uniform(0, np.pi), a, b, h, 0.0, 0.0, 0.0, r)):
-            roles.append("moved")
-            if place(True, (VEHICLE, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a, b, h, r)):
-                roles.append("moved")
-            else:  # no room for its new place: it left
-                roles[-1] = "left"
+            moved = place(True, (VEHICLE, rng.uniform(0, np.pi), 0.0, 0.0, 0.0, a, b, h, r))
+            roles += ["moved", "moved"] if moved else ["left"]  # no room for its new place: it left
     for n, after in ((cfg.arrivals, True), (cfg.departures, False)):
         for _ in range(n):
             a, b, h = vehicle_shape(rng)
@@ -130,7 +127,7 @@ def bush(rng: np.random.Generator) -> tuple:
 
 def vehicle(rng: np.random.Generator) -> tuple:
     """A vehicle's feature parameters (type 1: the same place in both epochs)."""
-    a, b, h = rng.uniform(2.1, 2.6), rng.uniform(0.85, 1.0), rng.uniform(1.4, 1.9)
+    a, b, h = vehicle_shape(rng)
     return (1, rng.uniform(0, np.pi), a, b, h, a, b, h, math.hypot(a, b))
 
 
@@ -153,8 +150,7 @@ def feature_points(feats: np.ndarray, feat_zc: np.ndarray, epoch: int, idx, k, p
     with np.errstate(divide="ignore", invalid="ignore"):  # a vehicle absent from this epoch: 0 x 0
         rho2 = np.nan_to_num((u / a) ** 2 + (v / b) ** 2, nan=np.inf)
     gi = g[idx]
-    r1 = rng.random(idx.size)
-    r2 = rng.random(idx.size)
+    r1, r2 = rng.random(idx.size), rng.random(idx.size)
     # bushes: canopy seen with probability 0.95 - 0.35 rho, else ground below
     bush = (typ == 0) & (rho2 < 1.0) & (r1 < 0.95 - 0.35 * np.sqrt(np.minimum(rho2, 1.0)))
     hb = h * np.sqrt(np.clip(1.0 - rho2, 0.0, 1.0)) * (0.75 + 0.25 * r2)
@@ -171,7 +167,5 @@ def feature_points(feats: np.ndarray, feat_zc: np.ndarray, epoch: int, idx, k, p
     bush |= low
     hb = np.where(low, h * (0.7 + 0.6 * r2), hb)
     veg_cls = np.where(hb < 0.5, 3, np.where(hb < 2.0, 4, 5)).astype(np.uint8)
-    znew = np.where(bush, gi + hb, np.where(veh, np.maximum(hv, gi + 0.2), np.where(bou, hbo, gi)))
-    cnew = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE, np.where(bou, CLASS_BOULDER, CLASS_GROUND)))
-    z[idx] = znew
-    cls[idx] = cnew.astype(np.uint8)
+    z[idx] = np.where(bush, gi + hb, np.where(veh, np.maximum(hv, gi + 0.2), np.where(bou, hbo, gi)))
+    cls[idx] = np.where(bush, veg_cls, np.where(veh, CLASS_VEHICLE, np.where(bou, CLASS_BOULDER, CLASS_GROUND)))

@@ -18,7 +18,7 @@ from ..core.types import SoilVolumeError
 from ..distributed import cluster
 from ..options import Options
 from ..registration.o3d import _o3d  # Open3D as the engine imports it (without its web drawing)
-from .synthetic import SceneConfig, make_pair, write_pair
+from .synthetic import SceneConfig, write_pair_streaming
 
 #: module -> attribute that must exist (an old version lacks it)
 MODULES = {
@@ -95,7 +95,7 @@ def run_selftest(out: Path, hooks: Hooks) -> dict:
         data = staged.path("data")
         data.mkdir()
         cfg = SceneConfig.small(before_points=POINTS[0], after_points=POINTS[1])
-        before, after, truth_path = write_pair(make_pair(0, cfg), data, "laz")
+        before, after, truth_path = write_pair_streaming(0, cfg, data, "laz")
         truth = json.loads(truth_path.read_text())
         hooks.step(30, "estimating its volume change")
         res = api.estimate(before, after, staged.path("result"), Options(cell=3.0), overwrite=True, hooks=Hooks())

@@ -75,13 +75,6 @@ def misalignment(k: int, centre_abs: np.ndarray, errors=GPS_ERRORS) -> np.ndarra
     return m
 
 
-def _points(world, box, n: int, feats: dict, rng) -> np.ndarray:
-    x = rng.uniform(box[0], box[2], n)
-    y = rng.uniform(box[1], box[3], n)
-    z = world.terrain(x, y) + features_dz(x, y, list(feats.values()))
-    return np.column_stack([x, y, z + rng.normal(0.0, world.cfg.noise_m, n)])
-
-
 def _write_epoch(path: Path, xyz: np.ndarray, config: SceneConfig, date: str) -> Path:
     """One survey as LAS: ground points (class 2), the CRS, the survey date in the header."""
     header = las_header(config, 0.001)
@@ -114,7 +107,9 @@ def write_series(
         rng = np.random.default_rng(np.random.SeedSequence([int(seed), 21, k]))
         box = (0.0, 0.0, *config.before_size) if k == 0 else (ax0, ay0, ax1, ay1)
         n = int(density[0 if k == 0 else 1] * (box[2] - box[0]) * (box[3] - box[1]))
-        xyz = _points(world, box, n, fk, rng) + origin
+        x, y = rng.uniform(box[0], box[2], n), rng.uniform(box[1], box[3], n)
+        z = world.terrain(x, y) + features_dz(x, y, list(fk.values())) + rng.normal(0.0, config.noise_m, n)
+        xyz = np.column_stack([x, y, z]) + origin
         mk = misalignment(k, centre, errors)
         xyz = xyz @ mk[:3, :3].T + mk[:3, 3]
         paths.append(_write_epoch(d / f"epoch{k}.las", xyz, config, DATES[k]))

@@ -39,8 +39,7 @@ class Terrain:
 
     def __call__(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Ground height (m) of the before epoch at local x/y."""
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
         z = self.z0 + self.tilt[0] * (x - self.centre[0]) + self.tilt[1] * (y - self.centre[1])
         if self.slope_deg:
             z += math.tan(math.radians(self.slope_deg)) * (x - self.centre[0])
@@ -50,12 +49,8 @@ class Terrain:
             z += amp * np.exp(-((x - hx) ** 2 + (y - hy) ** 2) / (2 * sig * sig))
         for kind, x0, y0, x1, y1, height, width in self.lines:
             reach = 3.5 * width if kind == 0 else 2.0 * width + 0.5
-            m = (
-                (x > min(x0, x1) - reach)
-                & (x < max(x0, x1) + reach)
-                & (y > min(y0, y1) - reach)
-                & (y < max(y0, y1) + reach)
-            )
+            (xl, xh), (yl, yh) = ((min(a, b) - reach, max(a, b) + reach) for a, b in ((x0, x1), (y0, y1)))
+            m = (x > xl) & (x < xh) & (y > yl) & (y < yh)
             if not m.any():
                 continue
             px, py = x[m], y[m]
@@ -93,8 +88,7 @@ def _lines(rng: np.random.Generator, box: tuple[float, float, float, float]) -> 
     th0 = rng.uniform(0, np.pi)
     lines = []
     for kind, ang in ((0, th0), (0, th0 + rng.uniform(1.0, 2.1)), (1, th0 + rng.uniform(0.5, 1.0))):
-        px = acx + rng.uniform(-0.3, 0.3) * aw
-        py = acy + rng.uniform(-0.3, 0.3) * ah
+        px, py = acx + rng.uniform(-0.3, 0.3) * aw, acy + rng.uniform(-0.3, 0.3) * ah
         half = rng.uniform(25.0, 50.0)
         dx, dy = np.cos(ang) * half, np.sin(ang) * half
         height = -rng.uniform(0.5, 1.0) if kind == 0 else rng.uniform(0.6, 1.2)

@@ -18,40 +18,6 @@ from .terrain import Terrain
 CHUNK_POINTS = 1_000_000  # points per generation chunk (fixed: results never depend on the caller)
 
 
-class _Placer:
-    """Features ``(type, x, y, angle, a, b, h, a2, b2, h2, rbound)`` placed at random, apart and away
-    from the change."""
-
-    def __init__(self, size, box, changes: list[dict], rng: np.random.Generator) -> None:
-        self.size, self.box, self.changes, self.rng = size, box, changes, rng
-        self.feats: list[tuple] = []  # their last field: the bounding radius
-
-    def free(self, x: float, y: float, r: float) -> bool:
-        bw, bh = self.size
-        return (
-            r < x < bw - r
-            and r < y < bh - r
-            and all(clear_of(c, x, y, r + 2.0) for c in self.changes)
-            and all(math.hypot(x - f[1], y - f[2]) > r + f[-1] + 0.5 for f in self.feats)
-        )
-
-    def place(self, n: int, inside_after: bool, make, rng: np.random.Generator | None = None) -> bool:
-        """Place ``n`` features ``make()`` (50 tries each); whether any was placed."""
-        rng, placed = self.rng if rng is None else rng, len(self.feats)
-        ax0, ay0, ax1, ay1 = self.box
-        for _ in range(n):
-            for _try in range(50):
-                if inside_after:
-                    x, y = rng.uniform(ax0 + 1, ax1 - 1), rng.uniform(ay0 + 1, ay1 - 1)
-                else:
-                    x, y = rng.uniform(0, self.size[0]), rng.uniform(0, self.size[1])
-                params = make()
-                if self.free(x, y, params[-1]):
-                    self.feats.append((params[0], x, y) + params[1:])
-                    break
-        return len(self.feats) > placed
-
-
 class World:
     """Everything of one (seed, config) but per-point randomness, from its own RNG stream (so epochs
     and chunks are independent)."""
@@ -73,23 +39,24 @@ class World:
         self.water = water_levels(self) if cfg.water_m > 0 else []
 
     def _init_features(self, rng: np.random.Generator) -> None:
-        """Non-ground features placed apart and away from the change, and their label grid."""
+        """Non-ground features ``(type, x, y, angle, a, b, h, a2, b2, h2, rbound)`` placed apart and away
+        from the change, and their label grid."""
         cfg = self.cfg
         bw, bh = cfg.before_size
         aw, ah = self.ax1 - self.ax0, self.ay1 - self.ay0
         self.feat_res = 0.25
         shape = (int(math.ceil(bh / self.feat_res)) + 1, int(math.ceil(bw / self.feat_res)) + 1)
         self.label = np.zeros(shape, dtype=np.int32)  # 0 = none, k+1 = feature k
-        placer = _Placer(cfg.before_size, (self.ax0, self.ay0, self.ax1, self.ay1), self.changes, rng)
-        place, feats = placer.place, placer.feats
+        self._placed: list[tuple] = []  # their last field: the bounding radius
+        place, feats = self._place, self._placed
         if cfg.vegetation:
-            place(int(bw * bh / 600), False, lambda: bush(rng))
-            place(int(aw * ah / 250), True, lambda: bush(rng))
+            place(int(bw * bh / 600), False, lambda: bush(rng), rng)
+            place(int(aw * ah / 250), True, lambda: bush(rng), rng)
         if cfg.objects:
-            place(5, True, lambda: vehicle(rng))
-            place(3, False, lambda: vehicle(rng))
-            place(12, True, lambda: boulder(rng))
-            place(10, False, lambda: boulder(rng))
+            place(5, True, lambda: vehicle(rng), rng)
+            place(3, False, lambda: vehicle(rng), rng)
+            place(12, True, lambda: boulder(rng), rng)
+            place(10, False, lambda: boulder(rng), rng)
         extra = np.random.default_rng(np.random.SeedSequence([self.seed, 7]))  # new kinds: own stream
         self.n_plain = len(feats)  # features after these are the config's extra kinds
         self.roles = extra_features(cfg, extra, lambda inside, params: place(1, inside, lambda: params, extra))
@@ -102,13 +69,33 @@ class World:
         for k, f in enumerate(self.feats):
             self.stamp(self.label, self.feat_res, f[1], f[2], f[10] + self.feat_res, k + 1)
 
+    def _place(self, n: int, inside_after: bool, make, rng: np.random.Generator) -> bool:
+        """Place ``n`` features ``make()`` at random (50 tries each), apart and away from the change:
+        whether any was placed."""
+        (bw, bh), placed = self.cfg.before_size, len(self._placed)
+        for _ in range(n):
+            for _try in range(50):
+                if inside_after:
+                    x, y = rng.uniform(self.ax0 + 1, self.ax1 - 1), rng.uniform(self.ay0 + 1, self.ay1 - 1)
+                else:
+                    x, y = rng.uniform(0, bw), rng.uniform(0, bh)
+                params = make()
+                r = params[-1]
+                if (
+                    r < x < bw - r
+                    and r < y < bh - r
+                    and all(clear_of(c, x, y, r + 2.0) for c in self.changes)
+                    and all(math.hypot(x - f[1], y - f[2]) > r + f[-1] + 0.5 for f in self._placed)
+                ):
+                    self._placed.append((params[0], x, y) + params[1:])
+                    break
+        return len(self._placed) > placed
+
     @staticmethod
     def stamp(grid: np.ndarray, res: float, x: float, y: float, r: float, value) -> None:
         ny, nx = grid.shape
         i0, i1 = max(0, int((x - r) / res)), min(nx, int((x + r) / res) + 2)
-        j0, j1 = max(0, int((y - r) / res)), min(ny, int((y + r) / res) + 2)
-        if i0 >= i1 or j0 >= j1:
-            return
+        j0, j1 = max(0, int((y - r) / res)), min(ny, int((y + r) / res) + 2)  # (empty off the grid)
         xs = (np.arange(i0, i1) + 0.5) * res
         ys = (np.arange(j0, j1) + 0.5) * res
         d = np.hypot(xs[None, :] - x, ys[:, None] - y)
@@ -197,9 +184,7 @@ class World:
         if epoch == 1:
             xyz = self._misaligned(xyz)
         xyz += np.asarray(cfg.origin, dtype=np.float64)
-        if not signals:
-            return xyz, cls
-        return (xyz, *self._signals(epoch, index, cls, o, lab, fresh))
+        return (xyz, *self._signals(epoch, index, cls, o, lab, fresh)) if signals else (xyz, cls)
 
     def _misaligned(self, xyz: np.ndarray) -> np.ndarray:
         """The after points misaligned element-wise (not BLAS): the same whatever the chunking."""
@@ -219,8 +204,7 @@ class World:
             fields.update(red=rgb[:, 0], green=rgb[:, 1], blue=rgb[:, 2])
         if cfg.signals in ("lidar", "returns"):
             fields["return_number"], fields["number_of_returns"] = returns(cat, lab > 0, rng)
-        keep = cfg.signals in ("class", "lidar")
-        return (cls if keep else np.zeros_like(cls)), fields
+        return (cls if cfg.signals in ("class", "lidar") else np.zeros_like(cls)), fields
 
 
 def _outliers(rng: np.random.Generator, z: np.ndarray, cls: np.ndarray, fraction: float) -> np.ndarray:

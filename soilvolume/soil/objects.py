@@ -8,6 +8,10 @@ object's is about one mixed cell. A blob is an object when that band's width (ar
 perimeter) implies a slope of at least :data:`WALL_SLOPE` or is unresolved by the cells, its
 footprint is under :data:`MAX_AREA_M2`, not elongated and mostly ringed by unchanged ground. On
 cells coarser than :data:`MAX_SINGLE_CELL` only matching pairs are objects.
+
+Rough cells (:func:`roughness`, :func:`rough_cells`): a canopy is a spread of heights a cell's slope
+does not explain (soil is smooth at a cell's scale); used where no signal labelled any point, their
+volume carried in the interval.
 """
 
 from __future__ import annotations
@@ -29,6 +33,10 @@ MAX_SINGLE_CELL = 0.8  # m: on coarser cells a vehicle's walls are not seen; onl
 AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 2.0, 1.5, 2.5
 RING_HOLE = 0.2  # a blob around unseen cells of this share of its own area is a ring, not an object
 _EIGHT = np.ones((3, 3), bool)
+ROUGH_FACTOR = 3.0  # residual spread over this many times the stable ground's is rough
+ROUGH_MIN_M = 0.05
+IQR_SPREAD = 1.5  # interquartile spread (IQR / 1.349) of a sloping cell over its standard deviation, with margin
+MIN_POINTS = 6  # a spread of fewer points says little
 
 
 @dataclass(frozen=True)
@@ -80,10 +88,8 @@ def find_objects(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: floa
     blobs = _pairs(blobs)
     if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs only
         blobs = [b for b in blobs if b.partner]
-    kept = [b.label for b in blobs]
-    labels = np.where(np.isin(labels, kept), labels, 0)
-    moved_ids = [b.label for b in blobs if b.partner]
-    moved = np.isin(labels, moved_ids) & (labels > 0)
+    labels = np.where(np.isin(labels, [b.label for b in blobs]), labels, 0)
+    moved = np.isin(labels, [b.label for b in blobs if b.partner]) & (labels > 0)
     moved = scipy.ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls
     single = (labels > 0) & ~moved
     return Objects(tuple(blobs), labels, moved, single)
@@ -122,17 +128,12 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     ring = grown & ~scipy.ndimage.binary_dilation(whole, _EIGHT)
     if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
         return None
-    vol = float(np.where(whole, d[win], 0.0).sum()) * a
-    slope = _wall_slope(np.where(whole, d[win], 0.0), whole, height, cell)
+    dw = np.where(whole, d[win], 0.0)
+    gy, gx = np.gradient(dw, cell)  # the walls' median slope: about 1 on a pile's flank, 1.5 and more on a box's
+    band = whole & (dw >= 0.2 * height) & (dw <= 0.8 * height)
+    slope = float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell
+    vol = float(dw.sum()) * a
     return Blob(sign, area, height, vol, float(cc.mean() + c0), float(rr.mean() + r0), elong, label, slope=slope)
-
-
-def _wall_slope(dd: np.ndarray, whole: np.ndarray, height: float, cell: float) -> float:
-    """Median slope (rise/run) of a blob's cells between 20 % and 80 % of its height (about 1 on a
-    pile's flank, 1.5 and more on a box's walls)."""
-    gy, gx = np.gradient(dd, cell)
-    band = whole & (dd >= 0.2 * height) & (dd <= 0.8 * height)
-    return float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell
 
 
 def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:
@@ -157,3 +158,29 @@ def _pairs(blobs: list[Blob]) -> list[Blob]:
         if f not in partner and c not in partner:
             partner[f], partner[c] = c, f
     return [replace(b, partner=partner.get(b.label, 0)) for b in blobs]
+
+
+def roughness(spread: np.ndarray, heights: np.ndarray, counts: np.ndarray, cell: float) -> np.ndarray:
+    """Per-cell spread of heights (m) beyond a slope g's (|g| c / sqrt(12), times :data:`IQR_SPREAD`
+    as an interquartile spread); NaN where too few points."""
+    g2 = _steepest(heights, 1) ** 2 + _steepest(heights, 0) ** 2
+    planar = IQR_SPREAD**2 * g2 / 12.0  # steps are per cell: g c
+    with np.errstate(invalid="ignore"):
+        r = np.sqrt(np.maximum(np.square(spread) - planar, 0.0))
+    return np.where(counts >= MIN_POINTS, r, np.nan)
+
+
+def _steepest(h: np.ndarray, axis: int) -> np.ndarray:
+    """Per cell, the larger one-sided height step along ``axis`` (a central one halves a flank at a
+    break of slope)."""
+    before = np.abs(np.diff(h, axis=axis, prepend=np.nan))
+    after = np.abs(np.diff(h, axis=axis, append=np.nan))
+    return np.nan_to_num(np.fmax(before, after))
+
+
+def rough_cells(r: np.ndarray, stable: np.ndarray) -> np.ndarray:
+    """Cells whose spread ``r`` is over :data:`ROUGH_FACTOR` times stable ground's (>= :data:`ROUGH_MIN_M`)."""
+    ref = r[stable & np.isfinite(r)]
+    level = float(np.median(ref)) if ref.size else 0.0
+    with np.errstate(invalid="ignore"):
+        return np.nan_to_num(r) > max(ROUGH_FACTOR * level, ROUGH_MIN_M)

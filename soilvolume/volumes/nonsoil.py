@@ -15,8 +15,7 @@ import scipy
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
-from ..soil.objects import Blob, find_objects
-from ..soil.rough import rough_cells, roughness
+from ..soil.objects import Blob, find_objects, rough_cells, roughness
 from .change import change_areas
 from .correct import Corrected
 from .refill import Refill
