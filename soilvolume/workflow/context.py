@@ -40,18 +40,6 @@ def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
     return out
 
 
-def process_age() -> float | None:
-    """Seconds since this process started (Linux: /proc; else None): the middle of its start's clock
-    tick against the boot-time clock, within half a tick (/proc/uptime's truncations made two)."""
-    try:
-        with open("/proc/self/stat", encoding="ascii") as f:
-            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
-        uptime = time.clock_gettime(time.CLOCK_BOOTTIME)  # the clock /proc's start time counts on
-        return max(0.0, uptime - (start_ticks + 0.5) / os.sysconf("SC_CLK_TCK"))
-    except (OSError, ValueError, IndexError, AttributeError):
-        return None
-
-
 class Timer:
     """Per-stage wall times (s) in the order they ran; :meth:`totals` adds ``startup`` (process start to
     this timer) and ``other`` (untimed), so they sum to the process's wall time."""
@@ -59,7 +47,14 @@ class Timer:
     def __init__(self) -> None:
         self.s: dict[str, float] = {}
         self.t0 = time.perf_counter()
-        self.startup = process_age()
+        self.startup = None  # s since this process started (Linux: /proc): the middle of its start's clock tick
+        try:  # against the boot-time clock, within half a tick (/proc/uptime's truncations made two)
+            with open("/proc/self/stat", encoding="ascii") as f:
+                start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
+            uptime = time.clock_gettime(time.CLOCK_BOOTTIME)  # the clock /proc's start time counts on
+            self.startup = max(0.0, uptime - (start_ticks + 0.5) / os.sysconf("SC_CLK_TCK"))
+        except (OSError, ValueError, IndexError, AttributeError):
+            pass
         self._open: dict[str, float] = {}
         self._inner: dict[str, float] = {}  # of each open stage: the time of the stages timed within it
 

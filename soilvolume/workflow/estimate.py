@@ -25,16 +25,6 @@ from . import design, steps
 from .context import PAIR, Context, Timer, threads
 
 
-def epochs_of(before: Path, after: Path, options: Options, before_pipeline=None, after_pipeline=None) -> tuple:
-    """The two epochs of an estimate: the first a surface when it is one (a design, an earlier DEM)."""
-    given = {"georeferencing": options.georeferencing}
-    if before_pipeline is None and is_surface(before):
-        first = Epoch(Path(before), "surface", crs=options.before_crs)
-    else:
-        first = survey(before, before_pipeline, crs=options.before_crs, **given)
-    return first, survey(after, after_pipeline, crs=options.after_crs, **given)
-
-
 def run_estimate(
     before: str | Path,
     after: str | Path,
@@ -52,7 +42,12 @@ def run_estimate(
     schedule = schedule_of(options)  # the one parse of --scheduler, before any file is read
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
         check_two_surveys(before, after)
-    epochs = epochs_of(before, after, options, before_pipeline, after_pipeline)
+    given = {"georeferencing": options.georeferencing}  # the first epoch a surface when it is one (a design, a DEM)
+    if before_pipeline is None and is_surface(before):
+        first = Epoch(before, "surface", crs=options.before_crs)
+    else:
+        first = survey(before, before_pipeline, crs=options.before_crs, **given)
+    epochs = first, survey(after, after_pipeline, crs=options.after_crs, **given)
     if options.tolerance is not None and not epochs[0].is_surface:
         raise SoilVolumeError(
             "{opt:tolerance}: an on-grade tolerance needs a design as BEFORE (a GeoTIFF or LandXML surface), "
