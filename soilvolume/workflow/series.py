@@ -206,7 +206,7 @@ def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
         span = (ctx.at("register", k / n), ctx.at("register", (k + 1) / n))
         progress = (*span, f"registering {name} into {ctx.epochs[0].name}'s frame")
         with naming(pair_named(ctx, k + 1)):
-            reg, opts = steps.register_pair(prep, ctx, (prep.after.xyz, prep.before.xyz), progress)
+            reg, opts = steps.register(ctx, prep, (prep.after.xyz, prep.before.xyz), progress)
         ctx.hooks.info(f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m")
         seconds = {s: t + ctx.timer.s[s] for s, t in seconds.items()}
         if fits:
