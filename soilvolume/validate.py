@@ -61,12 +61,7 @@ def check_options(options: Options) -> Options:
             check_number(f.name, value, meta, integer=f.type in ("int", int))
         elif f.type in ("str | None", "str") and not isinstance(value, str):
             raise OptionError(f.name, f"must be text (got {value!r})")
-    _check_polygon_files(options)
-    return options
-
-
-def _check_polygon_files(options: Options) -> None:
-    """The zones, stable-ground and sections files read now, before any point (their CRS is checked later)."""
+    # the zones, stable-ground and sections files read now, before any point (their CRS is checked later)
     for name, what in (("zones", "zones file"), ("stable_mask", f"{opt('stable_mask')} file")):
         path = getattr(options, name)
         if path:
@@ -75,6 +70,7 @@ def _check_polygon_files(options: Options) -> None:
         zone_factors(options.zones)
     if options.sections:
         read_lines(options.sections, what=f"{opt('sections')} file")
+    return options
 
 
 def schedule_of(options: Options) -> Schedule | None:

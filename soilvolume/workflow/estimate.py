@@ -66,24 +66,20 @@ def run_estimate(
             b, a = epochs  # the backend of the run's schedule (auto resolved from the headers): tiles but for none
             plan = None if surface else schedule_for(schedule, b.path, a.path, options, b.pipeline or a.pipeline)
             backend = InMemory() if surface or plan.in_process else Tiled(plan)
-        if surface:
-            report, keyed = design.estimate(ctx, backend)
-        else:
-            cloud = out.path("after_registered.laz") if options.keep_registered_cloud else None
-            report, keyed = estimate_pair(ctx, backend, cloud)
+        report, keyed = (design.estimate if surface else estimate_pair)(ctx, backend)
     hooks.step(100, "done")
     return Result.written(report, out.moved, keyed)
 
 
-def estimate_pair(ctx: Context, backend: Backend, cloud: Path | None = None) -> tuple[dict, dict]:
-    """Read, register, grid, planes, volume, write, report; ``cloud``: where the registered
-    after cloud goes (``--registered-cloud``), else None."""
+def estimate_pair(ctx: Context, backend: Backend) -> tuple[dict, dict]:
+    """Read, register (the registered after cloud kept with ``--registered-cloud``), grid, planes, volume, write,
+    report."""
     with backend.session(ctx):
         prep = steps.read(ctx, backend)
         reg, options = steps.register(ctx, prep, backend.dense(prep))
+        if options.keep_registered_cloud:
+            backend.keep_cloud(prep, reg, ctx.out.path("after_registered.laz"))
         ctx = replace(ctx, options=options)
-        if cloud is not None:
-            backend.keep_cloud(prep, reg, cloud)
         gridded = steps.grid(ctx, backend, prep, reg)
         fitted = steps.planes(ctx, gridded)
         vols = steps.volume(ctx, backend, gridded, fitted, reg)
