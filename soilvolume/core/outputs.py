@@ -79,22 +79,6 @@ def os_errors(path: Path | None = None) -> Iterator[None]:
         raise SoilVolumeError(f"{path}: {said}" if path is not None else said) from exc
 
 
-def _make_parents(folder: Path) -> list[Path]:
-    """Create ``folder`` and its missing parents; returns those created (deepest last)."""
-    missing = [p for p in [folder, *folder.parents] if not p.exists()][::-1]
-    for p in missing:
-        try:
-            p.mkdir()
-        except FileExistsError:
-            if not p.is_dir():
-                raise SoilVolumeError(f"{p}: exists and is not a folder") from None
-        except OSError as exc:
-            raise os_problem(exc, p) from exc
-    if not folder.is_dir():
-        raise SoilVolumeError(f"{folder}: not a folder")
-    return missing
-
-
 class OutputDir:
     """Staging for one run's output folder: ``commit()`` swaps it in, ``abort()`` removes it; ``inputs`` never
     lie inside it; ``allowed``: what ``--overwrite`` may replace (default: files a run writes)."""
@@ -110,7 +94,18 @@ class OutputDir:
         self.overwrite, self.allowed = overwrite, set(allowed) if allowed is not None else None
         sweep_inside(self.final)
         self._check()
-        self.created = _make_parents(self.final.parent)
+        parent = self.final.parent  # made with its missing parents: those created, deepest last
+        self.created = [p for p in [parent, *parent.parents] if not p.exists()][::-1]
+        for p in self.created:
+            try:
+                p.mkdir()
+            except FileExistsError:
+                if not p.is_dir():
+                    raise SoilVolumeError(f"{p}: exists and is not a folder") from None
+            except OSError as exc:
+                raise os_problem(exc, p) from exc
+        if not parent.is_dir():
+            raise SoilVolumeError(f"{parent}: not a folder")
         self.token = secrets.token_hex(4)
         with locked(self.final.parent):
             sweep(self.final)

@@ -44,8 +44,7 @@ def run_cloud_to_dem(
     with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
         one = steps.read_one(ctx)
     with steps.running(ctx, "grid", ctx.message("grid"), "grids"):  # on --bounds, else the points' box
-        xyz, origin = one.xyz, one.origin
-        box = xyz
+        xyz, origin, box = one.xyz, one.origin, one.xyz
         if bounds is not None:  # in CRS units
             b = np.asarray(bounds, dtype=np.float64) * one.frame.xy_unit
             box = (b[:2] - origin[:2], b[2:] - origin[:2])
