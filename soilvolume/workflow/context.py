@@ -28,18 +28,6 @@ PROGRESS: dict[str, tuple[float, float, str]] = {
 PAIR = tuple(PROGRESS)  # the steps of a pair, in order
 
 
-def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
-    """Each step's percent range: the table's for a whole run, its share of 0-100 for a shorter one."""
-    if steps == PAIR:
-        return {s: PROGRESS[s][:2] for s in steps}
-    widths = [PROGRESS[s][1] - PROGRESS[s][0] for s in steps]
-    total, at, out = sum(widths), 0.0, {}
-    for s, w in zip(steps, widths, strict=True):
-        out[s] = (round(100 * at / total, 1), round(100 * (at + w) / total, 1))
-        at += w
-    return out
-
-
 class Timer:
     """Per-stage wall times (s) in the order they ran; :meth:`totals` adds ``startup`` (process start to
     this timer) and ``other`` (untimed), so they sum to the process's wall time."""
@@ -87,7 +75,7 @@ class Timer:
 @dataclass(frozen=True)
 class Context:
     """A product's run: epochs, options, callbacks, timer, output folder (None: one file), each step's percent
-    range (:func:`spans`), ``--scheduler`` as parsed once (None: ``auto``), never its text again."""
+    range, ``--scheduler`` as parsed once (None: ``auto``), never its text again."""
 
     epochs: tuple[Epoch, ...]
     options: Options
@@ -99,8 +87,14 @@ class Context:
     schedule: Schedule | None = None
 
     def __post_init__(self) -> None:
-        if not self.spans:
-            object.__setattr__(self, "spans", spans(self.steps))
+        if self.spans:  # given; else the table's for a whole run, each step's share of 0-100 for a shorter one
+            return
+        widths = [PROGRESS[s][1] - PROGRESS[s][0] for s in self.steps]
+        total, at, out = sum(widths), 0.0, {}
+        for s, w in zip(self.steps, widths, strict=True):
+            out[s] = (round(100 * at / total, 1), round(100 * (at + w) / total, 1))
+            at += w
+        object.__setattr__(self, "spans", {s: PROGRESS[s][:2] for s in PAIR} if self.steps == PAIR else out)
 
     def at(self, step: str, fraction: float = 0.0) -> float:
         """The percent ``fraction`` of the way through ``step``."""
