@@ -1,5 +1,5 @@
 """``python -m soilvolume`` and the ``soilvolume`` command: a signal while still importing ends it in one
-line, the process is settled (:func:`soilvolume.process.settle`), the command line run, the process left."""
+line, the process is settled (:mod:`soilvolume.process`), the command line run, the process left."""
 
 import os
 import signal
@@ -17,7 +17,8 @@ def _early(signum: int, _frame) -> None:
 
 for _sig in (signal.SIGINT, signal.SIGTERM):  # main() installs the run's own handlers
     signal.signal(_sig, _early)
-process.settle()
+process.one_blas_thread()
+process.hide_extras()
 
 from .cli import main  # noqa: E402 - after the handlers and the settings: it loads numpy
 from .native import OFF_THE_GIL  # noqa: E402

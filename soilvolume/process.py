@@ -1,6 +1,7 @@
 """The ``soilvolume`` command's own process settings, made by :mod:`soilvolume.__main__` only, each kept
 for its measured gain (``bench/README.md``, *Process settings*; those under 5 % wall and 10 % peak memory
-were removed). No numpy here: :func:`settle` runs before it loads."""
+were removed). No numpy here: :func:`one_blas_thread` (read by numpy as it loads, here and in the Dask
+workers) and :func:`hide_extras` run before it loads."""
 
 from __future__ import annotations
 
@@ -16,12 +17,6 @@ from .core.watchdog import remove_process_temp_dir
 #: HTTP); in the Dask workers jinja2 too (Dask's notebook HTML; the command needs it for report.html)
 EXTRAS = ("requests",)
 WORKER_EXTRAS = (*EXTRAS, "jinja2")
-
-
-def settle() -> None:
-    """:func:`one_blas_thread` (read by numpy as it loads, here and in the Dask workers) and :func:`hide_extras`."""
-    one_blas_thread()
-    hide_extras()
 
 
 def hide_extras(names: tuple[str, ...] = EXTRAS) -> None:

@@ -47,7 +47,7 @@ def _finite(value: Any) -> Any:
 
 
 class Protocol:
-    """Writes the protocol's lines (thread-safe); listens for ``cancel`` on standard input."""
+    """Writes the protocol's lines (thread-safe); ``cancelled`` is set by a ``cancel`` line on standard input."""
 
     def __init__(self, stream: IO[str]) -> None:
         self.stream = stream
@@ -66,46 +66,33 @@ class Protocol:
     def log(self, message: str) -> None:
         self.emit("log", message=message)
 
-    def is_cancelled(self) -> bool:
-        return self.cancelled.is_set()
-
-    def listen(self, stdin: IO[str] | None = None) -> None:
-        """Watch standard input for a ``cancel`` line (end of input is ignored)."""
-        source = stdin if stdin is not None else sys.stdin
-        if source is None or source.isatty():
-            return
-
-        def watch() -> None:
-            try:
-                for line in source:
-                    if line.strip() == "cancel":
-                        self.cancelled.set()
-                        return
-            except (OSError, ValueError):
-                return
-
-        threading.Thread(target=watch, name="soilvolume-cancel", daemon=True).start()
-
-    def capture_warnings(self) -> None:
-        """Python warnings become ``warning`` lines (once per message)."""
-        seen: set[str] = set()
-
-        def show(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ARG001
-            text = f"{category.__name__}: {message}"
-            if text not in seen:
-                seen.add(text)
-                self.emit("warning", message=text)
-
-        warnings.showwarning = show
-
 
 def open_protocol() -> Protocol:
-    """The protocol on the original standard output, fd 1 and ``sys.stdout`` then on standard error."""
+    """The protocol on the original standard output, fd 1 and ``sys.stdout`` then on standard error; Python
+    warnings become ``warning`` lines (once per message); a ``cancel`` line on standard input cancels (its end
+    is ignored)."""
     sys.stdout.flush()
     stream = os.fdopen(os.dup(1), "w", buffering=1, encoding="utf-8", errors="backslashreplace")
     os.dup2(2, 1)
     sys.stdout = sys.stderr
-    proto = Protocol(stream)
-    proto.capture_warnings()
-    proto.listen()
+    proto, seen, source = Protocol(stream), set(), sys.stdin
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ARG001
+        text = f"{category.__name__}: {message}"
+        if text not in seen:
+            seen.add(text)
+            proto.emit("warning", message=text)
+
+    def watch() -> None:
+        try:
+            for line in source:
+                if line.strip() == "cancel":
+                    proto.cancelled.set()
+                    return
+        except (OSError, ValueError):
+            return
+
+    warnings.showwarning = show
+    if source is not None and not source.isatty():
+        threading.Thread(target=watch, name="soilvolume-cancel", daemon=True).start()
     return proto

@@ -16,9 +16,6 @@ from .options import Options
 from .volumes.polygons import read_lines, read_polygons
 from .volumes.quantities import zone_factors
 
-#: fewest grid cells over the compared area that give a meaningful volume
-MIN_CELLS = 25
-
 
 class OptionError(SoilVolumeError):
     """An option value outside its allowed range; ``field`` is the :class:`Options` field name."""
@@ -64,12 +61,7 @@ def check_options(options: Options) -> Options:
             check_number(f.name, value, meta, integer=f.type in ("int", int))
         elif f.type in ("str | None", "str") and not isinstance(value, str):
             raise OptionError(f.name, f"must be text (got {value!r})")
-    _check_polygon_files(options)
-    return options
-
-
-def _check_polygon_files(options: Options) -> None:
-    """The zones, stable-ground and sections files read now, before any point (their CRS is checked later)."""
+    # the zones, stable-ground and sections files read now, before any point (their CRS is checked later)
     for name, what in (("zones", "zones file"), ("stable_mask", f"{opt('stable_mask')} file")):
         path = getattr(options, name)
         if path:
@@ -78,6 +70,7 @@ def _check_polygon_files(options: Options) -> None:
         zone_factors(options.zones)
     if options.sections:
         read_lines(options.sections, what=f"{opt('sections')} file")
+    return options
 
 
 def schedule_of(options: Options) -> Schedule | None:
@@ -98,14 +91,3 @@ def check_bounds(bounds: Sequence[float] | None) -> tuple[float, ...] | None:
     if not (b[0] < b[2] and b[1] < b[3]):
         raise SoilVolumeError(f"--bounds: XMIN must be < XMAX and YMIN < YMAX (got {' '.join(f'{v:g}' for v in b)})")
     return b
-
-
-def check_grid_cells(rows: int, cols: int, cell: float) -> None:
-    """Refuse a grid of fewer than :data:`MIN_CELLS` cells: a cell as large as the site makes noise."""
-    if (n := rows * cols) < MIN_CELLS:
-        raise OptionError(
-            "cell",
-            f"a {cell:g} m grid has only {n} cell(s) over the compared area "
-            f"(at least {MIN_CELLS} needed); use a smaller {opt('cell')} or leave it unset "
-            "to derive it from the point density",
-        )

@@ -58,7 +58,7 @@ def test_declared_datum_with_gps_error_is_registered(datum_pair, tmp_path):
 
 
 def test_tiled_run_decides_as_the_in_process_one(datum_pair, tmp_path):
-    """One decision for both executors (workflow/steps.register_pair drives it)."""
+    """One decision for both executors (workflow/steps.register drives it)."""
     before, after, _ = datum_pair
     whole = estimate(before, after, tmp_path / "ip", Options(scheduler="none")).report
     tiled = estimate(before, after, tmp_path / "tiled", Options(scheduler="threads:2", tile_cells=16)).report

@@ -128,8 +128,8 @@ def test_tiles_the_driver_read_go_out_before_the_registration(vpcs, tmp_path, mo
     monkeypatch.setattr(
         pointcache.PointCache, "send_held", lambda self: (events.append(("send", len(self.held))), send_held(self))
     )
-    register = steps.register_pair
-    monkeypatch.setattr(steps, "register_pair", lambda *a: (events.append(("register", 0)), register(*a))[1])
+    register = steps.register
+    monkeypatch.setattr(steps, "register", lambda *a: (events.append(("register", 0)), register(*a))[1])
     got, eng = _run(vpcs, tmp_path / "driver", "threads:2")
     sent = [k for k, (what, n) in enumerate(events) if what == "send" and n]
     assert sent and sent[0] < events.index(("register", 0)), events

@@ -53,7 +53,9 @@ def hooks(ns: argparse.Namespace) -> Hooks:
     """The protocol's progress, log and cancel; else progress for people on stderr where the command has
     ``--quiet`` (the estimate) and it is not given; else none (dem, register, volume print only JSON)."""
     if ns.protocol is not None:
-        return Hooks(progress=ns.protocol.progress, log=ns.protocol.log, cancel=ns.protocol.is_cancelled, keyed=True)
+        return Hooks(
+            progress=ns.protocol.progress, log=ns.protocol.log, cancel=ns.protocol.cancelled.is_set, keyed=True
+        )
     if getattr(ns, "quiet", True):
         return Hooks()
     return Hooks(progress=lambda pct, msg: print(f"[{pct:5.1f}%] {msg}", file=sys.stderr, flush=True))

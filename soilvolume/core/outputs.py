@@ -54,49 +54,29 @@ def os_problem(exc: OSError, path: str | os.PathLike | None = None) -> SoilVolum
 
 @contextmanager
 def os_errors(path: Path | None = None) -> Iterator[None]:
-    """OSErrors and the writer libraries' errors of the block as one line naming ``path`` or the error's file."""
+    """OSErrors and the writer libraries' errors of the block as one line naming ``path`` or the error's file:
+    the clearest account of a failed write (the OS error, a full disk, or GDAL's first cause)."""
     try:
         yield
     except Exception as exc:
-        if isinstance(exc, OSError) or type(exc).__module__.startswith(WRITER_LIBRARIES):
-            raise _write_problem(exc, path) from exc
-        raise
-
-
-def _write_problem(exc: BaseException, path: Path | None) -> SoilVolumeError:
-    """The clearest account of a failed write: the OS error, a full disk, or GDAL's first cause."""
-    if isinstance(exc, OSError) and exc.errno:
-        where = exc.filename
-        if where and STAGING in str(where):  # a staged file: named where it was going, else the output
-            inner = STAGING in Path(where).parent.name and STAGING not in Path(where).name
-            where = path / Path(where).name if inner and path is not None else path
-        return os_problem(exc, where or path)
-    folder = path if path is not None and path.is_dir() else (path.parent if path is not None else Path.cwd())
-    try:
-        full = shutil.disk_usage(folder).free < 1 << 20
-    except OSError:
-        full = False
-    cause = exc
-    while cause.__cause__ is not None or cause.__context__ is not None:
-        cause = cause.__cause__ or cause.__context__
-    text = "no space left on the device" if full else short_error(cause)
-    return SoilVolumeError(f"{path}: cannot write ({text})" if path is not None else f"cannot write ({text})")
-
-
-def _make_parents(folder: Path) -> list[Path]:
-    """Create ``folder`` and its missing parents; returns those created (deepest last)."""
-    missing = [p for p in [folder, *folder.parents] if not p.exists()][::-1]
-    for p in missing:
+        if not (isinstance(exc, OSError) or type(exc).__module__.startswith(WRITER_LIBRARIES)):
+            raise
+        if isinstance(exc, OSError) and exc.errno:
+            where = exc.filename
+            if where and STAGING in str(where):  # a staged file: named where it was going, else the output
+                inner = STAGING in Path(where).parent.name and STAGING not in Path(where).name
+                where = path / Path(where).name if inner and path is not None else path
+            raise os_problem(exc, where or path) from exc
+        folder = path if path is not None and path.is_dir() else (path.parent if path is not None else Path.cwd())
         try:
-            p.mkdir()
-        except FileExistsError:
-            if not p.is_dir():
-                raise SoilVolumeError(f"{p}: exists and is not a folder") from None
-        except OSError as exc:
-            raise os_problem(exc, p) from exc
-    if not folder.is_dir():
-        raise SoilVolumeError(f"{folder}: not a folder")
-    return missing
+            full = shutil.disk_usage(folder).free < 1 << 20
+        except OSError:
+            full = False
+        cause = exc
+        while cause.__cause__ is not None or cause.__context__ is not None:
+            cause = cause.__cause__ or cause.__context__
+        said = f"cannot write ({'no space left on the device' if full else short_error(cause)})"
+        raise SoilVolumeError(f"{path}: {said}" if path is not None else said) from exc
 
 
 class OutputDir:
@@ -114,7 +94,18 @@ class OutputDir:
         self.overwrite, self.allowed = overwrite, set(allowed) if allowed is not None else None
         sweep_inside(self.final)
         self._check()
-        self.created = _make_parents(self.final.parent)
+        parent = self.final.parent  # made with its missing parents: those created, deepest last
+        self.created = [p for p in [parent, *parent.parents] if not p.exists()][::-1]
+        for p in self.created:
+            try:
+                p.mkdir()
+            except FileExistsError:
+                if not p.is_dir():
+                    raise SoilVolumeError(f"{p}: exists and is not a folder") from None
+            except OSError as exc:
+                raise os_problem(exc, p) from exc
+        if not parent.is_dir():
+            raise SoilVolumeError(f"{parent}: not a folder")
         self.token = secrets.token_hex(4)
         with locked(self.final.parent):
             sweep(self.final)

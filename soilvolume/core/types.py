@@ -69,9 +69,8 @@ class GridSpec:
 
     def box(self) -> tuple[np.ndarray, np.ndarray]:
         """The grid's (lo, hi) corners, absolute x/y (metres)."""
-        return np.array([self.xmin, self.ymax - self.rows * self.cell]), np.array(
-            [self.xmin + self.cols * self.cell, self.ymax]
-        )
+        lo = np.array([self.xmin, self.ymax - self.rows * self.cell])
+        return lo, np.array([self.xmin + self.cols * self.cell, self.ymax])
 
     @property
     def cell_area(self) -> float:

@@ -65,8 +65,14 @@ def start(leave: Callable[[int | None], None], stopping: Callable[[], bool]) -> 
         _close(read_fd, write_fd)
         return lambda: None
     done, limit = threading.Event(), address_limit()
-    if limit is not None:
-        few_arenas()
+    if limit is not None:  # glibc's malloc on two arenas (under ulimit -v, each thread's own 64 MiB arena counts)
+        import ctypes
+        import ctypes.util
+
+        try:
+            ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt(M_ARENA_MAX, 2)
+        except (OSError, AttributeError):
+            pass
     old = threading.stack_size(STACK)  # a small thread: under ulimit -v its space counts
     try:
         watch = (read_fd, write_fd, done, leave, stopping, limit)
@@ -118,17 +124,6 @@ def _spinning(limit: int | None) -> Iterator[bool]:
             hot = hot and any(t - prev[1].get(k, t) >= per_tick for k, t in system.items())
             since = (since or now) if hot else None
         yield sample is not None and since is not None and now - since >= SPIN_S
-
-
-def few_arenas() -> None:
-    """glibc's malloc on two arenas (under ``ulimit -v``, each thread's own 64 MiB arena counts); else nothing."""
-    import ctypes
-    import ctypes.util
-
-    try:
-        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt(M_ARENA_MAX, 2)
-    except (OSError, AttributeError):
-        pass
 
 
 def _sample() -> tuple[int, dict[str, int]] | None:

@@ -24,8 +24,6 @@ from . import steps
 from .context import Context, threads
 from .plan import cloud_cell, plan_grid
 
-DEM = ("prepare", "grid", "write")
-
 
 def run_cloud_to_dem(
     cloud: str | Path,
@@ -40,12 +38,11 @@ def run_cloud_to_dem(
     CRS, snapped outwards to the cell); returns the grid (cell_m, rows, cols, crs, transform, points, valid_cells)."""
     options, bounds, hooks = options or Options(), check_bounds(bounds), hooks or Hooks()
     cloud, out_tif = Path(cloud), check_output_file(Path(out_tif), [cloud])
-    ctx = Context((survey(cloud, crs=crs),), options, hooks, DEM)
+    ctx = Context((survey(cloud, crs=crs),), options, hooks, ("prepare", "grid", "write"))
     with steps.running(ctx, "prepare", ctx.message("prepare") + InMemory.reading_note, "crop"):
         one = steps.read_one(ctx)
     with steps.running(ctx, "grid", ctx.message("grid"), "grids"):  # on --bounds, else the points' box
-        xyz, origin = one.xyz, one.origin
-        box = xyz
+        xyz, origin, box = one.xyz, one.origin, one.xyz
         if bounds is not None:  # in CRS units
             b = np.asarray(bounds, dtype=np.float64) * one.frame.xy_unit
             box = (b[:2] - origin[:2], b[2:] - origin[:2])

@@ -28,30 +28,6 @@ PROGRESS: dict[str, tuple[float, float, str]] = {
 PAIR = tuple(PROGRESS)  # the steps of a pair, in order
 
 
-def spans(steps: tuple[str, ...]) -> dict[str, tuple[float, float]]:
-    """Each step's percent range: the table's for a whole run, its share of 0-100 for a shorter one."""
-    if steps == PAIR:
-        return {s: PROGRESS[s][:2] for s in steps}
-    widths = [PROGRESS[s][1] - PROGRESS[s][0] for s in steps]
-    total, at, out = sum(widths), 0.0, {}
-    for s, w in zip(steps, widths, strict=True):
-        out[s] = (round(100 * at / total, 1), round(100 * (at + w) / total, 1))
-        at += w
-    return out
-
-
-def process_age() -> float | None:
-    """Seconds since this process started (Linux: /proc; else None): the middle of its start's clock
-    tick against the boot-time clock, within half a tick (/proc/uptime's truncations made two)."""
-    try:
-        with open("/proc/self/stat", encoding="ascii") as f:
-            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
-        uptime = time.clock_gettime(time.CLOCK_BOOTTIME)  # the clock /proc's start time counts on
-        return max(0.0, uptime - (start_ticks + 0.5) / os.sysconf("SC_CLK_TCK"))
-    except (OSError, ValueError, IndexError, AttributeError):
-        return None
-
-
 class Timer:
     """Per-stage wall times (s) in the order they ran; :meth:`totals` adds ``startup`` (process start to
     this timer) and ``other`` (untimed), so they sum to the process's wall time."""
@@ -59,7 +35,14 @@ class Timer:
     def __init__(self) -> None:
         self.s: dict[str, float] = {}
         self.t0 = time.perf_counter()
-        self.startup = process_age()
+        self.startup = None  # s since this process started (Linux: /proc): the middle of its start's clock tick
+        try:  # against the boot-time clock, within half a tick (/proc/uptime's truncations made two)
+            with open("/proc/self/stat", encoding="ascii") as f:
+                start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
+            uptime = time.clock_gettime(time.CLOCK_BOOTTIME)  # the clock /proc's start time counts on
+            self.startup = max(0.0, uptime - (start_ticks + 0.5) / os.sysconf("SC_CLK_TCK"))
+        except (OSError, ValueError, IndexError, AttributeError):
+            pass
         self._open: dict[str, float] = {}
         self._inner: dict[str, float] = {}  # of each open stage: the time of the stages timed within it
 
@@ -92,7 +75,7 @@ class Timer:
 @dataclass(frozen=True)
 class Context:
     """A product's run: epochs, options, callbacks, timer, output folder (None: one file), each step's percent
-    range (:func:`spans`), ``--scheduler`` as parsed once (None: ``auto``), never its text again."""
+    range, ``--scheduler`` as parsed once (None: ``auto``), never its text again."""
 
     epochs: tuple[Epoch, ...]
     options: Options
@@ -104,8 +87,14 @@ class Context:
     schedule: Schedule | None = None
 
     def __post_init__(self) -> None:
-        if not self.spans:
-            object.__setattr__(self, "spans", spans(self.steps))
+        if self.spans:  # given; else the table's for a whole run, each step's share of 0-100 for a shorter one
+            return
+        widths = [PROGRESS[s][1] - PROGRESS[s][0] for s in self.steps]
+        total, at, out = sum(widths), 0.0, {}
+        for s, w in zip(self.steps, widths, strict=True):
+            out[s] = (round(100 * at / total, 1), round(100 * (at + w) / total, 1))
+            at += w
+        object.__setattr__(self, "spans", {s: PROGRESS[s][:2] for s in PAIR} if self.steps == PAIR else out)
 
     def at(self, step: str, fraction: float = 0.0) -> float:
         """The percent ``fraction`` of the way through ``step``."""

@@ -67,24 +67,17 @@ def estimate(ctx: Context, backend: Backend) -> tuple[dict, dict]:
             vols = backend.volume(ctx, step, gridded, fitted, None)
         layers = [(name, key, SAID.get(key, desc)) for name, key, desc in output_layers("none")]
         extras = steps.write(ctx, backend, vols, gridded.grid, layers)
-        graded = write_grade(ctx, vols.diff, gridded.grid)
+        if ctx.options.tolerance is not None:  # grade.tif (uint8: 1 cut to go, 2 on grade, 3 fill to go, 255
+            # not compared) and report.json's ``grade`` (:func:`volumes.grade.grade`)
+            cls, extras["grade"] = grade(vols.diff, gridded.grid, ctx.options.tolerance, ctx.options.zones)
+            said = f"1 cut to go, 2 on grade (within {ctx.options.tolerance:g} m of the design), 3 fill to go"
+            write_grid(ctx.out.path("grade.tif"), cls, gridded.grid, said, units="", dtype="uint8")
         judged = steps.judged(vols, gridded.grid, ctx.options)
         stage = StageQuality(NONE, float("nan"), float("nan"), accepted=False, note=NONE)  # nothing registered
         geo = Georeferencing(ctx.options.georeferencing, "none", "the reference is a surface")
         reg = Registration(np.eye(4), stage, stage, geo)
         record = RunRecord(prep, reg, gridded.grid, fitted[:2], vols, ctx.options, judged, backend.engine())
-        return steps.report(ctx, record, gridded, {**(extras or {}), **(graded or {})})
-
-
-def write_grade(ctx: Context, diff: np.ndarray, on: GridSpec) -> dict | None:
-    """With ``--tolerance``: grade.tif (uint8: 1 cut to go, 2 on grade, 3 fill to go, 255 not
-    compared) and report.json's ``grade`` (:func:`volumes.grade.grade`); None without it."""
-    if ctx.options.tolerance is None:
-        return None
-    cls, summary = grade(diff, on, ctx.options.tolerance, ctx.options.zones)
-    said = f"1 cut to go, 2 on grade (within {ctx.options.tolerance:g} m of the design), 3 fill to go"
-    write_grid(ctx.out.path("grade.tif"), cls, on, said, units="", dtype="uint8")
-    return {"grade": summary}
+        return steps.report(ctx, record, gridded, extras)
 
 
 def read(ctx: Context) -> tuple[Context, Prepared, Surface | Tin, float]:

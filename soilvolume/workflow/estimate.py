@@ -25,16 +25,6 @@ from . import design, steps
 from .context import PAIR, Context, Timer, threads
 
 
-def epochs_of(before: Path, after: Path, options: Options, before_pipeline=None, after_pipeline=None) -> tuple:
-    """The two epochs of an estimate: the first a surface when it is one (a design, an earlier DEM)."""
-    given = {"georeferencing": options.georeferencing}
-    if before_pipeline is None and is_surface(before):
-        first = Epoch(Path(before), "surface", crs=options.before_crs)
-    else:
-        first = survey(before, before_pipeline, crs=options.before_crs, **given)
-    return first, survey(after, after_pipeline, crs=options.after_crs, **given)
-
-
 def run_estimate(
     before: str | Path,
     after: str | Path,
@@ -52,7 +42,12 @@ def run_estimate(
     schedule = schedule_of(options)  # the one parse of --scheduler, before any file is read
     if before_pipeline is None and after_pipeline is None:  # pipelines may make two clouds of one file
         check_two_surveys(before, after)
-    epochs = epochs_of(before, after, options, before_pipeline, after_pipeline)
+    given = {"georeferencing": options.georeferencing}  # the first epoch a surface when it is one (a design, a DEM)
+    if before_pipeline is None and is_surface(before):
+        first = Epoch(before, "surface", crs=options.before_crs)
+    else:
+        first = survey(before, before_pipeline, crs=options.before_crs, **given)
+    epochs = first, survey(after, after_pipeline, crs=options.after_crs, **given)
     if options.tolerance is not None and not epochs[0].is_surface:
         raise SoilVolumeError(
             "{opt:tolerance}: an on-grade tolerance needs a design as BEFORE (a GeoTIFF or LandXML surface), "
@@ -71,24 +66,20 @@ def run_estimate(
             b, a = epochs  # the backend of the run's schedule (auto resolved from the headers): tiles but for none
             plan = None if surface else schedule_for(schedule, b.path, a.path, options, b.pipeline or a.pipeline)
             backend = InMemory() if surface or plan.in_process else Tiled(plan)
-        if surface:
-            report, keyed = design.estimate(ctx, backend)
-        else:
-            cloud = out.path("after_registered.laz") if options.keep_registered_cloud else None
-            report, keyed = estimate_pair(ctx, backend, cloud)
+        report, keyed = (design.estimate if surface else estimate_pair)(ctx, backend)
     hooks.step(100, "done")
     return Result.written(report, out.moved, keyed)
 
 
-def estimate_pair(ctx: Context, backend: Backend, cloud: Path | None = None) -> tuple[dict, dict]:
-    """Read, register, grid, planes, volume, write, report; ``cloud``: where the registered
-    after cloud goes (``--registered-cloud``), else None."""
+def estimate_pair(ctx: Context, backend: Backend) -> tuple[dict, dict]:
+    """Read, register (the registered after cloud kept with ``--registered-cloud``), grid, planes, volume, write,
+    report."""
     with backend.session(ctx):
         prep = steps.read(ctx, backend)
         reg, options = steps.register(ctx, prep, backend.dense(prep))
+        if options.keep_registered_cloud:
+            backend.keep_cloud(prep, reg, ctx.out.path("after_registered.laz"))
         ctx = replace(ctx, options=options)
-        if cloud is not None:
-            backend.keep_cloud(prep, reg, cloud)
         gridded = steps.grid(ctx, backend, prep, reg)
         fitted = steps.planes(ctx, gridded)
         vols = steps.volume(ctx, backend, gridded, fitted, reg)

@@ -9,12 +9,16 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
+from ..core.wording import opt
 from ..dem.grid import cell_for, choose_cell, make_grid
 from ..inputs.crs import WorkFrame
 from ..inputs.footprint import footprint, inside, polygon_area
 from ..inputs.prepare import Prepared
 from ..options import Options
-from ..validate import check_grid_cells
+from ..validate import OptionError
+
+#: fewest grid cells over the compared area that give a meaningful volume
+MIN_CELLS = 25
 
 
 def given_cell(options: Options) -> float | None:
@@ -55,5 +59,11 @@ def plan_grid(cell: float, boxes: Sequence[tuple], origin: np.ndarray, frame: Wo
     if (hi <= lo).any():
         raise SoilVolumeError(empty)
     grid = make_grid(lo, hi, cell, origin, frame.wkt, frame.xy_unit)
-    check_grid_cells(grid.rows, grid.cols, cell)
+    if (n := grid.rows * grid.cols) < MIN_CELLS:  # a cell as large as the site makes noise
+        raise OptionError(
+            "cell",
+            f"a {cell:g} m grid has only {n} cell(s) over the compared area "
+            f"(at least {MIN_CELLS} needed); use a smaller {opt('cell')} or leave it unset "
+            "to derive it from the point density",
+        )
     return grid

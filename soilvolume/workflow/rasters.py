@@ -40,16 +40,6 @@ def open_dem(path: Path) -> Dem:
     return Dem(raster, raster.crs, *metres_per_unit(raster.crs, raster.unit, str(path)))
 
 
-def describe(dem: Dem, heights: Heights) -> dict:
-    """report's description of an input DEM and what of it was read."""
-    return {
-        "path": dem.path,
-        "vertical_unit": dem.vertical_unit,
-        **dem.raster.describe(),
-        "masked_as_nodata": heights.masked,
-    }
-
-
 def after_on_before(after: Dem, before: Dem, hb: Heights) -> tuple[np.ndarray, Heights]:
     """The after DEM's heights on the grid of the before's ``hb``: read over the before's extent only
     (two of its cells around), resampled bilinearly by GDAL's warp (horizontal CRSs)."""
@@ -125,7 +115,10 @@ def run_volume_from_rasters(
         "crs": parse_crs(grid.crs_wkt, "raster").name,
         "median_difference_m": median,
         "method": NO_CORRECTION,
-        "inputs": {"before": describe(db, hb), "after": describe(da, ha)},
+        "inputs": {  # each DEM and what of it was read
+            key: {"path": d.path, "vertical_unit": d.vertical_unit, **d.raster.describe(), "masked_as_nodata": h.masked}
+            for key, d, h in (("before", db, hb), ("after", da, ha))
+        },
     }
     if zones:  # before writing: a bad zones file leaves nothing behind
         result["zones"] = zone_budgets(diff, grid, zones, zone_field)

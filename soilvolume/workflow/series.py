@@ -63,20 +63,16 @@ def series_epochs(paths: list[Path], dates: list[str] | None, options: Options) 
             raise SoilVolumeError(f"{path}: no such file")
     if dates is not None and len(dates) != len(paths):
         raise SoilVolumeError(f"--dates: {len(dates)} dates for {len(paths)} epochs (give one per epoch)")
-    dated: list[tuple[str | None, str | None]] = []
+    epochs = []
     for path, text in zip(paths, [d.strip() for d in dates or [""] * len(paths)], strict=True):
-        if not text:
-            found = creation_date(path)
-            dated.append((found, "LAS header" if found else None))
-            continue
         try:
-            dated.append((dt.date.fromisoformat(text).isoformat(), "given"))
+            date = dt.date.fromisoformat(text).isoformat() if text else creation_date(path)
         except ValueError:
             raise SoilVolumeError(f"--dates: {text!r} is not a date (YYYY-MM-DD)") from None
-    given = {"crs": None, "georeferencing": options.georeferencing}
-    epochs = tuple(survey(p, date=d, date_source=ds, **given) for p, (d, ds) in zip(paths, dated, strict=True))
-    check_series(epochs)
-    return epochs
+        source = None if date is None else "given" if text else "LAS header"
+        epochs.append(survey(path, crs=None, date=date, date_source=source, georeferencing=options.georeferencing))
+    check_series(tuple(epochs))
+    return tuple(epochs)
 
 
 def check_series(epochs: tuple[Epoch, ...]) -> None:
@@ -177,7 +173,10 @@ def series(ctx: Context, backend: InMemory, design=None) -> dict:
             grid, dems = _grid(ctx, fits)
         fitted = _planes(ctx, fits, grid, dems)
         with steps.running(ctx, "volume", ctx.message("volume")):
-            vols = _volumes(ctx, fits, fitted, grid, dems)
+            vols = []  # each pair's volume step on the whole grid: Ek corrected once relative to E0
+            for k, (f, planes) in enumerate(zip(fits, fitted, strict=True), 1):
+                with naming(pair_named(ctx, k)):
+                    vols.append(steps.volume_step(f.reg, f.options)(dems[k], dems[0], planes[2], grid))
             ctx.hooks.step(ctx.at("volume", 0.8), "periods, cumulative and their intervals")
             combined = combine(vols, list(dems), [steps.alternative_move(f.reg) for f in fits], grid, ctx.options)
             heights = [vols[0].dem_out_b + d for d in combined.to_e0]  # as dem_epoch<k>.tif, local
@@ -206,7 +205,7 @@ def _register(ctx: Context, preps: list[Prepared]) -> list[Fit]:
         span = (ctx.at("register", k / n), ctx.at("register", (k + 1) / n))
         progress = (*span, f"registering {name} into {ctx.epochs[0].name}'s frame")
         with naming(pair_named(ctx, k + 1)):
-            reg, opts = steps.register_pair(prep, ctx, (prep.after.xyz, prep.before.xyz), progress)
+            reg, opts = steps.register(ctx, prep, (prep.after.xyz, prep.before.xyz), progress)
         ctx.hooks.info(f"{name}: fine ({reg.fine.method}) fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m")
         seconds = {s: t + ctx.timer.s[s] for s, t in seconds.items()}
         if fits:
@@ -245,12 +244,3 @@ def _planes(ctx: Context, fits: list[Fit], grid: GridSpec, dems: tuple) -> list[
                 p_b, p_a = steps.fit_planes(f.prep, thin, f.options)(grid, dems[0])
                 out.append((p_b, p_a, plane_offset(p_b, p_a, grid)))
     return out
-
-
-def _volumes(ctx: Context, fits: list[Fit], fitted: list, grid: GridSpec, dems: tuple) -> list:
-    """Each pair's volume step on the whole grid, in this process: Ek corrected once relative to E0."""
-    vols = []
-    for k, (f, planes) in enumerate(zip(fits, fitted, strict=True), 1):
-        with naming(pair_named(ctx, k)):
-            vols.append(steps.volume_step(f.reg, f.options)(dems[k], dems[0], planes[2], grid))
-    return vols

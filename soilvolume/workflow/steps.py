@@ -60,25 +60,15 @@ def read_one(ctx: Context) -> Single:
     return prepare_single(open_source(epoch.path, epoch.pipeline), epoch.crs, ctx.options, check=check)
 
 
-def register(ctx: Context, prep: Prepared, dense) -> tuple[Registration, Options]:
-    """Step 2: the georeferencing decision, then coarse + fine registration (``dense``: the full-resolution
-    points of the stable-ground refinement, or None): the registration and the options the later steps take
-    (precise georeferencing: no correction)."""
-    reg, options = register_pair(prep, ctx, dense, (*ctx.spans["register"], ctx.message("register")))
-    fine = reg.fine
-    ctx.hooks.info(f"coarse: {reg.coarse.note}")
-    ctx.hooks.info(f"fine ({fine.method}): fitness {fine.fitness:.3f}, RMSE {fine.rmse:.3f} m, {fine.note}")
-    return reg, options
-
-
-def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple[Registration, Options]:
-    """How far the georeferencing is trusted, then the registration: (Registration, the options the
-    rest of the run uses). Auto with a vertical datum both files declare keeps the coordinates only
-    when the registration confirms them (:func:`registration.georef.confirm`); ``register_other``
-    times the decision."""
+def register(ctx: Context, prep: Prepared, dense, progress: tuple | None = None) -> tuple[Registration, Options]:
+    """Step 2: how far the georeferencing is trusted, then coarse + fine registration (``dense``: the full-resolution
+    points of the stable-ground refinement, or None): (Registration, the options the rest of the run uses: precise
+    georeferencing, no correction). Auto with a vertical datum both files declare keeps the coordinates only when
+    the registration confirms them (:func:`registration.georef.confirm`); ``register_other`` times the decision.
+    ``progress``: (start %, end %, message) of a series' pair (it logs its own fit), else the step's."""
     options, hooks, timer = ctx.options, ctx.hooks, ctx.timer
     with timer("register"):
-        lo, hi, message = progress
+        lo, hi, message = progress or (*ctx.spans["register"], ctx.message("register"))
         hooks.step(lo, message)
         after, before = prep.after_thin, prep.before_thin
         decided, check = georef.declared(options.georeferencing, prep.inputs), None
@@ -100,6 +90,11 @@ def register_pair(prep: Prepared, ctx: Context, dense, progress: tuple) -> tuple
     reg = replace(reg, georeferencing=Georeferencing(options.georeferencing, mode, why, check))
     timer.s["coarse"], timer.s["fine"] = ran.coarse.seconds, ran.fine.seconds
     timer.s["register_other"] = max(0.0, timer.s.pop("register") - ran.coarse.seconds - ran.fine.seconds)
+    if progress is None:
+        hooks.info(f"coarse: {reg.coarse.note}")
+        hooks.info(
+            f"fine ({reg.fine.method}): fitness {reg.fine.fitness:.3f}, RMSE {reg.fine.rmse:.3f} m, {reg.fine.note}"
+        )
     return reg, options
 
 
