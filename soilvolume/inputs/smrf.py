@@ -12,26 +12,18 @@ import numpy as np
 
 from ..core.cells import cell_index
 
+CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool)
 
-def _cross(a: np.ndarray, iterations: int, op) -> np.ndarray:
-    """Grey erosion/dilation with the 5-point cross, iterated (a diamond of that radius);
-    neighbours outside the raster are ignored, as in PDAL's erodeDiamond/dilateDiamond."""
-    for _ in range(iterations):
-        out = a.copy()
-        op(out[1:, :], a[:-1, :], out=out[1:, :])
-        op(out[:-1, :], a[1:, :], out=out[:-1, :])
-        op(out[:, 1:], a[:, :-1], out=out[:, 1:])
-        op(out[:, :-1], a[:, 1:], out=out[:, :-1])
-        a = out
+
+def morph(a: np.ndarray, radius: int, op: str) -> np.ndarray:
+    """Grey "erosion" or "dilation" by the diamond of ``radius``: scipy.ndimage's with the 5-point cross,
+    iterated; edges repeated, so neighbours outside the raster are ignored, as in PDAL's erodeDiamond and
+    dilateDiamond (a zero's sign may differ: openings are only compared)."""
+    from scipy import ndimage  # here, as cKDTree below
+
+    for _ in range(radius):
+        a = getattr(ndimage, f"grey_{op}")(a, footprint=CROSS, mode="nearest")
     return a
-
-
-def erode(a: np.ndarray, it: int) -> np.ndarray:
-    return _cross(a, it, np.minimum)
-
-
-def dilate(a: np.ndarray, it: int) -> np.ndarray:
-    return _cross(a, it, np.maximum)
 
 
 def knnfill(z: np.ndarray, cell: float) -> np.ndarray:
@@ -57,8 +49,8 @@ def progressive(zi: np.ndarray, cell: float, slope: float, max_window: float) ->
     prev, erosion = zi, zi
     obj = np.zeros(zi.shape, dtype=bool)
     for radius in range(1, max_radius + 1):
-        erosion = erode(erosion, 1)
-        opening = dilate(erosion, radius)
+        erosion = morph(erosion, 1, "erosion")
+        opening = morph(erosion, radius, "dilation")
         obj |= np.abs(prev - opening) > slope * cell * radius
         prev = opening
     return obj
