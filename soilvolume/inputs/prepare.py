@@ -17,10 +17,9 @@ from ..options import Options
 from ..soil.points import PointRule
 from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, xy_unit, z_unit
 from .crs import to_local as _local
-from .csf import DEFAULTS, csf_classify
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
 from .io import RawPoints
-from .smrf import smrf_classify
+from .smrf import DEFAULTS, csf_classify, smrf_classify
 from .stream import ColumnThinner, Loaded, Source, from_raw, load
 
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
