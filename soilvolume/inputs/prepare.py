@@ -25,6 +25,8 @@ from .stream import ColumnThinner, Loaded, Source, from_raw, load
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
 SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
 CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
+THIN_POINTS = 200_000  # registration subset: about this many after points
+NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 
 
 @dataclass(frozen=True)
@@ -65,12 +67,6 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
             "pipeline whose reader sets override_srs)"
         )
     return header or given
-
-
-THIN_POINTS = 200_000  # registration subset: about this many after points
-
-
-NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 
 
 def prepare(

@@ -13,7 +13,6 @@ piles and pits yet bridge vehicles and bushes (rigidness 3 would bridge small pi
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import sys
@@ -130,7 +129,7 @@ def _quiet_native_stdout() -> Iterator[None]:
     moved to a copy of it (the command line's progress protocol writes on stdout)."""
     try:
         ours = sys.stdout.fileno() == 1
-    except (AttributeError, OSError, ValueError, io.UnsupportedOperation):
+    except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is both of the last two
         ours = False
     sys.stdout.flush()
     real = os.dup(1)

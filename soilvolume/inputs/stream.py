@@ -73,11 +73,13 @@ class Source:
         return replace(self, region=(np.asarray(lo[:2], float), np.asarray(hi[:2], float)))
 
     def tiles(self) -> list[str]:
-        """The files that a read of this source opens."""
+        """The files that a read of this source opens: of a VPC, the tiles whose x/y box meets the region."""
         if self.vpc is None:
             return [self.path]
-        lo, hi = self.region if self.region is not None else (None, None)
-        return [t.path for t in self.vpc.tiles_meeting(lo, hi)]
+        if self.region is None:
+            return [t.path for t in self.vpc.tiles]
+        lo, hi = self.region
+        return [t.path for t in self.vpc.tiles if (np.less_equal(t.lo[:2], hi) & np.less_equal(lo, t.hi[:2])).all()]
 
     def materialize(self) -> RawPoints:
         """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
@@ -226,15 +228,12 @@ def load(
     out = Growing(src.count if box is None or (box[1] >= box[0]).all() else 0), Growing(0), Growing(0, None, np.uint8)
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
     chunks, shift, by_kernel = _labelled(src, to_local, index is not None, mode, exclude, keep)
-    if by_kernel:
-        kernel = NativeChunks(native.kernels(), thinner, keep, box, to_local.origin, CHUNK)
-    work = (
-        partial(native_work, kernel, out=out) if by_kernel else partial(numpy_work, shift, keep, thinner, box, out=out)
-    )
+    kernel = NativeChunks(native.kernels(), thinner, keep, box, to_local.origin, CHUNK) if by_kernel else None
+    work = partial(native_work, kernel, out=out) if kernel else partial(numpy_work, shift, keep, thinner, box, out=out)
     try:
         points, used, cropped, reading, rule = consume(chunks, work, index, check)
     finally:
-        if by_kernel:
+        if kernel:
             kernel.close()
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()

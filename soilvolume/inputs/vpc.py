@@ -44,12 +44,6 @@ class Vpc:
     def count(self) -> int:
         return sum(t.count for t in self.tiles)
 
-    def tiles_meeting(self, lo=None, hi=None) -> list[Tile]:
-        """The tiles whose x/y box meets the x/y box lo..hi (all when None)."""
-        return [
-            t for t in self.tiles if lo is None or (np.less_equal(t.lo[:2], hi) & np.less_equal(lo, t.hi[:2])).all()
-        ]
-
 
 MAX_BYTES = 256 * 2**20  # a .vpc lists tiles: far larger is not one
 #: how far a tile's box in the VPC may differ from its header's: native boxes (proj:bbox) are
