@@ -166,20 +166,13 @@ def write_las_chunked(
     chunks: Iterable[tuple[np.ndarray, np.ndarray | None]],
     origin: np.ndarray,
     crs_wkt: str | None,
-    transform: np.ndarray | None = None,
-    scale: float = 0.001,
+    transform: np.ndarray,
 ) -> None:
     """Write (local xyz, classification) chunks, through a rigid ``transform``, as LAS 1.4/LAZ atomically."""
     origin = np.asarray(origin, float)
-
-    def absolute() -> Iterator[tuple]:
-        for xyz, cls in chunks:
-            part = np.asarray(xyz, dtype=np.float64)
-            if transform is not None:
-                part = part @ transform[:3, :3].T + transform[:3, 3]
-            yield part + origin, cls
-
-    _write(path, np.floor(origin), scale, crs_wkt, absolute())
+    rot, shift = transform[:3, :3].T, transform[:3, 3]
+    absolute = ((np.asarray(xyz, dtype=np.float64) @ rot + shift + origin, cls) for xyz, cls in chunks)
+    _write(path, np.floor(origin), 0.001, crs_wkt, absolute)
 
 
 def write_las(

@@ -15,6 +15,7 @@ from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
 from ..soil.points import PointRule
+from .chunkwork import NOTHING  # a box no point is in
 from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, xy_unit, z_unit
 from .crs import to_local as _local
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
@@ -26,7 +27,6 @@ CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as cla
 SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
 CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
 THIN_POINTS = 200_000  # registration subset: about this many after points
-NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
 
 
 @dataclass(frozen=True)

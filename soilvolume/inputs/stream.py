@@ -58,14 +58,12 @@ class Source:
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
 
-    def records(
-        self, size: int | None = None, signals: bool | Callable = False, direct=None, whole_first: bool = False
-    ) -> Iterator[tuple]:
+    def records(self, signals: bool | Callable = False, direct=None, whole_first: bool = False) -> Iterator[tuple]:
         """The undecoded chunks of the source's LAS/LAZ files (:func:`records.las_records`): the
         native kernel's input (:func:`native_reads` says when a source can)."""
         for path in self.tiles():
             count = _header(Path(path)).count
-            yield from las_records(Path(path), count, size or CHUNK, signals, direct=direct, whole_first=whole_first)
+            yield from las_records(Path(path), count, CHUNK, signals, direct=direct, whole_first=whole_first)
             whole_first = whole_first and not count
 
     def within(self, lo, hi) -> Source:

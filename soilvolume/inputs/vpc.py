@@ -140,17 +140,14 @@ def _href(vpc: Path, item) -> str:
 
 def _common_crs(vpc: Path, crss: list) -> str | None:
     """The one CRS of all tiles (WKT), or an error naming two tiles that differ."""
-    known = [(c, t) for c, t in crss if c is not None]
-    if not known:
-        return None
-    first, first_tile = known[0]
-    for crs, tile in known[1:]:
+    (first, first_tile), *known = [(c, t) for c, t in crss if c is not None] or [(None, None)]
+    for crs, tile in known:
         if not crs.equals(first):
             raise SoilVolumeError(
                 f"{vpc}: tiles in different CRSs ({Path(first_tile).name}: {first.name}; "
                 f"{Path(tile).name}: {crs.name}); reproject them to one CRS first"
             )
-    return first.to_wkt()
+    return None if first is None else first.to_wkt()
 
 
 def _tile(vpc: Path, item, tile_path: str) -> tuple[Tile, Any]:
