@@ -78,10 +78,9 @@ def work_frame(before: pyproj.CRS, lonlat_hint: tuple[float, float] | None = Non
     if lonlat_hint is None:
         raise SoilVolumeError("a geographic before CRS needs a position to choose a UTM zone")
     lon, lat = lonlat_hint
-    infos = query_utm_crs_info(
-        datum_name=h.datum.name if h.datum else "WGS 84",
-        area_of_interest=AreaOfInterest(lon, lat, lon, lat),
-    ) or query_utm_crs_info(datum_name="WGS 84", area_of_interest=AreaOfInterest(lon, lat, lon, lat))
+    at = AreaOfInterest(lon, lat, lon, lat)
+    infos = query_utm_crs_info(datum_name=h.datum.name if h.datum else "WGS 84", area_of_interest=at)
+    infos = infos or query_utm_crs_info(datum_name="WGS 84", area_of_interest=at)
     if not infos:
         raise SoilVolumeError(f"no UTM zone found for lon/lat {lon:.4f}, {lat:.4f}")
     return WorkFrame(pyproj.CRS.from_epsg(int(infos[0].code)), 1.0)
