@@ -89,10 +89,16 @@ class Source:
 
 
 def open_source(path) -> Source:
-    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now."""
+    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now. A VPC: its
+    CRS (else its tiles'), bounds and count from the tiles' headers (checked finite by ``check_las_header``)."""
     p = Path(path)
     if p.suffix.lower() == ".vpc":
-        return _open_vpc(p)
+        vpc = read_vpc(p)
+        first = _header(Path(vpc.tiles[0].path))
+        if vpc.count == 0:
+            raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
+        lo, hi = np.min([t.lo for t in vpc.tiles], axis=0), np.max([t.hi for t in vpc.tiles], axis=0)
+        return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
     _check_readable(p)
     if p.suffix.lower() not in LAS_SUFFIXES:
         return from_raw(read_points(p))
@@ -106,17 +112,6 @@ def _header(p: Path) -> Source:
     """A LAS/LAZ/COPC file's source from its header."""
     wkt, count, lo, hi, has_class, compressed = las_header(p)
     return Source(str(p), wkt, count, lo, hi, has_class, compressed=compressed)
-
-
-def _open_vpc(p: Path) -> Source:
-    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from the tiles' headers
-    (checked finite by :func:`lasheader.check_las_header`)."""
-    vpc = read_vpc(p)
-    first = _header(Path(vpc.tiles[0].path))
-    if vpc.count == 0:
-        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
-    lo, hi = np.min([t.lo for t in vpc.tiles], axis=0), np.max([t.hi for t in vpc.tiles], axis=0)
-    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
 
 
 def from_raw(raw: RawPoints) -> Source:
