@@ -16,8 +16,6 @@ from __future__ import annotations
 import math
 import os
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 
 import numpy as np
 
@@ -116,17 +114,9 @@ def csf_classify(x: np.ndarray, y: np.ndarray, z: np.ndarray, **params) -> np.nd
     origin = np.array([x.min(), y.min(), z.min()])  # small coordinates: the module works in doubles
     sim.setPointCloud(np.column_stack([x, y, z]).astype(np.float64) - origin)
     ground, other = CSF.VecInt(), CSF.VecInt()
-    with _quiet_native_stdout():  # the module prints its progress on the process's stdout
-        sim.do_filtering(ground, other, exportCloth=False)
-    keep = np.zeros(n, bool)
-    keep[np.asarray(ground, dtype=np.int64)] = True
-    return keep
-
-
-@contextmanager
-def _quiet_native_stdout() -> Iterator[None]:
-    """File descriptor 1 to the null device for the block; ``sys.stdout``, when it writes there,
-    moved to a copy of it (the command line's progress protocol writes on stdout)."""
+    # the module prints its progress on the process's stdout: file descriptor 1 to the null device for the
+    # filtering; ``sys.stdout``, when it writes there, moved to a copy of it (the command line's progress
+    # protocol writes on stdout)
     try:
         ours = sys.stdout.fileno() == 1
     except (AttributeError, OSError, ValueError):  # io.UnsupportedOperation is both of the last two
@@ -139,7 +129,7 @@ def _quiet_native_stdout() -> Iterator[None]:
     null = os.open(os.devnull, os.O_WRONLY)
     os.dup2(null, 1)
     try:
-        yield
+        sim.do_filtering(ground, other, exportCloth=False)
     finally:
         sys.stdout.flush()
         os.dup2(real, 1)
@@ -148,3 +138,6 @@ def _quiet_native_stdout() -> Iterator[None]:
         if ours:
             sys.stdout.close()
             sys.stdout = python_stdout
+    keep = np.zeros(n, bool)
+    keep[np.asarray(ground, dtype=np.int64)] = True
+    return keep

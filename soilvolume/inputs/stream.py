@@ -189,8 +189,7 @@ def _labelled(
 
 def file_kernel() -> bool:
     """Whether the native library reads whole chunks from files itself (POSIX builds)."""
-    lib = native.kernels()
-    return lib is not None and hasattr(lib, "sv_file_chunk")
+    return hasattr(native.kernels(), "sv_file_chunk")  # None without the library
 
 
 def native_reads(src: Source, to_local, keep: Callable | None) -> bool:
