@@ -44,9 +44,7 @@ def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
 
 def raster_wkt(wkt: str | None) -> str | None:
     """WKT of the 2D horizontal part of ``wkt``: rasters hold metres, which a vertical CRS in feet would mislabel."""
-    if not wkt:
-        return None
-    return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt()
+    return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt() if wkt else None
 
 
 def has_vertical(crs: pyproj.CRS) -> bool:
@@ -56,9 +54,7 @@ def has_vertical(crs: pyproj.CRS) -> bool:
 def xy_unit(crs: pyproj.CRS) -> float:
     """Metres per horizontal unit (1 for geographic: not used for lengths)."""
     h = horizontal(crs)
-    if h.is_geographic:
-        return 1.0
-    return float(h.axis_info[0].unit_conversion_factor)
+    return 1.0 if h.is_geographic else float(h.axis_info[0].unit_conversion_factor)
 
 
 def z_unit(crs: pyproj.CRS) -> float:

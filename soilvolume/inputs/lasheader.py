@@ -120,7 +120,7 @@ class BoundsCheck:
         self.seen_lo, self.seen_hi = np.full(3, np.inf), np.full(3, -np.inf)
 
     def extend(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Take in a (non-empty) chunk's per-axis min ``lo`` and max ``hi``."""
+        """Take in a chunk's per-axis min ``lo`` and max ``hi`` (an empty one's inf and -inf change nothing)."""
         if (lo < self.lo - self.tol).any() or (hi > self.hi + self.tol).any():
             raise SoilVolumeError(
                 f"{self.path}: points lie outside the bounds in the LAS header (corrupt scale, offset or bounds)"

@@ -79,8 +79,8 @@ def prepare(
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(before, crs_b)
     origin, voxel, to_a, thinner = _setup(after, crs_a, frame)
-    original_after = after
-    after, a, note_a = _load_whole(after, crs_a, to_a, thinner, options, check, None if full else NOTHING, loader)
+    # the source streamed has the path and count of ``after``
+    _, a, note_a = _load_whole(after, crs_a, to_a, thinner, options, check, None if full else NOTHING, loader)
     check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
     before, b, note_b = _load_before(
@@ -98,7 +98,7 @@ def prepare(
         b.thin,
         a.thin,
         voxel,
-        _all_points(original_after, to_a),
+        _all_points(after, to_a),
         a.extra["read_s"] + b.extra["read_s"],
         b.extra["counts"],
         (b.note == CLASS_NOTE, a.note == CLASS_NOTE),

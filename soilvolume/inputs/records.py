@@ -136,8 +136,7 @@ def las_chunks(
     file, ``size`` points at a time (one read buffer); with ``origin``, ``xyz - origin``."""
     for rec, cls, sig in las_records(path, count, size, signals, piece=size, ring=1):
         xyz, lo, hi = decoded_xyz(rec, origin)
-        if len(xyz):
-            rec.check.extend(lo, hi)
+        rec.check.extend(lo, hi)
         if rec.last:
             rec.check.finish()
         item = (xyz, cls, sig) if signals else (xyz, cls)

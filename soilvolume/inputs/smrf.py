@@ -89,8 +89,7 @@ def smrf_classify(x, y, z, *, cell=1.0, slope=0.15, window=18.0, threshold=0.5, 
     obj = progressive(zimin, cell, slope, window)
     zipro = knnfill(np.where(obj | low, np.nan, zimin), cell)
     scaled = zipro / cell
-    gsurf = np.hypot(_gradient(scaled, 1), _gradient(scaled, 0))
-    gsurf = knnfill(gsurf, cell)
+    gsurf = knnfill(np.hypot(_gradient(scaled, 1), _gradient(scaled, 0)), cell)
     thresh = threshold + scalar * gsurf
     zp, tp = zipro.ravel()[flat], thresh.ravel()[flat]
     return np.abs(zp - z) <= tp  # NaN comparisons are False: not ground, as PDAL skips them
