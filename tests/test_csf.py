@@ -11,7 +11,7 @@ import pytest
 from conftest import SITE
 
 from soilvolume.api import estimate
-from soilvolume.inputs.csf import csf_classify
+from soilvolume.inputs.smrf import csf_classify
 from soilvolume.options import Options
 from soilvolume.pipelines.pipeline import build_prepare_pipeline
 from soilvolume.scenes.synthetic import SceneConfig, write_pair_streaming

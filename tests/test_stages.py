@@ -244,7 +244,7 @@ def test_smrf_classifies_last_and_single_returns_only():
 def test_morphology_matches_pdal_diamond():
     a = np.zeros((7, 7))
     a[3, 3] = 1
-    d2 = smrf.dilate(a, 2)
+    d2 = smrf.morph(a, 2, "dilation")
     expect = (np.abs(np.arange(7)[:, None] - 3) + np.abs(np.arange(7)[None, :] - 3)) <= 2
     np.testing.assert_array_equal(d2 == 1, expect)
-    np.testing.assert_array_equal(smrf.erode(d2, 2), a)
+    np.testing.assert_array_equal(smrf.morph(d2, 2, "erosion"), a)

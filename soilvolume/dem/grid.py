@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 
 from .. import native
+from ..core.polygons import covers
 from ..core.types import GridSpec, SoilVolumeError
-from ..inputs.footprint import inside
 from ..native import axes
 from ..soil.points import OBJECT, OTHER, VEGETATION
 from .cellstats import BLOCK, OffsetSums, cell_heights
@@ -209,7 +209,7 @@ def cell_for(xyz: np.ndarray, polygon: np.ndarray, minimum: float = 0.5) -> floa
     ids, _ = cell_ids(xyz, lattice)
     counts = np.bincount(ids, minlength=lattice.rows * lattice.cols)
     x, y = lattice.centers_local()
-    ins = inside(np.c_[x.ravel(), y.ravel()], polygon)
+    ins = covers([polygon], x.ravel(), y.ravel())
     return choose_cell(int(counts[ins].sum()), float(ins.sum()) * res * res, minimum=minimum)
 
 

@@ -19,6 +19,8 @@ from ..soil.points import SOIL
 from .records import PIECE, FileChunk, Records, decoded_xyz
 from .thinning import ColumnThinner
 
+NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # the x/y bounds of no point
+
 
 class Growing:
     """Rows appended into one buffer sized up front (pages never written are never resident), doubled
@@ -82,7 +84,7 @@ class NativeChunks:
         self.holds = box is None or bool((np.asarray(box[1]) >= np.asarray(box[0])).all())  # a box points can be in
         self.files: dict[str, int] = {}
         self.buf: np.ndarray | None = None
-        self.span: tuple | None = None  # x/y bounds of the pieces since the last flush
+        self.span = NOTHING  # x/y bounds of the pieces since the last flush
 
     def add(self, rec, labels: np.ndarray | None, parts: Growing, others: Growing, other_labels: Growing):
         """A piece (:class:`Records` and ``labels``) or a :class:`FileChunk`: kept soil points appended
@@ -199,11 +201,8 @@ def native_work(kernel: NativeChunks, item: tuple, out: tuple) -> tuple:
     local.check.extend(got.lo, got.hi)
     if local.last:
         local.check.finish()
-    span = kernel.span
-    piece = (
-        (got.lo[:2], got.hi[:2]) if span is None else (np.minimum(span[0], got.lo[:2]), np.maximum(span[1], got.hi[:2]))
-    )
-    kernel.span, box = (None, piece) if local.flush else (piece, None)
+    piece = np.minimum(kernel.span[0], got.lo[:2]), np.maximum(kernel.span[1], got.hi[:2])
+    kernel.span, box = (NOTHING, piece) if local.flush else (piece, None)
     return got.cropped, got.soil, box
 
 

@@ -44,9 +44,7 @@ def horizontal(crs: pyproj.CRS) -> pyproj.CRS:
 
 def raster_wkt(wkt: str | None) -> str | None:
     """WKT of the 2D horizontal part of ``wkt``: rasters hold metres, which a vertical CRS in feet would mislabel."""
-    if not wkt:
-        return None
-    return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt()
+    return horizontal(pyproj.CRS.from_user_input(wkt)).to_2d().to_wkt() if wkt else None
 
 
 def has_vertical(crs: pyproj.CRS) -> bool:
@@ -56,9 +54,7 @@ def has_vertical(crs: pyproj.CRS) -> bool:
 def xy_unit(crs: pyproj.CRS) -> float:
     """Metres per horizontal unit (1 for geographic: not used for lengths)."""
     h = horizontal(crs)
-    if h.is_geographic:
-        return 1.0
-    return float(h.axis_info[0].unit_conversion_factor)
+    return 1.0 if h.is_geographic else float(h.axis_info[0].unit_conversion_factor)
 
 
 def z_unit(crs: pyproj.CRS) -> float:
@@ -78,10 +74,9 @@ def work_frame(before: pyproj.CRS, lonlat_hint: tuple[float, float] | None = Non
     if lonlat_hint is None:
         raise SoilVolumeError("a geographic before CRS needs a position to choose a UTM zone")
     lon, lat = lonlat_hint
-    infos = query_utm_crs_info(
-        datum_name=h.datum.name if h.datum else "WGS 84",
-        area_of_interest=AreaOfInterest(lon, lat, lon, lat),
-    ) or query_utm_crs_info(datum_name="WGS 84", area_of_interest=AreaOfInterest(lon, lat, lon, lat))
+    at = AreaOfInterest(lon, lat, lon, lat)
+    infos = query_utm_crs_info(datum_name=h.datum.name if h.datum else "WGS 84", area_of_interest=at)
+    infos = infos or query_utm_crs_info(datum_name="WGS 84", area_of_interest=at)
     if not infos:
         raise SoilVolumeError(f"no UTM zone found for lon/lat {lon:.4f}, {lat:.4f}")
     return WorkFrame(pyproj.CRS.from_epsg(int(infos[0].code)), 1.0)

@@ -18,11 +18,8 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
         raise SoilVolumeError(
             f"{path}: too few points to work with ({len(xy)} distinct positions {what}, at least {MIN_COLUMNS} needed)"
         )
-    x, y = xy[:, 0] - xy[:, 0].mean(), xy[:, 1] - xy[:, 1].mean()
-    xy_ = float(x @ y)
-    moments = np.array([[float(x @ x), xy_], [xy_, float(y @ y)]]) / len(xy)
     # the singular values of the centred points / sqrt(n), from their 2 x 2 second moments
-    spread = np.sqrt(np.maximum(np.linalg.eigvalsh(moments)[::-1], 0.0))
+    spread = np.sqrt(np.maximum(np.linalg.eigvalsh(np.cov(xy.T, bias=True))[::-1], 0.0))
     if spread[1] < max(0.01, 1e-4 * spread[0]):
         raise SoilVolumeError(f"{path}: the points lie on a line (a degenerate cloud: no area to compare)")
 
@@ -76,11 +73,6 @@ def _not_inside_extremes(xy: np.ndarray) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def inside(xy: np.ndarray, polygon: np.ndarray) -> np.ndarray:
-    """Mask of points inside a polygon (K, 2), boundary included, as the embedded filters.crop tests."""
-    return covers([polygon], xy[:, 0], xy[:, 1])
-
-
 class PolygonMask:
     """Point-in-polygon for streaming: the polygon rasterized on about ``max_cells`` cells at most, of
     ``resolution`` m at least (a cell is in when its centre is)."""
@@ -93,7 +85,7 @@ class PolygonMask:
         xs = self.lo[0] + (np.arange(cols) + 0.5) * self.res
         ys = self.lo[1] + (np.arange(rows) + 0.5) * self.res
         gx, gy = np.meshgrid(xs, ys)
-        self.mask = inside(np.c_[gx.ravel(), gy.ravel()], polygon).reshape(rows, cols)
+        self.mask = covers([polygon], gx.ravel(), gy.ravel()).reshape(rows, cols)  # boundary in, as filters.crop
         self.framed = np.pad(self.mask, 1)  # a border of False: indices clipped onto it are out
 
     def __call__(self, xyz: np.ndarray) -> np.ndarray:

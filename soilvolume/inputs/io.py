@@ -1,8 +1,11 @@
 """Read and write point clouds: LAS/LAZ (laspy + lazrs), PLY/PCD (Open3D), XYZ/TXT/CSV (numpy).
-Readers return absolute float64 coordinates in the file's CRS and units; writers rename when done."""
+Readers return absolute float64 coordinates in the file's CRS and units; writers rename when done. Two
+inputs that must be different surveys: one file given twice (the same path, a symbolic or hard link to it,
+or a byte-for-byte copy) compares a survey with itself, 0 ± 0 m3, and is refused."""
 
 from __future__ import annotations
 
+import filecmp
 import os
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
@@ -68,6 +71,27 @@ def validate(raw: RawPoints) -> None:
     bad = ~np.isfinite(raw.xyz).all(axis=1)
     if bad.any():
         raise SoilVolumeError(f"{raw.path}: {int(bad.sum())} point(s) have NaN or infinite coordinates")
+
+
+def sameness(a: Path, b: Path) -> str | None:
+    """How ``b`` is ``a``: "is the same file as" (a path or link to it), "is a byte-for-byte copy of", or None."""
+    try:
+        if os.path.samefile(a, b):
+            return "is the same file as"
+        if a.is_file() and b.is_file() and filecmp.cmp(a, b, shallow=False):
+            return "is a byte-for-byte copy of"
+    except OSError:  # missing or unreadable: the reading says so
+        return None
+    return None
+
+
+def check_two_surveys(before: Path, after: Path, what: str = "the before survey") -> None:
+    """Refuse an ``after`` that is ``before`` (see :func:`sameness`), naming both files."""
+    how = sameness(Path(before), Path(after))
+    if how:
+        raise SoilVolumeError(
+            f"{after}: {how} {what} {before}; before and after must be two surveys of the site at different times"
+        )
 
 
 def _read_las(path: Path) -> RawPoints:
@@ -142,20 +166,13 @@ def write_las_chunked(
     chunks: Iterable[tuple[np.ndarray, np.ndarray | None]],
     origin: np.ndarray,
     crs_wkt: str | None,
-    transform: np.ndarray | None = None,
-    scale: float = 0.001,
+    transform: np.ndarray,
 ) -> None:
     """Write (local xyz, classification) chunks, through a rigid ``transform``, as LAS 1.4/LAZ atomically."""
     origin = np.asarray(origin, float)
-
-    def absolute() -> Iterator[tuple]:
-        for xyz, cls in chunks:
-            part = np.asarray(xyz, dtype=np.float64)
-            if transform is not None:
-                part = part @ transform[:3, :3].T + transform[:3, 3]
-            yield part + origin, cls
-
-    _write(path, np.floor(origin), scale, crs_wkt, absolute())
+    rot, shift = transform[:3, :3].T, transform[:3, 3]
+    absolute = ((np.asarray(xyz, dtype=np.float64) @ rot + shift + origin, cls) for xyz, cls in chunks)
+    _write(path, np.floor(origin), 0.001, crs_wkt, absolute)
 
 
 def write_las(

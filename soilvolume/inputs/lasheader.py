@@ -27,8 +27,8 @@ def _fail(path: Path, problem: str) -> SoilVolumeError:
     return SoilVolumeError(f"{path}: corrupt LAS header ({problem})")
 
 
-def check_las_header(path: Path) -> int:
-    """Raise naming the file when its header is inconsistent; returns the point count."""
+def check_las_header(path: Path) -> None:
+    """Raise naming the file when its header is inconsistent."""
     size = path.stat().st_size
     with open(path, "rb") as fh:
         head = fh.read(375)
@@ -59,7 +59,6 @@ def check_las_header(path: Path) -> int:
     _check_numbers(path, struct.unpack_from("<12d", head, 131), count)
     compressed = compressed or path.suffix.lower() == ".laz"
     _check_count(path, count, rec_len, evlr_start if n_evlrs else size, offset, compressed)
-    return count
 
 
 def _walk_records(fh, path: Path, pos: int, count: int, end: int, kind: str, words: tuple, limit: str) -> None:
@@ -121,7 +120,7 @@ class BoundsCheck:
         self.seen_lo, self.seen_hi = np.full(3, np.inf), np.full(3, -np.inf)
 
     def extend(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Take in a (non-empty) chunk's per-axis min ``lo`` and max ``hi``."""
+        """Take in a chunk's per-axis min ``lo`` and max ``hi`` (an empty one's inf and -inf change nothing)."""
         if (lo < self.lo - self.tol).any() or (hi > self.hi + self.tol).any():
             raise SoilVolumeError(
                 f"{self.path}: points lie outside the bounds in the LAS header (corrupt scale, offset or bounds)"

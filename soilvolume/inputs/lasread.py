@@ -17,23 +17,6 @@ CRS_RECORDS = {2111, 2112, 34735, 34736, 34737}  # WKT (math transform, CRS) and
 WKT_STARTS = (b"PROJCS", b"PROJCRS", b"GEOGCS", b"GEOGCRS", b"COMPD_CS", b"COMPOUNDCRS", b"GEODCRS")
 
 
-def las_crs_wkt(header, path: Path) -> str | None:
-    """A LAS header's CRS (WKT VLR or GeoTIFF keys) as WKT, None without any; an unreadable one: an error."""
-    try:
-        crs = header.parse_crs()
-    except Exception as exc:  # laspy raises several types on broken VLRs
-        raise SoilVolumeError(f"{path}: the CRS stored in the header cannot be read ({short_error(exc)})") from exc
-    if crs is None:
-        broken = next((v for v in header.vlrs if _looks_like_crs(v)), None)
-        if broken is not None:
-            user = "".join(c if c.isprintable() else "?" for c in str(broken.user_id))
-            raise SoilVolumeError(
-                f"{path}: the header's CRS record (VLR '{user}' {broken.record_id}) cannot be read (corrupt header?)"
-            )
-        return None
-    return crs.to_wkt()
-
-
 def _looks_like_crs(vlr) -> bool:
     """A VLR that was meant to hold the CRS: its ids, or WKT-looking content."""
     from difflib import SequenceMatcher
@@ -46,15 +29,26 @@ def _looks_like_crs(vlr) -> bool:
 
 
 def las_header(p: Path) -> tuple:
-    """(CRS WKT or None, count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC header."""
+    """(CRS WKT or None, count, mins, maxs, has a classification, compressed) of a LAS/LAZ/COPC header;
+    its CRS (WKT VLR or GeoTIFF keys) None without any, an unreadable one an error."""
     import laspy
 
     try:
         with laspy.open(p) as reader:
             h = reader.header
-            wkt = las_crs_wkt(h, p)
+            try:
+                crs = h.parse_crs()
+            except Exception as exc:  # laspy raises several types on broken VLRs
+                raise SoilVolumeError(f"{p}: the CRS stored in the header cannot be read ({short_error(exc)})") from exc
+            broken = None if crs is not None else next((v for v in h.vlrs if _looks_like_crs(v)), None)
+            if broken is not None:
+                user = "".join(c if c.isprintable() else "?" for c in str(broken.user_id))
+                raise SoilVolumeError(
+                    f"{p}: the header's CRS record (VLR '{user}' {broken.record_id}) cannot be read (corrupt header?)"
+                )
             dims = set(h.point_format.dimension_names)
             lo, hi = np.asarray(h.mins, float), np.asarray(h.maxs, float)
+            wkt = None if crs is None else crs.to_wkt()
             return wkt, int(h.point_count), lo, hi, "classification" in dims, bool(h.are_points_compressed)
     except SoilVolumeError:
         raise

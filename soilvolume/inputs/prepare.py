@@ -15,17 +15,18 @@ from ..core.types import Cloud, SoilVolumeError
 from ..core.wording import opt
 from ..options import Options
 from ..soil.points import PointRule
+from .chunkwork import NOTHING  # a box no point is in
 from .crs import WorkFrame, frame_box, lonlat_of, parse_crs, work_frame, xy_unit, z_unit
 from .crs import to_local as _local
-from .csf import DEFAULTS, csf_classify
 from .footprint import MIN_COLUMNS, PolygonMask, check_spread, footprint
 from .io import RawPoints
-from .smrf import smrf_classify
+from .smrf import DEFAULTS, csf_classify, smrf_classify
 from .stream import ColumnThinner, Loaded, Source, from_raw, load
 
 CLASS_NOTE = "class 2 (ground)"  # the selection note of a cloud streamed as class 2 only
 SMRF_NOTE = "SMRF ground filter (window {window:g} m, slope {slope:g})"
 CSF_NOTE = "cloth simulation filter (CSF: cloth {resolution:g} m, rigidness {rigidness}, {threshold:g} m)"
+THIN_POINTS = 200_000  # registration subset: about this many after points
 
 
 @dataclass(frozen=True)
@@ -68,12 +69,6 @@ def resolve_crs(raw: RawPoints | Source, override: str | None, flag: str) -> pyp
     return header or given
 
 
-THIN_POINTS = 200_000  # registration subset: about this many after points
-
-
-NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in
-
-
 def prepare(
     before: Source, after: Source, options: Options, check=None, full: bool = True, loader: Callable[..., Loaded] = load
 ) -> Prepared:
@@ -84,8 +79,8 @@ def prepare(
     crs_a = resolve_crs(after, options.after_crs, opt("after_crs"))
     frame = _own_frame(before, crs_b)
     origin, voxel, to_a, thinner = _setup(after, crs_a, frame)
-    original_after = after
-    after, a, note_a = _load_whole(after, crs_a, to_a, thinner, options, check, None if full else NOTHING, loader)
+    # the source streamed has the path and count of ``after``
+    _, a, note_a = _load_whole(after, crs_a, to_a, thinner, options, check, None if full else NOTHING, loader)
     check_spread(a.thin[:, :2], after.path, "after the ground selection")
     poly = footprint(a.thin[:, :2], options.radius)
     before, b, note_b = _load_before(
@@ -103,7 +98,7 @@ def prepare(
         b.thin,
         a.thin,
         voxel,
-        _all_points(original_after, to_a),
+        _all_points(after, to_a),
         a.extra["read_s"] + b.extra["read_s"],
         b.extra["counts"],
         (b.note == CLASS_NOTE, a.note == CLASS_NOTE),

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from itertools import takewhile
 from pathlib import Path
 
 import numpy as np
@@ -97,7 +98,8 @@ def las_records(
             if whole_first and chunks:
                 chunks[0] = [sum(chunks[0])]
             if h.are_points_compressed:
-                arrays = _laz(reader, [m for c in chunks for m in c])
+                # up to the first empty read: fewer points than the header says, reported below
+                arrays = takewhile(len, (reader.read_points(m).array for c in chunks for m in c))
             else:
                 arrays = _mapped(path, h, sum(map(sum, chunks))) if mapped else _raw(path, h, chunks, ring, direct)
             for array in arrays:
@@ -134,8 +136,7 @@ def las_chunks(
     file, ``size`` points at a time (one read buffer); with ``origin``, ``xyz - origin``."""
     for rec, cls, sig in las_records(path, count, size, signals, piece=size, ring=1):
         xyz, lo, hi = decoded_xyz(rec, origin)
-        if len(xyz):
-            rec.check.extend(lo, hi)
+        rec.check.extend(lo, hi)
         if rec.last:
             rec.check.finish()
         item = (xyz, cls, sig) if signals else (xyz, cls)
@@ -202,14 +203,6 @@ def chunk_pieces(count: int, size: int, piece: int) -> list[list[int]]:
     return [
         [min(piece, m - k) for k in range(0, m, piece)] for m in (min(size, count - s) for s in range(0, count, size))
     ]
-
-
-def _laz(reader, lengths: list[int]) -> Iterator[np.ndarray]:
-    for m in lengths:
-        part = reader.read_points(m)
-        if len(part) == 0:  # fewer points than the header says: las_records reports it
-            return
-        yield part.array
 
 
 def _mapped(path: Path, header, m: int) -> Iterator[np.ndarray]:

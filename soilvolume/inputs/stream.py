@@ -58,14 +58,12 @@ class Source:
         for path in self.tiles():
             yield from file_chunks(path, self.region, size or CHUNK, signals=signals, origin=origin)
 
-    def records(
-        self, size: int | None = None, signals: bool | Callable = False, direct=None, whole_first: bool = False
-    ) -> Iterator[tuple]:
+    def records(self, signals: bool | Callable = False, direct=None, whole_first: bool = False) -> Iterator[tuple]:
         """The undecoded chunks of the source's LAS/LAZ files (:func:`records.las_records`): the
         native kernel's input (:func:`native_reads` says when a source can)."""
         for path in self.tiles():
             count = _header(Path(path)).count
-            yield from las_records(Path(path), count, size or CHUNK, signals, direct=direct, whole_first=whole_first)
+            yield from las_records(Path(path), count, CHUNK, signals, direct=direct, whole_first=whole_first)
             whole_first = whole_first and not count
 
     def within(self, lo, hi) -> Source:
@@ -73,11 +71,13 @@ class Source:
         return replace(self, region=(np.asarray(lo[:2], float), np.asarray(hi[:2], float)))
 
     def tiles(self) -> list[str]:
-        """The files that a read of this source opens."""
+        """The files that a read of this source opens: of a VPC, the tiles whose x/y box meets the region."""
         if self.vpc is None:
             return [self.path]
-        lo, hi = self.region if self.region is not None else (None, None)
-        return [t.path for t in self.vpc.tiles_meeting(lo, hi)]
+        if self.region is None:
+            return [t.path for t in self.vpc.tiles]
+        lo, hi = self.region
+        return [t.path for t in self.vpc.tiles if (np.less_equal(t.lo[:2], hi) & np.less_equal(lo, t.hi[:2])).all()]
 
     def materialize(self) -> RawPoints:
         """The whole cloud in memory (for steps that need all points at once, e.g. SMRF)."""
@@ -89,10 +89,16 @@ class Source:
 
 
 def open_source(path) -> Source:
-    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now."""
+    """A streamable LAS/LAZ/COPC file or VPC from its header(s), else the whole cloud read now. A VPC: its
+    CRS (else its tiles'), bounds and count from the tiles' headers (checked finite by ``check_las_header``)."""
     p = Path(path)
     if p.suffix.lower() == ".vpc":
-        return _open_vpc(p)
+        vpc = read_vpc(p)
+        first = _header(Path(vpc.tiles[0].path))
+        if vpc.count == 0:
+            raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
+        lo, hi = np.min([t.lo for t in vpc.tiles], axis=0), np.max([t.hi for t in vpc.tiles], axis=0)
+        return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
     _check_readable(p)
     if p.suffix.lower() not in LAS_SUFFIXES:
         return from_raw(read_points(p))
@@ -106,17 +112,6 @@ def _header(p: Path) -> Source:
     """A LAS/LAZ/COPC file's source from its header."""
     wkt, count, lo, hi, has_class, compressed = las_header(p)
     return Source(str(p), wkt, count, lo, hi, has_class, compressed=compressed)
-
-
-def _open_vpc(p: Path) -> Source:
-    """A virtual point cloud: CRS from the VPC (else its tiles), bounds and count from the tiles' headers
-    (checked finite by :func:`lasheader.check_las_header`)."""
-    vpc = read_vpc(p)
-    first = _header(Path(vpc.tiles[0].path))
-    if vpc.count == 0:
-        raise SoilVolumeError(f"{p}: the point cloud is empty (0 points in {len(vpc.tiles)} tiles)")
-    lo, hi = np.min([t.lo for t in vpc.tiles], axis=0), np.max([t.hi for t in vpc.tiles], axis=0)
-    return Source(str(p), vpc.crs_wkt or first.crs_wkt, vpc.count, lo, hi, first.has_class, vpc=vpc)
 
 
 def from_raw(raw: RawPoints) -> Source:
@@ -194,8 +189,7 @@ def _labelled(
 
 def file_kernel() -> bool:
     """Whether the native library reads whole chunks from files itself (POSIX builds)."""
-    lib = native.kernels()
-    return lib is not None and hasattr(lib, "sv_file_chunk")
+    return hasattr(native.kernels(), "sv_file_chunk")  # None without the library
 
 
 def native_reads(src: Source, to_local, keep: Callable | None) -> bool:
@@ -226,15 +220,12 @@ def load(
     out = Growing(src.count if box is None or (box[1] >= box[0]).all() else 0), Growing(0), Growing(0, None, np.uint8)
     index = [] if indexed and src.vpc is None and src.raw is None and not is_copc(src.path) else None
     chunks, shift, by_kernel = _labelled(src, to_local, index is not None, mode, exclude, keep)
-    if by_kernel:
-        kernel = NativeChunks(native.kernels(), thinner, keep, box, to_local.origin, CHUNK)
-    work = (
-        partial(native_work, kernel, out=out) if by_kernel else partial(numpy_work, shift, keep, thinner, box, out=out)
-    )
+    kernel = NativeChunks(native.kernels(), thinner, keep, box, to_local.origin, CHUNK) if by_kernel else None
+    work = partial(native_work, kernel, out=out) if kernel else partial(numpy_work, shift, keep, thinner, box, out=out)
     try:
         points, used, cropped, reading, rule = consume(chunks, work, index, check)
     finally:
-        if by_kernel:
+        if kernel:
             kernel.close()
     note = "class 2 (ground)" if rule is not None and rule.use_class else "all points"
     rule = rule or PointRule()

@@ -44,12 +44,6 @@ class Vpc:
     def count(self) -> int:
         return sum(t.count for t in self.tiles)
 
-    def tiles_meeting(self, lo=None, hi=None) -> list[Tile]:
-        """The tiles whose x/y box meets the x/y box lo..hi (all when None)."""
-        return [
-            t for t in self.tiles if lo is None or (np.less_equal(t.lo[:2], hi) & np.less_equal(lo, t.hi[:2])).all()
-        ]
-
 
 MAX_BYTES = 256 * 2**20  # a .vpc lists tiles: far larger is not one
 #: how far a tile's box in the VPC may differ from its header's: native boxes (proj:bbox) are
@@ -95,16 +89,22 @@ def _read_vpc(path: str, size: int, mtime_ns: int, inode: int) -> tuple[Vpc, lis
     except (OSError, ValueError, RecursionError) as exc:
         why = "nested too deeply" if isinstance(exc, RecursionError) else short_error(exc)
         raise SoilVolumeError(f"{p}: not a readable virtual point cloud ({why})") from None
-    crss, tiles, seen = [], [], {}
+    first, tiles, seen = None, [], {}  # first: the first tile with a CRS, its CRS and path
     for item in items(p, doc):
         tile_path = _href(p, item)
         if tile_path in seen:
             raise SoilVolumeError(f"{p}: {item.name} lists the tile {item.href} that {seen[tile_path]} lists already")
         seen[tile_path] = item.name
         tile, crs = _tile(p, item, tile_path)
-        crss.append((crs, tile_path))
         tiles.append(tile)
-    return Vpc(str(p), _common_crs(p, crss), tuple(tiles)), [_version(t.path) for t in tiles]
+        if crs is not None and first is None:
+            first = crs, tile_path
+        elif crs is not None and not crs.equals(first[0]):
+            raise SoilVolumeError(
+                f"{p}: tiles in different CRSs ({Path(first[1]).name}: {first[0].name}; "
+                f"{Path(tile_path).name}: {crs.name}); reproject them to one CRS first"
+            )
+    return Vpc(str(p), first and first[0].to_wkt(), tuple(tiles)), [_version(t.path) for t in tiles]
 
 
 def file_url_path(url: str, windows: bool = os.name == "nt") -> str:
@@ -142,21 +142,6 @@ def _href(vpc: Path, item) -> str:
     if full.suffix.lower() not in (".las", ".laz"):
         raise SoilVolumeError(f"{vpc}: tile {href} is not a LAS/LAZ file (its name does not end in .las or .laz)")
     return str(full)
-
-
-def _common_crs(vpc: Path, crss: list) -> str | None:
-    """The one CRS of all tiles (WKT), or an error naming two tiles that differ."""
-    known = [(c, t) for c, t in crss if c is not None]
-    if not known:
-        return None
-    first, first_tile = known[0]
-    for crs, tile in known[1:]:
-        if not crs.equals(first):
-            raise SoilVolumeError(
-                f"{vpc}: tiles in different CRSs ({Path(first_tile).name}: {first.name}; "
-                f"{Path(tile).name}: {crs.name}); reproject them to one CRS first"
-            )
-    return first.to_wkt()
 
 
 def _tile(vpc: Path, item, tile_path: str) -> tuple[Tile, Any]:

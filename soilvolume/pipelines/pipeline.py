@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from ..core.types import SoilVolumeError
-from ..inputs.csf import DEFAULTS as CSF_DEFAULTS
 from ..inputs.io import GROUND, LAS_SUFFIXES, TEXT_SUFFIXES, RawPoints, atomic_path
 from ..inputs.lasheader import check_las_header
+from ..inputs.smrf import DEFAULTS as CSF_DEFAULTS
 from ..inputs.stream import Source, from_raw
 from ..inputs.stream import open_source as open_file
 from . import stages as embedded

@@ -14,8 +14,7 @@ from ..core.wording import cli_tree
 from ..dem.geotiff import write_grid
 from ..dem.grid import epoch_dem
 from ..execution.inmemory import InMemory
-from ..inputs.distinct import check_two_surveys
-from ..inputs.io import LAS_SUFFIXES
+from ..inputs.io import LAS_SUFFIXES, check_two_surveys
 from ..options import Options
 from ..reporting.report import dem_summary, registration_summary
 from ..validate import check_bounds

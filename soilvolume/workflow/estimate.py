@@ -16,7 +16,7 @@ from ..distributed.schedule import schedule_for
 from ..execution.inmemory import InMemory
 from ..execution.seam import Backend
 from ..execution.tiled import Tiled
-from ..inputs.distinct import check_two_surveys
+from ..inputs.io import check_two_surveys
 from ..inputs.surface import is_surface
 from ..options import Options
 from ..pipelines.confine import writers_into

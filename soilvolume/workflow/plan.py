@@ -8,11 +8,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..core.polygons import covers
 from ..core.types import GridSpec, SoilVolumeError
 from ..core.wording import opt
 from ..dem.grid import cell_for, choose_cell, make_grid
 from ..inputs.crs import WorkFrame
-from ..inputs.footprint import footprint, inside, polygon_area
+from ..inputs.footprint import footprint, polygon_area
 from ..inputs.prepare import Prepared
 from ..options import Options
 from ..validate import OptionError
@@ -34,7 +35,7 @@ def reference_cell(prep: Prepared, poly: np.ndarray, options: Options) -> float:
         return cell
     if len(prep.before):
         return cell_for(prep.before.xyz, poly)
-    ins = inside(prep.before_thin[:, :2], poly)
+    ins = covers([poly], prep.before_thin[:, 0], prep.before_thin[:, 1])
     return choose_cell(int(prep.before_counts[ins].sum()), polygon_area(poly))
 
 

@@ -13,7 +13,6 @@ from ..core.outputs import check_output_file, os_errors
 from ..core.types import GridSpec, SoilVolumeError
 from ..dem.geotiff import write_grid
 from ..inputs.crs import horizontal, parse_crs, xy_unit
-from ..inputs.distinct import check_two_surveys
 from ..inputs.heights import (
     Heights,
     masked_notes,
@@ -22,6 +21,7 @@ from ..inputs.heights import (
     read_heights,
     window_over,
 )
+from ..inputs.io import check_two_surveys
 from ..inputs.surface import SurfaceSource as Dem
 from ..volumes.difference import budget
 from ..volumes.zones import zone_budgets

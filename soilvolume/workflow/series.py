@@ -20,8 +20,8 @@ from ..core.outputs import os_errors, output_dir
 from ..core.types import Epoch, GridSpec, SoilVolumeError, survey
 from ..dem.grid import epoch_dem
 from ..execution.inmemory import InMemory
-from ..inputs.distinct import sameness
 from ..inputs.footprint import footprint
+from ..inputs.io import sameness
 from ..inputs.lasheader import creation_date
 from ..inputs.prepare import Prepared
 from ..options import Options
@@ -76,7 +76,7 @@ def series_epochs(paths: list[Path], dates: list[str] | None, options: Options) 
 
 
 def check_series(epochs: tuple[Epoch, ...]) -> None:
-    """Every epoch another survey (:func:`~soilvolume.inputs.distinct.sameness`), the known dates in
+    """Every epoch another survey (:func:`~soilvolume.inputs.io.sameness`), the known dates in
     the epochs' order (a series is not reordered: E0 is the reference)."""
     for j, k in itertools.combinations(range(len(epochs)), 2):
         how = sameness(Path(epochs[j].path), Path(epochs[k].path))

@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from ...core.types import SoilVolumeError
-from ...inputs.csf import DEFAULTS as CSF_DEFAULTS
+from ...inputs.smrf import DEFAULTS as CSF_DEFAULTS
 from ..load import normalise
 from . import files, filters
 from .view import PointView, StageContext

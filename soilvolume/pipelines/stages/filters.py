@@ -4,7 +4,7 @@ PDAL; :func:`soilvolume.core.polygons.covers`), filters.range with ``Dimension[l
 filters.assign with ``Dimension = number``: the forms of the project's own pipelines
 (``Classification[2:2]``, ``Classification = 0``); the other forms (open or negated ranges, WHERE
 clauses, bounds, several polygons) need PDAL; filters.smrf and filters.csf: Classification 2 for ground,
-1 for the rest, by the project's ground filters (:mod:`soilvolume.inputs.smrf`, :mod:`soilvolume.inputs.csf`)."""
+1 for the rest, by the project's ground filters (:mod:`soilvolume.inputs.smrf`)."""
 
 from __future__ import annotations
 
@@ -15,8 +15,7 @@ import pyproj
 
 from ...core.polygons import covers
 from ...core.types import SoilVolumeError
-from ...inputs.csf import DEFAULTS, csf_classify
-from ...inputs.smrf import smrf_classify
+from ...inputs.smrf import DEFAULTS, csf_classify, smrf_classify
 from .view import PointView, StageContext
 
 _NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
