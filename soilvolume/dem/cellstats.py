@@ -96,9 +96,7 @@ class _SortedCells:
         lib.sv_keys(ids.ctypes.data, z.ctypes.data, len(z), self.base, self.q, self.bits, key.ctypes.data, counts)
         out = z.view(np.int64) if own and _spare(z, key) else np.empty_like(key)
         pos = np.empty(n_cells, np.int64)
-        lib.sv_sort_keys(
-            key.ctypes.data, len(key), self.counts.ctypes.data, n_cells, self.bits, out.ctypes.data, pos.ctypes.data
-        )
+        lib.sv_sort_keys(key.ctypes.data, len(key), counts, n_cells, self.bits, out.ctypes.data, pos.ctypes.data)
         return out
 
     def height(self, idx: np.ndarray) -> np.ndarray:

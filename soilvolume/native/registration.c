@@ -114,11 +114,9 @@ void sv_grid_build(const double *t, int64_t tn, int64_t m, double x0, double y0,
                    int64_t *start, int64_t *order) {
     int64_t cells = nx * ny;
     for (int64_t c = 0; c <= cells; c++) start[c] = 0;
-    for (int64_t i = 0; i < m; i++) start[grid_cell(t[i], t[tn + i], x0, y0, g, nx, ny) + 1]++;
-    for (int64_t c = 0; c < cells; c++) start[c + 1] += start[c];
-    for (int64_t i = 0; i < m; i++) order[start[grid_cell(t[i], t[tn + i], x0, y0, g, nx, ny)]++] = i;
-    for (int64_t c = cells; c > 0; c--) start[c] = start[c - 1];
-    start[0] = 0;
+    for (int64_t i = 0; i < m; i++) start[grid_cell(t[i], t[tn + i], x0, y0, g, nx, ny)]++;
+    for (int64_t c = 1; c <= cells; c++) start[c] += start[c - 1]; /* the end of each cell */
+    for (int64_t i = m - 1; i >= 0; i--) order[--start[grid_cell(t[i], t[tn + i], x0, y0, g, nx, ny)]] = i;
 }
 
 /* The points of the cells of row cy, columns lo..hi: their squared distances to (px, py, pz),
