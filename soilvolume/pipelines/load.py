@@ -85,8 +85,6 @@ def normalise(raw: Any, name: str) -> list[dict[str, Any]]:
             if kind is None:
                 raise SoilVolumeError(f"{where}: cannot infer a stage for '{fname}'")
             stage = {"type": kind, **stage}
-        if not isinstance(kind, str):
-            raise SoilVolumeError(f"{where}: 'type' must be a string, got {kind!r}")
         for key, value in stage.items():
             _check_value(key, value, f"{where} ({kind})")
         out.append(stage)
