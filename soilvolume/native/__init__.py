@@ -134,11 +134,9 @@ def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
 def axes(points: np.ndarray, dtype) -> tuple[np.ndarray, tuple[int, int, int], int]:
     """(the points as the kernels read them, their first x, y, z addresses, the step between
     points): walkable ones as they are (:func:`steps`), others copied (keep the array alive)."""
-    walk = steps(points, dtype)
-    if walk is None:
+    if steps(points, dtype) is None:
         points = np.ascontiguousarray(points, dtype)
-        walk = steps(points, dtype)
-    (step, axis), at, size = walk, points.ctypes.data, np.dtype(dtype).itemsize
+    (step, axis), at, size = steps(points, dtype), points.ctypes.data, np.dtype(dtype).itemsize
     return points, (at, at + size * axis, at + 2 * size * axis), step
 
 
