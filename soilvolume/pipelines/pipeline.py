@@ -118,9 +118,7 @@ def build_prepare_pipeline(
     if output is not None:
         if Path(output).suffix.lower() not in LAS_SUFFIXES:
             raise SoilVolumeError(f"{output}: the prepared cloud is written as .las or .laz")
-        out.append(
-            {"type": "writers.las", "filename": str(output), "scale_x": 0.001, "scale_y": 0.001, "scale_z": 0.001}
-        )
+        out.append({"type": "writers.las", "filename": str(output), **{f"scale_{a}": 0.001 for a in "xyz"}})
     return out
 
 

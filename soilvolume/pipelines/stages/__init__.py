@@ -20,9 +20,7 @@ GENERIC = {"type", "tag", "user_data"}
 _FILE = frozenset({"filename", "default_srs"})
 #: each stage's function and options (docs/cli.md lists them)
 REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
-    "readers.las": (files.read_file, _FILE),
-    "readers.ply": (files.read_file, _FILE),
-    "readers.pcd": (files.read_file, _FILE),
+    **{f"readers.{name}": (files.read_file, _FILE) for name in ("las", "ply", "pcd")},
     "readers.text": (files.read_text, _FILE | {"header", "separator"}),
     "filters.reprojection": (filters.reproject, frozenset({"out_srs"})),
     "filters.crop": (filters.crop, frozenset({"polygon"})),

@@ -144,9 +144,8 @@ def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     use = _last_or_only(view, ctx)
     if not use.any():
         raise ctx.error("no returns to process")
-    idx = np.flatnonzero(use)
-    ground = smrf_classify(*(view.arrays[d][idx] for d in "XYZ"), **params)
-    cls[idx] = np.where(ground, 2, 1).astype(cls.dtype)
+    ground = smrf_classify(*(view.arrays[d][use] for d in "XYZ"), **params)
+    cls[use] = np.where(ground, 2, 1).astype(cls.dtype)
     return view
 
 
