@@ -60,8 +60,7 @@ class _SortedCells:
 
     def __init__(self, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool = False) -> None:
         low = float(z.min())
-        id_bits = max(1, int(n_cells).bit_length())
-        self.bits = 62 - id_bits
+        self.bits = 62 - max(1, int(n_cells).bit_length())
         self.q = max(QUANTUM, (float(z.max()) - low) / (2**self.bits - 4))
         self.base = math.floor(low / self.q)  # every level rint(z / q) - base is >= 0 and fits the bits
         lib = native.kernels()

@@ -70,13 +70,8 @@ def has_ground_class(path: str | os.PathLike) -> bool:
     import laspy
 
     check_las_header(Path(path))
-    with laspy.open(path) as reader:
-        if "classification" not in reader.header.point_format.dimension_names:
-            return False
-        for chunk in reader.chunk_iterator(2_000_000):
-            if np.any(np.asarray(chunk.classification) == GROUND):
-                return True
-    return False
+    with laspy.open(path) as reader:  # every LAS point format has a classification
+        return any(np.any(np.asarray(chunk.classification) == GROUND) for chunk in reader.chunk_iterator(2_000_000))
 
 
 def _ground_stages(ground: str, smrf: dict[str, Any] | None) -> list[dict[str, Any]]:
