@@ -48,7 +48,7 @@ _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
 #: set while a long kernel runs without the GIL (a whole chunk of a file read and worked on): another
 #: thread may use the interpreter meanwhile without slowing this one
 OFF_THE_GIL = threading.Event()
-#: each kernel's result and arguments (:data:`.chunk.TYPES`' letters; "-": no result)
+#: each kernel's result and arguments (:data:`TYPES`' letters; "-": no result)
 PROTOTYPES = {
     "sv_chunk": ("-", "c"),
     "sv_file_chunk": ("i", "ciiipipii"),
@@ -91,7 +91,7 @@ def _load() -> ctypes.CDLL | None:
     if os.environ.get(ENV, "1") == "0" or not all(path.exists() for path in SOURCES):
         return None
     name = library_name()
-    folders = [Path(os.environ[DIR_ENV])] if os.environ.get(DIR_ENV) else []  # then beside the source
+    folders = [Path(os.environ[DIR_ENV])] if os.environ.get(DIR_ENV) else []  # then beside the sources
     path = next((f / name for f in [*folders, HERE] if (f / name).is_file()), None)
     if path is None:
         if os.environ.get("SOILVOLUME_DEBUG"):
