@@ -40,7 +40,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   .venv/bin/pip install -q --disable-pip-version-check -c constraints.txt -c .venv/engine-constraints.txt -e '.[dev]'
   echo "$want" > "$stamp"
 fi
-# the engine's native kernels (soilvolume/native/kernels.c) for the dev venv and the tests; the
+# the engine's native kernels (soilvolume/native/*.c) for the dev venv and the tests; the
 # plugin's installer below finds them present (the same source, the same folder)
 .venv/bin/python -m soilvolume.native.build
 # the engine's modules byte-compiled now: each run is a new process, and where Python may not write

@@ -1,4 +1,4 @@
-"""The native kernels (soilvolume/native/kernels.c) give the bits of their numpy twins: the chunk
+"""The native kernels (soilvolume/native/*.c) give the bits of their numpy twins: the chunk
 kernel of the streaming against :func:`soilvolume.inputs.chunkwork.numpy_chunk`, the column means
 of the registration against numpy's bincounts, and a whole estimate with and without the library;
 the library is built from this source (its name carries the source's digest) or not used."""
@@ -10,7 +10,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import laspy
 import numpy as np
@@ -228,7 +227,7 @@ def test_no_compiler_builds_nothing_and_says_so(tmp_path):
 def test_the_build_names_its_source_and_platform():
     name = native.library_name()
     assert name.startswith("_soilvolume_kernels-") and native.tag() in name
-    assert Path(native.SOURCE).name == "kernels.c"
+    assert [p.name for p in native.SOURCES] == ["kernels.h", "chunks.c", "cells.c", "registration.c"]
 
 
 def _both(monkeypatch, fn):

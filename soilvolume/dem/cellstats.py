@@ -60,8 +60,7 @@ class _SortedCells:
 
     def __init__(self, ids: np.ndarray, z: np.ndarray, n_cells: int, own: bool = False) -> None:
         low = float(z.min())
-        id_bits = max(1, int(n_cells).bit_length())
-        self.bits = 62 - id_bits
+        self.bits = 62 - max(1, int(n_cells).bit_length())
         self.q = max(QUANTUM, (float(z.max()) - low) / (2**self.bits - 4))
         self.base = math.floor(low / self.q)  # every level rint(z / q) - base is >= 0 and fits the bits
         lib = native.kernels()
@@ -96,9 +95,7 @@ class _SortedCells:
         lib.sv_keys(ids.ctypes.data, z.ctypes.data, len(z), self.base, self.q, self.bits, key.ctypes.data, counts)
         out = z.view(np.int64) if own and _spare(z, key) else np.empty_like(key)
         pos = np.empty(n_cells, np.int64)
-        lib.sv_sort_keys(
-            key.ctypes.data, len(key), self.counts.ctypes.data, n_cells, self.bits, out.ctypes.data, pos.ctypes.data
-        )
+        lib.sv_sort_keys(key.ctypes.data, len(key), counts, n_cells, self.bits, out.ctypes.data, pos.ctypes.data)
         return out
 
     def height(self, idx: np.ndarray) -> np.ndarray:

@@ -103,9 +103,8 @@ def _save(mem, final: Path) -> None:
     """The in-memory file ``mem`` written to ``final`` atomically (a full disk: an OSError naming it)."""
     mem.seek(0)
     try:
-        with atomic_path(final) as tmp:
-            with open(tmp, "wb") as fh:
-                shutil.copyfileobj(mem, fh, COPY_CHUNK)
+        with atomic_path(final) as tmp, open(tmp, "wb") as fh:
+            shutil.copyfileobj(mem, fh, COPY_CHUNK)
     except OSError as exc:
         exc.filename = str(final)  # not the hidden partial file
         raise

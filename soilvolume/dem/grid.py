@@ -134,8 +134,7 @@ def epoch_dem(xyz: np.ndarray, grid: GridSpec, statistic: str = "robust-mean", n
     """An :class:`EpochDEM` of one epoch's soil points (spreads, offsets from the cell centres) and
     its ``nonsoil`` points' counts (:func:`finish_epoch`). ``move``: applied to each block of
     :data:`BLOCK` points (no moved copy of the cloud); only cell ids and heights are kept whole."""
-    n = grid.rows * grid.cols
-    sums = OffsetSums(n)
+    sums = OffsetSums(grid.rows * grid.cols)
     ids, z = _cells_of(xyz, grid, move, sums)
     heights = cell_heights(ids, z, (grid.rows, grid.cols), statistic, full=True, own=True)
     del ids, z

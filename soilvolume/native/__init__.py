@@ -1,5 +1,5 @@
-"""The engine's native kernels (``kernels.c``): one-pass loops where numpy makes many passes,
-loaded with ctypes when a build of this very source is present (its name carries the source's
+"""The engine's native kernels (:data:`SOURCES`): one-pass loops where numpy makes many passes,
+loaded with ctypes when a build of these very sources is present (its name carries their
 digest), else the numpy path runs (the same bits, slower; said under ``SOILVOLUME_DEBUG``).
 ``SOILVOLUME_NATIVE=0`` turns them off. Built by ``python -m soilvolume.native.build`` when the
 environment is installed, never during a run. A ctypes call releases the GIL. :class:`ChunkArgs`: the
@@ -20,15 +20,15 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-SOURCE = HERE / "kernels.c"
-ABI = 1  # sv_abi() of kernels.c
+SOURCES = tuple(HERE / name for name in ("kernels.h", "chunks.c", "cells.c", "registration.c"))  # one library
+ABI = 1  # sv_abi() of chunks.c
 ENV = "SOILVOLUME_NATIVE"  # "0": the numpy path only
 DIR_ENV = "SOILVOLUME_NATIVE_DIR"  # another folder holding the built library (the plugin's environment)
 
 #: the C types of the kernels' arguments and fields by letter: int64, double, float, a pointer (and
 #: "c", an ``sv_chunk_t *``)
 TYPES = {"i": ctypes.c_int64, "d": ctypes.c_double, "f": ctypes.c_float, "p": ctypes.c_void_p}
-#: ``sv_chunk_t`` of kernels.c field for field: name, type letter and array length
+#: ``sv_chunk_t`` of chunks.c field for field: name, type letter and array length
 FIELDS = (
     "rec p, n i, stride i, field i3, scale d3, offset d3, origin d3, labels p, framed p, plo d2, pres d, prows i, "
     "pcols i, tlo d2, voxel d, first i2, shape i2, ncols i, sums p, mark p, side_ids p, side p, nside i, chunk i, "
@@ -37,7 +37,7 @@ FIELDS = (
 
 
 class ChunkArgs(ctypes.Structure):
-    """``sv_chunk_t`` of kernels.c, field for field (:data:`FIELDS`)."""
+    """``sv_chunk_t`` of chunks.c, field for field (:data:`FIELDS`)."""
 
     _fields_ = [
         (name, TYPES[kind[0]] * int(kind[1:]) if kind[1:] else TYPES[kind])
@@ -81,7 +81,7 @@ class Gate:
 
 
 OFF_THE_GIL = Gate()
-#: each kernel's result and arguments (:data:`.chunk.TYPES`' letters; "-": no result)
+#: each kernel's result and arguments (:data:`TYPES`' letters; "-": no result)
 PROTOTYPES = {
     "sv_chunk": ("-", "c"),
     "sv_file_chunk": ("i", "ciiipipii"),
@@ -106,14 +106,14 @@ def tag() -> str:
 
 
 def library_name() -> str:
-    """The file name of a build of this source for this platform."""
-    digest = hashlib.sha256(SOURCE.read_bytes()).hexdigest()[:16]
+    """The file name of a build of these sources for this platform."""
+    digest = hashlib.sha256(b"".join(path.read_bytes() for path in SOURCES)).hexdigest()[:16]
     suffix = {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
     return f"_soilvolume_kernels-{digest}-{tag()}{suffix}"
 
 
 def kernels() -> ctypes.CDLL | None:
-    """The loaded library with its prototypes, or None (no build of this source, or turned off)."""
+    """The loaded library with its prototypes, or None (no build of these sources, or turned off)."""
     global _lib
     if _lib is False:
         _lib = _load()
@@ -121,10 +121,10 @@ def kernels() -> ctypes.CDLL | None:
 
 
 def _load() -> ctypes.CDLL | None:
-    if os.environ.get(ENV, "1") == "0" or not SOURCE.exists():
+    if os.environ.get(ENV, "1") == "0" or not all(path.exists() for path in SOURCES):
         return None
     name = library_name()
-    folders = [Path(os.environ[DIR_ENV])] if os.environ.get(DIR_ENV) else []  # then beside the source
+    folders = [Path(os.environ[DIR_ENV])] if os.environ.get(DIR_ENV) else []  # then beside the sources
     path = next((f / name for f in [*folders, HERE] if (f / name).is_file()), None)
     if path is None:
         if os.environ.get("SOILVOLUME_DEBUG"):
@@ -167,11 +167,9 @@ def steps(points: np.ndarray, dtype) -> tuple[int, int] | None:
 def axes(points: np.ndarray, dtype) -> tuple[np.ndarray, tuple[int, int, int], int]:
     """(the points as the kernels read them, their first x, y, z addresses, the step between
     points): walkable ones as they are (:func:`steps`), others copied (keep the array alive)."""
-    walk = steps(points, dtype)
-    if walk is None:
+    if steps(points, dtype) is None:
         points = np.ascontiguousarray(points, dtype)
-        walk = steps(points, dtype)
-    (step, axis), at, size = walk, points.ctypes.data, np.dtype(dtype).itemsize
+    (step, axis), at, size = steps(points, dtype), points.ctypes.data, np.dtype(dtype).itemsize
     return points, (at, at + size * axis, at + 2 * size * axis), step
 
 

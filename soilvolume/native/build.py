@@ -1,7 +1,7 @@
 """Build the native kernels: ``python -m soilvolume.native.build [--out DIR] [--cc CC] [--quiet]``.
 
-``kernels.c`` compiled into the library :func:`soilvolume.native.library_name` names (renamed into
-place when complete). Exit status 0 when the library is there, 1 when it could not be built."""
+:data:`soilvolume.native.SOURCES` compiled into the one library :func:`soilvolume.native.library_name`
+names (renamed into place when complete). Exit status 0 when the library is there, 1 when it could not be built."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from . import HERE, SOURCE, library_name
+from . import HERE, SOURCES, library_name
 
 #: -ffp-contract=off: no fused multiply-add (the numpy twins round every product)
 FLAGS = ["-O2", "-std=c99", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math", "-Wall"]
@@ -31,7 +31,7 @@ def build(out: Path = HERE, cc: str | None = None) -> tuple[Path | None, str]:
         return None, "no C compiler (cc, gcc or clang) found: the engine runs its numpy path"
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / f".{target.name}.{os.getpid()}.tmp"
-    cmd = [*tool.split(), *FLAGS, "-o", str(tmp), str(SOURCE), "-lm"]
+    cmd = [*tool.split(), *FLAGS, "-o", str(tmp), *(str(p) for p in SOURCES if p.suffix == ".c"), "-lm"]
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=COMPILE_S)
         if done.returncode != 0 or not tmp.is_file():
@@ -47,7 +47,7 @@ def build(out: Path = HERE, cc: str | None = None) -> tuple[Path | None, str]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m soilvolume.native.build", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=HERE, help="folder for the library (default: beside kernels.c)")
+    parser.add_argument("--out", type=Path, default=HERE, help="folder for the library (default: beside the sources)")
     parser.add_argument("--cc", help="the C compiler (default: $CC, cc, gcc or clang)")
     parser.add_argument("--quiet", action="store_true", help="print nothing when it is built or present")
     args = parser.parse_args(argv)

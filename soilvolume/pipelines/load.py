@@ -65,28 +65,23 @@ def normalise(raw: Any, name: str) -> list[dict[str, Any]]:
     if not raw:
         raise SoilVolumeError(f"pipeline {name}: the pipeline has no stages (missing reader)")
     out: list[dict[str, Any]] = []
-    last = len(raw) - 1
     for i, entry in enumerate(raw):
         where = f"pipeline {name}: stage {i + 1}"
-        if isinstance(entry, str):
-            entry = {"filename": entry}
-        elif not isinstance(entry, dict):
+        if not isinstance(entry, (str, dict)):
             raise SoilVolumeError(f"{where} must be an object or a filename string, got {type(entry).__name__}")
-        stage = dict(entry)
+        stage = {"filename": entry} if isinstance(entry, str) else dict(entry)
         kind = stage.get("type")
         if kind is None:
             fname = stage.get("filename")
             if not isinstance(fname, str):
                 raise SoilVolumeError(f"{where} has no 'type' (and no filename to infer it from)")
-            table = READERS if i == 0 else WRITERS if i == last else None
+            table = READERS if i == 0 else WRITERS if i == len(raw) - 1 else None
             if table is None:
                 raise SoilVolumeError(f"{where}: a bare filename must be the first (reader) or the last (writer) stage")
             kind = table.get(Path(fname).suffix.lower())
             if kind is None:
                 raise SoilVolumeError(f"{where}: cannot infer a stage for '{fname}'")
             stage = {"type": kind, **stage}
-        if not isinstance(kind, str):
-            raise SoilVolumeError(f"{where}: 'type' must be a string, got {kind!r}")
         for key, value in stage.items():
             _check_value(key, value, f"{where} ({kind})")
         out.append(stage)
@@ -119,9 +114,8 @@ def load_pipeline(path: str | os.PathLike) -> list[dict[str, Any]]:
     """Stages of a pipeline file (``{"pipeline": [...]}`` or a list; strings are a reader's or a
     writer's filename, as PDAL takes them), checked; errors name the file."""
     name = str(path)
-    text = _read_text(Path(path), name)
     try:
-        raw = json.loads(text)
+        raw = json.loads(_read_text(Path(path), name))
     except json.JSONDecodeError as exc:
         raise SoilVolumeError(
             f"pipeline {name}: invalid JSON (line {exc.lineno}, column {exc.colno}: {exc.msg})"

@@ -21,7 +21,7 @@ from .confine import confine_writers
 from .load import READERS, load_pipeline
 from .stages.view import PointView
 
-#: a reader's SRS options, kept when a user's pipeline reads another file (see :func:`with_input`)
+#: a reader's SRS options, kept when a user's pipeline reads another file (see :func:`prepare_cloud_from_file`)
 SRS_OPTS = ("override_srs", "spatialreference", "default_srs")
 
 
@@ -70,13 +70,8 @@ def has_ground_class(path: str | os.PathLike) -> bool:
     import laspy
 
     check_las_header(Path(path))
-    with laspy.open(path) as reader:
-        if "classification" not in reader.header.point_format.dimension_names:
-            return False
-        for chunk in reader.chunk_iterator(2_000_000):
-            if np.any(np.asarray(chunk.classification) == GROUND):
-                return True
-    return False
+    with laspy.open(path) as reader:  # every LAS point format has a classification
+        return any(np.any(np.asarray(chunk.classification) == GROUND) for chunk in reader.chunk_iterator(2_000_000))
 
 
 def _ground_stages(ground: str, smrf: dict[str, Any] | None) -> list[dict[str, Any]]:
@@ -118,9 +113,7 @@ def build_prepare_pipeline(
     if output is not None:
         if Path(output).suffix.lower() not in LAS_SUFFIXES:
             raise SoilVolumeError(f"{output}: the prepared cloud is written as .las or .laz")
-        out.append(
-            {"type": "writers.las", "filename": str(output), "scale_x": 0.001, "scale_y": 0.001, "scale_z": 0.001}
-        )
+        out.append({"type": "writers.las", "filename": str(output), **{f"scale_{a}": 0.001 for a in "xyz"}})
     return out
 
 
@@ -134,8 +127,13 @@ def save_pipeline(stages: list[dict[str, Any]], path: str | os.PathLike) -> None
         Path(tmp).write_text(dumps(stages), encoding="utf-8")
 
 
-def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
-    """The stages run by real PDAL; its views' points concatenated in PDAL's dimension names."""
+def run_pipeline(stages: list[dict[str, Any]], source: str = "<pipeline>") -> PointView:
+    """Run stages with real PDAL when its bindings import (its views' points concatenated in PDAL's
+    dimension names), else with the embedded executor."""
+    try:
+        import pdal  # type: ignore[import-not-found]
+    except Exception:  # ImportError, or a broken libpdal
+        return embedded.execute(stages, source)
     try:
         p = pdal.Pipeline(json.dumps({"pipeline": stages}))
         p.execute()
@@ -149,15 +147,6 @@ def _run_pdal(pdal, stages: list[dict[str, Any]], source: str) -> PointView:
     return PointView(out, getattr(p, "srswkt2", None) or None)  # the bindings' SRS
 
 
-def run_pipeline(stages: list[dict[str, Any]], source: str = "<pipeline>") -> PointView:
-    """Run stages with real PDAL when its bindings import, else with the embedded executor."""
-    try:
-        import pdal  # type: ignore[import-not-found]
-    except Exception:  # ImportError, or a broken libpdal
-        return embedded.execute(stages, source)
-    return _run_pdal(pdal, stages, source)
-
-
 def view_to_raw(view: PointView, path: str, source: str = "<pipeline>") -> RawPoints:
     """A pipeline's result as :class:`RawPoints` (in the view's SRS units: the engine converts Z)."""
     if len(view) == 0:
@@ -166,22 +155,16 @@ def view_to_raw(view: PointView, path: str, source: str = "<pipeline>") -> RawPo
     return RawPoints(view.xyz, None if cls is None else cls.astype(np.uint8), view.srs_wkt, path)
 
 
-def with_input(stages: list[dict[str, Any]], path: str | os.PathLike) -> list[dict[str, Any]]:
-    """The stages reading ``path`` (``pdal pipeline --readers.las.filename=...``), the reader's type
-    that of its format, its SRS options kept."""
-    reader = dict(stages[0])
-    fresh = reader_stage(path)
-    if fresh["type"] != reader["type"]:
-        reader = {**fresh, **{k: v for k, v in reader.items() if k in SRS_OPTS}}
-    reader["filename"] = str(path)
-    return [reader, *stages[1:]]
-
-
 def prepare_cloud_from_file(pipeline: str | os.PathLike, path: str | os.PathLike | None = None) -> RawPoints:
-    """A user's preparation pipeline run on ``path`` (default: the pipeline's own reader file)."""
+    """A user's preparation pipeline run on ``path`` (default: the pipeline's own reader file): its
+    reader's filename replaced (``pdal pipeline --readers.las.filename=...``), the reader's type that
+    of the file's format, its SRS options kept."""
     stages = load_pipeline(pipeline)
     if path is not None:
-        stages = with_input(stages, path)
+        reader, fresh = dict(stages[0]), reader_stage(path)
+        if fresh["type"] != reader["type"]:
+            reader = {**fresh, **{k: v for k, v in reader.items() if k in SRS_OPTS}}
+        stages = [{**reader, "filename": str(path)}, *stages[1:]]
     stages = confine_writers(stages, str(pipeline))
     view = run_pipeline(stages, str(pipeline))
     return view_to_raw(view, stages[0]["filename"], str(pipeline))

@@ -79,7 +79,10 @@ def test_zip_contents(plugin_zip):
         "plugin/environment.py",
         "plugin/interpreters.py",
         "plugin/platforms.py",
-        "soilvolume/native/kernels.c",
+        "soilvolume/native/kernels.h",  # the kernels' sources (native.SOURCES)
+        "soilvolume/native/chunks.c",
+        "soilvolume/native/cells.c",
+        "soilvolume/native/registration.c",
         "soilvolume/native/build.py",
         "soilvolume/reporting/templates/base.html.j2",  # report.html's templates
         "soilvolume/reporting/templates/report.html.j2",

@@ -20,9 +20,7 @@ GENERIC = {"type", "tag", "user_data"}
 _FILE = frozenset({"filename", "default_srs"})
 #: each stage's function and options (docs/cli.md lists them)
 REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
-    "readers.las": (files.read_file, _FILE),
-    "readers.ply": (files.read_file, _FILE),
-    "readers.pcd": (files.read_file, _FILE),
+    **{f"readers.{name}": (files.read_file, _FILE) for name in ("las", "ply", "pcd")},
     "readers.text": (files.read_text, _FILE | {"header", "separator"}),
     "filters.reprojection": (filters.reproject, frozenset({"out_srs"})),
     "filters.crop": (filters.crop, frozenset({"polygon"})),
@@ -34,7 +32,7 @@ REGISTRY: dict[str, tuple[StageFn, frozenset[str]]] = {
 }
 
 
-def check_stage(stage: dict, source: str) -> tuple[StageFn, str]:
+def _checked(stage: dict, source: str) -> StageFn:
     """The function of a stage, or the error naming the stage or option that needs PDAL."""
     kind = stage.get("type")
     if kind not in REGISTRY:
@@ -49,23 +47,23 @@ def check_stage(stage: dict, source: str) -> tuple[StageFn, str]:
                 f"pipeline {source}: option '{name}' of {kind} needs PDAL (without the pdal Python "
                 f"bindings {kind} takes only {', '.join(sorted(allowed))})"
             )
-    return fn, kind
+    return fn
 
 
 def execute(stages: list[dict], source: str = "<pipeline>") -> PointView:
     """Run a linear pipeline (one reader first, then filters and writers in order), its stages and
     options checked as a loaded file's (:func:`soilvolume.pipelines.load.normalise`)."""
     stages = normalise(stages, source)
-    checked = [check_stage(s, source) for s in stages]
-    if [kind.startswith("readers.") for _, kind in checked].count(True) > 1:
+    fns = [_checked(s, source) for s in stages]
+    if sum(s["type"].startswith("readers.") for s in stages) > 1:
         raise SoilVolumeError(
             f"pipeline {source}: several readers need PDAL (the embedded executor runs exactly one "
             "reader, as the first stage)"
         )
     view: PointView | None = None
-    for stage, (fn, kind) in zip(stages, checked, strict=True):
-        view = fn(view, stage, StageContext(source, kind))
+    for stage, fn in zip(stages, fns, strict=True):
+        view = fn(view, stage, StageContext(source, stage["type"]))
     return view
 
 
-__all__ = ["REGISTRY", "PointView", "StageContext", "check_stage", "execute"]
+__all__ = ["REGISTRY", "PointView", "StageContext", "execute"]

@@ -68,8 +68,7 @@ def read_text(view: PointView | None, opts: dict, ctx: StageContext) -> PointVie
     """Delimited text as PDAL reads it: dimensions named by the first line (or 'header'), split by
     its first non-alphanumeric character (or 'separator'; a space: any whitespace)."""
     path = _path(opts, ctx)
-    header_line = opts.get("header")
-    skiprows = 0
+    header_line, skiprows = opts.get("header"), 0
     if header_line is None:
         with open(path, encoding="utf-8", errors="replace") as fh:
             header_line, skiprows = next(fh, ""), 1

@@ -101,10 +101,9 @@ def reproject(view: PointView, opts: dict, ctx: StageContext) -> PointView:
             tr = pyproj.Transformer.from_crs(src, dst, always_xy=True)
         except pyproj.exceptions.ProjError as exc:
             raise ctx.error(f"no transformation from {src.name} to {dst.name} ({exc})") from exc
-        x, y, z = tr.transform(view.arrays["X"], view.arrays["Y"], view.arrays["Z"], errcheck=False)
-        x, y, z = (np.asarray(a, dtype=np.float64) for a in (x, y, z))
-        ok = np.isfinite(x) & np.isfinite(y) & np.isfinite(z)
-        view.arrays["X"], view.arrays["Y"], view.arrays["Z"] = x, y, z
+        moved = tr.transform(*(view.arrays[d] for d in "XYZ"), errcheck=False)
+        view.arrays.update(zip("XYZ", (np.asarray(a, dtype=np.float64) for a in moved), strict=True))
+        ok = np.logical_and.reduce([np.isfinite(view.arrays[d]) for d in "XYZ"])
         if not ok.all():
             view = view.take(ok)
     view.srs_wkt = dst.to_wkt()
@@ -113,15 +112,13 @@ def reproject(view: PointView, opts: dict, ctx: StageContext) -> PointView:
 
 def _last_or_only(view: PointView, ctx: StageContext) -> np.ndarray:
     """The points SMRF classifies: last and single returns (all when the returns are not known)."""
-    n = len(view)
-    rn_key, nr_key = view.dim("ReturnNumber"), view.dim("NumberOfReturns")
-    if rn_key is None or nr_key is None:
-        return np.ones(n, dtype=bool)
-    rn = view.arrays[rn_key].astype(np.int64)
-    nr = view.arrays[nr_key].astype(np.int64)
+    keys = view.dim("ReturnNumber"), view.dim("NumberOfReturns")
+    if None in keys:
+        return np.ones(len(view), dtype=bool)
+    rn, nr = (view.arrays[key].astype(np.int64) for key in keys)
     zero = (rn == 0) | (nr == 0)
     if zero.all():
-        return np.ones(n, dtype=bool)
+        return np.ones(len(view), dtype=bool)
     if zero.any():
         raise ctx.error("some NumberOfReturns or ReturnNumber values are 0, but not all")
     return ((rn == nr) & (nr > 1)) | (nr == 1)
@@ -143,9 +140,8 @@ def smrf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
     use = _last_or_only(view, ctx)
     if not use.any():
         raise ctx.error("no returns to process")
-    idx = np.flatnonzero(use)
-    ground = smrf_classify(*(view.arrays[d][idx] for d in "XYZ"), **params)
-    cls[idx] = np.where(ground, 2, 1).astype(cls.dtype)
+    ground = smrf_classify(*(view.arrays[d][use] for d in "XYZ"), **params)
+    cls[use] = np.where(ground, 2, 1).astype(cls.dtype)
     return view
 
 
