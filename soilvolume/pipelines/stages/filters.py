@@ -152,7 +152,8 @@ def csf(view: PointView, opts: dict, ctx: StageContext) -> PointView:
         for key, value in DEFAULTS.items()
         if key != "smooth"
     }
-    params["smooth"] = bool(opts.get("smooth", DEFAULTS["smooth"]))
+    smooth = opts.get("smooth", DEFAULTS["smooth"])  # true or false, or their text as PDAL reads it
+    params["smooth"] = smooth if isinstance(smooth, bool) else str(smooth).lower() == "true"
     if params["rigidness"] not in (1, 2, 3):
         raise ctx.error("'rigidness' must be 1, 2 or 3")
     cls = view.ensure("Classification")
