@@ -9,7 +9,7 @@ import pyproj
 import pytest
 
 from soilvolume.core.types import GridSpec, SoilVolumeError
-from soilvolume.volumes.difference import budget
+from soilvolume.volumes.change import budget
 from soilvolume.volumes.zones import polygons_mask, zone_budgets
 
 UTM = pyproj.CRS.from_epsg(32654)

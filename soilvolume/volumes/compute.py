@@ -12,8 +12,8 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from . import coverage
+from .change import budget, refilled_budget, signed_budget, thresholded_volumes
 from .correct import Corrected, correct
-from .difference import budget, refilled_budget, signed_budget, thresholded_volumes
 from .holes.interpolate import fill
 from .interval import Interval, interval
 from .nonsoil import Areas, classify

@@ -12,9 +12,8 @@ import numpy as np
 from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..options import Options
-from .change import marginal_terms
+from .change import marginal_terms, signed_budget
 from .correct import Corrected
-from .difference import signed_budget
 from .holes.works import blind_change, outline_sigma
 from .nonsoil import Areas
 from .refill import Refill

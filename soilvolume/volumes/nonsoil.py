@@ -17,7 +17,7 @@ from ..dem.grid import EpochDEM
 from ..options import Options
 from ..soil.objects import Blob, find_objects
 from ..soil.rough import rough_cells, roughness
-from .change import change_areas
+from .change import change_areas, part_budget
 from .correct import Corrected
 from .refill import Refill
 from .results import Epochs
@@ -264,10 +264,3 @@ def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarra
 def labelled(e: EpochDEM) -> bool:
     """Whether a point rule labelled the epoch (or, without its rule, any point is not soil)."""
     return (e.rule is not None and e.rule.active) or bool(e.nonsoil().any())
-
-
-def part_budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
-    """Net, cut, fill (m3) and area (m2) of ``d`` over ``cells`` (NaN as 0)."""
-    v = np.where(cells, np.nan_to_num(d), 0.0)
-    fill, cut = float(v[v > 0].sum()) * cell_area, float(-v[v < 0].sum()) * cell_area
-    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(cells.sum()) * cell_area}

@@ -22,8 +22,7 @@ from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
-from .change import cell_lod, cell_sigma, change_areas, marginal_terms
-from .difference import signed_budget
+from .change import cell_lod, cell_sigma, change_areas, marginal_terms, signed_budget
 from .interval import pose_effect
 from .refill import refill_sigma
 from .results import Volumes

@@ -23,7 +23,7 @@ from ..inputs.heights import (
     window_over,
 )
 from ..inputs.surface import SurfaceSource as Dem
-from ..volumes.difference import budget
+from ..volumes.change import budget
 from ..volumes.zones import zone_budgets
 
 NO_CORRECTION = (

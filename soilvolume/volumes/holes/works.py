@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 import scipy
 
+from ..change import part_budget
 from ..results import Epochs
 from .interpolate import FOUR, enclosed_holes, fill
 from .testholes import error_by_radius
@@ -202,9 +203,8 @@ def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area
             items.append({**item, "survey": name})
     report = {"count": len(items), "area_m2": sum(i["area_m2"] for i in items), "bound_m3": bound, "items": items}
     once = change & seen_once
-    d = np.where(once, np.nan_to_num(diff), 0.0)
-    cut, fill = float(-d[d < 0].sum()) * cell_area, float(d[d > 0].sum()) * cell_area
-    report["interpolated"] = {"area_m2": float(once.sum()) * cell_area, "cut": cut, "fill": fill}
+    b = part_budget(diff, once, cell_area)
+    report["interpolated"] = {k: b[k] for k in ("area_m2", "cut", "fill")}
     return report
 
 
