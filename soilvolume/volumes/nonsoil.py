@@ -255,10 +255,10 @@ def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarra
     """Change on rough ground (fill: after's, cut: before's) where no signal labelled a point (they tell better)."""
     if any(labelled(e) for e in epochs):
         return np.zeros(fill.shape, bool)
-    out = []
-    for e, h in zip(epochs, heights, strict=True):
-        out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
-    return (fill & out[0]) | (cut & out[1])
+    after, before = (
+        rough_cells(roughness(e.spread, h, e.counts, cell), stable) for e, h in zip(epochs, heights, strict=True)
+    )
+    return (fill & after) | (cut & before)
 
 
 def labelled(e: EpochDEM) -> bool:
