@@ -181,17 +181,11 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
 
 def _shares(epochs: Epochs) -> dict[str, np.ndarray]:
     """Per class, the largest share of a cell's points (either epoch) that are of that class."""
-    out = {}
+    totals, out = [e.counts + e.nonsoil() for e in epochs], {}
     for name, attr in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
-        best = np.zeros(epochs[0].counts.shape)
-        for e in epochs:
-            part = getattr(e, attr)
-            if part is None:
-                continue
-            total = e.counts + e.nonsoil()
-            with np.errstate(invalid="ignore", divide="ignore"):
-                best = np.maximum(best, np.where(total > 0, part / np.maximum(total, 1), 0.0))
-        out[name] = best
+        parts = [(getattr(e, attr), t) for e, t in zip(epochs, totals, strict=True) if getattr(e, attr) is not None]
+        shares = [np.where(t > 0, part / np.maximum(t, 1), 0.0) for part, t in parts]  # never divides by 0
+        out[name] = np.maximum.reduce([np.zeros(epochs[0].counts.shape), *shares])
     return out
 
 

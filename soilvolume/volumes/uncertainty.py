@@ -121,10 +121,8 @@ def _beyond_area(diff, valid, stable, grid: GridSpec, fills: tuple, surface: boo
 
 def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
     """One-sigma volume (m3) per part of the cell statistic's bias: ``skews`` differenced, summed (not refilled)."""
-    d = np.zeros(refilled.shape)
-    for sign, sk in zip((1.0, -1.0), skews, strict=True):
-        if sk is not None:
-            d += sign * np.nan_to_num(sk)
+    signed = (sign * np.nan_to_num(sk) for sign, sk in zip((1.0, -1.0), skews, strict=True) if sk is not None)
+    d = sum(signed, np.zeros(refilled.shape))
     d[refilled] = 0.0
     return {k: abs(float(d[m].sum())) * cell_area for k, m in parts.items()}
 
