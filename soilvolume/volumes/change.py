@@ -19,8 +19,7 @@ _EIGHT = np.ones((3, 3), bool)
 
 def cell_sigma(spread: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Standard error (m) of each cell's height: spread / sqrt(points) (NaN where empty)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, spread / np.sqrt(np.maximum(counts, 1)), np.nan)
+    return np.where(counts > 0, spread / np.sqrt(np.maximum(counts, 1)), np.nan)
 
 
 def cell_lod(lod: float, se_a: np.ndarray, se_b: np.ndarray, z: float) -> np.ndarray:

@@ -47,9 +47,8 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
     bound = {k: v + hidden["bound_m3"][k] for k, v in ex["bound_m3"].items()}
-    counted = np.zeros(c.diff.shape, bool) if c.tile else None  # the error model over a caller's cells:
-    if c.tile:  # those a tile counts, its core; the overview has the bias
-        counted[c.core] = True
+    counted = np.zeros(c.diff.shape, bool)  # the error model over the cells counted: a tile's core
+    counted[c.core] = True  # (the overview has the bias)
     n_coef = 0 if c.tile else MODES[options.correction].coefficients
     run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=n_coef, bound_m3=bound)
     model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma), **run)

@@ -130,10 +130,8 @@ def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarr
 def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
     """A cell's LoD (m): :func:`_lod` of the stable residuals, at most twice the neighbour noise's."""
     r = diff[stable & np.isfinite(diff)]
-    lod = _lod(r, nmad(r), confidence) if r.size else None
-    noise = noise_sigma(diff)
-    cap = 2.0 * z_value(confidence) * noise if np.isfinite(noise) else None
-    known = [v for v in (lod, cap) if v is not None and np.isfinite(v)]
+    cap = 2.0 * z_value(confidence) * noise_sigma(diff)  # NaN with too few neighbours
+    known = [v for v in (_lod(r, nmad(r), confidence), cap) if v is not None and np.isfinite(v)]
     return float(min(known)) if known else 0.0
 
 
