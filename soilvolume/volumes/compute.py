@@ -38,9 +38,8 @@ def compute_volumes(
     (h_a, h_b), mask = s.heights, s.filled_mask  # dem_after.tif, dem_before.tif: refilled cells get the before's
     base = np.where(mask, s.f_b, h_b)  # refilled height and it plus the refilled difference
     gap = mask & ~np.isfinite(base)
-    if gap.any():
-        base = fill(base, gap & ~np.isfinite(h_a), options.fill_method)
-        base = np.where(gap & np.isfinite(h_a), h_a - c.filled, base)
+    base = fill(base, gap & ~np.isfinite(h_a), options.fill_method)
+    base = np.where(gap & np.isfinite(h_a), h_a - c.filled, base)
     grids = Grids(*s.heights, *layers, np.where(mask, base + c.filled, h_a), base)
     return Volumes(grids, *parts, c.params, iv.uncertainty, a.excluded, iv.blind)
 

@@ -101,11 +101,8 @@ def line(report: dict) -> str | None:
     cov = report.get("coverage")
     if not cov:
         return None
-    who = (
-        ("the design covers", "the design misses")
-        if (report.get("reference") or {}).get("kind") == "surface"
-        else ("both surveys cover", "the before survey misses")
-    )
+    surface = (report.get("reference") or {}).get("kind") == "surface"
+    who = ("the design covers", "the design misses") if surface else ("both surveys cover", "the before survey misses")
     text = f"coverage: {who[0]} {cov['compared_share']:.1%} of the after footprint"
     if cov["before_missing_m2"] > 0:
         text += f" ({who[1]} {cov['before_missing_m2']:,.0f} m2)"
