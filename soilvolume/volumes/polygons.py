@@ -57,12 +57,11 @@ def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple
         feats, wkt = _read(path)
     except Exception as exc:  # noqa: BLE001 - driver errors come in many types
         raise SoilVolumeError(f"{path}: cannot read {noun} from this {what} ({short_error(exc)})") from None
-    kept = [
+    return [
         (i, fid, props, g)
         for i, (fid, props, g) in enumerate(feats)
         if g is not None and g.geom_type in kinds and not g.is_empty
-    ]
-    return kept, wkt
+    ], wkt
 
 
 def feature_fields(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
@@ -79,9 +78,8 @@ def _read(path: Path):
         warnings.simplefilter("ignore")
         meta, fids, wkb, values = raw.read(str(path), return_fids=True)
         geoms = shapely.from_wkb(wkb) if wkb is not None else [None] * len(fids)
-    names = list(meta["fields"])
     feats = [
-        (int(fid), {n: v[k] for n, v in zip(names, values, strict=True)}, g)
+        (int(fid), {n: v[k] for n, v in zip(meta["fields"], values, strict=True)}, g)
         for k, (fid, g) in enumerate(zip(fids, geoms, strict=True))
     ]
     if not meta.get("crs"):
