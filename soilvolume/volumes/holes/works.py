@@ -95,15 +95,11 @@ def fill_own_holes(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(after, before, cells filled in their own survey, their one-sigma error m): ``hole`` cells the other sees change
     across filled, with ``weak`` cells beside them (see module)."""
-    out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
-    parts, m = scipy.ndimage.label(hole, FOUR)
+    out, (parts, m) = [h_a.copy(), h_b.copy()], scipy.ndimage.label(hole, FOUR)
     share = scipy.ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
-    if shared.any():
-        bulk, bulk_sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
-        own |= bulk
-        sigma[bulk] = bulk_sigma[bulk]
-        shared &= ~bulk
+    own, sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
+    shared &= ~own
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
         labels, n = scipy.ndimage.label(one, FOUR)
