@@ -23,7 +23,7 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import cell_lod, cell_sigma, change_areas, marginal_terms, signed_budget
-from .interval import pose_effect
+from .compute import pose_effect
 from .refill import refill_sigma
 from .results import Volumes
 from .uncertainty import detection_level, statistic_bias, volume_uncertainty, z_value
