@@ -1,5 +1,5 @@
-"""The volume step: five stages taking and returning frozen typed results, refill (:mod:`.refill`),
-correction (:mod:`.correct`), classification (:func:`.nonsoil.classify`), interval (:func:`interval`: the error
+"""The volume step: five stages taking and returning frozen typed results, refill and
+correction (:mod:`.refill`), classification (:func:`.nonsoil.classify`), interval (:func:`interval`: the error
 model over the counted change (:mod:`.uncertainty`), the terms beyond it by name and the bound of what no survey saw
 (:mod:`.holes.works`)) and budgets (:func:`budgets`), gathered in a :class:`Volumes`."""
 
@@ -17,11 +17,10 @@ from ..dem.grid import EpochDEM
 from ..options import Options
 from . import coverage
 from .change import budget, marginal_terms, refilled_budget, signed_budget, thresholded_volumes
-from .correct import Corrected, correct
 from .holes.interpolate import fill
 from .holes.works import blind_change, outline_sigma
 from .nonsoil import Areas, classify
-from .refill import Refill, centred_heights, refill
+from .refill import Corrected, Refill, centred_heights, correct, refill
 from .results import Budgets, Cells, Epochs, Given, Grids, Volumes
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
 from .zones import zone_budgets, zone_interval

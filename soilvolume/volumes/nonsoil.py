@@ -18,8 +18,7 @@ from ..options import Options
 from ..soil.objects import Blob, find_objects
 from ..soil.rough import rough_cells, roughness
 from .change import change_areas, part_budget
-from .correct import Corrected
-from .refill import Refill
+from .refill import Corrected, Refill
 from .results import Epochs
 
 SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
