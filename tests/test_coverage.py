@@ -73,4 +73,4 @@ def test_a_small_gap_at_quiet_ground_is_a_caution():
 def test_the_after_survey_beyond_the_grid():
     grid = GridSpec(xmin=0.0, ymax=10.0, cell=1.0, rows=10, cols=10)
     xy = np.array([[0.5, 5.0, 0], [12.5, 5.5, 0], [12.6, 5.4, 0], [14.5, 5.5, 0], [5.0, -3.5, 0]])
-    assert coverage.outside_m2(xy, grid) == 3.0  # three cells of the lattice beyond the grid
+    assert coverage.outside(xy, grid, None, None)[0] == 3.0  # three cells of the lattice beyond the grid

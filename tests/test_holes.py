@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from soilvolume.volumes.difference import refilled_budget as summary
+from soilvolume.volumes.change import refilled_budget as summary
 from soilvolume.volumes.holes import solve, testholes
 from soilvolume.volumes.holes.interpolate import (
     biharmonic_fill,

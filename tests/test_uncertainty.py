@@ -8,7 +8,7 @@ from scipy import ndimage
 
 from soilvolume.compensation.correction import apply
 from soilvolume.core.types import GridSpec
-from soilvolume.volumes.difference import thresholded_volumes
+from soilvolume.volumes.change import thresholded_volumes
 from soilvolume.volumes.uncertainty import (
     correlated_fraction,
     fit_spherical,
@@ -145,7 +145,7 @@ def test_interval_covers_true_net_in_at_least_18_of_20_pairs():
 
 def test_budgets_without_cut_say_zero_not_minus_zero():
     """A pile-only pair: the summary line reads "cut 0.00 m3", not "-0.00"."""
-    from soilvolume.volumes.difference import budget, signed_budget
+    from soilvolume.volumes.change import budget, signed_budget
 
     d = np.array([[1.0, 2.0], [0.5, np.nan]])
     assert f"{budget(d, 1.0)['cut']:.2f}" == "0.00"

@@ -9,7 +9,7 @@ import pyproj
 import pytest
 
 from soilvolume.core.types import GridSpec, SoilVolumeError
-from soilvolume.volumes.difference import budget
+from soilvolume.volumes.change import budget
 from soilvolume.volumes.zones import polygons_mask, zone_budgets
 
 UTM = pyproj.CRS.from_epsg(32654)
@@ -108,7 +108,7 @@ def test_the_reader_gives_the_zones_and_their_crs(tmp_path):
     from soilvolume.volumes import polygons
 
     path = _geojson(tmp_path / "z.geojson", [box(500010, 3900010, 500020, 3900030)], names=["pad"])
-    ((fid, props, geom), *rest), wkt = polygons._read(path)
+    ((_, fid, props, geom), *rest), wkt = polygons._features(path, "zones file", "polygons", polygons.POLYGONAL)
     assert not rest and props["name"] == "pad" and geom.area == pytest.approx(200.0) and "UTM zone 54N" in wkt
 
 

@@ -114,8 +114,7 @@ def nonsoil_lines(report: dict) -> list[str]:
 def _coverage(prep: Prepared, reg, grid: GridSpec, vols: Volumes) -> dict:
     """report.json's ``coverage`` (see :mod:`soilvolume.volumes.coverage`)."""
     after = transform_points(prep.after_thin, reg.transform)
-    beyond = coverage.outside_m2(after, grid)
-    outside = coverage.outside_change(after, grid, vols.dem_b, vols.offset) if beyond else None
+    beyond, outside = coverage.outside(after, grid, vols.dem_b, vols.offset)
     return coverage.summary(vols.coverage, grid.cell_area, beyond, vols.uncertainty["lod_m"], outside)
 
 

@@ -1,7 +1,8 @@
 """Change areas, cut and fill apart: patches of a few cells beyond their own level of detection
 (the stable LoD, raised where a cell's heights are uncertain; border cells, partly covered, never
 start one), each with a buffer of neighbours whatever their sign, which recovers the toes of piles
-and rims of pits (a buffer of one sign would select noise by its sign and bias cut and fill)."""
+and rims of pits (a buffer of one sign would select noise by its sign and bias cut and fill). The budgets of the
+paper's ``V = S_g * sum(H_after - H_before - d_i)``: fill (added, >= 0), cut (removed, >= 0), net = fill - cut."""
 
 from __future__ import annotations
 
@@ -18,8 +19,7 @@ _EIGHT = np.ones((3, 3), bool)
 
 def cell_sigma(spread: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """Standard error (m) of each cell's height: spread / sqrt(points) (NaN where empty)."""
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, spread / np.sqrt(np.maximum(counts, 1)), np.nan)
+    return np.where(counts > 0, spread / np.sqrt(np.maximum(counts, 1)), np.nan)
 
 
 def cell_lod(lod: float, se_a: np.ndarray, se_b: np.ndarray, z: float) -> np.ndarray:
@@ -74,3 +74,47 @@ def marginal_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod, cel
         out[key] = float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())
     out["net"] = float(np.hypot(out["fill"], out["cut"]))
     return out
+
+
+def fill_cut(d: np.ndarray, cell_area: float) -> dict[str, float]:
+    """Net, cut and fill (m3) of the finite differences ``d``."""
+    fill, cut = float(d[d > 0].sum()) * cell_area, float(-d[d < 0].sum()) * cell_area
+    return {"net": fill - cut, "cut": cut, "fill": fill}
+
+
+def part_budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
+    """Net, cut, fill (m3) and area (m2) of ``d`` over ``cells`` (NaN as 0)."""
+    return {**fill_cut(np.where(cells, np.nan_to_num(d), 0.0), cell_area), "area_m2": float(cells.sum()) * cell_area}
+
+
+def budget(diff: np.ndarray, cell_area: float, mask: np.ndarray | None = None) -> dict[str, float]:
+    """Cut, fill and net (m3) over the finite cells of ``diff`` (and ``mask`` when given)."""
+    ok = np.isfinite(diff) if mask is None else np.isfinite(diff) & mask
+    out = fill_cut(diff[ok], cell_area)  # + 0.0: no -0.0 cut
+    return {**out, "cut": out["cut"] + 0.0, "cells": int(ok.sum()), "area_m2": float(ok.sum() * cell_area)}
+
+
+def signed_budget(diff: np.ndarray, fill_area: np.ndarray, cut_area: np.ndarray, cell_area: float) -> dict:
+    """Fill over the fill areas, cut over the cut areas (m3), net = fill - cut."""
+    fill = float(np.nansum(np.where(fill_area, diff, 0.0)) * cell_area)
+    cut = float(-np.nansum(np.where(cut_area, diff, 0.0)) * cell_area) + 0.0
+    cells = int((fill_area | cut_area).sum())
+    return {"net": fill - cut, "cut": cut, "fill": fill, "cells": cells, "area_m2": cells * cell_area}
+
+
+def refilled_budget(diff: np.ndarray, filled_mask: np.ndarray, cell_area: float) -> dict:
+    """The refilled cells' count, area and net volume."""
+    d = np.where(filled_mask, diff, 0.0)
+    n = int(filled_mask.sum())
+    return {"filled_cells": n, "filled_area_m2": n * cell_area, "filled_net_m3": float(np.nansum(d) * cell_area)}
+
+
+def thresholded_volumes(
+    diff: np.ndarray, lod: float | np.ndarray, cell_area: float, min_cells: int = 1
+) -> dict[str, float]:
+    """Net, cut, fill (m^3) over cells with |d| >= ``lod``, without same-sign patches under ``min_cells`` (isolated
+    noise)."""
+    keep = np.isfinite(diff) & (np.abs(diff) >= lod)
+    if min_cells > 1:
+        keep = patches(keep & (diff > 0), min_cells) | patches(keep & (diff < 0), min_cells)
+    return {**fill_cut(np.where(keep, diff, 0.0), cell_area), "area_m2": float(keep.sum() * cell_area)}

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .change import fill_cut
+
 CAUTION_SHARE = 0.005  # unseen share of the after footprint that is named in the verdict
 MAX_SHARE = 0.05  # more than this unseen: not reliable, whatever its surroundings say
 RING = 3  # cells around a gap (or along the grid's edge) whose difference tells what it may hide
@@ -41,12 +43,6 @@ def combine(parts: list[dict]) -> dict:
         v = np.array([p[f"{key}_p95_m"] for p in parts], float)
         out[f"{key}_p95_m"] = float(np.sum(w * v) / w.sum()) if w.sum() > 0 else 0.0
     return out
-
-
-def outside_m2(after_thin: np.ndarray, grid) -> float:
-    """Area (m2) of the lattice's cells past the grid holding the after survey's registered ``after_thin`` columns."""
-    row, col, ok = grid.index(after_thin[:, :2])
-    return float(len(np.unique(np.c_[row[~ok], col[~ok]], axis=0)) * grid.cell_area)
 
 
 def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outside: dict | None = None) -> dict:
@@ -105,11 +101,8 @@ def line(report: dict) -> str | None:
     cov = report.get("coverage")
     if not cov:
         return None
-    who = (
-        ("the design covers", "the design misses")
-        if (report.get("reference") or {}).get("kind") == "surface"
-        else ("both surveys cover", "the before survey misses")
-    )
+    surface = (report.get("reference") or {}).get("kind") == "surface"
+    who = ("the design covers", "the design misses") if surface else ("both surveys cover", "the before survey misses")
     text = f"coverage: {who[0]} {cov['compared_share']:.1%} of the after footprint"
     if cov["before_missing_m2"] > 0:
         text += f" ({who[1]} {cov['before_missing_m2']:,.0f} m2)"
@@ -119,13 +112,14 @@ def line(report: dict) -> str | None:
 EDGE_FIT = 10  # cells along the grid's edge the before ground beyond it is carried on from
 
 
-def outside_change(after_reg: np.ndarray, grid, dem_b: np.ndarray, offset: np.ndarray) -> dict:
-    """Fill and cut (m3) of the after survey beyond the grid over the before ground carried on (a plane within
-    :data:`EDGE_FIT` of the edge)."""
-    none = {"fill_m3": 0.0, "cut_m3": 0.0}
+def outside(after_reg: np.ndarray, grid, dem_b: np.ndarray | None, offset: np.ndarray) -> tuple[float, dict]:
+    """(the area (m2) of the lattice's cells past the grid holding the after survey's registered points, their fill and
+    cut (m3) over the before ground carried on: a plane within :data:`EDGE_FIT` of the edge)."""
     row, col, ok = grid.index(after_reg[:, :2])
+    cells, inverse = np.unique(np.c_[row[~ok], col[~ok]], axis=0, return_inverse=True)
+    beyond, none = float(len(cells) * grid.cell_area), {"fill_m3": 0.0, "cut_m3": 0.0}
     if ok.all() or dem_b is None or dem_b.shape != (grid.rows, grid.cols):
-        return none
+        return beyond, none
     xs, ys = grid.centers_local()
     edge = np.zeros(dem_b.shape, bool)  # the sides the after survey runs past
     r, c = row[~ok], col[~ok]
@@ -134,13 +128,13 @@ def outside_change(after_reg: np.ndarray, grid, dem_b: np.ndarray, offset: np.nd
         edge[side] |= bool(past.any())
     use = edge & np.isfinite(dem_b)
     if use.sum() < 3:
-        return none
+        return beyond, none
     a = np.c_[xs[use], ys[use], np.ones(int(use.sum()))]
     plane, *_ = np.linalg.lstsq(a, dem_b[use], rcond=None)
     out = after_reg[~ok]
-    cells, inverse = np.unique(np.c_[row[~ok], col[~ok]], axis=0, return_inverse=True)
     n = np.bincount(inverse.ravel(), minlength=len(cells)).astype(float)
     mean = {k: np.bincount(inverse.ravel(), out[:, k], minlength=len(cells)) / n for k in range(3)}
     shift = float(np.nanmedian(offset)) if np.isfinite(offset).any() else 0.0
     d = mean[2] - (plane[0] * mean[0] + plane[1] * mean[1] + plane[2]) - shift
-    return {"fill_m3": float(d[d > 0].sum()) * grid.cell_area, "cut_m3": float(-d[d < 0].sum()) * grid.cell_area}
+    m3 = fill_cut(d, grid.cell_area)
+    return beyond, {"fill_m3": m3["fill"], "cut_m3": m3["cut"]}

@@ -16,9 +16,8 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from ..soil.objects import Blob, find_objects, rough_cells, roughness
-from .change import change_areas
-from .correct import Corrected
-from .refill import Refill
+from .change import change_areas, part_budget
+from .refill import Corrected, Refill
 from .results import Epochs
 
 SHARE = 1.0 / 3.0  # a cell belongs to a non-soil class when at least this share of its points is
@@ -180,17 +179,11 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
 
 def _shares(epochs: Epochs) -> dict[str, np.ndarray]:
     """Per class, the largest share of a cell's points (either epoch) that are of that class."""
-    out = {}
+    totals, out = [e.counts + e.nonsoil() for e in epochs], {}
     for name, attr in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
-        best = np.zeros(epochs[0].counts.shape)
-        for e in epochs:
-            part = getattr(e, attr)
-            if part is None:
-                continue
-            total = e.counts + e.nonsoil()
-            with np.errstate(invalid="ignore", divide="ignore"):
-                best = np.maximum(best, np.where(total > 0, part / np.maximum(total, 1), 0.0))
-        out[name] = best
+        parts = [(getattr(e, attr), t) for e, t in zip(epochs, totals, strict=True) if getattr(e, attr) is not None]
+        shares = [np.where(t > 0, part / np.maximum(t, 1), 0.0) for part, t in parts]  # never divides by 0
+        out[name] = np.maximum.reduce([np.zeros(epochs[0].counts.shape), *shares])
     return out
 
 
@@ -254,19 +247,12 @@ def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarra
     """Change on rough ground (fill: after's, cut: before's) where no signal labelled a point (they tell better)."""
     if any(labelled(e) for e in epochs):
         return np.zeros(fill.shape, bool)
-    out = []
-    for e, h in zip(epochs, heights, strict=True):
-        out.append(rough_cells(roughness(e.spread, h, e.counts, cell), stable))
-    return (fill & out[0]) | (cut & out[1])
+    after, before = (
+        rough_cells(roughness(e.spread, h, e.counts, cell), stable) for e, h in zip(epochs, heights, strict=True)
+    )
+    return (fill & after) | (cut & before)
 
 
 def labelled(e: EpochDEM) -> bool:
     """Whether a point rule labelled the epoch (or, without its rule, any point is not soil)."""
     return (e.rule is not None and e.rule.active) or bool(e.nonsoil().any())
-
-
-def part_budget(d: np.ndarray, cells: np.ndarray, cell_area: float) -> dict:
-    """Net, cut, fill (m3) and area (m2) of ``d`` over ``cells`` (NaN as 0)."""
-    v = np.where(cells, np.nan_to_num(d), 0.0)
-    fill, cut = float(v[v > 0].sum()) * cell_area, float(-v[v < 0].sum()) * cell_area
-    return {"net": fill - cut, "cut": cut, "fill": fill, "area_m2": float(cells.sum()) * cell_area}

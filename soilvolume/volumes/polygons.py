@@ -49,46 +49,29 @@ def _features(path: Path, what: str, noun: str, kinds: tuple[str, ...]) -> tuple
     if not (path.is_file() or path.is_dir()):  # a FIFO would block the reader for ever
         raise SoilVolumeError(f"{path}: not a regular file (a device or pipe)")
     try:
-        import pyogrio  # noqa: F401 - the reader
-        import shapely  # noqa: F401 - validity and repair
+        import pyproj  # the file's CRS
+        import shapely  # validity and repair
+        from pyogrio import raw  # the reader
     except ImportError as exc:
         raise SoilVolumeError(f"{path}: reading {noun} needs {exc.name} (pip install {exc.name})") from None
     try:
-        feats, wkt = _read(path)
+        with warnings.catch_warnings():  # GDAL's and GEOS's complaints about a broken file: the error says it
+            warnings.simplefilter("ignore")
+            meta, fids, wkb, values = raw.read(str(path), return_fids=True)
+            geoms = shapely.from_wkb(wkb) if wkb is not None else [None] * len(fids)
+        wkt = pyproj.CRS.from_user_input(meta["crs"]).to_wkt() if meta.get("crs") else None
     except Exception as exc:  # noqa: BLE001 - driver errors come in many types
         raise SoilVolumeError(f"{path}: cannot read {noun} from this {what} ({short_error(exc)})") from None
-    kept = [
-        (i, fid, props, g)
-        for i, (fid, props, g) in enumerate(feats)
+    return [
+        (i, int(fid), {n: v[i] for n, v in zip(meta["fields"], values, strict=True)}, g)
+        for i, (fid, g) in enumerate(zip(fids, geoms, strict=True))
         if g is not None and g.geom_type in kinds and not g.is_empty
-    ]
-    return kept, wkt
+    ], wkt
 
 
 def feature_fields(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
     """[(feature id, attributes)] of the polygon features of ``path`` (as :func:`read_polygons`)."""
     return [(fid, props) for _, fid, props, _ in _features(Path(path), "zones file", "polygons", POLYGONAL)[0]]
-
-
-def _read(path: Path):
-    """[(fid, properties, shapely geometry or None)], CRS WKT, read with pyogrio."""
-    import shapely
-    from pyogrio import raw
-
-    with warnings.catch_warnings():  # GDAL's and GEOS's complaints about a broken file: the error says it
-        warnings.simplefilter("ignore")
-        meta, fids, wkb, values = raw.read(str(path), return_fids=True)
-        geoms = shapely.from_wkb(wkb) if wkb is not None else [None] * len(fids)
-    names = list(meta["fields"])
-    feats = [
-        (int(fid), {n: v[k] for n, v in zip(names, values, strict=True)}, g)
-        for k, (fid, g) in enumerate(zip(fids, geoms, strict=True))
-    ]
-    if not meta.get("crs"):
-        return feats, None
-    import pyproj
-
-    return feats, pyproj.CRS.from_user_input(meta["crs"]).to_wkt()
 
 
 def _valid(p: Polygon, path: Path) -> Polygon:

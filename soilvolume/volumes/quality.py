@@ -36,8 +36,7 @@ def assess(report: dict, q: QualityInputs) -> dict:
     out += _blind(hidden, moved) + _canopy(excluded, moved) + _unclassified(excluded, v["net"], random_half)
     out += _nonsoil(excluded, random_half, u["net"])
     out += [("caution", m) for m in zone_messages(report.get("zones") or [])]
-    unseen = coverage_check(report)
-    out += [unseen] if unseen else []
+    out += filter(None, [coverage_check(report)])
     if all(sev != "unreliable" for sev, _ in out):  # a run not reliable states no confidence
         out += significance_check(v["net"], u["net"])
     return verdict(out)

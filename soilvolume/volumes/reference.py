@@ -72,19 +72,6 @@ def _sided(diff: np.ndarray, cells: dict[str, np.ndarray], cell_area: float, z: 
     return out
 
 
-def truncation(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
-    """The change below detection in the :data:`RING` around the areas, not counted (a graded pad crossing contours)."""
-    ring = {k: scipy.ndimage.binary_dilation(counted[k], iterations=RING) & ~counted["net"] for k, _ in _SIGNS}
-    return _sided(diff, {k: m & np.isfinite(diff) for k, m in ring.items()}, cell_area, z)
-
-
-def outline(diff: np.ndarray, counted: dict[str, np.ndarray], cell_area: float, z: float) -> dict:
-    """The change areas' cells on the compared area's outline, known to half a cell: half their volume."""
-    valid = np.isfinite(diff)
-    edge = valid & ~scipy.ndimage.binary_erosion(valid, border_value=0)
-    return _sided(diff, {k: edge & counted[k] for k, _ in _SIGNS}, cell_area, z, 0.5)
-
-
 def with_surface(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridSpec) -> Volumes:
     """The volume step's result with the surface's :data:`TERMS` (``sigma``: its per-cell error) in quadrature."""
     u, cut, change = vols.uncertainty, vols.cut_mask, vols.change_mask
@@ -97,8 +84,13 @@ def with_surface(vols: Volumes, sigma: np.ndarray, options: Options, grid: GridS
         terms["resampling"][key] = float(z * np.sqrt(np.sum(s * s)) * grid.cell_area)
         terms["given"][key] = float(z * options.design_uncertainty * area)
         terms["datum"][key] = float(z * datum * area)
-    terms["truncation"] = truncation(vols.diff, counted, grid.cell_area, z)
-    terms["outline"] = outline(vols.diff, counted, grid.cell_area, z)
+    # truncation: the change below detection in the RING around the areas, not counted (a graded pad crossing contours)
+    valid = np.isfinite(vols.diff)
+    ring = {k: scipy.ndimage.binary_dilation(counted[k], iterations=RING) & ~counted["net"] & valid for k, _ in _SIGNS}
+    terms["truncation"] = _sided(vols.diff, ring, grid.cell_area, z)
+    # outline: the change areas' cells on the compared area's outline, known to half a cell: half their volume
+    edge = valid & ~scipy.ndimage.binary_erosion(valid, border_value=0)
+    terms["outline"] = _sided(vols.diff, {k: edge & counted[k] for k, _ in _SIGNS}, grid.cell_area, z, 0.5)
     out = {**u, "reference_m3": terms}
     for key in ("net", "cut", "fill"):
         out[key] = float(np.linalg.norm([u[key], *(terms[part][key] for part in TERMS)]))

@@ -22,9 +22,8 @@ from ..compensation.correction import MODES
 from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
-from .change import cell_lod, cell_sigma, change_areas, marginal_terms
-from .difference import signed_budget
-from .interval import pose_effect
+from .change import cell_lod, cell_sigma, change_areas, marginal_terms, signed_budget
+from .compute import pose_effect
 from .refill import refill_sigma
 from .results import Volumes
 from .uncertainty import detection_level, statistic_bias, volume_uncertainty, z_value
@@ -54,7 +53,6 @@ class SeriesVolumes:
     works: np.ndarray
     periods: list[Change]
     cumulative: Change
-    works_m3: list[float]  # W_k: D_k summed over the works
 
 
 def combine(
@@ -76,11 +74,11 @@ def combine(
         lod_cell = cell_lod(detection_level(diff, stable, conf), se[i], se[j], z_value(conf))
         found[i, j] = (diff, change_areas(diff, lod_cell, refilled=refilled), lod_cell)
     works = np.logical_or.reduce([fill | cut for _, (fill, cut), _ in found.values()]) & valid
-    works_m3 = [math.fsum(d[works].tolist()) * grid.cell_area for d in to_e0]
+    works_m3 = [math.fsum(d[works].tolist()) * grid.cell_area for d in to_e0]  # W_k: D_k summed over the works
     run = (works, stable, refilled, grid, options)
     skews = [d.skew for d in dems]
     changes = [_period(i, j, *found[i, j], works_m3, pose[j] - pose[i], (skews[j], skews[i]), run) for i, j in pairs]
-    return SeriesVolumes(to_e0, valid, refilled, stable, works, changes[:-1], changes[-1], works_m3)
+    return SeriesVolumes(to_e0, valid, refilled, stable, works, changes[:-1], changes[-1])
 
 
 def _period(i: int, j: int, diff, areas: tuple, lod_cell, works_m3: list, pose, skews: tuple, run: tuple) -> Change:

@@ -121,10 +121,8 @@ def _beyond_area(diff, valid, stable, grid: GridSpec, fills: tuple, surface: boo
 
 def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarray], cell_area: float) -> dict:
     """One-sigma volume (m3) per part of the cell statistic's bias: ``skews`` differenced, summed (not refilled)."""
-    d = np.zeros(refilled.shape)
-    for sign, sk in zip((1.0, -1.0), skews, strict=True):
-        if sk is not None:
-            d += sign * np.nan_to_num(sk)
+    signed = (sign * np.nan_to_num(sk) for sign, sk in zip((1.0, -1.0), skews, strict=True) if sk is not None)
+    d = sum(signed, np.zeros(refilled.shape))
     d[refilled] = 0.0
     return {k: abs(float(d[m].sum())) * cell_area for k, m in parts.items()}
 
@@ -132,10 +130,8 @@ def statistic_bias(skews: tuple, refilled: np.ndarray, parts: dict[str, np.ndarr
 def detection_level(diff: np.ndarray, stable: np.ndarray, confidence: float = 0.95) -> float:
     """A cell's LoD (m): :func:`_lod` of the stable residuals, at most twice the neighbour noise's."""
     r = diff[stable & np.isfinite(diff)]
-    lod = _lod(r, nmad(r), confidence) if r.size else None
-    noise = noise_sigma(diff)
-    cap = 2.0 * z_value(confidence) * noise if np.isfinite(noise) else None
-    known = [v for v in (lod, cap) if v is not None and np.isfinite(v)]
+    cap = 2.0 * z_value(confidence) * noise_sigma(diff)  # NaN with too few neighbours
+    known = [v for v in (_lod(r, nmad(r), confidence), cap) if v is not None and np.isfinite(v)]
     return float(min(known)) if known else 0.0
 
 

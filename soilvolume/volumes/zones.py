@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..core.types import GridSpec, SoilVolumeError
-from .difference import budget, signed_budget
+from .change import budget, signed_budget
 from .polygons import Polygon, read_polygons, to_grid_crs
 from .uncertainty import TERMS, widen, z_value
 

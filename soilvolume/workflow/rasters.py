@@ -23,7 +23,7 @@ from ..inputs.heights import (
 )
 from ..inputs.io import check_two_surveys
 from ..inputs.surface import SurfaceSource as Dem
-from ..volumes.difference import budget
+from ..volumes.change import budget
 from ..volumes.zones import zone_budgets
 
 NO_CORRECTION = (

@@ -44,11 +44,7 @@ def error_by_radius(
     """:func:`fill_error` at radii 1, 2, 4 ... up to :data:`MAX_TEST_RADIUS`, interpolated in log radius at each
     ``radius`` (at least ``floor``): (radii, 2); None without room."""
     ladder = 2.0 ** np.arange(int(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS))) + 1)
-    rows = []
-    for r in ladder:
-        e = fill_error(h, usable, method, r, seed=seed)
-        if np.isfinite(e).all():
-            rows.append((r, *e))
+    rows = [(r, *e) for r in ladder if np.isfinite(e := fill_error(h, usable, method, r, seed=seed)).all()]
     if not rows:
         return None
     r_m, *e_m = np.log(np.maximum(np.array(rows), floor)).T

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 import scipy
 
+from ..change import part_budget
 from ..results import Epochs
 from .interpolate import FOUR, enclosed_holes, fill
 from .testholes import error_by_radius
@@ -94,15 +95,11 @@ def fill_own_holes(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(after, before, cells filled in their own survey, their one-sigma error m): ``hole`` cells the other sees change
     across filled, with ``weak`` cells beside them (see module)."""
-    out, own, sigma = [h_a.copy(), h_b.copy()], np.zeros(hole.shape, bool), np.zeros(hole.shape)
-    parts, m = scipy.ndimage.label(hole, FOUR)
+    out, (parts, m) = [h_a.copy(), h_b.copy()], scipy.ndimage.label(hole, FOUR)
     share = scipy.ndimage.mean(hole & ~np.isfinite(h_a) & ~np.isfinite(h_b), parts, np.arange(1, m + 1)) if m else []
     shared = np.r_[False, np.asarray(share) >= SHARED][parts]
-    if shared.any():
-        bulk, bulk_sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
-        own |= bulk
-        sigma[bulk] = bulk_sigma[bulk]
-        shared &= ~bulk
+    own, sigma = _bulk_holes(out, parts, np.unique(parts[shared]), seed, cell_area)
+    shared &= ~own
     for miss, seen in ((1, 0), (0, 1)):
         one = hole & ~shared & ~np.isfinite(out[miss]) & np.isfinite(out[seen])
         labels, n = scipy.ndimage.label(one, FOUR)
@@ -202,9 +199,8 @@ def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area
             items.append({**item, "survey": name})
     report = {"count": len(items), "area_m2": sum(i["area_m2"] for i in items), "bound_m3": bound, "items": items}
     once = change & seen_once
-    d = np.where(once, np.nan_to_num(diff), 0.0)
-    cut, fill = float(-d[d < 0].sum()) * cell_area, float(d[d > 0].sum()) * cell_area
-    report["interpolated"] = {"area_m2": float(once.sum()) * cell_area, "cut": cut, "fill": fill}
+    b = part_budget(diff, once, cell_area)
+    report["interpolated"] = {k: b[k] for k in ("area_m2", "cut", "fill")}
     return report
 
 
