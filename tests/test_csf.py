@@ -14,6 +14,7 @@ from soilvolume.api import estimate
 from soilvolume.inputs.smrf import csf_classify
 from soilvolume.options import Options
 from soilvolume.pipelines.pipeline import build_prepare_pipeline
+from soilvolume.pipelines.stages import execute, filters
 from soilvolume.scenes.synthetic import SceneConfig, write_pair_streaming
 
 
@@ -55,3 +56,19 @@ def test_pipeline_with_csf_stage():
     i = kinds.index("filters.csf")
     assert kinds[i + 1] == "filters.range" and stages[i + 1]["limits"] == "Classification[2:2]"
     assert stages[i]["resolution"] == 0.5 and stages[i]["rigidness"] == 2
+
+
+@pytest.mark.parametrize(("given", "smooth"), [(False, False), ("false", False), ("FALSE", False), ("true", True)])
+def test_csf_stage_reads_smooth_as_pdal_does(tmp_path, monkeypatch, given, smooth):
+    """``"smooth": "false"`` (text, which the loader accepts as PDAL does) turns smoothing off."""
+    f = tmp_path / "a.xyz"
+    f.write_text("X Y Z\n" + "".join(f"{x} {y} {0.01 * x}\n" for x in range(10) for y in range(10)))
+    seen = {}
+
+    def classify(x, y, z, **params):
+        seen.update(params)
+        return np.ones(len(x), bool)
+
+    monkeypatch.setattr(filters, "csf_classify", classify)
+    execute([{"type": "readers.text", "filename": str(f)}, {"type": "filters.csf", "smooth": given}])
+    assert seen["smooth"] is smooth
