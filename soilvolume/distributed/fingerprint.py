@@ -59,16 +59,10 @@ def number_options(options: Options) -> dict[str, Any]:
         if f.metadata.get("run_control"):
             continue
         value = getattr(options, f.name)
-        if (
-            f.name in FILE_OPTIONS and value
-        ):  # a vector file and its sidecars (a Shapefile's .dbf, .prj, ...), or a folder
+        if f.name in FILE_OPTIONS and value:  # a vector file and its sidecars (a Shapefile's .dbf, ...), or a folder
             path = Path(value)
-            files = (
-                sorted(path.iterdir())
-                if path.is_dir()
-                else sorted(p for p in path.parent.iterdir() if p.stem == path.stem)
-            )
-            value = {"path": str(value), "files": {p.name: file_identity(p) for p in files if p.is_file()}}
+            files = path.iterdir() if path.is_dir() else (p for p in path.parent.iterdir() if p.stem == path.stem)
+            value = {"path": str(value), "files": {p.name: file_identity(p) for p in sorted(files) if p.is_file()}}
         out[f.name] = value
     return out
 

@@ -163,9 +163,8 @@ def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: Offse
     """Flat cell ids (on the whole grid's cells) and heights of the points on the window; positions
     in their cells added to ``offsets`` (if any); ``keep_ids``: ids with their points' indices."""
     lib = native.kernels() if offsets is not None and not keep_ids and xyz32.dtype == np.float32 else None
-    if (
-        lib is not None
-    ):  # soil points on the kernel (sv_cells), bit for bit: the chunk's offsets summed from zero, then added
+    # soil points on the kernel (sv_cells), bit for bit: the chunk's offsets summed from zero, then added
+    if lib is not None:
         ids, z = np.empty(len(xyz32), np.int64), np.empty(len(xyz32), np.float64)
         sx, sy = np.zeros_like(offsets.sx), np.zeros_like(offsets.sy)
         m = native_cells(lib, xyz32, grid, win, ids, z, sx, sy)

@@ -41,11 +41,6 @@ BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "threshol
 PARTS = ("net", "cut", "fill", "net_compared_area")
 
 
-def halo(cell: float) -> int:
-    """Cells of context around a tile: ``HALO_CELLS``, or ``HALO_M`` metres on fine grids."""
-    return max(HALO_CELLS, int(np.ceil(HALO_M / cell)))
-
-
 @dataclass(frozen=True)
 class VolumeJob:
     """What a volume tile task needs (picklable)."""
@@ -68,7 +63,7 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     and uncertainty."""
     g = job.grid
     r0, r1, c0, c1 = win
-    h = halo(g.cell)
+    h = max(HALO_CELLS, int(np.ceil(HALO_M / g.cell)))  # HALO_CELLS, or HALO_M metres on fine grids
     ext = (max(0, r0 - h), min(g.rows, r1 + h), max(0, c0 - h), min(g.cols, c1 + h))
     a = [job.store.read(n, ext, fill=empty_value(n)) for n in TILE_ARRAYS]
     wgrid = g.window(*ext)
@@ -179,8 +174,9 @@ def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
     hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
     stats: dict = {}
     for _, blocks, hist in grid_stored(c, plan, store, hooks, stats, cache, k):
-        for e in range(2):
-            overview.add_blocks(sums[e], blocks[e])
+        for e, (b0, c0, part) in enumerate(blocks):  # one tile's block_sums into the overview's
+            for full, s in zip(sums[e], part, strict=True):
+                full[b0 : b0 + s.shape[0], c0 : c0 + s.shape[1]] += s
             hists[e] += hist[e]
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)

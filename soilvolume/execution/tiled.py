@@ -68,7 +68,7 @@ class Tiled:
             lambda: {"before": input_identity(paths[0]), "after": input_identity(paths[1])}, name="soilvolume-ids"
         )
         self.src_b, self.src_a = (open_source(e.path) for e in ctx.epochs)
-        direct = self.schedule.on_this_machine  # this machine's workers: sent straight to them
+        direct = self.schedule.kind != "tcp"  # this machine's workers: sent straight to them
         self.cache = PointCache(self.c, budget_gb(options.memory_limit), direct)
         self.cache.expect(near_after(self.src_b, self.src_a, options.radius))
         loader = dask_loader(self.c, lambda m: hooks.step(ctx.at("prepare", 0.46), m), checker(hooks), self.cache)
