@@ -41,6 +41,11 @@ BUDGETS = ("compensated", "all_cells", "uncompensated", "paper_plane", "threshol
 PARTS = ("net", "cut", "fill", "net_compared_area")
 
 
+def halo(cell: float) -> int:
+    """Cells of context around a tile: ``HALO_CELLS``, or ``HALO_M`` metres on fine grids."""
+    return max(HALO_CELLS, int(np.ceil(HALO_M / cell)))
+
+
 @dataclass(frozen=True)
 class VolumeJob:
     """What a volume tile task needs (picklable)."""
@@ -63,7 +68,7 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     and uncertainty."""
     g = job.grid
     r0, r1, c0, c1 = win
-    h = max(HALO_CELLS, int(np.ceil(HALO_M / g.cell)))  # HALO_CELLS, or HALO_M metres on fine grids
+    h = halo(g.cell)
     ext = (max(0, r0 - h), min(g.rows, r1 + h), max(0, c0 - h), min(g.cols, c1 + h))
     a = [job.store.read(n, ext, fill=empty_value(n)) for n in TILE_ARRAYS]
     wgrid = g.window(*ext)
