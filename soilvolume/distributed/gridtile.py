@@ -67,17 +67,14 @@ def crop_mask(plan: Plan) -> PolygonMask:
     return plan.mask or PolygonMask(plan.crop)
 
 
-def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Window, tuple[np.ndarray, ...], dict]:
-    """(window, arrays of :data:`TILE_ARRAYS`, stats: points read, seconds) of one tile;
+def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[dict[str, np.ndarray], dict]:
+    """({name of :data:`TILE_ARRAYS`: array}, stats: points read, seconds) of one tile;
     ``cached``: (before, after) {path: KeptTile} of VPC tiles in memory (:mod:`.pointcache`)."""
     t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
     before = _epoch(plan, 0, win, crop_mask(plan), stats, cached[0])
     after = _epoch(plan, 1, win, None, stats, cached[1])
     stats["seconds"] = time.perf_counter() - t0
-    arrays = tuple(
-        a.astype(np.int32) if k == "n" else a for e in (after, before) for k, a in zip(EPOCH_ARRAYS, e, strict=True)
-    )
-    return win, arrays, stats
+    return dict(zip(TILE_ARRAYS, (*after, *before), strict=True)), stats
 
 
 def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
@@ -117,9 +114,8 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
     if rule is not None:
         others = nonsoil_sums(_joined(o_ids, np.int32), _joined(o_lab, np.uint8), _joined(o_z, np.float32), shape)
     dem = finish_epoch(heights, offsets.means(heights[1], plan.grid.cell), others, rule)
-    zero = np.zeros(shape)
-    names = [f.name for f in fields(EpochDEM)][: len(EPOCH_ARRAYS)]
-    return tuple(zero if a is None else a for a in (getattr(dem, n) for n in names))
+    arrays = {n: getattr(dem, f.name) for n, f in zip(EPOCH_ARRAYS, fields(EpochDEM), strict=False)}  # field order
+    return [np.zeros(shape) if a is None else a.astype(np.int32) if n == "n" else a for n, a in arrays.items()]
 
 
 def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -129,14 +129,14 @@ def _edges(n: int, offset: int, side: int) -> list[int]:
 def grid_tile_stored(plan: Plan, win: Window, store: TileStore, k: int, cached: tuple = (None, None)) -> tuple:
     """:func:`.gridtile.grid_tile` kept in ``store``: (:func:`summary` of the tile (``k`` > 1) or its
     window, stats)."""
-    win, arrays, stats = grid_tile(plan, win, cached)
-    store.save(win, dict(zip(TILE_ARRAYS, arrays, strict=True)))
+    arrays, stats = grid_tile(plan, win, cached)
+    store.save(win, arrays)
     return (summary(win, arrays, k) if k > 1 else win), stats
 
 
-def summary(win: Window, arrays, k: int) -> tuple:
-    """(window, (after, before) block sums of the overview of ``k`` x ``k`` cells, their count histograms)."""
-    a = dict(zip(TILE_ARRAYS, arrays, strict=True))
+def summary(win: Window, a: dict, k: int) -> tuple:
+    """(window, (after, before) block sums of the overview of ``k`` x ``k`` cells, their count histograms);
+    ``a``: the tile's arrays by name."""
     blocks = tuple(overview.block_sums(win, k, a[f"h_{e}"], a[f"n_{e}"]) for e in "ab")
     return win, blocks, tuple(overview.count_histogram(a[f"n_{e}"]) for e in "ab")
 
@@ -149,7 +149,7 @@ def grid_stored(c, plan: Plan, store: TileStore, hooks: Hooks, stats: dict, cach
     stats.update(dict.fromkeys(STATS, 0), resumed=len(store.windows) - len(todo))
     for w in store.windows:
         if w not in todo:
-            yield summary(w, [store.load(n, w) for n in TILE_ARRAYS], k) if k > 1 else w
+            yield summary(w, {n: store.load(n, w) for n in TILE_ARRAYS}, k) if k > 1 else w
     if cache is not None:
         cache.sent()  # tiles the driver read while the cluster started
     per = None  # per window, the (before, after) {path: future} of the cached VPC tiles its reads open
