@@ -73,6 +73,13 @@ def median_from_histogram(hist: np.ndarray) -> float:
     return (lo + hi) / 2.0
 
 
+def add_blocks(target: tuple[np.ndarray, ...], part: tuple) -> None:
+    """Add one tile's :func:`block_sums` into the overview's (sum, valid, count) arrays."""
+    b0, c0, sums = part
+    for full, s in zip(target, sums, strict=True):
+        full[b0 : b0 + s.shape[0], c0 : c0 + s.shape[1]] += s
+
+
 def to_cells(values: np.ndarray, k: int, win, nearest: bool = False) -> np.ndarray:
     """An overview raster on the cells of window ``win``: bilinear between block centres (NaN
     blocks take their nearest finite block's value first), or ``nearest`` the block's value."""

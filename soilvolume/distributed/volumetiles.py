@@ -179,9 +179,8 @@ def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
     hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
     stats: dict = {}
     for _, blocks, hist in grid_stored(c, plan, store, hooks, stats, cache, k):
-        for e, (b0, c0, part) in enumerate(blocks):  # one tile's block_sums into the overview's
-            for full, s in zip(sums[e], part, strict=True):
-                full[b0 : b0 + s.shape[0], c0 : c0 + s.shape[1]] += s
+        for e in range(2):
+            overview.add_blocks(sums[e], blocks[e])
             hists[e] += hist[e]
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
