@@ -74,10 +74,10 @@ def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinne
         return got
 
     try:
-        points, used, cropped, read_s, _ = consume(items, work, None, None)
+        points, used, cropped, _, _ = consume(items, work, None, None)
     finally:
         kernel.close()
-    res = {"points": points, "used": used, "cropped": cropped, "index": [], "read_s": read_s}
+    res = {"points": points, "used": used, "cropped": cropped, "index": []}
     chunks = []  # each kept chunk's (local float32 xyz, labels or None): its soil points, then its others
     if keeping:
         soil, other, labels = (g.result() for g in out)

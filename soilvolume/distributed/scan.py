@@ -5,7 +5,6 @@ boxes: a drop-in for :func:`stream.load` keeping no full-resolution points, for 
 from __future__ import annotations
 
 import operator
-import time
 from collections.abc import Callable
 from dataclasses import replace
 from itertools import chain
@@ -59,10 +58,8 @@ def scan_unit(
     else:
         chunks = las_ranges(path, [(start, count)], CHUNK, signals=True)
     thinner = ColumnThinner(*thinning)
-    out = {"unit": tuple(unit), "points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
-    t0 = time.perf_counter()
+    out = {"unit": tuple(unit), "points": 0, "used": 0, "cropped": 0, "index": []}
     for xyz, cls, sig in chunks:
-        out["read_s"] += time.perf_counter() - t0
         if indexed and start is not None:  # a range of a single file: its chunks' boxes bound the grid's reads
             out["index"].append((start + out["points"], len(xyz), *bounds(xyz, 2)))
         out["points"] += len(xyz)
@@ -79,7 +76,6 @@ def scan_unit(
             local = rows(local, mask)
         thinner.add(local)
         out["cropped"] += len(local)
-        t0 = time.perf_counter()
     if resolution is not None:  # a thinned read: counts back to the survey's density
         scale = 1.0 / read_fraction(path, *(region if region is not None else (None, None)), resolution)
         thinner.sums *= scale  # centroids unchanged, counts scaled
