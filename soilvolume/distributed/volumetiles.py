@@ -97,9 +97,7 @@ def _sum_dicts(dicts: list[dict]) -> dict:
 
 
 def _zones(tiles: list[dict]) -> list[dict]:
-    if not tiles[0]["zones"]:
-        return []
-    out = []
+    out = []  # none when the run has no zones (each tile's list empty)
     for rows in zip(*(t["zones"] for t in tiles), strict=True):
         same = {k: rows[0][k] for k in ("polygon_area_m2", "repaired") if k in rows[0]}  # each tile's whole polygon
         out.append({"id": rows[0]["id"], "name": rows[0]["name"], **_sum_dicts(list(rows)), **same})
