@@ -27,7 +27,7 @@ NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no 
 
 
 def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kept: list | None) -> dict | None:
-    """The scan of the file ``path`` (counts, read seconds, the thinning ``sums`` as a
+    """The scan of the file ``path`` (counts, the thinning ``sums`` as a
     :class:`.thinning.Block`; each chunk's kept points and labels appended to ``kept``, a list),
     or None where the kernel does not apply: no library, a frame not a plain shift, a crop not a
     lattice, a COPC, empty or unreadable file. Thinned on the columns meeting its header's box

@@ -98,8 +98,7 @@ def dask_loader(
     points stream here); ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
 
     def loader(src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check, box, indexed, exclude) -> Loaded:
-        keeps_points = box is None or (box[1] >= box[0]).all()
-        if src.raw is not None or keeps_points:
+        if src.raw is not None or box is None or (box[1] >= box[0]).all():  # a read keeping the points
             return load(src, to_local, mode, keep, thinner, check, box, indexed, exclude)
         todo, ready = units(src), client.ready
         crop = None if keep is None else getattr(keep, "key", lambda: False)()  # False: not a lattice, not kept
