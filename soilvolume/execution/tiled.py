@@ -13,11 +13,10 @@ from ..dem.geotiff import grid_layout, write_cog
 from ..dem.grid import UINT8_LAYERS
 from ..distributed import overview
 from ..distributed.cluster import checker
-from ..distributed.fingerprint import input_identity, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
 from ..distributed.schedule import Schedule, budget_gb, client
-from ..distributed.tilestore import run_store
+from ..distributed.tilestore import input_identity, run_parts, run_store
 from ..distributed.tiletask import Plan, plan_parts, run_tiles, tile_windows, volume_factor
 from ..distributed.volumetiles import VolumeJob, grid_tiles, reader, tile_volumes
 from ..distributed.waiting import in_thread
