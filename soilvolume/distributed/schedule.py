@@ -230,12 +230,9 @@ def schedule_for(chosen: Schedule | None, before, after, options, pipeline: bool
     """The parsed ``--scheduler`` (``chosen``), or for ``auto`` (None) :func:`choose` by the LAS/COPC/VPC
     headers' points; pipelines and other formats in-process."""
     if chosen is None:
-        points = [
-            open_source(p).count if Path(p).suffix.lower() in LAS_SUFFIXES | {".vpc"} else None for p in (before, after)
-        ]
-        if pipeline or None in points:
+        if pipeline or any(Path(p).suffix.lower() not in LAS_SUFFIXES | {".vpc"} for p in (before, after)):
             return Schedule("none")
-        return choose(options.memory_limit, sum(points))
+        return choose(options.memory_limit, sum(open_source(p).count for p in (before, after)))
     if pipeline and not chosen.in_process:
         raise SoilVolumeError(
             f"{opt('scheduler', options.scheduler)}: preparation pipelines run in-process only "

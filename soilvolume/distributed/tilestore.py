@@ -176,10 +176,8 @@ def file_identity(path: str | os.PathLike) -> dict[str, Any]:
     p = Path(path)
     st = p.stat()
     step = (st.st_size - 2 * HEAD_BYTES) // (SAMPLES + 1)
-    samples = [(HEAD_BYTES + k * step, SAMPLE_BYTES) for k in range(1, SAMPLES + 1)]
-    spans = (
-        [(0, None)] if st.st_size <= WHOLE_BYTES else [(0, HEAD_BYTES), *samples, (st.st_size - HEAD_BYTES, HEAD_BYTES)]
-    )
+    spans = [(0, HEAD_BYTES), *((HEAD_BYTES + k * step, SAMPLE_BYTES) for k in range(1, SAMPLES + 1))]
+    spans = [*spans, (st.st_size - HEAD_BYTES, HEAD_BYTES)] if st.st_size > WHOLE_BYTES else [(0, None)]
     crc = 0
     with open(p, "rb") as f:
         for at, size in spans:

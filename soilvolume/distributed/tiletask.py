@@ -104,9 +104,7 @@ def plan_parts(plan: Plan, windows: list[Window], k: int) -> dict:
     return parts
 
 
-def tiles(
-    grid: GridSpec, side: int, align: float | None = None, corner: tuple[float, float] = (0.0, 0.0)
-) -> list[Window]:
+def tiles(grid: GridSpec, side: int, align: float | None = None, corner: tuple = (0.0, 0.0)) -> list[Window]:
     """The grid cut into ``side`` x ``side`` tiles (row-major); with ``align`` (m), edges on ``corner``
     (x, y) plus multiples of it (the input's tiling: one task per data tile), slivers merged."""
     r_off = c_off = 0
@@ -156,9 +154,8 @@ def grid_stored(c, plan: Plan, store: TileStore, hooks: Hooks, stats: dict, cach
     if cache is not None and cache.futures:
         crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
         per = [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in todo]
-    for part, task in map_tiles(
-        c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per
-    ):
+    tasks = map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per)
+    for part, task in tasks:
         for key in STATS:
             stats[key] += task[key]
         yield part
