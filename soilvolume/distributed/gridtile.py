@@ -120,7 +120,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
 
 def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(soil points, other points, their labels) of a chunk in order: slices when soil comes first
-    (as :mod:`.nativescan` keeps a tile), else a mask (a third of a task's time on 4 M points)."""
+    (as :func:`.scan.native_scan` keeps a tile), else a mask (a third of a task's time on 4 M points)."""
     soil = labels == 0
     k = int(np.count_nonzero(soil))
     if soil[:k].all():
