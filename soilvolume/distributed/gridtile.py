@@ -95,7 +95,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
     rule, (src, made) = plan.rules[epoch], _file_chunks(plan, epoch, win, keep, stats)
     if rule is None and plan.ground[epoch]:
         cached = None  # kept tiles hold every class: class 2 is chosen from the files' classes
-    o_ids, o_lab, o_z = [], [], []
+    o_ids, o_lab, o_z = [np.empty(0, np.int32)], [np.empty(0, np.uint8)], [np.empty(0, np.float32)]  # parts' dtypes
     for local, labels in chunks(src, cached, stats, made):
         if transform is not None:
             local = transform_points32(local, transform)
@@ -112,7 +112,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
     heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, full=True)
     others = None
     if rule is not None:
-        others = nonsoil_sums(_joined(o_ids, np.int32), _joined(o_lab, np.uint8), _joined(o_z, np.float32), shape)
+        others = nonsoil_sums(*(np.concatenate(parts) for parts in (o_ids, o_lab, o_z)), shape)
     dem = finish_epoch(heights, offsets.means(heights[1], plan.grid.cell), others, rule)
     arrays = {n: getattr(dem, f.name) for n, f in zip(EPOCH_ARRAYS, fields(EpochDEM), strict=False)}  # field order
     return [np.zeros(shape) if a is None else a.astype(np.int32) if n == "n" else a for n, a in arrays.items()]
@@ -149,10 +149,6 @@ def _file_chunks(plan: Plan, epoch: int, win: Window, keep, stats: dict) -> tupl
             yield kept_chunk(local, labels, None if keep is None else keep(local))
 
     return src, made
-
-
-def _joined(parts: list, dtype) -> np.ndarray:
-    return np.concatenate(parts) if parts else np.empty(0, dtype)
 
 
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums | None, keep_ids: bool = False):

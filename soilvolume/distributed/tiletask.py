@@ -59,10 +59,8 @@ def _shared(corners: np.ndarray) -> np.ndarray:
 
 def _mode(values: np.ndarray) -> int | None:
     """The most common of ``values`` (the smallest on ties), None when there are none."""
-    if len(values) == 0:
-        return None
     v, n = np.unique(values, return_counts=True)
-    return int(v[np.argmax(n)])
+    return int(v[np.argmax(n)]) if len(v) else None
 
 
 def tile_windows(options: Options, grid: GridSpec, prep, schedule: Schedule, src) -> tuple:
