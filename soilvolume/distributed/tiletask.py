@@ -150,14 +150,15 @@ def grid_stored(c, plan: Plan, store: TileStore, hooks: Hooks, stats: dict, cach
     for w in store.windows:
         if w not in todo:
             yield summary(w, {n: store.load(n, w) for n in TILE_ARRAYS}, k) if k > 1 else w
+    if stats["resumed"]:
+        hooks.step(55, f"resuming: {stats['resumed']} of {len(store.windows)} tiles done in an earlier run")
     if cache is not None:
         cache.sent()  # tiles the driver read while the cluster started
     per = None  # per window, the (before, after) {path: future} of the cached VPC tiles its reads open
     if cache is not None and cache.futures:
         crops = (crop_mask(plan).key(), None)  # the before is kept cropped, the after whole
         per = [tuple(cache.meeting(window_source(plan, e, w)[1], crops[e]) for e in (0, 1)) for w in todo]
-    tasks = map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, total=len(store.windows), per=per)
-    for part, task in tasks:
+    for part, task in map_tiles(c, grid_tile_stored, plan, todo, store, k, hooks=hooks, per=per):
         for key in STATS:
             stats[key] += task[key]
         yield part
@@ -173,15 +174,10 @@ def run_tiles(c, plan: Plan, hooks: Hooks, store: TileStore, stats=None, cache=N
     return epoch_dems(arrays, plan.rules)
 
 
-def map_tiles(
-    c, fn, shared, windows: list[Window], *args, hooks: Hooks, total: int = 0, steps=(55, 70, "gridded"), per=None
-):
+def map_tiles(c, fn, shared, windows: list[Window], *args, hooks: Hooks, steps=(55, 70, "gridded"), per=None):
     """``fn(shared, window, *args[, per[i]])`` for every window as Dask tasks on ``c`` (``shared``
     sent to the workers once), yielding results as tasks finish, progress from ``steps[0]`` to
-    ``steps[1]`` %. ``total``: the run's tiles, when an earlier run did those not in ``windows``;
-    ``per``: one more argument per window (futures in it resolved on the worker)."""
-    if len(windows) < total:
-        hooks.step(steps[0], f"resuming: {total - len(windows)} of {total} tiles done in an earlier run")
+    ``steps[1]`` %; ``per``: one more argument per window (futures in it resolved on the worker)."""
     if not windows:
         return
     n, (lo, hi, verb) = len(windows), steps
