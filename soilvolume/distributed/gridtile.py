@@ -189,5 +189,4 @@ def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.n
         r, t = transform[:3, :3], transform[:3, 3]
         corners = (corners - t) @ r
         margin += 0.02 * (x1 - x0 + y1 - y0) + 1.0  # tilt of the unknown z
-    lo, hi = corners[:, :2].min(axis=0) - margin + o[:2], corners[:, :2].max(axis=0) + margin + o[:2]
-    return lo, hi
+    return corners[:, :2].min(axis=0) - margin + o[:2], corners[:, :2].max(axis=0) + margin + o[:2]

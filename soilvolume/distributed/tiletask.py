@@ -168,8 +168,7 @@ def run_tiles(c, plan: Plan, hooks: Hooks, store: TileStore, stats=None, cache=N
     """(after, before) DEMs of the grid, read from ``store`` once every tile is there (:func:`grid_stored`)."""
     for _ in grid_stored(c, plan, store, hooks, {} if stats is None else stats, cache):
         pass
-    g = plan.grid
-    whole = (0, g.rows, 0, g.cols)
+    whole = (0, plan.grid.rows, 0, plan.grid.cols)
     arrays = [store.read(n, whole, empty_value(n), np.int64 if n[0] == "n" else float) for n in TILE_ARRAYS]
     return epoch_dems(arrays, plan.rules)
 
