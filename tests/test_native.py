@@ -421,10 +421,10 @@ def test_the_thinning_writes_a_fresh_column_before_reading_it(lib):
 @pytest.mark.parametrize("suffix", [".las", ".laz"])
 @pytest.mark.parametrize("rule", ["class", "colour", "none"])
 def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeypatch, suffix, rule, keeping):
-    """The first pass's scan of a VPC tile on the kernel (``distributed.nativescan``) gives numpy's
+    """The first pass's scan of a VPC tile on the kernel (``distributed.scan.native_scan``) gives numpy's
     thinning sums and counts bit for bit, and kept chunks of numpy's sizes whose soil points and
     other points (with their labels) are numpy's, each in order: what the grid takes apart."""
-    from soilvolume.distributed import nativescan, scan
+    from soilvolume.distributed import scan
     from soilvolume.inputs.crs import Shift
     from soilvolume.soil.points import PointRule
 
@@ -438,15 +438,14 @@ def test_a_tile_scanned_by_the_kernel_is_what_numpy_scans(lib, tmp_path, monkeyp
     path = tmp_path / f"t{suffix}"
     las.write(str(path))
     point_rule = {"class": PointRule(use_class=True), "colour": PointRule(green=0.05), "none": PointRule()}[rule]
-    for module in (scan, nativescan):
-        monkeypatch.setattr(module, "CHUNK", 2_000)  # five chunks
+    monkeypatch.setattr(scan, "CHUNK", 2_000)  # five chunks
     keep = PolygonMask(np.array([[-5.0, -5.0], [45.0, -5.0], [20.0, 25.0]]))
     thinning = (np.array([-11.0, -11.0]), np.array([60.0, 40.0]), 0.5, None)
     to_local = Shift(np.array([500_010.0, 3_900_010.0, 49.0]))
 
     run = _tile_scan(path, to_local, point_rule, keep, thinning, keeping)
     calls = []
-    monkeypatch.setattr(nativescan, "NativeChunks", lambda *a, f=nativescan.NativeChunks: calls.append(1) or f(*a))
+    monkeypatch.setattr(scan, "NativeChunks", lambda *a, f=scan.NativeChunks: calls.append(1) or f(*a))
     (kind, *a), (numpy_kind, *b) = _both(monkeypatch, run)
     assert a == b and len(calls) == 1  # the kernel scanned it, then numpy
     assert (kind, numpy_kind) == ("Block", "tuple")  # the kernel's on the tile's columns only
@@ -479,7 +478,7 @@ def _tile_scan(path, to_local, rule, keep, thinning: tuple, keeping: bool):
 def test_a_tile_with_points_off_its_header_box_is_thinned_on_all_columns(lib, tmp_path, monkeypatch):
     """The kernel's scan thins a tile on the columns its header's box meets: a point that missed
     them (a box too small) makes it scan the tile again on all of them, and it gives numpy's bits."""
-    from soilvolume.distributed import nativescan
+    from soilvolume.distributed import scan
     from soilvolume.inputs.crs import Shift
     from soilvolume.soil.points import PointRule
 
@@ -496,9 +495,9 @@ def test_a_tile_with_points_off_its_header_box_is_thinned_on_all_columns(lib, tm
     las.write(str(path))
     thinning = (np.array([-20.0, -20.0]), np.array([70.0, 50.0]), 0.5, None)
     half = lambda thinning, box: (*thinning[:3], (box[0], (box[0] + box[1]) / 2))  # noqa: E731
-    monkeypatch.setattr(nativescan, "narrowed", half)
+    monkeypatch.setattr(scan, "narrowed", half)
     calls = []
-    monkeypatch.setattr(nativescan, "NativeChunks", lambda *a, f=nativescan.NativeChunks: calls.append(1) or f(*a))
+    monkeypatch.setattr(scan, "NativeChunks", lambda *a, f=scan.NativeChunks: calls.append(1) or f(*a))
     run = _tile_scan(
         path, Shift(np.array([500_010.0, 3_900_010.0, 0.0])), PointRule(use_class=True), None, thinning, True
     )
@@ -509,7 +508,7 @@ def test_a_tile_with_points_off_its_header_box_is_thinned_on_all_columns(lib, tm
 
 def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):
     """A VPC tile without points: the kernel's scan steps aside and the numpy scan finds nothing."""
-    from soilvolume.distributed import nativescan, scan
+    from soilvolume.distributed import scan
     from soilvolume.inputs.crs import Shift
     from soilvolume.soil.points import PointRule
 
@@ -517,7 +516,7 @@ def test_an_empty_tile_is_left_to_the_numpy_scan(lib, tmp_path):
     laspy.LasData(laspy.LasHeader(point_format=6, version="1.4")).write(str(path))
     thinning, to_local = (np.zeros(2), np.full(2, 10.0), 0.5, None), Shift(np.zeros(3))
     rule, kept = PointRule(use_class=True), []
-    assert nativescan.native_scan(str(path), to_local, rule, None, thinning, []) is None
+    assert scan.native_scan(str(path), to_local, rule, None, thinning, []) is None
     got = scan.scan_unit((str(path), None, None), None, to_local, rule, None, thinning, False, None, kept)
     assert (got["points"], got["used"], got["cropped"], len(got["sums"][0]), kept) == (0, 0, 0, 0, [])
 

@@ -279,13 +279,13 @@ def _read(path) -> np.ma.MaskedArray:
 
 
 def test_overview_pieces():
-    from soilvolume.distributed import overview
+    from soilvolume.distributed import tiletask
 
     rng = np.random.default_rng(0)
     for n in (1, 2, 7, 10):
         counts = rng.integers(1, 40, n)
-        hist = overview.count_histogram(counts)
-        assert overview.median_from_histogram(hist) == np.median(counts)
+        hist = tiletask.count_histogram(counts)
+        assert tiletask.median_from_histogram(hist) == np.median(counts)
     grid = GridSpec(xmin=0.0, ymax=50.0, cell=1.0, rows=50, cols=45)
     h = rng.normal(size=(50, 45))
     h[rng.random(h.shape) < 0.2] = np.nan
@@ -293,8 +293,8 @@ def test_overview_pieces():
     k = 4
     sums = tuple(np.zeros((13, 12)) for _ in range(3))
     for win in tiles(grid, 16):
-        overview.add_blocks(
-            sums, overview.block_sums(win, k, h[win[0] : win[1], win[2] : win[3]], n[win[0] : win[1], win[2] : win[3]])
+        tiletask.add_blocks(
+            sums, tiletask.block_sums(win, k, h[win[0] : win[1], win[2] : win[3]], n[win[0] : win[1], win[2] : win[3]])
         )
     pad = np.full((52, 48), np.nan)
     pad[:50, :45] = h
@@ -302,7 +302,7 @@ def test_overview_pieces():
     np.testing.assert_allclose(sums[0], np.nansum(blocks, axis=(1, 3)))
     np.testing.assert_array_equal(sums[1], np.isfinite(blocks).sum(axis=(1, 3)))
     assert sums[2].sum() == n.sum()
-    up = overview.to_cells(np.arange(12.0)[None, :].repeat(13, 0), k, (0, 50, 0, 45))
+    up = tiletask.to_cells(np.arange(12.0)[None, :].repeat(13, 0), k, (0, 50, 0, 45))
     assert up.shape == (50, 45) and np.all(np.diff(up[0]) >= 0)
     from soilvolume.distributed.volumetiles import halo
 
@@ -350,7 +350,7 @@ def test_dense_data_tiles_are_not_snapped_to_past_the_memory_budget(pair, tmp_pa
 
 
 def test_overview_factor_from_budget_and_size():
-    from soilvolume.distributed import overview
+    from soilvolume.distributed import tiletask
     from soilvolume.distributed.tiletask import volume_factor
 
     small = GridSpec(xmin=0.0, ymax=0.0, cell=0.5, rows=1000, cols=1000)  # 1e6 cells: ~200 MB
@@ -359,8 +359,8 @@ def test_overview_factor_from_budget_and_size():
     assert volume_factor(Options(memory_limit=8.0, volume_step="tiles"), small) == 2
     assert volume_factor(Options(memory_limit=0.1, volume_step="whole"), small) == 1
     k = volume_factor(Options(memory_limit=8.0), huge)
-    assert k > 1 and huge.rows * huge.cols / k**2 <= overview.MAX_CELLS
-    assert overview.factor(huge, 8.0) <= k
+    assert k > 1 and huge.rows * huge.cols / k**2 <= tiletask.MAX_CELLS
+    assert tiletask.factor(huge, 8.0) <= k
 
 
 def _tile_array(name: str, shape: tuple[int, int], k: int, counts: np.ndarray) -> np.ndarray:

@@ -16,7 +16,7 @@ from test_robustness import WKT, _cloud
 
 from soilvolume.core.interrupt import Interrupted
 from soilvolume.core.types import GridSpec
-from soilvolume.distributed import fingerprint
+from soilvolume.distributed import tilestore
 from soilvolume.distributed.gridtile import Plan
 from soilvolume.distributed.tilestore import RunStore, run_store
 from soilvolume.distributed.tiletask import plan_parts
@@ -83,7 +83,7 @@ def _polygons(path, x0: float = 500000.0) -> str:
 
 
 def test_every_option_but_run_control_keys_the_tiles(tmp_path):
-    plain = fingerprint.number_options(Options())
+    plain = tilestore.number_options(Options())
     run_control = {f.name for f in fields(Options) if f.metadata["run_control"]}
     # contours and sections are drawn from the rasters written: they never change a tile's numbers
     assert run_control == {
@@ -101,17 +101,17 @@ def test_every_option_but_run_control_keys_the_tiles(tmp_path):
         else:
             assert f.name in OTHER, f"{f.name}: give it a value in OTHER"
             changed = Options(**{f.name: OTHER[f.name]})
-        differs = fingerprint.number_options(changed) != plain
+        differs = tilestore.number_options(changed) != plain
         assert differs != (f.name in run_control), f.name
 
 
 def test_a_changed_polygon_file_changes_the_key(tmp_path):
     path = _polygons(tmp_path / "z.geojson")
-    a = fingerprint.number_options(Options(zones=path))
+    a = tilestore.number_options(Options(zones=path))
     _polygons(tmp_path / "z.geojson", 500001.0)
-    b = fingerprint.number_options(Options(zones=path))
+    b = tilestore.number_options(Options(zones=path))
     assert a != b
-    why = fingerprint.difference({"options": a}, {"options": b, "inputs": {}, "code": None})
+    why = tilestore.difference({"options": a}, {"options": b, "inputs": {}, "code": None})
     assert why in ("the engine's code changed", "the --zones file z.geojson changed")
 
 
@@ -119,24 +119,24 @@ def test_the_identity_of_a_file_follows_its_content(tmp_path):
     path = tmp_path / "a.las"
     write_las(path, _cloud(30), WKT)
     st = path.stat()
-    first = fingerprint.file_identity(path)
+    first = tilestore.file_identity(path)
     data = bytearray(path.read_bytes())
     data[-5] ^= 0xFF  # one byte of a point, the size and the modification time kept
     path.write_bytes(bytes(data))
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
-    assert fingerprint.file_identity(path) != first
-    assert fingerprint.file_identity(path)["size"] == first["size"]
+    assert tilestore.file_identity(path) != first
+    assert tilestore.file_identity(path)["size"] == first["size"]
 
 
 def test_large_files_are_sampled_not_read_whole(tmp_path, monkeypatch):
-    monkeypatch.setattr(fingerprint, "WHOLE_BYTES", 1000)
+    monkeypatch.setattr(tilestore, "WHOLE_BYTES", 1000)
     path = tmp_path / "big.bin"
     body = bytearray(np.random.default_rng(0).integers(0, 255, 300_000, dtype=np.uint8).tobytes())
     path.write_bytes(bytes(body))
-    first = fingerprint.file_identity(path)
+    first = tilestore.file_identity(path)
     body[100] ^= 1  # in the head
     path.write_bytes(bytes(body))
-    assert fingerprint.file_identity(path)["hash"] != first["hash"]
+    assert tilestore.file_identity(path)["hash"] != first["hash"]
 
 
 def test_a_vpc_is_identified_by_its_tiles_too(tmp_path):
@@ -145,14 +145,14 @@ def test_a_vpc_is_identified_by_its_tiles_too(tmp_path):
         tiles.append(tmp_path / f"t{k}.laz")
         write_las(tiles[-1], _cloud(20, x0=500000.0 + 20 * k), WKT)
     vpc = write_vpc(tmp_path / "s.vpc", tiles)
-    first = fingerprint.input_identity(vpc)
+    first = tilestore.input_identity(vpc)
     assert set(first) == {str(vpc), *(str(t.resolve()) for t in tiles)}
     xyz = _cloud(20, x0=500020.0)
     xyz[:, 2] += 1.0
     write_las(tiles[1], xyz, WKT)  # the same box, other heights
-    again = fingerprint.input_identity(vpc)
+    again = tilestore.input_identity(vpc)
     assert again != first
-    why = fingerprint.difference({"code": "c", "inputs": {"before": first}}, {"code": "c", "inputs": {"before": again}})
+    why = tilestore.difference({"code": "c", "inputs": {"before": first}}, {"code": "c", "inputs": {"before": again}})
     assert why == "t1.laz changed (size, modification time or content)"
 
 
@@ -300,7 +300,7 @@ def _plan_parts(windows=((0, 40, 0, 40),), k: int = 1, **changed) -> dict:
         np.zeros((3, 2)),
         "mean",
     )
-    return fingerprint.run_parts({}, Options(), plan_parts(replace(plan, **changed), list(windows), k))
+    return tilestore.run_parts({}, Options(), plan_parts(replace(plan, **changed), list(windows), k))
 
 
 def test_every_field_of_the_tile_plan_keys_the_tiles():
@@ -330,6 +330,6 @@ def test_every_field_of_the_tile_plan_keys_the_tiles():
             continue
         assert f.name in other, f"{f.name}: give it a value in `other`"
         changed = _plan_parts(**{f.name: other[f.name]})
-        assert fingerprint.difference(plain, changed) == "the registration, grid or tiling differs", f.name
+        assert tilestore.difference(plain, changed) == "the registration, grid or tiling differs", f.name
     for other_cut in (_plan_parts(windows=((0, 20, 0, 40), (20, 40, 0, 40))), _plan_parts(k=2)):
-        assert fingerprint.difference(plain, other_cut) == "the registration, grid or tiling differs"
+        assert tilestore.difference(plain, other_cut) == "the registration, grid or tiling differs"

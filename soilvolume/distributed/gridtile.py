@@ -67,17 +67,14 @@ def crop_mask(plan: Plan) -> PolygonMask:
     return plan.mask or PolygonMask(plan.crop)
 
 
-def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[Window, tuple[np.ndarray, ...], dict]:
-    """(window, arrays of :data:`TILE_ARRAYS`, stats: points read, seconds) of one tile;
+def grid_tile(plan: Plan, win: Window, cached: tuple = (None, None)) -> tuple[dict[str, np.ndarray], dict]:
+    """({name of :data:`TILE_ARRAYS`: array}, stats: points read, seconds) of one tile;
     ``cached``: (before, after) {path: KeptTile} of VPC tiles in memory (:mod:`.pointcache`)."""
     t0, stats = time.perf_counter(), {"read": 0, "cached": 0}
     before = _epoch(plan, 0, win, crop_mask(plan), stats, cached[0])
     after = _epoch(plan, 1, win, None, stats, cached[1])
     stats["seconds"] = time.perf_counter() - t0
-    arrays = tuple(
-        a.astype(np.int32) if k == "n" else a for e in (after, before) for k, a in zip(EPOCH_ARRAYS, e, strict=True)
-    )
-    return win, arrays, stats
+    return dict(zip(TILE_ARRAYS, (*after, *before), strict=True)), stats
 
 
 def window_source(plan: Plan, epoch: int, win: Window) -> tuple:
@@ -98,7 +95,7 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
     rule, (src, made) = plan.rules[epoch], _file_chunks(plan, epoch, win, keep, stats)
     if rule is None and plan.ground[epoch]:
         cached = None  # kept tiles hold every class: class 2 is chosen from the files' classes
-    o_ids, o_lab, o_z = [], [], []
+    o_ids, o_lab, o_z = [np.empty(0, np.int32)], [np.empty(0, np.uint8)], [np.empty(0, np.float32)]  # parts' dtypes
     for local, labels in chunks(src, cached, stats, made):
         if transform is not None:
             local = transform_points32(local, transform)
@@ -115,16 +112,15 @@ def _epoch(plan: Plan, epoch: int, win: Window, keep, stats: dict, cached: dict 
     heights = cell_heights(np.concatenate(ids), z, shape, plan.statistic, full=True)
     others = None
     if rule is not None:
-        others = nonsoil_sums(_joined(o_ids, np.int32), _joined(o_lab, np.uint8), _joined(o_z, np.float32), shape)
+        others = nonsoil_sums(*(np.concatenate(parts) for parts in (o_ids, o_lab, o_z)), shape)
     dem = finish_epoch(heights, offsets.means(heights[1], plan.grid.cell), others, rule)
-    zero = np.zeros(shape)
-    names = [f.name for f in fields(EpochDEM)][: len(EPOCH_ARRAYS)]
-    return tuple(zero if a is None else a for a in (getattr(dem, n) for n in names))
+    arrays = {n: getattr(dem, f.name) for n, f in zip(EPOCH_ARRAYS, fields(EpochDEM), strict=False)}  # field order
+    return [np.zeros(shape) if a is None else a.astype(np.int32) if n == "n" else a for n, a in arrays.items()]
 
 
 def _soil_apart(local: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(soil points, other points, their labels) of a chunk in order: slices when soil comes first
-    (as :mod:`.nativescan` keeps a tile), else a mask (a third of a task's time on 4 M points)."""
+    (as :func:`.scan.native_scan` keeps a tile), else a mask (a third of a task's time on 4 M points)."""
     soil = labels == 0
     k = int(np.count_nonzero(soil))
     if soil[:k].all():
@@ -155,17 +151,12 @@ def _file_chunks(plan: Plan, epoch: int, win: Window, keep, stats: dict) -> tupl
     return src, made
 
 
-def _joined(parts: list, dtype) -> np.ndarray:
-    return np.concatenate(parts) if parts else np.empty(0, dtype)
-
-
 def _window_cells(xyz32: np.ndarray, grid: GridSpec, win: Window, offsets: OffsetSums | None, keep_ids: bool = False):
     """Flat cell ids (on the whole grid's cells) and heights of the points on the window; positions
     in their cells added to ``offsets`` (if any); ``keep_ids``: ids with their points' indices."""
     lib = native.kernels() if offsets is not None and not keep_ids and xyz32.dtype == np.float32 else None
-    if (
-        lib is not None
-    ):  # soil points on the kernel (sv_cells), bit for bit: the chunk's offsets summed from zero, then added
+    # soil points on the kernel (sv_cells), bit for bit: the chunk's offsets summed from zero, then added
+    if lib is not None:
         ids, z = np.empty(len(xyz32), np.int64), np.empty(len(xyz32), np.float64)
         sx, sy = np.zeros_like(offsets.sx), np.zeros_like(offsets.sy)
         m = native_cells(lib, xyz32, grid, win, ids, z, sx, sy)
@@ -198,5 +189,4 @@ def _read_box(plan: Plan, crs, win: Window, transform) -> tuple[np.ndarray, np.n
         r, t = transform[:3, :3], transform[:3, 3]
         corners = (corners - t) @ r
         margin += 0.02 * (x1 - x0 + y1 - y0) + 1.0  # tilt of the unknown z
-    lo, hi = corners[:, :2].min(axis=0) - margin + o[:2], corners[:, :2].max(axis=0) + margin + o[:2]
-    return lo, hi
+    return corners[:, :2].min(axis=0) - margin + o[:2], corners[:, :2].max(axis=0) + margin + o[:2]

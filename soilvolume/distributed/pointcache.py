@@ -139,9 +139,7 @@ class PointCache:
                 interrupt.check()
                 if time.monotonic() > deadline:
                     raise SoilVolumeError(f"the Dask workers did not receive the tiles read here within {SEND_S:.0f} s")
-            failed = sending.exception()
-            if isinstance(failed, SoilVolumeError):
-                raise failed
+            failed = sending.exception()  # the scatter's (the client was resolved in the driver: send_held)
             if failed is not None:
                 raise SoilVolumeError(f"sending the tiles read here to the Dask workers failed ({short_error(failed)})")
 

@@ -1,23 +1,33 @@
 """The tiled engine's first pass as Dask tasks, each streaming one unit of a source (a range of a
 LAS/LAZ file's points, or a VPC tile) and returning its column-thinning sums, counts and chunk
-boxes: a drop-in for :func:`stream.load` keeping no full-resolution points, for :func:`prepare.prepare`."""
+boxes: a drop-in for :func:`stream.load` keeping no full-resolution points, for :func:`prepare.prepare`.
+
+A whole LAS/LAZ file is scanned on the native chunk kernel (:class:`~soilvolume.inputs.chunkwork.NativeChunks`,
+as :func:`stream.load` streams one): decode, crop, labels, thinning and the points kept for the grid in one
+pass, without the GIL (the driver scans tiles while the cluster starts; its imports share the cores): numpy's
+sums and counts, the same kept chunks (one per ``CHUNK`` points) with soil points first, then the others,
+each in file order: the grid takes them apart (:func:`.gridtile._epoch`), its sums byte-identical."""
 
 from __future__ import annotations
 
 import operator
-import time
 from collections.abc import Callable
 from dataclasses import replace
-from itertools import chain
+from itertools import chain, pairwise
+from pathlib import Path
 
 import numpy as np
 
+from .. import native
 from ..core.cells import bounds, rows
+from ..core.types import SoilVolumeError
+from ..inputs import stream
+from ..inputs.chunkwork import Growing, NativeChunks, consume, native_work
 from ..inputs.lasread import is_copc, read_fraction
-from ..inputs.stream import CHUNK, ColumnThinner, Loaded, Source, epoch_rule, file_chunks, las_ranges, load
-from ..inputs.thinning import Block
+from ..inputs.records import FileChunk, las_records
+from ..inputs.stream import CHUNK, Loaded, Source, epoch_rule, file_chunks, file_kernel, las_ranges, load, native_reads
+from ..inputs.thinning import Block, ColumnThinner, narrowed
 from ..soil.points import SOIL, NonSoil, PointRule
-from .nativescan import native_scan
 from .pointcache import KeptTile, kept_chunk, read_tile
 from .waiting import completed
 
@@ -26,7 +36,7 @@ UNIT = 8_000_000  # points per task of a single file
 # this many points squared in a registration column (a column centroid of ~16 points instead of
 # all of them: ~4x less noise than one point, a fraction of the reading)
 COPC_POINTS_PER_COLUMN_SIDE = 4.0
-
+NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no points kept
 Unit = tuple[str, int | None, int | None]  # path, first point, point count (None: the whole file)
 
 
@@ -59,10 +69,8 @@ def scan_unit(
     else:
         chunks = las_ranges(path, [(start, count)], CHUNK, signals=True)
     thinner = ColumnThinner(*thinning)
-    out = {"unit": tuple(unit), "points": 0, "used": 0, "cropped": 0, "index": [], "read_s": 0.0}
-    t0 = time.perf_counter()
+    out = {"unit": tuple(unit), "points": 0, "used": 0, "cropped": 0, "index": []}
     for xyz, cls, sig in chunks:
-        out["read_s"] += time.perf_counter() - t0
         if indexed and start is not None:  # a range of a single file: its chunks' boxes bound the grid's reads
             out["index"].append((start + out["points"], len(xyz), *bounds(xyz, 2)))
         out["points"] += len(xyz)
@@ -79,7 +87,6 @@ def scan_unit(
             local = rows(local, mask)
         thinner.add(local)
         out["cropped"] += len(local)
-        t0 = time.perf_counter()
     if resolution is not None:  # a thinned read: counts back to the survey's density
         scale = 1.0 / read_fraction(path, *(region if region is not None else (None, None)), resolution)
         thinner.sums *= scale  # centroids unchanged, counts scaled
@@ -102,8 +109,7 @@ def dask_loader(
     points stream here); ``wait_check`` runs while waiting; ``cache``: a :class:`.pointcache.PointCache`."""
 
     def loader(src: Source, to_local, mode: str, keep, thinner: ColumnThinner, check, box, indexed, exclude) -> Loaded:
-        keeps_points = box is None or (box[1] >= box[0]).all()
-        if src.raw is not None or keeps_points:
+        if src.raw is not None or box is None or (box[1] >= box[0]).all():  # a read keeping the points
             return load(src, to_local, mode, keep, thinner, check, box, indexed, exclude)
         todo, ready = units(src), client.ready
         crop = None if keep is None else getattr(keep, "key", lambda: False)()  # False: not a lattice, not kept
@@ -214,3 +220,64 @@ def _scan_here(src: Source, todo: list[Unit], args: tuple, kept: tuple, ready: C
         todo = todo[1:]
         check()
     return parts, todo
+
+
+def native_scan(path: str, to_local, rule: PointRule, keep, thinning: tuple, kept: list | None) -> dict | None:
+    """The scan of the file ``path`` (counts, the thinning ``sums`` as a
+    :class:`.thinning.Block`; each chunk's kept points and labels appended to ``kept``, a list),
+    or None where the kernel does not apply: no library, a frame not a plain shift, a crop not a
+    lattice, a COPC, empty or unreadable file. Thinned on the columns meeting its header's box
+    (points outside fail the reader's bounds check), not the epoch's, zeroed and swept per tile;
+    if a point missed them, scanned again on all (its sums those of its columns with points)."""
+    if is_copc(path):
+        return None
+    try:
+        src = stream.open_source(path)
+    except SoilVolumeError:  # an empty or unreadable tile: the numpy scan says what it says of it
+        return None
+    if src.raw is not None or not native_reads(src, to_local, keep):
+        return None
+    pad = thinning[2]  # a column: the lattice adds one more on each side
+    box = (src.lo[:2] - to_local.origin[:2] - pad, src.hi[:2] - to_local.origin[:2] + pad)
+    tile = ColumnThinner(*narrowed(thinning, box))
+    res, thinner, chunks = _scan(src, path, to_local, rule, keep, tile, kept is not None)
+    if float(thinner.sums[3].sum()) == res["cropped"]:
+        res["sums"] = thinner.block()
+    else:  # a point off the header's box: on all the columns, the sums of those with points
+        res, thinner, chunks = _scan(src, path, to_local, rule, keep, ColumnThinner(*thinning), kept is not None)
+        res["sums"] = thinner.occupied()
+    if kept is not None:
+        kept.extend(chunks)
+    return res
+
+
+def _scan(src, path: str, to_local, rule: PointRule, keep, thinner: ColumnThinner, keeping: bool) -> tuple:
+    """(the scan's counts, ``thinner`` fed, each chunk's kept points and labels if ``keeping``)."""
+    out = Growing(src.count if keeping else 0), Growing(0), Growing(0, None, np.uint8)
+    kernel = NativeChunks(native.kernels(), thinner, keep, None if keeping else NOTHING, to_local.origin, CHUNK)
+    direct = (lambda has_class: rule.class_table(has_class)) if file_kernel() else None
+    records = las_records(Path(path), src.count, CHUNK, lambda _cls: rule.signal_dims, direct=direct)
+    items = ((rec, None if isinstance(rec, FileChunk) else rule.labels(cls, sig), rule) for rec, cls, sig in records)
+    ends, labelled = [], False
+
+    def work(item: tuple) -> tuple:
+        nonlocal labelled
+        rec, labels, _ = item
+        labelled = labelled or labels is not None or (isinstance(rec, FileChunk) and rec.table is not None)
+        got = native_work(kernel, item, out)
+        if rec.flush:  # the end of a chunk of CHUNK points: of a kept chunk
+            ends.append((out[0].n, out[1].n))
+        return got
+
+    try:
+        points, used, cropped, _, _ = consume(items, work, None, None)
+    finally:
+        kernel.close()
+    res = {"points": points, "used": used, "cropped": cropped, "index": []}
+    chunks = []  # each kept chunk's (local float32 xyz, labels or None): its soil points, then its others
+    if keeping:
+        soil, other, labels = (g.result() for g in out)
+        for (a0, b0), (a1, b1) in pairwise([(0, 0), *ends]):
+            lab = np.concatenate([np.zeros(a1 - a0, np.uint8), labels[b0:b1]]) if labelled else None
+            chunks.append((np.concatenate([soil[a0:a1], other[b0:b1]]), lab))
+    return res, thinner, chunks

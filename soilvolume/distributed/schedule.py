@@ -10,6 +10,7 @@ import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Literal
 
@@ -48,11 +49,6 @@ class Schedule:
     def in_process(self) -> bool:
         """Whether the run keeps whole clouds in this process (``none``): no tiles, no cluster."""
         return self.kind == "none"
-
-    @property
-    def on_this_machine(self) -> bool:
-        """Whether its workers run on this machine (all but an existing cluster, tcp)."""
-        return self.kind != "tcp"
 
     def __str__(self) -> str:
         return {"none": "none", "tcp": str(self.address)}.get(self.kind, f"{self.kind}:{self.workers}")
@@ -204,8 +200,8 @@ def client(schedule: Schedule, memory_limit: float, scratch: Path) -> Iterator[S
     """A :class:`cluster.Starting` of the Dask client of ``schedule`` (a LocalCluster's workers share
     the budget, their scratch space in ``scratch``), shut on exit."""
     check_local(schedule, memory_limit)
-    start = lambda: _start(schedule, memory_limit, scratch)  # noqa: E731
-    starting = Starting(start, str(schedule), START_S[schedule.kind], schedule.on_this_machine)
+    start = partial(_start, schedule, memory_limit, scratch)
+    starting = Starting(start, str(schedule), START_S[schedule.kind], here=schedule.kind != "tcp")
     try:
         yield starting
     finally:
@@ -234,12 +230,9 @@ def schedule_for(chosen: Schedule | None, before, after, options, pipeline: bool
     """The parsed ``--scheduler`` (``chosen``), or for ``auto`` (None) :func:`choose` by the LAS/COPC/VPC
     headers' points; pipelines and other formats in-process."""
     if chosen is None:
-        points = [
-            open_source(p).count if Path(p).suffix.lower() in LAS_SUFFIXES | {".vpc"} else None for p in (before, after)
-        ]
-        if pipeline or None in points:
+        if pipeline or any(Path(p).suffix.lower() not in LAS_SUFFIXES | {".vpc"} for p in (before, after)):
             return Schedule("none")
-        return choose(options.memory_limit, sum(points))
+        return choose(options.memory_limit, sum(open_source(p).count for p in (before, after)))
     if pipeline and not chosen.in_process:
         raise SoilVolumeError(
             f"{opt('scheduler', options.scheduler)}: preparation pipelines run in-process only "

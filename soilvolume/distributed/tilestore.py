@@ -2,13 +2,18 @@
 after an interruption.
 
 :class:`TileStore`: one ``.npy`` file per array and tile, named with the run's key
-(:mod:`fingerprint`), written atomically, read back as any window of the grid (memory-mapped).
+(below), written atomically, read back as any window of the grid (memory-mapped).
 
 :class:`RunStore`: each run's own store, a hidden sibling of the output folder
 (``.NAME.soilvolume-tiles-PID-TOKEN``), the Dask workers' scratch space in it; removed when the
 run succeeds or fails. An interrupted run keeps its finished tiles as ``.NAME.soilvolume-tiles``,
 which the next run into the folder claims (one atomic rename: one run gets it) and uses only if
 they were computed from what it computes from (``store.json``), else discards, saying why.
+
+The run's key, what its tiles were computed from, so a resume never reuses work of other inputs,
+options or code: every input file's content identity, every option that changes numbers (all not
+declared run control in :class:`~soilvolume.options.Options`: a new one cannot be forgotten), the
+engine's source and the run's plan (grid, registration, tiling).
 """
 
 from __future__ import annotations
@@ -19,17 +24,21 @@ import json
 import os
 import shutil
 import threading
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..core.interrupt import Interrupted, cleanup_on_exit
 from ..core.siblings import dead_siblings, remove, sibling, tag
 from ..inputs.io import atomic_path
-from . import fingerprint
+from ..inputs.vpc import read_vpc
+from ..options import Options
 
 Window = tuple[int, int, int, int]  # r0, r1, c0, c1
 KEPT, MANIFEST = "soilvolume-tiles", "store.json"
@@ -38,6 +47,10 @@ KEPT, MANIFEST = "soilvolume-tiles", "store.json"
 # fail with "SystemError: AST constructor recursion depth mismatch" (python/cpython#106905): the
 # tasks of a threads:N run load tiles at the same time. Their header reads take turns.
 _HEADERS = threading.Lock()
+WHOLE_BYTES = 16 * 2**20  # files up to this size are hashed whole
+HEAD_BYTES = 64 * 1024  # else: the header and VLRs, the end (LAZ chunk table, EVLRs) ...
+SAMPLES, SAMPLE_BYTES = 16, 4096  # ... and this many blocks spread over the body
+FILE_OPTIONS = ("zones", "stable_mask")  # options naming files whose content matters
 
 
 @dataclass(frozen=True)
@@ -114,7 +127,7 @@ class RunStore:
                 old = json.loads(manifest.read_text())
             except (OSError, ValueError):
                 old = {}
-            why = fingerprint.difference(old, parts) if old else "they carry no record of their inputs"
+            why = difference(old, parts) if old else "they carry no record of their inputs"
             if why:
                 said = f"discarding the tiles kept by an interrupted run: {why}; starting afresh"
                 for entry in self.folder.iterdir():
@@ -153,3 +166,92 @@ def run_store(final: Path) -> Iterator[RunStore]:
         raise Interrupted(exc.signum, kept=str(store.kept) if store.close(keep=True) else None) from None
     finally:
         store.close(keep=False)  # after keeping (renamed), nothing left to remove
+
+
+def file_identity(path: str | os.PathLike) -> dict[str, Any]:
+    """Size, modification time (ns) and a CRC-32 of ``path``'s content (whole when small, else its
+    first and last :data:`HEAD_BYTES` and :data:`SAMPLES` blocks between). A change detector:
+    an edit in place keeps size and time only if set back, and the CRC still catches all but one
+    in 4 billion; zlib's CRC reads 3-4 GB/s, BLAKE2 under 1 GB/s (a run hashes every tile)."""
+    st = os.stat(path)
+    step = (st.st_size - 2 * HEAD_BYTES) // (SAMPLES + 1)
+    spans = [(0, HEAD_BYTES), *((HEAD_BYTES + k * step, SAMPLE_BYTES) for k in range(1, SAMPLES + 1))]
+    spans = [*spans, (st.st_size - HEAD_BYTES, HEAD_BYTES)] if st.st_size > WHOLE_BYTES else [(0, None)]
+    crc = 0
+    with open(path, "rb") as f:
+        for at, size in spans:
+            f.seek(at)
+            crc = zlib.crc32(f.read(size), crc)
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns, "hash": f"crc32:{crc:08x}"}
+
+
+def input_identity(path: str | os.PathLike) -> dict[str, Any]:
+    """{file name: identity} of an input: the file, and for a VPC each of its tiles too."""
+    p = Path(path)
+    out = {str(p): file_identity(p)}
+    if p.suffix.lower() == ".vpc":
+        out.update({t.path: file_identity(t.path) for t in read_vpc(p).tiles})
+    return out
+
+
+def number_options(options: Options) -> dict[str, Any]:
+    """Every option that changes the numbers (not ``run_control``), a file named by one as its identity."""
+    out: dict[str, Any] = {}
+    for f in fields(options):
+        if f.metadata.get("run_control"):
+            continue
+        value = getattr(options, f.name)
+        if f.name in FILE_OPTIONS and value:  # a vector file and its sidecars (a Shapefile's .dbf, ...), or a folder
+            path = Path(value)
+            files = path.iterdir() if path.is_dir() else (p for p in path.parent.iterdir() if p.stem == path.stem)
+            value = {"path": str(value), "files": {p.name: file_identity(p) for p in sorted(files) if p.is_file()}}
+        out[f.name] = value
+    return out
+
+
+@lru_cache(maxsize=1)
+def code_identity() -> str:
+    """A digest of the engine's Python sources (a changed engine computes other numbers)."""
+    root = Path(__file__).resolve().parent.parent
+    digest = hashlib.blake2b(digest_size=16)
+    for source in sorted(root.rglob("*.py")):
+        digest.update(str(source.relative_to(root)).encode())
+        digest.update(source.read_bytes())
+    return digest.hexdigest()
+
+
+def run_parts(inputs: dict[str, Any], options: Options, plan: dict[str, Any]) -> dict[str, Any]:
+    """What a run's tiles are computed from, as plain JSON values; ``inputs``: {"before": ...,
+    "after": ...} of :func:`input_identity`."""
+    parts = {"code": code_identity(), "inputs": inputs, "options": number_options(options), "plan": plan}
+    plain = lambda v: v.tolist() if hasattr(v, "tolist") else str(v)  # noqa: E731 - numpy values as Python
+    return json.loads(json.dumps(parts, default=plain))  # tuples as lists: JSON-comparable
+
+
+def difference(old: dict[str, Any], new: dict[str, Any]) -> str:
+    """Why the tiles of ``old`` parts cannot serve ``new`` ones, in a few words ("" when equal)."""
+    if old.get("code") != new.get("code"):
+        return "the engine's code changed"
+    for role in ("before", "after"):
+        a, b = old.get("inputs", {}).get(role, {}), new.get("inputs", {}).get(role, {})
+        for name in b:
+            if name not in a:
+                return f"the {role} input is another set of files ({Path(name).name} is new)"
+            if a[name] != b[name]:
+                return f"{Path(name).name} changed (size, modification time or content)"
+        if set(a) != set(b):
+            return f"the {role} input is another set of files"
+    o, n = old.get("options", {}), new.get("options", {})
+    for key in n:
+        if o.get(key) != n[key] and isinstance(n[key], dict) and isinstance(o.get(key), dict):
+            return f"the --{key.replace('_', '-')} file {Path(n[key]['path']).name} changed"
+        if o.get(key) != n[key]:
+            return f"--{key.replace('_', '-')} differs ({_short(o.get(key))} then, {_short(n[key])} now)"
+    if old.get("plan") != new.get("plan"):
+        return "the registration, grid or tiling differs"
+    return "" if old == new else "they were computed differently"
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value) if isinstance(value, dict) else str(value)
+    return text if len(text) <= 40 else text[:37] + "..."

@@ -1,7 +1,7 @@
 """The volume step of a grid too large for one process, tile by tile (``--volume-step tiles``):
 
 1. The gridding tasks keep their tiles on disk (:class:`TileStore`) and return the block sums of
-   an overview of the grid (:mod:`overview`) and their count histograms.
+   an overview of the grid (:mod:`tiletask`) and their count histograms.
 2. The driver runs the volume step on the overview (cells k times larger): stable ground, the
    correction and the paper's planes found over the whole site, as in-process; each epoch's
    median point count from the histograms.
@@ -30,10 +30,9 @@ from ..volumes import coverage
 from ..volumes.compute import Given, Volumes, compute_volumes
 from ..volumes.uncertainty import TERMS, region_sigma, widen, z_value
 from ..volumes.zones import check_inside
-from . import overview
 from .gridtile import TILE_ARRAYS, empty_value
 from .tilestore import TileStore, Window
-from .tiletask import epoch_dems, grid_stored, map_tiles
+from .tiletask import COUNT_CAP, add_blocks, coarse, epoch_dems, grid_stored, map_tiles, median_from_histogram, to_cells
 
 HALO_CELLS, HALO_M = 16, 5.0  # context around a tile (change areas, refills, buffers): the larger
 VOLUME_ARRAYS = ("dem_out_a", "dem_out_b", "diff", "offset", "filled_mask", "classes")
@@ -73,8 +72,8 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     a = [job.store.read(n, ext, fill=empty_value(n)) for n in TILE_ARRAYS]
     wgrid = g.window(*ext)
     core = (slice(r0 - ext[0], r1 - ext[0]), slice(c0 - ext[2], c1 - ext[2]))
-    stable = overview.to_cells(job.stable, job.k, ext, nearest=True).astype(bool)
-    given = Given(overview.to_cells(job.offset, job.k, ext), stable, job.params, job.medians, core)
+    stable = to_cells(job.stable, job.k, ext, nearest=True).astype(bool)
+    given = Given(to_cells(job.offset, job.k, ext), stable, job.params, job.medians, core)
     d_i = plane_offset(job.planes[0], job.planes[1], wgrid)
     after, before = epoch_dems(a, job.rules)
     vols = compute_volumes(after, before, d_i, wgrid, job.options, job.moved, given)
@@ -97,9 +96,7 @@ def _sum_dicts(dicts: list[dict]) -> dict:
 
 
 def _zones(tiles: list[dict]) -> list[dict]:
-    if not tiles[0]["zones"]:
-        return []
-    out = []
+    out = []  # none when the run has no zones (each tile's list empty)
     for rows in zip(*(t["zones"] for t in tiles), strict=True):
         same = {k: rows[0][k] for k in ("polygon_area_m2", "repaired") if k in rows[0]}  # each tile's whole polygon
         out.append({"id": rows[0]["id"], "name": rows[0]["name"], **_sum_dicts(list(rows)), **same})
@@ -174,20 +171,20 @@ def tile_volumes(c, job: VolumeJob, over, hooks: Hooks, steps: tuple):
 def grid_tiles(c, plan, store: TileStore, k: int, hooks: Hooks, cache=None):
     """Grid every tile into ``store`` (:func:`.tiletask.grid_stored`): ((after, before) DEMs of the
     overview, (after, before) median counts, stats)."""
-    coarse = overview.coarse(plan.grid, k)
-    sums = [tuple(np.zeros((coarse.rows, coarse.cols)) for _ in range(3)) for _ in range(2)]
-    hists = [np.zeros(overview.COUNT_CAP + 1, np.int64) for _ in range(2)]
+    over = coarse(plan.grid, k)
+    sums = [tuple(np.zeros((over.rows, over.cols)) for _ in range(3)) for _ in range(2)]
+    hists = [np.zeros(COUNT_CAP + 1, np.int64) for _ in range(2)]
     stats: dict = {}
     for _, blocks, hist in grid_stored(c, plan, store, hooks, stats, cache, k):
         for e in range(2):
-            overview.add_blocks(sums[e], blocks[e])
+            add_blocks(sums[e], blocks[e])
             hists[e] += hist[e]
     epochs = []
     for total, valid, count in sums:  # block means; no per-cell spread (the LoD is the stable ground's)
         with np.errstate(invalid="ignore", divide="ignore"):
             heights = np.where(valid > 0, total / valid, np.nan)
         epochs.append(EpochDEM(heights, count.astype(np.int64), np.zeros(heights.shape)))
-    medians = (overview.median_from_histogram(hists[0]), overview.median_from_histogram(hists[1]))
+    medians = (median_from_histogram(hists[0]), median_from_histogram(hists[1]))
     return tuple(epochs), medians, stats
 
 

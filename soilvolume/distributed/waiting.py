@@ -38,12 +38,9 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
             raise _cluster_error(exc, what, _lost(c, started)) from None
         for fut in sorted(done, key=lambda f: order[f.key]):
             yield _result(fut, what, lambda: _lost(c, started))
-        if done:
-            lonely = None
-            continue
-        if c.status not in ("running", "connecting", "newly-created"):
+        if not done and c.status not in ("running", "connecting", "newly-created"):
             raise SoilVolumeError(f"lost the connection to the Dask scheduler while {what}")
-        if c.scheduler_info().get("workers"):
+        if done or c.scheduler_info().get("workers"):
             lonely = None
         elif time.monotonic() - (lonely := lonely or time.monotonic()) > NO_WORKERS_S:  # since it first had none
             raise SoilVolumeError(f"the Dask cluster has had no workers for {NO_WORKERS_S:.0f} s while {what}")

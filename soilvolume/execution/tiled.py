@@ -11,14 +11,12 @@ from ..core.types import GridSpec, SoilVolumeError
 from ..core.wording import opt
 from ..dem.geotiff import grid_layout, write_cog
 from ..dem.grid import UINT8_LAYERS
-from ..distributed import overview
 from ..distributed.cluster import checker
-from ..distributed.fingerprint import input_identity, run_parts
 from ..distributed.pointcache import PointCache, near_after
 from ..distributed.scan import dask_loader
 from ..distributed.schedule import Schedule, budget_gb, client
-from ..distributed.tilestore import run_store
-from ..distributed.tiletask import Plan, plan_parts, run_tiles, tile_windows, volume_factor
+from ..distributed.tilestore import input_identity, run_parts, run_store
+from ..distributed.tiletask import Plan, coarse, plan_parts, run_tiles, tile_windows, volume_factor
 from ..distributed.volumetiles import VolumeJob, grid_tiles, reader, tile_volumes
 from ..distributed.waiting import in_thread
 from ..inputs.footprint import PolygonMask, footprint
@@ -68,7 +66,7 @@ class Tiled:
             lambda: {"before": input_identity(paths[0]), "after": input_identity(paths[1])}, name="soilvolume-ids"
         )
         self.src_b, self.src_a = (open_source(e.path) for e in ctx.epochs)
-        direct = self.schedule.on_this_machine  # this machine's workers: sent straight to them
+        direct = self.schedule.kind != "tcp"  # this machine's workers: sent straight to them
         self.cache = PointCache(self.c, budget_gb(options.memory_limit), direct)
         self.cache.expect(near_after(self.src_b, self.src_a, options.radius))
         loader = dask_loader(self.c, lambda m: hooks.step(ctx.at("prepare", 0.46), m), checker(hooks), self.cache)
@@ -101,7 +99,7 @@ class Tiled:
             ctx.hooks.step(ctx.at("grid"), self.said)
         self.kept, self.stats = self.store.tiles(self.windows), {}
         if self.k > 1:  # the correction found on the overview
-            at, dems = overview.coarse(grid, self.k), ()
+            at, dems = coarse(grid, self.k), ()
             at_dems, self.medians, self.stats = grid_tiles(self.c, self.plan, self.kept, self.k, ctx.hooks, self.cache)
         else:
             at, dems = grid, run_tiles(self.c, self.plan, ctx.hooks, self.kept, self.stats, self.cache)
