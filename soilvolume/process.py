@@ -10,13 +10,8 @@ import logging
 import os
 import sys
 import threading
-from functools import partial
-from typing import TYPE_CHECKING
 
 from .core.watchdog import remove_process_temp_dir
-
-if TYPE_CHECKING:  # not imported: it loads numpy
-    from .native import Gate
 
 #: optional extras libraries import for functions the engine never calls: requests (laspy's COPC over
 #: HTTP); in the Dask workers jinja2 too (Dask's notebook HTML; the command needs it for report.html)
@@ -44,17 +39,18 @@ AHEAD = ("scipy.spatial", "scipy.ndimage", "scipy.sparse.linalg", "rasterio.io",
 RUNS = frozenset({"estimate", "series", "register", "dem", "stockpile"})
 
 
-def import_ahead(argv: list[str], gate: Gate) -> None:
+def import_ahead(argv: list[str], gate: threading.Event) -> None:
     """For a run (:data:`RUNS`), import :data:`AHEAD` in a background thread, each only while ``gate``
-    is open (the native kernel reading a file without the GIL; the reading waits for an import begun)."""
+    is set (the native kernel reading a file without the GIL)."""
     if argv and argv[0] in RUNS and not {"-h", "--help"} & set(argv):
         threading.Thread(target=_import_all, args=(gate,), name="soilvolume-import-ahead", daemon=True).start()
 
 
-def _import_all(gate: Gate) -> None:
+def _import_all(gate: threading.Event) -> None:
     for name in AHEAD:
+        gate.wait()
         try:
-            gate.run(partial(importlib.import_module, name))
+            importlib.import_module(name)
         except Exception:  # noqa: BLE001 - the step that uses it says what is missing
             return
 

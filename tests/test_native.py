@@ -8,8 +8,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import threading
-import time
 
 import laspy
 import numpy as np
@@ -22,7 +20,7 @@ from soilvolume.inputs.footprint import PolygonMask
 from soilvolume.inputs.lasheader import BoundsCheck
 from soilvolume.inputs.records import Records, chunk_pieces
 from soilvolume.inputs.thinning import ColumnThinner
-from soilvolume.native import OFF_THE_GIL, Gate
+from soilvolume.native import OFF_THE_GIL
 
 
 @pytest.fixture(scope="module")
@@ -656,25 +654,3 @@ def test_the_first_chunk_is_read_mapped_as_it_is_read_into_buffers(tmp_path):
     short.write_bytes(path.read_bytes()[: -(n - 1_000) * las.header.point_format.size])
     cls, _ = records.first_chunk_signals(short, n, 3_000, True)
     assert np.array_equal(cls, las.classification[:1_000])
-
-
-def test_work_waits_for_the_open_gate_and_closing_waits_for_the_work():
-    """Another thread's work (the ahead imports) starts only while a kernel reads without the GIL, and
-    leaving the reading waits for it: the two threads' Python never runs at once."""
-    gate, events = Gate(), []
-
-    def work():
-        events.append("started")
-        time.sleep(0.2)
-        events.append("ended")
-
-    thread = threading.Thread(target=gate.run, args=(work,), daemon=True)
-    thread.start()
-    time.sleep(0.2)
-    assert events == []  # closed: nothing started
-    with gate.opened():
-        while not events:
-            time.sleep(0.001)
-    events.append("closed")
-    thread.join(5)
-    assert events == ["started", "ended", "closed"] and not gate.is_set()

@@ -50,7 +50,8 @@ def ahead_probe(argv: list[str]) -> str:
         "ahead = [t for t in threading.enumerate() if t.name == 'soilvolume-import-ahead']",
         "time.sleep(0.3)",
         "held = [m in sys.modules for m in AHEAD]",
-        "with OFF_THE_GIL.opened(): [t.join(60) for t in ahead]",
+        "OFF_THE_GIL.set()",
+        "[t.join(60) for t in ahead]",
         "print(json.dumps([len(ahead), held, [m in sys.modules for m in AHEAD]]))",
         "return 0",
     ]

@@ -119,10 +119,13 @@ class NativeChunks:
         buf, room = address(self.buf), len(self.buf) // rec.dtype.itemsize
         table = None if rec.table is None else np.ascontiguousarray(rec.table, np.uint8)  # alive through the call
         where = (self.files[rec.path], rec.offset, rec.count)
-        with OFF_THE_GIL.opened():
+        OFF_THE_GIL.set()
+        try:
             failed = self.lib.sv_file_chunk(
                 ctypes.byref(self.args), *where, buf, room, address(table), rec.cls_at, rec.cls_mask
             )
+        finally:
+            OFF_THE_GIL.clear()
         if failed:
             raise SoilVolumeError(f"{rec.path}: corrupt LAS file (its points end before the header's count)")
 

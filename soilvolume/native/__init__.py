@@ -13,8 +13,6 @@ import os
 import platform
 import sys
 import threading
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -47,40 +45,9 @@ class ChunkArgs(ctypes.Structure):
 
 TYPES["c"] = ctypes.POINTER(ChunkArgs)
 _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
-
-
-class Gate:
-    """Open while a long kernel runs without the GIL (a whole chunk of a file read and worked on): another
-    thread's work (:meth:`run`) starts only then, and closing waits for work begun, so it never runs
-    beside this thread's Python (two threads importing at once can meet a half-imported module)."""
-
-    def __init__(self) -> None:
-        self._open, self._busy = threading.Event(), threading.Lock()
-
-    def is_set(self) -> bool:
-        return self._open.is_set()
-
-    @contextmanager
-    def opened(self) -> Iterator[None]:
-        """Open for the block; on leaving, the work begun in it finished."""
-        self._open.set()
-        try:
-            yield
-        finally:
-            self._open.clear()
-            with self._busy:
-                pass
-
-    def run(self, work: Callable[[], object]) -> object:
-        """``work()`` started once the gate is open (called from another thread)."""
-        while True:
-            self._open.wait()
-            with self._busy:
-                if self._open.is_set():
-                    return work()
-
-
-OFF_THE_GIL = Gate()
+#: set while a long kernel runs without the GIL (a whole chunk of a file read and worked on): another
+#: thread may use the interpreter meanwhile without slowing this one
+OFF_THE_GIL = threading.Event()
 #: each kernel's result and arguments (:data:`TYPES`' letters; "-": no result)
 PROTOTYPES = {
     "sv_chunk": ("-", "c"),
