@@ -8,6 +8,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..core.cells import bounds
 from ..core.polygons import covers
 from ..core.types import GridSpec, SoilVolumeError
 from ..core.wording import opt
@@ -54,7 +55,7 @@ def cloud_cell(xyz: np.ndarray, thin: np.ndarray, options: Options) -> float:
 def plan_grid(cell: float, boxes: Sequence[tuple], origin: np.ndarray, frame: WorkFrame, empty: str) -> GridSpec:
     """The grid of ``cell`` over the overlap of ``boxes`` (local (lo, hi) pairs, x/y first, or the points'
     own); ``empty``: the error when they do not overlap."""
-    boxes = [(b[:, :2].min(axis=0), b[:, :2].max(axis=0)) if isinstance(b, np.ndarray) else b for b in boxes]
+    boxes = [bounds(b, 2) if isinstance(b, np.ndarray) else b for b in boxes]  # the native one pass
     lo = np.max([np.asarray(b[0], float)[:2] for b in boxes], axis=0)
     hi = np.min([np.asarray(b[1], float)[:2] for b in boxes], axis=0)
     if (hi <= lo).any():
