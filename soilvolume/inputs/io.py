@@ -96,9 +96,13 @@ def check_two_surveys(before: Path, after: Path, what: str = "the before survey"
 
 def _read_las(path: Path) -> RawPoints:
     wkt, n, _, _, has_cls, _ = las_header(path)
-    parts = list(las_chunks(path, n, 2_000_000)) or [(np.empty((0, 3)), np.empty(0, np.uint8))]  # all n points
-    xyz, cls = zip(*parts, strict=True)
-    return RawPoints(np.concatenate(xyz), np.concatenate(cls) if has_cls else None, wkt, str(path))
+    xyz, cls, start = np.empty((n, 3)), np.empty(n, dtype=np.uint8) if has_cls else None, 0
+    for part, part_cls in las_chunks(path, n, 2_000_000):  # raises unless exactly n points come
+        xyz[start : start + len(part)] = part  # filled in place: no second copy of the cloud
+        if cls is not None:
+            cls[start : start + len(part)] = part_cls
+        start += len(part)
+    return RawPoints(xyz, cls, wkt, str(path))
 
 
 def _read_o3d(path: Path) -> RawPoints:
