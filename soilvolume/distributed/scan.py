@@ -22,7 +22,7 @@ from .. import native
 from ..core.cells import bounds, rows
 from ..core.types import SoilVolumeError
 from ..inputs import stream
-from ..inputs.chunkwork import Growing, NativeChunks, consume, native_work
+from ..inputs.chunkwork import NOTHING, Growing, NativeChunks, consume, native_work
 from ..inputs.lasread import is_copc, read_fraction
 from ..inputs.records import FileChunk, las_records
 from ..inputs.stream import CHUNK, Loaded, Source, epoch_rule, file_chunks, file_kernel, las_ranges, load, native_reads
@@ -36,7 +36,6 @@ UNIT = 8_000_000  # points per task of a single file
 # this many points squared in a registration column (a column centroid of ~16 points instead of
 # all of them: ~4x less noise than one point, a fraction of the reading)
 COPC_POINTS_PER_COLUMN_SIDE = 4.0
-NOTHING = (np.full(2, np.inf), np.full(2, -np.inf))  # a box no point is in: no points kept
 Unit = tuple[str, int | None, int | None]  # path, first point, point count (None: the whole file)
 
 

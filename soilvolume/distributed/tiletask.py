@@ -145,10 +145,11 @@ def grid_stored(c, plan: Plan, store: TileStore, hooks: Hooks, stats: dict, cach
     """Every tile of ``store`` not there yet (an interrupted run's are kept) gridded into it on ``c``:
     the :func:`grid_tile_stored` of each, the kept ones' first; ``stats``: points read (and from
     memory), seconds, tiles resumed."""
-    todo = [w for w in store.windows if not store.has(TILE_ARRAYS, w)]
-    stats.update(dict.fromkeys(STATS, 0), resumed=len(store.windows) - len(todo))
-    for w in store.windows:
-        if w not in todo:
+    kept = [store.has(TILE_ARRAYS, w) for w in store.windows]
+    todo = [w for w, done in zip(store.windows, kept, strict=True) if not done]
+    stats.update(dict.fromkeys(STATS, 0), resumed=sum(kept))
+    for w, done in zip(store.windows, kept, strict=True):
+        if done:
             yield summary(w, {n: store.load(n, w) for n in TILE_ARRAYS}, k) if k > 1 else w
     if stats["resumed"]:
         hooks.step(55, f"resuming: {stats['resumed']} of {len(store.windows)} tiles done in an earlier run")
