@@ -11,7 +11,7 @@ import numpy as np
 from markupsafe import Markup
 
 from ..core.types import GridSpec
-from .svgparts import DISPLAY, _repeat, block_mean, colour_bar, extent_text, map_figure
+from .svgparts import DISPLAY, _repeat, block_any, block_mean, colour_bar, extent_text, map_figure
 
 
 def ramp(colours: str) -> np.ndarray:
@@ -152,7 +152,7 @@ def difference_map(
     said = ""
     for words, (marks, colour) in outlined.items():
         if (m := _like(marks, d)) is not None and m.any():  # outlined at display scale
-            rgba[_outline(_repeat(block_mean(np.asarray(m, float), k) > 0, f))] = colour
+            rgba[_outline(_repeat(block_any(m, k), f))] = colour
             said += words
     caption = (
         f"{html.escape(title)}: after − before, red = cut (lowered), blue = fill (raised), ramp "

@@ -27,6 +27,12 @@ def _fold(a: np.ndarray, k: int, axis: int) -> np.ndarray:
     return np.moveaxis(out, 0, axis)
 
 
+def block_any(mask: np.ndarray, k: int) -> np.ndarray:
+    """Whether any cell of each k x k block (partial blocks at the edges) is set."""
+    mask = np.asarray(mask, bool)
+    return mask if k <= 1 else _fold(_fold(mask, k, 0), k, 1) > 0
+
+
 def block_mean(a: np.ndarray, k: int) -> np.ndarray:
     """NaN-aware mean over k x k blocks (partial blocks at the edges); NaN where a block has no data."""
     if k <= 1:

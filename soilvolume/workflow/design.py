@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.cells import bounds
 from ..core.hooks import Hooks
 from ..core.record import Georeferencing, RunRecord
 from ..core.types import GridSpec, SoilVolumeError, StageQuality
@@ -94,8 +95,8 @@ def read(ctx: Context) -> tuple[Context, Prepared, Surface | Tin, float]:
         ctx.timer.s["read"] = prep.read_s
         ctx.timer.s["crop"] = ctx.timer.s.get("crop", 0.0) - prep.read_s
         cell = survey_cell(prep.after.xyz, prep.after_thin, ctx.options)
-        thin, origin = prep.after_thin[:, :2], prep.origin[:2]
-        surface = read_over(source, thin.min(axis=0) + origin, thin.max(axis=0) + origin, prep.frame, 2 * cell)
+        (lo, hi), origin = bounds(prep.after_thin, 2), prep.origin[:2]  # the native one pass
+        surface = read_over(source, lo + origin, hi + origin, prep.frame, 2 * cell)
         for note in masked_notes(source.path, surface.masked):
             ctx.hooks.info(note)
         ctx.hooks.info(NOT_REGISTERED)
