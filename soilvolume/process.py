@@ -41,7 +41,7 @@ RUNS = frozenset({"estimate", "series", "register", "dem", "stockpile"})
 
 def import_ahead(argv: list[str], gate: threading.Event) -> None:
     """For a run (:data:`RUNS`), import :data:`AHEAD` in a background thread, each only while ``gate``
-    is set (the native kernel reading a file without the GIL)."""
+    is set (the native kernel reading a file without the GIL, a tiled run's driver waiting for its tasks)."""
     if argv and argv[0] in RUNS and not {"-h", "--help"} & set(argv):
         threading.Thread(target=_import_all, args=(gate,), name="soilvolume-import-ahead", daemon=True).start()
 

@@ -513,3 +513,26 @@ def test_a_grid_task_takes_soil_and_other_points_apart_as_a_mask_would():
         assert np.array_equal(other_labels, labels[~keep])
         sliced = np.shares_memory(soil, xyz) or np.shares_memory(other, xyz)
         assert sliced == (labels is not mixed)  # slices unless mixed
+
+
+def test_the_driver_waiting_for_its_tasks_lets_the_ahead_imports_go():
+    """While the driver waits for its tasks (``waiting.completed``) the ahead imports' gate is open (they
+    would otherwise run after the wait, in the driver's own time) and shut again once the results are in."""
+    import threading
+    import time
+
+    from dask.distributed import Client
+
+    from soilvolume.distributed.waiting import completed
+    from soilvolume.native import OFF_THE_GIL
+
+    OFF_THE_GIL.clear()
+    opened = threading.Event()
+    watcher = threading.Thread(target=lambda: OFF_THE_GIL.wait(10) and opened.set(), daemon=True)
+    watcher.start()
+    with Client(processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None) as c:
+        futures = [c.submit(time.sleep, 0.5, pure=False)]
+        assert not OFF_THE_GIL.is_set()
+        assert list(completed(c, futures, "sleeping")) == [None]
+    watcher.join(10)
+    assert opened.is_set() and not OFF_THE_GIL.is_set()

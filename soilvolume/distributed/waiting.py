@@ -12,6 +12,7 @@ from concurrent.futures import Future
 from ..core import interrupt
 from ..core.types import SoilVolumeError, short_error
 from ..core.wording import opt
+from ..native import OFF_THE_GIL
 from .cluster import NO_WORKERS_S, POLL_S
 
 
@@ -30,12 +31,15 @@ def completed(c, futures: list, what: str, check: Callable[[], None] = interrupt
     started = _workers(c)
     while pending:
         check()
+        OFF_THE_GIL.set()  # the driver waits: the ahead imports may use the interpreter meanwhile
         try:
             done, pending = wait(pending, timeout=POLL_S, return_when="FIRST_COMPLETED")
         except TimeoutError:
             done = set()
         except Exception as exc:  # noqa: BLE001 - the connection broke
             raise _cluster_error(exc, what, _lost(c, started)) from None
+        finally:
+            OFF_THE_GIL.clear()
         for fut in sorted(done, key=lambda f: order[f.key]):
             yield _result(fut, what, lambda: _lost(c, started))
         if not done and c.status not in ("running", "connecting", "newly-created"):

@@ -45,8 +45,9 @@ class ChunkArgs(ctypes.Structure):
 
 TYPES["c"] = ctypes.POINTER(ChunkArgs)
 _lib: ctypes.CDLL | None | bool = False  # False: not looked for yet
-#: set while a long kernel runs without the GIL (a whole chunk of a file read and worked on): another
-#: thread may use the interpreter meanwhile without slowing this one
+#: set while the run's thread needs no interpreter for a while (a long kernel without the GIL, a whole
+#: chunk of a file read and worked on; a tiled run's driver waiting for its tasks): another thread may
+#: use it meanwhile without slowing this one
 OFF_THE_GIL = threading.Event()
 #: each kernel's result and arguments (:data:`TYPES`' letters; "-": no result)
 PROTOTYPES = {
