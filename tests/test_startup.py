@@ -37,6 +37,21 @@ def test_engine_modules_leave_the_heavy_libraries_to_the_run(tmp_path):
     assert dict(zip(HEAVY, heavy, strict=True)) == dict.fromkeys(HEAVY, False)
 
 
+def test_a_command_loads_its_own_workflow_not_the_others():
+    """The estimate's command module imports the estimate's workflow, not the series', the DEM's or the
+    rasters' (the public ``soilvolume.api`` imports them all: the command line goes round it)."""
+    code = (
+        "import sys, json\n"
+        "import soilvolume.cli.estimate\n"
+        "mods = ('soilvolume.workflow.estimate', 'soilvolume.api', 'soilvolume.workflow.series', "
+        "'soilvolume.workflow.commands', 'soilvolume.workflow.rasters')\n"
+        "print(json.dumps([m in sys.modules for m in mods]))\n"
+    )
+    r = run_python(code)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout) == [True, False, False, False, False]
+
+
 HEAVY = ("open3d", "rasterio", "scipy.optimize", "scipy.ndimage", "scipy.sparse", "scipy.spatial", "shapely", "jinja2")
 
 

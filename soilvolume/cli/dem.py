@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pyproj
 
-from .. import api
 from ..inputs.crs import parse_crs
 from ..inputs.stream import open_source
 from ..validate import check_bounds
+from ..workflow.commands import run_cloud_to_dem
 from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "dem"
@@ -39,7 +39,7 @@ def run(ns: argparse.Namespace) -> int:
     options, bounds = options_from(ns), check_bounds(ns.bounds)
     if bounds is not None and ns.bounds_crs:
         bounds = bounds_in_cloud_crs(ns.cloud, ns.crs, bounds, ns.bounds_crs)
-    return result(ns, api.cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds, hooks=hooks(ns)))
+    return result(ns, run_cloud_to_dem(ns.cloud, ns.out, options, crs=ns.crs, bounds=bounds, hooks=hooks(ns)))
 
 
 def bounds_in_cloud_crs(cloud: Path, crs: str | None, bounds: tuple, bounds_crs: str) -> tuple:

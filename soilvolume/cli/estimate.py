@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .. import api
 from ..reporting import summary
 from ..reporting.report import summary_lines
+from ..workflow.estimate import run_estimate
 from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "estimate"
@@ -69,7 +69,7 @@ def add_parser(sub) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """Estimate; print the summary (or send the result through the protocol)."""
-    res = api.estimate(
+    res = run_estimate(
         ns.before,
         ns.after,
         ns.out,

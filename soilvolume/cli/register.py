@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .. import api
+from ..workflow.commands import run_register
 from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "register"
@@ -23,4 +23,4 @@ def add_parser(sub) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """Register; print the transform and what was written as JSON (or send it through the protocol)."""
-    return result(ns, api.register(ns.before, ns.after, ns.out, options_from(ns), hooks=hooks(ns)))
+    return result(ns, run_register(ns.before, ns.after, ns.out, options_from(ns), hooks=hooks(ns)))

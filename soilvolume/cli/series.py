@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .. import api
 from ..reporting.serieshtml import changes
+from ..workflow.series import run_series
 from .flags import add_options, add_progress, hooks, options_from, result
 
 NAME = "series"
@@ -57,7 +57,7 @@ def add_parser(sub) -> None:
 def run(ns: argparse.Namespace) -> int:
     """Run the series; print the ledger (or send the result through the protocol)."""
     dates = None if ns.dates is None else ns.dates.split(",")
-    res = api.series(ns.epochs, ns.out, options_from(ns), dates=dates, overwrite=ns.overwrite, hooks=hooks(ns))
+    res = run_series(ns.epochs, ns.out, options_from(ns), dates=dates, overwrite=ns.overwrite, hooks=hooks(ns))
     data = {"report": res.report, "outputs": res.outputs}
     return result(ns, data, [*ledger_lines(res.report), f"outputs in {ns.out}"])
 

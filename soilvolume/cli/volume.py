@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .. import api
+from ..workflow.rasters import run_volume_from_rasters
 from .flags import add_progress, hooks, result
 
 NAME = "volume"
@@ -24,7 +24,7 @@ def add_parser(sub) -> None:
 
 def run(ns: argparse.Namespace) -> int:
     """Difference the DEMs; print the volumes as JSON (or send them through the protocol)."""
-    res = api.volume_from_rasters(
+    res = run_volume_from_rasters(
         ns.before_dem, ns.after_dem, ns.out, zones=ns.zones, zone_field=ns.zone_field, hooks=hooks(ns)
     )
     return result(ns, res)
