@@ -16,7 +16,7 @@ from ..dem.geotiff import write_grid
 from ..inputs.io import write_las_chunked
 from ..inputs.prepare import Prepared, prepare
 from ..pipelines.pipeline import open_source
-from ..registration.rigid import CACHE_ROWS, transform_points32
+from ..registration.rigid import transform_points32
 from .seam import Gridded, VolumeFn
 
 
@@ -61,7 +61,7 @@ class InMemory:
         statistic = ctx.options.statistic
         heights = self.pool.submit(gridmod.epoch_dem, prep.before.xyz, grid, statistic, prep.before.nonsoil)
         later = self.pool.submit(lambda: beside(grid, heights.result()))
-        move = partial(transform_points32, t=reg.transform, chunk=CACHE_ROWS)
+        move = partial(transform_points32, t=reg.transform)
         nonsoil = None if prep.after.nonsoil is None else prep.after.nonsoil.moved(reg.transform)
         dem_a = gridmod.epoch_dem(prep.after.xyz, grid, statistic, nonsoil, move)
         dems = (dem_a, heights.result())

@@ -36,9 +36,6 @@ def transform_points(xyz: np.ndarray, t: np.ndarray) -> np.ndarray:
     return xyz @ t[:3, :3].T + t[:3, 3]
 
 
-CACHE_ROWS = 1 << 15  # rows of a product whose points stay in the cache through it
-
-
 def transform_points32(xyz: np.ndarray, t: np.ndarray, chunk: int = 4_000_000) -> np.ndarray:
     """``xyz @ R.T + shift`` of float32 points in float32, in chunks (no float64 copy): as ``R @ xyz.T``
     (same bits, 3-6x faster in BLAS), returned transposed. A lone last point joins the chunk before
