@@ -5,9 +5,14 @@ only is listed, left out or counted as ``objects`` says.
 
 Soil stands under about 45 degrees, so its band between 20 % and 80 % of the height is wide; an
 object's is about one mixed cell. A blob is an object when that band's width (area over
-perimeter) implies a slope of at least :data:`WALL_SLOPE` or is unresolved by the cells, its
-footprint is under :data:`MAX_AREA_M2`, not elongated and mostly ringed by unchanged ground. On
-cells coarser than :data:`MAX_SINGLE_CELL` only matching pairs are objects.
+perimeter) implies a slope of at least :data:`WALL_SLOPE` or is unresolved by the cells, and it is
+mostly ringed by unchanged ground. Given the two surveys' surfaces, an object stands on the ground
+around it: what arrived stands on a surface level with its ring of ground, what left leaves one
+(:func:`level_with_ring`); a cut below the ground around it is a pit, soil however steep its walls.
+A structure (walls no soil stands at, on level ground) is an object whatever its size or
+shape (a building, a fence); without the surfaces only compact blobs under :data:`MAX_AREA_M2`
+and :data:`MAX_ELONGATION` are. On cells coarser than :data:`MAX_SINGLE_CELL` only matching pairs
+are objects.
 
 Rough cells (:func:`roughness`, :func:`rough_cells`): a canopy is a spread of heights a cell's slope
 does not explain (soil is smooth at a cell's scale); used where no signal labelled any point, their
@@ -28,8 +33,10 @@ MIN_AREA_M2 = 2.0
 MAX_AREA_M2 = 150.0
 MAX_ELONGATION = 7.0  # two vehicles end to end are 5; a trench across a survey 20 and more
 MIN_QUIET_RING = 0.6  # share of the ring around a blob that must be unchanged ground
+LEVEL_SHARE, LEVEL_MIN_M = 0.5, 0.15  # level: nearer the ring's plane than half the height (or 0.15 m)
 MAX_SINGLE_CELL = 0.8  # m: on coarser cells a vehicle's walls are not seen; only moved pairs are told
-# a moved object: the two blobs' ratios within these
+# a moved object: the two blobs' ratios within these, their outlines' rise over run at least PAIR_EDGE_SLOPE
+PAIR_EDGE_SLOPE = 1.0  # soil stands at 0.6-0.9 (its angle of repose); a vehicle 1.2 m tall at 0.5 m cells reads 1.1
 AREA_RATIO, HEIGHT_RATIO, SHAPE_RATIO = 2.0, 1.5, 2.5
 RING_HOLE = 0.2  # a blob around unseen cells of this share of its own area is a ring, not an object
 _EIGHT = np.ones((3, 3), bool)
@@ -53,6 +60,13 @@ class Blob:
     label: int  # its label in :attr:`Objects.labels`
     partner: int = 0  # the label of the blob it moved from or to (0: none)
     slope: float = 0.0  # median slope (rise/run) of its walls between 20 % and 80 % of its height
+    on_ground: bool | None = None  # stood on or left a surface level with the ground around (None: unknown)
+    edge_slope: float = 0.0  # rise over run across its half-height outline (:func:`_edge_slope`)
+
+    @property
+    def structure(self) -> bool:
+        """Walls no soil stands at, on the ground around it: an object whatever its size (a roof may slope)."""
+        return bool(self.on_ground) and self.edge_slope >= WALL_SLOPE
 
 
 @dataclass(frozen=True)
@@ -71,23 +85,28 @@ class Objects:
         return [b for b in self.blobs if not b.partner]
 
 
-def find_objects(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, refilled=None) -> Objects:
+def find_objects(
+    diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: float, refilled=None, surfaces=None
+) -> Objects:
     """Object blobs of the difference in the ``fill`` and ``cut`` areas, moved ones matched;
-    ``refilled``: interpolated cells, in a blob's area but not its measurements."""
+    ``refilled``: interpolated cells, in a blob's area but not its measurements; ``surfaces``: the
+    (after, before) heights, whether a blob stood on the ground around it (see the module)."""
     labels = np.zeros(diff.shape, np.int32)
     blobs: list[Blob] = []
     changed, unknown = fill | cut, ~np.isfinite(diff)
     d0 = np.nan_to_num(diff)
     for sign, area in ((1, fill), (-1, cut)):
         comp, _ = scipy.ndimage.label(area, structure=_EIGHT)
+        under = None if surfaces is None else surfaces[1 if sign > 0 else 0]  # arrived on before, left after
+        masks = (changed, refilled, unknown, under)
         for k, sl in enumerate(scipy.ndimage.find_objects(comp), 1):
-            blob = _measure(sign * d0, comp, k, sl, (changed, refilled, unknown), cell, sign, len(blobs) + 1)
+            blob = _measure(sign * d0, comp, k, sl, masks, cell, sign, len(blobs) + 1)
             if blob is not None:
                 labels[sl][comp[sl] == k] = blob.label
                 blobs.append(blob)
     blobs = _pairs(blobs)
-    if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs only
-        blobs = [b for b in blobs if b.partner]
+    if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs and resolved walls only
+        blobs = [b for b in blobs if b.partner or b.structure]
     labels = np.where(np.isin(labels, [b.label for b in blobs]), labels, 0)
     moved = np.isin(labels, [b.label for b in blobs if b.partner]) & (labels > 0)
     moved = scipy.ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls
@@ -96,12 +115,13 @@ def find_objects(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell: floa
 
 
 def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
-    """The blob of component ``k`` (``d`` positive), None when no object (a ring around unseen cells
-    is none); ``masks``: (changed, refilled or None, without a difference)."""
+    """The blob of component ``k`` (``d`` positive), None when no object (a ring around unseen cells,
+    a pit); ``masks``: (changed, refilled or None, without a difference, the surface it
+    stood on or left, or None)."""
     pad = 3
     r0, c0 = max(sl[0].start - pad, 0), max(sl[1].start - pad, 0)
     win = (slice(r0, sl[0].stop + pad), slice(c0, sl[1].stop + pad))
-    changed, refilled, unknown = masks
+    changed, refilled, unknown, under = masks
     whole = comp[win] == k
     if (scipy.ndimage.binary_fill_holes(whole) & ~whole & unknown[win]).sum() > RING_HOLE * whole.sum():
         return None
@@ -113,27 +133,54 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     a = cell * cell
     half = mine & (dd >= 0.5 * height)
     area = float(half.sum()) * a
-    if not MIN_AREA_M2 <= area <= MAX_AREA_M2:
-        return None
     base, top = float((mine & (dd >= 0.2 * height)).sum()), float((mine & (dd >= 0.8 * height)).sum())
     edge = half & ~scipy.ndimage.binary_erosion(half, _EIGHT)
     width = (base - top) * a / max(float(edge.sum()) * cell, cell)
-    if width > max(0.6 * height / WALL_SLOPE, UNRESOLVED * cell):
-        return None
-    rr, cc = np.nonzero(half)
-    elong = _elongation(rr, cc)
-    if elong > MAX_ELONGATION:
+    if area < MIN_AREA_M2 or width > max(0.6 * height / WALL_SLOPE, UNRESOLVED * cell):
         return None
     grown = scipy.ndimage.binary_dilation(whole, _EIGHT, iterations=2)
     ring = grown & ~scipy.ndimage.binary_dilation(whole, _EIGHT)
     if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
         return None
+    level = None if under is None else level_with_ring(under[win], half, ring & ~changed[win], height)
+    if level is False and sign < 0:
+        return None  # a pit: below the ground around it, soil however steep its walls
+    rr, cc = np.nonzero(half)
+    elong = _elongation(rr, cc)
+    if not level and (area > MAX_AREA_M2 or elong > MAX_ELONGATION):
+        return None  # not known to stand on the ground: only compact blobs are objects
     dw = np.where(whole, d[win], 0.0)
     gy, gx = np.gradient(dw, cell)  # the walls' median slope: about 1 on a pile's flank, 1.5 and more on a box's
     band = whole & (dw >= 0.2 * height) & (dw <= 0.8 * height)
     slope = float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell
     vol = float(dw.sum()) * a
-    return Blob(sign, area, height, vol, float(cc.mean() + c0), float(rr.mean() + r0), elong, label, slope=slope)
+    centre = (float(cc.mean() + c0), float(rr.mean() + r0))
+    edge = _edge_slope(dw, half, cell)
+    return Blob(sign, area, height, vol, *centre, elong, label, slope=slope, on_ground=level, edge_slope=edge)
+
+
+def _edge_slope(d: np.ndarray, half: np.ndarray, cell: float) -> float:
+    """Rise over run across a blob's half-height outline: its second ring of cells in against the first ring
+    out, two cells apart (the mixed cells of a wall between them); the first ring in when none is second."""
+    inner = scipy.ndimage.binary_erosion(half, _EIGHT)
+    second = inner & ~scipy.ndimage.binary_erosion(inner, _EIGHT)
+    first_in, run = (second, 2.0) if second.any() else (half & ~inner, 1.0)
+    out = scipy.ndimage.binary_dilation(half, _EIGHT) & ~half
+    low = float(np.median(np.clip(d[out], 0.0, None))) if out.any() else 0.0
+    return (float(np.median(d[first_in])) - low) / (run * cell)
+
+
+def level_with_ring(surface: np.ndarray, inside: np.ndarray, ring: np.ndarray, height: float) -> bool | None:
+    """Whether ``surface`` over ``inside`` lies on the plane through its ``ring`` of unchanged ground, within
+    :data:`LEVEL_SHARE` of ``height`` (:data:`LEVEL_MIN_M` at least); None with too little of either measured."""
+    rr, cc = np.nonzero(ring & np.isfinite(surface))
+    ri, ci = np.nonzero(inside & np.isfinite(surface))
+    if len(rr) < 6 or len(ri) < 3:
+        return None
+    design = np.c_[rr, cc, np.ones(len(rr))].astype(float)
+    coef, *_ = np.linalg.lstsq(design, surface[rr, cc], rcond=None)
+    off = float(np.median(surface[ri, ci] - np.c_[ri, ci, np.ones(len(ri))] @ coef))
+    return abs(off) <= max(LEVEL_SHARE * height, LEVEL_MIN_M)
 
 
 def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:
@@ -145,8 +192,10 @@ def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:
 
 
 def _pairs(blobs: list[Blob]) -> list[Blob]:
-    """Fill and cut blobs matched into moved objects, the closest matches first."""
-    fills, cuts = [b for b in blobs if b.sign > 0], [b for b in blobs if b.sign < 0]
+    """Fill and cut blobs matched into moved objects, the closest matches first; given the surfaces, only blobs with
+    walls steeper than soil stands (:data:`PAIR_EDGE_SLOPE` at their outline): a pile is not half of a machine."""
+    walled = [b for b in blobs if b.on_ground is None or b.edge_slope >= PAIR_EDGE_SLOPE]
+    fills, cuts = [b for b in walled if b.sign > 0], [b for b in walled if b.sign < 0]
     scored = []
     for f in fills:
         for c in cuts:

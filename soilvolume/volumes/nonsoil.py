@@ -86,6 +86,8 @@ def exclude_nonsoil(
     shares = _shares(epochs)
     found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
     leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
+    if mode != "none" and not all(e.rule is not None and e.rule.use_class for e in epochs):
+        leave_out |= shares["objects"] >= SHARE  # one survey's object: the unclassified one shows its top, not ground
     # the share of an excluded volume it may have got wrong: less by a LAS classification (its ground is measured)
     share = CLASS_MISSED_SHARE if all(e.rule is not None and e.rule.use_class for e in epochs) else MISSED_SHARE
     fill, cut = fill & ~leave_out, cut & ~leave_out  # what the headline counts
@@ -113,7 +115,8 @@ def _left_out(diff, areas, epochs, grid: GridSpec, options: Options, refilled, s
     """(objects found by shape, those of one survey left out, grass patches left out) of ``areas``."""
     (fill, cut), mode = areas, options.exclude
     labelled = np.any([v >= SHARE for v in shares.values()], axis=0)  # canopy beside a machine: not its walls
-    found = find_objects(diff, fill, cut, grid.cell, refilled=refilled | labelled)
+    surfaces = tuple(e.heights for e in epochs)  # (after, before): what a blob stood on or left
+    found = find_objects(diff, fill, cut, grid.cell, refilled=refilled | labelled, surfaces=surfaces)
     drop_single = options.objects == "exclude" and mode != "none"
     lone = _lone(found) if drop_single else np.zeros(diff.shape, bool)
     after, before = (_shares((e, e))["vegetation"] < SHARE for e in epochs)  # soil measured on the surface that rose
@@ -161,8 +164,13 @@ def _objects(diff, found, lone, grid: GridSpec, mode: str, drop_single: bool) ->
 
 
 def _lone(found) -> np.ndarray:
-    """Single objects of a machine's size (:data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`)."""
-    ids = [b.label for b in found.single_blobs() if b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE]
+    """Single objects of a machine's size (:data:`OBJECT_MAX_M3`) with a box's walls (:data:`OBJECT_SLOPE`), and
+    structures of any size (walls no soil stands at, on the ground around them: :attr:`Blob.structure`)."""
+    ids = [
+        b.label
+        for b in found.single_blobs()
+        if b.structure or (b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE)
+    ]
     return found.single & np.isin(found.labels, ids)
 
 
