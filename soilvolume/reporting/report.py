@@ -210,4 +210,17 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
         "options": recorded_options(options),
         "timings_s": timings,
     }
-    return amend(report, prep, vols)  # a run against a surface: its reference
+    return amend(with_unseen(report), prep, vols)  # a run against a surface: its reference
+
+
+def with_unseen(report: dict) -> dict:
+    """``report`` with the net's, cut's and fill's 95 % half-widths widened by what the part of the after
+    footprint no before data covers could hide (``coverage.unseen_volume_bound_m3``) once that part is named in
+    the verdict (:data:`~soilvolume.volumes.coverage.CAUTION_SHARE`): the volumes are the compared area's; the
+    interval is for the site the after survey shows."""
+    cov = report.get("coverage") or {}
+    bound = float(cov.get("unseen_volume_bound_m3", 0.0))
+    if bound > 0 and 1.0 - cov.get("compared_share", 1.0) > coverage.CAUTION_SHARE:
+        u = report["uncertainty_m3"]
+        u.update({k: u[k] + bound for k in ("net", "cut", "fill", "net_change_areas")}, unseen_m3=bound)
+    return report

@@ -78,7 +78,8 @@ def check(report: dict) -> tuple[str, str] | None:
     if not cov or cov["after_footprint_m2"] <= 0:
         return None
     unseen, share = cov["unseen_m2"], 1.0 - cov["compared_share"]
-    bound, interval = cov["unseen_volume_bound_m3"], report["uncertainty_m3"]["net"]
+    u = report["uncertainty_m3"]
+    bound, interval = cov["unseen_volume_bound_m3"], u["net"] - u.get("unseen_m3", 0.0)  # the measured part
     before = cov["before_missing_m2"] >= 0.5 * unseen
     who = "the before survey does not cover" if before else "the surveys do not both cover"
     who = "the design does not cover" if (report.get("reference") or {}).get("kind") == "surface" else who
@@ -89,7 +90,7 @@ def check(report: dict) -> tuple[str, str] | None:
         if out.get("fill_m3", 0.0) + out.get("cut_m3", 0.0) > 0.5 * bound:
             source = "from what the after survey shows beyond the before survey's edge, against its ground carried on"
         said += f": change there is not in the volumes (up to ~{bound:,.0f} m³ {source}, "
-        return "unreliable", f"{said}against their ±{interval:,.1f} m³ interval)"
+        return "unreliable", f"{said}against their ±{interval:,.1f} m³ interval without it)"
     if share > CAUTION_SHARE:
         said += f": the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around it "
         return "caution", f"{said}would make up to ~{bound:,.0f} m³ there, within their interval)"
