@@ -108,10 +108,10 @@ def test_change_areas_count_no_noise_and_no_sign_selected_rim():
     assert not fill0.any() and not cut0.any()
 
 
-def _report(net, half_width, used="gps", fitness=0.9):
+def _report(net, half_width, used="gps", fitness=0.9, cut=0.0):
     return {
-        "volume_m3": {"net": net},
-        "uncertainty_m3": {"net": half_width},
+        "volume_m3": {"net": net, "cut": cut, "fill": net + cut},
+        "uncertainty_m3": {"net": half_width, "cut": 0.0, "fill": 0.0},
         "registration": {
             "georeferencing": {"used": used},
             "rotation_deg": 1.0,
@@ -131,8 +131,12 @@ def test_quality_gate_words():
     change = np.zeros_like(grid, bool)
     change[15:25, 15:25] = True
     around = ~change
-    good = quality.assess(_report(500.0, 20.0), QualityInputs(around, change, grid, None, 1.0, PRIOR))
+    good = quality.assess(_report(500.0, 4.0), QualityInputs(around, change, grid, None, 1.0, PRIOR))
     assert good["verdict"] == "reliable" and good["trusted"]
+    # the same run with an interval wider than 1 % of the volume moved: its largest part named, in m3
+    wide = quality.assess(_report(500.0, 20.0), QualityInputs(around, change, grid, None, 1.0, PRIOR))
+    assert wide["verdict"] == "use with caution" and not wide["trusted"]
+    assert "wider than 1 % of the volume moved (500 m³)" in wide["messages"][0]
 
     little = around & (np.arange(40)[:, None] < 1)  # one row of stable ground: 2.5 %
     bad = quality.assess(_report(500.0, 20.0), QualityInputs(little, ~little, grid, None, 1.0, PRIOR))

@@ -12,6 +12,7 @@ from ..core.record import QualityInputs
 from ..core.wording import opt
 from ..registration.georef import GROUND_AGREES, INCONCLUSIVE, disagreement
 from .coverage import check as coverage_check
+from .tolerance import tolerance_check
 from .zones import zone_messages
 
 VERDICTS = ("reliable", "use with caution", "not reliable")
@@ -39,6 +40,8 @@ def assess(report: dict, q: QualityInputs) -> dict:
     out += filter(None, [coverage_check(report)])
     if all(sev != "unreliable" for sev, _ in out):  # a run not reliable states no confidence
         out += significance_check(v["net"], u["net"])
+    if not out:  # reliable only with the interval within the tolerance
+        out += tolerance_check(v, u, report.get("uncertainty") or {}, bound)
     return verdict(out)
 
 
