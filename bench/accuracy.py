@@ -507,18 +507,17 @@ MATRIX += [
         crops=True,
         **RGB,
     ),
-    _nsyn(
+    Case(  # the pillars' 5-6 m walls make them structures by default (issue 53): the paper counts them
         "paper-pillars-rgb",
-        "Shao et al.'s known change: three pillars (1030 m3) on the after model, every nuisance; RGB; counted",
+        "synthetic",
+        "Shao et al.'s known change: three pillars (1030 m3) on the after model, every nuisance; RGB; counted "
+        "as the paper counts them (objects=count)",
         127,
+        dict(change="pillars", **DENSE, **NUISANCES, **GPS2, **RGB),
         "paper",
         True,
         True,
-        change="pillars",
-        **DENSE,
-        **NUISANCES,
-        **GPS2,
-        **RGB,
+        {"objects": "count"},
     ),
     _nsyn(
         "pit-mown-returns",

@@ -74,6 +74,12 @@ def judge(report: dict, truth: dict) -> dict:
     quality = report.get("quality") or {}
     row["verdict"] = quality.get("verdict")
     row["messages"] = quality.get("messages", [])
+    model = report.get("uncertainty") or {}
+    z = 1.959963984540054
+    row["parts_m3"] = {q: [z * x for x in (model.get("terms_m3") or {}).get(q, [])] for q in QUANTITIES}
+    row["bound_m3"] = {
+        key: float(((report.get(key) or {}).get("bound_m3") or {}).get("net", 0.0)) for key in ("excluded", "blind")
+    }
     return row
 
 
@@ -87,7 +93,7 @@ def run_site(seed: int, root: Path, keys: tuple[str, str], keep: bool = False) -
     scene = root / "scenes" / f"s{seed}-{keys[0]}"
     out = root / "runs" / f"s{seed}"
     try:
-        if not (scene / "truth.json").exists():
+        if not all((scene / name).exists() for name in ("truth.json", "before.las", "after.las")):
             tmp = Path(tempfile.mkdtemp(prefix=".gen-", dir=root / "scenes"))
             composer.compose(seed, tmp)
             shutil.rmtree(scene, ignore_errors=True)
@@ -101,7 +107,8 @@ def run_site(seed: int, root: Path, keys: tuple[str, str], keep: bool = False) -
         shutil.rmtree(out, ignore_errors=True)
         for name in ("before.las", "after.las"):
             (scene / name).unlink(missing_ok=True)
-    cached.write_text(json.dumps(row, default=str) + "\n")
+    if not row.get("error"):  # a failed site is tried again next time
+        cached.write_text(json.dumps(row, default=str) + "\n")
     return row
 
 
