@@ -134,7 +134,9 @@ def test_tommy_thompson_progress_moves_through_registration(tommy):
     assert len(feedback.warnings) == 2, feedback.warnings
     assert any("The before survey does not cover" in w for w in feedback.warnings)
     assert any("no point at all in the before survey" in w for w in feedback.warnings)
-    assert results["NET_VOLUME"] - results["NET_UNCERTAINTY"] > 0  # a significant gain
+    # a gain over the compared area, whose interval also holds what the 7 % no before data covers could hide
+    # (up to ~15,600 m3 of the rise the 2023 survey shows past the 2015 edge): the site's net is not known
+    assert results["NET_VOLUME"] > 0 and results["NET_UNCERTAINTY"] > 15_000
 
 
 def test_autzen_layers_as_loaded(run_alg, real_dir, tmp_path):
