@@ -78,6 +78,19 @@ def test_a_pile_is_not_half_of_a_machine_that_moved():
     assert all(not b.structure and b.edge_slope < 1.2 for b in pile)
 
 
+def test_a_thin_even_sharp_edged_fill_may_be_a_slab():
+    """A 0.3 m plate of 14 x 10 m reads as a slab or as a thin layer of soil alike: its volume goes into the
+    interval as change that could not be classified; a pile, and a layer feathered over three cells, do not."""
+    fill = np.zeros((120, 120))
+    fill[20:48, 20:40] = 0.3  # the plate
+    yy, xx = np.mgrid[0:120, 0:120]
+    fill += np.clip(2.2 - 0.7 * CELL * np.hypot(xx - 90, yy - 30), 0.0, None)  # a pile
+    ramp = np.clip((np.minimum(np.minimum(yy - 70, 109 - yy), np.minimum(xx - 20, 59 - xx)) + 1) / 3.0, 0, 1)
+    fill += 0.3 * np.where((yy >= 70) & (yy < 110) & (xx >= 20) & (xx < 60), ramp, 0.0)  # feathered layer
+    found = nonsoil.plates(fill, fill > 0.02, CELL * CELL)
+    assert found[20:48, 20:40].all() and found.sum() == 28 * 20
+
+
 def test_the_interval_covers_what_the_unseen_part_could_hide():
     """The volumes are the compared area's; each 95 % half-width grows by the coverage's unseen bound once the
     unseen part is named in the verdict (over 0.5 % of the after footprint)."""

@@ -29,6 +29,7 @@ MACHINE_M3 = 40.0  # an object in one survey of at most this volume may be a mac
 # Their volume is a bound, not a random error: the interval is widened by it (the net by the
 # larger of the fill and cut parts) and the verdict names it.
 UNCLEAR_AREA_M2, UNCLEAR_M3 = 150.0, MACHINE_M3
+PLATE_M, PLATE_AREA_M2 = 0.45, 4.0  # a fill this thin, even and sharp-edged may be a slab as well as soil
 CANOPY_REACH = 2.0  # how far above the ground a canopy's points taken for soil may lift a cell (x its mean)
 # excluded.tif: one byte per cell
 CLASS_CODES = {
@@ -236,6 +237,7 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     compact."""
     small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
     out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
+    out |= plates(diff, counted & (np.nan_to_num(diff) > 0), cell_area)  # a slab, or a thin layer of soil
     if not signal:
         d = np.nan_to_num(diff)
         for part in (counted & (d > 0), counted & (d < 0)):
@@ -249,6 +251,28 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
     comp, n = scipy.ndimage.label(out, structure=np.ones((3, 3), bool))
     vols = np.abs(scipy.ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
     return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
+
+
+def plates(diff: np.ndarray, fill: np.ndarray, cell_area: float) -> np.ndarray:
+    """Fill patches a slab may be as well as soil: :data:`PLATE_M` thick at most, of even thickness (their core's
+    interquartile range under a quarter of it) and full thickness one cell in from their edge (a thin layer's
+    edges are within a cell at these resolutions, soil's as a slab's)."""
+    comp, n = scipy.ndimage.label(fill, structure=np.ones((3, 3), bool))
+    out = np.zeros(fill.shape, bool)
+    for k, box in enumerate(scipy.ndimage.find_objects(comp), start=1):
+        blob = comp[box] == k
+        if blob.sum() * cell_area < PLATE_AREA_M2:
+            continue
+        inner = scipy.ndimage.binary_erosion(blob, iterations=1)
+        core = scipy.ndimage.binary_erosion(inner, iterations=1)
+        if core.sum() < 4:
+            continue
+        d = np.nan_to_num(diff[box])
+        q1, mid, q3 = np.percentile(d[core], [25, 50, 75])
+        edge = np.median(d[inner & ~core])
+        if mid <= PLATE_M and q3 - q1 <= 0.25 * mid and edge >= 0.8 * mid:
+            out[box] |= blob
+    return out
 
 
 def rough(epochs, heights, stable, cell: float, fill: np.ndarray, cut: np.ndarray) -> np.ndarray:
