@@ -41,7 +41,7 @@ def assess(report: dict, q: QualityInputs) -> dict:
     if all(sev != "unreliable" for sev, _ in out):  # a run not reliable states no confidence
         out += significance_check(v["net"], u["net"])
     if not out:  # reliable only with the interval within the tolerance
-        out += tolerance_check(v, u, report.get("uncertainty") or {}, bound)
+        out += tolerance_check(report)
     return verdict(out)
 
 
