@@ -41,6 +41,8 @@ import accuracy  # noqa: E402
 import calibration_report  # noqa: E402
 import composer  # noqa: E402
 
+from soilvolume.volumes.uncertainty import z_value  # noqa: E402
+
 QUANTITIES = ("net", "cut", "fill")
 LIMITS_PCT = {"net": 1.0, "cut": 3.0, "fill": 3.0}  # of the moved volume
 MIN_MOVED_M3 = 10.0
@@ -75,7 +77,7 @@ def judge(report: dict, truth: dict) -> dict:
     row["verdict"] = quality.get("verdict")
     row["messages"] = quality.get("messages", [])
     model = report.get("uncertainty") or {}
-    z = 1.959963984540054
+    z = z_value(model.get("confidence", 0.95))
     row["parts_m3"] = {q: [z * x for x in (model.get("terms_m3") or {}).get(q, [])] for q in QUANTITIES}
     row["bound_m3"] = {
         key: float(((report.get(key) or {}).get("bound_m3") or {}).get("net", 0.0)) for key in ("excluded", "blind")

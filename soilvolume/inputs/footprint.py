@@ -19,7 +19,8 @@ def check_spread(xy: np.ndarray, path: str, what: str = "") -> None:
             f"{path}: too few points to work with ({len(xy)} distinct positions {what}, at least {MIN_COLUMNS} needed)"
         )
     x, y = xy[:, 0] - xy[:, 0].mean(), xy[:, 1] - xy[:, 1].mean()  # two vectors, not np.cov's (2, N) copy
-    moments = np.array([[x @ x, x @ y], [x @ y, y @ y]]) / len(xy)
+    xy_ = float(x @ y)
+    moments = np.array([[x @ x, xy_], [xy_, y @ y]]) / len(xy)
     # the singular values of the centred points / sqrt(n), from their 2 x 2 second moments
     spread = np.sqrt(np.maximum(np.linalg.eigvalsh(moments)[::-1], 0.0))
     if spread[1] < max(0.01, 1e-4 * spread[0]):

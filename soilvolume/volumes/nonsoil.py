@@ -87,10 +87,11 @@ def exclude_nonsoil(
     shares = _shares(epochs)
     found, lone, grass = _left_out(diff, areas, epochs, grid, options, refilled, shares)
     leave_out = (found.moved if mode != "none" else np.zeros(diff.shape, bool)) | lone | grass
-    if mode != "none" and not all(e.rule is not None and e.rule.use_class for e in epochs):
+    classified = all(e.rule is not None and e.rule.use_class for e in epochs)
+    if mode != "none" and not classified:
         leave_out |= shares["objects"] >= SHARE  # one survey's object: the unclassified one shows its top, not ground
     # the share of an excluded volume it may have got wrong: less by a LAS classification (its ground is measured)
-    share = CLASS_MISSED_SHARE if all(e.rule is not None and e.rule.use_class for e in epochs) else MISSED_SHARE
+    share = CLASS_MISSED_SHARE if classified else MISSED_SHARE
     fill, cut = fill & ~leave_out, cut & ~leave_out  # what the headline counts
     # only what was left out in or beside the counted change areas can bias the headline
     near = scipy.ndimage.binary_dilation(fill | cut, iterations=NEAR_CELLS)
@@ -257,7 +258,7 @@ def plates(diff: np.ndarray, fill: np.ndarray, cell_area: float) -> np.ndarray:
     """Fill patches a slab may be as well as soil: :data:`PLATE_M` thick at most, of even thickness (their core's
     interquartile range under a quarter of it) and full thickness one cell in from their edge (a thin layer's
     edges are within a cell at these resolutions, soil's as a slab's)."""
-    comp, n = scipy.ndimage.label(fill, structure=np.ones((3, 3), bool))
+    comp, _ = scipy.ndimage.label(fill, structure=np.ones((3, 3), bool))
     out = np.zeros(fill.shape, bool)
     for k, box in enumerate(scipy.ndimage.find_objects(comp), start=1):
         blob = comp[box] == k
