@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import sys
 import types
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -33,6 +35,19 @@ def limit_threads(threads: int) -> None:
     _ASKED[:] = [threads]
     if "open3d" in sys.modules:
         _o3d()
+
+
+@contextmanager
+def one_thread() -> Iterator[None]:
+    """Open3D on one thread inside: its parallel RANSAC splits the seeded draws by how the threads happen to be
+    scheduled, so the same inputs gave another pose on a busy machine (isl-org/Open3D#7475)."""
+    utility = _o3d().utility
+    before = utility.get_max_threads()
+    utility.set_max_threads(1)
+    try:
+        yield
+    finally:
+        utility.set_max_threads(before)
 
 
 def _import_without_plotly() -> None:

@@ -16,7 +16,7 @@ from ..options import Options
 from . import columns
 from .fine import fine_stage
 from .ground import EVAL_DISTANCE, cap_voxel, evaluate_surface, judged, spacing
-from .o3d import _o3d, limit_threads, to_pcd
+from .o3d import _o3d, limit_threads, one_thread, to_pcd
 from .rigid import rotation_deg, shift_at
 
 AUTO_FITNESS = 0.6  # --coarse auto runs FPFH only when the fine stage from the GPS pose fits worse
@@ -95,18 +95,20 @@ def coarse_stage(after_xyz, before_xyz, options: Options) -> StageQuality:
     param = o3d.geometry.KDTreeSearchParamHybrid(radius=5 * voxel, max_nn=100)
     fs, ft = reg.compute_fpfh_feature(src, param), reg.compute_fpfh_feature(tgt, param)
     dist = 1.5 * voxel
-    res = reg.registration_ransac_based_on_feature_matching(
-        src,
-        tgt,
-        fs,
-        ft,
-        True,
-        dist,
-        reg.TransformationEstimationPointToPoint(False),
-        3,
-        [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)],
-        reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
-    )
+    checkers = [reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(dist)]
+    with one_thread():  # the same pose from the same inputs, however busy the machine
+        res = reg.registration_ransac_based_on_feature_matching(
+            src,
+            tgt,
+            fs,
+            ft,
+            True,
+            dist,
+            reg.TransformationEstimationPointToPoint(False),
+            3,
+            checkers,
+            reg.RANSACConvergenceCriteria(COARSE_ITER, 0.999),
+        )
     t = np.asarray(res.transformation)
     src, tgt = to_pcd(after_xyz, voxel=options.coarse_voxel), to_pcd(before_xyz, voxel=options.coarse_voxel)
     ev = reg.evaluate_registration(src, tgt, 1.5 * options.coarse_voxel, t)  # point to point
