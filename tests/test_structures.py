@@ -8,13 +8,14 @@ holds the truth."""
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from soilvolume.reporting.report import with_unseen
-from soilvolume.soil.objects import find_objects
+from soilvolume.soil.objects import Blob, _pairs, find_objects
 from soilvolume.volumes import nonsoil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
@@ -76,6 +77,19 @@ def test_a_pile_is_not_half_of_a_machine_that_moved():
     assert not found.moved.any()
     pile = [b for b in found.blobs if b.sign > 0]
     assert all(not b.structure and b.edge_slope < 1.2 for b in pile)
+
+
+def test_a_pit_under_water_is_not_the_place_a_machine_left():
+    """A machine 22 m2, 2.8 m tall, that arrived, and a walled cut alike in size and height whose bottom no survey
+    saw (water standing in a pit: the level of what it left is unknown): not one object that moved. A cut is an
+    object's footprint only where the ground it left is seen level with its ring (a blob of unknown level had
+    been exempt from the outline test, as if no surfaces were given)."""
+    machine = Blob(1, 22.7, 2.8, 64.2, 10.0, 10.0, 1.4, 1, slope=2.5, on_ground=True, edge_slope=3.1)
+    flooded = Blob(-1, 21.9, 2.4, 64.8, 60.0, 60.0, 1.3, 2, slope=2.0, on_ground=None, edge_slope=1.3)
+    assert [b.partner for b in _pairs([machine, flooded], surfaces=True)] == [0, 0]
+    left = replace(flooded, on_ground=True)  # the ground it left seen, level with its ring
+    assert [b.partner for b in _pairs([machine, left], surfaces=True)] == [2, 1]
+    assert [b.partner for b in _pairs([machine, flooded], surfaces=False)] == [2, 1]  # by shape alone
 
 
 def test_a_thin_even_sharp_edged_fill_may_be_a_slab():

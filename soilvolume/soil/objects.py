@@ -104,7 +104,7 @@ def find_objects(
             if blob is not None:
                 labels[sl][comp[sl] == k] = blob.label
                 blobs.append(blob)
-    blobs = _pairs(blobs)
+    blobs = _pairs(blobs, surfaces is not None)
     if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs and resolved walls only
         blobs = [b for b in blobs if b.partner or b.structure]
     labels = np.where(np.isin(labels, [b.label for b in blobs]), labels, 0)
@@ -140,9 +140,11 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
         return None
     grown = scipy.ndimage.binary_dilation(whole, _EIGHT, iterations=2)
     ring = grown & ~scipy.ndimage.binary_dilation(whole, _EIGHT)
-    if ring.any() and float(np.mean(~changed[win][ring])) < MIN_QUIET_RING:
+    seen = ring & ~unknown[win]  # an unmeasured cell is neither changed nor unchanged ground
+    quiet = seen & ~changed[win]
+    if ring.any() and (not seen.any() or float(quiet.sum()) < MIN_QUIET_RING * float(seen.sum())):
         return None
-    level = None if under is None else level_with_ring(under[win], half, ring & ~changed[win], height)
+    level = None if under is None else level_with_ring(under[win], half, quiet, height)
     if level is False and sign < 0:
         return None  # a pit: below the ground around it, soil however steep its walls
     rr, cc = np.nonzero(half)
@@ -191,10 +193,11 @@ def _elongation(rr: np.ndarray, cc: np.ndarray) -> float:
     return float(np.sqrt(max(ev[1], 1e-9) / max(ev[0], 1e-9)))
 
 
-def _pairs(blobs: list[Blob]) -> list[Blob]:
-    """Fill and cut blobs matched into moved objects, the closest matches first; given the surfaces, only blobs with
-    walls steeper than soil stands (:data:`PAIR_EDGE_SLOPE` at their outline): a pile is not half of a machine."""
-    walled = [b for b in blobs if b.on_ground is None or b.edge_slope >= PAIR_EDGE_SLOPE]
+def _pairs(blobs: list[Blob], surfaces: bool) -> list[Blob]:
+    """Fill and cut blobs matched into moved objects, the closest matches first; given the ``surfaces``, only blobs with
+    walls steeper than soil stands (:data:`PAIR_EDGE_SLOPE` at their outline: a pile is not half of a machine), and a
+    cut only where the ground it left is seen level with its ring (a pit under water is not a machine's footprint)."""
+    walled = [b for b in blobs if not surfaces or (b.edge_slope >= PAIR_EDGE_SLOPE and (b.on_ground or b.sign > 0))]
     fills, cuts = [b for b in walled if b.sign > 0], [b for b in walled if b.sign < 0]
     scored = []
     for f in fills:
