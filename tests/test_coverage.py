@@ -22,7 +22,7 @@ def _grids(gap: bool = True):
     if gap:
         n_b[15:35, 15:35] = 0  # no before data under the pile and around it
     d[(n_a == 0) | (n_b == 0)] = np.nan
-    return n_a, n_b, np.zeros(shape, bool), d
+    return n_a, n_b, np.zeros(shape, bool), d, n_a.copy()  # no point that is not soil
 
 
 def test_counts_of_a_gap_under_the_works():
@@ -33,8 +33,8 @@ def test_counts_of_a_gap_under_the_works():
 
 
 def test_tiles_add_up_to_the_whole_grid():
-    n_a, n_b, refilled, d = _grids()
-    whole = coverage.counts(n_a, n_b, refilled, d)
+    n_a, n_b, refilled, d, shown = _grids()
+    whole = coverage.counts(n_a, n_b, refilled, d, shown)
     parts, h = [], 3
     for r0, r1 in ((0, 30), (30, 60)):
         for c0, c1 in ((0, 40), (40, 80)):
@@ -42,7 +42,7 @@ def test_tiles_add_up_to_the_whole_grid():
             win = (slice(e[0], e[1]), slice(e[2], e[3]))
             core = (slice(r0 - e[0], r1 - e[0]), slice(c0 - e[2], c1 - e[2]))
             edges = (e[0] == 0, e[1] == 60, e[2] == 0, e[3] == 80)
-            parts.append(coverage.counts(n_a[win], n_b[win], refilled[win], d[win], core, edges))
+            parts.append(coverage.counts(n_a[win], n_b[win], refilled[win], d[win], shown[win], core, edges))
     total = coverage.combine(parts)
     for key in coverage.COUNTS:
         assert total[key] == whole[key], key
@@ -62,12 +62,33 @@ def test_the_verdict_of_a_half_covered_survey():
 
 
 def test_a_small_gap_at_quiet_ground_is_a_caution():
-    n_a, n_b, refilled, d = _grids(gap=False)
+    n_a, n_b, refilled, d, shown = _grids(gap=False)
     n_b[50:55, 5:10] = 0  # 25 cells (0.6 %) far from the works
     d[50:55, 5:10] = np.nan
-    cov = coverage.summary(coverage.counts(n_a, n_b, refilled, d), 1.0, 0.0, 0.08)
+    cov = coverage.summary(coverage.counts(n_a, n_b, refilled, d, shown), 1.0, 0.0, 0.08)
     severity, text = coverage.check({"coverage": cov, "uncertainty_m3": {"net": 20.0}})
     assert severity == "caution" and "25 m²" in text and "within their interval" in text, text
+
+
+def test_a_gap_of_the_after_survey_over_the_before_ground_is_unseen():
+    """Water standing in a pit (or a pit the camera could not see into) leaves the after survey without any
+    point where the before saw ground: change there is not measured, so it is unseen, not outside the survey;
+    a gap the after survey shows vegetation in, and one neither survey saw, are not."""
+    n_a, n_b, refilled, d, shown = _grids(gap=False)
+    d[20:30, 20:30] -= 3.0  # a pit where the pile was
+    n_a[22:28, 22:28], shown[22:28, 22:28] = 0, 0  # water in it: no return at all
+    d[22:28, 22:28] = np.nan
+    cells = coverage.counts(n_a, n_b, refilled, d, shown)
+    assert cells["after_cells"] == 60 * 70 and cells["compared_cells"] == 60 * 70 - 36
+    assert cells["before_missing_cells"] == 0 and cells["gap_ring_p95_m"] > 1.0  # the pit's walls around it
+    cov = coverage.summary(cells, 1.0, 0.0, 0.08)
+    assert cov["unseen_m2"] == 36 and cov["unseen_volume_bound_m3"] > 36 * 1.0
+    severity, text = coverage.check({"coverage": cov, "uncertainty_m3": {"net": 5.0}})
+    assert severity == "unreliable" and text.startswith("the surveys do not both cover 36 m²"), text
+    shown[22:28, 22:28] = 4  # the after survey's points there are vegetation: not a gap in it
+    assert coverage.counts(n_a, n_b, refilled, d, shown)["after_cells"] == 60 * 70 - 36
+    shown[22:28, 22:28], n_b[22:28, 22:28] = 0, 0  # a pond in both surveys: nobody saw that ground
+    assert coverage.counts(n_a, n_b, refilled, d, shown)["after_cells"] == 60 * 70 - 36
 
 
 def test_the_after_survey_beyond_the_grid():

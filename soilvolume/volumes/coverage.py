@@ -15,15 +15,20 @@ COUNTS = ("after_cells", "compared_cells", "before_missing_cells", "gap_ring_cel
 _P95 = {"abs_diff": "compared", "gap_ring": "gap_ring", "edge_ring": "edge_ring"}  # percentile: its cells
 
 
-def counts(n_after, n_before, refilled, diff, core=(slice(None), slice(None)), edges=(True,) * 4) -> dict:
-    """Cells of the after footprint on the ``core``, compared, without before data; the |difference| p95 of the compared
-    cells, near such gaps and along the ``edges`` (top, bottom, left, right) that are the grid's."""
+def counts(n_after, n_before, refilled, diff, shown, core=(slice(None), slice(None)), edges=(True,) * 4) -> dict:
+    """Cells of the after footprint on the ``core`` (its soil cells, refilled ones, and its gaps without any
+    point (``shown``: its points of any kind per cell) over soil the before saw: water, a pit it could not see
+    into), compared, without before data; the |difference| p95 of the compared cells, near such gaps and along
+    the ``edges`` (top, bottom, left, right) that are the grid's."""
     from scipy import ndimage
 
-    footprint = (n_after > 0) | refilled
+    seen = (n_after > 0) | refilled
+    hidden = ndimage.binary_fill_holes(seen | (shown > 0)) & ~seen & (shown == 0) & (n_before > 0)
+    footprint = seen | hidden
     compared = footprint & np.isfinite(diff)
     missing = footprint & (n_before == 0) & ~compared
-    near_gap = ndimage.binary_dilation(missing, iterations=RING) & compared if missing.any() else missing
+    gaps = missing | hidden
+    near_gap = ndimage.binary_dilation(gaps, iterations=RING) & compared if gaps.any() else gaps
     edge = np.zeros(diff.shape, bool)
     for side, cut in zip(edges, (np.s_[:RING], np.s_[-RING:], np.s_[:, :RING], np.s_[:, -RING:]), strict=True):
         edge[cut] |= side
