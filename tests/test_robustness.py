@@ -464,3 +464,22 @@ def test_without_flock_the_engine_imports_and_a_stale_lock_is_one_line(tmp_path)
     with pytest.raises(SoilVolumeError, match="soilvolume-lock: another soilvolume run"):
         with siblings._lock_folder(tmp_path, wait_s=0.2):
             pass
+
+
+@pytest.mark.parametrize("quiet", [True, False])
+def test_an_unread_future_of_the_event_loop_prints_nothing(quiet):
+    """A Dask client's close that outran its timeout on a busy host left a future whose exception nobody read:
+    asyncio printed "Future exception was never retrieved" after the run's one-line error (seen once in a CI run
+    of test_hostile's full-disk case on threads:1). The command line hands asyncio's records to a null handler."""
+    code = (
+        "import asyncio, gc\n"
+        "from soilvolume.core.nativelog import quiet_library_logs\n"
+        f"if {quiet}: quiet_library_logs()\n"
+        "loop = asyncio.new_event_loop()\n"
+        "f = loop.create_future()\n"
+        "f.set_exception(TimeoutError('Timeout'))\n"
+        "del f\n"
+        "gc.collect()\n"
+    )
+    err = run_python(code).stderr
+    assert ("never retrieved" in err) is not quiet, err

@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import logging
 import re
 import sys
 import traceback
 
 from ..core.interrupt import handle_signals
-from ..core.nativelog import hold_native_stderr, quiet_library_warnings
+from ..core.nativelog import hold_native_stderr, quiet_library_logs, quiet_library_warnings
 from ..core.outputs import os_problem
 from ..core.types import SoilVolumeError
 from ..core.watchdog import out_of_memory, short_of_memory
@@ -84,7 +83,7 @@ def one_line(message: str, limit: int = 400) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Run one command; every failure is one line on stderr and a non-zero exit: 1 for errors,
     130/143 for SIGINT/SIGTERM (outputs are never half-written)."""
-    logging.getLogger("rasterio").addHandler(logging.NullHandler())  # GDAL's errors reach us as exceptions
+    quiet_library_logs()
     quiet_library_warnings()
     with handle_signals(then_ignore=argv is None):  # None: the program exits right after
         argv = sys.argv[1:] if argv is None else argv

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import faulthandler
 import io
+import logging
 import os
 import sys
 import warnings
@@ -50,3 +51,20 @@ def quiet_library_warnings() -> None:
         return
     warnings.simplefilter("ignore")
     os.environ["PYTHONWARNINGS"] = "ignore"
+
+
+#: libraries whose log records never reach the terminal: rasterio (GDAL's errors reach us as exceptions), asyncio
+#: (Dask's event loop: a task's failure reaches us through its future; a shutdown that outran its timeout on a busy
+#: host printed "Future exception was never retrieved" after the run's one-line error)
+QUIET_LOGGERS = ("rasterio", "asyncio")
+
+
+def quiet_library_logs() -> None:
+    """:data:`QUIET_LOGGERS`' records handled by a null handler (Python's last resort would print them), unless
+    ``SOILVOLUME_DEBUG`` is set."""
+    if os.environ.get("SOILVOLUME_DEBUG"):
+        return
+    for name in QUIET_LOGGERS:
+        log = logging.getLogger(name)
+        if not any(isinstance(h, logging.NullHandler) for h in log.handlers):
+            log.addHandler(logging.NullHandler())
