@@ -15,6 +15,7 @@ MIN_CELLS = 3  # a change area has at least this many significant cells
 BUFFER_CELLS = 1  # cells of buffer around each change area
 MARGINAL_CELLS = 50  # smaller areas barely above their LoD may be noise (a few correlation areas)
 _EIGHT = np.ones((3, 3), bool)
+SKIRT_CELLS = 3  # the ring around the change areas whose same-signed change they may leave out
 
 
 def cell_sigma(spread: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -73,6 +74,19 @@ def marginal_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod, cel
         size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
         out[key] = float(vol[(mean_abs < 2.0 * mean_lod) & (size < MARGINAL_CELLS)].sum())
     out["net"] = float(np.hypot(out["fill"], out["cut"]))
+    return out
+
+
+def skirt_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell_area: float) -> dict:
+    """Per part, the change (m3) in the :data:`SKIRT_CELLS` cells around its areas that the areas leave out: the
+    difference summed there when it carries the part's sign (a lowering's or a pile's gentle edge under the detection
+    level; noise sums to about nothing); the net's, the two's signed sum."""
+    d, out = np.where(np.isfinite(diff), diff, 0.0), {}
+    changed = fill | cut
+    for key, area, sign in (("fill", fill, 1.0), ("cut", cut, -1.0)):
+        ring = scipy.ndimage.binary_dilation(area, _EIGHT, iterations=SKIRT_CELLS) & ~changed if area.any() else area
+        out[key] = max(0.0, sign * float(d[ring].sum()) * cell_area)
+    out["net"] = abs(out["fill"] - out["cut"])
     return out
 
 

@@ -16,7 +16,7 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from . import coverage
-from .change import budget, marginal_terms, refilled_budget, signed_budget, thresholded_volumes
+from .change import budget, marginal_terms, refilled_budget, signed_budget, skirt_terms, thresholded_volumes
 from .holes.interpolate import fill
 from .holes.works import blind_change, outline_sigma
 from .nonsoil import Areas, classify
@@ -69,7 +69,8 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     statistic = statistic_bias(skews, s.filled_mask[c.core], parts, area)
     outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(s.filled_mask), area)
     reg_in = 0.0 if c.tile else 1.0
-    terms = (registration, marginal, ex["sigma_m3"], statistic)
+    skirt = skirt_terms(d, fa, ca, area)  # the areas' gentle edges under the detection level
+    terms = (registration, marginal, ex["sigma_m3"], statistic, skirt)
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
@@ -80,7 +81,7 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=n_coef, bound_m3=bound)
     model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma), **run)
     named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
-    named.update(statistic_m3=statistic, outline_m3=outline)
+    named.update(statistic_m3=statistic, outline_m3=outline, skirt_m3=skirt)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}
     return Interval(unc, model, hidden)
 

@@ -1,0 +1,40 @@
+"""The change the change areas leave out at their edges (issue 53): a lowering or a pile whose edge runs out
+under the detection level loses its skirt from the headline; the interval carries the difference summed in
+the ring around each part's areas, where it has the part's sign (noise sums to about nothing)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from soilvolume.volumes.change import SKIRT_CELLS, skirt_terms
+
+CELL_AREA = 0.25
+
+
+def _compaction(noise: float = 0.0):
+    """A 0.2 m lowering over 5 x 5 m whose edge runs out over 1.5 m (three cells), on quiet ground."""
+    rng = np.random.default_rng(3)
+    yy, xx = np.mgrid[0:80, 0:80]
+    dist = np.maximum(np.abs(yy - 39.5), np.abs(xx - 39.5)) - 5.0  # cells outside the 10 x 10 core
+    d = -0.2 * np.clip(1.0 - dist / SKIRT_CELLS, 0.0, 1.0)
+    return d + rng.normal(0.0, noise, d.shape)
+
+
+def test_the_skirt_of_a_lowering_under_the_detection_level():
+    d = _compaction()
+    cut = d < -0.1  # the areas stop halfway down the edge
+    left_out = -float(d[~cut].sum()) * CELL_AREA
+    assert left_out > 1.5  # m3: a fifth of the lowering
+    terms = skirt_terms(d, np.zeros(d.shape, bool), cut, CELL_AREA)
+    assert terms["cut"] == pytest.approx(left_out, rel=0.05)
+    assert terms["fill"] == 0.0 and terms["net"] == pytest.approx(terms["cut"])
+
+
+def test_noise_around_the_areas_sums_to_about_nothing():
+    d = _compaction(noise=0.03)
+    d[np.abs(d) < 0.2] = np.random.default_rng(4).normal(0.0, 0.03, int((np.abs(d) < 0.2).sum()))  # no skirt
+    cut = d < -0.1
+    cut[:] = False
+    cut[35:45, 35:45] = True  # the lowering's core only
+    assert skirt_terms(d, np.zeros(d.shape, bool), cut, CELL_AREA)["cut"] < 0.5  # m3, against about 2 of a skirt
