@@ -79,6 +79,21 @@ def test_a_pile_is_not_half_of_a_machine_that_moved():
     assert all(not b.structure and b.edge_slope < 1.2 for b in pile)
 
 
+def test_a_machine_that_left_beside_the_trench_it_dug():
+    """A 6 x 3 m machine, 2.8 m tall, in the before survey only, standing at the edge of a 1.3 m trench dug since:
+    one cut area with the trench. Its core is the place an object left (level ground, walls no soil stands at),
+    left out; the trench is soil."""
+    before = np.zeros((120, 120))
+    after = before.copy()
+    after[30:90, 50:58] = -1.3  # the trench, 4 x 30 m
+    before[50:62, 58:64] = 2.8  # the machine, beside it
+    found, diff = _blobs(before, after)
+    [machine] = [b for b in found.blobs if b.sign < 0]
+    assert machine.structure and machine.on_ground and machine.height_m == pytest.approx(2.8, abs=0.1)
+    lone = nonsoil._lone(found)
+    assert lone[52:60, 59:63].all() and not lone[30:90, 50:57].any()
+
+
 def test_a_pit_under_water_is_not_the_place_a_machine_left():
     """A machine 22 m2, 2.8 m tall, that arrived, and a walled cut alike in size and height whose bottom no survey
     saw (water standing in a pit: the level of what it left is unknown): not one object that moved. A cut is an

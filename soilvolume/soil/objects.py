@@ -11,8 +11,9 @@ around it: what arrived stands on a surface level with its ring of ground, what 
 (:func:`level_with_ring`); a cut below the ground around it is a pit, soil however steep its walls.
 A structure (walls no soil stands at, on level ground) is an object whatever its size or
 shape (a building, a fence); without the surfaces only compact blobs under :data:`MAX_AREA_M2`
-and :data:`MAX_ELONGATION` are. On cells coarser than :data:`MAX_SINGLE_CELL` only matching pairs
-are objects.
+and :data:`MAX_ELONGATION` are. A change area that is no object as a whole is tried core by core
+(its parts above half its height): a machine that left beside the trench it dug is one area with it.
+On cells coarser than :data:`MAX_SINGLE_CELL` only matching pairs are objects.
 
 Rough cells (:func:`roughness`, :func:`rough_cells`): a canopy is a spread of heights a cell's slope
 does not explain (soil is smooth at a cell's scale); used where no signal labelled any point, their
@@ -99,11 +100,14 @@ def find_objects(
         comp, _ = scipy.ndimage.label(area, structure=_EIGHT)
         under = None if surfaces is None else surfaces[1 if sign > 0 else 0]  # arrived on before, left after
         masks = (changed, refilled, unknown, under)
+        signed = sign * d0
         for k, sl in enumerate(scipy.ndimage.find_objects(comp), 1):
-            blob = _measure(sign * d0, comp, k, sl, masks, cell, sign, len(blobs) + 1)
-            if blob is not None:
-                labels[sl][comp[sl] == k] = blob.label
-                blobs.append(blob)
+            blob = _measure(signed, comp, k, sl, masks, cell, sign, len(blobs) + 1)
+            for part, psl, pk, found in [(comp, sl, k, blob)] if blob else _cores(signed, comp, k, sl):
+                found = found or _measure(signed, part, pk, psl, masks, cell, sign, len(blobs) + 1)
+                if found is not None:
+                    labels[psl][part[psl] == pk] = found.label
+                    blobs.append(found)
     blobs = _pairs(blobs, surfaces is not None)
     if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs and resolved walls only
         blobs = [b for b in blobs if b.partner or b.structure]
@@ -112,6 +116,19 @@ def find_objects(
     moved = scipy.ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls
     single = (labels > 0) & ~moved
     return Objects(tuple(blobs), labels, moved, single)
+
+
+def _cores(d, comp, k, sl) -> list[tuple]:
+    """The cores of component ``k`` (no object as a whole) above half its height, each a candidate of its own
+    (part, box, label, None): a machine that left beside the trench it dug, a cabin on a platform's edge."""
+    whole = comp[sl] == k
+    dd = np.where(whole, d[sl], 0.0)
+    cores, n = scipy.ndimage.label(whole & (dd >= 0.5 * float(np.percentile(dd[whole], 90))), structure=_EIGHT)
+    if n == 1 and (cores > 0).sum() == whole.sum():
+        return []
+    part = np.zeros(comp.shape, np.int32)
+    part[sl] = cores
+    return [(part, csl, j, None) for j, csl in enumerate(scipy.ndimage.find_objects(part), 1)]
 
 
 def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
