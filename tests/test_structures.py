@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from soilvolume.reporting.report import with_unseen
+from soilvolume.reporting.report import with_nothing_found, with_unseen
 from soilvolume.soil.objects import Blob, _pairs, find_objects
 from soilvolume.volumes import nonsoil
 
@@ -153,3 +153,13 @@ def test_a_composed_site_with_a_building_holds_the_truth(seed, kinds, tmp_path):
     assert "error" not in row, row.get("error")
     assert all(row["covered"].values()), (row["err_m3"], row["half_width"])
     assert row["right"] or row["verdict"] != "reliable"
+
+
+def test_no_change_area_is_not_an_interval_of_zero():
+    """A site where no change area was found (a 12 m3 pit of a few cells the after survey could not see into,
+    composed site 90198) read net 0 +- 0: the interval is at least the compared area's."""
+    u = {"net": 0.0, "cut": 0.0, "fill": 0.0, "net_change_areas": 0.0, "net_all_cells": 13.6}
+    none = with_nothing_found({"grid": {"change_area_m2": 0.0}, "uncertainty_m3": dict(u)})["uncertainty_m3"]
+    assert (none["net"], none["cut"], none["fill"], none["net_change_areas"]) == (13.6, 13.6, 13.6, 13.6)
+    some = with_nothing_found({"grid": {"change_area_m2": 4.0}, "uncertainty_m3": dict(u)})["uncertainty_m3"]
+    assert some == u

@@ -210,7 +210,18 @@ def _report(record: RunRecord, timings: dict[str, float]) -> dict:
         "options": recorded_options(options),
         "timings_s": timings,
     }
-    return amend(with_unseen(report), prep, vols)  # a run against a surface: its reference
+    return amend(with_unseen(with_nothing_found(report)), prep, vols)  # against a surface: its reference
+
+
+def with_nothing_found(report: dict) -> dict:
+    """``report`` with the net's, cut's and fill's 95 % half-widths at least the compared area's when no change
+    area was found: "no change" speaks for every compared cell, and a change under the detection level (a small
+    pit, a compaction) is not measured by an empty change area's interval of +-0."""
+    if report["grid"]["change_area_m2"] > 0:
+        return report
+    u = report["uncertainty_m3"]
+    u.update({k: max(u[k], u["net_all_cells"]) for k in ("net", "cut", "fill", "net_change_areas")})
+    return report
 
 
 def with_unseen(report: dict) -> dict:
