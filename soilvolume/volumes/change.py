@@ -80,7 +80,7 @@ def marginal_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, lod, cel
 def skirt_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell_area: float) -> dict:
     """Per part, the change (m3) in the :data:`SKIRT_CELLS` cells around its areas that the areas leave out: the
     difference summed there when it carries the part's sign (a lowering's or a pile's gentle edge under the detection
-    level; noise sums to about nothing); the net's, the two's signed sum."""
+    level; noise sums to about nothing); the net's, the size of their difference."""
     d, out = np.where(np.isfinite(diff), diff, 0.0), {}
     changed = fill | cut
     for key, area, sign in (("fill", fill, 1.0), ("cut", cut, -1.0)):
