@@ -122,20 +122,22 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     w = np.array([t["uncertainty"]["stable_cells"] for t in tiles], float)  # the models pooled by stable cells
     model = {k: _weighted(tiles, f"{k}_{u}", w, 0.0) for k, u in (("nugget", "m2"), ("psill", "m2"), ("range", "m"))}
     u.update(nugget_m2=model["nugget"], psill_m2=model["psill"], range_m=model["range"])
+    skirt = {p: sum(t["uncertainty"]["skirt_m3"][p] for t in tiles) for p in ("cut", "fill")}  # one-sided: summed
+    skirt["net"] = abs(skirt["fill"] - skirt["cut"])
     for part in PARTS:
         area = sum(t["uncertainty"]["part_area_m2"][part] for t in tiles)
         region = region_sigma(round(area / cell**2), cell, model)  # correlated across tile edges too
         terms = [dict(zip(TERMS, t["uncertainty"]["terms_m3"][part], strict=True)) for t in tiles]
         # the refilled share and leftover bias are fully correlated across tiles; refill errors
         # and the extras (small detections) independent
-        systematic = [sum(t[n] for t in terms) for n in ("refilled_share", "leftover_bias")]
+        systematic = [sum(t[n] for t in terms) for n in ("refilled_share", "leftover_bias")] + [skirt.get(part, 0.0)]
         independent = [float(np.sqrt(sum(t[n] * t[n] for t in terms))) for n in ("refill_error", "extras")]
         shared = np.hypot(area * over.uncertainty["bias_sigma_m"], reg[part])  # the same in every tile
         u[part] = z * float(np.linalg.norm([region, *systematic, *independent, shared]))
     unclear = {p: sum(t["uncertainty"].get("unclassified_m3", {}).get(p, 0.0) for t in tiles) for p in ("cut", "fill")}
     unclear["net"] = max(unclear.values())  # as volumes/nonsoil: between net - fill and net + cut
     u.update(widen({p: u[p] for p in PARTS}, unclear), unclassified_m3=unclear)
-    u["registration_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}
+    u["registration_m3"], u["skirt_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}, skirt
     marginal = [t["uncertainty"]["marginal_detections_m3"] for t in tiles]  # in quadrature
     u["marginal_detections_m3"] = {
         p: float(np.sqrt(np.sum(np.square([m[p] for m in marginal])))) for p in ("net", "cut", "fill")

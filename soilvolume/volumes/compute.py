@@ -69,8 +69,8 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     statistic = statistic_bias(skews, s.filled_mask[c.core], parts, area)
     outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(s.filled_mask), area)
     reg_in = 0.0 if c.tile else 1.0
-    skirt = skirt_terms(d, fa, ca, area)  # the areas' gentle edges under the detection level
-    terms = (registration, marginal, ex["sigma_m3"], statistic, skirt)
+    skirt = skirt_terms(d, fa, ca, area)  # the areas' gentle edges under the detection level (a tile's: summed)
+    terms = (registration, marginal, ex["sigma_m3"], statistic, *(() if c.tile else (skirt,)))
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
