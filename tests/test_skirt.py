@@ -38,3 +38,24 @@ def test_noise_around_the_areas_sums_to_about_nothing():
     cut[:] = False
     cut[35:45, 35:45] = True  # the lowering's core only
     assert skirt_terms(d, np.zeros(d.shape, bool), cut, CELL_AREA)["cut"] < 0.5  # m3, against about 2 of a skirt
+
+
+def test_the_caution_names_the_skirt_when_it_is_the_largest_part():
+    """A wide interval's caution names its largest part in m³; the other terms by their own names (a compaction's
+    edge under the detection level is not "what is not soil")."""
+    from soilvolume.volumes.tolerance import tolerance_check
+
+    report = {
+        "volume_m3": {"net": -40.0, "cut": 40.0, "fill": 0.0},
+        "uncertainty_m3": {"net": 6.0, "cut": 6.0, "fill": 0.1},
+        "uncertainty": {
+            "confidence": 0.95,
+            "terms_m3": {"net": [0.5, 0.4, 0.1, 0.1, 3.0]},  # one-sigma; the last: the other terms
+            "skirt_m3": {"net": 2.9, "cut": 2.9, "fill": 0.0},
+            "registration_m3": {"net": -0.4, "cut": 0.3, "fill": 0.1},
+            "classification_m3": {"net": 0.2, "cut": 0.2, "fill": 0.0},
+        },
+    }
+    [(severity, text)] = tolerance_check(report)
+    assert severity == "caution" and "net's 95 % interval (±6.0 m³)" in text
+    assert text.endswith("its largest part is change at the works' edges under the detection level (±5.7 m³)"), text

@@ -16,11 +16,20 @@ WORDS = dict(
             "heights interpolated into holes",
             "the interpolation's error",
             "the bias correction's leftover",
-            "what is not soil, left out or counted",
+            "the other terms",
         ),
         strict=True,
     )
 )
+#: the other terms' named parts (report.json ``uncertainty``, one-sigma m³ per part) in words: named in its stead
+EXTRAS = {
+    "skirt_m3": "change at the works' edges under the detection level",
+    "outline_m3": "holes across the works' outlines",
+    "marginal_detections_m3": "small change areas that may be noise",
+    "registration_m3": "the registration's uncertainty",
+    "statistic_m3": "the cells' height statistic",
+    "classification_m3": "what is not soil, left out or counted",
+}
 BOUND = "change that could not be classified as soil or not, or seen"  # the bounds added as they are
 
 
@@ -33,7 +42,8 @@ def tolerance_check(report: dict) -> list[tuple[str, str]]:
         return []
     q = wide[0]
     bound = sum(float(((report.get(key) or {}).get("bound_m3") or {}).get(q, 0.0)) for key in ("excluded", "blind"))
-    name, m3 = largest_part((model.get("terms_m3") or {}).get(q) or [], model.get("confidence", 0.95), bound)
+    extras = {EXTRAS[k]: abs(float((model.get(k) or {}).get(q, 0.0))) for k in EXTRAS}
+    name, m3 = largest_part((model.get("terms_m3") or {}).get(q) or [], model.get("confidence", 0.95), bound, extras)
     said = (
         f"the {q}'s 95 % interval (±{u[q]:,.1f} m³) is wider than {100 * TOLERANCE[q]:.0f} % of the volume moved "
         f"({moved:,.0f} m³): the {q} may be off by more than that; its largest part is {name} (±{m3:,.1f} m³)"
@@ -41,9 +51,12 @@ def tolerance_check(report: dict) -> list[tuple[str, str]]:
     return [("caution", said)]
 
 
-def largest_part(sigmas: list[float], confidence: float, bound: float) -> tuple[str, float]:
+def largest_part(sigmas: list[float], confidence: float, bound: float, extras: dict | None = None) -> tuple[str, float]:
     """(words, m³ at ``confidence``) of the largest of an interval's one-sigma ``sigmas`` (in the order of
-    :data:`~.uncertainty.TERMS`) and its ``bound`` of change that could not be classified or seen."""
+    :data:`~.uncertainty.TERMS`; the last, the other terms, by its named parts ``extras`` when given: words to
+    one-sigma m³) and its ``bound`` of change that could not be classified or seen."""
     z = z_value(confidence)
     parts = [(WORDS[term], z * float(x)) for term, x in zip(TERMS, sigmas, strict=False)]
+    if extras and len(parts) == len(TERMS):
+        parts[-1:] = [(words, z * m3) for words, m3 in extras.items()]
     return max([*parts, (BOUND, float(bound))], key=lambda p: p[1])
