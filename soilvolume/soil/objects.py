@@ -100,14 +100,15 @@ def find_objects(
         comp, _ = scipy.ndimage.label(area, structure=_EIGHT)
         under = None if surfaces is None else surfaces[1 if sign > 0 else 0]  # arrived on before, left after
         masks = (changed, refilled, unknown, under)
-        signed = sign * d0
+        signed, cores = sign * d0, np.zeros(comp.shape, np.int32)  # a component's cores, one at a time
         for k, sl in enumerate(scipy.ndimage.find_objects(comp), 1):
             blob = _measure(signed, comp, k, sl, masks, cell, sign, len(blobs) + 1)
-            for part, psl, pk, found in [(comp, sl, k, blob)] if blob else _cores(signed, comp, k, sl):
+            for part, psl, pk, found in [(comp, sl, k, blob)] if blob else _cores(signed, comp, k, sl, cores):
                 found = found or _measure(signed, part, pk, psl, masks, cell, sign, len(blobs) + 1)
                 if found is not None:
                     labels[psl][part[psl] == pk] = found.label
                     blobs.append(found)
+            cores[sl] = 0
     blobs = _pairs(blobs, surfaces is not None)
     if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs and resolved walls only
         blobs = [b for b in blobs if b.partner or b.structure]
@@ -118,17 +119,20 @@ def find_objects(
     return Objects(tuple(blobs), labels, moved, single)
 
 
-def _cores(d, comp, k, sl) -> list[tuple]:
-    """The cores of component ``k`` (no object as a whole) above half its height, each a candidate of its own
-    (part, box, label, None): a machine that left beside the trench it dug, a cabin on a platform's edge."""
+def _cores(d, comp, k, sl, part: np.ndarray) -> list[tuple]:
+    """The cores of component ``k`` (no object as a whole) above half its height, labelled in ``part`` within the
+    component's box (zeros elsewhere), each a candidate of its own (part, box, label, None): a machine that left
+    beside the trench it dug, a cabin on a platform's edge."""
     whole = comp[sl] == k
     dd = np.where(whole, d[sl], 0.0)
     cores, n = scipy.ndimage.label(whole & (dd >= 0.5 * float(np.percentile(dd[whole], 90))), structure=_EIGHT)
     if n == 1 and (cores > 0).sum() == whole.sum():
         return []
-    part = np.zeros(comp.shape, np.int32)
     part[sl] = cores
-    return [(part, csl, j, None) for j, csl in enumerate(scipy.ndimage.find_objects(part), 1)]
+    (r0, c0), out = (s.start for s in sl), []
+    for j, (rows, cols) in enumerate(scipy.ndimage.find_objects(cores), 1):  # boxes within the component's
+        out.append((part, (slice(rows.start + r0, rows.stop + r0), slice(cols.start + c0, cols.stop + c0)), j, None))
+    return out
 
 
 def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
