@@ -40,6 +40,10 @@ class EpochDEM:
         parts = [a for a in (self.veg, self.obj, self.other) if a is not None]
         return sum(parts) if parts else np.zeros(self.counts.shape, np.int64)
 
+    def all_points(self) -> np.ndarray:
+        """Points per cell of every kind, soil or not."""
+        return self.counts + self.nonsoil()
+
     def all_points_height(self) -> np.ndarray:
         """Each cell's mean height of every point, non-soil ones too (NaN where it has none)."""
         if self.nonsoil_z is None:

@@ -80,13 +80,14 @@ def volume_tile(job: VolumeJob, win: Window) -> dict:
     job.store.save(win, {n: getattr(vols, n)[core] for n in VOLUME_ARRAYS})
     out = {b: getattr(vols, b) for b in BUDGETS}
     edges = (ext[0] == 0, ext[1] == g.rows, ext[2] == 0, ext[3] == g.cols)  # the grid's edge: top, bottom, left, right
-    counts = after.counts, before.counts
     out.update(
         window=win,
         uncertainty=vols.uncertainty,
         zones=vols.zones,
         empty=(vols.empty_cells, vols.empty_before, vols.empty_after),
-        coverage=coverage.counts(*counts, vols.filled_mask, vols.diff, after.counts + after.nonsoil(), core, edges),
+        coverage=coverage.counts(
+            after.counts, before.counts, vols.filled_mask, vols.diff, after.all_points(), core, edges
+        ),
     )
     return out
 

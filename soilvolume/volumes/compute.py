@@ -122,5 +122,5 @@ def budgets(
     )
     n_a, n_b = (e.counts for e in epochs)  # the empty cells (either survey, the before, the after), the coverage
     empty = (int((~np.isfinite(s.raw[core])).sum()), int((n_b[core] == 0).sum()), int((n_a[core] == 0).sum()))
-    cov = coverage.counts(n_a, n_b, s.filled_mask, c.diff, n_a + epochs[0].nonsoil(), core, (not c.tile,) * 4)
+    cov = coverage.counts(n_a, n_b, s.filled_mask, c.diff, epochs[0].all_points(), core, (not c.tile,) * 4)
     return out, Cells(*empty, cov)

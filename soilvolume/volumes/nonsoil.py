@@ -189,7 +189,7 @@ def _grass_patches(change: np.ndarray, veg: np.ndarray, bare: np.ndarray, cell_a
 
 def _shares(epochs: Epochs) -> dict[str, np.ndarray]:
     """Per class, the largest share of a cell's points (either epoch) that are of that class."""
-    totals, out = [e.counts + e.nonsoil() for e in epochs], {}
+    totals, out = [e.all_points() for e in epochs], {}
     for name, attr in (("vegetation", "veg"), ("objects", "obj"), ("other", "other")):
         parts = [(getattr(e, attr), t) for e, t in zip(epochs, totals, strict=True) if getattr(e, attr) is not None]
         shares = [np.where(t > 0, part / np.maximum(t, 1), 0.0) for part, t in parts]  # never divides by 0

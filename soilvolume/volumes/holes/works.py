@@ -185,7 +185,7 @@ def blind_change(diff: np.ndarray, epochs: Epochs, change: np.ndarray, cell_area
     ``seen_once`` cells (filled in one survey from its own ground)."""
     bound, items = dict.fromkeys(("net", "cut", "fill"), 0.0), []
     for name, e in zip(("after", "before"), epochs, strict=True):
-        empty = (e.counts + e.nonsoil()) == 0
+        empty = e.all_points() == 0
         labels, _ = scipy.ndimage.label(enclosed_holes(~empty, empty.size), FOUR)
         for k, box in enumerate(scipy.ndimage.find_objects(labels), 1):
             win = tuple(slice(max(b.start - PAD, 0), b.stop + PAD) for b in box)  # the hole and its rings
