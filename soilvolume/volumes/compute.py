@@ -20,7 +20,7 @@ from .change import budget, marginal_terms, refilled_budget, signed_budget, skir
 from .holes.interpolate import fill
 from .holes.works import blind_change, outline_sigma
 from .nonsoil import Areas, classify
-from .refill import Corrected, Refill, centred_heights, correct, refill
+from .refill import Corrected, Refill, centred_heights, change_hole_sigma, correct, refill
 from .results import Budgets, Cells, Epochs, Given, Grids, Volumes
 from .uncertainty import interp_fraction, statistic_bias, volume_uncertainty
 from .zones import zone_budgets, zone_interval
@@ -79,7 +79,8 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     counted[c.core] = True  # (the overview has the bias)
     n_coef = 0 if c.tile else MODES[options.correction].coefficients
     run = dict(grid=grid, confidence=options.lod_confidence, counted=counted, n_coef=n_coef, bound_m3=bound)
-    model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma), **run)
+    tested = change_hole_sigma(c.diff, s.filled_mask, a.counted, c.lod_cell, options)
+    model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma, tested), **run)
     named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
     named.update(statistic_m3=statistic, outline_m3=outline, skirt_m3=skirt)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}

@@ -19,7 +19,7 @@ from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import MIN_CELLS, cell_lod, cell_sigma
 from .holes.interpolate import enclosed_holes, fill, refill_epoch, weak_cells
-from .holes.testholes import error_by_radius
+from .holes.testholes import error_by_radius, error_where
 from .holes.works import fill_own_holes, refill_across_outline
 from .results import Epochs, Given
 from .uncertainty import detection_level, z_value
@@ -84,6 +84,26 @@ def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
         s = nmad(diff[stable])
         return np.where(filled_mask, s if np.isfinite(s) else 0.0, 0.0)
     return np.where(filled_mask, np.r_[0.0, per_patch[:, 1]][labels], 0.0)
+
+
+def change_hole_sigma(diff, filled_mask, counted, lod, options: Options) -> np.ndarray:
+    """Per-cell one-sigma error (m) of the mean of each refilled patch in or along the counted change, on test holes of
+    its radius centred in the change over ``lod`` (a narrow trench's floor refills from its rim); NaN elsewhere, and for
+    a patch larger than the test holes that fit (:func:`.holes.testholes.error_where`)."""
+    out = np.full(diff.shape, np.nan)
+    labels, n = scipy.ndimage.label(filled_mask, structure=scipy.ndimage.generate_binary_structure(2, 1))
+    touching = np.unique(labels[scipy.ndimage.binary_dilation(counted) & filled_mask])
+    if not touching.size:
+        return out
+    radius = np.sqrt(np.bincount(labels.ravel(), minlength=n + 1) / np.pi)
+    measured = ~filled_mask & np.isfinite(diff)
+    size = np.abs(np.nan_to_num(diff))
+    deep = np.median(size[counted & measured]) if (counted & measured).any() else 0.0
+    where = counted & measured & (size > lod) & (size >= deep)  # a survey misses the deeper half most
+    per_patch = error_where(diff, measured, where, options.fill_method, radius[touching], options.seed)
+    at = np.full(n + 1, np.nan)
+    at[touching] = np.full(touching.size, np.nan) if per_patch is None else per_patch
+    return np.where(labels > 0, at[labels], np.nan)
 
 
 @dataclass(frozen=True)

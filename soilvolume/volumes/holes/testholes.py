@@ -19,14 +19,21 @@ def fill_error(
 ) -> tuple[float, float]:
     """(RMS, one-sigma error of a hole's MEAN height) of the fill (m), on discs of ``radius`` cut from ``usable`` ``h``
     (NaN if no room)."""
-    r = int(np.ceil(radius))
-    yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
-    step = 2 * r + 5
+    step = 2 * int(np.ceil(radius)) + 5
     cand = np.argwhere(disc_erosion_every(usable & np.isfinite(h), radius + 2, step)) * step
     if len(cand) < 5:
         return float("nan"), float("nan")
     rng = np.random.default_rng(seed)
     centres = cand[rng.choice(len(cand), min(40, len(cand)), replace=False)]  # 40 test holes
+    mean_err, err = disc_errors(h, centres, radius, method)
+    return float(np.sqrt(np.mean(np.square(err)))), float(np.sqrt(np.mean(np.square(mean_err))))
+
+
+def disc_errors(h: np.ndarray, centres: np.ndarray, radius: float, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """(each disc's mean error, every disc cell's error) (m) of ``method``'s refill of apart discs of ``radius`` on
+    ``centres`` cut from ``h``."""
+    r = int(np.ceil(radius))
+    yy, xx = np.mgrid[-r - 2 : r + 3, -r - 2 : r + 3]
     labels = np.zeros(h.shape, np.int32)
     disc = np.argwhere(xx * xx + yy * yy <= radius * radius) - (r + 2)
     labels[centres[:, :1] + disc[:, 0], centres[:, 1:] + disc[:, 1]] = np.arange(1, len(centres) + 1)[:, None]
@@ -35,7 +42,42 @@ def fill_error(
     filled = discs_filled(values, targets, centres, disc) if method == "biharmonic" else None
     err = (fill(values, targets, method) if filled is None else filled) - h
     mean_err = scipy.ndimage.mean(np.nan_to_num(err), labels, np.arange(1, len(centres) + 1))
-    return float(np.sqrt(np.mean(np.square(np.nan_to_num(err[targets]))))), float(np.sqrt(np.mean(np.square(mean_err))))
+    return np.asarray(mean_err), np.nan_to_num(err[targets])
+
+
+def error_where(
+    h: np.ndarray, usable: np.ndarray, where: np.ndarray, method: str, radius: np.ndarray, seed: int
+) -> np.ndarray | None:
+    """One-sigma error (m) of a hole's mean height at each ``radius``, on test discs centred in ``where`` (the change
+    itself: a trench's floor is not its rim's), 1, 2, 4 ... cells up to the largest with room (NaN beyond 1.4 times it)
+    or the first at least the largest ``radius``;
+    None without room for the smallest."""
+    known = np.pad(usable & np.isfinite(h), 1)
+    room = scipy.ndimage.distance_transform_edt(known)[1:-1, 1:-1]
+    rows = []
+    for r in 2.0 ** np.arange(int(np.ceil(np.log2(min(max(radius.max(), 1.0), MAX_TEST_RADIUS)))) + 1):
+        centres = _apart(np.argwhere(where & (room > r + 2)), 2 * int(np.ceil(r)) + 5, seed)
+        if len(centres) < 5:
+            break
+        rows.append((r, float(np.sqrt(np.mean(np.square(disc_errors(h, centres, r, method)[0]))))))
+    if not rows:
+        return None
+    r_m, e_m = np.log(np.array(rows)).T
+    at = np.log(np.maximum(radius, 1.0))
+    return np.where(at <= r_m[-1] + 0.5 * np.log(2.0), np.exp(np.interp(at, r_m, e_m)), np.nan)
+
+
+def _apart(cand: np.ndarray, step: int, seed: int, n: int = 40) -> np.ndarray:
+    """Up to ``n`` of the ``cand`` cells (rows, cols) drawn at random, each ``step`` cells from the others."""
+    cand = cand[np.random.default_rng(seed).permutation(len(cand))]
+    _, first = np.unique(cand // step, axis=0, return_index=True)  # one per block of the lattice
+    picked: list[np.ndarray] = []
+    for c in cand[np.sort(first)]:
+        if all(np.abs(c - p).max() >= step for p in picked):
+            picked.append(c)
+            if len(picked) == n:
+                break
+    return np.array(picked, int).reshape(-1, 2)
 
 
 def error_by_radius(

@@ -78,13 +78,14 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
 def outline_sigma(
     delta: np.ndarray, diff: np.ndarray, parts: dict[str, np.ndarray], share: float, cell_area: float
 ) -> dict[str, float]:
-    """One-sigma volume (m3) per part of ``delta`` summed per hole, beyond the refilled ``share`` of the
-    |difference|."""
+    """One-sigma volume (m3) per part of ``delta`` summed over each hole in the part or along its edge (the side refill
+    may have moved a hole's cells out of it), beyond the refilled ``share`` of the |difference|."""
     labels, n = scipy.ndimage.label(delta != 0, np.ones((3, 3), bool))
     idx = np.arange(1, n + 1)
     out = {}
     for k, m in parts.items():
-        moved = np.abs(scipy.ndimage.sum(np.where(m, delta, 0.0), labels, idx))
+        hit = np.isin(labels, np.unique(labels[scipy.ndimage.binary_dilation(m) & (labels > 0)]))
+        moved = np.abs(scipy.ndimage.sum(np.where(hit, delta, 0.0), labels, idx))
         given = share * scipy.ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
         out[k] = float(np.linalg.norm(np.maximum(moved - given, 0.0))) * cell_area
     return out
