@@ -63,6 +63,7 @@ class Blob:
     slope: float = 0.0  # median slope (rise/run) of its walls between 20 % and 80 % of its height
     on_ground: bool | None = None  # stood on or left a surface level with the ground around (None: unknown)
     edge_slope: float = 0.0  # rise over run across its half-height outline (:func:`_edge_slope`)
+    resolved: bool = True  # False: on cells too coarse to tell a lone object from a steep heap (neither is said)
 
     @property
     def structure(self) -> bool:
@@ -110,13 +111,19 @@ def find_objects(
                     blobs.append(found)
             cores[sl] = 0
     blobs = _pairs(blobs, surfaces is not None)
-    if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs and resolved walls only
-        blobs = [b for b in blobs if b.partner or b.structure]
+    if cell > MAX_SINGLE_CELL:  # too coarse to tell a lone object from a steep pile: pairs and resolved walls, and
+        blobs = [_coarse(b) for b in blobs if b.partner or b.structure or b.edge_slope >= PAIR_EDGE_SLOPE]
     labels = np.where(np.isin(labels, [b.label for b in blobs]), labels, 0)
     moved = np.isin(labels, [b.label for b in blobs if b.partner]) & (labels > 0)
     moved = scipy.ndimage.binary_dilation(moved, _EIGHT) & changed  # the mixed cells at the walls
     single = (labels > 0) & ~moved
     return Objects(tuple(blobs), labels, moved, single)
+
+
+def _coarse(b: Blob) -> Blob:
+    """A blob on coarse cells: a pair or a structure as it is; else, with walls steeper than soil stands at, unresolved
+    (a machine that left and a steep heap read alike there)."""
+    return b if b.partner or b.structure else replace(b, resolved=False)
 
 
 def _cores(d, comp, k, sl, part: np.ndarray) -> list[tuple]:

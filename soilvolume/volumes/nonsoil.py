@@ -171,7 +171,7 @@ def _lone(found) -> np.ndarray:
     ids = [
         b.label
         for b in found.single_blobs()
-        if b.structure or (b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE)
+        if b.structure or (b.resolved and b.volume_m3 <= OBJECT_MAX_M3 and b.slope >= OBJECT_SLOPE)
     ]
     return found.single & np.isin(found.labels, ids)
 
@@ -236,8 +236,8 @@ def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) 
 def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
     """(the change not said to be soil, its patches): single machine-sized objects; without signals rough and
     compact."""
-    small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3]
-    out = np.isin(found.labels, small) & found.single  # a machine, or a small steep heap: counted or not
+    small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3 or not b.resolved]
+    out = np.isin(found.labels, small) & found.single  # a machine, or a small or unresolved steep heap: counted or not
     out |= plates(diff, counted & (np.nan_to_num(diff) > 0), cell_area)  # a slab, or a thin layer of soil
     if not signal:
         d = np.nan_to_num(diff)

@@ -93,10 +93,11 @@ def widen(half: dict[str, float], bound: dict[str, float] | None) -> dict[str, f
 
 
 def _beyond_area(diff, valid, stable, grid: GridSpec, fills: tuple, surface: bool):
-    """(a part's terms beyond its area's, m3: the error of the refilled patches in it or along its edge, measured on
-    test holes in the change where they fit (``fills``' fourth: each patch's one-sigma error of its mean, NaN where
-    unmeasured), else the refilled share of its |volume| (10-22 % off on synthetic pairs); the refills' ``fill_sigma``
-    per patch; the leftover bias. Then the cells refilled in the difference; the correction's residual m)."""
+    """(a part's terms beyond its area's, m3: the error of the refilled patches in it or along its edge, the larger of
+    that measured on test holes in the change where they fit (``fills``' fourth: each patch's one-sigma error of its
+    mean, NaN where unmeasured) and the refilled share of their |volume| of the part's sign (10-22 % off on synthetic
+    pairs); the refills' ``fill_sigma`` per patch; the leftover bias. Then the cells refilled in the difference; the
+    correction's residual m)."""
     (filled_mask, own, fill_sigma, *more), area = fills, grid.cell_area
     in_change = more[0] if more and more[0] is not None else np.full(valid.shape, np.nan)
     given = np.zeros(valid.shape, bool) if filled_mask is None else filled_mask
@@ -116,8 +117,12 @@ def _beyond_area(diff, valid, stable, grid: GridSpec, fills: tuple, surface: boo
         hit = np.unique(labels[scipy.ndimage.binary_dilation(m) & shared & np.isfinite(in_change)])
         tested = np.isin(labels, hit) & shared  # patches in the part or along its edge: they may hide some of it
         measured = scipy.ndimage.sum(np.where(tested, in_change, 0.0), labels, np.arange(1, n + 1)) * area
+        signs = np.sign(diff[m & valid])
+        alike = m | (np.sign(diff) == signs[0]) if signs.size and (signs == signs[0]).all() else True
+        assumed = fraction * float(absd[tested & alike].sum()) * area  # the share of their change of the part's sign
         return [
-            float(np.sqrt(np.sum(np.square(measured)))) + fraction * float(absd[m & shared & ~tested].sum()) * area,
+            max(float(np.sqrt(np.sum(np.square(measured)))), assumed)
+            + fraction * float(absd[m & shared & ~tested].sum()) * area,
             float(np.sqrt(np.sum(np.square(per_patch)))) if n else 0.0,
             float(np.hypot(signed, residual * float(m.sum()) * area)),
         ]
