@@ -120,3 +120,19 @@ def test_works_beyond_the_before_survey_are_bounded(tmp_path):
     assert abs(missed) <= rep["uncertainty_m3"]["net"] + cov["unseen_volume_bound_m3"]
     assert cov["beyond_change_m3"]["fill_m3"] > 0.5 * missed
     assert rep["quality"]["verdict"] == "not reliable"
+
+
+@pytest.mark.parametrize(("radius", "slope", "depth"), [(6.0, 1.5, 3.0), (7.0, 2.0, 4.0)])
+def test_steep_walls_carry_on_under_the_water(radius, slope, depth):
+    """A small pit with steep walls (1.5-2 m per cell) under water to 30 % of its depth, refilled from the water
+    line: the walls above the water are two cells or less, so the rim's rings (3-4 cells out: on the ground beside
+    the pit) read a slope of 0.6-0.8 and the hole's range held 70-95 % of what the water hides; the walls carried on
+    as steep as they are at the rim, the range holds it (measured -105 in [0, -117] and -176 in [0, -234] m3)."""
+    yy, xx = np.indices((40, 40)).astype(float)
+    r = np.hypot(xx - 20, yy - 20)
+    truth = -np.clip((radius - r) * slope, 0.0, depth)
+    water = truth < -0.7 * depth
+    refilled = works.fill(np.where(water, np.nan, truth), water, "harmonic")
+    hidden = float((truth - refilled)[water].sum())
+    item = works._hole(refilled, water, r < radius + 2, 1.0)
+    assert min(item["range_m3"]) <= hidden < 0.0 == max(item["range_m3"])

@@ -37,7 +37,8 @@ BULK_M3 = 120.0  # ... even with no change on its rim, when it holds more than a
 PILE_M3 = 40.0  # a shared hole one survey sees a pile in: its departure beyond the terrain's detail, in all
 BULK_MIN_M2 = 100.0  # ... a hole that large at least (smaller shared holes are the difference's to fill)
 RIM_SHARE = 0.5  # share of a hole's rim in change areas that makes it a hole in the works
-DEEPER = 2.0  # the walls carried on into a hole go at most this many times the rim's depth further
+DEEPER = 4.0  # the walls carried on into a hole go at most this many times the rim's depth further (water
+# standing to 80 % of a pit's depth)
 MIN_M3 = 0.5  # ranges below this are noise, not named
 BASIN_DROP_M = 0.2  # a hole whose rim lies this much below the ground around it (median): a basin
 
@@ -237,7 +238,8 @@ def _hole(diff: np.ndarray, cells: np.ndarray, change: np.ndarray, cell_area: fl
     d_near = float(np.median(diff[near])) if near.any() else 0.0
     d_far = float(np.median(diff[far])) if far.any() else d_near
     step = (d_near - d_far) / 2.5  # per cell, going in; none if the rim does not deepen inwards
-    step = 0.0 if step * d_near <= 0 else step
+    wall = np.hypot(*np.gradient(np.where(np.isfinite(diff), diff, d_near)))  # the walls as steep as seen at the rim
+    step = 0.0 if step * d_near <= 0 else np.sign(step) * max(abs(step), float(np.percentile(wall[near], 75)))
     dist = scipy.ndimage.distance_transform_edt(cells)
     extra = np.clip(step * dist, -DEEPER * abs(d_near), DEEPER * abs(d_near))[cells]
     extra_m3 = float(extra.sum()) * cell_area
