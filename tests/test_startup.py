@@ -91,8 +91,9 @@ def test_a_run_imports_its_heavy_libraries_while_the_kernel_reads():
 def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     """A local cluster's workers come from one forkserver that imported Dask and the tasks'
     modules once (a spawned worker imports them itself, ~0.6 s of CPU each, while the driver
-    reads); Dask's pre-spawn environment (one BLAS/OpenMP thread per worker) still reaches them and
-    their server, which starts before Dask is imported."""
+    reads), frozen out of the collector's reach (:mod:`soilvolume.distributed.forkfreeze`); Dask's pre-spawn
+    environment (one BLAS/OpenMP thread per worker) still reaches them and their server, which starts before Dask
+    is imported."""
     code = (
         "import json, os, pathlib, sys, tempfile\n"
         "os.environ.pop('MALLOC_TRIM_THRESHOLD_', None)\n"
@@ -103,7 +104,8 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
         "    info = client.run(lambda: (os.getppid(), os.environ.get('OMP_NUM_THREADS'),\n"
         "                               'soilvolume.distributed.tiletask' in sys.modules,\n"
         "                               open(f'/proc/{os.getppid()}/environ').read().split(chr(0)),\n"
-        "                               [sys.modules.get(m, 0) for m in ('requests', 'jinja2')]))\n"
+        "                               [sys.modules.get(m, 0) for m in ('requests', 'jinja2')],\n"
+        "                               __import__('gc').get_freeze_count()))\n"
         "finally:\n"
         "    cluster.shut(c, client)\n"
         "print(json.dumps([os.getpid(), sorted(info.values())]))\n"
@@ -116,6 +118,7 @@ def test_local_workers_are_forked_from_a_server_that_imported_their_modules():
     assert len(parents) == 1 and driver not in parents  # one server forked both (spawned: the driver)
     assert all(w[1] == "1" and w[2] for w in workers)
     assert all(w[4] == [None, None] for w in workers)  # the extras hidden (process.hide_extras) before Dask and laspy
+    assert all(w[5] > 10_000 for w in workers), [w[5] for w in workers]  # the server's imports frozen (~64,000)
     # the server started before any nanny set Dask's pre-spawn environment: it had it from its start
     # (OpenBLAS reads its threads as the server imports numpy), but for Dask's malloc trim threshold
     # (cluster.LOCAL_WORKER_ENV: glibc's own, as in-process)

@@ -38,7 +38,7 @@ LOCAL_WORKER_ENV = {"MALLOC_TRIM_THRESHOLD_": None}
 TASK_MODULES = ("soilvolume.distributed.scan", "soilvolume.distributed.tiletask", "laspy", "pyproj")
 #: imported once by the forkserver, for every worker forked from it (WORKER_INIT first: the
 #: extras it hides are left out of Dask's and laspy's imports)
-FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES)
+FORKSERVER_PRELOAD = (WORKER_INIT, "distributed", *TASK_MODULES, f"{__package__}.forkfreeze")
 
 
 class Starting:
