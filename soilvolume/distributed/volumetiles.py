@@ -139,10 +139,9 @@ def combine(tiles: list[dict], over: Volumes, cell: float, k: int) -> Volumes:
     unclear["net"] = max(unclear.values())  # as volumes/nonsoil: between net - fill and net + cut
     u.update(widen({p: u[p] for p in PARTS}, unclear), unclassified_m3=unclear)
     u["registration_m3"], u["skirt_m3"] = {p: reg[p] for p in ("net", "cut", "fill")}, skirt
-    marginal = [t["uncertainty"]["marginal_detections_m3"] for t in tiles]  # in quadrature
-    u["marginal_detections_m3"] = {
-        p: float(np.sqrt(np.sum(np.square([m[p] for m in marginal])))) for p in ("net", "cut", "fill")
-    }
+    for key in ("marginal_detections_m3", "broad_m3"):  # each tile's in its extras: in quadrature
+        per_tile = [t["uncertainty"][key] for t in tiles]
+        u[key] = {p: float(np.sqrt(np.sum(np.square([m[p] for m in per_tile])))) for p in ("net", "cut", "fill")}
     cells = np.array([t["all_cells"]["cells"] for t in tiles], float)
     for key in ("lod_m", "sigma_m"):
         u[key] = _weighted(tiles, key, cells, over.uncertainty[key])

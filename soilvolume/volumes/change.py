@@ -16,6 +16,8 @@ BUFFER_CELLS = 1  # cells of buffer around each change area
 MARGINAL_CELLS = 50  # smaller areas barely above their LoD may be noise (a few correlation areas)
 _EIGHT = np.ones((3, 3), bool)
 SKIRT_CELLS = 3  # the ring around the change areas whose same-signed change they may leave out
+BLOCK_M = 5.0  # blocks of about this side whose mean change is compared with the other blocks'
+BROAD_Z = 3.0  # a block stands out at this many times the blocks' NMAD (3: one noise block in 370)
 
 
 def cell_sigma(spread: np.ndarray, counts: np.ndarray) -> np.ndarray:
@@ -86,6 +88,32 @@ def skirt_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell_area: 
     for key, area, sign in (("fill", fill, 1.0), ("cut", cut, -1.0)):
         ring = scipy.ndimage.binary_dilation(area, _EIGHT, iterations=SKIRT_CELLS) & ~changed if area.any() else area
         out[key] = max(0.0, sign * float(d[ring].sum()) * cell_area)
+    out["net"] = abs(out["fill"] - out["cut"])
+    return out
+
+
+def broad_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, soil: np.ndarray, cell: float, lod: float) -> dict:
+    """Per part, the change (m3) in blocks of about :data:`BLOCK_M` away from the areas and their skirts whose mean
+    stands out of the blocks' spread (:data:`BROAD_Z` x their NMAD) and reaches half the cells' ``lod`` (m), on
+    ``soil`` cells (nothing left out as not soil): a
+    settlement or a thin layer spread wide under each cell's detection level (averaged over a block, it is not); the
+    net's, the size of their difference."""
+    quiet = np.isfinite(diff) & soil & ~scipy.ndimage.binary_dilation(fill | cut, _EIGHT, iterations=SKIRT_CELLS)
+    b = max(3, round(BLOCK_M / cell))
+    rows, cols = -(-diff.shape[0] // b) * b, -(-diff.shape[1] // b) * b
+    d = np.zeros((rows, cols))
+    n = np.zeros((rows, cols))
+    d[: diff.shape[0], : diff.shape[1]] = np.where(quiet, diff, 0.0)
+    n[: diff.shape[0], : diff.shape[1]] = quiet
+    sums, counts = (a.reshape(rows // b, b, cols // b, b).sum(axis=(1, 3)) for a in (d, n))
+    full = counts >= 0.5 * b * b
+    out = {"fill": 0.0, "cut": 0.0}
+    if full.sum() >= 8:
+        means = sums[full] / counts[full]
+        spread = 1.4826 * float(np.median(np.abs(means - np.median(means))))
+        for key, sign in (("fill", 1.0), ("cut", -1.0)):
+            over = sign * means > max(BROAD_Z * spread, 0.5 * lod)
+            out[key] = max(0.0, float(sign * sums[full][over].sum())) * cell * cell
     out["net"] = abs(out["fill"] - out["cut"])
     return out
 

@@ -16,7 +16,15 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from . import coverage
-from .change import budget, marginal_terms, refilled_budget, signed_budget, skirt_terms, thresholded_volumes
+from .change import (
+    broad_terms,
+    budget,
+    marginal_terms,
+    refilled_budget,
+    signed_budget,
+    skirt_terms,
+    thresholded_volumes,
+)
 from .holes.interpolate import fill
 from .holes.works import blind_change, outline_sigma
 from .nonsoil import Areas, classify
@@ -70,7 +78,9 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(s.filled_mask), area)
     reg_in = 0.0 if c.tile else 1.0
     skirt = skirt_terms(d, fa, ca, area)  # the areas' gentle edges under the detection level (a tile's: summed)
-    terms = (registration, marginal, ex["sigma_m3"], statistic, *(() if c.tile else (skirt,)))
+    soil = a.classes[c.core] == 0  # a settlement spread wide under each cell's detection level:
+    broad = broad_terms(d, fa, ca, soil, grid.cell, c.lod)
+    terms = (registration, marginal, ex["sigma_m3"], statistic, broad, *(() if c.tile else (skirt,)))
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
@@ -82,7 +92,7 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     tested = change_hole_sigma(c.diff, s.filled_mask, a.counted, c.lod_cell, options)
     model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma, tested), **run)
     named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
-    named.update(statistic_m3=statistic, outline_m3=outline, skirt_m3=skirt)
+    named.update(statistic_m3=statistic, outline_m3=outline, skirt_m3=skirt, broad_m3=broad)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}
     return Interval(unc, model, hidden)
 

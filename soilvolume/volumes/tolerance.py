@@ -24,6 +24,7 @@ WORDS = dict(
 #: the other terms' named parts (report.json ``uncertainty``, one-sigma m³ per part) in words: named in its stead
 EXTRAS = {
     "skirt_m3": "change at the works' edges under the detection level",
+    "broad_m3": "change spread wide under the detection level, away from the works",
     "outline_m3": "holes across the works' outlines",
     "marginal_detections_m3": "small change areas that may be noise",
     "registration_m3": "the registration's uncertainty",
