@@ -186,3 +186,18 @@ def test_on_coarse_cells_a_machine_that_left_is_neither_soil_nor_left_out():
     assert not nonsoil._lone(found).any()
     unclear, n = nonsoil._unclear(diff, (diff > 0.1) | (diff < -0.1), found, np.zeros(diff.shape, bool), True, cell**2)
     assert n == 1 and unclear[20:27, 20:23].all() and not unclear[30:55, 30:55].any()
+
+
+def test_a_building_under_a_low_gabled_roof_is_a_structure():
+    """Walls 3 m, the ridge at 5 m over a 20 m span: most of the band between 20 and 80 % of the height is roof, so
+    the blob reads as wide as a slope (it had been no object: composed site 10202, a 16 x 13 m building that
+    arrived, +344 % of the moved volume as fill, now +5 %); its outline rises as a wall on the ground around it,
+    with no lower change beside it: a structure, left out."""
+    before = np.zeros((120, 120))
+    after = before.copy()
+    rows = np.arange(30, 70)[:, None]
+    after[30:70, 30:70] = 3.0 + 2.0 * (1 - np.abs(rows - 49.5) / 20.0)
+    found, diff = _blobs(before, after)
+    [blob] = found.blobs
+    assert blob.structure and blob.on_ground and blob.volume_m3 == pytest.approx(1600.0, rel=0.02)
+    assert nonsoil._lone(found).sum() == (diff > 0.1).sum()

@@ -164,7 +164,8 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     base, top = float((mine & (dd >= 0.2 * height)).sum()), float((mine & (dd >= 0.8 * height)).sum())
     edge = half & ~scipy.ndimage.binary_erosion(half, _EIGHT)
     width = (base - top) * a / max(float(edge.sum()) * cell, cell)
-    if area < MIN_AREA_M2 or width > max(0.6 * height / WALL_SLOPE, UNRESOLVED * cell):
+    boxed = width <= max(0.6 * height / WALL_SLOPE, UNRESOLVED * cell)  # walls, not a slope (a roof may slope)
+    if area < MIN_AREA_M2:
         return None
     grown = scipy.ndimage.binary_dilation(whole, _EIGHT, iterations=2)
     ring = grown & ~scipy.ndimage.binary_dilation(whole, _EIGHT)
@@ -180,12 +181,15 @@ def _measure(d, comp, k, sl, masks, cell, sign, label) -> Blob | None:
     if not level and (area > MAX_AREA_M2 or elong > MAX_ELONGATION):
         return None  # not known to stand on the ground: only compact blobs are objects
     dw = np.where(whole, d[win], 0.0)
+    edge = _edge_slope(dw, half, cell)
+    apart = whole & ~scipy.ndimage.binary_dilation(half, _EIGHT, iterations=2)  # low change beside it: cores first
+    if not boxed and not (level and edge >= WALL_SLOPE and apart.sum() <= 0.1 * whole.sum()):
+        return None
     gy, gx = np.gradient(dw, cell)  # the walls' median slope: about 1 on a pile's flank, 1.5 and more on a box's
     band = whole & (dw >= 0.2 * height) & (dw <= 0.8 * height)
     slope = float(np.median(np.hypot(gx, gy)[band])) if band.any() else height / cell  # a step: within a cell
     vol = float(dw.sum()) * a
     centre = (float(cc.mean() + c0), float(rr.mean() + r0))
-    edge = _edge_slope(dw, half, cell)
     return Blob(sign, area, height, vol, *centre, elong, label, slope=slope, on_ground=level, edge_slope=edge)
 
 
