@@ -136,3 +136,17 @@ def test_steep_walls_carry_on_under_the_water(radius, slope, depth):
     hidden = float((truth - refilled)[water].sum())
     item = works._hole(refilled, water, r < radius + 2, 1.0)
     assert min(item["range_m3"]) <= hidden < 0.0 == max(item["range_m3"])
+
+
+def test_a_hole_that_cannot_move_the_net_past_its_tolerance_is_no_caution():
+    """A 3 m2 hole in the works that may hide 0 to 2 m3 of a 5,000 m3 job stays in the interval and in the report's
+    ``blind``, but names no caution (the verdict names only terms that could move a number past its tolerance: 1 %
+    of the volume moved for the net); the same hole on a 100 m3 job does."""
+    from soilvolume.volumes.quality import _blind
+
+    item = {"area_m2": 3.0, "rim_difference_m": -0.5, "walls_m3": -2.0, "range_m3": [0.0, -2.0], "survey": "after"}
+    hidden = {"count": 1, "area_m2": 3.0, "bound_m3": {"net": 2.0, "cut": 2.0, "fill": 0.0}, "items": [item]}
+    assert _blind(hidden, moved=5000.0) == []
+    [(severity, said)] = _blind(hidden, moved=100.0)
+    assert severity == "caution" and "3 m² inside the works has no point at all in the after survey" in said
+    assert _blind(hidden, moved=50.0)[0][0] == "unreliable"  # over 2 % of what moved

@@ -12,7 +12,7 @@ from ..core.record import QualityInputs
 from ..core.wording import opt
 from ..registration.georef import GROUND_AGREES, INCONCLUSIVE, disagreement
 from .coverage import check as coverage_check
-from .tolerance import tolerance_check
+from .tolerance import TOLERANCE, tolerance_check
 from .zones import zone_messages
 
 VERDICTS = ("reliable", "use with caution", "not reliable")
@@ -116,7 +116,8 @@ def _canopy(excluded: dict, moved: float) -> list[tuple[str, str]]:
 
 
 def _blind(hidden: dict, moved: float) -> list[tuple[str, str]]:
-    """Change on ground interpolated under a large hole, and holes without points in the works (:mod:`.holes.works`)."""
+    """Change on ground interpolated under a large hole, and holes without points in the works (:mod:`.holes.works`)
+    whose range could move the net past its tolerance."""
     out, part = [], hidden.get("interpolated") or {}
     m3 = part.get("cut", 0.0) + part.get("fill", 0.0)
     if m3 > BLIND_SHARE * moved:
@@ -127,9 +128,9 @@ def _blind(hidden: dict, moved: float) -> list[tuple[str, str]]:
         )
         out.append(("unreliable", said))
     items = hidden.get("items") or []
-    if not items:
-        return out
     reach = float((hidden.get("bound_m3") or {}).get("net", 0.0))
+    if not items or reach <= TOLERANCE["net"] * moved:  # it cannot move the net past its tolerance: in the interval
+        return out
     lo, hi = sum(min(i["range_m3"]) for i in items), sum(max(i["range_m3"]) for i in items)
     said = (
         f"{hidden['area_m2']:,.0f} m² inside the works has no point at all in the "
