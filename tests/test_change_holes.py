@@ -112,3 +112,15 @@ def test_the_outline_term_counts_a_hole_the_side_refill_moved_out_of_the_part():
     diff = np.where(cut, -1.0, 0.0)
     got = outline_sigma(delta, diff, {"cut": cut, "fill": np.zeros_like(cut)}, 0.0, 1.0)
     assert got["cut"] == 6.0 and got["fill"] == 0.0
+
+
+def test_a_patch_larger_than_any_test_hole_that_fits_goes_on_their_trend():
+    """Test holes of 8 cells' radius find no room in the change of a 2 m wide trench: a refilled patch of 6 cells'
+    radius across it had no measured error and fell back on a share of its refilled change, itself
+    too shallow (composed development sites 10510 and 10551: holes across trenches 11.5 m3 short, intervals +-5);
+    its error goes on the trend of the radii that fit, at least as the square root of the radius."""
+    d = _trench()
+    trench = d < -0.1
+    radius = np.array([1.0, 2.0, 6.0])
+    got = error_where(d, np.ones(d.shape, bool), trench, "biharmonic", radius, 0)
+    assert got is not None and np.isfinite(got).all() and got[2] >= got[:2].max() > 0.0  # 0.24, 0.21 -> 0.42 m

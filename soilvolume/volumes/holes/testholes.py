@@ -49,8 +49,9 @@ def error_where(
     h: np.ndarray, usable: np.ndarray, where: np.ndarray, method: str, radius: np.ndarray, seed: int
 ) -> np.ndarray | None:
     """One-sigma error (m) of a hole's mean height at each ``radius``, on test discs centred in ``where`` (the change
-    itself: a trench's floor is not its rim's), 1, 2, 4 ... cells up to the largest with room (NaN beyond 1.4 times it)
-    or the first at least the largest ``radius``;
+    itself: a trench's floor is not its rim's), 1, 2, 4 ... cells up to the largest with room (beyond it, on the
+    log-log trend of the last two, at least as the square root of the radius) or the first at least the largest
+    ``radius``;
     None without room for the smallest."""
     known = np.pad(usable & np.isfinite(h), 1)
     room = scipy.ndimage.distance_transform_edt(known)[1:-1, 1:-1]
@@ -64,7 +65,8 @@ def error_where(
         return None
     r_m, e_m = np.log(np.array(rows)).T
     at = np.log(np.maximum(radius, 1.0))
-    return np.where(at <= r_m[-1] + 0.5 * np.log(2.0), np.exp(np.interp(at, r_m, e_m)), np.nan)
+    slope = float(np.clip((e_m[-1] - e_m[-2]) / (r_m[-1] - r_m[-2]), 0.5, 2.0)) if len(rows) > 1 else 1.0
+    return np.exp(np.interp(at, r_m, e_m) + slope * np.maximum(at - r_m[-1], 0.0))  # beyond: on the last rungs' trend
 
 
 def _apart(cand: np.ndarray, step: int, seed: int, n: int = 40) -> np.ndarray:
