@@ -1,11 +1,25 @@
 """Points to the cells of a regular grid: the one ``floor((v - lo) / cell)`` binning shared by the
-registration's column surfaces and the embedded PDAL stages."""
+registration's column surfaces and the embedded PDAL stages; a grid's sums over blocks of cells."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .. import native
+
+
+def block_sums(a: np.ndarray, k: int) -> np.ndarray:
+    """Sums over the k x k blocks of a 2-D array (partial blocks at the edges): float64 for floats, else int32."""
+    return _fold(_fold(a, k, 0), k, 1)
+
+
+def _fold(a: np.ndarray, k: int, axis: int) -> np.ndarray:
+    """Sums of k consecutive entries along ``axis`` (the last group may be shorter), added in turn."""
+    a = np.moveaxis(a, axis, 0)
+    out = np.zeros((-(-len(a) // k), *a.shape[1:]), np.float64 if a.dtype.kind == "f" else np.int32)
+    for i in range(k):
+        out[: len(a[i::k])] += a[i::k]
+    return np.moveaxis(out, 0, axis)
 
 
 def cell_index(v: np.ndarray, lo, cell: float) -> np.ndarray:

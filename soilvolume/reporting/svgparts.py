@@ -13,24 +13,16 @@ import zlib
 import numpy as np
 from markupsafe import Markup
 
+from ..core.cells import block_sums
 from ..core.types import GridSpec
 
 DISPLAY = 760  # longest side of a map on the page (CSS px)
 
 
-def _fold(a: np.ndarray, k: int, axis: int) -> np.ndarray:
-    """Sums of k consecutive entries along ``axis`` (the last group may be shorter), added in turn."""
-    a = np.moveaxis(a, axis, 0)
-    out = np.zeros((-(-len(a) // k), *a.shape[1:]), np.float64 if a.dtype.kind == "f" else np.int32)
-    for i in range(k):
-        out[: len(a[i::k])] += a[i::k]
-    return np.moveaxis(out, 0, axis)
-
-
 def block_any(mask: np.ndarray, k: int) -> np.ndarray:
     """Whether any cell of each k x k block (partial blocks at the edges) is set."""
     mask = np.asarray(mask, bool)
-    return mask if k <= 1 else _fold(_fold(mask, k, 0), k, 1) > 0
+    return mask if k <= 1 else block_sums(mask, k) > 0
 
 
 def block_mean(a: np.ndarray, k: int) -> np.ndarray:
@@ -38,8 +30,8 @@ def block_mean(a: np.ndarray, k: int) -> np.ndarray:
     if k <= 1:
         return a
     ok = np.isfinite(a)
-    total = _fold(_fold(np.where(ok, a, 0.0), k, 0), k, 1)
-    count = _fold(_fold(ok, k, 0), k, 1)
+    total = block_sums(np.where(ok, a, 0.0), k)
+    count = block_sums(ok, k)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(count > 0, total / count, np.nan)
 

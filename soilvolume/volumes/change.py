@@ -10,6 +10,7 @@ import numpy as np
 import scipy
 
 from ..compensation.robust import patches
+from ..core.cells import block_sums
 
 MIN_CELLS = 3  # a change area has at least this many significant cells
 BUFFER_CELLS = 1  # cells of buffer around each change area
@@ -95,17 +96,11 @@ def skirt_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, cell_area: 
 def broad_terms(diff: np.ndarray, fill: np.ndarray, cut: np.ndarray, soil: np.ndarray, cell: float, lod: float) -> dict:
     """Per part, the change (m3) in blocks of about :data:`BLOCK_M` away from the areas and their skirts whose mean
     stands out of the blocks' spread (:data:`BROAD_Z` x their NMAD) and reaches half the cells' ``lod`` (m), on
-    ``soil`` cells (nothing left out as not soil): a
-    settlement or a thin layer spread wide under each cell's detection level (averaged over a block, it is not); the
-    net's, the size of their difference."""
+    ``soil`` cells (nothing left out as not soil): a settlement or a thin layer spread wide under each cell's
+    detection level (averaged over a block, it is not); the net's, the size of their difference."""
     quiet = np.isfinite(diff) & soil & ~scipy.ndimage.binary_dilation(fill | cut, _EIGHT, iterations=SKIRT_CELLS)
     b = max(3, round(BLOCK_M / cell))
-    rows, cols = -(-diff.shape[0] // b) * b, -(-diff.shape[1] // b) * b
-    d = np.zeros((rows, cols))
-    n = np.zeros((rows, cols))
-    d[: diff.shape[0], : diff.shape[1]] = np.where(quiet, diff, 0.0)
-    n[: diff.shape[0], : diff.shape[1]] = quiet
-    sums, counts = (a.reshape(rows // b, b, cols // b, b).sum(axis=(1, 3)) for a in (d, n))
+    sums, counts = block_sums(np.where(quiet, diff, 0.0), b), block_sums(quiet, b)
     full = counts >= 0.5 * b * b
     out = {"fill": 0.0, "cut": 0.0}
     if full.sum() >= 8:

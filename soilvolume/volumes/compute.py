@@ -78,8 +78,7 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     outline = outline_sigma(c.outline[c.core], d, parts, interp_fraction(s.filled_mask), area)
     reg_in = 0.0 if c.tile else 1.0
     skirt = skirt_terms(d, fa, ca, area)  # the areas' gentle edges under the detection level (a tile's: summed)
-    soil = a.classes[c.core] == 0  # a settlement spread wide under each cell's detection level:
-    broad = broad_terms(d, fa, ca, soil, grid.cell, c.lod)
+    broad = broad_terms(d, fa, ca, a.classes[c.core] == 0, grid.cell, c.lod)  # a settlement spread wide, on soil
     terms = (registration, marginal, ex["sigma_m3"], statistic, broad, *(() if c.tile else (skirt,)))
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}

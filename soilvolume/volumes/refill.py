@@ -88,8 +88,8 @@ def refill_sigma(diff, filled_mask, stable, options: Options) -> np.ndarray:
 
 def change_hole_sigma(diff, filled_mask, counted, lod, options: Options) -> np.ndarray:
     """Per-cell one-sigma error (m) of the mean of each refilled patch in or along the counted change, on test holes of
-    its radius centred in the change over ``lod`` (a narrow trench's floor refills from its rim); NaN elsewhere, and for
-    a patch larger than the test holes that fit (:func:`.holes.testholes.error_where`)."""
+    its radius centred in the change's deeper half over ``lod`` (a narrow trench's floor refills from its rim;
+    :func:`.holes.testholes.error_where`); NaN elsewhere, and everywhere when no test hole fits."""
     out = np.full(diff.shape, np.nan)
     labels, n = scipy.ndimage.label(filled_mask, structure=scipy.ndimage.generate_binary_structure(2, 1))
     touching = np.unique(labels[scipy.ndimage.binary_dilation(counted) & filled_mask])
@@ -101,8 +101,10 @@ def change_hole_sigma(diff, filled_mask, counted, lod, options: Options) -> np.n
     deep = np.median(size[counted & measured]) if (counted & measured).any() else 0.0
     where = counted & measured & (size > lod) & (size >= deep)  # a survey misses the deeper half most
     per_patch = error_where(diff, measured, where, options.fill_method, radius[touching], options.seed)
+    if per_patch is None:
+        return out
     at = np.full(n + 1, np.nan)
-    at[touching] = np.full(touching.size, np.nan) if per_patch is None else per_patch
+    at[touching] = per_patch
     return np.where(labels > 0, at[labels], np.nan)
 
 

@@ -49,10 +49,9 @@ def error_where(
     h: np.ndarray, usable: np.ndarray, where: np.ndarray, method: str, radius: np.ndarray, seed: int
 ) -> np.ndarray | None:
     """One-sigma error (m) of a hole's mean height at each ``radius``, on test discs centred in ``where`` (the change
-    itself: a trench's floor is not its rim's), 1, 2, 4 ... cells up to the largest with room (beyond it, on the
-    log-log trend of the last two, at least as the square root of the radius) or the first at least the largest
-    ``radius``;
-    None without room for the smallest."""
+    itself: a trench's floor is not its rim's) of 1, 2, 4 ... cells, up to the first at least the largest ``radius``
+    or the largest with room; beyond that, on the log-log trend of the last two (at least as the square root of the
+    radius). None without room for the smallest."""
     known = np.pad(usable & np.isfinite(h), 1)
     room = scipy.ndimage.distance_transform_edt(known)[1:-1, 1:-1]
     rows = []
