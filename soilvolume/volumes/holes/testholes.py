@@ -71,11 +71,14 @@ def error_where(
 def _apart(cand: np.ndarray, step: int, seed: int, n: int = 40) -> np.ndarray:
     """Up to ``n`` of the ``cand`` cells (rows, cols) drawn at random, each ``step`` cells from the others."""
     cand = cand[np.random.default_rng(seed).permutation(len(cand))]
-    _, first = np.unique(cand // step, axis=0, return_index=True)  # one per block of the lattice
-    picked: list[np.ndarray] = []
-    for c in cand[np.sort(first)]:
-        if all(np.abs(c - p).max() >= step for p in picked):
-            picked.append(c)
+    block = cand // step
+    _, first = np.unique(
+        block[:, 0] * (int(block[:, 1].max(initial=0)) + 1) + block[:, 1], return_index=True
+    )  # one per block
+    picked: list[tuple[int, int]] = []
+    for r, c in cand[np.sort(first)].tolist():  # Python ints: a few numbers per test, no arrays
+        if all(max(abs(r - pr), abs(c - pc)) >= step for pr, pc in picked):
+            picked.append((r, c))
             if len(picked) == n:
                 break
     return np.array(picked, int).reshape(-1, 2)
