@@ -68,6 +68,12 @@ def test_a_small_gap_at_quiet_ground_is_a_caution():
     cov = coverage.summary(coverage.counts(n_a, n_b, refilled, d, shown), 1.0, 0.0, 0.08)
     severity, text = coverage.check({"coverage": cov, "uncertainty_m3": {"net": 20.0}})
     assert severity == "caution" and "25 m²" in text and "within their interval" in text, text
+    bound = cov["unseen_volume_bound_m3"]
+    assert bound > 0
+    moved = {"cut": 30.0 * bound, "fill": 69.0 * bound}  # 1 % of the moved volume is 0.99 bound: it could tip the net
+    assert coverage.check({"coverage": cov, "uncertainty_m3": {"net": 20.0}, "volume_m3": moved})[0] == "caution"
+    moved["fill"] = 80.0 * bound  # 1.1 bound: it cannot move the net past its tolerance, so the verdict is silent
+    assert coverage.check({"coverage": cov, "uncertainty_m3": {"net": 20.0}, "volume_m3": moved}) is None
 
 
 def test_a_gap_of_the_after_survey_over_the_before_ground_is_unseen():

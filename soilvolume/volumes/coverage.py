@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .change import fill_cut
+from .tolerance import TOLERANCE
 
 CAUTION_SHARE = 0.005  # unseen share of the after footprint that is named in the verdict
 MAX_SHARE = 0.05  # more than this unseen: not reliable, whatever its surroundings say
@@ -78,7 +79,8 @@ def summary(cells: dict, cell_area: float, beyond_m2: float, lod_m: float, outsi
 
 def check(report: dict) -> tuple[str, str] | None:
     """(severity, sentence) of the unseen footprint: unreliable over :data:`MAX_SHARE` or over the net's interval (and
-    twice the LoD), caution over :data:`CAUTION_SHARE`."""
+    twice the LoD), caution over :data:`CAUTION_SHARE` when what it could hide could move the net past its tolerance
+    (the coverage line and report.json say the rest)."""
     cov = report.get("coverage")
     if not cov or cov["after_footprint_m2"] <= 0:
         return None
@@ -96,7 +98,8 @@ def check(report: dict) -> tuple[str, str] | None:
             source = "from what the after survey shows beyond the before survey's edge, against its ground carried on"
         said += f": change there is not in the volumes (up to ~{bound:,.0f} m³ {source}, "
         return "unreliable", f"{said}against their ±{interval:,.1f} m³ interval without it)"
-    if share > CAUTION_SHARE:
+    v = report.get("volume_m3") or {}
+    if share > CAUTION_SHARE and bound > TOLERANCE["net"] * (v.get("cut", 0.0) + v.get("fill", 0.0)):
         said += f": the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around it "
         return "caution", f"{said}would make up to ~{bound:,.0f} m³ there, within their interval)"
     return None
