@@ -112,3 +112,35 @@ def test_holes_beside_a_trench_wall_keep_the_ground_level():
         smooth += float((values - truth)[hole].sum()) * CELL**2
     assert smooth < -10.0, smooth
     assert abs(err) < 0.75 * abs(smooth) and abs(err) < 10.5, (err, smooth)
+
+
+def _narrow_trench(n: int = 80, angle_deg: float = 32.0, width: float = 1.5, depth: float = 1.6) -> np.ndarray:
+    """The difference of a straight, steep-walled trench ``width`` m wide across level ground."""
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) * CELL - n * CELL / 2
+    a = np.radians(angle_deg)
+    across = np.abs(-x * np.sin(a) + y * np.cos(a))  # the distance from the trench's axis
+    return -depth * np.clip((width / 2 - across) / CELL + 0.5, 0.0, 1.0)
+
+
+def test_a_trench_across_a_hole_is_carried_through_it():
+    """A 1.6 m deep, 3-cell trench crossing a 2.5 m hole (an occluded trench's floor) at six angles: the rim holds
+    the trench where it enters and leaves and level ground around. The trench's outline, interpolated, gave the
+    hole to the banks (12-24 % of its 12 m3 kept; the smooth fill 46-92 %); carried on along the lines between
+    where it enters and leaves (the cells between are a cell wider or narrower with the angle: 60-148 % of it),
+    its cut is kept to 1 % over the angles (5 % asserted), and the banks stay level."""
+    kept, plain = [], []
+    for angle in (0.0, 20.0, 32.0, 45.0, 60.0, 71.0):
+        truth = _narrow_trench(angle_deg=angle)
+        hole = _rim_holes(truth.shape, [(0.0, 0.0)], 2.5)
+        values = holes.fill(np.where(hole, np.nan, truth), hole)
+        change = ~hole & (truth < -0.01)
+        want = float(truth[hole].sum())
+        got = refill_across_outline(values, hole, change, "biharmonic")
+        kept.append(float(got[hole].sum()) / want)
+        plain.append(
+            float(refill_across_outline(values, hole, change, "biharmonic", np.zeros_like(hole))[hole].sum()) / want
+        )
+        assert 0.5 < kept[-1] < 1.5, (angle, kept)
+        assert abs(float(got[hole & (truth == 0)].sum())) < 0.05 * abs(want)  # the banks stay level
+        assert np.array_equal(got[~hole], values[~hole])
+    assert max(plain) < 0.3 and abs(np.mean(kept) - 1.0) < 0.05, (plain, kept)

@@ -145,7 +145,8 @@ def correct(s: Refill, epochs: Epochs, d_i, grid: GridSpec, options: Options, gi
     se = (np.where(m, np.nan, cell_sigma(e.spread, e.counts)) for e, m in zip(epochs, (s.m_a, s.m_b), strict=True))
     lod_cell = np.maximum(cell_lod(lod, *se, z), z * fill_sigma)
     significant = patches(~s.filled_mask & (np.abs(np.nan_to_num(diff)) > lod_cell), MIN_CELLS)
-    sides = refill_across_outline(diff, s.filled_mask & ~s.own, significant, options.fill_method)
+    soil = (epochs[0].nonsoil() == 0) & (epochs[1].nonsoil() == 0)  # a trench carried through a hole, not a crown
+    sides = refill_across_outline(diff, s.filled_mask & ~s.own, significant, options.fill_method, soil)
     outline = np.nan_to_num(sides - diff)  # where the outline runs in the holes: a term
     return Corrected(
         offset, params, stable, given is not None, core, sides, sides + offset, fill_sigma, lod, lod_cell, outline

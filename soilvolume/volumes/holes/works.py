@@ -43,8 +43,11 @@ MIN_M3 = 0.5  # ranges below this are noise, not named
 BASIN_DROP_M = 0.2  # a hole whose rim lies this much below the ground around it (median): a basin
 
 
-def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarray, method: str) -> np.ndarray:
-    """``values`` with each ``hole`` whose rim holds change and unchanged cells refilled side by side."""
+def refill_across_outline(
+    values: np.ndarray, hole: np.ndarray, change: np.ndarray, method: str, through: np.ndarray | None = None
+) -> np.ndarray:
+    """``values`` with each ``hole`` whose rim holds change and unchanged cells refilled side by side; a cut of
+    ``through`` (change no survey saw anything but soil in) carried on across it where it enters and leaves."""
     known = np.isfinite(values) & ~hole
     change, stable = known & change, known & ~change
     out = values.copy()
@@ -68,12 +71,40 @@ def refill_across_outline(values: np.ndarray, hole: np.ndarray, change: np.ndarr
         to_stable = scipy.ndimage.distance_transform_edt(~stable[box])
         signed = np.where(change[box], to_stable - 1.0, np.where(stable[box], -to_change, np.nan))
         signed = fill(np.where(cells, np.nan, signed), cells, method)
-        nearer_change = np.where(np.isfinite(signed), signed > 0, to_change < to_stable)
+        nearer_change = np.where(np.isfinite(signed), signed > 0, to_change < to_stable) | _between(
+            cells, change[box] & (values[box] < 0) & (True if through is None else through[box]), stable[box]
+        )
         for side, own in ((cells & nearer_change, change[box]), (cells & ~nearer_change, stable[box])):
             filled = fill(np.where(own | side, values[box], np.nan), side, method)
             ok = side & np.isfinite(filled)
             out[box][ok] = filled[ok]
     return out
+
+
+LINES = 8  # lines through a cell, 22.5 degrees apart (a 3-cell trench followed within a cell over 8)
+
+
+def _between(cells: np.ndarray, change: np.ndarray, stable: np.ndarray) -> np.ndarray:
+    """The ``cells`` that lie between two change cells on a line through them (the first known cell each way is
+    change): a trench across a hole carries on through it (its outline's signed distance, interpolated, gave the
+    middle of a 4-cell trench to the banks around the hole)."""
+    if not change.any():
+        return np.zeros(cells.shape, bool)
+    known = np.pad(np.where(change, 1, np.where(stable, 2, 0)), 1, constant_values=3)  # 3: the box's edge
+    r, c = np.nonzero(cells)
+    angle = np.arange(2 * LINES) * np.pi / LINES  # each line both ways: k and k + LINES
+    dr, dc = np.sin(angle)[:, None], np.cos(angle)[:, None]
+    first = np.zeros((angle.size, r.size), known.dtype)
+    for step in range(1, max(known.shape)):
+        rr = np.clip(np.rint(r + step * dr).astype(int) + 1, 0, known.shape[0] - 1)
+        cc = np.clip(np.rint(c + step * dc).astype(int) + 1, 0, known.shape[1] - 1)
+        first = np.where(first > 0, first, known[rr, cc])
+        if (first > 0).all():
+            break
+    out = (first[:LINES] == 1) & (first[LINES:] == 1)
+    found = np.zeros(cells.shape, bool)
+    found[r[out.any(axis=0)], c[out.any(axis=0)]] = True
+    return found
 
 
 def outline_sigma(
