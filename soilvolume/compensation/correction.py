@@ -12,6 +12,7 @@ import numpy as np
 from ..core.types import GridSpec
 from .robust import _TERM_NAMES, fit_poly, residual_stats
 from .stable import find_stable, largest_gap_deg
+from .strips import strip_levels, strip_steps
 
 
 @dataclass(frozen=True)
@@ -80,6 +81,10 @@ def apply(diff: np.ndarray, method: str, grid: GridSpec, user_mask: np.ndarray |
     elif method == "surface" and largest_gap_deg(stable, valid & ~stable) > 180.0:
         used = "plane"
     surface, params = fit_surface(diff, stable, grid, used)
+    found = strip_steps(diff - surface, stable, grid) if used in ("surface", "plane") else None
+    if found is not None:  # a survey's flight strips at offsets: their levels subtracted too
+        surface, params["strips"] = surface + strip_levels(found, grid), found
+        params["residuals"] = residual_stats(diff - surface, stable & valid)
     params["method"], params["fitted"] = method, used
     surface = np.where(valid, surface, np.nan)
     params.update(stable_cells=int(stable.sum()), stable_fraction=float(stable.sum() / max(valid.sum(), 1)))

@@ -83,7 +83,10 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     extra = {k: float(np.linalg.norm([reg_in * registration[k], *(t[k] for t in terms[1:])])) for k in statistic}
     extra = {k: float(np.hypot(v, outline[k])) for k, v in extra.items()}
     hidden = blind_change(c.diff, epochs, a.counted, area, s.seen_once)
-    bound = {k: v + hidden["bound_m3"][k] for k, v in ex["bound_m3"].items()}
+    levels = (c.params.get("strips") or {}).get("levels_m") or [0.0]
+    span = max(levels) - min(levels)  # a cell given another strip's level, or a strip's edge off, is off by up to this
+    strip_m3 = {k: float(m.sum()) * area * span for k, m in parts.items()}
+    bound = {k: v + hidden["bound_m3"][k] + strip_m3[k] for k, v in ex["bound_m3"].items()}
     counted = np.zeros(c.diff.shape, bool)  # the error model over the cells counted: a tile's core
     counted[c.core] = True  # (the overview has the bias)
     n_coef = 0 if c.tile else MODES[options.correction].coefficients
@@ -91,7 +94,7 @@ def interval(s: Refill, c: Corrected, a: Areas, epochs: Epochs, grid: GridSpec, 
     tested = change_hole_sigma(c.diff, s.filled_mask, a.counted, c.lod_cell, options)
     model = partial(volume_uncertainty, c.diff, a.stable, fills=(s.filled_mask, s.own, c.fill_sigma, tested), **run)
     named = {"registration_m3": registration, "marginal_detections_m3": marginal, "classification_m3": terms[2]}
-    named.update(statistic_m3=statistic, outline_m3=outline, skirt_m3=skirt, broad_m3=broad)
+    named.update(statistic_m3=statistic, outline_m3=outline, skirt_m3=skirt, broad_m3=broad, strips_m3=strip_m3)
     unc = {**model(change_mask=a.counted, extra_sigma=extra), "lod_m": c.lod, **named}
     return Interval(unc, model, hidden)
 

@@ -32,6 +32,7 @@ EXTRAS = {
     "classification_m3": "what is not soil, left out or counted",
 }
 BOUND = "change that could not be classified as soil or not, or seen"  # the bounds added as they are
+STRIPS = "the flight strips' steps taken out (a cell given another strip's level)"
 
 
 def tolerance_check(report: dict) -> list[tuple[str, str]]:
@@ -44,7 +45,9 @@ def tolerance_check(report: dict) -> list[tuple[str, str]]:
     q = wide[0]
     bound = sum(float(((report.get(key) or {}).get("bound_m3") or {}).get(q, 0.0)) for key in ("excluded", "blind"))
     extras = {EXTRAS[k]: abs(float((model.get(k) or {}).get(q, 0.0))) for k in EXTRAS}
-    name, m3 = largest_part((model.get("terms_m3") or {}).get(q) or [], model.get("confidence", 0.95), bound, extras)
+    strips = {STRIPS: abs(float((model.get("strips_m3") or {}).get(q, 0.0)))}
+    terms, confidence = (model.get("terms_m3") or {}).get(q) or [], model.get("confidence", 0.95)
+    name, m3 = largest_part(terms, confidence, bound, extras, strips)
     said = (
         f"the {q}'s 95 % interval (±{u[q]:,.1f} m³) is wider than {100 * TOLERANCE[q]:.0f} % of the volume moved "
         f"({moved:,.0f} m³): the {q} may be off by more than that; its largest part is {name} (±{m3:,.1f} m³)"
@@ -52,12 +55,15 @@ def tolerance_check(report: dict) -> list[tuple[str, str]]:
     return [("caution", said)]
 
 
-def largest_part(sigmas: list[float], confidence: float, bound: float, extras: dict | None = None) -> tuple[str, float]:
+def largest_part(
+    sigmas: list[float], confidence: float, bound: float, extras: dict | None = None, bounds: dict | None = None
+) -> tuple[str, float]:
     """(words, m³ at ``confidence``) of the largest of an interval's one-sigma ``sigmas`` (in the order of
     :data:`~.uncertainty.TERMS`; the last, the other terms, by its named parts ``extras`` when given: words to
-    one-sigma m³) and its ``bound`` of change that could not be classified or seen."""
+    one-sigma m³), its ``bound`` of change that could not be classified or seen and its other ``bounds`` (words to
+    m³ as they are)."""
     z = z_value(confidence)
     parts = [(WORDS[term], z * float(x)) for term, x in zip(TERMS, sigmas, strict=False)]
     if extras and len(parts) == len(TERMS):
         parts[-1:] = [(words, z * m3) for words, m3 in extras.items()]
-    return max([*parts, (BOUND, float(bound))], key=lambda p: p[1])
+    return max([*parts, (BOUND, float(bound)), *(bounds or {}).items()], key=lambda p: p[1])
