@@ -15,7 +15,8 @@ from ..core.types import GridSpec
 from .robust import nmad
 
 BIN_M = 1.0  # the residual's profile across a direction, in bins this wide
-STEP_DEG = 3.0  # directions searched this far apart, then refined about the best
+COARSE_DEG = 15.0  # directions searched this far apart, then about the best every STEP_DEG and a sixth of it
+STEP_DEG = 3.0
 MIN_STRIP_M = 8.0  # no run of constant level narrower than this (a flight strip is tens of metres wide)
 MIN_STEP_M = 0.01  # nor a step smaller than this
 MIN_SHARE = 0.3  # the steps must explain at least this share of the stable residual's variance
@@ -39,9 +40,7 @@ def strip_steps(residual: np.ndarray, stable: np.ndarray, grid: GridSpec) -> dic
         return None
     r = np.clip(r, centre - 3 * spread, centre + 3 * spread)  # a stray patch of change is no strip
     total = float(np.sum((r - r.mean()) ** 2))
-    best = max((_profile(px, py, r, a, spread) for a in np.arange(0.0, 180.0, STEP_DEG)), key=lambda p: p[0])
-    fine = np.arange(best[1] - STEP_DEG, best[1] + STEP_DEG + 1e-9, STEP_DEG / 6)
-    gain, angle, lo, edges, levels = max((_profile(px, py, r, a, spread) for a in fine), key=lambda p: p[0])
+    gain, angle, lo, edges, levels = _search(px, py, r, spread, total)
     if len(levels) < 2 or gain < MIN_SHARE * total:
         return None
     starts = [float(lo + BIN_M * e) for e in edges]
@@ -51,6 +50,18 @@ def strip_steps(residual: np.ndarray, stable: np.ndarray, grid: GridSpec) -> dic
         "levels_m": [float(v) for v in levels],
         "explained": gain / total,
     }
+
+
+def _search(px, py, r, spread: float, total: float) -> tuple:
+    """The best direction's profile: every :data:`COARSE_DEG` first (strips blurred a little still step), then
+    about the best every :data:`STEP_DEG` and a sixth of it, unless the coarse steps explain too little."""
+    best = max((_profile(px, py, r, a, spread) for a in np.arange(0.0, 180.0, COARSE_DEG)), key=lambda p: p[0])
+    if best[0] < 0.5 * MIN_SHARE * total:
+        return best
+    for step, reach in ((STEP_DEG, COARSE_DEG), (STEP_DEG / 6, STEP_DEG)):
+        around = np.arange(best[1] - reach, best[1] + reach + 1e-9, step)
+        best = max((best, *(_profile(px, py, r, a, spread) for a in around)), key=lambda p: p[0])
+    return best
 
 
 def strip_levels(strips: dict | None, grid: GridSpec) -> np.ndarray:
