@@ -22,7 +22,7 @@ MIN_STEP_M = 0.01  # nor a step smaller than this
 MIN_SHARE = 0.3  # the steps must explain at least this share of the stable residual's variance
 MIN_CELLS = 400  # stable cells needed to look for strips
 MAX_CELLS = 40_000  # stable cells used (a regular subsample beyond)
-MAX_RUNS = 12
+MAX_RUNS = 12  # the binary segmentation goes this many runs deep at most (log2: its depth)
 
 
 def strip_steps(residual: np.ndarray, stable: np.ndarray, grid: GridSpec) -> dict | None:

@@ -3,7 +3,8 @@
 Across the outline: a smooth fill rounds the kink at a pile's foot or a pit's rim (paper-density: -1.76 %
 of a 259 m3 pit, +0.45 % of 954 m3 of piles; -0.08 % and -0.00 % this way). The outline is carried
 through the hole (its signed distance interpolated; the nearer rim cut a trench's edge like a pie: -3.6
-and +4.0 m3), each side filled from its own rim, the difference a term (:func:`outline_sigma`).
+and +4.0 m3), each side filled from its own rim, the difference a term (:func:`outline_sigma`); a cut that enters
+and leaves the hole is carried on between (an occluded trench's floor had gone to the banks: :func:`_between`).
 
 In one survey: the difference is not smooth across a wall (a hole on a pillar's side dipped 3-5 m: -19
 m3 of 299 m3 in paper-pillars-rgb), so such a hole is filled in the survey missing it when the other's
@@ -41,6 +42,7 @@ DEEPER = 4.0  # the walls carried on into a hole go at most this many times the 
 # standing to 80 % of a pit's depth)
 MIN_M3 = 0.5  # ranges below this are noise, not named
 BASIN_DROP_M = 0.2  # a hole whose rim lies this much below the ground around it (median): a basin
+LINES = 8  # lines through a hole's cell, 22.5 degrees apart (a 3-cell trench followed within a cell over 8)
 
 
 def refill_across_outline(
@@ -81,13 +83,10 @@ def refill_across_outline(
     return out
 
 
-LINES = 8  # lines through a cell, 22.5 degrees apart (a 3-cell trench followed within a cell over 8)
-
-
 def _between(cells: np.ndarray, change: np.ndarray, stable: np.ndarray) -> np.ndarray:
     """The ``cells`` that lie between two change cells on a line through them (the first known cell each way is
     change): a trench across a hole carries on through it (its outline's signed distance, interpolated, gave the
-    middle of a 4-cell trench to the banks around the hole)."""
+    middle of a 3-cell trench to the banks around the hole)."""
     if not change.any():
         return np.zeros(cells.shape, bool)
     known = np.pad(np.where(change, 1, np.where(stable, 2, 0)), 1, constant_values=3)  # 3: the box's edge
