@@ -18,7 +18,7 @@ from ..core.types import GridSpec
 from ..dem.grid import EpochDEM
 from ..options import Options
 from .change import MIN_CELLS, cell_lod, cell_sigma
-from .holes.interpolate import enclosed_holes, fill, refill_epoch, weak_cells
+from .holes.interpolate import enclosed_holes, fill, patches_touching, refill_epoch, weak_cells
 from .holes.testholes import error_by_radius, error_where
 from .holes.works import fill_own_holes, refill_across_outline
 from .results import Epochs, Given
@@ -92,7 +92,7 @@ def change_hole_sigma(diff, filled_mask, counted, lod, options: Options) -> np.n
     :func:`.holes.testholes.error_where`); NaN elsewhere, and everywhere when no test hole fits."""
     out = np.full(diff.shape, np.nan)
     labels, n = scipy.ndimage.label(filled_mask, structure=scipy.ndimage.generate_binary_structure(2, 1))
-    touching = np.unique(labels[scipy.ndimage.binary_dilation(counted) & filled_mask])
+    touching = patches_touching(labels, counted)
     if not touching.size:
         return out
     radius = np.sqrt(np.bincount(labels.ravel(), minlength=n + 1) / np.pi)

@@ -26,6 +26,12 @@ def enclosed_holes(valid: np.ndarray, max_cells: int | None) -> np.ndarray:
     return keep[labels]
 
 
+def patches_touching(labels: np.ndarray, part: np.ndarray) -> np.ndarray:
+    """The labels (> 0) of the patches of ``labels`` with a cell in ``part`` or beside it (4-neighbours): a refilled
+    patch along a part's edge may hide some of it."""
+    return np.unique(labels[scipy.ndimage.binary_dilation(part) & (labels > 0)])
+
+
 def harmonic_fill(values: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """``values`` with ``targets`` harmonically interpolated (NaN in a component without a finite neighbour): deg_i u_i
     - sum_{unknown j} u_j = sum_{known k} v_k on them (Neumann at the other cells)."""

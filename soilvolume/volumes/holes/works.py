@@ -24,7 +24,7 @@ import scipy
 
 from ..change import part_budget
 from ..results import Epochs
-from .interpolate import FOUR, enclosed_holes, fill
+from .interpolate import FOUR, enclosed_holes, fill, patches_touching
 from .testholes import error_by_radius
 
 PAD = 8  # cells of context around a hole's box (its rings and the ground they are compared with)
@@ -115,7 +115,7 @@ def outline_sigma(
     idx = np.arange(1, n + 1)
     out = {}
     for k, m in parts.items():
-        hit = np.isin(labels, np.unique(labels[scipy.ndimage.binary_dilation(m) & (labels > 0)]))
+        hit = np.isin(labels, patches_touching(labels, m))
         moved = np.abs(scipy.ndimage.sum(np.where(hit, delta, 0.0), labels, idx))
         given = share * scipy.ndimage.sum(np.where(m, np.abs(np.nan_to_num(diff)), 0.0), labels, idx)
         out[k] = float(np.linalg.norm(np.maximum(moved - given, 0.0))) * cell_area
