@@ -243,20 +243,30 @@ def test_no_signal_pile_stays_usable(tmp_path):
 
 def test_verdict_on_what_could_not_be_classified():
     """Not reliable when, without any signal, the unclassified change is over the interval and a
-    tenth of the net; use with caution when only machine-sized objects in one survey are open; no
-    word when it is small against the interval."""
+    tenth of the net, or, with signals, over a tenth of the volume moved (the number may be off by
+    that much); use with caution when only machine-sized objects in one survey are open and they are
+    small against the volume moved; no word when it is small against the interval."""
     from soilvolume.volumes.quality import _unclassified
 
     def excluded(fill, cut, signals):
         unclear = {"fill": fill, "cut": cut, "net": fill - cut, "count": 3, "signals": signals}
         return {"unclassified": unclear, "bound_m3": {"fill": fill, "cut": cut, "net": max(fill, cut)}}
 
-    ((sev, msg),) = _unclassified(excluded(150.0, 20.0, False), net=180.0, half=60.0)
+    ((sev, msg),) = _unclassified(excluded(150.0, 20.0, False), net=180.0, half=60.0, moved=2000.0)
     assert sev == "unreliable" and "from +30 to +200 m³" in msg and "no classification, colour" in msg
-    ((sev, msg),) = _unclassified(excluded(15.0, 0.0, True), net=-2.0, half=8.0)
+    ((sev, msg),) = _unclassified(excluded(15.0, 0.0, True), net=-2.0, half=8.0, moved=400.0)
     assert sev == "caution" and "machine-sized objects in one survey only" in msg
-    assert _unclassified(excluded(15.0, 0.0, False), net=900.0, half=40.0) == []  # within the interval
-    assert _unclassified(excluded(50.0, 0.0, False), net=900.0, half=40.0) == []  # under a tenth of the net
+    ((sev, msg),) = _unclassified(excluded(15.0, 0.0, True), net=-2.0, half=8.0, moved=100.0)
+    assert sev == "unreliable" and "more than 10% of the volume moved (100 m³)" in msg
+    ((sev, msg),) = _unclassified(excluded(15.0, 0.0, True), net=90.0, half=20.0, moved=100.0)  # in the interval
+    assert sev == "unreliable" and "more than 10% of the volume moved" in msg
+    ((sev, msg),) = _unclassified(excluded(3.0, 0.0, True), net=0.5, half=2.0, moved=4.0)  # over a tenth moved
+    assert sev == "unreliable" and "more than 10% of the volume moved (4 m³)" in msg
+    assert _unclassified(excluded(6.0, 0.0, True), net=-7.5, half=10.6, moved=8.1) == []  # no change: in its noise
+    ((sev, msg),) = _unclassified(excluded(15.0, 0.0, True), net=-1.4, half=7.5, moved=1.8)
+    assert sev == "unreliable" and "more than the measurement error (±7.5 m³) of a job that moved 1.8 m³" in msg
+    assert _unclassified(excluded(15.0, 0.0, False), net=900.0, half=40.0, moved=1000.0) == []  # within the interval
+    assert _unclassified(excluded(50.0, 0.0, False), net=900.0, half=40.0, moved=1000.0) == []  # under a tenth
 
 
 @pytest.mark.parametrize("seed", [126, 128])

@@ -28,10 +28,11 @@ def _report(net: float, half: float, bound: float, verdict: str | None = None) -
 def test_nonsoil_caution_quotes_the_reported_interval():
     """Tommy Thompson: '... more than the net's interval (±23.8 m3)' while the run reported ±48.97
     (the 23.8 left out the unclassified change's term). The caution now quotes ±48.97 and says
-    what the smaller figure is; the verdict is the same."""
+    what the smaller figure is; the verdict is the same (the unclassified change under a tenth of the
+    volume moved)."""
     import numpy as np
 
-    rep = _report(net=200.0, half=48.97, bound=25.17)
+    rep = _report(net=300.0, half=48.97, bound=25.17)
     z = np.zeros((4, 4))
     q = assess(rep, QualityInputs(z.astype(bool), z.astype(bool), z, None, 1.0, {}))
     said = [m for m in q["messages"] if "together more than" in m]
@@ -59,6 +60,7 @@ def test_a_not_reliable_verdict_lists_no_significance():
     import numpy as np
 
     rep = _report(net=5.0, half=20.0, bound=0.0)
+    rep["volume_m3"].update(cut=400.0, fill=405.0)  # the 30 m3 unclassified under a tenth of the volume moved
     rep["excluded"]["unclassified"] = {"count": 1, "fill": 30.0, "cut": 0.0, "signals": False}
     rep["excluded"]["bound_m3"] = {"net": 30.0}
     rep["uncertainty_m3"]["net"] = 40.0

@@ -17,6 +17,7 @@ from .zones import zone_messages
 
 VERDICTS = ("reliable", "use with caution", "not reliable")
 UNCLASSIFIED_SHARE = 0.1  # change that may not be soil over this share of the net (and its interval): said
+OPEN_SHARE = 0.1  # change that may not be soil over this share of the volume moved: not reliable
 CANOPY_SHARE = 0.05  # change under vegetation told by returns alone, over this share of the moved: not reliable
 BLIND_SHARE = 0.02  # what holes in the works may hide, over this share of the volume moved: not reliable
 MIN_STABLE_FRACTION = 0.05  # less stable ground than this share of the compared area: not reliable
@@ -34,7 +35,7 @@ def assess(report: dict, q: QualityInputs) -> dict:
     bound = sum(float((r.get("bound_m3") or {}).get("net", 0.0)) for r in (excluded, hidden))
     random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified or seen
     moved = max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)  # the volume moved
-    out += _blind(hidden, moved) + _canopy(excluded, moved) + _unclassified(excluded, v["net"], random_half)
+    out += _blind(hidden, moved) + _canopy(excluded, moved) + _unclassified(excluded, v["net"], random_half, moved)
     out += _nonsoil(excluded, random_half, u["net"])
     out += [("caution", m) for m in zone_messages(report.get("zones") or [])]
     out += filter(None, [coverage_check(report)])
@@ -81,11 +82,13 @@ def _nonsoil(excluded: dict, half: float, reported: float) -> list[tuple[str, st
     return [("caution", said)]
 
 
-def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, str]]:
+def _unclassified(excluded: dict, net: float, half: float, moved: float) -> list[tuple[str, str]]:
     """When the unclassified change exceeds the interval and :data:`UNCLASSIFIED_SHARE` of the net: unreliable without
-    signals."""
-    u = excluded.get("unclassified") or {}
-    if float((excluded.get("bound_m3") or {}).get("net", 0.0)) <= max(half, UNCLASSIFIED_SHARE * abs(net)):
+    signals or over :data:`OPEN_SHARE` of the volume ``moved`` (the number may be off by that much); on a job that
+    moved less than the interval's measurement part ``half``, over that part (no change is measured by its noise)."""
+    u, bound = excluded.get("unclassified") or {}, float((excluded.get("bound_m3") or {}).get("net", 0.0))
+    wide = bound > (OPEN_SHARE * moved if moved > half else half)
+    if bound <= max(half, UNCLASSIFIED_SHARE * abs(net)) and not wide:
         return []
     signals = u.get("signals", True)
     why = "these are machine-sized objects in one survey only"
@@ -96,7 +99,11 @@ def _unclassified(excluded: dict, net: float, half: float) -> list[tuple[str, st
         f"rough areas could not be classified as soil or not ({why}): the soil's net lies anywhere "
         f"from {net + below:+.0f} to {net + above:+.0f} m³, and the interval is widened by it"
     )
-    return [("caution" if signals else "unreliable", said)]  # signals said the rest: only objects are open
+    if wide and moved > half:
+        said += f"; that is more than {OPEN_SHARE:.0%} of the volume moved ({moved:,.0f} m³)"
+    elif wide:
+        said += f"; that is more than the measurement error (±{half:,.1f} m³) of a job that moved {moved:,.1f} m³"
+    return [("caution" if signals and not wide else "unreliable", said)]  # signals said the rest: only objects open
 
 
 def _canopy(excluded: dict, moved: float) -> list[tuple[str, str]]:
