@@ -120,6 +120,21 @@ def test_a_thin_even_sharp_edged_fill_may_be_a_slab():
     assert found[20:48, 20:40].all() and found.sum() == 28 * 20
 
 
+def test_a_composed_site_with_a_slab_that_arrived_says_not_reliable(tmp_path):
+    """Composed site 10187: a 14 x 4 m slab, 0.3 m thick, poured on a yard that moved 59 m3 (drone LiDAR both
+    times): the plate is counted as fill or soil alike (+22 % of the moved volume) and was "use with caution";
+    its 19 m3, over a tenth of the volume moved, now make the run not reliable, said as a slab-like plate, the
+    intervals holding the truth."""
+    (tmp_path / "rows").mkdir()
+    (tmp_path / "scenes").mkdir()
+    row = calibration.run_site(10187, tmp_path, ("test", "test"))
+    assert "object: slab arrived" in row["kinds"] and "error" not in row, row.get("error")
+    assert all(row["covered"].values()), (row["err_m3"], row["half_width"])
+    assert row["verdict"] == "not reliable", row["messages"]
+    said = [m for m in row["messages"] if "could not be classified as soil or not" in m]
+    assert said and "thin even plates with sharp edges" in said[0] and "10% of the volume moved" in said[0], said
+
+
 def test_the_interval_covers_what_the_unseen_part_could_hide():
     """The volumes are the compared area's; each 95 % half-width grows by the coverage's unseen bound once the
     unseen part is named in the verdict (over 0.5 % of the after footprint)."""
@@ -184,7 +199,9 @@ def test_on_coarse_cells_a_machine_that_left_is_neither_soil_nor_left_out():
     assert not machine.resolved and not machine.structure and machine.edge_slope >= 1.0
     assert not [b for b in found.blobs if b.sign > 0]  # the pile: soil
     assert not nonsoil._lone(found).any()
-    unclear, n = nonsoil._unclear(diff, (diff > 0.1) | (diff < -0.1), found, np.zeros(diff.shape, bool), True, cell**2)
+    unclear, n, _ = nonsoil._unclear(
+        diff, (diff > 0.1) | (diff < -0.1), found, np.zeros(diff.shape, bool), True, cell**2
+    )
     assert n == 1 and unclear[20:27, 20:23].all() and not unclear[30:55, 30:55].any()
 
 

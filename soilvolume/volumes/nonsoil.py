@@ -207,8 +207,9 @@ def _item(b: Blob, grid: GridSpec) -> dict:
 def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) -> dict:
     """The bound (m3) of the unclassified and under-canopy change in ``counted``; their sections set in ``report``."""
     signal = any(labelled(e) for e in epochs)
-    unclear, n = _unclear(diff, counted, found, rough, signal, cell_area)
+    unclear, n, plate = _unclear(diff, counted, found, rough, signal, cell_area)
     report["unclassified"] = {**part_budget(diff, unclear, cell_area), "count": n, "signals": signal}
+    report["unclassified"]["plates_m3"] = part_budget(diff, plate, cell_area)["fill"]  # of it: slab-like plates
     kept, left = part_budget(diff, unclear & counted, cell_area), part_budget(diff, unclear & ~counted, cell_area)
     # the soil's net lies between net - (counted fill + left-out cut) and net + (counted cut + left-out fill)
     below, above = kept["fill"] + left["cut"], kept["cut"] + left["fill"]
@@ -233,12 +234,13 @@ def bounds(diff, counted, found, rough, epochs, cell_area: float, report: dict) 
     return bound
 
 
-def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int]:
-    """(the change not said to be soil, its patches): single machine-sized objects; without signals rough and
-    compact."""
+def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tuple[np.ndarray, int, np.ndarray]:
+    """(the change not said to be soil, its patches, the slab-like plates in it): single machine-sized objects,
+    plates; without signals rough and compact."""
     small = [b.label for b in found.single_blobs() if b.volume_m3 <= UNCLEAR_M3 or not b.resolved]
     out = np.isin(found.labels, small) & found.single  # a machine, or a small or unresolved steep heap: counted or not
-    out |= plates(diff, counted & (np.nan_to_num(diff) > 0), cell_area)  # a slab, or a thin layer of soil
+    plate = plates(diff, counted & (np.nan_to_num(diff) > 0), cell_area)  # a slab, or a thin layer of soil
+    out |= plate
     if not signal:
         d = np.nan_to_num(diff)
         for part in (counted & (d > 0), counted & (d < 0)):
@@ -251,7 +253,7 @@ def _unclear(diff, counted, found, rough, signal: bool, cell_area: float) -> tup
         out |= rough & counted
     comp, n = scipy.ndimage.label(out, structure=np.ones((3, 3), bool))
     vols = np.abs(scipy.ndimage.sum(np.nan_to_num(diff), comp, np.arange(1, n + 1))) * cell_area
-    return out, int((vols >= 0.5).sum())  # patches of noise are no objects to name
+    return out, int((vols >= 0.5).sum()), plate  # patches of noise are no objects to name
 
 
 def plates(diff: np.ndarray, fill: np.ndarray, cell_area: float) -> np.ndarray:

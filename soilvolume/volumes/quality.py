@@ -90,20 +90,29 @@ def _unclassified(excluded: dict, net: float, half: float, moved: float) -> list
     wide = bound > (OPEN_SHARE * moved if moved > half else half)
     if bound <= max(half, UNCLASSIFIED_SHARE * abs(net)) and not wide:
         return []
-    signals = u.get("signals", True)
-    why = "these are machine-sized objects in one survey only"
-    why = why if signals else "the files carry no classification, colour or return numbers to say what they are"
+    signals, n = u.get("signals", True), u.get("count", 0)
     below, above = u.get("net_range_m3") or (-u.get("fill", 0.0), u.get("cut", 0.0))
     said = (
-        f"{u.get('fill', 0.0) + u.get('cut', 0.0):.0f} m³ of change in {u.get('count', 0)} compact objects or "
-        f"rough areas could not be classified as soil or not ({why}): the soil's net lies anywhere "
-        f"from {net + below:+.0f} to {net + above:+.0f} m³, and the interval is widened by it"
+        f"{u.get('fill', 0.0) + u.get('cut', 0.0):.0f} m³ of change in {n} compact object{'s' * (n != 1)} or "
+        f"rough area{'s' * (n != 1)} could not be classified as soil or not ({_why(u, signals)}): the soil's net "
+        f"lies anywhere from {net + below:+.0f} to {net + above:+.0f} m³, and the interval is widened by it"
     )
     if wide and moved > half:
         said += f"; that is more than {OPEN_SHARE:.0%} of the volume moved ({moved:,.0f} m³)"
     elif wide:
         said += f"; that is more than the measurement error (±{half:,.1f} m³) of a job that moved {moved:,.1f} m³"
     return [("caution" if signals and not wide else "unreliable", said)]  # signals said the rest: only objects open
+
+
+def _why(u: dict, signals: bool) -> str:
+    """Why the unclassified change ``u`` could not be classified, its slab-like plates said with their m³."""
+    if not signals:
+        return "the files carry no classification, colour or return numbers to say what they are"
+    plates, m3 = float(u.get("plates_m3", 0.0)), u.get("fill", 0.0) + u.get("cut", 0.0)
+    slabs = "thin even plates with sharp edges: slabs, or a layer of soil"
+    if plates < 0.5:
+        return "these are machine-sized objects in one survey only"
+    return slabs if plates >= m3 - 0.5 else f"machine-sized objects in one survey only, and {plates:,.0f} m³ of {slabs}"
 
 
 def _canopy(excluded: dict, moved: float) -> list[tuple[str, str]]:
