@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .change import fill_cut
-from .tolerance import TOLERANCE
+from .tolerance import moved_m3, past_net_tolerance
 
 CAUTION_SHARE = 0.005  # unseen share of the after footprint that is named in the verdict
 MAX_SHARE = 0.05  # more than this unseen: not reliable, whatever its surroundings say
@@ -98,8 +98,7 @@ def check(report: dict) -> tuple[str, str] | None:
             source = "from what the after survey shows beyond the before survey's edge, against its ground carried on"
         said += f": change there is not in the volumes (up to ~{bound:,.0f} m³ {source}, "
         return "unreliable", f"{said}against their ±{interval:,.1f} m³ interval without it)"
-    v = report.get("volume_m3") or {}
-    if share > CAUTION_SHARE and bound > TOLERANCE["net"] * (v.get("cut", 0.0) + v.get("fill", 0.0)):
+    if share > CAUTION_SHARE and past_net_tolerance(bound, moved_m3(report)):
         said += f": the volumes are for the compared {cov['compared_m2']:,.0f} m² only (the change seen around it "
         return "caution", f"{said}would make up to ~{bound:,.0f} m³ there, within their interval)"
     return None

@@ -12,7 +12,7 @@ from ..core.record import QualityInputs
 from ..core.wording import opt
 from ..registration.georef import GROUND_AGREES, INCONCLUSIVE, disagreement
 from .coverage import check as coverage_check
-from .tolerance import TOLERANCE, tolerance_check
+from .tolerance import moved_m3, past_net_tolerance, tolerance_check
 from .zones import zone_messages
 
 VERDICTS = ("reliable", "use with caution", "not reliable")
@@ -34,7 +34,7 @@ def assess(report: dict, q: QualityInputs) -> dict:
     excluded, hidden = report.get("excluded") or {}, report.get("blind") or {}
     bound = sum(float((r.get("bound_m3") or {}).get("net", 0.0)) for r in (excluded, hidden))
     random_half = max(u["net"] - bound, 0.0)  # the interval without what could not be classified or seen
-    moved = max(v.get("cut", 0.0) + v.get("fill", 0.0), 1e-9)  # the volume moved
+    moved = max(moved_m3(report), 1e-9)
     out += _blind(hidden, moved) + _canopy(excluded, moved) + _unclassified(excluded, v["net"], random_half, moved)
     out += _nonsoil(excluded, random_half, u["net"])
     out += [("caution", m) for m in zone_messages(report.get("zones") or [])]
@@ -87,7 +87,8 @@ def _unclassified(excluded: dict, net: float, half: float, moved: float) -> list
     signals or over :data:`OPEN_SHARE` of the volume ``moved`` (the number may be off by that much); on a job that
     moved less than the interval's measurement part ``half``, over that part (no change is measured by its noise)."""
     u, bound = excluded.get("unclassified") or {}, float((excluded.get("bound_m3") or {}).get("net", 0.0))
-    wide = bound > (OPEN_SHARE * moved if moved > half else half)
+    no_change = moved <= half  # a job that moved less than its noise is measured by it
+    wide = bound > (half if no_change else OPEN_SHARE * moved)
     if bound <= max(half, UNCLASSIFIED_SHARE * abs(net)) and not wide:
         return []
     signals, n = u.get("signals", True), u.get("count", 0)
@@ -97,10 +98,10 @@ def _unclassified(excluded: dict, net: float, half: float, moved: float) -> list
         f"rough area{'s' * (n != 1)} could not be classified as soil or not ({_why(u, signals)}): the soil's net "
         f"lies anywhere from {net + below:+.0f} to {net + above:+.0f} m³, and the interval is widened by it"
     )
-    if wide and moved > half:
-        said += f"; that is more than {OPEN_SHARE:.0%} of the volume moved ({moved:,.0f} m³)"
-    elif wide:
+    if wide and no_change:
         said += f"; that is more than the measurement error (±{half:,.1f} m³) of a job that moved {moved:,.1f} m³"
+    elif wide:
+        said += f"; that is more than {OPEN_SHARE:.0%} of the volume moved ({moved:,.0f} m³)"
     return [("caution" if signals and not wide else "unreliable", said)]  # signals said the rest: only objects open
 
 
@@ -145,7 +146,7 @@ def _blind(hidden: dict, moved: float) -> list[tuple[str, str]]:
         out.append(("unreliable", said))
     items = hidden.get("items") or []
     reach = float((hidden.get("bound_m3") or {}).get("net", 0.0))
-    if not items or reach <= TOLERANCE["net"] * moved:  # it cannot move the net past its tolerance: in the interval
+    if not items or not past_net_tolerance(reach, moved):  # in the interval
         return out
     lo, hi = sum(min(i["range_m3"]) for i in items), sum(max(i["range_m3"]) for i in items)
     said = (

@@ -35,10 +35,20 @@ BOUND = "change that could not be classified as soil or not, or seen"  # the bou
 STRIPS = "the flight strips' steps taken out (a cell given another strip's level)"
 
 
+def moved_m3(report: dict) -> float:
+    """The volume moved (cut + fill, m³) of a report: what the tolerances are shares of."""
+    v = report.get("volume_m3") or {}
+    return v.get("cut", 0.0) + v.get("fill", 0.0)
+
+
+def past_net_tolerance(m3: float, moved: float) -> bool:
+    """Whether ``m3`` could move the net past its tolerance (:data:`TOLERANCE` of the volume ``moved``)."""
+    return m3 > TOLERANCE["net"] * moved
+
+
 def tolerance_check(report: dict) -> list[tuple[str, str]]:
     """A caution when a 95 % interval is wider than :data:`TOLERANCE` of the volume moved, naming its largest part."""
-    v, u, model = report["volume_m3"], report["uncertainty_m3"], report.get("uncertainty") or {}
-    moved = v.get("cut", 0.0) + v.get("fill", 0.0)
+    u, model, moved = report["uncertainty_m3"], report.get("uncertainty") or {}, moved_m3(report)
     wide = [q for q in TOLERANCE if u.get(q, 0.0) > TOLERANCE[q] * moved]
     if not wide:
         return []
